@@ -1,0 +1,34 @@
+# Two commands on a fresh machine: `make demo` and `make test`.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+OUT    ?= out
+
+.PHONY: install demo test bench browser urdf clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+install: $(STAMP)
+
+browser:
+	bash scripts/ensure-chromium.sh
+
+demo: $(STAMP)
+	$(PY) -m arm_model.demo --out $(OUT)/demo
+
+test: $(STAMP) browser
+	$(PY) -m pytest -n 2 -q tests
+
+bench: $(STAMP)
+	$(PY) -m benchmarks.run
+
+urdf: $(STAMP)
+	$(VENV)/bin/aacmm urdf urdf/aacmm7.dh.toml -o urdf/aacmm7.urdf
+
+clean:
+	rm -rf $(VENV) $(OUT) .pytest_cache

@@ -1,0 +1,41 @@
+"""One base exception for the project; subclasses carry their context."""
+from __future__ import annotations
+
+from pathlib import Path
+
+__all__ = ["AacmmError", "InputError", "NumericalError"]
+
+
+class AacmmError(Exception):
+    """Base of every error the toolkit raises on purpose."""
+
+
+class InputError(AacmmError):
+    """Bad input: names the file, the line (or key) and the column, and what was expected.
+
+    Args:
+        message: what is wrong and what was expected.
+        path: the file.
+        line: 1-based line number, if known.
+        column: column name (CSV) or key path (TOML), if known.
+    """
+
+    def __init__(self, message: str, path: str | Path | None = None,
+                 line: int | None = None, column: str | None = None):
+        self.path = None if path is None else str(path)
+        self.line = line
+        self.column = column
+        self.reason = message
+        where = []
+        if self.path is not None:
+            where.append(self.path)
+        if line is not None:
+            where.append(f"line {line}")
+        if column is not None:
+            where.append(f"column '{column}'" if not column.startswith("key ") else column)
+        prefix = ", ".join(where)
+        super().__init__(f"{prefix}: {message}" if prefix else message)
+
+
+class NumericalError(AacmmError):
+    """A numerical failure (no convergence, rank deficiency) that must not pass silently."""

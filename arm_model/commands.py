@@ -1,0 +1,84 @@
+"""``aacmm tip`` and ``aacmm urdf``."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from .description import load_description
+from .io import atomic_write_text, guard_output, read_points, write_csv
+from .kinematics import ball_centres
+from .urdf import urdf_text
+
+__all__ = ["register", "tip_table"]
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "tip", help="rigid and deflection-corrected ball centres for a points file",
+        description="Read a points CSV (encoder angles and, if present, the contact force) and write, per point, "
+                    "the rigid ball centre, the deflection-corrected ball centre [mm] and the deflection [um]. "
+                    "Points whose force exceeds the probe's calibrated range are flagged (over_force = 1), "
+                    "never dropped.")
+    p.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
+    p.add_argument("--arm", type=Path, required=True, help="arm description TOML, e.g. urdf/aacmm7.dh.toml")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output CSV (never one of the inputs)")
+    p.set_defaults(func=run_tip)
+
+    u = sub.add_parser(
+        "urdf", help="generate the URDF of an arm description",
+        description="Write the URDF (links, joints, the probe's virtual elastic joints, visuals) generated "
+                    "from an arm description. The repository's urdf/aacmm7.urdf is made this way.")
+    u.add_argument("arm", type=Path, help="arm description TOML")
+    u.add_argument("-o", "--output", type=Path, required=True, help="output URDF")
+    u.set_defaults(func=run_urdf)
+
+
+def tip_table(desc, points) -> dict:
+    """Columns of the ``aacmm tip`` output for a :class:`~arm_model.io.PointSet`."""
+    rigid = ball_centres(desc, points.q)
+    corrected = ball_centres(desc, points.q, points.wrench) if points.wrench is not None else rigid.copy()
+    delta = corrected - rigid
+    cols = {"measurement": points.measurement, "feature": points.feature}
+    for k, axis in enumerate("xyz"):
+        cols[f"{axis}_rigid_mm"] = rigid[:, k] * 1e3
+    for k, axis in enumerate("xyz"):
+        cols[f"{axis}_mm"] = corrected[:, k] * 1e3
+    for k, axis in enumerate("xyz"):
+        cols[f"d{axis}_um"] = delta[:, k] * 1e6
+    cols["deflection_um"] = np.linalg.norm(delta, axis=1) * 1e6
+    cols["over_force"] = points.over_force(desc.probe.max_force).astype(int)
+    return cols
+
+
+def run_tip(args: argparse.Namespace) -> int:
+    guard_output(args.output, [args.points, args.arm])
+    desc = load_description(args.arm)
+    points = read_points(args.points, desc.n_joints)
+    cols = tip_table(desc, points)
+    write_csv(args.output, cols, inputs=[args.points, args.arm], fmt="%.6f")
+    n = len(points)
+    print(f"{n} points in {len(points.measurements())} measurement(s) -> {args.output}")
+    if points.force is None:
+        print("no force columns: corrected = rigid (no deflection applied)")
+    else:
+        if points.force_kind == "two-channel":
+            print("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not measured "
+                  "and is taken as zero")
+        d = cols["deflection_um"]
+        print(f"deflection: mean {d.mean():.2f} um, max {d.max():.2f} um")
+    flagged = int(cols["over_force"].sum())
+    if flagged:
+        lines = points.lines[cols["over_force"].astype(bool)][:10]
+        print(f"warning: {flagged} point(s) over the probe's calibrated force range "
+              f"({desc.probe.max_force:g} N), flagged in column over_force; lines {', '.join(map(str, lines))}"
+              + (" ..." if flagged > 10 else ""))
+    return 0
+
+
+def run_urdf(args: argparse.Namespace) -> int:
+    desc = load_description(args.arm)
+    atomic_write_text(args.output, urdf_text(desc), inputs=[args.arm])
+    print(f"URDF of '{desc.name}' ({desc.n_joints} joints + 3 elastic probe joints) -> {args.output}")
+    return 0

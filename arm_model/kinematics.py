@@ -1,0 +1,89 @@
+"""The fast batch evaluator: deflection-aware ball centres for (N, J) joint arrays.
+
+Chunks of the input are evaluated by :func:`arm_model.chain.ball_centre_expr` on numpy columns
+(structure of arrays, three numbers a point carried from the probe inwards) in a small thread pool;
+memory is the output plus a few chunk-sized temporaries, linear in N.
+"""
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from .chain import NUMPY_OPS, ball_centre_expr
+from .description import ArmDescription
+from .params import split_params
+
+__all__ = ["ball_centres", "rigid_centres", "as_wrench"]
+
+_CHUNK = 16384
+
+
+def as_wrench(wrench, n: int | None = None) -> np.ndarray | None:
+    """Check a wrench array: (N, 3) force [N] or (N, 6) force [N] then torque [N m], probe frame."""
+    if wrench is None:
+        return None
+    w = np.asarray(wrench, dtype=float)
+    if w.ndim == 1:
+        w = w[None, :]
+    if w.ndim != 2 or w.shape[1] not in (3, 6):
+        raise ValueError(f"wrench must have shape (N, 3) or (N, 6), got {w.shape}")
+    if n is not None and w.shape[0] != n:
+        raise ValueError(f"wrench has {w.shape[0]} rows, joint angles have {n}")
+    return w
+
+
+def _default_threads() -> int:
+    return max(1, min(2, os.cpu_count() or 1))
+
+
+def ball_centres(desc: ArmDescription, q, wrench=None, p=None, *, threads: int | None = None,
+                 chunk: int = _CHUNK) -> np.ndarray:
+    """Deflection-aware ball centres [m] in the base frame.
+
+    Args:
+        desc: the arm.
+        q: (N, J) joint angles [rad] (or (J,) for one point).
+        wrench: None (rigid), (N, 3) force [N] or (N, 6) force [N] and torque [N m] at the ball,
+            in the probe frame: the force the part exerts on the ball.
+        p: parameter errors (see :mod:`arm_model.params`), None for the description itself.
+        threads: worker threads (default: up to 2).
+
+    Returns:
+        (N, 3) ball centres [m] (or (3,) for one point).
+    """
+    q = np.asarray(q, dtype=float)
+    single = q.ndim == 1
+    q2 = q[None, :] if single else q
+    if q2.ndim != 2 or q2.shape[1] != desc.n_joints:
+        raise ValueError(f"q must have shape (N, {desc.n_joints}), got {q.shape}")
+    n = q2.shape[0]
+    w = as_wrench(wrench, n)
+    rows, p_last, compliance = split_params(desc, None if p is None else np.asarray(p, dtype=float))
+    out = np.empty((n, 3))
+
+    def work(start: int) -> None:
+        stop = min(start + chunk, n)
+        qt = np.ascontiguousarray(q2[start:stop].T)
+        wt = None if w is None else np.ascontiguousarray(w[start:stop].T)
+        x, y, z = ball_centre_expr(desc.convention, rows, p_last, compliance, qt,
+                                   None if wt is None else list(wt), NUMPY_OPS)
+        out[start:stop, 0] = x
+        out[start:stop, 1] = y
+        out[start:stop, 2] = z
+
+    starts = range(0, n, chunk)
+    nthreads = threads or _default_threads()
+    if nthreads == 1 or n <= chunk:
+        for s in starts:
+            work(s)
+    else:
+        with ThreadPoolExecutor(max_workers=nthreads) as pool:
+            list(pool.map(work, starts))
+    return out[0] if single else out
+
+
+def rigid_centres(desc: ArmDescription, q, p=None, **kw) -> np.ndarray:
+    """Ball centres [m] with a rigid stylus (zero wrench)."""
+    return ball_centres(desc, q, None, p, **kw)

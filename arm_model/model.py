@@ -1,0 +1,175 @@
+"""An arm with effects: the base chain plus :mod:`arm_model.effects`, with one parameter vector.
+
+``p = [base errors (arm_model.params order), effect 1 params, effect 2 params, ...]``.
+The numpy batch path, the CasADi Function and the Pinocchio evaluation all run the same effect
+code (:meth:`ArmModel._evaluate`) and are tested to agree.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+
+import numpy as np
+
+from .chain import NUMPY_OPS, ball_centre_expr
+from .description import ArmDescription
+from .effects import Effect, Geometry, ModelInputs
+from .params import ParamSpec, apply_params, param_spec, split_params
+
+__all__ = ["ArmModel", "AuxData"]
+
+
+@dataclass(frozen=True)
+class AuxData:
+    """Per-point data some effects need: temperature (N,) [°C], joint torques (N, J) [N m]."""
+    temperature: np.ndarray | None = None
+    tau_gravity: np.ndarray | None = None
+    tau_contact: np.ndarray | None = None
+
+    def select(self, mask) -> "AuxData":
+        return AuxData(*(None if a is None else a[mask] for a in (self.temperature, self.tau_gravity, self.tau_contact)))
+
+
+@dataclass(frozen=True)
+class ArmModel:
+    desc: ArmDescription
+    effects: tuple[Effect, ...] = ()
+    spec: ParamSpec = field(init=False)
+    base_size: int = field(init=False)
+
+    def __post_init__(self):
+        base = param_spec(self.desc)
+        names, units = list(base.names), list(base.units)
+        for e in self.effects:
+            for n, u in e.param_defs(self.desc):
+                if n in names:
+                    raise ValueError(f"parameter {n!r} is declared twice (effect {e.describe()})")
+                names.append(n)
+                units.append(u)
+        object.__setattr__(self, "spec", ParamSpec(tuple(names), tuple(units), self.desc.n_joints))
+        object.__setattr__(self, "base_size", base.size)
+
+    # -- structure ----------------------------------------------------------------------------
+    def with_effects(self, *effects: Effect) -> "ArmModel":
+        return ArmModel(self.desc, tuple(self.effects) + tuple(effects))
+
+    def needs(self) -> set[str]:
+        return {n for e in self.effects for n in e.needs()}
+
+    def effect_slices(self) -> list[tuple[Effect, slice]]:
+        out, k = [], self.base_size
+        for e in self.effects:
+            n = len(e.param_defs(self.desc))
+            out.append((e, slice(k, k + n)))
+            k += n
+        return out
+
+    # -- the one evaluation -------------------------------------------------------------------
+    def _evaluate(self, p, inputs: ModelInputs, ops):
+        rows, p_last, compliance = split_params(self.desc, p[: self.base_size] if p is not None else None)
+        geom = Geometry([list(r) for r in rows], list(p_last), list(compliance))
+        for e, sl in self.effect_slices():
+            params = [p[i] for i in range(sl.start, sl.stop)] if p is not None else [0.0] * (sl.stop - sl.start)
+            e.apply(self.desc, params, inputs, geom, ops)
+        return ball_centre_expr(self.desc.convention, geom.rows, geom.p_last, geom.compliance,
+                                inputs.q, inputs.wrench, ops)
+
+    def _check_aux(self, aux: AuxData | None, n: int) -> AuxData:
+        aux = aux or AuxData()
+        for name in self.needs():
+            v = getattr(aux, name)
+            if v is None:
+                raise ValueError(f"the model's effects need per-point '{name}' (effects: "
+                                 f"{', '.join(e.describe() for e in self.effects)})")
+            if len(v) != n:
+                raise ValueError(f"'{name}' has {len(v)} rows, q has {n}")
+        return aux
+
+    # -- numpy batch ----------------------------------------------------------------------------
+    def ball_centres(self, q, wrench=None, p=None, aux: AuxData | None = None) -> np.ndarray:
+        """(N, 3) deflection-aware ball centres [m]; ``p`` of size ``spec.size`` (None: zeros)."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        n = q.shape[0]
+        aux = self._check_aux(aux, n)
+        p = None if p is None else np.asarray(p, dtype=float)
+        if p is not None and p.shape != (self.spec.size,):
+            raise ValueError(f"p has shape {p.shape}, expected ({self.spec.size},)")
+        if not self.effects:
+            from .kinematics import ball_centres
+            return ball_centres(self.desc, q, wrench, p)
+        w = np.zeros((n, 6))
+        if wrench is not None:
+            wr = np.atleast_2d(np.asarray(wrench, dtype=float))
+            w[:, : wr.shape[1]] = wr
+        out = np.empty((n, 3))
+        chunk = 16384
+        for s in range(0, n, chunk):
+            e = min(s + chunk, n)
+            inputs = ModelInputs(
+                q=list(q[s:e].T), wrench=list(w[s:e].T),
+                temperature=None if aux.temperature is None else aux.temperature[s:e],
+                tau_gravity=None if aux.tau_gravity is None else list(aux.tau_gravity[s:e].T),
+                tau_contact=None if aux.tau_contact is None else list(aux.tau_contact[s:e].T))
+            x, y, z = self._evaluate(p, inputs, NUMPY_OPS)
+            out[s:e, 0], out[s:e, 1], out[s:e, 2] = x, y, z
+        return out
+
+    # -- CasADi -------------------------------------------------------------------------------
+    def casadi_function(self, name: str = "ball_centre"):
+        """``f(q[J], w[6], aux[1 + 2J], p[P]) -> p_base[3]`` with aux = (temperature [°C],
+        tau_gravity[J], tau_contact[J]) (zeros where no effect needs them)."""
+        import casadi as ca
+
+        j = self.desc.n_joints
+        q = ca.SX.sym("q", j)
+        w = ca.SX.sym("w", 6)
+        aux = ca.SX.sym("aux", 1 + 2 * j)
+        p = ca.SX.sym("p", self.spec.size)
+        inputs = ModelInputs(q=[q[i] for i in range(j)], wrench=[w[i] for i in range(6)],
+                             temperature=aux[0], tau_gravity=[aux[1 + i] for i in range(j)],
+                             tau_contact=[aux[1 + j + i] for i in range(j)])
+        x, y, z = self._evaluate(p, inputs, SimpleNamespace(sin=ca.sin, cos=ca.cos))
+        return ca.Function(name, [q, w, aux, p], [ca.vertcat(x, y, z)], ["q", "w", "aux", "p"], ["p_base"])
+
+    @staticmethod
+    def aux_matrix(aux: AuxData | None, n: int, n_joints: int) -> np.ndarray:
+        """(N, 1 + 2J) aux rows for :meth:`casadi_function` (zeros where absent)."""
+        m = np.zeros((n, 1 + 2 * n_joints))
+        if aux is not None:
+            if aux.temperature is not None:
+                m[:, 0] = aux.temperature
+            if aux.tau_gravity is not None:
+                m[:, 1:1 + n_joints] = aux.tau_gravity
+            if aux.tau_contact is not None:
+                m[:, 1 + n_joints:] = aux.tau_contact
+        return m
+
+    # -- Pinocchio ------------------------------------------------------------------------------
+    def pinocchio_ball_centre(self, q, wrench=None, p=None, aux_row: dict | None = None) -> np.ndarray:
+        """One point through Pinocchio: the effects transform the inputs and geometry (same code),
+        Pinocchio evaluates the chain of the resulting description."""
+        from .pinocchio_model import PinocchioArm
+
+        j = self.desc.n_joints
+        p = np.zeros(self.spec.size) if p is None else np.asarray(p, dtype=float)
+        w = np.zeros(6)
+        if wrench is not None:
+            w[: len(wrench)] = wrench
+        aux_row = aux_row or {}
+        inputs = ModelInputs(q=[float(v) for v in q], wrench=[float(v) for v in w],
+                             temperature=aux_row.get("temperature"),
+                             tau_gravity=None if aux_row.get("tau_gravity") is None else list(aux_row["tau_gravity"]),
+                             tau_contact=None if aux_row.get("tau_contact") is None else list(aux_row["tau_contact"]))
+        rows, p_last, compliance = split_params(self.desc, p[: self.base_size])
+        geom = Geometry([list(r) for r in rows], list(p_last), list(compliance))
+        ops = SimpleNamespace(sin=np.sin, cos=np.cos)
+        for e, sl in self.effect_slices():
+            e.apply(self.desc, [float(v) for v in p[sl]], inputs, geom, ops)
+        d = self.desc.with_dh_table(np.array(geom.rows, dtype=float)).with_probe(
+            p_last=tuple(float(v) for v in geom.p_last), bending_compliance_x=float(geom.compliance[0]),
+            bending_compliance_y=float(geom.compliance[1]), axial_compliance=float(geom.compliance[2]))
+        return PinocchioArm(d).ball_centre(np.array(inputs.q, dtype=float)[:j], np.array(inputs.wrench, dtype=float))
+
+    def described(self, p) -> ArmDescription:
+        """The description with the base part of ``p`` folded in (effects are not representable)."""
+        return apply_params(self.desc, np.asarray(p, dtype=float)[: self.base_size])

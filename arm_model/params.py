@@ -1,0 +1,97 @@
+"""Named model parameters: the vector ``p`` that calibration identifies.
+
+``p`` holds *errors* added to the description's values, so ``p = 0`` is the description itself.
+Order, stated once and kept everywhere: for each joint, base first,
+``theta_offset [rad], d [m], a [m], alpha [rad]``; then ``probe.x, probe.y, probe.z [m]``; then
+``probe.compliance_x, probe.compliance_y, probe.compliance_z [m/N]``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .description import ArmDescription
+
+__all__ = ["ParamSpec", "param_spec", "split_params", "apply_params"]
+
+_ROW_FIELDS = (("theta_offset", "rad"), ("d", "m"), ("a", "m"), ("alpha", "rad"))
+_PROBE_FIELDS = (("probe.x", "m"), ("probe.y", "m"), ("probe.z", "m"),
+                 ("probe.compliance_x", "m/N"), ("probe.compliance_y", "m/N"),
+                 ("probe.compliance_z", "m/N"))
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """Names and SI units of the parameter vector of one arm."""
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+    n_joints: int
+
+    @property
+    def size(self) -> int:
+        return len(self.names)
+
+    @property
+    def labels(self) -> tuple[str, ...]:
+        """``"j3.d [m]"`` style labels for reports."""
+        return tuple(f"{n} [{u}]" for n, u in zip(self.names, self.units))
+
+    def index(self, name: str) -> int:
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise KeyError(f"unknown parameter {name!r}; known: {', '.join(self.names)}") from None
+
+    def vector(self, values: dict[str, float] | None = None) -> np.ndarray:
+        """A parameter vector, zero except for the named ``values`` (SI)."""
+        p = np.zeros(self.size)
+        for name, value in (values or {}).items():
+            p[self.index(name)] = value
+        return p
+
+
+def param_spec(desc: ArmDescription) -> ParamSpec:
+    names, units = [], []
+    for j in desc.joints:
+        for field, unit in _ROW_FIELDS:
+            names.append(f"{j.name}.{field}")
+            units.append(unit)
+    for field, unit in _PROBE_FIELDS:
+        names.append(field)
+        units.append(unit)
+    return ParamSpec(tuple(names), tuple(units), desc.n_joints)
+
+
+def split_params(desc: ArmDescription, p=None):
+    """(rows, p_last, compliance) of ``desc`` plus the errors ``p``.
+
+    ``p`` may be None (the description itself), a numpy vector or a CasADi SX/MX column; the
+    entries returned are floats or symbolic expressions accordingly.
+    """
+    table = desc.dh_table()
+    probe = desc.probe
+    p_last = list(probe.p_last)
+    compliance = list(probe.compliance)
+    rows = [[float(v) for v in r] for r in table]
+    if p is None:
+        return rows, p_last, compliance
+    n = desc.n_joints
+    rows = [[rows[i][k] + p[4 * i + k] for k in range(4)] for i in range(n)]
+    p_last = [p_last[k] + p[4 * n + k] for k in range(3)]
+    compliance = [compliance[k] + p[4 * n + 3 + k] for k in range(3)]
+    return rows, p_last, compliance
+
+
+def apply_params(desc: ArmDescription, p) -> ArmDescription:
+    """A new description with the errors ``p`` (numeric) folded into its values."""
+    p = np.asarray(p, dtype=float)
+    spec = param_spec(desc)
+    if p.shape != (spec.size,):
+        raise ValueError(f"parameter vector has shape {p.shape}, expected ({spec.size},)")
+    rows, p_last, compliance = split_params(desc, p)
+    out = desc.with_dh_table(np.array(rows, dtype=float))
+    return out.with_probe(p_last=tuple(float(v) for v in p_last),
+                          bending_compliance_x=float(compliance[0]),
+                          bending_compliance_y=float(compliance[1]),
+                          axial_compliance=float(compliance[2]))
