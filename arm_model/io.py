@@ -114,6 +114,21 @@ def _parse_float(cell: str) -> float | None:
         return None
 
 
+def _csv_records(text: str, path: str) -> list[tuple[int, list[str]]]:
+    """Non-blank CSV records with their physical line; a record may not span lines."""
+    out = []
+    for no, line in enumerate(text.splitlines(), start=1):
+        if not line.strip():
+            continue
+        try:
+            rec = next(csv.reader([line], strict=True))
+        except csv.Error as exc:
+            raise InputError(f"not valid CSV: {exc}", path, no) from None
+        if any(c.strip() for c in rec):
+            out.append((no, rec))
+    return out
+
+
 def read_points(path: str | Path, n_joints: int | None = None) -> PointSet:
     """Read a points CSV (DATA-FORMATS §3).
 
@@ -136,9 +151,7 @@ def read_points(path: str | Path, n_joints: int | None = None) -> PointSet:
 
 def parse_points(text: str, path: str = "<string>", n_joints: int | None = None) -> PointSet:
     """Parse points CSV text; see :func:`read_points`."""
-    rows = list(csv.reader(io.StringIO(text)))
-    # keep the physical line of each record (csv may span lines inside quotes; we do not allow that)
-    records = [(no, r) for no, r in enumerate(rows, start=1) if any(c.strip() for c in r)]
+    records = _csv_records(text, path)
     if not records:
         raise InputError("the file is empty (expected a header line and at least one point)", path, 1)
     header_line, header = records[0]
@@ -433,7 +446,7 @@ def read_force_signal(path: str | Path) -> ForceSignal:
         raise InputError(f"cannot read the force signal: {exc.strerror}", path) from None
     except UnicodeDecodeError:
         raise InputError("not UTF-8 text", path) from None
-    rows = [(no, r) for no, r in enumerate(csv.reader(io.StringIO(text)), start=1) if any(c.strip() for c in r)]
+    rows = _csv_records(text, str(path))
     if len(rows) < 2:
         raise InputError("the file is empty (expected a header and samples)", path, 1)
     hline, header = rows[0]
@@ -510,7 +523,11 @@ def write_csv(path: str | Path, columns: dict, inputs=(), fmt: str = "%.9g") -> 
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(names)
-    cols = [np.asarray(columns[k]) for k in names]
-    for i in range(n.pop() if n else 0):
-        w.writerow([c[i] if c.dtype.kind in "OUS" else (fmt % c[i]) for c in cols])
+    def cells(c: np.ndarray) -> list[str]:
+        if c.dtype.kind in "iub":
+            return [str(int(v)) for v in c]
+        if c.dtype.kind == "f":
+            return [fmt % v for v in c]
+        return [str(v) for v in c]
+    w.writerows(zip(*(cells(np.asarray(columns[k])) for k in names)))
     return atomic_write_text(path, buf.getvalue(), inputs)

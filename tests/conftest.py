@@ -1,0 +1,41 @@
+"""Shared test helpers: paths, the nominal arm, one array comparison that also rejects NaN."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+NOMINAL = ROOT / "urdf" / "aacmm7.dh.toml"
+
+
+def assert_close(actual, expected, atol: float, rtol: float = 0.0, msg: str = "") -> None:
+    """np.testing.assert_allclose that also fails on NaN/inf in either side."""
+    a, e = np.asarray(actual, dtype=float), np.asarray(expected, dtype=float)
+    assert np.all(np.isfinite(a)), f"non-finite values in actual {msg}"
+    assert np.all(np.isfinite(e)), f"non-finite values in expected {msg}"
+    np.testing.assert_allclose(a, e, atol=atol, rtol=rtol, err_msg=msg)
+
+
+def fd_jacobian(fun, x, eps: float = 1e-6) -> np.ndarray:
+    """Central finite-difference Jacobian of fun: R^n -> R^m at x."""
+    x = np.asarray(x, dtype=float)
+    cols = []
+    for k in range(x.size):
+        dx = np.zeros_like(x)
+        dx[k] = eps
+        cols.append((np.asarray(fun(x + dx)) - np.asarray(fun(x - dx))) / (2 * eps))
+    return np.column_stack(cols)
+
+
+@pytest.fixture(scope="session")
+def nominal():
+    from arm_model import load_description
+    return load_description(NOMINAL)
+
+
+@pytest.fixture(scope="session")
+def pin_arm(nominal):
+    from arm_model import PinocchioArm
+    return PinocchioArm(nominal)
