@@ -12,6 +12,7 @@ from .kinematics import ball_centres, rigid_centres
 from .io import (PointSet, Artefacts, Feature, Distance, ForceSignal, read_points, read_artefacts,
                  read_force_signal, check_features, atomic_write_text, write_csv)
 from .urdf import urdf_text
+from .urdf_import import load_arm, description_from_urdf
 
 __all__ = [
     "AacmmError", "InputError", "NumericalError",
@@ -20,7 +21,7 @@ __all__ = [
     "ball_centres", "rigid_centres",
     "PointSet", "Artefacts", "Feature", "Distance", "ForceSignal", "read_points", "read_artefacts",
     "read_force_signal", "check_features", "atomic_write_text", "write_csv",
-    "urdf_text", "PinocchioArm", "casadi_ball_centre",
+    "urdf_text", "load_arm", "description_from_urdf", "PinocchioArm", "casadi_ball_centre",
 ]
 
 

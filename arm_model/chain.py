@@ -8,7 +8,8 @@ independent third evaluator built from the URDF, and the tests hold all three to
 
 Geometry (all SI):
 
-* ``rows``: one (theta_offset [rad], d [m], a [m], alpha [rad]) per joint, base first.
+* ``rows``: one (theta_offset [rad], d [m], a [m], alpha [rad]) per joint, base first (for URDF
+  chains: the joint origin (x, y, z [m], roll, pitch, yaw [rad]) and a constant unit axis).
   Standard DH: ``T_{i-1,i} = Rz(theta_offset + q) Tz(d) Tx(a) Rx(alpha)``;
   modified DH: ``T_{i-1,i} = Rx(alpha) Tx(a) Rz(theta_offset + q) Tz(d)``.
 * ``p_last``: the probe ball centre (x, y, z) [m] in the last joint frame with a rigid stylus.
@@ -80,14 +81,38 @@ def ball_in_last_frame(p_last, q_e, ops=NUMPY_OPS):
             length * cx_ * cy_)
 
 
-def chain_point(convention: str, rows, q, point, ops=NUMPY_OPS):
+def _rotate_axis(axis, c, s, x, y, z):
+    """Rodrigues: rotate (x, y, z) by the angle (cos c, sin s) about the constant unit ``axis``."""
+    kx, ky, kz = axis
+    if (kx, ky, kz) == (0.0, 0.0, 1.0):
+        return c * x - s * y, s * x + c * y, z
+    dot = (kx * x + ky * y + kz * z) * (1 - c)
+    return (x * c + (ky * z - kz * y) * s + kx * dot,
+            y * c + (kz * x - kx * z) * s + ky * dot,
+            z * c + (kx * y - ky * x) * s + kz * dot)
+
+
+def chain_point(convention: str, rows, q, point, ops=NUMPY_OPS, axes=None):
     """Map ``point`` (x, y, z) given in the last joint frame to the base frame.
 
-    ``rows[i]`` = (theta_offset, d, a, alpha) of joint i; ``q[i]`` its angle [rad]. Works from the
+    ``rows[i]`` = (theta_offset, d, a, alpha) of joint i for DH/MDH, or (x, y, z, roll, pitch, yaw)
+    of its URDF origin (then ``axes[i]`` is its unit axis); ``q[i]`` its angle [rad]. Works from the
     last joint inwards, carrying only the point (three numbers a point), never a matrix.
     """
     x, y, z = point
     for i in range(len(rows) - 1, -1, -1):
+        if convention == "urdf":    # T_origin(xyz, Rz(yaw) Ry(pitch) Rx(roll)) R(axis, q) p
+            ox, oy, oz, roll, pitch, yaw = rows[i]
+            cq, sq = _cos_sin(q[i], ops)
+            x, y, z = _rotate_axis(axes[i], cq, sq, x, y, z)
+            cr, sr = _cos_sin(roll, ops)
+            y, z = cr * y - sr * z, sr * y + cr * z
+            cp, sp = _cos_sin(pitch, ops)
+            x, z = cp * x + sp * z, -sp * x + cp * z
+            cw, sw = _cos_sin(yaw, ops)
+            x, y = cw * x - sw * y, sw * x + cw * y
+            x, y, z = x + ox, y + oy, z + oz
+            continue
         theta_offset, d, a, alpha = rows[i]
         ca, sa = _cos_sin(alpha, ops)
         ct, st = _cos_sin(theta_offset + q[i], ops)
@@ -106,10 +131,10 @@ def chain_point(convention: str, rows, q, point, ops=NUMPY_OPS):
     return x, y, z
 
 
-def ball_centre_expr(convention: str, rows, p_last, compliance, q, wrench=None, ops=NUMPY_OPS):
+def ball_centre_expr(convention: str, rows, p_last, compliance, q, wrench=None, ops=NUMPY_OPS, axes=None):
     """Deflection-aware ball centre (x, y, z) [m] in the base frame: FK of (q, q_e(wrench))."""
     if wrench is None:
         q_e = (0.0, 0.0, 0.0)
     else:
         q_e = elastic_displacement(p_last, compliance, wrench)
-    return chain_point(convention, rows, q, ball_in_last_frame(p_last, q_e, ops), ops)
+    return chain_point(convention, rows, q, ball_in_last_frame(p_last, q_e, ops), ops, axes)

@@ -16,7 +16,10 @@ from ._errors import InputError
 from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, split_unit
 
 __all__ = ["JointRow", "Probe", "ArmDescription", "load_description", "parse_description",
-           "format_description", "GRAVITY"]
+           "format_description", "GRAVITY", "DH_ROW_FIELDS", "URDF_ROW_FIELDS"]
+
+DH_ROW_FIELDS = ("theta_offset", "d", "a", "alpha")
+URDF_ROW_FIELDS = ("origin_x", "origin_y", "origin_z", "origin_roll", "origin_pitch", "origin_yaw")
 
 #: gravity in the base frame [m/s^2] (DATA-FORMATS §2: -z of the base frame)
 GRAVITY = np.array([0.0, 0.0, -9.81])
@@ -24,20 +27,27 @@ GRAVITY = np.array([0.0, 0.0, -9.81])
 
 @dataclass(frozen=True)
 class JointRow:
-    """One DH row. ``theta_offset`` [rad], ``d`` [m], ``a`` [m], ``alpha`` [rad].
+    """One joint row.
+
+    DH and modified DH: ``theta_offset`` [rad], ``d`` [m], ``a`` [m], ``alpha`` [rad].
+    URDF chains (convention "urdf"): ``origin`` = (x, y, z [m], roll, pitch, yaw [rad]) of the joint in
+    its parent's frame (URDF ``<origin>``) and ``axis`` (unit vector, joint frame); the DH fields are 0.
 
     ``lower``/``upper`` [rad] are the joint limits (None if not given), ``mass`` [kg] the mass of the
-    link this joint moves, ``com`` [m] its centre of mass in the row's end frame (after Rx(alpha)).
+    link this joint moves, ``com`` [m] its centre of mass in the row's end frame (after Rx(alpha) for
+    DH; the joint's child frame for MDH and URDF).
     """
     name: str
-    theta_offset: float
-    d: float
-    a: float
-    alpha: float
+    theta_offset: float = 0.0
+    d: float = 0.0
+    a: float = 0.0
+    alpha: float = 0.0
     lower: float | None = None
     upper: float | None = None
     mass: float = 0.0
     com: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    origin: tuple[float, float, float, float, float, float] | None = None
+    axis: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -66,7 +76,8 @@ class Probe:
 
 @dataclass(frozen=True)
 class ArmDescription:
-    """A serial arm: DH rows from the base out and a probe. ``convention`` is "dh" or "mdh"."""
+    """A serial arm: joint rows from the base out and a probe. ``convention`` is "dh", "mdh" or
+    "urdf" (rows are URDF joint origins and axes)."""
     name: str
     convention: str
     joints: tuple[JointRow, ...]
@@ -81,15 +92,35 @@ class ArmDescription:
     def joint_names(self) -> tuple[str, ...]:
         return tuple(j.name for j in self.joints)
 
-    def dh_table(self) -> np.ndarray:
-        """(J, 4) array of (theta_offset [rad], d [m], a [m], alpha [rad])."""
+    @property
+    def row_fields(self) -> tuple[str, ...]:
+        """Names of the geometric values of one row, in :meth:`row_table` order (SI)."""
+        return URDF_ROW_FIELDS if self.convention == "urdf" else DH_ROW_FIELDS
+
+    def row_table(self) -> np.ndarray:
+        """(J, 4) (theta_offset, d, a, alpha) for DH/MDH, (J, 6) (x, y, z, roll, pitch, yaw) for URDF."""
+        if self.convention == "urdf":
+            return np.array([j.origin for j in self.joints], dtype=float)
         return np.array([[j.theta_offset, j.d, j.a, j.alpha] for j in self.joints], dtype=float)
 
-    def with_dh_table(self, table: np.ndarray) -> "ArmDescription":
+    def with_row_table(self, table: np.ndarray) -> "ArmDescription":
         table = np.asarray(table, dtype=float)
-        joints = tuple(replace(j, theta_offset=float(r[0]), d=float(r[1]), a=float(r[2]), alpha=float(r[3]))
-                       for j, r in zip(self.joints, table))
+        if self.convention == "urdf":
+            joints = tuple(replace(j, origin=tuple(float(v) for v in r)) for j, r in zip(self.joints, table))
+        else:
+            joints = tuple(replace(j, theta_offset=float(r[0]), d=float(r[1]), a=float(r[2]), alpha=float(r[3]))
+                           for j, r in zip(self.joints, table))
         return replace(self, joints=joints)
+
+    @property
+    def axes(self) -> tuple | None:
+        """Joint axes (URDF chains), None for DH/MDH (z)."""
+        return tuple(j.axis for j in self.joints) if self.convention == "urdf" else None
+
+    @property
+    def length_indices(self) -> tuple[int, ...]:
+        """Indices of the row values that are lengths (thermal growth scales them)."""
+        return (0, 1, 2) if self.convention == "urdf" else (1, 2)
 
     def with_probe(self, **changes) -> "ArmDescription":
         return replace(self, probe=replace(self.probe, **changes))
@@ -101,6 +132,13 @@ class ArmDescription:
 _JOINT_KEYS = {  # base name -> (quantity, required)
     "theta_offset": ("angle", True), "d": ("length", True), "a": ("length", True),
     "alpha": ("angle", True), "lower": ("angle", False), "upper": ("angle", False),
+    "mass": ("mass", False), "com_x": ("length", False), "com_y": ("length", False),
+    "com_z": ("length", False),
+}
+_URDF_JOINT_KEYS = {
+    "origin_x": ("length", True), "origin_y": ("length", True), "origin_z": ("length", True),
+    "origin_roll": ("angle", True), "origin_pitch": ("angle", True), "origin_yaw": ("angle", True),
+    "lower": ("angle", False), "upper": ("angle", False),
     "mass": ("mass", False), "com_x": ("length", False), "com_y": ("length", False),
     "com_z": ("length", False),
 }
@@ -197,15 +235,27 @@ def parse_description(text: str, path: str = "<string>") -> ArmDescription:
     if not isinstance(name, str) or not name:
         raise r.error("missing or empty 'name'", "", 0, "name")
     convention = data.get("convention")
-    if convention not in ("dh", "mdh"):
-        raise r.error(f"'convention' must be \"dh\" or \"mdh\", got {convention!r}", "", 0, "convention")
+    if convention not in ("dh", "mdh", "urdf"):
+        raise r.error(f"'convention' must be \"dh\", \"mdh\" or \"urdf\", got {convention!r}", "", 0,
+                      "convention")
     rows = data.get("joint")
     if not isinstance(rows, list) or not rows:
         raise r.error("no [[joint]] rows", "", 0, "joint")
     joints = []
     seen = set()
     for i, row in enumerate(rows):
-        v = r.values(row, _JOINT_KEYS, "joint", i, text_keys=("name",))
+        if convention == "urdf":
+            row = dict(row)
+            axis = row.pop("axis", None)
+            if (not isinstance(axis, list) or len(axis) != 3
+                    or not all(isinstance(a, (int, float)) and not isinstance(a, bool) for a in axis)
+                    or not math.isfinite(sum(axis)) or math.hypot(*axis) < 1e-9):
+                raise r.error("a URDF row needs 'axis = [x, y, z]', a non-zero direction (no unit)",
+                              "joint", i, "axis")
+            norm = math.hypot(*axis)
+            axis = tuple(float(a) / norm for a in axis)
+        v = r.values(row, _URDF_JOINT_KEYS if convention == "urdf" else _JOINT_KEYS, "joint", i,
+                     text_keys=("name",))
         jname = row.get("name", f"j{i + 1}")
         if jname in seen:
             raise r.error(f"joint name '{jname}' is used twice", "joint", i, "name")
@@ -214,10 +264,13 @@ def parse_description(text: str, path: str = "<string>") -> ArmDescription:
             raise r.error("lower limit is not below upper limit", "joint", i, "lower_deg")
         if v.get("mass", 0.0) < 0:
             raise r.error("mass must not be negative", "joint", i, "mass_kg")
-        joints.append(JointRow(
-            name=jname, theta_offset=v["theta_offset"], d=v["d"], a=v["a"], alpha=v["alpha"],
-            lower=v.get("lower"), upper=v.get("upper"), mass=v.get("mass", 0.0),
-            com=(v.get("com_x", 0.0), v.get("com_y", 0.0), v.get("com_z", 0.0))))
+        common = dict(name=jname, lower=v.get("lower"), upper=v.get("upper"), mass=v.get("mass", 0.0),
+                      com=(v.get("com_x", 0.0), v.get("com_y", 0.0), v.get("com_z", 0.0)))
+        if convention == "urdf":
+            joints.append(JointRow(origin=tuple(v[k] for k in URDF_ROW_FIELDS), axis=axis, **common))
+        else:
+            joints.append(JointRow(theta_offset=v["theta_offset"], d=v["d"], a=v["a"], alpha=v["alpha"],
+                                   **common))
     ptab = data.get("probe")
     if not isinstance(ptab, dict):
         raise r.error("missing [probe] table", "", 0, "probe")
@@ -266,10 +319,15 @@ def format_description(desc: ArmDescription, comment: str | None = None) -> str:
         out += [f"# {line}" for line in comment.splitlines()]
     out += [f'name = "{desc.name}"', f'convention = "{desc.convention}"', ""]
     for j in desc.joints:
-        out += ["[[joint]]", f'name = "{j.name}"',
-                f"theta_offset_deg = {_num(j.theta_offset * deg)}",
-                f"d_mm = {_num(j.d * 1e3)}", f"a_mm = {_num(j.a * 1e3)}",
-                f"alpha_deg = {_num(j.alpha * deg)}"]
+        out += ["[[joint]]", f'name = "{j.name}"']
+        if desc.convention == "urdf":
+            out += [f"origin_{k}_mm = {_num(v * 1e3)}" for k, v in zip("xyz", j.origin[:3])]
+            out += [f"origin_{k}_deg = {_num(v * deg)}" for k, v in zip(("roll", "pitch", "yaw"), j.origin[3:])]
+            out.append(f"axis = [{', '.join(_num(a) for a in j.axis)}]")
+        else:
+            out += [f"theta_offset_deg = {_num(j.theta_offset * deg)}",
+                    f"d_mm = {_num(j.d * 1e3)}", f"a_mm = {_num(j.a * 1e3)}",
+                    f"alpha_deg = {_num(j.alpha * deg)}"]
         if j.lower is not None:
             out.append(f"lower_deg = {_num(j.lower * deg)}")
         if j.upper is not None:

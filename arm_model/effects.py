@@ -127,7 +127,7 @@ class JointCompliance(Effect):
 
 @dataclass(frozen=True)
 class ThermalGrowth(Effect):
-    """Link lengths d and a grow by ``(1 + alpha (T - 20 °C))``; one alpha [1/K] for the links of
+    """Link lengths (d and a; a URDF origin's xyz) grow by ``(1 + alpha (T - 20 °C))``; one alpha [1/K] for the links of
     ``joints`` (all by default), or one per joint with ``per_joint=True``."""
     per_joint: bool = False
     key: str = field(default="thermal", init=False, repr=False)
@@ -145,8 +145,8 @@ class ThermalGrowth(Effect):
         rows = [list(r) for r in geom.rows]
         for k, i in enumerate(self.joint_indices(desc)):
             scale = 1.0 + params[k if self.per_joint else 0] * dt
-            rows[i][1] = rows[i][1] * scale
-            rows[i][2] = rows[i][2] * scale
+            for m in desc.length_indices:
+                rows[i][m] = rows[i][m] * scale
         geom.rows = rows
 
 

@@ -72,7 +72,7 @@ class ArmModel:
             params = [p[i] for i in range(sl.start, sl.stop)] if p is not None else [0.0] * (sl.stop - sl.start)
             e.apply(self.desc, params, inputs, geom, ops)
         return ball_centre_expr(self.desc.convention, geom.rows, geom.p_last, geom.compliance,
-                                inputs.q, inputs.wrench, ops)
+                                inputs.q, inputs.wrench, ops, self.desc.axes)
 
     def _check_aux(self, aux: AuxData | None, n: int) -> AuxData:
         aux = aux or AuxData()
@@ -165,7 +165,7 @@ class ArmModel:
         ops = SimpleNamespace(sin=np.sin, cos=np.cos)
         for e, sl in self.effect_slices():
             e.apply(self.desc, [float(v) for v in p[sl]], inputs, geom, ops)
-        d = self.desc.with_dh_table(np.array(geom.rows, dtype=float)).with_probe(
+        d = self.desc.with_row_table(np.array(geom.rows, dtype=float)).with_probe(
             p_last=tuple(float(v) for v in geom.p_last), bending_compliance_x=float(geom.compliance[0]),
             bending_compliance_y=float(geom.compliance[1]), axial_compliance=float(geom.compliance[2]))
         return PinocchioArm(d).ball_centre(np.array(inputs.q, dtype=float)[:j], np.array(inputs.wrench, dtype=float))

@@ -2,7 +2,8 @@
 
 ``p`` holds *errors* added to the description's values, so ``p = 0`` is the description itself.
 Order, stated once and kept everywhere: for each joint, base first,
-``theta_offset [rad], d [m], a [m], alpha [rad]``; then ``probe.x, probe.y, probe.z [m]``; then
+``theta_offset [rad], d [m], a [m], alpha [rad]`` (DH and MDH) or ``origin_x, origin_y, origin_z [m],
+origin_roll, origin_pitch, origin_yaw [rad]`` (URDF chains); then ``probe.x, probe.y, probe.z [m]``; then
 ``probe.compliance_x, probe.compliance_y, probe.compliance_z [m/N]``.
 """
 from __future__ import annotations
@@ -15,7 +16,8 @@ from .description import ArmDescription
 
 __all__ = ["ParamSpec", "param_spec", "split_params", "apply_params"]
 
-_ROW_FIELDS = (("theta_offset", "rad"), ("d", "m"), ("a", "m"), ("alpha", "rad"))
+_UNITS = {"theta_offset": "rad", "d": "m", "a": "m", "alpha": "rad", "origin_x": "m", "origin_y": "m",
+          "origin_z": "m", "origin_roll": "rad", "origin_pitch": "rad", "origin_yaw": "rad"}
 _PROBE_FIELDS = (("probe.x", "m"), ("probe.y", "m"), ("probe.z", "m"),
                  ("probe.compliance_x", "m/N"), ("probe.compliance_y", "m/N"),
                  ("probe.compliance_z", "m/N"))
@@ -54,9 +56,9 @@ class ParamSpec:
 def param_spec(desc: ArmDescription) -> ParamSpec:
     names, units = [], []
     for j in desc.joints:
-        for field, unit in _ROW_FIELDS:
+        for field in desc.row_fields:
             names.append(f"{j.name}.{field}")
-            units.append(unit)
+            units.append(_UNITS[field])
     for field, unit in _PROBE_FIELDS:
         names.append(field)
         units.append(unit)
@@ -69,17 +71,17 @@ def split_params(desc: ArmDescription, p=None):
     ``p`` may be None (the description itself), a numpy vector or a CasADi SX/MX column; the
     entries returned are floats or symbolic expressions accordingly.
     """
-    table = desc.dh_table()
+    table = desc.row_table()
     probe = desc.probe
     p_last = list(probe.p_last)
     compliance = list(probe.compliance)
     rows = [[float(v) for v in r] for r in table]
     if p is None:
         return rows, p_last, compliance
-    n = desc.n_joints
-    rows = [[rows[i][k] + p[4 * i + k] for k in range(4)] for i in range(n)]
-    p_last = [p_last[k] + p[4 * n + k] for k in range(3)]
-    compliance = [compliance[k] + p[4 * n + 3 + k] for k in range(3)]
+    n, m = desc.n_joints, len(desc.row_fields)
+    rows = [[rows[i][k] + p[m * i + k] for k in range(m)] for i in range(n)]
+    p_last = [p_last[k] + p[m * n + k] for k in range(3)]
+    compliance = [compliance[k] + p[m * n + 3 + k] for k in range(3)]
     return rows, p_last, compliance
 
 
@@ -90,7 +92,7 @@ def apply_params(desc: ArmDescription, p) -> ArmDescription:
     if p.shape != (spec.size,):
         raise ValueError(f"parameter vector has shape {p.shape}, expected ({spec.size},)")
     rows, p_last, compliance = split_params(desc, p)
-    out = desc.with_dh_table(np.array(rows, dtype=float))
+    out = desc.with_row_table(np.array(rows, dtype=float))
     return out.with_probe(p_last=tuple(float(v) for v in p_last),
                           bending_compliance_x=float(compliance[0]),
                           bending_compliance_y=float(compliance[1]),

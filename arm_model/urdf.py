@@ -51,6 +51,14 @@ def rpy_from_matrix(r: np.ndarray) -> tuple[float, float, float]:
     return (math.atan2(sp * r[0, 1], r[1, 1]), sp * math.pi / 2, 0.0)
 
 
+def _origin_matrix(origin) -> np.ndarray:
+    """4x4 of a URDF origin (x, y, z, roll, pitch, yaw): T(xyz) Rz(yaw) Ry(pitch) Rx(roll)."""
+    x, y, z, roll, pitch, yaw = origin
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    ry = np.array([[cp, 0, sp, 0], [0, 1, 0, 0], [-sp, 0, cp, 0], [0, 0, 0, 1.0]])
+    return _tr(x, y, z) @ _rz(yaw) @ ry @ _rx(roll)
+
+
 def _f(x: float) -> str:
     return repr(float(x))
 
@@ -113,7 +121,15 @@ def urdf_text(desc: ArmDescription) -> str:
     parent = "base_link"
     tail_prev = np.eye(4)   # the previous row's tail, for standard DH
     for i, j in enumerate(desc.joints):
-        if desc.convention == "dh":
+        axis = (0.0, 0.0, 1.0)
+        if desc.convention == "urdf":
+            origin = _origin_matrix(j.origin)
+            tail = np.eye(4)
+            axis = j.axis
+            nxt = desc.joints[i + 1] if i + 1 < n else None
+            waypoints = [(0, 0, 0), tuple(_origin_matrix(nxt.origin)[:3, 3])] if nxt else [(0, 0, 0)]
+            row_end = np.eye(4)
+        elif desc.convention == "dh":
             origin = tail_prev @ _rz(j.theta_offset)
             tail = _tr(0, 0, j.d) @ _tr(j.a, 0, 0) @ _rx(j.alpha)
             waypoints = [(0, 0, 0), (0, 0, j.d), (j.a, 0, j.d)]
@@ -131,7 +147,7 @@ def urdf_text(desc: ArmDescription) -> str:
         lower = j.lower if j.lower is not None else -2 * math.pi
         upper = j.upper if j.upper is not None else 2 * math.pi
         lines.append(f'  <joint name="{escape(j.name)}" type="revolute"><parent link="{parent}"/>'
-                     f'<child link="link_{i + 1}"/>{_origin(origin)}<axis xyz="0 0 1"/>'
+                     f'<child link="link_{i + 1}"/>{_origin(origin)}<axis xyz="{_f(axis[0])} {_f(axis[1])} {_f(axis[2])}"/>'
                      f'<limit lower="{_f(lower)}" upper="{_f(upper)}" effort="100" velocity="3"/></joint>')
         visuals = [_joint_housing(float(radii[i]) * 1.3)]
         for a, b in zip(waypoints[:-1], waypoints[1:]):

@@ -1,0 +1,93 @@
+"""Arms given as a URDF: the chain to --tip-frame, origin-error parameters, three evaluators agree."""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from arm_model import InputError, PinocchioArm, apply_params, ball_centres, casadi_ball_centre, param_spec
+from arm_model.description import format_description, parse_description
+from arm_model.urdf import urdf_text
+from arm_model.urdf_import import description_from_urdf, load_arm
+from conftest import assert_close
+
+
+def arm_urdf(nominal) -> str:
+    """The nominal arm as a plain URDF: the probe as a fixed 'tip' link, a side branch, a fixed joint
+    inside the chain (the flange), and one joint axis that is not z (j7 turned about -z -> axis 0 0 -1)."""
+    text = urdf_text(nominal)
+    text = text[: text.index('  <joint name="stylus_root_joint"')]
+    text += ('  <joint name="tip_joint" type="fixed"><parent link="flange"/><child link="tip"/>'
+             '<origin xyz="0.001 -0.002 0.085" rpy="0.3 0 0"/></joint>\n  <link name="tip"/>\n'
+             '  <joint name="finger" type="revolute"><parent link="link_3"/><child link="finger_link"/>'
+             '<origin xyz="0.1 0 0" rpy="0 0 0"/><axis xyz="1 0 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>\n'
+             '  <link name="finger_link"/>\n</robot>\n')
+    return text
+
+
+def test_urdf_chain_matches_the_dh_arm(nominal, tmp_path):
+    path = tmp_path / "arm.urdf"
+    path.write_text(arm_urdf(nominal))
+    d = description_from_urdf(path, "tip")
+    assert d.convention == "urdf" and d.joint_names == nominal.joint_names
+    # the last joint frame of a URDF chain is j7's child link: the flange lies d7 = 95 mm beyond it
+    assert_close(d.probe.p_last, [0.001, -0.002, 0.180], atol=1e-15)
+    ref = nominal.with_probe(p_last=(0.001, -0.002, 0.085))
+    rng = np.random.default_rng(0)
+    q = rng.uniform(-3, 3, (50, 7))
+    assert_close(ball_centres(d, q), ball_centres(ref, q), atol=1e-12)
+    # with force: same first-order deflection C F; the bending hinge sits at z = 0 of the last joint
+    # frame, so the lever differs (180 vs 85 mm) and so does the second-order drop (c F)^2 / 2L < 1e-8 m
+    w = rng.normal(0, 1, (50, 3))
+    w *= 3.0 / np.linalg.norm(w, axis=1)[:, None]      # 3 N: (c F)^2 (1/0.17 - 1/0.36) = 5.7e-9 m
+    assert_close(ball_centres(d, q, w), ball_centres(ref, q, w), atol=6e-9)
+
+
+def test_urdf_chain_three_evaluators_with_origin_errors(nominal, tmp_path):
+    path = tmp_path / "arm.urdf"
+    text = arm_urdf(nominal)
+    assert '<axis xyz="0.0 0.0 1.0"/>' in text
+    path.write_text(text.replace('<axis xyz="0.0 0.0 1.0"/>', '<axis xyz="0 0.6 0.8"/>', 1))
+    d = load_arm(path, "tip")
+    assert_close(d.joints[0].axis, [0, 0.6, 0.8], atol=1e-15)
+    spec = param_spec(d)
+    assert spec.names[:6] == ("j1.origin_x", "j1.origin_y", "j1.origin_z", "j1.origin_roll",
+                              "j1.origin_pitch", "j1.origin_yaw")
+    rng = np.random.default_rng(1)
+    p = np.array([rng.normal(0, {"m": 1e-4, "rad": 1e-3, "m/N": 1e-6}[u]) for u in spec.units])
+    dp = apply_params(d, p)
+    arm, f = PinocchioArm(dp), casadi_ball_centre(d)
+    q = rng.uniform(-3, 3, (10, 7))
+    w = np.zeros((10, 6)); w[:, :3] = rng.normal(0, 3, (10, 3))
+    batch = ball_centres(d, q, w, p)
+    for i in range(10):
+        assert_close(arm.ball_centre(q[i], w[i]), batch[i], atol=1e-12)
+        assert_close(np.array(f(q[i], w[i], p)).ravel(), batch[i], atol=1e-12)
+
+
+def test_urdf_description_roundtrips_through_toml(nominal, tmp_path):
+    path = tmp_path / "arm.urdf"
+    path.write_text(arm_urdf(nominal))
+    d = description_from_urdf(path, "tip")
+    back = parse_description(format_description(d))
+    q = np.random.default_rng(2).uniform(-3, 3, (20, 7))
+    assert_close(ball_centres(back, q), ball_centres(d, q), atol=1e-12)
+
+
+@pytest.mark.parametrize("tip, words", [("nowhere", "no link named"), ("link_7", "beyond the last joint")])
+def test_urdf_bad_tip_frame(nominal, tmp_path, tip, words):
+    path = tmp_path / "arm.urdf"
+    path.write_text(arm_urdf(nominal))
+    with pytest.raises(InputError, match=words):
+        description_from_urdf(path, tip)
+
+
+def test_urdf_without_tip_frame_and_bad_xml(tmp_path):
+    path = tmp_path / "arm.urdf"
+    path.write_text("<robot><link name='a'>")
+    with pytest.raises(InputError, match="--tip-frame"):
+        load_arm(path)
+    with pytest.raises(InputError) as exc:
+        load_arm(path, "a")
+    assert exc.value.line == 1
