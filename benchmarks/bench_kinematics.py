@@ -26,7 +26,7 @@ def _best(fun, repeats: int) -> float:
     return best
 
 
-def main(sizes=(10**3, 10**4, 10**5, 10**6), loop_n: int = 20_000) -> dict:
+def main(sizes=(10**3, 10**4, 10**5, 10**6, 10**7), loop_n: int = 20_000) -> dict:
     desc = load_description(ARM)
     arm = PinocchioArm(desc)
     q, w = _inputs(loop_n)
@@ -37,7 +37,7 @@ def main(sizes=(10**3, 10**4, 10**5, 10**6), loop_n: int = 20_000) -> dict:
     rows = {}
     for n in sizes:
         q, w = _inputs(n)
-        reps = 5 if n <= 10**5 else 3
+        reps = 5 if n <= 10**5 else (3 if n <= 10**6 else 1)
         t2 = _best(lambda: ball_centres(desc, q, w), reps)
         t1 = _best(lambda: ball_centres(desc, q, w, threads=1), reps)
         tracemalloc.start()
