@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["AacmmError", "InputError", "NumericalError"]
+__all__ = ["AacmmError", "InputError", "NumericalError", "read_text"]
 
 
 class AacmmError(Exception):
@@ -39,3 +39,17 @@ class InputError(AacmmError):
 
 class NumericalError(AacmmError):
     """A numerical failure (no convergence, rank deficiency) that must not pass silently."""
+
+
+def read_text(path: str | Path, what: str) -> str:
+    """The UTF-8 text of a user's file (a BOM is dropped), or an InputError naming the file and,
+    for a bad byte, its line. ``what`` says which file it is ("the points file")."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read {what}: {exc.strerror}", path) from None
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise InputError("not UTF-8 text", path, raw[: exc.start].count(b"\n") + 1) from None

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._errors import InputError
+from ._errors import InputError, read_text
 from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, split_unit
 
 __all__ = ["JointRow", "Probe", "ArmDescription", "load_description", "parse_description",
@@ -294,14 +294,7 @@ def parse_description(text: str, path: str = "<string>") -> ArmDescription:
 
 def load_description(path: str | Path) -> ArmDescription:
     """Read an arm description TOML file (DATA-FORMATS §2)."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"cannot read the arm description: {exc.strerror}", path) from None
-    except UnicodeDecodeError:
-        raise InputError("not a UTF-8 text file", path) from None
-    return parse_description(text, str(path))
+    return parse_description(read_text(path, "the arm description"), str(path))
 
 
 # ---------------------------------------------------------------------------------------------

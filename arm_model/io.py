@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._errors import InputError
+from ._errors import InputError, read_text
 from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, split_unit
 
 __all__ = ["PointSet", "Feature", "Distance", "Artefacts", "ForceSignal", "read_points",
@@ -136,16 +136,7 @@ def read_points(path: str | Path, n_joints: int | None = None) -> PointSet:
         path: the CSV file.
         n_joints: number of joint columns the arm has; a different count is an error.
     """
-    path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise InputError(f"cannot read the points file: {exc.strerror}", path) from None
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        line = raw[: exc.start].count(b"\n") + 1
-        raise InputError("not UTF-8 text", path, line) from None
+    text = read_text(path, "the points file")
     return parse_points(text, str(path), n_joints)
 
 
@@ -330,14 +321,7 @@ def _toml_key_line(text: str, table: str, index: int, key: str | None) -> int | 
 
 def read_artefacts(path: str | Path) -> Artefacts:
     """Read an artefacts TOML file (DATA-FORMATS §4)."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"cannot read the artefacts file: {exc.strerror}", path) from None
-    except UnicodeDecodeError:
-        raise InputError("not UTF-8 text", path) from None
-    return parse_artefacts(text, str(path))
+    return parse_artefacts(read_text(path, "the artefacts file"), str(path))
 
 
 def parse_artefacts(text: str, path: str = "<string>") -> Artefacts:
@@ -439,13 +423,7 @@ class ForceSignal:
 
 def read_force_signal(path: str | Path) -> ForceSignal:
     """Read one force-signal CSV (``time_s`` and either f_bend/f_axial or fx/fy/fz)."""
-    pts_like = Path(path)
-    try:
-        text = pts_like.read_text(encoding="utf-8-sig")
-    except OSError as exc:
-        raise InputError(f"cannot read the force signal: {exc.strerror}", path) from None
-    except UnicodeDecodeError:
-        raise InputError("not UTF-8 text", path) from None
+    text = read_text(path, "the force signal")
     rows = _csv_records(text, str(path))
     if len(rows) < 2:
         raise InputError("the file is empty (expected a header and samples)", path, 1)
