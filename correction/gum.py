@@ -15,8 +15,9 @@ import math
 from dataclasses import dataclass, field
 
 import GTC
+import numpy as np
 
-__all__ = ["Term", "Budget", "BudgetResult", "student_k"]
+__all__ = ["Term", "Budget", "BudgetResult", "student_k", "ring_budget"]
 
 
 def student_k(dof: float, probability: float = 95.0) -> float:
@@ -149,3 +150,33 @@ class Budget:
         k = student_k(nu, p)
         influences = tuple((c.label, float(c.u)) for c in GTC.reporting.budget(y))
         return BudgetResult(self.name, self.unit, self.terms, u_c, nu, k, k * u_c, p, influences)
+
+
+def ring_budget(name: str, values, length: float, u_ring: float | None, u_cor: float | None = None, *,
+                delta_t: float = 0.5, u_alpha: float = 1e-6, resolution: float = 1e-7,
+                probability: float = 95.0, u_ring_source: str = "") -> Budget:
+    """The seed paper's ring-gauge test budget (its Eq. 10-16) for one quantity of a campaign, in mm.
+
+    Args:
+        name: e.g. "diameter, full wrench".
+        values: (M,) the quantity per measurement (diameters or form errors) [m]; u_r = s / sqrt(M), type A,
+            M - 1 degrees of freedom.
+        length: L of the thermal term u_t = L dT u(alpha) [m] (the diameter, or the form error).
+        u_ring: standard uncertainty of the reference [m] (certificate U / k), or None to leave it out.
+        u_cor: standard uncertainty of the correction [m] (2 c u_force for the diameter), None without model.
+        delta_t: temperature variation during the test [C]; u_alpha: uncertainty of the expansion
+            coefficient [1/C] (the paper: 0.5 C, 1e-6 /C).
+        resolution: resolution of the reported values [m] (the paper's software: 0.0001 mm), w/sqrt(12).
+    """
+    mm = 1e3
+    terms = []
+    if u_ring is not None:
+        terms.append(Term.normal("u_ring", u_ring * mm, source=u_ring_source or "artefact certificate"))
+    terms.append(Term.type_a("u_r", np.asarray(values, float) * mm))
+    terms.append(Term.normal("u_t", length * delta_t * u_alpha * mm, sensitivity_label="L dT",
+                             source=f"L dT u(alpha): L = {length * mm:.4g} mm, dT = {delta_t:g} C, "
+                                    f"u(alpha) = {u_alpha:g} /C"))
+    terms.append(Term.rectangular_width("u_res", resolution * mm))
+    if u_cor is not None:
+        terms.append(Term.normal("u_cor", u_cor * mm, source="2 c u_force"))
+    return Budget(name, tuple(terms), "mm", probability)

@@ -1,0 +1,126 @@
+"""``aacmm ring`` (a ring-gauge campaign, every correction model, report) and ``aacmm paper`` (the seed
+paper's tables reproduced, the loop closed on its Table 2)."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from arm_model import InputError, load_description, read_artefacts, read_points
+from arm_model.io import check_features, guard_output
+
+__all__ = ["register", "run_ring", "run_paper"]
+
+
+def _positive(kind):
+    def parse(text):
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not v > 0:
+            raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+        return v
+    parse.__name__ = kind
+    return parse
+
+
+def register(sub) -> None:
+    r = sub.add_parser(
+        "ring", help="ring-gauge campaign: force peaks, cylinder fits, the paper's four models and the "
+                     "full-wrench correction, correlations, GUM budgets, HTML report",
+        description="Analyse a ring-gauge campaign as the seed paper does and beyond. Per measurement: the force "
+                    "at each captured point (one peak of the force signal a point with --signals, else the points "
+                    "file's force columns), the ring fitted by orthogonal least squares (diameter = ball-centre "
+                    "cylinder + ball diameter, form error = max - min radial deviation), then corrected by the "
+                    "paper's four models (each point moved by f x compliance towards the axis with f = the point's "
+                    "bending force, or the measurement's mean, 10Max or max) and by the full-wrench model (ball "
+                    "centres evaluated again through the probe's elastic joint with each point's force vector). "
+                    "Writes report.html, summary.json, table2.csv, correlations.csv, budgets.csv and "
+                    "figures/*.png into the output folder.")
+    r.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3) with the ring's points")
+    r.add_argument("artefacts", type=Path, help="artefacts TOML (DATA-FORMATS §4) with the ring (kind = \"ring\")")
+    r.add_argument("--arm", type=Path, required=True, help="arm description TOML, e.g. urdf/aacmm7.dh.toml")
+    r.add_argument("--signals", type=Path, metavar="DIR",
+                   help="folder of force signals, one <measurement>.csv a measurement (DATA-FORMATS §5); "
+                        "without it the points file's force columns are used")
+    r.add_argument("--feature", help="id of the ring feature when the artefacts file has several rings")
+    r.add_argument("--compliance-mm-per-N", type=_positive("compliance"), dest="compliance",
+                   help="compliance of the paper's four models (default: the arm's probe bending compliance, "
+                        "0.0142 mm/N in the nominal arm)")
+    r.add_argument("--u-force-N", type=_positive("force"), dest="u_force", default=None,
+                   help="standard uncertainty of a measured force for the budgets' u_cor = 2 c u_force "
+                        "(default 0.0723 N: the paper's bending sensor, Table 1 terms combined)")
+    r.add_argument("--delta-T-C", type=_positive("temperature"), dest="delta_t", default=0.5,
+                   help="temperature variation during the test for the budgets' u_t (default 0.5 C, the paper's)")
+    r.add_argument("--probability-pct", type=_positive("probability"), dest="probability", default=95.0,
+                   help="coverage probability of the expanded uncertainties (default 95)")
+    r.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; never an input)")
+    r.set_defaults(func=run_ring)
+
+    p = sub.add_parser(
+        "paper", help="the seed paper's Tables 1-3 reproduced from its own data and budgets; the loop closed",
+        description="Reproduce the seed paper (Gonzalez-Madruga et al., Sensors 2013): the forces each model of "
+                    "its Table 2 implies, its Pearson coefficients and improvement figures, its uncertainty "
+                    "budgets (Tables 1 and 3) term by term with GTC, with every printed figure that does not "
+                    "follow from its own terms reported; then close the loop: the residual after the FEM probe "
+                    "correction against the force, the compliance in series that explains it, cross-validated "
+                    "leave-one-out. Writes report.html, summary.json, table2_implied.csv, findings.csv and "
+                    "figures/*.png.")
+    p.add_argument("--table2", type=Path, default=None,
+                   help="a Table 2 CSV in the bundled format (default: the bundled correction/data/paper_table2.csv)")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; never an input)")
+    p.set_defaults(func=run_paper)
+
+
+def run_ring(args: argparse.Namespace) -> int:
+    from .models import analyse_ring_campaign, campaign_summary
+    from .report import DEFAULT_U_FORCE, ring_budgets, ring_report
+
+    inputs = {"points": args.points, "artefacts": args.artefacts, "arm": args.arm}
+    guard_output(args.output, list(inputs.values()) + ([args.signals] if args.signals else []))
+    if args.signals is not None and not args.signals.is_dir():
+        raise InputError("--signals must be a folder of <measurement>.csv force signals", args.signals)
+    desc = load_description(args.arm)
+    points = read_points(args.points, desc.n_joints)
+    artefacts = read_artefacts(args.artefacts)
+    check_features(points, artefacts)
+    compliance = None if args.compliance is None else args.compliance * 1e-3
+    campaign = analyse_ring_campaign(desc, points, artefacts, args.feature, args.signals, compliance)
+    u_force = DEFAULT_U_FORCE if args.u_force is None else args.u_force
+    budgets = ring_budgets(campaign, u_force=u_force, delta_t=args.delta_t, probability=args.probability)
+    inputs["signals"] = args.signals
+    written = ring_report(campaign, args.output, inputs, budgets)
+    s = campaign_summary(campaign)
+    print(f"ring '{campaign.feature}': {len(campaign.measurements)} measurements, "
+          f"{sum(r.n_points for r in campaign.measurements)} points; forces from "
+          f"{'signals in ' + str(args.signals) if args.signals else 'the points file'}")
+    for n in campaign.notes:
+        print(f"note: {n}")
+    print(f"{'model':<12} {'mean |dD| [mm]':>15} {'reduction':>10} {'mean form [mm]':>15}")
+    for m, v in s.items():
+        print(f"{m:<12} {v['mean_abs_diameter_error_mm']:>15.4f} {v['diameter_error_reduction_pct']:>9.1f}% "
+              f"{v['mean_form_error_mm']:>15.4f}")
+    if args.u_force is None:
+        print(f"budgets: u_force = {DEFAULT_U_FORCE} N (the paper's bending sensor; set --u-force-N for yours)")
+    print(f"{len(written)} files -> {args.output}/ (report.html, summary.json, ...)")
+    return 0
+
+
+def run_paper(args: argparse.Namespace) -> int:
+    from .report import paper_report, paper_summary
+    from .paper import load_paper_table2
+
+    table = load_paper_table2(args.table2)
+    written = paper_report(args.output, args.table2)
+    s = paper_summary(table)
+    bad = [f for f in s["findings"] if not f["consistent"]]
+    print(f"Table 2 ({len(table.initial)} measurements): Pearson r with the (0, 0) point: "
+          + ", ".join(f"{c['force'].replace('_force_N', '')} {c['r']:.3f}" for c in s["pearson"] if c["with_reference"]))
+    print("improvement (reduction of the mean |diameter error|): "
+          + ", ".join(f"{m.replace('_force', '')} {d['mean_abs_reduction_pct']:.1f}%" for m, d in s["improvement"].items()))
+    print(f"{len(bad)} printed figures of Tables 1 and 3 do not follow from their own terms (see findings.csv)")
+    L = s["loop"]
+    print(f"loop: residual after the FEM correction vs mean force r = {L['r_residual_force']:.3f}; series compliance "
+          f"{L['series_compliance_mm_per_N']:.4f} mm/N; LOO RMS {L['rms_before_mm']:.4f} -> {L['loo_rms_after_mm']:.4f} mm")
+    print(f"{len(written)} files -> {args.output}/")
+    return 0
