@@ -1,0 +1,196 @@
+"""``aacmm view``: the arm at a captured point (or animated through a measurement) in a headless
+meshcat server, or written as a self-contained page / a screenshot."""
+from __future__ import annotations
+
+import argparse
+import signal
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from arm_model import InputError, ball_centres, check_features, load_description, read_artefacts, read_points
+from arm_model.io import guard_output
+
+from ._errors import ViewerError
+from .placement import place_features
+from .residuals import read_residuals
+
+__all__ = ["register", "run"]
+
+
+def _positive(kind):
+    def parse(text: str):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not v > 0:
+            raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+        return v
+    return parse
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "view", help="show the arm, probe deflection, artefacts and residuals in a headless meshcat viewer",
+        description="Show the arm at a captured point of a points file (or animated through the points) in a "
+                    "meshcat server on 127.0.0.1 with no display, and print its URL; or write the same scene as "
+                    "one self-contained HTML page (--html) or a PNG screenshot (--screenshot, headless Chromium). "
+                    "The scene: the arm (URDF visuals) with the probe deflected by the measured force, the probe "
+                    "ball, the deflection as a green arrow from the rigid to the corrected ball centre drawn "
+                    "--scale times long, the measured ball centres, artefacts placed by fitting their points "
+                    "(--artefacts) and residual vectors (--residuals). The scales are printed and written on "
+                    "the page. The server stops at Ctrl-C, at SIGTERM, or after --open-seconds.")
+    p.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
+    p.add_argument("--arm", type=Path, required=True, help="arm description TOML, e.g. urdf/aacmm7.dh.toml")
+    p.add_argument("--measurement", metavar="ID", help="only the points of this measurement (default: all)")
+    pose = p.add_mutually_exclusive_group()
+    pose.add_argument("--point", type=_positive(int), default=1, metavar="N",
+                      help="show the arm at the N-th point of the selection, file order (default 1)")
+    pose.add_argument("--animate", action="store_true",
+                      help="animate the arm through every point of the selection (embedded in --html pages)")
+    p.add_argument("--fps", type=_positive(float), default=2.0, help="points per second when animating (default 2)")
+    p.add_argument("--scale", type=_positive(float), default=1000.0,
+                   help="length of the deflection arrow per length of deflection (default 1000: 0.1 mm is "
+                        "drawn 100 mm long)")
+    p.add_argument("--artefacts", type=Path, help="artefacts TOML (DATA-FORMATS §4): draw each feature, placed "
+                   "by fitting its points in each measurement")
+    p.add_argument("--residuals", type=Path, help="residuals CSV (x_mm, y_mm, z_mm, rx_um, ry_um, rz_um, see "
+                   "docs/viewer.md): draw each residual vector")
+    p.add_argument("--residual-scale", type=_positive(float), default=1000.0,
+                   help="length of a residual line per length of residual (default 1000)")
+    p.add_argument("--html", type=Path, metavar="OUT.html", help="write the scene as a self-contained page")
+    p.add_argument("--screenshot", type=Path, metavar="OUT.png",
+                   help="render the page in headless Chromium and write a PNG (800 x 600)")
+    p.add_argument("--browser", metavar="PATH", help="Chromium executable for --screenshot (default: chromium "
+                   "on PATH)")
+    p.add_argument("--serve", action="store_true",
+                   help="keep serving after writing --html/--screenshot (serving is the default without them)")
+    p.add_argument("--port", type=int, help="web port of the server (default: the first free one from 7000)")
+    p.add_argument("--open-seconds", type=_positive(float), metavar="N",
+                   help="stop the server after N seconds (default: run until Ctrl-C)")
+    p.set_defaults(func=run)
+
+
+def _selection(points, measurement: str | None):
+    if measurement is None:
+        return points
+    mask = points.measurement == measurement
+    if not mask.any():
+        known = ", ".join(points.measurements()[:20])
+        raise InputError(f"no measurement '{measurement}' (the file has: {known})", points.path, None,
+                         "measurement")
+    return points.select(mask)
+
+
+def run(args: argparse.Namespace) -> int:
+    inputs = [f for f in (args.points, args.arm, args.artefacts, args.residuals) if f is not None]
+    for out in (args.html, args.screenshot):
+        if out is not None:
+            guard_output(out, inputs)
+    if args.html is not None and args.screenshot is not None and args.html.resolve() == args.screenshot.resolve():
+        raise InputError("--html and --screenshot name the same file", args.html)
+    if args.screenshot is not None:
+        from .browser import find_chromium
+        find_chromium(args.browser)   # before any work: a missing browser is reported at once
+    # read everything first: a bad file stops here, before a server starts or a file is written
+    desc = load_description(args.arm)
+    points = read_points(args.points, desc.n_joints)
+    artefacts = read_artefacts(args.artefacts) if args.artefacts else None
+    if artefacts is not None:
+        check_features(points, artefacts)
+    residuals = read_residuals(args.residuals) if args.residuals else None
+    sel = _selection(points, args.measurement)
+    if not args.animate and args.point > len(sel):
+        raise InputError(f"--point {args.point}: the selection has {len(sel)} point(s)", points.path)
+    wrench = sel.wrench
+    centres = ball_centres(desc, sel.q, wrench)
+    serve = args.serve or (args.html is None and args.screenshot is None)
+
+    from .view import View   # heavy backends from here on
+
+    with View(desc, port=args.port) as view:
+        if args.animate:
+            view.animate(sel.q, wrench, fps=args.fps, scale=args.scale)
+            shown = range(len(sel))
+        else:
+            i = args.point - 1
+            view.show_pose(sel.q[i], None if wrench is None else wrench[i], scale=args.scale)
+            shown = [i]
+        view.show_points(centres, name="ball centres (corrected)")
+        notes = []
+        if artefacts is not None:
+            placements, notes = place_features(artefacts, sel.measurement, sel.feature, centres)
+            view.show_artefacts(placements, artefacts.distances)
+        if residuals is not None:
+            view.show_residuals(residuals.points, residuals.vectors, scale=args.residual_scale)
+        _report(desc, sel, centres, shown, wrench, args, view, notes)
+        if args.html is not None:
+            view.write_html(args.html, inputs=inputs)
+            print(f"page -> {args.html}")
+        if args.screenshot is not None:
+            _screenshot(view, args)
+            print(f"screenshot -> {args.screenshot}")
+        if serve:
+            _serve(view, args.open_seconds)
+    return 0
+
+
+def _report(desc, sel, centres, shown, wrench, args, view, notes) -> None:
+    print(f"{len(sel)} point(s) of {sel.path}" + (f", measurement '{args.measurement}'" if args.measurement else ""))
+    for line in view.legend:
+        print("  " + line)
+    if wrench is None:
+        print("no force columns: no deflection (the arrows have zero length)")
+    elif sel.force_kind == "two-channel":
+        print("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not measured and "
+              "is taken as zero")
+    rigid = ball_centres(desc, sel.q)
+    d_um = np.linalg.norm(centres - rigid, axis=1) * 1e6
+    if len(shown) == 1:
+        i = shown[0]
+        line = "" if sel.lines is None else f", line {sel.lines[i]}"
+        print(f"point {i + 1}: measurement '{sel.measurement[i]}'{line}; ball centre (mm) "
+              + ", ".join(f"{v:.4f}" for v in centres[i] * 1e3) + f"; deflection {d_um[i]:.2f} um, drawn "
+              f"{d_um[i] * args.scale / 1e3:.1f} mm long")
+    else:
+        print(f"animated through {len(shown)} points at {args.fps:g} per second; deflection {d_um.min():.2f} to "
+              f"{d_um.max():.2f} um")
+    over = sel.over_force(desc.probe.max_force)
+    if over.any():
+        print(f"warning: {int(over.sum())} point(s) over the probe's calibrated force range "
+              f"({desc.probe.max_force:g} N); shown all the same")
+    for note in notes:
+        print("note: " + note)
+
+
+def _screenshot(view, args) -> None:
+    from .browser import screenshot
+
+    with tempfile.TemporaryDirectory(prefix="aacmm-view-") as tmp:
+        page = Path(tmp) / "scene.html"
+        page.write_text(view.html(), encoding="utf-8")
+        screenshot(page, args.screenshot, browser=args.browser)
+
+
+def _serve(view, seconds: float | None) -> None:
+    def stop(signum, frame):
+        raise SystemExit(0)
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        print(f"meshcat server: {view.url}", flush=True)
+        print("serving " + (f"for {seconds:g} s" if seconds else "until Ctrl-C"), flush=True)
+        end = None if seconds is None else time.monotonic() + seconds
+        try:
+            while end is None or time.monotonic() < end:
+                if not view.server.running:
+                    raise ViewerError(f"the meshcat server at {view.url} stopped unexpectedly")
+                time.sleep(0.2)
+        except KeyboardInterrupt:
+            pass
+        print("server stopped", flush=True)
+    finally:
+        signal.signal(signal.SIGTERM, previous)

@@ -1,0 +1,360 @@
+"""Drawing an arm and its measurement into a meshcat scene.
+
+:class:`ArmScene` draws, under one root node of a :class:`meshcat.Visualizer`: the arm from its URDF
+visuals (Pinocchio's meshcat visualiser), posed with the probe's elastic joints set by statics from
+the wrench; the probe ball (true size, plus a marker that stays visible at arm scale); the deflection
+as an arrow from the rigid to the corrected ball centre, scaled; the measured ball centres; artefacts
+placed by fitting (:mod:`viz.placement`); residual vectors, scaled. Poses can be animated
+(a meshcat animation, which a static page embeds). All inputs SI, base frame.
+
+Every scaled quantity is named with its scale in the scene tree (``deflection x1000``) and in
+:attr:`ArmScene.legend`, which the CLI prints and the static page shows.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from arm_model import ArmDescription
+
+__all__ = ["ArmScene", "Camera", "PoseInfo", "ROOT", "DEFLECTION_RGB", "RESIDUAL_RGB", "POINTS_RGB",
+           "ARTEFACT_RGB"]
+
+ROOT = "aacmm"
+DEFLECTION_RGB = 0x18C018     # green arrow
+RESIDUAL_RGB = 0xE020E0       # magenta residual vectors
+POINTS_RGB = 0xFFFFFF         # measured ball centres
+ARTEFACT_RGB = 0xB0C4DE       # light steel blue, translucent
+BALL_MARKER_RGB = 0xD01818
+_ARROW_RADIUS = 0.005         # [m] shaft radius of the deflection arrow
+_HEAD = (0.012, 0.035)        # [m] head radius and length
+
+
+# -------------------------------------------------------------------------------------------------
+# camera
+
+@dataclass(frozen=True)
+class Camera:
+    """meshcat's default perspective camera at ``position``, looking at ``target`` with z up.
+
+    meshcat's orbit controls always look at the scene origin, so :meth:`ArmScene.set_camera` shifts
+    the drawing (and the floor grid) by ``-target``; coordinates stay base-frame everywhere else.
+
+    Attributes:
+        position: (3,) camera centre [m], base frame.
+        target: (3,) the point at the centre of the page [m], base frame.
+        fov_deg: vertical field of view [deg] (meshcat's default camera has 75).
+    """
+    position: tuple
+    target: tuple = (0.0, 0.0, 0.0)
+    fov_deg: float = 75.0
+
+    def project(self, p_base, width: int, height: int) -> np.ndarray:
+        """(N, 2) pixel coordinates (x right, y down) of points (N, 3) [m] on a ``width`` x ``height``
+        page; NaN for points behind the camera."""
+        p = np.atleast_2d(np.asarray(p_base, dtype=float))
+        c = np.asarray(self.position, dtype=float)
+        f = np.asarray(self.target, dtype=float) - c
+        f /= np.linalg.norm(f)
+        r = np.cross(f, [0.0, 0.0, 1.0])
+        r /= np.linalg.norm(r)
+        u = np.cross(r, f)
+        d = p - c
+        x, y, z = d @ r, d @ u, d @ f
+        t = np.tan(np.radians(self.fov_deg) / 2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            nx = np.where(z > 0, x / (z * t * width / height), np.nan)
+            ny = np.where(z > 0, y / (z * t), np.nan)
+        return np.column_stack([(nx + 1) / 2 * width, (1 - ny) / 2 * height])
+
+    @classmethod
+    def framing(cls, p_base, direction=(0.45, -1.0, 0.45), aspect: float = 4 / 3,
+                fill: float = 0.8, pad: float = 0.06, fov_deg: float = 75.0) -> "Camera":
+        """The camera looking along ``-direction`` at the middle of the points ``p_base`` (N, 3) [m],
+        as close as keeps them, grown by ``pad`` [m] on every axis, within ``fill`` of the
+        half-width and half-height of a page of the given aspect."""
+        p = np.atleast_2d(np.asarray(p_base, dtype=float))
+        p = np.vstack([p] + [p + s * pad * e for e in np.eye(3) for s in (-1, 1)])
+        u = np.asarray(direction, dtype=float)
+        u = u / np.linalg.norm(u)
+        if abs(u[2]) > 0.99:
+            raise ValueError("the camera direction must not be vertical (z is up on the page)")
+        target = (p.min(axis=0) + p.max(axis=0)) / 2
+        dist = max(0.3, float(np.max(np.linalg.norm(p - target, axis=1))))
+        for _ in range(200):
+            cam = cls(tuple(target + dist * u), tuple(target), fov_deg)
+            ndc = np.abs(cam.project(p, 1000 * aspect, 1000) / [500 * aspect, 500] - 1)
+            if np.all(np.isfinite(ndc)) and ndc.max() <= fill:
+                return cam
+            dist *= 1.05
+        return cam
+
+    def meshcat_position(self) -> list[float]:
+        """The position in meshcat's camera node (``/Cameras/default/rotated``: y up, origin at the
+        target)."""
+        x, y, z = (float(v) for v in np.subtract(self.position, self.target))
+        return [x, z, -y]
+
+
+# -------------------------------------------------------------------------------------------------
+# arrows
+
+def _rotation_y_to(v: np.ndarray) -> np.ndarray:
+    """A rotation whose y axis is along ``v`` (meshcat cylinders and cones lie along y)."""
+    n = np.linalg.norm(v)
+    y = np.array([0.0, 1.0, 0.0]) if n < 1e-15 else v / n
+    helper = np.array([0.0, 0.0, 1.0]) if abs(y[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    x = np.cross(y, helper)
+    x /= np.linalg.norm(x)
+    return np.column_stack([x, y, np.cross(x, y)])
+
+
+def _arrow_parts(length: float) -> dict[str, tuple[list, list]]:
+    """Local (position, scale) of the unit shaft and unit head of an arrow of ``length`` [m]."""
+    head_len = min(_HEAD[1], 0.5 * length)
+    k = head_len / _HEAD[1]
+    shaft = max(length - head_len, 1e-9)
+    return {"shaft": ([0.0, shaft / 2, 0.0], [max(k, 1e-9), shaft, max(k, 1e-9)]),
+            "head": ([0.0, shaft + head_len / 2, 0.0], [max(k, 1e-9), max(head_len, 1e-9), max(k, 1e-9)])}
+
+
+def _dots(mg, p: np.ndarray, rgb: int, size: float):
+    """A meshcat points object (meshcat's PointsMaterial always uses per-vertex colours)."""
+    colour = np.array([(rgb >> 16) & 255, (rgb >> 8) & 255, rgb & 255], dtype=np.float32) / 255
+    return mg.Points(mg.PointsGeometry(p.T.astype(np.float32), np.tile(colour[:, None], (1, len(p)))),
+                     mg.PointsMaterial(size=size))
+
+
+def _matrix(position, rotation=None, scale=(1.0, 1.0, 1.0)) -> np.ndarray:
+    t = np.eye(4)
+    t[:3, :3] = (np.eye(3) if rotation is None else rotation) @ np.diag(scale)
+    t[:3, 3] = position
+    return t
+
+
+@dataclass(frozen=True)
+class PoseInfo:
+    """Ball centres of one drawn pose [m], base frame: ``rigid`` (no deflection), ``corrected``
+    (deflection-aware), and ``deflection`` = corrected - rigid."""
+    rigid: np.ndarray
+    corrected: np.ndarray
+
+    @property
+    def deflection(self) -> np.ndarray:
+        return self.corrected - self.rigid
+
+
+# -------------------------------------------------------------------------------------------------
+# the scene
+
+class ArmScene:
+    """An arm drawn into a meshcat visualizer.
+
+    Args:
+        vis: a :class:`meshcat.Visualizer` (e.g. ``MeshcatServer().start().visualizer``).
+        arm: an :class:`~arm_model.ArmDescription`, an :class:`~arm_model.PinocchioArm`, or None for a
+            scene of data only (residuals, points).
+        root: the scene node everything is drawn under.
+    """
+
+    def __init__(self, vis, arm, root: str = ROOT):
+        import meshcat.geometry as mg
+        import pinocchio as pin
+        from pinocchio.visualize import MeshcatVisualizer
+
+        from arm_model import PinocchioArm
+
+        self._pin, self._mg = pin, mg
+        self.vis = vis
+        self.root = root
+        self.legend: list[str] = []
+        self._extent: list[np.ndarray] = [np.zeros((1, 3))]
+        self.arm = PinocchioArm(arm) if isinstance(arm, ArmDescription) else arm
+        self.desc = None if arm is None else self.arm.desc
+        self._pv = None
+        if self.arm is not None:
+            geom = pin.buildGeomFromUrdfString(self.arm.model, self.arm.urdf, pin.GeometryType.VISUAL)
+            self._pv = MeshcatVisualizer(self.arm.model, None, geom)
+            self._pv.initViewer(viewer=vis)
+            self._pv.loadViewerModel(rootNodeName=f"{root}/arm")
+            self._legend(f"arm '{self.desc.name}': links orange, probe ball red (marker 24 mm wide)")
+        vis["/Axes"].set_property("visible", False)   # its x axis fades to orange, the arm's colour
+        vis[f"{root}/base frame"].set_object(mg.LineSegments(
+            mg.PointsGeometry(position=(0.15 * np.array([[0, 0, 0], [1, 0, 0], [0, 0, 0], [0, 1, 0],
+                                                          [0, 0, 0], [0, 0, 1]])).T.astype(np.float32),
+                              color=np.array([[1, 0, 0], [1, 0, 0], [0, 1, 0], [0, 1, 0],
+                                              [0, 0, 1], [0, 0, 1]]).T.astype(np.float32)),
+            mg.LineBasicMaterial(vertexColors=True)))
+        self._arrow_path = None
+
+    # -- poses --------------------------------------------------------------------------------
+    def pose(self, q, wrench=None) -> tuple[np.ndarray, PoseInfo]:
+        """(Pinocchio configuration with the elastic joints, ball centres) for angles ``q`` (J,) [rad]
+        and ``wrench`` (3,) [N] or (6,) [N, N m] of the part on the ball, probe frame."""
+        if self.arm is None:
+            raise ValueError("this scene has no arm (ArmScene(vis, arm=None))")
+        q = np.asarray(q, dtype=float)
+        if q.shape != (self.desc.n_joints,):
+            raise ValueError(f"q must have {self.desc.n_joints} angles, got shape {q.shape}")
+        rigid = self.arm.ball_centre(q)
+        if wrench is None or not np.any(wrench):
+            return self.arm.full_q(q), PoseInfo(rigid, rigid.copy())
+        x = self.arm.full_q(q, self.arm.elastic_q(q, np.asarray(wrench, dtype=float)))
+        return x, PoseInfo(rigid, self.arm.ball_centre(q, np.asarray(wrench, dtype=float)))
+
+    def _joint_points(self, x) -> np.ndarray:
+        pin = self._pin
+        pin.framesForwardKinematics(self.arm.model, self.arm.data, x)
+        return np.array([m.translation for m in self.arm.data.oMf])
+
+    def _arrow_node(self, scale: float) -> str:
+        name = f"{self.root}/deflection x{scale:g}"
+        if self._arrow_path != name:
+            mg = self._mg
+            if self._arrow_path is not None:
+                self.vis[self._arrow_path].delete()
+            mat = mg.MeshLambertMaterial(color=DEFLECTION_RGB)
+            self.vis[f"{name}/shaft"].set_object(mg.Cylinder(1.0, _ARROW_RADIUS), mat)
+            self.vis[f"{name}/head"].set_object(mg.Cylinder(1.0, radiusTop=0.0, radiusBottom=_HEAD[0]), mat)
+            marker = mg.MeshLambertMaterial(color=BALL_MARKER_RGB, opacity=0.45)
+            self.vis[f"{self.root}/probe ball marker"].set_object(mg.Sphere(0.012), marker)
+            self._arrow_path = name
+            self._legend(f"green arrow: deflection, from the rigid to the corrected ball centre, drawn x{scale:g}")
+        return name
+
+    def _legend(self, line: str) -> None:
+        if line not in self.legend:
+            self.legend.append(line)
+
+    def show_pose(self, q, wrench=None, scale: float = 1000.0) -> PoseInfo:
+        """Draw the arm at ``q`` [rad] deflected by ``wrench``, the ball marker, and the deflection
+        arrow from the rigid centre, ``scale`` times the deflection long."""
+        x, info = self.pose(q, wrench)
+        self._pv.display(x)
+        name = self._arrow_node(scale)
+        vec = scale * info.deflection
+        self.vis[name].set_transform(_matrix(info.rigid, _rotation_y_to(vec)))
+        for part, (pos, scl) in _arrow_parts(float(np.linalg.norm(vec))).items():
+            self.vis[f"{name}/{part}"].set_transform(_matrix(pos, None, scl))
+        self.vis[f"{self.root}/probe ball marker"].set_transform(_matrix(info.corrected))
+        self._extent += [self._joint_points(x), (info.rigid + vec)[None]]
+        return info
+
+    def animate(self, qs, wrenches=None, fps: float = 2.0, scale: float = 1000.0,
+                repetitions: int = 1000) -> list[PoseInfo]:
+        """Animate the arm through poses ``qs`` (N, J) [rad] with ``wrenches`` (N, 3|6) or None, one
+        pose every 1/``fps`` s, ``repetitions`` times; the arm is also left at the first pose.
+        Static pages embed the animation."""
+        import meshcat.animation as ma
+
+        pin = self._pin
+        qs = np.atleast_2d(np.asarray(qs, dtype=float))
+        ws = [None] * len(qs) if wrenches is None else np.asarray(wrenches, dtype=float)
+        if len(ws) != len(qs):
+            raise ValueError(f"{len(qs)} poses but {len(ws)} wrenches")
+        self.show_pose(qs[0], ws[0], scale)
+        name = self._arrow_node(scale)
+        pv = self._pv
+        anim = ma.Animation(default_framerate=fps)   # frame i is shown at time i / fps
+        infos = []
+        for i, (q, w) in enumerate(zip(qs, ws)):
+            x, info = self.pose(q, w)
+            infos.append(info)
+            pin.forwardKinematics(pv.model, pv.data, x)
+            pin.updateGeometryPlacements(pv.model, pv.data, pv.visual_model, pv.visual_data)
+            with anim.at_frame(self.vis, i) as frame:
+                for g in pv.visual_model.geometryObjects:
+                    t = pv.visual_data.oMg[pv.visual_model.getGeometryId(g.name)].homogeneous
+                    frame[pv.getViewerNodeName(g, pin.GeometryType.VISUAL)].set_transform(
+                        t @ np.diag([*g.meshScale, 1.0]))
+                vec = scale * info.deflection
+                frame[name].set_transform(_matrix(info.rigid, _rotation_y_to(vec)))
+                for part, (pos, scl) in _arrow_parts(float(np.linalg.norm(vec))).items():
+                    frame[f"{name}/{part}"].set_property("position", "vector3", pos)
+                    frame[f"{name}/{part}"].set_property("scale", "vector3", scl)
+                frame[f"{self.root}/probe ball marker"].set_transform(_matrix(info.corrected))
+            self._extent += [self._joint_points(x), (info.rigid + vec)[None]]
+        self.vis.set_animation(anim, play=True, repetitions=int(repetitions))
+        self._legend(f"animation: {len(qs)} pose(s), {fps:g} per second")
+        return infos
+
+    # -- data ---------------------------------------------------------------------------------
+    def show_points(self, p_base, name: str = "ball centres", color: int = POINTS_RGB,
+                    size: float = 0.006, legend: str | None = "white dots") -> None:
+        """Draw points (N, 3) [m] as dots ``size`` [m] wide; ``legend`` names their colour."""
+        mg = self._mg
+        p = np.atleast_2d(np.asarray(p_base, dtype=float))
+        self.vis[f"{self.root}/{name}"].set_object(_dots(mg, p, color, size))
+        self._extent.append(p)
+        if legend:
+            self._legend(f"{legend}: {len(p)} {name}")
+
+    def show_residuals(self, points, residuals, scale: float = 1000.0) -> None:
+        """Draw residual vectors (N, 3) [m] as lines from ``points`` (N, 3) [m], ``scale`` times long."""
+        mg = self._mg
+        p = np.atleast_2d(np.asarray(points, dtype=float))
+        r = np.atleast_2d(np.asarray(residuals, dtype=float))
+        if p.shape != r.shape or p.shape[1] != 3:
+            raise ValueError(f"points {p.shape} and residuals {r.shape} must both be (N, 3)")
+        seg = np.empty((2 * len(p), 3))
+        seg[0::2], seg[1::2] = p, p + scale * r
+        name = f"{self.root}/residuals x{scale:g}"
+        self.vis[f"{name}/vectors"].set_object(mg.LineSegments(
+            mg.PointsGeometry(seg.T.astype(np.float32)), mg.LineBasicMaterial(color=RESIDUAL_RGB, linewidth=2)))
+        self.vis[f"{name}/points"].set_object(_dots(mg, p, RESIDUAL_RGB, 0.004))
+        self._extent.append(seg)
+        self._legend(f"magenta lines: {len(p)} residual vector(s), drawn x{scale:g}")
+
+    def show_artefacts(self, placements, distances=()) -> None:
+        """Draw placed features (:func:`viz.placement.place_features`) with their certified size, and
+        a rod for each certified ``distance`` between two features placed in one measurement."""
+        mg = self._mg
+        mat = mg.MeshLambertMaterial(color=ARTEFACT_RGB, opacity=0.4)
+        by_key = {(pl.measurement, pl.feature): pl for pl in placements}
+        for pl in placements:
+            node = self.vis[f"{self.root}/artefacts/{pl.measurement}/{pl.feature}"]
+            radius = pl.radius if pl.radius is not None else pl.fitted_radius
+            if pl.kind in ("ring", "cylinder"):
+                height = max(float(pl.size[0]) + 0.01, 0.015)
+                node.set_object(mg.Cylinder(height, radius), mat)
+                node.set_transform(_matrix(pl.centre, _rotation_y_to(pl.axis)))
+                self._extent.append(pl.centre + radius * np.eye(3))
+            elif pl.kind == "sphere":
+                node.set_object(mg.Sphere(radius), mat)
+                node.set_transform(_matrix(pl.centre))
+            elif pl.kind == "plane":
+                size = np.asarray(pl.size) + 0.04
+                node.set_object(mg.Box([size[0], 0.001, size[1]]), mat)
+                rot = _rotation_y_to(pl.axis)
+                node.set_transform(_matrix(pl.centre, rot))
+            else:  # seat: a small marker at the ball centre
+                node.set_object(mg.Sphere(0.008), mat)
+                node.set_transform(_matrix(pl.centre))
+            self._extent.append(pl.centre[None])
+        for d in distances:
+            for meas in dict.fromkeys(pl.measurement for pl in placements):
+                a, b = by_key.get((meas, d.between[0])), by_key.get((meas, d.between[1]))
+                if a is None or b is None:
+                    continue
+                v = b.centre - a.centre
+                node = self.vis[f"{self.root}/artefacts/{meas}/{d.between[0]}--{d.between[1]}"]
+                node.set_object(mg.Cylinder(float(np.linalg.norm(v)), 0.004), mat)
+                node.set_transform(_matrix((a.centre + b.centre) / 2, _rotation_y_to(v)))
+        if placements:
+            self._legend(f"blue: {len(placements)} artefact feature(s), certified size, placed by fitting the ball centres")
+
+    # -- camera -------------------------------------------------------------------------------
+    @property
+    def extent(self) -> np.ndarray:
+        """(N, 3) [m] points the drawn scene spans (for framing the camera)."""
+        return np.vstack(self._extent)
+
+    def set_camera(self, camera: Camera | None = None, aspect: float = 4 / 3) -> Camera:
+        """Place meshcat's camera (default: framing everything drawn so far) and return it."""
+        camera = camera or Camera.framing(self.extent, aspect=aspect)
+        shift = _matrix(-np.asarray(camera.target, dtype=float))
+        self.vis[self.root].set_transform(shift)
+        self.vis["/Grid"].set_transform(shift)
+        self.vis["/Cameras/default/rotated/<object>"].set_property("position", camera.meshcat_position())
+        return camera
