@@ -1,0 +1,545 @@
+"""Campaign files: what to simulate (TOML, or the same structure as a Python dict).
+
+Every numeric key carries its unit (``diameter_mm``, ``stiffness_Nm_per_rad``, ``drift_C_per_h``);
+counts (``measurements``, ``points``), ratios (``gain``, ``friction_coefficient``) and directions
+(``axis``, ``normal``) are plain numbers. A key without a known unit, an unknown key, or a value of
+the wrong kind is one :class:`~arm_model.InputError` naming the file, the line and the key.
+Inside, everything is SI. The full key reference is ``docs/simulator.md``.
+"""
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._errors import InputError
+from ..description import ArmDescription, load_description
+
+__all__ = ["Campaign", "Task", "load_campaign", "campaign_from_dict", "TASK_KINDS", "SENSORS",
+           "DEFAULT_ARM"]
+
+DEFAULT_ARM = Path(__file__).resolve().parents[2] / "urdf" / "aacmm7.dh.toml"
+TASK_KINDS = ("ring", "sphere", "plane", "seat", "ballbar", "tracker")
+SENSORS = ("xyz", "two-channel", "none")
+
+# unit suffix -> (quantity, factor to SI); the longest suffix wins ("_Nm_per_rad" before "_rad")
+_UNITS: dict[str, tuple[str, float]] = {
+    "mm": ("length", 1e-3), "m": ("length", 1.0), "um": ("length", 1e-6),
+    "deg": ("angle", math.pi / 180), "rad": ("angle", 1.0), "arcsec": ("angle", math.pi / 648000),
+    "N": ("force", 1.0),
+    "C": ("temperature", 1.0),
+    "s": ("time", 1.0), "h": ("time", 3600.0),
+    "mm_per_N": ("compliance", 1e-3), "um_per_N": ("compliance", 1e-6), "m_per_N": ("compliance", 1.0),
+    "Nm_per_rad": ("stiffness", 1.0), "Nm_per_deg": ("stiffness", 180 / math.pi),
+    "per_K": ("expansion", 1.0), "ppm_per_K": ("expansion", 1e-6),
+    "C_per_h": ("temperature_rate", 1 / 3600),
+}
+_SUFFIXES = sorted(_UNITS, key=len, reverse=True)
+_UNITLESS = ("count", "ratio", "direction", "text", "bool", "names", "table", "matrix")
+
+
+def _split(key: str) -> tuple[str, str] | None:
+    for unit in _SUFFIXES:
+        if key.endswith("_" + unit) and len(key) > len(unit) + 1:
+            return key[: -len(unit) - 1], unit
+    return None
+
+
+# ---------------------------------------------------------------------------------------------
+# schema: section -> {base key: (quantity, default, shape)}; shape None scalar, n a vector, -1 a list
+
+_S = {
+    "top": {"name": ("text", "campaign", None), "seed": ("count", 0, None), "arm": ("text", None, None),
+            "sensor": ("text", "xyz", None), "truth": ("table", None, None), "noise": ("table", None, None),
+            "environment": ("table", None, None), "operator": ("table", None, None),
+            "signals": ("table", None, None), "task": ("table", None, None),
+            "description": ("text", "", None)},
+    "truth": {"length_error": ("length", 20e-6, None), "angle_error": ("angle", math.radians(0.003), None),
+              "probe_error": ("length", 20e-6, None), "errors": ("table", None, None),
+              "eccentricity": ("table", None, None), "joint_compliance": ("table", None, None),
+              "thermal": ("table", None, None), "probe_compliance": ("table", None, None),
+              "force_sensor": ("table", None, None)},
+    "eccentricity": {"joint": ("text", None, None), "amplitude": ("angle", None, None),
+                     "phase": ("angle", 0.0, None), "amplitude2": ("angle", 0.0, None),
+                     "phase2": ("angle", 0.0, None)},
+    "joint_compliance": {"joints": ("names", None, None), "stiffness": ("stiffness", None, -1),
+                         "gravity": ("bool", True, None), "contact": ("bool", True, None)},
+    "thermal": {"joints": ("names", None, None), "alpha": ("expansion", None, -1)},
+    "probe_compliance": {"bending": ("compliance", None, None), "bending_x": ("compliance", None, None),
+                         "bending_y": ("compliance", None, None), "axial": ("compliance", None, None)},
+    "force_sensor": {"gain": ("ratio", (0.0, 0.0, 0.0), 3), "offset": ("force", (0.0, 0.0, 0.0), 3),
+                     "cross_talk": ("matrix", None, None)},
+    "noise": {"encoder_resolution": ("angle", 0.0, None), "encoder_noise": ("angle", 0.0, None),
+              "probing_repeatability": ("length", 0.0, None), "force_noise": ("force", 0.0, None),
+              "temperature_noise": ("temperature", 0.0, None)},
+    "environment": {"temperature": ("temperature", 20.0, None), "drift": ("temperature_rate", 0.0, None),
+                    "cycle_amplitude": ("temperature", 0.0, None), "cycle_period": ("time", 86400.0, None)},
+    "operator": {"force_mean": ("force", 1.0, None), "level_log_sd": ("ratio", 0.35, None),
+                 "point_cv": ("ratio", 0.35, None), "min_force": ("force", 0.15, None),
+                 "max_force": ("force", 8.0, None), "spike_probability": ("ratio", 0.002, None),
+                 "friction_coefficient": ("ratio", 0.1, None), "friction_torque": ("bool", False, None),
+                 "point_period": ("time", 1.2, None), "measurement_gap": ("time", 60.0, None)},
+    "signals": {"enabled": ("bool", True, None), "sample_period": ("time", 1e-3, None),
+                "rise": ("time", 0.12, None), "decay": ("time", 0.2, None)},
+}
+_COMMON_TASK = {"kind": ("text", None, None), "id": ("text", None, None),
+                "measurements": ("count", 1, None), "stylus_cone": ("angle", None, None)}
+_TASKS = {
+    "ring": {"diameter": ("length", 174.996e-3, None), "u_diameter": ("length", None, None),
+             "form_error": ("length", None, None), "centre": ("length", (0.70, 0.0, 0.05), 3),
+             "axis": ("direction", (0.0, 0.0, 1.0), 3), "depths": ("length", (5e-3, 12e-3, 19e-3), -1),
+             "points_per_row": ("count", 24, None), "angle_jitter": ("angle", math.radians(3.0), None),
+             "depth_jitter": ("length", 1e-3, None), "stylus_tilt": ("angle", 0.0, None),
+             "roll": ("text", "random", None), "roll_jitter": ("angle", math.radians(10.0), None)},
+    "sphere": {"diameter": ("length", 25e-3, None), "centre": ("length", (0.55, 0.25, 0.1), 3),
+               "points": ("count", 25, None), "polar_max": ("angle", math.radians(90.0), None)},
+    "plane": {"point": ("length", (0.6, -0.2, 0.0), 3), "normal": ("direction", (0.0, 0.0, 1.0), 3),
+              "size": ("length", (0.3, 0.3), 2), "points": ("count", 25, None)},
+    "seat": {"position": ("length", (0.6, 0.2, 0.05), 3), "axis": ("direction", (0.0, 0.0, 1.0), 3),
+             "articulations": ("count", 20, None), "force_cone": ("angle", math.radians(30.0), None)},
+    "ballbar": {"positions": ("count", 20, None), "length": ("length", 0.6, None),
+                "u_length": ("length", None, None), "true_length": ("length", None, None),
+                "ends": ("text", "sphere", None), "sphere_diameter": ("length", 25e-3, None),
+                "points_per_sphere": ("count", 5, None), "articulations": ("count", 3, None),
+                "polar_max": ("angle", math.radians(70.0), None),
+                "force_cone": ("angle", math.radians(30.0), None),
+                "radius": ("length", (0.3, 0.8), 2), "height": ("length", (-0.2, 0.6), 2),
+                "reach": ("length", 0.85, None)},
+    "tracker": {"nests": ("count", 20, None), "articulations": ("count", 3, None),
+                "noise": ("length", 10e-6, None), "radius": ("length", (0.3, 0.8), 2),
+                "height": ("length", (-0.2, 0.6), 2), "reach": ("length", 0.85, None),
+                "force_cone": ("angle", math.radians(30.0), None),
+                "distance": ("length", 3.0, None)},
+}
+_DEFAULT_CONE = {"ring": 0.0, "sphere": math.radians(30.0), "plane": math.radians(30.0),
+                 "seat": math.radians(60.0), "ballbar": math.radians(45.0), "tracker": math.radians(45.0)}
+_ID = {"ring": "ring", "sphere": "sphere", "plane": "plane", "seat": "seat", "ballbar": "bar",
+       "tracker": "nest"}
+
+
+@dataclass(frozen=True)
+class Task:
+    """One artefact task: ``kind`` (see :data:`TASK_KINDS`), its feature ``id``, how many
+    ``measurements``, and its options in SI (``opts``: key base name -> value)."""
+    kind: str
+    id: str
+    measurements: int
+    opts: dict
+    line: int | None = None
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """A parsed campaign (SI inside). ``sections`` holds truth/noise/environment/operator/signals
+    options by key base name; ``source`` the file (None for a dict)."""
+    name: str
+    seed: int
+    arm: ArmDescription
+    arm_path: Path | None
+    sensor: str
+    truth: dict
+    noise: dict
+    environment: dict
+    operator: dict
+    signals: dict
+    tasks: tuple[Task, ...]
+    source: Path | None = None
+    description: str = ""
+    raw: dict = field(default_factory=dict, compare=False, repr=False)
+
+    @property
+    def inputs(self) -> tuple[Path, ...]:
+        """The input files, which outputs must never overwrite."""
+        return tuple(p for p in (self.source, self.arm_path) if p is not None)
+
+
+# ---------------------------------------------------------------------------------------------
+# line lookup for messages
+
+def _key_lines(text: str) -> dict[tuple, int]:
+    """Map (table path, key) to its 1-based line. A table path is a tuple like ("task", 2) or
+    ("truth", "thermal"); arrays of tables carry their 0-based index."""
+    lines: dict[tuple, int] = {}
+    counts: dict[tuple, int] = {}
+    table: tuple = ()
+    for no, raw in enumerate(text.splitlines(), start=1):
+        line = raw.split("#", 1)[0].strip()
+        m = re.match(r"^\[\[\s*([\w.\-\" ]+?)\s*\]\]$", line) or re.match(r"^\[\s*([\w.\-\" ]+?)\s*\]$", line)
+        if m:
+            names = tuple(p.strip().strip('"') for p in m.group(1).split("."))
+            if line.startswith("[["):
+                counts[names] = counts.get(names, -1) + 1
+                table = names[:-1] + ((names[-1], counts[names]),)
+            else:
+                table = names
+            lines[(_flat(table), "")] = no
+            continue
+        m = re.match(r'^("?[\w.\-]+"?)\s*=', line)
+        if m:
+            lines[(_flat(table), m.group(1).strip('"'))] = no
+    return lines
+
+
+def _flat(table: tuple) -> tuple:
+    out = []
+    for t in table:
+        if isinstance(t, tuple):
+            out.extend(t)
+        else:
+            out.append(t)
+    return tuple(out)
+
+
+class _Ctx:
+    """Where a value came from: builds errors that name file, line and key."""
+
+    def __init__(self, path: str, lines: dict | None):
+        self.path = path
+        self.lines = lines or {}
+
+    def error(self, msg: str, table: tuple, key: str | None = None) -> InputError:
+        line = self.lines.get((table, key or ""))
+        if line is None:
+            line = self.lines.get((table, ""))
+        parts = []
+        for t in table:
+            if isinstance(t, int):
+                parts[-1] = f"{parts[-1]}[{t + 1}]"
+            else:
+                parts.append(str(t))
+        where = ".".join(parts + ([key] if key else []))
+        return InputError(msg, self.path, line, f"key '{where or 'top level'}'")
+
+
+def _number(ctx, v, table, key) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise ctx.error(f"'{key}' must be a finite number, got {v!r}", table, key)
+    return float(v)
+
+
+def _section(ctx: _Ctx, data: Any, spec: dict, table: tuple) -> dict:
+    """Read one table against its spec; returns base name -> SI value (defaults filled in)."""
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise ctx.error("expected a table", table)
+    out: dict[str, Any] = {}
+    for key, v in data.items():
+        base, unit = key, None
+        if key not in spec or spec[key][0] not in _UNITLESS:
+            parts = _split(key)
+            if parts is not None and parts[0] in spec and spec[parts[0]][0] not in _UNITLESS:
+                base, unit = parts
+            elif key in spec:
+                raise ctx.error(f"'{key}' needs a unit suffix for a {spec[key][0]} "
+                                f"(e.g. {_example(spec[key][0])})", table, key)
+            else:
+                known = ", ".join(_display(b, q[0]) for b, q in spec.items())
+                raise ctx.error(f"unknown key '{key}' (known: {known})", table, key)
+        quantity, _, shape = spec[base]
+        if base in out:
+            raise ctx.error(f"'{base}' is given twice (with two units)", table, key)
+        if unit is not None:
+            if _UNITS[unit][0] != quantity:
+                raise ctx.error(f"'{key}' is a {quantity}, but '_{unit}' is a unit of {_UNITS[unit][0]} "
+                                f"(e.g. {_example(quantity)})", table, key)
+            out[base] = _scaled(ctx, v, _UNITS[unit][1], shape, table, key)
+        else:
+            out[base] = _unitless(ctx, v, quantity, shape, table, key)
+    for base, (quantity, default, shape) in spec.items():
+        if base not in out and quantity != "table":
+            out[base] = default
+    return out
+
+
+def _example(quantity: str) -> str:
+    return ", ".join("_" + u for u, (q, _) in _UNITS.items() if q == quantity)
+
+
+def _display(base: str, quantity: str) -> str:
+    if quantity in _UNITLESS:
+        return base
+    return f"{base}_<{quantity} unit>"
+
+
+def _scaled(ctx, v, factor, shape, table, key):
+    if shape is None:
+        return _number(ctx, v, table, key) * factor
+    values = v if isinstance(v, list) else ([v] if shape == -1 else None)
+    if values is None or (shape != -1 and len(values) != shape) or not values:
+        want = "a list" if shape == -1 else f"a list of {shape} numbers"
+        raise ctx.error(f"'{key}' must be {want}, got {v!r}", table, key)
+    return tuple(_number(ctx, x, table, key) * factor for x in values)
+
+
+def _unitless(ctx, v, quantity, shape, table, key):
+    if quantity == "table":
+        if not isinstance(v, (dict, list)):
+            raise ctx.error(f"'{key}' must be a table", table, key)
+        return v
+    if quantity == "text":
+        if not isinstance(v, str) or not v.strip():
+            raise ctx.error(f"'{key}' must be a non-empty text", table, key)
+        return v.strip()
+    if quantity == "bool":
+        if not isinstance(v, bool):
+            raise ctx.error(f"'{key}' must be true or false", table, key)
+        return v
+    if quantity == "count":
+        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+            raise ctx.error(f"'{key}' must be a whole number >= 0, got {v!r}", table, key)
+        return int(v)
+    if quantity == "names":
+        if not isinstance(v, list) or not v or not all(isinstance(x, str) for x in v):
+            raise ctx.error(f"'{key}' must be a list of joint names", table, key)
+        return tuple(v)
+    if quantity == "matrix":
+        if (not isinstance(v, list) or len(v) != 3
+                or not all(isinstance(r, list) and len(r) == 3 for r in v)):
+            raise ctx.error(f"'{key}' must be a 3x3 list of lists", table, key)
+        return np.array([[_number(ctx, x, table, key) for x in r] for r in v])
+    if quantity == "direction":
+        vec = _scaled(ctx, v, 1.0, shape, table, key)
+        norm = math.sqrt(sum(x * x for x in vec))
+        if norm < 1e-9:
+            raise ctx.error(f"'{key}' must be a non-zero direction", table, key)
+        return tuple(x / norm for x in vec)
+    # ratio
+    return _scaled(ctx, v, 1.0, shape, table, key)
+
+
+# ---------------------------------------------------------------------------------------------
+
+def _joint_index(ctx, desc: ArmDescription, name: str, table, key) -> int:
+    if name not in desc.joint_names:
+        raise ctx.error(f"unknown joint '{name}' (the arm has: {', '.join(desc.joint_names)})", table, key)
+    return desc.joint_names.index(name)
+
+
+def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm=None) -> Campaign:
+    ctx = _Ctx(path, lines)
+    top = _section(ctx, data, _S["top"], ())
+    if top["sensor"] not in SENSORS:
+        raise ctx.error(f"'sensor' must be one of {', '.join(SENSORS)}, got {top['sensor']!r}", (), "sensor")
+    # the arm
+    arm_path = None
+    if isinstance(arm, ArmDescription):
+        desc = arm
+    else:
+        arm_path = Path(arm) if arm is not None else None
+        if arm_path is None and top["arm"] is not None:
+            arm_path = Path(top["arm"])
+            if not arm_path.is_absolute() and base_dir is not None:
+                arm_path = base_dir / arm_path
+        if arm_path is None:
+            arm_path = DEFAULT_ARM
+        if not arm_path.exists():
+            raise ctx.error(f"arm description not found: {arm_path}", (), "arm")
+        desc = load_description(arm_path)
+    # truth and its effects
+    truth = _section(ctx, data.get("truth"), _S["truth"], ("truth",))
+    raw_truth = data.get("truth") or {}
+    truth["errors"] = _errors(ctx, raw_truth.get("errors"), desc)
+    ecc = raw_truth.get("eccentricity")
+    if ecc is not None:
+        if isinstance(ecc, dict):
+            ecc = [ecc]
+        if not isinstance(ecc, list):
+            raise ctx.error("'eccentricity' must be [[truth.eccentricity]] tables", ("truth",), "eccentricity")
+        rows = []
+        for i, t in enumerate(ecc):
+            tbl = ("truth", "eccentricity", i)
+            e = _section(ctx, t, _S["eccentricity"], tbl)
+            if e["joint"] is None or e["amplitude"] is None:
+                raise ctx.error("an eccentricity needs 'joint' and 'amplitude_<angle unit>'", tbl)
+            e["index"] = _joint_index(ctx, desc, e["joint"], tbl, "joint")
+            if any(r["index"] == e["index"] for r in rows):
+                raise ctx.error(f"joint '{e['joint']}' has two eccentricity tables", tbl, "joint")
+            rows.append(e)
+        truth["eccentricity"] = rows
+    for name in ("joint_compliance", "thermal", "probe_compliance", "force_sensor"):
+        if raw_truth.get(name) is None:
+            truth[name] = None
+            continue
+        tbl = ("truth", name)
+        e = _section(ctx, raw_truth[name], _S[name], tbl)
+        if name in ("joint_compliance", "thermal"):
+            names = e["joints"] or desc.joint_names
+            e["indices"] = tuple(_joint_index(ctx, desc, n, tbl, "joints") for n in names)
+            key = "stiffness" if name == "joint_compliance" else "alpha"
+            vals = e[key]
+            if vals is None:
+                raise ctx.error(f"'{name}' needs '{key}_<unit>'", tbl)
+            if len(vals) not in (1, len(e["indices"])):
+                raise ctx.error(f"'{key}' has {len(vals)} values for {len(e['indices'])} joints", tbl, key)
+            if name == "joint_compliance" and min(vals) <= 0:
+                raise ctx.error("stiffness must be > 0", tbl, key)
+            e[key] = tuple(vals) * (len(e["indices"]) if len(vals) == 1 else 1)
+        if name == "probe_compliance":
+            if e["bending"] is not None and (e["bending_x"] is not None or e["bending_y"] is not None):
+                raise ctx.error("give 'bending' or 'bending_x'/'bending_y', not both", tbl)
+            if all(e[k] is None for k in ("bending", "bending_x", "bending_y", "axial")):
+                raise ctx.error("probe_compliance needs the true 'bending_<unit>' (or bending_x/_y) "
+                                "and/or 'axial_<unit>'", tbl)
+            for k in ("bending", "bending_x", "bending_y", "axial"):
+                if e[k] is not None and e[k] < 0:
+                    raise ctx.error(f"'{k}' must not be negative", tbl, k)
+        if name == "force_sensor":
+            if e["cross_talk"] is None:
+                e["cross_talk"] = np.zeros((3, 3))
+            if np.any(np.diag(e["cross_talk"]) != 0):
+                raise ctx.error("the diagonal of 'cross_talk' must be 0 (gains are 'gain')", tbl, "cross_talk")
+            if min(e["gain"]) <= -1:
+                raise ctx.error("'gain' must be > -1 (reading = (1 + gain) force)", tbl, "gain")
+        truth[name] = e
+    if ecc is None:
+        truth["eccentricity"] = []
+    sections = {}
+    for name in ("noise", "environment", "operator", "signals"):
+        sections[name] = _section(ctx, data.get(name), _S[name], (name,))
+    for k, v in sections["noise"].items():
+        if v < 0:
+            raise ctx.error(f"'{k}' must not be negative", ("noise",), k)
+    op = sections["operator"]
+    if not 0 < op["min_force"] < op["max_force"]:
+        raise ctx.error("need 0 < min_force < max_force", ("operator",), "min_force")
+    if not op["min_force"] <= op["force_mean"] <= op["max_force"]:
+        raise ctx.error("force_mean must lie between min_force and max_force", ("operator",), "force_mean")
+    for k in ("level_log_sd", "point_cv", "friction_coefficient"):
+        if op[k] < 0:
+            raise ctx.error(f"'{k}' must not be negative", ("operator",), k)
+    if not 0 <= op["spike_probability"] <= 1:
+        raise ctx.error("'spike_probability' must lie in [0, 1]", ("operator",), "spike_probability")
+    sg = sections["signals"]
+    if sg["sample_period"] <= 0 or sg["rise"] <= 0 or sg["decay"] <= 0:
+        raise ctx.error("sample period, rise and decay must be > 0", ("signals",))
+    if op["point_period"] < 1.5 * (sg["rise"] + sg["decay"]):
+        raise ctx.error(f"'point_period' must be at least 1.5 x (rise + decay) = "
+                        f"{1.5 * (sg['rise'] + sg['decay']):.3g} s so that pulses do not overlap",
+                        ("operator",), "point_period_s")
+    # tasks
+    raw_tasks = data.get("task")
+    if raw_tasks is None:
+        raw_tasks = []
+    if not isinstance(raw_tasks, list):
+        raise ctx.error("'task' must be [[task]] tables", (), "task")
+    if not raw_tasks:
+        raise ctx.error("no [[task]] tables: nothing to simulate", ())
+    tasks = []
+    ids: dict[str, str] = {}
+    for i, t in enumerate(raw_tasks):
+        tbl = (("task", i),)
+        tbl = ("task", i)
+        if not isinstance(t, dict):
+            raise ctx.error("expected a table", tbl)
+        kind = t.get("kind")
+        if kind not in TASK_KINDS:
+            raise ctx.error(f"'kind' must be one of {', '.join(TASK_KINDS)}, got {kind!r}", tbl, "kind")
+        spec = dict(_COMMON_TASK)
+        spec.update(_TASKS[kind])
+        o = _section(ctx, t, spec, tbl)
+        tid = o.pop("id") or _ID[kind]
+        if not re.fullmatch(r"[A-Za-z0-9_.\-]+", tid):
+            raise ctx.error(f"'id' {tid!r} may hold letters, digits, '_', '.', '-' only", tbl, "id")
+        if tid in ids:
+            raise ctx.error(f"task id '{tid}' is used twice", tbl, "id")
+        ids[tid] = kind
+        o.pop("kind")
+        n_meas = o.pop("measurements")
+        if kind == "ballbar":
+            n_meas = o["positions"]
+        if o["stylus_cone"] is None:
+            o["stylus_cone"] = _DEFAULT_CONE[kind]
+        _check_task(ctx, kind, o, tbl)
+        if n_meas < 1:
+            raise ctx.error("need at least one measurement", tbl, "measurements")
+        tasks.append(Task(kind, tid, n_meas, o, ctx.lines.get((tbl, ""))))
+    return Campaign(name=top["name"], seed=top["seed"], arm=desc, arm_path=arm_path, sensor=top["sensor"],
+                    truth=truth, noise=sections["noise"], environment=sections["environment"],
+                    operator=op, signals=sg, tasks=tuple(tasks),
+                    source=None if path.startswith("<") else Path(path), description=top["description"],
+                    raw=data)
+
+
+def _check_task(ctx, kind, o, tbl):
+    positive = {"ring": ("diameter", "points_per_row"), "sphere": ("diameter", "points"),
+                "plane": ("points",), "seat": ("articulations",),
+                "ballbar": ("length", "positions", "sphere_diameter", "reach"),
+                "tracker": ("nests", "articulations", "reach")}[kind]
+    for k in positive:
+        if o[k] <= 0:
+            raise ctx.error(f"'{k}' must be > 0", tbl, k)
+    if kind == "ring":
+        if o["roll"] not in ("random", "bend-along-force"):
+            raise ctx.error("'roll' must be \"random\" or \"bend-along-force\"", tbl, "roll")
+    if kind == "ballbar":
+        if o["ends"] not in ("sphere", "seat"):
+            raise ctx.error("'ends' must be \"sphere\" or \"seat\"", tbl, "ends")
+        if o["ends"] == "sphere" and o["points_per_sphere"] < 1:
+            raise ctx.error("'points_per_sphere' must be > 0", tbl, "points_per_sphere")
+        if o["ends"] == "seat" and o["articulations"] < 1:
+            raise ctx.error("'articulations' must be > 0", tbl, "articulations")
+    if kind in ("ballbar", "tracker"):
+        for k in ("radius", "height"):
+            if o[k][0] >= o[k][1]:
+                raise ctx.error(f"'{k}' must be [low, high] with low < high", tbl, k)
+
+
+_PARAM_QUANTITY = {"m": "length", "rad": "angle", "m/N": "compliance"}
+
+
+def _errors(ctx, tbl, desc) -> dict[str, float]:
+    """Explicit true parameter errors ``"j2.d_um" = 25.0`` -> {"j2.d": 2.5e-5}."""
+    from ..params import param_spec
+
+    if tbl is None:
+        return {}
+    where = ("truth", "errors")
+    if not isinstance(tbl, dict):
+        raise ctx.error("expected a table of parameter errors", where)
+    spec = param_spec(desc)
+    out = {}
+    for key, v in tbl.items():
+        parts = _split(key)
+        if parts is None or parts[0] not in spec.names:
+            raise ctx.error(f"unknown parameter key '{key}' (expected a parameter name with a unit, e.g. "
+                            f"\"{spec.names[1]}_um\"; names: {', '.join(spec.names)})", where, key)
+        base, unit = parts
+        quantity = _PARAM_QUANTITY[spec.units[spec.index(base)]]
+        if _UNITS[unit][0] != quantity:
+            raise ctx.error(f"'{base}' is a {quantity}, '_{unit}' is not (e.g. {_example(quantity)})", where, key)
+        out[base] = _number(ctx, v, where, key) * _UNITS[unit][1]
+    return out
+
+
+def load_campaign(path: str | Path) -> Campaign:
+    """Read a campaign TOML file; the arm path in it is relative to the file."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise InputError(f"cannot read the campaign file: {exc.strerror}", path) from None
+    except UnicodeDecodeError:
+        raise InputError("not a UTF-8 text file", path) from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        m = re.search(r"line (\d+), column (\d+)", str(exc))
+        raise InputError(f"not valid TOML: {exc}", path, int(m.group(1)) if m else None,
+                         f"column {m.group(2)}" if m else None) from None
+    return _parse(data, str(path), _key_lines(text), path.resolve().parent)
+
+
+def campaign_from_dict(data: dict, arm: str | Path | ArmDescription | None = None,
+                       base_dir: str | Path | None = None) -> Campaign:
+    """A campaign from a dict with the structure of the TOML file (e.g. ``{"seed": 1, "task":
+    [{"kind": "sphere", "points": 5}]}``). ``arm``: a description or its path (default: the
+    dict's ``arm`` or the nominal arm ``urdf/aacmm7.dh.toml``)."""
+    if not isinstance(data, dict):
+        raise InputError("a campaign must be a dict", "<dict>")
+    return _parse(data, "<dict>", None, None if base_dir is None else Path(base_dir), arm)

@@ -1,0 +1,239 @@
+"""Redundant inverse kinematics on the true arm, for many points at once.
+
+Constraints per point: the deflected ball centre at a target (3), the stylus (probe z axis) along a
+required direction (2), and optionally the probe x axis towards a required direction (1). A 7-axis
+arm keeps one or two redundant degrees of freedom (elbow swivel, handle roll); they are drawn at
+random like an operator does, by starting each solve from a random configuration inside the joint
+limits. Damped Gauss-Newton on all pending points in parallel (numpy), with exact Jacobians by
+complex-step differentiation of the core's kinematic chain; solutions outside the limits or
+pointing the wrong way are rejected and retried from a new random start.
+
+The wrench that deflects the probe is the world-frame contact force rotated into the probe frame
+of the current configuration, so it is recomputed at every iteration; at convergence the true
+deflected ball centre is on target to ``tol`` [m].
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._errors import NumericalError
+from ..effects import Geometry
+from .truth import Truth
+
+__all__ = ["IKTargets", "IKResult", "solve_ik", "joint_limits", "wrap_into_limits"]
+
+_H = 1e-30       # complex step [rad]
+_L0 = 0.1        # position scale [m] of the residual
+
+
+@dataclass(frozen=True)
+class IKTargets:
+    """Per-point targets, base frame.
+
+    Attributes:
+        position: (N, 3) deflected ball centre [m].
+        stylus: (N, 3) unit direction of the probe z axis (from the flange towards the ball).
+        x_dir: (N, 3) unit direction for the probe x axis (perpendicular to ``stylus``), or NaN rows
+            where the roll is free.
+        force: (N, 3) force the part exerts on the ball [N], base frame.
+        torque: (N, 3) torque about the ball centre [N m], base frame.
+        temperature: (N,) arm temperature [°C].
+        stylus_axis, stylus_cone: (N, 3), (N,) [rad]: the cone the stylus direction was drawn from;
+            a point that finds no solution for its direction gets a new one from this cone (the
+            operator changes the approach). None: the direction is fixed.
+    """
+    position: np.ndarray
+    stylus: np.ndarray
+    x_dir: np.ndarray
+    force: np.ndarray
+    torque: np.ndarray
+    temperature: np.ndarray
+    stylus_axis: np.ndarray | None = None
+    stylus_cone: np.ndarray | None = None
+
+    def take(self, idx) -> "IKTargets":
+        return IKTargets(*(None if a is None else a[idx]
+                           for a in (self.position, self.stylus, self.x_dir, self.force, self.torque,
+                                     self.temperature, self.stylus_axis, self.stylus_cone)))
+
+
+@dataclass(frozen=True)
+class IKResult:
+    """q: (N, J) true joint angles [rad]; wrench: (N, 6) probe-frame wrench at the solution;
+    attempts: (N,) random starts used; position_error: (N,) [m]; direction_error: (N,) [rad];
+    stylus, x_dir: (N, 3) the directions finally used (changed where the first was out of reach)."""
+    q: np.ndarray
+    wrench: np.ndarray
+    attempts: np.ndarray
+    position_error: np.ndarray
+    direction_error: np.ndarray
+    stylus: np.ndarray
+    x_dir: np.ndarray
+
+
+def joint_limits(desc) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) [rad]; a joint without limits gets (-pi, pi)."""
+    lo = np.array([-np.pi if j.lower is None else j.lower for j in desc.joints])
+    hi = np.array([np.pi if j.upper is None else j.upper for j in desc.joints])
+    return lo, hi
+
+
+def wrap_into_limits(q, lower, upper) -> tuple[np.ndarray, np.ndarray]:
+    """Shift each angle by whole turns into [-pi, pi), or else into [lower, upper] where possible;
+    returns (q, ok)."""
+    q = np.asarray(q, dtype=float)
+    q = np.mod(q + np.pi, 2 * np.pi) - np.pi
+    for turn in (2 * np.pi, -2 * np.pi):
+        q = np.where((q < lower) | (q > upper), np.where(((q + turn) >= lower) & ((q + turn) <= upper),
+                                                         q + turn, q), q)
+    ok = np.all((q >= lower) & (q <= upper), axis=1)
+    return q, ok
+
+
+def _take_geom(geom: Geometry, idx, reps: int = 1) -> Geometry:
+    def t(v):
+        if isinstance(v, np.ndarray) and v.ndim == 1:
+            return np.tile(v[idx], reps)
+        return v
+    return Geometry([[t(v) for v in r] for r in geom.rows], [t(v) for v in geom.p_last],
+                    [t(v) for v in geom.compliance])
+
+
+def probe_wrench(force, torque, z, x) -> np.ndarray:
+    """(N, 6) wrench in the probe frame from base-frame force/torque and the probe axes."""
+    y = np.cross(z, x)
+    r = np.stack([x, y, z], axis=1)           # rows: probe axes in base -> R_probe_base
+    return np.concatenate([np.einsum("nij,nj->ni", r, force), np.einsum("nij,nj->ni", r, torque)], axis=1)
+
+
+def _residual_and_jacobian(truth: Truth, q, geom, tg: IKTargets, has_x):
+    """Residual (N, 9) = ((ball - target) / L0, z - stylus, x - x_dir (0 where the roll is free))
+    and its Jacobian (N, 9, J), the wrench held at its value for q."""
+    n, j = q.shape
+    _, z0, x0 = truth.pose(q, geom)
+    w = probe_wrench(tg.force, tg.torque, z0, x0)
+    qc = np.repeat(q[None, :, :], j + 1, axis=0).astype(complex)
+    for k in range(j):
+        qc[k + 1, :, k] += 1j * _H
+    qc = qc.reshape((j + 1) * n, j)
+    ball, z, x = truth.pose(qc, _take_geom(geom, np.arange(n), j + 1), np.tile(w, (j + 1, 1)))
+    ball, z, x = (a.reshape(j + 1, n, 3) for a in (ball, z, x))
+    pos = ball[0].real
+    hx = has_x[:, None]
+    r = np.concatenate([(pos - tg.position) / _L0, z[0].real - tg.stylus,
+                        np.where(hx, x[0].real - np.nan_to_num(tg.x_dir), 0.0)], axis=1)
+    d = [np.transpose(a[1:].imag / _H, (1, 2, 0)) for a in (ball, z, x)]     # (N, 3, J) each
+    jac = np.concatenate([d[0] / _L0, d[1], np.where(hx[:, :, None], d[2], 0.0)], axis=1)
+    return r, jac, pos, w
+
+
+def _solve_batch(truth: Truth, q, tg: IKTargets, tol: float, max_iter: int):
+    """Damped Gauss-Newton (Levenberg-Marquardt) from starts ``q``;
+    returns (q, converged, wrench, position error [m], direction error)."""
+    n, j = q.shape
+    geom_all = truth.geometry(tg.temperature)
+    has_x = ~np.isnan(tg.x_dir[:, 0])
+    q = q.copy()
+    done = np.zeros(n, bool)
+    wrench = np.zeros((n, 6))
+    pos_err = np.full(n, np.inf)
+    dir_err = np.full(n, np.inf)
+    active = np.arange(n)
+    lam = 1e-9
+    for _ in range(max_iter):
+        if active.size == 0:
+            break
+        sub = tg.take(active)
+        r, jac, pos, w = _residual_and_jacobian(truth, q[active], _take_geom(geom_all, active), sub,
+                                                has_x[active])
+        pe = np.linalg.norm(pos - sub.position, axis=1)
+        de = np.max(np.abs(r[:, 3:]), axis=1)
+        conv = (pe < tol) & (de < 1e-12)
+        pos_err[active], dir_err[active], wrench[active] = pe, de, w
+        done[active[conv]] = True
+        keep = ~conv
+        active, r, jac = active[keep], r[keep], jac[keep]
+        if active.size == 0:
+            break
+        jt = np.transpose(jac, (0, 2, 1))
+        a = jt @ jac + lam * np.eye(j)
+        step = -np.linalg.solve(a, (jt @ r[:, :, None]))[:, :, 0]
+        norm = np.linalg.norm(step, axis=1, keepdims=True)
+        step *= np.minimum(1.0, 0.4 / np.maximum(norm, 1e-300))
+        q[active] += step
+        bad = ~np.all(np.isfinite(q[active]), axis=1)
+        if np.any(bad):
+            active = active[~bad]
+    return q, done, wrench, pos_err, dir_err
+
+
+def _redraw(targets: IKTargets, idx, rng) -> IKTargets:
+    """New stylus directions (uniform in each point's cone) for the points ``idx``."""
+    from .artefacts import cone_directions
+
+    stylus, x_dir = targets.stylus.copy(), targets.x_dir.copy()
+    for i in idx:
+        if targets.stylus_cone[i] <= 0:
+            continue
+        u = cone_directions(rng, targets.stylus_axis[i], targets.stylus_cone[i], 1)[0]
+        stylus[i] = u
+        if not np.isnan(x_dir[i, 0]):
+            x = x_dir[i] - (x_dir[i] @ u) * u
+            x_dir[i] = x / np.linalg.norm(x)
+    return IKTargets(targets.position, stylus, x_dir, targets.force, targets.torque, targets.temperature,
+                     targets.stylus_axis, targets.stylus_cone)
+
+
+def solve_ik(truth: Truth, targets: IKTargets, rng: np.random.Generator, tol: float = 1e-12,
+             max_attempts: int = 120, max_iter: int = 80, labels=None, redraw_every: int = 5) -> IKResult:
+    """Solve every point from random starts inside the joint limits (see the module docstring).
+    After every ``redraw_every`` failed starts a point gets a new stylus direction from its cone.
+
+    Raises :class:`~arm_model.NumericalError` naming the points (``labels``) that found no valid
+    solution in ``max_attempts`` starts (a target out of reach, or a direction the arm cannot take).
+    """
+    result, pending = solve_points(truth, targets, rng, tol, max_attempts, max_iter, redraw_every)
+    if pending.size:
+        names = [str(labels[i]) if labels is not None else f"point {i}" for i in pending[:8]]
+        raise NumericalError(
+            f"inverse kinematics found no solution inside the joint limits for {pending.size} point(s) after "
+            f"{max_attempts} random starts: {', '.join(names)}{' ...' if pending.size > 8 else ''}; "
+            "the target is probably out of reach: move the artefact closer to the arm")
+    return result
+
+
+def solve_points(truth: Truth, targets: IKTargets, rng: np.random.Generator, tol: float = 1e-12,
+                 max_attempts: int = 120, max_iter: int = 80, redraw_every: int = 5):
+    """Like :func:`solve_ik` but returns (IKResult, indices of the points without a solution)
+    instead of raising (their rows of the result are NaN)."""
+    desc = truth.nominal
+    n, j = len(targets.position), desc.n_joints
+    lo, hi = joint_limits(desc)
+    span_lo, span_hi = np.maximum(lo, -np.pi), np.minimum(hi, np.pi)
+    q_out = np.full((n, j), np.nan)
+    w_out = np.zeros((n, 6))
+    attempts = np.zeros(n, int)
+    pos_err = np.full(n, np.inf)
+    dir_err = np.full(n, np.inf)
+    pending = np.arange(n)
+    for attempt in range(max_attempts):
+        if pending.size == 0:
+            break
+        if attempt and attempt % redraw_every == 0 and targets.stylus_cone is not None:
+            targets = _redraw(targets, pending, rng)
+        attempts[pending] += 1
+        starts = rng.uniform(span_lo, span_hi, (pending.size, j))
+        sub = targets.take(pending)
+        q, conv, w, pe, de = _solve_batch(truth, starts, sub, tol, max_iter)
+        q, inside = wrap_into_limits(q, lo, hi)
+        _, z, x = truth.pose(q, _take_geom(truth.geometry(sub.temperature), np.arange(pending.size)))
+        right_way = np.einsum("ni,ni->n", z, sub.stylus) > 0
+        has_x = ~np.isnan(sub.x_dir[:, 0])
+        right_way &= ~has_x | (np.einsum("ni,ni->n", x, np.nan_to_num(sub.x_dir)) > 0)
+        ok = conv & inside & right_way
+        idx = pending[ok]
+        q_out[idx], w_out[idx], pos_err[idx], dir_err[idx] = q[ok], w[ok], pe[ok], de[ok]
+        pending = pending[~ok]
+    return IKResult(q_out, w_out, attempts, pos_err, dir_err, targets.stylus, targets.x_dir), pending

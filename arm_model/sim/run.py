@@ -1,0 +1,401 @@
+"""Run a campaign: plan -> operator -> inverse kinematics on the true arm -> readings -> files.
+
+The steps draw from independent random streams spawned from the seed (truth, plan, operator,
+inverse kinematics, noise, signals), so the same seed gives the same bytes, and changing e.g. the
+noise does not move the points.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .._errors import NumericalError
+from ..io import (Artefacts, ForceSignal, PointSet, atomic_write_text, guard_output, parse_points)
+from ..io import parse_artefacts
+from ..model import AuxData
+from .artefacts import Plan, make_plan
+from .campaign import Campaign
+from .ik import IKTargets, solve_ik
+from .operator import OperatorDraw, draw_operator, force_signal, measurement_slices
+from .truth import Truth, build_truth, si_key
+
+__all__ = ["SimResult", "simulate", "TRUTH_HEADER", "POINTS_FILE", "REFERENCE_FILE", "ARTEFACTS_FILE",
+           "TRUTH_FILE", "TRUTH_POINTS_FILE", "SIGNALS_DIR"]
+
+POINTS_FILE = "points.csv"
+REFERENCE_FILE = "points-ref.csv"
+ARTEFACTS_FILE = "artefacts.toml"
+TRUTH_FILE = "truth.toml"
+TRUTH_POINTS_FILE = "truth-points.csv"
+SIGNALS_DIR = "signals"
+TRUTH_HEADER = ("# TRUTH of a simulated campaign. No analysis reads this file: it holds the hidden true arm, "
+                "its effects and the artefacts' placement, only to score results.")
+
+_DEG = 180.0 / math.pi
+_FMT = {"q": "%.12f", "force": "%.6f", "temperature": "%.6f", "time": "%.3f", "ref": "%.9f"}
+
+
+@dataclass
+class SimResult:
+    """What :func:`simulate` made, in memory (SI).
+
+    Attributes:
+        campaign: the campaign simulated.
+        points: the points file as :func:`arm_model.read_points` reads it (all rows but the tracker's).
+        reference_points: the tracker rows (with ``ref``), or None without a tracker task.
+        artefacts: the artefacts file as :func:`arm_model.read_artefacts` reads it.
+        signals: measurement id -> :class:`arm_model.io.ForceSignal` (as read back from its CSV).
+        truth: the hidden truth: ``p`` (name -> true value, SI), ``p_vector``, ``spec``, ``model``
+            (the core ArmModel of the truth), ``effects`` (settings), ``noise``, ``placements``,
+            ``T_ref_base`` (tracker task id -> (4, 4)), ``operator`` (per-measurement force levels).
+        true_centres: (N, 3) [m] true deflected ball centres of ``points`` rows (base frame).
+        true_q: (N, J) [rad] true joint angles of ``points`` rows.
+        true_wrench: (N, 6) true wrench (probe frame) of ``points`` rows.
+        ref_true_centres, ref_true_q: the same for ``reference_points`` rows (or None).
+        stats: numbers for the summary (IK attempts, truth residuals ...).
+    """
+    campaign: Campaign
+    points: PointSet
+    reference_points: PointSet | None
+    artefacts: Artefacts
+    signals: dict
+    truth: dict
+    true_centres: np.ndarray
+    true_q: np.ndarray
+    true_wrench: np.ndarray
+    ref_true_centres: np.ndarray | None
+    ref_true_q: np.ndarray | None
+    stats: dict
+    texts: dict = field(default_factory=dict, repr=False)
+
+    def write(self, out_dir: str | Path, inputs=()) -> list[Path]:
+        """Write every file into ``out_dir`` (atomically, never over the campaign's inputs or
+        ``inputs``); returns the paths written."""
+        out_dir = Path(out_dir)
+        protect = list(self.campaign.inputs) + list(inputs)
+        for name in self.texts:
+            guard_output(out_dir / name, protect)
+        written = []
+        for name, text in self.texts.items():
+            written.append(atomic_write_text(out_dir / name, text, protect))
+        return written
+
+
+# ---------------------------------------------------------------------------------------------
+# text writers (deterministic formats)
+
+def _csv_text(columns: dict) -> str:
+    """CSV text from {name: (values, fmt or None for text)}."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    names = list(columns)
+    w.writerow(names)
+    cells = []
+    for name in names:
+        values, fmt = columns[name]
+        cells.append([str(v) for v in values] if fmt is None else [fmt % v for v in values])
+    w.writerows(zip(*cells))
+    return buf.getvalue()
+
+
+def _num(x: float) -> str:
+    return repr(float(x))
+
+
+def _artefacts_text(plan: Plan, campaign: Campaign) -> str:
+    out = [f"# Artefacts of the simulated campaign '{campaign.name}' (DATA-FORMATS §4).", ""]
+    for f in plan.features:
+        out += ["[[feature]]", f'id = "{f["id"]}"', f'kind = "{f["kind"]}"']
+        for key in ("diameter", "u_diameter", "form_error"):
+            if f.get(key) is not None:
+                out.append(f"{key}_mm = {_num(f[key] * 1e3)}")
+        out.append("")
+    for (a, b), length, u, _ in plan.distances:
+        out += ["[[distance]]", f'between = ["{a}", "{b}"]', f"length_mm = {_num(length * 1e3)}"]
+        if u is not None:
+            out.append(f"u_length_mm = {_num(u * 1e3)}")
+        out.append("")
+    return "\n".join(out)
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        return _num(v)
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, np.ndarray):
+        return _toml_value(v.tolist())
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"cannot write {type(v)} to TOML")
+
+
+def _toml_table(name: str, d: dict) -> list[str]:
+    out = [f"[{name}]"]
+    sub = []
+    for k, v in d.items():
+        key = k if k.replace("_", "").replace("-", "").isalnum() else f'"{k}"'
+        if v is None:
+            continue
+        if isinstance(v, dict):
+            sub.append((f"{name}.{key}", v))
+        elif isinstance(v, list) and v and isinstance(v[0], dict):
+            for item in v:
+                sub.append((f"[{name}.{key}]", item))
+        else:
+            out.append(f"{key} = {_toml_value(v)}")
+    out.append("")
+    for sname, sd in sub:
+        if sname.startswith("["):
+            lines = _toml_table(sname[1:], sd)
+            lines[0] = f"[{lines[0]}]"
+            out += lines
+        else:
+            out += _toml_table(sname, sd)
+    return out
+
+
+_SETTING_UNITS = {"amplitude": "rad", "phase": "rad", "amplitude2": "rad", "phase2": "rad",
+                  "stiffness": "Nm_per_rad", "alpha": "per_K", "bending_x": "m_per_N", "bending_y": "m_per_N",
+                  "axial": "m_per_N", "offset": "N"}
+
+
+def _with_units(d):
+    if isinstance(d, list):
+        return [_with_units(x) for x in d]
+    if not isinstance(d, dict):
+        return d
+    return {(f"{k}_{_SETTING_UNITS[k]}" if k in _SETTING_UNITS else k): _with_units(v) for k, v in d.items()}
+
+
+def _truth_text(campaign: Campaign, truth: Truth, plan: Plan, draw: OperatorDraw, stats: dict) -> str:
+    spec = truth.model.spec
+    out = [TRUTH_HEADER, f"# Campaign '{campaign.name}', seed {campaign.seed}. SI units, named in every key.", ""]
+    out += [f"campaign = {_toml_value(campaign.name)}", f"seed = {campaign.seed}",
+            f"arm = {_toml_value(campaign.arm.name)}", f"sensor = {_toml_value(campaign.sensor)}",
+            f"effects_on = {_toml_value(truth.effects_on())}", ""]
+    out += ["# true parameter vector of the core ArmModel(nominal, effects): errors added to the nominal arm",
+            "[parameters]"]
+    out += [f'"{si_key(n, u)}" = {_num(v)}' for n, u, v in zip(spec.names, spec.units, truth.p)]
+    out.append("")
+    out += _toml_table("effects", _with_units(truth.settings))
+    noise = {f"{k}_{u}": v for k, v, u in ((k, v, {"encoder_resolution": "rad", "encoder_noise": "rad",
+                                                   "probing_repeatability": "m", "force_noise": "N",
+                                                   "temperature_noise": "C"}[k])
+                                          for k, v in campaign.noise.items())}
+    out += _toml_table("noise", noise)
+    levels = {"level_N": [draw.level[m] for m in draw.level], "measurements": list(draw.level)}
+    out += _toml_table("operator", levels)
+    for tid, pl in plan.placements.items():
+        out += _toml_table(f'artefact."{tid}"', pl)
+    out += _toml_table("stats", stats)
+    return "\n".join(out)
+
+
+# ---------------------------------------------------------------------------------------------
+
+def _rng_streams(seed: int) -> dict[str, np.random.Generator]:
+    names = ("truth", "plan", "operator", "ik", "noise", "signals", "tracker")
+    seqs = np.random.SeedSequence(seed).spawn(len(names))
+    return {n: np.random.default_rng(s) for n, s in zip(names, seqs)}
+
+
+def _x_directions(plan: Plan, force: np.ndarray, rng) -> np.ndarray:
+    """Required probe x axis: along the force's part across the stylus (rotated by the operator's
+    roll error), NaN where the roll is free."""
+    x = np.full_like(force, np.nan)
+    for i in np.flatnonzero(plan.roll_along_force):
+        u = plan.stylus[i]
+        f = force[i] - (force[i] @ u) * u
+        f /= np.linalg.norm(f)
+        a = rng.uniform(-1, 1) * plan.roll_jitter[i]
+        x[i] = np.cos(a) * f + np.sin(a) * np.cross(u, f)
+    return x
+
+
+def _ball_jacobian(truth: Truth, q, temperature, wrench) -> np.ndarray:
+    """(N, 3, J) d ball / d q [m/rad] at true angles (complex step through the core chain)."""
+    from .ik import _H, _take_geom
+    n, j = q.shape
+    qc = np.repeat(q[None], j, axis=0).astype(complex)
+    for k in range(j):
+        qc[k, :, k] += 1j * _H
+    geom = _take_geom(truth.geometry(temperature), np.arange(n), j)
+    ball, _, _ = truth.pose(qc.reshape(j * n, j), geom, np.tile(wrench, (j, 1)))
+    return np.transpose(ball.imag.reshape(j, n, 3) / _H, (1, 2, 0))
+
+
+def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimResult:
+    """Simulate ``campaign`` (seed: the campaign's unless given). ``progress``: optional callable
+    taking a message, called at each stage. Raises :class:`~arm_model.NumericalError` if a point
+    cannot be reached or the truth check fails."""
+    say = progress or (lambda msg: None)
+    seed = campaign.seed if seed is None else int(seed)
+    if seed != campaign.seed:
+        from dataclasses import replace
+        campaign = replace(campaign, seed=seed)
+    rng = _rng_streams(seed)
+    desc = campaign.arm
+    truth = build_truth(desc, campaign.truth, rng["truth"])
+    plan = make_plan(campaign, rng["plan"], truth)
+    n = len(plan)
+    say(f"{n} points in {len(set(plan.measurement))} measurements planned")
+    draw = draw_operator(plan, campaign.operator, campaign.environment, campaign.signals, rng["operator"])
+    x_dir = _x_directions(plan, draw.force, rng["operator"])
+    targets = IKTargets(plan.position, plan.stylus, x_dir, draw.force, draw.torque, draw.temperature,
+                        plan.stylus_axis, plan.stylus_cone)
+    labels = [f"{m} row {i + 1} (feature {f})" for i, (m, f) in enumerate(zip(plan.measurement, plan.feature))]
+    say("inverse kinematics on the true arm ...")
+    ik = solve_ik(truth, targets, rng["ik"], labels=labels)
+    q_true, wrench = ik.q, ik.wrench
+    # physical torques and the readings the encoders give
+    if truth.needs_torques():
+        say("gravity and contact torques (Pinocchio, true arm) ...")
+        tau_g, tau_c = truth.torques(q_true, wrench)
+    else:
+        tau_g = tau_c = np.zeros_like(q_true)
+    aux = truth.aux(draw.temperature, tau_g, tau_c)
+    q_enc = truth.encoder_readings(q_true, aux)
+    # the truth check: the core model evaluated on exact readings lands on the target surface
+    no_sensor = [e for e in truth.model.effects if e.key != "force_sensor"]
+    from ..model import ArmModel
+    check_model = ArmModel(desc, tuple(no_sensor))
+    keep = np.concatenate([np.arange(truth.model.base_size)] +
+                          [np.arange(sl.start, sl.stop) for e, sl in truth.model.effect_slices()
+                           if e.key != "force_sensor"]).astype(int)
+    centres = check_model.ball_centres(q_enc, wrench, truth.p[keep], aux)
+    residual = np.linalg.norm(centres - plan.position, axis=1)
+    if residual.max() > 1e-9:
+        i = int(np.argmax(residual))
+        raise NumericalError(f"truth check failed: the true ball centre of {labels[i]} is "
+                             f"{residual[i] * 1e9:.3g} nm off its target")
+    # noise on the readings
+    nz, nrng = campaign.noise, rng["noise"]
+    q_read = q_enc.copy()
+    if nz["probing_repeatability"] > 0:
+        jac = _ball_jacobian(truth, q_true, draw.temperature, wrench)
+        dx = nrng.normal(0.0, nz["probing_repeatability"], (n, 3))
+        q_read += np.einsum("nij,nj->ni", np.linalg.pinv(jac), dx)
+    if nz["encoder_noise"] > 0:
+        q_read += nrng.normal(0.0, nz["encoder_noise"], q_read.shape)
+    if nz["encoder_resolution"] > 0:
+        q_read = np.round(q_read / nz["encoder_resolution"]) * nz["encoder_resolution"]
+    temp_read = draw.temperature + (nrng.normal(0.0, nz["temperature_noise"], n)
+                                    if nz["temperature_noise"] > 0 else 0.0)
+    f_read = truth.sensor_reading(wrench[:, :3])
+    if nz["force_noise"] > 0:
+        f_read = f_read + nrng.normal(0.0, nz["force_noise"], f_read.shape)
+    # files
+    say("writing files in memory ...")
+    sensor = campaign.sensor
+    is_ref = plan.reference
+    texts = {}
+
+    def points_columns(rows, with_ref):
+        cols = {"measurement": (plan.measurement[rows], None), "feature": (plan.feature[rows], None)}
+        for k in range(desc.n_joints):
+            cols[f"q{k + 1}_deg"] = (q_read[rows, k] * _DEG, _FMT["q"])
+        if sensor == "xyz":
+            for k, a in enumerate("xyz"):
+                cols[f"f{a}_N"] = (f_read[rows, k], _FMT["force"])
+        elif sensor == "two-channel":
+            cols["f_bend_N"] = (f_read[rows, 0], _FMT["force"])
+            cols["f_axial_N"] = (f_read[rows, 2], _FMT["force"])
+        cols["temperature_C"] = (temp_read[rows], _FMT["temperature"])
+        cols["time_s"] = (draw.time[rows], _FMT["time"])
+        if with_ref:
+            ref = np.empty((rows.size, 3))
+            trng = rng["tracker"]
+            for tid, T in plan.T_ref_base.items():
+                k = [i for i, t in enumerate(campaign.tasks) if t.id == tid][0]
+                sel = plan.task[rows] == k
+                p = centres[rows[sel]] @ T[:3, :3].T + T[:3, 3]
+                ref[sel] = p + trng.normal(0.0, plan.ref_noise[tid], p.shape)
+            for k, a in enumerate("xyz"):
+                cols[f"{a}_ref_mm"] = (ref[:, k] * 1e3, _FMT["ref"])
+        return cols
+
+    main_rows = np.flatnonzero(~is_ref)
+    ref_rows = np.flatnonzero(is_ref)
+    points = ref_points = None
+    if main_rows.size:
+        texts[POINTS_FILE] = _csv_text(points_columns(main_rows, False))
+        points = parse_points(texts[POINTS_FILE], POINTS_FILE, desc.n_joints)
+    if ref_rows.size:
+        texts[REFERENCE_FILE] = _csv_text(points_columns(ref_rows, True))
+        ref_points = parse_points(texts[REFERENCE_FILE], REFERENCE_FILE, desc.n_joints)
+    texts[ARTEFACTS_FILE] = _artefacts_text(plan, campaign)
+    artefacts = parse_artefacts(texts[ARTEFACTS_FILE], ARTEFACTS_FILE)
+    # force signals, one a measurement
+    signals = {}
+    if sensor != "none" and campaign.signals["enabled"]:
+        say("force signals ...")
+        chans = (0, 2) if sensor == "two-channel" else (0, 1, 2)
+        names = ("f_bend_N", "f_axial_N") if sensor == "two-channel" else ("fx_N", "fy_N", "fz_N")
+        srng = rng["signals"]
+        for mid, idx in measurement_slices(plan.measurement).items():
+            peaks = np.array([[float(_FMT["force"] % v) for v in f_read[i, list(chans)]] for i in idx])
+            t, f = force_signal(draw.time[idx], peaks, truth.force_offset[list(chans)], draw.windows[mid],
+                                campaign.signals, nz["force_noise"], srng)
+            cols = {"time_s": (t, _FMT["time"])}
+            for c, name in enumerate(names):
+                cols[name] = (f[:, c], _FMT["force"])
+            text = _fast_csv(cols)
+            rel = f"{SIGNALS_DIR}/{mid}.csv"
+            texts[rel] = text
+            arr = np.loadtxt(io.StringIO(text), delimiter=",", skiprows=1, ndmin=2)
+            force = arr[:, 1:]
+            if sensor == "two-channel":
+                force = np.column_stack([force[:, 0], np.zeros(len(force)), force[:, 1]])
+            signals[mid] = ForceSignal(rel, arr[:, 0], force, "two-channel" if sensor == "two-channel" else "xyz")
+    f_true = wrench[:, :3]
+    stats = {"points": int(n), "measurements": len(set(plan.measurement)),
+             "ik_attempts_mean": float(ik.attempts.mean()), "ik_attempts_max": int(ik.attempts.max()),
+             "truth_residual_max_m": float(residual.max()),
+             "force_mean_N": float(np.linalg.norm(f_true, axis=1).mean()),
+             "force_max_N": float(np.linalg.norm(f_true, axis=1).max())}
+    texts[TRUTH_FILE] = _truth_text(campaign, truth, plan, draw, stats)
+    tcols = {"measurement": (plan.measurement, None), "feature": (plan.feature, None),
+             "file": (np.where(is_ref, REFERENCE_FILE, POINTS_FILE), None)}
+    for k in range(desc.n_joints):
+        tcols[f"q{k + 1}_true_deg"] = (q_true[:, k] * _DEG, "%.12f")
+    for k in range(desc.n_joints):
+        tcols[f"q{k + 1}_enc_deg"] = (q_enc[:, k] * _DEG, "%.12f")
+    for k, a in enumerate("xyz"):
+        tcols[f"{a}_true_mm"] = (centres[:, k] * 1e3, "%.9f")
+    for k, a in enumerate("xyz"):
+        tcols[f"f{a}_true_N"] = (f_true[:, k], "%.9f")
+    tcols["temperature_true_C"] = (draw.temperature, "%.6f")
+    texts[TRUTH_POINTS_FILE] = "# TRUTH: true values per captured point; no analysis reads this file.\n" + \
+        _csv_text(tcols)
+    truth_dict = {"p": truth.values, "p_vector": truth.p.copy(), "spec": truth.model.spec, "model": truth.model,
+                  "effects": truth.settings, "effects_on": truth.effects_on(), "noise": dict(campaign.noise),
+                  "placements": plan.placements, "T_ref_base": dict(plan.T_ref_base),
+                  "operator": dict(draw.level), "cross_talk": truth.cross_talk.copy(),
+                  "description": truth.description, "truth": truth,
+                  "tau_gravity": tau_g, "tau_contact": tau_c, "q_enc": q_enc, "temperature": draw.temperature,
+                  "force_base": draw.force}
+    return SimResult(campaign, points, ref_points, artefacts, signals, truth_dict,
+                     centres[main_rows], q_true[main_rows], wrench[main_rows],
+                     centres[ref_rows] if ref_rows.size else None, q_true[ref_rows] if ref_rows.size else None,
+                     stats, texts)
+
+
+def _fast_csv(columns: dict) -> str:
+    """Numeric CSV text (all columns formatted), row-wise, deterministic."""
+    names = list(columns)
+    arr = np.column_stack([columns[k][0] for k in names])
+    fmt = ",".join(columns[k][1] for k in names)
+    buf = io.StringIO()
+    buf.write(",".join(names) + "\n")
+    np.savetxt(buf, arr, fmt=fmt, delimiter=",", newline="\n")
+    return buf.getvalue()
