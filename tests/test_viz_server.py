@@ -1,0 +1,173 @@
+"""Viewer with a live meshcat server (no browser): lifecycle, errors, and what the scene holds, read
+back from the server's self-contained page (each command is a base64 msgpack blob)."""
+from __future__ import annotations
+
+import base64
+import os
+import re
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from arm_model import ball_centres
+from conftest import ROOT, assert_close
+from viz import MeshcatServer, View, ViewerError, show, show_residuals
+
+
+def page_commands(page: str) -> list[dict]:
+    """The meshcat commands embedded in a static page, in order."""
+    import umsgpack
+
+    blobs = re.findall(r'fetch\("data:application/octet-binary;base64,([A-Za-z0-9+/=]+)"\)', page)
+    return [umsgpack.unpackb(base64.b64decode(b)) for b in blobs]
+
+
+def transforms(cmds) -> dict[str, np.ndarray]:
+    return {c["path"]: np.array(c["matrix"]).reshape(4, 4).T for c in cmds if c["type"] == "set_transform"}
+
+
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    # a zombie is gone for our purposes
+    with open(f"/proc/{pid}/stat") as fh:
+        return fh.read().split(") ", 1)[1][0] != "Z"
+
+
+def wait_gone(pid: int, seconds: float = 5.0) -> bool:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        if not alive(pid):
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def listeners(port: int) -> set[str]:
+    """Local addresses (hex, as in /proc/net/tcp*) listening on ``port``."""
+    found = set()
+    for proto in ("tcp", "tcp6"):
+        with open(f"/proc/net/{proto}") as fh:
+            for line in fh.readlines()[1:]:
+                local, state = line.split()[1], line.split()[3]
+                addr, p = local.split(":")
+                if state == "0A" and int(p, 16) == port:
+                    found.add(f"{proto} {addr}")
+    return found
+
+
+Q = np.radians([0, 30, 0, 60, 0, 45, 0])
+W = np.array([8.0, -2.0, 3.0])
+
+
+def test_server_lifecycle_and_loopback_only():
+    with MeshcatServer() as server:
+        pid = server.pid
+        assert server.running and server.url.startswith("http://127.0.0.1:") and server.url.endswith("/static/")
+        with socket.create_connection(("127.0.0.1", server.port), timeout=5):
+            pass
+        assert listeners(server.port) == {"tcp 0100007F"}      # 127.0.0.1 only, not every interface
+    assert not server.running and wait_gone(pid)
+    server.close()                                        # idempotent
+
+
+def test_busy_port_is_a_clear_error_and_leaves_nothing():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        server = MeshcatServer(port=port)
+        with pytest.raises(ViewerError, match=f"port {port} on 127.0.0.1 is in use: choose another with --port"):
+            server.start()
+        assert server.pid is None and not server.running
+    with pytest.raises(ViewerError, match="between 1 and 65535"):
+        MeshcatServer(port=70000)
+
+
+@pytest.mark.parametrize("ending", ["exit", "kill"])
+def test_server_stops_with_its_parent(ending, tmp_path):
+    """Normal exit (atexit) and SIGKILL of the parent (the server watches its parent) both stop it."""
+    code = ("import os, sys, signal\n"
+            "from viz import MeshcatServer\n"
+            "s = MeshcatServer().start()\n"
+            "print(s.pid, flush=True)\n"
+            + ("os.kill(os.getpid(), signal.SIGKILL)\n" if ending == "kill" else "sys.exit(0)\n"))
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    pid = int(out.stdout.split()[0])
+    assert wait_gone(pid, 5.0), f"server {pid} outlived its parent ({ending})"
+
+
+def test_scene_holds_the_deflected_pose(nominal):
+    """The drawn ball sits at the deflection-corrected centre (elastic joints set by statics), the arrow
+    starts at the rigid centre and is scale x the deflection long, the legend says the scale."""
+    with View(nominal) as view:
+        info = view.show_pose(Q, W, scale=1000.0)
+        page = view.html()
+    rigid = ball_centres(nominal, Q[None])[0]
+    corrected = ball_centres(nominal, Q[None], W[None])[0]
+    assert_close(info.rigid, rigid, 1e-12)
+    assert_close(info.corrected, corrected, 1e-12)
+    assert 50e-6 < np.linalg.norm(corrected - rigid) < 200e-6
+    tf = transforms(page_commands(page))
+    assert_close(tf["/meshcat/aacmm/arm/visuals/ball_0"][:3, 3], corrected, 1e-12)
+    arrow = tf["/meshcat/aacmm/deflection x1000"]
+    assert_close(arrow[:3, 3], rigid, 1e-12)
+    direction = arrow[:3, 1]
+    assert_close(direction, (corrected - rigid) / np.linalg.norm(corrected - rigid), 1e-9)
+    head = tf["/meshcat/aacmm/deflection x1000/head"]
+    tip = head[1, 3] + head[1, 1] / 2
+    assert tip == pytest.approx(1000 * np.linalg.norm(corrected - rigid), rel=1e-9)
+    assert "<title>aacmm7: AACMM viewer</title>" in page
+    assert "drawn x1000" in page
+
+
+def test_zero_force_draws_the_rigid_arm(nominal):
+    with View(nominal) as view:
+        info = view.show_pose(Q, np.zeros(3))
+        cmds = page_commands(view.html())
+    assert_close(info.corrected, info.rigid, 0.0)
+    head = transforms(cmds)["/meshcat/aacmm/deflection x1000/head"]
+    assert head[1, 1] < 1e-8
+
+
+def test_animation_is_embedded(nominal):
+    qs = np.radians([[0, 30, 0, 60, 0, 45, 0], [20, 10, 0, 80, 0, 30, 0], [40, 0, 0, 90, 0, 10, 0]])
+    ws = np.array([[5.0, 0, 0], [0, 5.0, 0], [0, 0, 5.0]])
+    with View(nominal) as view:
+        infos = view.animate(qs, ws, fps=4.0, repetitions=1)
+        cmds = page_commands(view.html())
+    anims = [c for c in cmds if c["type"] == "set_animation"]
+    assert len(anims) == 1
+    clips = {a["path"]: a["clip"] for a in anims[0]["animations"]}
+    ball = clips["/meshcat/aacmm/arm/visuals/ball_0"]
+    assert ball["fps"] == 4.0
+    pos = next(t for t in ball["tracks"] if t["name"] == ".position")
+    assert [k["time"] for k in pos["keys"]] == [0, 1, 2]
+    assert_close([k["value"] for k in pos["keys"]], ball_centres(view.scene.desc, qs, ws), 1e-12)
+    assert_close([i.corrected for i in infos], ball_centres(view.scene.desc, qs, ws), 1e-12)
+
+
+def test_show_and_show_residuals_api(nominal):
+    view = show(nominal, Q, wrench=W, scale=500)
+    try:
+        assert view.url.startswith("http://127.0.0.1:") and "drawn x500" in " ".join(view.legend)
+        p = np.array([[0.5, 0.0, 0.3], [0.6, 0.1, 0.3]])
+        r = np.array([[1e-6, 0, 0], [0, -2e-6, 0]])
+        assert show_residuals(p, r, scale=2e4, view=view) is view
+        cmds = page_commands(view.html())
+        seg = next(c for c in cmds if c["type"] == "set_object"
+                   and c["path"] == "/meshcat/aacmm/residuals x20000/vectors")
+        assert seg["object"]["object"]["type"] == "LineSegments"
+        assert "<iframe src=\"http://127.0.0.1:" in view._repr_html_()
+    finally:
+        view.close()
+    assert not view.server.running
+    # residuals alone, no arm
+    with show_residuals(p, r) as alone:
+        assert any("2 residual vector(s), drawn x1000" in line for line in alone.legend)
