@@ -1,0 +1,452 @@
+"""``calibrate(model, data, free=...) -> CalibrationResult``: the whole fit, checked at each step.
+
+1. Free set: names or glob patterns over ``model.spec`` (the rest held at ``values``, default 0).
+2. Nuisance start: algebraic fits of every feature, polished with the parameters held.
+3. Identifiability at the start (:mod:`calibration.identifiability`): the reduced Jacobian, with the
+   rigid motions of the base frame (exact symmetries of artefact residuals, and of reference points
+   when ``T_ref_base`` is fitted) projected out; dependent parameters are fixed and listed
+   (``on_unidentifiable="fix"``) or the fit stops with the list (``"stop"``).
+4. Levenberg-Marquardt (:mod:`calibration.solver`), exact CasADi Jacobians, checked exit status.
+5. Identifiability again at the solution (a new deficiency is fixed and the fit repeated).
+6. Covariance ``s0^2 (J_red^T J_red)^-1`` of the free parameters, ``s0^2`` the residual variance
+   factor ``2 cost / dof`` (``covariance="residual"``) or 1 (``"stated"``: the stated uncertainties
+   are taken as true); standard uncertainties and correlations by name.
+7. Outliers: standardized residuals ``r_w / (s_rob sqrt(1 - h))`` (``h`` the leverage, ``s_rob`` a
+   robust scale: 1.4826 times the median) beyond ``outlier_threshold`` are reported with measurement,
+   feature and file line; they are kept unless ``drop_outliers`` (then dropped once and refitted).
+"""
+from __future__ import annotations
+
+import fnmatch
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from arm_model import InputError, NumericalError
+from arm_model.model import ArmModel
+
+from .data import CalibrationData, Weights
+from .identifiability import DEFAULT_RANK_TOL, Combination, Identifiability, analyse, reduced_jacobian
+from .problem import Problem
+from .solver import levenberg_marquardt, normal_solver
+
+__all__ = ["FixedParameter", "Outlier", "CalibrationResult", "calibrate", "resolve_parameters",
+           "default_free", "rigid_gauge", "display_unit"]
+
+
+def display_unit(unit: str) -> tuple[str, float]:
+    """User-facing unit and factor from SI: m -> um, rad -> deg, m/N -> um/N, others unchanged."""
+    return {"m": ("um", 1e6), "rad": ("deg", 180.0 / math.pi), "m/N": ("um/N", 1e6)}.get(unit, (unit, 1.0))
+
+
+@dataclass(frozen=True)
+class FixedParameter:
+    """A parameter held fixed by the identifiability analysis: its value [SI], why, and the
+    combination with the free parameters that the data cannot see."""
+    name: str
+    value: float
+    reason: str
+    combination: Combination | None = None
+    stage: str = "start"
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "value": self.value, "reason": self.reason, "stage": self.stage,
+                "combination": None if self.combination is None else self.combination.text()}
+
+
+@dataclass(frozen=True)
+class Outlier:
+    """A point (or distance) whose standardized residual exceeds the threshold."""
+    kind: str
+    measurement: str
+    feature: str
+    point: int | None          # index into the data's points (None for a distance)
+    line: int | None           # line in the points file
+    standardized: float
+    residual: float            # [m]
+
+    def to_dict(self) -> dict:
+        return {"kind": self.kind, "measurement": self.measurement, "feature": self.feature, "point": self.point,
+                "line": self.line, "standardized": self.standardized, "residual_um": self.residual * 1e6}
+
+
+def resolve_parameters(spec, patterns) -> list[int]:
+    """Indices of the parameters of ``spec`` named by ``patterns`` (names or globs like ``j*.d``)."""
+    out = []
+    for pat in patterns:
+        hits = [i for i, n in enumerate(spec.names) if fnmatch.fnmatchcase(n, pat)]
+        if not hits:
+            raise InputError(f"'{pat}' matches no parameter; known: {', '.join(spec.names)}")
+        out += [i for i in hits if i not in out]
+    return sorted(out)
+
+
+def default_free(model: ArmModel) -> list[str]:
+    """Every joint-row error, the probe offset and every effect parameter (compliances only when named)."""
+    return [n for n in model.spec.names if not n.startswith("probe.compliance")]
+
+
+def rigid_gauge(problem: Problem, p, free) -> np.ndarray:
+    """Parameter directions (len(free), k) [SI] that move every ball centre by one rigid motion of the
+    base frame (fitted to 1e-9 relative): exact symmetries of the residuals unless the reference
+    transform is held at identity."""
+    free = np.asarray(free, dtype=int)
+    if not len(free) or any(it.kind == "reference" and it.n_theta == 0 for it in problem.instances):
+        return np.zeros((len(free), 0))
+    x, dx = problem.centres(p, jac=True)
+    a = dx[:, :, free].reshape(-1, len(free))
+    fields = [np.tile(e, (len(x), 1)) for e in np.eye(3)] + [np.cross(e, x) for e in np.eye(3)]
+    dirs = []
+    for f in fields:
+        sol = np.linalg.lstsq(a, f.ravel(), rcond=None)[0]
+        if np.linalg.norm(a @ sol - f.ravel()) <= 1e-9 * np.linalg.norm(f):
+            dirs.append(sol)
+    return np.array(dirs).T if dirs else np.zeros((len(free), 0))
+
+
+@dataclass
+class CalibrationResult:
+    """Everything a fit produced, by name. Lengths [m], angles [rad] (SI) unless a key says otherwise.
+
+    Attributes:
+        model: the model fitted (its ``spec`` names every entry of ``p``).
+        p: full parameter vector (free entries estimated, the others at their fixed values).
+        free: names of the estimated parameters (order of ``cov``, ``u``, ``corr``).
+        fixed: parameters held fixed by the identifiability analysis (with reasons, combinations).
+        held: parameters the user did not free (at their given values).
+        cov, u, corr: covariance [SI^2], standard uncertainties [SI], correlation matrix of ``free``.
+        s0: residual standard deviation factor (weighted residual RMS with dof correction).
+        covariance_source: how ``cov`` was scaled.
+        status, iterations, evaluations, cost: solver outcome (cost = 0.5 sum r_w^2).
+        n_residuals, n_nuisance, dof: problem size.
+        identifiability: at the start; identifiability_final: at the solution.
+        residuals: per-point table (``Problem.residual_table`` plus ``standardized``, ``line``,
+            ``measurement``, ``feature``); instances: per artefact instance scalars;
+            distances: per certified-length instance.
+        reference: the fitted ``T_ref_base`` (4x4) with the standard uncertainties of its
+            increments (translation [m], rotation [rad]), or None.
+        outliers, dropped: outliers found (kept unless dropped); points dropped and refitted.
+        data, weights: what was fitted.
+    """
+    model: ArmModel
+    p: np.ndarray
+    free: tuple
+    fixed: tuple
+    held: tuple
+    cov: np.ndarray
+    u: np.ndarray
+    corr: np.ndarray
+    s0: float
+    covariance_source: str
+    status: str
+    iterations: int
+    evaluations: int
+    cost: float
+    n_residuals: int
+    n_nuisance: int
+    dof: int
+    identifiability: Identifiability
+    identifiability_final: Identifiability
+    residuals: dict
+    instances: list
+    distances: list
+    reference: dict | None
+    outliers: list
+    dropped: list
+    data: CalibrationData
+    weights: Weights
+    reference_mode: str = "fit"
+    unused: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+
+    # -- access by name ----------------------------------------------------------------------------
+    @property
+    def names(self) -> tuple:
+        return self.model.spec.names
+
+    def value(self, name: str) -> float:
+        return float(self.p[self.model.spec.index(name)])
+
+    def uncertainty(self, name: str) -> float:
+        """Standard uncertainty [SI] of a free parameter (0 for a fixed or held one)."""
+        return float(self.u[self.free.index(name)]) if name in self.free else 0.0
+
+    def parameter_rows(self) -> list[dict]:
+        """One row a parameter: name, SI unit, value, u, state (free / fixed / held), display values."""
+        rows = []
+        fixed = {f.name: f for f in self.fixed}
+        for i, (n, unit) in enumerate(zip(self.model.spec.names, self.model.spec.units)):
+            du, fac = display_unit(unit)
+            state = "free" if n in self.free else ("fixed" if n in fixed else "held")
+            u = self.uncertainty(n)
+            rows.append({"name": n, "unit": unit, "value": float(self.p[i]), "u": u, "state": state,
+                         "display_unit": du, "display_value": float(self.p[i]) * fac, "display_u": u * fac})
+        return rows
+
+    def described(self):
+        """The calibrated description (base errors folded in; effect parameters are not representable)."""
+        return self.model.described(self.p)
+
+    def equivalent(self, p_other) -> np.ndarray:
+        """``p_other`` (e.g. a simulation's truth) moved along the unidentifiable combinations so
+        that the fixed parameters take their fixed values: what this fit can estimate of it."""
+        p = np.array(p_other, dtype=float)
+        spec = self.model.spec
+        for f in self.fixed:
+            if f.combination is None:
+                continue
+            shift = p[spec.index(f.name)] - f.value
+            for name, coef in f.combination.terms:
+                p[spec.index(name)] -= shift * coef
+        return p
+
+    # -- held-out data -----------------------------------------------------------------------------
+    def predict(self, data: CalibrationData) -> dict:
+        """Residuals on other data with the fitted parameters (features re-fitted, nothing else):
+        the per-point table of ``Problem.residual_table`` and the weighted RMS."""
+        prob = Problem(self.model, data, self.weights, [], reference=self.reference_mode)
+        st = levenberg_marquardt(prob, self.p, prob.initial_states(self.p)).states
+        table = prob.residual_table(self.p, st)
+        ev = prob.evaluate(self.p, st, jac=False)
+        table["rms_weighted"] = float(np.sqrt(np.mean(ev.r ** 2)))
+        table["measurement"] = data.points.measurement[table["point"]]
+        table["feature"] = data.points.feature[table["point"]]
+        return table
+
+    def validate(self, data: CalibrationData):
+        """:class:`calibration.validation.Validation` of the fitted parameters on ``data``."""
+        from .validation import validate
+        return validate(self.model, self.p, data, self.weights, self.reference_mode)
+
+    def compare(self, data: CalibrationData, p_before=None) -> list[dict]:
+        """Before/after table on ``data``: ``p_before`` (default the nominal, zeros) vs the fit."""
+        from .validation import before_after
+        before = np.zeros(self.model.spec.size) if p_before is None else p_before
+        return before_after(self.model, before, self.p, data, self.weights, self.reference_mode)
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary (SI values, plus display units in the parameter rows)."""
+        return {
+            "status": self.status, "iterations": self.iterations, "evaluations": self.evaluations,
+            "cost": self.cost, "s0": self.s0, "covariance_source": self.covariance_source,
+            "n_points": len(self.data), "n_residuals": self.n_residuals, "n_nuisance": self.n_nuisance,
+            "dof": self.dof, "parameters": self.parameter_rows(), "free": list(self.free),
+            "fixed": [f.to_dict() for f in self.fixed], "held": list(self.held),
+            "correlation": {"names": list(self.free), "matrix": self.corr.tolist()},
+            "identifiability_start": self.identifiability.to_dict(),
+            "identifiability_final": self.identifiability_final.to_dict(),
+            "reference_frame": self.reference,
+            "weights": {"probe_um": self.weights.probe * 1e6, "reference_um": self.weights.reference * 1e6,
+                        "length_um": None if self.weights.length is None else self.weights.length * 1e6},
+            "outliers": [o.to_dict() for o in self.outliers], "dropped": [o.to_dict() for o in self.dropped],
+            "instances": self.instances, "distances": self.distances,
+            "unused_points": [int(i) for i in self.unused],
+        }
+
+
+def _leverage(j: sp.csc_matrix, solve, chunk: int = 2000) -> np.ndarray:
+    jr = j.tocsr()
+    h = np.empty(j.shape[0])
+    for s in range(0, j.shape[0], chunk):
+        blk = jr[s: s + chunk]
+        z = solve(np.asarray(blk.T.todense()))
+        h[s: s + chunk] = np.asarray(blk.multiply(z.T).sum(axis=1)).ravel()
+    return np.clip(h, 0.0, 1.0 - 1e-12)
+
+
+def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict | None = None,
+              start: dict | None = None, weights: Weights | None = None, on_unidentifiable: str = "fix",
+              rank_tol: float = DEFAULT_RANK_TOL, outlier_threshold: float = 4.0, drop_outliers: bool = False,
+              covariance: str = "residual", reference: str = "fit", max_iter: int = 200,
+              prefer=None) -> CalibrationResult:
+    """Identify the parameters ``free`` of ``model`` from ``data``.
+
+    Args:
+        model: the arm model; p = 0 is its description (parameters are errors).
+        data: :class:`~calibration.data.CalibrationData` (``make_data``).
+        free: names or glob patterns (``["j*.d", "probe.*"]``); default :func:`default_free`.
+        values: values [SI] of parameters that are not free (default 0).
+        start: starting values [SI] of free parameters (default their ``values`` or 0).
+        weights: standard uncertainties of the residuals.
+        on_unidentifiable: "fix" (hold and list dependent parameters) or "stop" (raise with the list).
+        rank_tol: relative singular value below which a direction is not identifiable.
+        outlier_threshold: standardized residual beyond which a point is an outlier.
+        drop_outliers: drop the outlier points once and refit (they are listed in ``dropped``).
+        covariance: "residual" (scaled by the residual variance factor) or "stated".
+        reference: "fit" (``T_ref_base`` unknown), "identity" (reference coordinates are base
+            coordinates: then the base pose is identifiable) or "off".
+        prefer: parameter names in order of preference to keep when columns tie.
+
+    Raises:
+        NumericalError: no convergence, too few residuals, or unidentifiable parameters with "stop".
+    """
+    if on_unidentifiable not in ("fix", "stop"):
+        raise ValueError(f"on_unidentifiable must be 'fix' or 'stop', got {on_unidentifiable!r}")
+    if covariance not in ("residual", "stated"):
+        raise ValueError(f"covariance must be 'residual' or 'stated', got {covariance!r}")
+    weights = weights or Weights()
+    spec = model.spec
+    cand = resolve_parameters(spec, default_free(model) if free is None else free)
+    p0 = spec.vector(values or {})
+    for name, v in (start or {}).items():
+        p0[spec.index(name)] = v
+    problem = Problem(model, data, weights, cand, reference=reference)
+    states = levenberg_marquardt(problem.with_free([]), p0, problem.initial_states(p0), max_iter=max_iter).states
+
+    fixed: list[FixedParameter] = []
+    kept = list(cand)
+
+    def check(p, states, stage) -> Identifiability:
+        nonlocal kept
+        prob = problem.with_free(kept)
+        ev = prob.evaluate(p, states)
+        gauge = rigid_gauge(prob, p, kept)
+        idf = analyse(reduced_jacobian(ev.jp, ev.jt), ev.jp, [spec.names[i] for i in kept], rank_tol, prefer,
+                      gauge=gauge)
+        if idf.dependent:
+            if on_unidentifiable == "stop":
+                lines = [f"  {k}: {c.text()}" for k, c in idf.combinations.items()]
+                raise NumericalError(f"{len(idf.dependent)} parameter combination(s) the data cannot identify "
+                                     f"({stage}; rank {idf.rank} of {len(kept)}, rank_tol {rank_tol:g}):\n"
+                                     + "\n".join(lines) + "\nfix these parameters or use on_unidentifiable='fix'")
+            for name in idf.dependent:
+                comb = idf.combinations[name]
+                if name in idf.no_effect:
+                    reason = "no effect on the data (its Jacobian column is zero)"
+                elif len(comb.terms) == 1 and name in idf.gauge:
+                    reason = "a rigid motion of the base frame: not observable from these data"
+                elif len(comb.terms) == 1:
+                    reason = "absorbed by the artefacts' unknowns (centres, axes, transforms)"
+                else:
+                    reason = "not separable from the free parameters: " + comb.text()
+                fixed.append(FixedParameter(name, float(p[spec.index(name)]), reason, comb, stage))
+            kept = [i for i in kept if spec.names[i] not in idf.dependent]
+        return idf
+
+    idf0 = check(p0, states, "start")
+    p = p0
+    for _ in range(4):
+        prob = problem.with_free(kept)
+        sol = levenberg_marquardt(prob, p, states, max_iter=max_iter)
+        p, states = sol.p, sol.states
+        n_before = len(kept)
+        idf1 = check(p, states, "solution")
+        if len(kept) == n_before:
+            break
+    else:
+        raise NumericalError("the identifiable set kept changing between fits; raise rank_tol or fix parameters")
+    prob = problem.with_free(kept)
+    ev = sol.evaluation
+    n_rows = len(ev.r)
+    n_nuis = sum(it.n_theta for it in prob.instances)
+    dof = n_rows - len(kept) - n_nuis
+    if dof <= 0:
+        raise NumericalError(f"{n_rows} residuals for {len(kept)} parameters and {n_nuis} nuisance unknowns: "
+                             "not enough data for a fit with redundancy")
+    s0 = math.sqrt(2 * sol.cost / dof)
+    var = s0 ** 2 if covariance == "residual" else 1.0
+    source = (f"a posteriori: s0^2 = {s0 ** 2:.4g} (weighted residual variance, dof {dof})" if covariance == "residual"
+              else "stated uncertainties (s0 = 1)")
+    # covariance of the free parameters from the reduced Jacobian
+    jred = reduced_jacobian(ev.jp, ev.jt)
+    scale = _scale(ev.jp)
+    _, s, vt = np.linalg.svd(jred / scale, full_matrices=False)
+    if len(kept) and s[-1] <= 0:
+        raise NumericalError("singular covariance: a free parameter has no effect on the residuals")
+    cov = var * (vt.T / s ** 2) @ vt / np.outer(scale, scale) if len(kept) else np.zeros((0, 0))
+    u = np.sqrt(np.diag(cov))
+    corr = cov / np.outer(u, u) if len(kept) else cov
+    # leverage, standardized residuals, outliers
+    j = sp.hstack([sp.csr_matrix(ev.jp), ev.jt], format="csc") if len(kept) else ev.jt.tocsc()
+    jscale = np.sqrt(np.asarray(j.multiply(j).sum(axis=0)).ravel())
+    jscale[jscale == 0] = 1.0
+    js = (j @ sp.diags(1.0 / jscale)).tocsc()
+    solve = normal_solver(js)
+    h = _leverage(js, solve)
+    zraw = ev.r / np.sqrt(1.0 - h)
+    s_rob = 1.4826 * float(np.median(np.abs(zraw))) or 1.0
+    z = zraw / s_rob
+    table = prob.residual_table(p, states)
+    pts = data.points
+    lines = pts.lines
+    npr = prob.n_point_rows
+    # per point: the largest |z| of its rows (signed for one-row kinds)
+    zp = np.zeros(len(table["point"]))
+    k = 0
+    for g in prob.groups:
+        npt, rows = len(g["points"]), g["rows"]
+        zz = z[g["row0"]: g["row0"] + npt * rows].reshape(npt, rows)
+        pick = np.argmax(np.abs(zz), axis=1)
+        zp[k: k + npt] = zz[np.arange(npt), pick]
+        k += npt
+    table["standardized"] = zp
+    table["measurement"] = pts.measurement[table["point"]]
+    table["feature"] = pts.feature[table["point"]]
+    table["line"] = (lines[table["point"]] if lines is not None else table["point"] + 1)
+    zd = z[npr:]
+    outliers = []
+    for i in np.flatnonzero(np.abs(zp) > outlier_threshold):
+        pi = int(table["point"][i])
+        outliers.append(Outlier(str(table["kind"][i]), str(pts.measurement[pi]), str(pts.feature[pi]), pi,
+                                None if lines is None else int(lines[pi]), float(zp[i]), float(table["value"][i])))
+    for i in np.flatnonzero(np.abs(zd) > outlier_threshold):
+        d = prob.distance_items[i]
+        outliers.append(Outlier("distance", d.measurement, " - ".join(d.between), None, None, float(zd[i]),
+                                float(table["distance"][i])))
+    if drop_outliers and any(o.point is not None for o in outliers):
+        drop = sorted({o.point for o in outliers if o.point is not None})
+        keep = np.setdiff1d(np.arange(len(data)), drop)
+        res = calibrate(model, data.select(keep), free, values=values, start=start, weights=weights,
+                        on_unidentifiable=on_unidentifiable, rank_tol=rank_tol, outlier_threshold=outlier_threshold,
+                        drop_outliers=False, covariance=covariance, reference=reference, max_iter=max_iter,
+                        prefer=prefer)
+        res.dropped = [o for o in outliers if o.point is not None]
+        return res
+    # per-instance scalars
+    instances = []
+    for i, it in enumerate(prob.instances):
+        sel = table["instance"] == i
+        v = table["value"][sel]
+        st = states[i]
+        item = {"measurement": it.measurement, "feature": it.feature, "kind": it.kind,
+                "points": [int(x) for x in it.points], "n": int(sel.sum()),
+                "rms": float(np.sqrt(np.mean(v ** 2))) if len(v) else 0.0,
+                "max_abs": float(np.max(np.abs(v))) if len(v) else 0.0}
+        if it.kind in ("seat", "sphere"):
+            item["centre"] = st[:3].tolist()
+        elif it.kind in ("ring", "cylinder"):
+            item["axis_point"], item["axis_direction"] = st[0:3].tolist(), st[3:6].tolist()
+        elif it.kind == "plane":
+            item["normal"], item["offset"] = st[0:3].tolist(), float(st[9])
+        instances.append(item)
+    distances = [{"measurement": d.measurement, "between": list(d.between), "certified": d.length,
+                  "residual": float(table["distance"][i]), "standardized": float(zd[i]), "sigma": d.sigma}
+                 for i, d in enumerate(prob.distance_items)]
+    ref = None
+    for i, it in enumerate(prob.instances):
+        if it.kind == "reference":
+            t = np.eye(4)
+            t[:3, :3] = states[i][0:9].reshape(3, 3, order="F")
+            t[:3, 3] = states[i][9:12]
+            ref = {"T_ref_base": t.tolist(), "fitted": it.n_theta > 0}
+            if it.n_theta:
+                cols = len(kept) + it.offset + np.arange(6)
+                e = np.zeros((js.shape[1], 6))
+                e[cols, np.arange(6)] = 1.0
+                blk = solve(e)[cols] / np.outer(jscale[cols], jscale[cols]) * var
+                uu = np.sqrt(np.diag(blk))
+                ref["u_translation"] = uu[:3].tolist()
+                ref["u_rotation"] = uu[3:].tolist()
+    return CalibrationResult(
+        model=model, p=p, free=tuple(spec.names[i] for i in kept), fixed=tuple(fixed),
+        held=tuple(n for i, n in enumerate(spec.names) if i not in cand), cov=cov, u=u, corr=corr, s0=s0,
+        covariance_source=source, status=sol.status, iterations=sol.iterations, evaluations=sol.evaluations,
+        cost=sol.cost, n_residuals=n_rows, n_nuisance=n_nuis, dof=dof, identifiability=idf0,
+        identifiability_final=idf1, residuals=table, instances=instances, distances=distances, reference=ref,
+        outliers=outliers, dropped=[], data=data, weights=weights, reference_mode=reference, unused=prob.unused)
+
+
+def _scale(jp: np.ndarray) -> np.ndarray:
+    s = np.linalg.norm(jp, axis=0)
+    return np.where(s > 0, s, 1.0)

@@ -1,0 +1,148 @@
+"""Calibration data: the captured points, the artefacts and the per-point inputs of the model's
+effects, split by measurement (never by point) into training and held-out sets."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from arm_model import InputError
+from arm_model.io import Artefacts, PointSet, check_features
+from arm_model.model import ArmModel, AuxData
+
+__all__ = ["Weights", "CalibrationData", "make_data", "split_holdout"]
+
+
+@dataclass(frozen=True)
+class Weights:
+    """Standard uncertainties that weight the residuals (each residual is divided by its own).
+
+    Attributes:
+        probe: of one probed ball centre, per axis [m] (points on seats, spheres, rings, planes).
+        reference: of one reference-instrument coordinate, per axis [m]; a reference residual is
+            weighted by ``hypot(probe, reference)``.
+        length: of a certified length whose artefact gives no ``u_length_mm`` [m] (None: ``probe``).
+    """
+    probe: float = 10e-6
+    reference: float = 0.0
+    length: float | None = None
+
+    def __post_init__(self):
+        for name in ("probe", "reference", "length"):
+            v = getattr(self, name)
+            if v is not None and (not np.isfinite(v) or v < 0 or (name == "probe" and v == 0)):
+                raise ValueError(f"weight {name} must be a finite positive uncertainty [m], got {v!r}")
+
+    @property
+    def reference_sigma(self) -> float:
+        return float(np.hypot(self.probe, self.reference))
+
+    def length_sigma(self, u_length: float | None) -> float:
+        if u_length is not None and u_length > 0:
+            return float(u_length)
+        return float(self.length if self.length is not None else self.probe)
+
+
+@dataclass(frozen=True)
+class CalibrationData:
+    """Points (``arm_model.io.PointSet``), their artefacts and the per-point aux inputs
+    (``AuxData``: temperature, gravity and contact torques) that the model's effects need."""
+    points: PointSet
+    artefacts: Artefacts
+    aux: AuxData | None = None
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    def measurements(self) -> list[str]:
+        return self.points.measurements()
+
+    @property
+    def wrench(self) -> np.ndarray:
+        """(N, 6) wrench at the ball, probe frame [N, N m] (zeros without force columns)."""
+        w = self.points.wrench
+        return np.zeros((len(self), 6)) if w is None else w
+
+    def select(self, mask) -> "CalibrationData":
+        """The rows where ``mask`` holds (bool array or indices), file order kept."""
+        return CalibrationData(self.points.select(mask), self.artefacts,
+                               None if self.aux is None else self.aux.select(mask))
+
+    def with_measurements(self, ids) -> "CalibrationData":
+        """Only the measurements ``ids``."""
+        ids = set(ids)
+        return self.select(np.array([m in ids for m in self.points.measurement], bool))
+
+
+def make_data(points: PointSet, artefacts: Artefacts, model: ArmModel | None = None,
+              aux: AuxData | None = None) -> CalibrationData:
+    """Check the points against the artefacts and attach the aux inputs ``model.needs()``.
+
+    Temperatures come from the points' ``temperature_C`` column; gravity and contact torques, when
+    an effect needs them and ``aux`` does not give them, from ``PinocchioArm(model.desc).torques``
+    at the measured angles and wrenches with the nominal description.
+    """
+    check_features(points, artefacts)
+    if model is None:
+        return CalibrationData(points, artefacts, aux)
+    if points.n_joints != model.desc.n_joints:
+        raise InputError(f"{points.n_joints} joint columns, but the arm has {model.desc.n_joints} joints",
+                         points.path)
+    needs = model.needs()
+    temperature = None if aux is None else aux.temperature
+    tau_g = None if aux is None else aux.tau_gravity
+    tau_c = None if aux is None else aux.tau_contact
+    if "temperature" in needs and temperature is None:
+        if points.temperature is None:
+            raise InputError("the model's effects need the arm temperature: add a 'temperature_C' column",
+                             points.path, None, "temperature_C")
+        temperature = points.temperature
+    if ({"tau_gravity", "tau_contact"} & needs) and (tau_g is None or tau_c is None):
+        from arm_model import PinocchioArm
+        g, c = PinocchioArm(model.desc).torques(points.q, points.wrench)
+        tau_g = g if tau_g is None else tau_g
+        tau_c = c if tau_c is None else tau_c
+    if temperature is None and tau_g is None and tau_c is None:
+        return CalibrationData(points, artefacts, None)
+    return CalibrationData(points, artefacts, AuxData(temperature, tau_g, tau_c))
+
+
+def split_holdout(data: CalibrationData, holdout, seed: int = 0) -> tuple[CalibrationData, CalibrationData]:
+    """Split by measurement into (training, held-out).
+
+    Args:
+        holdout: a list of measurement ids, or a fraction in (0, 1) of the measurements drawn at
+            random (seeded) within each feature kind, so that every kind stays in training.
+        seed: for the random draw.
+    """
+    ids = data.measurements()
+    if isinstance(holdout, (float, int)) and not isinstance(holdout, bool):
+        frac = float(holdout)
+        if not 0.0 < frac < 1.0:
+            raise ValueError(f"holdout fraction must be in (0, 1), got {frac}")
+        rng = np.random.default_rng(seed)
+        # stratify by the set of feature kinds a measurement touches
+        groups: dict[tuple, list[str]] = {}
+        for m in ids:
+            feats = set(data.points.feature[data.points.measurement == m])
+            kinds = tuple(sorted(data.artefacts.features[f].kind if f else "free" for f in feats))
+            groups.setdefault(kinds, []).append(m)
+        chosen = []
+        for members in groups.values():
+            k = int(round(frac * len(members)))
+            if k >= len(members):
+                k = len(members) - 1
+            chosen += list(rng.choice(members, size=k, replace=False)) if k > 0 else []
+        held = set(chosen)
+    else:
+        held = set(holdout)
+        unknown = held - set(ids)
+        if unknown:
+            raise InputError(f"held-out measurement(s) not in the points file: {', '.join(sorted(unknown))}",
+                             data.points.path, None, "measurement")
+    if not held:
+        raise ValueError("the held-out set is empty")
+    if held == set(ids):
+        raise ValueError("every measurement is held out: nothing left to calibrate on")
+    mask = np.array([m in held for m in data.points.measurement], bool)
+    return data.select(~mask), data.select(mask)

@@ -1,0 +1,360 @@
+"""Small synthetic calibration campaigns from a known true arm (for tests, benchmarks, planning).
+
+The full measurement simulator is :mod:`arm_model.sim` (operator, force signals, hidden effects);
+this module only needs forward kinematics and a vectorised inverse kinematics on the true model,
+so calibration can be tested on its own. The true arm is ``model`` with parameter errors
+``p_true``; every true deflected ball centre lies exactly (to 1e-12 m) on its artefact before the
+probing noise is added.
+
+Artefacts made: ball bars (two spheres or two seats at a certified length, several positions),
+seat articulations, spheres, rings (inner cylinders) and planes, and reference (tracker) points
+seen through a random rigid transform ``T_ref_base``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from arm_model import NumericalError
+from arm_model.chain import NUMPY_OPS, chain_point
+from arm_model.io import Artefacts, Distance, Feature, PointSet, atomic_write_text, write_csv
+from arm_model.model import ArmModel, AuxData
+from arm_model.params import split_params
+
+from .geometry import perpendicular_basis, rotation_xyz
+
+__all__ = ["SynthSpec", "SynthCampaign", "random_truth", "random_q", "solve_ik", "make_campaign",
+           "probe_rotation"]
+
+
+@dataclass(frozen=True)
+class SynthSpec:
+    """What to measure (lengths [m], forces [N]).
+
+    Attributes:
+        ballbars: ball-bar positions (one measurement each).
+        ballbar_length: certified centre distance [m].
+        ballbar_kind: "sphere" (probed spheres) or "seat" (kinematic seats, articulations).
+        ballbar_points: points per sphere (or articulations per seat) at each end.
+        seats: single-point articulation measurements; ``articulations`` points each.
+        spheres: reference-sphere measurements; ``sphere_points`` points each, ``sphere_diameter``.
+        rings: ring measurements (``ring_points`` points in 3 rows), ``ring_diameter``.
+        planes: plane measurements, ``plane_points`` each.
+        reference_points: tracker points (one measurement), ``reference_noise`` per axis [m].
+        force: mean contact force [N] along the surface normal (0: no force columns).
+        noise: probing noise of a ball centre per axis [m].
+        u_length: certificate uncertainty of the ball bar [m].
+        centre: middle of the working volume [m] (base frame); ``spread`` its half-size [m].
+    """
+    ballbars: int = 8
+    ballbar_length: float = 0.5
+    ballbar_kind: str = "sphere"
+    ballbar_points: int = 6
+    seats: int = 2
+    articulations: int = 12
+    spheres: int = 1
+    sphere_points: int = 12
+    sphere_diameter: float = 0.025
+    rings: int = 0
+    ring_points: int = 24
+    ring_diameter: float = 0.174996
+    planes: int = 0
+    plane_points: int = 12
+    reference_points: int = 0
+    reference_noise: float = 5e-6
+    force: float = 0.0
+    noise: float = 2e-6
+    u_length: float = 0.8e-6
+    centre: tuple = (0.55, 0.0, 0.15)
+    spread: tuple = (0.2, 0.35, 0.2)
+
+
+@dataclass
+class SynthCampaign:
+    """Points and artefacts like the readers give, plus the truth (never read by the analysis)."""
+    points: PointSet
+    artefacts: Artefacts
+    truth: dict                      # true parameter errors by name (SI)
+    p_true: np.ndarray
+    true_centres: np.ndarray         # (N, 3) [m] before the probing noise
+    T_ref_base: np.ndarray | None = None
+    extra: dict = field(default_factory=dict)
+
+    def write(self, out_dir, stem: str = "synthetic") -> tuple[Path, Path]:
+        """Write ``<stem>-points.csv`` and ``<stem>-artefacts.toml`` (DATA-FORMATS §3, §4)."""
+        out = Path(out_dir)
+        pts = self.points
+        cols = {"measurement": pts.measurement, "feature": pts.feature}
+        for j in range(pts.n_joints):
+            cols[f"q{j + 1}_deg"] = np.degrees(pts.q[:, j])
+        if pts.force is not None:
+            for k, a in enumerate("xyz"):
+                cols[f"f{a}_N"] = pts.force[:, k]
+        if pts.temperature is not None:
+            cols["temperature_C"] = pts.temperature
+        if pts.ref is not None:
+            for k, a in enumerate("xyz"):
+                cols[f"{a}_ref_mm"] = pts.ref[:, k] * 1e3
+        p_csv = write_csv(out / f"{stem}-points.csv", cols, fmt="%.12g")
+        lines = []
+        for f in self.artefacts.features.values():
+            lines += ["[[feature]]", f'id = "{f.id}"', f'kind = "{f.kind}"']
+            if f.diameter is not None:
+                lines.append(f"diameter_mm = {f.diameter * 1e3!r}")
+            lines.append("")
+        for d in self.artefacts.distances:
+            lines += ["[[distance]]", f'between = ["{d.between[0]}", "{d.between[1]}"]',
+                      f"length_mm = {d.length * 1e3!r}"]
+            if d.u_length is not None:
+                lines.append(f"u_length_mm = {d.u_length * 1e3!r}")
+            lines.append("")
+        a_toml = atomic_write_text(out / f"{stem}-artefacts.toml", "\n".join(lines))
+        return p_csv, a_toml
+
+
+def random_truth(model: ArmModel, rng, length: float = 50e-6, angle: float = 1e-4,
+                 probe: float = 50e-6) -> np.ndarray:
+    """Random base errors: lengths N(0, length) [m], angles N(0, angle) [rad], probe offset
+    N(0, probe) [m]; compliances and effect parameters zero."""
+    p = np.zeros(model.spec.size)
+    for i, (n, u) in enumerate(zip(model.spec.names, model.spec.units)):
+        if n.startswith("probe.compliance") or i >= model.base_size:
+            continue
+        if n.startswith("probe."):
+            p[i] = rng.normal(0, probe)
+        elif u == "m":
+            p[i] = rng.normal(0, length)
+        elif u == "rad":
+            p[i] = rng.normal(0, angle)
+    return p
+
+
+def _limits(desc, margin: float = 0.05):
+    lo = np.array([-np.pi if j.lower is None else max(j.lower, -np.pi) for j in desc.joints]) + margin
+    hi = np.array([np.pi if j.upper is None else min(j.upper, np.pi) for j in desc.joints]) - margin
+    return lo, hi
+
+
+def random_q(desc, n: int, rng) -> np.ndarray:
+    """(n, J) joint angles [rad] uniform within the limits (full turns clipped to +-pi)."""
+    lo, hi = _limits(desc)
+    return rng.uniform(lo, hi, size=(n, desc.n_joints))
+
+
+def probe_rotation(model: ArmModel, q: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) rotation of the probe frame (= last joint frame) in the base frame (rigid chain)."""
+    desc = model.desc
+    rows, _, _ = split_params(desc, np.asarray(p)[: model.base_size])
+    qt = list(np.asarray(q).T)
+    o = np.array(chain_point(desc.convention, rows, qt, (0.0, 0.0, 0.0), NUMPY_OPS, desc.axes))
+    cols = [np.array(chain_point(desc.convention, rows, qt, tuple(e), NUMPY_OPS, desc.axes)) - o
+            for e in np.eye(3)]
+    return np.stack(cols, axis=-1).transpose(1, 0, 2)
+
+
+def _jac_fn(model: ArmModel, n: int):
+    import casadi as ca
+    f = model.casadi_function()
+    q, w, aux, p = (ca.SX.sym(nm, f.size1_in(i)) for i, nm in enumerate(("q", "w", "aux", "p")))
+    x = f(q, w, aux, p)
+    return ca.Function("xq", [q, w, aux, p], [x, ca.jacobian(x, q)]).map(n)
+
+
+def solve_ik(model: ArmModel, p: np.ndarray, targets: np.ndarray, rng, force_base: np.ndarray | None = None,
+             q0: np.ndarray | None = None, tol: float = 1e-12, tries: int = 20) -> tuple[np.ndarray, np.ndarray]:
+    """Encoder readings that put the true deflected ball centre on ``targets`` (n, 3) [m].
+
+    Damped Gauss-Newton from random starts (the redundancy gives random articulations); solutions
+    outside the joint limits are retried. ``force_base`` (n, 3) [N]: the contact force in the base
+    frame; the wrench in the probe frame follows the pose. Returns (q (n, J) [rad], wrench (n, 6)).
+    """
+    if model.needs() - {"temperature"}:
+        raise ValueError("synthetic IK supports effects that need no joint torques")
+    n, jn = len(targets), model.desc.n_joints
+    lo, hi = _limits(model.desc, 0.0)
+    def starts(idx):            # the nearest of 32 random poses to each target
+        cand = random_q(model.desc, 32 * len(idx), rng)
+        xc = model.ball_centres(cand, None, p, AuxData(temperature=np.full(len(cand), 20.0))
+                                if "temperature" in model.needs() else None).reshape(len(idx), 32, 3)
+        best = np.argmin(np.linalg.norm(xc - targets[idx, None, :], axis=2), axis=1)
+        return cand.reshape(len(idx), 32, jn)[np.arange(len(idx)), best]
+
+    q = starts(np.arange(n)) if q0 is None else q0.copy()
+    w = np.zeros((n, 6))
+    aux = np.zeros((1 + 2 * jn, n))
+    aux[0] = 20.0
+    fn = _jac_fn(model, n)
+    todo = np.ones(n, bool)
+    for attempt in range(tries):
+        for it in range(100):
+            if force_base is not None:
+                rot = probe_rotation(model, q, p)
+                w[:, :3] = np.einsum("nji,nj->ni", rot, force_base)
+            x, jq = fn(q.T, w.T, aux, p)
+            x = np.asarray(x).T
+            jq = np.asarray(jq).reshape(3, n, jn).transpose(1, 0, 2)
+            e = targets - x
+            err = np.linalg.norm(e, axis=1)
+            if np.all(err[todo] < tol) and it > 0:
+                break
+            lam = np.minimum(1e-2, err)[:, None, None] ** 2
+            a = jq @ jq.transpose(0, 2, 1) + lam * np.eye(3)
+            dq = np.einsum("nji,nj->ni", jq, np.linalg.solve(a, e[:, :, None])[:, :, 0])
+            step = np.linalg.norm(dq, axis=1, keepdims=True)
+            q = np.where(todo[:, None], q + dq * np.minimum(1.0, 0.5 / np.maximum(step, 1e-300)), q)
+        bad = (err > tol) | np.any(q < lo, axis=1) | np.any(q > hi, axis=1)
+        if not bad.any():
+            return q, w
+        q[bad] = starts(np.flatnonzero(bad))
+        todo = bad
+    raise NumericalError(f"synthetic IK: {int(bad.sum())} of {n} targets not reached within the joint limits")
+
+
+def _hemisphere(rng, n: int, axis=(0, 0, 1), min_cos: float = 0.2) -> np.ndarray:
+    out = []
+    while len(out) < n:
+        v = rng.normal(size=3)
+        v /= np.linalg.norm(v)
+        if v @ np.asarray(axis) >= min_cos:
+            out.append(v)
+    return np.array(out)
+
+
+def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0, p_true=None,
+                  T_ref_base=None) -> SynthCampaign:
+    """Make a campaign on the true arm ``(model, p_true)`` (default: :func:`random_truth`)."""
+    rng = np.random.default_rng(seed)
+    desc = model.desc
+    p_true = random_truth(model, rng) if p_true is None else np.asarray(p_true, float)
+    ball = desc.probe.ball_diameter
+    centre, spread = np.asarray(spec.centre), np.asarray(spec.spread)
+    meas, feat, targets, normals = [], [], [], []
+    features: dict[str, Feature] = {}
+    distances = []
+
+    shoulder = np.array([0.0, 0.0, desc.joints[0].d])
+
+    def reachable(x) -> bool:
+        return 0.35 <= np.linalg.norm(x - shoulder) <= 0.85
+
+    def place() -> np.ndarray:
+        while True:
+            x = centre + rng.uniform(-1, 1, 3) * spread
+            if reachable(x):
+                return x
+
+    def add(m, f, pts, nrm):
+        meas.extend([m] * len(pts))
+        feat.extend([f] * len(pts))
+        targets.extend(pts)
+        normals.extend(nrm)
+
+    def sphere_points(c, diameter, k):
+        nrm = _hemisphere(rng, k)
+        return c + nrm * (diameter + ball) / 2, nrm
+
+    if spec.ballbars:
+        if spec.ballbar_kind == "sphere":
+            features["bar-A"] = Feature("bar-A", "sphere", spec.sphere_diameter)
+            features["bar-B"] = Feature("bar-B", "sphere", spec.sphere_diameter)
+        else:
+            features["bar-A"] = Feature("bar-A", "seat")
+            features["bar-B"] = Feature("bar-B", "seat")
+        distances.append(Distance(("bar-A", "bar-B"), spec.ballbar_length, spec.u_length))
+        for i in range(spec.ballbars):
+            while True:
+                d = rng.normal(size=3)
+                d[2] *= 0.5
+                d /= np.linalg.norm(d)
+                a = place() - d * spec.ballbar_length / 2
+                b = a + d * spec.ballbar_length
+                if reachable(a) and reachable(b):
+                    break
+            for fid, c in (("bar-A", a), ("bar-B", b)):
+                if spec.ballbar_kind == "sphere":
+                    pts, nrm = sphere_points(c, spec.sphere_diameter, spec.ballbar_points)
+                else:
+                    pts, nrm = np.tile(c, (spec.ballbar_points, 1)), np.tile([0, 0, 1.0], (spec.ballbar_points, 1))
+                add(f"bar-{i + 1:02d}", fid, pts, nrm)
+    if spec.seats:
+        features["seat"] = Feature("seat", "seat")
+        for i in range(spec.seats):
+            c = place()
+            add(f"seat-{i + 1:02d}", "seat", np.tile(c, (spec.articulations, 1)),
+                np.tile([0, 0, 1.0], (spec.articulations, 1)))
+    if spec.spheres:
+        features["sphere"] = Feature("sphere", "sphere", spec.sphere_diameter)
+        for i in range(spec.spheres):
+            pts, nrm = sphere_points(place(), spec.sphere_diameter, spec.sphere_points)
+            add(f"sphere-{i + 1:02d}", "sphere", pts, nrm)
+    if spec.rings:
+        features["ring"] = Feature("ring", "ring", spec.ring_diameter)
+        rad = (spec.ring_diameter - ball) / 2
+        for i in range(spec.rings):
+            c = place()
+            axis = np.array([0, 0, 1.0]) + rng.normal(0, 0.05, 3)
+            axis /= np.linalg.norm(axis)
+            e1, e2 = perpendicular_basis(axis)
+            k = spec.ring_points
+            ang = np.linspace(0, 2 * np.pi, k, endpoint=False) + rng.uniform(0, 2 * np.pi)
+            h = np.repeat([-0.01, 0.0, 0.01], int(np.ceil(k / 3)))[:k]
+            radial = np.outer(np.cos(ang), e1) + np.outer(np.sin(ang), e2)
+            add(f"ring-{i + 1:02d}", "ring", c + rad * radial + np.outer(h, axis), -radial)
+    if spec.planes:
+        features["plane"] = Feature("plane", "plane")
+        for i in range(spec.planes):
+            c = place()
+            nrm = np.array([0, 0, 1.0]) + rng.normal(0, 0.1, 3)
+            nrm /= np.linalg.norm(nrm)
+            e1, e2 = perpendicular_basis(nrm)
+            uv = rng.uniform(-0.1, 0.1, (spec.plane_points, 2))
+            pts = c + uv[:, :1] * e1 + uv[:, 1:] * e2 + nrm * ball / 2
+            add(f"plane-{i + 1:02d}", "plane", pts, np.tile(nrm, (spec.plane_points, 1)))
+    n_art = len(targets)
+    targets = np.array(targets).reshape(-1, 3)
+    normals = np.array(normals).reshape(-1, 3)
+    noise = rng.normal(0, spec.noise, targets.shape)
+    force_base = None
+    if spec.force > 0:
+        mag = rng.gamma(4.0, spec.force / 4.0, n_art)
+        force_base = normals * mag[:, None]
+    q_art, w_art = (solve_ik(model, p_true, targets + noise, rng, force_base) if n_art
+                    else (np.zeros((0, desc.n_joints)), np.zeros((0, 6))))
+    true_c = targets.copy()
+    ref = None
+    t_ref = None
+    if spec.reference_points:
+        nr = spec.reference_points
+        q_ref = random_q(desc, nr, rng)
+        w_ref = np.zeros((nr, 6))
+        x_true = model.ball_centres(q_ref, w_ref, p_true, AuxData(temperature=np.full(nr, 20.0))
+                                    if "temperature" in model.needs() else None)
+        if T_ref_base is None:
+            T_ref_base = np.eye(4)
+            T_ref_base[:3, :3] = rotation_xyz(rng.uniform(-np.pi, np.pi, 3))
+            T_ref_base[:3, 3] = rng.uniform(-2, 2, 3)
+        t_ref = np.asarray(T_ref_base, float)
+        noise_r = rng.normal(0, spec.noise, (nr, 3))
+        x_ref = (x_true + noise_r) @ t_ref[:3, :3].T + t_ref[:3, 3] + rng.normal(0, spec.reference_noise, (nr, 3))
+        meas += ["tracker"] * nr
+        feat += [""] * nr
+        q_all = np.vstack([q_art, q_ref])
+        w_all = np.vstack([w_art, w_ref])
+        true_c = np.vstack([true_c, x_true])
+        ref = np.vstack([np.full((n_art, 3), 0.0) if n_art else np.zeros((0, 3)), x_ref])
+        if n_art:
+            # reference columns exist for every row; artefact rows carry the tracker view too
+            ref[:n_art] = (targets + noise) @ t_ref[:3, :3].T + t_ref[:3, 3] + rng.normal(0, spec.reference_noise, (n_art, 3))
+    else:
+        q_all, w_all = q_art, w_art
+    n = len(meas)
+    points = PointSet(path="<synthetic>", measurement=np.array(meas, dtype=object), feature=np.array(feat, dtype=object),
+                      q=q_all, force=w_all[:, :3].copy() if spec.force > 0 else None,
+                      force_kind="xyz" if spec.force > 0 else None,
+                      temperature=np.full(n, 20.0) if "temperature" in model.needs() else None,
+                      ref=ref, lines=np.arange(2, n + 2))
+    artefacts = Artefacts("<synthetic>", features, tuple(distances))
+    truth = {name: float(v) for name, v in zip(model.spec.names, p_true)}
+    return SynthCampaign(points, artefacts, truth, p_true, true_c, t_ref)

@@ -1,0 +1,182 @@
+"""Validation in the terms of the arm standards (ASME B89.4.22, ISO 10360-12), on any data set.
+
+With the parameters held fixed, each feature of the data is fitted on its own (no certified length
+is used to place a centre) and the standard figures are computed:
+
+* single-point articulation test (seats): per measurement, the deviations of the ball centres from
+  their mean; per axis ``(max - min) / 2`` and ``2 s`` (s with n - 1), and radially ``2 * RMS``
+  (``2 sqrt(sum d^2 / (n - 1))``) and the maximum deviation;
+* length test (ball bar, length bar, seat pairs): measured minus certified centre distance, the
+  centres fitted with the certified sphere diameter (seats: the mean centre);
+* effective diameter test (spheres; rings and cylinders likewise): fitted diameter minus certified,
+  with the radius free (instances with at least 5 sphere / 6 ring points);
+* planes: flatness (max - min of the signed distances); reference points: the errors after the
+  best-fit rigid transform ``T_ref_base`` (RMS and max).
+
+:func:`before_after` tabulates the figures of two parameter vectors (nominal and calibrated).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from arm_model.model import ArmModel
+
+from .data import CalibrationData, Weights
+from .problem import MIN_POINTS, Problem
+from .solver import levenberg_marquardt
+
+__all__ = ["Validation", "validate", "before_after", "FIGURES"]
+
+#: summary figures: key -> (label, unit shown, factor from SI)
+FIGURES = {
+    "articulation_half_range": ("single-point articulation: max over seats and axes of (max-min)/2", "um", 1e6),
+    "articulation_2sigma": ("single-point articulation: max over seats and axes of 2 s", "um", 1e6),
+    "articulation_2rms": ("single-point articulation: max over seats of 2 RMS radial deviation", "um", 1e6),
+    "articulation_max": ("single-point articulation: max radial deviation", "um", 1e6),
+    "length_error_max": ("length test: max |measured - certified|", "um", 1e6),
+    "length_error_rms": ("length test: RMS of measured - certified", "um", 1e6),
+    "sphere_diameter_error_max": ("effective diameter: max |fitted - certified| (spheres)", "um", 1e6),
+    "ring_diameter_error_max": ("ring/cylinder diameter: max |fitted - certified|", "um", 1e6),
+    "sphere_form_max": ("sphere form: max (max - min) radial residual", "um", 1e6),
+    "flatness_max": ("plane flatness: max (max - min)", "um", 1e6),
+    "reference_rms": ("reference points: RMS 3D error after best-fit transform", "um", 1e6),
+    "reference_max": ("reference points: max 3D error after best-fit transform", "um", 1e6),
+}
+
+
+@dataclass
+class Validation:
+    """Validation figures of one parameter vector on one data set (lengths [m])."""
+    articulation: list = field(default_factory=list)
+    lengths: list = field(default_factory=list)
+    diameters: list = field(default_factory=list)
+    planes: list = field(default_factory=list)
+    reference: dict | None = None
+
+    def summary(self) -> dict:
+        """Key figures (SI) by :data:`FIGURES` key; absent kinds are left out."""
+        out = {}
+        if self.articulation:
+            out["articulation_half_range"] = max(max(a["half_range"]) for a in self.articulation)
+            out["articulation_2sigma"] = max(max(a["two_sigma"]) for a in self.articulation)
+            out["articulation_2rms"] = max(a["two_rms"] for a in self.articulation)
+            out["articulation_max"] = max(a["max_radial"] for a in self.articulation)
+        if self.lengths:
+            e = np.array([item["error"] for item in self.lengths])
+            out["length_error_max"] = float(np.max(np.abs(e)))
+            out["length_error_rms"] = float(np.sqrt(np.mean(e ** 2)))
+        sph = [d for d in self.diameters if d["kind"] == "sphere"]
+        rng = [d for d in self.diameters if d["kind"] != "sphere"]
+        if sph:
+            out["sphere_diameter_error_max"] = max(abs(d["error"]) for d in sph)
+            out["sphere_form_max"] = max(d["form"] for d in sph)
+        if rng:
+            out["ring_diameter_error_max"] = max(abs(d["error"]) for d in rng)
+        if self.planes:
+            out["flatness_max"] = max(pl["flatness"] for pl in self.planes)
+        if self.reference:
+            out["reference_rms"] = self.reference["rms"]
+            out["reference_max"] = self.reference["max"]
+        return out
+
+    def to_dict(self) -> dict:
+        def clean(v):
+            if isinstance(v, np.ndarray):
+                return v.tolist()
+            if isinstance(v, (np.floating, np.integer)):
+                return v.item()
+            if isinstance(v, dict):
+                return {k: clean(x) for k, x in v.items()}
+            if isinstance(v, (list, tuple)):
+                return [clean(x) for x in v]
+            return v
+        return clean({"summary": self.summary(), "articulation": self.articulation, "lengths": self.lengths,
+                      "diameters": self.diameters, "planes": self.planes, "reference": self.reference})
+
+
+def _articulation(x: np.ndarray) -> dict:
+    dev = x - x.mean(axis=0)
+    n = len(x)
+    radial = np.linalg.norm(dev, axis=1)
+    return {"n": n, "centre": x.mean(axis=0), "half_range": (dev.max(axis=0) - dev.min(axis=0)) / 2,
+            "two_sigma": 2 * dev.std(axis=0, ddof=1),
+            "two_rms": float(2 * np.sqrt(np.sum(radial ** 2) / (n - 1))), "max_radial": float(radial.max())}
+
+
+def validate(model: ArmModel, p, data: CalibrationData, weights: Weights | None = None,
+             reference: str = "fit") -> Validation:
+    """Validation figures of ``model`` with parameters ``p`` (full vector, SI) on ``data``."""
+    weights = weights or Weights()
+    p = np.asarray(p, dtype=float)
+    val = Validation()
+    prob = Problem(model, data, weights, [], distances=False, reference=reference)
+    x_all, _ = prob.centres(p)
+    states = levenberg_marquardt(prob, p, prob.initial_states(p)).states
+    table = prob.residual_table(p, states)
+    lines = data.points.lines
+    for i, it in enumerate(prob.instances):
+        xi = x_all[prob._pos[it.points]]
+        base = {"measurement": it.measurement, "feature": it.feature, "kind": it.kind,
+                "line": None if lines is None else int(lines[it.points[0]])}
+        if it.kind == "seat" and len(it.points) >= 2:
+            val.articulation.append({**base, **_articulation(xi)})
+        elif it.kind == "plane":
+            v = table["value"][table["instance"] == i]
+            val.planes.append({**base, "n": len(v), "flatness": float(v.max() - v.min())})
+        elif it.kind == "reference":
+            e = table["value"][table["instance"] == i]
+            val.reference = {"n": len(e), "rms": float(np.sqrt(np.mean(e ** 2))), "max": float(e.max()),
+                             "T_ref_base": _transform(states[i])}
+    # lengths: centres of the features (certified diameters), no length used in the fit
+    centre = {(it.measurement, it.feature): states[i][:3] for i, it in enumerate(prob.instances)
+              if it.kind in ("seat", "sphere")}
+    for dist in data.artefacts.distances:
+        fa, fb = dist.between
+        for m in data.measurements():
+            if (m, fa) in centre and (m, fb) in centre:
+                measured = float(np.linalg.norm(centre[(m, fa)] - centre[(m, fb)]))
+                val.lengths.append({"measurement": m, "between": [fa, fb], "certified": dist.length,
+                                    "measured": measured, "error": measured - dist.length})
+    # diameters with the radius free
+    keep = [it for it in prob.instances if it.kind in ("sphere", "ring", "cylinder")
+            and len(it.points) >= MIN_POINTS[it.kind][1]]
+    if keep:
+        rows = np.sort(np.concatenate([it.points for it in keep]))
+        sub = data.select(rows)
+        prob_r = Problem(model, sub, weights, [], free_radius=True, distances=False, reference="off")
+        st = levenberg_marquardt(prob_r, p, prob_r.initial_states(p)).states
+        tab = prob_r.residual_table(p, st)
+        ball = model.desc.probe.ball_diameter
+        for i, it in enumerate(prob_r.instances):
+            feat = data.artefacts.features[it.feature]
+            radius = st[i][3] if it.kind == "sphere" else st[i][12]
+            fitted = 2 * radius - ball if it.kind == "sphere" else 2 * radius + ball
+            v = tab["value"][tab["instance"] == i]
+            val.diameters.append({"measurement": it.measurement, "feature": it.feature, "kind": it.kind,
+                                  "n": len(it.points), "certified": feat.diameter, "fitted": float(fitted),
+                                  "error": float(fitted - feat.diameter), "form": float(v.max() - v.min())})
+    return val
+
+
+def _transform(state) -> list:
+    t = np.eye(4)
+    t[:3, :3] = np.asarray(state[0:9]).reshape(3, 3, order="F")
+    t[:3, 3] = state[9:12]
+    return t.tolist()
+
+
+def before_after(model: ArmModel, p_before, p_after, data: CalibrationData, weights: Weights | None = None,
+                 reference: str = "fit") -> list[dict]:
+    """Rows ``{key, label, unit, before, after, ratio}`` (values in the shown unit) of the
+    validation figures of ``p_before`` (e.g. zeros: the nominal arm) and ``p_after`` on ``data``."""
+    a = validate(model, p_before, data, weights, reference).summary()
+    b = validate(model, p_after, data, weights, reference).summary()
+    rows = []
+    for key, (label, unit, factor) in FIGURES.items():
+        if key in a and key in b:
+            ratio = a[key] / b[key] if b[key] > 0 else float("inf")
+            rows.append({"key": key, "label": label, "unit": unit, "before": a[key] * factor,
+                         "after": b[key] * factor, "ratio": ratio})
+    return rows
