@@ -126,6 +126,14 @@ def _dots(mg, p: np.ndarray, rgb: int, size: float):
                      mg.PointsMaterial(size=size))
 
 
+def _tube(mg, height: float, radius: float):
+    """An open-ended cylinder along y (a ring's bore), meshcat's Cylinder without its caps."""
+    tube = mg.Cylinder(height, radius)
+    lower = tube.lower
+    tube.lower = lambda object_data: {**lower(object_data), "openEnded": True}
+    return tube
+
+
 def _matrix(position, rotation=None, scale=(1.0, 1.0, 1.0)) -> np.ndarray:
     t = np.eye(4)
     t[:3, :3] = (np.eye(3) if rotation is None else rotation) @ np.diag(scale)
@@ -317,7 +325,7 @@ class ArmScene:
             radius = pl.radius if pl.radius is not None else pl.fitted_radius
             if pl.kind in ("ring", "cylinder"):
                 height = max(float(pl.size[0]) + 0.01, 0.015)
-                node.set_object(mg.Cylinder(height, radius), mat)
+                node.set_object(_tube(mg, height, radius), mat)
                 node.set_transform(_matrix(pl.centre, _rotation_y_to(pl.axis)))
                 self._extent.append(pl.centre + radius * np.eye(3))
             elif pl.kind == "sphere":

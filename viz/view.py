@@ -57,6 +57,7 @@ class View:
             raise
         self.title = title or (f"{self.scene.desc.name}: AACMM viewer" if self.scene.desc else "AACMM viewer")
         self.camera: Camera | None = None
+        self._fixed: Camera | None = None
 
     @property
     def url(self) -> str:
@@ -70,35 +71,40 @@ class View:
     def show_pose(self, q, wrench=None, scale: float = 1000.0) -> PoseInfo:
         """Arm at ``q`` (J,) [rad] deflected by ``wrench`` (3,)/(6,) [N, N m]; deflection arrow x``scale``."""
         info = self.scene.show_pose(q, wrench, scale)
-        self.frame()
+        self._reframe()
         return info
 
     def animate(self, qs, wrenches=None, fps: float = 2.0, scale: float = 1000.0,
                 repetitions: int = 1000) -> list[PoseInfo]:
         """Animate through poses ``qs`` (N, J) [rad] with ``wrenches`` (N, 3|6) or None."""
         infos = self.scene.animate(qs, wrenches, fps, scale, repetitions)
-        self.frame()
+        self._reframe()
         return infos
 
     def show_points(self, p_base, **kw) -> None:
         """Dots at points (N, 3) [m], base frame."""
         self.scene.show_points(p_base, **kw)
-        self.frame()
+        self._reframe()
 
     def show_residuals(self, points, residuals, scale: float = 1000.0) -> None:
         """Residual vectors (N, 3) [m] from ``points`` (N, 3) [m], drawn ``scale`` times long."""
         self.scene.show_residuals(points, residuals, scale)
-        self.frame()
+        self._reframe()
 
     def show_artefacts(self, placements, distances=()) -> None:
         """Placed artefact features (:func:`viz.placement.place_features`)."""
         self.scene.show_artefacts(placements, distances)
-        self.frame()
+        self._reframe()
 
     def frame(self, camera: Camera | None = None) -> Camera:
-        """Set the camera (default: one that sees everything drawn) and return it."""
+        """Set the camera and keep it; ``None`` (the default) frames everything drawn, again after each
+        drawing call. Returns the camera set."""
+        self._fixed = camera
         self.camera = self.scene.set_camera(camera)
         return self.camera
+
+    def _reframe(self) -> None:
+        self.camera = self.scene.set_camera(self._fixed)
 
     # output
     def html(self) -> str:

@@ -1,0 +1,210 @@
+"""``aacmm view``: pages, artefacts, residuals, serving and stopping, and the errors (bad file, busy
+port, missing browser): one clear message, exit code 2, nothing written, no server left."""
+from __future__ import annotations
+
+import signal
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from arm_model import ball_centres
+from arm_model.cli import main
+from conftest import NOMINAL, ROOT
+from test_viz_server import page_commands, transforms, wait_gone
+
+HEADER = "measurement,feature," + ",".join(f"q{i}_deg" for i in range(1, 8)) + ",fx_N,fy_N,fz_N"
+Q0 = np.radians([0, 30, 0, 60, 0, 45, 0])
+
+
+def reach(desc, target, q0=Q0) -> np.ndarray:
+    """Angles [rad] that put the rigid ball centre at ``target`` [m] (least squares from ``q0``)."""
+    sol = least_squares(lambda q: ball_centres(desc, q[None])[0] - target, q0, xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    assert np.linalg.norm(sol.fun) < 1e-9
+    return sol.x
+
+
+def write_points(path, rows) -> None:
+    lines = [HEADER] + [",".join([m, f, *(f"{v:.10f}" for v in np.degrees(q)), *(f"{v:g}" for v in w)])
+                        for m, f, q, w in rows]
+    path.write_text("\n".join(lines) + "\n")
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory, nominal):
+    """A ring measured in one row and a sphere pair on a bar, reached by IK, with a residuals file."""
+    d = tmp_path_factory.mktemp("view")
+    rows = []
+    centre, r = np.array([-0.55, 0.05, 0.35]), (0.174996 - 0.004) / 2
+    for k in range(8):
+        a = 2 * np.pi * k / 8
+        target = centre + r * np.array([np.cos(a), np.sin(a), 0])
+        rows.append(("ring-01", "ring", reach(nominal, target), 6.0 * np.array([-np.cos(a), -np.sin(a), 0.3])))
+    dirs = np.array([[0, 0, 1], [1, 0, 1], [-1, 0, 1], [0, 1, 1], [0, -1, 1.0]])
+    dirs /= np.linalg.norm(dirs, axis=1)[:, None]
+    for fid, c in (("sphere-A", [-0.45, -0.3, 0.2]), ("sphere-B", [-0.45, 0.3, 0.2])):
+        for u in dirs:
+            rows.append(("bar-01", fid, reach(nominal, np.array(c) + 0.0145 * u), 4.0 * u))
+    rows.append(("bar-01", "seat", Q0, np.zeros(3)))
+    write_points(d / "points.csv", rows)
+    (d / "artefacts.toml").write_text(
+        '[[feature]]\nid = "ring"\nkind = "ring"\ndiameter_mm = 174.996\n'
+        '[[feature]]\nid = "sphere-A"\nkind = "sphere"\ndiameter_mm = 25.0\n'
+        '[[feature]]\nid = "sphere-B"\nkind = "sphere"\ndiameter_mm = 25.0\n'
+        '[[feature]]\nid = "seat"\nkind = "seat"\n'
+        '[[distance]]\nbetween = ["sphere-A", "sphere-B"]\nlength_mm = 600.0\n')
+    (d / "residuals.csv").write_text("measurement,feature,x_mm,y_mm,z_mm,rx_um,ry_um,rz_um\n"
+                                     "ring-01,ring,-462.5,50,350,1.5,0,0\nring-01,ring,-550,137.5,350,0,-2.0,0.5\n")
+    return d
+
+
+def run_view(*args) -> int:
+    return main(["view", *map(str, args)])
+
+
+def test_page_of_a_point(campaign, nominal, capsys, tmp_path):
+    out = tmp_path / "pose.html"
+    assert run_view(campaign / "points.csv", "--arm", NOMINAL, "--measurement", "ring-01", "--point", 3,
+                    "--html", out) == 0
+    text = capsys.readouterr().out
+    q, w = reach(nominal, np.array([-0.55, 0.05 + (0.174996 - 0.004) / 2, 0.35])), 6.0 * np.array([0, -1, 0.3])
+    d_um = np.linalg.norm(ball_centres(nominal, q[None], w[None]) - ball_centres(nominal, q[None])) * 1e6
+    assert "8 point(s)" in text and "measurement 'ring-01'" in text and "line 4" in text
+    assert f"deflection {d_um:.2f} um, drawn {d_um:.1f} mm long" in text
+    assert "drawn x1000" in text and "serving" not in text          # --html alone does not serve
+    page = out.read_text()
+    assert "drawn x1000" in page and "<title>aacmm7: AACMM viewer</title>" in page
+    ball = transforms(page_commands(page))["/meshcat/aacmm/arm/visuals/ball_0"][:3, 3]
+    assert np.linalg.norm(ball - ball_centres(nominal, q[None], w[None])[0]) < 1e-8   # 1e-10 deg rounding
+
+
+def test_artefacts_and_residuals(campaign, capsys, tmp_path):
+    out = tmp_path / "all.html"
+    assert run_view(campaign / "points.csv", "--arm", NOMINAL, "--artefacts", campaign / "artefacts.toml",
+                    "--residuals", campaign / "residuals.csv", "--residual-scale", 5000, "--animate",
+                    "--html", out) == 0
+    text = capsys.readouterr().out
+    assert "blue: 4 artefact feature(s)" in text          # ring, two spheres, the seat
+    assert "2 residual vector(s), drawn x5000" in text and "animated through 19 points" in text
+    cmds = page_commands(out.read_text())
+    tf = transforms(cmds)
+    ring = tf["/meshcat/aacmm/artefacts/ring-01/ring"]
+    assert np.linalg.norm(ring[:3, 3] - [-0.55, 0.05, 0.35]) < 1e-3        # deflected centres: ~0.1 mm off
+    assert abs(ring[2, 1]) > 0.999                                         # axis vertical
+    bar = tf["/meshcat/aacmm/artefacts/bar-01/sphere-A--sphere-B"]
+    assert np.linalg.norm(bar[:3, 3] - [-0.45, 0.0, 0.2]) < 1e-3
+    assert any(c["type"] == "set_animation" for c in cmds)
+
+
+def test_too_few_points_are_reported_not_dropped(campaign, capsys, tmp_path):
+    assert run_view(campaign / "points.csv", "--arm", NOMINAL, "--artefacts", campaign / "artefacts.toml",
+                    "--html", tmp_path / "x.html", "--measurement", "bar-01") == 0
+    assert "blue: 3 artefact feature(s)" in capsys.readouterr().out
+
+
+def test_serves_until_sigterm_and_leaves_no_server(campaign):
+    proc = subprocess.Popen([sys.executable, "-m", "arm_model.cli", "view", str(campaign / "points.csv"),
+                             "--arm", str(NOMINAL), "--open-seconds", "60"], cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        lines = []
+        while not any(line.startswith("serving") for line in lines):
+            line = proc.stdout.readline()
+            assert line, proc.stderr.read()
+            lines.append(line)
+        url = next(line.split(": ", 1)[1].strip() for line in lines if line.startswith("meshcat server:"))
+        port = int(url.rsplit(":", 1)[1].split("/")[0])
+        with socket.create_connection(("127.0.0.1", port), timeout=5):
+            pass
+        bridge = _bridge_children(proc.pid)
+        assert len(bridge) == 1
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=20) == 0
+        assert wait_gone(bridge[0])
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def _bridge_children(pid: int) -> list[int]:
+    """Server processes (viz._bridge) started by process ``pid``."""
+    out = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        for child in (task / "children").read_text().split():
+            cmd = open(f"/proc/{child}/cmdline", "rb").read().split(b"\0")
+            if b"viz._bridge" in cmd:
+                out.append(int(child))
+    return out
+
+
+# --- errors: one message, exit 2, nothing written ---------------------------------------------------
+
+def _no_output(tmp_path):
+    return sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def _cell(text: str, line: int, column: int, value: str) -> str:
+    lines = text.splitlines()
+    cells = lines[line - 1].split(",")
+    cells[column] = value
+    lines[line - 1] = ",".join(cells)
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("edit, expect", [
+    (lambda t: _cell(t, 5, 2, "oops"), "line 5, column 'q1_deg': expected a number, got 'oops'"),
+    (lambda t: _cell(t, 7, 11, "nan"), "line 7, column 'fz_N'"),
+    (lambda t: t.replace("q7_deg", "q8_deg"), "missing q7"),
+    (lambda t: "", "the file is empty"),
+])
+def test_bad_points_file(campaign, tmp_path, capsys, edit, expect):
+    bad = tmp_path / "in" / "bad.csv"
+    bad.parent.mkdir()
+    bad.write_text(edit((campaign / "points.csv").read_text()))
+    out = tmp_path / "out"
+    out.mkdir()
+    assert run_view(bad, "--arm", NOMINAL, "--html", out / "x.html", "--screenshot", out / "x.png") == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"aacmm view: error: {bad}") and expect in err, err
+    assert _no_output(out)
+
+
+@pytest.mark.parametrize("extra, expect", [
+    (["--measurement", "nope"], "column 'measurement': no measurement 'nope' (the file has: ring-01, bar-01)"),
+    (["--point", "20"], "--point 20: the selection has 19 point(s)"),
+    (["--screenshot", "{out}/x.png", "--browser", "/nonexistent/chromium"], "no browser at '/nonexistent/chromium'"),
+    (["--html", "{points}"], "refusing to write the output over an input file"),
+])
+def test_bad_options(campaign, tmp_path, capsys, extra, expect):
+    extra = [e.format(out=tmp_path, points=campaign / "points.csv") for e in extra]
+    args = [campaign / "points.csv", "--arm", NOMINAL, *extra]
+    if "--html" not in extra:
+        args += ["--html", tmp_path / "x.html"]
+    before = (campaign / "points.csv").read_bytes()
+    assert run_view(*args) == 2
+    assert expect in capsys.readouterr().err
+    assert _no_output(tmp_path) and (campaign / "points.csv").read_bytes() == before
+
+
+def test_busy_port(campaign, tmp_path, capsys):
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        assert run_view(campaign / "points.csv", "--arm", NOMINAL, "--port", port, "--html", tmp_path / "x.html") == 2
+    assert f"port {port} on 127.0.0.1 is in use: choose another with --port" in capsys.readouterr().err
+    assert _no_output(tmp_path)
+
+
+def test_help_is_useful(capsys):
+    with pytest.raises(SystemExit):
+        main(["view", "--help"])
+    text = capsys.readouterr().out
+    for word in ("--html", "--animate", "--scale", "--artefacts", "--residuals", "--port", "--open-seconds",
+                 "headless", "127.0.0.1"):
+        assert word in text
