@@ -30,28 +30,37 @@ from .campaign import Campaign, Task
 __all__ = ["Plan", "make_plan", "random_rotation", "cone_directions", "perpendicular_basis"]
 
 
+#: per-point fields of a plan, in order
+ROW_FIELDS = ("measurement", "feature", "task", "position", "normal", "cone", "lever", "stylus", "stylus_axis",
+              "stylus_cone", "roll_along_force", "roll_jitter", "reference", "redraw", "q_start")
+
+
 @dataclass
 class Plan:
     """The points to capture, in capture order (N rows), and the artefacts' truth.
 
-    Attributes:
-        measurement, feature: (N,) ids.
-        task: (N,) index of the task in the campaign.
-        position: (N, 3) target (true, deflected) ball centre [m].
-        normal: (N, 3) unit axis of the force the part exerts on the ball.
-        cone: (N,) tangent of the half-angle of the cone around ``normal`` the force lies in.
-        lever: (N,) [m] distance from the ball centre to the contact (friction torque), 0 for seats.
-        stylus: (N, 3) required stylus direction (probe z, flange towards ball).
-        stylus_axis, stylus_cone: (N, 3), (N,) [rad]: the cone ``stylus`` was drawn from (the inverse
+    Per point (lists while drawing, arrays after :meth:`arrays`):
+        measurement, feature: ids.
+        task: index of the task in the campaign.
+        position: (3,) target (true, deflected) ball centre [m].
+        normal: (3,) unit axis of the force the part exerts on the ball.
+        cone: tangent of the half-angle of the cone around ``normal`` the force lies in.
+        lever: [m] distance from the ball centre to the contact (friction torque), 0 for seats.
+        stylus: (3,) required stylus direction (probe z, flange towards ball).
+        stylus_axis, stylus_cone: (3,), [rad]: the cone ``stylus`` was drawn from (the inverse
             kinematics draws again from it when the arm cannot take the first direction).
-        roll_along_force: (N,) True where the probe x axis must follow the force (ring, paper's sensor).
-        roll_jitter: (N,) [rad] how far the operator misses that roll (uniform +-).
-        reference: (N,) True for rows a tracker sees.
-        features: artefact features for artefacts.toml: dicts (id, kind, SI values).
-        distances: (between, length [m], u_length [m] or None, true length [m]).
-        placements: per task id, where the artefact truly is (for the truth file).
-        T_ref_base: per tracker task id, the (4, 4) transform from the arm base to the tracker.
-        ref_noise: per tracker task id, the tracker's noise [m] (standard deviation per axis).
+        roll_along_force: True where the probe x axis must follow the force (ring, paper's sensor).
+        roll_jitter: [rad] how far the operator misses that roll (uniform +-).
+        reference: True for rows a tracker sees.
+        redraw: None, or how to draw another contact on the same feature when the arm cannot reach
+            this one (sphere and plane points; the operator probes elsewhere).
+        q_start: (J,) true joint angles [rad] of an articulation found without contact force (NaN:
+            none yet); the final inverse kinematics starts there.
+
+    Artefacts: ``features`` (dicts for artefacts.toml: id, kind, SI values), ``distances``
+    ((between, length [m], u_length [m] or None, true length [m])), ``placements`` (per task id, where
+    the artefact truly is), ``T_ref_base`` (per tracker task id, the (4, 4) transform from the arm base
+    to the tracker), ``ref_noise`` (per tracker task id, its noise [m], 1 sigma per axis).
     """
     measurement: list = field(default_factory=list)
     feature: list = field(default_factory=list)
@@ -66,6 +75,8 @@ class Plan:
     roll_along_force: list = field(default_factory=list)
     roll_jitter: list = field(default_factory=list)
     reference: list = field(default_factory=list)
+    redraw: list = field(default_factory=list)
+    q_start: list = field(default_factory=list)
     features: list = field(default_factory=list)
     distances: list = field(default_factory=list)
     placements: dict = field(default_factory=dict)
@@ -73,39 +84,41 @@ class Plan:
     ref_noise: dict = field(default_factory=dict)
 
     def add(self, measurement, feature, task, position, normal, cone, lever, stylus, roll=False,
-            roll_jitter=0.0, reference=False, stylus_axis=None, stylus_cone=0.0):
-        self.measurement.append(measurement)
-        self.feature.append(feature)
-        self.task.append(task)
-        self.position.append(np.asarray(position, float))
-        self.normal.append(np.asarray(normal, float))
-        self.cone.append(float(cone))
-        self.lever.append(float(lever))
-        self.stylus.append(np.asarray(stylus, float))
-        self.stylus_axis.append(np.asarray(stylus if stylus_axis is None else stylus_axis, float))
-        self.stylus_cone.append(float(stylus_cone))
-        self.roll_along_force.append(bool(roll))
-        self.roll_jitter.append(float(roll_jitter))
-        self.reference.append(bool(reference))
+            roll_jitter=0.0, reference=False, stylus_axis=None, stylus_cone=0.0, redraw=None):
+        row = dict(measurement=measurement, feature=feature, task=task, position=np.asarray(position, float),
+                   normal=np.asarray(normal, float), cone=float(cone), lever=float(lever),
+                   stylus=np.asarray(stylus, float),
+                   stylus_axis=np.asarray(stylus if stylus_axis is None else stylus_axis, float),
+                   stylus_cone=float(stylus_cone), roll_along_force=bool(roll), roll_jitter=float(roll_jitter),
+                   reference=bool(reference), redraw=redraw, q_start=None)
+        for name in ROW_FIELDS:
+            getattr(self, name).append(row[name])
 
-    def arrays(self) -> "Plan":
-        """The same plan with numpy arrays for the per-point lists."""
-        out = Plan(np.array(self.measurement, dtype=object), np.array(self.feature, dtype=object),
-                   np.array(self.task, int), np.array(self.position).reshape(-1, 3),
-                   np.array(self.normal).reshape(-1, 3), np.array(self.cone), np.array(self.lever),
-                   np.array(self.stylus).reshape(-1, 3), np.array(self.stylus_axis).reshape(-1, 3),
-                   np.array(self.stylus_cone), np.array(self.roll_along_force, bool),
-                   np.array(self.roll_jitter), np.array(self.reference, bool), self.features,
-                   self.distances, self.placements, self.T_ref_base, self.ref_noise)
-        return out
+    def arrays(self, n_joints: int = 7) -> "Plan":
+        """The same plan with numpy arrays for the per-point fields."""
+        kinds = {"measurement": object, "feature": object, "task": int, "roll_along_force": bool, "reference": bool,
+                 "redraw": object}
+        out = {}
+        for name in ROW_FIELDS:
+            v = getattr(self, name)
+            if name == "q_start":
+                out[name] = np.array([np.full(n_joints, np.nan) if x is None else x for x in v]).reshape(-1, n_joints)
+            elif name == "redraw":
+                out[name] = np.empty(len(v), dtype=object)
+                out[name][:] = v
+            elif name in ("position", "normal", "stylus", "stylus_axis"):
+                out[name] = np.array(v, dtype=float).reshape(-1, 3)
+            else:
+                out[name] = np.array(v, dtype=kinds.get(name, float))
+        return Plan(**out, features=self.features, distances=self.distances, placements=self.placements,
+                    T_ref_base=self.T_ref_base, ref_noise=self.ref_noise)
 
     def __len__(self) -> int:
         return len(self.measurement)
 
     def extend(self, other: "Plan") -> None:
         """Append the per-point rows of ``other`` (lists) to this plan."""
-        for name in ("measurement", "feature", "task", "position", "normal", "cone", "lever", "stylus",
-                     "stylus_axis", "stylus_cone", "roll_along_force", "roll_jitter", "reference"):
+        for name in ROW_FIELDS:
             getattr(self, name).extend(getattr(other, name))
 
 
@@ -166,22 +179,29 @@ def _candidate(rng, o: dict, k: int, n: int, shoulder, spread=None):
 
 def _reachable(truth, parts: list, rng) -> np.ndarray:
     """For each part plan: can the true arm take every one of its points (no contact force)? One
-    quick batch of inverse kinematics for all parts."""
+    quick batch of inverse kinematics for all parts; the articulations found become the parts'
+    ``q_start`` (and their stylus directions the ones that worked)."""
     from .ik import IKTargets, solve_points
 
     p = Plan()
     owner = []
     for k, part in enumerate(parts):
         p.extend(part)
-        owner += [k] * len(part)
-    p = p.arrays()
+        owner += [(k, i) for i in range(len(part))]
+    j = truth.nominal.n_joints
+    p = p.arrays(j)
     n = len(p)
     zeros = np.zeros((n, 3))
     targets = IKTargets(p.position, p.stylus, np.full((n, 3), np.nan), zeros, zeros, np.full(n, 20.0),
                         p.stylus_axis, p.stylus_cone)
-    _, pending = solve_points(truth, targets, rng, tol=1e-9, max_attempts=12, max_iter=60)
+    res, pending = solve_points(truth, targets, rng, tol=1e-9, max_attempts=12, max_iter=60)
     ok = np.ones(len(parts), bool)
-    ok[np.array(owner, int)[pending]] = False
+    for r in pending:
+        ok[owner[r][0]] = False
+    for r, (k, i) in enumerate(owner):
+        if ok[k]:
+            parts[k].q_start[i] = res.q[r]
+            parts[k].stylus[i] = res.stylus[r]
     return ok
 
 
@@ -247,13 +267,15 @@ def _ring(plan, k, t: Task, rng, ball_d):
 
 
 def _sphere_points(plan, mid, fid, k, t, rng, centre, diameter, n, polar_max, ball_d):
+    """The pole, then points uniform on the cap of ``polar_max`` about the base z axis."""
     up = np.array([0.0, 0.0, 1.0])
     r = (diameter + ball_d) / 2
     normals = np.vstack([up[None, :], cone_directions(rng, up, polar_max, n - 1)])[:n]
+    redraw = {"kind": "sphere", "centre": np.asarray(centre, float), "radius": r, "polar_max": polar_max}
     for nrm in normals:
         stylus = cone_directions(rng, -nrm, t.opts["stylus_cone"], 1)[0]
         plan.add(mid, fid, k, centre + r * nrm, nrm, np.nan, ball_d / 2, stylus, stylus_axis=-nrm,
-                 stylus_cone=t.opts["stylus_cone"])
+                 stylus_cone=t.opts["stylus_cone"], redraw=redraw)
 
 
 def _sphere(plan, k, t, rng, ball_d):
@@ -272,12 +294,14 @@ def _plane(plan, k, t, rng, ball_d):
     e1, e2 = perpendicular_basis(nrm)
     plan.features.append({"id": t.id, "kind": "plane"})
     plan.placements[t.id] = {"kind": "plane", "point_m": p0.tolist(), "normal": nrm.tolist()}
+    redraw = {"kind": "plane", "origin": p0 + nrm * ball_d / 2, "e1": e1, "e2": e2,
+              "size": np.array(o["size"])}
     for m in range(t.measurements):
         for _ in range(o["points"]):
-            u, v = rng.uniform(-0.5, 0.5, 2) * np.array(o["size"])
+            u, v = rng.uniform(-0.5, 0.5, 2) * redraw["size"]
             stylus = cone_directions(rng, -nrm, o["stylus_cone"], 1)[0]
-            plan.add(f"{t.id}-{m + 1:02d}", t.id, k, p0 + u * e1 + v * e2 + nrm * ball_d / 2, nrm, np.nan,
-                     ball_d / 2, stylus, stylus_axis=-nrm, stylus_cone=o["stylus_cone"])
+            plan.add(f"{t.id}-{m + 1:02d}", t.id, k, redraw["origin"] + u * e1 + v * e2, nrm, np.nan,
+                     ball_d / 2, stylus, stylus_axis=-nrm, stylus_cone=o["stylus_cone"], redraw=redraw)
 
 
 def _seat_points(plan, mid, fid, k, t, rng, position, axis, n, reference=False):
@@ -368,7 +392,55 @@ def make_plan(campaign: Campaign, rng: np.random.Generator, truth=None) -> Plan:
                 (_ballbar if t.kind == "ballbar" else _tracker)(plan, k, t, rng, ball_d, campaign.arm, truth)
             except ValueError as exc:
                 raise InputError(str(exc), campaign.source or "<dict>", t.line, f"key 'task[{k + 1}]'") from None
-    out = plan.arrays()
+    out = plan.arrays(campaign.arm.n_joints)
     mu = campaign.operator["friction_coefficient"]
     out.cone = np.where(np.isnan(out.cone), mu, out.cone)
+    if truth is not None:
+        settle(out, truth, rng)
     return out
+
+
+def _redraw_row(plan: Plan, i: int, rng) -> None:
+    """Another contact on the same feature for row i (sphere: a new point of its cap; plane: a new
+    place), with a new stylus direction from its cone."""
+    rd = plan.redraw[i]
+    if rd["kind"] == "sphere":
+        nrm = cone_directions(rng, np.array([0.0, 0.0, 1.0]), rd["polar_max"], 1)[0]
+        plan.position[i] = rd["centre"] + rd["radius"] * nrm
+        plan.normal[i] = nrm
+        plan.stylus_axis[i] = -nrm
+    else:
+        u, v = rng.uniform(-0.5, 0.5, 2) * rd["size"]
+        plan.position[i] = rd["origin"] + u * rd["e1"] + v * rd["e2"]
+    plan.stylus[i] = cone_directions(rng, plan.stylus_axis[i], plan.stylus_cone[i], 1)[0]
+
+
+def settle(plan: Plan, truth, rng, rounds: int = 8) -> None:
+    """Find an articulation (no contact force) for every row without ``q_start``; a sphere or plane
+    point the arm cannot reach is moved elsewhere on its feature, as an operator would. Rows that stay
+    out of reach raise :class:`~arm_model.NumericalError` naming them."""
+    from .._errors import NumericalError
+    from .ik import IKTargets, solve_points
+
+    todo = np.flatnonzero(np.isnan(plan.q_start[:, 0]))
+    for _ in range(rounds):
+        if todo.size == 0:
+            return
+        n = todo.size
+        zeros = np.zeros((n, 3))
+        targets = IKTargets(plan.position[todo], plan.stylus[todo], np.full((n, 3), np.nan), zeros, zeros,
+                            np.full(n, 20.0), plan.stylus_axis[todo], plan.stylus_cone[todo])
+        res, pending = solve_points(truth, targets, rng, tol=1e-9, max_attempts=15, max_iter=60)
+        good = np.setdiff1d(np.arange(n), pending)
+        plan.q_start[todo[good]] = res.q[good]
+        plan.stylus[todo[good]] = res.stylus[good]
+        todo = todo[pending]
+        for i in todo:
+            if plan.redraw[i] is not None:
+                _redraw_row(plan, i, rng)
+    if todo.size:
+        rows = [f"{plan.measurement[i]} row {i + 1} (feature {plan.feature[i]}, ball centre "
+                f"{np.round(plan.position[i] * 1e3, 1).tolist()} mm)" for i in todo[:6]]
+        raise NumericalError(f"{todo.size} point(s) are out of the arm's reach (no articulation inside the joint "
+                             f"limits): {'; '.join(rows)}{' ...' if todo.size > 6 else ''}; "
+                             "move the artefact closer to the arm")

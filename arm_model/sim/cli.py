@@ -45,8 +45,9 @@ def summary(result, elapsed: float | None = None) -> str:
         meas = ps.measurements()
         lines.append(f"{label}: {len(ps)} points in {len(meas)} measurements "
                      f"({', '.join(meas[:3])}{' ...' if len(meas) > 3 else ''})")
+    per_task = result.stats.get("measurements_per_task", {})
     for t in c.tasks:
-        lines.append(f"  task {t.kind:8s} id {t.id:10s} {t.measurements} measurement(s)")
+        lines.append(f"  task {t.kind:8s} id {t.id:10s} {per_task.get(t.id, t.measurements)} measurement(s)")
     if result.points is not None and len(result.points):
         f = np.linalg.norm(result.true_wrench[:, :3], axis=1)
         per = {}
@@ -58,8 +59,10 @@ def summary(result, elapsed: float | None = None) -> str:
                      f"{means.min():.2f}-{means.max():.2f}, max {maxes.min():.2f}-{maxes.max():.2f}")
     on = result.truth["effects_on"]
     lines.append(f"effects on: {', '.join(on) if on else 'none (parameter errors only)'}")
-    nz = {k: v for k, v in result.truth["noise"].items() if v}
-    lines.append("noise: " + (", ".join(f"{k} {v:.3g} (SI)" for k, v in nz.items()) if nz else "none"))
+    shown = {"encoder_resolution": (180 / np.pi, "deg"), "encoder_noise": (180 / np.pi, "deg"),
+             "probing_repeatability": (1e6, "um"), "force_noise": (1.0, "N"), "temperature_noise": (1.0, "C")}
+    nz = [f"{k} {v * shown[k][0]:.3g} {shown[k][1]}" for k, v in result.truth["noise"].items() if v]
+    lines.append("noise (1 sigma): " + (", ".join(nz) if nz else "none"))
     s = result.stats
     lines.append(f"inverse kinematics: {s['ik_attempts_mean']:.2f} random starts a point on average "
                  f"(max {s['ik_attempts_max']}); truth check: ball centres on their surfaces within "

@@ -142,7 +142,7 @@ def _solve_batch(truth: Truth, q, tg: IKTargets, tol: float, max_iter: int):
     dir_err = np.full(n, np.inf)
     active = np.arange(n)
     lam = 1e-9
-    for _ in range(max_iter):
+    for it in range(max_iter):
         if active.size == 0:
             break
         sub = tg.take(active)
@@ -154,6 +154,8 @@ def _solve_batch(truth: Truth, q, tg: IKTargets, tol: float, max_iter: int):
         pos_err[active], dir_err[active], wrench[active] = pe, de, w
         done[active[conv]] = True
         keep = ~conv
+        if it >= 25:   # a start that is still far away after 25 steps is dropped (a new start is cheaper)
+            keep &= np.linalg.norm(r, axis=1) < 1e-5
         active, r, jac = active[keep], r[keep], jac[keep]
         if active.size == 0:
             break
@@ -187,14 +189,17 @@ def _redraw(targets: IKTargets, idx, rng) -> IKTargets:
 
 
 def solve_ik(truth: Truth, targets: IKTargets, rng: np.random.Generator, tol: float = 1e-12,
-             max_attempts: int = 120, max_iter: int = 80, labels=None, redraw_every: int = 5) -> IKResult:
+             max_attempts: int = 120, max_iter: int = 80, labels=None, redraw_every: int = 5,
+             starts=None) -> IKResult:
     """Solve every point from random starts inside the joint limits (see the module docstring).
     After every ``redraw_every`` failed starts a point gets a new stylus direction from its cone.
+    ``starts``: optional (N, J) first starts [rad] (NaN rows: random), e.g. articulations found
+    without contact force.
 
     Raises :class:`~arm_model.NumericalError` naming the points (``labels``) that found no valid
     solution in ``max_attempts`` starts (a target out of reach, or a direction the arm cannot take).
     """
-    result, pending = solve_points(truth, targets, rng, tol, max_attempts, max_iter, redraw_every)
+    result, pending = solve_points(truth, targets, rng, tol, max_attempts, max_iter, redraw_every, starts)
     if pending.size:
         names = [str(labels[i]) if labels is not None else f"point {i}" for i in pending[:8]]
         raise NumericalError(
@@ -205,7 +210,7 @@ def solve_ik(truth: Truth, targets: IKTargets, rng: np.random.Generator, tol: fl
 
 
 def solve_points(truth: Truth, targets: IKTargets, rng: np.random.Generator, tol: float = 1e-12,
-                 max_attempts: int = 120, max_iter: int = 80, redraw_every: int = 5):
+                 max_attempts: int = 120, max_iter: int = 80, redraw_every: int = 5, starts=None):
     """Like :func:`solve_ik` but returns (IKResult, indices of the points without a solution)
     instead of raising (their rows of the result are NaN)."""
     desc = truth.nominal
@@ -224,9 +229,12 @@ def solve_points(truth: Truth, targets: IKTargets, rng: np.random.Generator, tol
         if attempt and attempt % redraw_every == 0 and targets.stylus_cone is not None:
             targets = _redraw(targets, pending, rng)
         attempts[pending] += 1
-        starts = rng.uniform(span_lo, span_hi, (pending.size, j))
+        q0 = rng.uniform(span_lo, span_hi, (pending.size, j))
+        if attempt == 0 and starts is not None:
+            given = np.asarray(starts, dtype=float)[pending]
+            q0 = np.where(np.isnan(given[:, :1]), q0, given)
         sub = targets.take(pending)
-        q, conv, w, pe, de = _solve_batch(truth, starts, sub, tol, max_iter)
+        q, conv, w, pe, de = _solve_batch(truth, q0, sub, tol, max_iter)
         q, inside = wrap_into_limits(q, lo, hi)
         _, z, x = truth.pose(q, _take_geom(truth.geometry(sub.temperature), np.arange(pending.size)))
         right_way = np.einsum("ni,ni->n", z, sub.stylus) > 0

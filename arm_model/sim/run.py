@@ -123,45 +123,19 @@ def _artefacts_text(plan: Plan, campaign: Campaign) -> str:
     return "\n".join(out)
 
 
-def _toml_value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, np.integer)):
-        return str(int(v))
-    if isinstance(v, (float, np.floating)):
-        return _num(v)
-    if isinstance(v, str):
-        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(v, np.ndarray):
-        return _toml_value(v.tolist())
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    raise TypeError(f"cannot write {type(v)} to TOML")
-
-
-def _toml_table(name: str, d: dict) -> list[str]:
-    out = [f"[{name}]"]
-    sub = []
-    for k, v in d.items():
-        key = k if k.replace("_", "").replace("-", "").isalnum() else f'"{k}"'
-        if v is None:
-            continue
-        if isinstance(v, dict):
-            sub.append((f"{name}.{key}", v))
-        elif isinstance(v, list) and v and isinstance(v[0], dict):
-            for item in v:
-                sub.append((f"[{name}.{key}]", item))
-        else:
-            out.append(f"{key} = {_toml_value(v)}")
-    out.append("")
-    for sname, sd in sub:
-        if sname.startswith("["):
-            lines = _toml_table(sname[1:], sd)
-            lines[0] = f"[{lines[0]}]"
-            out += lines
-        else:
-            out += _toml_table(sname, sd)
-    return out
+def _plain(v):
+    """numpy scalars/arrays -> Python values, recursively (for tomli_w)."""
+    if isinstance(v, dict):
+        return {str(k): _plain(x) for k, x in v.items() if x is not None}
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return [_plain(x) for x in (v.tolist() if isinstance(v, np.ndarray) else v)]
+    if isinstance(v, np.bool_):
+        return bool(v)
+    if isinstance(v, np.integer):
+        return int(v)
+    if isinstance(v, np.floating):
+        return float(v)
+    return v
 
 
 _SETTING_UNITS = {"amplitude": "rad", "phase": "rad", "amplitude2": "rad", "phase2": "rad",
@@ -178,27 +152,25 @@ def _with_units(d):
 
 
 def _truth_text(campaign: Campaign, truth: Truth, plan: Plan, draw: OperatorDraw, stats: dict) -> str:
+    import tomli_w
+
     spec = truth.model.spec
-    out = [TRUTH_HEADER, f"# Campaign '{campaign.name}', seed {campaign.seed}. SI units, named in every key.", ""]
-    out += [f"campaign = {_toml_value(campaign.name)}", f"seed = {campaign.seed}",
-            f"arm = {_toml_value(campaign.arm.name)}", f"sensor = {_toml_value(campaign.sensor)}",
-            f"effects_on = {_toml_value(truth.effects_on())}", ""]
-    out += ["# true parameter vector of the core ArmModel(nominal, effects): errors added to the nominal arm",
-            "[parameters]"]
-    out += [f'"{si_key(n, u)}" = {_num(v)}' for n, u, v in zip(spec.names, spec.units, truth.p)]
-    out.append("")
-    out += _toml_table("effects", _with_units(truth.settings))
-    noise = {f"{k}_{u}": v for k, v, u in ((k, v, {"encoder_resolution": "rad", "encoder_noise": "rad",
-                                                   "probing_repeatability": "m", "force_noise": "N",
-                                                   "temperature_noise": "C"}[k])
-                                          for k, v in campaign.noise.items())}
-    out += _toml_table("noise", noise)
-    levels = {"level_N": [draw.level[m] for m in draw.level], "measurements": list(draw.level)}
-    out += _toml_table("operator", levels)
-    for tid, pl in plan.placements.items():
-        out += _toml_table(f'artefact."{tid}"', pl)
-    out += _toml_table("stats", stats)
-    return "\n".join(out)
+    noise_units = {"encoder_resolution": "rad", "encoder_noise": "rad", "probing_repeatability": "m",
+                   "force_noise": "N", "temperature_noise": "C"}
+    doc = {
+        "campaign": campaign.name, "seed": campaign.seed, "arm": campaign.arm.name, "sensor": campaign.sensor,
+        "effects_on": truth.effects_on(),
+        "parameters": {si_key(n, u): float(v) for n, u, v in zip(spec.names, spec.units, truth.p)},
+        "effects": _with_units(truth.settings),
+        "noise": {f"{k}_{noise_units[k]}": v for k, v in campaign.noise.items()},
+        "operator": {"measurements": list(draw.level), "level_N": [draw.level[m] for m in draw.level]},
+        "artefact": plan.placements,
+        "stats": stats,
+    }
+    head = [TRUTH_HEADER, f"# Campaign '{campaign.name}', seed {campaign.seed}. SI units, named in every key; "
+            "[parameters] is the true parameter vector of the core ArmModel(nominal arm, effects on), "
+            "errors added to the nominal description.", ""]
+    return "\n".join(head) + tomli_w.dumps(_plain(doc))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -255,7 +227,7 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
                         plan.stylus_axis, plan.stylus_cone)
     labels = [f"{m} row {i + 1} (feature {f})" for i, (m, f) in enumerate(zip(plan.measurement, plan.feature))]
     say("inverse kinematics on the true arm ...")
-    ik = solve_ik(truth, targets, rng["ik"], labels=labels)
+    ik = solve_ik(truth, targets, rng["ik"], labels=labels, starts=plan.q_start)
     q_true, wrench = ik.q, ik.wrench
     # physical torques and the readings the encoders give
     if truth.needs_torques():
@@ -358,7 +330,8 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
                 force = np.column_stack([force[:, 0], np.zeros(len(force)), force[:, 1]])
             signals[mid] = ForceSignal(rel, arr[:, 0], force, "two-channel" if sensor == "two-channel" else "xyz")
     f_true = wrench[:, :3]
-    stats = {"points": int(n), "measurements": len(set(plan.measurement)),
+    per_task = {t.id: len(set(plan.measurement[plan.task == k])) for k, t in enumerate(campaign.tasks)}
+    stats = {"points": int(n), "measurements": len(set(plan.measurement)), "measurements_per_task": per_task,
              "ik_attempts_mean": float(ik.attempts.mean()), "ik_attempts_max": int(ik.attempts.max()),
              "truth_residual_max_m": float(residual.max()),
              "force_mean_N": float(np.linalg.norm(f_true, axis=1).mean()),
@@ -391,11 +364,8 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
 
 
 def _fast_csv(columns: dict) -> str:
-    """Numeric CSV text (all columns formatted), row-wise, deterministic."""
+    """Numeric CSV text (every column with its % format), deterministic; one formatting pass."""
     names = list(columns)
     arr = np.column_stack([columns[k][0] for k in names])
-    fmt = ",".join(columns[k][1] for k in names)
-    buf = io.StringIO()
-    buf.write(",".join(names) + "\n")
-    np.savetxt(buf, arr, fmt=fmt, delimiter=",", newline="\n")
-    return buf.getvalue()
+    row = ",".join(columns[k][1] for k in names) + "\n"
+    return ",".join(names) + "\n" + (row * len(arr)) % tuple(arr.ravel().tolist())
