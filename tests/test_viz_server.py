@@ -171,3 +171,15 @@ def test_show_and_show_residuals_api(nominal):
     # residuals alone, no arm
     with show_residuals(p, r) as alone:
         assert any("2 residual vector(s), drawn x1000" in line for line in alone.legend)
+
+
+def test_docs_example_runs(tmp_path, monkeypatch, capsys):
+    text = (ROOT / "docs" / "viewer.md").read_text()
+    code = text.split("```python\n", 1)[1].split("```", 1)[0]
+    monkeypatch.chdir(tmp_path)
+    exec(compile(code.replace('"urdf/aacmm7.dh.toml"', repr(str(ROOT / "urdf" / "aacmm7.dh.toml"))),
+                 "docs/viewer.md", "exec"), {})
+    out = capsys.readouterr().out
+    assert out.startswith("http://127.0.0.1:") and "drawn x1000" in out
+    page = (tmp_path / "pose.html").read_text()
+    assert "2 residual vector(s), drawn x1000" in page

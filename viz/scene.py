@@ -13,10 +13,11 @@ Every scaled quantity is named with its scale in the scene tree (``deflection x1
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-from arm_model import ArmDescription
+from arm_model import ArmDescription, load_description
 
 __all__ = ["ArmScene", "Camera", "PoseInfo", "ROOT", "DEFLECTION_RGB", "RESIDUAL_RGB", "POINTS_RGB",
            "ARTEFACT_RGB"]
@@ -161,8 +162,8 @@ class ArmScene:
 
     Args:
         vis: a :class:`meshcat.Visualizer` (e.g. ``MeshcatServer().start().visualizer``).
-        arm: an :class:`~arm_model.ArmDescription`, an :class:`~arm_model.PinocchioArm`, or None for a
-            scene of data only (residuals, points).
+        arm: an :class:`~arm_model.ArmDescription`, an :class:`~arm_model.PinocchioArm`, the path of a
+            description file, or None for a scene of data only (residuals, points).
         root: the scene node everything is drawn under.
     """
 
@@ -178,6 +179,8 @@ class ArmScene:
         self.root = root
         self.legend: list[str] = []
         self._extent: list[np.ndarray] = [np.zeros((1, 3))]
+        if isinstance(arm, (str, Path)):
+            arm = load_description(arm)
         self.arm = PinocchioArm(arm) if isinstance(arm, ArmDescription) else arm
         self.desc = None if arm is None else self.arm.desc
         self._pv = None
