@@ -6,7 +6,6 @@ import signal
 import socket
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +14,7 @@ from scipy.optimize import least_squares
 from arm_model import ball_centres
 from arm_model.cli import main
 from conftest import NOMINAL, ROOT
-from test_viz_server import page_commands, transforms, wait_gone
+from test_viz_server import bridge_children, no_server_left, page_commands, transforms, wait_gone  # noqa: F401
 
 HEADER = "measurement,feature," + ",".join(f"q{i}_deg" for i in range(1, 8)) + ",fx_N,fy_N,fz_N"
 Q0 = np.radians([0, 30, 0, 60, 0, 45, 0])
@@ -120,7 +119,7 @@ def test_serves_until_sigterm_and_leaves_no_server(campaign):
         port = int(url.rsplit(":", 1)[1].split("/")[0])
         with socket.create_connection(("127.0.0.1", port), timeout=5):
             pass
-        bridge = _bridge_children(proc.pid)
+        bridge = bridge_children(proc.pid)
         assert len(bridge) == 1
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=20) == 0
@@ -129,17 +128,6 @@ def test_serves_until_sigterm_and_leaves_no_server(campaign):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-
-
-def _bridge_children(pid: int) -> list[int]:
-    """Server processes (viz._bridge) started by process ``pid``."""
-    out = []
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        for child in (task / "children").read_text().split():
-            cmd = open(f"/proc/{child}/cmdline", "rb").read().split(b"\0")
-            if b"viz._bridge" in cmd:
-                out.append(int(child))
-    return out
 
 
 # --- errors: one message, exit 2, nothing written ---------------------------------------------------

@@ -9,6 +9,7 @@ import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -47,6 +48,24 @@ def wait_gone(pid: int, seconds: float = 5.0) -> bool:
             return True
         time.sleep(0.05)
     return False
+
+
+def bridge_children(pid: int) -> list[int]:
+    """Server processes (viz._bridge) started by process ``pid``."""
+    out = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        for child in (task / "children").read_text().split():
+            with open(f"/proc/{child}/cmdline", "rb") as fh:
+                if b"viz._bridge" in fh.read().split(b"\0"):
+                    out.append(int(child))
+    return out
+
+
+@pytest.fixture(autouse=True, scope="module")
+def no_server_left():
+    """After the module, this test process has no server process left."""
+    yield
+    assert bridge_children(os.getpid()) == []
 
 
 def listeners(port: int) -> set[str]:

@@ -67,7 +67,8 @@ def register(sub) -> None:
     p.add_argument("--browser", metavar="PATH", help="Chromium executable for --screenshot (default: chromium "
                    "on PATH)")
     p.add_argument("--serve", action="store_true",
-                   help="keep serving after writing --html/--screenshot (serving is the default without them)")
+                   help="keep serving after writing --html/--screenshot (serving is the default without them, "
+                        "and with --open-seconds)")
     p.add_argument("--port", type=int, help="web port of the server (default: the first free one from 7000)")
     p.add_argument("--open-seconds", type=_positive(float), metavar="N",
                    help="stop the server after N seconds (default: run until Ctrl-C)")
@@ -107,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--point {args.point}: the selection has {len(sel)} point(s)", points.path)
     wrench = sel.wrench
     centres = ball_centres(desc, sel.q, wrench)
-    serve = args.serve or (args.html is None and args.screenshot is None)
+    serve = args.serve or args.open_seconds is not None or (args.html is None and args.screenshot is None)
 
     from .view import View   # heavy backends from here on
 

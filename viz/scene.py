@@ -225,6 +225,7 @@ class ArmScene:
             mg = self._mg
             if self._arrow_path is not None:
                 self.vis[self._arrow_path].delete()
+                self.legend[:] = [line for line in self.legend if not line.startswith("green arrow:")]
             mat = mg.MeshLambertMaterial(color=DEFLECTION_RGB)
             self.vis[f"{name}/shaft"].set_object(mg.Cylinder(1.0, _ARROW_RADIUS), mat)
             self.vis[f"{name}/head"].set_object(mg.Cylinder(1.0, radiusTop=0.0, radiusBottom=_HEAD[0]), mat)
@@ -353,7 +354,8 @@ class ArmScene:
                 node.set_object(mg.Cylinder(float(np.linalg.norm(v)), 0.004), mat)
                 node.set_transform(_matrix((a.centre + b.centre) / 2, _rotation_y_to(v)))
         if placements:
-            self._legend(f"blue: {len(placements)} artefact feature(s), certified size, placed by fitting the ball centres")
+            self._legend(f"blue: {len(placements)} artefact feature(s), certified size, placed by fitting "
+                         "the ball centres")
 
     # -- camera -------------------------------------------------------------------------------
     @property
