@@ -95,7 +95,7 @@ _TASKS = {
              "axis": ("direction", (0.0, 0.0, 1.0), 3), "depths": ("length", (5e-3, 12e-3, 19e-3), -1),
              "points_per_row": ("count", 24, None), "angle_jitter": ("angle", math.radians(3.0), None),
              "depth_jitter": ("length", 1e-3, None), "stylus_tilt": ("angle", 0.0, None),
-             "roll": ("text", "random", None), "roll_jitter": ("angle", math.radians(10.0), None)},
+             "roll": ("text", None, None), "roll_jitter": ("angle", math.radians(10.0), None)},
     "sphere": {"diameter": ("length", 25e-3, None), "centre": ("length", (0.55, 0.25, 0.1), 3),
                "points": ("count", 25, None), "polar_max": ("angle", math.radians(90.0), None)},
     "plane": {"point": ("length", (0.6, -0.2, 0.0), 3), "normal": ("direction", (0.0, 0.0, 1.0), 3),
@@ -455,7 +455,7 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
             n_meas = o["positions"]
         if o["stylus_cone"] is None:
             o["stylus_cone"] = _DEFAULT_CONE[kind]
-        _check_task(ctx, kind, o, tbl)
+        _check_task(ctx, kind, o, tbl, top["sensor"])
         if n_meas < 1:
             raise ctx.error("need at least one measurement", tbl, "measurements")
         tasks.append(Task(kind, tid, n_meas, o, ctx.lines.get((tbl, ""))))
@@ -466,7 +466,7 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
                     raw=data)
 
 
-def _check_task(ctx, kind, o, tbl):
+def _check_task(ctx, kind, o, tbl, sensor):
     positive = {"ring": ("diameter", "points_per_row"), "sphere": ("diameter", "points"),
                 "plane": ("points",), "seat": ("articulations",),
                 "ballbar": ("length", "positions", "sphere_diameter", "reach"),
@@ -475,6 +475,8 @@ def _check_task(ctx, kind, o, tbl):
         if o[k] <= 0:
             raise ctx.error(f"'{k}' must be > 0", tbl, k)
     if kind == "ring":
+        if o["roll"] is None:   # the paper's sensor sees one bending axis: its operator keeps it on the force
+            o["roll"] = "bend-along-force" if sensor == "two-channel" else "random"
         if o["roll"] not in ("random", "bend-along-force"):
             raise ctx.error("'roll' must be \"random\" or \"bend-along-force\"", tbl, "roll")
     if kind == "ballbar":

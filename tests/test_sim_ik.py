@@ -1,0 +1,87 @@
+"""Redundant inverse kinematics on the true arm: on target to 1 pm, inside the joint limits, the
+required stylus direction, different articulations for the same target; unreachable targets raise."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from arm_model import NumericalError
+from arm_model.sim import campaign_from_dict, simulate
+from arm_model.sim.ik import IKTargets, joint_limits, solve_ik, wrap_into_limits
+from arm_model.sim.truth import build_truth
+from conftest import assert_close
+
+
+@pytest.fixture(scope="module")
+def seat_and_ring():
+    return simulate(campaign_from_dict({
+        "seed": 21, "signals": {"enabled": False}, "operator": {"point_period_s": 0.5},
+        "task": [{"kind": "seat", "articulations": 25, "stylus_cone_deg": 60.0},
+                 {"kind": "ring", "points_per_row": 6, "roll": "bend-along-force", "roll_jitter_deg": 5.0}]}))
+
+
+def test_inside_joint_limits(seat_and_ring):
+    lo, hi = joint_limits(seat_and_ring.campaign.arm)
+    q = seat_and_ring.true_q
+    assert np.all(q >= lo) and np.all(q <= hi)
+    assert np.all(seat_and_ring.points.q >= lo - 1e-9) and np.all(seat_and_ring.points.q <= hi + 1e-9)
+
+
+def test_articulations_are_redundant_and_varied(seat_and_ring):
+    r = seat_and_ring
+    seat = r.points.feature == "seat"
+    q = r.true_q[seat]
+    assert_close(r.true_centres[seat], np.tile(r.truth["placements"]["seat"]["position_m"], (seat.sum(), 1)),
+                 atol=1e-12)
+    # every pair of articulations differs by more than 0.1 rad in some joint, and each joint varies
+    diff = np.abs(q[:, None, :] - q[None, :, :]).max(axis=2)
+    assert np.all(diff[~np.eye(len(q), dtype=bool)] > 0.1)
+    assert np.all(np.std(q, axis=0) > 0.1)
+
+
+def test_stylus_and_roll_directions(seat_and_ring):
+    r = seat_and_ring
+    truth = r.truth["truth"]
+    R = truth.rotation(r.true_q, r.points.temperature)       # columns: probe x, y, z in base
+    ring = r.points.feature == "ring"
+    axis = np.array(r.truth["placements"]["ring"]["axis"])
+    assert_close(R[ring][:, :, 2] @ axis, -np.ones(ring.sum()), atol=1e-12)  # stylus parallel to the axis, down
+    # roll along the force: probe x within the jitter of the bending force's direction
+    f = r.true_wrench[ring]
+    angle = np.degrees(np.arctan2(np.abs(f[:, 1]), f[:, 0]))
+    assert np.all(angle <= 5.0 + 1e-6)
+    # seat: stylus within its cone about -axis
+    seat = r.points.feature == "seat"
+    cosang = R[seat][:, :, 2] @ np.array([0, 0, -1.0])
+    assert np.all(cosang >= np.cos(np.radians(60.0)) - 1e-12)
+
+
+def test_unreachable_target_raises():
+    c = campaign_from_dict({"seed": 1, "task": [{"kind": "seat", "articulations": 1,
+                                                 "position_mm": [2500.0, 0.0, 0.0]}]})
+    with pytest.raises(NumericalError, match="out of the arm's reach"):
+        simulate(c)
+
+
+def test_solve_ik_directly_on_target_with_given_directions():
+    c = campaign_from_dict({"seed": 2, "task": [{"kind": "seat"}]})
+    truth = build_truth(c.arm, c.truth, np.random.default_rng(0))
+    n = 12
+    rng = np.random.default_rng(4)
+    pos = np.column_stack([rng.uniform(0.4, 0.7, n), rng.uniform(-0.3, 0.3, n), rng.uniform(0.0, 0.3, n)])
+    stylus = np.tile([0.0, 0.0, -1.0], (n, 1))
+    force = np.column_stack([np.zeros((n, 2)), rng.uniform(0.5, 3, n)])   # pushing the ball up
+    tg = IKTargets(pos, stylus, np.full((n, 3), np.nan), force, np.zeros((n, 3)), rng.uniform(18, 25, n))
+    res = solve_ik(truth, tg, rng)
+    ball, z, _ = truth.pose(res.q, truth.geometry(tg.temperature), res.wrench)
+    assert_close(ball, pos, atol=1e-12)
+    assert_close(z, stylus, atol=1e-12)
+    # the wrench is the world force in the probe frame: stylus down -> force along -z of the probe
+    assert_close(res.wrench[:, 2], -force[:, 2], atol=1e-12)
+
+
+def test_wrap_into_limits():
+    lo, hi = np.array([-2 * np.pi, -2.0]), np.array([2 * np.pi, 2.0])
+    q, ok = wrap_into_limits(np.array([[7.0, 2.0 * np.pi + 1.0], [-4.0, 3.0]]), lo, hi)
+    assert_close(q, [[7.0 - 2 * np.pi, 1.0], [-4.0 + 2 * np.pi, 3.0]], atol=1e-15)
+    assert ok.tolist() == [True, False]
