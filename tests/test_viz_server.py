@@ -202,3 +202,13 @@ def test_docs_example_runs(tmp_path, monkeypatch, capsys):
     assert out.startswith("http://127.0.0.1:") and "drawn x1000" in out
     page = (tmp_path / "pose.html").read_text()
     assert "2 residual vector(s), drawn x1000" in page
+
+
+def test_a_server_that_stops_answering_is_a_clear_error(nominal):
+    server = MeshcatServer(timeout=2.0).start()
+    with View(nominal, server=server) as view:
+        os.kill(server.pid, 9)
+        assert wait_gone(server.pid)
+        with pytest.raises(ViewerError, match="did not answer"):
+            view.show_pose(Q, W)
+    server.close()

@@ -8,6 +8,7 @@
 """
 from __future__ import annotations
 
+import contextlib
 import html as _html
 from pathlib import Path
 
@@ -36,6 +37,18 @@ def page_with_legend(page: str, title: str, legend: list[str]) -> str:
     return page.replace(head, f"<title>{_html.escape(title)}</title>", 1).replace(body, body + box, 1)
 
 
+@contextlib.contextmanager
+def _answering(server: MeshcatServer):
+    """Turn a server that stopped answering into a :class:`ViewerError`."""
+    import zmq
+
+    try:
+        yield
+    except zmq.ZMQError as exc:
+        raise ViewerError(f"the meshcat server at {server.url} did not answer ({exc}); it may have stopped"
+                          ) from None
+
+
 class View:
     """A meshcat server (started here, or given) with an :class:`~viz.scene.ArmScene` in it.
 
@@ -51,7 +64,8 @@ class View:
         self._own = server is None
         self.server = MeshcatServer(port).start() if server is None else server
         try:
-            self.scene = ArmScene(self.server.visualizer, arm)
+            with _answering(self.server):
+                self.scene = ArmScene(self.server.visualizer, arm)
         except BaseException:
             self.close()
             raise
@@ -70,37 +84,43 @@ class View:
     # drawing: thin wrappers that keep the camera framing everything drawn
     def show_pose(self, q, wrench=None, scale: float = 1000.0) -> PoseInfo:
         """Arm at ``q`` (J,) [rad] deflected by ``wrench`` (3,)/(6,) [N, N m]; deflection arrow x``scale``."""
-        info = self.scene.show_pose(q, wrench, scale)
-        self._reframe()
+        with _answering(self.server):
+            info = self.scene.show_pose(q, wrench, scale)
+            self._reframe()
         return info
 
     def animate(self, qs, wrenches=None, fps: float = 2.0, scale: float = 1000.0,
                 repetitions: int = 1000) -> list[PoseInfo]:
         """Animate through poses ``qs`` (N, J) [rad] with ``wrenches`` (N, 3|6) or None."""
-        infos = self.scene.animate(qs, wrenches, fps, scale, repetitions)
-        self._reframe()
+        with _answering(self.server):
+            infos = self.scene.animate(qs, wrenches, fps, scale, repetitions)
+            self._reframe()
         return infos
 
     def show_points(self, p_base, **kw) -> None:
         """Dots at points (N, 3) [m], base frame."""
-        self.scene.show_points(p_base, **kw)
-        self._reframe()
+        with _answering(self.server):
+            self.scene.show_points(p_base, **kw)
+            self._reframe()
 
     def show_residuals(self, points, residuals, scale: float = 1000.0) -> None:
         """Residual vectors (N, 3) [m] from ``points`` (N, 3) [m], drawn ``scale`` times long."""
-        self.scene.show_residuals(points, residuals, scale)
-        self._reframe()
+        with _answering(self.server):
+            self.scene.show_residuals(points, residuals, scale)
+            self._reframe()
 
     def show_artefacts(self, placements, distances=()) -> None:
         """Placed artefact features (:func:`viz.placement.place_features`)."""
-        self.scene.show_artefacts(placements, distances)
-        self._reframe()
+        with _answering(self.server):
+            self.scene.show_artefacts(placements, distances)
+            self._reframe()
 
     def frame(self, camera: Camera | None = None) -> Camera:
         """Set the camera and keep it; ``None`` (the default) frames everything drawn, again after each
         drawing call. Returns the camera set."""
         self._fixed = camera
-        self.camera = self.scene.set_camera(camera)
+        with _answering(self.server):
+            self.camera = self.scene.set_camera(camera)
         return self.camera
 
     def _reframe(self) -> None:
