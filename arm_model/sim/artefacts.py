@@ -243,15 +243,24 @@ def _place(plan, rng, o, n, shoulder, spread, make, truth, max_rounds: int = 40)
 # ---------------------------------------------------------------------------------------------
 # the tasks
 
+def ring_surface(placement: dict, phi):
+    """Radius [m] of a ring's true bore at angle ``phi`` [rad] about its axis (from its first
+    perpendicular axis): ``D/2 + (form/2) cos(lobes phi + phase)``, and its derivative d r / d phi."""
+    r0, f = placement["diameter_m"] / 2, placement["true_form_error_m"] / 2
+    n, ph = placement["form_lobes"], placement["form_phase_rad"]
+    return r0 + f * np.cos(n * phi + ph), -f * n * np.sin(n * phi + ph)
+
+
 def _ring(plan, k, t: Task, rng, ball_d):
     o = t.opts
     c, a = np.array(o["centre"]), np.array(o["axis"])
     e1, e2 = perpendicular_basis(a)
-    radius = (o["diameter"] - ball_d) / 2
     plan.features.append({"id": t.id, "kind": "ring", "diameter": o["diameter"], "u_diameter": o["u_diameter"],
                           "form_error": o["form_error"]})
-    plan.placements[t.id] = {"kind": "ring", "centre_m": c.tolist(), "axis": a.tolist(),
-                             "diameter_m": o["diameter"], "ball_centre_radius_m": radius}
+    place = {"kind": "ring", "centre_m": c.tolist(), "axis": a.tolist(), "e1": e1.tolist(), "e2": e2.tolist(),
+             "diameter_m": o["diameter"], "true_form_error_m": o["true_form_error"],
+             "form_lobes": o["form_lobes"], "form_phase_rad": float(rng.uniform(0, 2 * np.pi))}
+    plan.placements[t.id] = place
     npr = o["points_per_row"]
     for m in range(t.measurements):
         mid = f"{t.id}-{m + 1:02d}"
@@ -260,8 +269,13 @@ def _ring(plan, k, t: Task, rng, ball_d):
                 phi = 2 * np.pi * i / npr + rng.uniform(-1, 1) * o["angle_jitter"]
                 dz = depth + rng.uniform(-1, 1) * o["depth_jitter"]
                 radial = np.cos(phi) * e1 + np.sin(phi) * e2
+                tangent = -np.sin(phi) * e1 + np.cos(phi) * e2
+                r, dr = ring_surface(place, phi)
+                inward = -r * radial + dr * tangent          # the bore's normal, towards the axis
+                inward /= np.linalg.norm(inward)
+                contact = c - dz * a + r * radial
                 stylus = cone_directions(rng, -a, o["stylus_tilt"], 1)[0] if o["stylus_tilt"] > 0 else -a
-                plan.add(mid, t.id, k, c - dz * a + radial * radius, -radial, np.nan, ball_d / 2, stylus,
+                plan.add(mid, t.id, k, contact + inward * ball_d / 2, inward, np.nan, ball_d / 2, stylus,
                          roll=o["roll"] == "bend-along-force", roll_jitter=o["roll_jitter"], stylus_axis=-a,
                          stylus_cone=o["stylus_tilt"])
 

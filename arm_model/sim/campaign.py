@@ -91,7 +91,8 @@ _COMMON_TASK = {"kind": ("text", None, None), "id": ("text", None, None),
                 "measurements": ("count", 1, None), "stylus_cone": ("angle", None, None)}
 _TASKS = {
     "ring": {"diameter": ("length", 174.996e-3, None), "u_diameter": ("length", None, None),
-             "form_error": ("length", None, None), "centre": ("length", (0.70, 0.0, 0.05), 3),
+             "form_error": ("length", None, None), "true_form_error": ("length", 0.0, None),
+             "form_lobes": ("count", 3, None), "centre": ("length", (0.70, 0.0, 0.05), 3),
              "axis": ("direction", (0.0, 0.0, 1.0), 3), "depths": ("length", (5e-3, 12e-3, 19e-3), -1),
              "points_per_row": ("count", 24, None), "angle_jitter": ("angle", math.radians(3.0), None),
              "depth_jitter": ("length", 1e-3, None), "stylus_tilt": ("angle", 0.0, None),
@@ -396,6 +397,9 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
                 raise ctx.error("the diagonal of 'cross_talk' must be 0 (gains are 'gain')", tbl, "cross_talk")
             if min(e["gain"]) <= -1:
                 raise ctx.error("'gain' must be > -1 (reading = (1 + gain) force)", tbl, "gain")
+            if top["sensor"] == "two-channel" and (e["gain"][1] or e["offset"][1] or np.any(e["cross_talk"][1])):
+                raise ctx.error("the two-channel sensor does not measure probe y: its gain, offset and "
+                                "cross-talk row must be 0", tbl)
         truth[name] = e
     if ecc is None:
         truth["eccentricity"] = []

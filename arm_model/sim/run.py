@@ -17,7 +17,6 @@ import numpy as np
 from .._errors import NumericalError
 from ..io import (Artefacts, ForceSignal, PointSet, atomic_write_text, guard_output, parse_points)
 from ..io import parse_artefacts
-from ..model import AuxData
 from .artefacts import Plan, make_plan
 from .campaign import Campaign
 from .ik import IKTargets, solve_ik
@@ -217,7 +216,7 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
         campaign = replace(campaign, seed=seed)
     rng = _rng_streams(seed)
     desc = campaign.arm
-    truth = build_truth(desc, campaign.truth, rng["truth"])
+    truth = build_truth(desc, campaign.truth, rng["truth"], campaign.sensor)
     plan = make_plan(campaign, rng["plan"], truth)
     n = len(plan)
     say(f"{n} points in {len(set(plan.measurement))} measurements planned")

@@ -189,11 +189,11 @@ def _random_base(rng, desc: ArmDescription, t: dict) -> np.ndarray:
     return p
 
 
-def build_truth(desc: ArmDescription, t: dict, rng: np.random.Generator) -> Truth:
+def build_truth(desc: ArmDescription, t: dict, rng: np.random.Generator, sensor: str = "xyz") -> Truth:
     """The true arm from a campaign's ``truth`` section (SI, see :mod:`arm_model.sim.campaign`):
     random base errors of the given sizes (explicit ``errors`` override them), then each effect
     that is on, in a fixed order: eccentricity, joint compliance, thermal growth, probe
-    compliance, force sensor."""
+    compliance, force sensor (on the axes the ``sensor`` measures: x and z for the two-channel one)."""
     p_base = _random_base(rng, desc, t)
     effects, values = [], []
     settings = {}
@@ -240,8 +240,9 @@ def build_truth(desc: ArmDescription, t: dict, rng: np.random.Generator) -> Trut
     if fs is not None:
         gain, offset, cross = np.array(fs["gain"]), np.array(fs["offset"]), np.array(fs["cross_talk"])
         if np.any(gain) or np.any(offset):
-            effects.append(ForceSensorError(axes=(0, 1, 2), offsets=True))
-            values += list(gain) + list(offset)
+            axes = (0, 2) if sensor == "two-channel" else (0, 1, 2)
+            effects.append(ForceSensorError(axes=axes, offsets=True))
+            values += [gain[a] for a in axes] + [offset[a] for a in axes]
         settings["force_sensor"] = {"gain": gain.tolist(), "offset": offset.tolist(),
                                     "cross_talk": cross.tolist()}
     model = ArmModel(desc, tuple(effects))
