@@ -1,0 +1,53 @@
+"""Kinematic calibration in CasADi: artefact residuals, identifiability, uncertainty, validation, studies.
+
+Typical use::
+
+    from arm_model import load_description, read_points, read_artefacts
+    from arm_model.model import ArmModel
+    from calibration import make_data, split_holdout, calibrate, Weights
+
+    model = ArmModel(load_description("urdf/aacmm7.dh.toml"))          # effects optional
+    data = make_data(read_points("points.csv", 7), read_artefacts("artefacts.toml"), model,
+                     reference=read_points("points-ref.csv", 7))        # tracker points optional
+    train, test = split_holdout(data, 0.2, seed=0)                      # by measurement
+    res = calibrate(model, train, free=["j*", "probe.x", "probe.y", "probe.z"],
+                    weights=Weights(probe=5e-6, reference=10e-6))
+    res.p, res.free, res.u, res.corr, res.fixed, res.status            # by name, SI
+    res.compare(test)                                                   # nominal vs calibrated, held out
+    res.predict(test)                                                   # residuals on other data
+
+API for the close-the-loop work (issue 7):
+
+* :func:`calibrate` ``(model, data, free=None, values=None, start=None, weights=...) ->``
+  :class:`CalibrationResult`: ``p`` (full vector of ``model.spec``), ``free``, ``cov``, ``u``,
+  ``corr``, ``s0``, ``status``, ``iterations``, ``fixed`` (:class:`FixedParameter` with the named
+  combination the data cannot see), ``identifiability`` / ``identifiability_final``
+  (:class:`Identifiability`), ``residuals`` (per point: ``point`` index, ``kind``, ``instance``,
+  ``value`` [m], ``vector`` (n, 3) [m] base frame, ``standardized``, ``measurement``, ``feature``,
+  ``line``), ``instances`` (per artefact instance: kind, point indices, RMS, fitted geometry),
+  ``distances``, ``outliers``; ``predict(data)``, ``validate(data)``, ``compare(data)``,
+  ``equivalent(p_true)``, ``described()``, ``to_dict()``.
+* Any :class:`arm_model.model.ArmModel` with effects works: their parameters are in ``model.spec``
+  and :func:`make_data` attaches the aux inputs they need.
+* :class:`Problem` (residual structure, exact CasADi Jacobians) and :func:`levenberg_marquardt`
+  for custom fits; :func:`validate` / :func:`before_after` for ASME B89.4.22 figures of any p.
+
+Command line: ``aacmm calibrate`` and ``aacmm study {montecarlo, poses}``. Reference:
+docs/calibration.md.
+"""
+from .calibrate import (CalibrationResult, FixedParameter, Outlier, calibrate, default_free, display_unit,
+                        resolve_parameters, rigid_gauge)
+from .data import CalibrationData, Weights, make_data, merge_points, split_holdout
+from .identifiability import DEFAULT_RANK_TOL, Combination, Identifiability, analyse, reduced_jacobian
+from .problem import Problem
+from .solver import LMResult, levenberg_marquardt
+from .validation import FIGURES, Validation, before_after, validate
+
+__all__ = [
+    "calibrate", "CalibrationResult", "FixedParameter", "Outlier", "default_free", "resolve_parameters",
+    "rigid_gauge", "display_unit",
+    "CalibrationData", "Weights", "make_data", "merge_points", "split_holdout",
+    "Identifiability", "Combination", "analyse", "reduced_jacobian", "DEFAULT_RANK_TOL",
+    "Problem", "levenberg_marquardt", "LMResult",
+    "Validation", "validate", "before_after", "FIGURES",
+]

@@ -10,7 +10,7 @@ from arm_model import InputError
 from arm_model.io import Artefacts, PointSet, check_features
 from arm_model.model import ArmModel, AuxData
 
-__all__ = ["Weights", "CalibrationData", "make_data", "split_holdout"]
+__all__ = ["Weights", "CalibrationData", "make_data", "merge_points", "split_holdout"]
 
 
 @dataclass(frozen=True)
@@ -19,22 +19,24 @@ class Weights:
 
     Attributes:
         probe: of one probed ball centre, per axis [m] (points on seats, spheres, rings, planes).
-        reference: of one reference-instrument coordinate, per axis [m]; a reference residual is
-            weighted by ``hypot(probe, reference)``.
+        reference: of one reference-instrument coordinate, per axis [m]. A reference point on a seat
+            (a tracker nest) ties the seat's centre to the instrument (weight ``reference``); on a free
+            point it ties the ball centre (weight ``hypot(probe, reference)``).
         length: of a certified length whose artefact gives no ``u_length_mm`` [m] (None: ``probe``).
     """
     probe: float = 10e-6
-    reference: float = 0.0
+    reference: float = 10e-6
     length: float | None = None
 
     def __post_init__(self):
         for name in ("probe", "reference", "length"):
             v = getattr(self, name)
-            if v is not None and (not np.isfinite(v) or v < 0 or (name == "probe" and v == 0)):
+            if v is not None and (not np.isfinite(v) or v <= 0):
                 raise ValueError(f"weight {name} must be a finite positive uncertainty [m], got {v!r}")
 
     @property
     def reference_sigma(self) -> float:
+        """Of a reference residual on a free point (the arm's ball and the instrument's view) [m]."""
         return float(np.hypot(self.probe, self.reference))
 
     def length_sigma(self, u_length: float | None) -> float:
@@ -46,10 +48,24 @@ class Weights:
 @dataclass(frozen=True)
 class CalibrationData:
     """Points (``arm_model.io.PointSet``), their artefacts and the per-point aux inputs
-    (``AuxData``: temperature, gravity and contact torques) that the model's effects need."""
+    (``AuxData``: temperature, gravity and contact torques) that the model's effects need.
+
+    ``points`` may join several files (:func:`merge_points`: e.g. the artefact points and the tracker
+    points); ``points.ref`` is NaN on rows without reference coordinates and ``files`` names each
+    row's file (for messages, with ``points.lines``).
+    """
     points: PointSet
     artefacts: Artefacts
     aux: AuxData | None = None
+    files: np.ndarray | None = None
+
+    def file_of(self, i: int) -> str:
+        return str(self.files[i]) if self.files is not None else self.points.path
+
+    def where(self, i: int) -> str:
+        """``file line N`` of point ``i`` for messages."""
+        line = None if self.points.lines is None else int(self.points.lines[i])
+        return f"{self.file_of(i)}" + (f" line {line}" if line is not None else "")
 
     def __len__(self) -> int:
         return len(self.points)
@@ -66,7 +82,8 @@ class CalibrationData:
     def select(self, mask) -> "CalibrationData":
         """The rows where ``mask`` holds (bool array or indices), file order kept."""
         return CalibrationData(self.points.select(mask), self.artefacts,
-                               None if self.aux is None else self.aux.select(mask))
+                               None if self.aux is None else self.aux.select(mask),
+                               None if self.files is None else self.files[mask])
 
     def with_measurements(self, ids) -> "CalibrationData":
         """Only the measurements ``ids``."""
@@ -74,17 +91,64 @@ class CalibrationData:
         return self.select(np.array([m in ids for m in self.points.measurement], bool))
 
 
+def merge_points(*sets: PointSet) -> tuple[PointSet, np.ndarray]:
+    """Join point sets (file order kept, one after the other) into one; returns it and the file of
+    each row. Absent force/torque columns are zero, absent reference coordinates, temperature and
+    time are NaN; text and extra columns are kept where every set has them."""
+    sets = [s for s in sets if s is not None]
+    if len(sets) == 1:
+        return sets[0], np.full(len(sets[0]), sets[0].path, dtype=object)
+    jn = {s.n_joints for s in sets}
+    if len(jn) != 1:
+        raise InputError(f"the point files have different joint counts: "
+                         f"{', '.join(f'{s.path}: {s.n_joints}' for s in sets)}", sets[-1].path)
+
+    def stack(attr, width, fill):
+        if all(getattr(s, attr) is None for s in sets):
+            return None
+        parts = []
+        for s in sets:
+            v = getattr(s, attr)
+            parts.append(np.full((len(s),) + width, fill) if v is None else v)
+        return np.concatenate(parts)
+
+    kinds = {s.force_kind for s in sets if s.force_kind is not None}
+    common_extra = set.intersection(*(set(s.extra) for s in sets))
+    common_text = set.intersection(*(set(s.text) for s in sets))
+    merged = PointSet(
+        path=sets[0].path, measurement=np.concatenate([s.measurement for s in sets]),
+        feature=np.concatenate([s.feature for s in sets]), q=np.vstack([s.q for s in sets]),
+        force=stack("force", (3,), 0.0), torque=stack("torque", (3,), 0.0),
+        force_kind=None if not kinds else (kinds.pop() if len(kinds) == 1 else "mixed"),
+        temperature=stack("temperature", (), np.nan), time=stack("time", (), np.nan),
+        ref=stack("ref", (3,), np.nan),
+        lines=np.concatenate([s.lines if s.lines is not None else np.arange(1, len(s) + 1) for s in sets]),
+        extra={k: np.concatenate([s.extra[k] for s in sets]) for k in common_extra},
+        text={k: np.concatenate([s.text[k] for s in sets]) for k in common_text})
+    files = np.concatenate([np.full(len(s), s.path, dtype=object) for s in sets])
+    return merged, files
+
+
 def make_data(points: PointSet, artefacts: Artefacts, model: ArmModel | None = None,
-              aux: AuxData | None = None) -> CalibrationData:
+              aux: AuxData | None = None, reference: PointSet | None = None) -> CalibrationData:
     """Check the points against the artefacts and attach the aux inputs ``model.needs()``.
+
+    ``reference``: a second points file with reference coordinates (e.g. the tracker nests of
+    ``aacmm simulate``'s ``points-ref.csv``), joined after ``points``.
 
     Temperatures come from the points' ``temperature_C`` column; gravity and contact torques, when
     an effect needs them and ``aux`` does not give them, from ``PinocchioArm(model.desc).torques``
     at the measured angles and wrenches with the nominal description.
     """
     check_features(points, artefacts)
+    if reference is not None:
+        check_features(reference, artefacts)
+        if reference.ref is None:
+            raise InputError("the reference points file has no reference columns (x_ref_mm, y_ref_mm, z_ref_mm)",
+                             reference.path, 1)
+    points, files = merge_points(points, reference)
     if model is None:
-        return CalibrationData(points, artefacts, aux)
+        return CalibrationData(points, artefacts, aux, files)
     if points.n_joints != model.desc.n_joints:
         raise InputError(f"{points.n_joints} joint columns, but the arm has {model.desc.n_joints} joints",
                          points.path)
@@ -93,9 +157,10 @@ def make_data(points: PointSet, artefacts: Artefacts, model: ArmModel | None = N
     tau_g = None if aux is None else aux.tau_gravity
     tau_c = None if aux is None else aux.tau_contact
     if "temperature" in needs and temperature is None:
-        if points.temperature is None:
+        if points.temperature is None or not np.all(np.isfinite(points.temperature)):
+            bad = 0 if points.temperature is None else int(np.flatnonzero(~np.isfinite(points.temperature))[0])
             raise InputError("the model's effects need the arm temperature: add a 'temperature_C' column",
-                             points.path, None, "temperature_C")
+                             files[bad], None, "temperature_C")
         temperature = points.temperature
     if ({"tau_gravity", "tau_contact"} & needs) and (tau_g is None or tau_c is None):
         from arm_model import PinocchioArm
@@ -103,8 +168,8 @@ def make_data(points: PointSet, artefacts: Artefacts, model: ArmModel | None = N
         tau_g = g if tau_g is None else tau_g
         tau_c = c if tau_c is None else tau_c
     if temperature is None and tau_g is None and tau_c is None:
-        return CalibrationData(points, artefacts, None)
-    return CalibrationData(points, artefacts, AuxData(temperature, tau_g, tau_c))
+        return CalibrationData(points, artefacts, None, files)
+    return CalibrationData(points, artefacts, AuxData(temperature, tau_g, tau_c), files)
 
 
 def split_holdout(data: CalibrationData, holdout, seed: int = 0) -> tuple[CalibrationData, CalibrationData]:

@@ -97,23 +97,23 @@ class Problem:
 
     # -- structure --------------------------------------------------------------------------------
     def _build(self) -> None:
-        pts, arte = self.data.points, self.data.artefacts
+        pts, arte, data = self.data.points, self.data.artefacts, self.data
         ball = self.model.desc.probe.ball_diameter
         n = len(pts)
         lines = pts.lines if pts.lines is not None else np.arange(1, n + 1)
-        use_ref = pts.ref is not None and self.reference != "off"
+        has_ref = (np.all(np.isfinite(pts.ref), axis=1) if pts.ref is not None and self.reference != "off"
+                   else np.zeros(n, bool))
         instances: list[Instance] = []
         by_key: dict[tuple[str, str], int] = {}
-        ref_rows, unused = [], []
+        unused = []
         offset = 0
         for m in pts.measurements():
             rows_m = np.flatnonzero(pts.measurement == m)
-            feats = list(dict.fromkeys(pts.feature[rows_m].tolist()))
-            for f in feats:
+            for f in dict.fromkeys(pts.feature[rows_m].tolist()):
                 rows = rows_m[pts.feature[rows_m] == f]
                 kind = arte.features[f].kind if f else "point"
                 if kind == "point":
-                    (ref_rows if use_ref else unused).append(rows)
+                    unused.append(rows[~has_ref[rows]])
                     continue
                 feat = arte.features[f]
                 radius = None
@@ -128,16 +128,28 @@ class Problem:
                 need = MIN_POINTS[kind][1 if free_r else 0]
                 if len(rows) < need:
                     raise InputError(f"measurement '{m}', feature '{f}' ({kind}): {len(rows)} point(s), at least "
-                                     f"{need} needed", pts.path, int(lines[rows[0]]), "feature")
+                                     f"{need} needed", data.file_of(rows[0]), int(lines[rows[0]]), "feature")
                 nt = geo.n_theta(kind, free_r)
                 by_key[(m, f)] = len(instances)
                 instances.append(Instance(m, f, kind, rows, offset, nt, None if free_r else radius, free_r))
                 offset += nt
+        # reference rows: on a free point the ball centre, on a seat the seat's centre (a tracker nest)
+        ref_rows, anchor = [], []
+        for i in np.flatnonzero(has_ref):
+            f = pts.feature[i]
+            kind = arte.features[f].kind if f else "point"
+            if kind == "point":
+                ref_rows.append(i)
+                anchor.append(-1)
+            elif kind == "seat":
+                ref_rows.append(i)
+                anchor.append(by_key[(pts.measurement[i], f)])
+        self.ref_anchor = np.array(anchor, dtype=int)
         if ref_rows:
-            rows = np.sort(np.concatenate(ref_rows))
+            rows = np.array(ref_rows)
             if len(rows) < 3:
                 raise InputError(f"{len(rows)} reference point(s): a rigid transform needs at least 3",
-                                 pts.path, int(lines[rows[0]]), "x_ref_mm")
+                                 data.file_of(rows[0]), int(lines[rows[0]]), "x_ref_mm")
             nt = 6 if self.reference == "fit" else 0
             instances.append(Instance("*", "", "reference", rows, offset, nt, None))
             offset += nt
@@ -161,7 +173,7 @@ class Problem:
                                                   self.weights.length_sigma(dist.u_length)))
         self.distance_items = items
         # point rows, grouped by kind
-        self.groups = []          # (kind, free_radius, inst indices per point, point indices, row0)
+        self.groups = []
         row = 0
         used = []
         for kind in POINT_KINDS:
@@ -173,10 +185,15 @@ class Problem:
                 iidx = np.concatenate([np.full(len(instances[i].points), i) for i in insts])
                 local = np.concatenate([np.full(len(instances[i].points), k) for k, i in enumerate(insts)])
                 rows = geo.KINDS[kind].rows
-                self.groups.append(dict(kind=kind, free_radius=fr, inst=iidx, uinst=insts, local=local,
-                                        points=pidx, row0=row, rows=rows,
-                                        fn=geo.kind_function(kind, fr).map(len(pidx))))
-                used.append(pidx)
+                g = dict(kind=kind, free_radius=fr, inst=iidx, uinst=insts, local=local, points=pidx, row0=row,
+                         rows=rows, fn=geo.kind_function(kind, fr).map(len(pidx)))
+                if kind == "reference":
+                    g["anchor"] = self.ref_anchor
+                    g["on_point"] = self.ref_anchor < 0
+                    used.append(pidx[g["on_point"]])
+                else:
+                    used.append(pidx)
+                self.groups.append(g)
                 row += rows * len(pidx)
         self.n_point_rows = row
         self.n_rows = row + len(items)
@@ -202,12 +219,14 @@ class Problem:
         self._q = np.ascontiguousarray(pts.q[self.used].T)
         self._w = np.ascontiguousarray(self.data.wrench[self.used].T)
         self._aux = np.ascontiguousarray(ArmModel.aux_matrix(self.data.aux, n, jn)[self.used].T)
-        self._xref = (np.ascontiguousarray(pts.ref[self.used].T) if pts.ref is not None
-                      else np.zeros((3, nu)))
+        self._xref_all = pts.ref if pts.ref is not None else None
         sig = np.empty(self.n_rows)
         for g in self.groups:
-            s = self.weights.reference_sigma if g["kind"] == "reference" else self.weights.probe
-            sig[g["row0"]: g["row0"] + g["rows"] * len(g["points"])] = s
+            sl = slice(g["row0"], g["row0"] + g["rows"] * len(g["points"]))
+            if g["kind"] == "reference":
+                sig[sl] = np.repeat(np.where(g["on_point"], self.weights.reference_sigma, self.weights.reference), 3)
+            else:
+                sig[sl] = self.weights.probe
         sig[self.n_point_rows:] = [d.sigma for d in items]
         self.sigma = sig
         # row metadata
@@ -224,6 +243,8 @@ class Problem:
     def centres(self, p, jac: bool = False):
         """Ball centres (n_used, 3) [m] of the used points and, with ``jac``, d x / d p (n_used, 3, P)."""
         p = np.asarray(p, dtype=float)
+        if len(self.used) == 0:
+            return np.zeros((0, 3)), (np.zeros((0, 3, len(p))) if jac else None)
         if not jac:
             return np.asarray(self._fx(self._q, self._w, self._aux, p)).T, None
         x, dx = self._fxj(self._q, self._w, self._aux, p)
@@ -231,18 +252,36 @@ class Problem:
         dx = np.asarray(dx).reshape(3, len(self.used), len(p)).transpose(1, 0, 2)
         return x, dx
 
+    def _group_inputs(self, g, x, states):
+        """(x_in (3, n), states (k, n), xref (3, n)) of a group: reference rows anchored on a seat take
+        the seat's centre instead of the ball centre."""
+        kst = np.stack([states[i] for i in g["uinst"]])[g["local"]].T
+        if g["kind"] != "reference":
+            return x[g["pos"]].T, kst, np.zeros((3, len(g["points"])))
+        xin = np.empty((3, len(g["points"])))
+        on = g["on_point"]
+        xin[:, on] = x[g["pos"][on]].T
+        if (~on).any():
+            xin[:, ~on] = np.array([states[a][:3] for a in g["anchor"][~on]]).T
+        return xin, kst, self._xref_all[g["points"]].T
+
     def initial_states(self, p) -> list[np.ndarray]:
         """Starting nuisance states from the ball centres at ``p`` (algebraic fits)."""
         x, _ = self.centres(p)
-        pts = self.data.points
         states = []
         for it in self.instances:
-            xi = x[self._pos[it.points]]
-            xr = None if pts.ref is None else pts.ref[it.points]
-            if it.kind == "reference" and it.n_theta == 0:
-                states.append(np.concatenate([np.eye(3).reshape(-1, order="F"), np.zeros(3)]))
+            if it.kind == "reference":
+                if it.n_theta == 0:
+                    states.append(np.concatenate([np.eye(3).reshape(-1, order="F"), np.zeros(3)]))
+                    continue
+                pos = self._pos[it.points]
+                xi = np.where((pos >= 0)[:, None], x[np.maximum(pos, 0)], 0.0)
+                for k, a in enumerate(self.ref_anchor):
+                    if a >= 0:
+                        xi[k] = states[a][:3]
+                states.append(geo.initial_state("reference", xi, None, self._xref_all[it.points]))
                 continue
-            states.append(geo.initial_state(it.kind, xi, it.radius, xr))
+            states.append(geo.initial_state(it.kind, x[self._pos[it.points]], it.radius))
         return states
 
     def retract(self, states: list[np.ndarray], dtheta: np.ndarray) -> list[np.ndarray]:
@@ -259,27 +298,39 @@ class Problem:
         if jac:
             jp = np.zeros((self.n_rows, nf))
             ti, tj, tv = [], [], []
+
+        def add(rows_idx, cols_idx, vals):
+            ti.append(rows_idx.reshape(-1))
+            tj.append(cols_idx.reshape(-1))
+            tv.append(vals.reshape(-1))
+
         for g in self.groups:
             kind, rows, npt = g["kind"], g["rows"], len(g["points"])
-            insts = g["inst"]
-            kst = np.stack([states[i] for i in g["uinst"]])[g["local"]].T
             nt = geo.n_theta(kind, g["free_radius"])
-            res, drdx, drdt = g["fn"](x[g["pos"]].T, np.zeros((nt, npt)), kst, self._xref[:, g["pos"]])
+            xin, kst, xref = self._group_inputs(g, x, states)
+            res, drdx, drdt = g["fn"](xin, np.zeros((nt, npt)), kst, xref)
             sl = slice(g["row0"], g["row0"] + rows * npt)
             r[sl] = np.asarray(res).T.reshape(-1)
-            if jac:
-                drdx = np.asarray(drdx).reshape(rows, npt, 3).transpose(1, 0, 2)        # (npt, rows, 3)
-                if nf:
-                    jp[sl] = np.einsum("nrk,nkp->nrp", drdx, dx[g["pos"]][:, :, self.free]).reshape(-1, nf)
-                drdt = np.asarray(drdt).reshape(rows, npt, nt).transpose(1, 0, 2)         # (npt, rows, nt)
-                off = np.array([self.instances[i].offset for i in insts])
-                active = np.array([self.instances[i].n_theta > 0 for i in insts])
-                if active.any():
-                    rr = (g["row0"] + np.arange(npt * rows).reshape(npt, rows))[active]
-                    cc = off[active][:, None] + np.arange(nt)[None, :]
-                    ti.append(np.repeat(rr.reshape(-1), nt))
-                    tj.append(np.broadcast_to(cc[:, None, :], (active.sum(), rows, nt)).reshape(-1))
-                    tv.append(drdt[active].reshape(-1))
+            if not jac:
+                continue
+            drdx = np.asarray(drdx).reshape(rows, npt, 3).transpose(1, 0, 2)        # (npt, rows, 3)
+            rr = g["row0"] + np.arange(npt * rows).reshape(npt, rows)
+            on = g.get("on_point", np.ones(npt, bool))
+            if nf and on.any():
+                blk = np.einsum("nrk,nkp->nrp", drdx[on], dx[g["pos"][on]][:, :, self.free])
+                jp[rr[on].reshape(-1)] = blk.reshape(-1, nf)
+            if (~on).any():            # reference rows on a seat: d r / d (seat centre)
+                off = np.array([self.instances[a].offset for a in g["anchor"][~on]])
+                cols = off[:, None, None] + np.arange(3)[None, None, :]
+                add(np.broadcast_to(rr[~on][:, :, None], (len(off), rows, 3)),
+                    np.broadcast_to(cols, (len(off), rows, 3)), drdx[~on])
+            drdt = np.asarray(drdt).reshape(rows, npt, nt).transpose(1, 0, 2)         # (npt, rows, nt)
+            off = np.array([self.instances[i].offset for i in g["inst"]])
+            active = np.array([self.instances[i].n_theta > 0 for i in g["inst"]])
+            if active.any():
+                cols = off[active][:, None, None] + np.arange(nt)[None, None, :]
+                add(np.broadcast_to(rr[active][:, :, None], (int(active.sum()), rows, nt)),
+                    np.broadcast_to(cols, (int(active.sum()), rows, nt)), drdt[active])
         if self.distance_items:
             items = self.distance_items
             ca_ = np.array([states[d.a][:3] for d in items]).T
@@ -287,14 +338,11 @@ class Problem:
             res, da, db = self._dist_fn(ca_, cb_, np.array([d.length for d in items]))
             r[self.n_point_rows:] = np.asarray(res).reshape(-1)
             if jac:
-                da = np.asarray(da).reshape(len(items), 3)
-                db = np.asarray(db).reshape(len(items), 3)
                 rows = self.n_point_rows + np.arange(len(items))
-                for i_attr, d in (("a", da), ("b", db)):
-                    offs = np.array([self.instances[getattr(it, i_attr)].offset for it in items])
-                    ti.append(np.repeat(rows, 3))
-                    tj.append((offs[:, None] + np.arange(3)[None, :]).reshape(-1))
-                    tv.append(d.reshape(-1))
+                for attr, d in (("a", da), ("b", db)):
+                    d = np.asarray(d).reshape(len(items), 3)
+                    offs = np.array([self.instances[getattr(it, attr)].offset for it in items])
+                    add(np.repeat(rows, 3), offs[:, None] + np.arange(3)[None, :], d)
         r /= self.sigma
         if not jac:
             return Evaluation(r, x)
@@ -329,8 +377,8 @@ class Problem:
         for g in self.groups:
             kind, rows, npt = g["kind"], g["rows"], len(g["points"])
             nt = geo.n_theta(kind, g["free_radius"])
-            kst = np.stack([states[i] for i in g["uinst"]])[g["local"]].T
-            res, drdx, _ = g["fn"](x[g["pos"]].T, np.zeros((nt, npt)), kst, self._xref[:, g["pos"]])
+            xin, kst, xref = self._group_inputs(g, x, states)
+            res, drdx, _ = g["fn"](xin, np.zeros((nt, npt)), kst, xref)
             res = np.asarray(res).T                                                   # (npt, rows)
             if rows == 1:
                 grad = np.asarray(drdx).reshape(1, npt, 3)[0]

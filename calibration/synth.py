@@ -12,7 +12,7 @@ seen through a random rigid transform ``T_ref_base``.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -78,26 +78,18 @@ class SynthCampaign:
     artefacts: Artefacts
     truth: dict                      # true parameter errors by name (SI)
     p_true: np.ndarray
-    true_centres: np.ndarray         # (N, 3) [m] before the probing noise
+    true_centres: np.ndarray         # (N, 3) [m] artefact points before the probing noise
+    reference_points: PointSet | None = None     # tracker points (feature "", with ref)
+    reference_true: np.ndarray | None = None     # their true ball centres [m]
     T_ref_base: np.ndarray | None = None
-    extra: dict = field(default_factory=dict)
 
-    def write(self, out_dir, stem: str = "synthetic") -> tuple[Path, Path]:
-        """Write ``<stem>-points.csv`` and ``<stem>-artefacts.toml`` (DATA-FORMATS §3, §4)."""
+    def write(self, out_dir) -> dict:
+        """Write ``points.csv``, ``points-ref.csv`` (with reference points) and ``artefacts.toml``
+        (DATA-FORMATS §3, §4); returns ``{role: Path}``."""
         out = Path(out_dir)
-        pts = self.points
-        cols = {"measurement": pts.measurement, "feature": pts.feature}
-        for j in range(pts.n_joints):
-            cols[f"q{j + 1}_deg"] = np.degrees(pts.q[:, j])
-        if pts.force is not None:
-            for k, a in enumerate("xyz"):
-                cols[f"f{a}_N"] = pts.force[:, k]
-        if pts.temperature is not None:
-            cols["temperature_C"] = pts.temperature
-        if pts.ref is not None:
-            for k, a in enumerate("xyz"):
-                cols[f"{a}_ref_mm"] = pts.ref[:, k] * 1e3
-        p_csv = write_csv(out / f"{stem}-points.csv", cols, fmt="%.12g")
+        files = {"points": _write_points(out / "points.csv", self.points)}
+        if self.reference_points is not None:
+            files["reference"] = _write_points(out / "points-ref.csv", self.reference_points)
         lines = []
         for f in self.artefacts.features.values():
             lines += ["[[feature]]", f'id = "{f.id}"', f'kind = "{f.kind}"']
@@ -110,8 +102,23 @@ class SynthCampaign:
             if d.u_length is not None:
                 lines.append(f"u_length_mm = {d.u_length * 1e3!r}")
             lines.append("")
-        a_toml = atomic_write_text(out / f"{stem}-artefacts.toml", "\n".join(lines))
-        return p_csv, a_toml
+        files["artefacts"] = atomic_write_text(out / "artefacts.toml", "\n".join(lines))
+        return files
+
+
+def _write_points(path, pts: PointSet) -> Path:
+    cols = {"measurement": pts.measurement, "feature": pts.feature}
+    for j in range(pts.n_joints):
+        cols[f"q{j + 1}_deg"] = np.degrees(pts.q[:, j])
+    if pts.force is not None:
+        for k, a in enumerate("xyz"):
+            cols[f"f{a}_N"] = pts.force[:, k]
+    if pts.temperature is not None:
+        cols["temperature_C"] = pts.temperature
+    if pts.ref is not None:
+        for k, a in enumerate("xyz"):
+            cols[f"{a}_ref_mm"] = pts.ref[:, k] * 1e3
+    return write_csv(path, cols, fmt="%.15g")
 
 
 def random_truth(model: ArmModel, rng, length: float = 50e-6, angle: float = 1e-4,
@@ -322,39 +329,29 @@ def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0,
         force_base = normals * mag[:, None]
     q_art, w_art = (solve_ik(model, p_true, targets + noise, rng, force_base) if n_art
                     else (np.zeros((0, desc.n_joints)), np.zeros((0, 6))))
-    true_c = targets.copy()
-    ref = None
-    t_ref = None
+    n = len(meas)
+    needs_t = "temperature" in model.needs()
+    points = PointSet(path="<synthetic points>", measurement=np.array(meas, dtype=object),
+                      feature=np.array(feat, dtype=object), q=q_art,
+                      force=w_art[:, :3].copy() if spec.force > 0 else None,
+                      force_kind="xyz" if spec.force > 0 else None,
+                      temperature=np.full(n, 20.0) if needs_t else None, lines=np.arange(2, n + 2))
+    reference_points, t_ref, x_true = None, None, None
     if spec.reference_points:
         nr = spec.reference_points
         q_ref = random_q(desc, nr, rng)
-        w_ref = np.zeros((nr, 6))
-        x_true = model.ball_centres(q_ref, w_ref, p_true, AuxData(temperature=np.full(nr, 20.0))
-                                    if "temperature" in model.needs() else None)
+        x_true = model.ball_centres(q_ref, None, p_true, AuxData(temperature=np.full(nr, 20.0)) if needs_t else None)
         if T_ref_base is None:
             T_ref_base = np.eye(4)
             T_ref_base[:3, :3] = rotation_xyz(rng.uniform(-np.pi, np.pi, 3))
             T_ref_base[:3, 3] = rng.uniform(-2, 2, 3)
         t_ref = np.asarray(T_ref_base, float)
-        noise_r = rng.normal(0, spec.noise, (nr, 3))
-        x_ref = (x_true + noise_r) @ t_ref[:3, :3].T + t_ref[:3, 3] + rng.normal(0, spec.reference_noise, (nr, 3))
-        meas += ["tracker"] * nr
-        feat += [""] * nr
-        q_all = np.vstack([q_art, q_ref])
-        w_all = np.vstack([w_art, w_ref])
-        true_c = np.vstack([true_c, x_true])
-        ref = np.vstack([np.full((n_art, 3), 0.0) if n_art else np.zeros((0, 3)), x_ref])
-        if n_art:
-            # reference columns exist for every row; artefact rows carry the tracker view too
-            ref[:n_art] = (targets + noise) @ t_ref[:3, :3].T + t_ref[:3, 3] + rng.normal(0, spec.reference_noise, (n_art, 3))
-    else:
-        q_all, w_all = q_art, w_art
-    n = len(meas)
-    points = PointSet(path="<synthetic>", measurement=np.array(meas, dtype=object), feature=np.array(feat, dtype=object),
-                      q=q_all, force=w_all[:, :3].copy() if spec.force > 0 else None,
-                      force_kind="xyz" if spec.force > 0 else None,
-                      temperature=np.full(n, 20.0) if "temperature" in model.needs() else None,
-                      ref=ref, lines=np.arange(2, n + 2))
-    artefacts = Artefacts("<synthetic>", features, tuple(distances))
+        seen = x_true + rng.normal(0, spec.noise, (nr, 3))
+        x_ref = seen @ t_ref[:3, :3].T + t_ref[:3, 3] + rng.normal(0, spec.reference_noise, (nr, 3))
+        reference_points = PointSet(path="<synthetic reference>", measurement=np.array(["tracker"] * nr, dtype=object),
+                                    feature=np.array([""] * nr, dtype=object), q=q_ref,
+                                    temperature=np.full(nr, 20.0) if needs_t else None, ref=x_ref,
+                                    lines=np.arange(2, nr + 2))
+    artefacts = Artefacts("<synthetic artefacts>", features, tuple(distances))
     truth = {name: float(v) for name, v in zip(model.spec.names, p_true)}
-    return SynthCampaign(points, artefacts, truth, p_true, true_c, t_ref)
+    return SynthCampaign(points, artefacts, truth, p_true, targets, reference_points, x_true, t_ref)

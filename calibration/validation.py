@@ -9,7 +9,8 @@ is used to place a centre) and the standard figures are computed:
 * length test (ball bar, length bar, seat pairs): measured minus certified centre distance, the
   centres fitted with the certified sphere diameter (seats: the mean centre);
 * effective diameter test (spheres; rings and cylinders likewise): fitted diameter minus certified,
-  with the radius free (instances with at least 5 sphere / 6 ring points);
+  with the radius free (instances with at least :data:`DIAMETER_MIN_POINTS` points: a ball-bar
+  sphere probed 6 times gives a centre, not a diameter);
 * planes: flatness (max - min of the signed distances); reference points: the errors after the
   best-fit rigid transform ``T_ref_base`` (RMS and max).
 
@@ -27,7 +28,10 @@ from .data import CalibrationData, Weights
 from .problem import MIN_POINTS, Problem
 from .solver import levenberg_marquardt
 
-__all__ = ["Validation", "validate", "before_after", "FIGURES"]
+__all__ = ["Validation", "validate", "before_after", "FIGURES", "DIAMETER_MIN_POINTS"]
+
+#: fewest points on a sphere, ring or cylinder for a diameter figure
+DIAMETER_MIN_POINTS = 9
 
 #: summary figures: key -> (label, unit shown, factor from SI)
 FIGURES = {
@@ -141,7 +145,7 @@ def validate(model: ArmModel, p, data: CalibrationData, weights: Weights | None 
                                     "measured": measured, "error": measured - dist.length})
     # diameters with the radius free
     keep = [it for it in prob.instances if it.kind in ("sphere", "ring", "cylinder")
-            and len(it.points) >= MIN_POINTS[it.kind][1]]
+            and len(it.points) >= max(MIN_POINTS[it.kind][1], DIAMETER_MIN_POINTS)]
     if keep:
         rows = np.sort(np.concatenate([it.points for it in keep]))
         sub = data.select(rows)

@@ -1,0 +1,268 @@
+"""``aacmm calibrate`` and ``aacmm study`` (``montecarlo``, ``poses``)."""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from arm_model import InputError
+from arm_model.io import atomic_write_text, guard_output, read_artefacts, read_points
+
+__all__ = ["register", "run_calibrate", "run_montecarlo", "run_poses"]
+
+
+def _load_arm(path: Path, tip_frame: str | None):
+    from arm_model.urdf_import import load_arm
+    return load_arm(path, tip_frame)
+
+
+def _effects(keys):
+    from arm_model.effects import EFFECTS
+    out = []
+    for k in keys or ():
+        if k not in EFFECTS:
+            raise InputError(f"unknown effect '{k}' (known: {', '.join(EFFECTS)})")
+        out.append(EFFECTS[k]())
+    return tuple(out)
+
+
+def _holdout(text: str | None):
+    if text is None:
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        return [t.strip() for t in text.split(",") if t.strip()]
+    if not 0.0 < v < 1.0:
+        raise InputError(f"--holdout fraction must be in (0, 1), got {text}")
+    return v
+
+
+def _positive(text: str) -> float:
+    v = float(text)
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return v
+
+
+def _common_fit_options(p) -> None:
+    p.add_argument("--free", action="append", metavar="PATTERN",
+                   help="parameters to identify, by name or glob (repeatable), e.g. 'j*.d', 'probe.*', "
+                        "'j3.theta_offset'. Default: every joint-row error, probe.x/y/z and the parameters of "
+                        "the --effect options (probe compliances only when named)")
+    p.add_argument("--hold", action="append", metavar="PATTERN",
+                   help="parameters to hold at the nominal value (removed from the free set; repeatable)")
+    p.add_argument("--effect", action="append", metavar="KEY",
+                   help="add an effect of arm_model.effects to the model (repeatable): eccentricity, "
+                        "joint_compliance, thermal, force_sensor, probe_compliance")
+    p.add_argument("--sigma-probe-um", type=_positive, default=10.0,
+                   help="standard uncertainty of a probed ball centre per axis [um] (default 10)")
+    p.add_argument("--sigma-ref-um", type=_positive, default=10.0,
+                   help="standard uncertainty of a reference-instrument coordinate per axis [um] (default 10)")
+    p.add_argument("--sigma-length-um", type=_positive, default=None,
+                   help="standard uncertainty of a certified length without u_length_mm [um] "
+                        "(default: --sigma-probe-um)")
+    p.add_argument("--rank-tol", type=_positive, default=None,
+                   help="relative singular value below which a parameter combination counts as not "
+                        "identifiable (default 1e-4)")
+
+
+def register(sub) -> None:
+    c = sub.add_parser(
+        "calibrate", help="identify the arm's kinematic parameters from artefact measurements",
+        description="Kinematic calibration in CasADi: the arm's parameter errors (DH or URDF joint origins, probe "
+                    "offset, compliances, effects) from points on ball bars, seats, spheres, rings, cylinders, "
+                    "planes and reference (tracker) points, with the artefacts' unknowns (centres, axes, "
+                    "T_ref_base) solved jointly. Reports which parameter combinations the data cannot identify "
+                    "(held fixed and listed, or the fit stops), uncertainties and correlations, outliers "
+                    "(kept unless --drop-outliers), and validation figures (ASME B89.4.22 / ISO 10360-12 terms) "
+                    "nominal vs calibrated on the training data and on held-out measurements. Writes a NEW "
+                    "calibrated description (TOML and URDF), summary.json, CSV tables and report.html.",
+        epilog="Parameter names: docs/calibration.md. Example: aacmm calibrate points.csv artefacts.toml "
+               "--arm urdf/aacmm7.dh.toml --reference-points points-ref.csv --holdout 0.2 -o out/cal")
+    c.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
+    c.add_argument("artefacts", type=Path, help="artefacts TOML (DATA-FORMATS §4)")
+    c.add_argument("--arm", type=Path, required=True, help="nominal arm: description TOML or URDF (with --tip-frame)")
+    c.add_argument("--tip-frame", default=None, help="for a URDF arm: the link at the ball centre")
+    c.add_argument("--reference-points", type=Path, default=None,
+                   help="a second points CSV with reference coordinates (x_ref_mm ...), e.g. tracker nests")
+    c.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; never an input)")
+    _common_fit_options(c)
+    c.add_argument("--holdout", default=None,
+                   help="measurements kept out of the fit for validation: a fraction (0.2) drawn at random per "
+                        "artefact kind, or a comma-separated list of measurement ids")
+    c.add_argument("--seed", type=int, default=0, help="seed of the random --holdout draw (default 0)")
+    c.add_argument("--reference", choices=("fit", "identity", "off"), default="fit",
+                   help="reference coordinates: fit T_ref_base (default), take them as base coordinates "
+                        "(identity: the base pose becomes identifiable) or ignore them")
+    c.add_argument("--on-unidentifiable", choices=("fix", "stop"), default="fix",
+                   help="hold unidentifiable parameters fixed and list them (default), or stop with the list")
+    c.add_argument("--outlier-threshold", type=_positive, default=4.0,
+                   help="standardized residual beyond which a point is reported as an outlier (default 4)")
+    c.add_argument("--drop-outliers", action="store_true",
+                   help="drop the outlier points and refit once (they are listed); default: report and keep")
+    c.add_argument("--covariance", choices=("residual", "stated"), default="residual",
+                   help="scale the covariance by the residual variance factor s0^2 (default) or trust the stated "
+                        "uncertainties (s0 = 1)")
+    c.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    c.set_defaults(func=run_calibrate)
+
+    s = sub.add_parser(
+        "study", help="plan a calibration campaign: Monte Carlo runs, pose-set choice",
+        description="Calibration studies before measuring. 'montecarlo': simulate a campaign many times (new noise "
+                    "and poses each run), calibrate on the training measurements, validate on held-out ones; "
+                    "reports parameter errors against the truth next to the reported uncertainties and the "
+                    "predicted accuracy after calibration. 'poses': choose the measurements that identify the "
+                    "parameters best by the observability index O1 (Borm and Menq 1991).")
+    ss = s.add_subparsers(dest="study", metavar="STUDY", required=True)
+    m = ss.add_parser("montecarlo", help="Monte Carlo over noise and pose sets with the simulator",
+                      description="Run a simulator campaign (examples/campaigns/*.toml) --runs times with seeds "
+                                  "--seed, --seed+1, ...; each run is calibrated and validated on held-out "
+                                  "measurements. Local processes by default; --scheduler sends the runs to a Dask "
+                                  "cluster. Writes study.json and prints a table.")
+    m.add_argument("campaign", type=Path, help="campaign TOML of the simulator")
+    m.add_argument("--runs", type=int, default=20, help="number of runs (default 20)")
+    m.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+    m.add_argument("--holdout", type=float, default=0.25, help="held-out fraction of measurements (default 0.25)")
+    m.add_argument("--workers", type=int, default=None, help="local processes (default: CPU count)")
+    m.add_argument("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://10.0.0.5:8786")
+    m.add_argument("-o", "--output", type=Path, required=True, help="output folder")
+    m.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    _common_fit_options(m)
+    m.set_defaults(func=run_montecarlo)
+    q = ss.add_parser("poses", help="choose measurements by the observability index O1",
+                      description="Greedy choice of --count measurements of a points file (a candidate pool, "
+                                  "measured or simulated) maximising O1 = (prod s_i)^(1/m)/sqrt(n) of the "
+                                  "identification Jacobian; compared with random choices of the same size.")
+    q.add_argument("points", type=Path, help="candidate points CSV")
+    q.add_argument("artefacts", type=Path, help="artefacts TOML")
+    q.add_argument("--arm", type=Path, required=True, help="nominal arm (TOML, or URDF with --tip-frame)")
+    q.add_argument("--tip-frame", default=None, help="for a URDF arm: the link at the ball centre")
+    q.add_argument("--reference-points", type=Path, default=None, help="reference points CSV")
+    q.add_argument("--count", type=int, required=True, help="how many measurements to choose")
+    q.add_argument("-o", "--output", type=Path, required=True, help="output folder")
+    q.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    _common_fit_options(q)
+    q.set_defaults(func=run_poses)
+
+
+def _weights(args):
+    from .data import Weights
+    return Weights(probe=args.sigma_probe_um * 1e-6, reference=args.sigma_ref_um * 1e-6,
+                   length=None if args.sigma_length_um is None else args.sigma_length_um * 1e-6)
+
+
+def _free(model, args):
+    from .calibrate import default_free, resolve_parameters
+    free = resolve_parameters(model.spec, args.free or default_free(model))
+    if args.hold:
+        held = set(resolve_parameters(model.spec, args.hold))
+        free = [i for i in free if i not in held]
+    return [model.spec.names[i] for i in free]
+
+
+def _load_data(args):
+    from arm_model.model import ArmModel
+    from .data import make_data
+    desc = _load_arm(args.arm, args.tip_frame)
+    model = ArmModel(desc, _effects(args.effect))
+    points = read_points(args.points, desc.n_joints)
+    artefacts = read_artefacts(args.artefacts)
+    reference = None if args.reference_points is None else read_points(args.reference_points, desc.n_joints)
+    return model, make_data(points, artefacts, model, reference=reference)
+
+
+def run_calibrate(args: argparse.Namespace) -> int:
+    from .calibrate import calibrate
+    from .data import split_holdout
+    from .report import poorly_determined, write_outputs
+    inputs = [args.points, args.artefacts, args.arm, args.reference_points]
+    guard_output(args.output, inputs)
+    model, data = _load_data(args)
+    holdout = _holdout(args.holdout)
+    train, test = (data, None) if holdout is None else split_holdout(data, holdout, args.seed)
+    kw = {} if args.rank_tol is None else {"rank_tol": args.rank_tol}
+    res = calibrate(model, train, _free(model, args), weights=_weights(args), on_unidentifiable=args.on_unidentifiable,
+                    outlier_threshold=args.outlier_threshold, drop_outliers=args.drop_outliers,
+                    covariance=args.covariance, reference=args.reference, **kw)
+    val_train = res.compare(res.data)
+    val_test = res.compare(test) if test is not None else None
+    files = write_outputs(res, args.output, inputs=inputs, validation_training=val_train,
+                          validation_holdout=val_test, plots=not args.no_plots,
+                          extra={"inputs": {"points": str(args.points), "artefacts": str(args.artefacts),
+                                            "arm": str(args.arm),
+                                            "reference_points": None if args.reference_points is None
+                                            else str(args.reference_points)},
+                                 "holdout": None if test is None else test.measurements()})
+    print(f"{len(train)} training points in {len(train.measurements())} measurements"
+          + (f", {len(test)} held-out points in {len(test.measurements())}" if test is not None else ""))
+    if data.points.force_kind == "two-channel":
+        print("two-channel force sensor: the probe-y force is not measured and is taken as zero")
+    print(f"solver: {res.status} after {res.iterations} iterations; s0 = {res.s0:.3f}; "
+          f"{len(res.free)} parameters free, {res.n_nuisance} nuisance unknowns, dof {res.dof}")
+    idf = res.identifiability_final
+    print(f"identifiability: rank {idf.rank}/{len(idf.names)} at the solution, condition number {idf.condition:.3g}")
+    for f in res.fixed:
+        print(f"  fixed {f.name}: {f.reason}")
+    for text in poorly_determined(res):
+        print(f"  poorly determined: {text}")
+    if res.outliers:
+        print(f"{len(res.outliers)} outlier(s) ({'dropped and refitted' if res.dropped else 'kept'}):")
+        for o in res.outliers[:10]:
+            print(f"  {o.measurement} {o.feature} line {o.line}: standardized {o.standardized:+.1f}")
+    for title, rows in (("training", val_train), ("held-out", val_test)):
+        if rows:
+            print(f"validation on {title} data (nominal -> calibrated):")
+            for r in rows:
+                print(f"  {r['label']}: {r['before']:.2f} -> {r['after']:.2f} {r['unit']} ({r['ratio']:.1f}x)")
+    print(f"calibrated description -> {files['description']}; report -> {files['report']}")
+    return 0
+
+
+def run_montecarlo(args: argparse.Namespace) -> int:
+    from .data import Weights
+    from .study import RunSettings, SimSource, monte_carlo
+    guard_output(args.output / "study.json", [args.campaign])
+    if args.runs < 1:
+        raise InputError("--runs must be at least 1")
+    from arm_model.sim import load_campaign
+    camp = load_campaign(args.campaign)            # checks the file before any run starts
+    from arm_model.model import ArmModel
+    model = ArmModel(camp.arm, _effects(args.effect))
+    settings = RunSettings(free=tuple(_free(model, args)), weights=_weights(args), holdout=args.holdout,
+                           rank_tol=args.rank_tol, effects=_effects(args.effect))
+    mc = monte_carlo(SimSource(str(args.campaign)), args.runs, seed=args.seed, settings=settings,
+                     scheduler=args.scheduler, workers=args.workers, progress=not args.quiet)
+    atomic_write_text(args.output / "study.json", json.dumps(mc.to_dict(), indent=1, default=float) + "\n",
+                      [args.campaign])
+    print(f"{args.runs - len(mc.failures)} of {args.runs} runs succeeded")
+    for f in mc.failures[:5]:
+        print(f"  seed {f['seed']}: {f['error']}")
+    print("predicted accuracy on held-out data (median / 95th percentile):")
+    for a in mc.accuracy.values():
+        print(f"  {a['label']}: nominal {a['before_median']:.2f}/{a['before_p95']:.2f} -> calibrated "
+              f"{a['after_median']:.2f}/{a['after_p95']:.2f} {a['unit']}")
+    from .calibrate import display_unit
+    print("parameters: RMS error vs truth, mean reported u, within 3u:")
+    for n, v in mc.parameters.items():
+        du, fac = display_unit(model.spec.units[model.spec.index(n)])
+        print(f"  {n:22s} {v['rms_error'] * fac:10.4g} {v['mean_u'] * fac:10.4g} {du:5s} {100 * v['within_3u']:5.0f} %")
+    print(f"-> {args.output / 'study.json'}")
+    return 0 if not mc.failures else 1
+
+
+def run_poses(args: argparse.Namespace) -> int:
+    from .study import select_measurements
+    inputs = [args.points, args.artefacts, args.arm, args.reference_points]
+    guard_output(args.output / "poses.json", inputs)
+    model, data = _load_data(args)
+    sel = select_measurements(model, data, args.count, _free(model, args), weights=_weights(args),
+                              progress=not args.quiet)
+    atomic_write_text(args.output / "poses.json", json.dumps(sel.to_dict(), indent=1) + "\n", inputs)
+    print(f"{len(sel.parameters)} identifiable parameters; chosen measurements (O1, random sets' O1):")
+    for m, o, r, n in zip(sel.chosen, sel.o1, sel.o1_random, sel.n_points):
+        print(f"  {m:20s} O1 {o:10.4g}   random {r:10.4g}   ({n} points)")
+    print(f"-> {args.output / 'poses.json'}")
+    return 0

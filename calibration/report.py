@@ -1,0 +1,261 @@
+"""Outputs of a calibration: the calibrated description (TOML and URDF, new files, never over the
+nominal), ``summary.json``, CSV tables and an HTML report with plots. Every file is written
+atomically and refused if it would overwrite an input."""
+from __future__ import annotations
+
+import html
+import io
+import json
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from arm_model import InputError
+from arm_model.description import format_description
+from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, write_csv
+from arm_model.urdf import urdf_text
+
+from .calibrate import CalibrationResult, display_unit
+
+__all__ = ["write_outputs", "plot_residuals", "plot_parameters", "plot_correlation"]
+
+
+def _json_default(o):
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (np.floating, np.integer, np.bool_)):
+        return o.item()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def _finite(o):
+    """Replace inf/nan by None (JSON has no such numbers)."""
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
+    if isinstance(o, dict):
+        return {k: _finite(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_finite(v) for v in o]
+    return o
+
+
+def _png(fig) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+    import matplotlib.pyplot as plt
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def _figure(w, h):
+    import matplotlib
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+    return plt.subplots(figsize=(w, h))
+
+
+def plot_residuals(result: CalibrationResult) -> bytes:
+    """PNG: residuals [um] of every point, grouped by artefact instance, coloured by kind; certified
+    distances as their own group."""
+    t = result.residuals
+    fig, ax = _figure(max(6.0, 0.12 * len(result.instances) + 4), 4.0)
+    colours = {"seat": "C0", "sphere": "C1", "ring": "C2", "cylinder": "C2", "plane": "C3", "reference": "C4"}
+    labels = []
+    for i, inst in enumerate(result.instances):
+        v = t["value"][t["instance"] == i] * 1e6
+        ax.plot(np.full(len(v), i), v, ".", color=colours.get(inst["kind"], "k"), ms=3)
+        labels.append(f"{inst['measurement']}:{inst['feature'] or 'ref'}")
+    if len(t["distance"]):
+        x0 = len(result.instances)
+        ax.plot(np.arange(x0, x0 + len(t["distance"])), t["distance"] * 1e6, "s", color="C5", ms=4)
+        labels += [f"{d['measurement']}:length" for d in result.distances]
+    for kind, c in colours.items():
+        if any(inst["kind"] == kind for inst in result.instances):
+            ax.plot([], [], ".", color=c, label=kind)
+    if len(t["distance"]):
+        ax.plot([], [], "s", color="C5", label="distance")
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set_ylabel("residual [um]")
+    ax.set_title("residuals per artefact instance (seats and reference: norm)")
+    if len(labels) <= 60:
+        ax.set_xticks(range(len(labels)))
+        ax.set_xticklabels(labels, rotation=90, fontsize=6)
+    else:
+        ax.set_xlabel("artefact instance")
+    ax.legend(fontsize=7, loc="best")
+    return _png(fig)
+
+
+def plot_parameters(result: CalibrationResult) -> bytes:
+    """PNG: free parameter estimates with 2u error bars, one panel per display unit."""
+    rows = [r for r in result.parameter_rows() if r["state"] == "free"]
+    units = list(dict.fromkeys(r["display_unit"] for r in rows)) or ["-"]
+    import matplotlib
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(len(units), 1, figsize=(max(6.0, 0.25 * len(rows) + 3), 2.6 * len(units)),
+                             squeeze=False)
+    for ax, unit in zip(axes[:, 0], units):
+        rr = [r for r in rows if r["display_unit"] == unit]
+        x = np.arange(len(rr))
+        ax.errorbar(x, [r["display_value"] for r in rr], yerr=[2 * r["display_u"] for r in rr], fmt="o", ms=3,
+                    capsize=2)
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set_xticks(x)
+        ax.set_xticklabels([r["name"] for r in rr], rotation=90, fontsize=7)
+        ax.set_ylabel(f"[{unit}]")
+    axes[0, 0].set_title("estimated errors (p = 0 is the nominal description), bars: 2 u")
+    fig.tight_layout()
+    return _png(fig)
+
+
+def plot_correlation(result: CalibrationResult) -> bytes:
+    """PNG: correlation matrix of the free parameters."""
+    n = len(result.free)
+    fig, ax = _figure(max(4.0, 0.22 * n + 2), max(3.5, 0.22 * n + 1.5))
+    im = ax.imshow(result.corr if n else np.zeros((1, 1)), vmin=-1, vmax=1, cmap="RdBu_r")
+    ax.set_xticks(range(n))
+    ax.set_yticks(range(n))
+    ax.set_xticklabels(result.free, rotation=90, fontsize=6)
+    ax.set_yticklabels(result.free, fontsize=6)
+    fig.colorbar(im, ax=ax, shrink=0.8)
+    ax.set_title("correlation of the estimates")
+    return _png(fig)
+
+
+def _table(headers, rows) -> str:
+    h = "".join(f"<th>{html.escape(str(x))}</th>" for x in headers)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>" for r in rows)
+    return f"<table><tr>{h}</tr>{body}</table>"
+
+
+def _fmt(v, digits=4):
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return f"{v:.{digits}g}"
+    return str(v)
+
+
+def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
+    par = [(r["name"], r["state"], r["display_unit"], _fmt(r["display_value"], 6),
+            _fmt(r["display_u"], 3) if r["state"] == "free" else "-") for r in result.parameter_rows()]
+    fixed = [(f.name, f.stage, f.reason) for f in result.fixed]
+    idf = result.identifiability_final
+    parts = [
+        "<!DOCTYPE html><html><head><meta charset='utf-8'><title>Calibration report</title>",
+        "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;"
+        "font-size:12px}td,th{border:1px solid #bbb;padding:2px 6px}th{background:#eee}</style></head><body>",
+        f"<h1>Calibration of {html.escape(result.model.desc.name)}</h1>",
+        f"<p>Solver: {html.escape(result.status)}; {result.iterations} iterations; "
+        f"{result.n_residuals} residuals, {len(result.free)} parameters, {result.n_nuisance} nuisance unknowns, "
+        f"dof {result.dof}; s0 = {result.s0:.4g}. Covariance: {html.escape(result.covariance_source)}.</p>",
+        f"<p>Identifiability at the solution: rank {idf.rank} of {len(idf.names)}, condition number "
+        f"{idf.condition:.4g} (columns scaled by their norms), rank tolerance {idf.rank_tol:g}.</p>",
+        "<h2>Fixed parameters (not identifiable from these data)</h2>",
+        _table(["parameter", "stage", "reason"], fixed) if fixed else "<p>none</p>",
+    ]
+    if summary.get("poorly_determined"):
+        parts.append("<p>Poorly determined (large uncertainty; consider fixing): "
+                     + html.escape(", ".join(summary["poorly_determined"])) + "</p>")
+    for key, title in (("validation_training", "Validation on the training data"),
+                       ("validation_holdout", "Validation on held-out data (never seen by the fit)")):
+        rows = summary.get(key)
+        if rows:
+            parts += [f"<h2>{title}</h2>", _table(["figure", "unit", "nominal", "calibrated", "ratio"],
+                                                  [(r["label"], r["unit"], _fmt(r["before"]), _fmt(r["after"]),
+                                                    _fmt(r["ratio"], 3)) for r in rows])]
+    parts += ["<h2>Parameters</h2>", _table(["parameter", "state", "unit", "estimate", "u"], par)]
+    if result.outliers:
+        parts += ["<h2>Outliers (kept)</h2>" if not result.dropped else "<h2>Outliers</h2>",
+                  _table(["kind", "measurement", "feature", "line", "standardized", "residual [um]"],
+                         [(o.kind, o.measurement, o.feature, o.line, _fmt(o.standardized, 3),
+                           _fmt(o.residual * 1e6, 4)) for o in result.outliers])]
+    if result.dropped:
+        parts += ["<h2>Dropped points (refitted without them)</h2>",
+                  _table(["measurement", "feature", "line", "standardized"],
+                         [(o.measurement, o.feature, o.line, _fmt(o.standardized, 3)) for o in result.dropped])]
+    for name, title in (("residuals_png", "Residuals"), ("parameters_png", "Estimates"),
+                        ("correlation_png", "Correlations")):
+        if name in files:
+            parts += [f"<h2>{title}</h2>", f"<img src='{html.escape(files[name].name)}' style='max-width:100%'>"]
+    parts.append("</body></html>")
+    return "\n".join(parts)
+
+
+def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_training=None,
+                  validation_holdout=None, extra: dict | None = None, plots: bool = True) -> dict:
+    """Write the outputs of ``result`` into ``out_dir`` (created); returns ``{role: Path}``.
+
+    Files: ``<name>-calibrated.toml`` and ``.urdf`` (the base errors folded into a new description),
+    ``summary.json``, ``parameters.csv``, ``residuals.csv``, ``report.html`` and three PNG plots.
+    ``inputs``: files that must never be overwritten (points, artefacts, the nominal arm).
+    """
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InputError("the output must be a directory", out)
+    desc = result.described()
+    name = f"{result.model.desc.name}-calibrated"
+    cal = replace(desc, name=name)
+    files = {"description": out / f"{name}.toml", "urdf": out / f"{name}.urdf", "summary": out / "summary.json",
+             "parameters": out / "parameters.csv", "residuals": out / "residuals.csv", "report": out / "report.html"}
+    if plots:
+        files.update({"residuals_png": out / "residuals.png", "parameters_png": out / "parameters.png",
+                      "correlation_png": out / "correlation.png"})
+    for f in files.values():
+        guard_output(f, inputs)
+    effects = [e.describe() for e in result.model.effects]
+    comment = (f"Calibrated description of '{result.model.desc.name}' written by aacmm calibrate.\n"
+               f"Solver: {result.status}; s0 = {result.s0:.4g}.")
+    if effects:
+        comment += ("\nThe model's effects (" + ", ".join(effects) + ") are not part of a description: "
+                    "their parameters are in summary.json.")
+    atomic_write_text(files["description"], format_description(cal, comment), inputs)
+    atomic_write_text(files["urdf"], urdf_text(cal), inputs)
+    rows = result.parameter_rows()
+    write_csv(files["parameters"], {
+        "name": np.array([r["name"] for r in rows], dtype=object),
+        "state": np.array([r["state"] for r in rows], dtype=object),
+        "unit": np.array([r["display_unit"] for r in rows], dtype=object),
+        "value": np.array([r["display_value"] for r in rows]),
+        "u": np.array([r["display_u"] for r in rows])}, inputs, fmt="%.9g")
+    t = result.residuals
+    write_csv(files["residuals"], {
+        "measurement": t["measurement"], "feature": t["feature"], "kind": t["kind"],
+        "line": np.asarray(t["line"], dtype=int), "residual_um": t["value"] * 1e6,
+        "dx_um": t["vector"][:, 0] * 1e6, "dy_um": t["vector"][:, 1] * 1e6, "dz_um": t["vector"][:, 2] * 1e6,
+        "standardized": t["standardized"]}, inputs, fmt="%.6g")
+    summary = result.to_dict()
+    summary["arm"] = result.model.desc.name
+    summary["effects"] = effects
+    summary["calibrated_description"] = files["description"].name
+    summary["calibrated_urdf"] = files["urdf"].name
+    summary["validation_training"] = validation_training
+    summary["validation_holdout"] = validation_holdout
+    summary["poorly_determined"] = poorly_determined(result)
+    if extra:
+        summary.update(extra)
+    if plots:
+        atomic_write_bytes(files["residuals_png"], plot_residuals(result), inputs)
+        atomic_write_bytes(files["parameters_png"], plot_parameters(result), inputs)
+        atomic_write_bytes(files["correlation_png"], plot_correlation(result), inputs)
+    atomic_write_text(files["summary"], json.dumps(_finite(summary), indent=1, default=_json_default) + "\n", inputs)
+    atomic_write_text(files["report"], _html(result, summary, files), inputs)
+    return files
+
+
+#: standard uncertainty beyond which a free parameter is reported as poorly determined, per SI unit
+POOR_U = {"m": 1e-4, "rad": 1e-3}
+
+
+def poorly_determined(result: CalibrationResult) -> list[str]:
+    """Free parameters whose standard uncertainty exceeds :data:`POOR_U` (0.1 mm, 1 mrad)."""
+    out = []
+    for r in result.parameter_rows():
+        bound = POOR_U.get(r["unit"])
+        if r["state"] == "free" and bound is not None and r["u"] > bound:
+            du, fac = display_unit(r["unit"])
+            out.append(f"{r['name']} (u = {r['u'] * fac:.3g} {du})")
+    return out

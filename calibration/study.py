@@ -1,0 +1,337 @@
+"""Calibration studies: plan a campaign before measuring.
+
+* :func:`monte_carlo`: repeat "simulate -> calibrate on the training measurements -> validate on the
+  held-out ones" over noise draws and pose sets (a new simulator seed each run); report the
+  parameter errors against the truth (expressed in the identifiable parameterization, see
+  :meth:`CalibrationResult.equivalent`) next to the uncertainties the fits reported, and the predicted
+  post-calibration accuracy (validation figures before/after).
+* :func:`select_measurements`: greedy choice of a pose set (measurements) from a candidate pool by the
+  observability index O1 of Borm and Menq (1991), ``O1 = (s_1 s_2 ... s_m)^(1/m) / sqrt(n)`` with
+  ``s_i`` the singular values of the column-scaled identification Jacobian (nuisance eliminated) and
+  ``n`` the number of poses (points).
+
+Runs go to local processes (:class:`concurrent.futures.ProcessPoolExecutor`) by default, or to a
+Dask cluster when a scheduler address (or a ``distributed.Client``) is given. A progress line is
+written to stderr.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from arm_model import AacmmError
+from arm_model.model import ArmModel
+
+from .calibrate import calibrate, resolve_parameters
+from .data import CalibrationData, Weights, make_data, split_holdout
+from .identifiability import reduced_jacobian
+from .problem import Problem
+
+__all__ = ["Progress", "run_tasks", "SimSource", "SynthSource", "RunSettings", "run_once", "monte_carlo",
+           "MonteCarloResult", "select_measurements", "Selection", "observability_index"]
+
+
+# ---------------------------------------------------------------------------------------------
+# execution
+
+class Progress:
+    """A one-line progress bar on stderr: ``label [#####.....] k/n  elapsed``."""
+
+    def __init__(self, total: int, label: str = "", stream=None, enabled: bool = True, width: int = 30):
+        self.total, self.label, self.width = total, label, width
+        self.stream = stream or sys.stderr
+        self.enabled = enabled
+        self.done = 0
+        self.t0 = time.perf_counter()
+        self._draw()
+
+    def _draw(self):
+        if not self.enabled:
+            return
+        k = int(self.width * self.done / max(self.total, 1))
+        el = time.perf_counter() - self.t0
+        self.stream.write(f"\r{self.label} [{'#' * k}{'.' * (self.width - k)}] {self.done}/{self.total}  {el:.1f} s")
+        if self.done >= self.total:
+            self.stream.write("\n")
+        self.stream.flush()
+
+    def update(self, n: int = 1):
+        self.done += n
+        self._draw()
+
+
+def run_tasks(fn, items, *, scheduler=None, workers: int | None = None, progress: bool = True,
+              label: str = "runs") -> list:
+    """``[fn(item) for item in items]``, in parallel, results in the order of ``items``.
+
+    Args:
+        fn: a picklable top-level function.
+        scheduler: None (local processes), a Dask scheduler address (``"tcp://host:8786"``) or a
+            ``distributed.Client``.
+        workers: local processes (default: the CPU count); 1 runs in this process.
+    """
+    items = list(items)
+    bar = Progress(len(items), label, enabled=progress)
+    out = [None] * len(items)
+    if scheduler is not None:
+        from distributed import Client, as_completed as dask_completed
+        client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
+        try:
+            futures = client.map(fn, items, pure=False)
+            index = {f.key: i for i, f in enumerate(futures)}
+            for fut in dask_completed(futures):
+                out[index[fut.key]] = fut.result()
+                bar.update()
+        finally:
+            if client is not scheduler:
+                client.close()
+        return out
+    if workers == 1 or len(items) <= 1:
+        for i, it in enumerate(items):
+            out[i] = fn(it)
+            bar.update()
+        return out
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        futs = {pool.submit(fn, it): i for i, it in enumerate(items)}
+        for fut in as_completed(futs):
+            out[futs[fut]] = fut.result()
+            bar.update()
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# campaign sources (picklable: they travel to worker processes)
+
+@dataclass(frozen=True)
+class SimSource:
+    """Campaigns from :mod:`arm_model.sim`: a campaign file, simulated with a new seed each run."""
+    path: str
+
+    def make(self, seed: int):
+        from arm_model.sim import load_campaign, simulate
+        camp = load_campaign(self.path)
+        sim = simulate(camp, seed=seed)
+        return camp.arm, sim.points, sim.artefacts, sim.reference_points, dict(sim.truth["p"])
+
+
+@dataclass(frozen=True)
+class SynthSource:
+    """Campaigns from :mod:`calibration.synth` (no simulator needed): ``spec`` on the arm ``desc``;
+    the truth is drawn anew each run unless ``truth`` (name -> value) is given."""
+    desc: object
+    spec: object
+    truth: dict | None = None
+
+    def make(self, seed: int):
+        from .synth import make_campaign
+        model = ArmModel(self.desc)
+        p_true = None if self.truth is None else model.spec.vector(self.truth)
+        c = make_campaign(model, self.spec, seed, p_true)
+        return self.desc, c.points, c.artefacts, c.reference_points, c.truth
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """How each run calibrates and validates."""
+    free: tuple | None = None
+    weights: Weights = field(default_factory=Weights)
+    holdout: float = 0.25
+    rank_tol: float | None = None
+    effects: tuple = ()
+
+
+def run_once(task) -> dict:
+    """One Monte Carlo run: ``task = (source, settings, seed)``. Never raises: a failed run is
+    reported with its error."""
+    source, settings, seed = task
+    t0 = time.perf_counter()
+    try:
+        desc, points, artefacts, reference, truth = source.make(seed)
+        model = ArmModel(desc, tuple(settings.effects))
+        data = make_data(points, artefacts, model, reference=reference)
+        train, test = split_holdout(data, settings.holdout, seed)
+        kw = {} if settings.rank_tol is None else {"rank_tol": settings.rank_tol}
+        res = calibrate(model, train, settings.free, weights=settings.weights, **kw)
+        p_true = model.spec.vector({k: v for k, v in truth.items() if k in model.spec.names})
+        p_eq = res.equivalent(p_true)
+        idx = [model.spec.index(n) for n in res.free]
+        return {"seed": seed, "ok": True, "free": list(res.free), "p": res.p[idx].tolist(),
+                "u": res.u.tolist(), "truth": p_eq[idx].tolist(), "fixed": [f.name for f in res.fixed],
+                "s0": res.s0, "iterations": res.iterations, "validation": res.compare(test),
+                "seconds": time.perf_counter() - t0}
+    except (AacmmError, ValueError) as exc:
+        return {"seed": seed, "ok": False, "error": f"{type(exc).__name__}: {exc}",
+                "seconds": time.perf_counter() - t0}
+
+
+@dataclass
+class MonteCarloResult:
+    """Aggregated Monte Carlo runs.
+
+    Attributes:
+        runs: every run's dict (:func:`run_once`).
+        parameters: per parameter free in every successful run: ``rms_error`` (estimate minus the
+            truth in the fit's parameterization) [SI], ``mean_u`` (mean reported u) [SI], ``ratio``
+            rms_error / mean_u (about 1 when the reported uncertainties are right) and
+            ``within_3u`` (fraction of runs with |error| <= 3 u).
+        accuracy: per validation figure: median and 95th percentile, before and after [shown unit].
+    """
+    runs: list
+    parameters: dict
+    accuracy: dict
+
+    @property
+    def failures(self) -> list:
+        return [r for r in self.runs if not r["ok"]]
+
+    def to_dict(self) -> dict:
+        return {"runs": self.runs, "parameters": self.parameters, "accuracy": self.accuracy,
+                "failures": len(self.failures)}
+
+
+def _aggregate(runs: list) -> MonteCarloResult:
+    ok = [r for r in runs if r["ok"]]
+    params = {}
+    if ok:
+        common = [n for n in ok[0]["free"] if all(n in r["free"] for r in ok)]
+        for n in common:
+            e = np.array([r["p"][r["free"].index(n)] - r["truth"][r["free"].index(n)] for r in ok])
+            u = np.array([r["u"][r["free"].index(n)] for r in ok])
+            rms = float(np.sqrt(np.mean(e ** 2)))
+            params[n] = {"rms_error": rms, "mean_u": float(u.mean()), "ratio": rms / float(u.mean()),
+                         "within_3u": float(np.mean(np.abs(e) <= 3 * u))}
+    acc = {}
+    for r in ok:
+        for row in r["validation"]:
+            a = acc.setdefault(row["key"], {"label": row["label"], "unit": row["unit"], "before": [], "after": []})
+            a["before"].append(row["before"])
+            a["after"].append(row["after"])
+    for a in acc.values():
+        b, f = np.array(a.pop("before")), np.array(a.pop("after"))
+        a.update(n=len(b), before_median=float(np.median(b)), before_p95=float(np.percentile(b, 95)),
+                 after_median=float(np.median(f)), after_p95=float(np.percentile(f, 95)))
+    return MonteCarloResult(runs, params, acc)
+
+
+def monte_carlo(source, runs: int, *, seed: int = 0, settings: RunSettings | None = None, scheduler=None,
+                workers: int | None = None, progress: bool = True) -> MonteCarloResult:
+    """``runs`` Monte Carlo runs of ``source`` (:class:`SimSource` or :class:`SynthSource`) with
+    seeds ``seed, seed + 1, ...``; see :func:`run_tasks` for ``scheduler`` and ``workers``."""
+    settings = settings or RunSettings()
+    tasks = [(source, settings, seed + i) for i in range(runs)]
+    return _aggregate(run_tasks(run_once, tasks, scheduler=scheduler, workers=workers, progress=progress,
+                                label="monte carlo"))
+
+
+# ---------------------------------------------------------------------------------------------
+# pose-set choice by an observability index
+
+def observability_index(info: np.ndarray, n_poses: int) -> float:
+    """Borm and Menq's O1 = (prod s_i)^(1/m) / sqrt(n) from the information matrix ``J^T J``
+    (``s_i^2`` its eigenvalues) of ``n_poses`` poses."""
+    ev = np.linalg.eigvalsh(info)
+    if ev.min() <= 0 or n_poses == 0:
+        return 0.0
+    return float(np.exp(0.5 * np.mean(np.log(ev))) / math.sqrt(n_poses))
+
+
+@dataclass
+class Selection:
+    """Measurements chosen greedily, in order, with O1 after each addition; the O1 of random sets of
+    the same sizes (mean of ``random_draws``) for comparison; predicted standard uncertainties [SI]
+    of the parameters with the chosen set and with the whole pool (stated weights, s0 = 1)."""
+    parameters: tuple
+    chosen: list
+    o1: list
+    o1_random: list
+    n_points: list
+    u_chosen: dict
+    u_pool: dict
+
+    def to_dict(self) -> dict:
+        return {"parameters": list(self.parameters), "chosen": self.chosen, "o1": self.o1,
+                "o1_random": self.o1_random, "n_points": self.n_points, "u_chosen": self.u_chosen,
+                "u_pool": self.u_pool}
+
+
+def select_measurements(model: ArmModel, data: CalibrationData, count: int, free=None, *,
+                        weights: Weights | None = None, p=None, random_draws: int = 20, seed: int = 0,
+                        progress: bool = True, always=()) -> Selection:
+    """Choose ``count`` measurements of ``data`` that best identify the parameters.
+
+    The pool is first reduced to its identifiable parameters (:func:`calibrate`'s analysis, run at
+    ``p``, default the nominal, on the whole pool with the nuisance fitted); then each measurement's
+    rows of the reduced, column-scaled Jacobian give an information block and measurements are added
+    one at a time, each time the one that maximises O1 (a shared reference transform is eliminated
+    over the whole pool, a stated approximation). ``always``: measurements kept from the start.
+    """
+    from .calibrate import _scale, rigid_gauge
+    from .identifiability import analyse
+    from .solver import levenberg_marquardt
+
+    weights = weights or Weights()
+    spec = model.spec
+    from .calibrate import default_free
+    cand = resolve_parameters(spec, default_free(model) if free is None else free)
+    p = np.zeros(spec.size) if p is None else np.asarray(p, float)
+    prob = Problem(model, data, weights, cand)
+    states = levenberg_marquardt(prob.with_free([]), p, prob.initial_states(p)).states
+    ev = prob.evaluate(p, states)
+    gauge = rigid_gauge(prob, p, cand)
+    idf = analyse(reduced_jacobian(ev.jp, ev.jt), ev.jp, [spec.names[i] for i in cand], gauge=gauge)
+    kept = [i for i in cand if spec.names[i] not in idf.dependent]
+    prob = prob.with_free(kept)
+    ev = prob.evaluate(p, states)
+    jred = reduced_jacobian(ev.jp, ev.jt) / _scale(ev.jp)
+    meas_of_row = np.where(prob.row_point >= 0, data.points.measurement[np.maximum(prob.row_point, 0)], None)
+    for k, d in enumerate(prob.distance_items):
+        meas_of_row[prob.n_point_rows + k] = d.measurement
+    ids = data.measurements()
+    blocks = {m: jred[meas_of_row == m] for m in ids}
+    info = {m: b.T @ b for m, b in blocks.items()}
+    npts = {m: int(np.sum(data.points.measurement == m)) for m in ids}
+    total = sum(info.values())
+    eps = 1e-12 * np.trace(total) / len(kept)
+    reg = eps * np.eye(len(kept))
+    count = min(count, len(ids))
+    chosen = [m for m in always if m in info]
+    cur = sum((info[m] for m in chosen), np.zeros((len(kept),) * 2))
+    o1s, ns = [], []
+    bar = Progress(count, "selecting", enabled=progress)
+    bar.update(len(chosen))
+    while len(chosen) < count:
+        n_now = sum(npts[m] for m in chosen)
+        best, best_val = None, -np.inf
+        for m in ids:
+            if m in chosen:
+                continue
+            sign, logdet = np.linalg.slogdet(cur + info[m] + reg)
+            val = 0.5 * logdet / len(kept) - 0.5 * math.log(n_now + npts[m])
+            if val > best_val:
+                best, best_val = m, val
+        chosen.append(best)
+        cur = cur + info[best]
+        o1s.append(observability_index(cur + reg, n_now + npts[best]))
+        ns.append(n_now + npts[best])
+        bar.update()
+    rng = np.random.default_rng(seed)
+    o1r = []
+    for k in range(1, len(chosen) + 1):
+        vals = []
+        for _ in range(random_draws):
+            pick = rng.choice(len(ids), size=k, replace=False)
+            mat = sum((info[ids[i]] for i in pick), np.zeros((len(kept),) * 2))
+            vals.append(observability_index(mat + reg, sum(npts[ids[i]] for i in pick)))
+        o1r.append(float(np.mean(vals)))
+    scale = _scale(ev.jp)
+    names = [spec.names[i] for i in kept]
+
+    def u_of(mat):
+        cov = np.linalg.pinv(mat) / np.outer(scale, scale)
+        return {n: float(np.sqrt(max(cov[k, k], 0.0))) for k, n in enumerate(names)}
+    return Selection(tuple(names), chosen, o1s, o1r, ns, u_of(cur), u_of(total))
