@@ -349,7 +349,7 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
     tcols["temperature_true_C"] = (draw.temperature, "%.6f")
     texts[TRUTH_POINTS_FILE] = "# TRUTH: true values per captured point; no analysis reads this file.\n" + \
         _csv_text(tcols)
-    truth_dict = {"p": truth.values, "p_vector": truth.p.copy(), "spec": truth.model.spec, "model": truth.model,
+    truth_dict = {"p": truth.values, "aliases": truth.aliases, "p_vector": truth.p.copy(), "spec": truth.model.spec, "model": truth.model,
                   "effects": truth.settings, "effects_on": truth.effects_on(), "noise": dict(campaign.noise),
                   "placements": plan.placements, "T_ref_base": dict(plan.T_ref_base),
                   "operator": dict(draw.level), "cross_talk": truth.cross_talk.copy(),

@@ -17,7 +17,7 @@ from .._errors import NumericalError
 from ..chain import NUMPY_OPS, ball_in_last_frame, chain_point, elastic_displacement
 from ..description import ArmDescription
 from ..effects import (EncoderEccentricity, ForceSensorError, Geometry, JointCompliance, ModelInputs,
-                       ProbeCompliance, ThermalGrowth)
+                       ThermalGrowth)
 from ..model import ArmModel, AuxData
 from ..params import apply_params, param_spec
 
@@ -63,12 +63,27 @@ class Truth:
         return dict(zip(self.model.spec.names, (float(v) for v in self.p)))
 
     @property
+    def aliases(self) -> dict[str, float]:
+        """The same true quantities under the names of effects the truth does not use, for analyses
+        that model them that way: the probe compliance errors as the core ``ProbeCompliance``
+        parameters (``probe.dcompliance_bend`` only when isotropic)."""
+        dx, dy, dz = self.p[self.model.base_size - 3: self.model.base_size]
+        out = {"probe.dcompliance_x": float(dx), "probe.dcompliance_y": float(dy), "probe.dcompliance_z": float(dz)}
+        if dx == dy:
+            out["probe.dcompliance_bend"] = float(dx)
+        return out
+
+    @property
     def description(self) -> ArmDescription:
         """The nominal description with the true base errors folded in (no effects)."""
         return apply_params(self.nominal, self.p[: self.model.base_size])
 
     def effects_on(self) -> list[str]:
         out = [e.describe() for e in self.model.effects]
+        dc = self.p[self.model.base_size - 3: self.model.base_size]
+        if np.any(dc):
+            out.append("probe_compliance (" + ("isotropic" if dc[0] == dc[1] else "anisotropic")
+                       + (", axial" if dc[2] else "") + ")")
         if np.any(self.cross_talk):
             out.append("force_sensor.cross_talk (simulator only)")
         return out
@@ -191,9 +206,10 @@ def _random_base(rng, desc: ArmDescription, t: dict) -> np.ndarray:
 
 def build_truth(desc: ArmDescription, t: dict, rng: np.random.Generator, sensor: str = "xyz") -> Truth:
     """The true arm from a campaign's ``truth`` section (SI, see :mod:`arm_model.sim.campaign`):
-    random base errors of the given sizes (explicit ``errors`` override them), then each effect
-    that is on, in a fixed order: eccentricity, joint compliance, thermal growth, probe
-    compliance, force sensor (on the axes the ``sensor`` measures: x and z for the two-channel one)."""
+    random base errors of the given sizes (explicit ``errors`` override them); a true probe
+    compliance sets the base parameters ``probe.compliance_x/_y/_z`` (true minus declared); then each
+    effect that is on, in a fixed order: eccentricity, joint compliance, thermal growth, force sensor
+    (on the axes the ``sensor`` measures: x and z for the two-channel one)."""
     p_base = _random_base(rng, desc, t)
     effects, values = [], []
     settings = {}
@@ -227,14 +243,13 @@ def build_truth(desc: ArmDescription, t: dict, rng: np.random.Generator, sensor:
         cy = pc["bending_y"] if pc["bending_y"] is not None else pc["bending"]
         cx = declared[0] if cx is None else cx
         cy = declared[1] if cy is None else cy
-        anis = not np.isclose(cx - declared[0], cy - declared[1], rtol=0, atol=1e-15)
-        axial = pc["axial"] is not None
-        effects.append(ProbeCompliance(anisotropic=anis, axial=axial))
-        values += [cx - declared[0], cy - declared[1]] if anis else [cx - declared[0]]
-        if axial:
-            values.append(pc["axial"] - declared[2])
-        settings["probe_compliance"] = {"bending_x": cx, "bending_y": cy,
-                                        "axial": pc["axial"] if axial else declared[2]}
+        cz = declared[2] if pc["axial"] is None else pc["axial"]
+        # the base parameters already hold the probe compliance errors: no extra effect is needed
+        spec = param_spec(desc)
+        for name, true, decl in zip(("probe.compliance_x", "probe.compliance_y", "probe.compliance_z"),
+                                    (cx, cy, cz), declared):
+            p_base[spec.index(name)] = true - decl
+        settings["probe_compliance"] = {"bending_x": cx, "bending_y": cy, "axial": cz}
     fs = t["force_sensor"]
     gain, offset, cross = np.zeros(3), np.zeros(3), np.zeros((3, 3))
     if fs is not None:
