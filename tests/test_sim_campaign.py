@@ -188,3 +188,29 @@ def test_units_are_read_from_the_key_names(value, length, angle):
                             "task": [{"kind": "sphere", f"diameter_{length[0]}": value}]})
     assert c.tasks[0].opts["diameter"] == pytest.approx(value * length[1], rel=1e-15)
     assert c.truth["eccentricity"][0]["amplitude"] == pytest.approx(value * angle[1], rel=1e-15)
+
+
+def test_other_arm_conventions(tmp_path, nominal):
+    """Modified DH and URDF-chain arms: the inverse kinematics and the truth use the core chain of
+    any convention."""
+    import re
+    tasks = [{"kind": "sphere", "points": 4, "centre_mm": [450.0, 200.0, 150.0]},
+             {"kind": "seat", "articulations": 4, "position_mm": [450.0, -200.0, 100.0]}]
+    truth = {"eccentricity": [{"joint": "j2", "amplitude_deg": 0.002}], "thermal": {"alpha_per_K": 1e-5}}
+    mdh = simulate(campaign_from_dict({"seed": 1, "truth": truth, "task": tasks}, arm=replace(nominal, convention="mdh")))
+    assert mdh.stats["truth_residual_max_m"] < 1e-9 and len(mdh.points) == 8
+    # a URDF chain: the nominal arm's URDF up to the flange, a fixed ball 85 mm further
+    text = (ROOT / "urdf" / "aacmm7.urdf").read_text()
+    head = text[: text.index('<link name="stylus_root"')]
+    head = re.sub(r'<joint name="(stylus_root_joint|probe_bend_y|probe_bend_x|probe_axial|ball_joint)".*?</joint>',
+                  "", head, flags=re.S)
+    (tmp_path / "arm.urdf").write_text(
+        head + '<link name="ball"/><joint name="ball_joint" type="fixed"><parent link="flange"/>'
+        '<child link="ball"/><origin xyz="0 0 0.085" rpy="0 0 0"/></joint></robot>')
+    c = _write(tmp_path, 'seed = 2\narm = "arm.urdf"\ntip_frame = "ball"\n[truth.thermal]\nalpha_per_K = 1e-5\n'
+               '[[task]]\nkind = "seat"\narticulations = 4\nposition_mm = [450.0, -200.0, 100.0]\n')
+    r = simulate(load_campaign(c))
+    assert r.campaign.arm.convention == "urdf" and "j1.origin_x" in r.truth["p"]
+    assert r.stats["truth_residual_max_m"] < 1e-9
+    with pytest.raises(InputError, match="tip_frame"):
+        load_campaign(_write(tmp_path, 'arm = "arm.urdf"\n[[task]]\nkind = "seat"\n'))

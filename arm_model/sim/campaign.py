@@ -18,7 +18,8 @@ from typing import Any
 import numpy as np
 
 from .._errors import InputError
-from ..description import ArmDescription, load_description
+from ..description import ArmDescription
+from ..urdf_import import load_arm
 
 __all__ = ["Campaign", "Task", "load_campaign", "campaign_from_dict", "TASK_KINDS", "SENSORS",
            "DEFAULT_ARM"]
@@ -55,6 +56,7 @@ def _split(key: str) -> tuple[str, str] | None:
 
 _S = {
     "top": {"name": ("text", "campaign", None), "seed": ("count", 0, None), "arm": ("text", None, None),
+            "tip_frame": ("text", None, None),
             "sensor": ("text", "xyz", None), "truth": ("table", None, None), "noise": ("table", None, None),
             "environment": ("table", None, None), "operator": ("table", None, None),
             "signals": ("table", None, None), "task": ("table", None, None),
@@ -341,7 +343,9 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
             arm_path = DEFAULT_ARM
         if not arm_path.exists():
             raise ctx.error(f"arm description not found: {arm_path}", (), "arm")
-        desc = load_description(arm_path)
+        if arm_path.suffix.lower() == ".urdf" and not top["tip_frame"]:
+            raise ctx.error("an arm given as a URDF needs 'tip_frame' (the link at the ball centre)", (), "arm")
+        desc = load_arm(arm_path, top["tip_frame"])
     # truth and its effects
     truth = _section(ctx, data.get("truth"), _S["truth"], ("truth",))
     raw_truth = data.get("truth") or {}
