@@ -441,7 +441,6 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
     tasks = []
     ids: dict[str, str] = {}
     for i, t in enumerate(raw_tasks):
-        tbl = (("task", i),)
         tbl = ("task", i)
         if not isinstance(t, dict):
             raise ctx.error("expected a table", tbl)
@@ -459,6 +458,11 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
         ids[tid] = kind
         o.pop("kind")
         n_meas = o.pop("measurements")
+        if kind == "ballbar" and "measurements" in t:
+            raise ctx.error("a ball bar makes one measurement a position: give 'positions'", tbl, "measurements")
+        if kind == "ring" and any(k.startswith("stylus_cone") for k in t):
+            raise ctx.error("a ring's stylus is parallel to its axis: tilt it with 'stylus_tilt_<angle unit>'",
+                            tbl, next(k for k in t if k.startswith("stylus_cone")))
         if kind == "ballbar":
             n_meas = o["positions"]
         if o["stylus_cone"] is None:
