@@ -13,13 +13,13 @@
    are taken as true); standard uncertainties and correlations by name.
 7. Outliers: standardized residuals ``r_w / (s_rob sqrt(1 - h))`` (``h`` the leverage, ``s_rob`` a
    robust scale: 1.4826 times the median) beyond ``outlier_threshold`` are reported with measurement,
-   feature and file line; they are kept unless ``drop_outliers`` (then dropped once and refitted).
+   feature and file line; they are kept unless ``drop_outliers`` (then dropped, worst first, and refitted).
 """
 from __future__ import annotations
 
 import fnmatch
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -259,7 +259,7 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
               start: dict | None = None, weights: Weights | None = None, on_unidentifiable: str = "fix",
               rank_tol: float = DEFAULT_RANK_TOL, outlier_threshold: float = 4.0, drop_outliers: bool = False,
               covariance: str = "residual", reference: str = "fit", max_iter: int = 200,
-              prefer=None) -> CalibrationResult:
+              prefer=None, _depth: int = 0) -> CalibrationResult:
     """Identify the parameters ``free`` of ``model`` from ``data``.
 
     Args:
@@ -272,7 +272,9 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
         on_unidentifiable: "fix" (hold and list dependent parameters) or "stop" (raise with the list).
         rank_tol: relative singular value below which a direction is not identifiable.
         outlier_threshold: standardized residual beyond which a point is an outlier.
-        drop_outliers: drop the outlier points once and refit (they are listed in ``dropped``).
+        drop_outliers: drop outlier points and refit, in rounds (the worst first: a gross error pulls
+            its neighbours out too) until none is left; they are listed in ``dropped`` (indices into
+            ``data``) and ``data`` of the result holds the points kept.
         covariance: "residual" (scaled by the residual variance factor) or "stated".
         reference: "fit" (``T_ref_base`` unknown), "identity" (reference coordinates are base
             coordinates: then the base pose is identifiable) or "off".
@@ -394,14 +396,21 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
         d = prob.distance_items[i]
         outliers.append(Outlier("distance", d.measurement, " - ".join(d.between), None, None, float(zd[i]),
                                 float(table["distance"][i])))
-    if drop_outliers and any(o.point is not None for o in outliers):
-        drop = sorted({o.point for o in outliers if o.point is not None})
-        keep = np.setdiff1d(np.arange(len(data)), drop)
+    point_outliers = [o for o in outliers if o.point is not None]
+    if drop_outliers and point_outliers:
+        if _depth >= 10:
+            raise NumericalError("outliers remain after 10 rounds of dropping; check the data")
+        # drop the worst (a gross error also pulls its neighbours: those go only if they stay out)
+        worst = max(abs(o.standardized) for o in point_outliers)
+        drop = [o for o in point_outliers if abs(o.standardized) >= max(outlier_threshold, 0.5 * worst)]
+        keep = np.setdiff1d(np.arange(len(data)), [o.point for o in drop])
         res = calibrate(model, data.select(keep), free, values=values, start=start, weights=weights,
                         on_unidentifiable=on_unidentifiable, rank_tol=rank_tol, outlier_threshold=outlier_threshold,
-                        drop_outliers=False, covariance=covariance, reference=reference, max_iter=max_iter,
-                        prefer=prefer)
-        res.dropped = [o for o in outliers if o.point is not None]
+                        drop_outliers=True, covariance=covariance, reference=reference, max_iter=max_iter,
+                        prefer=prefer, _depth=_depth + 1)
+        kept_index = np.flatnonzero(np.isin(np.arange(len(data)), keep))
+        # report the dropped points with indices into the data given at this level
+        res.dropped = [o for o in drop] + [replace(o, point=int(kept_index[o.point])) for o in res.dropped]
         return res
     # per-instance scalars
     instances = []

@@ -176,8 +176,30 @@ def fit_circle_axis(x: np.ndarray, radius: float | None = None) -> tuple[np.ndar
         c, rad, rms = _fit_circle_2d(uv)
         score = rms + (abs(rad - radius) if radius is not None else 0.0)
         if best is None or score < best[0]:
-            best = (score, mean + c[0] * e1 + c[1] * e2, u)
-    return best[1], best[2]
+            best = (score, mean + c[0] * e1 + c[1] * e2, u, rad)
+    return _refine_axis(x, best[1], best[2], radius if radius is not None else best[3])
+
+
+def _refine_axis(x, p0, u0, radius):
+    """A few Levenberg-Marquardt steps (scipy) on the axis, radius fixed (or fitted if None)."""
+    from scipy.optimize import least_squares
+    e1, e2 = perpendicular_basis(u0)
+
+    def axis(t):
+        u = u0 + t[2] * e1 + t[3] * e2
+        return p0 + t[0] * e1 + t[1] * e2, u / np.linalg.norm(u)
+
+    def res(t):
+        p, u = axis(t)
+        v = x - p
+        return np.linalg.norm(v - np.outer(v @ u, u), axis=1) - (radius if radius is not None else t[4])
+
+    t0 = np.zeros(4 if radius is not None else 5)
+    if radius is None:
+        t0[4] = np.mean(np.linalg.norm((x - p0) - np.outer((x - p0) @ u0, u0), axis=1))
+    sol = least_squares(res, t0, method="lm", max_nfev=200)
+    p, u = axis(sol.x)
+    return p, u
 
 
 def kabsch(x_base: np.ndarray, x_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,141 @@
+"""The fit: exact recovery without noise, uncertainties that cover the truth, outliers reported (not
+dropped), effects calibrated, validation figures by hand, held-out improvement."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from arm_model.effects import ProbeCompliance
+from arm_model.model import ArmModel
+from calibration import Weights, calibrate, make_data, split_holdout, validate
+from calibration.validation import _articulation
+from calibration.synth import SynthSpec, make_campaign, random_truth
+from conftest import assert_close
+
+SPEC = SynthSpec(ballbars=10, ballbar_points=5, seats=3, articulations=10, spheres=1, sphere_points=12, rings=1,
+                 ring_points=12, planes=1, plane_points=8, reference_points=40, force=1.5, noise=2e-6,
+                 reference_noise=3e-6)
+
+
+@pytest.fixture(scope="module")
+def model(nominal):
+    return ArmModel(nominal)
+
+
+def _data(model, c):
+    return make_data(c.points, c.artefacts, model, reference=c.reference_points)
+
+
+def test_noise_free_campaign_is_recovered_exactly(model):
+    """Without noise the fit returns the truth to 1e-11 (m, rad) and residuals below 1e-11 m when the
+    unidentifiable parameters are zero in the truth."""
+    spec = replace(SPEC, noise=0.0, reference_noise=0.0)
+    c = make_campaign(model, spec, seed=21)
+    w = Weights(probe=1e-6, reference=1e-6)
+    res = calibrate(model, _data(model, c), weights=w)
+    # the fixed parameters' true errors map into the kept ones to first order only: the second-order
+    # remainder (~(1e-4 rad)^2 x lever) leaves nanometres; with them zero in the truth the recovery is exact
+    assert np.sqrt(np.mean(res.residuals["value"] ** 2)) < 2e-8 and res.status.startswith("converged")
+    truth = c.p_true.copy()
+    truth[[model.spec.index(f.name) for f in res.fixed]] = 0.0
+    c2 = make_campaign(model, spec, seed=21, p_true=truth, T_ref_base=c.T_ref_base)
+    res2 = calibrate(model, _data(model, c2), list(res.free), weights=w)
+    assert res2.free == res.free and not res2.fixed
+    idx = [model.spec.index(n) for n in res2.free]
+    assert_close(res2.p[idx], truth[idx], atol=1e-11)
+    assert_close(res2.p, truth, atol=1e-11)
+    assert np.sqrt(np.mean(res2.residuals["value"] ** 2)) < 1e-11
+
+
+@pytest.fixture(scope="module")
+def noisy(model):
+    c = make_campaign(model, SPEC, seed=22)
+    data = _data(model, c)
+    train, test = split_holdout(data, 0.3, seed=1)
+    res = calibrate(model, train, weights=Weights(probe=2e-6, reference=3e-6))
+    return c, train, test, res
+
+
+def test_truth_within_three_sigma(noisy, model):
+    c, _, _, res = noisy
+    peq = res.equivalent(c.p_true)
+    z = np.array([(res.value(n) - peq[model.spec.index(n)]) / res.uncertainty(n) for n in res.free])
+    assert np.all(np.abs(z) < 3.0), dict(zip(res.free, np.round(z, 2)))
+    assert 0.3 < np.sqrt(np.mean(z ** 2)) < 1.7          # the uncertainties are about right, not inflated
+    assert 0.8 < res.s0 < 1.2                             # weights equal to the noise: s0 about 1
+    assert_close(np.diag(res.corr), 1.0, atol=1e-12)
+    assert np.all(np.abs(res.corr) <= 1 + 1e-12)
+
+
+def test_held_out_figures_improve_five_fold(noisy, model):
+    _, _, test, res = noisy
+    rows = {r["key"]: r for r in res.compare(test)}
+    assert rows["length_error_max"]["ratio"] >= 5
+    assert rows["articulation_2sigma"]["ratio"] >= 5
+    assert rows["articulation_2sigma"]["after"] < 15          # um: a few probing sigmas
+    assert rows["length_error_max"]["after"] < 15
+
+
+def test_predict_on_held_out_data(noisy):
+    _, _, test, res = noisy
+    pred = res.predict(test)
+    assert set(pred["measurement"]) <= set(test.measurements())
+    assert pred["rms_weighted"] < 3.0                  # held-out residuals at the noise level (sigma units)
+    zero = replace(res, p=np.zeros_like(res.p))
+    assert zero.predict(test)["rms_weighted"] > 10 * pred["rms_weighted"]
+
+
+def test_outlier_is_reported_with_its_line_and_kept(model):
+    c = make_campaign(model, replace(SPEC, rings=0, planes=0, reference_points=0, force=0.0), seed=23)
+    q = c.points.q.copy()
+    bad = int(np.flatnonzero(c.points.feature == "seat")[4])
+    q[bad, 1] += 5e-4                                    # 0.5 mrad on the shoulder: ~0.3 mm off
+    pts = replace(c.points, q=q)
+    data = make_data(pts, c.artefacts, model)
+    res = calibrate(model, data, weights=Weights(probe=2e-6))
+    o = max(res.outliers, key=lambda o: abs(o.standardized))      # the gross error is the worst
+    assert o.point == bad and o.line == pts.lines[bad] and o.measurement == pts.measurement[bad]
+    assert abs(o.standardized) > 10
+    assert bad in res.residuals["point"] and len(res.data) == len(data)          # reported, kept
+    dropped = calibrate(model, data, weights=Weights(probe=2e-6), drop_outliers=True)
+    assert [o.point for o in dropped.dropped] == [bad]          # only the bad one: its neighbours come back
+    assert len(dropped.data) == len(data) - 1 and not dropped.outliers
+    assert dropped.s0 < res.s0
+
+
+def test_effect_parameters_are_calibrated(nominal):
+    """A model with an effect (probe compliance increment): its parameter is identified with the base ones."""
+    model = ArmModel(nominal, (ProbeCompliance(),))
+    truth = random_truth(model, np.random.default_rng(24))
+    truth[model.spec.index("probe.dcompliance_bend")] = 3e-6
+    c = make_campaign(model, replace(SPEC, force=3.0, reference_points=0), seed=24, p_true=truth)
+    res = calibrate(model, make_data(c.points, c.artefacts, model), weights=Weights(probe=2e-6))
+    assert "probe.dcompliance_bend" in res.free
+    u = res.uncertainty("probe.dcompliance_bend")
+    assert abs(res.value("probe.dcompliance_bend") - 3e-6) < 3 * u and u < 5e-7
+
+
+def test_articulation_figures_by_hand():
+    x = np.array([[0.0, 0, 0], [2e-6, 0, 0], [0, 4e-6, 0], [0, 0, -2e-6]])
+    a = _articulation(x)
+    mean = x.mean(axis=0)
+    assert_close(a["centre"], mean, atol=1e-18)
+    assert_close(a["half_range"], [1e-6, 2e-6, 1e-6], atol=1e-18)
+    assert_close(a["two_sigma"], 2 * np.std(x, axis=0, ddof=1), atol=1e-18)
+    d = np.linalg.norm(x - mean, axis=1)
+    assert_close(a["two_rms"], 2 * np.sqrt(np.sum(d ** 2) / 3), atol=1e-18)
+    assert_close(a["max_radial"], d.max(), atol=1e-18)
+
+
+def test_validation_at_the_truth_is_at_noise_level(model):
+    """Noise-free data, the true parameters: every validation figure is zero to 1e-9 m; the nominal
+    parameters give errors of tens of micrometres."""
+    c = make_campaign(model, replace(SPEC, noise=0.0, reference_noise=0.0), seed=25)
+    data = _data(model, c)
+    v = validate(model, c.p_true, data, Weights(probe=1e-6, reference=1e-6)).summary()
+    for key, value in v.items():
+        assert abs(value) < 1e-9, key
+    v0 = validate(model, np.zeros(model.spec.size), data, Weights(probe=1e-6, reference=1e-6)).summary()
+    assert v0["length_error_max"] > 10e-6 and v0["articulation_2sigma"] > 10e-6

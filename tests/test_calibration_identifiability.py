@@ -1,0 +1,131 @@
+"""Identifiability: the fit finds and names the combinations the data cannot separate, by itself."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from arm_model import NumericalError
+from arm_model.model import ArmModel
+from calibration import analyse, calibrate, make_data, Weights
+from calibration.synth import SynthSpec, make_campaign
+from conftest import assert_close
+
+
+def test_analyse_on_a_hand_built_matrix():
+    """Columns a, b = 2 a (units differ), c independent: rank 2, one of a/b dependent with the exact
+    combination, the SVD null vector (1, -1/2, 0) up to scale, condition by hand."""
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=50)
+    c = rng.normal(size=50)
+    c -= (c @ a) / (a @ a) * a                  # orthogonal to a
+    c *= np.linalg.norm(a) / np.linalg.norm(c)
+    j = np.column_stack([a, 2 * a, c])
+    idf = analyse(j, j, ["a", "b", "c"])
+    assert idf.rank == 2
+    assert len(idf.dependent) == 1 and idf.dependent[0] in ("a", "b")
+    comb = idf.combinations[idf.dependent[0]]
+    terms = dict(comb.terms)
+    if idf.dependent[0] == "b":
+        assert_close(terms["a"], -2.0, atol=1e-12)
+    else:
+        assert_close(terms["b"], -0.5, atol=1e-12)
+    assert "c" not in terms
+    null = dict(idf.null[0].terms)
+    assert_close(null[idf.null[0].terms[0][0]], 1.0, atol=0)
+    assert_close(null.get("b", 0) / null.get("a", 1), -0.5, atol=1e-12)
+    # scaled columns: a/|a|, b/|b| equal, c/|c| orthogonal: singular values sqrt(2), 1
+    assert_close(idf.singular_values[:2], [np.sqrt(2), 1.0], atol=1e-12)
+    assert_close(idf.condition, np.sqrt(2), atol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def artefact_data(nominal):
+    model = ArmModel(nominal)
+    c = make_campaign(model, SynthSpec(ballbars=8, ballbar_points=5, seats=3, articulations=8, spheres=1,
+                                       sphere_points=10, noise=1e-6), seed=4)
+    return model, c, make_data(c.points, c.artefacts, model)
+
+
+def test_base_pose_not_observable_from_artefacts(artefact_data):
+    """Without reference coordinates the base pose is invisible: the fit finds j1.theta_offset (rotation
+    about the base z) and j1.d (translation along it) and names the exact equivalences of the chain's end
+    (probe offset vs j7), without being told."""
+    model, c, data = artefact_data
+    res = calibrate(model, data, weights=Weights(probe=1e-6))
+    fixed = {f.name: f for f in res.fixed}
+    assert {"j1.theta_offset", "j1.d"} <= set(fixed)
+    for name in ("j1.theta_offset", "j1.d"):
+        assert "rigid motion of the base" in fixed[name].reason
+        assert name in res.identifiability.gauge
+    # the ball is on the j7 axis: probe.x ~ j7.a and probe.z ~ j7.d exactly
+    for pair in (("probe.x", "j7.a"), ("probe.z", "j7.d")):
+        named = [f for f in res.fixed if f.name in pair]
+        assert len(named) == 1
+        terms = dict(named[0].combination.terms)
+        other = pair[1] if named[0].name == pair[0] else pair[0]
+        assert_close(terms[other], -1.0, atol=1e-6)
+    assert not set(fixed) & set(res.free)
+    assert res.identifiability_final.rank == len(res.free)
+
+
+def test_reference_in_base_frame_makes_the_base_pose_identifiable(nominal):
+    """Tracker points given in the base frame (reference='identity'): j1.theta_offset and j1.d become
+    identifiable, and they are recovered."""
+    model = ArmModel(nominal)
+    c = make_campaign(model, SynthSpec(ballbars=4, seats=2, spheres=0, reference_points=60, noise=1e-6,
+                                       reference_noise=1e-6), seed=6, T_ref_base=np.eye(4))
+    data = make_data(c.points, c.artefacts, model, reference=c.reference_points)
+    res = calibrate(model, data, weights=Weights(probe=1e-6, reference=1e-6), reference="identity")
+    assert "j1.theta_offset" in res.free and "j1.d" in res.free
+    for n in ("j1.theta_offset", "j1.d"):
+        assert abs(res.value(n) - c.truth[n]) < 4 * res.uncertainty(n)
+    res2 = calibrate(model, data, weights=Weights(probe=1e-6, reference=1e-6), reference="fit")
+    assert {"j1.theta_offset", "j1.d"} <= {f.name for f in res2.fixed}
+
+
+def test_stop_policy_lists_the_combinations(artefact_data):
+    model, _, data = artefact_data
+    with pytest.raises(NumericalError) as exc:
+        calibrate(model, data, on_unidentifiable="stop")
+    msg = str(exc.value)
+    assert "j1.theta_offset" in msg and "probe.z" in msg or "j7.d" in msg
+
+
+def test_compliance_without_force_has_no_effect(artefact_data):
+    model, _, data = artefact_data
+    res = calibrate(model, data, free=["j2.*", "probe.compliance_*"], weights=Weights(probe=1e-6))
+    fixed = {f.name: f.reason for f in res.fixed}
+    for n in ("probe.compliance_x", "probe.compliance_y", "probe.compliance_z"):
+        assert "no effect" in fixed[n]
+    assert set(res.free) == {"j2.theta_offset", "j2.d", "j2.a", "j2.alpha"}
+
+
+def test_urdf_arm_origin_errors(nominal, tmp_path):
+    """An arm given as a URDF (per-joint origin xyz/rpy errors, 6 a joint): the same code finds the
+    redundant origin parameters (the first joint's 6 are rigid motions of the base) and recovers the
+    rest in the identifiable parameterization."""
+    from arm_model.urdf import urdf_text
+    from arm_model.urdf_import import description_from_urdf
+    text = urdf_text(nominal)
+    text = text[: text.index('  <joint name="stylus_root_joint"')]
+    text += ('  <joint name="tip_joint" type="fixed"><parent link="flange"/><child link="tip"/>'
+             '<origin xyz="0.002 -0.001 0.085" rpy="0 0 0"/></joint>\n  <link name="tip"/>\n</robot>\n')
+    path = tmp_path / "arm.urdf"
+    path.write_text(text)
+    desc = description_from_urdf(path, "tip")
+    model = ArmModel(desc)
+    assert model.spec.names[:6] == ("j1.origin_x", "j1.origin_y", "j1.origin_z", "j1.origin_roll",
+                                    "j1.origin_pitch", "j1.origin_yaw")
+    c = make_campaign(model, SynthSpec(ballbars=8, ballbar_points=5, seats=3, articulations=10, spheres=1,
+                                       noise=1e-6), seed=8)
+    res = calibrate(model, make_data(c.points, c.artefacts, model), weights=Weights(probe=1e-6))
+    j1 = {f"j1.origin_{k}" for k in ("x", "y", "z", "roll", "pitch", "yaw")}
+    assert j1 <= set(res.identifiability.gauge)          # all six rigid motions found
+    rigid = {f.name for f in res.fixed if "rigid motion" in f.reason}
+    assert len(rigid) >= 6 and rigid <= set(res.identifiability.gauge)
+    # j2's origin z and yaw act along / about the j1 axis: rigid motions too (or exact equivalents)
+    assert {"j2.origin_z", "j2.origin_yaw"} <= set(res.identifiability.gauge)
+    assert len(res.fixed) > 6 and res.identifiability_final.rank == len(res.free)
+    peq = res.equivalent(c.p_true)
+    z = [(res.value(n) - peq[model.spec.index(n)]) / res.uncertainty(n) for n in res.free]
+    assert np.max(np.abs(z)) < 4.0
