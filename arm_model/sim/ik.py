@@ -1,7 +1,8 @@
 """Redundant inverse kinematics on the true arm, for many points at once.
 
 Constraints per point: the deflected ball centre at a target (3), the stylus (probe z axis) along a
-required direction (2), and optionally the probe x axis towards a required direction (1). A 7-axis
+required direction (2; the residual is ``z - u``, so the opposite direction is no solution), and
+optionally the probe x axis towards a required direction (1). A 7-axis
 arm keeps one or two redundant degrees of freedom (elbow swivel, handle roll); they are drawn at
 random like an operator does, by starting each solve from a random configuration inside the joint
 limits. Damped Gauss-Newton on all pending points in parallel (numpy), with exact Jacobians by
@@ -22,7 +23,8 @@ from .._errors import NumericalError
 from ..effects import Geometry
 from .truth import Truth
 
-__all__ = ["IKTargets", "IKResult", "solve_ik", "joint_limits", "wrap_into_limits"]
+__all__ = ["IKTargets", "IKResult", "solve_ik", "solve_points", "joint_limits", "wrap_into_limits",
+           "ball_jacobian", "probe_wrench"]
 
 _H = 1e-30       # complex step [rad]
 _L0 = 0.1        # position scale [m] of the residual
@@ -106,6 +108,18 @@ def probe_wrench(force, torque, z, x) -> np.ndarray:
     y = np.cross(z, x)
     r = np.stack([x, y, z], axis=1)           # rows: probe axes in base -> R_probe_base
     return np.concatenate([np.einsum("nij,nj->ni", r, force), np.einsum("nij,nj->ni", r, torque)], axis=1)
+
+
+def ball_jacobian(truth: Truth, q, temperature, wrench) -> np.ndarray:
+    """(N, 3, J) d ball / d q [m/rad] of the true arm at true angles ``q`` (N, J) with a fixed
+    probe-frame ``wrench`` (N, 6) (complex step through the core chain)."""
+    n, j = q.shape
+    qc = np.repeat(q[None], j, axis=0).astype(complex)
+    for k in range(j):
+        qc[k, :, k] += 1j * _H
+    geom = _take_geom(truth.geometry(temperature), np.arange(n), j)
+    ball, _, _ = truth.pose(qc.reshape(j * n, j), geom, np.tile(wrench, (j, 1)))
+    return np.transpose(ball.imag.reshape(j, n, 3) / _H, (1, 2, 0))
 
 
 def _residual_and_jacobian(truth: Truth, q, geom, tg: IKTargets, has_x):

@@ -19,7 +19,7 @@ from ..io import (Artefacts, ForceSignal, PointSet, atomic_write_text, guard_out
 from ..io import parse_artefacts
 from .artefacts import Plan, make_plan
 from .campaign import Campaign
-from .ik import IKTargets, solve_ik
+from .ik import IKTargets, ball_jacobian, solve_ik
 from .operator import OperatorDraw, draw_operator, force_signal, measurement_slices
 from .truth import Truth, build_truth, si_key
 
@@ -193,18 +193,6 @@ def _x_directions(plan: Plan, force: np.ndarray, rng) -> np.ndarray:
     return x
 
 
-def _ball_jacobian(truth: Truth, q, temperature, wrench) -> np.ndarray:
-    """(N, 3, J) d ball / d q [m/rad] at true angles (complex step through the core chain)."""
-    from .ik import _H, _take_geom
-    n, j = q.shape
-    qc = np.repeat(q[None], j, axis=0).astype(complex)
-    for k in range(j):
-        qc[k, :, k] += 1j * _H
-    geom = _take_geom(truth.geometry(temperature), np.arange(n), j)
-    ball, _, _ = truth.pose(qc.reshape(j * n, j), geom, np.tile(wrench, (j, 1)))
-    return np.transpose(ball.imag.reshape(j, n, 3) / _H, (1, 2, 0))
-
-
 def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimResult:
     """Simulate ``campaign`` (seed: the campaign's unless given). ``progress``: optional callable
     taking a message, called at each stage. Raises :class:`~arm_model.NumericalError` if a point
@@ -253,7 +241,7 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
     nz, nrng = campaign.noise, rng["noise"]
     q_read = q_enc.copy()
     if nz["probing_repeatability"] > 0:
-        jac = _ball_jacobian(truth, q_true, draw.temperature, wrench)
+        jac = ball_jacobian(truth, q_true, draw.temperature, wrench)
         dx = nrng.normal(0.0, nz["probing_repeatability"], (n, 3))
         q_read += np.einsum("nij,nj->ni", np.linalg.pinv(jac), dx)
     if nz["encoder_noise"] > 0:
