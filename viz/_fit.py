@@ -29,8 +29,12 @@ def fit_plane(p) -> tuple[np.ndarray, np.ndarray]:
     return c, vt[2]
 
 
-def fit_sphere(p) -> tuple[np.ndarray, float]:
-    """(centre (3,) [m], radius [m]) by linear least squares; >= 4 points not on one plane."""
+def fit_sphere(p, radius: float | None = None) -> tuple[np.ndarray, float]:
+    """(centre (3,) [m], radius [m]) of the least-squares sphere; >= 4 points not on one plane.
+
+    Linear (algebraic) fit; with a known ``radius`` [m] the centre is then refined by geometric least
+    squares at that radius, which is far better conditioned for points on a small cap.
+    """
     p = _points(p, 4, "sphere")
     a = np.column_stack([2 * p, np.ones(len(p))])
     b = np.sum(p * p, axis=1)
@@ -38,4 +42,11 @@ def fit_sphere(p) -> tuple[np.ndarray, float]:
     if rank < 4:
         raise NumericalError(f"{len(p)} points on one plane cannot place a sphere")
     centre = x[:3]
-    return centre, float(np.sqrt(x[3] + centre @ centre))
+    if radius is None:
+        return centre, float(np.sqrt(x[3] + centre @ centre))
+    from scipy.optimize import least_squares
+
+    sol = least_squares(lambda c: np.linalg.norm(p - c, axis=1) - radius, centre, method="lm")
+    if not sol.success:
+        raise NumericalError(f"the sphere fit at radius {radius * 1e3:g} mm did not converge: {sol.message}")
+    return sol.x, float(radius)

@@ -123,7 +123,8 @@ def run(args: argparse.Namespace) -> int:
         view.show_points(centres, name="ball centres (corrected)")
         notes = []
         if artefacts is not None:
-            placements, notes = place_features(artefacts, sel.measurement, sel.feature, centres)
+            placements, notes = place_features(artefacts, sel.measurement, sel.feature, centres,
+                                               desc.probe.ball_diameter)
             view.show_artefacts(placements, artefacts.distances)
         if residuals is not None:
             view.show_residuals(residuals.points, residuals.vectors, scale=args.residual_scale)

@@ -3,7 +3,8 @@
 The artefacts file gives sizes, not placements: each (measurement, feature) group of measured ball
 centres is fitted (ring/cylinder: axis, centre and radius, by :func:`correction.cylinder.fit_cylinder`,
 or for a ring probed in one plane the plane's normal and a circle in it; sphere: centre; plane:
-centroid and normal; seat: the mean point) and drawn with the certified size. For drawing only.
+centroid and normal; seat: the mean point) and drawn with the certified size. A sphere's centre is
+fitted at the known radius of its ball centres when the ball diameter is given. For drawing only.
 """
 from __future__ import annotations
 
@@ -31,7 +32,8 @@ class Placement:
             plane: the points' centroid; seat: the mean ball centre.
         axis: (3,) unit axis (ring/cylinder) or normal (plane), else None.
         radius: [m] the artefact's certified radius (diameter / 2) where it has one, else None.
-        fitted_radius: [m] radius of the ball centres' fit (ring/cylinder/sphere), else None.
+        fitted_radius: [m] radius of the ball centres' fit (ring/cylinder/sphere; a sphere fitted at
+            its known radius gives that radius), else None.
         size: (2,) [m] ring/cylinder: (height spanned by the points, 0); plane: the points' extent
             along two in-plane axes; else zeros.
         n_points: number of ball centres used.
@@ -73,14 +75,16 @@ def _ring_axis(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     return centroid + circle.centre[0] * u + circle.centre[1] * v, normal, circle.radius
 
 
-def place_features(artefacts, measurement: np.ndarray, feature: np.ndarray,
-                   centres: np.ndarray) -> tuple[list[Placement], list[str]]:
+def place_features(artefacts, measurement: np.ndarray, feature: np.ndarray, centres: np.ndarray,
+                   ball_diameter: float | None = None) -> tuple[list[Placement], list[str]]:
     """Place every (measurement, feature) group of ball centres.
 
     Args:
         artefacts: :class:`arm_model.Artefacts`.
         measurement, feature: (N,) ids of each point (feature "" = free point, skipped).
         centres: (N, 3) deflection-corrected ball centres [m], base frame.
+        ball_diameter: the probe ball's diameter [m]; if given, a sphere's centre is fitted at the known
+            radius of its ball centres, (certified diameter + ball diameter) / 2.
 
     Returns:
         (placements, notes): notes say which groups could not be placed and why (too few points,
@@ -109,7 +113,8 @@ def place_features(artefacts, measurement: np.ndarray, feature: np.ndarray,
                 centre = origin + axis * (t.min() + t.max()) / 2
                 size = np.array([t.max() - t.min(), 0.0])
             elif feat.kind == "sphere":
-                centre, fitted = fit_sphere(p)
+                known = None if ball_diameter is None else (feat.diameter + ball_diameter) / 2
+                centre, fitted = fit_sphere(p, known)
             elif feat.kind == "plane":
                 centre, axis = fit_plane(p)
                 u, v = _in_plane_basis(axis)

@@ -42,6 +42,8 @@ def _answering(server: MeshcatServer):
     """Turn a server that stopped answering into a :class:`ViewerError`."""
     import zmq
 
+    if not server.running:   # never talk to whatever took its port since
+        raise ViewerError(f"the meshcat server at {server.url} has stopped")
     try:
         yield
     except zmq.ZMQError as exc:
