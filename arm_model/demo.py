@@ -55,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
                                                  str(out / "sim-calibration"), "-q", "--no-signals"])
     cal = out / "sim-calibration"
     cal_args = ["calibrate", str(cal / "points.csv"), str(cal / "artefacts.toml"), "--arm", str(ARM),
-                "-o", str(out / "calibration")]
+                "--holdout", "0.25", "-o", str(out / "calibration")]
     if (cal / "points-ref.csv").exists():
         cal_args[3:3] = ["--reference-points", str(cal / "points-ref.csv")]
     _step("5b. kinematic calibration with held-out validation", cal_args)
