@@ -1,0 +1,176 @@
+"""Candidate missing effects: the effect library (:mod:`arm_model.effects`) instantiated for one arm
+and one data set, each with a readable name.
+
+A candidate is an :class:`~arm_model.effects.Effect` instance that the closed loop may add to the
+model (``ArmModel.with_effects``). The library gives, per arm and data:
+
+* ``eccentricity jN``: encoder eccentricity of joint N, harmonics 1 and 2 (4 parameters);
+* ``joint compliance jN``: joint N turns by ``c (tau_contact - tau_gravity)`` (1 parameter); offered
+  only where the joint's gravity or contact torque is not zero throughout the data;
+* ``thermal growth``: one expansion coefficient of every link length; offered only when the
+  temperature column varies by at least :data:`MIN_TEMPERATURE_SPAN`;
+* ``force sensor x|y|z``: gain and offset of one sensor axis; only with force data on that axis
+  (a constant offset deflects the probe by a constant vector, which the probe offset ``probe.x/y/z``
+  absorbs: the screening shows it as not identifiable);
+* ``probe compliance (isotropic)`` / ``(anisotropic)``: bending compliance beyond the declared one;
+  only with force data.
+
+A new candidate is one :class:`~arm_model.effects.Effect` subclass (parameters zero = no change,
+as every library effect) wrapped in a :class:`Candidate`, passed to the loop as an extra candidate.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from arm_model.description import ArmDescription
+from arm_model.effects import (Effect, EncoderEccentricity, ForceSensorError, JointCompliance, ProbeCompliance,
+                               ThermalGrowth)
+from arm_model.model import ArmModel
+
+from .data import CalibrationData
+
+__all__ = ["Candidate", "Skipped", "FAMILIES", "MIN_TEMPERATURE_SPAN", "library_candidates", "needs_model",
+           "torques_of"]
+
+#: candidate families of the library, by effect key (the CLI's ``--candidates`` names)
+FAMILIES = ("eccentricity", "joint_compliance", "thermal", "force_sensor", "probe_compliance")
+
+#: smallest temperature range [K] over the data for which thermal growth is a candidate
+MIN_TEMPERATURE_SPAN = 0.2
+
+#: torque [N m] below which a joint's torque counts as zero throughout the data
+_ZERO_TORQUE = 1e-6
+#: force [N] below which a sensor axis counts as unused
+_ZERO_FORCE = 1e-6
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A missing effect the loop may add.
+
+    Attributes:
+        name: readable name, e.g. ``"eccentricity j2"`` (unique within a candidate set).
+        effect: the effect instance added to the model.
+        family: the effect family (the effect's key for library effects).
+        joint: the joint it acts on (name), or None.
+    """
+    name: str
+    effect: Effect
+    family: str
+    joint: str | None = None
+
+    def param_names(self, desc: ArmDescription) -> list[str]:
+        return [n for n, _ in self.effect.param_defs(desc)]
+
+    def size(self, desc: ArmDescription) -> int:
+        return len(self.effect.param_defs(desc))
+
+
+@dataclass(frozen=True)
+class Skipped:
+    """A library candidate left out for these data, and why."""
+    name: str
+    reason: str
+
+
+def needs_model(desc: ArmDescription, effects=()) -> ArmModel:
+    """A model that needs every per-point input ``effects`` need (for ``make_data``): one effect per need."""
+    picked, seen = [], set()
+    for e in effects:
+        new = set(e.needs()) - seen
+        if new:
+            picked.append(e)
+            seen |= set(e.needs())
+    names: set[str] = set()
+    out = []
+    for e in picked:                  # parameter names must not collide in one model
+        pn = {n for n, _ in e.param_defs(desc)}
+        if pn & names:
+            continue
+        names |= pn
+        out.append(e)
+    return ArmModel(desc, tuple(out))
+
+
+def torques_of(desc: ArmDescription, data: CalibrationData) -> tuple[np.ndarray, np.ndarray]:
+    """(tau_gravity, tau_contact) (N, J) [N m] of the data: its aux inputs, else Pinocchio at the
+    measured angles and wrenches (nominal description)."""
+    aux = data.aux
+    if aux is not None and aux.tau_gravity is not None and aux.tau_contact is not None:
+        return aux.tau_gravity, aux.tau_contact
+    from arm_model import PinocchioArm
+    return PinocchioArm(desc).torques(data.points.q, data.points.wrench)
+
+
+def library_candidates(desc: ArmDescription, data: CalibrationData, families=None,
+                       extra=()) -> tuple[list[Candidate], list[Skipped]]:
+    """The library's candidates for ``desc`` and ``data``, and those left out with the reason.
+
+    Args:
+        families: keys of :data:`FAMILIES` to offer (default all).
+        extra: user candidates (:class:`Candidate`), appended after the library's.
+    """
+    families = FAMILIES if families is None else tuple(families)
+    unknown = set(families) - set(FAMILIES)
+    if unknown:
+        raise ValueError(f"unknown candidate famil{'y' if len(unknown) == 1 else 'ies'} "
+                         f"{', '.join(sorted(unknown))}; known: {', '.join(FAMILIES)}")
+    pts = data.points
+    names = [j.name for j in desc.joints]
+    out: list[Candidate] = []
+    skipped: list[Skipped] = []
+    force = pts.force if pts.force is not None else np.zeros((len(pts), 3))
+    axes_used = [a for a in range(3) if np.max(np.abs(force[:, a]), initial=0.0) > _ZERO_FORCE]
+    if "eccentricity" in families:
+        for i, n in enumerate(names):
+            out.append(Candidate(f"eccentricity {n}", EncoderEccentricity(joints=(i,), harmonics=(1, 2)),
+                                 "eccentricity", n))
+    if "joint_compliance" in families:
+        tau_g, tau_c = torques_of(desc, data)
+        for i, n in enumerate(names):
+            g = np.max(np.abs(tau_g[:, i]), initial=0.0)
+            c = np.max(np.abs(tau_c[:, i]), initial=0.0)
+            if g <= _ZERO_TORQUE and c <= _ZERO_TORQUE:
+                skipped.append(Skipped(f"joint compliance {n}", "neither gravity nor the contact loads this joint "
+                                                                 "in these data (torques zero)"))
+                continue
+            out.append(Candidate(f"joint compliance {n}", JointCompliance(joints=(i,), gravity=True, contact=True),
+                                 "joint_compliance", n))
+    if "thermal" in families:
+        t = pts.temperature
+        if t is None or not np.all(np.isfinite(t)):
+            skipped.append(Skipped("thermal growth", "no temperature_C column (or empty cells)"))
+        elif np.ptp(t) < MIN_TEMPERATURE_SPAN:
+            skipped.append(Skipped("thermal growth", f"the temperature varies by {np.ptp(t):.3g} K only "
+                                                     f"(at least {MIN_TEMPERATURE_SPAN:g} K needed)"))
+        else:
+            out.append(Candidate("thermal growth", ThermalGrowth(), "thermal"))
+    if "force_sensor" in families:
+        if not axes_used:
+            skipped.append(Skipped("force sensor", "no force data"))
+        for a in range(3):
+            if a in axes_used:
+                out.append(Candidate(f"force sensor {'xyz'[a]}", ForceSensorError(axes=(a,), offsets=True),
+                                     "force_sensor"))
+            elif axes_used:
+                skipped.append(Skipped(f"force sensor {'xyz'[a]}", f"no force along probe {'xyz'[a]} in these data"))
+    if "probe_compliance" in families:
+        if not axes_used:
+            skipped.append(Skipped("probe compliance", "no force data"))
+        else:
+            out.append(Candidate("probe compliance (isotropic)", ProbeCompliance(anisotropic=False),
+                                 "probe_compliance"))
+            out.append(Candidate("probe compliance (anisotropic)", ProbeCompliance(anisotropic=True),
+                                 "probe_compliance"))
+    for c in extra:
+        if not isinstance(c, Candidate):
+            raise TypeError(f"an extra candidate must be a Candidate, got {type(c).__name__}")
+        out.append(c)
+    seen = set()
+    for c in out:
+        if c.name in seen:
+            raise ValueError(f"two candidates are named {c.name!r}")
+        seen.add(c.name)
+    return out, skipped

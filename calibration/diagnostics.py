@@ -1,0 +1,597 @@
+"""Residual diagnostics after a calibration: which structure do the residuals still hold?
+
+Everything happens in the space of the fit's weighted residual rows ``r`` (each row divided by its
+standard uncertainty, :class:`~calibration.problem.Problem`). A *group* of regressor columns ``C``
+(rows x k) is a hypothesis about the residual: a candidate effect (its exact Jacobian, from the CasADi
+model with the effect appended at zero) or a generic family (a joint-angle error that is a function
+of some variable, a displacement of the ball along the probe or base axes that is a function of
+some variable, a per-measurement or per-artefact offset). Before testing, the columns are projected
+off what the fit already absorbs: the nuisance unknowns of every artefact instance (centres, axes,
+planes, ``T_ref_base``; :func:`~calibration.identifiability.reduced_jacobian`) and the fit's free
+parameters. Then, for the projected columns ``C~`` of rank ``k`` (directions whose scaled size is
+below ``rank_tol`` are *absorbed*: the data cannot tell them from what is already fitted):
+
+* ``delta_chi2 = |P_C~ r|^2``: the drop of the weighted sum of squares a Gauss-Newton step adding the
+  group would give (the score, or Lagrange multiplier, statistic);
+* ``F = (delta_chi2 / k) / ((chi2 - delta_chi2) / (dof - k))`` and its p-value (F(k, dof - k));
+* ``delta_bic = n ln((chi2 - delta_chi2) / chi2) + k ln n`` (negative: the group is worth its parameters);
+* ``explained_cv``: the share of the residual sum of squares that the group predicts on held-out
+  folds of whole measurements (coefficients fitted on the other folds' rows).
+
+Generic families (:func:`structure_tests`), with ``D_j = dx/dq_j`` the ball's sensitivity to joint j:
+harmonics ``cos/sin(h q_j)``, h = 1..3, times ``D_j``; the gravity torque and the contact torque of
+joint j times ``D_j``; contact force components and magnitude times the probe axes; temperature and
+time times the base axes and the position vector (a scale); the stylus direction (approach) times the
+base axes; one offset per measurement (one-way ANOVA) and per artefact feature or certified length.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from arm_model.effects import Effect
+from arm_model.model import ArmModel
+
+from .calibrate import CalibrationResult
+from .candidates import Candidate, torques_of
+from .data import CalibrationData
+from .identifiability import DEFAULT_RANK_TOL, reduced_jacobian
+from .problem import Problem
+from .solver import levenberg_marquardt
+from .synth import probe_rotation
+
+__all__ = ["JointAngleOffset", "measurement_folds", "ResidualSpace", "residual_space", "GroupTest",
+           "Family", "families", "candidate_family", "test_group", "screen_candidates", "structure_tests",
+           "binned_estimates", "holm"]
+
+#: harmonics of each joint angle tested by the structure tests
+HARMONICS = (1, 2, 3)
+
+
+# ---------------------------------------------------------------------------------------------------
+# a diagnostic effect: a constant error of each joint angle (its Jacobian is dx/dq_j for any chain kind)
+
+@dataclass(frozen=True)
+class JointAngleOffset(Effect):
+    """``q_j += dq_j`` for every joint (diagnostic only: its Jacobian at zero is ``dx/dq_j``)."""
+    key: str = field(default="diag_joint_offset", init=False, repr=False)
+
+    def param_defs(self, desc):
+        return [(f"diag.{desc.joints[i].name}.dq", "rad") for i in self.joint_indices(desc)]
+
+    def apply(self, desc, params, inputs, geom, ops):
+        q = list(inputs.q)
+        for k, i in enumerate(self.joint_indices(desc)):
+            q[i] = q[i] + params[k]
+        inputs.q = q
+
+
+# ---------------------------------------------------------------------------------------------------
+# folds of whole measurements
+
+def measurement_folds(data: CalibrationData, k: int, seed: int = 0) -> dict[str, int]:
+    """Measurement id -> fold (0..k-1), drawn at random (seeded) within each group of measurements
+    that touch the same feature kinds, so that every fold holds each kind as far as possible."""
+    if k < 2:
+        raise ValueError(f"cross-validation needs at least 2 folds, got {k}")
+    ids = data.measurements()
+    if len(ids) < k:
+        raise ValueError(f"{len(ids)} measurement(s) cannot make {k} folds")
+    rng = np.random.default_rng(seed)
+    pts, arte = data.points, data.artefacts
+    groups: dict[tuple, list[str]] = {}
+    for m in ids:
+        feats = set(pts.feature[pts.measurement == m])
+        kinds = tuple(sorted(arte.features[f].kind if f else "free" for f in feats))
+        groups.setdefault(kinds, []).append(m)
+    out, start = {}, 0
+    for key in sorted(groups):
+        members = list(groups[key])
+        rng.shuffle(members)
+        for i, m in enumerate(members):
+            out[m] = (start + i) % k
+        start += len(members)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------
+# the residual space of one fit
+
+@dataclass
+class ResidualSpace:
+    """Weighted residual rows of a fit and the Jacobians that the tests project.
+
+    Attributes:
+        result: the fit.
+        model: the fit's model with ``extra`` effects and :class:`JointAngleOffset` appended (at zero).
+        problem: its :class:`~calibration.problem.Problem` on the fit's data.
+        p: parameters of ``model`` (the fit's, zeros for the appended effects) [SI].
+        r: (n,) weighted residuals at the fit; jp: (n, P) weighted Jacobian of every parameter.
+        basis: (n, m) orthonormal basis of the free parameters' columns after the nuisance projection.
+        row_point, row_measurement, row_feature, row_kind: per row (point index or -1 for a length).
+        extra_slices: columns of each extra effect; offset_slice: the joint-angle columns.
+    """
+    result: CalibrationResult
+    model: ArmModel
+    problem: Problem
+    p: np.ndarray
+    r: np.ndarray
+    jp: np.ndarray
+    jt: object
+    basis: np.ndarray
+    row_point: np.ndarray
+    row_measurement: np.ndarray
+    row_feature: np.ndarray
+    row_kind: np.ndarray
+    extra_slices: list
+    offset_slice: slice
+
+    @property
+    def data(self) -> CalibrationData:
+        return self.result.data
+
+    @property
+    def n(self) -> int:
+        return len(self.r)
+
+    @property
+    def chi2(self) -> float:
+        return float(self.r @ self.r)
+
+    @property
+    def dof(self) -> int:
+        return int(self.result.dof)
+
+    def project(self, cols: np.ndarray) -> np.ndarray:
+        """Columns (n, k) with the nuisance and the free parameters projected out."""
+        cols = np.asarray(cols, dtype=float).reshape(self.n, -1)
+        if cols.shape[1] == 0:
+            return cols
+        red = reduced_jacobian(cols, self.jt)
+        return red - self.basis @ (self.basis.T @ red)
+
+    def per_row(self, values: np.ndarray) -> np.ndarray:
+        """A per-point array (N, ...) taken at each row's point (zero on length rows)."""
+        values = np.asarray(values, dtype=float)
+        out = np.zeros((self.n,) + values.shape[1:])
+        ok = self.row_point >= 0
+        out[ok] = values[self.row_point[ok]]
+        return out
+
+
+def residual_space(result: CalibrationResult, extra=()) -> ResidualSpace:
+    """The residual space of ``result`` with the effects ``extra`` appended (at zero parameters).
+
+    The nuisance states are solved again at the fitted parameters (the same optimum as the fit)."""
+    model = result.model
+    extra = tuple(extra)
+    sup = ArmModel(model.desc, tuple(model.effects) + extra + (JointAngleOffset(),))
+    size = sup.spec.size
+    p = np.concatenate([result.p, np.zeros(size - model.spec.size)])
+    prob = Problem(sup, result.data, result.weights, np.arange(size), reference=result.reference_mode)
+    states = levenberg_marquardt(prob.with_free([]), p, prob.initial_states(p)).states
+    ev = prob.evaluate(p, states)
+    free = np.array([sup.spec.index(n) for n in result.free], dtype=int)
+    if len(free):
+        red = reduced_jacobian(ev.jp[:, free], ev.jt)
+        norm = np.linalg.norm(ev.jp[:, free], axis=0)
+        red = red / np.where(norm > 0, norm, 1.0)
+        u, s, _ = np.linalg.svd(red, full_matrices=False)
+        basis = u[:, s > 1e-9 * max(s.max(initial=0.0), 1e-300)]
+    else:
+        basis = np.zeros((len(ev.r), 0))
+    pts = result.data.points
+    rp = prob.row_point.copy()
+    rp[prob.row_distance >= 0] = -1
+    items = prob.distance_items
+    meas = np.empty(len(ev.r), dtype=object)
+    feat = np.empty(len(ev.r), dtype=object)
+    kind = np.empty(len(ev.r), dtype=object)
+    ok = rp >= 0
+    meas[ok] = pts.measurement[rp[ok]]
+    feat[ok] = pts.feature[rp[ok]]
+    kind[ok] = [prob.instances[i].kind for i in prob.row_instance[ok]]
+    for row in np.flatnonzero(~ok):
+        d = items[prob.row_distance[row]]
+        meas[row], feat[row], kind[row] = d.measurement, "length " + "-".join(d.between), "length"
+    slices, k = [], model.spec.size
+    for e in extra:
+        n = len(e.param_defs(model.desc))
+        slices.append(slice(k, k + n))
+        k += n
+    return ResidualSpace(result, sup, prob, p, ev.r.copy(), ev.jp, ev.jt, basis, rp, meas, feat, kind, slices,
+                         slice(k, size))
+
+
+# ---------------------------------------------------------------------------------------------------
+# one group of columns
+
+@dataclass
+class GroupTest:
+    """Evidence for one group of regressor columns (see the module docstring).
+
+    Attributes:
+        name: the candidate or family name.
+        k: columns; rank: identifiable directions after the projection.
+        absorbed: column names absorbed by the fit (nuisance and free parameters).
+        delta_chi2, f, p_value, delta_bic, explained, explained_cv: the statistics (``explained``
+            in-sample share of ``chi2``).
+        estimate, u: one-step estimates of the group's coefficients and their standard uncertainties
+            (SI of each column; NaN where absorbed).
+        names: column names; best: the subgroup with the largest delta_chi2 and its p-value.
+        beta_dirs: estimate reshaped (directions, basis) for families.
+    """
+    name: str
+    k: int
+    rank: int
+    absorbed: tuple
+    delta_chi2: float
+    f: float
+    p_value: float
+    delta_bic: float
+    explained: float
+    explained_cv: float
+    estimate: np.ndarray
+    u: np.ndarray
+    names: tuple
+    best: str = ""
+    best_p: float = float("nan")
+    note: str = ""
+
+    @property
+    def identifiable(self) -> bool:
+        return self.rank > 0
+
+    def to_dict(self) -> dict:
+        def num(v):
+            v = float(v)
+            return v if math.isfinite(v) else None
+        return {"name": self.name, "columns": self.k, "rank": self.rank, "absorbed": list(self.absorbed),
+                "delta_chi2": num(self.delta_chi2), "F": num(self.f), "p_value": num(self.p_value),
+                "delta_bic": num(self.delta_bic), "explained": num(self.explained),
+                "explained_heldout": num(self.explained_cv), "best_regressor": self.best,
+                "best_p_value": num(self.best_p), "note": self.note,
+                "estimate": {n: {"value": num(v), "u": num(u)} for n, v, u in zip(self.names, self.estimate, self.u)}}
+
+
+def _svd_scaled(c: np.ndarray, raw_norm: np.ndarray, rank_tol: float):
+    scale = np.where(raw_norm > 0, raw_norm, 1.0)
+    a = c / scale
+    a[:, raw_norm <= 0] = 0.0
+    u, s, vt = np.linalg.svd(a, full_matrices=False)
+    keep = s > rank_tol
+    return scale, u[:, keep], s[keep], vt[keep]
+
+
+def test_group(space: ResidualSpace, cols: np.ndarray, names, name: str, fold_of_row: np.ndarray | None,
+               raw: np.ndarray | None = None, subgroups: dict | None = None,
+               rank_tol: float = DEFAULT_RANK_TOL, projected: bool = False, cv: bool = True) -> GroupTest:
+    """Test the columns ``cols`` (n, k) (raw, or already projected with ``projected=True`` and their
+    raw columns in ``raw``) against the residual of ``space``.
+
+    Args:
+        fold_of_row: (n,) fold of each row for ``explained_cv`` (None: not computed).
+        subgroups: name -> column indices; ``best`` names the subgroup with the largest delta_chi2.
+        cv: compute ``explained_cv`` (False for columns that a held-out fold cannot predict, such as
+            one offset per measurement).
+    """
+    raw = cols if raw is None else raw
+    c = cols if projected else space.project(cols)
+    k = c.shape[1]
+    raw_norm = np.linalg.norm(raw, axis=0)
+    scale, u, s, vt = _svd_scaled(c, raw_norm, rank_tol)
+    rank = len(s)
+    frac = np.linalg.norm(c, axis=0) / np.where(raw_norm > 0, raw_norm, 1.0)
+    absorbed = tuple(n for n, f_, rn in zip(names, frac, raw_norm) if f_ <= rank_tol or rn <= 0)
+    r, chi2, dof = space.r, space.chi2, space.dof
+    nan = float("nan")
+    if rank == 0:
+        return GroupTest(name, k, 0, absorbed, 0.0, nan, 1.0, nan, 0.0, nan, np.full(k, nan), np.full(k, nan),
+                         tuple(names), note="absorbed by the fit: the data cannot tell it from what is fitted")
+    z = u.T @ r
+    d = float(z @ z)
+    rest = max(chi2 - d, 1e-300)
+    dof2 = dof - rank
+    if dof2 <= 0:
+        f_, p = nan, nan
+    else:
+        f_ = (d / rank) / (rest / dof2)
+        p = float(stats.f.sf(f_, rank, dof2))
+    n = len(r)
+    dbic = n * math.log(rest / chi2) + rank * math.log(n) if chi2 > 0 else nan
+    beta = -(vt.T / s) @ z / scale          # the Gauss-Newton step: r + C beta is smallest
+    var = rest / dof2 if dof2 > 0 else nan
+    cov = var * (vt.T / s ** 2) @ vt / np.outer(scale, scale)
+    uu = np.sqrt(np.clip(np.diag(cov), 0, None))
+    if absorbed:
+        idx = [i for i, nm in enumerate(names) if nm in absorbed]
+        beta[idx] = nan
+        uu[idx] = nan
+    ev_cv = nan
+    if fold_of_row is not None and cv:
+        ev_cv = _explained_cv(u, r, fold_of_row)
+    best, best_p = "", nan
+    if subgroups:
+        best_d = -1.0
+        for sg, idx in subgroups.items():
+            t = test_group(space, c[:, idx], [names[i] for i in idx], sg, None, raw=raw[:, idx], projected=True,
+                           rank_tol=rank_tol)
+            if t.rank and t.delta_chi2 > best_d:
+                best, best_p, best_d = sg, t.p_value, t.delta_chi2
+    return GroupTest(name, k, rank, absorbed, d, f_, p, dbic, d / chi2 if chi2 > 0 else nan, ev_cv, beta, uu,
+                     tuple(names), best, best_p)
+
+
+def _explained_cv(u: np.ndarray, r: np.ndarray, fold_of_row: np.ndarray) -> float:
+    sse = sst = 0.0
+    for f in np.unique(fold_of_row):
+        te = fold_of_row == f
+        tr = ~te
+        if not te.any() or not tr.any():
+            continue
+        b = np.linalg.lstsq(u[tr], r[tr], rcond=None)[0]
+        e = r[te] - u[te] @ b
+        sse += float(e @ e)
+        sst += float(r[te] @ r[te])
+    return 1.0 - sse / sst if sst > 0 else float("nan")
+
+
+def row_folds(space: ResidualSpace, folds: dict[str, int]) -> np.ndarray:
+    return np.array([folds.get(m, -1) for m in space.row_measurement])
+
+
+def holm(p_values) -> np.ndarray:
+    """Holm-Bonferroni adjusted p-values (NaN stays NaN)."""
+    p = np.asarray(p_values, dtype=float)
+    out = np.full(len(p), np.nan)
+    ok = np.flatnonzero(np.isfinite(p))
+    order = ok[np.argsort(p[ok])]
+    m = len(order)
+    run = 0.0
+    for i, j in enumerate(order):
+        run = max(run, min(1.0, (m - i) * p[j]))
+        out[j] = run
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------
+# candidate screening
+
+def _batches(desc, base_names, candidates) -> list[list[int]]:
+    """Candidates in groups whose parameter names collide neither with each other nor with the model."""
+    batches: list[tuple[set, list[int]]] = []
+    for i, c in enumerate(candidates):
+        names = set(c.param_names(desc))
+        if names & base_names:
+            raise ValueError(f"candidate {c.name!r} declares parameters the model already has: "
+                             f"{', '.join(sorted(names & base_names))}")
+        for used, members in batches:
+            if not names & used:
+                used |= names
+                members.append(i)
+                break
+        else:
+            batches.append((set(names), [i]))
+    return [m for _, m in batches]
+
+
+def screen_candidates(result: CalibrationResult, candidates, folds: dict[str, int] | None = None,
+                      rank_tol: float = DEFAULT_RANK_TOL) -> tuple[list[GroupTest], ResidualSpace]:
+    """Score test of every candidate at the fit ``result`` (one :class:`GroupTest` each, in the order
+    of ``candidates``) and the residual space (of the first batch) for further tests."""
+    desc = result.model.desc
+    tests: list[GroupTest | None] = [None] * len(candidates)
+    first = None
+    for members in _batches(desc, set(result.model.spec.names), candidates):
+        space = residual_space(result, [candidates[i].effect for i in members])
+        first = first or space
+        fr = row_folds(space, folds) if folds else None
+        for i, sl in zip(members, space.extra_slices):
+            c = candidates[i]
+            tests[i] = test_group(space, space.jp[:, sl], c.param_names(desc), c.name, fr, rank_tol=rank_tol)
+    if first is None:
+        first = residual_space(result)
+    return tests, first
+
+
+# ---------------------------------------------------------------------------------------------------
+# generic families
+
+@dataclass
+class Family:
+    """Regressor columns ``direction_d(row) * basis_b(point of the row)`` (``kind="field"``) or
+    ``indicator_g(row) / sigma(row)`` (``kind="groups"``).
+
+    Attributes:
+        name: e.g. ``"q2 harmonics"``; what: a sentence for the report.
+        directions: (name, unit, (n,) column) of each direction.
+        basis: (name, (N,) per-point values) of each basis function.
+        variable: (label, unit, factor to the shown unit, (N,) values) for the plot.
+        subgroups: name -> column indices (best-regressor naming).
+    """
+    name: str
+    what: str
+    kind: str
+    directions: list
+    basis: list
+    variable: tuple | None = None
+    subgroups: dict = field(default_factory=dict)
+    groups: list = field(default_factory=list)
+
+    def columns(self, space: ResidualSpace) -> tuple[np.ndarray, list[str]]:
+        if self.kind == "groups":
+            return self._indicator(space)
+        cols, names = [], []
+        for dn, _, d in self.directions:
+            for bn, b in self.basis:
+                cols.append(d * space.per_row(b))
+                names.append(f"{bn} -> {dn}")
+        return np.column_stack(cols), names
+
+    def _indicator(self, space):
+        sigma = space.problem.sigma
+        label = space.row_measurement if self.name == "measurement" else space.row_feature
+        cols = [np.where(label == g, 1.0 / sigma, 0.0) for g in self.groups]
+        return np.column_stack(cols), [str(g) for g in self.groups]
+
+
+def _point_frames(space: ResidualSpace):
+    """Per point: probe rotation R_base_probe (N, 3, 3) and ball centre (N, 3) [m] at the fit."""
+    res = space.result
+    data = res.data
+    base = ArmModel(res.model.desc)
+    rot = probe_rotation(base, data.points.q, res.p[: res.model.base_size])
+    x = res.model.ball_centres(data.points.q, data.wrench, res.p, data.aux)
+    return rot, x
+
+
+def families(space: ResidualSpace) -> list[Family]:
+    """The generic structure families for the fit of ``space`` (those the data can express)."""
+    res = space.result
+    desc = res.model.desc
+    data = res.data
+    pts = data.points
+    spec = space.model.spec
+    jp = space.jp
+    out: list[Family] = []
+    rot, x = _point_frames(space)
+    probe_dirs = [(f"probe {a}", "m", jp[:, spec.index(f"probe.{a}")]) for a in "xyz"]
+    base_cols = [sum(probe_dirs[a][2] * space.per_row(rot[:, ax, a]) for a in range(3)) for ax in range(3)]
+    base_dirs = [(f"base {a}", "m", base_cols[i]) for i, a in enumerate("xyz")]
+    scale_dir = ("scale (position x 1)", "1", sum(base_cols[i] * space.per_row(x[:, i]) for i in range(3)))
+    tau_g, tau_c = torques_of(desc, data)
+    force = data.wrench[:, :3]
+    has_force = pts.force is not None and np.max(np.abs(force), initial=0.0) > 1e-9
+    for j, jr in enumerate(desc.joints):
+        dq = ("angle " + jr.name, "rad", jp[:, space.offset_slice.start + j])
+        qj = pts.q[:, j]
+        basis = []
+        for h in HARMONICS:
+            basis += [(f"cos({h} q{j + 1})", np.cos(h * qj)), (f"sin({h} q{j + 1})", np.sin(h * qj))]
+        sub = {f"cos/sin({h} q{j + 1})": [2 * i, 2 * i + 1] for i, h in enumerate(HARMONICS)}
+        out.append(Family(f"q{j + 1} harmonics", f"error of joint {jr.name}'s angle periodic in q{j + 1} "
+                          f"(harmonics {', '.join(map(str, HARMONICS))})", "field", [dq], basis,
+                          (f"q{j + 1}", "deg", 180 / math.pi, qj), sub))
+        if np.max(np.abs(tau_g[:, j]), initial=0.0) > 1e-6:
+            out.append(Family(f"{jr.name} gravity torque", f"error of joint {jr.name}'s angle proportional to the "
+                              "torque it holds against gravity", "field", [dq], [(f"tau_g{j + 1}", tau_g[:, j])],
+                              (f"gravity torque {jr.name}", "N m", 1.0, tau_g[:, j])))
+        if has_force and np.max(np.abs(tau_c[:, j]), initial=0.0) > 1e-6:
+            out.append(Family(f"{jr.name} contact torque", f"error of joint {jr.name}'s angle proportional to the "
+                              "contact force's torque on it", "field", [dq], [(f"tau_c{j + 1}", tau_c[:, j])],
+                              (f"contact torque {jr.name}", "N m", 1.0, tau_c[:, j])))
+    if has_force:
+        axes = [a for a in range(3) if np.max(np.abs(force[:, a]), initial=0.0) > 1e-9]
+        basis = [(f"f{'xyz'[a]}", force[:, a]) for a in axes]
+        nb = len(basis)
+        sub = {f"f{'xyz'[a]} (probe frame)": [d * nb + i for d in range(3)] for i, a in enumerate(axes)}
+        big = axes[int(np.argmax([np.std(force[:, a]) for a in axes]))]
+        out.append(Family("contact force", "ball displacement along the probe axes linear in the contact force "
+                          "components (a full compliance matrix)", "field", probe_dirs, basis,
+                          (f"f{'xyz'[big]}", "N", 1.0, force[:, big]), sub))
+        mag = np.linalg.norm(force, axis=1)
+        out.append(Family("force magnitude", "ball displacement along the probe axes proportional to |f|", "field",
+                          probe_dirs, [("|f|", mag)], ("|f|", "N", 1.0, mag)))
+    for label, values, unit in (("temperature", pts.temperature, "C"), ("time", pts.time, "s")):
+        if values is None or not np.all(np.isfinite(values)) or np.ptp(values) <= 0:
+            continue
+        v = values - values.mean()
+        dirs = base_dirs + [scale_dir]
+        sub = {f"{label}: {dn}": [i] for i, (dn, _, _) in enumerate(dirs)}
+        out.append(Family(label, f"ball displacement along the base axes, and a scale, linear in the {label}",
+                          "field", dirs, [(f"d{label}", v)], (label, unit, 1.0, values), sub))
+    stylus = rot[:, :, 2]
+    basis = [(f"stylus {a}", stylus[:, i]) for i, a in enumerate("xyz")]
+    sub = {f"stylus {a} component": [d * 3 + i for d in range(3)] for i, a in enumerate("xyz")}
+    out.append(Family("approach direction", "ball displacement along the base axes linear in the stylus direction "
+                      "(base frame)", "field", base_dirs, basis, ("stylus z (base frame)", "1", 1.0, stylus[:, 2]),
+                      sub))
+    meas = list(dict.fromkeys(space.row_measurement.tolist()))
+    if len(meas) > 1:
+        out.append(Family("measurement", "one offset of the residual per measurement (one-way ANOVA)", "groups", [],
+                          [], None, {m: [i] for i, m in enumerate(meas)}, meas))
+    feats = list(dict.fromkeys(space.row_feature.tolist()))
+    if len(feats) > 1:
+        out.append(Family("artefact", "one offset of the residual per artefact feature and per certified length",
+                          "groups", [], [], None, {f: [i] for i, f in enumerate(feats)}, feats))
+    return out
+
+
+def structure_tests(space: ResidualSpace, folds: dict[str, int] | None,
+                    rank_tol: float = DEFAULT_RANK_TOL) -> list[tuple[Family, GroupTest]]:
+    """Every generic family tested against the residual of ``space``, Holm-adjusted p-values in
+    ``GroupTest.note`` order (see :func:`holm`); sorted by p-value."""
+    fr = row_folds(space, folds) if folds else None
+    out = []
+    for fam in families(space):
+        cols, names = fam.columns(space)
+        t = test_group(space, cols, names, fam.name, fr, subgroups=fam.subgroups, rank_tol=rank_tol,
+                       cv=fam.kind == "field")
+        out.append((fam, t))
+    out.sort(key=lambda ft: (ft[1].p_value if np.isfinite(ft[1].p_value) else 2.0, -ft[1].delta_chi2))
+    return out
+
+
+def candidate_family(space: ResidualSpace, cand: Candidate, fams: list[Family] | None = None) -> Family | None:
+    """The generic family that shows a candidate's signature best in a plot (by family key)."""
+    fams = families(space) if fams is None else fams
+    by = {f.name: f for f in fams}
+    j = None
+    if cand.joint is not None:
+        j = [jr.name for jr in space.result.model.desc.joints].index(cand.joint)
+    key = cand.family
+    if key == "eccentricity" and j is not None:
+        return by.get(f"q{j + 1} harmonics")
+    if key == "joint_compliance" and j is not None:
+        data = space.result.data
+        tau_g, tau_c = torques_of(space.result.model.desc, data)
+        load = tau_c[:, j] - tau_g[:, j]
+        jr = space.result.model.desc.joints[j]
+        dq = ("angle " + jr.name, "rad", space.jp[:, space.offset_slice.start + j])
+        return Family(f"{jr.name} load torque", f"error of joint {jr.name}'s angle proportional to its load "
+                      "(contact minus gravity torque)", "field", [dq], [(f"load{j + 1}", load)],
+                      (f"load torque {jr.name} (contact - gravity)", "N m", 1.0, load))
+    if key == "thermal":
+        return by.get("temperature")
+    if key in ("force_sensor", "probe_compliance"):
+        return by.get("contact force")
+    return None
+
+
+def binned_estimates(space: ResidualSpace, fam: Family, bins: int = 12, rank_tol: float = DEFAULT_RANK_TOL) -> dict:
+    """For a field family: per direction and per bin of the plot variable, the least-squares value of the
+    direction's error (its unit) with its standard uncertainty, and the family's fitted curve; for a
+    groups family: one offset [m] per group. Returns plain arrays for plotting."""
+    nan = float("nan")
+    if fam.kind == "groups":
+        cols, names = fam.columns(space)
+        t = test_group(space, cols, names, fam.name, None, rank_tol=rank_tol)
+        return {"kind": "groups", "names": list(names), "value": t.estimate, "u": t.u}
+    label, unit, factor, v = fam.variable
+    ok_pts = np.isfinite(v)
+    lo, hi = np.nanmin(v), np.nanmax(v)
+    if unit == "deg":            # angles: equal-width bins
+        edges = np.linspace(lo, hi, bins + 1)
+    else:
+        edges = np.unique(np.quantile(v[ok_pts], np.linspace(0, 1, bins + 1)))
+    nb = max(len(edges) - 1, 1)
+    which = np.clip(np.searchsorted(edges, v, side="right") - 1, 0, nb - 1)
+    cols = []
+    for _, _, d in fam.directions:
+        for b in range(nb):
+            cols.append(d * space.per_row((which == b).astype(float)))
+    cols = np.column_stack(cols)
+    names = [f"{dn} bin {b}" for dn, _, _ in fam.directions for b in range(nb)]
+    t = test_group(space, cols, names, fam.name, None, rank_tol=rank_tol)
+    centres = np.array([np.mean(v[which == b]) if np.any(which == b) else nan for b in range(nb)])
+    fcols, fnames = fam.columns(space)
+    ft = test_group(space, fcols, fnames, fam.name, None, rank_tol=rank_tol)
+    beta = np.nan_to_num(ft.estimate).reshape(len(fam.directions), len(fam.basis))
+    bvals = np.column_stack([b for _, b in fam.basis])
+    curve = bvals @ beta.T              # (N, directions): the fitted error at each point
+    return {"kind": "field", "variable": v, "label": label, "unit": unit, "factor": factor, "centres": centres,
+            "value": t.estimate.reshape(len(fam.directions), nb), "u": t.u.reshape(len(fam.directions), nb),
+            "curve": curve, "directions": [(dn, du) for dn, du, _ in fam.directions]}

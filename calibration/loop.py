@@ -1,0 +1,519 @@
+"""Close the loop: calibrate, find the residual's structure, add the effect it points to, repeat.
+
+:func:`close_loop` runs, on points and artefacts of any campaign:
+
+1. An outer **test set** of whole measurements (``test_fraction``, seeded, stratified by feature kind)
+   is put aside; it takes part in no decision and gives the before/after figures of the report.
+2. The base model is calibrated on the rest (the **design set**).
+3. **Screening** (:func:`calibration.diagnostics.screen_candidates`): the score test of every candidate
+   effect at the current fit. It only filters: candidates whose p-value is below
+   ``screen_alpha / (number of identifiable candidates)`` (Bonferroni), at most ``cv_top`` of them, go on.
+4. **Decision on held-out data**: K-fold cross-validation by measurement on the design set. In each fold
+   the current model and the model plus the candidate are calibrated on the other folds and predict the
+   fold's measurements, whose nuisance unknowns (centres, axes, planes, ``T_ref_base``) are solved on the
+   held-out points only. Per held-out measurement, the mean squared weighted residual of the two models
+   is compared by a one-sided Wilcoxon signed-rank test; a candidate passes with ``p < alpha / (number of
+   candidates tested)`` and a relative drop of the pooled held-out RMS of at least ``min_improvement``.
+   The passing candidate with the largest drop is added; ties in signature are reported (``nested``,
+   ``alternatives``: candidates the data cannot tell from it).
+5. Recalibrate on the design set with the new effect; repeat from 3 until no candidate passes, none is
+   left, or ``max_effects`` were added.
+6. The generic structure tests (:func:`calibration.diagnostics.structure_tests`) on the final fit: a
+   family significant after Holm's correction (``alpha``) with a positive held-out explained variance
+   means that **structured residual remains**; the verdict names its regressors and claims no fix.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from arm_model import NumericalError
+from arm_model.description import ArmDescription
+from arm_model.effects import JointCompliance, ThermalGrowth
+from arm_model.io import Artefacts, PointSet
+from arm_model.model import ArmModel
+
+from .calibrate import CalibrationResult, calibrate, display_unit, resolve_parameters
+from .candidates import Candidate, Skipped, library_candidates, needs_model
+from .data import CalibrationData, Weights, make_data, split_holdout
+from .diagnostics import (Family, GroupTest, ResidualSpace, binned_estimates, candidate_family, families, holm,
+                          measurement_folds, residual_space, screen_candidates, structure_tests)
+from .identifiability import DEFAULT_RANK_TOL
+from .problem import Problem
+from .solver import levenberg_marquardt
+from .validation import FIGURES, validate
+
+__all__ = ["LoopSettings", "CVResult", "Stage", "LoopResult", "close_loop", "heldout_residuals",
+           "heldout_figures", "cross_validate", "display", "effect_summary"]
+
+#: share of a candidate's signature inside another's above which the data cannot tell them apart
+SAME_SIGNATURE = 0.99
+
+
+@dataclass(frozen=True)
+class LoopSettings:
+    """Options of :func:`close_loop` (see its docstring)."""
+    folds: int = 4
+    test_fraction: float = 0.25
+    alpha: float = 0.01
+    screen_alpha: float = 0.05
+    min_improvement: float = 0.02
+    max_effects: int = 4
+    cv_top: int = 3
+    seed: int = 0
+    rank_tol: float = DEFAULT_RANK_TOL
+
+    def __post_init__(self):
+        if self.folds < 2:
+            raise ValueError(f"folds must be at least 2, got {self.folds}")
+        if not 0.0 < self.test_fraction < 1.0:
+            raise ValueError(f"test_fraction must be in (0, 1), got {self.test_fraction}")
+        for name in ("alpha", "screen_alpha"):
+            v = getattr(self, name)
+            if not 0.0 < v < 1.0:
+                raise ValueError(f"{name} must be in (0, 1), got {v}")
+        if self.min_improvement < 0 or self.max_effects < 0 or self.cv_top < 1:
+            raise ValueError("min_improvement and max_effects must be >= 0 and cv_top >= 1")
+
+    def to_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+# ---------------------------------------------------------------------------------------------------
+# held-out evaluation
+
+def heldout_residuals(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit") -> dict:
+    """Residual rows of ``data`` with the parameters ``p`` held and every nuisance unknown solved on
+    ``data`` alone: ``r`` weighted (n,), ``e`` [m] (n,), ``measurement``, ``kind`` per row."""
+    prob = Problem(model, data, weights, [], reference=reference)
+    states = levenberg_marquardt(prob, p, prob.initial_states(p)).states
+    r = prob.evaluate(p, states, jac=False).r
+    pts = data.points
+    meas = np.empty(len(r), dtype=object)
+    kind = np.empty(len(r), dtype=object)
+    ok = prob.row_distance < 0
+    meas[ok] = pts.measurement[prob.row_point[ok]]
+    kind[ok] = [prob.instances[i].kind for i in prob.row_instance[ok]]
+    for row in np.flatnonzero(~ok):
+        meas[row] = prob.distance_items[prob.row_distance[row]].measurement
+        kind[row] = "length"
+    return {"r": r, "e": r * prob.sigma, "measurement": meas, "kind": kind}
+
+
+def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit") -> dict:
+    """Figures of ``(model, p)`` on held-out ``data`` [um]: RMS and max |residual| over the artefact rows
+    (each row a residual component: a sphere/ring/plane distance, a seat coordinate, a length error; the
+    reference-instrument rows only when there is nothing else, since their noise is the instrument's), the
+    same per kind, the weighted RMS of all rows, and the standard test figures
+    (:data:`calibration.validation.FIGURES`)."""
+    h = heldout_residuals(model, p, data, weights, reference)
+    e = h["e"]
+    art = h["kind"] != "reference"
+    head = e[art] if art.any() else e
+    out = {"rms_um": float(np.sqrt(np.mean(head ** 2))) * 1e6, "max_um": float(np.max(np.abs(head))) * 1e6,
+           "headline_rows": "artefact points and lengths" if art.any() else "reference points",
+           "rms_weighted": float(np.sqrt(np.mean(h["r"] ** 2))), "rows": int(len(e)), "by_kind": {}}
+    for k in dict.fromkeys(h["kind"].tolist()):
+        ek = e[h["kind"] == k]
+        out["by_kind"][k] = {"rows": int(len(ek)), "rms_um": float(np.sqrt(np.mean(ek ** 2))) * 1e6,
+                             "max_um": float(np.max(np.abs(ek))) * 1e6}
+    summary = validate(model, p, data, weights, reference).summary()
+    out["standard"] = {k: summary[k] * FIGURES[k][2] for k in FIGURES if k in summary}
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------
+# cross-validation of one candidate
+
+@dataclass
+class FoldFit:
+    """The fits of one model on each fold's training part and their held-out residual rows."""
+    results: list                     # CalibrationResult per fold
+    sse: dict                         # measurement -> (sum of squared weighted residuals, rows)
+
+
+@dataclass
+class CVResult:
+    """Held-out evidence for adding one candidate.
+
+    Attributes:
+        rms_base, rms_new: pooled held-out weighted RMS of the current model and with the candidate.
+        improvement: ``1 - rms_new / rms_base``.
+        p_value: one-sided Wilcoxon signed-rank test over held-out measurements (mean squared weighted
+            residual of each); threshold: the level it was held to (``alpha / tested``).
+        wins: measurements improved, of ``n_measurements``.
+    """
+    candidate: str
+    rms_base: float
+    rms_new: float
+    improvement: float
+    p_value: float
+    threshold: float
+    n_measurements: int
+    wins: int
+    passed: bool
+    reason: str
+    score_p: float = float("nan")
+    folds: FoldFit | None = field(default=None, repr=False)
+
+    def to_dict(self) -> dict:
+        def num(v):
+            return float(v) if v is not None and math.isfinite(float(v)) else None
+        return {"candidate": self.candidate, "heldout_rms_weighted_before": num(self.rms_base),
+                "heldout_rms_weighted_after": num(self.rms_new), "relative_improvement": num(self.improvement),
+                "wilcoxon_p_value": num(self.p_value), "threshold": num(self.threshold),
+                "measurements": self.n_measurements, "measurements_improved": self.wins, "passed": self.passed,
+                "reason": self.reason, "screening_p_value": num(self.score_p)}
+
+
+def _fold_fit(model: ArmModel, design: CalibrationData, fold_of: dict, k: int, fit) -> FoldFit:
+    results, sse = [], {}
+    for f in range(k):
+        held = [m for m, g in fold_of.items() if g == f]
+        train = design.with_measurements([m for m, g in fold_of.items() if g != f])
+        res = fit(model, train)
+        h = heldout_residuals(model, res.p, design.with_measurements(held), res.weights, res.reference_mode)
+        for m in held:
+            sel = h["measurement"] == m
+            sse[m] = (float(np.sum(h["r"][sel] ** 2)), int(sel.sum()))
+        results.append(res)
+    return FoldFit(results, sse)
+
+
+def cross_validate(name: str, base: FoldFit, new: FoldFit | None, threshold: float, min_improvement: float,
+                   error: str | None = None) -> CVResult:
+    """Compare the held-out residuals of two fold fits (see :class:`CVResult`)."""
+    nan = float("nan")
+    if new is None:
+        return CVResult(name, nan, nan, nan, nan, threshold, 0, 0, False, f"a fold fit failed: {error}")
+    ms = sorted(base.sse)
+    b = np.array([base.sse[m][0] / base.sse[m][1] for m in ms])
+    a = np.array([new.sse[m][0] / new.sse[m][1] for m in ms])
+    rows = sum(base.sse[m][1] for m in ms)
+    rms_b = math.sqrt(sum(base.sse[m][0] for m in ms) / rows)
+    rms_a = math.sqrt(sum(new.sse[m][0] for m in ms) / rows)
+    imp = 1.0 - rms_a / rms_b if rms_b > 0 else 0.0
+    d = b - a
+    if np.all(d == 0):
+        p = 1.0
+    else:
+        p = float(stats.wilcoxon(d, alternative="greater", zero_method="wilcox").pvalue)
+    wins = int(np.sum(d > 0))
+    passed = p < threshold and imp >= min_improvement
+    if passed:
+        reason = f"held-out RMS {100 * imp:.1f} % lower, Wilcoxon p = {p:.2g} < {threshold:.2g}"
+    elif p >= threshold:
+        reason = f"not significant on held-out data (Wilcoxon p = {p:.2g} >= {threshold:.2g})"
+    else:
+        reason = (f"significant but too small: held-out RMS {100 * imp:.1f} % lower "
+                  f"(at least {100 * min_improvement:g} % required)")
+    return CVResult(name, rms_b, rms_a, imp, p, threshold, len(ms), wins, passed, reason, folds=new)
+
+
+# ---------------------------------------------------------------------------------------------------
+# results
+
+@dataclass
+class Stage:
+    """One step of the loop: the model after it, its fit and the evidence that led to it.
+
+    Attributes:
+        index: 0 for the base model.
+        model, result: the model and its fit on the design set.
+        added: the candidate added at this stage (None for the base).
+        screening: score tests at the previous fit (one per candidate then offered), ranked.
+        cv: held-out evidence of the candidates tested.
+        nested, alternatives: candidates whose signature lies within the added one's (they cannot be
+            told from it), and candidates that alone would explain the same.
+        heldout: figures of this model on the outer test set (:func:`heldout_figures`).
+        plot_before, plot_after: binned estimates of the added effect's signature family at the
+            previous fit and at this fit (:func:`calibration.diagnostics.binned_estimates`).
+    """
+    index: int
+    model: ArmModel
+    result: CalibrationResult
+    added: Candidate | None = None
+    screening: list = field(default_factory=list)
+    cv: list = field(default_factory=list)
+    nested: list = field(default_factory=list)
+    alternatives: list = field(default_factory=list)
+    heldout: dict = field(default_factory=dict)
+    plot_family: str | None = None
+    plot_before: dict | None = None
+    plot_after: dict | None = None
+
+
+@dataclass
+class LoopResult:
+    """What :func:`close_loop` found.
+
+    Attributes:
+        stages: the base model and one stage per effect added.
+        final_screening, final_cv: the last screening and held-out tests (nothing passed, or the limit).
+        stop_reason: why the loop stopped.
+        structure: generic structure tests on the final fit, (Family, GroupTest, Holm-adjusted p), ranked.
+        remaining: the significant structure families (after Holm, positive held-out explained variance).
+        verdict: a sentence; candidates, skipped: the candidate set; design, test: measurement ids.
+        structure_plots: binned estimates of the significant families at the final fit.
+    """
+    stages: list
+    final_screening: list
+    final_cv: list
+    stop_reason: str
+    structure: list
+    remaining: list
+    verdict: str
+    candidates: list
+    skipped: list
+    design: list
+    test: list
+    settings: LoopSettings
+    desc: ArmDescription
+    structure_plots: dict = field(default_factory=dict)
+
+    @property
+    def final(self) -> Stage:
+        return self.stages[-1]
+
+    @property
+    def added(self) -> list[Candidate]:
+        return [s.added for s in self.stages[1:]]
+
+    def before_after(self) -> list[dict]:
+        """One row a stage: held-out (outer test set) figures [um], with the relative change to the base."""
+        rows = []
+        base = self.stages[0].heldout
+        for s in self.stages:
+            h = s.heldout
+            rows.append({"stage": s.index, "model": "base model" if s.added is None else f"+ {s.added.name}",
+                         "rms_um": h["rms_um"], "max_um": h["max_um"],
+                         "ratio_rms": base["rms_um"] / h["rms_um"] if h["rms_um"] > 0 else float("inf"),
+                         **{k: v for k, v in h["standard"].items()}})
+        return rows
+
+
+# ---------------------------------------------------------------------------------------------------
+
+def display(value: float, unit: str) -> tuple[float, str]:
+    """A value [SI] in the report's unit: m -> um, rad -> deg, m/N -> um/N, rad/(N m) -> urad/(N m),
+    1/K -> ppm/K, 1 (a gain) -> %, N unchanged."""
+    extra = {"rad/(N m)": ("urad/(N m)", 1e6), "1/K": ("ppm/K", 1e6), "1": ("%", 100.0)}
+    if unit in extra:
+        u, f = extra[unit]
+    else:
+        u, f = display_unit(unit)
+    return value * f, u
+
+
+def effect_summary(result: CalibrationResult, cand: Candidate) -> list[dict]:
+    """The added effect's parameters: name, SI value and u, display value and u, and for an eccentricity
+    the amplitude and phase of each harmonic (``a sin(h q + phi)``, amplitude u by linear propagation)."""
+    desc = result.model.desc
+    rows = []
+    for name, unit in cand.effect.param_defs(desc):
+        v, u = result.value(name), result.uncertainty(name)
+        dv, du = display(v, unit)
+        state = "free" if name in result.free else "fixed (not identifiable)"
+        rows.append({"name": name, "unit": unit, "value": v, "u": u, "display_value": dv,
+                     "display_u": display(u, unit)[0], "display_unit": du, "state": state})
+    if cand.family == "eccentricity":
+        for i in cand.effect.joint_indices(desc):
+            jn = desc.joints[i].name
+            for h in cand.effect.harmonics:
+                nc, ns = f"{jn}.ecc{h}_cos", f"{jn}.ecc{h}_sin"
+                c, s = result.value(nc), result.value(ns)
+                a = math.hypot(c, s)
+                ua = float("nan")
+                if nc in result.free and ns in result.free and a > 0:
+                    ic, is_ = result.free.index(nc), result.free.index(ns)
+                    g = np.array([c / a, s / a])
+                    cov = result.cov[np.ix_([ic, is_], [ic, is_])]
+                    ua = float(math.sqrt(g @ cov @ g))
+                rows.append({"name": f"{jn}.ecc{h}_amplitude", "unit": "rad", "value": a, "u": ua,
+                             "display_value": math.degrees(a), "display_u": math.degrees(ua), "display_unit": "deg",
+                             "state": "derived", "phase_deg": math.degrees(math.atan2(c, s))})
+    return rows
+
+
+def _signature_overlap(space: ResidualSpace, a_cols: np.ndarray, b_cols: np.ndarray, rank_tol: float) -> float:
+    """Share of b's projected signature (mean squared cosine of the principal angles) inside span(a)."""
+    def basis(c):
+        pc = space.project(c)
+        norm = np.linalg.norm(c, axis=0)
+        pc = pc / np.where(norm > 0, norm, 1.0)
+        u, s, _ = np.linalg.svd(pc, full_matrices=False)
+        return u[:, s > rank_tol]
+    ua, ub = basis(a_cols), basis(b_cols)
+    if ua.shape[1] == 0 or ub.shape[1] == 0:
+        return 0.0
+    return float(np.sum((ua.T @ ub) ** 2) / ub.shape[1])
+
+
+def _plot(space: ResidualSpace, cand: Candidate) -> tuple[str | None, dict | None]:
+    fam = candidate_family(space, cand)
+    if fam is None:
+        return None, None
+    return fam.name, binned_estimates(space, fam)
+
+
+def close_loop(points: PointSet, artefacts: Artefacts, desc: ArmDescription, *, reference: PointSet | None = None,
+               effects=(), free=None, weights: Weights | None = None, settings: LoopSettings | None = None,
+               families_: tuple | None = None, extra=(), progress=None, **kw) -> LoopResult:
+    """Calibrate, diagnose, add the best-supported effect, recalibrate ... until nothing passes.
+
+    Args:
+        points, artefacts: the campaign (``arm_model.read_points`` / ``read_artefacts``).
+        desc: the arm description (nominal).
+        reference: a second points file with reference (tracker) coordinates.
+        effects: effects already in the base model (not candidates).
+        free: base parameters to calibrate (names or globs; default ``calibration.calibrate.default_free``);
+            the parameters of every effect are always free.
+        weights: standard uncertainties of the residuals.
+        settings: :class:`LoopSettings`; keyword arguments (``folds=5`` ...) override its fields.
+        families_: candidate families to offer (default all, :data:`calibration.candidates.FAMILIES`).
+        extra: user candidates (:class:`calibration.candidates.Candidate`).
+        progress: ``callable(str)`` for progress lines.
+
+    Raises:
+        NumericalError: the base model cannot be calibrated on the design set or a training fold.
+    """
+    settings = settings or LoopSettings()
+    if kw:
+        settings = LoopSettings(**{**settings.to_dict(), **kw})
+    say = progress or (lambda msg: None)
+    weights = weights or Weights()
+    has_t = points.temperature is not None and np.all(np.isfinite(points.temperature))
+    need = [JointCompliance()] + ([ThermalGrowth()] if has_t else []) + list(effects) + [c.effect for c in extra]
+    data = make_data(points, artefacts, needs_model(desc, need), reference=reference)
+    cands, skipped = library_candidates(desc, data, families_, extra)
+    design, test = split_holdout(data, settings.test_fraction, settings.seed)
+    fold_of = measurement_folds(design, settings.folds, settings.seed)
+    say(f"{len(data)} points, {len(data.measurements())} measurements: {len(design.measurements())} for design "
+        f"({settings.folds} folds), {len(test.measurements())} held out for the test; {len(cands)} candidates")
+
+    def fit(model: ArmModel, d: CalibrationData) -> CalibrationResult:
+        names = None
+        if free is not None:
+            names = [model.spec.names[i] for i in resolve_parameters(model.spec, free)]
+            names += [n for n in model.spec.names[model.base_size:] if n not in names]
+        return calibrate(model, d, free=names, weights=weights, rank_tol=settings.rank_tol)
+
+    model = ArmModel(desc, tuple(effects))
+    say("calibrating the base model on the design set")
+    result = fit(model, design)
+    stages = [Stage(0, model, result, heldout=heldout_figures(model, result.p, test, weights, result.reference_mode))]
+    say(f"  base model: s0 {result.s0:.3g}, held-out test RMS {stages[0].heldout['rms_um']:.2f} um")
+    base_folds: FoldFit | None = None
+    remaining = list(cands)
+    stop, last_tests, last_cv = "", [], []
+    while True:
+        say(f"screening {len(remaining)} candidate(s) at stage {len(stages) - 1}")
+        tests, space = screen_candidates(result, remaining, fold_of, settings.rank_tol)
+        ranked = sorted(zip(remaining, tests), key=lambda ct: (ct[1].p_value if np.isfinite(ct[1].p_value) else 2,
+                                                               -ct[1].delta_chi2))
+        last_tests, last_cv = [t for _, t in ranked], []
+        ident = [(c, t) for c, t in ranked if t.identifiable]
+        gate = settings.screen_alpha / max(len(ident), 1)
+        gated = [(c, t) for c, t in ident if t.p_value < gate][: settings.cv_top]
+        if not gated:
+            stop = (f"no candidate passes the screening (score-test p < {gate:.2g}): nothing significant remains "
+                    "that the library explains")
+            break
+        if len(stages) - 1 >= settings.max_effects:
+            stop = f"the maximum number of effects ({settings.max_effects}) was added"
+            break
+        if base_folds is None:
+            say(f"  cross-validating the current model ({settings.folds} folds)")
+            base_folds = _fold_fit(model, design, fold_of, settings.folds, fit)
+        threshold = settings.alpha / len(gated)
+        cvs = []
+        for c, t in gated:
+            say(f"  cross-validating + {c.name} (score p = {t.p_value:.2g})")
+            try:
+                new = _fold_fit(model.with_effects(c.effect), design, fold_of, settings.folds, fit)
+                cv = cross_validate(c.name, base_folds, new, threshold, settings.min_improvement)
+            except NumericalError as exc:
+                cv = cross_validate(c.name, base_folds, None, threshold, settings.min_improvement, str(exc))
+            cv.score_p = t.p_value
+            say(f"    {cv.reason}")
+            cvs.append(cv)
+        last_cv = cvs
+        passing = [(c, cv) for (c, _), cv in zip(gated, cvs) if cv.passed]
+        if not passing:
+            stop = "no screened candidate improves the held-out data significantly"
+            break
+        best = max(passing, key=lambda x: (round(x[1].improvement, 3), -x[0].size(desc)))
+        cand, cv = best
+        # signature overlaps with the other candidates (same batch as the winner)
+        nested, alternatives = [], []
+        wi = remaining.index(cand)
+        wcols = _candidate_cols(space, remaining, wi)
+        for i, other in enumerate(remaining):
+            if i == wi or not tests[i].identifiable:
+                continue
+            ocols = _candidate_cols(space, remaining, i)
+            if wcols is None or ocols is None:
+                continue
+            if _signature_overlap(space, wcols, ocols, settings.rank_tol) >= SAME_SIGNATURE:
+                nested.append(other.name)
+            if _signature_overlap(space, ocols, wcols, settings.rank_tol) >= SAME_SIGNATURE:
+                alternatives.append(other.name)
+        fam_name, before = _plot(space, cand)
+        model = model.with_effects(cand.effect)
+        say(f"adding {cand.name}; recalibrating")
+        result = fit(model, design)
+        after = None
+        if fam_name is not None:
+            sp2 = residual_space(result)
+            fam2 = next((f for f in families(sp2) if f.name == fam_name), None) or candidate_family(sp2, cand)
+            after = binned_estimates(sp2, fam2) if fam2 is not None else None
+        stage = Stage(len(stages), model, result, cand, last_tests, cvs, nested, alternatives,
+                      heldout_figures(model, result.p, test, weights, result.reference_mode), fam_name, before, after)
+        stages.append(stage)
+        say(f"  + {cand.name}: held-out test RMS {stage.heldout['rms_um']:.2f} um "
+            f"(base {stages[0].heldout['rms_um']:.2f} um)")
+        base_folds = cv.folds
+        remaining = [c for c in remaining if c is not cand]
+        if not remaining:
+            stop = "every candidate was added"
+            last_tests, last_cv = [], []
+            break
+    say("structure tests on the final fit")
+    space = residual_space(result)
+    st = structure_tests(space, fold_of, settings.rank_tol)
+    adj = holm([t.p_value for _, t in st])
+    structure = [(f, t, float(a)) for (f, t), a in zip(st, adj)]
+    significant = [(f, t, a) for f, t, a in structure
+                   if np.isfinite(a) and a < settings.alpha and (not np.isfinite(t.explained_cv) or t.explained_cv > 0)]
+    plots = {f.name: binned_estimates(space, f) for f, _, _ in significant[:4]}
+    verdict = _verdict(stages, significant, stop)
+    say(verdict)
+    return LoopResult(stages, last_tests, last_cv, stop, structure, significant, verdict, cands, skipped,
+                      design.measurements(), test.measurements(), settings, desc, plots)
+
+
+def _candidate_cols(space: ResidualSpace, remaining: list, i: int):
+    """Raw columns of candidate ``i`` in ``space`` (None if it was screened in another batch)."""
+    effects = [e for e in space.model.effects]
+    try:
+        k = next(n for n, e in enumerate(effects[len(space.result.model.effects):]) if e is remaining[i].effect)
+    except StopIteration:
+        return None
+    return space.jp[:, space.extra_slices[k]]
+
+
+def _verdict(stages, significant, stop) -> str:
+    added = [s.added.name for s in stages[1:]]
+    head = ("effects added: " + ", ".join(added) if added else "no effect added")
+    base, last = stages[0].heldout, stages[-1].heldout
+    if added:
+        head += (f"; held-out test RMS {base['rms_um']:.2f} -> {last['rms_um']:.2f} um, "
+                 f"max {base['max_um']:.2f} -> {last['max_um']:.2f} um")
+    if not significant:
+        return head + ". No structured residual remains (no regressor family is significant after Holm's correction)."
+    fams = "; ".join(f"{f.name} ({t.best})" if t.best else f.name for f, t, _ in significant)
+    return (head + f". Structured residual remains, not explained by the effect library: it correlates with {fams}. "
+            "No fix is claimed for it.")
