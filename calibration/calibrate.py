@@ -28,7 +28,8 @@ from arm_model import InputError, NumericalError
 from arm_model.model import ArmModel
 
 from .data import CalibrationData, Weights
-from .identifiability import DEFAULT_RANK_TOL, Combination, Identifiability, analyse, reduced_jacobian
+from .identifiability import (DEFAULT_RANK_TOL, Combination, Identifiability, analyse, prior_scales,
+                              reduced_jacobian, weakly_determined)
 from .problem import Problem
 from .solver import levenberg_marquardt, normal_solver
 
@@ -259,7 +260,8 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
               start: dict | None = None, weights: Weights | None = None, on_unidentifiable: str = "fix",
               rank_tol: float = DEFAULT_RANK_TOL, outlier_threshold: float = 4.0, drop_outliers: bool = False,
               covariance: str = "residual", reference: str = "fit", max_iter: int = 200,
-              prefer=None, _depth: int = 0) -> CalibrationResult:
+              min_resolution: float | None = 0.1, priors: dict | None = None,
+              _depth: int = 0) -> CalibrationResult:
     """Identify the parameters ``free`` of ``model`` from ``data``.
 
     Args:
@@ -278,7 +280,13 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
         covariance: "residual" (scaled by the residual variance factor) or "stated".
         reference: "fit" (``T_ref_base`` unknown), "identity" (reference coordinates are base
             coordinates: then the base pose is identifiable) or "off".
-        prefer: parameter names in order of preference to keep when columns tie.
+        min_resolution: hold parameters the data would resolve only to worse than this fraction of a
+            plausible error size (:func:`~calibration.identifiability.prior_scales`, ``priors``):
+            their effect is below the noise (e.g. the handle's theta offset seen only through the
+            stylus deflection). None keeps every linearly independent parameter.
+        priors: plausible error sizes [SI] by parameter name or glob pattern (overrides). They also
+            choose which of two equivalent parameters is kept: the one whose plausible error moves
+            the data more.
 
     Raises:
         NumericalError: no convergence, too few residuals, or unidentifiable parameters with "stop".
@@ -304,8 +312,9 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
         prob = problem.with_free(kept)
         ev = prob.evaluate(p, states)
         gauge = rigid_gauge(prob, p, kept)
-        idf = analyse(reduced_jacobian(ev.jp, ev.jt), ev.jp, [spec.names[i] for i in kept], rank_tol, prefer,
-                      gauge=gauge)
+        jred = reduced_jacobian(ev.jp, ev.jt)
+        names = [spec.names[i] for i in kept]
+        idf = analyse(jred, ev.jp, names, rank_tol, prior_scales(model, names, priors), gauge=gauge)
         if idf.dependent:
             if on_unidentifiable == "stop":
                 lines = [f"  {k}: {c.text()}" for k, c in idf.combinations.items()]
@@ -324,6 +333,22 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
                     reason = "not separable from the free parameters: " + comb.text()
                 fixed.append(FixedParameter(name, float(p[spec.index(name)]), reason, comb, stage))
             kept = [i for i in kept if spec.names[i] not in idf.dependent]
+        if min_resolution is not None and kept:
+            names = [spec.names[i] for i in kept]
+            sel = [idf.names.index(n) for n in names]
+            weak = weakly_determined(jred[:, sel], names, prior_scales(model, names, priors), min_resolution)
+            if weak and on_unidentifiable == "stop":
+                raise NumericalError("parameters the data resolve to worse than "
+                                     f"{min_resolution:g} of a plausible size ({stage}): "
+                                     + ", ".join(f"{n} (u ~ {u:.3g} {spec.units[spec.index(n)]})" for n, u, _ in weak)
+                                     + "\nhold them or use on_unidentifiable='fix'")
+            for name, u, comb in weak:
+                unit = spec.units[spec.index(name)]
+                fixed.append(FixedParameter(name, float(p[spec.index(name)]),
+                                            f"weakly determined: the data would resolve it only to u ~ {u:.3g} {unit}, "
+                                            f"more than {min_resolution:g} of a plausible size; its effect is below "
+                                            "the noise", comb, stage))
+            kept = [i for i in kept if spec.names[i] not in {w[0] for w in weak}]
         return idf
 
     idf0 = check(p0, states, "start")
@@ -407,7 +432,7 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
         res = calibrate(model, data.select(keep), free, values=values, start=start, weights=weights,
                         on_unidentifiable=on_unidentifiable, rank_tol=rank_tol, outlier_threshold=outlier_threshold,
                         drop_outliers=True, covariance=covariance, reference=reference, max_iter=max_iter,
-                        prefer=prefer, _depth=_depth + 1)
+                        min_resolution=min_resolution, priors=priors, _depth=_depth + 1)
         kept_index = np.flatnonzero(np.isin(np.arange(len(data)), keep))
         # report the dropped points with indices into the data given at this level
         res.dropped = [o for o in drop] + [replace(o, point=int(kept_index[o.point])) for o in res.dropped]

@@ -113,14 +113,15 @@ def _terms(names, vec, scale_in_si, rel: float = 1e-3, lead: int | None = None, 
 
 
 def analyse(jred: np.ndarray, jp: np.ndarray, names, rank_tol: float = DEFAULT_RANK_TOL,
-            prefer=None, n_weak: int = 3, gauge: np.ndarray | None = None) -> Identifiability:
+            pivot_scale: np.ndarray | None = None, n_weak: int = 3, gauge: np.ndarray | None = None) -> Identifiability:
     """Identifiability of the parameters ``names`` from the reduced (``jred``) and full (``jp``)
     weighted Jacobians (rows x len(names)).
 
     Args:
         rank_tol: relative singular value below which a direction is not identifiable.
-        prefer: optional list of names in order of preference to keep (they are offered to the
-            pivoting first when columns tie).
+        pivot_scale: column scale [SI] for the pivoting that picks the parameters to keep (e.g. plausible
+            error sizes, :func:`prior_scales`: of two equivalent parameters the one whose plausible error
+            moves the data more is kept); default the column norms.
         gauge: (len(names), k) parameter directions [SI] known to leave the cost unchanged (exact
             symmetries, e.g. rigid motions of the base frame): projected out, so they count as null.
     """
@@ -144,13 +145,9 @@ def analyse(jred: np.ndarray, jp: np.ndarray, names, rank_tol: float = DEFAULT_R
     smax = s[0] if s.size and s[0] > 0 else 1.0
     rank = int(np.sum(s > rank_tol * smax))
     condition = float(s[0] / s[rank - 1]) if rank else float("inf")
-    # pivoted QR, columns offered in preference order
-    order = np.arange(n)
-    if prefer:
-        pref = {nm: i for i, nm in enumerate(prefer)}
-        order = np.array(sorted(range(n), key=lambda k: pref.get(names[k], len(pref) + k)))
-    _, _, piv = sla.qr(a[:, order], mode="economic", pivoting=True)
-    piv = order[piv]
+    # pivoted QR on the columns scaled for the choice (same null space as ``a``)
+    b = a if pivot_scale is None else a * (scale * np.asarray(pivot_scale, dtype=float))
+    _, _, piv = sla.qr(b, mode="economic", pivoting=True)
     kept, dep = np.sort(piv[:rank]), piv[rank:]
     dependent = tuple(names[k] for k in sorted(dep))
     combos = {}
@@ -169,3 +166,62 @@ def analyse(jred: np.ndarray, jp: np.ndarray, names, rank_tol: float = DEFAULT_R
                  for i in range(max(rank - n_weak, 0), rank))[::-1]
     return Identifiability(names, scale, s, rank, rank_tol, condition, dependent, combos, null, weak,
                            tuple(names[k] for k in np.flatnonzero(tiny)), tuple(sorted(gauge_names)))
+
+
+# ---------------------------------------------------------------------------------------------
+# practical identifiability: is the effect of a parameter over a plausible range above the noise?
+
+#: plausible size of a parameter error, by SI unit (compliances: from the description, see
+#: :func:`prior_scales`); a parameter the data resolve only to more than ``min_resolution`` of it is
+#: not identifiable in practice
+PRIOR_SCALES = {"m": 1e-3, "rad": 1e-2, "1": 0.1, "N": 1.0, "N m": 0.1, "rad/(N m)": 1e-4, "1/K": 1e-4}
+
+
+def prior_scales(model, names, priors: dict | None = None) -> np.ndarray:
+    """Plausible error size [SI] of each parameter: ``priors`` (names or glob patterns -> value) first,
+    then :data:`PRIOR_SCALES` by unit; a compliance [m/N] gets 10 times the description's compliance
+    along its axis (``*_z``: axial, else bending), at least 1e-8 m/N."""
+    import fnmatch
+    spec = model.spec
+    probe = model.desc.probe
+    out = []
+    for n in names:
+        hit = [v for pat, v in (priors or {}).items() if fnmatch.fnmatchcase(n, pat)]
+        unit = spec.units[spec.index(n)]
+        if hit:
+            out.append(float(hit[0]))
+        elif unit == "m/N":
+            c = probe.axial_compliance if n.endswith("_z") else max(probe.bending_compliance_x,
+                                                                    probe.bending_compliance_y)
+            out.append(max(10.0 * c, 1e-8))
+        else:
+            out.append(PRIOR_SCALES.get(unit, 1.0))
+    return np.array(out)
+
+
+def weakly_determined(jred: np.ndarray, names, prior: np.ndarray, min_resolution: float = 0.1):
+    """Parameters whose standard uncertainty (stated weights, the others free) would exceed
+    ``min_resolution * prior``: pivoted QR of ``J_red diag(prior)``; a column whose remaining norm
+    ``|R_kk|`` (residual change, in sigmas, over one prior size, beyond what the better-determined
+    parameters explain) is below ``1 / min_resolution`` is weak.
+
+    Returns ``[(name, predicted u [SI], Combination with the kept ones)]``, weakest last.
+    """
+    names = list(names)
+    if not names:
+        return []
+    a = jred * prior
+    _, r, piv = sla.qr(a, mode="economic", pivoting=True)
+    d = np.abs(np.diag(r))
+    cut = int(np.sum(d >= 1.0 / min_resolution))
+    kept, weak = np.sort(piv[:cut]), piv[cut:]
+    out = []
+    for k in weak:
+        v = np.zeros(len(names))
+        v[k] = 1.0
+        if len(kept):
+            v[kept] = -np.linalg.lstsq(a[:, kept], a[:, k], rcond=None)[0]
+        v_si = v * prior / prior[k]
+        u = prior[k] / max(d[list(piv).index(k)], 1e-300)
+        out.append((names[k], float(u), Combination(_terms(names, v_si, 1.0 / prior, lead=k))))
+    return out
