@@ -380,6 +380,16 @@ def close_loop(points: PointSet, artefacts: Artefacts, desc: ArmDescription, *, 
     Raises:
         NumericalError: the base model cannot be calibrated on the design set or a training fold.
     """
+    from threadpoolctl import threadpool_limits
+
+    # many small dense solves: threaded BLAS only adds contention (8x slower on a loaded 2-core machine)
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _close_loop(points, artefacts, desc, reference, effects, free, weights, settings, families_, extra,
+                           progress, kw)
+
+
+def _close_loop(points, artefacts, desc, reference, effects, free, weights, settings, families_, extra, progress,
+                kw) -> LoopResult:
     settings = settings or LoopSettings()
     if kw:
         settings = LoopSettings(**{**settings.to_dict(), **kw})

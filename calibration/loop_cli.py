@@ -1,0 +1,146 @@
+"""``aacmm close-loop``: calibrate, diagnose the residual, add the effect it points to, repeat, report."""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from arm_model import InputError
+from arm_model.io import guard_output, read_artefacts, read_points
+
+__all__ = ["register", "run"]
+
+
+def _positive(text: str) -> float:
+    v = float(text)
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return v
+
+
+def _fraction(text: str) -> float:
+    v = float(text)
+    if not 0.0 < v < 1.0:
+        raise argparse.ArgumentTypeError(f"must be in (0, 1), got {text}")
+    return v
+
+
+def _count(minimum: int):
+    def parse(text: str) -> int:
+        v = int(text)
+        if v < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {text}")
+        return v
+    return parse
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "close-loop", help="find what the model lacks: calibrate, diagnose, add the effect, repeat",
+        description="Close the loop on measured (or simulated) data. An outer test set of whole measurements is put "
+                    "aside; on the rest the base model is calibrated, every candidate effect of the library "
+                    "(encoder eccentricity per joint, joint compliance per joint, thermal growth, force sensor gain "
+                    "and offset per axis, probe compliance) is screened by a score test at the fit, the best are "
+                    "cross-validated by measurement (calibrate with and without, predict held-out measurements), and "
+                    "the one that lowers the held-out error significantly is added; repeat until nothing passes. "
+                    "Then the residual is tested against generic regressors (joint-angle harmonics, gravity and "
+                    "contact torques, force, temperature, time, approach direction, measurement, artefact): a "
+                    "significant one is reported as structure the library does not explain, with no fix claimed. "
+                    "Writes summary.json, report.html (with PNG plots) and before-after.txt; prints the "
+                    "before/after table of the held-out test set.",
+        epilog="Example: aacmm close-loop points.csv artefacts.toml --arm urdf/aacmm7.dh.toml "
+               "--reference-points points-ref.csv -o out/loop. Method and outputs: docs/close-loop.md")
+    p.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
+    p.add_argument("artefacts", type=Path, help="artefacts TOML (DATA-FORMATS §4)")
+    p.add_argument("--arm", type=Path, required=True, help="nominal arm: description TOML or URDF (with --tip-frame)")
+    p.add_argument("--tip-frame", default=None, help="for a URDF arm: the link at the ball centre")
+    p.add_argument("--reference-points", type=Path, default=None,
+                   help="a second points CSV with reference coordinates (x_ref_mm ...), e.g. tracker nests")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; never an input)")
+    p.add_argument("--folds", type=_count(2), default=4,
+                   help="cross-validation folds of whole measurements for each decision (default 4)")
+    p.add_argument("--test-fraction", type=_fraction, default=0.25,
+                   help="share of the measurements kept out of every decision for the before/after figures "
+                        "(default 0.25, drawn per artefact kind)")
+    p.add_argument("--alpha", type=_fraction, default=0.01,
+                   help="significance level of the held-out test to add an effect (Bonferroni over the candidates "
+                        "tested) and of the final structure tests (Holm) (default 0.01)")
+    p.add_argument("--screen-alpha", type=_fraction, default=0.05,
+                   help="level of the score-test screening, Bonferroni over the candidates (default 0.05)")
+    p.add_argument("--min-improvement", type=float, default=0.02,
+                   help="smallest relative drop of the held-out RMS for an effect to be added (default 0.02)")
+    p.add_argument("--max-effects", type=_count(0), default=4, help="most effects to add (default 4)")
+    p.add_argument("--cv-top", type=_count(1), default=3,
+                   help="candidates cross-validated at each step, the best screened first (default 3)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the test-set and fold draws (default 0)")
+    p.add_argument("--candidates", default=None, metavar="KEYS",
+                   help="comma-separated candidate families (default all): eccentricity, joint_compliance, thermal, "
+                        "force_sensor, probe_compliance")
+    p.add_argument("--effect", action="append", metavar="KEY",
+                   help="an effect already in the base model (repeatable; not a candidate then), e.g. thermal")
+    p.add_argument("--free", action="append", metavar="PATTERN",
+                   help="base parameters to identify, by name or glob (repeatable); default every joint-row error "
+                        "and probe.x/y/z (probe compliances are candidates instead); effect parameters are always free")
+    p.add_argument("--sigma-probe-um", type=_positive, default=10.0,
+                   help="standard uncertainty of a probed ball centre per axis [um] (default 10)")
+    p.add_argument("--sigma-ref-um", type=_positive, default=10.0,
+                   help="standard uncertainty of a reference-instrument coordinate per axis [um] (default 10)")
+    p.add_argument("--sigma-length-um", type=_positive, default=None,
+                   help="standard uncertainty of a certified length without u_length_mm [um] (default: probe)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from arm_model.effects import EFFECTS
+    from arm_model.urdf_import import load_arm
+
+    from .candidates import FAMILIES
+    from .data import Weights
+    from .loop import LoopSettings, close_loop
+    from .loop_report import before_after_text, write_loop_report
+
+    inputs = [p for p in (args.points, args.artefacts, args.arm, args.reference_points) if p is not None]
+    for name in ("summary.json", "report.html", "before-after.txt"):
+        guard_output(args.output / name, inputs)
+    if args.output.exists() and not args.output.is_dir():
+        raise InputError("the output must be a folder", args.output)
+    families = None
+    if args.candidates:
+        families = tuple(k.strip() for k in args.candidates.split(",") if k.strip())
+        bad = [k for k in families if k not in FAMILIES]
+        if bad:
+            raise InputError(f"unknown candidate famil{'y' if len(bad) == 1 else 'ies'} {', '.join(bad)} "
+                             f"(known: {', '.join(FAMILIES)})")
+    effects = []
+    for k in args.effect or ():
+        if k not in EFFECTS:
+            raise InputError(f"unknown effect '{k}' (known: {', '.join(EFFECTS)})")
+        effects.append(EFFECTS[k]())
+    if effects and families is None:
+        families = tuple(f for f in FAMILIES if f not in {e.key for e in effects})
+    desc = load_arm(args.arm, args.tip_frame)
+    points = read_points(args.points, desc.n_joints)
+    artefacts = read_artefacts(args.artefacts)
+    reference = read_points(args.reference_points, desc.n_joints) if args.reference_points else None
+    weights = Weights(args.sigma_probe_um * 1e-6, args.sigma_ref_um * 1e-6,
+                      None if args.sigma_length_um is None else args.sigma_length_um * 1e-6)
+    settings = LoopSettings(folds=args.folds, test_fraction=args.test_fraction, alpha=args.alpha,
+                            screen_alpha=args.screen_alpha, min_improvement=args.min_improvement,
+                            max_effects=args.max_effects, cv_top=args.cv_top, seed=args.seed)
+    t0 = time.perf_counter()
+
+    def progress(msg: str) -> None:
+        if not args.quiet:
+            print(f"[{time.perf_counter() - t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
+
+    loop = close_loop(points, artefacts, desc, reference=reference, effects=tuple(effects), free=args.free,
+                      weights=weights, settings=settings, families_=families, progress=progress)
+    names = {"points": str(args.points), "artefacts": str(args.artefacts), "arm": str(args.arm),
+             "reference_points": None if args.reference_points is None else str(args.reference_points)}
+    write_loop_report(loop, args.output, inputs=inputs, input_names=names)
+    print(before_after_text(loop))
+    print(loop.verdict)
+    print(f"report: {args.output / 'report.html'}; machine summary: {args.output / 'summary.json'}")
+    return 0

@@ -1,0 +1,324 @@
+"""Outputs of the closed loop: ``summary.json`` (for machines), ``report.html`` with PNG plots (for
+people) and the before/after table printed by ``aacmm close-loop``. Every file is written atomically
+and refused if it would overwrite an input."""
+from __future__ import annotations
+
+import html
+import io
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output
+
+from .loop import LoopResult, Stage, display, effect_summary
+
+__all__ = ["summary_dict", "before_after_text", "write_loop_report", "plot_signature", "plot_screening",
+           "plot_before_after"]
+
+#: columns of the before/after table: key, header, unit
+TABLE = (("rms_um", "RMS", "um"), ("max_um", "max", "um"), ("length_error_max", "length max", "um"),
+         ("length_error_rms", "length RMS", "um"), ("articulation_2rms", "artic. 2RMS", "um"),
+         ("sphere_diameter_error_max", "sphere diam.", "um"), ("ring_diameter_error_max", "ring diam.", "um"),
+         ("flatness_max", "flatness", "um"), ("reference_rms", "ref. RMS", "um"))
+
+
+def _num(v):
+    if v is None:
+        return None
+    if isinstance(v, (np.floating, np.integer)):
+        v = v.item()
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return v
+
+
+def _clean(o):
+    if isinstance(o, dict):
+        return {str(k): _clean(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_clean(v) for v in o]
+    if isinstance(o, np.ndarray):
+        return _clean(o.tolist())
+    if isinstance(o, (float, np.floating, np.integer)):
+        return _num(o)
+    return o
+
+
+def _stage_dict(s: Stage) -> dict:
+    r = s.result
+    out = {"stage": s.index, "model_effects": [e.describe() for e in s.model.effects],
+           "fit": {"s0": r.s0, "dof": r.dof, "points": len(r.data), "status": r.status,
+                   "fixed": [f.to_dict() for f in r.fixed]},
+           "heldout_test": s.heldout}
+    if s.added is not None:
+        out["added"] = {"name": s.added.name, "family": s.added.family, "joint": s.added.joint,
+                        "effect": s.added.effect.describe(), "parameters": effect_summary(r, s.added),
+                        "indistinguishable_nested": s.nested, "indistinguishable_alternatives": s.alternatives}
+        out["screening"] = [t.to_dict() for t in s.screening]
+        out["cross_validation"] = [c.to_dict() for c in s.cv]
+    return out
+
+
+def summary_dict(loop: LoopResult, inputs: dict | None = None) -> dict:
+    """Everything of the report for machines (SI values, display values where named so)."""
+    base = loop.stages[0].heldout
+    effects = []
+    prev = base
+    for s in loop.stages[1:]:
+        effects.append({"name": s.added.name, "family": s.added.family, "joint": s.added.joint,
+                        "parameters": effect_summary(s.result, s.added),
+                        "heldout_before": {"rms_um": prev["rms_um"], "max_um": prev["max_um"],
+                                           "standard": prev["standard"]},
+                        "heldout_after": {"rms_um": s.heldout["rms_um"], "max_um": s.heldout["max_um"],
+                                          "standard": s.heldout["standard"]},
+                        "indistinguishable_from": s.nested + [a for a in s.alternatives if a not in s.nested]})
+        prev = s.heldout
+    return _clean({
+        "inputs": inputs or {},
+        "arm": loop.desc.name,
+        "settings": loop.settings.to_dict(),
+        "measurements": {"design": loop.design, "test": loop.test},
+        "candidates": [{"name": c.name, "family": c.family, "joint": c.joint, "effect": c.effect.describe()}
+                       for c in loop.candidates],
+        "skipped_candidates": [{"name": s.name, "reason": s.reason} for s in loop.skipped],
+        "effects_added": effects,
+        "before_after": loop.before_after(),
+        "stages": [_stage_dict(s) for s in loop.stages],
+        "final_screening": [t.to_dict() for t in loop.final_screening],
+        "final_cross_validation": [c.to_dict() for c in loop.final_cv],
+        "stop_reason": loop.stop_reason,
+        "structure_tests": [{**t.to_dict(), "family": f.name, "description": f.what, "p_value_holm": a}
+                            for f, t, a in loop.structure],
+        "structure_remains": bool(loop.remaining),
+        "remaining_structure": [{"family": f.name, "best_regressor": t.best, "p_value_holm": a,
+                                 "explained_heldout": t.explained_cv} for f, t, a in loop.remaining],
+        "verdict": loop.verdict,
+    })
+
+
+def before_after_text(loop: LoopResult) -> str:
+    """The before/after table on the outer test set (fixed-width text)."""
+    rows = loop.before_after()
+    cols = [(k, h, u) for k, h, u in TABLE if any(k in r for r in rows)]
+    name_w = max(len("model"), *(len(r["model"]) for r in rows))
+    head = f"{'model':<{name_w}}  " + "  ".join(f"{h:>12}" for _, h, _ in cols)
+    units = f"{'':<{name_w}}  " + "  ".join(f"{'[' + u + ']':>12}" for _, _, u in cols)
+    lines = [f"held-out test set: {len(loop.test)} measurements never used for a decision "
+             f"(rows: {loop.stages[0].heldout.get('headline_rows', '')})", head, units]
+    for r in rows:
+        lines.append(f"{r['model']:<{name_w}}  " + "  ".join(
+            f"{r[k]:>12.2f}" if k in r and r[k] is not None else f"{'-':>12}" for k, _, _ in cols))
+    if len(rows) > 1:
+        lines.append(f"RMS ratio base / final: {rows[0]['rms_um'] / rows[-1]['rms_um']:.2f}")
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------------
+# plots
+
+def _figure(w, h, ncols=1):
+    import matplotlib
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+    return plt.subplots(1, ncols, figsize=(w, h), squeeze=False)
+
+
+def _png(fig) -> bytes:
+    import matplotlib.pyplot as plt
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def _plot_unit(unit: str) -> tuple[str, float]:
+    return {"rad": ("arcsec", 180 / math.pi * 3600), "m": ("um", 1e6), "1": ("ppm", 1e6)}.get(unit, (unit, 1.0))
+
+
+def plot_signature(before: dict | None, after: dict | None, title: str) -> bytes:
+    """PNG: binned estimates of a family (error bars 2u) and its fitted curve, at the previous fit and after
+    the effect was added (field families: one panel per direction; groups: one bar per group)."""
+    data = [(lab, d) for lab, d in (("before", before), ("after", after)) if d is not None]
+    first = data[0][1]
+    if first["kind"] == "groups":
+        fig, axs = _figure(10, 3.2)
+        ax = axs[0, 0]
+        for k, (lab, d) in enumerate(data):
+            x = np.arange(len(d["names"])) + (k - 0.5 * (len(data) - 1)) * 0.35
+            ax.errorbar(x, np.asarray(d["value"]) * 1e6, yerr=2 * np.asarray(d["u"]) * 1e6, fmt="o", ms=3,
+                        label=lab, capsize=2)
+        names = first["names"]
+        step = max(1, len(names) // 40)
+        ax.set_xticks(np.arange(len(names))[::step])
+        ax.set_xticklabels(names[::step], rotation=90, fontsize=7)
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set_ylabel("offset [um] (2u bars)")
+        ax.legend(fontsize=8)
+        ax.set_title(title, fontsize=10)
+        return _png(fig)
+    nd = len(first["directions"])
+    fig, axs = _figure(4.2 * nd, 3.2, nd)
+    colours = {"before": "tab:red", "after": "tab:blue"}
+    for j, (dname, dunit) in enumerate(first["directions"]):
+        ax = axs[0, j]
+        pu, pf = _plot_unit(dunit)
+        for lab, d in data:
+            x = np.asarray(d["centres"]) * d["factor"]
+            v, u = np.asarray(d["value"][j]) * pf, np.asarray(d["u"][j]) * pf
+            ok = np.isfinite(v)
+            ax.errorbar(x[ok], v[ok], yerr=2 * u[ok], fmt="o", ms=4, capsize=2, color=colours[lab],
+                        label=f"{lab}: binned estimate")
+            xs = np.asarray(d["variable"]) * d["factor"]
+            order = np.argsort(xs)
+            curve = np.asarray(d["curve"])[:, j] * pf
+            ax.plot(xs[order], curve[order], "-", lw=1, color=colours[lab], alpha=0.7, label=f"{lab}: fitted")
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set_xlabel(f"{first['label']} [{first['unit']}]")
+        ax.set_ylabel(f"{dname} error [{pu}]")
+        ax.legend(fontsize=7)
+    fig.suptitle(title, fontsize=10)
+    return _png(fig)
+
+
+def plot_screening(tests, title: str, gate: float | None = None) -> bytes:
+    """PNG: -log10(p) of each candidate's score test (absorbed candidates grey at 0)."""
+    tests = list(tests)[:30]
+    fig, axs = _figure(7, 0.25 * len(tests) + 1.2)
+    ax = axs[0, 0]
+    y = np.arange(len(tests))[::-1]
+    vals = [-math.log10(max(t.p_value, 1e-300)) if t.identifiable and math.isfinite(t.p_value) else 0.0
+            for t in tests]
+    ax.barh(y, vals, color=["tab:orange" if t.identifiable else "0.7" for t in tests])
+    ax.set_yticks(y)
+    ax.set_yticklabels([t.name + ("" if t.identifiable else " (absorbed)") for t in tests], fontsize=7)
+    if gate:
+        ax.axvline(-math.log10(gate), color="k", ls="--", lw=0.8, label=f"screening gate p = {gate:.2g}")
+        ax.legend(fontsize=7)
+    ax.set_xlabel("-log10(p) of the score test")
+    ax.set_title(title, fontsize=10)
+    return _png(fig)
+
+
+def plot_before_after(loop: LoopResult) -> bytes:
+    """PNG: held-out test-set figures of every stage."""
+    rows = loop.before_after()
+    keys = [(k, h) for k, h, _ in TABLE if all(k in r and r[k] is not None for r in rows)]
+    fig, axs = _figure(1.4 * len(keys) * max(len(rows), 2) / 2 + 2, 3.2)
+    ax = axs[0, 0]
+    w = 0.8 / len(rows)
+    for i, r in enumerate(rows):
+        ax.bar(np.arange(len(keys)) + i * w, [r[k] for k, _ in keys], w, label=r["model"])
+    ax.set_xticks(np.arange(len(keys)) + 0.4 - w / 2)
+    ax.set_xticklabels([h for _, h in keys], fontsize=8)
+    ax.set_ylabel("um")
+    ax.set_title("held-out test set, stage by stage", fontsize=10)
+    ax.legend(fontsize=7)
+    return _png(fig)
+
+
+# ---------------------------------------------------------------------------------------------------
+# HTML
+
+def _table(headers, rows) -> str:
+    h = "".join(f"<th>{html.escape(str(x))}</th>" for x in headers)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>" for r in rows)
+    return f"<table><tr>{h}</tr>{body}</table>"
+
+
+def _g(v, fmt=".3g"):
+    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, fmt)
+
+
+def _screening_rows(tests):
+    return [(t.name, t.k, t.rank, _g(t.delta_chi2, ".1f"), _g(t.p_value, ".2g"), _g(t.delta_bic, ".1f"),
+             _g(t.explained_cv, ".3f"), ", ".join(t.absorbed) or "") for t in tests]
+
+
+_SCREEN_HEAD = ("candidate", "k", "rank", "delta chi2", "p (score F)", "delta BIC", "explained (held-out)",
+                "absorbed parameters")
+_CV_HEAD = ("candidate", "weighted RMS before", "after", "improvement", "Wilcoxon p", "threshold",
+            "measurements improved", "passed", "reason")
+
+
+def _cv_rows(cvs):
+    return [(c.candidate, _g(c.rms_base, ".4g"), _g(c.rms_new, ".4g"), _g(100 * c.improvement, ".1f") + " %",
+             _g(c.p_value, ".2g"), _g(c.threshold, ".2g"), f"{c.wins} / {c.n_measurements}",
+             "yes" if c.passed else "no", c.reason) for c in cvs]
+
+
+def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | None = None) -> list[Path]:
+    """Write ``summary.json``, ``report.html``, ``before-after.txt`` and the PNGs into ``out_dir``
+    (atomically, never over ``inputs``); returns the paths written."""
+    out = Path(out_dir)
+    inputs = [Path(p) for p in inputs]
+    for name in ("summary.json", "report.html", "before-after.txt"):
+        guard_output(out / name, inputs)
+    written = []
+
+    def png(name, data):
+        written.append(atomic_write_bytes(out / name, data, inputs))
+        return name
+
+    sections = []
+    table = before_after_text(loop)
+    img = png("before-after.png", plot_before_after(loop))
+    sections.append(f"<h2>Verdict</h2><p>{html.escape(loop.verdict)}</p><p>Stopped: "
+                    f"{html.escape(loop.stop_reason)}.</p><h2>Before and after (held-out test set)</h2>"
+                    f"<pre>{html.escape(table)}</pre><img src='{img}'>")
+    for s in loop.stages[1:]:
+        gate = loop.settings.screen_alpha / max(sum(t.identifiable for t in s.screening), 1)
+        parts = [f"<h2>Stage {s.index}: + {html.escape(s.added.name)}</h2>"]
+        prm = effect_summary(s.result, s.added)
+        parts.append(_table(("parameter", "value", "u (1 sigma)", "unit", "state"),
+                            [(r["name"], _g(r["display_value"], ".5g"), _g(r["display_u"], ".2g"), r["display_unit"],
+                              r["state"] + (f", phase {r['phase_deg']:.1f} deg" if "phase_deg" in r else ""))
+                             for r in prm]))
+        if s.nested or s.alternatives:
+            parts.append("<p>The data cannot tell it from: "
+                         + html.escape(", ".join(dict.fromkeys(s.nested + s.alternatives)))
+                         + " (same residual signature).</p>")
+        parts.append("<h3>Screening at the previous fit</h3>" + _table(_SCREEN_HEAD, _screening_rows(s.screening)))
+        img = png(f"stage-{s.index}-screening.png", plot_screening(s.screening, f"stage {s.index}: screening", gate))
+        parts.append(f"<img src='{img}'>")
+        parts.append("<h3>Cross-validation (held-out folds of the design set)</h3>" + _table(_CV_HEAD, _cv_rows(s.cv)))
+        if s.plot_before is not None:
+            img = png(f"stage-{s.index}-signature.png",
+                      plot_signature(s.plot_before, s.plot_after, f"{s.plot_family}: before and after + {s.added.name}"))
+            parts.append(f"<h3>The residual that led to it</h3><img src='{img}'>")
+        sections.append("".join(parts))
+    parts = ["<h2>Final screening</h2>"]
+    if loop.final_screening:
+        parts.append(_table(_SCREEN_HEAD, _screening_rows(loop.final_screening)))
+        gate = loop.settings.screen_alpha / max(sum(t.identifiable for t in loop.final_screening), 1)
+        img = png("final-screening.png", plot_screening(loop.final_screening, "final screening", gate))
+        parts.append(f"<img src='{img}'>")
+    if loop.final_cv:
+        parts.append("<h3>Cross-validation</h3>" + _table(_CV_HEAD, _cv_rows(loop.final_cv)))
+    parts.append("<h2>Structure tests on the final fit</h2>")
+    parts.append(_table(("family", "columns", "rank", "delta chi2", "p", "p (Holm)", "explained (held-out)",
+                         "best regressor", "what"),
+                        [(f.name, t.k, t.rank, _g(t.delta_chi2, ".1f"), _g(t.p_value, ".2g"), _g(a, ".2g"),
+                          _g(t.explained_cv, ".3f"), t.best, f.what) for f, t, a in loop.structure]))
+    for name, d in loop.structure_plots.items():
+        img = png(f"structure-{_slug(name)}.png", plot_signature(d, None, f"remaining structure: {name}"))
+        parts.append(f"<img src='{img}'>")
+    if loop.skipped:
+        parts.append("<h3>Candidates not offered</h3>" + _table(("candidate", "why"),
+                                                               [(s.name, s.reason) for s in loop.skipped]))
+    sections.append("".join(parts))
+    page = ("<!doctype html><html><head><meta charset='utf-8'><title>close-loop report</title><style>"
+            "body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;font-size:12px}"
+            "td,th{border:1px solid #ccc;padding:2px 6px}pre{background:#f6f6f6;padding:6px}</style></head><body>"
+            f"<h1>Closing the loop: {html.escape(loop.desc.name)}</h1>" + "".join(sections) + "</body></html>")
+    summary = summary_dict(loop, input_names)
+    written.append(atomic_write_text(out / "summary.json", json.dumps(summary, indent=1) + "\n", inputs))
+    written.append(atomic_write_text(out / "before-after.txt", table + "\n", inputs))
+    written.append(atomic_write_text(out / "report.html", page, inputs))
+    return written
+
+
+def _slug(name: str) -> str:
+    return "".join(c if c.isalnum() else "-" for c in name).strip("-").lower()
