@@ -198,7 +198,16 @@ def test_help_is_useful(capsys):
         assert word in text
 
 
-def test_a_simulated_campaign_is_drawn_where_the_truth_is(tmp_path, capsys, nominal):
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory):
+    """The calibration campaign of examples/, simulated (points, reference points, artefacts, truth)."""
+    sim = tmp_path_factory.mktemp("sim")
+    assert main(["simulate", str(ROOT / "examples" / "campaigns" / "calibration.toml"), "-o", str(sim),
+                 "--no-signals", "-q"]) == 0
+    return sim
+
+
+def test_a_simulated_campaign_is_drawn_where_the_truth_is(simulated, tmp_path, capsys, nominal):
     """End to end with the simulator: each ball-bar sphere is drawn at its true centre moved by the
     nominal arm's errors at that sphere's points (the simulated true arm differs from the nominal one by
     up to ~0.4 mm), as a fit at the known radius propagates them to first order: within 20 um."""
@@ -207,9 +216,8 @@ def test_a_simulated_campaign_is_drawn_where_the_truth_is(tmp_path, capsys, nomi
 
     from arm_model import read_points
 
-    sim = tmp_path / "sim"
-    assert main(["simulate", str(ROOT / "examples" / "campaigns" / "calibration.toml"), "-o", str(sim),
-                 "--no-signals", "-q"]) == 0
+    sim = simulated
+    capsys.readouterr()
     out = tmp_path / "view.html"
     assert run_view(sim / "points.csv", "--arm", NOMINAL, "--artefacts", sim / "artefacts.toml", "--html", out) == 0
     assert "note:" not in capsys.readouterr().out          # every feature could be placed
@@ -232,3 +240,36 @@ def test_a_simulated_campaign_is_drawn_where_the_truth_is(tmp_path, capsys, nomi
             assert np.linalg.norm(drawn - (pos[f"{end}_m"] + shift)) < 20e-6, (pos["measurement"], end)
             worst = max(worst, float(np.linalg.norm(drawn - pos[f"{end}_m"])))
     assert 50e-6 < worst < 2e-3     # the test is not vacuous: the nominal arm is measurably off
+
+
+def test_residuals_of_aacmm_calibrate(simulated, tmp_path, capsys):
+    """The residuals.csv that aacmm calibrate writes is drawn as it is: each vector from the ball centre
+    of its points-file line (with the calibrated arm), the tracker rows of the other file counted."""
+    import csv
+
+    from arm_model import load_description, read_points
+
+    cal = tmp_path / "cal"
+    assert main(["calibrate", str(simulated / "points.csv"), str(simulated / "artefacts.toml"), "--arm",
+                 str(NOMINAL), "--reference-points", str(simulated / "points-ref.csv"), "-o", str(cal)]) == 0
+    arm = next(cal.glob("*-calibrated.toml"))
+    capsys.readouterr()
+    out = tmp_path / "view.html"
+    assert run_view(simulated / "points.csv", "--arm", arm, "--residuals", cal / "residuals.csv",
+                    "--residual-scale", 2000, "--html", out) == 0
+    text = capsys.readouterr().out
+    desc = load_description(arm)
+    pts = read_points(simulated / "points.csv", desc.n_joints)
+    rows = list(csv.DictReader((cal / "residuals.csv").read_text().splitlines()))
+    here = [r for r in rows if r["measurement"] in set(pts.measurement)]   # not the tracker file's nests
+    assert 0 < len(here) < len(rows)
+    assert f"magenta lines: {len(here)} residual vector(s), drawn x2000" in text
+    assert f"note: {len(rows) - len(here)} residual(s)" in text
+    cmds = page_commands(out.read_text())
+    seg = next(c for c in cmds if c["path"] == "/meshcat/aacmm/residuals x2000/vectors")
+    xyz = np.frombuffer(seg["object"]["geometries"][0]["data"]["attributes"]["position"]["array"].data,
+                        dtype=np.float32).reshape(-1, 2, 3)
+    i = np.searchsorted(pts.lines, [int(r["line"]) for r in here])
+    start = ball_centres(desc, pts.q[i], pts.wrench[i])
+    vec = np.array([[float(r[f"d{a}_um"]) for a in "xyz"] for r in here]) * 1e-6
+    assert np.allclose(xyz[:, 0], start, atol=1e-6) and np.allclose(xyz[:, 1], start + 2000 * vec, atol=1e-6)

@@ -13,7 +13,7 @@ from arm_model.io import parse_artefacts
 from arm_model.urdf import ARM_RGBA, BALL_RGBA
 from conftest import assert_close
 from viz import Camera, ViewerError, colour_mask, find_chromium, page_with_legend, place_features
-from viz.residuals import parse_residuals
+from viz.residuals import parse_residuals, residual_origins
 from viz.scene import _arrow_parts, _rotation_y_to
 
 
@@ -184,13 +184,34 @@ def test_residuals_roundtrip_any_length_unit(rows, pu, ru, text_columns):
     assert res.measurement.tolist() == ([f"m{k}" for k in range(len(rows))] if text_columns else [""] * len(rows))
 
 
+def test_residuals_by_points_file_line(nominal):
+    """The calibration's residuals.csv names points by line: vectors start at those ball centres; a
+    line of another file (other measurement) is counted, not drawn."""
+    from arm_model.io import parse_points
+
+    pts = parse_points("measurement,feature," + ",".join(f"q{i}_deg" for i in range(1, 8)) + "\n\n"
+                       "ring-01,ring,0,30,0,60,0,45,0\nring-01,ring,10,30,0,60,0,45,0\n"
+                       "bar-01,bar-A,20,30,0,60,0,45,0\n", "p.csv", 7)
+    centres = np.arange(9.0).reshape(3, 3)
+    res = parse_residuals("measurement,feature,kind,line,residual_um,dx_um,dy_um,dz_um,standardized\n"
+                          "bar-01,bar-A,sphere,5,1,1,0,0,0.1\nring-01,ring,ring,3,2,0,2,0,0.2\n"
+                          "nest-01,nest-01,reference,4,3,0,0,3,0.3\n", "res.csv")
+    assert res.points is None and res.point_lines.tolist() == [5, 3, 4]
+    origins, vectors, skipped = residual_origins(res, pts, centres)
+    assert_close(origins, centres[[2, 0]], 0.0)
+    assert_close(vectors, [[1e-6, 0, 0], [0, 2e-6, 0]], 1e-18)
+    assert skipped == 1
+
+
 GOOD = "x_mm,y_mm,z_mm,rx_um,ry_um,rz_um\n1,2,3,0.1,0.2,0.3\n"
 
 
 @pytest.mark.parametrize("text, where", [
     ("", "res.csv, line 1"),
     ("x_mm,y_mm,z_mm,rx_um,ry_um,rz_um\n", "res.csv, line 2"),
-    ("x_mm,y_mm,z_mm,rx_um,ry_um\n1,2,3,4,5\n", "missing column 'rz_mm'"),
+    ("x_mm,y_mm,z_mm,rx_um,ry_um\n1,2,3,4,5\n", "missing residual columns: expected rx, ry, rz"),
+    ("rx_um,ry_um,rz_um\n1,2,3\n", "or 'line' (its line in the points file)"),
+    ("line,dx_um,dy_um,dz_um\n2.5,1,2,3\n", "res.csv, line 2, column 'line': expected a line number"),
     ("x_mm,y_mm,z_mm,rx_um,ry_um,rz_deg\n1,2,3,4,5,6\n", "column 'rz_deg'"),
     (GOOD + "1,2,3,0.1,oops,0.3\n", "res.csv, line 3, column 'ry_um'"),
     (GOOD + "1,2,3,0.1,inf,0.3\n", "res.csv, line 3, column 'ry_um'"),

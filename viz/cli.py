@@ -15,7 +15,7 @@ from arm_model.io import guard_output
 
 from ._errors import ViewerError
 from .placement import place_features
-from .residuals import read_residuals
+from .residuals import read_residuals, residual_origins
 
 __all__ = ["register", "run"]
 
@@ -57,8 +57,9 @@ def register(sub) -> None:
                         "drawn 100 mm long)")
     p.add_argument("--artefacts", type=Path, help="artefacts TOML (DATA-FORMATS §4): draw each feature, placed "
                    "by fitting its points in each measurement")
-    p.add_argument("--residuals", type=Path, help="residuals CSV (x_mm, y_mm, z_mm, rx_um, ry_um, rz_um, see "
-                   "docs/viewer.md): draw each residual vector")
+    p.add_argument("--residuals", type=Path, help="residuals CSV: x_mm, y_mm, z_mm, rx_um, ry_um, rz_um, or the "
+                   "residuals.csv of aacmm calibrate (line, dx_um, dy_um, dz_um; see docs/viewer.md): draw "
+                   "each residual vector")
     p.add_argument("--residual-scale", type=_positive(float), default=1000.0,
                    help="length of a residual line per length of residual (default 1000)")
     p.add_argument("--html", type=Path, metavar="OUT.html", help="write the scene as a self-contained page")
@@ -127,7 +128,15 @@ def run(args: argparse.Namespace) -> int:
                                                desc.probe.ball_diameter)
             view.show_artefacts(placements, artefacts.distances)
         if residuals is not None:
-            view.show_residuals(residuals.points, residuals.vectors, scale=args.residual_scale)
+            if args.measurement is not None:   # the selected measurement's (and those of no measurement)
+                residuals = residuals.select(np.isin(residuals.measurement, ["", args.measurement]))
+            all_centres = ball_centres(desc, points.q, points.wrench)
+            origins, vectors, skipped = residual_origins(residuals, points, all_centres)
+            if skipped:
+                notes.append(f"{skipped} residual(s) of {residuals.path} name lines that are not points of "
+                             f"{points.path} with the same measurement and feature; not drawn")
+            if len(vectors):
+                view.show_residuals(origins, vectors, scale=args.residual_scale)
         _report(desc, sel, centres, shown, wrench, args, view, notes)
         if args.html is not None:
             view.write_html(args.html, inputs=inputs)

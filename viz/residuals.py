@@ -1,13 +1,22 @@
 """The residuals file the viewer draws (``aacmm view --residuals``).
 
-One row a residual vector, units in the column names (DATA-FORMATS §1)::
+One row a residual vector, units in the column names (DATA-FORMATS §1). Either the start point is
+given::
 
     measurement,feature,x_mm,y_mm,z_mm,rx_um,ry_um,rz_um
     ring-01,ring,512.113,-20.410,118.025,1.8,-0.6,0.2
 
-* ``x, y, z`` (required, any length unit): where the vector starts, the ball centre in the base frame.
-* ``rx, ry, rz`` (required, any length unit): the residual vector, base frame: measured minus model
-  (e.g. the ball centre minus its nearest point on the fitted feature's ball-centre surface).
+or, as ``aacmm calibrate`` writes its ``residuals.csv``, the line of the point in the points file::
+
+    measurement,feature,kind,line,residual_um,dx_um,dy_um,dz_um,standardized
+    ring-01,ring,ring,2,1.93,1.8,-0.6,0.2,0.4
+
+* ``x, y, z`` (any length unit): where the vector starts, the ball centre in the base frame; or
+  ``line``: the file line of the point in the points file the viewer shows (the vector then starts at
+  that point's deflection-corrected ball centre; a row whose measurement or feature differs from that
+  line's, e.g. a point of another file, is not drawn and is counted).
+* ``rx, ry, rz`` or ``dx, dy, dz`` (any length unit): the residual vector, base frame: measured minus
+  model (e.g. the ball centre minus its nearest point on the fitted feature's ball-centre surface).
 * ``measurement``, ``feature`` (optional text). Other columns are allowed and ignored; a column of
   numbers without a unit suffix is an error, as in every file of the project.
 """
@@ -24,25 +33,34 @@ from arm_model._errors import read_text
 from arm_model._units import QUANTITY_OF_UNIT, UNIT_FACTORS, split_unit
 from arm_model.io import _csv_records
 
-__all__ = ["Residuals", "read_residuals", "parse_residuals"]
+__all__ = ["Residuals", "read_residuals", "parse_residuals", "residual_origins"]
 
 _POINT = ("x", "y", "z")
-_VECTOR = ("rx", "ry", "rz")
+_VECTORS = (("rx", "ry", "rz"), ("dx", "dy", "dz"))
 
 
 @dataclass(frozen=True)
 class Residuals:
-    """Residual vectors: ``points`` (N, 3) [m] and ``vectors`` (N, 3) [m], base frame; ``measurement``
-    and ``feature`` (N,) text ("" when absent); ``lines`` (N,) file line of each row."""
+    """Residual vectors ``vectors`` (N, 3) [m], base frame, starting at ``points`` (N, 3) [m] or, when
+    the file gives none, at the points-file lines ``point_lines`` (N,); ``measurement`` and
+    ``feature`` (N,) text ("" when absent); ``lines`` (N,) the file line of each row."""
     path: str
-    points: np.ndarray
+    points: np.ndarray | None
     vectors: np.ndarray
     measurement: np.ndarray
     feature: np.ndarray
     lines: np.ndarray
+    point_lines: np.ndarray | None = None
 
     def __len__(self) -> int:
-        return len(self.points)
+        return len(self.vectors)
+
+    def select(self, mask) -> "Residuals":
+        """The rows where ``mask`` holds."""
+        def take(a):
+            return None if a is None else a[mask]
+        return Residuals(self.path, take(self.points), self.vectors[mask], self.measurement[mask],
+                         self.feature[mask], self.lines[mask], take(self.point_lines))
 
 
 def read_residuals(path: str | Path) -> Residuals:
@@ -67,10 +85,15 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
         parts = split_unit(h)
         if parts is not None:
             by_base[parts[0]] = (k, h)
-    for base in _POINT + _VECTOR:
-        if base not in by_base:
-            raise InputError(f"missing column '{base}_mm' (or _m, _um): expected x, y, z and rx, ry, rz "
-                             "lengths", path, hline)
+    vector = next((v for v in _VECTORS if all(b in by_base for b in v)), None)
+    if vector is None:
+        raise InputError("missing residual columns: expected rx, ry, rz (or dx, dy, dz) with a length unit, "
+                         "e.g. rx_um", path, hline)
+    has_xyz = all(b in by_base for b in _POINT)
+    if not has_xyz and "line" not in header:
+        raise InputError("missing columns x_mm, y_mm, z_mm (where each vector starts) or 'line' (its line in "
+                         "the points file)", path, hline)
+    for base in (_POINT if has_xyz else ()) + vector:
         h = by_base[base][1]
         if QUANTITY_OF_UNIT[split_unit(h)[1]] != "length":
             raise InputError(f"'{base}' must be a length (_mm, _m or _um)", path, hline, h)
@@ -78,7 +101,7 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
         if len(r) != len(header):
             raise InputError(f"{len(r)} cells where the header has {len(header)} columns", path, no)
     for k, h in enumerate(header):
-        if split_unit(h) is None and h not in ("measurement", "feature"):
+        if split_unit(h) is None and h not in ("measurement", "feature", "line", "standardized"):
             cells = [r[k].strip() for _, r in data]
             if all(c and _number(c) is not None for c in cells):
                 raise InputError("numeric column without a unit suffix (expected e.g. '_mm', '_um')",
@@ -100,9 +123,44 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
         k = header.index(name)
         return np.array([r[k].strip() for _, r in data], dtype=object)
 
-    return Residuals(path, np.column_stack([column(b) for b in _POINT]),
-                     np.column_stack([column(b) for b in _VECTOR]), text("measurement"), text("feature"),
-                     np.array([no for no, _ in data]))
+    point_lines = None
+    if not has_xyz:
+        k = header.index("line")
+        point_lines = np.empty(len(data), dtype=int)
+        for i, (no, r) in enumerate(data):
+            cell = r[k].strip()
+            if not cell.isdigit() or int(cell) < 1:
+                raise InputError(f"expected a line number (1, 2, ...), got {cell!r}", path, no, "line")
+            point_lines[i] = int(cell)
+    return Residuals(path, np.column_stack([column(b) for b in _POINT]) if has_xyz else None,
+                     np.column_stack([column(b) for b in vector]), text("measurement"), text("feature"),
+                     np.array([no for no, _ in data]), point_lines)
+
+
+def residual_origins(res: Residuals, points, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """Start points and vectors [m] of the residuals that can be drawn.
+
+    Args:
+        res: the residuals read.
+        points: the :class:`~arm_model.PointSet` shown (for residuals given by ``line``).
+        centres: (N, 3) its deflection-corrected ball centres [m].
+
+    Returns:
+        (origins (M, 3), vectors (M, 3), skipped): ``skipped`` counts rows given by a line that is not a
+        point of ``points`` with the same measurement and feature.
+    """
+    if res.points is not None:
+        return res.points, res.vectors, 0
+    row_of = {int(line): i for i, line in enumerate(points.lines)}
+    keep, origins = [], []
+    for k, line in enumerate(res.point_lines):
+        i = row_of.get(int(line))
+        if i is None or (res.measurement[k] and res.measurement[k] != points.measurement[i]) \
+                or (res.feature[k] and res.feature[k] != points.feature[i]):
+            continue
+        keep.append(k)
+        origins.append(centres[i])
+    return np.reshape(origins, (-1, 3)), res.vectors[keep], len(res.vectors) - len(keep)
 
 
 def _number(cell: str) -> float | None:
