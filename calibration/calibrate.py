@@ -18,6 +18,7 @@
 from __future__ import annotations
 
 import fnmatch
+import functools
 import math
 from dataclasses import dataclass, field, replace
 
@@ -28,13 +29,13 @@ from arm_model import InputError, NumericalError
 from arm_model.model import ArmModel
 
 from .data import CalibrationData, Weights
-from .identifiability import (DEFAULT_RANK_TOL, Combination, Identifiability, analyse, prior_scales,
+from .identifiability import (DEFAULT_RANK_TOL, Combination, Identifiability, _compress, analyse, prior_scales,
                               reduced_jacobian, weakly_determined)
 from .problem import Problem
-from .solver import levenberg_marquardt, normal_solver
+from .solver import blas_threads, levenberg_marquardt, normal_solver
 
 __all__ = ["FixedParameter", "Outlier", "CalibrationResult", "calibrate", "resolve_parameters",
-           "default_free", "rigid_gauge", "display_unit"]
+           "default_free", "rigid_gauge", "display_unit", "blas_threads"]
 
 
 def display_unit(unit: str) -> tuple[str, float]:
@@ -98,13 +99,11 @@ def rigid_gauge(problem: Problem, p, free) -> np.ndarray:
         return np.zeros((len(free), 0))
     x, dx = problem.centres(p, jac=True)
     a = dx[:, :, free].reshape(-1, len(free))
-    fields = [np.tile(e, (len(x), 1)) for e in np.eye(3)] + [np.cross(e, x) for e in np.eye(3)]
-    dirs = []
-    for f in fields:
-        sol = np.linalg.lstsq(a, f.ravel(), rcond=None)[0]
-        if np.linalg.norm(a @ sol - f.ravel()) <= 1e-9 * np.linalg.norm(f):
-            dirs.append(sol)
-    return np.array(dirs).T if dirs else np.zeros((len(free), 0))
+    fields = np.column_stack([np.tile(e, (len(x), 1)).ravel() for e in np.eye(3)]
+                             + [np.cross(e, x).ravel() for e in np.eye(3)])
+    sol = np.linalg.lstsq(a, fields, rcond=None)[0]
+    ok = np.linalg.norm(a @ sol - fields, axis=0) <= 1e-9 * np.linalg.norm(fields, axis=0)
+    return sol[:, ok]
 
 
 @dataclass
@@ -256,6 +255,15 @@ def _leverage(j: sp.csc_matrix, solve, chunk: int = 2000) -> np.ndarray:
     return np.clip(h, 0.0, 1.0 - 1e-12)
 
 
+def _with_blas_limit(fn):
+    @functools.wraps(fn)
+    def wrapper(*args, blas: int | None = 1, **kwargs):
+        with blas_threads(blas):
+            return fn(*args, **kwargs)
+    return wrapper
+
+
+@_with_blas_limit
 def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict | None = None,
               start: dict | None = None, weights: Weights | None = None, on_unidentifiable: str = "fix",
               rank_tol: float = DEFAULT_RANK_TOL, outlier_threshold: float = 4.0, drop_outliers: bool = False,
@@ -287,6 +295,7 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
         priors: plausible error sizes [SI] by parameter name or glob pattern (overrides). They also
             choose which of two equivalent parameters is kept: the one whose plausible error moves
             the data more.
+        blas: BLAS threads during the fit (default 1, see :func:`blas_threads`; None: unchanged).
 
     Raises:
         NumericalError: no convergence, too few residuals, or unidentifiable parameters with "stop".
@@ -378,7 +387,7 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
     # covariance of the free parameters from the reduced Jacobian
     jred = reduced_jacobian(ev.jp, ev.jt)
     scale = _scale(ev.jp)
-    _, s, vt = np.linalg.svd(jred / scale, full_matrices=False)
+    _, s, vt = np.linalg.svd(_compress(jred / scale), full_matrices=False)
     if len(kept) and s[-1] <= 0:
         raise NumericalError("singular covariance: a free parameter has no effect on the residuals")
     cov = var * (vt.T / s ** 2) @ vt / np.outer(scale, scale) if len(kept) else np.zeros((0, 0))
@@ -484,3 +493,4 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
 def _scale(jp: np.ndarray) -> np.ndarray:
     s = np.linalg.norm(jp, axis=0)
     return np.where(s > 0, s, 1.0)
+

@@ -90,6 +90,14 @@ class Identifiability:
                 "no_effect": list(self.no_effect), "rigid_motion_parameters": list(self.gauge)}
 
 
+def _compress(a: np.ndarray) -> np.ndarray:
+    """``R`` of ``a = Q R`` (Q orthonormal): the same column norms, inner products, singular values
+    and least-squares relations between columns, in ``n`` rows instead of thousands."""
+    if a.shape[0] <= a.shape[1]:
+        return a
+    return np.linalg.qr(a, mode="r")
+
+
 def reduced_jacobian(jp: np.ndarray, jt: sp.spmatrix) -> np.ndarray:
     """``J_p - J_t (J_t^T J_t)^-1 J_t^T J_p``: the parameter Jacobian with the nuisance eliminated."""
     if jt.shape[1] == 0 or jp.shape[1] == 0:
@@ -129,6 +137,7 @@ def analyse(jred: np.ndarray, jp: np.ndarray, names, rank_tol: float = DEFAULT_R
     n = len(names)
     if n == 0:
         return Identifiability(names, np.zeros(0), np.zeros(0), 0, rank_tol, 1.0, ())
+    jred = _compress(jred)            # the same column geometry in n rows: every step below is cheap
     full_norm = np.linalg.norm(jp, axis=0)
     tiny = full_norm <= 1e-12 * max(full_norm.max(), 1e-300)
     scale = np.where(tiny, 1.0, full_norm)
@@ -151,12 +160,13 @@ def analyse(jred: np.ndarray, jp: np.ndarray, names, rank_tol: float = DEFAULT_R
     kept, dep = np.sort(piv[:rank]), piv[rank:]
     dependent = tuple(names[k] for k in sorted(dep))
     combos = {}
-    for k in sorted(dep):
+    dep = sorted(dep)
+    coefs = np.linalg.lstsq(a[:, kept], a[:, dep], rcond=None)[0] if rank and dep else None
+    for j, k in enumerate(dep):
         v = np.zeros(n)
         v[k] = 1.0
         if rank:
-            coef = np.linalg.lstsq(a[:, kept], a[:, k], rcond=None)[0]
-            v[kept] = -coef
+            v[kept] = -coefs[:, j]
         v_si = v / scale * scale[k]
         combos[names[k]] = Combination(_terms(names, v_si, scale, lead=k),
                                        float(np.linalg.norm(a @ v)))
@@ -210,17 +220,18 @@ def weakly_determined(jred: np.ndarray, names, prior: np.ndarray, min_resolution
     names = list(names)
     if not names:
         return []
-    a = jred * prior
+    a = _compress(jred) * prior
     _, r, piv = sla.qr(a, mode="economic", pivoting=True)
     d = np.abs(np.diag(r))
     cut = int(np.sum(d >= 1.0 / min_resolution))
     kept, weak = np.sort(piv[:cut]), piv[cut:]
     out = []
-    for k in weak:
+    coefs = np.linalg.lstsq(a[:, kept], a[:, weak], rcond=None)[0] if len(kept) and len(weak) else None
+    for j, k in enumerate(weak):
         v = np.zeros(len(names))
         v[k] = 1.0
         if len(kept):
-            v[kept] = -np.linalg.lstsq(a[:, kept], a[:, k], rcond=None)[0]
+            v[kept] = -coefs[:, j]
         v_si = v * prior / prior[k]
         u = prior[k] / max(d[list(piv).index(k)], 1e-300)
         out.append((names[k], float(u), Combination(_terms(names, v_si, 1.0 / prior, lead=k))))

@@ -41,7 +41,7 @@ from .candidates import Candidate, Skipped, library_candidates, needs_model
 from .data import CalibrationData, Weights, make_data, split_holdout
 from .diagnostics import (Family, GroupTest, ResidualSpace, binned_estimates, candidate_family, families, holm,
                           measurement_folds, residual_space, screen_candidates, structure_tests)
-from .identifiability import DEFAULT_RANK_TOL
+from .identifiability import DEFAULT_RANK_TOL, prior_scales
 from .problem import Problem
 from .solver import levenberg_marquardt
 from .validation import FIGURES, validate
@@ -51,6 +51,8 @@ __all__ = ["LoopSettings", "CVResult", "Stage", "LoopResult", "close_loop", "hel
 
 #: share of a candidate's signature inside another's above which the data cannot tell them apart
 SAME_SIGNATURE = 0.99
+#: held-out improvement (fraction) within which a smaller nested candidate is preferred
+PARSIMONY = 0.01
 
 
 @dataclass(frozen=True)
@@ -404,12 +406,15 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
     say(f"{len(data)} points, {len(data.measurements())} measurements: {len(design.measurements())} for design "
         f"({settings.folds} folds), {len(test.measurements())} held out for the test; {len(cands)} candidates")
 
-    def fit(model: ArmModel, d: CalibrationData) -> CalibrationResult:
+    priors: dict[str, float] = {}
+
+    def fit(model: ArmModel, d: CalibrationData, extra_priors: dict | None = None) -> CalibrationResult:
         names = None
         if free is not None:
             names = [model.spec.names[i] for i in resolve_parameters(model.spec, free)]
             names += [n for n in model.spec.names[model.base_size:] if n not in names]
-        return calibrate(model, d, free=names, weights=weights, rank_tol=settings.rank_tol)
+        return calibrate(model, d, free=names, weights=weights, rank_tol=settings.rank_tol,
+                         priors={**priors, **(extra_priors or {})})
 
     model = ArmModel(desc, tuple(effects))
     say("calibrating the base model on the design set")
@@ -442,9 +447,16 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         cvs = []
         for c, t in gated:
             say(f"  cross-validating + {c.name} (score p = {t.p_value:.2g})")
+            cp = _candidate_priors(model.with_effects(c.effect), c, t)
             try:
-                new = _fold_fit(model.with_effects(c.effect), design, fold_of, settings.folds, fit)
+                new = _fold_fit(model.with_effects(c.effect), design, fold_of, settings.folds,
+                                lambda m, d: fit(m, d, cp))
                 cv = cross_validate(c.name, base_folds, new, threshold, settings.min_improvement)
+                held = [k for k, r in enumerate(new.results) if not set(c.param_names(desc)) & set(r.free)]
+                if held and cv.passed:
+                    cv.passed = False
+                    cv.reason = (f"its parameters were held (not resolved) in the training part of fold(s) "
+                                 f"{', '.join(str(k + 1) for k in held)}")
             except NumericalError as exc:
                 cv = cross_validate(c.name, base_folds, None, threshold, settings.min_improvement, str(exc))
             cv.score_p = t.p_value
@@ -455,12 +467,23 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         if not passing:
             stop = "no screened candidate improves the held-out data significantly"
             break
-        best = max(passing, key=lambda x: (round(x[1].improvement, 3), -x[0].size(desc)))
-        cand, cv = best
+        rank = {c.name: t.rank for c, t in gated}
+        cand, cv = max(passing, key=lambda x: x[1].improvement)
+        wcols = _candidate_cols(space, remaining, remaining.index(cand))
+        # parsimony: a passing candidate inside the best one's signature, with fewer parameters and nearly
+        # the same held-out improvement, explains as much with less
+        for c2, cv2 in sorted(passing, key=lambda x: rank[x[0].name]):
+            if c2 is cand or rank[c2.name] >= rank[cand.name] or cv.improvement - cv2.improvement > PARSIMONY:
+                continue
+            c2cols = _candidate_cols(space, remaining, remaining.index(c2))
+            if wcols is not None and c2cols is not None and \
+                    _signature_overlap(space, wcols, c2cols, settings.rank_tol) >= SAME_SIGNATURE:
+                cand, cv = c2, cv2
+                wcols = c2cols
+                break
         # signature overlaps with the other candidates (same batch as the winner)
         nested, alternatives = [], []
         wi = remaining.index(cand)
-        wcols = _candidate_cols(space, remaining, wi)
         for i, other in enumerate(remaining):
             if i == wi or not tests[i].identifiable:
                 continue
@@ -473,6 +496,7 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
                 alternatives.append(other.name)
         fam_name, before = _plot(space, cand)
         model = model.with_effects(cand.effect)
+        priors.update(_candidate_priors(model, cand, tests[wi]))
         say(f"adding {cand.name}; recalibrating")
         result = fit(model, design)
         after = None
@@ -503,6 +527,18 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
     say(verdict)
     return LoopResult(stages, last_tests, last_cv, stop, structure, significant, verdict, cands, skipped,
                       design.measurements(), test.measurements(), settings, desc, plots)
+
+
+def _candidate_priors(model: ArmModel, cand: Candidate, test: GroupTest) -> dict[str, float]:
+    """Plausible sizes of a candidate's parameters for ``calibrate``'s practical-identifiability check:
+    at least ten times the screening's one-step estimate, so that a parameter the data resolve to better
+    than its own estimated size stays free (the held-out test decides whether it helps)."""
+    names = cand.param_names(model.desc)
+    default = prior_scales(model, names)
+    out = {}
+    for n, d, b in zip(names, default, test.estimate):
+        out[n] = float(max(d, 10.0 * abs(b))) if np.isfinite(b) else float(d)
+    return out
 
 
 def _candidate_cols(space: ResidualSpace, remaining: list, i: int):

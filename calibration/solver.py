@@ -8,6 +8,7 @@ The exit status is always checked: no convergence raises :class:`arm_model.Numer
 """
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,7 +19,7 @@ from arm_model import NumericalError
 
 from .problem import Evaluation, Problem
 
-__all__ = ["LMResult", "levenberg_marquardt", "normal_solver"]
+__all__ = ["LMResult", "levenberg_marquardt", "normal_solver", "blas_threads"]
 
 
 @dataclass
@@ -119,3 +120,13 @@ def levenberg_marquardt(problem: Problem, p0, states0, *, max_iter: int = 200, x
         raise NumericalError(f"Levenberg-Marquardt did not converge in {max_iter} iterations "
                              f"(cost {cost:.6g}); raise max_iter or check the data")
     return LMResult(p, states, ev, cost, it, n_eval, status)
+
+
+def blas_threads(n: int | None = 1):
+    """Context limiting the BLAS threads (threadpoolctl) to ``n`` (None: unchanged). The matrices here
+    are thin (thousands x tens): one thread is as fast, and several threads on a busy machine are
+    slower by orders of magnitude (OpenBLAS spin-waits)."""
+    if n is None:
+        return contextlib.nullcontext()
+    from threadpoolctl import threadpool_limits
+    return threadpool_limits(limits=n, user_api="blas")

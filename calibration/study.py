@@ -31,6 +31,7 @@ from .calibrate import calibrate, resolve_parameters
 from .data import CalibrationData, Weights, make_data, split_holdout
 from .identifiability import reduced_jacobian
 from .problem import Problem
+from .solver import blas_threads
 
 __all__ = ["Progress", "run_tasks", "SimSource", "SynthSource", "RunSettings", "run_once", "monte_carlo",
            "MonteCarloResult", "select_measurements", "Selection", "observability_index"]
@@ -151,22 +152,27 @@ def run_once(task) -> dict:
     source, settings, seed = task
     t0 = time.perf_counter()
     try:
-        desc, points, artefacts, reference, truth = source.make(seed)
-        model = ArmModel(desc, tuple(settings.effects))
-        data = make_data(points, artefacts, model, reference=reference)
-        train, test = split_holdout(data, settings.holdout, seed)
-        kw = {} if settings.rank_tol is None else {"rank_tol": settings.rank_tol}
-        res = calibrate(model, train, settings.free, weights=settings.weights, **kw)
-        p_true = model.spec.vector({k: v for k, v in truth.items() if k in model.spec.names})
-        p_eq = res.equivalent(p_true)
-        idx = [model.spec.index(n) for n in res.free]
-        return {"seed": seed, "ok": True, "free": list(res.free), "p": res.p[idx].tolist(),
-                "u": res.u.tolist(), "truth": p_eq[idx].tolist(), "fixed": [f.name for f in res.fixed],
-                "s0": res.s0, "iterations": res.iterations, "validation": res.compare(test),
-                "seconds": time.perf_counter() - t0}
+        with blas_threads(1):
+            return _run(source, settings, seed, t0)
     except (AacmmError, ValueError) as exc:
         return {"seed": seed, "ok": False, "error": f"{type(exc).__name__}: {exc}",
                 "seconds": time.perf_counter() - t0}
+
+
+def _run(source, settings, seed, t0) -> dict:
+    desc, points, artefacts, reference, truth = source.make(seed)
+    model = ArmModel(desc, tuple(settings.effects))
+    data = make_data(points, artefacts, model, reference=reference)
+    train, test = split_holdout(data, settings.holdout, seed)
+    kw = {} if settings.rank_tol is None else {"rank_tol": settings.rank_tol}
+    res = calibrate(model, train, settings.free, weights=settings.weights, **kw)
+    p_true = model.spec.vector({k: v for k, v in truth.items() if k in model.spec.names})
+    p_eq = res.equivalent(p_true)
+    idx = [model.spec.index(n) for n in res.free]
+    return {"seed": seed, "ok": True, "free": list(res.free), "p": res.p[idx].tolist(),
+            "u": res.u.tolist(), "truth": p_eq[idx].tolist(), "fixed": [f.name for f in res.fixed],
+            "s0": res.s0, "iterations": res.iterations, "validation": res.compare(test),
+            "seconds": time.perf_counter() - t0}
 
 
 @dataclass

@@ -26,7 +26,7 @@ from arm_model.model import ArmModel
 
 from .data import CalibrationData, Weights
 from .problem import MIN_POINTS, Problem
-from .solver import levenberg_marquardt
+from .solver import blas_threads, levenberg_marquardt
 
 __all__ = ["Validation", "validate", "before_after", "FIGURES", "DIAMETER_MIN_POINTS"]
 
@@ -112,6 +112,11 @@ def _articulation(x: np.ndarray) -> dict:
 def validate(model: ArmModel, p, data: CalibrationData, weights: Weights | None = None,
              reference: str = "fit") -> Validation:
     """Validation figures of ``model`` with parameters ``p`` (full vector, SI) on ``data``."""
+    with blas_threads(1):
+        return _validate(model, p, data, weights, reference)
+
+
+def _validate(model, p, data, weights, reference) -> Validation:
     weights = weights or Weights()
     p = np.asarray(p, dtype=float)
     val = Validation()
