@@ -38,7 +38,7 @@ from arm_model.model import ArmModel
 from .calibrate import CalibrationResult
 from .candidates import Candidate, torques_of
 from .data import CalibrationData
-from .identifiability import DEFAULT_RANK_TOL, reduced_jacobian
+from .identifiability import DEFAULT_RANK_TOL, prior_scales, reduced_jacobian, weakly_determined
 from .problem import Problem
 from .solver import levenberg_marquardt
 from .synth import probe_rotation
@@ -49,6 +49,8 @@ __all__ = ["JointAngleOffset", "measurement_folds", "ResidualSpace", "residual_s
 
 #: harmonics of each joint angle tested by the structure tests
 HARMONICS = (1, 2, 3)
+#: a candidate parameter the data resolve only to worse than this many plausible sizes counts as absorbed
+SCREEN_RESOLUTION = 1.0
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -268,7 +270,8 @@ def _svd_scaled(c: np.ndarray, raw_norm: np.ndarray, rank_tol: float):
 
 def test_group(space: ResidualSpace, cols: np.ndarray, names, name: str, fold_of_row: np.ndarray | None,
                raw: np.ndarray | None = None, subgroups: dict | None = None,
-               rank_tol: float = DEFAULT_RANK_TOL, projected: bool = False, cv: bool = True) -> GroupTest:
+               rank_tol: float = DEFAULT_RANK_TOL, projected: bool = False, cv: bool = True,
+               prior: np.ndarray | None = None, min_resolution: float = 1.0) -> GroupTest:
     """Test the columns ``cols`` (n, k) (raw, or already projected with ``projected=True`` and their
     raw columns in ``raw``) against the residual of ``space``.
 
@@ -277,15 +280,30 @@ def test_group(space: ResidualSpace, cols: np.ndarray, names, name: str, fold_of
         subgroups: name -> column indices; ``best`` names the subgroup with the largest delta_chi2.
         cv: compute ``explained_cv`` (False for columns that a held-out fold cannot predict, such as
             one offset per measurement).
+        prior: plausible size [SI] of each column's coefficient (``calibration.identifiability.prior_scales``):
+            columns the data would resolve only to worse than ``min_resolution`` times it are treated as
+            absorbed (:func:`~calibration.identifiability.weakly_determined`): a direction nearly absorbed by
+            the fit must not explain the residual with an implausibly large coefficient.
     """
     raw = cols if raw is None else raw
     c = cols if projected else space.project(cols)
     k = c.shape[1]
     raw_norm = np.linalg.norm(raw, axis=0)
-    scale, u, s, vt = _svd_scaled(c, raw_norm, rank_tol)
-    rank = len(s)
     frac = np.linalg.norm(c, axis=0) / np.where(raw_norm > 0, raw_norm, 1.0)
-    absorbed = tuple(n for n, f_, rn in zip(names, frac, raw_norm) if f_ <= rank_tol or rn <= 0)
+    absorbed = [n for n, f_, rn in zip(names, frac, raw_norm) if f_ <= rank_tol or rn <= 0]
+    weak = []
+    if prior is not None:
+        ok = [i for i, n in enumerate(names) if n not in absorbed]
+        weak = [w[0] for w in weakly_determined(c[:, ok], [names[i] for i in ok], np.asarray(prior)[ok],
+                                                min_resolution)] if ok else []
+        absorbed += [n for n in weak if n not in absorbed]
+    drop = np.array([n in weak for n in names], bool)
+    c_use = c.copy()
+    c_use[:, drop] = 0.0
+    raw_use = np.where(drop[None, :], 0.0, raw)
+    scale, u, s, vt = _svd_scaled(c_use, np.linalg.norm(raw_use, axis=0), rank_tol)
+    rank = len(s)
+    absorbed = tuple(absorbed)
     r, chi2, dof = space.r, space.chi2, space.dof
     nan = float("nan")
     if rank == 0:
@@ -391,7 +409,9 @@ def screen_candidates(result: CalibrationResult, candidates, folds: dict[str, in
         fr = row_folds(space, folds) if folds else None
         for i, sl in zip(members, space.extra_slices):
             c = candidates[i]
-            tests[i] = test_group(space, space.jp[:, sl], c.param_names(desc), c.name, fr, rank_tol=rank_tol)
+            names = c.param_names(desc)
+            tests[i] = test_group(space, space.jp[:, sl], names, c.name, fr, rank_tol=rank_tol,
+                                  prior=prior_scales(space.model, names), min_resolution=SCREEN_RESOLUTION)
     if first is None:
         first = residual_space(result)
     return tests, first

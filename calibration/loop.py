@@ -469,13 +469,13 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
             break
         rank = {c.name: t.rank for c, t in gated}
         cand, cv = max(passing, key=lambda x: x[1].improvement)
-        wcols = _candidate_cols(space, remaining, remaining.index(cand))
+        wcols = _candidate_cols(space, remaining, remaining.index(cand), tests[remaining.index(cand)])
         # parsimony: a passing candidate inside the best one's signature, with fewer parameters and nearly
         # the same held-out improvement, explains as much with less
         for c2, cv2 in sorted(passing, key=lambda x: rank[x[0].name]):
             if c2 is cand or rank[c2.name] >= rank[cand.name] or cv.improvement - cv2.improvement > PARSIMONY:
                 continue
-            c2cols = _candidate_cols(space, remaining, remaining.index(c2))
+            c2cols = _candidate_cols(space, remaining, remaining.index(c2), tests[remaining.index(c2)])
             if wcols is not None and c2cols is not None and \
                     _signature_overlap(space, wcols, c2cols, settings.rank_tol) >= SAME_SIGNATURE:
                 cand, cv = c2, cv2
@@ -484,10 +484,11 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         # signature overlaps with the other candidates (same batch as the winner)
         nested, alternatives = [], []
         wi = remaining.index(cand)
+        wcols = _candidate_cols(space, remaining, wi, tests[wi])
         for i, other in enumerate(remaining):
             if i == wi or not tests[i].identifiable:
                 continue
-            ocols = _candidate_cols(space, remaining, i)
+            ocols = _candidate_cols(space, remaining, i, tests[i])
             if wcols is None or ocols is None:
                 continue
             if _signature_overlap(space, wcols, ocols, settings.rank_tol) >= SAME_SIGNATURE:
@@ -541,14 +542,16 @@ def _candidate_priors(model: ArmModel, cand: Candidate, test: GroupTest) -> dict
     return out
 
 
-def _candidate_cols(space: ResidualSpace, remaining: list, i: int):
-    """Raw columns of candidate ``i`` in ``space`` (None if it was screened in another batch)."""
+def _candidate_cols(space: ResidualSpace, remaining: list, i: int, test: GroupTest):
+    """Raw columns of candidate ``i`` in ``space`` without those the screening found absorbed (None if it
+    was screened in another batch)."""
     effects = [e for e in space.model.effects]
     try:
         k = next(n for n, e in enumerate(effects[len(space.result.model.effects):]) if e is remaining[i].effect)
     except StopIteration:
         return None
-    return space.jp[:, space.extra_slices[k]]
+    keep = [j for j, n in enumerate(test.names) if n not in test.absorbed]
+    return space.jp[:, space.extra_slices[k]][:, keep]
 
 
 def _verdict(stages, significant, stop) -> str:
