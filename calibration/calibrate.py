@@ -35,7 +35,7 @@ from .problem import Problem
 from .solver import blas_threads, levenberg_marquardt, normal_solver
 
 __all__ = ["FixedParameter", "Outlier", "CalibrationResult", "calibrate", "resolve_parameters",
-           "default_free", "rigid_gauge", "display_unit", "blas_threads"]
+           "default_free", "rigid_gauge", "display_unit", "blas_threads", "identify"]
 
 
 def display_unit(unit: str) -> tuple[str, float]:
@@ -97,8 +97,8 @@ def rigid_gauge(problem: Problem, p, free) -> np.ndarray:
     free = np.asarray(free, dtype=int)
     if not len(free) or any(it.kind == "reference" and it.n_theta == 0 for it in problem.instances):
         return np.zeros((len(free), 0))
-    x, dx = problem.centres(p, jac=True)
-    a = dx[:, :, free].reshape(-1, len(free))
+    x, dx = problem.centres(p, True, free)
+    a = dx.reshape(-1, len(free))
     fields = np.column_stack([np.tile(e, (len(x), 1)).ravel() for e in np.eye(3)]
                              + [np.cross(e, x).ravel() for e in np.eye(3)])
     sol = np.linalg.lstsq(a, fields, rcond=None)[0]
@@ -255,6 +255,63 @@ def _leverage(j: sp.csc_matrix, solve, chunk: int = 2000) -> np.ndarray:
     return np.clip(h, 0.0, 1.0 - 1e-12)
 
 
+def identify(problem: Problem, p, states, candidates, *, stage: str = "start", rank_tol: float = DEFAULT_RANK_TOL,
+             min_resolution: float | None = 0.1, priors: dict | None = None, stop: bool = False):
+    """Which of the ``candidates`` (indices into ``problem.model.spec``) the data identify at ``p`` and
+    ``states``: ``(kept indices, [FixedParameter], Identifiability)``.
+
+    Two tests, in order: linear dependence (SVD rank of the reduced Jacobian with the base frame's rigid
+    motions projected out; pivoted QR, columns scaled by plausible error sizes, chooses which to hold),
+    then practical resolution (``min_resolution``, :func:`~calibration.identifiability.weakly_determined`).
+    ``stop``: raise :class:`NumericalError` with the list instead of holding them.
+    """
+    model = problem.model
+    spec = model.spec
+    kept = list(candidates)
+    prob = problem.with_free(kept)
+    ev = prob.evaluate(p, states)
+    gauge = rigid_gauge(prob, p, kept)
+    jred = reduced_jacobian(ev.jp, ev.jt)
+    names = [spec.names[i] for i in kept]
+    idf = analyse(jred, ev.jp, names, rank_tol, prior_scales(model, names, priors), gauge=gauge)
+    fixed = []
+    if idf.dependent:
+        if stop:
+            lines = [f"  {k}: {c.text()}" for k, c in idf.combinations.items()]
+            raise NumericalError(f"{len(idf.dependent)} parameter combination(s) the data cannot identify "
+                                 f"({stage}; rank {idf.rank} of {len(kept)}, rank_tol {rank_tol:g}):\n"
+                                 + "\n".join(lines) + "\nfix these parameters or use on_unidentifiable='fix'")
+        for name in idf.dependent:
+            comb = idf.combinations[name]
+            if name in idf.no_effect:
+                reason = "no effect on the data (its Jacobian column is zero)"
+            elif len(comb.terms) == 1 and name in idf.gauge:
+                reason = "a rigid motion of the base frame: not observable from these data"
+            elif len(comb.terms) == 1:
+                reason = "absorbed by the artefacts' unknowns (centres, axes, transforms)"
+            else:
+                reason = "not separable from the free parameters: " + comb.text()
+            fixed.append(FixedParameter(name, float(p[spec.index(name)]), reason, comb, stage))
+        kept = [i for i in kept if spec.names[i] not in idf.dependent]
+    if min_resolution is not None and kept:
+        names = [spec.names[i] for i in kept]
+        sel = [idf.names.index(n) for n in names]
+        weak = weakly_determined(jred[:, sel], names, prior_scales(model, names, priors), min_resolution)
+        if weak and stop:
+            raise NumericalError("parameters the data resolve to worse than "
+                                 f"{min_resolution:g} of a plausible size ({stage}): "
+                                 + ", ".join(f"{n} (u ~ {u:.3g} {spec.units[spec.index(n)]})" for n, u, _ in weak)
+                                 + "\nhold them or use on_unidentifiable='fix'")
+        for name, u, comb in weak:
+            unit = spec.units[spec.index(name)]
+            fixed.append(FixedParameter(name, float(p[spec.index(name)]),
+                                        f"weakly determined: the data would resolve it only to u ~ {u:.3g} {unit}, "
+                                        f"more than {min_resolution:g} of a plausible size; its effect is below "
+                                        "the noise", comb, stage))
+        kept = [i for i in kept if spec.names[i] not in {w[0] for w in weak}]
+    return kept, fixed, idf
+
+
 def _with_blas_limit(fn):
     @functools.wraps(fn)
     def wrapper(*args, blas: int | None = 1, **kwargs):
@@ -318,46 +375,9 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
 
     def check(p, states, stage) -> Identifiability:
         nonlocal kept
-        prob = problem.with_free(kept)
-        ev = prob.evaluate(p, states)
-        gauge = rigid_gauge(prob, p, kept)
-        jred = reduced_jacobian(ev.jp, ev.jt)
-        names = [spec.names[i] for i in kept]
-        idf = analyse(jred, ev.jp, names, rank_tol, prior_scales(model, names, priors), gauge=gauge)
-        if idf.dependent:
-            if on_unidentifiable == "stop":
-                lines = [f"  {k}: {c.text()}" for k, c in idf.combinations.items()]
-                raise NumericalError(f"{len(idf.dependent)} parameter combination(s) the data cannot identify "
-                                     f"({stage}; rank {idf.rank} of {len(kept)}, rank_tol {rank_tol:g}):\n"
-                                     + "\n".join(lines) + "\nfix these parameters or use on_unidentifiable='fix'")
-            for name in idf.dependent:
-                comb = idf.combinations[name]
-                if name in idf.no_effect:
-                    reason = "no effect on the data (its Jacobian column is zero)"
-                elif len(comb.terms) == 1 and name in idf.gauge:
-                    reason = "a rigid motion of the base frame: not observable from these data"
-                elif len(comb.terms) == 1:
-                    reason = "absorbed by the artefacts' unknowns (centres, axes, transforms)"
-                else:
-                    reason = "not separable from the free parameters: " + comb.text()
-                fixed.append(FixedParameter(name, float(p[spec.index(name)]), reason, comb, stage))
-            kept = [i for i in kept if spec.names[i] not in idf.dependent]
-        if min_resolution is not None and kept:
-            names = [spec.names[i] for i in kept]
-            sel = [idf.names.index(n) for n in names]
-            weak = weakly_determined(jred[:, sel], names, prior_scales(model, names, priors), min_resolution)
-            if weak and on_unidentifiable == "stop":
-                raise NumericalError("parameters the data resolve to worse than "
-                                     f"{min_resolution:g} of a plausible size ({stage}): "
-                                     + ", ".join(f"{n} (u ~ {u:.3g} {spec.units[spec.index(n)]})" for n, u, _ in weak)
-                                     + "\nhold them or use on_unidentifiable='fix'")
-            for name, u, comb in weak:
-                unit = spec.units[spec.index(name)]
-                fixed.append(FixedParameter(name, float(p[spec.index(name)]),
-                                            f"weakly determined: the data would resolve it only to u ~ {u:.3g} {unit}, "
-                                            f"more than {min_resolution:g} of a plausible size; its effect is below "
-                                            "the noise", comb, stage))
-            kept = [i for i in kept if spec.names[i] not in {w[0] for w in weak}]
+        kept, new, idf = identify(problem, p, states, kept, stage=stage, rank_tol=rank_tol,
+                                  min_resolution=min_resolution, priors=priors, stop=on_unidentifiable == "stop")
+        fixed.extend(new)
         return idf
 
     idf0 = check(p0, states, "start")

@@ -67,6 +67,10 @@ def _common_fit_options(p) -> None:
     p.add_argument("--rank-tol", type=_positive, default=None,
                    help="relative singular value below which a parameter combination counts as not "
                         "identifiable (default 1e-4)")
+    p.add_argument("--min-resolution", type=float, default=0.1, metavar="FRACTION",
+                   help="hold parameters the data would resolve only to worse than this fraction of a plausible "
+                        "error size (1 mm, 0.01 rad, 10x the nominal compliance ...): their effect is below the "
+                        "noise (default 0.1; 0 keeps every linearly independent parameter)")
 
 
 def register(sub) -> None:
@@ -154,6 +158,15 @@ def _weights(args):
                    length=None if args.sigma_length_um is None else args.sigma_length_um * 1e-6)
 
 
+def _fit_kwargs(args) -> dict:
+    if args.min_resolution < 0:
+        raise InputError(f"--min-resolution must be >= 0, got {args.min_resolution}")
+    kw = {"min_resolution": args.min_resolution or None}
+    if args.rank_tol is not None:
+        kw["rank_tol"] = args.rank_tol
+    return kw
+
+
 def _free(model, args):
     from .calibrate import default_free, resolve_parameters
     free = resolve_parameters(model.spec, args.free or default_free(model))
@@ -183,7 +196,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     model, data = _load_data(args)
     holdout = _holdout(args.holdout)
     train, test = (data, None) if holdout is None else split_holdout(data, holdout, args.seed)
-    kw = {} if args.rank_tol is None else {"rank_tol": args.rank_tol}
+    kw = _fit_kwargs(args)
     res = calibrate(model, train, _free(model, args), weights=_weights(args), on_unidentifiable=args.on_unidentifiable,
                     outlier_threshold=args.outlier_threshold, drop_outliers=args.drop_outliers,
                     covariance=args.covariance, reference=args.reference, **kw)
@@ -232,7 +245,7 @@ def run_montecarlo(args: argparse.Namespace) -> int:
     from arm_model.model import ArmModel
     model = ArmModel(camp.arm, _effects(args.effect))
     settings = RunSettings(free=tuple(_free(model, args)), weights=_weights(args), holdout=args.holdout,
-                           rank_tol=args.rank_tol, effects=_effects(args.effect))
+                           fit=_fit_kwargs(args), effects=_effects(args.effect))
     mc = monte_carlo(SimSource(str(args.campaign)), args.runs, seed=args.seed, settings=settings,
                      scheduler=args.scheduler, workers=args.workers, progress=not args.quiet)
     atomic_write_text(args.output / "study.json", json.dumps(mc.to_dict(), indent=1, default=float) + "\n",
@@ -259,7 +272,7 @@ def run_poses(args: argparse.Namespace) -> int:
     guard_output(args.output / "poses.json", inputs)
     model, data = _load_data(args)
     sel = select_measurements(model, data, args.count, _free(model, args), weights=_weights(args),
-                              progress=not args.quiet)
+                              progress=not args.quiet, fit=_fit_kwargs(args))
     atomic_write_text(args.output / "poses.json", json.dumps(sel.to_dict(), indent=1) + "\n", inputs)
     print(f"{len(sel.parameters)} identifiable parameters; chosen measurements (O1, random sets' O1):")
     for m, o, r, n in zip(sel.chosen, sel.o1, sel.o1_random, sel.n_points):

@@ -45,6 +45,7 @@ from .synth import probe_rotation
 
 __all__ = ["JointAngleOffset", "measurement_folds", "ResidualSpace", "residual_space", "GroupTest",
            "Family", "families", "candidate_family", "test_group", "screen_candidates", "structure_tests",
+           "remaining_structure",
            "binned_estimates", "holm"]
 
 #: harmonics of each joint angle tested by the structure tests
@@ -130,6 +131,7 @@ class ResidualSpace:
     row_kind: np.ndarray
     extra_slices: list
     offset_slice: slice
+    dof_used: int = 0
 
     @property
     def data(self) -> CalibrationData:
@@ -145,7 +147,7 @@ class ResidualSpace:
 
     @property
     def dof(self) -> int:
-        return int(self.result.dof)
+        return int(self.result.dof) - self.dof_used
 
     def project(self, cols: np.ndarray) -> np.ndarray:
         """Columns (n, k) with the nuisance and the free parameters projected out."""
@@ -154,6 +156,18 @@ class ResidualSpace:
             return cols
         red = reduced_jacobian(cols, self.jt)
         return red - self.basis @ (self.basis.T @ red)
+
+    def with_columns(self, cols: np.ndarray, rank_tol: float = DEFAULT_RANK_TOL) -> "ResidualSpace":
+        """The same space with ``cols`` (raw) fitted too: their projected directions join the basis,
+        the residual loses its part along them and the dof their rank (for conditional tests)."""
+        c = self.project(cols)
+        norm = np.linalg.norm(cols, axis=0)
+        _, u, _, _ = _svd_scaled(c, norm, rank_tol)
+        new = ResidualSpace(**{k: getattr(self, k) for k in self.__dataclass_fields__})
+        new.basis = np.hstack([self.basis, u])
+        new.r = self.r - u @ (u.T @ self.r)
+        new.dof_used = self.dof_used + u.shape[1]
+        return new
 
     def per_row(self, values: np.ndarray) -> np.ndarray:
         """A per-point array (N, ...) taken at each row's point (zero on length rows)."""
@@ -542,8 +556,7 @@ def families(space: ResidualSpace) -> list[Family]:
 
 def structure_tests(space: ResidualSpace, folds: dict[str, int] | None,
                     rank_tol: float = DEFAULT_RANK_TOL) -> list[tuple[Family, GroupTest]]:
-    """Every generic family tested against the residual of ``space``, Holm-adjusted p-values in
-    ``GroupTest.note`` order (see :func:`holm`); sorted by p-value."""
+    """Every generic family tested against the residual of ``space``; sorted by p-value."""
     fr = row_folds(space, folds) if folds else None
     out = []
     for fam in families(space):
@@ -553,6 +566,37 @@ def structure_tests(space: ResidualSpace, folds: dict[str, int] | None,
         out.append((fam, t))
     out.sort(key=lambda ft: (ft[1].p_value if np.isfinite(ft[1].p_value) else 2.0, -ft[1].delta_chi2))
     return out
+
+
+def remaining_structure(space: ResidualSpace, folds: dict[str, int] | None, alpha: float,
+                        rank_tol: float = DEFAULT_RANK_TOL, most: int = 5) -> list[tuple[Family, GroupTest]]:
+    """Forward selection of the structure families that the residual still holds: the most significant
+    family is kept if its p-value passes ``alpha`` after Bonferroni over the families tested and its
+    held-out explained variance is positive (groups families: not predictable, p-value only); then every
+    other family is tested again *given* the ones kept (their columns fitted first), so a family that only
+    shadows a kept one drops out. Returns the kept families with their conditional tests."""
+    fr = row_folds(space, folds) if folds else None
+    fams = families(space)
+    kept: list[tuple[Family, GroupTest]] = []
+    cur = space
+    for _ in range(most):
+        best = None
+        for fam in fams:
+            if any(fam is k for k, _ in kept):
+                continue
+            cols, names = fam.columns(space)
+            t = test_group(cur, cols, names, fam.name, fr, subgroups=fam.subgroups, rank_tol=rank_tol,
+                           cv=fam.kind == "field")
+            if np.isfinite(t.p_value) and (best is None or t.p_value < best[1].p_value):
+                best = (fam, t, cols)
+        if best is None:
+            break
+        fam, t, cols = best
+        if not (t.p_value * len(fams) < alpha and (not np.isfinite(t.explained_cv) or t.explained_cv > 0)):
+            break
+        kept.append((fam, t))
+        cur = cur.with_columns(cols, rank_tol)
+    return kept
 
 
 def candidate_family(space: ResidualSpace, cand: Candidate, fams: list[Family] | None = None) -> Family | None:

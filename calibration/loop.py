@@ -18,9 +18,11 @@
    ``alternatives``: candidates the data cannot tell from it).
 5. Recalibrate on the design set with the new effect; repeat from 3 until no candidate passes, none is
    left, or ``max_effects`` were added.
-6. The generic structure tests (:func:`calibration.diagnostics.structure_tests`) on the final fit: a
-   family significant after Holm's correction (``alpha``) with a positive held-out explained variance
-   means that **structured residual remains**; the verdict names its regressors and claims no fix.
+6. The generic structure tests (:func:`calibration.diagnostics.structure_tests`) on the final fit, and a
+   forward selection among them (:func:`calibration.diagnostics.remaining_structure`): a family
+   significant after Bonferroni's correction (``alpha``), given the families kept before it, with a
+   positive held-out explained variance means that **structured residual remains**; the verdict names
+   its regressors and claims no fix.
 """
 from __future__ import annotations
 
@@ -40,7 +42,8 @@ from .calibrate import CalibrationResult, calibrate, display_unit, resolve_param
 from .candidates import Candidate, Skipped, library_candidates, needs_model
 from .data import CalibrationData, Weights, make_data, split_holdout
 from .diagnostics import (Family, GroupTest, ResidualSpace, binned_estimates, candidate_family, families, holm,
-                          measurement_folds, residual_space, screen_candidates, structure_tests)
+                          measurement_folds, remaining_structure, residual_space, screen_candidates,
+                          structure_tests)
 from .identifiability import DEFAULT_RANK_TOL, prior_scales
 from .problem import Problem
 from .solver import levenberg_marquardt
@@ -257,7 +260,7 @@ class LoopResult:
         final_screening, final_cv: the last screening and held-out tests (nothing passed, or the limit).
         stop_reason: why the loop stopped.
         structure: generic structure tests on the final fit, (Family, GroupTest, Holm-adjusted p), ranked.
-        remaining: the significant structure families (after Holm, positive held-out explained variance).
+        remaining: the families kept by the forward selection (conditional test, Bonferroni-adjusted p).
         verdict: a sentence; candidates, skipped: the candidate set; design, test: measurement ids.
         structure_plots: binned estimates of the significant families at the final fit.
     """
@@ -521,8 +524,8 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
     st = structure_tests(space, fold_of, settings.rank_tol)
     adj = holm([t.p_value for _, t in st])
     structure = [(f, t, float(a)) for (f, t), a in zip(st, adj)]
-    significant = [(f, t, a) for f, t, a in structure
-                   if np.isfinite(a) and a < settings.alpha and (not np.isfinite(t.explained_cv) or t.explained_cv > 0)]
+    significant = [(f, t, min(1.0, t.p_value * len(structure)))
+                   for f, t in remaining_structure(space, fold_of, settings.alpha, settings.rank_tol)]
     plots = {f.name: binned_estimates(space, f) for f, _, _ in significant[:4]}
     verdict = _verdict(stages, significant, stop)
     say(verdict)
@@ -562,7 +565,8 @@ def _verdict(stages, significant, stop) -> str:
         head += (f"; held-out test RMS {base['rms_um']:.2f} -> {last['rms_um']:.2f} um, "
                  f"max {base['max_um']:.2f} -> {last['max_um']:.2f} um")
     if not significant:
-        return head + ". No structured residual remains (no regressor family is significant after Holm's correction)."
+        return head + (". No structured residual remains (no regressor family is significant after Bonferroni's "
+                       "correction).")
     fams = "; ".join(f"{f.name} ({t.best})" if t.best else f.name for f, t, _ in significant)
     return (head + f". Structured residual remains, not explained by the effect library: it correlates with {fams}. "
             "No fix is claimed for it.")

@@ -214,7 +214,9 @@ class Problem:
         x = f(q, w, aux, p)
         nu = len(self.used)
         self._fx = ca.Function("x", [q, w, aux, p], [x]).map(nu)
-        self._fxj = ca.Function("xj", [q, w, aux, p], [x, ca.jacobian(x, p)]).map(nu)
+        self._fxj_full = ca.Function("xj", [q, w, aux, p], [x, ca.jacobian(x, p)]).map(nu)
+        self._sym = (q, w, aux, p, x)
+        self._fxj_cache = {}          # free set -> mapped Function of (x, d x / d p[free]), shared by copies
         jn = self.model.desc.n_joints
         self._q = np.ascontiguousarray(pts.q[self.used].T)
         self._w = np.ascontiguousarray(self.data.wrench[self.used].T)
@@ -240,16 +242,29 @@ class Problem:
         self.row_distance[self.n_point_rows:] = np.arange(len(items))
 
     # -- evaluation -------------------------------------------------------------------------------
-    def centres(self, p, jac: bool = False):
-        """Ball centres (n_used, 3) [m] of the used points and, with ``jac``, d x / d p (n_used, 3, P)."""
+    def centres(self, p, jac: bool = False, columns=None):
+        """Ball centres (n_used, 3) [m] of the used points and, with ``jac``, d x / d p (n_used, 3, P),
+        or only the ``columns`` (indices into p) of it."""
         p = np.asarray(p, dtype=float)
+        ncol = len(p) if columns is None else len(columns)
         if len(self.used) == 0:
-            return np.zeros((0, 3)), (np.zeros((0, 3, len(p))) if jac else None)
+            return np.zeros((0, 3)), (np.zeros((0, 3, ncol)) if jac else None)
         if not jac:
             return np.asarray(self._fx(self._q, self._w, self._aux, p)).T, None
-        x, dx = self._fxj(self._q, self._w, self._aux, p)
+        if columns is None:
+            fn = self._fxj_full
+        else:
+            key = tuple(int(c) for c in columns)
+            fn = self._fxj_cache.get(key)
+            if fn is None:
+                import casadi as ca
+                q, w, aux, ps, x = self._sym
+                jcols = ca.jacobian(x, ps)[:, list(key)] if key else ca.DM.zeros(3, 0)
+                fn = ca.Function("xj", [q, w, aux, ps], [x, jcols]).map(len(self.used))
+                self._fxj_cache[key] = fn
+        x, dx = fn(self._q, self._w, self._aux, p)
         x = np.asarray(x).T
-        dx = np.asarray(dx).reshape(3, len(self.used), len(p)).transpose(1, 0, 2)
+        dx = np.asarray(dx).reshape(3, len(self.used), ncol).transpose(1, 0, 2)
         return x, dx
 
     def _group_inputs(self, g, x, states):
@@ -292,9 +307,9 @@ class Problem:
 
     def evaluate(self, p, states: list[np.ndarray], jac: bool = True) -> Evaluation:
         """Weighted residuals (and Jacobians) at parameters ``p`` (full vector, SI) and ``states``."""
-        x, dx = self.centres(p, jac)
-        r = np.empty(self.n_rows)
         nf = len(self.free)
+        x, dx = self.centres(p, jac and nf > 0, self.free)
+        r = np.empty(self.n_rows)
         if jac:
             jp = np.zeros((self.n_rows, nf))
             ti, tj, tv = [], [], []
@@ -317,7 +332,7 @@ class Problem:
             rr = g["row0"] + np.arange(npt * rows).reshape(npt, rows)
             on = g.get("on_point", np.ones(npt, bool))
             if nf and on.any():
-                blk = np.einsum("nrk,nkp->nrp", drdx[on], dx[g["pos"][on]][:, :, self.free])
+                blk = np.einsum("nrk,nkp->nrp", drdx[on], dx[g["pos"][on]])
                 jp[rr[on].reshape(-1)] = blk.reshape(-1, nf)
             if (~on).any():            # reference rows on a seat: d r / d (seat centre)
                 off = np.array([self.instances[a].offset for a in g["anchor"][~on]])

@@ -142,7 +142,7 @@ class RunSettings:
     free: tuple | None = None
     weights: Weights = field(default_factory=Weights)
     holdout: float = 0.25
-    rank_tol: float | None = None
+    fit: dict = field(default_factory=dict)      # more keyword arguments of calibrate
     effects: tuple = ()
 
 
@@ -164,8 +164,7 @@ def _run(source, settings, seed, t0) -> dict:
     model = ArmModel(desc, tuple(settings.effects))
     data = make_data(points, artefacts, model, reference=reference)
     train, test = split_holdout(data, settings.holdout, seed)
-    kw = {} if settings.rank_tol is None else {"rank_tol": settings.rank_tol}
-    res = calibrate(model, train, settings.free, weights=settings.weights, **kw)
+    res = calibrate(model, train, settings.free, weights=settings.weights, **settings.fit)
     p_true = model.spec.vector({k: v for k, v in truth.items() if k in model.spec.names})
     p_eq = res.equivalent(p_true)
     idx = [model.spec.index(n) for n in res.free]
@@ -267,30 +266,26 @@ class Selection:
 
 def select_measurements(model: ArmModel, data: CalibrationData, count: int, free=None, *,
                         weights: Weights | None = None, p=None, random_draws: int = 20, seed: int = 0,
-                        progress: bool = True, always=()) -> Selection:
+                        progress: bool = True, always=(), fit: dict | None = None) -> Selection:
     """Choose ``count`` measurements of ``data`` that best identify the parameters.
 
-    The pool is first reduced to its identifiable parameters (:func:`calibrate`'s analysis, run at
-    ``p``, default the nominal, on the whole pool with the nuisance fitted); then each measurement's
+    The pool is first reduced to its identifiable parameters (:func:`calibration.calibrate.identify`,
+    with the options ``fit``, at ``p``, default the nominal, on the whole pool with the nuisance
+    fitted); then each measurement's
     rows of the reduced, column-scaled Jacobian give an information block and measurements are added
     one at a time, each time the one that maximises O1 (a shared reference transform is eliminated
     over the whole pool, a stated approximation). ``always``: measurements kept from the start.
     """
-    from .calibrate import _scale, rigid_gauge
-    from .identifiability import analyse
+    from .calibrate import _scale, default_free, identify
     from .solver import levenberg_marquardt
 
     weights = weights or Weights()
     spec = model.spec
-    from .calibrate import default_free
     cand = resolve_parameters(spec, default_free(model) if free is None else free)
     p = np.zeros(spec.size) if p is None else np.asarray(p, float)
     prob = Problem(model, data, weights, cand)
     states = levenberg_marquardt(prob.with_free([]), p, prob.initial_states(p)).states
-    ev = prob.evaluate(p, states)
-    gauge = rigid_gauge(prob, p, cand)
-    idf = analyse(reduced_jacobian(ev.jp, ev.jt), ev.jp, [spec.names[i] for i in cand], gauge=gauge)
-    kept = [i for i in cand if spec.names[i] not in idf.dependent]
+    kept, _, _ = identify(prob, p, states, cand, **(fit or {}))
     prob = prob.with_free(kept)
     ev = prob.evaluate(p, states)
     jred = reduced_jacobian(ev.jp, ev.jt) / _scale(ev.jp)
