@@ -5,8 +5,6 @@ import argparse
 import json
 from pathlib import Path
 
-import numpy as np
-
 from arm_model import InputError
 from arm_model.io import atomic_write_text, guard_output, read_artefacts, read_points
 
@@ -235,7 +233,6 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
 
 def run_montecarlo(args: argparse.Namespace) -> int:
-    from .data import Weights
     from .study import RunSettings, SimSource, monte_carlo
     guard_output(args.output / "study.json", [args.campaign])
     if args.runs < 1:

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from arm_model.effects import EncoderEccentricity, ProbeCompliance, ThermalGrowth
-from arm_model.model import ArmModel, AuxData
+from arm_model.model import ArmModel
 from calibration import Problem, Weights, make_data
 from calibration import geometry as geo
 from calibration.synth import SynthSpec, make_campaign
