@@ -303,9 +303,9 @@ def identify(problem: Problem, p, states, candidates, *, stage: str = "start", r
                                  + ", ".join(f"{n} (u ~ {u:.3g} {spec.units[spec.index(n)]})" for n, u, _ in weak)
                                  + "\nhold them or use on_unidentifiable='fix'")
         for name, u, comb in weak:
-            unit = spec.units[spec.index(name)]
+            du, fac = display_unit(spec.units[spec.index(name)])
             fixed.append(FixedParameter(name, float(p[spec.index(name)]),
-                                        f"weakly determined: the data would resolve it only to u ~ {u:.3g} {unit}, "
+                                        f"weakly determined: the data would resolve it only to u ~ {u * fac:.3g} {du}, "
                                         f"more than {min_resolution:g} of a plausible size; its effect is below "
                                         "the noise", comb, stage))
         kept = [i for i in kept if spec.names[i] not in {w[0] for w in weak}]
