@@ -45,7 +45,7 @@ from .diagnostics import (Family, GroupTest, ResidualSpace, binned_estimates, ca
                           measurement_folds, remaining_structure, residual_space, screen_candidates,
                           structure_tests)
 from .identifiability import DEFAULT_RANK_TOL, prior_scales
-from .problem import Problem
+from .problem import MIN_POINTS, Problem
 from .solver import levenberg_marquardt
 from .validation import FIGURES, validate
 
@@ -70,6 +70,8 @@ class LoopSettings:
     cv_top: int = 3
     seed: int = 0
     rank_tol: float = DEFAULT_RANK_TOL
+    drop_outliers: bool = True
+    outlier_threshold: float = 4.0
 
     def __post_init__(self):
         if self.folds < 2:
@@ -176,14 +178,16 @@ class CVResult:
 
 def _fold_fit(model: ArmModel, design: CalibrationData, fold_of: dict, k: int, fit) -> FoldFit:
     results, sse = [], {}
+    present = set(design.measurements())
     for f in range(k):
-        held = [m for m, g in fold_of.items() if g == f]
-        train = design.with_measurements([m for m, g in fold_of.items() if g != f])
+        held = [m for m, g in fold_of.items() if g == f and m in present]
+        train = design.with_measurements([m for m, g in fold_of.items() if g != f and m in present])
         res = fit(model, train)
         h = heldout_residuals(model, res.p, design.with_measurements(held), res.weights, res.reference_mode)
         for m in held:
             sel = h["measurement"] == m
-            sse[m] = (float(np.sum(h["r"][sel] ** 2)), int(sel.sum()))
+            if sel.any():
+                sse[m] = (float(np.sum(h["r"][sel] ** 2)), int(sel.sum()))
         results.append(res)
     return FoldFit(results, sse)
 
@@ -263,6 +267,8 @@ class LoopResult:
         remaining: the families kept by the forward selection (conditional test, Bonferroni-adjusted p).
         verdict: a sentence; candidates, skipped: the candidate set; design, test: measurement ids.
         structure_plots: binned estimates of the significant families at the final fit.
+        dropped: outlier points left out ("design": by the base fit, "test": by the base model's
+            held-out residuals), with measurement, feature, line.
     """
     stages: list
     final_screening: list
@@ -278,6 +284,7 @@ class LoopResult:
     settings: LoopSettings
     desc: ArmDescription
     structure_plots: dict = field(default_factory=dict)
+    dropped: dict = field(default_factory=dict)
 
     @property
     def final(self) -> Stage:
@@ -417,11 +424,22 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
             names = [model.spec.names[i] for i in resolve_parameters(model.spec, free)]
             names += [n for n in model.spec.names[model.base_size:] if n not in names]
         return calibrate(model, d, free=names, weights=weights, rank_tol=settings.rank_tol,
-                         priors={**priors, **(extra_priors or {})})
+                         priors={**priors, **(extra_priors or {})}, outlier_threshold=settings.outlier_threshold)
 
     model = ArmModel(desc, tuple(effects))
     say("calibrating the base model on the design set")
     result = fit(model, design)
+    dropped = {"design": [], "test": []}
+    if settings.drop_outliers:
+        result, design, dropped["design"] = _drop_design_outliers(result, design, fit)
+        if dropped["design"]:
+            say(f"  {len(dropped['design'])} outlier point(s) of the design set dropped (base model, robust "
+                f"standardized residual > {settings.outlier_threshold:g}); they stay out of every later fit")
+    if settings.drop_outliers:
+        test, dropped["test"] = _drop_test_outliers(model, result.p, test, weights, result.reference_mode,
+                                                    settings.outlier_threshold)
+        if dropped["test"]:
+            say(f"  {len(dropped['test'])} outlier point(s) of the test set dropped (base model)")
     stages = [Stage(0, model, result, heldout=heldout_figures(model, result.p, test, weights, result.reference_mode))]
     say(f"  base model: s0 {result.s0:.3g}, held-out test RMS {stages[0].heldout['rms_um']:.2f} um")
     base_folds: FoldFit | None = None
@@ -527,10 +545,56 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
     significant = [(f, t, min(1.0, t.p_value * len(structure)))
                    for f, t in remaining_structure(space, fold_of, settings.alpha, settings.rank_tol)]
     plots = {f.name: binned_estimates(space, f) for f, _, _ in significant[:4]}
-    verdict = _verdict(stages, significant, stop)
+    verdict = _verdict(stages, significant, stop, settings)
     say(verdict)
     return LoopResult(stages, last_tests, last_cv, stop, structure, significant, verdict, cands, skipped,
-                      design.measurements(), test.measurements(), settings, desc, plots)
+                      design.measurements(), test.measurements(), settings, desc, plots, dropped)
+
+
+def _drop_design_outliers(result: CalibrationResult, design: CalibrationData, fit, max_share: float = 0.1):
+    """Drop the worst outlier point of the base fit and refit, in rounds, until none is left (at most
+    ``max_share`` of the points); a feature instance left with too few points goes out whole. Returns the
+    last fit, the data kept and the dropped points (measurement, feature, line, standardized residual)."""
+    out = []
+    for _ in range(max(1, int(max_share * len(design)))):
+        cands = [o for o in result.outliers if o.point is not None]
+        if not cands:
+            break
+        worst = max(cands, key=lambda o: abs(o.standardized))
+        pts = design.points
+        inst = (pts.measurement == pts.measurement[worst.point]) & (pts.feature == pts.feature[worst.point])
+        kind = design.artefacts.features[pts.feature[worst.point]].kind if pts.feature[worst.point] else "point"
+        drop = [worst.point]
+        if kind in MIN_POINTS and int(inst.sum()) - 1 < MIN_POINTS[kind][0]:
+            drop = list(np.flatnonzero(inst))
+        for i in drop:
+            out.append({"measurement": str(pts.measurement[i]), "feature": str(pts.feature[i]),
+                        "line": None if pts.lines is None else int(pts.lines[i]),
+                        "standardized": float(worst.standardized) if i == worst.point else None,
+                        "why": "outlier" if i == worst.point else "its feature instance has too few points left"})
+        design = design.select(np.setdiff1d(np.arange(len(design)), drop))
+        result = fit(result.model, design)
+    return result, design, out
+
+
+def _drop_test_outliers(model, p, test: CalibrationData, weights, reference, threshold):
+    """Points of the test set whose weighted residual under the base model (nuisance solved on the test set)
+    exceeds ``threshold`` robust standard deviations (1.4826 times the median |r|); decided before any
+    effect is added, so it favours no model. Returns the test set without them and their descriptions."""
+    prob = Problem(model, test, weights, [], reference=reference)
+    states = levenberg_marquardt(prob, p, prob.initial_states(p)).states
+    r = prob.evaluate(p, states, jac=False).r
+    scale = 1.4826 * float(np.median(np.abs(r))) or 1.0
+    pts = test.points
+    bad_rows = np.flatnonzero((np.abs(r) > threshold * scale) & (prob.row_distance < 0))
+    bad = sorted(set(int(prob.row_point[i]) for i in bad_rows))
+    if not bad:
+        return test, []
+    out = [{"measurement": str(pts.measurement[i]), "feature": str(pts.feature[i]),
+            "line": None if pts.lines is None else int(pts.lines[i]),
+            "standardized": float(np.max(np.abs(r[prob.row_point == i])) / scale)} for i in bad]
+    keep = np.setdiff1d(np.arange(len(test)), bad)
+    return test.select(keep), out
 
 
 def _candidate_priors(model: ArmModel, cand: Candidate, test: GroupTest) -> dict[str, float]:
@@ -557,13 +621,22 @@ def _candidate_cols(space: ResidualSpace, remaining: list, i: int, test: GroupTe
     return space.jp[:, space.extra_slices[k]][:, keep]
 
 
-def _verdict(stages, significant, stop) -> str:
+#: residual standard deviation factor above which the residual is not noise at the stated level
+S0_LIMIT = 3.0
+
+
+def _verdict(stages, significant, stop, settings) -> str:
     added = [s.added.name for s in stages[1:]]
+    s0 = stages[-1].result.s0
     head = ("effects added: " + ", ".join(added) if added else "no effect added")
     base, last = stages[0].heldout, stages[-1].heldout
     if added:
         head += (f"; held-out test RMS {base['rms_um']:.2f} -> {last['rms_um']:.2f} um, "
                  f"max {base['max_um']:.2f} -> {last['max_um']:.2f} um")
+    if not significant and s0 > S0_LIMIT:
+        return head + (f". The final residual is s0 = {s0:.3g} times the stated uncertainties: it is not noise at the "
+                       "stated level, but no tested regressor family explains it (wrong weights, or structure "
+                       "beyond the tests). No fix is claimed.")
     if not significant:
         return head + (". No structured residual remains (no regressor family is significant after Bonferroni's "
                        "correction).")

@@ -90,6 +90,7 @@ def summary_dict(loop: LoopResult, inputs: dict | None = None) -> dict:
         "final_screening": [t.to_dict() for t in loop.final_screening],
         "final_cross_validation": [c.to_dict() for c in loop.final_cv],
         "stop_reason": loop.stop_reason,
+        "outliers_dropped": loop.dropped,
         "structure_tests": [{**t.to_dict(), "family": f.name, "description": f.what, "p_value_holm": a}
                             for f, t, a in loop.structure],
         "structure_remains": bool(loop.remaining),
