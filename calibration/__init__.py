@@ -30,24 +30,30 @@ API for the close-the-loop work (issue 7):
 * Any :class:`arm_model.model.ArmModel` with effects works: their parameters are in ``model.spec``
   and :func:`make_data` attaches the aux inputs they need.
 * :class:`Problem` (residual structure, exact CasADi Jacobians) and :func:`levenberg_marquardt`
-  for custom fits; :func:`validate` / :func:`before_after` for ASME B89.4.22 figures of any p.
+  for custom fits; :func:`identify` (which parameters the data identify: rank with the base frame's
+  rigid motions projected out, then practical resolution against :func:`prior_scales`);
+  :func:`validate` / :func:`before_after` for ASME B89.4.22 figures of any p.
+* Studies (:mod:`calibration.study`): Monte Carlo over simulated campaigns, pose-set choice by the
+  observability index O1; small synthetic campaigns without the simulator: :mod:`calibration.synth`.
 
 Command line: ``aacmm calibrate`` and ``aacmm study {montecarlo, poses}``. Reference:
 docs/calibration.md.
 """
 from .calibrate import (CalibrationResult, FixedParameter, Outlier, calibrate, default_free, display_unit,
-                        resolve_parameters, rigid_gauge)
+                        identify, resolve_parameters, rigid_gauge)
 from .data import CalibrationData, Weights, make_data, merge_points, split_holdout
-from .identifiability import DEFAULT_RANK_TOL, Combination, Identifiability, analyse, reduced_jacobian
+from .identifiability import (DEFAULT_RANK_TOL, PRIOR_SCALES, Combination, Identifiability, analyse, prior_scales,
+                              reduced_jacobian, weakly_determined)
 from .problem import Problem
-from .solver import LMResult, levenberg_marquardt
+from .solver import LMResult, blas_threads, levenberg_marquardt
 from .validation import FIGURES, Validation, before_after, validate
 
 __all__ = [
     "calibrate", "CalibrationResult", "FixedParameter", "Outlier", "default_free", "resolve_parameters",
-    "rigid_gauge", "display_unit",
+    "rigid_gauge", "display_unit", "identify",
     "CalibrationData", "Weights", "make_data", "merge_points", "split_holdout",
-    "Identifiability", "Combination", "analyse", "reduced_jacobian", "DEFAULT_RANK_TOL",
-    "Problem", "levenberg_marquardt", "LMResult",
+    "Identifiability", "Combination", "analyse", "reduced_jacobian", "DEFAULT_RANK_TOL", "prior_scales",
+    "weakly_determined", "PRIOR_SCALES",
+    "Problem", "levenberg_marquardt", "LMResult", "blas_threads",
     "Validation", "validate", "before_after", "FIGURES",
 ]
