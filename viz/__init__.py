@@ -10,7 +10,7 @@ Heavy backends (meshcat, Pinocchio) load when a view is made, not at import.
 from ._errors import ViewerError
 from .browser import arm_mask, colour_mask, find_chromium, load_png, screenshot
 from .placement import Placement, place_features
-from .residuals import Residuals, read_residuals
+from .residuals import Residuals, read_residuals, residual_origins
 from .scene import ArmScene, Camera, PoseInfo
 from .server import MeshcatServer
 from .view import View, page_with_legend, show, show_residuals
@@ -21,6 +21,6 @@ __all__ = [
     "ArmScene", "Camera", "PoseInfo",
     "MeshcatServer",
     "Placement", "place_features",
-    "Residuals", "read_residuals",
+    "Residuals", "read_residuals", "residual_origins",
     "find_chromium", "screenshot", "load_png", "colour_mask", "arm_mask",
 ]
