@@ -1,0 +1,102 @@
+"""Residual diagnostics against independent references: the score statistic against an actual refit,
+the joint-angle columns against finite differences, folds, Holm's adjustment by hand, candidates."""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+import pytest
+
+from arm_model.effects import EncoderEccentricity, JointCompliance
+from arm_model.model import ArmModel
+from calibration.calibrate import calibrate
+from calibration.candidates import library_candidates, needs_model
+from calibration.data import Weights, make_data
+from calibration.diagnostics import (JointAngleOffset, holm, measurement_folds, residual_space,
+                                     screen_candidates)
+from calibration.synth import SynthSpec, make_campaign, random_truth
+
+
+@lru_cache(maxsize=None)
+def fitted(desc):
+    """A synthetic campaign with a hidden j2 eccentricity, fitted without it."""
+    truth = ArmModel(desc, (EncoderEccentricity(joints=(1,), harmonics=(1,)),))
+    p = random_truth(truth, np.random.default_rng(5), length=30e-6, angle=5e-5, probe=30e-6)
+    p[truth.spec.index("j2.ecc1_cos")] = 2e-5
+    p[truth.spec.index("j2.ecc1_sin")] = -3e-5
+    camp = make_campaign(truth, SynthSpec(ballbars=8, ballbar_points=4, seats=3, articulations=8, spheres=4,
+                                          sphere_points=8, noise=2e-6), seed=5, p_true=p)
+    data = make_data(camp.points, camp.artefacts, needs_model(desc, [JointCompliance()]))
+    res = calibrate(ArmModel(desc), data, weights=Weights(probe=2e-6))
+    return camp, data, res
+
+
+def test_score_statistic_matches_the_refit(nominal):
+    """delta chi2 of the score test = the drop of sum(r_w^2) when the effect is fitted (to first order), and
+    the one-step estimate = the refitted parameters."""
+    camp, data, res = fitted(nominal)
+    eff = EncoderEccentricity(joints=(1,), harmonics=(1,))
+    cand = [c for c in library_candidates(nominal, data)[0] if c.name == "eccentricity j2"][0]
+    cand = type(cand)(cand.name, eff, cand.family, cand.joint)
+    (test,), _ = screen_candidates(res, [cand], measurement_folds(data, 3))
+    refit = calibrate(ArmModel(nominal, (eff,)), data, weights=Weights(probe=2e-6))
+    drop = 2 * res.cost - 2 * refit.cost
+    assert test.rank == 2
+    assert test.delta_chi2 == pytest.approx(drop, rel=0.02)
+    for name, b in zip(test.names, test.estimate):
+        assert b == pytest.approx(refit.value(name), abs=0.05 * abs(refit.value(name)) + 1e-7)
+    assert test.p_value < 1e-10 and test.explained_cv > 0.5
+
+
+def test_joint_angle_columns_are_the_ball_sensitivity(nominal):
+    """The diagnostic JointAngleOffset effect's Jacobian equals d(ball)/d(q_j) by central differences."""
+    model = ArmModel(nominal, (JointAngleOffset(),))
+    q = np.random.default_rng(0).uniform(-1, 1, (5, nominal.n_joints))
+    f = model.casadi_function()
+    import casadi as ca
+    p = ca.SX.sym("p", model.spec.size)
+    jac = ca.Function("j", [p], [ca.jacobian(f(q[0], np.zeros(6), np.zeros(1 + 2 * nominal.n_joints), p), p)])
+    j = np.asarray(jac(np.zeros(model.spec.size)))[:, model.base_size:]
+    h = 1e-6
+    for k in range(nominal.n_joints):
+        dq = np.zeros(nominal.n_joints)
+        dq[k] = h
+        fd = (ArmModel(nominal).ball_centres(q[:1] + dq) - ArmModel(nominal).ball_centres(q[:1] - dq))[0] / (2 * h)
+        np.testing.assert_allclose(j[:, k], fd, atol=1e-7)
+
+
+def test_residual_space_is_orthogonal_to_the_fit(nominal):
+    _, _, res = fitted(nominal)
+    space = residual_space(res)
+    free = [space.model.spec.index(n) for n in res.free]
+    assert np.max(np.abs(space.project(space.jp[:, free]))) < 1e-6 * np.max(np.abs(space.jp[:, free]))
+    assert np.max(np.abs(space.basis.T @ space.r)) < 1e-4 * np.linalg.norm(space.r)
+
+
+def test_folds_hold_whole_measurements(nominal):
+    _, data, _ = fitted(nominal)
+    a = measurement_folds(data, 3, seed=2)
+    assert a == measurement_folds(data, 3, seed=2)
+    assert set(a) == set(data.measurements()) and set(a.values()) == {0, 1, 2}
+    counts = np.bincount(list(a.values()))
+    assert counts.max() - counts.min() <= 3      # one stratum may leave one extra in a fold
+    with pytest.raises(ValueError):
+        measurement_folds(data, 1)
+
+
+def test_holm_by_hand():
+    # p sorted 0.01, 0.02, 0.04 (m = 3): 3*0.01, max(0.03, 2*0.02), max(0.04, 1*0.04)
+    np.testing.assert_allclose(holm([0.04, 0.01, 0.02, np.nan])[:3], [0.04, 0.03, 0.04])
+    assert np.isnan(holm([0.04, 0.01, 0.02, np.nan])[3])
+
+
+def test_candidates_follow_the_data(nominal):
+    _, data, _ = fitted(nominal)
+    cands, skipped = library_candidates(nominal, data)
+    names = [c.name for c in cands]
+    assert "eccentricity j7" in names and "joint compliance j2" in names
+    assert not any(n.startswith(("force sensor", "probe compliance", "thermal")) for n in names)
+    why = {s.name: s.reason for s in skipped}
+    assert "no force data" in why["force sensor"] and "temperature" in why["thermal growth"]
+    with pytest.raises(ValueError, match="unknown candidate"):
+        library_candidates(nominal, data, families=["gravity"])
