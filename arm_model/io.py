@@ -23,7 +23,7 @@ from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, split_unit
 
 __all__ = ["PointSet", "Feature", "Distance", "Artefacts", "ForceSignal", "read_points",
            "read_artefacts", "read_force_signal", "check_features", "atomic_write_text",
-           "atomic_write_bytes", "write_csv", "guard_output", "FEATURE_KINDS"]
+           "atomic_write_bytes", "write_csv", "guard_output", "csv_records", "FEATURE_KINDS"]
 
 FEATURE_KINDS = ("ring", "cylinder", "sphere", "seat", "plane", "point")
 _TEXT_COLUMNS = ("measurement", "feature")
@@ -114,7 +114,7 @@ def _parse_float(cell: str) -> float | None:
         return None
 
 
-def _csv_records(text: str, path: str) -> list[tuple[int, list[str]]]:
+def csv_records(text: str, path: str) -> list[tuple[int, list[str]]]:
     """Non-blank CSV records with their physical line; a record may not span lines."""
     out = []
     for no, line in enumerate(text.splitlines(), start=1):
@@ -142,7 +142,7 @@ def read_points(path: str | Path, n_joints: int | None = None) -> PointSet:
 
 def parse_points(text: str, path: str = "<string>", n_joints: int | None = None) -> PointSet:
     """Parse points CSV text; see :func:`read_points`."""
-    records = _csv_records(text, path)
+    records = csv_records(text, path)
     if not records:
         raise InputError("the file is empty (expected a header line and at least one point)", path, 1)
     header_line, header = records[0]
@@ -424,7 +424,7 @@ class ForceSignal:
 def read_force_signal(path: str | Path) -> ForceSignal:
     """Read one force-signal CSV (``time_s`` and either f_bend/f_axial or fx/fy/fz)."""
     text = read_text(path, "the force signal")
-    rows = _csv_records(text, str(path))
+    rows = csv_records(text, str(path))
     if len(rows) < 2:
         raise InputError("the file is empty (expected a header and samples)", path, 1)
     hline, header = rows[0]

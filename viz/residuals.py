@@ -28,10 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from arm_model import InputError
-from arm_model._errors import read_text
-from arm_model._units import QUANTITY_OF_UNIT, UNIT_FACTORS, split_unit
-from arm_model.io import _csv_records
+from arm_model import QUANTITY_OF_UNIT, UNIT_FACTORS, InputError, csv_records, read_text, split_unit
 
 __all__ = ["Residuals", "read_residuals", "parse_residuals", "residual_origins"]
 
@@ -70,7 +67,7 @@ def read_residuals(path: str | Path) -> Residuals:
 
 def parse_residuals(text: str, path: str = "<string>") -> Residuals:
     """Parse residuals CSV text; see :func:`read_residuals`."""
-    records = _csv_records(text, path)
+    records = csv_records(text, path)
     if not records:
         raise InputError("the file is empty (expected a header line and at least one residual)", path, 1)
     hline, header = records[0]
