@@ -1,0 +1,76 @@
+"""``aacmm close-loop``: files in, report out; bad input stops with one message and writes nothing."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from arm_model.cli import main
+from arm_model.sim import campaign_from_dict, simulate
+
+from conftest import NOMINAL
+
+CAMPAIGN = {"seed": 11, "sensor": "xyz", "signals": {"enabled": False},
+            "noise": {"probing_repeatability_um": 2.0},
+            "truth": {"eccentricity": [{"joint": "j3", "amplitude_deg": 0.005, "phase_deg": -60.0}]},
+            "task": [{"kind": "ballbar", "positions": 8, "length_mm": 600.0, "points_per_sphere": 4},
+                     {"kind": "seat", "articulations": 8, "measurements": 4},
+                     {"kind": "sphere", "points": 8, "measurements": 4}]}
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    out = tmp_path_factory.mktemp("loop")
+    simulate(campaign_from_dict(CAMPAIGN)).write(out)
+    return out
+
+
+def test_close_loop_writes_the_report(files, tmp_path, capsys):
+    out = tmp_path / "loop"
+    code = main(["close-loop", str(files / "points.csv"), str(files / "artefacts.toml"), "--arm", str(NOMINAL),
+                 "--sigma-probe-um", "2", "--folds", "3", "--cv-top", "2", "-o", str(out)])
+    assert code == 0
+    printed = capsys.readouterr()
+    assert "base model" in printed.out and "+ eccentricity j3" in printed.out
+    assert "screening" in printed.err                       # progress on stderr
+    s = json.loads((out / "summary.json").read_text())
+    (eff,) = s["effects_added"]
+    assert eff["name"] == "eccentricity j3" and eff["joint"] == "j3"
+    names = {p["name"] for p in eff["parameters"]}
+    assert {"j3.ecc1_cos", "j3.ecc1_sin", "j3.ecc1_amplitude"} <= names
+    amp = next(p for p in eff["parameters"] if p["name"] == "j3.ecc1_amplitude")
+    assert amp["display_value"] == pytest.approx(0.005, abs=3 * amp["display_u"] + 1e-5)
+    assert eff["heldout_after"]["rms_um"] < eff["heldout_before"]["rms_um"]
+    assert s["structure_remains"] is False and "eccentricity j3" in s["verdict"]
+    assert s["stages"][1]["cross_validation"][0]["passed"] is True
+    html = (out / "report.html").read_text()
+    for png in ("before-after.png", "stage-1-screening.png", "stage-1-signature.png"):
+        assert (out / png).stat().st_size > 1000 and png in html
+    assert (out / "before-after.txt").read_text().startswith("held-out test set")
+
+
+def test_refuses_to_write_over_an_input(files, tmp_path, capsys):
+    points = tmp_path / "summary.json"                  # an input where the report would go
+    points.write_text((files / "points.csv").read_text())
+    before = points.read_text()
+    code = main(["close-loop", str(points), str(files / "artefacts.toml"), "--arm", str(NOMINAL), "-o", str(tmp_path)])
+    assert code == 2
+    assert "over an input" in capsys.readouterr().err
+    assert points.read_text() == before
+    assert not (tmp_path / "report.html").exists()
+
+
+def test_bad_options_stop_with_one_message(files, tmp_path, capsys):
+    out = tmp_path / "x"
+    code = main(["close-loop", str(files / "points.csv"), str(files / "artefacts.toml"), "--arm", str(NOMINAL),
+                 "--candidates", "eccentricity,gravity", "-o", str(out)])
+    assert code == 2
+    assert "unknown candidate family gravity" in capsys.readouterr().err
+    assert not out.exists()
+    bad = tmp_path / "points.csv"
+    bad.write_text((files / "points.csv").read_text().replace("q2_deg", "q2", 1))
+    code = main(["close-loop", str(bad), str(files / "artefacts.toml"), "--arm", str(NOMINAL), "-o", str(out)])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "points.csv" in err and "q2" in err
+    assert not out.exists()
