@@ -39,9 +39,9 @@ from arm_model.io import Artefacts, PointSet
 from arm_model.model import ArmModel
 
 from .calibrate import CalibrationResult, calibrate, display_unit, resolve_parameters
-from .candidates import Candidate, Skipped, library_candidates, needs_model
+from .candidates import Candidate, library_candidates, needs_model
 from .data import CalibrationData, Weights, make_data, split_holdout
-from .diagnostics import (Family, GroupTest, ResidualSpace, binned_estimates, candidate_family, families, holm,
+from .diagnostics import (GroupTest, ResidualSpace, binned_estimates, candidate_family, families, holm,
                           measurement_folds, remaining_structure, residual_space, screen_candidates,
                           structure_tests)
 from .identifiability import DEFAULT_RANK_TOL, prior_scales

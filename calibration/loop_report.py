@@ -13,7 +13,7 @@ import numpy as np
 
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output
 
-from .loop import LoopResult, Stage, display, effect_summary
+from .loop import LoopResult, Stage, effect_summary
 
 __all__ = ["summary_dict", "before_after_text", "write_loop_report", "plot_signature", "plot_screening",
            "plot_before_after"]
