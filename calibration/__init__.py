@@ -47,6 +47,10 @@ from .identifiability import (DEFAULT_RANK_TOL, PRIOR_SCALES, Combination, Ident
 from .problem import Problem
 from .solver import LMResult, blas_threads, levenberg_marquardt
 from .validation import FIGURES, Validation, before_after, validate
+from .candidates import Candidate, library_candidates
+from .diagnostics import remaining_structure, residual_space, screen_candidates, structure_tests
+from .loop import LoopResult, LoopSettings, close_loop
+from .loop_report import before_after_text, write_loop_report
 
 __all__ = [
     "calibrate", "CalibrationResult", "FixedParameter", "Outlier", "default_free", "resolve_parameters",
@@ -56,4 +60,6 @@ __all__ = [
     "weakly_determined", "PRIOR_SCALES",
     "Problem", "levenberg_marquardt", "LMResult", "blas_threads",
     "Validation", "validate", "before_after", "FIGURES",
+    "close_loop", "LoopSettings", "LoopResult", "Candidate", "library_candidates", "residual_space",
+    "screen_candidates", "structure_tests", "remaining_structure", "write_loop_report", "before_after_text",
 ]
