@@ -67,9 +67,11 @@ def main(argv: list[str] | None = None) -> int:
         _step("7a. simulate a campaign with an effect the model does not declare",
               ["simulate", str(loop_campaign), "-o", str(out / "sim-loop"), "-q", "--no-signals"])
         lp = out / "sim-loop"
-        _step("7b. close the loop: calibrate, diagnose, add the effect, report before/after",
-              ["close-loop", str(lp / "points.csv"), str(lp / "artefacts.toml"), "--arm", str(ARM),
-               "-o", str(out / "close-loop")])
+        loop_args = ["close-loop", str(lp / "points.csv"), str(lp / "artefacts.toml"), "--arm", str(ARM),
+                     "--sigma-probe-um", "2", "-o", str(out / "close-loop")]
+        if (lp / "points-ref.csv").exists():
+            loop_args[3:3] = ["--reference-points", str(lp / "points-ref.csv")]
+        _step("7b. close the loop: calibrate, diagnose, add the effect, report before/after", loop_args)
     print(f"\ndemo done: reports in {out}/ (ring/report.html, paper/report.html, calibration/report.html, "
           f"view.html{', close-loop/report.html' if (out / 'close-loop').exists() else ''})")
     return 0
