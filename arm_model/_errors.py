@@ -1,9 +1,11 @@
 """One base exception for the project; subclasses carry their context."""
 from __future__ import annotations
 
+import re
+import tomllib
 from pathlib import Path
 
-__all__ = ["AacmmError", "InputError", "NumericalError", "read_text"]
+__all__ = ["AacmmError", "InputError", "NumericalError", "read_text", "parse_toml"]
 
 
 class AacmmError(Exception):
@@ -53,3 +55,13 @@ def read_text(path: str | Path, what: str) -> str:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise InputError("not UTF-8 text", path, raw[: exc.start].count(b"\n") + 1) from None
+
+
+def parse_toml(text: str, path: str | Path) -> dict:
+    """Parse TOML text; a syntax error becomes an InputError naming the file, line and column."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        m = re.search(r"line (\d+), column (\d+)", str(exc))
+        raise InputError(f"not valid TOML: {exc}", path, int(m.group(1)) if m else None,
+                         f"column {m.group(2)}" if m else None) from None

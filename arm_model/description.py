@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import math
 import re
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from ._errors import InputError, read_text
+from ._errors import InputError, parse_toml, read_text
 from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, split_unit
 
 __all__ = ["JointRow", "Probe", "ArmDescription", "load_description", "parse_description",
@@ -221,12 +220,7 @@ class _Reader:
 
 def parse_description(text: str, path: str = "<string>") -> ArmDescription:
     """Parse an arm description from TOML text; raise :class:`InputError` naming line and key."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        m = re.search(r"line (\d+), column (\d+)", str(exc))
-        raise InputError(f"not valid TOML: {exc}", path, int(m.group(1)) if m else None,
-                         f"column {m.group(2)}" if m else None) from None
+    data = parse_toml(text, path)
     r = _Reader(path, text)
     for key in data:
         if key not in ("name", "convention", "joint", "probe"):

@@ -12,13 +12,12 @@ import math
 import os
 import re
 import tempfile
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ._errors import InputError, read_text
+from ._errors import InputError, parse_toml, read_text
 from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, split_unit
 
 __all__ = ["PointSet", "Feature", "Distance", "Artefacts", "ForceSignal", "read_points",
@@ -325,11 +324,7 @@ def read_artefacts(path: str | Path) -> Artefacts:
 
 
 def parse_artefacts(text: str, path: str = "<string>") -> Artefacts:
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        m = re.search(r"line (\d+), column (\d+)", str(exc))
-        raise InputError(f"not valid TOML: {exc}", path, int(m.group(1)) if m else None) from None
+    data = parse_toml(text, path)
 
     def err(msg, table, index, key=None):
         col = f"key '{table}[{index + 1}].{key}'" if key else f"key '{table}[{index + 1}]'"

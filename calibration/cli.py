@@ -45,6 +45,17 @@ def _positive(text: str) -> float:
     return v
 
 
+def sigma_options(p) -> None:
+    """The stated uncertainties that weight the residuals (shared with ``aacmm close-loop``)."""
+    p.add_argument("--sigma-probe-um", type=_positive, default=10.0,
+                   help="standard uncertainty of a probed ball centre per axis [um] (default 10)")
+    p.add_argument("--sigma-ref-um", type=_positive, default=10.0,
+                   help="standard uncertainty of a reference-instrument coordinate per axis [um] (default 10)")
+    p.add_argument("--sigma-length-um", type=_positive, default=None,
+                   help="standard uncertainty of a certified length without u_length_mm [um] "
+                        "(default: --sigma-probe-um)")
+
+
 def _common_fit_options(p) -> None:
     p.add_argument("--free", action="append", metavar="PATTERN",
                    help="parameters to identify, by name or glob (repeatable), e.g. 'j*.d', 'probe.*', "
@@ -55,13 +66,7 @@ def _common_fit_options(p) -> None:
     p.add_argument("--effect", action="append", metavar="KEY",
                    help="add an effect of arm_model.effects to the model (repeatable): eccentricity, "
                         "joint_compliance, thermal, force_sensor, probe_compliance")
-    p.add_argument("--sigma-probe-um", type=_positive, default=10.0,
-                   help="standard uncertainty of a probed ball centre per axis [um] (default 10)")
-    p.add_argument("--sigma-ref-um", type=_positive, default=10.0,
-                   help="standard uncertainty of a reference-instrument coordinate per axis [um] (default 10)")
-    p.add_argument("--sigma-length-um", type=_positive, default=None,
-                   help="standard uncertainty of a certified length without u_length_mm [um] "
-                        "(default: --sigma-probe-um)")
+    sigma_options(p)
     p.add_argument("--rank-tol", type=_positive, default=None,
                    help="relative singular value below which a parameter combination counts as not "
                         "identifiable (default 1e-4)")

@@ -9,14 +9,9 @@ from pathlib import Path
 from arm_model import InputError
 from arm_model.io import guard_output, read_artefacts, read_points
 
+from .cli import sigma_options
+
 __all__ = ["register", "run"]
-
-
-def _positive(text: str) -> float:
-    v = float(text)
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
-    return v
 
 
 def _fraction(text: str) -> float:
@@ -82,12 +77,7 @@ def register(sub) -> None:
     p.add_argument("--free", action="append", metavar="PATTERN",
                    help="base parameters to identify, by name or glob (repeatable); default every joint-row error "
                         "and probe.x/y/z (probe compliances are candidates instead); effect parameters are always free")
-    p.add_argument("--sigma-probe-um", type=_positive, default=10.0,
-                   help="standard uncertainty of a probed ball centre per axis [um] (default 10)")
-    p.add_argument("--sigma-ref-um", type=_positive, default=10.0,
-                   help="standard uncertainty of a reference-instrument coordinate per axis [um] (default 10)")
-    p.add_argument("--sigma-length-um", type=_positive, default=None,
-                   help="standard uncertainty of a certified length without u_length_mm [um] (default: probe)")
+    sigma_options(p)
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=run)
 

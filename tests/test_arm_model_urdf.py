@@ -5,7 +5,7 @@ import numpy as np
 
 from arm_model import ball_centres, urdf_text
 from arm_model.urdf import ELASTIC_JOINTS, rpy_from_matrix
-from conftest import NOMINAL, ROOT, assert_close
+from conftest import ROOT, assert_close
 
 
 def test_committed_urdf_is_not_stale(nominal):

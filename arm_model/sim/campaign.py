@@ -10,14 +10,13 @@ from __future__ import annotations
 
 import math
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .._errors import InputError
+from .._errors import InputError, parse_toml, read_text
 from ..description import ArmDescription
 from ..urdf_import import load_arm
 
@@ -534,18 +533,8 @@ def _errors(ctx, tbl, desc) -> dict[str, float]:
 def load_campaign(path: str | Path) -> Campaign:
     """Read a campaign TOML file; the arm path in it is relative to the file."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"cannot read the campaign file: {exc.strerror}", path) from None
-    except UnicodeDecodeError:
-        raise InputError("not a UTF-8 text file", path) from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        m = re.search(r"line (\d+), column (\d+)", str(exc))
-        raise InputError(f"not valid TOML: {exc}", path, int(m.group(1)) if m else None,
-                         f"column {m.group(2)}" if m else None) from None
+    text = read_text(path, "the campaign file")
+    data = parse_toml(text, str(path))
     return _parse(data, str(path), _key_lines(text), path.resolve().parent)
 
 
