@@ -299,17 +299,27 @@ def split_rows(heights, rows: int | None = None) -> np.ndarray:
 
     Args:
         heights: (N,) coordinate along the axis [m].
-        rows: number of rows; None finds them: a gap in the sorted heights wider than ten times the
-            median gap separates two rows (each row must keep at least 3 points, else one row).
+        rows: number of rows; None finds them: the sorted heights are cut at their k widest gaps, with k the
+            count at which the k-th widest gap is the most times (and at least 3 times) wider than the
+            (k+1)-th, i.e. than any gap left inside a row; every row must keep at least 3 points, else the
+            points are one row.
     """
     h = np.asarray(heights, float)
     order = np.argsort(h)
     gaps = np.diff(h[order])
     if rows is None:
-        if len(gaps) == 0:
-            return np.zeros(len(h), int)
-        threshold = max(10 * float(np.median(gaps)), 1e-6 * float(h.max() - h.min()))
-        cut = np.flatnonzero(gaps > threshold)
+        desc = np.sort(gaps)[::-1]
+        best, best_ratio = 0, 3.0
+        for k in range(1, len(desc)):
+            if (k + 1) * 3 > len(h):
+                break
+            ratio = desc[k - 1] / desc[k] if desc[k] > 0 else np.inf
+            if ratio > best_ratio:
+                cut = np.sort(np.argsort(gaps)[::-1][:k])
+                sizes = np.diff(np.r_[0, cut + 1, len(h)])
+                if np.all(sizes >= 3):
+                    best, best_ratio = k, ratio
+        cut = np.sort(np.argsort(gaps)[::-1][:best])
     else:
         if rows < 1 or rows > len(h):
             raise ValueError(f"rows must be in 1..{len(h)}, got {rows}")
@@ -317,9 +327,6 @@ def split_rows(heights, rows: int | None = None) -> np.ndarray:
     labels_sorted = np.zeros(len(h), int)
     for k in cut:
         labels_sorted[k + 1:] += 1
-    counts = np.bincount(labels_sorted)
-    if rows is None and np.any(counts < 3):
-        labels_sorted[:] = 0
     out = np.empty(len(h), int)
     out[order] = labels_sorted
     return out
