@@ -43,18 +43,18 @@ def register(sub) -> None:
     r.add_argument("--signals", type=Path, metavar="DIR",
                    help="folder of force signals, one <measurement>.csv a measurement (DATA-FORMATS §5); "
                         "without it the points file's force columns are used")
-    r.add_argument("--feature", help="id of the ring feature when the artefacts file has several rings")
-    r.add_argument("--compliance-mm-per-N", type=_positive("compliance"), dest="compliance",
+    r.add_argument("--feature", metavar="ID", help="id of the ring feature when the artefacts file has several rings")
+    r.add_argument("--compliance-mm-per-N", type=_positive("compliance"), dest="compliance", metavar="C",
                    help="compliance of the paper's four models (default: the arm's probe bending compliance, "
                         "0.0142 mm/N in the nominal arm)")
-    r.add_argument("--u-force-N", type=_positive("force"), dest="u_force", default=None,
+    r.add_argument("--u-force-N", type=_positive("force"), dest="u_force", default=None, metavar="U",
                    help="standard uncertainty of a measured force for the budgets' u_cor = 2 c u_force "
                         "(default 0.0723 N: the paper's bending sensor, Table 1 terms combined)")
-    r.add_argument("--delta-T-C", type=_positive("temperature"), dest="delta_t", default=0.5,
+    r.add_argument("--delta-T-C", type=_positive("temperature"), dest="delta_t", default=0.5, metavar="DT",
                    help="temperature variation during the test for the budgets' u_t (default 0.5 C, the paper's)")
-    r.add_argument("--probability-pct", type=_positive("probability"), dest="probability", default=95.0,
+    r.add_argument("--probability-pct", type=_positive("probability"), dest="probability", default=95.0, metavar="P",
                    help="coverage probability of the expanded uncertainties (default 95)")
-    r.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; never an input)")
+    r.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created; never an input)")
     r.set_defaults(func=run_ring)
 
     p = sub.add_parser(
@@ -66,9 +66,9 @@ def register(sub) -> None:
                     "correction against the force, the compliance in series that explains it, cross-validated "
                     "leave-one-out. Writes report.html, summary.json, table2_implied.csv, findings.csv and "
                     "figures/*.png.")
-    p.add_argument("--table2", type=Path, default=None,
+    p.add_argument("--table2", type=Path, default=None, metavar="CSV",
                    help="a Table 2 CSV in the bundled format (default: the bundled correction/data/paper_table2.csv)")
-    p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; never an input)")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created; never an input)")
     p.set_defaults(func=run_paper)
 
 

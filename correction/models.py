@@ -110,7 +110,8 @@ def correct_ring(rigid, ball_diameter: float, reference_diameter: float | None, 
 @dataclass(frozen=True)
 class RingCampaign:
     """A ring-gauge campaign analysed: the ring feature, its reference diameter [m], the compliance the
-    paper's models used [m/N], and the measurements in file order."""
+    paper's models used [m/N], and the measurements in file order; the ring's certified standard
+    uncertainty of the diameter and its form error [m] when the artefacts file gives them."""
     feature: str
     reference_diameter: float | None
     ball_diameter: float
@@ -118,6 +119,8 @@ class RingCampaign:
     force_kind: str
     measurements: list = field(default_factory=list)
     notes: list = field(default_factory=list)
+    u_diameter: float | None = None
+    reference_form_error: float | None = None
 
     @property
     def models(self) -> tuple:
@@ -206,7 +209,8 @@ def analyse_ring_campaign(desc, points: PointSet, artefacts, feature: str | None
     if kind == "two-channel":
         notes.append("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not "
                      "measured and is taken as zero; the full-wrench model sees the probe-x bending only")
-    return RingCampaign(ring.id, ring.diameter, desc.probe.ball_diameter, c, kind or "", out, notes)
+    return RingCampaign(ring.id, ring.diameter, desc.probe.ball_diameter, c, kind or "", out, notes,
+                        ring.u_diameter, ring.form_error)
 
 
 def table2(campaign: RingCampaign) -> dict:

@@ -81,22 +81,34 @@ def ring_budgets(campaign: RingCampaign, u_force: float = DEFAULT_U_FORCE, u_rin
     Args:
         u_force: standard uncertainty of a measured force [N]; u_cor = 2 c u_force [m].
         u_ring_form: standard uncertainty of the ring's form [m]; None: its certified form error as the
-            half-width of a rectangular distribution (the paper used CMM repetitions instead).
-        u_ring: the ring diameter's standard uncertainty [m]; None takes ``u_diameter`` of the artefact.
+            half-width of a rectangular distribution (the paper used CMM repetitions instead), or no term
+            when the artefacts file gives no form error.
+        u_ring: the ring diameter's standard uncertainty [m]; None takes ``u_diameter`` of the artefact (no
+            term when it has none).
         delta_t [C], u_alpha [1/C], resolution [m], probability [%]: see :func:`correction.gum.ring_budget`.
     """
     out = []
     u_cor = 2 * campaign.compliance * u_force
+    if u_ring is None:
+        u_ring, ring_src = campaign.u_diameter, "certificate (artefacts file u_diameter)"
+    else:
+        ring_src = "given"
+    if u_ring_form is None and campaign.reference_form_error is not None:
+        u_ring_form = campaign.reference_form_error / math.sqrt(3)
+        form_src = (f"ring form error {campaign.reference_form_error * 1e3:g} mm as a rectangular half-width, "
+                    "/sqrt(3)")
+    else:
+        form_src = "given"
     for m in campaign.models:
         cor = None if m == "initial" else u_cor
         d = campaign.column(m, "diameter")
         f = campaign.column(m, "form_error")
         out.append(ring_budget(f"diameter, {MODEL_LABELS[m]}", d, float(np.mean(d)), u_ring, cor,
                                delta_t=delta_t, u_alpha=u_alpha, resolution=resolution, probability=probability,
-                               u_ring_source="certificate U/k").evaluate())
+                               u_ring_source=ring_src).evaluate())
         out.append(ring_budget(f"form error, {MODEL_LABELS[m]}", f, float(np.mean(f)), u_ring_form, cor,
                                delta_t=delta_t, u_alpha=u_alpha, resolution=resolution, probability=probability,
-                               u_ring_source="ring form error / sqrt(3) (rectangular)").evaluate())
+                               u_ring_source=form_src).evaluate())
     return out
 
 
@@ -132,7 +144,7 @@ def _ring_figures(c: RingCampaign, budgets) -> dict:
     for m in [mm for mm in ("initial", "point", "wrench") if mm in worst.fits]:
         f = worst.fits[m]
         o = np.argsort(f.angles_deg)
-        ax.plot(f.angles_deg[o], f.point_errors[o] * 1e6, ".-", ms=4, lw=0.8, color=_COLOURS[m],
+        ax.plot(f.angles_deg[o], f.point_errors[o] * 1e6, "o", ms=3, color=_COLOURS[m],
                 label=f"{MODEL_LABELS[m]} (diameter error {f.diameter_error * 1e3:+.4f} mm)")
     ax.axhline(0, color="k", lw=0.6)
     ax.set(xlabel="angular position of the point [deg]", ylabel="contact point radial error [µm]",

@@ -1,0 +1,135 @@
+"""``aacmm ring`` and ``aacmm paper``: the files they write, their content, and refusals."""
+from __future__ import annotations
+
+import json
+import tomllib
+
+import numpy as np
+import pytest
+
+from arm_model import load_description, read_artefacts, read_points
+from arm_model.cli import build_parser, main
+from conftest import NOMINAL, ROOT, assert_close
+from correction.models import analyse_ring_campaign
+
+RING_FILES = {"report.html", "summary.json", "table2.csv", "correlations.csv", "budgets.csv",
+              "figures/point_errors.png", "figures/diameters.png", "figures/form_errors.png", "figures/forces.png",
+              "figures/correlation_diameter.png", "figures/correlation_form.png", "figures/budgets.png"}
+
+
+@pytest.fixture(scope="module")
+def small_campaign(tmp_path_factory):
+    """A small simulated paper-like campaign (3 x 24 points, three-axis forces, signals) on disk."""
+    from arm_model.sim import campaign_from_dict, simulate
+    data = tomllib.loads((ROOT / "examples/campaigns/paper-ring-xyz.toml").read_text())
+    data.pop("arm")
+    data["task"][0].update(measurements=4, points_per_row=8)
+    out = tmp_path_factory.mktemp("sim")
+    simulate(campaign_from_dict(data, arm=NOMINAL)).write(out)
+    return out
+
+
+def files_under(d):
+    return {str(p.relative_to(d)) for p in d.rglob("*") if p.is_file()}
+
+
+def test_ring_report_with_signals(small_campaign, tmp_path):
+    out = tmp_path / "report"
+    rc = main(["ring", str(small_campaign / "points.csv"), str(small_campaign / "artefacts.toml"), "--arm",
+               str(NOMINAL), "--signals", str(small_campaign / "signals"), "-o", str(out)])
+    assert rc == 0
+    assert files_under(out) == RING_FILES
+    for png in out.glob("figures/*.png"):
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    html = (out / "report.html").read_text()
+    for f in RING_FILES:
+        if f.startswith("figures/"):
+            assert f"src='{f}'" in html
+    s = json.loads((out / "summary.json").read_text())
+    assert len(s["measurements"]) == 4 and all(m["n_points"] == 24 for m in s["measurements"])
+    # the summary holds what the Python API computes (forces from the same signals)
+    desc = load_description(NOMINAL)
+    camp = analyse_ring_campaign(desc, read_points(small_campaign / "points.csv", 7),
+                                 read_artefacts(small_campaign / "artefacts.toml"),
+                                 signals_dir=small_campaign / "signals")
+    for m, r in zip(s["measurements"], camp.measurements):
+        for model, fit in r.fits.items():
+            assert_close(m["models"][model]["diameter_error_mm"], fit.diameter_error * 1e3, atol=1e-12)
+            assert_close(m["models"][model]["form_error_mm"], fit.form_error * 1e3, atol=1e-12)
+        assert_close(m["forces_N"]["max"], r.summary.max, atol=1e-12)
+    assert s["summary"]["wrench"]["diameter_error_reduction_pct"] > 80
+    assert {b["name"] for b in s["budgets"]} >= {"diameter, initial", "diameter, full wrench"}
+    # the CSV table carries the same numbers
+    lines = (out / "table2.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    assert header[0] == "measurement" and "diameter_error_wrench_mm" in header and "force_max_N" in header
+    col = header.index("diameter_error_initial_mm")
+    assert_close([float(l.split(",")[col]) for l in lines[1:]],
+                 [m["models"]["initial"]["diameter_error_mm"] for m in s["measurements"]], atol=1e-6)
+
+
+def test_ring_report_from_point_columns_on_the_bundled_campaign(tmp_path):
+    data = ROOT / "examples/data/paper-ring-xyz"
+    out = tmp_path / "r"
+    assert main(["ring", str(data / "points.csv"), str(data / "artefacts.toml"), "--arm", str(NOMINAL),
+                 "-o", str(out), "--u-force-N", "0.01"]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert len(s["measurements"]) == 17 and s["force_kind"] == "xyz"
+    ucor = [t for b in s["budgets"] if b["name"] == "diameter, full wrench" for t in b["terms"] if t["name"] == "u_cor"]
+    assert_close(ucor[0]["u"], 2 * 0.0142 * 0.01, atol=1e-12)
+
+
+def test_ring_refusals_write_nothing(small_campaign, tmp_path, capsys):
+    pts, art = str(small_campaign / "points.csv"), str(small_campaign / "artefacts.toml")
+    out = tmp_path / "never"
+    # a signal folder without the measurement's file
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main(["ring", pts, art, "--arm", str(NOMINAL), "--signals", str(empty), "-o", str(out)]) == 2
+    assert "no force signal for measurement 'ring-01'" in capsys.readouterr().err
+    # a signal with one peak too few: both counts named
+    sig = tmp_path / "sig"
+    sig.mkdir()
+    for f in (small_campaign / "signals").glob("*.csv"):
+        (sig / f.name).write_text(f.read_text())
+    text = (sig / "ring-02.csv").read_text().splitlines()
+    (sig / "ring-02.csv").write_text("\n".join(text[: int(len(text) * 0.9)]) + "\n")
+    assert main(["ring", pts, art, "--arm", str(NOMINAL), "--signals", str(sig), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "ring-02.csv" in err and "24 points" in err and "peaks" in err
+    # the output over an input: the points file, or the signals folder given
+    assert main(["ring", pts, art, "--arm", str(NOMINAL), "-o", pts]) == 2
+    assert main(["ring", pts, art, "--arm", str(NOMINAL), "--signals", str(sig), "-o", str(sig)]) == 2
+    assert "refusing to write" in capsys.readouterr().err
+    # an artefacts file without a ring
+    noring = tmp_path / "a.toml"
+    noring.write_text('[[feature]]\nid = "ring"\nkind = "sphere"\ndiameter_mm = 25.0\n')
+    assert main(["ring", pts, str(noring), "--arm", str(NOMINAL), "-o", str(out)]) == 2
+    assert "0 ring features" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_paper_report(tmp_path):
+    out = tmp_path / "paper"
+    assert main(["paper", "-o", str(out)]) == 0
+    assert files_under(out) == {"report.html", "summary.json", "table2_implied.csv", "findings.csv",
+                                "figures/paper_table2.png", "figures/paper_implied_forces.png",
+                                "figures/paper_correlation.png", "figures/paper_loop.png"}
+    s = json.loads((out / "summary.json").read_text())
+    r = {c["force"]: c["r"] for c in s["pearson"] if c["with_reference"]}
+    assert abs(r["mean_force_N"] - 0.89) < 0.005 and abs(r["max_force_N"] - 0.90) < 0.005
+    assert s["loop"]["loo_rms_after_mm"] < 0.4 * s["loop"]["rms_before_mm"]
+    assert len(s["per_measurement"]) == 17
+    assert any(not f["consistent"] and "misprint" in f["note"] for f in s["findings"])
+    assert "0.0723" in (out / "report.html").read_text()
+
+
+def test_help_texts():
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    for name in ("ring", "paper"):
+        p = sub.choices[name]
+        assert len(p.description) > 200
+        for action in p._actions:
+            if action.dest != "help":
+                assert action.help and len(action.help) > 20, (name, action.dest)
