@@ -15,7 +15,9 @@ assumption on the direction of the force and acts on the whole 3-D deflection.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -135,21 +137,26 @@ class RingCampaign:
         return np.array([getattr(r.summary, which) for r in self.measurements], float)
 
 
-def measurement_forces(points: PointSet, measurement: str, signals_dir=None) -> PointForces:
-    """Per-point forces of every row of one measurement: from ``signals_dir/<measurement>.csv`` (one peak a
-    point, in capture order) if a folder is given, else from the points file's force columns."""
+def measurement_forces(points: PointSet, measurement: str, signals=None) -> PointForces:
+    """Per-point forces of every row of one measurement: one peak a point (capture order) of its force
+    signal if ``signals`` is given (a folder holding ``<measurement>.csv``, or a mapping {measurement:
+    :class:`arm_model.io.ForceSignal`}), else the points file's force columns."""
     rows = np.flatnonzero(points.measurement == measurement)
-    if signals_dir is None:
+    if signals is None:
         return forces_from_columns(points, rows)
-    from pathlib import Path
-    path = Path(signals_dir) / f"{measurement}.csv"
+    if isinstance(signals, Mapping):
+        if measurement not in signals:
+            raise InputError(f"no force signal for measurement '{measurement}' (signals given for: "
+                             f"{', '.join(sorted(signals)) or 'none'})", points.path)
+        return find_point_forces(signals[measurement], len(rows), measurement)
+    path = Path(signals) / f"{measurement}.csv"
     if not path.exists():
         raise InputError(f"no force signal for measurement '{measurement}' (expected one file a measurement, "
                          f"named <measurement>.csv, DATA-FORMATS §5)", path)
     return find_point_forces(read_force_signal(path), len(rows), measurement)
 
 
-def analyse_ring_campaign(desc, points: PointSet, artefacts, feature: str | None = None, signals_dir=None,
+def analyse_ring_campaign(desc, points: PointSet, artefacts, feature: str | None = None, signals=None,
                           compliance: float | None = None, models=MODELS) -> RingCampaign:
     """Analyse a ring-gauge campaign: per measurement, the per-point forces, the ring initially (rigid ball
     centres from the encoder angles) and after each correction model.
@@ -159,8 +166,8 @@ def analyse_ring_campaign(desc, points: PointSet, artefacts, feature: str | None
         points: the points (``arm_model.read_points``).
         artefacts: ``arm_model.read_artefacts``; the ring is its feature of kind "ring".
         feature: the ring's feature id; None takes the only ring feature.
-        signals_dir: folder of force signals, one ``<measurement>.csv`` a measurement, or None to use the
-            points file's force columns.
+        signals: folder of force signals, one ``<measurement>.csv`` a measurement, or a mapping {measurement:
+            ForceSignal}, or None to use the points file's force columns.
         compliance: compliance of the paper's models [m/N]; None takes the probe's bending compliance.
         models: subset of :data:`MODELS`.
     """
@@ -187,7 +194,7 @@ def analyse_ring_campaign(desc, points: PointSet, artefacts, feature: str | None
         sel = on_ring[rows]
         if not np.any(sel):
             continue
-        forces_all = measurement_forces(points, mid, signals_dir)
+        forces_all = measurement_forces(points, mid, signals)
         kind = forces_all.kind
         forces = PointForces(forces_all.force[sel], forces_all.kind, forces_all.source,
                              None if forces_all.index is None else forces_all.index[sel],

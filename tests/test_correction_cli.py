@@ -51,7 +51,7 @@ def test_ring_report_with_signals(small_campaign, tmp_path):
     desc = load_description(NOMINAL)
     camp = analyse_ring_campaign(desc, read_points(small_campaign / "points.csv", 7),
                                  read_artefacts(small_campaign / "artefacts.toml"),
-                                 signals_dir=small_campaign / "signals")
+                                 signals=small_campaign / "signals")
     for m, r in zip(s["measurements"], camp.measurements):
         for model, fit in r.fits.items():
             assert_close(m["models"][model]["diameter_error_mm"], fit.diameter_error * 1e3, atol=1e-12)

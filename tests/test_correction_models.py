@@ -130,7 +130,7 @@ def test_campaign_input_errors(nominal, campaign_data, tmp_path):
     with pytest.raises(InputError, match="no ring feature 'nope'"):
         analyse_ring_campaign(nominal, pts, two, feature="nope")
     with pytest.raises(InputError, match="no force signal for measurement 'ring-00'") as exc:
-        analyse_ring_campaign(nominal, pts, parse_artefacts(ARTEFACTS, "a.toml"), signals_dir=tmp_path)
+        analyse_ring_campaign(nominal, pts, parse_artefacts(ARTEFACTS, "a.toml"), signals=tmp_path)
     assert "ring-00.csv" in str(exc.value)
     no_force = parse_points("measurement,feature," + ",".join(f"q{i}_deg" for i in range(1, 8)) + "\n"
                             + "m,ring," + ",".join("0" for _ in range(7)) + "\n", "nf.csv", 7)
