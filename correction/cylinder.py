@@ -104,6 +104,7 @@ class RingFit:
             (the seed paper's Figure 6), or against the fitted radius when no reference is given.
         angles_deg: (N,) angular position of each point [deg].
         reference_diameter: [m] or None.
+        centres: (N, 3) the ball centres fitted [m].
     """
     cylinder: CylinderFit
     ball_diameter: float
@@ -112,6 +113,13 @@ class RingFit:
     point_errors: np.ndarray
     angles_deg: np.ndarray
     reference_diameter: float | None
+    centres: np.ndarray | None = None
+
+    def rows(self, rows=None) -> list[dict]:
+        """Circles per row (see :func:`fit_row_circles`), lowest first: ``height`` along the axis,
+        ``diameter`` (ball compensated) and ``form_error`` [m]."""
+        return [{"height": c.height, "diameter": c.diameter + self.ball_diameter, "form_error": c.form_error}
+                for c in fit_row_circles(self.centres, self.cylinder, rows)]
 
     @property
     def diameter_error(self) -> float | None:
@@ -379,4 +387,5 @@ def ring_fit(ball_centres, ball_diameter: float, reference_diameter: float | Non
     ref_r = (diameter if reference_diameter is None else reference_diameter) / 2.0
     errors = cyl.radius + cyl.residuals + ball_diameter / 2.0 - ref_r
     return RingFit(cylinder=cyl, ball_diameter=ball_diameter, diameter=diameter, form_error=cyl.form_error,
-                   point_errors=errors, angles_deg=np.degrees(cyl.angles), reference_diameter=reference_diameter)
+                   point_errors=errors, angles_deg=np.degrees(cyl.angles), reference_diameter=reference_diameter,
+                   centres=np.asarray(ball_centres, float))

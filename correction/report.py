@@ -120,7 +120,10 @@ def ring_summary(campaign: RingCampaign, budgets: list[BudgetResult], inputs: di
             "measurement": r.id, "n_points": r.n_points,
             "forces_N": {"mean": r.summary.mean, "max10": r.summary.max10, "max": r.summary.max},
             "models": {m: {"diameter_mm": f.diameter * 1e3, "diameter_error_mm": f.diameter_error * 1e3,
-                           "form_error_mm": f.form_error * 1e3} for m, f in r.fits.items()},
+                           "form_error_mm": f.form_error * 1e3,
+                           "rows": [{"height_mm": row["height"] * 1e3, "diameter_mm": row["diameter"] * 1e3,
+                                     "form_error_mm": row["form_error"] * 1e3} for row in f.rows()]}
+                       for m, f in r.fits.items()},
         })
     corr = [c.as_dict() for c in campaign_correlations(campaign, "initial")]
     return _num({

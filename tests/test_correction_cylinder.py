@@ -195,3 +195,13 @@ def test_failures_raise():
         fit_cylinder(line)
     with pytest.raises(NumericalError, match="collinear"):
         fit_circle_2d(np.column_stack([np.linspace(0, 1, 5), np.zeros(5)]))
+
+
+def test_ring_rows_are_ball_compensated():
+    ball = 0.004
+    local = cylinder_points(0.0855, [-0.008, 0.0, 0.008], 24)
+    ring = ring_fit(local, ball, 0.175)
+    rows = ring.rows()
+    assert len(rows) == 3
+    assert_close([r["diameter"] for r in rows], [0.175] * 3, atol=1e-12)
+    assert_close([r["height"] for r in rows], [-0.008, 0.0, 0.008], atol=1e-12)
