@@ -147,7 +147,9 @@ def _ring_figures(c: RingCampaign, budgets) -> dict:
     for m in [mm for mm in ("initial", "point", "wrench") if mm in worst.fits]:
         f = worst.fits[m]
         o = np.argsort(f.angles_deg)
-        ax.plot(f.angles_deg[o], f.point_errors[o] * 1e6, "o", ms=3, color=_COLOURS[m],
+        style = {"initial": dict(marker="o", ms=3), "point": dict(marker="o", ms=6, mfc="none"),
+                 "wrench": dict(marker="o", ms=2.5)}[m]
+        ax.plot(f.angles_deg[o], f.point_errors[o] * 1e6, ls="none", color=_COLOURS[m], **style,
                 label=f"{MODEL_LABELS[m]} (diameter error {f.diameter_error * 1e3:+.4f} mm)")
     ax.axhline(0, color="k", lw=0.6)
     ax.set(xlabel="angular position of the point [deg]", ylabel="contact point radial error [µm]",
