@@ -105,7 +105,11 @@ def test_peaks_property(n, seed, noise):
     pf = find_point_forces(sig, n)
     assert len(pf) == n
     assert np.all(np.diff(pf.index) > 0)
-    assert_close(pf.time, times, atol=0.01)
+    # near its top a raised cosine of half-width w drops by F (pi dt / 2w)^2: the noisy maximum can lie
+    # anywhere the pulse is within ~6 sigma of its top, |dt| < (2w / pi) sqrt(6 sigma / F) (+ 1 sample)
+    width = 0.08
+    tol = np.maximum(0.01, 2 * width / np.pi * np.sqrt(6 * noise / np.linalg.norm(forces, axis=1)) + 1e-3)
+    assert np.all(np.abs(pf.time - times) <= tol), (pf.time - times, tol)
     with pytest.raises(InputError):
         find_point_forces(sig, n + 1)
 
