@@ -96,3 +96,20 @@ def test_force_gain_and_compliance_signatures_are_reported_as_indistinguishable(
     _, loop = run("force_sensor")
     stage = loop.stages[1]
     assert "probe compliance (anisotropic)" in stage.nested + stage.alternatives
+
+
+@pytest.mark.parametrize("seed", [4, 5])
+@pytest.mark.parametrize("case", list(CASES))
+def test_loop_names_the_effect_on_other_seeds(case, seed):
+    """Not tuned to one draw: on other seeds (new errors, poses, noise, test set) the loop names the same
+    effect and joint and lowers the held-out error. (How much depends on the draw: where the effect is
+    small next to the 2 um probing noise the RMS cannot halve; see docs/close-loop.md.)"""
+    camp = campaign_from_dict(campaign(CASES[case][0], seed=seed))
+    sim = simulate(camp)
+    loop = close_loop(sim.points, sim.artefacts, camp.arm, reference=sim.reference_points,
+                      weights=Weights(probe=NOISE_UM * 1e-6), cv_top=2)
+    _, name, joint = CASES[case]
+    assert [c.name for c in loop.added] == [name], loop.verdict
+    assert loop.added[0].joint == joint
+    rows = loop.before_after()
+    assert rows[-1]["rms_um"] < rows[0]["rms_um"], rows
