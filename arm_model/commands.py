@@ -6,12 +6,26 @@ from pathlib import Path
 
 import numpy as np
 
-from .description import load_description
 from .io import atomic_write_text, guard_output, read_points, write_csv
 from .kinematics import ball_centres
 from .urdf import urdf_text
+from .urdf_import import load_arm
 
-__all__ = ["register", "tip_table"]
+__all__ = ["register", "tip_table", "add_arm_options", "arm_from_args"]
+
+
+def add_arm_options(p, help_arm: str = "the arm: description TOML (e.g. urdf/aacmm7.dh.toml) or a URDF "
+                                       "with --tip-frame") -> None:
+    """``--arm`` and ``--tip-frame``, the same for every subcommand."""
+    p.add_argument("--arm", type=Path, required=True, help=help_arm)
+    p.add_argument("--tip-frame", default=None, metavar="LINK",
+                   help="for an arm given as a URDF: the link at the ball centre (the chain runs from the root "
+                        "to it; the probe data default to the seed paper's 85 mm probe)")
+
+
+def arm_from_args(args: argparse.Namespace):
+    """The arm named by :func:`add_arm_options`."""
+    return load_arm(args.arm, args.tip_frame)
 
 
 def register(sub) -> None:
@@ -22,7 +36,7 @@ def register(sub) -> None:
                     "Points whose force exceeds the probe's calibrated range are flagged (over_force = 1), "
                     "never dropped.")
     p.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
-    p.add_argument("--arm", type=Path, required=True, help="arm description TOML, e.g. urdf/aacmm7.dh.toml")
+    add_arm_options(p)
     p.add_argument("-o", "--output", type=Path, required=True, help="output CSV (never one of the inputs)")
     p.set_defaults(func=run_tip)
 
@@ -30,7 +44,9 @@ def register(sub) -> None:
         "urdf", help="generate the URDF of an arm description",
         description="Write the URDF (links, joints, the probe's virtual elastic joints, visuals) generated "
                     "from an arm description. The repository's urdf/aacmm7.urdf is made this way.")
-    u.add_argument("arm", type=Path, help="arm description TOML")
+    u.add_argument("arm", type=Path, help="arm description TOML (or a URDF with --tip-frame, to see the chain "
+                                          "the toolkit reads from it)")
+    u.add_argument("--tip-frame", default=None, metavar="LINK", help="for a URDF arm: the link at the ball centre")
     u.add_argument("-o", "--output", type=Path, required=True, help="output URDF")
     u.set_defaults(func=run_urdf)
 
@@ -54,7 +70,7 @@ def tip_table(desc, points) -> dict:
 
 def run_tip(args: argparse.Namespace) -> int:
     guard_output(args.output, [args.points, args.arm])
-    desc = load_description(args.arm)
+    desc = arm_from_args(args)
     points = read_points(args.points, desc.n_joints)
     cols = tip_table(desc, points)
     write_csv(args.output, cols, inputs=[args.points, args.arm], fmt="%.6f")
@@ -78,7 +94,7 @@ def run_tip(args: argparse.Namespace) -> int:
 
 
 def run_urdf(args: argparse.Namespace) -> int:
-    desc = load_description(args.arm)
+    desc = arm_from_args(args)
     atomic_write_text(args.output, urdf_text(desc), inputs=[args.arm])
     print(f"URDF of '{desc.name}' ({desc.n_joints} joints + 3 elastic probe joints) -> {args.output}")
     return 0

@@ -6,14 +6,10 @@ import json
 from pathlib import Path
 
 from arm_model import InputError
+from arm_model.commands import add_arm_options, arm_from_args
 from arm_model.io import atomic_write_text, guard_output, read_artefacts, read_points
 
 __all__ = ["register", "run_calibrate", "run_montecarlo", "run_poses"]
-
-
-def _load_arm(path: Path, tip_frame: str | None):
-    from arm_model.urdf_import import load_arm
-    return load_arm(path, tip_frame)
 
 
 def _effects(keys):
@@ -91,8 +87,7 @@ def register(sub) -> None:
                "--arm urdf/aacmm7.dh.toml --reference-points points-ref.csv --holdout 0.2 -o out/cal")
     c.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
     c.add_argument("artefacts", type=Path, help="artefacts TOML (DATA-FORMATS §4)")
-    c.add_argument("--arm", type=Path, required=True, help="nominal arm: description TOML or URDF (with --tip-frame)")
-    c.add_argument("--tip-frame", default=None, help="for a URDF arm: the link at the ball centre")
+    add_arm_options(c, "nominal arm: description TOML or URDF (with --tip-frame)")
     c.add_argument("--reference-points", type=Path, default=None,
                    help="a second points CSV with reference coordinates (x_ref_mm ...), e.g. tracker nests")
     c.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; never an input)")
@@ -145,8 +140,7 @@ def register(sub) -> None:
                                   "identification Jacobian; compared with random choices of the same size.")
     q.add_argument("points", type=Path, help="candidate points CSV")
     q.add_argument("artefacts", type=Path, help="artefacts TOML")
-    q.add_argument("--arm", type=Path, required=True, help="nominal arm (TOML, or URDF with --tip-frame)")
-    q.add_argument("--tip-frame", default=None, help="for a URDF arm: the link at the ball centre")
+    add_arm_options(q, "nominal arm (TOML, or URDF with --tip-frame)")
     q.add_argument("--reference-points", type=Path, default=None, help="reference points CSV")
     q.add_argument("--count", type=int, required=True, help="how many measurements to choose")
     q.add_argument("-o", "--output", type=Path, required=True, help="output folder")
@@ -182,7 +176,7 @@ def _free(model, args):
 def _load_data(args):
     from arm_model.model import ArmModel
     from .data import make_data
-    desc = _load_arm(args.arm, args.tip_frame)
+    desc = arm_from_args(args)
     model = ArmModel(desc, _effects(args.effect))
     points = read_points(args.points, desc.n_joints)
     artefacts = read_artefacts(args.artefacts)

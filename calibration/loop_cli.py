@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 
 from arm_model import InputError
+from arm_model.commands import add_arm_options, arm_from_args
 from arm_model.io import guard_output, read_artefacts, read_points
 
 from .cli import sigma_options
@@ -48,8 +49,7 @@ def register(sub) -> None:
                "--reference-points points-ref.csv -o out/loop. Method and outputs: docs/close-loop.md")
     p.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
     p.add_argument("artefacts", type=Path, help="artefacts TOML (DATA-FORMATS §4)")
-    p.add_argument("--arm", type=Path, required=True, help="nominal arm: description TOML or URDF (with --tip-frame)")
-    p.add_argument("--tip-frame", default=None, help="for a URDF arm: the link at the ball centre")
+    add_arm_options(p, "nominal arm: description TOML or URDF (with --tip-frame)")
     p.add_argument("--reference-points", type=Path, default=None,
                    help="a second points CSV with reference coordinates (x_ref_mm ...), e.g. tracker nests")
     p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; never an input)")
@@ -84,7 +84,6 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from arm_model.effects import EFFECTS
-    from arm_model.urdf_import import load_arm
 
     from .candidates import FAMILIES
     from .data import Weights
@@ -110,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
         effects.append(EFFECTS[k]())
     if effects and families is None:
         families = tuple(f for f in FAMILIES if f not in {e.key for e in effects})
-    desc = load_arm(args.arm, args.tip_frame)
+    desc = arm_from_args(args)
     points = read_points(args.points, desc.n_joints)
     artefacts = read_artefacts(args.artefacts)
     reference = read_points(args.reference_points, desc.n_joints) if args.reference_points else None

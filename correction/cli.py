@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from arm_model import InputError, load_description, read_artefacts, read_points
+from arm_model import InputError, read_artefacts, read_points
+from arm_model.commands import add_arm_options, arm_from_args
 from arm_model.io import check_features, guard_output
 
 __all__ = ["register", "run_ring", "run_paper"]
@@ -39,7 +40,7 @@ def register(sub) -> None:
                     "figures/*.png into the output folder.")
     r.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3) with the ring's points")
     r.add_argument("artefacts", type=Path, help="artefacts TOML (DATA-FORMATS §4) with the ring (kind = \"ring\")")
-    r.add_argument("--arm", type=Path, required=True, help="arm description TOML, e.g. urdf/aacmm7.dh.toml")
+    add_arm_options(r)
     r.add_argument("--signals", type=Path, metavar="DIR",
                    help="folder of force signals, one <measurement>.csv a measurement (DATA-FORMATS §5); "
                         "without it the points file's force columns are used")
@@ -80,7 +81,7 @@ def run_ring(args: argparse.Namespace) -> int:
     guard_output(args.output, list(inputs.values()) + ([args.signals] if args.signals else []))
     if args.signals is not None and not args.signals.is_dir():
         raise InputError("--signals must be a folder of <measurement>.csv force signals", args.signals)
-    desc = load_description(args.arm)
+    desc = arm_from_args(args)
     points = read_points(args.points, desc.n_joints)
     artefacts = read_artefacts(args.artefacts)
     check_features(points, artefacts)

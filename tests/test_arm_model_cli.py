@@ -85,3 +85,16 @@ def test_entry_point_help_and_exit_code(tmp_path):
     bad = subprocess.run(exe + ["tip", str(tmp_path / "missing.csv"), "--arm", str(NOMINAL), "-o",
                                 str(tmp_path / "o.csv")], capture_output=True, text=True)
     assert bad.returncode == 2 and "cannot read" in bad.stderr
+
+
+def test_tip_with_a_urdf_arm_and_tip_frame(tmp_path, nominal):
+    from test_arm_model_urdf_chain import arm_urdf
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text(arm_urdf(nominal))
+    pts = write_points(tmp_path / "p.csv", [["m1", "ring", *[10] * 7, 1.0, 0.0, 0.0]])
+    out = tmp_path / "o.csv"
+    assert main(["tip", str(pts), "--arm", str(urdf), "-o", str(out)]) == 2      # no --tip-frame: said
+    assert main(["tip", str(pts), "--arm", str(urdf), "--tip-frame", "tip", "-o", str(out)]) == 0
+    row = next(csv.DictReader(out.open()))
+    ref = ball_centres(nominal.with_probe(p_last=(0.001, -0.002, 0.085)), np.deg2rad([10] * 7))
+    assert_close([float(row[k]) for k in ("x_rigid_mm", "y_rigid_mm", "z_rigid_mm")], ref * 1e3, atol=1e-6)

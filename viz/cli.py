@@ -10,7 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from arm_model import InputError, ball_centres, check_features, load_description, read_artefacts, read_points
+from arm_model import InputError, ball_centres, check_features, read_artefacts, read_points
+from arm_model.commands import add_arm_options, arm_from_args
 from arm_model.io import guard_output
 
 from ._errors import ViewerError
@@ -44,7 +45,7 @@ def register(sub) -> None:
                     "(--artefacts) and residual vectors (--residuals). The scales are printed and written on "
                     "the page. The server stops at Ctrl-C, at SIGTERM, or after --open-seconds.")
     p.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
-    p.add_argument("--arm", type=Path, required=True, help="arm description TOML, e.g. urdf/aacmm7.dh.toml")
+    add_arm_options(p)
     p.add_argument("--measurement", metavar="ID", help="only the points of this measurement (default: all)")
     pose = p.add_mutually_exclusive_group()
     pose.add_argument("--point", type=_positive(int), default=1, metavar="N",
@@ -98,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
         from .browser import find_chromium
         find_chromium(args.browser)   # before any work: a missing browser is reported at once
     # read everything first: a bad file stops here, before a server starts or a file is written
-    desc = load_description(args.arm)
+    desc = arm_from_args(args)
     points = read_points(args.points, desc.n_joints)
     artefacts = read_artefacts(args.artefacts) if args.artefacts else None
     if artefacts is not None:
