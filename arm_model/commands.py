@@ -11,7 +11,43 @@ from .kinematics import ball_centres
 from .urdf import urdf_text
 from .urdf_import import load_arm
 
-__all__ = ["register", "tip_table", "add_arm_options", "arm_from_args"]
+__all__ = ["register", "tip_table", "add_arm_options", "arm_from_args", "positive", "at_least", "fraction"]
+
+
+def _number(text: str, kind):
+    try:
+        return kind(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {'a whole number' if kind is int else 'a number'}, "
+                                         f"got {text!r}") from None
+
+
+def positive(kind=float):
+    """argparse type: a number > 0 (``kind`` float or int)."""
+    def parse(text: str):
+        v = _number(text, kind)
+        if not v > 0:
+            raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+        return v
+    return parse
+
+
+def at_least(minimum: int):
+    """argparse type: a whole number >= ``minimum``."""
+    def parse(text: str) -> int:
+        v = _number(text, int)
+        if v < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {text}")
+        return v
+    return parse
+
+
+def fraction(text: str) -> float:
+    """argparse type: a number in (0, 1)."""
+    v = _number(text, float)
+    if not 0.0 < v < 1.0:
+        raise argparse.ArgumentTypeError(f"must be in (0, 1), got {text}")
+    return v
 
 
 def add_arm_options(p, help_arm: str = "the arm: description TOML (e.g. urdf/aacmm7.dh.toml) or a URDF "

@@ -65,12 +65,17 @@ class ArmModel:
         return out
 
     # -- the one evaluation -------------------------------------------------------------------
-    def _evaluate(self, p, inputs: ModelInputs, ops):
+    def _apply_effects(self, p, inputs: ModelInputs, ops) -> Geometry:
+        """The geometry of ``p`` with every effect applied; ``inputs`` are modified in place."""
         rows, p_last, compliance = split_params(self.desc, p[: self.base_size] if p is not None else None)
         geom = Geometry([list(r) for r in rows], list(p_last), list(compliance))
         for e, sl in self.effect_slices():
             params = [p[i] for i in range(sl.start, sl.stop)] if p is not None else [0.0] * (sl.stop - sl.start)
             e.apply(self.desc, params, inputs, geom, ops)
+        return geom
+
+    def _evaluate(self, p, inputs: ModelInputs, ops):
+        geom = self._apply_effects(p, inputs, ops)
         return ball_centre_expr(self.desc.convention, geom.rows, geom.p_last, geom.compliance,
                                 inputs.q, inputs.wrench, ops, self.desc.axes)
 
@@ -160,11 +165,7 @@ class ArmModel:
                              temperature=aux_row.get("temperature"),
                              tau_gravity=None if aux_row.get("tau_gravity") is None else list(aux_row["tau_gravity"]),
                              tau_contact=None if aux_row.get("tau_contact") is None else list(aux_row["tau_contact"]))
-        rows, p_last, compliance = split_params(self.desc, p[: self.base_size])
-        geom = Geometry([list(r) for r in rows], list(p_last), list(compliance))
-        ops = SimpleNamespace(sin=np.sin, cos=np.cos)
-        for e, sl in self.effect_slices():
-            e.apply(self.desc, [float(v) for v in p[sl]], inputs, geom, ops)
+        geom = self._apply_effects([float(v) for v in p], inputs, NUMPY_OPS)
         d = self.desc.with_row_table(np.array(geom.rows, dtype=float)).with_probe(
             p_last=tuple(float(v) for v in geom.p_last), bending_compliance_x=float(geom.compliance[0]),
             bending_compliance_y=float(geom.compliance[1]), axial_compliance=float(geom.compliance[2]))

@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 from arm_model import InputError
-from arm_model.commands import add_arm_options, arm_from_args
+from arm_model.commands import add_arm_options, arm_from_args, positive
 from arm_model.io import atomic_write_text, guard_output, read_artefacts, read_points
 
 __all__ = ["register", "run_calibrate", "run_montecarlo", "run_poses"]
@@ -34,20 +34,23 @@ def _holdout(text: str | None):
     return v
 
 
-def _positive(text: str) -> float:
-    v = float(text)
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
-    return v
+def campaign_inputs(p) -> None:
+    """Points, artefacts, arm, reference points and output folder (shared with ``aacmm close-loop``)."""
+    p.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
+    p.add_argument("artefacts", type=Path, help="artefacts TOML (DATA-FORMATS §4)")
+    add_arm_options(p, "nominal arm: description TOML or URDF (with --tip-frame)")
+    p.add_argument("--reference-points", type=Path, default=None,
+                   help="a second points CSV with reference coordinates (x_ref_mm ...), e.g. tracker nests")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; never an input)")
 
 
 def sigma_options(p) -> None:
     """The stated uncertainties that weight the residuals (shared with ``aacmm close-loop``)."""
-    p.add_argument("--sigma-probe-um", type=_positive, default=10.0,
+    p.add_argument("--sigma-probe-um", type=positive(), default=10.0,
                    help="standard uncertainty of a probed ball centre per axis [um] (default 10)")
-    p.add_argument("--sigma-ref-um", type=_positive, default=10.0,
+    p.add_argument("--sigma-ref-um", type=positive(), default=10.0,
                    help="standard uncertainty of a reference-instrument coordinate per axis [um] (default 10)")
-    p.add_argument("--sigma-length-um", type=_positive, default=None,
+    p.add_argument("--sigma-length-um", type=positive(), default=None,
                    help="standard uncertainty of a certified length without u_length_mm [um] "
                         "(default: --sigma-probe-um)")
 
@@ -63,7 +66,7 @@ def _common_fit_options(p) -> None:
                    help="add an effect of arm_model.effects to the model (repeatable): eccentricity, "
                         "joint_compliance, thermal, force_sensor, probe_compliance")
     sigma_options(p)
-    p.add_argument("--rank-tol", type=_positive, default=None,
+    p.add_argument("--rank-tol", type=positive(), default=None,
                    help="relative singular value below which a parameter combination counts as not "
                         "identifiable (default 1e-4)")
     p.add_argument("--min-resolution", type=float, default=0.1, metavar="FRACTION",
@@ -85,12 +88,7 @@ def register(sub) -> None:
                     "calibrated description (TOML and URDF), summary.json, CSV tables and report.html.",
         epilog="Parameter names: docs/calibration.md. Example: aacmm calibrate points.csv artefacts.toml "
                "--arm urdf/aacmm7.dh.toml --reference-points points-ref.csv --holdout 0.2 -o out/cal")
-    c.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
-    c.add_argument("artefacts", type=Path, help="artefacts TOML (DATA-FORMATS §4)")
-    add_arm_options(c, "nominal arm: description TOML or URDF (with --tip-frame)")
-    c.add_argument("--reference-points", type=Path, default=None,
-                   help="a second points CSV with reference coordinates (x_ref_mm ...), e.g. tracker nests")
-    c.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; never an input)")
+    campaign_inputs(c)
     _common_fit_options(c)
     c.add_argument("--holdout", default=None,
                    help="measurements kept out of the fit for validation: a fraction (0.2) drawn at random per "
@@ -101,7 +99,7 @@ def register(sub) -> None:
                         "(identity: the base pose becomes identifiable) or ignore them")
     c.add_argument("--on-unidentifiable", choices=("fix", "stop"), default="fix",
                    help="hold unidentifiable parameters fixed and list them (default), or stop with the list")
-    c.add_argument("--outlier-threshold", type=_positive, default=4.0,
+    c.add_argument("--outlier-threshold", type=positive(), default=4.0,
                    help="standardized residual beyond which a point is reported as an outlier (default 4)")
     c.add_argument("--drop-outliers", action="store_true",
                    help="drop the outlier points and refit once (they are listed); default: report and keep")

@@ -4,31 +4,14 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from pathlib import Path
 
 from arm_model import InputError
-from arm_model.commands import add_arm_options, arm_from_args
+from arm_model.commands import arm_from_args, at_least, fraction
 from arm_model.io import guard_output, read_artefacts, read_points
 
-from .cli import sigma_options
+from .cli import campaign_inputs, sigma_options
 
 __all__ = ["register", "run"]
-
-
-def _fraction(text: str) -> float:
-    v = float(text)
-    if not 0.0 < v < 1.0:
-        raise argparse.ArgumentTypeError(f"must be in (0, 1), got {text}")
-    return v
-
-
-def _count(minimum: int):
-    def parse(text: str) -> int:
-        v = int(text)
-        if v < minimum:
-            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {text}")
-        return v
-    return parse
 
 
 def register(sub) -> None:
@@ -47,26 +30,21 @@ def register(sub) -> None:
                     "before/after table of the held-out test set.",
         epilog="Example: aacmm close-loop points.csv artefacts.toml --arm urdf/aacmm7.dh.toml "
                "--reference-points points-ref.csv -o out/loop. Method and outputs: docs/close-loop.md")
-    p.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
-    p.add_argument("artefacts", type=Path, help="artefacts TOML (DATA-FORMATS §4)")
-    add_arm_options(p, "nominal arm: description TOML or URDF (with --tip-frame)")
-    p.add_argument("--reference-points", type=Path, default=None,
-                   help="a second points CSV with reference coordinates (x_ref_mm ...), e.g. tracker nests")
-    p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; never an input)")
-    p.add_argument("--folds", type=_count(2), default=4,
+    campaign_inputs(p)
+    p.add_argument("--folds", type=at_least(2), default=4,
                    help="cross-validation folds of whole measurements for each decision (default 4)")
-    p.add_argument("--test-fraction", type=_fraction, default=0.25,
+    p.add_argument("--test-fraction", type=fraction, default=0.25,
                    help="share of the measurements kept out of every decision for the before/after figures "
                         "(default 0.25, drawn per artefact kind)")
-    p.add_argument("--alpha", type=_fraction, default=0.01,
+    p.add_argument("--alpha", type=fraction, default=0.01,
                    help="significance level of the held-out test to add an effect (Bonferroni over the candidates "
                         "tested) and of the final structure tests (Holm) (default 0.01)")
-    p.add_argument("--screen-alpha", type=_fraction, default=0.05,
+    p.add_argument("--screen-alpha", type=fraction, default=0.05,
                    help="level of the score-test screening, Bonferroni over the candidates (default 0.05)")
     p.add_argument("--min-improvement", type=float, default=0.02,
                    help="smallest relative drop of the held-out RMS for an effect to be added (default 0.02)")
-    p.add_argument("--max-effects", type=_count(0), default=4, help="most effects to add (default 4)")
-    p.add_argument("--cv-top", type=_count(1), default=3,
+    p.add_argument("--max-effects", type=at_least(0), default=4, help="most effects to add (default 4)")
+    p.add_argument("--cv-top", type=at_least(1), default=3,
                    help="candidates cross-validated at each step, the best screened first (default 3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the test-set and fold draws (default 0)")
     p.add_argument("--candidates", default=None, metavar="KEYS",

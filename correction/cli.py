@@ -6,23 +6,10 @@ import argparse
 from pathlib import Path
 
 from arm_model import InputError, read_artefacts, read_points
-from arm_model.commands import add_arm_options, arm_from_args
+from arm_model.commands import add_arm_options, arm_from_args, positive
 from arm_model.io import check_features, guard_output
 
 __all__ = ["register", "run_ring", "run_paper"]
-
-
-def _positive(kind):
-    def parse(text):
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-        if not v > 0:
-            raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
-        return v
-    parse.__name__ = kind
-    return parse
 
 
 def register(sub) -> None:
@@ -45,15 +32,15 @@ def register(sub) -> None:
                    help="folder of force signals, one <measurement>.csv a measurement (DATA-FORMATS §5); "
                         "without it the points file's force columns are used")
     r.add_argument("--feature", metavar="ID", help="id of the ring feature when the artefacts file has several rings")
-    r.add_argument("--compliance-mm-per-N", type=_positive("compliance"), dest="compliance", metavar="C",
+    r.add_argument("--compliance-mm-per-N", type=positive(), dest="compliance", metavar="C",
                    help="compliance of the paper's four models (default: the arm's probe bending compliance, "
                         "0.0142 mm/N in the nominal arm)")
-    r.add_argument("--u-force-N", type=_positive("force"), dest="u_force", default=None, metavar="U",
+    r.add_argument("--u-force-N", type=positive(), dest="u_force", default=None, metavar="U",
                    help="standard uncertainty of a measured force for the budgets' u_cor = 2 c u_force "
                         "(default 0.0723 N: the paper's bending sensor, Table 1 terms combined)")
-    r.add_argument("--delta-T-C", type=_positive("temperature"), dest="delta_t", default=0.5, metavar="DT",
+    r.add_argument("--delta-T-C", type=positive(), dest="delta_t", default=0.5, metavar="DT",
                    help="temperature variation during the test for the budgets' u_t (default 0.5 C, the paper's)")
-    r.add_argument("--probability-pct", type=_positive("probability"), dest="probability", default=95.0, metavar="P",
+    r.add_argument("--probability-pct", type=positive(), dest="probability", default=95.0, metavar="P",
                    help="coverage probability of the expanded uncertainties (default 95)")
     r.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created; never an input)")
     r.set_defaults(func=run_ring)

@@ -26,8 +26,21 @@ __all__ = ["CylinderFit", "CircleFit", "RingFit", "fit_cylinder", "fit_circle_2d
 _RANK_TOL = 1e-9
 
 
+class _RadialFit:
+    """Diameter and form error of a fit with ``radius`` and radial ``residuals`` [m]."""
+
+    @property
+    def diameter(self) -> float:
+        return 2.0 * self.radius
+
+    @property
+    def form_error(self) -> float:
+        """max - min radial deviation [m]."""
+        return float(self.residuals.max() - self.residuals.min())
+
+
 @dataclass(frozen=True)
-class CylinderFit:
+class CylinderFit(_RadialFit):
     """A fitted cylinder.
 
     Attributes:
@@ -52,15 +65,6 @@ class CylinderFit:
     radial: np.ndarray
     nfev: int
 
-    @property
-    def diameter(self) -> float:
-        return 2.0 * self.radius
-
-    @property
-    def form_error(self) -> float:
-        """max - min radial deviation [m]."""
-        return float(self.residuals.max() - self.residuals.min())
-
     def to_axis(self, p) -> np.ndarray:
         """(N, 3) unit vectors from points ``p`` (N, 3) towards the axis, perpendicular to it (Eq. 3-7 of
         the seed paper: the intersection of the plane through the point normal to the axis)."""
@@ -73,7 +77,7 @@ class CylinderFit:
 
 
 @dataclass(frozen=True)
-class CircleFit:
+class CircleFit(_RadialFit):
     """A fitted circle in a plane: ``centre`` (2,) in plane coordinates, ``radius``, ``residuals`` (N,)
     (outward positive) [m], and for circles of a cylinder's rows ``centre_3d`` (3,), ``height`` [m]."""
     centre: np.ndarray
@@ -81,14 +85,6 @@ class CircleFit:
     residuals: np.ndarray
     centre_3d: np.ndarray | None = None
     height: float | None = None
-
-    @property
-    def diameter(self) -> float:
-        return 2.0 * self.radius
-
-    @property
-    def form_error(self) -> float:
-        return float(self.residuals.max() - self.residuals.min())
 
 
 @dataclass(frozen=True)

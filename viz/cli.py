@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError, ball_centres, check_features, read_artefacts, read_points
-from arm_model.commands import add_arm_options, arm_from_args
+from arm_model.commands import add_arm_options, arm_from_args, positive
 from arm_model.io import guard_output
 
 from ._errors import ViewerError
@@ -19,18 +19,6 @@ from .placement import place_features
 from .residuals import read_residuals, residual_origins
 
 __all__ = ["register", "run"]
-
-
-def _positive(kind):
-    def parse(text: str):
-        try:
-            v = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-        if not v > 0:
-            raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
-        return v
-    return parse
 
 
 def register(sub) -> None:
@@ -48,12 +36,12 @@ def register(sub) -> None:
     add_arm_options(p)
     p.add_argument("--measurement", metavar="ID", help="only the points of this measurement (default: all)")
     pose = p.add_mutually_exclusive_group()
-    pose.add_argument("--point", type=_positive(int), default=1, metavar="N",
+    pose.add_argument("--point", type=positive(int), default=1, metavar="N",
                       help="show the arm at the N-th point of the selection, file order (default 1)")
     pose.add_argument("--animate", action="store_true",
                       help="animate the arm through every point of the selection (embedded in --html pages)")
-    p.add_argument("--fps", type=_positive(float), default=2.0, help="points per second when animating (default 2)")
-    p.add_argument("--scale", type=_positive(float), default=1000.0,
+    p.add_argument("--fps", type=positive(), default=2.0, help="points per second when animating (default 2)")
+    p.add_argument("--scale", type=positive(), default=1000.0,
                    help="length of the deflection arrow per length of deflection (default 1000: 0.1 mm is "
                         "drawn 100 mm long)")
     p.add_argument("--artefacts", type=Path, help="artefacts TOML (DATA-FORMATS §4): draw each feature, placed "
@@ -61,7 +49,7 @@ def register(sub) -> None:
     p.add_argument("--residuals", type=Path, help="residuals CSV: x_mm, y_mm, z_mm, rx_um, ry_um, rz_um, or the "
                    "residuals.csv of aacmm calibrate (line, dx_um, dy_um, dz_um; see docs/viewer.md): draw "
                    "each residual vector")
-    p.add_argument("--residual-scale", type=_positive(float), default=1000.0,
+    p.add_argument("--residual-scale", type=positive(), default=1000.0,
                    help="length of a residual line per length of residual (default 1000)")
     p.add_argument("--html", type=Path, metavar="OUT.html", help="write the scene as a self-contained page")
     p.add_argument("--screenshot", type=Path, metavar="OUT.png",
@@ -72,7 +60,7 @@ def register(sub) -> None:
                    help="keep serving after writing --html/--screenshot (serving is the default without them, "
                         "and with --open-seconds)")
     p.add_argument("--port", type=int, help="web port of the server (default: the first free one from 7000)")
-    p.add_argument("--open-seconds", type=_positive(float), metavar="N",
+    p.add_argument("--open-seconds", type=positive(), metavar="N",
                    help="stop the server after N seconds (default: run until Ctrl-C)")
     p.set_defaults(func=run)
 
