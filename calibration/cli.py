@@ -28,7 +28,10 @@ def _holdout(text: str | None):
     try:
         v = float(text)
     except ValueError:
-        return [t.strip() for t in text.split(",") if t.strip()]
+        ids = [t.strip() for t in text.split(",") if t.strip()]
+        if not ids:
+            raise InputError(f"--holdout names no measurement (got {text!r}): give measurement ids or a fraction")
+        return ids
     if not 0.0 < v < 1.0:
         raise InputError(f"--holdout fraction must be in (0, 1), got {text}")
     return v

@@ -80,7 +80,8 @@ def summary_dict(loop: LoopResult, inputs: dict | None = None) -> dict:
         "inputs": inputs or {},
         "arm": loop.desc.name,
         "settings": loop.settings.to_dict(),
-        "measurements": {"design": loop.design, "test": loop.test},
+        "measurements": {"design": loop.design, "test": loop.test, "test_by": loop.test_by},
+        "decision_power": loop.power,
         "candidates": [{"name": c.name, "family": c.family, "joint": c.joint, "effect": c.effect.describe()}
                        for c in loop.candidates],
         "skipped_candidates": [{"name": s.name, "reason": s.reason} for s in loop.skipped],
@@ -107,8 +108,10 @@ def before_after_text(loop: LoopResult) -> str:
     name_w = max(len("model"), *(len(r["model"]) for r in rows))
     head = f"{'model':<{name_w}}  " + "  ".join(f"{h:>12}" for _, h, _ in cols)
     units = f"{'':<{name_w}}  " + "  ".join(f"{'[' + u + ']':>12}" for _, _, u in cols)
-    lines = [f"held-out test set: {len(loop.test)} measurements never used for a decision "
-             f"(rows: {loop.stages[0].heldout.get('headline_rows', '')})", head, units]
+    what = (f"{len(loop.test)} measurements never used for a decision" if loop.test_by == "measurement" else
+            "poses of each feature never used for a decision, each predicted against its feature's centre "
+            "fitted on the design poses")
+    lines = [f"held-out test set: {what} (rows: {loop.stages[0].heldout.get('headline_rows', '')})", head, units]
     for r in rows:
         lines.append(f"{r['model']:<{name_w}}  " + "  ".join(
             f"{r[k]:>12.2f}" if k in r and r[k] is not None else f"{'-':>12}" for k, _, _ in cols))

@@ -1,0 +1,70 @@
+"""``aacmm close-loop`` on the real measured Panda seat data (examples/data/real-panda-seats): one placement
+alone runs (the test set and the folds by pose), and misuse stops with one message."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from arm_model.cli import main
+from calibration.loop import wilcoxon_units_needed
+
+REAL = Path(__file__).resolve().parents[1] / "examples" / "data" / "real-panda-seats"
+ARM = ["--arm", str(REAL / "panda-with-inertials.urdf"), "--tip-frame", "ball_link"]
+
+
+def all_placements(tmp_path) -> Path:
+    """The three placements in one points file."""
+    out = tmp_path / "all.csv"
+    parts = [(REAL / p / "points.csv").read_text().splitlines() for p in ("front", "right", "back-high")]
+    out.write_text("\n".join(parts[0] + parts[1][1:] + parts[2][1:]) + "\n")
+    return out
+
+
+@pytest.mark.parametrize("alpha, tests", [(0.01, 1), (0.01, 3), (0.05, 1), (0.005, 4)])
+def test_units_needed_is_where_the_exact_wilcoxon_first_reaches_the_level(alpha, tests):
+    n = wilcoxon_units_needed(alpha, tests)
+    p = [stats.wilcoxon(np.arange(1.0, k + 1), alternative="greater").pvalue for k in (n - 1, n)]
+    assert p[0] >= alpha / tests > p[1]
+    assert p[1] == pytest.approx(0.5 ** n)
+
+
+def test_one_placement_runs_with_folds_by_pose(tmp_path, capsys):
+    out = tmp_path / "loop"
+    code = main(["close-loop", str(REAL / "front" / "points.csv"), str(REAL / "artefacts.toml"), *ARM,
+                 "--max-effects", "1", "-o", str(out)])
+    assert code == 0, capsys.readouterr().err
+    s = json.loads((out / "summary.json").read_text())
+    assert s["measurements"]["test_by"] == "pose"
+    power = s["decision_power"]
+    assert power["fold_by"] == "pose" and power["can_reach"] and power["units"] >= power["needed"]
+    assert "folds by pose" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("holdout, message", [("front", "every measurement is held out"),
+                                              ("nowhere", "not in the points file: nowhere"),
+                                              (" , ", "names no measurement")])
+def test_an_empty_or_impossible_test_set_stops_with_one_message(tmp_path, capsys, holdout, message):
+    out = tmp_path / "loop"
+    code = main(["close-loop", str(REAL / "front" / "points.csv"), str(REAL / "artefacts.toml"), *ARM,
+                 "--holdout", holdout, "-o", str(out)])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+    assert not out.exists()
+
+
+def test_a_test_that_cannot_reach_its_level_is_reported_before_it_runs(tmp_path, capsys):
+    out = tmp_path / "loop"
+    code = main(["close-loop", str(all_placements(tmp_path)), str(REAL / "artefacts.toml"), *ARM,
+                 "--holdout", "back-high", "--fold-by", "measurement", "--folds", "2", "--quiet", "-o", str(out)])
+    assert code == 0
+    err = capsys.readouterr().err
+    assert "WARNING: the held-out test cannot reach its level" in err
+    assert "smallest p = 1/2^2 = 0.25" in err and "at least 9 measurements" in err
+    s = json.loads((out / "summary.json").read_text())
+    assert s["measurements"]["test"] == ["back-high"] and s["decision_power"]["can_reach"] is False
+    assert s["effects_added"] == []
