@@ -8,7 +8,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from arm_model.effects import EncoderEccentricity, ForceSensorError, JointCompliance, ProbeCompliance, ThermalGrowth
+from arm_model.effects import (ApproachOffset, EncoderEccentricity, ForceSensorError, JointCompliance, JointHarmonics,
+                               LateralCompliance, ProbeCompliance, ProbeComplianceMatrix, ProbeThermalGrowth, ThermalGrowth)
 from arm_model.jacobian import chain_jacobian
 from arm_model.model import ArmModel, AuxData
 from arm_model.params import split_params
@@ -57,7 +58,9 @@ def test_chain_jacobian_is_the_casadi_jacobian(nominal, tmp_path, convention):
 
 def _effect_model(nominal):
     return ArmModel(nominal, (EncoderEccentricity(joints=(1, 3)), ThermalGrowth(), ForceSensorError(),
-                              ProbeCompliance(anisotropic=True, axial=True), JointCompliance(joints=(1, 2))))
+                              ProbeCompliance(anisotropic=True, axial=True), JointCompliance(joints=(1, 2)),
+                              JointHarmonics(joints=(2,), source=1, harmonics=(1, 2)), ProbeThermalGrowth(),
+                              ProbeComplianceMatrix(), ApproachOffset(), LateralCompliance(joints=(1, 4))))
 
 
 def _random_cov(rng, k, scale):
