@@ -23,16 +23,41 @@ class Weights:
             (a tracker nest) ties the seat's centre to the instrument (weight ``reference``); on a free
             point it ties the ball centre (weight ``hypot(probe, reference)``).
         length: of a certified length whose artefact gives no ``u_length_mm`` [m] (None: ``probe``).
+        factors: ``((group, factor), ...)``: every row of a group (a point kind: "seat", "sphere", "ring",
+            "cylinder", "plane", "reference"; or "length") has its uncertainty multiplied by the factor
+            (the variance components estimated from a fit, :func:`calibration.calibrate.calibrate`).
     """
     probe: float = 10e-6
     reference: float = 10e-6
     length: float | None = None
+    factors: tuple = ()
 
     def __post_init__(self):
         for name in ("probe", "reference", "length"):
             v = getattr(self, name)
             if v is not None and (not np.isfinite(v) or v <= 0):
                 raise ValueError(f"weight {name} must be a finite positive uncertainty [m], got {v!r}")
+        object.__setattr__(self, "factors", tuple(sorted((str(g), float(f)) for g, f in dict(self.factors).items())))
+        for g, f in self.factors:
+            if not np.isfinite(f) or f <= 0:
+                raise ValueError(f"weight factor of '{g}' must be finite and positive, got {f!r}")
+
+    def factor(self, group: str) -> float:
+        """The factor of a row group (1 if not estimated)."""
+        return dict(self.factors).get(group, 1.0)
+
+    def scaled(self, factors: dict) -> "Weights":
+        """These weights with the group factors multiplied by ``factors``."""
+        new = dict(self.factors)
+        for g, f in factors.items():
+            new[g] = new.get(g, 1.0) * float(f)
+        return Weights(self.probe, self.reference, self.length, tuple(new.items()))
+
+    def sigma_of(self, group: str) -> float | None:
+        """The uncertainty [m] of a point of a group, factor applied (None for "length": per artefact)."""
+        if group == "length":
+            return None
+        return (self.reference if group == "reference" else self.probe) * self.factor(group)
 
     @property
     def reference_sigma(self) -> float:

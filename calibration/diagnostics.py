@@ -38,7 +38,7 @@ from arm_model.model import ArmModel
 from .calibrate import CalibrationResult
 from .candidates import Candidate, torques_of
 from .data import CalibrationData
-from .identifiability import DEFAULT_RANK_TOL, prior_scales, reduced_jacobian, weakly_determined
+from .identifiability import DEFAULT_RANK_TOL, point_noise, prior_scales, reduced_jacobian, weakly_determined
 from .problem import Problem
 from .solver import levenberg_marquardt
 from .synth import probe_rotation
@@ -454,7 +454,8 @@ def screen_candidates(result: CalibrationResult, candidates, folds: "dict[str, i
             c = candidates[i]
             names = c.param_names(desc)
             tests[i] = test_group(space, space.jp[:, sl], names, c.name, fr, rank_tol=rank_tol,
-                                  prior=prior_scales(space.model, names), min_resolution=SCREEN_RESOLUTION)
+                                  prior=prior_scales(space.model, names, noise=point_noise(space.problem)),
+                                  min_resolution=SCREEN_RESOLUTION)
     if first is None:
         first = residual_space(result)
     return tests, first

@@ -88,6 +88,7 @@ class LoopSettings:
     outlier_threshold: float = 4.0
     holdout: tuple = ()
     fold_by: str = "auto"
+    weights_from_data: bool = True
 
     def __post_init__(self):
         object.__setattr__(self, "holdout", tuple(self.holdout or ()))
@@ -351,6 +352,10 @@ class LoopResult:
         structure_plots: binned estimates of the significant families at the final fit.
         dropped: outlier points left out ("design": by the base fit, "test": by the base model's
             held-out residuals), with measurement, feature, line.
+        test_by: the outer test set holds whole "measurement"s or "pose"s of every feature.
+        power: the folds of the decisions and whether their test can reach its level (see ``_choose_folds``).
+        model_fit: the final model calibrated on every point (design and test, as ``calibrate`` would with the
+            same options): the model to use.
     """
     stages: list
     final_screening: list
@@ -369,6 +374,7 @@ class LoopResult:
     dropped: dict = field(default_factory=dict)
     test_by: str = "measurement"
     power: dict = field(default_factory=dict)
+    model_fit: CalibrationResult | None = None
 
     @property
     def final(self) -> Stage:
@@ -490,7 +496,7 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
     if kw:
         settings = LoopSettings(**{**settings.to_dict(), **kw})
     say = progress or (lambda msg: None)
-    weights = weights or Weights()
+    weights = stated = weights or Weights()
     has_t = points.temperature is not None and np.all(np.isfinite(points.temperature))
     need = [JointCompliance()] + ([ThermalGrowth()] if has_t else []) + list(effects) + [c.effect for c in extra]
     data = make_data(points, artefacts, needs_model(desc, need), reference=reference)
@@ -513,17 +519,27 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
 
     priors: dict[str, float] = {}
 
-    def fit(model: ArmModel, d: CalibrationData, extra_priors: dict | None = None) -> CalibrationResult:
+    def fit(model: ArmModel, d: CalibrationData, extra_priors: dict | None = None,
+            reweight: bool = False) -> CalibrationResult:
         names = None
         if free is not None:
             names = [model.spec.names[i] for i in resolve_parameters(model.spec, free)]
             names += [n for n in model.spec.names[model.base_size:] if n not in names]
         return calibrate(model, d, free=names, weights=weights, rank_tol=settings.rank_tol,
-                         priors={**priors, **(extra_priors or {})}, outlier_threshold=settings.outlier_threshold)
+                         priors={**priors, **(extra_priors or {})}, outlier_threshold=settings.outlier_threshold,
+                         weights_from_data=reweight and settings.weights_from_data)
+
+    def noise(res: CalibrationResult) -> str:
+        parts = [f"{v['group']} {v['sigma_um']:.3g} um" for v in res.variance
+                 if v["estimated"] and v["sigma_um"] is not None]
+        return "; noise from the data: " + ", ".join(parts) if parts and res.weights_history else ""
 
     model = ArmModel(desc, tuple(effects))
     say("calibrating the base model on the design set")
-    result = fit(model, design)
+    result = fit(model, design, reweight=True)
+    weights = result.weights
+    if noise(result):
+        say("  " + noise(result)[2:] + " (the stated uncertainties are starting values)")
     dropped = {"design": [], "test": []}
     if settings.drop_outliers:
         result, design, dropped["design"] = _drop_design_outliers(result, design, fit)
@@ -617,7 +633,8 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         model = model.with_effects(cand.effect)
         priors.update(_candidate_priors(model, cand, tests[wi]))
         say(f"adding {cand.name}; recalibrating")
-        result = fit(model, design)
+        old_weights, result = weights, fit(model, design, reweight=True)
+        weights = result.weights
         after = None
         if fam_name is not None:
             sp2 = residual_space(result)
@@ -628,7 +645,7 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         stages.append(stage)
         say(f"  + {cand.name}: held-out test RMS {stage.heldout['rms_um']:.2f} um "
             f"(base {stages[0].heldout['rms_um']:.2f} um)")
-        base_folds = cv.folds
+        base_folds = cv.folds if weights == old_weights else None      # compared at the same weights
         remaining = [c for c in remaining if c is not cand]
         if not remaining:
             stop = "every candidate was added"
@@ -644,8 +661,12 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
     plots = {f.name: binned_estimates(space, f) for f, _, _ in significant[:4]}
     verdict = _verdict(stages, significant, stop, settings)
     say(verdict)
+    say("calibrating the final model on every point (design and test; outliers kept, as calibrate does)")
+    weights = stated                  # the user's uncertainties as the start, as calibrate starts
+    model_fit = fit(model, data, reweight=True)
     return LoopResult(stages, last_tests, last_cv, stop, structure, significant, verdict, cands, skipped,
-                      design.measurements(), test.measurements(), settings, desc, plots, dropped, test_by, power)
+                      design.measurements(), test.measurements(), settings, desc, plots, dropped, test_by, power,
+                      model_fit)
 
 
 def _outer_split(data: CalibrationData, settings: LoopSettings):

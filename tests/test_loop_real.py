@@ -11,6 +11,7 @@ from scipy import stats
 
 from arm_model.cli import main
 from calibration.loop import wilcoxon_units_needed
+from calibration.placements import seat_figures
 
 REAL = Path(__file__).resolve().parents[1] / "examples" / "data" / "real-panda-seats"
 ARM = ["--arm", str(REAL / "panda-with-inertials.urdf"), "--tip-frame", "ball_link"]
@@ -68,3 +69,47 @@ def test_a_test_that_cannot_reach_its_level_is_reported_before_it_runs(tmp_path,
     s = json.loads((out / "summary.json").read_text())
     assert s["measurements"]["test"] == ["back-high"] and s["decision_power"]["can_reach"] is False
     assert s["effects_added"] == []
+
+
+def test_trained_on_one_placement_the_loop_is_no_worse_than_calibrate_on_the_others():
+    """Train on 'front' with the default options of both commands, predict 'right' and 'back-high': the loop's
+    model (calibrated on every point of the training placement) spreads the held-out seats no more than plain
+    calibrate's (5 % tolerance), with the distance error no worse than 0.1 mm more."""
+    from arm_model import PinocchioArm
+    from arm_model.io import read_artefacts, read_points
+    from arm_model.model import ArmModel, AuxData
+    from arm_model.urdf_import import load_arm
+    from calibration.calibrate import calibrate
+    from calibration.data import make_data
+    from calibration.loop import close_loop
+    from calibration.placements import seat_figures
+
+    desc = load_arm(REAL / "panda-with-inertials.urdf", "ball_link")
+    art = read_artefacts(REAL / "artefacts.toml")
+    pts = {p: read_points(REAL / p / "points.csv", 7) for p in ("front", "right", "back-high")}
+    plain = calibrate(ArmModel(desc), make_data(pts["front"], art, ArmModel(desc)), weights_from_data=True)
+    loop = close_loop(pts["front"], art, desc)
+    assert loop.model_fit is not None and len(loop.model_fit.data) == len(pts["front"])
+
+    def figures(res, p):
+        m = res.model
+        aux = None
+        if m.needs():
+            g, c = PinocchioArm(desc).torques(p.q, p.wrench)
+            aux = AuxData(None, g, c)
+        return seat_figures(m.ball_centres(p.q, p.wrench, res.p, aux), p.feature, ("hole-0", "hole-1"), 0.05)
+
+    for held in ("right", "back-high"):
+        a, b = figures(plain, pts[held]), figures(loop.model_fit, pts[held])
+        assert 0.2 < a["spread_mean_mm"] < 5.0                      # a real fit, not a degenerate one
+        assert b["spread_mean_mm"] <= 1.05 * a["spread_mean_mm"], (held, a, b)
+        assert abs(b["distance_error_mm"]) <= abs(a["distance_error_mm"]) + 0.1, (held, a, b)
+
+
+def test_seat_figures_by_hand():
+    x = np.array([[0, 0, 0], [2, 0, 0], [50, 0, 0], [50, 0, 4]], float) * 1e-3
+    f = seat_figures(x, np.array(["a", "a", "b", "b"]), ("a", "b"), 0.05)
+    # hole a: deviations +-1 mm, 2 sqrt((1 + 1) / 1) = 2.828 mm; hole b: +-2 mm -> 5.657 mm
+    assert f["spread_a_mm"] == pytest.approx(2 * np.sqrt(2.0))
+    assert f["spread_b_mm"] == pytest.approx(4 * np.sqrt(2.0))
+    assert f["distance_error_mm"] == pytest.approx(np.hypot(49.0, 2.0) - 50.0)
