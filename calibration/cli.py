@@ -253,6 +253,8 @@ def noise_lines(res) -> list[str]:
     out = []
     if res.weights_history:
         out.append(f"noise from the data (variance components, {len(res.weights_history)} fit(s)):")
+        if not res.weights_history[-1].get("settled", True):
+            out.append("  warning: " + res.weights_history[-1]["note"])
     for v in res.variance:
         what = f"{v['group']} points" if v["group"] != "length" else "lengths"
         used = res.weights.factor(v["group"])

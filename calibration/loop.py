@@ -234,19 +234,27 @@ class Folds:
             against the feature's centre fitted on its other poses).
         k: number of folds.
         assign: measurement id -> fold (by measurement), or the fold of every design point (-1: never held).
+        per_pose: by measurement, the units of the paired test are the held-out poses (each against its
+            held-out measurement's own centre) instead of whole measurements: with few measurements (one
+            plate at a few placements) the test can still reach its level.
+        n_poses: held-out poses over all folds (by measurement with ``per_pose``).
     """
     by: str
     k: int
     assign: object
+    per_pose: bool = False
+    n_poses: int = 0
 
     @property
     def units(self) -> int:
         """Held-out units of the paired test: measurements, or poses."""
-        return len(self.assign) if self.by == "measurement" else int(np.sum(np.asarray(self.assign) >= 0))
+        if self.by == "pose":
+            return int(np.sum(np.asarray(self.assign) >= 0))
+        return self.n_poses if self.per_pose else len(self.assign)
 
     @property
     def unit_name(self) -> str:
-        return "measurements" if self.by == "measurement" else "poses"
+        return "measurements" if self.by == "measurement" and not self.per_pose else "poses"
 
 
 def _fold_fit(model: ArmModel, design: CalibrationData, folds: Folds, fit) -> FoldFit:
@@ -267,10 +275,10 @@ def _fold_fit(model: ArmModel, design: CalibrationData, folds: Folds, fit) -> Fo
         train = design.with_measurements([m for m, g in folds.assign.items() if g != f and m in present])
         res = fit(model, train)
         h = heldout_residuals(model, res.p, design.with_measurements(held), res.weights, res.reference_mode)
-        for m in held:
-            sel = h["measurement"] == m
-            if sel.any():
-                sse[m] = (float(np.sum(h["r"][sel] ** 2)), int(sel.sum()))
+        keys = [(m, int(i)) for m, i in zip(h["measurement"], h["point"])] if folds.per_pose else h["measurement"]
+        for key in dict.fromkeys(keys):
+            sel = np.array([k == key for k in keys]) if folds.per_pose else h["measurement"] == key
+            sse[key] = (float(np.sum(h["r"][sel] ** 2)), int(sel.sum()))
         results.append(res)
     return FoldFit(results, sse)
 
@@ -536,16 +544,18 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
 
     model = ArmModel(desc, tuple(effects))
     say("calibrating the base model on the design set")
-    result = fit(model, design, reweight=True)
-    weights = result.weights
-    if noise(result):
-        say("  " + noise(result)[2:] + " (the stated uncertainties are starting values)")
+    result = fit(model, design)
     dropped = {"design": [], "test": []}
     if settings.drop_outliers:
         result, design, dropped["design"] = _drop_design_outliers(result, design, fit)
         if dropped["design"]:
             say(f"  {len(dropped['design'])} outlier point(s) of the design set dropped (base model, robust "
                 f"standardized residual > {settings.outlier_threshold:g}); they stay out of every later fit")
+    if settings.weights_from_data:
+        result = fit(model, design, reweight=True)
+        weights = result.weights
+        if noise(result):
+            say("  " + noise(result)[2:] + " (the stated uncertainties are starting values)")
     if settings.drop_outliers:
         test, dropped["test"] = _drop_test_outliers(model, result.p, test, weights, result.reference_mode,
                                                     settings.outlier_threshold,
@@ -646,7 +656,8 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         say(f"  + {cand.name}: held-out test RMS {stage.heldout['rms_um']:.2f} um "
             f"(base {stages[0].heldout['rms_um']:.2f} um)")
         base_folds = cv.folds if weights == old_weights else None      # compared at the same weights
-        remaining = [c for c in remaining if c is not cand]
+        remaining = [c for c in remaining if c is not cand                 # and those it contains
+                     and not set(c.param_names(desc)) & set(model.spec.names)]
         if not remaining:
             stop = "every candidate was added"
             last_tests, last_cv = [], []
@@ -698,12 +709,16 @@ def _choose_folds(design: CalibrationData, settings: LoopSettings) -> tuple[Fold
     n_meas = len(design.measurements())
     by = settings.fold_by
     if by == "auto":
-        by = "measurement" if n_meas >= max(settings.folds, need) else "pose"
+        by = "measurement" if n_meas >= 2 else "pose"
     if by == "measurement":
-        if n_meas < settings.folds:
-            raise InputError(f"{n_meas} design measurement(s) cannot make {settings.folds} folds of whole "
-                             "measurements: lower --folds or fold by pose (--fold-by pose)")
-        folds = Folds("measurement", settings.folds, measurement_folds(design, settings.folds, settings.seed))
+        if n_meas < 2:
+            raise InputError(f"{n_meas} design measurement(s): folds of whole measurements need at least 2; "
+                             "fold by pose (--fold-by pose)")
+        k = min(settings.folds, n_meas)
+        assign = measurement_folds(design, k, settings.seed)
+        per_pose = settings.fold_by == "auto" and n_meas < need
+        n_poses = int(sum(np.sum(design.points.feature[design.points.measurement == m] != "") for m in assign))
+        folds = Folds("measurement", k, assign, per_pose, n_poses)
     else:
         folds = Folds("pose", settings.folds, pose_folds(design, settings.folds, settings.seed))
     n = folds.units
@@ -711,8 +726,12 @@ def _choose_folds(design: CalibrationData, settings: LoopSettings) -> tuple[Fold
     ok = smallest < level
     power = {"fold_by": folds.by, "folds": folds.k, "units": n, "unit": folds.unit_name, "needed": need,
              "smallest_p": smallest, "level": level, "can_reach": ok}
-    why = "" if settings.fold_by != "auto" or by == "measurement" else \
-        f" (only {n_meas} design measurement(s): too few for a test by measurement)"
+    why = ""
+    if folds.by == "pose" and settings.fold_by == "auto":
+        why = f" (only {n_meas} design measurement: whole measurements cannot be held out)"
+    elif folds.per_pose:
+        why = (f", {folds.k} of {n_meas} measurements held out in turn, the test over their poses (each against "
+               f"its measurement's own centre: {n_meas} measurements are too few units)")
     if ok:
         power["note"] = (f"decisions: {folds.k} folds by {by}{why}; one-sided Wilcoxon over {n} {folds.unit_name} "
                          f"(smallest possible p = 1/2^{n} < {level:.2g} = alpha / {tests} candidates)")
