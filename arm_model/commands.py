@@ -74,6 +74,8 @@ def register(sub) -> None:
     p.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
     add_arm_options(p)
     p.add_argument("-o", "--output", type=Path, required=True, help="output CSV (never one of the inputs)")
+    from .uncertainty_cli import add_tip_options
+    add_tip_options(p)
     p.set_defaults(func=run_tip)
 
     u = sub.add_parser(
@@ -109,6 +111,14 @@ def run_tip(args: argparse.Namespace) -> int:
     desc = arm_from_args(args)
     points = read_points(args.points, desc.n_joints)
     cols = tip_table(desc, points)
+    lines = []
+    from .uncertainty_cli import inputs_from_args, tip_columns, wants_uncertainty
+    parameters = None
+    if wants_uncertainty(args, parameters):
+        from .model import ArmModel
+        inputs = inputs_from_args(desc, args, points.wrench is not None)
+        ucols, lines = tip_columns(ArmModel(desc), None, points.q, points.wrench, None, parameters, inputs, args)
+        cols.update(ucols)
     write_csv(args.output, cols, inputs=[args.points, args.arm], fmt="%.6f")
     n = len(points)
     print(f"{n} points in {len(points.measurements())} measurement(s) -> {args.output}")
@@ -120,6 +130,8 @@ def run_tip(args: argparse.Namespace) -> int:
                   "and is taken as zero")
         d = cols["deflection_um"]
         print(f"deflection: mean {d.mean():.2f} um, max {d.max():.2f} um")
+    for line in lines:
+        print(line)
     flagged = int(cols["over_force"].sum())
     if flagged:
         lines = points.lines[cols["over_force"].astype(bool)][:10]

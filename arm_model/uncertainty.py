@@ -162,11 +162,11 @@ class Propagation:
         return {k: np.sqrt(v.mean(axis=0)) for k, v in self.contributions.items()}
 
 
-def covariance_columns(cov: np.ndarray, unit: float = 1e6) -> dict:
-    """The six terms of (N, 3, 3) covariances as columns ``cov_xx_mm2`` ... (``unit`` 1e6: m^2 -> mm^2)."""
+def covariance_columns(cov: np.ndarray) -> dict:
+    """The six terms of (N, 3, 3) covariances [m^2] as columns ``cov_xx_um2`` ... [um^2]."""
     out = {}
     for a, b in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)):
-        out[f"cov_{'xyz'[a]}{'xyz'[b]}_mm2"] = cov[:, a, b] * unit
+        out[f"cov_{'xyz'[a]}{'xyz'[b]}_um2"] = cov[:, a, b] * 1e12
     return out
 
 
