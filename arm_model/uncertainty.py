@@ -300,14 +300,18 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
             cov[s:e, i, j] = cv[i, j]
             cov[s:e, j, i] = cv[i, j]
 
+    from threadpoolctl import threadpool_limits
+
     starts = range(0, n, chunk)
     nthreads = threads or _default_threads()
-    if nthreads == 1 or n <= chunk:
-        for s in starts:
-            work(s)
-    else:
-        with ThreadPoolExecutor(max_workers=nthreads) as pool:
-            list(pool.map(work, starts))
+    # the products are thin (tens x chunk): one BLAS thread each; more spin-wait on a busy machine
+    with threadpool_limits(limits=1, user_api="blas"):
+        if nthreads == 1 or n <= chunk:
+            for s in starts:
+                work(s)
+        else:
+            with ThreadPoolExecutor(max_workers=nthreads) as pool:
+                list(pool.map(work, starts))
     sources = dict(inputs.sources)
     sources["parameters"] = "none (parameters taken as exact)" if parameters is None else parameters.source
     if _compliance_covered(pnames):
