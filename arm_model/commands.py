@@ -6,7 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .io import atomic_write_text, guard_output, read_points, write_csv
+from ._output import output_file
+from .io import read_points, write_csv
 from .model_file import Arm, load_model
 from .urdf import urdf_text
 
@@ -118,12 +119,12 @@ def tip_table(arm, points) -> dict:
 
 
 def run_tip(args: argparse.Namespace) -> int:
-    guard_output(args.output, [args.points, args.arm])
-    arm = model_from_args(args)
-    desc = arm.desc
-    points = read_points(args.points, desc.n_joints)
-    cols = tip_table(arm, points)
-    write_csv(args.output, cols, inputs=[args.points, args.arm], fmt="%.6f")
+    with output_file(args.output, [args.points, args.arm]) as tmp:
+        arm = model_from_args(args)
+        desc = arm.desc
+        points = read_points(args.points, desc.n_joints)
+        cols = tip_table(arm, points)
+        write_csv(tmp, cols, fmt="%.6f")
     n = len(points)
     print(f"{n} points in {len(points.measurements())} measurement(s) -> {args.output}")
     if arm.effects:
@@ -146,9 +147,10 @@ def run_tip(args: argparse.Namespace) -> int:
 
 
 def run_urdf(args: argparse.Namespace) -> int:
-    arm = model_from_args(args)
-    desc = arm.desc
-    atomic_write_text(args.output, urdf_text(desc), inputs=[args.arm])
+    with output_file(args.output, [args.arm]) as tmp:
+        arm = model_from_args(args)
+        desc = arm.desc
+        tmp.write_text(urdf_text(desc), encoding="utf-8")
     print(f"URDF of '{desc.name}' ({desc.n_joints} joints + 3 elastic probe joints) -> {args.output}")
     if arm.effects:
         print("note: a URDF holds the geometry only; the model's effects ("

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from arm_model._output import safe_name
 from arm_model.model_file import Arm, format_model, write_covariance
 from arm_model.io import atomic_write_text, guard_output
 from arm_model.urdf import urdf_text
@@ -17,10 +18,12 @@ __all__ = ["model_paths", "fitted_arm", "write_model", "model_check"]
 
 
 def model_paths(out_dir, name: str) -> dict:
-    """``{"model": <name>.toml, "covariance": <name>-covariance.csv, "urdf": <name>.urdf}`` in ``out_dir``."""
+    """``{"model": <name>.toml, "covariance": <name>-covariance.csv, "urdf": <name>.urdf}`` in ``out_dir``
+    (the name made safe as a file name: :func:`arm_model._output.safe_name`)."""
     out = Path(out_dir)
-    return {"model": out / f"{name}.toml", "covariance": out / f"{name}-covariance.csv",
-            "urdf": out / f"{name}.urdf"}
+    stem = safe_name(name)
+    return {"model": out / f"{stem}.toml", "covariance": out / f"{stem}-covariance.csv",
+            "urdf": out / f"{stem}.urdf"}
 
 
 def fitted_arm(result, name: str | None = None) -> Arm:

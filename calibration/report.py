@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError
+from arm_model._output import safe_name
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, write_csv
 
 from .calibrate import CalibrationResult, display_unit
@@ -244,6 +245,11 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
     atomic_write_text(files["summary"], json.dumps(_finite(summary), indent=1, default=_json_default) + "\n", inputs)
     atomic_write_text(files["report"], _html(result, summary, files), inputs)
     return files
+
+
+def _safe_arm_name(name: str) -> str:
+    """The arm's name as the stem of a file name (see :func:`arm_model._output.safe_name`)."""
+    return safe_name(name)
 
 
 #: standard uncertainty beyond which a free parameter is reported as poorly determined, per SI unit
