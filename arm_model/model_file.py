@@ -187,7 +187,8 @@ def effect_tables(desc: ArmDescription, effects, values: dict, uncertainties: di
         if e.joints is not None:
             tbl["joints"] = [desc.joints[i].name for i in e.joints]
         for f in _options(e):
-            tbl[f.name] = _plain(getattr(e, f.name))
+            if getattr(e, f.name) is not None:          # TOML has no null: an absent option takes its default
+                tbl[f.name] = _plain(getattr(e, f.name))
         params = []
         for name, si in e.param_defs(desc):
             suffix, factor = _unit_of(si)

@@ -32,7 +32,7 @@ EFFECT_SETS = {
 }
 
 #: plausible sizes [SI] of effect parameters by SI unit (values drawn at this scale)
-SCALE = {"rad": 5e-5, "rad/(N m)": 2e-5, "1/K": 2e-5, "1": 0.02, "N": 0.3, "m/N": 2e-6}
+SCALE = {"rad": 5e-5, "rad/(N m)": 2e-5, "1/K": 2e-5, "1": 0.02, "N": 0.3, "m/N": 2e-6, "m": 2e-5}
 
 
 def points_file(tmp_path, n=40, seed=0, temperature=True, force=True):
@@ -73,7 +73,8 @@ def test_each_effect_round_trips_through_the_file(kind, nominal, tmp_path):
     path.write_text(text)
     arm = load_model(path)
     assert arm.desc == nominal and arm.effects == effects
-    assert arm.values == values and arm.uncertainties == pytest.approx(u, rel=1e-15) and arm.states == states
+    assert arm.values == pytest.approx(values, rel=3e-16, abs=1e-300) and arm.states == states
+    assert arm.uncertainties == pytest.approx(u, rel=3e-16, abs=1e-300)
     assert arm.covariance == tmp_path / "x-covariance.csv"
     pts = read_points(points_file(tmp_path), 7)
     original = Arm(nominal, effects, values)
@@ -86,6 +87,17 @@ def test_every_registered_effect_has_model_file_units(nominal):
     for cls in EFFECTS.values():
         for name, unit in cls().param_defs(nominal):
             assert unit in PARAM_UNITS, f"{cls.__name__}: {name} [{unit}]"
+
+
+@pytest.mark.parametrize("key", list(EFFECTS))
+def test_every_registered_effect_round_trips_with_its_defaults(key, nominal, tmp_path):
+    """Generic over the Effect classes: a new effect needs no code in the model file."""
+    effects = (EFFECTS[key](joints=(1, 3)),)
+    values = random_values(nominal, effects, 7)
+    arm = parse_model(format_model(nominal, effects, values), "m.toml")
+    assert arm.effects == effects and arm.values == pytest.approx(values, rel=3e-16, abs=1e-300)
+    pts = read_points(points_file(tmp_path, n=6), 7)
+    assert_close(arm.ball_centres(pts), Arm(nominal, effects, values).ball_centres(pts), atol=1e-12)
 
 
 def test_a_missing_column_names_the_effect_and_the_column(tmp_path, nominal, capsys):
