@@ -84,8 +84,28 @@ def contribution_lines(res) -> list[str]:
     return lines
 
 
-def tip_columns(model, p, points_q, wrench, aux, parameters, inputs, args) -> tuple[dict, list[str]]:
-    """The uncertainty columns of ``aacmm tip`` (mm, mm^2) and the lines it prints."""
+def parameters_of(arm) -> ParameterCovariance | None:
+    """The parameter covariance of an :class:`~arm_model.model_file.Arm` (its model file's covariance
+    file), or None when it names none. A parameter the model does not have is an InputError."""
+    if getattr(arm, "covariance", None) is None:
+        return None
+    from ._errors import InputError
+    from .model_file import read_covariance
+    cov = read_covariance(arm.covariance)
+    names = arm.model.spec.names
+    for i, n in enumerate(cov.names):
+        if n not in names:
+            raise InputError(f"parameter '{n}' of the covariance file is not a parameter of the model "
+                             f"(known: {', '.join(names)})", arm.covariance, i + 2, "parameter")
+    return ParameterCovariance(tuple(cov.names), cov.matrix, source=f"the model's covariance file {arm.covariance.name}")
+
+
+def tip_columns(arm, points, parameters, args) -> tuple[dict, list[str]]:
+    """The uncertainty columns of ``aacmm tip`` (mm, um^2) for an :class:`~arm_model.model_file.Arm`
+    and a :class:`~arm_model.io.PointSet`, and the lines it prints."""
+    inputs = inputs_from_args(arm.desc, args, points.wrench is not None)
+    model, p, wrench, aux = arm.model, arm.p, points.wrench, arm.aux(points)
+    points_q = points.q
     res = propagate(model, p, points_q, wrench, aux, parameters=parameters, inputs=inputs)
     u = res.u
     cols = {f"u_{a}_mm": u[:, k] * 1e3 for k, a in enumerate("xyz")}
