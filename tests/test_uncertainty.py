@@ -179,3 +179,34 @@ def test_tip_writes_uncertainty_columns_and_monte_carlo_agrees(tmp_path, nominal
     # no covariance and no option: no uncertainty columns
     assert main(["tip", str(pts), "--arm", str(NOMINAL), "-o", str(out2)]) == 0
     assert "u_x_mm" not in out2.read_text().splitlines()[0]
+
+
+def test_tip_with_a_model_file_and_its_covariance(tmp_path, nominal, capsys):
+    """A model file naming a covariance file: tip writes the uncertainty columns without being asked,
+    and the parameter contribution is J Sigma J^T of that covariance (CasADi Jacobian)."""
+    import csv
+
+    from arm_model.cli import main
+    from arm_model.model_file import format_model, write_covariance
+
+    model = ArmModel(nominal)
+    spec = model.spec
+    names = ["j2.d", "j3.a", "j4.alpha", "probe.z"]
+    idx = [spec.index(n) for n in names]
+    rng = np.random.default_rng(8)
+    cov = _random_cov(rng, 4, np.array([2e-6, 3e-6, 5e-6, 1e-6]))
+    write_covariance(tmp_path / "arm-covariance.csv", names, [spec.units[i] for i in idx], np.zeros(4), cov)
+    (tmp_path / "arm.toml").write_text(format_model(nominal, covariance="arm-covariance.csv"))
+    q = rng.uniform(-90, 90, (5, 7))
+    pts = tmp_path / "p.csv"
+    pts.write_text("measurement,feature," + ",".join(f"q{i}_deg" for i in range(1, 8)) + "\n"
+                   + "\n".join(",".join(map(str, ["m1", "", *qi])) for qi in q) + "\n")
+    out = tmp_path / "t.csv"
+    assert main(["tip", str(pts), "--arm", str(tmp_path / "arm.toml"), "-o", str(out)]) == 0
+    assert "arm-covariance.csv" in capsys.readouterr().out
+    rows = list(csv.DictReader(out.open()))
+    u = np.array([[float(r[f"u_{a}_mm"]) for a in "xyz"] for r in rows]) * 1e-3
+    jac = _casadi_jacobians(model)
+    for i in range(5):
+        jp = np.array(jac(np.radians(q[i]), np.zeros(6), np.zeros(15), np.zeros(spec.size))[1])[:, idx]
+        assert_close(u[i], np.sqrt(np.diag(jp @ cov @ jp.T)), atol=2e-9)
