@@ -606,3 +606,9 @@ def reweighted(fit, weights: Weights, tol: float = 0.03, rounds: int = 12) -> Ca
                                "weights are used")
     res.weights_history = history
     return res
+
+
+def _scale(jp: np.ndarray) -> np.ndarray:
+    s = np.linalg.norm(jp, axis=0)
+    return np.where(s > 0, s, 1.0)
+
