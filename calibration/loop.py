@@ -61,6 +61,10 @@ __all__ = ["LoopSettings", "CVResult", "Stage", "LoopResult", "close_loop", "hel
 SAME_SIGNATURE = 0.99
 #: held-out improvement (fraction) within which a smaller nested candidate is preferred
 PARSIMONY = 0.01
+#: the loop's decisions use the noise estimated from the data when a group's residual differs from its
+#: stated sigma by more than this factor (the stated sigmas are wrong); within it the stated sigmas are kept,
+#: since a missing effect inflates the residual of the groups it acts on and re-weighting would hide it
+NOISE_OFF = 2.0
 #: how the decisions' folds are made: by whole measurement, by pose inside each feature, or the first
 #: that can reach the significance level
 FOLD_BY = ("auto", "measurement", "pose")
@@ -554,7 +558,8 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         if dropped["design"]:
             say(f"  {len(dropped['design'])} outlier point(s) of the design set dropped (base model, robust "
                 f"standardized residual > {settings.outlier_threshold:g}); they stay out of every later fit")
-    if settings.weights_from_data:
+    off = [v for v in result.variance if v["estimated"] and not 1 / NOISE_OFF < v["factor"] < NOISE_OFF]
+    if settings.weights_from_data and off:
         result = fit(model, design, reweight=True)
         weights = result.weights
         if noise(result):
@@ -646,7 +651,7 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         model = model.with_effects(cand.effect)
         priors.update(_candidate_priors(model, cand, tests[wi]))
         say(f"adding {cand.name}; recalibrating")
-        old_weights, result = weights, fit(model, design, reweight=True)
+        old_weights, result = weights, fit(model, design, reweight=weights != stated)
         weights = result.weights
         after = None
         if fam_name is not None:
