@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._errors import InputError, parse_toml, read_text
+from ._errors import InputError, did_you_mean, parse_toml, read_text, unknown_key
 from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, split_unit
 
 __all__ = ["JointRow", "Probe", "ArmDescription", "load_description", "parse_description",
@@ -200,7 +200,8 @@ class _Reader:
                                  f"_mm, _m, _um, _deg, _rad, _N, _mm_per_N, _kg ...)", table, index, key)
             base, unit = parts
             if base not in spec:
-                raise self.error(f"unknown key '{key}' (known: {', '.join(sorted(spec))})", table, index, key)
+                raise self.error(f"unknown key '{key}'{did_you_mean(key, spec)} (known: {', '.join(sorted(spec))})",
+                                 table, index, key)
             quantity = spec[base][0]
             if QUANTITY_OF_UNIT[unit] != quantity:
                 raise self.error(f"'{key}' is a {quantity}, but '_{unit}' is a unit of "
@@ -224,7 +225,7 @@ def parse_description(text: str, path: str = "<string>") -> ArmDescription:
     r = _Reader(path, text)
     for key in data:
         if key not in ("name", "convention", "joint", "probe"):
-            raise r.error(f"unknown top-level key '{key}' (known: name, convention, joint, probe)", "", 0, key)
+            raise r.error(unknown_key(key, ("name", "convention", "joint", "probe")), "", 0, key)
     name = data.get("name")
     if not isinstance(name, str) or not name:
         raise r.error("missing or empty 'name'", "", 0, "name")

@@ -6,7 +6,7 @@ import sys
 import time
 
 from arm_model import InputError
-from arm_model.commands import arm_from_args, at_least, fraction
+from arm_model.commands import arm_from_args, at_least, fraction, number_in, seed
 from arm_model._output import output_folder
 from arm_model.io import read_artefacts, read_points
 
@@ -42,12 +42,12 @@ def register(sub) -> None:
                         "tested) and of the final structure tests (Holm) (default 0.01)")
     p.add_argument("--screen-alpha", type=fraction, default=0.05,
                    help="level of the score-test screening, Bonferroni over the candidates (default 0.05)")
-    p.add_argument("--min-improvement", type=float, default=0.02,
+    p.add_argument("--min-improvement", type=number_in(0, 1, high_open=True), default=0.02,
                    help="smallest relative drop of the held-out RMS for an effect to be added (default 0.02)")
     p.add_argument("--max-effects", type=at_least(0), default=4, help="most effects to add (default 4)")
     p.add_argument("--cv-top", type=at_least(1), default=3,
                    help="candidates cross-validated at each step, the best screened first (default 3)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the test-set and fold draws (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the test-set and fold draws (default 0)")
     p.add_argument("--candidates", default=None, metavar="KEYS",
                    help="comma-separated candidate families (default all): eccentricity, joint_compliance, thermal, "
                         "force_sensor, probe_compliance")

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from arm_model import InputError, read_artefacts, read_points
-from arm_model.commands import add_arm_options, arm_from_args, positive
+from arm_model.commands import add_arm_options, arm_from_args, non_negative, number_in, positive
 from arm_model._output import output_folder
 from arm_model.io import check_features
 
@@ -39,9 +39,9 @@ def register(sub) -> None:
     r.add_argument("--u-force-N", type=positive(), dest="u_force", default=None, metavar="U",
                    help="standard uncertainty of a measured force for the budgets' u_cor = 2 c u_force "
                         "(default 0.0723 N: the paper's bending sensor, Table 1 terms combined)")
-    r.add_argument("--delta-T-C", type=positive(), dest="delta_t", default=0.5, metavar="DT",
+    r.add_argument("--delta-T-C", type=non_negative(), dest="delta_t", default=0.5, metavar="DT",
                    help="temperature variation during the test for the budgets' u_t (default 0.5 C, the paper's)")
-    r.add_argument("--probability-pct", type=positive(), dest="probability", default=95.0, metavar="P",
+    r.add_argument("--probability-pct", type=number_in(0, 100, low_open=True, high_open=True), dest="probability", default=95.0, metavar="P",
                    help="coverage probability of the expanded uncertainties (default 95)")
     r.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created; never an input)")
     r.set_defaults(func=run_ring)

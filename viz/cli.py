@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError, ball_centres, check_features, read_artefacts, read_points
-from arm_model.commands import add_arm_options, arm_from_args, positive
+from arm_model.commands import add_arm_options, arm_from_args, port, positive
 from arm_model._output import output_file
 
 from ._errors import ViewerError
@@ -60,7 +60,7 @@ def register(sub) -> None:
     p.add_argument("--serve", action="store_true",
                    help="keep serving after writing --html/--screenshot (serving is the default without them, "
                         "and with --open-seconds)")
-    p.add_argument("--port", type=int, help="web port of the server (default: the first free one from 7000)")
+    p.add_argument("--port", type=port, help="web port of the server (default: the first free one from 7000)")
     p.add_argument("--open-seconds", type=positive(), metavar="N",
                    help="stop the server after N seconds (default: run until Ctrl-C)")
     p.set_defaults(func=run)
