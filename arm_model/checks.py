@@ -112,8 +112,10 @@ def print_warnings(warnings, file=None) -> None:
 
 
 def warnings_html(warnings) -> str:
-    """A "Warnings" section of a report (empty text when there are none)."""
+    """A "Warnings" section of a report (empty text when there are none); ``warnings`` are
+    :class:`InputWarning` or their :meth:`~InputWarning.as_dict`."""
     if not warnings:
         return ""
-    items = "".join(f"<li>{html.escape(w.message)}</li>" for w in warnings)
+    items = "".join(f"<li>{html.escape(w['message'] if isinstance(w, dict) else w.message)}</li>"
+                    for w in warnings)
     return f"<h2>Warnings</h2><ul class='warnings'>{items}</ul>"

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ._output import output_file
+from .checks import point_warnings, print_warnings
 from .io import read_points, write_csv
 from .model_file import Arm, load_model
 from .urdf import urdf_text
@@ -171,6 +172,7 @@ def run_tip(args: argparse.Namespace) -> int:
         print(f"warning: {flagged} point(s) over the probe's calibrated force range "
               f"({desc.probe.max_force:g} N), flagged in column over_force; lines {', '.join(map(str, lines))}"
               + (" ..." if flagged > 10 else ""))
+    print_warnings([w for w in point_warnings(desc, points) if w.kind != "over_force"])
     return 0
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 from arm_model import InputError
 from arm_model.commands import add_arm_options, at_least, fraction, model_from_args, non_negative, positive, seed
 from arm_model._output import output_folder
+from arm_model.checks import point_warnings, print_warnings
 from arm_model.io import read_artefacts, read_points
 from arm_model.model_file import Arm
 
@@ -194,10 +195,12 @@ def _load_data(args):
     points = read_points(args.points, desc.n_joints)
     artefacts = read_artefacts(args.artefacts)
     reference = None if args.reference_points is None else read_points(args.reference_points, desc.n_joints)
+    warnings = []
     for pts in (points, reference):
         if pts is not None:
             Arm(desc, model.effects).check_points(pts)
-    return model, make_data(points, artefacts, model, reference=reference), arm.values
+            warnings += point_warnings(desc, pts)
+    return model, make_data(points, artefacts, model, reference=reference), arm.values, warnings
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
@@ -206,7 +209,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     from .report import poorly_determined, write_outputs
     inputs = [args.points, args.artefacts, args.arm, args.reference_points]
     with output_folder(args.output, inputs, "calibrate") as out:
-        model, data, values = _load_data(args)
+        model, data, values, warnings = _load_data(args)
         holdout = _holdout(args.holdout)
         train, test = (data, None) if holdout is None else split_holdout(data, holdout, args.seed)
         kw = _fit_kwargs(args)
@@ -221,12 +224,14 @@ def run_calibrate(args: argparse.Namespace) -> int:
                                                 "arm": str(args.arm),
                                                 "reference_points": None if args.reference_points is None
                                                 else str(args.reference_points)},
-                                     "holdout": None if test is None else test.measurements()})
+                                     "holdout": None if test is None else test.measurements(),
+                                     "warnings": [w.as_dict() for w in warnings]})
     files = {k: out.published(v) for k, v in files.items()}
     print(f"{len(train)} training points in {len(train.measurements())} measurements"
           + (f", {len(test)} held-out points in {len(test.measurements())}" if test is not None else ""))
     if data.points.force_kind == "two-channel":
         print("two-channel force sensor: the probe-y force is not measured and is taken as zero")
+    print_warnings(warnings)
     print(f"solver: {res.status} after {res.iterations} iterations; s0 = {res.s0:.3f}; "
           f"{len(res.free)} parameters free, {res.n_nuisance} nuisance unknowns, dof {res.dof}")
     idf = res.identifiability_final
@@ -281,13 +286,14 @@ def run_poses(args: argparse.Namespace) -> int:
     from .study import select_measurements
     inputs = [args.points, args.artefacts, args.arm, args.reference_points]
     with output_folder(args.output, inputs, "study poses") as out:
-        model, data, _ = _load_data(args)
+        model, data, _, warnings = _load_data(args)
         n = len(data.measurements())
         if args.count > n:
             raise InputError(f"--count {args.count}: the points file has {n} measurement(s)", args.points)
         sel = select_measurements(model, data, args.count, _free(model, args), weights=_weights(args),
                                   progress=not args.quiet, fit=_fit_kwargs(args))
         (out.dir / "poses.json").write_text(json.dumps(sel.to_dict(), indent=1) + "\n", encoding="utf-8")
+    print_warnings(warnings)
     print(f"{len(sel.parameters)} identifiable parameters; chosen measurements (O1, random sets' O1):")
     for m, o, r, n in zip(sel.chosen, sel.o1, sel.o1_random, sel.n_points):
         print(f"  {m:20s} O1 {o:10.4g}   random {r:10.4g}   ({n} points)")

@@ -206,8 +206,9 @@ def split_holdout(data: CalibrationData, holdout, seed: int = 0) -> tuple[Calibr
             raise InputError(f"held-out measurement(s) not in the points file: {', '.join(sorted(unknown))}",
                              data.points.path, None, "measurement")
     if not held:
-        raise InputError(f"the held-out set is empty: {len(ids)} measurement(s) are too few for this --holdout "
-                         "fraction (raise it, or name the measurements to hold out)")
+        raise InputError(f"the held-out set is empty: {len(ids)} measurement(s) are too few to hold out a "
+                         f"fraction {holdout:g} of them" if isinstance(holdout, float) else
+                         "the held-out set is empty")
     if held == set(ids):
         raise InputError("every measurement is held out: nothing left to calibrate on")
     mask = np.array([m in held for m in data.points.measurement], bool)

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError
+from arm_model.checks import warnings_html
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, write_csv
 
 from .calibrate import CalibrationResult, display_unit
@@ -151,6 +152,7 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
         f"<p>Solver: {html.escape(result.status)}; {result.iterations} iterations; "
         f"{result.n_residuals} residuals, {len(result.free)} parameters, {result.n_nuisance} nuisance unknowns, "
         f"dof {result.dof}; s0 = {result.s0:.4g}. Covariance: {html.escape(result.covariance_source)}.</p>",
+        warnings_html(summary.get("warnings", ())),
         f"<p>Identifiability at the solution: rank {idf.rank} of {len(idf.names)}, condition number "
         f"{idf.condition:.4g} (columns scaled by their norms), rank tolerance {idf.rank_tol:g}.</p>",
         "<h2>Fixed parameters (not identifiable from these data)</h2>",

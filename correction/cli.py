@@ -8,6 +8,7 @@ from pathlib import Path
 from arm_model import InputError, read_artefacts, read_points
 from arm_model.commands import add_arm_options, arm_from_args, non_negative, number_in, positive
 from arm_model._output import output_folder
+from arm_model.checks import print_warnings
 from arm_model.io import check_features
 
 __all__ = ["register", "run_ring", "run_paper"]
@@ -62,7 +63,7 @@ def register(sub) -> None:
 
 
 def run_ring(args: argparse.Namespace) -> int:
-    from .models import analyse_ring_campaign, campaign_summary
+    from .models import analyse_ring_campaign, campaign_summary, check_reportable, ring_warnings
     from .report import DEFAULT_U_FORCE, ring_budgets, ring_report
 
     inputs = {"points": args.points, "artefacts": args.artefacts, "arm": args.arm}
@@ -75,16 +76,19 @@ def run_ring(args: argparse.Namespace) -> int:
         check_features(points, artefacts)
         compliance = None if args.compliance is None else args.compliance * 1e-3
         campaign = analyse_ring_campaign(desc, points, artefacts, args.feature, args.signals, compliance)
+        check_reportable(campaign, points)
+        warnings = ring_warnings(desc, points, campaign)
         u_force = DEFAULT_U_FORCE if args.u_force is None else args.u_force
         budgets = ring_budgets(campaign, u_force=u_force, delta_t=args.delta_t, probability=args.probability)
         inputs["signals"] = args.signals
-        written = ring_report(campaign, out.dir, inputs, budgets)
+        written = ring_report(campaign, out.dir, inputs, budgets, warnings)
     s = campaign_summary(campaign)
     print(f"ring '{campaign.feature}': {len(campaign.measurements)} measurements, "
           f"{sum(r.n_points for r in campaign.measurements)} points; forces from "
           f"{'signals in ' + str(args.signals) if args.signals else 'the points file'}")
     for n in campaign.notes:
         print(f"note: {n}")
+    print_warnings(warnings)
     print(f"{'model':<12} {'mean |dD| [mm]':>15} {'reduction':>10} {'mean form [mm]':>15}")
     for m, v in s.items():
         print(f"{m:<12} {v['mean_abs_diameter_error_mm']:>15.4f} {v['diameter_error_reduction_pct']:>9.1f}% "
