@@ -55,13 +55,18 @@ def add_arm_options(p, help_arm: str = "the arm: description TOML (e.g. urdf/aac
     """``--arm`` and ``--tip-frame``, the same for every subcommand."""
     p.add_argument("--arm", type=Path, required=True, help=help_arm)
     p.add_argument("--tip-frame", default=None, metavar="LINK",
-                   help="for an arm given as a URDF: the link at the ball centre (the chain runs from the root "
-                        "to it; the probe data default to the seed paper's 85 mm probe)")
+                   help="for an arm given as a URDF: the link at the ball centre, in any orientation (its z axis "
+                        "is the probe's, along the tool; the chain runs from the root to it; force range and "
+                        "compliances default to the seed paper's probe)")
+    p.add_argument("--masses", type=Path, default=None, metavar="TOML",
+                   help="for a URDF arm: link masses and centres of mass ([[link]] name, mass_kg, com_x_mm, "
+                        "com_y_mm, com_z_mm), replacing the URDF's <inertial>; gravity torques (joint "
+                        "compliance) need masses")
 
 
 def arm_from_args(args: argparse.Namespace):
     """The arm named by :func:`add_arm_options`."""
-    return load_arm(args.arm, args.tip_frame)
+    return load_arm(args.arm, args.tip_frame, masses=getattr(args, "masses", None))
 
 
 def register(sub) -> None:

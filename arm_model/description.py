@@ -53,19 +53,35 @@ class JointRow:
 class Probe:
     """The probe: ball centre ``p_last`` [m] in the last joint frame, ball diameter [m],
     calibrated force range [N], and compliances [m/N] of the ball along probe x, y (bending)
-    and z (axial)."""
+    and z (axial).
+
+    ``rpy`` (roll, pitch, yaw) [rad] orients the probe frame in the last joint frame
+    (R = Rz(yaw) Ry(pitch) Rx(roll), as a URDF origin); its z axis runs along the stylus towards the
+    ball. ``lever`` [m] is the stylus length from the bending hinge to the ball; None puts the hinge
+    where the stylus line passes closest to the last joint origin (lever = the ball's coordinate along
+    probe z, seen from the last joint origin; z of ``p_last`` for an unrotated probe).
+    """
     p_last: tuple[float, float, float]
     ball_diameter: float
     max_force: float
     bending_compliance_x: float
     bending_compliance_y: float
     axial_compliance: float
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    lever: float | None = None
+
+    @property
+    def rotation(self) -> tuple | None:
+        """R_last_probe as a 3x3 nested tuple, None for an unrotated probe."""
+        from .chain import rotation_rpy
+        return None if not any(self.rpy) else rotation_rpy(self.rpy)
 
     @property
     def stylus_length(self) -> float:
-        """Distance [m] from the flange plane (z = 0 of the last joint frame) to the ball centre,
-        the lever of the virtual bending joints."""
-        return self.p_last[2]
+        """Distance [m] from the bending hinge to the ball centre along probe z, the lever of the
+        virtual bending joints."""
+        from .chain import probe_lever
+        return float(probe_lever(self.p_last, self.rotation, self.lever))
 
     @property
     def compliance(self) -> np.ndarray:
@@ -82,6 +98,8 @@ class ArmDescription:
     joints: tuple[JointRow, ...]
     probe: Probe
     source: str | None = field(default=None, compare=False)
+    #: the URDF link at the ball centre when the arm was read from a URDF (``source``)
+    tip_frame: str | None = field(default=None, compare=False)
 
     @property
     def n_joints(self) -> int:
@@ -146,6 +164,8 @@ _PROBE_KEYS = {
     "ball_diameter": ("length", True), "max_force": ("force", True),
     "bending_compliance": ("compliance", True), "axial_compliance": ("compliance", True),
     "bending_compliance_x": ("compliance", False), "bending_compliance_y": ("compliance", False),
+    "roll": ("angle", False), "pitch": ("angle", False), "yaw": ("angle", False),
+    "stylus_length": ("length", False),
 }
 
 
@@ -269,7 +289,10 @@ def parse_description(text: str, path: str = "<string>") -> ArmDescription:
     if not isinstance(ptab, dict):
         raise r.error("missing [probe] table", "", 0, "probe")
     pv = r.values(ptab, _PROBE_KEYS, "probe", 0)
-    if pv["z"] <= 0:
+    rpy = (pv.get("roll", 0.0), pv.get("pitch", 0.0), pv.get("yaw", 0.0))
+    if pv.get("stylus_length", 1.0) <= 0:
+        raise r.error("'stylus_length' must be > 0", "probe", 0, "stylus_length_mm")
+    if not any(rpy) and pv["z"] <= 0:
         raise r.error("the ball must lie beyond the flange: z of the probe must be > 0 "
                       "(the probe z axis points along the stylus towards the ball)", "probe", 0, "z_mm")
     for key in ("ball_diameter", "max_force"):
@@ -282,7 +305,13 @@ def parse_description(text: str, path: str = "<string>") -> ArmDescription:
         p_last=(pv["x"], pv["y"], pv["z"]), ball_diameter=pv["ball_diameter"], max_force=pv["max_force"],
         bending_compliance_x=pv.get("bending_compliance_x", pv["bending_compliance"]),
         bending_compliance_y=pv.get("bending_compliance_y", pv["bending_compliance"]),
-        axial_compliance=pv["axial_compliance"])
+        axial_compliance=pv["axial_compliance"], rpy=rpy, lever=pv.get("stylus_length"))
+    if probe.stylus_length <= 0:
+        raise r.error(f"the ball must lie ahead along the probe z axis (the stylus direction): its z in the "
+                      f"probe frame seen from the last joint origin is {probe.stylus_length * 1e3:.3f} mm; turn "
+                      "the probe frame (roll_deg, pitch_deg, yaw_deg) so that z points towards the ball, or give "
+                      "stylus_length_mm, the distance from the bending hinge to the ball",
+                      "probe", 0, "x_mm")
     return ArmDescription(name=name, convention=convention, joints=tuple(joints), probe=probe, source=path)
 
 
@@ -334,4 +363,8 @@ def format_description(desc: ArmDescription, comment: str | None = None) -> str:
         out += [f"bending_compliance_x_mm_per_N = {_num(p.bending_compliance_x * 1e3)}",
                 f"bending_compliance_y_mm_per_N = {_num(p.bending_compliance_y * 1e3)}"]
     out.append(f"axial_compliance_mm_per_N = {_num(p.axial_compliance * 1e3)}")
+    if any(p.rpy):
+        out += [f"{k}_deg = {_num(v * deg)}" for k, v in zip(("roll", "pitch", "yaw"), p.rpy)]
+    if p.lever is not None:
+        out.append(f"stylus_length_mm = {_num(p.lever * 1e3)}")
     return "\n".join(out) + "\n"

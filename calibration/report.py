@@ -15,7 +15,7 @@ import numpy as np
 from arm_model import InputError
 from arm_model.description import format_description
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, write_csv
-from arm_model.urdf import urdf_text
+from arm_model.urdf_import import calibrated_urdf_text
 
 from .calibrate import CalibrationResult, display_unit
 
@@ -189,7 +189,8 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
                   validation_holdout=None, extra: dict | None = None, plots: bool = True) -> dict:
     """Write the outputs of ``result`` into ``out_dir`` (created); returns ``{role: Path}``.
 
-    Files: ``<name>-calibrated.toml`` and ``.urdf`` (the base errors folded into a new description),
+    Files: ``<name>-calibrated.toml`` and ``.urdf`` (the base errors folded into a new description; for
+    an arm read from a URDF, the user's own file with only the identified origins changed),
     ``summary.json``, ``parameters.csv``, ``residuals.csv``, ``report.html`` and three PNG plots.
     ``inputs``: files that must never be overwritten (points, artefacts, the nominal arm).
     """
@@ -213,7 +214,7 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
         comment += ("\nThe model's effects (" + ", ".join(effects) + ") are not part of a description: "
                     "their parameters are in summary.json.")
     atomic_write_text(files["description"], format_description(cal, comment), inputs)
-    atomic_write_text(files["urdf"], urdf_text(cal), inputs)
+    atomic_write_text(files["urdf"], calibrated_urdf_text(result.model.desc, cal), inputs)
     rows = result.parameter_rows()
     write_csv(files["parameters"], {
         "name": np.array([r["name"] for r in rows], dtype=object),
