@@ -444,3 +444,48 @@ def test_prismatic_joint_on_the_chain_is_refused_with_its_line():
         load_arm(PANDA, "panda_leftfinger")
     lines = PANDA.read_text().splitlines()
     assert exc.value.line == 1 + next(i for i, t in enumerate(lines) if 'joint name="panda_finger_joint1"' in t)
+
+
+def test_every_effect_with_a_rotated_tool_three_evaluators(tmp_path):
+    """Every effect of the library on a URDF arm whose tool points along x: the effects that read the probe
+    frame (contact moments, approach direction, compliance matrix) agree with Pinocchio, whose ball
+    frame carries the tip frame's orientation (its moments come from RNEA)."""
+    from arm_model.effects import EFFECTS
+    from arm_model.model import ArmModel, AuxData
+    mpath = tmp_path / "masses.toml"
+    mpath.write_text(MASSES)
+    d = load_arm(_tool_urdf(tmp_path, *TOOLS["tool along x"]), "ball_link", masses=mpath)
+    model = ArmModel(d, tuple(cls() for cls in EFFECTS.values()))
+    rng = np.random.default_rng(13)
+    n = 5
+    q = rng.uniform(-2, 2, (n, 7))
+    w = np.column_stack([rng.normal(0, 2, (n, 3)), rng.normal(0, 0.02, (n, 3))])
+    tg, tc = PinocchioArm(d).torques(q, w)
+    aux = AuxData(rng.uniform(15, 30, n), tg, tc)
+    p = rng.normal(0, 1e-5, model.spec.size)
+    batch = model.ball_centres(q, w, p, aux)
+    f = model.casadi_function()
+    A = ArmModel.aux_matrix(aux, n, 7)
+    for i in range(n):
+        assert_close(np.array(f(q[i], w[i], A[i], p)).ravel(), batch[i], atol=1e-12)
+        row = dict(temperature=aux.temperature[i], tau_gravity=tg[i], tau_contact=tc[i])
+        assert_close(model.pinocchio_ball_centre(q[i], w[i], p, row), batch[i], atol=1e-12)
+
+
+def test_simulator_truth_uses_the_probe_frame(tmp_path):
+    """The simulator's true pose of a rotated tool: the ball of the model under the same wrench, and the
+    probe axes of Pinocchio's ball frame (the simulator turns contact forces into the probe frame)."""
+    from arm_model.model import ArmModel
+    from arm_model.sim.truth import Truth
+    d = load_arm(_tool_urdf(tmp_path, *TOOLS["arbitrary rpy"]), "ball_link")
+    truth = Truth(ArmModel(d), np.zeros(ArmModel(d).spec.size), np.zeros((3, 3)), np.zeros(3), np.zeros(3))
+    rng = np.random.default_rng(14)
+    q = rng.uniform(-2, 2, (6, 7))
+    w = np.column_stack([rng.normal(0, 2, (6, 3)), np.zeros((6, 3))])
+    ball, z, x = truth.pose(q, truth.geometry(np.full(6, 20.0)), w)
+    assert_close(ball, ball_centres(d, q, w), atol=1e-12)
+    arm = PinocchioArm(d)
+    for i in range(6):
+        R = arm.T_base_ball(q[i])[:3, :3]
+        assert_close(z[i], R[:, 2], atol=1e-12)
+        assert_close(x[i], R[:, 0], atol=1e-12)
