@@ -8,11 +8,11 @@ import numpy as np
 
 from ._output import output_file
 from .io import read_points, write_csv
-from .kinematics import ball_centres
+from .model_file import Arm, load_model
 from .urdf import urdf_text
-from .urdf_import import load_arm
 
-__all__ = ["register", "tip_table", "add_arm_options", "arm_from_args", "positive", "at_least", "fraction"]
+__all__ = ["register", "tip_table", "add_arm_options", "arm_from_args", "model_from_args", "positive", "at_least",
+           "fraction"]
 
 
 def _number(text: str, kind):
@@ -51,8 +51,9 @@ def fraction(text: str) -> float:
     return v
 
 
-def add_arm_options(p, help_arm: str = "the arm: description TOML (e.g. urdf/aacmm7.dh.toml) or a URDF "
-                                       "with --tip-frame") -> None:
+def add_arm_options(p, help_arm: str = "the arm: a model file or description TOML (e.g. urdf/aacmm7.dh.toml; "
+                                       "the effects a model file holds are applied) or a URDF with --tip-frame"
+                    ) -> None:
     """``--arm`` and ``--tip-frame``, the same for every subcommand."""
     p.add_argument("--arm", type=Path, required=True, help=help_arm)
     p.add_argument("--tip-frame", default=None, metavar="LINK",
@@ -65,9 +66,16 @@ def add_arm_options(p, help_arm: str = "the arm: description TOML (e.g. urdf/aac
                         "compliance) need masses")
 
 
+def model_from_args(args: argparse.Namespace) -> Arm:
+    """The arm named by :func:`add_arm_options`: description, effects and their parameter values
+    (:class:`arm_model.model_file.Arm`), read by the one loader every subcommand uses."""
+    return load_model(args.arm, args.tip_frame, masses=getattr(args, "masses", None))
+
+
 def arm_from_args(args: argparse.Namespace):
-    """The arm named by :func:`add_arm_options`."""
-    return load_arm(args.arm, args.tip_frame, masses=getattr(args, "masses", None))
+    """The description of the arm named by :func:`add_arm_options` (its effects, if any, left out:
+    commands that evaluate points use :func:`model_from_args`)."""
+    return model_from_args(args).desc
 
 
 def register(sub) -> None:
@@ -93,10 +101,15 @@ def register(sub) -> None:
     u.set_defaults(func=run_urdf)
 
 
-def tip_table(desc, points) -> dict:
-    """Columns of the ``aacmm tip`` output for a :class:`~arm_model.io.PointSet`."""
-    rigid = ball_centres(desc, points.q)
-    corrected = ball_centres(desc, points.q, points.wrench) if points.wrench is not None else rigid.copy()
+def tip_table(arm, points) -> dict:
+    """Columns of the ``aacmm tip`` output for a :class:`~arm_model.io.PointSet`; ``arm`` an
+    :class:`~arm_model.model_file.Arm` (every effect applied) or a description. ``x_rigid_mm``: the
+    ball centre at a zero force reading; ``x_mm``: with the points' wrench."""
+    if not isinstance(arm, Arm):
+        arm = Arm(arm)
+    desc = arm.desc
+    rigid = arm.ball_centres(points, rigid=True)
+    corrected = arm.ball_centres(points) if points.wrench is not None else rigid.copy()
     delta = corrected - rigid
     cols = {"measurement": points.measurement, "feature": points.feature}
     for k, axis in enumerate("xyz"):
@@ -112,12 +125,15 @@ def tip_table(desc, points) -> dict:
 
 def run_tip(args: argparse.Namespace) -> int:
     with output_file(args.output, [args.points, args.arm]) as tmp:
-        desc = arm_from_args(args)
+        arm = model_from_args(args)
+        desc = arm.desc
         points = read_points(args.points, desc.n_joints)
-        cols = tip_table(desc, points)
+        cols = tip_table(arm, points)
         write_csv(tmp, cols, fmt="%.6f")
     n = len(points)
     print(f"{n} points in {len(points.measurements())} measurement(s) -> {args.output}")
+    if arm.effects:
+        print("effects applied: " + ", ".join(e.describe() for e in arm.effects))
     if points.force is None:
         print("no force columns: corrected = rigid (no deflection applied)")
     else:
@@ -137,7 +153,11 @@ def run_tip(args: argparse.Namespace) -> int:
 
 def run_urdf(args: argparse.Namespace) -> int:
     with output_file(args.output, [args.arm]) as tmp:
-        desc = arm_from_args(args)
+        arm = model_from_args(args)
+        desc = arm.desc
         tmp.write_text(urdf_text(desc), encoding="utf-8")
     print(f"URDF of '{desc.name}' ({desc.n_joints} joints + 3 elastic probe joints) -> {args.output}")
+    if arm.effects:
+        print("note: a URDF holds the geometry only; the model's effects ("
+              + ", ".join(e.describe() for e in arm.effects) + ") are not in it")
     return 0

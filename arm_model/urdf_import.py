@@ -29,8 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ._errors import InputError, parse_toml, read_text
-from .description import ArmDescription, JointRow, Probe, _key_lines, load_description
-from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, split_unit
+from .description import ArmDescription, JointRow, Probe, TomlReader, load_description
 from .urdf import ELASTIC_JOINTS, _origin_matrix, rpy_from_matrix
 
 __all__ = ["description_from_urdf", "load_arm", "load_masses", "calibrated_urdf_text", "PAPER_PROBE",
@@ -276,47 +275,27 @@ def load_masses(path: str | Path) -> dict[str, LinkMass]:
     """
     text = read_text(path, "the masses file")
     data = parse_toml(text, path)
-    lines = _key_lines(text)
-
-    def err(msg, index=None, key=None):
-        line = lines.get(("link", index, key or ""), lines.get(("link", index, ""))) if index is not None else None
-        col = None if index is None else f"key 'link[{index + 1}]{'.' + key if key else ''}'"
-        return InputError(msg, path, line, col)
-
-    unknown = set(data) - {"link"}
+    r = TomlReader(str(path), text)
+    unknown = sorted(set(data) - {"link"})
     if unknown:
-        raise InputError(f"unknown top-level key '{sorted(unknown)[0]}' (known: link)", path,
-                         lines.get(("", 0, sorted(unknown)[0])))
+        raise r.error(f"unknown top-level key '{unknown[0]}' (known: link)", unknown[0])
     rows = data.get("link")
-    if not isinstance(rows, list) or not rows:
-        raise err("no [[link]] tables (one per link: name, mass_kg, com_x_mm, com_y_mm, com_z_mm)")
+    if not isinstance(rows, list) or not rows or not all(isinstance(row, dict) for row in rows):
+        raise r.error("no [[link]] tables (one per link: name, mass_kg, com_x_mm, com_y_mm, com_z_mm)", "link")
     out: dict[str, LinkMass] = {}
-    spec = {"mass": "mass", "com_x": "length", "com_y": "length", "com_z": "length"}
+    spec = {"mass": ("mass", True), "com_x": ("length", False), "com_y": ("length", False),
+            "com_z": ("length", False)}
     for i, row in enumerate(rows):
         name = row.get("name")
         if not isinstance(name, str) or not name:
-            raise err("each [[link]] needs 'name', the URDF link", i, "name")
+            raise r.error("each [[link]] needs 'name', the URDF link", "link", i, "name")
         if name in out:
-            raise err(f"link '{name}' is listed twice", i, "name")
-        vals = {}
-        for key, value in row.items():
-            if key == "name":
-                continue
-            parts = split_unit(key)
-            if parts is None or parts[0] not in spec:
-                raise err(f"unknown key '{key}' (known: name, mass_kg, com_x_mm, com_y_mm, com_z_mm)", i, key)
-            base, unit = parts
-            if QUANTITY_OF_UNIT[unit] != spec[base]:
-                raise err(f"'{key}' is a {spec[base]}, but '_{unit}' is a unit of {QUANTITY_OF_UNIT[unit]}", i, key)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise err(f"'{key}' must be a finite number, got {value!r}", i, key)
-            vals[base] = float(value) * UNIT_FACTORS[unit]
-        if "mass" not in vals:
-            raise err("missing 'mass_kg'", i)
+            raise r.error(f"link '{name}' is listed twice", "link", i, "name")
+        vals = r.values(row, spec, ("link", i), text_keys=("name",))
         if not 0 <= vals["mass"] <= 1e4:
-            raise err(f"mass must be in [0, 10000] kg, got {vals['mass']:g}", i, "mass_kg")
+            raise r.error(f"mass must be in [0, 10000] kg, got {vals['mass']:g}", "link", i, "mass_kg")
         if any(abs(vals.get(k, 0.0)) > 100.0 for k in ("com_x", "com_y", "com_z")):
-            raise err("a centre of mass more than 100 m from its link frame is not plausible", i)
+            raise r.error("a centre of mass more than 100 m from its link frame is not plausible", "link", i)
         out[name] = LinkMass(vals["mass"], tuple(vals.get(k, 0.0) for k in ("com_x", "com_y", "com_z")))
     return out
 

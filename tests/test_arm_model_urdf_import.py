@@ -291,11 +291,11 @@ def test_masses_file_folds_fixed_children_and_branches(tmp_path):
 @pytest.mark.parametrize("text, words, line", [
     ('[[link]]\nname = "panda_link1"\nmass_kg = -1.0\n', "mass must be in", 3),
     ('[[link]]\nname = "panda_link1"\nmass_kg = 1.0\ncom_q_mm = 3.0\n', "unknown key 'com_q_mm'", 4),
-    ('[[link]]\nname = "panda_link1"\nmass_g = 1.0\n', "unknown key 'mass_g'", 3),
-    ('[[link]]\nname = "panda_link1"\ncom_x_mm = 1.0\n', "missing 'mass_kg'", 1),
+    ('[[link]]\nname = "panda_link1"\nmass_g = 1.0\n', "'mass_g' has no known unit", 3),
+    ('[[link]]\nname = "panda_link1"\ncom_x_mm = 1.0\n', "missing key 'mass_<unit>'", 1),
     ('[[link]]\nname = "panda_link1"\nmass_kg = 1.0\n[[link]]\nname = "panda_link1"\nmass_kg = 2.0\n',
      "listed twice", 5),
-    ('[link]\nname = "x"\n', "no [[link]]", None),
+    ('[link]\nname = "x"\n', "no [[link]]", 1),
 ])
 def test_bad_masses_file_is_located(tmp_path, text, words, line):
     p = tmp_path / "m.toml"
