@@ -88,6 +88,8 @@ def register(sub) -> None:
     p.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
     add_arm_options(p)
     p.add_argument("-o", "--output", type=Path, required=True, help="output CSV (never one of the inputs)")
+    from .uncertainty_cli import add_tip_options
+    add_tip_options(p)
     p.set_defaults(func=run_tip)
 
     u = sub.add_parser(
@@ -129,6 +131,12 @@ def run_tip(args: argparse.Namespace) -> int:
         desc = arm.desc
         points = read_points(args.points, desc.n_joints)
         cols = tip_table(arm, points)
+        from .uncertainty_cli import parameters_of, tip_columns, wants_uncertainty
+        parameters = parameters_of(arm)
+        ulines = []
+        if wants_uncertainty(args, parameters):
+            ucols, ulines = tip_columns(arm, points, parameters, args)
+            cols.update(ucols)
         write_csv(tmp, cols, fmt="%.6f")
     n = len(points)
     print(f"{n} points in {len(points.measurements())} measurement(s) -> {args.output}")
@@ -142,6 +150,8 @@ def run_tip(args: argparse.Namespace) -> int:
                   "and is taken as zero")
         d = cols["deflection_um"]
         print(f"deflection: mean {d.mean():.2f} um, max {d.max():.2f} um")
+    for line in ulines:
+        print(line)
     flagged = int(cols["over_force"].sum())
     if flagged:
         lines = points.lines[cols["over_force"].astype(bool)][:10]
