@@ -110,6 +110,8 @@ def run(args: argparse.Namespace) -> int:
         write_loop_report(loop, out.dir, inputs=inputs, input_names=names, warnings=warnings)
     print_warnings(warnings)
     print(before_after_text(loop))
+    for sk in loop.skipped:
+        print(f"{sk.name} not offered: {sk.reason}")
     print(loop.verdict)
     print(f"report: {args.output / 'report.html'}; machine summary: {args.output / 'summary.json'}")
     return 0
