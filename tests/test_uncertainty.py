@@ -227,3 +227,20 @@ def test_encoder_resolution_from_the_description(nominal):
     assert parse_description(format_description(desc)) == desc           # written back exactly
     with pytest.raises(InputError, match="encoder_resolution"):
         parse_description(text.replace("encoder_resolution_deg = 0.0005", "encoder_resolution_deg = 0"))
+
+
+def test_tip_refuses_a_covariance_that_is_not_one(tmp_path, nominal, capsys):
+    from arm_model.cli import main
+    from arm_model.model_file import format_model, write_covariance
+
+    spec = ArmModel(nominal).spec
+    names = ["j2.d", "j3.a"]
+    cov = np.array([[1e-12, 2e-12], [2e-12, 1e-12]])          # correlation 2: not positive semi-definite
+    write_covariance(tmp_path / "c.csv", names, [spec.units[spec.index(n)] for n in names], np.zeros(2), cov)
+    (tmp_path / "arm.toml").write_text(format_model(nominal, covariance="c.csv"))
+    pts = tmp_path / "p.csv"
+    pts.write_text("measurement,feature," + ",".join(f"q{i}_deg" for i in range(1, 8)) + "\nm,," + "10," * 6 + "10\n")
+    out = tmp_path / "t.csv"
+    assert main(["tip", str(pts), "--arm", str(tmp_path / "arm.toml"), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "c.csv" in err and "positive semi-definite" in err and not out.exists()
