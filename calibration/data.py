@@ -209,7 +209,7 @@ def split_holdout(data: CalibrationData, holdout, seed: int = 0) -> tuple[Calibr
     if isinstance(holdout, (float, int)) and not isinstance(holdout, bool):
         frac = float(holdout)
         if not 0.0 < frac < 1.0:
-            raise ValueError(f"holdout fraction must be in (0, 1), got {frac}")
+            raise InputError(f"--holdout fraction must be in (0, 1), got {frac}")
         rng = np.random.default_rng(seed)
         # stratify by the set of feature kinds a measurement touches
         groups: dict[tuple, list[str]] = {}
