@@ -37,7 +37,8 @@ def campaign(seed: int, stiffness: float | None):
             tasks.append({"kind": "seat", "id": f"p{k + 1}-{h}", "position_mm": ((np.array(p) + off * d) * 1e3).tolist(),
                           "articulations": 30, "stylus_cone_deg": 60.0})
     c = {"seed": seed, "sensor": "none", "signals": {"enabled": False},
-         "truth": {"length_error_um": 300.0, "angle_error_deg": 0.05, "probe_error_um": 300.0},
+         "truth": {"length_error_um": 300.0, "angle_error_deg": 0.05, "probe_error_um": 300.0,
+                   "probe_compliance": {"bending_um_per_N": 0.0, "axial_um_per_N": 0.0}},   # a rigid tool
          "noise": {"probing_repeatability_um": 200.0}, "operator": {"force_mean_N": 0.3, "max_force_N": 1.0},
          "task": tasks}
     if stiffness:
