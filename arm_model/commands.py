@@ -6,7 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .io import atomic_write_text, guard_output, read_points, write_csv
+from ._output import output_file
+from .io import read_points, write_csv
 from .kinematics import ball_centres
 from .urdf import urdf_text
 from .urdf_import import load_arm
@@ -105,11 +106,11 @@ def tip_table(desc, points) -> dict:
 
 
 def run_tip(args: argparse.Namespace) -> int:
-    guard_output(args.output, [args.points, args.arm])
-    desc = arm_from_args(args)
-    points = read_points(args.points, desc.n_joints)
-    cols = tip_table(desc, points)
-    write_csv(args.output, cols, inputs=[args.points, args.arm], fmt="%.6f")
+    with output_file(args.output, [args.points, args.arm]) as tmp:
+        desc = arm_from_args(args)
+        points = read_points(args.points, desc.n_joints)
+        cols = tip_table(desc, points)
+        write_csv(tmp, cols, fmt="%.6f")
     n = len(points)
     print(f"{n} points in {len(points.measurements())} measurement(s) -> {args.output}")
     if points.force is None:
@@ -130,7 +131,8 @@ def run_tip(args: argparse.Namespace) -> int:
 
 
 def run_urdf(args: argparse.Namespace) -> int:
-    desc = arm_from_args(args)
-    atomic_write_text(args.output, urdf_text(desc), inputs=[args.arm])
+    with output_file(args.output, [args.arm]) as tmp:
+        desc = arm_from_args(args)
+        tmp.write_text(urdf_text(desc), encoding="utf-8")
     print(f"URDF of '{desc.name}' ({desc.n_joints} joints + 3 elastic probe joints) -> {args.output}")
     return 0

@@ -9,15 +9,14 @@ from __future__ import annotations
 import csv
 import io
 import math
-import os
 import re
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ._errors import InputError, parse_toml, read_text
+from ._output import atomic_write_bytes, guard_output
 from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, split_unit
 
 __all__ = ["PointSet", "Feature", "Distance", "Artefacts", "ForceSignal", "read_points",
@@ -456,35 +455,6 @@ def read_force_signal(path: str | Path) -> ForceSignal:
 
 # ---------------------------------------------------------------------------------------------
 # writing
-
-def guard_output(out: str | Path, inputs=()) -> Path:
-    """Refuse an output path that is one of the inputs (by resolved path)."""
-    out = Path(out)
-    ro = out.resolve()
-    for p in inputs:
-        if p is not None and Path(p).resolve() == ro:
-            raise InputError("refusing to write the output over an input file", out)
-    return out
-
-
-def atomic_write_bytes(path: str | Path, data: bytes, inputs=()) -> Path:
-    """Write ``data`` to ``path`` atomically (temporary file in the same folder, then rename)."""
-    path = guard_output(path, inputs)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.fchmod(fd, 0o666 & ~umask)          # mkstemp makes 0600; outputs get the usual mode
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
-
 
 def atomic_write_text(path: str | Path, text: str, inputs=()) -> Path:
     return atomic_write_bytes(path, text.encode("utf-8"), inputs)

@@ -7,7 +7,8 @@ import time
 
 from arm_model import InputError
 from arm_model.commands import arm_from_args, at_least, fraction
-from arm_model.io import guard_output, read_artefacts, read_points
+from arm_model._output import output_folder
+from arm_model.io import read_artefacts, read_points
 
 from .cli import campaign_inputs, sigma_options
 
@@ -73,10 +74,6 @@ def run(args: argparse.Namespace) -> int:
     from .loop_report import before_after_text, write_loop_report
 
     inputs = [p for p in (args.points, args.artefacts, args.arm, args.reference_points) if p is not None]
-    for name in ("summary.json", "report.html", "before-after.txt"):
-        guard_output(args.output / name, inputs)
-    if args.output.exists() and not args.output.is_dir():
-        raise InputError("the output must be a folder", args.output)
     families = None
     if args.candidates:
         families = tuple(k.strip() for k in args.candidates.split(",") if k.strip())
@@ -107,11 +104,12 @@ def run(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"[{time.perf_counter() - t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
-    loop = close_loop(points, artefacts, desc, reference=reference, effects=tuple(effects), free=args.free,
-                      weights=weights, settings=settings, families_=families, progress=progress)
-    names = {"points": str(args.points), "artefacts": str(args.artefacts), "arm": str(args.arm),
-             "reference_points": None if args.reference_points is None else str(args.reference_points)}
-    write_loop_report(loop, args.output, inputs=inputs, input_names=names)
+    with output_folder(args.output, inputs, "close-loop") as out:
+        loop = close_loop(points, artefacts, desc, reference=reference, effects=tuple(effects), free=args.free,
+                          weights=weights, settings=settings, families_=families, progress=progress)
+        names = {"points": str(args.points), "artefacts": str(args.artefacts), "arm": str(args.arm),
+                 "reference_points": None if args.reference_points is None else str(args.reference_points)}
+        write_loop_report(loop, out.dir, inputs=inputs, input_names=names)
     print(before_after_text(loop))
     print(loop.verdict)
     print(f"report: {args.output / 'report.html'}; machine summary: {args.output / 'summary.json'}")

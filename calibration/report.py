@@ -14,6 +14,7 @@ import numpy as np
 
 from arm_model import InputError
 from arm_model.description import format_description
+from arm_model._output import safe_name
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, write_csv
 from arm_model.urdf import urdf_text
 
@@ -199,7 +200,8 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
     desc = result.described()
     name = f"{result.model.desc.name}-calibrated"
     cal = replace(desc, name=name)
-    files = {"description": out / f"{name}.toml", "urdf": out / f"{name}.urdf", "summary": out / "summary.json",
+    stem = f"{_safe_arm_name(result.model.desc.name)}-calibrated"
+    files = {"description": out / f"{stem}.toml", "urdf": out / f"{stem}.urdf", "summary": out / "summary.json",
              "parameters": out / "parameters.csv", "residuals": out / "residuals.csv", "report": out / "report.html"}
     if plots:
         files.update({"residuals_png": out / "residuals.png", "parameters_png": out / "parameters.png",
@@ -244,6 +246,11 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
     atomic_write_text(files["summary"], json.dumps(_finite(summary), indent=1, default=_json_default) + "\n", inputs)
     atomic_write_text(files["report"], _html(result, summary, files), inputs)
     return files
+
+
+def _safe_arm_name(name: str) -> str:
+    """The arm's name as the stem of a file name (see :func:`arm_model._output.safe_name`)."""
+    return safe_name(name)
 
 
 #: standard uncertainty beyond which a free parameter is reported as poorly determined, per SI unit
