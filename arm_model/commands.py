@@ -8,11 +8,11 @@ import numpy as np
 
 from ._output import output_file
 from .io import read_points, write_csv
-from .kinematics import ball_centres
+from .model_file import Arm, load_model
 from .urdf import urdf_text
-from .urdf_import import load_arm
 
-__all__ = ["register", "tip_table", "add_arm_options", "arm_from_args", "positive", "at_least", "fraction"]
+__all__ = ["register", "tip_table", "add_arm_options", "arm_from_args", "model_from_args", "positive", "at_least",
+           "fraction"]
 
 
 def _number(text: str, kind):
@@ -51,18 +51,31 @@ def fraction(text: str) -> float:
     return v
 
 
-def add_arm_options(p, help_arm: str = "the arm: description TOML (e.g. urdf/aacmm7.dh.toml) or a URDF "
-                                       "with --tip-frame") -> None:
+def add_arm_options(p, help_arm: str = "the arm: a model file or description TOML (e.g. urdf/aacmm7.dh.toml; "
+                                       "the effects a model file holds are applied) or a URDF with --tip-frame"
+                    ) -> None:
     """``--arm`` and ``--tip-frame``, the same for every subcommand."""
     p.add_argument("--arm", type=Path, required=True, help=help_arm)
     p.add_argument("--tip-frame", default=None, metavar="LINK",
-                   help="for an arm given as a URDF: the link at the ball centre (the chain runs from the root "
-                        "to it; the probe data default to the seed paper's 85 mm probe)")
+                   help="for an arm given as a URDF: the link at the ball centre, in any orientation (its z axis "
+                        "is the probe's, along the tool; the chain runs from the root to it; force range and "
+                        "compliances default to the seed paper's probe)")
+    p.add_argument("--masses", type=Path, default=None, metavar="TOML",
+                   help="for a URDF arm: link masses and centres of mass ([[link]] name, mass_kg, com_x_mm, "
+                        "com_y_mm, com_z_mm), replacing the URDF's <inertial>; gravity torques (joint "
+                        "compliance) need masses")
+
+
+def model_from_args(args: argparse.Namespace) -> Arm:
+    """The arm named by :func:`add_arm_options`: description, effects and their parameter values
+    (:class:`arm_model.model_file.Arm`), read by the one loader every subcommand uses."""
+    return load_model(args.arm, args.tip_frame, masses=getattr(args, "masses", None))
 
 
 def arm_from_args(args: argparse.Namespace):
-    """The arm named by :func:`add_arm_options`."""
-    return load_arm(args.arm, args.tip_frame)
+    """The description of the arm named by :func:`add_arm_options` (its effects, if any, left out:
+    commands that evaluate points use :func:`model_from_args`)."""
+    return model_from_args(args).desc
 
 
 def register(sub) -> None:
@@ -75,6 +88,8 @@ def register(sub) -> None:
     p.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
     add_arm_options(p)
     p.add_argument("-o", "--output", type=Path, required=True, help="output CSV (never one of the inputs)")
+    from .uncertainty_cli import add_tip_options
+    add_tip_options(p)
     p.set_defaults(func=run_tip)
 
     u = sub.add_parser(
@@ -88,10 +103,15 @@ def register(sub) -> None:
     u.set_defaults(func=run_urdf)
 
 
-def tip_table(desc, points) -> dict:
-    """Columns of the ``aacmm tip`` output for a :class:`~arm_model.io.PointSet`."""
-    rigid = ball_centres(desc, points.q)
-    corrected = ball_centres(desc, points.q, points.wrench) if points.wrench is not None else rigid.copy()
+def tip_table(arm, points) -> dict:
+    """Columns of the ``aacmm tip`` output for a :class:`~arm_model.io.PointSet`; ``arm`` an
+    :class:`~arm_model.model_file.Arm` (every effect applied) or a description. ``x_rigid_mm``: the
+    ball centre at a zero force reading; ``x_mm``: with the points' wrench."""
+    if not isinstance(arm, Arm):
+        arm = Arm(arm)
+    desc = arm.desc
+    rigid = arm.ball_centres(points, rigid=True)
+    corrected = arm.ball_centres(points) if points.wrench is not None else rigid.copy()
     delta = corrected - rigid
     cols = {"measurement": points.measurement, "feature": points.feature}
     for k, axis in enumerate("xyz"):
@@ -107,12 +127,21 @@ def tip_table(desc, points) -> dict:
 
 def run_tip(args: argparse.Namespace) -> int:
     with output_file(args.output, [args.points, args.arm]) as tmp:
-        desc = arm_from_args(args)
+        arm = model_from_args(args)
+        desc = arm.desc
         points = read_points(args.points, desc.n_joints)
-        cols = tip_table(desc, points)
+        cols = tip_table(arm, points)
+        from .uncertainty_cli import parameters_of, tip_columns, wants_uncertainty
+        parameters = parameters_of(arm)
+        ulines = []
+        if wants_uncertainty(args, parameters):
+            ucols, ulines = tip_columns(arm, points, parameters, args)
+            cols.update(ucols)
         write_csv(tmp, cols, fmt="%.6f")
     n = len(points)
     print(f"{n} points in {len(points.measurements())} measurement(s) -> {args.output}")
+    if arm.effects:
+        print("effects applied: " + ", ".join(e.describe() for e in arm.effects))
     if points.force is None:
         print("no force columns: corrected = rigid (no deflection applied)")
     else:
@@ -121,6 +150,8 @@ def run_tip(args: argparse.Namespace) -> int:
                   "and is taken as zero")
         d = cols["deflection_um"]
         print(f"deflection: mean {d.mean():.2f} um, max {d.max():.2f} um")
+    for line in ulines:
+        print(line)
     flagged = int(cols["over_force"].sum())
     if flagged:
         lines = points.lines[cols["over_force"].astype(bool)][:10]
@@ -132,7 +163,11 @@ def run_tip(args: argparse.Namespace) -> int:
 
 def run_urdf(args: argparse.Namespace) -> int:
     with output_file(args.output, [args.arm]) as tmp:
-        desc = arm_from_args(args)
+        arm = model_from_args(args)
+        desc = arm.desc
         tmp.write_text(urdf_text(desc), encoding="utf-8")
     print(f"URDF of '{desc.name}' ({desc.n_joints} joints + 3 elastic probe joints) -> {args.output}")
+    if arm.effects:
+        print("note: a URDF holds the geometry only; the model's effects ("
+              + ", ".join(e.describe() for e in arm.effects) + ") are not in it")
     return 0

@@ -6,9 +6,10 @@ import json
 from pathlib import Path
 
 from arm_model import InputError
-from arm_model.commands import add_arm_options, arm_from_args, positive
+from arm_model.commands import add_arm_options, model_from_args, positive
 from arm_model._output import output_folder
 from arm_model.io import read_artefacts, read_points
+from arm_model.model_file import Arm
 
 __all__ = ["register", "run_calibrate", "run_montecarlo", "run_poses"]
 
@@ -172,15 +173,33 @@ def _free(model, args):
     return [model.spec.names[i] for i in free]
 
 
-def _load_data(args):
+def model_effects(arm, keys):
+    """The effects of a loaded ``--arm`` model followed by those of ``--effect`` (an effect kind the
+    model already holds is an error: its parameters would be declared twice)."""
     from arm_model.model import ArmModel
+    added = _effects(keys)
+    twice = sorted({e.key for e in added} & {e.key for e in arm.effects})
+    if twice:
+        raise InputError(f"the arm model already holds the effect(s) {', '.join(twice)}; drop the --effect option "
+                         "(the model's effects start from their values in the file)", arm.desc.source)
+    try:
+        return ArmModel(arm.desc, tuple(arm.effects) + added)
+    except ValueError as exc:
+        raise InputError(f"--effect: {exc}", arm.desc.source) from None
+
+
+def _load_data(args):
     from .data import make_data
-    desc = arm_from_args(args)
-    model = ArmModel(desc, _effects(args.effect))
+    arm = model_from_args(args)
+    desc = arm.desc
+    model = model_effects(arm, args.effect)
     points = read_points(args.points, desc.n_joints)
     artefacts = read_artefacts(args.artefacts)
     reference = None if args.reference_points is None else read_points(args.reference_points, desc.n_joints)
-    return model, make_data(points, artefacts, model, reference=reference)
+    for pts in (points, reference):
+        if pts is not None:
+            Arm(desc, model.effects).check_points(pts)
+    return model, make_data(points, artefacts, model, reference=reference), arm.values
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
@@ -189,11 +208,16 @@ def run_calibrate(args: argparse.Namespace) -> int:
     from .report import poorly_determined, write_outputs
     inputs = [args.points, args.artefacts, args.arm, args.reference_points]
     with output_folder(args.output, inputs, "calibrate") as out:
-        model, data = _load_data(args)
+        model, data, values = _load_data(args)
+        if any(e.key == "joint_compliance" for e in model.effects):
+            from .candidates import no_torque_reason
+            why = no_torque_reason(model.desc, data)
+            if why:
+                print(f"joint compliance cannot be identified: {why}")
         holdout = _holdout(args.holdout)
         train, test = (data, None) if holdout is None else split_holdout(data, holdout, args.seed)
         kw = _fit_kwargs(args)
-        res = calibrate(model, train, _free(model, args), weights=_weights(args),
+        res = calibrate(model, train, _free(model, args), values=values, weights=_weights(args),
                         on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
                         drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference, **kw)
         val_train = res.compare(res.data)
@@ -266,7 +290,7 @@ def run_poses(args: argparse.Namespace) -> int:
     from .study import select_measurements
     inputs = [args.points, args.artefacts, args.arm, args.reference_points]
     with output_folder(args.output, inputs, "study poses") as out:
-        model, data = _load_data(args)
+        model, data, _ = _load_data(args)
         sel = select_measurements(model, data, args.count, _free(model, args), weights=_weights(args),
                                   progress=not args.quiet, fit=_fit_kwargs(args))
         (out.dir / "poses.json").write_text(json.dumps(sel.to_dict(), indent=1) + "\n", encoding="utf-8")
