@@ -205,6 +205,7 @@ def _load_data(args):
 def run_calibrate(args: argparse.Namespace) -> int:
     from .calibrate import calibrate
     from .data import split_holdout
+    from .model_output import refine_torques
     from .report import poorly_determined, write_outputs
     inputs = [args.points, args.artefacts, args.arm, args.reference_points]
     with output_folder(args.output, inputs, "calibrate") as out:
@@ -215,6 +216,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
         res = calibrate(model, train, _free(model, args), values=values, weights=_weights(args),
                         on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
                         drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference, **kw)
+        res = refine_torques(res, covariance=args.covariance, outlier_threshold=args.outlier_threshold,
+                             **{k: v for k, v in kw.items() if k == "rank_tol"})
         val_train = res.compare(res.data)
         val_test = res.compare(test) if test is not None else None
         files = write_outputs(res, out.dir, inputs=inputs, validation_training=val_train,

@@ -67,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
     from .data import Weights
     from .loop import LoopSettings, close_loop
     from .loop_report import before_after_text, write_loop_report
+    from .model_output import refine_torques
 
     inputs = [p for p in (args.points, args.artefacts, args.arm, args.reference_points) if p is not None]
     families = None
@@ -102,6 +103,9 @@ def run(args: argparse.Namespace) -> int:
         loop = close_loop(points, artefacts, desc, reference=reference, effects=tuple(effects), values=arm.values,
                           free=args.free,
                           weights=weights, settings=settings, families_=families, progress=progress)
+        final = loop.stages[-1]
+        final.result = refine_torques(final.result, rank_tol=settings.rank_tol,
+                                      outlier_threshold=settings.outlier_threshold)
         names = {"points": str(args.points), "artefacts": str(args.artefacts), "arm": str(args.arm),
                  "reference_points": None if args.reference_points is None else str(args.reference_points)}
         write_loop_report(loop, out.dir, inputs=inputs, input_names=names)
