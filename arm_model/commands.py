@@ -57,14 +57,19 @@ def add_arm_options(p, help_arm: str = "the arm: a model file or description TOM
     """``--arm`` and ``--tip-frame``, the same for every subcommand."""
     p.add_argument("--arm", type=Path, required=True, help=help_arm)
     p.add_argument("--tip-frame", default=None, metavar="LINK",
-                   help="for an arm given as a URDF: the link at the ball centre (the chain runs from the root "
-                        "to it; the probe data default to the seed paper's 85 mm probe)")
+                   help="for an arm given as a URDF: the link at the ball centre, in any orientation (its z axis "
+                        "is the probe's, along the tool; the chain runs from the root to it; force range and "
+                        "compliances default to the seed paper's probe)")
+    p.add_argument("--masses", type=Path, default=None, metavar="TOML",
+                   help="for a URDF arm: link masses and centres of mass ([[link]] name, mass_kg, com_x_mm, "
+                        "com_y_mm, com_z_mm), replacing the URDF's <inertial>; gravity torques (joint "
+                        "compliance) need masses")
 
 
 def model_from_args(args: argparse.Namespace) -> Arm:
     """The arm named by :func:`add_arm_options`: description, effects and their parameter values
     (:class:`arm_model.model_file.Arm`), read by the one loader every subcommand uses."""
-    return load_model(args.arm, args.tip_frame)
+    return load_model(args.arm, args.tip_frame, masses=getattr(args, "masses", None))
 
 
 def arm_from_args(args: argparse.Namespace):
@@ -83,6 +88,8 @@ def register(sub) -> None:
     p.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
     add_arm_options(p)
     p.add_argument("-o", "--output", type=Path, required=True, help="output CSV (never one of the inputs)")
+    from .uncertainty_cli import add_tip_options
+    add_tip_options(p)
     p.set_defaults(func=run_tip)
 
     u = sub.add_parser(
@@ -124,6 +131,12 @@ def run_tip(args: argparse.Namespace) -> int:
         desc = arm.desc
         points = read_points(args.points, desc.n_joints)
         cols = tip_table(arm, points)
+        from .uncertainty_cli import parameters_of, tip_columns, wants_uncertainty
+        parameters = parameters_of(arm)
+        ulines = []
+        if wants_uncertainty(args, parameters):
+            ucols, ulines = tip_columns(arm, points, parameters, args)
+            cols.update(ucols)
         write_csv(tmp, cols, fmt="%.6f")
     n = len(points)
     print(f"{n} points in {len(points.measurements())} measurement(s) -> {args.output}")
@@ -137,6 +150,8 @@ def run_tip(args: argparse.Namespace) -> int:
                   "and is taken as zero")
         d = cols["deflection_um"]
         print(f"deflection: mean {d.mean():.2f} um, max {d.max():.2f} um")
+    for line in ulines:
+        print(line)
     flagged = int(cols["over_force"].sum())
     if flagged:
         lines = points.lines[cols["over_force"].astype(bool)][:10]

@@ -5,6 +5,8 @@ import argparse
 import json
 from pathlib import Path
 
+import numpy as np
+
 from arm_model import InputError
 from arm_model.commands import add_arm_options, model_from_args, positive
 from arm_model._output import output_folder
@@ -210,6 +212,11 @@ def run_calibrate(args: argparse.Namespace) -> int:
     inputs = [args.points, args.artefacts, args.arm, args.reference_points]
     with output_folder(args.output, inputs, "calibrate") as out:
         model, data, values = _load_data(args)
+        if any(e.key == "joint_compliance" for e in model.effects):
+            from .candidates import no_torque_reason
+            why = no_torque_reason(model.desc, data)
+            if why:
+                print(f"joint compliance cannot be identified: {why}")
         holdout = _holdout(args.holdout)
         train, test = (data, None) if holdout is None else split_holdout(data, holdout, args.seed)
         kw = _fit_kwargs(args)
@@ -276,10 +283,19 @@ def run_montecarlo(args: argparse.Namespace) -> int:
         print(f"  {a['label']}: nominal {a['before_median']:.2f}/{a['before_p95']:.2f} -> calibrated "
               f"{a['after_median']:.2f}/{a['after_p95']:.2f} {a['unit']}")
     from .calibrate import display_unit
-    print("parameters: RMS error vs truth, mean reported u, within 3u:")
+    if mc.s0:
+        s0 = np.array(mc.s0)
+        print(f"residual scale factor s0 over the runs: median {np.median(s0):.2f} (range {s0.min():.2f}-{s0.max():.2f})"
+              + ("; far from 1: the stated --sigma-* do not match the residuals, and one factor cannot rescale "
+                 "residual groups that are mis-stated differently (docs/uncertainty.md)"
+                 if abs(np.median(s0) - 1) > 0.2 else ""))
+    lo, hi = next(iter(mc.parameters.values()))["z_rms_95"] if mc.parameters else (0.0, 0.0)
+    print(f"parameters: RMS error vs truth, mean reported u, within 3u, z = error / u: RMS (right uncertainties "
+          f"give {lo:.2f}-{hi:.2f} for {len(mc.s0)} runs, 95 %) and mean (bias), verdict:")
     for n, v in mc.parameters.items():
         du, fac = display_unit(model.spec.units[model.spec.index(n)])
-        print(f"  {n:22s} {v['rms_error'] * fac:10.4g} {v['mean_u'] * fac:10.4g} {du:5s} {100 * v['within_3u']:5.0f} %")
+        print(f"  {n:22s} {v['rms_error'] * fac:10.4g} {v['mean_u'] * fac:10.4g} {du:5s} {100 * v['within_3u']:5.0f} %"
+              f" {v['z_rms']:6.2f} {v['z_mean']:+6.2f}  {v['verdict']}")
     print(f"-> {args.output / 'study.json'}")
     return 0 if not mc.failures else 1
 

@@ -23,9 +23,9 @@ import numpy as np
 
 from arm_model import InputError
 from arm_model._output import safe_name
+from arm_model.geometry import CylinderFit, RingFit, ring_fit
 from arm_model.io import PointSet, read_force_signal
 
-from .cylinder import CylinderFit, RingFit, ring_fit
 from .signals import ForceSummary, PointForces, find_point_forces, force_summary, forces_from_columns
 
 __all__ = ["PAPER_MODELS", "MODELS", "MODEL_LABELS", "paper_correction", "correct_ring", "RingMeasurement",
