@@ -89,7 +89,8 @@ def register(sub) -> None:
                     "(held fixed and listed, or the fit stops), uncertainties and correlations, outliers "
                     "(kept unless --drop-outliers), and validation figures (ASME B89.4.22 / ISO 10360-12 terms) "
                     "nominal vs calibrated on the training data and on held-out measurements. Writes a NEW "
-                    "calibrated description (TOML and URDF), summary.json, CSV tables and report.html.",
+                    "calibrated model file (the description with every effect and its parameters, TOML, read by every "
+                    "--arm), its covariance (CSV) and URDF, summary.json, CSV tables and report.html.",
         epilog="Parameter names: docs/calibration.md. Example: aacmm calibrate points.csv artefacts.toml "
                "--arm urdf/aacmm7.dh.toml --reference-points points-ref.csv --holdout 0.2 -o out/cal")
     campaign_inputs(c)
@@ -256,7 +257,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
             print(f"validation on {title} data (nominal -> calibrated):")
             for r in rows:
                 print(f"  {r['label']}: {r['before']:.2f} -> {r['after']:.2f} {r['unit']} ({r['ratio']:.1f}x)")
-    print(f"calibrated description -> {files['description']}; report -> {files['report']}")
+    print(f"model file -> {files['description']} (covariance {files['covariance'].name}); "
+          f"report -> {files['report']}")
     return 0
 
 

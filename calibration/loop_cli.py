@@ -28,7 +28,9 @@ def register(sub) -> None:
                     "Then the residual is tested against generic regressors (joint-angle harmonics, gravity and "
                     "contact torques, force, temperature, time, approach direction, measurement, artefact): a "
                     "significant one is reported as structure the library does not explain, with no fix claimed. "
-                    "Writes summary.json, report.html (with PNG plots) and before-after.txt; prints the "
+                    "Writes the final model as a model file (<arm>-calibrated.toml with its covariance and URDF; "
+                    "every --arm applies it), summary.json, report.html (with PNG plots) and before-after.txt; "
+                    "prints the "
                     "before/after table of the held-out test set.",
         epilog="Example: aacmm close-loop points.csv artefacts.toml --arm urdf/aacmm7.dh.toml "
                "--reference-points points-ref.csv -o out/loop. Method and outputs: docs/close-loop.md")
@@ -113,5 +115,8 @@ def run(args: argparse.Namespace) -> int:
     for sk in loop.skipped:
         print(f"{sk.name} not offered: {sk.reason}")
     print(loop.verdict)
+    from .loop_report import loop_model_name
+    from .model_output import model_paths
+    print(f"model file: {model_paths(args.output, loop_model_name(loop))['model']} (every --arm applies it)")
     print(f"report: {args.output / 'report.html'}; machine summary: {args.output / 'summary.json'}")
     return 0
