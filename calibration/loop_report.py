@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from arm_model.checks import warnings_html
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output
 
 from .loop import LoopResult, Stage, effect_summary
@@ -56,7 +57,7 @@ def _stage_dict(s: Stage) -> dict:
            "heldout_test": s.heldout}
     if s.added is not None:
         out["added"] = {"name": s.added.name, "family": s.added.family, "joint": s.added.joint,
-                        "effect": s.added.effect.describe(), "parameters": effect_summary(r, s.added),
+                        "origin": s.added.origin, "effect": s.added.effect.describe(), "parameters": effect_summary(r, s.added),
                         "indistinguishable_nested": s.nested, "indistinguishable_alternatives": s.alternatives}
         out["screening"] = [t.to_dict() for t in s.screening]
         out["cross_validation"] = [c.to_dict() for c in s.cv]
@@ -70,6 +71,8 @@ def summary_dict(loop: LoopResult, inputs: dict | None = None) -> dict:
     prev = base
     for s in loop.stages[1:]:
         effects.append({"name": s.added.name, "family": s.added.family, "joint": s.added.joint,
+                        "origin": s.added.origin,
+                        "found_from_the_residual": s.added.origin == "residual",
                         "parameters": effect_summary(s.result, s.added),
                         "heldout_before": {"rms_um": prev["rms_um"], "max_um": prev["max_um"],
                                            "standard": prev["standard"]},
@@ -82,8 +85,8 @@ def summary_dict(loop: LoopResult, inputs: dict | None = None) -> dict:
         "arm": loop.desc.name,
         "settings": loop.settings.to_dict(),
         "measurements": {"design": loop.design, "test": loop.test},
-        "candidates": [{"name": c.name, "family": c.family, "joint": c.joint, "effect": c.effect.describe()}
-                       for c in loop.candidates],
+        "candidates": [{"name": c.name, "family": c.family, "joint": c.joint, "effect": c.effect.describe(),
+                        "origin": c.origin} for c in loop.candidates],
         "skipped_candidates": [{"name": s.name, "reason": s.reason} for s in loop.skipped],
         "effects_added": effects,
         "before_after": loop.before_after(),
@@ -269,7 +272,8 @@ def write_loop_model(loop: LoopResult, out_dir, inputs=()) -> dict:
                        comment=comment)
 
 
-def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | None = None) -> list[Path]:
+def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | None = None,
+                      warnings=()) -> list[Path]:
     """Write the model file (:func:`write_loop_model`), ``summary.json``, ``report.html``,
     ``before-after.txt`` and the PNGs into ``out_dir`` (atomically, never over ``inputs``); returns the
     paths written."""
@@ -292,7 +296,8 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
                     f"<pre>{html.escape(table)}</pre><img src='{img}'>")
     for s in loop.stages[1:]:
         gate = loop.settings.screen_alpha / max(sum(t.identifiable for t in s.screening), 1)
-        parts = [f"<h2>Stage {s.index}: + {html.escape(s.added.name)}</h2>"]
+        found = " (found from the residual)" if s.added.origin == "residual" else ""
+        parts = [f"<h2>Stage {s.index}: + {html.escape(s.added.name)}{found}</h2>"]
         prm = effect_summary(s.result, s.added)
         parts.append(_table(("parameter", "value", "u (1 sigma)", "unit", "state"),
                             [(r["name"], _g(r["display_value"], ".5g"), _g(r["display_u"], ".2g"), r["display_unit"],
@@ -334,8 +339,10 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
     page = ("<!doctype html><html><head><meta charset='utf-8'><title>close-loop report</title><style>"
             "body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;font-size:12px}"
             "td,th{border:1px solid #ccc;padding:2px 6px}pre{background:#f6f6f6;padding:6px}</style></head><body>"
-            f"<h1>Closing the loop: {html.escape(loop.desc.name)}</h1>" + "".join(sections) + "</body></html>")
+            f"<h1>Closing the loop: {html.escape(loop.desc.name)}</h1>" + warnings_html(warnings)
+            + "".join(sections) + "</body></html>")
     summary = summary_dict(loop, input_names)
+    summary["warnings"] = [w.as_dict() for w in warnings]
     summary["model"] = {"file": model_files["model"].name, "covariance": model_files["covariance"].name,
                         "urdf": model_files["urdf"].name, "check": model_check(loop.final.result)}
     written.append(atomic_write_text(out / "summary.json", json.dumps(summary, indent=1) + "\n", inputs))

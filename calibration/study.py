@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from arm_model import AacmmError
+from arm_model import AacmmError, InputError
 from arm_model.model import ArmModel
 
 from .calibrate import calibrate, resolve_parameters
@@ -66,6 +66,46 @@ class Progress:
         self._draw()
 
 
+#: seconds to wait for a Dask scheduler before giving up
+CONNECT_TIMEOUT_S = 3.0
+
+
+def connect(address: str):
+    """A ``distributed.Client`` of the scheduler at ``address``, or an InputError naming the address
+    within about :data:`CONNECT_TIMEOUT_S` (a TCP address is tried with a plain socket first, so that an
+    unreachable host does not wait for Dask's own retries)."""
+    import logging
+    import socket
+    from urllib.parse import urlsplit
+
+    from distributed import Client
+
+    def fail(reason: str):
+        return InputError(f"cannot reach the Dask scheduler at {address!r}: {reason}")
+
+    url = urlsplit(address if "://" in address else f"tcp://{address}")
+    if url.scheme in ("tcp", "tls"):
+        try:
+            host, port = url.hostname, url.port
+        except ValueError as exc:
+            raise fail(str(exc)) from None
+        if not host or port is None:
+            raise fail("expected an address like tcp://host:8786")
+        try:
+            socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S).close()
+        except OSError as exc:
+            raise fail(f"{exc.strerror or exc} (waited at most {CONNECT_TIMEOUT_S:g} s)") from None
+    quiet = logging.getLogger("distributed")
+    level = quiet.level
+    quiet.setLevel(logging.CRITICAL)         # its own retry messages would bury ours
+    try:
+        return Client(address, timeout=CONNECT_TIMEOUT_S)
+    except Exception as exc:                 # whatever Dask raises: one message naming the address
+        raise fail(f"{type(exc).__name__}: {exc}") from None
+    finally:
+        quiet.setLevel(level)
+
+
 def run_tasks(fn, items, *, scheduler=None, workers: int | None = None, progress: bool = True,
               label: str = "runs") -> list:
     """``[fn(item) for item in items]``, in parallel, results in the order of ``items``.
@@ -81,7 +121,7 @@ def run_tasks(fn, items, *, scheduler=None, workers: int | None = None, progress
     out = [None] * len(items)
     if scheduler is not None:
         from distributed import Client, as_completed as dask_completed
-        client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
+        client = scheduler if isinstance(scheduler, Client) else connect(scheduler)
         try:
             futures = client.map(fn, items, pure=False)
             index = {f.key: i for i, f in enumerate(futures)}
