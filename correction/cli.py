@@ -6,11 +6,7 @@ import argparse
 from pathlib import Path
 
 from arm_model import InputError, read_artefacts, read_points
-<<<<<<< HEAD
-from arm_model.commands import add_arm_options, model_from_args, positive
-=======
-from arm_model.commands import add_arm_options, arm_from_args, non_negative, number_in, positive
->>>>>>> main
+from arm_model.commands import add_arm_options, model_from_args, non_negative, number_in, positive
 from arm_model._output import output_folder
 from arm_model.checks import print_warnings
 from arm_model.io import check_features
@@ -80,13 +76,9 @@ def run_ring(args: argparse.Namespace) -> int:
         artefacts = read_artefacts(args.artefacts)
         check_features(points, artefacts)
         compliance = None if args.compliance is None else args.compliance * 1e-3
-<<<<<<< HEAD
         campaign = analyse_ring_campaign(desc, points, artefacts, args.feature, args.signals, compliance, arm=arm)
-=======
-        campaign = analyse_ring_campaign(desc, points, artefacts, args.feature, args.signals, compliance)
         check_reportable(campaign, points)
         warnings = ring_warnings(desc, points, campaign)
->>>>>>> main
         u_force = DEFAULT_U_FORCE if args.u_force is None else args.u_force
         budgets = ring_budgets(campaign, u_force=u_force, delta_t=args.delta_t, probability=args.probability)
         inputs["signals"] = args.signals
