@@ -57,14 +57,19 @@ def add_arm_options(p, help_arm: str = "the arm: a model file or description TOM
     """``--arm`` and ``--tip-frame``, the same for every subcommand."""
     p.add_argument("--arm", type=Path, required=True, help=help_arm)
     p.add_argument("--tip-frame", default=None, metavar="LINK",
-                   help="for an arm given as a URDF: the link at the ball centre (the chain runs from the root "
-                        "to it; the probe data default to the seed paper's 85 mm probe)")
+                   help="for an arm given as a URDF: the link at the ball centre, in any orientation (its z axis "
+                        "is the probe's, along the tool; the chain runs from the root to it; force range and "
+                        "compliances default to the seed paper's probe)")
+    p.add_argument("--masses", type=Path, default=None, metavar="TOML",
+                   help="for a URDF arm: link masses and centres of mass ([[link]] name, mass_kg, com_x_mm, "
+                        "com_y_mm, com_z_mm), replacing the URDF's <inertial>; gravity torques (joint "
+                        "compliance) need masses")
 
 
 def model_from_args(args: argparse.Namespace) -> Arm:
     """The arm named by :func:`add_arm_options`: description, effects and their parameter values
     (:class:`arm_model.model_file.Arm`), read by the one loader every subcommand uses."""
-    return load_model(args.arm, args.tip_frame)
+    return load_model(args.arm, args.tip_frame, masses=getattr(args, "masses", None))
 
 
 def arm_from_args(args: argparse.Namespace):

@@ -54,19 +54,35 @@ class JointRow:
 class Probe:
     """The probe: ball centre ``p_last`` [m] in the last joint frame, ball diameter [m],
     calibrated force range [N], and compliances [m/N] of the ball along probe x, y (bending)
-    and z (axial)."""
+    and z (axial).
+
+    ``rpy`` (roll, pitch, yaw) [rad] orients the probe frame in the last joint frame
+    (R = Rz(yaw) Ry(pitch) Rx(roll), as a URDF origin); its z axis runs along the stylus towards the
+    ball. ``lever`` [m] is the stylus length from the bending hinge to the ball; None puts the hinge
+    where the stylus line passes closest to the last joint origin (lever = the ball's coordinate along
+    probe z, seen from the last joint origin; z of ``p_last`` for an unrotated probe).
+    """
     p_last: tuple[float, float, float]
     ball_diameter: float
     max_force: float
     bending_compliance_x: float
     bending_compliance_y: float
     axial_compliance: float
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    lever: float | None = None
+
+    @property
+    def rotation(self) -> tuple | None:
+        """R_last_probe as a 3x3 nested tuple, None for an unrotated probe."""
+        from .chain import rotation_rpy
+        return None if not any(self.rpy) else rotation_rpy(self.rpy)
 
     @property
     def stylus_length(self) -> float:
-        """Distance [m] from the flange plane (z = 0 of the last joint frame) to the ball centre,
-        the lever of the virtual bending joints."""
-        return self.p_last[2]
+        """Distance [m] from the bending hinge to the ball centre along probe z, the lever of the
+        virtual bending joints."""
+        from .chain import probe_lever
+        return float(probe_lever(self.p_last, self.rotation, self.lever))
 
     @property
     def compliance(self) -> np.ndarray:
@@ -83,6 +99,8 @@ class ArmDescription:
     joints: tuple[JointRow, ...]
     probe: Probe
     source: str | None = field(default=None, compare=False)
+    #: the URDF link at the ball centre when the arm was read from a URDF (``source``)
+    tip_frame: str | None = field(default=None, compare=False)
 
     @property
     def n_joints(self) -> int:
@@ -147,6 +165,8 @@ _PROBE_KEYS = {
     "ball_diameter": ("length", True), "max_force": ("force", True),
     "bending_compliance": ("compliance", True), "axial_compliance": ("compliance", True),
     "bending_compliance_x": ("compliance", False), "bending_compliance_y": ("compliance", False),
+    "roll": ("angle", False), "pitch": ("angle", False), "yaw": ("angle", False),
+    "stylus_length": ("length", False),
 }
 
 
@@ -344,7 +364,10 @@ def description_from_data(data: dict, r: TomlReader, extra_keys: tuple[str, ...]
     if not isinstance(ptab, dict):
         raise r.error("missing [probe] table", "probe")
     pv = r.values(ptab, _PROBE_KEYS, ("probe",))
-    if pv["z"] <= 0:
+    rpy = (pv.get("roll", 0.0), pv.get("pitch", 0.0), pv.get("yaw", 0.0))
+    if pv.get("stylus_length", 1.0) <= 0:
+        raise r.error("'stylus_length' must be > 0", "probe", "stylus_length_mm")
+    if not any(rpy) and pv["z"] <= 0:
         raise r.error("the ball must lie beyond the flange: z of the probe must be > 0 "
                       "(the probe z axis points along the stylus towards the ball)", "probe", "z_mm")
     for key in ("ball_diameter", "max_force"):
@@ -357,7 +380,12 @@ def description_from_data(data: dict, r: TomlReader, extra_keys: tuple[str, ...]
         p_last=(pv["x"], pv["y"], pv["z"]), ball_diameter=pv["ball_diameter"], max_force=pv["max_force"],
         bending_compliance_x=pv.get("bending_compliance_x", pv["bending_compliance"]),
         bending_compliance_y=pv.get("bending_compliance_y", pv["bending_compliance"]),
-        axial_compliance=pv["axial_compliance"])
+        axial_compliance=pv["axial_compliance"], rpy=rpy, lever=pv.get("stylus_length"))
+    if probe.stylus_length <= 0:
+        raise r.error(f"the ball must lie ahead along the probe z axis (the stylus direction): its z in the "
+                      f"probe frame seen from the last joint origin is {probe.stylus_length * 1e3:.3f} mm; turn "
+                      "the probe frame (roll_deg, pitch_deg, yaw_deg) so that z points towards the ball, or give "
+                      "stylus_length_mm, the distance from the bending hinge to the ball", "probe", "x_mm")
     return ArmDescription(name=name, convention=convention, joints=tuple(joints), probe=probe, source=path)
 
 
@@ -417,6 +445,10 @@ def description_data(desc: ArmDescription) -> dict:
         probe.update({"bending_compliance_x_mm_per_N": in_unit(p.bending_compliance_x, mpn),
                       "bending_compliance_y_mm_per_N": in_unit(p.bending_compliance_y, mpn)})
     probe["axial_compliance_mm_per_N"] = in_unit(p.axial_compliance, mpn)
+    if any(p.rpy):
+        probe.update({f"{k}_deg": in_unit(v, deg) for k, v in zip(("roll", "pitch", "yaw"), p.rpy)})
+    if p.lever is not None:
+        probe["stylus_length_mm"] = in_unit(p.lever, mm)
     return {"name": desc.name, "convention": desc.convention, "joint": joints, "probe": probe}
 
 

@@ -259,7 +259,8 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
         rows = [vals[m * i: m * i + m] for i in range(nj)]
         k0 = m * nj
         cen, g = chain_jacobian(model.desc.convention, rows, vals[k0: k0 + 3], vals[k0 + 3: k0 + 6],
-                                vals[k0 + 6: k0 + 6 + nj], vals[k0 + 6 + nj:], model.desc.axes)
+                                vals[k0 + 6: k0 + 6 + nj], vals[k0 + 6 + nj:], model.desc.axes,
+                                model.desc.probe.rotation, model.desc.probe.lever)
         centres[s:e] = cen
         # the chain rule: T = M g for constant coefficients, plus per-point coefficients separately
         mmat = np.zeros((len(directions), len(flat)))

@@ -209,6 +209,11 @@ def run_calibrate(args: argparse.Namespace) -> int:
     inputs = [args.points, args.artefacts, args.arm, args.reference_points]
     with output_folder(args.output, inputs, "calibrate") as out:
         model, data, values = _load_data(args)
+        if any(e.key == "joint_compliance" for e in model.effects):
+            from .candidates import no_torque_reason
+            why = no_torque_reason(model.desc, data)
+            if why:
+                print(f"joint compliance cannot be identified: {why}")
         holdout = _holdout(args.holdout)
         train, test = (data, None) if holdout is None else split_holdout(data, holdout, args.seed)
         kw = _fit_kwargs(args)

@@ -106,6 +106,8 @@ def run(args: argparse.Namespace) -> int:
                  "reference_points": None if args.reference_points is None else str(args.reference_points)}
         write_loop_report(loop, out.dir, inputs=inputs, input_names=names)
     print(before_after_text(loop))
+    for sk in loop.skipped:
+        print(f"{sk.name} not offered: {sk.reason}")
     print(loop.verdict)
     print(f"report: {args.output / 'report.html'}; machine summary: {args.output / 'summary.json'}")
     return 0

@@ -45,7 +45,8 @@ def test_chain_jacobian_is_the_casadi_jacobian(nominal, tmp_path, convention):
     w = np.column_stack([rng.normal(0, 3, (n, 3)), rng.normal(0, 0.1, (n, 3))])
     p = rng.normal(0, 1e-3, model.spec.size) * np.array([1e-3 if u == "m/N" else 1.0 for u in model.spec.units])
     rows, pl, c = split_params(desc, p)
-    cen, g = chain_jacobian(desc.convention, rows, pl, c, list(q.T), list(w.T), desc.axes)
+    cen, g = chain_jacobian(desc.convention, rows, pl, c, list(q.T), list(w.T), desc.axes,
+                            desc.probe.rotation, desc.probe.lever)
     jac = _casadi_jacobians(model)
     size = model.spec.size
     for i in range(n):
