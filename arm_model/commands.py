@@ -2,53 +2,82 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 import numpy as np
 
 from ._output import output_file
+from .checks import point_warnings, print_warnings
 from .io import read_points, write_csv
 from .model_file import Arm, load_model
 from .urdf import urdf_text
 
-__all__ = ["register", "tip_table", "add_arm_options", "arm_from_args", "model_from_args", "positive", "at_least",
-           "fraction"]
+__all__ = ["register", "tip_table", "add_arm_options", "arm_from_args", "model_from_args", "number_in",
+           "positive", "non_negative", "at_least", "fraction", "finite", "seed", "port"]
 
 
-def _number(text: str, kind):
+def _number(text: str, kind=float):
+    """``text`` as a finite float or a whole number: no underscores ("4_5" is not 45), no nan or inf."""
+    what = "a whole number" if kind is int else "a finite number"
     try:
-        return kind(text)
+        if "_" in text:
+            raise ValueError
+        v = kind(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected {'a whole number' if kind is int else 'a number'}, "
-                                         f"got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+    if kind is float and not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
+    return v
+
+
+def number_in(low=None, high=None, *, low_open=False, high_open=False, kind=float):
+    """argparse type: a finite number (``kind`` float or int) in the interval from ``low`` to ``high``
+    (either may be None: unbounded; ``*_open``: the end itself excluded)."""
+    lo = "" if low is None else ("(" if low_open else "[") + f"{low:g}"
+    hi = "" if high is None else f"{high:g}" + (")" if high_open else "]")
+    if low is not None and high is not None:
+        want = f"in {lo}, {hi}"
+    elif low is not None:
+        want = f"{'>' if low_open else '>='} {low:g}"
+    elif high is not None:
+        want = f"{'<' if high_open else '<='} {high:g}"
+    else:
+        want = ""
+
+    def parse(text: str):
+        v = _number(text, kind)
+        if ((low is not None and (v < low or (low_open and v == low)))
+                or (high is not None and (v > high or (high_open and v == high)))):
+            raise argparse.ArgumentTypeError(f"must be {want}, got {text}")
+        return v
+    parse.__name__ = "whole number" if kind is int else "number"     # argparse names the type in messages
+    return parse
 
 
 def positive(kind=float):
-    """argparse type: a number > 0 (``kind`` float or int)."""
-    def parse(text: str):
-        v = _number(text, kind)
-        if not v > 0:
-            raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
-        return v
-    return parse
+    """argparse type: a finite number > 0 (``kind`` float or int)."""
+    return number_in(0, low_open=True, kind=kind)
+
+
+def non_negative(kind=float):
+    """argparse type: a finite number >= 0."""
+    return number_in(0, kind=kind)
 
 
 def at_least(minimum: int):
     """argparse type: a whole number >= ``minimum``."""
-    def parse(text: str) -> int:
-        v = _number(text, int)
-        if v < minimum:
-            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {text}")
-        return v
-    return parse
+    return number_in(minimum, kind=int)
 
 
-def fraction(text: str) -> float:
-    """argparse type: a number in (0, 1)."""
-    v = _number(text, float)
-    if not 0.0 < v < 1.0:
-        raise argparse.ArgumentTypeError(f"must be in (0, 1), got {text}")
-    return v
+#: argparse type: a number in (0, 1)
+fraction = number_in(0, 1, low_open=True, high_open=True)
+#: argparse type: a finite number (any sign)
+finite = number_in()
+#: argparse type: a random seed (a whole number >= 0)
+seed = number_in(0, kind=int)
+#: argparse type: a TCP port
+port = number_in(1, 65535, kind=int)
 
 
 def add_arm_options(p, help_arm: str = "the arm: a model file or description TOML (e.g. urdf/aacmm7.dh.toml; "
@@ -158,6 +187,7 @@ def run_tip(args: argparse.Namespace) -> int:
         print(f"warning: {flagged} point(s) over the probe's calibrated force range "
               f"({desc.probe.max_force:g} N), flagged in column over_force; lines {', '.join(map(str, lines))}"
               + (" ..." if flagged > 10 else ""))
+    print_warnings([w for w in point_warnings(desc, points) if w.kind != "over_force"])
     return 0
 
 

@@ -35,7 +35,9 @@ class JointRow:
 
     ``lower``/``upper`` [rad] are the joint limits (None if not given), ``mass`` [kg] the mass of the
     link this joint moves, ``com`` [m] its centre of mass in the row's end frame (after Rx(alpha) for
-    DH; the joint's child frame for MDH and URDF).
+    DH; the joint's child frame for MDH and URDF). ``encoder_resolution`` [rad] is the step of the
+    joint's encoder (optional key ``encoder_resolution_deg``; None if not given): the uncertainty of
+    the corrected ball centres takes ``resolution / sqrt(12)`` per reading (docs/uncertainty.md).
     """
     name: str
     theta_offset: float = 0.0
@@ -48,6 +50,7 @@ class JointRow:
     com: tuple[float, float, float] = (0.0, 0.0, 0.0)
     origin: tuple[float, float, float, float, float, float] | None = None
     axis: tuple[float, float, float] | None = None
+    encoder_resolution: float | None = None
 
 
 @dataclass(frozen=True)
@@ -151,14 +154,14 @@ _JOINT_KEYS = {  # base name -> (quantity, required)
     "theta_offset": ("angle", True), "d": ("length", True), "a": ("length", True),
     "alpha": ("angle", True), "lower": ("angle", False), "upper": ("angle", False),
     "mass": ("mass", False), "com_x": ("length", False), "com_y": ("length", False),
-    "com_z": ("length", False),
+    "com_z": ("length", False), "encoder_resolution": ("angle", False),
 }
 _URDF_JOINT_KEYS = {
     "origin_x": ("length", True), "origin_y": ("length", True), "origin_z": ("length", True),
     "origin_roll": ("angle", True), "origin_pitch": ("angle", True), "origin_yaw": ("angle", True),
     "lower": ("angle", False), "upper": ("angle", False),
     "mass": ("mass", False), "com_x": ("length", False), "com_y": ("length", False),
-    "com_z": ("length", False),
+    "com_z": ("length", False), "encoder_resolution": ("angle", False),
 }
 _PROBE_KEYS = {
     "x": ("length", True), "y": ("length", True), "z": ("length", True),
@@ -353,8 +356,11 @@ def description_from_data(data: dict, r: TomlReader, extra_keys: tuple[str, ...]
             raise r.error("lower limit is not below upper limit", "joint", i, "lower_deg")
         if v.get("mass", 0.0) < 0:
             raise r.error("mass must not be negative", "joint", i, "mass_kg")
+        if v.get("encoder_resolution", 1.0) <= 0:
+            raise r.error("encoder_resolution must be > 0", "joint", i, "encoder_resolution_deg")
         common = dict(name=jname, lower=v.get("lower"), upper=v.get("upper"), mass=v.get("mass", 0.0),
-                      com=(v.get("com_x", 0.0), v.get("com_y", 0.0), v.get("com_z", 0.0)))
+                      com=(v.get("com_x", 0.0), v.get("com_y", 0.0), v.get("com_z", 0.0)),
+                      encoder_resolution=v.get("encoder_resolution"))
         if convention == "urdf":
             joints.append(JointRow(origin=tuple(v[k] for k in URDF_ROW_FIELDS), axis=axis, **common))
         else:
@@ -435,6 +441,8 @@ def description_data(desc: ArmDescription) -> dict:
             row["mass_kg"] = float(j.mass)
         if any(j.com):
             row.update({f"com_{k}_mm": in_unit(v, mm) for k, v in zip("xyz", j.com)})
+        if j.encoder_resolution is not None:
+            row["encoder_resolution_deg"] = in_unit(j.encoder_resolution, deg)
         joints.append(row)
     p = desc.probe
     mpn = UNIT_FACTORS["mm_per_N"]

@@ -97,7 +97,12 @@ def parameters_of(arm) -> ParameterCovariance | None:
         if n not in names:
             raise InputError(f"parameter '{n}' of the covariance file is not a parameter of the model "
                              f"(known: {', '.join(names)})", arm.covariance, i + 2, "parameter")
-    return ParameterCovariance(tuple(cov.names), cov.matrix, source=f"the model's covariance file {arm.covariance.name}")
+    try:
+        out = ParameterCovariance(tuple(cov.names), cov.matrix, source=f"the model's covariance file {arm.covariance.name}")
+        out.factor()
+    except ValueError as exc:
+        raise InputError(f"not a usable covariance: {exc}", arm.covariance) from None
+    return out
 
 
 def tip_columns(arm, points, parameters, args) -> tuple[dict, list[str]]:

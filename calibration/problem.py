@@ -128,6 +128,12 @@ class Problem:
                 if len(rows) < need:
                     raise InputError(f"measurement '{m}', feature '{f}' ({kind}): {len(rows)} point(s), at least "
                                      f"{need} needed", data.file_of(rows[0]), int(lines[rows[0]]), "feature")
+                distinct = len(np.unique(pts.q[rows], axis=0))
+                if kind != "seat" and distinct < need:
+                    raise InputError(f"measurement '{m}', feature '{f}' ({kind}): {len(rows)} points but only "
+                                     f"{distinct} distinct pose(s) (the same encoder angles repeated): the {kind}'s "
+                                     f"unknowns are unidentifiable; at least {need} distinct points needed",
+                                     data.file_of(rows[0]), int(lines[rows[0]]), "feature")
                 nt = geo.n_theta(kind, free_r)
                 by_key[(m, f)] = len(instances)
                 instances.append(Instance(m, f, kind, rows, offset, nt, None if free_r else radius, free_r))

@@ -211,3 +211,36 @@ def test_tip_with_a_model_file_and_its_covariance(tmp_path, nominal, capsys):
     for i in range(5):
         jp = np.array(jac(np.radians(q[i]), np.zeros(6), np.zeros(15), np.zeros(spec.size))[1])[:, idx]
         assert_close(u[i], np.sqrt(np.diag(jp @ cov @ jp.T)), atol=2e-9)
+
+
+def test_encoder_resolution_from_the_description(nominal):
+    from arm_model import InputError
+    from arm_model.description import format_description, parse_description
+
+    text = format_description(nominal).replace('name = "j2"\n', 'name = "j2"\nencoder_resolution_deg = 0.0005\n')
+    desc = parse_description(text)
+    assert_close(desc.joints[1].encoder_resolution, np.radians(0.0005), atol=1e-18)
+    assert desc.joints[0].encoder_resolution is None
+    d = default_inputs(desc)
+    assert_close(d.encoder, [0, np.radians(0.0005) / np.sqrt(12)] + [0] * 5, atol=1e-18)
+    assert "1 of 7 joints" in d.sources["encoders"]
+    assert parse_description(format_description(desc)) == desc           # written back exactly
+    with pytest.raises(InputError, match="encoder_resolution"):
+        parse_description(text.replace("encoder_resolution_deg = 0.0005", "encoder_resolution_deg = 0"))
+
+
+def test_tip_refuses_a_covariance_that_is_not_one(tmp_path, nominal, capsys):
+    from arm_model.cli import main
+    from arm_model.model_file import format_model, write_covariance
+
+    spec = ArmModel(nominal).spec
+    names = ["j2.d", "j3.a"]
+    cov = np.array([[1e-12, 2e-12], [2e-12, 1e-12]])          # correlation 2: not positive semi-definite
+    write_covariance(tmp_path / "c.csv", names, [spec.units[spec.index(n)] for n in names], np.zeros(2), cov)
+    (tmp_path / "arm.toml").write_text(format_model(nominal, covariance="c.csv"))
+    pts = tmp_path / "p.csv"
+    pts.write_text("measurement,feature," + ",".join(f"q{i}_deg" for i in range(1, 8)) + "\nm,," + "10," * 6 + "10\n")
+    out = tmp_path / "t.csv"
+    assert main(["tip", str(pts), "--arm", str(tmp_path / "arm.toml"), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "c.csv" in err and "positive semi-definite" in err and not out.exists()
