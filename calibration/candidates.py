@@ -56,11 +56,14 @@ class Candidate:
         effect: the effect instance added to the model.
         family: the effect family (the effect's key for library effects).
         joint: the joint it acts on (name), or None.
+        origin: "library", "user" (an extra candidate) or "residual" (built from a structure family that
+            stayed significant, :mod:`calibration.synthesis`).
     """
     name: str
     effect: Effect
     family: str
     joint: str | None = None
+    origin: str = "library"
 
     def param_names(self, desc: ArmDescription) -> list[str]:
         return [n for n, _ in self.effect.param_defs(desc)]

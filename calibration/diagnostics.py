@@ -21,8 +21,9 @@ below ``rank_tol`` are *absorbed*: the data cannot tell them from what is alread
 Generic families (:func:`structure_tests`), with ``D_j = dx/dq_j`` the ball's sensitivity to joint j:
 harmonics ``cos/sin(h q_j)``, h = 1..3, times ``D_j``; the gravity torque and the contact torque of
 joint j times ``D_j``; contact force components and magnitude times the probe axes; temperature and
-time times the base axes and the position vector (a scale); the stylus direction (approach) times the
-base axes; one offset per measurement (one-way ANOVA) and per artefact feature or certified length.
+time times the base axes and the position vector (a scale); the temperature times each link's length
+and the probe's ("temperature per link"); the tilt of joint j about its frame's x and y axes times the
+moment across it ("jN lateral load"); the stylus direction (approach) times the base axes; one offset per measurement (one-way ANOVA) and per artefact feature or certified length.
 """
 from __future__ import annotations
 
@@ -32,9 +33,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from arm_model.effects import Effect
+from arm_model.chain import NUMPY_OPS
+from arm_model.effects import Effect, Geometry, contact_moment, gravity_moment, joint_frame
 from arm_model.kinematics import probe_rotations
 from arm_model.model import ArmModel
+from arm_model.params import split_params
 
 from .calibrate import CalibrationResult
 from .candidates import Candidate, torques_of
@@ -481,6 +484,30 @@ def _point_frames(space: ResidualSpace):
     return rot, x
 
 
+def _lateral_loads(res: CalibrationResult, x: np.ndarray) -> list[tuple[list, np.ndarray]]:
+    """Per joint: the ball's move per unit tilt about the joint frame's x and y axes (two (N, 3) [m/rad])
+    and the moment across the joint about those axes (N, 2) [N m] (gravity and contact), at the fit's
+    base geometry and the measured angles (:class:`arm_model.effects.LateralCompliance`)."""
+    desc, data = res.model.desc, res.data
+    n = len(data)
+    rows, p_last, comp = split_params(desc, res.p[: res.model.base_size])
+    geom = Geometry([list(r) for r in rows], list(p_last), list(comp))
+    q, w = list(data.points.q.T), list(data.wrench.T)
+
+    def col(v):
+        return np.column_stack([np.broadcast_to(np.asarray(c, dtype=float), (n,)) for c in v])
+
+    out = []
+    for j in range(desc.n_joints):
+        o, axes = joint_frame(desc, geom, q, j, NUMPY_OPS)
+        m = [a + b for a, b in zip(gravity_moment(desc, geom, q, j, o, NUMPY_OPS),
+                                   contact_moment(desc, geom, q, w, o, NUMPY_OPS))]
+        o, m = col(o), col(m)
+        u = [col(a) for a in axes[:2]]
+        out.append(([np.cross(a, x - o) for a in u], np.column_stack([np.sum(m * a, axis=1) for a in u])))
+    return out
+
+
 def families(space: ResidualSpace) -> list[Family]:
     """The generic structure families for the fit of ``space`` (those the data can express)."""
     res = space.result
@@ -516,6 +543,17 @@ def families(space: ResidualSpace) -> list[Family]:
             out.append(Family(f"{jr.name} contact torque", f"error of joint {jr.name}'s angle proportional to the "
                               "contact force's torque on it", "field", [dq], [(f"tau_c{j + 1}", tau_c[:, j])],
                               (f"contact torque {jr.name}", "N m", 1.0, tau_c[:, j])))
+    for j, (tilt, moment) in enumerate(_lateral_loads(res, x)):
+        if np.max(np.abs(moment), initial=0.0) <= 1e-6:
+            continue
+        jn = desc.joints[j].name
+        dirs = [(f"tilt of {jn} about its {a}", "rad", sum(base_cols[ax] * space.per_row(tilt[k][:, ax]) for ax in range(3)))
+                for k, a in enumerate("xy")]
+        basis = [(f"M{a}{j + 1}", moment[:, k]) for k, a in enumerate("xy")]
+        mag = np.hypot(moment[:, 0], moment[:, 1])
+        out.append(Family(f"{jn} lateral load", f"tilt of joint {jn}'s axis proportional to the moment across it "
+                          "(gravity on the links it moves and the contact wrench): a lateral compliance", "field",
+                          dirs, basis, (f"moment across {jn}", "N m", 1.0, mag)))
     if has_force:
         axes = [a for a in range(3) if np.max(np.abs(force[:, a]), initial=0.0) > 1e-9]
         basis = [(f"f{'xyz'[a]}", force[:, a]) for a in axes]
@@ -536,6 +574,19 @@ def families(space: ResidualSpace) -> list[Family]:
         sub = {f"{label}: {dn}": [i] for i, (dn, _, _) in enumerate(dirs)}
         out.append(Family(label, f"ball displacement along the base axes, and a scale, linear in the {label}",
                           "field", dirs, [(f"d{label}", v)], (label, unit, 1.0, values), sub))
+    t = pts.temperature
+    if t is not None and np.all(np.isfinite(t)) and np.ptp(t) > 0:
+        # each link's length and the probe's, each scaled on its own: d x / d(relative length) times dT
+        rows, fields = desc.row_table(), desc.row_fields
+        dirs = [(f"length of {jr.name}", "1", sum(jp[:, spec.index(f"{jr.name}.{fields[m]}")] * rows[i, m]
+                                               for m in desc.length_indices))
+                for i, jr in enumerate(desc.joints) if np.any(rows[i, list(desc.length_indices)] != 0)]
+        dirs.append(("probe length", "1", sum(jp[:, spec.index(f"probe.{a}")] * desc.probe.p_last[k]
+                                             for k, a in enumerate("xyz"))))
+        sub = {f"temperature: {dn}": [i] for i, (dn, _, _) in enumerate(dirs)}
+        out.append(Family("temperature per link", "each link length and the probe growing with the temperature at "
+                          "its own rate", "field", dirs, [("dtemperature", t - t.mean())], ("temperature", "C", 1.0, t),
+                          sub))
     stylus = rot[:, :, 2]
     basis = [(f"stylus {a}", stylus[:, i]) for i, a in enumerate("xyz")]
     sub = {f"stylus {a} component": [d * 3 + i for d in range(3)] for i, a in enumerate("xyz")}
@@ -619,8 +670,16 @@ def candidate_family(space: ResidualSpace, cand: Candidate, fams: list[Family] |
                       (f"load torque {jr.name} (contact - gravity)", "N m", 1.0, load))
     if key == "thermal":
         return by.get("temperature")
-    if key in ("force_sensor", "probe_compliance"):
+    if key in ("force_sensor", "probe_compliance", "probe_compliance_matrix"):
         return by.get("contact force")
+    if key == "joint_harmonics" and j is not None:
+        return by.get(f"q{j + 1} harmonics")
+    if key in ("thermal_links", "probe_thermal"):
+        return by.get("temperature per link")
+    if key == "approach_offset":
+        return by.get("approach direction")
+    if key == "lateral_compliance" and cand.joint is not None:
+        return by.get(f"{cand.joint} lateral load")
     return None
 
 

@@ -18,6 +18,13 @@
    ``alternatives``: candidates the data cannot tell from it).
 5. Recalibrate on the design set with the new effect; repeat from 3 until no candidate passes, none is
    left, or ``max_effects`` were added.
+   **Beyond the library**: when no candidate passes at a stage, the generic structure families still
+   significant at the current fit (the forward selection of step 6) become candidate effects
+   (:mod:`calibration.synthesis`: a joint's harmonics of order k = 1..4, per-link and probe thermal growth,
+   a full probe compliance matrix, an approach-direction offset, a joint's lateral compliance), screened
+   and cross-validated in steps 3-4 exactly like the library's, against a Bonferroni level over every
+   candidate then offered. One that passes is added and reported as found from the residual; one that
+   does not is reported with its held-out evidence and not added.
 6. The generic structure tests (:func:`calibration.diagnostics.structure_tests`) on the final fit, and a
    forward selection among them (:func:`calibration.diagnostics.remaining_structure`): a family
    significant after Bonferroni's correction (``alpha``), given the families kept before it, with a
@@ -47,6 +54,7 @@ from .diagnostics import (GroupTest, ResidualSpace, binned_estimates, candidate_
 from .identifiability import DEFAULT_RANK_TOL, prior_scales
 from .problem import MIN_POINTS, Problem
 from .solver import levenberg_marquardt
+from .synthesis import RESIDUAL, synthesise
 from .validation import FIGURES, validate
 
 __all__ = ["LoopSettings", "CVResult", "Stage", "LoopResult", "close_loop", "heldout_residuals",
@@ -72,6 +80,7 @@ class LoopSettings:
     rank_tol: float = DEFAULT_RANK_TOL
     drop_outliers: bool = True
     outlier_threshold: float = 4.0
+    synthesise: bool = True
 
     def __post_init__(self):
         if self.folds < 2:
@@ -321,8 +330,8 @@ def display(value: float, unit: str) -> tuple[float, str]:
 
 
 def effect_summary(result: CalibrationResult, cand: Candidate) -> list[dict]:
-    """The added effect's parameters: name, SI value and u, display value and u, and for an eccentricity
-    the amplitude and phase of each harmonic (``a sin(h q + phi)``, amplitude u by linear propagation)."""
+    """The added effect's parameters: name, SI value and u, display value and u, and for an eccentricity or
+    joint harmonics the amplitude and phase of each harmonic (``a sin(h q + phi)``, amplitude u by linear propagation)."""
     desc = result.model.desc
     rows = []
     for name, unit in cand.effect.param_defs(desc):
@@ -331,22 +340,20 @@ def effect_summary(result: CalibrationResult, cand: Candidate) -> list[dict]:
         state = "free" if name in result.free else "fixed (not identifiable)"
         rows.append({"name": name, "unit": unit, "value": v, "u": u, "display_value": dv,
                      "display_u": display(u, unit)[0], "display_unit": du, "state": state})
-    if cand.family == "eccentricity":
-        for i in cand.effect.joint_indices(desc):
-            jn = desc.joints[i].name
-            for h in cand.effect.harmonics:
-                nc, ns = f"{jn}.ecc{h}_cos", f"{jn}.ecc{h}_sin"
-                c, s = result.value(nc), result.value(ns)
-                a = math.hypot(c, s)
-                ua = float("nan")
-                if nc in result.free and ns in result.free and a > 0:
-                    ic, is_ = result.free.index(nc), result.free.index(ns)
-                    g = np.array([c / a, s / a])
-                    cov = result.cov[np.ix_([ic, is_], [ic, is_])]
-                    ua = float(math.sqrt(g @ cov @ g))
-                rows.append({"name": f"{jn}.ecc{h}_amplitude", "unit": "rad", "value": a, "u": ua,
-                             "display_value": math.degrees(a), "display_u": math.degrees(ua), "display_unit": "deg",
-                             "state": "derived", "phase_deg": math.degrees(math.atan2(c, s))})
+    if cand.family in ("eccentricity", "joint_harmonics"):
+        defs = [n for n, _ in cand.effect.param_defs(desc)]
+        for nc, ns in zip(defs[0::2], defs[1::2]):         # (cos, sin) pairs of each harmonic
+            c, s = result.value(nc), result.value(ns)
+            a = math.hypot(c, s)
+            ua = float("nan")
+            if nc in result.free and ns in result.free and a > 0:
+                ic, is_ = result.free.index(nc), result.free.index(ns)
+                g = np.array([c / a, s / a])
+                cov = result.cov[np.ix_([ic, is_], [ic, is_])]
+                ua = float(math.sqrt(g @ cov @ g))
+            rows.append({"name": nc.replace("_cos", "_amplitude", 1), "unit": "rad", "value": a, "u": ua,
+                         "display_value": math.degrees(a), "display_u": math.degrees(ua), "display_unit": "deg",
+                         "state": "derived", "phase_deg": math.degrees(math.atan2(c, s))})
     return rows
 
 
@@ -448,6 +455,8 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
     base_folds: FoldFit | None = None
     remaining = list(cands)
     stop, last_tests, last_cv = "", [], []
+    synthesised: list[Candidate] = []      # every candidate built from the residual, in the order offered
+    synthesised_here = False               # built at this stage already
     while True:
         say(f"screening {len(remaining)} candidate(s) at stage {len(stages) - 1}")
         tests, space = screen_candidates(result, remaining, fold_of, settings.rank_tol)
@@ -458,8 +467,12 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         gate = settings.screen_alpha / max(len(ident), 1)
         gated = [(c, t) for c, t in ident if t.p_value < gate][: settings.cv_top]
         if not gated:
+            if not synthesised_here and _offer_synthesised(result, model, fold_of, settings, remaining, synthesised,
+                                                           say):
+                synthesised_here = True
+                continue
             stop = (f"no candidate passes the screening (score-test p < {gate:.2g}): nothing significant remains "
-                    "that the library explains")
+                    "that the library or an effect built from the residual explains")
             break
         if len(stages) - 1 >= settings.max_effects:
             stop = f"the maximum number of effects ({settings.max_effects}) was added"
@@ -489,10 +502,19 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         last_cv = cvs
         passing = [(c, cv) for (c, _), cv in zip(gated, cvs) if cv.passed]
         if not passing:
+            if not synthesised_here and _offer_synthesised(result, model, fold_of, settings, remaining, synthesised,
+                                                           say):
+                synthesised_here = True
+                continue
             stop = "no screened candidate improves the held-out data significantly"
             break
         rank = {c.name: t.rank for c, t in gated}
         cand, cv = max(passing, key=lambda x: x[1].improvement)
+        if cand.origin == RESIDUAL and cand.family == "joint_harmonics":
+            # the harmonic order: the fewest parameters within the parsimony margin of the best held-out drop
+            same = [(c, v) for c, v in passing if c.family == cand.family and c.joint == cand.joint
+                    and cv.improvement - v.improvement <= PARSIMONY]
+            cand, cv = min(same, key=lambda x: x[0].size(desc))
         wcols = _candidate_cols(space, remaining, remaining.index(cand), tests[remaining.index(cand)])
         # parsimony: a passing candidate inside the best one's signature, with fewer parameters and nearly
         # the same held-out improvement, explains as much with less
@@ -535,7 +557,9 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         say(f"  + {cand.name}: held-out test RMS {stage.heldout['rms_um']:.2f} um "
             f"(base {stages[0].heldout['rms_um']:.2f} um)")
         base_folds = cv.folds
-        remaining = [c for c in remaining if c is not cand]
+        synthesised_here = False
+        have = set(model.spec.names)      # e.g. the other harmonic orders of a joint once one is in
+        remaining = [c for c in remaining if c is not cand and not set(c.param_names(desc)) & have]
         if not remaining:
             stop = "every candidate was added"
             last_tests, last_cv = [], []
@@ -548,10 +572,31 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
     significant = [(f, t, min(1.0, t.p_value * len(structure)))
                    for f, t in remaining_structure(space, fold_of, settings.alpha, settings.rank_tol)]
     plots = {f.name: binned_estimates(space, f) for f, _, _ in significant[:4]}
-    verdict = _verdict(stages, significant, stop, settings)
+    verdict = _verdict(stages, significant, stop, settings, synthesised)
     say(verdict)
-    return LoopResult(stages, last_tests, last_cv, stop, structure, significant, verdict, cands, skipped,
-                      design.measurements(), test.measurements(), settings, desc, plots, dropped)
+    return LoopResult(stages, last_tests, last_cv, stop, structure, significant, verdict, cands + synthesised,
+                      skipped, design.measurements(), test.measurements(), settings, desc, plots, dropped)
+
+
+def _offer_synthesised(result, model, fold_of, settings, remaining: list, synthesised: list, say) -> bool:
+    """When the library is exhausted: the structure families still significant at ``result`` (forward
+    selection, Bonferroni, held-out explained variance > 0) become candidate effects
+    (:func:`calibration.synthesis.synthesise`), appended to ``remaining`` (and ``synthesised``) to be
+    screened and cross-validated like any candidate. Returns whether any new candidate was offered."""
+    if not settings.synthesise:
+        return False
+    kept = remaining_structure(residual_space(result), fold_of, settings.alpha, settings.rank_tol)
+    if not kept:
+        return False
+    known = {c.name for c in remaining} | {c.name for c in synthesised}
+    new = [c for c in synthesise([f.name for f, _ in kept], model) if c.name not in known]
+    if not new:
+        return False
+    say(f"  structure remains ({', '.join(f.name for f, _ in kept)}): offering "
+        f"{', '.join(c.name for c in new)} (built from the residual)")
+    remaining.extend(new)
+    synthesised.extend(new)
+    return True
 
 
 def _drop_design_outliers(result: CalibrationResult, design: CalibrationData, fit, max_share: float = 0.1):
@@ -628,8 +673,9 @@ def _candidate_cols(space: ResidualSpace, remaining: list, i: int, test: GroupTe
 S0_LIMIT = 3.0
 
 
-def _verdict(stages, significant, stop, settings) -> str:
-    added = [s.added.name for s in stages[1:]]
+def _verdict(stages, significant, stop, settings, synthesised=()) -> str:
+    added = [s.added.name + (" (found from the residual)" if s.added.origin == RESIDUAL else "")
+             for s in stages[1:]]
     s0 = stages[-1].result.s0
     head = ("effects added: " + ", ".join(added) if added else "no effect added")
     base, last = stages[0].heldout, stages[-1].heldout
@@ -644,5 +690,9 @@ def _verdict(stages, significant, stop, settings) -> str:
         return head + (". No structured residual remains (no regressor family is significant after Bonferroni's "
                        "correction).")
     fams = "; ".join(f"{f.name} ({t.best})" if t.best else f.name for f, t, _ in significant)
-    return (head + f". Structured residual remains, not explained by the effect library: it correlates with {fams}. "
-            "No fix is claimed for it.")
+    added_names = {s.added.name for s in stages[1:]}
+    tried = [c.name for c in synthesised if c.name not in added_names]
+    built = (f" nor by the effects built from it that were tried and not supported by held-out data "
+             f"({', '.join(tried)})" if tried else "")
+    return (head + f". Structured residual remains, not explained by the effect library{built}: it correlates with "
+            f"{fams}. No fix is claimed for it.")

@@ -53,6 +53,10 @@ def register(sub) -> None:
     p.add_argument("--candidates", default=None, metavar="KEYS",
                    help="comma-separated candidate families (default all): eccentricity, joint_compliance, thermal, "
                         "force_sensor, probe_compliance")
+    p.add_argument("--library-only", action="store_true",
+                   help="do not build effects from the residual's structure once the library is exhausted "
+                        "(default: build them: joint harmonics, per-link and probe thermal growth, a probe "
+                        "compliance matrix, an approach offset, lateral joint compliance)")
     p.add_argument("--effect", action="append", metavar="KEY",
                    help="an effect already in the base model (repeatable; not a candidate then), e.g. thermal")
     p.add_argument("--free", action="append", metavar="PATTERN",
@@ -94,7 +98,8 @@ def run(args: argparse.Namespace) -> int:
                       None if args.sigma_length_um is None else args.sigma_length_um * 1e-6)
     settings = LoopSettings(folds=args.folds, test_fraction=args.test_fraction, alpha=args.alpha,
                             screen_alpha=args.screen_alpha, min_improvement=args.min_improvement,
-                            max_effects=args.max_effects, cv_top=args.cv_top, seed=args.seed)
+                            max_effects=args.max_effects, cv_top=args.cv_top, seed=args.seed,
+                            synthesise=not args.library_only)
     t0 = time.perf_counter()
 
     def progress(msg: str) -> None:

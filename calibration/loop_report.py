@@ -57,7 +57,7 @@ def _stage_dict(s: Stage) -> dict:
            "heldout_test": s.heldout}
     if s.added is not None:
         out["added"] = {"name": s.added.name, "family": s.added.family, "joint": s.added.joint,
-                        "effect": s.added.effect.describe(), "parameters": effect_summary(r, s.added),
+                        "origin": s.added.origin, "effect": s.added.effect.describe(), "parameters": effect_summary(r, s.added),
                         "indistinguishable_nested": s.nested, "indistinguishable_alternatives": s.alternatives}
         out["screening"] = [t.to_dict() for t in s.screening]
         out["cross_validation"] = [c.to_dict() for c in s.cv]
@@ -71,6 +71,8 @@ def summary_dict(loop: LoopResult, inputs: dict | None = None) -> dict:
     prev = base
     for s in loop.stages[1:]:
         effects.append({"name": s.added.name, "family": s.added.family, "joint": s.added.joint,
+                        "origin": s.added.origin,
+                        "found_from_the_residual": s.added.origin == "residual",
                         "parameters": effect_summary(s.result, s.added),
                         "heldout_before": {"rms_um": prev["rms_um"], "max_um": prev["max_um"],
                                            "standard": prev["standard"]},
@@ -83,8 +85,8 @@ def summary_dict(loop: LoopResult, inputs: dict | None = None) -> dict:
         "arm": loop.desc.name,
         "settings": loop.settings.to_dict(),
         "measurements": {"design": loop.design, "test": loop.test},
-        "candidates": [{"name": c.name, "family": c.family, "joint": c.joint, "effect": c.effect.describe()}
-                       for c in loop.candidates],
+        "candidates": [{"name": c.name, "family": c.family, "joint": c.joint, "effect": c.effect.describe(),
+                        "origin": c.origin} for c in loop.candidates],
         "skipped_candidates": [{"name": s.name, "reason": s.reason} for s in loop.skipped],
         "effects_added": effects,
         "before_after": loop.before_after(),
@@ -294,7 +296,8 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
                     f"<pre>{html.escape(table)}</pre><img src='{img}'>")
     for s in loop.stages[1:]:
         gate = loop.settings.screen_alpha / max(sum(t.identifiable for t in s.screening), 1)
-        parts = [f"<h2>Stage {s.index}: + {html.escape(s.added.name)}</h2>"]
+        found = " (found from the residual)" if s.added.origin == "residual" else ""
+        parts = [f"<h2>Stage {s.index}: + {html.escape(s.added.name)}{found}</h2>"]
         prm = effect_summary(s.result, s.added)
         parts.append(_table(("parameter", "value", "u (1 sigma)", "unit", "state"),
                             [(r["name"], _g(r["display_value"], ".5g"), _g(r["display_u"], ".2g"), r["display_unit"],
