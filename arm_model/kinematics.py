@@ -11,11 +11,11 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from .chain import NUMPY_OPS, ball_centre_expr, chain_point
+from .chain import NUMPY_OPS, ball_centre_expr
 from .description import ArmDescription
 from .params import split_params
 
-__all__ = ["ball_centres", "rigid_centres", "as_wrench", "probe_rotations"]
+__all__ = ["ball_centres", "rigid_centres", "as_wrench"]
 
 _CHUNK = 16384
 
@@ -88,14 +88,3 @@ def ball_centres(desc: ArmDescription, q, wrench=None, p=None, *, threads: int |
 def rigid_centres(desc: ArmDescription, q, p=None, **kw) -> np.ndarray:
     """Ball centres [m] with a rigid stylus (zero wrench)."""
     return ball_centres(desc, q, None, p, **kw)
-
-
-def probe_rotations(desc: ArmDescription, q, p=None) -> np.ndarray:
-    """(N, 3, 3) rotation R_base_probe of the probe frame (= last joint frame; columns: its x, y, z
-    axes in the base frame) at joint angles ``q`` (N, J) [rad] with parameter errors ``p`` (rigid chain)."""
-    rows, _, _ = split_params(desc, None if p is None else np.asarray(p, dtype=float))
-    qt = list(np.asarray(q, dtype=float).T)
-    o = np.array(chain_point(desc.convention, rows, qt, (0.0, 0.0, 0.0), NUMPY_OPS, desc.axes))
-    cols = [np.array(chain_point(desc.convention, rows, qt, tuple(e), NUMPY_OPS, desc.axes)) - o
-            for e in np.eye(3)]
-    return np.stack(cols, axis=-1).transpose(1, 0, 2)

@@ -1,13 +1,10 @@
-"""The simulator's fast path: small campaigns from a known true model (for tests, studies, benchmarks).
+"""Small synthetic calibration campaigns from a known true arm (for tests, benchmarks, planning).
 
-The full campaign (:func:`arm_model.sim.simulate`) has an operator, force signals, a drawn truth and
-encoder quantisation. This path takes the true arm as given, ``model`` (a core
-:class:`~arm_model.model.ArmModel` with any effects that need no joint torques) with parameters
-``p_true``, draws artefact points in a working volume, and finds the readings with the simulator's
-own inverse kinematics (:func:`arm_model.sim.ik.solve_ik`, on the :class:`~arm_model.sim.truth.Truth`
-of ``(model, p_true)``: the probe's stylus inside a cone about the approach, the redundancy drawn at
-random), then maps the true angles to encoder readings through the model's effects. Every true
-deflected ball centre lies on its artefact (to 1e-12 m) before the probing noise is added.
+The full measurement simulator is :mod:`arm_model.sim` (operator, force signals, hidden effects);
+this module only needs forward kinematics and a vectorised inverse kinematics on the true model,
+so calibration can be tested on its own. The true arm is ``model`` with parameter errors
+``p_true``; every true deflected ball centre lies exactly (to 1e-12 m) on its artefact before the
+probing noise is added.
 
 Artefacts made: ball bars (two spheres or two seats at a certified length, several positions),
 seat articulations, spheres, rings (inner cylinders) and planes, and reference (tracker) points
@@ -20,19 +17,16 @@ from pathlib import Path
 
 import numpy as np
 
-from .._errors import NumericalError
-from ..geometry import ball_centre_radius, perpendicular_basis, rotation_xyz
-from ..io import Artefacts, Distance, Feature, PointSet, atomic_write_text, write_csv
-from ..model import ArmModel, AuxData
-from .artefacts import _shoulder, cone_directions
-from .ik import IKTargets, joint_limits, solve_points
-from .truth import Truth
+from arm_model import NumericalError
+from arm_model.chain import NUMPY_OPS, chain_point
+from arm_model.io import Artefacts, Distance, Feature, PointSet, atomic_write_text, write_csv
+from arm_model.model import ArmModel, AuxData
+from arm_model.params import split_params
 
-__all__ = ["SynthSpec", "SynthCampaign", "random_truth", "random_q", "make_campaign"]
+from arm_model.geometry import perpendicular_basis, rotation_xyz
 
-#: half-angle [rad] of the cone about the approach direction the stylus is drawn from
-_STYLUS_CONE = {"seat": np.radians(60.0), "sphere": np.radians(75.0), "ring": np.radians(10.0),
-                "plane": np.radians(60.0)}
+__all__ = ["SynthSpec", "SynthCampaign", "random_truth", "random_q", "solve_ik", "make_campaign",
+           "probe_rotation"]
 
 
 @dataclass(frozen=True)
@@ -96,16 +90,19 @@ class SynthCampaign:
         files = {"points": _write_points(out / "points.csv", self.points)}
         if self.reference_points is not None:
             files["reference"] = _write_points(out / "points-ref.csv", self.reference_points)
-        import tomli_w
-
-        doc = {"feature": [{"id": f.id, "kind": f.kind, **({} if f.diameter is None else
-                                                             {"diameter_mm": f.diameter * 1e3})}
-                           for f in self.artefacts.features.values()],
-               "distance": [{"between": list(d.between), "length_mm": d.length * 1e3,
-                             **({} if d.u_length is None else {"u_length_mm": d.u_length * 1e3})}
-                            for d in self.artefacts.distances]}
-        doc = {k: v for k, v in doc.items() if v}
-        files["artefacts"] = atomic_write_text(out / "artefacts.toml", tomli_w.dumps(doc))
+        lines = []
+        for f in self.artefacts.features.values():
+            lines += ["[[feature]]", f'id = "{f.id}"', f'kind = "{f.kind}"']
+            if f.diameter is not None:
+                lines.append(f"diameter_mm = {f.diameter * 1e3!r}")
+            lines.append("")
+        for d in self.artefacts.distances:
+            lines += ["[[distance]]", f'between = ["{d.between[0]}", "{d.between[1]}"]',
+                      f"length_mm = {d.length * 1e3!r}"]
+            if d.u_length is not None:
+                lines.append(f"u_length_mm = {d.u_length * 1e3!r}")
+            lines.append("")
+        files["artefacts"] = atomic_write_text(out / "artefacts.toml", "\n".join(lines))
         return files
 
 
@@ -141,60 +138,85 @@ def random_truth(model: ArmModel, rng, length: float = 50e-6, angle: float = 1e-
     return p
 
 
-def random_q(desc, n: int, rng, margin: float = 0.05) -> np.ndarray:
-    """(n, J) joint angles [rad] uniform within the limits less ``margin`` (full turns clipped to +-pi)."""
-    lo, hi = joint_limits(desc)
-    lo, hi = np.maximum(lo, -np.pi) + margin, np.minimum(hi, np.pi) - margin
+def _limits(desc, margin: float = 0.05):
+    lo = np.array([-np.pi if j.lower is None else max(j.lower, -np.pi) for j in desc.joints]) + margin
+    hi = np.array([np.pi if j.upper is None else min(j.upper, np.pi) for j in desc.joints]) - margin
+    return lo, hi
+
+
+def random_q(desc, n: int, rng) -> np.ndarray:
+    """(n, J) joint angles [rad] uniform within the limits (full turns clipped to +-pi)."""
+    lo, hi = _limits(desc)
     return rng.uniform(lo, hi, size=(n, desc.n_joints))
 
 
-def _starts(truth: Truth, targets, approach, cones, rng, k: int = 48):
-    """For each target: of ``k`` random poses, the nearest whose stylus is inside the cone about the
-    approach, and that stylus direction (a random articulation, as an operator takes it); without such
-    a pose, the nearest pose and a direction drawn in the cone. Returns (starts (n, J), stylus (n, 3))."""
-    n = len(targets)
-    cand = random_q(truth.nominal, k * n, rng, 0.0)
-    x, z, _ = truth.pose(cand, truth.geometry(np.full(k * n, 20.0)))
-    x, z = x.reshape(n, k, 3), z.reshape(n, k, 3)
-    dist = np.linalg.norm(x - targets[:, None], axis=2)
-    inside = np.einsum("nkj,nj->nk", z, approach) >= np.cos(cones)[:, None]
-    best = np.argmin(np.where(inside, dist, np.inf), axis=1)
-    found = inside[np.arange(n), best]
-    best = np.where(found, best, np.argmin(dist, axis=1))
-    drawn = np.array([cone_directions(rng, a, c, 1)[0] for a, c in zip(approach, cones)]).reshape(-1, 3)
-    return cand.reshape(n, k, -1)[np.arange(n), best], np.where(found[:, None], z[np.arange(n), best], drawn)
+def probe_rotation(model: ArmModel, q: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) rotation of the probe frame (= last joint frame) in the base frame (rigid chain)."""
+    desc = model.desc
+    rows, _, _ = split_params(desc, np.asarray(p)[: model.base_size])
+    qt = list(np.asarray(q).T)
+    o = np.array(chain_point(desc.convention, rows, qt, (0.0, 0.0, 0.0), NUMPY_OPS, desc.axes))
+    cols = [np.array(chain_point(desc.convention, rows, qt, tuple(e), NUMPY_OPS, desc.axes)) - o
+            for e in np.eye(3)]
+    return np.stack(cols, axis=-1).transpose(1, 0, 2)
 
 
-def _readings(model: ArmModel, p_true, targets, approach, cones, rng, force_base, labels, rounds: int = 40):
-    """Encoder readings (n, J) [rad] and probe-frame wrenches (n, 6) that put the true deflected ball
-    centre on ``targets`` (n, 3) [m]: the simulator's IK (:func:`arm_model.sim.ik.solve_points`) on the
-    true arm from the starts of :func:`_starts` (new ones each round for the points left), then the
-    effects' inverse (:meth:`Truth.encoder_readings`)."""
+def _jac_fn(model: ArmModel, n: int):
+    import casadi as ca
+    f = model.casadi_function()
+    q, w, aux, p = (ca.SX.sym(nm, f.size1_in(i)) for i, nm in enumerate(("q", "w", "aux", "p")))
+    x = f(q, w, aux, p)
+    return ca.Function("xq", [q, w, aux, p], [x, ca.jacobian(x, q)]).map(n)
+
+
+def solve_ik(model: ArmModel, p: np.ndarray, targets: np.ndarray, rng, force_base: np.ndarray | None = None,
+             q0: np.ndarray | None = None, tol: float = 1e-12, tries: int = 20) -> tuple[np.ndarray, np.ndarray]:
+    """Encoder readings that put the true deflected ball centre on ``targets`` (n, 3) [m].
+
+    Damped Gauss-Newton from random starts (the redundancy gives random articulations); solutions
+    outside the joint limits are retried. ``force_base`` (n, 3) [N]: the contact force in the base
+    frame; the wrench in the probe frame follows the pose. Returns (q (n, J) [rad], wrench (n, 6)).
+    """
     if model.needs() - {"temperature"}:
-        raise ValueError("the fast path supports effects that need no joint torques")
-    n = len(targets)
-    truth = Truth(model, np.asarray(p_true, float), np.zeros((3, 3)), np.zeros(3), np.zeros(3))
-    force = np.zeros((n, 3)) if force_base is None else np.asarray(force_base, float)
-    temperature = np.full(n, 20.0)
-    q, wrench = np.full((n, model.desc.n_joints), np.nan), np.zeros((n, 6))
-    pending = np.arange(n)
-    for r in range(rounds):
-        # after 10 rounds a point that finds no articulation with the stylus in its cone takes any stylus
-        # direction the arm allows (the operator approaches however they can)
-        cone = cones[pending] if r < 10 else np.full(len(pending), np.pi)
-        starts, stylus = _starts(truth, targets[pending], approach[pending], cone, rng)
-        tg = IKTargets(targets[pending], stylus, np.full((len(pending), 3), np.nan), force[pending],
-                       np.zeros((len(pending), 3)), temperature[pending])
-        res, left = solve_points(truth, tg, rng, max_attempts=1, starts=starts)
-        ok = np.setdiff1d(np.arange(len(pending)), left)
-        q[pending[ok]], wrench[pending[ok]] = res.q[ok], res.wrench[ok]
-        pending = pending[left]
-        if pending.size == 0:
-            return truth.encoder_readings(q, truth.aux(temperature)), wrench
-    names = ", ".join(labels[i] for i in pending[:8])
-    raise NumericalError(f"inverse kinematics found no solution inside the joint limits for {pending.size} "
-                         f"point(s): {names}{' ...' if pending.size > 8 else ''}; the target is probably out of "
-                         "reach: move the working volume closer to the arm")
+        raise ValueError("synthetic IK supports effects that need no joint torques")
+    n, jn = len(targets), model.desc.n_joints
+    lo, hi = _limits(model.desc, 0.0)
+    def starts(idx):            # the nearest of 32 random poses to each target
+        cand = random_q(model.desc, 32 * len(idx), rng)
+        xc = model.ball_centres(cand, None, p, AuxData(temperature=np.full(len(cand), 20.0))
+                                if "temperature" in model.needs() else None).reshape(len(idx), 32, 3)
+        best = np.argmin(np.linalg.norm(xc - targets[idx, None, :], axis=2), axis=1)
+        return cand.reshape(len(idx), 32, jn)[np.arange(len(idx)), best]
+
+    q = starts(np.arange(n)) if q0 is None else q0.copy()
+    w = np.zeros((n, 6))
+    aux = np.zeros((1 + 2 * jn, n))
+    aux[0] = 20.0
+    fn = _jac_fn(model, n)
+    todo = np.ones(n, bool)
+    for attempt in range(tries):
+        for it in range(100):
+            if force_base is not None:
+                rot = probe_rotation(model, q, p)
+                w[:, :3] = np.einsum("nji,nj->ni", rot, force_base)
+            x, jq = fn(q.T, w.T, aux, p)
+            x = np.asarray(x).T
+            jq = np.asarray(jq).reshape(3, n, jn).transpose(1, 0, 2)
+            e = targets - x
+            err = np.linalg.norm(e, axis=1)
+            if np.all(err[todo] < tol) and it > 0:
+                break
+            lam = np.minimum(1e-2, err)[:, None, None] ** 2
+            a = jq @ jq.transpose(0, 2, 1) + lam * np.eye(3)
+            dq = np.einsum("nji,nj->ni", jq, np.linalg.solve(a, e[:, :, None])[:, :, 0])
+            step = np.linalg.norm(dq, axis=1, keepdims=True)
+            q = np.where(todo[:, None], q + dq * np.minimum(1.0, 0.5 / np.maximum(step, 1e-300)), q)
+        bad = (err > tol) | np.any(q < lo, axis=1) | np.any(q > hi, axis=1)
+        if not bad.any():
+            return q, w
+        q[bad] = starts(np.flatnonzero(bad))
+        todo = bad
+    raise NumericalError(f"synthetic IK: {int(bad.sum())} of {n} targets not reached within the joint limits")
 
 
 def _hemisphere(rng, n: int, axis=(0, 0, 1), min_cos: float = 0.2) -> np.ndarray:
@@ -215,11 +237,11 @@ def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0,
     p_true = random_truth(model, rng) if p_true is None else np.asarray(p_true, float)
     ball = desc.probe.ball_diameter
     centre, spread = np.asarray(spec.centre), np.asarray(spec.spread)
-    meas, feat, targets, normals, approach = [], [], [], [], []
+    meas, feat, targets, normals = [], [], [], []
     features: dict[str, Feature] = {}
     distances = []
 
-    shoulder = _shoulder(desc)
+    shoulder = np.array([0.0, 0.0, desc.joints[0].d])
 
     def reachable(x) -> bool:
         return 0.35 <= np.linalg.norm(x - shoulder) <= 0.85
@@ -230,16 +252,15 @@ def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0,
             if reachable(x):
                 return x
 
-    def add(m, f, pts, nrm, stylus=None):
+    def add(m, f, pts, nrm):
         meas.extend([m] * len(pts))
         feat.extend([f] * len(pts))
         targets.extend(pts)
         normals.extend(nrm)
-        approach.extend(-np.asarray(nrm, float) if stylus is None else np.tile(stylus, (len(pts), 1)))
 
     def sphere_points(c, diameter, k):
         nrm = _hemisphere(rng, k)
-        return c + nrm * ball_centre_radius("sphere", diameter, ball), nrm
+        return c + nrm * (diameter + ball) / 2, nrm
 
     if spec.ballbars:
         if spec.ballbar_kind == "sphere":
@@ -277,7 +298,7 @@ def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0,
             add(f"sphere-{i + 1:02d}", "sphere", pts, nrm)
     if spec.rings:
         features["ring"] = Feature("ring", "ring", spec.ring_diameter)
-        rad = ball_centre_radius("ring", spec.ring_diameter, ball)
+        rad = (spec.ring_diameter - ball) / 2
         for i in range(spec.rings):
             c = place()
             axis = np.array([0, 0, 1.0]) + rng.normal(0, 0.05, 3)
@@ -287,7 +308,7 @@ def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0,
             ang = np.linspace(0, 2 * np.pi, k, endpoint=False) + rng.uniform(0, 2 * np.pi)
             h = np.repeat([-0.01, 0.0, 0.01], int(np.ceil(k / 3)))[:k]
             radial = np.outer(np.cos(ang), e1) + np.outer(np.sin(ang), e2)
-            add(f"ring-{i + 1:02d}", "ring", c + rad * radial + np.outer(h, axis), -radial, -axis)
+            add(f"ring-{i + 1:02d}", "ring", c + rad * radial + np.outer(h, axis), -radial)
     if spec.planes:
         features["plane"] = Feature("plane", "plane")
         for i in range(spec.planes):
@@ -306,11 +327,7 @@ def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0,
     if spec.force > 0:
         mag = rng.gamma(4.0, spec.force / 4.0, n_art)
         force_base = normals * mag[:, None]
-    kinds = np.array([features[f].kind for f in feat], dtype=object)
-    cones = np.array([_STYLUS_CONE[k] for k in kinds]).reshape(-1)
-    labels = [f"{m} point {k + 1} ({f})" for k, (m, f) in enumerate(zip(meas, feat))]
-    q_art, w_art = (_readings(model, p_true, targets + noise, np.array(approach).reshape(-1, 3), cones, rng,
-                              force_base, labels) if n_art
+    q_art, w_art = (solve_ik(model, p_true, targets + noise, rng, force_base) if n_art
                     else (np.zeros((0, desc.n_joints)), np.zeros((0, 6))))
     n = len(meas)
     needs_t = "temperature" in model.needs()
