@@ -103,7 +103,8 @@ def register(sub) -> None:
                     "(held fixed and listed, or the fit stops), uncertainties and correlations, outliers "
                     "(kept unless --drop-outliers), and validation figures (ASME B89.4.22 / ISO 10360-12 terms) "
                     "nominal vs calibrated on the training data and on held-out measurements. Writes a NEW "
-                    "calibrated description (TOML and URDF), summary.json, CSV tables and report.html.",
+                    "calibrated model file (the description with every effect and its parameters, TOML, read by every "
+                    "--arm), its covariance (CSV) and URDF, summary.json, CSV tables and report.html.",
         epilog="Parameter names: docs/calibration.md. Example: aacmm calibrate points.csv artefacts.toml "
                "--arm urdf/aacmm7.dh.toml --reference-points points-ref.csv --holdout 0.2 -o out/cal")
     campaign_inputs(c)
@@ -225,6 +226,7 @@ def _load_data(args):
 def run_calibrate(args: argparse.Namespace) -> int:
     from .calibrate import calibrate
     from .data import split_holdout
+    from .model_output import refine_torques
     from .report import poorly_determined, write_outputs
     inputs = [args.points, args.artefacts, args.arm, args.reference_points]
     with output_folder(args.output, inputs, "calibrate") as out:
@@ -240,6 +242,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
         res = calibrate(model, train, _free(model, args), values=values, weights=_weights(args),
                         on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
                         drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference, **kw)
+        res = refine_torques(res, covariance=args.covariance, outlier_threshold=args.outlier_threshold,
+                             **{k: v for k, v in kw.items() if k == "rank_tol"})
         val_train = res.compare(res.data)
         val_test = res.compare(test) if test is not None else None
         files = write_outputs(res, out.dir, inputs=inputs, validation_training=val_train,
@@ -275,7 +279,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
             print(f"validation on {title} data (nominal -> calibrated):")
             for r in rows:
                 print(f"  {r['label']}: {r['before']:.2f} -> {r['after']:.2f} {r['unit']} ({r['ratio']:.1f}x)")
-    print(f"calibrated description -> {files['description']}; report -> {files['report']}")
+    print(f"model file -> {files['description']} (covariance {files['covariance'].name}); "
+          f"report -> {files['report']}")
     return 0
 
 

@@ -29,7 +29,9 @@ def register(sub) -> None:
                     "Then the residual is tested against generic regressors (joint-angle harmonics, gravity and "
                     "contact torques, force, temperature, time, approach direction, measurement, artefact): a "
                     "significant one is reported as structure the library does not explain, with no fix claimed. "
-                    "Writes summary.json, report.html (with PNG plots) and before-after.txt; prints the "
+                    "Writes the final model as a model file (<arm>-calibrated.toml with its covariance and URDF; "
+                    "every --arm applies it), summary.json, report.html (with PNG plots) and before-after.txt; "
+                    "prints the "
                     "before/after table of the held-out test set.",
         epilog="Example: aacmm close-loop points.csv artefacts.toml --arm urdf/aacmm7.dh.toml "
                "--reference-points points-ref.csv -o out/loop. Method and outputs: docs/close-loop.md")
@@ -77,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
     from .data import Weights
     from .loop import LoopSettings, close_loop
     from .loop_report import before_after_text, write_loop_report
+    from .model_output import refine_torques
 
     inputs = [p for p in (args.points, args.artefacts, args.arm, args.reference_points) if p is not None]
     families = None
@@ -118,6 +121,9 @@ def run(args: argparse.Namespace) -> int:
         loop = close_loop(points, artefacts, desc, reference=reference, effects=tuple(effects), values=arm.values,
                           free=args.free,
                           weights=weights, settings=settings, families_=families, progress=progress)
+        final = loop.stages[-1]
+        final.result = refine_torques(final.result, rank_tol=settings.rank_tol,
+                                      outlier_threshold=settings.outlier_threshold)
         names = {"points": str(args.points), "artefacts": str(args.artefacts), "arm": str(args.arm),
                  "reference_points": None if args.reference_points is None else str(args.reference_points)}
         write_loop_report(loop, out.dir, inputs=inputs, input_names=names, warnings=warnings)
@@ -126,5 +132,8 @@ def run(args: argparse.Namespace) -> int:
     for sk in loop.skipped:
         print(f"{sk.name} not offered: {sk.reason}")
     print(loop.verdict)
+    from .loop_report import loop_model_name
+    from .model_output import model_paths
+    print(f"model file: {model_paths(args.output, loop_model_name(loop))['model']} (every --arm applies it)")
     print(f"report: {args.output / 'report.html'}; machine summary: {args.output / 'summary.json'}")
     return 0
