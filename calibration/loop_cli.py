@@ -124,6 +124,9 @@ def run(args: argparse.Namespace) -> int:
         final = loop.stages[-1]
         final.result = refine_torques(final.result, rank_tol=settings.rank_tol,
                                       outlier_threshold=settings.outlier_threshold)
+        if loop.model_fit is not None:            # the model written (every point, calibrate's start)
+            loop.model_fit = refine_torques(loop.model_fit, rank_tol=settings.rank_tol,
+                                            outlier_threshold=settings.outlier_threshold)
         names = {"points": str(args.points), "artefacts": str(args.artefacts), "arm": str(args.arm),
                  "reference_points": None if args.reference_points is None else str(args.reference_points)}
         write_loop_report(loop, out.dir, inputs=inputs, input_names=names, warnings=warnings)
