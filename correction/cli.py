@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from arm_model import InputError, read_artefacts, read_points
-from arm_model.commands import add_arm_options, arm_from_args, non_negative, number_in, positive
+from arm_model import InputError, NumericalError, read_artefacts, read_points
+from arm_model.commands import add_arm_options, model_from_args, non_negative, number_in, positive
 from arm_model._output import output_folder
 from arm_model.checks import print_warnings
 from arm_model.io import check_features
@@ -63,14 +63,17 @@ def register(sub) -> None:
 
 
 def run_ring(args: argparse.Namespace) -> int:
-    from .models import analyse_ring_campaign, campaign_summary, check_reportable, ring_warnings
+    from arm_model.uncertainty import FORCE_SENSOR_U_N, default_inputs
+    from arm_model.uncertainty_cli import parameters_of
+    from .models import analyse_ring_campaign, campaign_summary, check_reportable, ring_uncertainties, ring_warnings
     from .report import DEFAULT_U_FORCE, ring_budgets, ring_report
 
     inputs = {"points": args.points, "artefacts": args.artefacts, "arm": args.arm}
     if args.signals is not None and not args.signals.is_dir():
         raise InputError("--signals must be a folder of <measurement>.csv force signals", args.signals)
     with output_folder(args.output, list(inputs.values()) + [args.signals], "ring") as out:
-        desc = arm_from_args(args)
+        arm = model_from_args(args)
+        desc = arm.desc
         points = read_points(args.points, desc.n_joints)
         artefacts = read_artefacts(args.artefacts)
         check_features(points, artefacts)
@@ -80,8 +83,16 @@ def run_ring(args: argparse.Namespace) -> int:
         warnings = ring_warnings(desc, points, campaign)
         u_force = DEFAULT_U_FORCE if args.u_force is None else args.u_force
         budgets = ring_budgets(campaign, u_force=u_force, delta_t=args.delta_t, probability=args.probability)
+        parameters = parameters_of(arm)
+        unc_inputs = default_inputs(desc, force=None if args.u_force is None else
+                                    (args.u_force, args.u_force, FORCE_SENSOR_U_N[2]))
+        try:
+            point_unc = ring_uncertainties(arm, points, campaign, parameters, unc_inputs)
+        except NumericalError as exc:
+            raise InputError(f"diameter uncertainty from the points: {exc}", args.points) from None
         inputs["signals"] = args.signals
-        written = ring_report(campaign, out.dir, inputs, budgets, warnings)
+        written = ring_report(campaign, out.dir, inputs, budgets, warnings, point_unc,
+                              parameters.source if parameters is not None else None)
     s = campaign_summary(campaign)
     print(f"ring '{campaign.feature}': {len(campaign.measurements)} measurements, "
           f"{sum(r.n_points for r in campaign.measurements)} points; forces from "
@@ -93,6 +104,9 @@ def run_ring(args: argparse.Namespace) -> int:
     for m, v in s.items():
         print(f"{m:<12} {v['mean_abs_diameter_error_mm']:>15.4f} {v['diameter_error_reduction_pct']:>9.1f}% "
               f"{v['mean_form_error_mm']:>15.4f}")
+    u = [x.u for x in point_unc]
+    print(f"diameter uncertainty from the points' covariances (k = 1): {min(u) * 1e3:.4f} .. {max(u) * 1e3:.4f} mm "
+          f"({'parameters from ' + parameters.source if parameters is not None else 'no parameter covariance: parameters exact'})")
     if args.u_force is None:
         print(f"budgets: u_force = {DEFAULT_U_FORCE} N (the paper's bending sensor; set --u-force-N for yours)")
     print(f"{len(written)} files -> {args.output}/ (report.html, summary.json, ...)")
