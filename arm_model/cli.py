@@ -8,6 +8,7 @@ import importlib.util
 import sys
 
 from ._errors import AacmmError
+from .shipped import version
 
 __all__ = ["main", "COMMAND_MODULES"]
 
@@ -27,7 +28,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="aacmm",
         description="Portable measuring arm toolkit: deflection-aware ball centres from encoder angles and "
                     "contact force, simulation, ring-gauge analysis, calibration and closing the loop. "
-                    "Files carry units in their column and key names (mm, deg, N ...).")
+                    "Files carry units in their column and key names (mm, deg, N ...); every format: docs/formats.md.")
+    parser.add_argument("--version", action="version", version=f"aacmm-toolkit {version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMAND_MODULES:
         if importlib.util.find_spec(name.rsplit(".", 1)[0]) is None or importlib.util.find_spec(name) is None:

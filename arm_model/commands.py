@@ -50,8 +50,8 @@ def fraction(text: str) -> float:
     return v
 
 
-def add_arm_options(p, help_arm: str = "the arm: description TOML (e.g. urdf/aacmm7.dh.toml) or a URDF "
-                                       "with --tip-frame") -> None:
+def add_arm_options(p, help_arm: str = "the arm: a shipped arm's name (aacmm7), a description TOML or a URDF "
+                                       "with --tip-frame (docs/formats.md §2, docs/own-arm.md)") -> None:
     """``--arm`` and ``--tip-frame``, the same for every subcommand."""
     p.add_argument("--arm", type=Path, required=True, help=help_arm)
     p.add_argument("--tip-frame", default=None, metavar="LINK",
@@ -71,7 +71,7 @@ def register(sub) -> None:
                     "the rigid ball centre, the deflection-corrected ball centre [mm] and the deflection [um]. "
                     "Points whose force exceeds the probe's calibrated range are flagged (over_force = 1), "
                     "never dropped.")
-    p.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
+    p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3)")
     add_arm_options(p)
     p.add_argument("-o", "--output", type=Path, required=True, help="output CSV (never one of the inputs)")
     p.set_defaults(func=run_tip)
@@ -85,6 +85,14 @@ def register(sub) -> None:
     u.add_argument("--tip-frame", default=None, metavar="LINK", help="for a URDF arm: the link at the ball centre")
     u.add_argument("-o", "--output", type=Path, required=True, help="output URDF")
     u.set_defaults(func=run_urdf)
+
+    e = sub.add_parser(
+        "examples", help="copy the example campaigns, data and docs into a folder",
+        description="Copy the shipped example campaigns (campaigns/*.toml, for aacmm simulate), the example "
+                    "data (data/: a simulated ring campaign, real measured robot data with its licence) and "
+                    "the user docs (docs/, e.g. docs/formats.md) into DIR. Existing files are never overwritten.")
+    e.add_argument("dir", type=Path, help="destination folder (created)")
+    e.set_defaults(func=run_examples)
 
 
 def tip_table(desc, points) -> dict:
@@ -126,6 +134,14 @@ def run_tip(args: argparse.Namespace) -> int:
         print(f"warning: {flagged} point(s) over the probe's calibrated force range "
               f"({desc.probe.max_force:g} N), flagged in column over_force; lines {', '.join(map(str, lines))}"
               + (" ..." if flagged > 10 else ""))
+    return 0
+
+
+def run_examples(args: argparse.Namespace) -> int:
+    from .shipped import copy_examples
+    written = copy_examples(args.dir)
+    print(f"examples -> {args.dir}/ ({', '.join(p.name for p in written)}); try: "
+          f"aacmm simulate {args.dir}/campaigns/paper-ring.toml -o out/paper-ring")
     return 0
 
 

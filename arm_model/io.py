@@ -1,4 +1,4 @@
-"""Readers and writers of the interchange formats (DATA-FORMATS §3-5). I/O lives here only.
+"""Readers and writers of the interchange formats (docs/formats.md §3-5). I/O lives here only.
 
 Readers stop at the first problem with one :class:`~arm_model.InputError` that names the file, the
 line (or key) and the column. Writers are atomic (temporary file, then rename) and refuse to write
@@ -33,7 +33,7 @@ _TEXT_COLUMNS = ("measurement", "feature")
 
 @dataclass(frozen=True)
 class PointSet:
-    """Captured points (DATA-FORMATS §3), SI inside.
+    """Captured points (docs/formats.md §3), SI inside.
 
     Attributes:
         path: the file read.
@@ -129,7 +129,7 @@ def csv_records(text: str, path: str) -> list[tuple[int, list[str]]]:
 
 
 def read_points(path: str | Path, n_joints: int | None = None) -> PointSet:
-    """Read a points CSV (DATA-FORMATS §3).
+    """Read a points CSV (docs/formats.md §3).
 
     Args:
         path: the CSV file.
@@ -319,7 +319,7 @@ def _toml_key_line(text: str, table: str, index: int, key: str | None) -> int | 
 
 
 def read_artefacts(path: str | Path) -> Artefacts:
-    """Read an artefacts TOML file (DATA-FORMATS §4)."""
+    """Read an artefacts TOML file (docs/formats.md §4)."""
     return parse_artefacts(read_text(path, "the artefacts file"), str(path))
 
 
@@ -408,7 +408,7 @@ def check_features(points: PointSet, artefacts: Artefacts) -> None:
 
 @dataclass(frozen=True)
 class ForceSignal:
-    """A force signal (DATA-FORMATS §5): ``time`` (M,) [s], ``force`` (M, 3) [N] in the probe frame
+    """A force signal (docs/formats.md §5): ``time`` (M,) [s], ``force`` (M, 3) [N] in the probe frame
     (probe y zero for the two-channel sensor), ``kind`` "xyz" or "two-channel"."""
     path: str
     time: np.ndarray

@@ -1,4 +1,4 @@
-"""An arm given as a URDF (DATA-FORMATS §2): the chain from the root link to the tip frame.
+"""An arm given as a URDF (docs/formats.md §2): the chain from the root link to the tip frame.
 
 Other branches are ignored (their joints held at zero). Fixed joints on the chain are folded into
 the next revolute joint's origin; those after the last revolute joint into the probe point. The
@@ -16,6 +16,7 @@ import numpy as np
 
 from ._errors import InputError
 from .description import ArmDescription, JointRow, Probe, load_description
+from .shipped import arm_path
 from .urdf import _origin_matrix, rpy_from_matrix
 
 __all__ = ["description_from_urdf", "load_arm", "PAPER_PROBE"]
@@ -117,8 +118,8 @@ def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None =
 
 
 def load_arm(path: str | Path, tip_frame: str | None = None, probe: dict | None = None) -> ArmDescription:
-    """An arm from a description TOML or, with ``tip_frame``, a URDF file."""
-    path = Path(path)
+    """An arm from a description TOML, a shipped arm's name (``aacmm7``) or, with ``tip_frame``, a URDF file."""
+    path = arm_path(path)
     if path.suffix.lower() == ".urdf":
         if not tip_frame:
             raise InputError("an arm given as a URDF needs --tip-frame (the link at the ball centre)", path)

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output
+from arm_model.shipped import provenance
 
 from .loop import LoopResult, Stage, effect_summary
 
@@ -315,6 +316,7 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
             "td,th{border:1px solid #ccc;padding:2px 6px}pre{background:#f6f6f6;padding:6px}</style></head><body>"
             f"<h1>Closing the loop: {html.escape(loop.desc.name)}</h1>" + "".join(sections) + "</body></html>")
     summary = summary_dict(loop, input_names)
+    summary.update(provenance(inputs))
     written.append(atomic_write_text(out / "summary.json", json.dumps(summary, indent=1) + "\n", inputs))
     written.append(atomic_write_text(out / "before-after.txt", table + "\n", inputs))
     written.append(atomic_write_text(out / "report.html", page, inputs))

@@ -15,6 +15,7 @@ import numpy as np
 from arm_model import InputError
 from arm_model.description import format_description
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, write_csv
+from arm_model.shipped import provenance
 from arm_model.urdf import urdf_text
 
 from .calibrate import CalibrationResult, display_unit
@@ -237,6 +238,7 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
     summary["poorly_determined"] = poorly_determined(result)
     if extra:
         summary.update(extra)
+    summary.update(provenance(inputs))
     if plots:
         atomic_write_bytes(files["residuals_png"], plot_residuals(result), inputs)
         atomic_write_bytes(files["parameters_png"], plot_parameters(result), inputs)

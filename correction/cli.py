@@ -25,11 +25,11 @@ def register(sub) -> None:
                     "centres evaluated again through the probe's elastic joint with each point's force vector). "
                     "Writes report.html, summary.json, table2.csv, correlations.csv, budgets.csv and "
                     "figures/*.png into the output folder.")
-    r.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3) with the ring's points")
-    r.add_argument("artefacts", type=Path, help="artefacts TOML (DATA-FORMATS §4) with the ring (kind = \"ring\")")
+    r.add_argument("points", type=Path, help="points CSV (docs/formats.md §3) with the ring's points")
+    r.add_argument("artefacts", type=Path, help="artefacts TOML (docs/formats.md §4) with the ring (kind = \"ring\")")
     add_arm_options(r)
     r.add_argument("--signals", type=Path, metavar="DIR",
-                   help="folder of force signals, one <measurement>.csv a measurement (DATA-FORMATS §5); "
+                   help="folder of force signals, one <measurement>.csv a measurement (docs/formats.md §5); "
                         "without it the points file's force columns are used")
     r.add_argument("--feature", metavar="ID", help="id of the ring feature when the artefacts file has several rings")
     r.add_argument("--compliance-mm-per-N", type=positive(), dest="compliance", metavar="C",

@@ -369,7 +369,7 @@ def fit_row_circles(points, cylinder: CylinderFit, rows=None) -> list[CircleFit]
 
 def ring_fit(ball_centres, ball_diameter: float, reference_diameter: float | None = None,
              axis_hint=None) -> RingFit:
-    """Fit an inner ring measured from inside with ball centres (DATA-FORMATS §4: the centres lie on a
+    """Fit an inner ring measured from inside with ball centres (docs/formats.md §4: the centres lie on a
     cylinder of diameter D - ball diameter).
 
     Args:

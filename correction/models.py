@@ -152,7 +152,7 @@ def measurement_forces(points: PointSet, measurement: str, signals=None) -> Poin
     path = Path(signals) / f"{measurement}.csv"
     if not path.exists():
         raise InputError(f"no force signal for measurement '{measurement}' (expected one file a measurement, "
-                         f"named <measurement>.csv, DATA-FORMATS §5)", path)
+                         f"named <measurement>.csv, docs/formats.md §5)", path)
     return find_point_forces(read_force_signal(path), len(rows), measurement)
 
 

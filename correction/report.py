@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output
+from arm_model.shipped import provenance
 
 from . import paper as P
 from .correlation import FORCE_VALUES, campaign_correlations
@@ -291,6 +292,7 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
     in_paths = [p for p in inputs.values() if p is not None]
     guard_output(out, in_paths)
     summary = ring_summary(campaign, budgets, {k: None if v is None else str(v) for k, v in inputs.items()})
+    summary.update(provenance(in_paths))
     t2 = table2(campaign)
     corr = campaign_correlations(campaign)
     figs = _ring_figures(campaign, budgets)
@@ -551,7 +553,7 @@ def paper_report(out: str | Path, table_path: str | Path | None = None) -> list[
     parts.append("<h3>Diameter error per measurement [mm]</h3>" + _table_html(
         ("measurement", "initial", "after FEM (mean force)", "after FEM + series compliance (LOO)"), rows))
     files = {"report.html": _page("The seed paper reproduced and the loop closed", parts),
-             "summary.json": json.dumps(s, indent=1, allow_nan=False) + "\n",
+             "summary.json": json.dumps({**s, **provenance([P.TABLE2_PATH if table_path is None else table_path])}, indent=1, allow_nan=False) + "\n",
              "table2_implied.csv": _csv_text(t2cols),
              "findings.csv": _csv_text({k: np.array([str(f[k]) for f in findings], dtype=object)
                                         for k in ("table", "item", "printed", "computed", "consistent", "note")})}
