@@ -24,7 +24,8 @@ from .description import ArmDescription
 
 __all__ = ["ModelInputs", "Geometry", "Effect", "EncoderEccentricity", "JointCompliance",
            "ThermalGrowth", "ForceSensorError", "ProbeCompliance", "EFFECTS", "effect_from_name",
-           "REFERENCE_TEMPERATURE_C"]
+           "REFERENCE_TEMPERATURE_C", "JointHarmonics", "ProbeThermalGrowth", "ProbeComplianceMatrix",
+           "ApproachOffset", "LateralCompliance", "joint_frame", "last_frame", "gravity_moment", "contact_moment"]
 
 REFERENCE_TEMPERATURE_C = 20.0
 
@@ -37,6 +38,9 @@ class ModelInputs:
     temperature: Any = None       # [°C]
     tau_gravity: list | None = None   # J [N m]
     tau_contact: list | None = None   # J [N m]
+    #: optional provider of joint moments, ``f(geom, q, i, origin) -> (M_gravity, M_contact)`` (base frame,
+    #: about ``origin``, [N m]); :class:`LateralCompliance` computes them itself when None
+    moments: Any = None
 
 
 @dataclass
@@ -211,3 +215,239 @@ def effect_from_name(key: str, **kwargs) -> Effect:
         return EFFECTS[key](**kwargs)
     except KeyError:
         raise KeyError(f"unknown effect {key!r}; known: {', '.join(EFFECTS)}") from None
+
+
+# ---------------------------------------------------------------------------------------------
+# effects the closed loop synthesises from the residual's structure (beyond the library above)
+
+def _chain(desc: ArmDescription, geom: Geometry, q, upto: int, point, ops):
+    """``point`` given in frame ``upto - 1`` (the end of row ``upto - 1``) in base coordinates."""
+    from .chain import chain_point
+    return chain_point(desc.convention, geom.rows[:upto], q[:upto], point, ops,
+                       None if desc.axes is None else desc.axes[:upto])
+
+
+def _perpendicular(axis) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """Two constant unit vectors (u, v) with (u, v, axis) right-handed and orthonormal."""
+    import numpy as np
+    a = np.asarray(axis, dtype=float)
+    a = a / np.linalg.norm(a)
+    e = np.array([0.0, 1.0, 0.0]) if abs(a[0]) > 0.9 else np.array([1.0, 0.0, 0.0])
+    u = e - (e @ a) * a
+    u /= np.linalg.norm(u)
+    v = np.cross(a, u)
+    return tuple(float(x) for x in u), tuple(float(x) for x in v)
+
+
+def _sub(a, b):
+    return [a[k] - b[k] for k in range(3)]
+
+
+def _cross(a, b):
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def joint_frame(desc: ArmDescription, geom: Geometry, q, i: int, ops):
+    """Origin and axes (x, y, z) [m, unit] in the base frame of joint ``i``'s frame, the frame that turns
+    with the joint: for standard DH the frame ``i - 1`` turned by ``Rz(theta_offset + q)`` (x along the
+    common normal); for modified DH and URDF the joint's child frame (for URDF x, y are a fixed pair of
+    unit vectors perpendicular to the joint's axis, see :func:`_perpendicular`)."""
+    if desc.convention == "dh":
+        o = _chain(desc, geom, q, i, (0.0, 0.0, 0.0), ops)
+        theta = geom.rows[i][0] + q[i]
+        c, s = ops.cos(theta), ops.sin(theta)
+        ex, ey, ez = (c, s, 0.0), (-s, c, 0.0), (0.0, 0.0, 1.0)
+        return o, [_sub(_chain(desc, geom, q, i, e, ops), o) for e in (ex, ey, ez)]
+    o = _chain(desc, geom, q, i + 1, (0.0, 0.0, 0.0), ops)
+    if desc.convention == "urdf":
+        axis = desc.axes[i]
+        u, v = _perpendicular(axis)
+        vecs = (u, v, tuple(axis))
+    else:
+        vecs = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+    return o, [_sub(_chain(desc, geom, q, i + 1, e, ops), o) for e in vecs]
+
+
+def last_frame(desc: ArmDescription, geom: Geometry, q, ops):
+    """Origin and axes (x, y, z) of the last joint frame (the probe frame) in the base frame."""
+    n = desc.n_joints
+    o = _chain(desc, geom, q, n, (0.0, 0.0, 0.0), ops)
+    return o, [_sub(_chain(desc, geom, q, n, e, ops), o) for e in ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0),
+                                                                    (0.0, 0.0, 1.0))]
+
+
+def _shift_ball(desc, geom: Geometry, q, d_base, ops, frame=None) -> None:
+    """Move the ball by ``d_base`` (base frame) at this pose: ``p_last += R^T d``."""
+    _, axes = last_frame(desc, geom, q, ops) if frame is None else frame
+    geom.p_last = [geom.p_last[k] + _dot(axes[k], d_base) for k in range(3)]
+
+
+@dataclass(frozen=True)
+class JointHarmonics(Effect):
+    """Joint-angle error periodic in an angle: ``q_i += sum_h c_h cos(h q_s) + s_h sin(h q_s)`` for the
+    harmonics ``harmonics`` of the reading of joint ``source`` (0-based; None: the joint's own angle, a
+    cross-coupling otherwise, e.g. a cable or a counterbalance). ``joints``: the joint(s) i it acts on."""
+    source: int | None = None
+    harmonics: tuple[int, ...] = (1, 2, 3)
+    key: str = field(default="joint_harmonics", init=False, repr=False)
+
+    def _suffix(self, desc, i):
+        return "" if self.source is None or self.source == i else f"_by_{desc.joints[self.source].name}"
+
+    def param_defs(self, desc):
+        out = []
+        for i in self.joint_indices(desc):
+            sfx = self._suffix(desc, i)
+            for h in self.harmonics:
+                out += [(f"{desc.joints[i].name}.harm{h}_cos{sfx}", "rad"),
+                        (f"{desc.joints[i].name}.harm{h}_sin{sfx}", "rad")]
+        return out
+
+    def apply(self, desc, params, inputs, geom, ops):
+        q0 = list(inputs.q)
+        q = list(inputs.q)
+        k = 0
+        for i in self.joint_indices(desc):
+            src = q0[i if self.source is None else self.source]
+            for h in self.harmonics:
+                q[i] = q[i] + params[k] * ops.cos(h * src) + params[k + 1] * ops.sin(h * src)
+                k += 2
+        inputs.q = q
+
+    def describe(self):
+        src = "" if self.source is None else f" of q{self.source + 1}"
+        js = "" if self.joints is None else ", ".join(f"j{i + 1}" for i in self.joints)
+        return f"{self.key}({js}; h {','.join(map(str, self.harmonics))}{src})"
+
+
+@dataclass(frozen=True)
+class ProbeThermalGrowth(Effect):
+    """The probe (ball centre ``p_last`` in the last joint frame) grows by ``(1 + alpha (T - 20 °C))``."""
+    key: str = field(default="probe_thermal", init=False, repr=False)
+
+    def needs(self):
+        return ("temperature",)
+
+    def param_defs(self, desc):
+        return [("probe.thermal_alpha", "1/K")]
+
+    def apply(self, desc, params, inputs, geom, ops):
+        scale = 1.0 + params[0] * (inputs.temperature - REFERENCE_TEMPERATURE_C)
+        geom.p_last = [v * scale for v in geom.p_last]
+
+
+#: parameter order of the symmetric compliance increment of :class:`ProbeComplianceMatrix`
+_MATRIX_TERMS = ("xx", "yy", "zz", "xy", "xz", "yz")
+
+
+@dataclass(frozen=True)
+class ProbeComplianceMatrix(Effect):
+    """The probe's compliance as a full symmetric 3x3 matrix in the probe frame: an increment ``dC`` of
+    the declared (diagonal) one, so the ball moves by about ``(diag(c) + dC) f`` under the force ``f``
+    (probe frame). The diagonal adds to the declared compliance (the elastic joints), the off-diagonal
+    terms move the ball by ``dC_off f``."""
+    key: str = field(default="probe_compliance_matrix", init=False, repr=False)
+
+    def param_defs(self, desc):
+        return [(f"probe.dcompliance_{t}", "m/N") for t in _MATRIX_TERMS]
+
+    def apply(self, desc, params, inputs, geom, ops):
+        cxx, cyy, czz, cxy, cxz, cyz = params
+        fx, fy, fz = inputs.wrench[0], inputs.wrench[1], inputs.wrench[2]
+        geom.compliance = [geom.compliance[0] + cxx, geom.compliance[1] + cyy, geom.compliance[2] + czz]
+        geom.p_last = [geom.p_last[0] + cxy * fy + cxz * fz, geom.p_last[1] + cxy * fx + cyz * fz,
+                       geom.p_last[2] + cxz * fx + cyz * fy]
+
+
+@dataclass(frozen=True)
+class ApproachOffset(Effect):
+    """Approach-direction (probe lobing) offset: the ball moves by ``B u`` (base frame), ``u`` the stylus
+    direction (probe z) in the base frame, which is the part's frame up to a constant rotation (the
+    parts do not move during a campaign). ``B`` is 3x3: parameter ``approach.d<a>_u<b>`` [m] is the
+    offset along base axis a per unit stylus component b. Its part ``b I`` is a probe-length error
+    (the probe offset absorbs it)."""
+    key: str = field(default="approach_offset", init=False, repr=False)
+
+    def param_defs(self, desc):
+        return [(f"approach.d{a}_u{b}", "m") for a in "xyz" for b in "xyz"]
+
+    def apply(self, desc, params, inputs, geom, ops):
+        frame = last_frame(desc, geom, inputs.q, ops)
+        u = frame[1][2]
+        d = [params[3 * a] * u[0] + params[3 * a + 1] * u[1] + params[3 * a + 2] * u[2] for a in range(3)]
+        _shift_ball(desc, geom, inputs.q, d, ops, frame)
+
+
+def gravity_moment(desc: ArmDescription, geom: Geometry, q, i: int, origin, ops):
+    """Moment [N m] (base frame) of gravity on the links joint ``i`` moves, about ``origin``."""
+    from .description import GRAVITY
+    g = [float(v) for v in GRAVITY]
+    m = [0.0, 0.0, 0.0]
+    for k in range(i, desc.n_joints):
+        jr = desc.joints[k]
+        if jr.mass <= 0:
+            continue
+        c = _chain(desc, geom, q, k + 1, jr.com, ops)
+        t = _cross(_sub(c, origin), [jr.mass * gk for gk in g])
+        m = [m[a] + t[a] for a in range(3)]
+    return m
+
+
+def contact_moment(desc: ArmDescription, geom: Geometry, q, wrench, origin, ops, frame=None):
+    """Moment [N m] (base frame) about ``origin`` of the contact wrench at the ball (probe frame)."""
+    o_last, axes = last_frame(desc, geom, q, ops) if frame is None else frame
+    ball = [o_last[a] + sum(axes[k][a] * geom.p_last[k] for k in range(3)) for a in range(3)]
+    f = [sum(axes[k][a] * wrench[k] for k in range(3)) for a in range(3)]
+    mt = [sum(axes[k][a] * wrench[3 + k] for k in range(3)) for a in range(3)]
+    t = _cross(_sub(ball, origin), f)
+    return [t[a] + mt[a] for a in range(3)]
+
+
+@dataclass(frozen=True)
+class LateralCompliance(Effect):
+    """Off-axis (lateral) compliance of joint i: the links it moves tilt about the joint frame's x and y
+    axes (:func:`joint_frame`) through its origin by ``c_x M_x`` and ``c_y M_y`` [rad], ``M`` the moment
+    [N m] there of gravity on those links and of the contact wrench (``gravity``/``contact`` select);
+    the ball moves by ``e x (ball - origin)`` (small rotation ``e``). The moments come from the masses
+    and centres of mass of the description (the axial part of ``M`` is ``tau_contact - tau_gravity``).
+    An evaluator may supply them through ``ModelInputs.moments`` (Pinocchio does, by RNEA)."""
+    gravity: bool = True
+    contact: bool = True
+    key: str = field(default="lateral_compliance", init=False, repr=False)
+
+    def param_defs(self, desc):
+        out = []
+        for i in self.joint_indices(desc):
+            out += [(f"{desc.joints[i].name}.lateral_compliance_x", "rad/(N m)"),
+                    (f"{desc.joints[i].name}.lateral_compliance_y", "rad/(N m)")]
+        return out
+
+    def apply(self, desc, params, inputs, geom, ops):
+        q = inputs.q
+        last = last_frame(desc, geom, q, ops)
+        ball = [last[0][a] + sum(last[1][k][a] * geom.p_last[k] for k in range(3)) for a in range(3)]
+        shift = [0.0, 0.0, 0.0]
+        for k, i in enumerate(self.joint_indices(desc)):
+            o, (ux, uy, _) = joint_frame(desc, geom, q, i, ops)
+            if inputs.moments is not None:
+                mg, mc = inputs.moments(geom, q, i, o)
+            else:
+                mg = gravity_moment(desc, geom, q, i, o, ops) if self.gravity else None
+                mc = contact_moment(desc, geom, q, inputs.wrench, o, ops, last) if self.contact else None
+            m = [0.0, 0.0, 0.0]
+            for part, on in ((mg, self.gravity), (mc, self.contact)):
+                if on:
+                    m = [m[a] + part[a] for a in range(3)]
+            ex, ey = params[2 * k] * _dot(m, ux), params[2 * k + 1] * _dot(m, uy)
+            e = [ex * ux[a] + ey * uy[a] for a in range(3)]
+            t = _cross(e, _sub(ball, o))
+            shift = [shift[a] + t[a] for a in range(3)]
+        _shift_ball(desc, geom, q, shift, ops, last)
+
+
+EFFECTS.update({cls.__dataclass_fields__["key"].default: cls for cls in
+                (JointHarmonics, ProbeThermalGrowth, ProbeComplianceMatrix, ApproachOffset, LateralCompliance)})

@@ -165,11 +165,45 @@ class ArmModel:
                              temperature=aux_row.get("temperature"),
                              tau_gravity=None if aux_row.get("tau_gravity") is None else list(aux_row["tau_gravity"]),
                              tau_contact=None if aux_row.get("tau_contact") is None else list(aux_row["tau_contact"]))
+        inputs.moments = lambda geom, q, i, origin: self._pinocchio_moments(geom, q, i, origin, inputs.wrench)
         geom = self._apply_effects([float(v) for v in p], inputs, NUMPY_OPS)
-        d = self.desc.with_row_table(np.array(geom.rows, dtype=float)).with_probe(
+        return PinocchioArm(self._geometry_description(geom)).ball_centre(np.array(inputs.q, dtype=float)[:j],
+                                                                         np.array(inputs.wrench, dtype=float))
+
+    def _geometry_description(self, geom) -> ArmDescription:
+        return self.desc.with_row_table(np.array(geom.rows, dtype=float)).with_probe(
             p_last=tuple(float(v) for v in geom.p_last), bending_compliance_x=float(geom.compliance[0]),
             bending_compliance_y=float(geom.compliance[1]), axial_compliance=float(geom.compliance[2]))
-        return PinocchioArm(d).ball_centre(np.array(inputs.q, dtype=float)[:j], np.array(inputs.wrench, dtype=float))
+
+    def _pinocchio_moments(self, geom, q, i: int, origin, wrench):
+        """(M_gravity, M_contact) [N m], base frame, about ``origin``: the wrench that gravity on the links
+        joint ``i`` moves, and the contact wrench at the (rigid) ball, put on them, from Pinocchio's RNEA
+        (the spatial force its joint transmits, in equilibrium with them)."""
+        from .pinocchio_model import PinocchioArm
+
+        arm = PinocchioArm(self._geometry_description(geom))
+        pin, model, data = arm._pin, arm.model, arm.data
+        x = arm.full_q(np.array([float(v) for v in q[: self.desc.n_joints]]))
+        zero = np.zeros(model.nv)
+        pin.forwardKinematics(model, data, x)
+        jid = model.getJointId(self.desc.joints[i].name)
+        out = []
+        frame = model.frames[arm.ball_id]
+        parent = frame.parentJoint if hasattr(frame, "parentJoint") else frame.parent
+        w = np.array([float(v) for v in wrench], dtype=float)
+        for part in ("gravity", "contact"):
+            if part == "gravity":
+                pin.rnea(model, data, x, zero, zero)
+            else:
+                model.gravity.linear = np.zeros(3)
+                fext = [pin.Force.Zero() for _ in range(model.njoints)]
+                fext[parent] = frame.placement.act(pin.Force(w[:3], w[3:]))
+                pin.rnea(model, data, x, zero, zero, fext)
+            f, o_m_i = data.f[jid], data.oMi[jid]
+            force = -(o_m_i.rotation @ f.linear)             # what gravity / contact put on the subtree
+            moment = -(o_m_i.rotation @ f.angular) + np.cross(o_m_i.translation - np.asarray(origin, float), force)
+            out.append(moment)
+        return out[0], out[1]
 
     def described(self, p) -> ArmDescription:
         """The description with the base part of ``p`` folded in (effects are not representable)."""

@@ -65,13 +65,16 @@ _S = {
               "probe_error": ("length", 20e-6, None), "errors": ("table", None, None),
               "eccentricity": ("table", None, None), "joint_compliance": ("table", None, None),
               "thermal": ("table", None, None), "probe_compliance": ("table", None, None),
-              "force_sensor": ("table", None, None)},
+              "force_sensor": ("table", None, None), "harmonics": ("table", None, None)},
+    "harmonics": {"joint": ("text", None, None), "of": ("text", None, None), "harmonic": ("count", None, None),
+                  "amplitude": ("angle", None, None), "phase": ("angle", 0.0, None)},
     "eccentricity": {"joint": ("text", None, None), "amplitude": ("angle", None, None),
                      "phase": ("angle", 0.0, None), "amplitude2": ("angle", 0.0, None),
                      "phase2": ("angle", 0.0, None)},
     "joint_compliance": {"joints": ("names", None, None), "stiffness": ("stiffness", None, -1),
                          "gravity": ("bool", True, None), "contact": ("bool", True, None)},
-    "thermal": {"joints": ("names", None, None), "alpha": ("expansion", None, -1)},
+    "thermal": {"joints": ("names", None, None), "alpha": ("expansion", None, -1),
+                "probe_alpha": ("expansion", 0.0, None)},
     "probe_compliance": {"bending": ("compliance", None, None), "bending_x": ("compliance", None, None),
                          "bending_y": ("compliance", None, None), "axial": ("compliance", None, None)},
     "force_sensor": {"gain": ("ratio", (0.0, 0.0, 0.0), 3), "offset": ("force", (0.0, 0.0, 0.0), 3),
@@ -196,6 +199,34 @@ def _flat(table: tuple) -> tuple:
         else:
             out.append(t)
     return tuple(out)
+
+
+def _harmonics(ctx, raw, desc) -> list[dict]:
+    """``[[truth.harmonics]]``: joint-angle errors ``a sin(h q_of + phi)`` of ``joint`` (``of``: the joint
+    whose angle drives it, the joint itself by default), harmonic h of 1..4."""
+    if raw is None:
+        return []
+    if isinstance(raw, dict):
+        raw = [raw]
+    if not isinstance(raw, list):
+        raise ctx.error("'harmonics' must be [[truth.harmonics]] tables", ("truth",), "harmonics")
+    rows = []
+    for i, t in enumerate(raw):
+        tbl = ("truth", "harmonics", i)
+        e = _section(ctx, t, _S["harmonics"], tbl)
+        if e["joint"] is None or e["amplitude"] is None or e["harmonic"] is None:
+            raise ctx.error("a harmonic needs 'joint', 'harmonic' and 'amplitude_<angle unit>'", tbl)
+        if not 1 <= e["harmonic"] <= 4:
+            raise ctx.error(f"'harmonic' must be 1 to 4, got {e['harmonic']}", tbl, "harmonic")
+        e["index"] = _joint_index(ctx, desc, e["joint"], tbl, "joint")
+        e["source"] = None if e["of"] is None else _joint_index(ctx, desc, e["of"], tbl, "of")
+        if e["source"] == e["index"]:
+            e["source"] = None
+        if any((r["index"], r["source"], r["harmonic"]) == (e["index"], e["source"], e["harmonic"]) for r in rows):
+            raise ctx.error(f"joint '{e['joint']}' has two tables of harmonic {e['harmonic']} of the same angle",
+                            tbl, "harmonic")
+        rows.append(e)
+    return rows
 
 
 class _Ctx:
@@ -369,6 +400,7 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
                 raise ctx.error(f"joint '{e['joint']}' has two eccentricity tables", tbl, "joint")
             rows.append(e)
         truth["eccentricity"] = rows
+    truth["harmonics"] = _harmonics(ctx, raw_truth.get("harmonics"), desc)
     for name in ("joint_compliance", "thermal", "probe_compliance", "force_sensor"):
         if raw_truth.get(name) is None:
             truth[name] = None

@@ -139,7 +139,7 @@ def _plain(v):
 
 _SETTING_UNITS = {"amplitude": "rad", "phase": "rad", "amplitude2": "rad", "phase2": "rad",
                   "stiffness": "Nm_per_rad", "alpha": "per_K", "bending_x": "m_per_N", "bending_y": "m_per_N",
-                  "axial": "m_per_N", "offset": "N"}
+                  "axial": "m_per_N", "offset": "N", "probe_alpha": "per_K"}
 
 
 def _with_units(d):

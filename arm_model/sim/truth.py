@@ -16,8 +16,8 @@ import numpy as np
 from .._errors import NumericalError
 from ..chain import NUMPY_OPS, ball_in_last_frame, chain_point, elastic_displacement
 from ..description import ArmDescription
-from ..effects import (EncoderEccentricity, ForceSensorError, Geometry, JointCompliance, ModelInputs,
-                       ThermalGrowth)
+from ..effects import (EncoderEccentricity, ForceSensorError, Geometry, JointCompliance, JointHarmonics,
+                       ModelInputs, ProbeThermalGrowth, ThermalGrowth)
 from ..model import ArmModel, AuxData
 from ..params import apply_params, param_spec
 
@@ -221,6 +221,13 @@ def build_truth(desc: ArmDescription, t: dict, rng: np.random.Generator, sensor:
                 values += [a * np.sin(phi), a * np.cos(phi)]
         settings["eccentricity"] = [{k: r[k] for k in ("joint", "amplitude", "phase", "amplitude2", "phase2")}
                                     for r in rows]
+    for r in t.get("harmonics", ()):
+        effects.append(JointHarmonics(joints=(r["index"],), source=r["source"], harmonics=(r["harmonic"],)))
+        values += [r["amplitude"] * np.sin(r["phase"]), r["amplitude"] * np.cos(r["phase"])]
+        settings.setdefault("harmonics", []).append(
+            {"joint": desc.joint_names[r["index"]], "of": desc.joint_names[r["index"] if r["source"] is None
+                                                                           else r["source"]],
+             "harmonic": r["harmonic"], "amplitude": r["amplitude"], "phase": r["phase"]})
     jc = t["joint_compliance"]
     if jc is not None:
         effects.append(JointCompliance(joints=jc["indices"], gravity=jc["gravity"], contact=jc["contact"]))
@@ -236,6 +243,10 @@ def build_truth(desc: ArmDescription, t: dict, rng: np.random.Generator, sensor:
                                      per_joint=per_joint))
         values += list(th["alpha"]) if per_joint else [th["alpha"][0]]
         settings["thermal"] = {"joints": [desc.joint_names[i] for i in idx], "alpha": list(th["alpha"])}
+        if th.get("probe_alpha"):
+            effects.append(ProbeThermalGrowth())
+            values.append(th["probe_alpha"])
+            settings["thermal"]["probe_alpha"] = th["probe_alpha"]
     pc = t["probe_compliance"]
     if pc is not None:
         declared = desc.probe.compliance
