@@ -6,7 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .io import atomic_write_text, guard_output, read_points, write_csv
+from ._csv import format_csv
+from .io import atomic_open, atomic_write_text, guard_output, iter_points
 from .kinematics import ball_centres
 from .urdf import urdf_text
 from .urdf_import import load_arm
@@ -115,25 +116,33 @@ def tip_table(desc, points) -> dict:
 def run_tip(args: argparse.Namespace) -> int:
     guard_output(args.output, [args.points, args.arm])
     desc = arm_from_args(args)
-    points = read_points(args.points, desc.n_joints)
-    cols = tip_table(desc, points)
-    write_csv(args.output, cols, inputs=[args.points, args.arm], fmt="%.6f")
-    n = len(points)
-    print(f"{n} points in {len(points.measurements())} measurement(s) -> {args.output}")
-    if points.force is None:
+    n, measurements, flagged, flagged_count, kinds = 0, {}, [], 0, set()
+    d_sum, d_max = 0.0, 0.0
+    # block by block: a file of millions of rows in bounded memory; nothing is written on an error
+    with atomic_open(args.output, [args.points, args.arm]) as fh:
+        for block in iter_points(args.points, desc.n_joints):
+            cols = tip_table(desc, block)
+            fh.write(format_csv(cols, "%.6f", header=n == 0))
+            n += len(block)
+            measurements.update(dict.fromkeys(block.measurement.tolist()))
+            kinds.add(block.force_kind)
+            d = cols["deflection_um"]
+            d_sum, d_max = d_sum + float(d.sum()), max(d_max, float(d.max()))
+            if len(flagged) < 11:
+                flagged += block.lines[cols["over_force"].astype(bool)][:11].tolist()
+            flagged_count += int(cols["over_force"].sum())
+    print(f"{n} points in {len(measurements)} measurement(s) -> {args.output}")
+    if kinds == {None}:
         print("no force columns: corrected = rigid (no deflection applied)")
     else:
-        if points.force_kind == "two-channel":
+        if "two-channel" in kinds:
             print("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not measured "
                   "and is taken as zero")
-        d = cols["deflection_um"]
-        print(f"deflection: mean {d.mean():.2f} um, max {d.max():.2f} um")
-    flagged = int(cols["over_force"].sum())
-    if flagged:
-        lines = points.lines[cols["over_force"].astype(bool)][:10]
-        print(f"warning: {flagged} point(s) over the probe's calibrated force range "
-              f"({desc.probe.max_force:g} N), flagged in column over_force; lines {', '.join(map(str, lines))}"
-              + (" ..." if flagged > 10 else ""))
+        print(f"deflection: mean {d_sum / n:.2f} um, max {d_max:.2f} um")
+    if flagged_count:
+        print(f"warning: {flagged_count} point(s) over the probe's calibrated force range "
+              f"({desc.probe.max_force:g} N), flagged in column over_force; lines {', '.join(map(str, flagged[:10]))}"
+              + (" ..." if flagged_count > 10 else ""))
     return 0
 
 
