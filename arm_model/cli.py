@@ -1,16 +1,33 @@
 """``aacmm``: the command line. Each subcommand lives in the package it belongs to and exposes
-``register(subparsers)``; this module only dispatches and turns errors into one clear message."""
+``register(subparsers)``; this module only dispatches and turns every error into one clear message:
+
+- bad input (:class:`~arm_model.InputError` and the toolkit's other errors), a file or folder the
+  system refuses (``OSError``), too little memory: the message, exit 2;
+- Ctrl-C or SIGTERM: "interrupted", exit 130 (143 for SIGTERM), nothing written;
+- a closed standard output (``aacmm tip ... | head -1``): quiet;
+- anything else is a bug: a message asking for a report, exit 3; ``--debug`` adds the traceback.
+
+Outputs are written complete or not at all (:mod:`arm_model._output`), so no error leaves a partial
+output behind.
+"""
 from __future__ import annotations
 
 import argparse
 import importlib
 import importlib.util
+import os
+import signal
 import sys
+import traceback
 
 from ._errors import AacmmError
 from .shipped import version
 
-__all__ = ["main", "COMMAND_MODULES"]
+__all__ = ["main", "COMMAND_MODULES", "EXIT_INPUT", "EXIT_INTERNAL"]
+
+#: exit codes: 0 done, 1 done but some runs failed (study montecarlo), 2 bad input or a file/system
+#: error, 3 internal error (a bug), 130 Ctrl-C, 143 SIGTERM
+EXIT_INPUT, EXIT_INTERNAL = 2, 3
 
 #: modules that each register one or more subcommands, in the order of ``aacmm --help``
 COMMAND_MODULES = (
@@ -22,33 +39,113 @@ COMMAND_MODULES = (
     "calibration.loop_cli",      # close-loop
 )
 
+_DEBUG_HELP = "on an internal error, print the Python traceback (for a bug report)"
+
+
+def _add_debug(parser: argparse.ArgumentParser, top: bool) -> None:
+    parser.add_argument("--debug", action="store_true", help=_DEBUG_HELP,
+                        **({} if top else {"default": argparse.SUPPRESS}))
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                _add_debug(sub, False)
+
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="aacmm",
         description="Portable measuring arm toolkit: deflection-aware ball centres from encoder angles and "
                     "contact force, simulation, ring-gauge analysis, calibration and closing the loop. "
-                    "Files carry units in their column and key names (mm, deg, N ...); every format: docs/formats.md.")
+                    "Files carry units in their column and key names (mm, deg, N ...); every format: docs/formats.md.",
+        epilog="Exit status: 0 done; 2 bad input or a file the system refuses (one message, nothing "
+               "written); 3 internal error (please report it); 130 interrupted. docs/guarantees.md")
     parser.add_argument("--version", action="version", version=f"aacmm-toolkit {version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMAND_MODULES:
         if importlib.util.find_spec(name.rsplit(".", 1)[0]) is None or importlib.util.find_spec(name) is None:
             continue
         importlib.import_module(name).register(sub)
+    _add_debug(parser, True)
     return parser
+
+
+class Terminated(BaseException):
+    """SIGTERM, raised like Ctrl-C so that every output being written is removed."""
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated()
+
+
+def _quiet_stdout() -> None:
+    """Standard output was closed by its reader: send the rest to /dev/null, silently."""
+    try:
+        fd = sys.stdout.fileno()
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, fd)
+        os.close(devnull)
+    except (AttributeError, OSError, ValueError):
+        pass
+
+
+def _os_message(exc: OSError) -> str:
+    text = exc.strerror or str(exc) or type(exc).__name__
+    names = [str(f) for f in (exc.filename, exc.filename2) if f is not None]
+    return f"{', '.join(names)}: {text}" if names else text
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    name = "aacmm " + args.command + (f" {args.study}" if getattr(args, "study", None) else "")
+
+    def error(text: str) -> None:
+        try:
+            print(f"{name}: error: {text}", file=sys.stderr, flush=True)
+        except (OSError, ValueError):
+            pass
+
+    previous = None
     try:
-        return int(args.func(args) or 0)
+        previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    except ValueError:          # not the main thread: leave SIGTERM alone
+        pass
+    try:
+        code = int(args.func(args) or 0)
+        try:
+            sys.stdout.flush()
+        except BrokenPipeError:
+            _quiet_stdout()
+        return code
     except AacmmError as exc:
-        print(f"aacmm {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        error(str(exc))
+        return EXIT_INPUT
+    except BrokenPipeError:
+        _quiet_stdout()
+        return 141
     except KeyboardInterrupt:
-        print(f"aacmm {args.command}: interrupted", file=sys.stderr)
+        error("interrupted; nothing written")
         return 130
+    except Terminated:
+        error("terminated; nothing written")
+        return 143
+    except MemoryError:
+        error("out of memory: the input is too large for this machine; nothing written")
+        return EXIT_INPUT
+    except OSError as exc:
+        error(_os_message(exc) + "; nothing written")
+        return EXIT_INPUT
+    except Exception as exc:        # a bug: say so, never a bare traceback
+        if getattr(args, "debug", False):
+            traceback.print_exc()
+        error(f"internal error ({type(exc).__name__}: {exc}). This is a bug: please report it with the "
+              "command line and its input files" + ("" if getattr(args, "debug", False)
+                                                    else " (add --debug for the traceback)")
+              + "; nothing written")
+        return EXIT_INTERNAL
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

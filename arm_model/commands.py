@@ -7,12 +7,13 @@ from pathlib import Path
 import numpy as np
 
 from ._csv import format_csv
-from .io import atomic_open, atomic_write_text, guard_output, iter_points
-from .kinematics import ball_centres
+from ._output import output_file
+from .io import iter_points
+from .model_file import Arm, load_model
 from .urdf import urdf_text
-from .urdf_import import load_arm
 
-__all__ = ["register", "tip_table", "add_arm_options", "arm_from_args", "positive", "at_least", "fraction"]
+__all__ = ["register", "tip_table", "add_arm_options", "arm_from_args", "model_from_args", "positive", "at_least",
+           "fraction"]
 
 
 def _number(text: str, kind):
@@ -51,8 +52,9 @@ def fraction(text: str) -> float:
     return v
 
 
-def add_arm_options(p, help_arm: str = "the arm: a shipped arm's name (aacmm7), a description TOML or a URDF "
-                                       "with --tip-frame (docs/formats.md §2, docs/own-arm.md)") -> None:
+def add_arm_options(p, help_arm: str = "the arm: a shipped arm's name (aacmm7), a model file or description TOML "
+                                       "(the effects a model file holds are applied) or a URDF with --tip-frame "
+                                       "(docs/formats.md §2, docs/own-arm.md)") -> None:
     """``--arm`` and ``--tip-frame``, the same for every subcommand."""
     p.add_argument("--arm", type=Path, required=True, help=help_arm)
     p.add_argument("--tip-frame", default=None, metavar="LINK",
@@ -60,9 +62,16 @@ def add_arm_options(p, help_arm: str = "the arm: a shipped arm's name (aacmm7), 
                         "to it; the probe data default to the seed paper's 85 mm probe)")
 
 
+def model_from_args(args: argparse.Namespace) -> Arm:
+    """The arm named by :func:`add_arm_options`: description, effects and their parameter values
+    (:class:`arm_model.model_file.Arm`), read by the one loader every subcommand uses."""
+    return load_model(args.arm, args.tip_frame)
+
+
 def arm_from_args(args: argparse.Namespace):
-    """The arm named by :func:`add_arm_options`."""
-    return load_arm(args.arm, args.tip_frame)
+    """The description of the arm named by :func:`add_arm_options` (its effects, if any, left out:
+    commands that evaluate points use :func:`model_from_args`)."""
+    return model_from_args(args).desc
 
 
 def register(sub) -> None:
@@ -96,10 +105,15 @@ def register(sub) -> None:
     e.set_defaults(func=run_examples)
 
 
-def tip_table(desc, points) -> dict:
-    """Columns of the ``aacmm tip`` output for a :class:`~arm_model.io.PointSet`."""
-    rigid = ball_centres(desc, points.q)
-    corrected = ball_centres(desc, points.q, points.wrench) if points.wrench is not None else rigid.copy()
+def tip_table(arm, points) -> dict:
+    """Columns of the ``aacmm tip`` output for a :class:`~arm_model.io.PointSet`; ``arm`` an
+    :class:`~arm_model.model_file.Arm` (every effect applied) or a description. ``x_rigid_mm``: the
+    ball centre at a zero force reading; ``x_mm``: with the points' wrench."""
+    if not isinstance(arm, Arm):
+        arm = Arm(arm)
+    desc = arm.desc
+    rigid = arm.ball_centres(points, rigid=True)
+    corrected = arm.ball_centres(points) if points.wrench is not None else rigid.copy()
     delta = corrected - rigid
     cols = {"measurement": points.measurement, "feature": points.feature}
     for k, axis in enumerate("xyz"):
@@ -114,14 +128,14 @@ def tip_table(desc, points) -> dict:
 
 
 def run_tip(args: argparse.Namespace) -> int:
-    guard_output(args.output, [args.points, args.arm])
-    desc = arm_from_args(args)
     n, measurements, flagged, flagged_count, kinds = 0, {}, [], 0, set()
     d_sum, d_max = 0.0, 0.0
     # block by block: a file of millions of rows in bounded memory; nothing is written on an error
-    with atomic_open(args.output, [args.points, args.arm]) as fh:
+    with output_file(args.output, [args.points, args.arm]) as tmp, open(tmp, "wb") as fh:
+        arm = model_from_args(args)
+        desc = arm.desc
         for block in iter_points(args.points, desc.n_joints):
-            cols = tip_table(desc, block)
+            cols = tip_table(arm, block)
             fh.write(format_csv(cols, "%.6f", header=n == 0))
             n += len(block)
             measurements.update(dict.fromkeys(block.measurement.tolist()))
@@ -132,6 +146,8 @@ def run_tip(args: argparse.Namespace) -> int:
                 flagged += block.lines[cols["over_force"].astype(bool)][:11].tolist()
             flagged_count += int(cols["over_force"].sum())
     print(f"{n} points in {len(measurements)} measurement(s) -> {args.output}")
+    if arm.effects:
+        print("effects applied: " + ", ".join(e.describe() for e in arm.effects))
     if kinds == {None}:
         print("no force columns: corrected = rigid (no deflection applied)")
     else:
@@ -155,7 +171,12 @@ def run_examples(args: argparse.Namespace) -> int:
 
 
 def run_urdf(args: argparse.Namespace) -> int:
-    desc = arm_from_args(args)
-    atomic_write_text(args.output, urdf_text(desc), inputs=[args.arm])
+    with output_file(args.output, [args.arm]) as tmp:
+        arm = model_from_args(args)
+        desc = arm.desc
+        tmp.write_text(urdf_text(desc), encoding="utf-8")
     print(f"URDF of '{desc.name}' ({desc.n_joints} joints + 3 elastic probe joints) -> {args.output}")
+    if arm.effects:
+        print("note: a URDF holds the geometry only; the model's effects ("
+              + ", ".join(e.describe() for e in arm.effects) + ") are not in it")
     return 0

@@ -4,6 +4,7 @@ Inside, everything is SI: lengths [m], angles [rad], forces [N], compliances [m/
 """
 from __future__ import annotations
 
+import difflib
 import math
 import re
 from dataclasses import dataclass, field, replace
@@ -149,92 +150,166 @@ _PROBE_KEYS = {
 }
 
 
-def _key_lines(text: str) -> dict[tuple[str, int, str], int]:
-    """Map (table, index, key) to its 1-based line, for messages. Tables: "", "joint", "probe"."""
-    lines: dict[tuple[str, int, str], int] = {}
-    table, counts = "", {}
-    for no, raw in enumerate(text.splitlines(), start=1):
-        line = raw.split("#", 1)[0].strip()
-        m = re.match(r"^\[\[\s*([\w.-]+)\s*\]\]$", line)
-        if m:
-            table = m.group(1)
-            counts[table] = counts.get(table, -1) + 1
-            lines[(table, counts[table], "")] = no
+def _split_key(text: str) -> tuple[str, ...]:
+    """``a."b.c".d`` -> ("a", "b.c", "d")."""
+    return tuple(p.strip().strip('"') for p in re.findall(r'"[^"]*"|[^.]+', text))
+
+
+def toml_key_lines(text: str) -> dict[tuple, int]:
+    """Map a key path to its 1-based line, for messages.
+
+    A path is a tuple of table names, 0-based indices of array-of-tables entries and the key, e.g.
+    ``("joint", 2, "d_mm")``, ``("effect", 0, "parameter", 3, "value_urad")``; a table or array entry
+    itself maps without a key (``("probe",)``, ``("joint", 2)``). Arrays of tables written as
+    ``[[name]]`` headers and as inline tables one a line (``name = [`` then ``{ k = v, ... },``) are
+    both followed.
+    """
+    lines: dict[tuple, int] = {}
+    counts: dict[tuple, int] = {}
+    prefix: tuple = ()
+    array: tuple | None = None          # inside "key = [" over several lines: the array's path
+    for no, raw in enumerate(text.split("\n"), start=1):
+        line = re.sub(r"#[^\"']*$", "", raw).strip()
+        if array is not None:
+            if line.startswith("]"):
+                array = None
+                continue
+            if line.startswith("{"):
+                counts[array] = counts.get(array, -1) + 1
+                item = array + (counts[array],)
+                lines[item] = no
+                for key in re.findall(r'(?:^\{|,)\s*("[^"]*"|[\w-]+)\s*=', line):
+                    lines[item + (key.strip('"'),)] = no
             continue
-        m = re.match(r"^\[\s*([\w.-]+)\s*\]$", line)
+        m = re.match(r"^\[\[\s*(.+?)\s*\]\]$", line) or re.match(r"^\[\s*(.+?)\s*\]$", line)
         if m:
-            table = m.group(1)
-            counts[table] = 0
-            lines[(table, 0, "")] = no
+            names = _split_key(m.group(1))
+            path: tuple = ()
+            for k, name in enumerate(names):
+                path += (name,)
+                if k < len(names) - 1 and path in counts:
+                    path += (counts[path],)
+            if line.startswith("[["):
+                counts[path] = counts.get(path, -1) + 1
+                path += (counts[path],)
+            prefix = path
+            lines[prefix] = no
             continue
-        m = re.match(r"^([\w-]+)\s*=", line)
+        m = re.match(r'^("[^"]*"|[\w-]+)\s*=\s*(.*)$', line)
         if m:
-            lines[(table, counts.get(table, 0), m.group(1))] = no
+            key = m.group(1).strip('"')
+            lines[prefix + (key,)] = no
+            if m.group(2) == "[":
+                array = prefix + (key,)
     return lines
 
 
-class _Reader:
+def key_path_text(path: tuple) -> str:
+    """``("joint", 2, "d_mm")`` -> ``joint[3].d_mm`` (1-based entries, as users count)."""
+    out = ""
+    for p in path:
+        if isinstance(p, int):
+            out += f"[{p + 1}]"
+        else:
+            out += ("." if out else "") + p
+    return out or "top level"
+
+
+class TomlReader:
+    """Messages naming the file, the line and the key path of a parsed TOML text."""
+
     def __init__(self, path: str, text: str):
         self.path = path
-        self.lines = _key_lines(text)
+        self.lines = toml_key_lines(text)
 
-    def error(self, msg: str, table: str, index: int, key: str | None) -> InputError:
-        line = self.lines.get((table, index, key or ""), self.lines.get((table, index, "")))
-        where = table if table else "top level"
-        if table == "joint":
-            where = f"joint[{index + 1}]"
-        col = f"key '{where}.{key}'" if key else f"key '{where}'"
-        return InputError(msg, self.path, line, col)
+    def error(self, msg: str, *path) -> InputError:
+        """An InputError at ``path`` (the key path; its line, else its table's, else none)."""
+        line = None
+        for k in range(len(path), -1, -1):
+            line = self.lines.get(tuple(path[:k]))
+            if line is not None:
+                break
+        return InputError(msg, self.path, line, f"key '{key_path_text(path)}'")
 
-    def values(self, tbl: dict, spec: dict, table: str, index: int,
-               text_keys: tuple[str, ...] = ()) -> dict[str, float]:
+    def values(self, tbl: dict, spec: dict, where: tuple, text_keys: tuple[str, ...] = ()) -> dict[str, float]:
+        """Numeric keys with unit suffixes of ``tbl`` (at key path ``where``) in SI by base name;
+        ``spec``: base name -> (quantity, required)."""
         out: dict[str, float] = {}
         for key, value in tbl.items():
             if key in text_keys:
                 if not isinstance(value, str) or not value.strip():
-                    raise self.error(f"'{key}' must be a non-empty text", table, index, key)
+                    raise self.error(f"'{key}' must be a non-empty text", *where, key)
                 continue
             parts = split_unit(key)
             if parts is None:
+                near = nearest(key, [f"{b}_<unit>" for b in spec] + list(text_keys))
                 raise self.error(f"'{key}' has no known unit suffix (a numeric key carries its unit: "
-                                 f"_mm, _m, _um, _deg, _rad, _N, _mm_per_N, _kg ...)", table, index, key)
+                                 f"_mm, _m, _um, _deg, _rad, _N, _mm_per_N, _kg ...){near}", *where, key)
             base, unit = parts
             if base not in spec:
-                raise self.error(f"unknown key '{key}' (known: {', '.join(sorted(spec))})", table, index, key)
+                raise self.error(f"unknown key '{key}' (known: {', '.join(sorted(spec))})"
+                                 f"{nearest(base, list(spec))}", *where, key)
             quantity = spec[base][0]
             if QUANTITY_OF_UNIT[unit] != quantity:
                 raise self.error(f"'{key}' is a {quantity}, but '_{unit}' is a unit of "
-                                 f"{QUANTITY_OF_UNIT[unit]}", table, index, key)
+                                 f"{QUANTITY_OF_UNIT[unit]}", *where, key)
             if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise self.error(f"'{key}' must be a number, got {value!r}", table, index, key)
+                raise self.error(f"'{key}' must be a number, got {value!r}", *where, key)
             if not math.isfinite(value):
-                raise self.error(f"'{key}' must be finite, got {value!r}", table, index, key)
+                raise self.error(f"'{key}' must be finite, got {value!r}", *where, key)
             if base in out:
-                raise self.error(f"'{base}' is given twice (with two units)", table, index, key)
+                raise self.error(f"'{base}' is given twice (with two units)", *where, key)
             out[base] = float(value) * UNIT_FACTORS[unit]
         for base, (quantity, required) in spec.items():
             if required and base not in out:
-                raise self.error(f"missing key '{base}_<unit>' ({quantity})", table, index, None)
+                raise self.error(f"missing key '{base}_<unit>' ({quantity})", *where)
         return out
 
 
+def nearest(word: str, known) -> str:
+    """`` (did you mean 'x'?)`` for the closest of ``known``, or an empty text."""
+    hit = difflib.get_close_matches(word, list(known), n=1, cutoff=0.6)
+    return f" (did you mean '{hit[0]}'?)" if hit else ""
+
+
+#: top-level keys of a description; a model file (arm_model.model_file) adds its effects and calibration tables
+DESCRIPTION_KEYS = ("name", "convention", "joint", "probe")
+MODEL_KEYS = ("effect", "calibration")
+
+
 def parse_description(text: str, path: str = "<string>") -> ArmDescription:
-    """Parse an arm description from TOML text; raise :class:`InputError` naming line and key."""
+    """Parse an arm description from TOML text; raise :class:`InputError` naming line and key.
+
+    A model file's ``[calibration]`` table is accepted (and checked); its ``[[effect]]`` tables are
+    refused here: a model with effects is read by :func:`arm_model.model_file.parse_model` (every
+    ``--arm`` option does), which applies them."""
     data = parse_toml(text, path)
-    r = _Reader(path, text)
+    r = TomlReader(path, text)
+    if data.get("effect"):
+        raise r.error("this model file holds effects ([[effect]] tables); read it with "
+                      "arm_model.model_file.load_model, which applies them", "effect", 0)
+    if "calibration" in data:
+        from .model_file import check_calibration_table
+        check_calibration_table(data["calibration"], r)
+    return description_from_data({k: v for k, v in data.items() if k not in MODEL_KEYS}, r)
+
+
+def description_from_data(data: dict, r: TomlReader, extra_keys: tuple[str, ...] = ()) -> ArmDescription:
+    """The description of parsed TOML ``data``; keys of ``extra_keys`` are left to the caller."""
+    path = r.path
+    known = DESCRIPTION_KEYS + tuple(extra_keys)
     for key in data:
-        if key not in ("name", "convention", "joint", "probe"):
-            raise r.error(f"unknown top-level key '{key}' (known: name, convention, joint, probe)", "", 0, key)
+        if key not in known:
+            raise r.error(f"unknown top-level key '{key}' (known: {', '.join(known)}){nearest(key, known)}", key)
     name = data.get("name")
     if not isinstance(name, str) or not name:
-        raise r.error("missing or empty 'name'", "", 0, "name")
+        raise r.error("missing or empty 'name'", "name")
     convention = data.get("convention")
     if convention not in ("dh", "mdh", "urdf"):
-        raise r.error(f"'convention' must be \"dh\", \"mdh\" or \"urdf\", got {convention!r}", "", 0,
-                      "convention")
+        raise r.error(f"'convention' must be \"dh\", \"mdh\" or \"urdf\", got {convention!r}", "convention")
     rows = data.get("joint")
-    if not isinstance(rows, list) or not rows:
-        raise r.error("no [[joint]] rows", "", 0, "joint")
+    if not isinstance(rows, list) or not rows or not all(isinstance(x, dict) for x in rows):
+        raise r.error("no [[joint]] rows", "joint")
     joints = []
     seen = set()
     for i, row in enumerate(rows):
@@ -248,7 +323,7 @@ def parse_description(text: str, path: str = "<string>") -> ArmDescription:
                               "joint", i, "axis")
             norm = math.hypot(*axis)
             axis = tuple(float(a) / norm for a in axis)
-        v = r.values(row, _URDF_JOINT_KEYS if convention == "urdf" else _JOINT_KEYS, "joint", i,
+        v = r.values(row, _URDF_JOINT_KEYS if convention == "urdf" else _JOINT_KEYS, ("joint", i),
                      text_keys=("name",))
         jname = row.get("name", f"j{i + 1}")
         if jname in seen:
@@ -267,17 +342,17 @@ def parse_description(text: str, path: str = "<string>") -> ArmDescription:
                                    **common))
     ptab = data.get("probe")
     if not isinstance(ptab, dict):
-        raise r.error("missing [probe] table", "", 0, "probe")
-    pv = r.values(ptab, _PROBE_KEYS, "probe", 0)
+        raise r.error("missing [probe] table", "probe")
+    pv = r.values(ptab, _PROBE_KEYS, ("probe",))
     if pv["z"] <= 0:
         raise r.error("the ball must lie beyond the flange: z of the probe must be > 0 "
-                      "(the probe z axis points along the stylus towards the ball)", "probe", 0, "z_mm")
+                      "(the probe z axis points along the stylus towards the ball)", "probe", "z_mm")
     for key in ("ball_diameter", "max_force"):
         if pv[key] <= 0:
-            raise r.error(f"'{key}' must be > 0", "probe", 0, key)
+            raise r.error(f"'{key}' must be > 0", "probe", key)
     for key in ("bending_compliance", "axial_compliance", "bending_compliance_x", "bending_compliance_y"):
         if pv.get(key, 0.0) < 0:
-            raise r.error(f"'{key}' must not be negative", "probe", 0, key)
+            raise r.error(f"'{key}' must not be negative", "probe", key)
     probe = Probe(
         p_last=(pv["x"], pv["y"], pv["z"]), ball_diameter=pv["ball_diameter"], max_force=pv["max_force"],
         bending_compliance_x=pv.get("bending_compliance_x", pv["bending_compliance"]),
@@ -294,44 +369,72 @@ def load_description(path: str | Path) -> ArmDescription:
 # ---------------------------------------------------------------------------------------------
 # writing
 
-def _num(x: float) -> str:
-    return repr(float(x))
+def in_unit(value_si: float, factor: float) -> float:
+    """``value_si`` in a unit of ``factor`` (to SI), chosen among the nearest floats so that reading it
+    back (``x * factor``) gives ``value_si`` exactly whenever such a float exists."""
+    value_si = float(value_si)
+    x = value_si / factor
+    if x * factor == value_si or not math.isfinite(x):
+        return x
+    lo = hi = x
+    for _ in range(8):
+        lo, hi = math.nextafter(lo, -math.inf), math.nextafter(hi, math.inf)
+        for c in (lo, hi):
+            if c * factor == value_si:
+                return c
+    return x
+
+
+def description_data(desc: ArmDescription) -> dict:
+    """The TOML tables of a description (mm and degrees) as plain data for ``tomli_w``; read back,
+    every value is the same float."""
+    mm, deg = UNIT_FACTORS["mm"], UNIT_FACTORS["deg"]
+    joints = []
+    for j in desc.joints:
+        row: dict = {"name": j.name}
+        if desc.convention == "urdf":
+            row.update({f"origin_{k}_mm": in_unit(v, mm) for k, v in zip("xyz", j.origin[:3])})
+            row.update({f"origin_{k}_deg": in_unit(v, deg) for k, v in zip(("roll", "pitch", "yaw"), j.origin[3:])})
+            row["axis"] = [float(a) for a in j.axis]
+        else:
+            row.update({"theta_offset_deg": in_unit(j.theta_offset, deg), "d_mm": in_unit(j.d, mm),
+                        "a_mm": in_unit(j.a, mm), "alpha_deg": in_unit(j.alpha, deg)})
+        if j.lower is not None:
+            row["lower_deg"] = in_unit(j.lower, deg)
+        if j.upper is not None:
+            row["upper_deg"] = in_unit(j.upper, deg)
+        if j.mass:
+            row["mass_kg"] = float(j.mass)
+        if any(j.com):
+            row.update({f"com_{k}_mm": in_unit(v, mm) for k, v in zip("xyz", j.com)})
+        joints.append(row)
+    p = desc.probe
+    mpn = UNIT_FACTORS["mm_per_N"]
+    probe = {"x_mm": in_unit(p.p_last[0], mm), "y_mm": in_unit(p.p_last[1], mm), "z_mm": in_unit(p.p_last[2], mm),
+             "ball_diameter_mm": in_unit(p.ball_diameter, mm), "max_force_N": float(p.max_force),
+             "bending_compliance_mm_per_N": in_unit(p.bending_compliance_x, mpn)}
+    if p.bending_compliance_y != p.bending_compliance_x:
+        probe.update({"bending_compliance_x_mm_per_N": in_unit(p.bending_compliance_x, mpn),
+                      "bending_compliance_y_mm_per_N": in_unit(p.bending_compliance_y, mpn)})
+    probe["axial_compliance_mm_per_N"] = in_unit(p.axial_compliance, mpn)
+    return {"name": desc.name, "convention": desc.convention, "joint": joints, "probe": probe}
+
+
+def comment_block(comment: str | None) -> str:
+    """``comment`` as TOML comment lines (every line, whatever it holds, stays a comment)."""
+    if not comment:
+        return ""
+    clean = "".join(c if c == "\n" or c == "\t" or (ord(c) >= 32 and ord(c) != 127) else "?" for c in comment)
+    return "".join(f"# {line}".rstrip() + "\n" for line in clean.split("\n"))
+
+
+def toml_text(data: dict, comment: str | None = None) -> str:
+    """TOML text of ``data`` written by ``tomli_w`` (every name and text quoted as TOML needs), with
+    ``comment`` as a header."""
+    import tomli_w
+    return comment_block(comment) + tomli_w.dumps(data)
 
 
 def format_description(desc: ArmDescription, comment: str | None = None) -> str:
     """TOML text of a description, in mm and degrees, that :func:`parse_description` reads back exactly."""
-    deg = 180.0 / math.pi
-    out = []
-    if comment:
-        out += [f"# {line}" for line in comment.splitlines()]
-    out += [f'name = "{desc.name}"', f'convention = "{desc.convention}"', ""]
-    for j in desc.joints:
-        out += ["[[joint]]", f'name = "{j.name}"']
-        if desc.convention == "urdf":
-            out += [f"origin_{k}_mm = {_num(v * 1e3)}" for k, v in zip("xyz", j.origin[:3])]
-            out += [f"origin_{k}_deg = {_num(v * deg)}" for k, v in zip(("roll", "pitch", "yaw"), j.origin[3:])]
-            out.append(f"axis = [{', '.join(_num(a) for a in j.axis)}]")
-        else:
-            out += [f"theta_offset_deg = {_num(j.theta_offset * deg)}",
-                    f"d_mm = {_num(j.d * 1e3)}", f"a_mm = {_num(j.a * 1e3)}",
-                    f"alpha_deg = {_num(j.alpha * deg)}"]
-        if j.lower is not None:
-            out.append(f"lower_deg = {_num(j.lower * deg)}")
-        if j.upper is not None:
-            out.append(f"upper_deg = {_num(j.upper * deg)}")
-        if j.mass:
-            out.append(f"mass_kg = {_num(j.mass)}")
-        if any(j.com):
-            out += [f"com_x_mm = {_num(j.com[0] * 1e3)}", f"com_y_mm = {_num(j.com[1] * 1e3)}",
-                    f"com_z_mm = {_num(j.com[2] * 1e3)}"]
-        out.append("")
-    p = desc.probe
-    out += ["[probe]", f"x_mm = {_num(p.p_last[0] * 1e3)}", f"y_mm = {_num(p.p_last[1] * 1e3)}",
-            f"z_mm = {_num(p.p_last[2] * 1e3)}", f"ball_diameter_mm = {_num(p.ball_diameter * 1e3)}",
-            f"max_force_N = {_num(p.max_force)}",
-            f"bending_compliance_mm_per_N = {_num(p.bending_compliance_x * 1e3)}"]
-    if p.bending_compliance_y != p.bending_compliance_x:
-        out += [f"bending_compliance_x_mm_per_N = {_num(p.bending_compliance_x * 1e3)}",
-                f"bending_compliance_y_mm_per_N = {_num(p.bending_compliance_y * 1e3)}"]
-    out.append(f"axial_compliance_mm_per_N = {_num(p.axial_compliance * 1e3)}")
-    return "\n".join(out) + "\n"
+    return toml_text(description_data(desc), comment)

@@ -7,10 +7,7 @@ over an input.
 from __future__ import annotations
 
 import math
-import os
 import re
-import tempfile
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -18,12 +15,13 @@ import numpy as np
 
 from ._csv import BLOCK_BYTES, csv_records, format_csv, iter_csv_blocks
 from ._errors import InputError, parse_toml, read_text
+from ._output import atomic_write_bytes, guard_output
 from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, split_unit
 
 __all__ = ["PointSet", "Feature", "Distance", "Artefacts", "ForceSignal", "read_points",
            "read_artefacts", "read_force_signal", "check_features", "atomic_write_text",
            "atomic_write_bytes", "write_csv", "guard_output", "csv_records", "FEATURE_KINDS", "iter_points",
-           "concat_points", "POINT_COLUMNS", "atomic_open"]
+           "concat_points", "POINT_COLUMNS"]
 
 FEATURE_KINDS = ("ring", "cylinder", "sphere", "seat", "plane", "point")
 _TEXT_COLUMNS = ("measurement", "feature")
@@ -452,43 +450,6 @@ def read_force_signal(path: str | Path) -> ForceSignal:
 
 # ---------------------------------------------------------------------------------------------
 # writing
-
-def guard_output(out: str | Path, inputs=()) -> Path:
-    """Refuse an output path that is one of the inputs (by resolved path)."""
-    out = Path(out)
-    ro = out.resolve()
-    for p in inputs:
-        if p is not None and Path(p).resolve() == ro:
-            raise InputError("refusing to write the output over an input file", out)
-    return out
-
-
-@contextmanager
-def atomic_open(path: str | Path, inputs=()):
-    """A binary file to write ``path`` in pieces, atomically: a temporary file in the same folder,
-    renamed to ``path`` when the block ends without an exception, removed otherwise."""
-    path = guard_output(path, inputs)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.fchmod(fd, 0o666 & ~umask)          # mkstemp makes 0600; outputs get the usual mode
-        with os.fdopen(fd, "wb") as fh:
-            yield fh
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
-def atomic_write_bytes(path: str | Path, data: bytes, inputs=()) -> Path:
-    """Write ``data`` to ``path`` atomically (temporary file in the same folder, then rename)."""
-    with atomic_open(path, inputs) as fh:
-        fh.write(data)
-    return Path(path)
-
 
 def atomic_write_text(path: str | Path, text: str, inputs=()) -> Path:
     return atomic_write_bytes(path, text.encode("utf-8"), inputs)

@@ -6,8 +6,10 @@ import json
 from pathlib import Path
 
 from arm_model import InputError
-from arm_model.commands import add_arm_options, arm_from_args, positive
-from arm_model.io import atomic_write_text, guard_output, read_artefacts, read_points
+from arm_model.commands import add_arm_options, model_from_args, positive
+from arm_model._output import output_folder
+from arm_model.io import read_artefacts, read_points
+from arm_model.model_file import Arm
 
 __all__ = ["register", "run_calibrate", "run_montecarlo", "run_poses"]
 
@@ -171,15 +173,33 @@ def _free(model, args):
     return [model.spec.names[i] for i in free]
 
 
-def _load_data(args):
+def model_effects(arm, keys):
+    """The effects of a loaded ``--arm`` model followed by those of ``--effect`` (an effect kind the
+    model already holds is an error: its parameters would be declared twice)."""
     from arm_model.model import ArmModel
+    added = _effects(keys)
+    twice = sorted({e.key for e in added} & {e.key for e in arm.effects})
+    if twice:
+        raise InputError(f"the arm model already holds the effect(s) {', '.join(twice)}; drop the --effect option "
+                         "(the model's effects start from their values in the file)", arm.desc.source)
+    try:
+        return ArmModel(arm.desc, tuple(arm.effects) + added)
+    except ValueError as exc:
+        raise InputError(f"--effect: {exc}", arm.desc.source) from None
+
+
+def _load_data(args):
     from .data import make_data
-    desc = arm_from_args(args)
-    model = ArmModel(desc, _effects(args.effect))
+    arm = model_from_args(args)
+    desc = arm.desc
+    model = model_effects(arm, args.effect)
     points = read_points(args.points, desc.n_joints)
     artefacts = read_artefacts(args.artefacts)
     reference = None if args.reference_points is None else read_points(args.reference_points, desc.n_joints)
-    return model, make_data(points, artefacts, model, reference=reference)
+    for pts in (points, reference):
+        if pts is not None:
+            Arm(desc, model.effects).check_points(pts)
+    return model, make_data(points, artefacts, model, reference=reference), arm.values
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
@@ -187,23 +207,24 @@ def run_calibrate(args: argparse.Namespace) -> int:
     from .data import split_holdout
     from .report import poorly_determined, write_outputs
     inputs = [args.points, args.artefacts, args.arm, args.reference_points]
-    guard_output(args.output, inputs)
-    model, data = _load_data(args)
-    holdout = _holdout(args.holdout)
-    train, test = (data, None) if holdout is None else split_holdout(data, holdout, args.seed)
-    kw = _fit_kwargs(args)
-    res = calibrate(model, train, _free(model, args), weights=_weights(args), on_unidentifiable=args.on_unidentifiable,
-                    outlier_threshold=args.outlier_threshold, drop_outliers=args.drop_outliers,
-                    covariance=args.covariance, reference=args.reference, **kw)
-    val_train = res.compare(res.data)
-    val_test = res.compare(test) if test is not None else None
-    files = write_outputs(res, args.output, inputs=inputs, validation_training=val_train,
-                          validation_holdout=val_test, plots=not args.no_plots,
-                          extra={"inputs": {"points": str(args.points), "artefacts": str(args.artefacts),
-                                            "arm": str(args.arm),
-                                            "reference_points": None if args.reference_points is None
-                                            else str(args.reference_points)},
-                                 "holdout": None if test is None else test.measurements()})
+    with output_folder(args.output, inputs, "calibrate") as out:
+        model, data, values = _load_data(args)
+        holdout = _holdout(args.holdout)
+        train, test = (data, None) if holdout is None else split_holdout(data, holdout, args.seed)
+        kw = _fit_kwargs(args)
+        res = calibrate(model, train, _free(model, args), values=values, weights=_weights(args),
+                        on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
+                        drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference, **kw)
+        val_train = res.compare(res.data)
+        val_test = res.compare(test) if test is not None else None
+        files = write_outputs(res, out.dir, inputs=inputs, validation_training=val_train,
+                              validation_holdout=val_test, plots=not args.no_plots,
+                              extra={"inputs": {"points": str(args.points), "artefacts": str(args.artefacts),
+                                                "arm": str(args.arm),
+                                                "reference_points": None if args.reference_points is None
+                                                else str(args.reference_points)},
+                                     "holdout": None if test is None else test.measurements()})
+    files = {k: out.published(v) for k, v in files.items()}
     print(f"{len(train)} training points in {len(train.measurements())} measurements"
           + (f", {len(test)} held-out points in {len(test.measurements())}" if test is not None else ""))
     if data.points.force_kind == "two-channel":
@@ -231,19 +252,19 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
 def run_montecarlo(args: argparse.Namespace) -> int:
     from .study import RunSettings, SimSource, monte_carlo
-    guard_output(args.output / "study.json", [args.campaign])
     if args.runs < 1:
         raise InputError("--runs must be at least 1")
     from arm_model.sim import load_campaign
     camp = load_campaign(args.campaign)            # checks the file before any run starts
-    from arm_model.model import ArmModel
-    model = ArmModel(camp.arm, _effects(args.effect))
-    settings = RunSettings(free=tuple(_free(model, args)), weights=_weights(args), holdout=args.holdout,
-                           fit=_fit_kwargs(args), effects=_effects(args.effect))
-    mc = monte_carlo(SimSource(str(args.campaign)), args.runs, seed=args.seed, settings=settings,
-                     scheduler=args.scheduler, workers=args.workers, progress=not args.quiet)
-    atomic_write_text(args.output / "study.json", json.dumps(mc.to_dict(), indent=1, default=float) + "\n",
-                      [args.campaign])
+    with output_folder(args.output, camp.inputs, "study montecarlo") as out:
+        from arm_model.model import ArmModel
+        model = ArmModel(camp.arm, _effects(args.effect))
+        settings = RunSettings(free=tuple(_free(model, args)), weights=_weights(args), holdout=args.holdout,
+                               fit=_fit_kwargs(args), effects=_effects(args.effect))
+        mc = monte_carlo(SimSource(str(args.campaign)), args.runs, seed=args.seed, settings=settings,
+                         scheduler=args.scheduler, workers=args.workers, progress=not args.quiet)
+        (out.dir / "study.json").write_text(json.dumps(mc.to_dict(), indent=1, default=float) + "\n",
+                                            encoding="utf-8")
     print(f"{args.runs - len(mc.failures)} of {args.runs} runs succeeded")
     for f in mc.failures[:5]:
         print(f"  seed {f['seed']}: {f['error']}")
@@ -263,11 +284,11 @@ def run_montecarlo(args: argparse.Namespace) -> int:
 def run_poses(args: argparse.Namespace) -> int:
     from .study import select_measurements
     inputs = [args.points, args.artefacts, args.arm, args.reference_points]
-    guard_output(args.output / "poses.json", inputs)
-    model, data = _load_data(args)
-    sel = select_measurements(model, data, args.count, _free(model, args), weights=_weights(args),
-                              progress=not args.quiet, fit=_fit_kwargs(args))
-    atomic_write_text(args.output / "poses.json", json.dumps(sel.to_dict(), indent=1) + "\n", inputs)
+    with output_folder(args.output, inputs, "study poses") as out:
+        model, data, _ = _load_data(args)
+        sel = select_measurements(model, data, args.count, _free(model, args), weights=_weights(args),
+                                  progress=not args.quiet, fit=_fit_kwargs(args))
+        (out.dir / "poses.json").write_text(json.dumps(sel.to_dict(), indent=1) + "\n", encoding="utf-8")
     print(f"{len(sel.parameters)} identifiable parameters; chosen measurements (O1, random sets' O1):")
     for m, o, r, n in zip(sel.chosen, sel.o1, sel.o1_random, sel.n_points):
         print(f"  {m:20s} O1 {o:10.4g}   random {r:10.4g}   ({n} points)")

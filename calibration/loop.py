@@ -372,8 +372,9 @@ def _plot(space: ResidualSpace, cand: Candidate) -> tuple[str | None, dict | Non
 
 
 def close_loop(points: PointSet, artefacts: Artefacts, desc: ArmDescription, *, reference: PointSet | None = None,
-               effects=(), free=None, weights: Weights | None = None, settings: LoopSettings | None = None,
-               families_: tuple | None = None, extra=(), progress=None, **kw) -> LoopResult:
+               effects=(), values: dict | None = None, free=None, weights: Weights | None = None,
+               settings: LoopSettings | None = None, families_: tuple | None = None, extra=(), progress=None,
+               **kw) -> LoopResult:
     """Calibrate, diagnose, add the best-supported effect, recalibrate ... until nothing passes.
 
     Args:
@@ -381,6 +382,8 @@ def close_loop(points: PointSet, artefacts: Artefacts, desc: ArmDescription, *, 
         desc: the arm description (nominal).
         reference: a second points file with reference (tracker) coordinates.
         effects: effects already in the base model (not candidates).
+        values: starting values [SI] of parameters by name (e.g. the effect parameters of a model file);
+            parameters held fixed keep them.
         free: base parameters to calibrate (names or globs; default ``calibration.calibrate.default_free``);
             the parameters of every effect are always free.
         weights: standard uncertainties of the residuals.
@@ -397,11 +400,11 @@ def close_loop(points: PointSet, artefacts: Artefacts, desc: ArmDescription, *, 
     # many small dense solves: threaded BLAS only adds contention (8x slower on a loaded 2-core machine)
     with threadpool_limits(limits=1, user_api="blas"):
         return _close_loop(points, artefacts, desc, reference, effects, free, weights, settings, families_, extra,
-                           progress, kw)
+                           progress, kw, values)
 
 
 def _close_loop(points, artefacts, desc, reference, effects, free, weights, settings, families_, extra, progress,
-                kw) -> LoopResult:
+                kw, values=None) -> LoopResult:
     settings = settings or LoopSettings()
     if kw:
         settings = LoopSettings(**{**settings.to_dict(), **kw})
@@ -423,7 +426,7 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         if free is not None:
             names = [model.spec.names[i] for i in resolve_parameters(model.spec, free)]
             names += [n for n in model.spec.names[model.base_size:] if n not in names]
-        return calibrate(model, d, free=names, weights=weights, rank_tol=settings.rank_tol,
+        return calibrate(model, d, free=names, values=values, weights=weights, rank_tol=settings.rank_tol,
                          priors={**priors, **(extra_priors or {})}, outlier_threshold=settings.outlier_threshold)
 
     model = ArmModel(desc, tuple(effects))

@@ -6,10 +6,12 @@ import sys
 import time
 
 from arm_model import InputError
-from arm_model.commands import arm_from_args, at_least, fraction
-from arm_model.io import guard_output, read_artefacts, read_points
+from arm_model.commands import at_least, fraction, model_from_args
+from arm_model._output import output_folder
+from arm_model.io import read_artefacts, read_points
+from arm_model.model_file import Arm
 
-from .cli import campaign_inputs, sigma_options
+from .cli import campaign_inputs, model_effects, sigma_options
 
 __all__ = ["register", "run"]
 
@@ -61,18 +63,12 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from arm_model.effects import EFFECTS
-
     from .candidates import FAMILIES
     from .data import Weights
     from .loop import LoopSettings, close_loop
     from .loop_report import before_after_text, write_loop_report
 
     inputs = [p for p in (args.points, args.artefacts, args.arm, args.reference_points) if p is not None]
-    for name in ("summary.json", "report.html", "before-after.txt"):
-        guard_output(args.output / name, inputs)
-    if args.output.exists() and not args.output.is_dir():
-        raise InputError("the output must be a folder", args.output)
     families = None
     if args.candidates:
         families = tuple(k.strip() for k in args.candidates.split(",") if k.strip())
@@ -80,17 +76,17 @@ def run(args: argparse.Namespace) -> int:
         if bad:
             raise InputError(f"unknown candidate famil{'y' if len(bad) == 1 else 'ies'} {', '.join(bad)} "
                              f"(known: {', '.join(FAMILIES)})")
-    effects = []
-    for k in args.effect or ():
-        if k not in EFFECTS:
-            raise InputError(f"unknown effect '{k}' (known: {', '.join(EFFECTS)})")
-        effects.append(EFFECTS[k]())
+    arm = model_from_args(args)
+    desc = arm.desc
+    effects = model_effects(arm, args.effect).effects
     if effects and families is None:
         families = tuple(f for f in FAMILIES if f not in {e.key for e in effects})
-    desc = arm_from_args(args)
     points = read_points(args.points, desc.n_joints)
     artefacts = read_artefacts(args.artefacts)
     reference = read_points(args.reference_points, desc.n_joints) if args.reference_points else None
+    for pts in (points, reference):
+        if pts is not None:
+            Arm(desc, effects).check_points(pts)
     weights = Weights(args.sigma_probe_um * 1e-6, args.sigma_ref_um * 1e-6,
                       None if args.sigma_length_um is None else args.sigma_length_um * 1e-6)
     settings = LoopSettings(folds=args.folds, test_fraction=args.test_fraction, alpha=args.alpha,
@@ -102,11 +98,13 @@ def run(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"[{time.perf_counter() - t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
-    loop = close_loop(points, artefacts, desc, reference=reference, effects=tuple(effects), free=args.free,
-                      weights=weights, settings=settings, families_=families, progress=progress)
-    names = {"points": str(args.points), "artefacts": str(args.artefacts), "arm": str(args.arm),
-             "reference_points": None if args.reference_points is None else str(args.reference_points)}
-    write_loop_report(loop, args.output, inputs=inputs, input_names=names)
+    with output_folder(args.output, inputs, "close-loop") as out:
+        loop = close_loop(points, artefacts, desc, reference=reference, effects=tuple(effects), values=arm.values,
+                          free=args.free,
+                          weights=weights, settings=settings, families_=families, progress=progress)
+        names = {"points": str(args.points), "artefacts": str(args.artefacts), "arm": str(args.arm),
+                 "reference_points": None if args.reference_points is None else str(args.reference_points)}
+        write_loop_report(loop, out.dir, inputs=inputs, input_names=names)
     print(before_after_text(loop))
     print(loop.verdict)
     print(f"report: {args.output / 'report.html'}; machine summary: {args.output / 'summary.json'}")

@@ -1,4 +1,4 @@
-"""Outputs of the closed loop: ``summary.json`` (for machines), ``report.html`` with PNG plots (for
+"""Outputs of the closed loop: the model file (description, effects, covariance, URDF), ``summary.json`` (for machines), ``report.html`` with PNG plots (for
 people) and the before/after table printed by ``aacmm close-loop``. Every file is written atomically
 and refused if it would overwrite an input."""
 from __future__ import annotations
@@ -15,8 +15,9 @@ from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output
 from arm_model.shipped import provenance
 
 from .loop import LoopResult, Stage, effect_summary
+from .model_output import model_check, model_paths, write_model
 
-__all__ = ["summary_dict", "before_after_text", "write_loop_report", "plot_signature", "plot_screening",
+__all__ = ["summary_dict", "before_after_text", "write_loop_report", "write_loop_model", "loop_model_name", "plot_signature", "plot_screening",
            "plot_before_after"]
 
 #: columns of the before/after table: key, header, unit
@@ -251,14 +252,34 @@ def _cv_rows(cvs):
              "yes" if c.passed else "no", c.reason) for c in cvs]
 
 
+def loop_model_name(loop: LoopResult) -> str:
+    """Name of the loop's model file (without ``.toml``): ``<arm>-calibrated``."""
+    return f"{loop.desc.name}-calibrated"
+
+
+def write_loop_model(loop: LoopResult, out_dir, inputs=()) -> dict:
+    """The final model of the loop (its last fit on the design set, every effect added with its
+    parameters) as a model file, covariance file and URDF (:mod:`calibration.model_output`)."""
+    res = loop.final.result
+    added = [s.added.name for s in loop.stages[1:]]
+    comment = (f"Model of '{loop.desc.name}' found by aacmm close-loop: the description with the final fit's values "
+               f"folded in and the effects " + (f"added ({', '.join(added)})" if added else "of the base model")
+               + f" with their parameters.\nFitted on the design set ({len(loop.design)} measurements); s0 = "
+               f"{res.s0:.4g}. Read by every --arm option; format: docs/calibration.md.")
+    return write_model(res, out_dir, loop_model_name(loop), inputs=inputs, written_by="aacmm close-loop",
+                       comment=comment)
+
+
 def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | None = None) -> list[Path]:
-    """Write ``summary.json``, ``report.html``, ``before-after.txt`` and the PNGs into ``out_dir``
-    (atomically, never over ``inputs``); returns the paths written."""
+    """Write the model file (:func:`write_loop_model`), ``summary.json``, ``report.html``,
+    ``before-after.txt`` and the PNGs into ``out_dir`` (atomically, never over ``inputs``); returns the
+    paths written."""
     out = Path(out_dir)
     inputs = [Path(p) for p in inputs]
-    for name in ("summary.json", "report.html", "before-after.txt"):
+    for name in ("summary.json", "report.html", "before-after.txt", *model_paths(out, loop_model_name(loop)).values()):
         guard_output(out / name, inputs)
-    written = []
+    model_files = write_loop_model(loop, out, inputs)
+    written = list(model_files.values())
 
     def png(name, data):
         written.append(atomic_write_bytes(out / name, data, inputs))
@@ -316,6 +337,8 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
             "td,th{border:1px solid #ccc;padding:2px 6px}pre{background:#f6f6f6;padding:6px}</style></head><body>"
             f"<h1>Closing the loop: {html.escape(loop.desc.name)}</h1>" + "".join(sections) + "</body></html>")
     summary = summary_dict(loop, input_names)
+    summary["model"] = {"file": model_files["model"].name, "covariance": model_files["covariance"].name,
+                        "urdf": model_files["urdf"].name, "check": model_check(loop.final.result)}
     summary.update(provenance(inputs))
     written.append(atomic_write_text(out / "summary.json", json.dumps(summary, indent=1) + "\n", inputs))
     written.append(atomic_write_text(out / "before-after.txt", table + "\n", inputs))

@@ -13,12 +13,12 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError
-from arm_model.description import format_description
+from arm_model._output import safe_name
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, write_csv
 from arm_model.shipped import provenance
-from arm_model.urdf import urdf_text
 
 from .calibrate import CalibrationResult, display_unit
+from .model_output import model_check, model_paths, write_model
 
 __all__ = ["write_outputs", "plot_residuals", "plot_parameters", "plot_correlation"]
 
@@ -190,17 +190,18 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
                   validation_holdout=None, extra: dict | None = None, plots: bool = True) -> dict:
     """Write the outputs of ``result`` into ``out_dir`` (created); returns ``{role: Path}``.
 
-    Files: ``<name>-calibrated.toml`` and ``.urdf`` (the base errors folded into a new description),
-    ``summary.json``, ``parameters.csv``, ``residuals.csv``, ``report.html`` and three PNG plots.
+    Files: the model file ``<name>-calibrated.toml`` (the base errors folded into a new description, the
+    model's effects with their parameters; :mod:`calibration.model_output`), its covariance file
+    ``<name>-calibrated-covariance.csv`` and ``<name>-calibrated.urdf``, ``summary.json``, ``parameters.csv``, ``residuals.csv``, ``report.html`` and three PNG plots.
     ``inputs``: files that must never be overwritten (points, artefacts, the nominal arm).
     """
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError("the output must be a directory", out)
-    desc = result.described()
     name = f"{result.model.desc.name}-calibrated"
-    cal = replace(desc, name=name)
-    files = {"description": out / f"{name}.toml", "urdf": out / f"{name}.urdf", "summary": out / "summary.json",
+    model_files = model_paths(out, name)
+    files = {"description": model_files["model"], "covariance": model_files["covariance"],
+             "urdf": model_files["urdf"], "summary": out / "summary.json",
              "parameters": out / "parameters.csv", "residuals": out / "residuals.csv", "report": out / "report.html"}
     if plots:
         files.update({"residuals_png": out / "residuals.png", "parameters_png": out / "parameters.png",
@@ -208,13 +209,11 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
     for f in files.values():
         guard_output(f, inputs)
     effects = [e.describe() for e in result.model.effects]
-    comment = (f"Calibrated description of '{result.model.desc.name}' written by aacmm calibrate.\n"
-               f"Solver: {result.status}; s0 = {result.s0:.4g}.")
-    if effects:
-        comment += ("\nThe model's effects (" + ", ".join(effects) + ") are not part of a description: "
-                    "their parameters are in summary.json.")
-    atomic_write_text(files["description"], format_description(cal, comment), inputs)
-    atomic_write_text(files["urdf"], urdf_text(cal), inputs)
+    comment = (f"Calibrated model of '{result.model.desc.name}' written by aacmm calibrate: the description with the "
+               f"fitted values folded in"
+               + (", and the model's effects with their parameters" if effects else "") + ".\n"
+               f"Solver: {result.status}; s0 = {result.s0:.4g}. Read by every --arm option; format: docs/calibration.md.")
+    write_model(result, out, name, inputs=inputs, written_by="aacmm calibrate", comment=comment)
     rows = result.parameter_rows()
     write_csv(files["parameters"], {
         "name": np.array([r["name"] for r in rows], dtype=object),
@@ -232,10 +231,12 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
     summary["arm"] = result.model.desc.name
     summary["effects"] = effects
     summary["calibrated_description"] = files["description"].name
+    summary["calibrated_covariance"] = files["covariance"].name
     summary["calibrated_urdf"] = files["urdf"].name
     summary["validation_training"] = validation_training
     summary["validation_holdout"] = validation_holdout
     summary["poorly_determined"] = poorly_determined(result)
+    summary["model_check"] = model_check(result)
     if extra:
         summary.update(extra)
     summary.update(provenance(inputs))
@@ -246,6 +247,11 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
     atomic_write_text(files["summary"], json.dumps(_finite(summary), indent=1, default=_json_default) + "\n", inputs)
     atomic_write_text(files["report"], _html(result, summary, files), inputs)
     return files
+
+
+def _safe_arm_name(name: str) -> str:
+    """The arm's name as the stem of a file name (see :func:`arm_model._output.safe_name`)."""
+    return safe_name(name)
 
 
 #: standard uncertainty beyond which a free parameter is reported as poorly determined, per SI unit

@@ -7,7 +7,8 @@ from pathlib import Path
 
 from arm_model import InputError, read_artefacts, read_points
 from arm_model.commands import add_arm_options, arm_from_args, positive
-from arm_model.io import check_features, guard_output
+from arm_model._output import output_folder
+from arm_model.io import check_features
 
 __all__ = ["register", "run_ring", "run_paper"]
 
@@ -65,19 +66,19 @@ def run_ring(args: argparse.Namespace) -> int:
     from .report import DEFAULT_U_FORCE, ring_budgets, ring_report
 
     inputs = {"points": args.points, "artefacts": args.artefacts, "arm": args.arm}
-    guard_output(args.output, list(inputs.values()) + ([args.signals] if args.signals else []))
     if args.signals is not None and not args.signals.is_dir():
         raise InputError("--signals must be a folder of <measurement>.csv force signals", args.signals)
-    desc = arm_from_args(args)
-    points = read_points(args.points, desc.n_joints)
-    artefacts = read_artefacts(args.artefacts)
-    check_features(points, artefacts)
-    compliance = None if args.compliance is None else args.compliance * 1e-3
-    campaign = analyse_ring_campaign(desc, points, artefacts, args.feature, args.signals, compliance)
-    u_force = DEFAULT_U_FORCE if args.u_force is None else args.u_force
-    budgets = ring_budgets(campaign, u_force=u_force, delta_t=args.delta_t, probability=args.probability)
-    inputs["signals"] = args.signals
-    written = ring_report(campaign, args.output, inputs, budgets)
+    with output_folder(args.output, list(inputs.values()) + [args.signals], "ring") as out:
+        desc = arm_from_args(args)
+        points = read_points(args.points, desc.n_joints)
+        artefacts = read_artefacts(args.artefacts)
+        check_features(points, artefacts)
+        compliance = None if args.compliance is None else args.compliance * 1e-3
+        campaign = analyse_ring_campaign(desc, points, artefacts, args.feature, args.signals, compliance)
+        u_force = DEFAULT_U_FORCE if args.u_force is None else args.u_force
+        budgets = ring_budgets(campaign, u_force=u_force, delta_t=args.delta_t, probability=args.probability)
+        inputs["signals"] = args.signals
+        written = ring_report(campaign, out.dir, inputs, budgets)
     s = campaign_summary(campaign)
     print(f"ring '{campaign.feature}': {len(campaign.measurements)} measurements, "
           f"{sum(r.n_points for r in campaign.measurements)} points; forces from "
@@ -98,8 +99,9 @@ def run_paper(args: argparse.Namespace) -> int:
     from .report import paper_report, paper_summary
     from .paper import load_paper_table2
 
-    table = load_paper_table2(args.table2)
-    written = paper_report(args.output, args.table2)
+    with output_folder(args.output, [args.table2], "paper") as out:
+        table = load_paper_table2(args.table2)
+        written = paper_report(out.dir, args.table2)
     s = paper_summary(table)
     bad = [f for f in s["findings"] if not f["consistent"]]
     print(f"Table 2 ({len(table.initial)} measurements): Pearson r with the (0, 0) point: "

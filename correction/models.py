@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError, ball_centres
+from arm_model._output import safe_name
 from arm_model.io import PointSet, read_force_signal
 
 from .cylinder import CylinderFit, RingFit, ring_fit
@@ -149,10 +150,11 @@ def measurement_forces(points: PointSet, measurement: str, signals=None) -> Poin
             raise InputError(f"no force signal for measurement '{measurement}' (signals given for: "
                              f"{', '.join(sorted(signals)) or 'none'})", points.path)
         return find_point_forces(signals[measurement], len(rows), measurement)
-    path = Path(signals) / f"{measurement}.csv"
+    path = Path(signals) / safe_name(measurement, ".csv")
     if not path.exists():
         raise InputError(f"no force signal for measurement '{measurement}' (expected one file a measurement, "
-                         f"named <measurement>.csv, docs/formats.md §5)", path)
+                         f"named <measurement>.csv; characters other than letters, digits and . _ + - "
+                         f"become _; docs/formats.md §5)", path)
     return find_point_forces(read_force_signal(path), len(rows), measurement)
 
 
@@ -185,6 +187,13 @@ def analyse_ring_campaign(desc, points: PointSet, artefacts, feature: str | None
     on_ring = points.feature == ring.id
     if not np.any(on_ring):
         raise InputError(f"no point of the points file touches the ring '{ring.id}'", points.path, None, "feature")
+    if signals is not None and not isinstance(signals, Mapping):
+        files: dict[str, str] = {}
+        for mid in points.measurements():
+            other = files.setdefault(safe_name(mid, ".csv"), mid)
+            if other != mid:
+                raise InputError(f"measurements '{other}' and '{mid}' would both read the signal file "
+                                 f"{safe_name(mid, '.csv')}; rename one", points.path, None, "measurement")
     c = desc.probe.bending_compliance_x if compliance is None else float(compliance)
     notes = []
     kind = None

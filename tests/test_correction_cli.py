@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from arm_model import load_description, read_artefacts, read_points
+from arm_model._output import MARKER
 from arm_model.cli import build_parser, main
 from conftest import NOMINAL, ROOT, assert_close
 from correction.models import analyse_ring_campaign
@@ -30,7 +31,7 @@ def small_campaign(tmp_path_factory):
 
 
 def files_under(d):
-    return {str(p.relative_to(d)) for p in d.rglob("*") if p.is_file()}
+    return {str(p.relative_to(d)) for p in d.rglob("*") if p.is_file() and p.name != MARKER}
 
 
 def test_ring_report_with_signals(small_campaign, tmp_path):

@@ -3,6 +3,7 @@ meshcat server, or written as a self-contained page / a screenshot."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import signal
 import tempfile
 import time
@@ -12,7 +13,7 @@ import numpy as np
 
 from arm_model import InputError, ball_centres, check_features, read_artefacts, read_points
 from arm_model.commands import add_arm_options, arm_from_args, positive
-from arm_model.io import guard_output
+from arm_model._output import output_file
 
 from ._errors import ViewerError
 from .placement import place_features
@@ -78,14 +79,18 @@ def _selection(points, measurement: str | None):
 
 def run(args: argparse.Namespace) -> int:
     inputs = [f for f in (args.points, args.arm, args.artefacts, args.residuals) if f is not None]
-    for out in (args.html, args.screenshot):
-        if out is not None:
-            guard_output(out, inputs)
     if args.html is not None and args.screenshot is not None and args.html.resolve() == args.screenshot.resolve():
         raise InputError("--html and --screenshot name the same file", args.html)
     if args.screenshot is not None:
         from .browser import find_chromium
         find_chromium(args.browser)   # before any work: a missing browser is reported at once
+    with contextlib.ExitStack() as outputs:    # --html and --screenshot: both complete, or neither
+        tmp = {k: outputs.enter_context(output_file(getattr(args, k), inputs))
+               for k in ("html", "screenshot") if getattr(args, k) is not None}
+        return _run(args, inputs, outputs, tmp)
+
+
+def _run(args, inputs, outputs, tmp) -> int:
     # read everything first: a bad file stops here, before a server starts or a file is written
     desc = arm_from_args(args)
     points = read_points(args.points, desc.n_joints)
@@ -128,10 +133,13 @@ def run(args: argparse.Namespace) -> int:
                 view.show_residuals(origins, vectors, scale=args.residual_scale)
         _report(desc, sel, centres, shown, wrench, args, view, notes)
         if args.html is not None:
-            view.write_html(args.html, inputs=inputs)
+            view.write_html(tmp["html"], inputs=inputs)
+        if args.screenshot is not None:
+            _screenshot(view, args, tmp["screenshot"])
+        outputs.close()                     # publish the files now, before serving
+        if args.html is not None:
             print(f"page -> {args.html}")
         if args.screenshot is not None:
-            _screenshot(view, args)
             print(f"screenshot -> {args.screenshot}")
         if serve:
             _serve(view, args.open_seconds)
@@ -166,13 +174,13 @@ def _report(desc, sel, centres, shown, wrench, args, view, notes) -> None:
         print("note: " + note)
 
 
-def _screenshot(view, args) -> None:
+def _screenshot(view, args, out_png) -> None:
     from .browser import screenshot
 
     with tempfile.TemporaryDirectory(prefix="aacmm-view-") as tmp:
         page = Path(tmp) / "scene.html"
         page.write_text(view.html(), encoding="utf-8")
-        screenshot(page, args.screenshot, browser=args.browser)
+        screenshot(page, out_png, browser=args.browser)
 
 
 def _serve(view, seconds: float | None) -> None:

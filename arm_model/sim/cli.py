@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._output import output_folder
 from .campaign import load_campaign
 from .run import (ARTEFACTS_FILE, POINTS_FILE, REFERENCE_FILE, SIGNALS_DIR, TRUTH_FILE, TRUTH_POINTS_FILE,
                   simulate)
@@ -75,6 +76,17 @@ def summary(result, elapsed: float | None = None) -> str:
 def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     campaign = load_campaign(args.campaign)
+    with output_folder(args.output, campaign.inputs, "simulate") as out:
+        result, written = _simulate(args, campaign, out, t0)
+    print(summary(result, time.perf_counter() - t0))
+    written = [out.published(p) for p in written]
+    n_sig = sum(1 for p in written if p.parent.name == SIGNALS_DIR)
+    print(f"wrote {args.output}/: " + ", ".join(p.name for p in written if p.parent.name != SIGNALS_DIR)
+          + (f", {n_sig} signal file(s) in {SIGNALS_DIR}/" if n_sig else ""))
+    return 0
+
+
+def _simulate(args, campaign, out, t0):
     if args.no_signals:
         from dataclasses import replace
         campaign = replace(campaign, signals=dict(campaign.signals, enabled=False))
@@ -84,10 +96,6 @@ def run(args: argparse.Namespace) -> int:
             print(f"[{time.perf_counter() - t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
     result = simulate(campaign, seed=args.seed, progress=progress)
-    written = result.write(args.output)
+    written = result.write(out.dir, campaign.inputs)
     progress(f"{len(written)} files written to {args.output}")
-    print(summary(result, time.perf_counter() - t0))
-    n_sig = sum(1 for p in written if p.parent.name == SIGNALS_DIR)
-    print(f"wrote {args.output}/: " + ", ".join(p.name for p in written if p.parent.name != SIGNALS_DIR)
-          + (f", {n_sig} signal file(s) in {SIGNALS_DIR}/" if n_sig else ""))
-    return 0
+    return result, written

@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._errors import NumericalError
+from .._errors import InputError, NumericalError
+from .._output import safe_name
 from ..io import (Artefacts, ForceSignal, PointSet, atomic_write_text, guard_output, parse_points)
 from ..io import parse_artefacts
 from .artefacts import Plan, make_plan
@@ -309,7 +310,10 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
             for c, name in enumerate(names):
                 cols[name] = (f[:, c], _FMT["force"])
             text = _fast_csv(cols)
-            rel = f"{SIGNALS_DIR}/{mid}.csv"
+            rel = f"{SIGNALS_DIR}/{safe_name(mid, '.csv')}"
+            if rel in texts:
+                raise InputError(f"two measurement ids give the same signal file name {rel}; rename the task "
+                                 "ids (letters, digits and . _ + - keep a name as it is)", campaign.source)
             texts[rel] = text
             arr = np.loadtxt(io.StringIO(text), delimiter=",", skiprows=1, ndmin=2)
             force = arr[:, 1:]

@@ -1,0 +1,296 @@
+"""Every output of every command, complete or absent (one place).
+
+A command that writes a folder does so inside :func:`output_folder`::
+
+    with output_folder(args.output, inputs, "calibrate") as out:
+        write_report(..., out.dir)          # any writer, into a fresh temporary folder beside -o
+    print(f"report -> {args.output / 'report.html'}")
+
+The temporary folder sits beside ``-o`` (same file system). When the block ends normally it is renamed
+into place: an earlier output of the same command at ``-o`` is replaced only then, as a whole (no stale
+file of an earlier run survives, and two runs into one ``-o`` at once never mix: the last to finish
+wins, each complete). On any error, Ctrl-C or SIGTERM the temporary folder is removed and ``-o`` is as
+it was. A command that writes one file uses :func:`output_file` (temporary file, then ``os.replace``).
+
+Refused before any work, with an :class:`InputError` (exit 2): ``-o`` that is an input, holds an input,
+is a file where a folder is expected (or the reverse), sits below a file, cannot be written, or is a
+non-empty folder that is not an earlier output of the same command (``-o .`` never empties a folder of
+the user's). File names built from input text (arm names, measurement ids) go through :func:`safe_name`
+and are checked by :meth:`Output.path` to stay inside the folder.
+"""
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import shutil
+import tempfile
+import unicodedata
+import zlib
+from pathlib import Path
+
+from ._errors import InputError
+
+__all__ = ["output_folder", "output_file", "Output", "safe_name", "guard_output", "atomic_write_bytes",
+           "MARKER"]
+
+#: the file that marks a folder as an output of ``aacmm <command>`` (its text: ``aacmm <command>``)
+MARKER = ".aacmm-output"
+_MAX_NAME = 120
+
+
+def safe_name(text: str, suffix: str = "") -> str:
+    """A file name made from input text (an arm name, a measurement id), that cannot leave its folder.
+
+    Letters, digits and ``. _ + -`` are kept; every other character (``/``, ``\\``, ``:``, spaces,
+    control characters, markup) becomes ``_``; a leading dot becomes ``_`` (no hidden files, no
+    ``..``); an empty text gives ``_``; a name longer than 120 characters is cut and given a checksum of
+    the whole text. The same text always gives the same name, so a reader finds what a writer wrote.
+    """
+    text = unicodedata.normalize("NFC", str(text))
+    name = "".join(c if (c.isalnum() or c in "._+-") and c.isprintable() else "_" for c in text)
+    if name.startswith("."):
+        name = "_" + name[1:]
+    if not name:
+        name = "_"
+    if len(name) > _MAX_NAME:
+        name = f"{name[:_MAX_NAME - 9]}-{zlib.crc32(text.encode('utf-8')):08x}"
+    return name + suffix
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    return path == folder or folder in path.parents
+
+
+def guard_output(out: str | Path, inputs=()) -> Path:
+    """Refuse an output (file or folder) that is one of the inputs or holds one (by resolved path)."""
+    out = Path(out)
+    ro = out.resolve()
+    for p in inputs:
+        if p is None:
+            continue
+        rp = Path(p).resolve()
+        if rp == ro:
+            raise InputError("refusing to write the output over an input file", out)
+        if _inside(rp, ro):
+            raise InputError(f"refusing to write the output over an input: the output folder holds the "
+                             f"input {p} and is replaced as a whole; choose another output folder", out)
+    return out
+
+
+def _mode(umask_mode: int) -> int:
+    umask = os.umask(0)
+    os.umask(umask)
+    return umask_mode & ~umask
+
+
+def _oserror(exc: OSError, what: str, path: Path) -> InputError:
+    reason = exc.strerror or str(exc)
+    if exc.errno == errno.ENOTDIR:
+        reason = "a file is in the way (a folder is expected)"
+    return InputError(f"cannot {what}: {reason}", path)
+
+
+def _make_parents(folder: Path) -> list[Path]:
+    """Create ``folder`` and its missing parents; the ones created, outermost first."""
+    missing = []
+    p = folder
+    while not p.exists():
+        if p.is_symlink():
+            raise InputError("the output's folder is a broken symbolic link", p)
+        missing.append(p)
+        p = p.parent
+    if not p.is_dir():
+        raise InputError("the output would be below a file, not a folder", p)
+    created = []
+    for q in reversed(missing):
+        try:
+            q.mkdir()
+        except FileExistsError:
+            if not q.is_dir():
+                raise InputError("the output would be below a file, not a folder", q) from None
+            continue
+        except OSError as exc:
+            _remove_empty(created)
+            raise _oserror(exc, "create the output's folder", q) from None
+        created.append(q)
+    return created
+
+
+def _remove_empty(created: list[Path]) -> None:
+    for q in reversed(created):
+        with contextlib.suppress(OSError):
+            q.rmdir()
+
+
+class Output:
+    """The temporary folder a command writes into (``dir``); see :func:`output_folder`."""
+
+    def __init__(self, stage: Path, final: Path):
+        self.dir = stage
+        self.final = final
+        self._names: dict[str, str] = {}
+
+    def path(self, *parts: str, source: str | None = None) -> Path:
+        """The path of a file inside the folder (its parent folders created). Each part must be one
+        plain name (use :func:`safe_name` for input text); two different sources that give the same
+        name are refused. ``source`` is the input text the name was made from, for the message."""
+        for part in parts:
+            if not part or part in (".", "..") or "/" in part or "\\" in part or "\0" in part:
+                raise ValueError(f"not a plain file name: {part!r}")
+        rel = "/".join(parts)
+        key = source if source is not None else rel
+        other = self._names.setdefault(rel, key)
+        if other != key:
+            raise InputError(f"'{source}' and '{other}' give the same output file name '{rel}'; rename one")
+        p = self.dir.joinpath(*parts)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        return p
+
+    def published(self, path: str | Path) -> Path:
+        """Where a file written into the temporary folder will be once published."""
+        return self.final / Path(path).relative_to(self.dir)
+
+
+def _owner(folder: Path) -> str | None:
+    """``"aacmm <command>"`` for an earlier output, ``""`` for an empty folder, None otherwise."""
+    try:
+        if not os.listdir(folder):
+            return ""
+        return (folder / MARKER).read_text(encoding="utf-8").strip()
+    except (OSError, UnicodeDecodeError):
+        return None
+
+
+def _not_ours(final: Path, owner: str | None, command: str) -> InputError:
+    what = f"an output of '{owner}'" if owner and owner.startswith("aacmm ") else "not an earlier output of aacmm"
+    return InputError(f"the output folder exists, is not empty and is {what}; an output folder is replaced "
+                      f"as a whole, so name a new or empty folder (or an earlier output of aacmm {command})",
+                      final)
+
+
+def _check_folder(final: Path, command: str) -> None:
+    if not final.exists():
+        return
+    if not final.is_dir():
+        raise InputError("the output must be a folder, but a file of that name exists", final)
+    if _inside(Path.cwd().resolve(), final):
+        raise InputError("the output folder would replace the current folder (or one above it); "
+                         "name a new folder", final)
+    if not os.access(final, os.R_OK | os.X_OK):
+        raise InputError("cannot read the output folder: permission denied", final)
+    owner = _owner(final)
+    if owner not in ("", f"aacmm {command}"):
+        raise _not_ours(final, owner, command)
+
+
+def _publish(stage: Path, final: Path, command: str) -> None:
+    """Rename ``stage`` to ``final``. An existing ``final`` is first moved aside (atomically, so no
+    other run can change it meanwhile), checked to be an earlier output of ``command`` (else put back
+    and refused) and removed after."""
+    aside = []
+    try:
+        for _ in range(1000):
+            try:
+                os.rename(stage, final)
+                break
+            except OSError as exc:
+                if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST):
+                    raise
+            old = Path(tempfile.mkdtemp(prefix=f".{final.name}.old-", dir=final.parent))
+            try:
+                os.rename(final, old)        # replaces the empty folder just made
+            except FileNotFoundError:        # another run moved it: try again
+                old.rmdir()
+                continue
+            owner = _owner(old)
+            if owner not in ("", f"aacmm {command}"):
+                with contextlib.suppress(OSError):
+                    os.rename(old, final)
+                    raise _not_ours(final, owner, command)
+                raise InputError(f"the output folder was replaced meanwhile by something else, now at {old}",
+                                 final)
+            aside.append(old)
+        else:
+            raise InputError("the output folder keeps being replaced by other runs", final)
+    finally:
+        for old in aside:
+            shutil.rmtree(old, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def output_folder(final: str | Path, inputs=(), command: str = ""):
+    """Write a command's output folder complete or not at all (see the module's doc).
+
+    Args:
+        final: the ``-o`` folder.
+        inputs: the command's input files and folders (``None`` entries ignored): never written over,
+            never inside the output folder.
+        command: the subcommand (``"calibrate"``, ``"study montecarlo"``); an existing non-empty folder
+            is replaced only if an earlier run of the same command wrote it.
+    Yields:
+        an :class:`Output`; write into ``out.dir``.
+    """
+    final = Path(final)
+    guard_output(final, inputs)
+    final = Path(os.path.abspath(final))
+    if final.is_symlink():
+        final = final.resolve()
+    if final.name in ("", ".", ".."):
+        raise InputError("name an output folder", final)
+    _check_folder(final, command)
+    created = _make_parents(final.parent)
+    try:
+        stage = Path(tempfile.mkdtemp(prefix=f".{final.name}.tmp-", dir=final.parent))
+    except OSError as exc:
+        _remove_empty(created)
+        raise _oserror(exc, "write the output folder", final) from None
+    try:
+        os.chmod(stage, _mode(0o777))
+        (stage / MARKER).write_text(f"aacmm {command}\n", encoding="utf-8")
+        yield Output(stage, final)
+        _publish(stage, final, command)
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        _remove_empty(created)
+        raise
+
+
+@contextlib.contextmanager
+def output_file(final: str | Path, inputs=()):
+    """Write one output file complete or not at all: yields a temporary path beside ``final``;
+    when the block ends normally it replaces ``final`` (``os.replace``), else it is removed."""
+    final = Path(final)
+    guard_output(final, inputs)
+    if final.is_dir():
+        raise InputError("the output is a file, but a folder of that name exists", final)
+    if final.name in ("", ".", ".."):
+        raise InputError("name an output file", final)
+    created = _make_parents(final.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.tmp-", suffix=final.suffix, dir=final.parent)
+    except OSError as exc:
+        _remove_empty(created)
+        raise _oserror(exc, "write the output file", final) from None
+    tmp = Path(tmp)
+    try:
+        os.fchmod(fd, _mode(0o666))      # mkstemp makes 0600; outputs get the usual mode
+        os.close(fd)
+        yield tmp
+        if final.is_dir():
+            raise InputError("the output is a file, but a folder of that name exists", final)
+        os.replace(tmp, final)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        _remove_empty(created)
+        raise
+
+
+def atomic_write_bytes(path: str | Path, data: bytes, inputs=()) -> Path:
+    """Write ``data`` to the file ``path`` complete or not at all (never over an input)."""
+    path = Path(path)
+    with output_file(path, inputs) as tmp:
+        tmp.write_bytes(data)
+    return path
+

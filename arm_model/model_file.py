@@ -1,0 +1,459 @@
+"""The model file: an arm description plus the effects a calibration found, with their parameters.
+
+One TOML file (``aacmm calibrate`` and ``aacmm close-loop`` write it, every ``--arm`` reads it):
+
+* the description (``name``, ``convention``, ``[[joint]]``, ``[probe]``) with the calibrated values
+  folded in, exactly as :mod:`arm_model.description` reads it;
+* one ``[[effect]]`` table an effect: ``kind`` (a key of :data:`arm_model.effects.EFFECTS`),
+  ``joints`` (joint names; absent: all joints), the effect's other options (its dataclass fields,
+  e.g. ``harmonics``, ``gravity``) and ``parameter``, one entry a parameter of the effect
+  (``param_defs``): ``name``, ``value_<unit>``, ``u_<unit>`` (standard uncertainty; 0 when not
+  estimated) and ``state`` ("free", "fixed" or "held") — units from :data:`PARAM_UNITS`;
+* an optional ``[calibration]`` table: ``covariance`` (the covariance file, relative to the TOML)
+  and ``written_by``.
+
+The covariance file (:func:`write_covariance`, :func:`read_covariance`) is a CSV: one row a free
+parameter of the fit, columns ``parameter``, ``unit``, ``value``, ``u`` (in that row's unit) and one
+column per parameter holding the correlation coefficients, so that
+``cov[i, k] = u[i] * u[k] * corr[i, k]``.
+
+The serialisation is generic over :class:`arm_model.effects.Effect`: an effect's options are its
+dataclass fields and its parameters its ``param_defs``, so a new effect class needs no code here
+(only, for a new SI unit, an entry of :data:`PARAM_UNITS`).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ._errors import InputError, parse_toml, read_text
+from .description import (MODEL_KEYS, ArmDescription, TomlReader, description_data, description_from_data,
+                          in_unit, nearest, toml_text)
+from .effects import EFFECTS, Effect
+from .model import ArmModel, AuxData
+
+__all__ = ["Arm", "PARAM_UNITS", "parse_model", "load_model", "format_model", "effect_tables",
+           "effects_from_tables", "write_covariance", "read_covariance", "Covariance", "check_calibration_table",
+           "EFFECT_COLUMNS"]
+
+#: SI unit of an effect parameter -> the unit suffixes a model file may use, (suffix, factor to SI); the
+#: first is the one written. A new effect whose parameters have a new SI unit adds an entry here.
+PARAM_UNITS: dict[str, tuple[tuple[str, float], ...]] = {
+    "m": (("um", 1e-6), ("mm", 1e-3), ("m", 1.0)),
+    "rad": (("urad", 1e-6), ("mrad", 1e-3), ("deg", math.pi / 180.0), ("rad", 1.0)),
+    "m/N": (("um_per_N", 1e-6), ("mm_per_N", 1e-3), ("m_per_N", 1.0)),
+    "rad/(N m)": (("urad_per_Nm", 1e-6), ("rad_per_Nm", 1.0)),
+    "1/K": (("ppm_per_K", 1e-6), ("per_K", 1.0)),
+    "1": (("ppm", 1e-6), ("pct", 1e-2), ("ratio", 1.0)),
+    "N": (("N", 1.0),),
+    "N m": (("Nm", 1.0), ("Nmm", 1e-3)),
+    "K": (("K", 1.0),),
+    "s": (("s", 1.0),),
+    "kg": (("kg", 1.0),),
+}
+
+#: per-point input of an effect (``Effect.needs``) -> the points-file column it comes from (None:
+#: computed from the description, e.g. gravity and contact torques)
+EFFECT_COLUMNS: dict[str, str | None] = {"temperature": "temperature_C", "tau_gravity": None, "tau_contact": None}
+
+STATES = ("free", "fixed", "held")
+
+
+def _unit_of(si: str) -> tuple[str, float]:
+    try:
+        return PARAM_UNITS[si][0]
+    except KeyError:
+        raise ValueError(f"no model-file unit for the SI unit {si!r}: add it to "
+                         "arm_model.model_file.PARAM_UNITS") from None
+
+
+# ---------------------------------------------------------------------------------------------
+# the arm as --arm gives it
+
+@dataclass(frozen=True)
+class Arm:
+    """An arm as every ``--arm`` option gives it: the description, its effects and their parameter
+    values [SI] by name (``values``; the description's own values are folded in, so the base part
+    of the parameter vector is zero), with standard uncertainties and states when a fit wrote them.
+    ``covariance``: the covariance file named by the model file (resolved path) or None."""
+    desc: ArmDescription
+    effects: tuple[Effect, ...] = ()
+    values: dict = field(default_factory=dict)
+    uncertainties: dict = field(default_factory=dict)
+    states: dict = field(default_factory=dict)
+    covariance: Path | None = None
+
+    @property
+    def model(self) -> ArmModel:
+        return ArmModel(self.desc, tuple(self.effects))
+
+    @property
+    def p(self) -> np.ndarray:
+        """The parameter vector of :attr:`model`: zeros for the description, the effects' values."""
+        return self.model.spec.vector(self.values)
+
+    def missing_inputs(self, points) -> list[tuple[Effect, str]]:
+        """(effect, column) of every points-file column an effect needs and ``points`` lack."""
+        out = []
+        for e in self.effects:
+            for need in e.needs():
+                column = EFFECT_COLUMNS.get(need)
+                if column == "temperature_C":
+                    t = points.temperature
+                    if t is None or not np.all(np.isfinite(t)):
+                        out.append((e, column))
+        return out
+
+    def check_points(self, points) -> None:
+        """An :class:`InputError` naming the effect and the column when ``points`` lack a column an
+        effect needs."""
+        missing = self.missing_inputs(points)
+        if missing:
+            e, column = missing[0]
+            raise InputError(f"the model's effect '{e.describe()}' needs the column '{column}', which the "
+                             f"points lack (or hold a non-finite value in)", points.path, 1, column)
+
+    def aux(self, points, wrench=None, contact: bool = True) -> AuxData | None:
+        """Per-point inputs of the effects for a :class:`~arm_model.io.PointSet` (temperature from its
+        column; gravity and contact torques from this description by Pinocchio at the points' angles
+        and ``wrench``, default the points' own). A column an effect needs and the points lack is an
+        :class:`InputError` naming the effect and the column. ``contact=False``: contact torques zero."""
+        self.check_points(points)
+        needs = self.model.needs()
+        if not needs:
+            return None
+        temperature = points.temperature if "temperature" in needs else None
+        tau_g = tau_c = None
+        if needs & {"tau_gravity", "tau_contact"}:
+            from .pinocchio_model import PinocchioArm
+            w = points.wrench if wrench is None else wrench
+            tau_g, tau_c = PinocchioArm(self.desc).torques(points.q, w if contact else None)
+        return AuxData(temperature, tau_g, tau_c)
+
+    def ball_centres(self, points, wrench=None, rigid: bool = False) -> np.ndarray:
+        """(N, 3) ball centres [m] of a :class:`~arm_model.io.PointSet` with every effect applied, from
+        the points' wrench (or ``wrench``, e.g. forces found in signals). ``rigid``: at a zero force
+        reading (no contact wrench, no contact torques), the other effects still applied."""
+        w = points.wrench if wrench is None else np.asarray(wrench, dtype=float)
+        if rigid:
+            w = None
+        aux = self.aux(points, wrench=w, contact=not rigid)
+        return self.model.ball_centres(points.q, w, self.p, aux)
+
+
+def check_calibration_table(tbl, r: TomlReader) -> None:
+    """The ``[calibration]`` table of a model file: text keys ``covariance`` and ``written_by``."""
+    if not isinstance(tbl, dict):
+        raise r.error("'calibration' must be a table", "calibration")
+    known = ("covariance", "written_by")
+    for key, value in tbl.items():
+        if key not in known:
+            raise r.error(f"unknown key '{key}' (known: {', '.join(known)}){nearest(key, known)}",
+                          "calibration", key)
+        if not isinstance(value, str) or not value.strip():
+            raise r.error(f"'{key}' must be a non-empty text", "calibration", key)
+
+
+# ---------------------------------------------------------------------------------------------
+# effects <-> TOML tables (generic over Effect subclasses)
+
+def _options(effect: Effect) -> list[dataclasses.Field]:
+    """The dataclass fields of an effect that a model file carries (all but ``key`` and ``joints``)."""
+    return [f for f in dataclasses.fields(effect) if f.init and f.name not in ("key", "joints")]
+
+
+def _plain(v):
+    if isinstance(v, (bool, str)):
+        return v
+    if isinstance(v, (int, np.integer)):
+        return int(v)
+    if isinstance(v, (float, np.floating)):
+        return float(v)
+    if isinstance(v, (tuple, list)):
+        return [_plain(x) for x in v]
+    raise ValueError(f"an effect option of type {type(v).__name__} cannot be written to a model file")
+
+
+def effect_tables(desc: ArmDescription, effects, values: dict, uncertainties: dict | None = None,
+                  states: dict | None = None) -> list[dict]:
+    """The ``[[effect]]`` tables of ``effects`` (values and uncertainties [SI] by parameter name)."""
+    out = []
+    for e in effects:
+        tbl: dict = {"kind": e.key}
+        if e.joints is not None:
+            tbl["joints"] = [desc.joints[i].name for i in e.joints]
+        for f in _options(e):
+            if getattr(e, f.name) is not None:          # TOML has no null: an absent option takes its default
+                tbl[f.name] = _plain(getattr(e, f.name))
+        params = []
+        for name, si in e.param_defs(desc):
+            suffix, factor = _unit_of(si)
+            row = {"name": name, f"value_{suffix}": in_unit(values.get(name, 0.0), factor),
+                   f"u_{suffix}": in_unit((uncertainties or {}).get(name, 0.0), factor)}
+            if states and name in states:
+                row["state"] = states[name]
+            params.append(row)
+        tbl["parameter"] = params
+        out.append(tbl)
+    return out
+
+
+def _option_value(value, default, r: TomlReader, where: tuple):
+    """``value`` read as the type of the field's ``default``."""
+    def bad(what):
+        return r.error(f"must be {what}, got {value!r}", *where)
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise bad("true or false")
+        return value
+    if isinstance(default, int):
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise bad("a whole number")
+        return value
+    if isinstance(default, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise bad("a finite number")
+        return float(value)
+    if isinstance(default, str):
+        if not isinstance(value, str):
+            raise bad("a text")
+        return value
+    if isinstance(default, tuple):
+        if not isinstance(value, list):
+            raise bad("a list")
+        kinds = {type(x) for x in default}
+        for x in value:
+            if isinstance(x, bool) or (kinds and not any(isinstance(x, k) for k in kinds)):
+                raise bad(f"a list of {' or '.join(sorted(k.__name__ for k in kinds))}")
+        return tuple(value)
+    if isinstance(value, list):
+        return tuple(value)
+    return value
+
+
+def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
+    """Effects, values, uncertainties and states [SI] of the ``[[effect]]`` tables of a model file."""
+    if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
+        raise r.error("'effect' must be an array of tables ([[effect]])", "effect")
+    effects, values, uncertainties, states = [], {}, {}, {}
+    jnames = list(desc.joint_names)
+    for i, tbl in enumerate(tables):
+        where = ("effect", i)
+        kind = tbl.get("kind")
+        if not isinstance(kind, str):
+            raise r.error(f"missing 'kind' (one of: {', '.join(EFFECTS)})", *where)
+        if kind not in EFFECTS:
+            raise r.error(f"unknown effect kind '{kind}' (known: {', '.join(EFFECTS)}){nearest(kind, EFFECTS)}",
+                          *where, "kind")
+        cls = EFFECTS[kind]
+        fields = {f.name: f for f in dataclasses.fields(cls) if f.init and f.name not in ("key", "joints")}
+        known = ("kind", "joints", *fields, "parameter")
+        kwargs = {}
+        for key, value in tbl.items():
+            if key in ("kind", "parameter"):
+                continue
+            if key == "joints":
+                if not isinstance(value, list) or not value or not all(isinstance(x, str) for x in value):
+                    raise r.error("'joints' must be a list of joint names", *where, key)
+                idx = []
+                for x in value:
+                    if x not in jnames:
+                        raise r.error(f"no joint named '{x}' (joints: {', '.join(jnames)}){nearest(x, jnames)}",
+                                      *where, key)
+                    idx.append(jnames.index(x))
+                kwargs["joints"] = tuple(idx)
+                continue
+            if key not in fields:
+                raise r.error(f"unknown key '{key}' of a '{kind}' effect (known: {', '.join(known)})"
+                              f"{nearest(key, known)}", *where, key)
+            f = fields[key]
+            default = f.default if f.default is not dataclasses.MISSING else None
+            kwargs[key] = _option_value(value, default, r, where + (key,))
+        try:
+            effect = cls(**kwargs)
+            defs = effect.param_defs(desc)
+        except (TypeError, ValueError, IndexError) as exc:
+            raise r.error(f"not a valid '{kind}' effect: {exc}", *where) from None
+        effects.append(effect)
+        expected = {n: si for n, si in defs}
+        rows = tbl.get("parameter", [])
+        if not isinstance(rows, list) or not all(isinstance(x, dict) for x in rows):
+            raise r.error("'parameter' must be a list of tables", *where, "parameter")
+        seen = set()
+        for k, row in enumerate(rows):
+            pw = where + ("parameter", k)
+            name = row.get("name")
+            if not isinstance(name, str):
+                raise r.error("a parameter needs a 'name'", *pw)
+            if name not in expected:
+                raise r.error(f"'{name}' is not a parameter of this '{kind}' effect (its parameters: "
+                              f"{', '.join(expected)}){nearest(name, expected)}", *pw, "name")
+            if name in seen or name in values:
+                raise r.error(f"parameter '{name}' is given twice", *pw, "name")
+            seen.add(name)
+            units = dict(PARAM_UNITS.get(expected[name], ()))
+            got: dict = {}
+            for key, v in row.items():
+                if key == "name":
+                    continue
+                if key == "state":
+                    if v not in STATES:
+                        raise r.error(f"'state' must be one of {', '.join(STATES)}, got {v!r}", *pw, key)
+                    states[name] = v
+                    continue
+                base, _, suffix = key.partition("_")
+                if base not in ("value", "u") or suffix not in units:
+                    allowed = [f"{b}_{s}" for b in ("value", "u") for s in units] + ["state"]
+                    raise r.error(f"unknown key '{key}' (a '{expected[name]}' parameter takes "
+                                  f"{', '.join(allowed)}){nearest(key, allowed)}", *pw, key)
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                    raise r.error(f"'{key}' must be a finite number, got {v!r}", *pw, key)
+                if base in got:
+                    raise r.error(f"'{base}' is given twice (with two units)", *pw, key)
+                got[base] = float(v) * units[suffix]
+            if "value" not in got:
+                raise r.error(f"parameter '{name}' has no 'value_<unit>' (e.g. value_{PARAM_UNITS[expected[name]][0][0]})",
+                              *pw)
+            if got.get("u", 0.0) < 0:
+                raise r.error("a standard uncertainty must not be negative", *pw)
+            values[name] = got["value"]
+            uncertainties[name] = got.get("u", 0.0)
+        missing = [n for n in expected if n not in seen]
+        if missing:
+            raise r.error(f"the '{kind}' effect lacks parameter(s) {', '.join(missing)}", *where, "parameter")
+    try:
+        ArmModel(desc, tuple(effects))
+    except ValueError as exc:
+        raise r.error(f"the effects overlap: {exc}", "effect") from None
+    return tuple(effects), values, uncertainties, states
+
+
+# ---------------------------------------------------------------------------------------------
+# whole files
+
+def parse_model(text: str, path: str = "<string>") -> Arm:
+    """A model file (or a plain description) from TOML text; errors name the file, line and key."""
+    data = parse_toml(text, path)
+    r = TomlReader(path, text)
+    desc = description_from_data(data, r, MODEL_KEYS)
+    covariance = None
+    if "calibration" in data:
+        check_calibration_table(data["calibration"], r)
+        cov = data["calibration"].get("covariance")
+        if cov is not None:
+            covariance = (Path(path).parent / cov) if path != "<string>" else Path(cov)
+    if "effect" not in data:
+        return Arm(desc, covariance=covariance)
+    effects, values, u, states = effects_from_tables(desc, data["effect"], r)
+    return Arm(desc, effects, values, u, states, covariance)
+
+
+def load_model(path, tip_frame: str | None = None, probe: dict | None = None) -> Arm:
+    """The arm of an ``--arm`` option: a model file or description TOML (effects applied), or a URDF
+    with ``tip_frame`` (no effects), or a shipped arm's name (``aacmm7``)."""
+    from .shipped import arm_path
+    path = arm_path(path)
+    if path.suffix.lower() == ".urdf":
+        from .urdf_import import load_arm
+        return Arm(load_arm(path, tip_frame, probe))
+    if tip_frame:
+        raise InputError("--tip-frame is for an arm given as a URDF; this arm is a TOML file", path)
+    return parse_model(read_text(path, "the arm model"), str(path))
+
+
+def format_model(desc: ArmDescription, effects=(), values: dict | None = None, uncertainties: dict | None = None,
+                 states: dict | None = None, *, covariance: str | None = None, written_by: str | None = None,
+                 comment: str | None = None) -> str:
+    """TOML text of a model file that :func:`parse_model` reads back exactly."""
+    data = description_data(desc)
+    if effects:
+        data["effect"] = effect_tables(desc, effects, values or {}, uncertainties, states)
+    cal = {k: v for k, v in (("covariance", covariance), ("written_by", written_by)) if v}
+    if cal:
+        data["calibration"] = cal
+    return toml_text(data, comment)
+
+
+# ---------------------------------------------------------------------------------------------
+# the covariance file
+
+@dataclass(frozen=True)
+class Covariance:
+    """Covariance of the free parameters of a fit, SI: ``names``, SI ``units``, ``values`` (the
+    estimates: errors of the nominal description for the base parameters, the values of the effect
+    parameters), standard uncertainties ``u`` and correlations ``corr``."""
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+    values: np.ndarray
+    u: np.ndarray
+    corr: np.ndarray
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """(n, n) covariance [SI]."""
+        return self.corr * np.outer(self.u, self.u)
+
+
+def _display(si: str) -> tuple[str, float]:
+    """Unit written for an SI unit in the covariance file (the model file's, e.g. um, urad)."""
+    if si in PARAM_UNITS:
+        return PARAM_UNITS[si][0]
+    return si, 1.0
+
+
+def write_covariance(path, names, units, values, cov, inputs=()) -> Path:
+    """Write the covariance file: ``parameter, unit, value, u`` and one correlation column a parameter."""
+    from .io import write_csv
+    cov = np.asarray(cov, dtype=float)
+    u = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(u, u)
+    corr[~np.isfinite(corr)] = 0.0
+    np.fill_diagonal(corr, 1.0)
+    shown = [_display(si) for si in units]
+    cols = {"parameter": np.array(list(names), dtype=object),
+            "unit": np.array([s for s, _ in shown], dtype=object),
+            "value": np.array([v / f for v, (_, f) in zip(values, shown)]),
+            "u": np.array([x / f for x, (_, f) in zip(u, shown)])}
+    for k, n in enumerate(names):
+        cols[n] = corr[:, k]
+    return write_csv(path, cols, inputs, fmt="%.17g")
+
+
+def read_covariance(path) -> Covariance:
+    """Read a covariance file written by :func:`write_covariance` (SI inside)."""
+    from .io import csv_records
+    text = read_text(path, "the covariance file")
+    recs = csv_records(text, str(path))
+    if not recs:
+        raise InputError("the covariance file is empty", path, 1)
+    hl, header = recs[0]
+    head = ["parameter", "unit", "value", "u"]
+    if [h.strip() for h in header[:4]] != head:
+        raise InputError(f"the header must start with {', '.join(head)}", path, hl)
+    names = tuple(h.strip() for h in header[4:])
+    rows = recs[1:]
+    if len(rows) != len(names):
+        raise InputError(f"{len(rows)} rows for {len(names)} parameter columns", path, hl)
+    si_of = {s: (si, f) for si, opts in PARAM_UNITS.items() for s, f in opts}
+    units, values, u = [], np.empty(len(rows)), np.empty(len(rows))
+    corr = np.empty((len(rows), len(rows)))
+    for i, (no, r) in enumerate(rows):
+        if len(r) != len(header):
+            raise InputError(f"{len(r)} cells where the header has {len(header)}", path, no)
+        if r[0].strip() != names[i]:
+            raise InputError(f"row {i + 1} is '{r[0].strip()}', but column {i + 5} is '{names[i]}'", path, no,
+                             "parameter")
+        si, f = si_of.get(r[1].strip(), (r[1].strip(), 1.0))
+        units.append(si)
+        try:
+            nums = [float(c) for c in r[2:]]
+        except ValueError:
+            raise InputError("expected numbers after the unit", path, no) from None
+        values[i], u[i] = nums[0] * f, nums[1] * f
+        corr[i] = nums[2:]
+    return Covariance(names, tuple(units), values, u, corr)

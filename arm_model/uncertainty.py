@@ -1,0 +1,359 @@
+"""The uncertainty of every corrected ball centre: linear propagation with exact Jacobians, and Monte Carlo.
+
+The corrected ball centre ``x = f(p, q, w)`` of a model (:class:`arm_model.model.ArmModel`, every
+effect applied) depends on the model parameters ``p``, the encoder readings ``q`` and the measured
+wrench ``w``. Its covariance, to first order, is the sum of named contributions
+
+    parameters      J_p Sigma_p J_p^T         (the calibration's covariance of the free parameters)
+    encoders        J_q diag(u_q^2) J_q^T     (u_q = resolution / sqrt(12) per joint: rectangular)
+    force sensor    J_w diag(u_w^2) J_w^T     (probe frame: bending x, y and axial z)
+    compliance      J_c diag(u_c^2) J_c^T     (the probe's compliances, unless the covariance has them)
+    probing         u_probe^2 I               (the scatter of the contact itself, per axis)
+
+with the Jacobians exact (:mod:`arm_model.jacobian`: the geometric Jacobian of the chain and dual
+numbers through the effects' own code), evaluated for N points in chunks on two threads.
+:func:`monte_carlo` samples the same inputs (parameters from their covariance, rectangular encoder
+errors, normal force and compliance errors, normal probing scatter) and re-evaluates the model.
+
+Everything here is SI: metres, radians, newtons, m/N.
+"""
+from __future__ import annotations
+
+import math
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .jacobian import Dual, DUAL_OPS, chain_jacobian, geometry_entries, value
+from .kinematics import _default_threads
+from .effects import ModelInputs
+from .model import ArmModel, AuxData
+
+__all__ = ["FORCE_SENSOR_U_N", "COMPLIANCE_U_RELATIVE", "CONTRIBUTIONS", "InputUncertainty",
+           "ParameterCovariance", "Propagation", "default_inputs", "propagate", "monte_carlo",
+           "covariance_columns"]
+
+#: standard uncertainty [N] of the force along probe x, y (bending) and z (axial): the seed paper's
+#: Table 1, the root-sum-square of its printed terms (the printed bending total, 0.00723 N, is a
+#: misprint of 0.0723 N; ``correction.paper.table1_reproduction`` recomputes both)
+FORCE_SENSOR_U_N = (0.0723, 0.0723, 0.0464)
+#: standard uncertainty of a declared probe compliance, relative to its value: the standard error of
+#: the series compliance fitted on the seed paper's Table 2 (0.0028 mm/N, ``correction.paper.close_loop``
+#: through the origin) relative to the paper's FEM bending compliance (0.0142 mm/N)
+COMPLIANCE_U_RELATIVE = 0.2
+#: the contributions, in report order
+CONTRIBUTIONS = ("parameters", "encoders", "force sensor", "compliance", "probing")
+
+
+@dataclass(frozen=True)
+class InputUncertainty:
+    """Standard uncertainties of the inputs (SI) and where each comes from.
+
+    Attributes:
+        encoder: (J,) per joint [rad] (the resolution / sqrt(12) of a rectangular quantisation).
+        force: (3,) force along probe x, y, z [N]; torque: (3,) [N m].
+        compliance: (3,) of the probe compliances along x, y, z [m/N] (used only for compliances the
+            parameter covariance does not hold).
+        probing: per axis [m], the scatter of the contact itself.
+        sources: contribution name -> a sentence saying where the value comes from.
+    """
+    encoder: np.ndarray
+    force: np.ndarray
+    torque: np.ndarray
+    compliance: np.ndarray
+    probing: float = 0.0
+    sources: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class ParameterCovariance:
+    """The covariance [SI^2] of the named model parameters (the free ones of a calibration)."""
+    names: tuple
+    cov: np.ndarray
+    source: str = "the calibration's covariance"
+
+    def __post_init__(self):
+        c = np.asarray(self.cov, dtype=float)
+        if c.shape != (len(self.names), len(self.names)):
+            raise ValueError(f"covariance has shape {c.shape}, expected {len(self.names)} x {len(self.names)}")
+        if not np.all(np.isfinite(c)) or not np.allclose(c, c.T, rtol=1e-9, atol=0.0):
+            raise ValueError("the parameter covariance must be finite and symmetric")
+        object.__setattr__(self, "cov", c)
+
+    def factor(self) -> np.ndarray:
+        """L with ``L L^T = cov`` (eigen-decomposition: a positive semi-definite cov is accepted)."""
+        w, v = np.linalg.eigh(self.cov)
+        if w.size and w.min() < -1e-9 * max(w.max(), 0.0):
+            raise ValueError(f"the parameter covariance is not positive semi-definite (eigenvalue {w.min():.3g})")
+        keep = w > 0
+        return v[:, keep] * np.sqrt(w[keep])
+
+
+def default_inputs(desc, *, encoder=None, force=None, torque=None, compliance=None, probing=None,
+                   has_force: bool = True) -> InputUncertainty:
+    """The input uncertainties of ``desc`` with their sources; any argument overrides its default.
+
+    Args:
+        encoder: standard uncertainty [rad], one value or one a joint (default: each joint's
+            ``encoder_resolution`` of the description / sqrt(12), 0 where not given).
+        force: [N], one value or (x, y, z) (default :data:`FORCE_SENSOR_U_N`).
+        torque: [N m] (default 0: no torque is measured by the seed paper's sensor).
+        compliance: [m/N], one value or (x, y, z) (default :data:`COMPLIANCE_U_RELATIVE` times the
+            description's compliances).
+        probing: [m] per axis (default 0).
+        has_force: False when the points carry no force (then no force-sensor contribution).
+    """
+    j = desc.n_joints
+    src = {}
+    if encoder is None:
+        res = np.array([getattr(jt, "encoder_resolution", None) or 0.0 for jt in desc.joints])
+        enc = res / math.sqrt(12.0)
+        given = [jt.name for jt in desc.joints if getattr(jt, "encoder_resolution", None)]
+        src["encoders"] = ("resolution / sqrt(12) from the description's encoder_resolution"
+                           + ("" if len(given) == j else f" (given for {len(given)} of {j} joints; 0 elsewhere)")
+                           if given else "none: the description gives no encoder_resolution (0 assumed)")
+    else:
+        enc = np.broadcast_to(np.asarray(encoder, dtype=float), (j,)).copy()
+        src["encoders"] = "given"
+    if not has_force:
+        f = np.zeros(3)
+        src["force sensor"] = "no force in the points"
+    elif force is None:
+        f = np.array(FORCE_SENSOR_U_N)
+        src["force sensor"] = "seed paper Table 1: 0.0723 N bending (x, y), 0.0464 N axial (z)"
+    else:
+        f = np.broadcast_to(np.asarray(force, dtype=float), (3,)).copy()
+        src["force sensor"] = "given"
+    t = np.zeros(3) if torque is None else np.broadcast_to(np.asarray(torque, dtype=float), (3,)).copy()
+    if compliance is None:
+        c = COMPLIANCE_U_RELATIVE * np.asarray(desc.probe.compliance, dtype=float)
+        src["compliance"] = (f"{COMPLIANCE_U_RELATIVE:.0%} of the declared compliances (the seed paper's Table 2 "
+                             "fit: 0.0028 mm/N on 0.0142 mm/N)")
+    else:
+        c = np.broadcast_to(np.asarray(compliance, dtype=float), (3,)).copy()
+        src["compliance"] = "given"
+    src["probing"] = "given" if probing is not None else "none (0)"
+    for name, arr in (("encoder", enc), ("force", f), ("torque", t), ("compliance", c)):
+        if not np.all(np.isfinite(arr)) or np.any(arr < 0):
+            raise ValueError(f"{name} uncertainty must be finite and >= 0, got {arr}")
+    pr = 0.0 if probing is None else float(probing)
+    if not (math.isfinite(pr) and pr >= 0):
+        raise ValueError(f"probing uncertainty must be finite and >= 0, got {probing}")
+    return InputUncertainty(enc, f, t, c, pr, src)
+
+
+@dataclass
+class Propagation:
+    """Per point: the corrected centre (N, 3) [m], its covariance (N, 3, 3) [m^2], and each named
+    contribution's variances along x, y, z (N, 3) [m^2]; ``sources`` says where each input came from."""
+    centres: np.ndarray
+    cov: np.ndarray
+    contributions: dict
+    sources: dict
+
+    @property
+    def u(self) -> np.ndarray:
+        """(N, 3) standard uncertainties along x, y, z [m]."""
+        return np.sqrt(np.einsum("nii->ni", self.cov))
+
+    def summary(self) -> dict:
+        """Per contribution: the RMS over the points of its standard uncertainty per axis [m]."""
+        return {k: np.sqrt(v.mean(axis=0)) for k, v in self.contributions.items()}
+
+
+def covariance_columns(cov: np.ndarray, unit: float = 1e6) -> dict:
+    """The six terms of (N, 3, 3) covariances as columns ``cov_xx_mm2`` ... (``unit`` 1e6: m^2 -> mm^2)."""
+    out = {}
+    for a, b in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)):
+        out[f"cov_{'xyz'[a]}{'xyz'[b]}_mm2"] = cov[:, a, b] * unit
+    return out
+
+
+def _compliance_covered(names) -> bool:
+    return any(n.startswith(("probe.compliance", "probe.dcompliance")) for n in names)
+
+
+def _prepare(model: ArmModel, q, wrench, aux):
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    n, j = q.shape
+    if j != model.desc.n_joints:
+        raise ValueError(f"q must have shape (N, {model.desc.n_joints}), got {q.shape}")
+    w = np.zeros((n, 6))
+    if wrench is not None:
+        wr = np.atleast_2d(np.asarray(wrench, dtype=float))
+        if wr.shape[0] != n or wr.shape[1] not in (3, 6):
+            raise ValueError(f"wrench must have shape (N, 3) or (N, 6), got {wr.shape}")
+        w[:, : wr.shape[1]] = wr
+    aux = model._check_aux(aux, n)
+    return q, w, aux
+
+
+def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
+              parameters: ParameterCovariance | None = None, inputs: InputUncertainty,
+              threads: int | None = None, chunk: int = 8192) -> Propagation:
+    """Linear propagation to the corrected ball centres of N points (see the module docstring).
+
+    Args:
+        model: the arm model (every effect applied); p: its full parameter vector [SI] (None: zeros).
+        q: (N, J) encoder readings [rad]; wrench: (N, 3) or (N, 6) measured wrench (probe frame) or None.
+        aux: per-point temperature / joint torques when the model's effects need them.
+        parameters: the covariance of named parameters (None: the parameters are taken as exact).
+        inputs: :func:`default_inputs`.
+    """
+    q, w, aux = _prepare(model, q, wrench, aux)
+    n, nj = q.shape
+    spec = model.spec
+    p = np.zeros(spec.size) if p is None else np.asarray(p, dtype=float)
+    if p.shape != (spec.size,):
+        raise ValueError(f"p has shape {p.shape}, expected ({spec.size},)")
+    pnames = () if parameters is None else tuple(parameters.names)
+    pidx = [spec.index(nm) for nm in pnames]
+    lfac = parameters.factor() if parameters is not None and len(pnames) else np.zeros((0, 0))
+    use_compliance = not _compliance_covered(pnames) and np.any(inputs.compliance > 0)
+    u_w = np.concatenate([inputs.force, inputs.torque])
+    entries = geometry_entries(model.desc.convention, nj)
+    comp_cols = [entries.index(("compliance", k)) for k in range(3)]
+    # directions of the total Jacobian: the parameters in the covariance, the encoders, the wrench
+    directions = [("p", i) for i in pidx] + [("q", i) for i in range(nj)] + [("w", k) for k in range(6)]
+    d_index = {d: k for k, d in enumerate(directions)}
+    npar = len(pidx)
+    # S maps the directions to the rows of one stacked product A = S T (T the total Jacobian): each
+    # block of rows of A squared and summed gives one contribution
+    blocks = {"parameters": lfac.T, "encoders": np.diag(inputs.encoder), "force sensor": np.diag(u_w)}
+    s_mat = np.zeros((sum(b.shape[0] for b in blocks.values()), len(directions)))
+    spans, r0, c0 = {}, 0, 0
+    for name, b in blocks.items():
+        s_mat[r0: r0 + b.shape[0], c0: c0 + b.shape[1]] = b
+        spans[name] = slice(r0, r0 + b.shape[0])
+        r0, c0 = r0 + b.shape[0], c0 + b.shape[1]
+    cov = np.empty((n, 3, 3))
+    contrib = {k: np.zeros((n, 3)) for k in CONTRIBUTIONS}
+    centres = np.empty((n, 3))
+    seeded = set(pidx)
+    wanted = model.needs()
+    pairs = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+    def squares(a, out_cov, name, s, e):
+        """Add sum_r a[r, i] a[r, j] to the covariance; the diagonal is the contribution ``name``."""
+        for i, j in pairs:
+            v = np.einsum("rn,rn->n", a[:, i], a[:, j])
+            out_cov[i, j] += v
+            if i == j:
+                contrib[name][s:e, i] = v
+
+    def work(s: int) -> None:
+        e = min(s + chunk, n)
+        pd = [Dual(float(v), {("p", i): 1.0}) if i in seeded else float(v) for i, v in enumerate(p)]
+        inp = ModelInputs(
+            q=[Dual(q[s:e, i], {("q", i): 1.0}) for i in range(nj)],
+            wrench=[Dual(w[s:e, k], {("w", k): 1.0}) for k in range(6)],
+            temperature=None if aux.temperature is None else aux.temperature[s:e],
+            tau_gravity=None if aux.tau_gravity is None or "tau_gravity" not in wanted else list(aux.tau_gravity[s:e].T),
+            tau_contact=None if aux.tau_contact is None or "tau_contact" not in wanted else list(aux.tau_contact[s:e].T))
+        geom = model._apply_effects(pd, inp, DUAL_OPS)
+        flat = [x for r in geom.rows for x in r] + list(geom.p_last) + list(geom.compliance) + list(inp.q) \
+            + list(inp.wrench)
+        vals = [value(x) for x in flat]
+        m = len(geom.rows[0])
+        rows = [vals[m * i: m * i + m] for i in range(nj)]
+        k0 = m * nj
+        cen, g = chain_jacobian(model.desc.convention, rows, vals[k0: k0 + 3], vals[k0 + 3: k0 + 6],
+                                vals[k0 + 6: k0 + 6 + nj], vals[k0 + 6 + nj:], model.desc.axes)
+        centres[s:e] = cen
+        # the chain rule: T = M g for constant coefficients, plus per-point coefficients separately
+        mmat = np.zeros((len(directions), len(flat)))
+        per_point = {}
+        for col, x in enumerate(flat):
+            if not isinstance(x, Dual):
+                continue
+            for key, coef in x.der.items():
+                k = d_index.get(key)
+                if k is None:
+                    continue
+                if np.ndim(coef) == 0:
+                    mmat[k, col] += coef
+                else:
+                    t = g[col] * coef
+                    per_point[k] = per_point[k] + t if k in per_point else t
+        b = s_mat @ mmat
+        gf = g.reshape(len(flat), -1)
+        pp = np.stack([per_point[k] for k in per_point]).reshape(len(per_point), -1) if per_point else None
+        cv = np.zeros((3, 3, e - s))
+        for name, sl in spans.items():
+            blk = b[sl]
+            if not blk.shape[0]:
+                continue
+            nz = np.flatnonzero(np.any(blk != 0, axis=0))
+            a = blk[:, nz] @ gf[nz]
+            if pp is not None:
+                a += s_mat[sl][:, list(per_point)] @ pp
+            squares(a.reshape(len(blk), 3, e - s), cv, name, s, e)
+        if use_compliance:
+            squares(g[comp_cols] * inputs.compliance[:, None, None], cv, "compliance", s, e)
+        if inputs.probing > 0:
+            var = inputs.probing ** 2
+            for i in range(3):
+                cv[i, i] += var
+            contrib["probing"][s:e] = var
+        for i, j in pairs:
+            cov[s:e, i, j] = cv[i, j]
+            cov[s:e, j, i] = cv[i, j]
+
+    starts = range(0, n, chunk)
+    nthreads = threads or _default_threads()
+    if nthreads == 1 or n <= chunk:
+        for s in starts:
+            work(s)
+    else:
+        with ThreadPoolExecutor(max_workers=nthreads) as pool:
+            list(pool.map(work, starts))
+    sources = dict(inputs.sources)
+    sources["parameters"] = "none (parameters taken as exact)" if parameters is None else parameters.source
+    if _compliance_covered(pnames):
+        sources["compliance"] = "in the parameter covariance (calibrated)"
+    return Propagation(centres, cov, contrib, sources)
+
+
+def monte_carlo(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
+                parameters: ParameterCovariance | None = None, inputs: InputUncertainty, samples: int = 1000,
+                seed: int = 0) -> Propagation:
+    """The covariance of the corrected centres by sampling the inputs of :func:`propagate`: the
+    parameters from their covariance (normal), each encoder reading uniformly within +-sqrt(3) u
+    (its quantisation), the wrench and the compliances normal, the probing scatter normal.
+    ``contributions`` is empty (the samples do not separate them)."""
+    if samples < 2:
+        raise ValueError(f"samples must be at least 2, got {samples}")
+    q, w, aux = _prepare(model, q, wrench, aux)
+    n, nj = q.shape
+    spec = model.spec
+    p = np.zeros(spec.size) if p is None else np.asarray(p, dtype=float)
+    pnames = () if parameters is None else tuple(parameters.names)
+    pidx = np.array([spec.index(nm) for nm in pnames], dtype=int)
+    lfac = parameters.factor() if parameters is not None and len(pnames) else np.zeros((0, 0))
+    comp_idx = [spec.index(f"probe.compliance_{a}") for a in "xyz"]
+    use_compliance = not _compliance_covered(pnames) and np.any(inputs.compliance > 0)
+    u_w = np.concatenate([inputs.force, inputs.torque])
+    rng = np.random.default_rng(seed)
+    nominal = model.ball_centres(q, w if wrench is not None else None, p, aux)
+    s1 = np.zeros((n, 3))
+    s2 = np.zeros((n, 3, 3))
+    half = math.sqrt(3.0) * inputs.encoder
+    for _ in range(samples):
+        ps = p.copy()
+        if len(pidx):
+            ps[pidx] += lfac @ rng.standard_normal(lfac.shape[1])
+        if use_compliance:
+            ps[comp_idx] += inputs.compliance * rng.standard_normal(3)
+        qs = q + rng.uniform(-1.0, 1.0, q.shape) * half
+        ws = w + rng.standard_normal(w.shape) * u_w if wrench is not None else None
+        d = model.ball_centres(qs, ws, ps, aux) - nominal
+        if inputs.probing > 0:
+            d += inputs.probing * rng.standard_normal(d.shape)
+        s1 += d
+        s2 += d[:, :, None] * d[:, None, :]
+    mean = s1 / samples
+    cov = (s2 - samples * mean[:, :, None] * mean[:, None, :]) / (samples - 1)
+    sources = dict(inputs.sources)
+    sources["parameters"] = "none (parameters taken as exact)" if parameters is None else parameters.source
+    return Propagation(nominal, cov, {}, sources | {"method": f"Monte Carlo, {samples} samples, seed {seed}"})

@@ -1,0 +1,72 @@
+"""The model file out of a fit (``aacmm calibrate`` and ``aacmm close-loop``): the calibrated
+description with every effect and its parameters, the covariance file beside it and the URDF.
+
+Format: :mod:`arm_model.model_file` and docs/calibration.md ("The model file")."""
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from arm_model._output import safe_name
+from arm_model.model_file import Arm, format_model, write_covariance
+from arm_model.io import atomic_write_text, guard_output
+from arm_model.urdf import urdf_text
+
+__all__ = ["model_paths", "fitted_arm", "write_model", "model_check"]
+
+
+def model_paths(out_dir, name: str) -> dict:
+    """``{"model": <name>.toml, "covariance": <name>-covariance.csv, "urdf": <name>.urdf}`` in ``out_dir``
+    (the name made safe as a file name: :func:`arm_model._output.safe_name`)."""
+    out = Path(out_dir)
+    stem = safe_name(name)
+    return {"model": out / f"{stem}.toml", "covariance": out / f"{stem}-covariance.csv",
+            "urdf": out / f"{stem}.urdf"}
+
+
+def fitted_arm(result, name: str | None = None) -> Arm:
+    """The :class:`~arm_model.model_file.Arm` of a :class:`~calibration.calibrate.CalibrationResult`:
+    the base errors folded into the description, the effects with their fitted values, uncertainties
+    and states (free / fixed / held)."""
+    desc = result.described()
+    if name:
+        desc = replace(desc, name=name)
+    model = result.model
+    names = model.spec.names[model.base_size:]
+    rows = {r["name"]: r for r in result.parameter_rows()}
+    return Arm(desc, tuple(model.effects), {n: result.value(n) for n in names},
+               {n: result.uncertainty(n) for n in names}, {n: rows[n]["state"] for n in names})
+
+
+def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aacmm calibrate",
+                comment: str | None = None) -> dict:
+    """Write the model file, its covariance file and the URDF of ``result`` into ``out_dir``;
+    returns :func:`model_paths`. ``inputs``: files never to be overwritten."""
+    files = model_paths(out_dir, name)
+    for f in files.values():
+        guard_output(f, inputs)
+    arm = fitted_arm(result, name)
+    spec = result.model.spec
+    free = list(result.free)
+    idx = [spec.index(n) for n in free]
+    write_covariance(files["covariance"], free, [spec.units[i] for i in idx], result.p[idx], result.cov, inputs)
+    atomic_write_text(files["model"], format_model(arm.desc, arm.effects, arm.values, arm.uncertainties, arm.states,
+                                                   covariance=files["covariance"].name, written_by=written_by,
+                                                   comment=comment), inputs)
+    atomic_write_text(files["urdf"], urdf_text(arm.desc), inputs)
+    return files
+
+
+def model_check(result, arm: Arm | None = None) -> dict:
+    """How far the written model's ball centres lie from the fit's own on the fitted points [m]: the
+    model file recomputes gravity and contact torques from the calibrated description, the fit used
+    the nominal one (zero without joint-compliance effects, rounding otherwise)."""
+    arm = arm or fitted_arm(result)
+    pts = result.data.points
+    own = result.model.ball_centres(pts.q, result.data.wrench, result.p, result.data.aux)
+    out = arm.ball_centres(pts, wrench=result.data.wrench)
+    d = np.linalg.norm(out - own, axis=1)
+    return {"max_difference_nm": float(d.max() * 1e9) if len(d) else 0.0,
+            "rms_difference_nm": float(np.sqrt(np.mean(d ** 2)) * 1e9) if len(d) else 0.0}

@@ -1,0 +1,253 @@
+"""The model file: written by calibrate and close-loop, read by every --arm; effects round-trip exactly."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from arm_model import InputError, parse_description
+from arm_model.cli import main
+from arm_model.description import format_description
+from arm_model.effects import (EFFECTS, EncoderEccentricity, ForceSensorError, JointCompliance, ProbeCompliance,
+                               ThermalGrowth)
+from arm_model.io import parse_points, read_points
+from arm_model.model_file import (PARAM_UNITS, Arm, format_model, load_model, parse_model, read_covariance,
+                                  write_covariance)
+
+from conftest import NOMINAL, assert_close
+
+EFFECT_SETS = {
+    "eccentricity": (EncoderEccentricity(joints=(1, 4), harmonics=(1, 3)),),
+    "joint_compliance": (JointCompliance(joints=(1, 2)),),
+    "joint_compliance_gravity_only": (JointCompliance(joints=(2,), contact=False),),
+    "thermal": (ThermalGrowth(),),
+    "thermal_per_joint": (ThermalGrowth(joints=(0, 3), per_joint=True),),
+    "force_sensor": (ForceSensorError(axes=(0, 2)),),
+    "probe_compliance": (ProbeCompliance(anisotropic=True, axial=True),),
+    "all": (EncoderEccentricity(joints=(2,)), JointCompliance(joints=(1,)), ThermalGrowth(), ForceSensorError(),
+            ProbeCompliance()),
+}
+
+#: plausible sizes [SI] of effect parameters by SI unit (values drawn at this scale)
+SCALE = {"rad": 5e-5, "rad/(N m)": 2e-5, "1/K": 2e-5, "1": 0.02, "N": 0.3, "m/N": 2e-6, "m": 2e-5}
+
+
+def points_file(tmp_path, n=40, seed=0, temperature=True, force=True):
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(-120, 120, (n, 7))
+    head = ["measurement", "feature"] + [f"q{i}_deg" for i in range(1, 8)]
+    cols = [q]
+    if force:
+        head += ["fx_N", "fy_N", "fz_N"]
+        cols.append(rng.normal(0, 3, (n, 3)))
+    if temperature:
+        head.append("temperature_C")
+        cols.append(rng.uniform(15, 30, (n, 1)))
+    data = np.hstack(cols)
+    lines = [",".join(head)] + [",".join(["m1", ""] + [repr(float(v)) for v in r]) for r in data]
+    path = tmp_path / "points.csv"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def random_values(desc, effects, seed):
+    rng = np.random.default_rng(seed)
+    out = {}
+    for e in effects:
+        for name, unit in e.param_defs(desc):
+            out[name] = float(rng.normal(0, SCALE[unit]))
+    return out
+
+
+@pytest.mark.parametrize("kind", list(EFFECT_SETS))
+def test_each_effect_round_trips_through_the_file(kind, nominal, tmp_path):
+    effects = EFFECT_SETS[kind]
+    values = random_values(nominal, effects, 1)
+    u = {k: abs(v) / 10 for k, v in values.items()}
+    states = {k: "free" for k in values}
+    text = format_model(nominal, effects, values, u, states, covariance="x-covariance.csv", comment="a\nb")
+    path = tmp_path / "m.toml"
+    path.write_text(text)
+    arm = load_model(path)
+    assert arm.desc == nominal and arm.effects == effects
+    assert arm.values == pytest.approx(values, rel=3e-16, abs=1e-300) and arm.states == states
+    assert arm.uncertainties == pytest.approx(u, rel=3e-16, abs=1e-300)
+    assert arm.covariance == tmp_path / "x-covariance.csv"
+    pts = read_points(points_file(tmp_path), 7)
+    original = Arm(nominal, effects, values)
+    assert_close(arm.ball_centres(pts), original.ball_centres(pts), atol=1e-12)
+    # the effects really act: the model's centres differ from the bare description's
+    assert np.abs(arm.ball_centres(pts) - Arm(nominal).ball_centres(pts)).max() > 1e-7
+
+
+def test_every_registered_effect_has_model_file_units(nominal):
+    for cls in EFFECTS.values():
+        for name, unit in cls().param_defs(nominal):
+            assert unit in PARAM_UNITS, f"{cls.__name__}: {name} [{unit}]"
+
+
+@pytest.mark.parametrize("key", list(EFFECTS))
+def test_every_registered_effect_round_trips_with_its_defaults(key, nominal, tmp_path):
+    """Generic over the Effect classes: a new effect needs no code in the model file."""
+    effects = (EFFECTS[key](joints=(1, 3)),)
+    values = random_values(nominal, effects, 7)
+    arm = parse_model(format_model(nominal, effects, values), "m.toml")
+    assert arm.effects == effects and arm.values == pytest.approx(values, rel=3e-16, abs=1e-300)
+    pts = read_points(points_file(tmp_path, n=6), 7)
+    assert_close(arm.ball_centres(pts), Arm(nominal, effects, values).ball_centres(pts), atol=1e-12)
+
+
+def test_a_missing_column_names_the_effect_and_the_column(tmp_path, nominal, capsys):
+    model = tmp_path / "m.toml"
+    model.write_text(format_model(nominal, (ThermalGrowth(),), {"links.thermal_alpha": 1e-5}))
+    pts = points_file(tmp_path, temperature=False)
+    out = tmp_path / "tip.csv"
+    assert main(["tip", str(pts), "--arm", str(model), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "thermal" in err and "temperature_C" in err and "points.csv" in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda t: t.replace('kind = "thermal"', 'kind = "thermall"'), ["thermall", "did you mean 'thermal'"]),
+    (lambda t: t.replace("per_joint = false", "per_jiont = false"), ["per_jiont", "did you mean 'per_joint'"]),
+    (lambda t: t.replace("per_joint = false", "per_joint = 1"), ["per_joint", "true or false"]),
+    (lambda t: t.replace("value_ppm_per_K", "value_ppm_per_C"), ["value_ppm_per_C", "value_ppm_per_K"]),
+    (lambda t: t.replace('name = "links.thermal_alpha"', 'name = "links.thermal_alfa"'),
+     ["links.thermal_alfa", "did you mean 'links.thermal_alpha'"]),
+    (lambda t: t.replace("[calibration]", "[calibraton]"), ["calibraton", "did you mean 'calibration'"]),
+    (lambda t: t.replace('covariance = "c.csv"', 'covarience = "c.csv"'), ["covarience", "did you mean"]),
+])
+def test_unknown_keys_are_errors_with_the_nearest_known(edit, words, nominal):
+    text = format_model(nominal, (ThermalGrowth(),), {"links.thermal_alpha": 1e-5}, covariance="c.csv")
+    with pytest.raises(InputError) as exc:
+        parse_model(edit(text), "m.toml")
+    msg = str(exc.value)
+    assert msg.startswith("m.toml, line "), msg
+    for w in words:
+        assert w in msg, msg
+
+
+def test_error_lines_point_at_the_key(nominal):
+    text = format_model(nominal, (ThermalGrowth(),), {"links.thermal_alpha": 1e-5})
+    bad = text.replace("value_ppm_per_K = 10.0", "value_ppm_per_K = \"ten\"")
+    with pytest.raises(InputError) as exc:
+        parse_model(bad, "m.toml")
+    line = next(i for i, t in enumerate(bad.splitlines(), 1) if '"ten"' in t)
+    assert exc.value.line == line
+
+
+def test_a_missing_parameter_and_a_bad_joint_are_errors(nominal):
+    import tomllib
+
+    import tomli_w
+    text = format_model(nominal, (JointCompliance(joints=(1, 2)),), {"j2.compliance": 1e-6, "j3.compliance": 2e-6})
+    with pytest.raises(InputError, match="'j2.compliance' is given twice"):
+        parse_model(text.replace('name = "j3.compliance"', 'name = "j2.compliance"'), "m.toml")
+    data = tomllib.loads(text)
+    del data["effect"][0]["parameter"][1]
+    with pytest.raises(InputError, match="lacks parameter.*j3.compliance"):
+        parse_model(tomli_w.dumps(data), "m.toml")
+    data = tomllib.loads(text)
+    data["effect"][0]["joints"] = ["j2", "j9"]
+    with pytest.raises(InputError, match="no joint named 'j9'"):
+        parse_model(tomli_w.dumps(data), "m.toml")
+
+
+def test_a_plain_description_reader_refuses_effects(nominal):
+    text = format_model(nominal, (ThermalGrowth(),), {"links.thermal_alpha": 1e-5})
+    with pytest.raises(InputError, match="load_model"):
+        parse_description(text, "m.toml")
+    # without effects a model file is a description
+    assert parse_description(format_model(nominal, covariance="c.csv")) == nominal
+
+
+@settings(max_examples=60, deadline=None)
+@given(name=st.text(min_size=1, max_size=30).filter(lambda s: s.strip()),
+       jname=st.text(min_size=1, max_size=12).filter(lambda s: s.strip()),
+       d=st.floats(-5.0, 5.0, allow_nan=False), theta=st.floats(-3.0, 3.0, allow_nan=False))
+def test_description_round_trip_with_any_names_and_values(nominal, name, jname, d, theta):
+    from dataclasses import replace
+    joints = list(nominal.joints)
+    joints[0] = replace(joints[0], name=jname, d=d, theta_offset=theta)
+    desc = replace(nominal, name=name, joints=tuple(joints))
+    back = parse_description(format_description(desc, comment=f"arm {name}\nline two"))
+    assert back.name == name and back.joint_names == desc.joint_names
+    # values: the same float, or (when no decimal in mm or degrees maps back onto it) the next one
+    assert_close(back.row_table(), desc.row_table(), atol=1e-300, rtol=3e-16)
+    assert back.probe == desc.probe
+
+
+def test_covariance_file_round_trip(tmp_path):
+    rng = np.random.default_rng(2)
+    a = rng.normal(size=(4, 4))
+    cov = a @ a.T * np.outer([1e-5, 1e-3, 1e-6, 1e-2], [1e-5, 1e-3, 1e-6, 1e-2])
+    names = ["j1.d", "j2.theta_offset", "j2.compliance", "force.gain_x"]
+    units = ["m", "rad", "rad/(N m)", "1"]
+    values = [1e-5, -2e-4, 3e-6, 0.01]
+    write_covariance(tmp_path / "c.csv", names, units, values, cov)
+    c = read_covariance(tmp_path / "c.csv")
+    assert c.names == tuple(names) and c.units == tuple(units)
+    assert_close(c.values, values, atol=0, rtol=1e-15)
+    assert_close(c.matrix, cov, atol=0, rtol=1e-12)
+    head = (tmp_path / "c.csv").read_text().splitlines()[:2]
+    assert head[0].startswith("parameter,unit,value,u,j1.d,") and head[1].startswith("j1.d,um,")
+
+
+def test_calibrate_writes_a_model_that_tip_and_calibrate_read(tmp_path, capsys):
+    """calibrate --effect ... writes the model file and covariance; tip with it gives the fit's own ball
+    centres (torques on the calibrated geometry) to 1 nm; calibrate given it starts from its effects."""
+    from arm_model.sim import campaign_from_dict, simulate
+    camp = {"seed": 3, "sensor": "xyz", "signals": {"enabled": False}, "noise": {"probing_repeatability_um": 2.0},
+            "truth": {"joint_compliance": {"joints": ["j2"], "stiffness_Nm_per_rad": [2e4]},
+                      "thermal": {"alpha_per_K": [2.3e-5]}},
+            "environment": {"drift_C_per_h": 8.0}, "operator": {"measurement_gap_s": 300.0, "force_mean_N": 4.0},
+            "task": [{"kind": "ballbar", "positions": 6, "length_mm": 600.0, "points_per_sphere": 4},
+                     {"kind": "seat", "articulations": 8, "measurements": 3}]}
+    sim = tmp_path / "sim"
+    simulate(campaign_from_dict(camp)).write(sim)
+    out = tmp_path / "cal"
+    args = [str(sim / "points.csv"), str(sim / "artefacts.toml"), "--sigma-probe-um", "2", "--no-plots"]
+    assert main(["calibrate", *args, "--arm", str(NOMINAL), "--effect", "joint_compliance", "--effect", "thermal",
+                 "-o", str(out)]) == 0
+    model = out / "aacmm7-calibrated.toml"
+    arm = load_model(model)
+    assert [e.key for e in arm.effects] == ["joint_compliance", "thermal"]
+    s = json.loads((out / "summary.json").read_text())
+    fitted = {r["name"]: r for r in s["parameters"]}
+    assert arm.values["links.thermal_alpha"] == pytest.approx(fitted["links.thermal_alpha"]["value"], rel=1e-15)
+    assert arm.values["links.thermal_alpha"] == pytest.approx(2.3e-5, rel=0.2)
+    assert s["model_check"]["max_difference_nm"] < 1000
+    cov = read_covariance(arm.covariance)
+    assert "links.thermal_alpha" in cov.names and "j2.compliance" in cov.names
+    k = cov.names.index("j2.compliance")
+    assert cov.u[k] == pytest.approx(fitted["j2.compliance"]["u"], rel=1e-12)
+    # tip with the model file == the fit's model and parameters, torques from the calibrated description
+    tip = tmp_path / "tip.csv"
+    assert main(["tip", str(sim / "points.csv"), "--arm", str(model), "-o", str(tip)]) == 0
+    assert "effects applied: joint_compliance, thermal" in capsys.readouterr().out
+    got = np.genfromtxt(tip, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    from calibration.model_output import fitted_arm
+    from calibration.cli import _load_data  # noqa: F401  (the CLI path is what is tested above)
+    from arm_model.io import read_points as rp
+    from arm_model.model import ArmModel
+    from arm_model.model_file import Arm as A
+    pts = rp(sim / "points.csv", 7)
+    own = ArmModel(load_model(NOMINAL).desc, arm.effects)
+    p = own.spec.vector({r["name"]: r["value"] for r in s["parameters"]})
+    aux = A(arm.desc, arm.effects).aux(pts)
+    expected = own.ball_centres(pts.q, pts.wrench, p, aux) * 1e3
+    assert_close(np.column_stack([got["x_mm"], got["y_mm"], got["z_mm"]]), expected, atol=1e-6)
+    # calibrate given the model starts from its effects (the file's values), and finds them again
+    out2 = tmp_path / "cal2"
+    assert main(["calibrate", *args, "--arm", str(model), "-o", str(out2)]) == 0
+    s2 = json.loads((out2 / "summary.json").read_text())
+    assert s2["effects"] == ["joint_compliance", "thermal"]
+    again = {r["name"]: r for r in s2["parameters"]}
+    assert again["links.thermal_alpha"]["value"] == pytest.approx(arm.values["links.thermal_alpha"], rel=0.05)
+    # a model file's effect given again with --effect is refused
+    assert main(["calibrate", *args, "--arm", str(model), "--effect", "thermal", "-o", str(tmp_path / "c3")]) == 2
+    assert "already holds" in capsys.readouterr().err
