@@ -1,11 +1,13 @@
 """One base exception for the project; subclasses carry their context."""
 from __future__ import annotations
 
+import difflib
 import re
 import tomllib
 from pathlib import Path
 
-__all__ = ["AacmmError", "InputError", "NumericalError", "read_text", "parse_toml"]
+__all__ = ["AacmmError", "InputError", "NumericalError", "read_text", "parse_toml", "did_you_mean",
+           "unknown_key"]
 
 
 class AacmmError(Exception):
@@ -65,3 +67,27 @@ def parse_toml(text: str, path: str | Path) -> dict:
         m = re.search(r"line (\d+), column (\d+)", str(exc))
         raise InputError(f"not valid TOML: {exc}", path, int(m.group(1)) if m else None,
                          f"column {m.group(2)}" if m else None) from None
+
+
+def did_you_mean(word: str, known) -> str:
+    """``"; did you mean 'x'?"`` for the known word nearest to ``word`` (difflib), or ``""``.
+
+    A key with a unit suffix (``u_diamter_mm``) is matched by its base name and offered with the
+    user's unit (``u_diameter_mm``); ``known`` may hold bases (``"u_diameter"``) or whole keys."""
+    from ._units import split_unit
+    known = list(dict.fromkeys(known))
+    best = []
+    parts = split_unit(word)
+    if parts is not None:
+        near = difflib.get_close_matches(parts[0], known, n=1, cutoff=0.6)
+        best = [f"{near[0]}_{parts[1]}"] if near else []
+    if not best:
+        best = difflib.get_close_matches(word, known, n=1, cutoff=0.6)
+    return f"; did you mean '{best[0]}'?" if best and best[0] != word else ""
+
+
+def unknown_key(key: str, known, shown=None) -> str:
+    """The message for an unknown key: the nearest known one suggested, the known ones listed
+    (``shown``: how to list them, e.g. with ``_<length unit>``; default ``known``)."""
+    known = list(known)
+    return f"unknown key '{key}'{did_you_mean(key, known)} (known: {', '.join(shown or known)})"

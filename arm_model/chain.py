@@ -13,12 +13,16 @@ Geometry (all SI):
   Standard DH: ``T_{i-1,i} = Rz(theta_offset + q) Tz(d) Tx(a) Rx(alpha)``;
   modified DH: ``T_{i-1,i} = Rx(alpha) Tx(a) Rz(theta_offset + q) Tz(d)``.
 * ``p_last``: the probe ball centre (x, y, z) [m] in the last joint frame with a rigid stylus.
+* ``rotation``: R_last_probe, the probe frame's orientation in the last joint frame (3x3 constants),
+  None for a probe frame parallel to the last joint frame; the probe z axis runs along the stylus.
+* ``lever``: the stylus length L [m] from the bending hinge to the ball, or None for the ball's
+  coordinate along probe z seen from the last joint origin (``z`` of ``p_last`` when unrotated).
 * ``compliance``: (c_x, c_y, c_z) [m/N], the ball's compliance along probe x, y, z.
 
 The probe's compliance is a virtual elastic joint in the chain: the stylus hangs from a hinge at
-``(x, y, 0)`` of the last joint frame (the flange plane), of lever ``L = z``. Two revolute DOF bend it
-(``theta_y`` about probe y, then ``theta_x`` about probe x) and one prismatic DOF ``s`` shortens it
-along probe z. A wrench ``w = (F, M)`` at the ball (probe frame, force first [N], then torque [N m])
+``p_last - L z_probe`` (for an unrotated probe with the default lever: ``(x, y, 0)`` of the last joint
+frame, the flange plane). Two revolute DOF bend it (``theta_y`` about probe y, then ``theta_x`` about
+probe x) and one prismatic DOF ``s`` shortens it along probe z. A wrench ``w = (F, M)`` at the ball (probe frame, force first [N], then torque [N m])
 sets the joint displacement by statics, ``q_e = K^-1 J_e^T w`` with ``J_e`` the ball's Jacobian with
 respect to ``q_e`` at ``q_e = 0`` (probe frame) and ``K = diag(L^2/c_x, L^2/c_y, 1/c_z)``:
 
@@ -35,7 +39,7 @@ from types import SimpleNamespace
 import numpy as np
 
 __all__ = ["NUMPY_OPS", "elastic_displacement", "ball_in_last_frame", "chain_point",
-           "ball_centre_expr"]
+           "ball_centre_expr", "rotation_rpy", "probe_lever"]
 
 NUMPY_OPS = SimpleNamespace(sin=np.sin, cos=np.cos)
 
@@ -50,13 +54,34 @@ def _cos_sin(angle, ops):
     return ops.cos(angle), ops.sin(angle)
 
 
-def elastic_displacement(p_last, compliance, wrench):
+def rotation_rpy(rpy) -> tuple:
+    """URDF roll-pitch-yaw (floats) as a 3x3 nested tuple, R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    cr, sr = math.cos(rpy[0]), math.sin(rpy[0])
+    cp, sp = math.cos(rpy[1]), math.sin(rpy[1])
+    cw, sw = math.cos(rpy[2]), math.sin(rpy[2])
+    return ((cw * cp, cw * sp * sr - sw * cr, cw * sp * cr + sw * sr),
+            (sw * cp, sw * sp * sr + cw * cr, sw * sp * cr - cw * sr),
+            (-sp, cp * sr, cp * cr))
+
+
+def probe_lever(p_last, rotation=None, lever=None):
+    """The stylus length L [m]: ``lever`` if given, else the ball's coordinate along probe z seen
+    from the last joint origin (``z_probe . p_last``)."""
+    if lever is not None:
+        return lever
+    if rotation is None:
+        return p_last[2]
+    return rotation[0][2] * p_last[0] + rotation[1][2] * p_last[1] + rotation[2][2] * p_last[2]
+
+
+def elastic_displacement(p_last, compliance, wrench, lever=None):
     """Virtual elastic joint displacement ``(theta_y [rad], theta_x [rad], s [m])`` under ``wrench``.
 
-    ``wrench`` is a sequence of 3 (force) or 6 (force, torque) components, each a scalar, an array
-    or an SX; a missing torque is zero.
+    ``wrench`` is a sequence of 3 (force) or 6 (force, torque) components in the probe frame, each a
+    scalar, an array or an SX; a missing torque is zero. ``lever``: the stylus length L (default z of
+    ``p_last``, see :func:`probe_lever`).
     """
-    lever = p_last[2]
+    lever = p_last[2] if lever is None else lever
     fx, fy, fz = wrench[0], wrench[1], wrench[2]
     mx, my = (wrench[3], wrench[4]) if len(wrench) >= 6 else (0.0, 0.0)
     cx, cy, cz = compliance
@@ -66,19 +91,27 @@ def elastic_displacement(p_last, compliance, wrench):
     return theta_y, theta_x, s
 
 
-def ball_in_last_frame(p_last, q_e, ops=NUMPY_OPS):
+def ball_in_last_frame(p_last, q_e, ops=NUMPY_OPS, rotation=None, lever=None):
     """Ball centre (x, y, z) [m] in the last joint frame for elastic displacement ``q_e``.
 
-    Forward kinematics of the virtual joints: hinge at (x, y, 0), then Ry(theta_y) Rx(theta_x)
-    Tz(L + s) with L = z of ``p_last``.
+    Forward kinematics of the virtual joints: the hinge at ``p_last - L z_probe`` with the probe's
+    orientation ``rotation``, then Ry(theta_y) Rx(theta_x) Tz(L + s), L from :func:`probe_lever`.
     """
     theta_y, theta_x, s = q_e
     cy_, sy_ = _cos_sin(theta_y, ops)
     cx_, sx_ = _cos_sin(theta_x, ops)
-    length = p_last[2] + s
-    return (p_last[0] + length * cx_ * sy_,
-            p_last[1] - length * sx_,
-            length * cx_ * cy_)
+    if rotation is None and lever is None:
+        length = p_last[2] + s
+        return (p_last[0] + length * cx_ * sy_,
+                p_last[1] - length * sx_,
+                length * cx_ * cy_)
+    big_l = probe_lever(p_last, rotation, lever)
+    length = big_l + s
+    u = (length * cx_ * sy_, -length * sx_, length * cx_ * cy_ - big_l)   # ball - p_last, probe frame
+    if rotation is None:
+        return p_last[0] + u[0], p_last[1] + u[1], p_last[2] + u[2]
+    return tuple(p_last[k] + rotation[k][0] * u[0] + rotation[k][1] * u[1] + rotation[k][2] * u[2]
+                 for k in range(3))
 
 
 def _rotate_axis(axis, c, s, x, y, z):
@@ -131,10 +164,12 @@ def chain_point(convention: str, rows, q, point, ops=NUMPY_OPS, axes=None):
     return x, y, z
 
 
-def ball_centre_expr(convention: str, rows, p_last, compliance, q, wrench=None, ops=NUMPY_OPS, axes=None):
-    """Deflection-aware ball centre (x, y, z) [m] in the base frame: FK of (q, q_e(wrench))."""
+def ball_centre_expr(convention: str, rows, p_last, compliance, q, wrench=None, ops=NUMPY_OPS, axes=None,
+                     rotation=None, lever=None):
+    """Deflection-aware ball centre (x, y, z) [m] in the base frame: FK of (q, q_e(wrench)).
+
+    ``rotation``, ``lever``: the probe frame (see :class:`arm_model.description.Probe`)."""
     if wrench is None:
-        q_e = (0.0, 0.0, 0.0)
-    else:
-        q_e = elastic_displacement(p_last, compliance, wrench)
-    return chain_point(convention, rows, q, ball_in_last_frame(p_last, q_e, ops), ops, axes)
+        return chain_point(convention, rows, q, tuple(p_last), ops, axes)
+    q_e = elastic_displacement(p_last, compliance, wrench, probe_lever(p_last, rotation, lever))
+    return chain_point(convention, rows, q, ball_in_last_frame(p_last, q_e, ops, rotation, lever), ops, axes)

@@ -2,54 +2,83 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 import numpy as np
 
 from ._csv import format_csv
 from ._output import output_file
-from .io import iter_points
+from .checks import point_warnings, print_warnings
+from .io import concat_points, iter_points
 from .model_file import Arm, load_model
 from .urdf import urdf_text
 
-__all__ = ["register", "tip_table", "add_arm_options", "arm_from_args", "model_from_args", "positive", "at_least",
-           "fraction"]
+__all__ = ["register", "tip_table", "add_arm_options", "arm_from_args", "model_from_args", "number_in",
+           "positive", "non_negative", "at_least", "fraction", "finite", "seed", "port"]
 
 
-def _number(text: str, kind):
+def _number(text: str, kind=float):
+    """``text`` as a finite float or a whole number: no underscores ("4_5" is not 45), no nan or inf."""
+    what = "a whole number" if kind is int else "a finite number"
     try:
-        return kind(text)
+        if "_" in text:
+            raise ValueError
+        v = kind(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected {'a whole number' if kind is int else 'a number'}, "
-                                         f"got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+    if kind is float and not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
+    return v
+
+
+def number_in(low=None, high=None, *, low_open=False, high_open=False, kind=float):
+    """argparse type: a finite number (``kind`` float or int) in the interval from ``low`` to ``high``
+    (either may be None: unbounded; ``*_open``: the end itself excluded)."""
+    lo = "" if low is None else ("(" if low_open else "[") + f"{low:g}"
+    hi = "" if high is None else f"{high:g}" + (")" if high_open else "]")
+    if low is not None and high is not None:
+        want = f"in {lo}, {hi}"
+    elif low is not None:
+        want = f"{'>' if low_open else '>='} {low:g}"
+    elif high is not None:
+        want = f"{'<' if high_open else '<='} {high:g}"
+    else:
+        want = ""
+
+    def parse(text: str):
+        v = _number(text, kind)
+        if ((low is not None and (v < low or (low_open and v == low)))
+                or (high is not None and (v > high or (high_open and v == high)))):
+            raise argparse.ArgumentTypeError(f"must be {want}, got {text}")
+        return v
+    parse.__name__ = "whole number" if kind is int else "number"     # argparse names the type in messages
+    return parse
 
 
 def positive(kind=float):
-    """argparse type: a number > 0 (``kind`` float or int)."""
-    def parse(text: str):
-        v = _number(text, kind)
-        if not v > 0:
-            raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
-        return v
-    return parse
+    """argparse type: a finite number > 0 (``kind`` float or int)."""
+    return number_in(0, low_open=True, kind=kind)
+
+
+def non_negative(kind=float):
+    """argparse type: a finite number >= 0."""
+    return number_in(0, kind=kind)
 
 
 def at_least(minimum: int):
     """argparse type: a whole number >= ``minimum``."""
-    def parse(text: str) -> int:
-        v = _number(text, int)
-        if v < minimum:
-            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {text}")
-        return v
-    return parse
+    return number_in(minimum, kind=int)
 
 
-def fraction(text: str) -> float:
-    """argparse type: a number in (0, 1)."""
-    v = _number(text, float)
-    if not 0.0 < v < 1.0:
-        raise argparse.ArgumentTypeError(f"must be in (0, 1), got {text}")
-    return v
+#: argparse type: a number in (0, 1)
+fraction = number_in(0, 1, low_open=True, high_open=True)
+#: argparse type: a finite number (any sign)
+finite = number_in()
+#: argparse type: a random seed (a whole number >= 0)
+seed = number_in(0, kind=int)
+#: argparse type: a TCP port
+port = number_in(1, 65535, kind=int)
 
 
 def add_arm_options(p, help_arm: str = "the arm: a shipped arm's name (aacmm7), a model file or description TOML "
@@ -58,14 +87,19 @@ def add_arm_options(p, help_arm: str = "the arm: a shipped arm's name (aacmm7), 
     """``--arm`` and ``--tip-frame``, the same for every subcommand."""
     p.add_argument("--arm", type=Path, required=True, help=help_arm)
     p.add_argument("--tip-frame", default=None, metavar="LINK",
-                   help="for an arm given as a URDF: the link at the ball centre (the chain runs from the root "
-                        "to it; the probe data default to the seed paper's 85 mm probe)")
+                   help="for an arm given as a URDF: the link at the ball centre, in any orientation (its z axis "
+                        "is the probe's, along the tool; the chain runs from the root to it; force range and "
+                        "compliances default to the seed paper's probe)")
+    p.add_argument("--masses", type=Path, default=None, metavar="TOML",
+                   help="for a URDF arm: link masses and centres of mass ([[link]] name, mass_kg, com_x_mm, "
+                        "com_y_mm, com_z_mm), replacing the URDF's <inertial>; gravity torques (joint "
+                        "compliance) need masses")
 
 
 def model_from_args(args: argparse.Namespace) -> Arm:
     """The arm named by :func:`add_arm_options`: description, effects and their parameter values
     (:class:`arm_model.model_file.Arm`), read by the one loader every subcommand uses."""
-    return load_model(args.arm, args.tip_frame)
+    return load_model(args.arm, args.tip_frame, masses=getattr(args, "masses", None))
 
 
 def arm_from_args(args: argparse.Namespace):
@@ -84,6 +118,8 @@ def register(sub) -> None:
     p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3)")
     add_arm_options(p)
     p.add_argument("-o", "--output", type=Path, required=True, help="output CSV (never one of the inputs)")
+    from .uncertainty_cli import add_tip_options
+    add_tip_options(p)
     p.set_defaults(func=run_tip)
 
     u = sub.add_parser(
@@ -134,8 +170,18 @@ def run_tip(args: argparse.Namespace) -> int:
     with output_file(args.output, [args.points, args.arm]) as tmp, open(tmp, "wb") as fh:
         arm = model_from_args(args)
         desc = arm.desc
-        for block in iter_points(args.points, desc.n_joints):
+        from .uncertainty_cli import parameters_of, tip_columns, wants_uncertainty
+        parameters = parameters_of(arm)
+        blocks = iter_points(args.points, desc.n_joints)
+        uncertain = wants_uncertainty(args, parameters)
+        if uncertain:                   # the uncertainty summary is over all points: one block
+            blocks = [concat_points(blocks)]
+        ulines, warnings = [], []
+        for block in blocks:
             cols = tip_table(arm, block)
+            if uncertain:
+                ucols, ulines = tip_columns(arm, block, parameters, args)
+                cols.update(ucols)
             fh.write(format_csv(cols, "%.6f", header=n == 0))
             n += len(block)
             measurements.update(dict.fromkeys(block.measurement.tolist()))
@@ -145,6 +191,7 @@ def run_tip(args: argparse.Namespace) -> int:
             if len(flagged) < 11:
                 flagged += block.lines[cols["over_force"].astype(bool)][:11].tolist()
             flagged_count += int(cols["over_force"].sum())
+            warnings += [w for w in point_warnings(desc, block) if w.kind != "over_force"]
     print(f"{n} points in {len(measurements)} measurement(s) -> {args.output}")
     if arm.effects:
         print("effects applied: " + ", ".join(e.describe() for e in arm.effects))
@@ -155,10 +202,13 @@ def run_tip(args: argparse.Namespace) -> int:
             print("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not measured "
                   "and is taken as zero")
         print(f"deflection: mean {d_sum / n:.2f} um, max {d_max:.2f} um")
+    for line in ulines:
+        print(line)
     if flagged_count:
         print(f"warning: {flagged_count} point(s) over the probe's calibrated force range "
               f"({desc.probe.max_force:g} N), flagged in column over_force; lines {', '.join(map(str, flagged[:10]))}"
               + (" ..." if flagged_count > 10 else ""))
+    print_warnings(warnings)
     return 0
 
 

@@ -35,7 +35,9 @@ class JointRow:
 
     ``lower``/``upper`` [rad] are the joint limits (None if not given), ``mass`` [kg] the mass of the
     link this joint moves, ``com`` [m] its centre of mass in the row's end frame (after Rx(alpha) for
-    DH; the joint's child frame for MDH and URDF).
+    DH; the joint's child frame for MDH and URDF). ``encoder_resolution`` [rad] is the step of the
+    joint's encoder (optional key ``encoder_resolution_deg``; None if not given): the uncertainty of
+    the corrected ball centres takes ``resolution / sqrt(12)`` per reading (docs/uncertainty.md).
     """
     name: str
     theta_offset: float = 0.0
@@ -48,25 +50,42 @@ class JointRow:
     com: tuple[float, float, float] = (0.0, 0.0, 0.0)
     origin: tuple[float, float, float, float, float, float] | None = None
     axis: tuple[float, float, float] | None = None
+    encoder_resolution: float | None = None
 
 
 @dataclass(frozen=True)
 class Probe:
     """The probe: ball centre ``p_last`` [m] in the last joint frame, ball diameter [m],
     calibrated force range [N], and compliances [m/N] of the ball along probe x, y (bending)
-    and z (axial)."""
+    and z (axial).
+
+    ``rpy`` (roll, pitch, yaw) [rad] orients the probe frame in the last joint frame
+    (R = Rz(yaw) Ry(pitch) Rx(roll), as a URDF origin); its z axis runs along the stylus towards the
+    ball. ``lever`` [m] is the stylus length from the bending hinge to the ball; None puts the hinge
+    where the stylus line passes closest to the last joint origin (lever = the ball's coordinate along
+    probe z, seen from the last joint origin; z of ``p_last`` for an unrotated probe).
+    """
     p_last: tuple[float, float, float]
     ball_diameter: float
     max_force: float
     bending_compliance_x: float
     bending_compliance_y: float
     axial_compliance: float
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    lever: float | None = None
+
+    @property
+    def rotation(self) -> tuple | None:
+        """R_last_probe as a 3x3 nested tuple, None for an unrotated probe."""
+        from .chain import rotation_rpy
+        return None if not any(self.rpy) else rotation_rpy(self.rpy)
 
     @property
     def stylus_length(self) -> float:
-        """Distance [m] from the flange plane (z = 0 of the last joint frame) to the ball centre,
-        the lever of the virtual bending joints."""
-        return self.p_last[2]
+        """Distance [m] from the bending hinge to the ball centre along probe z, the lever of the
+        virtual bending joints."""
+        from .chain import probe_lever
+        return float(probe_lever(self.p_last, self.rotation, self.lever))
 
     @property
     def compliance(self) -> np.ndarray:
@@ -83,6 +102,8 @@ class ArmDescription:
     joints: tuple[JointRow, ...]
     probe: Probe
     source: str | None = field(default=None, compare=False)
+    #: the URDF link at the ball centre when the arm was read from a URDF (``source``)
+    tip_frame: str | None = field(default=None, compare=False)
 
     @property
     def n_joints(self) -> int:
@@ -133,20 +154,22 @@ _JOINT_KEYS = {  # base name -> (quantity, required)
     "theta_offset": ("angle", True), "d": ("length", True), "a": ("length", True),
     "alpha": ("angle", True), "lower": ("angle", False), "upper": ("angle", False),
     "mass": ("mass", False), "com_x": ("length", False), "com_y": ("length", False),
-    "com_z": ("length", False),
+    "com_z": ("length", False), "encoder_resolution": ("angle", False),
 }
 _URDF_JOINT_KEYS = {
     "origin_x": ("length", True), "origin_y": ("length", True), "origin_z": ("length", True),
     "origin_roll": ("angle", True), "origin_pitch": ("angle", True), "origin_yaw": ("angle", True),
     "lower": ("angle", False), "upper": ("angle", False),
     "mass": ("mass", False), "com_x": ("length", False), "com_y": ("length", False),
-    "com_z": ("length", False),
+    "com_z": ("length", False), "encoder_resolution": ("angle", False),
 }
 _PROBE_KEYS = {
     "x": ("length", True), "y": ("length", True), "z": ("length", True),
     "ball_diameter": ("length", True), "max_force": ("force", True),
     "bending_compliance": ("compliance", True), "axial_compliance": ("compliance", True),
     "bending_compliance_x": ("compliance", False), "bending_compliance_y": ("compliance", False),
+    "roll": ("angle", False), "pitch": ("angle", False), "yaw": ("angle", False),
+    "stylus_length": ("length", False),
 }
 
 
@@ -333,8 +356,11 @@ def description_from_data(data: dict, r: TomlReader, extra_keys: tuple[str, ...]
             raise r.error("lower limit is not below upper limit", "joint", i, "lower_deg")
         if v.get("mass", 0.0) < 0:
             raise r.error("mass must not be negative", "joint", i, "mass_kg")
+        if v.get("encoder_resolution", 1.0) <= 0:
+            raise r.error("encoder_resolution must be > 0", "joint", i, "encoder_resolution_deg")
         common = dict(name=jname, lower=v.get("lower"), upper=v.get("upper"), mass=v.get("mass", 0.0),
-                      com=(v.get("com_x", 0.0), v.get("com_y", 0.0), v.get("com_z", 0.0)))
+                      com=(v.get("com_x", 0.0), v.get("com_y", 0.0), v.get("com_z", 0.0)),
+                      encoder_resolution=v.get("encoder_resolution"))
         if convention == "urdf":
             joints.append(JointRow(origin=tuple(v[k] for k in URDF_ROW_FIELDS), axis=axis, **common))
         else:
@@ -344,7 +370,10 @@ def description_from_data(data: dict, r: TomlReader, extra_keys: tuple[str, ...]
     if not isinstance(ptab, dict):
         raise r.error("missing [probe] table", "probe")
     pv = r.values(ptab, _PROBE_KEYS, ("probe",))
-    if pv["z"] <= 0:
+    rpy = (pv.get("roll", 0.0), pv.get("pitch", 0.0), pv.get("yaw", 0.0))
+    if pv.get("stylus_length", 1.0) <= 0:
+        raise r.error("'stylus_length' must be > 0", "probe", "stylus_length_mm")
+    if not any(rpy) and pv["z"] <= 0:
         raise r.error("the ball must lie beyond the flange: z of the probe must be > 0 "
                       "(the probe z axis points along the stylus towards the ball)", "probe", "z_mm")
     for key in ("ball_diameter", "max_force"):
@@ -357,7 +386,12 @@ def description_from_data(data: dict, r: TomlReader, extra_keys: tuple[str, ...]
         p_last=(pv["x"], pv["y"], pv["z"]), ball_diameter=pv["ball_diameter"], max_force=pv["max_force"],
         bending_compliance_x=pv.get("bending_compliance_x", pv["bending_compliance"]),
         bending_compliance_y=pv.get("bending_compliance_y", pv["bending_compliance"]),
-        axial_compliance=pv["axial_compliance"])
+        axial_compliance=pv["axial_compliance"], rpy=rpy, lever=pv.get("stylus_length"))
+    if probe.stylus_length <= 0:
+        raise r.error(f"the ball must lie ahead along the probe z axis (the stylus direction): its z in the "
+                      f"probe frame seen from the last joint origin is {probe.stylus_length * 1e3:.3f} mm; turn "
+                      "the probe frame (roll_deg, pitch_deg, yaw_deg) so that z points towards the ball, or give "
+                      "stylus_length_mm, the distance from the bending hinge to the ball", "probe", "x_mm")
     return ArmDescription(name=name, convention=convention, joints=tuple(joints), probe=probe, source=path)
 
 
@@ -407,6 +441,8 @@ def description_data(desc: ArmDescription) -> dict:
             row["mass_kg"] = float(j.mass)
         if any(j.com):
             row.update({f"com_{k}_mm": in_unit(v, mm) for k, v in zip("xyz", j.com)})
+        if j.encoder_resolution is not None:
+            row["encoder_resolution_deg"] = in_unit(j.encoder_resolution, deg)
         joints.append(row)
     p = desc.probe
     mpn = UNIT_FACTORS["mm_per_N"]
@@ -417,6 +453,10 @@ def description_data(desc: ArmDescription) -> dict:
         probe.update({"bending_compliance_x_mm_per_N": in_unit(p.bending_compliance_x, mpn),
                       "bending_compliance_y_mm_per_N": in_unit(p.bending_compliance_y, mpn)})
     probe["axial_compliance_mm_per_N"] = in_unit(p.axial_compliance, mpn)
+    if any(p.rpy):
+        probe.update({f"{k}_deg": in_unit(v, deg) for k, v in zip(("roll", "pitch", "yaw"), p.rpy)})
+    if p.lever is not None:
+        probe["stylus_length_mm"] = in_unit(p.lever, mm)
     return {"name": desc.name, "convention": desc.convention, "joint": joints, "probe": probe}
 
 

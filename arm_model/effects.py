@@ -273,11 +273,21 @@ def joint_frame(desc: ArmDescription, geom: Geometry, q, i: int, ops):
 
 
 def last_frame(desc: ArmDescription, geom: Geometry, q, ops):
-    """Origin and axes (x, y, z) of the last joint frame (the probe frame) in the base frame."""
+    """Origin and axes (x, y, z) of the last joint frame in the base frame (the probe frame's axes:
+    :func:`probe_axes`)."""
     n = desc.n_joints
     o = _chain(desc, geom, q, n, (0.0, 0.0, 0.0), ops)
     return o, [_sub(_chain(desc, geom, q, n, e, ops), o) for e in ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0),
                                                                     (0.0, 0.0, 1.0))]
+
+
+def probe_axes(desc: ArmDescription, axes):
+    """The probe frame's axes (x, y, z) in the base frame from the last joint frame's ``axes``
+    (the probe's rotation R_last_probe of the description; the same axes for an unrotated probe)."""
+    r = desc.probe.rotation
+    if r is None:
+        return axes
+    return [[sum(axes[m][a] * r[m][k] for m in range(3)) for a in range(3)] for k in range(3)]
 
 
 def _shift_ball(desc, geom: Geometry, q, d_base, ops, frame=None) -> None:
@@ -359,8 +369,11 @@ class ProbeComplianceMatrix(Effect):
         cxx, cyy, czz, cxy, cxz, cyz = params
         fx, fy, fz = inputs.wrench[0], inputs.wrench[1], inputs.wrench[2]
         geom.compliance = [geom.compliance[0] + cxx, geom.compliance[1] + cyy, geom.compliance[2] + czz]
-        geom.p_last = [geom.p_last[0] + cxy * fy + cxz * fz, geom.p_last[1] + cxy * fx + cyz * fz,
-                       geom.p_last[2] + cxz * fx + cyz * fy]
+        d = [cxy * fy + cxz * fz, cxy * fx + cyz * fz, cxz * fx + cyz * fy]     # probe frame
+        r = desc.probe.rotation
+        if r is not None:                                                       # into the last joint frame
+            d = [r[k][0] * d[0] + r[k][1] * d[1] + r[k][2] * d[2] for k in range(3)]
+        geom.p_last = [geom.p_last[k] + d[k] for k in range(3)]
 
 
 @dataclass(frozen=True)
@@ -377,7 +390,7 @@ class ApproachOffset(Effect):
 
     def apply(self, desc, params, inputs, geom, ops):
         frame = last_frame(desc, geom, inputs.q, ops)
-        u = frame[1][2]
+        u = probe_axes(desc, frame[1])[2]
         d = [params[3 * a] * u[0] + params[3 * a + 1] * u[1] + params[3 * a + 2] * u[2] for a in range(3)]
         _shift_ball(desc, geom, inputs.q, d, ops, frame)
 
@@ -401,8 +414,9 @@ def contact_moment(desc: ArmDescription, geom: Geometry, q, wrench, origin, ops,
     """Moment [N m] (base frame) about ``origin`` of the contact wrench at the ball (probe frame)."""
     o_last, axes = last_frame(desc, geom, q, ops) if frame is None else frame
     ball = [o_last[a] + sum(axes[k][a] * geom.p_last[k] for k in range(3)) for a in range(3)]
-    f = [sum(axes[k][a] * wrench[k] for k in range(3)) for a in range(3)]
-    mt = [sum(axes[k][a] * wrench[3 + k] for k in range(3)) for a in range(3)]
+    pa = probe_axes(desc, axes)
+    f = [sum(pa[k][a] * wrench[k] for k in range(3)) for a in range(3)]
+    mt = [sum(pa[k][a] * wrench[3 + k] for k in range(3)) for a in range(3)]
     t = _cross(_sub(ball, origin), f)
     return [t[a] + mt[a] for a in range(3)]
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ._csv import BLOCK_BYTES, csv_records, format_csv, iter_csv_blocks
-from ._errors import InputError, parse_toml, read_text
+from ._errors import InputError, parse_toml, read_text, unknown_key
 from ._output import atomic_write_bytes, guard_output
 from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, split_unit
 
@@ -312,6 +312,18 @@ def _toml_key_line(text: str, table: str, index: int, key: str | None) -> int | 
     return None
 
 
+#: the numeric keys of a feature (lengths; each with its unit suffix)
+_FEATURE_LENGTHS = ("diameter", "u_diameter", "form_error")
+
+
+def _toml_top_line(text: str, key: str) -> int | None:
+    for no, raw in enumerate(text.splitlines(), start=1):
+        line = raw.split("#", 1)[0].strip()
+        if re.match(r"^\[*\s*\"?" + re.escape(key) + r"\"?\s*(\]|=|\.)", line):
+            return no
+    return None
+
+
 def read_artefacts(path: str | Path) -> Artefacts:
     """Read an artefacts TOML file (docs/formats.md §4)."""
     return parse_artefacts(read_text(path, "the artefacts file"), str(path))
@@ -326,12 +338,18 @@ def parse_artefacts(text: str, path: str = "<string>") -> Artefacts:
 
     for key in data:
         if key not in ("feature", "distance"):
-            raise InputError(f"unknown top-level key '{key}' (known: feature, distance)", path, None, f"key '{key}'")
+            raise InputError(unknown_key(key, ("feature", "distance")), path, _toml_top_line(text, key),
+                             f"key '{key}'")
+    if not isinstance(data.get("distance", []), list):
+        raise InputError("'distance' must be [[distance]] tables", path, _toml_top_line(text, "distance"),
+                         "key 'distance'")
     feats = data.get("feature", [])
     if not isinstance(feats, list) or not feats:
         raise InputError("no [[feature]] tables", path, 1)
     features: dict[str, Feature] = {}
     for i, t in enumerate(feats):
+        if not isinstance(t, dict):
+            raise err("expected a [[feature]] table", "feature", i)
         fid = t.get("id")
         if not isinstance(fid, str) or not fid.strip():
             raise err("missing or empty 'id'", "feature", i, "id")
@@ -345,15 +363,19 @@ def parse_artefacts(text: str, path: str = "<string>") -> Artefacts:
             if key in ("id", "kind"):
                 continue
             parts = split_unit(key)
-            if parts is None:
-                if isinstance(v, (int, float)) and not isinstance(v, bool):
-                    raise err(f"numeric key '{key}' has no unit suffix", "feature", i, key)
-                continue
+            if parts is None or parts[0] not in _FEATURE_LENGTHS:
+                raise err(unknown_key(key, ("id", "kind") + _FEATURE_LENGTHS,
+                                      ["id", "kind"] + [f"{b}_<length unit>" for b in _FEATURE_LENGTHS]),
+                          "feature", i, key)
+            if QUANTITY_OF_UNIT[parts[1]] != "length":
+                raise err(f"'{key}' must be a length (_mm, _m, _um)", "feature", i, key)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise err(f"'{key}' must be a finite number, got {v!r}", "feature", i, key)
+            if parts[0] in values:
+                raise err(f"'{parts[0]}' is given twice (with two units)", "feature", i, key)
             values[parts[0]] = float(v) * UNIT_FACTORS[parts[1]]
-            if parts[0] in ("diameter", "u_diameter", "form_error") and QUANTITY_OF_UNIT[parts[1]] != "length":
-                raise err(f"'{key}' must be a length", "feature", i, key)
+            if parts[0] != "diameter" and values[parts[0]] < 0:
+                raise err(f"'{key}' must not be negative, got {v!r}", "feature", i, key)
         if kind in ("ring", "cylinder", "sphere") and "diameter" not in values:
             raise err(f"a {kind} needs 'diameter_mm'", "feature", i)
         if "diameter" in values and values["diameter"] <= 0:
@@ -362,6 +384,8 @@ def parse_artefacts(text: str, path: str = "<string>") -> Artefacts:
                                 values.get("form_error"), values)
     distances = []
     for i, t in enumerate(data.get("distance", [])):
+        if not isinstance(t, dict):
+            raise err("expected a [[distance]] table", "distance", i)
         between = t.get("between")
         if (not isinstance(between, list) or len(between) != 2
                 or not all(isinstance(b, str) for b in between)):
@@ -369,21 +393,35 @@ def parse_artefacts(text: str, path: str = "<string>") -> Artefacts:
         for b in between:
             if b not in features:
                 raise err(f"unknown feature '{b}' (known: {', '.join(features)})", "distance", i, "between")
+        if between[0] == between[1]:
+            raise err(f"'between' names '{between[0]}' twice; a distance joins two features", "distance", i,
+                      "between")
         length = u = None
         for key, v in t.items():
             if key == "between":
                 continue
             parts = split_unit(key)
-            if parts is None or QUANTITY_OF_UNIT[parts[1]] != "length" or parts[0] not in ("length", "u_length"):
-                raise err(f"unknown key '{key}' (expected length_mm, u_length_mm)", "distance", i, key)
+            if parts is None or parts[0] not in ("length", "u_length"):
+                raise err(unknown_key(key, ("between", "length", "u_length"),
+                                      ["between", "length_<length unit>", "u_length_<length unit>"]),
+                          "distance", i, key)
+            if QUANTITY_OF_UNIT[parts[1]] != "length":
+                raise err(f"'{key}' must be a length (_mm, _m, _um)", "distance", i, key)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise err(f"'{key}' must be a finite number", "distance", i, key)
+                raise err(f"'{key}' must be a finite number, got {v!r}", "distance", i, key)
+            if (length if parts[0] == "length" else u) is not None:
+                raise err(f"'{parts[0]}' is given twice (with two units)", "distance", i, key)
             if parts[0] == "length":
                 length = float(v) * UNIT_FACTORS[parts[1]]
+                if not length > 0:
+                    raise err(f"'{key}' must be > 0, got {v!r}", "distance", i, key)
             else:
                 u = float(v) * UNIT_FACTORS[parts[1]]
-        if length is None or length <= 0:
-            raise err("missing or non-positive 'length_mm'", "distance", i)
+                if not u > 0:
+                    raise err(f"'{key}' must be > 0 (a certified length has an uncertainty; leave the key "
+                              f"out to use --sigma-length-um), got {v!r}", "distance", i, key)
+        if length is None:
+            raise err("missing 'length_mm'", "distance", i)
         distances.append(Distance((between[0], between[1]), length, u))
     return Artefacts(path, features, tuple(distances))
 

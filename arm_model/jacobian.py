@@ -25,7 +25,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .chain import ball_in_last_frame, elastic_displacement
+from .chain import ball_in_last_frame, elastic_displacement, probe_lever
 
 __all__ = ["Dual", "DUAL_OPS", "chain_jacobian", "geometry_entries"]
 
@@ -168,14 +168,14 @@ def _cross(u, v):
     return (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
 
 
-def chain_jacobian(convention: str, rows, p_last, compliance, q, wrench=None, axes=None):
+def chain_jacobian(convention: str, rows, p_last, compliance, q, wrench=None, axes=None, rotation=None, lever=None):
     """Ball centres and their exact Jacobian for N points.
 
     Args:
         rows, p_last, compliance: the geometry as :func:`arm_model.chain.ball_centre_expr` takes it
             (each entry a float or an (N,) column).
         q: J columns (N,) of joint angles [rad]; wrench: 6 columns (force [N], torque [N m], probe
-            frame) or None (rigid).
+            frame) or None (rigid); rotation, lever: the probe frame (:class:`arm_model.description.Probe`).
 
     Returns:
         (centre (N, 3) [m], jac (E, 3, N)) with the entries of :func:`geometry_entries` (SI), one
@@ -193,8 +193,8 @@ def chain_jacobian(convention: str, rows, p_last, compliance, q, wrench=None, ax
         q_e = (0.0, 0.0, 0.0)
     else:
         w = [Dual(v, {("w", k): 1.0}) for k, v in enumerate(wrench)]
-        q_e = elastic_displacement(pl, cp, w)
-    ball = ball_in_last_frame(pl, q_e, DUAL_OPS)
+        q_e = elastic_displacement(pl, cp, w, probe_lever(pl, rotation, lever))
+    ball = ball_in_last_frame(pl, q_e, DUAL_OPS, rotation, lever)
     # forward pass: record (u, o) of each elementary motion
     cols = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
     origin = (0.0, 0.0, 0.0)

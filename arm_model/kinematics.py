@@ -68,7 +68,8 @@ def ball_centres(desc: ArmDescription, q, wrench=None, p=None, *, threads: int |
         qt = np.ascontiguousarray(q2[start:stop].T)
         wt = None if w is None else np.ascontiguousarray(w[start:stop].T)
         x, y, z = ball_centre_expr(desc.convention, rows, p_last, compliance, qt,
-                                   None if wt is None else list(wt), NUMPY_OPS, desc.axes)
+                                   None if wt is None else list(wt), NUMPY_OPS, desc.axes,
+                                   desc.probe.rotation, desc.probe.lever)
         out[start:stop, 0] = x
         out[start:stop, 1] = y
         out[start:stop, 2] = z

@@ -162,11 +162,11 @@ class Propagation:
         return {k: np.sqrt(v.mean(axis=0)) for k, v in self.contributions.items()}
 
 
-def covariance_columns(cov: np.ndarray, unit: float = 1e6) -> dict:
-    """The six terms of (N, 3, 3) covariances as columns ``cov_xx_mm2`` ... (``unit`` 1e6: m^2 -> mm^2)."""
+def covariance_columns(cov: np.ndarray) -> dict:
+    """The six terms of (N, 3, 3) covariances [m^2] as columns ``cov_xx_um2`` ... [um^2]."""
     out = {}
     for a, b in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)):
-        out[f"cov_{'xyz'[a]}{'xyz'[b]}_mm2"] = cov[:, a, b] * unit
+        out[f"cov_{'xyz'[a]}{'xyz'[b]}_um2"] = cov[:, a, b] * 1e12
     return out
 
 
@@ -259,7 +259,8 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
         rows = [vals[m * i: m * i + m] for i in range(nj)]
         k0 = m * nj
         cen, g = chain_jacobian(model.desc.convention, rows, vals[k0: k0 + 3], vals[k0 + 3: k0 + 6],
-                                vals[k0 + 6: k0 + 6 + nj], vals[k0 + 6 + nj:], model.desc.axes)
+                                vals[k0 + 6: k0 + 6 + nj], vals[k0 + 6 + nj:], model.desc.axes,
+                                model.desc.probe.rotation, model.desc.probe.lever)
         centres[s:e] = cen
         # the chain rule: T = M g for constant coefficients, plus per-point coefficients separately
         mmat = np.zeros((len(directions), len(flat)))
@@ -300,14 +301,18 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
             cov[s:e, i, j] = cv[i, j]
             cov[s:e, j, i] = cv[i, j]
 
+    from threadpoolctl import threadpool_limits
+
     starts = range(0, n, chunk)
     nthreads = threads or _default_threads()
-    if nthreads == 1 or n <= chunk:
-        for s in starts:
-            work(s)
-    else:
-        with ThreadPoolExecutor(max_workers=nthreads) as pool:
-            list(pool.map(work, starts))
+    # the products are thin (tens x chunk): one BLAS thread each; more spin-wait on a busy machine
+    with threadpool_limits(limits=1, user_api="blas"):
+        if nthreads == 1 or n <= chunk:
+            for s in starts:
+                work(s)
+        else:
+            with ThreadPoolExecutor(max_workers=nthreads) as pool:
+                list(pool.map(work, starts))
     sources = dict(inputs.sources)
     sources["parameters"] = "none (parameters taken as exact)" if parameters is None else parameters.source
     if _compliance_covered(pnames):

@@ -1,7 +1,7 @@
 """URDF generated from the arm description, with the probe's virtual elastic joints and visuals.
 
 Chain: ``base_link -> j1 ... jJ (revolute, z) -> flange (the last joint frame, fixed) -> stylus_root
-(hinge at (x, y, 0), fixed) -> probe_bend_y (revolute, y) -> probe_bend_x (revolute, x) ->
+(the bending hinge, in the probe frame's orientation, fixed; at (x, y, 0) for an unrotated probe) -> probe_bend_y (revolute, y) -> probe_bend_x (revolute, x) ->
 probe_axial (prismatic, z) -> ball (fixed, at (0, 0, L))``. The elastic joints carry no limits of
 interest; they are set by statics from the measured wrench (see :mod:`arm_model.chain`).
 """
@@ -60,7 +60,7 @@ def _origin_matrix(origin) -> np.ndarray:
 
 
 def _f(x: float) -> str:
-    return repr(float(x))
+    return repr(float(x) + 0.0)    # + 0.0: no "-0.0"
 
 
 def _origin(t: np.ndarray) -> str:
@@ -158,12 +158,17 @@ def urdf_text(desc: ArmDescription) -> str:
         tail_prev = tail
     p = desc.probe
     lever = p.stylus_length
+    hinge = np.eye(4)       # T_last_hinge: the probe frame's orientation at p_last - L z_probe
+    if p.rotation is not None:
+        hinge[:3, :3] = p.rotation
+    hinge[:3, 3] = np.asarray(p.p_last) - lever * hinge[:3, 2]
     lines += [
         f'  <joint name="{FLANGE_FRAME}_joint" type="fixed"><parent link="{parent}"/>'
         f'<child link="{FLANGE_FRAME}"/>{_origin(tail_prev)}</joint>',
-        f'  <link name="{FLANGE_FRAME}">{_cylinder_between((p.p_last[0], p.p_last[1], 0), (p.p_last[0], p.p_last[1], 0.012), 0.012, "joint")}</link>',
+        f'  <link name="{FLANGE_FRAME}">'
+        f'{_cylinder_between(hinge[:3, 3], hinge[:3, 3] + 0.012 * hinge[:3, 2], 0.012, "joint")}</link>',
         f'  <joint name="stylus_root_joint" type="fixed"><parent link="{FLANGE_FRAME}"/>'
-        f'<child link="stylus_root"/><origin xyz="{_f(p.p_last[0])} {_f(p.p_last[1])} 0" rpy="0 0 0"/></joint>',
+        f'<child link="stylus_root"/>{_origin(hinge)}</joint>',
         '  <link name="stylus_root"/>',
         '  <joint name="probe_bend_y" type="revolute"><parent link="stylus_root"/><child link="probe_bend_y_link"/>'
         '<origin xyz="0 0 0" rpy="0 0 0"/><axis xyz="0 1 0"/><limit lower="-0.1" upper="0.1" effort="1" velocity="1"/></joint>',

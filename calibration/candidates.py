@@ -6,7 +6,8 @@ model (``ArmModel.with_effects``). The library gives, per arm and data:
 
 * ``eccentricity jN``: encoder eccentricity of joint N, harmonics 1 and 2 (4 parameters);
 * ``joint compliance jN``: joint N turns by ``c (tau_contact - tau_gravity)`` (1 parameter); offered
-  only where the joint's gravity or contact torque is not zero throughout the data;
+  only where the joint's gravity or contact torque is not zero throughout the data (none at all for an
+  arm without masses measured without force: one "joint compliance" entry says so);
 * ``thermal growth``: one expansion coefficient of every link length; offered only when the
   temperature column varies by at least :data:`MIN_TEMPERATURE_SPAN`;
 * ``force sensor x|y|z``: gain and offset of one sensor axis; only with force data on that axis
@@ -32,7 +33,7 @@ from arm_model.model import ArmModel
 from .data import CalibrationData
 
 __all__ = ["Candidate", "Skipped", "FAMILIES", "MIN_TEMPERATURE_SPAN", "library_candidates", "needs_model",
-           "torques_of"]
+           "torques_of", "no_torque_reason"]
 
 #: candidate families of the library, by effect key (the CLI's ``--candidates`` names)
 FAMILIES = ("eccentricity", "joint_compliance", "thermal", "force_sensor", "probe_compliance")
@@ -104,6 +105,17 @@ def torques_of(desc: ArmDescription, data: CalibrationData) -> tuple[np.ndarray,
     return PinocchioArm(desc).torques(data.points.q, data.points.wrench)
 
 
+def no_torque_reason(desc: ArmDescription, data: CalibrationData) -> str | None:
+    """Why no joint carries a torque in these data (no masses and no force), or None."""
+    pts = data.points
+    has_force = pts.force is not None and np.max(np.abs(pts.force), initial=0.0) > _ZERO_FORCE
+    if has_force or any(j.mass > 0 for j in desc.joints):
+        return None
+    return ("the arm has no masses (no <inertial> in its URDF, no mass_kg in its description) and the data no "
+            "force, so no joint carries a torque; give the link masses with --masses (or mass_kg in the "
+            "description)")
+
+
 def library_candidates(desc: ArmDescription, data: CalibrationData, families=None,
                        extra=()) -> tuple[list[Candidate], list[Skipped]]:
     """The library's candidates for ``desc`` and ``data``, and those left out with the reason.
@@ -127,7 +139,9 @@ def library_candidates(desc: ArmDescription, data: CalibrationData, families=Non
         for i, n in enumerate(names):
             out.append(Candidate(f"eccentricity {n}", EncoderEccentricity(joints=(i,), harmonics=(1, 2)),
                                  "eccentricity", n))
-    if "joint_compliance" in families:
+    if "joint_compliance" in families and no_torque_reason(desc, data):
+        skipped.append(Skipped("joint compliance", no_torque_reason(desc, data)))
+    elif "joint_compliance" in families:
         tau_g, tau_c = torques_of(desc, data)
         for i, n in enumerate(names):
             g = np.max(np.abs(tau_g[:, i]), initial=0.0)

@@ -5,9 +5,12 @@ import argparse
 import json
 from pathlib import Path
 
+import numpy as np
+
 from arm_model import InputError
-from arm_model.commands import add_arm_options, model_from_args, positive
+from arm_model.commands import add_arm_options, at_least, fraction, model_from_args, non_negative, positive, seed
 from arm_model._output import output_folder
+from arm_model.checks import point_warnings, print_warnings
 from arm_model.io import read_artefacts, read_points
 from arm_model.model_file import Arm
 
@@ -68,10 +71,10 @@ def _common_fit_options(p) -> None:
                    help="add an effect of arm_model.effects to the model (repeatable): eccentricity, "
                         "joint_compliance, thermal, force_sensor, probe_compliance")
     sigma_options(p)
-    p.add_argument("--rank-tol", type=positive(), default=None,
+    p.add_argument("--rank-tol", type=fraction, default=None,
                    help="relative singular value below which a parameter combination counts as not "
                         "identifiable (default 1e-4)")
-    p.add_argument("--min-resolution", type=float, default=0.1, metavar="FRACTION",
+    p.add_argument("--min-resolution", type=non_negative(), default=0.1, metavar="FRACTION",
                    help="hold parameters the data would resolve only to worse than this fraction of a plausible "
                         "error size (1 mm, 0.01 rad, 10x the nominal compliance ...): their effect is below the "
                         "noise (default 0.1; 0 keeps every linearly independent parameter)")
@@ -95,7 +98,7 @@ def register(sub) -> None:
     c.add_argument("--holdout", default=None,
                    help="measurements kept out of the fit for validation: a fraction (0.2) drawn at random per "
                         "artefact kind, or a comma-separated list of measurement ids")
-    c.add_argument("--seed", type=int, default=0, help="seed of the random --holdout draw (default 0)")
+    c.add_argument("--seed", type=seed, default=0, help="seed of the random --holdout draw (default 0)")
     c.add_argument("--reference", choices=("fit", "identity", "off"), default="fit",
                    help="reference coordinates: fit T_ref_base (default), take them as base coordinates "
                         "(identity: the base pose becomes identifiable) or ignore them")
@@ -125,10 +128,10 @@ def register(sub) -> None:
                                   "measurements. Local processes by default; --scheduler sends the runs to a Dask "
                                   "cluster. Writes study.json and prints a table.")
     m.add_argument("campaign", type=Path, help="campaign TOML of the simulator")
-    m.add_argument("--runs", type=int, default=20, help="number of runs (default 20)")
-    m.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
-    m.add_argument("--holdout", type=float, default=0.25, help="held-out fraction of measurements (default 0.25)")
-    m.add_argument("--workers", type=int, default=None, help="local processes (default: CPU count)")
+    m.add_argument("--runs", type=at_least(1), default=20, help="number of runs (default 20)")
+    m.add_argument("--seed", type=seed, default=0, help="first seed (default 0)")
+    m.add_argument("--holdout", type=fraction, default=0.25, help="held-out fraction of measurements (default 0.25)")
+    m.add_argument("--workers", type=at_least(1), default=None, help="local processes (default: CPU count)")
     m.add_argument("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://10.0.0.5:8786")
     m.add_argument("-o", "--output", type=Path, required=True, help="output folder")
     m.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
@@ -142,7 +145,7 @@ def register(sub) -> None:
     q.add_argument("artefacts", type=Path, help="artefacts TOML")
     add_arm_options(q, "nominal arm (TOML, or URDF with --tip-frame)")
     q.add_argument("--reference-points", type=Path, default=None, help="reference points CSV")
-    q.add_argument("--count", type=int, required=True, help="how many measurements to choose")
+    q.add_argument("--count", type=at_least(1), required=True, help="how many measurements to choose")
     q.add_argument("-o", "--output", type=Path, required=True, help="output folder")
     q.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     _common_fit_options(q)
@@ -156,8 +159,6 @@ def _weights(args):
 
 
 def _fit_kwargs(args) -> dict:
-    if args.min_resolution < 0:
-        raise InputError(f"--min-resolution must be >= 0, got {args.min_resolution}")
     kw = {"min_resolution": args.min_resolution or None}
     if args.rank_tol is not None:
         kw["rank_tol"] = args.rank_tol
@@ -196,10 +197,12 @@ def _load_data(args):
     points = read_points(args.points, desc.n_joints)
     artefacts = read_artefacts(args.artefacts)
     reference = None if args.reference_points is None else read_points(args.reference_points, desc.n_joints)
+    warnings = []
     for pts in (points, reference):
         if pts is not None:
             Arm(desc, model.effects).check_points(pts)
-    return model, make_data(points, artefacts, model, reference=reference), arm.values
+            warnings += point_warnings(desc, pts)
+    return model, make_data(points, artefacts, model, reference=reference), arm.values, warnings
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
@@ -208,7 +211,12 @@ def run_calibrate(args: argparse.Namespace) -> int:
     from .report import poorly_determined, write_outputs
     inputs = [args.points, args.artefacts, args.arm, args.reference_points]
     with output_folder(args.output, inputs, "calibrate") as out:
-        model, data, values = _load_data(args)
+        model, data, values, warnings = _load_data(args)
+        if any(e.key == "joint_compliance" for e in model.effects):
+            from .candidates import no_torque_reason
+            why = no_torque_reason(model.desc, data)
+            if why:
+                print(f"joint compliance cannot be identified: {why}")
         holdout = _holdout(args.holdout)
         train, test = (data, None) if holdout is None else split_holdout(data, holdout, args.seed)
         kw = _fit_kwargs(args)
@@ -223,12 +231,14 @@ def run_calibrate(args: argparse.Namespace) -> int:
                                                 "arm": str(args.arm),
                                                 "reference_points": None if args.reference_points is None
                                                 else str(args.reference_points)},
-                                     "holdout": None if test is None else test.measurements()})
+                                     "holdout": None if test is None else test.measurements(),
+                                     "warnings": [w.as_dict() for w in warnings]})
     files = {k: out.published(v) for k, v in files.items()}
     print(f"{len(train)} training points in {len(train.measurements())} measurements"
           + (f", {len(test)} held-out points in {len(test.measurements())}" if test is not None else ""))
     if data.points.force_kind == "two-channel":
         print("two-channel force sensor: the probe-y force is not measured and is taken as zero")
+    print_warnings(warnings)
     print(f"solver: {res.status} after {res.iterations} iterations; s0 = {res.s0:.3f}; "
           f"{len(res.free)} parameters free, {res.n_nuisance} nuisance unknowns, dof {res.dof}")
     idf = res.identifiability_final
@@ -252,8 +262,6 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
 def run_montecarlo(args: argparse.Namespace) -> int:
     from .study import RunSettings, SimSource, monte_carlo
-    if args.runs < 1:
-        raise InputError("--runs must be at least 1")
     from arm_model.sim import load_campaign
     camp = load_campaign(args.campaign)            # checks the file before any run starts
     with output_folder(args.output, camp.inputs, "study montecarlo") as out:
@@ -273,10 +281,19 @@ def run_montecarlo(args: argparse.Namespace) -> int:
         print(f"  {a['label']}: nominal {a['before_median']:.2f}/{a['before_p95']:.2f} -> calibrated "
               f"{a['after_median']:.2f}/{a['after_p95']:.2f} {a['unit']}")
     from .calibrate import display_unit
-    print("parameters: RMS error vs truth, mean reported u, within 3u:")
+    if mc.s0:
+        s0 = np.array(mc.s0)
+        print(f"residual scale factor s0 over the runs: median {np.median(s0):.2f} (range {s0.min():.2f}-{s0.max():.2f})"
+              + ("; far from 1: the stated --sigma-* do not match the residuals, and one factor cannot rescale "
+                 "residual groups that are mis-stated differently (docs/uncertainty.md)"
+                 if abs(np.median(s0) - 1) > 0.2 else ""))
+    lo, hi = next(iter(mc.parameters.values()))["z_rms_95"] if mc.parameters else (0.0, 0.0)
+    print(f"parameters: RMS error vs truth, mean reported u, within 3u, z = error / u: RMS (right uncertainties "
+          f"give {lo:.2f}-{hi:.2f} for {len(mc.s0)} runs, 95 %) and mean (bias), verdict:")
     for n, v in mc.parameters.items():
         du, fac = display_unit(model.spec.units[model.spec.index(n)])
-        print(f"  {n:22s} {v['rms_error'] * fac:10.4g} {v['mean_u'] * fac:10.4g} {du:5s} {100 * v['within_3u']:5.0f} %")
+        print(f"  {n:22s} {v['rms_error'] * fac:10.4g} {v['mean_u'] * fac:10.4g} {du:5s} {100 * v['within_3u']:5.0f} %"
+              f" {v['z_rms']:6.2f} {v['z_mean']:+6.2f}  {v['verdict']}")
     print(f"-> {args.output / 'study.json'}")
     return 0 if not mc.failures else 1
 
@@ -285,10 +302,14 @@ def run_poses(args: argparse.Namespace) -> int:
     from .study import select_measurements
     inputs = [args.points, args.artefacts, args.arm, args.reference_points]
     with output_folder(args.output, inputs, "study poses") as out:
-        model, data, _ = _load_data(args)
+        model, data, _, warnings = _load_data(args)
+        n = len(data.measurements())
+        if args.count > n:
+            raise InputError(f"--count {args.count}: the points file has {n} measurement(s)", args.points)
         sel = select_measurements(model, data, args.count, _free(model, args), weights=_weights(args),
                                   progress=not args.quiet, fit=_fit_kwargs(args))
         (out.dir / "poses.json").write_text(json.dumps(sel.to_dict(), indent=1) + "\n", encoding="utf-8")
+    print_warnings(warnings)
     print(f"{len(sel.parameters)} identifiable parameters; chosen measurements (O1, random sets' O1):")
     for m, o, r, n in zip(sel.chosen, sel.o1, sel.o1_random, sel.n_points):
         print(f"  {m:20s} O1 {o:10.4g}   random {r:10.4g}   ({n} points)")

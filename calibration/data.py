@@ -180,7 +180,7 @@ def split_holdout(data: CalibrationData, holdout, seed: int = 0) -> tuple[Calibr
     if isinstance(holdout, (float, int)) and not isinstance(holdout, bool):
         frac = float(holdout)
         if not 0.0 < frac < 1.0:
-            raise ValueError(f"holdout fraction must be in (0, 1), got {frac}")
+            raise InputError(f"--holdout fraction must be in (0, 1), got {frac}")
         rng = np.random.default_rng(seed)
         # stratify by the set of feature kinds a measurement touches
         groups: dict[tuple, list[str]] = {}
@@ -202,8 +202,10 @@ def split_holdout(data: CalibrationData, holdout, seed: int = 0) -> tuple[Calibr
             raise InputError(f"held-out measurement(s) not in the points file: {', '.join(sorted(unknown))}",
                              data.points.path, None, "measurement")
     if not held:
-        raise ValueError("the held-out set is empty")
+        raise InputError(f"the held-out set is empty: {len(ids)} measurement(s) are too few to hold out a "
+                         f"fraction {holdout:g} of them" if isinstance(holdout, float) else
+                         "the held-out set is empty")
     if held == set(ids):
-        raise ValueError("every measurement is held out: nothing left to calibrate on")
+        raise InputError("every measurement is held out: nothing left to calibrate on")
     mask = np.array([m in held for m in data.points.measurement], bool)
     return data.select(~mask), data.select(mask)

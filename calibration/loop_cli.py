@@ -6,8 +6,9 @@ import sys
 import time
 
 from arm_model import InputError
-from arm_model.commands import at_least, fraction, model_from_args
+from arm_model.commands import at_least, fraction, model_from_args, number_in, seed
 from arm_model._output import output_folder
+from arm_model.checks import point_warnings, print_warnings
 from arm_model.io import read_artefacts, read_points
 from arm_model.model_file import Arm
 
@@ -43,12 +44,12 @@ def register(sub) -> None:
                         "tested) and of the final structure tests (Holm) (default 0.01)")
     p.add_argument("--screen-alpha", type=fraction, default=0.05,
                    help="level of the score-test screening, Bonferroni over the candidates (default 0.05)")
-    p.add_argument("--min-improvement", type=float, default=0.02,
+    p.add_argument("--min-improvement", type=number_in(0, 1, high_open=True), default=0.02,
                    help="smallest relative drop of the held-out RMS for an effect to be added (default 0.02)")
     p.add_argument("--max-effects", type=at_least(0), default=4, help="most effects to add (default 4)")
     p.add_argument("--cv-top", type=at_least(1), default=3,
                    help="candidates cross-validated at each step, the best screened first (default 3)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the test-set and fold draws (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the test-set and fold draws (default 0)")
     p.add_argument("--candidates", default=None, metavar="KEYS",
                    help="comma-separated candidate families (default all): eccentricity, joint_compliance, thermal, "
                         "force_sensor, probe_compliance")
@@ -84,9 +85,11 @@ def run(args: argparse.Namespace) -> int:
     points = read_points(args.points, desc.n_joints)
     artefacts = read_artefacts(args.artefacts)
     reference = read_points(args.reference_points, desc.n_joints) if args.reference_points else None
+    warnings = []
     for pts in (points, reference):
         if pts is not None:
             Arm(desc, effects).check_points(pts)
+            warnings += point_warnings(desc, pts)
     weights = Weights(args.sigma_probe_um * 1e-6, args.sigma_ref_um * 1e-6,
                       None if args.sigma_length_um is None else args.sigma_length_um * 1e-6)
     settings = LoopSettings(folds=args.folds, test_fraction=args.test_fraction, alpha=args.alpha,
@@ -104,8 +107,11 @@ def run(args: argparse.Namespace) -> int:
                           weights=weights, settings=settings, families_=families, progress=progress)
         names = {"points": str(args.points), "artefacts": str(args.artefacts), "arm": str(args.arm),
                  "reference_points": None if args.reference_points is None else str(args.reference_points)}
-        write_loop_report(loop, out.dir, inputs=inputs, input_names=names)
+        write_loop_report(loop, out.dir, inputs=inputs, input_names=names, warnings=warnings)
+    print_warnings(warnings)
     print(before_after_text(loop))
+    for sk in loop.skipped:
+        print(f"{sk.name} not offered: {sk.reason}")
     print(loop.verdict)
     print(f"report: {args.output / 'report.html'}; machine summary: {args.output / 'summary.json'}")
     return 0

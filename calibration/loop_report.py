@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from arm_model.checks import warnings_html
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output
 from arm_model.shipped import provenance
 
@@ -270,7 +271,8 @@ def write_loop_model(loop: LoopResult, out_dir, inputs=()) -> dict:
                        comment=comment)
 
 
-def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | None = None) -> list[Path]:
+def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | None = None,
+                      warnings=()) -> list[Path]:
     """Write the model file (:func:`write_loop_model`), ``summary.json``, ``report.html``,
     ``before-after.txt`` and the PNGs into ``out_dir`` (atomically, never over ``inputs``); returns the
     paths written."""
@@ -335,8 +337,10 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
     page = ("<!doctype html><html><head><meta charset='utf-8'><title>close-loop report</title><style>"
             "body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;font-size:12px}"
             "td,th{border:1px solid #ccc;padding:2px 6px}pre{background:#f6f6f6;padding:6px}</style></head><body>"
-            f"<h1>Closing the loop: {html.escape(loop.desc.name)}</h1>" + "".join(sections) + "</body></html>")
+            f"<h1>Closing the loop: {html.escape(loop.desc.name)}</h1>" + warnings_html(warnings)
+            + "".join(sections) + "</body></html>")
     summary = summary_dict(loop, input_names)
+    summary["warnings"] = [w.as_dict() for w in warnings]
     summary["model"] = {"file": model_files["model"].name, "covariance": model_files["covariance"].name,
                         "urdf": model_files["urdf"].name, "check": model_check(loop.final.result)}
     summary.update(provenance(inputs))

@@ -1,5 +1,6 @@
 """The model file out of a fit (``aacmm calibrate`` and ``aacmm close-loop``): the calibrated
-description with every effect and its parameters, the covariance file beside it and the URDF.
+description with every effect and its parameters, the covariance file beside it and the URDF (for an
+arm read from a URDF: the user's own file with only the identified joint origins and tool offset changed).
 
 Format: :mod:`arm_model.model_file` and docs/calibration.md ("The model file")."""
 from __future__ import annotations
@@ -12,7 +13,7 @@ import numpy as np
 from arm_model._output import safe_name
 from arm_model.model_file import Arm, format_model, write_covariance
 from arm_model.io import atomic_write_text, guard_output
-from arm_model.urdf import urdf_text
+from arm_model.urdf_import import calibrated_urdf_text
 
 __all__ = ["model_paths", "fitted_arm", "write_model", "model_check"]
 
@@ -55,7 +56,7 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
     atomic_write_text(files["model"], format_model(arm.desc, arm.effects, arm.values, arm.uncertainties, arm.states,
                                                    covariance=files["covariance"].name, written_by=written_by,
                                                    comment=comment), inputs)
-    atomic_write_text(files["urdf"], urdf_text(arm.desc), inputs)
+    atomic_write_text(files["urdf"], calibrated_urdf_text(result.model.desc, arm.desc), inputs)
     return files
 
 

@@ -3,7 +3,7 @@
 Built once per problem structure (model, data, weights, which kinds): the ball centres and their
 Jacobian with respect to the parameters come from the model's CasADi Function mapped over the
 points, the artefact residuals and their Jacobians from the kind functions of
-:mod:`calibration.geometry`; the chain rule joins them. Unknowns are the free parameters and the
+:mod:`calibration.kinds`; the chain rule joins them. Unknowns are the free parameters and the
 nuisance increments of every artefact instance (a feature within one measurement) and of the
 reference transform ``T_ref_base``.
 
@@ -19,9 +19,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from arm_model import InputError
+from arm_model.geometry import ball_centre_radius
 from arm_model.model import ArmModel
 
-from . import geometry as geo
+from . import kinds as geo
 from .data import CalibrationData, Weights
 
 __all__ = ["Instance", "DistanceItem", "Problem", "Evaluation", "MIN_POINTS", "POINT_KINDS"]
@@ -117,10 +118,8 @@ class Problem:
                     continue
                 feat = arte.features[f]
                 radius = None
-                if kind == "sphere":
-                    radius = (feat.diameter + ball) / 2
-                elif kind in ("ring", "cylinder"):
-                    radius = (feat.diameter - ball) / 2
+                if kind in ("sphere", "ring", "cylinder"):
+                    radius = ball_centre_radius(kind, feat.diameter, ball)
                     if radius <= 0:
                         raise InputError(f"feature '{f}': diameter {feat.diameter * 1e3:g} mm is not larger than "
                                          f"the ball ({ball * 1e3:g} mm)", arte.path, None, f"key 'feature {f}'")
@@ -129,6 +128,12 @@ class Problem:
                 if len(rows) < need:
                     raise InputError(f"measurement '{m}', feature '{f}' ({kind}): {len(rows)} point(s), at least "
                                      f"{need} needed", data.file_of(rows[0]), int(lines[rows[0]]), "feature")
+                distinct = len(np.unique(pts.q[rows], axis=0))
+                if kind != "seat" and distinct < need:
+                    raise InputError(f"measurement '{m}', feature '{f}' ({kind}): {len(rows)} points but only "
+                                     f"{distinct} distinct pose(s) (the same encoder angles repeated): the {kind}'s "
+                                     f"unknowns are unidentifiable; at least {need} distinct points needed",
+                                     data.file_of(rows[0]), int(lines[rows[0]]), "feature")
                 nt = geo.n_theta(kind, free_r)
                 by_key[(m, f)] = len(instances)
                 instances.append(Instance(m, f, kind, rows, offset, nt, None if free_r else radius, free_r))

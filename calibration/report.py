@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError
-from arm_model._output import safe_name
+from arm_model.checks import warnings_html
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, write_csv
 from arm_model.shipped import provenance
 
@@ -153,6 +153,7 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
         f"<p>Solver: {html.escape(result.status)}; {result.iterations} iterations; "
         f"{result.n_residuals} residuals, {len(result.free)} parameters, {result.n_nuisance} nuisance unknowns, "
         f"dof {result.dof}; s0 = {result.s0:.4g}. Covariance: {html.escape(result.covariance_source)}.</p>",
+        warnings_html(summary.get("warnings", ())),
         f"<p>Identifiability at the solution: rank {idf.rank} of {len(idf.names)}, condition number "
         f"{idf.condition:.4g} (columns scaled by their norms), rank tolerance {idf.rank_tol:g}.</p>",
         "<h2>Fixed parameters (not identifiable from these data)</h2>",
@@ -247,11 +248,6 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
     atomic_write_text(files["summary"], json.dumps(_finite(summary), indent=1, default=_json_default) + "\n", inputs)
     atomic_write_text(files["report"], _html(result, summary, files), inputs)
     return files
-
-
-def _safe_arm_name(name: str) -> str:
-    """The arm's name as the stem of a file name (see :func:`arm_model._output.safe_name`)."""
-    return safe_name(name)
 
 
 #: standard uncertainty beyond which a free parameter is reported as poorly determined, per SI unit

@@ -47,8 +47,9 @@ def normal_solver(j: sp.spmatrix, damping: np.ndarray | float = 0.0):
     try:
         lu = spla.splu(a)
     except RuntimeError as exc:          # exactly singular
-        raise NumericalError(f"the normal matrix is singular ({exc}): an unknown does not affect the "
-                             "residuals (too few points on a feature, or an unidentifiable parameter)") from None
+        raise NumericalError(f"unidentifiable: an unknown does not affect the residuals, the normal matrix is "
+                             f"singular ({exc}) (too few distinct points on a feature, a pose repeated, or a "
+                             "parameter the data cannot identify)") from None
     return lu.solve
 
 

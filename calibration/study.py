@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from arm_model import AacmmError
+from arm_model import AacmmError, InputError
 from arm_model.model import ArmModel
 
 from .calibrate import calibrate, resolve_parameters
@@ -66,6 +66,46 @@ class Progress:
         self._draw()
 
 
+#: seconds to wait for a Dask scheduler before giving up
+CONNECT_TIMEOUT_S = 3.0
+
+
+def connect(address: str):
+    """A ``distributed.Client`` of the scheduler at ``address``, or an InputError naming the address
+    within about :data:`CONNECT_TIMEOUT_S` (a TCP address is tried with a plain socket first, so that an
+    unreachable host does not wait for Dask's own retries)."""
+    import logging
+    import socket
+    from urllib.parse import urlsplit
+
+    from distributed import Client
+
+    def fail(reason: str):
+        return InputError(f"cannot reach the Dask scheduler at {address!r}: {reason}")
+
+    url = urlsplit(address if "://" in address else f"tcp://{address}")
+    if url.scheme in ("tcp", "tls"):
+        try:
+            host, port = url.hostname, url.port
+        except ValueError as exc:
+            raise fail(str(exc)) from None
+        if not host or port is None:
+            raise fail("expected an address like tcp://host:8786")
+        try:
+            socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S).close()
+        except OSError as exc:
+            raise fail(f"{exc.strerror or exc} (waited at most {CONNECT_TIMEOUT_S:g} s)") from None
+    quiet = logging.getLogger("distributed")
+    level = quiet.level
+    quiet.setLevel(logging.CRITICAL)         # its own retry messages would bury ours
+    try:
+        return Client(address, timeout=CONNECT_TIMEOUT_S)
+    except Exception as exc:                 # whatever Dask raises: one message naming the address
+        raise fail(f"{type(exc).__name__}: {exc}") from None
+    finally:
+        quiet.setLevel(level)
+
+
 def run_tasks(fn, items, *, scheduler=None, workers: int | None = None, progress: bool = True,
               label: str = "runs") -> list:
     """``[fn(item) for item in items]``, in parallel, results in the order of ``items``.
@@ -81,7 +121,7 @@ def run_tasks(fn, items, *, scheduler=None, workers: int | None = None, progress
     out = [None] * len(items)
     if scheduler is not None:
         from distributed import Client, as_completed as dask_completed
-        client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
+        client = scheduler if isinstance(scheduler, Client) else connect(scheduler)
         try:
             futures = client.map(fn, items, pure=False)
             index = {f.key: i for i, f in enumerate(futures)}
@@ -182,13 +222,20 @@ class MonteCarloResult:
         runs: every run's dict (:func:`run_once`).
         parameters: per parameter free in every successful run: ``rms_error`` (estimate minus the
             truth in the fit's parameterization) [SI], ``mean_u`` (mean reported u) [SI], ``ratio``
-            rms_error / mean_u (about 1 when the reported uncertainties are right) and
-            ``within_3u`` (fraction of runs with |error| <= 3 u).
+            rms_error / mean_u, ``within_3u`` (fraction of runs with |error| <= 3 u), and from the
+            standardized errors z = error / u of each run: ``z_rms`` (about 1 when the reported
+            uncertainties are right), ``z_mean`` (a bias: the model lacks something the truth has),
+            ``z_rms_95`` the interval that z_rms of this many runs falls in with 95 % probability when
+            the uncertainties are right (chi distribution: with 20 runs 0.69-1.31, so a spread of
+            ratios over that range is sampling, not a fault), and ``verdict``.
+        s0: the runs' residual scale factors (far from 1: the stated uncertainties do not match the
+            residuals; one factor rescales every residual group alike, see docs/uncertainty.md).
         accuracy: per validation figure: median and 95th percentile, before and after [shown unit].
     """
     runs: list
     parameters: dict
     accuracy: dict
+    s0: list = field(default_factory=list)
 
     @property
     def failures(self) -> list:
@@ -196,20 +243,42 @@ class MonteCarloResult:
 
     def to_dict(self) -> dict:
         return {"runs": self.runs, "parameters": self.parameters, "accuracy": self.accuracy,
-                "failures": len(self.failures)}
+                "failures": len(self.failures), "s0": self.s0}
+
+
+def rms_z_interval(runs: int, probability: float = 0.95) -> tuple[float, float]:
+    """The interval the RMS of ``runs`` standard normal z falls in with ``probability``."""
+    from scipy.stats import chi2
+    a = (1.0 - probability) / 2
+    return float(np.sqrt(chi2.ppf(a, runs) / runs)), float(np.sqrt(chi2.ppf(1 - a, runs) / runs))
+
+
+def _verdict(z: np.ndarray, lo: float, hi: float) -> str:
+    rms, mean = float(np.sqrt(np.mean(z ** 2))), float(np.mean(z))
+    if abs(mean) > 2.0 / np.sqrt(len(z)) and rms > hi:
+        return "biased"
+    if rms > hi:
+        return "u too small"
+    if rms < lo:
+        return "u too large"
+    return "ok"
 
 
 def _aggregate(runs: list) -> MonteCarloResult:
     ok = [r for r in runs if r["ok"]]
     params = {}
+    lo, hi = rms_z_interval(len(ok)) if ok else (0.0, 0.0)
     if ok:
         common = [n for n in ok[0]["free"] if all(n in r["free"] for r in ok)]
         for n in common:
             e = np.array([r["p"][r["free"].index(n)] - r["truth"][r["free"].index(n)] for r in ok])
             u = np.array([r["u"][r["free"].index(n)] for r in ok])
             rms = float(np.sqrt(np.mean(e ** 2)))
+            z = e / u
             params[n] = {"rms_error": rms, "mean_u": float(u.mean()), "ratio": rms / float(u.mean()),
-                         "within_3u": float(np.mean(np.abs(e) <= 3 * u))}
+                         "within_3u": float(np.mean(np.abs(e) <= 3 * u)),
+                         "z_rms": float(np.sqrt(np.mean(z ** 2))), "z_mean": float(np.mean(z)),
+                         "z_rms_95": [lo, hi], "verdict": _verdict(z, lo, hi)}
     acc = {}
     for r in ok:
         for row in r["validation"]:
@@ -220,7 +289,7 @@ def _aggregate(runs: list) -> MonteCarloResult:
         b, f = np.array(a.pop("before")), np.array(a.pop("after"))
         a.update(n=len(b), before_median=float(np.median(b)), before_p95=float(np.percentile(b, 95)),
                  after_median=float(np.median(f)), after_p95=float(np.percentile(f, 95)))
-    return MonteCarloResult(runs, params, acc)
+    return MonteCarloResult(runs, params, acc, [float(r["s0"]) for r in ok])
 
 
 def monte_carlo(source, runs: int, *, seed: int = 0, settings: RunSettings | None = None, scheduler=None,

@@ -23,7 +23,7 @@ from arm_model.io import Artefacts, Distance, Feature, PointSet, atomic_write_te
 from arm_model.model import ArmModel, AuxData
 from arm_model.params import split_params
 
-from .geometry import perpendicular_basis, rotation_xyz
+from arm_model.geometry import perpendicular_basis, rotation_xyz
 
 __all__ = ["SynthSpec", "SynthCampaign", "random_truth", "random_q", "solve_ik", "make_campaign",
            "probe_rotation"]

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from arm_model.geometry import feature_diameter
 from arm_model.model import ArmModel
 
 from .data import CalibrationData, Weights
@@ -161,7 +162,7 @@ def _validate(model, p, data, weights, reference) -> Validation:
         for i, it in enumerate(prob_r.instances):
             feat = data.artefacts.features[it.feature]
             radius = st[i][3] if it.kind == "sphere" else st[i][12]
-            fitted = 2 * radius - ball if it.kind == "sphere" else 2 * radius + ball
+            fitted = feature_diameter(it.kind, radius, ball)
             v = tab["value"][tab["instance"] == i]
             val.diameters.append({"measurement": it.measurement, "feature": it.feature, "kind": it.kind,
                                   "n": len(it.points), "certified": feat.diameter, "fitted": float(fitted),

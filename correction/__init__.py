@@ -1,14 +1,12 @@
 """The seed paper's ring-gauge pipeline, reproduced and surpassed.
 
-Force peaks (:mod:`.signals`), orthogonal-distance cylinder and circle fits (:mod:`.cylinder`), the paper's
-four correction models and the full-wrench correction (:mod:`.models`), correlations (:mod:`.correlation`),
+Force peaks (:mod:`.signals`), the ring fits (orthogonal-distance cylinder and circles, ball compensation:
+:mod:`arm_model.geometry`), the paper's four correction models and the full-wrench correction (:mod:`.models`), correlations (:mod:`.correlation`),
 GUM budgets on GTC (:mod:`.gum`), the paper's own numbers reproduced and the loop closed on its Table 2
 (:mod:`.paper`), and the reports of ``aacmm ring`` / ``aacmm paper`` (:mod:`.report`). See
 docs/ring-pipeline.md.
 """
 from .correlation import Correlation, campaign_correlations, correlate
-from .cylinder import (CircleFit, CylinderFit, RingFit, fit_circle_2d, fit_cylinder, fit_row_circles, ring_fit,
-                       split_rows)
 from .gum import Budget, BudgetResult, Term, ring_budget, student_k
 from .models import (MODEL_LABELS, MODELS, PAPER_MODELS, RingCampaign, RingMeasurement, analyse_ring_campaign,
                      campaign_summary, correct_ring, paper_correction, table2)
@@ -17,8 +15,6 @@ from .signals import ForceSummary, PointForces, find_point_forces, force_summary
 
 __all__ = [
     "Correlation", "campaign_correlations", "correlate",
-    "CircleFit", "CylinderFit", "RingFit", "fit_circle_2d", "fit_cylinder", "fit_row_circles", "ring_fit",
-    "split_rows",
     "Budget", "BudgetResult", "Term", "ring_budget", "student_k",
     "MODEL_LABELS", "MODELS", "PAPER_MODELS", "RingCampaign", "RingMeasurement", "analyse_ring_campaign",
     "campaign_summary", "correct_ring", "paper_correction", "table2",

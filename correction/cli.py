@@ -6,8 +6,9 @@ import argparse
 from pathlib import Path
 
 from arm_model import InputError, read_artefacts, read_points
-from arm_model.commands import add_arm_options, arm_from_args, positive
+from arm_model.commands import add_arm_options, arm_from_args, non_negative, number_in, positive
 from arm_model._output import output_folder
+from arm_model.checks import print_warnings
 from arm_model.io import check_features
 
 __all__ = ["register", "run_ring", "run_paper"]
@@ -39,9 +40,9 @@ def register(sub) -> None:
     r.add_argument("--u-force-N", type=positive(), dest="u_force", default=None, metavar="U",
                    help="standard uncertainty of a measured force for the budgets' u_cor = 2 c u_force "
                         "(default 0.0723 N: the paper's bending sensor, Table 1 terms combined)")
-    r.add_argument("--delta-T-C", type=positive(), dest="delta_t", default=0.5, metavar="DT",
+    r.add_argument("--delta-T-C", type=non_negative(), dest="delta_t", default=0.5, metavar="DT",
                    help="temperature variation during the test for the budgets' u_t (default 0.5 C, the paper's)")
-    r.add_argument("--probability-pct", type=positive(), dest="probability", default=95.0, metavar="P",
+    r.add_argument("--probability-pct", type=number_in(0, 100, low_open=True, high_open=True), dest="probability", default=95.0, metavar="P",
                    help="coverage probability of the expanded uncertainties (default 95)")
     r.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created; never an input)")
     r.set_defaults(func=run_ring)
@@ -62,7 +63,7 @@ def register(sub) -> None:
 
 
 def run_ring(args: argparse.Namespace) -> int:
-    from .models import analyse_ring_campaign, campaign_summary
+    from .models import analyse_ring_campaign, campaign_summary, check_reportable, ring_warnings
     from .report import DEFAULT_U_FORCE, ring_budgets, ring_report
 
     inputs = {"points": args.points, "artefacts": args.artefacts, "arm": args.arm}
@@ -75,16 +76,19 @@ def run_ring(args: argparse.Namespace) -> int:
         check_features(points, artefacts)
         compliance = None if args.compliance is None else args.compliance * 1e-3
         campaign = analyse_ring_campaign(desc, points, artefacts, args.feature, args.signals, compliance)
+        check_reportable(campaign, points)
+        warnings = ring_warnings(desc, points, campaign)
         u_force = DEFAULT_U_FORCE if args.u_force is None else args.u_force
         budgets = ring_budgets(campaign, u_force=u_force, delta_t=args.delta_t, probability=args.probability)
         inputs["signals"] = args.signals
-        written = ring_report(campaign, out.dir, inputs, budgets)
+        written = ring_report(campaign, out.dir, inputs, budgets, warnings)
     s = campaign_summary(campaign)
     print(f"ring '{campaign.feature}': {len(campaign.measurements)} measurements, "
           f"{sum(r.n_points for r in campaign.measurements)} points; forces from "
           f"{'signals in ' + str(args.signals) if args.signals else 'the points file'}")
     for n in campaign.notes:
         print(f"note: {n}")
+    print_warnings(warnings)
     print(f"{'model':<12} {'mean |dD| [mm]':>15} {'reduction':>10} {'mean form [mm]':>15}")
     for m, v in s.items():
         print(f"{m:<12} {v['mean_abs_diameter_error_mm']:>15.4f} {v['diameter_error_reduction_pct']:>9.1f}% "

@@ -23,9 +23,9 @@ import numpy as np
 
 from arm_model import InputError, ball_centres
 from arm_model._output import safe_name
+from arm_model.geometry import CylinderFit, RingFit, ring_fit
 from arm_model.io import PointSet, read_force_signal
 
-from .cylinder import CylinderFit, RingFit, ring_fit
 from .signals import ForceSummary, PointForces, find_point_forces, force_summary, forces_from_columns
 
 __all__ = ["PAPER_MODELS", "MODELS", "MODEL_LABELS", "paper_correction", "correct_ring", "RingMeasurement",
@@ -227,6 +227,42 @@ def analyse_ring_campaign(desc, points: PointSet, artefacts, feature: str | None
                      "measured and is taken as zero; the full-wrench model sees the probe-x bending only")
     return RingCampaign(ring.id, ring.diameter, desc.probe.ball_diameter, c, kind or "", out, notes,
                         ring.u_diameter, ring.form_error)
+
+
+def ring_warnings(desc, points: PointSet, campaign: RingCampaign) -> list:
+    """The input warnings of a ring campaign (:mod:`arm_model.checks`): joint angles beyond their
+    limits in the points file, and forces over the probe's range among the forces the analysis used
+    (the force signals' peaks with ``--signals``, else the points file's columns)."""
+    from arm_model.checks import joint_limit_warning, over_force_warning
+    lines = points.lines if points.lines is not None else np.arange(1, len(points) + 1)
+    out = [joint_limit_warning(desc, points.q, lines, points.path)]
+    if campaign.measurements:
+        force = np.vstack([r.forces.force for r in campaign.measurements])
+        where = np.concatenate([r.lines for r in campaign.measurements])
+        out.append(over_force_warning(force, where, desc.probe.max_force, points.path))
+    return [w for w in out if w is not None]
+
+
+#: the fewest measurements a ring campaign can be analysed with (repeatability, correlations)
+MIN_MEASUREMENTS = 3
+
+
+def check_reportable(campaign: RingCampaign, points: PointSet) -> None:
+    """Refuse a campaign the report (budgets, correlations) cannot say anything about: too few
+    measurements, or forces that are the same in every measurement (all zero: nothing to correct,
+    nothing to correlate)."""
+    measurements = campaign.measurements
+    if len(measurements) < MIN_MEASUREMENTS:
+        raise InputError(f"{len(measurements)} measurement(s) of the ring; the analysis (repeatability in the "
+                         f"budgets, correlation of the error with the force) needs at least {MIN_MEASUREMENTS}",
+                         points.path, None, "measurement")
+    for which in ("mean", "max10", "max"):
+        v = np.array([getattr(r.summary, which) for r in measurements], float)
+        if np.ptp(v) == 0:
+            what = "zero" if np.all(v == 0) else f"{v[0]:.6g} N"
+            raise InputError(f"the {which} force is {what} in every measurement: no force to correct with or to "
+                             "correlate with (check the force columns or the force signals)",
+                             measurements[0].forces.source, None, None)
 
 
 def table2(campaign: RingCampaign) -> dict:

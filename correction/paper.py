@@ -29,6 +29,7 @@ import numpy as np
 from scipy import stats
 
 from arm_model import InputError
+from arm_model._errors import read_text, unknown_key
 
 from .correlation import Correlation, correlate
 from .gum import Budget, Term, student_k
@@ -68,41 +69,66 @@ class PaperTable2:
         return self.columns["initial"]
 
 
+#: the fewest Table 2 rows the analysis can use (a correlation and a leave-one-out fit of a line)
+MIN_ROWS = 3
+
+
 def load_paper_table2(path: str | Path | None = None) -> PaperTable2:
     """Read the bundled Table 2 (or a file in the same format: ``#`` comment lines, then a CSV header
     ``measurement,initial_mm,point_force_mm,mean_force_mm,max_force_mm,max10_force_mm``)."""
     path = Path(TABLE2_PATH if path is None else path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"cannot read the table: {exc.strerror}", path) from None
+    text = read_text(path, "the table")
     rows = [(no, line) for no, line in enumerate(text.splitlines(), start=1)
             if line.strip() and not line.lstrip().startswith("#")]
     if not rows:
         raise InputError("no header line", path, 1)
+
+    def cells(no: int, line: str) -> list[str]:
+        try:
+            return [c.strip() for c in next(csv.reader([line], strict=True))]
+        except csv.Error as exc:
+            raise InputError(f"not valid CSV: {exc}", path, no) from None
+
     hno, hline = rows[0]
-    header = [h.strip() for h in next(csv.reader([hline]))]
+    header = cells(hno, hline)
     expected = ["measurement", "initial_mm"] + [f"{m}_mm" for m in TABLE2_MODELS]
     for col in expected:
         if col not in header:
             raise InputError(f"missing column '{col}' (expected {', '.join(expected)})", path, hno, col)
+    for k, col in enumerate(header):
+        if col not in expected:
+            raise InputError(unknown_key(col, expected).replace("key", "column", 1), path, hno, col)
+        if col in header[:k]:
+            raise InputError(f"column '{col}' appears twice", path, hno, col)
     ids, data = [], {c: [] for c in expected[1:]}
     for no, line in rows[1:]:
-        rec = [c.strip() for c in next(csv.reader([line]))]
+        rec = cells(no, line)
         if len(rec) != len(header):
             raise InputError(f"{len(rec)} cells where the header has {len(header)} columns", path, no)
         ids.append(rec[header.index("measurement")])
+        if not ids[-1]:
+            raise InputError("empty measurement id", path, no, "measurement")
         for col in expected[1:]:
             cell = rec[header.index(col)]
             try:
+                if "_" in cell:
+                    raise ValueError
                 v = float(cell)
             except ValueError:
                 raise InputError(f"expected a number, got {cell!r}", path, no, col) from None
             if not math.isfinite(v):
                 raise InputError(f"value must be finite, got {cell!r}", path, no, col)
             data[col].append(v * 1e-3)
-    if not ids:
-        raise InputError("no rows after the header", path, hno + 1)
+    if len(ids) < MIN_ROWS:
+        raise InputError(f"{len(ids)} measurement row(s); correlations and the cross-validated loop need at least "
+                         f"{MIN_ROWS}", path, rows[-1][0])
+    if np.ptp(data["initial_mm"]) == 0:
+        raise InputError("the initial diameter errors are all equal: nothing to correlate with a force", path,
+                         None, "initial_mm")
+    for m in TABLE2_MODELS:
+        if np.ptp(np.subtract(data["initial_mm"], data[f"{m}_mm"])) == 0:
+            raise InputError("the correction (initial - corrected) is the same in every row: the force it "
+                             "implies is constant and correlates with nothing", path, None, f"{m}_mm")
     cols = {"initial": np.array(data["initial_mm"])}
     cols.update({m: np.array(data[f"{m}_mm"]) for m in TABLE2_MODELS})
     return PaperTable2(np.array(ids, dtype=object), cols, str(path))

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from arm_model.checks import warnings_html
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output
 from arm_model.shipped import provenance
 
@@ -278,7 +279,8 @@ def _csv_text(columns: dict, fmt: str = "%.6f") -> str:
     return buf.getvalue()
 
 
-def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: list[BudgetResult]) -> list[Path]:
+def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: list[BudgetResult],
+                warnings=()) -> list[Path]:
     """Write the report of an analysed ring campaign into folder ``out``: ``report.html``,
     ``summary.json``, ``table2.csv``, ``correlations.csv``, ``budgets.csv`` and ``figures/*.png``.
 
@@ -292,6 +294,7 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
     in_paths = [p for p in inputs.values() if p is not None]
     guard_output(out, in_paths)
     summary = ring_summary(campaign, budgets, {k: None if v is None else str(v) for k, v in inputs.items()})
+    summary["warnings"] = [w.as_dict() for w in warnings]
     summary.update(provenance(in_paths))
     t2 = table2(campaign)
     corr = campaign_correlations(campaign)
@@ -306,6 +309,7 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
              "the full-wrench model evaluates the ball centres again through the probe's elastic joint with "
              "each point's force vector.</p>"]
     parts += [f"<p class='bad'>{html.escape(n)}</p>" for n in campaign.notes]
+    parts.append(warnings_html(warnings))
     parts.append("<h2>Summary per model</h2>" + _table_html(
         ("model", "mean |diameter error| [mm]", "reduction [%]", "mean form error [mm]", "form change [%]",
          "largest form increase [mm]"),

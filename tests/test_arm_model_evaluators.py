@@ -211,3 +211,50 @@ def test_gravity_torques_hand_derived(nominal, pin_arm):
 def _prefix(desc, k):
     from dataclasses import replace
     return replace(desc, joints=desc.joints[:k])
+
+
+#: probe frames turned away from the last joint frame: tool along x, along -y, and an arbitrary rpy;
+#: (p_last [m], rpy [rad]) with the ball ahead along the probe's own z axis
+ROTATED_PROBES = {
+    "tool along x": ((0.10, 0.0, 0.02), (0.0, math.pi / 2, 0.0)),
+    "tool along -y": ((0.0, -0.08, 0.03), (math.pi / 2, 0.0, 0.0)),
+    "arbitrary rpy": ((0.03, 0.04, 0.07), (0.4, -0.7, 2.1)),
+}
+
+
+@pytest.mark.parametrize("tool", ROTATED_PROBES)
+@pytest.mark.parametrize("convention", ["dh", "mdh"])
+def test_three_evaluators_agree_with_a_rotated_probe(nominal, convention, tool):
+    p_last, rpy = ROTATED_PROBES[tool]
+    desc = (nominal if convention == "dh" else _mdh_variant(nominal)).with_probe(p_last=p_last, rpy=rpy)
+    rng = np.random.default_rng(17)
+    f = casadi_ball_centre(desc)
+    p = random_params(rng, desc)
+    arm = PinocchioArm(apply_params(desc, p))
+    q, w = random_inputs(rng, 15, desc)
+    batch = ball_centres(desc, q, w, p)
+    for i in range(len(q)):
+        assert_close(arm.ball_centre(q[i], w[i]), batch[i], atol=1e-12)
+        assert_close(np.array(f(q[i], w[i], p)).ravel(), batch[i], atol=1e-12)
+
+
+@pytest.mark.parametrize("tool", ROTATED_PROBES)
+def test_rotated_probe_deflects_along_its_own_axes(nominal, tool):
+    """The rigid ball is the hand-written DH product of p_last; a small force F given in the probe frame
+    moves it by R_base_last R_last_probe diag(c) F, the rotation built here from the rpy by hand."""
+    from scipy.spatial.transform import Rotation
+    p_last, rpy = ROTATED_PROBES[tool]
+    desc = nominal.with_probe(p_last=p_last, rpy=rpy)
+    R_last_probe = Rotation.from_euler("xyz", rpy).as_matrix()
+    rng = np.random.default_rng(19)
+    q, _ = random_inputs(rng, 20, desc)
+    F = rng.normal(0, 1.0, (20, 3))
+    F *= 2.0 / np.linalg.norm(F, axis=1)[:, None]
+    rigid = ball_centres(desc, q)
+    moved = ball_centres(desc, q, F) - rigid
+    c = desc.probe.compliance
+    for i in range(20):
+        ref, T = hand_dh_point(desc, q[i], p_last)
+        assert_close(rigid[i], ref, atol=1e-12)
+        # second order: c F^2 c / L < 2e-8 m at 2 N
+        assert_close(moved[i], T[:3, :3] @ R_last_probe @ (c * F[i]), atol=2e-8)

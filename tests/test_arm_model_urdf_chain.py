@@ -32,12 +32,14 @@ def test_urdf_chain_matches_the_dh_arm(nominal, tmp_path):
     assert d.convention == "urdf" and d.joint_names == nominal.joint_names
     # the last joint frame of a URDF chain is j7's child link: the flange lies d7 = 95 mm beyond it
     assert_close(d.probe.p_last, [0.001, -0.002, 0.180], atol=1e-15)
-    ref = nominal.with_probe(p_last=(0.001, -0.002, 0.085))
+    assert_close(d.probe.rpy, [0.3, 0, 0], atol=1e-15)     # the tip frame's orientation is the probe's
+    ref = nominal.with_probe(p_last=(0.001, -0.002, 0.085), rpy=(0.3, 0.0, 0.0))
     rng = np.random.default_rng(0)
     q = rng.uniform(-3, 3, (50, 7))
     assert_close(ball_centres(d, q), ball_centres(ref, q), atol=1e-12)
-    # with force: same first-order deflection C F; the bending hinge sits at z = 0 of the last joint
-    # frame, so the lever differs (180 vs 85 mm) and so does the second-order drop (c F)^2 / 2L < 1e-8 m
+    # with force: same first-order deflection C F; the bending hinge sits where the stylus line passes
+    # closest to the last joint origin, so the lever differs (173 vs 82 mm) and so does the second-order
+    # drop (c F)^2 / 2L < 1e-8 m
     w = rng.normal(0, 1, (50, 3))
     w *= 3.0 / np.linalg.norm(w, axis=1)[:, None]      # 3 N: (c F)^2 (1/0.17 - 1/0.36) = 5.7e-9 m
     assert_close(ball_centres(d, q, w), ball_centres(ref, q, w), atol=6e-9)
@@ -74,7 +76,7 @@ def test_urdf_description_roundtrips_through_toml(nominal, tmp_path):
     assert_close(ball_centres(back, q), ball_centres(d, q), atol=1e-12)
 
 
-@pytest.mark.parametrize("tip, words", [("nowhere", "no link named"), ("link_7", "beyond the last joint")])
+@pytest.mark.parametrize("tip, words", [("nowhere", "no link named"), ("link_7", "at the origin of the last joint")])
 def test_urdf_bad_tip_frame(nominal, tmp_path, tip, words):
     path = tmp_path / "arm.urdf"
     path.write_text(arm_urdf(nominal))

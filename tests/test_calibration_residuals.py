@@ -11,7 +11,8 @@ from hypothesis import given, settings, strategies as st
 from arm_model.effects import EncoderEccentricity, ProbeCompliance, ThermalGrowth
 from arm_model.model import ArmModel
 from calibration import Problem, Weights, make_data
-from calibration import geometry as geo
+from arm_model.geometry import perpendicular_basis, rotation_xyz
+from calibration import kinds as geo
 from calibration.synth import SynthSpec, make_campaign
 from conftest import assert_close
 
@@ -54,12 +55,12 @@ def test_residual_kinds_by_hand():
     assert_close(float(r), 0.0005, atol=1e-15)
     assert_close(np.array(drdx).ravel(), [0.6, 0.8, 0.0], atol=1e-15)
     # ring: axis through (1, 0, 0) along z; point at distance 3 from the axis, R = 2
-    e1, e2 = geo.perpendicular_basis(np.array([0, 0, 1.0]))
+    e1, e2 = perpendicular_basis(np.array([0, 0, 1.0]))
     k = np.concatenate([[1, 0, 0], [0, 0, 1], e1, e2, [2.0]])
     r, _, _ = geo.kind_function("ring")([1, 3, 7.0], z(4), k, z(3))
     assert_close(float(r), 1.0, atol=1e-15)
     # plane z = 0.25 (h absorbs the ball radius): signed distance
-    e1, e2 = geo.perpendicular_basis(np.array([0, 0, 1.0]))
+    e1, e2 = perpendicular_basis(np.array([0, 0, 1.0]))
     r, _, _ = geo.kind_function("plane")([5, 6, 0.75], z(3), np.concatenate([[0, 0, 1], e1, e2, [0.25]]), z(3))
     assert_close(float(r), 0.5, atol=1e-15)
     # reference: R x + t - x_ref with R a quarter turn about z
@@ -156,13 +157,13 @@ def _concat_ref(a, b):
 def test_retract_stays_on_the_manifold(theta, axis):
     """Axes stay unit vectors with an orthonormal complement; rotations stay proper rotations."""
     u = np.array(axis) / np.linalg.norm(axis)
-    e1, e2 = geo.perpendicular_basis(u)
+    e1, e2 = perpendicular_basis(u)
     ring = np.concatenate([[0.1, 0.2, 0.3], u, e1, e2, [0.05]])
     new = geo.retract("ring", ring, np.array(theta[:4]))
     b = np.column_stack([new[3:6], new[6:9], new[9:12]])
     assert_close(b.T @ b, np.eye(3), atol=1e-12)
     assert_close(np.linalg.det(b), 1.0, atol=1e-12)
-    rot = geo.rotation_xyz(theta[3:])
+    rot = rotation_xyz(theta[3:])
     ref = np.concatenate([rot.reshape(-1, order="F"), [0, 0, 0]])
     new = geo.retract("reference", ref, np.array(theta))
     r = new[0:9].reshape(3, 3, order="F")
@@ -170,29 +171,31 @@ def test_retract_stays_on_the_manifold(theta, axis):
     assert_close(np.linalg.det(r), 1.0, atol=1e-13)
 
 
-def test_starting_fits_find_the_features():
-    """Starting fits on exact data: a sphere, a short ring and a long cylinder (axis either way), a
-    rigid transform."""
+def test_starting_states_find_the_features():
+    """Starting states on exact data (the fits are tested in test_geometry): a sphere at its known radius,
+    a ring, a plane and a rigid transform."""
     rng = np.random.default_rng(5)
     c = np.array([0.4, -0.1, 0.2])
     d = rng.normal(size=(30, 3))
     d[:, 2] = np.abs(d[:, 2])
     x = c + 0.015 * d / np.linalg.norm(d, axis=1)[:, None]
-    cs, rs = geo.fit_sphere(x)
-    assert_close(cs, c, atol=1e-12)
-    assert_close(rs, 0.015, atol=1e-12)
-    for height in (0.01, 0.5):          # a ring (short) and a cylinder (long): the axis either way
-        u = np.array([0.2, 0.1, 1.0]) / np.linalg.norm([0.2, 0.1, 1.0])
-        e1, e2 = geo.perpendicular_basis(u)
-        a = rng.uniform(0, 2 * np.pi, 40)
-        h = rng.uniform(-height, height, 40)
-        x = c + 0.08 * (np.outer(np.cos(a), e1) + np.outer(np.sin(a), e2)) + np.outer(h, u)
-        p0, u0 = geo.fit_circle_axis(x, 0.08)
-        assert abs(abs(u0 @ u) - 1) < 1e-12
-        v = p0 - c
-        assert np.linalg.norm(v - (v @ u) * u) < 1e-9
-    rot = geo.rotation_xyz([0.3, -1.0, 2.0])
+    assert_close(geo.initial_state("sphere", x, 0.015), np.r_[c, 0.015], atol=1e-12)
+    u = np.array([0.2, 0.1, 1.0]) / np.linalg.norm([0.2, 0.1, 1.0])
+    e1, e2 = perpendicular_basis(u)
+    a = rng.uniform(0, 2 * np.pi, 40)
+    x = c + 0.08 * (np.outer(np.cos(a), e1) + np.outer(np.sin(a), e2)) + np.outer(rng.uniform(-0.01, 0.01, 40), u)
+    s = geo.initial_state("ring", x, 0.08)
+    assert abs(abs(s[3:6] @ u) - 1) < 1e-12 and s[12] == 0.08
+    b = np.column_stack([s[3:6], s[6:9], s[9:12]])
+    assert_close(b.T @ b, np.eye(3), atol=1e-12)
+    plane = c + np.outer(rng.uniform(-1, 1, 10), e1) + np.outer(rng.uniform(-1, 1, 10), e2)
+    s = geo.initial_state("plane", plane)
+    assert abs(abs(s[0:3] @ u) - 1) < 1e-12 and abs(abs(s[9]) - abs(u @ c)) < 1e-12
+    rot = rotation_xyz([0.3, -1.0, 2.0])
     xb = rng.normal(size=(10, 3))
-    r, t = geo.kabsch(xb, xb @ rot.T + [1, 2, 3])
-    assert_close(r, rot, atol=1e-12)
-    assert_close(t, [1, 2, 3], atol=1e-12)
+    s = geo.initial_state("reference", xb, None, xb @ rot.T + [1, 2, 3])
+    assert_close(s[0:9].reshape(3, 3, order="F"), rot, atol=1e-12)
+    assert_close(s[9:12], [1, 2, 3], atol=1e-12)
+    # too few points for the fits: a start anyway (the solver and the readers judge the data)
+    assert np.all(np.isfinite(geo.initial_state("ring", x[:2], 0.08)))
+    assert np.all(np.isfinite(geo.initial_state("sphere", x[:2], 0.015)))

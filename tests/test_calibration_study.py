@@ -77,3 +77,18 @@ def test_monte_carlo_on_a_dask_local_cluster(nominal):
     local = monte_carlo(SynthSource(nominal, SOURCE_SPEC), 1, seed=50, workers=1, progress=False,
                         settings=RunSettings(weights=Weights(probe=2e-6), holdout=0.3))
     assert_close(local.runs[0]["p"], mc.runs[0]["p"], atol=1e-15)
+
+
+def test_rms_z_interval_and_verdicts():
+    """The interval RMS z of R runs falls in when the uncertainties are right (chi distribution; checked
+    by sampling), and the verdicts on a biased, an overstated and a right set of z."""
+    from calibration.study import _verdict, rms_z_interval
+
+    lo, hi = rms_z_interval(20)
+    assert abs(lo - 0.692) < 0.002 and abs(hi - 1.307) < 0.002
+    rng = np.random.default_rng(0)
+    rms = np.sqrt(np.mean(rng.standard_normal((20000, 20)) ** 2, axis=1))
+    assert abs(np.mean((rms >= lo) & (rms <= hi)) - 0.95) < 0.005
+    assert _verdict(np.full(20, 2.0), lo, hi) == "biased"
+    assert _verdict(0.4 * rng.standard_normal(20), lo, hi) == "u too large"
+    assert _verdict(np.tile([1.0, -1.0], 10), lo, hi) == "ok"

@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 from arm_model import InputError, ball_centres
 from arm_model.io import parse_artefacts, parse_points
 from conftest import assert_close
-from correction.cylinder import fit_cylinder
+from arm_model.geometry import fit_cylinder
 from correction.models import (MODELS, analyse_ring_campaign, campaign_summary, correct_ring, paper_correction,
                                table2)
 from correction.signals import PointForces

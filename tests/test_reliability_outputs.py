@@ -182,10 +182,10 @@ def test_safe_name_is_one_plain_name_inside_its_folder(text):
 
 @pytest.mark.parametrize("name", ["../../x", "/tmp/abs", "a\"b<joint name='x'/>", "..", ".hidden", "a/../../b"])
 def test_calibrate_arm_name_stays_in_the_output(tmp_path, name):
-    from calibration.report import _safe_arm_name
+    from calibration.model_output import model_paths
     out = tmp_path / "out"
-    stem = _safe_arm_name(name)
-    assert (out / f"{stem}-calibrated.toml").resolve().parent == out.resolve()
+    for p in model_paths(out, f"{name}-calibrated").values():
+        assert p.resolve().parent == out.resolve()
 
 
 def test_measurement_id_cannot_make_ring_read_outside_signals(tmp_path):

@@ -45,7 +45,8 @@ def test_chain_jacobian_is_the_casadi_jacobian(nominal, tmp_path, convention):
     w = np.column_stack([rng.normal(0, 3, (n, 3)), rng.normal(0, 0.1, (n, 3))])
     p = rng.normal(0, 1e-3, model.spec.size) * np.array([1e-3 if u == "m/N" else 1.0 for u in model.spec.units])
     rows, pl, c = split_params(desc, p)
-    cen, g = chain_jacobian(desc.convention, rows, pl, c, list(q.T), list(w.T), desc.axes)
+    cen, g = chain_jacobian(desc.convention, rows, pl, c, list(q.T), list(w.T), desc.axes,
+                            desc.probe.rotation, desc.probe.lever)
     jac = _casadi_jacobians(model)
     size = model.spec.size
     for i in range(n):
@@ -141,3 +142,105 @@ def test_monte_carlo_agrees_with_linear_on_the_nominal_arm(nominal):
     ratio = mc.u / lin.u
     assert np.all(np.abs(ratio - 1) < 0.10), ratio
     assert abs(np.median(ratio) - 1) < 0.03
+
+
+# ---------------------------------------------------------------------------------------------
+# aacmm tip
+
+def test_tip_writes_uncertainty_columns_and_monte_carlo_agrees(tmp_path, nominal, capsys):
+    import csv
+
+    from arm_model.cli import main
+    from conftest import NOMINAL
+
+    rng = np.random.default_rng(4)
+    q = rng.uniform(-90, 90, (30, 7))
+    f = rng.normal(0, 2, (30, 3))
+    pts = tmp_path / "p.csv"
+    pts.write_text("measurement,feature," + ",".join(f"q{i}_deg" for i in range(1, 8)) + ",fx_N,fy_N,fz_N\n"
+                   + "\n".join(",".join(map(str, ["m1", "ring", *qi, *fi])) for qi, fi in zip(q, f)) + "\n")
+    out = tmp_path / "tips.csv"
+    assert main(["tip", str(pts), "--arm", str(NOMINAL), "-o", str(out), "--covariance", "--mc", "2000",
+                 "--encoder-resolution-deg", "0.001", "--u-probing-um", "0.5"]) == 0
+    text = capsys.readouterr().out
+    assert "force sensor" in text and "Table 1" in text and "Monte Carlo (2000 samples" in text
+    rows = list(csv.DictReader(out.open()))
+    u = np.array([[float(r[f"u_{a}_mm"]) for a in "xyz"] for r in rows])
+    cov = np.array([[float(r[f"cov_{a}{a}_um2"]) for a in "xyz"] for r in rows])
+    umc = np.array([[float(r[f"u_{a}_mc_mm"]) for a in "xyz"] for r in rows])
+    assert_close(u * 1e3, np.sqrt(cov), atol=2e-3)
+    # by hand: the probing term alone is 0.5 um, the rest adds in quadrature
+    assert np.all(u * 1e3 >= 0.5 - 1e-6)
+    assert np.all(np.abs(umc / u - 1) < 0.10)
+    # bad option: message, exit 2 (argparse), nothing written
+    out2 = tmp_path / "t2.csv"
+    with pytest.raises(SystemExit) as exc:
+        main(["tip", str(pts), "--arm", str(NOMINAL), "-o", str(out2), "--u-probing-um", "-1"])
+    assert exc.value.code == 2 and not out2.exists()
+    # no covariance and no option: no uncertainty columns
+    assert main(["tip", str(pts), "--arm", str(NOMINAL), "-o", str(out2)]) == 0
+    assert "u_x_mm" not in out2.read_text().splitlines()[0]
+
+
+def test_tip_with_a_model_file_and_its_covariance(tmp_path, nominal, capsys):
+    """A model file naming a covariance file: tip writes the uncertainty columns without being asked,
+    and the parameter contribution is J Sigma J^T of that covariance (CasADi Jacobian)."""
+    import csv
+
+    from arm_model.cli import main
+    from arm_model.model_file import format_model, write_covariance
+
+    model = ArmModel(nominal)
+    spec = model.spec
+    names = ["j2.d", "j3.a", "j4.alpha", "probe.z"]
+    idx = [spec.index(n) for n in names]
+    rng = np.random.default_rng(8)
+    cov = _random_cov(rng, 4, np.array([2e-6, 3e-6, 5e-6, 1e-6]))
+    write_covariance(tmp_path / "arm-covariance.csv", names, [spec.units[i] for i in idx], np.zeros(4), cov)
+    (tmp_path / "arm.toml").write_text(format_model(nominal, covariance="arm-covariance.csv"))
+    q = rng.uniform(-90, 90, (5, 7))
+    pts = tmp_path / "p.csv"
+    pts.write_text("measurement,feature," + ",".join(f"q{i}_deg" for i in range(1, 8)) + "\n"
+                   + "\n".join(",".join(map(str, ["m1", "", *qi])) for qi in q) + "\n")
+    out = tmp_path / "t.csv"
+    assert main(["tip", str(pts), "--arm", str(tmp_path / "arm.toml"), "-o", str(out)]) == 0
+    assert "arm-covariance.csv" in capsys.readouterr().out
+    rows = list(csv.DictReader(out.open()))
+    u = np.array([[float(r[f"u_{a}_mm"]) for a in "xyz"] for r in rows]) * 1e-3
+    jac = _casadi_jacobians(model)
+    for i in range(5):
+        jp = np.array(jac(np.radians(q[i]), np.zeros(6), np.zeros(15), np.zeros(spec.size))[1])[:, idx]
+        assert_close(u[i], np.sqrt(np.diag(jp @ cov @ jp.T)), atol=2e-9)
+
+
+def test_encoder_resolution_from_the_description(nominal):
+    from arm_model import InputError
+    from arm_model.description import format_description, parse_description
+
+    text = format_description(nominal).replace('name = "j2"\n', 'name = "j2"\nencoder_resolution_deg = 0.0005\n')
+    desc = parse_description(text)
+    assert_close(desc.joints[1].encoder_resolution, np.radians(0.0005), atol=1e-18)
+    assert desc.joints[0].encoder_resolution is None
+    d = default_inputs(desc)
+    assert_close(d.encoder, [0, np.radians(0.0005) / np.sqrt(12)] + [0] * 5, atol=1e-18)
+    assert "1 of 7 joints" in d.sources["encoders"]
+    assert parse_description(format_description(desc)) == desc           # written back exactly
+    with pytest.raises(InputError, match="encoder_resolution"):
+        parse_description(text.replace("encoder_resolution_deg = 0.0005", "encoder_resolution_deg = 0"))
+
+
+def test_tip_refuses_a_covariance_that_is_not_one(tmp_path, nominal, capsys):
+    from arm_model.cli import main
+    from arm_model.model_file import format_model, write_covariance
+
+    spec = ArmModel(nominal).spec
+    names = ["j2.d", "j3.a"]
+    cov = np.array([[1e-12, 2e-12], [2e-12, 1e-12]])          # correlation 2: not positive semi-definite
+    write_covariance(tmp_path / "c.csv", names, [spec.units[spec.index(n)] for n in names], np.zeros(2), cov)
+    (tmp_path / "arm.toml").write_text(format_model(nominal, covariance="c.csv"))
+    pts = tmp_path / "p.csv"
+    pts.write_text("measurement,feature," + ",".join(f"q{i}_deg" for i in range(1, 8)) + "\nm,," + "10," * 6 + "10\n")
+    out = tmp_path / "t.csv"
+    assert main(["tip", str(pts), "--arm", str(tmp_path / "arm.toml"), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "c.csv" in err and "positive semi-definite" in err and not out.exists()

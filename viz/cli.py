@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError, ball_centres, check_features, read_artefacts, read_points
-from arm_model.commands import add_arm_options, arm_from_args, positive
+from arm_model.commands import add_arm_options, arm_from_args, port, positive
 from arm_model._output import output_file
+from arm_model.checks import point_warnings, print_warnings
 
 from ._errors import ViewerError
 from .placement import place_features
@@ -60,7 +61,7 @@ def register(sub) -> None:
     p.add_argument("--serve", action="store_true",
                    help="keep serving after writing --html/--screenshot (serving is the default without them, "
                         "and with --open-seconds)")
-    p.add_argument("--port", type=int, help="web port of the server (default: the first free one from 7000)")
+    p.add_argument("--port", type=port, help="web port of the server (default: the first free one from 7000)")
     p.add_argument("--open-seconds", type=positive(), metavar="N",
                    help="stop the server after N seconds (default: run until Ctrl-C)")
     p.set_defaults(func=run)
@@ -166,10 +167,7 @@ def _report(desc, sel, centres, shown, wrench, args, view, notes) -> None:
     else:
         print(f"animated through {len(shown)} points at {args.fps:g} per second; deflection {d_um.min():.2f} to "
               f"{d_um.max():.2f} um")
-    over = sel.over_force(desc.probe.max_force)
-    if over.any():
-        print(f"warning: {int(over.sum())} point(s) over the probe's calibrated force range "
-              f"({desc.probe.max_force:g} N); shown all the same")
+    print_warnings(point_warnings(desc, sel))
     for note in notes:
         print("note: " + note)
 

@@ -1,9 +1,9 @@
 """Placing artefact features in the base frame from the ball centres measured on them.
 
 The artefacts file gives sizes, not placements: each (measurement, feature) group of measured ball
-centres is fitted (ring/cylinder: axis, centre and radius, by :func:`correction.cylinder.fit_cylinder`,
-or for a ring probed in one plane the plane's normal and a circle in it; sphere: centre; plane:
-centroid and normal; seat: the mean point) and drawn with the certified size. A sphere's centre is
+centres is fitted with :mod:`arm_model.geometry` (ring/cylinder: axis, centre and radius by
+:func:`~arm_model.geometry.fit_ring_axis`, i.e. the cylinder fit, or for a ring probed in one plane the plane's
+normal and a circle in it; sphere: centre; plane: centroid and normal; seat: the mean point) and drawn with the certified size. A sphere's centre is
 fitted at the known radius of its ball centres when the ball diameter is given. For drawing only.
 """
 from __future__ import annotations
@@ -13,8 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from arm_model import NumericalError
-
-from ._fit import fit_plane, fit_sphere
+from arm_model.geometry import ball_centre_radius, fit_plane, fit_ring_axis, fit_sphere, perpendicular_basis
 
 __all__ = ["Placement", "place_features", "NEEDED_POINTS"]
 
@@ -47,32 +46,6 @@ class Placement:
     fitted_radius: float | None
     size: np.ndarray
     n_points: int
-
-
-def _in_plane_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    helper = np.array([1.0, 0, 0]) if abs(n[0]) < 0.9 else np.array([0, 1.0, 0])
-    u = np.cross(n, helper)
-    u /= np.linalg.norm(u)
-    return u, np.cross(n, u)
-
-
-def _ring_axis(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """(point on the axis [m], unit axis, radius [m]) of ball centres on a ring or cylinder: the
-    cylinder fit, or, when the points lie in one plane (one row: the tilt of the axis is not
-    determined), the plane's normal and the circle fitted in it."""
-    from correction.cylinder import fit_circle_2d, fit_cylinder
-
-    centroid, normal = fit_plane(p)
-    u, v = _in_plane_basis(normal)
-    flat = np.ptp((p - centroid) @ normal) <= 1e-3 * np.ptp((p - centroid) @ u)
-    if not flat:
-        try:
-            cyl = fit_cylinder(p)
-            return cyl.point, cyl.axis, cyl.radius
-        except NumericalError:
-            pass   # no tilt information: fall back to the plane's normal below
-    circle = fit_circle_2d(np.column_stack([(p - centroid) @ u, (p - centroid) @ v]))
-    return centroid + circle.centre[0] * u + circle.centre[1] * v, normal, circle.radius
 
 
 def place_features(artefacts, measurement: np.ndarray, feature: np.ndarray, centres: np.ndarray,
@@ -108,16 +81,18 @@ def place_features(artefacts, measurement: np.ndarray, feature: np.ndarray, cent
         axis, fitted, size = None, None, np.zeros(2)
         try:
             if feat.kind in ("ring", "cylinder"):
-                origin, axis, fitted = _ring_axis(p)
+                origin, axis, fitted = fit_ring_axis(p)
                 t = (p - origin) @ axis
                 centre = origin + axis * (t.min() + t.max()) / 2
                 size = np.array([t.max() - t.min(), 0.0])
             elif feat.kind == "sphere":
-                known = None if ball_diameter is None else (feat.diameter + ball_diameter) / 2
-                centre, fitted = fit_sphere(p, known)
+                known = None if ball_diameter is None else ball_centre_radius("sphere", feat.diameter, ball_diameter)
+                fit = fit_sphere(p, known)
+                centre, fitted = fit.centre, fit.radius
             elif feat.kind == "plane":
-                centre, axis = fit_plane(p)
-                u, v = _in_plane_basis(axis)
+                plane = fit_plane(p)
+                centre, axis = plane.point, plane.normal
+                u, v = perpendicular_basis(axis)
                 d = p - centre
                 size = np.array([np.ptp(d @ u), np.ptp(d @ v)])
             else:  # seat

@@ -25,9 +25,10 @@ import numpy as np
 
 from .._errors import InputError
 from ..chain import NUMPY_OPS, chain_point
+from ..geometry import ball_centre_radius, perpendicular_basis, random_rotation
 from .campaign import Campaign, Task
 
-__all__ = ["Plan", "make_plan", "random_rotation", "cone_directions", "perpendicular_basis"]
+__all__ = ["Plan", "make_plan", "cone_directions"]
 
 
 #: per-point fields of a plan, in order
@@ -123,16 +124,7 @@ class Plan:
 
 
 # ---------------------------------------------------------------------------------------------
-# geometry helpers
-
-def perpendicular_basis(u) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors perpendicular to the unit vector ``u`` and to each other (right-handed)."""
-    u = np.asarray(u, float)
-    a = np.array([1.0, 0, 0]) if abs(u[0]) < 0.9 else np.array([0, 1.0, 0])
-    e1 = np.cross(u, a)
-    e1 /= np.linalg.norm(e1)
-    return e1, np.cross(u, e1)
-
+# sampling helpers (frames and rotations: :mod:`arm_model.geometry`)
 
 def cone_directions(rng, axis, half_angle: float, n: int) -> np.ndarray:
     """(n, 3) unit directions uniform on the spherical cap of ``half_angle`` [rad] about ``axis``."""
@@ -142,15 +134,6 @@ def cone_directions(rng, axis, half_angle: float, n: int) -> np.ndarray:
     phi = rng.uniform(0, 2 * np.pi, n)
     sin_t = np.sqrt(np.maximum(0.0, 1 - cos_t ** 2))
     return (cos_t[:, None] * axis + sin_t[:, None] * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2))
-
-
-def random_rotation(rng) -> np.ndarray:
-    """A (3, 3) rotation drawn uniformly (unit quaternion from four normals)."""
-    qv = rng.normal(size=4)
-    w, x, y, z = qv / np.linalg.norm(qv)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
 
 
 def _shoulder(desc) -> np.ndarray:
@@ -283,7 +266,7 @@ def _ring(plan, k, t: Task, rng, ball_d):
 def _sphere_points(plan, mid, fid, k, t, rng, centre, diameter, n, polar_max, ball_d):
     """The pole, then points uniform on the cap of ``polar_max`` about the base z axis."""
     up = np.array([0.0, 0.0, 1.0])
-    r = (diameter + ball_d) / 2
+    r = ball_centre_radius("sphere", diameter, ball_d)
     normals = np.vstack([up[None, :], cone_directions(rng, up, polar_max, n - 1)])[:n]
     redraw = {"kind": "sphere", "centre": np.asarray(centre, float), "radius": r, "polar_max": polar_max}
     for nrm in normals:

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from .._errors import InputError, parse_toml, read_text
+from .._errors import InputError, did_you_mean, parse_toml, read_text
 from ..description import ArmDescription
 from ..shipped import SHIPPED_ARMS, shipped_path
 from ..urdf_import import load_arm
@@ -274,7 +274,7 @@ def _section(ctx: _Ctx, data: Any, spec: dict, table: tuple) -> dict:
                                 f"(e.g. {_example(spec[key][0])})", table, key)
             else:
                 known = ", ".join(_display(b, q[0]) for b, q in spec.items())
-                raise ctx.error(f"unknown key '{key}' (known: {known})", table, key)
+                raise ctx.error(f"unknown key '{key}'{did_you_mean(key, spec)} (known: {known})", table, key)
         quantity, _, shape = spec[base]
         if base in out:
             raise ctx.error(f"'{base}' is given twice (with two units)", table, key)
@@ -351,7 +351,7 @@ def _unitless(ctx, v, quantity, shape, table, key):
 
 def _joint_index(ctx, desc: ArmDescription, name: str, table, key) -> int:
     if name not in desc.joint_names:
-        raise ctx.error(f"unknown joint '{name}' (the arm has: {', '.join(desc.joint_names)})", table, key)
+        raise ctx.error(f"unknown joint '{name}'{did_you_mean(name, desc.joint_names)} (the arm has: {', '.join(desc.joint_names)})", table, key)
     return desc.joint_names.index(name)
 
 
@@ -505,11 +505,43 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
         if n_meas < 1:
             raise ctx.error("need at least one measurement", tbl, "measurements")
         tasks.append(Task(kind, tid, n_meas, o, ctx.lines.get((tbl, ""))))
+    _check_size(ctx, tasks, op, sg)
     return Campaign(name=top["name"], seed=top["seed"], arm=desc, arm_path=arm_path, sensor=top["sensor"],
                     truth=truth, noise=sections["noise"], environment=sections["environment"],
                     operator=op, signals=sg, tasks=tuple(tasks),
                     source=None if path.startswith("<") else Path(path), description=top["description"],
                     raw=data)
+
+
+#: the most points a campaign may ask for (the simulator makes ~500 points/s with their force signals)
+MAX_POINTS = 1_000_000
+
+
+def points_per_measurement(kind: str, o: dict) -> int:
+    """Captured points of one measurement of a task (tracker tasks: points of the arm, not the tracker)."""
+    if kind == "ring":
+        return len(o["depths"]) * int(o["points_per_row"])
+    if kind in ("sphere", "plane"):
+        return int(o["points"])
+    if kind == "seat":
+        return int(o["articulations"])
+    if kind == "ballbar":
+        return 2 * int(o["points_per_sphere"] if o["ends"] == "sphere" else o["articulations"])
+    return int(o["nests"]) * int(o["articulations"])        # tracker
+
+
+def _check_size(ctx, tasks, op, sg) -> None:
+    """Refuse a campaign too large to simulate, with an estimate, before anything is allocated."""
+    n = sum(t.measurements * points_per_measurement(t.kind, t.opts) for t in tasks)
+    if n <= MAX_POINTS:
+        return
+    big = max(tasks, key=lambda t: t.measurements * points_per_measurement(t.kind, t.opts))
+    samples = n * op["point_period"] / sg["sample_period"] if sg["enabled"] else 0.0
+    raise ctx.error(f"the campaign asks for {n:.3g} points (about {n / 500 / 3600:.3g} h at ~500 points/s"
+                    + (f", {samples * 30 / 1e9:.3g} GB of force signals" if samples else "")
+                    + f"); at most {MAX_POINTS:,} points a campaign: fewer measurements or points (task "
+                      f"'{big.id}' asks for {big.measurements} x {points_per_measurement(big.kind, big.opts)})",
+                    ("task", tasks.index(big)))
 
 
 def _check_task(ctx, kind, o, tbl, sensor):
@@ -555,7 +587,7 @@ def _errors(ctx, tbl, desc) -> dict[str, float]:
     for key, v in tbl.items():
         parts = _split(key)
         if parts is None or parts[0] not in spec.names:
-            raise ctx.error(f"unknown parameter key '{key}' (expected a parameter name with a unit, e.g. "
+            raise ctx.error(f"unknown parameter key '{key}'{did_you_mean(key, spec.names)} (expected a parameter name with a unit, e.g. "
                             f"\"{spec.names[1]}_um\"; names: {', '.join(spec.names)})", where, key)
         base, unit = parts
         quantity = _PARAM_QUANTITY[spec.units[spec.index(base)]]

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from .._output import output_folder
+from ..commands import seed
 from .campaign import load_campaign
 from .run import (ARTEFACTS_FILE, POINTS_FILE, REFERENCE_FILE, SIGNALS_DIR, TRUTH_FILE, TRUTH_POINTS_FILE,
                   simulate)
@@ -29,7 +30,7 @@ def register(sub) -> None:
     p.add_argument("campaign", type=Path, help="campaign TOML file")
     p.add_argument("-o", "--output", type=Path, required=True,
                    help="output folder (created if needed; files are replaced atomically, never an input)")
-    p.add_argument("--seed", type=int, default=None, help="random seed (default: the campaign's 'seed')")
+    p.add_argument("--seed", type=seed, default=None, help="random seed (default: the campaign's 'seed')")
     p.add_argument("--no-signals", action="store_true", help="do not write the force-signal files")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress messages (the summary is printed)")
     p.set_defaults(func=run)

@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .artefacts import Plan, perpendicular_basis
+from ..geometry import perpendicular_basis
+from .artefacts import Plan
 
 __all__ = ["OperatorDraw", "draw_operator", "force_signal", "measurement_slices"]
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._errors import NumericalError
-from ..chain import NUMPY_OPS, ball_in_last_frame, chain_point, elastic_displacement
+from ..chain import NUMPY_OPS, ball_in_last_frame, chain_point, elastic_displacement, probe_lever
 from ..description import ArmDescription
 from ..effects import (EncoderEccentricity, ForceSensorError, Geometry, JointCompliance, JointHarmonics,
                        ModelInputs, ProbeThermalGrowth, ThermalGrowth)
@@ -111,20 +111,22 @@ class Truth:
         complex, for complex-step derivatives) with a fixed ``wrench`` (N, 6) (probe frame).
 
         Returns (ball (N, 3) [m], z axis (N, 3), x axis (N, 3)) in the base frame; the axes are
-        those of the last joint frame (= probe frame axes, undeflected).
+        those of the probe frame (undeflected).
         """
         d = self.nominal
         q = np.asarray(q)
         n = q.shape[0]
+        rot, lever = d.probe.rotation, d.probe.lever
         if wrench is None:
             qe = (0.0, 0.0, 0.0)
         else:
-            qe = elastic_displacement(geom.p_last, geom.compliance, list(np.asarray(wrench).T))
-        bx, by, bz = (np.broadcast_to(c, (n,)) for c in ball_in_last_frame(geom.p_last, qe))
-        # one pass of the chain for four points: ball, origin, origin + z, origin + x
-        zero, one = np.zeros(n), np.ones(n)
-        pts = (np.concatenate([bx, zero, zero, one]), np.concatenate([by, zero, zero, zero]),
-               np.concatenate([bz, zero, one, zero]))
+            qe = elastic_displacement(geom.p_last, geom.compliance, list(np.asarray(wrench).T),
+                                      probe_lever(geom.p_last, rot, lever))
+        bx, by, bz = (np.broadcast_to(c, (n,)) for c in ball_in_last_frame(geom.p_last, qe, NUMPY_OPS, rot, lever))
+        # one pass of the chain for four points: ball, origin, origin + probe z, origin + probe x
+        zero = np.zeros(n)
+        rm = np.eye(3) if rot is None else np.array(rot)
+        pts = tuple(np.concatenate([b, zero, zero + rm[k, 2], zero + rm[k, 0]]) for k, b in enumerate((bx, by, bz)))
         rows = [[np.tile(v, 4) if isinstance(v, np.ndarray) else v for v in r] for r in geom.rows]
         x, y, z = chain_point(d.convention, rows, list(np.tile(q, (4, 1)).T), pts, NUMPY_OPS, d.axes)
         p = np.column_stack([x, y, z]).reshape(4, n, 3)

@@ -26,10 +26,11 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
-__all__ = ["Kind", "KINDS", "kind_function", "distance_function", "initial_state", "retract",
-           "rotation_xyz", "centre_of", "perpendicular_basis", "fit_sphere", "fit_circle_axis",
-           "kabsch", "rpy_of"]
+from arm_model import NumericalError, geometry
+
+__all__ = ["Kind", "KINDS", "kind_function", "distance_function", "initial_state", "retract", "centre_of"]
 
 
 @dataclass(frozen=True)
@@ -62,6 +63,7 @@ def _normalize(ca, v):
 
 
 def _rot_xyz_ca(ca, w):
+    """CasADi twin of :func:`arm_model.geometry.rotation_xyz` (``Rz Ry Rx``; symbolic, so hand-written)."""
     cx, sx, cy, sy, cz, sz = ca.cos(w[0]), ca.sin(w[0]), ca.cos(w[1]), ca.sin(w[1]), ca.cos(w[2]), ca.sin(w[2])
     rx = ca.vertcat(ca.horzcat(1, 0, 0), ca.horzcat(0, cx, -sx), ca.horzcat(0, sx, cx))
     ry = ca.vertcat(ca.horzcat(cy, 0, sy), ca.horzcat(0, 1, 0), ca.horzcat(-sy, 0, cy))
@@ -120,145 +122,42 @@ def distance_function():
 
 
 # ---------------------------------------------------------------------------------------------
-# numeric helpers (starting values and state updates)
-
-def rotation_xyz(w) -> np.ndarray:
-    """``Rz(w[2]) Ry(w[1]) Rx(w[0])`` (3x3)."""
-    cx, sx, cy, sy, cz, sz = np.cos(w[0]), np.sin(w[0]), np.cos(w[1]), np.sin(w[1]), np.cos(w[2]), np.sin(w[2])
-    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
-    return rz @ ry @ rx
-
-
-def rpy_of(rot: np.ndarray) -> np.ndarray:
-    """(roll, pitch, yaw) [rad] with ``rot = Rz(yaw) Ry(pitch) Rx(roll)``."""
-    pitch = np.arcsin(-np.clip(rot[2, 0], -1.0, 1.0))
-    return np.array([np.arctan2(rot[2, 1], rot[2, 2]), pitch, np.arctan2(rot[1, 0], rot[0, 0])])
-
-
-def perpendicular_basis(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors completing the unit vector ``u`` to a right-handed orthonormal basis."""
-    u = u / np.linalg.norm(u)
-    helper = np.eye(3)[int(np.argmin(np.abs(u)))]
-    e1 = np.cross(u, helper)
-    e1 /= np.linalg.norm(e1)
-    return e1, np.cross(u, e1)
-
-
-def fit_sphere(x: np.ndarray) -> tuple[np.ndarray, float]:
-    """Algebraic sphere through points (n >= 4, not coplanar): centre [m], radius [m]."""
-    a = np.column_stack([2 * x, np.ones(len(x))])
-    sol = np.linalg.lstsq(a, np.sum(x * x, axis=1), rcond=None)[0]
-    c = sol[:3]
-    return c, float(np.sqrt(max(sol[3] + c @ c, 0.0)))
-
-
-def _fit_circle_2d(uv: np.ndarray) -> tuple[np.ndarray, float, float]:
-    a = np.column_stack([2 * uv, np.ones(len(uv))])
-    sol = np.linalg.lstsq(a, np.sum(uv * uv, axis=1), rcond=None)[0]
-    c = sol[:2]
-    radius = float(np.sqrt(max(sol[2] + c @ c, 0.0)))
-    rms = float(np.sqrt(np.mean((np.linalg.norm(uv - c, axis=1) - radius) ** 2)))
-    return c, radius, rms
-
-
-def fit_circle_axis(x: np.ndarray, radius: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Starting axis (point [m], unit direction) of a cylinder through points ``x``: the axis is
-    taken along the principal direction (least or most spread) whose projected points fit a circle
-    best (of the given ``radius`` if known)."""
-    mean = x.mean(axis=0)
-    _, _, vt = np.linalg.svd(x - mean)
-    best = None
-    for u in (vt[2], vt[0]):
-        e1, e2 = perpendicular_basis(u)
-        uv = np.column_stack([(x - mean) @ e1, (x - mean) @ e2])
-        c, rad, rms = _fit_circle_2d(uv)
-        score = rms + (abs(rad - radius) if radius is not None else 0.0)
-        if best is None or score < best[0]:
-            best = (score, mean + c[0] * e1 + c[1] * e2, u, rad)
-    return _refine_axis(x, best[1], best[2], radius if radius is not None else best[3])
-
-
-def _refine_axis(x, p0, u0, radius):
-    """A few Levenberg-Marquardt steps (scipy) on the axis, radius fixed (or fitted if None)."""
-    from scipy.optimize import least_squares
-    e1, e2 = perpendicular_basis(u0)
-
-    def axis(t):
-        u = u0 + t[2] * e1 + t[3] * e2
-        return p0 + t[0] * e1 + t[1] * e2, u / np.linalg.norm(u)
-
-    def res(t):
-        p, u = axis(t)
-        v = x - p
-        return np.linalg.norm(v - np.outer(v @ u, u), axis=1) - (radius if radius is not None else t[4])
-
-    t0 = np.zeros(4 if radius is not None else 5)
-    if radius is None:
-        t0[4] = np.mean(np.linalg.norm((x - p0) - np.outer((x - p0) @ u0, u0), axis=1))
-    sol = least_squares(res, t0, method="lm", max_nfev=200)
-    p, u = axis(sol.x)
-    return p, u
-
-
-def kabsch(x_base: np.ndarray, x_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rigid ``(R, t)`` with ``x_ref ~ R x_base + t`` (least squares, proper rotation)."""
-    mb, mr = x_base.mean(axis=0), x_ref.mean(axis=0)
-    h = (x_base - mb).T @ (x_ref - mr)
-    u, _, vt = np.linalg.svd(h)
-    d = np.sign(np.linalg.det(vt.T @ u.T))
-    rot = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
-    return rot, mr - rot @ mb
-
+# starting states and state updates (the fits themselves are in :mod:`arm_model.geometry`)
 
 def initial_state(kind: str, x: np.ndarray, radius: float | None = None, x_ref: np.ndarray | None = None) -> np.ndarray:
-    """Packed starting state of one instance from its ball centres ``x`` (n, 3) [m].
+    """Packed starting state of one instance from its ball centres ``x`` (n, 3) [m] (the fits of
+    :mod:`arm_model.geometry`; points that do not determine a fit start from their mean).
 
     ``radius``: the offset radius of sphere, ring, cylinder [m] (None: fitted).
     """
     if kind == "seat":
         return x.mean(axis=0)
     if kind == "sphere":
-        if len(x) >= 4:
-            c, rad = fit_sphere(x)
-        else:
+        try:
+            fit = geometry.fit_sphere(x, radius)
+            c, rad = fit.centre, fit.radius
+        except NumericalError:
             c, rad = x.mean(axis=0), 0.0
-        if radius is not None and len(x) >= 1:
-            # move the centre along the mean outward direction so that the known radius fits
-            c = _sphere_centre_known_radius(x, c, radius)
         return np.concatenate([c, [radius if radius is not None else rad]])
     if kind in ("ring", "cylinder"):
-        p0, u0 = fit_circle_axis(x, radius)
-        e1, e2 = perpendicular_basis(u0)
-        if radius is None:
-            v = x - p0
-            radius = float(np.mean(np.linalg.norm(v - np.outer(v @ u0, u0), axis=1)))
-        return np.concatenate([p0, u0, e1, e2, [radius]])
+        try:
+            p0, u0, rad = geometry.fit_ring_axis(x)
+        except NumericalError:
+            p0, u0, rad = x.mean(axis=0), np.array([0.0, 0.0, 1.0]), 0.0
+        e1, e2 = geometry.perpendicular_basis(u0)
+        return np.concatenate([p0, u0, e1, e2, [radius if radius is not None else rad]])
     if kind == "plane":
-        mean = x.mean(axis=0)
-        _, _, vt = np.linalg.svd(x - mean)
-        n0 = vt[2]
-        e1, e2 = perpendicular_basis(n0)
-        return np.concatenate([n0, e1, e2, [float(n0 @ mean)]])
+        try:
+            plane = geometry.fit_plane(x)
+            n0, h = plane.normal, plane.offset
+        except NumericalError:
+            n0, h = np.array([0.0, 0.0, 1.0]), float(x.mean(axis=0)[2])
+        e1, e2 = geometry.perpendicular_basis(n0)
+        return np.concatenate([n0, e1, e2, [h]])
     if kind == "reference":
-        rot, t = kabsch(x, x_ref)
+        rot, t = geometry.kabsch(x, x_ref)
         return np.concatenate([rot.reshape(-1, order="F"), t])
     raise ValueError(f"unknown residual kind {kind!r}")
-
-
-def _sphere_centre_known_radius(x, c, radius, iters: int = 50):
-    """Gauss-Newton on the centre with the radius fixed, from ``c``."""
-    for _ in range(iters):
-        v = x - c
-        d = np.linalg.norm(v, axis=1)
-        r = d - radius
-        jac = -v / d[:, None]
-        step = np.linalg.lstsq(jac, -r, rcond=None)[0]
-        c = c + step
-        if np.linalg.norm(step) < 1e-13:
-            break
-    return c
 
 
 def retract(kind: str, state: np.ndarray, theta: np.ndarray) -> np.ndarray:
@@ -276,20 +175,19 @@ def retract(kind: str, state: np.ndarray, theta: np.ndarray) -> np.ndarray:
         p = p0 + theta[0] * e1 + theta[1] * e2
         u = u0 + theta[2] * e1 + theta[3] * e2
         u /= np.linalg.norm(u)
-        f1, f2 = perpendicular_basis(u)
+        f1, f2 = geometry.perpendicular_basis(u)
         radius = s[12] + (theta[4] if len(theta) > 4 else 0.0)
         return np.concatenate([p, u, f1, f2, [radius]])
     if kind == "plane":
         n0, e1, e2, h = s[0:3], s[3:6], s[6:9], s[9]
         n = n0 + theta[0] * e1 + theta[1] * e2
         n /= np.linalg.norm(n)
-        f1, f2 = perpendicular_basis(n)
+        f1, f2 = geometry.perpendicular_basis(n)
         return np.concatenate([n, f1, f2, [h + theta[2]]])
     if kind == "reference":
         rot = s[0:9].reshape(3, 3, order="F")
-        rot = rotation_xyz(theta[3:6]) @ rot
-        u, _, vt = np.linalg.svd(rot)           # keep it a rotation to the last bit
-        rot = u @ vt
+        # the same x-y-z angles as the CasADi residual; from_matrix keeps it a rotation to the last bit
+        rot = Rotation.from_matrix(geometry.rotation_xyz(theta[3:6]) @ rot).as_matrix()
         return np.concatenate([rot.reshape(-1, order="F"), s[9:12] + theta[0:3]])
     raise ValueError(f"unknown residual kind {kind!r}")
 

@@ -1,0 +1,121 @@
+"""Input warnings: values a command uses but that lie outside what the arm declares (one place).
+
+- ``over_force``: a contact force beyond the probe's calibrated range (``max_force_N`` of the
+  description). Such points are used and flagged, never dropped.
+- ``joint_limits``: an encoder angle beyond the joint's declared limits (``lower_deg``/``upper_deg``).
+
+Every command that reads points prints these (``warning: ...``) and, when it writes a summary and a
+report, lists them there too (``"warnings"`` of summary.json, a "Warnings" section of report.html).
+"""
+from __future__ import annotations
+
+import html
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["InputWarning", "over_force_warning", "joint_limit_warning", "point_warnings", "print_warnings",
+           "warnings_html", "LIMIT_TOLERANCE_RAD"]
+
+#: how far beyond a declared joint limit an angle may read before it is reported [rad] (1e-6 deg:
+#: below every encoder's resolution, above the rounding of a file written in degrees)
+LIMIT_TOLERANCE_RAD = 1e-6 * np.pi / 180.0
+_SHOWN = 10
+
+
+@dataclass(frozen=True)
+class InputWarning:
+    """``kind`` ("over_force", "joint_limits"), the ``message``, the ``file`` and the 1-based ``lines``
+    of the rows concerned (all of them), and ``count``."""
+    kind: str
+    message: str
+    file: str
+    lines: tuple
+
+    @property
+    def count(self) -> int:
+        return len(self.lines)
+
+    def as_dict(self) -> dict:
+        return {"kind": self.kind, "message": self.message, "file": self.file, "count": self.count,
+                "lines": [int(v) for v in self.lines]}
+
+
+def _lines_text(lines) -> str:
+    shown = ", ".join(str(int(v)) for v in lines[:_SHOWN])
+    return f"line{'s' if len(lines) > 1 else ''} {shown}" + (" ..." if len(lines) > _SHOWN else "")
+
+
+def over_force_warning(force, lines, max_force: float, file: str) -> InputWarning | None:
+    """A warning for the rows whose force magnitude [N] exceeds ``max_force`` [N], or None.
+
+    Args:
+        force: (N, 3) forces [N] (from the points file's columns or the force signals' peaks).
+        lines: (N,) the rows' lines in ``file``.
+    """
+    if force is None or len(force) == 0:
+        return None
+    mag = np.linalg.norm(np.asarray(force, float), axis=1)
+    over = np.flatnonzero(mag > max_force)
+    if not len(over):
+        return None
+    lines = tuple(int(v) for v in np.asarray(lines)[over])
+    return InputWarning(
+        "over_force",
+        f"{len(over)} point(s) with a force over the probe's calibrated range ({max_force:g} N; largest "
+        f"{mag[over].max():.3g} N): used and flagged, not dropped; {file} {_lines_text(lines)}",
+        file, lines)
+
+
+def joint_limit_warning(desc, q, lines, file: str) -> InputWarning | None:
+    """A warning for the rows with an encoder angle beyond its joint's declared limits, or None."""
+    q = np.atleast_2d(np.asarray(q, float))
+    if q.size == 0:
+        return None
+    bad = np.zeros(len(q), bool)
+    names = []
+    for j, joint in enumerate(desc.joints[: q.shape[1]]):
+        out = np.zeros(len(q), bool)
+        if joint.lower is not None:
+            out |= q[:, j] < joint.lower - LIMIT_TOLERANCE_RAD
+        if joint.upper is not None:
+            out |= q[:, j] > joint.upper + LIMIT_TOLERANCE_RAD
+        if out.any():
+            names.append(f"{joint.name} ({int(out.sum())}, limits {np.degrees(joint.lower):.4g} to "
+                         f"{np.degrees(joint.upper):.4g} deg)" if joint.lower is not None and joint.upper is not None
+                         else f"{joint.name} ({int(out.sum())})")
+        bad |= out
+    if not bad.any():
+        return None
+    lines = tuple(int(v) for v in np.asarray(lines)[bad])
+    return InputWarning(
+        "joint_limits",
+        f"{int(bad.sum())} point(s) with a joint angle beyond the arm's declared limits: "
+        f"{', '.join(names)}; used all the same (check the arm description or the encoder zero); "
+        f"{file} {_lines_text(lines)}", file, lines)
+
+
+def point_warnings(desc, points, force=None) -> list[InputWarning]:
+    """Both checks on a :class:`~arm_model.io.PointSet` (``force``: the (N, 3) forces the command
+    uses, default the file's own force columns)."""
+    lines = points.lines if points.lines is not None else np.arange(1, len(points) + 1)
+    out = [joint_limit_warning(desc, points.q, lines, points.path),
+           over_force_warning(points.force if force is None else force, lines, desc.probe.max_force,
+                              points.path)]
+    return [w for w in out if w is not None]
+
+
+def print_warnings(warnings, file=None) -> None:
+    """``warning: <message>`` for each, on standard output (the summary the command prints)."""
+    for w in warnings:
+        print(f"warning: {w.message}", file=file)
+
+
+def warnings_html(warnings) -> str:
+    """A "Warnings" section of a report (empty text when there are none); ``warnings`` are
+    :class:`InputWarning` or their :meth:`~InputWarning.as_dict`."""
+    if not warnings:
+        return ""
+    items = "".join(f"<li>{html.escape(w['message'] if isinstance(w, dict) else w.message)}</li>"
+                    for w in warnings)
+    return f"<h2>Warnings</h2><ul class='warnings'>{items}</ul>"

@@ -1,0 +1,132 @@
+"""Command-line side of :mod:`arm_model.uncertainty`: the input-uncertainty options every command shares,
+and the per-point columns of ``aacmm tip`` (``u_x_mm`` ..., ``cov_xx_um2`` ..., Monte Carlo)."""
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+
+from .uncertainty import (COMPLIANCE_U_RELATIVE, CONTRIBUTIONS, InputUncertainty, ParameterCovariance,
+                          covariance_columns, default_inputs, monte_carlo, propagate)
+
+__all__ = ["add_input_options", "inputs_from_args", "add_tip_options", "wants_uncertainty", "tip_columns",
+           "contribution_lines", "non_negative"]
+
+
+def non_negative(text: str) -> float:
+    """argparse type: a finite number >= 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (math.isfinite(v) and v >= 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
+    return v
+
+
+def add_input_options(p) -> None:
+    """The input uncertainties (each overrides its default, see docs/uncertainty.md)."""
+    g = p.add_argument_group("input uncertainties (defaults and their sources: docs/uncertainty.md)")
+    g.add_argument("--encoder-resolution-deg", type=non_negative, default=None, metavar="R",
+                   help="encoder resolution of every joint [deg] (u = R / sqrt(12)); default: each joint's "
+                        "encoder_resolution of the description, 0 where not given")
+    g.add_argument("--u-force-N", type=non_negative, nargs=2, default=None, metavar=("BENDING", "AXIAL"),
+                   help="standard uncertainty of the force [N] across (probe x, y) and along (z) the stylus; "
+                        "default 0.0723 0.0464 (the seed paper's Table 1)")
+    g.add_argument("--u-compliance-rel", type=non_negative, default=None, metavar="R",
+                   help=f"standard uncertainty of the probe compliances relative to their value (default "
+                        f"{COMPLIANCE_U_RELATIVE:g}, from the seed paper's Table 2 fit); not used for compliances "
+                        "the model's covariance holds")
+    g.add_argument("--u-probing-um", type=non_negative, default=None, metavar="U",
+                   help="probing scatter of a ball centre per axis [um] (default 0)")
+
+
+def inputs_from_args(desc, args, has_force: bool) -> InputUncertainty:
+    enc = None if args.encoder_resolution_deg is None else math.radians(args.encoder_resolution_deg) / math.sqrt(12)
+    force = None if args.u_force_N is None else (args.u_force_N[0], args.u_force_N[0], args.u_force_N[1])
+    comp = None if args.u_compliance_rel is None else args.u_compliance_rel * np.asarray(desc.probe.compliance)
+    probing = None if args.u_probing_um is None else args.u_probing_um * 1e-6
+    inputs = default_inputs(desc, encoder=enc, force=force, compliance=comp, probing=probing, has_force=has_force)
+    if args.u_compliance_rel is not None:
+        inputs.sources["compliance"] = f"given: {args.u_compliance_rel:g} of the declared compliances"
+    return inputs
+
+
+def add_tip_options(p) -> None:
+    from .commands import at_least
+    g = p.add_argument_group("uncertainty of the corrected centres (docs/uncertainty.md)")
+    g.add_argument("--uncertainty", action="store_true",
+                   help="write u_x_mm, u_y_mm, u_z_mm even when the model carries no parameter covariance "
+                        "(the parameters are then taken as exact); with a covariance they are always written")
+    g.add_argument("--covariance", action="store_true",
+                   help="also write the six terms of each point's 3x3 covariance [um^2] (cov_xx_um2, cov_yy_um2, cov_zz_um2, cov_xy_um2, cov_xz_um2, cov_yz_um2)")
+    g.add_argument("--mc", type=at_least(2), default=None, metavar="N",
+                   help="also a Monte Carlo of N samples of the same inputs: columns u_x_mc_mm ... and the "
+                        "largest relative difference to the linear result")
+    g.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo (default 0)")
+    add_input_options(p)
+
+
+def wants_uncertainty(args, parameters: ParameterCovariance | None) -> bool:
+    return bool(parameters is not None or args.uncertainty or args.covariance or args.mc)
+
+
+def contribution_lines(res) -> list[str]:
+    """One line a contribution: RMS over the points of its standard uncertainty per axis [um], source."""
+    lines = []
+    for name in CONTRIBUTIONS:
+        v = res.summary().get(name)
+        if v is None:
+            continue
+        lines.append(f"  {name:<13} {v[0] * 1e6:8.3f} {v[1] * 1e6:8.3f} {v[2] * 1e6:8.3f}   "
+                     f"{res.sources.get(name, '')}")
+    return lines
+
+
+def parameters_of(arm) -> ParameterCovariance | None:
+    """The parameter covariance of an :class:`~arm_model.model_file.Arm` (its model file's covariance
+    file), or None when it names none. A parameter the model does not have is an InputError."""
+    if getattr(arm, "covariance", None) is None:
+        return None
+    from ._errors import InputError
+    from .model_file import read_covariance
+    cov = read_covariance(arm.covariance)
+    names = arm.model.spec.names
+    for i, n in enumerate(cov.names):
+        if n not in names:
+            raise InputError(f"parameter '{n}' of the covariance file is not a parameter of the model "
+                             f"(known: {', '.join(names)})", arm.covariance, i + 2, "parameter")
+    try:
+        out = ParameterCovariance(tuple(cov.names), cov.matrix, source=f"the model's covariance file {arm.covariance.name}")
+        out.factor()
+    except ValueError as exc:
+        raise InputError(f"not a usable covariance: {exc}", arm.covariance) from None
+    return out
+
+
+def tip_columns(arm, points, parameters, args) -> tuple[dict, list[str]]:
+    """The uncertainty columns of ``aacmm tip`` (mm, um^2) for an :class:`~arm_model.model_file.Arm`
+    and a :class:`~arm_model.io.PointSet`, and the lines it prints."""
+    inputs = inputs_from_args(arm.desc, args, points.wrench is not None)
+    model, p, wrench, aux = arm.model, arm.p, points.wrench, arm.aux(points)
+    points_q = points.q
+    res = propagate(model, p, points_q, wrench, aux, parameters=parameters, inputs=inputs)
+    u = res.u
+    cols = {f"u_{a}_mm": u[:, k] * 1e3 for k, a in enumerate("xyz")}
+    if args.covariance:
+        cols.update(covariance_columns(res.cov))
+    lines = ["uncertainty of the corrected centres (linear, exact Jacobians); RMS over the points [um]:",
+             f"  {'contribution':<13} {'x':>8} {'y':>8} {'z':>8}   source"] + contribution_lines(res)
+    tot = np.sqrt(np.mean(u ** 2, axis=0)) * 1e6
+    lines.append(f"  {'total':<13} {tot[0]:8.3f} {tot[1]:8.3f} {tot[2]:8.3f}")
+    if args.mc:
+        mc = monte_carlo(model, p, points_q, wrench, aux, parameters=parameters, inputs=inputs,
+                         samples=args.mc, seed=args.seed)
+        umc = mc.u
+        cols.update({f"u_{a}_mc_mm": umc[:, k] * 1e3 for k, a in enumerate("xyz")})
+        with np.errstate(invalid="ignore", divide="ignore"):
+            rel = np.where(u > 0, umc / u - 1.0, 0.0)
+        lines.append(f"Monte Carlo ({args.mc} samples, seed {args.seed}): u_mc / u_linear - 1 over the points and "
+                     f"axes: median {np.median(rel):+.3f}, largest |.| {np.max(np.abs(rel)):.3f}")
+    return cols, lines
