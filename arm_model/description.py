@@ -309,8 +309,9 @@ def parse_description(text: str, path: str = "<string>") -> ArmDescription:
     data = parse_toml(text, path)
     r = TomlReader(path, text)
     if data.get("effect"):
-        raise r.error("this model file holds effects ([[effect]] tables); read it with "
-                      "arm_model.model_file.load_model, which applies them", "effect", 0)
+        raise r.error("this model file holds effects ([[effect]] tables), which a plain description cannot "
+                      "carry: give it to an --arm option (tip, ring, view, calibrate, close-loop apply them; in "
+                      "Python arm_model.model_file.load_model)", "effect", 0)
     if "calibration" in data:
         from .model_file import check_calibration_table
         check_calibration_table(data["calibration"], r)

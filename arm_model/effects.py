@@ -359,14 +359,22 @@ class ProbeComplianceMatrix(Effect):
     """The probe's compliance as a full symmetric 3x3 matrix in the probe frame: an increment ``dC`` of
     the declared (diagonal) one, so the ball moves by about ``(diag(c) + dC) f`` under the force ``f``
     (probe frame). The diagonal adds to the declared compliance (the elastic joints), the off-diagonal
-    terms move the ball by ``dC_off f``."""
+    terms move the ball by ``dC_off f``. ``terms``: which of xx, yy, zz, xy, xz, yz are parameters (the
+    others zero), e.g. only the off-diagonal ones beside a diagonal :class:`ProbeCompliance`."""
+    terms: tuple[str, ...] = _MATRIX_TERMS
     key: str = field(default="probe_compliance_matrix", init=False, repr=False)
 
+    def __post_init__(self):
+        bad = set(self.terms) - set(_MATRIX_TERMS)
+        if bad or len(set(self.terms)) != len(self.terms) or not self.terms:
+            raise ValueError(f"terms must be distinct entries of {_MATRIX_TERMS}, got {self.terms}")
+
     def param_defs(self, desc):
-        return [(f"probe.dcompliance_{t}", "m/N") for t in _MATRIX_TERMS]
+        return [(f"probe.dcompliance_{t}", "m/N") for t in _MATRIX_TERMS if t in self.terms]
 
     def apply(self, desc, params, inputs, geom, ops):
-        cxx, cyy, czz, cxy, cxz, cyz = params
+        it = iter(params)
+        cxx, cyy, czz, cxy, cxz, cyz = (next(it) if t in self.terms else 0.0 for t in _MATRIX_TERMS)
         fx, fy, fz = inputs.wrench[0], inputs.wrench[1], inputs.wrench[2]
         geom.compliance = [geom.compliance[0] + cxx, geom.compliance[1] + cyy, geom.compliance[2] + czz]
         d = [cxy * fy + cxz * fz, cxy * fx + cyz * fz, cxz * fx + cyz * fy]     # probe frame

@@ -21,8 +21,9 @@ below ``rank_tol`` are *absorbed*: the data cannot tell them from what is alread
 Generic families (:func:`structure_tests`), with ``D_j = dx/dq_j`` the ball's sensitivity to joint j:
 harmonics ``cos/sin(h q_j)``, h = 1..3, times ``D_j``; the gravity torque and the contact torque of
 joint j times ``D_j``; contact force components and magnitude times the probe axes; temperature and
-time times the base axes and the position vector (a scale); the stylus direction (approach) times the
-base axes; one offset per measurement (one-way ANOVA) and per artefact feature or certified length.
+time times the base axes and the position vector (a scale); the temperature times each link's length
+and the probe's ("temperature per link"); the tilt of joint j about its frame's x and y axes times the
+moment across it ("jN lateral load"); the stylus direction (approach) times the base axes; one offset per measurement (one-way ANOVA) and per artefact feature or certified length.
 """
 from __future__ import annotations
 
@@ -32,18 +33,20 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from arm_model.effects import Effect
+from arm_model.chain import NUMPY_OPS
+from arm_model.effects import Effect, Geometry, contact_moment, gravity_moment, joint_frame
 from arm_model.model import ArmModel
+from arm_model.params import split_params
 
 from .calibrate import CalibrationResult
 from .candidates import Candidate, torques_of
 from .data import CalibrationData
-from .identifiability import DEFAULT_RANK_TOL, prior_scales, reduced_jacobian, weakly_determined
+from .identifiability import DEFAULT_RANK_TOL, point_noise, prior_scales, reduced_jacobian, weakly_determined
 from .problem import Problem
 from .solver import levenberg_marquardt
 from .synth import probe_rotation
 
-__all__ = ["JointAngleOffset", "measurement_folds", "ResidualSpace", "residual_space", "GroupTest",
+__all__ = ["JointAngleOffset", "measurement_folds", "pose_folds", "ResidualSpace", "residual_space", "GroupTest",
            "Family", "families", "candidate_family", "test_group", "screen_candidates", "structure_tests",
            "remaining_structure",
            "binned_estimates", "holm"]
@@ -97,6 +100,30 @@ def measurement_folds(data: CalibrationData, k: int, seed: int = 0) -> dict[str,
         for i, m in enumerate(members):
             out[m] = (start + i) % k
         start += len(members)
+    return out
+
+
+def pose_folds(data: CalibrationData, k: int, seed: int = 0) -> np.ndarray:
+    """Fold (0..k-1) of every point, -1 for points never held out: inside each artefact instance (a
+    feature within a measurement; the reference points as one) the poses are shuffled (seeded) and dealt
+    to the folds in turn, so that a held-out pose is predicted against the instance's centre (axis,
+    plane, ``T_ref_base``) fitted on the instance's other poses. An instance whose training part would
+    have fewer points than its fit needs is never held out."""
+    from .problem import MIN_POINTS
+    from .data import pose_groups
+    if k < 2:
+        raise ValueError(f"cross-validation needs at least 2 folds, got {k}")
+    rng = np.random.default_rng(seed)
+    out = np.full(len(data), -1)
+    start = 0
+    for kind, rows in pose_groups(data):
+        n = len(rows)
+        if n - math.ceil(n / k) < MIN_POINTS[kind][0] or n < 2:
+            continue
+        rows = rows.copy()
+        rng.shuffle(rows)
+        out[rows] = (start + np.arange(n)) % k
+        start += n
     return out
 
 
@@ -371,8 +398,13 @@ def _explained_cv(u: np.ndarray, r: np.ndarray, fold_of_row: np.ndarray) -> floa
     return 1.0 - sse / sst if sst > 0 else float("nan")
 
 
-def row_folds(space: ResidualSpace, folds: dict[str, int]) -> np.ndarray:
-    return np.array([folds.get(m, -1) for m in space.row_measurement])
+def row_folds(space: ResidualSpace, folds) -> np.ndarray:
+    """Fold of each residual row: ``folds`` by measurement id (dict) or by point (array, -1 never held;
+    length rows are never held then)."""
+    if isinstance(folds, dict):
+        return np.array([folds.get(m, -1) for m in space.row_measurement])
+    f = np.asarray(folds)
+    return np.where(space.row_point >= 0, f[np.maximum(space.row_point, 0)], -1)
 
 
 def holm(p_values) -> np.ndarray:
@@ -410,7 +442,7 @@ def _batches(desc, base_names, candidates) -> list[list[int]]:
     return [m for _, m in batches]
 
 
-def screen_candidates(result: CalibrationResult, candidates, folds: dict[str, int] | None = None,
+def screen_candidates(result: CalibrationResult, candidates, folds: "dict[str, int] | np.ndarray | None" = None,
                       rank_tol: float = DEFAULT_RANK_TOL) -> tuple[list[GroupTest], ResidualSpace]:
     """Score test of every candidate at the fit ``result`` (one :class:`GroupTest` each, in the order
     of ``candidates``) and the residual space (of the first batch) for further tests."""
@@ -420,12 +452,13 @@ def screen_candidates(result: CalibrationResult, candidates, folds: dict[str, in
     for members in _batches(desc, set(result.model.spec.names), candidates):
         space = residual_space(result, [candidates[i].effect for i in members])
         first = first or space
-        fr = row_folds(space, folds) if folds else None
+        fr = row_folds(space, folds) if folds is not None and len(folds) else None
         for i, sl in zip(members, space.extra_slices):
             c = candidates[i]
             names = c.param_names(desc)
             tests[i] = test_group(space, space.jp[:, sl], names, c.name, fr, rank_tol=rank_tol,
-                                  prior=prior_scales(space.model, names), min_resolution=SCREEN_RESOLUTION)
+                                  prior=prior_scales(space.model, names, noise=point_noise(space.problem)),
+                                  min_resolution=SCREEN_RESOLUTION)
     if first is None:
         first = residual_space(result)
     return tests, first
@@ -482,6 +515,30 @@ def _point_frames(space: ResidualSpace):
     return rot, x
 
 
+def _lateral_loads(res: CalibrationResult, x: np.ndarray) -> list[tuple[list, np.ndarray]]:
+    """Per joint: the ball's move per unit tilt about the joint frame's x and y axes (two (N, 3) [m/rad])
+    and the moment across the joint about those axes (N, 2) [N m] (gravity and contact), at the fit's
+    base geometry and the measured angles (:class:`arm_model.effects.LateralCompliance`)."""
+    desc, data = res.model.desc, res.data
+    n = len(data)
+    rows, p_last, comp = split_params(desc, res.p[: res.model.base_size])
+    geom = Geometry([list(r) for r in rows], list(p_last), list(comp))
+    q, w = list(data.points.q.T), list(data.wrench.T)
+
+    def col(v):
+        return np.column_stack([np.broadcast_to(np.asarray(c, dtype=float), (n,)) for c in v])
+
+    out = []
+    for j in range(desc.n_joints):
+        o, axes = joint_frame(desc, geom, q, j, NUMPY_OPS)
+        m = [a + b for a, b in zip(gravity_moment(desc, geom, q, j, o, NUMPY_OPS),
+                                   contact_moment(desc, geom, q, w, o, NUMPY_OPS))]
+        o, m = col(o), col(m)
+        u = [col(a) for a in axes[:2]]
+        out.append(([np.cross(a, x - o) for a in u], np.column_stack([np.sum(m * a, axis=1) for a in u])))
+    return out
+
+
 def families(space: ResidualSpace) -> list[Family]:
     """The generic structure families for the fit of ``space`` (those the data can express)."""
     res = space.result
@@ -517,6 +574,17 @@ def families(space: ResidualSpace) -> list[Family]:
             out.append(Family(f"{jr.name} contact torque", f"error of joint {jr.name}'s angle proportional to the "
                               "contact force's torque on it", "field", [dq], [(f"tau_c{j + 1}", tau_c[:, j])],
                               (f"contact torque {jr.name}", "N m", 1.0, tau_c[:, j])))
+    for j, (tilt, moment) in enumerate(_lateral_loads(res, x)):
+        if np.max(np.abs(moment), initial=0.0) <= 1e-6:
+            continue
+        jn = desc.joints[j].name
+        dirs = [(f"tilt of {jn} about its {a}", "rad", sum(base_cols[ax] * space.per_row(tilt[k][:, ax]) for ax in range(3)))
+                for k, a in enumerate("xy")]
+        basis = [(f"M{a}{j + 1}", moment[:, k]) for k, a in enumerate("xy")]
+        mag = np.hypot(moment[:, 0], moment[:, 1])
+        out.append(Family(f"{jn} lateral load", f"tilt of joint {jn}'s axis proportional to the moment across it "
+                          "(gravity on the links it moves and the contact wrench): a lateral compliance", "field",
+                          dirs, basis, (f"moment across {jn}", "N m", 1.0, mag)))
     if has_force:
         axes = [a for a in range(3) if np.max(np.abs(force[:, a]), initial=0.0) > 1e-9]
         basis = [(f"f{'xyz'[a]}", force[:, a]) for a in axes]
@@ -537,6 +605,19 @@ def families(space: ResidualSpace) -> list[Family]:
         sub = {f"{label}: {dn}": [i] for i, (dn, _, _) in enumerate(dirs)}
         out.append(Family(label, f"ball displacement along the base axes, and a scale, linear in the {label}",
                           "field", dirs, [(f"d{label}", v)], (label, unit, 1.0, values), sub))
+    t = pts.temperature
+    if t is not None and np.all(np.isfinite(t)) and np.ptp(t) > 0:
+        # each link's length and the probe's, each scaled on its own: d x / d(relative length) times dT
+        rows, fields = desc.row_table(), desc.row_fields
+        dirs = [(f"length of {jr.name}", "1", sum(jp[:, spec.index(f"{jr.name}.{fields[m]}")] * rows[i, m]
+                                               for m in desc.length_indices))
+                for i, jr in enumerate(desc.joints) if np.any(rows[i, list(desc.length_indices)] != 0)]
+        dirs.append(("probe length", "1", sum(jp[:, spec.index(f"probe.{a}")] * desc.probe.p_last[k]
+                                             for k, a in enumerate("xyz"))))
+        sub = {f"temperature: {dn}": [i] for i, (dn, _, _) in enumerate(dirs)}
+        out.append(Family("temperature per link", "each link length and the probe growing with the temperature at "
+                          "its own rate", "field", dirs, [("dtemperature", t - t.mean())], ("temperature", "C", 1.0, t),
+                          sub))
     stylus = rot[:, :, 2]
     basis = [(f"stylus {a}", stylus[:, i]) for i, a in enumerate("xyz")]
     sub = {f"stylus {a} component": [d * 3 + i for d in range(3)] for i, a in enumerate("xyz")}
@@ -554,10 +635,10 @@ def families(space: ResidualSpace) -> list[Family]:
     return out
 
 
-def structure_tests(space: ResidualSpace, folds: dict[str, int] | None,
+def structure_tests(space: ResidualSpace, folds: "dict[str, int] | np.ndarray | None",
                     rank_tol: float = DEFAULT_RANK_TOL) -> list[tuple[Family, GroupTest]]:
     """Every generic family tested against the residual of ``space``; sorted by p-value."""
-    fr = row_folds(space, folds) if folds else None
+    fr = row_folds(space, folds) if folds is not None and len(folds) else None
     out = []
     for fam in families(space):
         cols, names = fam.columns(space)
@@ -568,14 +649,14 @@ def structure_tests(space: ResidualSpace, folds: dict[str, int] | None,
     return out
 
 
-def remaining_structure(space: ResidualSpace, folds: dict[str, int] | None, alpha: float,
+def remaining_structure(space: ResidualSpace, folds: "dict[str, int] | np.ndarray | None", alpha: float,
                         rank_tol: float = DEFAULT_RANK_TOL, most: int = 5) -> list[tuple[Family, GroupTest]]:
     """Forward selection of the structure families that the residual still holds: the most significant
     family is kept if its p-value passes ``alpha`` after Bonferroni over the families tested and its
     held-out explained variance is positive (groups families: not predictable, p-value only); then every
     other family is tested again *given* the ones kept (their columns fitted first), so a family that only
     shadows a kept one drops out. Returns the kept families with their conditional tests."""
-    fr = row_folds(space, folds) if folds else None
+    fr = row_folds(space, folds) if folds is not None and len(folds) else None
     fams = families(space)
     kept: list[tuple[Family, GroupTest]] = []
     cur = space
@@ -620,8 +701,16 @@ def candidate_family(space: ResidualSpace, cand: Candidate, fams: list[Family] |
                       (f"load torque {jr.name} (contact - gravity)", "N m", 1.0, load))
     if key == "thermal":
         return by.get("temperature")
-    if key in ("force_sensor", "probe_compliance"):
+    if key in ("force_sensor", "probe_compliance", "probe_compliance_matrix"):
         return by.get("contact force")
+    if key == "joint_harmonics" and j is not None:
+        return by.get(f"q{j + 1} harmonics")
+    if key in ("thermal_links", "probe_thermal"):
+        return by.get("temperature per link")
+    if key == "approach_offset":
+        return by.get("approach direction")
+    if key == "lateral_compliance" and cand.joint is not None:
+        return by.get(f"{cand.joint} lateral load")
     return None
 
 

@@ -58,7 +58,7 @@ def _stage_dict(s: Stage) -> dict:
            "heldout_test": s.heldout}
     if s.added is not None:
         out["added"] = {"name": s.added.name, "family": s.added.family, "joint": s.added.joint,
-                        "effect": s.added.effect.describe(), "parameters": effect_summary(r, s.added),
+                        "origin": s.added.origin, "effect": s.added.effect.describe(), "parameters": effect_summary(r, s.added),
                         "indistinguishable_nested": s.nested, "indistinguishable_alternatives": s.alternatives}
         out["screening"] = [t.to_dict() for t in s.screening]
         out["cross_validation"] = [c.to_dict() for c in s.cv]
@@ -72,6 +72,8 @@ def summary_dict(loop: LoopResult, inputs: dict | None = None) -> dict:
     prev = base
     for s in loop.stages[1:]:
         effects.append({"name": s.added.name, "family": s.added.family, "joint": s.added.joint,
+                        "origin": s.added.origin,
+                        "found_from_the_residual": s.added.origin == "residual",
                         "parameters": effect_summary(s.result, s.added),
                         "heldout_before": {"rms_um": prev["rms_um"], "max_um": prev["max_um"],
                                            "standard": prev["standard"]},
@@ -83,9 +85,10 @@ def summary_dict(loop: LoopResult, inputs: dict | None = None) -> dict:
         "inputs": inputs or {},
         "arm": loop.desc.name,
         "settings": loop.settings.to_dict(),
-        "measurements": {"design": loop.design, "test": loop.test},
-        "candidates": [{"name": c.name, "family": c.family, "joint": c.joint, "effect": c.effect.describe()}
-                       for c in loop.candidates],
+        "measurements": {"design": loop.design, "test": loop.test, "test_by": loop.test_by},
+        "decision_power": loop.power,
+        "candidates": [{"name": c.name, "family": c.family, "joint": c.joint, "effect": c.effect.describe(),
+                        "origin": c.origin} for c in loop.candidates],
         "skipped_candidates": [{"name": s.name, "reason": s.reason} for s in loop.skipped],
         "effects_added": effects,
         "before_after": loop.before_after(),
@@ -110,8 +113,10 @@ def before_after_text(loop: LoopResult) -> str:
     name_w = max(len("model"), *(len(r["model"]) for r in rows))
     head = f"{'model':<{name_w}}  " + "  ".join(f"{h:>12}" for _, h, _ in cols)
     units = f"{'':<{name_w}}  " + "  ".join(f"{'[' + u + ']':>12}" for _, _, u in cols)
-    lines = [f"held-out test set: {len(loop.test)} measurements never used for a decision "
-             f"(rows: {loop.stages[0].heldout.get('headline_rows', '')})", head, units]
+    what = (f"{len(loop.test)} measurements never used for a decision" if loop.test_by == "measurement" else
+            "poses of each feature never used for a decision, each predicted against its feature's centre "
+            "fitted on the design poses")
+    lines = [f"held-out test set: {what} (rows: {loop.stages[0].heldout.get('headline_rows', '')})", head, units]
     for r in rows:
         lines.append(f"{r['model']:<{name_w}}  " + "  ".join(
             f"{r[k]:>12.2f}" if k in r and r[k] is not None else f"{'-':>12}" for k, _, _ in cols))
@@ -259,13 +264,14 @@ def loop_model_name(loop: LoopResult) -> str:
 
 
 def write_loop_model(loop: LoopResult, out_dir, inputs=()) -> dict:
-    """The final model of the loop (its last fit on the design set, every effect added with its
-    parameters) as a model file, covariance file and URDF (:mod:`calibration.model_output`)."""
-    res = loop.final.result
+    """The final model of the loop (every effect added, calibrated on every point: ``loop.model_fit``, or
+    the last fit on the design set if absent) as a model file, covariance file and URDF
+    (:mod:`calibration.model_output`)."""
+    res = loop.model_fit or loop.final.result
     added = [s.added.name for s in loop.stages[1:]]
     comment = (f"Model of '{loop.desc.name}' found by aacmm close-loop: the description with the final fit's values "
                f"folded in and the effects " + (f"added ({', '.join(added)})" if added else "of the base model")
-               + f" with their parameters.\nFitted on the design set ({len(loop.design)} measurements); s0 = "
+               + f" with their parameters.\nFitted on {len(res.data)} points (design and test); s0 = "
                f"{res.s0:.4g}. Read by every --arm option; format: docs/calibration.md.")
     return write_model(res, out_dir, loop_model_name(loop), inputs=inputs, written_by="aacmm close-loop",
                        comment=comment)
@@ -295,7 +301,8 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
                     f"<pre>{html.escape(table)}</pre><img src='{img}'>")
     for s in loop.stages[1:]:
         gate = loop.settings.screen_alpha / max(sum(t.identifiable for t in s.screening), 1)
-        parts = [f"<h2>Stage {s.index}: + {html.escape(s.added.name)}</h2>"]
+        found = " (found from the residual)" if s.added.origin == "residual" else ""
+        parts = [f"<h2>Stage {s.index}: + {html.escape(s.added.name)}{found}</h2>"]
         prm = effect_summary(s.result, s.added)
         parts.append(_table(("parameter", "value", "u (1 sigma)", "unit", "state"),
                             [(r["name"], _g(r["display_value"], ".5g"), _g(r["display_u"], ".2g"), r["display_unit"],
@@ -342,7 +349,7 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
     summary = summary_dict(loop, input_names)
     summary["warnings"] = [w.as_dict() for w in warnings]
     summary["model"] = {"file": model_files["model"].name, "covariance": model_files["covariance"].name,
-                        "urdf": model_files["urdf"].name, "check": model_check(loop.final.result)}
+                        "urdf": model_files["urdf"].name, "check": model_check(loop.model_fit or loop.final.result)}
     summary.update(provenance(inputs))
     written.append(atomic_write_text(out / "summary.json", json.dumps(summary, indent=1) + "\n", inputs))
     written.append(atomic_write_text(out / "before-after.txt", table + "\n", inputs))

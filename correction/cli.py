@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from arm_model import InputError, read_artefacts, read_points
-from arm_model.commands import add_arm_options, arm_from_args, non_negative, number_in, positive
+from arm_model.commands import add_arm_options, model_from_args, non_negative, number_in, positive
 from arm_model._output import output_folder
 from arm_model.checks import print_warnings
 from arm_model.io import check_features
@@ -70,12 +70,13 @@ def run_ring(args: argparse.Namespace) -> int:
     if args.signals is not None and not args.signals.is_dir():
         raise InputError("--signals must be a folder of <measurement>.csv force signals", args.signals)
     with output_folder(args.output, list(inputs.values()) + [args.signals], "ring") as out:
-        desc = arm_from_args(args)
+        arm = model_from_args(args)
+        desc = arm.desc
         points = read_points(args.points, desc.n_joints)
         artefacts = read_artefacts(args.artefacts)
         check_features(points, artefacts)
         compliance = None if args.compliance is None else args.compliance * 1e-3
-        campaign = analyse_ring_campaign(desc, points, artefacts, args.feature, args.signals, compliance)
+        campaign = analyse_ring_campaign(desc, points, artefacts, args.feature, args.signals, compliance, arm=arm)
         check_reportable(campaign, points)
         warnings = ring_warnings(desc, points, campaign)
         u_force = DEFAULT_U_FORCE if args.u_force is None else args.u_force
@@ -86,6 +87,8 @@ def run_ring(args: argparse.Namespace) -> int:
     print(f"ring '{campaign.feature}': {len(campaign.measurements)} measurements, "
           f"{sum(r.n_points for r in campaign.measurements)} points; forces from "
           f"{'signals in ' + str(args.signals) if args.signals else 'the points file'}")
+    if arm.effects:
+        print("effects applied to every ball centre: " + ", ".join(e.describe() for e in arm.effects))
     for n in campaign.notes:
         print(f"note: {n}")
     print_warnings(warnings)

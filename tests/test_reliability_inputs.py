@@ -263,7 +263,8 @@ def test_close_loop_with_one_sphere_measurement(small, tmp_path, capsys):
     pts.write_text("\n".join([lines[0]] + [ln for ln in lines[1:] if ln.split(",")[m] == first]) + "\n")
     code, _, err = run(["close-loop", pts, small / "artefacts.toml", "--arm", NOMINAL, "--quiet",
                         "-o", tmp_path / "o"], capsys)
-    assert code == 2 and "held-out set is empty" in err
+    # one measurement: the test set falls back to poses of the feature, and the fit says what is missing
+    assert code == 2 and ("held-out set is empty" in err or "not enough data" in err) and "Traceback" not in err
     assert not (tmp_path / "o").exists()
 
 
@@ -310,3 +311,29 @@ def test_joint_angles_beyond_the_limits_are_warned(tmp_path, capsys):
     code, text, _ = run(["tip", pts, "--arm", NOMINAL, "-o", tmp_path / "t.csv"], capsys)
     assert code == 0 and "beyond the arm's declared limits: j2 (1" in text and "line 3" in text
     assert len((tmp_path / "t.csv").read_text().splitlines()) == 4        # used all the same
+
+
+# ---------------------------------------------------------------------------------------------
+# written files read back, whatever the names hold
+
+@pytest.mark.parametrize("name", ['arm "quoted"', "<b>&amp;</b> -- ]]>", "tab\tand\u0001control", "ø ünï"])
+def test_hostile_names_round_trip_through_toml_and_urdf(tmp_path, name):
+    import xml.etree.ElementTree as ET
+    from dataclasses import replace
+
+    from arm_model import load_description
+    from arm_model.description import format_description, parse_description
+    from arm_model.urdf import BALL_FRAME, urdf_text
+    from arm_model.urdf_import import load_arm
+
+    desc = load_description(NOMINAL)
+    desc = replace(desc, name=name, joints=(replace(desc.joints[0], name=name + "-j1"),) + desc.joints[1:])
+    back = parse_description(format_description(desc), "x.toml")
+    assert back.name == name and back.joints[0].name == name + "-j1"
+    urdf = tmp_path / "a.urdf"
+    urdf.write_text(urdf_text(desc), encoding="utf-8")
+    root = ET.parse(urdf).getroot()                       # well-formed XML
+    printable = "".join(c if c.isprintable() else "\ufffd" for c in name)
+    assert root.get("name") == printable
+    arm = load_arm(urdf, BALL_FRAME)
+    assert arm.n_joints == 7 and arm.joints[0].name == printable + "-j1"

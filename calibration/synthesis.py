@@ -1,0 +1,116 @@
+"""Effects built from the residual's structure: when a generic structure family stays significant after the
+effect library is exhausted, the effect whose signature that family describes becomes a candidate, and the
+loop tests it exactly like a library candidate (screening, held-out folds, minimum improvement).
+
+Family (:func:`calibration.diagnostics.families`) -> candidates (:mod:`arm_model.effects`):
+
+* ``qN harmonics`` -> ``harmonics jN (h ...)``: :class:`~arm_model.effects.JointHarmonics` of joint N's own
+  angle, harmonics 1..k for k = 1..4 (those already in the model, e.g. an eccentricity's 1 and 2, left
+  out); the held-out data choose k (the smallest k within the parsimony margin of the best);
+* ``temperature`` / ``temperature per link`` -> ``thermal growth per link`` (each link length its own coefficient,
+  :class:`~arm_model.effects.ThermalGrowth` ``per_joint``; beside a common coefficient the longest link
+  keeps the common one) and ``probe thermal growth`` (:class:`~arm_model.effects.ProbeThermalGrowth`);
+* ``contact force`` / ``force magnitude`` -> ``probe compliance matrix``
+  (:class:`~arm_model.effects.ProbeComplianceMatrix`, the terms a probe compliance in the model does not
+  already hold);
+* ``approach direction`` -> ``approach offset`` (:class:`~arm_model.effects.ApproachOffset`);
+* ``jN lateral load`` -> ``lateral compliance jN`` (:class:`~arm_model.effects.LateralCompliance`).
+
+Other families (time, per measurement, per artefact, a joint's gravity or contact torque) have no effect
+here: they stay reported as unexplained.
+"""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from arm_model.effects import (ApproachOffset, EncoderEccentricity, JointHarmonics, LateralCompliance,
+                               ProbeCompliance, ProbeComplianceMatrix, ProbeThermalGrowth, ThermalGrowth)
+from arm_model.model import ArmModel
+
+from .candidates import Candidate
+
+__all__ = ["MAX_HARMONIC", "synthesise", "RESIDUAL"]
+
+#: highest harmonic of a joint angle a synthesised joint-angle error holds
+MAX_HARMONIC = 4
+#: ``Candidate.origin`` of a synthesised candidate
+RESIDUAL = "residual"
+
+
+def _own_harmonics(model: ArmModel, j: int) -> set[int]:
+    out: set[int] = set()
+    for e in model.effects:
+        if isinstance(e, EncoderEccentricity) or (isinstance(e, JointHarmonics) and e.source in (None, j)):
+            if j in e.joint_indices(model.desc):
+                out |= set(e.harmonics)
+    return out
+
+
+def _length_joints(desc) -> list[int]:
+    rows = desc.row_table()
+    return [i for i in range(desc.n_joints) if np.any(np.abs(rows[i, list(desc.length_indices)]) > 0)]
+
+
+def synthesise(family_names, model: ArmModel) -> list[Candidate]:
+    """Candidates for the significant families ``family_names`` (in their order) given the current model;
+    effects the model already holds are not offered again."""
+    desc = model.desc
+    names = {jr.name: i for i, jr in enumerate(desc.joints)}
+    held = {type(e) for e in model.effects}
+    out: list[Candidate] = []
+
+    def add(name, effect, family, joint=None):
+        if name not in {c.name for c in out}:
+            out.append(Candidate(name, effect, family, joint, origin=RESIDUAL))
+
+    for fam in family_names:
+        m = re.fullmatch(r"q(\d+) harmonics", fam)
+        if m:
+            j = int(m.group(1)) - 1
+            jn = desc.joints[j].name
+            present = _own_harmonics(model, j)
+            seen = set()
+            for k in range(1, MAX_HARMONIC + 1):
+                hs = tuple(h for h in range(1, k + 1) if h not in present)
+                if hs and hs not in seen:
+                    seen.add(hs)
+                    add(f"harmonics {jn} (h {','.join(map(str, hs))})", JointHarmonics(joints=(j,), harmonics=hs),
+                        "joint_harmonics", jn)
+        elif fam in ("temperature", "temperature per link"):
+            per_link = [e for e in model.effects if isinstance(e, ThermalGrowth) and e.per_joint]
+            if not per_link:
+                joints = _length_joints(desc)
+                if any(isinstance(e, ThermalGrowth) and not e.per_joint for e in model.effects) and joints:
+                    rows = desc.row_table()[:, list(desc.length_indices)]
+                    longest = max(joints, key=lambda i: float(np.linalg.norm(rows[i])))
+                    joints = [i for i in joints if i != longest]
+                if joints:
+                    add("thermal growth per link", ThermalGrowth(joints=tuple(joints), per_joint=True),
+                        "thermal_links")
+            if ProbeThermalGrowth not in held:
+                add("probe thermal growth", ProbeThermalGrowth(), "probe_thermal")
+        elif fam in ("contact force", "force magnitude"):
+            if ProbeComplianceMatrix in held:
+                continue
+            terms = ["xx", "yy", "zz", "xy", "xz", "yz"]
+            for e in model.effects:
+                if isinstance(e, ProbeCompliance):
+                    terms.remove("xx")
+                    if e.anisotropic:
+                        terms.remove("yy")
+                    if e.axial:
+                        terms.remove("zz")
+            add("probe compliance matrix", ProbeComplianceMatrix(terms=tuple(terms)), "probe_compliance_matrix")
+        elif fam == "approach direction":
+            if ApproachOffset not in held:
+                add("approach offset", ApproachOffset(), "approach_offset")
+        else:
+            m = re.fullmatch(r"(.+) lateral load", fam)
+            if m and m.group(1) in names:
+                j = names[m.group(1)]
+                if not any(isinstance(e, LateralCompliance) and j in e.joint_indices(desc) for e in model.effects):
+                    add(f"lateral compliance {m.group(1)}", LateralCompliance(joints=(j,)), "lateral_compliance",
+                        m.group(1))
+    return out
