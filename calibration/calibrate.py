@@ -29,13 +29,15 @@ from arm_model import InputError, NumericalError
 from arm_model.model import ArmModel
 
 from .data import CalibrationData, Weights
-from .identifiability import (DEFAULT_RANK_TOL, Combination, Identifiability, _compress, analyse, prior_scales,
+from .identifiability import (DEFAULT_RANK_TOL, Combination, Identifiability, _compress, analyse, point_noise,
+                              prior_scales,
                               reduced_jacobian, weakly_determined)
 from .problem import Problem
 from .solver import blas_threads, levenberg_marquardt, normal_solver
 
 __all__ = ["FixedParameter", "Outlier", "CalibrationResult", "calibrate", "resolve_parameters",
-           "default_free", "rigid_gauge", "display_unit", "blas_threads", "identify"]
+           "default_free", "rigid_gauge", "display_unit", "blas_threads", "identify", "variance_components",
+           "reweighted", "MIN_REDUNDANCY"]
 
 
 def display_unit(unit: str) -> tuple[str, float]:
@@ -159,6 +161,8 @@ class CalibrationResult:
     weights: Weights
     reference_mode: str = "fit"
     unused: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    variance: list = field(default_factory=list)
+    weights_history: list = field(default_factory=list)
 
     # -- access by name ----------------------------------------------------------------------------
     @property
@@ -238,7 +242,10 @@ class CalibrationResult:
             "identifiability_final": self.identifiability_final.to_dict(),
             "reference_frame": self.reference,
             "weights": {"probe_um": self.weights.probe * 1e6, "reference_um": self.weights.reference * 1e6,
-                        "length_um": None if self.weights.length is None else self.weights.length * 1e6},
+                        "length_um": None if self.weights.length is None else self.weights.length * 1e6,
+                        "factors": dict(self.weights.factors),
+                        "from_data": bool(self.weights_history)},
+            "variance_components": self.variance, "weights_history": self.weights_history,
             "outliers": [o.to_dict() for o in self.outliers], "dropped": [o.to_dict() for o in self.dropped],
             "instances": self.instances, "distances": self.distances,
             "unused_points": [int(i) for i in self.unused],
@@ -256,7 +263,8 @@ def _leverage(j: sp.csc_matrix, solve, chunk: int = 2000) -> np.ndarray:
 
 
 def identify(problem: Problem, p, states, candidates, *, stage: str = "start", rank_tol: float = DEFAULT_RANK_TOL,
-             min_resolution: float | None = 0.1, priors: dict | None = None, stop: bool = False):
+             min_resolution: float | None = 0.1, priors: dict | None = None, stop: bool = False,
+             prior_length: float | None = None):
     """Which of the ``candidates`` (indices into ``problem.model.spec``) the data identify at ``p`` and
     ``states``: ``(kept indices, [FixedParameter], Identifiability)``.
 
@@ -273,7 +281,8 @@ def identify(problem: Problem, p, states, candidates, *, stage: str = "start", r
     gauge = rigid_gauge(prob, p, kept)
     jred = reduced_jacobian(ev.jp, ev.jt)
     names = [spec.names[i] for i in kept]
-    idf = analyse(jred, ev.jp, names, rank_tol, prior_scales(model, names, priors), gauge=gauge)
+    sizes = functools.partial(prior_scales, model, priors=priors, noise=point_noise(problem), length=prior_length)
+    idf = analyse(jred, ev.jp, names, rank_tol, sizes(names), gauge=gauge)
     fixed = []
     if idf.dependent:
         if stop:
@@ -296,7 +305,7 @@ def identify(problem: Problem, p, states, candidates, *, stage: str = "start", r
     if min_resolution is not None and kept:
         names = [spec.names[i] for i in kept]
         sel = [idf.names.index(n) for n in names]
-        weak = weakly_determined(jred[:, sel], names, prior_scales(model, names, priors), min_resolution)
+        weak = weakly_determined(jred[:, sel], names, sizes(names), min_resolution)
         if weak and stop:
             raise NumericalError("parameters the data resolve to worse than "
                                  f"{min_resolution:g} of a plausible size ({stage}): "
@@ -325,8 +334,8 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
               start: dict | None = None, weights: Weights | None = None, on_unidentifiable: str = "fix",
               rank_tol: float = DEFAULT_RANK_TOL, outlier_threshold: float = 4.0, drop_outliers: bool = False,
               covariance: str = "residual", reference: str = "fit", max_iter: int = 200,
-              min_resolution: float | None = 0.1, priors: dict | None = None,
-              _depth: int = 0) -> CalibrationResult:
+              min_resolution: float | None = 0.1, priors: dict | None = None, prior_length: float | None = None,
+              weights_from_data: bool = False, _depth: int = 0) -> CalibrationResult:
     """Identify the parameters ``free`` of ``model`` from ``data``.
 
     Args:
@@ -352,6 +361,14 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
         priors: plausible error sizes [SI] by parameter name or glob pattern (overrides). They also
             choose which of two equivalent parameters is kept: the one whose plausible error moves
             the data more.
+        prior_length: plausible size [m] of a length error (angles: 10 rad/m times it); default the
+            larger of 1 mm and ten times the noise of one point (stated, or estimated with
+            ``weights_from_data``): a robot's lengths are not held for being resolved to a few tenths
+            of a millimetre.
+        weights_from_data: take ``weights`` as starting values only: estimate the noise of each row
+            group (every point kind, the reference points, the lengths) from the fit's residuals and
+            redundancy (variance components, :func:`variance_components`), re-weight and refit until the
+            factors settle (``weights_history`` lists the rounds).
         blas: BLAS threads during the fit (default 1, see :func:`blas_threads`; None: unchanged).
 
     Raises:
@@ -362,6 +379,14 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
     if covariance not in ("residual", "stated"):
         raise ValueError(f"covariance must be 'residual' or 'stated', got {covariance!r}")
     weights = weights or Weights()
+    if weights_from_data:
+        def once(w, st):
+            return calibrate(model, data, free, values=values, start={**(start or {}), **st}, weights=w,
+                             on_unidentifiable=on_unidentifiable, rank_tol=rank_tol,
+                             outlier_threshold=outlier_threshold, drop_outliers=drop_outliers, covariance=covariance,
+                             reference=reference, max_iter=max_iter, min_resolution=min_resolution, priors=priors,
+                             prior_length=prior_length)
+        return reweighted(once, weights)
     spec = model.spec
     cand = resolve_parameters(spec, default_free(model) if free is None else free)
     p0 = spec.vector(values or {})
@@ -376,7 +401,8 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
     def check(p, states, stage) -> Identifiability:
         nonlocal kept
         kept, new, idf = identify(problem, p, states, kept, stage=stage, rank_tol=rank_tol,
-                                  min_resolution=min_resolution, priors=priors, stop=on_unidentifiable == "stop")
+                                  min_resolution=min_resolution, priors=priors, stop=on_unidentifiable == "stop",
+                                  prior_length=prior_length)
         fixed.extend(new)
         return idf
 
@@ -420,6 +446,7 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
     js = (j @ sp.diags(1.0 / jscale)).tocsc()
     solve = normal_solver(js)
     h = _leverage(js, solve)
+    variance = variance_components(prob, ev.r, h, weights)
     zraw = ev.r / np.sqrt(1.0 - h)
     s_rob = 1.4826 * float(np.median(np.abs(zraw))) or 1.0
     z = zraw / s_rob
@@ -461,7 +488,8 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
         res = calibrate(model, data.select(keep), free, values=values, start=start, weights=weights,
                         on_unidentifiable=on_unidentifiable, rank_tol=rank_tol, outlier_threshold=outlier_threshold,
                         drop_outliers=True, covariance=covariance, reference=reference, max_iter=max_iter,
-                        min_resolution=min_resolution, priors=priors, _depth=_depth + 1)
+                        min_resolution=min_resolution, priors=priors, prior_length=prior_length,
+                        _depth=_depth + 1)
         kept_index = np.flatnonzero(np.isin(np.arange(len(data)), keep))
         # report the dropped points with indices into the data given at this level
         res.dropped = [o for o in drop] + [replace(o, point=int(kept_index[o.point])) for o in res.dropped]
@@ -507,7 +535,77 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
         covariance_source=source, status=sol.status, iterations=sol.iterations, evaluations=sol.evaluations,
         cost=sol.cost, n_residuals=n_rows, n_nuisance=n_nuis, dof=dof, identifiability=idf0,
         identifiability_final=idf1, residuals=table, instances=instances, distances=distances, reference=ref,
-        outliers=outliers, dropped=[], data=data, weights=weights, reference_mode=reference, unused=prob.unused)
+        outliers=outliers, dropped=[], data=data, weights=weights, reference_mode=reference, unused=prob.unused,
+        variance=variance)
+
+
+#: fewest redundant rows (rows minus their share of the unknowns) for a group's noise to be estimated
+MIN_REDUNDANCY = 5.0
+#: rows whose residual exceeds this many robust standard deviations of their group (1.4826 times the median
+#: of ``|r| / sqrt(1 - h)``) are gross errors: left out of the group's noise estimate
+OUTLIER_ROWS = 4.0
+
+
+def variance_components(problem: Problem, r: np.ndarray, leverage: np.ndarray, weights: Weights) -> list[dict]:
+    """The noise of each row group estimated from a fit (Helmert / Foerstner): for a group g with weighted
+    residuals ``r_g`` and redundancy ``red_g = sum(1 - h_i)`` over its rows (``h`` the leverage: the share
+    of each row that the unknowns absorb), ``factor_g = sqrt(|r_g|^2 / red_g)`` estimates by how much its
+    stated uncertainty must be multiplied. Rows beyond :data:`OUTLIER_ROWS` robust standard deviations of
+    their group are left out (a gross error would inflate the estimate). Groups with less than
+    :data:`MIN_REDUNDANCY` redundant rows are not estimated (``estimated`` False, factor 1).
+
+    Returns one dict a group: ``group``, ``rows``, ``redundancy``, ``factor``, ``estimated``, and
+    ``sigma_um`` (the current uncertainty of a point of the group, per axis, factor applied) and
+    ``estimate_um`` (times ``factor``) for point groups.
+    """
+    rows: dict[str, list] = {}
+    for g in problem.groups:
+        rows.setdefault(g["kind"], []).append(np.arange(g["row0"], g["row0"] + g["rows"] * len(g["points"])))
+    if problem.n_rows > problem.n_point_rows:
+        rows["length"] = [np.arange(problem.n_point_rows, problem.n_rows)]
+    out = []
+    for name, parts in rows.items():
+        idx = np.concatenate(parts)
+        z = np.abs(r[idx]) / np.sqrt(1.0 - leverage[idx])
+        s_rob = 1.4826 * float(np.median(z))
+        gross = z > OUTLIER_ROWS * s_rob if s_rob > 0 else np.zeros(len(idx), bool)
+        idx = idx[~gross]
+        red = float(np.sum(1.0 - leverage[idx]))
+        ok = red >= MIN_REDUNDANCY
+        factor = math.sqrt(float(r[idx] @ r[idx]) / red) if ok else 1.0
+        sig = weights.sigma_of(name)
+        out.append({"group": name, "rows": int(len(idx)), "redundancy": red, "factor": factor, "estimated": ok,
+                    "gross_rows_left_out": int(gross.sum()),
+                    "sigma_um": None if sig is None else sig * 1e6,
+                    "estimate_um": None if sig is None else sig * factor * 1e6})
+    return out
+
+
+def reweighted(fit, weights: Weights, tol: float = 0.03, rounds: int = 12) -> CalibrationResult:
+    """Iterated variance-component estimation: ``fit(weights, start)`` (start: the free parameters' values
+    of the previous round) with every group's factor updated from the fit, until all change by less than
+    ``tol``. From the fifth round on the updates are damped (square root of the factor), since a parameter
+    held or freed by the practical-resolution rule can make the estimates alternate. The result carries
+    ``weights_history`` (factors and s0 of each round; the last entry says whether they settled)."""
+    history, st = [], {}
+    for k in range(rounds):
+        res = fit(weights, st)
+        est = {v["group"]: v["factor"] for v in res.variance if v["estimated"]}
+        history.append({"round": k + 1, "factors": dict(weights.factors), "s0": res.s0})
+        if all(abs(f - 1.0) <= tol for f in est.values()):
+            history[-1]["settled"] = True
+            break
+        if k >= 4:
+            est = {g: math.sqrt(f) for g, f in est.items()}
+        weights = weights.scaled(est)
+        st = {n: res.value(n) for n in res.free}
+    else:
+        history[-1]["settled"] = False
+        history[-1]["note"] = (f"the noise estimates did not settle in {rounds} rounds (last residual/stated "
+                               f"ratios {', '.join(f'{g} {f:.3g}' for g, f in est.items())}); the last round's "
+                               "weights are used")
+    res.weights_history = history
+    return res
 
 
 def _scale(jp: np.ndarray) -> np.ndarray:

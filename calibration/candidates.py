@@ -7,7 +7,8 @@ model (``ArmModel.with_effects``). The library gives, per arm and data:
 * ``eccentricity jN``: encoder eccentricity of joint N, harmonics 1 and 2 (4 parameters);
 * ``joint compliance jN``: joint N turns by ``c (tau_contact - tau_gravity)`` (1 parameter); offered
   only where the joint's gravity or contact torque is not zero throughout the data (none at all for an
-  arm without masses measured without force: one "joint compliance" entry says so);
+  arm without masses measured without force: one "joint compliance" entry says so); and
+  ``joint compliance (every loaded joint)``: one such parameter for each of those joints at once;
 * ``thermal growth``: one expansion coefficient of every link length; offered only when the
   temperature column varies by at least :data:`MIN_TEMPERATURE_SPAN`;
 * ``force sensor x|y|z``: gain and offset of one sensor axis; only with force data on that axis
@@ -146,6 +147,7 @@ def library_candidates(desc: ArmDescription, data: CalibrationData, families=Non
         skipped.append(Skipped("joint compliance", no_torque_reason(desc, data)))
     elif "joint_compliance" in families:
         tau_g, tau_c = torques_of(desc, data)
+        loaded = []
         for i, n in enumerate(names):
             g = np.max(np.abs(tau_g[:, i]), initial=0.0)
             c = np.max(np.abs(tau_c[:, i]), initial=0.0)
@@ -155,6 +157,12 @@ def library_candidates(desc: ArmDescription, data: CalibrationData, families=Non
                 continue
             out.append(Candidate(f"joint compliance {n}", JointCompliance(joints=(i,), gravity=True, contact=True),
                                  "joint_compliance", n))
+            loaded.append(i)
+        if len(loaded) > 1:
+            # every loaded joint at once: under gravity the joints deflect together, and one joint's share of
+            # the signature may be too small to pass alone when the sum is plain
+            out.append(Candidate("joint compliance (every loaded joint)",
+                                 JointCompliance(joints=tuple(loaded), gravity=True, contact=True), "joint_compliance"))
     if "thermal" in families:
         t = pts.temperature
         if t is None or not np.all(np.isfinite(t)):

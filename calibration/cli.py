@@ -33,7 +33,10 @@ def _holdout(text: str | None):
     try:
         v = float(text)
     except ValueError:
-        return [t.strip() for t in text.split(",") if t.strip()]
+        ids = [t.strip() for t in text.split(",") if t.strip()]
+        if not ids:
+            raise InputError(f"--holdout names no measurement (got {text!r}): give measurement ids or a fraction")
+        return ids
     if not 0.0 < v < 1.0:
         raise InputError(f"--holdout fraction must be in (0, 1), got {text}")
     return v
@@ -41,8 +44,8 @@ def _holdout(text: str | None):
 
 def campaign_inputs(p) -> None:
     """Points, artefacts, arm, reference points and output folder (shared with ``aacmm close-loop``)."""
-    p.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
-    p.add_argument("artefacts", type=Path, help="artefacts TOML (DATA-FORMATS §4)")
+    p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3)")
+    p.add_argument("artefacts", type=Path, help="artefacts TOML (docs/formats.md §4)")
     add_arm_options(p, "nominal arm: description TOML or URDF (with --tip-frame)")
     p.add_argument("--reference-points", type=Path, default=None,
                    help="a second points CSV with reference coordinates (x_ref_mm ...), e.g. tracker nests")
@@ -58,6 +61,15 @@ def sigma_options(p) -> None:
     p.add_argument("--sigma-length-um", type=positive(), default=None,
                    help="standard uncertainty of a certified length without u_length_mm [um] "
                         "(default: --sigma-probe-um)")
+    p.add_argument("--weights", choices=("data", "stated"), default="data",
+                   help="data (default): the sigmas above are starting values; the noise of each group of rows "
+                        "(points per artefact kind, reference points, lengths) is estimated from the fit's residuals "
+                        "(variance components), the rows re-weighted and the fit repeated until it settles; "
+                        "stated: use the sigmas as given")
+    p.add_argument("--plausible-length-mm", type=positive(), default=None,
+                   help="plausible size of a length error [mm] (angles: 0.01 rad per mm of it), for the rule that "
+                        "holds parameters the data resolve to worse than --min-resolution of it; default the larger "
+                        "of 1 mm and ten times the noise of one point (so a robot's lengths are not held)")
 
 
 def _common_fit_options(p) -> None:
@@ -76,8 +88,9 @@ def _common_fit_options(p) -> None:
                         "identifiable (default 1e-4)")
     p.add_argument("--min-resolution", type=non_negative(), default=0.1, metavar="FRACTION",
                    help="hold parameters the data would resolve only to worse than this fraction of a plausible "
-                        "error size (1 mm, 0.01 rad, 10x the nominal compliance ...): their effect is below the "
-                        "noise (default 0.1; 0 keeps every linearly independent parameter)")
+                        "error size (lengths: --plausible-length-mm; angles 0.01 rad per mm of it; 10x the nominal "
+                        "compliance ...): their effect is below the noise (default 0.1; 0 keeps every linearly "
+                        "independent parameter)")
 
 
 def register(sub) -> None:
@@ -90,7 +103,8 @@ def register(sub) -> None:
                     "(held fixed and listed, or the fit stops), uncertainties and correlations, outliers "
                     "(kept unless --drop-outliers), and validation figures (ASME B89.4.22 / ISO 10360-12 terms) "
                     "nominal vs calibrated on the training data and on held-out measurements. Writes a NEW "
-                    "calibrated description (TOML and URDF), summary.json, CSV tables and report.html.",
+                    "calibrated model file (the description with every effect and its parameters, TOML, read by every "
+                    "--arm), its covariance (CSV) and URDF, summary.json, CSV tables and report.html.",
         epilog="Parameter names: docs/calibration.md. Example: aacmm calibrate points.csv artefacts.toml "
                "--arm urdf/aacmm7.dh.toml --reference-points points-ref.csv --holdout 0.2 -o out/cal")
     campaign_inputs(c)
@@ -160,6 +174,10 @@ def _weights(args):
 
 def _fit_kwargs(args) -> dict:
     kw = {"min_resolution": args.min_resolution or None}
+    if getattr(args, "plausible_length_mm", None) is not None:
+        kw["prior_length"] = args.plausible_length_mm * 1e-3
+    if getattr(args, "weights", "stated") == "data":
+        kw["weights_from_data"] = True
     if args.rank_tol is not None:
         kw["rank_tol"] = args.rank_tol
     return kw
@@ -208,6 +226,7 @@ def _load_data(args):
 def run_calibrate(args: argparse.Namespace) -> int:
     from .calibrate import calibrate
     from .data import split_holdout
+    from .model_output import refine_torques
     from .report import poorly_determined, write_outputs
     inputs = [args.points, args.artefacts, args.arm, args.reference_points]
     with output_folder(args.output, inputs, "calibrate") as out:
@@ -223,6 +242,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
         res = calibrate(model, train, _free(model, args), values=values, weights=_weights(args),
                         on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
                         drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference, **kw)
+        res = refine_torques(res, covariance=args.covariance, outlier_threshold=args.outlier_threshold,
+                             **{k: v for k, v in kw.items() if k == "rank_tol"})
         val_train = res.compare(res.data)
         val_test = res.compare(test) if test is not None else None
         files = write_outputs(res, out.dir, inputs=inputs, validation_training=val_train,
@@ -239,6 +260,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
     if data.points.force_kind == "two-channel":
         print("two-channel force sensor: the probe-y force is not measured and is taken as zero")
     print_warnings(warnings)
+    for line in noise_lines(res):
+        print(line)
     print(f"solver: {res.status} after {res.iterations} iterations; s0 = {res.s0:.3f}; "
           f"{len(res.free)} parameters free, {res.n_nuisance} nuisance unknowns, dof {res.dof}")
     idf = res.identifiability_final
@@ -256,8 +279,34 @@ def run_calibrate(args: argparse.Namespace) -> int:
             print(f"validation on {title} data (nominal -> calibrated):")
             for r in rows:
                 print(f"  {r['label']}: {r['before']:.2f} -> {r['after']:.2f} {r['unit']} ({r['ratio']:.1f}x)")
-    print(f"calibrated description -> {files['description']}; report -> {files['report']}")
+    print(f"model file -> {files['description']} (covariance {files['covariance'].name}); "
+          f"report -> {files['report']}")
     return 0
+
+
+def noise_lines(res) -> list[str]:
+    """Console lines: the noise of each row group, estimated from the fit, and the weights used."""
+    out = []
+    if res.weights_history:
+        out.append(f"noise from the data (variance components, {len(res.weights_history)} fit(s)):")
+        if not res.weights_history[-1].get("settled", True):
+            out.append("  warning: " + res.weights_history[-1]["note"])
+    for v in res.variance:
+        what = f"{v['group']} points" if v["group"] != "length" else "lengths"
+        used = res.weights.factor(v["group"])
+        if v["group"] == "length":
+            size = f"x{used:.3g} the certified/stated uncertainties"
+        else:
+            size = f"{v['sigma_um']:.3g} um per axis (stated {v['sigma_um'] / used:.3g} um)"
+        if not v["estimated"]:
+            out.append(f"  {what}: {size}; not estimated (redundancy {v['redundancy']:.2g} of {v['rows']} rows, "
+                       f"too little)")
+        elif res.weights_history:
+            out.append(f"  {what}: {size}; redundancy {v['redundancy']:.1f} of {v['rows']} rows")
+        else:
+            out.append(f"  {what}: residual/stated ratio {v['factor']:.3g} (redundancy {v['redundancy']:.1f} of "
+                       f"{v['rows']} rows); --weights data would use it")
+    return out
 
 
 def run_montecarlo(args: argparse.Namespace) -> int:
@@ -306,8 +355,10 @@ def run_poses(args: argparse.Namespace) -> int:
         n = len(data.measurements())
         if args.count > n:
             raise InputError(f"--count {args.count}: the points file has {n} measurement(s)", args.points)
+        fit = _fit_kwargs(args)
+        fit.pop("weights_from_data", None)            # the choice is made at the nominal, before any fit
         sel = select_measurements(model, data, args.count, _free(model, args), weights=_weights(args),
-                                  progress=not args.quiet, fit=_fit_kwargs(args))
+                                  progress=not args.quiet, fit=fit)
         (out.dir / "poses.json").write_text(json.dumps(sel.to_dict(), indent=1) + "\n", encoding="utf-8")
     print_warnings(warnings)
     print(f"{len(sel.parameters)} identifiable parameters; chosen measurements (O1, random sets' O1):")

@@ -23,16 +23,41 @@ class Weights:
             (a tracker nest) ties the seat's centre to the instrument (weight ``reference``); on a free
             point it ties the ball centre (weight ``hypot(probe, reference)``).
         length: of a certified length whose artefact gives no ``u_length_mm`` [m] (None: ``probe``).
+        factors: ``((group, factor), ...)``: every row of a group (a point kind: "seat", "sphere", "ring",
+            "cylinder", "plane", "reference"; or "length") has its uncertainty multiplied by the factor
+            (the variance components estimated from a fit, :func:`calibration.calibrate.calibrate`).
     """
     probe: float = 10e-6
     reference: float = 10e-6
     length: float | None = None
+    factors: tuple = ()
 
     def __post_init__(self):
         for name in ("probe", "reference", "length"):
             v = getattr(self, name)
             if v is not None and (not np.isfinite(v) or v <= 0):
                 raise ValueError(f"weight {name} must be a finite positive uncertainty [m], got {v!r}")
+        object.__setattr__(self, "factors", tuple(sorted((str(g), float(f)) for g, f in dict(self.factors).items())))
+        for g, f in self.factors:
+            if not np.isfinite(f) or f <= 0:
+                raise ValueError(f"weight factor of '{g}' must be finite and positive, got {f!r}")
+
+    def factor(self, group: str) -> float:
+        """The factor of a row group (1 if not estimated)."""
+        return dict(self.factors).get(group, 1.0)
+
+    def scaled(self, factors: dict) -> "Weights":
+        """These weights with the group factors multiplied by ``factors``."""
+        new = dict(self.factors)
+        for g, f in factors.items():
+            new[g] = new.get(g, 1.0) * float(f)
+        return Weights(self.probe, self.reference, self.length, tuple(new.items()))
+
+    def sigma_of(self, group: str) -> float | None:
+        """The uncertainty [m] of a point of a group, factor applied (None for "length": per artefact)."""
+        if group == "length":
+            return None
+        return (self.reference if group == "reference" else self.probe) * self.factor(group)
 
     @property
     def reference_sigma(self) -> float:
@@ -113,8 +138,6 @@ def merge_points(*sets: PointSet) -> tuple[PointSet, np.ndarray]:
         return np.concatenate(parts)
 
     kinds = {s.force_kind for s in sets if s.force_kind is not None}
-    common_extra = set.intersection(*(set(s.extra) for s in sets))
-    common_text = set.intersection(*(set(s.text) for s in sets))
     merged = PointSet(
         path=sets[0].path, measurement=np.concatenate([s.measurement for s in sets]),
         feature=np.concatenate([s.feature for s in sets]), q=np.vstack([s.q for s in sets]),
@@ -122,9 +145,7 @@ def merge_points(*sets: PointSet) -> tuple[PointSet, np.ndarray]:
         force_kind=None if not kinds else (kinds.pop() if len(kinds) == 1 else "mixed"),
         temperature=stack("temperature", (), np.nan), time=stack("time", (), np.nan),
         ref=stack("ref", (3,), np.nan),
-        lines=np.concatenate([s.lines if s.lines is not None else np.arange(1, len(s) + 1) for s in sets]),
-        extra={k: np.concatenate([s.extra[k] for s in sets]) for k in common_extra},
-        text={k: np.concatenate([s.text[k] for s in sets]) for k in common_text})
+        lines=np.concatenate([s.lines if s.lines is not None else np.arange(1, len(s) + 1) for s in sets]))
     files = np.concatenate([np.full(len(s), s.path, dtype=object) for s in sets])
     return merged, files
 
@@ -206,10 +227,65 @@ def split_holdout(data: CalibrationData, holdout, seed: int = 0) -> tuple[Calibr
             raise InputError(f"held-out measurement(s) not in the points file: {', '.join(sorted(unknown))}",
                              data.points.path, None, "measurement")
     if not held:
-        raise InputError(f"the held-out set is empty: {len(ids)} measurement(s) are too few to hold out a "
-                         f"fraction {holdout:g} of them" if isinstance(holdout, float) else
-                         "the held-out set is empty")
+        raise InputError(f"the held-out set is empty ({len(ids)} measurement(s): "
+                         f"{', '.join(ids[:6])}{' ...' if len(ids) > 6 else ''}); name the measurements to hold out "
+                         "(--holdout ID,ID) or give more measurements", data.points.path, None, "measurement")
     if held == set(ids):
-        raise InputError("every measurement is held out: nothing left to calibrate on")
+        raise InputError("every measurement is held out: nothing left to calibrate on", data.points.path, None,
+                         "measurement")
     mask = np.array([m in held for m in data.points.measurement], bool)
     return data.select(~mask), data.select(mask)
+
+
+def concat(a: CalibrationData, b: CalibrationData) -> CalibrationData:
+    """``a``'s rows then ``b``'s (same artefacts), files and aux inputs kept."""
+    pts, _ = merge_points(a.points, b.points)
+    files = np.concatenate([a.files if a.files is not None else np.full(len(a), a.points.path, dtype=object),
+                            b.files if b.files is not None else np.full(len(b), b.points.path, dtype=object)])
+    aux = None
+    if a.aux is not None or b.aux is not None:
+        def join(name, width):
+            va = None if a.aux is None else getattr(a.aux, name)
+            vb = None if b.aux is None else getattr(b.aux, name)
+            if va is None and vb is None:
+                return None
+            if va is None or vb is None:
+                raise ValueError(f"aux input '{name}' is given for one part only")
+            return np.concatenate([va, vb])
+        aux = AuxData(join("temperature", ()), join("tau_gravity", None), join("tau_contact", None))
+    return CalibrationData(pts, a.artefacts, aux, files)
+
+
+def split_poses(data: CalibrationData, fraction: float, seed: int = 0, keep=None) -> np.ndarray:
+    """Held-out mask (N,) of a share ``fraction`` of the poses (points) of every artefact instance (a
+    feature within a measurement; the reference points as one instance), drawn at random (seeded). An
+    instance keeps at least ``keep[kind]`` points (default the fewest its fit needs, plus one) outside the
+    mask, so that its centre (axis, plane) can still be fitted on the rest; smaller instances are never held.
+    """
+    from .problem import MIN_POINTS
+    if not 0.0 < fraction < 1.0:
+        raise ValueError(f"the held-out share of poses must be in (0, 1), got {fraction}")
+    keep = keep or {k: v[0] + 1 for k, v in MIN_POINTS.items()}
+    rng = np.random.default_rng(seed)
+    out = np.zeros(len(data), bool)
+    for kind, rows in pose_groups(data):
+        n = len(rows)
+        k = min(int(round(fraction * n)), n - keep.get(kind, 1))
+        if k >= 1:
+            out[rng.choice(rows, size=k, replace=False)] = True
+    return out
+
+
+def pose_groups(data: CalibrationData) -> list[tuple[str, np.ndarray]]:
+    """``(kind, point indices)`` of every artefact instance (a feature within a measurement) and of the
+    reference points (one group, kind "reference"), in file order; unused points are in none."""
+    pts, arte = data.points, data.artefacts
+    ref = np.all(np.isfinite(pts.ref), axis=1) if pts.ref is not None else np.zeros(len(pts), bool)
+    groups: dict[tuple, list[int]] = {}
+    for i in range(len(pts)):
+        f = pts.feature[i]
+        kind = arte.features[f].kind if f else ("reference" if ref[i] else None)
+        if kind is not None:
+            key = ("*", "", "reference") if kind == "reference" else (pts.measurement[i], f, kind)
+            groups.setdefault(key, []).append(i)
+    return [(key[2], np.array(rows)) for key, rows in groups.items()]

@@ -41,12 +41,12 @@ from arm_model.params import split_params
 from .calibrate import CalibrationResult
 from .candidates import Candidate, torques_of
 from .data import CalibrationData
-from .identifiability import DEFAULT_RANK_TOL, prior_scales, reduced_jacobian, weakly_determined
+from .identifiability import DEFAULT_RANK_TOL, point_noise, prior_scales, reduced_jacobian, weakly_determined
 from .problem import Problem
 from .solver import levenberg_marquardt
 from .synth import probe_rotation
 
-__all__ = ["JointAngleOffset", "measurement_folds", "ResidualSpace", "residual_space", "GroupTest",
+__all__ = ["JointAngleOffset", "measurement_folds", "pose_folds", "ResidualSpace", "residual_space", "GroupTest",
            "Family", "families", "candidate_family", "test_group", "screen_candidates", "structure_tests",
            "remaining_structure",
            "binned_estimates", "holm"]
@@ -100,6 +100,30 @@ def measurement_folds(data: CalibrationData, k: int, seed: int = 0) -> dict[str,
         for i, m in enumerate(members):
             out[m] = (start + i) % k
         start += len(members)
+    return out
+
+
+def pose_folds(data: CalibrationData, k: int, seed: int = 0) -> np.ndarray:
+    """Fold (0..k-1) of every point, -1 for points never held out: inside each artefact instance (a
+    feature within a measurement; the reference points as one) the poses are shuffled (seeded) and dealt
+    to the folds in turn, so that a held-out pose is predicted against the instance's centre (axis,
+    plane, ``T_ref_base``) fitted on the instance's other poses. An instance whose training part would
+    have fewer points than its fit needs is never held out."""
+    from .problem import MIN_POINTS
+    from .data import pose_groups
+    if k < 2:
+        raise ValueError(f"cross-validation needs at least 2 folds, got {k}")
+    rng = np.random.default_rng(seed)
+    out = np.full(len(data), -1)
+    start = 0
+    for kind, rows in pose_groups(data):
+        n = len(rows)
+        if n - math.ceil(n / k) < MIN_POINTS[kind][0] or n < 2:
+            continue
+        rows = rows.copy()
+        rng.shuffle(rows)
+        out[rows] = (start + np.arange(n)) % k
+        start += n
     return out
 
 
@@ -374,8 +398,13 @@ def _explained_cv(u: np.ndarray, r: np.ndarray, fold_of_row: np.ndarray) -> floa
     return 1.0 - sse / sst if sst > 0 else float("nan")
 
 
-def row_folds(space: ResidualSpace, folds: dict[str, int]) -> np.ndarray:
-    return np.array([folds.get(m, -1) for m in space.row_measurement])
+def row_folds(space: ResidualSpace, folds) -> np.ndarray:
+    """Fold of each residual row: ``folds`` by measurement id (dict) or by point (array, -1 never held;
+    length rows are never held then)."""
+    if isinstance(folds, dict):
+        return np.array([folds.get(m, -1) for m in space.row_measurement])
+    f = np.asarray(folds)
+    return np.where(space.row_point >= 0, f[np.maximum(space.row_point, 0)], -1)
 
 
 def holm(p_values) -> np.ndarray:
@@ -413,7 +442,7 @@ def _batches(desc, base_names, candidates) -> list[list[int]]:
     return [m for _, m in batches]
 
 
-def screen_candidates(result: CalibrationResult, candidates, folds: dict[str, int] | None = None,
+def screen_candidates(result: CalibrationResult, candidates, folds: "dict[str, int] | np.ndarray | None" = None,
                       rank_tol: float = DEFAULT_RANK_TOL) -> tuple[list[GroupTest], ResidualSpace]:
     """Score test of every candidate at the fit ``result`` (one :class:`GroupTest` each, in the order
     of ``candidates``) and the residual space (of the first batch) for further tests."""
@@ -423,12 +452,13 @@ def screen_candidates(result: CalibrationResult, candidates, folds: dict[str, in
     for members in _batches(desc, set(result.model.spec.names), candidates):
         space = residual_space(result, [candidates[i].effect for i in members])
         first = first or space
-        fr = row_folds(space, folds) if folds else None
+        fr = row_folds(space, folds) if folds is not None and len(folds) else None
         for i, sl in zip(members, space.extra_slices):
             c = candidates[i]
             names = c.param_names(desc)
             tests[i] = test_group(space, space.jp[:, sl], names, c.name, fr, rank_tol=rank_tol,
-                                  prior=prior_scales(space.model, names), min_resolution=SCREEN_RESOLUTION)
+                                  prior=prior_scales(space.model, names, noise=point_noise(space.problem)),
+                                  min_resolution=SCREEN_RESOLUTION)
     if first is None:
         first = residual_space(result)
     return tests, first
@@ -605,10 +635,10 @@ def families(space: ResidualSpace) -> list[Family]:
     return out
 
 
-def structure_tests(space: ResidualSpace, folds: dict[str, int] | None,
+def structure_tests(space: ResidualSpace, folds: "dict[str, int] | np.ndarray | None",
                     rank_tol: float = DEFAULT_RANK_TOL) -> list[tuple[Family, GroupTest]]:
     """Every generic family tested against the residual of ``space``; sorted by p-value."""
-    fr = row_folds(space, folds) if folds else None
+    fr = row_folds(space, folds) if folds is not None and len(folds) else None
     out = []
     for fam in families(space):
         cols, names = fam.columns(space)
@@ -619,14 +649,14 @@ def structure_tests(space: ResidualSpace, folds: dict[str, int] | None,
     return out
 
 
-def remaining_structure(space: ResidualSpace, folds: dict[str, int] | None, alpha: float,
+def remaining_structure(space: ResidualSpace, folds: "dict[str, int] | np.ndarray | None", alpha: float,
                         rank_tol: float = DEFAULT_RANK_TOL, most: int = 5) -> list[tuple[Family, GroupTest]]:
     """Forward selection of the structure families that the residual still holds: the most significant
     family is kept if its p-value passes ``alpha`` after Bonferroni over the families tested and its
     held-out explained variance is positive (groups families: not predictable, p-value only); then every
     other family is tested again *given* the ones kept (their columns fitted first), so a family that only
     shadows a kept one drops out. Returns the kept families with their conditional tests."""
-    fr = row_folds(space, folds) if folds else None
+    fr = row_folds(space, folds) if folds is not None and len(folds) else None
     fams = families(space)
     kept: list[tuple[Family, GroupTest]] = []
     cur = space

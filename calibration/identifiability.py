@@ -21,7 +21,8 @@ import scipy.sparse as sp
 
 from .solver import normal_solver
 
-__all__ = ["Combination", "Identifiability", "reduced_jacobian", "analyse", "DEFAULT_RANK_TOL"]
+__all__ = ["Combination", "Identifiability", "reduced_jacobian", "analyse", "DEFAULT_RANK_TOL", "prior_scales",
+           "point_noise", "weakly_determined", "NOISE_MULTIPLE"]
 
 #: relative singular value below which a direction counts as not identifiable
 DEFAULT_RANK_TOL = 1e-4
@@ -187,13 +188,32 @@ def analyse(jred: np.ndarray, jp: np.ndarray, names, rank_tol: float = DEFAULT_R
 PRIOR_SCALES = {"m": 1e-3, "rad": 1e-2, "1": 0.1, "N": 1.0, "N m": 0.1, "rad/(N m)": 1e-4, "1/K": 1e-4}
 
 
-def prior_scales(model, names, priors: dict | None = None) -> np.ndarray:
+#: plausible size of a length error in units of the noise of one point: with a robot's scatter (tenths of a
+#: millimetre) the plausible errors of its lengths are larger than a measuring arm's
+NOISE_MULTIPLE = 10.0
+
+
+def point_noise(problem) -> float | None:
+    """The largest standard uncertainty [m] of a point of ``problem`` (stated, times the group's factor)."""
+    sig = [problem.weights.sigma_of(g["kind"]) for g in problem.groups]
+    sig = [v for v in sig if v is not None]
+    return max(sig) if sig else None
+
+
+def prior_scales(model, names, priors: dict | None = None, noise: float | None = None,
+                 length: float | None = None) -> np.ndarray:
     """Plausible error size [SI] of each parameter: ``priors`` (names or glob patterns -> value) first,
     then :data:`PRIOR_SCALES` by unit; a compliance [m/N] gets 10 times the description's compliance
-    along its axis (``*_z``: axial, else bending), at least 1e-8 m/N."""
+    along its axis (``*_z``: axial, else bending), at least 1e-8 m/N.
+
+    Lengths [m] and angles [rad] scale together: a length error's plausible size is ``length`` if given,
+    else the larger of 1 mm and :data:`NOISE_MULTIPLE` times ``noise`` (the standard uncertainty of one
+    point, [m]); an angle's is 0.01 rad times the same factor."""
     import fnmatch
     spec = model.spec
     probe = model.desc.probe
+    lsize = length if length is not None else max(PRIOR_SCALES["m"], NOISE_MULTIPLE * (noise or 0.0))
+    factor = lsize / PRIOR_SCALES["m"]
     out = []
     for n in names:
         hit = [v for pat, v in (priors or {}).items() if fnmatch.fnmatchcase(n, pat)]
@@ -204,6 +224,8 @@ def prior_scales(model, names, priors: dict | None = None) -> np.ndarray:
             c = probe.axial_compliance if n.endswith("_z") else max(probe.bending_compliance_x,
                                                                     probe.bending_compliance_y)
             out.append(max(10.0 * c, 1e-8))
+        elif unit in ("m", "rad"):
+            out.append(PRIOR_SCALES[unit] * factor)
         else:
             out.append(PRIOR_SCALES.get(unit, 1.0))
     return np.array(out)

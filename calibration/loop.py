@@ -2,17 +2,22 @@
 
 :func:`close_loop` runs, on points and artefacts of any campaign:
 
-1. An outer **test set** of whole measurements (``test_fraction``, seeded, stratified by feature kind)
-   is put aside; it takes part in no decision and gives the before/after figures of the report.
+1. An outer **test set** is put aside: the measurements ``holdout`` or a share ``test_fraction`` of them
+   (seeded, stratified by feature kind), or, with too few measurements, that share of every feature's
+   poses (each predicted against its feature's centre fitted on the design poses). It takes part in no
+   decision and gives the before/after figures of the report.
 2. The base model is calibrated on the rest (the **design set**).
 3. **Screening** (:func:`calibration.diagnostics.screen_candidates`): the score test of every candidate
    effect at the current fit. It only filters: candidates whose p-value is below
    ``screen_alpha / (number of identifiable candidates)`` (Bonferroni), at most ``cv_top`` of them, go on.
-4. **Decision on held-out data**: K-fold cross-validation by measurement on the design set. In each fold
-   the current model and the model plus the candidate are calibrated on the other folds and predict the
-   fold's measurements, whose nuisance unknowns (centres, axes, planes, ``T_ref_base``) are solved on the
-   held-out points only. Per held-out measurement, the mean squared weighted residual of the two models
-   is compared by a one-sided Wilcoxon signed-rank test; a candidate passes with ``p < alpha / (number of
+4. **Decision on held-out data**: K-fold cross-validation on the design set, by measurement or, when the
+   measurements are too few for the test to reach its level (``fold_by="auto"``), by pose inside each
+   feature. In each fold the current model and the model plus the candidate are calibrated on the other
+   folds and predict the fold's units: whole measurements, whose nuisance unknowns (centres, axes, planes,
+   ``T_ref_base``) are solved on the held-out points only, or poses, predicted against their feature's
+   centre fitted on its other poses. Whether the test can reach its level (smallest p over n units is
+   1/2^n) is reported before it runs. Per held-out unit, the mean squared weighted residual of the two
+   models is compared by a one-sided Wilcoxon signed-rank test; a candidate passes with ``p < alpha / (number of
    candidates tested)`` and a relative drop of the pooled held-out RMS of at least ``min_improvement``.
    The passing candidate with the largest drop is added; ties in signature are reported (``nested``,
    ``alternatives``: candidates the data cannot tell from it).
@@ -39,7 +44,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from arm_model import NumericalError
+from arm_model import InputError, NumericalError
 from arm_model.description import ArmDescription
 from arm_model.effects import JointCompliance, ThermalGrowth
 from arm_model.io import Artefacts, PointSet
@@ -47,9 +52,9 @@ from arm_model.model import ArmModel
 
 from .calibrate import CalibrationResult, calibrate, display_unit, resolve_parameters
 from .candidates import Candidate, library_candidates, needs_model
-from .data import CalibrationData, Weights, make_data, split_holdout
+from .data import CalibrationData, Weights, concat, make_data, split_holdout, split_poses
 from .diagnostics import (GroupTest, ResidualSpace, binned_estimates, candidate_family, families, holm,
-                          measurement_folds, remaining_structure, residual_space, screen_candidates,
+                          measurement_folds, pose_folds, remaining_structure, residual_space, screen_candidates,
                           structure_tests)
 from .identifiability import DEFAULT_RANK_TOL, prior_scales
 from .problem import MIN_POINTS, Problem
@@ -64,6 +69,19 @@ __all__ = ["LoopSettings", "CVResult", "Stage", "LoopResult", "close_loop", "hel
 SAME_SIGNATURE = 0.99
 #: held-out improvement (fraction) within which a smaller nested candidate is preferred
 PARSIMONY = 0.01
+#: the loop's decisions use the noise estimated from the data when a group's residual differs from its
+#: stated sigma by more than this factor (the stated sigmas are wrong); within it the stated sigmas are kept,
+#: since a missing effect inflates the residual of the groups it acts on and re-weighting would hide it
+NOISE_OFF = 2.0
+#: how the decisions' folds are made: by whole measurement, by pose inside each feature, or the first
+#: that can reach the significance level
+FOLD_BY = ("auto", "measurement", "pose")
+
+
+def wilcoxon_units_needed(alpha: float, tests: int) -> int:
+    """Fewest paired units for which a one-sided Wilcoxon signed-rank test can reach ``p < alpha / tests``:
+    its smallest p-value over n units is ``1 / 2^n`` (every difference positive)."""
+    return int(math.floor(math.log2(tests / alpha))) + 1
 
 
 @dataclass(frozen=True)
@@ -80,9 +98,15 @@ class LoopSettings:
     rank_tol: float = DEFAULT_RANK_TOL
     drop_outliers: bool = True
     outlier_threshold: float = 4.0
+    holdout: tuple = ()
+    fold_by: str = "auto"
+    weights_from_data: bool = True
     synthesise: bool = True
 
     def __post_init__(self):
+        object.__setattr__(self, "holdout", tuple(self.holdout or ()))
+        if self.fold_by not in FOLD_BY:
+            raise ValueError(f"fold_by must be one of {', '.join(FOLD_BY)}, got {self.fold_by!r}")
         if self.folds < 2:
             raise ValueError(f"folds must be at least 2, got {self.folds}")
         if not 0.0 < self.test_fraction < 1.0:
@@ -101,11 +125,32 @@ class LoopSettings:
 # ---------------------------------------------------------------------------------------------------
 # held-out evaluation
 
-def heldout_residuals(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit") -> dict:
-    """Residual rows of ``data`` with the parameters ``p`` held and every nuisance unknown solved on
-    ``data`` alone: ``r`` weighted (n,), ``e`` [m] (n,), ``measurement``, ``kind`` per row."""
+def heldout_residuals(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit",
+                      train=None) -> dict:
+    """Residual rows of held-out points with the parameters ``p`` held: ``r`` weighted (n,), ``e`` [m] (n,),
+    ``measurement``, ``kind`` and ``point`` (index into ``data``, -1 for a length) per row.
+
+    ``train`` None: every point of ``data`` is held out and every nuisance unknown (centre, axis, plane,
+    ``T_ref_base``) is solved on ``data`` alone. ``train`` a mask: the points where it holds are the
+    training poses; the nuisance unknowns are solved on them, and the rows of the other points are
+    returned (a held-out pose against the centre fitted on the rest of its feature's poses); the
+    lengths then belong to training."""
     prob = Problem(model, data, weights, [], reference=reference)
-    states = levenberg_marquardt(prob, p, prob.initial_states(p)).states
+    if train is None:
+        states = levenberg_marquardt(prob, p, prob.initial_states(p)).states
+        keep = np.ones(prob.n_rows, bool)
+    else:
+        train = np.asarray(train, bool)
+        sub = Problem(model, data.select(train), weights, [], reference=reference)
+        fitted = {(it.measurement, it.feature): st for it, st in
+                  zip(sub.instances, levenberg_marquardt(sub, p, sub.initial_states(p)).states)}
+        start = prob.initial_states(p)
+        states = [fitted.get((it.measurement, it.feature), s0) for it, s0 in zip(prob.instances, start)]
+        missing = [f"{it.measurement} {it.feature}" for it in prob.instances
+                   if (it.measurement, it.feature) not in fitted]
+        if missing:
+            raise ValueError(f"no training pose on {', '.join(missing)}: its centre cannot be predicted")
+        keep = (prob.row_distance < 0) & ~train[np.maximum(prob.row_point, 0)]
     r = prob.evaluate(p, states, jac=False).r
     pts = data.points
     meas = np.empty(len(r), dtype=object)
@@ -116,27 +161,35 @@ def heldout_residuals(model: ArmModel, p, data: CalibrationData, weights: Weight
     for row in np.flatnonzero(~ok):
         meas[row] = prob.distance_items[prob.row_distance[row]].measurement
         kind[row] = "length"
-    return {"r": r, "e": r * prob.sigma, "measurement": meas, "kind": kind}
+    point = np.where(ok, prob.row_point, -1)
+    return {"r": r[keep], "e": (r * prob.sigma)[keep], "measurement": meas[keep], "kind": kind[keep],
+            "point": point[keep]}
 
 
-def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit") -> dict:
-    """Figures of ``(model, p)`` on held-out ``data`` [um]: RMS and max |residual| over the artefact rows
-    (each row a residual component: a sphere/ring/plane distance, a seat coordinate, a length error; the
-    reference-instrument rows only when there is nothing else, since their noise is the instrument's), the
-    same per kind, the weighted RMS of all rows, and the standard test figures
-    (:data:`calibration.validation.FIGURES`)."""
-    h = heldout_residuals(model, p, data, weights, reference)
+def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit",
+                    train=None) -> dict:
+    """Figures of ``(model, p)`` on held-out data [um] (``train``: see :func:`heldout_residuals`): RMS and
+    max |residual| over the artefact rows (each row a residual component: a sphere/ring/plane distance, a
+    seat coordinate, a length error; the reference-instrument rows only when there is nothing else, since
+    their noise is the instrument's), the same per kind, the weighted RMS of all rows, and the standard
+    test figures (:data:`calibration.validation.FIGURES`) of the held-out points."""
+    h = heldout_residuals(model, p, data, weights, reference, train)
     e = h["e"]
     art = h["kind"] != "reference"
     head = e[art] if art.any() else e
     out = {"rms_um": float(np.sqrt(np.mean(head ** 2))) * 1e6, "max_um": float(np.max(np.abs(head))) * 1e6,
-           "headline_rows": "artefact points and lengths" if art.any() else "reference points",
+           "headline_rows": ("reference points" if not art.any() else "artefact points and lengths"
+                             if (h["kind"] == "length").any() else "artefact points"),
            "rms_weighted": float(np.sqrt(np.mean(h["r"] ** 2))), "rows": int(len(e)), "by_kind": {}}
     for k in dict.fromkeys(h["kind"].tolist()):
         ek = e[h["kind"] == k]
         out["by_kind"][k] = {"rows": int(len(ek)), "rms_um": float(np.sqrt(np.mean(ek ** 2))) * 1e6,
                              "max_um": float(np.max(np.abs(ek))) * 1e6}
-    summary = validate(model, p, data, weights, reference).summary()
+    held = data if train is None else data.select(~np.asarray(train, bool))
+    try:
+        summary = validate(model, p, held, weights, reference).summary()
+    except InputError:                # held-out poses too few on some feature for its own fit
+        summary = {}
     out["standard"] = {k: summary[k] * FIGURES[k][2] for k in FIGURES if k in summary}
     return out
 
@@ -185,18 +238,60 @@ class CVResult:
                 "reason": self.reason, "screening_p_value": num(self.score_p)}
 
 
-def _fold_fit(model: ArmModel, design: CalibrationData, fold_of: dict, k: int, fit) -> FoldFit:
+@dataclass(frozen=True)
+class Folds:
+    """The folds of the design set for the held-out decisions.
+
+    Attributes:
+        by: "measurement" (whole measurements held out) or "pose" (poses inside each feature, predicted
+            against the feature's centre fitted on its other poses).
+        k: number of folds.
+        assign: measurement id -> fold (by measurement), or the fold of every design point (-1: never held).
+        per_pose: by measurement, the units of the paired test are the held-out poses (each against its
+            held-out measurement's own centre) instead of whole measurements: with few measurements (one
+            plate at a few placements) the test can still reach its level.
+        n_poses: held-out poses over all folds (by measurement with ``per_pose``).
+    """
+    by: str
+    k: int
+    assign: object
+    per_pose: bool = False
+    n_poses: int = 0
+
+    @property
+    def units(self) -> int:
+        """Held-out units of the paired test: measurements, or poses."""
+        if self.by == "pose":
+            return int(np.sum(np.asarray(self.assign) >= 0))
+        return self.n_poses if self.per_pose else len(self.assign)
+
+    @property
+    def unit_name(self) -> str:
+        return "measurements" if self.by == "measurement" and not self.per_pose else "poses"
+
+
+def _fold_fit(model: ArmModel, design: CalibrationData, folds: Folds, fit) -> FoldFit:
     results, sse = [], {}
+    if folds.by == "pose":
+        for f in range(folds.k):
+            train = np.asarray(folds.assign) != f
+            res = fit(model, design.select(train))
+            h = heldout_residuals(model, res.p, design, res.weights, res.reference_mode, train=train)
+            for i in np.unique(h["point"]):
+                sel = h["point"] == i
+                sse[int(i)] = (float(np.sum(h["r"][sel] ** 2)), int(sel.sum()))
+            results.append(res)
+        return FoldFit(results, sse)
     present = set(design.measurements())
-    for f in range(k):
-        held = [m for m, g in fold_of.items() if g == f and m in present]
-        train = design.with_measurements([m for m, g in fold_of.items() if g != f and m in present])
+    for f in range(folds.k):
+        held = [m for m, g in folds.assign.items() if g == f and m in present]
+        train = design.with_measurements([m for m, g in folds.assign.items() if g != f and m in present])
         res = fit(model, train)
         h = heldout_residuals(model, res.p, design.with_measurements(held), res.weights, res.reference_mode)
-        for m in held:
-            sel = h["measurement"] == m
-            if sel.any():
-                sse[m] = (float(np.sum(h["r"][sel] ** 2)), int(sel.sum()))
+        keys = [(m, int(i)) for m, i in zip(h["measurement"], h["point"])] if folds.per_pose else h["measurement"]
+        for key in dict.fromkeys(keys):
+            sel = np.array([k == key for k in keys]) if folds.per_pose else h["measurement"] == key
+            sse[key] = (float(np.sum(h["r"][sel] ** 2)), int(sel.sum()))
         results.append(res)
     return FoldFit(results, sse)
 
@@ -278,6 +373,10 @@ class LoopResult:
         structure_plots: binned estimates of the significant families at the final fit.
         dropped: outlier points left out ("design": by the base fit, "test": by the base model's
             held-out residuals), with measurement, feature, line.
+        test_by: the outer test set holds whole "measurement"s or "pose"s of every feature.
+        power: the folds of the decisions and whether their test can reach its level (see ``_choose_folds``).
+        model_fit: the final model calibrated on every point (design and test, as ``calibrate`` would with the
+            same options): the model to use.
     """
     stages: list
     final_screening: list
@@ -294,6 +393,9 @@ class LoopResult:
     desc: ArmDescription
     structure_plots: dict = field(default_factory=dict)
     dropped: dict = field(default_factory=dict)
+    test_by: str = "measurement"
+    power: dict = field(default_factory=dict)
+    model_fit: CalibrationResult | None = None
 
     @property
     def final(self) -> Stage:
@@ -416,25 +518,43 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
     if kw:
         settings = LoopSettings(**{**settings.to_dict(), **kw})
     say = progress or (lambda msg: None)
-    weights = weights or Weights()
+    weights = stated = weights or Weights()
     has_t = points.temperature is not None and np.all(np.isfinite(points.temperature))
     need = [JointCompliance()] + ([ThermalGrowth()] if has_t else []) + list(effects) + [c.effect for c in extra]
     data = make_data(points, artefacts, needs_model(desc, need), reference=reference)
     cands, skipped = library_candidates(desc, data, families_, extra)
-    design, test = split_holdout(data, settings.test_fraction, settings.seed)
-    fold_of = measurement_folds(design, settings.folds, settings.seed)
-    say(f"{len(data)} points, {len(data.measurements())} measurements: {len(design.measurements())} for design "
-        f"({settings.folds} folds), {len(test.measurements())} held out for the test; {len(cands)} candidates")
+    design, test, test_by = _outer_split(data, settings)
+    if test_by == "measurement":
+        say(f"{len(data)} points, {len(data.measurements())} measurements: {len(design.measurements())} for design, "
+            f"{len(test.measurements())} held out for the test ({', '.join(test.measurements())}); "
+            f"{len(cands)} candidates")
+    else:
+        say(f"{len(data)} points in {len(data.measurements())} measurement(s): too few to hold whole measurements "
+            f"out, so the test set is {len(test)} poses ({100 * settings.test_fraction:g} % of each feature's), "
+            f"each predicted against its feature's centre fitted on the design poses; {len(cands)} candidates")
+
+    def test_figures(m: ArmModel, p, reference: str) -> dict:
+        if test_by == "measurement":
+            return heldout_figures(m, p, test, weights, reference)
+        return heldout_figures(m, p, concat(design, test), weights, reference,
+                               np.arange(len(design) + len(test)) < len(design))
 
     priors: dict[str, float] = {}
 
-    def fit(model: ArmModel, d: CalibrationData, extra_priors: dict | None = None) -> CalibrationResult:
+    def fit(model: ArmModel, d: CalibrationData, extra_priors: dict | None = None,
+            reweight: bool = False) -> CalibrationResult:
         names = None
         if free is not None:
             names = [model.spec.names[i] for i in resolve_parameters(model.spec, free)]
             names += [n for n in model.spec.names[model.base_size:] if n not in names]
         return calibrate(model, d, free=names, values=values, weights=weights, rank_tol=settings.rank_tol,
-                         priors={**priors, **(extra_priors or {})}, outlier_threshold=settings.outlier_threshold)
+                         priors={**priors, **(extra_priors or {})}, outlier_threshold=settings.outlier_threshold,
+                         weights_from_data=reweight and settings.weights_from_data)
+
+    def noise(res: CalibrationResult) -> str:
+        parts = [f"{v['group']} {v['sigma_um']:.3g} um" for v in res.variance
+                 if v["estimated"] and v["sigma_um"] is not None]
+        return "; noise from the data: " + ", ".join(parts) if parts and res.weights_history else ""
 
     model = ArmModel(desc, tuple(effects))
     say("calibrating the base model on the design set")
@@ -445,12 +565,21 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         if dropped["design"]:
             say(f"  {len(dropped['design'])} outlier point(s) of the design set dropped (base model, robust "
                 f"standardized residual > {settings.outlier_threshold:g}); they stay out of every later fit")
+    off = [v for v in result.variance if v["estimated"] and not 1 / NOISE_OFF < v["factor"] < NOISE_OFF]
+    if settings.weights_from_data and off:
+        result = fit(model, design, reweight=True)
+        weights = result.weights
+        if noise(result):
+            say("  " + noise(result)[2:] + " (the stated uncertainties are starting values)")
     if settings.drop_outliers:
         test, dropped["test"] = _drop_test_outliers(model, result.p, test, weights, result.reference_mode,
-                                                    settings.outlier_threshold)
+                                                    settings.outlier_threshold,
+                                                    None if test_by == "measurement" else design)
         if dropped["test"]:
             say(f"  {len(dropped['test'])} outlier point(s) of the test set dropped (base model)")
-    stages = [Stage(0, model, result, heldout=heldout_figures(model, result.p, test, weights, result.reference_mode))]
+    folds, power = _choose_folds(design, settings)
+    say(power["note"])
+    stages = [Stage(0, model, result, heldout=test_figures(model, result.p, result.reference_mode))]
     say(f"  base model: s0 {result.s0:.3g}, held-out test RMS {stages[0].heldout['rms_um']:.2f} um")
     base_folds: FoldFit | None = None
     remaining = list(cands)
@@ -459,7 +588,7 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
     synthesised_here = False               # built at this stage already
     while True:
         say(f"screening {len(remaining)} candidate(s) at stage {len(stages) - 1}")
-        tests, space = screen_candidates(result, remaining, fold_of, settings.rank_tol)
+        tests, space = screen_candidates(result, remaining, folds.assign, settings.rank_tol)
         ranked = sorted(zip(remaining, tests), key=lambda ct: (ct[1].p_value if np.isfinite(ct[1].p_value) else 2,
                                                                -ct[1].delta_chi2))
         last_tests, last_cv = [t for _, t in ranked], []
@@ -467,7 +596,7 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         gate = settings.screen_alpha / max(len(ident), 1)
         gated = [(c, t) for c, t in ident if t.p_value < gate][: settings.cv_top]
         if not gated:
-            if not synthesised_here and _offer_synthesised(result, model, fold_of, settings, remaining, synthesised,
+            if not synthesised_here and _offer_synthesised(result, model, folds.assign, settings, remaining, synthesised,
                                                            say):
                 synthesised_here = True
                 continue
@@ -478,16 +607,15 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
             stop = f"the maximum number of effects ({settings.max_effects}) was added"
             break
         if base_folds is None:
-            say(f"  cross-validating the current model ({settings.folds} folds)")
-            base_folds = _fold_fit(model, design, fold_of, settings.folds, fit)
+            say(f"  cross-validating the current model ({folds.k} folds by {folds.by})")
+            base_folds = _fold_fit(model, design, folds, fit)
         threshold = settings.alpha / len(gated)
         cvs = []
         for c, t in gated:
             say(f"  cross-validating + {c.name} (score p = {t.p_value:.2g})")
             cp = _candidate_priors(model.with_effects(c.effect), c, t)
             try:
-                new = _fold_fit(model.with_effects(c.effect), design, fold_of, settings.folds,
-                                lambda m, d: fit(m, d, cp))
+                new = _fold_fit(model.with_effects(c.effect), design, folds, lambda m, d: fit(m, d, cp))
                 cv = cross_validate(c.name, base_folds, new, threshold, settings.min_improvement)
                 held = [k for k, r in enumerate(new.results) if not set(c.param_names(desc)) & set(r.free)]
                 if held and cv.passed:
@@ -502,7 +630,7 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         last_cv = cvs
         passing = [(c, cv) for (c, _), cv in zip(gated, cvs) if cv.passed]
         if not passing:
-            if not synthesised_here and _offer_synthesised(result, model, fold_of, settings, remaining, synthesised,
+            if not synthesised_here and _offer_synthesised(result, model, folds.assign, settings, remaining, synthesised,
                                                            say):
                 synthesised_here = True
                 continue
@@ -545,18 +673,19 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         model = model.with_effects(cand.effect)
         priors.update(_candidate_priors(model, cand, tests[wi]))
         say(f"adding {cand.name}; recalibrating")
-        result = fit(model, design)
+        old_weights, result = weights, fit(model, design, reweight=weights != stated)
+        weights = result.weights
         after = None
         if fam_name is not None:
             sp2 = residual_space(result)
             fam2 = next((f for f in families(sp2) if f.name == fam_name), None) or candidate_family(sp2, cand)
             after = binned_estimates(sp2, fam2) if fam2 is not None else None
         stage = Stage(len(stages), model, result, cand, last_tests, cvs, nested, alternatives,
-                      heldout_figures(model, result.p, test, weights, result.reference_mode), fam_name, before, after)
+                      test_figures(model, result.p, result.reference_mode), fam_name, before, after)
         stages.append(stage)
         say(f"  + {cand.name}: held-out test RMS {stage.heldout['rms_um']:.2f} um "
             f"(base {stages[0].heldout['rms_um']:.2f} um)")
-        base_folds = cv.folds
+        base_folds = cv.folds if weights == old_weights else None      # compared at the same weights
         synthesised_here = False
         have = set(model.spec.names)      # e.g. the other harmonic orders of a joint once one is in
         remaining = [c for c in remaining if c is not cand and not set(c.param_names(desc)) & have]
@@ -566,16 +695,86 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
             break
     say("structure tests on the final fit")
     space = residual_space(result)
-    st = structure_tests(space, fold_of, settings.rank_tol)
+    st = structure_tests(space, folds.assign, settings.rank_tol)
     adj = holm([t.p_value for _, t in st])
     structure = [(f, t, float(a)) for (f, t), a in zip(st, adj)]
     significant = [(f, t, min(1.0, t.p_value * len(structure)))
-                   for f, t in remaining_structure(space, fold_of, settings.alpha, settings.rank_tol)]
+                   for f, t in remaining_structure(space, folds.assign, settings.alpha, settings.rank_tol)]
     plots = {f.name: binned_estimates(space, f) for f, _, _ in significant[:4]}
     verdict = _verdict(stages, significant, stop, settings, synthesised)
     say(verdict)
+    say("calibrating the final model on every point (design and test; outliers kept, as calibrate does)")
+    weights = stated                  # the user's uncertainties as the start, as calibrate starts
+    model_fit = fit(model, data, reweight=True)
     return LoopResult(stages, last_tests, last_cv, stop, structure, significant, verdict, cands + synthesised,
-                      skipped, design.measurements(), test.measurements(), settings, desc, plots, dropped)
+                      skipped, design.measurements(), test.measurements(), settings, desc, plots, dropped, test_by,
+                      power, model_fit)
+
+
+def _outer_split(data: CalibrationData, settings: LoopSettings):
+    """(design, test, "measurement" | "pose"): the measurements ``settings.holdout`` if named, else a share
+    ``test_fraction`` of the measurements (per feature kind), else, with too few measurements for that, the
+    same share of the poses of every feature."""
+    if settings.holdout:
+        design, test = split_holdout(data, list(settings.holdout))
+        return design, test, "measurement"
+    try:
+        design, test = split_holdout(data, settings.test_fraction, settings.seed)
+        return design, test, "measurement"
+    except InputError:
+        pass
+    held = split_poses(data, settings.test_fraction, settings.seed)
+    if not held.any():
+        raise InputError(f"the test set is empty: {len(data.measurements())} measurement(s) and no feature has "
+                         "enough poses to hold some out; give more measurements or name a test measurement "
+                         "(--holdout ID)", data.points.path, None, "measurement")
+    return data.select(~held), data.select(held), "pose"
+
+
+def _choose_folds(design: CalibrationData, settings: LoopSettings) -> tuple[Folds, dict]:
+    """The folds of the decisions and, decided before any test runs, whether the held-out test can reach
+    its level with them (a one-sided Wilcoxon test over n units cannot go below p = 1/2^n)."""
+    tests = settings.cv_top
+    level = settings.alpha / tests
+    need = wilcoxon_units_needed(settings.alpha, tests)
+    n_meas = len(design.measurements())
+    by = settings.fold_by
+    if by == "auto":
+        by = "measurement" if n_meas >= 2 else "pose"
+    if by == "measurement":
+        if n_meas < 2:
+            raise InputError(f"{n_meas} design measurement(s): folds of whole measurements need at least 2; "
+                             "fold by pose (--fold-by pose)")
+        k = min(settings.folds, n_meas)
+        assign = measurement_folds(design, k, settings.seed)
+        per_pose = settings.fold_by == "auto" and n_meas < need
+        n_poses = int(sum(np.sum(design.points.feature[design.points.measurement == m] != "") for m in assign))
+        folds = Folds("measurement", k, assign, per_pose, n_poses)
+    else:
+        folds = Folds("pose", settings.folds, pose_folds(design, settings.folds, settings.seed))
+    n = folds.units
+    smallest = 0.5 ** n if n else 1.0
+    ok = smallest < level
+    power = {"fold_by": folds.by, "folds": folds.k, "units": n, "unit": folds.unit_name, "needed": need,
+             "smallest_p": smallest, "level": level, "can_reach": ok}
+    why = ""
+    if folds.by == "pose" and settings.fold_by == "auto":
+        why = f" (only {n_meas} design measurement: whole measurements cannot be held out)"
+    elif folds.per_pose:
+        why = (f", {folds.k} of {n_meas} measurements held out in turn, the test over their poses (each against "
+               f"its measurement's own centre: {n_meas} measurements are too few units)")
+    if ok:
+        power["note"] = (f"decisions: {folds.k} folds by {by}{why}; one-sided Wilcoxon over {n} {folds.unit_name} "
+                         f"(smallest possible p = 1/2^{n} < {level:.2g} = alpha / {tests} candidates)")
+    else:
+        fix = ("more measurements, or folds by pose (--fold-by pose)" if by == "measurement"
+               else "more poses on each feature, or more measurements")
+        power["note"] = (f"WARNING: the held-out test cannot reach its level with these data: one-sided Wilcoxon "
+                         f"over {n} {folds.unit_name} has smallest p = 1/2^{n} = {smallest:.3g} >= "
+                         f"{level:.2g} = alpha {settings.alpha:g} / {tests} candidates; it needs at least {need} "
+                         f"{folds.unit_name} (n >= log2({tests} / {settings.alpha:g})): {fix}, or a larger "
+                         f"--alpha or a smaller --cv-top. No effect can be added.")
+    return folds, power
 
 
 def _offer_synthesised(result, model, fold_of, settings, remaining: list, synthesised: list, say) -> bool:
@@ -625,22 +824,27 @@ def _drop_design_outliers(result: CalibrationResult, design: CalibrationData, fi
     return result, design, out
 
 
-def _drop_test_outliers(model, p, test: CalibrationData, weights, reference, threshold):
-    """Points of the test set whose weighted residual under the base model (nuisance solved on the test set)
-    exceeds ``threshold`` robust standard deviations (1.4826 times the median |r|); decided before any
-    effect is added, so it favours no model. Returns the test set without them and their descriptions."""
-    prob = Problem(model, test, weights, [], reference=reference)
-    states = levenberg_marquardt(prob, p, prob.initial_states(p)).states
-    r = prob.evaluate(p, states, jac=False).r
+def _drop_test_outliers(model, p, test: CalibrationData, weights, reference, threshold, design=None):
+    """Points of the test set whose weighted residual under the base model (nuisance solved on the test set,
+    or, with ``design``, on the design poses of the same features) exceeds ``threshold`` robust standard
+    deviations (1.4826 times the median |r|); decided before any effect is added, so it favours no model.
+    Returns the test set without them and their descriptions."""
+    if design is None:
+        h = heldout_residuals(model, p, test, weights, reference)
+        point = h["point"]
+    else:
+        h = heldout_residuals(model, p, concat(design, test), weights, reference,
+                              np.arange(len(design) + len(test)) < len(design))
+        point = np.where(h["point"] >= 0, h["point"] - len(design), -1)
+    r = h["r"]
     scale = 1.4826 * float(np.median(np.abs(r))) or 1.0
     pts = test.points
-    bad_rows = np.flatnonzero((np.abs(r) > threshold * scale) & (prob.row_distance < 0))
-    bad = sorted(set(int(prob.row_point[i]) for i in bad_rows))
+    bad = sorted(set(int(i) for i in point[(np.abs(r) > threshold * scale) & (point >= 0)]))
     if not bad:
         return test, []
     out = [{"measurement": str(pts.measurement[i]), "feature": str(pts.feature[i]),
             "line": None if pts.lines is None else int(pts.lines[i]),
-            "standardized": float(np.max(np.abs(r[prob.row_point == i])) / scale)} for i in bad]
+            "standardized": float(np.max(np.abs(r[point == i])) / scale)} for i in bad]
     keep = np.setdiff1d(np.arange(len(test)), bad)
     return test.select(keep), out
 

@@ -12,7 +12,7 @@ from arm_model.checks import point_warnings, print_warnings
 from arm_model.io import read_artefacts, read_points
 from arm_model.model_file import Arm
 
-from .cli import campaign_inputs, model_effects, sigma_options
+from .cli import _holdout, campaign_inputs, model_effects, sigma_options
 
 __all__ = ["register", "run"]
 
@@ -29,16 +29,23 @@ def register(sub) -> None:
                     "Then the residual is tested against generic regressors (joint-angle harmonics, gravity and "
                     "contact torques, force, temperature, time, approach direction, measurement, artefact): a "
                     "significant one is reported as structure the library does not explain, with no fix claimed. "
-                    "Writes summary.json, report.html (with PNG plots) and before-after.txt; prints the "
+                    "Writes the final model as a model file (<arm>-calibrated.toml with its covariance and URDF; "
+                    "every --arm applies it), summary.json, report.html (with PNG plots) and before-after.txt; "
+                    "prints the "
                     "before/after table of the held-out test set.",
         epilog="Example: aacmm close-loop points.csv artefacts.toml --arm urdf/aacmm7.dh.toml "
                "--reference-points points-ref.csv -o out/loop. Method and outputs: docs/close-loop.md")
     campaign_inputs(p)
     p.add_argument("--folds", type=at_least(2), default=4,
                    help="cross-validation folds of whole measurements for each decision (default 4)")
-    p.add_argument("--test-fraction", type=fraction, default=0.25,
-                   help="share of the measurements kept out of every decision for the before/after figures "
-                        "(default 0.25, drawn per artefact kind)")
+    p.add_argument("--holdout", default=None, metavar="IDS|FRACTION",
+                   help="the outer test set, kept out of every decision for the before/after figures: a "
+                        "comma-separated list of measurement ids, or a fraction of the measurements drawn per "
+                        "artefact kind (default 0.25; with too few measurements, that share of each feature's poses)")
+    p.add_argument("--fold-by", choices=("auto", "measurement", "pose"), default="auto",
+                   help="folds of the held-out decisions: whole measurements, or poses inside each feature "
+                        "(predicted against the feature's centre fitted on its other poses); auto (default): by "
+                        "measurement when there are enough measurements for the test to reach --alpha, else by pose")
     p.add_argument("--alpha", type=fraction, default=0.01,
                    help="significance level of the held-out test to add an effect (Bonferroni over the candidates "
                         "tested) and of the final structure tests (Holm) (default 0.01)")
@@ -72,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
     from .data import Weights
     from .loop import LoopSettings, close_loop
     from .loop_report import before_after_text, write_loop_report
+    from .model_output import refine_torques
 
     inputs = [p for p in (args.points, args.artefacts, args.arm, args.reference_points) if p is not None]
     families = None
@@ -96,20 +104,26 @@ def run(args: argparse.Namespace) -> int:
             warnings += point_warnings(desc, pts)
     weights = Weights(args.sigma_probe_um * 1e-6, args.sigma_ref_um * 1e-6,
                       None if args.sigma_length_um is None else args.sigma_length_um * 1e-6)
-    settings = LoopSettings(folds=args.folds, test_fraction=args.test_fraction, alpha=args.alpha,
+    holdout = _holdout(args.holdout)
+    settings = LoopSettings(folds=args.folds, alpha=args.alpha, fold_by=args.fold_by,
+                            **({"holdout": tuple(holdout)} if isinstance(holdout, list) else
+                               {"test_fraction": holdout} if holdout is not None else {}),
                             screen_alpha=args.screen_alpha, min_improvement=args.min_improvement,
                             max_effects=args.max_effects, cv_top=args.cv_top, seed=args.seed,
                             synthesise=not args.library_only)
     t0 = time.perf_counter()
 
     def progress(msg: str) -> None:
-        if not args.quiet:
+        if not args.quiet or msg.startswith("WARNING"):
             print(f"[{time.perf_counter() - t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
     with output_folder(args.output, inputs, "close-loop") as out:
         loop = close_loop(points, artefacts, desc, reference=reference, effects=tuple(effects), values=arm.values,
                           free=args.free,
                           weights=weights, settings=settings, families_=families, progress=progress)
+        final = loop.stages[-1]
+        final.result = refine_torques(final.result, rank_tol=settings.rank_tol,
+                                      outlier_threshold=settings.outlier_threshold)
         names = {"points": str(args.points), "artefacts": str(args.artefacts), "arm": str(args.arm),
                  "reference_points": None if args.reference_points is None else str(args.reference_points)}
         write_loop_report(loop, out.dir, inputs=inputs, input_names=names, warnings=warnings)
@@ -118,5 +132,8 @@ def run(args: argparse.Namespace) -> int:
     for sk in loop.skipped:
         print(f"{sk.name} not offered: {sk.reason}")
     print(loop.verdict)
+    from .loop_report import loop_model_name
+    from .model_output import model_paths
+    print(f"model file: {model_paths(args.output, loop_model_name(loop))['model']} (every --arm applies it)")
     print(f"report: {args.output / 'report.html'}; machine summary: {args.output / 'summary.json'}")
     return 0

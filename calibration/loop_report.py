@@ -13,6 +13,7 @@ import numpy as np
 
 from arm_model.checks import warnings_html
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output
+from arm_model.shipped import provenance
 
 from .loop import LoopResult, Stage, effect_summary
 from .model_output import model_check, model_paths, write_model
@@ -84,7 +85,8 @@ def summary_dict(loop: LoopResult, inputs: dict | None = None) -> dict:
         "inputs": inputs or {},
         "arm": loop.desc.name,
         "settings": loop.settings.to_dict(),
-        "measurements": {"design": loop.design, "test": loop.test},
+        "measurements": {"design": loop.design, "test": loop.test, "test_by": loop.test_by},
+        "decision_power": loop.power,
         "candidates": [{"name": c.name, "family": c.family, "joint": c.joint, "effect": c.effect.describe(),
                         "origin": c.origin} for c in loop.candidates],
         "skipped_candidates": [{"name": s.name, "reason": s.reason} for s in loop.skipped],
@@ -111,8 +113,10 @@ def before_after_text(loop: LoopResult) -> str:
     name_w = max(len("model"), *(len(r["model"]) for r in rows))
     head = f"{'model':<{name_w}}  " + "  ".join(f"{h:>12}" for _, h, _ in cols)
     units = f"{'':<{name_w}}  " + "  ".join(f"{'[' + u + ']':>12}" for _, _, u in cols)
-    lines = [f"held-out test set: {len(loop.test)} measurements never used for a decision "
-             f"(rows: {loop.stages[0].heldout.get('headline_rows', '')})", head, units]
+    what = (f"{len(loop.test)} measurements never used for a decision" if loop.test_by == "measurement" else
+            "poses of each feature never used for a decision, each predicted against its feature's centre "
+            "fitted on the design poses")
+    lines = [f"held-out test set: {what} (rows: {loop.stages[0].heldout.get('headline_rows', '')})", head, units]
     for r in rows:
         lines.append(f"{r['model']:<{name_w}}  " + "  ".join(
             f"{r[k]:>12.2f}" if k in r and r[k] is not None else f"{'-':>12}" for k, _, _ in cols))
@@ -260,13 +264,14 @@ def loop_model_name(loop: LoopResult) -> str:
 
 
 def write_loop_model(loop: LoopResult, out_dir, inputs=()) -> dict:
-    """The final model of the loop (its last fit on the design set, every effect added with its
-    parameters) as a model file, covariance file and URDF (:mod:`calibration.model_output`)."""
-    res = loop.final.result
+    """The final model of the loop (every effect added, calibrated on every point: ``loop.model_fit``, or
+    the last fit on the design set if absent) as a model file, covariance file and URDF
+    (:mod:`calibration.model_output`)."""
+    res = loop.model_fit or loop.final.result
     added = [s.added.name for s in loop.stages[1:]]
     comment = (f"Model of '{loop.desc.name}' found by aacmm close-loop: the description with the final fit's values "
                f"folded in and the effects " + (f"added ({', '.join(added)})" if added else "of the base model")
-               + f" with their parameters.\nFitted on the design set ({len(loop.design)} measurements); s0 = "
+               + f" with their parameters.\nFitted on {len(res.data)} points (design and test); s0 = "
                f"{res.s0:.4g}. Read by every --arm option; format: docs/calibration.md.")
     return write_model(res, out_dir, loop_model_name(loop), inputs=inputs, written_by="aacmm close-loop",
                        comment=comment)
@@ -344,7 +349,8 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
     summary = summary_dict(loop, input_names)
     summary["warnings"] = [w.as_dict() for w in warnings]
     summary["model"] = {"file": model_files["model"].name, "covariance": model_files["covariance"].name,
-                        "urdf": model_files["urdf"].name, "check": model_check(loop.final.result)}
+                        "urdf": model_files["urdf"].name, "check": model_check(loop.model_fit or loop.final.result)}
+    summary.update(provenance(inputs))
     written.append(atomic_write_text(out / "summary.json", json.dumps(summary, indent=1) + "\n", inputs))
     written.append(atomic_write_text(out / "before-after.txt", table + "\n", inputs))
     written.append(atomic_write_text(out / "report.html", page, inputs))

@@ -5,6 +5,7 @@ arm read from a URDF: the user's own file with only the identified joint origins
 Format: :mod:`arm_model.model_file` and docs/calibration.md ("The model file")."""
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import replace
 from pathlib import Path
 
@@ -15,7 +16,7 @@ from arm_model.model_file import Arm, format_model, write_covariance
 from arm_model.io import atomic_write_text, guard_output
 from arm_model.urdf_import import calibrated_urdf_text
 
-__all__ = ["model_paths", "fitted_arm", "write_model", "model_check"]
+__all__ = ["model_paths", "fitted_arm", "write_model", "model_check", "refine_torques"]
 
 
 def model_paths(out_dir, name: str) -> dict:
@@ -71,3 +72,29 @@ def model_check(result, arm: Arm | None = None) -> dict:
     d = np.linalg.norm(out - own, axis=1)
     return {"max_difference_nm": float(d.max() * 1e9) if len(d) else 0.0,
             "rms_difference_nm": float(np.sqrt(np.mean(d ** 2)) * 1e9) if len(d) else 0.0}
+
+
+def refine_torques(result, **fit):
+    """The fit refined once with the gravity and contact torques evaluated on its calibrated description
+    (the fit evaluated them on the nominal one), so that the model file, which evaluates them on the
+    description it holds, gives the fit's own ball centres (:func:`model_check`: within rounding).
+
+    Only for models with an effect that needs the torques; the same free parameters, started at the
+    fit's values; the fixed, held and dropped parameters and points and the identifiability analyses
+    of ``result`` are kept. ``fit``: options of the fit to keep (``covariance``, ``rank_tol``,
+    ``outlier_threshold``)."""
+    model = result.model
+    if not ({"tau_gravity", "tau_contact"} & model.needs()):
+        return result
+    from arm_model.model import AuxData
+    from arm_model.pinocchio_model import PinocchioArm
+
+    from .calibrate import calibrate
+    data = result.data
+    tau_g, tau_c = PinocchioArm(result.described()).torques(data.points.q, data.wrench)
+    aux = AuxData(None if data.aux is None else data.aux.temperature, tau_g, tau_c)
+    values = dict(zip(model.spec.names, (float(v) for v in result.p)))
+    new = calibrate(model, replace(data, aux=aux), free=list(result.free), values=values, weights=result.weights,
+                    reference=result.reference_mode, min_resolution=None, drop_outliers=False, **fit)
+    keep = {f: getattr(result, f) for f in ("fixed", "held", "dropped", "identifiability")}
+    return dataclasses.replace(new, **keep)

@@ -234,7 +234,8 @@ class Problem:
                 sig[sl] = np.repeat(np.where(g["on_point"], self.weights.reference_sigma, self.weights.reference), 3)
             else:
                 sig[sl] = self.weights.probe
-        sig[self.n_point_rows:] = [d.sigma for d in items]
+            sig[sl] *= self.weights.factor(g["kind"])
+        sig[self.n_point_rows:] = [d.sigma * self.weights.factor("length") for d in items]
         self.sigma = sig
         # row metadata
         self.row_point = np.full(self.n_rows, -1)

@@ -27,11 +27,11 @@ def register(sub) -> None:
                     "centres evaluated again through the probe's elastic joint with each point's force vector). "
                     "Writes report.html, summary.json, table2.csv, correlations.csv, budgets.csv and "
                     "figures/*.png into the output folder.")
-    r.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3) with the ring's points")
-    r.add_argument("artefacts", type=Path, help="artefacts TOML (DATA-FORMATS §4) with the ring (kind = \"ring\")")
+    r.add_argument("points", type=Path, help="points CSV (docs/formats.md §3) with the ring's points")
+    r.add_argument("artefacts", type=Path, help="artefacts TOML (docs/formats.md §4) with the ring (kind = \"ring\")")
     add_arm_options(r)
     r.add_argument("--signals", type=Path, metavar="DIR",
-                   help="folder of force signals, one <measurement>.csv a measurement (DATA-FORMATS §5); "
+                   help="folder of force signals, one <measurement>.csv a measurement (docs/formats.md §5); "
                         "without it the points file's force columns are used")
     r.add_argument("--feature", metavar="ID", help="id of the ring feature when the artefacts file has several rings")
     r.add_argument("--compliance-mm-per-N", type=positive(), dest="compliance", metavar="C",
@@ -78,7 +78,7 @@ def run_ring(args: argparse.Namespace) -> int:
         artefacts = read_artefacts(args.artefacts)
         check_features(points, artefacts)
         compliance = None if args.compliance is None else args.compliance * 1e-3
-        campaign = analyse_ring_campaign(desc, points, artefacts, args.feature, args.signals, compliance)
+        campaign = analyse_ring_campaign(desc, points, artefacts, args.feature, args.signals, compliance, arm=arm)
         check_reportable(campaign, points)
         warnings = ring_warnings(desc, points, campaign)
         u_force = DEFAULT_U_FORCE if args.u_force is None else args.u_force
@@ -97,6 +97,8 @@ def run_ring(args: argparse.Namespace) -> int:
     print(f"ring '{campaign.feature}': {len(campaign.measurements)} measurements, "
           f"{sum(r.n_points for r in campaign.measurements)} points; forces from "
           f"{'signals in ' + str(args.signals) if args.signals else 'the points file'}")
+    if arm.effects:
+        print("effects applied to every ball centre: " + ", ".join(e.describe() for e in arm.effects))
     for n in campaign.notes:
         print(f"note: {n}")
     print_warnings(warnings)

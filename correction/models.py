@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from arm_model import InputError, ball_centres
+from arm_model import InputError
 from arm_model._output import safe_name
 from arm_model.geometry import CylinderFit, RingFit, ring_fit
 from arm_model.io import PointSet, read_force_signal
@@ -155,12 +155,12 @@ def measurement_forces(points: PointSet, measurement: str, signals=None) -> Poin
     if not path.exists():
         raise InputError(f"no force signal for measurement '{measurement}' (expected one file a measurement, "
                          f"named <measurement>.csv; characters other than letters, digits and . _ + - "
-                         f"become _)", path)
+                         f"become _; docs/formats.md §5)", path)
     return find_point_forces(read_force_signal(path), len(rows), measurement)
 
 
 def analyse_ring_campaign(desc, points: PointSet, artefacts, feature: str | None = None, signals=None,
-                          compliance: float | None = None, models=MODELS) -> RingCampaign:
+                          compliance: float | None = None, models=MODELS, arm=None) -> RingCampaign:
     """Analyse a ring-gauge campaign: per measurement, the per-point forces, the ring initially (rigid ball
     centres from the encoder angles) and after each correction model.
 
@@ -173,7 +173,12 @@ def analyse_ring_campaign(desc, points: PointSet, artefacts, feature: str | None
             ForceSignal}, or None to use the points file's force columns.
         compliance: compliance of the paper's models [m/N]; None takes the probe's bending compliance.
         models: subset of :data:`MODELS`.
+        arm: the arm model whose effects every ball centre gets (``arm_model.model_file.Arm``, e.g. a
+            calibrated model file); None: the description alone.
     """
+    from arm_model.model_file import Arm
+    arm = Arm(desc) if arm is None else arm
+    arm.check_points(points)
     rings = artefacts.of_kind("ring")
     if feature is None:
         if len(rings) != 1:
@@ -215,12 +220,12 @@ def analyse_ring_campaign(desc, points: PointSet, artefacts, feature: str | None
         if len(idx) < 6:
             raise InputError(f"measurement '{mid}' has {len(idx)} points on the ring; a cylinder needs at "
                              "least 6", points.path, int(points.lines[idx[0]]), "measurement")
-        q = points.q[idx]
-        rigid = ball_centres(desc, q)
+        sub = points.select(idx)
+        rigid = arm.ball_centres(sub, rigid=True)
         wrench = forces.force
         if points.torque is not None:
             wrench = np.column_stack([wrench, points.torque[idx]])
-        wrench_centres = ball_centres(desc, q, wrench) if "wrench" in models else None
+        wrench_centres = arm.ball_centres(sub, wrench=wrench) if "wrench" in models else None
         fits = correct_ring(rigid, desc.probe.ball_diameter, ring.diameter, c, forces, wrench_centres, models)
         out.append(RingMeasurement(mid, forces, force_summary(forces.bending), fits, points.lines[idx], idx))
     if kind == "two-channel":

@@ -20,6 +20,7 @@ import numpy as np
 
 from arm_model.checks import warnings_html
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output
+from arm_model.shipped import provenance
 
 from . import paper as P
 from .correlation import FORCE_VALUES, campaign_correlations
@@ -301,6 +302,7 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
             "parameters": parameters_source or "none (parameters taken as exact)",
             "measurements": [dict(measurement=r.id, **u.as_dict())
                              for r, u in zip(campaign.measurements, point_uncertainty)]}
+    summary.update(provenance(in_paths))
     t2 = table2(campaign)
     corr = campaign_correlations(campaign)
     figs = _ring_figures(campaign, budgets)
@@ -573,7 +575,7 @@ def paper_report(out: str | Path, table_path: str | Path | None = None) -> list[
     parts.append("<h3>Diameter error per measurement [mm]</h3>" + _table_html(
         ("measurement", "initial", "after FEM (mean force)", "after FEM + series compliance (LOO)"), rows))
     files = {"report.html": _page("The seed paper reproduced and the loop closed", parts),
-             "summary.json": json.dumps(s, indent=1, allow_nan=False) + "\n",
+             "summary.json": json.dumps({**s, **provenance([P.TABLE2_PATH if table_path is None else table_path])}, indent=1, allow_nan=False) + "\n",
              "table2_implied.csv": _csv_text(t2cols),
              "findings.csv": _csv_text({k: np.array([str(f[k]) for f in findings], dtype=object)
                                         for k in ("table", "item", "printed", "computed", "consistent", "note")})}

@@ -325,7 +325,9 @@ def test_joint_compliance_skip_says_why():
         d = load_arm(path, "ball_link")
         cands, skipped = library_candidates(d, make_data(pts, arts), ("joint_compliance",))
         if offered:      # joint 1 turns about the vertical: gravity never loads it
-            assert len(cands) == 6 and [s.name for s in skipped] == ["joint compliance panda_joint1"]
+            assert len([c for c in cands if c.joint]) == 6                 # one a loaded joint, and all at once
+            assert [c.name for c in cands if not c.joint] == ["joint compliance (every loaded joint)"]
+            assert [s.name for s in skipped] == ["joint compliance panda_joint1"]
         else:
             assert not cands and len(skipped) == 1
             assert "no masses" in skipped[0].reason and "--masses" in skipped[0].reason

@@ -25,7 +25,7 @@ form_error_mm = 0.005
 
 
 def points_csv(measurements, two_channel=False) -> str:
-    """A points CSV (DATA-FORMATS §3) from [(id, q (N, 7) [rad], force (N, 3) [N])]."""
+    """A points CSV (docs/formats.md §3) from [(id, q (N, 7) [rad], force (N, 3) [N])]."""
     cols = ["measurement", "feature"] + [f"q{i}_deg" for i in range(1, 8)]
     cols += ["f_bend_N", "f_axial_N"] if two_channel else ["fx_N", "fy_N", "fz_N"]
     lines = [",".join(cols)]

@@ -74,3 +74,26 @@ def test_bad_options_stop_with_one_message(files, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "points.csv" in err and "q2" in err
     assert not out.exists()
+
+
+def test_effect_built_from_the_residual_and_library_only(tmp_path, capsys):
+    """A third harmonic of the wrist j6 hidden in the simulator's truth: by default the loop builds it from
+    the residual (summary.json origin "residual"); with --library-only it adds nothing."""
+    camp = {**CAMPAIGN, "seed": 3,
+            "truth": {"harmonics": [{"joint": "j6", "harmonic": 3, "amplitude_deg": 0.004, "phase_deg": 30.0}]},
+            "task": [{"kind": "ballbar", "positions": 10, "length_mm": 600.0, "points_per_sphere": 4},
+                     {"kind": "seat", "articulations": 8, "measurements": 4},
+                     {"kind": "sphere", "points": 8, "measurements": 5}]}
+    simulate(campaign_from_dict(camp)).write(tmp_path / "sim")
+    args = ["close-loop", str(tmp_path / "sim" / "points.csv"), str(tmp_path / "sim" / "artefacts.toml"),
+            "--arm", str(NOMINAL), "--sigma-probe-um", "2", "--cv-top", "2", "--quiet"]
+    assert main(args + ["-o", str(tmp_path / "built")]) == 0
+    s = json.loads((tmp_path / "built" / "summary.json").read_text())
+    (eff,) = s["effects_added"]
+    assert eff["name"].startswith("harmonics j6 (h ") and eff["origin"] == "residual" and eff["found_from_the_residual"]
+    assert "(found from the residual)" in s["verdict"]
+    assert "found from the residual" in (tmp_path / "built" / "report.html").read_text()
+    assert main(args + ["--library-only", "-o", str(tmp_path / "library")]) == 0
+    s = json.loads((tmp_path / "library" / "summary.json").read_text())
+    assert s["effects_added"] == [] and s["settings"]["synthesise"] is False
+    capsys.readouterr()

@@ -251,3 +251,98 @@ def test_calibrate_writes_a_model_that_tip_and_calibrate_read(tmp_path, capsys):
     # a model file's effect given again with --effect is refused
     assert main(["calibrate", *args, "--arm", str(model), "--effect", "thermal", "-o", str(tmp_path / "c3")]) == 2
     assert "already holds" in capsys.readouterr().err
+
+
+def equivalent_pair(nominal, tmp_path, delta=3e-6):
+    """A model file (nominal + a probe-compliance effect of ``delta`` [m/N]) and the description it is
+    equivalent to (the bending compliance raised by ``delta``): an independent reference."""
+    model = tmp_path / "model.toml"
+    model.write_text(format_model(nominal, (ProbeCompliance(),), {"probe.dcompliance_bend": delta}))
+    desc = tmp_path / "equivalent.toml"
+    desc.write_text(format_description(nominal.with_probe(
+        bending_compliance_x=nominal.probe.bending_compliance_x + delta,
+        bending_compliance_y=nominal.probe.bending_compliance_y + delta)))
+    return model, desc
+
+
+def test_ring_applies_the_models_effects(nominal, tmp_path):
+    import tomllib
+    from arm_model.sim import campaign_from_dict, simulate
+    from conftest import ROOT
+    data = tomllib.loads((ROOT / "examples/campaigns/paper-ring-xyz.toml").read_text())
+    data.pop("arm")
+    data["task"][0].update(measurements=3, points_per_row=8)
+    data["signals"] = {"enabled": False}
+    sim = tmp_path / "sim"
+    simulate(campaign_from_dict(data, arm=NOMINAL)).write(sim)
+    model, equivalent = equivalent_pair(nominal, tmp_path)
+    runs = {}
+    for name, arm in (("model", model), ("equivalent", equivalent), ("nominal", NOMINAL)):
+        out = tmp_path / name
+        assert main(["ring", str(sim / "points.csv"), str(sim / "artefacts.toml"), "--arm", str(arm),
+                     "-o", str(out)]) == 0
+        runs[name] = json.loads((out / "summary.json").read_text())["measurements"]
+    for m, e, n in zip(runs["model"], runs["equivalent"], runs["nominal"]):
+        for key in ("diameter_error_mm", "form_error_mm"):
+            assert_close(m["models"]["wrench"][key], e["models"]["wrench"][key], atol=1e-9)
+        assert abs(m["models"]["wrench"]["diameter_error_mm"] - n["models"]["wrench"]["diameter_error_mm"]) > 1e-4
+
+
+def test_view_applies_the_models_effects(nominal, tmp_path, capsys):
+    model, equivalent = equivalent_pair(nominal, tmp_path)
+    pts = points_file(tmp_path, n=5, temperature=False)
+    shown = {}
+    for name, arm in (("model", model), ("equivalent", equivalent), ("nominal", NOMINAL)):
+        assert main(["view", str(pts), "--arm", str(arm), "--point", "3", "--html", str(tmp_path / f"{name}.html")]) == 0
+        out = capsys.readouterr().out
+        shown[name] = next(line for line in out.splitlines() if line.startswith("point 3:"))
+        if name == "model":
+            assert "effects applied to the ball centres: probe_compliance" in out
+    assert shown["model"] == shown["equivalent"] != shown["nominal"]
+
+
+LOOP_CAMPAIGN = {"seed": 11, "sensor": "xyz", "signals": {"enabled": False},
+                 "noise": {"probing_repeatability_um": 2.0},
+                 "truth": {"eccentricity": [{"joint": "j3", "amplitude_deg": 0.005, "phase_deg": -60.0}],
+                           "joint_compliance": {"joints": ["j2"], "stiffness_Nm_per_rad": [3e4]}},
+                 "task": [{"kind": "ballbar", "positions": 8, "length_mm": 600.0, "points_per_sphere": 4},
+                          {"kind": "seat", "articulations": 8, "measurements": 4},
+                          {"kind": "sphere", "points": 8, "measurements": 4}]}
+
+
+def test_tip_with_the_loops_model_reproduces_the_loops_corrected_points(nominal, tmp_path, capsys):
+    """close-loop finds joint compliance and an eccentricity; its model file, given to aacmm tip, gives the
+    ball centres the loop's final model computes on its campaign to 1 nm (as aacmm close-loop writes it:
+    the final fit refined with the torques on its calibrated geometry)."""
+    from arm_model.io import read_artefacts
+    from arm_model.sim import campaign_from_dict, simulate
+    from calibration.data import Weights
+    from calibration.loop import close_loop
+    from calibration.loop_report import write_loop_report
+    from calibration.model_output import refine_torques
+    sim = tmp_path / "sim"
+    simulate(campaign_from_dict(LOOP_CAMPAIGN)).write(sim)
+    pts = read_points(sim / "points.csv", 7)
+    loop = close_loop(pts, read_artefacts(sim / "artefacts.toml"), nominal, weights=Weights(2e-6),
+                      folds=3, cv_top=2)
+    assert {s.added.family for s in loop.stages[1:]} >= {"joint_compliance", "eccentricity"}
+    unrefined = loop.final.result
+    loop.stages[-1].result = refine_torques(unrefined)
+    final = loop.final.result
+    out = tmp_path / "loop"
+    write_loop_report(loop, out, inputs=[sim / "points.csv"])
+    s = json.loads((out / "summary.json").read_text())
+    assert s["model"]["file"] == "aacmm7-calibrated.toml" and s["model"]["check"]["max_difference_nm"] < 0.1
+    model = out / s["model"]["file"]
+    tip = tmp_path / "tip.csv"
+    assert main(["tip", str(sim / "points.csv"), "--arm", str(model), "-o", str(tip)]) == 0
+    got = np.genfromtxt(tip, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    got = np.column_stack([got["x_mm"], got["y_mm"], got["z_mm"]]) * 1e-3
+    # the loop's own corrected points: its final model and parameters on the points it was fitted to
+    data = final.data
+    own = final.model.ball_centres(data.points.q, data.wrench, final.p, data.aux)
+    rows = data.points.lines - 2                       # file order: header on line 1
+    assert_close(got[rows], own, atol=1e-9)
+    # the refinement moved the points by tens of nm at most (torques on nominal vs calibrated geometry)
+    before = unrefined.model.ball_centres(data.points.q, data.wrench, unrefined.p, unrefined.data.aux)
+    assert np.abs(own - before).max() < 1e-6

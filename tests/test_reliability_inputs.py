@@ -263,7 +263,8 @@ def test_close_loop_with_one_sphere_measurement(small, tmp_path, capsys):
     pts.write_text("\n".join([lines[0]] + [ln for ln in lines[1:] if ln.split(",")[m] == first]) + "\n")
     code, _, err = run(["close-loop", pts, small / "artefacts.toml", "--arm", NOMINAL, "--quiet",
                         "-o", tmp_path / "o"], capsys)
-    assert code == 2 and "held-out set is empty" in err
+    # one measurement: the test set falls back to poses of the feature, and the fit says what is missing
+    assert code == 2 and ("held-out set is empty" in err or "not enough data" in err) and "Traceback" not in err
     assert not (tmp_path / "o").exists()
 
 

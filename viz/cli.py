@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from arm_model import InputError, ball_centres, check_features, read_artefacts, read_points
-from arm_model.commands import add_arm_options, arm_from_args, port, positive
+from arm_model import InputError, check_features, read_artefacts, read_points
+from arm_model.commands import add_arm_options, model_from_args, port, positive
 from arm_model._output import output_file
 from arm_model.checks import point_warnings, print_warnings
 
@@ -34,7 +34,7 @@ def register(sub) -> None:
                     "--scale times long, the measured ball centres, artefacts placed by fitting their points "
                     "(--artefacts) and residual vectors (--residuals). The scales are printed and written on "
                     "the page. The server stops at Ctrl-C, at SIGTERM, or after --open-seconds.")
-    p.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
+    p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3)")
     add_arm_options(p)
     p.add_argument("--measurement", metavar="ID", help="only the points of this measurement (default: all)")
     pose = p.add_mutually_exclusive_group()
@@ -46,7 +46,7 @@ def register(sub) -> None:
     p.add_argument("--scale", type=positive(), default=1000.0,
                    help="length of the deflection arrow per length of deflection (default 1000: 0.1 mm is "
                         "drawn 100 mm long)")
-    p.add_argument("--artefacts", type=Path, help="artefacts TOML (DATA-FORMATS §4): draw each feature, placed "
+    p.add_argument("--artefacts", type=Path, help="artefacts TOML (docs/formats.md §4): draw each feature, placed "
                    "by fitting its points in each measurement")
     p.add_argument("--residuals", type=Path, help="residuals CSV: x_mm, y_mm, z_mm, rx_um, ry_um, rz_um, or the "
                    "residuals.csv of aacmm calibrate (line, dx_um, dy_um, dz_um; see docs/viewer.md): draw "
@@ -93,8 +93,10 @@ def run(args: argparse.Namespace) -> int:
 
 def _run(args, inputs, outputs, tmp) -> int:
     # read everything first: a bad file stops here, before a server starts or a file is written
-    desc = arm_from_args(args)
+    arm = model_from_args(args)
+    desc = arm.desc
     points = read_points(args.points, desc.n_joints)
+    arm.check_points(points)
     artefacts = read_artefacts(args.artefacts) if args.artefacts else None
     if artefacts is not None:
         check_features(points, artefacts)
@@ -103,7 +105,7 @@ def _run(args, inputs, outputs, tmp) -> int:
     if not args.animate and args.point > len(sel):
         raise InputError(f"--point {args.point}: the selection has {len(sel)} point(s)", points.path)
     wrench = sel.wrench
-    centres = ball_centres(desc, sel.q, wrench)
+    centres = arm.ball_centres(sel)
     serve = args.serve or args.open_seconds is not None or (args.html is None and args.screenshot is None)
 
     from .view import View   # heavy backends from here on
@@ -125,14 +127,14 @@ def _run(args, inputs, outputs, tmp) -> int:
         if residuals is not None:
             if args.measurement is not None:   # the selected measurement's (and those of no measurement)
                 residuals = residuals.select(np.isin(residuals.measurement, ["", args.measurement]))
-            all_centres = ball_centres(desc, points.q, points.wrench)
+            all_centres = arm.ball_centres(points)
             origins, vectors, skipped = residual_origins(residuals, points, all_centres)
             if skipped:
                 notes.append(f"{skipped} residual(s) of {residuals.path} name lines that are not points of "
                              f"{points.path} with the same measurement and feature; not drawn")
             if len(vectors):
                 view.show_residuals(origins, vectors, scale=args.residual_scale)
-        _report(desc, sel, centres, shown, wrench, args, view, notes)
+        _report(arm, sel, centres, shown, wrench, args, view, notes)
         if args.html is not None:
             view.write_html(tmp["html"], inputs=inputs)
         if args.screenshot is not None:
@@ -147,7 +149,8 @@ def _run(args, inputs, outputs, tmp) -> int:
     return 0
 
 
-def _report(desc, sel, centres, shown, wrench, args, view, notes) -> None:
+def _report(arm, sel, centres, shown, wrench, args, view, notes) -> None:
+    desc = arm.desc
     print(f"{len(sel)} point(s) of {sel.path}" + (f", measurement '{args.measurement}'" if args.measurement else ""))
     for line in view.legend:
         print("  " + line)
@@ -156,7 +159,10 @@ def _report(desc, sel, centres, shown, wrench, args, view, notes) -> None:
     elif sel.force_kind == "two-channel":
         print("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not measured and "
               "is taken as zero")
-    rigid = ball_centres(desc, sel.q)
+    if arm.effects:
+        print("effects applied to the ball centres: " + ", ".join(e.describe() for e in arm.effects)
+              + " (the arm is drawn with its description's geometry)")
+    rigid = arm.ball_centres(sel, rigid=True)
     d_um = np.linalg.norm(centres - rigid, axis=1) * 1e6
     if len(shown) == 1:
         i = shown[0]

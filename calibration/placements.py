@@ -1,0 +1,157 @@
+"""Held-out placements of a seat plate: train on one placement, predict the others.
+
+The study the real-data sections of ``docs/calibration.md`` and ``docs/close-loop.md`` report: a plate
+with two seats a certified distance apart is measured at several placements (one folder each, with a
+``points.csv``); for every training placement, ``aacmm calibrate`` and ``aacmm close-loop`` are run on it
+with their default options, and the model each writes is applied by ``aacmm tip`` to the points of the
+other placements. Figures per held-out placement (``seat_figures``):
+
+* **seat spread (2 sigma) per hole** [mm]: ``2 sqrt(sum_i |x_i - x_mean|^2 / (n - 1))`` over the n ball
+  centres in the hole (twice the RMS radial distance to the hole's mean centre, n - 1 for the mean fitted;
+  the single-point articulation figure ``two_rms`` of :mod:`calibration.validation`);
+* **distance error** [mm]: distance between the two holes' mean centres minus the certified length.
+
+Run as ``python scripts/real_seats_study.py`` (see its ``--help``).
+"""
+from __future__ import annotations
+
+import contextlib
+import io
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from arm_model import InputError
+
+__all__ = ["seat_figures", "PlacementRow", "placement_study", "markdown_table"]
+
+
+def seat_figures(x: np.ndarray, feature: np.ndarray, holes: tuple[str, str], length: float) -> dict:
+    """Spread (2 sigma) of each hole and the distance error, from ball centres ``x`` (N, 3) [m] and the
+    feature of each point; values [mm]."""
+    out, centre = {}, {}
+    for h in holes:
+        xi = x[np.asarray(feature) == h]
+        if len(xi) < 2:
+            raise InputError(f"hole '{h}': {len(xi)} point(s), a spread needs at least 2")
+        d = xi - xi.mean(axis=0)
+        out[f"spread_{h}_mm"] = float(2 * np.sqrt(np.sum(d ** 2) / (len(xi) - 1))) * 1e3
+        centre[h] = xi.mean(axis=0)
+    out["spread_mean_mm"] = float(np.mean([out[f"spread_{h}_mm"] for h in holes]))
+    dist = float(np.linalg.norm(centre[holes[0]] - centre[holes[1]]))
+    out["distance_mm"] = dist * 1e3
+    out["distance_error_mm"] = (dist - length) * 1e3
+    return out
+
+
+@dataclass
+class PlacementRow:
+    """One training placement, one method, one held-out placement."""
+    train: str
+    method: str              # "calibrate" or "close-loop"
+    test: str
+    figures: dict
+    effects: tuple = ()
+
+    def to_dict(self) -> dict:
+        return {"train": self.train, "method": self.method, "test": self.test, "effects": list(self.effects),
+                **self.figures}
+
+
+def _cli(argv: list[str]) -> str:
+    """Run ``aacmm`` in this process; its stdout (raises on a non-zero exit)."""
+    from arm_model.cli import main
+    buf, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(err):
+        code = main(argv)
+    if code != 0:
+        raise RuntimeError(f"aacmm {' '.join(argv)} exited with {code}: {err.getvalue().strip()}")
+    return buf.getvalue()
+
+
+def _tip(points: Path, arm: Path, out: Path, tip_frame: str | None = None):
+    """``aacmm tip`` of ``points`` with the model ``arm``: (ball centres (N, 3) [m], features)."""
+    argv = ["tip", str(points), "--arm", str(arm), "-o", str(out)]
+    if tip_frame:
+        argv += ["--tip-frame", tip_frame]
+    _cli(argv)
+    import csv
+    with open(out, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    x = np.array([[float(r[f"{a}_mm"]) for a in "xyz"] for r in rows]) * 1e-3
+    return x, np.array([r["feature"] for r in rows])
+
+
+def _loop_model(folder: Path) -> Path | None:
+    """The model file ``aacmm close-loop`` wrote in ``folder`` (a description TOML), if any."""
+    found = sorted(p for p in folder.glob("*.toml"))
+    return found[0] if found else None
+
+
+def placement_study(root: Path, arm: Path, tip_frame: str | None, out: Path, train=None, progress=None,
+                    methods=("calibrate", "close-loop")) -> list[PlacementRow]:
+    """Train on each placement (folders of ``root`` with a points.csv; ``train``: only these), predict the
+    others; outputs of every command under ``out``. ``root`` holds the ``artefacts.toml`` (two seats and
+    one certified distance between them)."""
+    from arm_model.io import read_artefacts
+    root, out = Path(root), Path(out)
+    say = progress or (lambda msg: None)
+    artefacts = root / "artefacts.toml"
+    art = read_artefacts(artefacts)
+    if len(art.distances) != 1:
+        raise InputError("the study needs exactly one certified distance between two seats", artefacts)
+    holes, length = tuple(art.distances[0].between), art.distances[0].length
+    places = sorted(p.name for p in root.iterdir() if (p / "points.csv").is_file())
+    if len(places) < 2:
+        raise InputError(f"{len(places)} placement folder(s) with a points.csv: at least 2 needed", root)
+    arm_opts = ["--arm", str(arm)] + (["--tip-frame", tip_frame] if tip_frame else [])
+    rows: list[PlacementRow] = []
+    for tr in train or places:
+        if tr not in places:
+            raise InputError(f"no placement '{tr}' (known: {', '.join(places)})", root)
+        pts = root / tr / "points.csv"
+        models = {}
+        if "calibrate" in methods:
+            say(f"{tr}: aacmm calibrate")
+            dst = out / tr / "calibrate"
+            _cli(["calibrate", str(pts), str(artefacts), *arm_opts, "-o", str(dst), "--no-plots"])
+            models["calibrate"] = (next(dst.glob("*-calibrated.toml")), ())
+        if "close-loop" in methods:
+            say(f"{tr}: aacmm close-loop")
+            dst = out / tr / "close-loop"
+            _cli(["close-loop", str(pts), str(artefacts), *arm_opts, "-o", str(dst), "--quiet"])
+            import json
+            summary = json.loads((dst / "summary.json").read_text())
+            effects = tuple(e["name"] for e in summary["effects_added"])
+            model = _loop_model(dst)
+            if model is None:
+                raise RuntimeError(f"aacmm close-loop wrote no model file in {dst}")
+            models["close-loop"] = (model, effects)
+        for method, (model, effects) in models.items():
+            for te in places:
+                if te == tr:
+                    continue
+                x, feat = _tip(root / te / "points.csv", model, out / tr / f"{method}-tip-{te}.csv")
+                rows.append(PlacementRow(tr, method, te, seat_figures(x, feat, holes, length), effects))
+                say(f"  {method} -> {te}: spread {rows[-1].figures['spread_mean_mm']:.3f} mm, distance error "
+                    f"{rows[-1].figures['distance_error_mm']:+.3f} mm")
+    return rows
+
+
+def markdown_table(rows: list[PlacementRow], holes=("hole-0", "hole-1")) -> str:
+    """One line per training placement, method and held-out placement, and the mean per method."""
+    head = ("| trained on | model | held out | " + " | ".join(f"spread {h} 2σ [mm]" for h in holes)
+            + " | distance error [mm] | effects added |")
+    lines = [head, "|" + "---|" * (5 + len(holes))]
+    for r in rows:
+        f = r.figures
+        lines.append(f"| {r.train} | {r.method} | {r.test} | "
+                     + " | ".join(f"{f[f'spread_{h}_mm']:.3f}" for h in holes)
+                     + f" | {f['distance_error_mm']:+.3f} | {', '.join(r.effects) or '-'} |")
+    for m in dict.fromkeys(r.method for r in rows):
+        sel = [r.figures for r in rows if r.method == m]
+        lines.append(f"| **mean** | {m} | all | "
+                     + " | ".join(f"{np.mean([f[f'spread_{h}_mm'] for f in sel]):.3f}" for h in holes)
+                     + f" | {np.mean([abs(f['distance_error_mm']) for f in sel]):.3f} (mean abs) | |")
+    return "\n".join(lines)
