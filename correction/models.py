@@ -296,14 +296,16 @@ def check_reportable(campaign: RingCampaign, points: PointSet) -> None:
 
 def table2(campaign: RingCampaign) -> dict:
     """Columns of a Table 2-like table [mm, %]: per measurement, diameter error initially and after each
-    model with its improvement ``(initial - corrected) / initial`` in %, and the form errors."""
+    model with its improvement ``(|initial| - |corrected|) / |initial|`` in % (an over-correction that
+    flips the sign and grows the error is negative), and the form errors."""
     cols = {"measurement": np.array([r.id for r in campaign.measurements], dtype=object)}
     init = campaign.column("initial") * 1e3
     for m in campaign.models:
         cols[f"diameter_error_{m}_mm"] = campaign.column(m) * 1e3
         if m != "initial":
             with np.errstate(divide="ignore", invalid="ignore"):
-                cols[f"improvement_{m}_pct"] = (init - cols[f"diameter_error_{m}_mm"]) / init * 100.0
+                cols[f"improvement_{m}_pct"] = ((np.abs(init) - np.abs(cols[f"diameter_error_{m}_mm"]))
+                                                 / np.abs(init) * 100.0)
     for m in campaign.models:
         cols[f"form_error_{m}_mm"] = campaign.column(m, "form_error") * 1e3
     for w in ("mean", "max10", "max"):
