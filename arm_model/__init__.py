@@ -1,6 +1,6 @@
 """Deflection-aware kinematic model of a portable measuring arm (AACMM).
 
-One description (:class:`ArmDescription`, read from the TOML of DATA-FORMATS §2) feeds three
+One description (:class:`ArmDescription`, read from the TOML of docs/formats.md §2) feeds three
 evaluators that agree to 1e-12 m: the batch path (:func:`ball_centres`), Pinocchio
 (:class:`PinocchioArm`, built from the generated URDF) and CasADi (:func:`casadi_ball_centre`).
 Conventions: docs/CONVENTIONS.md.

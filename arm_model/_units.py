@@ -1,4 +1,4 @@
-"""Units live in the names (DATA-FORMATS §1). Everything inside the code is SI."""
+"""Units live in the names (docs/formats.md §1). Everything inside the code is SI."""
 from __future__ import annotations
 
 import math

@@ -21,6 +21,7 @@ import sys
 import traceback
 
 from ._errors import AacmmError
+from .shipped import version
 
 __all__ = ["main", "COMMAND_MODULES", "EXIT_INPUT", "EXIT_INTERNAL"]
 
@@ -55,9 +56,10 @@ def build_parser() -> argparse.ArgumentParser:
         prog="aacmm",
         description="Portable measuring arm toolkit: deflection-aware ball centres from encoder angles and "
                     "contact force, simulation, ring-gauge analysis, calibration and closing the loop. "
-                    "Files carry units in their column and key names (mm, deg, N ...).",
+                    "Files carry units in their column and key names (mm, deg, N ...); every format: docs/formats.md.",
         epilog="Exit status: 0 done; 2 bad input or a file the system refuses (one message, nothing "
                "written); 3 internal error (please report it); 130 interrupted. docs/guarantees.md")
+    parser.add_argument("--version", action="version", version=f"aacmm-toolkit {version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMAND_MODULES:
         if importlib.util.find_spec(name.rsplit(".", 1)[0]) is None or importlib.util.find_spec(name) is None:

@@ -7,9 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ._csv import format_csv
 from ._output import output_file
 from .checks import point_warnings, print_warnings
-from .io import read_points, write_csv
+from .io import concat_points, iter_points
 from .model_file import Arm, load_model
 from .urdf import urdf_text
 
@@ -80,9 +81,9 @@ seed = number_in(0, kind=int)
 port = number_in(1, 65535, kind=int)
 
 
-def add_arm_options(p, help_arm: str = "the arm: a model file or description TOML (e.g. urdf/aacmm7.dh.toml; "
-                                       "the effects a model file holds are applied) or a URDF with --tip-frame"
-                    ) -> None:
+def add_arm_options(p, help_arm: str = "the arm: a shipped arm's name (aacmm7), a model file or description TOML "
+                                       "(the effects a model file holds are applied) or a URDF with --tip-frame "
+                                       "(docs/formats.md §2, docs/own-arm.md)") -> None:
     """``--arm`` and ``--tip-frame``, the same for every subcommand."""
     p.add_argument("--arm", type=Path, required=True, help=help_arm)
     p.add_argument("--tip-frame", default=None, metavar="LINK",
@@ -114,7 +115,7 @@ def register(sub) -> None:
                     "the rigid ball centre, the deflection-corrected ball centre [mm] and the deflection [um]. "
                     "Points whose force exceeds the probe's calibrated range are flagged (over_force = 1), "
                     "never dropped.")
-    p.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
+    p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3)")
     add_arm_options(p)
     p.add_argument("-o", "--output", type=Path, required=True, help="output CSV (never one of the inputs)")
     from .uncertainty_cli import add_tip_options
@@ -130,6 +131,14 @@ def register(sub) -> None:
     u.add_argument("--tip-frame", default=None, metavar="LINK", help="for a URDF arm: the link at the ball centre")
     u.add_argument("-o", "--output", type=Path, required=True, help="output URDF")
     u.set_defaults(func=run_urdf)
+
+    e = sub.add_parser(
+        "examples", help="copy the example campaigns, data and docs into a folder",
+        description="Copy the shipped example campaigns (campaigns/*.toml, for aacmm simulate), the example "
+                    "data (data/: a simulated ring campaign, real measured robot data with its licence) and "
+                    "the user docs (docs/, e.g. docs/formats.md) into DIR. Existing files are never overwritten.")
+    e.add_argument("dir", type=Path, help="destination folder (created)")
+    e.set_defaults(func=run_examples)
 
 
 def tip_table(arm, points) -> dict:
@@ -155,39 +164,59 @@ def tip_table(arm, points) -> dict:
 
 
 def run_tip(args: argparse.Namespace) -> int:
-    with output_file(args.output, [args.points, args.arm]) as tmp:
+    n, measurements, flagged, flagged_count, kinds = 0, {}, [], 0, set()
+    d_sum, d_max = 0.0, 0.0
+    # block by block: a file of millions of rows in bounded memory; nothing is written on an error
+    with output_file(args.output, [args.points, args.arm]) as tmp, open(tmp, "wb") as fh:
         arm = model_from_args(args)
         desc = arm.desc
-        points = read_points(args.points, desc.n_joints)
-        cols = tip_table(arm, points)
         from .uncertainty_cli import parameters_of, tip_columns, wants_uncertainty
         parameters = parameters_of(arm)
-        ulines = []
-        if wants_uncertainty(args, parameters):
-            ucols, ulines = tip_columns(arm, points, parameters, args)
-            cols.update(ucols)
-        write_csv(tmp, cols, fmt="%.6f")
-    n = len(points)
-    print(f"{n} points in {len(points.measurements())} measurement(s) -> {args.output}")
+        blocks = iter_points(args.points, desc.n_joints)
+        uncertain = wants_uncertainty(args, parameters)
+        if uncertain:                   # the uncertainty summary is over all points: one block
+            blocks = [concat_points(blocks)]
+        ulines, warnings = [], []
+        for block in blocks:
+            cols = tip_table(arm, block)
+            if uncertain:
+                ucols, ulines = tip_columns(arm, block, parameters, args)
+                cols.update(ucols)
+            fh.write(format_csv(cols, "%.6f", header=n == 0))
+            n += len(block)
+            measurements.update(dict.fromkeys(block.measurement.tolist()))
+            kinds.add(block.force_kind)
+            d = cols["deflection_um"]
+            d_sum, d_max = d_sum + float(d.sum()), max(d_max, float(d.max()))
+            if len(flagged) < 11:
+                flagged += block.lines[cols["over_force"].astype(bool)][:11].tolist()
+            flagged_count += int(cols["over_force"].sum())
+            warnings += [w for w in point_warnings(desc, block) if w.kind != "over_force"]
+    print(f"{n} points in {len(measurements)} measurement(s) -> {args.output}")
     if arm.effects:
         print("effects applied: " + ", ".join(e.describe() for e in arm.effects))
-    if points.force is None:
+    if kinds == {None}:
         print("no force columns: corrected = rigid (no deflection applied)")
     else:
-        if points.force_kind == "two-channel":
+        if "two-channel" in kinds:
             print("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not measured "
                   "and is taken as zero")
-        d = cols["deflection_um"]
-        print(f"deflection: mean {d.mean():.2f} um, max {d.max():.2f} um")
+        print(f"deflection: mean {d_sum / n:.2f} um, max {d_max:.2f} um")
     for line in ulines:
         print(line)
-    flagged = int(cols["over_force"].sum())
-    if flagged:
-        lines = points.lines[cols["over_force"].astype(bool)][:10]
-        print(f"warning: {flagged} point(s) over the probe's calibrated force range "
-              f"({desc.probe.max_force:g} N), flagged in column over_force; lines {', '.join(map(str, lines))}"
-              + (" ..." if flagged > 10 else ""))
-    print_warnings([w for w in point_warnings(desc, points) if w.kind != "over_force"])
+    if flagged_count:
+        print(f"warning: {flagged_count} point(s) over the probe's calibrated force range "
+              f"({desc.probe.max_force:g} N), flagged in column over_force; lines {', '.join(map(str, flagged[:10]))}"
+              + (" ..." if flagged_count > 10 else ""))
+    print_warnings(warnings)
+    return 0
+
+
+def run_examples(args: argparse.Namespace) -> int:
+    from .shipped import copy_examples
+    written = copy_examples(args.dir)
+    print(f"examples -> {args.dir}/ ({', '.join(p.name for p in written)}); try: "
+          f"aacmm simulate {args.dir}/campaigns/paper-ring.toml -o out/paper-ring")
     return 0
 
 

@@ -1,4 +1,4 @@
-"""The arm description (DATA-FORMATS §2): the single source of every evaluator.
+"""The arm description (docs/formats.md §2): the single source of every evaluator.
 
 Inside, everything is SI: lengths [m], angles [rad], forces [N], compliances [m/N], masses [kg].
 """
@@ -21,7 +21,7 @@ __all__ = ["JointRow", "Probe", "ArmDescription", "load_description", "parse_des
 DH_ROW_FIELDS = ("theta_offset", "d", "a", "alpha")
 URDF_ROW_FIELDS = ("origin_x", "origin_y", "origin_z", "origin_roll", "origin_pitch", "origin_yaw")
 
-#: gravity in the base frame [m/s^2] (DATA-FORMATS §2: -z of the base frame)
+#: gravity in the base frame [m/s^2] (docs/formats.md §2: -z of the base frame)
 GRAVITY = np.array([0.0, 0.0, -9.81])
 
 
@@ -397,7 +397,7 @@ def description_from_data(data: dict, r: TomlReader, extra_keys: tuple[str, ...]
 
 
 def load_description(path: str | Path) -> ArmDescription:
-    """Read an arm description TOML file (DATA-FORMATS §2)."""
+    """Read an arm description TOML file (docs/formats.md §2)."""
     return parse_description(read_text(path, "the arm description"), str(path))
 
 

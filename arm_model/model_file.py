@@ -354,8 +354,10 @@ def parse_model(text: str, path: str = "<string>") -> Arm:
 
 def load_model(path, tip_frame: str | None = None, probe: dict | None = None, masses=None) -> Arm:
     """The arm of an ``--arm`` option: a model file or description TOML (effects applied), or a URDF
-    with ``tip_frame`` (no effects) and optionally a masses file (:func:`arm_model.urdf_import.load_masses`)."""
-    path = Path(path)
+    with ``tip_frame`` (no effects) and optionally a masses file (:func:`arm_model.urdf_import.load_masses`),
+    or a shipped arm's name (``aacmm7``)."""
+    from .shipped import arm_path
+    path = arm_path(path)
     if path.suffix.lower() == ".urdf" or masses is not None:   # masses with a TOML arm: load_arm says why not
         from .urdf_import import load_arm
         return Arm(load_arm(path, tip_frame, probe, masses))

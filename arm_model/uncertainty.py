@@ -151,6 +151,10 @@ class Propagation:
     cov: np.ndarray
     contributions: dict
     sources: dict
+    #: (N, R, 3) [m], with ``systematic=True``: the rows of the errors every point shares (the
+    #: parameters' factor L^T J_p^T, then the three compliances'), so that the covariance of points i
+    #: and j from them is ``systematic[i].T @ systematic[j]``; None otherwise
+    systematic: np.ndarray | None = None
 
     @property
     def u(self) -> np.ndarray:
@@ -191,7 +195,7 @@ def _prepare(model: ArmModel, q, wrench, aux):
 
 def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
               parameters: ParameterCovariance | None = None, inputs: InputUncertainty,
-              threads: int | None = None, chunk: int = 8192) -> Propagation:
+              threads: int | None = None, chunk: int = 8192, systematic: bool = False) -> Propagation:
     """Linear propagation to the corrected ball centres of N points (see the module docstring).
 
     Args:
@@ -200,6 +204,8 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
         aux: per-point temperature / joint torques when the model's effects need them.
         parameters: the covariance of named parameters (None: the parameters are taken as exact).
         inputs: :func:`default_inputs`.
+        systematic: also keep :attr:`Propagation.systematic` (for features fitted to several points,
+            whose shared errors do not average out).
     """
     q, w, aux = _prepare(model, q, wrench, aux)
     n, nj = q.shape
@@ -230,6 +236,8 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
     cov = np.empty((n, 3, 3))
     contrib = {k: np.zeros((n, 3)) for k in CONTRIBUTIONS}
     centres = np.empty((n, 3))
+    n_sys = npar + 3
+    sys_rows = np.zeros((n, n_sys, 3)) if systematic else None
     seeded = set(pidx)
     wanted = model.needs()
     pairs = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
@@ -289,9 +297,15 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
             a = blk[:, nz] @ gf[nz]
             if pp is not None:
                 a += s_mat[sl][:, list(per_point)] @ pp
-            squares(a.reshape(len(blk), 3, e - s), cv, name, s, e)
+            a = a.reshape(len(blk), 3, e - s)
+            if sys_rows is not None and name == "parameters":
+                sys_rows[s:e, :npar] = a.transpose(2, 0, 1)
+            squares(a, cv, name, s, e)
         if use_compliance:
-            squares(g[comp_cols] * inputs.compliance[:, None, None], cv, "compliance", s, e)
+            a = g[comp_cols] * inputs.compliance[:, None, None]
+            if sys_rows is not None:
+                sys_rows[s:e, npar:] = a.transpose(2, 0, 1)
+            squares(a, cv, "compliance", s, e)
         if inputs.probing > 0:
             var = inputs.probing ** 2
             for i in range(3):
@@ -317,7 +331,7 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
     sources["parameters"] = "none (parameters taken as exact)" if parameters is None else parameters.source
     if _compliance_covered(pnames):
         sources["compliance"] = "in the parameter covariance (calibrated)"
-    return Propagation(centres, cov, contrib, sources)
+    return Propagation(centres, cov, contrib, sources, sys_rows)
 
 
 def monte_carlo(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,

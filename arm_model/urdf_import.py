@@ -1,4 +1,4 @@
-"""An arm given as a URDF (DATA-FORMATS §2): the chain from the root link to the tip frame.
+"""An arm given as a URDF (docs/formats.md §2): the chain from the root link to the tip frame.
 
 The file is read with lxml (so that every error names its line) and modelled with yourdfpy. The chain
 runs from the root link to ``tip_frame``; other branches (fingers, sensors) are held at zero. Fixed
@@ -30,6 +30,7 @@ import numpy as np
 
 from ._errors import InputError, parse_toml, read_text
 from .description import ArmDescription, JointRow, Probe, TomlReader, load_description
+from .shipped import arm_path
 from .urdf import ELASTIC_JOINTS, _origin_matrix, rpy_from_matrix
 
 __all__ = ["description_from_urdf", "load_arm", "load_masses", "calibrated_urdf_text", "PAPER_PROBE",
@@ -374,9 +375,9 @@ def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None =
 
 def load_arm(path: str | Path, tip_frame: str | None = None, probe: dict | None = None,
              masses: str | Path | None = None) -> ArmDescription:
-    """An arm from a description TOML or, with ``tip_frame``, a URDF file; ``masses``: a masses file
-    (:func:`load_masses`) for a URDF arm."""
-    path = Path(path)
+    """An arm from a description TOML, a shipped arm's name (``aacmm7``) or, with ``tip_frame``, a URDF
+    file; ``masses``: a masses file (:func:`load_masses`) for a URDF arm."""
+    path = arm_path(path)
     if path.suffix.lower() == ".urdf":
         if not tip_frame:
             raise InputError("an arm given as a URDF needs --tip-frame (the link at the ball centre)", path)

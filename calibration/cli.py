@@ -44,8 +44,8 @@ def _holdout(text: str | None):
 
 def campaign_inputs(p) -> None:
     """Points, artefacts, arm, reference points and output folder (shared with ``aacmm close-loop``)."""
-    p.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
-    p.add_argument("artefacts", type=Path, help="artefacts TOML (DATA-FORMATS §4)")
+    p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3)")
+    p.add_argument("artefacts", type=Path, help="artefacts TOML (docs/formats.md §4)")
     add_arm_options(p, "nominal arm: description TOML or URDF (with --tip-frame)")
     p.add_argument("--reference-points", type=Path, default=None,
                    help="a second points CSV with reference coordinates (x_ref_mm ...), e.g. tracker nests")

@@ -138,8 +138,6 @@ def merge_points(*sets: PointSet) -> tuple[PointSet, np.ndarray]:
         return np.concatenate(parts)
 
     kinds = {s.force_kind for s in sets if s.force_kind is not None}
-    common_extra = set.intersection(*(set(s.extra) for s in sets))
-    common_text = set.intersection(*(set(s.text) for s in sets))
     merged = PointSet(
         path=sets[0].path, measurement=np.concatenate([s.measurement for s in sets]),
         feature=np.concatenate([s.feature for s in sets]), q=np.vstack([s.q for s in sets]),
@@ -147,9 +145,7 @@ def merge_points(*sets: PointSet) -> tuple[PointSet, np.ndarray]:
         force_kind=None if not kinds else (kinds.pop() if len(kinds) == 1 else "mixed"),
         temperature=stack("temperature", (), np.nan), time=stack("time", (), np.nan),
         ref=stack("ref", (3,), np.nan),
-        lines=np.concatenate([s.lines if s.lines is not None else np.arange(1, len(s) + 1) for s in sets]),
-        extra={k: np.concatenate([s.extra[k] for s in sets]) for k in common_extra},
-        text={k: np.concatenate([s.text[k] for s in sets]) for k in common_text})
+        lines=np.concatenate([s.lines if s.lines is not None else np.arange(1, len(s) + 1) for s in sets]))
     files = np.concatenate([np.full(len(s), s.path, dtype=object) for s in sets])
     return merged, files
 

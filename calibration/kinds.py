@@ -6,7 +6,7 @@ outside (``k``, packed floats) and every residual is evaluated at ``theta = 0``:
 derivatives with respect to ``x`` and ``theta``; after a step the state is moved by :func:`retract`
 (an axis or a rotation stays a unit vector or a rotation matrix).
 
-Kinds (DATA-FORMATS §4; ``b`` = ball diameter):
+Kinds (docs/formats.md §4; ``b`` = ball diameter):
 
 * ``seat``: ``x - c`` (3 rows a point); state ``c``.
 * ``sphere``: ``|x - c| - R`` with ``R = (D + b) / 2``; state ``(c, R)``; ``theta = dc`` (and ``dR``

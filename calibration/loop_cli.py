@@ -121,12 +121,12 @@ def run(args: argparse.Namespace) -> int:
         loop = close_loop(points, artefacts, desc, reference=reference, effects=tuple(effects), values=arm.values,
                           free=args.free,
                           weights=weights, settings=settings, families_=families, progress=progress)
-        final = loop.stages[-1]
-        final.result = refine_torques(final.result, rank_tol=settings.rank_tol,
-                                      outlier_threshold=settings.outlier_threshold)
-        if loop.model_fit is not None:            # the model written (every point, calibrate's start)
-            loop.model_fit = refine_torques(loop.model_fit, rank_tol=settings.rank_tol,
-                                            outlier_threshold=settings.outlier_threshold)
+        # the model written is loop.model_fit (every point) or else the last stage's fit: refine that one
+        opts = dict(rank_tol=settings.rank_tol, outlier_threshold=settings.outlier_threshold)
+        if loop.model_fit is not None:
+            loop.model_fit = refine_torques(loop.model_fit, **opts)
+        else:
+            loop.stages[-1].result = refine_torques(loop.stages[-1].result, **opts)
         names = {"points": str(args.points), "artefacts": str(args.artefacts), "arm": str(args.arm),
                  "reference_points": None if args.reference_points is None else str(args.reference_points)}
         write_loop_report(loop, out.dir, inputs=inputs, input_names=names, warnings=warnings)

@@ -13,6 +13,7 @@ import numpy as np
 
 from arm_model.checks import warnings_html
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output
+from arm_model.shipped import provenance
 
 from .loop import LoopResult, Stage, effect_summary
 from .model_output import model_check, model_paths, write_model
@@ -349,6 +350,7 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
     summary["warnings"] = [w.as_dict() for w in warnings]
     summary["model"] = {"file": model_files["model"].name, "covariance": model_files["covariance"].name,
                         "urdf": model_files["urdf"].name, "check": model_check(loop.model_fit or loop.final.result)}
+    summary.update(provenance(inputs))
     written.append(atomic_write_text(out / "summary.json", json.dumps(summary, indent=1) + "\n", inputs))
     written.append(atomic_write_text(out / "before-after.txt", table + "\n", inputs))
     written.append(atomic_write_text(out / "report.html", page, inputs))

@@ -15,6 +15,7 @@ import numpy as np
 from arm_model import InputError
 from arm_model.checks import warnings_html
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, write_csv
+from arm_model.shipped import provenance
 
 from .calibrate import CalibrationResult, display_unit
 from .model_output import model_check, model_paths, write_model
@@ -239,6 +240,7 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
     summary["model_check"] = model_check(result)
     if extra:
         summary.update(extra)
+    summary.update(provenance(inputs))
     if plots:
         atomic_write_bytes(files["residuals_png"], plot_residuals(result), inputs)
         atomic_write_bytes(files["parameters_png"], plot_parameters(result), inputs)

@@ -85,7 +85,7 @@ class SynthCampaign:
 
     def write(self, out_dir) -> dict:
         """Write ``points.csv``, ``points-ref.csv`` (with reference points) and ``artefacts.toml``
-        (DATA-FORMATS §3, §4); returns ``{role: Path}``."""
+        (docs/formats.md §3, §4); returns ``{role: Path}``."""
         out = Path(out_dir)
         files = {"points": _write_points(out / "points.csv", self.points)}
         if self.reference_points is not None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from arm_model import InputError, read_artefacts, read_points
+from arm_model import InputError, NumericalError, read_artefacts, read_points
 from arm_model.commands import add_arm_options, model_from_args, non_negative, number_in, positive
 from arm_model._output import output_folder
 from arm_model.checks import print_warnings
@@ -27,11 +27,11 @@ def register(sub) -> None:
                     "centres evaluated again through the probe's elastic joint with each point's force vector). "
                     "Writes report.html, summary.json, table2.csv, correlations.csv, budgets.csv and "
                     "figures/*.png into the output folder.")
-    r.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3) with the ring's points")
-    r.add_argument("artefacts", type=Path, help="artefacts TOML (DATA-FORMATS §4) with the ring (kind = \"ring\")")
+    r.add_argument("points", type=Path, help="points CSV (docs/formats.md §3) with the ring's points")
+    r.add_argument("artefacts", type=Path, help="artefacts TOML (docs/formats.md §4) with the ring (kind = \"ring\")")
     add_arm_options(r)
     r.add_argument("--signals", type=Path, metavar="DIR",
-                   help="folder of force signals, one <measurement>.csv a measurement (DATA-FORMATS §5); "
+                   help="folder of force signals, one <measurement>.csv a measurement (docs/formats.md §5); "
                         "without it the points file's force columns are used")
     r.add_argument("--feature", metavar="ID", help="id of the ring feature when the artefacts file has several rings")
     r.add_argument("--compliance-mm-per-N", type=positive(), dest="compliance", metavar="C",
@@ -63,7 +63,9 @@ def register(sub) -> None:
 
 
 def run_ring(args: argparse.Namespace) -> int:
-    from .models import analyse_ring_campaign, campaign_summary, check_reportable, ring_warnings
+    from arm_model.uncertainty import FORCE_SENSOR_U_N, default_inputs
+    from arm_model.uncertainty_cli import parameters_of
+    from .models import analyse_ring_campaign, campaign_summary, check_reportable, ring_uncertainties, ring_warnings
     from .report import DEFAULT_U_FORCE, ring_budgets, ring_report
 
     inputs = {"points": args.points, "artefacts": args.artefacts, "arm": args.arm}
@@ -81,8 +83,16 @@ def run_ring(args: argparse.Namespace) -> int:
         warnings = ring_warnings(desc, points, campaign)
         u_force = DEFAULT_U_FORCE if args.u_force is None else args.u_force
         budgets = ring_budgets(campaign, u_force=u_force, delta_t=args.delta_t, probability=args.probability)
+        parameters = parameters_of(arm)
+        unc_inputs = default_inputs(desc, force=None if args.u_force is None else
+                                    (args.u_force, args.u_force, FORCE_SENSOR_U_N[2]))
+        try:
+            point_unc = ring_uncertainties(arm, points, campaign, parameters, unc_inputs)
+        except NumericalError as exc:
+            raise InputError(f"diameter uncertainty from the points: {exc}", args.points) from None
         inputs["signals"] = args.signals
-        written = ring_report(campaign, out.dir, inputs, budgets, warnings)
+        written = ring_report(campaign, out.dir, inputs, budgets, warnings, point_unc,
+                              parameters.source if parameters is not None else None)
     s = campaign_summary(campaign)
     print(f"ring '{campaign.feature}': {len(campaign.measurements)} measurements, "
           f"{sum(r.n_points for r in campaign.measurements)} points; forces from "
@@ -96,6 +106,9 @@ def run_ring(args: argparse.Namespace) -> int:
     for m, v in s.items():
         print(f"{m:<12} {v['mean_abs_diameter_error_mm']:>15.4f} {v['diameter_error_reduction_pct']:>9.1f}% "
               f"{v['mean_form_error_mm']:>15.4f}")
+    u = [x.u for x in point_unc]
+    print(f"diameter uncertainty from the points' covariances (k = 1): {min(u) * 1e3:.4f} .. {max(u) * 1e3:.4f} mm "
+          f"({'parameters from ' + parameters.source if parameters is not None else 'no parameter covariance: parameters exact'})")
     if args.u_force is None:
         print(f"budgets: u_force = {DEFAULT_U_FORCE} N (the paper's bending sensor; set --u-force-N for yours)")
     print(f"{len(written)} files -> {args.output}/ (report.html, summary.json, ...)")

@@ -29,7 +29,7 @@ from arm_model.io import PointSet, read_force_signal
 from .signals import ForceSummary, PointForces, find_point_forces, force_summary, forces_from_columns
 
 __all__ = ["PAPER_MODELS", "MODELS", "MODEL_LABELS", "paper_correction", "correct_ring", "RingMeasurement",
-           "RingCampaign", "analyse_ring_campaign", "measurement_forces", "table2", "campaign_summary"]
+           "RingCampaign", "analyse_ring_campaign", "ring_uncertainties", "measurement_forces", "table2", "campaign_summary"]
 
 #: the paper's four models, in the order of its Table 2 (point, mean, max, 10Max) kept as labelled
 PAPER_MODELS = ("point", "mean", "max", "max10")
@@ -66,6 +66,7 @@ class RingMeasurement:
     summary: ForceSummary
     fits: dict
     lines: np.ndarray | None = None
+    rows: np.ndarray | None = None
 
     @property
     def n_points(self) -> int:
@@ -154,7 +155,7 @@ def measurement_forces(points: PointSet, measurement: str, signals=None) -> Poin
     if not path.exists():
         raise InputError(f"no force signal for measurement '{measurement}' (expected one file a measurement, "
                          f"named <measurement>.csv; characters other than letters, digits and . _ + - "
-                         f"become _)", path)
+                         f"become _; docs/formats.md §5)", path)
     return find_point_forces(read_force_signal(path), len(rows), measurement)
 
 
@@ -226,12 +227,35 @@ def analyse_ring_campaign(desc, points: PointSet, artefacts, feature: str | None
             wrench = np.column_stack([wrench, points.torque[idx]])
         wrench_centres = arm.ball_centres(sub, wrench=wrench) if "wrench" in models else None
         fits = correct_ring(rigid, desc.probe.ball_diameter, ring.diameter, c, forces, wrench_centres, models)
-        out.append(RingMeasurement(mid, forces, force_summary(forces.bending), fits, points.lines[idx]))
+        out.append(RingMeasurement(mid, forces, force_summary(forces.bending), fits, points.lines[idx], idx))
     if kind == "two-channel":
         notes.append("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not "
                      "measured and is taken as zero; the full-wrench model sees the probe-x bending only")
     return RingCampaign(ring.id, ring.diameter, desc.probe.ball_diameter, c, kind or "", out, notes,
                         ring.u_diameter, ring.form_error)
+
+
+def ring_uncertainties(arm, points: PointSet, campaign: RingCampaign, parameters, inputs) -> list:
+    """Per measurement: the standard uncertainty of the diameter fitted to the corrected ball centres
+    (:class:`arm_model.feature_uncertainty.DiameterUncertainty`), from the covariance of each centre
+    (:func:`arm_model.uncertainty.propagate`: the model's parameter covariance ``parameters`` or None,
+    the input uncertainties ``inputs``), the errors the points share propagated jointly."""
+    from arm_model.feature_uncertainty import diameter_sensitivity, diameter_uncertainty
+    from arm_model.uncertainty import propagate
+
+    aux = arm.aux(points)
+    out = []
+    for r in campaign.measurements:
+        wrench = r.forces.force
+        if points.torque is not None:
+            wrench = np.column_stack([wrench, points.torque[r.rows]])
+        res = propagate(arm.model, arm.p, points.q[r.rows], wrench, None if aux is None else aux.select(r.rows),
+                        parameters=parameters, inputs=inputs, systematic=True)
+        fit = r.fits.get("wrench", r.fits["initial"])
+        sens = diameter_sensitivity(fit.centres, fit.cylinder)
+        out.append(diameter_uncertainty(sens, res.cov, res.systematic,
+                                        0 if parameters is None else len(parameters.names)))
+    return out
 
 
 def ring_warnings(desc, points: PointSet, campaign: RingCampaign) -> list:
@@ -272,14 +296,16 @@ def check_reportable(campaign: RingCampaign, points: PointSet) -> None:
 
 def table2(campaign: RingCampaign) -> dict:
     """Columns of a Table 2-like table [mm, %]: per measurement, diameter error initially and after each
-    model with its improvement ``(initial - corrected) / initial`` in %, and the form errors."""
+    model with its improvement ``(|initial| - |corrected|) / |initial|`` in % (an over-correction that
+    flips the sign and grows the error is negative), and the form errors."""
     cols = {"measurement": np.array([r.id for r in campaign.measurements], dtype=object)}
     init = campaign.column("initial") * 1e3
     for m in campaign.models:
         cols[f"diameter_error_{m}_mm"] = campaign.column(m) * 1e3
         if m != "initial":
             with np.errstate(divide="ignore", invalid="ignore"):
-                cols[f"improvement_{m}_pct"] = (init - cols[f"diameter_error_{m}_mm"]) / init * 100.0
+                cols[f"improvement_{m}_pct"] = ((np.abs(init) - np.abs(cols[f"diameter_error_{m}_mm"]))
+                                                 / np.abs(init) * 100.0)
     for m in campaign.models:
         cols[f"form_error_{m}_mm"] = campaign.column(m, "form_error") * 1e3
     for w in ("mean", "max10", "max"):

@@ -20,6 +20,7 @@ import numpy as np
 
 from arm_model.checks import warnings_html
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output
+from arm_model.shipped import provenance
 
 from . import paper as P
 from .correlation import FORCE_VALUES, campaign_correlations
@@ -279,7 +280,7 @@ def _csv_text(columns: dict, fmt: str = "%.6f") -> str:
 
 
 def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: list[BudgetResult],
-                warnings=()) -> list[Path]:
+                warnings=(), point_uncertainty=None, parameters_source=None) -> list[Path]:
     """Write the report of an analysed ring campaign into folder ``out``: ``report.html``,
     ``summary.json``, ``table2.csv``, ``correlations.csv``, ``budgets.csv`` and ``figures/*.png``.
 
@@ -294,6 +295,14 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
     guard_output(out, in_paths)
     summary = ring_summary(campaign, budgets, {k: None if v is None else str(v) for k, v in inputs.items()})
     summary["warnings"] = [w.as_dict() for w in warnings]
+    if point_uncertainty is not None:
+        summary["diameter_uncertainty_from_points"] = {
+            "method": "linear propagation of each corrected ball centre's covariance through the cylinder fit; "
+                      "errors shared by the points (parameters, compliance) propagated jointly; k = 1",
+            "parameters": parameters_source or "none (parameters taken as exact)",
+            "measurements": [dict(measurement=r.id, **u.as_dict())
+                             for r, u in zip(campaign.measurements, point_uncertainty)]}
+    summary.update(provenance(in_paths))
     t2 = table2(campaign)
     corr = campaign_correlations(campaign)
     figs = _ring_figures(campaign, budgets)
@@ -342,6 +351,17 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
                  "<img src='figures/correlation_form.png' alt='form error against force'>")
     parts.append("<h2>Uncertainty budgets (GUM, paper Table 3)</h2><img src='figures/budgets.png' alt='budgets'>")
     parts += [_budget_html(b) for b in budgets]
+    if point_uncertainty is not None:
+        parts.append("<h2>Diameter uncertainty from the points' covariances (k = 1, beside the GUM budgets)</h2>"
+                     f"<p>Parameters: {html.escape(parameters_source or 'none (taken as exact)')}. Each corrected "
+                     "ball centre's covariance is propagated through the cylinder fit; errors the points share "
+                     "(parameters, compliance) do not average out. 'if independent' is what the naive sum of "
+                     "independent point variances would give. See docs/ring-pipeline.md.</p>" + _table_html(
+                         ("measurement", "u(D) [mm]", "point-alone errors [mm]", "parameters [mm]",
+                          "compliance [mm]", "if independent [mm]"),
+                         [(r.id, f"{u.u * 1e3:.4f}", f"{u.independent * 1e3:.4f}", f"{u.parameters * 1e3:.4f}",
+                           f"{u.compliance * 1e3:.4f}", f"{u.if_independent * 1e3:.4f}")
+                          for r, u in zip(campaign.measurements, point_uncertainty)]))
     files = {"report.html": _page("Ring-gauge campaign: force correction", parts),
              "summary.json": json.dumps(summary, indent=1, allow_nan=False) + "\n",
              "table2.csv": _csv_text(t2),
@@ -555,7 +575,7 @@ def paper_report(out: str | Path, table_path: str | Path | None = None) -> list[
     parts.append("<h3>Diameter error per measurement [mm]</h3>" + _table_html(
         ("measurement", "initial", "after FEM (mean force)", "after FEM + series compliance (LOO)"), rows))
     files = {"report.html": _page("The seed paper reproduced and the loop closed", parts),
-             "summary.json": json.dumps(s, indent=1, allow_nan=False) + "\n",
+             "summary.json": json.dumps({**s, **provenance([P.TABLE2_PATH if table_path is None else table_path])}, indent=1, allow_nan=False) + "\n",
              "table2_implied.csv": _csv_text(t2cols),
              "findings.csv": _csv_text({k: np.array([str(f[k]) for f in findings], dtype=object)
                                         for k in ("table", "item", "printed", "computed", "consistent", "note")})}

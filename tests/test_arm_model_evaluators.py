@@ -12,7 +12,7 @@ from conftest import assert_close, fd_jacobian
 
 
 def hand_dh_point(desc, q, p_last):
-    """Independent reference: 4x4 matrix product of the DH formula of DATA-FORMATS §2."""
+    """Independent reference: 4x4 matrix product of the DH formula of docs/formats.md §2."""
     def rz(t):
         c, s = math.cos(t), math.sin(t)
         return np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])

@@ -1,4 +1,4 @@
-"""Readers: the formats of DATA-FORMATS exactly; bad input -> one clear error naming file, line, column."""
+"""Readers: the formats of docs/formats.md exactly; bad input -> one clear error naming file, line, column."""
 from __future__ import annotations
 
 import math

@@ -78,6 +78,11 @@ def test_ring_report_from_point_columns_on_the_bundled_campaign(tmp_path):
     assert len(s["measurements"]) == 17 and s["force_kind"] == "xyz"
     ucor = [t for b in s["budgets"] if b["name"] == "diameter, full wrench" for t in b["terms"] if t["name"] == "u_cor"]
     assert_close(ucor[0]["u"], 2 * 0.0142 * 0.01, atol=1e-12)
+    du = s["diameter_uncertainty_from_points"]["measurements"]
+    assert len(du) == 17
+    for d in du:   # no parameter covariance: nothing from the parameters; the parts add in quadrature
+        assert d["parameters_mm"] == 0 and d["u_mm"] > 0
+        assert_close(d["u_mm"] ** 2, d["independent_mm"] ** 2 + d["compliance_mm"] ** 2, atol=1e-15)
 
 
 def test_ring_refusals_write_nothing(small_campaign, tmp_path, capsys):

@@ -25,7 +25,7 @@ form_error_mm = 0.005
 
 
 def points_csv(measurements, two_channel=False) -> str:
-    """A points CSV (DATA-FORMATS §3) from [(id, q (N, 7) [rad], force (N, 3) [N])]."""
+    """A points CSV (docs/formats.md §3) from [(id, q (N, 7) [rad], force (N, 3) [N])]."""
     cols = ["measurement", "feature"] + [f"q{i}_deg" for i in range(1, 8)]
     cols += ["f_bend_N", "f_axial_N"] if two_channel else ["fx_N", "fy_N", "fz_N"]
     lines = [",".join(cols)]
@@ -136,3 +136,14 @@ def test_campaign_input_errors(nominal, campaign_data, tmp_path):
                             + "m,ring," + ",".join("0" for _ in range(7)) + "\n", "nf.csv", 7)
     with pytest.raises(InputError, match="no force columns"):
         analyse_ring_campaign(nominal, no_force, parse_artefacts(ARTEFACTS, "a.toml"))
+
+
+def test_improvement_uses_the_size_of_the_error():
+    """An over-correction from +0.015 mm to -0.152 mm is a worse result (-913 %), never "+1113 %"."""
+    from types import SimpleNamespace
+    cols = {"initial": np.array([0.015e-3, -0.020e-3]), "point": np.array([-0.152e-3, 0.010e-3])}
+    camp = SimpleNamespace(measurements=[SimpleNamespace(id="a"), SimpleNamespace(id="b")], models=("initial", "point"),
+                           column=lambda m, what="diameter_error": cols[m] if what == "diameter_error" else cols[m] * 0,
+                           force_values=lambda w: np.zeros(2))
+    t = table2(camp)
+    np.testing.assert_allclose(t["improvement_point_pct"], [(0.015 - 0.152) / 0.015 * 100, 50.0], rtol=1e-12)

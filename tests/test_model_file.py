@@ -326,9 +326,10 @@ def test_tip_with_the_loops_model_reproduces_the_loops_corrected_points(nominal,
     loop = close_loop(pts, read_artefacts(sim / "artefacts.toml"), nominal, weights=Weights(2e-6),
                       folds=3, cv_top=2)
     assert {s.added.family for s in loop.stages[1:]} >= {"joint_compliance", "eccentricity"}
-    unrefined = loop.model_fit                    # the model written: the final model fitted on every point
-    loop.model_fit = refine_torques(unrefined)
-    final = loop.model_fit
+    # the model written is the final model fitted on every point (loop.model_fit), refined as close-loop does
+    assert loop.model_fit is not None
+    unrefined = loop.model_fit
+    loop.model_fit = final = refine_torques(unrefined)
     out = tmp_path / "loop"
     write_loop_report(loop, out, inputs=[sim / "points.csv"])
     s = json.loads((out / "summary.json").read_text())

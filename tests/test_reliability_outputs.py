@@ -312,7 +312,7 @@ def test_os_error_is_one_message(tmp_path, monkeypatch, capsys):
     def full(*a, **k):
         raise OSError(28, "No space left on device", str(tmp_path / "t.csv"))
 
-    monkeypatch.setattr(commands, "write_csv", full)
+    monkeypatch.setattr(commands, "format_csv", full)       # tip writes block by block
     assert main(["tip", str(POINTS), "--arm", str(NOMINAL), "-o", str(tmp_path / "t.csv")]) == 2
     err = capsys.readouterr().err
     assert "No space left on device" in err and "Traceback" not in err

@@ -100,6 +100,12 @@ def test_linear_propagation_is_j_sigma_jt_through_every_effect(nominal):
     assert not res.contributions["compliance"].any()
     parts = sum(res.contributions.values())
     assert_close(parts, np.einsum("nii->ni", res.cov), atol=1e-9 * res.cov.max())
+    # the shared rows give the covariance BETWEEN points: J_p(i) Sigma J_p(k)^T
+    sy = propagate(model, p, q, w, aux, parameters=pc, inputs=inputs, chunk=3, systematic=True)
+    assert_close(sy.cov, res.cov, atol=1e-12 * res.cov.max())
+    jps = [np.array(jac(q[i], w[i], amat[i], p)[1])[:, free] for i in (0, 4)]
+    ref = jps[0] @ cov @ jps[1].T
+    assert_close(sy.systematic[0].T @ sy.systematic[4], ref, atol=1e-9 * np.abs(ref).max())
 
 
 def test_compliance_contribution_by_hand(nominal):

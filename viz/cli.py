@@ -34,7 +34,7 @@ def register(sub) -> None:
                     "--scale times long, the measured ball centres, artefacts placed by fitting their points "
                     "(--artefacts) and residual vectors (--residuals). The scales are printed and written on "
                     "the page. The server stops at Ctrl-C, at SIGTERM, or after --open-seconds.")
-    p.add_argument("points", type=Path, help="points CSV (DATA-FORMATS §3)")
+    p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3)")
     add_arm_options(p)
     p.add_argument("--measurement", metavar="ID", help="only the points of this measurement (default: all)")
     pose = p.add_mutually_exclusive_group()
@@ -46,7 +46,7 @@ def register(sub) -> None:
     p.add_argument("--scale", type=positive(), default=1000.0,
                    help="length of the deflection arrow per length of deflection (default 1000: 0.1 mm is "
                         "drawn 100 mm long)")
-    p.add_argument("--artefacts", type=Path, help="artefacts TOML (DATA-FORMATS §4): draw each feature, placed "
+    p.add_argument("--artefacts", type=Path, help="artefacts TOML (docs/formats.md §4): draw each feature, placed "
                    "by fitting its points in each measurement")
     p.add_argument("--residuals", type=Path, help="residuals CSV: x_mm, y_mm, z_mm, rx_um, ry_um, rz_um, or the "
                    "residuals.csv of aacmm calibrate (line, dx_um, dy_um, dz_um; see docs/viewer.md): draw "

@@ -1,6 +1,6 @@
 """The residuals file the viewer draws (``aacmm view --residuals``).
 
-One row a residual vector, units in the column names (DATA-FORMATS §1). Either the start point is
+One row a residual vector, units in the column names (docs/formats.md §1). Either the start point is
 given::
 
     measurement,feature,x_mm,y_mm,z_mm,rx_um,ry_um,rz_um

@@ -1,6 +1,6 @@
 """Artefacts and where the ball centre must be: one plan row a captured point.
 
-For each task of a campaign this draws the points an operator takes (DATA-FORMATS §4 meaning):
+For each task of a campaign this draws the points an operator takes (docs/formats.md §4 meaning):
 
 * ring (inner cylinder, probed from inside, stylus parallel to its axis): ball centres on the
   cylinder of diameter D - ball diameter, rows at given depths below the top face; the part pushes

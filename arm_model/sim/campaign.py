@@ -18,12 +18,13 @@ import numpy as np
 
 from .._errors import InputError, did_you_mean, parse_toml, read_text
 from ..description import ArmDescription
+from ..shipped import SHIPPED_ARMS, shipped_path
 from ..urdf_import import load_arm
 
 __all__ = ["Campaign", "Task", "load_campaign", "campaign_from_dict", "TASK_KINDS", "SENSORS",
            "DEFAULT_ARM"]
 
-DEFAULT_ARM = Path(__file__).resolve().parents[2] / "urdf" / "aacmm7.dh.toml"
+DEFAULT_ARM = shipped_path(SHIPPED_ARMS["aacmm7"])
 TASK_KINDS = ("ring", "sphere", "plane", "seat", "ballbar", "tracker")
 SENSORS = ("xyz", "two-channel", "none")
 
@@ -369,6 +370,8 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
             arm_path = Path(top["arm"])
             if not arm_path.is_absolute() and base_dir is not None:
                 arm_path = base_dir / arm_path
+            if top["arm"] in SHIPPED_ARMS and not arm_path.exists():     # a shipped arm by name
+                arm_path = shipped_path(SHIPPED_ARMS[top["arm"]])
         if arm_path is None:
             arm_path = DEFAULT_ARM
         if not arm_path.exists():

@@ -5,9 +5,9 @@ required direction (2; the residual is ``z - u``, so the opposite direction is n
 optionally the probe x axis towards a required direction (1). A 7-axis
 arm keeps one or two redundant degrees of freedom (elbow swivel, handle roll); they are drawn at
 random like an operator does, by starting each solve from a random configuration inside the joint
-limits. Damped Gauss-Newton on all pending points in parallel (numpy), with the model's exact
-geometric Jacobians (:func:`arm_model.jacobian.chain_jacobian`: ``u x (p - o)`` per joint); solutions
-outside the limits or pointing the wrong way are rejected and retried from a new random start.
+limits. Damped Gauss-Newton on all pending points in parallel (numpy), with exact Jacobians by
+complex-step differentiation of the core's kinematic chain; solutions outside the limits or
+pointing the wrong way are rejected and retried from a new random start.
 
 The wrench that deflects the probe is the world-frame contact force rotated into the probe frame
 of the current configuration, so it is recomputed at every iteration; at convergence the true
@@ -21,12 +21,12 @@ import numpy as np
 
 from .._errors import NumericalError
 from ..effects import Geometry
-from ..jacobian import chain_jacobian, geometry_entries
 from .truth import Truth
 
 __all__ = ["IKTargets", "IKResult", "solve_ik", "solve_points", "joint_limits", "wrap_into_limits",
            "ball_jacobian", "probe_wrench"]
 
+_H = 1e-30       # complex step [rad]
 _L0 = 0.1        # position scale [m] of the residual
 
 
@@ -110,46 +110,36 @@ def probe_wrench(force, torque, z, x) -> np.ndarray:
     return np.concatenate([np.einsum("nij,nj->ni", r, force), np.einsum("nij,nj->ni", r, torque)], axis=1)
 
 
-def _pose_jacobian(truth: Truth, q, geom: Geometry, wrench):
-    """Ball centre, flange z and x axes (N, 3) at true angles ``q`` (N, J) with a fixed probe-frame
-    ``wrench`` (N, 6), and their exact Jacobians d/dq (N, 3, J) each: one pass of
-    :func:`arm_model.jacobian.chain_jacobian` over four points a pose (the ball and three flange
-    points; an axis and its Jacobian are the difference of two points')."""
-    d = truth.nominal
-    n, j = q.shape
-
-    def cols(v, rest):
-        return np.concatenate([np.broadcast_to(np.asarray(v, float), (n,)), np.repeat(rest, n)])
-
-    # flange points (0, 0, 1), (0, 0, 2), (1, 0, 1): off the origin, where the probe's lever would be 0
-    p_last = [cols(geom.p_last[k], [[0.0, 0.0, 1.0][k], [0.0, 0.0, 2.0][k], [1.0, 0.0, 1.0][k]]) for k in range(3)]
-    compliance = [cols(geom.compliance[k], [0.0, 0.0, 0.0]) for k in range(3)]
-    w = [cols(wrench[:, k], [0.0, 0.0, 0.0]) for k in range(6)]
-    rows = [[np.tile(v, 4) if isinstance(v, np.ndarray) else v for v in r] for r in geom.rows]
-    pts, jac = chain_jacobian(d.convention, rows, p_last, compliance, list(np.tile(q, (4, 1)).T), w, d.axes)
-    q0 = geometry_entries(d.convention, j).index(("q", 0))
-    pts = pts.reshape(4, n, 3)
-    jq = np.transpose(jac[q0:q0 + j].reshape(j, 3, 4, n), (2, 3, 1, 0))      # (4, N, 3, J)
-    return pts[0], pts[2] - pts[1], pts[3] - pts[1], jq[0], jq[2] - jq[1], jq[3] - jq[1]
-
-
 def ball_jacobian(truth: Truth, q, temperature, wrench) -> np.ndarray:
     """(N, 3, J) d ball / d q [m/rad] of the true arm at true angles ``q`` (N, J) with a fixed
-    probe-frame ``wrench`` (N, 6) (the exact geometric Jacobian of the chain)."""
-    q = np.asarray(q, float)
-    return _pose_jacobian(truth, q, truth.geometry(temperature), np.asarray(wrench, float))[3]
+    probe-frame ``wrench`` (N, 6) (complex step through the core chain)."""
+    n, j = q.shape
+    qc = np.repeat(q[None], j, axis=0).astype(complex)
+    for k in range(j):
+        qc[k, :, k] += 1j * _H
+    geom = _take_geom(truth.geometry(temperature), np.arange(n), j)
+    ball, _, _ = truth.pose(qc.reshape(j * n, j), geom, np.tile(wrench, (j, 1)))
+    return np.transpose(ball.imag.reshape(j, n, 3) / _H, (1, 2, 0))
 
 
 def _residual_and_jacobian(truth: Truth, q, geom, tg: IKTargets, has_x):
     """Residual (N, 9) = ((ball - target) / L0, z - stylus, x - x_dir (0 where the roll is free))
     and its Jacobian (N, 9, J), the wrench held at its value for q."""
+    n, j = q.shape
     _, z0, x0 = truth.pose(q, geom)
     w = probe_wrench(tg.force, tg.torque, z0, x0)
-    pos, z, x, jb, jz, jx = _pose_jacobian(truth, q, geom, w)
+    qc = np.repeat(q[None, :, :], j + 1, axis=0).astype(complex)
+    for k in range(j):
+        qc[k + 1, :, k] += 1j * _H
+    qc = qc.reshape((j + 1) * n, j)
+    ball, z, x = truth.pose(qc, _take_geom(geom, np.arange(n), j + 1), np.tile(w, (j + 1, 1)))
+    ball, z, x = (a.reshape(j + 1, n, 3) for a in (ball, z, x))
+    pos = ball[0].real
     hx = has_x[:, None]
-    r = np.concatenate([(pos - tg.position) / _L0, z - tg.stylus,
-                        np.where(hx, x - np.nan_to_num(tg.x_dir), 0.0)], axis=1)
-    jac = np.concatenate([jb / _L0, jz, np.where(hx[:, :, None], jx, 0.0)], axis=1)
+    r = np.concatenate([(pos - tg.position) / _L0, z[0].real - tg.stylus,
+                        np.where(hx, x[0].real - np.nan_to_num(tg.x_dir), 0.0)], axis=1)
+    d = [np.transpose(a[1:].imag / _H, (1, 2, 0)) for a in (ball, z, x)]     # (N, 3, J) each
+    jac = np.concatenate([d[0] / _L0, d[1], np.where(hx[:, :, None], d[2], 0.0)], axis=1)
     return r, jac, pos, w
 
 

@@ -108,7 +108,7 @@ def _num(x: float) -> str:
 
 
 def _artefacts_text(plan: Plan, campaign: Campaign) -> str:
-    out = [f"# Artefacts of the simulated campaign '{campaign.name}' (DATA-FORMATS §4).", ""]
+    out = [f"# Artefacts of the simulated campaign '{campaign.name}' (docs/formats.md §4).", ""]
     for f in plan.features:
         out += ["[[feature]]", f'id = "{f["id"]}"', f'kind = "{f["kind"]}"']
         for key in ("diameter", "u_diameter", "form_error"):

@@ -1,0 +1,86 @@
+"""The uncertainty of a fitted cylinder's diameter from the covariances of its points.
+
+The orthogonal least-squares cylinder (:func:`arm_model.geometry.fit_cylinder`) has parameters
+theta = (two axis offsets, two axis tilts, radius) and residuals r_i = rho_i - R, rho_i the distance
+of point i from the axis. Moving point i by dp_i changes r_i by n_i . dp_i (n_i the unit radial
+direction), and the refit changes theta by ``-(J^T J)^-1 J^T (n . dp)`` (J the residuals' Jacobian
+in theta; Gauss-Newton, first order). So the diameter D = 2 R (+ the ball diameter) has the
+sensitivity ``s_i = dD/dp_i`` (3,) to each point, and
+
+    var(D) = sum_i s_i^T C_i s_i            errors of each point alone (encoders, force, probing)
+           + |sum_i S_i s_i|^2              errors shared by all points (parameters, compliance)
+
+with C_i the point's covariance without the shared part and S_i its rows of shared factors
+(:attr:`arm_model.uncertainty.Propagation.systematic`): a shared error (a wrong link length, a wrong
+compliance) moves every point the same way and does not average out over the points.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .geometry import CylinderFit
+
+__all__ = ["DiameterUncertainty", "diameter_sensitivity", "diameter_uncertainty"]
+
+
+def diameter_sensitivity(points, cylinder: CylinderFit) -> np.ndarray:
+    """(N, 3) dD/dp_i: the fitted diameter's first-order change per metre of each point's coordinates."""
+    p = np.asarray(points, float)
+    d = p - cylinder.point
+    t = d @ cylinder.axis
+    perp = d - np.outer(t, cylinder.axis)
+    n = perp / np.linalg.norm(perp, axis=1)[:, None]
+    e1 = np.cross(cylinder.axis, [1.0, 0.0, 0.0])
+    if np.linalg.norm(e1) < 0.5:
+        e1 = np.cross(cylinder.axis, [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(cylinder.axis, e1)
+    jac = np.column_stack([-n @ e1, -n @ e2, -t * (n @ e1), -t * (n @ e2), -np.ones(len(p))])
+    # the radius row of the least-squares pseudo-inverse (lstsq: stable for tall thin Jacobians)
+    g = np.linalg.pinv(jac)[4]
+    return -2.0 * g[:, None] * n
+
+
+@dataclass(frozen=True)
+class DiameterUncertainty:
+    """Standard uncertainties of a fitted diameter [m]: ``u`` in total, from the errors of each point
+    alone (``independent``) and from the errors the points share (``parameters``, ``compliance``), and
+    ``if_independent``: what ``u`` would be if every point's whole covariance were independent of the
+    others' (the naive sum, shown to say how much the shared errors matter)."""
+    u: float
+    independent: float
+    parameters: float
+    compliance: float
+    if_independent: float
+
+    def as_dict(self) -> dict:
+        return {"u_mm": self.u * 1e3, "independent_mm": self.independent * 1e3,
+                "parameters_mm": self.parameters * 1e3, "compliance_mm": self.compliance * 1e3,
+                "if_independent_mm": self.if_independent * 1e3}
+
+
+def diameter_uncertainty(sens: np.ndarray, cov: np.ndarray, systematic: np.ndarray | None = None,
+                         n_parameters: int | None = None) -> DiameterUncertainty:
+    """Propagate point covariances to a fitted diameter.
+
+    Args:
+        sens: (N, 3) from :func:`diameter_sensitivity`.
+        cov: (N, 3, 3) each point's whole covariance [m^2] (shared part included).
+        systematic: (N, R, 3) shared factor rows (``Propagation.systematic``) or None (all independent).
+        n_parameters: how many of the R rows are the parameters' (the rest: the compliances); None: all.
+    """
+    s = np.asarray(sens, float)
+    cov = np.asarray(cov, float)
+    naive = float(np.einsum("ni,nij,nj->", s, cov, s))
+    if systematic is None or systematic.shape[1] == 0:
+        return DiameterUncertainty(*(np.sqrt(max(naive, 0.0)),) * 2, 0.0, 0.0, float(np.sqrt(max(naive, 0.0))))
+    shared_cov = np.einsum("nri,nrj->nij", systematic, systematic)
+    indep = float(np.einsum("ni,nij,nj->", s, cov - shared_cov, s))
+    v = np.einsum("nri,ni->r", systematic, s)
+    k = systematic.shape[1] if n_parameters is None else int(n_parameters)
+    par, comp = float(v[:k] @ v[:k]), float(v[k:] @ v[k:])
+    indep = max(indep, 0.0)
+    return DiameterUncertainty(float(np.sqrt(indep + par + comp)), float(np.sqrt(indep)), float(np.sqrt(par)),
+                               float(np.sqrt(comp)), float(np.sqrt(max(naive, 0.0))))

@@ -1,0 +1,94 @@
+"""Files that ship with the toolkit: the nominal arm, the example campaigns and data.
+
+In a source checkout they are the repository's ``urdf/`` and ``examples/``; an installed wheel carries a
+copy under ``arm_model/_shipped/`` (made by ``setup.py`` at build time), so ``--arm aacmm7`` and
+``aacmm examples DIR`` work from any folder without a clone. Light: no numpy at import.
+"""
+from __future__ import annotations
+
+import hashlib
+import shutil
+from pathlib import Path
+
+__all__ = ["SHIPPED_ARMS", "shipped_path", "arm_path", "version", "provenance", "copy_examples"]
+
+_PACKAGE = Path(__file__).resolve().parent
+#: shipped arms by name -> path relative to the shipped root
+SHIPPED_ARMS = {"aacmm7": "urdf/aacmm7.dh.toml"}
+
+
+def _root() -> Path:
+    installed = _PACKAGE / "_shipped"
+    return installed if installed.is_dir() else _PACKAGE.parent
+
+
+def shipped_path(rel: str) -> Path:
+    """Path of a shipped file or folder (``"urdf/aacmm7.dh.toml"``, ``"examples"``)."""
+    return _root() / rel
+
+
+def arm_path(value: str | Path) -> Path:
+    """``value`` as a path; a shipped arm's name (``aacmm7``) that is not an existing file becomes
+    the shipped description."""
+    p = Path(value)
+    name = str(value)
+    if name in SHIPPED_ARMS and not p.exists():
+        return shipped_path(SHIPPED_ARMS[name])
+    return p
+
+
+def version() -> str:
+    """The installed version of aacmm-toolkit."""
+    from importlib.metadata import PackageNotFoundError, version as _v
+    try:
+        return _v("aacmm-toolkit")
+    except PackageNotFoundError:
+        return "0+unknown"
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def provenance(inputs) -> dict:
+    """What every ``summary.json`` records: the toolkit's version and the SHA-256 of each input file
+    (a folder: each file in it, sorted). ``inputs``: paths, or a ``{role: path}`` dict; None skipped."""
+    paths = inputs.values() if isinstance(inputs, dict) else inputs
+    files: dict[str, str] = {}
+    for p in paths:
+        if p is None:
+            continue
+        p = arm_path(p)                 # a shipped arm given by name: its file
+        if p.is_dir():
+            for f in sorted(q for q in p.rglob("*") if q.is_file()):
+                files[str(f)] = _sha256(f)
+        elif p.is_file():
+            files[str(p)] = _sha256(p)
+    return {"aacmm_version": version(), "input_sha256": files}
+
+
+def copy_examples(dest: str | Path) -> list[Path]:
+    """Copy the example campaigns and data (with their licences) and the user docs into ``dest``;
+    refuses to write over existing files. Returns the top-level entries written."""
+    from ._errors import InputError
+    dest = Path(dest)
+    src = shipped_path("examples")
+    if not src.is_dir():
+        raise InputError("the example files are not installed with this copy of the toolkit", src)
+    pairs = [(sub, dest / sub.name) for sub in sorted(src.iterdir()) if not sub.name.startswith((".", "__"))]
+    if shipped_path("docs").is_dir():
+        pairs.append((shipped_path("docs"), dest / "docs"))
+    files = [(f, t / f.relative_to(s)) for s, t in pairs if s.is_dir() for f in s.rglob("*")
+             if f.is_file() and "__pycache__" not in f.parts]
+    files += [(s, t) for s, t in pairs if s.is_file()]
+    clashes = [t for _, t in files if t.exists()]
+    if clashes:
+        raise InputError(f"refusing to write over {len(clashes)} existing file(s), e.g. {clashes[0]}", dest)
+    for f, t in files:
+        t.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(f, t)
+    return [t for _, t in pairs]

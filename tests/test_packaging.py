@@ -1,0 +1,130 @@
+"""Installed use: --version, shipped arms by name, `aacmm examples`, provenance in summaries, and
+(slow) a wheel built and run from another folder without the checkout."""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from arm_model.cli import main
+from arm_model.shipped import SHIPPED_ARMS, arm_path, provenance, shipped_path, version
+from conftest import NOMINAL, ROOT
+
+
+def test_version_option(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    assert out.strip() == f"aacmm-toolkit {version()}" and version()[0].isdigit()
+
+
+def test_shipped_arm_by_name_is_the_nominal_file():
+    assert arm_path("aacmm7").read_bytes() == NOMINAL.read_bytes()
+    assert set(SHIPPED_ARMS) == {"aacmm7"}
+    assert arm_path("some/arm.toml") == Path("some/arm.toml")
+
+
+def test_tip_with_arm_by_name_from_another_folder(tmp_path, monkeypatch, capsys):
+    pts = ROOT / "examples" / "data" / "paper-ring-xyz" / "points.csv"
+    monkeypatch.chdir(tmp_path)
+    assert main(["tip", str(pts), "--arm", "aacmm7", "-o", "a.csv"]) == 0
+    assert main(["tip", str(pts), "--arm", str(NOMINAL), "-o", "b.csv"]) == 0
+    assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "b.csv").read_bytes()
+
+
+def test_examples_copies_campaigns_data_docs_and_licence(tmp_path, capsys):
+    dest = tmp_path / "ex"
+    assert main(["examples", str(dest)]) == 0
+    lic = dest / "data" / "real-panda-seats" / "LICENSE-MUKCa.txt"
+    assert lic.read_bytes() == (ROOT / "examples" / "data" / "real-panda-seats" / "LICENSE-MUKCa.txt").read_bytes()
+    assert (dest / "docs" / "formats.md").is_file()
+    for c in (ROOT / "examples" / "campaigns").glob("*.toml"):
+        assert (dest / "campaigns" / c.name).read_bytes() == c.read_bytes()
+    # a copied campaign finds its arm (by name) wherever it lies
+    from arm_model.sim.campaign import load_campaign
+    camp = load_campaign(dest / "campaigns" / "paper-ring.toml")
+    assert camp.arm.name == "aacmm7" and camp.arm_path == shipped_path("urdf/aacmm7.dh.toml")
+    # never over existing files: exit 2, nothing changed
+    lic.write_text("mine")
+    assert main(["examples", str(dest)]) == 2
+    assert lic.read_text() == "mine"
+
+
+def test_provenance_hashes_files_and_folders(tmp_path):
+    a = tmp_path / "a.csv"
+    a.write_bytes(b"x,y\n")
+    d = tmp_path / "sig"
+    d.mkdir()
+    (d / "m1.csv").write_bytes(b"1\n")
+    p = provenance({"points": a, "signals": d, "none": None})
+    assert p["aacmm_version"] == version()
+    assert p["input_sha256"] == {str(a): hashlib.sha256(b"x,y\n").hexdigest(),
+                                 str(d / "m1.csv"): hashlib.sha256(b"1\n").hexdigest()}
+
+
+def test_calibrate_summary_carries_version_and_input_hashes(tmp_path):
+    out = tmp_path / "sim"
+    assert main(["simulate", str(ROOT / "examples" / "campaigns" / "hidden-eccentricity.toml"),
+                 "-o", str(out), "--no-signals"]) == 0
+    pts, art = out / "points.csv", out / "artefacts.toml"
+    assert main(["calibrate", str(pts), str(art), "--arm", "aacmm7", "--no-plots",
+                 "-o", str(tmp_path / "cal")]) == 0
+    s = json.loads((tmp_path / "cal" / "summary.json").read_text())
+    assert s["aacmm_version"] == version()
+    assert s["input_sha256"][str(pts)] == hashlib.sha256(pts.read_bytes()).hexdigest()
+    assert s["input_sha256"][str(shipped_path("urdf/aacmm7.dh.toml"))] == hashlib.sha256(NOMINAL.read_bytes()).hexdigest()
+
+
+def test_pyproject_licence_is_an_spdx_string():
+    import tomllib
+    meta = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    assert meta["project"]["license"] == "MIT"
+    assert "MIT License" in (ROOT / "LICENSE").read_text()
+    req = meta["build-system"]["requires"]
+    assert any(r.replace(" ", "").startswith("setuptools>=7") and int(r.split(">=")[1]) >= 77 for r in req)
+
+
+@pytest.mark.slow
+def test_wheel_installed_use_without_the_checkout(tmp_path):
+    """Build the wheel, install it (no deps: they are in this venv) into a folder that shadows the
+    checkout, and run from an unrelated folder: --version, --arm aacmm7, aacmm examples."""
+    wheels = tmp_path / "wheels"
+    r = subprocess.run([sys.executable, "-m", "pip", "wheel", str(ROOT), "--no-deps", "-q", "-w", str(wheels)],
+                       capture_output=True, text=True, timeout=600)
+    if r.returncode != 0 and ("Could not find a version" in r.stderr or "connection" in r.stderr.lower()):
+        pytest.skip("no package index to build the wheel: " + r.stderr[-200:])
+    assert r.returncode == 0, r.stderr
+    assert "warning" not in r.stderr.lower().replace("byte-compiling is disabled", "")
+    whl = next(wheels.glob("aacmm_toolkit-*.whl"))
+    names = zipfile.ZipFile(whl).namelist()
+    assert "arm_model/_shipped/urdf/aacmm7.dh.toml" in names
+    assert "arm_model/_shipped/examples/data/real-panda-seats/LICENSE-MUKCa.txt" in names
+    assert any(n.endswith("licenses/LICENSE") for n in names)
+    site = tmp_path / "site"
+    subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site), str(whl)],
+                   check=True, capture_output=True, timeout=600)
+    work = tmp_path / "elsewhere"
+    work.mkdir()
+    env = dict(os.environ, PYTHONPATH=str(site))
+
+    def aacmm(*args):
+        return subprocess.run([sys.executable, "-c", "import sys; from arm_model.cli import main; sys.exit(main())",
+                               *args], cwd=work, env=env, capture_output=True, text=True, timeout=300)
+
+    r = aacmm("--version")
+    assert r.returncode == 0 and r.stdout.strip() == f"aacmm-toolkit {version()}", r.stderr
+    probe = subprocess.run([sys.executable, "-c", "import arm_model; print(arm_model.__file__)"], cwd=work, env=env,
+                           capture_output=True, text=True)
+    assert probe.stdout.startswith(str(site)), probe.stdout
+    r = aacmm("examples", "ex")
+    assert r.returncode == 0, r.stderr
+    r = aacmm("tip", "ex/data/paper-ring-xyz/points.csv", "--arm", "aacmm7", "-o", "tips.csv")
+    assert r.returncode == 0, r.stderr
+    assert (work / "tips.csv").read_text().count("\n") == 1225
