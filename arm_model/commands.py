@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ._csv import format_csv
+from ._errors import InputError
 from ._output import output_file
 from .checks import point_warnings, print_warnings
 from .io import concat_points, iter_points
@@ -102,6 +103,17 @@ def model_from_args(args: argparse.Namespace) -> Arm:
     return load_model(args.arm, args.tip_frame, masses=getattr(args, "masses", None))
 
 
+def arm_inputs(args: argparse.Namespace) -> list:
+    """Every file the ``--arm`` options read: the arm, the ``--masses`` file and the covariance file a model
+    file names. Outputs are never written over any of them (:func:`arm_model._output.guard_output`)."""
+    files = [args.arm, getattr(args, "masses", None)]
+    try:
+        cov = model_from_args(args).covariance
+    except InputError:
+        cov = None          # the command reports the bad arm itself when it loads it
+    return [f for f in files + [cov] if f is not None]
+
+
 def arm_from_args(args: argparse.Namespace):
     """The description of the arm named by :func:`add_arm_options` (its effects, if any, left out:
     commands that evaluate points use :func:`model_from_args`)."""
@@ -167,7 +179,7 @@ def run_tip(args: argparse.Namespace) -> int:
     n, measurements, flagged, flagged_count, kinds = 0, {}, [], 0, set()
     d_sum, d_max = 0.0, 0.0
     # block by block: a file of millions of rows in bounded memory; nothing is written on an error
-    with output_file(args.output, [args.points, args.arm]) as tmp, open(tmp, "wb") as fh:
+    with output_file(args.output, [args.points, *arm_inputs(args)]) as tmp, open(tmp, "wb") as fh:
         arm = model_from_args(args)
         desc = arm.desc
         from .uncertainty_cli import parameters_of, tip_columns, wants_uncertainty
@@ -221,7 +233,7 @@ def run_examples(args: argparse.Namespace) -> int:
 
 
 def run_urdf(args: argparse.Namespace) -> int:
-    with output_file(args.output, [args.arm]) as tmp:
+    with output_file(args.output, arm_inputs(args)) as tmp:
         arm = model_from_args(args)
         desc = arm.desc
         tmp.write_text(urdf_text(desc), encoding="utf-8")

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError
-from arm_model.commands import add_arm_options, at_least, fraction, model_from_args, non_negative, positive, seed
+from arm_model.commands import add_arm_options, arm_inputs, at_least, fraction, model_from_args, non_negative, positive, seed
 from arm_model._output import output_folder
 from arm_model.checks import point_warnings, print_warnings
 from arm_model.io import read_artefacts, read_points
@@ -228,7 +228,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     from .data import split_holdout
     from .model_output import refine_torques
     from .report import poorly_determined, write_outputs
-    inputs = [args.points, args.artefacts, args.arm, args.reference_points]
+    inputs = [args.points, args.artefacts, *arm_inputs(args), args.reference_points]
     with output_folder(args.output, inputs, "calibrate") as out:
         model, data, values, warnings = _load_data(args)
         if any(e.key == "joint_compliance" for e in model.effects):
@@ -349,7 +349,7 @@ def run_montecarlo(args: argparse.Namespace) -> int:
 
 def run_poses(args: argparse.Namespace) -> int:
     from .study import select_measurements
-    inputs = [args.points, args.artefacts, args.arm, args.reference_points]
+    inputs = [args.points, args.artefacts, *arm_inputs(args), args.reference_points]
     with output_folder(args.output, inputs, "study poses") as out:
         model, data, _, warnings = _load_data(args)
         n = len(data.measurements())

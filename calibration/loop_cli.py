@@ -6,7 +6,7 @@ import sys
 import time
 
 from arm_model import InputError
-from arm_model.commands import at_least, fraction, model_from_args, number_in, seed
+from arm_model.commands import arm_inputs, at_least, fraction, model_from_args, number_in, seed
 from arm_model._output import output_folder
 from arm_model.checks import point_warnings, print_warnings
 from arm_model.io import read_artefacts, read_points
@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
     from .loop_report import before_after_text, write_loop_report
     from .model_output import refine_torques
 
-    inputs = [p for p in (args.points, args.artefacts, args.arm, args.reference_points) if p is not None]
+    inputs = [p for p in (args.points, args.artefacts, *arm_inputs(args), args.reference_points) if p is not None]
     families = None
     if args.candidates:
         families = tuple(k.strip() for k in args.candidates.split(",") if k.strip())

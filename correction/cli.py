@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from arm_model import InputError, NumericalError, read_artefacts, read_points
-from arm_model.commands import add_arm_options, model_from_args, non_negative, number_in, positive
+from arm_model.commands import add_arm_options, arm_inputs, model_from_args, non_negative, number_in, positive
 from arm_model._output import output_folder
 from arm_model.checks import print_warnings
 from arm_model.io import check_features
@@ -71,7 +71,7 @@ def run_ring(args: argparse.Namespace) -> int:
     inputs = {"points": args.points, "artefacts": args.artefacts, "arm": args.arm}
     if args.signals is not None and not args.signals.is_dir():
         raise InputError("--signals must be a folder of <measurement>.csv force signals", args.signals)
-    with output_folder(args.output, list(inputs.values()) + [args.signals], "ring") as out:
+    with output_folder(args.output, [*inputs.values(), *arm_inputs(args), args.signals], "ring") as out:
         arm = model_from_args(args)
         desc = arm.desc
         points = read_points(args.points, desc.n_joints)

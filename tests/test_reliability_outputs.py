@@ -330,3 +330,24 @@ def test_closed_stdout_is_quiet(tmp_path):
     assert "BrokenPipe" not in err and "Traceback" not in err, err
     assert proc.returncode in (0, 141)
     assert out.is_file()
+
+
+def test_files_named_by_the_arm_are_inputs_too(tmp_path, capsys):
+    """A model file's covariance file and a --masses file are inputs: no output is written over them."""
+    real = ROOT / "examples" / "data" / "real-panda-seats"
+    cal = tmp_path / "cal"
+    assert main(["calibrate", str(real / "front" / "points.csv"), str(real / "artefacts.toml"), "--arm",
+                 str(real / "panda-with-inertials.urdf"), "--tip-frame", "ball_link", "--no-plots",
+                 "-o", str(cal)]) == 0
+    model = next(cal.glob("*-calibrated.toml"))
+    cov = next(cal.glob("*-covariance.csv"))
+    before = cov.read_bytes()
+    capsys.readouterr()
+    assert main(["tip", str(real / "front" / "points.csv"), "--arm", str(model), "-o", str(cov)]) == 2
+    assert "input" in capsys.readouterr().err
+    assert cov.read_bytes() == before
+    masses = tmp_path / "masses.toml"
+    masses.write_text('[[link]]\nname = "panda_link1"\nmass_kg = 1.0\n', encoding="utf-8")
+    assert main(["tip", str(real / "front" / "points.csv"), "--arm", str(real / "panda.urdf"), "--tip-frame",
+                 "ball_link", "--masses", str(masses), "-o", str(masses)]) == 2
+    assert masses.read_text(encoding="utf-8").startswith("[[link]]")

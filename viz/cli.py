@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError, check_features, read_artefacts, read_points
-from arm_model.commands import add_arm_options, model_from_args, port, positive
+from arm_model.commands import add_arm_options, arm_inputs, model_from_args, port, positive
 from arm_model._output import output_file
 from arm_model.checks import point_warnings, print_warnings
 
@@ -79,7 +79,7 @@ def _selection(points, measurement: str | None):
 
 
 def run(args: argparse.Namespace) -> int:
-    inputs = [f for f in (args.points, args.arm, args.artefacts, args.residuals) if f is not None]
+    inputs = [f for f in (args.points, *arm_inputs(args), args.artefacts, args.residuals) if f is not None]
     if args.html is not None and args.screenshot is not None and args.html.resolve() == args.screenshot.resolve():
         raise InputError("--html and --screenshot name the same file", args.html)
     if args.screenshot is not None:
