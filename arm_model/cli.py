@@ -29,15 +29,34 @@ __all__ = ["main", "COMMAND_MODULES", "EXIT_INPUT", "EXIT_INTERNAL"]
 #: error, 3 internal error (a bug), 130 Ctrl-C, 143 SIGTERM
 EXIT_INPUT, EXIT_INTERNAL = 2, 3
 
-#: modules that each register one or more subcommands, in the order of ``aacmm --help``
-COMMAND_MODULES = (
-    "arm_model.commands",        # tip, urdf
-    "arm_model.sim.cli",         # simulate
-    "viz.cli",                   # view
-    "correction.cli",            # ring
-    "calibration.cli",           # calibrate, study
-    "calibration.loop_cli",      # close-loop
-)
+#: every subcommand, in the order of ``aacmm --help``: the module that registers it (``register(subparsers)``)
+#: and its one-line help. ``aacmm --help`` lists them without importing any of those modules, and
+#: ``aacmm CMD ...`` imports only CMD's module, so the start-up stays short.
+COMMANDS = {
+    "tip": ("arm_model.commands", "rigid and deflection-corrected ball centres for a points file"),
+    "urdf": ("arm_model.commands", "generate the URDF of an arm description"),
+    "examples": ("arm_model.commands", "copy the example campaigns, data and docs into a folder"),
+    "simulate": ("arm_model.sim.cli", "simulate a measurement campaign on a virtual arm with a hidden truth"),
+    "view": ("viz.cli", "show the arm, probe deflection, artefacts and residuals in a headless meshcat viewer"),
+    "ring": ("correction.cli", "ring-gauge campaign: force peaks, cylinder fits, the paper's four models and the full-wrench correction, correlations, GUM budgets, HTML report"),
+    "paper": ("correction.cli", "the seed paper's Tables 1-3 reproduced from its own data and budgets; the loop closed"),
+    "calibrate": ("calibration.cli", "identify the arm's kinematic parameters from artefact measurements"),
+    "study": ("calibration.cli", "plan a calibration campaign: Monte Carlo runs, pose-set choice"),
+    "close-loop": ("calibration.loop_cli", "find what the model lacks: calibrate, diagnose, add the effect, repeat"),
+}
+COMMAND_MODULES = tuple(dict.fromkeys(module for module, _ in COMMANDS.values()))
+
+
+def command_help(name: str) -> str:
+    """The one-line help of subcommand ``name`` (for its module's ``register``)."""
+    return COMMANDS[name][1]
+
+
+def _requested(argv) -> str | None:
+    """The subcommand named on the command line (the first word not an option: the top-level
+    options take no value), or None."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
 
 _DEBUG_HELP = "on an internal error, print the Python traceback (for a bug report)"
 
@@ -51,7 +70,9 @@ def _add_debug(parser: argparse.ArgumentParser, top: bool) -> None:
                 _add_debug(sub, False)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The ``aacmm`` parser. With ``argv`` (the command line), only the subcommand it names is built in
+    full (the others are listed for ``--help``); without, every subcommand."""
     parser = argparse.ArgumentParser(
         prog="aacmm",
         description="Portable measuring arm toolkit: deflection-aware ball centres from encoder angles and "
@@ -61,10 +82,18 @@ def build_parser() -> argparse.ArgumentParser:
                "written); 3 internal error (please report it); 130 interrupted. docs/guarantees.md")
     parser.add_argument("--version", action="version", version=f"aacmm-toolkit {version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for name in COMMAND_MODULES:
-        if importlib.util.find_spec(name.rsplit(".", 1)[0]) is None or importlib.util.find_spec(name) is None:
+    wanted = _requested(argv) if argv is not None else None
+    if argv is None:
+        modules = COMMAND_MODULES
+    else:
+        modules = (COMMANDS[wanted][0],) if wanted in COMMANDS else ()
+    for module in modules:
+        if importlib.util.find_spec(module.rsplit(".", 1)[0]) is None or importlib.util.find_spec(module) is None:
             continue
-        importlib.import_module(name).register(sub)
+        importlib.import_module(module).register(sub)            # every subcommand of that module
+    for name, (module, text) in COMMANDS.items():
+        if name not in sub.choices and module not in modules:
+            sub.add_parser(name, help=text, add_help=False)     # listed only: not the one that runs
     _add_debug(parser, True)
     return parser
 
@@ -95,7 +124,8 @@ def _os_message(exc: OSError) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
     name = "aacmm " + args.command + (f" {args.study}" if getattr(args, "study", None) else "")
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from .cli import command_help
 from pathlib import Path
 
 import numpy as np
@@ -122,7 +123,7 @@ def arm_from_args(args: argparse.Namespace):
 
 def register(sub) -> None:
     p = sub.add_parser(
-        "tip", help="rigid and deflection-corrected ball centres for a points file",
+        "tip", help=command_help("tip"),
         description="Read a points CSV (encoder angles and, if present, the contact force) and write, per point, "
                     "the rigid ball centre, the deflection-corrected ball centre [mm] and the deflection [um]. "
                     "Points whose force exceeds the probe's calibrated range are flagged (over_force = 1), "
@@ -135,7 +136,7 @@ def register(sub) -> None:
     p.set_defaults(func=run_tip)
 
     u = sub.add_parser(
-        "urdf", help="generate the URDF of an arm description",
+        "urdf", help=command_help("urdf"),
         description="Write the URDF (links, joints, the probe's virtual elastic joints, visuals) generated "
                     "from an arm description. The repository's urdf/aacmm7.urdf is made this way.")
     u.add_argument("arm", type=Path, help="arm description TOML (or a URDF with --tip-frame, to see the chain "
@@ -145,7 +146,7 @@ def register(sub) -> None:
     u.set_defaults(func=run_urdf)
 
     e = sub.add_parser(
-        "examples", help="copy the example campaigns, data and docs into a folder",
+        "examples", help=command_help("examples"),
         description="Copy the shipped example campaigns (campaigns/*.toml, for aacmm simulate), the example "
                     "data (data/: a simulated ring campaign, real measured robot data with its licence) and "
                     "the user docs (docs/, e.g. docs/formats.md) into DIR. Existing files are never overwritten.")

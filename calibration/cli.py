@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from arm_model.cli import command_help
 from pathlib import Path
 
 import numpy as np
@@ -95,7 +96,7 @@ def _common_fit_options(p) -> None:
 
 def register(sub) -> None:
     c = sub.add_parser(
-        "calibrate", help="identify the arm's kinematic parameters from artefact measurements",
+        "calibrate", help=command_help("calibrate"),
         description="Kinematic calibration in CasADi: the arm's parameter errors (DH or URDF joint origins, probe "
                     "offset, compliances, effects) from points on ball bars, seats, spheres, rings, cylinders, "
                     "planes and reference (tracker) points, with the artefacts' unknowns (centres, axes, "
@@ -129,7 +130,7 @@ def register(sub) -> None:
     c.set_defaults(func=run_calibrate)
 
     s = sub.add_parser(
-        "study", help="plan a calibration campaign: Monte Carlo runs, pose-set choice",
+        "study", help=command_help("study"),
         description="Calibration studies before measuring. 'montecarlo': simulate a campaign many times (new noise "
                     "and poses each run), calibrate on the training measurements, validate on held-out ones; "
                     "reports parameter errors against the truth next to the reported uncertainties and the "

@@ -5,6 +5,7 @@ import argparse
 import sys
 import time
 
+from arm_model.cli import command_help
 from arm_model import InputError
 from arm_model.commands import arm_inputs, at_least, fraction, model_from_args, number_in, seed
 from arm_model._output import output_folder
@@ -19,7 +20,7 @@ __all__ = ["register", "run"]
 
 def register(sub) -> None:
     p = sub.add_parser(
-        "close-loop", help="find what the model lacks: calibrate, diagnose, add the effect, repeat",
+        "close-loop", help=command_help("close-loop"),
         description="Close the loop on measured (or simulated) data. An outer test set of whole measurements is put "
                     "aside; on the rest the base model is calibrated, every candidate effect of the library "
                     "(encoder eccentricity per joint, joint compliance per joint, thermal growth, force sensor gain "

@@ -3,6 +3,7 @@ paper's tables reproduced, the loop closed on its Table 2)."""
 from __future__ import annotations
 
 import argparse
+from arm_model.cli import command_help
 from pathlib import Path
 
 from arm_model import InputError, NumericalError, read_artefacts, read_points
@@ -16,8 +17,7 @@ __all__ = ["register", "run_ring", "run_paper"]
 
 def register(sub) -> None:
     r = sub.add_parser(
-        "ring", help="ring-gauge campaign: force peaks, cylinder fits, the paper's four models and the "
-                     "full-wrench correction, correlations, GUM budgets, HTML report",
+        "ring", help=command_help("ring"),
         description="Analyse a ring-gauge campaign as the seed paper does and beyond. Per measurement: the force "
                     "at each captured point (one peak of the force signal a point with --signals, else the points "
                     "file's force columns), the ring fitted by orthogonal least squares (diameter = ball-centre "
@@ -48,7 +48,7 @@ def register(sub) -> None:
     r.set_defaults(func=run_ring)
 
     p = sub.add_parser(
-        "paper", help="the seed paper's Tables 1-3 reproduced from its own data and budgets; the loop closed",
+        "paper", help=command_help("paper"),
         description="Reproduce the seed paper (Gonzalez-Madruga et al., Sensors 2013): the forces each model of "
                     "its Table 2 implies, its Pearson coefficients and improvement figures, its uncertainty "
                     "budgets (Tables 1 and 3) term by term with GTC, with every printed figure that does not "

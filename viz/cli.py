@@ -7,6 +7,7 @@ import contextlib
 import signal
 import tempfile
 import time
+from arm_model.cli import command_help
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +26,7 @@ __all__ = ["register", "run"]
 
 def register(sub) -> None:
     p = sub.add_parser(
-        "view", help="show the arm, probe deflection, artefacts and residuals in a headless meshcat viewer",
+        "view", help=command_help("view"),
         description="Show the arm at a captured point of a points file (or animated through the points) in a "
                     "meshcat server on 127.0.0.1 with no display, and print its URL; or write the same scene as "
                     "one self-contained HTML page (--html) or a PNG screenshot (--screenshot, headless Chromium). "

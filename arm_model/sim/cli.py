@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from ..cli import command_help
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,7 @@ __all__ = ["register", "run", "summary"]
 
 def register(sub) -> None:
     p = sub.add_parser(
-        "simulate", help="simulate a measurement campaign on a virtual arm with a hidden truth",
+        "simulate", help=command_help("simulate"),
         description="Simulate a campaign (examples/campaigns/*.toml): a true arm (nominal + parameter errors + "
                     "the effects the campaign switches on), an operator (contact forces like the seed paper's), "
                     "artefacts (ring gauge, spheres, ball bar, seats, plane, tracker nests). Writes "
