@@ -98,3 +98,20 @@ def test_tip_with_a_urdf_arm_and_tip_frame(tmp_path, nominal):
     row = next(csv.DictReader(out.open()))
     ref = ball_centres(nominal.with_probe(p_last=(0.001, -0.002, 0.085)), np.deg2rad([10] * 7))
     assert_close([float(row[k]) for k in ("x_rigid_mm", "y_rigid_mm", "z_rigid_mm")], ref * 1e3, atol=1e-6)
+
+
+def test_help_imports_no_subcommand_module():
+    """`aacmm --help` lists every subcommand without importing their modules (start-up stays short);
+    `aacmm CMD --help` builds CMD in full."""
+    import subprocess
+    import sys
+    code = ("import sys, contextlib, io\n"
+            "from arm_model.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+            "    try: main(['--help'])\n"
+            "    except SystemExit: pass\n"
+            "heavy = [m for m in ('casadi', 'pinocchio', 'matplotlib', 'scipy', 'calibration', 'correction', 'viz',\n"
+            "                     'arm_model.commands') if m in sys.modules]\n"
+            "print(heavy); print('close-loop' in out.getvalue() and 'tip' in out.getvalue())\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert res.stdout.split("\n")[:2] == ["[]", "True"], res.stdout + res.stderr
