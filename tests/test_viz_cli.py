@@ -73,10 +73,11 @@ def test_page_of_a_point(campaign, nominal, capsys, tmp_path):
     q, w = reach(nominal, np.array([-0.55, 0.05 + (0.174996 - 0.004) / 2, 0.35])), 6.0 * np.array([0, -1, 0.3])
     d_um = np.linalg.norm(ball_centres(nominal, q[None], w[None]) - ball_centres(nominal, q[None])) * 1e6
     assert "8 point(s)" in text and "measurement 'ring-01'" in text and "line 4" in text
-    assert f"deflection {d_um:.2f} um, drawn {d_um:.1f} mm long" in text
-    assert "drawn x1000" in text and "serving" not in text          # --html alone does not serve
+    # default scale from the data: 85.2 um wants x704 for a 60 mm arrow; the nearest 1-2-5 number is 500
+    assert f"deflection {d_um:.2f} um, drawn {d_um * 0.5:.1f} mm long" in text
+    assert "drawn x500" in text and "serving" not in text           # --html alone does not serve
     page = out.read_text()
-    assert "drawn x1000" in page and "<title>aacmm7: AACMM viewer</title>" in page
+    assert "drawn x500" in page and "<title>aacmm7: AACMM viewer</title>" in page
     ball = transforms(page_commands(page))["/meshcat/aacmm/arm/visuals/ball_0"][:3, 3]
     assert np.linalg.norm(ball - ball_centres(nominal, q[None], w[None])[0]) < 1e-8   # 1e-10 deg rounding
 
@@ -273,3 +274,15 @@ def test_residuals_of_aacmm_calibrate(simulated, tmp_path, capsys):
     start = ball_centres(desc, pts.q[i], pts.wrench[i])
     vec = np.array([[float(r[f"d{a}_um"]) for a in "xyz"] for r in here]) * 1e-6
     assert np.allclose(xyz[:, 0], start, atol=1e-6) and np.allclose(xyz[:, 1], start + 2000 * vec, atol=1e-6)
+
+
+def test_default_arrow_scale_draws_the_deflection_outside_the_marker():
+    """By hand: 10 um wants x6000 for a 60 mm arrow -> 5000 (50 mm); 100 um -> 500; 142 um -> 500
+    (71 mm); nothing deflected -> 1000. The drawn median arrow is always longer than the 12 mm marker radius."""
+    from viz.cli import arrow_scale
+    assert arrow_scale([10.0]) == 5000.0
+    assert arrow_scale([100.0, 0.0, 100.0]) == 500.0
+    assert arrow_scale([142.0]) == 500.0
+    assert arrow_scale([0.0, 0.0]) == 1000.0
+    for d in (0.3, 2.0, 7.7, 33.0, 250.0, 1900.0):
+        assert 0.03 < arrow_scale([d]) * d * 1e-6 < 0.12

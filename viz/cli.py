@@ -44,9 +44,11 @@ def register(sub) -> None:
     pose.add_argument("--animate", action="store_true",
                       help="animate the arm through every point of the selection (embedded in --html pages)")
     p.add_argument("--fps", type=positive(), default=2.0, help="points per second when animating (default 2)")
-    p.add_argument("--scale", type=positive(), default=1000.0,
-                   help="length of the deflection arrow per length of deflection (default 1000: 0.1 mm is "
-                        "drawn 100 mm long)")
+    p.add_argument("--scale", type=positive(), default=None,
+                   help="length of the deflection arrow per length of deflection (e.g. 1000: 0.1 mm is drawn "
+                        "100 mm long); default: from the data, so that the median deflection shown is drawn "
+                        f"about {ARROW_TARGET_M * 1e3:g} mm long, well outside the 24 mm ball marker "
+                        "(a 1-2-5 number, printed)")
     p.add_argument("--artefacts", type=Path, help="artefacts TOML (docs/formats.md §4): draw each feature, placed "
                    "by fitting its points in each measurement")
     p.add_argument("--residuals", type=Path, help="residuals CSV: x_mm, y_mm, z_mm, rx_um, ry_um, rz_um, or the "
@@ -92,6 +94,23 @@ def run(args: argparse.Namespace) -> int:
         return _run(args, inputs, outputs, tmp)
 
 
+#: the length [m] the median deflection's arrow is drawn by default (the ball marker is 12 mm in radius)
+ARROW_TARGET_M = 0.06
+
+
+def arrow_scale(deflection_um) -> float:
+    """The default arrow scale: the 1-2-5 number that draws the median nonzero deflection [um] closest to
+    :data:`ARROW_TARGET_M` long (1000 when nothing is deflected)."""
+    d = np.asarray(deflection_um, dtype=float)
+    d = d[np.isfinite(d) & (d > 0)]
+    if not len(d):
+        return 1000.0
+    ideal = ARROW_TARGET_M / (np.median(d) * 1e-6)
+    steps = [m * 10.0 ** e for e in range(int(np.floor(np.log10(ideal))) - 1, int(np.floor(np.log10(ideal))) + 2)
+             for m in (1, 2, 5)]
+    return float(min(steps, key=lambda v: abs(np.log(v / ideal))))
+
+
 def _run(args, inputs, outputs, tmp) -> int:
     # read everything first: a bad file stops here, before a server starts or a file is written
     arm = model_from_args(args)
@@ -107,6 +126,10 @@ def _run(args, inputs, outputs, tmp) -> int:
         raise InputError(f"--point {args.point}: the selection has {len(sel)} point(s)", points.path)
     wrench = sel.wrench
     centres = arm.ball_centres(sel)
+    rigid = arm.ball_centres(sel, rigid=True)
+    d_um = np.linalg.norm(centres - rigid, axis=1) * 1e6
+    if args.scale is None:
+        args.scale = arrow_scale(d_um if args.animate else d_um[args.point - 1:args.point])
     serve = args.serve or args.open_seconds is not None or (args.html is None and args.screenshot is None)
 
     from .view import View   # heavy backends from here on
@@ -135,7 +158,7 @@ def _run(args, inputs, outputs, tmp) -> int:
                              f"{points.path} with the same measurement and feature; not drawn")
             if len(vectors):
                 view.show_residuals(origins, vectors, scale=args.residual_scale)
-        _report(arm, sel, centres, shown, wrench, args, view, notes)
+        _report(arm, sel, centres, d_um, shown, wrench, args, view, notes)
         if args.html is not None:
             view.write_html(tmp["html"], inputs=inputs)
         if args.screenshot is not None:
@@ -150,7 +173,7 @@ def _run(args, inputs, outputs, tmp) -> int:
     return 0
 
 
-def _report(arm, sel, centres, shown, wrench, args, view, notes) -> None:
+def _report(arm, sel, centres, d_um, shown, wrench, args, view, notes) -> None:
     desc = arm.desc
     print(f"{len(sel)} point(s) of {sel.path}" + (f", measurement '{args.measurement}'" if args.measurement else ""))
     for line in view.legend:
@@ -163,8 +186,6 @@ def _report(arm, sel, centres, shown, wrench, args, view, notes) -> None:
     if arm.effects:
         print("effects applied to the ball centres: " + ", ".join(e.describe() for e in arm.effects)
               + " (the arm is drawn with its description's geometry)")
-    rigid = arm.ball_centres(sel, rigid=True)
-    d_um = np.linalg.norm(centres - rigid, axis=1) * 1e6
     if len(shown) == 1:
         i = shown[0]
         line = "" if sel.lines is None else f", line {sel.lines[i]}"
