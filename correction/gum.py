@@ -154,7 +154,7 @@ class Budget:
 
 def ring_budget(name: str, values, length: float, u_ring: float | None, u_cor: float | None = None, *,
                 delta_t: float = 0.5, u_alpha: float = 1e-6, resolution: float = 1e-7,
-                probability: float = 95.0, u_ring_source: str = "") -> Budget:
+                probability: float = 95.0, u_ring_source: str = "", ring_half_width: float | None = None) -> Budget:
     """The seed paper's ring-gauge test budget (its Eq. 10-16) for one quantity of a campaign, in mm.
 
     Args:
@@ -167,10 +167,14 @@ def ring_budget(name: str, values, length: float, u_ring: float | None, u_cor: f
         delta_t: temperature variation during the test [C]; u_alpha: uncertainty of the expansion
             coefficient [1/C] (the paper: 0.5 C, 1e-6 /C).
         resolution: resolution of the reported values [m] (the paper's software: 0.0001 mm), w/sqrt(12).
+        ring_half_width: instead of ``u_ring``, a reference known only by bounds +-a [m] (the ring's certified
+            form error): a rectangular term, u = a / sqrt(3), labelled so in the budget.
     """
     mm = 1e3
     terms = []
-    if u_ring is not None:
+    if ring_half_width is not None:
+        terms.append(Term.rectangular("u_ring", ring_half_width * mm, source=u_ring_source or "a/sqrt(3)"))
+    elif u_ring is not None:
         terms.append(Term.normal("u_ring", u_ring * mm, source=u_ring_source or "artefact certificate"))
     terms.append(Term.type_a("u_r", np.asarray(values, float) * mm))
     terms.append(Term.normal("u_t", length * delta_t * u_alpha * mm, sensitivity_label="L dT",

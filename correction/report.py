@@ -95,10 +95,10 @@ def ring_budgets(campaign: RingCampaign, u_force: float = DEFAULT_U_FORCE, u_rin
         u_ring, ring_src = campaign.u_diameter, "certificate (artefacts file u_diameter)"
     else:
         ring_src = "given"
+    form_half = None            # the ring's certified form error, taken as a rectangular half-width
     if u_ring_form is None and campaign.reference_form_error is not None:
-        u_ring_form = campaign.reference_form_error / math.sqrt(3)
-        form_src = (f"ring form error {campaign.reference_form_error * 1e3:g} mm as a rectangular half-width, "
-                    "/sqrt(3)")
+        form_half = campaign.reference_form_error
+        form_src = (f"ring form error {form_half * 1e3:g} mm as a rectangular half-width a, a/sqrt(3)")
     else:
         form_src = "given"
     for m in campaign.models:
@@ -110,7 +110,7 @@ def ring_budgets(campaign: RingCampaign, u_force: float = DEFAULT_U_FORCE, u_rin
                                u_ring_source=ring_src).evaluate())
         out.append(ring_budget(f"form error, {MODEL_LABELS[m]}", f, float(np.mean(f)), u_ring_form, cor,
                                delta_t=delta_t, u_alpha=u_alpha, resolution=resolution, probability=probability,
-                               u_ring_source=form_src).evaluate())
+                               u_ring_source=form_src, ring_half_width=form_half).evaluate())
     return out
 
 

@@ -112,3 +112,19 @@ def test_table3_term_by_term():
     rec = {t.name: t.u for t in rep["recomputed"]["with_diameter"].terms}
     assert_close(rec["u_cor"], 0.002052, atol=1e-6)
     assert rep["recomputed"]["with_diameter"].u_c > rep["budgets"]["with_diameter"].u_c
+
+
+def test_form_error_row_labels_the_ring_form_term_rectangular():
+    """The ring's certified form error a enters the form-error budget as a rectangular half-width:
+    u = a / sqrt(3) (by hand: 0.005 mm -> 2.8868 um), labelled rectangular; the diameter row keeps the
+    certificate's normal term."""
+    import math
+
+    from correction.gum import ring_budget
+    vals = [1.0e-5, 1.2e-5, 0.9e-5]
+    form = ring_budget("form error, initial", vals, 1.0e-5, None, ring_half_width=5e-6)
+    (term,) = [t for t in form.terms if t.name == "u_ring"]
+    assert term.distribution == "rectangular" and math.isclose(term.u, 0.005 / math.sqrt(3), rel_tol=1e-12)
+    diam = ring_budget("diameter, initial", [0.175, 0.175001, 0.174999], 0.175, 1.05e-6)
+    (term,) = [t for t in diam.terms if t.name == "u_ring"]
+    assert term.distribution == "normal" and math.isclose(term.u, 1.05e-3, rel_tol=1e-12)
