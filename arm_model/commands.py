@@ -101,7 +101,11 @@ def add_arm_options(p, help_arm: str = "the arm: a shipped arm's name (aacmm7), 
 def model_from_args(args: argparse.Namespace) -> Arm:
     """The arm named by :func:`add_arm_options`: description, effects and their parameter values
     (:class:`arm_model.model_file.Arm`), read by the one loader every subcommand uses."""
-    return load_model(args.arm, args.tip_frame, masses=getattr(args, "masses", None))
+    key = (args.arm, args.tip_frame, getattr(args, "masses", None))
+    cached = getattr(args, "_arm_loaded", None)
+    if cached is None or cached[0] != key:        # read once per command line (arm_inputs reads it first)
+        args._arm_loaded = (key, load_model(*key[:2], masses=key[2]))
+    return args._arm_loaded[1]
 
 
 def arm_inputs(args: argparse.Namespace) -> list:

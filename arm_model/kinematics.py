@@ -38,6 +38,20 @@ def _default_threads() -> int:
     return max(1, min(2, os.cpu_count() or 1))
 
 
+def run_chunks(work, n: int, chunk: int, threads: int | None = None) -> None:
+    """Call ``work(start)`` for every chunk start of ``range(0, n, chunk)``: in a thread pool of
+    ``threads`` (default :func:`_default_threads`) when there is more than one chunk, else in line.
+    ``work`` writes its own slice of a preallocated output (numpy releases the GIL)."""
+    starts = range(0, n, chunk)
+    nthreads = threads or _default_threads()
+    if nthreads == 1 or n <= chunk:
+        for s in starts:
+            work(s)
+    else:
+        with ThreadPoolExecutor(max_workers=nthreads) as pool:
+            list(pool.map(work, starts))
+
+
 def ball_centres(desc: ArmDescription, q, wrench=None, p=None, *, threads: int | None = None,
                  chunk: int = _CHUNK) -> np.ndarray:
     """Deflection-aware ball centres [m] in the base frame.
@@ -74,14 +88,7 @@ def ball_centres(desc: ArmDescription, q, wrench=None, p=None, *, threads: int |
         out[start:stop, 1] = y
         out[start:stop, 2] = z
 
-    starts = range(0, n, chunk)
-    nthreads = threads or _default_threads()
-    if nthreads == 1 or n <= chunk:
-        for s in starts:
-            work(s)
-    else:
-        with ThreadPoolExecutor(max_workers=nthreads) as pool:
-            list(pool.map(work, starts))
+    run_chunks(work, n, chunk, threads)
     return out[0] if single else out
 
 

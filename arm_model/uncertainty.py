@@ -20,13 +20,12 @@ Everything here is SI: metres, radians, newtons, m/N.
 from __future__ import annotations
 
 import math
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .jacobian import Dual, DUAL_OPS, chain_jacobian, geometry_entries, value
-from .kinematics import _default_threads
+from .kinematics import run_chunks
 from .effects import ModelInputs
 from .model import ArmModel, AuxData
 
@@ -317,16 +316,9 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
 
     from threadpoolctl import threadpool_limits
 
-    starts = range(0, n, chunk)
-    nthreads = threads or _default_threads()
     # the products are thin (tens x chunk): one BLAS thread each; more spin-wait on a busy machine
     with threadpool_limits(limits=1, user_api="blas"):
-        if nthreads == 1 or n <= chunk:
-            for s in starts:
-                work(s)
-        else:
-            with ThreadPoolExecutor(max_workers=nthreads) as pool:
-                list(pool.map(work, starts))
+        run_chunks(work, n, chunk, threads)
     sources = dict(inputs.sources)
     sources["parameters"] = "none (parameters taken as exact)" if parameters is None else parameters.source
     if _compliance_covered(pnames):
