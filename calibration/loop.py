@@ -641,7 +641,7 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         if cand.origin == RESIDUAL and cand.family == "joint_harmonics":
             # the harmonic order: the fewest parameters within the parsimony margin of the best held-out drop
             same = [(c, v) for c, v in passing if c.family == cand.family and c.joint == cand.joint
-                    and cv.improvement - v.improvement <= PARSIMONY]
+                    and c.effect.source == cand.effect.source and cv.improvement - v.improvement <= PARSIMONY]
             cand, cv = min(same, key=lambda x: x[0].size(desc))
         wcols = _candidate_cols(space, remaining, remaining.index(cand), tests[remaining.index(cand)])
         # parsimony: a passing candidate inside the best one's signature, with fewer parameters and nearly
@@ -844,7 +844,17 @@ def _drop_test_outliers(model, p, test: CalibrationData, weights, reference, thr
         return test, []
     out = [{"measurement": str(pts.measurement[i]), "feature": str(pts.feature[i]),
             "line": None if pts.lines is None else int(pts.lines[i]),
-            "standardized": float(np.max(np.abs(r[point == i])) / scale)} for i in bad]
+            "standardized": float(np.max(np.abs(r[point == i])) / scale), "why": "outlier"} for i in bad]
+    if design is None:
+        # a feature instance left with too few points for its own fit goes out whole (as in the design set)
+        for m, f in sorted({(str(pts.measurement[i]), str(pts.feature[i])) for i in bad}):
+            kind = test.artefacts.features[f].kind if f else "point"
+            inst = np.flatnonzero((pts.measurement == m) & (pts.feature == f))
+            if kind in MIN_POINTS and len(np.setdiff1d(inst, bad)) < max(MIN_POINTS[kind]):
+                more = [int(i) for i in np.setdiff1d(inst, bad)]
+                out += [{"measurement": m, "feature": f, "line": None if pts.lines is None else int(pts.lines[i]),
+                         "standardized": None, "why": "its feature instance has too few points left"} for i in more]
+                bad = sorted(set(bad) | set(more))
     keep = np.setdiff1d(np.arange(len(test)), bad)
     return test.select(keep), out
 
