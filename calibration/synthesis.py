@@ -63,6 +63,11 @@ def _harmonic_orders(present: set[int]):
             yield hs
 
 
+def _length_joints(desc) -> list[int]:
+    rows = desc.row_table()
+    return [i for i in range(desc.n_joints) if np.any(np.abs(rows[i, list(desc.length_indices)]) > 0)]
+
+
 def synthesise(family_names, model: ArmModel) -> list[Candidate]:
     """Candidates for the significant families ``family_names`` (in their order) given the current model;
     effects the model already holds are not offered again."""
