@@ -5,8 +5,8 @@ required direction (2; the residual is ``z - u``, so the opposite direction is n
 optionally the probe x axis towards a required direction (1). A 7-axis
 arm keeps one or two redundant degrees of freedom (elbow swivel, handle roll); they are drawn at
 random like an operator does, by starting each solve from a random configuration inside the joint
-limits. Damped Gauss-Newton on all pending points in parallel (numpy), with exact Jacobians by
-complex-step differentiation of the core's kinematic chain; solutions outside the limits or
+limits. Damped Gauss-Newton on all pending points in parallel (numpy), with the exact joint
+Jacobians of one forward pass of the chain (:func:`arm_model.jacobian.joint_screws`); solutions outside the limits or
 pointing the wrong way are rejected and retried from a new random start.
 
 The wrench that deflects the probe is the world-frame contact force rotated into the probe frame
@@ -26,7 +26,6 @@ from .truth import Truth
 __all__ = ["IKTargets", "IKResult", "solve_ik", "solve_points", "joint_limits", "wrap_into_limits",
            "ball_jacobian", "probe_wrench"]
 
-_H = 1e-30       # complex step [rad]
 _L0 = 0.1        # position scale [m] of the residual
 
 
@@ -112,34 +111,18 @@ def probe_wrench(force, torque, z, x) -> np.ndarray:
 
 def ball_jacobian(truth: Truth, q, temperature, wrench) -> np.ndarray:
     """(N, 3, J) d ball / d q [m/rad] of the true arm at true angles ``q`` (N, J) with a fixed
-    probe-frame ``wrench`` (N, 6) (complex step through the core chain)."""
-    n, j = q.shape
-    qc = np.repeat(q[None], j, axis=0).astype(complex)
-    for k in range(j):
-        qc[k, :, k] += 1j * _H
-    geom = _take_geom(truth.geometry(temperature), np.arange(n), j)
-    ball, _, _ = truth.pose(qc.reshape(j * n, j), geom, np.tile(wrench, (j, 1)))
-    return np.transpose(ball.imag.reshape(j, n, 3) / _H, (1, 2, 0))
+    probe-frame ``wrench`` (N, 6) (exact: :meth:`Truth.pose_jacobian`)."""
+    return truth.pose_jacobian(q, truth.geometry(temperature), wrench)[3]
 
 
 def _residual_and_jacobian(truth: Truth, q, geom, tg: IKTargets, has_x):
     """Residual (N, 9) = ((ball - target) / L0, z - stylus, x - x_dir (0 where the roll is free))
-    and its Jacobian (N, 9, J), the wrench held at its value for q."""
-    n, j = q.shape
-    _, z0, x0 = truth.pose(q, geom)
-    w = probe_wrench(tg.force, tg.torque, z0, x0)
-    qc = np.repeat(q[None, :, :], j + 1, axis=0).astype(complex)
-    for k in range(j):
-        qc[k + 1, :, k] += 1j * _H
-    qc = qc.reshape((j + 1) * n, j)
-    ball, z, x = truth.pose(qc, _take_geom(geom, np.arange(n), j + 1), np.tile(w, (j + 1, 1)))
-    ball, z, x = (a.reshape(j + 1, n, 3) for a in (ball, z, x))
-    pos = ball[0].real
+    and its exact Jacobian (N, 9, J), the wrench held at its value for q."""
+    pos, z, x, jb, jz, jx, w = truth.pose_jacobian(q, geom, load=(tg.force, tg.torque))
     hx = has_x[:, None]
-    r = np.concatenate([(pos - tg.position) / _L0, z[0].real - tg.stylus,
-                        np.where(hx, x[0].real - np.nan_to_num(tg.x_dir), 0.0)], axis=1)
-    d = [np.transpose(a[1:].imag / _H, (1, 2, 0)) for a in (ball, z, x)]     # (N, 3, J) each
-    jac = np.concatenate([d[0] / _L0, d[1], np.where(hx[:, :, None], d[2], 0.0)], axis=1)
+    r = np.concatenate([(pos - tg.position) / _L0, z - tg.stylus,
+                        np.where(hx, x - np.nan_to_num(tg.x_dir), 0.0)], axis=1)
+    jac = np.concatenate([jb / _L0, jz, np.where(hx[:, :, None], jx, 0.0)], axis=1)
     return r, jac, pos, w
 
 
