@@ -9,7 +9,7 @@ import pytest
 from arm_model import load_description
 from arm_model.cli import main
 from arm_model.model import ArmModel
-from calibration.synth import SynthSpec, make_campaign
+from arm_model.sim.quick import SynthSpec, make_campaign
 from conftest import NOMINAL
 
 
