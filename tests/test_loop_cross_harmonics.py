@@ -14,7 +14,7 @@ from arm_model.effects import JointHarmonics
 from arm_model.model import ArmModel
 from calibration.data import Weights
 from calibration.loop import close_loop
-from calibration.synth import SynthSpec, make_campaign, random_truth
+from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 from calibration.synthesis import RESIDUAL, synthesise
 from conftest import NOMINAL
 
