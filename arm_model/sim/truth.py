@@ -116,8 +116,9 @@ class Truth:
     def _pose_geometry(self, q, geom: Geometry, wrench) -> Geometry:
         """``geom`` with the pose-dependent effects (:data:`POSE_EFFECTS`) applied at the true angles ``q``
         (N, J) and the true ``wrench`` (N, 6), in the model's order (a copy). For complex ``q`` (complex-step
-        derivatives) they are evaluated at its real part: their derivative (a micrometre shift's) is left out
-        of the inverse kinematics' Newton steps, which only slows convergence negligibly."""
+        derivatives) they are evaluated at its real part. Their derivative (a micrometre shift's) is left out
+        of the inverse kinematics' Newton steps (:meth:`pose_jacobian`), which only slows convergence
+        negligibly."""
         pose_effects = [(e, sl) for e, sl in self.model.effect_slices() if isinstance(e, POSE_EFFECTS)]
         if not pose_effects:
             return geom
@@ -158,7 +159,8 @@ class Truth:
 
     def pose_jacobian(self, q, geom: Geometry, wrench=None, load=None):
         """:meth:`pose` and its exact Jacobians with respect to the true joint angles ``q`` (N, J) [rad]
-        (:func:`arm_model.jacobian.joint_screws`: one forward pass, the wrench held fixed).
+        (:func:`arm_model.jacobian.joint_screws`: one forward pass, the wrench held fixed; the shift of the
+        pose-dependent effects, :data:`POSE_EFFECTS`, is in the ball, its own derivative is not).
 
         ``wrench``: (N, 6) fixed probe-frame wrench, or ``load``: (force (N, 3) [N], torque (N, 3) [N m])
         in the base frame, rotated into the probe frame of this pose. Returns (ball (N, 3) [m],
@@ -180,6 +182,7 @@ class Truth:
         if wrench is None:
             qe = (0.0, 0.0, 0.0)
         else:
+            geom = self._pose_geometry(q, geom, wrench)      # their own derivative left out, as in pose
             qe = elastic_displacement(geom.p_last, geom.compliance, list(np.asarray(wrench).T),
                                       probe_lever(geom.p_last, rot, lever))
         b = np.column_stack([np.broadcast_to(v, (n,)) for v in ball_in_last_frame(geom.p_last, qe, NUMPY_OPS, rot, lever)])
