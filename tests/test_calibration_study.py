@@ -1,14 +1,13 @@
 """Studies: executors (local processes, Dask), Monte Carlo aggregation, the observability index."""
 from __future__ import annotations
 
-import io
 import math
 
 import numpy as np
 import pytest
 
 from calibration.study import (RunSettings, SynthSource, monte_carlo, observability_index, run_tasks)
-from calibration.synth import SynthSpec
+from arm_model.sim.quick import SynthSpec
 from calibration import Weights
 from conftest import assert_close
 
