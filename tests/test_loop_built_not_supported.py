@@ -52,7 +52,7 @@ def test_built_effect_without_held_out_support_is_reported_not_added(tmp_path, c
     out = tmp_path / "loop"
     code = main(["close-loop", str(tmp_path / "sim" / "points.csv"), str(tmp_path / "sim" / "artefacts.toml"),
                  "--arm", str(NOMINAL), "--sigma-probe-um", "2", "--candidates", "probe_compliance",
-                 "--screen-alpha", "0.99", "--quiet", "-o", str(out)])
+                 "--screen-alpha", "0.99", "-o", str(out)])
     assert code == 0
     printed = capsys.readouterr().out
     s = json.loads((out / "summary.json").read_text())
