@@ -31,7 +31,7 @@ __all__ = ["parse_number", "csv_records", "CsvBlock", "iter_csv_blocks", "format
 
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-]?(?:nan|inf|infinity)",
                      re.IGNORECASE)
-BLOCK_BYTES = 1 << 24
+BLOCK_BYTES = 1 << 22          # 4 MiB (about 37 000 points rows): small temporaries, few page faults
 
 
 def parse_number(cell: str) -> float | None:

@@ -11,7 +11,7 @@ import numpy as np
 from ._csv import format_csv
 from ._errors import InputError
 from ._output import output_file
-from .checks import point_warnings, print_warnings
+from .checks import JointLimitTally, print_warnings
 from .io import concat_points, iter_points
 from .model_file import Arm, load_model
 from .urdf import urdf_text
@@ -193,7 +193,7 @@ def run_tip(args: argparse.Namespace) -> int:
         uncertain = wants_uncertainty(args, parameters)
         if uncertain:                   # the uncertainty summary is over all points: one block
             blocks = [concat_points(blocks)]
-        ulines, warnings = [], []
+        ulines, limits = [], JointLimitTally(desc, str(args.points))
         for block in blocks:
             cols = tip_table(arm, block)
             if uncertain:
@@ -208,7 +208,7 @@ def run_tip(args: argparse.Namespace) -> int:
             if len(flagged) < 11:
                 flagged += block.lines[cols["over_force"].astype(bool)][:11].tolist()
             flagged_count += int(cols["over_force"].sum())
-            warnings += [w for w in point_warnings(desc, block) if w.kind != "over_force"]
+            limits.add(block.q, block.lines)
     print(f"{n} points in {len(measurements)} measurement(s) -> {args.output}")
     if arm.effects:
         print("effects applied: " + ", ".join(e.describe() for e in arm.effects))
@@ -225,7 +225,7 @@ def run_tip(args: argparse.Namespace) -> int:
         print(f"warning: {flagged_count} point(s) over the probe's calibrated force range "
               f"({desc.probe.max_force:g} N), flagged in column over_force; lines {', '.join(map(str, flagged[:10]))}"
               + (" ..." if flagged_count > 10 else ""))
-    print_warnings(warnings)
+    print_warnings([w for w in [limits.warning()] if w is not None])
     return 0
 
 
