@@ -25,7 +25,7 @@ from arm_model.effects import EncoderEccentricity
 from arm_model.model import ArmModel
 from calibration import Problem, Weights, calibrate, levenberg_marquardt, make_data
 from calibration.solver import blas_threads
-from calibration.synth import SynthSpec, make_campaign, random_truth
+from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 
 ARM = "urdf/aacmm7.dh.toml"
 WEIGHTS = Weights(probe=2e-6, reference=5e-6)

@@ -229,6 +229,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     from .data import split_holdout
     from .model_output import refine_torques
     from .report import poorly_determined, write_outputs
+    from .validation import with_u
     inputs = [args.points, args.artefacts, *arm_inputs(args), args.reference_points]
     with output_folder(args.output, inputs, "calibrate") as out:
         model, data, values, warnings = _load_data(args)
@@ -277,9 +278,11 @@ def run_calibrate(args: argparse.Namespace) -> int:
             print(f"  {o.measurement} {o.feature} line {o.line}: standardized {o.standardized:+.1f}")
     for title, rows in (("training", val_train), ("held-out", val_test)):
         if rows:
-            print(f"validation on {title} data (nominal -> calibrated):")
+            print(f"validation on {title} data (nominal -> calibrated; ± standard uncertainty, bootstrap over "
+                  "its measurements):")
             for r in rows:
-                print(f"  {r['label']}: {r['before']:.2f} -> {r['after']:.2f} {r['unit']} ({r['ratio']:.1f}x)")
+                print(f"  {r['label']}: {with_u(r['before'], r['u_before'])} -> {with_u(r['after'], r['u_after'])} "
+                      f"{r['unit']} ({r['ratio']:.1f}x)")
     print(f"model file -> {files['description']} (covariance {files['covariance'].name}); "
           f"report -> {files['report']}")
     return 0

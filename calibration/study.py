@@ -162,14 +162,14 @@ class SimSource:
 
 @dataclass(frozen=True)
 class SynthSource:
-    """Campaigns from :mod:`calibration.synth` (no simulator needed): ``spec`` on the arm ``desc``;
+    """Campaigns of the simulator's fast path (:mod:`arm_model.sim.quick`): ``spec`` on the arm ``desc``;
     the truth is drawn anew each run unless ``truth`` (name -> value) is given."""
     desc: object
     spec: object
     truth: dict | None = None
 
     def make(self, seed: int):
-        from .synth import make_campaign
+        from arm_model.sim.quick import make_campaign
         model = ArmModel(self.desc)
         p_true = None if self.truth is None else model.spec.vector(self.truth)
         c = make_campaign(model, self.spec, seed, p_true)

@@ -106,9 +106,12 @@ def run_ring(args: argparse.Namespace) -> int:
     for m, v in s.items():
         print(f"{m:<12} {v['mean_abs_diameter_error_mm']:>15.4f} {v['diameter_error_reduction_pct']:>9.1f}% "
               f"{v['mean_form_error_mm']:>15.4f}")
-    u = [x.u for x in point_unc]
-    print(f"diameter uncertainty from the points' covariances (k = 1): {min(u) * 1e3:.4f} .. {max(u) * 1e3:.4f} mm "
-          f"({'parameters from ' + parameters.source if parameters is not None else 'no parameter covariance: parameters exact'})")
+    u = [d.u for d, _ in point_unc]
+    uf = [f.u for _, f in point_unc]
+    print(f"from the points' covariances (k = 1; "
+          f"{'parameters from ' + parameters.source if parameters is not None else 'no parameter covariance: parameters exact'}):"
+          f"\n  diameter uncertainty {min(u) * 1e3:.4f} .. {max(u) * 1e3:.4f} mm; form-error uncertainty "
+          f"{min(uf) * 1e3:.4f} .. {max(uf) * 1e3:.4f} mm")
     if args.u_force is None:
         print(f"budgets: u_force = {DEFAULT_U_FORCE} N (the paper's bending sensor; set --u-force-N for yours)")
     print(f"{len(written)} files -> {args.output}/ (report.html, summary.json, ...)")

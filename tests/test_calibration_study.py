@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from calibration.study import (Progress, RunSettings, SynthSource, monte_carlo, observability_index, run_tasks)
-from calibration.synth import SynthSpec
+from arm_model.sim.quick import SynthSpec
 from calibration import Weights
 from conftest import assert_close
 

@@ -17,7 +17,7 @@ from arm_model.sim import campaign_from_dict, simulate
 from calibration.candidates import Candidate
 from calibration.data import Weights
 from calibration.loop import close_loop
-from calibration.synth import SynthSpec, make_campaign, random_truth
+from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 from calibration.synthesis import RESIDUAL, synthesise
 from conftest import NOMINAL
 

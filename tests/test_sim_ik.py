@@ -87,10 +87,12 @@ def test_wrap_into_limits():
     assert ok.tolist() == [True, False]
 
 
-def test_complex_step_jacobian_matches_pinocchio(nominal):
-    """The IK's exact Jacobian (complex step through the core chain) against Pinocchio's analytic one."""
+def test_ik_jacobian_matches_pinocchio_and_finite_differences(nominal):
+    """The IK's exact Jacobians (one forward pass, :meth:`Truth.pose_jacobian`) against Pinocchio's analytic
+    one (ball) and central differences of :meth:`Truth.pose` (ball, probe z and x axes), a fixed wrench."""
     from arm_model import PinocchioArm
     from arm_model.sim.ik import ball_jacobian
+    from conftest import fd_jacobian
 
     c = campaign_from_dict({"seed": 3, "task": [{"kind": "seat"}]})
     truth = build_truth(c.arm, c.truth, np.random.default_rng(1))
@@ -99,6 +101,12 @@ def test_complex_step_jacobian_matches_pinocchio(nominal):
     w = np.column_stack([rng.normal(0, 3, (6, 3)), np.zeros((6, 3))])
     jac = ball_jacobian(truth, q, np.full(6, 20.0), w)
     arm = PinocchioArm(truth.description)
+    geom = truth.geometry(np.full(1, 20.0))
+    _, _, _, jb, jz, jx, _ = truth.pose_jacobian(q, truth.geometry(np.full(6, 20.0)), w)
+    assert_close(jb, jac, atol=0.0)
     for i in range(6):
         jq, _ = arm.jacobians(q[i], w[i, :3])
-        assert_close(jac[i], jq, atol=1e-12)
+        assert_close(jac[i], jq, atol=1e-9 * np.abs(jq).max())
+        for k, ref in enumerate((jb, jz, jx)):
+            fd = fd_jacobian(lambda x: truth.pose(x[None], geom, w[i:i + 1])[k][0], q[i])
+            assert_close(ref[i], fd, atol=1e-9 * np.abs(fd).max(), msg=f"point {i} output {k}")

@@ -10,13 +10,13 @@ import pytest
 
 from arm_model.effects import (ApproachOffset, EncoderEccentricity, ForceSensorError, JointCompliance, JointHarmonics,
                                LateralCompliance, ProbeCompliance, ProbeComplianceMatrix, ProbeThermalGrowth, ThermalGrowth)
-from arm_model.jacobian import chain_jacobian
+from arm_model.jacobian import chain_jacobian, direction_jacobian, joint_screws, point_jacobian
 from arm_model.model import ArmModel, AuxData
 from arm_model.params import split_params
 from arm_model.uncertainty import (FORCE_SENSOR_U_N, COMPLIANCE_U_RELATIVE, ParameterCovariance, default_inputs,
                                    monte_carlo, propagate)
 from arm_model.urdf_import import load_arm
-from conftest import assert_close
+from conftest import assert_close, fd_jacobian
 from test_arm_model_urdf_chain import arm_urdf
 
 
@@ -55,6 +55,44 @@ def test_chain_jacobian_is_the_casadi_jacobian(nominal, tmp_path, convention):
         ref = np.hstack([jp, jq, jw])
         assert_close(g[:, :, i].T, ref, atol=1e-12 * np.abs(ref).max(), msg=f"point {i}")
     assert g.shape[0] == size + j + 6
+
+
+@pytest.mark.parametrize("convention", ["dh", "mdh", "urdf"])
+def test_joint_screws_give_pinocchios_and_finite_difference_jacobians(nominal, tmp_path, convention):
+    """The q-only Jacobian of the inverse kinematics: the last frame against the chain (a second
+    implementation), the ball's Jacobian against Pinocchio's frame Jacobian and central differences, the
+    frame axes' Jacobians against central differences, all to 1e-9 relative."""
+    from arm_model import PinocchioArm
+    from arm_model.chain import chain_point
+    from arm_model.kinematics import rigid_centres
+
+    desc = _arms(nominal, tmp_path)[convention].with_probe(rpy=(0.1, -0.2, 0.3))
+    rng = np.random.default_rng(4)
+    n, j = 6, desc.n_joints
+    q = rng.uniform(-2.5, 2.5, (n, j))
+    rows = desc.row_table()
+
+    def frame(qq):
+        qt = list(np.atleast_2d(qq).T)
+        o = np.column_stack(chain_point(desc.convention, rows, qt, (0.0, 0.0, 0.0), axes=desc.axes))
+        return np.stack([np.column_stack(chain_point(desc.convention, rows, qt, tuple(e), axes=desc.axes)) - o
+                         for e in np.eye(3)], axis=2), o
+
+    r, o, u, c = joint_screws(desc.convention, rows, q, desc.axes)
+    r_ref, o_ref = frame(q)
+    assert_close(r, r_ref, atol=1e-14)
+    assert_close(o, o_ref, atol=1e-14)
+    ball = rigid_centres(desc, q)
+    jb = point_jacobian(u, c, ball)
+    arm = PinocchioArm(desc)
+    for i in range(n):
+        ref = arm.jacobians(q[i])[0]
+        assert_close(jb[i], ref, atol=1e-9 * np.abs(ref).max(), msg=f"point {i}")
+        fd = fd_jacobian(lambda x: rigid_centres(desc, x[None])[0], q[i])
+        assert_close(jb[i], fd, atol=1e-9 * np.abs(fd).max(), msg=f"point {i}")
+        for k in range(3):
+            fd = fd_jacobian(lambda x: frame(x)[0][0, :, k], q[i])
+            assert_close(direction_jacobian(u[i:i + 1], r[i:i + 1, :, k])[0], fd, atol=1e-9, msg=f"axis {k}")
 
 
 def _effect_model(nominal):

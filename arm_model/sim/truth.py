@@ -107,8 +107,8 @@ class Truth:
         return geom
 
     def pose(self, q, geom: Geometry, wrench=None):
-        """Ball centre and flange axes at the TRUE joint angles ``q`` (N, J) [rad] (real or
-        complex, for complex-step derivatives) with a fixed ``wrench`` (N, 6) (probe frame).
+        """Ball centre and flange axes at the TRUE joint angles ``q`` (N, J) [rad] with a fixed
+        ``wrench`` (N, 6) (probe frame).
 
         Returns (ball (N, 3) [m], z axis (N, 3), x axis (N, 3)) in the base frame; the axes are
         those of the probe frame (undeflected).
@@ -131,6 +131,37 @@ class Truth:
         x, y, z = chain_point(d.convention, rows, list(np.tile(q, (4, 1)).T), pts, NUMPY_OPS, d.axes)
         p = np.column_stack([x, y, z]).reshape(4, n, 3)
         return p[0], p[2] - p[1], p[3] - p[1]
+
+    def pose_jacobian(self, q, geom: Geometry, wrench=None, load=None):
+        """:meth:`pose` and its exact Jacobians with respect to the true joint angles ``q`` (N, J) [rad]
+        (:func:`arm_model.jacobian.joint_screws`: one forward pass, the wrench held fixed).
+
+        ``wrench``: (N, 6) fixed probe-frame wrench, or ``load``: (force (N, 3) [N], torque (N, 3) [N m])
+        in the base frame, rotated into the probe frame of this pose. Returns (ball (N, 3) [m],
+        z (N, 3), x (N, 3), d ball/dq (N, 3, J) [m/rad], dz/dq, dx/dq (N, 3, J) [1/rad], wrench (N, 6)).
+        """
+        from ..jacobian import direction_jacobian, joint_screws, point_jacobian
+
+        d = self.nominal
+        q = np.asarray(q, dtype=float)
+        n = q.shape[0]
+        rot, lever = d.probe.rotation, d.probe.lever
+        r, o, u, c = joint_screws(d.convention, geom.rows, q, d.axes)
+        rm = np.eye(3) if rot is None else np.array(rot, dtype=float)
+        z, x = r @ rm[:, 2], r @ rm[:, 0]
+        if load is not None:
+            from .ik import probe_wrench
+
+            wrench = probe_wrench(load[0], load[1], z, x)
+        if wrench is None:
+            qe = (0.0, 0.0, 0.0)
+        else:
+            qe = elastic_displacement(geom.p_last, geom.compliance, list(np.asarray(wrench).T),
+                                      probe_lever(geom.p_last, rot, lever))
+        b = np.column_stack([np.broadcast_to(v, (n,)) for v in ball_in_last_frame(geom.p_last, qe, NUMPY_OPS, rot, lever)])
+        ball = o + np.einsum("nij,nj->ni", r, b)
+        w = np.zeros((n, 6)) if wrench is None else np.asarray(wrench, dtype=float)
+        return (ball, z, x, point_jacobian(u, c, ball), direction_jacobian(u, z), direction_jacobian(u, x), w)
 
     def rotation(self, q, temperature) -> np.ndarray:
         """(N, 3, 3) rotation R_base_probe (columns: probe x, y, z in the base frame) at true angles."""
