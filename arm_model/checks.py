@@ -4,18 +4,21 @@
   description). Such points are used and flagged, never dropped.
 - ``joint_limits``: an encoder angle beyond the joint's declared limits (``lower_deg``/``upper_deg``).
 
-Every command that reads points prints these (``warning: ...``) and, when it writes a summary and a
+Every command that reads points logs these at WARNING (``warning: ...`` on standard error) and, when it writes a summary and a
 report, lists them there too (``"warnings"`` of summary.json, a "Warnings" section of report.html).
 """
 from __future__ import annotations
 
 import html
+import logging
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["InputWarning", "over_force_warning", "joint_limit_warning", "point_warnings", "print_warnings",
+__all__ = ["InputWarning", "over_force_warning", "joint_limit_warning", "point_warnings", "log_warnings",
            "warnings_html", "LIMIT_TOLERANCE_RAD"]
+
+log = logging.getLogger(__name__)
 
 #: how far beyond a declared joint limit an angle may read before it is reported [rad] (1e-6 deg:
 #: below every encoder's resolution, above the rounding of a file written in degrees)
@@ -105,10 +108,11 @@ def point_warnings(desc, points, force=None) -> list[InputWarning]:
     return [w for w in out if w is not None]
 
 
-def print_warnings(warnings, file=None) -> None:
-    """``warning: <message>`` for each, on standard output (the summary the command prints)."""
+def log_warnings(warnings, logger: logging.Logger | None = None) -> None:
+    """Each warning logged at WARNING (``warning: <message>`` on standard error under ``aacmm``; shown
+    with ``--quiet`` too)."""
     for w in warnings:
-        print(f"warning: {w.message}", file=file)
+        (logger or log).warning(w.message)
 
 
 def warnings_html(warnings) -> str:

@@ -38,6 +38,7 @@
 """
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, field
 
@@ -45,6 +46,7 @@ import numpy as np
 from scipy import stats
 
 from arm_model import InputError, NumericalError
+from arm_model._log import progress_line
 from arm_model.description import ArmDescription
 from arm_model.effects import JointCompliance, ThermalGrowth
 from arm_model.io import Artefacts, PointSet
@@ -61,6 +63,8 @@ from .problem import MIN_POINTS, Problem
 from .solver import levenberg_marquardt
 from .synthesis import RESIDUAL, synthesise
 from .validation import BOOTSTRAP_SAMPLES, FIGURES, bootstrap, validate
+
+log = logging.getLogger(__name__)
 
 __all__ = ["LoopSettings", "CVResult", "Stage", "LoopResult", "close_loop", "heldout_residuals",
            "heldout_figures", "cross_validate", "display", "effect_summary"]
@@ -539,7 +543,7 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
     settings = settings or LoopSettings()
     if kw:
         settings = LoopSettings(**{**settings.to_dict(), **kw})
-    say = progress or (lambda msg: None)
+    say = progress or progress_line(log)
     weights = stated = weights or Weights()
     has_t = points.temperature is not None and np.all(np.isfinite(points.temperature))
     need = [JointCompliance()] + ([ThermalGrowth()] if has_t else []) + list(effects) + [c.effect for c in extra]
@@ -600,7 +604,10 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         if dropped["test"]:
             say(f"  {len(dropped['test'])} outlier point(s) of the test set dropped (base model)")
     folds, power = _choose_folds(design, settings)
-    say(power["note"])
+    if power["note"].startswith("WARNING: "):        # shown with --quiet too
+        log.warning(power["note"][len("WARNING: "):])
+    else:
+        say(power["note"])
     stages = [Stage(0, model, result, heldout=test_figures(model, result.p, result.reference_mode))]
     say(f"  base model: s0 {result.s0:.3g}, held-out test RMS {stages[0].heldout['rms_um']:.2f} um")
     base_folds: FoldFit | None = None
