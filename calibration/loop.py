@@ -227,6 +227,7 @@ class CVResult:
     reason: str
     score_p: float = float("nan")
     folds: FoldFit | None = field(default=None, repr=False)
+    held: bool = False            # its parameters were held (not resolved) in some fold's training part
 
     def to_dict(self) -> dict:
         def num(v):
@@ -610,14 +611,14 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
             say(f"  cross-validating the current model ({folds.k} folds by {folds.by})")
             base_folds = _fold_fit(model, design, folds, fit)
         threshold = settings.alpha / len(gated)
-        cvs = []
-        for c, t in gated:
-            say(f"  cross-validating + {c.name} (score p = {t.p_value:.2g})")
+
+        def _cv_of(c, t):
             cp = _candidate_priors(model.with_effects(c.effect), c, t)
             try:
                 new = _fold_fit(model.with_effects(c.effect), design, folds, lambda m, d: fit(m, d, cp))
                 cv = cross_validate(c.name, base_folds, new, threshold, settings.min_improvement)
                 held = [k for k, r in enumerate(new.results) if not set(c.param_names(desc)) & set(r.free)]
+                cv.held = bool(held)
                 if held and cv.passed:
                     cv.passed = False
                     cv.reason = (f"its parameters were held (not resolved) in the training part of fold(s) "
@@ -625,6 +626,12 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
             except NumericalError as exc:
                 cv = cross_validate(c.name, base_folds, None, threshold, settings.min_improvement, str(exc))
             cv.score_p = t.p_value
+            return cv
+
+        cvs = []
+        for c, t in gated:
+            say(f"  cross-validating + {c.name} (score p = {t.p_value:.2g})")
+            cv = _cv_of(c, t)
             say(f"    {cv.reason}")
             cvs.append(cv)
         last_cv = cvs
@@ -643,6 +650,9 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
             same = [(c, v) for c, v in passing if c.family == cand.family and c.joint == cand.joint
                     and cv.improvement - v.improvement <= PARSIMONY]
             cand, cv = min(same, key=lambda x: x[0].size(desc))
+        if cand.family == "joint_compliance" and cand.joint is not None:
+            cand, cv = _whole_family(cand, cv, remaining, gated, cvs, lambda c: _cv_of(c, tests[remaining.index(c)]),
+                                     say)
         wcols = _candidate_cols(space, remaining, remaining.index(cand), tests[remaining.index(cand)])
         # parsimony: a passing candidate inside the best one's signature, with fewer parameters and nearly
         # the same held-out improvement, explains as much with less
@@ -847,6 +857,30 @@ def _drop_test_outliers(model, p, test: CalibrationData, weights, reference, thr
             "standardized": float(np.max(np.abs(r[point == i])) / scale)} for i in bad]
     keep = np.setdiff1d(np.arange(len(test)), bad)
     return test.select(keep), out
+
+
+def _whole_family(cand: Candidate, cv: CVResult, remaining: list, gated: list, cvs: list, cross_validate_, say):
+    """A joint compliance is a property of the arm: when one loaded joint's compliance is supported on
+    held-out data, the compliance of every loaded joint (one candidate) replaces it, provided it does not
+    predict the held-out data worse (its relative improvement is positive). Within one plate placement
+    the gravity torques of the joints move together, so held-out poses of that placement favour the one
+    joint whose signature is plainest, while the deflection of every loaded joint is what carries over
+    to the rest of the workspace; the joints the data cannot resolve are held by the identifiability
+    rules. Returns the (candidate, CV result) to add."""
+    every = next((c for c in remaining if c.family == cand.family and c.joint is None), None)
+    if every is None:
+        return cand, cv
+    got = next((v for (c, _), v in zip(gated, cvs) if c is every), None)
+    if got is None:
+        say(f"  cross-validating + {every.name} (the whole family of {cand.name})")
+        got = cross_validate_(every)
+        say(f"    {got.reason}")
+        cvs.append(got)
+    if np.isfinite(got.improvement) and got.improvement > 0 and not got.held:
+        say(f"  {cand.name} is supported: taking {every.name} (held-out RMS {100 * got.improvement:.1f} % lower "
+            f"than the current model's)")
+        return every, got
+    return cand, cv
 
 
 def _candidate_priors(model: ArmModel, cand: Candidate, test: GroupTest) -> dict[str, float]:
