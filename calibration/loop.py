@@ -651,8 +651,11 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
                     and cv.improvement - v.improvement <= PARSIMONY]
             cand, cv = min(same, key=lambda x: x[0].size(desc))
         if cand.family == "joint_compliance" and cand.joint is not None:
-            cand, cv = _whole_family(cand, cv, remaining, gated, cvs, lambda c: _cv_of(c, tests[remaining.index(c)]),
-                                     say)
+            cand, cv = _whole_family(
+                cand, cv, remaining, gated, cvs, lambda c: _cv_of(c, tests[remaining.index(c)]),
+                lambda c: fit(model.with_effects(c.effect), design,
+                              _candidate_priors(model.with_effects(c.effect), c, tests[remaining.index(c)])),
+                settings.alpha, say)
         wcols = _candidate_cols(space, remaining, remaining.index(cand), tests[remaining.index(cand)])
         # parsimony: a passing candidate inside the best one's signature, with fewer parameters and nearly
         # the same held-out improvement, explains as much with less
@@ -859,26 +862,40 @@ def _drop_test_outliers(model, p, test: CalibrationData, weights, reference, thr
     return test.select(keep), out
 
 
-def _whole_family(cand: Candidate, cv: CVResult, remaining: list, gated: list, cvs: list, cross_validate_, say):
-    """A joint compliance is a property of the arm: when one loaded joint's compliance is supported on
-    held-out data, the compliance of every loaded joint (one candidate) replaces it, provided it does not
-    predict the held-out data worse (its relative improvement is positive). Within one plate placement
-    the gravity torques of the joints move together, so held-out poses of that placement favour the one
-    joint whose signature is plainest, while the deflection of every loaded joint is what carries over
-    to the rest of the workspace; the joints the data cannot resolve are held by the identifiability
-    rules. Returns the (candidate, CV result) to add."""
+def _whole_family(cand: Candidate, cv: CVResult, remaining: list, gated: list, cvs: list, cross_validate_,
+                  fit_design, alpha: float, say):
+    """A joint compliance is a property of the arm, and under gravity the joints deflect together: when one
+    loaded joint's compliance is supported on held-out data, the compliance of every loaded joint (one
+    candidate) replaces it if (1) fitted on the design set it resolves the compliance of at least one
+    other joint as non-zero (|c| > z u, z two-sided at ``alpha`` with Bonferroni over those joints) and
+    (2) it does not predict the held-out data worse (positive relative improvement). Within one plate
+    placement the gravity torques of the joints move together, so its held-out poses favour the one joint
+    whose signature is plainest; the deflection of every compliant joint is what carries over to the rest
+    of the workspace. A compliance of one joint alone (a measuring arm's shoulder) stays that joint's.
+    Returns the (candidate, CV result) to add."""
     every = next((c for c in remaining if c.family == cand.family and c.joint is None), None)
     if every is None:
         return cand, cv
+    res = fit_design(every)
+    own = set(cand.param_names(res.model.desc))
+    others = [n for n in every.param_names(res.model.desc) if n not in own and n in res.free]
+    if not others:
+        return cand, cv
+    z = stats.norm.isf(alpha / (2 * len(others)))
+    resolved = [n for n in others if abs(res.value(n)) > z * res.uncertainty(n)]
+    if not resolved:
+        say(f"  {every.name}: no other joint's compliance resolved as non-zero (|c| > {z:.2f} u); "
+            f"keeping {cand.name}")
+        return cand, cv
     got = next((v for (c, _), v in zip(gated, cvs) if c is every), None)
     if got is None:
-        say(f"  cross-validating + {every.name} (the whole family of {cand.name})")
+        say(f"  cross-validating + {every.name} (other joints resolved: {', '.join(resolved)})")
         got = cross_validate_(every)
         say(f"    {got.reason}")
         cvs.append(got)
     if np.isfinite(got.improvement) and got.improvement > 0 and not got.held:
-        say(f"  {cand.name} is supported: taking {every.name} (held-out RMS {100 * got.improvement:.1f} % lower "
-            f"than the current model's)")
+        say(f"  {cand.name} is supported and the design set resolves {', '.join(resolved)}: taking "
+            f"{every.name} (held-out RMS {100 * got.improvement:.1f} % lower than the current model's)")
         return every, got
     return cand, cv
 
