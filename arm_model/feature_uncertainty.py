@@ -13,6 +13,13 @@ sensitivity ``s_i = dD/dp_i`` (3,) to each point, and
 with C_i the point's covariance without the shared part and S_i its rows of shared factors
 (:attr:`arm_model.uncertainty.Propagation.systematic`): a shared error (a wrong link length, a wrong
 compliance) moves every point the same way and does not average out over the points.
+
+The form error F = max_i r_i - min_i r_i is not smooth in the points (which point is the extreme
+changes), so :func:`form_uncertainty` samples instead of differentiating: each sample draws the point
+errors from the same covariances (independent parts per point, shared factors once per sample),
+maps them to residual changes through the refit to first order, ``dr = (I - J J^+) (n . dp)``, and
+takes max - min of ``r + dr``. The spread of the samples is the standard uncertainty of F; their mean
+minus F is how much the errors alone inflate a form error (max - min of noise is positive).
 """
 from __future__ import annotations
 
@@ -22,11 +29,16 @@ import numpy as np
 
 from .geometry import CylinderFit
 
-__all__ = ["DiameterUncertainty", "diameter_sensitivity", "diameter_uncertainty"]
+__all__ = ["DiameterUncertainty", "diameter_sensitivity", "diameter_uncertainty", "FormUncertainty",
+           "form_uncertainty", "FORM_SAMPLES"]
+
+#: samples of :func:`form_uncertainty` (a standard deviation from B samples is known to about 1/sqrt(2B))
+FORM_SAMPLES = 2000
 
 
-def diameter_sensitivity(points, cylinder: CylinderFit) -> np.ndarray:
-    """(N, 3) dD/dp_i: the fitted diameter's first-order change per metre of each point's coordinates."""
+def _radial_jacobian(points, cylinder: CylinderFit):
+    """The unit radial directions (N, 3) and the residuals' Jacobian (N, 5) in the cylinder's
+    parameters (two axis offsets, two tilts, the radius)."""
     p = np.asarray(points, float)
     d = p - cylinder.point
     t = d @ cylinder.axis
@@ -38,6 +50,12 @@ def diameter_sensitivity(points, cylinder: CylinderFit) -> np.ndarray:
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(cylinder.axis, e1)
     jac = np.column_stack([-n @ e1, -n @ e2, -t * (n @ e1), -t * (n @ e2), -np.ones(len(p))])
+    return n, jac
+
+
+def diameter_sensitivity(points, cylinder: CylinderFit) -> np.ndarray:
+    """(N, 3) dD/dp_i: the fitted diameter's first-order change per metre of each point's coordinates."""
+    n, jac = _radial_jacobian(points, cylinder)
     # the radius row of the least-squares pseudo-inverse (lstsq: stable for tall thin Jacobians)
     g = np.linalg.pinv(jac)[4]
     return -2.0 * g[:, None] * n
@@ -84,3 +102,43 @@ def diameter_uncertainty(sens: np.ndarray, cov: np.ndarray, systematic: np.ndarr
     indep = max(indep, 0.0)
     return DiameterUncertainty(float(np.sqrt(indep + par + comp)), float(np.sqrt(indep)), float(np.sqrt(par)),
                                float(np.sqrt(comp)), float(np.sqrt(max(naive, 0.0))))
+
+
+@dataclass(frozen=True)
+class FormUncertainty:
+    """The form error (max - min of the residuals) of a fitted cylinder and its uncertainty [m]:
+    ``u`` the standard deviation of the sampled form errors, ``inflation`` their mean minus the
+    measured form error (what the point errors alone add to a form error), ``samples`` how many."""
+    form: float
+    u: float
+    inflation: float
+    samples: int
+
+    def as_dict(self) -> dict:
+        return {"form_mm": self.form * 1e3, "u_form_mm": self.u * 1e3, "inflation_mm": self.inflation * 1e3,
+                "samples": self.samples}
+
+
+def form_uncertainty(points, cylinder: CylinderFit, cov: np.ndarray, systematic: np.ndarray | None = None,
+                     samples: int = FORM_SAMPLES, seed: int = 0) -> FormUncertainty:
+    """Sample the form error of the cylinder fitted to ``points`` under the point errors of
+    ``cov`` (N, 3, 3) [m^2] with the shared factor rows ``systematic`` (N, R, 3) (see the module
+    docstring); seeded, so the same data give the same figure."""
+    if samples < 2:
+        raise ValueError(f"samples must be at least 2, got {samples}")
+    n, jac = _radial_jacobian(points, cylinder)
+    cov = np.asarray(cov, float)
+    shared = None
+    if systematic is not None and systematic.shape[1]:
+        cov = cov - np.einsum("nri,nrj->nij", systematic, systematic)
+        shared = np.einsum("nri,ni->nr", systematic, n)              # (N, R) radial parts
+    var = np.maximum(np.einsum("ni,nij,nj->n", n, cov, n), 0.0)      # radial variance of each point alone
+    pinv = np.linalg.pinv(jac)
+    rng = np.random.default_rng(seed)
+    eps = rng.standard_normal((len(n), samples)) * np.sqrt(var)[:, None]
+    if shared is not None:
+        eps += shared @ rng.standard_normal((shared.shape[1], samples))
+    r = np.asarray(cylinder.residuals, float)[:, None] + eps - jac @ (pinv @ eps)    # after the refit
+    f = r.max(axis=0) - r.min(axis=0)
+    form = float(cylinder.form_error)
+    return FormUncertainty(form, float(f.std(ddof=1)), float(f.mean() - form), samples)

@@ -15,7 +15,7 @@ from .chain import NUMPY_OPS, ball_centre_expr
 from .description import ArmDescription
 from .params import split_params
 
-__all__ = ["ball_centres", "rigid_centres", "as_wrench"]
+__all__ = ["ball_centres", "rigid_centres", "as_wrench", "probe_rotations"]
 
 _CHUNK = 16384
 
@@ -95,3 +95,14 @@ def ball_centres(desc: ArmDescription, q, wrench=None, p=None, *, threads: int |
 def rigid_centres(desc: ArmDescription, q, p=None, **kw) -> np.ndarray:
     """Ball centres [m] with a rigid stylus (zero wrench)."""
     return ball_centres(desc, q, None, p, **kw)
+
+
+def probe_rotations(desc: ArmDescription, q, p=None) -> np.ndarray:
+    """(N, 3, 3) rotation R_base_probe (columns: the probe frame's x, y, z axes in the base frame) at joint
+    angles ``q`` (N, J) [rad] with base parameter errors ``p`` (rigid chain;
+    :func:`arm_model.jacobian.joint_screws`)."""
+    from .jacobian import joint_screws
+
+    rows, _, _ = split_params(desc, None if p is None else np.asarray(p, dtype=float))
+    rot = joint_screws(desc.convention, rows, np.atleast_2d(np.asarray(q, dtype=float)), desc.axes)[0]
+    return rot if desc.probe.rotation is None else rot @ np.asarray(desc.probe.rotation, dtype=float)

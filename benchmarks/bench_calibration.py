@@ -25,7 +25,7 @@ from arm_model.effects import EncoderEccentricity
 from arm_model.model import ArmModel
 from calibration import Problem, Weights, calibrate, levenberg_marquardt, make_data
 from calibration.solver import blas_threads
-from calibration.synth import SynthSpec, make_campaign, random_truth
+from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 
 ARM = "urdf/aacmm7.dh.toml"
 WEIGHTS = Weights(probe=2e-6, reference=5e-6)
@@ -167,6 +167,9 @@ def compare(model: ArmModel, n: int, scipy_methods=("lm", "trf-sparse")) -> dict
                        "rel_p": float(np.linalg.norm(ps - sol.p[free]) / np.linalg.norm(sol.p[free])),
                        "max_dp_over_u": float(np.max(np.abs(ps - sol.p[free]) / u))}
     return row
+
+
+QUICK = {"sizes": (500, 1000), "scipy_sizes": (500,)}   # make bench BENCH=--quick
 
 
 def main(sizes=(500, 1000, 2000, 5000), scipy_sizes=(500, 1000, 2000)) -> dict:

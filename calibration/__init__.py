@@ -34,7 +34,7 @@ API for the close-the-loop work (issue 7):
   rigid motions projected out, then practical resolution against :func:`prior_scales`);
   :func:`validate` / :func:`before_after` for ASME B89.4.22 figures of any p.
 * Studies (:mod:`calibration.study`): Monte Carlo over simulated campaigns, pose-set choice by the
-  observability index O1; small synthetic campaigns without the simulator: :mod:`calibration.synth`.
+  observability index O1; small campaigns from a known true model: the simulator's fast path, :mod:`arm_model.sim.quick`.
 
 Command line: ``aacmm calibrate`` and ``aacmm study {montecarlo, poses}``. Reference:
 docs/calibration.md.

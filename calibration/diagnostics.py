@@ -35,6 +35,7 @@ from scipy import stats
 
 from arm_model.chain import NUMPY_OPS
 from arm_model.effects import Effect, Geometry, contact_moment, gravity_moment, joint_frame
+from arm_model.kinematics import probe_rotations
 from arm_model.model import ArmModel
 from arm_model.params import split_params
 
@@ -44,7 +45,6 @@ from .data import CalibrationData
 from .identifiability import DEFAULT_RANK_TOL, point_noise, prior_scales, reduced_jacobian, weakly_determined
 from .problem import Problem
 from .solver import levenberg_marquardt
-from .synth import probe_rotation
 
 __all__ = ["JointAngleOffset", "measurement_folds", "pose_folds", "ResidualSpace", "residual_space", "GroupTest",
            "Family", "families", "candidate_family", "test_group", "screen_candidates", "structure_tests",
@@ -509,8 +509,7 @@ def _point_frames(space: ResidualSpace):
     """Per point: probe rotation R_base_probe (N, 3, 3) and ball centre (N, 3) [m] at the fit."""
     res = space.result
     data = res.data
-    base = ArmModel(res.model.desc)
-    rot = probe_rotation(base, data.points.q, res.p[: res.model.base_size])
+    rot = probe_rotations(res.model.desc, data.points.q, res.p[: res.model.base_size])
     x = res.model.ball_centres(data.points.q, data.wrench, res.p, data.aux)
     return rot, x
 

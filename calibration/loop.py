@@ -38,6 +38,7 @@
 """
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, field
 
@@ -45,6 +46,7 @@ import numpy as np
 from scipy import stats
 
 from arm_model import InputError, NumericalError
+from arm_model._log import progress_line
 from arm_model.description import ArmDescription
 from arm_model.effects import JointCompliance, ThermalGrowth
 from arm_model.io import Artefacts, PointSet
@@ -60,7 +62,9 @@ from .identifiability import DEFAULT_RANK_TOL, prior_scales
 from .problem import MIN_POINTS, Problem
 from .solver import levenberg_marquardt
 from .synthesis import RESIDUAL, synthesise
-from .validation import FIGURES, validate
+from .validation import BOOTSTRAP_SAMPLES, FIGURES, bootstrap, validate
+
+log = logging.getLogger(__name__)
 
 __all__ = ["LoopSettings", "CVResult", "Stage", "LoopResult", "close_loop", "heldout_residuals",
            "heldout_figures", "cross_validate", "display", "effect_summary"]
@@ -188,13 +192,32 @@ def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights,
         ek = e[h["kind"] == k]
         out["by_kind"][k] = {"rows": int(len(ek)), "rms_um": float(np.sqrt(np.mean(ek ** 2))) * 1e6,
                              "max_um": float(np.max(np.abs(ek))) * 1e6}
+    u = _bootstrap_rows(head, h["measurement"][art] if art.any() else h["measurement"])
+    out["u_rms_um"], out["u_max_um"] = (None, None) if u is None else (u[0] * 1e6, u[1] * 1e6)
     held = data if train is None else data.select(~np.asarray(train, bool))
     try:
-        summary = validate(model, p, held, weights, reference).summary()
+        val = validate(model, p, held, weights, reference)
+        summary, u_std = val.summary(), bootstrap(val)
     except InputError:                # held-out poses too few on some feature for its own fit
-        summary = {}
+        summary, u_std = {}, {}
     out["standard"] = {k: summary[k] * FIGURES[k][2] for k in FIGURES if k in summary}
+    out["u_standard"] = {k: None if u_std.get(k) is None else u_std[k] * FIGURES[k][2] for k in out["standard"]}
     return out
+
+
+def _bootstrap_rows(e: np.ndarray, measurement: np.ndarray, samples: int = BOOTSTRAP_SAMPLES, seed: int = 0):
+    """Standard uncertainties [m] of the RMS and the max |e| of residual rows, by the bootstrap of
+    :func:`calibration.validation.bootstrap` (whole measurements resampled with replacement); None
+    with fewer than two measurements."""
+    groups = [e[measurement == m] for m in dict.fromkeys(measurement.tolist())]
+    if len(groups) < 2:
+        return None
+    rng = np.random.default_rng(seed)
+    rms, mx = np.empty(samples), np.empty(samples)
+    for k in range(samples):
+        x = np.concatenate([groups[i] for i in rng.integers(0, len(groups), len(groups))])
+        rms[k], mx[k] = np.sqrt(np.mean(x ** 2)), np.max(np.abs(x))
+    return float(rms.std(ddof=1)), float(mx.std(ddof=1))
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -410,7 +433,9 @@ class LoopResult:
         return [s.added for s in self.stages[1:]]
 
     def before_after(self) -> list[dict]:
-        """One row a stage: held-out (outer test set) figures [um], with the relative change to the base."""
+        """One row a stage: held-out (outer test set) figures [um], with the relative change to the base;
+        ``u``: the standard uncertainty of each figure [um] (bootstrap over the test measurements, None
+        with fewer than two)."""
         rows = []
         base = self.stages[0].heldout
         for s in self.stages:
@@ -418,7 +443,8 @@ class LoopResult:
             rows.append({"stage": s.index, "model": "base model" if s.added is None else f"+ {s.added.name}",
                          "rms_um": h["rms_um"], "max_um": h["max_um"],
                          "ratio_rms": base["rms_um"] / h["rms_um"] if h["rms_um"] > 0 else float("inf"),
-                         **{k: v for k, v in h["standard"].items()}})
+                         **{k: v for k, v in h["standard"].items()},
+                         "u": {"rms_um": h["u_rms_um"], "max_um": h["u_max_um"], **h["u_standard"]}})
         return rows
 
 
@@ -521,7 +547,7 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
     settings = settings or LoopSettings()
     if kw:
         settings = LoopSettings(**{**settings.to_dict(), **kw})
-    say = progress or (lambda msg: None)
+    say = progress or progress_line(log)
     weights = stated = weights or Weights()
     has_t = points.temperature is not None and np.all(np.isfinite(points.temperature))
     need = [JointCompliance()] + ([ThermalGrowth()] if has_t else []) + list(effects) + [c.effect for c in extra]
@@ -582,7 +608,10 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         if dropped["test"]:
             say(f"  {len(dropped['test'])} outlier point(s) of the test set dropped (base model)")
     folds, power = _choose_folds(design, settings)
-    say(power["note"])
+    if power["note"].startswith("WARNING: "):        # shown with --quiet too
+        log.warning(power["note"][len("WARNING: "):])
+    else:
+        say(power["note"])
     stages = [Stage(0, model, result, heldout=test_figures(model, result.p, result.reference_mode))]
     say(f"  base model: s0 {result.s0:.3g}, held-out test RMS {stages[0].heldout['rms_um']:.2f} um")
     base_folds: FoldFit | None = None

@@ -17,6 +17,7 @@ from arm_model.shipped import provenance
 
 from .loop import LoopResult, Stage, effect_summary
 from .model_output import model_check, model_paths, write_model
+from .validation import with_u
 
 __all__ = ["summary_dict", "before_after_text", "write_loop_report", "write_loop_model", "loop_model_name", "plot_signature", "plot_screening",
            "plot_before_after"]
@@ -26,6 +27,10 @@ TABLE = (("rms_um", "RMS", "um"), ("max_um", "max", "um"), ("length_error_max", 
          ("length_error_rms", "length RMS", "um"), ("articulation_2rms", "artic. 2RMS", "um"),
          ("sphere_diameter_error_max", "sphere diam.", "um"), ("ring_diameter_error_max", "ring diam.", "um"),
          ("flatness_max", "flatness", "um"), ("reference_rms", "ref. RMS", "um"))
+
+
+#: the held-out figures of a stage that the summary repeats per added effect
+HELDOUT_KEYS = ("rms_um", "u_rms_um", "max_um", "u_max_um", "standard", "u_standard")
 
 
 def _num(v):
@@ -75,10 +80,8 @@ def summary_dict(loop: LoopResult, inputs: dict | None = None) -> dict:
                         "origin": s.added.origin,
                         "found_from_the_residual": s.added.origin == "residual",
                         "parameters": effect_summary(s.result, s.added),
-                        "heldout_before": {"rms_um": prev["rms_um"], "max_um": prev["max_um"],
-                                           "standard": prev["standard"]},
-                        "heldout_after": {"rms_um": s.heldout["rms_um"], "max_um": s.heldout["max_um"],
-                                          "standard": s.heldout["standard"]},
+                        "heldout_before": {k: prev[k] for k in HELDOUT_KEYS},
+                        "heldout_after": {k: s.heldout[k] for k in HELDOUT_KEYS},
                         "indistinguishable_from": s.nested + [a for a in s.alternatives if a not in s.nested]})
         prev = s.heldout
     return _clean({
@@ -111,15 +114,18 @@ def before_after_text(loop: LoopResult) -> str:
     rows = loop.before_after()
     cols = [(k, h, u) for k, h, u in TABLE if any(k in r for r in rows)]
     name_w = max(len("model"), *(len(r["model"]) for r in rows))
-    head = f"{'model':<{name_w}}  " + "  ".join(f"{h:>12}" for _, h, _ in cols)
-    units = f"{'':<{name_w}}  " + "  ".join(f"{'[' + u + ']':>12}" for _, _, u in cols)
+    w = 16
+    head = f"{'model':<{name_w}}  " + "  ".join(f"{h:>{w}}" for _, h, _ in cols)
+    units = f"{'':<{name_w}}  " + "  ".join(f"{'[' + u + ']':>{w}}" for _, _, u in cols)
     what = (f"{len(loop.test)} measurements never used for a decision" if loop.test_by == "measurement" else
             "poses of each feature never used for a decision, each predicted against its feature's centre "
             "fitted on the design poses")
-    lines = [f"held-out test set: {what} (rows: {loop.stages[0].heldout.get('headline_rows', '')})", head, units]
+    lines = [f"held-out test set: {what} (rows: {loop.stages[0].heldout.get('headline_rows', '')}); "
+             "± the standard uncertainty of each figure (bootstrap over the test measurements)", head, units]
     for r in rows:
         lines.append(f"{r['model']:<{name_w}}  " + "  ".join(
-            f"{r[k]:>12.2f}" if k in r and r[k] is not None else f"{'-':>12}" for k, _, _ in cols))
+            f"{with_u(r[k], r.get('u', {}).get(k)):>{w}}" if k in r and r[k] is not None else f"{'-':>{w}}"
+            for k, _, _ in cols))
     if len(rows) > 1:
         lines.append(f"RMS ratio base / final: {rows[0]['rms_um'] / rows[-1]['rms_um']:.2f}")
     return "\n".join(lines)

@@ -19,6 +19,7 @@ from arm_model.shipped import provenance
 
 from .calibrate import CalibrationResult, display_unit
 from .model_output import model_check, model_paths, write_model
+from .validation import with_u
 
 __all__ = ["write_outputs", "plot_residuals", "plot_parameters", "plot_correlation"]
 
@@ -166,9 +167,12 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
                        ("validation_holdout", "Validation on held-out data (never seen by the fit)")):
         rows = summary.get(key)
         if rows:
-            parts += [f"<h2>{title}</h2>", _table(["figure", "unit", "nominal", "calibrated", "ratio"],
-                                                  [(r["label"], r["unit"], _fmt(r["before"]), _fmt(r["after"]),
-                                                    _fmt(r["ratio"], 3)) for r in rows])]
+            parts += [f"<h2>{title}</h2>", "<p>± the standard uncertainty of each figure: a bootstrap over the "
+                      "measurements (whole measurements resampled); '-' with fewer than two "
+                      "measurements of its kind.</p>",
+                      _table(["figure", "unit", "nominal", "calibrated", "ratio"],
+                             [(r["label"], r["unit"], with_u(r["before"], r.get("u_before")),
+                               with_u(r["after"], r.get("u_after")), _fmt(r["ratio"], 3)) for r in rows])]
     parts += ["<h2>Parameters</h2>", _table(["parameter", "state", "unit", "estimate", "u"], par)]
     if result.outliers:
         parts += ["<h2>Outliers (kept)</h2>" if not result.dropped else "<h2>Outliers</h2>",

@@ -14,7 +14,11 @@ is used to place a centre) and the standard figures are computed:
 * planes: flatness (max - min of the signed distances); reference points: the errors after the
   best-fit rigid transform ``T_ref_base`` (RMS and max).
 
-:func:`before_after` tabulates the figures of two parameter vectors (nominal and calibrated).
+:func:`before_after` tabulates the figures of two parameter vectors (nominal and calibrated), each
+with a standard uncertainty from :func:`bootstrap`: the figures of the calibrated model are fixed
+properties of that model (its parameter error is what they measure), so what is uncertain is how well
+the few measurements represent the arm's use. The bootstrap resamples the measurements with
+replacement; the standard deviation of the resampled figure is its standard uncertainty.
 """
 from __future__ import annotations
 
@@ -29,7 +33,12 @@ from .data import CalibrationData, Weights
 from .problem import MIN_POINTS, Problem
 from .solver import blas_threads, levenberg_marquardt
 
-__all__ = ["Validation", "validate", "before_after", "FIGURES", "DIAMETER_MIN_POINTS"]
+__all__ = ["Validation", "validate", "before_after", "bootstrap", "with_u", "FIGURES", "DIAMETER_MIN_POINTS",
+           "BOOTSTRAP_SAMPLES"]
+
+#: resamples of :func:`bootstrap` (the relative precision of a standard deviation from B resamples
+#: is about 1 / sqrt(2 B): 3 % for 500)
+BOOTSTRAP_SAMPLES = 500
 
 #: fewest points on a sphere, ring or cylinder for a diameter figure
 DIAMETER_MIN_POINTS = 9
@@ -59,6 +68,8 @@ class Validation:
     diameters: list = field(default_factory=list)
     planes: list = field(default_factory=list)
     reference: dict | None = None
+    #: the reference points' errors [m] and their measurements (for :func:`bootstrap`; not in :meth:`to_dict`)
+    reference_errors: tuple | None = field(default=None, repr=False)
 
     def summary(self) -> dict:
         """Key figures (SI) by :data:`FIGURES` key; absent kinds are left out."""
@@ -139,6 +150,8 @@ def _validate(model, p, data, weights, reference) -> Validation:
             e = table["value"][table["instance"] == i]
             val.reference = {"n": len(e), "rms": float(np.sqrt(np.mean(e ** 2))), "max": float(e.max()),
                              "T_ref_base": _transform(states[i])}
+            rows = table["point"][table["instance"] == i]
+            val.reference_errors = (e, np.asarray(data.points.measurement)[rows])
     # lengths: centres of the features (certified diameters), no length used in the fit
     centre = {(it.measurement, it.feature): states[i][:3] for i, it in enumerate(prob.instances)
               if it.kind in ("seat", "sphere")}
@@ -170,6 +183,70 @@ def _validate(model, p, data, weights, reference) -> Validation:
     return val
 
 
+def _units(val: Validation) -> dict:
+    """Measurement id -> its items: (list name, item); ``"reference"`` items are the errors [m]."""
+    out: dict = {}
+    for name in ("articulation", "lengths", "diameters", "planes"):
+        for item in getattr(val, name):
+            out.setdefault(item["measurement"], []).append((name, item))
+    if val.reference_errors is not None:
+        e, meas = val.reference_errors
+        for m in dict.fromkeys(meas.tolist()):
+            out.setdefault(m, []).append(("reference", e[meas == m]))
+    return out
+
+
+def _summary_of(items) -> dict:
+    v = Validation()
+    ref = []
+    for name, item in items:
+        if name == "reference":
+            ref.append(item)
+        else:
+            getattr(v, name).append(item)
+    if ref:
+        e = np.concatenate(ref)
+        v.reference = {"n": len(e), "rms": float(np.sqrt(np.mean(e ** 2))), "max": float(e.max())}
+    return v.summary()
+
+
+def bootstrap(val: Validation, samples: int = BOOTSTRAP_SAMPLES, seed: int = 0) -> dict:
+    """Standard uncertainty [SI] of each figure of ``val.summary()`` by a bootstrap over the
+    measurements: the measurements resampled with replacement (each with all its items: a seat's
+    articulation, a length, a diameter, its reference points; resampling whole measurements only, the
+    spread inside a measurement enters through the spread between them, as Davison and Hinkley (1997,
+    section 3.8) recommend for two-stage data), the figure recomputed on each resample and its
+    standard deviation (ddof 1) returned. A figure whose items come from fewer than two measurements
+    gets None. Seeded: the same data give the same uncertainties."""
+    units = _units(val)
+    count: dict = {}
+    for items in units.values():
+        for key in _summary_of(items):
+            count[key] = count.get(key, 0) + 1
+    out = {k: None for k in val.summary()}
+    ids = list(units)
+    rng = np.random.default_rng(seed)
+    draws: dict = {k: [] for k, n in count.items() if n >= 2}
+    if not draws:
+        return out
+    for _ in range(samples):
+        items = [it for m in rng.integers(0, len(ids), len(ids)) for it in units[ids[m]]]
+        for k, x in _summary_of(items).items():
+            if k in draws:
+                draws[k].append(x)
+    for k, xs in draws.items():
+        if len(xs) >= 2:
+            out[k] = float(np.std(xs, ddof=1))
+    return out
+
+
+def with_u(value, u, digits: int = 2) -> str:
+    """``"12.30 ± 0.45"`` (``"12.30"`` without an uncertainty)."""
+    if value is None:
+        return "-"
+    return f"{value:.{digits}f}" + ("" if u is None else f" ± {u:.{digits}f}")
+
+
 def _transform(state) -> list:
     t = np.eye(4)
     t[:3, :3] = np.asarray(state[0:9]).reshape(3, 3, order="F")
@@ -179,14 +256,20 @@ def _transform(state) -> list:
 
 def before_after(model: ArmModel, p_before, p_after, data: CalibrationData, weights: Weights | None = None,
                  reference: str = "fit") -> list[dict]:
-    """Rows ``{key, label, unit, before, after, ratio}`` (values in the shown unit) of the
-    validation figures of ``p_before`` (e.g. zeros: the nominal arm) and ``p_after`` on ``data``."""
-    a = validate(model, p_before, data, weights, reference).summary()
-    b = validate(model, p_after, data, weights, reference).summary()
+    """Rows ``{key, label, unit, before, after, ratio, u_before, u_after}`` (values in the shown unit)
+    of the validation figures of ``p_before`` (e.g. zeros: the nominal arm) and ``p_after`` on
+    ``data``; ``u_*``: standard uncertainties by :func:`bootstrap` over the measurements (None with
+    fewer than two measurements of the figure's kind)."""
+    va = validate(model, p_before, data, weights, reference)
+    vb = validate(model, p_after, data, weights, reference)
+    a, b = va.summary(), vb.summary()
+    ua, ub = bootstrap(va), bootstrap(vb)
     rows = []
     for key, (label, unit, factor) in FIGURES.items():
         if key in a and key in b:
             ratio = a[key] / b[key] if b[key] > 0 else float("inf")
             rows.append({"key": key, "label": label, "unit": unit, "before": a[key] * factor,
-                         "after": b[key] * factor, "ratio": ratio})
+                         "after": b[key] * factor, "ratio": ratio,
+                         "u_before": None if ua.get(key) is None else ua[key] * factor,
+                         "u_after": None if ub.get(key) is None else ub[key] * factor})
     return rows

@@ -236,11 +236,13 @@ def analyse_ring_campaign(desc, points: PointSet, artefacts, feature: str | None
 
 
 def ring_uncertainties(arm, points: PointSet, campaign: RingCampaign, parameters, inputs) -> list:
-    """Per measurement: the standard uncertainty of the diameter fitted to the corrected ball centres
-    (:class:`arm_model.feature_uncertainty.DiameterUncertainty`), from the covariance of each centre
-    (:func:`arm_model.uncertainty.propagate`: the model's parameter covariance ``parameters`` or None,
-    the input uncertainties ``inputs``), the errors the points share propagated jointly."""
-    from arm_model.feature_uncertainty import diameter_sensitivity, diameter_uncertainty
+    """Per measurement: ``(diameter, form)``, the standard uncertainties of the diameter and of the form
+    error of the cylinder fitted to the corrected ball centres
+    (:class:`arm_model.feature_uncertainty.DiameterUncertainty`, :class:`~.FormUncertainty`), from the
+    covariance of each centre (:func:`arm_model.uncertainty.propagate`: the model's parameter
+    covariance ``parameters`` or None, the input uncertainties ``inputs``), the errors the points share
+    propagated jointly."""
+    from arm_model.feature_uncertainty import diameter_sensitivity, diameter_uncertainty, form_uncertainty
     from arm_model.uncertainty import propagate
 
     aux = arm.aux(points)
@@ -253,8 +255,9 @@ def ring_uncertainties(arm, points: PointSet, campaign: RingCampaign, parameters
                         parameters=parameters, inputs=inputs, systematic=True)
         fit = r.fits.get("wrench", r.fits["initial"])
         sens = diameter_sensitivity(fit.centres, fit.cylinder)
-        out.append(diameter_uncertainty(sens, res.cov, res.systematic,
-                                        0 if parameters is None else len(parameters.names)))
+        out.append((diameter_uncertainty(sens, res.cov, res.systematic,
+                                         0 if parameters is None else len(parameters.names)),
+                    form_uncertainty(fit.centres, fit.cylinder, res.cov, res.systematic)))
     return out
 
 

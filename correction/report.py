@@ -300,8 +300,15 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
             "method": "linear propagation of each corrected ball centre's covariance through the cylinder fit; "
                       "errors shared by the points (parameters, compliance) propagated jointly; k = 1",
             "parameters": parameters_source or "none (parameters taken as exact)",
-            "measurements": [dict(measurement=r.id, **u.as_dict())
-                             for r, u in zip(campaign.measurements, point_uncertainty)]}
+            "measurements": [dict(measurement=r.id, **d.as_dict())
+                             for r, (d, _) in zip(campaign.measurements, point_uncertainty)]}
+        summary["form_uncertainty_from_points"] = {
+            "method": "the point errors sampled from the same covariances (shared errors once per sample), mapped "
+                      "to the residuals through the refit to first order, max - min of each sample; u_form_mm: "
+                      "their standard deviation (k = 1), inflation_mm: their mean minus the measured form error",
+            "model": "wrench" if campaign.measurements and "wrench" in campaign.measurements[0].fits else "initial",
+            "measurements": [dict(measurement=r.id, **f.as_dict())
+                             for r, (_, f) in zip(campaign.measurements, point_uncertainty)]}
     summary.update(provenance(in_paths))
     t2 = table2(campaign)
     corr = campaign_correlations(campaign)
@@ -352,16 +359,20 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
     parts.append("<h2>Uncertainty budgets (GUM, paper Table 3)</h2><img src='figures/budgets.png' alt='budgets'>")
     parts += [_budget_html(b) for b in budgets]
     if point_uncertainty is not None:
-        parts.append("<h2>Diameter uncertainty from the points' covariances (k = 1, beside the GUM budgets)</h2>"
+        parts.append("<h2>Diameter and form uncertainty from the points' covariances (k = 1, beside the GUM budgets)</h2>"
                      f"<p>Parameters: {html.escape(parameters_source or 'none (taken as exact)')}. Each corrected "
                      "ball centre's covariance is propagated through the cylinder fit; errors the points share "
                      "(parameters, compliance) do not average out. 'if independent' is what the naive sum of "
-                     "independent point variances would give. See docs/ring-pipeline.md.</p>" + _table_html(
+                     "independent point variances would give. The form error (max - min of the residuals) is sampled: its "
+                     "standard deviation is u(form), and the mean of the samples minus the measured form is how much the "
+                     "point errors alone add to a form error. See docs/ring-pipeline.md.</p>" + _table_html(
                          ("measurement", "u(D) [mm]", "point-alone errors [mm]", "parameters [mm]",
-                          "compliance [mm]", "if independent [mm]"),
+                          "compliance [mm]", "if independent [mm]", "form error [mm]", "u(form) [mm]",
+                          "inflation by the errors [mm]"),
                          [(r.id, f"{u.u * 1e3:.4f}", f"{u.independent * 1e3:.4f}", f"{u.parameters * 1e3:.4f}",
-                           f"{u.compliance * 1e3:.4f}", f"{u.if_independent * 1e3:.4f}")
-                          for r, u in zip(campaign.measurements, point_uncertainty)]))
+                           f"{u.compliance * 1e3:.4f}", f"{u.if_independent * 1e3:.4f}", f"{f.form * 1e3:.4f}",
+                           f"{f.u * 1e3:.4f}", f"{f.inflation * 1e3:.4f}")
+                          for r, (u, f) in zip(campaign.measurements, point_uncertainty)]))
     files = {"report.html": _page("Ring-gauge campaign: force correction", parts),
              "summary.json": json.dumps(summary, indent=1, allow_nan=False) + "\n",
              "table2.csv": _csv_text(t2),

@@ -9,7 +9,7 @@ import pytest
 from arm_model import load_description
 from arm_model.cli import main
 from arm_model.model import ArmModel
-from calibration.synth import SynthSpec, make_campaign
+from arm_model.sim.quick import SynthSpec, make_campaign
 from conftest import NOMINAL
 
 
@@ -40,6 +40,12 @@ def test_calibrate_end_to_end(files, tmp_path, capsys):
     assert {"parameters", "fixed", "correlation", "identifiability_final", "validation_holdout"} <= set(summary)
     assert any(r["name"] == "j1.theta_offset" and r["state"] == "fixed" for r in summary["parameters"])
     assert summary["validation_holdout"]
+    # each held-out figure with its bootstrap uncertainty (more than one held-out measurement here)
+    held = {r["key"]: r for r in summary["validation_holdout"]}
+    assert len(summary["holdout"]) >= 2
+    assert all(r["u_after"] is not None and 0 < r["u_after"] for k, r in held.items()
+               if k.startswith(("length", "reference")))
+    assert " ± " in text
     # the calibrated description reads back and carries the estimated errors
     cal = load_description(out / "aacmm7-calibrated.toml")
     nom = load_description(NOMINAL)

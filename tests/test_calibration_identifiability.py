@@ -7,7 +7,7 @@ import pytest
 from arm_model import NumericalError
 from arm_model.model import ArmModel
 from calibration import analyse, calibrate, make_data, Weights
-from calibration.synth import SynthSpec, make_campaign
+from arm_model.sim.quick import SynthSpec, make_campaign
 from conftest import assert_close
 
 

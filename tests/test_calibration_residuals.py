@@ -13,7 +13,7 @@ from arm_model.model import ArmModel
 from calibration import Problem, Weights, make_data
 from arm_model.geometry import perpendicular_basis, rotation_xyz
 from calibration import kinds as geo
-from calibration.synth import SynthSpec, make_campaign
+from arm_model.sim.quick import SynthSpec, make_campaign
 from conftest import assert_close
 
 

@@ -83,6 +83,14 @@ def test_ring_report_from_point_columns_on_the_bundled_campaign(tmp_path):
     for d in du:   # no parameter covariance: nothing from the parameters; the parts add in quadrature
         assert d["parameters_mm"] == 0 and d["u_mm"] > 0
         assert_close(d["u_mm"] ** 2, d["independent_mm"] ** 2 + d["compliance_mm"] ** 2, atol=1e-15)
+    # the form error of each measurement with its sampled uncertainty: the same form as table2's
+    fu = s["form_uncertainty_from_points"]
+    assert fu["model"] == "wrench" and len(fu["measurements"]) == 17
+    table = (out / "table2.csv").read_text().splitlines()
+    col = table[0].split(",").index("form_error_wrench_mm")
+    for f, row in zip(fu["measurements"], table[1:]):
+        assert_close(f["form_mm"], float(row.split(",")[col]), atol=5e-7)   # table2: 6 decimals
+        assert 0 < f["u_form_mm"] < f["form_mm"] and f["samples"] == 2000
 
 
 def test_ring_refusals_write_nothing(small_campaign, tmp_path, capsys):

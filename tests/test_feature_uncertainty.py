@@ -3,7 +3,7 @@ of the fit itself (independent of the linearisation)."""
 import numpy as np
 import pytest
 
-from arm_model.feature_uncertainty import diameter_sensitivity, diameter_uncertainty
+from arm_model.feature_uncertainty import diameter_sensitivity, diameter_uncertainty, form_uncertainty
 from arm_model.geometry import fit_cylinder
 
 
@@ -63,3 +63,52 @@ def test_against_monte_carlo_of_the_fit():
     print(f"linear {u.u * 1e6:.3f} um, Monte Carlo {u_mc * 1e6:.3f} um, naive {u.if_independent * 1e6:.3f} um")
     assert u.u == pytest.approx(u_mc, rel=0.1)
     assert u.u ** 2 == pytest.approx(u.independent ** 2 + u.parameters ** 2 + u.compliance ** 2, rel=1e-12)
+
+
+def test_form_uncertainty_of_two_extreme_points_is_their_noise():
+    # hand-derived: a ring with one point 20 um out and one 20 um in, every point with independent
+    # isotropic noise sigma = 1 um: the extremes stay the same points, F = r_max - r_min moves by the
+    # difference of their two radial errors, u(F) = sqrt(2) sigma (less a refit share of order 5/N),
+    # and the noise does not inflate F on average
+    p = ring_points(50, (-0.01, -0.003, 0.003, 0.01))
+    radial = (p - np.array([0.3, -0.2, 0.1])) * np.array([1, 1, 0])
+    radial /= np.linalg.norm(radial, axis=1)[:, None]
+    p[7] += 20e-6 * radial[7]
+    p[120] -= 20e-6 * radial[120]
+    cyl = fit_cylinder(p)
+    sigma = 1e-6
+    cov = np.broadcast_to(np.eye(3) * sigma ** 2, (len(p), 3, 3))
+    f = form_uncertainty(p, cyl, cov, samples=4000)
+    assert f.form == pytest.approx(cyl.form_error) and f.form == pytest.approx(40e-6, rel=0.05)
+    assert f.u == pytest.approx(np.sqrt(2) * sigma, rel=0.05)
+    assert abs(f.inflation) < 0.1 * sigma
+    assert form_uncertainty(p, cyl, cov, samples=4000) == f            # seeded
+
+
+def test_form_uncertainty_against_monte_carlo_of_the_fit():
+    # a second implementation: perturb the points in 3D with the same covariances (independent and
+    # shared parts), refit the cylinder nonlinearly, take max - min of the new residuals
+    rng = np.random.default_rng(5)
+    q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+    p = ring_points(24, (-0.012, 0.0, 0.011), rot=q)
+    centre = np.array([0.3, -0.2, 0.1])
+    d = (p - centre) @ q                                    # in the ring's own frame
+    lobes = 3e-6 * np.cos(3 * np.arctan2(d[:, 1], d[:, 0]))  # a 3-lobed ring, 6 um form
+    radial = (d * np.array([1, 1, 0])) / np.linalg.norm(d[:, :2], axis=1)[:, None]
+    p = p + (lobes[:, None] * radial) @ q.T
+    n = len(p)
+    cyl = fit_cylinder(p)
+    m = rng.standard_normal((n, 3, 3)) * 0.8e-6
+    indep = np.einsum("nij,nkj->nik", m, m)
+    sysr = rng.standard_normal((n, 3, 3)) * 0.5e-6 + rng.standard_normal((1, 3, 3)) * 1e-6
+    cov = indep + np.einsum("nri,nrj->nij", sysr, sysr)
+    f = form_uncertainty(p, cyl, cov, sysr)
+    forms = []
+    for _ in range(1500):
+        e = np.einsum("nij,nj->ni", m, rng.standard_normal((n, 3)))
+        e += np.einsum("nri,r->ni", sysr, rng.standard_normal(3))
+        forms.append(fit_cylinder(p + e, cyl.axis).form_error)
+    print(f"form {f.form * 1e6:.3f} um: u sampled-linear {f.u * 1e6:.3f} um, refits {np.std(forms, ddof=1) * 1e6:.3f} um; "
+          f"inflation {f.inflation * 1e6:.3f} vs {(np.mean(forms) - f.form) * 1e6:.3f} um")
+    assert f.u == pytest.approx(np.std(forms, ddof=1), rel=0.1)
+    assert f.inflation == pytest.approx(np.mean(forms) - f.form, abs=0.1 * f.u)

@@ -41,6 +41,9 @@ def test_close_loop_writes_the_report(files, tmp_path, capsys):
     amp = next(p for p in eff["parameters"] if p["name"] == "j3.ecc1_amplitude")
     assert amp["display_value"] == pytest.approx(0.005, abs=3 * amp["display_u"] + 1e-5)
     assert eff["heldout_after"]["rms_um"] < eff["heldout_before"]["rms_um"]
+    # the held-out RMS with its bootstrap uncertainty, also in the before/after table
+    assert 0 < eff["heldout_after"]["u_rms_um"] < eff["heldout_after"]["rms_um"]
+    assert all(r["u"]["rms_um"] > 0 for r in s["before_after"])
     assert s["structure_remains"] is False and "eccentricity j3" in s["verdict"]
     assert s["stages"][1]["cross_validation"][0]["passed"] is True
     html = (out / "report.html").read_text()

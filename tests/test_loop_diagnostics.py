@@ -14,7 +14,7 @@ from calibration.candidates import library_candidates, needs_model
 from calibration.data import Weights, make_data
 from calibration.diagnostics import (JointAngleOffset, holm, measurement_folds, residual_space,
                                      screen_candidates)
-from calibration.synth import SynthSpec, make_campaign, random_truth
+from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 
 
 @lru_cache(maxsize=None)

@@ -1,7 +1,7 @@
 """Coverage of the reported uncertainty on simulated campaigns with a known truth.
 
 For each case (rigid stylus, deflected by a contact force with the compliances calibrated, an encoder
-effect calibrated too), a true arm makes two campaigns (:mod:`calibration.synth`, probing noise
+effect calibrated too), a true arm makes two campaigns (:mod:`arm_model.sim.quick`, probing noise
 2 um per axis): the first calibrates the model, the second is corrected with it, and the true ball
 centres of the second are compared with the corrected ones and their reported covariance (the
 calibration's parameter covariance, the probing scatter the calibration estimated: s0 times the
@@ -18,7 +18,7 @@ from arm_model.effects import EncoderEccentricity
 from arm_model.model import ArmModel
 from arm_model.uncertainty import ParameterCovariance, default_inputs, propagate
 from calibration import Weights, calibrate, make_data
-from calibration.synth import SynthSpec, make_campaign, random_truth
+from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 
 pytestmark = pytest.mark.slow
 

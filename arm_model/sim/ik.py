@@ -1,5 +1,11 @@
 """Redundant inverse kinematics on the true arm, for many points at once.
 
+Two solvers. :func:`solve_ik` (the full simulator) places the ball and orients the stylus, at true
+angles of a :class:`~arm_model.sim.truth.Truth`. :func:`solve_positions` (the fast path of
+:mod:`arm_model.sim.quick`) places only the ball, directly in encoder readings of a core
+:class:`~arm_model.model.ArmModel`, so every effect the model holds (but joint torques) is in the
+truth. The rest of this docstring is about :func:`solve_ik`.
+
 Constraints per point: the deflected ball centre at a target (3), the stylus (probe z axis) along a
 required direction (2; the residual is ``z - u``, so the opposite direction is no solution), and
 optionally the probe x axis towards a required direction (1). A 7-axis
@@ -23,8 +29,8 @@ from .._errors import NumericalError
 from ..effects import Geometry
 from .truth import Truth
 
-__all__ = ["IKTargets", "IKResult", "solve_ik", "solve_points", "joint_limits", "wrap_into_limits",
-           "ball_jacobian", "probe_wrench"]
+__all__ = ["IKTargets", "IKResult", "solve_ik", "solve_points", "solve_positions", "joint_limits",
+           "random_q", "wrap_into_limits", "ball_jacobian", "probe_wrench"]
 
 _L0 = 0.1        # position scale [m] of the residual
 
@@ -79,6 +85,13 @@ def joint_limits(desc) -> tuple[np.ndarray, np.ndarray]:
     lo = np.array([-np.pi if j.lower is None else j.lower for j in desc.joints])
     hi = np.array([np.pi if j.upper is None else j.upper for j in desc.joints])
     return lo, hi
+
+
+def random_q(desc, n: int, rng, margin: float = 0.05) -> np.ndarray:
+    """(n, J) joint angles [rad] uniform within the limits less ``margin`` (full turns clipped to +-pi)."""
+    lo, hi = joint_limits(desc)
+    lo, hi = np.maximum(lo, -np.pi) + margin, np.minimum(hi, np.pi) - margin
+    return rng.uniform(lo, hi, size=(n, desc.n_joints))
 
 
 def wrap_into_limits(q, lower, upper) -> tuple[np.ndarray, np.ndarray]:
@@ -242,3 +255,76 @@ def solve_points(truth: Truth, targets: IKTargets, rng: np.random.Generator, tol
         q_out[idx], w_out[idx], pos_err[idx], dir_err[idx] = q[ok], w[ok], pe[ok], de[ok]
         pending = pending[~ok]
     return IKResult(q_out, w_out, attempts, pos_err, dir_err, targets.stylus, targets.x_dir), pending
+
+
+def _model_jacobian(model, n: int):
+    """CasADi function (q, w, aux, p) -> (ball (3, n), d ball/dq) of the core model, mapped over n points
+    (the model's own exact derivatives through every effect)."""
+    import casadi as ca
+
+    f = model.casadi_function()
+    q, w, aux, p = (ca.SX.sym(nm, f.size1_in(i)) for i, nm in enumerate(("q", "w", "aux", "p")))
+    x = f(q, w, aux, p)
+    return ca.Function("xq", [q, w, aux, p], [x, ca.jacobian(x, q)]).map(n)
+
+
+def solve_positions(model, p, targets, rng, force_base=None, tol: float = 1e-12, tries: int = 20,
+                    starts: int = 32) -> tuple[np.ndarray, np.ndarray]:
+    """Encoder readings that put the deflected ball centre of the core model ``(model, p)`` on
+    ``targets`` (n, 3) [m]: the fast path's position-only inverse kinematics.
+
+    Each point starts from the nearest of ``starts`` random poses (the redundancy gives random
+    articulations); damped Gauss-Newton with the minimum-norm step on all points at once; a point that
+    does not converge or ends outside the joint limits is retried from new starts. ``force_base``
+    (n, 3) [N]: the contact force in the base frame, rotated into the probe frame of the current pose
+    at every step. Returns (q (n, J) [rad], wrench (n, 6), probe frame); raises
+    :class:`~arm_model.NumericalError` for the points not reached in ``tries`` rounds.
+    """
+    from ..kinematics import probe_rotations
+    from ..model import AuxData
+
+    if model.needs() - {"temperature"}:
+        raise ValueError("the fast path's inverse kinematics supports effects that need no joint torques")
+    targets = np.asarray(targets, dtype=float)
+    desc = model.desc
+    n, jn = len(targets), desc.n_joints
+    lo, hi = joint_limits(desc)
+    lo, hi = np.maximum(lo, -np.pi), np.minimum(hi, np.pi)
+    aux_t = "temperature" in model.needs()
+
+    def first(idx):            # the nearest of `starts` random poses to each target
+        cand = random_q(desc, starts * len(idx), rng)
+        xc = model.ball_centres(cand, None, p, AuxData(temperature=np.full(len(cand), 20.0)) if aux_t
+                                else None).reshape(len(idx), starts, 3)
+        best = np.argmin(np.linalg.norm(xc - targets[idx, None, :], axis=2), axis=1)
+        return cand.reshape(len(idx), starts, jn)[np.arange(len(idx)), best]
+
+    q = first(np.arange(n))
+    w = np.zeros((n, 6))
+    aux = np.zeros((1 + 2 * jn, n))
+    aux[0] = 20.0
+    fn = _model_jacobian(model, n)
+    todo = np.ones(n, bool)
+    for attempt in range(tries):
+        for it in range(100):
+            if force_base is not None:
+                w[:, :3] = np.einsum("nji,nj->ni", probe_rotations(desc, q, p[: model.base_size]), force_base)
+            x, jq = fn(q.T, w.T, aux, p)
+            x = np.asarray(x).T
+            jq = np.asarray(jq).reshape(3, n, jn).transpose(1, 0, 2)
+            e = targets - x
+            err = np.linalg.norm(e, axis=1)
+            if np.all(err[todo] < tol) and it > 0:
+                break
+            lam = np.minimum(1e-2, err)[:, None, None] ** 2
+            a = jq @ jq.transpose(0, 2, 1) + lam * np.eye(3)
+            dq = np.einsum("nji,nj->ni", jq, np.linalg.solve(a, e[:, :, None])[:, :, 0])
+            step = np.linalg.norm(dq, axis=1, keepdims=True)
+            q = np.where(todo[:, None], q + dq * np.minimum(1.0, 0.5 / np.maximum(step, 1e-300)), q)
+        bad = (err > tol) | np.any(q < lo, axis=1) | np.any(q > hi, axis=1)
+        if not bad.any():
+            return q, w
+        q[bad] = first(np.flatnonzero(bad))
+        todo = bad
+    raise NumericalError(f"inverse kinematics (fast path): {int(bad.sum())} of {n} targets not reached within "
+                         "the joint limits")

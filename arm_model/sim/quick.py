@@ -1,10 +1,13 @@
-"""Small synthetic calibration campaigns from a known true arm (for tests, benchmarks, planning).
+"""The simulator's fast path: small campaigns from a known true model (tests, studies, benchmarks).
 
-The full measurement simulator is :mod:`arm_model.sim` (operator, force signals, hidden effects);
-this module only needs forward kinematics and a vectorised inverse kinematics on the true model,
-so calibration can be tested on its own. The true arm is ``model`` with parameter errors
-``p_true``; every true deflected ball centre lies exactly (to 1e-12 m) on its artefact before the
-probing noise is added.
+The full campaign (:func:`arm_model.sim.simulate`) has an operator, force signals, a drawn truth and
+encoder quantisation. This path takes the true arm as given, ``model`` (a core
+:class:`~arm_model.model.ArmModel` with any effects that need no joint torques) with parameter errors
+``p_true``, draws artefact points in a working volume and finds the encoder readings that put the
+true deflected ball centre on each point with the position-only inverse kinematics of
+:func:`arm_model.sim.ik.solve_positions` (the model's own exact Jacobian, the redundancy drawn at
+random). Every true deflected ball centre lies on its artefact (to 1e-12 m) before the probing noise
+is added.
 
 Artefacts made: ball bars (two spheres or two seats at a certified length, several positions),
 seat articulations, spheres, rings (inner cylinders) and planes, and reference (tracker) points
@@ -17,16 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-from arm_model import NumericalError
-from arm_model.chain import NUMPY_OPS, chain_point
-from arm_model.io import Artefacts, Distance, Feature, PointSet, atomic_write_text, write_csv
-from arm_model.model import ArmModel, AuxData
-from arm_model.params import split_params
+from ..geometry import perpendicular_basis, rotation_xyz
+from ..io import Artefacts, Distance, Feature, PointSet, atomic_write_text, write_csv
+from ..model import ArmModel, AuxData
+from .ik import random_q, solve_positions
 
-from arm_model.geometry import perpendicular_basis, rotation_xyz
-
-__all__ = ["SynthSpec", "SynthCampaign", "random_truth", "random_q", "solve_ik", "make_campaign",
-           "probe_rotation"]
+__all__ = ["SynthSpec", "SynthCampaign", "random_truth", "random_q", "make_campaign"]
 
 
 @dataclass(frozen=True)
@@ -90,19 +89,16 @@ class SynthCampaign:
         files = {"points": _write_points(out / "points.csv", self.points)}
         if self.reference_points is not None:
             files["reference"] = _write_points(out / "points-ref.csv", self.reference_points)
-        lines = []
-        for f in self.artefacts.features.values():
-            lines += ["[[feature]]", f'id = "{f.id}"', f'kind = "{f.kind}"']
-            if f.diameter is not None:
-                lines.append(f"diameter_mm = {f.diameter * 1e3!r}")
-            lines.append("")
-        for d in self.artefacts.distances:
-            lines += ["[[distance]]", f'between = ["{d.between[0]}", "{d.between[1]}"]',
-                      f"length_mm = {d.length * 1e3!r}"]
-            if d.u_length is not None:
-                lines.append(f"u_length_mm = {d.u_length * 1e3!r}")
-            lines.append("")
-        files["artefacts"] = atomic_write_text(out / "artefacts.toml", "\n".join(lines))
+        import tomli_w
+
+        doc = {"feature": [{"id": f.id, "kind": f.kind, **({} if f.diameter is None else
+                                                             {"diameter_mm": f.diameter * 1e3})}
+                           for f in self.artefacts.features.values()],
+               "distance": [{"between": list(d.between), "length_mm": d.length * 1e3,
+                             **({} if d.u_length is None else {"u_length_mm": d.u_length * 1e3})}
+                            for d in self.artefacts.distances]}
+        text = tomli_w.dumps({k: v for k, v in doc.items() if v})
+        files["artefacts"] = atomic_write_text(out / "artefacts.toml", text)
         return files
 
 
@@ -136,87 +132,6 @@ def random_truth(model: ArmModel, rng, length: float = 50e-6, angle: float = 1e-
         elif u == "rad":
             p[i] = rng.normal(0, angle)
     return p
-
-
-def _limits(desc, margin: float = 0.05):
-    lo = np.array([-np.pi if j.lower is None else max(j.lower, -np.pi) for j in desc.joints]) + margin
-    hi = np.array([np.pi if j.upper is None else min(j.upper, np.pi) for j in desc.joints]) - margin
-    return lo, hi
-
-
-def random_q(desc, n: int, rng) -> np.ndarray:
-    """(n, J) joint angles [rad] uniform within the limits (full turns clipped to +-pi)."""
-    lo, hi = _limits(desc)
-    return rng.uniform(lo, hi, size=(n, desc.n_joints))
-
-
-def probe_rotation(model: ArmModel, q: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) rotation of the probe frame (= last joint frame) in the base frame (rigid chain)."""
-    desc = model.desc
-    rows, _, _ = split_params(desc, np.asarray(p)[: model.base_size])
-    qt = list(np.asarray(q).T)
-    o = np.array(chain_point(desc.convention, rows, qt, (0.0, 0.0, 0.0), NUMPY_OPS, desc.axes))
-    cols = [np.array(chain_point(desc.convention, rows, qt, tuple(e), NUMPY_OPS, desc.axes)) - o
-            for e in np.eye(3)]
-    return np.stack(cols, axis=-1).transpose(1, 0, 2)
-
-
-def _jac_fn(model: ArmModel, n: int):
-    import casadi as ca
-    f = model.casadi_function()
-    q, w, aux, p = (ca.SX.sym(nm, f.size1_in(i)) for i, nm in enumerate(("q", "w", "aux", "p")))
-    x = f(q, w, aux, p)
-    return ca.Function("xq", [q, w, aux, p], [x, ca.jacobian(x, q)]).map(n)
-
-
-def solve_ik(model: ArmModel, p: np.ndarray, targets: np.ndarray, rng, force_base: np.ndarray | None = None,
-             q0: np.ndarray | None = None, tol: float = 1e-12, tries: int = 20) -> tuple[np.ndarray, np.ndarray]:
-    """Encoder readings that put the true deflected ball centre on ``targets`` (n, 3) [m].
-
-    Damped Gauss-Newton from random starts (the redundancy gives random articulations); solutions
-    outside the joint limits are retried. ``force_base`` (n, 3) [N]: the contact force in the base
-    frame; the wrench in the probe frame follows the pose. Returns (q (n, J) [rad], wrench (n, 6)).
-    """
-    if model.needs() - {"temperature"}:
-        raise ValueError("synthetic IK supports effects that need no joint torques")
-    n, jn = len(targets), model.desc.n_joints
-    lo, hi = _limits(model.desc, 0.0)
-    def starts(idx):            # the nearest of 32 random poses to each target
-        cand = random_q(model.desc, 32 * len(idx), rng)
-        xc = model.ball_centres(cand, None, p, AuxData(temperature=np.full(len(cand), 20.0))
-                                if "temperature" in model.needs() else None).reshape(len(idx), 32, 3)
-        best = np.argmin(np.linalg.norm(xc - targets[idx, None, :], axis=2), axis=1)
-        return cand.reshape(len(idx), 32, jn)[np.arange(len(idx)), best]
-
-    q = starts(np.arange(n)) if q0 is None else q0.copy()
-    w = np.zeros((n, 6))
-    aux = np.zeros((1 + 2 * jn, n))
-    aux[0] = 20.0
-    fn = _jac_fn(model, n)
-    todo = np.ones(n, bool)
-    for attempt in range(tries):
-        for it in range(100):
-            if force_base is not None:
-                rot = probe_rotation(model, q, p)
-                w[:, :3] = np.einsum("nji,nj->ni", rot, force_base)
-            x, jq = fn(q.T, w.T, aux, p)
-            x = np.asarray(x).T
-            jq = np.asarray(jq).reshape(3, n, jn).transpose(1, 0, 2)
-            e = targets - x
-            err = np.linalg.norm(e, axis=1)
-            if np.all(err[todo] < tol) and it > 0:
-                break
-            lam = np.minimum(1e-2, err)[:, None, None] ** 2
-            a = jq @ jq.transpose(0, 2, 1) + lam * np.eye(3)
-            dq = np.einsum("nji,nj->ni", jq, np.linalg.solve(a, e[:, :, None])[:, :, 0])
-            step = np.linalg.norm(dq, axis=1, keepdims=True)
-            q = np.where(todo[:, None], q + dq * np.minimum(1.0, 0.5 / np.maximum(step, 1e-300)), q)
-        bad = (err > tol) | np.any(q < lo, axis=1) | np.any(q > hi, axis=1)
-        if not bad.any():
-            return q, w
-        q[bad] = starts(np.flatnonzero(bad))
-        todo = bad
-    raise NumericalError(f"synthetic IK: {int(bad.sum())} of {n} targets not reached within the joint limits")
 
 
 def _hemisphere(rng, n: int, axis=(0, 0, 1), min_cos: float = 0.2) -> np.ndarray:
@@ -327,7 +242,7 @@ def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0,
     if spec.force > 0:
         mag = rng.gamma(4.0, spec.force / 4.0, n_art)
         force_base = normals * mag[:, None]
-    q_art, w_art = (solve_ik(model, p_true, targets + noise, rng, force_base) if n_art
+    q_art, w_art = (solve_positions(model, p_true, targets + noise, rng, force_base) if n_art
                     else (np.zeros((0, desc.n_joints)), np.zeros((0, 6))))
     n = len(meas)
     needs_t = "temperature" in model.needs()
