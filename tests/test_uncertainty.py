@@ -79,6 +79,9 @@ def test_joint_screws_give_pinocchios_and_finite_difference_jacobians(nominal, t
                          for e in np.eye(3)], axis=2), o
 
     r, o, u, c = joint_screws(desc.convention, rows, q, desc.axes)
+    columns = joint_screws(desc.convention, [[np.full(n, v) for v in row] for row in rows], q, desc.axes)
+    for a, b in zip(columns, (r, o, u, c)):      # rows as columns (a geometry per point, e.g. thermal)
+        assert_close(a, b, atol=1e-15)
     r_ref, o_ref = frame(q)
     assert_close(r, r_ref, atol=1e-14)
     assert_close(o, o_ref, atol=1e-14)
