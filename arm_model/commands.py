@@ -12,7 +12,7 @@ import numpy as np
 from ._csv import format_csv
 from ._errors import InputError
 from ._output import output_file
-from .checks import point_warnings, log_warnings
+from .checks import JointLimitTally, log_warnings
 from .io import concat_points, iter_points
 from .model_file import Arm, load_model
 from .urdf import urdf_text
@@ -200,7 +200,7 @@ def run_tip(args: argparse.Namespace) -> int:
         uncertain = wants_uncertainty(args, parameters)
         if uncertain:                   # the uncertainty summary is over all points: one block
             blocks = [concat_points(blocks)]
-        ulines, warnings = [], []
+        ulines, limits = [], JointLimitTally(desc, str(args.points))
         for block in blocks:
             cols = tip_table(arm, block)
             if uncertain:
@@ -215,7 +215,7 @@ def run_tip(args: argparse.Namespace) -> int:
             if len(flagged) < 11:
                 flagged += block.lines[cols["over_force"].astype(bool)][:11].tolist()
             flagged_count += int(cols["over_force"].sum())
-            warnings += [w for w in point_warnings(desc, block) if w.kind != "over_force"]
+            limits.add(block.q, block.lines)
     log.info(f"{n} points in {len(measurements)} measurement(s) -> {args.output}")
     if arm.effects:
         log.info("effects applied: " + ", ".join(e.describe() for e in arm.effects))
@@ -232,7 +232,7 @@ def run_tip(args: argparse.Namespace) -> int:
         log.warning(f"{flagged_count} point(s) over the probe's calibrated force range "
               f"({desc.probe.max_force:g} N), flagged in column over_force; lines {', '.join(map(str, flagged[:10]))}"
               + (" ..." if flagged_count > 10 else ""))
-    log_warnings(warnings)
+    log_warnings([w for w in [limits.warning()] if w is not None])
     return 0
 
 

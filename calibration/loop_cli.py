@@ -66,6 +66,11 @@ def register(sub) -> None:
                    help="do not build effects from the residual's structure once the library is exhausted "
                         "(default: build them: joint harmonics, per-link and probe thermal growth, a probe "
                         "compliance matrix, an approach offset, lateral joint compliance)")
+    p.add_argument("--held-out-gain-only", action="store_true",
+                   help="add only effects that improve the held-out data significantly (default: also include "
+                        "joint compliance under gravity as physics when its signature is significant, its "
+                        "compliances resolve positive and the held-out data are not significantly worse; see "
+                        "docs/close-loop.md)")
     p.add_argument("--effect", action="append", metavar="KEY",
                    help="an effect already in the base model (repeatable; not a candidate then), e.g. thermal")
     p.add_argument("--free", action="append", metavar="PATTERN",
@@ -111,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
                                {"test_fraction": holdout} if holdout is not None else {}),
                             screen_alpha=args.screen_alpha, min_improvement=args.min_improvement,
                             max_effects=args.max_effects, cv_top=args.cv_top, seed=args.seed,
-                            synthesise=not args.library_only)
+                            synthesise=not args.library_only, physics=not args.held_out_gain_only)
     with output_folder(args.output, inputs, "close-loop") as out:
         loop = close_loop(points, artefacts, desc, reference=reference, effects=tuple(effects), values=arm.values,
                           free=args.free,
