@@ -404,6 +404,9 @@ class LoopResult:
         power: the folds of the decisions and whether their test can reach its level (see ``_choose_folds``).
         model_fit: the final model calibrated on every point (design and test, as ``calibrate`` would with the
             same options): the model to use.
+        built: every effect built from the residual (:mod:`calibration.synthesis`), in the order offered:
+            name, family, joint, effect, ``added`` and, if not, ``why_not_added`` (the held-out test's or
+            the screening's reason).
     """
     stages: list
     final_screening: list
@@ -423,6 +426,7 @@ class LoopResult:
     test_by: str = "measurement"
     power: dict = field(default_factory=dict)
     model_fit: CalibrationResult | None = None
+    built: list = field(default_factory=list)
 
     @property
     def final(self) -> Stage:
@@ -619,6 +623,7 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
     stop, last_tests, last_cv = "", [], []
     synthesised: list[Candidate] = []      # every candidate built from the residual, in the order offered
     synthesised_here = False               # built at this stage already
+    fate: dict[str, str] = {}              # synthesised candidate -> why it is not added (ADDED if it is)
     while True:
         say(f"screening {len(remaining)} candidate(s) at stage {len(stages) - 1}")
         tests, space = screen_candidates(result, remaining, folds.assign, settings.rank_tol)
@@ -628,6 +633,13 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         ident = [(c, t) for c, t in ranked if t.identifiable]
         gate = settings.screen_alpha / max(len(ident), 1)
         gated = [(c, t) for c, t in ident if t.p_value < gate][: settings.cv_top]
+        for c, t in ranked:               # why each effect built from the residual is not (yet) added
+            if c.origin == RESIDUAL:
+                fate[c.name] = ("absorbed by the fit (the data cannot tell it from what is fitted)"
+                                if not t.identifiable else
+                                f"not significant at the screening (score p = {t.p_value:.2g} >= {gate:.2g})"
+                                if not t.p_value < gate else
+                                f"significant at the screening but not among the --cv-top {settings.cv_top} best")
         if not gated:
             if not synthesised_here and _offer_synthesised(result, model, folds.assign, settings, remaining, synthesised,
                                                            say):
@@ -638,6 +650,9 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
             break
         if len(stages) - 1 >= settings.max_effects:
             stop = f"the maximum number of effects ({settings.max_effects}) was added"
+            for c, _ in gated:
+                if c.origin == RESIDUAL:
+                    fate[c.name] = f"not cross-validated: {stop}"
             break
         if base_folds is None:
             say(f"  cross-validating the current model ({folds.k} folds by {folds.by})")
@@ -666,6 +681,8 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
             cv = _cv_of(c, t)
             say(f"    {cv.reason}")
             cvs.append(cv)
+            if c.origin == RESIDUAL:
+                fate[c.name] = cv.reason if not cv.passed else "passed, but another candidate was added"
         last_cv = cvs
         passing = [(c, cv) for (c, _), cv in zip(gated, cvs) if cv.passed]
         if not passing and settings.physics and power["can_reach"]:
@@ -690,7 +707,7 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         if cand.origin == RESIDUAL and cand.family == "joint_harmonics":
             # the harmonic order: the fewest parameters within the parsimony margin of the best held-out drop
             same = [(c, v) for c, v in passing if c.family == cand.family and c.joint == cand.joint
-                    and cv.improvement - v.improvement <= PARSIMONY]
+                    and c.effect.source == cand.effect.source and cv.improvement - v.improvement <= PARSIMONY]
             cand, cv = min(same, key=lambda x: x[0].size(desc))
         if cand.family == "joint_compliance" and cand.joint is not None:
             cand, cv = _whole_family(
@@ -743,6 +760,10 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         base_folds = cv.folds if weights == old_weights else None      # compared at the same weights
         synthesised_here = False
         have = set(model.spec.names)      # e.g. the other harmonic orders of a joint once one is in
+        fate[cand.name] = ADDED
+        for c in remaining:
+            if c is not cand and c.origin == RESIDUAL and set(c.param_names(desc)) & have:
+                fate[c.name] = f"shares parameters with {cand.name}, which was added"
         remaining = [c for c in remaining if c is not cand and not set(c.param_names(desc)) & have]
         if not remaining:
             stop = "every candidate was added"
@@ -756,14 +777,17 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
     significant = [(f, t, min(1.0, t.p_value * len(structure)))
                    for f, t in remaining_structure(space, folds.assign, settings.alpha, settings.rank_tol)]
     plots = {f.name: binned_estimates(space, f) for f, _, _ in significant[:4]}
-    verdict = _verdict(stages, significant, stop, settings, synthesised)
+    built = [{"name": c.name, "family": c.family, "joint": c.joint, "effect": c.effect.describe(),
+              "added": fate.get(c.name) == ADDED, "why_not_added": None if fate.get(c.name) == ADDED else
+              fate.get(c.name, "not screened")} for c in synthesised]
+    verdict = _verdict(stages, significant, stop, settings, built, model)
     say(verdict)
     say("calibrating the final model on every point (design and test; outliers kept, as calibrate does)")
     weights = stated                  # the user's uncertainties as the start, as calibrate starts
     model_fit = fit(model, data, reweight=True)
     return LoopResult(stages, last_tests, last_cv, stop, structure, significant, verdict, cands + synthesised,
                       skipped, design.measurements(), test.measurements(), settings, desc, plots, dropped, test_by,
-                      power, model_fit)
+                      power, model_fit, built)
 
 
 def _outer_split(data: CalibrationData, settings: LoopSettings):
@@ -899,7 +923,17 @@ def _drop_test_outliers(model, p, test: CalibrationData, weights, reference, thr
         return test, []
     out = [{"measurement": str(pts.measurement[i]), "feature": str(pts.feature[i]),
             "line": None if pts.lines is None else int(pts.lines[i]),
-            "standardized": float(np.max(np.abs(r[point == i])) / scale)} for i in bad]
+            "standardized": float(np.max(np.abs(r[point == i])) / scale), "why": "outlier"} for i in bad]
+    if design is None:
+        # a feature instance left with too few points for its own fit goes out whole (as in the design set)
+        for m, f in sorted({(str(pts.measurement[i]), str(pts.feature[i])) for i in bad}):
+            kind = test.artefacts.features[f].kind if f else "point"
+            inst = np.flatnonzero((pts.measurement == m) & (pts.feature == f))
+            if kind in MIN_POINTS and len(np.setdiff1d(inst, bad)) < max(MIN_POINTS[kind]):
+                more = [int(i) for i in np.setdiff1d(inst, bad)]
+                out += [{"measurement": m, "feature": f, "line": None if pts.lines is None else int(pts.lines[i]),
+                         "standardized": None, "why": "its feature instance has too few points left"} for i in more]
+                bad = sorted(set(bad) | set(more))
     keep = np.setdiff1d(np.arange(len(test)), bad)
     return test.select(keep), out
 
@@ -1018,9 +1052,13 @@ def _candidate_cols(space: ResidualSpace, remaining: list, i: int, test: GroupTe
 
 #: residual standard deviation factor above which the residual is not noise at the stated level
 S0_LIMIT = 3.0
+#: the fate of a synthesised candidate that was added
+ADDED = "added"
 
 
-def _verdict(stages, significant, stop, settings, synthesised=()) -> str:
+def _verdict(stages, significant, stop, settings, built=(), model: ArmModel | None = None) -> str:
+    """What was added (and how much the held-out error dropped), what was built from the residual and not
+    added (and why), and what structure remains unexplained."""
     def label(s):
         if any(cv.candidate == s.added.name and cv.reason.startswith(PHYSICS) for cv in s.cv):
             return " (included as physics, not for a held-out gain)"
@@ -1028,22 +1066,28 @@ def _verdict(stages, significant, stop, settings, synthesised=()) -> str:
 
     added = [s.added.name + label(s) for s in stages[1:]]
     s0 = stages[-1].result.s0
-    head = ("effects added: " + ", ".join(added) if added else "no effect added")
+    out = ("effects added: " + ", ".join(added) if added else "no effect added")
     base, last = stages[0].heldout, stages[-1].heldout
     if added:
-        head += (f"; held-out test RMS {base['rms_um']:.2f} -> {last['rms_um']:.2f} um, "
-                 f"max {base['max_um']:.2f} -> {last['max_um']:.2f} um")
+        out += (f"; held-out test RMS {base['rms_um']:.2f} -> {last['rms_um']:.2f} um, "
+                f"max {base['max_um']:.2f} -> {last['max_um']:.2f} um")
+    not_added = [b for b in built if not b["added"]]
+    if not_added:
+        out += (". Built from the residual, not supported, not added: "
+                + "; ".join(f"{b['name']} ({b['why_not_added']})" for b in not_added))
     if not significant and s0 > S0_LIMIT:
-        return head + (f". The final residual is s0 = {s0:.3g} times the stated uncertainties: it is not noise at the "
-                       "stated level, but no tested regressor family explains it (wrong weights, or structure "
-                       "beyond the tests). No fix is claimed.")
+        return out + (f". The final residual is s0 = {s0:.3g} times the stated uncertainties: it is not noise at the "
+                      "stated level, but no tested regressor family explains it (wrong weights, or structure "
+                      "beyond the tests). No fix is claimed.")
     if not significant:
-        return head + (". No structured residual remains (no regressor family is significant after Bonferroni's "
-                       "correction).")
+        return out + (". No structured residual remains (no regressor family is significant after Bonferroni's "
+                      "correction).")
     fams = "; ".join(f"{f.name} ({t.best})" if t.best else f.name for f, t, _ in significant)
-    added_names = {s.added.name for s in stages[1:]}
-    tried = [c.name for c in synthesised if c.name not in added_names]
-    built = (f" nor by the effects built from it that were tried and not supported by held-out data "
-             f"({', '.join(tried)})" if tried else "")
-    return (head + f". Structured residual remains, not explained by the effect library{built}: it correlates with "
-            f"{fams}. No fix is claimed for it.")
+    nothing = []
+    if settings.synthesise and model is not None:
+        nothing = [f.name for f, _, _ in significant if not synthesise([f.name], model)]
+    why = (" (effects are not built from the residual: library only)" if not settings.synthesise else
+           f" (no further effect is built for {', '.join(nothing)})" if nothing else "")
+    built_by = " nor by the effects built from it" if not_added else ""
+    return (out + f". Structured residual remains, not explained by the effect library{built_by}{why}: it "
+            f"correlates with {fams}. No fix is claimed for it.")

@@ -142,7 +142,9 @@ def _plain(v):
 
 _SETTING_UNITS = {"amplitude": "rad", "phase": "rad", "amplitude2": "rad", "phase2": "rad",
                   "stiffness": "Nm_per_rad", "alpha": "per_K", "bending_x": "m_per_N", "bending_y": "m_per_N",
-                  "axial": "m_per_N", "offset": "N", "probe_alpha": "per_K"}
+                  "axial": "m_per_N", "offset": "N", "probe_alpha": "per_K", "stiffness_x": "Nm_per_rad",
+                  "stiffness_y": "Nm_per_rad", "coupling_xy": "m_per_N", "coupling_xz": "m_per_N",
+                  "coupling_yz": "m_per_N", **{f"d{a}_u{b}": "m" for a in "xyz" for b in "xyz"}}
 
 
 def _with_units(d):
