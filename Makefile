@@ -25,7 +25,7 @@ test: $(STAMP) browser
 	$(PY) -m pytest -n 2 -q tests
 
 bench: $(STAMP)
-	$(PY) -m benchmarks.run
+	$(PY) -m benchmarks.run $(BENCH)
 
 urdf: $(STAMP)
 	$(VENV)/bin/aacmm urdf urdf/aacmm7.dh.toml -o urdf/aacmm7.urdf

@@ -31,7 +31,7 @@ __all__ = ["parse_number", "csv_records", "CsvBlock", "iter_csv_blocks", "format
 
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-]?(?:nan|inf|infinity)",
                      re.IGNORECASE)
-BLOCK_BYTES = 1 << 24
+BLOCK_BYTES = 1 << 22          # 4 MiB (about 37 000 points rows): small temporaries, few page faults
 
 
 def parse_number(cell: str) -> float | None:
@@ -88,58 +88,71 @@ def _slow_block(text: str, path: str, first_line: int, header: list[str], num_id
     return CsvBlock(np.array([no for no, _ in recs], dtype=np.int64), numbers, texts)
 
 
-def _fast_block(body: bytes, path: str, first_line: int, header: list[str], num_idx, txt_idx) -> CsvBlock | None:
-    """numpy's reader on a block of whole lines, or None when the block needs the careful reader."""
+def _fast_block(body: bytes, text: str, path: str, first_line: int, header: list[str], num_idx,
+                txt_idx) -> CsvBlock | None:
+    """numpy's reader on a block of whole lines (``body``, decoded: ``text``), or None when the block
+    needs the careful reader."""
     if b'"' in body:
         return None
     arr = np.frombuffer(body, np.uint8)
     ends = np.flatnonzero(arr == 10)
     if len(arr) and arr[-1] != 10:
         ends = np.append(ends, len(arr))
-    starts = np.concatenate(([0], ends[:-1] + 1))
+    starts = np.empty_like(ends)
+    starts[:1] = 0
+    starts[1:] = ends[:-1] + 1
     lengths = ends - starts
     cr = np.zeros(len(ends), bool)
     has = lengths > 0
     cr[has] = arr[ends[has] - 1] == 13
     lengths = lengths - cr
-    keep = lengths > 0
+    keep = np.flatnonzero(lengths > 0)
+    starts, stops = starts[keep], starts[keep] + lengths[keep]
+    n, k = len(keep), len(header) - 1
+    # every kept line has exactly k commas: the commas, k to a line in file order, all lie inside
+    # their line (a blank-looking line or a wrong cell count: the careful reader)
     commas = np.flatnonzero(arr == 44)
-    count = np.searchsorted(commas, ends) - np.searchsorted(commas, starts)
-    if np.any(count[keep] != len(header) - 1):
-        return None                      # a wrong cell count or a blank-looking line: careful reader
-    lines = first_line + np.flatnonzero(keep)
-    if not len(lines):
+    if len(commas) != n * k:
+        return None
+    commas = commas.reshape(n, k)
+    if k and n and (np.any(commas[:, 0] <= starts - 1) or np.any(commas[:, -1] >= stops)):
+        return None
+    lines = first_line + keep
+    if not n:
         return CsvBlock(lines, np.empty((0, len(num_idx))), np.empty((0, len(txt_idx)), dtype=str))
     kw = dict(delimiter=",", comments=None, quotechar=None, ndmin=2, encoding=None)
     if num_idx:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                numbers = np.loadtxt(io.StringIO(body.decode("utf-8")), dtype=float, usecols=num_idx, **kw)
+                numbers = np.loadtxt(io.StringIO(text), dtype=float, usecols=num_idx, **kw)
         except ValueError:
             return None
-        if numbers.shape[0] != len(lines):
+        if numbers.shape[0] != n:
             return None
     else:
-        numbers = np.empty((len(lines), 0))
-    # text cells straight from the bytes: every kept line has exactly len(header) - 1 commas
-    bounds = np.column_stack([starts[keep] - 1, commas.reshape(len(lines), len(header) - 1),
-                              starts[keep] + lengths[keep]])
-    texts = np.empty((len(lines), len(txt_idx)), dtype=object)
-    for k, c in enumerate(txt_idx):
-        texts[:, k] = _cells_text(arr, bounds[:, c] + 1, bounds[:, c + 1])
+        numbers = np.empty((n, 0))
+    texts = np.empty((n, len(txt_idx)), dtype=object)
+    for j, c in enumerate(txt_idx):                       # cell c: between comma c - 1 and comma c
+        a = starts if c == 0 else commas[:, c - 1] + 1
+        texts[:, j] = _cells_text(arr, a, stops if c == k else commas[:, c])
     return CsvBlock(lines, numbers, texts)
 
 
 def _cells_text(arr: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Object array of the stripped text of cells ``arr[a:b]``; equal cells share one string."""
+    """Object array of the stripped text of cells ``arr[a:b]``; equal cells share one string (equal
+    neighbours, a measurement's rows, are decoded once)."""
     width = int((b - a).max()) if len(a) else 0
     if width == 0:
         return np.full(len(a), "", dtype=object)
-    idx = a[:, None] + np.arange(width)
-    m = np.where(idx < b[:, None], arr[np.minimum(idx, len(arr) - 1)], 0).astype(np.uint8)
-    uniq, inv = np.unique(np.ascontiguousarray(m).view(f"S{width}").ravel(), return_inverse=True)
-    return np.array([u.decode("utf-8").strip() for u in uniq.tolist()], dtype=object)[inv.ravel()]
+    cells = np.zeros((len(a), width), np.uint8)
+    for p in range(width):
+        cells[:, p] = np.where(a + p < b, arr[np.minimum(a + p, len(arr) - 1)], 0)
+    new = np.ones(len(a), bool)
+    new[1:] = np.any(cells[1:] != cells[:-1], axis=1)
+    uniq, inv = np.unique(cells[new].view(f"S{width}").ravel(), return_inverse=True)
+    decoded = np.array([u.decode("utf-8").strip() for u in uniq.tolist()], dtype=object)
+    return decoded[inv.ravel()[np.cumsum(new) - 1]]
 
 
 def _decode(data: bytes, path, first_line: int) -> str:
@@ -209,10 +222,10 @@ def iter_csv_blocks(path: str | Path, what: str, header_check, block_bytes: int 
                         raise InputError("the file is empty (expected a header line and data)", path, 1)
                     continue
             if data:
-                _decode(data, path, line_no)            # located error for a bad byte
-                blk = _fast_block(data, str(path), line_no, header, num_idx, txt_idx)
+                text = _decode(data, path, line_no)     # located error for a bad byte
+                blk = _fast_block(data, text, str(path), line_no, header, num_idx, txt_idx)
                 if blk is None:
-                    blk = _slow_block(data.decode("utf-8"), str(path), line_no, header, num_idx, txt_idx)
+                    blk = _slow_block(text, str(path), line_no, header, num_idx, txt_idx)
                 line_no += data.count(b"\n")
                 yield header_line, header, blk
             if eof:
@@ -225,51 +238,58 @@ def iter_csv_blocks(path: str | Path, what: str, header_check, block_bytes: int 
 _FIXED = re.compile(r"%\.(\d)f")
 
 
-def _fixed_bytes(v: np.ndarray, decimals: int) -> np.ndarray | None:
-    """(n, W) uint8 matrix of ``%.{decimals}f`` texts, 0 where no character; None if not possible."""
+def _fixed_chars(v: np.ndarray, decimals: int) -> np.ndarray | None:
+    """(W, n) uint8 matrix, one row per character position, of the ``%.{decimals}f`` texts of ``v``
+    (right-aligned, 0 where no character); None when the fast path cannot be exact (a non-finite
+    value, more than 15 digits, many values within an ulp of a half)."""
     v = np.asarray(v, dtype=float)
-    if not np.all(np.isfinite(v)) or (len(v) and np.max(np.abs(v)) * 10.0 ** decimals > 9e15):
+    n = len(v)
+    if not np.all(np.isfinite(v)) or (n and np.max(np.abs(v)) * 10.0 ** decimals > 9e15):
         return None
     scale = 10 ** decimals
     prod = np.abs(v) * scale
-    scaled = np.rint(prod).astype(np.int64)
+    scaled = (prod + 0.5).astype(np.int64)              # round half up, halves fixed below
     # the float product can round a value that lies within an ulp of a half the wrong way: those few
     # are rounded exactly (half to even, as Python's % does) from the double's exact decimal value
-    near = np.flatnonzero(np.abs(prod - np.floor(prod) - 0.5) <= prod * 4.5e-16 + 1e-300)
+    near = np.flatnonzero(np.abs(np.abs(prod - scaled) - 0.5) <= prod * 4.5e-16 + 1e-300)
+    if len(near) > 64 + n // 100:
+        return None                                       # huge values: Python's formatting
     for i in near:
         scaled[i] = int((Decimal(abs(float(v[i]))) * scale).quantize(Decimal(1), ROUND_HALF_EVEN))
-    neg = (v < 0) & (scaled != 0)
-    ip, fp = np.divmod(scaled, scale)
-    nd = np.ones(len(v), np.int64)                    # digits before the point
-    p = 10
-    top = ip.max() if len(v) else 0
-    while p <= top:
-        nd += ip >= p
-        p *= 10
-    maxnd = int(nd.max()) if len(v) else 1
-    width = 1 + maxnd + (1 + decimals if decimals else 0)
-    m = np.zeros((len(v), width), np.uint8)
-    col = width - 1
-    for _ in range(decimals):
-        fp, d = np.divmod(fp, 10)
-        m[:, col] = d
-        col -= 1
-    m[:, col + 1:] += 48
-    if decimals:
-        m[:, col] = 46
-        col -= 1
-    for j in range(maxnd):
-        ip, d = np.divmod(ip, 10)
-        m[:, col - j] = np.where(j < nd, d + 48, 0)
-    rows = np.flatnonzero(neg)
-    m[rows, col - nd[rows]] = 45
+    ndig = max(len(str(int(scaled.max()))) if n else 1, decimals + 1)
+    point = 1 if decimals else 0
+    m = np.empty((1 + ndig + point, n), np.uint8)       # sign, digits, point, decimals
+    x = scaled
+    top = np.full(n, ndig - decimals - 1, np.int64)      # row of a sign: just before the first digit
+    for k in range(ndig):                                 # the k-th digit from the right
+        row = ndig - k if k >= decimals else ndig + 1 - k
+        q = x // 10                                       # (np.divmod is many times slower)
+        d = (x - q * 10).astype(np.uint8) + 48
+        if k > decimals:                                  # a leading zero of the integer part: none
+            shown = x > 0
+            m[row] = d * shown
+            top -= shown
+        else:
+            m[row] = d
+        x = q
+    if point:
+        m[ndig - decimals + 1] = 46
+    m[0] = 0
+    rows = np.flatnonzero((v < 0) & (scaled != 0))
+    m[top[rows], rows] = 45
     return m
 
 
-def _text_bytes(values) -> np.ndarray:
-    """(n, W) uint8 matrix of CSV cells of text values (quoted where needed), 0 where no character."""
+def _text_chars(values) -> np.ndarray:
+    """(W, n) uint8 matrix of the CSV cells of text values (quoted where needed), 0 where no
+    character. Equal neighbours (a measurement's rows) are encoded once."""
     vals = np.asarray(values, dtype=object)
-    uniq, inv = np.unique(vals.astype(str), return_inverse=True)
+    n = len(vals)
+    new = np.ones(n, bool)
+    if n > 1:
+        new[1:] = vals[1:] != vals[:-1]
+    uniq, inv = np.unique(vals[new].astype(str), return_inverse=True)
+    inv = inv.ravel()[np.cumsum(new) - 1]
 
     def cell(s: str) -> bytes:
         if any(c in s for c in ',"\n\r') or s != s.strip():
@@ -277,23 +297,44 @@ def _text_bytes(values) -> np.ndarray:
         return s.encode("utf-8")
     enc = [cell(u) for u in uniq.tolist()]
     width = max([len(e) for e in enc] + [1])
-    table = np.zeros((len(enc), width), np.uint8)
+    table = np.zeros((width, len(enc)), np.uint8)
     for i, e in enumerate(enc):
-        table[i, : len(e)] = np.frombuffer(e, np.uint8)
-    return table[inv.ravel()]
+        table[: len(e), i] = np.frombuffer(e, np.uint8)
+    return table[:, inv]
 
 
-def _column_bytes(c: np.ndarray, fmt: str) -> np.ndarray | None:
+def _column_chars(c: np.ndarray, fmt: str) -> np.ndarray | None:
     if c.dtype.kind == "b":
         c = c.astype(np.int64)
     if c.dtype.kind in "iu":
         if len(c) and np.max(np.abs(c)) > 9e15:
             return None
-        return _fixed_bytes(c.astype(float), 0)
+        return _fixed_chars(c.astype(float), 0)
     if c.dtype.kind == "f":
         m = _FIXED.fullmatch(fmt)
-        return None if m is None else _fixed_bytes(c, int(m.group(1)))
-    return _text_bytes(c)
+        return None if m is None else _fixed_chars(c, int(m.group(1)))
+    return _text_chars(c)
+
+
+def _rows_text(mats: list[np.ndarray]) -> bytes:
+    """The CSV rows of the (W, n) character matrices of the columns: one row per character position
+    (each written contiguously), packed eight positions to a uint64 so that the transposition to
+    text order moves words, not bytes; the empty positions (0) are dropped."""
+    n = mats[0].shape[1]
+    sep = np.full((1, n), 44, np.uint8)
+    parts = []
+    for m in mats:
+        parts += [m, sep]
+    parts[-1] = np.full((1, n), 10, np.uint8)
+    width = sum(len(p) for p in parts)
+    chars = np.zeros((-(-width // 8) * 8, n), np.uint8)
+    np.concatenate(parts, out=chars[:width])
+    packed = np.zeros((len(chars) // 8, n), np.uint64)
+    for b in range(8):       # byte b of each word: position 8 r + b (the words are read back as bytes)
+        word = chars[b::8].astype(np.uint64)
+        packed |= word << np.uint64(8 * b) if np.little_endian else word << np.uint64(56 - 8 * b)
+    text = np.ascontiguousarray(packed.T).view(np.uint8).ravel()
+    return text[text != 0].tobytes()
 
 
 def _slow_rows(columns: list[np.ndarray], fmts: list[str]) -> bytes:
@@ -309,7 +350,7 @@ def _slow_rows(columns: list[np.ndarray], fmts: list[str]) -> bytes:
     return buf.getvalue().encode("utf-8")
 
 
-def format_csv(columns: dict, fmt="%.9g", header: bool = True, chunk: int = 100_000) -> bytes:
+def format_csv(columns: dict, fmt="%.9g", header: bool = True, chunk: int = 16_384) -> bytes:
     """CSV bytes of ``{name: 1-D array}``. ``fmt``: one ``%`` format for the float columns or a dict
     ``{name: format}`` (default ``%.9g`` for names it does not list). Fixed formats (``%.6f``), integer
     and text columns are formatted by vectorised code."""
@@ -326,16 +367,9 @@ def format_csv(columns: dict, fmt="%.9g", header: bool = True, chunk: int = 100_
         out.append(buf.getvalue().encode("utf-8"))
     for a in range(0, n, chunk):
         cols = [np.asarray(columns[k])[a:a + chunk] for k in names]
-        mats = [_column_bytes(c, f) for c, f in zip(cols, fmts)]
+        mats = [_column_chars(c, f) for c, f in zip(cols, fmts)]
         if any(m is None for m in mats):
             out.append(_slow_rows(cols, fmts))
             continue
-        rows = len(cols[0])
-        sep = np.full((rows, 1), 44, np.uint8)
-        parts = []
-        for m in mats:
-            parts += [m, sep]
-        parts[-1] = np.full((rows, 1), 10, np.uint8)
-        full = np.hstack(parts)
-        out.append(full[full != 0].tobytes())
+        out.append(_rows_text(mats))
     return b"".join(out)

@@ -4,7 +4,7 @@ A command that writes a folder does so inside :func:`output_folder`::
 
     with output_folder(args.output, inputs, "calibrate") as out:
         write_report(..., out.dir)          # any writer, into a fresh temporary folder beside -o
-    print(f"report -> {args.output / 'report.html'}")
+    log.info(f"report -> {args.output / 'report.html'}")
 
 The temporary folder sits beside ``-o`` (same file system). When the block ends normally it is renamed
 into place: an earlier output of the same command at ``-o`` is replaced only then, as a whole (no stale
@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import logging
 import os
 import shutil
 import tempfile
@@ -33,6 +34,8 @@ from ._errors import InputError
 
 __all__ = ["output_folder", "output_file", "Output", "safe_name", "guard_output", "atomic_write_bytes",
            "MARKER"]
+
+log = logging.getLogger(__name__)
 
 #: the file that marks a folder as an output of ``aacmm <command>`` (its text: ``aacmm <command>``)
 MARKER = ".aacmm-output"
@@ -250,6 +253,7 @@ def output_folder(final: str | Path, inputs=(), command: str = ""):
         (stage / MARKER).write_text(f"aacmm {command}\n", encoding="utf-8")
         yield Output(stage, final)
         _publish(stage, final, command)
+        log.debug(f"{final}: {sum(1 for p in final.rglob('*') if p.is_file()) - 1} file(s) written")
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         _remove_empty(created)
@@ -280,6 +284,7 @@ def output_file(final: str | Path, inputs=()):
         if final.is_dir():
             raise InputError("the output is a file, but a folder of that name exists", final)
         os.replace(tmp, final)
+        log.debug(f"{final}: written ({final.stat().st_size} bytes)")
     except BaseException:
         with contextlib.suppress(OSError):
             tmp.unlink()

@@ -4,18 +4,21 @@
   description). Such points are used and flagged, never dropped.
 - ``joint_limits``: an encoder angle beyond the joint's declared limits (``lower_deg``/``upper_deg``).
 
-Every command that reads points prints these (``warning: ...``) and, when it writes a summary and a
+Every command that reads points logs these at WARNING (``warning: ...`` on standard error) and, when it writes a summary and a
 report, lists them there too (``"warnings"`` of summary.json, a "Warnings" section of report.html).
 """
 from __future__ import annotations
 
 import html
+import logging
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["InputWarning", "over_force_warning", "joint_limit_warning", "point_warnings", "print_warnings",
+__all__ = ["InputWarning", "over_force_warning", "joint_limit_warning", "JointLimitTally", "point_warnings", "log_warnings",
            "warnings_html", "LIMIT_TOLERANCE_RAD"]
+
+log = logging.getLogger(__name__)
 
 #: how far beyond a declared joint limit an angle may read before it is reported [rad] (1e-6 deg:
 #: below every encoder's resolution, above the rounding of a file written in degrees)
@@ -67,32 +70,61 @@ def over_force_warning(force, lines, max_force: float, file: str) -> InputWarnin
         file, lines)
 
 
+def _beyond_limits(desc, q) -> np.ndarray:
+    """(N, J) True where an angle [rad] lies beyond its joint's declared limits."""
+    out = np.zeros(q.shape, bool)
+    for j, joint in enumerate(desc.joints[: q.shape[1]]):
+        if joint.lower is not None:
+            out[:, j] |= q[:, j] < joint.lower - LIMIT_TOLERANCE_RAD
+        if joint.upper is not None:
+            out[:, j] |= q[:, j] > joint.upper + LIMIT_TOLERANCE_RAD
+    return out
+
+
+def _joint_limit_message(desc, per_joint, lines, file: str) -> InputWarning | None:
+    if not len(lines):
+        return None
+    names = []
+    for joint, count in zip(desc.joints, per_joint):
+        if count:
+            names.append(f"{joint.name} ({int(count)}, limits {np.degrees(joint.lower):.4g} to "
+                         f"{np.degrees(joint.upper):.4g} deg)" if joint.lower is not None and joint.upper is not None
+                         else f"{joint.name} ({int(count)})")
+    lines = tuple(np.asarray(lines).tolist())
+    return InputWarning(
+        "joint_limits",
+        f"{len(lines)} point(s) with a joint angle beyond the arm's declared limits: "
+        f"{', '.join(names)}; used all the same (check the arm description or the encoder zero); "
+        f"{file} {_lines_text(lines)}", file, lines)
+
+
 def joint_limit_warning(desc, q, lines, file: str) -> InputWarning | None:
     """A warning for the rows with an encoder angle beyond its joint's declared limits, or None."""
     q = np.atleast_2d(np.asarray(q, float))
     if q.size == 0:
         return None
-    bad = np.zeros(len(q), bool)
-    names = []
-    for j, joint in enumerate(desc.joints[: q.shape[1]]):
-        out = np.zeros(len(q), bool)
-        if joint.lower is not None:
-            out |= q[:, j] < joint.lower - LIMIT_TOLERANCE_RAD
-        if joint.upper is not None:
-            out |= q[:, j] > joint.upper + LIMIT_TOLERANCE_RAD
-        if out.any():
-            names.append(f"{joint.name} ({int(out.sum())}, limits {np.degrees(joint.lower):.4g} to "
-                         f"{np.degrees(joint.upper):.4g} deg)" if joint.lower is not None and joint.upper is not None
-                         else f"{joint.name} ({int(out.sum())})")
-        bad |= out
-    if not bad.any():
-        return None
-    lines = tuple(int(v) for v in np.asarray(lines)[bad])
-    return InputWarning(
-        "joint_limits",
-        f"{int(bad.sum())} point(s) with a joint angle beyond the arm's declared limits: "
-        f"{', '.join(names)}; used all the same (check the arm description or the encoder zero); "
-        f"{file} {_lines_text(lines)}", file, lines)
+    out = _beyond_limits(desc, q)
+    return _joint_limit_message(desc, out.sum(axis=0), np.asarray(lines)[out.any(axis=1)], file)
+
+
+class JointLimitTally:
+    """:func:`joint_limit_warning` over the blocks of one file read block by block (``aacmm tip`` on
+    millions of rows): one warning for the whole file."""
+
+    def __init__(self, desc, file: str):
+        self.desc, self.file = desc, file
+        self.per_joint = np.zeros(len(desc.joints), np.int64)
+        self.lines = []
+
+    def add(self, q, lines) -> None:
+        q = np.atleast_2d(np.asarray(q, float))
+        out = _beyond_limits(self.desc, q)
+        self.per_joint[: q.shape[1]] += out.sum(axis=0)
+        self.lines.append(np.asarray(lines)[out.any(axis=1)])
+
+    def warning(self) -> InputWarning | None:
+        lines = np.concatenate(self.lines) if self.lines else np.empty(0, np.int64)
+        return _joint_limit_message(self.desc, self.per_joint, lines, self.file)
 
 
 def point_warnings(desc, points, force=None) -> list[InputWarning]:
@@ -105,10 +137,11 @@ def point_warnings(desc, points, force=None) -> list[InputWarning]:
     return [w for w in out if w is not None]
 
 
-def print_warnings(warnings, file=None) -> None:
-    """``warning: <message>`` for each, on standard output (the summary the command prints)."""
+def log_warnings(warnings, logger: logging.Logger | None = None) -> None:
+    """Each warning logged at WARNING (``warning: <message>`` on standard error under ``aacmm``; shown
+    with ``--quiet`` too)."""
     for w in warnings:
-        print(f"warning: {w.message}", file=file)
+        (logger or log).warning(w.message)
 
 
 def warnings_html(warnings) -> str:

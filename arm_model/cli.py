@@ -7,6 +7,9 @@
 - a closed standard output (``aacmm tip ... | head -1``): quiet;
 - anything else is a bug: a message asking for a report, exit 3; ``--debug`` adds the traceback.
 
+Every subcommand accepts ``-q/--quiet`` (warnings and errors only) and ``-v/--verbose`` (debug messages
+too), defined once here; the messages go through :mod:`logging` (:mod:`arm_model._log`).
+
 Outputs are written complete or not at all (:mod:`arm_model._output`), so no error leaves a partial
 output behind.
 """
@@ -15,12 +18,16 @@ from __future__ import annotations
 import argparse
 import importlib
 import importlib.util
+import logging
 import os
+import platform
 import signal
 import sys
+import time
 import traceback
 
 from ._errors import AacmmError
+from ._log import console, level_from_flags
 from .shipped import version
 
 __all__ = ["main", "COMMAND_MODULES", "EXIT_INPUT", "EXIT_INTERNAL"]
@@ -28,6 +35,8 @@ __all__ = ["main", "COMMAND_MODULES", "EXIT_INPUT", "EXIT_INTERNAL"]
 #: exit codes: 0 done, 1 done but some runs failed (study montecarlo), 2 bad input or a file/system
 #: error, 3 internal error (a bug), 130 Ctrl-C, 143 SIGTERM
 EXIT_INPUT, EXIT_INTERNAL = 2, 3
+
+log = logging.getLogger(__name__)
 
 #: every subcommand, in the order of ``aacmm --help``: the module that registers it (``register(subparsers)``)
 #: and its one-line help. ``aacmm --help`` lists them without importing any of those modules, and
@@ -59,15 +68,22 @@ def _requested(argv) -> str | None:
 
 
 _DEBUG_HELP = "on an internal error, print the Python traceback (for a bug report)"
+_QUIET_HELP = "only warnings and errors (no summary, no progress)"
+_VERBOSE_HELP = "also debug messages (inputs read, model used, timings, files written)"
 
 
-def _add_debug(parser: argparse.ArgumentParser, top: bool) -> None:
-    parser.add_argument("--debug", action="store_true", help=_DEBUG_HELP,
-                        **({} if top else {"default": argparse.SUPPRESS}))
+def _add_common(parser: argparse.ArgumentParser, top: bool) -> None:
+    """--debug, -q/--quiet and -v/--verbose on ``parser`` and every subcommand below it: defined once
+    here, accepted before or after the subcommand (``aacmm -q tip ...`` or ``aacmm tip ... -q``)."""
+    default = {} if top else {"default": argparse.SUPPRESS}
+    parser.add_argument("--debug", action="store_true", help=_DEBUG_HELP, **default)
+    talk = parser.add_mutually_exclusive_group()
+    talk.add_argument("-q", "--quiet", action="store_true", help=_QUIET_HELP, **default)
+    talk.add_argument("-v", "--verbose", action="store_true", help=_VERBOSE_HELP, **default)
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
             for sub in action.choices.values():
-                _add_debug(sub, False)
+                _add_common(sub, False)
 
 
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
@@ -94,7 +110,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     for name, (module, text) in COMMANDS.items():
         if name not in sub.choices and module not in modules:
             sub.add_parser(name, help=text, add_help=False)     # listed only: not the one that runs
-    _add_debug(parser, True)
+    _add_common(parser, True)
     return parser
 
 
@@ -127,6 +143,8 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv)
     args = parser.parse_args(argv)
+    if args.quiet and args.verbose:
+        parser.error("-q/--quiet and -v/--verbose exclude each other")
     name = "aacmm " + args.command + (f" {args.study}" if getattr(args, "study", None) else "")
 
     def error(text: str) -> None:
@@ -141,7 +159,11 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:          # not the main thread: leave SIGTERM alone
         pass
     try:
-        code = int(args.func(args) or 0)
+        with console(level_from_flags(args.quiet, args.verbose)):
+            t0 = time.perf_counter()
+            log.debug(f"aacmm-toolkit {version()}, Python {platform.python_version()}: {name}")
+            code = int(args.func(args) or 0)
+            log.debug(f"{name}: done in {time.perf_counter() - t0:.2f} s, exit {code}")
         try:
             sys.stdout.flush()
         except BrokenPipeError:

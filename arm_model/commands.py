@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 from .cli import command_help
 from pathlib import Path
@@ -11,13 +12,15 @@ import numpy as np
 from ._csv import format_csv
 from ._errors import InputError
 from ._output import output_file
-from .checks import point_warnings, print_warnings
+from .checks import JointLimitTally, log_warnings
 from .io import concat_points, iter_points
 from .model_file import Arm, load_model
 from .urdf import urdf_text
 
 __all__ = ["register", "tip_table", "add_arm_options", "arm_from_args", "model_from_args", "number_in",
            "positive", "non_negative", "at_least", "fraction", "finite", "seed", "port"]
+
+log = logging.getLogger(__name__)
 
 
 def _number(text: str, kind=float):
@@ -104,7 +107,11 @@ def model_from_args(args: argparse.Namespace) -> Arm:
     key = (args.arm, args.tip_frame, getattr(args, "masses", None))
     cached = getattr(args, "_arm_loaded", None)
     if cached is None or cached[0] != key:        # read once per command line (arm_inputs reads it first)
-        args._arm_loaded = (key, load_model(*key[:2], masses=key[2]))
+        arm = load_model(*key[:2], masses=key[2])
+        args._arm_loaded = (key, arm)
+        log.debug(f"arm {args.arm}: '{arm.desc.name}', {arm.desc.n_joints} joints, effects: "
+                  f"{', '.join(e.describe() for e in arm.effects) or 'none'}"
+                  + (f", covariance {arm.covariance}" if arm.covariance else ""))
     return args._arm_loaded[1]
 
 
@@ -193,7 +200,7 @@ def run_tip(args: argparse.Namespace) -> int:
         uncertain = wants_uncertainty(args, parameters)
         if uncertain:                   # the uncertainty summary is over all points: one block
             blocks = [concat_points(blocks)]
-        ulines, warnings = [], []
+        ulines, limits = [], JointLimitTally(desc, str(args.points))
         for block in blocks:
             cols = tip_table(arm, block)
             if uncertain:
@@ -208,31 +215,31 @@ def run_tip(args: argparse.Namespace) -> int:
             if len(flagged) < 11:
                 flagged += block.lines[cols["over_force"].astype(bool)][:11].tolist()
             flagged_count += int(cols["over_force"].sum())
-            warnings += [w for w in point_warnings(desc, block) if w.kind != "over_force"]
-    print(f"{n} points in {len(measurements)} measurement(s) -> {args.output}")
+            limits.add(block.q, block.lines)
+    log.info(f"{n} points in {len(measurements)} measurement(s) -> {args.output}")
     if arm.effects:
-        print("effects applied: " + ", ".join(e.describe() for e in arm.effects))
+        log.info("effects applied: " + ", ".join(e.describe() for e in arm.effects))
     if kinds == {None}:
-        print("no force columns: corrected = rigid (no deflection applied)")
+        log.info("no force columns: corrected = rigid (no deflection applied)")
     else:
         if "two-channel" in kinds:
-            print("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not measured "
+            log.info("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not measured "
                   "and is taken as zero")
-        print(f"deflection: mean {d_sum / n:.2f} um, max {d_max:.2f} um")
+        log.info(f"deflection: mean {d_sum / n:.2f} um, max {d_max:.2f} um")
     for line in ulines:
-        print(line)
+        log.info(line)
     if flagged_count:
-        print(f"warning: {flagged_count} point(s) over the probe's calibrated force range "
+        log.warning(f"{flagged_count} point(s) over the probe's calibrated force range "
               f"({desc.probe.max_force:g} N), flagged in column over_force; lines {', '.join(map(str, flagged[:10]))}"
               + (" ..." if flagged_count > 10 else ""))
-    print_warnings(warnings)
+    log_warnings([w for w in [limits.warning()] if w is not None])
     return 0
 
 
 def run_examples(args: argparse.Namespace) -> int:
     from .shipped import copy_examples
     written = copy_examples(args.dir)
-    print(f"examples -> {args.dir}/ ({', '.join(p.name for p in written)}); try: "
+    log.info(f"examples -> {args.dir}/ ({', '.join(p.name for p in written)}); try: "
           f"aacmm simulate {args.dir}/campaigns/paper-ring.toml -o out/paper-ring")
     return 0
 
@@ -242,8 +249,8 @@ def run_urdf(args: argparse.Namespace) -> int:
         arm = model_from_args(args)
         desc = arm.desc
         tmp.write_text(urdf_text(desc), encoding="utf-8")
-    print(f"URDF of '{desc.name}' ({desc.n_joints} joints + 3 elastic probe joints) -> {args.output}")
+    log.info(f"URDF of '{desc.name}' ({desc.n_joints} joints + 3 elastic probe joints) -> {args.output}")
     if arm.effects:
-        print("note: a URDF holds the geometry only; the model's effects ("
+        log.info("note: a URDF holds the geometry only; the model's effects ("
               + ", ".join(e.describe() for e in arm.effects) + ") are not in it")
     return 0

@@ -6,6 +6,7 @@ over an input.
 """
 from __future__ import annotations
 
+import logging
 import math
 import re
 from dataclasses import dataclass, field
@@ -17,6 +18,8 @@ from ._csv import BLOCK_BYTES, csv_records, format_csv, iter_csv_blocks
 from ._errors import InputError, parse_toml, read_text, unknown_key
 from ._output import atomic_write_bytes, guard_output
 from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, split_unit
+
+log = logging.getLogger(__name__)
 
 __all__ = ["PointSet", "Feature", "Distance", "Artefacts", "ForceSignal", "read_points",
            "read_artefacts", "read_force_signal", "check_features", "atomic_write_text",
@@ -221,13 +224,15 @@ def iter_points(path: str | Path, n_joints: int | None = None, data: bytes | Non
     def check(header, line):
         layout.append(_points_layout(header, line, path, n_joints))
         return layout[0].num_idx, layout[0].txt_idx
-    count = 0
+    count, blocks = 0, 0
     for _, _, blk in iter_csv_blocks(path, "the points file", check, block_bytes, data):
         if len(blk.lines):
             count += len(blk.lines)
+            blocks += 1
             yield _points_from_block(layout[0], blk, path)
     if not count:
         raise InputError("no points after the header line", path, layout[0].line + 1)
+    log.debug(f"{path}: {count} point row(s) read in {blocks} block(s); columns {', '.join(layout[0].header)}")
 
 
 def concat_points(sets) -> PointSet:
@@ -326,7 +331,11 @@ def _toml_top_line(text: str, key: str) -> int | None:
 
 def read_artefacts(path: str | Path) -> Artefacts:
     """Read an artefacts TOML file (docs/formats.md §4)."""
-    return parse_artefacts(read_text(path, "the artefacts file"), str(path))
+    art = parse_artefacts(read_text(path, "the artefacts file"), str(path))
+    kinds = sorted({f.kind for f in art.features.values()})
+    log.debug(f"{path}: {len(art.features)} feature(s) ({', '.join(kinds) or 'none'}), "
+              f"{len(art.distances)} certified distance(s)")
+    return art
 
 
 def parse_artefacts(text: str, path: str = "<string>") -> Artefacts:

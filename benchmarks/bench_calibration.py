@@ -169,6 +169,9 @@ def compare(model: ArmModel, n: int, scipy_methods=("lm", "trf-sparse")) -> dict
     return row
 
 
+QUICK = {"sizes": (500, 1000), "scipy_sizes": (500,)}   # make bench BENCH=--quick
+
+
 def main(sizes=(500, 1000, 2000, 5000), scipy_sizes=(500, 1000, 2000)) -> dict:
     desc = load_description(ARM)
     model = ArmModel(desc, (EncoderEccentricity(joints=(0, 1, 2, 3, 4, 5), harmonics=(1,)),))

@@ -26,6 +26,9 @@ def _best(fun, repeats: int) -> float:
     return best
 
 
+QUICK = {"sizes": (10**3, 10**4, 10**5, 10**6)}   # make bench BENCH=--quick
+
+
 def main(sizes=(10**3, 10**4, 10**5, 10**6, 10**7), loop_n: int = 20_000) -> dict:
     desc = load_description(ARM)
     arm = PinocchioArm(desc)

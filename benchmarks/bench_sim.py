@@ -12,6 +12,9 @@ from arm_model.sim import load_campaign, simulate
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "campaigns"
 
 
+QUICK = {"names": ("paper-ring", "calibration")}   # make bench BENCH=--quick
+
+
 def main(names=("paper-ring", "paper-ring-xyz", "calibration", "hidden-eccentricity")) -> dict:
     print(f"{'campaign':22s} {'points':>7s} {'signal rows':>12s} {'total s':>8s} {'plan+settle s':>13s} "
           f"{'final IK s':>10s} {'starts/pt':>9s} {'truth residual':>15s}")

@@ -24,6 +24,9 @@ def _best(fun, repeats: int) -> tuple[float, float]:
     return wall, cpu
 
 
+QUICK = {"sizes": (10**4, 10**5)}   # make bench BENCH=--quick
+
+
 def main(sizes=(10**4, 10**5, 10**6)) -> dict:
     desc = load_description(ARM)
     model = ArmModel(desc)

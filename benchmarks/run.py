@@ -1,4 +1,8 @@
-"""`make bench`: run every benchmarks/bench_*.py main() in turn and print their tables."""
+"""`make bench`: run every benchmarks/bench_*.py main() in turn and print their tables.
+
+``python -m benchmarks.run [--quick] [NAME ...]``: only the named benchmarks (``io``,
+``kinematics``); ``--quick`` (``make bench BENCH=--quick``): the smaller sizes a module
+lists in its ``QUICK`` (keyword arguments of its ``main``), a minute or two in all."""
 from __future__ import annotations
 
 import importlib
@@ -22,13 +26,16 @@ def machine() -> str:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    print(f"machine: {machine()}")
+    quick = "--quick" in argv
+    argv = [a for a in argv if a != "--quick"]
+    print(f"machine: {machine()}" + (" (--quick sizes)" if quick else ""))
     names = sorted(p.stem for p in Path(__file__).parent.glob("bench_*.py"))
     if argv:
-        names = [n for n in names if any(a in n for a in argv)]
+        names = [n for n in names if any(n in (a, f"bench_{a}") for a in argv)]
     for name in names:
         print(f"\n=== {name} ===", flush=True)
-        importlib.import_module(f"benchmarks.{name}").main()
+        module = importlib.import_module(f"benchmarks.{name}")
+        module.main(**(getattr(module, "QUICK", {}) if quick else {}))
     return 0
 
 

@@ -318,7 +318,12 @@ def identify(problem: Problem, p, states, candidates, *, stage: str = "start", r
     if min_resolution is not None and kept:
         names = [spec.names[i] for i in kept]
         sel = [idf.names.index(n) for n in names]
-        weak = weakly_determined(jred[:, sel], names, sizes(names), min_resolution)
+        # only the description's parameters are held for being weak: an effect's parameters were asked for
+        # (an --effect, a loop candidate) and are estimated with their uncertainty (a joint compliance seen
+        # through one plate placement is resolved to tens of percent, and holding it at zero would keep
+        # its whole signature in the geometry)
+        weak = [w for w in weakly_determined(jred[:, sel], names, sizes(names), min_resolution)
+                if spec.index(w[0]) < model.base_size]
         if weak and stop:
             raise NumericalError("parameters the data resolve to worse than "
                                  f"{min_resolution:g} of a plausible size ({stage}): "

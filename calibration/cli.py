@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 from arm_model.cli import command_help
 from pathlib import Path
 
@@ -11,11 +12,13 @@ import numpy as np
 from arm_model import InputError
 from arm_model.commands import add_arm_options, arm_inputs, at_least, fraction, model_from_args, non_negative, positive, seed
 from arm_model._output import output_folder
-from arm_model.checks import point_warnings, print_warnings
+from arm_model.checks import point_warnings, log_warnings
 from arm_model.io import read_artefacts, read_points
 from arm_model.model_file import Arm
 
 __all__ = ["register", "run_calibrate", "run_montecarlo", "run_poses"]
+
+log = logging.getLogger(__name__)
 
 
 def _effects(keys):
@@ -88,10 +91,11 @@ def _common_fit_options(p) -> None:
                    help="relative singular value below which a parameter combination counts as not "
                         "identifiable (default 1e-4)")
     p.add_argument("--min-resolution", type=non_negative(), default=0.1, metavar="FRACTION",
-                   help="hold parameters the data would resolve only to worse than this fraction of a plausible "
-                        "error size (lengths: --plausible-length-mm; angles 0.01 rad per mm of it; 10x the nominal "
-                        "compliance ...): their effect is below the noise (default 0.1; 0 keeps every linearly "
-                        "independent parameter)")
+                   help="hold parameters of the description (joint rows, probe) the data would resolve only to "
+                        "worse than this fraction of a plausible error size (lengths: --plausible-length-mm; angles "
+                        "0.01 rad per mm of it; 10x the nominal probe compliance): their effect is below the noise "
+                        "(default 0.1; 0 keeps every linearly independent parameter). Effect parameters are "
+                        "always estimated when linearly identifiable")
 
 
 def register(sub) -> None:
@@ -149,7 +153,6 @@ def register(sub) -> None:
     m.add_argument("--workers", type=at_least(1), default=None, help="local processes (default: CPU count)")
     m.add_argument("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://10.0.0.5:8786")
     m.add_argument("-o", "--output", type=Path, required=True, help="output folder")
-    m.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     _common_fit_options(m)
     m.set_defaults(func=run_montecarlo)
     q = ss.add_parser("poses", help="choose measurements by the observability index O1",
@@ -162,7 +165,6 @@ def register(sub) -> None:
     q.add_argument("--reference-points", type=Path, default=None, help="reference points CSV")
     q.add_argument("--count", type=at_least(1), required=True, help="how many measurements to choose")
     q.add_argument("-o", "--output", type=Path, required=True, help="output folder")
-    q.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     _common_fit_options(q)
     q.set_defaults(func=run_poses)
 
@@ -237,7 +239,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
             from .candidates import no_torque_reason
             why = no_torque_reason(model.desc, data)
             if why:
-                print(f"joint compliance cannot be identified: {why}")
+                log.warning(f"joint compliance cannot be identified: {why}")
         holdout = _holdout(args.holdout)
         train, test = (data, None) if holdout is None else split_holdout(data, holdout, args.seed)
         kw = _fit_kwargs(args)
@@ -257,36 +259,36 @@ def run_calibrate(args: argparse.Namespace) -> int:
                                      "holdout": None if test is None else test.measurements(),
                                      "warnings": [w.as_dict() for w in warnings]})
     files = {k: out.published(v) for k, v in files.items()}
-    print(f"{len(train)} training points in {len(train.measurements())} measurements"
+    log.info(f"{len(train)} training points in {len(train.measurements())} measurements"
           + (f", {len(test)} held-out points in {len(test.measurements())}" if test is not None else ""))
     if data.points.force_kind == "two-channel":
-        print("two-channel force sensor: the probe-y force is not measured and is taken as zero")
-    print_warnings(warnings)
+        log.info("two-channel force sensor: the probe-y force is not measured and is taken as zero")
+    log_warnings(warnings)
     for line in noise_lines(res):
-        print(line)
-    print(f"solver: {res.status} after {res.iterations} iterations; s0 = {res.s0:.3f}; "
+        log.info(line)
+    log.info(f"solver: {res.status} after {res.iterations} iterations; s0 = {res.s0:.3f}; "
           f"{len(res.free)} parameters free, {res.n_nuisance} nuisance unknowns, dof {res.dof}")
     idf = res.identifiability_final
-    print(f"identifiability: rank {idf.rank}/{len(idf.names)} at the solution, condition number {idf.condition:.3g}")
+    log.info(f"identifiability: rank {idf.rank}/{len(idf.names)} at the solution, condition number {idf.condition:.3g}")
     for f in res.fixed:
-        print(f"  fixed {f.name}: {f.reason}")
+        log.info(f"  fixed {f.name}: {f.reason}")
     for text in poorly_determined(res):
-        print(f"  poorly determined: {text}")
+        log.info(f"  poorly determined: {text}")
     if res.outliers:
-        print(f"{len(res.outliers)} outlier(s) ({'dropped and refitted' if res.dropped else 'kept'}):")
+        log.info(f"{len(res.outliers)} outlier(s) ({'dropped and refitted' if res.dropped else 'kept'}):")
         for o in res.outliers[:10]:
-            print(f"  {o.measurement} {o.feature} line {o.line}: standardized {o.standardized:+.1f}")
+            log.info(f"  {o.measurement} {o.feature} line {o.line}: standardized {o.standardized:+.1f}")
     for title, rows in (("training", val_train), ("held-out", val_test)):
         if rows:
-            print(f"validation on {title} data (nominal -> calibrated; ± standard uncertainty, bootstrap over "
+            log.info(f"validation on {title} data (nominal -> calibrated; ± standard uncertainty, bootstrap over "
                   "its measurements):")
             for r in rows:
-                print(f"  {r['label']}: {with_u(r['before'], r['u_before'])} -> {with_u(r['after'], r['u_after'])} "
+                log.info(f"  {r['label']}: {with_u(r['before'], r['u_before'])} -> {with_u(r['after'], r['u_after'])} "
                       f"{r['unit']} ({r['ratio']:.1f}x)")
     scatter = res.probing_scatter()
-    print(f"model file -> {files['description']} (covariance {files['covariance'].name}"
-          + (f"; probing scatter {scatter * 1e6:.4g} um per axis, tip's default" if scatter is not None else "")
-          + f"); report -> {files['report']}")
+    log.info(f"model file -> {files['description']} (covariance {files['covariance'].name}"
+             + (f"; probing scatter {scatter * 1e6:.4g} um per axis, tip's default" if scatter is not None else "")
+             + f"); report -> {files['report']}")
     return 0
 
 
@@ -325,31 +327,31 @@ def run_montecarlo(args: argparse.Namespace) -> int:
         settings = RunSettings(free=tuple(_free(model, args)), weights=_weights(args), holdout=args.holdout,
                                fit=_fit_kwargs(args), effects=_effects(args.effect))
         mc = monte_carlo(SimSource(str(args.campaign)), args.runs, seed=args.seed, settings=settings,
-                         scheduler=args.scheduler, workers=args.workers, progress=not args.quiet)
+                         scheduler=args.scheduler, workers=args.workers)
         (out.dir / "study.json").write_text(json.dumps(mc.to_dict(), indent=1, default=float) + "\n",
                                             encoding="utf-8")
-    print(f"{args.runs - len(mc.failures)} of {args.runs} runs succeeded")
+    log.info(f"{args.runs - len(mc.failures)} of {args.runs} runs succeeded")
     for f in mc.failures[:5]:
-        print(f"  seed {f['seed']}: {f['error']}")
-    print("predicted accuracy on held-out data (median / 95th percentile):")
+        log.info(f"  seed {f['seed']}: {f['error']}")
+    log.info("predicted accuracy on held-out data (median / 95th percentile):")
     for a in mc.accuracy.values():
-        print(f"  {a['label']}: nominal {a['before_median']:.2f}/{a['before_p95']:.2f} -> calibrated "
+        log.info(f"  {a['label']}: nominal {a['before_median']:.2f}/{a['before_p95']:.2f} -> calibrated "
               f"{a['after_median']:.2f}/{a['after_p95']:.2f} {a['unit']}")
     from .calibrate import display_unit
     if mc.s0:
         s0 = np.array(mc.s0)
-        print(f"residual scale factor s0 over the runs: median {np.median(s0):.2f} (range {s0.min():.2f}-{s0.max():.2f})"
+        log.info(f"residual scale factor s0 over the runs: median {np.median(s0):.2f} (range {s0.min():.2f}-{s0.max():.2f})"
               + ("; far from 1: the stated --sigma-* do not match the residuals, and one factor cannot rescale "
                  "residual groups that are mis-stated differently (docs/uncertainty.md)"
                  if abs(np.median(s0) - 1) > 0.2 else ""))
     lo, hi = next(iter(mc.parameters.values()))["z_rms_95"] if mc.parameters else (0.0, 0.0)
-    print(f"parameters: RMS error vs truth, mean reported u, within 3u, z = error / u: RMS (right uncertainties "
+    log.info(f"parameters: RMS error vs truth, mean reported u, within 3u, z = error / u: RMS (right uncertainties "
           f"give {lo:.2f}-{hi:.2f} for {len(mc.s0)} runs, 95 %) and mean (bias), verdict:")
     for n, v in mc.parameters.items():
         du, fac = display_unit(model.spec.units[model.spec.index(n)])
-        print(f"  {n:22s} {v['rms_error'] * fac:10.4g} {v['mean_u'] * fac:10.4g} {du:5s} {100 * v['within_3u']:5.0f} %"
+        log.info(f"  {n:22s} {v['rms_error'] * fac:10.4g} {v['mean_u'] * fac:10.4g} {du:5s} {100 * v['within_3u']:5.0f} %"
               f" {v['z_rms']:6.2f} {v['z_mean']:+6.2f}  {v['verdict']}")
-    print(f"-> {args.output / 'study.json'}")
+    log.info(f"-> {args.output / 'study.json'}")
     return 0 if not mc.failures else 1
 
 
@@ -364,11 +366,11 @@ def run_poses(args: argparse.Namespace) -> int:
         fit = _fit_kwargs(args)
         fit.pop("weights_from_data", None)            # the choice is made at the nominal, before any fit
         sel = select_measurements(model, data, args.count, _free(model, args), weights=_weights(args),
-                                  progress=not args.quiet, fit=fit)
+                                  fit=fit)
         (out.dir / "poses.json").write_text(json.dumps(sel.to_dict(), indent=1) + "\n", encoding="utf-8")
-    print_warnings(warnings)
-    print(f"{len(sel.parameters)} identifiable parameters; chosen measurements (O1, random sets' O1):")
+    log_warnings(warnings)
+    log.info(f"{len(sel.parameters)} identifiable parameters; chosen measurements (O1, random sets' O1):")
     for m, o, r, n in zip(sel.chosen, sel.o1, sel.o1_random, sel.n_points):
-        print(f"  {m:20s} O1 {o:10.4g}   random {r:10.4g}   ({n} points)")
-    print(f"-> {args.output / 'poses.json'}")
+        log.info(f"  {m:20s} O1 {o:10.4g}   random {r:10.4g}   ({n} points)")
+    log.info(f"-> {args.output / 'poses.json'}")
     return 0

@@ -2,20 +2,21 @@
 from __future__ import annotations
 
 import argparse
-import sys
-import time
+import logging
 
 from arm_model.cli import command_help
 from arm_model import InputError
 from arm_model.commands import arm_inputs, at_least, fraction, model_from_args, number_in, seed
 from arm_model._output import output_folder
-from arm_model.checks import point_warnings, print_warnings
+from arm_model.checks import point_warnings, log_warnings
 from arm_model.io import read_artefacts, read_points
 from arm_model.model_file import Arm
 
 from .cli import _holdout, campaign_inputs, model_effects, sigma_options
 
 __all__ = ["register", "run"]
+
+log = logging.getLogger(__name__)
 
 
 def register(sub) -> None:
@@ -65,13 +66,17 @@ def register(sub) -> None:
                    help="do not build effects from the residual's structure once the library is exhausted "
                         "(default: build them: joint harmonics, per-link and probe thermal growth, a probe "
                         "compliance matrix, an approach offset, lateral joint compliance)")
+    p.add_argument("--held-out-gain-only", action="store_true",
+                   help="add only effects that improve the held-out data significantly (default: also include "
+                        "joint compliance under gravity as physics when its signature is significant, its "
+                        "compliances resolve positive and the held-out data are not significantly worse; see "
+                        "docs/close-loop.md)")
     p.add_argument("--effect", action="append", metavar="KEY",
                    help="an effect already in the base model (repeatable; not a candidate then), e.g. thermal")
     p.add_argument("--free", action="append", metavar="PATTERN",
                    help="base parameters to identify, by name or glob (repeatable); default every joint-row error "
                         "and probe.x/y/z (probe compliances are candidates instead); effect parameters are always free")
     sigma_options(p)
-    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=run)
 
 
@@ -111,17 +116,11 @@ def run(args: argparse.Namespace) -> int:
                                {"test_fraction": holdout} if holdout is not None else {}),
                             screen_alpha=args.screen_alpha, min_improvement=args.min_improvement,
                             max_effects=args.max_effects, cv_top=args.cv_top, seed=args.seed,
-                            synthesise=not args.library_only)
-    t0 = time.perf_counter()
-
-    def progress(msg: str) -> None:
-        if not args.quiet or msg.startswith("WARNING"):
-            print(f"[{time.perf_counter() - t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
-
+                            synthesise=not args.library_only, physics=not args.held_out_gain_only)
     with output_folder(args.output, inputs, "close-loop") as out:
         loop = close_loop(points, artefacts, desc, reference=reference, effects=tuple(effects), values=arm.values,
                           free=args.free,
-                          weights=weights, settings=settings, families_=families, progress=progress)
+                          weights=weights, settings=settings, families_=families)
         # the model written is loop.model_fit (every point) or else the last stage's fit: refine that one
         opts = dict(rank_tol=settings.rank_tol, outlier_threshold=settings.outlier_threshold)
         if loop.model_fit is not None:
@@ -131,13 +130,13 @@ def run(args: argparse.Namespace) -> int:
         names = {"points": str(args.points), "artefacts": str(args.artefacts), "arm": str(args.arm),
                  "reference_points": None if args.reference_points is None else str(args.reference_points)}
         write_loop_report(loop, out.dir, inputs=inputs, input_names=names, warnings=warnings)
-    print_warnings(warnings)
-    print(before_after_text(loop))
+    log_warnings(warnings)
+    log.info(before_after_text(loop))
     for sk in loop.skipped:
-        print(f"{sk.name} not offered: {sk.reason}")
-    print(loop.verdict)
+        log.info(f"{sk.name} not offered: {sk.reason}")
+    log.info(loop.verdict)
     from .loop_report import loop_model_name
     from .model_output import model_paths
-    print(f"model file: {model_paths(args.output, loop_model_name(loop))['model']} (every --arm applies it)")
-    print(f"report: {args.output / 'report.html'}; machine summary: {args.output / 'summary.json'}")
+    log.info(f"model file: {model_paths(args.output, loop_model_name(loop))['model']} (every --arm applies it)")
+    log.info(f"report: {args.output / 'report.html'}; machine summary: {args.output / 'summary.json'}")
     return 0

@@ -105,6 +105,7 @@ def summary_dict(loop: LoopResult, inputs: dict | None = None) -> dict:
         "structure_remains": bool(loop.remaining),
         "remaining_structure": [{"family": f.name, "best_regressor": t.best, "p_value_holm": a,
                                  "explained_heldout": t.explained_cv} for f, t, a in loop.remaining],
+        "built_from_residual": loop.built,
         "verdict": loop.verdict,
     })
 
@@ -305,6 +306,10 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
     sections.append(f"<h2>Verdict</h2><p>{html.escape(loop.verdict)}</p><p>Stopped: "
                     f"{html.escape(loop.stop_reason)}.</p><h2>Before and after (held-out test set)</h2>"
                     f"<pre>{html.escape(table)}</pre><img src='{img}'>")
+    if loop.built:
+        sections.append("<h2>Effects built from the residual</h2>" + _table(
+            ("effect", "family", "added", "why not"),
+            [(b["name"], b["family"], "yes" if b["added"] else "no", b["why_not_added"] or "") for b in loop.built]))
     for s in loop.stages[1:]:
         gate = loop.settings.screen_alpha / max(sum(t.identifiable for t in s.screening), 1)
         found = " (found from the residual)" if s.added.origin == "residual" else ""

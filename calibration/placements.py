@@ -17,12 +17,14 @@ from __future__ import annotations
 
 import contextlib
 import io
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from arm_model import InputError
+from arm_model._log import progress_line
 
 __all__ = ["seat_figures", "PlacementRow", "placement_study", "markdown_table"]
 
@@ -96,7 +98,7 @@ def placement_study(root: Path, arm: Path, tip_frame: str | None, out: Path, tra
     one certified distance between them)."""
     from arm_model.io import read_artefacts
     root, out = Path(root), Path(out)
-    say = progress or (lambda msg: None)
+    say = progress or progress_line(logging.getLogger(__name__))
     artefacts = root / "artefacts.toml"
     art = read_artefacts(artefacts)
     if len(art.distances) != 1:

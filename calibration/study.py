@@ -11,13 +11,14 @@
   ``n`` the number of poses (points).
 
 Runs go to local processes (:class:`concurrent.futures.ProcessPoolExecutor`) by default, or to a
-Dask cluster when a scheduler address (or a ``distributed.Client``) is given. A progress line is
-written to stderr.
+Dask cluster when a scheduler address (or a ``distributed.Client``) is given. Progress is shown by
+:class:`arm_model._log.Progress` (this module's logger: redrawn in place on a terminal, plain lines in a log
+file; silent unless logging is enabled for INFO, as under ``aacmm`` without ``--quiet``).
 """
 from __future__ import annotations
 
+import logging
 import math
-import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
@@ -25,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from arm_model import AacmmError, InputError
+from arm_model._log import Progress
 from arm_model.model import ArmModel
 
 from .calibrate import calibrate, resolve_parameters
@@ -36,35 +38,11 @@ from .solver import blas_threads
 __all__ = ["Progress", "run_tasks", "SimSource", "SynthSource", "RunSettings", "run_once", "monte_carlo",
            "MonteCarloResult", "select_measurements", "Selection", "observability_index"]
 
+log = logging.getLogger(__name__)
+
 
 # ---------------------------------------------------------------------------------------------
 # execution
-
-class Progress:
-    """A one-line progress bar on stderr: ``label [#####.....] k/n  elapsed``."""
-
-    def __init__(self, total: int, label: str = "", stream=None, enabled: bool = True, width: int = 30):
-        self.total, self.label, self.width = total, label, width
-        self.stream = stream or sys.stderr
-        self.enabled = enabled
-        self.done = 0
-        self.t0 = time.perf_counter()
-        self._draw()
-
-    def _draw(self):
-        if not self.enabled:
-            return
-        k = int(self.width * self.done / max(self.total, 1))
-        el = time.perf_counter() - self.t0
-        self.stream.write(f"\r{self.label} [{'#' * k}{'.' * (self.width - k)}] {self.done}/{self.total}  {el:.1f} s")
-        if self.done >= self.total:
-            self.stream.write("\n")
-        self.stream.flush()
-
-    def update(self, n: int = 1):
-        self.done += n
-        self._draw()
-
 
 #: seconds to wait for a Dask scheduler before giving up
 CONNECT_TIMEOUT_S = 3.0
@@ -117,7 +95,7 @@ def run_tasks(fn, items, *, scheduler=None, workers: int | None = None, progress
         workers: local processes (default: the CPU count); 1 runs in this process.
     """
     items = list(items)
-    bar = Progress(len(items), label, enabled=progress)
+    bar = Progress(len(items), label, logger=log, enabled=progress)
     out = [None] * len(items)
     if scheduler is not None:
         from distributed import Client, as_completed as dask_completed
@@ -372,7 +350,7 @@ def select_measurements(model: ArmModel, data: CalibrationData, count: int, free
     chosen = [m for m in always if m in info]
     cur = sum((info[m] for m in chosen), np.zeros((len(kept),) * 2))
     o1s, ns = [], []
-    bar = Progress(count, "selecting", enabled=progress)
+    bar = Progress(count, "selecting", logger=log, enabled=progress)
     bar.update(len(chosen))
     while len(chosen) < count:
         n_now = sum(npts[m] for m in chosen)

@@ -7,6 +7,8 @@ Family (:func:`calibration.diagnostics.families`) -> candidates (:mod:`arm_model
 * ``qN harmonics`` -> ``harmonics jN (h ...)``: :class:`~arm_model.effects.JointHarmonics` of joint N's own
   angle, harmonics 1..k for k = 1..4 (those already in the model, e.g. an eccentricity's 1 and 2, left
   out); the held-out data choose k (the smallest k within the parsimony margin of the best);
+* ``qK harmonics on jN`` -> ``harmonics jN of qK (h ...)``: the same for joint N's angle error driven by
+  joint K's angle (``JointHarmonics(source=K)``, a cross-coupling such as a cable or a counterbalance);
 * ``temperature`` / ``temperature per link`` -> ``thermal growth per link`` (each link length its own coefficient,
   :class:`~arm_model.effects.ThermalGrowth` ``per_joint``; beside a common coefficient the longest link
   keeps the common one) and ``probe thermal growth`` (:class:`~arm_model.effects.ProbeThermalGrowth`);
@@ -39,13 +41,26 @@ MAX_HARMONIC = 4
 RESIDUAL = "residual"
 
 
-def _own_harmonics(model: ArmModel, j: int) -> set[int]:
+def _harmonics_present(model: ArmModel, j: int, source: int | None = None) -> set[int]:
+    """Harmonics of joint ``source``'s angle (None: its own) that the model already holds for joint ``j``."""
     out: set[int] = set()
+    own = source is None or source == j
     for e in model.effects:
-        if isinstance(e, EncoderEccentricity) or (isinstance(e, JointHarmonics) and e.source in (None, j)):
+        if (own and isinstance(e, EncoderEccentricity)) or (
+                isinstance(e, JointHarmonics) and (e.source in (None, j) if own else e.source == source)):
             if j in e.joint_indices(model.desc):
                 out |= set(e.harmonics)
     return out
+
+
+def _harmonic_orders(present: set[int]):
+    """Harmonics 1..k (k = 1..MAX_HARMONIC) without those ``present``, each set once."""
+    seen = set()
+    for k in range(1, MAX_HARMONIC + 1):
+        hs = tuple(h for h in range(1, k + 1) if h not in present)
+        if hs and hs not in seen:
+            seen.add(hs)
+            yield hs
 
 
 def _length_joints(desc) -> list[int]:
@@ -67,17 +82,18 @@ def synthesise(family_names, model: ArmModel) -> list[Candidate]:
 
     for fam in family_names:
         m = re.fullmatch(r"q(\d+) harmonics", fam)
+        mc = re.fullmatch(r"q(\d+) harmonics on (.+)", fam)
         if m:
             j = int(m.group(1)) - 1
             jn = desc.joints[j].name
-            present = _own_harmonics(model, j)
-            seen = set()
-            for k in range(1, MAX_HARMONIC + 1):
-                hs = tuple(h for h in range(1, k + 1) if h not in present)
-                if hs and hs not in seen:
-                    seen.add(hs)
-                    add(f"harmonics {jn} (h {','.join(map(str, hs))})", JointHarmonics(joints=(j,), harmonics=hs),
-                        "joint_harmonics", jn)
+            for hs in _harmonic_orders(_harmonics_present(model, j)):
+                add(f"harmonics {jn} (h {','.join(map(str, hs))})", JointHarmonics(joints=(j,), harmonics=hs),
+                    "joint_harmonics", jn)
+        elif mc and mc.group(2) in names:
+            k, j, jn = int(mc.group(1)) - 1, names[mc.group(2)], mc.group(2)
+            for hs in _harmonic_orders(_harmonics_present(model, j, k)):
+                add(f"harmonics {jn} of q{k + 1} (h {','.join(map(str, hs))})",
+                    JointHarmonics(joints=(j,), source=k, harmonics=hs), "joint_harmonics", jn)
         elif fam in ("temperature", "temperature per link"):
             per_link = [e for e in model.effects if isinstance(e, ThermalGrowth) and e.per_joint]
             if not per_link:

@@ -3,16 +3,19 @@ paper's tables reproduced, the loop closed on its Table 2)."""
 from __future__ import annotations
 
 import argparse
+import logging
 from arm_model.cli import command_help
 from pathlib import Path
 
 from arm_model import InputError, NumericalError, read_artefacts, read_points
 from arm_model.commands import add_arm_options, arm_inputs, model_from_args, non_negative, number_in, positive
 from arm_model._output import output_folder
-from arm_model.checks import print_warnings
+from arm_model.checks import log_warnings
 from arm_model.io import check_features
 
 __all__ = ["register", "run_ring", "run_paper"]
+
+log = logging.getLogger(__name__)
 
 
 def register(sub) -> None:
@@ -95,27 +98,27 @@ def run_ring(args: argparse.Namespace) -> int:
         written = ring_report(campaign, out.dir, inputs, budgets, warnings, point_unc,
                               parameters.source if parameters is not None else None)
     s = campaign_summary(campaign)
-    print(f"ring '{campaign.feature}': {len(campaign.measurements)} measurements, "
+    log.info(f"ring '{campaign.feature}': {len(campaign.measurements)} measurements, "
           f"{sum(r.n_points for r in campaign.measurements)} points; forces from "
           f"{'signals in ' + str(args.signals) if args.signals else 'the points file'}")
     if arm.effects:
-        print("effects applied to every ball centre: " + ", ".join(e.describe() for e in arm.effects))
+        log.info("effects applied to every ball centre: " + ", ".join(e.describe() for e in arm.effects))
     for n in campaign.notes:
-        print(f"note: {n}")
-    print_warnings(warnings)
-    print(f"{'model':<12} {'mean |dD| [mm]':>15} {'reduction':>10} {'mean form [mm]':>15}")
+        log.info(f"note: {n}")
+    log_warnings(warnings)
+    log.info(f"{'model':<12} {'mean |dD| [mm]':>15} {'reduction':>10} {'mean form [mm]':>15}")
     for m, v in s.items():
-        print(f"{m:<12} {v['mean_abs_diameter_error_mm']:>15.4f} {v['diameter_error_reduction_pct']:>9.1f}% "
+        log.info(f"{m:<12} {v['mean_abs_diameter_error_mm']:>15.4f} {v['diameter_error_reduction_pct']:>9.1f}% "
               f"{v['mean_form_error_mm']:>15.4f}")
     u = [d.u for d, _ in point_unc]
     uf = [f.u for _, f in point_unc]
-    print(f"from the points' covariances (k = 1; "
+    log.info(f"from the points' covariances (k = 1; "
           f"{'parameters from ' + parameters.source if parameters is not None else 'no parameter covariance: parameters exact'}):"
           f"\n  diameter uncertainty {min(u) * 1e3:.4f} .. {max(u) * 1e3:.4f} mm; form-error uncertainty "
           f"{min(uf) * 1e3:.4f} .. {max(uf) * 1e3:.4f} mm")
     if args.u_force is None:
-        print(f"budgets: u_force = {DEFAULT_U_FORCE} N (the paper's bending sensor; set --u-force-N for yours)")
-    print(f"{len(written)} files -> {args.output}/ (report.html, summary.json, ...)")
+        log.info(f"budgets: u_force = {DEFAULT_U_FORCE} N (the paper's bending sensor; set --u-force-N for yours)")
+    log.info(f"{len(written)} files -> {args.output}/ (report.html, summary.json, ...)")
     return 0
 
 
@@ -128,13 +131,13 @@ def run_paper(args: argparse.Namespace) -> int:
         written = paper_report(out.dir, args.table2)
     s = paper_summary(table)
     bad = [f for f in s["findings"] if not f["consistent"]]
-    print(f"Table 2 ({len(table.initial)} measurements): Pearson r with the (0, 0) point: "
+    log.info(f"Table 2 ({len(table.initial)} measurements): Pearson r with the (0, 0) point: "
           + ", ".join(f"{c['force'].replace('_force_N', '')} {c['r']:.3f}" for c in s["pearson"] if c["with_reference"]))
-    print("improvement (reduction of the mean |diameter error|): "
+    log.info("improvement (reduction of the mean |diameter error|): "
           + ", ".join(f"{m.replace('_force', '')} {d['mean_abs_reduction_pct']:.1f}%" for m, d in s["improvement"].items()))
-    print(f"{len(bad)} printed figures of Tables 1 and 3 do not follow from their own terms (see findings.csv)")
+    log.info(f"{len(bad)} printed figures of Tables 1 and 3 do not follow from their own terms (see findings.csv)")
     L = s["loop"]
-    print(f"loop: residual after the FEM correction vs mean force r = {L['r_residual_force']:.3f}; series compliance "
+    log.info(f"loop: residual after the FEM correction vs mean force r = {L['r_residual_force']:.3f}; series compliance "
           f"{L['series_compliance_mm_per_N']:.4f} mm/N; LOO RMS {L['rms_before_mm']:.4f} -> {L['loo_rms_after_mm']:.4f} mm")
-    print(f"{len(written)} files -> {args.output}/")
+    log.info(f"{len(written)} files -> {args.output}/")
     return 0

@@ -38,7 +38,7 @@ def test_tip_writes_rigid_corrected_and_deflection(tmp_path, nominal, capsys):
     defl = np.array([float(r["deflection_um"]) for r in rows])
     assert_close(defl, np.linalg.norm(got - rigid, axis=1) * 1e3, atol=2e-3)
     assert [r["over_force"] for r in rows] == ["0"] * 5 + ["1"]
-    assert "flagged" in capsys.readouterr().out
+    assert "flagged" in capsys.readouterr().err          # a warning: on standard error
 
 
 def test_tip_two_channel_says_missing_component(tmp_path, capsys):

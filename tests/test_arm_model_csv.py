@@ -158,3 +158,94 @@ def test_force_signal_fast_and_located(tmp_path):
     with pytest.raises(InputError) as exc:
         read_force_signal(p)
     assert exc.value.line == 1501 and exc.value.column == "fy_N"
+
+
+# the fast block reader (cell count checked from the comma positions, text cells decoded once per run)
+# against the cell-by-cell reader: whatever the fast path accepts, the careful one reads the same;
+# whatever the careful one refuses, the fast path hands over (returns None)
+_ids = st.text(st.sampled_from("ab 1-_é,"), min_size=0, max_size=6)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(_ids, _ids, st.lists(finite, min_size=2, max_size=2)), min_size=1, max_size=25),
+       st.lists(st.sampled_from(["", "\r", " ", "x", ",", ",,"]), min_size=1, max_size=25),
+       st.sampled_from(["\n", "\r\n"]))
+def test_fast_block_agrees_with_the_careful_reader(rows, extras, eol):
+    from arm_model._csv import _fast_block
+    header = ["measurement", "feature", "a_mm", "b_mm"]
+    lines = []
+    for (m, f, v), extra in zip(rows, extras * len(rows)):
+        lines.append(",".join([m, f, *map(repr, v)]))
+        if extra in ("", "\r"):
+            lines.append(extra)                       # a blank line (kept out of the rows)
+        elif extra in (",", ",,"):
+            lines[-1] += extra                        # a wrong cell count
+    text = eol.join(lines) + eol
+    try:
+        slow = _slow_block(text, "p.csv", 2, header, [2, 3], [0, 1])
+    except InputError:
+        slow = None
+    fast = _fast_block(text.encode(), text, "p.csv", 2, header, [2, 3], [0, 1])
+    if slow is None:
+        assert fast is None
+    elif fast is not None:
+        assert fast.lines.tolist() == slow.lines.tolist()
+        np.testing.assert_array_equal(fast.numbers, slow.numbers)
+        assert fast.texts.tolist() == slow.texts.tolist()
+
+
+def test_wrong_cell_count_deep_in_a_block_is_located():
+    rows = body(2000).splitlines()
+    for k, (cells, words) in enumerate([(11, "11 cells"), (13, "13 cells")]):
+        r = list(rows)
+        c = r[1500 + k].split(",")
+        r[1500 + k] = ",".join(c[:11] if cells == 11 else c + ["0"])
+        with pytest.raises(InputError) as exc:
+            parse_points(HEADER + "\n" + "\n".join(r) + "\n", "p.csv", 7)
+        assert exc.value.line == 1502 + k and words in str(exc.value), str(exc.value)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.tuples(_ids.filter(lambda s: s.strip()), st.lists(finite, min_size=10, max_size=10)),
+                min_size=1, max_size=40), st.integers(1, 9))
+def test_points_written_and_read_back(rows, chunk):
+    """format_csv then the points reader: the same text cells, the numbers to the written decimals."""
+    ids = np.array([m.strip() for m, _ in rows], dtype=object)
+    v = np.array([x for _, x in rows])
+    names = [f"q{i}_deg" for i in range(1, 8)] + ["fx_N", "fy_N", "fz_N"]
+    cols = {"measurement": ids, "feature": np.full(len(ids), "ring", dtype=object),
+            **{k: v[:, j] for j, k in enumerate(names)}}
+    text = format_csv(cols, "%.6f", chunk=chunk)
+    assert text == format_csv(cols, "%.6f")           # chunk boundaries change nothing
+    pts = parse_points(text.decode(), "p.csv", 7)
+    assert pts.measurement.tolist() == ids.tolist() and pts.lines.tolist() == list(range(2, len(ids) + 2))
+    # half a unit of the 6th decimal, plus a few ulps (the decimal text read back, deg -> rad -> deg)
+    assert np.all(np.abs(np.rad2deg(pts.q) - v[:, :7]) <= 5e-7 + 1e-15 * np.abs(v[:, :7]))
+    assert np.all(np.abs(pts.force - v[:, 7:]) <= 5e-7 + 1e-15 * np.abs(v[:, 7:]))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.floats(-9e8, 9e8, allow_nan=False), min_size=1, max_size=300), st.sampled_from([0, 3, 6]))
+def test_fixed_format_of_large_values_equals_python(values, decimals):
+    """Values whose scaled product is near 2**53 (many within an ulp of a half): exact either way."""
+    v = np.array(values)
+    got = format_csv({"a": v}, f"%.{decimals}f", header=False).decode().splitlines()
+    want = [(f"%.{decimals}f" % x).replace("-0." + "0" * decimals, "0." + "0" * decimals) if decimals
+            else ("%.0f" % x if "%.0f" % x != "-0" else "0") for x in v]
+    assert got == want
+
+
+def test_joint_limit_tally_of_blocks_equals_the_whole(nominal):
+    from arm_model.checks import JointLimitTally, joint_limit_warning
+    desc = nominal
+    rng = np.random.default_rng(3)
+    q = np.deg2rad(rng.uniform(-175, 175, (1000, 7)))
+    lines = np.arange(2, 1002)
+    whole = joint_limit_warning(desc, q, lines, "p.csv")
+    tally = JointLimitTally(desc, "p.csv")
+    for a in range(0, 1000, 137):
+        tally.add(q[a:a + 137], lines[a:a + 137])
+    assert tally.warning() == whole
+    # hand count: j2 is limited to +-150 deg
+    assert f"j2 ({int(np.sum(np.abs(np.rad2deg(q[:, 1])) > 150))}," in whole.message
+    assert JointLimitTally(desc, "p.csv").warning() is None

@@ -1,13 +1,12 @@
 """Studies: executors (local processes, Dask), Monte Carlo aggregation, the observability index."""
 from __future__ import annotations
 
-import io
 import math
 
 import numpy as np
 import pytest
 
-from calibration.study import (Progress, RunSettings, SynthSource, monte_carlo, observability_index, run_tasks)
+from calibration.study import (RunSettings, SynthSource, monte_carlo, observability_index, run_tasks)
 from arm_model.sim.quick import SynthSpec
 from calibration import Weights
 from conftest import assert_close
@@ -20,15 +19,6 @@ def _square(x):
 def test_run_tasks_in_processes_keeps_order():
     assert run_tasks(_square, range(7), workers=2, progress=False) == [x * x for x in range(7)]
     assert run_tasks(_square, [3], workers=2, progress=False) == [9]
-
-
-def test_progress_line():
-    buf = io.StringIO()
-    bar = Progress(4, "runs", stream=buf, width=8)
-    for _ in range(4):
-        bar.update()
-    text = buf.getvalue()
-    assert "runs [........] 0/4" in text and "runs [########] 4/4" in text and text.endswith("\n")
 
 
 def test_observability_index_by_hand():

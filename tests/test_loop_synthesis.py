@@ -1,45 +1,57 @@
 """Beyond the library: an effect hidden in the truth that the library does not hold leaves a significant
 structure family; the loop builds the effect from it, cross-validates it like a library candidate, adds it
 (reported as found from the residual), recovers its size within 3 sigma, and brings the held-out RMS within
-1.3 times that of the same campaign without the effect."""
+1.3 times that of the same campaign without the effect.
+
+The loop may reach the hidden effect through another parameterization (a library effect first, then the
+rest from the residual: eccentricity j6 with harmonics j6 (h 3) for a third harmonic, the anisotropic probe
+compliance with the matrix's other terms). So the truth is put in the fit's terms independently of the
+loop: the hidden effect's ball displacement at the fit's own points (the true model, hidden parameters on
+minus off), least squares on the columns of the added parameters (the fitted model's evaluator, central
+differences; the effects are linear in their parameters at these sizes). The added effects must reproduce
+it (5 % RMS left at most) and the fitted values must lie in the 3-sigma region of the fit's covariance
+around it (chi-square of all added free parameters, 99.73 %)."""
 from __future__ import annotations
 
 from functools import lru_cache
 
 import numpy as np
 import pytest
+from scipy import stats
 
 from arm_model import load_description
 from arm_model.effects import (ApproachOffset, EncoderEccentricity, JointHarmonics, LateralCompliance,
                                ProbeComplianceMatrix)
 from arm_model.model import ArmModel
 from arm_model.sim import campaign_from_dict, simulate
-from calibration.candidates import Candidate
-from calibration.data import Weights
-from calibration.loop import close_loop
 from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
+from calibration.candidates import Candidate
+from calibration.data import Weights, make_data
+from calibration.loop import close_loop
 from calibration.synthesis import RESIDUAL, synthesise
 from conftest import NOMINAL
 
 NOISE = 2e-6
-SPEC = SynthSpec(ballbars=10, ballbar_points=4, seats=4, articulations=8, spheres=5, sphere_points=8, noise=NOISE)
+#: 280 points, 26 measurements: enough approach directions and forces that the loop's choices do not hang on
+#: one draw of the campaign (seeds 1-5 measured, docs/close-loop.md)
+SPEC = SynthSpec(ballbars=12, ballbar_points=5, seats=4, articulations=10, spheres=10, sphere_points=12,
+                 noise=NOISE)
 
-#: case -> (hidden effects, true values, force [N], expected added names in order)
+#: case -> (hidden effects, true values, force [N], kind of the effect built from the residual)
 CASES = {
     "wrist third harmonic": ((JointHarmonics(joints=(5,), harmonics=(3,)),),
-                             {"j6.harm3_cos": 3.5e-5, "j6.harm3_sin": 6.0e-5}, 0.0, ["harmonics j6 (h 1,2,3)"]),
+                             {"j6.harm3_cos": 3.5e-5, "j6.harm3_sin": 6.0e-5}, 0.0, "harmonics j6"),
     "elbow lateral compliance": ((LateralCompliance(joints=(3,)),),
                                  {"j4.lateral_compliance_x": 1e-5, "j4.lateral_compliance_y": -8e-6}, 0.0,
-                                 ["lateral compliance j4"]),
+                                 "lateral compliance j4"),
     "anisotropic probe": ((ProbeComplianceMatrix(),),
                           {"probe.dcompliance_xx": 3e-6, "probe.dcompliance_yy": -3e-6, "probe.dcompliance_xy": 4e-6},
-                          3.0, ["probe compliance matrix"]),
+                          3.0, "probe compliance matrix"),
     "lobing": ((ApproachOffset(),), {"approach.dx_uy": 6e-6, "approach.dy_ux": -4e-6, "approach.dz_ux": 5e-6}, 0.0,
-               ["approach offset"]),
+               "approach offset"),
     "library and residual": ((EncoderEccentricity(joints=(1,), harmonics=(1, 2)), ApproachOffset()),
                              {"j2.ecc1_cos": 3e-5, "j2.ecc1_sin": 5e-5, "approach.dx_uy": 6e-6,
-                              "approach.dy_ux": -4e-6, "approach.dz_ux": 5e-6}, 0.0,
-                             ["eccentricity j2", "approach offset"]),
+                              "approach.dy_ux": -4e-6, "approach.dz_ux": 5e-6}, 0.0, "approach offset"),
 }
 
 
@@ -55,43 +67,101 @@ def _truth(effects, values, seed=1):
 
 @lru_cache(maxsize=None)
 def run(case: str | None, force: float = 0.0):
-    """The loop on a small synthetic campaign (152 points, 19 measurements) with ``case`` hidden (None:
-    the same campaign, same base errors, without it)."""
+    """(truth model, true p, the loop) on a synthetic campaign with ``case`` hidden (None: the same campaign,
+    same base errors, without it)."""
     effects, values, force = CASES[case][:3] if case else ((), {}, force)
     nominal, truth, p = _truth(effects, values)
     camp = make_campaign(truth, SynthSpec(**{**SPEC.__dict__, "force": force}), seed=1, p_true=p)
-    return close_loop(camp.points, camp.artefacts, nominal, weights=Weights(probe=NOISE), cv_top=2)
+    return truth, p, close_loop(camp.points, camp.artefacts, nominal, weights=Weights(probe=NOISE), cv_top=2)
 
 
-def _within_3_sigma(result, values, names):
-    checked = 0
+def hidden_in_fit_terms(model: ArmModel, names, truth: ArmModel, p_true, hidden, q, w, aux=(None, None)):
+    """The hidden parameters ``hidden`` of ``(truth, p_true)`` in the terms of the parameters ``names`` of
+    ``model``: the values that reproduce the hidden effects' ball displacement at the points (q, w) (least
+    squares over the points, columns by central differences of 1e-6 SI), and the RMS fraction of that
+    displacement they leave unexplained. ``aux``: the truth's and the model's aux inputs."""
+    p_off = np.array(p_true, dtype=float)
+    p_off[[truth.spec.index(n) for n in hidden]] = 0.0
+    d = (truth.ball_centres(q, w, p_true, aux[0]) - truth.ball_centres(q, w, p_off, aux[0])).ravel()
+    cols = []
     for n in names:
-        if n not in result.free:            # held: not identifiable (e.g. the approach offset's trace)
-            continue
-        v, u = result.value(n), result.uncertainty(n)
-        assert abs(v - values.get(n, 0.0)) <= 3 * u, f"{n}: {v:.4g} +- {u:.2g}, true {values.get(n, 0.0):.4g}"
-        checked += 1
-    assert checked
+        dp = np.zeros(model.spec.size)
+        dp[model.spec.index(n)] = 1e-6
+        cols.append((model.ball_centres(q, w, dp, aux[1]) - model.ball_centres(q, w, -dp, aux[1])).ravel() / 2e-6)
+    a = np.column_stack(cols)
+    theta = np.linalg.lstsq(a, d, rcond=None)[0]
+    return theta, float(np.linalg.norm(a @ theta - d) / np.linalg.norm(d))
+
+
+def _within_3_sigma(result, truth_values: dict):
+    """The fitted values of the free names of ``truth_values`` (held ones: not identifiable, e.g. the thermal
+    rate of a link of zero length) inside the 3-sigma region of the fit's covariance around the truth
+    (chi-square, 99.73 %)."""
+    names = [n for n in truth_values if n in result.free]
+    assert names, (list(truth_values), result.free)
+    idx = [result.free.index(n) for n in names]
+    d = np.array([result.value(n) - truth_values[n] for n in names])
+    chi2 = float(d @ np.linalg.solve(result.cov[np.ix_(idx, idx)], d))
+    limit = stats.chi2.ppf(stats.chi2.cdf(9.0, 1), len(names))
+    z = ", ".join(f"{n} {result.value(n):.4g} +- {result.uncertainty(n):.2g} (truth {truth_values[n]:.4g})"
+                  for n in names)
+    assert chi2 <= limit, f"chi2 {chi2:.1f} > {limit:.1f}: {z}"
 
 
 @pytest.mark.parametrize("case", list(CASES))
 def test_loop_builds_adds_and_recovers_the_hidden_effect(case):
-    effects, values, force, expected = CASES[case]
-    loop = run(case)
-    names = [c.name for c in loop.added]
-    assert names[-len(expected):] == expected, loop.verdict
-    assert [names.index(e) for e in expected] == sorted(names.index(e) for e in expected)     # in this order
+    effects, values, force, kind = CASES[case]
+    truth, p, loop = run(case)
     final = loop.final.result
     desc = final.model.desc
-    built = [c for c in loop.added if c.name in expected and c.origin == RESIDUAL]
-    assert built
-    for c in built:                 # the size of what was built from the residual
+    built = [c for c in loop.added if c.origin == RESIDUAL]
+    assert [c.name for c in built if c.name.startswith(kind)], loop.verdict
+    for c in built:
         assert f"{c.name} (found from the residual)" in loop.verdict
-        _within_3_sigma(final, values, c.param_names(desc))
-    clean = run(None, force)
+    names = [n for c in loop.added for n in c.param_names(desc) if n in final.free]
+    pts = final.data.points
+    aux = (make_data(pts, final.data.artefacts, truth).aux, final.data.aux)
+    theta, unexplained = hidden_in_fit_terms(final.model, names, truth, p, list(values), pts.q, final.data.wrench, aux)
+    assert unexplained <= 0.05, ([c.name for c in loop.added], unexplained)
+    _within_3_sigma(final, dict(zip(names, theta)))
+    clean = run(None, force)[2]
     assert loop.final.heldout["rms_um"] <= 1.3 * clean.final.heldout["rms_um"], (
         loop.final.heldout["rms_um"], clean.final.heldout["rms_um"])
     assert not loop.remaining, loop.verdict
+
+
+def test_truth_in_fit_terms_maps_one_parameterization_onto_another(nominal):
+    """The reference of the test above, against hand-derived values: a diagonal probe compliance matrix
+    (xx 3, yy -3 um/N) seen by an anisotropic probe compliance (x, y) is the same numbers; a third harmonic
+    seen by harmonics 1-3 is harm3 itself and zeros; a lateral compliance is not a joint compliance."""
+    from arm_model.effects import JointCompliance, ProbeCompliance
+
+    rng = np.random.default_rng(2)
+    q = rng.uniform(-2, 2, (40, nominal.n_joints))
+    w = np.column_stack([rng.normal(0, 3, (40, 3)), np.zeros((40, 3))])
+    truth = ArmModel(nominal, (ProbeComplianceMatrix(terms=("xx", "yy")),))
+    p = truth.spec.vector({"probe.dcompliance_xx": 3e-6, "probe.dcompliance_yy": -3e-6})
+    theta, left = hidden_in_fit_terms(ArmModel(nominal, (ProbeCompliance(anisotropic=True),)),
+                                      ["probe.dcompliance_x", "probe.dcompliance_y"], truth, p,
+                                      ["probe.dcompliance_xx", "probe.dcompliance_yy"], q, w)
+    np.testing.assert_allclose(theta, [3e-6, -3e-6], rtol=1e-6)
+    assert left < 1e-3          # not 0: the elastic joints rotate the ball (second order in the compliance)
+    truth = ArmModel(nominal, (JointHarmonics(joints=(5,), harmonics=(3,)),))
+    p = truth.spec.vector({"j6.harm3_cos": 3.5e-5, "j6.harm3_sin": 6e-5})
+    fitted = ArmModel(nominal, (JointHarmonics(joints=(5,), harmonics=(1, 2, 3)),))
+    theta, left = hidden_in_fit_terms(fitted, list(fitted.spec.names[fitted.base_size:]), truth, p,
+                                      ["j6.harm3_cos", "j6.harm3_sin"], q, w)
+    np.testing.assert_allclose(theta, [0, 0, 0, 0, 3.5e-5, 6e-5], atol=1e-10)
+    assert left < 1e-3          # not 0: the chain is second order in the angle error
+    truth = ArmModel(nominal, (LateralCompliance(joints=(3,)),))
+    p = truth.spec.vector({"j4.lateral_compliance_x": 1e-5})
+    fitted = ArmModel(nominal, (JointCompliance(joints=(3,)),))
+    from arm_model import PinocchioArm
+    from arm_model.model import AuxData
+    tg, tc = PinocchioArm(nominal).torques(q, w)
+    _, left = hidden_in_fit_terms(fitted, list(fitted.spec.names[fitted.base_size:]), truth, p,
+                                  ["j4.lateral_compliance_x"], q, w, (None, AuxData(np.full(40, 20.0), tg, tc)))
+    assert left > 0.5
 
 
 def test_two_links_growing_at_different_rates_over_10_K():
@@ -118,7 +188,7 @@ def test_two_links_growing_at_different_rates_over_10_K():
     # in the model's terms: the common rate is the longest link's (j3), each other link its own minus it
     truth = {"links.thermal_alpha": 1.2e-5, "j5.thermal_alpha": 1.1e-5}
     truth.update({f"j{i}.thermal_alpha": -1.2e-5 for i in (1, 2, 4, 7)})
-    _within_3_sigma(final, truth, list(truth))
+    _within_3_sigma(final, truth)
     _, clean = loop(False)
     assert hot.final.heldout["rms_um"] <= 1.3 * clean.final.heldout["rms_um"]
 

@@ -273,7 +273,7 @@ def test_close_loop_with_one_sphere_measurement(small, tmp_path, capsys):
 
 def test_ring_flags_over_range_forces(ring_files, tmp_path, capsys):
     out = tmp_path / "o"
-    code, text, _ = run(["ring", ring_files / "points.csv", RING / "artefacts.toml", "--arm", NOMINAL,
+    code, _, text = run(["ring", ring_files / "points.csv", RING / "artefacts.toml", "--arm", NOMINAL,
                          "-o", out], capsys)
     assert code == 0
     assert "warning: 1 point(s) with a force over the probe's calibrated range (13 N; largest 40" in text
@@ -286,12 +286,12 @@ def test_ring_flags_over_range_forces(ring_files, tmp_path, capsys):
 
 def test_calibrate_and_close_loop_flag_over_range_forces(small, tmp_path, capsys):
     base = [small / "points.csv", small / "artefacts.toml", "--arm", NOMINAL]
-    code, text, _ = run(["calibrate", *base, "--no-plots", "-o", tmp_path / "cal"], capsys)
+    code, _, text = run(["calibrate", *base, "--no-plots", "-o", tmp_path / "cal"], capsys)
     assert code == 0 and "warning: 1 point(s) with a force over the probe's calibrated range" in text
     s = json.loads((tmp_path / "cal" / "summary.json").read_text())
     assert [w["lines"] for w in s["warnings"]] == [[6]]
     assert "<h2>Warnings</h2>" in (tmp_path / "cal" / "report.html").read_text()
-    code, text, _ = run(["close-loop", *base, "--max-effects", "0", "--folds", "2", "--quiet",
+    code, _, text = run(["close-loop", *base, "--max-effects", "0", "--folds", "2", "--quiet",
                          "-o", tmp_path / "loop"], capsys)
     assert code == 0 and "warning: 1 point(s) with a force over the probe's calibrated range" in text
     s = json.loads((tmp_path / "loop" / "summary.json").read_text())
@@ -308,7 +308,7 @@ def test_joint_angles_beyond_the_limits_are_warned(tmp_path, capsys):
     lines[2] = ",".join(cells)
     pts = tmp_path / "p.csv"
     pts.write_text("\n".join(lines) + "\n")
-    code, text, _ = run(["tip", pts, "--arm", NOMINAL, "-o", tmp_path / "t.csv"], capsys)
+    code, _, text = run(["tip", pts, "--arm", NOMINAL, "-o", tmp_path / "t.csv"], capsys)
     assert code == 0 and "beyond the arm's declared limits: j2 (1" in text and "line 3" in text
     assert len((tmp_path / "t.csv").read_text().splitlines()) == 4        # used all the same
 

@@ -155,11 +155,11 @@ def test_bad_toml_and_empty_campaign(tmp_path):
 
 def test_cli_writes_and_summarises(tmp_path, capsys):
     c = _write(tmp_path, 'seed = 3\nsensor = "two-channel"\n[[task]]\nkind = "ring"\npoints_per_row = 4\n')
-    assert main(["simulate", str(c), "-o", str(tmp_path / "out"), "-q"]) == 0
+    assert main(["simulate", str(c), "-o", str(tmp_path / "out")]) == 0
     out = capsys.readouterr().out
     assert "12 points in 1 measurements" in out and "two-channel" in out and "truth check" in out
     assert (tmp_path / "out" / "signals" / "ring-01.csv").exists()
-    assert main(["simulate", str(c), "-o", str(tmp_path / "out2"), "-q", "--no-signals", "--seed", "8"]) == 0
+    assert main(["simulate", str(c), "-o", str(tmp_path / "out2"), "--no-signals", "--seed", "8"]) == 0
     assert not (tmp_path / "out2" / "signals").exists()
     assert "seed 8" in capsys.readouterr().out
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import logging
 import signal
 import tempfile
 import time
@@ -15,7 +16,7 @@ import numpy as np
 from arm_model import InputError, NumericalError, check_features, read_artefacts, read_points
 from arm_model.commands import add_arm_options, arm_inputs, model_from_args, port, positive
 from arm_model._output import output_file
-from arm_model.checks import point_warnings, print_warnings
+from arm_model.checks import point_warnings, log_warnings
 from arm_model.uncertainty_cli import add_input_options
 
 from ._errors import ViewerError
@@ -23,6 +24,8 @@ from .placement import place_features
 from .residuals import read_residuals, residual_origins
 
 __all__ = ["register", "run"]
+
+log = logging.getLogger(__name__)
 
 
 def register(sub) -> None:
@@ -186,9 +189,9 @@ def _run(args, inputs, outputs, tmp) -> int:
             _screenshot(view, args, tmp["screenshot"])
         outputs.close()                     # publish the files now, before serving
         if args.html is not None:
-            print(f"page -> {args.html}")
+            log.info(f"page -> {args.html}")
         if args.screenshot is not None:
-            print(f"screenshot -> {args.screenshot}")
+            log.info(f"screenshot -> {args.screenshot}")
         if serve:
             _serve(view, args.open_seconds)
     return 0
@@ -209,35 +212,35 @@ def _ellipsoids(arm, sel, args, view) -> None:
         args.ellipsoid_scale = nice_scale(semi, ELLIPSOID_TARGET_M)
     view.show_ellipsoids(res.centres, res.cov, args.ellipsoid_scale)
     u = np.sqrt(np.mean(res.u ** 2, axis=0)) * 1e6
-    print(f"uncertainty of the corrected centres, RMS over the {len(sel)} point(s): u_x {u[0]:.3f}, u_y {u[1]:.3f}, "
+    log.info(f"uncertainty of the corrected centres, RMS over the {len(sel)} point(s): u_x {u[0]:.3f}, u_y {u[1]:.3f}, "
           f"u_z {u[2]:.3f} um (parameters: {res.sources['parameters']})")
 
 
 def _report(arm, sel, centres, d_um, shown, wrench, args, view, notes) -> None:
     desc = arm.desc
-    print(f"{len(sel)} point(s) of {sel.path}" + (f", measurement '{args.measurement}'" if args.measurement else ""))
+    log.info(f"{len(sel)} point(s) of {sel.path}" + (f", measurement '{args.measurement}'" if args.measurement else ""))
     for line in view.legend:
-        print("  " + line)
+        log.info("  " + line)
     if wrench is None:
-        print("no force columns: no deflection (the arrows have zero length)")
+        log.info("no force columns: no deflection (the arrows have zero length)")
     elif sel.force_kind == "two-channel":
-        print("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not measured and "
+        log.info("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not measured and "
               "is taken as zero")
     if arm.effects:
-        print("effects applied to the ball centres: " + ", ".join(e.describe() for e in arm.effects)
+        log.info("effects applied to the ball centres: " + ", ".join(e.describe() for e in arm.effects)
               + " (the arm is drawn with its description's geometry)")
     if len(shown) == 1:
         i = shown[0]
         line = "" if sel.lines is None else f", line {sel.lines[i]}"
-        print(f"point {i + 1}: measurement '{sel.measurement[i]}'{line}; ball centre (mm) "
+        log.info(f"point {i + 1}: measurement '{sel.measurement[i]}'{line}; ball centre (mm) "
               + ", ".join(f"{v:.4f}" for v in centres[i] * 1e3) + f"; deflection {d_um[i]:.2f} um, drawn "
               f"{d_um[i] * args.scale / 1e3:.1f} mm long")
     else:
-        print(f"animated through {len(shown)} points at {args.fps:g} per second; deflection {d_um.min():.2f} to "
+        log.info(f"animated through {len(shown)} points at {args.fps:g} per second; deflection {d_um.min():.2f} to "
               f"{d_um.max():.2f} um")
-    print_warnings(point_warnings(desc, sel))
+    log_warnings(point_warnings(desc, sel))
     for note in notes:
-        print("note: " + note)
+        log.info("note: " + note)
 
 
 def _screenshot(view, args, out_png) -> None:
@@ -255,8 +258,9 @@ def _serve(view, seconds: float | None) -> None:
 
     previous = signal.signal(signal.SIGTERM, stop)
     try:
+        # the address is the command's result, not a message: printed even with --quiet
         print(f"meshcat server: {view.url}", flush=True)
-        print("serving " + (f"for {seconds:g} s" if seconds else "until Ctrl-C"), flush=True)
+        log.info("serving " + (f"for {seconds:g} s" if seconds else "until Ctrl-C"))
         end = None if seconds is None else time.monotonic() + seconds
         try:
             while end is None or time.monotonic() < end:
@@ -265,6 +269,6 @@ def _serve(view, seconds: float | None) -> None:
                 time.sleep(0.2)
         except KeyboardInterrupt:
             pass
-        print("server stopped", flush=True)
+        log.info("server stopped")
     finally:
         signal.signal(signal.SIGTERM, previous)

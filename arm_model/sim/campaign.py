@@ -65,7 +65,12 @@ _S = {
               "probe_error": ("length", 20e-6, None), "errors": ("table", None, None),
               "eccentricity": ("table", None, None), "joint_compliance": ("table", None, None),
               "thermal": ("table", None, None), "probe_compliance": ("table", None, None),
-              "force_sensor": ("table", None, None), "harmonics": ("table", None, None)},
+              "force_sensor": ("table", None, None), "harmonics": ("table", None, None),
+              "lateral_compliance": ("table", None, None), "approach_offset": ("table", None, None)},
+    "lateral_compliance": {"joints": ("names", None, None), "stiffness_x": ("stiffness", None, -1),
+                           "stiffness_y": ("stiffness", None, -1), "gravity": ("bool", True, None),
+                           "contact": ("bool", True, None)},
+    "approach_offset": {f"d{a}_u{b}": ("length", 0.0, None) for a in "xyz" for b in "xyz"},
     "harmonics": {"joint": ("text", None, None), "of": ("text", None, None), "harmonic": ("count", None, None),
                   "amplitude": ("angle", None, None), "phase": ("angle", 0.0, None)},
     "eccentricity": {"joint": ("text", None, None), "amplitude": ("angle", None, None),
@@ -76,7 +81,9 @@ _S = {
     "thermal": {"joints": ("names", None, None), "alpha": ("expansion", None, -1),
                 "probe_alpha": ("expansion", 0.0, None)},
     "probe_compliance": {"bending": ("compliance", None, None), "bending_x": ("compliance", None, None),
-                         "bending_y": ("compliance", None, None), "axial": ("compliance", None, None)},
+                         "bending_y": ("compliance", None, None), "axial": ("compliance", None, None),
+                         "coupling_xy": ("compliance", 0.0, None), "coupling_xz": ("compliance", 0.0, None),
+                         "coupling_yz": ("compliance", 0.0, None)},
     "force_sensor": {"gain": ("ratio", (0.0, 0.0, 0.0), 3), "offset": ("force", (0.0, 0.0, 0.0), 3),
                      "cross_talk": ("matrix", None, None)},
     "noise": {"encoder_resolution": ("angle", 0.0, None), "encoder_noise": ("angle", 0.0, None),
@@ -227,6 +234,36 @@ def _harmonics(ctx, raw, desc) -> list[dict]:
                             tbl, "harmonic")
         rows.append(e)
     return rows
+
+
+def _given_key(raw: dict, base: str) -> str:
+    """The key of ``raw`` (as written, with its unit suffix) whose base name is ``base``."""
+    return next((k for k in raw if k == base or (_split(k) or ("",))[0] == base), base)
+
+
+#: largest approach (lobing) offset per unit stylus component [m] a campaign may hide
+APPROACH_MAX = 1e-3
+
+
+def _check_compliance_matrix(ctx, e: dict, desc, tbl, raw: dict) -> None:
+    """The true probe compliance as a symmetric 3x3 matrix (probe frame: the true bending x, y and axial
+    compliance on the diagonal, declared where not given; the coupling terms off it) must be positive
+    semi-definite: a probe does not move against the force."""
+    declared = desc.probe.compliance
+    cx = e["bending_x"] if e["bending_x"] is not None else e["bending"]
+    cy = e["bending_y"] if e["bending_y"] is not None else e["bending"]
+    diag = [declared[0] if cx is None else cx, declared[1] if cy is None else cy,
+            declared[2] if e["axial"] is None else e["axial"]]
+    c = np.diag(diag)
+    for (a, b), key in (((0, 1), "coupling_xy"), ((0, 2), "coupling_xz"), ((1, 2), "coupling_yz")):
+        c[a, b] = c[b, a] = e[key]
+    low = float(np.linalg.eigvalsh(c)[0])
+    if low < -1e-9 * max(float(np.abs(c).max()), 1e-12):
+        bad = max(("coupling_xy", "coupling_xz", "coupling_yz"), key=lambda k: abs(e[k]))
+        raise ctx.error(f"the true probe compliance matrix (diagonal {', '.join(f'{v * 1e6:.4g}' for v in diag)} "
+                        f"um/N, the declared one where not given) with these coupling terms is not positive "
+                        f"semi-definite (smallest eigenvalue {low * 1e6:.3g} um/N): a coupling term must be "
+                        "smaller than the geometric mean of its two diagonal terms", tbl, _given_key(raw, bad))
 
 
 class _Ctx:
@@ -401,7 +438,8 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
             rows.append(e)
         truth["eccentricity"] = rows
     truth["harmonics"] = _harmonics(ctx, raw_truth.get("harmonics"), desc)
-    for name in ("joint_compliance", "thermal", "probe_compliance", "force_sensor"):
+    for name in ("joint_compliance", "thermal", "probe_compliance", "force_sensor", "lateral_compliance",
+                 "approach_offset"):
         if raw_truth.get(name) is None:
             truth[name] = None
             continue
@@ -419,15 +457,43 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
             if name == "joint_compliance" and min(vals) <= 0:
                 raise ctx.error("stiffness must be > 0", tbl, key)
             e[key] = tuple(vals) * (len(e["indices"]) if len(vals) == 1 else 1)
+        if name == "lateral_compliance":
+            names = e["joints"] or desc.joint_names
+            e["indices"] = tuple(_joint_index(ctx, desc, n, tbl, "joints") for n in names)
+            if len(set(e["indices"])) != len(e["indices"]):
+                raise ctx.error("a joint is named twice", tbl, "joints")
+            if e["stiffness_x"] is None and e["stiffness_y"] is None:
+                raise ctx.error("'lateral_compliance' needs 'stiffness_x_<unit>' and/or 'stiffness_y_<unit>' "
+                                "(about the joint frame's x and y axes)", tbl)
+            if not (e["gravity"] or e["contact"]):
+                raise ctx.error("'gravity' and 'contact' are both false: the compliance would carry no load", tbl)
+            for key in ("stiffness_x", "stiffness_y"):
+                vals = e[key]
+                if vals is None:
+                    e[key] = (None,) * len(e["indices"])
+                    continue
+                if len(vals) not in (1, len(e["indices"])):
+                    raise ctx.error(f"'{key}' has {len(vals)} values for {len(e['indices'])} joints", tbl,
+                                    _given_key(raw_truth[name], key))
+                if min(vals) <= 0:
+                    raise ctx.error(f"'{key}' must be > 0", tbl, _given_key(raw_truth[name], key))
+                e[key] = tuple(vals) * (len(e["indices"]) if len(vals) == 1 else 1)
+        if name == "approach_offset":
+            for key, v in e.items():
+                if abs(v) > APPROACH_MAX:
+                    raise ctx.error(f"'{key}' is {v * 1e3:g} mm: an approach (lobing) offset must be within "
+                                    f"+-{APPROACH_MAX * 1e3:g} mm", tbl, _given_key(raw_truth[name], key))
         if name == "probe_compliance":
             if e["bending"] is not None and (e["bending_x"] is not None or e["bending_y"] is not None):
                 raise ctx.error("give 'bending' or 'bending_x'/'bending_y', not both", tbl)
-            if all(e[k] is None for k in ("bending", "bending_x", "bending_y", "axial")):
-                raise ctx.error("probe_compliance needs the true 'bending_<unit>' (or bending_x/_y) "
-                                "and/or 'axial_<unit>'", tbl)
+            if all(e[k] is None for k in ("bending", "bending_x", "bending_y", "axial")) and \
+                    not any(e[f"coupling_{a}"] for a in ("xy", "xz", "yz")):
+                raise ctx.error("probe_compliance needs the true 'bending_<unit>' (or bending_x/_y), "
+                                "'axial_<unit>' and/or a coupling term 'coupling_xy_<unit>' (xz, yz)", tbl)
             for k in ("bending", "bending_x", "bending_y", "axial"):
                 if e[k] is not None and e[k] < 0:
                     raise ctx.error(f"'{k}' must not be negative", tbl, k)
+            _check_compliance_matrix(ctx, e, desc, tbl, raw_truth[name])
         if name == "force_sensor":
             if e["cross_talk"] is None:
                 e["cross_talk"] = np.zeros((3, 3))

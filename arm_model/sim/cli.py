@@ -2,13 +2,14 @@
 from __future__ import annotations
 
 import argparse
-import sys
+import logging
 import time
 from ..cli import command_help
 from pathlib import Path
 
 import numpy as np
 
+from .._log import PROGRESS
 from .._output import output_folder
 from ..commands import seed
 from .campaign import load_campaign
@@ -16,6 +17,8 @@ from .run import (ARTEFACTS_FILE, POINTS_FILE, REFERENCE_FILE, SIGNALS_DIR, TRUT
                   simulate)
 
 __all__ = ["register", "run", "summary"]
+
+log = logging.getLogger(__name__)
 
 
 def register(sub) -> None:
@@ -33,7 +36,6 @@ def register(sub) -> None:
                    help="output folder (created if needed; files are replaced atomically, never an input)")
     p.add_argument("--seed", type=seed, default=None, help="random seed (default: the campaign's 'seed')")
     p.add_argument("--no-signals", action="store_true", help="do not write the force-signal files")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress messages (the summary is printed)")
     p.set_defaults(func=run)
 
 
@@ -79,25 +81,21 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     campaign = load_campaign(args.campaign)
     with output_folder(args.output, campaign.inputs, "simulate") as out:
-        result, written = _simulate(args, campaign, out, t0)
-    print(summary(result, time.perf_counter() - t0))
+        result, written = _simulate(args, campaign, out)
+    log.info(summary(result, time.perf_counter() - t0))
     written = [out.published(p) for p in written]
     n_sig = sum(1 for p in written if p.parent.name == SIGNALS_DIR)
-    print(f"wrote {args.output}/: " + ", ".join(p.name for p in written if p.parent.name != SIGNALS_DIR)
+    log.info(f"wrote {args.output}/: " + ", ".join(p.name for p in written if p.parent.name != SIGNALS_DIR)
           + (f", {n_sig} signal file(s) in {SIGNALS_DIR}/" if n_sig else ""))
     return 0
 
 
-def _simulate(args, campaign, out, t0):
+def _simulate(args, campaign, out):
     if args.no_signals:
         from dataclasses import replace
         campaign = replace(campaign, signals=dict(campaign.signals, enabled=False))
 
-    def progress(msg: str) -> None:
-        if not args.quiet:
-            print(f"[{time.perf_counter() - t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
-
-    result = simulate(campaign, seed=args.seed, progress=progress)
+    result = simulate(campaign, seed=args.seed)
     written = result.write(out.dir, campaign.inputs)
-    progress(f"{len(written)} files written to {args.output}")
+    log.info(f"{len(written)} files written to {args.output}", extra=PROGRESS)
     return result, written

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import io
+import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +24,7 @@ from .campaign import Campaign
 from .ik import IKTargets, ball_jacobian, solve_ik
 from .operator import OperatorDraw, draw_operator, force_signal, measurement_slices
 from .truth import Truth, build_truth, si_key
+from .._log import progress_line
 
 __all__ = ["SimResult", "simulate", "TRUTH_HEADER", "POINTS_FILE", "REFERENCE_FILE", "ARTEFACTS_FILE",
            "TRUTH_FILE", "TRUTH_POINTS_FILE", "SIGNALS_DIR"]
@@ -140,7 +142,9 @@ def _plain(v):
 
 _SETTING_UNITS = {"amplitude": "rad", "phase": "rad", "amplitude2": "rad", "phase2": "rad",
                   "stiffness": "Nm_per_rad", "alpha": "per_K", "bending_x": "m_per_N", "bending_y": "m_per_N",
-                  "axial": "m_per_N", "offset": "N", "probe_alpha": "per_K"}
+                  "axial": "m_per_N", "offset": "N", "probe_alpha": "per_K", "stiffness_x": "Nm_per_rad",
+                  "stiffness_y": "Nm_per_rad", "coupling_xy": "m_per_N", "coupling_xz": "m_per_N",
+                  "coupling_yz": "m_per_N", **{f"d{a}_u{b}": "m" for a in "xyz" for b in "xyz"}}
 
 
 def _with_units(d):
@@ -196,9 +200,9 @@ def _x_directions(plan: Plan, force: np.ndarray, rng) -> np.ndarray:
 
 def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimResult:
     """Simulate ``campaign`` (seed: the campaign's unless given). ``progress``: optional callable
-    taking a message, called at each stage. Raises :class:`~arm_model.NumericalError` if a point
+    taking a message, called at each stage (default: a progress record of this module's logger). Raises :class:`~arm_model.NumericalError` if a point
     cannot be reached or the truth check fails."""
-    say = progress or (lambda msg: None)
+    say = progress or progress_line(logging.getLogger(__name__))
     seed = campaign.seed if seed is None else int(seed)
     if seed != campaign.seed:
         from dataclasses import replace

@@ -16,12 +16,17 @@ import numpy as np
 from .._errors import NumericalError
 from ..chain import NUMPY_OPS, ball_in_last_frame, chain_point, elastic_displacement, probe_lever
 from ..description import ArmDescription
-from ..effects import (EncoderEccentricity, ForceSensorError, Geometry, JointCompliance, JointHarmonics,
-                       ModelInputs, ProbeThermalGrowth, ThermalGrowth)
+from ..effects import (ApproachOffset, EncoderEccentricity, ForceSensorError, Geometry, JointCompliance,
+                       JointHarmonics, LateralCompliance, ModelInputs, ProbeComplianceMatrix, ProbeThermalGrowth,
+                       ThermalGrowth)
 from ..model import ArmModel, AuxData
 from ..params import apply_params, param_spec
 
-__all__ = ["Truth", "build_truth", "si_key"]
+__all__ = ["Truth", "build_truth", "si_key", "POSE_EFFECTS"]
+
+#: effects whose change of the geometry depends on the pose and the wrench (applied by :meth:`Truth.pose` at
+#: the true angles, not by :meth:`Truth.geometry`)
+POSE_EFFECTS = (LateralCompliance, ProbeComplianceMatrix, ApproachOffset)
 
 #: SI unit of a parameter -> key suffix used in truth.toml
 _SUFFIX = {"m": "m", "rad": "rad", "m/N": "m_per_N", "rad/(N m)": "rad_per_Nm", "1/K": "per_K",
@@ -92,7 +97,8 @@ class Truth:
     def geometry(self, temperature) -> Geometry:
         """True geometry (rows, probe point, compliance) at the temperatures ``temperature`` (N,)
         [°C]: the base errors and every effect that acts on the geometry (thermal growth, probe
-        compliance), run through the core's effect code. Entries are floats or (N,) columns."""
+        compliance), run through the core's effect code. Entries are floats or (N,) columns. Effects that
+        depend on the pose (:data:`POSE_EFFECTS`) are left to :meth:`pose`."""
         from ..params import split_params
 
         t = np.atleast_1d(np.asarray(temperature, dtype=float))
@@ -103,19 +109,38 @@ class Truth:
         inputs = ModelInputs(q=[zeros] * j, wrench=[zeros] * 6, temperature=t,
                              tau_gravity=[zeros] * j, tau_contact=[zeros] * j)
         for e, sl in self.model.effect_slices():
-            e.apply(self.nominal, [float(v) for v in self.p[sl]], inputs, geom, NUMPY_OPS)
+            if not isinstance(e, POSE_EFFECTS):
+                e.apply(self.nominal, [float(v) for v in self.p[sl]], inputs, geom, NUMPY_OPS)
         return geom
+
+    def _pose_geometry(self, q, geom: Geometry, wrench) -> Geometry:
+        """``geom`` with the pose-dependent effects (:data:`POSE_EFFECTS`) applied at the true angles ``q``
+        (N, J) and the true ``wrench`` (N, 6), in the model's order (a copy). For complex ``q`` (complex-step
+        derivatives) they are evaluated at its real part. Their derivative (a micrometre shift's) is left out
+        of the inverse kinematics' Newton steps (:meth:`pose_jacobian`), which only slows convergence
+        negligibly."""
+        pose_effects = [(e, sl) for e, sl in self.model.effect_slices() if isinstance(e, POSE_EFFECTS)]
+        if not pose_effects:
+            return geom
+        out = Geometry([list(r) for r in geom.rows], list(geom.p_last), list(geom.compliance))
+        inputs = ModelInputs(q=list(np.real(q).T), wrench=list(np.real(np.asarray(wrench)).T))
+        for e, sl in pose_effects:
+            e.apply(self.nominal, [float(v) for v in self.p[sl]], inputs, out, NUMPY_OPS)
+        return out
 
     def pose(self, q, geom: Geometry, wrench=None):
         """Ball centre and flange axes at the TRUE joint angles ``q`` (N, J) [rad] with a fixed
         ``wrench`` (N, 6) (probe frame).
 
         Returns (ball (N, 3) [m], z axis (N, 3), x axis (N, 3)) in the base frame; the axes are
-        those of the probe frame (undeflected).
+        those of the probe frame (undeflected). The effects that depend on the pose (:data:`POSE_EFFECTS`)
+        move the ball when a ``wrench`` is given (without one, the ball is neither deflected nor moved).
         """
         d = self.nominal
         q = np.asarray(q)
         n = q.shape[0]
+        if wrench is not None:
+            geom = self._pose_geometry(q, geom, wrench)
         rot, lever = d.probe.rotation, d.probe.lever
         if wrench is None:
             qe = (0.0, 0.0, 0.0)
@@ -134,7 +159,8 @@ class Truth:
 
     def pose_jacobian(self, q, geom: Geometry, wrench=None, load=None):
         """:meth:`pose` and its exact Jacobians with respect to the true joint angles ``q`` (N, J) [rad]
-        (:func:`arm_model.jacobian.joint_screws`: one forward pass, the wrench held fixed).
+        (:func:`arm_model.jacobian.joint_screws`: one forward pass, the wrench held fixed; the shift of the
+        pose-dependent effects, :data:`POSE_EFFECTS`, is in the ball, its own derivative is not).
 
         ``wrench``: (N, 6) fixed probe-frame wrench, or ``load``: (force (N, 3) [N], torque (N, 3) [N m])
         in the base frame, rotated into the probe frame of this pose. Returns (ball (N, 3) [m],
@@ -156,6 +182,7 @@ class Truth:
         if wrench is None:
             qe = (0.0, 0.0, 0.0)
         else:
+            geom = self._pose_geometry(q, geom, wrench)      # their own derivative left out, as in pose
             qe = elastic_displacement(geom.p_last, geom.compliance, list(np.asarray(wrench).T),
                                       probe_lever(geom.p_last, rot, lever))
         b = np.column_stack([np.broadcast_to(v, (n,)) for v in ball_in_last_frame(geom.p_last, qe, NUMPY_OPS, rot, lever)])
@@ -187,7 +214,8 @@ class Truth:
                              tau_gravity=None if aux.tau_gravity is None else list(aux.tau_gravity.T),
                              tau_contact=None if aux.tau_contact is None else list(aux.tau_contact.T))
         for e, sl in self.model.effect_slices():
-            e.apply(self.nominal, [float(v) for v in self.p[sl]], inputs, geom, NUMPY_OPS)
+            if not isinstance(e, POSE_EFFECTS):         # they move the ball, not the joints
+                e.apply(self.nominal, [float(v) for v in self.p[sl]], inputs, geom, NUMPY_OPS)
         return np.column_stack([np.broadcast_to(np.asarray(c, dtype=float), (n,)) for c in inputs.q])
 
     def encoder_readings(self, q_true, aux: AuxData, tol: float = 1e-13, max_iter: int = 100) -> np.ndarray:
@@ -241,8 +269,10 @@ def build_truth(desc: ArmDescription, t: dict, rng: np.random.Generator, sensor:
     """The true arm from a campaign's ``truth`` section (SI, see :mod:`arm_model.sim.campaign`):
     random base errors of the given sizes (explicit ``errors`` override them); a true probe
     compliance sets the base parameters ``probe.compliance_x/_y/_z`` (true minus declared); then each
-    effect that is on, in a fixed order: eccentricity, joint compliance, thermal growth, force sensor
-    (on the axes the ``sensor`` measures: x and z for the two-channel one)."""
+    effect that is on, in a fixed order: eccentricity, joint harmonics, joint compliance, thermal growth,
+    force sensor (on the axes the ``sensor`` measures: x and z for the two-channel one), then the effects
+    that depend on the pose (:data:`POSE_EFFECTS`): lateral compliance, the probe compliance's coupling
+    terms (core ``ProbeComplianceMatrix``, off-diagonal), approach offset."""
     p_base = _random_base(rng, desc, t)
     effects, values = [], []
     settings = {}
@@ -304,6 +334,27 @@ def build_truth(desc: ArmDescription, t: dict, rng: np.random.Generator, sensor:
             values += [gain[a] for a in axes] + [offset[a] for a in axes]
         settings["force_sensor"] = {"gain": gain.tolist(), "offset": offset.tolist(),
                                     "cross_talk": cross.tolist()}
+    # effects that depend on the pose and the wrench, last (they see the true angles and force)
+    lc = t.get("lateral_compliance")
+    if lc is not None:
+        effects.append(LateralCompliance(joints=lc["indices"], gravity=lc["gravity"], contact=lc["contact"]))
+        for kx, ky in zip(lc["stiffness_x"], lc["stiffness_y"]):
+            values += [0.0 if kx is None else 1.0 / kx, 0.0 if ky is None else 1.0 / ky]
+        settings["lateral_compliance"] = {"joints": [desc.joint_names[i] for i in lc["indices"]],
+                                          "stiffness_x": [k for k in lc["stiffness_x"] if k is not None],
+                                          "stiffness_y": [k for k in lc["stiffness_y"] if k is not None],
+                                          "gravity": lc["gravity"], "contact": lc["contact"]}
+    if pc is not None and any(pc.get(f"coupling_{a}") for a in ("xy", "xz", "yz")):
+        terms = tuple(a for a in ("xy", "xz", "yz") if pc.get(f"coupling_{a}"))
+        effects.append(ProbeComplianceMatrix(terms=terms))
+        values += [pc[f"coupling_{a}"] for a in terms]
+        settings["probe_compliance"].update({f"coupling_{a}": pc[f"coupling_{a}"] for a in terms})
+    ap = t.get("approach_offset")
+    if ap is not None:
+        effects.append(ApproachOffset())
+        values += [ap[f"d{a}_u{b}"] for a in "xyz" for b in "xyz"]
+        settings["approach_offset"] = {f"d{a}_u{b}": ap[f"d{a}_u{b}"] for a in "xyz" for b in "xyz"
+                                       if ap[f"d{a}_u{b}"]}
     model = ArmModel(desc, tuple(effects))
     p = np.concatenate([p_base, np.array(values, dtype=float)])
     assert p.shape == (model.spec.size,)

@@ -1,0 +1,160 @@
+"""How the toolkit talks: one :mod:`logging` logger per package, one console handler set up by ``aacmm``.
+
+Library code logs and never prints: ``log = logging.getLogger(__name__)`` (a child of its package's
+logger: ``arm_model``, ``calibration``, ``correction`` or ``viz``), then
+
+- ``log.info(...)``: what a command did (its summary), on standard output;
+- ``log.info(..., extra=PROGRESS)``: a progress step ("[  12.3 s] screening ..."), on standard error;
+- ``log.warning(...)``: something the user must look at ("warning: ..."), on standard error;
+- ``log.debug(...)``: details for ``--verbose`` ("debug: ..."), on standard error.
+
+The ``aacmm`` command line installs the handler with :func:`console` for the time of one command: INFO by
+default, WARNING with ``-q/--quiet``, DEBUG with ``-v/--verbose``. Used as a library the toolkit says
+nothing until the caller configures :mod:`logging` (the Python convention). Errors are not logged: they
+are raised, and the command line prints them (exit 2).
+
+:class:`Progress` is the progress display of long loops: on a terminal one line redrawn with ``\\r``;
+otherwise (a log file, a pipe) one plain line every 10 % and at the end, never a ``\\r``.
+"""
+from __future__ import annotations
+
+import contextlib
+import logging
+import sys
+import time
+
+__all__ = ["PACKAGES", "PROGRESS", "console", "Progress", "progress_line", "level_from_flags"]
+
+#: the packages whose loggers the command line configures
+PACKAGES = ("arm_model", "calibration", "correction", "viz")
+#: ``extra=`` of a progress record
+PROGRESS = {"progress": True}
+
+
+def level_from_flags(quiet: bool, verbose: bool) -> int:
+    """The console level of ``-q/--quiet`` and ``-v/--verbose``."""
+    return logging.WARNING if quiet else logging.DEBUG if verbose else logging.INFO
+
+
+class _ConsoleFormatter(logging.Formatter):
+    def __init__(self, t0: float):
+        super().__init__()
+        self.t0 = t0
+
+    def format(self, record: logging.LogRecord) -> str:
+        text = record.getMessage()
+        if record.levelno >= logging.ERROR:
+            return f"error: {text}"
+        if record.levelno >= logging.WARNING:
+            return f"warning: {text}"
+        if getattr(record, "progress", False):
+            return f"[{record.created - self.t0:6.1f} s] {text}"
+        if record.levelno < logging.INFO:
+            return f"debug: {text}"
+        return text
+
+
+class ConsoleHandler(logging.Handler):
+    """INFO records on standard output, every other record on standard error (the streams current at
+    each record, so a redirection made after the handler was created is followed). A closed pipe
+    (``BrokenPipeError``) is raised to the command, which ends quietly."""
+
+    def __init__(self, level: int = logging.NOTSET):
+        super().__init__(level)
+        self.setFormatter(_ConsoleFormatter(time.time()))
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            to_err = record.levelno != logging.INFO or getattr(record, "progress", False)
+            stream = sys.stderr if to_err else sys.stdout
+            stream.write(self.format(record) + "\n")
+            stream.flush()
+        except BrokenPipeError:
+            raise
+        except Exception:           # logging's own convention: never let a message break the command
+            self.handleError(record)
+
+
+@contextlib.contextmanager
+def console(level: int = logging.INFO):
+    """The console handler on every package logger at ``level`` for the time of the block; the loggers'
+    earlier levels, handlers and propagation are restored afterwards (a command run inside another one,
+    or from a test, leaves no trace)."""
+    handler = ConsoleHandler()
+    saved = []
+    for name in PACKAGES:
+        logger = logging.getLogger(name)
+        saved.append((logger, logger.level, logger.handlers[:], logger.propagate))
+        logger.handlers = [handler]
+        logger.setLevel(level)
+        logger.propagate = False
+    try:
+        yield handler
+    finally:
+        for logger, lvl, handlers, propagate in saved:
+            logger.handlers = handlers
+            logger.setLevel(lvl)
+            logger.propagate = propagate
+
+
+def progress_line(logger: logging.Logger):
+    """A ``callable(str)`` that logs each text as a progress step of ``logger`` (for code that takes a
+    ``progress`` callback)."""
+    return lambda text: logger.info(text, extra=PROGRESS)
+
+
+def _is_tty(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
+
+
+class Progress:
+    """A progress display for ``total`` steps: ``label [#####.....] k/n  elapsed``.
+
+    Shown when ``logger`` is enabled for INFO (not with ``--quiet``; not in library use unless the caller
+    configured logging) and ``enabled`` is true. On a terminal (standard error a tty, or ``stream`` given
+    and a tty) the line is redrawn in place with ``\\r``; otherwise one progress record is logged at the
+    first step past every ``every_pct`` percent and at the end, so a log file gets plain lines.
+    """
+
+    def __init__(self, total: int, label: str = "", logger: logging.Logger | None = None,
+                 enabled: bool = True, stream=None, width: int = 30, every_pct: float = 10.0):
+        self.total, self.label, self.width = int(total), label, width
+        self.logger = logger or logging.getLogger("arm_model")
+        self.stream = stream
+        self.enabled = bool(enabled) and self.logger.isEnabledFor(logging.INFO)
+        self.tty = self.enabled and _is_tty(self._stream())
+        self.every = max(float(every_pct), 1e-9)
+        self.done = 0
+        self._next_pct = 0.0
+        self.t0 = time.perf_counter()
+        self._draw()
+
+    def _stream(self):
+        return self.stream if self.stream is not None else sys.stderr
+
+    def _bar(self) -> str:
+        k = int(self.width * min(self.done, self.total) / max(self.total, 1))
+        return f"{self.label} [{'#' * k}{'.' * (self.width - k)}] {self.done}/{self.total}"
+
+    def _draw(self) -> None:
+        if not self.enabled:
+            return
+        if self.tty:
+            stream = self._stream()
+            stream.write(f"\r{self._bar()}  {time.perf_counter() - self.t0:.1f} s")
+            if self.done >= self.total:
+                stream.write("\n")
+            stream.flush()
+            return
+        pct = 100.0 * self.done / max(self.total, 1)
+        if self.done and (pct >= self._next_pct or self.done >= self.total):
+            self.logger.info(f"{self.label} {self.done}/{self.total} ({pct:.0f} %)", extra=PROGRESS)
+            while self._next_pct <= pct:
+                self._next_pct += self.every
+
+    def update(self, n: int = 1) -> None:
+        self.done += n
+        self._draw()
