@@ -9,8 +9,9 @@ One TOML file (``aacmm calibrate`` and ``aacmm close-loop`` write it, every ``--
   e.g. ``harmonics``, ``gravity``) and ``parameter``, one entry a parameter of the effect
   (``param_defs``): ``name``, ``value_<unit>``, ``u_<unit>`` (standard uncertainty; 0 when not
   estimated) and ``state`` ("free", "fixed" or "held") — units from :data:`PARAM_UNITS`;
-* an optional ``[calibration]`` table: ``covariance`` (the covariance file, relative to the TOML)
-  and ``written_by``.
+* an optional ``[calibration]`` table: ``covariance`` (the covariance file, relative to the TOML),
+  ``written_by`` and ``probing_scatter_um`` (the scatter of one probed ball centre per axis that the
+  calibration's variance components estimated; ``aacmm tip``'s default probing uncertainty).
 
 The covariance file (:func:`write_covariance`, :func:`read_covariance`) is a CSV: one row a free
 parameter of the fit, columns ``parameter``, ``unit``, ``value``, ``u`` (in that row's unit) and one
@@ -79,13 +80,16 @@ class Arm:
     """An arm as every ``--arm`` option gives it: the description, its effects and their parameter
     values [SI] by name (``values``; the description's own values are folded in, so the base part
     of the parameter vector is zero), with standard uncertainties and states when a fit wrote them.
-    ``covariance``: the covariance file named by the model file (resolved path) or None."""
+    ``covariance``: the covariance file named by the model file (resolved path) or None;
+    ``probing_scatter``: the calibration's estimate of the scatter of one probed ball centre per axis [m]
+    (``[calibration] probing_scatter_um``) or None."""
     desc: ArmDescription
     effects: tuple[Effect, ...] = ()
     values: dict = field(default_factory=dict)
     uncertainties: dict = field(default_factory=dict)
     states: dict = field(default_factory=dict)
     covariance: Path | None = None
+    probing_scatter: float | None = None
 
     @property
     def model(self) -> ArmModel:
@@ -145,16 +149,26 @@ class Arm:
         return self.model.ball_centres(points.q, w, self.p, aux)
 
 
+#: the largest probing scatter a model file may give [um] (a larger one is a unit mistake)
+MAX_PROBING_SCATTER_UM = 1000.0
+
+
 def check_calibration_table(tbl, r: TomlReader) -> None:
-    """The ``[calibration]`` table of a model file: text keys ``covariance`` and ``written_by``."""
+    """The ``[calibration]`` table of a model file: text keys ``covariance`` and ``written_by``, the
+    number ``probing_scatter_um`` (> 0, at most :data:`MAX_PROBING_SCATTER_UM`)."""
     if not isinstance(tbl, dict):
         raise r.error("'calibration' must be a table", "calibration")
-    known = ("covariance", "written_by")
+    known = ("covariance", "written_by", "probing_scatter_um")
     for key, value in tbl.items():
         if key not in known:
             raise r.error(f"unknown key '{key}' (known: {', '.join(known)}){nearest(key, known)}",
                           "calibration", key)
-        if not isinstance(value, str) or not value.strip():
+        if key == "probing_scatter_um":
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                    or not 0 < value <= MAX_PROBING_SCATTER_UM:
+                raise r.error(f"'{key}' must be a number in (0, {MAX_PROBING_SCATTER_UM:g}] um, got {value!r}",
+                              "calibration", key)
+        elif not isinstance(value, str) or not value.strip():
             raise r.error(f"'{key}' must be a non-empty text", "calibration", key)
 
 
@@ -340,16 +354,18 @@ def parse_model(text: str, path: str = "<string>") -> Arm:
     data = parse_toml(text, path)
     r = TomlReader(path, text)
     desc = description_from_data(data, r, MODEL_KEYS)
-    covariance = None
+    covariance = scatter = None
     if "calibration" in data:
         check_calibration_table(data["calibration"], r)
         cov = data["calibration"].get("covariance")
         if cov is not None:
             covariance = (Path(path).parent / cov) if path != "<string>" else Path(cov)
+        if "probing_scatter_um" in data["calibration"]:
+            scatter = float(data["calibration"]["probing_scatter_um"]) * 1e-6
     if "effect" not in data:
-        return Arm(desc, covariance=covariance)
+        return Arm(desc, covariance=covariance, probing_scatter=scatter)
     effects, values, u, states = effects_from_tables(desc, data["effect"], r)
-    return Arm(desc, effects, values, u, states, covariance)
+    return Arm(desc, effects, values, u, states, covariance, scatter)
 
 
 def load_model(path, tip_frame: str | None = None, probe: dict | None = None, masses=None) -> Arm:
@@ -368,12 +384,15 @@ def load_model(path, tip_frame: str | None = None, probe: dict | None = None, ma
 
 def format_model(desc: ArmDescription, effects=(), values: dict | None = None, uncertainties: dict | None = None,
                  states: dict | None = None, *, covariance: str | None = None, written_by: str | None = None,
-                 comment: str | None = None) -> str:
-    """TOML text of a model file that :func:`parse_model` reads back exactly."""
+                 probing_scatter: float | None = None, comment: str | None = None) -> str:
+    """TOML text of a model file that :func:`parse_model` reads back exactly (``probing_scatter`` [m]:
+    written in um to 4 significant digits)."""
     data = description_data(desc)
     if effects:
         data["effect"] = effect_tables(desc, effects, values or {}, uncertainties, states)
-    cal = {k: v for k, v in (("covariance", covariance), ("written_by", written_by)) if v}
+    scatter = None if probing_scatter is None else float(f"{probing_scatter * 1e6:.4g}")
+    cal = {k: v for k, v in (("covariance", covariance), ("written_by", written_by),
+                             ("probing_scatter_um", scatter)) if v}
     if cal:
         data["calibration"] = cal
     return toml_text(data, comment)

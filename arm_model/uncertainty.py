@@ -90,7 +90,7 @@ class ParameterCovariance:
 
 
 def default_inputs(desc, *, encoder=None, force=None, torque=None, compliance=None, probing=None,
-                   has_force: bool = True) -> InputUncertainty:
+                   has_force: bool = True, model_probing: float | None = None) -> InputUncertainty:
     """The input uncertainties of ``desc`` with their sources; any argument overrides its default.
 
     Args:
@@ -100,8 +100,10 @@ def default_inputs(desc, *, encoder=None, force=None, torque=None, compliance=No
         torque: [N m] (default 0: no torque is measured by the seed paper's sensor).
         compliance: [m/N], one value or (x, y, z) (default :data:`COMPLIANCE_U_RELATIVE` times the
             description's compliances).
-        probing: [m] per axis (default 0).
+        probing: [m] per axis (default ``model_probing``, else 0).
         has_force: False when the points carry no force (then no force-sensor contribution).
+        model_probing: [m] the probing scatter a model file carries (``[calibration]
+            probing_scatter_um``: its calibration's variance components), the default of ``probing``.
     """
     j = desc.n_joints
     src = {}
@@ -132,7 +134,14 @@ def default_inputs(desc, *, encoder=None, force=None, torque=None, compliance=No
     else:
         c = np.broadcast_to(np.asarray(compliance, dtype=float), (3,)).copy()
         src["compliance"] = "given"
-    src["probing"] = "given" if probing is not None else "none (0)"
+    if probing is not None:
+        src["probing"] = "given"
+    elif model_probing is not None:
+        probing = model_probing
+        src["probing"] = (f"the model file's probing_scatter_um {model_probing * 1e6:.4g} um (its calibration's "
+                          "variance components)")
+    else:
+        src["probing"] = "none (0): the arm gives no probing_scatter_um (a model file from calibrate does)"
     for name, arr in (("encoder", enc), ("force", f), ("torque", t), ("compliance", c)):
         if not np.all(np.isfinite(arr)) or np.any(arr < 0):
             raise ValueError(f"{name} uncertainty must be finite and >= 0, got {arr}")

@@ -39,15 +39,20 @@ def add_input_options(p) -> None:
                         f"{COMPLIANCE_U_RELATIVE:g}, from the seed paper's Table 2 fit); not used for compliances "
                         "the model's covariance holds")
     g.add_argument("--u-probing-um", type=non_negative, default=None, metavar="U",
-                   help="probing scatter of a ball centre per axis [um] (default 0)")
+                   help="probing scatter of a ball centre per axis [um] (default: the model file's "
+                        "probing_scatter_um, which calibrate and close-loop write; 0 without one)")
 
 
-def inputs_from_args(desc, args, has_force: bool) -> InputUncertainty:
+def inputs_from_args(arm, args, has_force: bool) -> InputUncertainty:
+    """The input uncertainties of an :class:`~arm_model.model_file.Arm` with the options of
+    :func:`add_input_options` overriding their defaults."""
+    desc = arm.desc
     enc = None if args.encoder_resolution_deg is None else math.radians(args.encoder_resolution_deg) / math.sqrt(12)
     force = None if args.u_force_N is None else (args.u_force_N[0], args.u_force_N[0], args.u_force_N[1])
     comp = None if args.u_compliance_rel is None else args.u_compliance_rel * np.asarray(desc.probe.compliance)
     probing = None if args.u_probing_um is None else args.u_probing_um * 1e-6
-    inputs = default_inputs(desc, encoder=enc, force=force, compliance=comp, probing=probing, has_force=has_force)
+    inputs = default_inputs(desc, encoder=enc, force=force, compliance=comp, probing=probing, has_force=has_force,
+                            model_probing=arm.probing_scatter)
     if args.u_compliance_rel is not None:
         inputs.sources["compliance"] = f"given: {args.u_compliance_rel:g} of the declared compliances"
     return inputs
@@ -108,7 +113,7 @@ def parameters_of(arm) -> ParameterCovariance | None:
 def tip_columns(arm, points, parameters, args) -> tuple[dict, list[str]]:
     """The uncertainty columns of ``aacmm tip`` (mm, um^2) for an :class:`~arm_model.model_file.Arm`
     and a :class:`~arm_model.io.PointSet`, and the lines it prints."""
-    inputs = inputs_from_args(arm.desc, args, points.wrench is not None)
+    inputs = inputs_from_args(arm, args, points.wrench is not None)
     model, p, wrench, aux = arm.model, arm.p, points.wrench, arm.aux(points)
     points_q = points.q
     res = propagate(model, p, points_q, wrench, aux, parameters=parameters, inputs=inputs)

@@ -172,6 +172,19 @@ class CalibrationResult:
     def value(self, name: str) -> float:
         return float(self.p[self.model.spec.index(name)])
 
+    def probing_scatter(self) -> float | None:
+        """The scatter of one probed ball centre per axis [m] that the fit's variance components estimate
+        (:func:`variance_components`): the estimates of the probed point groups (seats, spheres, rings,
+        cylinders, planes; not the reference instrument, not the lengths), pooled by their redundancy,
+        ``sqrt(sum red_g est_g^2 / sum red_g)``. None when no probed group could be estimated."""
+        groups = [v for v in self.variance if v["estimated"] and v["group"] not in ("reference", "length")
+                  and v.get("estimate_um") is not None and v["redundancy"] > 0]
+        if not groups:
+            return None
+        red = np.array([v["redundancy"] for v in groups])
+        est = np.array([v["estimate_um"] for v in groups]) * 1e-6
+        return float(np.sqrt(np.sum(red * est ** 2) / np.sum(red)))
+
     def uncertainty(self, name: str) -> float:
         """Standard uncertainty [SI] of a free parameter (0 for a fixed or held one)."""
         return float(self.u[self.free.index(name)]) if name in self.free else 0.0

@@ -285,8 +285,10 @@ def run_calibrate(args: argparse.Namespace) -> int:
             for r in rows:
                 log.info(f"  {r['label']}: {with_u(r['before'], r['u_before'])} -> {with_u(r['after'], r['u_after'])} "
                       f"{r['unit']} ({r['ratio']:.1f}x)")
-    log.info(f"model file -> {files['description']} (covariance {files['covariance'].name}); "
-          f"report -> {files['report']}")
+    scatter = res.probing_scatter()
+    log.info(f"model file -> {files['description']} (covariance {files['covariance'].name}"
+             + (f"; probing scatter {scatter * 1e6:.4g} um per axis, tip's default" if scatter is not None else "")
+             + f"); report -> {files['report']}")
     return 0
 
 

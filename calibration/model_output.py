@@ -56,7 +56,8 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
     write_covariance(files["covariance"], free, [spec.units[i] for i in idx], result.p[idx], result.cov, inputs)
     atomic_write_text(files["model"], format_model(arm.desc, arm.effects, arm.values, arm.uncertainties, arm.states,
                                                    covariance=files["covariance"].name, written_by=written_by,
-                                                   comment=comment), inputs)
+                                                   probing_scatter=result.probing_scatter(), comment=comment),
+                      inputs)
     atomic_write_text(files["urdf"], calibrated_urdf_text(result.model.desc, arm.desc), inputs)
     return files
 

@@ -88,7 +88,8 @@ def run_ring(args: argparse.Namespace) -> int:
         budgets = ring_budgets(campaign, u_force=u_force, delta_t=args.delta_t, probability=args.probability)
         parameters = parameters_of(arm)
         unc_inputs = default_inputs(desc, force=None if args.u_force is None else
-                                    (args.u_force, args.u_force, FORCE_SENSOR_U_N[2]))
+                                    (args.u_force, args.u_force, FORCE_SENSOR_U_N[2]),
+                                    model_probing=arm.probing_scatter)
         try:
             point_unc = ring_uncertainties(arm, points, campaign, parameters, unc_inputs)
         except NumericalError as exc:

@@ -131,6 +131,18 @@ def test_unknown_keys_are_errors_with_the_nearest_known(edit, words, nominal):
         assert w in msg, msg
 
 
+def test_probing_scatter_key_reads_writes_and_is_range_checked(nominal):
+    text = format_model(nominal, covariance="c.csv", probing_scatter=2.345678e-6)
+    assert "probing_scatter_um = 2.346" in text
+    arm = parse_model(text, "m.toml")
+    assert arm.probing_scatter == pytest.approx(2.346e-6, rel=1e-12)
+    assert parse_model(format_model(nominal, covariance="c.csv"), "m.toml").probing_scatter is None
+    for bad in ("0", "-1.0", "2000.0", '"2"', "nan", "true"):
+        with pytest.raises(InputError) as exc:
+            parse_model(text.replace("probing_scatter_um = 2.346", f"probing_scatter_um = {bad}"), "m.toml")
+        assert "probing_scatter_um" in str(exc.value) and str(exc.value).startswith("m.toml, line ")
+
+
 def test_error_lines_point_at_the_key(nominal):
     text = format_model(nominal, (ThermalGrowth(),), {"links.thermal_alpha": 1e-5})
     bad = text.replace("value_ppm_per_K = 10.0", "value_ppm_per_K = \"ten\"")
@@ -225,10 +237,26 @@ def test_calibrate_writes_a_model_that_tip_and_calibrate_read(tmp_path, capsys):
     assert "links.thermal_alpha" in cov.names and "j2.compliance" in cov.names
     k = cov.names.index("j2.compliance")
     assert cov.u[k] == pytest.approx(fitted["j2.compliance"]["u"], rel=1e-12)
+    # the probing scatter of the variance components, pooled over the probed groups by redundancy (by
+    # hand from summary.json), near the simulator's 2 um; tip's default probing term is exactly it
+    groups = [v for v in s["variance_components"] if v["estimated"] and v["group"] not in ("reference", "length")]
+    red = np.array([v["redundancy"] for v in groups])
+    est = np.array([v["estimate_um"] for v in groups])
+    assert arm.probing_scatter * 1e6 == pytest.approx(np.sqrt(red @ est ** 2 / red.sum()), rel=5e-4)
+    assert arm.probing_scatter == pytest.approx(2e-6, rel=0.25)
+    tip0 = tmp_path / "tip0.csv"
+    assert main(["tip", str(sim / "points.csv"), "--arm", str(model), "-o", str(tip0), "--u-probing-um", "0"]) == 0
     # tip with the model file == the fit's model and parameters, torques from the calibrated description
     tip = tmp_path / "tip.csv"
+    capsys.readouterr()
     assert main(["tip", str(sim / "points.csv"), "--arm", str(model), "-o", str(tip)]) == 0
-    assert "effects applied: joint_compliance, thermal" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "effects applied: joint_compliance, thermal" in printed and "probing_scatter_um" in printed
+    u0 = np.genfromtxt(tip0, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    u1 = np.genfromtxt(tip, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    for a in "xyz":   # the file's u are rounded to 0.5e-6 mm: |d(u^2)| <= 2 u 0.5e-6 for each file
+        bound = float(np.max(u1[f"u_{a}_mm"] + u0[f"u_{a}_mm"])) * 1e-6
+        assert_close(u1[f"u_{a}_mm"] ** 2 - u0[f"u_{a}_mm"] ** 2, (arm.probing_scatter * 1e3) ** 2, atol=bound)
     got = np.genfromtxt(tip, delimiter=",", names=True, dtype=None, encoding="utf-8")
     from calibration.model_output import fitted_arm
     from calibration.cli import _load_data  # noqa: F401  (the CLI path is what is tested above)

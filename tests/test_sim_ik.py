@@ -1,5 +1,6 @@
 """Redundant inverse kinematics on the true arm: on target to 1 pm, inside the joint limits, the
-required stylus direction, different articulations for the same target; unreachable targets raise."""
+required stylus direction, different articulations for the same target; unreachable targets raise. The fast
+path's position-only IK on the core model; the probe frame against Pinocchio."""
 from __future__ import annotations
 
 import numpy as np
@@ -110,3 +111,44 @@ def test_ik_jacobian_matches_pinocchio_and_finite_differences(nominal):
         for k, ref in enumerate((jb, jz, jx)):
             fd = fd_jacobian(lambda x: truth.pose(x[None], geom, w[i:i + 1])[k][0], q[i])
             assert_close(ref[i], fd, atol=1e-9 * np.abs(fd).max(), msg=f"point {i} output {k}")
+
+
+def test_fast_path_ik_puts_the_models_ball_on_target_with_the_force_in_the_probe_frame(nominal):
+    """solve_positions (the fast path): the core model's deflected ball centre on each target to 1e-12 m,
+    inside the joint limits, through an effect that depends on the pose (approach offset), with the contact
+    force rotated into the probe frame of the solution; Pinocchio's probe frame as the reference rotation."""
+    from arm_model import PinocchioArm
+    from arm_model.effects import ApproachOffset
+    from arm_model.kinematics import probe_rotations
+    from arm_model.model import ArmModel
+    from arm_model.params import apply_params
+    from arm_model.sim.ik import solve_positions
+
+    model = ArmModel(nominal, (ApproachOffset(),))
+    p = model.spec.vector({"approach.dx_uy": 6e-6, "approach.dz_ux": 5e-6, "j2.d": 3e-5})
+    rng = np.random.default_rng(7)
+    targets = np.array([0.55, 0.0, 0.15]) + rng.uniform(-0.15, 0.15, (12, 3))
+    force = rng.normal(0, 3, (12, 3))
+    q, w = solve_positions(model, p, targets, rng, force)
+    assert_close(model.ball_centres(q, w, p), targets, atol=1e-12)
+    lo, hi = joint_limits(nominal)
+    assert np.all(q >= lo) and np.all(q <= hi)
+    rot = probe_rotations(nominal, q, p[: model.base_size])
+    arm = PinocchioArm(apply_params(nominal, p[: model.base_size]))
+    for i in range(12):
+        r_ref = arm.T_base_ball(q[i])[:3, :3]
+        assert_close(rot[i], r_ref, atol=1e-12)
+        assert_close(w[i, :3], r_ref.T @ force[i], atol=1e-12)
+    assert_close(w[:, 3:], 0.0, atol=0.0)
+
+
+def test_probe_rotations_of_a_rotated_probe_are_pinocchios_ball_frame(nominal):
+    from arm_model import PinocchioArm
+    from arm_model.kinematics import probe_rotations
+
+    desc = nominal.with_probe(rpy=(0.2, -0.1, 0.4))
+    q = np.random.default_rng(8).uniform(-2.5, 2.5, (5, desc.n_joints))
+    arm = PinocchioArm(desc)
+    rot = probe_rotations(desc, q)
+    for i in range(5):
+        assert_close(rot[i], arm.T_base_ball(q[i])[:3, :3], atol=1e-12)

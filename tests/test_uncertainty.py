@@ -79,6 +79,9 @@ def test_joint_screws_give_pinocchios_and_finite_difference_jacobians(nominal, t
                          for e in np.eye(3)], axis=2), o
 
     r, o, u, c = joint_screws(desc.convention, rows, q, desc.axes)
+    columns = joint_screws(desc.convention, [[np.full(n, v) for v in row] for row in rows], q, desc.axes)
+    for a, b in zip(columns, (r, o, u, c)):      # rows as columns (a geometry per point, e.g. thermal)
+        assert_close(a, b, atol=1e-15)
     r_ref, o_ref = frame(q)
     assert_close(r, r_ref, atol=1e-14)
     assert_close(o, o_ref, atol=1e-14)
@@ -252,16 +255,22 @@ def test_tip_with_a_model_file_and_its_covariance(tmp_path, nominal, capsys):
     rows = list(csv.DictReader(out.open()))
     u = np.array([[float(r[f"u_{a}_mm"]) for a in "xyz"] for r in rows]) * 1e-3
     jac = _casadi_jacobians(model)
+    u_q = np.radians(0.0001) / np.sqrt(12)             # the encoder step the nominal arm's description gives
     for i in range(5):
-        jp = np.array(jac(np.radians(q[i]), np.zeros(6), np.zeros(15), np.zeros(spec.size))[1])[:, idx]
-        assert_close(u[i], np.sqrt(np.diag(jp @ cov @ jp.T)), atol=2e-9)
+        out = jac(np.radians(q[i]), np.zeros(6), np.zeros(15), np.zeros(spec.size))
+        jp, jq = np.array(out[1])[:, idx], np.array(out[2])
+        assert_close(u[i], np.sqrt(np.diag(jp @ cov @ jp.T + u_q ** 2 * jq @ jq.T)), atol=2e-9)
 
 
 def test_encoder_resolution_from_the_description(nominal):
     from arm_model import InputError
     from arm_model.description import format_description, parse_description
 
-    text = format_description(nominal).replace('name = "j2"\n', 'name = "j2"\nencoder_resolution_deg = 0.0005\n')
+    # the shipped arm gives 0.0001 deg on every joint (the step of the bundled data's readings)
+    assert_close([j.encoder_resolution for j in nominal.joints], [np.radians(0.0001)] * 7, atol=1e-18)
+    assert_close(default_inputs(nominal).encoder, [np.radians(0.0001) / np.sqrt(12)] * 7, atol=1e-18)
+    bare = replace(nominal, joints=tuple(replace(j, encoder_resolution=None) for j in nominal.joints))
+    text = format_description(bare).replace('name = "j2"\n', 'name = "j2"\nencoder_resolution_deg = 0.0005\n')
     desc = parse_description(text)
     assert_close(desc.joints[1].encoder_resolution, np.radians(0.0005), atol=1e-18)
     assert desc.joints[0].encoder_resolution is None

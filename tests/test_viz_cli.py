@@ -257,7 +257,7 @@ def test_residuals_of_aacmm_calibrate(simulated, tmp_path, capsys):
     capsys.readouterr()
     out = tmp_path / "view.html"
     assert run_view(simulated / "points.csv", "--arm", arm, "--residuals", cal / "residuals.csv",
-                    "--residual-scale", 2000, "--html", out) == 0
+                    "--residual-scale", 2000, "--ellipsoids", "--ellipsoid-scale", 3000, "--html", out) == 0
     text = capsys.readouterr().out
     desc = load_description(arm)
     pts = read_points(simulated / "points.csv", desc.n_joints)
@@ -274,6 +274,26 @@ def test_residuals_of_aacmm_calibrate(simulated, tmp_path, capsys):
     start = ball_centres(desc, pts.q[i], pts.wrench[i])
     vec = np.array([[float(r[f"d{a}_um"]) for a in "xyz"] for r in here]) * 1e-6
     assert np.allclose(xyz[:, 0], start, atol=1e-6) and np.allclose(xyz[:, 1], start + 2000 * vec, atol=1e-6)
+    # the 95 % ellipsoids of the calibrated model (its covariance file, its probing scatter): every vertex
+    # of point i at Mahalanobis distance 3000 k from its corrected centre, with the covariance that
+    # aacmm tip --covariance writes for the same points (k^2 = 7.8147, chi-square table, 3 dof, 95 %)
+    n = len(pts)
+    assert f"yellow: {n} 95 % uncertainty ellipsoid(s) of the corrected ball centres (k = 2.795" in text
+    assert "drawn x3000" in text and "aacmm7-calibrated-covariance.csv" in text
+    ell = next(c for c in cmds if c["type"] == "set_object"
+               and c["path"] == "/meshcat/aacmm/uncertainty ellipsoids 95% x3000")
+    geo = ell["object"]["geometries"][0]["data"]
+    v = np.frombuffer(geo["attributes"]["position"]["array"].data, dtype=np.float32).reshape(n, -1, 3)
+    tips = tmp_path / "tips.csv"
+    assert main(["tip", str(simulated / "points.csv"), "--arm", str(arm), "--covariance", "-o", str(tips)]) == 0
+    t = np.genfromtxt(tips, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    cov = np.empty((n, 3, 3))
+    for a, b in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)):
+        cov[:, a, b] = cov[:, b, a] = t[f"cov_{'xyz'[a]}{'xyz'[b]}_um2"] * 1e-12
+    centre = np.column_stack([t["x_mm"], t["y_mm"], t["z_mm"]]) * 1e-3
+    d = v - centre[:, None, :]
+    m2 = np.einsum("nvi,nvi->nv", d, np.linalg.solve(cov, d.transpose(0, 2, 1)).transpose(0, 2, 1))
+    assert np.allclose(np.sqrt(m2) / 3000, np.sqrt(7.8147), rtol=2e-3)
 
 
 def test_default_arrow_scale_draws_the_deflection_outside_the_marker():

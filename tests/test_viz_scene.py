@@ -14,7 +14,7 @@ from arm_model.urdf import ARM_RGBA, BALL_RGBA
 from conftest import assert_close
 from viz import Camera, ViewerError, colour_mask, find_chromium, page_with_legend, place_features
 from viz.residuals import parse_residuals, residual_origins
-from viz.scene import _arrow_parts, _rotation_y_to
+from viz.scene import _arrow_parts, _rotation_y_to, coverage_factor, ellipsoid_mesh
 
 
 # --- camera --------------------------------------------------------------------------------------
@@ -251,3 +251,28 @@ def test_find_chromium_errors_say_what_to_do(monkeypatch, tmp_path):
     monkeypatch.setenv("PATH", str(tmp_path))
     with pytest.raises(ViewerError, match="install Debian's 'chromium' package"):
         find_chromium()
+
+
+# --- uncertainty ellipsoids -----------------------------------------------------------------------
+
+def test_ellipsoid_mesh_vertices_lie_on_the_95_percent_ellipsoid():
+    # k^2 of a 95 % region of a 3D normal: 7.8147 (chi-square table, 3 dof); every vertex of point i at
+    # Mahalanobis distance scale * k from its centre (checked with a solve, not the eigen-decomposition)
+    assert coverage_factor(0.95) == pytest.approx(math.sqrt(7.8147), rel=1e-4)
+    rng = np.random.default_rng(2)
+    m = rng.standard_normal((5, 3, 3)) * 2e-6
+    cov = np.einsum("nij,nkj->nik", m, m)
+    cov[0] = np.diag([1e-12, 4e-12, 9e-12])                 # 1, 2, 3 um along x, y, z
+    c = rng.uniform(-1, 1, (5, 3))
+    verts, faces, k = ellipsoid_mesh(c, cov, 2000.0)
+    assert k == pytest.approx(math.sqrt(7.8147), rel=1e-4)
+    v = verts.reshape(5, -1, 3)
+    assert v.shape[1] == 42 and faces.shape == (5 * 80, 3)
+    assert faces[80:160].min() == 42 and faces.max() == 5 * 42 - 1   # each point owns its vertices
+    d = v - c[:, None, :]
+    m2 = np.einsum("nvi,nvi->nv", d, np.linalg.solve(cov, d.transpose(0, 2, 1)).transpose(0, 2, 1))
+    assert_close(np.sqrt(m2), 2000.0 * k, 1e-6)
+    # the diagonal one spans +-2000 k (1, 2, 3) um along the axes at most
+    assert np.all(np.abs(d[0]).max(axis=0) <= 2000 * k * np.array([1e-6, 2e-6, 3e-6]) * (1 + 1e-12))
+    with pytest.raises(ValueError, match="level"):
+        ellipsoid_mesh(c, cov, 1.0, level=1.5)

@@ -13,10 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from arm_model import InputError, check_features, read_artefacts, read_points
+from arm_model import InputError, NumericalError, check_features, read_artefacts, read_points
 from arm_model.commands import add_arm_options, arm_inputs, model_from_args, port, positive
 from arm_model._output import output_file
 from arm_model.checks import point_warnings, log_warnings
+from arm_model.uncertainty_cli import add_input_options
 
 from ._errors import ViewerError
 from .placement import place_features
@@ -59,6 +60,14 @@ def register(sub) -> None:
                    "each residual vector")
     p.add_argument("--residual-scale", type=positive(), default=1000.0,
                    help="length of a residual line per length of residual (default 1000)")
+    p.add_argument("--ellipsoids", action="store_true",
+                   help="draw the 95 %% uncertainty ellipsoid of every corrected ball centre of the selection, from "
+                        "the model's parameter covariance (a model file from calibrate; a plain description: "
+                        "parameters exact) and the input uncertainties below (docs/uncertainty.md)")
+    p.add_argument("--ellipsoid-scale", type=positive(), default=None, metavar="S",
+                   help="drawn size of an ellipsoid per true size; default: from the data, so that the median "
+                        f"largest semi-axis is drawn about {ELLIPSOID_TARGET_M * 1e3:g} mm (a 1-2-5 number, printed)")
+    add_input_options(p)
     p.add_argument("--html", type=Path, metavar="OUT.html", help="write the scene as a self-contained page")
     p.add_argument("--screenshot", type=Path, metavar="OUT.png",
                    help="render the page in headless Chromium and write a PNG (800 x 600)")
@@ -101,14 +110,24 @@ def run(args: argparse.Namespace) -> int:
 ARROW_TARGET_M = 0.06
 
 
+#: the length [m] the median ellipsoid's largest semi-axis is drawn by default (the dots are 6 mm wide)
+ELLIPSOID_TARGET_M = 0.012
+
+
 def arrow_scale(deflection_um) -> float:
     """The default arrow scale: the 1-2-5 number that draws the median nonzero deflection [um] closest to
     :data:`ARROW_TARGET_M` long (1000 when nothing is deflected)."""
-    d = np.asarray(deflection_um, dtype=float)
+    return nice_scale(np.asarray(deflection_um, dtype=float) * 1e-6, ARROW_TARGET_M)
+
+
+def nice_scale(lengths_m, target_m: float, default: float = 1000.0) -> float:
+    """The 1-2-5 number that draws the median nonzero length [m] closest to ``target_m`` long
+    (``default`` when every length is zero)."""
+    d = np.asarray(lengths_m, dtype=float)
     d = d[np.isfinite(d) & (d > 0)]
     if not len(d):
-        return 1000.0
-    ideal = ARROW_TARGET_M / (np.median(d) * 1e-6)
+        return default
+    ideal = target_m / np.median(d)
     steps = [m * 10.0 ** e for e in range(int(np.floor(np.log10(ideal))) - 1, int(np.floor(np.log10(ideal))) + 2)
              for m in (1, 2, 5)]
     return float(min(steps, key=lambda v: abs(np.log(v / ideal))))
@@ -151,6 +170,8 @@ def _run(args, inputs, outputs, tmp) -> int:
             placements, notes = place_features(artefacts, sel.measurement, sel.feature, centres,
                                                desc.probe.ball_diameter)
             view.show_artefacts(placements, artefacts.distances)
+        if args.ellipsoids:
+            _ellipsoids(arm, sel, args, view)
         if residuals is not None:
             if args.measurement is not None:   # the selected measurement's (and those of no measurement)
                 residuals = residuals.select(np.isin(residuals.measurement, ["", args.measurement]))
@@ -174,6 +195,25 @@ def _run(args, inputs, outputs, tmp) -> int:
         if serve:
             _serve(view, args.open_seconds)
     return 0
+
+
+def _ellipsoids(arm, sel, args, view) -> None:
+    """The 95 % uncertainty ellipsoids of the selection's corrected centres (arm_model.uncertainty)."""
+    from arm_model.uncertainty import propagate
+    from arm_model.uncertainty_cli import inputs_from_args, parameters_of
+    from .scene import coverage_factor
+    parameters = parameters_of(arm)
+    inputs = inputs_from_args(arm, args, sel.wrench is not None)
+    res = propagate(arm.model, arm.p, sel.q, sel.wrench, arm.aux(sel), parameters=parameters, inputs=inputs)
+    if not np.all(np.isfinite(res.cov)):
+        raise NumericalError("the uncertainty of a corrected centre is not finite")
+    if args.ellipsoid_scale is None:
+        semi = coverage_factor() * np.sqrt(np.maximum(np.linalg.eigvalsh(res.cov)[:, -1], 0.0))
+        args.ellipsoid_scale = nice_scale(semi, ELLIPSOID_TARGET_M)
+    view.show_ellipsoids(res.centres, res.cov, args.ellipsoid_scale)
+    u = np.sqrt(np.mean(res.u ** 2, axis=0)) * 1e6
+    log.info(f"uncertainty of the corrected centres, RMS over the {len(sel)} point(s): u_x {u[0]:.3f}, u_y {u[1]:.3f}, "
+          f"u_z {u[2]:.3f} um (parameters: {res.sources['parameters']})")
 
 
 def _report(arm, sel, centres, d_um, shown, wrench, args, view, notes) -> None:

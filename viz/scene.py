@@ -4,7 +4,8 @@
 visuals (Pinocchio's meshcat visualiser), posed with the probe's elastic joints set by statics from
 the wrench; the probe ball (true size, plus a marker that stays visible at arm scale); the deflection
 as an arrow from the rigid to the corrected ball centre, scaled; the measured ball centres; artefacts
-placed by fitting (:mod:`viz.placement`); residual vectors, scaled. Poses can be animated
+placed by fitting (:mod:`viz.placement`); residual vectors, scaled; the 95 % uncertainty ellipsoids of
+the ball centres, scaled (:func:`ellipsoid_mesh`). Poses can be animated
 (a meshcat animation, which a static page embeds). All inputs SI, base frame.
 
 Every scaled quantity is named with its scale in the scene tree (``deflection x1000``) and in
@@ -20,7 +21,7 @@ import numpy as np
 from arm_model import ArmDescription, load_description
 
 __all__ = ["ArmScene", "Camera", "PoseInfo", "ROOT", "DEFLECTION_RGB", "RESIDUAL_RGB", "POINTS_RGB",
-           "ARTEFACT_RGB"]
+           "ARTEFACT_RGB", "ELLIPSOID_RGB", "ellipsoid_mesh", "coverage_factor"]
 
 ROOT = "aacmm"
 DEFLECTION_RGB = 0x18C018     # green arrow
@@ -28,6 +29,7 @@ RESIDUAL_RGB = 0xE020E0       # magenta residual vectors
 POINTS_RGB = 0xFFFFFF         # measured ball centres
 ARTEFACT_RGB = 0xB0C4DE       # light steel blue, translucent
 BALL_MARKER_RGB = 0xD01818
+ELLIPSOID_RGB = 0xFFD700      # yellow, translucent uncertainty ellipsoids
 _ARROW_RADIUS = 0.005         # [m] shaft radius of the deflection arrow
 _HEAD = (0.012, 0.035)        # [m] head radius and length
 
@@ -118,6 +120,45 @@ def _arrow_parts(length: float) -> dict[str, tuple[list, list]]:
     shaft = max(length - head_len, 1e-9)
     return {"shaft": ([0.0, shaft / 2, 0.0], [max(k, 1e-9), shaft, max(k, 1e-9)]),
             "head": ([0.0, shaft + head_len / 2, 0.0], [max(k, 1e-9), max(head_len, 1e-9), max(k, 1e-9)])}
+
+
+def coverage_factor(level: float = 0.95) -> float:
+    """k of the ``level`` ellipsoid of a 3D normal: ``sqrt`` of the chi-square quantile of 3 dof (2.796
+    for 95 %)."""
+    from scipy.stats import chi2
+    if not 0 < level < 1:
+        raise ValueError(f"level must be in (0, 1), got {level}")
+    return float(np.sqrt(chi2.ppf(level, 3)))
+
+
+def ellipsoid_mesh(centres, cov, scale: float, level: float = 0.95, subdivisions: int = 1):
+    """One triangle mesh of the ``level`` uncertainty ellipsoids of points with covariances.
+
+    The ellipsoid of a 3D normal that holds the point with probability ``level`` is
+    ``(x - c)^T cov^-1 (x - c) = k^2`` with ``k^2`` the chi-square quantile of 3 degrees of freedom
+    (k = 2.796 for 95 %); each is drawn ``scale`` times larger about its centre, as an icosphere
+    (trimesh; 42 vertices a point with ``subdivisions=1``) mapped by ``c + scale k V diag(sqrt(w)) v``
+    (``cov = V diag(w) V^T``).
+
+    Args:
+        centres: (N, 3) [m]; cov: (N, 3, 3) [m^2]; scale: drawn size per true size.
+    Returns:
+        vertices (N V, 3) [m], faces (N F, 3) (indices; point i owns vertices i V ... i V + V - 1), k.
+    """
+    import trimesh
+
+    c = np.atleast_2d(np.asarray(centres, dtype=float))
+    cov = np.asarray(cov, dtype=float).reshape(-1, 3, 3)
+    if len(c) != len(cov) or c.shape[1] != 3:
+        raise ValueError(f"centres {c.shape} and covariances {cov.shape} must be (N, 3) and (N, 3, 3)")
+    k = coverage_factor(level)
+    sphere = trimesh.creation.icosphere(subdivisions=subdivisions)
+    v0, f0 = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+    w, vec = np.linalg.eigh(cov)
+    a = vec * (scale * k * np.sqrt(np.maximum(w, 0.0)))[:, None, :]
+    verts = c[:, None, :] + np.einsum("nij,vj->nvi", a, v0)
+    faces = f0[None] + (np.arange(len(c)) * len(v0))[:, None, None]
+    return verts.reshape(-1, 3), faces.reshape(-1, 3), k
 
 
 def _dots(mg, p: np.ndarray, rgb: int, size: float):
@@ -317,6 +358,18 @@ class ArmScene:
         self.vis[f"{name}/points"].set_object(_dots(mg, p, RESIDUAL_RGB, 0.004))
         self._extent.append(seg)
         self._legend(f"magenta lines: {len(p)} residual vector(s), drawn x{scale:g}")
+
+    def show_ellipsoids(self, centres, cov, scale: float, level: float = 0.95) -> None:
+        """Draw the ``level`` uncertainty ellipsoids (:func:`ellipsoid_mesh`) of points (N, 3) [m] with
+        covariances (N, 3, 3) [m^2], ``scale`` times larger about each point, as one translucent mesh."""
+        mg = self._mg
+        verts, faces, k = ellipsoid_mesh(centres, cov, scale, level)
+        name = f"{self.root}/uncertainty ellipsoids {level * 100:g}% x{scale:g}"
+        self.vis[name].set_object(mg.TriangularMeshGeometry(verts, faces),
+                                  mg.MeshLambertMaterial(color=ELLIPSOID_RGB, opacity=0.55))
+        self._extent.append(verts)
+        self._legend(f"yellow: {len(np.atleast_2d(centres))} {level * 100:g} % uncertainty ellipsoid(s) of the "
+                     f"corrected ball centres (k = {k:.3f}, chi-square of 3 dof), drawn x{scale:g}")
 
     def show_artefacts(self, placements, distances=()) -> None:
         """Draw placed features (:func:`viz.placement.place_features`) with their certified size, and

@@ -111,6 +111,13 @@ class View:
             self.scene.show_residuals(points, residuals, scale)
             self._reframe()
 
+    def show_ellipsoids(self, centres, cov, scale: float, level: float = 0.95) -> None:
+        """The ``level`` uncertainty ellipsoids of points (N, 3) [m] with covariances (N, 3, 3) [m^2],
+        drawn ``scale`` times larger."""
+        with _answering(self.server):
+            self.scene.show_ellipsoids(centres, cov, scale, level)
+            self._reframe()
+
     def show_artefacts(self, placements, distances=()) -> None:
         """Placed artefact features (:func:`viz.placement.place_features`)."""
         with _answering(self.server):
