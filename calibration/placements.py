@@ -93,8 +93,9 @@ def _loop_model(folder: Path) -> Path | None:
 
 def placement_study(root: Path, arm: Path, tip_frame: str | None, out: Path, train=None, progress=None,
                     methods=("calibrate", "close-loop")) -> list[PlacementRow]:
-    """Train on each placement (folders of ``root`` with a points.csv; ``train``: only these), predict the
-    others; outputs of every command under ``out``. ``root`` holds the ``artefacts.toml`` (two seats and
+    """Train on each placement (folders of ``root`` with a points.csv; ``train``: only these, ``"a+b"``
+    trains on placements a and b together, their points in one file), predict the others; outputs of every
+    command under ``out``. ``root`` holds the ``artefacts.toml`` (two seats and
     one certified distance between them)."""
     from arm_model.io import read_artefacts
     root, out = Path(root), Path(out)
@@ -110,9 +111,16 @@ def placement_study(root: Path, arm: Path, tip_frame: str | None, out: Path, tra
     arm_opts = ["--arm", str(arm)] + (["--tip-frame", tip_frame] if tip_frame else [])
     rows: list[PlacementRow] = []
     for tr in train or places:
-        if tr not in places:
-            raise InputError(f"no placement '{tr}' (known: {', '.join(places)})", root)
+        group = tr.split("+")
+        for g in group:
+            if g not in places:
+                raise InputError(f"no placement '{g}' (known: {', '.join(places)})", root)
         pts = root / tr / "points.csv"
+        if len(group) > 1:                  # several placements trained together: one points file
+            parts = [(root / g / "points.csv").read_text().splitlines() for g in group]
+            pts = out / tr / "points.csv"
+            pts.parent.mkdir(parents=True, exist_ok=True)
+            pts.write_text("\n".join(parts[0] + [ln for p in parts[1:] for ln in p[1:] if ln.strip()]) + "\n")
         models = {}
         if "calibrate" in methods:
             say(f"{tr}: aacmm calibrate")
@@ -132,7 +140,7 @@ def placement_study(root: Path, arm: Path, tip_frame: str | None, out: Path, tra
             models["close-loop"] = (model, effects)
         for method, (model, effects) in models.items():
             for te in places:
-                if te == tr:
+                if te in group:
                     continue
                 x, feat = _tip(root / te / "points.csv", model, out / tr / f"{method}-tip-{te}.csv")
                 rows.append(PlacementRow(tr, method, te, seat_figures(x, feat, holes, length), effects))

@@ -5,6 +5,7 @@ on one placement, apply each model with ``aacmm tip`` to the other placements, a
 
     python scripts/real_seats_study.py                      # the real Panda data of examples/
     python scripts/real_seats_study.py --train front -o out/seats
+    python scripts/real_seats_study.py --train front+right,front+back-high,right+back-high   # two at once
 """
 from __future__ import annotations
 
@@ -25,7 +26,8 @@ def main(argv=None) -> int:
     p.add_argument("--data", type=Path, default=data, help="folder with artefacts.toml and one folder per placement")
     p.add_argument("--arm", type=Path, default=data / "panda-with-inertials.urdf", help="nominal arm")
     p.add_argument("--tip-frame", default="ball_link", help="tip link of a URDF arm")
-    p.add_argument("--train", default=None, help="comma-separated training placements (default every one)")
+    p.add_argument("--train", default=None,
+                   help="comma-separated training placements (default every one); a+b trains on a and b together")
     p.add_argument("--methods", default="calibrate,close-loop", help="calibrate, close-loop or both")
     p.add_argument("-o", "--output", type=Path, default=Path("out/real-seats"), help="output folder")
     args = p.parse_args(argv)
