@@ -113,3 +113,14 @@ def test_seat_figures_by_hand():
     assert f["spread_a_mm"] == pytest.approx(2 * np.sqrt(2.0))
     assert f["spread_b_mm"] == pytest.approx(4 * np.sqrt(2.0))
     assert f["distance_error_mm"] == pytest.approx(np.hypot(49.0, 2.0) - 50.0)
+
+
+def test_the_study_trains_on_two_placements_together_and_predicts_the_third(tmp_path):
+    from calibration.placements import placement_study
+    rows = placement_study(REAL, REAL / "panda-with-inertials.urdf", "ball_link", tmp_path, train=["front+right"],
+                           methods=("calibrate",))
+    assert [(r.train, r.method, r.test) for r in rows] == [("front+right", "calibrate", "back-high")]
+    trained = (tmp_path / "front+right" / "points.csv").read_text().splitlines()
+    parts = [(REAL / p / "points.csv").read_text().splitlines() for p in ("front", "right")]
+    assert len(trained) == len(parts[0]) + len(parts[1]) - 1 and trained[0] == parts[0][0]
+    assert 0.2 < rows[0].figures["spread_mean_mm"] < 5.0
