@@ -88,13 +88,186 @@ def _slow_block(text: str, path: str, first_line: int, header: list[str], num_id
     return CsvBlock(np.array([no for no, _ in recs], dtype=np.int64), numbers, texts)
 
 
-def _fast_block(body: bytes, text: str, path: str, first_line: int, header: list[str], num_idx,
-                txt_idx) -> CsvBlock | None:
-    """numpy's reader on a block of whole lines (``body``, decoded: ``text``), or None when the block
-    needs the careful reader."""
-    if b'"' in body:
+_ONES = np.uint64(0xFFFFFFFFFFFFFFFF)
+_POW10_U = np.array([10 ** k for k in range(20)], dtype=np.uint64)
+_DIVISORS = np.array([10.0 ** k for k in range(20)] + [-10.0 ** k for k in range(20)])   # the sign too
+_CELLS = 65536                 # cells parsed at a time: the temporaries stay in the cache
+_EXACT = 2 ** 53                      # a mantissa up to this is a double exactly
+
+
+def _u64(x) -> np.uint64:
+    return np.uint64(x)
+
+
+def _windows(arr: np.ndarray, width: int, before: bool = True) -> np.ndarray:
+    """(len(arr) + 1, width) read-only view of ``arr``: row ``p`` holds ``arr[p - width:p]``
+    (``before``) or ``arr[p:p + width]``, zeros outside ``arr``. Indexing rows of it copies the cells
+    of a block in one pass."""
+    pad = np.zeros(len(arr) + width, np.uint8)
+    if before:
+        pad[width:] = arr
+    else:
+        pad[:len(arr)] = arr
+    return np.lib.stride_tricks.as_strided(pad, shape=(len(arr) + 1, width), strides=(1, 1), writeable=False)
+
+
+def _byte_masks(width: int, low: bool) -> np.ndarray:
+    """(width + 1, width / 8) uint64: row ``k`` keeps the first ``k`` bytes of a row of ``width`` bytes
+    (``low``), or drops them (not ``low``)."""
+    keep = np.arange(width)[None, :] < np.arange(width + 1)[:, None]
+    return np.ascontiguousarray(np.where(keep == low, 255, 0).astype(np.uint8)).view(np.uint64)
+
+
+_MASKS = {(w, low): _byte_masks(w, low) for w in (8, 16, 24) for low in (False, True)}
+
+
+def _keep_bytes(lanes: np.ndarray, count: np.ndarray, low: bool) -> None:
+    """Keep, in place, the first ``count`` bytes (``low``) or all but the first ``count`` bytes (not
+    ``low``) of each row of ``lanes`` ((m, W/8) uint64 view of (m, W) bytes, little-endian);
+    ``count`` is clipped to 0 .. W."""
+    width = 8 * lanes.shape[1]
+    table = _MASKS.get((width, low))
+    if table is None:
+        table = _byte_masks(width, low)
+    lanes &= table.take(np.clip(count, 0, width), axis=0)
+
+
+def _all_bytes(flags: np.ndarray) -> np.ndarray:
+    """Per row, whether a (m, W) bool array (W a multiple of 8) is all True."""
+    lanes = flags.view(np.uint64)
+    ones = _u64(0x0101010101010101)
+    s = lanes[:, 0] == ones
+    for j in range(1, lanes.shape[1]):
+        s &= lanes[:, j] == ones
+    return s
+
+
+def _any_byte(flags: np.ndarray) -> np.ndarray:
+    """Per row, whether a (m, W) bool array (W a multiple of 8) has a True."""
+    lanes = flags.view(np.uint64)
+    s = lanes[:, 0].copy()
+    for j in range(1, lanes.shape[1]):
+        s |= lanes[:, j]
+    return s != 0
+
+
+def _byte_count(flags: np.ndarray) -> np.ndarray:
+    """Per row, the number of True in a (m, W) bool array (W a multiple of 8, at most 255 True)."""
+    lanes = flags.view(np.uint64)
+    s = lanes[:, 0].copy()
+    for j in range(1, lanes.shape[1]):
+        s += lanes[:, j]
+    return (s * _u64(0x0101010101010101)) >> _u64(56)
+
+
+def _eight_digits(lanes: np.ndarray) -> np.ndarray:
+    """The number written by each uint64 of digit values 0-9 (first digit in the lowest byte)."""
+    v = ((lanes & _u64(0x0F0F0F0F0F0F0F0F)) * _u64(2561)) >> _u64(8)
+    v = ((v & _u64(0x00FF00FF00FF00FF)) * _u64(6553601)) >> _u64(16)
+    return ((v & _u64(0x0000FFFF0000FFFF)) * _u64(42949672960001)) >> _u64(32)
+
+
+def _plain_decimals(arr: np.ndarray, ending: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Values of the cells ``arr[a:b]`` written as plain decimals (an optional sign, digits with at
+    most one point, at most 19 characters after the sign) and ``ok``: False where a cell is anything
+    else (empty, an exponent, nan, a space, too long): the caller reads those cell by cell.
+    ``ending``: ``_windows(arr, 24)``.
+
+    The digits (point dropped) form an integer mantissa ``m`` of at most 2**53 and the value is
+    ``m / 10**decimals``: both are doubles exactly, so the one rounded division gives the double
+    nearest the decimal, as Python's ``float`` does (``ok`` is False for a longer mantissa)."""
+    m = len(a)
+    if not m:
+        return np.empty(0), np.ones(0, bool)
+    first = np.where(a < b, arr.take(np.minimum(a, len(arr) - 1)), 0)
+    neg = first == 45
+    length = b - a - (neg | (first == 43))
+    width = 8 * min(3, max(1, -(-int(length.max()) // 8)))
+    cells = ending[b, 24 - width:]                             # right-aligned: the cell ends at column W
+    digit = cells - np.uint8(48)                               # a point: 254
+    _keep_bytes(digit.view(np.uint64), width - length, low=False)   # before the cell (and sign): 0
+    is_digit = digit < 10
+    is_point = digit == 254
+    n_points = _byte_count(is_point)
+    ok = _all_bytes(is_digit | is_point) & (n_points <= 1) & (length > n_points) & (length <= 19)
+    # the point's column: the lowest set byte of the point flags, from the exponent of that power of 256
+    lanes = is_point.view(np.uint64)
+    flags = lanes[:, 0].astype(np.float64)
+    for j in range(1, lanes.shape[1]):
+        flags += lanes[:, j].astype(np.float64) * 2.0 ** (64 * j)
+    col = ((flags.view(np.int64) >> 52) - 1023) >> 3
+    decimals = np.where(n_points == 1, width - 1 - col, 0).clip(0, 19)
+    digit *= is_digit
+    parts = _eight_digits(digit.view(np.uint64))
+    s = parts[:, 0].copy()
+    for j in range(1, parts.shape[1]):
+        s = s * _u64(10 ** 8) + parts[:, j]
+    low = s % _POW10_U[decimals]
+    # the point's column holds a 0 digit: the digits before it are one place too high
+    mant = np.where(n_points == 1, (s - low) // _u64(10) + low, s)
+    ok &= mant <= _u64(_EXACT)
+    return mant.astype(np.float64) / _DIVISORS[decimals + 20 * neg], ok
+
+
+def _numbers(arr, text, path, lines, header, num_idx, starts, stops, commas) -> np.ndarray | None:
+    """(n, k) values of the numeric cells of a block whose lines all have the header's cell count;
+    None when it needs the careful reader. Plain decimals are read by :func:`_plain_decimals`, a few
+    other cells one by one (a bad one raises its located error), many by numpy's reader."""
+    n, k = len(lines), len(header) - 1
+    bounds = np.column_stack([starts - 1, commas, stops])        # cell c: bounds[c] + 1 .. bounds[c + 1]
+    cols = np.asarray(num_idx)
+    flat_a, flat_b = (bounds[:, cols] + 1).ravel(), bounds[:, cols + 1].ravel()
+    ending = _windows(arr, 24)
+    parts = [_plain_decimals(arr, ending, flat_a[i:i + _CELLS], flat_b[i:i + _CELLS])
+             for i in range(0, len(flat_a), _CELLS)]
+    values, ok = np.concatenate([v for v, _ in parts]), np.concatenate([o for _, o in parts])
+    odd = np.flatnonzero(~ok)
+    if len(odd) > 16 + len(values) // 1000:
+        # many cells in another notation (exponents): numpy's reader, or the careful one
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                numbers = np.loadtxt(io.StringIO(text), dtype=float, usecols=num_idx, delimiter=",", comments=None,
+                                     quotechar=None, ndmin=2, encoding=None)
+        except ValueError:
+            return None
+        return numbers if numbers.shape[0] == n else None
+    for i in odd.tolist():
+        cell = arr[flat_a[i]:flat_b[i]].tobytes().decode("utf-8").strip()
+        v = parse_number(cell)
+        if v is None:
+            raise _empty_cell_error(cell, path, int(lines[i // len(num_idx)]), header[num_idx[i % len(num_idx)]])
+        values[i] = v
+    return values.reshape(n, len(num_idx))
+
+
+def _regular_layout(arr: np.ndarray, k: int):
+    """The common case in one pass: every line ends with a newline, holds ``k`` commas and is not
+    blank, no carriage return. (kept line indices, starts, stops, (n, k) commas) or None."""
+    if not len(arr) or arr[-1] != 10:
         return None
-    arr = np.frombuffer(body, np.uint8)
+    seps = np.flatnonzero((arr == 44) | (arr == 10))
+    if len(seps) % (k + 1):
+        return None
+    seps = seps.reshape(-1, k + 1)
+    kinds = arr[seps]
+    want = np.full(k + 1, 44, np.uint8)
+    want[-1] = 10
+    if not np.array_equal(kinds, np.broadcast_to(want, kinds.shape)):
+        return None
+    stops = seps[:, -1]
+    starts = np.empty_like(stops)
+    starts[0] = 0
+    starts[1:] = stops[:-1] + 1
+    if np.any(stops == starts) or np.any(arr[np.maximum(stops - 1, 0)] == 13):
+        return None                                       # a blank line, a carriage return: the general case
+    return np.arange(len(stops)), starts, stops, seps[:, :-1]
+
+
+def _lines_layout(arr: np.ndarray, k: int):
+    """(kept line indices, starts, stops, (n, k) commas) of the non-empty lines (a final line may lack
+    its newline; a carriage return before a newline is dropped), or None unless every kept line has
+    exactly ``k`` commas."""
     ends = np.flatnonzero(arr == 10)
     if len(arr) and arr[-1] != 10:
         ends = np.append(ends, len(arr))
@@ -108,7 +281,7 @@ def _fast_block(body: bytes, text: str, path: str, first_line: int, header: list
     lengths = lengths - cr
     keep = np.flatnonzero(lengths > 0)
     starts, stops = starts[keep], starts[keep] + lengths[keep]
-    n, k = len(keep), len(header) - 1
+    n = len(keep)
     # every kept line has exactly k commas: the commas, k to a line in file order, all lie inside
     # their line (a blank-looking line or a wrong cell count: the careful reader)
     commas = np.flatnonzero(arr == 44)
@@ -117,18 +290,30 @@ def _fast_block(body: bytes, text: str, path: str, first_line: int, header: list
     commas = commas.reshape(n, k)
     if k and n and (np.any(commas[:, 0] <= starts - 1) or np.any(commas[:, -1] >= stops)):
         return None
+    return keep, starts, stops, commas
+
+
+def _fast_block(body: bytes, text: str, path: str, first_line: int, header: list[str], num_idx,
+                txt_idx) -> CsvBlock | None:
+    """numpy's reader on a block of whole lines (``body``, decoded: ``text``), or None when the block
+    needs the careful reader."""
+    if b'"' in body or b"\0" in body or not np.little_endian:
+        return None
+    arr = np.frombuffer(body, np.uint8)
+    k = len(header) - 1
+    layout = _regular_layout(arr, k)
+    if layout is None:
+        layout = _lines_layout(arr, k)
+        if layout is None:
+            return None
+    keep, starts, stops, commas = layout
+    n = len(keep)
     lines = first_line + keep
     if not n:
         return CsvBlock(lines, np.empty((0, len(num_idx))), np.empty((0, len(txt_idx)), dtype=str))
-    kw = dict(delimiter=",", comments=None, quotechar=None, ndmin=2, encoding=None)
     if num_idx:
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                numbers = np.loadtxt(io.StringIO(text), dtype=float, usecols=num_idx, **kw)
-        except ValueError:
-            return None
-        if numbers.shape[0] != n:
+        numbers = _numbers(arr, text, path, lines, header, num_idx, starts, stops, commas)
+        if numbers is None:
             return None
     else:
         numbers = np.empty((n, 0))
@@ -142,14 +327,16 @@ def _fast_block(body: bytes, text: str, path: str, first_line: int, header: list
 def _cells_text(arr: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Object array of the stripped text of cells ``arr[a:b]``; equal cells share one string (equal
     neighbours, a measurement's rows, are decoded once)."""
-    width = int((b - a).max()) if len(a) else 0
+    width = -(-int((b - a).max()) // 8) * 8 if len(a) else 0
     if width == 0:
         return np.full(len(a), "", dtype=object)
-    cells = np.zeros((len(a), width), np.uint8)
-    for p in range(width):
-        cells[:, p] = np.where(a + p < b, arr[np.minimum(a + p, len(arr) - 1)], 0)
-    new = np.ones(len(a), bool)
-    new[1:] = np.any(cells[1:] != cells[:-1], axis=1)
+    cells = _windows(arr, width, before=False)[a]
+    lanes = cells.view(np.uint64)
+    _keep_bytes(lanes, b - a, low=True)
+    new = np.zeros(len(a), bool)
+    new[0] = True
+    for j in range(lanes.shape[1]):
+        new[1:] |= lanes[1:, j] != lanes[:-1, j]
     uniq, inv = np.unique(cells[new].view(f"S{width}").ravel(), return_inverse=True)
     decoded = np.array([u.decode("utf-8").strip() for u in uniq.tolist()], dtype=object)
     return decoded[inv.ravel()[np.cumsum(new) - 1]]
@@ -262,16 +449,23 @@ def _fixed_chars(v: np.ndarray, decimals: int) -> np.ndarray | None:
     x = scaled
     top = np.full(n, ndig - decimals - 1, np.int64)      # row of a sign: just before the first digit
     for k in range(ndig):                                 # the k-th digit from the right
+        if k % 4 == 0:                                    # four digits at a time in uint16: cheaper
+            if k + 4 < ndig:
+                q = x // 10000
+                group = (x - q * 10000).astype(np.uint16)
+                x = q
+            else:
+                group = x.astype(np.uint16)
         row = ndig - k if k >= decimals else ndig + 1 - k
-        q = x // 10                                       # (np.divmod is many times slower)
-        d = (x - q * 10).astype(np.uint8) + 48
+        q16 = group // 10                                 # (np.divmod is many times slower)
+        d = (group - q16 * 10).astype(np.uint8) + 48
+        group = q16
         if k > decimals:                                  # a leading zero of the integer part: none
-            shown = x > 0
+            shown = scaled >= 10 ** k
             m[row] = d * shown
             top -= shown
         else:
             m[row] = d
-        x = q
     if point:
         m[ndig - decimals + 1] = 46
     m[0] = 0
@@ -317,23 +511,14 @@ def _column_chars(c: np.ndarray, fmt: str) -> np.ndarray | None:
 
 
 def _rows_text(mats: list[np.ndarray]) -> bytes:
-    """The CSV rows of the (W, n) character matrices of the columns: one row per character position
-    (each written contiguously), packed eight positions to a uint64 so that the transposition to
-    text order moves words, not bytes; the empty positions (0) are dropped."""
+    """The CSV rows of the (W, n) character matrices of the columns (separators added), transposed to
+    text order; the empty positions (0) are dropped."""
     n = mats[0].shape[1]
-    sep = np.full((1, n), 44, np.uint8)
     parts = []
     for m in mats:
-        parts += [m, sep]
+        parts += [m, np.full((1, n), 44, np.uint8)]
     parts[-1] = np.full((1, n), 10, np.uint8)
-    width = sum(len(p) for p in parts)
-    chars = np.zeros((-(-width // 8) * 8, n), np.uint8)
-    np.concatenate(parts, out=chars[:width])
-    packed = np.zeros((len(chars) // 8, n), np.uint64)
-    for b in range(8):       # byte b of each word: position 8 r + b (the words are read back as bytes)
-        word = chars[b::8].astype(np.uint64)
-        packed |= word << np.uint64(8 * b) if np.little_endian else word << np.uint64(56 - 8 * b)
-    text = np.ascontiguousarray(packed.T).view(np.uint8).ravel()
+    text = np.ascontiguousarray(np.concatenate(parts).T).ravel()
     return text[text != 0].tobytes()
 
 

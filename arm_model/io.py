@@ -200,7 +200,8 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
     empty = np.flatnonzero(measurement == "")
     if len(empty):
         raise InputError("empty measurement id", path, int(blk.lines[empty[0]]), "measurement")
-    q = np.column_stack([nums[:, pos[c]] * UNIT_FACTORS[lay.header[c].rsplit("_", 1)[1]] for c in lay.joints])
+    q = nums[:, [pos[c] for c in lay.joints]] * np.array([UNIT_FACTORS[lay.header[c].rsplit("_", 1)[1]]
+                                                          for c in lay.joints])
     force, force_kind = group(("fx", "fy", "fz")), None
     if force is not None:
         force_kind = "xyz"
