@@ -249,3 +249,39 @@ def test_joint_limit_tally_of_blocks_equals_the_whole(nominal):
     # hand count: j2 is limited to +-150 deg
     assert f"j2 ({int(np.sum(np.abs(np.rad2deg(q[:, 1])) > 150))}," in whole.message
     assert JointLimitTally(desc, "p.csv").warning() is None
+
+
+_plain = st.from_regex(r"[+-]?[0-9]{0,10}\.?[0-9]{0,9}", fullmatch=True).filter(lambda s: any(c.isdigit() for c in s))
+_other = st.sampled_from(["1e3", "-2.5E-4", " 7.25", "nan", "inf", "12345678901234567.5", "9007199254740993"])
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.lists(_plain, min_size=10, max_size=10), min_size=1, max_size=60),
+       st.lists(st.tuples(st.integers(0, 59), st.integers(0, 9), _other), max_size=3))
+def test_plain_decimals_equal_python_float(rows, others):
+    """The vectorised reading of plain decimals (and the few other cells among them, read one by one)
+    gives exactly Python's float of each cell."""
+    for r, c, cell in others:
+        if r < len(rows):
+            rows[r][c] = cell
+    text = HEADER + "\n" + "\n".join(",".join(["m", "f", *r]) for r in rows) + "\n"
+    pts = parse_points(text, "p.csv", 7) if not any(c in ("nan", "inf") for r in rows for c in r) else None
+    want = np.array([[float(c) for c in r] for r in rows])
+    if pts is not None:
+        np.testing.assert_array_equal(pts.q, np.deg2rad(want[:, :7]))
+        np.testing.assert_array_equal(pts.force, want[:, 7:])
+        assert all(math.copysign(1, a) == math.copysign(1, b) for a, b in zip(pts.force.ravel(), want[:, 7:].ravel()))
+
+
+@pytest.mark.parametrize("cell", ["9007199254740992", "9007199254740993", "900719925474099.3", "0.9007199254740993",
+                                  "-0.0", "+.5", "5.", "0000000000000000001.25", "1234567890.123456789",
+                                  "0.1", "2.675", "-123456.7890123"])
+def test_plain_decimal_edge_cases_equal_python_float(cell):
+    rows = [r.split(",") for r in body(50).splitlines()]
+    rows = [",".join(r[:2] + [f"{float(c):.6f}" for c in r[2:]]) for r in rows]     # plain decimals
+    cells = rows[20].split(",")
+    cells[9] = cell                                    # fx_N
+    rows[20] = ",".join(cells)
+    pts = parse_points(HEADER + "\n" + "\n".join(rows) + "\n", "p.csv", 7)
+    got = pts.force[20, 0]
+    assert got == float(cell) and math.copysign(1, got) == math.copysign(1, float(cell))
