@@ -1,17 +1,19 @@
 """Fast, strict CSV reading and writing for large files (millions of rows).
 
-Reading: the file is read in blocks of whole lines; each block is parsed by numpy's C reader
-(``np.loadtxt``) after a vectorised check of the cell count of every line. Anything the fast path
-does not accept exactly (a quoted cell, a bad number, a wrong cell count, a blank-looking line)
-sends that block to the cell-by-cell reader, which either parses it the same way or raises the
-located :class:`InputError` (file, line, column). Both paths accept the same numbers: ASCII
-decimals with an optional exponent (``12.5``, ``-3e-4``) and ``nan``/``inf`` (callers refuse
-non-finite values with their location); never ``4_5`` (Python's ``float`` would read 45), hex,
-or non-ASCII digits.
+Reading: the file is read in blocks of whole lines. In a block whose lines all have the header's
+cell count (found from the separator positions), the numeric cells written as plain decimals
+(``-12.5``, ``3``, at most 2**53 as an integer mantissa) are read by integer arithmetic on numpy
+arrays, exactly as Python's ``float`` reads them; a few other cells are read one by one, a block
+of many (exponents) by numpy's C reader (``np.loadtxt``). Anything these do not accept exactly (a
+quoted cell, a wrong cell count, a blank-looking line) sends the block to the cell-by-cell reader,
+which either parses it the same way or raises the located :class:`InputError` (file, line,
+column). All paths accept the same numbers: ASCII decimals with an optional exponent (``12.5``,
+``-3e-4``) and ``nan``/``inf`` (callers refuse non-finite values with their location); never
+``4_5`` (Python's ``float`` would read 45), hex, or non-ASCII digits.
 
-Writing: fixed-decimal columns (``%.6f``) are formatted by integer arithmetic on numpy arrays,
-then the used characters of the byte matrix are kept, row by row; other formats fall back to
-Python's ``%`` formatting.
+Writing: fixed-decimal columns (``%.6f``) are formatted by integer arithmetic on numpy arrays into
+a character matrix, transposed to text order, and the unused characters dropped; other formats
+fall back to Python's ``%`` formatting.
 """
 from __future__ import annotations
 
@@ -88,11 +90,10 @@ def _slow_block(text: str, path: str, first_line: int, header: list[str], num_id
     return CsvBlock(np.array([no for no, _ in recs], dtype=np.int64), numbers, texts)
 
 
-_ONES = np.uint64(0xFFFFFFFFFFFFFFFF)
 _POW10_U = np.array([10 ** k for k in range(20)], dtype=np.uint64)
 _DIVISORS = np.array([10.0 ** k for k in range(20)] + [-10.0 ** k for k in range(20)])   # the sign too
 _CELLS = 65536                 # cells parsed at a time: the temporaries stay in the cache
-_EXACT = 2 ** 53                      # a mantissa up to this is a double exactly
+_EXACT = 2 ** 53               # a mantissa up to this is a double exactly
 
 
 def _u64(x) -> np.uint64:
@@ -142,15 +143,6 @@ def _all_bytes(flags: np.ndarray) -> np.ndarray:
     return s
 
 
-def _any_byte(flags: np.ndarray) -> np.ndarray:
-    """Per row, whether a (m, W) bool array (W a multiple of 8) has a True."""
-    lanes = flags.view(np.uint64)
-    s = lanes[:, 0].copy()
-    for j in range(1, lanes.shape[1]):
-        s |= lanes[:, j]
-    return s != 0
-
-
 def _byte_count(flags: np.ndarray) -> np.ndarray:
     """Per row, the number of True in a (m, W) bool array (W a multiple of 8, at most 255 True)."""
     lanes = flags.view(np.uint64)
@@ -167,7 +159,8 @@ def _eight_digits(lanes: np.ndarray) -> np.ndarray:
     return ((v & _u64(0x0000FFFF0000FFFF)) * _u64(42949672960001)) >> _u64(32)
 
 
-def _plain_decimals(arr: np.ndarray, ending: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _plain_decimals(arr: np.ndarray, ending: np.ndarray, a: np.ndarray,
+                    b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Values of the cells ``arr[a:b]`` written as plain decimals (an optional sign, digits with at
     most one point, at most 19 characters after the sign) and ``ok``: False where a cell is anything
     else (empty, an exponent, nan, a space, too long): the caller reads those cell by cell.
@@ -218,11 +211,14 @@ def _numbers(arr, text, path, lines, header, num_idx, starts, stops, commas) -> 
     cols = np.asarray(num_idx)
     flat_a, flat_b = (bounds[:, cols] + 1).ravel(), bounds[:, cols + 1].ravel()
     ending = _windows(arr, 24)
-    parts = [_plain_decimals(arr, ending, flat_a[i:i + _CELLS], flat_b[i:i + _CELLS])
-             for i in range(0, len(flat_a), _CELLS)]
+    parts = []
+    for i in range(0, len(flat_a), _CELLS):
+        parts.append(_plain_decimals(arr, ending, flat_a[i:i + _CELLS], flat_b[i:i + _CELLS]))
+        if i == 0 and np.count_nonzero(~parts[0][1]) > 16 + len(parts[0][1]) // 1000:
+            break                                         # another notation: stop here
     values, ok = np.concatenate([v for v, _ in parts]), np.concatenate([o for _, o in parts])
     odd = np.flatnonzero(~ok)
-    if len(odd) > 16 + len(values) // 1000:
+    if len(values) < len(flat_a) or len(odd) > 16 + len(values) // 1000:
         # many cells in another notation (exponents): numpy's reader, or the careful one
         try:
             with warnings.catch_warnings():
@@ -295,8 +291,8 @@ def _lines_layout(arr: np.ndarray, k: int):
 
 def _fast_block(body: bytes, text: str, path: str, first_line: int, header: list[str], num_idx,
                 txt_idx) -> CsvBlock | None:
-    """numpy's reader on a block of whole lines (``body``, decoded: ``text``), or None when the block
-    needs the careful reader."""
+    """The vectorised reader on a block of whole lines (``body``, decoded: ``text``), or None when the
+    block needs the careful reader."""
     if b'"' in body or b"\0" in body or not np.little_endian:
         return None
     arr = np.frombuffer(body, np.uint8)
