@@ -202,14 +202,12 @@ def _plain_decimals(arr: np.ndarray, ending: np.ndarray, a: np.ndarray,
     return mant.astype(np.float64) / _DIVISORS[decimals + 20 * neg], ok
 
 
-def _numbers(arr, text, path, lines, header, num_idx, starts, stops, commas) -> np.ndarray | None:
+def _numbers(arr, text, lines, num_idx, before, after) -> np.ndarray | None:
     """(n, k) values of the numeric cells of a block whose lines all have the header's cell count;
     None when it needs the careful reader. Plain decimals are read by :func:`_plain_decimals`, a few
-    other cells one by one (a bad one raises its located error), many by numpy's reader."""
-    n, k = len(lines), len(header) - 1
-    bounds = np.column_stack([starts - 1, commas, stops])        # cell c: bounds[c] + 1 .. bounds[c + 1]
-    cols = np.asarray(num_idx)
-    flat_a, flat_b = (bounds[:, cols] + 1).ravel(), bounds[:, cols + 1].ravel()
+    other cells one by one, many by numpy's reader; a bad cell: None."""
+    n = len(lines)
+    flat_a, flat_b = (before[:, num_idx] + 1).ravel(), after[:, num_idx].ravel()
     ending = _windows(arr, 24)
     parts = []
     for i in range(0, len(flat_a), _CELLS):
@@ -229,41 +227,38 @@ def _numbers(arr, text, path, lines, header, num_idx, starts, stops, commas) -> 
             return None
         return numbers if numbers.shape[0] == n else None
     for i in odd.tolist():
-        cell = arr[flat_a[i]:flat_b[i]].tobytes().decode("utf-8").strip()
-        v = parse_number(cell)
+        v = parse_number(arr[flat_a[i]:flat_b[i]].tobytes().decode("utf-8").strip())
         if v is None:
-            raise _empty_cell_error(cell, path, int(lines[i // len(num_idx)]), header[num_idx[i % len(num_idx)]])
+            return None                                   # the careful reader: its located error
         values[i] = v
     return values.reshape(n, len(num_idx))
 
 
-def _regular_layout(arr: np.ndarray, k: int):
+def _regular_layout(arr: np.ndarray, body: bytes, k: int):
     """The common case in one pass: every line ends with a newline, holds ``k`` commas and is not
-    blank, no carriage return. (kept line indices, starts, stops, (n, k) commas) or None."""
-    if not len(arr) or arr[-1] != 10:
+    blank, no carriage return. (kept line indices, before, after) as :func:`_lines_layout`, or None."""
+    if not body.endswith(b"\n") or b"\r" in body:
         return None
     seps = np.flatnonzero((arr == 44) | (arr == 10))
     if len(seps) % (k + 1):
         return None
-    seps = seps.reshape(-1, k + 1)
-    kinds = arr[seps]
-    want = np.full(k + 1, 44, np.uint8)
+    after = seps.reshape(-1, k + 1)
+    ends = after[:, -1]
+    want = np.full(k + 1, 44, np.uint8)                   # k commas, then the newline
     want[-1] = 10
-    if not np.array_equal(kinds, np.broadcast_to(want, kinds.shape)):
-        return None
-    stops = seps[:, -1]
-    starts = np.empty_like(stops)
-    starts[0] = 0
-    starts[1:] = stops[:-1] + 1
-    if np.any(stops == starts) or np.any(arr[np.maximum(stops - 1, 0)] == 13):
-        return None                                       # a blank line, a carriage return: the general case
-    return np.arange(len(stops)), starts, stops, seps[:, :-1]
+    if not np.all(arr[after] == want) or ends[0] == 0 or np.any(ends[1:] - ends[:-1] == 1):
+        return None                                       # a wrong cell count, a blank line
+    n = len(ends)
+    flat = np.empty(len(seps) + 1, np.int64)
+    flat[0] = -1
+    flat[1:] = seps
+    return np.arange(n), flat[:-1].reshape(n, k + 1), after
 
 
 def _lines_layout(arr: np.ndarray, k: int):
-    """(kept line indices, starts, stops, (n, k) commas) of the non-empty lines (a final line may lack
-    its newline; a carriage return before a newline is dropped), or None unless every kept line has
-    exactly ``k`` commas."""
+    """(kept line indices, before, after) of the non-empty lines (a final line may lack its newline;
+    a carriage return before a newline is dropped): cell ``c`` of row ``i`` is
+    ``arr[before[i, c] + 1:after[i, c]]``. None unless every kept line has exactly ``k`` commas."""
     ends = np.flatnonzero(arr == 10)
     if len(arr) and arr[-1] != 10:
         ends = np.append(ends, len(arr))
@@ -286,7 +281,7 @@ def _lines_layout(arr: np.ndarray, k: int):
     commas = commas.reshape(n, k)
     if k and n and (np.any(commas[:, 0] <= starts - 1) or np.any(commas[:, -1] >= stops)):
         return None
-    return keep, starts, stops, commas
+    return keep, np.column_stack([starts - 1, commas]), np.column_stack([commas, stops])
 
 
 def _fast_block(body: bytes, text: str, path: str, first_line: int, header: list[str], num_idx,
@@ -297,26 +292,25 @@ def _fast_block(body: bytes, text: str, path: str, first_line: int, header: list
         return None
     arr = np.frombuffer(body, np.uint8)
     k = len(header) - 1
-    layout = _regular_layout(arr, k)
+    layout = _regular_layout(arr, body, k)
     if layout is None:
         layout = _lines_layout(arr, k)
         if layout is None:
             return None
-    keep, starts, stops, commas = layout
+    keep, before, after = layout
     n = len(keep)
     lines = first_line + keep
     if not n:
         return CsvBlock(lines, np.empty((0, len(num_idx))), np.empty((0, len(txt_idx)), dtype=str))
     if num_idx:
-        numbers = _numbers(arr, text, path, lines, header, num_idx, starts, stops, commas)
+        numbers = _numbers(arr, text, lines, num_idx, before, after)
         if numbers is None:
             return None
     else:
         numbers = np.empty((n, 0))
     texts = np.empty((n, len(txt_idx)), dtype=object)
-    for j, c in enumerate(txt_idx):                       # cell c: between comma c - 1 and comma c
-        a = starts if c == 0 else commas[:, c - 1] + 1
-        texts[:, j] = _cells_text(arr, a, stops if c == k else commas[:, c])
+    for j, c in enumerate(txt_idx):
+        texts[:, j] = _cells_text(arr, before[:, c] + 1, after[:, c])
     return CsvBlock(lines, numbers, texts)
 
 

@@ -285,3 +285,11 @@ def test_plain_decimal_edge_cases_equal_python_float(cell):
     pts = parse_points(HEADER + "\n" + "\n".join(rows) + "\n", "p.csv", 7)
     got = pts.force[20, 0]
     assert got == float(cell) and math.copysign(1, got) == math.copysign(1, float(cell))
+
+
+def test_a_line_of_empty_cells_is_blank_in_every_reader():
+    rows = [r.split(",") for r in body(30).splitlines()]
+    rows = [",".join(r[:2] + [f"{float(c):.4f}" for c in r[2:]]) for r in rows]
+    rows.insert(10, "," * 11)
+    pts = parse_points(HEADER + "\n" + "\n".join(rows) + "\n", "p.csv", 7)
+    assert len(pts) == 30 and 12 not in pts.lines.tolist() and pts.lines[10] == 13
