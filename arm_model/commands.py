@@ -150,8 +150,9 @@ def register(sub) -> None:
         "urdf", help=command_help("urdf"),
         description="Write the URDF (links, joints, the probe's virtual elastic joints, visuals) generated "
                     "from an arm description. The repository's urdf/aacmm7.urdf is made this way.")
-    u.add_argument("arm", type=Path, help="arm description TOML (or a URDF with --tip-frame, to see the chain "
-                                          "the toolkit reads from it)")
+    u.add_argument("arm", type=Path, help="arm description TOML or a shipped arm's name (aacmm7), or a URDF with "
+                                          "--tip-frame, to see the chain the toolkit reads from it "
+                                          "(docs/formats.md §2)")
     u.add_argument("--tip-frame", default=None, metavar="LINK", help="for a URDF arm: the link at the ball centre")
     u.add_argument("-o", "--output", type=Path, required=True, help="output URDF")
     u.set_defaults(func=run_urdf)
