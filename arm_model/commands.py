@@ -160,7 +160,8 @@ def register(sub) -> None:
     e = sub.add_parser(
         "examples", help=command_help("examples"),
         description="Copy the shipped example campaigns (campaigns/*.toml, for aacmm simulate), the example "
-                    "data (data/: a simulated ring campaign, real measured robot data with its licence) and "
+                    "data (data/: a simulated ring campaign, real measured robot data with its licence), the "
+                    "shipped arm descriptions (arms/: the nominal aacmm7 as a DH table, a template for yours) and "
                     "the user docs (docs/, e.g. docs/formats.md) into DIR. Existing files are never overwritten.")
     e.add_argument("dir", type=Path, help="destination folder (created)")
     e.set_defaults(func=run_examples)

@@ -50,9 +50,11 @@ def campaign_inputs(p) -> None:
     """Points, artefacts, arm, reference points and output folder (shared with ``aacmm close-loop``)."""
     p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3)")
     p.add_argument("artefacts", type=Path, help="artefacts TOML (docs/formats.md §4)")
-    add_arm_options(p, "nominal arm: description TOML or URDF (with --tip-frame)")
+    add_arm_options(p, "nominal arm: a shipped arm's name (aacmm7), a description TOML or model file, or a URDF "
+                       "with --tip-frame (docs/formats.md §2, docs/own-arm.md)")
     p.add_argument("--reference-points", type=Path, default=None,
-                   help="a second points CSV with reference coordinates (x_ref_mm ...), e.g. tracker nests")
+                   help="a second points CSV with reference coordinates (x_ref_mm ...), e.g. tracker nests "
+                        "(docs/formats.md §3)")
     p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; never an input)")
 
 
