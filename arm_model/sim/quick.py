@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry import perpendicular_basis, rotation_xyz
-from ..io import Artefacts, Distance, Feature, PointSet, atomic_write_text, write_csv
+from ..io import Artefacts, Distance, Feature, PointSet, atomic_write_text, format_artefacts, write_csv
 from ..model import ArmModel, AuxData
 from .ik import random_q, solve_positions
 
@@ -89,15 +89,7 @@ class SynthCampaign:
         files = {"points": _write_points(out / "points.csv", self.points)}
         if self.reference_points is not None:
             files["reference"] = _write_points(out / "points-ref.csv", self.reference_points)
-        import tomli_w
-
-        doc = {"feature": [{"id": f.id, "kind": f.kind, **({} if f.diameter is None else
-                                                             {"diameter_mm": f.diameter * 1e3})}
-                           for f in self.artefacts.features.values()],
-               "distance": [{"between": list(d.between), "length_mm": d.length * 1e3,
-                             **({} if d.u_length is None else {"u_length_mm": d.u_length * 1e3})}
-                            for d in self.artefacts.distances]}
-        text = tomli_w.dumps({k: v for k, v in doc.items() if v})
+        text = format_artefacts(self.artefacts.features.values(), self.artefacts.distances)
         files["artefacts"] = atomic_write_text(out / "artefacts.toml", text)
         return files
 
