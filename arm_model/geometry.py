@@ -12,8 +12,9 @@ its nuisance states), the ring pipeline (:mod:`correction`) and the viewer:
 * standard uncertainties of the fitted radii (``u_radius``) from the residuals and the Jacobian at the
   solution, ``s^2 (J^T J)^-1`` with ``s^2 = sum r^2 / (N - parameters)`` (the scatter of the points
   about the fitted shape, nothing else: the uncertainty of the ball diameter is not included);
-* rotations through :class:`scipy.spatial.transform.Rotation` (:func:`rotation_xyz`,
-  :func:`random_rotation`, :func:`kabsch`) and :func:`perpendicular_basis`.
+* rotations through :class:`scipy.spatial.transform.Rotation` (:func:`rotation_xyz` and its inverse
+  :func:`rpy_from_matrix`, :func:`random_rotation`, :func:`kabsch`), frames from a direction
+  (:func:`perpendicular_basis`, :func:`frame_along`).
 
 Geometric fits minimise orthogonal distances with Levenberg-Marquardt (scipy ``least_squares``,
 analytic Jacobians) from an algebraic seed; the solver status and the rank of the Jacobian at the
@@ -35,7 +36,7 @@ from ._errors import NumericalError
 __all__ = ["CircleFit", "CylinderFit", "RingFit", "SphereFit", "PlaneFit", "kasa_circle", "fit_circle_2d",
            "fit_cylinder", "fit_row_circles", "split_rows", "ring_fit", "fit_ring_axis", "fit_sphere",
            "fit_plane", "ball_centre_radius", "feature_diameter", "perpendicular_basis", "angle_frame",
-           "rotation_xyz", "random_rotation", "kabsch", "sphere_seed"]
+           "rotation_xyz", "rpy_from_matrix", "frame_along", "random_rotation", "kabsch", "sphere_seed"]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -67,6 +68,29 @@ def angle_frame(a) -> tuple[np.ndarray, np.ndarray]:
 def rotation_xyz(w) -> np.ndarray:
     """``Rz(w[2]) Ry(w[1]) Rx(w[0])`` (3x3): fixed-axis x-y-z angles [rad] (roll, pitch, yaw)."""
     return Rotation.from_euler("xyz", np.asarray(w, float)).as_matrix()
+
+
+def rpy_from_matrix(r) -> tuple[float, float, float]:
+    """The angles ``(roll, pitch, yaw)`` [rad] of a rotation matrix, ``r = Rz(yaw) Ry(pitch) Rx(roll)``
+    (the inverse of :func:`rotation_xyz`, URDF's ``rpy``); at gimbal lock (pitch +-90 degrees) yaw is 0."""
+    import warnings
+
+    with warnings.catch_warnings():     # gimbal lock: scipy says so and sets yaw to zero, as wanted
+        warnings.simplefilter("ignore", UserWarning)
+        return tuple(float(a) for a in Rotation.from_matrix(np.asarray(r, float)).as_euler("xyz"))
+
+
+def frame_along(v, axis: int) -> np.ndarray:
+    """A rotation matrix (3, 3) whose column ``axis`` (0 x, 1 y, 2 z) is along the vector ``v`` (base
+    ``axis`` when ``v`` is zero); the other two columns from :func:`perpendicular_basis` (a right-handed
+    frame)."""
+    v = np.asarray(v, float)
+    n = np.linalg.norm(v)
+    u = np.eye(3)[axis] if n < 1e-15 else v / n
+    e1, e2 = perpendicular_basis(u)
+    cols = [None, None, None]
+    cols[axis], cols[(axis + 1) % 3], cols[(axis + 2) % 3] = u, e1, e2
+    return np.column_stack(cols)
 
 
 def random_rotation(rng) -> np.ndarray:
