@@ -17,6 +17,7 @@ import numpy as np
 
 from .._errors import InputError, NumericalError
 from .._output import safe_name
+from ..description import toml_text
 from ..io import (Artefacts, Distance, Feature, ForceSignal, PointSet, atomic_write_text, format_artefacts,
                   guard_output, parse_points)
 from ..io import parse_artefacts
@@ -145,8 +146,6 @@ def _with_units(d):
 
 
 def _truth_text(campaign: Campaign, truth: Truth, plan: Plan, draw: OperatorDraw, stats: dict) -> str:
-    import tomli_w
-
     spec = truth.model.spec
     noise_units = {"encoder_resolution": "rad", "encoder_noise": "rad", "probing_repeatability": "m",
                    "force_noise": "N", "temperature_noise": "C"}
@@ -160,10 +159,10 @@ def _truth_text(campaign: Campaign, truth: Truth, plan: Plan, draw: OperatorDraw
         "artefact": plan.placements,
         "stats": stats,
     }
-    head = [TRUTH_HEADER, f"# Campaign '{campaign.name}', seed {campaign.seed}. SI units, named in every key; "
-            "[parameters] is the true parameter vector of the core ArmModel(nominal arm, effects on), "
-            "errors added to the nominal description.", ""]
-    return "\n".join(head) + tomli_w.dumps(_plain(doc))
+    comment = (TRUTH_HEADER.removeprefix("# ") + f"\nCampaign '{campaign.name}', seed {campaign.seed}. SI units, named in "
+               "every key; [parameters] is the true parameter vector of the core ArmModel(nominal arm, effects on), "
+               "errors added to the nominal description.")
+    return toml_text(_plain(doc), comment)
 
 
 # ---------------------------------------------------------------------------------------------
