@@ -23,6 +23,7 @@ import numpy as np
 from ..geometry import perpendicular_basis, rotation_xyz
 from ..io import Artefacts, Distance, Feature, PointSet, atomic_write_text, format_artefacts, write_csv
 from ..model import ArmModel, AuxData
+from .artefacts import shoulder
 from .ik import random_q, solve_positions
 
 __all__ = ["SynthSpec", "SynthCampaign", "random_truth", "random_q", "make_campaign"]
@@ -148,10 +149,10 @@ def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0,
     features: dict[str, Feature] = {}
     distances = []
 
-    shoulder = np.array([0.0, 0.0, desc.joints[0].d])
+    origin = shoulder(desc)
 
     def reachable(x) -> bool:
-        return 0.35 <= np.linalg.norm(x - shoulder) <= 0.85
+        return 0.35 <= np.linalg.norm(x - origin) <= 0.85
 
     def place() -> np.ndarray:
         while True:
