@@ -8,7 +8,8 @@ import math
 import numpy as np
 
 from .uncertainty import (COMPLIANCE_U_RELATIVE, CONTRIBUTIONS, InputUncertainty, ParameterCovariance,
-                          covariance_columns, default_inputs, monte_carlo, propagate)
+                          covariance_columns, default_inputs, directional_ratio, monte_carlo,
+                          propagate)
 
 __all__ = ["add_input_options", "inputs_from_args", "add_tip_options", "wants_uncertainty", "tip_columns",
            "contribution_lines", "non_negative"]
@@ -67,8 +68,9 @@ def add_tip_options(p) -> None:
     g.add_argument("--covariance", action="store_true",
                    help="also write the six terms of each point's 3x3 covariance [um^2] (cov_xx_um2, cov_yy_um2, cov_zz_um2, cov_xy_um2, cov_xz_um2, cov_yz_um2)")
     g.add_argument("--mc", type=at_least(2), default=None, metavar="N",
-                   help="also a Monte Carlo of N samples of the same inputs: columns u_x_mc_mm ... and the "
-                        "largest relative difference to the linear result")
+                   help="also a Monte Carlo of N samples of the same inputs: columns u_x_mc_mm ... (with "
+                        "--covariance also cov_xx_mc_um2 ...) and the largest relative difference to the linear "
+                        "result, per axis and along any direction")
     g.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo (default 0)")
     add_input_options(p)
 
@@ -130,8 +132,15 @@ def tip_columns(arm, points, parameters, args) -> tuple[dict, list[str]]:
                          samples=args.mc, seed=args.seed)
         umc = mc.u
         cols.update({f"u_{a}_mc_mm": umc[:, k] * 1e3 for k, a in enumerate("xyz")})
+        if args.covariance:
+            cols.update({k.replace("_um2", "_mc_um2"): v for k, v in covariance_columns(mc.cov).items()})
         with np.errstate(invalid="ignore", divide="ignore"):
             rel = np.where(u > 0, umc / u - 1.0, 0.0)
         lines.append(f"Monte Carlo ({args.mc} samples, seed {args.seed}): u_mc / u_linear - 1 over the points and "
                      f"axes: median {np.median(rel):+.3f}, largest |.| {np.max(np.abs(rel)):.3f}")
+        d = directional_ratio(res.cov, mc.cov) - 1.0
+        if np.isfinite(d).any():
+            lines.append(f"  along any direction (the covariance terms included): from {np.nanmin(d):+.3f} to "
+                         f"{np.nanmax(d):+.3f}" + (f" ({np.isnan(d[:, 0]).sum()} points with a singular linear "
+                                                    "covariance left out)" if np.isnan(d).any() else ""))
     return cols, lines
