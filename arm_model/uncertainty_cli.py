@@ -26,15 +26,17 @@ def non_negative(text: str) -> float:
     return v
 
 
-def add_input_options(p) -> None:
-    """The input uncertainties (each overrides its default, see docs/uncertainty.md)."""
+def add_input_options(p, force: bool = True) -> None:
+    """The input uncertainties (each overrides its default, see docs/uncertainty.md); ``force=False``
+    leaves out ``--u-force-N`` for a command that has its own (``aacmm ring``)."""
     g = p.add_argument_group("input uncertainties (defaults and their sources: docs/uncertainty.md)")
     g.add_argument("--encoder-resolution-deg", type=non_negative, default=None, metavar="R",
                    help="encoder resolution of every joint [deg] (u = R / sqrt(12)); default: each joint's "
                         "encoder_resolution of the description, 0 where not given")
-    g.add_argument("--u-force-N", type=non_negative, nargs=2, default=None, metavar=("BENDING", "AXIAL"),
-                   help="standard uncertainty of the force [N] across (probe x, y) and along (z) the stylus; "
-                        "default 0.0723 0.0464 (the seed paper's Table 1)")
+    if force:
+        g.add_argument("--u-force-N", type=non_negative, nargs=2, default=None, metavar=("BENDING", "AXIAL"),
+                       help="standard uncertainty of the force [N] across (probe x, y) and along (z) the stylus; "
+                            "default 0.0723 0.0464 (the seed paper's Table 1)")
     g.add_argument("--u-compliance-rel", type=non_negative, default=None, metavar="R",
                    help=f"standard uncertainty of the probe compliances relative to their value (default "
                         f"{COMPLIANCE_U_RELATIVE:g}, from the seed paper's Table 2 fit); not used for compliances "
@@ -49,7 +51,8 @@ def inputs_from_args(arm, args, has_force: bool) -> InputUncertainty:
     :func:`add_input_options` overriding their defaults."""
     desc = arm.desc
     enc = None if args.encoder_resolution_deg is None else math.radians(args.encoder_resolution_deg) / math.sqrt(12)
-    force = None if args.u_force_N is None else (args.u_force_N[0], args.u_force_N[0], args.u_force_N[1])
+    u_force = getattr(args, "u_force_N", None)
+    force = None if u_force is None else (u_force[0], u_force[0], u_force[1])
     comp = None if args.u_compliance_rel is None else args.u_compliance_rel * np.asarray(desc.probe.compliance)
     probing = None if args.u_probing_um is None else args.u_probing_um * 1e-6
     inputs = default_inputs(desc, encoder=enc, force=force, compliance=comp, probing=probing, has_force=has_force,
