@@ -470,6 +470,12 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
         prob = problem.with_free(kept)
         sol = levenberg_marquardt(prob, p, states, max_iter=max_iter, prior=prior)
         p, states = sol.p, sol.states
+        # the artefacts' unknowns started from the nominal arm can settle in another basin (large errors):
+        # started again from the fitted arm, do they fit better? then the parameters are refitted from there
+        fresh = levenberg_marquardt(problem.with_free([]), p, problem.initial_states(p), max_iter=max_iter)
+        if fresh.cost < sol.cost * (1.0 - 1e-6):
+            sol = levenberg_marquardt(prob, p, fresh.states, max_iter=max_iter, prior=prior)
+            p, states = sol.p, sol.states
         n_before = len(kept)
         idf1 = check(p, states, "solution")
         if len(kept) == n_before:
