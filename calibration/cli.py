@@ -51,9 +51,11 @@ def campaign_inputs(p) -> None:
     """Points, artefacts, arm, reference points and output folder (shared with ``aacmm close-loop``)."""
     p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3)")
     p.add_argument("artefacts", type=Path, help="artefacts TOML (docs/formats.md §4)")
-    add_arm_options(p, "nominal arm: description TOML or URDF (with --tip-frame)")
+    add_arm_options(p, "nominal arm: a shipped arm's name (aacmm7), a description TOML or model file, or a URDF "
+                       "with --tip-frame (docs/formats.md §2, docs/own-arm.md)")
     p.add_argument("--reference-points", type=Path, default=None,
-                   help="a second points CSV with reference coordinates (x_ref_mm ...), e.g. tracker nests")
+                   help="a second points CSV with reference coordinates (x_ref_mm ...), e.g. tracker nests "
+                        "(docs/formats.md §3)")
     p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; never an input)")
 
 
@@ -154,6 +156,7 @@ def register(sub) -> None:
                    help="scale the covariance by the residual variance factor s0^2 (default) or trust the stated "
                         "uncertainties (s0 = 1)")
     c.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    mpe_options(c)
     c.set_defaults(func=run_calibrate)
 
     s = sub.add_parser(
@@ -162,14 +165,15 @@ def register(sub) -> None:
                     "and poses each run), calibrate on the training measurements, validate on held-out ones; "
                     "reports parameter errors against the truth next to the reported uncertainties and the "
                     "predicted accuracy after calibration. 'poses': choose the measurements that identify the "
-                    "parameters best by the observability index O1 (Borm and Menq 1991).")
+                    "parameters best by the observability index O1 (Borm and Menq 1991).",
+        epilog="File formats: docs/formats.md; the studies: docs/calibration.md.")
     ss = s.add_subparsers(dest="study", metavar="STUDY", required=True)
     m = ss.add_parser("montecarlo", help="Monte Carlo over noise and pose sets with the simulator",
                       description="Run a simulator campaign (examples/campaigns/*.toml) --runs times with seeds "
                                   "--seed, --seed+1, ...; each run is calibrated and validated on held-out "
                                   "measurements. Local processes by default; --scheduler sends the runs to a Dask "
                                   "cluster. Writes study.json and prints a table.")
-    m.add_argument("campaign", type=Path, help="campaign TOML of the simulator")
+    m.add_argument("campaign", type=Path, help="campaign TOML of the simulator (docs/formats.md §6)")
     m.add_argument("--runs", type=at_least(1), default=20, help="number of runs (default 20)")
     m.add_argument("--seed", type=seed, default=0, help="first seed (default 0)")
     m.add_argument("--holdout", type=fraction, default=0.25, help="held-out fraction of measurements (default 0.25)")
@@ -182,14 +186,40 @@ def register(sub) -> None:
                       description="Greedy choice of --count measurements of a points file (a candidate pool, "
                                   "measured or simulated) maximising O1 = (prod s_i)^(1/m)/sqrt(n) of the "
                                   "identification Jacobian; compared with random choices of the same size.")
-    q.add_argument("points", type=Path, help="candidate points CSV")
-    q.add_argument("artefacts", type=Path, help="artefacts TOML")
-    add_arm_options(q, "nominal arm (TOML, or URDF with --tip-frame)")
-    q.add_argument("--reference-points", type=Path, default=None, help="reference points CSV")
+    q.add_argument("points", type=Path, help="candidate points CSV (docs/formats.md §3)")
+    q.add_argument("artefacts", type=Path, help="artefacts TOML (docs/formats.md §4)")
+    add_arm_options(q, "nominal arm: a shipped arm's name (aacmm7), a description TOML, or a URDF with --tip-frame "
+                       "(docs/formats.md §2)")
+    q.add_argument("--reference-points", type=Path, default=None, help="reference points CSV (docs/formats.md §3)")
     q.add_argument("--count", type=at_least(1), required=True, help="how many measurements to choose")
     q.add_argument("-o", "--output", type=Path, required=True, help="output folder")
     _common_fit_options(q)
     q.set_defaults(func=run_poses)
+
+
+def mpe_options(p) -> None:
+    """``--mpe-<test>-um``: the maximum permissible error of each standard test (ISO 10360-12, ASME B89.4.22)."""
+    from .validation import MPE_TESTS
+    g = p.add_argument_group(
+        "standard tests with a maximum permissible error (MPE)",
+        "Each test of the validation (calibrated model, on the training data and on the held-out data) is "
+        "plotted (conformance_*.png) with every tested item; given its MPE [um] (a finite number > 0) it "
+        "gets PASS (every item within the MPE) or FAIL in the console, summary.json and the report. Without "
+        "these options: the plots and figures without pass/fail. Details: docs/calibration.md.")
+    for t in MPE_TESTS:
+        g.add_argument(t.option, type=positive(), default=None, metavar="UM", dest=f"mpe_{t.key.replace('-', '_')}",
+                       help=f"{t.standard} {t.name}: {t.what}")
+
+
+def _mpe(args) -> dict:
+    """{test key: MPE [m]} of the given ``--mpe-*-um`` options."""
+    from .validation import MPE_TESTS
+    out = {}
+    for t in MPE_TESTS:
+        v = getattr(args, f"mpe_{t.key.replace('-', '_')}", None)
+        if v is not None:
+            out[t.key] = v * 1e-6
+    return out
 
 
 def _weights(args):
@@ -273,8 +303,15 @@ def run_calibrate(args: argparse.Namespace) -> int:
                         drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference, **kw)
         res = refine_torques(res, covariance=args.covariance, outlier_threshold=args.outlier_threshold,
                              **{k: v for k, v in kw.items() if k == "rank_tol"})
-        val_train = res.compare(res.data)
-        val_test = res.compare(test) if test is not None else None
+        mpe = _mpe(args)
+        val_train, conf_train = _validation(res, res.data, mpe)
+        val_test, conf_test = _validation(res, test, mpe) if test is not None else (None, None)
+        conf = {"mpe_given": bool(mpe), "mpe_um": {k: v * 1e6 for k, v in mpe.items()},
+                "note": ("PASS: every tested item of the calibrated model within the MPE given by its "
+                         "--mpe-*-um option; FAIL: at least one beyond." if mpe else
+                         "No --mpe-*-um option given: the standard tests' figures, no pass/fail.")
+                        + " Items: every certified length, sphere and seat of the data set (docs/calibration.md).",
+                "training": conf_train, "holdout": conf_test}
         files = write_outputs(res, out.dir, inputs=inputs, validation_training=val_train,
                               validation_holdout=val_test, plots=not args.no_plots,
                               extra={"inputs": {"points": str(args.points), "artefacts": str(args.artefacts),
@@ -282,6 +319,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
                                                 "reference_points": None if args.reference_points is None
                                                 else str(args.reference_points)},
                                      "holdout": None if test is None else test.measurements(),
+                                     "conformance": conf,
                                      "warnings": [w.as_dict() for w in warnings]})
     files = {k: out.published(v) for k, v in files.items()}
     log.info(f"{len(train)} training points in {len(train.measurements())} measurements"
@@ -310,11 +348,25 @@ def run_calibrate(args: argparse.Namespace) -> int:
             for r in rows:
                 log.info(f"  {r['label']}: {with_u(r['before'], r['u_before'])} -> {with_u(r['after'], r['u_after'])} "
                       f"{r['unit']} ({r['ratio']:.1f}x)")
+    from .report import conformance_lines
+    if conf_train or conf_test:
+        log.info("standard tests, calibrated model (ASME B89.4.22 / ISO 10360-12):")
+        for line in conformance_lines(conf):
+            log.info(line)
     scatter = res.probing_scatter()
     log.info(f"model file -> {files['description']} (covariance {files['covariance'].name}"
              + (f"; probing scatter {scatter * 1e6:.4g} um per axis, tip's default" if scatter is not None else "")
              + f"); report -> {files['report']}")
     return 0
+
+
+def _validation(res, data, mpe):
+    """The before/after figure rows and the standard tests (:func:`calibration.validation.conformance`) of
+    the calibrated model on ``data``."""
+    from .validation import conformance, figure_rows, validate
+    before = validate(res.model, np.zeros(res.model.spec.size), data, res.weights, res.reference_mode)
+    after = res.validate(data)
+    return figure_rows(before, after), conformance(after, mpe, before)
 
 
 def noise_lines(res) -> list[str]:
@@ -357,8 +409,9 @@ def run_montecarlo(args: argparse.Namespace) -> int:
                                fit=_fit_kwargs(args), effects=_effects(args.effect))
         mc = monte_carlo(SimSource(str(args.campaign)), args.runs, seed=args.seed, settings=settings,
                          scheduler=args.scheduler, workers=args.workers)
-        (out.dir / "study.json").write_text(json.dumps(mc.to_dict(), indent=1, default=float) + "\n",
-                                            encoding="utf-8")
+        from arm_model.shipped import provenance
+        (out.dir / "study.json").write_text(json.dumps({**mc.to_dict(), **provenance(camp.inputs)}, indent=1,
+                                                       default=float) + "\n", encoding="utf-8")
     log.info(f"{args.runs - len(mc.failures)} of {args.runs} runs succeeded")
     for f in mc.failures[:5]:
         log.info(f"  seed {f['seed']}: {f['error']}")
@@ -396,7 +449,9 @@ def run_poses(args: argparse.Namespace) -> int:
         fit.pop("weights_from_data", None)            # the choice is made at the nominal, before any fit
         sel = select_measurements(model, data, args.count, _free(model, args), weights=_weights(args),
                                   fit=fit)
-        (out.dir / "poses.json").write_text(json.dumps(sel.to_dict(), indent=1) + "\n", encoding="utf-8")
+        from arm_model.shipped import provenance
+        (out.dir / "poses.json").write_text(json.dumps({**sel.to_dict(), **provenance(inputs)}, indent=1) + "\n",
+                                            encoding="utf-8")
     log_warnings(warnings)
     log.info(f"{len(sel.parameters)} identifiable parameters; chosen measurements (O1, random sets' O1):")
     for m, o, r, n in zip(sel.chosen, sel.o1, sel.o1_random, sel.n_points):
