@@ -39,7 +39,7 @@ from types import SimpleNamespace
 import numpy as np
 
 __all__ = ["NUMPY_OPS", "elastic_displacement", "ball_in_last_frame", "chain_point",
-           "ball_centre_expr", "rotation_rpy", "probe_lever"]
+           "ball_centre_expr", "probe_lever"]
 
 NUMPY_OPS = SimpleNamespace(sin=np.sin, cos=np.cos)
 
@@ -52,16 +52,6 @@ def _cos_sin(angle, ops):
     if _is_const(angle):
         return math.cos(angle), math.sin(angle)
     return ops.cos(angle), ops.sin(angle)
-
-
-def rotation_rpy(rpy) -> tuple:
-    """URDF roll-pitch-yaw (floats) as a 3x3 nested tuple, R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    cr, sr = math.cos(rpy[0]), math.sin(rpy[0])
-    cp, sp = math.cos(rpy[1]), math.sin(rpy[1])
-    cw, sw = math.cos(rpy[2]), math.sin(rpy[2])
-    return ((cw * cp, cw * sp * sr - sw * cr, cw * sp * cr + sw * sr),
-            (sw * cp, sw * sp * sr + cw * cr, sw * sp * cr - cw * sr),
-            (-sp, cp * sr, cp * cr))
 
 
 def probe_lever(p_last, rotation=None, lever=None):

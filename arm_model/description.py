@@ -77,8 +77,8 @@ class Probe:
     @property
     def rotation(self) -> tuple | None:
         """R_last_probe as a 3x3 nested tuple, None for an unrotated probe."""
-        from .chain import rotation_rpy
-        return None if not any(self.rpy) else rotation_rpy(self.rpy)
+        from .geometry import rotation_xyz
+        return None if not any(self.rpy) else tuple(map(tuple, rotation_xyz(self.rpy).tolist()))
 
     @property
     def stylus_length(self) -> float:

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import CylinderFit
+from .geometry import CylinderFit, perpendicular_basis
 
 __all__ = ["DiameterUncertainty", "diameter_sensitivity", "diameter_uncertainty", "FormUncertainty",
            "form_uncertainty", "FORM_SAMPLES"]
@@ -44,11 +44,7 @@ def _radial_jacobian(points, cylinder: CylinderFit):
     t = d @ cylinder.axis
     perp = d - np.outer(t, cylinder.axis)
     n = perp / np.linalg.norm(perp, axis=1)[:, None]
-    e1 = np.cross(cylinder.axis, [1.0, 0.0, 0.0])
-    if np.linalg.norm(e1) < 0.5:
-        e1 = np.cross(cylinder.axis, [0.0, 1.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(cylinder.axis, e1)
+    e1, e2 = perpendicular_basis(cylinder.axis)
     jac = np.column_stack([-n @ e1, -n @ e2, -t * (n @ e1), -t * (n @ e2), -np.ones(len(p))])
     return n, jac
 

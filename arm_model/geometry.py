@@ -12,8 +12,9 @@ its nuisance states), the ring pipeline (:mod:`correction`) and the viewer:
 * standard uncertainties of the fitted radii (``u_radius``) from the residuals and the Jacobian at the
   solution, ``s^2 (J^T J)^-1`` with ``s^2 = sum r^2 / (N - parameters)`` (the scatter of the points
   about the fitted shape, nothing else: the uncertainty of the ball diameter is not included);
-* rotations through :class:`scipy.spatial.transform.Rotation` (:func:`rotation_xyz`,
-  :func:`random_rotation`, :func:`kabsch`) and :func:`perpendicular_basis`.
+* rotations through :class:`scipy.spatial.transform.Rotation` (:func:`rotation_xyz` and its inverse
+  :func:`rpy_from_matrix`, :func:`random_rotation`, :func:`kabsch`), frames from a direction
+  (:func:`perpendicular_basis`, :func:`frame_along`).
 
 Geometric fits minimise orthogonal distances with Levenberg-Marquardt (scipy ``least_squares``,
 analytic Jacobians) from an algebraic seed; the solver status and the rank of the Jacobian at the
@@ -35,7 +36,7 @@ from ._errors import NumericalError
 __all__ = ["CircleFit", "CylinderFit", "RingFit", "SphereFit", "PlaneFit", "kasa_circle", "fit_circle_2d",
            "fit_cylinder", "fit_row_circles", "split_rows", "ring_fit", "fit_ring_axis", "fit_sphere",
            "fit_plane", "ball_centre_radius", "feature_diameter", "perpendicular_basis", "angle_frame",
-           "rotation_xyz", "random_rotation", "kabsch", "sphere_seed"]
+           "rotation_xyz", "rpy_from_matrix", "frame_along", "random_rotation", "kabsch", "sphere_seed"]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -67,6 +68,29 @@ def angle_frame(a) -> tuple[np.ndarray, np.ndarray]:
 def rotation_xyz(w) -> np.ndarray:
     """``Rz(w[2]) Ry(w[1]) Rx(w[0])`` (3x3): fixed-axis x-y-z angles [rad] (roll, pitch, yaw)."""
     return Rotation.from_euler("xyz", np.asarray(w, float)).as_matrix()
+
+
+def rpy_from_matrix(r) -> tuple[float, float, float]:
+    """The angles ``(roll, pitch, yaw)`` [rad] of a rotation matrix, ``r = Rz(yaw) Ry(pitch) Rx(roll)``
+    (the inverse of :func:`rotation_xyz`, URDF's ``rpy``); at gimbal lock (pitch +-90 degrees) yaw is 0."""
+    import warnings
+
+    with warnings.catch_warnings():     # gimbal lock: scipy says so and sets yaw to zero, as wanted
+        warnings.simplefilter("ignore", UserWarning)
+        return tuple(float(a) for a in Rotation.from_matrix(np.asarray(r, float)).as_euler("xyz"))
+
+
+def frame_along(v, axis: int) -> np.ndarray:
+    """A rotation matrix (3, 3) whose column ``axis`` (0 x, 1 y, 2 z) is along the vector ``v`` (base
+    ``axis`` when ``v`` is zero); the other two columns from :func:`perpendicular_basis` (a right-handed
+    frame)."""
+    v = np.asarray(v, float)
+    n = np.linalg.norm(v)
+    u = np.eye(3)[axis] if n < 1e-15 else v / n
+    e1, e2 = perpendicular_basis(u)
+    cols = [None, None, None]
+    cols[axis], cols[(axis + 1) % 3], cols[(axis + 2) % 3] = u, e1, e2
+    return np.column_stack(cols)
 
 
 def random_rotation(rng) -> np.ndarray:
@@ -280,6 +304,26 @@ def _check_rank(jac: np.ndarray, what: str, names: tuple[str, ...]) -> None:
                              "the points do not determine the fit")
 
 
+def _normalised(p: np.ndarray, what: str) -> tuple[np.ndarray, float, np.ndarray]:
+    """``(origin, scale, z)``: the points about their centroid in units of their RMS distance from it (the
+    fits solve on ``z``, well scaled whatever the unit and placement)."""
+    o = p.mean(axis=0)
+    scale = float(np.sqrt(((p - o) ** 2).sum(axis=1).mean()))
+    if scale == 0:
+        raise NumericalError(f"all points coincide: no {what}")
+    return o, scale, (p - o) / scale
+
+
+def _solve(fun, jac, x0, what: str, names: tuple[str, ...], **kw):
+    """Levenberg-Marquardt to tight tolerances, its status and the rank of its Jacobian checked:
+    ``(result, standard uncertainties of the parameters)``."""
+    res = least_squares(fun, x0, jac=jac, method="lm", xtol=1e-14, ftol=1e-14, gtol=1e-14, **kw)
+    _check_status(res, what)
+    jac_x = jac(res.x)
+    _check_rank(jac_x, what, names)
+    return res, _param_std(jac_x, res.fun)
+
+
 def fit_circle_2d(xy) -> CircleFit:
     """Geometric least-squares circle through 2-D points (N >= 3), Kasa seed then Levenberg-Marquardt.
 
@@ -289,11 +333,7 @@ def fit_circle_2d(xy) -> CircleFit:
     xy = np.asarray(xy, float)
     if xy.ndim != 2 or xy.shape[1] != 2 or len(xy) < 3:
         raise ValueError(f"need (N >= 3, 2) points, got {xy.shape}")
-    o = xy.mean(axis=0)
-    s = float(np.sqrt(((xy - o) ** 2).sum(axis=1).mean()))
-    if s == 0:
-        raise NumericalError("all points coincide: no circle")
-    z = (xy - o) / s
+    o, s, z = _normalised(xy, "circle")
     c0, r0 = kasa_circle(z)
 
     def fun(x):
@@ -305,11 +345,8 @@ def fit_circle_2d(xy) -> CircleFit:
         rho = np.hypot(d[:, 0], d[:, 1])
         return np.column_stack([-d / rho[:, None], -np.ones(len(z))])
 
-    res = least_squares(fun, np.r_[c0, r0], jac=jac, method="lm", xtol=1e-14, ftol=1e-14, gtol=1e-14)
-    _check_status(res, "circle fit")
-    _check_rank(jac(res.x), "circle fit", ("centre x", "centre y", "radius"))
+    res, u = _solve(fun, jac, np.r_[c0, r0], "circle fit", ("centre x", "centre y", "radius"))
     centre = o + s * res.x[:2]
-    u = _param_std(jac(res.x), fun(res.x))
     return CircleFit(centre=centre, radius=float(s * res.x[2]), residuals=s * fun(res.x), u_radius=float(s * u[2]))
 
 
@@ -330,11 +367,7 @@ def fit_cylinder(points, axis_hint=None) -> CylinderFit:
         raise ValueError(f"points must have shape (N, 3), got {p.shape}")
     if len(p) < 5:
         raise NumericalError(f"a cylinder needs at least 5 points, got {len(p)}")
-    centroid = p.mean(axis=0)
-    scale = float(np.sqrt(((p - centroid) ** 2).sum(axis=1).mean()))
-    if scale == 0:
-        raise NumericalError("all points coincide: no cylinder")
-    z = (p - centroid) / scale
+    centroid, scale, z = _normalised(p, "cylinder")
 
     # algebraic seed: principal directions as candidate axes, Kasa circle in the normal plane
     if axis_hint is not None:
@@ -381,11 +414,8 @@ def fit_cylinder(points, axis_hint=None) -> CylinderFit:
         return np.column_stack([-n @ e1, -n @ e2, -t * (n @ e1) / nw, -t * (n @ e2) / nw,
                                 -np.ones(len(z))])
 
-    res = least_squares(fun, np.array([0.0, 0.0, 0.0, 0.0, r0]), jac=jac, method="lm",
-                        xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=2000)
-    _check_status(res, "cylinder fit")
-    jac_x = jac(res.x)
-    _check_rank(jac_x, "cylinder fit", ("axis offset 1", "axis offset 2", "axis tilt 1", "axis tilt 2", "radius"))
+    res, u = _solve(fun, jac, np.array([0.0, 0.0, 0.0, 0.0, r0]), "cylinder fit",
+                       ("axis offset 1", "axis offset 2", "axis tilt 1", "axis tilt 2", "radius"), max_nfev=2000)
     a, _, t, perp, rho = geometry(res.x)
     if res.x[4] <= 0:
         raise NumericalError("cylinder fit converged to a non-positive radius")
@@ -400,7 +430,7 @@ def fit_cylinder(points, axis_hint=None) -> CylinderFit:
     ang = np.mod(np.arctan2(radial @ f2, radial @ f1), 2 * np.pi)
     return CylinderFit(point=centroid + scale * c, axis=a, radius=float(scale * res.x[4]),
                        residuals=scale * (rho - res.x[4]), heights=scale * t, angles=ang, radial=radial,
-                       nfev=int(res.nfev), u_radius=float(scale * _param_std(jac_x, res.fun)[4]))
+                       nfev=int(res.nfev), u_radius=float(scale * u[4]))
 
 
 def split_rows(heights, rows: int | None = None) -> np.ndarray:
@@ -616,11 +646,8 @@ def fit_sphere(points, radius: float | None = None, centre=None) -> SphereFit:
         return -n if known else np.column_stack([-n, -np.ones(len(z))])
 
     x0 = np.zeros(3) if known else np.r_[np.zeros(3), r0 / scale]
-    res = least_squares(fun, x0, jac=jac, method="lm", xtol=1e-14, ftol=1e-14, gtol=1e-14)
-    _check_status(res, "sphere fit")
-    jac_x = jac(res.x)
-    _check_rank(jac_x, "sphere fit", ("centre x", "centre y", "centre z", "radius")[: len(x0)])
-    u = scale * _param_std(jac_x, res.fun)
+    res, u = _solve(fun, jac, x0, "sphere fit", ("centre x", "centre y", "centre z", "radius")[: len(x0)])
+    u = scale * u
     r = float(radius) if known else float(scale * res.x[3])
     return SphereFit(centre=c0 + scale * res.x[:3], radius=r, residuals=scale * res.fun, u_centre=u[:3],
                      u_radius=0.0 if known else float(u[3]))

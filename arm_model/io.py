@@ -24,7 +24,7 @@ log = logging.getLogger(__name__)
 __all__ = ["PointSet", "Feature", "Distance", "Artefacts", "ForceSignal", "read_points",
            "read_artefacts", "read_force_signal", "check_features", "atomic_write_text",
            "atomic_write_bytes", "write_csv", "guard_output", "csv_records", "FEATURE_KINDS", "iter_points",
-           "concat_points", "POINT_COLUMNS"]
+           "concat_points", "POINT_COLUMNS", "format_artefacts"]
 
 FEATURE_KINDS = ("ring", "cylinder", "sphere", "seat", "plane", "point")
 _TEXT_COLUMNS = ("measurement", "feature")
@@ -500,6 +500,21 @@ def read_force_signal(path: str | Path) -> ForceSignal:
 
 def atomic_write_text(path: str | Path, text: str, inputs=()) -> Path:
     return atomic_write_bytes(path, text.encode("utf-8"), inputs)
+
+
+def format_artefacts(features, distances=(), comment: str | None = None) -> str:
+    """Text of an artefacts file (docs/formats.md §4) that :func:`parse_artefacts` reads back: the
+    :class:`Feature` s and :class:`Distance` s, lengths in mm, written by ``tomli_w`` with ``comment``
+    as a header."""
+    from .description import toml_text
+    mm = {"diameter": "diameter_mm", "u_diameter": "u_diameter_mm", "form_error": "form_error_mm"}
+    doc = {"feature": [{"id": f.id, "kind": f.kind, **{key: getattr(f, name) * 1e3 for name, key in mm.items()
+                                                         if getattr(f, name) is not None}}
+                       for f in features],
+           "distance": [{"between": list(d.between), "length_mm": d.length * 1e3,
+                         **({} if d.u_length is None else {"u_length_mm": d.u_length * 1e3})}
+                        for d in distances]}
+    return toml_text({k: v for k, v in doc.items() if v}, comment)
 
 
 def write_csv(path: str | Path, columns: dict, inputs=(), fmt="%.9g") -> Path:

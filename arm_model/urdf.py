@@ -11,8 +11,10 @@ import math
 from xml.sax.saxutils import escape as _xml_escape
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from .description import ArmDescription
+from .geometry import frame_along, rotation_xyz, rpy_from_matrix
 
 __all__ = ["urdf_text", "rpy_from_matrix", "ELASTIC_JOINTS", "BALL_FRAME", "FLANGE_FRAME",
            "ARM_RGBA", "BALL_RGBA"]
@@ -37,14 +39,19 @@ def _comment(text: str) -> str:
     return escape(text).replace("--", "- -")
 
 
+def _rot(axis: str, angle: float) -> np.ndarray:
+    """4x4 rotation about base ``axis`` ('x' or 'z')."""
+    t = np.eye(4)
+    t[:3, :3] = Rotation.from_euler(axis, angle).as_matrix()
+    return t
+
+
 def _rx(a):
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[1, 0, 0, 0], [0, c, -s, 0], [0, s, c, 0], [0, 0, 0, 1.0]])
+    return _rot("x", a)
 
 
 def _rz(a):
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
+    return _rot("z", a)
 
 
 def _tr(x, y, z):
@@ -53,21 +60,12 @@ def _tr(x, y, z):
     return t
 
 
-def rpy_from_matrix(r: np.ndarray) -> tuple[float, float, float]:
-    """URDF roll-pitch-yaw (R = Rz(yaw) Ry(pitch) Rx(roll)) of a rotation matrix."""
-    cp = math.hypot(r[0, 0], r[1, 0])
-    if cp > 1e-12:
-        return (math.atan2(r[2, 1], r[2, 2]), math.atan2(-r[2, 0], cp), math.atan2(r[1, 0], r[0, 0]))
-    sp = 1.0 if -r[2, 0] > 0 else -1.0
-    return (math.atan2(sp * r[0, 1], r[1, 1]), sp * math.pi / 2, 0.0)
-
-
 def _origin_matrix(origin) -> np.ndarray:
     """4x4 of a URDF origin (x, y, z, roll, pitch, yaw): T(xyz) Rz(yaw) Ry(pitch) Rx(roll)."""
     x, y, z, roll, pitch, yaw = origin
-    cp, sp = math.cos(pitch), math.sin(pitch)
-    ry = np.array([[cp, 0, sp, 0], [0, 1, 0, 0], [-sp, 0, cp, 0], [0, 0, 0, 1.0]])
-    return _tr(x, y, z) @ _rz(yaw) @ ry @ _rx(roll)
+    t = _tr(x, y, z)
+    t[:3, :3] = rotation_xyz((roll, pitch, yaw))
+    return t
 
 
 def _f(x: float) -> str:
@@ -90,12 +88,8 @@ def _cylinder_between(p0, p1, radius: float, material: str) -> str:
     length = float(np.linalg.norm(v))
     if length < 1e-6:
         return ""
-    z = v / length
-    helper = np.array([1.0, 0, 0]) if abs(z[0]) < 0.9 else np.array([0, 1.0, 0])
-    x = np.cross(helper, z)
-    x /= np.linalg.norm(x)
     t = np.eye(4)
-    t[:3, :3] = np.column_stack([x, np.cross(z, x), z])
+    t[:3, :3] = frame_along(v, 2)
     t[:3, 3] = (p0 + p1) / 2
     return (f'<visual>{_origin(t)}<geometry><cylinder radius="{_f(radius)}" length="{_f(length)}"/>'
             f'</geometry><material name="{material}"/></visual>')

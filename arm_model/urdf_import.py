@@ -31,7 +31,8 @@ import numpy as np
 from ._errors import InputError, parse_toml, read_text
 from .description import ArmDescription, JointRow, Probe, TomlReader, load_description
 from .shipped import arm_path
-from .urdf import ELASTIC_JOINTS, _origin_matrix, rpy_from_matrix
+from .geometry import rpy_from_matrix
+from .urdf import ELASTIC_JOINTS, _origin_matrix
 
 __all__ = ["description_from_urdf", "load_arm", "load_masses", "calibrated_urdf_text", "PAPER_PROBE",
            "LinkMass"]

@@ -11,9 +11,10 @@
 6. Covariance ``s0^2 (J_red^T J_red)^-1`` of the free parameters, ``s0^2`` the residual variance
    factor ``2 cost / dof`` (``covariance="residual"``) or 1 (``"stated"``: the stated uncertainties
    are taken as true); standard uncertainties and correlations by name.
-7. Outliers: standardized residuals ``r_w / (s_rob sqrt(1 - h))`` (``h`` the leverage, ``s_rob`` a
-   robust scale: 1.4826 times the median) beyond ``outlier_threshold`` are reported with measurement,
-   feature and file line; they are kept unless ``drop_outliers`` (then dropped, worst first, and refitted).
+7. Outliers: standardized residuals ``r_w / (s_rob sqrt(1 - h))`` (``h`` the leverage, ``s_rob`` the
+   robust scale of the row's observation group: 1.4826 times the median, one scale a point kind and one
+   for the lengths, :func:`standardized_residuals`) beyond ``outlier_threshold`` are reported with
+   measurement, feature and file line; they are kept unless ``drop_outliers`` (then dropped, worst first, and refitted).
 """
 from __future__ import annotations
 
@@ -37,7 +38,7 @@ from .solver import blas_threads, levenberg_marquardt, normal_solver
 
 __all__ = ["FixedParameter", "Outlier", "CalibrationResult", "calibrate", "resolve_parameters",
            "default_free", "rigid_gauge", "display_unit", "blas_threads", "identify", "variance_components",
-           "reweighted", "MIN_REDUNDANCY"]
+           "reweighted", "MIN_REDUNDANCY", "row_groups", "standardized_residuals"]
 
 
 def display_unit(unit: str) -> tuple[str, float]:
@@ -465,9 +466,7 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
     solve = normal_solver(js)
     h = _leverage(js, solve)
     variance = variance_components(prob, ev.r, h, weights)
-    zraw = ev.r / np.sqrt(1.0 - h)
-    s_rob = 1.4826 * float(np.median(np.abs(zraw))) or 1.0
-    z = zraw / s_rob
+    z = standardized_residuals(prob, ev.r, h)
     table = prob.residual_table(p, states)
     pts = data.points
     lines = pts.lines
@@ -564,6 +563,36 @@ MIN_REDUNDANCY = 5.0
 OUTLIER_ROWS = 4.0
 
 
+def row_groups(problem: Problem) -> dict[str, np.ndarray]:
+    """The residual rows of each observation group, {group: row indices}: one group a point kind (seats,
+    spheres, rings, ..., the reference points), and ``length`` for the certified lengths. The groups of
+    :func:`variance_components` and of the outlier scale of :func:`standardized_residuals`."""
+    rows: dict[str, list] = {}
+    for g in problem.groups:
+        rows.setdefault(g["kind"], []).append(np.arange(g["row0"], g["row0"] + g["rows"] * len(g["points"])))
+    out = {k: np.concatenate(v) for k, v in rows.items()}
+    if problem.n_rows > problem.n_point_rows:
+        out["length"] = np.arange(problem.n_point_rows, problem.n_rows)
+    return out
+
+
+def standardized_residuals(problem: Problem, r: np.ndarray, leverage: np.ndarray) -> np.ndarray:
+    """Standardized residuals ``r_i / (s_g sqrt(1 - h_i))`` with ``s_g`` the robust scale (1.4826 times
+    the median of ``|r| / sqrt(1 - h)``) of row i's observation group (:func:`row_groups`), so that a
+    group whose stated uncertainty is off (say the tracker's against the probe's) does not flag its rows
+    or hide the other groups' gross errors. A group with less than :data:`MIN_REDUNDANCY` redundant rows
+    takes the scale of all rows together (a median of a few rows is no scale)."""
+    zraw = r / np.sqrt(1.0 - leverage)
+    pooled = 1.4826 * float(np.median(np.abs(zraw))) or 1.0
+    z = np.empty_like(zraw)
+    for idx in row_groups(problem).values():
+        s = 1.4826 * float(np.median(np.abs(zraw[idx])))
+        if float(np.sum(1.0 - leverage[idx])) < MIN_REDUNDANCY or s <= 0:
+            s = pooled
+        z[idx] = zraw[idx] / s
+    return z
+
+
 def variance_components(problem: Problem, r: np.ndarray, leverage: np.ndarray, weights: Weights) -> list[dict]:
     """The noise of each row group estimated from a fit (Helmert / Foerstner): for a group g with weighted
     residuals ``r_g`` and redundancy ``red_g = sum(1 - h_i)`` over its rows (``h`` the leverage: the share
@@ -576,14 +605,8 @@ def variance_components(problem: Problem, r: np.ndarray, leverage: np.ndarray, w
     ``sigma_um`` (the current uncertainty of a point of the group, per axis, factor applied) and
     ``estimate_um`` (times ``factor``) for point groups.
     """
-    rows: dict[str, list] = {}
-    for g in problem.groups:
-        rows.setdefault(g["kind"], []).append(np.arange(g["row0"], g["row0"] + g["rows"] * len(g["points"])))
-    if problem.n_rows > problem.n_point_rows:
-        rows["length"] = [np.arange(problem.n_point_rows, problem.n_rows)]
     out = []
-    for name, parts in rows.items():
-        idx = np.concatenate(parts)
+    for name, idx in row_groups(problem).items():
         z = np.abs(r[idx]) / np.sqrt(1.0 - leverage[idx])
         s_rob = 1.4826 * float(np.median(z))
         gross = z > OUTLIER_ROWS * s_rob if s_rob > 0 else np.zeros(len(idx), bool)

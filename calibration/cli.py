@@ -131,6 +131,7 @@ def register(sub) -> None:
                    help="scale the covariance by the residual variance factor s0^2 (default) or trust the stated "
                         "uncertainties (s0 = 1)")
     c.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    mpe_options(c)
     c.set_defaults(func=run_calibrate)
 
     s = sub.add_parser(
@@ -167,6 +168,31 @@ def register(sub) -> None:
     q.add_argument("-o", "--output", type=Path, required=True, help="output folder")
     _common_fit_options(q)
     q.set_defaults(func=run_poses)
+
+
+def mpe_options(p) -> None:
+    """``--mpe-<test>-um``: the maximum permissible error of each standard test (ISO 10360-12, ASME B89.4.22)."""
+    from .validation import MPE_TESTS
+    g = p.add_argument_group(
+        "standard tests with a maximum permissible error (MPE)",
+        "Each test of the validation (calibrated model, on the training data and on the held-out data) is "
+        "plotted (conformance_*.png) with every tested item; given its MPE [um] (a finite number > 0) it "
+        "gets PASS (every item within the MPE) or FAIL in the console, summary.json and the report. Without "
+        "these options: the plots and figures without pass/fail. Details: docs/calibration.md.")
+    for t in MPE_TESTS:
+        g.add_argument(t.option, type=positive(), default=None, metavar="UM", dest=f"mpe_{t.key.replace('-', '_')}",
+                       help=f"{t.standard} {t.name}: {t.what}")
+
+
+def _mpe(args) -> dict:
+    """{test key: MPE [m]} of the given ``--mpe-*-um`` options."""
+    from .validation import MPE_TESTS
+    out = {}
+    for t in MPE_TESTS:
+        v = getattr(args, f"mpe_{t.key.replace('-', '_')}", None)
+        if v is not None:
+            out[t.key] = v * 1e-6
+    return out
 
 
 def _weights(args):
@@ -248,8 +274,15 @@ def run_calibrate(args: argparse.Namespace) -> int:
                         drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference, **kw)
         res = refine_torques(res, covariance=args.covariance, outlier_threshold=args.outlier_threshold,
                              **{k: v for k, v in kw.items() if k == "rank_tol"})
-        val_train = res.compare(res.data)
-        val_test = res.compare(test) if test is not None else None
+        mpe = _mpe(args)
+        val_train, conf_train = _validation(res, res.data, mpe)
+        val_test, conf_test = _validation(res, test, mpe) if test is not None else (None, None)
+        conf = {"mpe_given": bool(mpe), "mpe_um": {k: v * 1e6 for k, v in mpe.items()},
+                "note": ("PASS: every tested item of the calibrated model within the MPE given by its "
+                         "--mpe-*-um option; FAIL: at least one beyond." if mpe else
+                         "No --mpe-*-um option given: the standard tests' figures, no pass/fail.")
+                        + " Items: every certified length, sphere and seat of the data set (docs/calibration.md).",
+                "training": conf_train, "holdout": conf_test}
         files = write_outputs(res, out.dir, inputs=inputs, validation_training=val_train,
                               validation_holdout=val_test, plots=not args.no_plots,
                               extra={"inputs": {"points": str(args.points), "artefacts": str(args.artefacts),
@@ -257,6 +290,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
                                                 "reference_points": None if args.reference_points is None
                                                 else str(args.reference_points)},
                                      "holdout": None if test is None else test.measurements(),
+                                     "conformance": conf,
                                      "warnings": [w.as_dict() for w in warnings]})
     files = {k: out.published(v) for k, v in files.items()}
     log.info(f"{len(train)} training points in {len(train.measurements())} measurements"
@@ -285,11 +319,25 @@ def run_calibrate(args: argparse.Namespace) -> int:
             for r in rows:
                 log.info(f"  {r['label']}: {with_u(r['before'], r['u_before'])} -> {with_u(r['after'], r['u_after'])} "
                       f"{r['unit']} ({r['ratio']:.1f}x)")
+    from .report import conformance_lines
+    if conf_train or conf_test:
+        log.info("standard tests, calibrated model (ASME B89.4.22 / ISO 10360-12):")
+        for line in conformance_lines(conf):
+            log.info(line)
     scatter = res.probing_scatter()
     log.info(f"model file -> {files['description']} (covariance {files['covariance'].name}"
              + (f"; probing scatter {scatter * 1e6:.4g} um per axis, tip's default" if scatter is not None else "")
              + f"); report -> {files['report']}")
     return 0
+
+
+def _validation(res, data, mpe):
+    """The before/after figure rows and the standard tests (:func:`calibration.validation.conformance`) of
+    the calibrated model on ``data``."""
+    from .validation import conformance, figure_rows, validate
+    before = validate(res.model, np.zeros(res.model.spec.size), data, res.weights, res.reference_mode)
+    after = res.validate(data)
+    return figure_rows(before, after), conformance(after, mpe, before)
 
 
 def noise_lines(res) -> list[str]:

@@ -21,7 +21,8 @@ from .calibrate import CalibrationResult, display_unit
 from .model_output import model_check, model_paths, write_model
 from .validation import with_u
 
-__all__ = ["write_outputs", "plot_residuals", "plot_parameters", "plot_correlation"]
+__all__ = ["write_outputs", "plot_residuals", "plot_parameters", "plot_correlation", "plot_conformance",
+           "conformance_lines", "CONFORMANCE_SETS"]
 
 
 def _json_default(o):
@@ -127,6 +128,91 @@ def plot_correlation(result: CalibrationResult) -> bytes:
     return _png(fig)
 
 
+#: the data sets a conformance table can be on: summary key -> title
+CONFORMANCE_SETS = {"training": "training data", "holdout": "held-out data"}
+
+
+def plot_conformance(rows: list[dict], title: str) -> bytes:
+    """PNG: one panel a test of ``rows`` (:func:`calibration.validation.conformance`): each item's value
+    [um] of the calibrated model, the MPE band (+-MPE for errors, 0..MPE for sizes) shaded when given,
+    items beyond it in red, the verdict in the panel's title."""
+    import matplotlib
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+    rows = [r for r in rows if r["n"]]
+    fig, axes = plt.subplots(len(rows), 1, figsize=(9.0, 2.2 * len(rows) + 0.5), squeeze=False)
+    for ax, r in zip(axes[:, 0], rows):
+        v = np.array([it["value_um"] for it in r["items"]])
+        x = np.arange(len(v))
+        mpe = r["mpe_um"]
+        if mpe is not None:
+            ax.axhspan(-mpe if r["signed"] else 0.0, mpe, color="#2ca02c", alpha=0.15, lw=0,
+                       label=f"MPE {mpe:g} um")
+            for y in ((-mpe, mpe) if r["signed"] else (mpe,)):
+                ax.axhline(y, color="#2ca02c", lw=0.8)
+            bad = np.abs(v) > mpe
+            ax.plot(x[~bad], v[~bad], "o", ms=4, color="C0")
+            ax.plot(x[bad], v[bad], "o", ms=5, color="#d62728", label="beyond the MPE")
+            verdict = r["result"] + (f" ({r['n_fail']} of {r['n']} beyond)" if r["n_fail"] else "")
+        else:
+            ax.plot(x, v, "o", ms=4, color="C0")
+            verdict = "no MPE given: no pass/fail"
+        ax.axhline(0, color="k", lw=0.5)
+        lo, hi = min(0.0, v.min()), max(0.0, v.max())
+        if mpe is not None:
+            lo, hi = min(lo, -mpe if r["signed"] else 0.0), max(hi, mpe)
+        pad = 0.1 * (hi - lo or 1.0)
+        ax.set_ylim(lo - pad, hi + pad)
+        ax.set_xlim(-0.7, len(v) - 0.3)
+        ax.set_ylabel("[um]")
+        ax.set_title(f"{r['standard']} {r['test']}: {verdict}", fontsize=9)
+        if len(v) <= 40:
+            ax.set_xticks(x)
+            ax.set_xticklabels([it["label"] for it in r["items"]], rotation=90, fontsize=6)
+        if mpe is not None:
+            ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    axes[0, 0].figure.suptitle(title, fontsize=10)
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.3 / fig.get_figheight()))
+    return _png(fig)
+
+
+def conformance_lines(conf: dict) -> list[str]:
+    """Console lines of the ``conformance`` summary entry: one a test and data set."""
+    out = [] if conf["mpe_given"] else ["standard tests: no --mpe-*-um option given: figures without pass/fail"]
+    for key, what in CONFORMANCE_SETS.items():
+        for r in conf.get(key) or ():
+            if not r["n"]:
+                out.append(f"  {r['standard']} {r['test']} on {what}: no item in this data set (MPE {r['mpe_um']:g} um "
+                           "not tested)")
+                continue
+            head = f"  {r['standard']} {r['test']} on {what} ({r['n']} items): max |value| {r['max_abs_um']:.2f} um"
+            if r["result"] is None:
+                out.append(head + " (no MPE given)")
+            else:
+                out.append(f"{head} {'<=' if r['result'] == 'PASS' else '>'} MPE {r['mpe_um']:g} um: {r['result']}"
+                           + (f" ({r['n_fail']} beyond)" if r["n_fail"] else ""))
+    return out
+
+
+def _conformance_html(conf: dict, files: dict) -> list[str]:
+    parts = ["<h2>Standard tests (ASME B89.4.22 / ISO 10360-12), calibrated model</h2>",
+             f"<p>{html.escape(conf['note'])}</p>"]
+    for key, what in CONFORMANCE_SETS.items():
+        rows = conf.get(key)
+        if not rows:
+            continue
+        parts.append(f"<h3>On {what}</h3>")
+        parts.append(_table(["standard", "test", "what is tested", "items", "max |value| [um]", "MPE [um]",
+                             "result"],
+                            [(r["standard"], r["test"], r["what"], r["n"], _fmt(r["max_abs_um"], 4),
+                              _fmt(r["mpe_um"], 4), (r["result"] or ("- (no MPE)" if r["n"] else "no item"))
+                              + (f" ({r['n_fail']} beyond)" if r["n_fail"] else "")) for r in rows]))
+        png = files.get(f"conformance_{key}_png")
+        if png is not None:
+            parts.append(f"<img src='{html.escape(png.name)}' style='max-width:100%'>")
+    return parts
+
+
 def _table(headers, rows) -> str:
     h = "".join(f"<th>{html.escape(str(x))}</th>" for x in headers)
     body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>" for r in rows)
@@ -173,6 +259,8 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
                       _table(["figure", "unit", "nominal", "calibrated", "ratio"],
                              [(r["label"], r["unit"], with_u(r["before"], r.get("u_before")),
                                with_u(r["after"], r.get("u_after")), _fmt(r["ratio"], 3)) for r in rows])]
+    if summary.get("conformance"):
+        parts += _conformance_html(summary["conformance"], files)
     parts += ["<h2>Parameters</h2>", _table(["parameter", "state", "unit", "estimate", "u"], par)]
     if result.outliers:
         parts += ["<h2>Outliers (kept)</h2>" if not result.dropped else "<h2>Outliers</h2>",
@@ -197,7 +285,9 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
 
     Files: the model file ``<name>-calibrated.toml`` (the base errors folded into a new description, the
     model's effects with their parameters; :mod:`calibration.model_output`), its covariance file
-    ``<name>-calibrated-covariance.csv`` and ``<name>-calibrated.urdf``, ``summary.json``, ``parameters.csv``, ``residuals.csv``, ``report.html`` and three PNG plots.
+    ``<name>-calibrated-covariance.csv`` and ``<name>-calibrated.urdf``, ``summary.json``, ``parameters.csv``, ``residuals.csv``, ``report.html`` and three PNG plots, plus
+    ``conformance_training.png`` / ``conformance_holdout.png`` when ``extra`` holds a ``conformance`` entry
+    (:func:`calibration.validation.conformance` tables under ``training`` / ``holdout``).
     ``inputs``: files that must never be overwritten (points, artefacts, the nominal arm).
     """
     out = Path(out_dir)
@@ -208,9 +298,12 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
     files = {"description": model_files["model"], "covariance": model_files["covariance"],
              "urdf": model_files["urdf"], "summary": out / "summary.json",
              "parameters": out / "parameters.csv", "residuals": out / "residuals.csv", "report": out / "report.html"}
+    conf = (extra or {}).get("conformance") or {}
     if plots:
         files.update({"residuals_png": out / "residuals.png", "parameters_png": out / "parameters.png",
                       "correlation_png": out / "correlation.png"})
+        files.update({f"conformance_{k}_png": out / f"conformance_{k}.png" for k in CONFORMANCE_SETS
+                      if conf.get(k)})
     for f in files.values():
         guard_output(f, inputs)
     effects = [e.describe() for e in result.model.effects]
@@ -249,6 +342,11 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
         atomic_write_bytes(files["residuals_png"], plot_residuals(result), inputs)
         atomic_write_bytes(files["parameters_png"], plot_parameters(result), inputs)
         atomic_write_bytes(files["correlation_png"], plot_correlation(result), inputs)
+        for k, what in CONFORMANCE_SETS.items():
+            if conf.get(k):
+                atomic_write_bytes(files[f"conformance_{k}_png"], plot_conformance(
+                    conf[k], f"Standard tests on {what}, calibrated model"
+                    + ("" if conf["mpe_given"] else " (no MPE given: no pass/fail)")), inputs)
     atomic_write_text(files["summary"], json.dumps(_finite(summary), indent=1, default=_json_default) + "\n", inputs)
     atomic_write_text(files["report"], _html(result, summary, files), inputs)
     return files

@@ -33,8 +33,9 @@ from .data import CalibrationData, Weights
 from .problem import MIN_POINTS, Problem
 from .solver import blas_threads, levenberg_marquardt
 
-__all__ = ["Validation", "validate", "before_after", "bootstrap", "with_u", "FIGURES", "DIAMETER_MIN_POINTS",
-           "BOOTSTRAP_SAMPLES"]
+__all__ = ["Validation", "validate", "before_after", "figure_rows", "bootstrap", "with_u", "FIGURES",
+           "DIAMETER_MIN_POINTS", "BOOTSTRAP_SAMPLES", "MpeTest", "MPE_TESTS", "conformance",
+           "smallest_enclosing_sphere"]
 
 #: resamples of :func:`bootstrap` (the relative precision of a standard deviation from B resamples
 #: is about 1 / sqrt(2 B): 3 % for 500)
@@ -118,7 +119,8 @@ def _articulation(x: np.ndarray) -> dict:
     radial = np.linalg.norm(dev, axis=1)
     return {"n": n, "centre": x.mean(axis=0), "half_range": (dev.max(axis=0) - dev.min(axis=0)) / 2,
             "two_sigma": 2 * dev.std(axis=0, ddof=1),
-            "two_rms": float(2 * np.sqrt(np.sum(radial ** 2) / (n - 1))), "max_radial": float(radial.max())}
+            "two_rms": float(2 * np.sqrt(np.sum(radial ** 2) / (n - 1))), "max_radial": float(radial.max()),
+            "enclosing_diameter": 2.0 * smallest_enclosing_sphere(x)[1]}
 
 
 def validate(model: ArmModel, p, data: CalibrationData, weights: Weights | None = None,
@@ -260,8 +262,12 @@ def before_after(model: ArmModel, p_before, p_after, data: CalibrationData, weig
     of the validation figures of ``p_before`` (e.g. zeros: the nominal arm) and ``p_after`` on
     ``data``; ``u_*``: standard uncertainties by :func:`bootstrap` over the measurements (None with
     fewer than two measurements of the figure's kind)."""
-    va = validate(model, p_before, data, weights, reference)
-    vb = validate(model, p_after, data, weights, reference)
+    return figure_rows(validate(model, p_before, data, weights, reference),
+                       validate(model, p_after, data, weights, reference))
+
+
+def figure_rows(va: Validation, vb: Validation) -> list[dict]:
+    """The rows of :func:`before_after` from the two validations (before, after)."""
     a, b = va.summary(), vb.summary()
     ua, ub = bootstrap(va), bootstrap(vb)
     rows = []
@@ -273,3 +279,129 @@ def before_after(model: ArmModel, p_before, p_after, data: CalibrationData, weig
                          "u_before": None if ua.get(key) is None else ua[key] * factor,
                          "u_after": None if ub.get(key) is None else ub[key] * factor})
     return rows
+
+
+# ---------------------------------------------------------------------------------------------------
+# conformance with maximum permissible errors (MPE)
+
+@dataclass(frozen=True)
+class MpeTest:
+    """One acceptance test of the arm standards: its ``key`` (the option ``--mpe-<key>-um``), standard,
+    name, what one tested value is, and whether the values are signed (an error against a certified
+    value: passes when ``|value| <= MPE``, drawn against a +-MPE band) or sizes (``0 <= value <= MPE``)."""
+    key: str
+    standard: str
+    name: str
+    what: str
+    signed: bool
+
+    @property
+    def option(self) -> str:
+        return f"--mpe-{self.key}-um"
+
+    def values(self, val: Validation) -> list[tuple[str, float]]:
+        """(label, value [m]) of every tested item of ``val`` (a measurement and its feature or length)."""
+        sph = [d for d in val.diameters if d["kind"] == "sphere"]
+        if self.key in ("e-uni", "volumetric"):
+            return [(f"{x['measurement']} {' - '.join(x['between'])}", x["error"]) for x in val.lengths]
+        if self.key in ("p-size", "eff-diameter"):
+            return [(f"{d['measurement']} {d['feature']}", d["error"]) for d in sph]
+        if self.key == "p-form":
+            return [(f"{d['measurement']} {d['feature']}", d["form"]) for d in sph]
+        if self.key == "l-dia":
+            return [(f"{a['measurement']} {a['feature']}", a["enclosing_diameter"]) for a in val.articulation]
+        if self.key == "spat":
+            return [(f"{a['measurement']} {a['feature']}", a["max_radial"]) for a in val.articulation]
+        raise KeyError(self.key)
+
+
+#: the tests an MPE can be given for, in report order
+MPE_TESTS = (
+    MpeTest("e-uni", "ISO 10360-12", "E_UNI", "length error: measured - certified centre distance of each "
+            "certified length (ball bar, seat pairs), |error| <= MPE", True),
+    MpeTest("p-size", "ISO 10360-12", "P_Size", "probing size error: fitted - certified diameter of each sphere "
+            f"(at least {DIAMETER_MIN_POINTS} points, radius free), |error| <= MPE", True),
+    MpeTest("p-form", "ISO 10360-12", "P_Form", "probing form error: max - min radial residual of each sphere "
+            "(radius free), <= MPE", False),
+    MpeTest("l-dia", "ISO 10360-12", "L_Dia", "articulated location error: diameter of the smallest sphere "
+            "enclosing the ball centres of each seat (one centre an articulation), <= MPE", False),
+    MpeTest("spat", "ASME B89.4.22", "single-point articulation", "largest distance of a seat's ball centres "
+            "from their mean (delta_max), <= MPE", False),
+    MpeTest("eff-diameter", "ASME B89.4.22", "effective diameter", "fitted - certified diameter of each sphere, "
+            "|error| <= MPE", True),
+    MpeTest("volumetric", "ASME B89.4.22", "volumetric length", "measured - certified centre distance of each "
+            "certified length, |error| <= MPE", True),
+)
+
+
+def conformance(val: Validation, mpe: dict | None = None, before: Validation | None = None) -> list[dict]:
+    """Every test of :data:`MPE_TESTS` the data hold items for, on the validation ``val`` (the calibrated
+    model): ``{key, standard, test, what, option, signed, n, items: [{label, value_um, nominal_um}],
+    max_abs_um, mpe_um, result, n_fail}``, ``mpe`` {key: MPE [m]} (tests without one: ``mpe_um`` and
+    ``result`` None), ``result`` "PASS" when every item is within the MPE, else "FAIL" (with the failing
+    count ``n_fail``); ``nominal_um`` the same item under ``before`` (the nominal model) when given. A
+    test with an MPE but no item in the data gets a row with ``n`` 0 and ``result`` None (not tested)."""
+    mpe = mpe or {}
+    out = []
+    for t in MPE_TESTS:
+        items = t.values(val)
+        if not items:
+            if mpe.get(t.key) is not None:
+                out.append({"key": t.key, "standard": t.standard, "test": t.name, "what": t.what,
+                            "option": t.option, "signed": t.signed, "n": 0, "items": [], "max_abs_um": None,
+                            "mpe_um": mpe[t.key] * 1e6, "result": None, "n_fail": None})
+            continue
+        nominal = dict(t.values(before)) if before is not None else {}
+        v = np.array([x for _, x in items]) * 1e6
+        row = {"key": t.key, "standard": t.standard, "test": t.name, "what": t.what, "option": t.option,
+               "signed": t.signed, "n": len(items),
+               "items": [{"label": lab, "value_um": float(x * 1e6),
+                          "nominal_um": None if lab not in nominal else float(nominal[lab] * 1e6)}
+                         for lab, x in items],
+               "max_abs_um": float(np.max(np.abs(v))), "mpe_um": None, "result": None, "n_fail": None}
+        if mpe.get(t.key) is not None:
+            m = mpe[t.key] * 1e6
+            bad = int(np.sum(np.abs(v) > m))
+            row.update(mpe_um=m, result="FAIL" if bad else "PASS", n_fail=bad)
+        out.append(row)
+    return out
+
+
+def smallest_enclosing_sphere(points) -> tuple[np.ndarray, float]:
+    """Centre (3,) and radius of the smallest sphere enclosing ``points`` (N, 3) (Welzl's algorithm, the
+    points visited in a fixed order: deterministic; exact up to rounding)."""
+    x = np.asarray(points, float)
+    mean = x.mean(axis=0)
+    scale = float(np.max(np.linalg.norm(x - mean, axis=1))) or 1.0
+    y = (x - mean) / scale                          # centred and scaled: no cancellation
+
+    def ball(r):
+        if not r:
+            return np.zeros(3), -1.0
+        p0 = r[0]
+        if len(r) == 1:
+            return p0, 0.0
+        a = np.array([p - p0 for p in r[1:]])
+        # centre c = p0 + a^T l with 2 a (a^T l) = |a|^2 row by row: the circumcentre in the points' span
+        g = a @ a.T
+        lam = np.linalg.lstsq(2 * g, np.sum(a * a, axis=1), rcond=None)[0]
+        c = p0 + a.T @ lam
+        return c, float(np.linalg.norm(c - p0))
+
+    def welzl(n, r):
+        if n == 0 or len(r) == 4:
+            return ball(r)
+        c, rad = welzl(n - 1, r)
+        p = y[n - 1]
+        if rad >= 0 and np.linalg.norm(p - c) <= rad * (1 + 1e-12) + 1e-15:
+            return c, rad
+        return welzl(n - 1, r + [p])
+
+    import sys
+    limit = sys.getrecursionlimit()
+    sys.setrecursionlimit(max(limit, 4 * len(y) + 100))
+    try:
+        c, rad = welzl(len(y), [])
+    finally:
+        sys.setrecursionlimit(limit)
+    return mean + c * scale, rad * scale

@@ -28,8 +28,10 @@ def register(sub) -> None:
                     "paper's four models (each point moved by f x compliance towards the axis with f = the point's "
                     "bending force, or the measurement's mean, 10Max or max) and by the full-wrench model (ball "
                     "centres evaluated again through the probe's elastic joint with each point's force vector). "
-                    "Writes report.html, summary.json, table2.csv, correlations.csv, budgets.csv and "
-                    "figures/*.png into the output folder.")
+                    "Writes report.html, summary.json, table2.csv, correlations.csv, budgets.csv, roundness.csv (each "
+                    "point's radial deviation from the fitted cylinder against its angle, initial and corrected: "
+                    "the data of the polar roundness plots) and figures/*.png into the output folder "
+                    "(docs/formats.md).")
     r.add_argument("points", type=Path, help="points CSV (docs/formats.md §3) with the ring's points")
     r.add_argument("artefacts", type=Path, help="artefacts TOML (docs/formats.md §4) with the ring (kind = \"ring\")")
     add_arm_options(r)

@@ -28,7 +28,7 @@ from .gum import BudgetResult, ring_budget
 from .models import MODEL_LABELS, RingCampaign, campaign_summary, table2
 
 __all__ = ["ring_budgets", "ring_report", "paper_report", "ring_summary", "paper_summary",
-           "DEFAULT_U_FORCE"]
+           "DEFAULT_U_FORCE", "roundness_data", "roundness_models"]
 
 #: standard uncertainty of a measured force [N] when none is given: the paper's bending sensor, its
 #: Table 1 terms combined (0.0723 N; the table misprints 0.00723)
@@ -137,6 +137,69 @@ def ring_summary(campaign: RingCampaign, budgets: list[BudgetResult], inputs: di
         "budgets": [b.as_dict() for b in budgets], "notes": list(campaign.notes)})
 
 
+def roundness_models(c: RingCampaign) -> tuple:
+    """The models of the polar roundness plots: the initial one and the corrected one (the full wrench
+    when evaluated, else the paper's point-force model)."""
+    corrected = next((m for m in ("wrench", "point") if m in c.models), None)
+    return ("initial",) if corrected is None else ("initial", corrected)
+
+
+def roundness_data(c: RingCampaign) -> dict:
+    """What the polar roundness plots draw: ``{measurement: {model: (angle_deg, deviation_um)}}`` for
+    the models of :func:`roundness_models`, each point's angular position about the fitted axis [deg] and
+    its radial deviation from the fitted cylinder [µm] (outward positive: the fit's own residuals,
+    ``arm_model.geometry.CylinderFit``; max - min is the form error), sorted by angle."""
+    out = {}
+    for r in c.measurements:
+        out[r.id] = {}
+        for m in roundness_models(c):
+            cyl = r.fits[m].cylinder
+            o = np.argsort(cyl.angles, kind="stable")
+            out[r.id][m] = (np.degrees(cyl.angles[o]), cyl.residuals[o] * 1e6)
+    return out
+
+
+def roundness_csv(data: dict) -> dict:
+    """Columns of ``roundness.csv``: one row a point and model of :func:`roundness_data`."""
+    rows = [(mid, m, a, d) for mid, per in data.items() for m, (ang, dev) in per.items() for a, d in zip(ang, dev)]
+    return {"measurement": np.array([r[0] for r in rows], dtype=object),
+            "model": np.array([r[1] for r in rows], dtype=object),
+            "angle_deg": np.array([r[2] for r in rows], float),
+            "radial_deviation_um": np.array([r[3] for r in rows], float)}
+
+
+def _roundness_figure(c: RingCampaign, data: dict) -> bytes:
+    """A grid of polar plots, one a measurement: the radial deviations of :func:`roundness_data` against
+    angle, the fitted cylinder the dashed circle (deviation 0), one radial scale for all."""
+    plt = _plt()
+    models = roundness_models(c)
+    n = len(data)
+    cols = min(n, 4)
+    rows = -(-n // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.3 * cols, 3.4 * rows + 0.4),
+                             subplot_kw={"projection": "polar"}, squeeze=False)
+    big = max((float(np.max(np.abs(dev))) for per in data.values() for _, dev in per.values()), default=0.0) or 1.0
+    lo, hi = -1.5 * big, 1.15 * big
+    ring = np.linspace(0, 2 * np.pi, 181)
+    for ax, (mid, per) in zip(axes.flat, data.items()):
+        ax.plot(ring, np.zeros_like(ring), "--", lw=0.7, color="k")
+        for m in models:
+            ang, dev = per[m]
+            ax.plot(np.radians(np.r_[ang, ang[:1]]), np.r_[dev, dev[:1]], ".-", ms=3, lw=0.8, color=_COLOURS[m],
+                    label=f"{MODEL_LABELS[m]} (form {np.ptp(dev):.1f} µm)")
+        ax.set_ylim(lo, hi)
+        ax.set_rticks([round(v, 1) for v in (-big, 0.0, big)])
+        ax.tick_params(labelsize=6)
+        ax.set_title(mid, fontsize=9)
+        ax.legend(fontsize=6, loc="lower center", bbox_to_anchor=(0.5, -0.32))
+    for ax in list(axes.flat)[n:]:
+        ax.set_visible(False)
+    fig.suptitle("Radial deviation from the fitted cylinder [µm] against angle (dashed: the fitted cylinder)",
+                 fontsize=10)
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.35 / fig.get_figheight()))
+    return _png(fig)
+
+
 def _ring_figures(c: RingCampaign, budgets) -> dict:
     plt = _plt()
     figs = {}
@@ -204,6 +267,8 @@ def _ring_figures(c: RingCampaign, budgets) -> dict:
     ax.invert_yaxis()
     ax.set(xlabel=f"expanded uncertainty U ({budgets[0].probability:g} %) [mm]", title="Uncertainty budgets")
     figs["budgets.png"] = _png(fig)
+    # 8. polar roundness plots, one a measurement
+    figs["roundness.png"] = _roundness_figure(c, roundness_data(c))
     return figs
 
 
@@ -282,7 +347,8 @@ def _csv_text(columns: dict, fmt: str = "%.6f") -> str:
 def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: list[BudgetResult],
                 warnings=(), point_uncertainty=None, parameters_source=None) -> list[Path]:
     """Write the report of an analysed ring campaign into folder ``out``: ``report.html``,
-    ``summary.json``, ``table2.csv``, ``correlations.csv``, ``budgets.csv`` and ``figures/*.png``.
+    ``summary.json``, ``table2.csv``, ``correlations.csv``, ``budgets.csv``, ``roundness.csv`` and
+    ``figures/*.png``.
 
     Args:
         campaign: :func:`correction.models.analyse_ring_campaign`'s result.
@@ -350,6 +416,12 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
                       ("form_errors.png", "Initial and corrected form errors (paper Fig. 8, 14)"),
                       ("forces.png", "Force values (paper Fig. 9)")):
         parts.append(f"<h3>{html.escape(cap)}</h3><img src='figures/{name}' alt='{html.escape(cap)}'>")
+    rm = roundness_models(campaign)
+    parts.append("<h3>Roundness: radial deviations against angle, per measurement</h3>"
+                 f"<p>Each point's radial deviation from the fitted cylinder (the fit's residual, outward positive; "
+                 f"max - min is the form error) against its angle about the fitted axis, "
+                 f"{' and '.join(MODEL_LABELS[m] for m in rm)}; the data are in roundness.csv.</p>"
+                 "<img src='figures/roundness.png' alt='polar roundness plots'>")
     parts.append("<h2>Correlation with the force (initial errors)</h2>" + _table_html(
         ("error", "force value", "with (0, 0)", "n", "Pearson r", "R²", "p", "slope [mm/N]"),
         [(k.y_name, k.x_name, "yes" if k.with_reference else "no", k.n, f"{k.r:.3f}", f"{k.r2:.3f}",
@@ -379,7 +451,8 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
              "correlations.csv": _csv_text({k: np.array([getattr(c, k) for c in corr], dtype=object)
                                             for k in ("y_name", "x_name", "with_reference", "n", "r", "r2",
                                                       "p_value", "slope", "intercept")}),
-             "budgets.csv": _csv_text(_budget_csv(budgets), "%.6g")}
+             "budgets.csv": _csv_text(_budget_csv(budgets), "%.6g"),
+             "roundness.csv": _csv_text(roundness_csv(roundness_data(campaign)), "%.6f")}
     files.update({f"figures/{k}": v for k, v in figs.items()})
     return _write_outputs(out, files, in_paths)
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from arm_model import ball_centres, urdf_text
-from arm_model.urdf import ELASTIC_JOINTS, rpy_from_matrix
+from arm_model.urdf import ELASTIC_JOINTS
 from conftest import ROOT, assert_close
 
 
@@ -33,15 +33,3 @@ def test_urdf_pinocchio_model_has_elastic_joints(pin_arm):
     names = list(pin_arm.model.names)
     assert names[-3:] == list(ELASTIC_JOINTS)
     assert pin_arm.model.nq == 10
-
-
-def test_rpy_roundtrip_including_gimbal_lock():
-    from scipy.spatial.transform import Rotation
-    rng = np.random.default_rng(2)
-    mats = list(Rotation.random(200, random_state=3).as_matrix())
-    mats += [Rotation.from_euler("xyz", [r, s * np.pi / 2, y]).as_matrix()
-             for r, s, y in zip(rng.uniform(-3, 3, 20), rng.choice([-1, 1], 20), rng.uniform(-3, 3, 20))]
-    for R in mats:
-        r, p, y = rpy_from_matrix(R)
-        back = Rotation.from_euler("xyz", [r, p, y]).as_matrix()   # extrinsic x-y-z = Rz Ry Rx
-        assert_close(back, R, atol=1e-12)

@@ -1,9 +1,10 @@
-"""Exact synthetic ring campaigns for the correction tests (independent of arm_model.sim).
+"""Exact synthetic ring campaigns for the correction tests.
 
-Joint angles are found by a batch damped Newton inverse kinematics so that the deflected ball centre
-(``arm_model.ball_centres(desc, q, wrench)``) lies exactly on the ring's centre-line cylinder with the
-stylus parallel to the ring axis; the ring pushes the ball towards the axis (the force the part exerts on
-the ball). The rigid centres then show the paper's larger diameter.
+Joint angles are found by the simulator's inverse kinematics (:func:`arm_model.sim.ik.solve_ik` on the
+nominal arm as the true one) so that the deflected ball centre (``arm_model.ball_centres(desc, q,
+wrench)``) lies exactly on the ring's centre-line cylinder with the stylus parallel to the ring axis; the
+ring pushes the ball towards the axis (the force the part exerts on the ball). The rigid centres then
+show the paper's larger diameter.
 """
 from __future__ import annotations
 
@@ -11,54 +12,25 @@ import numpy as np
 import pytest
 
 from arm_model import ball_centres
+from arm_model.kinematics import probe_rotations
+from arm_model.model import ArmModel
+from arm_model.sim.ik import IKTargets, solve_ik
+from arm_model.sim.truth import Truth
 
 RING_D = 0.174996            # the paper's ring gauge [m]
 RING_CENTRE = np.array([0.55, 0.10, 0.05])
 
 
-def probe_rotation(desc, q) -> np.ndarray:
-    """(N, 3, 3) R_base_probe from the rigid chain: columns are differences of ball centres with the probe
-    point moved by one unit along probe x, y, z (exact: the probe point enters linearly)."""
-    p0 = np.array(desc.probe.p_last)
-    base = ball_centres(desc, q)
-    cols = []
-    for k in range(3):
-        p = p0.copy()
-        p[k] += 0.01
-        cols.append((ball_centres(desc.with_probe(p_last=tuple(p)), q) - base) / 0.01)
-    return np.stack(cols, axis=2)
-
-
-def solve_ik(desc, targets, f_base, q0, iters: int = 60):
-    """q (N, J) with ball_centres(desc, q, R^T f_base) == targets and probe z == -base z."""
-    n, J = len(targets), desc.n_joints
-    q = np.tile(q0, (n, 1)).astype(float)
-    zdes = np.array([0.0, 0.0, -1.0])
-    lever = 0.1
-
-    def residual(qq):
-        R = probe_rotation(desc, qq)
-        w = np.einsum("nji,nj->ni", R, f_base)
-        x = ball_centres(desc, qq, w)
-        return np.concatenate([x - targets, lever * (R[:, :, 2] - zdes)], axis=1)
-
-    for _ in range(iters):
-        r = residual(q)
-        if np.max(np.abs(r[:, :3])) < 1e-13 and np.max(np.abs(r[:, 3:])) < 1e-12:
-            break
-        Jm = np.empty((n, 6, J))
-        h = 1e-7
-        for k in range(J):
-            dq = np.zeros(J)
-            dq[k] = h
-            Jm[:, :, k] = (residual(q + dq) - residual(q - dq)) / (2 * h)
-        lam = 1e-8
-        A = np.einsum("nij,nik->njk", Jm, Jm) + lam * np.eye(J)
-        b = np.einsum("nij,ni->nj", Jm, r)
-        q = q - np.linalg.solve(A, b[:, :, None])[:, :, 0]
-    r = residual(q)
-    assert np.max(np.abs(r[:, :3])) < 1e-11, np.max(np.abs(r[:, :3]))
-    return q
+def solve(desc, targets, f_base, rng):
+    """q (N, J) [rad] with the deflected ball at ``targets`` under the base-frame force ``f_base`` and the
+    stylus along -base z, and that force in the probe frame (N, 3) [N]."""
+    model = ArmModel(desc)
+    truth = Truth(model, np.zeros(model.spec.size), np.zeros((3, 3)), np.zeros(3), np.zeros(3))
+    n = len(targets)
+    res = solve_ik(truth, IKTargets(position=targets, stylus=np.tile([0.0, 0.0, -1.0], (n, 1)),
+                                    x_dir=np.full((n, 3), np.nan), force=f_base, torque=np.zeros((n, 3)),
+                                    temperature=np.full(n, 20.0)), rng)
+    return res.q, res.wrench[:, :3]
 
 
 def ring_measurement(desc, rng, n_rows=3, per_row=8, row_gap=0.008, force_mean=1.0, axial=0.3,
@@ -77,10 +49,7 @@ def ring_measurement(desc, rng, n_rows=3, per_row=8, row_gap=0.008, force_mean=1
     P, U, fm = np.vstack(pts), np.vstack(inward), np.concatenate(fmag)
     # the ring pushes the ball towards the axis; the stylus is also pushed up (axial, towards the flange)
     f_base = fm[:, None] * U + axial * fm[:, None] * np.array([0, 0, 1.0])
-    q0 = np.radians([5.0, 40.0, 0.0, 80.0, 0.0, 60.0, 0.0])
-    q = solve_ik(desc, P, f_base, q0)
-    R = probe_rotation(desc, q)
-    f_probe = np.einsum("nji,nj->ni", R, f_base)
+    q, f_probe = solve(desc, P, f_base, rng)
     return q, f_probe, P
 
 
@@ -100,3 +69,12 @@ def test_synthetic_measurement_is_exact(nominal, synth_measurement):
     rigid = ball_centres(nominal, q)
     rr = np.hypot(*(rigid[:, :2] - RING_CENTRE[:2]).T)
     assert np.all(rr > r)
+    # the probe frames from the chain (not the IK): stylus along -base z, and the force, back in the base
+    # frame, pushes towards the axis and up by 0.3 of its horizontal part
+    R = probe_rotations(nominal, q)
+    assert np.max(np.abs(R[:, :, 2] - [0.0, 0.0, -1.0])) < 1e-9
+    f_base = np.einsum("nij,nj->ni", R, f)
+    inward = (RING_CENTRE[:2] - P[:, :2]) / r[:, None]
+    horizontal = np.linalg.norm(f_base[:, :2], axis=1)
+    assert np.max(np.abs(f_base[:, :2] / horizontal[:, None] - inward)) < 1e-9
+    assert np.max(np.abs(f_base[:, 2] / horizontal - 0.3)) < 1e-9

@@ -16,7 +16,8 @@ from arm_model import NumericalError
 from conftest import assert_close
 from arm_model.geometry import (ball_centre_radius, feature_diameter, fit_circle_2d, fit_cylinder, fit_plane,
                                 fit_ring_axis, fit_row_circles, fit_sphere, kabsch, kasa_circle, perpendicular_basis,
-                                random_rotation, ring_fit, rotation_xyz, split_rows)
+                                random_rotation, ring_fit, rotation_xyz, rpy_from_matrix, split_rows,
+                                frame_along)
 
 
 def cylinder_points(radius, heights, per_row, arc=2 * np.pi, start=0.0, jitter=None, rng=None):
@@ -231,6 +232,29 @@ def _rz(a):
 def test_rotation_xyz_is_rz_ry_rx(w):
     """Against the elementary rotations written out by hand."""
     assert_close(rotation_xyz(w), _rz(w[2]) @ _ry(w[1]) @ _rx(w[0]), atol=1e-15)
+
+
+def test_rpy_from_matrix_inverts_rotation_xyz_including_gimbal_lock():
+    """Random rotations and pitch +-90 degrees (yaw then 0), back through the hand-written Rz Ry Rx."""
+    rng = np.random.default_rng(2)
+    mats = list(Rotation.random(200, random_state=3).as_matrix())
+    mats += [_rz(y) @ _ry(s * np.pi / 2) @ _rx(r)
+             for r, s, y in zip(rng.uniform(-3, 3, 20), rng.choice([-1, 1], 20), rng.uniform(-3, 3, 20))]
+    for R in mats:
+        r, p, y = rpy_from_matrix(R)
+        assert_close(_rz(y) @ _ry(p) @ _rx(r), R, atol=1e-12)
+        assert abs(p) <= np.pi / 2 + 1e-12
+    assert rpy_from_matrix(_ry(np.pi / 2) @ _rx(0.3))[2] == 0.0
+
+
+@pytest.mark.parametrize("axis", [0, 1, 2])
+@pytest.mark.parametrize("v", [(1.0, 2.0, 3.0), (1.0, 0.0, 0.0), (0.0, 0.0, -2.0), (0.0, 1e-3, 1.0), (0.0, 0.0, 0.0)])
+def test_frame_along_puts_the_axis_along_the_vector(axis, v):
+    r = frame_along(v, axis)
+    assert_close(r.T @ r, np.eye(3), atol=1e-15)
+    assert_close(np.linalg.det(r), 1.0, atol=1e-15)
+    want = np.eye(3)[axis] if not any(v) else np.array(v) / np.linalg.norm(v)
+    assert_close(r[:, axis], want, atol=1e-15)
 
 
 def test_random_rotation_is_the_quaternion_of_four_normals():

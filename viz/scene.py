@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import ArmDescription, load_description
+from arm_model.geometry import frame_along
 
 __all__ = ["ArmScene", "Camera", "PoseInfo", "ROOT", "DEFLECTION_RGB", "RESIDUAL_RGB", "POINTS_RGB",
            "ARTEFACT_RGB", "ELLIPSOID_RGB", "ellipsoid_mesh", "coverage_factor"]
@@ -105,12 +106,7 @@ class Camera:
 
 def _rotation_y_to(v: np.ndarray) -> np.ndarray:
     """A rotation whose y axis is along ``v`` (meshcat cylinders and cones lie along y)."""
-    n = np.linalg.norm(v)
-    y = np.array([0.0, 1.0, 0.0]) if n < 1e-15 else v / n
-    helper = np.array([0.0, 0.0, 1.0]) if abs(y[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    x = np.cross(y, helper)
-    x /= np.linalg.norm(x)
-    return np.column_stack([x, y, np.cross(x, y)])
+    return frame_along(v, 1)
 
 
 def _arrow_parts(length: float) -> dict[str, tuple[list, list]]:

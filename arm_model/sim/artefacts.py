@@ -28,7 +28,7 @@ from ..chain import NUMPY_OPS, chain_point
 from ..geometry import ball_centre_radius, perpendicular_basis, random_rotation
 from .campaign import Campaign, Task
 
-__all__ = ["Plan", "make_plan", "cone_directions"]
+__all__ = ["Plan", "make_plan", "cone_directions", "shoulder"]
 
 
 #: per-point fields of a plan, in order
@@ -136,7 +136,7 @@ def cone_directions(rng, axis, half_angle: float, n: int) -> np.ndarray:
     return (cos_t[:, None] * axis + sin_t[:, None] * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2))
 
 
-def _shoulder(desc) -> np.ndarray:
+def shoulder(desc) -> np.ndarray:
     """Origin [m] of the first joint frame at q = 0 (for a DH arm: the shoulder), base frame."""
     rows = [list(r) for r in desc.row_table()[:1]]
     return np.array(chain_point(desc.convention, rows, [0.0], (0.0, 0.0, 0.0), NUMPY_OPS,
@@ -339,7 +339,7 @@ def _ballbar(plan, k, t, rng, ball_d, desc, truth):
                 _seat_points(part, mid, fid, k, t, rng, centre, up, o["articulations"])
         return {"measurement": mid, "A_m": a.tolist(), "B_m": b.tolist()}
 
-    placed = _place(plan, rng, o, t.measurements, _shoulder(desc), true_len / 2, make, truth)
+    placed = _place(plan, rng, o, t.measurements, shoulder(desc), true_len / 2, make, truth)
     plan.placements[t.id] = {"kind": "ballbar", "ends": o["ends"], "true_length_m": true_len,
                              "certified_length_m": o["length"], "positions": placed}
 
@@ -363,7 +363,7 @@ def _tracker(plan, k, t, rng, ball_d, desc, truth):
             _seat_points(part, mid, fid, k, t, rng, c, up, o["articulations"], reference=True)
         return {"feature": fid, "position_m": c.tolist()}
 
-    placed = _place(plan, rng, o, o["nests"], _shoulder(desc), None, make, truth)
+    placed = _place(plan, rng, o, o["nests"], shoulder(desc), None, make, truth)
     plan.features += [{"id": p["feature"], "kind": "seat"} for p in placed]
     plan.placements[t.id] = {"kind": "tracker", "nests": placed, "T_ref_base": T.tolist(),
                              "noise_m": o["noise"]}

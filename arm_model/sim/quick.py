@@ -21,8 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry import perpendicular_basis, rotation_xyz
-from ..io import Artefacts, Distance, Feature, PointSet, atomic_write_text, write_csv
+from ..io import Artefacts, Distance, Feature, PointSet, atomic_write_text, format_artefacts, write_csv
 from ..model import ArmModel, AuxData
+from .artefacts import shoulder
 from .ik import random_q, solve_positions
 
 __all__ = ["SynthSpec", "SynthCampaign", "random_truth", "random_q", "make_campaign"]
@@ -89,15 +90,7 @@ class SynthCampaign:
         files = {"points": _write_points(out / "points.csv", self.points)}
         if self.reference_points is not None:
             files["reference"] = _write_points(out / "points-ref.csv", self.reference_points)
-        import tomli_w
-
-        doc = {"feature": [{"id": f.id, "kind": f.kind, **({} if f.diameter is None else
-                                                             {"diameter_mm": f.diameter * 1e3})}
-                           for f in self.artefacts.features.values()],
-               "distance": [{"between": list(d.between), "length_mm": d.length * 1e3,
-                             **({} if d.u_length is None else {"u_length_mm": d.u_length * 1e3})}
-                            for d in self.artefacts.distances]}
-        text = tomli_w.dumps({k: v for k, v in doc.items() if v})
+        text = format_artefacts(self.artefacts.features.values(), self.artefacts.distances)
         files["artefacts"] = atomic_write_text(out / "artefacts.toml", text)
         return files
 
@@ -156,10 +149,10 @@ def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0,
     features: dict[str, Feature] = {}
     distances = []
 
-    shoulder = np.array([0.0, 0.0, desc.joints[0].d])
+    origin = shoulder(desc)
 
     def reachable(x) -> bool:
-        return 0.35 <= np.linalg.norm(x - shoulder) <= 0.85
+        return 0.35 <= np.linalg.norm(x - origin) <= 0.85
 
     def place() -> np.ndarray:
         while True:

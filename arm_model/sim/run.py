@@ -17,7 +17,9 @@ import numpy as np
 
 from .._errors import InputError, NumericalError
 from .._output import safe_name
-from ..io import (Artefacts, ForceSignal, PointSet, atomic_write_text, guard_output, parse_points)
+from ..description import toml_text
+from ..io import (Artefacts, Distance, Feature, ForceSignal, PointSet, atomic_write_text, format_artefacts,
+                  guard_output, parse_points)
 from ..io import parse_artefacts
 from .artefacts import Plan, make_plan
 from .campaign import Campaign
@@ -105,24 +107,12 @@ def _csv_text(columns: dict) -> str:
     return buf.getvalue()
 
 
-def _num(x: float) -> str:
-    return repr(float(x))
-
-
 def _artefacts_text(plan: Plan, campaign: Campaign) -> str:
-    out = [f"# Artefacts of the simulated campaign '{campaign.name}' (docs/formats.md §4).", ""]
-    for f in plan.features:
-        out += ["[[feature]]", f'id = "{f["id"]}"', f'kind = "{f["kind"]}"']
-        for key in ("diameter", "u_diameter", "form_error"):
-            if f.get(key) is not None:
-                out.append(f"{key}_mm = {_num(f[key] * 1e3)}")
-        out.append("")
-    for (a, b), length, u, _ in plan.distances:
-        out += ["[[distance]]", f'between = ["{a}", "{b}"]', f"length_mm = {_num(length * 1e3)}"]
-        if u is not None:
-            out.append(f"u_length_mm = {_num(u * 1e3)}")
-        out.append("")
-    return "\n".join(out)
+    features = [Feature(f["id"], f["kind"], *(f.get(k) for k in ("diameter", "u_diameter", "form_error")))
+                for f in plan.features]
+    distances = [Distance(tuple(between), length, u) for between, length, u, _ in plan.distances]
+    return format_artefacts(features, distances,
+                            f"Artefacts of the simulated campaign '{campaign.name}' (docs/formats.md §4).")
 
 
 def _plain(v):
@@ -156,8 +146,6 @@ def _with_units(d):
 
 
 def _truth_text(campaign: Campaign, truth: Truth, plan: Plan, draw: OperatorDraw, stats: dict) -> str:
-    import tomli_w
-
     spec = truth.model.spec
     noise_units = {"encoder_resolution": "rad", "encoder_noise": "rad", "probing_repeatability": "m",
                    "force_noise": "N", "temperature_noise": "C"}
@@ -171,10 +159,10 @@ def _truth_text(campaign: Campaign, truth: Truth, plan: Plan, draw: OperatorDraw
         "artefact": plan.placements,
         "stats": stats,
     }
-    head = [TRUTH_HEADER, f"# Campaign '{campaign.name}', seed {campaign.seed}. SI units, named in every key; "
-            "[parameters] is the true parameter vector of the core ArmModel(nominal arm, effects on), "
-            "errors added to the nominal description.", ""]
-    return "\n".join(head) + tomli_w.dumps(_plain(doc))
+    comment = (TRUTH_HEADER.removeprefix("# ") + f"\nCampaign '{campaign.name}', seed {campaign.seed}. SI units, named in "
+               "every key; [parameters] is the true parameter vector of the core ArmModel(nominal arm, effects on), "
+               "errors added to the nominal description.")
+    return toml_text(_plain(doc), comment)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -115,15 +115,14 @@ class Truth:
 
     def _pose_geometry(self, q, geom: Geometry, wrench) -> Geometry:
         """``geom`` with the pose-dependent effects (:data:`POSE_EFFECTS`) applied at the true angles ``q``
-        (N, J) and the true ``wrench`` (N, 6), in the model's order (a copy). For complex ``q`` (complex-step
-        derivatives) they are evaluated at its real part. Their derivative (a micrometre shift's) is left out
+        (N, J) and the true ``wrench`` (N, 6), in the model's order (a copy). Their derivative (a micrometre shift's) is left out
         of the inverse kinematics' Newton steps (:meth:`pose_jacobian`), which only slows convergence
         negligibly."""
         pose_effects = [(e, sl) for e, sl in self.model.effect_slices() if isinstance(e, POSE_EFFECTS)]
         if not pose_effects:
             return geom
         out = Geometry([list(r) for r in geom.rows], list(geom.p_last), list(geom.compliance))
-        inputs = ModelInputs(q=list(np.real(q).T), wrench=list(np.real(np.asarray(wrench)).T))
+        inputs = ModelInputs(q=list(np.asarray(q).T), wrench=list(np.asarray(wrench).T))
         for e, sl in pose_effects:
             e.apply(self.nominal, [float(v) for v in self.p[sl]], inputs, out, NUMPY_OPS)
         return out

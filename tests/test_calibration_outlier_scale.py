@@ -1,0 +1,71 @@
+"""Outliers on the robust scale of each observation group: a clean campaign whose tracker is ten times
+noisier than its probe (both stated alike) flags nothing; a gross error in either group is still flagged."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from arm_model.model import ArmModel
+from arm_model.sim.quick import SynthSpec, make_campaign
+from calibration import Weights, calibrate, make_data
+from calibration.calibrate import row_groups
+
+# probe 2 um, tracker 20 um per axis; the fit is told 2 um for both (--weights stated)
+SPEC = SynthSpec(ballbars=6, ballbar_points=5, seats=3, articulations=8, spheres=1, sphere_points=12,
+                 reference_points=60, noise=2e-6, reference_noise=20e-6)
+STATED = Weights(probe=2e-6, reference=2e-6)
+
+
+@pytest.fixture(scope="module")
+def campaign(nominal):
+    model = ArmModel(nominal)
+    return model, make_campaign(model, SPEC, seed=41)
+
+
+def _fit(model, c, points=None, reference=None):
+    data = make_data(c.points if points is None else points, c.artefacts, model,
+                     reference=c.reference_points if reference is None else reference)
+    return calibrate(model, data, weights=STATED)
+
+
+def test_clean_campaign_with_unequal_group_noise_flags_nothing(campaign):
+    model, c = campaign
+    res = _fit(model, c)
+    # the groups really differ: the tracker's residual/stated ratio is several times the seats' one (less
+    # than ten: told 2 um for the tracker, the fit bends the parameters towards it and the seats' residuals grow)
+    f = {v["group"]: v["factor"] for v in res.variance}
+    assert f["reference"] / f["seat"] > 3, f
+    # P(|z| > 4) = 6e-5 a row: with ~500 rows the expected count is 0.03
+    assert res.outliers == [], [(o.kind, o.standardized) for o in res.outliers]
+    # what one pooled scale over all rows gave: the tracker's rows stand out by their noise alone
+    t = res.residuals
+    ref = t["kind"] == "reference"
+    assert np.median(np.abs(t["standardized"][ref])) < 2.0
+
+
+def test_gross_errors_in_either_group_are_flagged(campaign):
+    model, c = campaign
+    q = c.points.q.copy()
+    bad_seat = int(np.flatnonzero(c.points.feature == "seat")[3])
+    q[bad_seat, 1] += 5e-4                                 # 0.5 mrad on the shoulder: ~0.3 mm, 100 probe sigmas
+    x_ref = c.reference_points.ref.copy()
+    bad_ref = 17
+    x_ref[bad_ref] += [0.0, 4e-4, 0.0]                     # 0.4 mm: 20 tracker sigmas
+    res = _fit(model, c, replace(c.points, q=q), replace(c.reference_points, ref=x_ref))
+    kinds = {(o.kind, o.measurement) for o in res.outliers if abs(o.standardized) > 10}
+    assert ("seat", c.points.measurement[bad_seat]) in kinds
+    worst_ref = max((o for o in res.outliers if o.kind == "reference"), key=lambda o: abs(o.standardized))
+    assert abs(worst_ref.standardized) > 10
+
+
+def test_row_groups_cover_every_row_once(campaign):
+    from calibration.problem import Problem
+    model, c = campaign
+    data = make_data(c.points, c.artefacts, model, reference=c.reference_points)
+    prob = Problem(model, data, STATED, [])
+    g = row_groups(prob)
+    assert set(g) == {"seat", "sphere", "reference", "length"}
+    rows = np.sort(np.concatenate(list(g.values())))
+    assert np.array_equal(rows, np.arange(prob.n_rows))
