@@ -124,7 +124,6 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", default="0-19", help="seeds, e.g. 0-19 or 1,4,7")
     p.add_argument("-o", "--output", type=Path, default=Path("out/honesty"), help="output folder")
     args = p.parse_args(argv)
-    logging.disable(logging.INFO)
     rows = []
     for seed in _seeds(args.seeds):
         rows.append(one_seed(seed, args.shape))
@@ -138,4 +137,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
+    logging.disable(logging.INFO)          # the loop's progress lines; the seeds' lines go to stderr
     raise SystemExit(main())
