@@ -5,15 +5,21 @@ evaluators that agree to 1e-12 m: the batch path (:func:`ball_centres`), Pinocch
 (:class:`PinocchioArm`, built from the generated URDF) and CasADi (:func:`casadi_ball_centre`).
 Conventions: docs/CONVENTIONS.md.
 """
-from ._errors import AacmmError, InputError, NumericalError, read_text
-from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, split_unit, to_si
-from .description import ArmDescription, JointRow, Probe, load_description, parse_description, format_description
-from .params import ParamSpec, param_spec, split_params, apply_params
-from .kinematics import ball_centres, rigid_centres
-from .io import (PointSet, Artefacts, Feature, Distance, ForceSignal, read_points, read_artefacts,
-                 read_force_signal, check_features, atomic_write_text, write_csv, csv_records)
-from .urdf import urdf_text
-from .urdf_import import load_arm, description_from_urdf
+# Every public name loads on first use (PEP 562), so `aacmm --help` and `import arm_model.cli` do not
+# import numpy, the readers or the URDF writer: name -> the submodule that defines it.
+_HOME = {
+    "AacmmError": "_errors", "InputError": "_errors", "NumericalError": "_errors", "read_text": "_errors",
+    "QUANTITY_OF_UNIT": "_units", "UNIT_FACTORS": "_units", "split_unit": "_units", "to_si": "_units",
+    "ArmDescription": "description", "JointRow": "description", "Probe": "description",
+    "load_description": "description", "parse_description": "description", "format_description": "description",
+    "ParamSpec": "params", "param_spec": "params", "split_params": "params", "apply_params": "params",
+    "ball_centres": "kinematics", "rigid_centres": "kinematics",
+    "PointSet": "io", "Artefacts": "io", "Feature": "io", "Distance": "io", "ForceSignal": "io",
+    "read_points": "io", "read_artefacts": "io", "read_force_signal": "io", "check_features": "io",
+    "atomic_write_text": "io", "write_csv": "io", "csv_records": "io",
+    "urdf_text": "urdf", "load_arm": "urdf_import", "description_from_urdf": "urdf_import",
+    "PinocchioArm": "pinocchio_model", "casadi_ball_centre": "casadi_model",
+}
 
 __all__ = [
     "AacmmError", "InputError", "NumericalError", "read_text",
@@ -27,11 +33,15 @@ __all__ = [
 ]
 
 
-def __getattr__(name):  # heavy backends load on first use, not at import
-    if name == "PinocchioArm":
-        from .pinocchio_model import PinocchioArm
-        return PinocchioArm
-    if name == "casadi_ball_centre":
-        from .casadi_model import casadi_ball_centre
-        return casadi_ball_centre
-    raise AttributeError(name)
+def __getattr__(name):
+    home = _HOME.get(name)
+    if home is None:
+        raise AttributeError(f"module 'arm_model' has no attribute '{name}'")
+    import importlib
+    value = getattr(importlib.import_module(f".{home}", __name__), name)
+    globals()[name] = value             # once loaded, a plain attribute
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

@@ -96,7 +96,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
                     "Files carry units in their column and key names (mm, deg, N ...); every format: docs/formats.md.",
         epilog="Exit status: 0 done; 2 bad input or a file the system refuses (one message, nothing "
                "written); 3 internal error (please report it); 130 interrupted. docs/guarantees.md")
-    parser.add_argument("--version", action="version", version=f"aacmm-toolkit {version()}")
+    parser.add_argument("--version", action=_Version, nargs=0, help="show the toolkit's version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     wanted = _requested(argv) if argv is not None else None
     if argv is None:
@@ -112,6 +112,15 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
             sub.add_parser(name, help=text, add_help=False)     # listed only: not the one that runs
     _add_common(parser, True)
     return parser
+
+
+class _Version(argparse.Action):
+    """``--version``: the installed version, looked up only when asked (importlib.metadata is slow to
+    import, and ``aacmm --help`` should start fast)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"aacmm-toolkit {version()}")
+        parser.exit()
 
 
 class Terminated(BaseException):

@@ -150,8 +150,9 @@ def register(sub) -> None:
         "urdf", help=command_help("urdf"),
         description="Write the URDF (links, joints, the probe's virtual elastic joints, visuals) generated "
                     "from an arm description. The repository's urdf/aacmm7.urdf is made this way.")
-    u.add_argument("arm", type=Path, help="arm description TOML (or a URDF with --tip-frame, to see the chain "
-                                          "the toolkit reads from it)")
+    u.add_argument("arm", type=Path, help="arm description TOML or a shipped arm's name (aacmm7), or a URDF with "
+                                          "--tip-frame, to see the chain the toolkit reads from it "
+                                          "(docs/formats.md §2)")
     u.add_argument("--tip-frame", default=None, metavar="LINK", help="for a URDF arm: the link at the ball centre")
     u.add_argument("-o", "--output", type=Path, required=True, help="output URDF")
     u.set_defaults(func=run_urdf)
@@ -159,7 +160,8 @@ def register(sub) -> None:
     e = sub.add_parser(
         "examples", help=command_help("examples"),
         description="Copy the shipped example campaigns (campaigns/*.toml, for aacmm simulate), the example "
-                    "data (data/: a simulated ring campaign, real measured robot data with its licence) and "
+                    "data (data/: a simulated ring campaign, real measured robot data with its licence), the "
+                    "shipped arm descriptions (arms/: the nominal aacmm7 as a DH table, a template for yours) and "
                     "the user docs (docs/, e.g. docs/formats.md) into DIR. Existing files are never overwritten.")
     e.add_argument("dir", type=Path, help="destination folder (created)")
     e.set_defaults(func=run_examples)

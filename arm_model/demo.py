@@ -33,6 +33,14 @@ def _step(title: str, argv: list[str]) -> None:
     print(f"({time.perf_counter() - t:.1f} s)", flush=True)
 
 
+def _on_campaign(command: str, folder: Path, options: list[str], out: Path) -> list[str]:
+    """The arguments of ``command`` on a simulated campaign's files (its reference points when it has them)."""
+    ref = folder / "points-ref.csv"
+    return ([command, str(folder / "points.csv"), str(folder / "artefacts.toml")]
+            + (["--reference-points", str(ref)] if ref.exists() else [])
+            + ["--arm", str(ARM), *options, "-o", str(out)])
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m arm_model.demo", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -54,11 +62,8 @@ def main(argv: list[str] | None = None) -> int:
     _step("5a. simulate a calibration campaign", ["simulate", str(CAMPAIGNS / "calibration.toml"), "-o",
                                                  str(out / "sim-calibration"), "-q", "--no-signals"])
     cal = out / "sim-calibration"
-    cal_args = ["calibrate", str(cal / "points.csv"), str(cal / "artefacts.toml"), "--arm", str(ARM),
-                "--holdout", "0.25", "-o", str(out / "calibration")]
-    if (cal / "points-ref.csv").exists():
-        cal_args[3:3] = ["--reference-points", str(cal / "points-ref.csv")]
-    _step("5b. kinematic calibration with held-out validation", cal_args)
+    _step("5b. kinematic calibration with held-out validation",
+          _on_campaign("calibrate", cal, ["--holdout", "0.25"], out / "calibration"))
     _step("6. the arm at a ring point, as a static meshcat page",
           ["view", str(ring / "points.csv"), "--arm", str(ARM), "--artefacts", str(ring / "artefacts.toml"),
            "--measurement", "ring-01", "--point", "5", "--html", str(out / "view.html")])
@@ -67,11 +72,8 @@ def main(argv: list[str] | None = None) -> int:
         _step("7a. simulate a campaign with an effect the model does not declare",
               ["simulate", str(loop_campaign), "-o", str(out / "sim-loop"), "-q", "--no-signals"])
         lp = out / "sim-loop"
-        loop_args = ["close-loop", str(lp / "points.csv"), str(lp / "artefacts.toml"), "--arm", str(ARM),
-                     "--sigma-probe-um", "2", "-o", str(out / "close-loop")]
-        if (lp / "points-ref.csv").exists():
-            loop_args[3:3] = ["--reference-points", str(lp / "points-ref.csv")]
-        _step("7b. close the loop: calibrate, diagnose, add the effect, report before/after", loop_args)
+        _step("7b. close the loop: calibrate, diagnose, add the effect, report before/after",
+              _on_campaign("close-loop", lp, ["--sigma-probe-um", "2"], out / "close-loop"))
     print(f"\ndemo done: reports in {out}/ (ring/report.html, paper/report.html, calibration/report.html, "
           f"view.html{', close-loop/report.html' if (out / 'close-loop').exists() else ''})")
     return 0

@@ -6,7 +6,8 @@ its nuisance states), the ring pipeline (:mod:`correction`) and the viewer:
 * circles (:func:`kasa_circle` algebraic, :func:`fit_circle_2d` geometric), cylinders
   (:func:`fit_cylinder`, orthogonal distances), circles of a cylinder's rows (:func:`fit_row_circles`),
   a ring's axis even when it was probed in one plane (:func:`fit_ring_axis`), spheres
-  (:func:`fit_sphere`, free or known radius) and planes (:func:`fit_plane`);
+  (:func:`fit_sphere`, free or known radius), planes (:func:`fit_plane`) and the smallest sphere enclosing
+  points (:func:`smallest_enclosing_sphere`, Welzl);
 * ball compensation: the radius on which the ball centres of a feature lie (:func:`ball_centre_radius`)
   and back (:func:`feature_diameter`); an inner ring measured with ball centres (:func:`ring_fit`);
 * standard uncertainties of the fitted radii (``u_radius``) from the residuals and the Jacobian at the
@@ -35,8 +36,8 @@ from ._errors import NumericalError
 
 __all__ = ["CircleFit", "CylinderFit", "RingFit", "SphereFit", "PlaneFit", "kasa_circle", "fit_circle_2d",
            "fit_cylinder", "fit_row_circles", "split_rows", "ring_fit", "fit_ring_axis", "fit_sphere",
-           "fit_plane", "ball_centre_radius", "feature_diameter", "perpendicular_basis", "angle_frame",
-           "rotation_xyz", "rpy_from_matrix", "frame_along", "random_rotation", "kabsch", "sphere_seed"]
+           "fit_plane", "smallest_enclosing_sphere", "ball_centre_radius", "feature_diameter",
+           "perpendicular_basis", "angle_frame", "rotation_xyz", "rpy_from_matrix", "frame_along", "random_rotation", "kabsch", "sphere_seed"]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -651,3 +652,43 @@ def fit_sphere(points, radius: float | None = None, centre=None) -> SphereFit:
     r = float(radius) if known else float(scale * res.x[3])
     return SphereFit(centre=c0 + scale * res.x[:3], radius=r, residuals=scale * res.fun, u_centre=u[:3],
                      u_radius=0.0 if known else float(u[3]))
+
+
+def smallest_enclosing_sphere(points) -> tuple[np.ndarray, float]:
+    """Centre (3,) and radius of the smallest sphere enclosing ``points`` (N, 3) (Welzl's algorithm, the
+    points visited in a fixed order: deterministic; exact up to rounding)."""
+    x = np.asarray(points, float)
+    mean = x.mean(axis=0)
+    scale = float(np.max(np.linalg.norm(x - mean, axis=1))) or 1.0
+    y = (x - mean) / scale                          # centred and scaled: no cancellation
+
+    def ball(r):
+        if not r:
+            return np.zeros(3), -1.0
+        p0 = r[0]
+        if len(r) == 1:
+            return p0, 0.0
+        a = np.array([p - p0 for p in r[1:]])
+        # centre c = p0 + a^T l with 2 a (a^T l) = |a|^2 row by row: the circumcentre in the points' span
+        g = a @ a.T
+        lam = np.linalg.lstsq(2 * g, np.sum(a * a, axis=1), rcond=None)[0]
+        c = p0 + a.T @ lam
+        return c, float(np.linalg.norm(c - p0))
+
+    def welzl(n, r):
+        if n == 0 or len(r) == 4:
+            return ball(r)
+        c, rad = welzl(n - 1, r)
+        p = y[n - 1]
+        if rad >= 0 and np.linalg.norm(p - c) <= rad * (1 + 1e-12) + 1e-15:
+            return c, rad
+        return welzl(n - 1, r + [p])
+
+    import sys
+    limit = sys.getrecursionlimit()
+    sys.setrecursionlimit(max(limit, 4 * len(y) + 100))
+    try:
+        c, rad = welzl(len(y), [])
+    finally:
+        sys.setrecursionlimit(limit)
+    return mean + c * scale, rad * scale

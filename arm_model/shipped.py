@@ -72,14 +72,16 @@ def provenance(inputs) -> dict:
 
 
 def copy_examples(dest: str | Path) -> list[Path]:
-    """Copy the example campaigns and data (with their licences) and the user docs into ``dest``;
-    refuses to write over existing files. Returns the top-level entries written."""
+    """Copy the example campaigns and data (with their licences), the shipped arm descriptions (``arms/``,
+    a template for your own DH table) and the user docs into ``dest``; refuses to write over existing
+    files. Returns the top-level entries written."""
     from ._errors import InputError
     dest = Path(dest)
     src = shipped_path("examples")
     if not src.is_dir():
         raise InputError("the example files are not installed with this copy of the toolkit", src)
     pairs = [(sub, dest / sub.name) for sub in sorted(src.iterdir()) if not sub.name.startswith((".", "__"))]
+    pairs += [(shipped_path(rel), dest / "arms" / Path(rel).name) for rel in SHIPPED_ARMS.values()]
     if shipped_path("docs").is_dir():
         pairs.append((shipped_path("docs"), dest / "docs"))
     files = [(f, t / f.relative_to(s)) for s, t in pairs if s.is_dir() for f in s.rglob("*")
@@ -91,4 +93,4 @@ def copy_examples(dest: str | Path) -> list[Path]:
     for f, t in files:
         t.parent.mkdir(parents=True, exist_ok=True)
         shutil.copy2(f, t)
-    return [t for _, t in pairs]
+    return list(dict.fromkeys(t if s.is_dir() else t.parent for s, t in pairs))

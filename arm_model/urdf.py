@@ -11,12 +11,10 @@ import math
 from xml.sax.saxutils import escape as _xml_escape
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from .description import ArmDescription
-from .geometry import frame_along, rotation_xyz, rpy_from_matrix
 
-__all__ = ["urdf_text", "rpy_from_matrix", "ELASTIC_JOINTS", "BALL_FRAME", "FLANGE_FRAME",
+__all__ = ["urdf_text", "ELASTIC_JOINTS", "BALL_FRAME", "FLANGE_FRAME",
            "ARM_RGBA", "BALL_RGBA"]
 
 ELASTIC_JOINTS = ("probe_bend_y", "probe_bend_x", "probe_axial")
@@ -41,6 +39,7 @@ def _comment(text: str) -> str:
 
 def _rot(axis: str, angle: float) -> np.ndarray:
     """4x4 rotation about base ``axis`` ('x' or 'z')."""
+    from scipy.spatial.transform import Rotation     # here: `aacmm --help` imports this module, not scipy
     t = np.eye(4)
     t[:3, :3] = Rotation.from_euler(axis, angle).as_matrix()
     return t
@@ -63,6 +62,7 @@ def _tr(x, y, z):
 def _origin_matrix(origin) -> np.ndarray:
     """4x4 of a URDF origin (x, y, z, roll, pitch, yaw): T(xyz) Rz(yaw) Ry(pitch) Rx(roll)."""
     x, y, z, roll, pitch, yaw = origin
+    from .geometry import rotation_xyz
     t = _tr(x, y, z)
     t[:3, :3] = rotation_xyz((roll, pitch, yaw))
     return t
@@ -73,6 +73,7 @@ def _f(x: float) -> str:
 
 
 def _origin(t: np.ndarray) -> str:
+    from .geometry import rpy_from_matrix
     r, p, y = rpy_from_matrix(t[:3, :3])
     return (f'<origin xyz="{_f(t[0, 3])} {_f(t[1, 3])} {_f(t[2, 3])}" '
             f'rpy="{_f(r)} {_f(p)} {_f(y)}"/>')
@@ -89,6 +90,7 @@ def _cylinder_between(p0, p1, radius: float, material: str) -> str:
     if length < 1e-6:
         return ""
     t = np.eye(4)
+    from .geometry import frame_along
     t[:3, :3] = frame_along(v, 2)
     t[:3, 3] = (p0 + p1) / 2
     return (f'<visual>{_origin(t)}<geometry><cylinder radius="{_f(radius)}" length="{_f(length)}"/>'

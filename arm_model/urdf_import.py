@@ -31,7 +31,6 @@ import numpy as np
 from ._errors import InputError, parse_toml, read_text
 from .description import ArmDescription, JointRow, Probe, TomlReader, load_description
 from .shipped import arm_path
-from .geometry import rpy_from_matrix
 from .urdf import ELASTIC_JOINTS, _origin_matrix
 
 __all__ = ["description_from_urdf", "load_arm", "load_masses", "calibrated_urdf_text", "PAPER_PROBE",
@@ -165,6 +164,13 @@ def _read_urdf(path: str | Path) -> _Urdf:
     except Exception as exc:   # a case the checks above miss: still one located-as-possible message
         raise InputError(f"yourdfpy cannot read the URDF: {exc}", path) from None
     return _Urdf(path, tree, model.robot, joints, links)
+
+
+def _rpy(T: np.ndarray) -> tuple[float, float, float]:
+    """URDF rpy of a 4x4's rotation (:func:`arm_model.geometry.rpy_from_matrix`, imported when used:
+    `aacmm --help` imports this module, not scipy)."""
+    from .geometry import rpy_from_matrix
+    return rpy_from_matrix(T[:3, :3])
 
 
 def _T(origin) -> np.ndarray:
@@ -345,13 +351,13 @@ def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None =
             lower, upper = float(j.limit.lower), float(j.limit.upper)
             if not lower < upper:
                 raise u.error(f"joint '{j.name}': lower limit {lower:g} is not below upper limit {upper:g}", j.name)
-        roll, pitch, yaw = rpy_from_matrix(T[:3, :3])
+        roll, pitch, yaw = _rpy(T)
         rows.append(JointRow(name=j.name, origin=(float(T[0, 3]), float(T[1, 3]), float(T[2, 3]), roll, pitch, yaw),
                              axis=tuple(float(v) for v in axis / np.linalg.norm(axis)), lower=lower, upper=upper,
                              mass=mass, com=com))
     T_tip = ch.T_last_tip
     p_last = tuple(float(v) for v in T_tip[:3, 3])
-    rpy = tuple(float(v) + 0.0 for v in rpy_from_matrix(T_tip[:3, :3]))
+    rpy = tuple(float(v) + 0.0 for v in _rpy(T_tip))
     if np.allclose(T_tip[:3, :3], np.eye(3), atol=0, rtol=0):
         rpy = (0.0, 0.0, 0.0)
     lever = None
@@ -404,7 +410,7 @@ def _set_origin(joint_el, T: np.ndarray, xyz_only: bool = False) -> None:
         o = etree.SubElement(joint_el, "origin")
     o.set("xyz", " ".join(_fmt(v) for v in T[:3, 3]))
     if not xyz_only:
-        o.set("rpy", " ".join(_fmt(v) for v in rpy_from_matrix(T[:3, :3])))
+        o.set("rpy", " ".join(_fmt(v) for v in _rpy(T)))
 
 
 def calibrated_urdf_text(nominal: ArmDescription, calibrated: ArmDescription) -> str:

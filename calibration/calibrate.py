@@ -12,8 +12,8 @@
    factor ``2 cost / dof`` (``covariance="residual"``) or 1 (``"stated"``: the stated uncertainties
    are taken as true); standard uncertainties and correlations by name.
 7. Outliers: standardized residuals ``r_w / (s_rob sqrt(1 - h))`` (``h`` the leverage, ``s_rob`` the
-   robust scale of the row's observation group: 1.4826 times the median, one scale a point kind and one
-   for the lengths, :func:`standardized_residuals`) beyond ``outlier_threshold`` are reported with
+   robust scale of the row's observation group: 1.4826 times the median, the larger of its kind's
+   and its stated uncertainty's (probe, reference, lengths), :func:`standardized_residuals`) beyond ``outlier_threshold`` are reported with
    measurement, feature and file line; they are kept unless ``drop_outliers`` (then dropped, worst first, and refitted).
 """
 from __future__ import annotations
@@ -563,13 +563,16 @@ MIN_REDUNDANCY = 5.0
 OUTLIER_ROWS = 4.0
 
 
-def row_groups(problem: Problem) -> dict[str, np.ndarray]:
+def row_groups(problem: Problem, by_source: bool = False) -> dict[str, np.ndarray]:
     """The residual rows of each observation group, {group: row indices}: one group a point kind (seats,
-    spheres, rings, ..., the reference points), and ``length`` for the certified lengths. The groups of
-    :func:`variance_components` and of the outlier scale of :func:`standardized_residuals`."""
+    spheres, rings, ..., the reference points), and ``length`` for the certified lengths (the groups of
+    :func:`variance_components`); with ``by_source`` one group a stated uncertainty instead: ``probe``
+    (the probed points of every artefact kind), ``reference`` and ``length``. Both are the groups of the
+    outlier scale (:func:`standardized_residuals`)."""
     rows: dict[str, list] = {}
     for g in problem.groups:
-        rows.setdefault(g["kind"], []).append(np.arange(g["row0"], g["row0"] + g["rows"] * len(g["points"])))
+        name = "probe" if by_source and g["kind"] != "reference" else g["kind"]
+        rows.setdefault(name, []).append(np.arange(g["row0"], g["row0"] + g["rows"] * len(g["points"])))
     out = {k: np.concatenate(v) for k, v in rows.items()}
     if problem.n_rows > problem.n_point_rows:
         out["length"] = np.arange(problem.n_point_rows, problem.n_rows)
@@ -577,20 +580,26 @@ def row_groups(problem: Problem) -> dict[str, np.ndarray]:
 
 
 def standardized_residuals(problem: Problem, r: np.ndarray, leverage: np.ndarray) -> np.ndarray:
-    """Standardized residuals ``r_i / (s_g sqrt(1 - h_i))`` with ``s_g`` the robust scale (1.4826 times
-    the median of ``|r| / sqrt(1 - h)``) of row i's observation group (:func:`row_groups`), so that a
-    group whose stated uncertainty is off (say the tracker's against the probe's) does not flag its rows
-    or hide the other groups' gross errors. A group with less than :data:`MIN_REDUNDANCY` redundant rows
-    takes the scale of all rows together (a median of a few rows is no scale)."""
+    """Standardized residuals ``r_i / (s_i sqrt(1 - h_i))`` with ``s_i`` the robust scale (1.4826 times the
+    median of ``|r| / sqrt(1 - h)``) of row i's observation group, so that a group whose stated
+    uncertainty is off (say the tracker's against the probe's) does not flag its clean rows or hide the
+    other groups' gross errors. Two groupings (:func:`row_groups`): a kind (seats, spheres, ..., the
+    reference points, the lengths) and a stated uncertainty (the probed points of every kind together,
+    the reference points, the lengths); ``s_i`` is the larger of row i's two scales. The kind's scale
+    keeps the points of a noisier kind (seats: articulations) from being flagged for its noise; the
+    probe's scale keeps a quieter kind's points from being flagged for an effect the model lacks that
+    shows more in the other kinds. A group with less than :data:`MIN_REDUNDANCY` redundant rows takes
+    the scale of all rows together (a median of a few rows is no scale)."""
     zraw = r / np.sqrt(1.0 - leverage)
     pooled = 1.4826 * float(np.median(np.abs(zraw))) or 1.0
-    z = np.empty_like(zraw)
-    for idx in row_groups(problem).values():
-        s = 1.4826 * float(np.median(np.abs(zraw[idx])))
-        if float(np.sum(1.0 - leverage[idx])) < MIN_REDUNDANCY or s <= 0:
-            s = pooled
-        z[idx] = zraw[idx] / s
-    return z
+    scale = np.zeros_like(zraw)
+    for by_source in (False, True):
+        for idx in row_groups(problem, by_source).values():
+            s = 1.4826 * float(np.median(np.abs(zraw[idx])))
+            if float(np.sum(1.0 - leverage[idx])) < MIN_REDUNDANCY or s <= 0:
+                s = pooled
+            scale[idx] = np.maximum(scale[idx], s)
+    return zraw / scale
 
 
 def variance_components(problem: Problem, r: np.ndarray, leverage: np.ndarray, weights: Weights) -> list[dict]:

@@ -50,9 +50,11 @@ def campaign_inputs(p) -> None:
     """Points, artefacts, arm, reference points and output folder (shared with ``aacmm close-loop``)."""
     p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3)")
     p.add_argument("artefacts", type=Path, help="artefacts TOML (docs/formats.md §4)")
-    add_arm_options(p, "nominal arm: description TOML or URDF (with --tip-frame)")
+    add_arm_options(p, "nominal arm: a shipped arm's name (aacmm7), a description TOML or model file, or a URDF "
+                       "with --tip-frame (docs/formats.md §2, docs/own-arm.md)")
     p.add_argument("--reference-points", type=Path, default=None,
-                   help="a second points CSV with reference coordinates (x_ref_mm ...), e.g. tracker nests")
+                   help="a second points CSV with reference coordinates (x_ref_mm ...), e.g. tracker nests "
+                        "(docs/formats.md §3)")
     p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; never an input)")
 
 
@@ -140,14 +142,15 @@ def register(sub) -> None:
                     "and poses each run), calibrate on the training measurements, validate on held-out ones; "
                     "reports parameter errors against the truth next to the reported uncertainties and the "
                     "predicted accuracy after calibration. 'poses': choose the measurements that identify the "
-                    "parameters best by the observability index O1 (Borm and Menq 1991).")
+                    "parameters best by the observability index O1 (Borm and Menq 1991).",
+        epilog="File formats: docs/formats.md; the studies: docs/calibration.md.")
     ss = s.add_subparsers(dest="study", metavar="STUDY", required=True)
     m = ss.add_parser("montecarlo", help="Monte Carlo over noise and pose sets with the simulator",
                       description="Run a simulator campaign (examples/campaigns/*.toml) --runs times with seeds "
                                   "--seed, --seed+1, ...; each run is calibrated and validated on held-out "
                                   "measurements. Local processes by default; --scheduler sends the runs to a Dask "
                                   "cluster. Writes study.json and prints a table.")
-    m.add_argument("campaign", type=Path, help="campaign TOML of the simulator")
+    m.add_argument("campaign", type=Path, help="campaign TOML of the simulator (docs/formats.md §6)")
     m.add_argument("--runs", type=at_least(1), default=20, help="number of runs (default 20)")
     m.add_argument("--seed", type=seed, default=0, help="first seed (default 0)")
     m.add_argument("--holdout", type=fraction, default=0.25, help="held-out fraction of measurements (default 0.25)")
@@ -160,10 +163,11 @@ def register(sub) -> None:
                       description="Greedy choice of --count measurements of a points file (a candidate pool, "
                                   "measured or simulated) maximising O1 = (prod s_i)^(1/m)/sqrt(n) of the "
                                   "identification Jacobian; compared with random choices of the same size.")
-    q.add_argument("points", type=Path, help="candidate points CSV")
-    q.add_argument("artefacts", type=Path, help="artefacts TOML")
-    add_arm_options(q, "nominal arm (TOML, or URDF with --tip-frame)")
-    q.add_argument("--reference-points", type=Path, default=None, help="reference points CSV")
+    q.add_argument("points", type=Path, help="candidate points CSV (docs/formats.md §3)")
+    q.add_argument("artefacts", type=Path, help="artefacts TOML (docs/formats.md §4)")
+    add_arm_options(q, "nominal arm: a shipped arm's name (aacmm7), a description TOML, or a URDF with --tip-frame "
+                       "(docs/formats.md §2)")
+    q.add_argument("--reference-points", type=Path, default=None, help="reference points CSV (docs/formats.md §3)")
     q.add_argument("--count", type=at_least(1), required=True, help="how many measurements to choose")
     q.add_argument("-o", "--output", type=Path, required=True, help="output folder")
     _common_fit_options(q)
@@ -376,8 +380,9 @@ def run_montecarlo(args: argparse.Namespace) -> int:
                                fit=_fit_kwargs(args), effects=_effects(args.effect))
         mc = monte_carlo(SimSource(str(args.campaign)), args.runs, seed=args.seed, settings=settings,
                          scheduler=args.scheduler, workers=args.workers)
-        (out.dir / "study.json").write_text(json.dumps(mc.to_dict(), indent=1, default=float) + "\n",
-                                            encoding="utf-8")
+        from arm_model.shipped import provenance
+        (out.dir / "study.json").write_text(json.dumps({**mc.to_dict(), **provenance(camp.inputs)}, indent=1,
+                                                       default=float) + "\n", encoding="utf-8")
     log.info(f"{args.runs - len(mc.failures)} of {args.runs} runs succeeded")
     for f in mc.failures[:5]:
         log.info(f"  seed {f['seed']}: {f['error']}")
@@ -415,7 +420,9 @@ def run_poses(args: argparse.Namespace) -> int:
         fit.pop("weights_from_data", None)            # the choice is made at the nominal, before any fit
         sel = select_measurements(model, data, args.count, _free(model, args), weights=_weights(args),
                                   fit=fit)
-        (out.dir / "poses.json").write_text(json.dumps(sel.to_dict(), indent=1) + "\n", encoding="utf-8")
+        from arm_model.shipped import provenance
+        (out.dir / "poses.json").write_text(json.dumps({**sel.to_dict(), **provenance(inputs)}, indent=1) + "\n",
+                                            encoding="utf-8")
     log_warnings(warnings)
     log.info(f"{len(sel.parameters)} identifiable parameters; chosen measurements (O1, random sets' O1):")
     for m, o, r, n in zip(sel.chosen, sel.o1, sel.o1_random, sel.n_points):

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from arm_model.geometry import feature_diameter
+from arm_model.geometry import feature_diameter, smallest_enclosing_sphere
 from arm_model.model import ArmModel
 
 from .data import CalibrationData, Weights
@@ -34,8 +34,7 @@ from .problem import MIN_POINTS, Problem
 from .solver import blas_threads, levenberg_marquardt
 
 __all__ = ["Validation", "validate", "before_after", "figure_rows", "bootstrap", "with_u", "FIGURES",
-           "DIAMETER_MIN_POINTS", "BOOTSTRAP_SAMPLES", "MpeTest", "MPE_TESTS", "conformance",
-           "smallest_enclosing_sphere"]
+           "DIAMETER_MIN_POINTS", "BOOTSTRAP_SAMPLES", "MpeTest", "MPE_TESTS", "conformance"]
 
 #: resamples of :func:`bootstrap` (the relative precision of a standard deviation from B resamples
 #: is about 1 / sqrt(2 B): 3 % for 500)
@@ -365,43 +364,3 @@ def conformance(val: Validation, mpe: dict | None = None, before: Validation | N
             row.update(mpe_um=m, result="FAIL" if bad else "PASS", n_fail=bad)
         out.append(row)
     return out
-
-
-def smallest_enclosing_sphere(points) -> tuple[np.ndarray, float]:
-    """Centre (3,) and radius of the smallest sphere enclosing ``points`` (N, 3) (Welzl's algorithm, the
-    points visited in a fixed order: deterministic; exact up to rounding)."""
-    x = np.asarray(points, float)
-    mean = x.mean(axis=0)
-    scale = float(np.max(np.linalg.norm(x - mean, axis=1))) or 1.0
-    y = (x - mean) / scale                          # centred and scaled: no cancellation
-
-    def ball(r):
-        if not r:
-            return np.zeros(3), -1.0
-        p0 = r[0]
-        if len(r) == 1:
-            return p0, 0.0
-        a = np.array([p - p0 for p in r[1:]])
-        # centre c = p0 + a^T l with 2 a (a^T l) = |a|^2 row by row: the circumcentre in the points' span
-        g = a @ a.T
-        lam = np.linalg.lstsq(2 * g, np.sum(a * a, axis=1), rcond=None)[0]
-        c = p0 + a.T @ lam
-        return c, float(np.linalg.norm(c - p0))
-
-    def welzl(n, r):
-        if n == 0 or len(r) == 4:
-            return ball(r)
-        c, rad = welzl(n - 1, r)
-        p = y[n - 1]
-        if rad >= 0 and np.linalg.norm(p - c) <= rad * (1 + 1e-12) + 1e-15:
-            return c, rad
-        return welzl(n - 1, r + [p])
-
-    import sys
-    limit = sys.getrecursionlimit()
-    sys.setrecursionlimit(max(limit, 4 * len(y) + 100))
-    try:
-        c, rad = welzl(len(y), [])
-    finally:
-        sys.setrecursionlimit(limit)
-    return mean + c * scale, rad * scale

@@ -60,9 +60,11 @@ def register(sub) -> None:
                     "follow from its own terms reported; then close the loop: the residual after the FEM probe "
                     "correction against the force, the compliance in series that explains it, cross-validated "
                     "leave-one-out. Writes report.html, summary.json, table2_implied.csv, findings.csv and "
-                    "figures/*.png.")
+                    "figures/*.png.",
+        epilog="Output files: docs/formats.md §7, docs/ring-pipeline.md.")
     p.add_argument("--table2", type=Path, default=None, metavar="CSV",
-                   help="a Table 2 CSV in the bundled format (default: the bundled correction/data/paper_table2.csv)")
+                   help="a Table 2 CSV in the bundled format (default: the bundled correction/data/paper_table2.csv; "
+                        "docs/ring-pipeline.md)")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created; never an input)")
     p.set_defaults(func=run_paper)
 

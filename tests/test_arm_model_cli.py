@@ -101,8 +101,8 @@ def test_tip_with_a_urdf_arm_and_tip_frame(tmp_path, nominal):
 
 
 def test_help_imports_no_subcommand_module():
-    """`aacmm --help` lists every subcommand without importing their modules (start-up stays short);
-    `aacmm CMD --help` builds CMD in full."""
+    """`aacmm --help` lists every subcommand without importing their modules, numpy or
+    importlib.metadata (start-up stays short); `aacmm CMD --help` builds CMD in full."""
     import subprocess
     import sys
     code = ("import sys, contextlib, io\n"
@@ -111,7 +111,7 @@ def test_help_imports_no_subcommand_module():
             "    try: main(['--help'])\n"
             "    except SystemExit: pass\n"
             "heavy = [m for m in ('casadi', 'pinocchio', 'matplotlib', 'scipy', 'calibration', 'correction', 'viz',\n"
-            "                     'arm_model.commands') if m in sys.modules]\n"
+            "                     'arm_model.commands', 'numpy', 'importlib.metadata') if m in sys.modules]\n"
             "print(heavy); print('close-loop' in out.getvalue() and 'tip' in out.getvalue())\n")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert res.stdout.split("\n")[:2] == ["[]", "True"], res.stdout + res.stderr

@@ -12,7 +12,7 @@ import pytest
 from arm_model.cli import main
 from arm_model.model import ArmModel
 from arm_model.sim.quick import SynthSpec, make_campaign
-from calibration.validation import MPE_TESTS, Validation, _articulation, conformance, smallest_enclosing_sphere
+from calibration.validation import MPE_TESTS, Validation, _articulation, conformance
 from conftest import NOMINAL, assert_close
 
 UM = 1e-6
@@ -80,24 +80,6 @@ def test_without_mpe_no_verdict_and_untested_mpe_said(val):
     r = _by_key(conformance(empty, {"p-size": 3 * UM}))
     assert r["p-size"]["n"] == 0 and r["p-size"]["result"] is None and r["p-size"]["mpe_um"] == pytest.approx(3)
     assert r["e-uni"]["result"] is None
-
-
-def test_smallest_enclosing_sphere_by_hand():
-    rng = np.random.default_rng(5)
-    # a regular tetrahedron's vertices plus points inside: the circumsphere, radius a sqrt(6) / 4
-    a = 2.0
-    tet = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], float) * a / (2 * math.sqrt(2))
-    inside = rng.uniform(-0.2, 0.2, (20, 3))
-    pts = np.vstack([inside[:10], tet, inside[10:]]) * 1e-5 + [0.4, -0.1, 0.3]
-    c, r = smallest_enclosing_sphere(pts)
-    assert_close(r, a * math.sqrt(6) / 4 * 1e-5, atol=1e-15)          # rounding of the 0.4 m offset: 1e-16
-    assert_close(c, [0.4, -0.1, 0.3], atol=1e-15)
-    # every point inside, and no smaller sphere: a brute-force check of a second kind
-    assert np.all(np.linalg.norm(pts - c, axis=1) <= r * (1 + 1e-9))
-    from scipy.optimize import minimize
-    best = minimize(lambda x: np.max(np.linalg.norm(pts * 1e5 - x, axis=1)), pts.mean(axis=0) * 1e5,
-                    method="Nelder-Mead", options={"xatol": 1e-12, "fatol": 1e-12, "maxiter": 20000}).fun
-    assert r * 1e5 <= best + 1e-9
 
 
 @pytest.mark.parametrize("value", ["0", "-3", "nan", "inf", "abc"])

@@ -1,5 +1,6 @@
-"""Outliers on the robust scale of each observation group: a clean campaign whose tracker is ten times
-noisier than its probe (both stated alike) flags nothing; a gross error in either group is still flagged."""
+"""Outliers on the robust scale of each observation group (probed points, reference points, lengths): a
+clean campaign whose tracker is ten times noisier than its probe (both stated alike) flags nothing; a gross
+error in either group is still flagged."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -65,7 +66,9 @@ def test_row_groups_cover_every_row_once(campaign):
     model, c = campaign
     data = make_data(c.points, c.artefacts, model, reference=c.reference_points)
     prob = Problem(model, data, STATED, [])
-    g = row_groups(prob)
-    assert set(g) == {"seat", "sphere", "reference", "length"}
-    rows = np.sort(np.concatenate(list(g.values())))
-    assert np.array_equal(rows, np.arange(prob.n_rows))
+    kinds, sources = row_groups(prob), row_groups(prob, by_source=True)
+    assert set(kinds) == {"seat", "sphere", "reference", "length"}
+    assert set(sources) == {"probe", "reference", "length"}
+    assert np.array_equal(np.sort(sources["probe"]), np.sort(np.r_[kinds["seat"], kinds["sphere"]]))
+    for g in (kinds, sources):
+        assert np.array_equal(np.sort(np.concatenate(list(g.values()))), np.arange(prob.n_rows))

@@ -17,7 +17,7 @@ from conftest import assert_close
 from arm_model.geometry import (ball_centre_radius, feature_diameter, fit_circle_2d, fit_cylinder, fit_plane,
                                 fit_ring_axis, fit_row_circles, fit_sphere, kabsch, kasa_circle, perpendicular_basis,
                                 random_rotation, ring_fit, rotation_xyz, rpy_from_matrix, split_rows,
-                                frame_along)
+                                frame_along, smallest_enclosing_sphere)
 
 
 def cylinder_points(radius, heights, per_row, arc=2 * np.pi, start=0.0, jitter=None, rng=None):
@@ -394,3 +394,21 @@ def test_ball_compensation_round_trip():
         assert_close(feature_diameter(kind, ball_centre_radius(kind, 0.05, 0.003), 0.003), 0.05, atol=1e-15)
     with pytest.raises(ValueError):
         ball_centre_radius("plane", 0.05, 0.003)
+
+
+def test_smallest_enclosing_sphere_by_hand():
+    rng = np.random.default_rng(5)
+    # a regular tetrahedron's vertices plus points inside: the circumsphere, radius a sqrt(6) / 4
+    a = 2.0
+    tet = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], float) * a / (2 * math.sqrt(2))
+    inside = rng.uniform(-0.2, 0.2, (20, 3))
+    pts = np.vstack([inside[:10], tet, inside[10:]]) * 1e-5 + [0.4, -0.1, 0.3]
+    c, r = smallest_enclosing_sphere(pts)
+    assert_close(r, a * math.sqrt(6) / 4 * 1e-5, atol=1e-15)          # rounding of the 0.4 m offset: 1e-16
+    assert_close(c, [0.4, -0.1, 0.3], atol=1e-15)
+    # every point inside, and no smaller sphere: a brute-force check of a second kind
+    assert np.all(np.linalg.norm(pts - c, axis=1) <= r * (1 + 1e-9))
+    from scipy.optimize import minimize
+    best = minimize(lambda x: np.max(np.linalg.norm(pts * 1e5 - x, axis=1)), pts.mean(axis=0) * 1e5,
+                    method="Nelder-Mead", options={"xatol": 1e-12, "fatol": 1e-12, "maxiter": 20000}).fun
+    assert r * 1e5 <= best + 1e-9

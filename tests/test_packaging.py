@@ -45,6 +45,7 @@ def test_examples_copies_campaigns_data_docs_and_licence(tmp_path, capsys):
     lic = dest / "data" / "real-panda-seats" / "LICENSE-MUKCa.txt"
     assert lic.read_bytes() == (ROOT / "examples" / "data" / "real-panda-seats" / "LICENSE-MUKCa.txt").read_bytes()
     assert (dest / "docs" / "formats.md").is_file()
+    assert (dest / "arms" / "aacmm7.dh.toml").read_bytes() == NOMINAL.read_bytes()
     for c in (ROOT / "examples" / "campaigns").glob("*.toml"):
         assert (dest / "campaigns" / c.name).read_bytes() == c.read_bytes()
     # a copied campaign finds its arm (by name) wherever it lies
