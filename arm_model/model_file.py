@@ -149,8 +149,9 @@ class Arm:
         return self.model.ball_centres(points.q, w, self.p, aux)
 
 
-#: the largest probing scatter a model file may give [um] (a larger one is a unit mistake)
-MAX_PROBING_SCATTER_UM = 1000.0
+#: the largest probing scatter a model file may give [um]: 100 mm is a unit mistake, while a poor fit of a
+#: robot can estimate more than a millimetre, and every model file calibrate writes must read back
+MAX_PROBING_SCATTER_UM = 1.0e5
 
 
 def check_calibration_table(tbl, r: TomlReader) -> None:

@@ -34,7 +34,7 @@ from .identifiability import (DEFAULT_RANK_TOL, Combination, Identifiability, _c
                               prior_scales,
                               reduced_jacobian, weakly_determined)
 from .problem import Problem
-from .solver import blas_threads, levenberg_marquardt, normal_solver
+from .solver import Prior, blas_threads, levenberg_marquardt, normal_solver
 
 __all__ = ["FixedParameter", "Outlier", "CalibrationResult", "calibrate", "resolve_parameters",
            "default_free", "rigid_gauge", "display_unit", "blas_threads", "identify", "variance_components",
@@ -164,6 +164,10 @@ class CalibrationResult:
     unused: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     variance: list = field(default_factory=list)
     weights_history: list = field(default_factory=list)
+    prior_scale: float | None = None          # the Gaussian prior's scale (None: no prior)
+    prior_centre: np.ndarray | None = None    # its centre (full parameter vector [SI])
+    log_evidence: float | None = None         # Laplace log evidence of the fit with its prior (weights as given)
+    evidence: list = field(default_factory=list)   # the scales tried when the prior scale came from the evidence
 
     # -- access by name ----------------------------------------------------------------------------
     @property
@@ -260,6 +264,8 @@ class CalibrationResult:
                         "factors": dict(self.weights.factors),
                         "from_data": bool(self.weights_history)},
             "variance_components": self.variance, "weights_history": self.weights_history,
+            "prior": None if self.prior_scale is None else {
+                "scale": self.prior_scale, "log_evidence": self.log_evidence, "scales_tried": self.evidence},
             "outliers": [o.to_dict() for o in self.outliers], "dropped": [o.to_dict() for o in self.dropped],
             "instances": self.instances, "distances": self.distances,
             "unused_points": [int(i) for i in self.unused],
@@ -354,7 +360,8 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
               rank_tol: float = DEFAULT_RANK_TOL, outlier_threshold: float = 4.0, drop_outliers: bool = False,
               covariance: str = "residual", reference: str = "fit", max_iter: int = 200,
               min_resolution: float | None = 0.1, priors: dict | None = None, prior_length: float | None = None,
-              weights_from_data: bool = False, _depth: int = 0) -> CalibrationResult:
+              weights_from_data: bool = False, prior_scale: float | str | None = None,
+              prior_centre: np.ndarray | None = None, _depth: int = 0) -> CalibrationResult:
     """Identify the parameters ``free`` of ``model`` from ``data``.
 
     Args:
@@ -384,6 +391,14 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
             larger of 1 mm and ten times the noise of one point (stated, or estimated with
             ``weights_from_data``): a robot's lengths are not held for being resolved to a few tenths
             of a millimetre.
+        prior_scale: None, "evidence" (the scale of :func:`evidence_scale`, the scales tried listed in the
+            result's ``evidence``), or fit with a Gaussian prior on every free parameter: centred on ``values``,
+            standard deviation ``prior_scale`` times its plausible error size (``priors``,
+            ``prior_length``): the maximum a posteriori estimate, which shrinks the directions the data
+            resolve poorly instead of holding them (``min_resolution`` is then not applied). The result
+            carries ``log_evidence`` (Laplace) to choose the scale (:func:`evidence_scale`).
+        prior_centre: the prior's centre (full vector [SI]) if not ``values`` (a refit of a result keeps
+            its centre).
         weights_from_data: take ``weights`` as starting values only: estimate the noise of each row
             group (every point kind, the reference points, the lengths) from the fit's residuals and
             redundancy (variance components, :func:`variance_components`), re-weight and refit until the
@@ -398,21 +413,39 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
     if covariance not in ("residual", "stated"):
         raise ValueError(f"covariance must be 'residual' or 'stated', got {covariance!r}")
     weights = weights or Weights()
+    if prior_scale == "evidence":
+        common = dict(values=values, start=start, on_unidentifiable=on_unidentifiable, rank_tol=rank_tol,
+                      outlier_threshold=outlier_threshold, covariance=covariance, reference=reference,
+                      max_iter=max_iter, priors=priors, prior_length=prior_length)
+        tau, rows = evidence_scale(model, data, free, weights=weights, **common)
+        res = calibrate(model, data, free, weights=weights, drop_outliers=drop_outliers, prior_scale=tau,
+                        weights_from_data=weights_from_data, _depth=_depth, **common)
+        res.evidence = rows
+        return res
     if weights_from_data:
         def once(w, st):
             return calibrate(model, data, free, values=values, start={**(start or {}), **st}, weights=w,
                              on_unidentifiable=on_unidentifiable, rank_tol=rank_tol,
                              outlier_threshold=outlier_threshold, drop_outliers=drop_outliers, covariance=covariance,
                              reference=reference, max_iter=max_iter, min_resolution=min_resolution, priors=priors,
-                             prior_length=prior_length)
+                             prior_length=prior_length, prior_scale=prior_scale, prior_centre=prior_centre)
         return reweighted(once, weights)
     spec = model.spec
     cand = resolve_parameters(spec, default_free(model) if free is None else free)
-    p0 = spec.vector(values or {})
+    nominal = spec.vector(values or {})      # a held parameter's value (``start`` only warm-starts the free)
+    p0 = nominal.copy()
     for name, v in (start or {}).items():
         p0[spec.index(name)] = v
     problem = Problem(model, data, weights, cand, reference=reference)
     states = levenberg_marquardt(problem.with_free([]), p0, problem.initial_states(p0), max_iter=max_iter).states
+    prior = None
+    if prior_scale is not None:
+        if not (math.isfinite(prior_scale) and prior_scale > 0):
+            raise ValueError(f"prior_scale must be a positive number, got {prior_scale!r}")
+        size = prior_scales(model, spec.names, priors=priors, noise=point_noise(problem), length=prior_length)
+        centre = nominal.copy() if prior_centre is None else np.array(prior_centre, dtype=float)
+        prior = Prior(centre, size * prior_scale)
+        min_resolution = None             # the prior shrinks what the data resolve poorly
 
     fixed: list[FixedParameter] = []
     kept = list(cand)
@@ -422,6 +455,13 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
         kept, new, idf = identify(problem, p, states, kept, stage=stage, rank_tol=rank_tol,
                                   min_resolution=min_resolution, priors=priors, stop=on_unidentifiable == "stop",
                                   prior_length=prior_length)
+        # a held parameter goes back to its given value (not a warm start's, not where a fit moved it along a
+        # direction the data do not see or see only below the noise): that value would be carried into every
+        # pose the model is used at; the others are refitted with it held
+        for k, f in enumerate(new):
+            i = spec.index(f.name)
+            p[i] = nominal[i]
+            new[k] = replace(f, value=float(nominal[i]))
         fixed.extend(new)
         return idf
 
@@ -429,8 +469,14 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
     p = p0
     for _ in range(4):
         prob = problem.with_free(kept)
-        sol = levenberg_marquardt(prob, p, states, max_iter=max_iter)
+        sol = levenberg_marquardt(prob, p, states, max_iter=max_iter, prior=prior)
         p, states = sol.p, sol.states
+        # the artefacts' unknowns started from the nominal arm can settle in another basin (large errors):
+        # started again from the fitted arm, do they fit better? then the parameters are refitted from there
+        fresh = levenberg_marquardt(problem.with_free([]), p, problem.initial_states(p), max_iter=max_iter)
+        if fresh.cost < sol.cost * (1.0 - 1e-6):
+            sol = levenberg_marquardt(prob, p, fresh.states, max_iter=max_iter, prior=prior)
+            p, states = sol.p, sol.states
         n_before = len(kept)
         idf1 = check(p, states, "solution")
         if len(kept) == n_before:
@@ -446,16 +492,23 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
         raise NumericalError(f"{n_rows} residuals for {len(kept)} parameters and {n_nuis} nuisance unknowns: "
                              "not enough data for a fit with redundancy")
     s0 = math.sqrt(2 * sol.cost / dof)
+    kept_arr = np.asarray(kept, dtype=int)
+    prec = (1.0 / prior.size[kept_arr] ** 2) if prior is not None else np.zeros(len(kept))   # prior precision
     var = s0 ** 2 if covariance == "residual" else 1.0
     source = (f"a posteriori: s0^2 = {s0 ** 2:.4g} (weighted residual variance, dof {dof})" if covariance == "residual"
               else "stated uncertainties (s0 = 1)")
     # covariance of the free parameters from the reduced Jacobian
     jred = reduced_jacobian(ev.jp, ev.jt)
     scale = _scale(ev.jp)
-    _, s, vt = np.linalg.svd(_compress(jred / scale), full_matrices=False)
-    if len(kept) and s[-1] <= 0:
-        raise NumericalError("singular covariance: a free parameter has no effect on the residuals")
-    cov = var * (vt.T / s ** 2) @ vt / np.outer(scale, scale) if len(kept) else np.zeros((0, 0))
+    if prior is None:
+        _, s, vt = np.linalg.svd(_compress(jred / scale), full_matrices=False)
+        if len(kept) and s[-1] <= 0:
+            raise NumericalError("singular covariance: a free parameter has no effect on the residuals")
+        cov = var * (vt.T / s ** 2) @ vt / np.outer(scale, scale) if len(kept) else np.zeros((0, 0))
+    else:                                 # posterior covariance: data and prior information together
+        js_red = jred / scale
+        cov = var * np.linalg.inv(js_red.T @ js_red + np.diag(prec / scale ** 2)) / np.outer(scale, scale)
+        cov = 0.5 * (cov + cov.T)
     u = np.sqrt(np.diag(cov))
     corr = cov / np.outer(u, u) if len(kept) else cov
     # leverage, standardized residuals, outliers
@@ -463,8 +516,16 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
     jscale = np.sqrt(np.asarray(j.multiply(j).sum(axis=0)).ravel())
     jscale[jscale == 0] = 1.0
     js = (j @ sp.diags(1.0 / jscale)).tocsc()
-    solve = normal_solver(js)
+    damp = np.zeros(js.shape[1])
+    damp[:len(kept)] = prec / jscale[:len(kept)] ** 2
+    solve = normal_solver(js, damp)
     h = _leverage(js, solve)
+    log_ev = None
+    if prior is not None:                 # Laplace: -cost - 0.5 log det(H) + log of the prior's normalisation
+        import scipy.sparse.linalg as spla
+        lu = spla.splu(((js.T @ js) + sp.diags(damp)).tocsc())
+        logdet = float(np.sum(np.log(np.abs(lu.U.diagonal())))) + 2.0 * float(np.sum(np.log(jscale)))
+        log_ev = -(sol.cost + sol.prior_cost) - 0.5 * logdet - float(np.sum(np.log(prior.size[kept_arr])))
     variance = variance_components(prob, ev.r, h, weights)
     z = standardized_residuals(prob, ev.r, h)
     table = prob.residual_table(p, states)
@@ -506,7 +567,7 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
                         on_unidentifiable=on_unidentifiable, rank_tol=rank_tol, outlier_threshold=outlier_threshold,
                         drop_outliers=True, covariance=covariance, reference=reference, max_iter=max_iter,
                         min_resolution=min_resolution, priors=priors, prior_length=prior_length,
-                        _depth=_depth + 1)
+                        prior_scale=prior_scale, prior_centre=prior_centre, _depth=_depth + 1)
         kept_index = np.flatnonzero(np.isin(np.arange(len(data)), keep))
         # report the dropped points with indices into the data given at this level
         res.dropped = [o for o in drop] + [replace(o, point=int(kept_index[o.point])) for o in res.dropped]
@@ -553,7 +614,8 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
         cost=sol.cost, n_residuals=n_rows, n_nuisance=n_nuis, dof=dof, identifiability=idf0,
         identifiability_final=idf1, residuals=table, instances=instances, distances=distances, reference=ref,
         outliers=outliers, dropped=[], data=data, weights=weights, reference_mode=reference, unused=prob.unused,
-        variance=variance)
+        variance=variance, prior_scale=prior_scale, log_evidence=log_ev,
+        prior_centre=None if prior is None else prior.centre)
 
 
 #: fewest redundant rows (rows minus their share of the unknowns) for a group's noise to be estimated
@@ -662,3 +724,33 @@ def _scale(jp: np.ndarray) -> np.ndarray:
     s = np.linalg.norm(jp, axis=0)
     return np.where(s > 0, s, 1.0)
 
+
+
+#: prior scales tried by :func:`evidence_scale` (times the plausible error sizes)
+EVIDENCE_GRID = (0.05, 0.1, 0.2, 0.3, 0.5, 1.0, 2.0, 5.0)
+
+
+def evidence_scale(model: ArmModel, data: CalibrationData, free=None, *, weights: Weights | None = None,
+                   grid=EVIDENCE_GRID, **kw) -> tuple[float, list[dict]]:
+    """The prior scale the data support best (empirical Bayes): the noise of each row group estimated
+    first (a fit without prior, :func:`variance_components`), then one maximum a posteriori fit per scale
+    of ``grid`` with those weights, and the scale of the largest Laplace log evidence
+    ``-cost - prior cost - 0.5 log det(H) - sum log(prior sizes)``: too small a scale pulls the fit away
+    from the data, too large a one pays for the volume of parameter space the data do not use.
+
+    Returns ``(scale, rows)``; rows: ``scale``, ``log_evidence`` (None where the fit failed, with
+    ``error``), ``s0``. ``kw``: options of :func:`calibrate`. Raises :class:`NumericalError` if no scale
+    gives a fit."""
+    base = calibrate(model, data, free, weights=weights, weights_from_data=True, **kw)
+    rows = []
+    for tau in grid:
+        try:
+            r = calibrate(model, data, free, weights=base.weights, prior_scale=float(tau), **kw)
+            rows.append({"scale": float(tau), "log_evidence": r.log_evidence, "s0": r.s0})
+        except NumericalError as exc:
+            rows.append({"scale": float(tau), "log_evidence": None, "s0": None, "error": str(exc)})
+    ok = [r for r in rows if r["log_evidence"] is not None]
+    if not ok:
+        raise NumericalError("no prior scale gives a fit: " + "; ".join(f"{r['scale']:g}: {r['error']}" for r in rows))
+    best = max(ok, key=lambda r: r["log_evidence"])
+    return best["scale"], rows

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import logging
 from arm_model.cli import command_help
 from pathlib import Path
@@ -76,6 +77,28 @@ def sigma_options(p) -> None:
                    help="plausible size of a length error [mm] (angles: 0.01 rad per mm of it), for the rule that "
                         "holds parameters the data resolve to worse than --min-resolution of it; default the larger "
                         "of 1 mm and ten times the noise of one point (so a robot's lengths are not held)")
+    p.add_argument("--prior-scale", type=prior_scale, default=None, metavar="evidence|off|FACTOR",
+                   help="off (default): parameters the data resolve poorly are held (--min-resolution); evidence: "
+                        "a Gaussian prior on every free parameter instead (centred on the description, standard "
+                        "deviation a factor times its plausible error size), the factor the one of the largest "
+                        "Laplace evidence of the data (empirical Bayes, tried from 0.05 to 5); FACTOR: that factor. "
+                        "Poorly resolved directions are then shrunk, not held (docs/calibration.md)")
+
+
+def prior_scale(text: str):
+    """``--prior-scale``: None (off), "evidence" or a positive finite factor."""
+    t = text.strip().lower()
+    if t == "off":
+        return None
+    if t == "evidence":
+        return "evidence"
+    try:
+        v = float(t)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected evidence, off or a positive number, got {text!r}") from None
+    if not (math.isfinite(v) and 0 < v <= 1e3):
+        raise argparse.ArgumentTypeError(f"a prior scale must be a number in (0, 1000], got {text!r}")
+    return v
 
 
 def _common_fit_options(p) -> None:
@@ -211,6 +234,8 @@ def _fit_kwargs(args) -> dict:
         kw["prior_length"] = args.plausible_length_mm * 1e-3
     if getattr(args, "weights", "stated") == "data":
         kw["weights_from_data"] = True
+    if getattr(args, "prior_scale", None) is not None:
+        kw["prior_scale"] = args.prior_scale
     if args.rank_tol is not None:
         kw["rank_tol"] = args.rank_tol
     return kw
@@ -351,6 +376,10 @@ def noise_lines(res) -> list[str]:
         out.append(f"noise from the data (variance components, {len(res.weights_history)} fit(s)):")
         if not res.weights_history[-1].get("settled", True):
             out.append("  warning: " + res.weights_history[-1]["note"])
+    if res.prior_scale is not None:
+        tried = ", ".join(f"{r['scale']:g}" for r in res.evidence if r["log_evidence"] is not None)
+        out.append(f"prior: each free parameter ~ N(nominal, ({res.prior_scale:g} x its plausible error size)^2)"
+                   + (f", the scale of the largest evidence among {tried}" if tried else " (scale given)"))
     for v in res.variance:
         what = f"{v['group']} points" if v["group"] != "length" else "lengths"
         used = res.weights.factor(v["group"])

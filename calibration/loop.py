@@ -54,7 +54,7 @@ from arm_model.effects import JointCompliance, ThermalGrowth
 from arm_model.io import Artefacts, PointSet
 from arm_model.model import ArmModel
 
-from .calibrate import CalibrationResult, calibrate, display_unit, resolve_parameters
+from .calibrate import evidence_scale, CalibrationResult, calibrate, display_unit, resolve_parameters
 from .candidates import Candidate, library_candidates, needs_model
 from .data import CalibrationData, Weights, concat, make_data, split_holdout, split_poses
 from .diagnostics import (GroupTest, ResidualSpace, binned_estimates, candidate_family, families, holm,
@@ -111,6 +111,7 @@ class LoopSettings:
     weights_from_data: bool = True
     synthesise: bool = True
     physics: bool = True
+    prior_scale: float | str | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "holdout", tuple(self.holdout or ()))
@@ -585,7 +586,15 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
             names += [n for n in model.spec.names[model.base_size:] if n not in names]
         return calibrate(model, d, free=names, values=values, weights=weights, rank_tol=settings.rank_tol,
                          priors={**priors, **(extra_priors or {})}, outlier_threshold=settings.outlier_threshold,
-                         weights_from_data=reweight and settings.weights_from_data)
+                         weights_from_data=reweight and settings.weights_from_data, prior_scale=prior_scale)
+
+    prior_scale = settings.prior_scale
+    if prior_scale == "evidence":
+        model0 = ArmModel(desc, tuple(effects))
+        names0 = None if free is None else [model0.spec.names[i] for i in resolve_parameters(model0.spec, free)]
+        prior_scale, _ = evidence_scale(model0, design, names0, values=values, weights=weights,
+                                        rank_tol=settings.rank_tol, priors=priors)
+        say(f"prior scale from the evidence of the design set: {prior_scale:g} x the plausible error sizes")
 
     def noise(res: CalibrationResult) -> str:
         parts = [f"{v['group']} {v['sigma_um']:.3g} um" for v in res.variance

@@ -116,7 +116,8 @@ def run(args: argparse.Namespace) -> int:
                                {"test_fraction": holdout} if holdout is not None else {}),
                             screen_alpha=args.screen_alpha, min_improvement=args.min_improvement,
                             max_effects=args.max_effects, cv_top=args.cv_top, seed=args.seed,
-                            synthesise=not args.library_only, physics=not args.held_out_gain_only)
+                            synthesise=not args.library_only, physics=not args.held_out_gain_only,
+                            prior_scale=args.prior_scale)
     with output_folder(args.output, inputs, "close-loop") as out:
         loop = close_loop(points, artefacts, desc, reference=reference, effects=tuple(effects), values=arm.values,
                           free=args.free,

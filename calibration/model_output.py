@@ -75,10 +75,11 @@ def model_check(result, arm: Arm | None = None) -> dict:
             "rms_difference_nm": float(np.sqrt(np.mean(d ** 2)) * 1e9) if len(d) else 0.0}
 
 
-def refine_torques(result, **fit):
-    """The fit refined once with the gravity and contact torques evaluated on its calibrated description
-    (the fit evaluated them on the nominal one), so that the model file, which evaluates them on the
-    description it holds, gives the fit's own ball centres (:func:`model_check`: within rounding).
+def refine_torques(result, rounds: int = 5, tol_nm: float = 1.0, **fit):
+    """The fit refined with the gravity and contact torques evaluated on its calibrated description (the
+    fit evaluated them on the nominal one), so that the model file, which evaluates them on the description
+    it holds, gives the fit's own ball centres (:func:`model_check`): repeated (a fixed point: each refit
+    moves the description a little) until they agree within ``tol_nm`` or ``rounds`` refits are done.
 
     Only for models with an effect that needs the torques; the same free parameters, started at the
     fit's values; the fixed, held and dropped parameters and points and the identifiability analyses
@@ -92,10 +93,17 @@ def refine_torques(result, **fit):
 
     from .calibrate import calibrate
     data = result.data
-    tau_g, tau_c = PinocchioArm(result.described()).torques(data.points.q, data.wrench)
-    aux = AuxData(None if data.aux is None else data.aux.temperature, tau_g, tau_c)
-    values = dict(zip(model.spec.names, (float(v) for v in result.p)))
-    new = calibrate(model, replace(data, aux=aux), free=list(result.free), values=values, weights=result.weights,
-                    reference=result.reference_mode, min_resolution=None, drop_outliers=False, **fit)
-    keep = {f: getattr(result, f) for f in ("fixed", "held", "dropped", "identifiability")}
-    return dataclasses.replace(new, **keep)
+    keep = {f: getattr(result, f) for f in ("fixed", "held", "dropped", "identifiability", "evidence",
+                                             "weights_history")}
+    cur = result
+    for _ in range(rounds):
+        tau_g, tau_c = PinocchioArm(cur.described()).torques(data.points.q, data.wrench)
+        aux = AuxData(None if data.aux is None else data.aux.temperature, tau_g, tau_c)
+        values = dict(zip(model.spec.names, (float(v) for v in cur.p)))
+        cur = dataclasses.replace(
+            calibrate(model, replace(data, aux=aux), free=list(cur.free), values=values, weights=result.weights,
+                      reference=result.reference_mode, min_resolution=None, drop_outliers=False,
+                      prior_scale=result.prior_scale, prior_centre=result.prior_centre, **fit), **keep)
+        if model_check(cur)["max_difference_nm"] <= tol_nm:
+            break
+    return cur

@@ -92,11 +92,11 @@ def _loop_model(folder: Path) -> Path | None:
 
 
 def placement_study(root: Path, arm: Path, tip_frame: str | None, out: Path, train=None, progress=None,
-                    methods=("calibrate", "close-loop")) -> list[PlacementRow]:
+                    methods=("calibrate", "close-loop"), options: dict | None = None) -> list[PlacementRow]:
     """Train on each placement (folders of ``root`` with a points.csv; ``train``: only these, ``"a+b"``
     trains on placements a and b together, their points in one file), predict the others; outputs of every
     command under ``out``. ``root`` holds the ``artefacts.toml`` (two seats and
-    one certified distance between them)."""
+    one certified distance between them). ``options``: extra command-line options per method (lists)."""
     from arm_model.io import read_artefacts
     root, out = Path(root), Path(out)
     say = progress or progress_line(logging.getLogger(__name__))
@@ -125,12 +125,14 @@ def placement_study(root: Path, arm: Path, tip_frame: str | None, out: Path, tra
         if "calibrate" in methods:
             say(f"{tr}: aacmm calibrate")
             dst = out / tr / "calibrate"
-            _cli(["calibrate", str(pts), str(artefacts), *arm_opts, "-o", str(dst), "--no-plots"])
+            _cli(["calibrate", str(pts), str(artefacts), *arm_opts, "-o", str(dst), "--no-plots",
+                  *(options or {}).get("calibrate", [])])
             models["calibrate"] = (next(dst.glob("*-calibrated.toml")), ())
         if "close-loop" in methods:
             say(f"{tr}: aacmm close-loop")
             dst = out / tr / "close-loop"
-            _cli(["close-loop", str(pts), str(artefacts), *arm_opts, "-o", str(dst), "--quiet"])
+            _cli(["close-loop", str(pts), str(artefacts), *arm_opts, "-o", str(dst), "--quiet",
+                  *(options or {}).get("close-loop", [])])
             import json
             summary = json.loads((dst / "summary.json").read_text())
             effects = tuple(e["name"] for e in summary["effects_added"])

@@ -19,7 +19,7 @@ from arm_model import NumericalError
 
 from .problem import Evaluation, Problem
 
-__all__ = ["LMResult", "levenberg_marquardt", "normal_solver", "blas_threads"]
+__all__ = ["LMResult", "Prior", "levenberg_marquardt", "normal_solver", "blas_threads"]
 
 
 @dataclass
@@ -27,10 +27,33 @@ class LMResult:
     p: np.ndarray                 # full parameter vector [SI]
     states: list                  # nuisance states
     evaluation: Evaluation        # residuals and Jacobians at the solution
-    cost: float                   # 0.5 * sum(r_w**2)
+    cost: float                   # 0.5 * sum(r_w**2) of the data rows
     iterations: int
     evaluations: int
     status: str                   # why it stopped (always a convergence reason)
+    prior_cost: float = 0.0       # 0.5 * sum(((p - centre) / size)**2) over the free parameters (with a prior)
+
+
+@dataclass(frozen=True)
+class Prior:
+    """A Gaussian prior on the free parameters: ``p[i] ~ N(centre[i], size[i]^2)`` [SI], full-length
+    vectors (entries of parameters that are not free are ignored). It enters the fit as one
+    pseudo-observation row per free parameter, ``(p - centre) / size``."""
+    centre: np.ndarray
+    size: np.ndarray
+
+    def rows(self, p, free) -> tuple[np.ndarray, np.ndarray]:
+        """(residual rows (nf,), their Jacobian's diagonal (nf,)) for the free indices ``free``."""
+        s = self.size[free]
+        return (np.asarray(p)[free] - self.centre[free]) / s, 1.0 / s
+
+    def augment(self, ev: Evaluation, p, free) -> Evaluation:
+        """``ev`` with the prior rows appended (below the data rows)."""
+        r, d = self.rows(p, free)
+        if ev.jp is None:
+            return Evaluation(np.concatenate([ev.r, r]), ev.x)
+        return Evaluation(np.concatenate([ev.r, r]), ev.x, np.vstack([ev.jp, np.diag(d)]),
+                          sp.vstack([ev.jt, sp.csr_matrix((len(r), ev.jt.shape[1]))], format="csr"))
 
 
 def _full_jacobian(ev: Evaluation) -> sp.csc_matrix:
@@ -54,19 +77,29 @@ def normal_solver(j: sp.spmatrix, damping: np.ndarray | float = 0.0):
 
 
 def levenberg_marquardt(problem: Problem, p0, states0, *, max_iter: int = 200, xtol: float = 1e-10,
-                        ftol: float = 1e-15) -> LMResult:
-    """Minimise ``0.5 |r_w|^2`` over the free parameters and the nuisance increments.
+                        ftol: float = 1e-15, prior: Prior | None = None) -> LMResult:
+    """Minimise ``0.5 |r_w|^2`` over the free parameters and the nuisance increments (plus the prior's
+    ``0.5 |(p - centre) / size|^2`` with a :class:`Prior`: the maximum a posteriori estimate).
 
     Args:
         p0: full parameter vector [SI]; entries not in ``problem.free`` stay as given.
         states0: starting nuisance states (``problem.initial_states``).
         xtol: stop when the scaled step (its effect on the weighted residuals) is below ``xtol``.
         ftol: stop when the predicted and actual relative cost reductions are below ``ftol``.
+        prior: a Gaussian prior on the free parameters, or None.
+
+    The result's ``evaluation`` and ``cost`` are the data rows' (the prior's part is ``prior_cost``).
     """
     free = problem.free
+    n_data = problem.n_rows
+
+    def evaluate(p, states, jac=True):
+        ev = problem.evaluate(p, states, jac=jac)
+        return ev if prior is None else prior.augment(ev, p, free)
+
     p = np.array(p0, dtype=float)
     states = list(states0)
-    ev = problem.evaluate(p, states)
+    ev = evaluate(p, states)
     cost = 0.5 * float(ev.r @ ev.r)
     n_eval = 1
     nf = len(free)
@@ -89,14 +122,14 @@ def levenberg_marquardt(problem: Problem, p0, states0, *, max_iter: int = 200, x
         p_new = p.copy()
         p_new[free] += d[:nf]
         states_new = problem.retract(states, d[nf:])
-        ev_new = problem.evaluate(p_new, states_new, jac=False)
+        ev_new = evaluate(p_new, states_new, jac=False)
         n_eval += 1
         cost_new = 0.5 * float(ev_new.r @ ev_new.r)
         actual = cost - cost_new
         rho = actual / pred if pred > 0 else -1.0
         if np.isfinite(cost_new) and rho > 1e-4:
             p, states = p_new, states_new
-            ev = problem.evaluate(p, states)
+            ev = evaluate(p, states)
             n_eval += 1
             j = _full_jacobian(ev)
             scale = np.maximum(scale, np.sqrt(np.asarray(j.multiply(j).sum(axis=0)).ravel()))
@@ -120,7 +153,11 @@ def levenberg_marquardt(problem: Problem, p0, states0, *, max_iter: int = 200, x
     if status is None:
         raise NumericalError(f"Levenberg-Marquardt did not converge in {max_iter} iterations "
                              f"(cost {cost:.6g}); raise max_iter or check the data")
-    return LMResult(p, states, ev, cost, it, n_eval, status)
+    if prior is None:
+        return LMResult(p, states, ev, cost, it, n_eval, status)
+    data = Evaluation(ev.r[:n_data], ev.x, ev.jp[:n_data], ev.jt[:n_data])
+    rd = data.r
+    return LMResult(p, states, data, 0.5 * float(rd @ rd), it, n_eval, status, cost - 0.5 * float(rd @ rd))
 
 
 def blas_threads(n: int | None = 1):

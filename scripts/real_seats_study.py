@@ -29,11 +29,15 @@ def main(argv=None) -> int:
     p.add_argument("--train", default=None,
                    help="comma-separated training placements (default every one); a+b trains on a and b together")
     p.add_argument("--methods", default="calibrate,close-loop", help="calibrate, close-loop or both")
+    p.add_argument("--calibrate-options", default="", help="extra options of aacmm calibrate (one string)")
+    p.add_argument("--loop-options", default="", help="extra options of aacmm close-loop (one string)")
     p.add_argument("-o", "--output", type=Path, default=Path("out/real-seats"), help="output folder")
     args = p.parse_args(argv)
     rows = placement_study(args.data, args.arm, args.tip_frame, args.output,
                            train=args.train.split(",") if args.train else None,
                            methods=tuple(args.methods.split(",")),
+                           options={"calibrate": args.calibrate_options.split(),
+                                    "close-loop": args.loop_options.split()},
                            progress=lambda m: print(m, file=sys.stderr, flush=True))
     args.output.mkdir(parents=True, exist_ok=True)
     (args.output / "results.json").write_text(json.dumps([r.to_dict() for r in rows], indent=1) + "\n")
