@@ -31,7 +31,7 @@ from .model import ArmModel, AuxData
 
 __all__ = ["FORCE_SENSOR_U_N", "COMPLIANCE_U_RELATIVE", "CONTRIBUTIONS", "InputUncertainty",
            "ParameterCovariance", "Propagation", "default_inputs", "propagate", "monte_carlo",
-           "covariance_columns"]
+           "covariance_columns", "directional_ratio"]
 
 #: standard uncertainty [N] of the force along probe x, y (bending) and z (axial): the seed paper's
 #: Table 1, the root-sum-square of its printed terms (the printed bending total, 0.00723 N, is a
@@ -179,6 +179,21 @@ def covariance_columns(cov: np.ndarray) -> dict:
     out = {}
     for a, b in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)):
         out[f"cov_{'xyz'[a]}{'xyz'[b]}_um2"] = cov[:, a, b] * 1e12
+    return out
+
+
+def directional_ratio(cov_ref: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """(N, 2): per point the smallest and largest ratio ``sqrt(v^T C v / v^T C_ref v)`` over all unit
+    directions ``v`` (the square roots of the extreme generalized eigenvalues of ``C`` against
+    ``C_ref``): how far the standard uncertainty of ``cov`` along any direction, the covariance terms
+    included, is from that of ``cov_ref``. NaN for a point whose ``cov_ref`` is not positive definite."""
+    cov_ref, cov = np.asarray(cov_ref, dtype=float), np.asarray(cov, dtype=float)
+    out = np.full((len(cov_ref), 2), np.nan)
+    ok = np.all(np.linalg.eigvalsh(cov_ref) > 0, axis=1)
+    if ok.any():
+        li = np.linalg.inv(np.linalg.cholesky(cov_ref[ok]))
+        ev = np.linalg.eigvalsh(li @ cov[ok] @ np.swapaxes(li, 1, 2))
+        out[ok] = np.sqrt(np.clip(ev[:, [0, -1]], 0.0, None))
     return out
 
 

@@ -8,7 +8,8 @@ import math
 import numpy as np
 
 from .uncertainty import (COMPLIANCE_U_RELATIVE, CONTRIBUTIONS, InputUncertainty, ParameterCovariance,
-                          covariance_columns, default_inputs, monte_carlo, propagate)
+                          covariance_columns, default_inputs, directional_ratio, monte_carlo,
+                          propagate)
 
 __all__ = ["add_input_options", "inputs_from_args", "add_tip_options", "wants_uncertainty", "tip_columns",
            "contribution_lines", "non_negative"]
@@ -25,15 +26,17 @@ def non_negative(text: str) -> float:
     return v
 
 
-def add_input_options(p) -> None:
-    """The input uncertainties (each overrides its default, see docs/uncertainty.md)."""
+def add_input_options(p, force: bool = True) -> None:
+    """The input uncertainties (each overrides its default, see docs/uncertainty.md); ``force=False``
+    leaves out ``--u-force-N`` for a command that has its own (``aacmm ring``)."""
     g = p.add_argument_group("input uncertainties (defaults and their sources: docs/uncertainty.md)")
     g.add_argument("--encoder-resolution-deg", type=non_negative, default=None, metavar="R",
                    help="encoder resolution of every joint [deg] (u = R / sqrt(12)); default: each joint's "
                         "encoder_resolution of the description, 0 where not given")
-    g.add_argument("--u-force-N", type=non_negative, nargs=2, default=None, metavar=("BENDING", "AXIAL"),
-                   help="standard uncertainty of the force [N] across (probe x, y) and along (z) the stylus; "
-                        "default 0.0723 0.0464 (the seed paper's Table 1)")
+    if force:
+        g.add_argument("--u-force-N", type=non_negative, nargs=2, default=None, metavar=("BENDING", "AXIAL"),
+                       help="standard uncertainty of the force [N] across (probe x, y) and along (z) the stylus; "
+                            "default 0.0723 0.0464 (the seed paper's Table 1)")
     g.add_argument("--u-compliance-rel", type=non_negative, default=None, metavar="R",
                    help=f"standard uncertainty of the probe compliances relative to their value (default "
                         f"{COMPLIANCE_U_RELATIVE:g}, from the seed paper's Table 2 fit); not used for compliances "
@@ -48,7 +51,8 @@ def inputs_from_args(arm, args, has_force: bool) -> InputUncertainty:
     :func:`add_input_options` overriding their defaults."""
     desc = arm.desc
     enc = None if args.encoder_resolution_deg is None else math.radians(args.encoder_resolution_deg) / math.sqrt(12)
-    force = None if args.u_force_N is None else (args.u_force_N[0], args.u_force_N[0], args.u_force_N[1])
+    u_force = getattr(args, "u_force_N", None)
+    force = None if u_force is None else (u_force[0], u_force[0], u_force[1])
     comp = None if args.u_compliance_rel is None else args.u_compliance_rel * np.asarray(desc.probe.compliance)
     probing = None if args.u_probing_um is None else args.u_probing_um * 1e-6
     inputs = default_inputs(desc, encoder=enc, force=force, compliance=comp, probing=probing, has_force=has_force,
@@ -67,8 +71,9 @@ def add_tip_options(p) -> None:
     g.add_argument("--covariance", action="store_true",
                    help="also write the six terms of each point's 3x3 covariance [um^2] (cov_xx_um2, cov_yy_um2, cov_zz_um2, cov_xy_um2, cov_xz_um2, cov_yz_um2)")
     g.add_argument("--mc", type=at_least(2), default=None, metavar="N",
-                   help="also a Monte Carlo of N samples of the same inputs: columns u_x_mc_mm ... and the "
-                        "largest relative difference to the linear result")
+                   help="also a Monte Carlo of N samples of the same inputs: columns u_x_mc_mm ... (with "
+                        "--covariance also cov_xx_mc_um2 ...) and the largest relative difference to the linear "
+                        "result, per axis and along any direction")
     g.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo (default 0)")
     add_input_options(p)
 
@@ -130,8 +135,15 @@ def tip_columns(arm, points, parameters, args) -> tuple[dict, list[str]]:
                          samples=args.mc, seed=args.seed)
         umc = mc.u
         cols.update({f"u_{a}_mc_mm": umc[:, k] * 1e3 for k, a in enumerate("xyz")})
+        if args.covariance:
+            cols.update({k.replace("_um2", "_mc_um2"): v for k, v in covariance_columns(mc.cov).items()})
         with np.errstate(invalid="ignore", divide="ignore"):
             rel = np.where(u > 0, umc / u - 1.0, 0.0)
         lines.append(f"Monte Carlo ({args.mc} samples, seed {args.seed}): u_mc / u_linear - 1 over the points and "
                      f"axes: median {np.median(rel):+.3f}, largest |.| {np.max(np.abs(rel)):.3f}")
+        d = directional_ratio(res.cov, mc.cov) - 1.0
+        if np.isfinite(d).any():
+            lines.append(f"  along any direction (the covariance terms included): from {np.nanmin(d):+.3f} to "
+                         f"{np.nanmax(d):+.3f}" + (f" ({np.isnan(d[:, 0]).sum()} points with a singular linear "
+                                                    "covariance left out)" if np.isnan(d).any() else ""))
     return cols, lines

@@ -21,7 +21,13 @@ def machine() -> str:
                 break
     except OSError:
         pass
-    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, {platform.system()} {platform.machine()}"
+    try:
+        load = "load average {:.1f} {:.1f} {:.1f} (1, 5, 15 min; above the core count, wall times are stretched)".format(
+            *os.getloadavg())
+    except OSError:
+        load = "load average unknown"
+    return (f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, {platform.system()} {platform.machine()}"
+            f"; {load}")
 
 
 def main(argv: list[str] | None = None) -> int:

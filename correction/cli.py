@@ -7,11 +7,14 @@ import logging
 from arm_model.cli import command_help
 from pathlib import Path
 
+import numpy as np
+
 from arm_model import InputError, NumericalError, read_artefacts, read_points
 from arm_model.commands import add_arm_options, arm_inputs, model_from_args, non_negative, number_in, positive
 from arm_model._output import output_folder
 from arm_model.checks import log_warnings
 from arm_model.io import check_features
+from arm_model.uncertainty_cli import add_input_options
 
 __all__ = ["register", "run_ring", "run_paper"]
 
@@ -44,11 +47,13 @@ def register(sub) -> None:
                         "0.0142 mm/N in the nominal arm)")
     r.add_argument("--u-force-N", type=positive(), dest="u_force", default=None, metavar="U",
                    help="standard uncertainty of a measured force for the budgets' u_cor = 2 c u_force "
-                        "(default 0.0723 N: the paper's bending sensor, Table 1 terms combined)")
+                        "and of the bending force (probe x, y) in the points' covariances (default 0.0723 N: "
+                        "the paper's bending sensor, Table 1 terms combined; the axial stays 0.0464 N)")
     r.add_argument("--delta-T-C", type=non_negative(), dest="delta_t", default=0.5, metavar="DT",
                    help="temperature variation during the test for the budgets' u_t (default 0.5 C, the paper's)")
     r.add_argument("--probability-pct", type=number_in(0, 100, low_open=True, high_open=True), dest="probability", default=95.0, metavar="P",
                    help="coverage probability of the expanded uncertainties (default 95)")
+    add_input_options(r, force=False)
     r.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created; never an input)")
     r.set_defaults(func=run_ring)
 
@@ -70,8 +75,10 @@ def register(sub) -> None:
 
 
 def run_ring(args: argparse.Namespace) -> int:
-    from arm_model.uncertainty import FORCE_SENSOR_U_N, default_inputs
-    from arm_model.uncertainty_cli import parameters_of
+    from dataclasses import replace
+
+    from arm_model.uncertainty import FORCE_SENSOR_U_N
+    from arm_model.uncertainty_cli import inputs_from_args, parameters_of
     from .models import analyse_ring_campaign, campaign_summary, check_reportable, ring_uncertainties, ring_warnings
     from .report import DEFAULT_U_FORCE, ring_budgets, ring_report
 
@@ -91,9 +98,10 @@ def run_ring(args: argparse.Namespace) -> int:
         u_force = DEFAULT_U_FORCE if args.u_force is None else args.u_force
         budgets = ring_budgets(campaign, u_force=u_force, delta_t=args.delta_t, probability=args.probability)
         parameters = parameters_of(arm)
-        unc_inputs = default_inputs(desc, force=None if args.u_force is None else
-                                    (args.u_force, args.u_force, FORCE_SENSOR_U_N[2]),
-                                    model_probing=arm.probing_scatter)
+        unc_inputs = inputs_from_args(arm, args, has_force=True)
+        if args.u_force is not None:
+            unc_inputs = replace(unc_inputs, force=np.array([args.u_force, args.u_force, FORCE_SENSOR_U_N[2]]),
+                                 sources=unc_inputs.sources | {"force sensor": f"given: {args.u_force:g} N bending"})
         try:
             point_unc = ring_uncertainties(arm, points, campaign, parameters, unc_inputs)
         except NumericalError as exc:

@@ -147,3 +147,25 @@ def test_help_texts():
         for action in p._actions:
             if action.dest != "help":
                 assert action.help and len(action.help) > 20, (name, action.dest)
+
+
+def test_ring_input_uncertainties_are_overridable(small_campaign, tmp_path):
+    """The points' input uncertainties of ``ring`` are the tip's options: the compliance part of the
+    diameter's uncertainty is linear in the compliance's (0.2 -> 0.4 doubles it), and a probing scatter
+    sigma independent at every point adds (2 sigma)^2 / N to the diameter's variance (the radius is the
+    mean radial distance to first order, for points spread around the ring)."""
+    def run(name, *opts):
+        out = tmp_path / name
+        assert main(["ring", str(small_campaign / "points.csv"), str(small_campaign / "artefacts.toml"),
+                     "--arm", str(NOMINAL), "-o", str(out), "-q", *opts]) == 0
+        s = json.loads((out / "summary.json").read_text())
+        n = {m["measurement"]: m["n_points"] for m in s["measurements"]}
+        return s["diameter_uncertainty_from_points"]["measurements"], n
+
+    base, n = run("base")
+    more, _ = run("more", "--u-compliance-rel", "0.4", "--u-probing-um", "3")
+    for a, b in zip(base, more):
+        assert a["compliance_mm"] > 0
+        assert_close(b["compliance_mm"], 2 * a["compliance_mm"], atol=1e-9 * a["compliance_mm"])
+        added = b["independent_mm"] ** 2 - a["independent_mm"] ** 2
+        assert_close(added, (2 * 3e-3) ** 2 / n[a["measurement"]], atol=0.1 * added)

@@ -14,7 +14,7 @@ from arm_model.jacobian import chain_jacobian, direction_jacobian, joint_screws,
 from arm_model.model import ArmModel, AuxData
 from arm_model.params import split_params
 from arm_model.uncertainty import (FORCE_SENSOR_U_N, COMPLIANCE_U_RELATIVE, ParameterCovariance, default_inputs,
-                                   monte_carlo, propagate)
+                                   directional_ratio, monte_carlo, propagate)
 from arm_model.urdf_import import load_arm
 from conftest import assert_close, fd_jacobian
 from test_arm_model_urdf_chain import arm_urdf
@@ -189,6 +189,21 @@ def test_monte_carlo_agrees_with_linear_on_the_nominal_arm(nominal):
     ratio = mc.u / lin.u
     assert np.all(np.abs(ratio - 1) < 0.10), ratio
     assert abs(np.median(ratio) - 1) < 0.03
+    # the covariance terms: each off-diagonal term within 10 % of the scale sqrt(C_ii C_jj) (a term can be
+    # near zero, so not relative to itself), i.e. the correlation coefficients agree within 0.1
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        scale_ij = lin.u[:, i] * lin.u[:, j]
+        assert np.all(np.abs(mc.cov[:, i, j] - lin.cov[:, i, j]) < 0.10 * scale_ij), (i, j)
+    # the whole covariance: the standard uncertainty along 2000 random directions within 10 % at every point
+    v = rng.standard_normal((2000, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    along = np.sqrt(np.einsum("di,nij,dj->nd", v, mc.cov, v) / np.einsum("di,nij,dj->nd", v, lin.cov, v))
+    assert np.all(np.abs(along - 1) < 0.10), (along.min(), along.max())
+    # directional_ratio (generalized eigenvalues) bounds the sampled directions and nearly reaches them
+    ext = directional_ratio(lin.cov, mc.cov)
+    assert np.all(ext[:, 0] <= along.min(axis=1) + 1e-12) and np.all(along.max(axis=1) <= ext[:, 1] + 1e-12)
+    assert_close(ext, np.column_stack([along.min(axis=1), along.max(axis=1)]), atol=0.01)
+    assert np.all(np.abs(ext - 1) < 0.10), ext
 
 
 # ---------------------------------------------------------------------------------------------
@@ -216,6 +231,15 @@ def test_tip_writes_uncertainty_columns_and_monte_carlo_agrees(tmp_path, nominal
     cov = np.array([[float(r[f"cov_{a}{a}_um2"]) for a in "xyz"] for r in rows])
     umc = np.array([[float(r[f"u_{a}_mc_mm"]) for a in "xyz"] for r in rows])
     assert_close(u * 1e3, np.sqrt(cov), atol=2e-3)
+    # the Monte Carlo's covariance terms beside the linear ones: its diagonal is u_mc, each off-diagonal
+    # term within 10 % of sqrt(C_ii C_jj) of the linear result
+    covmc = {t: np.array([float(r[f"cov_{t}_mc_um2"]) for r in rows]) for t in ("xx", "yy", "zz", "xy", "xz", "yz")}
+    assert_close(umc * 1e3, np.sqrt(np.column_stack([covmc["xx"], covmc["yy"], covmc["zz"]])), atol=2e-3)
+    for t in ("xy", "xz", "yz"):
+        lin_t = np.array([float(r[f"cov_{t}_um2"]) for r in rows])
+        scale_t = np.sqrt(np.array([float(r[f"cov_{t[0] * 2}_um2"]) * float(r[f"cov_{t[1] * 2}_um2"]) for r in rows]))
+        assert np.all(np.abs(covmc[t] - lin_t) < 0.10 * scale_t), t
+    assert "along any direction (the covariance terms included)" in text
     # by hand: the probing term alone is 0.5 um, the rest adds in quadrature
     assert np.all(u * 1e3 >= 0.5 - 1e-6)
     assert np.all(np.abs(umc / u - 1) < 0.10)
