@@ -28,7 +28,9 @@
    (:mod:`calibration.synthesis`: a joint's harmonics of order k = 1..4, per-link and probe thermal growth,
    a full probe compliance matrix, an approach-direction offset, a joint's lateral compliance), screened
    and cross-validated in steps 3-4 exactly like the library's, against a Bonferroni level over every
-   candidate then offered. One that passes is added and reported as found from the residual; one that
+   candidate then offered (screening) and every candidate held-out tested at the stage (Wilcoxon): the
+   candidates that already failed the held-out test at this stage are not tested again, so the built
+   effects reach it even when failed library candidates rank above them. One that passes is added and reported as found from the residual; one that
    does not is reported with its held-out evidence and not added.
 6. The generic structure tests (:func:`calibration.diagnostics.structure_tests`) on the final fit, and a
    forward selection among them (:func:`calibration.diagnostics.remaining_structure`): a family
@@ -633,15 +635,21 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
     synthesised: list[Candidate] = []      # every candidate built from the residual, in the order offered
     synthesised_here = False               # built at this stage already
     fate: dict[str, str] = {}              # synthesised candidate -> why it is not added (ADDED if it is)
+    # cross-validated at this stage (reset when an effect is added): after effects are built from the residual
+    # the screening runs again, and the candidates already held-out tested at this stage, which failed, are
+    # not tested again; the Wilcoxon level is Bonferroni over every candidate tested at the stage
+    cv_here: list[CVResult] = []
+    physics_here = False                   # the physics inclusion was weighed at this stage
     while True:
         say(f"screening {len(remaining)} candidate(s) at stage {len(stages) - 1}")
         tests, space = screen_candidates(result, remaining, folds.assign, settings.rank_tol)
         ranked = sorted(zip(remaining, tests), key=lambda ct: (ct[1].p_value if np.isfinite(ct[1].p_value) else 2,
                                                                -ct[1].delta_chi2))
-        last_tests, last_cv = [t for _, t in ranked], []
+        last_tests, last_cv = [t for _, t in ranked], list(cv_here)
         ident = [(c, t) for c, t in ranked if t.identifiable]
         gate = settings.screen_alpha / max(len(ident), 1)
-        gated = [(c, t) for c, t in ident if t.p_value < gate][: settings.cv_top]
+        tried = {cv.candidate for cv in cv_here}
+        gated = [(c, t) for c, t in ident if t.p_value < gate and c.name not in tried][: settings.cv_top]
         for c, t in ranked:               # why each effect built from the residual is not (yet) added
             if c.origin == RESIDUAL:
                 fate[c.name] = ("absorbed by the fit (the data cannot tell it from what is fitted)"
@@ -654,7 +662,8 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
                                                            say):
                 synthesised_here = True
                 continue
-            stop = (f"no candidate passes the screening (score-test p < {gate:.2g}): nothing significant remains "
+            stop = ("no screened candidate improves the held-out data significantly" if cv_here else
+                    f"no candidate passes the screening (score-test p < {gate:.2g}): nothing significant remains "
                     "that the library or an effect built from the residual explains")
             break
         if len(stages) - 1 >= settings.max_effects:
@@ -666,7 +675,7 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         if base_folds is None:
             say(f"  cross-validating the current model ({folds.k} folds by {folds.by})")
             base_folds = _fold_fit(model, design, folds, fit)
-        threshold = settings.alpha / len(gated)
+        threshold = settings.alpha / (len(cv_here) + len(gated))
 
         def _cv_of(c, t):
             cp = _candidate_priors(model.with_effects(c.effect), c, t)
@@ -692,9 +701,9 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
             cvs.append(cv)
             if c.origin == RESIDUAL:
                 fate[c.name] = cv.reason if not cv.passed else "passed, but another candidate was added"
-        last_cv = cvs
         passing = [(c, cv) for (c, _), cv in zip(gated, cvs) if cv.passed]
-        if not passing and settings.physics and power["can_reach"]:
+        if not passing and settings.physics and power["can_reach"] and not physics_here:
+            physics_here = True
             got = _physics_inclusion(
                 remaining, tests, gate, gated, cvs, lambda c: _cv_of(c, tests[remaining.index(c)]),
                 lambda c: fit(model.with_effects(c.effect), design,
@@ -704,10 +713,12 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
                 passing = [got]
                 if all(c is not got[0] for c, _ in gated):
                     gated.append((got[0], tests[remaining.index(got[0])]))
+        last_cv = cv_here + cvs
         if not passing:
             if not synthesised_here and _offer_synthesised(result, model, folds.assign, settings, remaining, synthesised,
                                                            say):
                 synthesised_here = True
+                cv_here = last_cv
                 continue
             stop = "no screened candidate improves the held-out data significantly"
             break
@@ -761,13 +772,14 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
             sp2 = residual_space(result)
             fam2 = next((f for f in families(sp2) if f.name == fam_name), None) or candidate_family(sp2, cand)
             after = binned_estimates(sp2, fam2) if fam2 is not None else None
-        stage = Stage(len(stages), model, result, cand, last_tests, cvs, nested, alternatives,
+        stage = Stage(len(stages), model, result, cand, last_tests, cv_here + cvs, nested, alternatives,
                       test_figures(model, result.p, result.reference_mode), fam_name, before, after)
         stages.append(stage)
         say(f"  + {cand.name}: held-out test RMS {stage.heldout['rms_um']:.2f} um "
             f"(base {stages[0].heldout['rms_um']:.2f} um)")
         base_folds = cv.folds if weights == old_weights else None      # compared at the same weights
-        synthesised_here = False
+        synthesised_here = physics_here = False
+        cv_here = []
         have = set(model.spec.names)      # e.g. the other harmonic orders of a joint once one is in
         fate[cand.name] = ADDED
         for c in remaining:

@@ -13,6 +13,7 @@ it (5 % RMS left at most) and the fitted values must lie in the 3-sigma region o
 around it (chi-square of all added free parameters, 99.73 %)."""
 from __future__ import annotations
 
+import dataclasses
 from functools import lru_cache
 
 import numpy as np
@@ -20,6 +21,7 @@ import pytest
 from scipy import stats
 
 from arm_model import load_description
+from arm_model.cli import main
 from arm_model.effects import (ApproachOffset, EncoderEccentricity, JointHarmonics, LateralCompliance,
                                ProbeComplianceMatrix)
 from arm_model.model import ArmModel
@@ -28,8 +30,10 @@ from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 from calibration.candidates import Candidate
 from calibration.data import Weights, make_data
 from calibration.loop import close_loop
+from calibration.loop_report import write_loop_model
+from calibration.model_output import refine_torques
 from calibration.synthesis import RESIDUAL, synthesise
-from conftest import NOMINAL
+from conftest import NOMINAL, assert_close
 
 NOISE = 2e-6
 #: 280 points, 26 measurements: enough approach directions and forces that the loop's choices do not hang on
@@ -67,12 +71,42 @@ def _truth(effects, values, seed=1):
 
 @lru_cache(maxsize=None)
 def run(case: str | None, force: float = 0.0):
-    """(truth model, true p, the loop) on a synthetic campaign with ``case`` hidden (None: the same campaign,
-    same base errors, without it)."""
+    """(truth model, true p, the loop, the campaign) on a synthetic campaign with ``case`` hidden (None: the
+    same campaign, same base errors, without it)."""
     effects, values, force = CASES[case][:3] if case else ((), {}, force)
     nominal, truth, p = _truth(effects, values)
     camp = make_campaign(truth, SynthSpec(**{**SPEC.__dict__, "force": force}), seed=1, p_true=p)
-    return truth, p, close_loop(camp.points, camp.artefacts, nominal, weights=Weights(probe=NOISE), cv_top=2)
+    return truth, p, close_loop(camp.points, camp.artefacts, nominal, weights=Weights(probe=NOISE), cv_top=2), camp
+
+
+def tip_gives_the_loops_points(loop, points_csv, tmp_path):
+    """``aacmm tip`` with the model file the loop writes (its final fit on every point, refined with the
+    torques on its calibrated geometry and written as ``aacmm close-loop`` does) gives the loop's own
+    corrected points to 1 nm; each effect built from the residual is in the file and moves those points by
+    more than 0.1 um somewhere (so a tip that left it out would fail)."""
+    from arm_model.model_file import load_model
+
+    s = loop.settings
+    final = refine_torques(loop.model_fit, rank_tol=s.rank_tol, outlier_threshold=s.outlier_threshold)
+    files = write_loop_model(dataclasses.replace(loop, model_fit=final), tmp_path / "loop")
+    built = [c for c in loop.added if c.origin == RESIDUAL]
+    assert built
+    in_file = load_model(files["model"]).effects
+    tip = tmp_path / "tip.csv"
+    assert main(["tip", str(points_csv), "--arm", str(files["model"]), "-o", str(tip)]) == 0
+    got = np.genfromtxt(tip, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    got = np.column_stack([got["x_mm"], got["y_mm"], got["z_mm"]]) * 1e-3
+    data = final.data
+    own = final.model.ball_centres(data.points.q, data.wrench, final.p, data.aux)
+    assert got.shape == own.shape
+    assert_close(got, own, atol=1e-9)
+    desc = final.model.desc
+    for c in built:
+        assert c.effect in in_file, (c.effect, in_file)
+        off = np.array(final.p, dtype=float)
+        off[[final.model.spec.index(n) for n in c.param_names(desc)]] = 0.0
+        moved = np.linalg.norm(own - final.model.ball_centres(data.points.q, data.wrench, off, data.aux), axis=1)
+        assert moved.max() > 1e-7, (c.name, moved.max())
 
 
 def hidden_in_fit_terms(model: ArmModel, names, truth: ArmModel, p_true, hidden, q, w, aux=(None, None)):
@@ -109,9 +143,9 @@ def _within_3_sigma(result, truth_values: dict):
 
 
 @pytest.mark.parametrize("case", list(CASES))
-def test_loop_builds_adds_and_recovers_the_hidden_effect(case):
+def test_loop_builds_adds_and_recovers_the_hidden_effect(case, tmp_path, capsys):
     effects, values, force, kind = CASES[case]
-    truth, p, loop = run(case)
+    truth, p, loop, camp = run(case)
     final = loop.final.result
     desc = final.model.desc
     built = [c for c in loop.added if c.origin == RESIDUAL]
@@ -128,6 +162,13 @@ def test_loop_builds_adds_and_recovers_the_hidden_effect(case):
     assert loop.final.heldout["rms_um"] <= 1.3 * clean.final.heldout["rms_um"], (
         loop.final.heldout["rms_um"], clean.final.heldout["rms_um"])
     assert not loop.remaining, loop.verdict
+    if case == "library and residual":
+        # the library's effect first (effects are built from the residual only once the library is exhausted)
+        assert [(c.name, c.origin) for c in loop.added] == [("eccentricity j2", "library"),
+                                                             ("approach offset", RESIDUAL)], loop.verdict
+    # the model file the loop writes, applied by aacmm tip, gives the loop's corrected points
+    camp.write(tmp_path / "sim")
+    tip_gives_the_loops_points(loop, tmp_path / "sim" / "points.csv", tmp_path)
 
 
 def test_truth_in_fit_terms_maps_one_parameterization_onto_another(nominal):
@@ -164,7 +205,7 @@ def test_truth_in_fit_terms_maps_one_parameterization_onto_another(nominal):
     assert left > 0.5
 
 
-def test_two_links_growing_at_different_rates_over_10_K():
+def test_two_links_growing_at_different_rates_over_10_K(tmp_path, capsys):
     """Simulator: links j3 and j5 grow at 12 and 23 ppm/K over about 10 K. The library's common growth
     comes first, then each link's own rate from the residual ('temperature per link')."""
     tasks = [{"kind": "ballbar", "positions": 10, "length_mm": 600.0, "points_per_sphere": 4},
@@ -181,7 +222,7 @@ def test_two_links_growing_at_different_rates_over_10_K():
         return sim, close_loop(sim.points, sim.artefacts, camp.arm, weights=Weights(probe=2e-6), cv_top=2)
 
     sim, hot = loop(True)
-    assert np.ptp(sim.points.temperature) > 9.0
+    assert np.ptp(sim.points.temperature) >= 10.0, np.ptp(sim.points.temperature)
     assert [c.name for c in hot.added] == ["thermal growth", "thermal growth per link"], hot.verdict
     assert hot.added[1].origin == RESIDUAL
     final = hot.final.result
@@ -191,6 +232,8 @@ def test_two_links_growing_at_different_rates_over_10_K():
     _within_3_sigma(final, truth)
     _, clean = loop(False)
     assert hot.final.heldout["rms_um"] <= 1.3 * clean.final.heldout["rms_um"]
+    sim.write(tmp_path / "sim")
+    tip_gives_the_loops_points(hot, tmp_path / "sim" / "points.csv", tmp_path)
 
 
 def test_synthesis_offers_only_what_the_model_lacks():
