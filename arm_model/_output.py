@@ -252,8 +252,9 @@ def output_folder(final: str | Path, inputs=(), command: str = ""):
         os.chmod(stage, _mode(0o777))
         (stage / MARKER).write_text(f"aacmm {command}\n", encoding="utf-8")
         yield Output(stage, final)
-        _publish(stage, final, command)
-        log.debug(f"{final}: {sum(1 for p in final.rglob('*') if p.is_file()) - 1} file(s) written")
+        n_files = sum(1 for p in stage.rglob("*") if p.is_file()) - 1     # counted before another run may
+        _publish(stage, final, command)                                     # replace the published folder
+        log.debug(f"{final}: {n_files} file(s) written")
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         _remove_empty(created)
