@@ -54,7 +54,8 @@ from arm_model.effects import JointCompliance, ThermalGrowth
 from arm_model.io import Artefacts, PointSet
 from arm_model.model import ArmModel
 
-from .calibrate import evidence_scale, CalibrationResult, calibrate, display_unit, resolve_parameters
+from .calibrate import (CalibrationResult, calibrate, default_free, display_unit, evidence_scale,
+                        resolve_parameters)
 from .candidates import Candidate, library_candidates, needs_model
 from .data import CalibrationData, Weights, concat, make_data, split_holdout, split_poses
 from .diagnostics import (GroupTest, ResidualSpace, binned_estimates, candidate_family, families, holm,
@@ -579,11 +580,13 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
     priors: dict[str, float] = {}
 
     def fit(model: ArmModel, d: CalibrationData, extra_priors: dict | None = None,
-            reweight: bool = False) -> CalibrationResult:
+            reweight: bool = False, hold: tuple = ()) -> CalibrationResult:
         names = None
         if free is not None:
             names = [model.spec.names[i] for i in resolve_parameters(model.spec, free)]
             names += [n for n in model.spec.names[model.base_size:] if n not in names]
+        if hold:
+            names = [n for n in (names or default_free(model)) if n not in hold]
         return calibrate(model, d, free=names, values=values, weights=weights, rank_tol=settings.rank_tol,
                          priors={**priors, **(extra_priors or {})}, outlier_threshold=settings.outlier_threshold,
                          weights_from_data=reweight and settings.weights_from_data, prior_scale=prior_scale)
@@ -806,6 +809,11 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
     say("calibrating the final model on every point (design and test; outliers kept, as calibrate does)")
     weights = stated                  # the user's uncertainties as the start, as calibrate starts
     model_fit = fit(model, data, reweight=True)
+    negative = _negative_compliances(model_fit, settings.alpha)
+    if negative:
+        say(f"  joint compliance resolved significantly negative in the final fit ({', '.join(negative)}): a "
+            "compliance cannot be negative, so it is held at zero and the final model refitted")
+        model_fit = fit(model, data, reweight=True, hold=tuple(negative))
     return LoopResult(stages, last_tests, last_cv, stop, structure, significant, verdict, cands + synthesised,
                       skipped, design.measurements(), test.measurements(), settings, desc, plots, dropped, test_by,
                       power, model_fit, built)
@@ -995,6 +1003,16 @@ def _whole_family(cand: Candidate, cv: CVResult, remaining: list, gated: list, c
             f"{every.name} (held-out RMS {100 * got.improvement:.1f} % lower than the current model's)")
         return every, got
     return cand, cv
+
+
+def _negative_compliances(res: CalibrationResult, level: float) -> list[str]:
+    """The joint compliances of ``res`` resolved significantly negative (``c < -z u``, z two-sided at
+    ``level`` with Bonferroni over the free compliances): not a physical compliance."""
+    names = [n for n in res.free if n.endswith(".compliance") and not n.startswith("probe.")]
+    if not names:
+        return []
+    z = stats.norm.isf(level / (2 * len(names)))
+    return [n for n in names if res.value(n) < -z * res.uncertainty(n)]
 
 
 def _physics_inclusion(remaining, tests, gate, gated, cvs, cross_validate_, fit_design, level, say):
