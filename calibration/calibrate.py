@@ -34,7 +34,7 @@ from .identifiability import (DEFAULT_RANK_TOL, Combination, Identifiability, _c
                               prior_scales,
                               reduced_jacobian, weakly_determined)
 from .problem import Problem
-from .solver import Prior, blas_threads, levenberg_marquardt, normal_solver
+from .solver import Prior, blas_threads, levenberg_marquardt, normal_factor
 
 __all__ = ["FixedParameter", "Outlier", "CalibrationResult", "calibrate", "resolve_parameters",
            "default_free", "rigid_gauge", "display_unit", "blas_threads", "identify", "variance_components",
@@ -518,12 +518,11 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
     js = (j @ sp.diags(1.0 / jscale)).tocsc()
     damp = np.zeros(js.shape[1])
     damp[:len(kept)] = prec / jscale[:len(kept)] ** 2
-    solve = normal_solver(js, damp)
+    lu = normal_factor(js, damp)
+    solve = lu.solve
     h = _leverage(js, solve)
     log_ev = None
     if prior is not None:                 # Laplace: -cost - 0.5 log det(H) + log of the prior's normalisation
-        import scipy.sparse.linalg as spla
-        lu = spla.splu(((js.T @ js) + sp.diags(damp)).tocsc())
         logdet = float(np.sum(np.log(np.abs(lu.U.diagonal())))) + 2.0 * float(np.sum(np.log(jscale)))
         log_ev = -(sol.cost + sol.prior_cost) - 0.5 * logdet - float(np.sum(np.log(prior.size[kept_arr])))
     variance = variance_components(prob, ev.r, h, weights)
@@ -723,7 +722,6 @@ def reweighted(fit, weights: Weights, tol: float = 0.03, rounds: int = 12) -> Ca
 def _scale(jp: np.ndarray) -> np.ndarray:
     s = np.linalg.norm(jp, axis=0)
     return np.where(s > 0, s, 1.0)
-
 
 
 #: prior scales tried by :func:`evidence_scale` (times the plausible error sizes)

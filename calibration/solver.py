@@ -19,7 +19,7 @@ from arm_model import NumericalError
 
 from .problem import Evaluation, Problem
 
-__all__ = ["LMResult", "Prior", "levenberg_marquardt", "normal_solver", "blas_threads"]
+__all__ = ["LMResult", "Prior", "levenberg_marquardt", "normal_solver", "normal_factor", "blas_threads"]
 
 
 @dataclass
@@ -64,6 +64,12 @@ def _full_jacobian(ev: Evaluation) -> sp.csc_matrix:
 
 def normal_solver(j: sp.spmatrix, damping: np.ndarray | float = 0.0):
     """A solver ``b -> (J^T J + diag(damping))^-1 b`` (sparse LU of the normal matrix)."""
+    return normal_factor(j, damping).solve
+
+
+def normal_factor(j: sp.spmatrix, damping: np.ndarray | float = 0.0) -> spla.SuperLU:
+    """The sparse LU factors of the normal matrix ``J^T J + diag(damping)`` (``.solve``; ``|det|`` is the
+    product of ``|U_ii|``)."""
     n = j.shape[1]
     a = (j.T @ j).tocsc()
     a = a + sp.diags(np.broadcast_to(damping, (n,)).astype(float), format="csc")
@@ -73,7 +79,7 @@ def normal_solver(j: sp.spmatrix, damping: np.ndarray | float = 0.0):
         raise NumericalError(f"unidentifiable: an unknown does not affect the residuals, the normal matrix is "
                              f"singular ({exc}) (too few distinct points on a feature, a pose repeated, or a "
                              "parameter the data cannot identify)") from None
-    return lu.solve
+    return lu
 
 
 def levenberg_marquardt(problem: Problem, p0, states0, *, max_iter: int = 200, xtol: float = 1e-10,
