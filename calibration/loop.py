@@ -65,7 +65,7 @@ from .identifiability import DEFAULT_RANK_TOL, prior_scales
 from .problem import MIN_POINTS, Problem
 from .solver import levenberg_marquardt
 from .synthesis import RESIDUAL, synthesise
-from .validation import BOOTSTRAP_SAMPLES, FIGURES, bootstrap, validate
+from .validation import BOOTSTRAP_SAMPLES, FIGURES, bootstrap, resamples, validate
 
 log = logging.getLogger(__name__)
 
@@ -216,10 +216,9 @@ def _bootstrap_rows(e: np.ndarray, measurement: np.ndarray, samples: int = BOOTS
     groups = [e[measurement == m] for m in dict.fromkeys(measurement.tolist())]
     if len(groups) < 2:
         return None
-    rng = np.random.default_rng(seed)
     rms, mx = np.empty(samples), np.empty(samples)
-    for k in range(samples):
-        x = np.concatenate([groups[i] for i in rng.integers(0, len(groups), len(groups))])
+    for k, idx in enumerate(resamples(len(groups), samples, seed)):
+        x = np.concatenate([groups[i] for i in idx])
         rms[k], mx[k] = np.sqrt(np.mean(x ** 2)), np.max(np.abs(x))
     return float(rms.std(ddof=1)), float(mx.std(ddof=1))
 
@@ -696,6 +695,13 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
             cv.score_p = t.p_value
             return cv
 
+        def cv_named(c):                   # a candidate's held-out test, its score test looked up
+            return _cv_of(c, tests[remaining.index(c)])
+
+        def fit_design(c):                 # a candidate fitted on the design set
+            m = model.with_effects(c.effect)
+            return fit(m, design, _candidate_priors(m, c, tests[remaining.index(c)]))
+
         cvs = []
         for c, t in gated:
             say(f"  cross-validating + {c.name} (score p = {t.p_value:.2g})")
@@ -707,11 +713,8 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         passing = [(c, cv) for (c, _), cv in zip(gated, cvs) if cv.passed]
         if not passing and settings.physics and power["can_reach"] and not physics_here:
             physics_here = True
-            got = _physics_inclusion(
-                remaining, tests, gate, gated, cvs, lambda c: _cv_of(c, tests[remaining.index(c)]),
-                lambda c: fit(model.with_effects(c.effect), design,
-                              _candidate_priors(model.with_effects(c.effect), c, tests[remaining.index(c)])),
-                settings.alpha / max(len(gated), 1), say)
+            got = _physics_inclusion(remaining, tests, gate, gated, cvs, cv_named, fit_design,
+                                     settings.alpha / max(len(gated), 1), say)
             if got is not None:
                 passing = [got]
                 if all(c is not got[0] for c, _ in gated):
@@ -733,11 +736,7 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
                     and c.effect.source == cand.effect.source and cv.improvement - v.improvement <= PARSIMONY]
             cand, cv = min(same, key=lambda x: x[0].size(desc))
         if cand.family == "joint_compliance" and cand.joint is not None:
-            cand, cv = _whole_family(
-                cand, cv, remaining, gated, cvs, lambda c: _cv_of(c, tests[remaining.index(c)]),
-                lambda c: fit(model.with_effects(c.effect), design,
-                              _candidate_priors(model.with_effects(c.effect), c, tests[remaining.index(c)])),
-                settings.alpha, say)
+            cand, cv = _whole_family(cand, cv, remaining, gated, cvs, cv_named, fit_design, settings.alpha, say)
         wcols = _candidate_cols(space, remaining, remaining.index(cand), tests[remaining.index(cand)])
         # parsimony: a passing candidate inside the best one's signature, with fewer parameters and nearly
         # the same held-out improvement, explains as much with less
@@ -986,8 +985,8 @@ def _whole_family(cand: Candidate, cv: CVResult, remaining: list, gated: list, c
     others = [n for n in every.param_names(res.model.desc) if n not in own and n in res.free]
     if not others:
         return cand, cv
-    z = stats.norm.isf(alpha / (2 * len(others)))
-    resolved = [n for n in others if abs(res.value(n)) > z * res.uncertainty(n)]
+    z, neg, pos = _resolved(res, others, alpha)
+    resolved = [n for n in others if n in neg or n in pos]
     if not resolved:
         say(f"  {every.name}: no other joint's compliance resolved as non-zero (|c| > {z:.2f} u); "
             f"keeping {cand.name}")
@@ -1005,14 +1004,19 @@ def _whole_family(cand: Candidate, cv: CVResult, remaining: list, gated: list, c
     return cand, cv
 
 
+def _resolved(res: CalibrationResult, names: list, level: float) -> tuple[float, list, list]:
+    """``(z, negative, positive)``: the parameters ``names`` of ``res`` resolved below ``-z u`` and above
+    ``z u``, z two-sided at ``level`` with Bonferroni over ``names``."""
+    z = float(stats.norm.isf(level / (2 * len(names))))
+    return (z, [n for n in names if res.value(n) < -z * res.uncertainty(n)],
+            [n for n in names if res.value(n) > z * res.uncertainty(n)])
+
+
 def _negative_compliances(res: CalibrationResult, level: float) -> list[str]:
-    """The joint compliances of ``res`` resolved significantly negative (``c < -z u``, z two-sided at
-    ``level`` with Bonferroni over the free compliances): not a physical compliance."""
+    """The joint compliances of ``res`` resolved significantly negative (:func:`_resolved` over the free
+    joint compliances): not a physical compliance."""
     names = [n for n in res.free if n.endswith(".compliance") and not n.startswith("probe.")]
-    if not names:
-        return []
-    z = stats.norm.isf(level / (2 * len(names)))
-    return [n for n in names if res.value(n) < -z * res.uncertainty(n)]
+    return _resolved(res, names, level)[1] if names else []
 
 
 def _physics_inclusion(remaining, tests, gate, gated, cvs, cross_validate_, fit_design, level, say):
@@ -1042,9 +1046,7 @@ def _physics_inclusion(remaining, tests, gate, gated, cvs, cross_validate_, fit_
     names = [n for n in every.param_names(res.model.desc) if n in res.free]
     if not names:
         return None
-    z = stats.norm.isf(level / (2 * len(names)))
-    neg = [n for n in names if res.value(n) < -z * res.uncertainty(n)]
-    pos = [n for n in names if res.value(n) > z * res.uncertainty(n)]
+    z, neg, pos = _resolved(res, names, level)
     say(f"  physics check of {every.name}: score p = {t.p_value:.2g} < {gate:.2g}; resolved positive: "
         f"{', '.join(pos) or 'none'}; significantly negative: {', '.join(neg) or 'none'} (z = {z:.2f})")
     if neg or not pos:

@@ -211,6 +211,14 @@ def _summary_of(items) -> dict:
     return v.summary()
 
 
+def resamples(n: int, samples: int = BOOTSTRAP_SAMPLES, seed: int = 0):
+    """The bootstrap's draws over ``n`` units (measurements): ``samples`` index arrays of ``n`` drawn with
+    replacement, seeded (the same data give the same uncertainties)."""
+    rng = np.random.default_rng(seed)
+    for _ in range(samples):
+        yield rng.integers(0, n, n)
+
+
 def bootstrap(val: Validation, samples: int = BOOTSTRAP_SAMPLES, seed: int = 0) -> dict:
     """Standard uncertainty [SI] of each figure of ``val.summary()`` by a bootstrap over the
     measurements: the measurements resampled with replacement (each with all its items: a seat's
@@ -226,12 +234,11 @@ def bootstrap(val: Validation, samples: int = BOOTSTRAP_SAMPLES, seed: int = 0) 
             count[key] = count.get(key, 0) + 1
     out = {k: None for k in val.summary()}
     ids = list(units)
-    rng = np.random.default_rng(seed)
     draws: dict = {k: [] for k, n in count.items() if n >= 2}
     if not draws:
         return out
-    for _ in range(samples):
-        items = [it for m in rng.integers(0, len(ids), len(ids)) for it in units[ids[m]]]
+    for idx in resamples(len(ids), samples, seed):
+        items = [it for m in idx for it in units[ids[m]]]
         for k, x in _summary_of(items).items():
             if k in draws:
                 draws[k].append(x)
