@@ -46,3 +46,34 @@ def nominal():
 def pin_arm(nominal):
     from arm_model import PinocchioArm
     return PinocchioArm(nominal)
+
+
+def simulate_and_close_loop(tmp_path: Path, campaign: str, *options: str) -> tuple[Path, Path, dict]:
+    """``aacmm simulate`` of the campaign TOML text, then ``aacmm close-loop`` on what it wrote with the
+    nominal arm, ``--sigma-probe-um 2`` and ``options``, both through the command line: (simulation folder,
+    loop folder, the loop's summary.json)."""
+    import json
+
+    from arm_model.cli import main
+    (tmp_path / "campaign.toml").write_text(campaign)
+    sim, out = tmp_path / "sim", tmp_path / "loop"
+    assert main(["simulate", str(tmp_path / "campaign.toml"), "-o", str(sim)]) == 0
+    assert main(["close-loop", str(sim / "points.csv"), str(sim / "artefacts.toml"), "--arm", str(NOMINAL),
+                 "--sigma-probe-um", "2", *options, "-o", str(out)]) == 0
+    return sim, out, json.loads((out / "summary.json").read_text())
+
+
+def seat_figures_of(res, desc, points) -> dict:
+    """:func:`calibration.placements.seat_figures` of a fit's ball centres of ``points`` of the real seat
+    data (two holes 50 mm apart), the gravity and contact torques (if the fit's model needs them) from the
+    nominal description ``desc``, as the fit had them."""
+    from arm_model import PinocchioArm
+    from arm_model.model import AuxData
+    from calibration.placements import seat_figures
+    m = res.model
+    aux = None
+    if m.needs():
+        g, c = PinocchioArm(desc).torques(points.q, points.wrench)
+        aux = AuxData(None, g, c)
+    return seat_figures(m.ball_centres(points.q, points.wrench, res.p, aux), points.feature, ("hole-0", "hole-1"),
+                        0.05)

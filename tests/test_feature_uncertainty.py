@@ -41,6 +41,22 @@ def test_shared_radial_error_does_not_average_out():
     assert u.if_independent == pytest.approx(2 * delta / np.sqrt(len(p)), rel=1e-9)
 
 
+def _random_covariance(rng, n: int, rows: int, s_indep: float, s_point: float, s_common: float):
+    """Random point covariances [m^2] of ``n`` points: an independent part ``m m^T`` (m: (n, 3, 3) of
+    scale ``s_indep``) and a shared part from ``rows`` factor rows (n, rows, 3) (each point's own of scale
+    ``s_point`` plus a common one of scale ``s_common``): ``(m, rows, cov)``."""
+    m = rng.standard_normal((n, 3, 3)) * s_indep
+    sysr = rng.standard_normal((n, rows, 3)) * s_point + rng.standard_normal((1, rows, 3)) * s_common
+    return m, sysr, np.einsum("nij,nkj->nik", m, m) + np.einsum("nri,nrj->nij", sysr, sysr)
+
+
+def _draw(rng, m, sysr):
+    """One draw of point errors (n, 3) [m] with the covariance of :func:`_random_covariance`: independent
+    standard normals through ``m``, one shared standard normal a factor row."""
+    e = np.einsum("nij,nj->ni", m, rng.standard_normal((len(m), 3)))
+    return e + np.einsum("nri,r->ni", sysr, rng.standard_normal(sysr.shape[1]))
+
+
 def test_against_monte_carlo_of_the_fit():
     rng = np.random.default_rng(3)
     q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
@@ -49,16 +65,11 @@ def test_against_monte_carlo_of_the_fit():
     n = len(p)
     cyl = fit_cylinder(p)
     # per point: a random independent covariance; shared: 4 random factor rows (N, 4, 3)
-    m = rng.standard_normal((n, 3, 3)) * 2e-6
-    indep = np.einsum("nij,nkj->nik", m, m)
-    sysr = rng.standard_normal((n, 4, 3)) * 1e-6 + rng.standard_normal((1, 4, 3)) * 2e-6
-    cov = indep + np.einsum("nri,nrj->nij", sysr, sysr)
+    m, sysr, cov = _random_covariance(rng, n, 4, 2e-6, 1e-6, 2e-6)
     u = diameter_uncertainty(diameter_sensitivity(p, cyl), cov, sysr, n_parameters=2)
     d = []
     for _ in range(3000):
-        e = np.einsum("nij,nj->ni", m, rng.standard_normal((n, 3)))
-        e += np.einsum("nri,r->ni", sysr, rng.standard_normal(4))
-        d.append(fit_cylinder(p + e, cyl.axis).diameter)
+        d.append(fit_cylinder(p + _draw(rng, m, sysr), cyl.axis).diameter)
     u_mc = float(np.std(d, ddof=1))
     print(f"linear {u.u * 1e6:.3f} um, Monte Carlo {u_mc * 1e6:.3f} um, naive {u.if_independent * 1e6:.3f} um")
     assert u.u == pytest.approx(u_mc, rel=0.1)
@@ -98,15 +109,11 @@ def test_form_uncertainty_against_monte_carlo_of_the_fit():
     p = p + (lobes[:, None] * radial) @ q.T
     n = len(p)
     cyl = fit_cylinder(p)
-    m = rng.standard_normal((n, 3, 3)) * 0.8e-6
-    indep = np.einsum("nij,nkj->nik", m, m)
-    sysr = rng.standard_normal((n, 3, 3)) * 0.5e-6 + rng.standard_normal((1, 3, 3)) * 1e-6
-    cov = indep + np.einsum("nri,nrj->nij", sysr, sysr)
+    m, sysr, cov = _random_covariance(rng, n, 3, 0.8e-6, 0.5e-6, 1e-6)
     f = form_uncertainty(p, cyl, cov, sysr)
     forms = []
     for _ in range(1500):
-        e = np.einsum("nij,nj->ni", m, rng.standard_normal((n, 3)))
-        e += np.einsum("nri,r->ni", sysr, rng.standard_normal(3))
+        e = _draw(rng, m, sysr)
         forms.append(fit_cylinder(p + e, cyl.axis).form_error)
     print(f"form {f.form * 1e6:.3f} um: u sampled-linear {f.u * 1e6:.3f} um, refits {np.std(forms, ddof=1) * 1e6:.3f} um; "
           f"inflation {f.inflation * 1e6:.3f} vs {(np.mean(forms) - f.form) * 1e6:.3f} um")

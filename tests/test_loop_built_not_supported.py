@@ -11,11 +11,7 @@ held to the probe compliances and every screened candidate is cross-validated (`
 so the built effect meets the held-out test rather than stopping at the screening."""
 from __future__ import annotations
 
-import json
-
-from arm_model.cli import main
-
-from conftest import NOMINAL
+from conftest import simulate_and_close_loop
 
 CAMPAIGN = """\
 seed = 3
@@ -46,16 +42,9 @@ measurements = 6
 
 
 def test_built_effect_without_held_out_support_is_reported_not_added(tmp_path, capsys):
-    (tmp_path / "campaign.toml").write_text(CAMPAIGN)
-    assert main(["simulate", str(tmp_path / "campaign.toml"), "-o", str(tmp_path / "sim")]) == 0
-    capsys.readouterr()
-    out = tmp_path / "loop"
-    code = main(["close-loop", str(tmp_path / "sim" / "points.csv"), str(tmp_path / "sim" / "artefacts.toml"),
-                 "--arm", str(NOMINAL), "--sigma-probe-um", "2", "--candidates", "probe_compliance",
-                 "--screen-alpha", "0.99", "-o", str(out)])
-    assert code == 0
+    _, out, s = simulate_and_close_loop(tmp_path, CAMPAIGN, "--candidates", "probe_compliance",
+                                        "--screen-alpha", "0.99")
     printed = capsys.readouterr().out
-    s = json.loads((out / "summary.json").read_text())
     # built from the residual, cross-validated, not supported, not added
     assert s["effects_added"] == [], s["verdict"]
     built = {b["name"]: b for b in s["built_from_residual"]}["probe compliance matrix"]

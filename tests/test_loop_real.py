@@ -75,14 +75,13 @@ def test_trained_on_one_placement_the_loop_is_no_worse_than_calibrate_on_the_oth
     """Train on 'front' with the default options of both commands, predict 'right' and 'back-high': the loop's
     model (calibrated on every point of the training placement) spreads the held-out seats no more than plain
     calibrate's (5 % tolerance), with the distance error no worse than 0.1 mm more."""
-    from arm_model import PinocchioArm
     from arm_model.io import read_artefacts, read_points
-    from arm_model.model import ArmModel, AuxData
+    from arm_model.model import ArmModel
     from arm_model.urdf_import import load_arm
     from calibration.calibrate import calibrate
     from calibration.data import make_data
     from calibration.loop import close_loop
-    from calibration.placements import seat_figures
+    from conftest import seat_figures_of
 
     desc = load_arm(REAL / "panda-with-inertials.urdf", "ball_link")
     art = read_artefacts(REAL / "artefacts.toml")
@@ -91,16 +90,8 @@ def test_trained_on_one_placement_the_loop_is_no_worse_than_calibrate_on_the_oth
     loop = close_loop(pts["front"], art, desc)
     assert loop.model_fit is not None and len(loop.model_fit.data) == len(pts["front"])
 
-    def figures(res, p):
-        m = res.model
-        aux = None
-        if m.needs():
-            g, c = PinocchioArm(desc).torques(p.q, p.wrench)
-            aux = AuxData(None, g, c)
-        return seat_figures(m.ball_centres(p.q, p.wrench, res.p, aux), p.feature, ("hole-0", "hole-1"), 0.05)
-
     for held in ("right", "back-high"):
-        a, b = figures(plain, pts[held]), figures(loop.model_fit, pts[held])
+        a, b = seat_figures_of(plain, desc, pts[held]), seat_figures_of(loop.model_fit, desc, pts[held])
         assert 0.2 < a["spread_mean_mm"] < 5.0                      # a real fit, not a degenerate one
         assert b["spread_mean_mm"] <= 1.05 * a["spread_mean_mm"], (held, a, b)
         assert abs(b["distance_error_mm"]) <= abs(a["distance_error_mm"]) + 0.1, (held, a, b)

@@ -14,6 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import seat_figures_of
+
 REAL = Path(__file__).resolve().parents[1] / "examples" / "data" / "real-panda-seats"
 PLACES = ("front", "right", "back-high")
 COMPLIANCE = 1e-4          # rad/(N m) on every joint: about 4 mrad on the shoulder
@@ -25,18 +27,6 @@ def setup():
     from arm_model.urdf_import import load_arm
     desc = load_arm(REAL / "panda-with-inertials.urdf", "ball_link")
     return desc, read_artefacts(REAL / "artefacts.toml"), {p: read_points(REAL / p / "points.csv", 7) for p in PLACES}
-
-
-def _figures(res, desc, pts):
-    from arm_model import PinocchioArm
-    from arm_model.model import AuxData
-    from calibration.placements import seat_figures
-    m = res.model
-    aux = None
-    if m.needs():
-        g, c = PinocchioArm(desc).torques(pts.q, pts.wrench)
-        aux = AuxData(None, g, c)
-    return seat_figures(m.ball_centres(pts.q, pts.wrench, res.p, aux), pts.feature, ("hole-0", "hole-1"), 0.05)
 
 
 def _inject(pts, c):
@@ -66,8 +56,8 @@ def test_trained_on_back_high_joint_compliance_is_included_and_the_other_placeme
     assert "(included as physics, not for a held-out gain)" in loop.verdict
     cv = [v for v in loop.stages[1].cv if v.candidate == loop.added[0].name][0]
     assert cv.reason.startswith(PHYSICS)
-    a = [_figures(plain, desc, pts[p]) for p in ("front", "right")]
-    b = [_figures(loop.model_fit, desc, pts[p]) for p in ("front", "right")]
+    a = [seat_figures_of(plain, desc, pts[p]) for p in ("front", "right")]
+    b = [seat_figures_of(loop.model_fit, desc, pts[p]) for p in ("front", "right")]
     spread = [np.mean([f["spread_mean_mm"] for f in x]) for x in (a, b)]
     # measured: 2.84 -> 2.07 mm (front 3.27 -> 1.80, right 2.42 -> 2.34)
     assert spread[1] <= 0.8 * spread[0], (a, b)
@@ -87,8 +77,8 @@ def test_a_compliance_injected_into_the_real_angles_is_found_recovered_and_carri
     loop = close_loop(inj["front"], art, desc)
     assert [c.name for c in loop.added] == ["joint compliance (every loaded joint)"], loop.verdict
     plain = calibrate(ArmModel(desc), make_data(inj["front"], art, ArmModel(desc)), weights_from_data=True)
-    a = [_figures(plain, desc, inj[p]) for p in ("right", "back-high")]
-    b = [_figures(loop.model_fit, desc, inj[p]) for p in ("right", "back-high")]
+    a = [seat_figures_of(plain, desc, inj[p]) for p in ("right", "back-high")]
+    b = [seat_figures_of(loop.model_fit, desc, inj[p]) for p in ("right", "back-high")]
     spread = [np.mean([f["spread_mean_mm"] for f in x]) for x in (a, b)]
     # measured: 3.21 -> 1.76 mm
     assert spread[1] <= 0.8 * spread[0], (a, b)

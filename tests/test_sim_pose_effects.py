@@ -135,22 +135,13 @@ measurements = 5
 """
 
 
-def test_lobing_hidden_by_aacmm_simulate_is_found_by_aacmm_close_loop(tmp_path, capsys):
+def test_lobing_hidden_by_aacmm_simulate_is_found_by_aacmm_close_loop(tmp_path):
     """From the command line only: a campaign file hides a lobing offset, ``aacmm close-loop`` builds the
     approach offset from the residual, adds it and recovers each term within 3 sigma."""
-    import json
+    from conftest import simulate_and_close_loop
 
-    from arm_model.cli import main
-    from conftest import NOMINAL
-
-    (tmp_path / "lobing.toml").write_text(LOBING)
-    assert main(["simulate", str(tmp_path / "lobing.toml"), "-o", str(tmp_path / "sim")]) == 0
-    truth = (tmp_path / "sim" / "truth.toml").read_text()
-    assert '"approach.dx_uy_m" = 8e-06' in truth
-    assert main(["close-loop", str(tmp_path / "sim" / "points.csv"), str(tmp_path / "sim" / "artefacts.toml"),
-                 "--arm", str(NOMINAL), "--sigma-probe-um", "2", "--cv-top", "2", "-o", str(tmp_path / "loop")]) == 0
-    capsys.readouterr()
-    s = json.loads((tmp_path / "loop" / "summary.json").read_text())
+    sim, _, s = simulate_and_close_loop(tmp_path, LOBING, "--cv-top", "2")
+    assert '"approach.dx_uy_m" = 8e-06' in (sim / "truth.toml").read_text()
     (eff,) = s["effects_added"]
     assert eff["name"] == "approach offset" and eff["origin"] == "residual", s["verdict"]
     true = {"approach.dx_uy": 8e-6, "approach.dy_ux": -6e-6, "approach.dz_ux": 6e-6}
