@@ -10,8 +10,9 @@ One TOML file (``aacmm calibrate`` and ``aacmm close-loop`` write it, every ``--
   (``param_defs``): ``name``, ``value_<unit>``, ``u_<unit>`` (standard uncertainty; 0 when not
   estimated) and ``state`` ("free", "fixed" or "held") — units from :data:`PARAM_UNITS`;
 * an optional ``[calibration]`` table: ``covariance`` (the covariance file, relative to the TOML),
-  ``written_by`` and ``probing_scatter_um`` (the scatter of one probed ball centre per axis that the
-  calibration's variance components estimated; ``aacmm tip``'s default probing uncertainty).
+  ``written_by`` and ``probing_scatter_um`` (the scatter of the contact itself per axis that the
+  calibration's variance components estimated, net of the encoder and force-sensor noise:
+  :meth:`calibration.CalibrationResult.probing_scatter`; ``aacmm tip``'s default probing uncertainty).
 
 The covariance file (:func:`write_covariance`, :func:`read_covariance`) is a CSV: one row a free
 parameter of the fit, columns ``parameter``, ``unit``, ``value``, ``u`` (in that row's unit) and one
