@@ -17,8 +17,9 @@ import sys
 __all__ = ["workers", "fork_map", "WorkerDied"]
 
 
-class WorkerDied(RuntimeError):
-    """A worker process ended without a result (killed, e.g. by the kernel's out-of-memory killer)."""
+class WorkerDied(OSError):
+    """A worker process ended without a result (killed, e.g. by the kernel's out-of-memory killer): a
+    failure of the system, reported like one (``aacmm``: the message, exit 2, nothing written)."""
 
 
 def workers(limit: int = 2) -> int:
