@@ -88,9 +88,14 @@ class Effect:
 @dataclass(frozen=True)
 class EncoderEccentricity(Effect):
     """Encoder reading error: ``q_true = q_enc + sum_h c_h cos(h q_enc) + s_h sin(h q_enc)``
-    (amplitude ``hypot(c, s)``, phase ``atan2(c, s)`` of ``a sin(h q + phi)``) for harmonics ``harmonics``."""
+    (amplitude ``hypot(c, s)``, phase ``atan2(c, s)`` of ``a sin(h q + phi)``) for harmonics ``harmonics``.
+    The cos/sin pair is linear in the reading's error, so an amplitude near zero is no singularity. An angle
+    error of the joint's reading, like the description's ``theta_offset``: a harmonic the data resolve only
+    to worse than ``--min-resolution`` of the plausible size of an angle error is held at its value (e.g. the
+    last joint's, when the ball is near that joint's axis), as the description's own parameters are."""
     harmonics: tuple[int, ...] = (1, 2)
     key: str = field(default="eccentricity", init=False, repr=False)
+    held_when_weak: ClassVar[bool] = True
 
     def param_defs(self, desc):
         out = []

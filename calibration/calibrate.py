@@ -375,7 +375,8 @@ def identify(problem: Problem, p, states, candidates, *, stage: str = "start", r
         # (an --effect, a loop candidate) and are estimated with their uncertainty (a joint compliance seen
         # through one plate placement is resolved to tens of percent, and holding it at zero would keep
         # its whole signature in the geometry)
-        # (an effect of the geometry kind, a joint gain, is held as the description's parameters are)
+        # (an effect of the geometry kind, an encoder's eccentricity or gain, is held as the description's
+        # parameters are: left free, a weak one wanders at each fit and the identifiable set never settles)
         geometric = {k for e, sl in model.effect_slices() if e.held_when_weak for k in range(sl.start, sl.stop)}
         weak = [w for w in weakly_determined(jred[:, sel], names, sizes(names), min_resolution)
                 if spec.index(w[0]) < model.base_size or spec.index(w[0]) in geometric]
@@ -516,6 +517,7 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
 
     idf0 = check(p0, states, "start")
     p = p0
+    n_start = len(fixed)
     for _ in range(4):
         prob = problem.with_free(kept)
         sol = levenberg_marquardt(prob, p, states, max_iter=max_iter, prior=prior)
@@ -531,7 +533,9 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
         if len(kept) == n_before:
             break
     else:
-        raise NumericalError("the identifiable set kept changing between fits; raise rank_tol or fix parameters")
+        raise NumericalError("the identifiable set kept changing between fits (held in turn: "
+                             + ", ".join(f.name for f in fixed[n_start:])
+                             + "); raise rank_tol or fix parameters")
     prob = problem.with_free(kept)
     ev = sol.evaluation
     n_rows = len(ev.r)

@@ -116,11 +116,12 @@ def _common_fit_options(p) -> None:
                    help="relative singular value below which a parameter combination counts as not "
                         "identifiable (default 1e-4)")
     p.add_argument("--min-resolution", type=non_negative(), default=0.1, metavar="FRACTION",
-                   help="hold parameters of the description (joint rows, probe) the data would resolve only to "
+                   help="hold parameters of the description (joint rows, probe) and of the encoders' reading errors "
+                        "(eccentricity, joint_gain: geometry like a joint offset) the data would resolve only to "
                         "worse than this fraction of a plausible error size (lengths: --plausible-length-mm; angles "
                         "0.01 rad per mm of it; 10x the nominal probe compliance): their effect is below the noise "
-                        "(default 0.1; 0 keeps every linearly independent parameter). Effect parameters are "
-                        "always estimated when linearly identifiable")
+                        "(default 0.1; 0 keeps every linearly independent parameter). Other effects' parameters "
+                        "are always estimated when linearly identifiable")
 
 
 def register(sub) -> None:
