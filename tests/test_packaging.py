@@ -41,6 +41,15 @@ def test_load_description_takes_a_shipped_arm_by_name(tmp_path, monkeypatch):
         load_description("aacmm7")
 
 
+def test_missing_arm_file_names_the_shipped_arms(tmp_path, monkeypatch, capsys):
+    pts = ROOT / "examples" / "data" / "paper-ring-xyz" / "points.csv"
+    monkeypatch.chdir(tmp_path)                      # as after a pip install: no urdf/ folder here
+    assert main(["tip", str(pts), "--arm", "urdf/aacmm7.dh.toml", "-o", "a.csv"]) == 2
+    err = capsys.readouterr().err
+    assert "urdf/aacmm7.dh.toml" in err and "--arm aacmm7" in err and "Traceback" not in err
+    assert not (tmp_path / "a.csv").exists()
+
+
 def test_tip_with_arm_by_name_from_another_folder(tmp_path, monkeypatch, capsys):
     pts = ROOT / "examples" / "data" / "paper-ring-xyz" / "points.csv"
     monkeypatch.chdir(tmp_path)
