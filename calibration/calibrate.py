@@ -169,6 +169,7 @@ class CalibrationResult:
     prior_centre: np.ndarray | None = None    # its centre (full parameter vector [SI])
     log_evidence: float | None = None         # Laplace log evidence of the fit with its prior (weights as given)
     evidence: list = field(default_factory=list)   # the scales tried when the prior scale came from the evidence
+    model_check: dict | None = None           # model_output.model_check of this fit, when refine_torques made it
 
     # -- access by name ----------------------------------------------------------------------------
     @property
