@@ -202,7 +202,8 @@ def mpe_options(p) -> None:
     from .validation import MPE_TESTS
     g = p.add_argument_group(
         "standard tests with a maximum permissible error (MPE)",
-        "Each test of the validation (calibrated model, on the training data and on the held-out data) is "
+        "Each test of the validation (calibrated model, on the training data and on the held-out data; for "
+        "close-loop: the final model on every point and the design fit on the outer test set) is "
         "plotted (conformance_*.png) with every tested item; given its MPE [um] (a finite number > 0) it "
         "gets PASS (every item within the MPE) or FAIL in the console, summary.json and the report. Without "
         "these options: the plots and figures without pass/fail. Details: docs/calibration.md.")
@@ -303,15 +304,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
                         drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference, **kw)
         res = refine_torques(res, covariance=args.covariance, outlier_threshold=args.outlier_threshold,
                              **{k: v for k, v in kw.items() if k == "rank_tol"})
-        mpe = _mpe(args)
-        val_train, conf_train = _validation(res, res.data, mpe)
-        val_test, conf_test = _validation(res, test, mpe) if test is not None else (None, None)
-        conf = {"mpe_given": bool(mpe), "mpe_um": {k: v * 1e6 for k, v in mpe.items()},
-                "note": ("PASS: every tested item of the calibrated model within the MPE given by its "
-                         "--mpe-*-um option; FAIL: at least one beyond." if mpe else
-                         "No --mpe-*-um option given: the standard tests' figures, no pass/fail.")
-                        + " Items: every certified length, sphere and seat of the data set (docs/calibration.md).",
-                "training": conf_train, "holdout": conf_test}
+        val_train, val_test, conf = conformance_entry(_mpe(args), (res, res.data),
+                                                      None if test is None else (res, test))
         files = write_outputs(res, out.dir, inputs=inputs, validation_training=val_train,
                               validation_holdout=val_test, plots=not args.no_plots,
                               extra={"inputs": {"points": str(args.points), "artefacts": str(args.artefacts),
@@ -348,16 +342,39 @@ def run_calibrate(args: argparse.Namespace) -> int:
             for r in rows:
                 log.info(f"  {r['label']}: {with_u(r['before'], r['u_before'])} -> {with_u(r['after'], r['u_after'])} "
                       f"{r['unit']} ({r['ratio']:.1f}x)")
-    from .report import conformance_lines
-    if conf_train or conf_test:
-        log.info("standard tests, calibrated model (ASME B89.4.22 / ISO 10360-12):")
-        for line in conformance_lines(conf):
-            log.info(line)
+    log_conformance(conf)
     scatter = res.probing_scatter()
     log.info(f"model file -> {files['description']} (covariance {files['covariance'].name}"
              + (f"; probing scatter {scatter * 1e6:.4g} um per axis, tip's default" if scatter is not None else "")
              + f"); report -> {files['report']}")
     return 0
+
+
+def conformance_entry(mpe: dict, training: tuple, holdout: tuple | None = None, sets: str = "") -> tuple:
+    """The standard tests of ``calibrate`` and ``close-loop`` (one implementation): ``training`` and
+    ``holdout`` each ``(result, data)``, the fit whose calibrated model is tested and the data it is tested
+    on (``holdout`` None: none). Returns (validation rows on training, on holdout or None, the summary's
+    ``conformance`` entry: ``mpe_given``, ``mpe_um``, ``note`` (``sets`` appended: what the two data sets
+    are), ``training``, ``holdout``)."""
+    val_train, conf_train = _validation(*training, mpe)
+    val_test, conf_test = _validation(*holdout, mpe) if holdout is not None else (None, None)
+    conf = {"mpe_given": bool(mpe), "mpe_um": {k: v * 1e6 for k, v in mpe.items()},
+            "note": ("PASS: every tested item of the calibrated model within the MPE given by its "
+                     "--mpe-*-um option; FAIL: at least one beyond." if mpe else
+                     "No --mpe-*-um option given: the standard tests' figures, no pass/fail.")
+                    + " Items: every certified length, sphere and seat of the data set (docs/calibration.md)."
+                    + (f" {sets}" if sets else ""),
+            "training": conf_train, "holdout": conf_test}
+    return val_train, val_test, conf
+
+
+def log_conformance(conf: dict) -> None:
+    """The standard tests of :func:`conformance_entry` on the console."""
+    from .report import conformance_lines
+    if conf["training"] or conf["holdout"]:
+        log.info("standard tests, calibrated model (ASME B89.4.22 / ISO 10360-12):")
+        for line in conformance_lines(conf):
+            log.info(line)
 
 
 def _validation(res, data, mpe):
