@@ -477,6 +477,12 @@ def read_force_signal(path: str | Path) -> ForceSignal:
             found.append(("two-channel", ("f_bend_N", "f_axial_N"), hline))
         else:
             raise InputError("expected force columns fx_N, fy_N, fz_N or f_bend_N, f_axial_N", path, hline)
+        known = ("time_s",) + found[-1][1]
+        for h in header:
+            if h not in known or header.count(h) > 1:
+                what = "repeated column" if h in known else "unknown column"
+                raise InputError(f"{what} '{h}' (the columns of this force signal are {', '.join(known)}; "
+                                 "docs/formats.md §5)", path, hline, h)
         return list(range(len(header))), []
     blocks = [(h, b) for _, h, b in iter_csv_blocks(path, "the force signal", check)]
     if not blocks or not sum(len(b.lines) for _, b in blocks):
