@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._errors import InputError, parse_toml, read_text
+from ._errors import InputError, open_input, parse_toml, read_text
 from .description import ArmDescription, JointRow, Probe, TomlReader, load_description
 from .shipped import arm_path
 from .urdf import ELASTIC_JOINTS, _origin_matrix
@@ -95,10 +95,11 @@ def _read_urdf(path: str | Path) -> _Urdf:
     import yourdfpy
 
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise InputError(f"cannot read the URDF: {exc.strerror}", path) from None
+    with open_input(path, "the URDF") as fh:
+        try:
+            data = fh.read()
+        except OSError as exc:
+            raise InputError(f"cannot read the URDF: {exc.strerror}", path) from None
     tree = _parse_xml(path, data)
     root = tree.getroot()
     if root.tag != "robot":
