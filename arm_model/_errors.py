@@ -38,7 +38,7 @@ class InputError(AacmmError):
         if line is not None:
             where.append(f"line {line}")
         if column is not None:
-            where.append(f"column '{column}'" if not column.startswith("key ") else column)
+            where.append(column if column.startswith(("key ", "column ")) else f"column '{column}'")
         prefix = ", ".join(where)
         super().__init__(f"{prefix}: {message}" if prefix else message)
 
@@ -78,21 +78,25 @@ def open_input(path: str | Path, what: str):
     a FIFO would wait forever)."""
     path = Path(path)
     try:
-        fh = open(path, "rb")
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))     # a FIFO's open would wait
     except IsADirectoryError:
         raise InputError(f"cannot read {what}: it is a folder, not a file", path) from None
     except OSError as exc:
         raise InputError(f"cannot read {what}: {exc.strerror or exc}", path) from None
     try:
-        mode = os.fstat(fh.fileno()).st_mode
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            raise InputError(f"cannot read {what}: " + ("it is a folder, not a file" if stat.S_ISDIR(mode)
+                                                       else "not a regular file"), path)
+        if hasattr(os, "set_blocking"):
+            os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
     except OSError as exc:
-        fh.close()
+        os.close(fd)
         raise InputError(f"cannot read {what}: {exc.strerror or exc}", path) from None
-    if not stat.S_ISREG(mode):
-        fh.close()
-        raise InputError(f"cannot read {what}: " + ("it is a folder, not a file" if stat.S_ISDIR(mode)
-                                                   else "not a regular file"), path)
-    return fh
+    except BaseException:
+        os.close(fd)
+        raise
 
 
 def read_text(path: str | Path, what: str) -> str:

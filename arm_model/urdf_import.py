@@ -28,7 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ._csv import parse_number
 from ._errors import InputError, open_input, parse_toml, read_text
+from ._units import implausible
 from .description import ArmDescription, JointRow, Probe, TomlReader, load_description
 from .shipped import arm_path
 from .urdf import ELASTIC_JOINTS, _origin_matrix
@@ -51,6 +53,14 @@ _NUMERIC = {
     "mimic": {"multiplier": 1, "offset": 1}, "calibration": {"rising": 1, "falling": 1},
     "safety_controller": {"soft_lower_limit": 1, "soft_upper_limit": 1, "k_position": 1, "k_velocity": 1},
 }
+#: (tag, attribute) -> the quantity whose plausible range (arm_model._units.PLAUSIBLE_SI) its numbers keep
+_QUANTITY = {("origin", "xyz"): "length", ("origin", "rpy"): "angle", ("mass", "value"): "mass", ("axis", "xyz"): "ratio",
+             ("sphere", "radius"): "length", ("cylinder", "radius"): "length", ("cylinder", "length"): "length",
+             ("box", "size"): "length"}
+#: (tag, attribute) whose numbers are sizes, masses, or colours: never negative
+_NOT_NEGATIVE = {("mass", "value"), ("sphere", "radius"), ("cylinder", "radius"), ("cylinder", "length"),
+                 ("box", "size"), ("mesh", "scale"), ("color", "rgba"), ("inertia", "ixx"), ("inertia", "iyy"),
+                 ("inertia", "izz")}
 _ELASTIC_TYPES = dict(zip(ELASTIC_JOINTS, ("revolute", "revolute", "prismatic")))
 
 
@@ -113,13 +123,20 @@ def _read_urdf(path: str | Path) -> _Urdf:
             text = el.get(attr)
             if text is None:
                 continue
-            try:
-                vals = [float(v) for v in text.split()]
-            except ValueError:
-                vals = []
-            if len(vals) != n or not all(math.isfinite(v) for v in vals):
+            vals = [parse_number(v) for v in text.split()]
+            if len(vals) != n or not all(v is not None and math.isfinite(v) for v in vals):
                 raise InputError(f"<{el.tag} {attr}=...> must be {n} finite number{'s' if n > 1 else ''}, "
                                  f"got {text!r}", path, el.sourceline, f"key '{el.tag}.{attr}'")
+            quantity = _QUANTITY.get((el.tag, attr))
+            wrong = implausible(vals, quantity) if quantity else None
+            if wrong:
+                raise InputError(f"<{el.tag} {attr}=...>: {wrong[1]}", path, el.sourceline, f"key '{el.tag}.{attr}'")
+            if (el.tag, attr) in _NOT_NEGATIVE and min(vals) < 0:
+                raise InputError(f"<{el.tag} {attr}=...> must not be negative, got {text!r}", path, el.sourceline,
+                                 f"key '{el.tag}.{attr}'")
+            if el.tag == "color" and max(vals) > 1:
+                raise InputError(f"<color rgba=...> takes four numbers in [0, 1], got {text!r}", path,
+                                 el.sourceline, f"key '{el.tag}.{attr}'")
     links, joints = {}, {}
     for el in root.findall("link"):
         name = el.get("name")
