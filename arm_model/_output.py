@@ -69,8 +69,8 @@ def resolved(path: str | Path) -> Path:
     """``path`` with its symbolic links resolved (as far as they exist); a link loop is an InputError."""
     try:
         return Path(path).resolve()
-    except (RuntimeError, OSError) as exc:     # Python < 3.13: RuntimeError on a loop; later: OSError ELOOP
-        raise InputError(f"cannot follow the path: a loop of symbolic links ({exc})", path) from None
+    except (RuntimeError, OSError):     # Python < 3.13: RuntimeError on a loop; later: OSError ELOOP
+        raise InputError("cannot follow the path: a loop of symbolic links", path) from None
 
 
 def guard_output(out: str | Path, inputs=()) -> Path:

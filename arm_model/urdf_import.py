@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import io
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -69,6 +69,8 @@ class LinkMass:
     """A link's mass [kg] and centre of mass [m] in its own frame (a URDF ``<inertial>``)."""
     mass: float
     com: tuple[float, float, float]
+    #: where it was read (the masses file and the line of its [[link]]), for messages
+    source: tuple[str, int | None] | None = field(default=None, compare=False)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -322,7 +324,8 @@ def load_masses(path: str | Path) -> dict[str, LinkMass]:
             raise r.error(f"mass must be in [0, 10000] kg, got {vals['mass']:g}", "link", i, "mass_kg")
         if any(abs(vals.get(k, 0.0)) > 100.0 for k in ("com_x", "com_y", "com_z")):
             raise r.error("a centre of mass more than 100 m from its link frame is not plausible", "link", i)
-        out[name] = LinkMass(vals["mass"], tuple(vals.get(k, 0.0) for k in ("com_x", "com_y", "com_z")))
+        out[name] = LinkMass(vals["mass"], tuple(vals.get(k, 0.0) for k in ("com_x", "com_y", "com_z")),
+                             (str(path), r.lines.get(("link", i, "name"), r.lines.get(("link", i)))))
     return out
 
 
@@ -352,10 +355,12 @@ def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None =
     """
     u = _read_urdf(path)
     if masses:
-        for lname in masses:
+        for lname, m in masses.items():
             if lname not in u.link_elements:
-                raise InputError(f"the masses name link '{lname}', which the URDF does not have "
-                                 f"(links: {', '.join(u.link_elements)})", u.path)
+                where = m.source if isinstance(m, LinkMass) and m.source else (u.path, None)
+                raise InputError(f"the masses name link '{lname}', which the URDF {u.path} does not have "
+                                 f"(links: {', '.join(u.link_elements)})", where[0], where[1],
+                                 "key 'link.name'")
     ch = _chain(u, tip_frame)
     folded = _fold_masses(u, ch, masses)
     rows = []
