@@ -20,7 +20,9 @@ from __future__ import annotations
 import csv
 from decimal import ROUND_HALF_EVEN, Decimal
 import io
+import os
 import re
+import stat
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,11 +31,12 @@ import numpy as np
 
 from ._errors import InputError, decode_text, open_input
 
-__all__ = ["parse_number", "csv_records", "CsvBlock", "iter_csv_blocks", "format_csv"]
+__all__ = ["parse_number", "csv_records", "CsvBlock", "iter_csv_blocks", "csv_spans", "format_csv"]
 
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-]?(?:nan|inf|infinity)",
                      re.IGNORECASE)
 BLOCK_BYTES = 1 << 22          # 4 MiB (about 37 000 points rows): small temporaries, few page faults
+PARALLEL_BYTES = 1 << 25       # 32 MiB (about 300 000 points rows): a file worth reading in parallel parts
 
 
 def parse_number(cell: str) -> float | None:
@@ -336,16 +339,77 @@ def _decode(data: bytes, path, first_line: int) -> str:
     return decode_text(data, path, first_line)
 
 
+def _find_header(data: bytes, path, line_no: int):
+    """The header in ``data`` (whole lines from line ``line_no``): the first non-blank line.
+    ``(names, line, end)``: stripped names, its line and the offset after it; None if ``data`` holds
+    only blank lines."""
+    pos = 0
+    while pos < len(data):
+        nl = data.find(b"\n", pos)
+        end = len(data) if nl < 0 else nl
+        raw = _decode(data[pos:end], path, line_no)
+        if raw.strip():
+            recs = csv_records(raw, str(path), line_no)
+            if recs:
+                return [h.strip() for h in recs[0][1]], line_no, end + 1
+        line_no += 1
+        pos = end + 1
+    return None
+
+
+def csv_spans(path: str | Path, parts: int, min_bytes: int | None = None) -> tuple | None:
+    """Split a large CSV file into ``parts`` byte ranges of whole lines after its header, for reading
+    in parallel with :func:`iter_csv_blocks` (``span``, ``known_header``).
+    ``((header_line, names), [(start, stop), ...])``: the first range starts at 0 (it holds the
+    header), the others at a line start after it. None for a file under ``min_bytes``, not a regular
+    file, or whose header is not in its first MiB (default ``min_bytes``: :data:`PARALLEL_BYTES`): the
+    caller reads it whole (with its located errors)."""
+    try:
+        st = os.stat(path)
+        if parts < 2 or st.st_size < (PARALLEL_BYTES if min_bytes is None else min_bytes) \
+                or not stat.S_ISREG(st.st_mode):
+            return None
+        size = st.st_size
+        with open(path, "rb") as fh:
+            head = fh.read(1 << 20)
+            bom = 3 if head.startswith(b"\xef\xbb\xbf") else 0
+            cut = head.rfind(b"\n") + 1
+            found = _find_header(head[bom:cut], path, 1) if cut > bom else None
+            if found is None:
+                return None
+            names, line, end = found
+            bounds = [0]
+            for k in range(1, parts):
+                fh.seek(max(bom + end, size * k // parts) - 1)
+                tail = fh.read(1 << 16)
+                nl = tail.find(b"\n")
+                if nl < 0:
+                    return None
+                bounds.append(fh.tell() - len(tail) + nl + 1)
+    except (OSError, InputError):
+        return None                                       # the serial reader says what is wrong
+    bounds.append(size)
+    if any(b >= c for b, c in zip(bounds[:-1], bounds[1:])):
+        return None
+    return (line, names), list(zip(bounds[:-1], bounds[1:]))
+
+
 def iter_csv_blocks(path: str | Path, what: str, header_check, block_bytes: int = BLOCK_BYTES,
-                    data: bytes | None = None):
+                    data: bytes | None = None, span: tuple[int, int] | None = None,
+                    known_header: tuple[int, list[str]] | None = None):
     """Read a CSV file (or ``data``, its bytes, with ``path`` only named in messages) in blocks of
     whole lines.
 
     ``header_check(header: list[str], header_line: int) -> (num_idx, txt_idx)`` validates the header
     (stripped names) and says which columns are numbers and which are kept as text. Yields
-    :class:`CsvBlock` (possibly empty). Raises InputError for an empty file or a file with no
-    header; the caller checks that rows came.
+    ``(header_line, header, CsvBlock)`` (the block possibly empty). Raises InputError for an empty
+    file or a file with no header; the caller checks that rows came.
+
+    ``span=(start, stop)``: only the bytes ``start:stop`` of the file (whole lines, from
+    :func:`csv_spans`); a span that starts after the header takes it as ``known_header=(line,
+    names)`` and numbers its lines by counting the newlines before ``start``.
     """
+    start, stop = span if span is not None else (0, None)
     if data is not None:
         fh = io.BytesIO(data)
     else:
@@ -353,9 +417,19 @@ def iter_csv_blocks(path: str | Path, what: str, header_check, block_bytes: int 
     with fh:
         carry, line_no, header, first = b"", 1, None, True
         num_idx = txt_idx = None
+        try:
+            if start:
+                while fh.tell() < start:
+                    line_no += fh.read(min(block_bytes, start - fh.tell())).count(b"\n")
+                header_line, header = known_header
+                num_idx, txt_idx = header_check(header, header_line)
+                first = False
+        except OSError as exc:
+            raise InputError(f"cannot read {what}: {exc.strerror}", path) from None
         while True:
             try:
-                block = fh.read(block_bytes)
+                want = block_bytes if stop is None else min(block_bytes, stop - fh.tell())
+                block = fh.read(want) if want > 0 else b""
             except OSError as exc:
                 raise InputError(f"cannot read {what}: {exc.strerror}", path) from None
             eof = not block
@@ -370,28 +444,16 @@ def iter_csv_blocks(path: str | Path, what: str, header_check, block_bytes: int 
                 data, carry = data[:cut], data[cut:]
             first = False
             if header is None:
-                # the header: the first non-blank line
-                pos = 0
-                while pos < len(data):
-                    nl = data.find(b"\n", pos)
-                    end = len(data) if nl < 0 else nl
-                    raw = _decode(data[pos:end], path, line_no)
-                    if raw.strip():
-                        recs = csv_records(raw, str(path), line_no)
-                        if recs:
-                            header = [h.strip() for h in recs[0][1]]
-                            num_idx, txt_idx = header_check(header, line_no)
-                            header_line = line_no
-                            line_no += 1
-                            pos = end + 1
-                            break
-                    line_no += 1
-                    pos = end + 1
-                data = data[pos:]
-                if header is None:
+                found = _find_header(data, path, line_no)
+                if found is None:
                     if eof:
                         raise InputError("the file is empty (expected a header line and data)", path, 1)
+                    line_no += data.count(b"\n")
                     continue
+                header, header_line, pos = found
+                num_idx, txt_idx = header_check(header, header_line)
+                line_no = header_line + 1
+                data = data[pos:]
             if data:
                 text = _decode(data, path, line_no)     # located error for a bad byte
                 blk = _fast_block(data, text, str(path), line_no, header, num_idx, txt_idx)

@@ -42,6 +42,9 @@ class InputError(AacmmError):
         prefix = ", ".join(where)
         super().__init__(f"{prefix}: {message}" if prefix else message)
 
+    def __reduce__(self):           # pickled whole (from a worker process), not only its text
+        return type(self), (self.reason, self.path, self.line, self.column)
+
 
 class NumericalError(AacmmError):
     """A numerical failure (no convergence, rank deficiency) that must not pass silently."""

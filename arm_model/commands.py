@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import os
+import shutil
 from .cli import command_help
 from pathlib import Path
 
@@ -189,36 +191,117 @@ def tip_table(arm, points) -> dict:
     return cols
 
 
+class _TipTally:
+    """What ``aacmm tip`` reports of the points it wrote (merged over the parts of a file read in
+    parallel, in file order)."""
+
+    def __init__(self, desc, path: str):
+        self.n, self.measurements, self.kinds = 0, {}, set()
+        self.d_sum, self.d_max, self.flagged, self.flagged_count = 0.0, 0.0, [], 0
+        self.limits = JointLimitTally(desc, path)
+
+    def add(self, block, cols) -> None:
+        self.n += len(block)
+        self.measurements.update(dict.fromkeys(block.measurement.tolist()))
+        self.kinds.add(block.force_kind)
+        d = cols["deflection_um"]
+        self.d_sum, self.d_max = self.d_sum + float(d.sum()), max(self.d_max, float(d.max()))
+        if len(self.flagged) < 11:
+            self.flagged += block.lines[cols["over_force"].astype(bool)][:11].tolist()
+        self.flagged_count += int(cols["over_force"].sum())
+        self.limits.add(block.q, block.lines)
+
+    def merge(self, other: "_TipTally") -> None:
+        self.n += other.n
+        self.measurements.update(other.measurements)
+        self.kinds |= other.kinds
+        self.d_sum, self.d_max = self.d_sum + other.d_sum, max(self.d_max, other.d_max)
+        self.flagged = (self.flagged + other.flagged)[:11]
+        self.flagged_count += other.flagged_count
+        self.limits.per_joint += other.limits.per_joint
+        self.limits.lines += other.limits.lines
+
+
+def _tip_rows(arm, path, blocks, out: Path, header: bool, extra=None) -> _TipTally:
+    """Write the ``aacmm tip`` rows of ``blocks`` (of the points file ``path``) to ``out`` (appending);
+    ``extra(block)``: more columns (the uncertainties)."""
+    tally = _TipTally(arm.desc, str(path))
+    with open(out, "ab") as fh:
+        for block in blocks:
+            cols = tip_table(arm, block)
+            if extra is not None:
+                cols.update(extra(block))
+            fh.write(format_csv(cols, "%.6f", header=header and tally.n == 0))
+            tally.add(block, cols)
+    return tally
+
+
+def _append(dst: Path, src: Path) -> None:
+    """Append the file ``src`` to the file ``dst`` (in the kernel where it can: copy_file_range)."""
+    with open(src, "rb") as fi, open(dst, "r+b") as fo:
+        size, done = os.fstat(fi.fileno()).st_size, 0
+        fo.seek(0, os.SEEK_END)
+        try:
+            while done < size:
+                n = os.copy_file_range(fi.fileno(), fo.fileno(), size - done)
+                if n == 0:
+                    break
+                done += n
+        except (AttributeError, OSError):   # not on this system or across these file systems
+            pass
+        fi.seek(done)
+        fo.seek(0, os.SEEK_END)
+        shutil.copyfileobj(fi, fo, 1 << 24)
+
+
+def _tip_part(arm, path, out: Path, span, known_header) -> _TipTally:
+    """One part of a large points file, in a worker process (see :func:`run_tip`)."""
+    from . import kinematics
+    kinematics.THREADS = 1                           # the other cores run the other parts
+    return _tip_rows(arm, path, iter_points(path, arm.desc.n_joints, span=span, known_header=known_header), out,
+                     header=span[0] == 0)
+
+
 def run_tip(args: argparse.Namespace) -> int:
-    n, measurements, flagged, flagged_count, kinds = 0, {}, [], 0, set()
-    d_sum, d_max = 0.0, 0.0
-    # block by block: a file of millions of rows in bounded memory; nothing is written on an error
-    with output_file(args.output, [args.points, *arm_inputs(args)]) as tmp, open(tmp, "wb") as fh:
+    # block by block: a file of millions of rows in bounded memory; a large file is read in parts by
+    # worker processes (one a core, up to 2), each part written to its own file and the parts joined in
+    # order; nothing is written on an error (the first error in file order is the one reported)
+    from ._csv import csv_spans
+    from ._parallel import fork_map, workers
+    with output_file(args.output, [args.points, *arm_inputs(args)]) as tmp:
         arm = model_from_args(args)
         desc = arm.desc
         from .uncertainty_cli import parameters_of, tip_columns, wants_uncertainty
         parameters = parameters_of(arm)
-        blocks = iter_points(args.points, desc.n_joints)
         uncertain = wants_uncertainty(args, parameters)
+        split = None if uncertain else csv_spans(args.points, workers())
+        ulines = []
         if uncertain:                   # the uncertainty summary is over all points: one block
-            blocks = [concat_points(blocks)]
-        ulines, limits = [], JointLimitTally(desc, str(args.points))
-        for block in blocks:
-            cols = tip_table(arm, block)
-            if uncertain:
-                ucols, ulines = tip_columns(arm, block, parameters, args)
-                cols.update(ucols)
-            fh.write(format_csv(cols, "%.6f", header=n == 0))
-            n += len(block)
-            measurements.update(dict.fromkeys(block.measurement.tolist()))
-            kinds.add(block.force_kind)
-            d = cols["deflection_um"]
-            d_sum, d_max = d_sum + float(d.sum()), max(d_max, float(d.max()))
-            if len(flagged) < 11:
-                flagged += block.lines[cols["over_force"].astype(bool)][:11].tolist()
-            flagged_count += int(cols["over_force"].sum())
-            limits.add(block.q, block.lines)
-    log.info(f"{n} points in {len(measurements)} measurement(s) -> {args.output}")
+            def extra(block):
+                ucols, lines = tip_columns(arm, block, parameters, args)
+                ulines.extend(lines)
+                return ucols
+            tally = _tip_rows(arm, args.points, [concat_points(iter_points(args.points, desc.n_joints))], tmp, True, extra)
+        elif split is None:
+            tally = _tip_rows(arm, args.points, iter_points(args.points, desc.n_joints), tmp, True)
+        else:
+            known_header, spans = split
+            parts = [tmp] + [tmp.with_name(f"{tmp.name}.part{k}") for k in range(1, len(spans))]
+            try:
+                tallies = fork_map(_tip_part, [(arm, str(args.points), part, span, known_header)
+                                               for part, span in zip(parts, spans)])
+                for part in parts[1:]:
+                    _append(tmp, part)
+            finally:
+                for part in parts[1:]:
+                    part.unlink(missing_ok=True)
+            tally = tallies[0]
+            for t in tallies[1:]:
+                tally.merge(t)
+            if not tally.n:
+                raise InputError("no points after the header line", args.points, known_header[0] + 1)
+    n, kinds, flagged, flagged_count = tally.n, tally.kinds, tally.flagged, tally.flagged_count
+    log.info(f"{n} points in {len(tally.measurements)} measurement(s) -> {args.output}")
     if arm.effects:
         log.info("effects applied: " + ", ".join(e.describe() for e in arm.effects))
     if kinds == {None}:
@@ -227,14 +310,14 @@ def run_tip(args: argparse.Namespace) -> int:
         if "two-channel" in kinds:
             log.info("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not measured "
                   "and is taken as zero")
-        log.info(f"deflection: mean {d_sum / n:.2f} um, max {d_max:.2f} um")
+        log.info(f"deflection: mean {tally.d_sum / n:.2f} um, max {tally.d_max:.2f} um")
     for line in ulines:
         log.info(line)
     if flagged_count:
         log.warning(f"{flagged_count} point(s) over the probe's calibrated force range "
               f"({desc.probe.max_force:g} N), flagged in column over_force; lines {', '.join(map(str, flagged[:10]))}"
               + (" ..." if flagged_count > 10 else ""))
-    log_warnings([w for w in [limits.warning()] if w is not None])
+    log_warnings([w for w in [tally.limits.warning()] if w is not None])
     return 0
 
 

@@ -18,12 +18,12 @@ Sign conventions:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 from .description import ArmDescription
 
 __all__ = ["ModelInputs", "Geometry", "Effect", "EncoderEccentricity", "JointCompliance",
-           "ThermalGrowth", "ForceSensorError", "ProbeCompliance", "EFFECTS", "effect_from_name",
+           "ThermalGrowth", "ForceSensorError", "JointGain", "ProbeCompliance", "EFFECTS", "effect_from_name",
            "REFERENCE_TEMPERATURE_C", "JointHarmonics", "ProbeThermalGrowth", "ProbeComplianceMatrix",
            "ApproachOffset", "LateralCompliance", "joint_frame", "last_frame", "gravity_moment", "contact_moment"]
 
@@ -58,6 +58,13 @@ class Effect:
     """
     joints: tuple[int, ...] | None = None
     key: str = field(default="effect", init=False, repr=False)
+    #: plausible size of an error of each parameter [SI] (None: by unit,
+    #: :data:`calibration.identifiability.PRIOR_SCALES`)
+    plausible_size: ClassVar[float | None] = None
+    #: a calibration parameter of the geometry kind: held, like the description's own parameters, when the
+    #: data resolve it only to worse than ``--min-resolution`` of its plausible size (other effects'
+    #: parameters are estimated whenever linearly identifiable)
+    held_when_weak: ClassVar[bool] = False
 
     def needs(self) -> tuple[str, ...]:
         """Per-point inputs the effect needs beyond q and the wrench."""
@@ -100,6 +107,30 @@ class EncoderEccentricity(Effect):
                 c, s = params[k], params[k + 1]
                 k += 2
                 q[i] = q[i] + c * ops.cos(h * inputs.q[i]) + s * ops.sin(h * inputs.q[i])
+        inputs.q = q
+
+
+@dataclass(frozen=True)
+class JointGain(Effect):
+    """Encoder scale (gain) error: ``q_true = (1 + g) q_enc`` for each joint of ``joints`` (all by
+    default), one gain ``g`` [1] a joint (a wrong gear ratio or encoder line count, a standard parameter of
+    robot calibration). The joint's zero offset stays the description's ``theta_offset``: a gain about
+    another zero differs from this one by an offset only. Over a small range of the joint's angle the gain
+    and the offset (or the first harmonic of an eccentricity) are nearly the same signature; the fit's
+    covariance says how well the data tell them apart. A gain the data resolve only to worse than
+    ``--min-resolution`` of :attr:`plausible_size` is held at its value (e.g. the last joint's, when the
+    ball is near that joint's axis), as the description's own parameters are."""
+    key: str = field(default="joint_gain", init=False, repr=False)
+    plausible_size: ClassVar[float] = 1e-2     # a 1 % scale error of an encoder is already large
+    held_when_weak: ClassVar[bool] = True
+
+    def param_defs(self, desc):
+        return [(f"{desc.joints[i].name}.gain", "1") for i in self.joint_indices(desc)]
+
+    def apply(self, desc, params, inputs, geom, ops):
+        q = list(inputs.q)
+        for k, i in enumerate(self.joint_indices(desc)):
+            q[i] = q[i] + params[k] * inputs.q[i]
         inputs.q = q
 
 
@@ -205,7 +236,7 @@ class ProbeCompliance(Effect):
 
 
 EFFECTS = {cls.__dataclass_fields__["key"].default: cls for cls in
-           (EncoderEccentricity, JointCompliance, ThermalGrowth, ForceSensorError, ProbeCompliance)}
+           (EncoderEccentricity, JointGain, JointCompliance, ThermalGrowth, ForceSensorError, ProbeCompliance)}
 
 
 def effect_from_name(key: str, **kwargs) -> Effect:

@@ -221,11 +221,14 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
 
 
 def iter_points(path: str | Path, n_joints: int | None = None, data: bytes | None = None,
-                block_bytes: int = BLOCK_BYTES):
+                block_bytes: int = BLOCK_BYTES, span: tuple[int, int] | None = None,
+                known_header: tuple[int, list[str]] | None = None):
     """The points of a points CSV (docs/formats.md §3) as :class:`PointSet` blocks of whole lines, file
     order, so that a file of millions of rows is processed in bounded memory. Same checks and
     errors as :func:`read_points` (an error in a later block comes after earlier blocks were yielded).
-    ``data``: the file's bytes instead of reading ``path``."""
+    ``data``: the file's bytes instead of reading ``path``. ``span``, ``known_header``: one part of
+    the file (see :func:`arm_model._csv.csv_spans`); a part may hold no rows (the caller checks the
+    whole file's count)."""
     path = str(path)
     layout = []
 
@@ -233,12 +236,12 @@ def iter_points(path: str | Path, n_joints: int | None = None, data: bytes | Non
         layout.append(_points_layout(header, line, path, n_joints))
         return layout[0].num_idx, layout[0].txt_idx
     count, blocks = 0, 0
-    for _, _, blk in iter_csv_blocks(path, "the points file", check, block_bytes, data):
+    for _, _, blk in iter_csv_blocks(path, "the points file", check, block_bytes, data, span, known_header):
         if len(blk.lines):
             count += len(blk.lines)
             blocks += 1
             yield _points_from_block(layout[0], blk, path)
-    if not count:
+    if not count and span is None:
         raise InputError("no points after the header line", path, layout[0].line + 1)
     log.debug(f"{path}: {count} point row(s) read in {blocks} block(s); columns {', '.join(layout[0].header)}")
 

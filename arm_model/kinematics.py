@@ -18,6 +18,9 @@ from .params import split_params
 __all__ = ["ball_centres", "rigid_centres", "as_wrench", "probe_rotations"]
 
 _CHUNK = 16384
+#: worker threads of every evaluation in this process (None: up to 2, one a core); a worker process of a
+#: command that splits its input over the cores sets 1
+THREADS: int | None = None
 
 
 def as_wrench(wrench, n: int | None = None) -> np.ndarray | None:
@@ -35,6 +38,8 @@ def as_wrench(wrench, n: int | None = None) -> np.ndarray | None:
 
 
 def _default_threads() -> int:
+    if THREADS:
+        return THREADS
     return max(1, min(2, os.cpu_count() or 1))
 
 

@@ -1,8 +1,9 @@
 """Start-up and file speed of the command line: ``aacmm --help``, ``aacmm tip`` on a 2-million-row points
-file (wall time, CPU time and peak memory of the process), ``aacmm ring`` with and without its 17
-force-signal files. Each command runs as its own process (what a user waits for); its CPU time and
-peak resident memory are its own (``os.wait4``). The load average is printed: on a shared machine the
-wall time grows with it, the CPU time much less.
+file (wall time, CPU time and peak memory), ``aacmm ring`` with and without its 17 force-signal files.
+Each command runs as its own process (what a user waits for); its CPU time (``os.wait4``) includes the
+worker processes it forks (``aacmm tip`` reads a large file in parts, one a core, up to 2), its peak
+memory is its own plus an upper bound for the workers (see ``_MEASURED``). The load average is printed:
+on a shared machine the wall time grows with it, the CPU time much less.
 
 ``python -m benchmarks.bench_io [--quick]``: ``--quick`` uses a 200 000-row points file."""
 from __future__ import annotations
@@ -19,22 +20,27 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 QUICK = {"n_rows": 200_000}
 AACMM = [sys.executable, "-c", "import sys; from arm_model.cli import main; sys.exit(main())"]
-# the peak memory of the command's own process: VmHWM at exit (the rusage of a child spawned from this
-# large process also counts the parent's pages it was started from)
+# the peak memory of the command: VmHWM of its own process at exit (the rusage of a child spawned from
+# this large process also counts the parent's pages it was started from), plus, when it forked worker
+# processes (``aacmm tip`` on a large file), their number times the largest worker's peak: an upper
+# bound on the total (the workers share the parent's pages, which this counts again for each)
 _MEASURED = [sys.executable, "-c", """
-import os, sys
+import os, resource, sys
 from arm_model.cli import main
 try:
     rc = main(sys.argv[1:])
 finally:
     hwm = [l.split()[1] for l in open('/proc/self/status') if l.startswith('VmHWM:')]
-    open(os.environ['AACMM_BENCH_HWM'], 'w').write(hwm[0] if hwm else '')
+    from arm_model._parallel import workers
+    child = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    open(os.environ['AACMM_BENCH_HWM'], 'w').write(str(int(hwm[0]) + workers() * child) if hwm else '')
 sys.exit(rc)
 """]
 
 
 def run(args, cwd=None) -> tuple[float, float, float]:
-    """(wall s, CPU s (user + system), peak RSS MiB) of one ``aacmm`` process."""
+    """(wall s, CPU s (user + system, its worker processes included), peak RSS MiB) of one ``aacmm``
+    process."""
     with tempfile.TemporaryFile() as err, tempfile.NamedTemporaryFile("r") as hwm:
         t = time.perf_counter()
         p = subprocess.Popen(_MEASURED + list(map(str, args)), cwd=cwd, stdout=subprocess.DEVNULL, stderr=err,

@@ -329,8 +329,10 @@ def identify(problem: Problem, p, states, candidates, *, stage: str = "start", r
         # (an --effect, a loop candidate) and are estimated with their uncertainty (a joint compliance seen
         # through one plate placement is resolved to tens of percent, and holding it at zero would keep
         # its whole signature in the geometry)
+        # (an effect of the geometry kind, a joint gain, is held as the description's parameters are)
+        geometric = {k for e, sl in model.effect_slices() if e.held_when_weak for k in range(sl.start, sl.stop)}
         weak = [w for w in weakly_determined(jred[:, sel], names, sizes(names), min_resolution)
-                if spec.index(w[0]) < model.base_size]
+                if spec.index(w[0]) < model.base_size or spec.index(w[0]) in geometric]
         if weak and stop:
             raise NumericalError("parameters the data resolve to worse than "
                                  f"{min_resolution:g} of a plausible size ({stage}): "
@@ -339,7 +341,8 @@ def identify(problem: Problem, p, states, candidates, *, stage: str = "start", r
         for name, u, comb in weak:
             du, fac = display_unit(spec.units[spec.index(name)])
             fixed.append(FixedParameter(name, float(p[spec.index(name)]),
-                                        f"weakly determined: the data would resolve it only to u ~ {u * fac:.3g} {du}, "
+                                        f"weakly determined: the data would resolve it only to u ~ {u * fac:.3g}"
+                                        f"{'' if du == '1' else ' ' + du}, "
                                         f"more than {min_resolution:g} of a plausible size; its effect is below "
                                         "the noise", comb, stage))
         kept = [i for i in kept if spec.names[i] not in {w[0] for w in weak}]

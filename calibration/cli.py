@@ -114,7 +114,7 @@ def _common_fit_options(p) -> None:
                    help="parameters to hold at the nominal value (removed from the free set; repeatable)")
     p.add_argument("--effect", action="append", metavar="KEY",
                    help="add an effect of arm_model.effects to the model (repeatable): eccentricity, "
-                        "joint_compliance, thermal, force_sensor, probe_compliance")
+                        "joint_gain, joint_compliance, thermal, force_sensor, probe_compliance")
     sigma_options(p)
     p.add_argument("--rank-tol", type=fraction, default=None,
                    help="relative singular value below which a parameter combination counts as not "

@@ -203,7 +203,8 @@ def point_noise(problem) -> float | None:
 def prior_scales(model, names, priors: dict | None = None, noise: float | None = None,
                  length: float | None = None) -> np.ndarray:
     """Plausible error size [SI] of each parameter: ``priors`` (names or glob patterns -> value) first,
-    then :data:`PRIOR_SCALES` by unit; a compliance [m/N] gets 10 times the description's compliance
+    then the effect's own (``Effect.plausible_size``, e.g. 1 % for a joint gain), then :data:`PRIOR_SCALES`
+    by unit; a compliance [m/N] gets 10 times the description's compliance
     along its axis (``*_z``: axial, else bending), at least 1e-8 m/N.
 
     Lengths [m] and angles [rad] scale together: a length error's plausible size is ``length`` if given,
@@ -214,12 +215,16 @@ def prior_scales(model, names, priors: dict | None = None, noise: float | None =
     probe = model.desc.probe
     lsize = length if length is not None else max(PRIOR_SCALES["m"], NOISE_MULTIPLE * (noise or 0.0))
     factor = lsize / PRIOR_SCALES["m"]
+    own = {spec.names[k]: e.plausible_size for e, sl in getattr(model, "effect_slices", lambda: [])()
+           if e.plausible_size is not None for k in range(sl.start, sl.stop)}
     out = []
     for n in names:
         hit = [v for pat, v in (priors or {}).items() if fnmatch.fnmatchcase(n, pat)]
         unit = spec.units[spec.index(n)]
         if hit:
             out.append(float(hit[0]))
+        elif n in own:
+            out.append(float(own[n]))
         elif unit == "m/N":
             c = probe.axial_compliance if n.endswith("_z") else max(probe.bending_compliance_x,
                                                                     probe.bending_compliance_y)

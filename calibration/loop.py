@@ -534,7 +534,8 @@ def close_loop(points: PointSet, artefacts: Artefacts, desc: ArmDescription, *, 
             the parameters of every effect are always free.
         weights: standard uncertainties of the residuals.
         settings: :class:`LoopSettings`; keyword arguments (``folds=5`` ...) override its fields.
-        families_: candidate families to offer (default all, :data:`calibration.candidates.FAMILIES`).
+        families_: candidate families to offer (default :data:`calibration.candidates.DEFAULT_FAMILIES`: every
+            family of :data:`~calibration.candidates.FAMILIES` but ``joint_gain``).
         extra: user candidates (:class:`calibration.candidates.Candidate`).
         progress: ``callable(str)`` for progress lines.
 

@@ -64,8 +64,9 @@ def register(sub) -> None:
                    help="candidates cross-validated at each step, the best screened first (default 3)")
     p.add_argument("--seed", type=seed, default=0, help="seed of the test-set and fold draws (default 0)")
     p.add_argument("--candidates", default=None, metavar="KEYS",
-                   help="comma-separated candidate families (default all): eccentricity, joint_compliance, thermal, "
-                        "force_sensor, probe_compliance")
+                   help="comma-separated candidate families: eccentricity, joint_gain, joint_compliance, thermal, "
+                        "force_sensor, probe_compliance (default every one but joint_gain, the encoder scale "
+                        "error of each joint, offered on request; see docs/close-loop.md)")
     p.add_argument("--library-only", action="store_true",
                    help="do not build effects from the residual's structure once the library is exhausted "
                         "(default: build them: joint harmonics, per-link and probe thermal growth, a probe "
@@ -85,7 +86,7 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .candidates import FAMILIES
+    from .candidates import DEFAULT_FAMILIES, FAMILIES
     from .data import Weights
     from .loop import LoopSettings, close_loop
     from .loop_report import before_after_text, write_loop_report
@@ -103,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
     desc = arm.desc
     effects = model_effects(arm, args.effect).effects
     if effects and families is None:
-        families = tuple(f for f in FAMILIES if f not in {e.key for e in effects})
+        families = tuple(f for f in DEFAULT_FAMILIES if f not in {e.key for e in effects})
     points = read_points(args.points, desc.n_joints)
     artefacts = read_artefacts(args.artefacts)
     reference = read_points(args.reference_points, desc.n_joints) if args.reference_points else None

@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from arm_model import PinocchioArm, ball_centres
-from arm_model.effects import (EncoderEccentricity, ForceSensorError, JointCompliance, ProbeCompliance,
+from arm_model.effects import (EncoderEccentricity, ForceSensorError, JointCompliance, JointGain, ProbeCompliance,
                                ThermalGrowth)
 from arm_model.model import ArmModel, AuxData
 from conftest import assert_close
 
-ALL = (EncoderEccentricity(), JointCompliance(), ThermalGrowth(), ForceSensorError(),
+ALL = (EncoderEccentricity(), JointGain(), JointCompliance(), ThermalGrowth(), ForceSensorError(),
        ProbeCompliance(anisotropic=True, axial=True))
 
 
@@ -54,6 +54,16 @@ def test_eccentricity_is_a_reading_error_of_its_joint(nominal):
     q = rng.uniform(-3, 3, (20, 7))
     q_true = q.copy()
     q_true[:, 1] += a * np.sin(q[:, 1] + phi)          # a sin(q + phi), by hand
+    assert_close(model.ball_centres(q, None, p), ball_centres(nominal, q_true), atol=1e-15)
+
+
+def test_joint_gain_scales_its_joint_reading(nominal):
+    model = ArmModel(nominal, (JointGain(joints=(3,)),))
+    assert model.spec.names[-1:] == ("j4.gain",) and model.spec.units[-1] == "1"
+    p = model.spec.vector({"j4.gain": 3e-3})
+    q = np.random.default_rng(4).uniform(-3, 3, (20, 7))
+    q_true = q.copy()
+    q_true[:, 3] *= 1.003                               # (1 + g) q, by hand
     assert_close(model.ball_centres(q, None, p), ball_centres(nominal, q_true), atol=1e-15)
 
 

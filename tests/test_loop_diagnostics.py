@@ -95,6 +95,9 @@ def test_candidates_follow_the_data(nominal):
     cands, skipped = library_candidates(nominal, data)
     names = [c.name for c in cands]
     assert "eccentricity j7" in names and "joint compliance j2" in names
+    assert not any(n.startswith("gain ") for n in names)          # offered on request only
+    gains = [c.name for c in library_candidates(nominal, data, families=["joint_gain"])[0]]
+    assert gains == [f"gain j{i}" for i in range(1, 8)]
     assert not any(n.startswith(("force sensor", "probe compliance", "thermal")) for n in names)
     why = {s.name: s.reason for s in skipped}
     assert "no force data" in why["force sensor"] and "temperature" in why["thermal growth"]

@@ -11,8 +11,8 @@ from hypothesis import given, settings, strategies as st
 from arm_model import InputError, parse_description
 from arm_model.cli import main
 from arm_model.description import format_description
-from arm_model.effects import (EFFECTS, EncoderEccentricity, ForceSensorError, JointCompliance, ProbeCompliance,
-                               ThermalGrowth)
+from arm_model.effects import (EFFECTS, EncoderEccentricity, ForceSensorError, JointCompliance, JointGain,
+                               ProbeCompliance, ThermalGrowth)
 from arm_model.io import parse_points, read_points
 from arm_model.model_file import (PARAM_UNITS, Arm, format_model, load_model, parse_model, read_covariance,
                                   write_covariance)
@@ -23,11 +23,12 @@ EFFECT_SETS = {
     "eccentricity": (EncoderEccentricity(joints=(1, 4), harmonics=(1, 3)),),
     "joint_compliance": (JointCompliance(joints=(1, 2)),),
     "joint_compliance_gravity_only": (JointCompliance(joints=(2,), contact=False),),
+    "joint_gain": (JointGain(joints=(0, 3)),),
     "thermal": (ThermalGrowth(),),
     "thermal_per_joint": (ThermalGrowth(joints=(0, 3), per_joint=True),),
     "force_sensor": (ForceSensorError(axes=(0, 2)),),
     "probe_compliance": (ProbeCompliance(anisotropic=True, axial=True),),
-    "all": (EncoderEccentricity(joints=(2,)), JointCompliance(joints=(1,)), ThermalGrowth(), ForceSensorError(),
+    "all": (EncoderEccentricity(joints=(2,)), JointGain(joints=(5,)), JointCompliance(joints=(1,)), ThermalGrowth(), ForceSensorError(),
             ProbeCompliance()),
 }
 

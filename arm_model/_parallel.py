@@ -1,0 +1,79 @@
+"""Work split over forked worker processes (the one place for it).
+
+:func:`fork_map` runs ``func(*args)`` for each ``args`` in its own process, forked from this one (so
+the workers share what is loaded, with nothing pickled on the way in), and returns the results in
+order. An exception in a worker is raised here, the first in argument order (the error of the
+earliest part of a file, as a serial run would give); the other workers are then stopped. Ctrl-C and
+SIGTERM reach the parent, which stops the workers. Where ``fork`` is not available (Windows, macOS'
+default) :func:`workers` is 1 and callers run serially.
+"""
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+import sys
+
+__all__ = ["workers", "fork_map", "WorkerDied"]
+
+
+class WorkerDied(OSError):
+    """A worker process ended without a result (killed, e.g. by the kernel's out-of-memory killer): a
+    failure of the system, reported like one (``aacmm``: the message, exit 2, nothing written)."""
+
+
+def workers(limit: int = 2) -> int:
+    """How many worker processes to use: the cores this process may run on, at most ``limit``; 1
+    where forking is not safe."""
+    if not sys.platform.startswith("linux"):
+        return 1
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cores = os.cpu_count() or 1
+    return max(1, min(limit, cores))
+
+
+def _child(conn, func, args) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)      # the parent handles Ctrl-C and stops us
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    try:
+        result = ("ok", func(*args))
+    except BaseException as exc:                     # noqa: BLE001 - handed to the parent
+        result = ("error", exc)
+    try:
+        conn.send(result)
+    except Exception as exc:                         # noqa: BLE001 - an unpicklable result
+        conn.send(("error", RuntimeError(f"a worker's result could not be returned: {exc}")))
+    conn.close()
+
+
+def fork_map(func, arg_lists) -> list:
+    """``[func(*args) for args in arg_lists]``, each in a forked process (see the module doc)."""
+    ctx = multiprocessing.get_context("fork")
+    procs, done = [], False
+    try:
+        for args in arg_lists:
+            recv, send = ctx.Pipe(duplex=False)
+            proc = ctx.Process(target=_child, args=(send, func, tuple(args)), daemon=True)
+            proc.start()
+            send.close()
+            procs.append((proc, recv))
+        out = []
+        for proc, recv in procs:
+            try:
+                kind, value = recv.recv()
+            except EOFError:
+                proc.join()
+                raise WorkerDied(f"a worker process ended without a result (exit code {proc.exitcode})") from None
+            if kind == "error":
+                raise value
+            out.append(value)
+        done = True
+        return out
+    finally:
+        for proc, recv in procs:
+            if not done and proc.is_alive():
+                proc.terminate()
+            proc.join()
+            recv.close()
