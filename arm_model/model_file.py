@@ -10,8 +10,9 @@ One TOML file (``aacmm calibrate`` and ``aacmm close-loop`` write it, every ``--
   (``param_defs``): ``name``, ``value_<unit>``, ``u_<unit>`` (standard uncertainty; 0 when not
   estimated) and ``state`` ("free", "fixed" or "held") — units from :data:`PARAM_UNITS`;
 * an optional ``[calibration]`` table: ``covariance`` (the covariance file, relative to the TOML),
-  ``written_by`` and ``probing_scatter_um`` (the scatter of one probed ball centre per axis that the
-  calibration's variance components estimated; ``aacmm tip``'s default probing uncertainty).
+  ``written_by`` and ``probing_scatter_um`` (the scatter of the contact itself per axis that the
+  calibration's variance components estimated, net of the encoder and force-sensor noise:
+  :meth:`calibration.CalibrationResult.probing_scatter`; ``aacmm tip``'s default probing uncertainty).
 
 The covariance file (:func:`write_covariance`, :func:`read_covariance`) is a CSV: one row a free
 parameter of the fit, columns ``parameter``, ``unit``, ``value``, ``u`` (in that row's unit) and one
@@ -162,7 +163,8 @@ MAX_PROBING_SCATTER_UM = 1.0e5
 
 def check_calibration_table(tbl, r: TomlReader) -> None:
     """The ``[calibration]`` table of a model file: text keys ``covariance`` and ``written_by``, the
-    number ``probing_scatter_um`` (> 0, at most :data:`MAX_PROBING_SCATTER_UM`)."""
+    number ``probing_scatter_um`` (>= 0: a calibration whose encoder and force-sensor noise alone account for
+    its residual scatter writes 0; at most :data:`MAX_PROBING_SCATTER_UM`)."""
     if not isinstance(tbl, dict):
         raise r.error("'calibration' must be a table", "calibration")
     known = ("covariance", "written_by", "probing_scatter_um")
@@ -172,8 +174,8 @@ def check_calibration_table(tbl, r: TomlReader) -> None:
                           "calibration", key)
         if key == "probing_scatter_um":
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                    or not 0 < value <= MAX_PROBING_SCATTER_UM:
-                raise r.error(f"'{key}' must be a number in (0, {MAX_PROBING_SCATTER_UM:g}] um, got {value!r}",
+                    or not 0 <= value <= MAX_PROBING_SCATTER_UM:
+                raise r.error(f"'{key}' must be a number in [0, {MAX_PROBING_SCATTER_UM:g}] um, got {value!r}",
                               "calibration", key)
         elif not isinstance(value, str) or not value.strip():
             raise r.error(f"'{key}' must be a non-empty text", "calibration", key)
@@ -402,7 +404,7 @@ def format_model(desc: ArmDescription, effects=(), values: dict | None = None, u
         data["effect"] = effect_tables(desc, effects, values or {}, uncertainties, states)
     scatter = None if probing_scatter is None else float(f"{probing_scatter * 1e6:.4g}")
     cal = {k: v for k, v in (("covariance", covariance), ("written_by", written_by),
-                             ("probing_scatter_um", scatter)) if v}
+                             ("probing_scatter_um", scatter)) if v or (k == "probing_scatter_um" and v is not None)}
     if cal:
         data["calibration"] = cal
     return toml_text(data, comment)

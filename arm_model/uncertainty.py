@@ -139,7 +139,7 @@ def default_inputs(desc, *, encoder=None, force=None, torque=None, compliance=No
     elif model_probing is not None:
         probing = model_probing
         src["probing"] = (f"the model file's probing_scatter_um {model_probing * 1e6:.4g} um (its calibration's "
-                          "variance components)")
+                          "variance components, net of the encoder and force-sensor noise)")
     else:
         src["probing"] = "none (0): the arm gives no probing_scatter_um (a model file from calibrate does)"
     for name, arr in (("encoder", enc), ("force", f), ("torque", t), ("compliance", c)):

@@ -40,7 +40,8 @@ def add_input_options(p, force: bool = True) -> None:
                         "the model's covariance holds")
     g.add_argument("--u-probing-um", type=number_in(0, MAX_U_PROBING_UM), default=None, metavar="U",
                    help="probing scatter of a ball centre per axis [um] (default: the model file's "
-                        "probing_scatter_um, which calibrate and close-loop write; 0 without one)")
+                        "probing_scatter_um, which calibrate and close-loop write: their residual scatter net of the "
+                        "encoder and force-sensor noise propagated with the default inputs; 0 without one)")
 
 
 def inputs_from_args(arm, args, has_force: bool) -> InputUncertainty:

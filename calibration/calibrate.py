@@ -109,6 +109,24 @@ def rigid_gauge(problem: Problem, p, free) -> np.ndarray:
     return sol[:, ok]
 
 
+def _input_variances(model: ArmModel, p, data: CalibrationData) -> dict:
+    """The encoder and force-sensor variances [m^2] per axis that the propagation with the default inputs
+    gives a probed point of ``data`` (its points on an artefact feature), averaged over the points and
+    axes: the share of the residual scatter that these inputs account for (:meth:`CalibrationResult.
+    probing_budget`)."""
+    from arm_model.uncertainty import default_inputs, propagate
+    pts = data.points
+    sel = np.flatnonzero(pts.feature != "")
+    if not len(sel):
+        return {"encoders": 0.0, "force sensor": 0.0}
+    inputs = default_inputs(model.desc, compliance=0.0, probing=0.0, has_force=pts.force is not None)
+    if not (np.any(inputs.encoder > 0) or np.any(inputs.force > 0)):
+        return {"encoders": 0.0, "force sensor": 0.0}
+    sub = data.select(sel)
+    out = propagate(model, p, sub.points.q, sub.wrench, sub.aux, inputs=inputs, threads=1)
+    return {k: float(np.mean(out.contributions[k])) for k in ("encoders", "force sensor")}
+
+
 @dataclass
 class CalibrationResult:
     """Everything a fit produced, by name. Lengths [m], angles [rad] (SI) unless a key says otherwise.
@@ -178,17 +196,44 @@ class CalibrationResult:
         return float(self.p[self.model.spec.index(name)])
 
     def probing_scatter(self) -> float | None:
-        """The scatter of one probed ball centre per axis [m] that the fit's variance components estimate
-        (:func:`variance_components`): the estimates of the probed point groups (seats, spheres, rings,
-        cylinders, planes; not the reference instrument, not the lengths), pooled by their redundancy,
-        ``sqrt(sum red_g est_g^2 / sum red_g)``. None when no probed group could be estimated."""
+        """The scatter of the contact itself per axis [m], net of the encoder and force-sensor noise:
+        ``probing_budget()["net"]`` (None when no probed group could be estimated). This is what a model
+        file carries and what :func:`arm_model.uncertainty.propagate` adds beside the propagated encoder
+        and force-sensor contributions, so that they are not counted twice."""
+        budget = self.probing_budget()
+        return None if budget is None else budget["net"]
+
+    def probing_budget(self) -> dict | None:
+        """How the probing scatter [m, per axis] is estimated from the fit's residuals.
+
+        ``gross``: the variance components of the probed point groups (seats, spheres, rings, cylinders,
+        planes; not the reference instrument, not the lengths, :func:`variance_components`), pooled by their
+        redundancy, ``sqrt(sum red_g est_g^2 / sum red_g)``. The residuals hold every random error of a
+        point, so ``gross`` also holds the encoder and force-sensor noise, which the propagation adds on its
+        own: ``encoders`` and ``force sensor`` are their standard uncertainties per axis (RMS over the
+        probed points and axes) propagated through the fitted model with the default inputs
+        (:func:`arm_model.uncertainty.default_inputs`: the description's encoder resolution / sqrt(12), the
+        force sensor's uncertainty when the points carry forces), and
+        ``net = sqrt(max(gross^2 - encoders^2 - force_sensor^2, 0))``. ``floored`` is True when the
+        propagated inputs alone exceed the residual scatter (their stated uncertainties are larger than
+        what this campaign shows; ``net`` is then 0). None when no probed group could be estimated."""
         groups = [v for v in self.variance if v["estimated"] and v["group"] not in ("reference", "length")
                   and v.get("estimate_um") is not None and v["redundancy"] > 0]
         if not groups:
             return None
         red = np.array([v["redundancy"] for v in groups])
         est = np.array([v["estimate_um"] for v in groups]) * 1e-6
-        return float(np.sqrt(np.sum(red * est ** 2) / np.sum(red)))
+        gross = float(np.sqrt(np.sum(red * est ** 2) / np.sum(red)))
+        var = _input_variances(self.model, self.p, self.data)
+        net2 = gross ** 2 - var["encoders"] - var["force sensor"]
+        return {"gross": gross, "encoders": math.sqrt(var["encoders"]), "force sensor": math.sqrt(var["force sensor"]),
+                "net": math.sqrt(max(net2, 0.0)), "floored": bool(net2 <= 0.0)}
+
+    def _budget_um(self) -> dict | None:
+        b = self.probing_budget()
+        return None if b is None else {"gross_um": b["gross"] * 1e6, "encoders_um": b["encoders"] * 1e6,
+                                       "force_sensor_um": b["force sensor"] * 1e6, "net_um": b["net"] * 1e6,
+                                       "floored": b["floored"]}
 
     def uncertainty(self, name: str) -> float:
         """Standard uncertainty [SI] of a free parameter (0 for a fixed or held one)."""
@@ -264,6 +309,7 @@ class CalibrationResult:
                         "factors": dict(self.weights.factors),
                         "from_data": bool(self.weights_history)},
             "variance_components": self.variance, "weights_history": self.weights_history,
+            "probing_scatter": self._budget_um(),
             "prior": None if self.prior_scale is None else {
                 "scale": self.prior_scale, "log_evidence": self.log_evidence, "scales_tried": self.evidence},
             "outliers": [o.to_dict() for o in self.outliers], "dropped": [o.to_dict() for o in self.dropped],

@@ -358,10 +358,15 @@ def run_calibrate(args: argparse.Namespace) -> int:
         log.info("standard tests, calibrated model (ASME B89.4.22 / ISO 10360-12):")
         for line in conformance_lines(conf):
             log.info(line)
-    scatter = res.probing_scatter()
-    log.info(f"model file -> {files['description']} (covariance {files['covariance'].name}"
-             + (f"; probing scatter {scatter * 1e6:.4g} um per axis, tip's default" if scatter is not None else "")
-             + f"); report -> {files['report']}")
+    budget = res.probing_budget()
+    if budget is not None:
+        log.info(f"probing scatter per axis: {budget['gross'] * 1e6:.4g} um in the residuals, of which encoders "
+                 f"{budget['encoders'] * 1e6:.3g} um and force sensor {budget['force sensor'] * 1e6:.3g} um (propagated, "
+                 f"default inputs) -> {budget['net'] * 1e6:.4g} um of the contact itself (tip's default)")
+        if budget["floored"]:
+            log.warning("the propagated encoder and force-sensor noise alone exceed the residual scatter: the probing "
+                        "scatter is set to 0 (their stated uncertainties are larger than this campaign shows)")
+    log.info(f"model file -> {files['description']} (covariance {files['covariance'].name}); report -> {files['report']}")
     return 0
 
 

@@ -141,7 +141,10 @@ def test_probing_scatter_key_reads_writes_and_is_range_checked(nominal):
     # a poor robot fit's estimate (seen: 1244 um from a real robot) reads back; 100 mm does not
     assert parse_model(text.replace("probing_scatter_um = 2.346", "probing_scatter_um = 1244.0"),
                        "m.toml").probing_scatter == pytest.approx(1.244e-3, rel=1e-12)
-    for bad in ("0", "-1.0", "100001.0", '"2"', "nan", "true"):
+    # a calibration whose encoder and force-sensor noise account for all its scatter writes 0: it reads back
+    zero = format_model(nominal, covariance="c.csv", probing_scatter=0.0)
+    assert "probing_scatter_um = 0.0" in zero and parse_model(zero, "m.toml").probing_scatter == 0.0
+    for bad in ("-1.0", "-0.001", "100001.0", '"2"', "nan", "true"):
         with pytest.raises(InputError) as exc:
             parse_model(text.replace("probing_scatter_um = 2.346", f"probing_scatter_um = {bad}"), "m.toml")
         assert "probing_scatter_um" in str(exc.value) and str(exc.value).startswith("m.toml, line ")
@@ -241,12 +244,17 @@ def test_calibrate_writes_a_model_that_tip_and_calibrate_read(tmp_path, capsys):
     assert "links.thermal_alpha" in cov.names and "j2.compliance" in cov.names
     k = cov.names.index("j2.compliance")
     assert cov.u[k] == pytest.approx(fitted["j2.compliance"]["u"], rel=1e-12)
-    # the probing scatter of the variance components, pooled over the probed groups by redundancy (by
-    # hand from summary.json), near the simulator's 2 um; tip's default probing term is exactly it
+    # the probing scatter: the variance components, pooled over the probed groups by redundancy (by hand
+    # from summary.json), net of the propagated encoder and force-sensor noise, near the simulator's 2 um;
+    # tip's default probing term is exactly it
     groups = [v for v in s["variance_components"] if v["estimated"] and v["group"] not in ("reference", "length")]
     red = np.array([v["redundancy"] for v in groups])
     est = np.array([v["estimate_um"] for v in groups])
-    assert arm.probing_scatter * 1e6 == pytest.approx(np.sqrt(red @ est ** 2 / red.sum()), rel=5e-4)
+    budget = s["probing_scatter"]
+    assert budget["gross_um"] == pytest.approx(np.sqrt(red @ est ** 2 / red.sum()), rel=1e-9)
+    assert not budget["floored"] and 0 < budget["encoders_um"] < 1 and 0 < budget["force_sensor_um"] < 2
+    net = np.sqrt(budget["gross_um"] ** 2 - budget["encoders_um"] ** 2 - budget["force_sensor_um"] ** 2)
+    assert arm.probing_scatter * 1e6 == pytest.approx(net, rel=5e-4)
     assert arm.probing_scatter == pytest.approx(2e-6, rel=0.25)
     tip0 = tmp_path / "tip0.csv"
     assert main(["tip", str(sim / "points.csv"), "--arm", str(model), "-o", str(tip0), "--u-probing-um", "0"]) == 0

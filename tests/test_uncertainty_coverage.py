@@ -7,10 +7,12 @@ and whose measured forces get the force sensor's noise (the seed paper's Table 1
 0.0464 N along the stylus): the first calibrates the model, the second is corrected with it, and the
 true ball centres of the second are compared with the corrected ones and their reported covariance
 (the calibration's parameter covariance, the default encoder and force-sensor inputs, the probing
-scatter the calibration estimated: s0 times the stated 2 um). The truth is taken in the fit's own
+scatter the calibration estimated, net of the encoder and force-sensor noise its residuals hold:
+:meth:`CalibrationResult.probing_scatter`, what a model file carries). The truth is taken in the fit's own
 parameterization (:meth:`CalibrationResult.equivalent`: the base frame's rigid motions, which no
 artefact can see, are the fit's). Over 12 seeds the fraction of true centres inside the 95 % interval
-must be 93-97 % per axis.
+must be 93-96.5 % per axis: above that the uncertainty is conservative (counting the encoder and force
+noise twice, in the propagation and in the probing scatter, gave 96.6-96.7 % for the deflected case).
 """
 from __future__ import annotations
 
@@ -54,7 +56,7 @@ def _one(nominal, case: str, seed: int) -> np.ndarray:
     res = calibrate(model, make_data(_measured(train.points, resolution, rng), train.artefacts, model), free,
                     weights=Weights(probe=2e-6))
     pts = _measured(test.points, resolution, rng)
-    inputs = default_inputs(nominal, probing=res.s0 * res.weights.probe, has_force=pts.force is not None)
+    inputs = default_inputs(nominal, probing=res.probing_scatter(), has_force=pts.force is not None)
     out = propagate(model, res.p, pts.q, pts.wrench, parameters=ParameterCovariance(res.free, res.cov), inputs=inputs)
     peq = res.equivalent(p_true)
     exact = test.points           # the true readings and forces
@@ -68,4 +70,4 @@ def test_true_centres_inside_the_95_percent_interval(nominal, case):
     inside = np.concatenate([_one(nominal, case, s) for s in SEEDS])
     frac = inside.mean(axis=0)
     print(f"{case}: {np.round(frac * 100, 1)} %")
-    assert np.all((frac >= 0.93) & (frac <= 0.97)), frac
+    assert np.all((frac >= 0.93) & (frac <= 0.965)), frac
