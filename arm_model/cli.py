@@ -93,7 +93,8 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         prog="aacmm",
         description="Portable measuring arm toolkit: deflection-aware ball centres from encoder angles and "
                     "contact force, simulation, ring-gauge analysis, calibration and closing the loop. "
-                    "Files carry units in their column and key names (mm, deg, N ...); every format: docs/formats.md.",
+                    "Files carry units in their column and key names (mm, deg, N ...); every format: "
+                    "docs/formats.md (in a clone, or DIR/docs/formats.md after `aacmm examples DIR`).",
         epilog="Exit status: 0 done; 2 bad input or a file the system refuses (one message, nothing "
                "written); 3 internal error (please report it); 130 interrupted. docs/guarantees.md")
     parser.add_argument("--version", action=_Version, nargs=0, help="show the toolkit's version and exit")

@@ -404,7 +404,10 @@ def description_from_data(data: dict, r: TomlReader, extra_keys: tuple[str, ...]
 
 
 def load_description(path: str | Path) -> ArmDescription:
-    """Read an arm description TOML file (docs/formats.md §2)."""
+    """Read an arm description TOML file (docs/formats.md §2); a shipped arm's name (``"aacmm7"``) that is
+    not an existing file reads the shipped description, as ``--arm`` does."""
+    from .shipped import arm_path
+    path = arm_path(path)
     return parse_description(read_text(path, "the arm description"), str(path))
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ._csv import BLOCK_BYTES, csv_records, format_csv, iter_csv_blocks
-from ._errors import InputError, did_you_mean, parse_toml, read_text, unknown_key
+from ._errors import InputError, parse_toml, read_text, unknown_key
 from ._output import atomic_write_bytes, guard_output
 from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
@@ -477,27 +477,22 @@ class ForceSignal:
 def read_force_signal(path: str | Path) -> ForceSignal:
     """Read one force-signal CSV (``time_s`` and either f_bend/f_axial or fx/fy/fz)."""
     found = []
-    sensors = {"xyz": ("fx_N", "fy_N", "fz_N"), "two-channel": ("f_bend_N", "f_axial_N")}
 
     def check(header, hline):
-        known = ("time_s",) + sensors["xyz"] + sensors["two-channel"]
-        for k, h in enumerate(header):
-            if h not in known:
-                what = "column without a unit suffix" if split_unit(h) is None else "unknown column"
-                raise InputError(f"{what} '{h}' (the columns of a force signal are time_s and either fx_N, fy_N, "
-                                 f"fz_N or f_bend_N, f_axial_N){did_you_mean(h, known)}", path, hline, h)
-            if h in header[:k]:
-                raise InputError(f"column '{h}' appears twice", path, hline, h)
         if "time_s" not in header:
             raise InputError("missing column 'time_s'", path, hline)
-        kinds = [kind for kind, cols in sensors.items() if any(c in header for c in cols)]
-        if len(kinds) != 1:
-            raise InputError("expected force columns fx_N, fy_N, fz_N or f_bend_N, f_axial_N"
-                             + (" (not both)" if kinds else ""), path, hline)
-        missing = [c for c in sensors[kinds[0]] if c not in header]
-        if missing:
-            raise InputError(f"missing column(s) {', '.join(missing)}", path, hline)
-        found.append((kinds[0], sensors[kinds[0]], hline))
+        if {"fx_N", "fy_N", "fz_N"} <= set(header):
+            found.append(("xyz", ("fx_N", "fy_N", "fz_N"), hline))
+        elif {"f_bend_N", "f_axial_N"} <= set(header):
+            found.append(("two-channel", ("f_bend_N", "f_axial_N"), hline))
+        else:
+            raise InputError("expected force columns fx_N, fy_N, fz_N or f_bend_N, f_axial_N", path, hline)
+        known = ("time_s",) + found[-1][1]
+        for h in header:
+            if h not in known or header.count(h) > 1:
+                what = "repeated column" if h in known else "unknown column"
+                raise InputError(f"{what} '{h}' (the columns of this force signal are {', '.join(known)}; "
+                                 "docs/formats.md §5)", path, hline, h)
         return list(range(len(header))), []
     blocks = [(h, b) for _, h, b in iter_csv_blocks(path, "the force signal", check)]
     if not blocks or not sum(len(b.lines) for _, b in blocks):

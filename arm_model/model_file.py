@@ -391,6 +391,10 @@ def load_model(path, tip_frame: str | None = None, probe: dict | None = None, ma
         return Arm(load_arm(path, tip_frame, probe, masses))
     if tip_frame:
         raise InputError("--tip-frame is for an arm given as a URDF; this arm is a TOML file", path)
+    if not path.exists():
+        from .shipped import SHIPPED_ARMS
+        raise InputError("cannot read the arm model: no such file (a shipped arm is named without a path: "
+                         f"{', '.join(f'--arm {n}' for n in SHIPPED_ARMS)})", path)
     return parse_model(read_text(path, "the arm model"), str(path))
 
 

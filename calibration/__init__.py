@@ -6,7 +6,7 @@ Typical use::
     from arm_model.model import ArmModel
     from calibration import make_data, split_holdout, calibrate, Weights
 
-    model = ArmModel(load_description("urdf/aacmm7.dh.toml"))          # effects optional
+    model = ArmModel(load_description("aacmm7"))          # effects optional
     data = make_data(read_points("points.csv", 7), read_artefacts("artefacts.toml"), model,
                      reference=read_points("points-ref.csv", 7))        # tracker points optional
     train, test = split_holdout(data, 0.2, seed=0)                      # by measurement

@@ -140,7 +140,7 @@ def register(sub) -> None:
                     "calibrated model file (the description with every effect and its parameters, TOML, read by every "
                     "--arm), its covariance (CSV) and URDF, summary.json, CSV tables and report.html.",
         epilog="Parameter names: docs/calibration.md. Example: aacmm calibrate points.csv artefacts.toml "
-               "--arm urdf/aacmm7.dh.toml --reference-points points-ref.csv --holdout 0.2 -o out/cal")
+               "--arm aacmm7 --reference-points points-ref.csv --holdout 0.2 -o out/cal")
     campaign_inputs(c)
     _common_fit_options(c)
     c.add_argument("--holdout", default=None,

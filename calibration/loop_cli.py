@@ -39,7 +39,7 @@ def register(sub) -> None:
                     "every --arm applies it), summary.json, report.html (with PNG plots) and before-after.txt; "
                     "prints the "
                     "before/after table of the held-out test set.",
-        epilog="Example: aacmm close-loop points.csv artefacts.toml --arm urdf/aacmm7.dh.toml "
+        epilog="Example: aacmm close-loop points.csv artefacts.toml --arm aacmm7 "
                "--reference-points points-ref.csv -o out/loop. Method and outputs: docs/close-loop.md")
     campaign_inputs(p)
     p.add_argument("--folds", type=at_least(2), default=4,

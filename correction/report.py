@@ -587,6 +587,8 @@ def paper_report(out: str | Path, table_path: str | Path | None = None) -> list[
     for m in P.TABLE2_MODELS:
         t2cols[f"{m}_improvement_pct"] = imp[m]["per_measurement_pct"]
     for m in P.TABLE2_MODELS:
+        t2cols[f"{m}_improvement_paper_formula_pct"] = imp[m]["paper_formula_pct"]
+    for m in P.TABLE2_MODELS:
         t2cols[f"{m}_implied_N"] = forces[m]
     t2cols["after_series_compliance_loo_mm"] = np.array([p["after_fem_plus_series_compliance_loo_mm"]
                                                          for p in s["per_measurement"]])

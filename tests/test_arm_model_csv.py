@@ -168,6 +168,18 @@ def test_force_signal_fast_and_located(tmp_path):
     assert exc.value.line == 1501 and exc.value.column == "fy_N"
 
 
+
+@pytest.mark.parametrize("header, bad", [("time_s,fx_N,fy_N,fz_N,temperature_C", "temperature_C"),
+                                         ("time_s,f_bend_N,f_axial_N,fz_N", "fz_N"),
+                                         ("time_s,fx_N,fy_N,fz_N,f_bend_N,f_axial_N", "f_bend_N")])
+def test_force_signal_unknown_column_is_an_error_naming_it(tmp_path, header, bad):
+    p = tmp_path / "m.csv"
+    n = header.count(",") + 1
+    p.write_text(header + "\n" + ",".join(["0"] * n) + "\n" + ",".join(["0.001"] * n) + "\n")
+    with pytest.raises(InputError) as exc:
+        read_force_signal(p)
+    assert exc.value.line == 1 and exc.value.column == bad and "unknown column" in str(exc.value)
+
 # the fast block reader (cell count checked from the comma positions, text cells decoded once per run)
 # against the cell-by-cell reader: whatever the fast path accepts, the careful one reads the same;
 # whatever the careful one refuses, the fast path hands over (returns None)

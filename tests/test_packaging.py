@@ -31,6 +31,25 @@ def test_shipped_arm_by_name_is_the_nominal_file():
     assert arm_path("some/arm.toml") == Path("some/arm.toml")
 
 
+def test_load_description_takes_a_shipped_arm_by_name(tmp_path, monkeypatch):
+    from arm_model.description import load_description
+    monkeypatch.chdir(tmp_path)                      # no urdf/ here: the name must find the shipped file
+    by_name, by_path = load_description("aacmm7"), load_description(NOMINAL)
+    assert by_name.joints == by_path.joints and by_name.probe == by_path.probe
+    (tmp_path / "aacmm7").write_text("not toml [")  # an existing file of that name is read as given
+    with pytest.raises(Exception):
+        load_description("aacmm7")
+
+
+def test_missing_arm_file_names_the_shipped_arms(tmp_path, monkeypatch, capsys):
+    pts = ROOT / "examples" / "data" / "paper-ring-xyz" / "points.csv"
+    monkeypatch.chdir(tmp_path)                      # as after a pip install: no urdf/ folder here
+    assert main(["tip", str(pts), "--arm", "urdf/aacmm7.dh.toml", "-o", "a.csv"]) == 2
+    err = capsys.readouterr().err
+    assert "urdf/aacmm7.dh.toml" in err and "--arm aacmm7" in err and "Traceback" not in err
+    assert not (tmp_path / "a.csv").exists()
+
+
 def test_tip_with_arm_by_name_from_another_folder(tmp_path, monkeypatch, capsys):
     pts = ROOT / "examples" / "data" / "paper-ring-xyz" / "points.csv"
     monkeypatch.chdir(tmp_path)
