@@ -38,7 +38,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-__all__ = ["NUMPY_OPS", "elastic_displacement", "ball_in_last_frame", "chain_point",
+__all__ = ["NUMPY_OPS", "elastic_displacement", "ball_in_last_frame", "row_motions", "chain_point",
            "ball_centre_expr", "probe_lever"]
 
 NUMPY_OPS = SimpleNamespace(sin=np.sin, cos=np.cos)
@@ -104,53 +104,72 @@ def ball_in_last_frame(p_last, q_e, ops=NUMPY_OPS, rotation=None, lever=None):
                  for k in range(3))
 
 
-def _rotate_axis(axis, c, s, x, y, z):
-    """Rodrigues: rotate (x, y, z) by the angle (cos c, sin s) about the constant unit ``axis``."""
-    kx, ky, kz = axis
-    if (kx, ky, kz) == (0.0, 0.0, 1.0):
-        return c * x - s * y, s * x + c * y, z
-    dot = (kx * x + ky * y + kz * z) * (1 - c)
-    return (x * c + (ky * z - kz * y) * s + kx * dot,
-            y * c + (kz * x - kx * z) * s + ky * dot,
-            z * c + (kx * y - ky * x) * s + kz * dot)
+def row_motions(convention: str, row, q, axis=None) -> list[tuple]:
+    """The one description of each joint convention: the elementary motions of one row of the chain,
+    in application order from its parent frame (the chain is their product).
+
+    Each motion is ``(kind, axis, amount, row indices, is_joint)``: kind ``"R"`` (rotation [rad]) or
+    ``"T"`` (translation [m]) along a local axis (0, 1, 2 for x, y, z, or a constant unit 3-vector), the
+    amount (a value of ``row``, the joint angle ``q``, or their sum), the indices of the row values it
+    depends on, and whether it depends on ``q``. :func:`chain_point` applies them to a point;
+    :mod:`arm_model.jacobian` differentiates them and multiplies them as homogeneous matrices.
+
+    * ``"dh"``:   ``Rz(theta_offset + q) Tz(d) Tx(a) Rx(alpha)``, ``row`` = (theta_offset, d, a, alpha);
+    * ``"mdh"``:  ``Rx(alpha) Tx(a) Rz(theta_offset + q) Tz(d)``, same ``row``;
+    * ``"urdf"``: ``T(x, y, z) Rz(yaw) Ry(pitch) Rx(roll) R(axis, q)``, ``row`` = (x, y, z, roll, pitch,
+      yaw) of the joint origin, ``axis`` its constant unit axis.
+    """
+    if convention == "dh":
+        return [("R", 2, row[0] + q, (0,), True), ("T", 2, row[1], (1,), False),
+                ("T", 0, row[2], (2,), False), ("R", 0, row[3], (3,), False)]
+    if convention == "mdh":
+        return [("R", 0, row[3], (3,), False), ("T", 0, row[2], (2,), False),
+                ("R", 2, row[0] + q, (0,), True), ("T", 2, row[1], (1,), False)]
+    if convention == "urdf":
+        ax = tuple(float(a) for a in axis)
+        return [("T", 0, row[0], (0,), False), ("T", 1, row[1], (1,), False), ("T", 2, row[2], (2,), False),
+                ("R", 2, row[5], (5,), False), ("R", 1, row[4], (4,), False), ("R", 0, row[3], (3,), False),
+                ("R", 2 if ax == (0.0, 0.0, 1.0) else ax, q, (), True)]
+    raise ValueError(f"unknown convention {convention!r}")
 
 
 def chain_point(convention: str, rows, q, point, ops=NUMPY_OPS, axes=None):
     """Map ``point`` (x, y, z) given in the last joint frame to the base frame.
 
     ``rows[i]`` = (theta_offset, d, a, alpha) of joint i for DH/MDH, or (x, y, z, roll, pitch, yaw)
-    of its URDF origin (then ``axes[i]`` is its unit axis); ``q[i]`` its angle [rad]. Works from the
-    last joint inwards, carrying only the point (three numbers a point), never a matrix.
+    of its URDF origin (then ``axes[i]`` is its unit axis); ``q[i]`` its angle [rad]. Applies the
+    motions of :func:`row_motions` from the last joint inwards, carrying only the point (three numbers
+    a point), never a matrix; a constant zero motion is skipped (exact).
     """
     x, y, z = point
     for i in range(len(rows) - 1, -1, -1):
-        if convention == "urdf":    # T_origin(xyz, Rz(yaw) Ry(pitch) Rx(roll)) R(axis, q) p
-            ox, oy, oz, roll, pitch, yaw = rows[i]
-            cq, sq = _cos_sin(q[i], ops)
-            x, y, z = _rotate_axis(axes[i], cq, sq, x, y, z)
-            cr, sr = _cos_sin(roll, ops)
-            y, z = cr * y - sr * z, sr * y + cr * z
-            cp, sp = _cos_sin(pitch, ops)
-            x, z = cp * x + sp * z, -sp * x + cp * z
-            cw, sw = _cos_sin(yaw, ops)
-            x, y = cw * x - sw * y, sw * x + cw * y
-            x, y, z = x + ox, y + oy, z + oz
-            continue
-        theta_offset, d, a, alpha = rows[i]
-        ca, sa = _cos_sin(alpha, ops)
-        ct, st = _cos_sin(theta_offset + q[i], ops)
-        if convention == "dh":     # Rz(theta) Tz(d) Tx(a) Rx(alpha) p
-            y, z = ca * y - sa * z, sa * y + ca * z
-            x = x + a
-            z = z + d
-            x, y = ct * x - st * y, st * x + ct * y
-        elif convention == "mdh":  # Rx(alpha) Tx(a) Rz(theta) Tz(d) p
-            z = z + d
-            x, y = ct * x - st * y, st * x + ct * y
-            x = x + a
-            y, z = ca * y - sa * z, sa * y + ca * z
-        else:
-            raise ValueError(f"unknown convention {convention!r}")
+        for kind, axis, amount, _, _ in reversed(row_motions(convention, rows[i], q[i],
+                                                             None if axes is None else axes[i])):
+            if _is_const(amount):
+                if amount == 0.0:
+                    continue
+                c, s = math.cos(amount), math.sin(amount)
+            elif kind == "R":
+                c, s = ops.cos(amount), ops.sin(amount)
+            if kind == "T":
+                if axis == 0:
+                    x = x + amount
+                elif axis == 1:
+                    y = y + amount
+                else:
+                    z = z + amount
+            elif axis == 2:
+                x, y = c * x - s * y, s * x + c * y
+            elif axis == 0:
+                y, z = c * y - s * z, s * y + c * z
+            elif axis == 1:
+                x, z = c * x + s * z, c * z - s * x
+            else:                 # Rodrigues about a constant unit axis
+                kx, ky, kz = axis
+                dot = (kx * x + ky * y + kz * z) * (1 - c)
+                x, y, z = (x * c + (ky * z - kz * y) * s + kx * dot,
+                           y * c + (kz * x - kx * z) * s + ky * dot,
+                           z * c + (kx * y - ky * x) * s + kz * dot)
     return x, y, z
 
 

@@ -6,7 +6,8 @@ relative:
 * :func:`chain_jacobian`: the ball centre and its derivatives with respect to the geometry of the
   chain (every row value, the probe point, the compliances) and the inputs (joint angles, wrench)
   for N points at once. Each row of the chain is a product of elementary motions (rotations and
-  translations along a local axis, in the order :func:`arm_model.chain.chain_point` applies them);
+  translations along a local axis, :func:`arm_model.chain.row_motions`, the one description of each
+  joint convention that :func:`arm_model.chain.chain_point` applies too);
   one forward pass from the base carries the frame (three axis columns and the origin, numpy
   columns) and records for every elementary motion its base axis ``u`` and the origin ``o`` it acts
   at. The ball ``p`` then moves by ``u x (p - o)`` per radian of a rotation and by ``u`` per metre of
@@ -32,7 +33,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .chain import ball_in_last_frame, elastic_displacement, probe_lever
+from .chain import ball_in_last_frame, elastic_displacement, probe_lever, row_motions
 
 __all__ = ["Dual", "DUAL_OPS", "chain_jacobian", "geometry_entries", "joint_screws", "point_jacobian",
            "direction_jacobian"]
@@ -130,23 +131,6 @@ def geometry_entries(convention: str, n_joints: int) -> list[tuple]:
             + [("w", k) for k in range(6)])
 
 
-def _elementary(convention: str, row, q, axis):
-    """The elementary motions of one row, in application order from its parent frame:
-    (kind "R"/"T", local axis 0/1/2 or a unit 3-vector, amount, row value indices, is the joint angle)."""
-    if convention == "dh":        # Rz(theta + q) Tz(d) Tx(a) Rx(alpha)
-        return [("R", 2, row[0] + q, (0,), True), ("T", 2, row[1], (1,), False),
-                ("T", 0, row[2], (2,), False), ("R", 0, row[3], (3,), False)]
-    if convention == "mdh":       # Rx(alpha) Tx(a) Rz(theta + q) Tz(d)
-        return [("R", 0, row[3], (3,), False), ("T", 0, row[2], (2,), False),
-                ("R", 2, row[0] + q, (0,), True), ("T", 2, row[1], (1,), False)]
-    if convention == "urdf":      # T(xyz) Rz(yaw) Ry(pitch) Rx(roll) R(axis, q)
-        ax = tuple(float(a) for a in axis)
-        return [("T", 0, row[0], (0,), False), ("T", 1, row[1], (1,), False), ("T", 2, row[2], (2,), False),
-                ("R", 2, row[5], (5,), False), ("R", 1, row[4], (4,), False), ("R", 0, row[3], (3,), False),
-                ("R", 2 if ax == (0.0, 0.0, 1.0) else ax, q, (), True)]
-    raise ValueError(f"unknown convention {convention!r}")
-
-
 def _rotate_frame(cols, axis, angle):
     """Columns of ``R Rot(axis, angle)`` from the columns (X, Y, Z) of R."""
     X, Y, Z = cols
@@ -208,7 +192,7 @@ def chain_jacobian(convention: str, rows, p_last, compliance, q, wrench=None, ax
     origin = (0.0, 0.0, 0.0)
     motions = []                  # (kind, u, o, row value columns, joint index or None)
     for i in range(nj):
-        for kind, axis, amount, idx, is_q in _elementary(convention, rows[i], q[i], None if axes is None else axes[i]):
+        for kind, axis, amount, idx, is_q in row_motions(convention, rows[i], q[i], None if axes is None else axes[i]):
             u = _base_axis(cols, axis)
             cols_idx = [m * i + k for k in idx] + ([m * nj + 6 + i] if is_q else [])
             if kind == "R":
@@ -266,7 +250,7 @@ def _row_parts(convention: str, row, axis):
     """One row of the chain as (fixed motion before the joint's rotation, fixed motion after it, the
     rotation's local axis): homogeneous matrices, (4, 4) or (N, 4, 4) for column entries."""
     before, after, joint = _I4, _I4, None
-    for kind, ax, amount, _, is_q in _elementary(convention, row, 0.0, axis):
+    for kind, ax, amount, _, is_q in row_motions(convention, row, 0.0, axis):
         if is_q:
             joint = ax
             if not (isinstance(amount, float) and amount == 0.0):    # a fixed offset (DH/MDH theta_offset)

@@ -38,7 +38,8 @@ from .solver import Prior, blas_threads, levenberg_marquardt, normal_factor
 
 __all__ = ["FixedParameter", "Outlier", "CalibrationResult", "calibrate", "resolve_parameters",
            "default_free", "rigid_gauge", "display_unit", "blas_threads", "identify", "variance_components",
-           "reweighted", "MIN_REDUNDANCY", "row_groups", "standardized_residuals"]
+           "reweighted", "MIN_REDUNDANCY", "row_groups", "row_kinds", "kind_groups", "standardized_residuals",
+           "grouped_standardized"]
 
 
 def display_unit(unit: str) -> tuple[str, float]:
@@ -186,6 +187,7 @@ class CalibrationResult:
     prior_centre: np.ndarray | None = None    # its centre (full parameter vector [SI])
     log_evidence: float | None = None         # Laplace log evidence of the fit with its prior (weights as given)
     evidence: list = field(default_factory=list)   # the scales tried when the prior scale came from the evidence
+    model_check: dict | None = None           # model_output.model_check of this fit, when refine_torques made it
 
     # -- access by name ----------------------------------------------------------------------------
     @property
@@ -677,38 +679,55 @@ MIN_REDUNDANCY = 5.0
 OUTLIER_ROWS = 4.0
 
 
-def row_groups(problem: Problem, by_source: bool = False) -> dict[str, np.ndarray]:
-    """The residual rows of each observation group, {group: row indices}: one group a point kind (seats,
-    spheres, rings, ..., the reference points), and ``length`` for the certified lengths (the groups of
-    :func:`variance_components`); with ``by_source`` one group a stated uncertainty instead: ``probe``
-    (the probed points of every artefact kind), ``reference`` and ``length``. Both are the groups of the
-    outlier scale (:func:`standardized_residuals`)."""
-    rows: dict[str, list] = {}
+def row_kinds(problem: Problem) -> np.ndarray:
+    """The observation group of each residual row of ``problem``: its point kind (seat, sphere, ring, ...,
+    ``reference``) or ``length`` for a certified length."""
+    kind = np.empty(problem.n_rows, dtype=object)
     for g in problem.groups:
-        name = "probe" if by_source and g["kind"] != "reference" else g["kind"]
-        rows.setdefault(name, []).append(np.arange(g["row0"], g["row0"] + g["rows"] * len(g["points"])))
-    out = {k: np.concatenate(v) for k, v in rows.items()}
-    if problem.n_rows > problem.n_point_rows:
-        out["length"] = np.arange(problem.n_point_rows, problem.n_rows)
-    return out
+        kind[g["row0"]: g["row0"] + g["rows"] * len(g["points"])] = g["kind"]
+    kind[problem.n_point_rows:] = "length"
+    return kind
+
+
+def kind_groups(kinds, by_source: bool = False) -> dict[str, np.ndarray]:
+    """{group: row indices} of rows whose observation groups are ``kinds`` (:func:`row_kinds`): one group a
+    kind; with ``by_source`` one group a stated uncertainty instead: ``probe`` (the probed points of every
+    artefact kind), ``reference`` and ``length``."""
+    names = np.array(["probe" if by_source and k not in ("reference", "length") else k for k in kinds],
+                     dtype=object)
+    return {name: np.flatnonzero(names == name) for name in dict.fromkeys(names.tolist())}
+
+
+def row_groups(problem: Problem, by_source: bool = False) -> dict[str, np.ndarray]:
+    """The residual rows of each observation group of ``problem`` (:func:`kind_groups`): by kind, the groups
+    of :func:`variance_components`; both groupings are those of the outlier scale
+    (:func:`standardized_residuals`)."""
+    return kind_groups(row_kinds(problem), by_source)
 
 
 def standardized_residuals(problem: Problem, r: np.ndarray, leverage: np.ndarray) -> np.ndarray:
+    """Standardized residuals of a fit of ``problem``: :func:`grouped_standardized` with its rows' groups."""
+    return grouped_standardized(r, leverage, row_kinds(problem))
+
+
+def grouped_standardized(r: np.ndarray, leverage, kinds) -> np.ndarray:
     """Standardized residuals ``r_i / (s_i sqrt(1 - h_i))`` with ``s_i`` the robust scale (1.4826 times the
-    median of ``|r| / sqrt(1 - h)``) of row i's observation group, so that a group whose stated
-    uncertainty is off (say the tracker's against the probe's) does not flag its clean rows or hide the
-    other groups' gross errors. Two groupings (:func:`row_groups`): a kind (seats, spheres, ..., the
-    reference points, the lengths) and a stated uncertainty (the probed points of every kind together,
-    the reference points, the lengths); ``s_i`` is the larger of row i's two scales. The kind's scale
-    keeps the points of a noisier kind (seats: articulations) from being flagged for its noise; the
-    probe's scale keeps a quieter kind's points from being flagged for an effect the model lacks that
-    shows more in the other kinds. A group with less than :data:`MIN_REDUNDANCY` redundant rows takes
-    the scale of all rows together (a median of a few rows is no scale)."""
+    median of ``|r| / sqrt(1 - h)``) of row i's observation group (``kinds``: each row's, :func:`row_kinds`;
+    ``leverage`` h: 0 for held-out rows), so that a group whose stated uncertainty is off (say the
+    tracker's against the probe's) does not flag its clean rows or hide the other groups' gross errors.
+    Two groupings (:func:`kind_groups`): a kind (seats, spheres, ..., the reference points, the lengths)
+    and a stated uncertainty (the probed points of every kind together, the reference points, the
+    lengths); ``s_i`` is the larger of row i's two scales. The kind's scale keeps the points of a noisier
+    kind (seats: articulations) from being flagged for its noise; the probe's scale keeps a quieter kind's
+    points from being flagged for an effect the model lacks that shows more in the other kinds. A group
+    with less than :data:`MIN_REDUNDANCY` redundant rows takes the scale of all rows together (a median of
+    a few rows is no scale)."""
+    leverage = np.broadcast_to(np.asarray(leverage, float), np.shape(r))
     zraw = r / np.sqrt(1.0 - leverage)
     pooled = 1.4826 * float(np.median(np.abs(zraw))) or 1.0
     scale = np.zeros_like(zraw)
     for by_source in (False, True):
-        for idx in row_groups(problem, by_source).values():
+        for idx in kind_groups(kinds, by_source).values():
             s = 1.4826 * float(np.median(np.abs(zraw[idx])))
             if float(np.sum(1.0 - leverage[idx])) < MIN_REDUNDANCY or s <= 0:
                 s = pooled

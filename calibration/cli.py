@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError
-from arm_model.commands import add_arm_options, arm_inputs, at_least, fraction, model_from_args, non_negative, positive, seed
+from arm_model.commands import (add_arm_options, arm_inputs, at_least, fraction, model_from_args, non_negative,
+                                number_in, positive, seed)
 from arm_model._output import output_folder
 from arm_model.checks import point_warnings, log_warnings
 from arm_model.io import read_artefacts, read_points
@@ -59,13 +60,18 @@ def campaign_inputs(p) -> None:
     p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; never an input)")
 
 
+#: argparse type of a stated standard uncertainty [um]: from 1e-6 um (whose square is still a normal
+#: number in m^2) to 100 mm
+SIGMA_UM = number_in(1e-6, 1e5)
+
+
 def sigma_options(p) -> None:
     """The stated uncertainties that weight the residuals (shared with ``aacmm close-loop``)."""
-    p.add_argument("--sigma-probe-um", type=positive(), default=10.0,
+    p.add_argument("--sigma-probe-um", type=SIGMA_UM, default=10.0,
                    help="standard uncertainty of a probed ball centre per axis [um] (default 10)")
-    p.add_argument("--sigma-ref-um", type=positive(), default=10.0,
+    p.add_argument("--sigma-ref-um", type=SIGMA_UM, default=10.0,
                    help="standard uncertainty of a reference-instrument coordinate per axis [um] (default 10)")
-    p.add_argument("--sigma-length-um", type=positive(), default=None,
+    p.add_argument("--sigma-length-um", type=SIGMA_UM, default=None,
                    help="standard uncertainty of a certified length without u_length_mm [um] "
                         "(default: --sigma-probe-um)")
     p.add_argument("--weights", choices=("data", "stated"), default="data",
@@ -73,7 +79,7 @@ def sigma_options(p) -> None:
                         "(points per artefact kind, reference points, lengths) is estimated from the fit's residuals "
                         "(variance components), the rows re-weighted and the fit repeated until it settles; "
                         "stated: use the sigmas as given")
-    p.add_argument("--plausible-length-mm", type=positive(), default=None,
+    p.add_argument("--plausible-length-mm", type=number_in(1e-6, 1e6), default=None,
                    help="plausible size of a length error [mm] (angles: 0.01 rad per mm of it), for the rule that "
                         "holds parameters the data resolve to worse than --min-resolution of it; default the larger "
                         "of 1 mm and ten times the noise of one point (so a robot's lengths are not held)")
@@ -93,11 +99,9 @@ def prior_scale(text: str):
     if t == "evidence":
         return "evidence"
     try:
-        v = float(t)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected evidence, off or a positive number, got {text!r}") from None
-    if not (math.isfinite(v) and 0 < v <= 1e3):
-        raise argparse.ArgumentTypeError(f"a prior scale must be a number in (0, 1000], got {text!r}")
+        v = number_in(0, 1e3, low_open=True)(t)
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(f"expected evidence, off or a number in (0, 1000]: {exc}") from None
     return v
 
 
@@ -175,7 +179,8 @@ def register(sub) -> None:
                                   "measurements. Local processes by default; --scheduler sends the runs to a Dask "
                                   "cluster. Writes study.json and prints a table.")
     m.add_argument("campaign", type=Path, help="campaign TOML of the simulator (docs/formats.md §6)")
-    m.add_argument("--runs", type=at_least(1), default=20, help="number of runs (default 20)")
+    m.add_argument("--runs", type=number_in(1, 100_000, kind=int), default=20,
+                   help="number of runs (default 20; at most 100000)")
     m.add_argument("--seed", type=seed, default=0, help="first seed (default 0)")
     m.add_argument("--holdout", type=fraction, default=0.25, help="held-out fraction of measurements (default 0.25)")
     m.add_argument("--workers", type=at_least(1), default=None, help="local processes (default: CPU count)")
@@ -203,7 +208,8 @@ def mpe_options(p) -> None:
     from .validation import MPE_TESTS
     g = p.add_argument_group(
         "standard tests with a maximum permissible error (MPE)",
-        "Each test of the validation (calibrated model, on the training data and on the held-out data) is "
+        "Each test of the validation (calibrated model, on the training data and on the held-out data; for "
+        "close-loop: the final model on every point and the design fit on the outer test set) is "
         "plotted (conformance_*.png) with every tested item; given its MPE [um] (a finite number > 0) it "
         "gets PASS (every item within the MPE) or FAIL in the console, summary.json and the report. Without "
         "these options: the plots and figures without pass/fail. Details: docs/calibration.md.")
@@ -304,15 +310,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
                         drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference, **kw)
         res = refine_torques(res, covariance=args.covariance, outlier_threshold=args.outlier_threshold,
                              **{k: v for k, v in kw.items() if k == "rank_tol"})
-        mpe = _mpe(args)
-        val_train, conf_train = _validation(res, res.data, mpe)
-        val_test, conf_test = _validation(res, test, mpe) if test is not None else (None, None)
-        conf = {"mpe_given": bool(mpe), "mpe_um": {k: v * 1e6 for k, v in mpe.items()},
-                "note": ("PASS: every tested item of the calibrated model within the MPE given by its "
-                         "--mpe-*-um option; FAIL: at least one beyond." if mpe else
-                         "No --mpe-*-um option given: the standard tests' figures, no pass/fail.")
-                        + " Items: every certified length, sphere and seat of the data set (docs/calibration.md).",
-                "training": conf_train, "holdout": conf_test}
+        val_train, val_test, conf = conformance_entry(_mpe(args), (res, res.data),
+                                                      None if test is None else (res, test))
         files = write_outputs(res, out.dir, inputs=inputs, validation_training=val_train,
                               validation_holdout=val_test, plots=not args.no_plots,
                               extra={"inputs": {"points": str(args.points), "artefacts": str(args.artefacts),
@@ -349,11 +348,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
             for r in rows:
                 log.info(f"  {r['label']}: {with_u(r['before'], r['u_before'])} -> {with_u(r['after'], r['u_after'])} "
                       f"{r['unit']} ({r['ratio']:.1f}x)")
-    from .report import conformance_lines
-    if conf_train or conf_test:
-        log.info("standard tests, calibrated model (ASME B89.4.22 / ISO 10360-12):")
-        for line in conformance_lines(conf):
-            log.info(line)
+    log_conformance(conf)
     budget = res.probing_budget()
     if budget is not None:
         log.info(f"probing scatter per axis: {budget['gross'] * 1e6:.4g} um in the residuals, of which encoders "
@@ -364,6 +359,33 @@ def run_calibrate(args: argparse.Namespace) -> int:
                         "scatter is set to 0 (their stated uncertainties are larger than this campaign shows)")
     log.info(f"model file -> {files['description']} (covariance {files['covariance'].name}); report -> {files['report']}")
     return 0
+
+
+def conformance_entry(mpe: dict, training: tuple, holdout: tuple | None = None, sets: str = "") -> tuple:
+    """The standard tests of ``calibrate`` and ``close-loop`` (one implementation): ``training`` and
+    ``holdout`` each ``(result, data)``, the fit whose calibrated model is tested and the data it is tested
+    on (``holdout`` None: none). Returns (validation rows on training, on holdout or None, the summary's
+    ``conformance`` entry: ``mpe_given``, ``mpe_um``, ``note`` (``sets`` appended: what the two data sets
+    are), ``training``, ``holdout``)."""
+    val_train, conf_train = _validation(*training, mpe)
+    val_test, conf_test = _validation(*holdout, mpe) if holdout is not None else (None, None)
+    conf = {"mpe_given": bool(mpe), "mpe_um": {k: v * 1e6 for k, v in mpe.items()},
+            "note": ("PASS: every tested item of the calibrated model within the MPE given by its "
+                     "--mpe-*-um option; FAIL: at least one beyond." if mpe else
+                     "No --mpe-*-um option given: the standard tests' figures, no pass/fail.")
+                    + " Items: every certified length, sphere and seat of the data set (docs/calibration.md)."
+                    + (f" {sets}" if sets else ""),
+            "training": conf_train, "holdout": conf_test}
+    return val_train, val_test, conf
+
+
+def log_conformance(conf: dict) -> None:
+    """The standard tests of :func:`conformance_entry` on the console."""
+    from .report import conformance_lines
+    if conf["training"] or conf["holdout"]:
+        log.info("standard tests, calibrated model (ASME B89.4.22 / ISO 10360-12):")
+        for line in conformance_lines(conf):
+            log.info(line)
 
 
 def _validation(res, data, mpe):

@@ -55,7 +55,7 @@ from arm_model.io import Artefacts, PointSet
 from arm_model.model import ArmModel
 
 from .calibrate import (CalibrationResult, calibrate, default_free, display_unit, evidence_scale,
-                        resolve_parameters)
+                        grouped_standardized, resolve_parameters)
 from .candidates import Candidate, library_candidates, needs_model
 from .data import CalibrationData, Weights, concat, make_data, split_holdout, split_poses
 from .diagnostics import (GroupTest, ResidualSpace, binned_estimates, candidate_family, families, holm,
@@ -935,7 +935,8 @@ def _drop_design_outliers(result: CalibrationResult, design: CalibrationData, fi
 def _drop_test_outliers(model, p, test: CalibrationData, weights, reference, threshold, design=None):
     """Points of the test set whose weighted residual under the base model (nuisance solved on the test set,
     or, with ``design``, on the design poses of the same features) exceeds ``threshold`` robust standard
-    deviations (1.4826 times the median |r|); decided before any effect is added, so it favours no model.
+    deviations of its observation group (:func:`calibration.calibrate.grouped_standardized`, the scale
+    ``calibrate`` flags outliers on); decided before any effect is added, so it favours no model.
     Returns the test set without them and their descriptions."""
     if design is None:
         h = heldout_residuals(model, p, test, weights, reference)
@@ -944,15 +945,14 @@ def _drop_test_outliers(model, p, test: CalibrationData, weights, reference, thr
         h = heldout_residuals(model, p, concat(design, test), weights, reference,
                               np.arange(len(design) + len(test)) < len(design))
         point = np.where(h["point"] >= 0, h["point"] - len(design), -1)
-    r = h["r"]
-    scale = 1.4826 * float(np.median(np.abs(r))) or 1.0
+    z = grouped_standardized(h["r"], 0.0, h["kind"])
     pts = test.points
-    bad = sorted(set(int(i) for i in point[(np.abs(r) > threshold * scale) & (point >= 0)]))
+    bad = sorted(set(int(i) for i in point[(np.abs(z) > threshold) & (point >= 0)]))
     if not bad:
         return test, []
     out = [{"measurement": str(pts.measurement[i]), "feature": str(pts.feature[i]),
             "line": None if pts.lines is None else int(pts.lines[i]),
-            "standardized": float(np.max(np.abs(r[point == i])) / scale), "why": "outlier"} for i in bad]
+            "standardized": float(np.max(np.abs(z[point == i]))), "why": "outlier"} for i in bad]
     if design is None:
         # a feature instance left with too few points for its own fit goes out whole (as in the design set)
         for m, f in sorted({(str(pts.measurement[i]), str(pts.feature[i])) for i in bad}):

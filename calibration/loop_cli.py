@@ -6,17 +6,22 @@ import logging
 
 from arm_model.cli import command_help
 from arm_model import InputError
-from arm_model.commands import arm_inputs, at_least, fraction, model_from_args, number_in, seed
+from arm_model.commands import arm_inputs, at_least, model_from_args, number_in, seed
 from arm_model._output import output_folder
 from arm_model.checks import point_warnings, log_warnings
 from arm_model.io import read_artefacts, read_points
 from arm_model.model_file import Arm
 
-from .cli import _holdout, campaign_inputs, model_effects, sigma_options
+from .cli import _holdout, _mpe, campaign_inputs, conformance_entry, log_conformance, model_effects, mpe_options, \
+    sigma_options
 
 __all__ = ["register", "run"]
 
 log = logging.getLogger(__name__)
+
+#: argparse type of a significance level: in [1e-12, 1) (a smaller one has no finite normal quantile after
+#: the Bonferroni division)
+ALPHA = number_in(1e-12, 1, high_open=True)
 
 
 def register(sub) -> None:
@@ -48,10 +53,10 @@ def register(sub) -> None:
                    help="folds of the held-out decisions: whole measurements, or poses inside each feature "
                         "(predicted against the feature's centre fitted on its other poses); auto (default): by "
                         "measurement when there are enough measurements for the test to reach --alpha, else by pose")
-    p.add_argument("--alpha", type=fraction, default=0.01,
+    p.add_argument("--alpha", type=ALPHA, default=0.01,
                    help="significance level of the held-out test to add an effect (Bonferroni over the candidates "
                         "tested) and of the final structure tests (Holm) (default 0.01)")
-    p.add_argument("--screen-alpha", type=fraction, default=0.05,
+    p.add_argument("--screen-alpha", type=ALPHA, default=0.05,
                    help="level of the score-test screening, Bonferroni over the candidates (default 0.05)")
     p.add_argument("--min-improvement", type=number_in(0, 1, high_open=True), default=0.02,
                    help="smallest relative drop of the held-out RMS for an effect to be added (default 0.02)")
@@ -78,6 +83,7 @@ def register(sub) -> None:
                    help="base parameters to identify, by name or glob (repeatable); default every joint-row error "
                         "and probe.x/y/z (probe compliances are candidates instead); effect parameters are always free")
     sigma_options(p)
+    mpe_options(p)
     p.set_defaults(func=run)
 
 
@@ -131,7 +137,8 @@ def run(args: argparse.Namespace) -> int:
             loop.stages[-1].result = refine_torques(loop.stages[-1].result, **opts)
         names = {"points": str(args.points), "artefacts": str(args.artefacts), "arm": str(args.arm),
                  "reference_points": None if args.reference_points is None else str(args.reference_points)}
-        write_loop_report(loop, out.dir, inputs=inputs, input_names=names, warnings=warnings)
+        conf = _conformance(loop, _mpe(args))
+        write_loop_report(loop, out.dir, inputs=inputs, input_names=names, warnings=warnings, conformance=conf)
     log_warnings(warnings)
     log.info(before_after_text(loop))
     for sk in loop.skipped:
@@ -139,6 +146,22 @@ def run(args: argparse.Namespace) -> int:
     log.info(loop.verdict)
     from .loop_report import loop_model_name
     from .model_output import model_paths
+    log_conformance(conf)
     log.info(f"model file: {model_paths(args.output, loop_model_name(loop))['model']} (every --arm applies it)")
     log.info(f"report: {args.output / 'report.html'}; machine summary: {args.output / 'summary.json'}")
     return 0
+
+
+def _conformance(loop, mpe: dict) -> dict:
+    """The standard tests (:func:`calibration.cli.conformance_entry`) of the model written: on "training"
+    the final model on every point it was fitted to; on "holdout", when the outer test set holds whole
+    measurements, the final model fitted on the design set alone (the last stage) on that test set."""
+    from .data import split_holdout
+    final = loop.model_fit or loop.final.result
+    holdout = None
+    if loop.model_fit is not None and loop.test_by == "measurement":
+        holdout = (loop.final.result, split_holdout(final.data, list(loop.test))[1])
+    sets = ("close-loop: training = the final model on every point (design and test); held-out = the final "
+            "model fitted on the design set, on the outer test set." if holdout is not None else
+            "close-loop: training = the final model on the points it was fitted to; no held-out set.")
+    return conformance_entry(mpe, (final, final.data), holdout, sets)[2]

@@ -17,6 +17,7 @@ from arm_model.shipped import provenance
 
 from .loop import LoopResult, Stage, effect_summary
 from .model_output import model_check, model_paths, write_model
+from .report import conformance_html, conformance_pngs, write_conformance_pngs
 from .validation import with_u
 
 __all__ = ["summary_dict", "before_after_text", "write_loop_report", "write_loop_model", "loop_model_name", "plot_signature", "plot_screening",
@@ -285,13 +286,16 @@ def write_loop_model(loop: LoopResult, out_dir, inputs=()) -> dict:
 
 
 def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | None = None,
-                      warnings=()) -> list[Path]:
+                      warnings=(), conformance: dict | None = None) -> list[Path]:
     """Write the model file (:func:`write_loop_model`), ``summary.json``, ``report.html``,
     ``before-after.txt`` and the PNGs into ``out_dir`` (atomically, never over ``inputs``); returns the
-    paths written."""
+    paths written. ``conformance``: the standard tests (:func:`calibration.cli.conformance_entry`), written
+    as ``calibrate`` writes them (summary key ``conformance``, ``conformance_*.png``, a report section)."""
     out = Path(out_dir)
     inputs = [Path(p) for p in inputs]
-    for name in ("summary.json", "report.html", "before-after.txt", *model_paths(out, loop_model_name(loop)).values()):
+    conf_files = conformance_pngs(conformance, out) if conformance else {}
+    for name in ("summary.json", "report.html", "before-after.txt", *model_paths(out, loop_model_name(loop)).values(),
+                 *(f.name for f in conf_files.values())):
         guard_output(out / name, inputs)
     model_files = write_loop_model(loop, out, inputs)
     written = list(model_files.values())
@@ -352,6 +356,9 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
         parts.append("<h3>Candidates not offered</h3>" + _table(("candidate", "why"),
                                                                [(s.name, s.reason) for s in loop.skipped]))
     sections.append("".join(parts))
+    if conformance:
+        written += write_conformance_pngs(conformance, conf_files, inputs)
+        sections.append("".join(conformance_html(conformance, conf_files)))
     page = ("<!doctype html><html><head><meta charset='utf-8'><title>close-loop report</title><style>"
             "body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;font-size:12px}"
             "td,th{border:1px solid #ccc;padding:2px 6px}pre{background:#f6f6f6;padding:6px}</style></head><body>"
@@ -361,6 +368,8 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
     summary["warnings"] = [w.as_dict() for w in warnings]
     summary["model"] = {"file": model_files["model"].name, "covariance": model_files["covariance"].name,
                         "urdf": model_files["urdf"].name, "check": model_check(loop.model_fit or loop.final.result)}
+    if conformance:
+        summary["conformance"] = conformance
     summary.update(provenance(inputs))
     written.append(atomic_write_text(out / "summary.json", json.dumps(summary, indent=1) + "\n", inputs))
     written.append(atomic_write_text(out / "before-after.txt", table + "\n", inputs))

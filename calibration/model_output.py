@@ -65,7 +65,10 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
 def model_check(result, arm: Arm | None = None) -> dict:
     """How far the written model's ball centres lie from the fit's own on the fitted points [m]: the
     model file recomputes gravity and contact torques from the calibrated description, the fit used
-    the nominal one (zero without joint-compliance effects, rounding otherwise)."""
+    the nominal one (zero without joint-compliance effects, rounding otherwise). Computed once a fit: the
+    check :func:`refine_torques` ended on is the result's ``model_check`` and is returned as it is."""
+    if arm is None and result.model_check is not None:
+        return result.model_check
     arm = arm or fitted_arm(result)
     pts = result.data.points
     own = result.model.ball_centres(pts.q, result.data.wrench, result.p, result.data.aux)
@@ -83,7 +86,8 @@ def refine_torques(result, rounds: int = 5, tol_nm: float = 1.0, **fit):
 
     Only for models with an effect that needs the torques; the same free parameters, started at the
     fit's values; the fixed, held and dropped parameters and points and the identifiability analyses
-    of ``result`` are kept. ``fit``: options of the fit to keep (``covariance``, ``rank_tol``,
+    of ``result`` are kept; the last round's :func:`model_check` is the result's ``model_check`` (the
+    writers report it without computing it again). ``fit``: options of the fit to keep (``covariance``, ``rank_tol``,
     ``outlier_threshold``)."""
     model = result.model
     if not ({"tau_gravity", "tau_contact"} & model.needs()):
@@ -104,6 +108,7 @@ def refine_torques(result, rounds: int = 5, tol_nm: float = 1.0, **fit):
             calibrate(model, replace(data, aux=aux), free=list(cur.free), values=values, weights=result.weights,
                       reference=result.reference_mode, min_resolution=None, drop_outliers=False,
                       prior_scale=result.prior_scale, prior_centre=result.prior_centre, **fit), **keep)
-        if model_check(cur)["max_difference_nm"] <= tol_nm:
+        cur = dataclasses.replace(cur, model_check=model_check(cur))
+        if cur.model_check["max_difference_nm"] <= tol_nm:
             break
     return cur

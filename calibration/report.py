@@ -22,7 +22,7 @@ from .model_output import model_check, model_paths, write_model
 from .validation import with_u
 
 __all__ = ["write_outputs", "plot_residuals", "plot_parameters", "plot_correlation", "plot_conformance",
-           "conformance_lines", "CONFORMANCE_SETS"]
+           "conformance_lines", "conformance_pngs", "write_conformance_pngs", "conformance_html", "CONFORMANCE_SETS"]
 
 
 def _json_default(o):
@@ -194,7 +194,23 @@ def conformance_lines(conf: dict) -> list[str]:
     return out
 
 
-def _conformance_html(conf: dict, files: dict) -> list[str]:
+def conformance_pngs(conf: dict, out) -> dict:
+    """``{"conformance_<set>_png": path}`` of the conformance plots of ``conf`` (its non-empty sets)."""
+    return {f"conformance_{k}_png": Path(out) / f"conformance_{k}.png" for k in CONFORMANCE_SETS if conf.get(k)}
+
+
+def write_conformance_pngs(conf: dict, files: dict, inputs=()) -> list[Path]:
+    """Write the plots of :func:`conformance_pngs` (``files`` holds their paths); returns the paths."""
+    written = []
+    for k, what in CONFORMANCE_SETS.items():
+        if conf.get(k):
+            written.append(atomic_write_bytes(files[f"conformance_{k}_png"], plot_conformance(
+                conf[k], f"Standard tests on {what}, calibrated model"
+                + ("" if conf["mpe_given"] else " (no MPE given: no pass/fail)")), inputs))
+    return written
+
+
+def conformance_html(conf: dict, files: dict) -> list[str]:
     parts = ["<h2>Standard tests (ASME B89.4.22 / ISO 10360-12), calibrated model</h2>",
              f"<p>{html.escape(conf['note'])}</p>"]
     for key, what in CONFORMANCE_SETS.items():
@@ -260,7 +276,7 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
                              [(r["label"], r["unit"], with_u(r["before"], r.get("u_before")),
                                with_u(r["after"], r.get("u_after")), _fmt(r["ratio"], 3)) for r in rows])]
     if summary.get("conformance"):
-        parts += _conformance_html(summary["conformance"], files)
+        parts += conformance_html(summary["conformance"], files)
     parts += ["<h2>Parameters</h2>", _table(["parameter", "state", "unit", "estimate", "u"], par)]
     if result.outliers:
         parts += ["<h2>Outliers (kept)</h2>" if not result.dropped else "<h2>Outliers</h2>",
@@ -302,8 +318,7 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
     if plots:
         files.update({"residuals_png": out / "residuals.png", "parameters_png": out / "parameters.png",
                       "correlation_png": out / "correlation.png"})
-        files.update({f"conformance_{k}_png": out / f"conformance_{k}.png" for k in CONFORMANCE_SETS
-                      if conf.get(k)})
+        files.update(conformance_pngs(conf, out))
     for f in files.values():
         guard_output(f, inputs)
     effects = [e.describe() for e in result.model.effects]
@@ -342,11 +357,7 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
         atomic_write_bytes(files["residuals_png"], plot_residuals(result), inputs)
         atomic_write_bytes(files["parameters_png"], plot_parameters(result), inputs)
         atomic_write_bytes(files["correlation_png"], plot_correlation(result), inputs)
-        for k, what in CONFORMANCE_SETS.items():
-            if conf.get(k):
-                atomic_write_bytes(files[f"conformance_{k}_png"], plot_conformance(
-                    conf[k], f"Standard tests on {what}, calibrated model"
-                    + ("" if conf["mpe_given"] else " (no MPE given: no pass/fail)")), inputs)
+        write_conformance_pngs(conf, files, inputs)
     atomic_write_text(files["summary"], json.dumps(_finite(summary), indent=1, default=_json_default) + "\n", inputs)
     atomic_write_text(files["report"], _html(result, summary, files), inputs)
     return files

@@ -28,7 +28,8 @@ def files(tmp_path_factory):
 def test_close_loop_writes_the_report(files, tmp_path, capsys):
     out = tmp_path / "loop"
     code = main(["close-loop", str(files / "points.csv"), str(files / "artefacts.toml"), "--arm", str(NOMINAL),
-                 "--sigma-probe-um", "2", "--folds", "3", "--cv-top", "2", "-o", str(out)])
+                 "--sigma-probe-um", "2", "--folds", "3", "--cv-top", "2", "--mpe-e-uni-um", "1000",
+                 "--mpe-spat-um", "0.01", "-o", str(out)])
     assert code == 0
     printed = capsys.readouterr()
     assert "base model" in printed.out and "+ eccentricity j3" in printed.out
@@ -50,6 +51,27 @@ def test_close_loop_writes_the_report(files, tmp_path, capsys):
     for png in ("before-after.png", "stage-1-screening.png", "stage-1-signature.png"):
         assert (out / png).stat().st_size > 1000 and png in html
     assert (out / "before-after.txt").read_text().startswith("held-out test set")
+    # the standard tests as calibrate gives them (--mpe-*-um): the final model on every point, the design fit
+    # on the outer test set; each verdict follows from the items written next to it
+    conf = s["conformance"]
+    assert conf["mpe_given"] and conf["mpe_um"] == {"e-uni": 1000.0, "spat": 0.01}
+    for key in ("training", "holdout"):
+        rows = {r["key"]: r for r in conf[key]}
+        assert rows["e-uni"]["n"] > 0 and rows["spat"]["n"] > 0, key
+        for r in rows.values():
+            if r["mpe_um"] is not None and r["n"]:
+                assert r["result"] == ("PASS" if max(abs(i["value_um"]) for i in r["items"]) <= r["mpe_um"]
+                                       else "FAIL")
+        assert rows["e-uni"]["result"] == "PASS" and rows["spat"]["result"] == "FAIL"
+        assert rows["l-dia"]["result"] is None
+        assert (out / f"conformance_{key}.png").read_bytes()[:4] == b"\x89PNG"
+        assert f"conformance_{key}.png" in html
+    # the training items are the whole campaign's (8 ball-bar positions), the held-out ones the outer test set's
+    training = {r["key"]: r for r in conf["training"]}
+    holdout = {r["key"]: r for r in conf["holdout"]}
+    bars = [m for m in s["measurements"]["test"] if m.startswith("bar-pos")]
+    assert training["e-uni"]["n"] == 8 and holdout["e-uni"]["n"] == len(bars) > 0, s["measurements"]
+    assert "E_UNI on training data" in printed.out and "FAIL" in printed.out
 
 
 def test_refuses_to_write_over_an_input(files, tmp_path, capsys):

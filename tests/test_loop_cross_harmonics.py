@@ -87,15 +87,26 @@ def test_synthesis_of_a_cross_coupling_offers_what_the_model_lacks():
 
 
 def test_test_set_instance_left_too_small_by_outliers_goes_out_whole():
-    """Twice the size (0.004 deg): the base model's held-out residuals flag two of the four points of a test
-    ball-bar sphere as outliers; the sphere cannot be fitted on two points, so its other points go out too
-    (reported), and the loop runs on and finds the cross-coupling."""
+    """Twice the size (0.004 deg), and four gross points (each joint angle off by N(0, 1 mrad): ~1 mm) in a
+    sphere measurement of eight points in the outer test set: the base model's held-out residuals flag
+    them (and points whose centre they pull) as outliers; the sphere cannot be fitted on what is left (5
+    points needed), so its other points go out too (reported), and the loop runs on and finds the
+    cross-coupling."""
+    from dataclasses import replace
     nominal = load_description(NOMINAL)
     truth = ArmModel(nominal, (JointHarmonics(joints=(1,), source=3, harmonics=(2,)),))
     p = random_truth(truth, np.random.default_rng(1), length=30e-6, angle=5e-5, probe=30e-6)
     p[truth.base_size:] = [2 * TRUE["j2.harm2_cos_by_j4"], 2 * TRUE["j2.harm2_sin_by_j4"]]
     camp = make_campaign(truth, SPEC, seed=1, p_true=p)
-    loop = close_loop(camp.points, camp.artefacts, nominal, weights=Weights(probe=NOISE), cv_top=2)
-    dropped = [d for d in loop.dropped["test"] if d["feature"] == "bar-B" and d["measurement"] == "bar-08"]
-    assert sorted(d["why"] for d in dropped) == ["its feature instance has too few points left"] * 2 + ["outlier"] * 2
+    pts = camp.points
+    inst = np.flatnonzero(pts.measurement == "sphere-02")
+    q = pts.q.copy()
+    q[inst[:4]] += np.random.default_rng(0).normal(0, 1e-3, (4, 7))
+    loop = close_loop(replace(pts, q=q), camp.artefacts, nominal, weights=Weights(probe=NOISE), cv_top=2)
+    assert "sphere-02" not in loop.design            # drawn into the outer test set
+    dropped = [d for d in loop.dropped["test"] if d["measurement"] == "sphere-02"]
+    whys = [d["why"] for d in dropped]
+    assert len(dropped) == len(inst) and whys.count("outlier") >= 4, dropped
+    assert "its feature instance has too few points left" in whys
+    assert all(d["standardized"] > 4 for d in dropped if d["why"] == "outlier")
     assert [c.name for c in loop.added] == ["harmonics j2 of q4 (h 1,2)"], loop.verdict

@@ -23,7 +23,7 @@ import numpy as np
 from ..geometry import perpendicular_basis, rotation_xyz
 from ..io import Artefacts, Distance, Feature, PointSet, atomic_write_text, format_artefacts, write_csv
 from ..model import ArmModel, AuxData
-from .artefacts import shoulder
+from .artefacts import cone_directions, shoulder
 from .ik import random_q, solve_positions
 
 __all__ = ["SynthSpec", "SynthCampaign", "random_truth", "random_q", "make_campaign"]
@@ -127,14 +127,8 @@ def random_truth(model: ArmModel, rng, length: float = 50e-6, angle: float = 1e-
     return p
 
 
-def _hemisphere(rng, n: int, axis=(0, 0, 1), min_cos: float = 0.2) -> np.ndarray:
-    out = []
-    while len(out) < n:
-        v = rng.normal(size=3)
-        v /= np.linalg.norm(v)
-        if v @ np.asarray(axis) >= min_cos:
-            out.append(v)
-    return np.array(out)
+#: the sphere points' normals: uniform on the cap of this half angle about the base z axis (cos = 0.2)
+SPHERE_CAP = float(np.arccos(0.2))
 
 
 def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0, p_true=None,
@@ -167,7 +161,7 @@ def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0,
         normals.extend(nrm)
 
     def sphere_points(c, diameter, k):
-        nrm = _hemisphere(rng, k)
+        nrm = cone_directions(rng, (0.0, 0.0, 1.0), SPHERE_CAP, k)
         return c + nrm * (diameter + ball) / 2, nrm
 
     if spec.ballbars:
