@@ -159,7 +159,7 @@ def test_cli_writes_and_summarises(tmp_path, capsys):
     c = _write(tmp_path, 'seed = 3\nsensor = "two-channel"\n[[task]]\nkind = "ring"\npoints_per_row = 4\n')
     assert main(["simulate", str(c), "-o", str(tmp_path / "out")]) == 0
     out = capsys.readouterr().out
-    assert "12 points in 1 measurements" in out and "two-channel" in out and "truth check" in out
+    assert "12 points in 1 measurement "  in out and "two-channel" in out and "truth check" in out
     assert (tmp_path / "out" / "signals" / "ring-01.csv").exists()
     # summary.json: version and the campaign's SHA-256 (computed here independently), as every command
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())

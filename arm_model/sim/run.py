@@ -27,7 +27,7 @@ from .campaign import Campaign
 from .ik import IKTargets, ball_jacobian, solve_ik
 from .operator import OperatorDraw, draw_operator, force_signal, measurement_slices
 from .truth import Truth, build_truth, si_key
-from .._log import progress_line
+from .._log import counted, progress_line
 
 __all__ = ["SimResult", "simulate", "TRUTH_HEADER", "POINTS_FILE", "REFERENCE_FILE", "ARTEFACTS_FILE",
            "TRUTH_FILE", "TRUTH_POINTS_FILE", "SUMMARY_FILE", "SIGNALS_DIR"]
@@ -218,7 +218,7 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
     truth = build_truth(desc, campaign.truth, rng["truth"], campaign.sensor)
     plan = make_plan(campaign, rng["plan"], truth)
     n = len(plan)
-    say(f"{n} points in {len(set(plan.measurement))} measurements planned")
+    say(f"{counted(n, 'point')} in {counted(len(set(plan.measurement)), 'measurement')} planned")
     draw = draw_operator(plan, campaign.operator, campaign.environment, campaign.signals, rng["operator"])
     x_dir = _x_directions(plan, draw.force, rng["operator"])
     targets = IKTargets(plan.position, plan.stylus, x_dir, draw.force, draw.torque, draw.temperature,
