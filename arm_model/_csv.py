@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._errors import InputError
+from ._errors import InputError, decode_text, open_input
 
 __all__ = ["parse_number", "csv_records", "CsvBlock", "iter_csv_blocks", "csv_spans", "format_csv"]
 
@@ -336,10 +336,7 @@ def _cells_text(arr: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _decode(data: bytes, path, first_line: int) -> str:
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise InputError("not UTF-8 text", path, first_line + data[: exc.start].count(b"\n")) from None
+    return decode_text(data, path, first_line)
 
 
 def _find_header(data: bytes, path, line_no: int):
@@ -416,10 +413,7 @@ def iter_csv_blocks(path: str | Path, what: str, header_check, block_bytes: int 
     if data is not None:
         fh = io.BytesIO(data)
     else:
-        try:
-            fh = open(path, "rb")
-        except OSError as exc:
-            raise InputError(f"cannot read {what}: {exc.strerror}", path) from None
+        fh = open_input(path, what)
     with fh:
         carry, line_no, header, first = b"", 1, None, True
         num_idx = txt_idx = None

@@ -2,12 +2,14 @@
 from __future__ import annotations
 
 import difflib
+import os
 import re
+import stat
 import tomllib
 from pathlib import Path
 
-__all__ = ["AacmmError", "InputError", "NumericalError", "read_text", "parse_toml", "did_you_mean",
-           "unknown_key"]
+__all__ = ["AacmmError", "InputError", "NumericalError", "read_text", "open_input", "decode_text", "parse_toml",
+           "did_you_mean", "unknown_key"]
 
 
 class AacmmError(Exception):
@@ -36,7 +38,7 @@ class InputError(AacmmError):
         if line is not None:
             where.append(f"line {line}")
         if column is not None:
-            where.append(f"column '{column}'" if not column.startswith("key ") else column)
+            where.append(column if column.startswith(("key ", "column ")) else f"column '{column}'")
         prefix = ", ".join(where)
         super().__init__(f"{prefix}: {message}" if prefix else message)
 
@@ -48,24 +50,76 @@ class NumericalError(AacmmError):
     """A numerical failure (no convergence, rank deficiency) that must not pass silently."""
 
 
-def read_text(path: str | Path, what: str) -> str:
-    """The UTF-8 text of a user's file (a BOM is dropped), or an InputError naming the file and,
-    for a bad byte, its line. ``what`` says which file it is ("the points file")."""
+_LONE_CR = re.compile(rb"\r(?!\n|\Z)")     # at the very end: a CRLF cut at its LF
+
+
+def decode_text(raw: bytes, path: str | Path, first_line: int = 1) -> str:
+    """The text of ``raw``, bytes of a user's text file starting at line ``first_line`` (one place for
+    every reader): UTF-8, no NUL byte (binary data, or a UTF-16 file), no carriage return that ends a
+    line alone (classic Mac line ends, which would merge or shift the numbered lines); else an
+    InputError naming the file and the line."""
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError("not UTF-8 text (save the file as UTF-8)", path,
+                         first_line + raw[: exc.start].count(b"\n")) from None
+    k = raw.find(b"\0")
+    if k >= 0:
+        raise InputError("a NUL byte: binary data, or a UTF-16 file (save the file as UTF-8 text)", path,
+                         first_line + raw[:k].count(b"\n"))
+    if b"\r" in raw:
+        m = _LONE_CR.search(raw)
+        if m:
+            raise InputError("a carriage return alone ends a line (old Mac line ends): save the file with "
+                             "LF or CRLF line ends", path, first_line + raw[: m.start()].count(b"\n"))
+    return text
+
+
+def open_input(path: str | Path, what: str):
+    """A user's input file opened for reading bytes, or an InputError naming it (``what``: which file
+    it is, "the points file"). A folder, a FIFO or a device is refused: it is not a file (and reading
+    a FIFO would wait forever)."""
     path = Path(path)
     try:
-        raw = path.read_bytes()
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))     # a FIFO's open would wait
+    except IsADirectoryError:
+        raise InputError(f"cannot read {what}: it is a folder, not a file", path) from None
     except OSError as exc:
-        raise InputError(f"cannot read {what}: {exc.strerror}", path) from None
+        raise InputError(f"cannot read {what}: {exc.strerror or exc}", path) from None
     try:
-        return raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise InputError("not UTF-8 text", path, raw[: exc.start].count(b"\n") + 1) from None
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            raise InputError(f"cannot read {what}: " + ("it is a folder, not a file" if stat.S_ISDIR(mode)
+                                                       else "not a regular file"), path)
+        if hasattr(os, "set_blocking"):
+            os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except OSError as exc:
+        os.close(fd)
+        raise InputError(f"cannot read {what}: {exc.strerror or exc}", path) from None
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def read_text(path: str | Path, what: str) -> str:
+    """The UTF-8 text of a user's file (a BOM is dropped; checked by :func:`decode_text`), or an
+    InputError naming the file and, for a bad byte, its line. ``what`` says which file it is ("the
+    points file"); :func:`open_input` refuses what is not a file."""
+    with open_input(path, what) as fh:
+        try:
+            raw = fh.read()
+        except OSError as exc:
+            raise InputError(f"cannot read {what}: {exc.strerror or exc}", path) from None
+    return decode_text(raw[3:] if raw.startswith(b"\xef\xbb\xbf") else raw, path)
 
 
 def parse_toml(text: str, path: str | Path) -> dict:
     """Parse TOML text; a syntax error becomes an InputError naming the file, line and column."""
     try:
         return tomllib.loads(text)
+    except RecursionError:
+        raise InputError("not valid TOML: arrays or tables nested too deeply", path) from None
     except tomllib.TOMLDecodeError as exc:
         m = re.search(r"line (\d+), column (\d+)", str(exc))
         raise InputError(f"not valid TOML: {exc}", path, int(m.group(1)) if m else None,

@@ -65,14 +65,22 @@ def _inside(path: Path, folder: Path) -> bool:
     return path == folder or folder in path.parents
 
 
+def resolved(path: str | Path) -> Path:
+    """``path`` with its symbolic links resolved (as far as they exist); a link loop is an InputError."""
+    try:
+        return Path(path).resolve()
+    except (RuntimeError, OSError):     # Python < 3.13: RuntimeError on a loop; later: OSError ELOOP
+        raise InputError("cannot follow the path: a loop of symbolic links", path) from None
+
+
 def guard_output(out: str | Path, inputs=()) -> Path:
     """Refuse an output (file or folder) that is one of the inputs or holds one (by resolved path)."""
     out = Path(out)
-    ro = out.resolve()
+    ro = resolved(out)
     for p in inputs:
         if p is None:
             continue
-        rp = Path(p).resolve()
+        rp = resolved(p)
         if rp == ro:
             raise InputError("refusing to write the output over an input file", out)
         if _inside(rp, ro):
@@ -238,7 +246,7 @@ def output_folder(final: str | Path, inputs=(), command: str = ""):
     guard_output(final, inputs)
     final = Path(os.path.abspath(final))
     if final.is_symlink():
-        final = final.resolve()
+        final = resolved(final)
     if final.name in ("", ".", ".."):
         raise InputError("name an output folder", final)
     _check_folder(final, command)

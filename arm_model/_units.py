@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["UNIT_FACTORS", "QUANTITY_OF_UNIT", "split_unit", "to_si"]
+__all__ = ["UNIT_FACTORS", "QUANTITY_OF_UNIT", "PLAUSIBLE_SI", "split_unit", "to_si", "implausible"]
 
 #: factor that converts a value in the suffix unit to SI (m, rad, N, N·m, m/N, °C, s)
 UNIT_FACTORS: dict[str, float] = {
@@ -41,3 +41,45 @@ def split_unit(name: str) -> tuple[str, str] | None:
 def to_si(value, unit: str):
     """Convert a value (scalar or array) given in ``unit`` to SI."""
     return value * UNIT_FACTORS[unit]
+
+
+#: the largest magnitude, in SI, that an input number of each quantity may have: far beyond any arm,
+#: artefact, probe or campaign (1 km, 10 000 degrees, 100 kN, 100 kN·m, 1 m/N, 10 000 °C, 10^10 s, 1000 t).
+#: A larger number is a typo or garbage, and would overflow the arithmetic; a temperature is also at or
+#: above absolute zero (docs/formats.md §1).
+PLAUSIBLE_SI: dict[str, float] = {
+    "length": 1e3, "angle": math.radians(1e4), "force": 1e5, "torque": 1e5, "compliance": 1.0,
+    "temperature": 1e4, "time": 1e10, "mass": 1e6,
+    # effect parameters of a model file (arm_model.model_file.PARAM_UNITS)
+    "angular compliance": 1.0, "expansion": 1.0, "ratio": 1e3, "temperature difference": 1e4,
+    # campaign files of the simulator
+    "stiffness": 1e12, "temperature_rate": 1e3,
+}
+ABSOLUTE_ZERO_C = -273.15
+
+
+def implausible(value_si, quantity: str):
+    """Where ``value_si`` (a number or an array, SI) is out of the plausible range of ``quantity``
+    (:data:`PLAUSIBLE_SI`): None if nowhere, else ``(index, message)`` for the first bad element
+    (index None for a scalar). Non-finite values are the caller's (they are refused before)."""
+    import numpy as np
+    bound = PLAUSIBLE_SI.get(quantity)
+    if bound is None:
+        return None
+    v = np.asarray(value_si, dtype=float)
+    bad = np.abs(v) > bound
+    if quantity == "temperature":
+        bad |= v < ABSOLUTE_ZERO_C
+    if not bad.any():
+        return None
+    idx = None if v.ndim == 0 else tuple(int(i) for i in np.argwhere(bad)[0])
+    x = float(v if idx is None else v[idx])
+    if quantity == "temperature" and x < ABSOLUTE_ZERO_C:
+        return idx, f"a temperature below absolute zero ({x:g} C)"
+    f, unit = {"length": (1e3, "mm"), "angle": (180 / math.pi, "deg"), "force": (1.0, "N"),
+               "torque": (1.0, "N m"), "compliance": (1e3, "mm/N"), "temperature": (1.0, "C"),
+               "time": (1.0, "s"), "mass": (1.0, "kg"), "angular compliance": (1.0, "rad/(N m)"),
+               "expansion": (1.0, "1/K"), "ratio": (1.0, ""), "temperature difference": (1.0, "K"),
+               "stiffness": (1.0, "N m/rad"), "temperature_rate": (1.0, "C/s")}[quantity]
+    return idx, (f"{x * f:g} {unit} is not a plausible {quantity} (|value| at most {bound * f:g} {unit}); "
+                 "check the number and its unit")

@@ -151,6 +151,9 @@ def _os_message(exc: OSError) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
+    if any("\0" in str(a) for a in argv):      # only from a program (a shell cannot pass one)
+        print("aacmm: error: a command-line argument holds a NUL character", file=sys.stderr)
+        return EXIT_INPUT
     parser = build_parser(argv)
     args = parser.parse_args(argv)
     if args.quiet and args.verbose:

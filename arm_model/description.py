@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ._errors import InputError, parse_toml, read_text
-from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, split_unit
+from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
 __all__ = ["JointRow", "Probe", "ArmDescription", "load_description", "parse_description",
            "format_description", "GRAVITY", "DH_ROW_FIELDS", "URDF_ROW_FIELDS"]
@@ -283,6 +283,9 @@ class TomlReader:
             if base in out:
                 raise self.error(f"'{base}' is given twice (with two units)", *where, key)
             out[base] = float(value) * UNIT_FACTORS[unit]
+            wrong = implausible(out[base], quantity)
+            if wrong:
+                raise self.error(f"'{key}': {wrong[1]}", *where, key)
         for base, (quantity, required) in spec.items():
             if required and base not in out:
                 raise self.error(f"missing key '{base}_<unit>' ({quantity})", *where)
@@ -326,8 +329,9 @@ def description_from_data(data: dict, r: TomlReader, extra_keys: tuple[str, ...]
         if key not in known:
             raise r.error(f"unknown top-level key '{key}' (known: {', '.join(known)}){nearest(key, known)}", key)
     name = data.get("name")
-    if not isinstance(name, str) or not name:
-        raise r.error("missing or empty 'name'", "name")
+    if not isinstance(name, str) or not name.strip():
+        raise r.error("missing or empty 'name'" if name is None or name == "" else
+                      f"'name' must be a non-empty text, got {name!r}", "name")
     convention = data.get("convention")
     if convention not in ("dh", "mdh", "urdf"):
         raise r.error(f"'convention' must be \"dh\", \"mdh\" or \"urdf\", got {convention!r}", "convention")
@@ -388,6 +392,9 @@ def description_from_data(data: dict, r: TomlReader, extra_keys: tuple[str, ...]
         bending_compliance_x=pv.get("bending_compliance_x", pv["bending_compliance"]),
         bending_compliance_y=pv.get("bending_compliance_y", pv["bending_compliance"]),
         axial_compliance=pv["axial_compliance"], rpy=rpy, lever=pv.get("stylus_length"))
+    if 0 < probe.stylus_length < 1e-6:
+        raise r.error(f"the stylus, from its bending hinge to the ball, is {probe.stylus_length * 1e3:.3g} mm long: "
+                      "at least 0.001 mm", "probe", "stylus_length_mm" if "stylus_length" in pv else "z_mm")
     if probe.stylus_length <= 0:
         raise r.error(f"the ball must lie ahead along the probe z axis (the stylus direction): its z in the "
                       f"probe frame seen from the last joint origin is {probe.stylus_length * 1e3:.3f} mm; turn "

@@ -17,7 +17,7 @@ import numpy as np
 from ._csv import BLOCK_BYTES, csv_records, format_csv, iter_csv_blocks
 from ._errors import InputError, parse_toml, read_text, unknown_key
 from ._output import atomic_write_bytes, guard_output
-from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, split_unit
+from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
 log = logging.getLogger(__name__)
 
@@ -183,7 +183,7 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
     bad = ~np.isfinite(nums)
     if bad.any():
         i, k = np.argwhere(bad)[0]
-        raise InputError(f"value must be finite, got {nums[i, k]!r}", path, int(blk.lines[i]),
+        raise InputError(f"value must be finite, got {float(nums[i, k])!r}", path, int(blk.lines[i]),
                          lay.header[lay.num_idx[k]])
     pos = {c: k for k, c in enumerate(lay.num_idx)}
 
@@ -191,7 +191,11 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
         if base not in lay.cols:
             return None
         c, unit = lay.cols[base]
-        return nums[:, pos[c]] * UNIT_FACTORS[unit]
+        values = nums[:, pos[c]] * UNIT_FACTORS[unit]
+        wrong = implausible(values, QUANTITY_OF_UNIT[unit])
+        if wrong:
+            raise InputError(wrong[1], path, int(blk.lines[wrong[0][0]]), lay.header[c])
+        return values
 
     def group(bases) -> np.ndarray | None:
         return None if bases[0] not in lay.cols else np.column_stack([col(b) for b in bases])
@@ -202,6 +206,9 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
         raise InputError("empty measurement id", path, int(blk.lines[empty[0]]), "measurement")
     q = nums[:, [pos[c] for c in lay.joints]] * np.array([UNIT_FACTORS[lay.header[c].rsplit("_", 1)[1]]
                                                           for c in lay.joints])
+    wrong = implausible(q, "angle")
+    if wrong:
+        raise InputError(wrong[1], path, int(blk.lines[wrong[0][0]]), lay.header[lay.joints[wrong[0][1]]])
     force, force_kind = group(("fx", "fy", "fz")), None
     if force is not None:
         force_kind = "xyz"
@@ -387,6 +394,9 @@ def parse_artefacts(text: str, path: str = "<string>") -> Artefacts:
             if parts[0] in values:
                 raise err(f"'{parts[0]}' is given twice (with two units)", "feature", i, key)
             values[parts[0]] = float(v) * UNIT_FACTORS[parts[1]]
+            wrong = implausible(values[parts[0]], "length")
+            if wrong:
+                raise err(f"'{key}': {wrong[1]}", "feature", i, key)
             if parts[0] != "diameter" and values[parts[0]] < 0:
                 raise err(f"'{key}' must not be negative, got {v!r}", "feature", i, key)
         if kind in ("ring", "cylinder", "sphere") and "diameter" not in values:
@@ -424,6 +434,9 @@ def parse_artefacts(text: str, path: str = "<string>") -> Artefacts:
                 raise err(f"'{key}' must be a finite number, got {v!r}", "distance", i, key)
             if (length if parts[0] == "length" else u) is not None:
                 raise err(f"'{parts[0]}' is given twice (with two units)", "distance", i, key)
+            wrong = implausible(float(v) * UNIT_FACTORS[parts[1]], "length")
+            if wrong:
+                raise err(f"'{key}': {wrong[1]}", "distance", i, key)
             if parts[0] == "length":
                 length = float(v) * UNIT_FACTORS[parts[1]]
                 if not length > 0:
@@ -466,9 +479,6 @@ def read_force_signal(path: str | Path) -> ForceSignal:
     found = []
 
     def check(header, hline):
-        for h in header:
-            if split_unit(h) is None:
-                raise InputError("column without a unit suffix", path, hline, h)
         if "time_s" not in header:
             raise InputError("missing column 'time_s'", path, hline)
         if {"fx_N", "fy_N", "fz_N"} <= set(header):
@@ -493,7 +503,11 @@ def read_force_signal(path: str | Path) -> ForceSignal:
     bad = ~np.isfinite(arr)
     if bad.any():
         i, k = np.argwhere(bad)[0]
-        raise InputError(f"expected a finite number, got {arr[i, k]!r}", path, int(lines[i]), header[k])
+        raise InputError(f"expected a finite number, got {float(arr[i, k])!r}", path, int(lines[i]), header[k])
+    for k, h in enumerate(header):
+        wrong = implausible(arr[:, k], QUANTITY_OF_UNIT[split_unit(h)[1]])
+        if wrong:
+            raise InputError(wrong[1], path, int(lines[wrong[0][0]]), h)
     kind, cols, _ = found[0]
     t = arr[:, header.index("time_s")]
     if np.any(np.diff(t) <= 0):

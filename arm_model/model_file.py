@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from ._errors import InputError, parse_toml, read_text
+from ._units import implausible
 from .description import (MODEL_KEYS, ArmDescription, TomlReader, description_data, description_from_data,
                           in_unit, nearest, toml_text)
 from .effects import EFFECTS, Effect
@@ -56,6 +57,11 @@ PARAM_UNITS: dict[str, tuple[tuple[str, float], ...]] = {
     "K": (("K", 1.0),),
     "s": (("s", 1.0),),
     "kg": (("kg", 1.0),),
+}
+#: SI unit of an effect parameter -> its quantity, for the plausible range (arm_model._units.PLAUSIBLE_SI)
+PARAM_QUANTITY: dict[str, str] = {
+    "m": "length", "rad": "angle", "m/N": "compliance", "rad/(N m)": "angular compliance", "1/K": "expansion",
+    "1": "ratio", "N": "force", "N m": "torque", "K": "temperature difference", "s": "time", "kg": "mass",
 }
 
 #: per-point input of an effect (``Effect.needs``) -> the points-file column it comes from (None:
@@ -332,6 +338,9 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
                 if base in got:
                     raise r.error(f"'{base}' is given twice (with two units)", *pw, key)
                 got[base] = float(v) * units[suffix]
+                wrong = implausible(got[base], PARAM_QUANTITY.get(expected[name], ""))
+                if wrong:
+                    raise r.error(f"'{key}': {wrong[1]}", *pw, key)
             if "value" not in got:
                 raise r.error(f"parameter '{name}' has no 'value_<unit>' (e.g. value_{PARAM_UNITS[expected[name]][0][0]})",
                               *pw)

@@ -2,46 +2,43 @@
 and the per-point columns of ``aacmm tip`` (``u_x_mm`` ..., ``cov_xx_um2`` ..., Monte Carlo)."""
 from __future__ import annotations
 
-import argparse
 import math
 
 import numpy as np
+
+from .commands import number_in, seed
 
 from .uncertainty import (COMPLIANCE_U_RELATIVE, CONTRIBUTIONS, InputUncertainty, ParameterCovariance,
                           covariance_columns, default_inputs, directional_ratio, monte_carlo,
                           propagate)
 
 __all__ = ["add_input_options", "inputs_from_args", "add_tip_options", "wants_uncertainty", "tip_columns",
-           "contribution_lines", "non_negative"]
+           "contribution_lines"]
 
 
-def non_negative(text: str) -> float:
-    """argparse type: a finite number >= 0."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (math.isfinite(v) and v >= 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
-    return v
+#: the largest values the input-uncertainty options take (their plausible ranges, docs/uncertainty.md):
+#: an encoder step of at most a turn, a force uncertainty of at most 100 kN, a relative compliance
+#: uncertainty of at most 1000 %, a probing scatter of at most 100 mm (as probing_scatter_um of a model
+#: file); at most a million Monte Carlo samples
+MAX_ENCODER_RESOLUTION_DEG, MAX_U_FORCE_N, MAX_U_COMPLIANCE_REL, MAX_U_PROBING_UM, MAX_MC = 360.0, 1e5, 10.0, 1e5, 10**6
 
 
 def add_input_options(p, force: bool = True) -> None:
     """The input uncertainties (each overrides its default, see docs/uncertainty.md); ``force=False``
     leaves out ``--u-force-N`` for a command that has its own (``aacmm ring``)."""
     g = p.add_argument_group("input uncertainties (defaults and their sources: docs/uncertainty.md)")
-    g.add_argument("--encoder-resolution-deg", type=non_negative, default=None, metavar="R",
+    g.add_argument("--encoder-resolution-deg", type=number_in(0, MAX_ENCODER_RESOLUTION_DEG), default=None, metavar="R",
                    help="encoder resolution of every joint [deg] (u = R / sqrt(12)); default: each joint's "
                         "encoder_resolution of the description, 0 where not given")
     if force:
-        g.add_argument("--u-force-N", type=non_negative, nargs=2, default=None, metavar=("BENDING", "AXIAL"),
+        g.add_argument("--u-force-N", type=number_in(0, MAX_U_FORCE_N), nargs=2, default=None, metavar=("BENDING", "AXIAL"),
                        help="standard uncertainty of the force [N] across (probe x, y) and along (z) the stylus; "
                             "default 0.0723 0.0464 (the seed paper's Table 1)")
-    g.add_argument("--u-compliance-rel", type=non_negative, default=None, metavar="R",
+    g.add_argument("--u-compliance-rel", type=number_in(0, MAX_U_COMPLIANCE_REL), default=None, metavar="R",
                    help=f"standard uncertainty of the probe compliances relative to their value (default "
                         f"{COMPLIANCE_U_RELATIVE:g}, from the seed paper's Table 2 fit); not used for compliances "
                         "the model's covariance holds")
-    g.add_argument("--u-probing-um", type=non_negative, default=None, metavar="U",
+    g.add_argument("--u-probing-um", type=number_in(0, MAX_U_PROBING_UM), default=None, metavar="U",
                    help="probing scatter of a ball centre per axis [um] (default: the model file's "
                         "probing_scatter_um, which calibrate and close-loop write: their residual scatter net of the "
                         "encoder and force-sensor noise propagated with the default inputs; 0 without one)")
@@ -64,18 +61,17 @@ def inputs_from_args(arm, args, has_force: bool) -> InputUncertainty:
 
 
 def add_tip_options(p) -> None:
-    from .commands import at_least
     g = p.add_argument_group("uncertainty of the corrected centres (docs/uncertainty.md)")
     g.add_argument("--uncertainty", action="store_true",
                    help="write u_x_mm, u_y_mm, u_z_mm even when the model carries no parameter covariance "
                         "(the parameters are then taken as exact); with a covariance they are always written")
     g.add_argument("--covariance", action="store_true",
                    help="also write the six terms of each point's 3x3 covariance [um^2] (cov_xx_um2, cov_yy_um2, cov_zz_um2, cov_xy_um2, cov_xz_um2, cov_yz_um2)")
-    g.add_argument("--mc", type=at_least(2), default=None, metavar="N",
+    g.add_argument("--mc", type=number_in(2, MAX_MC, kind=int), default=None, metavar="N",
                    help="also a Monte Carlo of N samples of the same inputs: columns u_x_mc_mm ... (with "
                         "--covariance also cov_xx_mc_um2 ...) and the largest relative difference to the linear "
                         "result, per axis and along any direction")
-    g.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo (default 0)")
+    g.add_argument("--seed", type=seed, default=0, help="seed of the Monte Carlo (default 0)")
     add_input_options(p)
 
 

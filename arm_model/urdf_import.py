@@ -23,12 +23,14 @@ from __future__ import annotations
 
 import io
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ._errors import InputError, parse_toml, read_text
+from ._csv import parse_number
+from ._errors import InputError, open_input, parse_toml, read_text
+from ._units import implausible
 from .description import ArmDescription, JointRow, Probe, TomlReader, load_description
 from .shipped import arm_path
 from .urdf import ELASTIC_JOINTS, _origin_matrix
@@ -51,6 +53,14 @@ _NUMERIC = {
     "mimic": {"multiplier": 1, "offset": 1}, "calibration": {"rising": 1, "falling": 1},
     "safety_controller": {"soft_lower_limit": 1, "soft_upper_limit": 1, "k_position": 1, "k_velocity": 1},
 }
+#: (tag, attribute) -> the quantity whose plausible range (arm_model._units.PLAUSIBLE_SI) its numbers keep
+_QUANTITY = {("origin", "xyz"): "length", ("origin", "rpy"): "angle", ("mass", "value"): "mass", ("axis", "xyz"): "ratio",
+             ("sphere", "radius"): "length", ("cylinder", "radius"): "length", ("cylinder", "length"): "length",
+             ("box", "size"): "length"}
+#: (tag, attribute) whose numbers are sizes, masses, or colours: never negative
+_NOT_NEGATIVE = {("mass", "value"), ("sphere", "radius"), ("cylinder", "radius"), ("cylinder", "length"),
+                 ("box", "size"), ("mesh", "scale"), ("color", "rgba"), ("inertia", "ixx"), ("inertia", "iyy"),
+                 ("inertia", "izz")}
 _ELASTIC_TYPES = dict(zip(ELASTIC_JOINTS, ("revolute", "revolute", "prismatic")))
 
 
@@ -59,6 +69,8 @@ class LinkMass:
     """A link's mass [kg] and centre of mass [m] in its own frame (a URDF ``<inertial>``)."""
     mass: float
     com: tuple[float, float, float]
+    #: where it was read (the masses file and the line of its [[link]]), for messages
+    source: tuple[str, int | None] | None = field(default=None, compare=False)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -95,10 +107,11 @@ def _read_urdf(path: str | Path) -> _Urdf:
     import yourdfpy
 
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise InputError(f"cannot read the URDF: {exc.strerror}", path) from None
+    with open_input(path, "the URDF") as fh:
+        try:
+            data = fh.read()
+        except OSError as exc:
+            raise InputError(f"cannot read the URDF: {exc.strerror}", path) from None
     tree = _parse_xml(path, data)
     root = tree.getroot()
     if root.tag != "robot":
@@ -112,13 +125,20 @@ def _read_urdf(path: str | Path) -> _Urdf:
             text = el.get(attr)
             if text is None:
                 continue
-            try:
-                vals = [float(v) for v in text.split()]
-            except ValueError:
-                vals = []
-            if len(vals) != n or not all(math.isfinite(v) for v in vals):
+            vals = [parse_number(v) for v in text.split()]
+            if len(vals) != n or not all(v is not None and math.isfinite(v) for v in vals):
                 raise InputError(f"<{el.tag} {attr}=...> must be {n} finite number{'s' if n > 1 else ''}, "
                                  f"got {text!r}", path, el.sourceline, f"key '{el.tag}.{attr}'")
+            quantity = _QUANTITY.get((el.tag, attr))
+            wrong = implausible(vals, quantity) if quantity else None
+            if wrong:
+                raise InputError(f"<{el.tag} {attr}=...>: {wrong[1]}", path, el.sourceline, f"key '{el.tag}.{attr}'")
+            if (el.tag, attr) in _NOT_NEGATIVE and min(vals) < 0:
+                raise InputError(f"<{el.tag} {attr}=...> must not be negative, got {text!r}", path, el.sourceline,
+                                 f"key '{el.tag}.{attr}'")
+            if el.tag == "color" and max(vals) > 1:
+                raise InputError(f"<color rgba=...> takes four numbers in [0, 1], got {text!r}", path,
+                                 el.sourceline, f"key '{el.tag}.{attr}'")
     links, joints = {}, {}
     for el in root.findall("link"):
         name = el.get("name")
@@ -304,7 +324,8 @@ def load_masses(path: str | Path) -> dict[str, LinkMass]:
             raise r.error(f"mass must be in [0, 10000] kg, got {vals['mass']:g}", "link", i, "mass_kg")
         if any(abs(vals.get(k, 0.0)) > 100.0 for k in ("com_x", "com_y", "com_z")):
             raise r.error("a centre of mass more than 100 m from its link frame is not plausible", "link", i)
-        out[name] = LinkMass(vals["mass"], tuple(vals.get(k, 0.0) for k in ("com_x", "com_y", "com_z")))
+        out[name] = LinkMass(vals["mass"], tuple(vals.get(k, 0.0) for k in ("com_x", "com_y", "com_z")),
+                             (str(path), r.lines.get(("link", i, "name"), r.lines.get(("link", i)))))
     return out
 
 
@@ -334,10 +355,12 @@ def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None =
     """
     u = _read_urdf(path)
     if masses:
-        for lname in masses:
+        for lname, m in masses.items():
             if lname not in u.link_elements:
-                raise InputError(f"the masses name link '{lname}', which the URDF does not have "
-                                 f"(links: {', '.join(u.link_elements)})", u.path)
+                where = m.source if isinstance(m, LinkMass) and m.source else (u.path, None)
+                raise InputError(f"the masses name link '{lname}', which the URDF {u.path} does not have "
+                                 f"(links: {', '.join(u.link_elements)})", where[0], where[1],
+                                 "key 'link.name'")
     ch = _chain(u, tip_frame)
     folded = _fold_masses(u, ch, masses)
     rows = []

@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError
-from arm_model.commands import add_arm_options, arm_inputs, at_least, fraction, model_from_args, non_negative, positive, seed
+from arm_model.commands import (add_arm_options, arm_inputs, at_least, fraction, model_from_args, non_negative,
+                                number_in, positive, seed)
 from arm_model._log import counted
 from arm_model._output import output_folder
 from arm_model.checks import point_warnings, log_warnings
@@ -60,13 +61,18 @@ def campaign_inputs(p) -> None:
     p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; never an input)")
 
 
+#: argparse type of a stated standard uncertainty [um]: from 1e-6 um (whose square is still a normal
+#: number in m^2) to 100 mm
+SIGMA_UM = number_in(1e-6, 1e5)
+
+
 def sigma_options(p) -> None:
     """The stated uncertainties that weight the residuals (shared with ``aacmm close-loop``)."""
-    p.add_argument("--sigma-probe-um", type=positive(), default=10.0,
+    p.add_argument("--sigma-probe-um", type=SIGMA_UM, default=10.0,
                    help="standard uncertainty of a probed ball centre per axis [um] (default 10)")
-    p.add_argument("--sigma-ref-um", type=positive(), default=10.0,
+    p.add_argument("--sigma-ref-um", type=SIGMA_UM, default=10.0,
                    help="standard uncertainty of a reference-instrument coordinate per axis [um] (default 10)")
-    p.add_argument("--sigma-length-um", type=positive(), default=None,
+    p.add_argument("--sigma-length-um", type=SIGMA_UM, default=None,
                    help="standard uncertainty of a certified length without u_length_mm [um] "
                         "(default: --sigma-probe-um)")
     p.add_argument("--weights", choices=("data", "stated"), default="data",
@@ -74,7 +80,7 @@ def sigma_options(p) -> None:
                         "(points per artefact kind, reference points, lengths) is estimated from the fit's residuals "
                         "(variance components), the rows re-weighted and the fit repeated until it settles; "
                         "stated: use the sigmas as given")
-    p.add_argument("--plausible-length-mm", type=positive(), default=None,
+    p.add_argument("--plausible-length-mm", type=number_in(1e-6, 1e6), default=None,
                    help="plausible size of a length error [mm] (angles: 0.01 rad per mm of it), for the rule that "
                         "holds parameters the data resolve to worse than --min-resolution of it; default the larger "
                         "of 1 mm and ten times the noise of one point (so a robot's lengths are not held)")
@@ -94,11 +100,9 @@ def prior_scale(text: str):
     if t == "evidence":
         return "evidence"
     try:
-        v = float(t)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected evidence, off or a positive number, got {text!r}") from None
-    if not (math.isfinite(v) and 0 < v <= 1e3):
-        raise argparse.ArgumentTypeError(f"a prior scale must be a number in (0, 1000], got {text!r}")
+        v = number_in(0, 1e3, low_open=True)(t)
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(f"expected evidence, off or a number in (0, 1000]: {exc}") from None
     return v
 
 
@@ -175,7 +179,8 @@ def register(sub) -> None:
                                   "measurements. Local processes by default; --scheduler sends the runs to a Dask "
                                   "cluster. Writes study.json and prints a table.")
     m.add_argument("campaign", type=Path, help="campaign TOML of the simulator (docs/formats.md §6)")
-    m.add_argument("--runs", type=at_least(1), default=20, help="number of runs (default 20)")
+    m.add_argument("--runs", type=number_in(1, 100_000, kind=int), default=20,
+                   help="number of runs (default 20; at most 100000)")
     m.add_argument("--seed", type=seed, default=0, help="first seed (default 0)")
     m.add_argument("--holdout", type=fraction, default=0.25, help="held-out fraction of measurements (default 0.25)")
     m.add_argument("--workers", type=at_least(1), default=None, help="local processes (default: CPU count)")

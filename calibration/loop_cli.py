@@ -6,7 +6,7 @@ import logging
 
 from arm_model.cli import command_help
 from arm_model import InputError
-from arm_model.commands import arm_inputs, at_least, fraction, model_from_args, number_in, seed
+from arm_model.commands import arm_inputs, at_least, model_from_args, number_in, seed
 from arm_model._output import output_folder
 from arm_model.checks import point_warnings, log_warnings
 from arm_model.io import read_artefacts, read_points
@@ -17,6 +17,10 @@ from .cli import _holdout, campaign_inputs, model_effects, sigma_options
 __all__ = ["register", "run"]
 
 log = logging.getLogger(__name__)
+
+#: argparse type of a significance level: in [1e-12, 1) (a smaller one has no finite normal quantile after
+#: the Bonferroni division)
+ALPHA = number_in(1e-12, 1, high_open=True)
 
 
 def register(sub) -> None:
@@ -48,10 +52,10 @@ def register(sub) -> None:
                    help="folds of the held-out decisions: whole measurements, or poses inside each feature "
                         "(predicted against the feature's centre fitted on its other poses); auto (default): by "
                         "measurement when there are enough measurements for the test to reach --alpha, else by pose")
-    p.add_argument("--alpha", type=fraction, default=0.01,
+    p.add_argument("--alpha", type=ALPHA, default=0.01,
                    help="significance level of the held-out test to add an effect (Bonferroni over the candidates "
                         "tested) and of the final structure tests (Holm) (default 0.01)")
-    p.add_argument("--screen-alpha", type=fraction, default=0.05,
+    p.add_argument("--screen-alpha", type=ALPHA, default=0.05,
                    help="level of the score-test screening, Bonferroni over the candidates (default 0.05)")
     p.add_argument("--min-improvement", type=number_in(0, 1, high_open=True), default=0.02,
                    help="smallest relative drop of the held-out RMS for an effect to be added (default 0.02)")

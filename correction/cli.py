@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError, NumericalError, read_artefacts, read_points
-from arm_model.commands import add_arm_options, arm_inputs, model_from_args, non_negative, number_in, positive
+from arm_model.commands import add_arm_options, arm_inputs, model_from_args, number_in
 from arm_model._log import counted
 from arm_model._output import output_folder
 from arm_model.checks import log_warnings
@@ -43,14 +43,14 @@ def register(sub) -> None:
                    help="folder of force signals, one <measurement>.csv a measurement (docs/formats.md §5); "
                         "without it the points file's force columns are used")
     r.add_argument("--feature", metavar="ID", help="id of the ring feature when the artefacts file has several rings")
-    r.add_argument("--compliance-mm-per-N", type=positive(), dest="compliance", metavar="C",
+    r.add_argument("--compliance-mm-per-N", type=number_in(0, 1e3, low_open=True), dest="compliance", metavar="C",
                    help="compliance of the paper's four models (default: the arm's probe bending compliance, "
                         "0.0142 mm/N in the nominal arm)")
-    r.add_argument("--u-force-N", type=positive(), dest="u_force", default=None, metavar="U",
+    r.add_argument("--u-force-N", type=number_in(0, 1e5, low_open=True), dest="u_force", default=None, metavar="U",
                    help="standard uncertainty of a measured force for the budgets' u_cor = 2 c u_force "
                         "and of the bending force (probe x, y) in the points' covariances (default 0.0723 N: "
                         "the paper's bending sensor, Table 1 terms combined; the axial stays 0.0464 N)")
-    r.add_argument("--delta-T-C", type=non_negative(), dest="delta_t", default=0.5, metavar="DT",
+    r.add_argument("--delta-T-C", type=number_in(0, 1e4), dest="delta_t", default=0.5, metavar="DT",
                    help="temperature variation during the test for the budgets' u_t (default 0.5 C, the paper's)")
     r.add_argument("--probability-pct", type=number_in(0, 100, low_open=True, high_open=True), dest="probability", default=95.0, metavar="P",
                    help="coverage probability of the expanded uncertainties (default 95)")

@@ -92,6 +92,20 @@ BAD_OPTIONS = [
     (["study", "montecarlo", "{c}", "--runs", "0"], "--runs"),
     (["view", "{p}", "--port", "70000", "--html", "{o}.html"], "--port"),
     (["simulate", "{c}", "--seed", "-1"], "--seed"),
+    # values that overflowed, underflowed to zero or ran (nearly) forever before they were bounded
+    (["tip", "{p}", "--mc", "99999999999999999999"], "--mc"),
+    (["tip", "{p}", "--seed", "1_0"], "--seed"),
+    (["tip", "{p}", "--u-probing-um", "1e308"], "--u-probing-um"),
+    (["tip", "{p}", "--encoder-resolution-deg", "1e99"], "--encoder-resolution-deg"),
+    (["ring", "{p}", "{a}", "--u-force-N", "1e308"], "--u-force-N"),
+    (["ring", "{p}", "{a}", "--delta-T-C", "1e308"], "--delta-T-C"),
+    (["calibrate", "{p}", "{a}", "--sigma-probe-um", "1e-320"], "--sigma-probe-um"),
+    (["calibrate", "{p}", "{a}", "--sigma-length-um", "1e308"], "--sigma-length-um"),
+    (["calibrate", "{p}", "{a}", "--plausible-length-mm", "1e308"], "--plausible-length-mm"),
+    (["calibrate", "{p}", "{a}", "--prior-scale", "1_0"], "--prior-scale"),
+    (["close-loop", "{p}", "{a}", "--alpha", "1e-320"], "--alpha"),
+    (["study", "montecarlo", "{c}", "--runs", "99999999999999999999"], "--runs"),
+    (["view", "{p}", "--scale", "1e308", "--html", "{o}.html"], "--scale"),
 ]
 
 
@@ -100,10 +114,10 @@ def test_bad_option_values_are_refused(tmp_path, capsys, args, option):
     fill = {"p": RING / "points.csv", "a": RING / "artefacts.toml", "c": ROOT / "examples" / "campaigns" /
             "paper-ring.toml", "o": tmp_path / "out"}
     argv = [a.format(**{k: str(v) for k, v in fill.items()}) for a in args]
-    if args[0] in ("ring", "calibrate", "close-loop", "view") or args[:2] == ["study", "poses"]:
+    if args[0] in ("tip", "ring", "calibrate", "close-loop", "view") or args[:2] == ["study", "poses"]:
         argv += ["--arm", str(NOMINAL)]
     if "--html" not in args:
-        argv += ["-o", str(tmp_path / "out")]
+        argv += ["-o", str(tmp_path / ("out.csv" if args[0] == "tip" else "out"))]
     with pytest.raises(SystemExit) as e:
         main(argv)
     assert e.value.code == 2

@@ -189,7 +189,7 @@ def test_never_writes_over_an_input(tmp_path):
 
 
 @settings(max_examples=25, deadline=None)
-@given(st.floats(1.0, 500.0), st.sampled_from([("mm", 1e-3), ("um", 1e-6), ("m", 1.0)]),
+@given(st.floats(1.0, 100.0), st.sampled_from([("mm", 1e-3), ("um", 1e-6), ("m", 1.0)]),
        st.sampled_from([("deg", np.pi / 180), ("arcsec", np.pi / 648000), ("rad", 1.0)]))
 def test_units_are_read_from_the_key_names(value, length, angle):
     c = campaign_from_dict({"seed": 1, "truth": {"eccentricity": [{"joint": "j2", f"amplitude_{angle[0]}": value}]},

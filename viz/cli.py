@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError, NumericalError, check_features, read_artefacts, read_points
-from arm_model.commands import add_arm_options, arm_inputs, model_from_args, port, positive
+from arm_model.commands import add_arm_options, arm_inputs, model_from_args, number_in, port, positive
 from arm_model._output import output_file
 from arm_model.checks import point_warnings, log_warnings
 from arm_model.uncertainty_cli import add_input_options
@@ -26,6 +26,9 @@ from .residuals import read_residuals, residual_origins
 __all__ = ["register", "run"]
 
 log = logging.getLogger(__name__)
+
+#: argparse type of a drawing scale or a frame rate: a finite number in (0, 1e9]
+SCALE = number_in(0, 1e9, low_open=True)
 
 
 def register(sub) -> None:
@@ -47,8 +50,8 @@ def register(sub) -> None:
                       help="show the arm at the N-th point of the selection, file order (default 1)")
     pose.add_argument("--animate", action="store_true",
                       help="animate the arm through every point of the selection (embedded in --html pages)")
-    p.add_argument("--fps", type=positive(), default=2.0, help="points per second when animating (default 2)")
-    p.add_argument("--scale", type=positive(), default=None,
+    p.add_argument("--fps", type=SCALE, default=2.0, help="points per second when animating (default 2)")
+    p.add_argument("--scale", type=SCALE, default=None,
                    help="length of the deflection arrow per length of deflection (e.g. 1000: 0.1 mm is drawn "
                         "100 mm long); default: from the data, so that the median deflection shown is drawn "
                         f"about {ARROW_TARGET_M * 1e3:g} mm long, well outside the 24 mm ball marker "
@@ -58,13 +61,13 @@ def register(sub) -> None:
     p.add_argument("--residuals", type=Path, help="residuals CSV: x_mm, y_mm, z_mm, rx_um, ry_um, rz_um, or the "
                    "residuals.csv of aacmm calibrate (line, dx_um, dy_um, dz_um; see docs/viewer.md): draw "
                    "each residual vector")
-    p.add_argument("--residual-scale", type=positive(), default=1000.0,
+    p.add_argument("--residual-scale", type=SCALE, default=1000.0,
                    help="length of a residual line per length of residual (default 1000)")
     p.add_argument("--ellipsoids", action="store_true",
                    help="draw the 95 %% uncertainty ellipsoid of every corrected ball centre of the selection, from "
                         "the model's parameter covariance (a model file from calibrate; a plain description: "
                         "parameters exact) and the input uncertainties below (docs/uncertainty.md)")
-    p.add_argument("--ellipsoid-scale", type=positive(), default=None, metavar="S",
+    p.add_argument("--ellipsoid-scale", type=SCALE, default=None, metavar="S",
                    help="drawn size of an ellipsoid per true size; default: from the data, so that the median "
                         f"largest semi-axis is drawn about {ELLIPSOID_TARGET_M * 1e3:g} mm (a 1-2-5 number, printed)")
     add_input_options(p)
@@ -77,7 +80,7 @@ def register(sub) -> None:
                    help="keep serving after writing --html/--screenshot (serving is the default without them, "
                         "and with --open-seconds)")
     p.add_argument("--port", type=port, help="web port of the server (default: the first free one from 7000)")
-    p.add_argument("--open-seconds", type=positive(), metavar="N",
+    p.add_argument("--open-seconds", type=number_in(0, 1e7, low_open=True), metavar="N",
                    help="stop the server after N seconds (default: run until Ctrl-C)")
     p.set_defaults(func=run)
 

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from .._errors import InputError, did_you_mean, parse_toml, read_text
+from .._units import implausible
 from ..description import ArmDescription
 from ..shipped import SHIPPED_ARMS, shipped_path
 from ..urdf_import import load_arm
@@ -319,7 +320,7 @@ def _section(ctx: _Ctx, data: Any, spec: dict, table: tuple) -> dict:
             if _UNITS[unit][0] != quantity:
                 raise ctx.error(f"'{key}' is a {quantity}, but '_{unit}' is a unit of {_UNITS[unit][0]} "
                                 f"(e.g. {_example(quantity)})", table, key)
-            out[base] = _scaled(ctx, v, _UNITS[unit][1], shape, table, key)
+            out[base] = _scaled(ctx, v, _UNITS[unit][1], shape, table, key, quantity)
         else:
             out[base] = _unitless(ctx, v, quantity, shape, table, key)
     for base, (quantity, default, shape) in spec.items():
@@ -338,14 +339,21 @@ def _display(base: str, quantity: str) -> str:
     return f"{base}_<{quantity} unit>"
 
 
-def _scaled(ctx, v, factor, shape, table, key):
+def _scaled(ctx, v, factor, shape, table, key, quantity=None):
+    """A number (or a list of ``shape`` numbers) in SI, each within the plausible range of ``quantity``."""
+    def one(x):
+        x = _number(ctx, x, table, key) * factor
+        wrong = implausible(x, quantity) if quantity else None
+        if wrong:
+            raise ctx.error(f"'{key}': {wrong[1]}", table, key)
+        return x
     if shape is None:
-        return _number(ctx, v, table, key) * factor
+        return one(v)
     values = v if isinstance(v, list) else ([v] if shape == -1 else None)
     if values is None or (shape != -1 and len(values) != shape) or not values:
         want = "a list" if shape == -1 else f"a list of {shape} numbers"
         raise ctx.error(f"'{key}' must be {want}, got {v!r}", table, key)
-    return tuple(_number(ctx, x, table, key) * factor for x in values)
+    return tuple(one(x) for x in values)
 
 
 def _unitless(ctx, v, quantity, shape, table, key):
@@ -381,7 +389,7 @@ def _unitless(ctx, v, quantity, shape, table, key):
             raise ctx.error(f"'{key}' must be a non-zero direction", table, key)
         return tuple(x / norm for x in vec)
     # ratio
-    return _scaled(ctx, v, 1.0, shape, table, key)
+    return _scaled(ctx, v, 1.0, shape, table, key, "ratio")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -418,6 +426,10 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
         desc = load_arm(arm_path, top["tip_frame"])
     # truth and its effects
     truth = _section(ctx, data.get("truth"), _S["truth"], ("truth",))
+    for k in ("length_error", "angle_error", "probe_error"):
+        if truth[k] < 0:
+            raise ctx.error(f"'{k}' (the size of the random errors, 1 sigma) must not be negative", ("truth",),
+                            _given_key(data.get("truth") or {}, k))
     raw_truth = data.get("truth") or {}
     truth["errors"] = _errors(ctx, raw_truth.get("errors"), desc)
     ecc = raw_truth.get("eccentricity")

@@ -48,7 +48,7 @@ def _magnitudes(rng, op: dict, n: int) -> tuple[float, np.ndarray]:
     level = op["force_mean"] * np.exp(rng.normal(0.0, s) - s * s / 2) if s > 0 else op["force_mean"]
     level = float(np.clip(level, op["min_force"], op["max_force"]))
     cv = op["point_cv"]
-    if cv > 0:
+    if cv * cv > 0:             # a spread so small that its square underflows: none
         shape = 1.0 / (cv * cv)
         f = rng.gamma(shape, level / shape, n)
     else:
