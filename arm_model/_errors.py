@@ -143,8 +143,9 @@ def did_you_mean(word: str, known) -> str:
     return f"; did you mean '{best[0]}'?" if best and best[0] != word else ""
 
 
-def unknown_key(key: str, known, shown=None) -> str:
-    """The message for an unknown key: the nearest known one suggested, the known ones listed
-    (``shown``: how to list them, e.g. with ``_<length unit>``; default ``known``)."""
+def unknown_key(key: str, known, shown=None, what: str = "key") -> str:
+    """The message for an unknown key (``what="column"``: a CSV column): the nearest known one
+    suggested, the known ones listed (``shown``: how to list them, e.g. with ``_<length unit>``;
+    default ``known``)."""
     known = list(known)
-    return f"unknown key '{key}'{did_you_mean(key, known)} (known: {', '.join(shown or known)})"
+    return f"unknown {what} '{key}'{did_you_mean(key, known)} (known: {', '.join(shown or known)})"

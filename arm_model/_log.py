@@ -23,12 +23,18 @@ import logging
 import sys
 import time
 
-__all__ = ["PACKAGES", "PROGRESS", "console", "Progress", "progress_line", "level_from_flags"]
+__all__ = ["PACKAGES", "PROGRESS", "console", "Progress", "progress_line", "level_from_flags", "counted"]
 
 #: the packages whose loggers the command line configures
 PACKAGES = ("arm_model", "calibration", "correction", "viz")
 #: ``extra=`` of a progress record
 PROGRESS = {"progress": True}
+
+
+def counted(n: int, word: str, plural: str | None = None) -> str:
+    """``"1 point"``, ``"0 points"``, ``"3 points"``: a count with its noun in the right number
+    (``plural``: when not ``word + "s"``)."""
+    return f"{n} {word if n == 1 else (plural or word + 's')}"
 
 
 def level_from_flags(quiet: bool, verbose: bool) -> int:

@@ -13,6 +13,7 @@ import numpy as np
 from arm_model import InputError
 from arm_model.commands import (add_arm_options, arm_inputs, at_least, fraction, model_from_args, non_negative,
                                 number_in, positive, seed)
+from arm_model._log import counted
 from arm_model._output import output_folder
 from arm_model.checks import point_warnings, log_warnings
 from arm_model.io import read_artefacts, read_points
@@ -322,8 +323,9 @@ def run_calibrate(args: argparse.Namespace) -> int:
                                      "conformance": conf,
                                      "warnings": [w.as_dict() for w in warnings]})
     files = {k: out.published(v) for k, v in files.items()}
-    log.info(f"{len(train)} training points in {len(train.measurements())} measurements"
-          + (f", {len(test)} held-out points in {len(test.measurements())}" if test is not None else ""))
+    log.info(f"{counted(len(train), 'training point')} in {counted(len(train.measurements()), 'measurement')}"
+             + (f", {counted(len(test), 'held-out point')} in {counted(len(test.measurements()), 'measurement')}"
+                if test is not None else ""))
     if data.points.force_kind == "two-channel":
         log.info("two-channel force sensor: the probe-y force is not measured and is taken as zero")
     log_warnings(warnings)
@@ -440,7 +442,7 @@ def run_montecarlo(args: argparse.Namespace) -> int:
         from arm_model.shipped import provenance
         (out.dir / "study.json").write_text(json.dumps({**mc.to_dict(), **provenance(camp.inputs)}, indent=1,
                                                        default=float) + "\n", encoding="utf-8")
-    log.info(f"{args.runs - len(mc.failures)} of {args.runs} runs succeeded")
+    log.info(f"{args.runs - len(mc.failures)} of {counted(args.runs, 'run')} succeeded")
     for f in mc.failures[:5]:
         log.info(f"  seed {f['seed']}: {f['error']}")
     log.info("predicted accuracy on held-out data (median / 95th percentile):")
@@ -483,6 +485,6 @@ def run_poses(args: argparse.Namespace) -> int:
     log_warnings(warnings)
     log.info(f"{len(sel.parameters)} identifiable parameters; chosen measurements (O1, random sets' O1):")
     for m, o, r, n in zip(sel.chosen, sel.o1, sel.o1_random, sel.n_points):
-        log.info(f"  {m:20s} O1 {o:10.4g}   random {r:10.4g}   ({n} points)")
+        log.info(f"  {m:20s} O1 {o:10.4g}   random {r:10.4g}   ({counted(n, 'point')})")
     log.info(f"-> {args.output / 'poses.json'}")
     return 0

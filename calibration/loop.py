@@ -48,7 +48,7 @@ import numpy as np
 from scipy import stats
 
 from arm_model import InputError, NumericalError
-from arm_model._log import progress_line
+from arm_model._log import counted, progress_line
 from arm_model.description import ArmDescription
 from arm_model.effects import JointCompliance, ThermalGrowth
 from arm_model.io import Artefacts, PointSet
@@ -563,9 +563,9 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
     cands, skipped = library_candidates(desc, data, families_, extra)
     design, test, test_by = _outer_split(data, settings)
     if test_by == "measurement":
-        say(f"{len(data)} points, {len(data.measurements())} measurements: {len(design.measurements())} for design, "
+        say(f"{counted(len(data), 'point')}, {counted(len(data.measurements()), 'measurement')}: {len(design.measurements())} for design, "
             f"{len(test.measurements())} held out for the test ({', '.join(test.measurements())}); "
-            f"{len(cands)} candidates")
+            f"{counted(len(cands), 'candidate')}")
     else:
         say(f"{len(data)} points in {len(data.measurements())} measurement(s): too few to hold whole measurements "
             f"out, so the test set is {len(test)} poses ({100 * settings.test_fraction:g} % of each feature's), "

@@ -15,6 +15,7 @@ import numpy as np
 from arm_model import InputError
 from arm_model.checks import warnings_html
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, write_csv
+from arm_model._log import counted
 from arm_model.shipped import provenance
 
 from .calibrate import CalibrationResult, display_unit
@@ -185,7 +186,7 @@ def conformance_lines(conf: dict) -> list[str]:
                 out.append(f"  {r['standard']} {r['test']} on {what}: no item in this data set (MPE {r['mpe_um']:g} um "
                            "not tested)")
                 continue
-            head = f"  {r['standard']} {r['test']} on {what} ({r['n']} items): max |value| {r['max_abs_um']:.2f} um"
+            head = f"  {r['standard']} {r['test']} on {what} ({counted(r['n'], 'item')}): max |value| {r['max_abs_um']:.2f} um"
             if r["result"] is None:
                 out.append(head + " (no MPE given)")
             else:

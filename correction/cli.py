@@ -11,6 +11,7 @@ import numpy as np
 
 from arm_model import InputError, NumericalError, read_artefacts, read_points
 from arm_model.commands import add_arm_options, arm_inputs, model_from_args, number_in
+from arm_model._log import counted
 from arm_model._output import output_folder
 from arm_model.checks import log_warnings
 from arm_model.io import check_features
@@ -110,8 +111,8 @@ def run_ring(args: argparse.Namespace) -> int:
         written = ring_report(campaign, out.dir, inputs, budgets, warnings, point_unc,
                               parameters.source if parameters is not None else None)
     s = campaign_summary(campaign)
-    log.info(f"ring '{campaign.feature}': {len(campaign.measurements)} measurements, "
-          f"{sum(r.n_points for r in campaign.measurements)} points; forces from "
+    log.info(f"ring '{campaign.feature}': {counted(len(campaign.measurements), 'measurement')}, "
+          f"{counted(sum(r.n_points for r in campaign.measurements), 'point')}; forces from "
           f"{'signals in ' + str(args.signals) if args.signals else 'the points file'}")
     if arm.effects:
         log.info("effects applied to every ball centre: " + ", ".join(e.describe() for e in arm.effects))
@@ -130,7 +131,7 @@ def run_ring(args: argparse.Namespace) -> int:
           f"{min(uf) * 1e3:.4f} .. {max(uf) * 1e3:.4f} mm")
     if args.u_force is None:
         log.info(f"budgets: u_force = {DEFAULT_U_FORCE} N (the paper's bending sensor; set --u-force-N for yours)")
-    log.info(f"{len(written)} files -> {args.output}/ (report.html, summary.json, ...)")
+    log.info(f"{counted(len(written), 'file')} -> {args.output}/ (report.html, summary.json, ...)")
     return 0
 
 
@@ -151,5 +152,5 @@ def run_paper(args: argparse.Namespace) -> int:
     L = s["loop"]
     log.info(f"loop: residual after the FEM correction vs mean force r = {L['r_residual_force']:.3f}; series compliance "
           f"{L['series_compliance_mm_per_N']:.4f} mm/N; LOO RMS {L['rms_before_mm']:.4f} -> {L['loo_rms_after_mm']:.4f} mm")
-    log.info(f"{len(written)} files -> {args.output}/")
+    log.info(f"{counted(len(written), 'file')} -> {args.output}/")
     return 0

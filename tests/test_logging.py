@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from arm_model._log import Progress, console
+from arm_model._log import Progress, console, counted
 from arm_model.cli import COMMANDS, build_parser, main
 from conftest import NOMINAL, ROOT
 
@@ -144,3 +144,12 @@ def test_study_progress_into_a_log_file_has_no_carriage_return(small, tmp_path):
     assert r.returncode == 0, text
     assert "\r" not in text and "selecting 4/4 (100 %)" in text
     assert "chosen measurements" in r.stdout
+
+
+@pytest.mark.parametrize("n, word, plural, expect", [
+    (0, "point", None, "0 points"), (1, "point", None, "1 point"), (2, "point", None, "2 points"),
+    (1, "training point", None, "1 training point"), (1, "analysis", "analyses", "1 analysis"),
+    (3, "analysis", "analyses", "3 analyses"),
+])
+def test_counted_puts_the_noun_in_the_right_number(n, word, plural, expect):
+    assert counted(n, word, plural) == expect

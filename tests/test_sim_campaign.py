@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import hashlib
+import json
 import tomllib
 from dataclasses import replace
 from pathlib import Path
@@ -12,6 +13,7 @@ from hypothesis import given, settings, strategies as st
 
 from arm_model import InputError, check_features, read_artefacts, read_points
 from arm_model.cli import main
+from arm_model.shipped import version
 from arm_model.sim import campaign_from_dict, load_campaign, simulate
 from conftest import ROOT, assert_close
 
@@ -157,8 +159,14 @@ def test_cli_writes_and_summarises(tmp_path, capsys):
     c = _write(tmp_path, 'seed = 3\nsensor = "two-channel"\n[[task]]\nkind = "ring"\npoints_per_row = 4\n')
     assert main(["simulate", str(c), "-o", str(tmp_path / "out")]) == 0
     out = capsys.readouterr().out
-    assert "12 points in 1 measurements" in out and "two-channel" in out and "truth check" in out
+    assert "12 points in 1 measurement "  in out and "two-channel" in out and "truth check" in out
     assert (tmp_path / "out" / "signals" / "ring-01.csv").exists()
+    # summary.json: version and the campaign's SHA-256 (computed here independently), as every command
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["aacmm_version"] == version()
+    assert summary["input_sha256"][str(c)] == hashlib.sha256(c.read_bytes()).hexdigest()
+    assert summary["seed"] == 3 and summary["points"] == {"points": 12, "measurements": 1}
+    assert "summary.json" not in summary["files"] and "points.csv" in summary["files"]
     assert main(["simulate", str(c), "-o", str(tmp_path / "out2"), "--no-signals", "--seed", "8"]) == 0
     assert not (tmp_path / "out2" / "signals").exists()
     assert "seed 8" in capsys.readouterr().out

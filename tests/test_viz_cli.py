@@ -163,6 +163,20 @@ def test_bad_points_file(campaign, tmp_path, capsys, edit, expect):
     assert _no_output(out)
 
 
+def test_unknown_residuals_column_is_an_error(campaign, tmp_path, capsys):
+    """An unknown column of the residuals file: exit 2, file, line 1 and the column named, nothing written."""
+    bad = tmp_path / "in" / "residuals.csv"
+    bad.parent.mkdir()
+    text = (campaign / "residuals.csv").read_text().splitlines()
+    bad.write_text("\n".join([text[0] + ",note"] + [r + ",x" for r in text[1:]]) + "\n")
+    out = tmp_path / "out"
+    out.mkdir()
+    assert run_view(campaign / "points.csv", "--arm", NOMINAL, "--residuals", bad, "--html", out / "x.html") == 2
+    err = capsys.readouterr().err
+    assert f"{bad}, line 1, column 'note': unknown column 'note'" in err, err
+    assert _no_output(out)
+
+
 @pytest.mark.parametrize("extra, expect", [
     (["--measurement", "nope"], "column 'measurement': no measurement 'nope' (the file has: ring-01, bar-01)"),
     (["--point", "20"], "--point 20: the selection has 19 point(s)"),

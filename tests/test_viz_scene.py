@@ -216,7 +216,13 @@ GOOD = "x_mm,y_mm,z_mm,rx_um,ry_um,rz_um\n1,2,3,0.1,0.2,0.3\n"
     (GOOD + "1,2,3,0.1,oops,0.3\n", "res.csv, line 3, column 'ry_um'"),
     (GOOD + "1,2,3,0.1,inf,0.3\n", "res.csv, line 3, column 'ry_um'"),
     (GOOD + "1,2,3\n", "res.csv, line 3"),
-    ("x_mm,y_mm,z_mm,rx_um,ry_um,rz_um,norm\n1,2,3,4,5,6,7\n", "column 'norm'"),
+    ("x_mm,y_mm,z_mm,rx_um,ry_um,rz_um,norm\n1,2,3,4,5,6,7\n", "res.csv, line 1, column 'norm': unknown column"),
+    # unknown columns are errors whatever they hold (text, a unit, no data rows), naming line 1
+    ("x_mm,y_mm,z_mm,rx_um,ry_um,rz_um,note\n1,2,3,4,5,6,hello\n", "res.csv, line 1, column 'note': unknown column"),
+    ("x_mm,y_mm,z_mm,rx_um,ry_um,rz_um,norm_um\n1,2,3,4,5,6,7\n", "res.csv, line 1, column 'norm_um'"),
+    ("x_mm,y_mm,z_mm,rx_um,ry_um,rz_um,measurment\n", "did you mean 'measurement'?"),
+    ("x_mm,x_m,y_mm,z_mm,rx_um,ry_um,rz_um\n1,1,2,3,4,5,6\n", "column 'x_m': 'x_m' and 'x_mm' give the same"),
+    ("line,dx_um,dy_um,dz_um,residual_deg\n2,1,2,3,4\n", "column 'residual_deg'"),
     ("x_mm,x_mm,y_mm,z_mm,rx_um,ry_um,rz_um\n1,1,2,3,4,5,6\n", "column 'x_mm'"),
 ])
 def test_residuals_errors_name_file_line_column(text, where):

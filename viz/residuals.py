@@ -17,8 +17,9 @@ or, as ``aacmm calibrate`` writes its ``residuals.csv``, the line of the point i
   line's, e.g. a point of another file, is not drawn and is counted).
 * ``rx, ry, rz`` or ``dx, dy, dz`` (any length unit): the residual vector, base frame: measured minus
   model (e.g. the ball centre minus its nearest point on the fitted feature's ball-centre surface).
-* ``measurement``, ``feature`` (optional text). Other columns are allowed and ignored; a column of
-  numbers without a unit suffix is an error, as in every file of the project.
+* ``measurement``, ``feature`` (optional text); ``kind``, ``residual`` (a length), ``standardized``
+  (read and not used: the columns ``aacmm calibrate`` writes). Any other column is an error naming the
+  file, line 1 (the header) and the column, as in every file of the project.
 """
 from __future__ import annotations
 
@@ -29,11 +30,14 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import QUANTITY_OF_UNIT, UNIT_FACTORS, InputError, csv_records, read_text, split_unit
+from arm_model._errors import unknown_key
 
 __all__ = ["Residuals", "read_residuals", "parse_residuals", "residual_origins"]
 
 _POINT = ("x", "y", "z")
 _VECTORS = (("rx", "ry", "rz"), ("dx", "dy", "dz"))
+_TEXT = ("measurement", "feature", "kind", "line", "standardized")     # no unit: text, line number, ratio
+_LENGTHS = _POINT + _VECTORS[0] + _VECTORS[1] + ("residual",)           # a length unit each
 
 
 @dataclass(frozen=True)
@@ -73,15 +77,21 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
     hline, header = records[0]
     header = [h.strip() for h in header]
     data = records[1:]
-    if not data:
-        raise InputError("no residuals after the header line", path, hline + 1)
     by_base: dict[str, tuple[int, str]] = {}
     for k, h in enumerate(header):
         if header.count(h) > 1:
             raise InputError(f"column '{h}' appears twice", path, hline, h)
         parts = split_unit(h)
+        if h not in _TEXT and (parts is None or parts[0] not in _LENGTHS):
+            raise InputError(unknown_key(h, _TEXT + _LENGTHS, _TEXT + tuple(f"{b}_<length unit>" for b in _LENGTHS),
+                                         what="column"), path, hline, h)
         if parts is not None:
+            if parts[0] in by_base:
+                raise InputError(f"'{h}' and '{by_base[parts[0]][1]}' give the same quantity: keep one",
+                                 path, hline, h)
             by_base[parts[0]] = (k, h)
+    if not data:
+        raise InputError("no residuals after the header line", path, hline + 1)
     vector = next((v for v in _VECTORS if all(b in by_base for b in v)), None)
     if vector is None:
         raise InputError("missing residual columns: expected rx, ry, rz (or dx, dy, dz) with a length unit, "
@@ -90,19 +100,12 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
     if not has_xyz and "line" not in header:
         raise InputError("missing columns x_mm, y_mm, z_mm (where each vector starts) or 'line' (its line in "
                          "the points file)", path, hline)
-    for base in (_POINT if has_xyz else ()) + vector:
-        h = by_base[base][1]
+    for base, (_, h) in by_base.items():
         if QUANTITY_OF_UNIT[split_unit(h)[1]] != "length":
             raise InputError(f"'{base}' must be a length (_mm, _m or _um)", path, hline, h)
     for no, r in data:
         if len(r) != len(header):
             raise InputError(f"{len(r)} cells where the header has {len(header)} columns", path, no)
-    for k, h in enumerate(header):
-        if split_unit(h) is None and h not in ("measurement", "feature", "line", "standardized"):
-            cells = [r[k].strip() for _, r in data]
-            if all(c and _number(c) is not None for c in cells):
-                raise InputError("numeric column without a unit suffix (expected e.g. '_mm', '_um')",
-                                 path, hline, h)
 
     def column(base: str) -> np.ndarray:
         k, h = by_base[base]

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._log import PROGRESS
+from .._log import PROGRESS, counted
 from .._output import output_folder
 from ..commands import seed
 from .campaign import load_campaign
@@ -48,7 +48,7 @@ def summary(result, elapsed: float | None = None) -> str:
         if ps is None:
             continue
         meas = ps.measurements()
-        lines.append(f"{label}: {len(ps)} points in {len(meas)} measurements "
+        lines.append(f"{label}: {counted(len(ps), 'point')} in {counted(len(meas), 'measurement')} "
                      f"({', '.join(meas[:3])}{' ...' if len(meas) > 3 else ''})")
     per_task = result.stats.get("measurements_per_task", {})
     for t in c.tasks:
@@ -97,5 +97,5 @@ def _simulate(args, campaign, out):
 
     result = simulate(campaign, seed=args.seed)
     written = result.write(out.dir, campaign.inputs)
-    log.info(f"{len(written)} files written to {args.output}", extra=PROGRESS)
+    log.info(f"{counted(len(written), 'file')} written to {args.output}", extra=PROGRESS)
     return result, written

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import logging
 import math
 from dataclasses import dataclass, field
@@ -26,16 +27,17 @@ from .campaign import Campaign
 from .ik import IKTargets, ball_jacobian, solve_ik
 from .operator import OperatorDraw, draw_operator, force_signal, measurement_slices
 from .truth import Truth, build_truth, si_key
-from .._log import progress_line
+from .._log import counted, progress_line
 
 __all__ = ["SimResult", "simulate", "TRUTH_HEADER", "POINTS_FILE", "REFERENCE_FILE", "ARTEFACTS_FILE",
-           "TRUTH_FILE", "TRUTH_POINTS_FILE", "SIGNALS_DIR"]
+           "TRUTH_FILE", "TRUTH_POINTS_FILE", "SUMMARY_FILE", "SIGNALS_DIR"]
 
 POINTS_FILE = "points.csv"
 REFERENCE_FILE = "points-ref.csv"
 ARTEFACTS_FILE = "artefacts.toml"
 TRUTH_FILE = "truth.toml"
 TRUTH_POINTS_FILE = "truth-points.csv"
+SUMMARY_FILE = "summary.json"
 SIGNALS_DIR = "signals"
 TRUTH_HEADER = ("# TRUTH of a simulated campaign. No analysis reads this file: it holds the hidden true arm, "
                 "its effects and the artefacts' placement, only to score results.")
@@ -82,12 +84,28 @@ class SimResult:
         ``inputs``); returns the paths written."""
         out_dir = Path(out_dir)
         protect = list(self.campaign.inputs) + list(inputs)
-        for name in self.texts:
+        texts = dict(self.texts, **{SUMMARY_FILE: self.summary_json(protect)})
+        for name in texts:
             guard_output(out_dir / name, protect)
         written = []
-        for name, text in self.texts.items():
+        for name, text in texts.items():
             written.append(atomic_write_text(out_dir / name, text, protect))
         return written
+
+    def summary_json(self, inputs=()) -> str:
+        """``summary.json``: the campaign, seed, arm, counts and files written (no truth: that is in
+        ``truth.toml``), with the toolkit version and each input's SHA-256 (:func:`provenance`,
+        ``inputs`` and the campaign's)."""
+        from ..shipped import provenance
+        c = self.campaign
+
+        def count(ps):
+            return {"points": len(ps), "measurements": len(ps.measurements())} if ps is not None else None
+        summary = {"campaign": c.name, "seed": c.seed, "arm": c.arm.name, "sensor": c.sensor,
+                   "points": count(self.points), "reference_points": count(self.reference_points),
+                   "effects_on": list(self.truth["effects_on"]), "files": sorted(self.texts),
+                   **provenance(list(dict.fromkeys(list(c.inputs) + list(inputs))))}
+        return json.dumps(summary, indent=1, allow_nan=False) + "\n"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -200,7 +218,7 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
     truth = build_truth(desc, campaign.truth, rng["truth"], campaign.sensor)
     plan = make_plan(campaign, rng["plan"], truth)
     n = len(plan)
-    say(f"{n} points in {len(set(plan.measurement))} measurements planned")
+    say(f"{counted(n, 'point')} in {counted(len(set(plan.measurement)), 'measurement')} planned")
     draw = draw_operator(plan, campaign.operator, campaign.environment, campaign.signals, rng["operator"])
     x_dir = _x_directions(plan, draw.force, rng["operator"])
     targets = IKTargets(plan.position, plan.stylus, x_dir, draw.force, draw.torque, draw.temperature,
