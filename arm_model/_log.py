@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import warnings
 import sys
 import time
 
@@ -88,6 +89,14 @@ def console(level: int = logging.INFO):
     or from a test, leaves no trace)."""
     handler = ConsoleHandler()
     saved = []
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        # a library's warning (numpy's overflow, ...) as one console line, its source only with -v
+        log = logging.getLogger(PACKAGES[0])
+        log.warning(f"{category.__name__}: {message}")
+        log.debug(f"  (raised at {filename}:{lineno})")
+    warnings.showwarning = show
     for name in PACKAGES:
         logger = logging.getLogger(name)
         saved.append((logger, logger.level, logger.handlers[:], logger.propagate))
@@ -97,6 +106,7 @@ def console(level: int = logging.INFO):
     try:
         yield handler
     finally:
+        warnings.showwarning = shown
         for logger, lvl, handlers, propagate in saved:
             logger.handlers = handlers
             logger.setLevel(lvl)

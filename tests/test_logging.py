@@ -153,3 +153,24 @@ def test_study_progress_into_a_log_file_has_no_carriage_return(small, tmp_path):
 ])
 def test_counted_puts_the_noun_in_the_right_number(n, word, plural, expect):
     assert counted(n, word, plural) == expect
+
+
+def test_a_library_warning_is_one_console_line_without_its_source(capsys):
+    """numpy's overflow (and any Python warning) inside a command: one ``warning:`` line, no file path or
+    source line (those only with -v); the previous ``showwarning`` restored afterwards."""
+    import warnings
+
+    import numpy as np
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        before = warnings.showwarning
+        with console(logging.INFO):
+            with np.errstate(over="warn"):
+                np.array([1e308]) * 10.0
+        err = capsys.readouterr().err
+        assert err.splitlines() == ["warning: RuntimeWarning: overflow encountered in multiply"], err
+        with console(logging.DEBUG):
+            warnings.warn("plain", UserWarning)
+        err = capsys.readouterr().err
+        assert "warning: UserWarning: plain" in err and "test_logging.py" in err
+        assert warnings.showwarning is before
