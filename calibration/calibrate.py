@@ -219,6 +219,13 @@ class CalibrationResult:
         ``net = sqrt(max(gross^2 - encoders^2 - force_sensor^2, 0))``. ``floored`` is True when the
         propagated inputs alone exceed the residual scatter (their stated uncertainties are larger than
         what this campaign shows; ``net`` is then 0). None when no probed group could be estimated."""
+        b = self._probing_budget
+        return None if b is None else dict(b)
+
+    @functools.cached_property
+    def _probing_budget(self) -> dict | None:
+        # the propagation over every probed point runs once a result: the console, the model file and
+        # summary.json each ask for the budget
         groups = [v for v in self.variance if v["estimated"] and v["group"] not in ("reference", "length")
                   and v.get("estimate_um") is not None and v["redundancy"] > 0]
         if not groups:
