@@ -291,7 +291,7 @@ def _fast_block(body: bytes, text: str, path: str, first_line: int, header: list
                 txt_idx) -> CsvBlock | None:
     """The vectorised reader on a block of whole lines (``body``, decoded: ``text``), or None when the
     block needs the careful reader."""
-    if b'"' in body or b"\0" in body or not np.little_endian:
+    if b'"' in body or not np.little_endian:          # (a NUL byte was refused by decode_text)
         return None
     arr = np.frombuffer(body, np.uint8)
     k = len(header) - 1
@@ -335,10 +335,6 @@ def _cells_text(arr: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return decoded[inv.ravel()[np.cumsum(new) - 1]]
 
 
-def _decode(data: bytes, path, first_line: int) -> str:
-    return decode_text(data, path, first_line)
-
-
 def _find_header(data: bytes, path, line_no: int):
     """The header in ``data`` (whole lines from line ``line_no``): the first non-blank line.
     ``(names, line, end)``: stripped names, its line and the offset after it; None if ``data`` holds
@@ -347,7 +343,7 @@ def _find_header(data: bytes, path, line_no: int):
     while pos < len(data):
         nl = data.find(b"\n", pos)
         end = len(data) if nl < 0 else nl
-        raw = _decode(data[pos:end], path, line_no)
+        raw = decode_text(data[pos:end], path, line_no)
         if raw.strip():
             recs = csv_records(raw, str(path), line_no)
             if recs:
@@ -414,24 +410,25 @@ def iter_csv_blocks(path: str | Path, what: str, header_check, block_bytes: int 
         fh = io.BytesIO(data)
     else:
         fh = open_input(path, what)
+    def read(limit: int | None) -> bytes:
+        """The next block, at most up to the offset ``limit``."""
+        try:
+            want = block_bytes if limit is None else min(block_bytes, limit - fh.tell())
+            return fh.read(want) if want > 0 else b""
+        except OSError as exc:
+            raise InputError(f"cannot read {what}: {exc.strerror}", path) from None
+
     with fh:
         carry, line_no, header, first = b"", 1, None, True
         num_idx = txt_idx = None
-        try:
-            if start:
-                while fh.tell() < start:
-                    line_no += fh.read(min(block_bytes, start - fh.tell())).count(b"\n")
-                header_line, header = known_header
-                num_idx, txt_idx = header_check(header, header_line)
-                first = False
-        except OSError as exc:
-            raise InputError(f"cannot read {what}: {exc.strerror}", path) from None
+        if start:
+            while block := read(start):
+                line_no += block.count(b"\n")
+            header_line, header = known_header
+            num_idx, txt_idx = header_check(header, header_line)
+            first = False
         while True:
-            try:
-                want = block_bytes if stop is None else min(block_bytes, stop - fh.tell())
-                block = fh.read(want) if want > 0 else b""
-            except OSError as exc:
-                raise InputError(f"cannot read {what}: {exc.strerror}", path) from None
+            block = read(stop)
             eof = not block
             data = carry + block
             if first and data.startswith(b"\xef\xbb\xbf"):
@@ -455,7 +452,7 @@ def iter_csv_blocks(path: str | Path, what: str, header_check, block_bytes: int 
                 line_no = header_line + 1
                 data = data[pos:]
             if data:
-                text = _decode(data, path, line_no)     # located error for a bad byte
+                text = decode_text(data, path, line_no)     # located error for a bad byte (a NUL, a lone CR)
                 blk = _fast_block(data, text, str(path), line_no, header, num_idx, txt_idx)
                 if blk is None:
                     blk = _slow_block(text, str(path), line_no, header, num_idx, txt_idx)
