@@ -145,12 +145,11 @@ def chain_point(convention: str, rows, q, point, ops=NUMPY_OPS, axes=None):
     for i in range(len(rows) - 1, -1, -1):
         for kind, axis, amount, _, _ in reversed(row_motions(convention, rows[i], q[i],
                                                              None if axes is None else axes[i])):
-            if _is_const(amount):
-                if amount == 0.0:
-                    continue
-                c, s = math.cos(amount), math.sin(amount)
-            elif kind == "R":
-                c, s = ops.cos(amount), ops.sin(amount)
+            const = _is_const(amount)
+            if const and amount == 0.0:
+                continue
+            if kind == "R":
+                c, s = (math.cos(amount), math.sin(amount)) if const else (ops.cos(amount), ops.sin(amount))
             if kind == "T":
                 if axis == 0:
                     x = x + amount
