@@ -408,7 +408,7 @@ def format_model(desc: ArmDescription, effects=(), values: dict | None = None, u
         data["effect"] = effect_tables(desc, effects, values or {}, uncertainties, states)
     scatter = None if probing_scatter is None else float(f"{probing_scatter * 1e6:.4g}")
     cal = {k: v for k, v in (("covariance", covariance), ("written_by", written_by),
-                             ("probing_scatter_um", scatter)) if v or (k == "probing_scatter_um" and v is not None)}
+                             ("probing_scatter_um", scatter)) if v not in (None, "")}     # a scatter of 0 is kept
     if cal:
         data["calibration"] = cal
     return toml_text(data, comment)

@@ -45,21 +45,27 @@ def _inject(pts, c):
     return dataclasses.replace(pts, q=q)
 
 
-def test_trained_on_back_high_joint_compliance_is_included_and_the_other_placements_spread_less(setup):
+def _compare(desc, art, pts, train: str, loop, held) -> tuple[list, list, list]:
+    """Plain calibrate trained on ``pts[train]`` against the loop's model, on the placements ``held``:
+    (plain's seat figures, the loop's, the two mean spreads [mm])."""
     from arm_model.model import ArmModel
     from calibration.calibrate import calibrate
     from calibration.data import make_data
+    plain = calibrate(ArmModel(desc), make_data(pts[train], art, ArmModel(desc)), weights_from_data=True)
+    a = [seat_figures_of(plain, desc, pts[p]) for p in held]
+    b = [seat_figures_of(loop.model_fit, desc, pts[p]) for p in held]
+    return a, b, [np.mean([f["spread_mean_mm"] for f in x]) for x in (a, b)]
+
+
+def test_trained_on_back_high_joint_compliance_is_included_and_the_other_placements_spread_less(setup):
     from calibration.loop import PHYSICS, close_loop
     desc, art, pts = setup
-    plain = calibrate(ArmModel(desc), make_data(pts["back-high"], art, ArmModel(desc)), weights_from_data=True)
     loop = close_loop(pts["back-high"], art, desc)
     assert [c.name for c in loop.added] == ["joint compliance (every loaded joint)"], loop.verdict
     assert "(included as physics, not for a held-out gain)" in loop.verdict
     cv = [v for v in loop.stages[1].cv if v.candidate == loop.added[0].name][0]
     assert cv.reason.startswith(PHYSICS)
-    a = [seat_figures_of(plain, desc, pts[p]) for p in ("front", "right")]
-    b = [seat_figures_of(loop.model_fit, desc, pts[p]) for p in ("front", "right")]
-    spread = [np.mean([f["spread_mean_mm"] for f in x]) for x in (a, b)]
+    a, b, spread = _compare(desc, art, pts, "back-high", loop, ("front", "right"))
     # measured: 2.84 -> 2.07 mm (front 3.27 -> 1.80, right 2.42 -> 2.34)
     assert spread[1] <= 0.8 * spread[0], (a, b)
     # the distance error is worse (0.56 -> 0.80 mm mean |error|), and bounded here
@@ -77,10 +83,7 @@ def test_a_compliance_injected_into_the_real_angles_is_found_recovered_and_carri
     inj = {p: _inject(pts[p], COMPLIANCE) for p in PLACES}
     loop = close_loop(inj["front"], art, desc)
     assert [c.name for c in loop.added] == ["joint compliance (every loaded joint)"], loop.verdict
-    plain = calibrate(ArmModel(desc), make_data(inj["front"], art, ArmModel(desc)), weights_from_data=True)
-    a = [seat_figures_of(plain, desc, inj[p]) for p in ("right", "back-high")]
-    b = [seat_figures_of(loop.model_fit, desc, inj[p]) for p in ("right", "back-high")]
-    spread = [np.mean([f["spread_mean_mm"] for f in x]) for x in (a, b)]
+    a, b, spread = _compare(desc, art, inj, "front", loop, ("right", "back-high"))
     # measured: 3.21 -> 1.76 mm
     assert spread[1] <= 0.8 * spread[0], (a, b)
     # recovered: the injected compliance is the difference to the same fit on the recorded angles (the real
@@ -120,10 +123,7 @@ def test_a_joint_gain_injected_into_the_real_angles_is_found_recovered_and_carri
     inj = {p: inject(pts[p]) for p in PLACES}
     loop = close_loop(inj["front"], art, desc, families_=FAMILIES)
     assert [c.name for c in loop.added] == ["gain panda_joint2"], loop.verdict
-    plain = calibrate(ArmModel(desc), make_data(inj["front"], art, ArmModel(desc)), weights_from_data=True)
-    a = [seat_figures_of(plain, desc, inj[p]) for p in ("right", "back-high")]
-    b = [seat_figures_of(loop.model_fit, desc, inj[p]) for p in ("right", "back-high")]
-    spread = [np.mean([f["spread_mean_mm"] for f in x]) for x in (a, b)]
+    a, b, spread = _compare(desc, art, inj, "front", loop, ("right", "back-high"))
     # measured: 5.57 -> 1.14 mm (distance error 1.65 -> 0.71 mm)
     assert spread[1] <= 0.5 * spread[0], (a, b)
     model = ArmModel(desc, (loop.added[0].effect,))
