@@ -38,13 +38,15 @@ sys.exit(rc)
 """]
 
 
-def run(args, cwd=None) -> tuple[float, float, float]:
+def run(args, cwd=None, one_core: bool = False) -> tuple[float, float, float]:
     """(wall s, CPU s (user + system, its worker processes included), peak RSS MiB) of one ``aacmm``
     process."""
     with tempfile.TemporaryFile() as err, tempfile.NamedTemporaryFile("r") as hwm:
         t = time.perf_counter()
+        # one_core: the command may run on one core only, so it takes its serial path
+        pin = (lambda: os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})) if one_core else None
         p = subprocess.Popen(_MEASURED + list(map(str, args)), cwd=cwd, stdout=subprocess.DEVNULL, stderr=err,
-                             env={**os.environ, "AACMM_BENCH_HWM": hwm.name})
+                             env={**os.environ, "AACMM_BENCH_HWM": hwm.name}, preexec_fn=pin)
         _, status, ru = os.wait4(p.pid, 0)
         wall = time.perf_counter() - t
         p.returncode = os.waitstatus_to_exitcode(status)
@@ -55,9 +57,9 @@ def run(args, cwd=None) -> tuple[float, float, float]:
     return wall, ru.ru_utime + ru.ru_stime, peak
 
 
-def best(args, repeat=3, cwd=None) -> tuple[float, float, float]:
+def best(args, repeat=3, cwd=None, one_core: bool = False) -> tuple[float, float, float]:
     """The fastest of ``repeat`` runs by wall time (wall, its CPU time, the largest peak RSS)."""
-    runs = [run(args, cwd) for _ in range(repeat)]
+    runs = [run(args, cwd, one_core) for _ in range(repeat)]
     fastest = min(runs)
     return fastest[0], fastest[1], max(r[2] for r in runs)
 
@@ -84,6 +86,37 @@ def points_file(path: Path, n: int, seed: int = 0) -> None:
             fh.write(format_csv(cols, fmt, header=a == 0))
 
 
+def phases(path: Path) -> dict:
+    """CPU time [s] of each phase of ``aacmm tip`` on ``path``, read whole in this process: reading the
+    points, the rigid and corrected centres, formatting, writing (the start-up is in the whole command's
+    figures)."""
+    from arm_model._csv import format_csv
+    from arm_model.commands import tip_table
+    from arm_model.io import iter_points
+    from arm_model.model_file import load_model
+    t = {"reading": 0.0, "centres": 0.0, "formatting": 0.0, "writing": 0.0}
+    arm = load_model("aacmm7")
+    blocks = iter_points(path, arm.desc.n_joints)
+    with tempfile.TemporaryFile() as fh:
+        while True:
+            c = time.process_time()
+            block = next(blocks, None)
+            t["reading"] += time.process_time() - c
+            if block is None:
+                break
+            c = time.process_time()
+            cols = tip_table(arm, block)
+            c2 = time.process_time()
+            text = format_csv(cols, "%.6f", header=fh.tell() == 0)
+            c3 = time.process_time()
+            fh.write(text)
+            c4 = time.process_time()
+            t["centres"] += c2 - c
+            t["formatting"] += c3 - c2
+            t["writing"] += c4 - c3
+    return t
+
+
 def load() -> str:
     return "load average " + " ".join(f"{v:.1f}" for v in os.getloadavg())
 
@@ -105,6 +138,16 @@ def main(n_rows: int = 2_000_000) -> dict:
         print(f"aacmm tip, {n_rows:,d} rows: {t:.2f} s wall, {cpu:.2f} s CPU, peak {mem:.0f} MiB "
               f"({mem * 2**20 / n_rows:.0f} B a row; best of 2; {load()})")
         out["tip"] = (t, cpu, mem)
+        if hasattr(os, "sched_setaffinity"):
+            t, cpu, mem = best(["tip", pts, "--arm", "aacmm7", "-o", tmp / "tips-serial.csv"], repeat=2, one_core=True)
+            same = (tmp / "tips.csv").read_bytes() == (tmp / "tips-serial.csv").read_bytes()
+            print(f"aacmm tip on one core (the file read whole): {t:.2f} s wall, {cpu:.2f} s CPU, peak {mem:.0f} MiB "
+                  f"(best of 2); output {'byte-identical' if same else 'DIFFERENT'} ({load()})")
+            out["tip_one_core"] = (t, cpu, mem)
+            os.unlink(tmp / "tips-serial.csv")
+            out["tip_phases"] = phases(pts)
+            print("aacmm tip's CPU time by phase, the file read whole in this process: "
+                  + ", ".join(f"{k} {v:.2f} s" for k, v in out["tip_phases"].items()))
         os.unlink(pts)
         os.unlink(tmp / "tips.csv")
         sim = tmp / "ring"
