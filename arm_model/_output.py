@@ -13,9 +13,10 @@ wins, each complete). On any error, Ctrl-C or SIGTERM the temporary folder is re
 it was. A command that writes one file uses :func:`output_file` (temporary file, then ``os.replace``).
 
 Refused before any work, with an :class:`InputError` (exit 2): ``-o`` that is an input, holds an input,
-is a file where a folder is expected (or the reverse), sits below a file, cannot be written, or is a
-non-empty folder that is not an earlier output of the same command (``-o .`` never empties a folder of
-the user's). File names built from input text (arm names, measurement ids) go through :func:`safe_name`
+is a file where a folder is expected (or the reverse), sits below a file, cannot be written, is not a
+regular file or folder (a device such as ``/dev/null``, a FIFO, a socket: never replaced, never written
+into), or is a non-empty folder that is not an earlier output of the same command (``-o .`` never
+empties a folder of the user's). File names built from input text (arm names, measurement ids) go through :func:`safe_name`
 and are checked by :meth:`Output.path` to stay inside the folder.
 """
 from __future__ import annotations
@@ -25,6 +26,7 @@ import errno
 import logging
 import os
 import shutil
+import stat
 import tempfile
 import unicodedata
 import zlib
@@ -93,6 +95,28 @@ def _mode(umask_mode: int) -> int:
     umask = os.umask(0)
     os.umask(umask)
     return umask_mode & ~umask
+
+
+def _special(path: Path) -> str | None:
+    """What ``path`` is when it exists (links followed) and is neither a regular file nor a folder: "a
+    device", "a FIFO (named pipe)", "a socket" (or "not a regular file"); else None."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    return "a FIFO (named pipe)" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode) else \
+        "not a regular file"
+
+
+def _refuse_special(path: Path, what: str) -> None:
+    kind = _special(path)
+    if kind is not None:
+        raise InputError(f"the output exists and is {kind}, not {what}: it is never replaced nor written into; "
+                         f"name a new {what.removeprefix('a ')}", path)
 
 
 def _oserror(exc: OSError, what: str, path: Path) -> InputError:
@@ -183,6 +207,7 @@ def _not_ours(final: Path, owner: str | None, command: str) -> InputError:
 def _check_folder(final: Path, command: str) -> None:
     if not final.exists():
         return
+    _refuse_special(final, "a folder")
     if not final.is_dir():
         raise InputError("the output must be a folder, but a file of that name exists", final)
     if _inside(Path.cwd().resolve(), final):
@@ -272,13 +297,17 @@ def output_folder(final: str | Path, inputs=(), command: str = ""):
 @contextlib.contextmanager
 def output_file(final: str | Path, inputs=()):
     """Write one output file complete or not at all: yields a temporary path beside ``final``;
-    when the block ends normally it replaces ``final`` (``os.replace``), else it is removed."""
+    when the block ends normally it replaces ``final`` (``os.replace``), else it is removed. A symbolic
+    link at ``final`` is followed: its target is replaced, the link stays."""
     final = Path(final)
     guard_output(final, inputs)
+    if final.is_symlink():              # written through the link (as a shell's > does), the link kept
+        final = resolved(final)
     if final.is_dir():
         raise InputError("the output is a file, but a folder of that name exists", final)
     if final.name in ("", ".", ".."):
         raise InputError("name an output file", final)
+    _refuse_special(final, "a regular file")
     created = _make_parents(final.parent)
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.tmp-", suffix=final.suffix, dir=final.parent)
@@ -292,6 +321,7 @@ def output_file(final: str | Path, inputs=()):
         yield tmp
         if final.is_dir():
             raise InputError("the output is a file, but a folder of that name exists", final)
+        _refuse_special(final, "a regular file")        # made meanwhile
         os.replace(tmp, final)
         log.debug(f"{final}: written ({final.stat().st_size} bytes)")
     except BaseException:
