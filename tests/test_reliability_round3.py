@@ -78,3 +78,69 @@ def test_item1_output_through_a_link_replaces_its_target_not_the_link(tmp_path, 
     assert tip(few_points, tmp_path / "link.csv") == 0
     assert (tmp_path / "link.csv").is_symlink()
     assert (tmp_path / "real.csv").read_text().startswith("measurement,")
+
+
+# ---------------------------------------------------------------------------------------------
+# 2. the covariance file beside a model file
+
+GOOD_COV = ("parameter,unit,value,u,j2.d,j3.a\n"
+            "j2.d,um,{v},{u},1,{c}\n"
+            "j3.a,um,-3,2,{c},1\n")
+
+
+def _model_with_covariance(tmp_path: Path, **cells) -> Path:
+    cov = dict(v="12.5", u="4", c="0.25") | cells
+    d = tmp_path / "model"
+    d.mkdir(exist_ok=True)
+    (d / "cov.csv").write_text(GOOD_COV.format(**cov), encoding="utf-8")
+    model = d / "arm.toml"
+    model.write_text(NOMINAL.read_text(encoding="utf-8") + '\n[calibration]\ncovariance = "cov.csv"\n',
+                     encoding="utf-8")
+    return model
+
+
+def test_item2_a_good_covariance_file_is_read(tmp_path, few_points, capsys):
+    from arm_model.model_file import read_covariance
+    cov = read_covariance(_model_with_covariance(tmp_path).parent / "cov.csv")
+    assert cov.units == ("m", "m") and cov.lines == (2, 3)
+    assert abs(cov.values[0] - 12.5e-6) < 1e-18 and abs(cov.matrix[0, 1] - 0.25 * 4e-6 * 2e-6) < 1e-24
+    assert tip(few_points, tmp_path / "t.csv", "--uncertainty") == 0
+
+
+@pytest.mark.parametrize("cells, line, column, words", [
+    ({"u": "4", "v": "12.5"}, None, None, None),                                       # the good file (control)
+    ({"v": "12.5,furlong"}, 2, "unit", "unknown unit 'furlong'"),
+    ({"u": "-4"}, 2, "u", "must not be negative"),
+    ({"v": "0_0"}, 2, "value", "expected a finite number, got '0_0'"),
+    ({"u": "4_5"}, 2, "u", "expected a finite number, got '4_5'"),
+    ({"v": "nan"}, 2, "value", "expected a finite number, got 'nan'"),
+    ({"u": "inf"}, 2, "u", "expected a finite number, got 'inf'"),
+    ({"u": "1e300"}, 2, "u", "not a plausible length"),
+    ({"c": "1.5"}, 2, "j3.a", "in [-1, 1]"),
+    ({"c": "nan"}, 2, "j3.a", "expected a finite number"),
+])
+def test_item2_covariance_file_cells_are_checked(tmp_path, few_points, capsys, cells, line, column, words):
+    if "v" in cells and "," in cells["v"]:          # the unit column: rewrite the row's unit
+        model = _model_with_covariance(tmp_path)
+        cov = model.parent / "cov.csv"
+        cov.write_text(cov.read_text().replace("j2.d,um,", "j2.d,furlong,"))
+    else:
+        model = _model_with_covariance(tmp_path, **cells)
+    out = tmp_path / "t.csv"
+    code = main(["tip", str(few_points), "--arm", str(model), "-o", str(out)])
+    err = capsys.readouterr().err
+    if words is None:
+        assert code == 0, err
+        return
+    assert code == 2, err
+    assert err.count("\n") == 1 and "overflow" not in err.lower() and "Warning" not in err, err
+    assert f"cov.csv, line {line}, column '{column}': " in err and words in err, err
+    assert not out.exists()
+
+
+def test_item2_covariance_unit_must_match_the_parameter(tmp_path, few_points, capsys):
+    model = _model_with_covariance(tmp_path)
+    cov = model.parent / "cov.csv"
+    cov.write_text(cov.read_text().replace("j2.d,um,", "j2.d,urad,"))
+    assert main(["tip", str(few_points), "--arm", str(model), "-o", str(tmp_path / "t.csv")]) == 2
+    assert "cov.csv, line 2, column 'unit': parameter 'j2.d' is a 'm' quantity" in capsys.readouterr().err
