@@ -126,6 +126,31 @@ def _oserror(exc: OSError, what: str, path: Path) -> InputError:
     return InputError(f"cannot {what}: {reason}", path)
 
 
+#: errors of a write that the output's place causes (disk full, quota, file size limit): named after the output
+_WRITE_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
+
+
+def _write_error(exc: OSError, stage: Path, final: Path, what: str) -> InputError | None:
+    """The InputError of an OSError raised while the output was being written into ``stage`` (the
+    temporary folder or file), naming where the file would have been published (the system names the
+    temporary path, or nothing: a full disk fails a write, not an open); None for an OSError of
+    something else (an input)."""
+    name = None if exc.filename is None else Path(os.path.abspath(os.fsdecode(exc.filename)))
+    inside = name is not None and _inside(name, stage)
+    if not inside and exc.errno not in _WRITE_ERRNOS:
+        return None
+    where = final / name.relative_to(stage) if inside and name != stage else final
+    return InputError(f"cannot write {what}: {exc.strerror or exc}; nothing written", where)
+
+
+def _published_error(exc: InputError, stage: Path, final: Path) -> InputError | None:
+    """``exc`` naming where its file would have been published, when it names a file of the temporary
+    folder (a file of the output refused while being written); else None."""
+    if exc.path is None or not _inside(Path(os.path.abspath(exc.path)), stage):
+        return None
+    return InputError(exc.reason, final / Path(os.path.abspath(exc.path)).relative_to(stage), exc.line, exc.column)
+
+
 def _make_parents(folder: Path) -> list[Path]:
     """Create ``folder`` and its missing parents; the ones created, outermost first."""
     missing = []
@@ -288,6 +313,14 @@ def output_folder(final: str | Path, inputs=(), command: str = ""):
         n_files = sum(1 for p in stage.rglob("*") if p.is_file()) - 1     # counted before another run may
         _publish(stage, final, command)                                     # replace the published folder
         log.debug(f"{final}: {n_files} file(s) written")
+    except (OSError, InputError) as exc:
+        shutil.rmtree(stage, ignore_errors=True)
+        _remove_empty(created)
+        named = _write_error(exc, stage, final, "the output folder") if isinstance(exc, OSError) else \
+            _published_error(exc, stage, final)
+        if named is None:
+            raise
+        raise named from None
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         _remove_empty(created)
@@ -324,11 +357,14 @@ def output_file(final: str | Path, inputs=()):
         _refuse_special(final, "a regular file")        # made meanwhile
         os.replace(tmp, final)
         log.debug(f"{final}: written ({final.stat().st_size} bytes)")
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             tmp.unlink()
         _remove_empty(created)
-        raise
+        named = _write_error(exc, tmp, final, "the output file") if isinstance(exc, OSError) else None
+        if named is None:
+            raise
+        raise named from None
 
 
 def atomic_write_bytes(path: str | Path, data: bytes, inputs=()) -> Path:

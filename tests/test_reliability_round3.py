@@ -144,3 +144,53 @@ def test_item2_covariance_unit_must_match_the_parameter(tmp_path, few_points, ca
     cov.write_text(cov.read_text().replace("j2.d,um,", "j2.d,urad,"))
     assert main(["tip", str(few_points), "--arm", str(model), "-o", str(tmp_path / "t.csv")]) == 2
     assert "cov.csv, line 2, column 'unit': parameter 'j2.d' is a 'm' quantity" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------------------------
+# 5. disk full: the message names the file or folder
+
+def test_item5_disk_full_names_the_output_file(tmp_path, few_points):
+    """A real failed write: the file size limit (RLIMIT_FSIZE) makes every write past 200 bytes fail
+    with EFBIG, as a full disk makes them fail with ENOSPC."""
+    import resource
+    import signal
+    import subprocess
+    import sys
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (200, 200))
+
+    out = tmp_path / "tips.csv"
+    proc = subprocess.run([sys.executable, "-c", "import sys; from arm_model.cli import main; sys.exit(main())",
+                           "tip", str(few_points), "--arm", str(NOMINAL), "-o", str(out)], preexec_fn=limit,
+                          capture_output=True, text=True, cwd=tmp_path, timeout=120,
+                          env=dict(os.environ, PYTHONDONTWRITEBYTECODE="1"))
+    assert proc.returncode == 2, proc.stderr
+    assert f"error: {out}: cannot write the output file: File too large; nothing written" in proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in"]
+
+
+@pytest.mark.parametrize("filename", [None, "stage"])
+def test_item5_disk_full_names_the_output_folder(tmp_path, filename):
+    import errno
+
+    from arm_model import InputError
+    from arm_model._output import output_folder
+    final = tmp_path / "out"
+    with pytest.raises(InputError) as info:
+        with output_folder(final, (), "demo") as out:
+            (out.dir / "a.txt").write_text("a")
+            name = None if filename is None else str(out.dir / "sub" / "b.png")
+            raise OSError(errno.ENOSPC, "No space left on device", name)
+    where = final if filename is None else final / "sub" / "b.png"
+    assert str(info.value) == f"{where}: cannot write the output folder: No space left on device; nothing written"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_item5_an_input_error_inside_the_output_is_not_renamed(tmp_path):
+    from arm_model import InputError
+    from arm_model._output import output_folder
+    with pytest.raises(InputError, match="^elsewhere.csv, line 3: bad$"):
+        with output_folder(tmp_path / "out", (), "demo"):
+            raise InputError("bad", "elsewhere.csv", 3)
