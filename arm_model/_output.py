@@ -22,6 +22,7 @@ and are checked by :meth:`Output.path` to stay inside the folder.
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import errno
 import logging
 import os
@@ -35,13 +36,36 @@ from pathlib import Path
 from ._errors import InputError
 
 __all__ = ["output_folder", "output_file", "Output", "safe_name", "guard_output", "atomic_write_bytes",
-           "MARKER"]
+           "MARKER", "published_outputs"]
 
 log = logging.getLogger(__name__)
 
 #: the file that marks a folder as an output of ``aacmm <command>`` (its text: ``aacmm <command>``)
 MARKER = ".aacmm-output"
 _MAX_NAME = 120
+
+
+#: the temporary folders being written (a file written into one is part of that output, not an output of its
+#: own) and the list that :func:`published_outputs` fills, for the current command
+_STAGES: contextvars.ContextVar[tuple] = contextvars.ContextVar("aacmm_stages", default=())
+_PUBLISHED: contextvars.ContextVar[list | None] = contextvars.ContextVar("aacmm_published", default=None)
+
+
+@contextlib.contextmanager
+def published_outputs(into: list):
+    """Append to ``into`` every output (``-o`` file or folder) published while the block runs, so that
+    what ends the command later (Ctrl-C, an error) can say what is already in place."""
+    token = _PUBLISHED.set(into)
+    try:
+        yield into
+    finally:
+        _PUBLISHED.reset(token)
+
+
+def _published(final: Path) -> None:
+    into = _PUBLISHED.get()
+    if into is not None and not any(_inside(final, s) for s in _STAGES.get()):
+        into.append(final)
 
 
 def safe_name(text: str, suffix: str = "") -> str:
@@ -309,9 +333,14 @@ def output_folder(final: str | Path, inputs=(), command: str = ""):
     try:
         os.chmod(stage, _mode(0o777))
         (stage / MARKER).write_text(f"aacmm {command}\n", encoding="utf-8")
-        yield Output(stage, final)
+        token = _STAGES.set(_STAGES.get() + (stage,))
+        try:
+            yield Output(stage, final)
+        finally:
+            _STAGES.reset(token)
         n_files = sum(1 for p in stage.rglob("*") if p.is_file()) - 1     # counted before another run may
         _publish(stage, final, command)                                     # replace the published folder
+        _published(final)
         log.debug(f"{final}: {n_files} file(s) written")
     except (OSError, InputError) as exc:
         shutil.rmtree(stage, ignore_errors=True)
@@ -356,6 +385,7 @@ def output_file(final: str | Path, inputs=()):
             raise InputError("the output is a file, but a folder of that name exists", final)
         _refuse_special(final, "a regular file")        # made meanwhile
         os.replace(tmp, final)
+        _published(final)
         log.debug(f"{final}: written ({final.stat().st_size} bytes)")
     except BaseException as exc:
         with contextlib.suppress(OSError):

@@ -194,3 +194,47 @@ def test_item5_an_input_error_inside_the_output_is_not_renamed(tmp_path):
     with pytest.raises(InputError, match="^elsewhere.csv, line 3: bad$"):
         with output_folder(tmp_path / "out", (), "demo"):
             raise InputError("bad", "elsewhere.csv", 3)
+
+
+# ---------------------------------------------------------------------------------------------
+# 6. Ctrl-C after the output is published
+
+@pytest.mark.parametrize("exc, code, word", [(KeyboardInterrupt, 130, "interrupted"),
+                                             (ZeroDivisionError, 3, "internal error")])
+def test_item6_interrupt_after_publishing_says_the_output_is_there(tmp_path, few_points, monkeypatch, capsys,
+                                                                   exc, code, word):
+    import arm_model.commands as commands
+
+    def late(*a, **k):                       # the last step of tip, after its output is in place
+        raise exc()
+
+    monkeypatch.setattr(commands, "log_warnings", late)
+    out = tmp_path / "tips.csv"
+    assert tip(few_points, out) == code
+    err = capsys.readouterr().err
+    assert word in err and f"the output was already written completely: {out}" in err, err
+    assert "nothing written" not in err
+    assert len(out.read_text().splitlines()) == 9           # complete: the header and the 8 points
+
+
+def test_item6_interrupt_before_publishing_says_nothing_written(tmp_path, few_points, monkeypatch, capsys):
+    import arm_model.commands as commands
+
+    def early(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(commands, "tip_table", early)
+    assert tip(few_points, tmp_path / "tips.csv") == 130
+    assert "interrupted; nothing written" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in"]
+
+
+def test_item6_files_written_inside_an_output_folder_are_not_outputs_of_their_own(tmp_path):
+    from arm_model._output import output_folder, published_outputs
+    from arm_model.io import atomic_write_text
+    written = []
+    with published_outputs(written):
+        with output_folder(tmp_path / "out", (), "demo") as out:
+            atomic_write_text(out.dir / "a.txt", "a")
+            assert written == []
+    assert written == [tmp_path / "out"]
