@@ -20,14 +20,38 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import warnings
+import re
 import sys
 import time
+import warnings
 
-__all__ = ["PACKAGES", "PROGRESS", "console", "Progress", "progress_line", "level_from_flags", "counted"]
+__all__ = ["PACKAGES", "PROGRESS", "console", "Progress", "progress_line", "level_from_flags", "counted", "escaped"]
 
 #: the packages whose loggers the command line configures
 PACKAGES = ("arm_model", "calibration", "correction", "viz")
+#: libraries that log: their records go through the same console handler (never Python's bare fallback)
+LIBRARIES = ("yourdfpy",)
+
+#: control characters (C0, DEL, C1, the Unicode line and paragraph separators) but the tab
+_CONTROL = re.compile("[\x00-\x08\x0a-\x1f\x7f-\x9f\u2028\u2029]")
+_ESCAPES = {"\n": "\\n", "\r": "\\r"}
+
+
+def _escape(m: re.Match) -> str:
+    c = m.group()
+    return _ESCAPES.get(c) or (f"\\x{ord(c):02x}" if ord(c) < 0x100 else f"\\u{ord(c):04x}")
+
+
+def escaped(text: str, keep_newlines: bool = False) -> str:
+    """``text`` with every control character shown as its escape (a newline as ``\\n``, ESC as ``\\x1b``),
+    so that a name holding one (a file name with a newline) cannot split a message or forge another line
+    (``warning: ...``), nor drive the terminal. ``keep_newlines``: the text's own line breaks kept (a
+    summary of several lines); every other control character escaped. The tab is kept."""
+    if keep_newlines:
+        return "\n".join(_CONTROL.sub(_escape, line) for line in text.split("\n"))
+    return _CONTROL.sub(_escape, text)
+
+
 #: ``extra=`` of a progress record
 PROGRESS = {"progress": True}
 
@@ -49,7 +73,10 @@ class _ConsoleFormatter(logging.Formatter):
         self.t0 = t0
 
     def format(self, record: logging.LogRecord) -> str:
-        text = record.getMessage()
+        # a warning, an error, a progress step and a debug line are one line each: any control character in
+        # them (a newline in a file name) is escaped; the summary (INFO) keeps its own line breaks
+        plain = record.levelno == logging.INFO and not getattr(record, "progress", False)
+        text = escaped(record.getMessage(), keep_newlines=plain)
         if record.levelno >= logging.ERROR:
             return f"error: {text}"
         if record.levelno >= logging.WARNING:
@@ -97,11 +124,11 @@ def console(level: int = logging.INFO):
         log.warning(f"{category.__name__}: {message}")
         log.debug(f"  (raised at {filename}:{lineno})")
     warnings.showwarning = show
-    for name in PACKAGES:
+    for name in PACKAGES + LIBRARIES:
         logger = logging.getLogger(name)
         saved.append((logger, logger.level, logger.handlers[:], logger.propagate))
         logger.handlers = [handler]
-        logger.setLevel(level)
+        logger.setLevel(level if name in PACKAGES else max(level, logging.WARNING))
         logger.propagate = False
     try:
         yield handler

@@ -28,7 +28,7 @@ import time
 import traceback
 
 from ._errors import AacmmError
-from ._log import console, level_from_flags
+from ._log import console, escaped, level_from_flags
 from ._output import published_outputs
 from .shipped import version
 
@@ -91,7 +91,7 @@ def _add_common(parser: argparse.ArgumentParser, top: bool) -> None:
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The ``aacmm`` parser. With ``argv`` (the command line), only the subcommand it names is built in
     full (the others are listed for ``--help``); without, every subcommand."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="aacmm",
         description="Portable measuring arm toolkit: deflection-aware ball centres from encoder angles and "
                     "contact force, simulation, ring-gauge analysis, calibration and closing the loop. "
@@ -115,6 +115,14 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
             sub.add_parser(name, help=text, add_help=False)     # listed only: not the one that runs
     _add_common(parser, True)
     return parser
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser whose error message (it may quote an argument: a file name with a newline) is one
+    line, control characters escaped (subcommands' parsers are of the same class)."""
+
+    def error(self, message: str):
+        super().error(escaped(message))
 
 
 class _Version(argparse.Action):
@@ -164,7 +172,7 @@ def main(argv: list[str] | None = None) -> int:
 
     def error(text: str) -> None:
         try:
-            print(f"{name}: error: {text}", file=sys.stderr, flush=True)
+            print(f"{name}: error: {escaped(text)}", file=sys.stderr, flush=True)
         except (OSError, ValueError):
             pass
 

@@ -3,6 +3,7 @@ full, Ctrl-C after the output is published, stray lines on standard error, progr
 Each test is named after the item it checks; all are fast (a few points, no fit)."""
 from __future__ import annotations
 
+import contextlib
 import os
 import stat
 from pathlib import Path
@@ -238,3 +239,70 @@ def test_item6_files_written_inside_an_output_folder_are_not_outputs_of_their_ow
             atomic_write_text(out.dir / "a.txt", "a")
             assert written == []
     assert written == [tmp_path / "out"]
+
+
+# ---------------------------------------------------------------------------------------------
+# 7. no line on standard error that the project did not write; names escaped
+
+ENTITY_URDF = """<?xml version="1.0"?>
+<!DOCTYPE robot [
+<!ENTITY % ext SYSTEM "http://127.0.0.1:9/evil.dtd">
+%ext;
+]>
+<robot name="r">
+  <link name="base"/>
+  <link name="tip"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="tip"/><origin xyz="0 0 0.5"/>
+    <axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+</robot>
+"""
+
+
+@pytest.mark.parametrize("doctype", [
+    '<!DOCTYPE robot [\n<!ENTITY % ext SYSTEM "http://127.0.0.1:9/evil.dtd">\n%ext;\n]>',
+    '<!DOCTYPE robot [\n<!ENTITY name "r2">\n]>',
+    '<!DOCTYPE robot SYSTEM "file:///etc/passwd">',
+])
+def test_item7_urdf_with_entities_is_one_error_and_no_library_line(tmp_path, few_points, capsys, doctype):
+    urdf = tmp_path / "r.urdf"
+    urdf.write_text(ENTITY_URDF.replace(ENTITY_URDF.splitlines()[1] + "\n" + "\n".join(ENTITY_URDF.splitlines()[2:5]),
+                                        doctype))
+    assert main(["tip", str(few_points), "--arm", str(urdf), "--tip-frame", "tip", "-o", str(tmp_path / "t.csv")]) == 2
+    err = capsys.readouterr().err
+    assert err.splitlines() == [f"aacmm tip: error: {urdf}, line 2: a <!DOCTYPE> that declares entities or names an "
+                                "external DTD: a URDF needs neither (entities could read other files or the network); "
+                                "remove it"], err
+
+
+def test_item7_a_plain_doctype_is_accepted(tmp_path):
+    from arm_model.urdf_import import _parse_xml
+    data = ENTITY_URDF.replace("\n".join(ENTITY_URDF.splitlines()[1:5]), "<!DOCTYPE robot>").encode()
+    assert _parse_xml(tmp_path / "r.urdf", data).getroot().get("name") == "r"
+
+
+def test_item7_library_log_records_go_through_the_console(capsys):
+    import logging
+
+    from arm_model._log import console
+    with console():
+        logging.getLogger("yourdfpy.urdf").error("Entity 'ext' not defined\nUsing different parsing approach.")
+        logging.getLogger("yourdfpy.urdf").info("not shown")
+    assert capsys.readouterr().err == "error: Entity 'ext' not defined\\nUsing different parsing approach.\n"
+
+
+@pytest.mark.parametrize("where", ["points", "output", "option"])
+def test_item7_control_characters_in_names_are_escaped(tmp_path, few_points, capsys, where):
+    name = "x\nwarning: forged\x1b[31m\u2028.csv"
+    evil = tmp_path / name
+    args = {"points": [str(evil), "--arm", str(NOMINAL), "-o", str(tmp_path / "t.csv")],
+            "output": [str(few_points), "--arm", str(NOMINAL), "-o", str(tmp_path / "d" / name)],
+            "option": [str(few_points), "--arm", str(NOMINAL), "--mc", name, "-o", str(tmp_path / "t.csv")]}[where]
+    if where == "output":
+        (tmp_path / "d").mkdir()
+        os.mkfifo(tmp_path / "d" / name)            # refused (item 1): the error names it
+    with pytest.raises(SystemExit) if where == "option" else contextlib.nullcontext():
+        assert main(["tip", *args]) == 2
+    err = capsys.readouterr().err
+    lines = [s for s in err.splitlines() if not s.startswith(("usage:", " "))]
+    assert len(lines) == 1 and lines[0].startswith("aacmm tip: error:"), err
+    assert "\x1b" not in err and "\u2028" not in err and "\\n" in err and "\\x1b[31m" in err
