@@ -306,3 +306,33 @@ def test_item7_control_characters_in_names_are_escaped(tmp_path, few_points, cap
     lines = [s for s in err.splitlines() if not s.startswith(("usage:", " "))]
     assert len(lines) == 1 and lines[0].startswith("aacmm tip: error:"), err
     assert "\x1b" not in err and "\u2028" not in err and "\\n" in err and "\\x1b[31m" in err
+
+
+# ---------------------------------------------------------------------------------------------
+# 4. more folds than poses
+
+def test_item4_close_loop_folds_beyond_the_poses_are_refused(tmp_path, capsys):
+    lines = POINTS.read_text(encoding="utf-8").splitlines()
+    pts = tmp_path / "points.csv"
+    pts.write_text("\n".join(lines[:61]) + "\n", encoding="utf-8")             # 60 poses
+    out = tmp_path / "loop"
+    assert main(["close-loop", str(pts), str(POINTS.parent / "artefacts.toml"), "--arm", str(NOMINAL),
+                 "--fold-by", "pose", "--folds", "1000", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "--folds 1000: the data hold 60 poses" in err and "at most 60 folds" in err, err
+    assert not out.exists()
+
+
+def test_item4_folds_up_to_the_poses_pass_the_check():
+    import numpy as np
+
+    from arm_model import InputError
+    from arm_model.io import PointSet
+    from calibration.loop_cli import _check_folds
+    feature = np.array(["ring"] * 5 + [""] * 3, dtype=object)
+    points = PointSet(path="p.csv", measurement=np.array(["m"] * 8, dtype=object), feature=feature,
+                      q=np.zeros((8, 7)), lines=np.arange(2, 10))
+    _check_folds(5, points, None)
+    with pytest.raises(InputError, match="5 poses"):
+        _check_folds(6, points, None)
+    _check_folds(7, points, points.select(np.arange(8) < 2))             # 2 reference points count too
