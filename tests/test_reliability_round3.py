@@ -336,3 +336,32 @@ def test_item4_folds_up_to_the_poses_pass_the_check():
     with pytest.raises(InputError, match="5 poses"):
         _check_folds(6, points, None)
     _check_folds(7, points, points.select(np.arange(8) < 2))             # 2 reference points count too
+
+
+# ---------------------------------------------------------------------------------------------
+# 8. a long Monte Carlo shows its progress and the time left
+
+def test_item8_monte_carlo_shows_progress_and_time_left(few_points, tmp_path, capsys):
+    out = tmp_path / "t.csv"
+    assert tip(few_points, out, "--mc", "3000") == 0
+    steps = [s for s in capsys.readouterr().err.splitlines() if "Monte Carlo, 8 points: samples" in s]
+    assert steps[0].endswith(("s left", "min left", "h left")) and "3/3000 (0 %), about " in steps[0], steps
+    assert steps[-1].endswith("samples 3000/3000 (100 %)") and 10 <= len(steps) <= 13, steps
+    assert tip(few_points, out, "--mc", "3000", "-q") == 0                  # --quiet: no progress
+    assert capsys.readouterr().err == ""
+
+
+def test_item8_progress_estimate_is_the_rate_so_far(monkeypatch):
+    import logging
+
+    import arm_model._log as _log
+    clock = iter([0.0, 0.0, 10.0, 20.0])            # created (and drawn) at 0 s; 1/4 done at 10 s; 2/4 at 20 s
+    monkeypatch.setattr(_log.time, "perf_counter", lambda: next(clock))
+    records = []
+    logger = logging.getLogger("test_item8")
+    logger.setLevel(logging.INFO)
+    logger.addHandler(type("H", (logging.Handler,), {"emit": lambda self, r: records.append(r.getMessage())})())
+    bar = _log.Progress(4, "s", logger=logger, stream=None, estimate=True, every_pct=50)
+    bar.update()
+    bar.update()
+    assert records == ["s 1/4 (25 %), about 30 s left", "s 2/4 (50 %), about 20 s left"]
