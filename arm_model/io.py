@@ -17,6 +17,7 @@ import numpy as np
 from ._csv import BLOCK_BYTES, csv_records, format_csv, iter_csv_blocks
 from ._errors import InputError, parse_toml, read_text, unknown_key
 from ._output import atomic_write_bytes, guard_output
+from ._readback import UnreadableOutput, read_back
 from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
 log = logging.getLogger(__name__)
@@ -24,7 +25,7 @@ log = logging.getLogger(__name__)
 __all__ = ["PointSet", "Feature", "Distance", "Artefacts", "ForceSignal", "read_points",
            "read_artefacts", "read_force_signal", "check_features", "atomic_write_text",
            "atomic_write_bytes", "write_csv", "guard_output", "csv_records", "FEATURE_KINDS", "iter_points",
-           "concat_points", "POINT_COLUMNS", "format_artefacts"]
+           "concat_points", "POINT_COLUMNS", "format_artefacts", "read_back", "UnreadableOutput"]
 
 FEATURE_KINDS = ("ring", "cylinder", "sphere", "seat", "plane", "point")
 _TEXT_COLUMNS = ("measurement", "feature")

@@ -13,10 +13,18 @@ import numpy as np
 
 from arm_model._output import safe_name
 from arm_model.model_file import Arm, format_model, write_covariance
-from arm_model.io import atomic_write_text, guard_output
+from arm_model.io import UnreadableOutput, atomic_write_text, guard_output, read_back
 from arm_model.urdf_import import calibrated_urdf_text
 
-__all__ = ["model_paths", "fitted_arm", "write_model", "model_check", "refine_torques"]
+__all__ = ["model_paths", "fitted_arm", "write_model", "model_check", "refine_torques", "check_reproduces",
+           "REPRODUCE_TOL_M"]
+
+#: how far beyond :func:`model_check`'s difference (the torques evaluated on the calibrated description, which
+#: the summary reports) the model file read back may put a fitted point from the fit's own ball centre [m]:
+#: the file's decimal text costs below 1e-12 m
+REPRODUCE_TOL_M = 1e-9
+#: how far the covariance read back may differ from the fit's, relative to u_i u_k
+REPRODUCE_COV_REL = 1e-9
 
 
 def model_paths(out_dir, name: str) -> dict:
@@ -59,7 +67,34 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
                                                    probing_scatter=result.probing_scatter(), comment=comment),
                       inputs)
     atomic_write_text(files["urdf"], calibrated_urdf_text(result.model.desc, arm.desc), inputs)
+    check_reproduces(result, read_back(files["model"]), files["model"])
     return files
+
+
+def check_reproduces(result, back: Arm, path) -> None:
+    """The model file read back (``back``: as every ``--arm`` reads it) must reproduce the fit: on every
+    fitted point its ball centre within :data:`REPRODUCE_TOL_M` of the fit's own beyond the difference
+    :func:`model_check` reports, and its covariance file the fit's covariance of the free parameters
+    (:data:`REPRODUCE_COV_REL`). Else :class:`~arm_model.io.UnreadableOutput` (a bug: exit 3, nothing
+    written)."""
+    pts = result.data.points
+    own = result.model.ball_centres(pts.q, result.data.wrench, result.p, result.data.aux)
+    d = np.linalg.norm(back.ball_centres(pts, wrench=result.data.wrench) - own, axis=1) if len(pts) else np.zeros(0)
+    allowed = REPRODUCE_TOL_M + model_check(result)["max_difference_nm"] * 1e-9
+    if len(d) and not d.max() <= allowed:
+        i = int(np.nanargmax(d)) if np.isfinite(d).any() else 0
+        raise UnreadableOutput(f"the model file read back does not reproduce the fit: the ball centre of "
+                               f"{pts.path}, line {pts.lines[i]} moves by {d[i] * 1e9:.3g} nm (at most "
+                               f"{allowed * 1e9:.3g} nm)", path)
+    if back.covariance is None:
+        return
+    from arm_model.model_file import read_covariance
+    cov = read_covariance(back.covariance)
+    free = list(result.free)
+    u = np.sqrt(np.clip(np.diag(result.cov), 0.0, None))
+    if list(cov.names) != free or not np.all(np.abs(cov.matrix - result.cov) <= REPRODUCE_COV_REL * np.outer(u, u)):
+        raise UnreadableOutput(f"the covariance file read back is not the fit's covariance of its free parameters "
+                               f"({', '.join(free)})", back.covariance)
 
 
 def model_check(result, arm: Arm | None = None) -> dict:

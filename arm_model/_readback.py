@@ -1,0 +1,168 @@
+"""Every file a command writes passes the reader that will read it: checked before it is published.
+
+:func:`arm_model._output.output_folder` and :func:`~arm_model._output.output_file` hand every file they
+are about to publish to :func:`check_output`, which finds the file's kind (:data:`KINDS`: by its suffix
+and its first bytes, never by the writer's say-so, so that no writer can forget it) and reads it with
+that kind's reader, the very function a command uses to read such a file:
+
+========================  =========================================  ===========================================
+kind                      recognised by                              read back by
+========================  =========================================  ===========================================
+model file                ``.toml`` with a ``convention`` key        ``load_model`` as every ``--arm`` reads it,
+                                                                     with its covariance file as ``tip`` reads it
+artefacts file            ``.toml`` with ``feature`` / ``distance``   ``read_artefacts``
+covariance file           ``.csv``, header ``parameter,unit,value,u``  ``read_covariance``
+points file               ``.csv``, header ``measurement,feature,``   ``read_points``
+                          and joint columns ``q1_...``
+force signal              ``.csv``, header starting ``time_s``        ``read_force_signal``
+residuals file            ``.csv`` with ``line`` and ``dx_um``, or     ``aacmm view --residuals``'s reader
+                          ``rx_um``
+URDF                      ``.urdf``                                  the URDF reader's checks (every number in
+                                                                     range, the tree; the tip frame is the user's)
+JSON file                 ``.json``                                  a strict JSON reader (no NaN, no Infinity:
+                                                                     standard JSON, as other tools read it)
+========================  =========================================  ===========================================
+
+Other files (HTML reports, PNG plots, text tables, ``tip``'s point table, the simulator's truth files, which
+no reader of the toolkit takes) are not read back. A refusal is a bug of the toolkit, not of the user's
+input: :class:`UnreadableOutput` (exit 3, "please report it"), and nothing is published.
+"""
+from __future__ import annotations
+
+import importlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from ._errors import InputError
+
+__all__ = ["UnreadableOutput", "KINDS", "kind_of", "read_back", "check_output"]
+
+
+class UnreadableOutput(RuntimeError):
+    """A file a command wrote is refused by the reader that will read it, or read back does not give what
+    was written (a bug: exit 3, nothing written). ``path``: the file; ``reason``: what is wrong."""
+
+    def __init__(self, reason: str, path: str | Path | None = None):
+        self.reason, self.path = reason, None if path is None else str(path)
+        super().__init__(f"{self.path}: {reason}" if self.path is not None else reason)
+
+    def __reduce__(self):
+        return type(self), (self.reason, self.path)
+
+
+@dataclass(frozen=True)
+class Kind:
+    """A kind of output file: its ``name``, the file ``suffix``, ``matches(first_line)`` (the file's first
+    line, for the suffixes that several kinds share) and its reader (``"module:function"``, imported when
+    a file of the kind is read: ``function(path)`` returns what it read or raises an InputError)."""
+    name: str
+    suffix: str
+    matches: object
+    reader: str
+
+
+def _header(line: str) -> list[str]:
+    return [c.strip() for c in line.split(",")]
+
+
+KINDS: tuple[Kind, ...] = (
+    Kind("model file", ".toml", lambda text: _toml_has(text, "convention"), "arm_model._readback:read_model"),
+    Kind("artefacts file", ".toml", lambda text: _toml_has(text, "feature", "distance"), "arm_model.io:read_artefacts"),
+    Kind("covariance file", ".csv", lambda line: _header(line)[:4] == ["parameter", "unit", "value", "u"],
+         "arm_model.model_file:read_covariance"),
+    Kind("points file", ".csv", lambda line: _header(line)[:2] == ["measurement", "feature"]
+         and any(h.startswith("q1_") for h in _header(line)), "arm_model.io:read_points"),
+    Kind("force signal", ".csv", lambda line: _header(line)[0] == "time_s", "arm_model.io:read_force_signal"),
+    # the viewer's reader (a floor above: imported by name, as arm_model.cli names every command's module)
+    Kind("residuals file", ".csv", lambda line: {"line", "dx_um"} <= set(_header(line)) or "rx_um" in _header(line),
+         "viz.residuals:read_residuals"),
+    Kind("URDF", ".urdf", lambda line: True, "arm_model.urdf_import:_read_urdf"),
+    Kind("JSON file", ".json", lambda line: True, "arm_model._readback:read_json"),
+)
+
+
+def _toml_has(text: str, *keys: str) -> bool:
+    """Whether the TOML text has one of ``keys`` at its top level (a text that is not TOML has none: it is
+    then read back as TOML, and refused, by :func:`read_toml`)."""
+    import tomllib
+    try:
+        data = tomllib.loads(text)
+    except (tomllib.TOMLDecodeError, RecursionError):
+        return False
+    return any(k in data for k in keys)
+
+
+def read_model(path: Path):
+    """A model file as ``--arm`` reads it and, when it names one, its covariance file as ``tip`` reads it."""
+    from .model_file import load_model
+    from .uncertainty_cli import parameters_of
+    arm = load_model(path)
+    parameters_of(arm)
+    return arm
+
+
+def read_json(path: Path):
+    """Standard JSON (RFC 8259): no ``NaN``, ``Infinity``, which Python writes and other tools refuse."""
+    def refuse(word):
+        raise InputError(f"'{word}' is not JSON (a value nobody resolved must be written as null)", path)
+    try:
+        return json.loads(path.read_text(encoding="utf-8"), parse_constant=refuse)
+    except (ValueError, UnicodeDecodeError) as exc:
+        line = getattr(exc, "lineno", None)
+        raise InputError(f"not valid JSON: {exc}", path, line) from None
+
+
+def read_toml(path: Path):
+    """Any other TOML the toolkit writes must still be TOML."""
+    from ._errors import parse_toml, read_text
+    return parse_toml(read_text(path, "the file"), path)
+
+
+def _first_line(path: Path) -> str:
+    with open(path, "rb") as fh:
+        return fh.readline(1 << 16).decode("utf-8", "replace").lstrip("\ufeff").rstrip("\r\n")
+
+
+def kind_of(path: Path, name: str | None = None) -> Kind | None:
+    """The :class:`Kind` of the file at ``path`` (``name``: the name it will be published under, for its
+    suffix; default ``path``'s), or None for a file no reader of the toolkit takes."""
+    suffix = Path(name or path).suffix.lower()
+    kinds = [k for k in KINDS if k.suffix == suffix]
+    if not kinds:
+        return None
+    probe = path.read_text(encoding="utf-8", errors="replace") if suffix == ".toml" else _first_line(path)
+    hit = next((k for k in kinds if k.matches(probe)), None)
+    if hit is None and suffix == ".toml":
+        return Kind("TOML file", ".toml", None, "arm_model._readback:read_toml")
+    return hit
+
+
+def read_back(path: str | Path, published: str | Path | None = None):
+    """Read the file ``path`` (to be published as ``published``) with the reader of its kind; returns
+    what the reader returned (None for a file of no kind). A refusal is an :class:`UnreadableOutput`
+    naming the published file, its kind and the reader's located message."""
+    path = Path(path)
+    published = Path(published or path)
+    kind = kind_of(path, published.name)
+    if kind is None:
+        return None
+    module, _, function = kind.reader.partition(":")
+    reader = getattr(importlib.import_module(module), function)
+    try:
+        return reader(path)
+    except InputError as exc:
+        where = ", ".join(w for w in (f"line {exc.line}" if exc.line is not None else None,
+                                      exc.column) if w)
+        raise UnreadableOutput(f"this command wrote a {kind.name} that its reader refuses"
+                               f"{' (' + where + ')' if where else ''}: {exc.reason}", published) from None
+
+
+def check_output(stage: Path, final: Path) -> None:
+    """Read back every file of a command's output before it is published: ``stage`` the temporary folder
+    (or file), ``final`` where it will be published. Raises :class:`UnreadableOutput` for the first
+    file refused (in name order)."""
+    from ._output import MARKER
+    files = [stage] if stage.is_file() else sorted(p for p in stage.rglob("*") if p.is_file() and p.name != MARKER)
+    for p in files:
+        read_back(p, final if p == stage else final / p.relative_to(stage))
