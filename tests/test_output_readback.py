@@ -252,3 +252,12 @@ def test_a_tip_frame_pointing_back_up_the_arm_is_published(tmp_path):
     assert desc.probe.p_last[2] < 0
     fit, campaign = _fit(desc, 3, (), 2.0, 0)
     _published_model_reproduces_the_fit(tmp_path, fit, campaign)
+
+
+def test_json_text_writes_null_for_a_value_nobody_resolved(tmp_path):
+    from arm_model._readback import read_json
+    from arm_model.io import json_text
+    text = json_text({"rms_um": np.float64("nan"), "u": np.array([1.5, np.inf]), "n": np.int64(3), "t": (1, 2.0)})
+    assert json.loads(text) == {"rms_um": None, "u": [1.5, None], "n": 3, "t": [1, 2.0]}
+    (tmp_path / "s.json").write_text(text)
+    assert read_json(tmp_path / "s.json")["u"] == [1.5, None]
