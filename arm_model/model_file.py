@@ -8,7 +8,7 @@ One TOML file (``aacmm calibrate`` and ``aacmm close-loop`` write it, every ``--
   ``joints`` (joint names; absent: all joints), the effect's other options (its dataclass fields,
   e.g. ``harmonics``, ``gravity``) and ``parameter``, one entry a parameter of the effect
   (``param_defs``): ``name``, ``value_<unit>``, ``u_<unit>`` (standard uncertainty; 0 when not
-  estimated) and ``state`` ("free", "fixed" or "held") — units from :data:`PARAM_UNITS`;
+  estimated) and ``state`` ("free", "prior-dominated", "fixed" or "held") — units from :data:`PARAM_UNITS`;
 * an optional ``[calibration]`` table: ``covariance`` (the covariance file, relative to the TOML),
   ``written_by`` and ``probing_scatter_um`` (the scatter of the contact itself per axis that the
   calibration's variance components estimated, net of the encoder and force-sensor noise:
@@ -68,7 +68,7 @@ PARAM_QUANTITY: dict[str, str] = {
 #: computed from the description, e.g. gravity and contact torques)
 EFFECT_COLUMNS: dict[str, str | None] = {"temperature": "temperature_C", "tau_gravity": None, "tau_contact": None}
 
-STATES = ("free", "fixed", "held")
+STATES = ("free", "prior-dominated", "fixed", "held")
 
 
 def _unit_of(si: str) -> tuple[str, float]:

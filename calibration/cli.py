@@ -66,8 +66,9 @@ def campaign_inputs(p) -> None:
 SIGMA_UM = number_in(1e-6, 1e5)
 
 
-def sigma_options(p) -> None:
-    """The stated uncertainties that weight the residuals (shared with ``aacmm close-loop``)."""
+def sigma_options(p, prior_default: str | None = None) -> None:
+    """The stated uncertainties that weight the residuals and the prior (shared with ``aacmm close-loop``, whose
+    ``--prior-scale`` defaults to ``prior_default``)."""
     p.add_argument("--sigma-probe-um", type=SIGMA_UM, default=10.0,
                    help="standard uncertainty of a probed ball centre per axis [um] (default 10)")
     p.add_argument("--sigma-ref-um", type=SIGMA_UM, default=10.0,
@@ -78,18 +79,22 @@ def sigma_options(p) -> None:
     p.add_argument("--weights", choices=("data", "stated"), default="data",
                    help="data (default): the sigmas above are starting values; the noise of each group of rows "
                         "(points per artefact kind, reference points, lengths) is estimated from the fit's residuals "
-                        "(variance components), the rows re-weighted and the fit repeated until it settles; "
-                        "stated: use the sigmas as given")
+                        "(variance components), jointly with the prior's scales, the rows re-weighted and the fit "
+                        "repeated until it settles; stated: use the sigmas as given")
     p.add_argument("--plausible-length-mm", type=number_in(1e-6, 1e6), default=None,
-                   help="plausible size of a length error [mm] (angles: 0.01 rad per mm of it), for the rule that "
-                        "holds parameters the data resolve to worse than --min-resolution of it; default the larger "
-                        "of 1 mm and ten times the noise of one point (so a robot's lengths are not held)")
-    p.add_argument("--prior-scale", type=prior_scale, default=None, metavar="evidence|off|FACTOR",
-                   help="off (default): parameters the data resolve poorly are held (--min-resolution); evidence: "
-                        "a Gaussian prior on every free parameter instead (centred on the description, standard "
-                        "deviation a factor times its plausible error size), the factor the one of the largest "
-                        "Laplace evidence of the data (empirical Bayes, tried from 0.05 to 5); FACTOR: that factor. "
-                        "Poorly resolved directions are then shrunk, not held (docs/calibration.md)")
+                   help="plausible size of a joint row's length error [mm] (angles: 1 mrad per mm of it) at prior "
+                        "scale 1 (default 1 mm, 1 mrad; the evidence scales them); with --prior-scale off, the size "
+                        "the --min-resolution rule judges against (default there: the larger of 1 mm and ten times "
+                        "the noise of one point, angles 0.01 rad per mm)")
+    default = "off" if prior_default is None else prior_default
+    p.add_argument("--prior-scale", type=prior_scale, default=prior_default, metavar="evidence|off|FACTOR",
+                   help=f"evidence: a Gaussian prior on every free parameter, centred on the nominal value, standard "
+                        "deviation its group's scale times its plausible error size (groups: lengths, joint offsets, "
+                        "axis angles, the tip or marker offset, the probe's compliance, each effect), each scale "
+                        "chosen by the evidence (type-II maximum likelihood) together with the noise: poorly "
+                        "resolved parameters are shrunk towards the nominal and reported as prior-dominated, never "
+                        "held; FACTOR: every group at that scale; off: no prior (--min-resolution may then hold "
+                        f"weak parameters). Default {default} (docs/calibration.md)")
 
 
 def prior_scale(text: str):
@@ -116,17 +121,15 @@ def _common_fit_options(p) -> None:
     p.add_argument("--effect", action="append", metavar="KEY",
                    help="add an effect of arm_model.effects to the model (repeatable): eccentricity, "
                         "joint_gain, joint_compliance, thermal, force_sensor, probe_compliance")
-    sigma_options(p)
+    sigma_options(p, prior_default="evidence")
     p.add_argument("--rank-tol", type=fraction, default=None,
                    help="relative singular value below which a parameter combination counts as not "
                         "identifiable (default 1e-4)")
-    p.add_argument("--min-resolution", type=non_negative(), default=0.1, metavar="FRACTION",
-                   help="hold parameters of the description (joint rows, probe) and of the encoders' reading errors "
-                        "(eccentricity, joint_gain: geometry like a joint offset) the data would resolve only to "
-                        "worse than this fraction of a plausible error size (lengths: --plausible-length-mm; angles "
-                        "0.01 rad per mm of it; 10x the nominal probe compliance): their effect is below the noise "
-                        "(default 0.1; 0 keeps every linearly independent parameter). Other effects' parameters "
-                        "are always estimated when linearly identifiable")
+    p.add_argument("--min-resolution", type=non_negative(), default=0.0, metavar="FRACTION",
+                   help="with --prior-scale off only: hold parameters of the description (joint rows, probe) and of "
+                        "the encoders' reading errors (eccentricity, joint_gain) the data would resolve only to worse "
+                        "than this fraction of a plausible error size (the practical-resolution rule of earlier "
+                        "versions: 0.1). Default 0: every linearly independent parameter is estimated")
 
 
 def register(sub) -> None:
@@ -240,9 +243,12 @@ def fit_options(args, **fields):
     """The :class:`~calibration.options.FitOptions` of the fit options on the command line (``--min-resolution``,
     ``--plausible-length-mm``, ``--weights``, ``--prior-scale``, ``--rank-tol``), with ``fields`` set too."""
     from .options import FitOptions
+    prior = getattr(args, "prior_scale", None)
+    if args.min_resolution and prior is not None:
+        raise InputError(f"--min-resolution holds weak parameters without a prior: give --prior-scale off with it "
+                         f"(the prior, --prior-scale {prior}, shrinks them instead)")
     kw = {"min_resolution": args.min_resolution or None,
-          "weights_from_data": getattr(args, "weights", "stated") == "data",
-          "prior_scale": getattr(args, "prior_scale", None)}
+          "weights_from_data": getattr(args, "weights", "stated") == "data", "prior_scale": prior}
     if getattr(args, "plausible_length_mm", None) is not None:
         kw["prior_length"] = args.plausible_length_mm * 1e-3
     if args.rank_tol is not None:
@@ -398,6 +404,31 @@ def _validation(res, data, mpe):
     return figure_rows(before, after), conformance(after, mpe, before)
 
 
+def prior_lines(res) -> list[str]:
+    """Console lines: the prior's scale of each group (chosen by the evidence or given) and the parameters the
+    prior dominates."""
+    if res.prior_scales is None:
+        return []
+    from .calibrate import display_unit
+    evidence = bool(res.evidence)
+    out = ["prior: each free parameter ~ N(nominal, (its group's scale x its plausible size)^2)"
+           + (f", the scales chosen by the evidence ({len(res.evidence)} rounds"
+              + ("" if res.evidence[-1].get("settled", True) else "; " + res.evidence[-1]["note"]) + ")"
+              if evidence else " (scales given)") + ":"]
+    for g, v in res.prior_groups.items():
+        out.append(f"  {g}: scale {v['scale']:.3g}; the data determine {v['effective_parameters']:.1f} of its "
+                   f"{len(v['parameters'])} parameters")
+    dominated = [r for r in res.parameter_rows() if r["state"] == "prior-dominated"]
+    if dominated:
+        out.append(f"prior-dominated ({len(dominated)}: the data add less than the prior; they stay near the nominal "
+                   "with about the prior's uncertainty, which the covariance carries):")
+        for r in dominated:
+            du, _ = display_unit(r["unit"])
+            out.append(f"  {r['name']}: {r['display_value']:.4g} ± {r['display_u']:.3g} {du} (prior ± "
+                       f"{r['display_prior_u']:.3g}, posterior/prior variance {r['prior_ratio']:.2f})")
+    return out
+
+
 def noise_lines(res) -> list[str]:
     """Console lines: the noise of each row group, estimated from the fit, and the weights used."""
     out = []
@@ -405,10 +436,6 @@ def noise_lines(res) -> list[str]:
         out.append(f"noise from the data (variance components, {len(res.weights_history)} fit(s)):")
         if not res.weights_history[-1].get("settled", True):
             out.append("  warning: " + res.weights_history[-1]["note"])
-    if res.prior_scale is not None:
-        tried = ", ".join(f"{r['scale']:g}" for r in res.evidence if r["log_evidence"] is not None)
-        out.append(f"prior: each free parameter ~ N(nominal, ({res.prior_scale:g} x its plausible error size)^2)"
-                   + (f", the scale of the largest evidence among {tried}" if tried else " (scale given)"))
     for v in res.variance:
         what = f"{v['group']} points" if v["group"] != "length" else "lengths"
         used = res.weights.factor(v["group"])
@@ -424,7 +451,7 @@ def noise_lines(res) -> list[str]:
         else:
             out.append(f"  {what}: residual/stated ratio {v['factor']:.3g} (redundancy {v['redundancy']:.1f} of "
                        f"{v['rows']} rows); --weights data would use it")
-    return out
+    return out + prior_lines(res)
 
 
 def run_montecarlo(args: argparse.Namespace) -> int:

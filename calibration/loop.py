@@ -73,6 +73,8 @@ log = logging.getLogger(__name__)
 __all__ = ["LoopSettings", "CVResult", "Stage", "LoopResult", "close_loop", "heldout_residuals",
            "heldout_figures", "cross_validate", "display", "effect_summary"]
 
+#: the practical-resolution rule the loop's fits without a prior keep (calibrate's default before its prior)
+LEGACY_RESOLUTION = 0.1
 #: share of a candidate's signature inside another's above which the data cannot tell them apart
 SAME_SIGNATURE = 0.99
 #: the start of the reason of a candidate included as physics (:func:`_physics_inclusion`)
@@ -592,7 +594,8 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
                                               priors={**priors, **(extra_priors or {})},
                                               outlier_threshold=settings.outlier_threshold,
                                               weights_from_data=reweight and settings.weights_from_data,
-                                              prior_scale=prior_scale))
+                                              prior_scale=prior_scale, min_resolution=LEGACY_RESOLUTION
+                                              if prior_scale is None else None))
 
     prior_scale = settings.prior_scale
     if prior_scale == "evidence":
@@ -600,7 +603,8 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
         names0 = None if free is None else [model0.spec.names[i] for i in resolve_parameters(model0.spec, free)]
         prior_scale, _ = evidence_scale(model0, design, FitOptions(free=names0, values=values, weights=weights,
                                                                    rank_tol=settings.rank_tol, priors=priors))
-        say(f"prior scale from the evidence of the design set: {prior_scale:g} x the plausible error sizes")
+        say("prior scales from the evidence of the design set: "
+            + ", ".join(f"{g} {v:.3g}" for g, v in prior_scale.items()) + " x the plausible error sizes")
 
     def noise(res: CalibrationResult) -> str:
         parts = [f"{v['group']} {v['sigma_um']:.3g} um" for v in res.variance
