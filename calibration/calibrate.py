@@ -392,7 +392,8 @@ def identify(problem: Problem, p, states, candidates, options: FitOptions = FitO
             lines = [f"  {k}: {c.text()}" for k, c in idf.combinations.items()]
             raise NumericalError(f"{len(idf.dependent)} parameter combination(s) the data cannot identify "
                                  f"({stage}; rank {idf.rank} of {len(kept)}, rank_tol {options.rank_tol:g}):\n"
-                                 + "\n".join(lines) + "\nfix these parameters or use on_unidentifiable='fix'")
+                                 + "\n".join(lines) + "\nhold these parameters (--hold) or let them be held and listed "
+                                 "(--on-unidentifiable fix, FitOptions.on_unidentifiable='fix')")
         for name in idf.dependent:
             fixed.append(FixedParameter(name, float(p[spec.index(name)]), _dependent_reason(idf, name),
                                         idf.combinations[name], stage))
@@ -403,7 +404,8 @@ def identify(problem: Problem, p, states, candidates, options: FitOptions = FitO
             raise NumericalError("parameters the data resolve to worse than "
                                  f"{options.min_resolution:g} of a plausible size ({stage}): "
                                  + ", ".join(f"{n} (u ~ {u:.3g} {spec.units[spec.index(n)]})" for n, u, _ in weak)
-                                 + "\nhold them or use on_unidentifiable='fix'")
+                                 + "\nhold them (--hold) or let them be held and listed (--on-unidentifiable fix, "
+                                 "FitOptions.on_unidentifiable='fix')")
         for name, u, comb in weak:
             du, fac = display_unit(spec.units[spec.index(name)])
             fixed.append(FixedParameter(name, float(p[spec.index(name)]),
@@ -614,6 +616,27 @@ def _restarted(s: _Setup, prob: Problem, sol, options: FitOptions):
     return sol
 
 
+#: prior scales (times the fit's) of the continuation when a fit does not converge from the nominal
+CONTINUATION = (1e-2, 1e-1, 1.0)
+
+
+def _lm(s: _Setup, prob: Problem, p, states, options: FitOptions):
+    """Levenberg-Marquardt of ``prob`` from ``p``, ``states`` with the setup's prior (damped restarts inside);
+    when that does not converge and there is a prior, a continuation in the prior's scale: the fit with the
+    prior narrowed to :data:`CONTINUATION` of its size (near the nominal, well conditioned), each started from
+    the one before, ending at the prior itself."""
+    try:
+        return levenberg_marquardt(prob, p, states, max_iter=options.max_iter, prior=s.prior)
+    except NumericalError:
+        if s.prior is None:
+            raise
+    for f in CONTINUATION:
+        narrowed = Prior(s.prior.centre, s.prior.size * f)
+        sol = levenberg_marquardt(prob, p, states, max_iter=options.max_iter, prior=narrowed)
+        p, states = sol.p, sol.states
+    return sol
+
+
 #: fits with a new identifiability analysis at the solution before the identifiable set must have settled
 SETTLE_ROUNDS = 4
 
@@ -628,8 +651,7 @@ def _solve(s: _Setup, options: FitOptions):
     states = s.states
     for _ in range(SETTLE_ROUNDS):
         prob = s.problem.with_free(kept)
-        sol = _restarted(s, prob, levenberg_marquardt(prob, p, states, max_iter=options.max_iter, prior=s.prior),
-                         options)
+        sol = _restarted(s, prob, _lm(s, prob, p, states, options), options)
         p, states = sol.p, sol.states
         n_before = len(kept)
         kept, bound = _at_bounds(s, p, kept, "solution")
@@ -898,7 +920,7 @@ def _evidence(model: ArmModel, data: CalibrationData, options: FitOptions) -> Ca
         p = sol.p.copy()
         kept, bound = _at_bounds(s, p, kept, "evidence")
         fixed += bound
-        sol = levenberg_marquardt(s.problem.with_free(kept), p, sol.states, max_iter=options.max_iter, prior=s.prior)
+        sol = _lm(s, s.problem.with_free(kept), p, sol.states, options)
     else:
         history[-1]["settled"] = False
         history[-1]["note"] = (f"the prior scales and noise did not settle in {EVIDENCE_ROUNDS} rounds; the last "
