@@ -45,7 +45,7 @@ from .solver import Prior, blas_threads, levenberg_marquardt, normal_factor
 __all__ = ["FixedParameter", "Outlier", "CalibrationResult", "calibrate", "resolve_parameters",
            "default_free", "rigid_gauge", "display_unit", "blas_threads", "identify", "variance_components",
            "reweighted", "MIN_REDUNDANCY", "row_groups", "row_kinds", "kind_groups", "standardized_residuals",
-           "grouped_standardized", "FitOptions", "evidence_scale"]
+           "grouped_standardized", "FitOptions", "evidence_scale", "nominal_baseline"]
 
 
 def display_unit(unit: str) -> tuple[str, float]:
@@ -1060,6 +1060,20 @@ def reweighted(model: ArmModel, data: CalibrationData, options: FitOptions, tol:
 def _scale(jp: np.ndarray) -> np.ndarray:
     s = np.linalg.norm(jp, axis=0)
     return np.where(s > 0, s, 1.0)
+
+
+def nominal_baseline(model: ArmModel, data: CalibrationData, options: FitOptions = FitOptions()) -> CalibrationResult:
+    """The nominal model given the same nuisance unknowns as a calibration with ``options``: the description
+    (``options.values``) with only the tip offset fitted (probe.x/y/z, where free: a probe's ball or a tracker
+    marker whose place on the last link may not be known) by least squares, the artefacts' unknowns and the
+    reference frame solved as in every fit, at the same weights (no noise estimate of its own). Its
+    ``p``/``reference`` are the baseline every "nominal -> calibrated" figure compares against."""
+    spec = model.spec
+    cand = resolve_parameters(spec, default_free(model) if options.free is None else options.free)
+    tip = [spec.names[i] for i in cand if spec.names[i] in ("probe.x", "probe.y", "probe.z")]
+    return calibrate(model, data, replace(options, free=tuple(tip), prior_scale=None, min_resolution=None,
+                                          weights_from_data=False, drop_outliers=False, start=None,
+                                          on_unidentifiable="fix"))
 
 
 def evidence_scale(model: ArmModel, data: CalibrationData, options: FitOptions = FitOptions()) -> tuple[dict, list]:

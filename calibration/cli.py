@@ -5,6 +5,7 @@ import argparse
 import json
 import math
 import logging
+from dataclasses import replace
 from arm_model.cli import command_help
 from pathlib import Path
 
@@ -149,8 +150,15 @@ def register(sub) -> None:
     campaign_inputs(c)
     _common_fit_options(c)
     c.add_argument("--holdout", default=None,
-                   help="measurements kept out of the fit for validation: a fraction (0.2) drawn at random per "
-                        "artefact kind, or a comma-separated list of measurement ids")
+                   help="data kept out of the fit for validation: a fraction (0.2) drawn at random, or (with "
+                        "--holdout-by measurement) a comma-separated list of measurement ids")
+    c.add_argument("--holdout-by", choices=("measurement", "pose"), default="measurement",
+                   help="measurement (default): whole measurements held out (the fraction drawn per artefact kind), "
+                        "their features and reference frame fitted on themselves, the reference points also "
+                        "predicted with the training fit's T_ref_base; pose: that fraction of every feature's poses "
+                        "held out, each predicted against its feature as fitted on the training poses (reference "
+                        "points: with the training fit's T_ref_base), so one placement of one artefact can be "
+                        "validated")
     c.add_argument("--seed", type=seed, default=0, help="seed of the random --holdout draw (default 0)")
     c.add_argument("--reference", choices=("fit", "identity", "off"), default="fit",
                    help="reference coordinates: fit T_ref_base (default), take them as base coordinates "
@@ -296,12 +304,33 @@ def _load_data(args):
     return model, make_data(points, artefacts, model, reference=reference), arm.values, warnings
 
 
+def _split(args, data):
+    """(training data, held-out data or None, held-out pose mask over ``data`` or None) of ``--holdout``:
+    whole measurements (``--holdout-by measurement``) or a share of every feature's poses (``pose``)."""
+    from .data import split_holdout, split_poses
+    holdout = _holdout(args.holdout)
+    if holdout is None:
+        if args.holdout_by == "pose":
+            raise InputError("--holdout-by pose needs --holdout FRACTION (the share of every feature's poses)")
+        return data, None, None
+    if args.holdout_by == "measurement":
+        train, test = split_holdout(data, holdout, args.seed)
+        return train, test, None
+    if not isinstance(holdout, float):
+        raise InputError(f"--holdout-by pose takes a fraction of every feature's poses, not measurement ids "
+                         f"(got {args.holdout!r})")
+    mask = split_poses(data, holdout, args.seed)
+    if not mask.any():
+        raise InputError(f"--holdout {args.holdout} --holdout-by pose holds out no pose: every feature has too few "
+                         "poses to spare one (a feature keeps the fewest its fit needs, plus one)")
+    return data.select(~mask), None, mask
+
+
 def run_calibrate(args: argparse.Namespace) -> int:
-    from .calibrate import calibrate
-    from .data import split_holdout
+    from .calibrate import calibrate, nominal_baseline
     from .model_output import refine_torques
-    from .report import poorly_determined, write_outputs
-    from .validation import with_u
+    from .report import write_outputs
+    from .validation import worse_than_nominal
     inputs = [args.points, args.artefacts, *arm_inputs(args), args.reference_points]
     with output_folder(args.output, inputs, "calibrate") as out:
         model, data, values, warnings = _load_data(args)
@@ -310,34 +339,61 @@ def run_calibrate(args: argparse.Namespace) -> int:
             why = no_torque_reason(model.desc, data)
             if why:
                 log.warning(f"joint compliance cannot be identified: {why}")
-        holdout = _holdout(args.holdout)
-        train, test = (data, None) if holdout is None else split_holdout(data, holdout, args.seed)
+        train, test, poses = _split(args, data)
         options = fit_options(args, free=_free(model, args), values=values, weights=_weights(args),
                               on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
                               drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference)
         res = refine_torques(calibrate(model, train, options))
-        val_train, val_test, conf = conformance_entry(_mpe(args), (res, res.data),
-                                                      None if test is None else (res, test))
+        base = nominal_baseline(model, res.data, replace(res.options, weights=res.weights))
+        held = (None if test is None and poses is None else
+                (res, test, base) if poses is None else (res, data, base, ~poses))
+        val_train, val_test, conf = conformance_entry(_mpe(args), (res, res.data, base), held)
+        worse = worse_than_nominal(val_test or [])
         files = write_outputs(res, out.dir, inputs=inputs, validation_training=val_train,
                               validation_holdout=val_test, plots=not args.no_plots,
                               extra={"inputs": {"points": str(args.points), "artefacts": str(args.artefacts),
                                                 "arm": str(args.arm),
                                                 "reference_points": None if args.reference_points is None
                                                 else str(args.reference_points)},
-                                     "holdout": None if test is None else test.measurements(),
+                                     "holdout": (None if test is None else test.measurements()),
+                                     "holdout_by": args.holdout_by,
+                                     "holdout_poses": None if poses is None else [int(i) for i in np.flatnonzero(poses)],
+                                     "nominal_baseline": _baseline_entry(base),
+                                     "heldout_worse_than_nominal": worse,
                                      "conformance": conf,
                                      "warnings": [w.as_dict() for w in warnings]})
     files = {k: out.published(v) for k, v in files.items()}
-    log.info(f"{counted(len(train), 'training point')} in {counted(len(train.measurements()), 'measurement')}"
-             + (f", {counted(len(test), 'held-out point')} in {counted(len(test.measurements()), 'measurement')}"
-                if test is not None else ""))
+    _log_calibration(res, data, train, test, poses, warnings, (val_train, val_test, conf, worse), files)
+    return 0
+
+
+NOMINAL_NOTE = ("nominal = the description with only the tip offset (probe or marker) fitted, the artefacts' "
+                "unknowns and the reference frame solved as for the calibrated model")
+
+
+def _baseline_entry(base) -> dict:
+    """summary.json's ``nominal_baseline``: what the nominal of every figure is, and its fitted tip offset."""
+    return {"definition": NOMINAL_NOTE, "fitted": list(base.free),
+            "values_mm": {n: base.value(n) * 1e3 for n in base.free}, "s0": base.s0,
+            "T_ref_base": None if base.reference is None else base.reference["T_ref_base"]}
+
+
+def _log_calibration(res, data, train, test, poses, warnings, validation, files) -> None:
+    """The console report of ``aacmm calibrate``."""
+    from .report import poorly_determined
+    from .validation import with_u
+    val_train, val_test, conf, worse = validation
+    held = ("" if test is None and poses is None else
+            f", {counted(len(test), 'held-out point')} in {counted(len(test.measurements()), 'measurement')}"
+            if poses is None else f", {counted(int(poses.sum()), 'held-out pose')} (a share of every feature's)")
+    log.info(f"{counted(len(train), 'training point')} in {counted(len(train.measurements()), 'measurement')}" + held)
     if data.points.force_kind == "two-channel":
         log.info("two-channel force sensor: the probe-y force is not measured and is taken as zero")
     log_warnings(warnings)
     for line in noise_lines(res):
         log.info(line)
     log.info(f"solver: {res.status} after {res.iterations} iterations; s0 = {res.s0:.3f}; "
-          f"{len(res.free)} parameters free, {res.n_nuisance} nuisance unknowns, dof {res.dof}")
+             f"{len(res.free)} parameters free, {res.n_nuisance} nuisance unknowns, dof {res.dof}")
     idf = res.identifiability_final
     log.info(f"identifiability: rank {idf.rank}/{len(idf.names)} at the solution, condition number {idf.condition:.3g}")
     for f in res.fixed:
@@ -350,11 +406,14 @@ def run_calibrate(args: argparse.Namespace) -> int:
             log.info(f"  {o.measurement} {o.feature} line {o.line}: standardized {o.standardized:+.1f}")
     for title, rows in (("training", val_train), ("held-out", val_test)):
         if rows:
-            log.info(f"validation on {title} data (nominal -> calibrated; ± standard uncertainty, bootstrap over "
-                  "its measurements):")
+            log.info(f"validation on {title} data (nominal -> calibrated; {NOMINAL_NOTE}; ± standard uncertainty, "
+                     "bootstrap over its measurements):")
             for r in rows:
                 log.info(f"  {r['label']}: {with_u(r['before'], r['u_before'])} -> {with_u(r['after'], r['u_after'])} "
-                      f"{r['unit']} ({r['ratio']:.1f}x)")
+                         f"{r['unit']} ({r['ratio']:.2f}x)")
+    if worse:
+        log.warning("on the held-out data the calibrated model is WORSE than the nominal: "
+                    + "; ".join(f"{r['label']} {r['before']:.4g} -> {r['after']:.4g} {r['unit']}" for r in worse))
     log_conformance(conf)
     budget = res.probing_budget()
     if budget is not None:
@@ -365,17 +424,17 @@ def run_calibrate(args: argparse.Namespace) -> int:
             log.warning("the propagated encoder and force-sensor noise alone exceed the residual scatter: the probing "
                         "scatter is set to 0 (their stated uncertainties are larger than this campaign shows)")
     log.info(f"model file -> {files['description']} (covariance {files['covariance'].name}); report -> {files['report']}")
-    return 0
 
 
 def conformance_entry(mpe: dict, training: tuple, holdout: tuple | None = None, sets: str = "") -> tuple:
     """The standard tests of ``calibrate`` and ``close-loop`` (one implementation): ``training`` and
-    ``holdout`` each ``(result, data)``, the fit whose calibrated model is tested and the data it is tested
-    on (``holdout`` None: none). Returns (validation rows on training, on holdout or None, the summary's
+    ``holdout`` each ``(result, data)`` or ``(result, data, baseline[, train_mask])`` (:func:`_validation`), the
+    fit whose calibrated model is tested, the data it is tested on (``holdout`` None: none) and the nominal
+    baseline it is compared with. Returns (validation rows on training, on holdout or None, the summary's
     ``conformance`` entry: ``mpe_given``, ``mpe_um``, ``note`` (``sets`` appended: what the two data sets
     are), ``training``, ``holdout``)."""
-    val_train, conf_train = _validation(*training, mpe)
-    val_test, conf_test = _validation(*holdout, mpe) if holdout is not None else (None, None)
+    val_train, conf_train = _validation(*training, mpe=mpe)
+    val_test, conf_test = _validation(*holdout, mpe=mpe) if holdout is not None else (None, None)
     conf = {"mpe_given": bool(mpe), "mpe_um": {k: v * 1e6 for k, v in mpe.items()},
             "note": ("PASS: every tested item of the calibrated model within the MPE given by its "
                      "--mpe-*-um option; FAIL: at least one beyond." if mpe else
@@ -395,12 +454,25 @@ def log_conformance(conf: dict) -> None:
             log.info(line)
 
 
-def _validation(res, data, mpe):
+def _validation(res, data, base=None, train_mask=None, mpe=None):
     """The before/after figure rows and the standard tests (:func:`calibration.validation.conformance`) of
-    the calibrated model on ``data``."""
-    from .validation import conformance, figure_rows, validate
-    before = validate(res.model, np.zeros(res.model.spec.size), data, res.weights, res.reference_mode)
-    after = res.validate(data)
+    the calibrated model on ``data``. Before: ``base`` (a :func:`calibration.calibrate.nominal_baseline` fit)
+    or, without one, the nominal description (p = 0). The reference points are also predicted with each fit's
+    own ``T_ref_base`` when ``data`` is not the fit's. ``train_mask``: only the poses outside it are held out,
+    each against its feature fitted on the poses inside (:func:`calibration.validation.validate_poses`; no
+    standard tests)."""
+    from .validation import conformance, figure_rows, validate, validate_poses
+    m, w, mode = res.model, res.weights, res.reference_mode
+    p0 = np.zeros(m.spec.size) if base is None else base.p
+    if train_mask is not None:
+        return figure_rows(validate_poses(m, p0, data, train_mask, w, mode),
+                           validate_poses(m, res.p, data, train_mask, w, mode)), None
+    own = data is res.data
+
+    def frame(fit):
+        return None if own or fit is None or fit.reference is None else fit.reference["T_ref_base"]
+    before = validate(m, p0, data, w, mode, T_ref_base=frame(base))
+    after = validate(m, res.p, data, w, mode, T_ref_base=frame(res))
     return figure_rows(before, after), conformance(after, mpe, before)
 
 

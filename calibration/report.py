@@ -272,12 +272,19 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
                        ("validation_holdout", "Validation on held-out data (never seen by the fit)")):
         rows = summary.get(key)
         if rows:
+            base = summary.get("nominal_baseline")
             parts += [f"<h2>{title}</h2>", "<p>± the standard uncertainty of each figure: a bootstrap over the "
                       "measurements (whole measurements resampled); '-' with fewer than two "
-                      "measurements of its kind.</p>",
+                      "measurements of its kind."
+                      + (f" The nominal: {html.escape(base['definition'])}." if base else "") + "</p>",
                       _table(["figure", "unit", "nominal", "calibrated", "ratio"],
                              [(r["label"], r["unit"], with_u(r["before"], r.get("u_before")),
                                with_u(r["after"], r.get("u_after")), _fmt(r["ratio"], 3)) for r in rows])]
+    worse = summary.get("heldout_worse_than_nominal")
+    if worse:
+        parts.append("<p><b>On the held-out data the calibrated model is worse than the nominal</b>: "
+                     + html.escape("; ".join(f"{r['label']} {r['before']:.4g} -> {r['after']:.4g} {r['unit']}"
+                                             for r in worse)) + ".</p>")
     if summary.get("conformance"):
         parts += conformance_html(summary["conformance"], files)
     parts += prior_html(result)
