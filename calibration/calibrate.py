@@ -369,7 +369,10 @@ def identify(problem: Problem, p, states, candidates, options: FitOptions = FitO
     ``states``: ``(kept indices, [FixedParameter], Identifiability)``.
 
     Two tests, in order: linear dependence (SVD rank of the reduced Jacobian with the base frame's rigid
-    motions projected out; pivoted QR, columns scaled by plausible error sizes, chooses which to hold),
+    motions projected out; pivoted QR, columns scaled by the plausible error sizes of
+    :func:`~calibration.identifiability.prior_scales`, chooses which to hold: of two equivalent parameters
+    the one whose plausible error moves the data more is kept, an exact tie going to the later one in the
+    spec's order, so that the choice never depends on rounding),
     then practical resolution (``options.min_resolution``,
     :func:`~calibration.identifiability.weakly_determined`). With ``options.on_unidentifiable == "stop"``:
     raise :class:`NumericalError` with the list instead of holding them.
@@ -385,7 +388,8 @@ def identify(problem: Problem, p, states, candidates, options: FitOptions = FitO
     names = [spec.names[i] for i in kept]
     sizes = functools.partial(prior_scales, model, priors=options.priors, noise=point_noise(problem),
                               length=options.prior_length)
-    idf = analyse(jred, ev.jp, names, options.rank_tol, sizes(names), gauge=gauge)
+    pivot = sizes(names) * (1.0 + TIE_BREAK * np.asarray(kept, dtype=float) / max(spec.size, 1))
+    idf = analyse(jred, ev.jp, names, options.rank_tol, pivot, gauge=gauge)
     fixed = []
     if idf.dependent:
         if stop:
@@ -415,6 +419,10 @@ def identify(problem: Problem, p, states, candidates, options: FitOptions = FitO
                                         "below the noise", comb, stage))
         kept = [i for i in kept if spec.names[i] not in {w[0] for w in weak}]
     return kept, fixed, idf
+
+
+#: relative weight given to a parameter's place in the spec when two equivalent ones are tied for the pivot
+TIE_BREAK = 1e-6
 
 
 def _dependent_reason(idf: Identifiability, name: str) -> str:
@@ -883,14 +891,26 @@ EVIDENCE_TOL = 0.02
 
 def _evidence(model: ArmModel, data: CalibrationData, options: FitOptions) -> CalibrationResult:
     """The fit whose prior scales (one a group) and, with ``weights_from_data``, noise (one factor a row group)
-    maximise the evidence together: from the fit at scale 1 and the given weights, each round updates every
-    group's scale by MacKay's fixed point (:func:`calibration.prior.update_scales`) and every row group's noise
-    by its variance component (:func:`variance_components`, the leverages including the prior), and refits
-    from the previous solution, until all change by less than :data:`EVIDENCE_TOL` (damped from the tenth
-    round). The free set (rank), the bounds and the restart are those of the first fit. The result carries
-    the rounds in ``evidence`` and the final scales in ``prior_scales``."""
+    maximise the evidence together (:func:`_evidence_rounds`), from scale 1 and the given weights, on the base
+    set of :func:`_solve`. The result carries the rounds in ``evidence`` and the final scales in
+    ``prior_scales``."""
     s = _setup(model, data, options)
     sol, kept, fixed, idf0, idf1 = _solve(s, options)
+    s, sol, kept, fixed, history = _evidence_rounds(s, sol, kept, fixed, options)
+    res = _result(s, sol, kept, fixed, (idf0, idf1), options)
+    res.evidence = history
+    if options.weights_from_data:
+        res.weights_history = [{"round": h["round"], "factors": h["noise_factors"], "s0": h["s0"]} for h in history]
+        res.weights_history[-1].update({k: v for k, v in history[-1].items() if k in ("settled", "note")})
+    return res
+
+
+def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
+    """From the fit ``sol`` of the base set ``kept``: each round updates every group's scale by MacKay's fixed
+    point (:func:`calibration.prior.update_scales`) and, with ``weights_from_data``, every row group's noise
+    by its variance component (:func:`variance_components`, the leverages including the prior), and refits
+    from the previous solution, until all change by less than :data:`EVIDENCE_TOL` (damped from the tenth
+    round). Returns (setup, solution, kept, fixed, rounds)."""
     history = []
     for k in range(EVIDENCE_ROUNDS):
         prob = s.problem.with_free(kept)
@@ -914,23 +934,17 @@ def _evidence(model: ArmModel, data: CalibrationData, options: FitOptions) -> Ca
                         "noise_factors": dict(prob.weights.factors), "s0": math.sqrt(2 * sol.cost / dof)})
         if change <= EVIDENCE_TOL:
             history[-1]["settled"] = True
-            break
+            return s, sol, kept, fixed, history
         s = replace(s, scales=scales, prior=Prior(s.prior.centre, s.spec.sizes(scales)),
                     problem=_reweighted_problem(s.problem, prob.weights.scaled(factors)))
         p = sol.p.copy()
         kept, bound = _at_bounds(s, p, kept, "evidence")
-        fixed += bound
+        fixed = fixed + bound
         sol = _lm(s, s.problem.with_free(kept), p, sol.states, options)
-    else:
-        history[-1]["settled"] = False
-        history[-1]["note"] = (f"the prior scales and noise did not settle in {EVIDENCE_ROUNDS} rounds; the last "
-                               "round's are used")
-    res = _result(s, sol, kept, fixed, (idf0, idf1), options)
-    res.evidence = history
-    if options.weights_from_data:
-        res.weights_history = [{"round": h["round"], "factors": h["noise_factors"], "s0": h["s0"]} for h in history]
-        res.weights_history[-1].update({k: v for k, v in history[-1].items() if k in ("settled", "note")})
-    return res
+    history[-1]["settled"] = False
+    history[-1]["note"] = (f"the prior scales and noise did not settle in {EVIDENCE_ROUNDS} rounds; the last "
+                           "round's are used")
+    return s, sol, kept, fixed, history
 
 
 #: fewest redundant rows (rows minus their share of the unknowns) for a group's noise to be estimated
