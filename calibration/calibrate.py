@@ -1,24 +1,30 @@
 """``calibrate(model, data, FitOptions(...)) -> CalibrationResult``: the whole fit, checked at each step.
 
 The options are one frozen :class:`~calibration.options.FitOptions`; the stages below are named functions
-(:func:`_setup`, :func:`_solve`, :func:`_fit`; the outlier rounds :func:`_without_outliers`, the noise
-estimate :func:`reweighted`, the prior's scale :func:`evidence_scale`).
+(:func:`_setup`, :func:`_solve`, :func:`_result`; the prior's scales and the noise :func:`_evidence`, the
+noise without a prior :func:`reweighted`, the outlier rounds :func:`_without_outliers`).
 
 1. Free set: names or glob patterns over ``model.spec`` (the rest held at ``values``, default 0).
 2. Nuisance start: algebraic fits of every feature, polished with the parameters held.
 3. Identifiability at the start (:mod:`calibration.identifiability`): the reduced Jacobian, with the
    rigid motions of the base frame (exact symmetries of artefact residuals, and of reference points
-   when ``T_ref_base`` is fitted) projected out; dependent parameters are fixed and listed
-   (``on_unidentifiable="fix"``) or the fit stops with the list (``"stop"``).
-4. Levenberg-Marquardt (:mod:`calibration.solver`), exact CasADi Jacobians, checked exit status.
-5. Identifiability again at the solution (a new deficiency is fixed and the fit repeated).
-6. Covariance ``s0^2 (J_red^T J_red)^-1`` of the free parameters, ``s0^2`` the residual variance
-   factor ``2 cost / dof`` (``covariance="residual"``) or 1 (``"stated"``: the stated uncertainties
-   are taken as true); standard uncertainties and correlations by name.
-7. Outliers: standardized residuals ``r_w / (s_rob sqrt(1 - h))`` (``h`` the leverage, ``s_rob`` the
-   robust scale of the row's observation group: 1.4826 times the median, the larger of its kind's
-   and its stated uncertainty's (probe, reference, lengths), :func:`standardized_residuals`) beyond ``outlier_threshold`` are reported with
-   measurement, feature and file line; they are kept unless ``drop_outliers`` (then dropped, worst first, and refitted).
+   when ``T_ref_base`` is fitted) projected out; one parameter of every exact dependence is held and
+   listed with its combination (the base parameters; ``on_unidentifiable="fix"``) or the fit stops with the
+   list (``"stop"``).
+4. Levenberg-Marquardt (:mod:`calibration.solver`), exact CasADi Jacobians, checked exit status, damped
+   restarts, with the Gaussian prior of :mod:`calibration.prior` (default): the maximum a posteriori
+   estimate; compliances held at their bound 0 when the data pull them below.
+5. Identifiability again at the solution (a new deficiency is held and the fit repeated).
+6. With ``prior_scale="evidence"`` (default): the prior's group scales and, with ``weights_from_data``, the
+   noise of each row group estimated together by the evidence (:func:`_evidence`).
+7. Covariance: the posterior ``(J_red^T J_red / s0^2 + prior precision)^-1`` of the free parameters
+   (without a prior ``s0^2 (J_red^T J_red)^-1``), ``s0^2`` the residual variance factor ``2 cost / dof``
+   (``covariance="residual"``) or 1 (``"stated"``); standard uncertainties, correlations and each
+   parameter's state (free / prior-dominated / fixed / held) by name.
+8. Outliers: standardized residuals ``r_w / (s_rob sqrt(1 - h))`` (``h`` the leverage, ``s_rob`` the robust
+   scale of the row's observation group, :func:`standardized_residuals`) beyond ``outlier_threshold`` are
+   reported with measurement, feature and file line; they are kept unless ``drop_outliers`` (then dropped,
+   worst first, and refitted).
 """
 from __future__ import annotations
 
