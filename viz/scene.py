@@ -251,6 +251,17 @@ class ArmScene:
         x = self.arm.full_q(q, self.arm.elastic_q(q, np.asarray(wrench, dtype=float)))
         return x, PoseInfo(rigid, self.arm.ball_centre(q, np.asarray(wrench, dtype=float)))
 
+    def move(self, q, wrench=None, redraw: bool = True, extent: bool = False) -> PoseInfo:
+        """Put the arm at ``q`` [rad] deflected by ``wrench`` and nothing else (no arrow): a live view's
+        frame, many a second. ``redraw=False``: only compute the pose; ``extent``: add the arm's joints to
+        the extent the camera frames."""
+        x, info = self.pose(q, wrench)
+        if redraw:
+            self._pv.display(x)
+        if extent:
+            self._extent.append(self._joint_points(x))
+        return info
+
     def _joint_points(self, x) -> np.ndarray:
         pin = self._pin
         pin.framesForwardKinematics(self.arm.model, self.arm.data, x)
