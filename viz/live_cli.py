@@ -62,11 +62,19 @@ def register(sub) -> None:
     g = p.add_argument_group("contacts (docs/live.md)")
     g.add_argument("--contact", choices=("force", "trigger"), default="force",
                    help="find contacts from the force (default) or from the trigger column (the arm's button)")
-    g.add_argument("--contact-on-N", type=positive(), default=0.25, help="|F| that starts a contact (default 0.25)")
-    g.add_argument("--contact-off-N", type=positive(), default=0.15,
-                   help="|F| below which it ends (default 0.15; less than --contact-on-N)")
-    g.add_argument("--min-dwell-s", type=non_negative(), default=0.02,
-                   help="shorter contacts give no point (default 0.02)")
+    g.add_argument("--contact-on-N", type=number_in(0, 1e5, low_open=True), default=0.1,
+                   help="the smoothed force, its zero removed, that starts a contact (default 0.1; raised to 8 "
+                        "times the noise the sensor shows out of contact)")
+    g.add_argument("--contact-off-N", type=number_in(0, 1e5, low_open=True), default=0.05,
+                   help="below it the contact ends (default 0.05, less than --contact-on-N; raised to 4 times "
+                        "the noise)")
+    g.add_argument("--min-dwell-s", type=number_in(0, 1e4), default=0.02,
+                   help="how long the force must stay at or above --contact-on-N for a point (default 0.02)")
+    g.add_argument("--smooth-s", type=number_in(0, 10), default=0.005,
+                   help="time constant of the force's smoothing for contacts (default 0.005; 0: none)")
+    g.add_argument("--baseline-s", type=number_in(0, 1e4), default=2.0,
+                   help="time constant of the zero that follows the sensor out of contact (default 2; 0: the "
+                        "force is not zeroed)")
     v = p.add_argument_group("live view (docs/viewer.md)")
     v.add_argument("--view", action="store_true", help="serve the live view on 127.0.0.1 (the URL is printed)")
     v.add_argument("--port", type=port, default=None, help="the view's web port (default: the first free from 7000)")
@@ -146,7 +154,8 @@ def run_live(args: argparse.Namespace) -> int:
     if args.plan is not None and args.feature is not None:
         raise InputError("give --plan or --feature, not both")
     try:
-        contact = ContactOptions(args.contact_on_N, args.contact_off_N, args.min_dwell_s, args.contact)
+        contact = ContactOptions(args.contact_on_N, args.contact_off_N, args.min_dwell_s, args.contact,
+                                 args.smooth_s, args.baseline_s)
     except ValueError as exc:
         raise InputError(f"contact options: {exc}") from None
     arm = model_from_args(args)
@@ -296,11 +305,10 @@ def _summary(session, said, skipped: int, status: str, message: str) -> None:
              + f" -> {folder}")
     noise = session.noise()
     if noise is not None:
-        on = session.contact_options.on
-        log.info(f"force noise out of contact: {', '.join(f'{v:.4f}' for v in noise)} N (x, y, z)")
-        if session.contact_options.source == "force" and on < 6 * float(noise.max()):
-            log.warning(f"the contact threshold {on:g} N is less than 6 times the force noise ({noise.max():.3f} N): "
-                        "noise may start contacts; raise --contact-on-N")
+        d = session.thresholds()
+        log.info(f"force noise out of contact: {', '.join(f'{v:.4f}' for v in noise)} N (x, y, z); contact "
+                 f"thresholds {d['on']:.3g} / {d['off']:.3g} N"
+                 + (" (raised to the noise)" if d["on"] > session.contact_options.on else ""))
     if status != "complete":
         log.warning(f"session {status}: {message}; {folder} holds every sample read until then "
                     f"(session.json: status '{status}')")

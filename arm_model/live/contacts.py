@@ -1,12 +1,22 @@
 """Contacts in a sample stream: from the force (a threshold with hysteresis and a minimum dwell) or from
 the arm's button (the trigger), and the force peak of each (:func:`arm_model.peaks.contact_peak`).
 
-Force (the default): a contact starts at the first sample whose force magnitude ``|F|`` reaches
-``on`` and ends at the first sample below ``off`` (< ``on``); a contact shorter than ``dwell`` (from its
-start to its end) is a bump, not a touch, and is counted but gives no point. The defaults (0.25 N,
-0.15 N, 20 ms) find an operator's light touch of 0.5 N over a sensor noise of a few hundredths of a
-newton: a noise of 0.03 N per channel puts ``on`` 8 standard deviations above zero and ``off`` 5, and
-a noise sample never lasts 20 ms.
+Force (the default). The force is first smoothed (an exponential moving average of each channel, time
+constant ``smooth``, 5 ms) and its baseline removed (the sensor's reading without contact: a slow moving
+average, time constant ``baseline``, 2 s, of the samples out of contact, which follows a zero offset
+and its drift). A contact starts at the first sample where this smoothed, zeroed force ``|F|`` reaches
+``on`` and ends at the first sample where it falls below ``off`` (< ``on``); it gives a point only if the
+force (zeroed, not smoothed) stayed at or above ``on`` for ``dwell`` in all, else it is a bump (counted, no
+point). The defaults (0.1 N, 0.05 N, 20 ms) find an operator's lightest touches, 0.15 N, over a sensor
+noise of a few hundredths of a newton: the smoothing divides a white noise by about 3, so a noise of
+0.03 N per channel puts ``on`` about 10 standard deviations above zero and ``off`` 5; a sensor offset
+is followed by the baseline. The thresholds are raised (never lowered) to 8 and 4 times the smoothed
+noise that the samples out of contact show (estimated every :data:`NOISE_EVERY` of them), so a noisier
+sensor does not make contacts of its noise.
+
+The point of a contact is at its force peak on the raw readings: the sample of largest ``|F|`` (the
+paper's extraction, :func:`arm_model.peaks.contact_peak`), the same sample ``aacmm ring --signals`` would
+take.
 
 Trigger: a contact lasts while the trigger column is not 0 (the button held), whatever the force; its
 point is at the force peak inside it (the first sample without a force sensor).
@@ -19,9 +29,13 @@ from dataclasses import dataclass
 from ..peaks import contact_peak
 from .samples import Sample
 
-__all__ = ["ContactOptions", "Contact", "ContactDetector", "CONTACT_SOURCES"]
+__all__ = ["ContactOptions", "Contact", "ContactDetector", "CONTACT_SOURCES", "NOISE_EVERY", "NOISE_ON", "NOISE_OFF"]
 
 CONTACT_SOURCES = ("force", "trigger")
+#: samples out of contact between two estimates of the noise
+NOISE_EVERY = 1000
+#: the thresholds are at least these many times the smoothed force's noise
+NOISE_ON, NOISE_OFF = 8.0, 4.0
 
 
 @dataclass(frozen=True)
@@ -29,18 +43,22 @@ class ContactOptions:
     """How contacts are found (see the module doc).
 
     Attributes:
-        on: [N] force magnitude that starts a contact.
+        on: [N] zeroed, smoothed force magnitude that starts a contact.
         off: [N] below it the contact ends (0 < off < on).
-        dwell: [s] the shortest contact that gives a point.
+        dwell: [s] how long the zeroed force must stay at or above ``on`` for a point.
         source: "force" or "trigger".
+        smooth: [s] time constant of the smoothing.
+        baseline: [s] time constant of the baseline (0: the force is not zeroed).
     """
-    on: float = 0.25
-    off: float = 0.15
+    on: float = 0.1
+    off: float = 0.05
     dwell: float = 0.02
     source: str = "force"
+    smooth: float = 0.005
+    baseline: float = 2.0
 
     def __post_init__(self):
-        for name in ("on", "off", "dwell"):
+        for name in ("on", "off", "dwell", "smooth", "baseline"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
@@ -75,17 +93,26 @@ class ContactDetector:
 
     Attributes:
         options: :class:`ContactOptions`.
-        bumps: contacts shorter than the dwell (no point).
+        bumps: contacts that did not hold the force for the dwell (no point).
         count: contacts returned.
+        on, off: the thresholds in force [N] (the options', raised to the noise when it demands).
+        noise: the smoothed force's noise per channel [N] last estimated (None before).
     """
 
     def __init__(self, options: ContactOptions):
         self.options = options
         self._by_force = options.source == "force"
-        self._on, self._off, self._dwell = options.on, options.off, options.dwell
+        self.on, self.off = options.on, options.off
         self._buf: list | None = None       # samples of the open contact
         self._mags: list = []
         self._lines: list = []
+        self._held = 0.0                    # time the zeroed force stayed >= on in the open contact [s]
+        self._fs = None                     # smoothed force (3 channels) [N]
+        self._base = [0.0, 0.0, 0.0]        # baseline [N]
+        self._t = None
+        self._dt = 0.0
+        self._idle: list = []               # smoothed-minus-baseline x of samples out of contact
+        self.noise: float | None = None
         self.bumps = 0
         self.count = 0
 
@@ -93,20 +120,98 @@ class ContactDetector:
     def in_contact(self) -> bool:
         return self._buf is not None
 
+    @property
+    def level(self) -> float:
+        """The zeroed, smoothed force magnitude of the last sample [N]."""
+        if self._fs is None:
+            return 0.0
+        b = self._base
+        return math.sqrt((self._fs[0] - b[0]) ** 2 + (self._fs[1] - b[1]) ** 2 + (self._fs[2] - b[2]) ** 2)
+
     def feed(self, s: Sample, magnitude: float, line: int | None = None) -> Contact | None:
-        """One sample and its force magnitude [N] (0 without a force sensor); the contact it ends, if any."""
+        """One sample and its raw force magnitude [N] (0 without a force sensor); the contact it ends, if
+        any."""
+        if self._by_force:
+            level, raw = self._smooth(s)
+            inside = level >= self.off
+            starts = level >= self.on
+        else:
+            inside = starts = bool(s.trigger)
+            raw = 0.0
         buf = self._buf
-        inside = magnitude >= self._off if self._by_force else bool(s.trigger)
         if buf is None:
-            if (magnitude >= self._on) if self._by_force else inside:
+            if starts:
                 self._buf, self._mags, self._lines = [s], [magnitude], [line]
+                self._held = 0.0
+                self._hold(raw, s.t)
+            elif self._by_force:
+                self._follow(s)
             return None
         if inside:
             buf.append(s)
             self._mags.append(magnitude)
             self._lines.append(line)
+            self._hold(raw, s.t)
             return None
         return self._close(s.t)
+
+    def _smooth(self, s: Sample) -> tuple[float, float]:
+        """Update the smoothed force; (smoothed, raw) zeroed magnitudes [N]."""
+        w, b = s.wrench, self._base
+        if w is None:
+            return 0.0, 0.0
+        fs = self._fs
+        if fs is None:
+            fs = self._fs = [w[0], w[1], w[2]]
+            if self.options.baseline > 0 and math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) < self.options.on:
+                b[:] = fs                   # the first reading, out of contact: the sensor's zero
+        else:
+            dt = s.t - self._t
+            a = 1.0 - math.exp(-dt / self.options.smooth) if self.options.smooth > 0 else 1.0
+            fs[0] += a * (w[0] - fs[0])
+            fs[1] += a * (w[1] - fs[1])
+            fs[2] += a * (w[2] - fs[2])
+        self._dt = 0.0 if self._t is None else s.t - self._t
+        self._t = s.t
+        dx, dy, dz = fs[0] - b[0], fs[1] - b[1], fs[2] - b[2]
+        rx, ry, rz = w[0] - b[0], w[1] - b[1], w[2] - b[2]
+        return math.sqrt(dx * dx + dy * dy + dz * dz), math.sqrt(rx * rx + ry * ry + rz * rz)
+
+    def _hold(self, raw: float, t: float) -> None:
+        if raw >= self.on:
+            self._held += self._dt if self._by_force else 0.0
+
+    def _follow(self, s: Sample) -> None:
+        """Out of contact: the baseline follows the smoothed force; every :data:`NOISE_EVERY` samples the
+        thresholds are checked against the noise."""
+        fs, b = self._fs, self._base
+        if fs is None:
+            return
+        tau = self.options.baseline
+        if tau > 0:
+            a = 1.0 - math.exp(-self._dt / tau)
+            b[0] += a * (fs[0] - b[0])
+            b[1] += a * (fs[1] - b[1])
+            b[2] += a * (fs[2] - b[2])
+        idle = self._idle
+        idle.append(fs[0] - b[0])
+        idle.append(fs[1] - b[1])
+        idle.append(fs[2] - b[2])
+        if len(idle) >= 3 * NOISE_EVERY:
+            self._noise(idle)
+            idle.clear()
+
+    def _noise(self, idle: list) -> None:
+        """The smoothed force's noise [N] (the largest channel's standard deviation, robust) and the
+        thresholds raised to it."""
+        import numpy as np
+        x = np.array(idle).reshape(-1, 3)
+        mad = np.median(np.abs(x - np.median(x, axis=0)), axis=0)
+        self.noise = float(1.4826 * mad.max())
+        self.on = max(self.options.on, NOISE_ON * self.noise)
+        self.off = max(self.options.off, NOISE_OFF * self.noise, 0.0)
+        if self.off >= self.on:
+            self.off = 0.5 * self.on
 
     def finish(self) -> Contact | None:
         """The stream ended: the open contact, if any, ends at its last sample."""
@@ -117,7 +222,7 @@ class ContactDetector:
     def _close(self, end: float) -> Contact | None:
         buf, mags, lines = self._buf, self._mags, self._lines
         self._buf, self._mags, self._lines = None, [], []
-        if self._by_force and end - buf[0].t < self._dwell:
+        if self._by_force and self._held < self.options.dwell:
             self.bumps += 1
             return None
         k = contact_peak(mags) if self._by_force or any(mags) else 0

@@ -111,8 +111,11 @@ class FeatureFit:
             parts.append(f"vs certified {self.deviation * 1e6:+.1f} um"
                          + ("" if self.agrees is None else (" (agrees)" if self.agrees else " (DIFFERS)")))
         if self.form is not None:
-            parts.append(f"form {self.form * 1e6:.1f} um"
+            parts.append(f"{'spread' if self.kind == 'seat' else 'form'} {self.form * 1e6:.1f} um"
                          + (f" ± {self.u_form * 1e6:.1f}" if self.u_form is not None else ""))
+        if self.kind in ("seat", "point", "sphere") and self.centre is not None:
+            c = self.centre * 1e3
+            parts.append(f"centre ({c[0]:.4f}, {c[1]:.4f}, {c[2]:.4f}) mm")
         return f"{name}: " + ", ".join(parts)
 
 

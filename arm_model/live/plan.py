@@ -31,7 +31,8 @@ from pathlib import Path
 from .._errors import InputError, parse_toml, read_text
 from ..io import Artefacts, Feature, format_artefacts, parse_artefacts
 
-__all__ = ["PlanFeature", "SessionPlan", "read_plan", "parse_plan", "single_feature_plan", "MAX_PLAN_POINTS"]
+__all__ = ["PlanFeature", "SessionPlan", "read_plan", "parse_plan", "format_plan", "single_feature_plan",
+           "MAX_PLAN_POINTS"]
 
 #: the most contacts one plan entry may ask for
 MAX_PLAN_POINTS = 100_000
@@ -99,6 +100,24 @@ def parse_plan(text: str, path: str = "<plan>") -> SessionPlan:
             raise InputError(f"'points' must be a whole number from 1 to {MAX_PLAN_POINTS}, got {n!r}", *where)
         entries.append(PlanFeature(feature, n))
     return SessionPlan(tuple(entries), tuple(art.distances), measurement, path)
+
+
+def format_plan(plan: SessionPlan, comment: str | None = None) -> str:
+    """The TOML text of a plan that :func:`parse_plan` reads back: its measurement, its features with their
+    ``points``, its distances (lengths in mm)."""
+    from ..description import toml_text
+    mm = {"diameter": "diameter_mm", "u_diameter": "u_diameter_mm", "form_error": "form_error_mm"}
+    doc = {} if plan.measurement is None else {"measurement": plan.measurement}
+    doc["feature"] = [{"id": e.feature.id, "kind": e.feature.kind,
+                       **{key: getattr(e.feature, name) * 1e3 for name, key in mm.items()
+                          if getattr(e.feature, name) is not None},
+                       **({} if e.points is None else {"points": e.points})} for e in plan.entries]
+    if plan.distances:
+        doc["distance"] = [{"between": list(d.between), "length_mm": d.length * 1e3,
+                            **({} if d.u_length is None else {"u_length_mm": d.u_length * 1e3})}
+                           for d in plan.distances]
+    return toml_text(doc, comment or "The plan of a live session (docs/formats.md §9): the features in the order "
+                                     "they are probed, how many points each takes.")
 
 
 def single_feature_plan(spec: str) -> SessionPlan:

@@ -212,7 +212,7 @@ class Session:
         if m > self.max_force or self._over or self._bounds:
             out = out + self._watch(s, m)
         detector = self._detector
-        if not detector.in_contact and w is not None and m < self.contact_options.on:
+        if not detector.in_contact and w is not None:
             idle = self._idle
             idle.append(w)
             if len(idle) >= 2 * _IDLE_KEPT:
@@ -257,6 +257,12 @@ class Session:
     @property
     def in_contact(self) -> bool:
         return self._detector.in_contact
+
+    def thresholds(self) -> dict:
+        """The contact thresholds in force [N] (``on``, ``off``: the options', raised to the noise when it
+        demands) and ``noise``, the smoothed force's noise [N] (None before it is estimated)."""
+        d = self._detector
+        return {"on": d.on, "off": d.off, "noise": d.noise}
 
     def noise(self) -> np.ndarray | None:
         """(3,) the force sensor's noise per channel [N] from the samples out of contact
@@ -317,7 +323,7 @@ class Session:
                                           f"period {self._period * 1e3:.4g} ms)", n),)
 
     def _watch(self, s: Sample, m: float) -> tuple:
-        """Over-force (one event a press: re-armed when |F| falls below the contact's off threshold) and
+        """Over-force (one event a contact: re-armed once the contact, or bump, has ended) and
         joint limits (one event each time a joint leaves its limits)."""
         out = ()
         if m > self.max_force:
@@ -328,8 +334,8 @@ class Session:
                                                       f"({self.max_force:g} N)"),)
                 if self.record is not None:
                     self.record.flush(self._progress())
-        elif self._over and m < self.contact_options.off:
-            self._over = False
+        elif self._over and not self._detector.in_contact:
+            self._over = False          # one event a contact (or a bump)
         for i, lo, hi in self._bounds:
             x = s.q[i]
             if x < lo or x > hi:
@@ -400,13 +406,15 @@ class Session:
     def _progress(self) -> dict:
         noise = self.noise()
         return {"counts": dict(self.counts), "last_sample_time_s": self._last_t,
-                "force_noise_N": None if noise is None else [round(float(v), 6) for v in noise]}
+                "force_noise_N": None if noise is None else [round(float(v), 6) for v in noise],
+                "thresholds_N": self.thresholds()}
 
     def _status(self, extra: dict | None) -> dict:
         from ..shipped import version
         c = self.contact_options
         return {"aacmm_version": version(), "arm": self.desc.name, "measurement": self.measurement,
-                "contact": {"source": c.source, "on_N": c.on, "off_N": c.off, "dwell_s": c.dwell},
+                "contact": {"source": c.source, "on_N": c.on, "off_N": c.off, "dwell_s": c.dwell,
+                            "smooth_s": c.smooth, "baseline_s": c.baseline},
                 "max_force_N": self.max_force, "files": dict(FILES), **(extra or {})}
 
     def _open_record(self, layout: SampleLayout) -> None:
