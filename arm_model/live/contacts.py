@@ -4,14 +4,17 @@ the arm's button (the trigger), and the force peak of each (:func:`arm_model.pea
 Force (the default). The force is first smoothed (an exponential moving average of each channel, time
 constant ``smooth``, 5 ms) and its baseline removed (the sensor's reading without contact: a slow moving
 average, time constant ``baseline``, 2 s, of the samples out of contact, which follows a zero offset
-and its drift). A contact starts at the first sample where this smoothed, zeroed force ``|F|`` reaches
+and its drift). The first 0.1 s of the stream set the zero and the noise and start no contact (start
+the stream with the probe free; a first reading of 1 N or more is taken as a contact, the zero then
+0 until it ends). A contact starts at the first sample where this smoothed, zeroed force ``|F|`` reaches
 ``on`` and ends at the first sample where it falls below ``off`` (< ``on``); it gives a point only if the
 force (zeroed, not smoothed) stayed at or above ``on`` for ``dwell`` in all, else it is a bump (counted, no
 point). The defaults (0.1 N, 0.05 N, 20 ms) find an operator's lightest touches, 0.15 N, over a sensor
 noise of a few hundredths of a newton: the smoothing divides a white noise by about 3, so a noise of
 0.03 N per channel puts ``on`` about 10 standard deviations above zero and ``off`` 5; a sensor offset
 is followed by the baseline. The thresholds are raised (never lowered) to 8 and 4 times the smoothed
-noise that the samples out of contact show (estimated every :data:`NOISE_EVERY` of them), so a noisier
+noise that the samples out of contact show (estimated at the end of the warm-up, then every
+:data:`NOISE_EVERY` of them), so a noisier
 sensor does not make contacts of its noise.
 
 The point of a contact is at its force peak on the raw readings: the sample of largest ``|F|`` (the
@@ -32,8 +35,14 @@ from .samples import Sample
 __all__ = ["ContactOptions", "Contact", "ContactDetector", "CONTACT_SOURCES", "NOISE_EVERY", "NOISE_ON", "NOISE_OFF"]
 
 CONTACT_SOURCES = ("force", "trigger")
-#: samples out of contact between two estimates of the noise
-NOISE_EVERY = 1000
+#: the first reading is taken as the sensor's zero when its magnitude is below this [N] (start with the probe
+#: free); a larger one is taken as a contact, the zero then staying 0 until the first contact ends
+FIRST_ZERO_N = 1.0
+#: samples out of contact between two estimates of the noise (the first at the end of the warm-up), and
+#: the fewest an estimate takes
+NOISE_EVERY, NOISE_LEAST = 1000, 20
+#: the first samples, while the probe is free, only set the sensor's zero and noise [s]
+WARMUP_S = 0.1
 #: the thresholds are at least these many times the smoothed force's noise
 NOISE_ON, NOISE_OFF = 8.0, 4.0
 
@@ -111,6 +120,8 @@ class ContactDetector:
         self._base = [0.0, 0.0, 0.0]        # baseline [N]
         self._t = None
         self._dt = 0.0
+        self._n_base = 1
+        self._warm: float | None = None     # the start of the warm-up, while it lasts
         self._idle: list = []               # smoothed-minus-baseline x of samples out of contact
         self.noise: float | None = None
         self.bumps = 0
@@ -133,6 +144,12 @@ class ContactDetector:
         any."""
         if self._by_force:
             level, raw = self._smooth(s)
+            if self._warm is not None and s.t - self._warm < WARMUP_S:
+                self._follow(s)         # the first samples set the zero and the noise
+                return None
+            if self._warm is not None:
+                self._warm = None
+                self._noise(self._idle)
             inside = level >= self.off
             starts = level >= self.on
         else:
@@ -163,8 +180,9 @@ class ContactDetector:
         fs = self._fs
         if fs is None:
             fs = self._fs = [w[0], w[1], w[2]]
-            if self.options.baseline > 0 and math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) < self.options.on:
-                b[:] = fs                   # the first reading, out of contact: the sensor's zero
+            if self.options.baseline > 0 and math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) < FIRST_ZERO_N:
+                b[:] = fs                   # the probe free at the start: the zero and the noise first
+                self._warm = s.t
         else:
             dt = s.t - self._t
             a = 1.0 - math.exp(-dt / self.options.smooth) if self.options.smooth > 0 else 1.0
@@ -189,7 +207,8 @@ class ContactDetector:
             return
         tau = self.options.baseline
         if tau > 0:
-            a = 1.0 - math.exp(-self._dt / tau)
+            self._n_base += 1           # the mean of the samples so far, until the time constant takes over
+            a = max(1.0 / self._n_base, 1.0 - math.exp(-self._dt / tau))
             b[0] += a * (fs[0] - b[0])
             b[1] += a * (fs[1] - b[1])
             b[2] += a * (fs[2] - b[2])
@@ -205,6 +224,8 @@ class ContactDetector:
         """The smoothed force's noise [N] (the largest channel's standard deviation, robust) and the
         thresholds raised to it."""
         import numpy as np
+        if len(idle) < 3 * NOISE_LEAST:
+            return
         x = np.array(idle).reshape(-1, 3)
         mad = np.median(np.abs(x - np.median(x, axis=0)), axis=0)
         self.noise = float(1.4826 * mad.max())

@@ -7,10 +7,11 @@ compliances), so a fit's uncertainty counts a shared error once, not as if it av
 those of :mod:`arm_model.geometry`, the uncertainties those of :mod:`arm_model.feature_uncertainty`:
 
 =================  ======  ====================================================  ==============================
-kind               points  size (its standard uncertainty)                       form
+kind               points  size (its standard uncertainty)                       form (one more point)
 =================  ======  ====================================================  ==============================
-ring, cylinder     5       diameter of the cylinder fit (one row of points in    max - min radial deviation
-                           a plane: the circle in that plane), ball compensated
+ring, cylinder     4       diameter, ball compensated: the cylinder fit from 8   max - min radial deviation
+                           points spread along the axis by 5 % of their width,
+                           else the circle in their plane (a ring in one row)
 sphere             5       diameter of the sphere fit, ball compensated          max - min radial deviation
 plane              3       (none)                                                flatness (max - min distance)
 seat               1       (none); its centre: the mean ball centre              max over axes of (max-min)/2
@@ -40,9 +41,12 @@ from .plan import PlanFeature, SessionPlan
 __all__ = ["FeatureFit", "FeatureTracker", "NEEDED_POINTS", "COVERAGE_K", "FORM_SAMPLES_LIVE"]
 
 #: fewest points that give each kind's size and form
-NEEDED_POINTS = {"ring": 5, "cylinder": 5, "sphere": 5, "plane": 3, "seat": 1, "point": 1}
+NEEDED_POINTS = {"ring": 4, "cylinder": 4, "sphere": 5, "plane": 3, "seat": 1, "point": 1}
 #: coverage factor of the agreement test against a certificate
 COVERAGE_K = 2.0
+#: a ring or cylinder is fitted as a cylinder (its axis tilt free) from this many points on, when they spread
+#: along the axis by at least this fraction of their width; else as a circle in their plane
+CYLINDER_POINTS, CYLINDER_SPREAD = 8, 0.05
 #: samples of the form uncertainty after each point
 FORM_SAMPLES_LIVE = 1000
 
@@ -101,8 +105,6 @@ class FeatureFit:
     def describe(self) -> str:
         """One line for people (mm, um)."""
         name = f"{self.kind} '{self.feature}' ({self.n_points} pt)"
-        if self.note:
-            return f"{name}: {self.note}"
         parts = []
         if self.size is not None:
             parts.append(f"{'length' if self.kind == 'distance' else 'D'} {self.size * 1e3:.4f} mm"
@@ -116,6 +118,8 @@ class FeatureFit:
         if self.kind in ("seat", "point", "sphere") and self.centre is not None:
             c = self.centre * 1e3
             parts.append(f"centre ({c[0]:.4f}, {c[1]:.4f}, {c[2]:.4f}) mm")
+        if self.note:
+            parts.append(self.note)
         return f"{name}: " + ", ".join(parts)
 
 
@@ -237,19 +241,29 @@ class FeatureTracker:
         return residual_form_uncertainty(residuals, n, jac, cov, shared, samples=FORM_SAMPLES_LIVE).u
 
     def _fit_cylinder(self, spec, g, p, cov, shared, base) -> FeatureFit:
-        cyl = _cylinder_or_circle(p)
+        cyl, circle = _cylinder_or_circle(p)
         t = (p - cyl.point) @ cyl.axis
         n, jac = cylinder_jacobian(p, cyl)
+        if circle:                          # the axis offsets and the radius only
+            jac = jac[:, [0, 1, 4]]
         e1, e2 = perpendicular_basis(cyl.axis)
-        sens = 2.0 * fit_sensitivity(n, jac, 4)
+        sens = 2.0 * fit_sensitivity(n, jac, jac.shape[1] - 1)
         u = diameter_uncertainty(sens, cov, shared, self.n_parameters).u
         g.centre_sens = (np.einsum("i,nj->nij", e1, fit_sensitivity(n, jac, 0))
                          + np.einsum("i,nj->nij", e2, fit_sensitivity(n, jac, 1)))
         g.centre = cyl.point
+        form, u_form = self._form_of(cyl.residuals, n, jac, cov, shared)
         return FeatureFit(**base, size=feature_diameter(spec.kind, cyl.radius, self.ball_diameter), u_size=u,
-                          form=cyl.form_error, u_form=self._form(cyl.residuals, n, jac, cov, shared),
-                          centre=cyl.point + cyl.axis * (t.min() + t.max()) / 2, axis=cyl.axis, radius=cyl.radius,
-                          extent=np.array([np.ptp(t), 0.0]))
+                          form=form, u_form=u_form, centre=cyl.point + cyl.axis * (t.min() + t.max()) / 2,
+                          axis=cyl.axis, radius=cyl.radius, extent=np.array([np.ptp(t), 0.0]),
+                          note="" if form is not None else "form needs one more point")
+
+    def _form_of(self, residuals, n, jac, cov, shared) -> tuple:
+        """(form, its uncertainty) [m], or (None, None) with no more points than the fit's parameters."""
+        if len(residuals) <= jac.shape[1]:
+            return None, None
+        res = np.asarray(residuals, float)
+        return float(res.max() - res.min()), self._form(res, n, jac, cov, shared)
 
     def _fit_sphere(self, spec, g, p, cov, shared, base) -> FeatureFit:
         fit = fit_sphere(p)
@@ -259,7 +273,7 @@ class FeatureTracker:
         g.centre = fit.centre
         return FeatureFit(**base, size=feature_diameter("sphere", fit.radius, self.ball_diameter),
                           u_size=diameter_uncertainty(sens, cov, shared, self.n_parameters).u,
-                          form=fit.form_error, u_form=self._form(fit.residuals, n, jac, cov, shared),
+                          **dict(zip(("form", "u_form"), self._form_of(fit.residuals, n, jac, cov, shared))),
                           centre=fit.centre, radius=fit.radius, extent=np.zeros(2))
 
     def _fit_plane(self, g, p, cov, shared, base) -> FeatureFit:
@@ -269,8 +283,9 @@ class FeatureTracker:
         d = p - plane.point
         g.centre_sens = np.tile(np.eye(3) / len(p), (len(p), 1, 1))
         g.centre = plane.point
-        return FeatureFit(**{**base, "certified": None, "u_certified": None}, form=plane.form_error,
-                          u_form=self._form(plane.residuals, n, jac, cov, shared), centre=plane.point,
+        form, u_form = self._form_of(plane.residuals, n, jac, cov, shared)
+        return FeatureFit(**{**base, "certified": None, "u_certified": None}, form=form, u_form=u_form,
+                          note="" if form is not None else "flatness needs one more point", centre=plane.point,
                           axis=plane.normal, extent=np.array([np.ptp(d @ u), np.ptp(d @ v)]))
 
     def _fit_seat(self, g, p, cov, shared, base) -> FeatureFit:
@@ -299,15 +314,17 @@ class FeatureTracker:
                           extent=np.zeros(2))
 
 
-def _cylinder_or_circle(p: np.ndarray) -> CylinderFit:
-    """The cylinder fit of ball centres, or, for points in one plane (one row: the axis tilt is not
-    determined), the circle fitted in that plane as a cylinder along its normal."""
+def _cylinder_or_circle(p: np.ndarray) -> tuple[CylinderFit, bool]:
+    """(fit, True for a circle): the cylinder fit of ball centres when they determine an axis (at least
+    :data:`CYLINDER_POINTS` of them, spread along the axis by at least :data:`CYLINDER_SPREAD` of their
+    width), else the circle fitted in their plane, as a cylinder along its normal (a ring probed in one
+    row: its axis tilt is not determined)."""
     plane = fit_plane(p)
     u, v = perpendicular_basis(plane.normal)
     d = p - plane.point
-    if np.ptp(d @ plane.normal) > 1e-3 * np.ptp(d @ u):
+    if len(p) >= CYLINDER_POINTS and np.ptp(d @ plane.normal) >= CYLINDER_SPREAD * np.ptp(d @ u):
         try:
-            return fit_cylinder(p)
+            return fit_cylinder(p), False
         except NumericalError:
             pass
     circle = fit_circle_2d(np.column_stack([d @ u, d @ v]))
@@ -319,4 +336,4 @@ def _cylinder_or_circle(p: np.ndarray) -> CylinderFit:
     radial = perp / rho[:, None]
     return CylinderFit(point=point, axis=plane.normal, radius=circle.radius, residuals=rho - circle.radius,
                        heights=t, angles=np.arctan2(radial @ v, radial @ u) % (2 * np.pi), radial=radial, nfev=0,
-                       u_radius=circle.u_radius)
+                       u_radius=circle.u_radius), True
