@@ -36,8 +36,15 @@ class LineSource:
     name = "<stream>"
     replay = False
     datagrams = False
+    _it = None
 
     def lines(self):
+        """The one iterator over the stream (every call continues where the last stopped)."""
+        if self._it is None:
+            self._it = self._lines()
+        return self._it
+
+    def _lines(self):
         raise NotImplementedError
 
     def close(self) -> None:
@@ -51,7 +58,7 @@ class _FileSource(LineSource):
         self.name = str(path)
         self._fh = open_input(path, "the sample stream")
 
-    def lines(self):
+    def _lines(self):
         no = 0
         for raw in self._fh:
             no += 1
@@ -70,7 +77,7 @@ class _FdSource(LineSource):
     def _read(self) -> bytes:
         return os.read(self.fd, _CHUNK)
 
-    def lines(self):
+    def _lines(self):
         sel = selectors.DefaultSelector()
         sel.register(self.fd, selectors.EVENT_READ)
         rest, no = b"", 0
@@ -132,7 +139,7 @@ class _UdpSource(LineSource):
         """The (host, port) bound (port 0 in the spec takes a free one)."""
         return self._sock.getsockname()[:2]
 
-    def lines(self):
+    def _lines(self):
         no = 0
         while True:
             try:
