@@ -95,9 +95,10 @@ class LiveView:
         session: the :class:`arm_model.live.Session` to show.
         port: the server's web port (None: the first free one from 7000).
         fps: display frames a second.
+        camera: a :class:`viz.Camera` to keep (None: framing the arm at its first pose, then the points).
     """
 
-    def __init__(self, session, *, port: int | None = None, fps: float = DEFAULT_FPS):
+    def __init__(self, session, *, port: int | None = None, fps: float = DEFAULT_FPS, camera=None):
         self.session = session
         self.view = View(session.desc, port=port, title=f"{session.desc.name}: aacmm live")
         self.scene = self.view.scene
@@ -109,7 +110,10 @@ class LiveView:
         self._colour = None
         self._q = None              # the angles the arm was last drawn at
         self._arrow = None          # the force arrow last drawn
-        self._framed = False
+        self._framed = camera is not None     # a given camera stays; else the view frames the arm, then the points
+        self._camera_given = camera is not None
+        if camera is not None:
+            self.view.frame(camera)
         self.lines: list[str] = ["waiting for the first sample ..."]
         self.frames = 0
         self._panel()
@@ -177,10 +181,10 @@ class LiveView:
     def _points(self) -> None:
         pts = np.array([p.corrected for p in self.session.points])
         self.scene.show_points(pts, name="live/points", color=LIVE_POINTS_RGB, size=0.012, legend="cyan dots")
+        first = self._shown_points == 0
         self._shown_points = len(pts)
-        if not self._framed or self._shown_points == 1:
+        if first and not self._camera_given:
             self.view.frame()
-            self._framed = True
 
     def _features(self) -> None:
         places = []
