@@ -1,6 +1,6 @@
 """The live view of a measurement session (:class:`arm_model.live.Session`) in the headless meshcat server.
 
-At display rate (``fps``, default 20 frames a second, whatever the sample rate) :meth:`LiveView.update`
+At display rate (``fps``, default 10 frames a second, whatever the sample rate) :meth:`LiveView.update`
 draws the arm at the latest sample (the probe deflected by its wrench), the force arrow at the ball
 (along the force the part exerts on the ball, 10 mm/N long, coloured by its magnitude against the probe's
 limit: green below half of it, yellow below 80 %, orange below 100 %, red beyond), each new point as it
@@ -34,10 +34,10 @@ FORCE_COLOURS = ((0.5, 0x20C020), (0.8, 0xE8D020), (1.0, 0xFF8C00), (math.inf, 0
 #: force arrow length per newton [mm/N]
 FORCE_MM_PER_N = 10.0
 #: display frames a second
-DEFAULT_FPS = 20.0
+DEFAULT_FPS = 10.0
 _LIVE = "aacmm/live"
-#: the arm is drawn again when a joint moved more than this [rad] (0.006 deg) since it was last drawn
-MOVE_RAD = 1e-4
+#: the arm is drawn again when a joint moved more than this [rad] (0.017 deg) since it was last drawn
+MOVE_RAD = 3e-4
 #: the force arrow is drawn again when its base or tip moved more than this [m]
 MOVE_M = 1e-3
 
@@ -167,7 +167,8 @@ class LiveView:
             self.vis[f"{node}/shaft"].set_object(mg.Cylinder(1.0, 0.004), mat)
             self.vis[f"{node}/head"].set_object(mg.Cylinder(1.0, radiusTop=0.0, radiusBottom=0.010), mat)
             self._colour = colour
-        rot = self.scene.arm.T_base_ball(np.asarray(s.q))[:3, :3]
+        arm = self.scene.arm               # its frames are those of the pose just computed (move)
+        rot = arm.data.oMf[arm.ball_id].rotation
         vec = rot @ f * FORCE_MM_PER_N * 1e-3
         key = np.r_[ball, vec]
         if self._arrow is not None and float(np.max(np.abs(key - self._arrow))) < MOVE_M:

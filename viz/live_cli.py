@@ -78,7 +78,7 @@ def register(sub) -> None:
     v = p.add_argument_group("live view (docs/viewer.md)")
     v.add_argument("--view", action="store_true", help="serve the live view on 127.0.0.1 (the URL is printed)")
     v.add_argument("--port", type=port, default=None, help="the view's web port (default: the first free from 7000)")
-    v.add_argument("--fps", type=number_in(0.5, 60), default=20.0, help="display frames a second (default 20)")
+    v.add_argument("--fps", type=number_in(0.5, 60), default=10.0, help="display frames a second (default 10)")
     v.add_argument("--linger-s", type=non_negative(), default=0.0, metavar="S",
                    help="keep serving the view S seconds after the stream ended (Ctrl-C ends it)")
     from arm_model.uncertainty_cli import add_input_options
@@ -207,6 +207,7 @@ def _run(args, source, session, layout, stop, skipped: int) -> int:
     said: dict[str, int] = {}
     header_text = ",".join(layout.header)
     idle_since = time.monotonic()
+    watch_idle, datagrams, paced = args.stop_after_idle_s is not None, source.datagrams, pacer.speed > 0
     status, message, code = "complete", "the stream ended", 0
 
     def idle() -> bool:
@@ -222,23 +223,28 @@ def _run(args, source, session, layout, stop, skipped: int) -> int:
                 if idle() or (args.stop_after_idle_s and time.monotonic() - idle_since > args.stop_after_idle_s):
                     break
                 continue
-            idle_since = time.monotonic()
+            if watch_idle:
+                idle_since = time.monotonic()
             no, raw = item
             try:
-                text = _text(raw, source.name, no)
-                if not text.strip() or (source.datagrams and text == header_text):
+                text = raw.decode("utf-8")
+                if not text or (datagrams and text == header_text) or not text.strip():
                     continue
                 sample = layout.parse(text, no)
-            except InputError as exc:
+            except (InputError, UnicodeDecodeError) as exc:
+                if isinstance(exc, UnicodeDecodeError):
+                    exc = InputError("not UTF-8 text", source.name, no)
                 _show(session.bad_line(exc), said)
                 if args.strict:
                     status, message, code = "stopped", f"stopped at a bad line (--strict): {exc}", 2
                     break
                 continue
-            if not pacer.wait(sample.t, idle):
+            if paced and not pacer.wait(sample.t, idle):
                 break
-            for out in session.push_sample(sample, text, no):
-                _show(out, said)
+            out = session.push_sample(sample, text, no)
+            if out:
+                for o in out:
+                    _show(o, said)
             if view is not None:
                 view.update()
     except OSError as exc:

@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..peaks import contact_peak
+from ..peaks import contact_peak, signal_noise
 from .samples import Sample
 
 __all__ = ["ContactOptions", "Contact", "ContactDetector", "CONTACT_SOURCES", "NOISE_EVERY", "NOISE_ON", "NOISE_OFF"]
@@ -105,7 +105,8 @@ class ContactDetector:
         bumps: contacts that did not hold the force for the dwell (no point).
         count: contacts returned.
         on, off: the thresholds in force [N] (the options', raised to the noise when it demands).
-        noise: the smoothed force's noise per channel [N] last estimated (None before).
+        noise: the smoothed force's noise [N] last estimated (its largest channel; None before).
+        raw_noise: (3,) the sensor's noise per channel [N] last estimated (None before).
     """
 
     def __init__(self, options: ContactOptions):
@@ -120,10 +121,12 @@ class ContactDetector:
         self._base = [0.0, 0.0, 0.0]        # baseline [N]
         self._t = None
         self._dt = 0.0
+        self._a_smooth, self._a_base = 1.0, 0.0
         self._n_base = 1
         self._warm: float | None = None     # the start of the warm-up, while it lasts
         self._idle: list = []               # smoothed-minus-baseline x of samples out of contact
         self.noise: float | None = None
+        self.raw_noise = None
         self.bumps = 0
         self.count = 0
 
@@ -185,15 +188,23 @@ class ContactDetector:
                 self._warm = s.t
         else:
             dt = s.t - self._t
-            a = 1.0 - math.exp(-dt / self.options.smooth) if self.options.smooth > 0 else 1.0
+            if dt != self._dt:              # the factors of this interval (mostly the last one's)
+                self._alphas(dt)
+            a = self._a_smooth
             fs[0] += a * (w[0] - fs[0])
             fs[1] += a * (w[1] - fs[1])
             fs[2] += a * (w[2] - fs[2])
-        self._dt = 0.0 if self._t is None else s.t - self._t
         self._t = s.t
         dx, dy, dz = fs[0] - b[0], fs[1] - b[1], fs[2] - b[2]
         rx, ry, rz = w[0] - b[0], w[1] - b[1], w[2] - b[2]
         return math.sqrt(dx * dx + dy * dy + dz * dz), math.sqrt(rx * rx + ry * ry + rz * rz)
+
+    def _alphas(self, dt: float) -> None:
+        """The moving averages' factors for an interval ``dt`` [s]."""
+        self._dt = dt
+        o = self.options
+        self._a_smooth = 1.0 - math.exp(-dt / o.smooth) if o.smooth > 0 else 1.0
+        self._a_base = 1.0 - math.exp(-dt / o.baseline) if o.baseline > 0 else 0.0
 
     def _hold(self, raw: float, t: float) -> None:
         if raw >= self.on:
@@ -205,30 +216,29 @@ class ContactDetector:
         fs, b = self._fs, self._base
         if fs is None:
             return
-        tau = self.options.baseline
-        if tau > 0:
+        if self.options.baseline > 0:
             self._n_base += 1           # the mean of the samples so far, until the time constant takes over
-            a = max(1.0 / self._n_base, 1.0 - math.exp(-self._dt / tau))
+            a = max(1.0 / self._n_base, self._a_base)
             b[0] += a * (fs[0] - b[0])
             b[1] += a * (fs[1] - b[1])
             b[2] += a * (fs[2] - b[2])
         idle = self._idle
-        idle.append(fs[0] - b[0])
-        idle.append(fs[1] - b[1])
-        idle.append(fs[2] - b[2])
-        if len(idle) >= 3 * NOISE_EVERY:
+        idle.append(s.wrench)
+        if len(idle) >= NOISE_EVERY:
             self._noise(idle)
             idle.clear()
 
     def _noise(self, idle: list) -> None:
-        """The smoothed force's noise [N] (the largest channel's standard deviation, robust) and the
+        """The sensor's noise per channel [N] (:func:`arm_model.peaks.signal_noise` of the raw readings out of
+        contact), the smoothed force's (the largest channel's, through the moving average) and the
         thresholds raised to it."""
         import numpy as np
-        if len(idle) < 3 * NOISE_LEAST:
+        if len(idle) < NOISE_LEAST:
             return
-        x = np.array(idle).reshape(-1, 3)
-        mad = np.median(np.abs(x - np.median(x, axis=0)), axis=0)
-        self.noise = float(1.4826 * mad.max())
+        x = np.array(idle, float)[:, :3]
+        self.raw_noise = np.array([signal_noise(x[:, k]) for k in range(3)])
+        a = self._a_smooth
+        self.noise = float(self.raw_noise.max() * math.sqrt(a / (2.0 - a)))
         self.on = max(self.options.on, NOISE_ON * self.noise)
         self.off = max(self.options.off, NOISE_OFF * self.noise, 0.0)
         if self.off >= self.on:

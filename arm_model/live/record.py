@@ -126,6 +126,10 @@ class SessionRecord:
         if header is not None:
             self._buf[role].append(header if header.endswith("\n") else header + "\n")
 
+    def queue(self, role: str) -> list:
+        """The list of lines queued for the file of ``role`` (append whole lines to it; the fastest way)."""
+        return self._buf[role]
+
     def append(self, role: str, text: str) -> None:
         """Queue whole lines (``text`` ends with a line end) for the file of ``role``."""
         self._buf[role].append(text)
@@ -139,17 +143,19 @@ class SessionRecord:
             os.close(fd)
 
     def flush(self, update: dict | None = None) -> None:
-        """Write every queued line (one write a file) and replace ``session.json`` with ``update`` merged."""
+        """Write every queued line (one write a file); with ``update``, also replace ``session.json`` with
+        it merged (at the timed flushes and at the end: its counts lag the files by at most
+        :data:`FLUSH_S`)."""
         for role, buf in self._buf.items():
             if buf:
                 data = "".join(buf).encode("utf-8")
                 buf.clear()
                 _write_all(self._fds[role], data)
-        if update:
+        if update is not None:
             self.status.update(update)
-        self.status["updated"] = _now()
-        self._write_status()
-        self.next_flush = time.monotonic() + FLUSH_S
+            self.status["updated"] = _now()
+            self._write_status()
+            self.next_flush = time.monotonic() + FLUSH_S
 
     def close(self, status: str, message: str, update: dict | None = None) -> None:
         """Flush, fsync and close every file; ``session.json`` says ``status`` and ``message``."""

@@ -100,6 +100,12 @@ class SampleLayout:
         # (column, unit factor, lowest, highest [SI]) of every numeric cell, for the range check
         self._checks = [(k, cols_f, -PLAUSIBLE_SI[q] if q != "temperature" else ABSOLUTE_ZERO_C, PLAUSIBLE_SI[q], q)
                         for k, (q, cols_f) in self._quantities(cols).items()]
+        # the same bounds per cell in the file's units, narrowed by 1e-9 so that a value within them is within
+        # the SI bounds whatever the rounding (one outside them is checked exactly); the trigger: any number
+        self._lows, self._highs = [-math.inf] * self.n_cells, [math.inf] * self.n_cells
+        for k, f, lo, hi, _ in self._checks:
+            self._lows[k], self._highs[k] = lo / f * (1 - 1e-9), hi / f * (1 - 1e-9)
+        self._q_slice = self._joint_slice()
 
     def _columns(self, n_joints: int) -> dict:
         """base name -> (index, unit factor) of every column; every header error here."""
@@ -167,12 +173,17 @@ class SampleLayout:
                 values = [float(c) for c in cells]
             except ValueError:
                 values = self._checked(cells, line)
-        for k, f, lo, hi, quantity in self._checks:     # plain numbers are finite; far ones are typos
+        for v, lo, hi in zip(values, self._lows, self._highs):     # plain numbers are finite; far ones are typos
+            if not lo <= v <= hi:
+                self._range_error(values, line)
+        return self._sample(values)
+
+    def _range_error(self, values: list[float], line: int) -> None:
+        for k, f, lo, hi, quantity in self._checks:
             if not lo <= values[k] * f <= hi:
                 wrong = implausible(values[k] * f, quantity)
                 raise InputError(wrong[1] if wrong else f"value out of range: {values[k]!r}", self.path, line,
                                  self.header[k])
-        return self._sample(values)
 
     def _checked(self, cells: list[str], line: int) -> list[float]:
         """Every cell read with the points reader's number rule; the first bad one is the error."""
@@ -188,8 +199,23 @@ class SampleLayout:
             values.append(v)
         return values
 
+    def _joint_slice(self) -> tuple[int, int, float] | None:
+        """(first, last + 1, factor) when the joints are consecutive columns of one unit, else None."""
+        ks = [k for k, _ in self._joints]
+        fs = {f for _, f in self._joints}
+        if len(fs) == 1 and ks == list(range(ks[0], ks[0] + len(ks))):
+            return ks[0], ks[-1] + 1, fs.pop()
+        return None
+
     def _sample(self, v: list[float]) -> Sample:
-        q = tuple(v[k] * f for k, f in self._joints)
+        qs = self._q_slice
+        if qs is None:
+            q = tuple(v[k] * f for k, f in self._joints)
+        elif qs[2] == 1.0:
+            q = tuple(v[qs[0]:qs[1]])                 # in rad: the values themselves (x 1.0 is exact)
+        else:
+            f = qs[2]
+            q = tuple([x * f for x in v[qs[0]:qs[1]]])
         wrench = None
         if self.force_kind is not None:
             f = [0.0 if c is None else v[c[0]] * c[1] for c in self._force]

@@ -24,7 +24,6 @@ import numpy as np
 from .._csv import format_csv
 from ..checks import limit_bounds
 from ..io import Feature, PointSet
-from ..peaks import signal_noise
 from .contacts import Contact, ContactDetector, ContactOptions
 from .features import FeatureFit, FeatureTracker
 from .plan import SessionPlan
@@ -42,7 +41,6 @@ PERIOD_SAMPLES = 16
 GAP_FACTOR = 1.5
 #: a joint back inside its limits by this much re-arms its joint-limit event [rad] (0.05 deg)
 LIMIT_MARGIN_RAD = math.radians(0.05)
-_IDLE_KEPT = 4096
 
 
 @dataclass(frozen=True)
@@ -137,6 +135,7 @@ class Session:
         npar = 0 if self.parameters is None else len(self.parameters.names)
         self.tracker = FeatureTracker(self.plan, self.desc.probe.ball_diameter, npar)
         self._period = None if rate is None else 1.0 / float(rate)
+        self._gap_limit = -math.inf if rate is None else GAP_FACTOR * self._period    # learning: every interval
         self._first_gaps: list = []
         self._bounds = [(i, lo, hi) for i, (lo, hi) in enumerate(limit_bounds(self.desc))
                         if math.isfinite(lo) or math.isfinite(hi)]
@@ -144,7 +143,6 @@ class Session:
         self._over = False
         self._last_t: float | None = None
         self._t_push = 0.0
-        self._idle: list = []
         self.latest: Sample | None = None
         self.latest_magnitude = 0.0
         self.counts = dict.fromkeys(("samples", "contacts", "points", "bumps", "over_force", "joint_limit",
@@ -184,45 +182,55 @@ class Session:
     def push_sample(self, s: Sample, raw: str | None = None, line: int | None = None) -> tuple:
         """One :class:`~arm_model.live.samples.Sample` (SI); ``raw``: its text as received (recorded
         verbatim), ``line``: its line in the stream."""
-        self._t_push = time.perf_counter()
-        rec = self.record
+        detector = self._detector
+        was_in = detector.in_contact
+        if was_in:                          # this sample may end the contact: the latency starts here
+            self._t_push = time.perf_counter()
         t = s.t
         last = self._last_t
         out = ()
         if last is not None:
             if not t > last:
-                self.counts["late"] += 1
-                if rec is not None and raw is not None:
-                    rec.append("samples", raw + "\n")
-                return (self._event(t, "late", f"a sample at t = {t!r} s after one at {last!r} s: out of order "
-                                               "or repeated, skipped"),)
-            if self._period is None or t - last > GAP_FACTOR * self._period:
+                return self._late(s, raw, last)
+            if t - last > self._gap_limit:
                 out = self._gap(last, t)
         self._last_t = t
         self.counts["samples"] += 1
         self.latest = s
+        rec = self.record
         if rec is not None:
             if raw is not None:
-                rec.append("samples", raw + "\n")
+                self._samples_buf.append(raw + "\n")
             if time.monotonic() >= rec.next_flush:
                 rec.flush(self._progress())
         w = s.wrench
         m = 0.0 if w is None else math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
         self.latest_magnitude = m
-        if m > self.max_force or self._over or self._bounds:
-            out = out + self._watch(s, m)
-        detector = self._detector
-        if not detector.in_contact and w is not None:
-            idle = self._idle
-            idle.append(w)
-            if len(idle) >= 2 * _IDLE_KEPT:
-                del idle[:_IDLE_KEPT]
+        if m > self.max_force or self._over:
+            out = out + self._watch_force(s, m)
+        if self._bounds:
+            q = s.q
+            for i, lo, hi in self._bounds:
+                x = q[i]
+                if x < lo or x > hi:
+                    out = out + self._watch_joints(s)
+                    break
+            else:
+                if self._beyond:
+                    out = out + self._watch_joints(s)
         contact = detector.feed(s, m, line)
         if contact is not None:
             out = out + self._on_contact(contact)
-        elif detector.bumps != self.counts["bumps"]:
+        elif was_in and not detector.in_contact:
             self.counts["bumps"] = detector.bumps
         return out
+
+    def _late(self, s: Sample, raw: str | None, last: float) -> tuple:
+        self.counts["late"] += 1
+        if self.record is not None and raw is not None:
+            self._samples_buf.append(raw + "\n")
+        return (self._event(s.t, "late", f"a sample at t = {s.t!r} s after one at {last!r} s: out of order or "
+                                         "repeated, skipped"),)
 
     def bad_line(self, error, raw: str | None = None) -> Event:
         """Count a line of the stream that is not a sample (its :class:`~arm_model.InputError`): it is
@@ -266,11 +274,8 @@ class Session:
 
     def noise(self) -> np.ndarray | None:
         """(3,) the force sensor's noise per channel [N] from the samples out of contact
-        (:func:`arm_model.peaks.signal_noise`), or None with fewer than 100 of them."""
-        if len(self._idle) < 100:
-            return None
-        f = np.array(self._idle[-_IDLE_KEPT:])[:, :3]
-        return np.array([signal_noise(f[:, k]) for k in range(3)])
+        (:func:`arm_model.peaks.signal_noise`, as the contact detector last estimated it), or None before."""
+        return self._detector.raw_noise
 
     def close(self, status: str = "complete", message: str = "the stream ended") -> tuple:
         """End the session: the open contact, if any, gives its point; the record is flushed and closed
@@ -282,6 +287,7 @@ class Session:
             if contact is not None:
                 out = (self._event(contact.end, "end", f"the stream ended during contact {contact.index}: its point "
                                                        "is taken at its peak so far"),) + self._on_contact(contact)
+        self.counts["bumps"] = self._detector.bumps
         if self.record is not None and not self.record.closed:
             self.record.close(status, message, self._progress())
         return out
@@ -313,6 +319,7 @@ class Session:
             if len(self._first_gaps) < PERIOD_SAMPLES:
                 return ()
             self._period = float(np.median([b - a for a, b in self._first_gaps]))
+            self._gap_limit = GAP_FACTOR * self._period
             gaps, self._first_gaps = self._first_gaps, []
             return tuple(e for a, b in gaps for e in self._gap(a, b))
         n = int(round((t - last) / self._period)) - 1
@@ -322,20 +329,25 @@ class Session:
         return (self._event(t, "dropped", f"{n} sample(s) missing between t = {last!r} and {t!r} s (nominal "
                                           f"period {self._period * 1e3:.4g} ms)", n),)
 
-    def _watch(self, s: Sample, m: float) -> tuple:
-        """Over-force (one event a contact: re-armed once the contact, or bump, has ended) and
-        joint limits (one event each time a joint leaves its limits)."""
-        out = ()
+    def _watch_force(self, s: Sample, m: float) -> tuple:
+        """Over-force: one event a contact (re-armed once the contact, or bump, has ended)."""
         if m > self.max_force:
             if not self._over:
                 self._over = True
                 self.counts["over_force"] += 1
-                out = (self._event(s.t, "over_force", f"|F| = {m:.3f} N beyond the probe's calibrated range "
-                                                      f"({self.max_force:g} N)"),)
+                ev = self._event(s.t, "over_force", f"|F| = {m:.3f} N beyond the probe's calibrated range "
+                                                    f"({self.max_force:g} N)")
                 if self.record is not None:
-                    self.record.flush(self._progress())
-        elif self._over and not self._detector.in_contact:
-            self._over = False          # one event a contact (or a bump)
+                    self.record.flush()
+                return (ev,)
+        elif not self._detector.in_contact:
+            self._over = False
+        return ()
+
+    def _watch_joints(self, s: Sample) -> tuple:
+        """Joint limits: one event each time a joint leaves its limits (re-armed once it is back inside by
+        :data:`LIMIT_MARGIN_RAD`)."""
+        out = ()
         for i, lo, hi in self._bounds:
             x = s.q[i]
             if x < lo or x > hi:
@@ -388,7 +400,7 @@ class Session:
             for fit in fits:
                 r = fit.row(point.index)
                 self.record.append("features", _csv_line(r.values()))
-            self.record.flush(self._progress())
+            self.record.flush()
         return (c, point) + fits
 
     def _record_point(self, point: LivePoint, ps: PointSet) -> None:
@@ -423,6 +435,7 @@ class Session:
         if rec is None:
             return
         rec.open("samples", ",".join(layout.header))
+        self._samples_buf = rec.queue("samples")
         rec.open("events", ",".join(EVENT_COLUMNS))
         rec.open("points", ",".join(points_columns(self.desc.n_joints, layout)))
         rec.open("tips", ",".join(TIP_COLUMNS))

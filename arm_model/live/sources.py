@@ -23,10 +23,12 @@ from pathlib import Path
 
 from .._errors import InputError, open_input
 
-__all__ = ["open_source", "LineSource", "Pacer", "TICK_S"]
+__all__ = ["open_source", "LineSource", "Pacer", "TICK_S", "AHEAD_S"]
 
 #: the longest wait without a sign of life [s]
 TICK_S = 0.25
+#: a replayed sample is released at most this early [s]
+AHEAD_S = 0.01
 _CHUNK = 1 << 16
 
 
@@ -180,8 +182,9 @@ def open_source(spec: str) -> LineSource:
 
 class Pacer:
     """Replays time stamps at ``speed`` times real time (0: as fast as possible): :meth:`wait` returns
-    when the sample of time ``t`` [s] is due, in slices of at most :data:`TICK_S`, calling ``idle()``
-    between them (``idle`` returns True to stop waiting: an interruption)."""
+    when the sample of time ``t`` [s] is due (up to :data:`AHEAD_S` early: the samples of the next 10 ms
+    go in one batch, not one sleep each), waiting in slices of at most :data:`TICK_S` and calling
+    ``idle()`` between them (``idle`` returns True to stop waiting: an interruption)."""
 
     def __init__(self, speed: float):
         self.speed = float(speed)
@@ -198,7 +201,7 @@ class Pacer:
         due = self._w0 + (t - self._t0) / self.speed
         while True:
             left = due - time.monotonic()
-            if left <= 0:
+            if left <= AHEAD_S:
                 return True
             time.sleep(min(left, TICK_S))
             if idle is not None and idle():
