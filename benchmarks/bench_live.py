@@ -8,7 +8,8 @@
   that ends a contact to the point with its uncertainty (:attr:`LivePoint.latency`), and the whole
   ``push`` that brought it (the feature fits too), in process;
 * replay at 50 times real time or better: ``aacmm live --speed 0`` on the same stream, its wall time less
-  the start-up and closing, against the stream's duration.
+  that of the same command on the stream's first second (start-up, a first point, closing), against the
+  rest of the stream's duration (and the same in CPU time, which a busy machine does not stretch).
 """
 from __future__ import annotations
 
@@ -118,29 +119,31 @@ def main(repeats: int = 4, latency_rounds: int = 12) -> dict:
         tmp = Path(tmp)
         src = tmp / "stream.csv"
         duration = stream(repeats, src)
-        tiny = tmp / "tiny.csv"
-        tiny.write_text("".join(EXAMPLE.read_text().splitlines(keepends=True)[:101]))
+        tiny = tmp / "tiny.csv"             # the first second: start-up, a first point, closing
+        tiny.write_text("".join(EXAMPLE.read_text().splitlines(keepends=True)[:1001]))
+        d0 = 1.0
         n = sum(1 for _ in open(src)) - 1
         print(f"stream: the bundled example x{repeats}, {n} samples, {duration:.1f} s at 1 kHz")
         w0, c0, _ = run(tiny, 0.0, False, tmp)
         w0v, c0v, _ = run(tiny, 0.0, True, tmp)
-        print(f"start-up and closing (100 samples): {w0:.2f} s wall, {c0:.2f} s CPU; with the view "
-              f"{w0v:.2f} s, {c0v:.2f} s")
+        print(f"start-up, the first second (one point) and closing, --speed 0: {w0:.2f} s wall, {c0:.2f} s CPU; "
+              f"with the view {w0v:.2f} s, {c0v:.2f} s")
         res = {}
         window = (0.15 * duration, 0.9 * duration)
         for view, (ws, cs) in ((False, (w0, c0)), (True, (w0v, c0v))):
             wall, cpu, steady = run(src, 1.0, view, tmp, window)
-            frac = (cpu - cs) / duration
+            frac = (cpu - cs) / (duration - d0)
             res["cpu_fraction_view" if view else "cpu_fraction"] = steady
             print(f"1 kHz at real time{' with the live view (10 fps, its server included)' if view else ''}: "
                   f"{100 * steady:.1f} % of one core from {window[0]:.0f} to {window[1]:.0f} s of the stream "
                   f"(target < 20 %); the whole run {wall:.1f} s wall, {cpu:.2f} s CPU, less start-up and "
                   f"closing {100 * frac:.1f} %")
         wall, cpu, _ = run(src, 0.0, False, tmp)
-        speed = duration / max(wall - w0, 1e-9)
+        speed = (duration - d0) / max(wall - w0, 1e-9)
         res["replay_x"] = speed
-        print(f"replay --speed 0: {wall:.2f} s wall, {cpu:.2f} s CPU; less start-up {wall - w0:.2f} s: "
-              f"{speed:.0f} x real time ({n / max(wall - w0, 1e-9) / 1e3:.0f} k samples/s; target >= 50 x)")
+        print(f"replay --speed 0: {wall:.2f} s wall, {cpu:.2f} s CPU; less the first second's run: "
+              f"{wall - w0:.2f} s wall, {cpu - c0:.2f} s CPU for {duration - d0:.1f} s of stream: {speed:.0f} x real "
+              f"time in wall time, {(duration - d0) / max(cpu - c0, 1e-9):.0f} x in CPU time (target >= 50 x)")
     lat = latency(latency_rounds)
     p, q = lat["point"] * 1e3, lat["push"] * 1e3
     res.update(latency_p99_ms=float(np.percentile(p, 99)), push_p99_ms=float(np.percentile(q, 99)))

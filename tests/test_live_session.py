@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, strategies as st
 
 from arm_model.cli import main
 from arm_model.io import read_artefacts, read_points, check_features
@@ -340,3 +341,15 @@ def test_the_bundled_example_is_its_generator_output(tmp_path):
     assert main(["simulate", str(CAMPAIGN), "--samples", "-o", str(tmp_path / "sim"), "-q"]) == 0
     for name in ("samples.csv", "plan.toml"):
         assert (tmp_path / "sim" / name).read_bytes() == (ROOT / "examples" / "live" / name).read_bytes(), name
+
+
+@given(st.lists(st.one_of(st.floats(allow_nan=False, allow_infinity=False, width=64), st.integers(-10**6, 10**6),
+                          st.text(max_size=8)), min_size=1, max_size=6),
+       st.sampled_from(["%.6f", "%.17g", "%.3f"]))
+def test_format_row_is_format_csv_of_one_row(values, fmt):
+    """The row a session appends is the row format_csv (aacmm tip's writer) makes of the same values."""
+    from arm_model._csv import format_csv, format_row
+    cols = {f"c{k}": np.array([v]) if not isinstance(v, str) else np.array([v], dtype=object)
+            for k, v in enumerate(values)}
+    row = {k: v[0] for k, v in cols.items()}
+    assert format_row(row, fmt).encode() == format_csv(cols, fmt, header=False)

@@ -22,7 +22,7 @@ import numpy as np
 
 from ._bridge import PANEL_NODE
 from .placement import Placement
-from .scene import _arrow_parts, _matrix, _rotation_y_to
+from .scene import _arrow_parts, _matrix, _rotation_y_to, send_transform
 from .view import View, page_with_legend
 
 __all__ = ["LiveView", "LIVE_POINTS_RGB", "FORCE_COLOURS", "FORCE_MM_PER_N", "DEFAULT_FPS", "panel_lines"]
@@ -110,6 +110,7 @@ class LiveView:
         self._colour = None
         self._q = None              # the angles the arm was last drawn at
         self._arrow = None          # the force arrow last drawn
+        self._arrow_paths = None
         self._framed = camera is not None     # a given camera stays; else the view frames the arm, then the points
         self._camera_given = camera is not None
         if camera is not None:
@@ -175,9 +176,12 @@ class LiveView:
             return
         self._arrow = key
         length = float(np.linalg.norm(vec))
-        self.vis[node].set_transform(_matrix(ball, _rotation_y_to(vec) if length > 0 else None))
+        if self._arrow_paths is None:
+            self._arrow_paths = {k: self.vis[n].path.lower() for k, n in
+                                 (("", node), ("shaft", f"{node}/shaft"), ("head", f"{node}/head"))}
+        send_transform(self.vis, self._arrow_paths[""], _matrix(ball, _rotation_y_to(vec) if length > 0 else None))
         for part, (pos, scl) in _arrow_parts(max(length, 1e-6)).items():
-            self.vis[f"{node}/{part}"].set_transform(_matrix(pos, None, scl))
+            send_transform(self.vis, self._arrow_paths[part], _matrix(pos, None, scl))
 
     def _points(self) -> None:
         pts = np.array([p.corrected for p in self.session.points])

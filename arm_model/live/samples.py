@@ -106,6 +106,9 @@ class SampleLayout:
         for k, f, lo, hi, _ in self._checks:
             self._lows[k], self._highs[k] = lo / f * (1 - 1e-9), hi / f * (1 - 1e-9)
         self._q_slice = self._joint_slice()
+        f = self._force
+        self._f_slice = (f[0][0] if self.force_kind == "xyz" and not self._torque and [c[1] for c in f] == [1.0] * 3
+                         and [c[0] for c in f] == [f[0][0] + k for k in range(3)] else None)
 
     def _columns(self, n_joints: int) -> dict:
         """base name -> (index, unit factor) of every column; every header error here."""
@@ -217,7 +220,10 @@ class SampleLayout:
             f = qs[2]
             q = tuple([x * f for x in v[qs[0]:qs[1]]])
         wrench = None
-        if self.force_kind is not None:
+        fx = self._f_slice
+        if fx is not None:                            # fx, fy, fz in N in three columns, no torque
+            wrench = (v[fx], v[fx + 1], v[fx + 2], 0.0, 0.0, 0.0)
+        elif self.force_kind is not None:
             f = [0.0 if c is None else v[c[0]] * c[1] for c in self._force]
             m = [v[k] * f_ for k, f_ in self._torque] if self._torque else [0.0, 0.0, 0.0]
             wrench = (*f, *m)

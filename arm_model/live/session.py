@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._csv import format_csv
+from .._csv import format_row
 from ..checks import limit_bounds
 from ..io import Feature, PointSet
 from .contacts import Contact, ContactDetector, ContactOptions
@@ -407,8 +407,8 @@ class Session:
         rec = self.record
         if rec is None:
             return
-        rec.append("points", format_csv(_points_values(ps), "%.17g", header=False).decode())
-        rec.append("tips", format_csv(point.row, "%.6f", header=False).decode())
+        rec.append("points", format_row({k: v[0] for k, v in _points_values(ps).items()}, "%.17g"))
+        rec.append("tips", format_row({k: v[0] for k, v in point.row.items()}, "%.6f"))
         c = point.contact
         rec.append("contacts", _csv_line([c.index, point.measurement, point.feature, _num(c.start), _num(c.peak.t),
                                           _num(c.end), c.samples, f"{c.peak_force:.6f}", int(point.over_force),
