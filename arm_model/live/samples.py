@@ -23,7 +23,7 @@ import re
 from typing import NamedTuple
 
 from .._csv import parse_number
-from .._errors import InputError, unknown_key
+from .._errors import InputError, did_you_mean
 from .._units import ABSOLUTE_ZERO_C, PLAUSIBLE_SI, QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
 __all__ = ["Sample", "SampleLayout", "TIME_COLUMNS", "sample_header"]
@@ -124,9 +124,10 @@ class SampleLayout:
                 parts = split_unit(h)
                 base = None if parts is None else parts[0]
                 if parts is None or not (re.fullmatch(r"q[1-9][0-9]*", base) or base in _QUANTITY):
-                    raise InputError(unknown_key(h, [c.split(" ")[0].rstrip(",") for c in known.split(", ")],
-                                                 what="column") + f"; the columns of a sample stream are {known}",
-                                     path, line, h)
+                    names = [*TIME_COLUMNS, "trigger", "temperature_C", "fx_N", "fy_N", "fz_N", "f_bend_N",
+                             "f_axial_N", "mx_Nm", "my_Nm", "mz_Nm"] + [f"q{i}_deg" for i in range(1, n_joints + 1)]
+                    raise InputError(f"unknown column '{h}'{did_you_mean(h, names)}; the columns of a sample "
+                                     f"stream are {known}", path, line, h)
                 want = "angle" if base.startswith("q") and base[1:].isdigit() else _QUANTITY[base]
                 if QUANTITY_OF_UNIT[parts[1]] != want:
                     raise InputError(f"'{base}' must be a{'n' if want[0] in 'aeiou' else ''} {want}, got unit "
