@@ -20,12 +20,12 @@ import numpy as np
 __all__ = ["force_magnitude", "force_peaks", "contact_peak", "signal_noise"]
 
 
-def force_magnitude(force) -> np.ndarray:
+def force_magnitude(force: np.ndarray) -> np.ndarray:
     """(M,) ``|F|`` [N] of (M, C) force channels, each taken as its absolute value first (the paper)."""
     return np.linalg.norm(np.abs(np.asarray(force, float)), axis=1)
 
 
-def force_peaks(magnitude, floor: float) -> tuple[np.ndarray, np.ndarray]:
+def force_peaks(magnitude: np.ndarray, floor: float) -> tuple[np.ndarray, np.ndarray]:
     """Peaks of a force-magnitude signal standing at least ``floor`` [N] above their surroundings.
 
     Args:
@@ -44,7 +44,7 @@ def force_peaks(magnitude, floor: float) -> tuple[np.ndarray, np.ndarray]:
     return idx - 1, props["prominences"]
 
 
-def contact_peak(magnitude) -> int:
+def contact_peak(magnitude: np.ndarray | list) -> int:
     """The sample of one contact's force peak: the most prominent peak of its magnitude (M,) [N], which
     is its maximum (the first of equally prominent peaks). A contact of one sample is its own peak."""
     m = np.asarray(magnitude, float)
@@ -56,7 +56,7 @@ def contact_peak(magnitude) -> int:
     return int(idx[int(np.argmax(prom))])
 
 
-def signal_noise(x) -> float:
+def signal_noise(x: np.ndarray) -> float:
     """Robust noise standard deviation of a sampled signal [its unit]: 1.4826 MAD of the second
     differences / sqrt(6) (the second difference of white noise has variance 6 sigma^2)."""
     d2 = np.diff(np.asarray(x, float), n=2)

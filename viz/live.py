@@ -23,6 +23,9 @@ import numpy as np
 from ._bridge import PANEL_NODE
 from .placement import Placement
 from .scene import _arrow_parts, _matrix, _rotation_y_to, send_transform
+from arm_model.live import Sample, Session
+
+from .scene import Camera
 from .view import View, page_with_legend
 
 __all__ = ["LiveView", "LIVE_POINTS_RGB", "FORCE_COLOURS", "FORCE_MM_PER_N", "DEFAULT_FPS", "panel_lines"]
@@ -46,7 +49,7 @@ class _PanelCommand:
     """A meshcat ``set_object`` of an empty object whose user data carries the panel's lines: the live
     page shows them in its panel; any other page draws nothing."""
 
-    def __init__(self, path, lines: list[str]):
+    def __init__(self, path: str, lines: list[str]):
         self.path, self.lines = path, lines
 
     def lower(self) -> dict:
@@ -56,7 +59,7 @@ class _PanelCommand:
         return {"type": "set_object", "object": obj, "path": self.path.lower()}
 
 
-def panel_lines(session, deflection: float | None = None) -> list[str]:
+def panel_lines(session: Session, deflection: float | None = None) -> list[str]:
     """The text panel of a session [mm, um, N]: time and samples, force, deflection, the last point and
     its uncertainty, the current feature's fit, the counts, the last event."""
     s, c = session.latest, session.counts
@@ -98,7 +101,8 @@ class LiveView:
         camera: a :class:`viz.Camera` to keep (None: framing the arm at its first pose, then the points).
     """
 
-    def __init__(self, session, *, port: int | None = None, fps: float = DEFAULT_FPS, camera=None):
+    def __init__(self, session: Session, *, port: int | None = None, fps: float = DEFAULT_FPS,
+                 camera: Camera | None = None):
         self.session = session
         self.view = View(session.desc, port=port, title=f"{session.desc.name}: aacmm live")
         self.scene = self.view.scene
@@ -143,7 +147,7 @@ class LiveView:
         self.frames += 1
         return True
 
-    def _pose(self, s) -> float:
+    def _pose(self, s: Sample) -> float:
         """The arm and the force arrow at sample ``s``; returns the deflection [m]."""
         q = np.asarray(s.q)
         moved = self._q is None or float(np.max(np.abs(q - self._q))) > MOVE_RAD
@@ -157,7 +161,7 @@ class LiveView:
         self._force_arrow(s, info.corrected)
         return float(np.linalg.norm(info.deflection))
 
-    def _force_arrow(self, s, ball: np.ndarray) -> None:
+    def _force_arrow(self, s: Sample, ball: np.ndarray) -> None:
         import meshcat.geometry as mg
         f = np.zeros(3) if s.wrench is None else np.asarray(s.wrench[:3])
         m = float(np.linalg.norm(f))

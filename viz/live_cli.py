@@ -17,7 +17,15 @@ from pathlib import Path
 
 from arm_model import InputError
 from arm_model.cli import command_help
+from typing import TYPE_CHECKING
+
 from arm_model.commands import add_arm_options, arm_inputs, model_from_args, non_negative, number_in, port, positive
+
+if TYPE_CHECKING:          # only for the annotations: the live modules load when the command runs
+    from arm_model.live import SampleLayout, Session
+    from arm_model.live.sources import LineSource
+
+    from .live import LiveView
 
 __all__ = ["register", "run_live", "WARN_FIRST"]
 
@@ -27,7 +35,7 @@ log = logging.getLogger(__name__)
 WARN_FIRST = 5
 
 
-def register(sub) -> None:
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "live", help=command_help("live"),
         description="Run a live measurement session: read samples (time, joint angles, force, optional torque, "
@@ -109,7 +117,7 @@ class _Stop:
             signal.signal(sig, old)
 
 
-def _header(source, stop: _Stop):
+def _header(source: LineSource, stop: _Stop) -> tuple:
     """(line number, cells) of the stream's header: its first line that is not blank (UDP: the first that
     is not a number, lines before it skipped and counted)."""
     skipped = 0
@@ -183,7 +191,7 @@ def _is_file(spec: str) -> bool:
     return spec != "-" and "://" not in spec
 
 
-def _status(args, source, files) -> dict:
+def _status(args: argparse.Namespace, source: LineSource, files: list) -> dict:
     from arm_model.shipped import provenance
     tip = ["aacmm", "tip", "points.csv", "--arm", str(args.arm)]
     tip += ["--tip-frame", args.tip_frame] if args.tip_frame else []
@@ -199,7 +207,8 @@ def _status(args, source, files) -> dict:
             **provenance([f for f in files if f is not None])}
 
 
-def _run(args, source, session, layout, stop, skipped: int) -> int:
+def _run(args: argparse.Namespace, source: LineSource, session: Session, layout: SampleLayout, stop: _Stop,
+         skipped: int) -> int:
     """The session's loop: push every line's sample, show what it brings, keep the view drawn."""
     from arm_model.live.sources import Pacer
     view = _start_view(args, session)
@@ -263,7 +272,7 @@ def _run(args, source, session, layout, stop, skipped: int) -> int:
     return code
 
 
-def _start_view(args, session):
+def _start_view(args: argparse.Namespace, session: Session) -> LiveView | None:
     if not args.view:
         return None
     from .live import LiveView
@@ -272,7 +281,7 @@ def _start_view(args, session):
     return view
 
 
-def _finish_view(args, session, view, stop) -> None:
+def _finish_view(args: argparse.Namespace, session: Session, view: LiveView, stop: _Stop) -> None:
     try:
         view.update(force=True)
         page = view.write_html(session.record.folder / "view.html")
@@ -286,7 +295,7 @@ def _finish_view(args, session, view, stop) -> None:
         view.close()
 
 
-def _show(out, said: dict) -> None:
+def _show(out: object, said: dict) -> None:
     """Print what the session brought: points (and fits) as info, events as warnings (dropped, late and
     bad lines one by one :data:`WARN_FIRST` times, then only counted)."""
     from arm_model.live import Event, FeatureFit, LivePoint
@@ -302,7 +311,7 @@ def _show(out, said: dict) -> None:
             log.warning(f"more '{out.kind}' events are counted, not shown (events.csv has each)")
 
 
-def _summary(session, said, skipped: int, status: str, message: str) -> None:
+def _summary(session: Session, said: dict, skipped: int, status: str, message: str) -> None:
     c = session.counts
     folder = session.record.folder
     log.info(f"{c['samples']} samples, {c['points']} points ({c['over_force']} over-force), {c['bumps']} touches "

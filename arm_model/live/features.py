@@ -36,6 +36,7 @@ from ..feature_uncertainty import (cylinder_jacobian, diameter_uncertainty, fit_
                                    residual_form_uncertainty, sphere_jacobian)
 from ..geometry import (CylinderFit, feature_diameter, fit_circle_2d, fit_cylinder, fit_plane, fit_sphere,
                         perpendicular_basis)
+from ..io import Distance, Feature
 from .plan import PlanFeature, SessionPlan
 
 __all__ = ["FeatureFit", "FeatureTracker", "NEEDED_POINTS", "COVERAGE_K", "FORM_SAMPLES_LIVE"]
@@ -94,7 +95,7 @@ class FeatureFit:
 
     def row(self, point: int) -> dict:
         """The row of ``features.csv`` after point number ``point`` (mm)."""
-        def mm(v):
+        def mm(v: float | None) -> str:
             return "" if v is None or not math.isfinite(v) else f"{v * 1e3:.6f}"
         agrees = self.agrees
         return {"point": point, "feature": self.feature, "kind": self.kind, "points": self.n_points,
@@ -178,7 +179,7 @@ class FeatureTracker:
         """id -> :class:`arm_model.io.Feature` of every entry so far."""
         return {e.feature.id: e.feature for e in self.entries}
 
-    def begin(self, feature, points: int | None = None) -> None:
+    def begin(self, feature: Feature, points: int | None = None) -> None:
         """Start an ad hoc feature (an :class:`arm_model.io.Feature` with a new id) now: the next ``points``
         points belong to it (None: all until the next ``begin``). The current entry ends with the points
         it has taken; the rest of the plan follows the new feature."""
@@ -193,7 +194,7 @@ class FeatureTracker:
         self.entries.insert(self._entry, PlanFeature(feature, points))
         self._taken = 0
 
-    def add(self, feature: str, centre, cov, shared) -> list[FeatureFit]:
+    def add(self, feature: str, centre: np.ndarray, cov: np.ndarray, shared: np.ndarray) -> list[FeatureFit]:
         """Add a point of ``feature`` (the :attr:`current` one, or "" for a free point; its centre (3,) [m],
         covariance (3, 3) [m^2], shared rows (R, 3) [m]) and refit: the feature's fit and the fits of the
         certified distances it takes part in."""
@@ -217,7 +218,7 @@ class FeatureTracker:
                 out.append(dist)
         return out
 
-    def _fit(self, spec, g: _Group) -> FeatureFit:
+    def _fit(self, spec: Feature, g: _Group) -> FeatureFit:
         p = np.array(g.points)
         need = NEEDED_POINTS[spec.kind]
         base = dict(feature=spec.id, kind=spec.kind, n_points=len(p), certified=spec.diameter,
@@ -237,10 +238,12 @@ class FeatureTracker:
             return FeatureFit(**base, note=str(exc))
         return self._fit_seat(g, p, cov, shared, base)
 
-    def _form(self, residuals, n, jac, cov, shared) -> float:
+    def _form(self, residuals: np.ndarray, n: np.ndarray, jac: np.ndarray, cov: np.ndarray,
+              shared: np.ndarray) -> float:
         return residual_form_uncertainty(residuals, n, jac, cov, shared, samples=FORM_SAMPLES_LIVE).u
 
-    def _fit_cylinder(self, spec, g, p, cov, shared, base) -> FeatureFit:
+    def _fit_cylinder(self, spec: Feature, g: _Group, p: np.ndarray, cov: np.ndarray, shared: np.ndarray,
+                      base: dict) -> FeatureFit:
         cyl, circle = _cylinder_or_circle(p)
         t = (p - cyl.point) @ cyl.axis
         n, jac = cylinder_jacobian(p, cyl)
@@ -258,14 +261,16 @@ class FeatureTracker:
                           axis=cyl.axis, radius=cyl.radius, extent=np.array([np.ptp(t), 0.0]),
                           note="" if form is not None else "form needs one more point")
 
-    def _form_of(self, residuals, n, jac, cov, shared) -> tuple:
+    def _form_of(self, residuals: np.ndarray, n: np.ndarray, jac: np.ndarray, cov: np.ndarray,
+                 shared: np.ndarray) -> tuple:
         """(form, its uncertainty) [m], or (None, None) with no more points than the fit's parameters."""
         if len(residuals) <= jac.shape[1]:
             return None, None
         res = np.asarray(residuals, float)
         return float(res.max() - res.min()), self._form(res, n, jac, cov, shared)
 
-    def _fit_sphere(self, spec, g, p, cov, shared, base) -> FeatureFit:
+    def _fit_sphere(self, spec: Feature, g: _Group, p: np.ndarray, cov: np.ndarray, shared: np.ndarray,
+                    base: dict) -> FeatureFit:
         fit = fit_sphere(p)
         n, jac = sphere_jacobian(p, fit.centre)
         sens = 2.0 * fit_sensitivity(n, jac, 3)
@@ -276,7 +281,7 @@ class FeatureTracker:
                           **dict(zip(("form", "u_form"), self._form_of(fit.residuals, n, jac, cov, shared))),
                           centre=fit.centre, radius=fit.radius, extent=np.zeros(2))
 
-    def _fit_plane(self, g, p, cov, shared, base) -> FeatureFit:
+    def _fit_plane(self, g: _Group, p: np.ndarray, cov: np.ndarray, shared: np.ndarray, base: dict) -> FeatureFit:
         plane = fit_plane(p)
         n, jac = plane_jacobian(p, plane)
         u, v = perpendicular_basis(plane.normal)
@@ -288,14 +293,14 @@ class FeatureTracker:
                           note="" if form is not None else "flatness needs one more point", centre=plane.point,
                           axis=plane.normal, extent=np.array([np.ptp(d @ u), np.ptp(d @ v)]))
 
-    def _fit_seat(self, g, p, cov, shared, base) -> FeatureFit:
+    def _fit_seat(self, g: _Group, p: np.ndarray, cov: np.ndarray, shared: np.ndarray, base: dict) -> FeatureFit:
         g.centre_sens = np.tile(np.eye(3) / len(p), (len(p), 1, 1))
         g.centre = p.mean(axis=0)
         spread = float(np.max(np.ptp(p, axis=0)) / 2) if len(p) > 1 else None
         return FeatureFit(**{**base, "certified": None, "u_certified": None}, form=spread, centre=g.centre,
                           extent=np.zeros(2))
 
-    def _distance(self, d) -> FeatureFit:
+    def _distance(self, d: Distance) -> FeatureFit:
         """The certified distance ``d`` between two features' centres, once both are placed."""
         a, b = (self.groups.get(f) for f in d.between)
         name = f"{d.between[0]}--{d.between[1]}"

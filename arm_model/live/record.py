@@ -24,6 +24,7 @@ import json
 import os
 import time
 from pathlib import Path
+from typing import Iterable
 
 from .._errors import InputError
 from .._output import MARKER, guard_output, resolved
@@ -75,7 +76,7 @@ def _refuse_existing(folder: Path) -> None:
                      "folder: name a new one (e.g. with the date)", folder)
 
 
-def check_new_folder(folder: str | Path, inputs=()) -> Path:
+def check_new_folder(folder: str | Path, inputs: Iterable = ()) -> Path:
     """Refuse (InputError) a session folder that exists and is not empty, or that is or holds an input;
     nothing is created."""
     folder = Path(folder)
@@ -94,7 +95,7 @@ class SessionRecord:
         status: the first content of ``session.json`` (what the session is: source, arm, options).
     """
 
-    def __init__(self, folder: str | Path, inputs=(), status: dict | None = None):
+    def __init__(self, folder: str | Path, inputs: Iterable = (), status: dict | None = None):
         folder = check_new_folder(folder, inputs)
         try:
             folder.mkdir(parents=True, exist_ok=True)

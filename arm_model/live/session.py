@@ -18,6 +18,7 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Iterable, Sequence
 
 import numpy as np
 
@@ -25,6 +26,7 @@ from .._csv import format_row
 from ..checks import limit_bounds
 from ..io import Feature, PointSet
 from .contacts import Contact, ContactDetector, ContactOptions
+from ..uncertainty import InputUncertainty
 from .features import FeatureFit, FeatureTracker
 from .plan import SessionPlan
 from .record import FILES, SessionRecord
@@ -111,10 +113,10 @@ class Session:
         inputs_files: files the session reads (never written over); status: more ``session.json`` keys.
     """
 
-    def __init__(self, arm, folder: str | Path | None = None, *, plan: SessionPlan | None = None,
-                 contact: ContactOptions = ContactOptions(), inputs=None, measurement: str | None = None,
-                 rate: float | None = None, layout: SampleLayout | None = None, inputs_files=(),
-                 status: dict | None = None):
+    def __init__(self, arm: Any, folder: str | Path | None = None, *, plan: SessionPlan | None = None,
+                 contact: ContactOptions = ContactOptions(), inputs: InputUncertainty | None = None,
+                 measurement: str | None = None, rate: float | None = None, layout: SampleLayout | None = None,
+                 inputs_files: Iterable = (), status: dict | None = None):
         from ..model_file import Arm, load_model
         from ..uncertainty import default_inputs
         from ..uncertainty_cli import parameters_of
@@ -157,7 +159,7 @@ class Session:
             self._open_record(layout)
 
     # -- samples in -----------------------------------------------------------------------------
-    def push(self, t: float, q, wrench=None, trigger: bool | None = None,
+    def push(self, t: float, q: Sequence[float], wrench: Sequence[float] | None = None, trigger: bool | None = None,
              temperature: float | None = None) -> tuple:
         """One sample: time ``t`` [s], joint angles ``q`` (J,) [rad], the wrench of the part on the ball
         (3,) [N] or (6,) [N, N m] in the probe frame (None: no force sensor), the trigger (the button
@@ -232,7 +234,7 @@ class Session:
         return (self._event(s.t, "late", f"a sample at t = {s.t!r} s after one at {last!r} s: out of order or "
                                          "repeated, skipped"),)
 
-    def bad_line(self, error, raw: str | None = None) -> Event:
+    def bad_line(self, error: Exception, raw: str | None = None) -> Event:
         """Count a line of the stream that is not a sample (its :class:`~arm_model.InputError`): it is
         recorded in ``events.csv`` and skipped (never in ``samples.csv``)."""
         self.counts["bad_lines"] += 1
@@ -295,7 +297,7 @@ class Session:
     def __enter__(self) -> "Session":
         return self
 
-    def __exit__(self, exc_type, exc, tb) -> None:
+    def __exit__(self, exc_type: type | None, exc: BaseException | None, tb: object) -> None:
         if exc_type is None:
             self.close()
         elif issubclass(exc_type, KeyboardInterrupt):
@@ -443,7 +445,7 @@ class Session:
         rec.open("features", ",".join(FEATURE_COLUMNS))
         rec.flush()
 
-    def _layout_from(self, s: Sample, wrench) -> None:
+    def _layout_from(self, s: Sample, wrench: Sequence[float] | None) -> None:
         """The first sample pushed from Python sets the recorded columns (SI)."""
         torque = wrench is not None and len(wrench) == 6
         header = sample_header(self.desc.n_joints, "xyz" if s.wrench is not None else None, torque,
@@ -513,7 +515,7 @@ def _num(x: float) -> str:
     return "" if x is None or not math.isfinite(x) else repr(float(x))
 
 
-def _csv_line(values) -> str:
+def _csv_line(values: Iterable) -> str:
     import csv
     import io
     buf = io.StringIO()

@@ -20,6 +20,7 @@ import selectors
 import socket
 import time
 from pathlib import Path
+from typing import Callable
 
 from .._errors import InputError, open_input
 
@@ -73,7 +74,7 @@ class _FileSource(LineSource):
 class _FdSource(LineSource):
     """Lines read from a file descriptor (standard input, a TCP socket) with idle ticks."""
 
-    def __init__(self, fd: int, name: str, owner=None):
+    def __init__(self, fd: int, name: str, owner: socket.socket | None = None):
         self.fd, self.name, self._owner = fd, name, owner
 
     def _read(self) -> bytes:
@@ -191,7 +192,7 @@ class Pacer:
         self._t0 = None
         self._w0 = 0.0
 
-    def wait(self, t: float, idle=None) -> bool:
+    def wait(self, t: float, idle: Callable[[], bool] | None = None) -> bool:
         """True once due; False when ``idle()`` asked to stop."""
         if self.speed <= 0:
             return True

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..live.plan import PlanFeature, SessionPlan
 from .operator import measurement_slices
+from .run import SimResult
 
 __all__ = ["sample_stream", "stream_plan", "SAMPLES_FILE", "PLAN_FILE"]
 
@@ -65,7 +66,7 @@ def _joint_track(t: np.ndarray, capture: np.ndarray, q: np.ndarray, rise: float,
     return out
 
 
-def sample_stream(result, seed: int = 0) -> str:
+def sample_stream(result: SimResult, seed: int = 0) -> str:
     """The CSV text of the sample stream of a :class:`~arm_model.sim.SimResult` (see the module doc).
     ``seed`` draws the noise between measurements."""
     c = result.campaign
@@ -119,7 +120,7 @@ def sample_stream(result, seed: int = 0) -> str:
     return ",".join(names) + "\n" + "".join(",".join(row) + "\n" for row in zip(*cols))
 
 
-def stream_plan(result) -> SessionPlan | None:
+def stream_plan(result: SimResult) -> SessionPlan | None:
     """The session plan of the stream (each feature of the points file with its count, in the order they
     are probed, and the certified distances), or None when a feature is probed in two separate runs."""
     pts = result.points
