@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import html
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 __all__ = ["InputWarning", "over_force_warning", "joint_limit_warning", "JointLimitTally", "point_warnings", "log_warnings",
-           "warnings_html", "LIMIT_TOLERANCE_RAD"]
+           "warnings_html", "LIMIT_TOLERANCE_RAD", "limit_bounds"]
 
 log = logging.getLogger(__name__)
 
@@ -68,6 +69,13 @@ def over_force_warning(force, lines, max_force: float, file: str) -> InputWarnin
         f"{len(over)} point(s) with a force over the probe's calibrated range ({max_force:g} N; largest "
         f"{mag[over].max():.3g} N): used and flagged, not dropped; {file} {_lines_text(lines)}",
         file, lines)
+
+
+def limit_bounds(desc) -> list[tuple[float, float]]:
+    """Per joint, the (lowest, highest) angle [rad] read without a joint-limit warning: the declared
+    limits widened by :data:`LIMIT_TOLERANCE_RAD` (-inf, inf where a joint declares none)."""
+    return [(-math.inf if j.lower is None else j.lower - LIMIT_TOLERANCE_RAD,
+             math.inf if j.upper is None else j.upper + LIMIT_TOLERANCE_RAD) for j in desc.joints]
 
 
 def _beyond_limits(desc, q) -> np.ndarray:

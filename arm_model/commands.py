@@ -19,7 +19,7 @@ from .io import concat_points, iter_points
 from .model_file import Arm, load_model
 from .urdf import urdf_text
 
-__all__ = ["register", "tip_table", "add_arm_options", "arm_from_args", "model_from_args", "number_in",
+__all__ = ["register", "tip_table", "tip_centres", "add_arm_options", "arm_from_args", "model_from_args", "number_in",
            "positive", "non_negative", "at_least", "fraction", "finite", "seed", "port"]
 
 log = logging.getLogger(__name__)
@@ -169,15 +169,26 @@ def register(sub) -> None:
     e.set_defaults(func=run_examples)
 
 
-def tip_table(arm, points) -> dict:
+def tip_centres(arm, points) -> tuple[np.ndarray, np.ndarray]:
+    """(rigid, corrected) ball centres (N, 3) [m] of ``aacmm tip`` for a :class:`~arm_model.io.PointSet`;
+    ``arm`` an :class:`~arm_model.model_file.Arm` (every effect applied) or a description. Rigid: at a
+    zero force reading; corrected: with the points' wrench (= rigid without force columns)."""
+    if not isinstance(arm, Arm):
+        arm = Arm(arm)
+    rigid = arm.ball_centres(points, rigid=True)
+    corrected = arm.ball_centres(points) if points.wrench is not None else rigid.copy()
+    return rigid, corrected
+
+
+def tip_table(arm, points, centres: tuple[np.ndarray, np.ndarray] | None = None) -> dict:
     """Columns of the ``aacmm tip`` output for a :class:`~arm_model.io.PointSet`; ``arm`` an
     :class:`~arm_model.model_file.Arm` (every effect applied) or a description. ``x_rigid_mm``: the
-    ball centre at a zero force reading; ``x_mm``: with the points' wrench."""
+    ball centre at a zero force reading; ``x_mm``: with the points' wrench. ``centres``: the (rigid,
+    corrected) centres of :func:`tip_centres`, when the caller has them."""
     if not isinstance(arm, Arm):
         arm = Arm(arm)
     desc = arm.desc
-    rigid = arm.ball_centres(points, rigid=True)
-    corrected = arm.ball_centres(points) if points.wrench is not None else rigid.copy()
+    rigid, corrected = tip_centres(arm, points) if centres is None else centres
     delta = corrected - rigid
     cols = {"measurement": points.measurement, "feature": points.feature}
     for k, axis in enumerate("xyz"):

@@ -349,7 +349,11 @@ def read_artefacts(path: str | Path) -> Artefacts:
     return art
 
 
-def parse_artefacts(text: str, path: str = "<string>") -> Artefacts:
+def parse_artefacts(text: str, path: str = "<string>", *, extra_keys: tuple = (),
+                    extra_feature_keys: tuple = ()) -> Artefacts:
+    """Parse artefacts TOML text (docs/formats.md §4). ``extra_keys`` (top level) and
+    ``extra_feature_keys`` (in a ``[[feature]]``) are left to a caller whose file extends the format
+    (a live session's plan); every other unknown key is an error."""
     data = parse_toml(text, path)
 
     def err(msg, table, index, key=None):
@@ -357,9 +361,9 @@ def parse_artefacts(text: str, path: str = "<string>") -> Artefacts:
         return InputError(msg, path, _toml_key_line(text, table, index, key), col)
 
     for key in data:
-        if key not in ("feature", "distance"):
-            raise InputError(unknown_key(key, ("feature", "distance")), path, _toml_top_line(text, key),
-                             f"key '{key}'")
+        if key not in ("feature", "distance") + tuple(extra_keys):
+            raise InputError(unknown_key(key, ("feature", "distance") + tuple(extra_keys)), path,
+                             _toml_top_line(text, key), f"key '{key}'")
     if not isinstance(data.get("distance", []), list):
         raise InputError("'distance' must be [[distance]] tables", path, _toml_top_line(text, "distance"),
                          "key 'distance'")
@@ -380,12 +384,13 @@ def parse_artefacts(text: str, path: str = "<string>") -> Artefacts:
             raise err(f"unknown kind {kind!r} (known: {', '.join(FEATURE_KINDS)})", "feature", i, "kind")
         values = {}
         for key, v in t.items():
-            if key in ("id", "kind"):
+            if key in ("id", "kind") or key in extra_feature_keys:
                 continue
             parts = split_unit(key)
             if parts is None or parts[0] not in _FEATURE_LENGTHS:
-                raise err(unknown_key(key, ("id", "kind") + _FEATURE_LENGTHS,
-                                      ["id", "kind"] + [f"{b}_<length unit>" for b in _FEATURE_LENGTHS]),
+                raise err(unknown_key(key, ("id", "kind") + _FEATURE_LENGTHS + tuple(extra_feature_keys),
+                                      ["id", "kind"] + [f"{b}_<length unit>" for b in _FEATURE_LENGTHS]
+                                      + list(extra_feature_keys)),
                           "feature", i, key)
             if QUANTITY_OF_UNIT[parts[1]] != "length":
                 raise err(f"'{key}' must be a length (_mm, _m, _um)", "feature", i, key)

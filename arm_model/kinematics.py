@@ -48,12 +48,11 @@ def run_chunks(work, n: int, chunk: int, threads: int | None = None) -> None:
     ``threads`` (default :func:`_default_threads`) when there is more than one chunk, else in line.
     ``work`` writes its own slice of a preallocated output (numpy releases the GIL)."""
     starts = range(0, n, chunk)
-    nthreads = threads or _default_threads()
-    if nthreads == 1 or n <= chunk:
+    if n <= chunk or (threads or _default_threads()) == 1:
         for s in starts:
             work(s)
     else:
-        with ThreadPoolExecutor(max_workers=nthreads) as pool:
+        with ThreadPoolExecutor(max_workers=threads or _default_threads()) as pool:
             list(pool.map(work, starts))
 
 

@@ -342,16 +342,26 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
             cov[s:e, i, j] = cv[i, j]
             cov[s:e, j, i] = cv[i, j]
 
-    from threadpoolctl import threadpool_limits
-
     # the products are thin (tens x chunk): one BLAS thread each; more spin-wait on a busy machine
-    with threadpool_limits(limits=1, user_api="blas"):
+    with _blas_controller().limit(limits=1, user_api="blas"):
         run_chunks(work, n, chunk, threads)
     sources = dict(inputs.sources)
     sources["parameters"] = "none (parameters taken as exact)" if parameters is None else parameters.source
     if _compliance_covered(pnames):
         sources["compliance"] = "in the parameter covariance (calibrated)"
     return Propagation(centres, cov, contrib, sources, sys_rows)
+
+
+_CONTROLLER = []
+
+
+def _blas_controller():
+    """threadpoolctl's controller, made once (finding the loaded BLAS libraries takes milliseconds: too
+    long for every point of a live session)."""
+    if not _CONTROLLER:
+        from threadpoolctl import ThreadpoolController
+        _CONTROLLER.append(ThreadpoolController())
+    return _CONTROLLER[0]
 
 
 def monte_carlo(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
