@@ -300,7 +300,7 @@ def nearest(word: str, known) -> str:
 
 #: top-level keys of a description; a model file (arm_model.model_file) adds its effects and calibration tables
 DESCRIPTION_KEYS = ("name", "convention", "joint", "probe")
-MODEL_KEYS = ("effect", "calibration")
+MODEL_KEYS = ("effect", "calibration", "reference_frame", "marker")
 
 
 def parse_description(text: str, path: str = "<string>") -> ArmDescription:

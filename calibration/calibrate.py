@@ -28,6 +28,7 @@ import scipy.sparse as sp
 
 from arm_model import InputError, NumericalError
 from arm_model.model import ArmModel
+from arm_model.tracker import Tracker
 
 from .data import CalibrationData, Weights
 from .identifiability import (DEFAULT_RANK_TOL, Combination, Identifiability, _compress, analyse, point_noise,
@@ -89,9 +90,14 @@ def resolve_parameters(spec, patterns) -> list[int]:
     return sorted(out)
 
 
-def default_free(model: ArmModel) -> list[str]:
-    """Every joint-row error, the probe offset and every effect parameter (compliances only when named)."""
-    return [n for n in model.spec.names if not n.startswith("probe.compliance")]
+def default_free(model: ArmModel, data: CalibrationData | None = None) -> list[str]:
+    """Every joint-row error, the probe offset and every effect parameter (compliances only when named).
+    On ``data`` whose only points are markers at unknown offsets (a tracker campaign), not the probe
+    offset: the markers' offsets on the tip frame take its place (it would move every marker alike)."""
+    tracker_only = (data is not None and data.marker_offsets == "fit"
+                    and not np.any(data.points.feature != ""))
+    drop = ("probe.compliance",) + (("probe.x", "probe.y", "probe.z") if tracker_only else ())
+    return [n for n in model.spec.names if not n.startswith(drop)]
 
 
 def rigid_gauge(problem: Problem, p, free) -> np.ndarray:
@@ -147,8 +153,9 @@ class CalibrationResult:
         residuals: per-point table (``Problem.residual_table`` plus ``standardized``, ``line``,
             ``measurement``, ``feature``); instances: per artefact instance scalars;
             distances: per certified-length instance.
-        reference: the fitted ``T_ref_base`` (4x4) with the standard uncertainties of its
-            increments (translation [m], rotation [rad]), or None.
+        tracker: the reference instrument's frame ``T_ref_base`` of each session and the markers' offsets
+            on the tip frame (:class:`arm_model.tracker.Tracker`, with the standard uncertainties of their
+            increments when fitted), or None without reference coordinates.
         outliers, dropped: outliers found (kept unless dropped); points dropped and refitted.
         data, weights: what was fitted.
     """
@@ -174,7 +181,7 @@ class CalibrationResult:
     residuals: dict
     instances: list
     distances: list
-    reference: dict | None
+    tracker: Tracker | None
     outliers: list
     dropped: list
     data: CalibrationData
@@ -312,7 +319,9 @@ class CalibrationResult:
             "correlation": {"names": list(self.free), "matrix": self.corr.tolist()},
             "identifiability_start": self.identifiability.to_dict(),
             "identifiability_final": self.identifiability_final.to_dict(),
-            "reference_frame": self.reference,
+            "reference_frame": None if self.tracker is None else {
+                **self.tracker.to_dict(), "fitted": self.reference_mode == "fit",
+                "marker_offsets": self.data.marker_offsets},
             "weights": {"probe_um": self.weights.probe * 1e6, "reference_um": self.weights.reference * 1e6,
                         "length_um": None if self.weights.length is None else self.weights.length * 1e6,
                         "factors": dict(self.weights.factors),
@@ -490,7 +499,7 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
                              prior_length=prior_length, prior_scale=prior_scale, prior_centre=prior_centre)
         return reweighted(once, weights)
     spec = model.spec
-    cand = resolve_parameters(spec, default_free(model) if free is None else free)
+    cand = resolve_parameters(spec, default_free(model, data) if free is None else free)
     nominal = spec.vector(values or {})      # a held parameter's value (``start`` only warm-starts the free)
     p0 = nominal.copy()
     for name, v in (start or {}).items():
@@ -653,27 +662,21 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
     distances = [{"measurement": d.measurement, "between": list(d.between), "certified": d.length,
                   "residual": float(table["distance"][i]), "standardized": float(zd[i]), "sigma": d.sigma}
                  for i, d in enumerate(prob.distance_items)]
-    ref = None
+    u_tracker = {}          # standard uncertainties of the reference frames' and markers' increments
     for i, it in enumerate(prob.instances):
-        if it.kind == "reference":
-            t = np.eye(4)
-            t[:3, :3] = states[i][0:9].reshape(3, 3, order="F")
-            t[:3, 3] = states[i][9:12]
-            ref = {"T_ref_base": t.tolist(), "fitted": it.n_theta > 0}
-            if it.n_theta:
-                cols = len(kept) + it.offset + np.arange(6)
-                e = np.zeros((js.shape[1], 6))
-                e[cols, np.arange(6)] = 1.0
-                blk = solve(e)[cols] / np.outer(jscale[cols], jscale[cols]) * var
-                uu = np.sqrt(np.diag(blk))
-                ref["u_translation"] = uu[:3].tolist()
-                ref["u_rotation"] = uu[3:].tolist()
+        if it.kind in ("reference", "marker") and it.n_theta:
+            cols = len(kept) + it.offset + np.arange(it.n_theta)
+            e = np.zeros((js.shape[1], it.n_theta))
+            e[cols, np.arange(it.n_theta)] = 1.0
+            blk = solve(e)[cols] / np.outer(jscale[cols], jscale[cols]) * var
+            u_tracker[i] = np.sqrt(np.diag(blk))
+    tracker = prob.tracker(states, u_tracker)
     return CalibrationResult(
         model=model, p=p, free=tuple(spec.names[i] for i in kept), fixed=tuple(fixed),
         held=tuple(n for i, n in enumerate(spec.names) if i not in cand), cov=cov, u=u, corr=corr, s0=s0,
         covariance_source=source, status=sol.status, iterations=sol.iterations, evaluations=sol.evaluations,
         cost=sol.cost, n_residuals=n_rows, n_nuisance=n_nuis, dof=dof, identifiability=idf0,
-        identifiability_final=idf1, residuals=table, instances=instances, distances=distances, reference=ref,
+        identifiability_final=idf1, residuals=table, instances=instances, distances=distances, tracker=tracker,
         outliers=outliers, dropped=[], data=data, weights=weights, reference_mode=reference, unused=prob.unused,
         variance=variance, prior_scale=prior_scale, log_evidence=log_ev,
         prior_centre=None if prior is None else prior.centre)

@@ -51,14 +51,26 @@ def _holdout(text: str | None):
 
 def campaign_inputs(p) -> None:
     """Points, artefacts, arm, reference points and output folder (shared with ``aacmm close-loop``)."""
-    p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3)")
-    p.add_argument("artefacts", type=Path, help="artefacts TOML (docs/formats.md §4)")
+    p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3); its reference columns (x_ref_mm ..., "
+                                             "or x1_ref_mm ... for several markers) are a tracker's coordinates")
+    p.add_argument("artefacts", type=Path, nargs="?", default=None,
+                   help="artefacts TOML (docs/formats.md §4); leave it out for a campaign of tracker (reference) "
+                        "coordinates only: every row a free point with reference columns")
     add_arm_options(p, "nominal arm: a shipped arm's name (aacmm7), a description TOML or model file, or a URDF "
                        "with --tip-frame (docs/formats.md §2, docs/own-arm.md)")
     p.add_argument("--reference-points", type=Path, default=None,
-                   help="a second points CSV with reference coordinates (x_ref_mm ...), e.g. tracker nests "
-                        "(docs/formats.md §3)")
+                   help="a second points CSV whose rows all carry reference coordinates (x_ref_mm ...), e.g. tracker "
+                        "nests, joined to the points file (docs/formats.md §3)")
     p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; never an input)")
+
+
+def marker_option(p) -> None:
+    """``--marker-offset``: where the reference instrument's markers sit on the tip frame."""
+    p.add_argument("--marker-offset", choices=("fit", "zero"), default=None,
+                   help="fit: each marker of the reference columns sits at an unknown offset on the tip frame "
+                        "(a motion-capture marker or a tracker target on a robot's flange), estimated with the fit "
+                        "and written to the model file; zero: the instrument sees the tip point itself (a tracker's "
+                        "reflector in the probe's place). Default: fit without an artefacts file, zero with one")
 
 
 #: argparse type of a stated standard uncertainty [um]: from 1e-6 um (whose square is still a normal
@@ -141,9 +153,12 @@ def register(sub) -> None:
                     "nominal vs calibrated on the training data and on held-out measurements. Writes a NEW "
                     "calibrated model file (the description with every effect and its parameters, TOML, read by every "
                     "--arm), its covariance (CSV) and URDF, summary.json, CSV tables and report.html.",
-        epilog="Parameter names: docs/calibration.md. Example: aacmm calibrate points.csv artefacts.toml "
-               "--arm aacmm7 --reference-points points-ref.csv --holdout 0.2 -o out/cal")
+        epilog="Parameter names: docs/calibration.md. Examples: aacmm calibrate points.csv artefacts.toml "
+               "--arm aacmm7 --reference-points points-ref.csv --holdout 0.2 -o out/cal; a robot seen by a tracker "
+               "(no artefacts file): aacmm calibrate tracker.csv --arm robot.urdf --tip-frame flange --holdout 0.2 "
+               "-o out/cal (docs/own-arm.md)")
     campaign_inputs(c)
+    marker_option(c)
     _common_fit_options(c)
     c.add_argument("--holdout", default=None,
                    help="measurements kept out of the fit for validation: a fraction (0.2) drawn at random per "
@@ -194,10 +209,12 @@ def register(sub) -> None:
                                   "measured or simulated) maximising O1 = (prod s_i)^(1/m)/sqrt(n) of the "
                                   "identification Jacobian; compared with random choices of the same size.")
     q.add_argument("points", type=Path, help="candidate points CSV (docs/formats.md §3)")
-    q.add_argument("artefacts", type=Path, help="artefacts TOML (docs/formats.md §4)")
+    q.add_argument("artefacts", type=Path, nargs="?", default=None,
+                   help="artefacts TOML (docs/formats.md §4); none for reference (tracker) points only")
     add_arm_options(q, "nominal arm: a shipped arm's name (aacmm7), a description TOML, or a URDF with --tip-frame "
                        "(docs/formats.md §2)")
     q.add_argument("--reference-points", type=Path, default=None, help="reference points CSV (docs/formats.md §3)")
+    marker_option(q)
     q.add_argument("--count", type=at_least(1), required=True, help="how many measurements to choose")
     q.add_argument("-o", "--output", type=Path, required=True, help="output folder")
     _common_fit_options(q)
@@ -279,14 +296,15 @@ def _load_data(args):
     desc = arm.desc
     model = model_effects(arm, args.effect)
     points = read_points(args.points, desc.n_joints)
-    artefacts = read_artefacts(args.artefacts)
+    artefacts = None if args.artefacts is None else read_artefacts(args.artefacts)
     reference = None if args.reference_points is None else read_points(args.reference_points, desc.n_joints)
     warnings = []
     for pts in (points, reference):
         if pts is not None:
             Arm(desc, model.effects).check_points(pts)
             warnings += point_warnings(desc, pts)
-    return model, make_data(points, artefacts, model, reference=reference), arm.values, warnings
+    data = make_data(points, artefacts, model, reference=reference, marker_offsets=args.marker_offset)
+    return model, data, arm.values, warnings
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
@@ -315,7 +333,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
                                                       None if test is None else (res, test))
         files = write_outputs(res, out.dir, inputs=inputs, validation_training=val_train,
                               validation_holdout=val_test, plots=not args.no_plots,
-                              extra={"inputs": {"points": str(args.points), "artefacts": str(args.artefacts),
+                              extra={"inputs": {"points": str(args.points),
+                                                "artefacts": None if args.artefacts is None else str(args.artefacts),
                                                 "arm": str(args.arm),
                                                 "reference_points": None if args.reference_points is None
                                                 else str(args.reference_points)},
@@ -392,10 +411,19 @@ def log_conformance(conf: dict) -> None:
 
 def _validation(res, data, mpe):
     """The before/after figure rows and the standard tests (:func:`calibration.validation.conformance`) of
-    the calibrated model on ``data``."""
+    the calibrated model on ``data``. On other data than the fit's, reference points are predicted with
+    the frames and marker offsets of the fit (the nominal model with its own, fitted on the same training
+    data: :func:`calibration.tracking.fit_tracker`), not fitted again on them."""
+    from .tracking import fit_tracker
     from .validation import conformance, figure_rows, validate
-    before = validate(res.model, np.zeros(res.model.spec.size), data, res.weights, res.reference_mode)
-    after = res.validate(data)
+    nominal = np.zeros(res.model.spec.size)
+    if data is not res.data and res.tracker is not None:
+        own = fit_tracker(res.model, nominal, res.data, res.weights, res.reference_mode)
+        before = validate(res.model, nominal, data.with_tracker(own), res.weights, res.reference_mode)
+        after = res.validate(data.with_tracker(res.tracker))
+    else:
+        before = validate(res.model, nominal, data, res.weights, res.reference_mode)
+        after = res.validate(data)
     return figure_rows(before, after), conformance(after, mpe, before)
 
 

@@ -19,6 +19,8 @@ Kinds (docs/formats.md §4; ``b`` = ball diameter):
 * ``reference``: ``T_ref_base x - x_ref`` (3 rows a point); state ``(R0, t0)``, ``theta = (dt, w)``
   with ``R = Rz(w3) Ry(w2) Rx(w1) R0``.
 * ``distance``: ``|c_A - c_B| - L`` between two centres (seat or sphere) of one measurement.
+* ``marker``: no rows of its own; state and ``theta`` the offset ``o`` [m] of a marker on the tip frame,
+  which moves the ball centres of its reference rows (:class:`calibration.problem.Problem`).
 """
 from __future__ import annotations
 
@@ -30,7 +32,8 @@ from scipy.spatial.transform import Rotation
 
 from arm_model import NumericalError, geometry
 
-__all__ = ["Kind", "KINDS", "kind_function", "distance_function", "initial_state", "retract", "centre_of"]
+__all__ = ["Kind", "KINDS", "kind_function", "distance_function", "initial_state", "retract", "centre_of",
+           "frame_state", "frame_of", "tracker_start"]
 
 
 @dataclass(frozen=True)
@@ -50,6 +53,7 @@ KINDS = {
     "cylinder": Kind("cylinder", 1, 4, 13),
     "plane": Kind("plane", 1, 3, 10),
     "reference": Kind("reference", 3, 6, 12),
+    "marker": Kind("marker", 0, 3, 3),
 }
 
 
@@ -156,14 +160,74 @@ def initial_state(kind: str, x: np.ndarray, radius: float | None = None, x_ref: 
         return np.concatenate([n0, e1, e2, [h]])
     if kind == "reference":
         rot, t = geometry.kabsch(x, x_ref)
-        return np.concatenate([rot.reshape(-1, order="F"), t])
+        return frame_state(_transform(rot, t))
     raise ValueError(f"unknown residual kind {kind!r}")
+
+
+def _transform(rot, t) -> np.ndarray:
+    out = np.eye(4)
+    out[:3, :3], out[:3, 3] = rot, t
+    return out
+
+
+def frame_state(transform) -> np.ndarray:
+    """The packed ``reference`` state (12,) of a 4x4 transform ``T_ref_base``."""
+    t = np.asarray(transform, float)
+    return np.concatenate([t[:3, :3].reshape(-1, order="F"), t[:3, 3]])
+
+
+def frame_of(state) -> np.ndarray:
+    """The 4x4 transform of a packed ``reference`` state (the inverse of :func:`frame_state`)."""
+    return _transform(np.asarray(state[0:9]).reshape(3, 3, order="F"), state[9:12])
+
+
+#: most rounds of :func:`tracker_start`'s alternation, and the change of every offset [m] that ends it
+TRACKER_ROUNDS, TRACKER_TOL = 200, 1e-9
+
+
+def tracker_start(base, turn, x_ref, frame, marker, frames, markers, held_frames, held_offsets):
+    """Starting states of the reference frames and marker offsets (the algebraic first fit).
+
+    Row ``j`` of the reference rows sees ``x_ref[j] = R_s (base[j] + turn[j] o_m) + t_s`` with ``s =
+    frame[j]`` and ``m = marker[j]`` (instance indices; -1: no marker, ``turn[j]`` zero), ``base`` [m] the
+    tip point (or a seat centre), ``turn`` (n, 3, 3) d x / d o (the tip frame's axes in the base frame).
+    Alternating least squares, each step exact in its block so that the cost never rises: every frame
+    by Kabsch (:func:`arm_model.geometry.kabsch`) with the offsets held, then every offset by linear
+    least squares with the frames held, from offsets zero, until no offset moves by more than
+    :data:`TRACKER_TOL` (at most :data:`TRACKER_ROUNDS` rounds; the Levenberg-Marquardt fit that follows
+    polishes the rest). Held frames / offsets (``held_*`` not None, in the order of ``frames`` /
+    ``markers``) stay as given. Returns (frame states, offset states) in the order of ``frames``,
+    ``markers``."""
+    offsets = [np.zeros(3) if h is None else np.asarray(h, float) for h in held_offsets]
+    where = {m: k for k, m in enumerate(markers)}
+    fstates = [None if h is None else np.asarray(h, float) for h in held_frames]
+    for _ in range(TRACKER_ROUNDS):
+        o = np.array([offsets[where[m]] if m >= 0 else np.zeros(3) for m in marker]).reshape(-1, 3)
+        x = base + np.einsum("nij,nj->ni", turn, o)
+        for k, (f, h) in enumerate(zip(frames, held_frames)):
+            if h is None:
+                sel = frame == f
+                fstates[k] = frame_state(_transform(*geometry.kabsch(x[sel], x_ref[sel])))
+        moved = 0.0
+        for k, m in enumerate(markers):
+            if held_offsets[k] is not None:
+                continue
+            sel = np.flatnonzero(marker == m)
+            rot = [frame_of(fstates[frames.index(f)]) for f in frame[sel]]
+            a = np.concatenate([t[:3, :3] @ turn[j] for t, j in zip(rot, sel)])
+            b = np.concatenate([x_ref[j] - t[:3, 3] - t[:3, :3] @ base[j] for t, j in zip(rot, sel)])
+            new = np.linalg.lstsq(a, b, rcond=None)[0]
+            moved = max(moved, float(np.max(np.abs(new - offsets[k]))))
+            offsets[k] = new
+        if moved <= TRACKER_TOL:
+            break
+    return fstates, offsets
 
 
 def retract(kind: str, state: np.ndarray, theta: np.ndarray) -> np.ndarray:
     """New packed state after the increment ``theta`` (evaluated at zero by the residuals)."""
     s = state.copy()
-    if kind == "seat":
+    if kind in ("seat", "marker"):
         return s + theta[:3]
     if kind == "sphere":
         s[:3] += theta[:3]

@@ -108,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
     if effects and families is None:
         families = tuple(f for f in DEFAULT_FAMILIES if f not in {e.key for e in effects})
     points = read_points(args.points, desc.n_joints)
-    artefacts = read_artefacts(args.artefacts)
+    artefacts = None if args.artefacts is None else read_artefacts(args.artefacts)
     reference = read_points(args.reference_points, desc.n_joints) if args.reference_points else None
     warnings = []
     for pts in (points, reference):
@@ -135,7 +135,8 @@ def run(args: argparse.Namespace) -> int:
             loop.model_fit = refine_torques(loop.model_fit, **opts)
         else:
             loop.stages[-1].result = refine_torques(loop.stages[-1].result, **opts)
-        names = {"points": str(args.points), "artefacts": str(args.artefacts), "arm": str(args.arm),
+        names = {"points": str(args.points), "artefacts": None if args.artefacts is None else str(args.artefacts),
+                 "arm": str(args.arm),
                  "reference_points": None if args.reference_points is None else str(args.reference_points)}
         conf = _conformance(loop, _mpe(args))
         write_loop_report(loop, out.dir, inputs=inputs, input_names=names, warnings=warnings, conformance=conf)

@@ -11,8 +11,10 @@ is used to place a centre) and the standard figures are computed:
 * effective diameter test (spheres; rings and cylinders likewise): fitted diameter minus certified,
   with the radius free (instances with at least :data:`DIAMETER_MIN_POINTS` points: a ball-bar
   sphere probed 6 times gives a centre, not a diameter);
-* planes: flatness (max - min of the signed distances); reference points: the errors after the
-  best-fit rigid transform ``T_ref_base`` (RMS and max).
+* planes: flatness (max - min of the signed distances); reference points: the 3D errors (RMS and max)
+  after the best-fit frames ``T_ref_base`` (and marker offsets), or, on data whose frames and offsets are
+  held at another fit's (:meth:`~calibration.data.CalibrationData.with_tracker`: a held-out set predicted
+  with the training fit's), the errors of that prediction (``reference_predicted_*``).
 
 :func:`before_after` tabulates the figures of two parameter vectors (nominal and calibrated), each
 with a standard uncertainty from :func:`bootstrap`: the figures of the calibrated model are fixed
@@ -57,6 +59,8 @@ FIGURES = {
     "flatness_max": ("plane flatness: max (max - min)", "um", 1e6),
     "reference_rms": ("reference points: RMS 3D error after best-fit transform", "um", 1e6),
     "reference_max": ("reference points: max 3D error after best-fit transform", "um", 1e6),
+    "reference_predicted_rms": ("reference points: RMS 3D error, frames and markers of the training fit", "um", 1e6),
+    "reference_predicted_max": ("reference points: max 3D error, frames and markers of the training fit", "um", 1e6),
 }
 
 
@@ -93,8 +97,9 @@ class Validation:
         if self.planes:
             out["flatness_max"] = max(pl["flatness"] for pl in self.planes)
         if self.reference:
-            out["reference_rms"] = self.reference["rms"]
-            out["reference_max"] = self.reference["max"]
+            key = "reference_predicted" if self.reference.get("predicted") else "reference"
+            out[f"{key}_rms"] = self.reference["rms"]
+            out[f"{key}_max"] = self.reference["max"]
         return out
 
     def to_dict(self) -> dict:
@@ -147,12 +152,7 @@ def _validate(model, p, data, weights, reference) -> Validation:
         elif it.kind == "plane":
             v = table["value"][table["instance"] == i]
             val.planes.append({**base, "n": len(v), "flatness": float(v.max() - v.min())})
-        elif it.kind == "reference":
-            e = table["value"][table["instance"] == i]
-            val.reference = {"n": len(e), "rms": float(np.sqrt(np.mean(e ** 2))), "max": float(e.max()),
-                             "T_ref_base": _transform(states[i])}
-            rows = table["point"][table["instance"] == i]
-            val.reference_errors = (e, np.asarray(data.points.measurement)[rows])
+    _reference_figures(val, prob, states, table, data)
     # lengths: centres of the features (certified diameters), no length used in the fit
     centre = {(it.measurement, it.feature): states[i][:3] for i, it in enumerate(prob.instances)
               if it.kind in ("seat", "sphere")}
@@ -184,6 +184,22 @@ def _validate(model, p, data, weights, reference) -> Validation:
     return val
 
 
+def _reference_figures(val: Validation, prob: Problem, states, table, data: CalibrationData) -> None:
+    """The reference points' 3D errors over every session: ``val.reference`` (``n``, ``rms``, ``max``,
+    ``predicted``: every frame and marker offset held at another fit's, ``tracker``) and
+    ``val.reference_errors``."""
+    frames = [i for i, it in enumerate(prob.instances) if it.kind == "reference"]
+    if not frames:
+        return
+    sel = np.isin(table["instance"], frames)
+    e = table["value"][sel]
+    held = all(it.n_theta == 0 for it in prob.instances if it.kind in ("reference", "marker"))
+    predicted = held and data.tracker is not None and prob.reference == "fit"
+    val.reference = {"n": len(e), "rms": float(np.sqrt(np.mean(e ** 2))), "max": float(e.max()),
+                     "predicted": predicted, "tracker": prob.tracker(states).to_dict()}
+    val.reference_errors = (e, np.asarray(data.points.measurement)[table["point"][sel]])
+
+
 def _units(val: Validation) -> dict:
     """Measurement id -> its items: (list name, item); ``"reference"`` items are the errors [m]."""
     out: dict = {}
@@ -192,22 +208,25 @@ def _units(val: Validation) -> dict:
             out.setdefault(item["measurement"], []).append((name, item))
     if val.reference_errors is not None:
         e, meas = val.reference_errors
+        name = "reference_predicted" if val.reference.get("predicted") else "reference"
         for m in dict.fromkeys(meas.tolist()):
-            out.setdefault(m, []).append(("reference", e[meas == m]))
+            out.setdefault(m, []).append((name, e[meas == m]))
     return out
 
 
 def _summary_of(items) -> dict:
     v = Validation()
-    ref = []
+    ref, predicted = [], False
     for name, item in items:
-        if name == "reference":
+        if name.startswith("reference"):
             ref.append(item)
+            predicted = name == "reference_predicted"
         else:
             getattr(v, name).append(item)
     if ref:
         e = np.concatenate(ref)
-        v.reference = {"n": len(e), "rms": float(np.sqrt(np.mean(e ** 2))), "max": float(e.max())}
+        v.reference = {"n": len(e), "rms": float(np.sqrt(np.mean(e ** 2))), "max": float(e.max()),
+                       "predicted": predicted}
     return v.summary()
 
 
@@ -253,13 +272,6 @@ def with_u(value, u, digits: int = 2) -> str:
     if value is None:
         return "-"
     return f"{value:.{digits}f}" + ("" if u is None else f" ± {u:.{digits}f}")
-
-
-def _transform(state) -> list:
-    t = np.eye(4)
-    t[:3, :3] = np.asarray(state[0:9]).reshape(3, 3, order="F")
-    t[:3, 3] = state[9:12]
-    return t.tolist()
 
 
 def before_after(model: ArmModel, p_before, p_after, data: CalibrationData, weights: Weights | None = None,

@@ -104,9 +104,9 @@ def _write_points(path, pts: PointSet) -> Path:
             cols[f"f{a}_N"] = pts.force[:, k]
     if pts.temperature is not None:
         cols["temperature_C"] = pts.temperature
-    if pts.ref is not None:
+    for m in range(pts.n_markers):
         for k, a in enumerate("xyz"):
-            cols[f"{a}_ref_mm"] = pts.ref[:, k] * 1e3
+            cols[f"{a}{'' if pts.n_markers == 1 else m + 1}_ref_mm"] = pts.ref[:, m, k] * 1e3
     return write_csv(path, cols, fmt="%.15g")
 
 
@@ -252,7 +252,7 @@ def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0,
         x_ref = seen @ t_ref[:3, :3].T + t_ref[:3, 3] + rng.normal(0, spec.reference_noise, (nr, 3))
         reference_points = PointSet(path="<synthetic reference>", measurement=np.array(["tracker"] * nr, dtype=object),
                                     feature=np.array([""] * nr, dtype=object), q=q_ref,
-                                    temperature=np.full(nr, 20.0) if needs_t else None, ref=x_ref,
+                                    temperature=np.full(nr, 20.0) if needs_t else None, ref=x_ref[:, None, :],
                                     lines=np.arange(2, nr + 2))
     artefacts = Artefacts("<synthetic artefacts>", features, tuple(distances))
     truth = {name: float(v) for name, v in zip(model.spec.names, p_true)}
