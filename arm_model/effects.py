@@ -259,8 +259,7 @@ def effect_from_name(key: str, **kwargs) -> Effect:
 def _chain(desc: ArmDescription, geom: Geometry, q, upto: int, point, ops):
     """``point`` given in frame ``upto - 1`` (the end of row ``upto - 1``) in base coordinates."""
     from .chain import chain_point
-    return chain_point(desc.convention, geom.rows[:upto], q[:upto], point, ops,
-                       None if desc.axes is None else desc.axes[:upto])
+    return chain_point(desc.convention, geom.rows[:upto], q, point, ops, desc.chain_joints[:upto])
 
 
 def _perpendicular(axis) -> tuple[tuple[float, float, float], tuple[float, float, float]]:

@@ -121,8 +121,10 @@ def test_any_tip_orientation_is_read(tmp_path_factory, rpy, xy):
 
 
 def test_tip_frame_pointing_back_and_at_the_joint(tmp_path):
-    """A tip frame whose z points back to the robot is still read (the hinge then |p| behind the ball);
-    a tip frame at the last joint's origin is refused with the line of its joint."""
+    """A tip frame whose z points back to the robot is still read (the hinge then |p| behind the ball) and
+    the model file written of it reads back; a tip frame at the last joint's origin (a flange) is a tip
+    without a stylus: rigid, compliances 0, equal to Pinocchio's frame, and a compliant probe there is
+    refused with the line of its joint."""
     path = _tool_urdf(tmp_path, (0.0, 0.0, 0.05), (math.pi, 0.0, 0.0))    # z points back to the robot
     d = description_from_urdf(path, "ball_link")
     assert abs(d.probe.stylus_length - np.linalg.norm(d.probe.p_last)) < 1e-15
@@ -131,14 +133,23 @@ def test_tip_frame_pointing_back_and_at_the_joint(tmp_path):
     T = _user_tip(model, d, q, "ball_link")
     assert_close(ball_centres(d, q), T[:3, 3], atol=1e-12)
     assert_close(ball_centres(d, q, [0, 0, 1.0]) - ball_centres(d, q), d.probe.axial_compliance * T[:3, 2], atol=1e-15)
+    back = parse_description(format_description(d))       # the model file written of it reads back
+    assert back.probe == d.probe
+    assert_close(ball_centres(back, q, [0, 0, 1.0]), ball_centres(d, q, [0, 0, 1.0]), atol=1e-15)
+    flipped = d.with_probe(rpy=(0.0, 0.0, 0.0), p_last=(0.0, 0.0, -0.07839), lever=0.07839)   # the issue's file
+    assert parse_description(format_description(flipped)).probe == flipped.probe
     text = PANDA.read_text()
     start = text.index('<joint name="ball_joint"')
     end = text.index("</joint>", start) + len("</joint>")
     text = (text[:start] + '<joint name="ball_joint" type="fixed"><origin xyz="0 0 0"/><parent link="panda_link7"/>'
             '<child link="ball_link"/></joint>' + text[end:])
     path.write_text(text)
+    d = description_from_urdf(path, "ball_link")
+    assert d.probe.lever == 0.0 and not d.probe.compliance.any()
+    assert parse_description(format_description(d)).probe == d.probe
+    assert_close(ball_centres(d, q), _user_tip(_pin_model(path), d, q, "ball_link")[:3, 3], atol=1e-12)
     with pytest.raises(InputError, match="at the origin of the last joint") as exc:
-        description_from_urdf(path, "ball_link")
+        description_from_urdf(path, "ball_link", probe=dict(axial_compliance=1e-7))
     assert exc.value.line is not None
 
 
@@ -441,11 +452,26 @@ def test_bad_urdf_is_located(tmp_path, capsys, edit, words, line):
     assert words.split()[0] in err and "Traceback" not in err and not out.exists()
 
 
-def test_prismatic_joint_on_the_chain_is_refused_with_its_line():
-    with pytest.raises(InputError, match="revolute joints only") as exc:
-        load_arm(PANDA, "panda_leftfinger")
-    lines = PANDA.read_text().splitlines()
-    assert exc.value.line == 1 + next(i for i, t in enumerate(lines) if 'joint name="panda_finger_joint1"' in t)
+def test_prismatic_finger_and_its_mimic_equal_pinocchio():
+    """The Panda's fingers: panda_finger_joint1 (prismatic) on the chain to the left finger; the right
+    finger's joint mimics it (off its chain), so its column holds the master's value. Both tips equal
+    Pinocchio's frames on the user's file, positions in metres."""
+    import pinocchio as pin
+    model = _pin_model(PANDA)
+    data = model.createData()
+    rng = np.random.default_rng(8)
+    for tip, joint in (("panda_leftfinger", "panda_finger_joint1"), ("panda_rightfinger", "panda_finger_joint2")):
+        d = load_arm(PANDA, tip)
+        assert d.n_joints == 8 and d.joints[-1].prismatic and d.joint_quantities[-1] == "length"
+        assert d.joint_names[-1] == "panda_finger_joint1"       # the mimic reads its master's column
+        assert d.joints[-1].name == joint
+        q = np.column_stack([rng.uniform(-2, 2, (6, 7)), rng.uniform(0.0, 0.04, 6)])
+        for i in range(len(q)):
+            x = np.zeros(model.nq)
+            for name, v in zip([j.name for j in d.joints], q[i]):
+                x[model.joints[model.getJointId(name)].idx_q] = v
+            pin.framesForwardKinematics(model, data, x)
+            assert_close(ball_centres(d, q[i]), data.oMf[model.getFrameId(tip)].translation, atol=1e-12)
 
 
 def test_every_effect_with_a_rotated_tool_three_evaluators(tmp_path):

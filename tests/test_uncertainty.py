@@ -45,7 +45,7 @@ def test_chain_jacobian_is_the_casadi_jacobian(nominal, tmp_path, convention):
     w = np.column_stack([rng.normal(0, 3, (n, 3)), rng.normal(0, 0.1, (n, 3))])
     p = rng.normal(0, 1e-3, model.spec.size) * np.array([1e-3 if u == "m/N" else 1.0 for u in model.spec.units])
     rows, pl, c = split_params(desc, p)
-    cen, g = chain_jacobian(desc.convention, rows, pl, c, list(q.T), list(w.T), desc.axes,
+    cen, g = chain_jacobian(desc.convention, rows, pl, c, list(q.T), list(w.T), desc.chain_joints,
                             desc.probe.rotation, desc.probe.lever)
     jac = _casadi_jacobians(model)
     size = model.spec.size
@@ -74,12 +74,12 @@ def test_joint_screws_give_pinocchios_and_finite_difference_jacobians(nominal, t
 
     def frame(qq):
         qt = list(np.atleast_2d(qq).T)
-        o = np.column_stack(chain_point(desc.convention, rows, qt, (0.0, 0.0, 0.0), axes=desc.axes))
-        return np.stack([np.column_stack(chain_point(desc.convention, rows, qt, tuple(e), axes=desc.axes)) - o
+        o = np.column_stack(chain_point(desc.convention, rows, qt, (0.0, 0.0, 0.0), joints=desc.chain_joints))
+        return np.stack([np.column_stack(chain_point(desc.convention, rows, qt, tuple(e), joints=desc.chain_joints)) - o
                          for e in np.eye(3)], axis=2), o
 
-    r, o, u, c = joint_screws(desc.convention, rows, q, desc.axes)
-    columns = joint_screws(desc.convention, [[np.full(n, v) for v in row] for row in rows], q, desc.axes)
+    r, o, u, c = joint_screws(desc.convention, rows, q, desc.chain_joints)
+    columns = joint_screws(desc.convention, [[np.full(n, v) for v in row] for row in rows], q, desc.chain_joints)
     for a, b in zip(columns, (r, o, u, c)):      # rows as columns (a geometry per point, e.g. thermal)
         assert_close(a, b, atol=1e-15)
     r_ref, o_ref = frame(q)
