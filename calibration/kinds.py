@@ -182,7 +182,7 @@ def frame_of(state) -> np.ndarray:
 
 
 #: most rounds of :func:`tracker_start`'s alternation, and the change of every offset [m] that ends it
-TRACKER_ROUNDS, TRACKER_TOL = 200, 1e-9
+TRACKER_ROUNDS, TRACKER_TOL = 200, 1e-8
 
 
 def tracker_start(base, turn, x_ref, frame, marker, frames, markers, held_frames, held_offsets):
@@ -191,37 +191,70 @@ def tracker_start(base, turn, x_ref, frame, marker, frames, markers, held_frames
     Row ``j`` of the reference rows sees ``x_ref[j] = R_s (base[j] + turn[j] o_m) + t_s`` with ``s =
     frame[j]`` and ``m = marker[j]`` (instance indices; -1: no marker, ``turn[j]`` zero), ``base`` [m] the
     tip point (or a seat centre), ``turn`` (n, 3, 3) d x / d o (the tip frame's axes in the base frame).
-    Alternating least squares, each step exact in its block so that the cost never rises: every frame
-    by Kabsch (:func:`arm_model.geometry.kabsch`) with the offsets held, then every offset by linear
-    least squares with the frames held, from offsets zero, until no offset moves by more than
-    :data:`TRACKER_TOL` (at most :data:`TRACKER_ROUNDS` rounds; the Levenberg-Marquardt fit that follows
-    polishes the rest). Held frames / offsets (``held_*`` not None, in the order of ``frames`` /
-    ``markers``) stay as given. Returns (frame states, offset states) in the order of ``frames``,
-    ``markers``."""
-    offsets = [np.zeros(3) if h is None else np.asarray(h, float) for h in held_offsets]
-    where = {m: k for k, m in enumerate(markers)}
-    fstates = [None if h is None else np.asarray(h, float) for h in held_frames]
+    Alternating least squares, each step exact in its block so that the cost never rises: every rotation
+    ``R_s`` by Kabsch (:func:`arm_model.geometry.kabsch`) with the offsets held, then every translation
+    ``t_s`` and offset ``o_m`` together by linear least squares with the rotations held (the translations
+    and offsets are strongly coupled; the rotations far less), from offsets zero, until no offset moves by
+    more than :data:`TRACKER_TOL` (at most :data:`TRACKER_ROUNDS` rounds; the Levenberg-Marquardt fit
+    that follows polishes the rest). Held frames / offsets (``held_*`` not None, in the order of
+    ``frames`` / ``markers``) stay as given. Returns (frame states, offset states) in the order of
+    ``frames``, ``markers``."""
+    fidx = np.array([frames.index(f) for f in frame], dtype=int)
+    midx = np.array([markers.index(m) if m >= 0 else -1 for m in marker], dtype=int)
+    offsets = np.array([np.zeros(3) if h is None else np.asarray(h, float) for h in held_offsets]).reshape(-1, 3)
+    free_f = [k for k, h in enumerate(held_frames) if h is None]
+    free_o = [k for k, h in enumerate(held_offsets) if h is None]
+    tf = [None if h is None else frame_of(h) for h in held_frames]
     for _ in range(TRACKER_ROUNDS):
-        o = np.array([offsets[where[m]] if m >= 0 else np.zeros(3) for m in marker]).reshape(-1, 3)
-        x = base + np.einsum("nij,nj->ni", turn, o)
-        for k, (f, h) in enumerate(zip(frames, held_frames)):
-            if h is None:
-                sel = frame == f
-                fstates[k] = frame_state(_transform(*geometry.kabsch(x[sel], x_ref[sel])))
-        moved = 0.0
-        for k, m in enumerate(markers):
-            if held_offsets[k] is not None:
-                continue
-            sel = np.flatnonzero(marker == m)
-            rot = [frame_of(fstates[frames.index(f)]) for f in frame[sel]]
-            a = np.concatenate([t[:3, :3] @ turn[j] for t, j in zip(rot, sel)])
-            b = np.concatenate([x_ref[j] - t[:3, 3] - t[:3, :3] @ base[j] for t, j in zip(rot, sel)])
-            new = np.linalg.lstsq(a, b, rcond=None)[0]
-            moved = max(moved, float(np.max(np.abs(new - offsets[k]))))
-            offsets[k] = new
+        x = base + np.einsum("nij,nj->ni", turn, _row_offsets(offsets, midx))
+        for k in free_f:
+            sel = fidx == k
+            tf[k] = _transform(*geometry.kabsch(x[sel], x_ref[sel]))
+        if not free_o:
+            break
+        new = _translations_and_offsets(base, turn, x_ref, fidx, midx, tf, free_f, offsets, free_o)
+        moved = float(np.max(np.abs(new - offsets)))
+        offsets = new
         if moved <= TRACKER_TOL:
             break
-    return fstates, offsets
+    return [frame_state(t) for t in tf], list(offsets)
+
+
+def _row_offsets(offsets, midx) -> np.ndarray:
+    """(n, 3) each row's marker offset (zero for a row without a marker)."""
+    if not len(offsets):
+        return np.zeros((len(midx), 3))
+    return np.where((midx >= 0)[:, None], offsets[np.maximum(midx, 0)], 0.0)
+
+
+def _translations_and_offsets(base, turn, x_ref, fidx, midx, tf, free_f, offsets, free_o) -> np.ndarray:
+    """The offsets of :func:`tracker_start`'s linear step: ``x_ref - R_s base = t_s + R_s turn o_m`` in least
+    squares over the free translations and offsets, the rotations (and the held parts) fixed; the free
+    frames' translations in ``tf`` are updated in place; returns the new offsets (K, 3)."""
+    rot = np.array([t[:3, :3] for t in tf])[fidx]
+    rhs = x_ref - np.einsum("nij,nj->ni", rot, base)
+    a_o = np.einsum("nij,njk->nik", rot, turn)                           # (n, 3, 3): d / d o_m
+    cols = 3 * (len(free_f) + len(free_o))
+    a = np.zeros((len(base), 3, cols))
+    for c, k in enumerate(free_f):
+        a[fidx == k, :, 3 * c:3 * c + 3] = np.eye(3)
+    held_t = np.array([np.zeros(3) if k in free_f else tf[k][:3, 3] for k in range(len(tf))])[fidx]
+    rhs = rhs - held_t
+    held_o = [k for k in range(len(offsets)) if k not in free_o]
+    for k in held_o:
+        sel = midx == k
+        rhs[sel] -= np.einsum("nij,j->ni", a_o[sel], offsets[k])
+    for c, k in enumerate(free_o):
+        sel = midx == k
+        a[sel, :, 3 * (len(free_f) + c):3 * (len(free_f) + c) + 3] = a_o[sel]
+    sol = np.linalg.lstsq(a.reshape(-1, cols), rhs.reshape(-1), rcond=None)[0]
+    for c, k in enumerate(free_f):
+        tf[k] = tf[k].copy()
+        tf[k][:3, 3] = sol[3 * c:3 * c + 3]
+    new = offsets.copy()
+    for c, k in enumerate(free_o):
+        new[k] = sol[3 * (len(free_f) + c):3 * (len(free_f) + c) + 3]
+    return new
 
 
 def retract(kind: str, state: np.ndarray, theta: np.ndarray) -> np.ndarray:

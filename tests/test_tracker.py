@@ -116,7 +116,7 @@ def test_a_marker_is_the_tip_frame_point_pinocchio_places(nominal, rpy, o):
 
 def test_the_first_fit_finds_exact_frames_and_offsets(nominal):
     """Noise-free data: the alternating Kabsch / least-squares start recovers the truth without any
-    Levenberg-Marquardt step."""
+    Levenberg-Marquardt step (to its stopping rule: 10 nm)."""
     model = ArmModel(nominal)
     cols, q, sess, exact = _campaign(model, np.zeros(model.spec.size), noise=0.0)
     data = make_data(parse_points(_text(cols), "t.csv", 7), None, model)
@@ -125,8 +125,8 @@ def test_the_first_fit_finds_exact_frames_and_offsets(nominal):
     got = prob.tracker(states)
     assert got.sessions == ("mon", "tue")
     for s in got.sessions:
-        assert_close(got.frame(s), _truth_tracker().frame(s), atol=1e-9)
-    assert_close(got.offsets, OFFSETS, atol=1e-9)
+        assert_close(got.frame(s), _truth_tracker().frame(s), atol=1e-8)
+    assert_close(got.offsets, OFFSETS, atol=1e-8)
 
 
 def test_tracker_start_holds_what_is_given():
