@@ -131,6 +131,27 @@ def random_truth(model: ArmModel, rng, length: float = 50e-6, angle: float = 1e-
 SPHERE_CAP = float(np.arccos(0.2))
 
 
+def _tracker_points(model: ArmModel, p_true, spec: SynthSpec, rng, T_ref_base=None):
+    """``(points, T_ref_base, true ball centres)`` of ``spec.reference_points`` free points a tracker sees
+    (the ball centre itself, marker 1), in ``T_ref_base`` (default: drawn at random)."""
+    desc, nr = model.desc, spec.reference_points
+    needs_t = "temperature" in model.needs()
+    q_ref = random_q(desc, nr, rng)
+    x_true = model.ball_centres(q_ref, None, p_true, AuxData(temperature=np.full(nr, 20.0)) if needs_t else None)
+    if T_ref_base is None:
+        T_ref_base = np.eye(4)
+        T_ref_base[:3, :3] = rotation_xyz(rng.uniform(-np.pi, np.pi, 3))
+        T_ref_base[:3, 3] = rng.uniform(-2, 2, 3)
+    t_ref = np.asarray(T_ref_base, float)
+    seen = x_true + rng.normal(0, spec.noise, (nr, 3))
+    x_ref = seen @ t_ref[:3, :3].T + t_ref[:3, 3] + rng.normal(0, spec.reference_noise, (nr, 3))
+    points = PointSet(path="<synthetic reference>", measurement=np.array(["tracker"] * nr, dtype=object),
+                      feature=np.array([""] * nr, dtype=object), q=q_ref,
+                      temperature=np.full(nr, 20.0) if needs_t else None, ref=x_ref[:, None, :],
+                      lines=np.arange(2, nr + 2))
+    return points, t_ref, x_true
+
+
 def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0, p_true=None,
                   T_ref_base=None) -> SynthCampaign:
     """Make a campaign on the true arm ``(model, p_true)`` (default: :func:`random_truth`)."""
@@ -238,22 +259,8 @@ def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0,
                       force=w_art[:, :3].copy() if spec.force > 0 else None,
                       force_kind="xyz" if spec.force > 0 else None,
                       temperature=np.full(n, 20.0) if needs_t else None, lines=np.arange(2, n + 2))
-    reference_points, t_ref, x_true = None, None, None
-    if spec.reference_points:
-        nr = spec.reference_points
-        q_ref = random_q(desc, nr, rng)
-        x_true = model.ball_centres(q_ref, None, p_true, AuxData(temperature=np.full(nr, 20.0)) if needs_t else None)
-        if T_ref_base is None:
-            T_ref_base = np.eye(4)
-            T_ref_base[:3, :3] = rotation_xyz(rng.uniform(-np.pi, np.pi, 3))
-            T_ref_base[:3, 3] = rng.uniform(-2, 2, 3)
-        t_ref = np.asarray(T_ref_base, float)
-        seen = x_true + rng.normal(0, spec.noise, (nr, 3))
-        x_ref = seen @ t_ref[:3, :3].T + t_ref[:3, 3] + rng.normal(0, spec.reference_noise, (nr, 3))
-        reference_points = PointSet(path="<synthetic reference>", measurement=np.array(["tracker"] * nr, dtype=object),
-                                    feature=np.array([""] * nr, dtype=object), q=q_ref,
-                                    temperature=np.full(nr, 20.0) if needs_t else None, ref=x_ref[:, None, :],
-                                    lines=np.arange(2, nr + 2))
+    reference_points, t_ref, x_true = (_tracker_points(model, p_true, spec, rng, T_ref_base)
+                                       if spec.reference_points else (None, None, None))
     artefacts = Artefacts("<synthetic artefacts>", features, tuple(distances))
     truth = {name: float(v) for name, v in zip(model.spec.names, p_true)}
     return SynthCampaign(points, artefacts, truth, p_true, targets, reference_points, x_true, t_ref)
