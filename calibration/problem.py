@@ -189,13 +189,14 @@ class Problem:
         sessions = data.sessions
         for s in dict.fromkeys(sessions[rows].tolist()):
             sr = rows[sessions[rows] == s]
-            if len(sr) < 3:
-                what = "" if s == DEFAULT_SESSION else f" in session '{s}'"
-                raise InputError(f"{len(sr)} reference point(s){what}: a rigid transform needs at least 3",
-                                 data.file_of(sr[0]), int(self._lines[sr[0]]), "x_ref_mm")
             frame = None if self.reference == "fit" else np.eye(4)
             if frame is None and given is not None:
                 frame = given.frame(s)
+            if frame is None and len(sr) < 3:
+                what = "" if s == DEFAULT_SESSION else f" in session '{s}'"
+                column = "x_ref_mm" if pts.n_markers == 1 else f"x{data.markers[sr[0]] + 1}_ref_mm"
+                raise InputError(f"{len(sr)} reference point(s){what}: a rigid transform needs at least 3",
+                                 data.file_of(sr[0]), int(self._lines[sr[0]]), column)
             held = None if frame is None else geo.frame_state(frame)
             self._add(Instance("*", s, "reference", sr, 0, 6 if held is None else 0, None, state=held))
         if data.marker_offsets != "fit":

@@ -303,3 +303,33 @@ def test_tracker_input_errors_stop_with_one_message(tracker_files, tmp_path, cap
     code, err = _run(capsys, "tip", str(src / "points.csv"), "--arm", "aacmm7", "--reference-frame",
                      "-o", str(tmp_path / "t.csv"))
     assert code == 2 and "[[reference_frame]]" in err and not (tmp_path / "t.csv").exists()
+
+
+def test_the_tip_frame_only_moves_the_offsets(tracker_files, tmp_path):
+    """The marker's link named at the flange (the last joint's origin, no stylus) or at the probe's ball:
+    the same predictions, offsets apart by the fixed 180 mm between the two frames. The held-out set
+    holds a single pose of session 'tue' (2 reference points): its frame is the training fit's."""
+    from conftest import ROOT
+    src = tracker_files[0]
+    got = {}
+    for tip in ("link_7", "ball"):
+        out = tmp_path / tip
+        assert main(["calibrate", str(src / "points.csv"), "--arm", str(ROOT / "urdf" / "aacmm7.urdf"), "--tip-frame",
+                     tip, "--holdout", "pose-005,pose-010,pose-035", "--no-plots", "-o", str(out)]) == 0
+        summary = json.loads((out / "summary.json").read_text())
+        got[tip] = ({r["key"]: r["after"] for r in summary["validation_holdout"]},
+                    load_model(out / "aacmm7-calibrated.toml").tracker)
+    assert got["link_7"][0]["reference_predicted_rms"] == pytest.approx(got["ball"][0]["reference_predicted_rms"],
+                                                                        rel=1e-6)
+    assert_close(got["link_7"][1].offsets - got["ball"][1].offsets, [[0, 0, 0.18]] * 2, atol=1e-9)
+
+
+def test_close_loop_without_artefacts(nominal, tmp_path):
+    model = ArmModel(nominal)
+    cols, *_ = _campaign(model, np.zeros(model.spec.size), n=10, noise=20e-6, sessions=("mon",))
+    write_csv(tmp_path / "p.csv", cols, fmt="%.12g")
+    out = tmp_path / "loop"
+    assert main(["close-loop", str(tmp_path / "p.csv"), "--arm", "aacmm7", "-o", str(out)]) == 0
+    arm = load_model(out / "aacmm7-calibrated.toml")
+    assert arm.tracker.sessions == ("mon",) and arm.tracker.offsets.shape == (2, 3)
+    assert_close(arm.tracker.offsets, OFFSETS, atol=2e-4)
