@@ -200,16 +200,21 @@ def tip_table(arm, points, reference_frame: bool = False) -> dict:
     return cols
 
 
+def _check_tracker(arm: Arm, path) -> None:
+    """An :class:`InputError` when ``arm`` holds no reference instrument's frame (``--reference-frame``)."""
+    if arm.tracker is None:
+        raise InputError("--reference-frame needs a model file with the reference instrument's frame "
+                         "([[reference_frame]]), as aacmm calibrate writes it from points with reference columns",
+                         path)
+
+
 def reference_columns(arm: Arm, points) -> dict:
     """``x_ref_mm, y_ref_mm, z_ref_mm`` (``x1_ref_mm`` ... for several markers): each marker of ``arm.tracker``
     where the instrument would see it [mm] in the frame of the row's session, and ``error_ref_um``
     (``error1_ref_um`` ...): the 3D distance [um] measured - predicted where ``points`` carry the
     instrument's coordinates of as many markers."""
     from .tracker import DEFAULT_SESSION, check_sessions, marker_positions
-    if arm.tracker is None:
-        raise InputError("--reference-frame needs a model file with the reference instrument's frame "
-                         "([[reference_frame]]), as aacmm calibrate writes it from points with reference columns",
-                         arm.desc.source)
+    _check_tracker(arm, arm.desc.source)
     sessions = points.session if points.session is not None else np.full(len(points), DEFAULT_SESSION, object)
     check_sessions(arm.tracker, sessions, points.path)
     predicted = marker_positions(arm.model, arm.p, points.q, arm.tracker, sessions,
@@ -308,10 +313,8 @@ def run_tip(args: argparse.Namespace) -> int:
         arm = model_from_args(args)
         desc = arm.desc
         ref = args.reference_frame
-        if ref and arm.tracker is None:
-            raise InputError("--reference-frame needs a model file with the reference instrument's frame "
-                             "([[reference_frame]]), as aacmm calibrate writes it from points with reference columns",
-                             args.arm)
+        if ref:
+            _check_tracker(arm, args.arm)
         from .uncertainty_cli import parameters_of, tip_columns, wants_uncertainty
         parameters = parameters_of(arm)
         uncertain = wants_uncertainty(args, parameters)

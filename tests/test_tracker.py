@@ -249,6 +249,13 @@ def test_calibrate_without_artefacts_then_tip_predicts_the_instrument(tracker_fi
         assert np.sqrt(np.mean(err ** 2)) < 40e-6, k            # against the noise-free truth
         measured = np.column_stack([cols[f"{a}{k + 1}_ref_mm"] for a in "xyz"]) * 1e-3
         assert_close(t[f"error{k + 1}_ref_um"], np.linalg.norm(measured - pred, axis=1) * 1e6, atol=2e-3)
+    # a session the model has no frame for, or rows without a session column: one message, nothing written
+    for name, columns in (("wed.csv", {**cols, "session": np.full(len(cols["session"]), "wed", dtype=object)}),
+                          ("none.csv", {k: v for k, v in cols.items() if k != "session"})):
+        write_csv(tmp_path / name, columns, fmt="%.12g")
+        out_csv = tmp_path / f"{name}.tips.csv"
+        assert main(["tip", str(tmp_path / name), "--arm", str(out / "aacmm7-calibrated.toml"), "--reference-frame",
+                     "-o", str(out_csv)]) == 2 and not out_csv.exists()
 
 
 def test_the_tracker_tables_read_back(nominal):
