@@ -687,9 +687,11 @@ def _instances(prob: Problem, table: dict, states) -> list[dict]:
     return out
 
 
-def _tracker(prob: Problem, states, nrm: _Normal, n_kept: int, var: float) -> Tracker | None:
+def _tracker(prob: Problem, p, states, nrm: _Normal, n_kept: int, var: float) -> Tracker | None:
     """The reference instrument's frames and the markers' offsets (:meth:`Problem.tracker`) with the standard
-    uncertainties of their increments, or None without reference rows."""
+    uncertainties of their increments, or None without reference rows; a :class:`NumericalError` when the
+    data do not determine them (:meth:`Problem.check_tracker`)."""
+    prob.check_tracker(p, states)
     u = {}
     for i, it in enumerate(prob.instances):
         if it.kind in ("reference", "marker") and it.n_theta:
@@ -735,7 +737,7 @@ def _fit(model: ArmModel, data: CalibrationData, options: FitOptions) -> Calibra
         covariance_source=source, status=sol.status, iterations=sol.iterations, evaluations=sol.evaluations,
         cost=sol.cost, n_residuals=n_rows, n_nuisance=n_nuis, dof=dof, identifiability=idf0,
         identifiability_final=idf1, residuals=table, instances=_instances(prob, table, sol.states),
-        distances=distances, tracker=_tracker(prob, sol.states, nrm, len(kept), var), outliers=outliers,
+        distances=distances, tracker=_tracker(prob, sol.p, sol.states, nrm, len(kept), var), outliers=outliers,
         dropped=[], data=data, weights=options.weights, reference_mode=options.reference, unused=prob.unused,
         variance=variance_components(prob, ev.r, nrm.h, options.weights), prior_scale=options.prior_scale,
         log_evidence=nrm.log_evidence, prior_centre=None if s.prior is None else s.prior.centre, options=options)

@@ -530,6 +530,26 @@ class Problem:
                 "instance": cat(insts, (0,)).astype(int), "value": cat(vals, (0,)),
                 "vector": cat(vecs, (0, 3)), "distance": dist}
 
+    def check_tracker(self, p, states, rtol: float = 1e-9) -> None:
+        """A :class:`NumericalError` when the data at ``p`` and ``states`` do not determine the unknown frames
+        and marker offsets apart (their weighted Jacobian columns, each scaled to unit length, have a
+        singular value below ``rtol`` of the largest): poses whose tip frame turns about one axis only, say,
+        cannot tell a marker's offset along that axis from the frame's translation."""
+        inst = [it for it in self.instances if it.kind in ("reference", "marker") and it.n_theta]
+        if not inst:
+            return
+        cols = np.concatenate([np.arange(it.offset, it.offset + it.n_theta) for it in inst])
+        j = self.with_free([]).evaluate(p, states).jt[:, cols].toarray()
+        norm = np.linalg.norm(j, axis=0)
+        s = np.linalg.svd(j / np.where(norm > 0, norm, 1.0), compute_uv=False) if len(j) else np.zeros(1)
+        if len(j) < len(cols) or not (norm > 0).all() or s[-1] < rtol * s[0]:
+            what = " and the markers' offsets" if any(it.kind == "marker" for it in inst) else ""
+            raise NumericalError(f"the reference points do not determine the instrument's frame{what}: "
+                                 f"{len(cols)} unknowns, condition {s[0] / max(s[-1], 1e-300):.3g}. The poses must turn "
+                                 "the tip frame about more than one axis (a marker's offset along the only axis "
+                                 "of rotation moves it as the frame's translation does), in every session; or, "
+                                 "where the instrument sees the tip point itself, --marker-offset zero")
+
     def tracker(self, states, u: dict | None = None) -> Tracker | None:
         """The :class:`~arm_model.tracker.Tracker` at ``states``: each session's frame and, when the
         markers sit at unknown offsets, their offsets (else None: the instrument sees the tip point);

@@ -34,4 +34,5 @@ def fit_tracker(model: ArmModel, p, data: CalibrationData, weights: Weights | No
         return None
     prob = Problem(model, data, weights or Weights(), [], distances=False, reference=reference)
     states = levenberg_marquardt(prob, np.asarray(p, float), prob.initial_states(p)).states
+    prob.check_tracker(p, states)
     return prob.tracker(states)

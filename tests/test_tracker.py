@@ -340,3 +340,19 @@ def test_close_loop_without_artefacts(nominal, tmp_path):
     arm = load_model(out / "aacmm7-calibrated.toml")
     assert arm.tracker.sessions == ("mon",) and arm.tracker.offsets.shape == (2, 3)
     assert_close(arm.tracker.offsets, OFFSETS, atol=2e-4)
+
+
+def test_poses_that_cannot_place_the_markers_are_a_numerical_failure(nominal, tmp_path, capsys):
+    """Only the first joint moves: the tip frame turns about one axis, and a marker's offset along it
+    moves the marker as the frame's translation does. The fit stops with that reason, nothing written."""
+    model = ArmModel(nominal)
+    cols, q, *_ = _campaign(model, np.zeros(model.spec.size), n=20, noise=0.0, sessions=("mon",))
+    q[:, 1:] = q[0, 1:]
+    exact = marker_positions(model, np.zeros(model.spec.size), q, _truth_tracker(("mon",)), cols["session"])
+    noisy = exact + np.random.default_rng(5).normal(0, 20e-6, exact.shape)
+    cols.update({f"q{j + 1}_rad": q[:, j] for j in range(7)})
+    cols.update({f"{a}{k + 1}_ref_mm": noisy[:, k, i] * 1e3 for k in range(2) for i, a in enumerate("xyz")})
+    write_csv(tmp_path / "p.csv", cols, fmt="%.12g")
+    code, err = _run(capsys, "calibrate", str(tmp_path / "p.csv"), "--arm", "aacmm7", "-o", str(tmp_path / "cal"))
+    assert code == 2 and "do not determine the instrument's frame and the markers' offsets" in err
+    assert not (tmp_path / "cal").exists()
