@@ -356,3 +356,25 @@ def test_poses_that_cannot_place_the_markers_are_a_numerical_failure(nominal, tm
     code, err = _run(capsys, "calibrate", str(tmp_path / "p.csv"), "--arm", "aacmm7", "-o", str(tmp_path / "cal"))
     assert code == 2 and "do not determine the instrument's frame and the markers' offsets" in err
     assert not (tmp_path / "cal").exists()
+
+
+@settings(max_examples=25, deadline=None)
+@given(k=st.integers(1, 4), n=st.integers(1, 6), unit=st.sampled_from(["mm", "m", "um"]),
+       numbered=st.booleans(), data=st.data())
+def test_marker_columns_read_back_whatever_their_count_and_unit(k, n, unit, numbered, data):
+    """Points written with K markers (numbered, or one unnumbered), sessions and any length unit read back
+    to the same metres."""
+    numbered = numbered or k > 1
+    values = np.array(data.draw(st.lists(st.floats(-1e3, 1e3, allow_nan=False), min_size=3 * k * n,
+                                         max_size=3 * k * n))).reshape(n, k, 3)
+    sessions = data.draw(st.lists(st.sampled_from(["a", "b c", "day-2"]), min_size=n, max_size=n))
+    factor = {"mm": 1e-3, "m": 1.0, "um": 1e-6}[unit]
+    cols = {"measurement": np.array([f"m{i}" for i in range(n)], dtype=object),
+            "feature": np.full(n, "", dtype=object), "session": np.array(sessions, dtype=object),
+            "q1_deg": np.arange(n, dtype=float)}
+    for m in range(k):
+        for a, axis in enumerate("xyz"):
+            cols[f"{axis}{m + 1 if numbered else ''}_ref_{unit}"] = values[:, m, a]
+    pts = parse_points(_text(cols), "p.csv")
+    assert pts.n_markers == k and list(pts.session) == sessions
+    assert_close(pts.ref, values * factor, atol=0, rtol=1e-11)
