@@ -192,7 +192,7 @@ class Problem:
             frame = None if self.reference == "fit" else np.eye(4)
             if frame is None and given is not None:
                 frame = given.frame(s)
-            if frame is None and len(sr) < 3:
+            if frame is None and len(sr) < MIN_POINTS["reference"][0]:
                 what = "" if s == DEFAULT_SESSION else f" in session '{s}'"
                 column = "x_ref_mm" if pts.n_markers == 1 else f"x{data.markers[sr[0]] + 1}_ref_mm"
                 raise InputError(f"{len(sr)} reference point(s){what}: a rigid transform needs at least 3",

@@ -14,16 +14,25 @@ from arm_model.model import ArmModel
 from arm_model.tracker import Tracker
 
 from .data import CalibrationData, Weights
-from .problem import Problem
+from .problem import MIN_POINTS, Problem
 from .solver import levenberg_marquardt
 
-__all__ = ["fit_tracker", "has_reference"]
+__all__ = ["fit_tracker", "has_reference", "own_frames_fit"]
 
 
 def has_reference(data: CalibrationData) -> bool:
     """True when some row of ``data`` carries reference coordinates."""
     ref = data.reference
     return ref is not None and bool(np.any(np.all(np.isfinite(ref), axis=1)))
+
+
+def own_frames_fit(data: CalibrationData) -> bool:
+    """True when every session of ``data`` has the reference points a frame of its own needs
+    (:data:`calibration.problem.MIN_POINTS`)."""
+    ref = data.reference
+    rows = np.all(np.isfinite(ref), axis=1) if ref is not None else np.zeros(len(data), bool)
+    _, counts = np.unique(data.sessions[rows].astype(str), return_counts=True)
+    return bool(np.all(counts >= MIN_POINTS["reference"][0]))
 
 
 def fit_tracker(model: ArmModel, p, data: CalibrationData, weights: Weights | None = None,

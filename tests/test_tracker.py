@@ -234,8 +234,8 @@ def test_calibrate_without_artefacts_then_tip_predicts_the_instrument(tracker_fi
     hold = {r["key"]: r for r in summary["validation_holdout"]}
     # the held-out prediction: the training fit's frames and offsets; the calibrated arm near the noise
     # (20 um per axis: 35 um in 3D), the nominal with its own frames and offsets far off
-    assert hold["reference_predicted_rms"]["after"] < 60
-    assert hold["reference_predicted_rms"]["before"] > 3 * hold["reference_predicted_rms"]["after"]
+    assert hold["reference_rms_predicted"]["after"] < 60
+    assert hold["reference_rms_predicted"]["before"] > 3 * hold["reference_rms_predicted"]["after"]
     arm = load_model(out / "aacmm7-calibrated.toml")
     assert arm.tracker.sessions == ("mon", "tue") and arm.tracker.offsets.shape == (2, 3)
     tips = tmp_path / "tips.csv"
@@ -326,7 +326,7 @@ def test_the_tip_frame_only_moves_the_offsets(tracker_files, tmp_path):
         summary = json.loads((out / "summary.json").read_text())
         got[tip] = ({r["key"]: r["after"] for r in summary["validation_holdout"]},
                     load_model(out / "aacmm7-calibrated.toml").tracker)
-    assert got["link_7"][0]["reference_predicted_rms"] == pytest.approx(got["ball"][0]["reference_predicted_rms"],
+    assert got["link_7"][0]["reference_rms_predicted"] == pytest.approx(got["ball"][0]["reference_rms_predicted"],
                                                                         rel=1e-6)
     assert_close(got["link_7"][1].offsets - got["ball"][1].offsets, [[0, 0, 0.18]] * 2, atol=1e-9)
 

@@ -53,7 +53,7 @@ def test_the_tracker_walkthrough_runs_and_gives_the_figures_it_states(tmp_path):
     assert main(tip) == 0
     summary = json.loads((tmp_path / "talos-cal" / "summary.json").read_text())
     fig = {r["key"]: r for r in summary["validation_holdout"]}
-    rms, mx = fig["reference_predicted_rms"], fig["reference_predicted_max"]
+    rms, mx = fig["reference_rms_predicted"], fig["reference_max_predicted"]
     assert (round(rms["before"] / 1e3, 2), round(mx["before"] / 1e3, 2)) == _stated("nominal URDF")
     assert (round(rms["after"] / 1e3, 2), round(mx["after"] / 1e3, 2)) == _stated("**these commands**")
     assert len(summary["holdout"]) == 30 and summary["inputs"]["artefacts"] is None
