@@ -258,7 +258,7 @@ def _tip_part(arm, path, out: Path, span, known_header) -> _TipTally:
     """One part of a large points file, in a worker process (see :func:`run_tip`)."""
     from . import kinematics
     kinematics.THREADS = 1                           # the other cores run the other parts
-    return _tip_rows(arm, path, iter_points(path, arm.desc.n_joints, span=span, known_header=known_header), out,
+    return _tip_rows(arm, path, iter_points(path, arm.desc.joint_quantities, span=span, known_header=known_header), out,
                      header=span[0] == 0)
 
 
@@ -281,9 +281,9 @@ def run_tip(args: argparse.Namespace) -> int:
                 ucols, lines = tip_columns(arm, block, parameters, args)
                 ulines.extend(lines)
                 return ucols
-            tally = _tip_rows(arm, args.points, [concat_points(iter_points(args.points, desc.n_joints))], tmp, True, extra)
+            tally = _tip_rows(arm, args.points, [concat_points(iter_points(args.points, desc.joint_quantities))], tmp, True, extra)
         elif split is None:
-            tally = _tip_rows(arm, args.points, iter_points(args.points, desc.n_joints), tmp, True)
+            tally = _tip_rows(arm, args.points, iter_points(args.points, desc.joint_quantities), tmp, True)
         else:
             known_header, spans = split
             parts = [tmp] + [tmp.with_name(f"{tmp.name}.part{k}") for k in range(1, len(spans))]

@@ -190,6 +190,12 @@ class ArmDescription:
         return tuple("length" if j.prismatic else "angle" for j in self.encoders)
 
     @property
+    def joint_column_units(self) -> tuple[tuple[str, float], ...]:
+        """Per encoder column: the unit suffix its column is written in and the factor from SI, ("deg",
+        180/pi) for a revolute joint, ("mm", 1000) for a prismatic one (``q3_mm``)."""
+        return tuple(("mm", 1e3) if j.prismatic else ("deg", 180.0 / math.pi) for j in self.encoders)
+
+    @property
     def revolute_columns(self) -> tuple[int, ...]:
         """Indices of the encoder columns of revolute joints."""
         return tuple(k for k, j in enumerate(self.encoders) if not j.prismatic)

@@ -68,6 +68,25 @@ def test_points_two_channel_sensor_sets_probe_y_to_zero():
     assert pts.temperature.tolist() == [20.5]
 
 
+def test_prismatic_joint_columns_are_lengths():
+    """A prismatic joint's column is a length (q3_mm, q3_m, q3_um) read to metres; an angle there, or a
+    length for a revolute joint, is refused naming the column; without the arm's kinds the unit decides."""
+    kinds = ("angle", "angle", "length") + ("angle",) * 4
+    text = HEADER.replace("q3_deg", "q3_mm") + "\n" + row(q=(90, 0, 250, 0, 0, 0, 0)) + "\n"
+    pts = parse_points(text, "p.csv", kinds)
+    assert pts.q[0, 2] == 0.25 and pts.q[0, 0] == pytest.approx(math.pi / 2)
+    assert parse_points(text.replace("q3_mm", "q3_m").replace(",250.0,", ",0.25,"), "p.csv", kinds).q[0, 2] == 0.25
+    with pytest.raises(InputError, match="prismatic: its column is a length") as exc:
+        parse_points(HEADER + "\n" + row() + "\n", "p.csv", kinds)
+    assert exc.value.column == "q3_deg" and exc.value.line == 1
+    with pytest.raises(InputError, match="plausible length") as exc:
+        parse_points(text.replace(",250.0,", ",1e7,"), "p.csv", kinds)
+    assert exc.value.column == "q3_mm" and exc.value.line == 2
+    assert parse_points(text, "p.csv", 7).q[0, 2] == 0.25
+    with pytest.raises(InputError, match="angle .* or, for a prismatic joint, a length"):
+        parse_points(HEADER.replace("q3_deg", "q3_N") + "\n" + row() + "\n", "p.csv", 7)
+
+
 @pytest.mark.parametrize("text, line, column, words", [
     ("", 1, None, "empty"),
     (HEADER + "\n", 2, None, "no points"),
@@ -83,7 +102,7 @@ def test_points_two_channel_sensor_sets_probe_y_to_zero():
 ])
 def test_points_errors_name_line_and_column(text, line, column, words):
     with pytest.raises(InputError) as exc:
-        parse_points(text, "pts.csv", 7)
+        parse_points(text, "pts.csv", ("angle",) * 7)
     e = exc.value
     assert e.path == "pts.csv" and e.line == line and e.column == column, str(e)
     assert words in str(e)

@@ -10,7 +10,6 @@ import csv
 import io
 import json
 import logging
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,7 +41,6 @@ SIGNALS_DIR = "signals"
 TRUTH_HEADER = ("# TRUTH of a simulated campaign. No analysis reads this file: it holds the hidden true arm, "
                 "its effects and the artefacts' placement, only to score results.")
 
-_DEG = 180.0 / math.pi
 _FMT = {"q": "%.12f", "force": "%.6f", "temperature": "%.6f", "time": "%.3f", "ref": "%.9f"}
 
 
@@ -272,8 +270,8 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
 
     def points_columns(rows, with_ref):
         cols = {"measurement": (plan.measurement[rows], None), "feature": (plan.feature[rows], None)}
-        for k in range(desc.n_joints):
-            cols[f"q{k + 1}_deg"] = (q_read[rows, k] * _DEG, _FMT["q"])
+        for k, (unit, factor) in enumerate(desc.joint_column_units):
+            cols[f"q{k + 1}_{unit}"] = (q_read[rows, k] * factor, _FMT["q"])
         if sensor == "xyz":
             for k, a in enumerate("xyz"):
                 cols[f"f{a}_N"] = (f_read[rows, k], _FMT["force"])
@@ -299,10 +297,10 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
     points = ref_points = None
     if main_rows.size:
         texts[POINTS_FILE] = _csv_text(points_columns(main_rows, False))
-        points = parse_points(texts[POINTS_FILE], POINTS_FILE, desc.n_joints)
+        points = parse_points(texts[POINTS_FILE], POINTS_FILE, desc.joint_quantities)
     if ref_rows.size:
         texts[REFERENCE_FILE] = _csv_text(points_columns(ref_rows, True))
-        ref_points = parse_points(texts[REFERENCE_FILE], REFERENCE_FILE, desc.n_joints)
+        ref_points = parse_points(texts[REFERENCE_FILE], REFERENCE_FILE, desc.joint_quantities)
     texts[ARTEFACTS_FILE] = _artefacts_text(plan, campaign)
     artefacts = parse_artefacts(texts[ARTEFACTS_FILE], ARTEFACTS_FILE)
     # force signals, one a measurement
@@ -340,10 +338,10 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
     texts[TRUTH_FILE] = _truth_text(campaign, truth, plan, draw, stats)
     tcols = {"measurement": (plan.measurement, None), "feature": (plan.feature, None),
              "file": (np.where(is_ref, REFERENCE_FILE, POINTS_FILE), None)}
-    for k in range(desc.n_joints):
-        tcols[f"q{k + 1}_true_deg"] = (q_true[:, k] * _DEG, "%.12f")
-    for k in range(desc.n_joints):
-        tcols[f"q{k + 1}_enc_deg"] = (q_enc[:, k] * _DEG, "%.12f")
+    for k, (unit, factor) in enumerate(desc.joint_column_units):
+        tcols[f"q{k + 1}_true_{unit}"] = (q_true[:, k] * factor, "%.12f")
+    for k, (unit, factor) in enumerate(desc.joint_column_units):
+        tcols[f"q{k + 1}_enc_{unit}"] = (q_enc[:, k] * factor, "%.12f")
     for k, a in enumerate("xyz"):
         tcols[f"{a}_true_mm"] = (centres[:, k] * 1e3, "%.9f")
     for k, a in enumerate("xyz"):
