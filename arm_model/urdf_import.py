@@ -116,22 +116,22 @@ def _parse_xml(path: Path, data: bytes):
 
 
 def _check_numbers(root, path: Path) -> None:
-    """Every numeric attribute holds numbers (count and syntax); those the kinematics or the masses use
-    (:data:`_USED`) are finite and plausible too."""
-    for el in root.iter():
-        if not isinstance(el.tag, str):
-            continue
+    """Every numeric attribute holds numbers (count and syntax); those the kinematics use (:data:`_USED`)
+    are finite and plausible too."""
+    for el in root.iter(*_NUMERIC):
         parent = el.getparent()
-        for attr, n in _NUMERIC.get(el.tag, {}).items():
+        ptag = None if parent is None else parent.tag
+        for attr, n in _NUMERIC[el.tag].items():
             text = el.get(attr)
             if text is None:
                 continue
-            vals = [parse_number(v) for v in text.split()]
-            used = (None if parent is None else parent.tag, el.tag, attr) in _USED
-            if len(vals) != n or any(v is None for v in vals) or (used and not all(map(math.isfinite, vals))):
+            parts = text.split()
+            vals = [parse_number(v) for v in parts] if len(parts) == n else None
+            used = (ptag, el.tag, attr) in _USED
+            if vals is None or None in vals or (used and not all(map(math.isfinite, vals))):
                 raise InputError(f"<{el.tag} {attr}=...> must be {n} finite number{'s' if n > 1 else ''}, "
                                  f"got {text!r}", path, el.sourceline, f"key '{el.tag}.{attr}'")
-            quantity = _USED.get((None if parent is None else parent.tag, el.tag, attr))
+            quantity = _USED.get((ptag, el.tag, attr)) if used else None
             wrong = implausible(vals, quantity) if quantity else None
             if wrong:
                 raise InputError(f"<{el.tag} {attr}=...>: {wrong[1]}", path, el.sourceline, f"key '{el.tag}.{attr}'")
