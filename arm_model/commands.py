@@ -306,6 +306,10 @@ def run_tip(args: argparse.Namespace) -> int:
         log.info("effects applied: " + ", ".join(e.describe() for e in arm.effects))
     if kinds == {None}:
         log.info("no force columns: corrected = rigid (no deflection applied)")
+    elif desc.probe.lever == 0.0:
+        log.warning("the tip has no stylus (it lies at the last joint's origin: a flange, a marker): the force "
+                    "columns bend nothing, corrected = rigid; for the deflection of a compliant probe give a tip "
+                    "frame at its ball")
     else:
         if "two-channel" in kinds:
             log.info("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not measured "

@@ -16,7 +16,7 @@ import numpy as np
 from ._errors import InputError, parse_toml, read_text
 from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
-__all__ = ["JointRow", "Mimic", "Probe", "ArmDescription", "load_description", "parse_description",
+__all__ = ["JointRow", "Mimic", "Probe", "Visual", "ArmDescription", "load_description", "parse_description",
            "format_description", "GRAVITY", "MIN_STYLUS", "DH_ROW_FIELDS", "URDF_ROW_FIELDS"]
 
 DH_ROW_FIELDS = ("theta_offset", "d", "a", "alpha")
@@ -80,6 +80,18 @@ class JointRow:
 
 
 @dataclass(frozen=True)
+class Visual:
+    """One visual of a URDF the arm was read from, for the viewer only: ``row`` the chain row whose moving
+    link carries it (-1: the base, before the first moving joint), ``pose`` its 4x4 pose in that link's
+    frame (nested tuples [m]), ``geometry`` the ``<geometry>`` element's XML (mesh file names absolute),
+    ``rgba`` its colour or None."""
+    row: int
+    pose: tuple
+    geometry: str
+    rgba: tuple | None = None
+
+
+@dataclass(frozen=True)
 class Probe:
     """The probe: ball centre ``p_last`` [m] in the last joint frame, ball diameter [m],
     calibrated force range [N], and compliances [m/N] of the ball along probe x, y (bending)
@@ -130,6 +142,9 @@ class ArmDescription:
     source: str | None = field(default=None, compare=False)
     #: the URDF link at the ball centre when the arm was read from a URDF (``source``)
     tip_frame: str | None = field(default=None, compare=False)
+    #: the user's visuals when the arm was read from a URDF, for the viewer (:class:`Visual`); never written
+    #: to a description TOML
+    visuals: tuple = field(default=(), compare=False, repr=False)
 
     @cached_property
     def encoders(self) -> tuple[JointRow, ...]:
@@ -571,9 +586,42 @@ def in_unit(value_si: float, factor: float) -> float:
     return x
 
 
+def _check_writable(desc: ArmDescription) -> None:
+    """The description obeys the reader's rules on numbers (:func:`arm_model._units.implausible`), so that
+    what is written reads back: a value beyond them (a joint origin of more than 1 km, say, from a fit
+    that ran away along a direction the data do not see) is a :class:`NumericalError` naming it, never a
+    file its reader refuses."""
+    from ._errors import NumericalError
+    for j in desc.joints:
+        length = "length" if j.prismatic else "angle"
+        values = ([("origin", v, "length") for v in j.origin[:3]] + [("origin", v, "angle") for v in j.origin[3:]]
+                  if desc.convention == "urdf" else
+                  [("theta_offset", j.theta_offset, "angle"), ("d", j.d, "length"), ("a", j.a, "length"),
+                   ("alpha", j.alpha, "angle")])
+        values += [("com", v, "length") for v in j.com] + [("limit", v, length) for v in (j.lower, j.upper)
+                                                             if v is not None]
+        for key, v, quantity in values:
+            wrong = implausible(v, quantity) if math.isfinite(v) else (None, f"{v!r} is not a finite number")
+            if wrong:
+                raise NumericalError(f"joint '{j.name}' of the arm '{desc.name}': its {key} value {wrong[1]}: "
+                                     "this arm cannot be written (a fit that ran away along a direction the data "
+                                     "do not see?)")
+    p = desc.probe
+    for key, v in (("x", p.p_last[0]), ("y", p.p_last[1]), ("z", p.p_last[2]), ("stylus_length", p.lever or 0.0)):
+        wrong = implausible(v, "length") if math.isfinite(v) else (None, f"{v!r} is not a finite number")
+        if wrong:
+            raise NumericalError(f"the probe of the arm '{desc.name}': its {key} {wrong[1]}: this arm cannot be "
+                                 "written")
+    if p.lever == 0.0 and p.compliance.any():
+        raise NumericalError(f"the probe of the arm '{desc.name}' has no stylus but compliances "
+                             f"{p.compliance.tolist()} m/N: a tip without a stylus bends under no force")
+
+
 def description_data(desc: ArmDescription) -> dict:
     """The TOML tables of a description (mm and degrees) as plain data for ``tomli_w``; read back,
-    every value is the same float."""
+    every value is the same float. A description its reader would refuse is a :class:`NumericalError`
+    (:func:`_check_writable`)."""
+    _check_writable(desc)
     mm, deg = UNIT_FACTORS["mm"], UNIT_FACTORS["deg"]
     joints = []
     for j in desc.joints:

@@ -196,3 +196,27 @@ u_length_mm = 0.0008
     with pytest.raises(InputError) as exc:
         parse_artefacts(bad, "a.toml")
     assert exc.value.line == 28 and "sphere-C" in str(exc.value)
+
+
+def test_every_description_written_reads_back_or_is_not_written(nominal):
+    """The writer and the reader share one rule: a probe whose z points back up the arm with its stylus
+    length (the issue's `z_mm = -78.39`), a rigid tip (stylus 0) and a prismatic joint are written and read
+    back; a joint origin beyond the reader's 1 km is a NumericalError naming it, never a file."""
+    from dataclasses import replace
+
+    from arm_model import NumericalError
+    from arm_model.description import format_description, parse_description
+    for probe in (dict(p_last=(0.0, 0.0, -0.07839), lever=0.07839), dict(p_last=(0.01, 0.0, 0.0), lever=0.0,
+                  bending_compliance_x=0.0, bending_compliance_y=0.0, axial_compliance=0.0)):
+        d = nominal.with_probe(**probe)
+        assert parse_description(format_description(d)).probe == d.probe
+    joints = list(nominal.joints)
+    joints[2] = replace(joints[2], kind="prismatic", lower=-0.05, upper=0.25)
+    d = replace(nominal, joints=tuple(joints))
+    back = parse_description(format_description(d))
+    assert back.joints[2].prismatic and back.joints[2].upper == pytest.approx(0.25, abs=1e-15)
+    joints[2] = replace(joints[2], d=1500.0)
+    with pytest.raises(NumericalError, match="joint 'j3'.*its d value"):
+        format_description(replace(nominal, joints=tuple(joints)))
+    with pytest.raises(NumericalError, match="no stylus"):
+        format_description(nominal.with_probe(lever=0.0))
