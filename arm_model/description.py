@@ -17,7 +17,7 @@ from ._errors import InputError, parse_toml, read_text
 from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
 __all__ = ["JointRow", "Mimic", "Probe", "Visual", "ArmDescription", "load_description", "parse_description",
-           "format_description", "GRAVITY", "MIN_STYLUS", "DH_ROW_FIELDS", "URDF_ROW_FIELDS"]
+           "format_description", "GRAVITY", "MIN_STYLUS", "default_lever", "DH_ROW_FIELDS", "URDF_ROW_FIELDS"]
 
 DH_ROW_FIELDS = ("theta_offset", "d", "a", "alpha")
 URDF_ROW_FIELDS = ("origin_x", "origin_y", "origin_z", "origin_roll", "origin_pitch", "origin_yaw")
@@ -493,11 +493,25 @@ def _check_mimics(r: TomlReader, joints: list[JointRow]) -> None:
                           "joint of its own kind", "joint", i, "mimic_joint")
 
 
+def default_lever(p_last, rotation=None) -> float | None:
+    """The stylus length a probe gets when none is given, one rule for every route (a description TOML, a
+    URDF's tip frame): None (the lever is the ball's coordinate along probe z, ``z_probe . p``) when that is
+    a length, at least :data:`MIN_STYLUS` and 1/1000 of the ball's distance from the last joint origin;
+    else ``|p|`` (the probe z points back past or across that origin: the hinge hangs |p| behind the ball);
+    0 for a ball at that origin (no stylus)."""
+    p = np.asarray(p_last, dtype=float)
+    z = np.array([0.0, 0.0, 1.0]) if rotation is None else np.asarray(rotation, dtype=float)[:, 2]
+    dist = float(np.linalg.norm(p))
+    if float(z @ p) >= max(1e-3 * dist, MIN_STYLUS):
+        return None
+    return dist if dist >= MIN_STYLUS else 0.0
+
+
 def _probe(r: TomlReader, ptab) -> Probe:
     """The [probe] table. What the probe model needs, and nothing a measuring arm merely suggests: a
-    compliant stylus needs a length (its bending hinge lies that far behind the ball along probe z, wherever
-    the ball is); ``stylus_length_mm = 0`` is a tip without a stylus (a flange point, a tracker marker),
-    rigid, its compliances 0."""
+    compliant stylus needs a length (its bending hinge lies that far behind the ball along probe z,
+    wherever the ball is: default :func:`default_lever`); ``stylus_length_mm = 0`` is a tip without a
+    stylus (a flange point, a tracker marker), rigid, its compliances 0."""
     if not isinstance(ptab, dict):
         raise r.error("missing [probe] table", "probe")
     pv = r.values(ptab, _PROBE_KEYS, ("probe",))
@@ -515,20 +529,18 @@ def _probe(r: TomlReader, ptab) -> Probe:
         bending_compliance_x=pv.get("bending_compliance_x", pv["bending_compliance"]),
         bending_compliance_y=pv.get("bending_compliance_y", pv["bending_compliance"]),
         axial_compliance=pv["axial_compliance"], rpy=rpy, lever=pv.get("stylus_length"))
-    if probe.lever == 0.0:
-        if probe.compliance.any():
-            raise r.error("a tip without a stylus (stylus_length_mm = 0) bends under no force: its compliances "
-                          "must be 0 (give the stylus length of a compliant probe)", "probe", "stylus_length_mm")
-        return probe
+    if probe.lever is None:
+        probe = replace(probe, lever=default_lever(probe.p_last, probe.rotation))
+    if probe.lever == 0.0 and probe.compliance.any():
+        given = "stylus_length" in pv
+        raise r.error((f"a tip without a stylus (stylus_length_mm = 0)" if given else
+                       f"the ball lies {float(np.linalg.norm(probe.p_last)) * 1e3:.3g} mm from the last joint origin, "
+                       "a tip without a stylus") + " bends under no force: its compliances must be 0 (a compliant "
+                      "stylus is at least 0.001 mm long: give its length, stylus_length_mm)", "probe",
+                      "stylus_length_mm" if given else "z_mm")
     if 0 < probe.stylus_length < MIN_STYLUS:
         raise r.error(f"the stylus, from its bending hinge to the ball, is {probe.stylus_length * 1e3:.3g} mm long: "
-                      "at least 0.001 mm", "probe", "stylus_length_mm" if "stylus_length" in pv else "z_mm")
-    if probe.stylus_length <= 0:
-        raise r.error(f"the ball must lie ahead along the probe z axis (the stylus direction): its z in the "
-                      f"probe frame seen from the last joint origin is {probe.stylus_length * 1e3:.3f} mm; turn "
-                      "the probe frame (roll_deg, pitch_deg, yaw_deg) so that z points towards the ball, or give "
-                      "stylus_length_mm, the distance from the bending hinge to the ball (0 for a tip without a "
-                      "stylus, compliances 0)", "probe", "z_mm")
+                      "at least 0.001 mm (0: a tip without a stylus)", "probe", "stylus_length_mm")
     return probe
 
 

@@ -41,7 +41,8 @@ import numpy as np
 from ._csv import parse_number
 from ._errors import InputError, open_input, parse_toml, read_text
 from ._units import implausible
-from .description import MIN_STYLUS, ArmDescription, JointRow, Mimic, Probe, TomlReader, Visual, load_description
+from .description import (MIN_STYLUS, ArmDescription, JointRow, Mimic, Probe, TomlReader, Visual, default_lever,
+                          load_description)
 from .shipped import arm_path
 from .urdf import ELASTIC_JOINTS, _origin_matrix
 
@@ -479,14 +480,10 @@ def _probe_of(u: _Urdf, ch: _Chain, tip_frame: str, probe: dict | None) -> Probe
     rpy = tuple(float(v) + 0.0 for v in _rpy(T_tip))
     if np.allclose(T_tip[:3, :3], np.eye(3), atol=0, rtol=0):
         rpy = (0.0, 0.0, 0.0)
-    dist = float(np.linalg.norm(T_tip[:3, 3]))
-    lever = None
     if ch.hinge is not None:
         lever = float((T_tip[:3, 3] - ch.hinge[:3, 3]) @ T_tip[:3, 2])
-    elif dist < MIN_STYLUS:
-        lever = 0.0
-    elif T_tip[:3, 2] @ T_tip[:3, 3] < 1e-3 * dist:
-        lever = dist
+    else:
+        lever = default_lever(p_last, T_tip[:3, :3])
     pr = dict(PAPER_PROBE)
     ball = _ball_diameter(u, tip_frame)
     if ball is not None:

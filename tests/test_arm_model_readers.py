@@ -31,7 +31,7 @@ def test_description_roundtrip_exact(nominal):
     (lambda t: t.replace("d_mm = 420.0", 'd_mm = "420"'), "joint[3].d_mm"),
     (lambda t: t.replace("d_mm = 420.0", "d_mm = nan"), "joint[3].d_mm"),
     (lambda t: t.replace("d_mm = 420.0\n", ""), "joint[3]"),
-    (lambda t: t.replace("z_mm = 85.0", "z_mm = -85.0"), "probe.z_mm"),
+    (lambda t: t.replace("z_mm = 85.0", "z_mm = 0.0"), "probe.z_mm"),     # a compliant probe at the joint origin
     (lambda t: t.replace('convention = "dh"', 'convention = "xyz"'), "convention"),
     (lambda t: t.replace("ball_diameter_mm = 4.0\n", ""), "probe"),
 ])

@@ -161,9 +161,14 @@ def test_probe_orientation_keys_in_the_toml(nominal):
     assert_close(d.probe.rpy, [0, math.pi / 2, 0], atol=1e-15)
     assert abs(d.probe.stylus_length - 0.100) < 1e-15          # along x of the last joint frame
     assert parse_description(format_description(d)) == d
-    bad = NOMINAL.read_text().replace("z_mm = 85.0", "z_mm = 85.0\npitch_deg = 180.0")
-    with pytest.raises(InputError, match="ahead along the probe z axis"):
-        parse_description(bad)
+    # the probe z turned back up the arm: one rule with the URDF route, the hinge |p| behind the ball
+    back = parse_description(NOMINAL.read_text().replace("z_mm = 85.0", "z_mm = 85.0\npitch_deg = 180.0"))
+    assert back.probe.lever == pytest.approx(0.085, abs=1e-15)
+    assert parse_description(format_description(back)).probe == back.probe
+    # at the joint origin: a tip without a stylus, which a compliant probe cannot be
+    with pytest.raises(InputError, match="from the last joint origin, a tip without a stylus") as exc:
+        parse_description(NOMINAL.read_text().replace("z_mm = 85.0", "z_mm = 0.0"))
+    assert exc.value.column == "key 'probe.z_mm'"
 
 
 # ---------------------------------------------------------------------------------------------
