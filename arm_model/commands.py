@@ -299,8 +299,8 @@ def _tip_part(arm, path, out: Path, span, known_header, reference_frame: bool) -
     """One part of a large points file, in a worker process (see :func:`run_tip`)."""
     from . import kinematics
     kinematics.THREADS = 1                           # the other cores run the other parts
-    return _tip_rows(arm, path, iter_points(path, arm.desc.n_joints, span=span, known_header=known_header), out,
-                     header=span[0] == 0, reference_frame=reference_frame)
+    return _tip_rows(arm, path, iter_points(path, arm.desc.joint_quantities, span=span, known_header=known_header),
+                     out, header=span[0] == 0, reference_frame=reference_frame)
 
 
 def run_tip(args: argparse.Namespace) -> int:
@@ -325,10 +325,11 @@ def run_tip(args: argparse.Namespace) -> int:
                 ucols, lines = tip_columns(arm, block, parameters, args)
                 ulines.extend(lines)
                 return ucols
-            tally = _tip_rows(arm, args.points, [concat_points(iter_points(args.points, desc.n_joints))], tmp, True, extra,
-                              ref)
+            tally = _tip_rows(arm, args.points, [concat_points(iter_points(args.points, desc.joint_quantities))], tmp,
+                              True, extra, ref)
         elif split is None:
-            tally = _tip_rows(arm, args.points, iter_points(args.points, desc.n_joints), tmp, True, reference_frame=ref)
+            tally = _tip_rows(arm, args.points, iter_points(args.points, desc.joint_quantities), tmp, True,
+                              reference_frame=ref)
         else:
             known_header, spans = split
             parts = [tmp] + [tmp.with_name(f"{tmp.name}.part{k}") for k in range(1, len(spans))]
@@ -355,6 +356,10 @@ def run_tip(args: argparse.Namespace) -> int:
         log.info("effects applied: " + ", ".join(e.describe() for e in arm.effects))
     if kinds == {None}:
         log.info("no force columns: corrected = rigid (no deflection applied)")
+    elif desc.probe.lever == 0.0:
+        log.warning("the tip has no stylus (it lies at the last joint's origin: a flange, a marker): the force "
+                    "columns bend nothing, corrected = rigid; for the deflection of a compliant probe give a tip "
+                    "frame at its ball")
     else:
         if "two-channel" in kinds:
             log.info("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not measured "

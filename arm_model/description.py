@@ -16,8 +16,8 @@ import numpy as np
 from ._errors import InputError, parse_toml, read_text
 from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
-__all__ = ["JointRow", "Mimic", "Probe", "ArmDescription", "load_description", "parse_description",
-           "format_description", "GRAVITY", "MIN_STYLUS", "DH_ROW_FIELDS", "URDF_ROW_FIELDS"]
+__all__ = ["JointRow", "Mimic", "Probe", "Visual", "ArmDescription", "load_description", "parse_description",
+           "format_description", "GRAVITY", "MIN_STYLUS", "default_lever", "DH_ROW_FIELDS", "URDF_ROW_FIELDS"]
 
 DH_ROW_FIELDS = ("theta_offset", "d", "a", "alpha")
 URDF_ROW_FIELDS = ("origin_x", "origin_y", "origin_z", "origin_roll", "origin_pitch", "origin_yaw")
@@ -80,6 +80,18 @@ class JointRow:
 
 
 @dataclass(frozen=True)
+class Visual:
+    """One visual of a URDF the arm was read from, for the viewer only: ``row`` the chain row whose moving
+    link carries it (-1: the base, before the first moving joint), ``pose`` its 4x4 pose in that link's
+    frame (nested tuples [m]), ``geometry`` the ``<geometry>`` element's XML (mesh file names absolute),
+    ``rgba`` its colour or None."""
+    row: int
+    pose: tuple
+    geometry: str
+    rgba: tuple | None = None
+
+
+@dataclass(frozen=True)
 class Probe:
     """The probe: ball centre ``p_last`` [m] in the last joint frame, ball diameter [m],
     calibrated force range [N], and compliances [m/N] of the ball along probe x, y (bending)
@@ -130,6 +142,9 @@ class ArmDescription:
     source: str | None = field(default=None, compare=False)
     #: the URDF link at the ball centre when the arm was read from a URDF (``source``)
     tip_frame: str | None = field(default=None, compare=False)
+    #: the user's visuals when the arm was read from a URDF, for the viewer (:class:`Visual`); never written
+    #: to a description TOML
+    visuals: tuple = field(default=(), compare=False, repr=False)
 
     @cached_property
     def encoders(self) -> tuple[JointRow, ...]:
@@ -188,6 +203,12 @@ class ArmDescription:
     def joint_quantities(self) -> tuple[str, ...]:
         """Per encoder column: "angle" (revolute) or "length" (prismatic), the unit a points file gives it in."""
         return tuple("length" if j.prismatic else "angle" for j in self.encoders)
+
+    @property
+    def joint_column_units(self) -> tuple[tuple[str, float], ...]:
+        """Per encoder column: the unit suffix its column is written in and the factor from SI, ("deg",
+        180/pi) for a revolute joint, ("mm", 1000) for a prismatic one (``q3_mm``)."""
+        return tuple(("mm", 1e3) if j.prismatic else ("deg", 180.0 / math.pi) for j in self.encoders)
 
     @property
     def revolute_columns(self) -> tuple[int, ...]:
@@ -472,11 +493,25 @@ def _check_mimics(r: TomlReader, joints: list[JointRow]) -> None:
                           "joint of its own kind", "joint", i, "mimic_joint")
 
 
+def default_lever(p_last, rotation=None) -> float | None:
+    """The stylus length a probe gets when none is given, one rule for every route (a description TOML, a
+    URDF's tip frame): None (the lever is the ball's coordinate along probe z, ``z_probe . p``) when that is
+    a length, at least :data:`MIN_STYLUS` and 1/1000 of the ball's distance from the last joint origin;
+    else ``|p|`` (the probe z points back past or across that origin: the hinge hangs |p| behind the ball);
+    0 for a ball at that origin (no stylus)."""
+    p = np.asarray(p_last, dtype=float)
+    z = np.array([0.0, 0.0, 1.0]) if rotation is None else np.asarray(rotation, dtype=float)[:, 2]
+    dist = float(np.linalg.norm(p))
+    if float(z @ p) >= max(1e-3 * dist, MIN_STYLUS):
+        return None
+    return dist if dist >= MIN_STYLUS else 0.0
+
+
 def _probe(r: TomlReader, ptab) -> Probe:
     """The [probe] table. What the probe model needs, and nothing a measuring arm merely suggests: a
-    compliant stylus needs a length (its bending hinge lies that far behind the ball along probe z, wherever
-    the ball is); ``stylus_length_mm = 0`` is a tip without a stylus (a flange point, a tracker marker),
-    rigid, its compliances 0."""
+    compliant stylus needs a length (its bending hinge lies that far behind the ball along probe z,
+    wherever the ball is: default :func:`default_lever`); ``stylus_length_mm = 0`` is a tip without a
+    stylus (a flange point, a tracker marker), rigid, its compliances 0."""
     if not isinstance(ptab, dict):
         raise r.error("missing [probe] table", "probe")
     pv = r.values(ptab, _PROBE_KEYS, ("probe",))
@@ -494,20 +529,18 @@ def _probe(r: TomlReader, ptab) -> Probe:
         bending_compliance_x=pv.get("bending_compliance_x", pv["bending_compliance"]),
         bending_compliance_y=pv.get("bending_compliance_y", pv["bending_compliance"]),
         axial_compliance=pv["axial_compliance"], rpy=rpy, lever=pv.get("stylus_length"))
-    if probe.lever == 0.0:
-        if probe.compliance.any():
-            raise r.error("a tip without a stylus (stylus_length_mm = 0) bends under no force: its compliances "
-                          "must be 0 (give the stylus length of a compliant probe)", "probe", "stylus_length_mm")
-        return probe
+    if probe.lever is None:
+        probe = replace(probe, lever=default_lever(probe.p_last, probe.rotation))
+    if probe.lever == 0.0 and probe.compliance.any():
+        given = "stylus_length" in pv
+        raise r.error((f"a tip without a stylus (stylus_length_mm = 0)" if given else
+                       f"the ball lies {float(np.linalg.norm(probe.p_last)) * 1e3:.3g} mm from the last joint origin, "
+                       "a tip without a stylus") + " bends under no force: its compliances must be 0 (a compliant "
+                      "stylus is at least 0.001 mm long: give its length, stylus_length_mm)", "probe",
+                      "stylus_length_mm" if given else "z_mm")
     if 0 < probe.stylus_length < MIN_STYLUS:
         raise r.error(f"the stylus, from its bending hinge to the ball, is {probe.stylus_length * 1e3:.3g} mm long: "
-                      "at least 0.001 mm", "probe", "stylus_length_mm" if "stylus_length" in pv else "z_mm")
-    if probe.stylus_length <= 0:
-        raise r.error(f"the ball must lie ahead along the probe z axis (the stylus direction): its z in the "
-                      f"probe frame seen from the last joint origin is {probe.stylus_length * 1e3:.3f} mm; turn "
-                      "the probe frame (roll_deg, pitch_deg, yaw_deg) so that z points towards the ball, or give "
-                      "stylus_length_mm, the distance from the bending hinge to the ball (0 for a tip without a "
-                      "stylus, compliances 0)", "probe", "z_mm")
+                      "at least 0.001 mm (0: a tip without a stylus)", "probe", "stylus_length_mm")
     return probe
 
 
@@ -565,9 +598,42 @@ def in_unit(value_si: float, factor: float) -> float:
     return x
 
 
+def _check_writable(desc: ArmDescription) -> None:
+    """The description obeys the reader's rules on numbers (:func:`arm_model._units.implausible`), so that
+    what is written reads back: a value beyond them (a joint origin of more than 1 km, say, from a fit
+    that ran away along a direction the data do not see) is a :class:`NumericalError` naming it, never a
+    file its reader refuses."""
+    from ._errors import NumericalError
+    for j in desc.joints:
+        length = "length" if j.prismatic else "angle"
+        values = ([("origin", v, "length") for v in j.origin[:3]] + [("origin", v, "angle") for v in j.origin[3:]]
+                  if desc.convention == "urdf" else
+                  [("theta_offset", j.theta_offset, "angle"), ("d", j.d, "length"), ("a", j.a, "length"),
+                   ("alpha", j.alpha, "angle")])
+        values += [("com", v, "length") for v in j.com] + [("limit", v, length) for v in (j.lower, j.upper)
+                                                             if v is not None]
+        for key, v, quantity in values:
+            wrong = implausible(v, quantity) if math.isfinite(v) else (None, f"{v!r} is not a finite number")
+            if wrong:
+                raise NumericalError(f"joint '{j.name}' of the arm '{desc.name}': its {key} value {wrong[1]}: "
+                                     "this arm cannot be written (a fit that ran away along a direction the data "
+                                     "do not see?)")
+    p = desc.probe
+    for key, v in (("x", p.p_last[0]), ("y", p.p_last[1]), ("z", p.p_last[2]), ("stylus_length", p.lever or 0.0)):
+        wrong = implausible(v, "length") if math.isfinite(v) else (None, f"{v!r} is not a finite number")
+        if wrong:
+            raise NumericalError(f"the probe of the arm '{desc.name}': its {key} {wrong[1]}: this arm cannot be "
+                                 "written")
+    if p.lever == 0.0 and p.compliance.any():
+        raise NumericalError(f"the probe of the arm '{desc.name}' has no stylus but compliances "
+                             f"{p.compliance.tolist()} m/N: a tip without a stylus bends under no force")
+
+
 def description_data(desc: ArmDescription) -> dict:
     """The TOML tables of a description (mm and degrees) as plain data for ``tomli_w``; read back,
-    every value is the same float."""
+    every value is the same float. A description its reader would refuse is a :class:`NumericalError`
+    (:func:`_check_writable`)."""
+    _check_writable(desc)
     mm, deg = UNIT_FACTORS["mm"], UNIT_FACTORS["deg"]
     joints = []
     for j in desc.joints:

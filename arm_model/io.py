@@ -43,7 +43,7 @@ class PointSet:
         path: the file read.
         measurement: (N,) measurement ids.
         feature: (N,) feature ids ("" for a free point).
-        q: (N, J) encoder angles [rad].
+        q: (N, J) encoder readings: joint angles [rad], prismatic joints' positions [m].
         force: (N, 3) force of the part on the ball, probe frame [N], or None. With the paper's
             two-channel sensor, column 1 (probe y) is zero: see ``force_kind``.
         torque: (N, 3) torque at the ball, probe frame [N m], or None (project columns mx, my, mz).
@@ -135,7 +135,15 @@ class _PointsLayout:
     markers: tuple = ()     # base names (x, y, z) of each marker's reference columns
 
 
-def _points_layout(header: list[str], line: int, path: str, n_joints: int | None) -> _PointsLayout:
+def _joint_count_and_kinds(joints) -> tuple[int | None, tuple | None]:
+    """``joints`` of the readers: None, a count, or each column's quantity ("angle", "length")."""
+    if joints is None or isinstance(joints, int):
+        return joints, None
+    return len(joints), tuple(joints)
+
+
+def _points_layout(header: list[str], line: int, path: str, joints) -> _PointsLayout:
+    n_joints, kinds = _joint_count_and_kinds(joints)
     seen = set()
     for h in header:
         if not h:
@@ -158,9 +166,16 @@ def _points_layout(header: list[str], line: int, path: str, n_joints: int | None
                              f"'_deg', '_N', '_C', '_s'); the columns of a points file are {known}", path, line, h)
         base, unit = parts
         if re.fullmatch(r"q[1-9][0-9]*", base):
-            quantity = "angle"
-            if QUANTITY_OF_UNIT[unit] != "angle":
-                raise InputError(f"joint column must be an angle (_deg or _rad), got '_{unit}'", path, line, h)
+            k_joint = int(base[1:]) - 1
+            want = kinds[k_joint] if kinds is not None and k_joint < len(kinds) else None
+            if want is not None and QUANTITY_OF_UNIT[unit] != want:
+                raise InputError(f"'{h}': joint {k_joint + 1} of the arm is "
+                                 + ("prismatic: its column is a length (_mm, _m or _um)" if want == "length" else
+                                    "revolute: its column is an angle (_deg or _rad)") + f", got '_{unit}'",
+                                 path, line, h)
+            if QUANTITY_OF_UNIT[unit] not in ("angle", "length"):
+                raise InputError(f"a joint column is an angle (_deg or _rad) or, for a prismatic joint, a length "
+                                 f"(_mm, _m or _um), got '_{unit}'", path, line, h)
         elif base in POINT_COLUMNS or _MARKER_COLUMN.fullmatch(base):
             quantity = POINT_COLUMNS.get(base, "length")
             if QUANTITY_OF_UNIT[unit] != quantity:
@@ -172,7 +187,7 @@ def _points_layout(header: list[str], line: int, path: str, n_joints: int | None
         cols[base] = (k, unit)
     idx = sorted(int(b[1:]) for b in cols if b.startswith("q") and b[1:].isdigit())
     if not idx:
-        raise InputError("no joint columns (q1_deg ... or q1_rad ...)", path, line)
+        raise InputError("no joint columns (q1_deg ... or q1_rad ...; a prismatic joint's q<i>_mm or q<i>_m)", path, line)
     if idx != list(range(1, len(idx) + 1)):
         missing = sorted(set(range(1, max(idx) + 1)) - set(idx))
         raise InputError(f"joint columns are not q1..q{max(idx)}: missing "
@@ -249,11 +264,12 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
     empty = np.flatnonzero(measurement == "")
     if len(empty):
         raise InputError("empty measurement id", path, int(blk.lines[empty[0]]), "measurement")
-    q = nums[:, [pos[c] for c in lay.joints]] * np.array([UNIT_FACTORS[lay.header[c].rsplit("_", 1)[1]]
-                                                          for c in lay.joints])
-    wrong = implausible(q, "angle")
-    if wrong:
-        raise InputError(wrong[1], path, int(blk.lines[wrong[0][0]]), lay.header[lay.joints[wrong[0][1]]])
+    units = [split_unit(lay.header[c])[1] for c in lay.joints]
+    q = nums[:, [pos[c] for c in lay.joints]] * np.array([UNIT_FACTORS[u] for u in units])
+    for k, unit in enumerate(units):
+        wrong = implausible(q[:, k], QUANTITY_OF_UNIT[unit])
+        if wrong:
+            raise InputError(wrong[1], path, int(blk.lines[wrong[0][0]]), lay.header[lay.joints[k]])
     force, force_kind = group(("fx", "fy", "fz")), None
     if force is not None:
         force_kind = "xyz"
@@ -270,7 +286,7 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
                     time=col("time"), ref=ref, lines=blk.lines, session=session)
 
 
-def iter_points(path: str | Path, n_joints: int | None = None, data: bytes | None = None,
+def iter_points(path: str | Path, joints=None, data: bytes | None = None,
                 block_bytes: int = BLOCK_BYTES, span: tuple[int, int] | None = None,
                 known_header: tuple[int, list[str]] | None = None):
     """The points of a points CSV (docs/formats.md §3) as :class:`PointSet` blocks of whole lines, file
@@ -283,7 +299,7 @@ def iter_points(path: str | Path, n_joints: int | None = None, data: bytes | Non
     layout = []
 
     def check(header, line):
-        layout.append(_points_layout(header, line, path, n_joints))
+        layout.append(_points_layout(header, line, path, joints))
         return layout[0].num_idx, layout[0].txt_idx
     count, blocks = 0, 0
     for _, _, blk in iter_csv_blocks(path, "the points file", check, block_bytes, data, span, known_header):
@@ -311,21 +327,24 @@ def concat_points(sets) -> PointSet:
                     session=cat("session"))
 
 
-def read_points(path: str | Path, n_joints: int | None = None) -> PointSet:
+def read_points(path: str | Path, joints=None) -> PointSet:
     """Read a points CSV (docs/formats.md §3): every column with its unit, SI inside. Unknown columns,
     two columns for one quantity, an empty or non-numeric cell, ``nan``/``inf``, ``4_5`` are errors
     naming the file, the line and the column.
 
     Args:
         path: the CSV file (UTF-8; a byte-order mark is accepted).
-        n_joints: number of joint columns the arm has; a different count is an error.
+        joints: the arm's joint columns: their number, or each one's quantity ("angle" for a revolute
+            joint, "length" for a prismatic one: :attr:`arm_model.ArmDescription.joint_quantities`); a
+            different count, or a column in the other quantity, is an error. None: any count, each column
+            an angle or a length by its unit.
     """
-    return concat_points(iter_points(path, n_joints))
+    return concat_points(iter_points(path, joints))
 
 
-def parse_points(text: str, path: str = "<string>", n_joints: int | None = None) -> PointSet:
+def parse_points(text: str, path: str = "<string>", joints=None) -> PointSet:
     """Parse points CSV text; see :func:`read_points`."""
-    return concat_points(iter_points(path, n_joints, data=text.encode("utf-8", "surrogatepass")))
+    return concat_points(iter_points(path, joints, data=text.encode("utf-8", "surrogatepass")))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -214,7 +214,7 @@ def effect_tables(desc: ArmDescription, effects, values: dict, uncertainties: di
     for e in effects:
         tbl: dict = {"kind": e.key}
         if e.joints is not None:
-            tbl["joints"] = [desc.joints[i].name for i in e.joints]
+            tbl["joints"] = [desc.joint_names[i] for i in e.joints]
         for f in _options(e):
             if getattr(e, f.name) is not None:          # TOML has no null: an absent option takes its default
                 tbl[f.name] = _plain(getattr(e, f.name))

@@ -111,6 +111,21 @@ def _inertial(mass: float, com) -> str:
             f'</inertial>')
 
 
+BASE_VISUAL = ('<visual><origin xyz="0 0 0.01" rpy="0 0 0"/><geometry><cylinder radius="0.07" length="0.02"/>'
+               '</geometry><material name="joint"/></visual>')
+
+
+def _user_visuals(desc: ArmDescription, row: int) -> str:
+    """The visuals of the user's URDF (:attr:`ArmDescription.visuals`) on the link of ``row`` (-1: the
+    base), or an empty text: then the generated cylinders draw it."""
+    out = []
+    for k, v in enumerate(w for w in desc.visuals if w.row == row):
+        mat = ('<material name="joint"/>' if v.rgba is None else
+               f'<material name="user_{row + 1}_{k}"><color rgba="{_rgba(v.rgba)}"/></material>')
+        out.append(f"<visual>{_origin(np.array(v.pose, dtype=float))}{v.geometry}{mat}</visual>")
+    return "".join(out)
+
+
 def _row_frames(desc: ArmDescription, i: int, tail_prev: np.ndarray):
     """Row ``i`` as a URDF joint: (its origin in the parent link, the row's tail after the joint (standard
     DH), its axis, the waypoints of its link's visual, the row's end frame in the joint's child link)."""
@@ -145,8 +160,7 @@ def urdf_text(desc: ArmDescription) -> str:
              f'  <material name="joint"><color rgba="{_rgba(JOINT_RGBA)}"/></material>',
              f'  <material name="probe"><color rgba="{_rgba(PROBE_RGBA)}"/></material>',
              f'  <material name="ball"><color rgba="{_rgba(BALL_RGBA)}"/></material>',
-             '  <link name="base_link"><visual><origin xyz="0 0 0.01" rpy="0 0 0"/><geometry>'
-             '<cylinder radius="0.07" length="0.02"/></geometry><material name="joint"/></visual></link>']
+             f'  <link name="base_link">{_user_visuals(desc, -1) or BASE_VISUAL}</link>']
     radii = np.linspace(0.03, 0.018, n)
     parent = "base_link"
     tail_prev = np.eye(4)   # the previous row's tail, for standard DH
@@ -163,9 +177,8 @@ def urdf_text(desc: ArmDescription) -> str:
         lines.append(f'  <joint name="{escape(j.name)}" type="{j.kind}"><parent link="{parent}"/>'
                      f'<child link="link_{i + 1}"/>{_origin(origin)}<axis xyz="{_f(axis[0])} {_f(axis[1])} {_f(axis[2])}"/>'
                      f'<limit lower="{_f(lower)}" upper="{_f(upper)}" effort="100" velocity="3"/>{mimic}</joint>')
-        visuals = [_joint_housing(float(radii[i]) * 1.3)]
-        for a, b in zip(waypoints[:-1], waypoints[1:]):
-            visuals.append(_cylinder_between(a, b, float(radii[i]), "arm"))
+        visuals = [_user_visuals(desc, i)] if _user_visuals(desc, i) else [_joint_housing(float(radii[i]) * 1.3)] + [
+            _cylinder_between(a, b, float(radii[i]), "arm") for a, b in zip(waypoints[:-1], waypoints[1:])]
         com = row_end @ np.array([*j.com, 1.0])
         lines.append(f'  <link name="link_{i + 1}">{_inertial(j.mass, com[:3])}{"".join(visuals)}</link>')
         parent = f"link_{i + 1}"

@@ -31,6 +31,7 @@ one; the force range and compliances from the caller (default: the seed paper's 
 from __future__ import annotations
 
 import io
+import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,9 +41,12 @@ import numpy as np
 from ._csv import parse_number
 from ._errors import InputError, open_input, parse_toml, read_text
 from ._units import implausible
-from .description import MIN_STYLUS, ArmDescription, JointRow, Mimic, Probe, TomlReader, load_description
+from .description import (MIN_STYLUS, ArmDescription, JointRow, Mimic, Probe, TomlReader, Visual, default_lever,
+                          load_description)
 from .shipped import arm_path
 from .urdf import ELASTIC_JOINTS, _origin_matrix
+
+log = logging.getLogger(__name__)
 
 __all__ = ["description_from_urdf", "load_arm", "load_masses", "calibrated_urdf_text", "PAPER_PROBE",
            "LinkMass"]
@@ -126,22 +130,22 @@ def _parse_xml(path: Path, data: bytes):
 
 
 def _check_numbers(root, path: Path) -> None:
-    """Every numeric attribute holds numbers (count and syntax); those the kinematics or the masses use
-    (:data:`_USED`) are finite and plausible too."""
-    for el in root.iter():
-        if not isinstance(el.tag, str):
-            continue
+    """Every numeric attribute holds numbers (count and syntax); those the kinematics use (:data:`_USED`)
+    are finite and plausible too."""
+    for el in root.iter(*_NUMERIC):
         parent = el.getparent()
-        for attr, n in _NUMERIC.get(el.tag, {}).items():
+        ptag = None if parent is None else parent.tag
+        for attr, n in _NUMERIC[el.tag].items():
             text = el.get(attr)
             if text is None:
                 continue
-            vals = [parse_number(v) for v in text.split()]
-            used = (None if parent is None else parent.tag, el.tag, attr) in _USED
-            if len(vals) != n or any(v is None for v in vals) or (used and not all(map(math.isfinite, vals))):
+            parts = text.split()
+            vals = [parse_number(v) for v in parts] if len(parts) == n else None
+            used = (ptag, el.tag, attr) in _USED
+            if vals is None or None in vals or (used and not all(map(math.isfinite, vals))):
                 raise InputError(f"<{el.tag} {attr}=...> must be {n} finite number{'s' if n > 1 else ''}, "
                                  f"got {text!r}", path, el.sourceline, f"key '{el.tag}.{attr}'")
-            quantity = _USED.get((None if parent is None else parent.tag, el.tag, attr))
+            quantity = _USED.get((ptag, el.tag, attr)) if used else None
             wrong = implausible(vals, quantity) if quantity else None
             if wrong:
                 raise InputError(f"<{el.tag} {attr}=...>: {wrong[1]}", path, el.sourceline, f"key '{el.tag}.{attr}'")
@@ -486,14 +490,10 @@ def _probe_of(u: _Urdf, ch: _Chain, tip_frame: str, probe: dict | None) -> Probe
     rpy = tuple(float(v) + 0.0 for v in _rpy(T_tip))
     if np.allclose(T_tip[:3, :3], np.eye(3), atol=0, rtol=0):
         rpy = (0.0, 0.0, 0.0)
-    dist = float(np.linalg.norm(T_tip[:3, 3]))
-    lever = None
     if ch.hinge is not None:
         lever = float((T_tip[:3, 3] - ch.hinge[:3, 3]) @ T_tip[:3, 2])
-    elif dist < MIN_STYLUS:
-        lever = 0.0
-    elif T_tip[:3, 2] @ T_tip[:3, 3] < 1e-3 * dist:
-        lever = dist
+    else:
+        lever = default_lever(p_last, T_tip[:3, :3])
     pr = dict(PAPER_PROBE)
     ball = _ball_diameter(u, tip_frame)
     if ball is not None:
@@ -511,6 +511,92 @@ def _probe_of(u: _Urdf, ch: _Chain, tip_frame: str, probe: dict | None) -> Probe
         raise InputError(f"the tip frame '{tip_frame}' lies at the stylus hinge of the probe's elastic joints: a "
                          "probe needs its ball beyond its hinge", u.path, u.line(ch.tip_joint.name), "key '--tip-frame'")
     return pro
+
+
+# ---------------------------------------------------------------------------------------------
+# the user's visuals, for the viewer
+
+def _link_frames(u: _Urdf, ch: _Chain) -> dict[str, tuple[int, np.ndarray]]:
+    """link -> (row, T_row_link): the links that move with each chain row (from its joint's child up to
+    the next moving joint of the chain, side branches at zero) and, as row -1, those before the first."""
+    moving = {j.name: i for i, (j, _, _) in enumerate(ch.moving)}
+    kids: dict[str, list] = {}
+    for j in u.robot.joints:
+        kids.setdefault(j.parent, []).append(j)
+    root = _walk_to_root(u, ch.moving[0][0].child)[0].parent
+    stack = [(root, -1, np.eye(4))] + [(j.child, i, np.eye(4)) for j, i in ((j, moving[j.name]) for j, _, _ in ch.moving)]
+    out = {}
+    while stack:
+        link, row, T = stack.pop()
+        out[link] = (row, T)
+        for k in kids.get(link, ()):
+            if k.name not in moving:
+                stack.append((k.child, row, T @ _T(k.origin)))
+    return out
+
+
+def _mesh_file(u: _Urdf, name: str) -> Path | None:
+    """The file of a ``<mesh filename>``: ``package://pkg/...`` found in a folder ``pkg`` beside the URDF or
+    above it, ``file://`` and absolute paths as they are, others relative to the URDF; None if absent."""
+    if name.startswith("file://"):
+        name = name[len("file://"):]
+    here = u.path.resolve().parent
+    if name.startswith("package://"):
+        pkg, _, rest = name[len("package://"):].partition("/")
+        for d in (here, *here.parents):
+            for cand in (d / pkg / rest, d / rest if d.name == pkg else None):
+                if cand is not None and cand.is_file():
+                    return cand.resolve()
+        return None
+    cand = (Path(name) if Path(name).is_absolute() else here / name).resolve()
+    return cand if cand.is_file() else None
+
+
+def _rgba_of(u: _Urdf, visual) -> tuple | None:
+    mat = visual.find("material")
+    if mat is None:
+        return None
+    color = mat.find("color")
+    if color is None and mat.get("name"):
+        named = u.tree.getroot().find(f"material[@name='{mat.get('name')}']") if "'" not in mat.get("name") else None
+        color = None if named is None else named.find("color")
+    vals = None if color is None else [parse_number(v) for v in color.get("rgba", "").split()]
+    return tuple(vals) if vals and len(vals) == 4 and all(v is not None and 0 <= v <= 1 for v in vals) else None
+
+
+def _visuals(u: _Urdf, ch: _Chain) -> tuple[Visual, ...]:
+    """The user's ``<visual>`` elements on the links the chain moves (and its base), each in its row's
+    link frame, for the viewer; a mesh whose file is missing, or a visual with numbers that are not
+    finite, is left out (the kinematics never use them)."""
+    from copy import deepcopy
+
+    from lxml import etree
+    from .urdf import _origin_matrix
+    out, missing = [], 0
+    for link, (row, T) in _link_frames(u, ch).items():
+        for vis in u.link_elements[link].findall("visual"):
+            geom, origin = vis.find("geometry"), vis.find("origin")
+            shape = None if geom is None else next((k for k in geom if isinstance(k.tag, str)), None)
+            if shape is None or shape.tag not in ("box", "cylinder", "sphere", "mesh"):
+                continue
+            nums = [parse_number(v) for v in ((origin.get("xyz", "0 0 0") + " " + origin.get("rpy", "0 0 0"))
+                                               if origin is not None else "0 0 0 0 0 0").split()]
+            if len(nums) != 6 or not all(v is not None and math.isfinite(v) for v in nums):
+                continue
+            shape = deepcopy(shape)
+            if shape.tag == "mesh":
+                found = _mesh_file(u, shape.get("filename", ""))
+                if found is None:
+                    missing += 1
+                    continue
+                shape.set("filename", str(found))
+            pose = T @ _origin_matrix(nums)
+            out.append(Visual(row, tuple(map(tuple, pose.tolist())),
+                              f"<geometry>{etree.tostring(shape, encoding='unicode').strip()}</geometry>",
+                              _rgba_of(u, vis)))
+    if missing:
+        log.debug(f"{u.path}: {missing} mesh file(s) not found: the viewer draws the arm without them")
+    return tuple(out)
 
 
 def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None = None,
@@ -538,7 +624,8 @@ def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None =
     rows = [_row(u, j, prefix, mimic, mass, com)
             for (j, prefix, mimic), (mass, com) in zip(ch.moving, _fold_masses(u, ch, masses))]
     return ArmDescription(name=name or u.robot.name or Path(path).stem, convention="urdf", joints=tuple(rows),
-                          probe=_probe_of(u, ch, tip_frame, probe), source=str(path), tip_frame=tip_frame)
+                          probe=_probe_of(u, ch, tip_frame, probe), source=str(path), tip_frame=tip_frame,
+                          visuals=_visuals(u, ch))
 
 
 def load_arm(path: str | Path, tip_frame: str | None = None, probe: dict | None = None,
@@ -574,13 +661,41 @@ def _set_origin(joint_el, T: np.ndarray, xyz_only: bool = False) -> None:
         o.set("rpy", " ".join(_fmt(v) for v in _rpy(T)))
 
 
+def _add_tool_frame(u: _Urdf, tip: str, probe: Probe) -> str:
+    """A fixed child link of the tip link at the calibrated tool point (a tip that hangs from a moving
+    joint, a flange, has no fixed joint whose origin could take it): ``<tip>_calibrated``; its name."""
+    from lxml import etree
+    root = u.tree.getroot()
+    name = f"{tip}_calibrated"
+    while name in u.link_elements or name + "_joint" in u.joint_elements:
+        name += "_"
+    root.append(etree.Comment(f" aacmm calibrate: the calibrated tool point of '{_comment_safe(tip)}', link "
+                              f"'{_comment_safe(name)}': give it as the tip frame "))
+    etree.SubElement(root, "link", name=name)
+    joint = etree.SubElement(root, "joint", name=name + "_joint", type="fixed")
+    etree.SubElement(joint, "parent", link=tip)
+    etree.SubElement(joint, "child", link=name)
+    T = np.eye(4)
+    T[:3, 3] = probe.p_last
+    if probe.rotation is not None:
+        T[:3, :3] = probe.rotation
+    _set_origin(joint, T)
+    log.info(f"calibrated URDF: the tool point is the new link '{name}' on '{tip}' (--tip-frame {name})")
+    return name
+
+
+def _comment_safe(text: str) -> str:
+    return str(text).replace("--", "- -")
+
+
 def calibrated_urdf_text(nominal: ArmDescription, calibrated: ArmDescription) -> str:
     """The calibrated arm as a URDF.
 
     For an arm read from a URDF (``nominal.tip_frame``): the user's own file, with only the origins
-    of the chain's revolute joints whose row changed and the tip joint's xyz (the tool offset)
-    rewritten; names, meshes, inertials, limits, comments, other joints and frames are kept. For a
-    description TOML: the generated URDF (:func:`arm_model.urdf.urdf_text`).
+    of the chain's moving joints whose row changed and the tip joint's xyz (the tool offset)
+    rewritten; names, meshes, inertials, limits, comments, other joints and frames are kept. A tip that
+    hangs from a moving joint (a flange) gets a fixed child link at the calibrated tool point,
+    ``<tip>_calibrated``. For a description TOML: the generated URDF (:func:`arm_model.urdf.urdf_text`).
     """
     from lxml import etree
     from .urdf import urdf_text
@@ -598,10 +713,9 @@ def calibrated_urdf_text(nominal: ArmDescription, calibrated: ArmDescription) ->
             continue
         T = np.linalg.inv(prefix) @ _origin_matrix(row_cal.origin)
         _set_origin(u.joint_elements[j.name], T)
-    if calibrated.probe.p_last != nominal.probe.p_last:
-        if ch.tool_prefix is None:
-            raise InputError(f"the tip frame '{nominal.tip_frame}' hangs from a moving joint: the tool offset "
-                             "cannot be written", u.path)
+    if calibrated.probe.p_last != nominal.probe.p_last and ch.tool_prefix is None:
+        _add_tool_frame(u, nominal.tip_frame, calibrated.probe)
+    elif calibrated.probe.p_last != nominal.probe.p_last:
         el = u.joint_elements[ch.tip_joint.name]
         T = _T(ch.tip_joint.origin).copy()
         T[:3, 3] = (np.linalg.inv(ch.tool_prefix) @ np.array([*calibrated.probe.p_last, 1.0]))[:3]

@@ -312,9 +312,9 @@ def _load_data(args):
     arm = model_from_args(args)
     desc = arm.desc
     model = model_effects(arm, args.effect)
-    points = read_points(args.points, desc.n_joints)
+    points = read_points(args.points, desc.joint_quantities)
     artefacts = None if args.artefacts is None else read_artefacts(args.artefacts)
-    reference = None if args.reference_points is None else read_points(args.reference_points, desc.n_joints)
+    reference = None if args.reference_points is None else read_points(args.reference_points, desc.joint_quantities)
     warnings = []
     for pts in (points, reference):
         if pts is not None:

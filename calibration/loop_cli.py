@@ -107,9 +107,9 @@ def run(args: argparse.Namespace) -> int:
     effects = model_effects(arm, args.effect).effects
     if effects and families is None:
         families = tuple(f for f in DEFAULT_FAMILIES if f not in {e.key for e in effects})
-    points = read_points(args.points, desc.n_joints)
+    points = read_points(args.points, desc.joint_quantities)
     artefacts = None if args.artefacts is None else read_artefacts(args.artefacts)
-    reference = read_points(args.reference_points, desc.n_joints) if args.reference_points else None
+    reference = read_points(args.reference_points, desc.joint_quantities) if args.reference_points else None
     warnings = []
     for pts in (points, reference):
         if pts is not None:

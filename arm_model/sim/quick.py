@@ -82,23 +82,26 @@ class SynthCampaign:
     reference_points: PointSet | None = None     # tracker points (feature "", with ref)
     reference_true: np.ndarray | None = None     # their true ball centres [m]
     T_ref_base: np.ndarray | None = None
+    #: per joint column: its unit suffix and factor from SI (ArmDescription.joint_column_units; () all degrees)
+    column_units: tuple = ()
 
     def write(self, out_dir) -> dict:
         """Write ``points.csv``, ``points-ref.csv`` (with reference points) and ``artefacts.toml``
         (docs/formats.md §3, §4); returns ``{role: Path}``."""
         out = Path(out_dir)
-        files = {"points": _write_points(out / "points.csv", self.points)}
+        files = {"points": _write_points(out / "points.csv", self.points, self.column_units)}
         if self.reference_points is not None:
-            files["reference"] = _write_points(out / "points-ref.csv", self.reference_points)
+            files["reference"] = _write_points(out / "points-ref.csv", self.reference_points, self.column_units)
         text = format_artefacts(self.artefacts.features.values(), self.artefacts.distances)
         files["artefacts"] = atomic_write_text(out / "artefacts.toml", text)
         return files
 
 
-def _write_points(path, pts: PointSet) -> Path:
+def _write_points(path, pts: PointSet, column_units=()) -> Path:
     cols = {"measurement": pts.measurement, "feature": pts.feature}
     for j in range(pts.n_joints):
-        cols[f"q{j + 1}_deg"] = np.degrees(pts.q[:, j])
+        unit, factor = column_units[j] if column_units else ("deg", None)
+        cols[f"q{j + 1}_{unit}"] = np.degrees(pts.q[:, j]) if factor is None else pts.q[:, j] * factor
     if pts.force is not None:
         for k, a in enumerate("xyz"):
             cols[f"f{a}_N"] = pts.force[:, k]
@@ -263,4 +266,5 @@ def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0,
                                        if spec.reference_points else (None, None, None))
     artefacts = Artefacts("<synthetic artefacts>", features, tuple(distances))
     truth = {name: float(v) for name, v in zip(model.spec.names, p_true)}
-    return SynthCampaign(points, artefacts, truth, p_true, targets, reference_points, x_true, t_ref)
+    return SynthCampaign(points, artefacts, truth, p_true, targets, reference_points, x_true, t_ref,
+                         desc.joint_column_units)

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._errors import NumericalError
-from ..chain import NUMPY_OPS, ball_in_last_frame, chain_point, elastic_displacement, probe_lever
+from ..chain import NUMPY_OPS, ball_in_last_frame, chain_point, elastic_displacement, has_stylus, probe_lever
 from ..description import ArmDescription
 from ..effects import (ApproachOffset, EncoderEccentricity, ForceSensorError, Geometry, JointCompliance,
                        JointHarmonics, LateralCompliance, ModelInputs, ProbeComplianceMatrix, ProbeThermalGrowth,
@@ -141,7 +141,7 @@ class Truth:
         if wrench is not None:
             geom = self._pose_geometry(q, geom, wrench)
         rot, lever = d.probe.rotation, d.probe.lever
-        if wrench is None:
+        if wrench is None or not has_stylus(lever):        # no stylus: nothing bends
             qe = (0.0, 0.0, 0.0)
         else:
             qe = elastic_displacement(geom.p_last, geom.compliance, list(np.asarray(wrench).T),
@@ -178,7 +178,7 @@ class Truth:
             from .ik import probe_wrench
 
             wrench = probe_wrench(load[0], load[1], z, x)
-        if wrench is None:
+        if wrench is None or not has_stylus(lever):
             qe = (0.0, 0.0, 0.0)
         else:
             geom = self._pose_geometry(q, geom, wrench)      # their own derivative left out, as in pose
