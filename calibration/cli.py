@@ -389,7 +389,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
 
 NOMINAL_NOTE = ("nominal = the description with only the tip offset (probe or marker) fitted, the artefacts' "
-                "unknowns, the reference frames and the markers' offsets solved as for the calibrated model")
+                "unknowns and the reference frame solved as for the calibrated model")
 
 
 def _baseline_entry(base) -> dict:
