@@ -80,7 +80,7 @@ class NumpyResidual:
             self.rows.append((g["kind"], g["points"], cidx, radius))
         self.dist = [(self.centre_index[d.a], self.centre_index[d.b], d.length) for d in prob.distance_items]
         self.sigma = prob.sigma
-        self.ref_xyz = data.points.ref
+        self.ref_xyz = None if data.points.ref is None else data.points.ref[:, 0]
 
     def params(self, z):
         p = self.p0.copy()

@@ -42,6 +42,7 @@ docs/calibration.md.
 from .calibrate import (CalibrationResult, FixedParameter, Outlier, calibrate, default_free, display_unit,
                         identify, resolve_parameters, rigid_gauge)
 from .data import CalibrationData, Weights, make_data, merge_points, split_holdout
+from .tracking import fit_tracker
 from .options import FitOptions
 from .identifiability import (DEFAULT_RANK_TOL, PRIOR_SCALES, Combination, Identifiability, analyse, prior_scales,
                               reduced_jacobian, weakly_determined)
@@ -56,7 +57,7 @@ from .loop_report import before_after_text, write_loop_report
 __all__ = [
     "calibrate", "FitOptions", "CalibrationResult", "FixedParameter", "Outlier", "default_free", "resolve_parameters",
     "rigid_gauge", "display_unit", "identify",
-    "CalibrationData", "Weights", "make_data", "merge_points", "split_holdout",
+    "CalibrationData", "Weights", "make_data", "merge_points", "split_holdout", "fit_tracker",
     "Identifiability", "Combination", "analyse", "reduced_jacobian", "DEFAULT_RANK_TOL", "prior_scales",
     "weakly_determined", "PRIOR_SCALES",
     "Problem", "levenberg_marquardt", "LMResult", "blas_threads",

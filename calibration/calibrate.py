@@ -38,6 +38,7 @@ import scipy.sparse as sp
 
 from arm_model import InputError, NumericalError
 from arm_model.model import ArmModel
+from arm_model.tracker import Tracker
 
 from .data import CalibrationData, Weights
 from .identifiability import (Combination, Identifiability, _compress, analyse, point_noise,
@@ -101,9 +102,14 @@ def resolve_parameters(spec, patterns) -> list[int]:
     return sorted(out)
 
 
-def default_free(model: ArmModel) -> list[str]:
-    """Every joint-row error, the probe offset and every effect parameter (compliances only when named)."""
-    return [n for n in model.spec.names if not n.startswith("probe.compliance")]
+def default_free(model: ArmModel, data: CalibrationData | None = None) -> list[str]:
+    """Every joint-row error, the probe offset and every effect parameter (compliances only when named).
+    On ``data`` whose only points are markers at unknown offsets (a tracker campaign), not the probe
+    offset: the markers' offsets on the tip frame take its place (it would move every marker alike)."""
+    tracker_only = (data is not None and data.marker_offsets == "fit"
+                    and not np.any(data.points.feature != ""))
+    drop = ("probe.compliance",) + (("probe.x", "probe.y", "probe.z") if tracker_only else ())
+    return [n for n in model.spec.names if not n.startswith(drop)]
 
 
 def rigid_gauge(problem: Problem, p, free) -> np.ndarray:
@@ -159,8 +165,9 @@ class CalibrationResult:
         residuals: per-point table (``Problem.residual_table`` plus ``standardized``, ``line``,
             ``measurement``, ``feature``); instances: per artefact instance scalars;
             distances: per certified-length instance.
-        reference: the fitted ``T_ref_base`` (4x4) with the standard uncertainties of its
-            increments (translation [m], rotation [rad]), or None.
+        tracker: the reference instrument's frame ``T_ref_base`` of each session and the markers' offsets
+            on the tip frame (:class:`arm_model.tracker.Tracker`, with the standard uncertainties of their
+            increments when fitted), or None without reference coordinates.
         outliers, dropped: outliers found (kept unless dropped); points dropped and refitted.
         data, weights: what was fitted.
     """
@@ -186,7 +193,7 @@ class CalibrationResult:
     residuals: dict
     instances: list
     distances: list
-    reference: dict | None
+    tracker: Tracker | None
     outliers: list
     dropped: list
     data: CalibrationData
@@ -342,7 +349,9 @@ class CalibrationResult:
             "correlation": {"names": list(self.free), "matrix": self.corr.tolist()},
             "identifiability_start": self.identifiability.to_dict(),
             "identifiability_final": self.identifiability_final.to_dict(),
-            "reference_frame": self.reference,
+            "reference_frame": None if self.tracker is None else {
+                **self.tracker.to_dict(), "fitted": self.reference_mode == "fit",
+                "marker_offsets": self.data.marker_offsets},
             "weights": {"probe_um": self.weights.probe * 1e6, "reference_um": self.weights.reference * 1e6,
                         "length_um": None if self.weights.length is None else self.weights.length * 1e6,
                         "factors": dict(self.weights.factors),
@@ -567,7 +576,7 @@ def _scales(options: FitOptions, groups) -> dict:
 
 def _setup(model: ArmModel, data: CalibrationData, options: FitOptions) -> _Setup:
     spec = model.spec
-    cand = resolve_parameters(spec, default_free(model) if options.free is None else options.free)
+    cand = resolve_parameters(spec, default_free(model, data) if options.free is None else options.free)
     nominal = spec.vector(options.values or {})  # a held parameter's value (``start`` only warm-starts the free)
     p0 = nominal.copy()
     for name, v in (options.start or {}).items():
@@ -575,6 +584,7 @@ def _setup(model: ArmModel, data: CalibrationData, options: FitOptions) -> _Setu
     problem = Problem(model, data, options.weights, cand, reference=options.reference)
     states = levenberg_marquardt(problem.with_free([]), p0, problem.initial_states(p0),
                                  max_iter=options.max_iter).states
+    problem.check_tracker(p0, states)        # frames and marker offsets the data cannot place: say so first
     if options.prior_scale is None:
         return _Setup(problem, cand, nominal, p0, states, None, options.min_resolution)
     pspec = _prior_spec(model, data, options)
@@ -782,25 +792,20 @@ def _instances(prob: Problem, table: dict, states) -> list[dict]:
     return out
 
 
-def _reference(prob: Problem, states, nrm: _Normal, n_kept: int, var: float) -> dict | None:
-    """The fitted ``T_ref_base`` with the standard uncertainties of its increments, or None."""
+def _tracker(prob: Problem, p, states, nrm: _Normal, n_kept: int, var: float) -> Tracker | None:
+    """The reference instrument's frames and the markers' offsets (:meth:`Problem.tracker`) with the standard
+    uncertainties of their increments, or None without reference rows; a :class:`NumericalError` when the
+    data do not determine them (:meth:`Problem.check_tracker`)."""
+    prob.check_tracker(p, states)
+    u = {}
     for i, it in enumerate(prob.instances):
-        if it.kind != "reference":
-            continue
-        t = np.eye(4)
-        t[:3, :3] = states[i][0:9].reshape(3, 3, order="F")
-        t[:3, 3] = states[i][9:12]
-        ref = {"T_ref_base": t.tolist(), "fitted": it.n_theta > 0}
-        if it.n_theta:
-            cols = n_kept + it.offset + np.arange(6)
-            e = np.zeros((nrm.js.shape[1], 6))
-            e[cols, np.arange(6)] = 1.0
+        if it.kind in ("reference", "marker") and it.n_theta:
+            cols = n_kept + it.offset + np.arange(it.n_theta)
+            e = np.zeros((nrm.js.shape[1], it.n_theta))
+            e[cols, np.arange(it.n_theta)] = 1.0
             blk = nrm.lu.solve(e)[cols] / np.outer(nrm.jscale[cols], nrm.jscale[cols]) * var
-            uu = np.sqrt(np.diag(blk))
-            ref["u_translation"] = uu[:3].tolist()
-            ref["u_rotation"] = uu[3:].tolist()
-        return ref
-    return None
+            u[i] = np.sqrt(np.diag(blk))
+    return prob.tracker(states, u)
 
 
 def _dof(prob: Problem, n_rows: int, n_kept: int) -> tuple[int, int]:
@@ -844,7 +849,7 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         covariance_source=source, status=sol.status, iterations=sol.iterations, evaluations=sol.evaluations,
         cost=sol.cost, n_residuals=n_rows, n_nuisance=n_nuis, dof=dof, identifiability=idfs[0],
         identifiability_final=idfs[1], residuals=table, instances=_instances(prob, table, sol.states),
-        distances=distances, reference=_reference(prob, sol.states, nrm, len(kept), var), outliers=outliers,
+        distances=distances, tracker=_tracker(prob, sol.p, sol.states, nrm, len(kept), var), outliers=outliers,
         dropped=[], data=data, weights=prob.weights, reference_mode=options.reference, unused=prob.unused,
         variance=variance_components(prob, ev.r, nrm.h, prob.weights),
         prior_scales=None if s.prior is None else dict(s.scales), log_evidence=nrm.log_evidence,
@@ -1084,12 +1089,13 @@ def _scale(jp: np.ndarray) -> np.ndarray:
 
 def nominal_baseline(model: ArmModel, data: CalibrationData, options: FitOptions = FitOptions()) -> CalibrationResult:
     """The nominal model given the same nuisance unknowns as a calibration with ``options``: the description
-    (``options.values``) with only the tip offset fitted (probe.x/y/z, where free: a probe's ball or a tracker
-    marker whose place on the last link may not be known) by least squares, the artefacts' unknowns and the
+    (``options.values``) with only the tip offset fitted (probe.x/y/z, where free: a probe's ball whose place
+    on the last link may not be known; a tracker's markers at unknown offsets are nuisance unknowns of every
+    fit) by least squares, the artefacts' unknowns and the
     reference frame solved as in every fit, at the same weights (no noise estimate of its own). Its
     ``p``/``reference`` are the baseline every "nominal -> calibrated" figure compares against."""
     spec = model.spec
-    cand = resolve_parameters(spec, default_free(model) if options.free is None else options.free)
+    cand = resolve_parameters(spec, default_free(model, data) if options.free is None else options.free)
     tip = [spec.names[i] for i in cand if spec.names[i] in ("probe.x", "probe.y", "probe.z")]
     return calibrate(model, data, replace(options, free=tuple(tip), prior_scale=None, min_resolution=None,
                                           weights_from_data=False, drop_outliers=False, start=None,

@@ -52,14 +52,26 @@ def _holdout(text: str | None):
 
 def campaign_inputs(p) -> None:
     """Points, artefacts, arm, reference points and output folder (shared with ``aacmm close-loop``)."""
-    p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3)")
-    p.add_argument("artefacts", type=Path, help="artefacts TOML (docs/formats.md §4)")
+    p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3); its reference columns (x_ref_mm ..., "
+                                             "or x1_ref_mm ... for several markers) are a tracker's coordinates")
+    p.add_argument("artefacts", type=Path, nargs="?", default=None,
+                   help="artefacts TOML (docs/formats.md §4); leave it out for a campaign of tracker (reference) "
+                        "coordinates only: every row a free point with reference columns")
     add_arm_options(p, "nominal arm: a shipped arm's name (aacmm7), a description TOML or model file, or a URDF "
                        "with --tip-frame (docs/formats.md §2, docs/own-arm.md)")
     p.add_argument("--reference-points", type=Path, default=None,
-                   help="a second points CSV with reference coordinates (x_ref_mm ...), e.g. tracker nests "
-                        "(docs/formats.md §3)")
+                   help="a second points CSV whose rows all carry reference coordinates (x_ref_mm ...), e.g. tracker "
+                        "nests, joined to the points file (docs/formats.md §3)")
     p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; never an input)")
+
+
+def marker_option(p) -> None:
+    """``--marker-offset``: where the reference instrument's markers sit on the tip frame."""
+    p.add_argument("--marker-offset", choices=("fit", "zero"), default=None,
+                   help="fit: each marker of the reference columns sits at an unknown offset on the tip frame "
+                        "(a motion-capture marker or a tracker target on a robot's flange), estimated with the fit "
+                        "and written to the model file; zero: the instrument sees the tip point itself (a tracker's "
+                        "reflector in the probe's place). Default: fit without an artefacts file, zero with one")
 
 
 #: argparse type of a stated standard uncertainty [um]: from 1e-6 um (whose square is still a normal
@@ -145,9 +157,12 @@ def register(sub) -> None:
                     "nominal vs calibrated on the training data and on held-out measurements. Writes a NEW "
                     "calibrated model file (the description with every effect and its parameters, TOML, read by every "
                     "--arm), its covariance (CSV) and URDF, summary.json, CSV tables and report.html.",
-        epilog="Parameter names: docs/calibration.md. Example: aacmm calibrate points.csv artefacts.toml "
-               "--arm aacmm7 --reference-points points-ref.csv --holdout 0.2 -o out/cal")
+        epilog="Parameter names: docs/calibration.md. Examples: aacmm calibrate points.csv artefacts.toml "
+               "--arm aacmm7 --reference-points points-ref.csv --holdout 0.2 -o out/cal; a robot seen by a tracker "
+               "(no artefacts file): aacmm calibrate tracker.csv --arm robot.urdf --tip-frame flange --holdout 0.2 "
+               "-o out/cal (docs/own-arm.md)")
     campaign_inputs(c)
+    marker_option(c)
     _common_fit_options(c)
     c.add_argument("--holdout", default=None,
                    help="data kept out of the fit for validation: a fraction (0.2) drawn at random, or (with "
@@ -205,10 +220,12 @@ def register(sub) -> None:
                                   "measured or simulated) maximising O1 = (prod s_i)^(1/m)/sqrt(n) of the "
                                   "identification Jacobian; compared with random choices of the same size.")
     q.add_argument("points", type=Path, help="candidate points CSV (docs/formats.md §3)")
-    q.add_argument("artefacts", type=Path, help="artefacts TOML (docs/formats.md §4)")
+    q.add_argument("artefacts", type=Path, nargs="?", default=None,
+                   help="artefacts TOML (docs/formats.md §4); none for reference (tracker) points only")
     add_arm_options(q, "nominal arm: a shipped arm's name (aacmm7), a description TOML, or a URDF with --tip-frame "
                        "(docs/formats.md §2)")
     q.add_argument("--reference-points", type=Path, default=None, help="reference points CSV (docs/formats.md §3)")
+    marker_option(q)
     q.add_argument("--count", type=at_least(1), required=True, help="how many measurements to choose")
     q.add_argument("-o", "--output", type=Path, required=True, help="output folder")
     _common_fit_options(q)
@@ -264,9 +281,11 @@ def fit_options(args, **fields):
     return FitOptions(**{**kw, **fields})
 
 
-def _free(model, args):
+def _free(model, args, data=None):
+    """The names of the parameters to fit: ``--free`` (default :func:`~calibration.calibrate.default_free` of
+    the model on ``data``) without ``--hold``."""
     from .calibrate import default_free, resolve_parameters
-    free = resolve_parameters(model.spec, args.free or default_free(model))
+    free = resolve_parameters(model.spec, args.free or default_free(model, data))
     if args.hold:
         held = set(resolve_parameters(model.spec, args.hold))
         free = [i for i in free if i not in held]
@@ -293,15 +312,16 @@ def _load_data(args):
     arm = model_from_args(args)
     desc = arm.desc
     model = model_effects(arm, args.effect)
-    points = read_points(args.points, desc.n_joints)
-    artefacts = read_artefacts(args.artefacts)
-    reference = None if args.reference_points is None else read_points(args.reference_points, desc.n_joints)
+    points = read_points(args.points, desc.joint_quantities)
+    artefacts = None if args.artefacts is None else read_artefacts(args.artefacts)
+    reference = None if args.reference_points is None else read_points(args.reference_points, desc.joint_quantities)
     warnings = []
     for pts in (points, reference):
         if pts is not None:
             Arm(desc, model.effects).check_points(pts)
             warnings += point_warnings(desc, pts)
-    return model, make_data(points, artefacts, model, reference=reference), arm.values, warnings
+    data = make_data(points, artefacts, model, reference=reference, marker_offsets=args.marker_offset)
+    return model, data, arm.values, warnings
 
 
 def _split(args, data):
@@ -340,7 +360,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
             if why:
                 log.warning(f"joint compliance cannot be identified: {why}")
         train, test, poses = _split(args, data)
-        options = fit_options(args, free=_free(model, args), values=values, weights=_weights(args),
+        options = fit_options(args, free=_free(model, args, data), values=values, weights=_weights(args),
                               on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
                               drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference)
         res = refine_torques(calibrate(model, train, options))
@@ -351,7 +371,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
         worse = worse_than_nominal(val_test or [])
         files = write_outputs(res, out.dir, inputs=inputs, validation_training=val_train,
                               validation_holdout=val_test, plots=not args.no_plots,
-                              extra={"inputs": {"points": str(args.points), "artefacts": str(args.artefacts),
+                              extra={"inputs": {"points": str(args.points),
+                                                "artefacts": None if args.artefacts is None else str(args.artefacts),
                                                 "arm": str(args.arm),
                                                 "reference_points": None if args.reference_points is None
                                                 else str(args.reference_points)},
@@ -375,7 +396,7 @@ def _baseline_entry(base) -> dict:
     """summary.json's ``nominal_baseline``: what the nominal of every figure is, and its fitted tip offset."""
     return {"definition": NOMINAL_NOTE, "fitted": list(base.free),
             "values_mm": {n: base.value(n) * 1e3 for n in base.free}, "s0": base.s0,
-            "T_ref_base": None if base.reference is None else base.reference["T_ref_base"]}
+            "tracker": None if base.tracker is None else base.tracker.to_dict()}
 
 
 def _log_calibration(res, data, train, test, poses, warnings, validation, files) -> None:
@@ -458,9 +479,11 @@ def _validation(res, data, base=None, train_mask=None, mpe=None):
     """The before/after figure rows and the standard tests (:func:`calibration.validation.conformance`) of
     the calibrated model on ``data``. Before: ``base`` (a :func:`calibration.calibrate.nominal_baseline` fit)
     or, without one, the nominal description (p = 0). The reference points are also predicted with each fit's
-    own ``T_ref_base`` when ``data`` is not the fit's. ``train_mask``: only the poses outside it are held out,
-    each against its feature fitted on the poses inside (:func:`calibration.validation.validate_poses`; no
-    standard tests)."""
+    own frames and marker offsets when ``data`` is not the fit's (the nominal's, without a baseline: fitted on
+    the training data, :func:`calibration.tracking.fit_tracker`). ``train_mask``: only the poses outside it
+    are held out, each against its feature fitted on the poses inside
+    (:func:`calibration.validation.validate_poses`; no standard tests)."""
+    from .tracking import fit_tracker
     from .validation import conformance, figure_rows, validate, validate_poses
     m, w, mode = res.model, res.weights, res.reference_mode
     p0 = np.zeros(m.spec.size) if base is None else base.p
@@ -469,10 +492,12 @@ def _validation(res, data, base=None, train_mask=None, mpe=None):
                            validate_poses(m, res.p, data, train_mask, w, mode)), None
     own = data is res.data
 
-    def frame(fit):
-        return None if own or fit is None or fit.reference is None else fit.reference["T_ref_base"]
-    before = validate(m, p0, data, w, mode, T_ref_base=frame(base))
-    after = validate(m, res.p, data, w, mode, T_ref_base=frame(res))
+    def tracker(fit):
+        if own or res.tracker is None:
+            return None
+        return fit_tracker(m, p0, res.data, w, mode) if fit is None else fit.tracker
+    before = validate(m, p0, data, w, mode, tracker=tracker(base))
+    after = validate(m, res.p, data, w, mode, tracker=tracker(res))
     return figure_rows(before, after), conformance(after, mpe, before)
 
 
@@ -574,7 +599,7 @@ def run_poses(args: argparse.Namespace) -> int:
         if args.count > n:
             raise InputError(f"--count {args.count}: the points file has {n} measurement(s)", args.points)
         # the choice is made at the nominal, before any fit
-        fit = fit_options(args, free=_free(model, args), weights=_weights(args), weights_from_data=False)
+        fit = fit_options(args, free=_free(model, args, data), weights=_weights(args), weights_from_data=False)
         sel = select_measurements(model, data, args.count, fit)
         from arm_model.shipped import provenance
         (out.dir / "poses.json").write_text(json.dumps({**sel.to_dict(), **provenance(inputs)}, indent=1) + "\n",

@@ -548,7 +548,7 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
             names = [model.spec.names[i] for i in resolve_parameters(model.spec, free)]
             names += [n for n in model.spec.names[model.base_size:] if n not in names]
         if hold:
-            names = [n for n in (names or default_free(model)) if n not in hold]
+            names = [n for n in (names or default_free(model, d)) if n not in hold]
         return calibrate(model, d, FitOptions(free=names, values=values, weights=weights, rank_tol=settings.rank_tol,
                                               priors={**priors, **(extra_priors or {})},
                                               outlier_threshold=settings.outlier_threshold,

@@ -31,7 +31,7 @@ def model_paths(out_dir, name: str) -> dict:
 def fitted_arm(result, name: str | None = None) -> Arm:
     """The :class:`~arm_model.model_file.Arm` of a :class:`~calibration.calibrate.CalibrationResult`:
     the base errors folded into the description, the effects with their fitted values, uncertainties
-    and states (free / fixed / held)."""
+    and states (free / fixed / held), and the reference instrument's frames and markers (``result.tracker``)."""
     desc = result.described()
     if name:
         desc = replace(desc, name=name)
@@ -39,7 +39,8 @@ def fitted_arm(result, name: str | None = None) -> Arm:
     names = model.spec.names[model.base_size:]
     rows = {r["name"]: r for r in result.parameter_rows()}
     return Arm(desc, tuple(model.effects), {n: result.value(n) for n in names},
-               {n: result.uncertainty(n) for n in names}, {n: rows[n]["state"] for n in names})
+               {n: result.uncertainty(n) for n in names}, {n: rows[n]["state"] for n in names},
+               tracker=result.tracker)
 
 
 def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aacmm calibrate",
@@ -56,7 +57,8 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
     write_covariance(files["covariance"], free, [spec.units[i] for i in idx], result.p[idx], result.cov, inputs)
     atomic_write_text(files["model"], format_model(arm.desc, arm.effects, arm.values, arm.uncertainties, arm.states,
                                                    covariance=files["covariance"].name, written_by=written_by,
-                                                   probing_scatter=result.probing_scatter(), comment=comment),
+                                                   probing_scatter=result.probing_scatter(), tracker=arm.tracker,
+                                                   comment=comment),
                       inputs)
     atomic_write_text(files["urdf"], calibrated_urdf_text(result.model.desc, arm.desc), inputs)
     return files

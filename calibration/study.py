@@ -328,7 +328,7 @@ def select_measurements(model: ArmModel, data: CalibrationData, count: int, opti
     from .solver import levenberg_marquardt
 
     spec = model.spec
-    cand = resolve_parameters(spec, default_free(model) if options.free is None else options.free)
+    cand = resolve_parameters(spec, default_free(model, data) if options.free is None else options.free)
     p = np.zeros(spec.size) if p is None else np.asarray(p, float)
     prob = Problem(model, data, options.weights, cand, reference=options.reference)
     states = levenberg_marquardt(prob.with_free([]), p, prob.initial_states(p)).states

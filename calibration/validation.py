@@ -11,12 +11,10 @@ is used to place a centre) and the standard figures are computed:
 * effective diameter test (spheres; rings and cylinders likewise): fitted diameter minus certified,
   with the radius free (instances with at least :data:`DIAMETER_MIN_POINTS` points: a ball-bar
   sphere probed 6 times gives a centre, not a diameter);
-* planes: flatness (max - min of the signed distances); reference points: the errors after the
-  best-fit rigid transform ``T_ref_base`` (RMS and max), and, given the transform of a fit on other data
-  (the training data of the same instrument station), the errors with that transform: a prediction;
-* held-out poses (:func:`validate_poses`): each pose held out of a feature is predicted against that
-  feature as fitted on its training poses (a seat's centre, a sphere, a plane; reference points with the
-  training fit's ``T_ref_base``): the RMS and largest distance.
+* planes: flatness (max - min of the signed distances); reference points: the 3D errors (RMS and max)
+  after the best-fit frames ``T_ref_base`` (and marker offsets) of every session, and, given the frames and
+  offsets of a fit on other data (:class:`arm_model.tracker.Tracker`: the training data of the same
+  instrument stations), the errors with those: a prediction (``reference_*_predicted``);
 
 :func:`before_after` tabulates the figures of two parameter vectors (nominal and calibrated), each
 with a standard uncertainty from :func:`bootstrap`: the figures of the calibrated model are fixed
@@ -26,12 +24,13 @@ replacement; the standard deviation of the resampled figure is its standard unce
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from arm_model.geometry import feature_diameter, smallest_enclosing_sphere
 from arm_model.model import ArmModel
+from arm_model.tracker import Tracker
 
 from .data import CalibrationData, Weights
 from .problem import MIN_POINTS, Problem
@@ -62,8 +61,8 @@ FIGURES = {
     "flatness_max": ("plane flatness: max (max - min)", "um", 1e6),
     "reference_rms": ("reference points: RMS 3D error after best-fit transform", "um", 1e6),
     "reference_max": ("reference points: max 3D error after best-fit transform", "um", 1e6),
-    "reference_rms_predicted": ("reference points: RMS 3D error, T_ref_base of the training fit", "um", 1e6),
-    "reference_max_predicted": ("reference points: max 3D error, T_ref_base of the training fit", "um", 1e6),
+    "reference_rms_predicted": ("reference points: RMS 3D error, frames and markers of the training fit", "um", 1e6),
+    "reference_max_predicted": ("reference points: max 3D error, frames and markers of the training fit", "um", 1e6),
     "pose_rms": ("held-out poses: RMS distance from their feature fitted on the training poses", "um", 1e6),
     "pose_max": ("held-out poses: max distance from their feature fitted on the training poses", "um", 1e6),
 }
@@ -79,7 +78,7 @@ class Validation:
     reference: dict | None = None
     #: the reference points' errors [m] and their measurements (for :func:`bootstrap`; not in :meth:`to_dict`)
     reference_errors: tuple | None = field(default=None, repr=False)
-    #: reference points with the ``T_ref_base`` of another fit: n, RMS, max [m]
+    #: reference points with the frames and marker offsets of another fit: n, RMS, max [m]
     reference_predicted: dict | None = None
     reference_predicted_errors: tuple | None = field(default=None, repr=False)
     #: held-out poses against their features fitted on the training poses: n, RMS, max [m]
@@ -143,27 +142,21 @@ def _articulation(x: np.ndarray) -> dict:
 
 
 def validate(model: ArmModel, p, data: CalibrationData, weights: Weights | None = None,
-             reference: str = "fit", T_ref_base=None) -> Validation:
-    """Validation figures of ``model`` with parameters ``p`` (full vector, SI) on ``data``; ``T_ref_base``
-    (4x4, of a fit on other data of the same instrument station) adds the reference points' errors with that
-    transform (``reference_predicted``) beside those after their own best-fit one."""
+             reference: str = "fit", tracker: Tracker | None = None) -> Validation:
+    """Validation figures of ``model`` with parameters ``p`` (full vector, SI) on ``data``; ``tracker`` (the
+    frames and marker offsets of a fit on other data of the same instrument stations) adds the reference
+    points' errors with those (``reference_predicted``) beside those after their own best fit (left out
+    where a session of ``data`` has too few reference points to fit its own frame: a prediction needs none)."""
+    from .tracking import has_reference, own_frames_fit
     with blas_threads(1):
-        val = _validate(model, p, data, weights, reference)
-        if T_ref_base is not None and reference == "fit" and val.reference is not None:
-            pred = _validate(model, p, _in_base(data, T_ref_base), weights, "identity")
-            val.reference_predicted = {k: pred.reference[k] for k in ("n", "rms", "max")}
-            val.reference_predicted_errors = pred.reference_errors
+        if tracker is None or reference != "fit" or not has_reference(data):
+            return _validate(model, p, data, weights, reference)
+        pred = _validate(model, p, data.with_tracker(tracker), weights, reference)
+        val = _validate(model, p, data, weights, reference) if own_frames_fit(data) else replace(pred, reference=None,
+                                                                                               reference_errors=None)
+        val.reference_predicted = {k: pred.reference[k] for k in ("n", "rms", "max")}
+        val.reference_predicted_errors = pred.reference_errors
         return val
-
-
-def _in_base(data: CalibrationData, T_ref_base) -> CalibrationData:
-    """``data`` with its reference coordinates mapped into the base frame by the inverse of ``T_ref_base``
-    (distances are kept: the errors in the base frame are those in the reference frame)."""
-    from dataclasses import replace
-    t = np.asarray(T_ref_base, dtype=float)
-    ref = data.points.ref
-    mapped = (ref - t[:3, 3]) @ t[:3, :3]
-    return replace(data, points=replace(data.points, ref=mapped))
 
 
 def _validate(model, p, data, weights, reference) -> Validation:
@@ -184,12 +177,7 @@ def _validate(model, p, data, weights, reference) -> Validation:
         elif it.kind == "plane":
             v = table["value"][table["instance"] == i]
             val.planes.append({**base, "n": len(v), "flatness": float(v.max() - v.min())})
-        elif it.kind == "reference":
-            e = table["value"][table["instance"] == i]
-            val.reference = {"n": len(e), "rms": float(np.sqrt(np.mean(e ** 2))), "max": float(e.max()),
-                             "T_ref_base": _transform(states[i])}
-            rows = table["point"][table["instance"] == i]
-            val.reference_errors = (e, np.asarray(data.points.measurement)[rows])
+    _reference_figures(val, prob, states, table, data)
     # lengths: centres of the features (certified diameters), no length used in the fit
     centre = {(it.measurement, it.feature): states[i][:3] for i, it in enumerate(prob.instances)
               if it.kind in ("seat", "sphere")}
@@ -219,6 +207,19 @@ def _validate(model, p, data, weights, reference) -> Validation:
                                   "n": len(it.points), "certified": feat.diameter, "fitted": float(fitted),
                                   "error": float(fitted - feat.diameter), "form": float(v.max() - v.min())})
     return val
+
+
+def _reference_figures(val: Validation, prob: Problem, states, table, data: CalibrationData) -> None:
+    """The reference points' 3D errors over every session: ``val.reference`` (``n``, ``rms``, ``max``,
+    ``tracker``: the frames and marker offsets) and ``val.reference_errors``."""
+    frames = [i for i, it in enumerate(prob.instances) if it.kind == "reference"]
+    if not frames:
+        return
+    sel = np.isin(table["instance"], frames)
+    e = table["value"][sel]
+    val.reference = {"n": len(e), "rms": float(np.sqrt(np.mean(e ** 2))), "max": float(e.max()),
+                     "tracker": prob.tracker(states).to_dict()}
+    val.reference_errors = (e, np.asarray(data.points.measurement)[table["point"][sel]])
 
 
 def heldout_residuals(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit",
@@ -358,13 +359,6 @@ def with_u(value, u, digits: int = 2) -> str:
     if value is None:
         return "-"
     return f"{value:.{digits}f}" + ("" if u is None else f" ± {u:.{digits}f}")
-
-
-def _transform(state) -> list:
-    t = np.eye(4)
-    t[:3, :3] = np.asarray(state[0:9]).reshape(3, 3, order="F")
-    t[:3, 3] = state[9:12]
-    return t.tolist()
 
 
 def before_after(model: ArmModel, p_before, p_after, data: CalibrationData, weights: Weights | None = None,

@@ -40,9 +40,11 @@ def sensitivity(res, name: str) -> tuple[np.ndarray, np.ndarray]:
     ev = prob.evaluate(res.p, states)
     jr = reduced_jacobian(ev.jp, ev.jt)
     g = -np.linalg.solve(jr.T @ jr, jr.T)[res.free.index(name)]     # d estimate / d weighted residual
-    own = prob.centres
+    # every ball centre the residuals see comes from Problem._centres (the markers' offsets beside): shift them
+    own = prob._centres
     shift = np.zeros((len(prob.used), 3))
-    prob.centres = lambda p, jac=False, columns=None: (lambda x, d: (x + shift, d))(*own(p, jac, columns))
+    prob._centres = lambda p, jac, columns, offsets: (lambda x, d, do: (x + shift, d, do))(*own(p, jac, columns,
+                                                                                                 offsets))
     h = 1e-9
     a = np.zeros_like(shift)
     for i in range(len(shift)):

@@ -53,7 +53,7 @@ def test_gross_errors_in_either_group_are_flagged(campaign):
     q[bad_seat, 1] += 5e-4                                 # 0.5 mrad on the shoulder: ~0.3 mm, 100 probe sigmas
     x_ref = c.reference_points.ref.copy()
     bad_ref = 17
-    x_ref[bad_ref] += [0.0, 4e-4, 0.0]                     # 0.4 mm: 20 tracker sigmas
+    x_ref[bad_ref, 0] += [0.0, 4e-4, 0.0]                     # 0.4 mm: 20 tracker sigmas
     res = _fit(model, c, replace(c.points, q=q), replace(c.reference_points, ref=x_ref))
     kinds = {(o.kind, o.measurement) for o in res.outliers if abs(o.standardized) > 10}
     assert ("seat", c.points.measurement[bad_seat]) in kinds

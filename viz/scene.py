@@ -13,14 +13,17 @@ Every scaled quantity is named with its scale in the scene tree (``deflection x1
 """
 from __future__ import annotations
 
+import logging
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from arm_model import ArmDescription, load_description
 from arm_model.geometry import frame_along
+
+log = logging.getLogger(__name__)
 
 __all__ = ["ArmScene", "Camera", "PoseInfo", "ROOT", "DEFLECTION_RGB", "RESIDUAL_RGB", "POINTS_RGB",
            "ARTEFACT_RGB", "ELLIPSOID_RGB", "ellipsoid_mesh", "coverage_factor", "transform_frames", "send_transform"]
@@ -256,11 +259,12 @@ class ArmScene:
         self.desc = None if arm is None else self.arm.desc
         self._pv = None
         if self.arm is not None:
-            geom = pin.buildGeomFromUrdfString(self.arm.model, self.arm.urdf, pin.GeometryType.VISUAL)
+            geom = self._visual_model(pin)
             self._pv = MeshcatVisualizer(self.arm.model, None, geom)
             self._pv.initViewer(viewer=vis)
             self._pv.loadViewerModel(rootNodeName=f"{root}/arm")
-            self._legend(f"arm '{self.desc.name}': links orange, probe ball red (marker 24 mm wide)")
+            self._legend(f"arm '{self.desc.name}': " + ("its URDF's own visuals" if self.desc.visuals else
+                                                          "links orange") + ", probe ball red (marker 24 mm wide)")
         vis["/Axes"].set_property("visible", False)   # its x axis fades to orange, the arm's colour
         vis[f"{root}/base frame"].set_object(mg.LineSegments(
             mg.PointsGeometry(position=(0.15 * np.array([[0, 0, 0], [1, 0, 0], [0, 0, 0], [0, 1, 0],
@@ -270,6 +274,21 @@ class ArmScene:
             mg.LineBasicMaterial(vertexColors=True)))
         self._arrow_path = None
         self._nodes = None
+
+    def _visual_model(self, pin):
+        """Pinocchio's visual model of the arm: the URDF's own visuals where the arm was read from one and its
+        meshes load; else (a mesh Pinocchio cannot read) the generated links, saying so."""
+        try:
+            return pin.buildGeomFromUrdfString(self.arm.model, self.arm.urdf, pin.GeometryType.VISUAL)
+        except (RuntimeError, ValueError) as exc:
+            if not self.desc.visuals:
+                raise
+            why = " ".join(str(exc).split())
+            log.warning(f"the URDF's own visuals cannot be drawn ({why[:300]}): the arm is drawn as generated links")
+            from arm_model import PinocchioArm
+            self.arm = PinocchioArm(replace(self.desc, visuals=()))
+            self.desc = self.arm.desc
+            return pin.buildGeomFromUrdfString(self.arm.model, self.arm.urdf, pin.GeometryType.VISUAL)
 
     # -- poses --------------------------------------------------------------------------------
     def pose(self, q, wrench=None) -> tuple[np.ndarray, PoseInfo]:
