@@ -115,6 +115,7 @@ def run(args: argparse.Namespace) -> int:
         if pts is not None:
             Arm(desc, effects).check_points(pts)
             warnings += point_warnings(desc, pts)
+    _check_folds(args.folds, points, reference)
     weights = Weights(args.sigma_probe_um * 1e-6, args.sigma_ref_um * 1e-6,
                       None if args.sigma_length_um is None else args.sigma_length_um * 1e-6)
     holdout = _holdout(args.holdout)
@@ -130,11 +131,10 @@ def run(args: argparse.Namespace) -> int:
                           free=args.free,
                           weights=weights, settings=settings, families_=families)
         # the model written is loop.model_fit (every point) or else the last stage's fit: refine that one
-        opts = dict(rank_tol=settings.rank_tol, outlier_threshold=settings.outlier_threshold)
         if loop.model_fit is not None:
-            loop.model_fit = refine_torques(loop.model_fit, **opts)
+            loop.model_fit = refine_torques(loop.model_fit)
         else:
-            loop.stages[-1].result = refine_torques(loop.stages[-1].result, **opts)
+            loop.stages[-1].result = refine_torques(loop.stages[-1].result)
         names = {"points": str(args.points), "artefacts": str(args.artefacts), "arm": str(args.arm),
                  "reference_points": None if args.reference_points is None else str(args.reference_points)}
         conf = _conformance(loop, _mpe(args))
@@ -150,6 +150,15 @@ def run(args: argparse.Namespace) -> int:
     log.info(f"model file: {model_paths(args.output, loop_model_name(loop))['model']} (every --arm applies it)")
     log.info(f"report: {args.output / 'report.html'}; machine summary: {args.output / 'summary.json'}")
     return 0
+
+
+def _check_folds(folds: int, points, reference) -> None:
+    """``--folds`` at most the poses the data hold (points on a feature, reference points): each fold of the
+    decisions holds out at least one pose, whether folded by measurement or by pose."""
+    poses = int((points.feature != "").sum()) + (0 if reference is None else len(reference))
+    if folds > poses:
+        raise InputError(f"--folds {folds}: the data hold {poses} poses (points on a feature and reference points), "
+                         f"and each fold holds out at least one: ask for at most {poses} folds")
 
 
 def _conformance(loop, mpe: dict) -> dict:
