@@ -19,6 +19,7 @@ _HOME = {
     "atomic_write_text": "io", "write_csv": "io", "csv_records": "io",
     "urdf_text": "urdf", "load_arm": "urdf_import", "description_from_urdf": "urdf_import",
     "PinocchioArm": "pinocchio_model", "casadi_ball_centre": "casadi_model",
+    "Tracker": "tracker", "marker_positions": "tracker",
 }
 
 __all__ = [
@@ -30,6 +31,7 @@ __all__ = [
     "PointSet", "Artefacts", "Feature", "Distance", "ForceSignal", "read_points", "read_artefacts",
     "read_force_signal", "check_features", "atomic_write_text", "write_csv", "csv_records",
     "urdf_text", "load_arm", "description_from_urdf", "PinocchioArm", "casadi_ball_centre",
+    "Tracker", "marker_positions",
 ]
 
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import csv
 from decimal import ROUND_HALF_EVEN, Decimal
 import io
+import math
 import os
 import re
 import stat
@@ -31,7 +32,7 @@ import numpy as np
 
 from ._errors import InputError, decode_text, open_input
 
-__all__ = ["parse_number", "csv_records", "CsvBlock", "iter_csv_blocks", "csv_spans", "format_csv"]
+__all__ = ["parse_number", "csv_records", "CsvBlock", "iter_csv_blocks", "csv_spans", "format_csv", "format_row"]
 
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-]?(?:nan|inf|infinity)",
                      re.IGNORECASE)
@@ -576,6 +577,41 @@ def _slow_rows(columns: list[np.ndarray], fmts: list[str]) -> bytes:
     w = csv.writer(buf, lineterminator="\n")
     w.writerows(zip(*(cells(c, f) for c, f in zip(columns, fmts))))
     return buf.getvalue().encode("utf-8")
+
+
+def format_row(values: dict, fmt="%.9g") -> str:
+    """The text of the one CSV row of ``{name: value}`` that :func:`format_csv` writes for one-row
+    columns of these values (same formats, quoting and zeros), without its arrays: for a file written a
+    row at a time (a live session's ``tips.csv`` must equal ``aacmm tip``'s output byte for byte)."""
+    names = list(values)
+    fmts = [fmt.get(k, "%.9g") if isinstance(fmt, dict) else fmt for k in names]
+    vals = [values[k] for k in names]
+
+    def fast(v, f) -> bool:           # the column would take format_csv's vectorised path
+        if isinstance(v, (bool, int, np.integer, np.bool_)):
+            return abs(int(v)) <= 9e15
+        if isinstance(v, (float, np.floating)):
+            m = _FIXED.fullmatch(f)
+            return m is not None and math.isfinite(v) and abs(float(v)) * 10.0 ** int(m.group(1)) <= 9e15
+        return True
+    if all(fast(v, f) for v, f in zip(vals, fmts)):
+        cells = []
+        for v, f in zip(vals, fmts):
+            if isinstance(v, (bool, int, np.integer, np.bool_)):
+                cells.append(str(int(v)))
+            elif isinstance(v, (float, np.floating)):
+                t = f % float(v)
+                cells.append(t[1:] if t.startswith("-") and not t.strip("-0.") else t)   # no "-0.000"
+            else:
+                t = str(v)
+                cells.append('"' + t.replace('"', '""') + '"' if any(c in t for c in ',"\n\r') or t != t.strip()
+                             else t)
+        return ",".join(cells) + "\n"
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerow(
+        [str(int(v)) if isinstance(v, (bool, int, np.integer, np.bool_)) else
+         f % v if isinstance(v, (float, np.floating)) else str(v) for v, f in zip(vals, fmts)])
+    return buf.getvalue()
 
 
 def format_csv(columns: dict, fmt="%.9g", header: bool = True, chunk: int = 16_384) -> bytes:

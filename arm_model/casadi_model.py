@@ -19,8 +19,6 @@ def _ops():
     return SimpleNamespace(sin=ca.sin, cos=ca.cos)
 
 
-
-
 def casadi_ball_centre(desc: ArmDescription, name: str = "ball_centre"):
     """CasADi Function ``ball_centre(q[J], w[6], p[P]) -> (p_base[3])`` [m].
 
@@ -34,6 +32,6 @@ def casadi_ball_centre(desc: ArmDescription, name: str = "ball_centre"):
     p = ca.SX.sym("p", spec.size)
     rows, p_last, compliance = split_params(desc, p)
     x, y, z = ball_centre_expr(desc.convention, rows, p_last, compliance,
-                               [q[i] for i in range(desc.n_joints)], [w[i] for i in range(6)], _ops(), desc.axes,
+                               [q[i] for i in range(desc.n_joints)], [w[i] for i in range(6)], _ops(), desc.chain_joints,
                                desc.probe.rotation, desc.probe.lever)
     return ca.Function(name, [q, w, p], [ca.vertcat(x, y, z)], ["q", "w", "p"], ["p_base"])

@@ -12,6 +12,11 @@ Geometry (all SI):
   chains: the joint origin (x, y, z [m], roll, pitch, yaw [rad]) and a constant unit axis).
   Standard DH: ``T_{i-1,i} = Rz(theta_offset + q) Tz(d) Tx(a) Rx(alpha)``;
   modified DH: ``T_{i-1,i} = Rx(alpha) Tx(a) Rz(theta_offset + q) Tz(d)``.
+  A prismatic joint translates instead: ``q`` [m] is added to ``d`` (DH, MDH) or moves along the
+  URDF axis.
+* ``joints``: how each row moves (:class:`Joint`: its URDF axis, revolute or prismatic, and the
+  encoder column it reads, ``value = multiplier q[column] + offset``, a URDF ``<mimic>``); None for
+  revolute DH/MDH rows reading one column each.
 * ``p_last``: the probe ball centre (x, y, z) [m] in the last joint frame with a rigid stylus.
 * ``rotation``: R_last_probe, the probe frame's orientation in the last joint frame (3x3 constants),
   None for a probe frame parallel to the last joint frame; the probe z axis runs along the stylus.
@@ -34,14 +39,44 @@ and the ball centre is the forward kinematics of ``(q, q_e)``: for small forces 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from types import SimpleNamespace
 
 import numpy as np
 
-__all__ = ["NUMPY_OPS", "elastic_displacement", "ball_in_last_frame", "row_motions", "chain_point",
-           "ball_centre_expr", "probe_lever"]
+__all__ = ["NUMPY_OPS", "Joint", "joint_value", "elastic_displacement", "ball_in_last_frame", "row_motions",
+           "chain_point", "ball_centre_expr", "probe_lever", "has_stylus"]
 
 NUMPY_OPS = SimpleNamespace(sin=np.sin, cos=np.cos)
+
+
+@dataclass(frozen=True)
+class Joint:
+    """How one row of the chain moves (constants, not calibrated).
+
+    ``axis``: the joint's constant unit axis in its own frame (URDF rows), None for DH/MDH (local z);
+    ``prismatic``: a translation along the axis [m] instead of a rotation about it [rad]; the row's
+    joint value is ``multiplier * q[column] + offset`` (``column``: the encoder column it reads; a URDF
+    ``<mimic>`` joint reads its master's column with the URDF's multiplier and offset [rad] or [m]).
+    """
+    column: int
+    axis: tuple[float, float, float] | None = None
+    prismatic: bool = False
+    multiplier: float = 1.0
+    offset: float = 0.0
+
+
+def joint_value(joints, i: int, q):
+    """The joint value of row ``i`` from the encoder columns ``q`` (``joints`` None: ``q[i]``)."""
+    if joints is None:
+        return q[i]
+    j = joints[i]
+    v = q[j.column]
+    if j.multiplier != 1.0:
+        v = j.multiplier * v
+    if j.offset != 0.0:
+        v = v + j.offset
+    return v
 
 
 def _is_const(x) -> bool:
@@ -104,60 +139,69 @@ def ball_in_last_frame(p_last, q_e, ops=NUMPY_OPS, rotation=None, lever=None):
                  for k in range(3))
 
 
-def row_motions(convention: str, row, q, axis=None) -> list[tuple]:
+def row_motions(convention: str, row, q, joint: Joint | None = None) -> list[tuple]:
     """The one description of each joint convention: the elementary motions of one row of the chain,
     in application order from its parent frame (the chain is their product).
 
     Each motion is ``(kind, axis, amount, row indices, is_joint)``: kind ``"R"`` (rotation [rad]) or
     ``"T"`` (translation [m]) along a local axis (0, 1, 2 for x, y, z, or a constant unit 3-vector), the
-    amount (a value of ``row``, the joint angle ``q``, or their sum), the indices of the row values it
+    amount (a value of ``row``, the joint value ``q``, or their sum), the indices of the row values it
     depends on, and whether it depends on ``q``. :func:`chain_point` applies them to a point;
     :mod:`arm_model.jacobian` differentiates them and multiplies them as homogeneous matrices.
 
     * ``"dh"``:   ``Rz(theta_offset + q) Tz(d) Tx(a) Rx(alpha)``, ``row`` = (theta_offset, d, a, alpha);
-    * ``"mdh"``:  ``Rx(alpha) Tx(a) Rz(theta_offset + q) Tz(d)``, same ``row``;
-    * ``"urdf"``: ``T(x, y, z) Rz(yaw) Ry(pitch) Rx(roll) R(axis, q)``, ``row`` = (x, y, z, roll, pitch,
-      yaw) of the joint origin, ``axis`` its constant unit axis.
+      prismatic: ``Rz(theta_offset) Tz(d + q) Tx(a) Rx(alpha)``;
+    * ``"mdh"``:  ``Rx(alpha) Tx(a) Rz(theta_offset + q) Tz(d)``, same ``row``; prismatic:
+      ``Rx(alpha) Tx(a) Rz(theta_offset) Tz(d + q)``;
+    * ``"urdf"``: ``T(x, y, z) Rz(yaw) Ry(pitch) Rx(roll) R(axis, q)`` (prismatic: ``T(axis q)``),
+      ``row`` = (x, y, z, roll, pitch, yaw) of the joint origin, ``joint.axis`` its constant unit axis.
     """
-    if convention == "dh":
-        return [("R", 2, row[0] + q, (0,), True), ("T", 2, row[1], (1,), False),
-                ("T", 0, row[2], (2,), False), ("R", 0, row[3], (3,), False)]
-    if convention == "mdh":
-        return [("R", 0, row[3], (3,), False), ("T", 0, row[2], (2,), False),
-                ("R", 2, row[0] + q, (0,), True), ("T", 2, row[1], (1,), False)]
+    prismatic = joint is not None and joint.prismatic
+    if convention in ("dh", "mdh"):
+        if prismatic:
+            turn, slide = ("R", 2, row[0], (0,), False), ("T", 2, row[1] + q, (1,), True)
+        else:
+            turn, slide = ("R", 2, row[0] + q, (0,), True), ("T", 2, row[1], (1,), False)
+        if convention == "dh":
+            return [turn, slide, ("T", 0, row[2], (2,), False), ("R", 0, row[3], (3,), False)]
+        return [("R", 0, row[3], (3,), False), ("T", 0, row[2], (2,), False), turn, slide]
     if convention == "urdf":
-        ax = tuple(float(a) for a in axis)
+        ax = tuple(float(a) for a in joint.axis)
+        local = 2 if ax == (0.0, 0.0, 1.0) else 0 if ax == (1.0, 0.0, 0.0) else 1 if ax == (0.0, 1.0, 0.0) else ax
         return [("T", 0, row[0], (0,), False), ("T", 1, row[1], (1,), False), ("T", 2, row[2], (2,), False),
                 ("R", 2, row[5], (5,), False), ("R", 1, row[4], (4,), False), ("R", 0, row[3], (3,), False),
-                ("R", 2 if ax == (0.0, 0.0, 1.0) else ax, q, (), True)]
+                ("T" if prismatic else "R", local, q, (), True)]
     raise ValueError(f"unknown convention {convention!r}")
 
 
-def chain_point(convention: str, rows, q, point, ops=NUMPY_OPS, axes=None):
+def chain_point(convention: str, rows, q, point, ops=NUMPY_OPS, joints=None):
     """Map ``point`` (x, y, z) given in the last joint frame to the base frame.
 
     ``rows[i]`` = (theta_offset, d, a, alpha) of joint i for DH/MDH, or (x, y, z, roll, pitch, yaw)
-    of its URDF origin (then ``axes[i]`` is its unit axis); ``q[i]`` its angle [rad]. Applies the
-    motions of :func:`row_motions` from the last joint inwards, carrying only the point (three numbers
-    a point), never a matrix; a constant zero motion is skipped (exact).
+    of its URDF origin; ``joints[i]`` how it moves (:class:`Joint`; None: revolute DH/MDH rows);
+    ``q`` the encoder columns [rad] or [m] (:func:`joint_value`). Applies the motions of
+    :func:`row_motions` from the last joint inwards, carrying only the point (three numbers a point),
+    never a matrix; a constant zero motion is skipped (exact).
     """
     x, y, z = point
     for i in range(len(rows) - 1, -1, -1):
-        for kind, axis, amount, _, _ in reversed(row_motions(convention, rows[i], q[i],
-                                                             None if axes is None else axes[i])):
+        for kind, axis, amount, _, _ in reversed(row_motions(convention, rows[i], joint_value(joints, i, q),
+                                                             None if joints is None else joints[i])):
             const = _is_const(amount)
             if const and amount == 0.0:
                 continue
-            if kind == "R":
-                c, s = (math.cos(amount), math.sin(amount)) if const else (ops.cos(amount), ops.sin(amount))
             if kind == "T":
                 if axis == 0:
                     x = x + amount
                 elif axis == 1:
                     y = y + amount
-                else:
+                elif axis == 2:
                     z = z + amount
-            elif axis == 2:
+                else:
+                    x, y, z = x + amount * axis[0], y + amount * axis[1], z + amount * axis[2]
+                continue
+            c, s = (math.cos(amount), math.sin(amount)) if const else (ops.cos(amount), ops.sin(amount))
+            if axis == 2:
                 x, y = c * x - s * y, s * x + c * y
             elif axis == 0:
                 y, z = c * y - s * z, s * y + c * z
@@ -172,12 +216,18 @@ def chain_point(convention: str, rows, q, point, ops=NUMPY_OPS, axes=None):
     return x, y, z
 
 
-def ball_centre_expr(convention: str, rows, p_last, compliance, q, wrench=None, ops=NUMPY_OPS, axes=None,
+def ball_centre_expr(convention: str, rows, p_last, compliance, q, wrench=None, ops=NUMPY_OPS, joints=None,
                      rotation=None, lever=None):
     """Deflection-aware ball centre (x, y, z) [m] in the base frame: FK of (q, q_e(wrench)).
 
-    ``rotation``, ``lever``: the probe frame (see :class:`arm_model.description.Probe`)."""
-    if wrench is None:
-        return chain_point(convention, rows, q, tuple(p_last), ops, axes)
+    ``rotation``, ``lever``: the probe frame (see :class:`arm_model.description.Probe`); a ``lever`` of
+    0 is a tip without a stylus (a flange point, a tracker marker): rigid, the wrench moves nothing."""
+    if wrench is None or not has_stylus(lever):
+        return chain_point(convention, rows, q, tuple(p_last), ops, joints)
     q_e = elastic_displacement(p_last, compliance, wrench, probe_lever(p_last, rotation, lever))
-    return chain_point(convention, rows, q, ball_in_last_frame(p_last, q_e, ops, rotation, lever), ops, axes)
+    return chain_point(convention, rows, q, ball_in_last_frame(p_last, q_e, ops, rotation, lever), ops, joints)
+
+
+def has_stylus(lever) -> bool:
+    """False for a tip without a stylus (a stylus length ``lever`` of exactly 0): no elastic joint."""
+    return lever is None or lever != 0.0

@@ -11,18 +11,21 @@ from __future__ import annotations
 
 import html
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 __all__ = ["InputWarning", "over_force_warning", "joint_limit_warning", "JointLimitTally", "point_warnings", "log_warnings",
-           "warnings_html", "LIMIT_TOLERANCE_RAD"]
+           "warnings_html", "LIMIT_TOLERANCE_RAD", "limit_bounds"]
 
 log = logging.getLogger(__name__)
 
 #: how far beyond a declared joint limit an angle may read before it is reported [rad] (1e-6 deg:
 #: below every encoder's resolution, above the rounding of a file written in degrees)
 LIMIT_TOLERANCE_RAD = 1e-6 * np.pi / 180.0
+#: the same for a prismatic joint [m]: a nanometre
+LIMIT_TOLERANCE_M = 1e-9
 _SHOWN = 10
 
 
@@ -70,30 +73,43 @@ def over_force_warning(force, lines, max_force: float, file: str) -> InputWarnin
         file, lines)
 
 
+def limit_bounds(desc) -> list[tuple[float, float]]:
+    """Per joint, the (lowest, highest) angle [rad] read without a joint-limit warning: the declared
+    limits widened by :data:`LIMIT_TOLERANCE_RAD` (-inf, inf where a joint declares none)."""
+    return [(-math.inf if j.lower is None else j.lower - LIMIT_TOLERANCE_RAD,
+             math.inf if j.upper is None else j.upper + LIMIT_TOLERANCE_RAD) for j in desc.joints]
+
+
 def _beyond_limits(desc, q) -> np.ndarray:
-    """(N, J) True where an angle [rad] lies beyond its joint's declared limits."""
+    """(N, J) True where an encoder reading (an angle [rad], a prismatic joint's position [m]) lies beyond
+    its joint's declared limits."""
     out = np.zeros(q.shape, bool)
-    for j, joint in enumerate(desc.joints[: q.shape[1]]):
+    for j, joint in enumerate(desc.encoders[: q.shape[1]]):
+        tol = LIMIT_TOLERANCE_M if joint.prismatic else LIMIT_TOLERANCE_RAD
         if joint.lower is not None:
-            out[:, j] |= q[:, j] < joint.lower - LIMIT_TOLERANCE_RAD
+            out[:, j] |= q[:, j] < joint.lower - tol
         if joint.upper is not None:
-            out[:, j] |= q[:, j] > joint.upper + LIMIT_TOLERANCE_RAD
+            out[:, j] |= q[:, j] > joint.upper + tol
     return out
+
+
+def _limits_text(joint) -> str:
+    unit, factor = ("mm", 1e3) if joint.prismatic else ("deg", 180.0 / np.pi)
+    return f"{joint.lower * factor:.4g} to {joint.upper * factor:.4g} {unit}"
 
 
 def _joint_limit_message(desc, per_joint, lines, file: str) -> InputWarning | None:
     if not len(lines):
         return None
     names = []
-    for joint, count in zip(desc.joints, per_joint):
+    for joint, count in zip(desc.encoders, per_joint):
         if count:
-            names.append(f"{joint.name} ({int(count)}, limits {np.degrees(joint.lower):.4g} to "
-                         f"{np.degrees(joint.upper):.4g} deg)" if joint.lower is not None and joint.upper is not None
-                         else f"{joint.name} ({int(count)})")
+            names.append(f"{joint.name} ({int(count)}, limits {_limits_text(joint)})"
+                         if joint.lower is not None and joint.upper is not None else f"{joint.name} ({int(count)})")
     lines = tuple(np.asarray(lines).tolist())
     return InputWarning(
         "joint_limits",
-        f"{len(lines)} point(s) with a joint angle beyond the arm's declared limits: "
+        f"{len(lines)} point(s) with a joint reading beyond the arm's declared limits: "
         f"{', '.join(names)}; used all the same (check the arm description or the encoder zero); "
         f"{file} {_lines_text(lines)}", file, lines)
 
@@ -113,7 +129,7 @@ class JointLimitTally:
 
     def __init__(self, desc, file: str):
         self.desc, self.file = desc, file
-        self.per_joint = np.zeros(len(desc.joints), np.int64)
+        self.per_joint = np.zeros(desc.n_joints, np.int64)
         self.lines = []
 
     def add(self, q, lines) -> None:

@@ -54,6 +54,8 @@ COMMANDS = {
     "calibrate": ("calibration.cli", "identify the arm's kinematic parameters from artefact measurements"),
     "study": ("calibration.cli", "plan a calibration campaign: Monte Carlo runs, pose-set choice"),
     "close-loop": ("calibration.loop_cli", "find what the model lacks: calibrate, diagnose, add the effect, repeat"),
+    "live": ("viz.live_cli", "live measurement session: stream in, corrected points with their uncertainty, "
+                             "events and feature fits out as the operator probes, recorded as it goes"),
 }
 COMMAND_MODULES = tuple(dict.fromkeys(module for module, _ in COMMANDS.values()))
 

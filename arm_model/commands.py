@@ -19,7 +19,7 @@ from .io import concat_points, iter_points
 from .model_file import Arm, load_model
 from .urdf import urdf_text
 
-__all__ = ["register", "tip_table", "add_arm_options", "arm_from_args", "model_from_args", "number_in",
+__all__ = ["register", "tip_table", "tip_centres", "add_arm_options", "arm_from_args", "model_from_args", "number_in",
            "positive", "non_negative", "at_least", "fraction", "finite", "seed", "port"]
 
 log = logging.getLogger(__name__)
@@ -144,6 +144,12 @@ def register(sub) -> None:
     p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3)")
     add_arm_options(p)
     p.add_argument("-o", "--output", type=Path, required=True, help="output CSV (never one of the inputs)")
+    p.add_argument("--reference-frame", action="store_true",
+                   help="also write where the reference instrument (tracker, motion capture) would see each marker: "
+                        "x_ref_mm, y_ref_mm, z_ref_mm (x1_ref_mm ... for several markers), in the instrument's frame "
+                        "of the row's session, with the frames and marker offsets of a model file written by "
+                        "aacmm calibrate on reference points; where the points carry the instrument's own "
+                        "coordinates, also their distance error_ref_um (error1_ref_um ...), measured - predicted")
     from .uncertainty_cli import add_tip_options
     add_tip_options(p)
     p.set_defaults(func=run_tip)
@@ -169,15 +175,28 @@ def register(sub) -> None:
     e.set_defaults(func=run_examples)
 
 
-def tip_table(arm, points) -> dict:
+def tip_centres(arm, points) -> tuple[np.ndarray, np.ndarray]:
+    """(rigid, corrected) ball centres (N, 3) [m] of ``aacmm tip`` for a :class:`~arm_model.io.PointSet`;
+    ``arm`` an :class:`~arm_model.model_file.Arm` (every effect applied) or a description. Rigid: at a
+    zero force reading; corrected: with the points' wrench (= rigid without force columns)."""
+    if not isinstance(arm, Arm):
+        arm = Arm(arm)
+    rigid = arm.ball_centres(points, rigid=True)
+    corrected = arm.ball_centres(points) if points.wrench is not None else rigid.copy()
+    return rigid, corrected
+
+
+def tip_table(arm, points, centres: tuple[np.ndarray, np.ndarray] | None = None,
+              reference_frame: bool = False) -> dict:
     """Columns of the ``aacmm tip`` output for a :class:`~arm_model.io.PointSet`; ``arm`` an
     :class:`~arm_model.model_file.Arm` (every effect applied) or a description. ``x_rigid_mm``: the
-    ball centre at a zero force reading; ``x_mm``: with the points' wrench."""
+    ball centre at a zero force reading; ``x_mm``: with the points' wrench. ``centres``: the (rigid,
+    corrected) centres of :func:`tip_centres`, when the caller has them. ``reference_frame``: also the markers
+    as the reference instrument would see them (:func:`reference_columns`)."""
     if not isinstance(arm, Arm):
         arm = Arm(arm)
     desc = arm.desc
-    rigid = arm.ball_centres(points, rigid=True)
-    corrected = arm.ball_centres(points) if points.wrench is not None else rigid.copy()
+    rigid, corrected = tip_centres(arm, points) if centres is None else centres
     delta = corrected - rigid
     cols = {"measurement": points.measurement, "feature": points.feature}
     for k, axis in enumerate("xyz"):
@@ -188,6 +207,40 @@ def tip_table(arm, points) -> dict:
         cols[f"d{axis}_um"] = delta[:, k] * 1e6
     cols["deflection_um"] = np.linalg.norm(delta, axis=1) * 1e6
     cols["over_force"] = points.over_force(desc.probe.max_force).astype(int)
+    if reference_frame:
+        cols.update(reference_columns(arm, points))
+    return cols
+
+
+def _check_tracker(arm: Arm, path) -> None:
+    """An :class:`InputError` when ``arm`` holds no reference instrument's frame (``--reference-frame``)."""
+    if arm.tracker is None:
+        raise InputError("--reference-frame needs a model file with the reference instrument's frame "
+                         "([[reference_frame]]), as aacmm calibrate writes it from points with reference columns",
+                         path)
+
+
+def reference_columns(arm: Arm, points) -> dict:
+    """``x_ref_mm, y_ref_mm, z_ref_mm`` (``x1_ref_mm`` ... for several markers): each marker of ``arm.tracker``
+    where the instrument would see it [mm] in the frame of the row's session, and ``error_ref_um``
+    (``error1_ref_um`` ...): the 3D distance [um] measured - predicted where ``points`` carry the
+    instrument's coordinates of as many markers."""
+    from .tracker import DEFAULT_SESSION, check_sessions, marker_positions
+    _check_tracker(arm, arm.desc.source)
+    sessions = points.session if points.session is not None else np.full(len(points), DEFAULT_SESSION, object)
+    check_sessions(arm.tracker, sessions, points.path)
+    predicted = marker_positions(arm.model, arm.p, points.q, arm.tracker, sessions,
+                                 arm.aux(points, wrench=np.zeros((len(points), 6)), contact=False))
+    k = predicted.shape[1]
+    cols = {}
+    for m in range(k):
+        tag = "" if k == 1 else str(m + 1)
+        for a, axis in enumerate("xyz"):
+            cols[f"{axis}{tag}_ref_mm"] = predicted[:, m, a] * 1e3
+    if points.n_markers == k:
+        for m in range(k):
+            cols[f"error{'' if k == 1 else m + 1}_ref_um"] = np.linalg.norm(points.ref[:, m] - predicted[:, m],
+                                                                              axis=1) * 1e6
     return cols
 
 
@@ -222,13 +275,13 @@ class _TipTally:
         self.limits.lines += other.limits.lines
 
 
-def _tip_rows(arm, path, blocks, out: Path, header: bool, extra=None) -> _TipTally:
+def _tip_rows(arm, path, blocks, out: Path, header: bool, extra=None, reference_frame: bool = False) -> _TipTally:
     """Write the ``aacmm tip`` rows of ``blocks`` (of the points file ``path``) to ``out`` (appending);
-    ``extra(block)``: more columns (the uncertainties)."""
+    ``extra(block)``: more columns (the uncertainties); ``reference_frame``: the instrument's columns."""
     tally = _TipTally(arm.desc, str(path))
     with open(out, "ab") as fh:
         for block in blocks:
-            cols = tip_table(arm, block)
+            cols = tip_table(arm, block, reference_frame=reference_frame)
             if extra is not None:
                 cols.update(extra(block))
             fh.write(format_csv(cols, "%.6f", header=header and tally.n == 0))
@@ -254,12 +307,12 @@ def _append(dst: Path, src: Path) -> None:
         shutil.copyfileobj(fi, fo, 1 << 24)
 
 
-def _tip_part(arm, path, out: Path, span, known_header) -> _TipTally:
+def _tip_part(arm, path, out: Path, span, known_header, reference_frame: bool) -> _TipTally:
     """One part of a large points file, in a worker process (see :func:`run_tip`)."""
     from . import kinematics
     kinematics.THREADS = 1                           # the other cores run the other parts
-    return _tip_rows(arm, path, iter_points(path, arm.desc.n_joints, span=span, known_header=known_header), out,
-                     header=span[0] == 0)
+    return _tip_rows(arm, path, iter_points(path, arm.desc.joint_quantities, span=span, known_header=known_header),
+                     out, header=span[0] == 0, reference_frame=reference_frame)
 
 
 def run_tip(args: argparse.Namespace) -> int:
@@ -271,6 +324,9 @@ def run_tip(args: argparse.Namespace) -> int:
     with output_file(args.output, [args.points, *arm_inputs(args)]) as tmp:
         arm = model_from_args(args)
         desc = arm.desc
+        ref = args.reference_frame
+        if ref:
+            _check_tracker(arm, args.arm)
         from .uncertainty_cli import parameters_of, tip_columns, wants_uncertainty
         parameters = parameters_of(arm)
         uncertain = wants_uncertainty(args, parameters)
@@ -281,14 +337,16 @@ def run_tip(args: argparse.Namespace) -> int:
                 ucols, lines = tip_columns(arm, block, parameters, args)
                 ulines.extend(lines)
                 return ucols
-            tally = _tip_rows(arm, args.points, [concat_points(iter_points(args.points, desc.n_joints))], tmp, True, extra)
+            tally = _tip_rows(arm, args.points, [concat_points(iter_points(args.points, desc.joint_quantities))], tmp,
+                              True, extra, ref)
         elif split is None:
-            tally = _tip_rows(arm, args.points, iter_points(args.points, desc.n_joints), tmp, True)
+            tally = _tip_rows(arm, args.points, iter_points(args.points, desc.joint_quantities), tmp, True,
+                              reference_frame=ref)
         else:
             known_header, spans = split
             parts = [tmp] + [tmp.with_name(f"{tmp.name}.part{k}") for k in range(1, len(spans))]
             try:
-                tallies = fork_map(_tip_part, [(arm, str(args.points), part, span, known_header)
+                tallies = fork_map(_tip_part, [(arm, str(args.points), part, span, known_header, ref)
                                                for part, span in zip(parts, spans)])
                 for part in parts[1:]:
                     _append(tmp, part)
@@ -302,10 +360,18 @@ def run_tip(args: argparse.Namespace) -> int:
                 raise InputError("no points after the header line", args.points, known_header[0] + 1)
     n, kinds, flagged, flagged_count = tally.n, tally.kinds, tally.flagged, tally.flagged_count
     log.info(f"{n} points in {len(tally.measurements)} measurement(s) -> {args.output}")
+    if ref:
+        k = arm.tracker.n_markers
+        log.info(f"reference instrument: {k} marker(s) predicted in the frame of each row's session "
+                 f"({', '.join(repr(s) for s in arm.tracker.sessions)})")
     if arm.effects:
         log.info("effects applied: " + ", ".join(e.describe() for e in arm.effects))
     if kinds == {None}:
         log.info("no force columns: corrected = rigid (no deflection applied)")
+    elif desc.probe.lever == 0.0:
+        log.warning("the tip has no stylus (it lies at the last joint's origin: a flange, a marker): the force "
+                    "columns bend nothing, corrected = rigid; for the deflection of a compliant probe give a tip "
+                    "frame at its ball")
     else:
         if "two-channel" in kinds:
             log.info("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not measured "

@@ -8,6 +8,7 @@ import difflib
 import math
 import re
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -15,14 +16,29 @@ import numpy as np
 from ._errors import InputError, parse_toml, read_text
 from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
-__all__ = ["JointRow", "Probe", "ArmDescription", "load_description", "parse_description",
-           "format_description", "GRAVITY", "DH_ROW_FIELDS", "URDF_ROW_FIELDS"]
+__all__ = ["JointRow", "Mimic", "Probe", "Visual", "ArmDescription", "load_description", "parse_description",
+           "format_description", "GRAVITY", "MIN_STYLUS", "default_lever", "DH_ROW_FIELDS", "URDF_ROW_FIELDS"]
 
 DH_ROW_FIELDS = ("theta_offset", "d", "a", "alpha")
 URDF_ROW_FIELDS = ("origin_x", "origin_y", "origin_z", "origin_roll", "origin_pitch", "origin_yaw")
 
 #: gravity in the base frame [m/s^2] (docs/formats.md §2: -z of the base frame)
 GRAVITY = np.array([0.0, 0.0, -9.81])
+
+
+JOINT_KINDS = ("revolute", "prismatic")
+#: the shortest stylus [m] a compliant probe may have (from its bending hinge to the ball)
+MIN_STYLUS = 1e-6
+
+
+@dataclass(frozen=True)
+class Mimic:
+    """A URDF ``<mimic>``: the joint's value is ``multiplier * value of joint`` + ``offset`` ([rad] or [m],
+    the joint's own unit). ``joint`` names the master: another joint of the chain (then the mimicking
+    joint takes no encoder column) or a joint off the chain (then the column holds the master's value)."""
+    joint: str
+    multiplier: float = 1.0
+    offset: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -38,6 +54,10 @@ class JointRow:
     DH; the joint's child frame for MDH and URDF). ``encoder_resolution`` [rad] is the step of the
     joint's encoder (optional key ``encoder_resolution_deg``; None if not given): the uncertainty of
     the corrected ball centres takes ``resolution / sqrt(12)`` per reading (docs/uncertainty.md).
+
+    ``kind``: "revolute" (q an angle [rad]) or "prismatic" (q a length [m]: it adds to ``d`` for DH/MDH,
+    it moves along ``axis`` for URDF; its limits and resolution are then lengths [m]). ``mimic``: the
+    joint follows another (:class:`Mimic`), None for a joint read by its own encoder.
     """
     name: str
     theta_offset: float = 0.0
@@ -51,6 +71,24 @@ class JointRow:
     origin: tuple[float, float, float, float, float, float] | None = None
     axis: tuple[float, float, float] | None = None
     encoder_resolution: float | None = None
+    kind: str = "revolute"
+    mimic: Mimic | None = None
+
+    @property
+    def prismatic(self) -> bool:
+        return self.kind == "prismatic"
+
+
+@dataclass(frozen=True)
+class Visual:
+    """One visual of a URDF the arm was read from, for the viewer only: ``row`` the chain row whose moving
+    link carries it (-1: the base, before the first moving joint), ``pose`` its 4x4 pose in that link's
+    frame (nested tuples [m]), ``geometry`` the ``<geometry>`` element's XML (mesh file names absolute),
+    ``rgba`` its colour or None."""
+    row: int
+    pose: tuple
+    geometry: str
+    rgba: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -104,14 +142,78 @@ class ArmDescription:
     source: str | None = field(default=None, compare=False)
     #: the URDF link at the ball centre when the arm was read from a URDF (``source``)
     tip_frame: str | None = field(default=None, compare=False)
+    #: the user's visuals when the arm was read from a URDF, for the viewer (:class:`Visual`); never written
+    #: to a description TOML
+    visuals: tuple = field(default=(), compare=False, repr=False)
+
+    @cached_property
+    def encoders(self) -> tuple[JointRow, ...]:
+        """The joints whose values are the encoder columns q1..qJ, in column order: every joint of the
+        chain but those mimicking another joint of the chain, and for a joint mimicking one off the chain,
+        that master (named after it, its limits mapped back through the mimic). Without ``<mimic>``
+        joints: :attr:`joints` itself."""
+        if not any(j.mimic for j in self.joints):
+            return self.joints
+        rows = {j.name: j for j in self.joints}
+        out: dict[str, JointRow] = {}
+        for j in self.joints:
+            source = j.name if j.mimic is None else j.mimic.joint
+            if source in out:
+                continue
+            if source in rows:
+                out[source] = rows[source]
+                continue
+            m = j.mimic
+            lims = None if j.lower is None or j.upper is None else sorted(((j.lower - m.offset) / m.multiplier,
+                                                                          (j.upper - m.offset) / m.multiplier))
+            out[source] = JointRow(name=source, kind=j.kind, lower=None if lims is None else lims[0],
+                                   upper=None if lims is None else lims[1])
+        return tuple(out.values())
+
+    @cached_property
+    def chain_joints(self) -> tuple:
+        """How each row moves (:class:`arm_model.chain.Joint`): axis, revolute or prismatic, and the
+        encoder column it reads (with a mimic's multiplier and offset)."""
+        from .chain import Joint
+        column = {e.name: k for k, e in enumerate(self.encoders)}
+        out = []
+        for j in self.joints:
+            m = j.mimic
+            out.append(Joint(column=column[j.name if m is None else m.joint],
+                             axis=j.axis if self.convention == "urdf" else None, prismatic=j.prismatic,
+                             multiplier=1.0 if m is None else m.multiplier, offset=0.0 if m is None else m.offset))
+        return tuple(out)
+
+    @property
+    def coupled(self) -> bool:
+        """True when some joint follows another joint of the chain (rows and encoder columns differ)."""
+        return len(self.encoders) != len(self.joints)
 
     @property
     def n_joints(self) -> int:
-        return len(self.joints)
+        """The number of encoder columns (joints read by an encoder; see :attr:`encoders`)."""
+        return len(self.encoders)
 
     @property
     def joint_names(self) -> tuple[str, ...]:
-        return tuple(j.name for j in self.joints)
+        """The names of the encoder columns q1..qJ (:attr:`encoders`)."""
+        return tuple(j.name for j in self.encoders)
+
+    @property
+    def joint_quantities(self) -> tuple[str, ...]:
+        """Per encoder column: "angle" (revolute) or "length" (prismatic), the unit a points file gives it in."""
+        return tuple("length" if j.prismatic else "angle" for j in self.encoders)
+
+    @property
+    def joint_column_units(self) -> tuple[tuple[str, float], ...]:
+        """Per encoder column: the unit suffix its column is written in and the factor from SI, ("deg",
+        180/pi) for a revolute joint, ("mm", 1000) for a prismatic one (``q3_mm``)."""
+        return tuple(("mm", 1e3) if j.prismatic else ("deg", 180.0 / math.pi) for j in self.encoders)
+
+    @property
+    def revolute_columns(self) -> tuple[int, ...]:
+        """Indices of the encoder columns of revolute joints."""
+        return tuple(k for k, j in enumerate(self.encoders) if not j.prismatic)
 
     @property
     def row_fields(self) -> tuple[str, ...]:
@@ -300,7 +402,7 @@ def nearest(word: str, known) -> str:
 
 #: top-level keys of a description; a model file (arm_model.model_file) adds its effects and calibration tables
 DESCRIPTION_KEYS = ("name", "convention", "joint", "probe")
-MODEL_KEYS = ("effect", "calibration")
+MODEL_KEYS = ("effect", "calibration", "reference_frame", "marker")
 
 
 def parse_description(text: str, path: str = "<string>") -> ArmDescription:
@@ -321,6 +423,127 @@ def parse_description(text: str, path: str = "<string>") -> ArmDescription:
     return description_from_data({k: v for k, v in data.items() if k not in MODEL_KEYS}, r)
 
 
+def _joint_kind_keys(convention: str, kind: str) -> dict:
+    """The numeric keys of a [[joint]] row: limits, resolution and mimic offset are angles for a revolute
+    joint, lengths for a prismatic one."""
+    spec = dict(_URDF_JOINT_KEYS if convention == "urdf" else _JOINT_KEYS)
+    quantity = "length" if kind == "prismatic" else "angle"
+    for key in ("lower", "upper", "encoder_resolution", "mimic_offset"):
+        spec[key] = (quantity, False)
+    return spec
+
+
+def _joint_row(r: TomlReader, convention: str, i: int, row: dict) -> JointRow:
+    """One [[joint]] table (number ``i``) as a :class:`JointRow`."""
+    row = dict(row)
+    kind = row.pop("type", "revolute")
+    if kind not in JOINT_KINDS:
+        raise r.error(f"'type' must be \"revolute\" or \"prismatic\", got {kind!r}", "joint", i, "type")
+    axis = None
+    if convention == "urdf":
+        axis = row.pop("axis", None)
+        if (not isinstance(axis, list) or len(axis) != 3
+                or not all(isinstance(a, (int, float)) and not isinstance(a, bool) for a in axis)
+                or not math.isfinite(sum(axis)) or math.hypot(*axis) < 1e-9):
+            raise r.error("a URDF row needs 'axis = [x, y, z]', a non-zero direction (no unit)",
+                          "joint", i, "axis")
+        norm = math.hypot(*axis)
+        axis = tuple(float(a) / norm for a in axis)
+    master, multiplier = row.pop("mimic_joint", None), row.pop("mimic_multiplier", 1.0)
+    if master is not None and (not isinstance(master, str) or not master.strip()):
+        raise r.error("'mimic_joint' must be the name of the joint this one follows", "joint", i, "mimic_joint")
+    if (isinstance(multiplier, bool) or not isinstance(multiplier, (int, float)) or not math.isfinite(multiplier)
+            or multiplier == 0 or abs(multiplier) > 1e3):
+        raise r.error(f"'mimic_multiplier' (no unit) must be a non-zero number of at most 1000 in size, got "
+                      f"{multiplier!r}", "joint", i, "mimic_multiplier")
+    unit = "mm" if kind == "prismatic" else "deg"
+    v = r.values(row, _joint_kind_keys(convention, kind), ("joint", i), text_keys=("name",))
+    if master is None and ("mimic_offset" in v or multiplier != 1.0):
+        raise r.error("'mimic_multiplier' and 'mimic_offset' need 'mimic_joint'", "joint", i)
+    if "lower" in v and "upper" in v and v["lower"] >= v["upper"]:
+        raise r.error("lower limit is not below upper limit", "joint", i, f"lower_{unit}")
+    if v.get("mass", 0.0) < 0:
+        raise r.error("mass must not be negative", "joint", i, "mass_kg")
+    if v.get("encoder_resolution", 1.0) <= 0:
+        raise r.error("encoder_resolution must be > 0", "joint", i, f"encoder_resolution_{unit}")
+    common = dict(name=row.get("name", f"j{i + 1}"), lower=v.get("lower"), upper=v.get("upper"),
+                  mass=v.get("mass", 0.0), com=(v.get("com_x", 0.0), v.get("com_y", 0.0), v.get("com_z", 0.0)),
+                  encoder_resolution=v.get("encoder_resolution"), kind=kind,
+                  mimic=None if master is None else Mimic(master, float(multiplier), v.get("mimic_offset", 0.0)))
+    if convention == "urdf":
+        return JointRow(origin=tuple(v[k] for k in URDF_ROW_FIELDS), axis=axis, **common)
+    return JointRow(theta_offset=v["theta_offset"], d=v["d"], a=v["a"], alpha=v["alpha"], **common)
+
+
+def _check_mimics(r: TomlReader, joints: list[JointRow]) -> None:
+    """A mimicking joint follows a joint of its own kind that is itself read by an encoder (or one off the
+    chain), never itself."""
+    by_name = {j.name: j for j in joints}
+    for i, j in enumerate(joints):
+        if j.mimic is None:
+            continue
+        master = by_name.get(j.mimic.joint)
+        if master is j:
+            raise r.error(f"joint '{j.name}' cannot mimic itself", "joint", i, "mimic_joint")
+        if master is not None and master.mimic is not None:
+            raise r.error(f"joint '{j.name}' mimics '{master.name}', which mimics '{master.mimic.joint}': name the "
+                          "joint read by the encoder (multiply the multipliers)", "joint", i, "mimic_joint")
+        if master is not None and master.kind != j.kind:
+            raise r.error(f"joint '{j.name}' ({j.kind}) mimics '{master.name}' ({master.kind}): a mimic follows a "
+                          "joint of its own kind", "joint", i, "mimic_joint")
+
+
+def default_lever(p_last, rotation=None) -> float | None:
+    """The stylus length a probe gets when none is given, one rule for every route (a description TOML, a
+    URDF's tip frame): None (the lever is the ball's coordinate along probe z, ``z_probe . p``) when that is
+    a length, at least :data:`MIN_STYLUS` and 1/1000 of the ball's distance from the last joint origin;
+    else ``|p|`` (the probe z points back past or across that origin: the hinge hangs |p| behind the ball);
+    0 for a ball at that origin (no stylus)."""
+    p = np.asarray(p_last, dtype=float)
+    z = np.array([0.0, 0.0, 1.0]) if rotation is None else np.asarray(rotation, dtype=float)[:, 2]
+    dist = float(np.linalg.norm(p))
+    if float(z @ p) >= max(1e-3 * dist, MIN_STYLUS):
+        return None
+    return dist if dist >= MIN_STYLUS else 0.0
+
+
+def _probe(r: TomlReader, ptab) -> Probe:
+    """The [probe] table. What the probe model needs, and nothing a measuring arm merely suggests: a
+    compliant stylus needs a length (its bending hinge lies that far behind the ball along probe z,
+    wherever the ball is: default :func:`default_lever`); ``stylus_length_mm = 0`` is a tip without a
+    stylus (a flange point, a tracker marker), rigid, its compliances 0."""
+    if not isinstance(ptab, dict):
+        raise r.error("missing [probe] table", "probe")
+    pv = r.values(ptab, _PROBE_KEYS, ("probe",))
+    rpy = (pv.get("roll", 0.0), pv.get("pitch", 0.0), pv.get("yaw", 0.0))
+    if pv.get("stylus_length", 0.0) < 0:
+        raise r.error("'stylus_length' must not be negative (0: a tip without a stylus)", "probe", "stylus_length_mm")
+    for key in ("ball_diameter", "max_force"):
+        if pv[key] <= 0:
+            raise r.error(f"'{key}' must be > 0", "probe", key)
+    for key in ("bending_compliance", "axial_compliance", "bending_compliance_x", "bending_compliance_y"):
+        if pv.get(key, 0.0) < 0:
+            raise r.error(f"'{key}' must not be negative", "probe", key)
+    probe = Probe(
+        p_last=(pv["x"], pv["y"], pv["z"]), ball_diameter=pv["ball_diameter"], max_force=pv["max_force"],
+        bending_compliance_x=pv.get("bending_compliance_x", pv["bending_compliance"]),
+        bending_compliance_y=pv.get("bending_compliance_y", pv["bending_compliance"]),
+        axial_compliance=pv["axial_compliance"], rpy=rpy, lever=pv.get("stylus_length"))
+    if probe.lever is None:
+        probe = replace(probe, lever=default_lever(probe.p_last, probe.rotation))
+    if probe.lever == 0.0 and probe.compliance.any():
+        given = "stylus_length" in pv
+        raise r.error((f"a tip without a stylus (stylus_length_mm = 0)" if given else
+                       f"the ball lies {float(np.linalg.norm(probe.p_last)) * 1e3:.3g} mm from the last joint origin, "
+                       "a tip without a stylus") + " bends under no force: its compliances must be 0 (a compliant "
+                      "stylus is at least 0.001 mm long: give its length, stylus_length_mm)", "probe",
+                      "stylus_length_mm" if given else "z_mm")
+    if 0 < probe.stylus_length < MIN_STYLUS:
+        raise r.error(f"the stylus, from its bending hinge to the ball, is {probe.stylus_length * 1e3:.3g} mm long: "
+                      "at least 0.001 mm (0: a tip without a stylus)", "probe", "stylus_length_mm")
+    return probe
+
+
 def description_from_data(data: dict, r: TomlReader, extra_keys: tuple[str, ...] = ()) -> ArmDescription:
     """The description of parsed TOML ``data``; keys of ``extra_keys`` are left to the caller."""
     path = r.path
@@ -339,67 +562,12 @@ def description_from_data(data: dict, r: TomlReader, extra_keys: tuple[str, ...]
     if not isinstance(rows, list) or not rows or not all(isinstance(x, dict) for x in rows):
         raise r.error("no [[joint]] rows", "joint")
     joints = []
-    seen = set()
     for i, row in enumerate(rows):
-        if convention == "urdf":
-            row = dict(row)
-            axis = row.pop("axis", None)
-            if (not isinstance(axis, list) or len(axis) != 3
-                    or not all(isinstance(a, (int, float)) and not isinstance(a, bool) for a in axis)
-                    or not math.isfinite(sum(axis)) or math.hypot(*axis) < 1e-9):
-                raise r.error("a URDF row needs 'axis = [x, y, z]', a non-zero direction (no unit)",
-                              "joint", i, "axis")
-            norm = math.hypot(*axis)
-            axis = tuple(float(a) / norm for a in axis)
-        v = r.values(row, _URDF_JOINT_KEYS if convention == "urdf" else _JOINT_KEYS, ("joint", i),
-                     text_keys=("name",))
-        jname = row.get("name", f"j{i + 1}")
-        if jname in seen:
-            raise r.error(f"joint name '{jname}' is used twice", "joint", i, "name")
-        seen.add(jname)
-        if "lower" in v and "upper" in v and v["lower"] >= v["upper"]:
-            raise r.error("lower limit is not below upper limit", "joint", i, "lower_deg")
-        if v.get("mass", 0.0) < 0:
-            raise r.error("mass must not be negative", "joint", i, "mass_kg")
-        if v.get("encoder_resolution", 1.0) <= 0:
-            raise r.error("encoder_resolution must be > 0", "joint", i, "encoder_resolution_deg")
-        common = dict(name=jname, lower=v.get("lower"), upper=v.get("upper"), mass=v.get("mass", 0.0),
-                      com=(v.get("com_x", 0.0), v.get("com_y", 0.0), v.get("com_z", 0.0)),
-                      encoder_resolution=v.get("encoder_resolution"))
-        if convention == "urdf":
-            joints.append(JointRow(origin=tuple(v[k] for k in URDF_ROW_FIELDS), axis=axis, **common))
-        else:
-            joints.append(JointRow(theta_offset=v["theta_offset"], d=v["d"], a=v["a"], alpha=v["alpha"],
-                                   **common))
-    ptab = data.get("probe")
-    if not isinstance(ptab, dict):
-        raise r.error("missing [probe] table", "probe")
-    pv = r.values(ptab, _PROBE_KEYS, ("probe",))
-    rpy = (pv.get("roll", 0.0), pv.get("pitch", 0.0), pv.get("yaw", 0.0))
-    if pv.get("stylus_length", 1.0) <= 0:
-        raise r.error("'stylus_length' must be > 0", "probe", "stylus_length_mm")
-    if not any(rpy) and pv["z"] <= 0:
-        raise r.error("the ball must lie beyond the flange: z of the probe must be > 0 "
-                      "(the probe z axis points along the stylus towards the ball)", "probe", "z_mm")
-    for key in ("ball_diameter", "max_force"):
-        if pv[key] <= 0:
-            raise r.error(f"'{key}' must be > 0", "probe", key)
-    for key in ("bending_compliance", "axial_compliance", "bending_compliance_x", "bending_compliance_y"):
-        if pv.get(key, 0.0) < 0:
-            raise r.error(f"'{key}' must not be negative", "probe", key)
-    probe = Probe(
-        p_last=(pv["x"], pv["y"], pv["z"]), ball_diameter=pv["ball_diameter"], max_force=pv["max_force"],
-        bending_compliance_x=pv.get("bending_compliance_x", pv["bending_compliance"]),
-        bending_compliance_y=pv.get("bending_compliance_y", pv["bending_compliance"]),
-        axial_compliance=pv["axial_compliance"], rpy=rpy, lever=pv.get("stylus_length"))
-    if 0 < probe.stylus_length < 1e-6:
-        raise r.error(f"the stylus, from its bending hinge to the ball, is {probe.stylus_length * 1e3:.3g} mm long: "
-                      "at least 0.001 mm", "probe", "stylus_length_mm" if "stylus_length" in pv else "z_mm")
-    if probe.stylus_length <= 0:
-        raise r.error(f"the ball must lie ahead along the probe z axis (the stylus direction): its z in the "
-                      f"probe frame seen from the last joint origin is {probe.stylus_length * 1e3:.3f} mm; turn "
-                      "the probe frame (roll_deg, pitch_deg, yaw_deg) so that z points towards the ball, or give "
-                      "stylus_length_mm, the distance from the bending hinge to the ball", "probe", "x_mm")
+        joints.append(_joint_row(r, convention, i, row))
+        if joints[-1].name in [j.name for j in joints[:-1]]:
+            raise r.error(f"joint name '{joints[-1].name}' is used twice", "joint", i, "name")
+    _check_mimics(r, joints)
+    probe = _probe(r, data.get("probe"))
     return ArmDescription(name=name, convention=convention, joints=tuple(joints), probe=probe, source=path)
 
 
@@ -430,13 +598,48 @@ def in_unit(value_si: float, factor: float) -> float:
     return x
 
 
+def _check_writable(desc: ArmDescription) -> None:
+    """The description obeys the reader's rules on numbers (:func:`arm_model._units.implausible`), so that
+    what is written reads back: a value beyond them (a joint origin of more than 1 km, say, from a fit
+    that ran away along a direction the data do not see) is a :class:`NumericalError` naming it, never a
+    file its reader refuses."""
+    from ._errors import NumericalError
+    for j in desc.joints:
+        length = "length" if j.prismatic else "angle"
+        values = ([("origin", v, "length") for v in j.origin[:3]] + [("origin", v, "angle") for v in j.origin[3:]]
+                  if desc.convention == "urdf" else
+                  [("theta_offset", j.theta_offset, "angle"), ("d", j.d, "length"), ("a", j.a, "length"),
+                   ("alpha", j.alpha, "angle")])
+        values += [("com", v, "length") for v in j.com] + [("limit", v, length) for v in (j.lower, j.upper)
+                                                             if v is not None]
+        for key, v, quantity in values:
+            wrong = implausible(v, quantity) if math.isfinite(v) else (None, f"{v!r} is not a finite number")
+            if wrong:
+                raise NumericalError(f"joint '{j.name}' of the arm '{desc.name}': its {key} value {wrong[1]}: "
+                                     "this arm cannot be written (a fit that ran away along a direction the data "
+                                     "do not see?)")
+    p = desc.probe
+    for key, v in (("x", p.p_last[0]), ("y", p.p_last[1]), ("z", p.p_last[2]), ("stylus_length", p.lever or 0.0)):
+        wrong = implausible(v, "length") if math.isfinite(v) else (None, f"{v!r} is not a finite number")
+        if wrong:
+            raise NumericalError(f"the probe of the arm '{desc.name}': its {key} {wrong[1]}: this arm cannot be "
+                                 "written")
+    if p.lever == 0.0 and p.compliance.any():
+        raise NumericalError(f"the probe of the arm '{desc.name}' has no stylus but compliances "
+                             f"{p.compliance.tolist()} m/N: a tip without a stylus bends under no force")
+
+
 def description_data(desc: ArmDescription) -> dict:
     """The TOML tables of a description (mm and degrees) as plain data for ``tomli_w``; read back,
-    every value is the same float."""
+    every value is the same float. A description its reader would refuse is a :class:`NumericalError`
+    (:func:`_check_writable`)."""
+    _check_writable(desc)
     mm, deg = UNIT_FACTORS["mm"], UNIT_FACTORS["deg"]
     joints = []
     for j in desc.joints:
         row: dict = {"name": j.name}
+        if j.prismatic:
+            row["type"] = "prismatic"
         if desc.convention == "urdf":
             row.update({f"origin_{k}_mm": in_unit(v, mm) for k, v in zip("xyz", j.origin[:3])})
             row.update({f"origin_{k}_deg": in_unit(v, deg) for k, v in zip(("roll", "pitch", "yaw"), j.origin[3:])})
@@ -444,16 +647,21 @@ def description_data(desc: ArmDescription) -> dict:
         else:
             row.update({"theta_offset_deg": in_unit(j.theta_offset, deg), "d_mm": in_unit(j.d, mm),
                         "a_mm": in_unit(j.a, mm), "alpha_deg": in_unit(j.alpha, deg)})
+        unit, factor = ("mm", mm) if j.prismatic else ("deg", deg)
         if j.lower is not None:
-            row["lower_deg"] = in_unit(j.lower, deg)
+            row[f"lower_{unit}"] = in_unit(j.lower, factor)
         if j.upper is not None:
-            row["upper_deg"] = in_unit(j.upper, deg)
+            row[f"upper_{unit}"] = in_unit(j.upper, factor)
         if j.mass:
             row["mass_kg"] = float(j.mass)
         if any(j.com):
             row.update({f"com_{k}_mm": in_unit(v, mm) for k, v in zip("xyz", j.com)})
         if j.encoder_resolution is not None:
-            row["encoder_resolution_deg"] = in_unit(j.encoder_resolution, deg)
+            row[f"encoder_resolution_{unit}"] = in_unit(j.encoder_resolution, factor)
+        if j.mimic is not None:
+            row.update({"mimic_joint": j.mimic.joint, "mimic_multiplier": float(j.mimic.multiplier)})
+            if j.mimic.offset:
+                row[f"mimic_offset_{unit}"] = in_unit(j.mimic.offset, factor)
         joints.append(row)
     p = desc.probe
     mpn = UNIT_FACTORS["mm_per_N"]

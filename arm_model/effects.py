@@ -65,13 +65,29 @@ class Effect:
     #: data resolve it only to worse than ``--min-resolution`` of its plausible size (other effects'
     #: parameters are estimated whenever linearly identifiable)
     held_when_weak: ClassVar[bool] = False
+    #: the effect models a joint angle's error (its unit rad, its physics a rotation): it acts on the
+    #: revolute joints only (by default all of them; a prismatic joint named in ``joints`` is an error)
+    revolute_only: ClassVar[bool] = False
 
     def needs(self) -> tuple[str, ...]:
         """Per-point inputs the effect needs beyond q and the wrench."""
         return ()
 
     def joint_indices(self, desc: ArmDescription) -> tuple[int, ...]:
-        return tuple(range(desc.n_joints)) if self.joints is None else tuple(self.joints)
+        """The encoder columns the effect acts on (0-based): ``joints``, or by default every joint (every
+        revolute joint for :attr:`revolute_only` effects). A ``ValueError`` names a prismatic joint given
+        to a revolute-only effect, or an arm with a joint mimicking another joint of its chain (its rows
+        and encoder columns differ: per-joint effects are not supported there)."""
+        if desc.coupled:
+            raise ValueError(f"the effect '{self.key}' acts per joint, and the arm has a joint that mimics another "
+                             "joint of its chain: per-joint effects on such an arm are not supported")
+        if self.joints is None:
+            return desc.revolute_columns if self.revolute_only else tuple(range(desc.n_joints))
+        for i in self.joints:
+            if self.revolute_only and 0 <= i < desc.n_joints and desc.encoders[i].prismatic:
+                raise ValueError(f"the effect '{self.key}' models a joint angle's error; joint "
+                                 f"'{desc.encoders[i].name}' is prismatic")
+        return tuple(self.joints)
 
     def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
         """(name, SI unit) of each parameter, in the order :meth:`apply` reads them."""
@@ -95,13 +111,14 @@ class EncoderEccentricity(Effect):
     last joint's, when the ball is near that joint's axis), as the description's own parameters are."""
     harmonics: tuple[int, ...] = (1, 2)
     key: str = field(default="eccentricity", init=False, repr=False)
+    revolute_only: ClassVar[bool] = True
     held_when_weak: ClassVar[bool] = True
 
     def param_defs(self, desc):
         out = []
         for i in self.joint_indices(desc):
             for h in self.harmonics:
-                out += [(f"{desc.joints[i].name}.ecc{h}_cos", "rad"), (f"{desc.joints[i].name}.ecc{h}_sin", "rad")]
+                out += [(f"{desc.joint_names[i]}.ecc{h}_cos", "rad"), (f"{desc.joint_names[i]}.ecc{h}_sin", "rad")]
         return out
 
     def apply(self, desc, params, inputs, geom, ops):
@@ -130,7 +147,7 @@ class JointGain(Effect):
     held_when_weak: ClassVar[bool] = True
 
     def param_defs(self, desc):
-        return [(f"{desc.joints[i].name}.gain", "1") for i in self.joint_indices(desc)]
+        return [(f"{desc.joint_names[i]}.gain", "1") for i in self.joint_indices(desc)]
 
     def apply(self, desc, params, inputs, geom, ops):
         q = list(inputs.q)
@@ -146,12 +163,13 @@ class JointCompliance(Effect):
     gravity: bool = True
     contact: bool = True
     key: str = field(default="joint_compliance", init=False, repr=False)
+    revolute_only: ClassVar[bool] = True
 
     def needs(self):
         return tuple(n for n, on in (("tau_gravity", self.gravity), ("tau_contact", self.contact)) if on)
 
     def param_defs(self, desc):
-        return [(f"{desc.joints[i].name}.compliance", "rad/(N m)") for i in self.joint_indices(desc)]
+        return [(f"{desc.joint_names[i]}.compliance", "rad/(N m)") for i in self.joint_indices(desc)]
 
     def apply(self, desc, params, inputs, geom, ops):
         q = list(inputs.q)
@@ -177,7 +195,7 @@ class ThermalGrowth(Effect):
 
     def param_defs(self, desc):
         if self.per_joint:
-            return [(f"{desc.joints[i].name}.thermal_alpha", "1/K") for i in self.joint_indices(desc)]
+            return [(f"{desc.joint_names[i]}.thermal_alpha", "1/K") for i in self.joint_indices(desc)]
         return [("links.thermal_alpha", "1/K")]
 
     def apply(self, desc, params, inputs, geom, ops):
@@ -259,8 +277,7 @@ def effect_from_name(key: str, **kwargs) -> Effect:
 def _chain(desc: ArmDescription, geom: Geometry, q, upto: int, point, ops):
     """``point`` given in frame ``upto - 1`` (the end of row ``upto - 1``) in base coordinates."""
     from .chain import chain_point
-    return chain_point(desc.convention, geom.rows[:upto], q[:upto], point, ops,
-                       None if desc.axes is None else desc.axes[:upto])
+    return chain_point(desc.convention, geom.rows[:upto], q, point, ops, desc.chain_joints[:upto])
 
 
 def _perpendicular(axis) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
@@ -311,7 +328,7 @@ def joint_frame(desc: ArmDescription, geom: Geometry, q, i: int, ops):
 def last_frame(desc: ArmDescription, geom: Geometry, q, ops):
     """Origin and axes (x, y, z) of the last joint frame in the base frame (the probe frame's axes:
     :func:`probe_axes`)."""
-    n = desc.n_joints
+    n = len(desc.joints)
     o = _chain(desc, geom, q, n, (0.0, 0.0, 0.0), ops)
     return o, [_sub(_chain(desc, geom, q, n, e, ops), o) for e in ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0),
                                                                     (0.0, 0.0, 1.0))]
@@ -340,17 +357,18 @@ class JointHarmonics(Effect):
     source: int | None = None
     harmonics: tuple[int, ...] = (1, 2, 3)
     key: str = field(default="joint_harmonics", init=False, repr=False)
+    revolute_only: ClassVar[bool] = True
 
     def _suffix(self, desc, i):
-        return "" if self.source is None or self.source == i else f"_by_{desc.joints[self.source].name}"
+        return "" if self.source is None or self.source == i else f"_by_{desc.joint_names[self.source]}"
 
     def param_defs(self, desc):
         out = []
         for i in self.joint_indices(desc):
             sfx = self._suffix(desc, i)
             for h in self.harmonics:
-                out += [(f"{desc.joints[i].name}.harm{h}_cos{sfx}", "rad"),
-                        (f"{desc.joints[i].name}.harm{h}_sin{sfx}", "rad")]
+                out += [(f"{desc.joint_names[i]}.harm{h}_cos{sfx}", "rad"),
+                        (f"{desc.joint_names[i]}.harm{h}_sin{sfx}", "rad")]
         return out
 
     def apply(self, desc, params, inputs, geom, ops):
@@ -444,7 +462,7 @@ def gravity_moment(desc: ArmDescription, geom: Geometry, q, i: int, origin, ops)
     from .description import GRAVITY
     g = [float(v) for v in GRAVITY]
     m = [0.0, 0.0, 0.0]
-    for k in range(i, desc.n_joints):
+    for k in range(i, len(desc.joints)):
         jr = desc.joints[k]
         if jr.mass <= 0:
             continue
@@ -476,12 +494,13 @@ class LateralCompliance(Effect):
     gravity: bool = True
     contact: bool = True
     key: str = field(default="lateral_compliance", init=False, repr=False)
+    revolute_only: ClassVar[bool] = True
 
     def param_defs(self, desc):
         out = []
         for i in self.joint_indices(desc):
-            out += [(f"{desc.joints[i].name}.lateral_compliance_x", "rad/(N m)"),
-                    (f"{desc.joints[i].name}.lateral_compliance_y", "rad/(N m)")]
+            out += [(f"{desc.joint_names[i]}.lateral_compliance_x", "rad/(N m)"),
+                    (f"{desc.joint_names[i]}.lateral_compliance_y", "rad/(N m)")]
         return out
 
     def apply(self, desc, params, inputs, geom, ops):

@@ -30,13 +30,14 @@ import numpy as np
 from .geometry import CylinderFit, perpendicular_basis
 
 __all__ = ["DiameterUncertainty", "diameter_sensitivity", "diameter_uncertainty", "FormUncertainty",
-           "form_uncertainty", "FORM_SAMPLES"]
+           "form_uncertainty", "FORM_SAMPLES", "fit_sensitivity", "sphere_jacobian", "plane_jacobian",
+           "residual_form_uncertainty", "cylinder_jacobian"]
 
 #: samples of :func:`form_uncertainty` (a standard deviation from B samples is known to about 1/sqrt(2B))
 FORM_SAMPLES = 2000
 
 
-def _radial_jacobian(points, cylinder: CylinderFit):
+def cylinder_jacobian(points, cylinder: CylinderFit) -> tuple[np.ndarray, np.ndarray]:
     """The unit radial directions (N, 3) and the residuals' Jacobian (N, 5) in the cylinder's
     parameters (two axis offsets, two tilts, the radius)."""
     p = np.asarray(points, float)
@@ -49,12 +50,36 @@ def _radial_jacobian(points, cylinder: CylinderFit):
     return n, jac
 
 
+def sphere_jacobian(points, centre) -> tuple[np.ndarray, np.ndarray]:
+    """The unit radial directions (N, 3) of points about a fitted sphere's ``centre`` and the residuals'
+    Jacobian (N, 4) in the sphere's parameters (the centre, the radius)."""
+    d = np.asarray(points, float) - np.asarray(centre, float)
+    n = d / np.linalg.norm(d, axis=1)[:, None]
+    return n, np.column_stack([-n, -np.ones(len(n))])
+
+
+def plane_jacobian(points, plane) -> tuple[np.ndarray, np.ndarray]:
+    """The plane's normal at every point (N, 3) and the residuals' Jacobian (N, 3) in the plane's
+    parameters (two tilts of the normal, the offset) of a :class:`arm_model.geometry.PlaneFit`."""
+    d = np.asarray(points, float) - plane.point
+    e1, e2 = perpendicular_basis(plane.normal)
+    n = np.tile(plane.normal, (len(d), 1))
+    return n, np.column_stack([d @ e1, d @ e2, -np.ones(len(d))])
+
+
+def fit_sensitivity(n: np.ndarray, jac: np.ndarray, row: int) -> np.ndarray:
+    """(N, 3) the first-order change of a fit's parameter ``row`` per metre of each point's coordinates,
+    for residuals whose change is ``n_i . dp_i`` (``n`` (N, 3)) and Jacobian ``jac`` (N, P) in the
+    parameters: the Gauss-Newton refit moves the parameters by ``-pinv(jac) dr``."""
+    # the parameter's row of the least-squares pseudo-inverse (stable for tall thin Jacobians)
+    g = np.linalg.pinv(jac)[row]
+    return -g[:, None] * n
+
+
 def diameter_sensitivity(points, cylinder: CylinderFit) -> np.ndarray:
     """(N, 3) dD/dp_i: the fitted diameter's first-order change per metre of each point's coordinates."""
-    n, jac = _radial_jacobian(points, cylinder)
-    # the radius row of the least-squares pseudo-inverse (lstsq: stable for tall thin Jacobians)
-    g = np.linalg.pinv(jac)[4]
-    return -2.0 * g[:, None] * n
+    n, jac = cylinder_jacobian(points, cylinder)
+    return 2.0 * fit_sensitivity(n, jac, 4)
 
 
 @dataclass(frozen=True)
@@ -120,9 +145,18 @@ def form_uncertainty(points, cylinder: CylinderFit, cov: np.ndarray, systematic:
     """Sample the form error of the cylinder fitted to ``points`` under the point errors of
     ``cov`` (N, 3, 3) [m^2] with the shared factor rows ``systematic`` (N, R, 3) (see the module
     docstring); seeded, so the same data give the same figure."""
+    n, jac = cylinder_jacobian(points, cylinder)
+    return residual_form_uncertainty(cylinder.residuals, n, jac, cov, systematic, samples, seed)
+
+
+def residual_form_uncertainty(residuals, n: np.ndarray, jac: np.ndarray, cov: np.ndarray,
+                              systematic: np.ndarray | None = None, samples: int = FORM_SAMPLES,
+                              seed: int = 0) -> FormUncertainty:
+    """:func:`form_uncertainty` for any least-squares fit: its ``residuals`` (N,) [m], the directions
+    ``n`` (N, 3) along which a point's move changes its residual, and the residuals' Jacobian ``jac``
+    (N, P) in the fit's parameters (:func:`sphere_jacobian`, :func:`plane_jacobian`)."""
     if samples < 2:
         raise ValueError(f"samples must be at least 2, got {samples}")
-    n, jac = _radial_jacobian(points, cylinder)
     cov = np.asarray(cov, float)
     shared = None
     if systematic is not None and systematic.shape[1]:
@@ -134,7 +168,8 @@ def form_uncertainty(points, cylinder: CylinderFit, cov: np.ndarray, systematic:
     eps = rng.standard_normal((len(n), samples)) * np.sqrt(var)[:, None]
     if shared is not None:
         eps += shared @ rng.standard_normal((shared.shape[1], samples))
-    r = np.asarray(cylinder.residuals, float)[:, None] + eps - jac @ (pinv @ eps)    # after the refit
+    res = np.asarray(residuals, float)
+    r = res[:, None] + eps - jac @ (pinv @ eps)    # after the refit
     f = r.max(axis=0) - r.min(axis=0)
-    form = float(cylinder.form_error)
+    form = float(res.max() - res.min())
     return FormUncertainty(form, float(f.std(ddof=1)), float(f.mean() - form), samples)

@@ -72,12 +72,36 @@ def rotation_xyz(w) -> np.ndarray:
 
 def rpy_from_matrix(r) -> tuple[float, float, float]:
     """The angles ``(roll, pitch, yaw)`` [rad] of a rotation matrix, ``r = Rz(yaw) Ry(pitch) Rx(roll)``
-    (the inverse of :func:`rotation_xyz`, URDF's ``rpy``); at gimbal lock (pitch +-90 degrees) yaw is 0."""
-    import warnings
+    (the inverse of :func:`rotation_xyz`, URDF's ``rpy``), exact to rounding everywhere: near gimbal lock
+    (pitch +-90 degrees) roll and yaw are each ill-determined but the matrix fixes their difference (or sum)
+    from its large entries, which is taken from those; at the lock itself yaw is 0.
 
-    with warnings.catch_warnings():     # gimbal lock: scipy says so and sets yaw to zero, as wanted
-        warnings.simplefilter("ignore", UserWarning)
-        return tuple(float(a) for a in Rotation.from_matrix(np.asarray(r, float)).as_euler("xyz"))
+    (Angles read one by one, as scipy's ``as_euler`` does, reproduce a rotation 1e-11 from the lock only to
+    about 1e-11: a URDF joint origin of a real robot, folded, lost that much against Pinocchio.)"""
+    r = np.asarray(r, float)
+    sp = -r[2, 0]
+    cp = math.hypot(r[2, 1], r[2, 2])
+    pitch = math.atan2(sp, math.hypot(r[0, 0], r[1, 0]))
+    roll, yaw = math.atan2(r[2, 1], r[2, 2]), math.atan2(r[1, 0], r[0, 0])
+    if cp > 0.1:
+        return roll, pitch, yaw
+    if cp < 1e-15:                        # the lock itself: the small entries are rounding noise
+        roll = yaw = 0.0
+    if sp > 0:      # r[0,1] - r[1,2] = (1 + sp) sin(roll - yaw), r[0,2] + r[1,1] = (1 + sp) cos(roll - yaw)
+        big = math.atan2(r[0, 1] - r[1, 2], r[0, 2] + r[1, 1])
+        small = roll - yaw
+    else:           # r[0,1] + r[1,2] = (sp - 1) sin(roll + yaw), r[0,2] - r[1,1] = (sp - 1) cos(roll + yaw)
+        big = math.atan2(-(r[0, 1] + r[1, 2]), -(r[0, 2] - r[1, 1]))
+        small = roll + yaw
+    big += 2 * math.pi * round((small - big) / (2 * math.pi))    # the branch nearest the small entries'
+    other = roll + yaw if sp > 0 else roll - yaw                  # the combination the large entries leave
+    if sp > 0:
+        roll, yaw = (other + big) / 2, (other - big) / 2
+    else:
+        roll, yaw = (big + other) / 2, (big - other) / 2
+    if cp < 1e-15:                        # yaw 0 at the lock (the roll carries the whole combination)
+        roll, yaw = (roll - yaw if sp > 0 else roll + yaw), 0.0
+    return roll, pitch, yaw
 
 
 def frame_along(v, axis: int) -> np.ndarray:

@@ -30,6 +30,8 @@ __all__ = ["PointSet", "Feature", "Distance", "Artefacts", "ForceSignal", "read_
 
 FEATURE_KINDS = ("ring", "cylinder", "sphere", "seat", "plane", "point")
 _TEXT_COLUMNS = ("measurement", "feature")
+#: optional text column: rows of one session share one reference-instrument frame (docs/formats.md §3)
+SESSION_COLUMN = "session"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -43,13 +45,17 @@ class PointSet:
         path: the file read.
         measurement: (N,) measurement ids.
         feature: (N,) feature ids ("" for a free point).
-        q: (N, J) encoder angles [rad].
+        q: (N, J) encoder readings: joint angles [rad], prismatic joints' positions [m].
         force: (N, 3) force of the part on the ball, probe frame [N], or None. With the paper's
             two-channel sensor, column 1 (probe y) is zero: see ``force_kind``.
         torque: (N, 3) torque at the ball, probe frame [N m], or None (project columns mx, my, mz).
         force_kind: "xyz", "two-channel" or None.
         temperature: (N,) [°C] or None; time: (N,) [s] or None.
-        ref: (N, 3) reference-instrument ball centres [m] or None.
+        ref: (N, K, 3) the reference instrument's coordinates of K markers [m] (columns ``x_ref_mm`` ...
+            for one marker, ``x1_ref_mm`` ... ``xK_ref_mm`` ... for K), in the instrument's frame, or None.
+            NaN where a row has no reference (a row of another file, :func:`calibration.data.merge_points`).
+        session: (N,) the session of each row (column ``session``: rows of one session share one frame of
+            the reference instrument), or None (one session).
         lines: (N,) 1-based line of each row in the file, for messages.
         flagged: (N,) True where |force| exceeds the probe's calibrated range (set by
             :func:`flag_forces`); never used to drop a row.
@@ -65,6 +71,7 @@ class PointSet:
     time: np.ndarray | None = None
     ref: np.ndarray | None = None
     lines: np.ndarray | None = None
+    session: np.ndarray | None = None
 
     def __len__(self) -> int:
         return self.q.shape[0]
@@ -72,6 +79,11 @@ class PointSet:
     @property
     def n_joints(self) -> int:
         return self.q.shape[1]
+
+    @property
+    def n_markers(self) -> int:
+        """How many markers the reference columns give (0 without reference columns)."""
+        return 0 if self.ref is None else self.ref.shape[1]
 
     @property
     def wrench(self) -> np.ndarray | None:
@@ -95,7 +107,7 @@ class PointSet:
             return None if a is None else a[mask]
         return PointSet(self.path, self.measurement[mask], self.feature[mask], self.q[mask],
                         take(self.force), take(self.torque), self.force_kind, take(self.temperature),
-                        take(self.time), take(self.ref), take(self.lines))
+                        take(self.time), take(self.ref), take(self.lines), take(self.session))
 
     def over_force(self, max_force: float) -> np.ndarray:
         """(N,) True where the force magnitude exceeds ``max_force`` [N] (rows are flagged, not dropped)."""
@@ -109,6 +121,8 @@ POINT_COLUMNS = {"fx": "force", "fy": "force", "fz": "force", "f_bend": "force",
                  "mx": "torque", "my": "torque", "mz": "torque", "temperature": "temperature", "time": "time",
                  "x_ref": "length", "y_ref": "length", "z_ref": "length"}
 _GROUPS = (("fx", "fy", "fz"), ("f_bend", "f_axial"), ("mx", "my", "mz"), ("x_ref", "y_ref", "z_ref"))
+#: a numbered marker's reference column (``x2_ref``), or the one marker's (``x_ref``)
+_MARKER_COLUMN = re.compile(r"([xyz])([1-9][0-9]*)?_ref")
 
 
 @dataclass(frozen=True)
@@ -120,9 +134,18 @@ class _PointsLayout:
     joints: tuple           # column indices of q1..qJ
     num_idx: list
     txt_idx: list
+    markers: tuple = ()     # base names (x, y, z) of each marker's reference columns
 
 
-def _points_layout(header: list[str], line: int, path: str, n_joints: int | None) -> _PointsLayout:
+def _joint_count_and_kinds(joints) -> tuple[int | None, tuple | None]:
+    """``joints`` of the readers: None, a count, or each column's quantity ("angle", "length")."""
+    if joints is None or isinstance(joints, int):
+        return joints, None
+    return len(joints), tuple(joints)
+
+
+def _points_layout(header: list[str], line: int, path: str, joints) -> _PointsLayout:
+    n_joints, kinds = _joint_count_and_kinds(joints)
     seen = set()
     for h in header:
         if not h:
@@ -133,10 +156,11 @@ def _points_layout(header: list[str], line: int, path: str, n_joints: int | None
     for req in _TEXT_COLUMNS:
         if req not in header:
             raise InputError(f"missing required column '{req}'", path, line, req)
-    known = "measurement, feature, q1_deg ..., " + ", ".join(f"{b}_<unit>" for b in POINT_COLUMNS)
+    known = ("measurement, feature, session, q1_deg ..., " + ", ".join(f"{b}_<unit>" for b in POINT_COLUMNS)
+             + ", x1_ref_mm ... (markers 1 to K)")
     cols: dict[str, tuple[int, str]] = {}
     for k, h in enumerate(header):
-        if h in _TEXT_COLUMNS:
+        if h in _TEXT_COLUMNS or h == SESSION_COLUMN:
             continue
         parts = split_unit(h)
         if parts is None:
@@ -144,11 +168,18 @@ def _points_layout(header: list[str], line: int, path: str, n_joints: int | None
                              f"'_deg', '_N', '_C', '_s'); the columns of a points file are {known}", path, line, h)
         base, unit = parts
         if re.fullmatch(r"q[1-9][0-9]*", base):
-            quantity = "angle"
-            if QUANTITY_OF_UNIT[unit] != "angle":
-                raise InputError(f"joint column must be an angle (_deg or _rad), got '_{unit}'", path, line, h)
-        elif base in POINT_COLUMNS:
-            quantity = POINT_COLUMNS[base]
+            k_joint = int(base[1:]) - 1
+            want = kinds[k_joint] if kinds is not None and k_joint < len(kinds) else None
+            if want is not None and QUANTITY_OF_UNIT[unit] != want:
+                raise InputError(f"'{h}': joint {k_joint + 1} of the arm is "
+                                 + ("prismatic: its column is a length (_mm, _m or _um)" if want == "length" else
+                                    "revolute: its column is an angle (_deg or _rad)") + f", got '_{unit}'",
+                                 path, line, h)
+            if QUANTITY_OF_UNIT[unit] not in ("angle", "length"):
+                raise InputError(f"a joint column is an angle (_deg or _rad) or, for a prismatic joint, a length "
+                                 f"(_mm, _m or _um), got '_{unit}'", path, line, h)
+        elif base in POINT_COLUMNS or _MARKER_COLUMN.fullmatch(base):
+            quantity = POINT_COLUMNS.get(base, "length")
             if QUANTITY_OF_UNIT[unit] != quantity:
                 raise InputError(f"'{base}' must be a {quantity}, got unit '_{unit}'", path, line, h)
         else:
@@ -158,7 +189,7 @@ def _points_layout(header: list[str], line: int, path: str, n_joints: int | None
         cols[base] = (k, unit)
     idx = sorted(int(b[1:]) for b in cols if b.startswith("q") and b[1:].isdigit())
     if not idx:
-        raise InputError("no joint columns (q1_deg ... or q1_rad ...)", path, line)
+        raise InputError("no joint columns (q1_deg ... or q1_rad ...; a prismatic joint's q<i>_mm or q<i>_m)", path, line)
     if idx != list(range(1, len(idx) + 1)):
         missing = sorted(set(range(1, max(idx) + 1)) - set(idx))
         raise InputError(f"joint columns are not q1..q{max(idx)}: missing "
@@ -176,8 +207,37 @@ def _points_layout(header: list[str], line: int, path: str, n_joints: int | None
         raise InputError("both three-axis (fx, fy, fz) and two-channel (f_bend, f_axial) force columns; "
                          "give one sensor", path, line, header[cols["f_bend"][0]])
     num_idx = sorted(k for k, _ in cols.values())
-    return _PointsLayout(tuple(header), line, cols, tuple(cols[f"q{i}"][0] for i in idx), num_idx,
-                         [header.index(t) for t in _TEXT_COLUMNS])
+    txt_idx = [header.index(t) for t in _TEXT_COLUMNS] + ([header.index(SESSION_COLUMN)]
+                                                          if SESSION_COLUMN in header else [])
+    return _PointsLayout(tuple(header), line, cols, tuple(cols[f"q{i}"][0] for i in idx), num_idx, txt_idx,
+                         _marker_groups(cols, header, path, line))
+
+
+def _marker_groups(cols: dict, header, path: str, line: int) -> tuple:
+    """The base names ``(x, y, z)`` of each marker's reference columns, marker 1 first: ``x_ref`` ... for
+    one marker, or ``x1_ref`` ... ``xK_ref`` ... for K (numbered from 1 without a gap; the two namings
+    are not mixed; each marker's three columns come together)."""
+    numbered = sorted({int(m.group(2)) for b in cols if (m := _MARKER_COLUMN.fullmatch(b)) and m.group(2)})
+    if not numbered:
+        return (("x_ref", "y_ref", "z_ref"),) if "x_ref" in cols else ()
+    if "x_ref" in cols:
+        raise InputError("both unnumbered (x_ref_mm ...) and numbered (x1_ref_mm ...) reference columns: give "
+                         "one marker as x_ref_mm, y_ref_mm, z_ref_mm or every marker numbered", path, line,
+                         header[cols["x_ref"][0]])
+    if numbered != list(range(1, len(numbered) + 1)):
+        gap = min(set(range(1, numbered[-1] + 1)) - set(numbered))
+        last = next(header[i] for b, (i, _) in cols.items() if (m := _MARKER_COLUMN.fullmatch(b))
+                    and m.group(2) == str(numbered[-1]))
+        raise InputError(f"marker columns are numbered up to {numbered[-1]} but marker {gap} is missing (markers "
+                         "are numbered from 1 without a gap)", path, line, last)
+    groups = tuple(tuple(f"{a}{k}_ref" for a in "xyz") for k in numbered)
+    for group in groups:
+        present = [b for b in group if b in cols]
+        if len(present) != 3:
+            missing = [b for b in group if b not in cols]
+            raise InputError(f"columns {', '.join(missing)} missing beside {', '.join(present)}", path, line,
+                             header[cols[present[0]][0]])
+    return groups
 
 
 def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
@@ -206,23 +266,29 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
     empty = np.flatnonzero(measurement == "")
     if len(empty):
         raise InputError("empty measurement id", path, int(blk.lines[empty[0]]), "measurement")
-    q = nums[:, [pos[c] for c in lay.joints]] * np.array([UNIT_FACTORS[lay.header[c].rsplit("_", 1)[1]]
-                                                          for c in lay.joints])
-    wrong = implausible(q, "angle")
-    if wrong:
-        raise InputError(wrong[1], path, int(blk.lines[wrong[0][0]]), lay.header[lay.joints[wrong[0][1]]])
+    units = [split_unit(lay.header[c])[1] for c in lay.joints]
+    q = nums[:, [pos[c] for c in lay.joints]] * np.array([UNIT_FACTORS[u] for u in units])
+    for k, unit in enumerate(units):
+        wrong = implausible(q[:, k], QUANTITY_OF_UNIT[unit])
+        if wrong:
+            raise InputError(wrong[1], path, int(blk.lines[wrong[0][0]]), lay.header[lay.joints[k]])
     force, force_kind = group(("fx", "fy", "fz")), None
     if force is not None:
         force_kind = "xyz"
     elif "f_bend" in lay.cols:
         force_kind = "two-channel"
         force = np.column_stack([col("f_bend"), np.zeros(len(q)), col("f_axial")])
+    ref = np.stack([group(m) for m in lay.markers], axis=1) if lay.markers else None
+    session = blk.texts[:, 2] if blk.texts.shape[1] > 2 else None
+    if session is not None and (empty := np.flatnonzero(session == "")).size:
+        raise InputError("empty session id (a session column names the session of every row)", path,
+                         int(blk.lines[empty[0]]), SESSION_COLUMN)
     return PointSet(path=path, measurement=measurement, feature=blk.texts[:, 1], q=q, force=force,
                     torque=group(("mx", "my", "mz")), force_kind=force_kind, temperature=col("temperature"),
-                    time=col("time"), ref=group(("x_ref", "y_ref", "z_ref")), lines=blk.lines)
+                    time=col("time"), ref=ref, lines=blk.lines, session=session)
 
 
-def iter_points(path: str | Path, n_joints: int | None = None, data: bytes | None = None,
+def iter_points(path: str | Path, joints=None, data: bytes | None = None,
                 block_bytes: int = BLOCK_BYTES, span: tuple[int, int] | None = None,
                 known_header: tuple[int, list[str]] | None = None):
     """The points of a points CSV (docs/formats.md §3) as :class:`PointSet` blocks of whole lines, file
@@ -235,7 +301,7 @@ def iter_points(path: str | Path, n_joints: int | None = None, data: bytes | Non
     layout = []
 
     def check(header, line):
-        layout.append(_points_layout(header, line, path, n_joints))
+        layout.append(_points_layout(header, line, path, joints))
         return layout[0].num_idx, layout[0].txt_idx
     count, blocks = 0, 0
     for _, _, blk in iter_csv_blocks(path, "the points file", check, block_bytes, data, span, known_header):
@@ -259,24 +325,28 @@ def concat_points(sets) -> PointSet:
         return None if v[0] is None else np.concatenate(v)
     return PointSet(path=sets[0].path, measurement=cat("measurement"), feature=cat("feature"), q=cat("q"),
                     force=cat("force"), torque=cat("torque"), force_kind=sets[0].force_kind,
-                    temperature=cat("temperature"), time=cat("time"), ref=cat("ref"), lines=cat("lines"))
+                    temperature=cat("temperature"), time=cat("time"), ref=cat("ref"), lines=cat("lines"),
+                    session=cat("session"))
 
 
-def read_points(path: str | Path, n_joints: int | None = None) -> PointSet:
+def read_points(path: str | Path, joints=None) -> PointSet:
     """Read a points CSV (docs/formats.md §3): every column with its unit, SI inside. Unknown columns,
     two columns for one quantity, an empty or non-numeric cell, ``nan``/``inf``, ``4_5`` are errors
     naming the file, the line and the column.
 
     Args:
         path: the CSV file (UTF-8; a byte-order mark is accepted).
-        n_joints: number of joint columns the arm has; a different count is an error.
+        joints: the arm's joint columns: their number, or each one's quantity ("angle" for a revolute
+            joint, "length" for a prismatic one: :attr:`arm_model.ArmDescription.joint_quantities`); a
+            different count, or a column in the other quantity, is an error. None: any count, each column
+            an angle or a length by its unit.
     """
-    return concat_points(iter_points(path, n_joints))
+    return concat_points(iter_points(path, joints))
 
 
-def parse_points(text: str, path: str = "<string>", n_joints: int | None = None) -> PointSet:
+def parse_points(text: str, path: str = "<string>", joints=None) -> PointSet:
     """Parse points CSV text; see :func:`read_points`."""
-    return concat_points(iter_points(path, n_joints, data=text.encode("utf-8", "surrogatepass")))
+    return concat_points(iter_points(path, joints, data=text.encode("utf-8", "surrogatepass")))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -351,7 +421,11 @@ def read_artefacts(path: str | Path) -> Artefacts:
     return art
 
 
-def parse_artefacts(text: str, path: str = "<string>") -> Artefacts:
+def parse_artefacts(text: str, path: str = "<string>", *, extra_keys: tuple = (),
+                    extra_feature_keys: tuple = ()) -> Artefacts:
+    """Parse artefacts TOML text (docs/formats.md §4). ``extra_keys`` (top level) and
+    ``extra_feature_keys`` (in a ``[[feature]]``) are left to a caller whose file extends the format
+    (a live session's plan); every other unknown key is an error."""
     data = parse_toml(text, path)
 
     def err(msg, table, index, key=None):
@@ -359,9 +433,9 @@ def parse_artefacts(text: str, path: str = "<string>") -> Artefacts:
         return InputError(msg, path, _toml_key_line(text, table, index, key), col)
 
     for key in data:
-        if key not in ("feature", "distance"):
-            raise InputError(unknown_key(key, ("feature", "distance")), path, _toml_top_line(text, key),
-                             f"key '{key}'")
+        if key not in ("feature", "distance") + tuple(extra_keys):
+            raise InputError(unknown_key(key, ("feature", "distance") + tuple(extra_keys)), path,
+                             _toml_top_line(text, key), f"key '{key}'")
     if not isinstance(data.get("distance", []), list):
         raise InputError("'distance' must be [[distance]] tables", path, _toml_top_line(text, "distance"),
                          "key 'distance'")
@@ -382,12 +456,13 @@ def parse_artefacts(text: str, path: str = "<string>") -> Artefacts:
             raise err(f"unknown kind {kind!r} (known: {', '.join(FEATURE_KINDS)})", "feature", i, "kind")
         values = {}
         for key, v in t.items():
-            if key in ("id", "kind"):
+            if key in ("id", "kind") or key in extra_feature_keys:
                 continue
             parts = split_unit(key)
             if parts is None or parts[0] not in _FEATURE_LENGTHS:
-                raise err(unknown_key(key, ("id", "kind") + _FEATURE_LENGTHS,
-                                      ["id", "kind"] + [f"{b}_<length unit>" for b in _FEATURE_LENGTHS]),
+                raise err(unknown_key(key, ("id", "kind") + _FEATURE_LENGTHS + tuple(extra_feature_keys),
+                                      ["id", "kind"] + [f"{b}_<length unit>" for b in _FEATURE_LENGTHS]
+                                      + list(extra_feature_keys)),
                           "feature", i, key)
             if QUANTITY_OF_UNIT[parts[1]] != "length":
                 raise err(f"'{key}' must be a length (_mm, _m, _um)", "feature", i, key)
@@ -455,10 +530,15 @@ def parse_artefacts(text: str, path: str = "<string>") -> Artefacts:
 
 
 def check_features(points: PointSet, artefacts: Artefacts) -> None:
-    """Every non-empty feature id of the points must exist in the artefacts file."""
+    """Every non-empty feature id of the points must exist in the artefacts file (``artefacts`` None: no
+    artefacts file, every row a free point)."""
     for i, fid in enumerate(points.feature):
-        if fid and fid not in artefacts.features:
+        if fid and (artefacts is None or fid not in artefacts.features):
             line = None if points.lines is None else int(points.lines[i])
+            if artefacts is None:
+                raise InputError(f"feature '{fid}' but no artefacts file was given (without one, every row is a "
+                                 "free point with reference coordinates and its feature cell is empty)",
+                                 points.path, line, "feature")
             raise InputError(f"unknown feature '{fid}' (the artefacts file {artefacts.path} has: "
                              f"{', '.join(artefacts.features)})", points.path, line, "feature")
 

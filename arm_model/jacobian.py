@@ -33,7 +33,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .chain import ball_in_last_frame, elastic_displacement, probe_lever, row_motions
+from .chain import Joint, ball_in_last_frame, elastic_displacement, has_stylus, joint_value, probe_lever, row_motions
 
 __all__ = ["Dual", "DUAL_OPS", "chain_jacobian", "geometry_entries", "joint_screws", "point_jacobian",
            "direction_jacobian"]
@@ -121,13 +121,14 @@ def value(x):
     return x.val if isinstance(x, Dual) else x
 
 
-def geometry_entries(convention: str, n_joints: int) -> list[tuple]:
+def geometry_entries(convention: str, n_rows: int, n_q: int | None = None) -> list[tuple]:
     """Names of the columns of :func:`chain_jacobian`: ``("row", i, k)`` (row i, its k-th value in
     :meth:`~arm_model.description.ArmDescription.row_table` order), ``("p_last", k)``,
-    ``("compliance", k)``, ``("q", i)``, ``("w", k)`` (force x, y, z [N], torque x, y, z [N m])."""
+    ``("compliance", k)``, ``("q", i)`` (encoder column i; ``n_q`` of them, default one a row), ``("w", k)``
+    (force x, y, z [N], torque x, y, z [N m])."""
     m = 6 if convention == "urdf" else 4
-    return ([("row", i, k) for i in range(n_joints) for k in range(m)] + [("p_last", k) for k in range(3)]
-            + [("compliance", k) for k in range(3)] + [("q", i) for i in range(n_joints)]
+    return ([("row", i, k) for i in range(n_rows) for k in range(m)] + [("p_last", k) for k in range(3)]
+            + [("compliance", k) for k in range(3)] + [("q", i) for i in range(n_rows if n_q is None else n_q)]
             + [("w", k) for k in range(6)])
 
 
@@ -160,14 +161,16 @@ def _cross(u, v):
     return (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
 
 
-def chain_jacobian(convention: str, rows, p_last, compliance, q, wrench=None, axes=None, rotation=None, lever=None):
+def chain_jacobian(convention: str, rows, p_last, compliance, q, wrench=None, joints=None, rotation=None,
+                   lever=None):
     """Ball centres and their exact Jacobian for N points.
 
     Args:
         rows, p_last, compliance: the geometry as :func:`arm_model.chain.ball_centre_expr` takes it
             (each entry a float or an (N,) column).
-        q: J columns (N,) of joint angles [rad]; wrench: 6 columns (force [N], torque [N m], probe
-            frame) or None (rigid); rotation, lever: the probe frame (:class:`arm_model.description.Probe`).
+        q: the encoder columns, each (N,) [rad] or [m]; wrench: 6 columns (force [N], torque [N m], probe
+            frame) or None (rigid); joints: how each row moves (:class:`arm_model.chain.Joint`, None: revolute
+            DH rows); rotation, lever: the probe frame (:class:`arm_model.description.Probe`).
 
     Returns:
         (centre (N, 3) [m], jac (E, 3, N)) with the entries of :func:`geometry_entries` (SI), one
@@ -176,38 +179,40 @@ def chain_jacobian(convention: str, rows, p_last, compliance, q, wrench=None, ax
     n = len(np.asarray(q[0]))
     nj = len(rows)
     m = len(rows[0])
-    entries = geometry_entries(convention, nj)
+    entries = geometry_entries(convention, nj, len(q))
     jac = np.zeros((len(entries), 3, n))
     # the probe: local derivatives by dual numbers through the chain's own code
     pl = [Dual(v, {("p_last", k): 1.0}) for k, v in enumerate(p_last)]
     cp = [Dual(v, {("compliance", k): 1.0}) for k, v in enumerate(compliance)]
-    if wrench is None:
+    if wrench is None or not has_stylus(lever):
         q_e = (0.0, 0.0, 0.0)
     else:
         w = [Dual(v, {("w", k): 1.0}) for k, v in enumerate(wrench)]
         q_e = elastic_displacement(pl, cp, w, probe_lever(pl, rotation, lever))
-    ball = ball_in_last_frame(pl, q_e, DUAL_OPS, rotation, lever)
-    # forward pass: record (u, o) of each elementary motion
+    ball = ball_in_last_frame(pl, q_e, DUAL_OPS, rotation, lever) if has_stylus(lever) else pl
+    # forward pass: record (u, o) of each elementary motion and the entries it moves with their coefficients
     cols = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
     origin = (0.0, 0.0, 0.0)
-    motions = []                  # (kind, u, o, row value columns, joint index or None)
+    motions = []                  # (kind, u, o, [(entry index, coefficient)])
     for i in range(nj):
-        for kind, axis, amount, idx, is_q in row_motions(convention, rows[i], q[i], None if axes is None else axes[i]):
+        joint = None if joints is None else joints[i]
+        q_col = (m * nj + 6 + (i if joint is None else joint.column), 1.0 if joint is None else joint.multiplier)
+        for kind, axis, amount, idx, is_q in row_motions(convention, rows[i], joint_value(joints, i, q), joint):
             u = _base_axis(cols, axis)
-            cols_idx = [m * i + k for k in idx] + ([m * nj + 6 + i] if is_q else [])
+            moved = [(m * i + k, 1.0) for k in idx] + ([q_col] if is_q else [])
             if kind == "R":
-                motions.append(("R", u, origin, cols_idx))
+                motions.append(("R", u, origin, moved))
                 cols = _rotate_frame(cols, axis, amount)
             else:
-                motions.append(("T", u, None, cols_idx))
+                motions.append(("T", u, None, moved))
                 origin = tuple(o + amount * a for o, a in zip(origin, u))
     b = [value(v) for v in ball]
     centre = [origin[e] + cols[0][e] * b[0] + cols[1][e] * b[1] + cols[2][e] * b[2] for e in range(3)]
-    for kind, u, o, idx in motions:
+    for kind, u, o, moved in motions:
         d = u if kind == "T" else _cross(u, [centre[e] - o[e] for e in range(3)])
-        for c in idx:
+        for c, coef in moved:
             for e in range(3):
-                jac[c, e] = d[e]
+                jac[c, e] += d[e] if coef == 1.0 else coef * d[e]
     index = {key: k for k, key in enumerate(entries)}
     for a in range(3):            # local derivative of the ball, rotated to the base
         if not isinstance(ball[a], Dual):
@@ -232,7 +237,10 @@ def _motion(kind, axis, amount) -> np.ndarray:
     m = np.zeros(a.shape + (4, 4))
     m[..., [0, 1, 2, 3], [0, 1, 2, 3]] = 1.0
     if kind == "T":
-        m[..., axis, 3] = a
+        if isinstance(axis, int):
+            m[..., axis, 3] = a
+        else:
+            m[..., :3, 3] = a[..., None] * np.asarray(axis, dtype=float)
         return m
     c, s = np.cos(a), np.sin(a)
     if isinstance(axis, int):
@@ -246,65 +254,69 @@ def _motion(kind, axis, amount) -> np.ndarray:
     return m
 
 
-def _row_parts(convention: str, row, axis):
-    """One row of the chain as (fixed motion before the joint's rotation, fixed motion after it, the
-    rotation's local axis): homogeneous matrices, (4, 4) or (N, 4, 4) for column entries."""
-    before, after, joint = _I4, _I4, None
-    for kind, ax, amount, _, is_q in row_motions(convention, row, 0.0, axis):
+def _row_parts(convention: str, row, joint):
+    """One row of the chain as (fixed motion before the joint's motion, fixed motion after it, the joint's
+    motion ``(kind, local axis)``): homogeneous matrices, (4, 4) or (N, 4, 4) for column entries."""
+    before, after, moving = _I4, _I4, None
+    for kind, ax, amount, _, is_q in row_motions(convention, row, 0.0, joint):
         if is_q:
-            joint = ax
-            if not (isinstance(amount, float) and amount == 0.0):    # a fixed offset (DH/MDH theta_offset)
+            moving = (kind, ax)
+            if not (isinstance(amount, float) and amount == 0.0):    # a fixed offset (DH/MDH theta_offset, d)
                 after = after @ _motion(kind, ax, amount)
-        elif joint is None:
+        elif moving is None:
             before = before @ _motion(kind, ax, amount)
         else:
             after = after @ _motion(kind, ax, amount)
-    return before, after, joint
+    return before, after, moving
 
 
 @lru_cache(maxsize=256)
-def _row_parts_cached(convention: str, row: tuple, axis):
-    before, after, joint = _row_parts(convention, row, axis)
+def _row_parts_cached(convention: str, row: tuple, joint):
+    before, after, moving = _row_parts(convention, row, joint)
     before.setflags(write=False)
     after.setflags(write=False)
-    return before, after, joint
+    return before, after, moving
 
 
-def joint_screws(convention: str, rows, q, axes=None):
+def joint_screws(convention: str, rows, q, joints=None):
     """The last joint frame and the joints' axes for N points: one forward pass of the chain on
-    homogeneous matrices, joint angles only (no geometry entries, no dual numbers).
+    homogeneous matrices, joint values only (no geometry entries, no dual numbers).
 
     Args:
         rows: the chain's rows as :func:`arm_model.chain.chain_point` takes them (floats or (N,) columns);
-        q: (N, J) joint angles [rad]; axes: the URDF joint axes.
+        q: (N, J) encoder readings [rad] or [m]; joints: how each row moves (:class:`arm_model.chain.Joint`;
+            None: revolute DH rows, one column each).
 
     Returns:
         (R (N, 3, 3) the last frame's axes in the base frame (columns), o (N, 3) [m] its origin,
-        u (N, J, 3) each joint's unit axis in the base frame, c (N, J, 3) [m] a point on it).
+        u (N, R, 3) each row's unit joint axis in the base frame, c (N, R, 3) [m] a point on it).
     """
     q = np.asarray(q, dtype=float)
-    n, nj = q.shape
+    n = q.shape[0]
+    nr = len(rows)
     t = np.broadcast_to(_I4, (n, 4, 4))
-    u = np.empty((n, nj, 3))
-    c = np.empty((n, nj, 3))
-    for i in range(nj):
-        axis = None if axes is None else tuple(float(v) for v in axes[i])
+    u = np.empty((n, nr, 3))
+    c = np.empty((n, nr, 3))
+    for i in range(nr):
+        joint = None if joints is None else joints[i]
+        # the row's motion alone (its column and mimic apply to the value below): one cache entry per shape
+        local = None if joint is None else Joint(0, None if joint.axis is None else tuple(map(float, joint.axis)),
+                                                 joint.prismatic)
         if all(isinstance(v, float) for v in rows[i]):
-            before, after, joint = _row_parts_cached(convention, tuple(rows[i]), axis)
+            before, after, (kind, axis) = _row_parts_cached(convention, tuple(rows[i]), local)
         else:
-            before, after, joint = _row_parts(convention, rows[i], axis)
+            before, after, (kind, axis) = _row_parts(convention, rows[i], local)
+        qi = joint_value(joints, i, list(q.T))
         t = _times(t, before)
-        if isinstance(joint, int):
-            u[:, i] = t[:, :3, joint]
-            a, b = ((1, 2), (2, 0), (0, 1))[joint]       # rotate the two other columns by the angle
-            cq, sq = np.cos(q[:, i])[:, None], np.sin(q[:, i])[:, None]
+        u[:, i] = t[:, :3, axis] if isinstance(axis, int) else t[:, :3, :3] @ np.asarray(axis, dtype=float)
+        c[:, i] = t[:, :3, 3]
+        if kind == "R" and isinstance(axis, int):
+            a, b = ((1, 2), (2, 0), (0, 1))[axis]       # rotate the two other columns by the angle
+            cq, sq = np.cos(qi)[:, None], np.sin(qi)[:, None]
             t = t.copy()
             t[:, :, a], t[:, :, b] = cq * t[:, :, a] + sq * t[:, :, b], cq * t[:, :, b] - sq * t[:, :, a]
         else:
-            u[:, i] = t[:, :3, :3] @ np.asarray(joint, dtype=float)
-        c[:, i] = t[:, :3, 3]
-        if not isinstance(joint, int):
-            t = t @ _motion("R", joint, q[:, i])
+            t = t @ _motion(kind, axis, qi)
         t = _times(t, after)
     return t[:, :3, :3], t[:, :3, 3].copy(), u, c
 
@@ -316,12 +328,36 @@ def _times(t, m):
     return t @ m
 
 
-def point_jacobian(u, c, p) -> np.ndarray:
-    """(N, 3, J) d p / d q [m/rad] of points ``p`` (N, 3) [m] fixed in the last frame, from the joint
-    axes ``u`` and points ``c`` on them (N, J, 3) of :func:`joint_screws`."""
-    return np.cross(u, p[:, None, :] - c).transpose(0, 2, 1)
+def _to_columns(per_row: np.ndarray, joints, n_q: int | None) -> np.ndarray:
+    """(N, 3, R) derivatives by row -> (N, 3, J) by encoder column (a mimic's multiplier applied)."""
+    if joints is None:
+        return per_row
+    n_q = max(j.column for j in joints) + 1 if n_q is None else n_q
+    out = np.zeros(per_row.shape[:2] + (n_q,))
+    for i, j in enumerate(joints):
+        out[:, :, j.column] += per_row[:, :, i] if j.multiplier == 1.0 else j.multiplier * per_row[:, :, i]
+    return out
 
 
-def direction_jacobian(u, v) -> np.ndarray:
-    """(N, 3, J) d v / d q [1/rad] of directions ``v`` (N, 3) fixed in the last frame."""
-    return np.cross(u, v[:, None, :]).transpose(0, 2, 1)
+def point_jacobian(u, c, p, joints=None, n_q: int | None = None) -> np.ndarray:
+    """(N, 3, J) d p / d q [m/rad, or m/m for a prismatic joint] of points ``p`` (N, 3) [m] fixed in the last
+    frame, from the joint axes ``u`` and points ``c`` on them (N, R, 3) of :func:`joint_screws`; ``joints``
+    (:class:`arm_model.chain.Joint`, None: revolute rows, one column each) and ``n_q`` map the rows to the
+    encoder columns."""
+    d = np.cross(u, p[:, None, :] - c)
+    if joints is not None:
+        for i, j in enumerate(joints):
+            if j.prismatic:
+                d[:, i] = u[:, i]
+    return _to_columns(d.transpose(0, 2, 1), joints, n_q)
+
+
+def direction_jacobian(u, v, joints=None, n_q: int | None = None) -> np.ndarray:
+    """(N, 3, J) d v / d q [1/rad; 0 for a prismatic joint] of directions ``v`` (N, 3) fixed in the last
+    frame (``joints``, ``n_q`` as :func:`point_jacobian`)."""
+    d = np.cross(u, v[:, None, :])
+    if joints is not None:
+        for i, j in enumerate(joints):
+            if j.prismatic:
+                d[:, i] = 0.0
+    return _to_columns(d.transpose(0, 2, 1), joints, n_q)

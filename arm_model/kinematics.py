@@ -48,12 +48,11 @@ def run_chunks(work, n: int, chunk: int, threads: int | None = None) -> None:
     ``threads`` (default :func:`_default_threads`) when there is more than one chunk, else in line.
     ``work`` writes its own slice of a preallocated output (numpy releases the GIL)."""
     starts = range(0, n, chunk)
-    nthreads = threads or _default_threads()
-    if nthreads == 1 or n <= chunk:
+    if n <= chunk or (threads or _default_threads()) == 1:
         for s in starts:
             work(s)
     else:
-        with ThreadPoolExecutor(max_workers=nthreads) as pool:
+        with ThreadPoolExecutor(max_workers=threads or _default_threads()) as pool:
             list(pool.map(work, starts))
 
 
@@ -63,7 +62,8 @@ def ball_centres(desc: ArmDescription, q, wrench=None, p=None, *, threads: int |
 
     Args:
         desc: the arm.
-        q: (N, J) joint angles [rad] (or (J,) for one point).
+        q: (N, J) encoder readings (or (J,) for one point): joint angles [rad], prismatic joints' positions
+            [m] (:attr:`~arm_model.description.ArmDescription.encoders`).
         wrench: None (rigid), (N, 3) force [N] or (N, 6) force [N] and torque [N m] at the ball,
             in the probe frame: the force the part exerts on the ball.
         p: parameter errors (see :mod:`arm_model.params`), None for the description itself.
@@ -87,7 +87,7 @@ def ball_centres(desc: ArmDescription, q, wrench=None, p=None, *, threads: int |
         qt = np.ascontiguousarray(q2[start:stop].T)
         wt = None if w is None else np.ascontiguousarray(w[start:stop].T)
         x, y, z = ball_centre_expr(desc.convention, rows, p_last, compliance, qt,
-                                   None if wt is None else list(wt), NUMPY_OPS, desc.axes,
+                                   None if wt is None else list(wt), NUMPY_OPS, desc.chain_joints,
                                    desc.probe.rotation, desc.probe.lever)
         out[start:stop, 0] = x
         out[start:stop, 1] = y
@@ -109,5 +109,5 @@ def probe_rotations(desc: ArmDescription, q, p=None) -> np.ndarray:
     from .jacobian import joint_screws
 
     rows, _, _ = split_params(desc, None if p is None else np.asarray(p, dtype=float))
-    rot = joint_screws(desc.convention, rows, np.atleast_2d(np.asarray(q, dtype=float)), desc.axes)[0]
+    rot = joint_screws(desc.convention, rows, np.atleast_2d(np.asarray(q, dtype=float)), desc.chain_joints)[0]
     return rot if desc.probe.rotation is None else rot @ np.asarray(desc.probe.rotation, dtype=float)

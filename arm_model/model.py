@@ -77,7 +77,7 @@ class ArmModel:
     def _evaluate(self, p, inputs: ModelInputs, ops):
         geom = self._apply_effects(p, inputs, ops)
         return ball_centre_expr(self.desc.convention, geom.rows, geom.p_last, geom.compliance,
-                                inputs.q, inputs.wrench, ops, self.desc.axes,
+                                inputs.q, inputs.wrench, ops, self.desc.chain_joints,
                                 self.desc.probe.rotation, self.desc.probe.lever)
 
     def _check_aux(self, aux: AuxData | None, n: int) -> AuxData:

@@ -8,11 +8,14 @@ One TOML file (``aacmm calibrate`` and ``aacmm close-loop`` write it, every ``--
   ``joints`` (joint names; absent: all joints), the effect's other options (its dataclass fields,
   e.g. ``harmonics``, ``gravity``) and ``parameter``, one entry a parameter of the effect
   (``param_defs``): ``name``, ``value_<unit>``, ``u_<unit>`` (standard uncertainty; 0 when not
-  estimated) and ``state`` ("free", "fixed" or "held") — units from :data:`PARAM_UNITS`;
+  estimated) and ``state`` ("free", "prior-dominated", "fixed" or "held") — units from :data:`PARAM_UNITS`;
 * an optional ``[calibration]`` table: ``covariance`` (the covariance file, relative to the TOML),
   ``written_by`` and ``probing_scatter_um`` (the scatter of the contact itself per axis that the
   calibration's variance components estimated, net of the encoder and force-sensor noise:
-  :meth:`calibration.CalibrationResult.probing_scatter`; ``aacmm tip``'s default probing uncertainty).
+  :meth:`calibration.CalibrationResult.probing_scatter`; ``aacmm tip``'s default probing uncertainty);
+* optional ``[[reference_frame]]`` and ``[[marker]]`` tables: the reference instrument's frame of each
+  session and the markers' offsets on the tip frame that a calibration on tracker data estimated
+  (:mod:`arm_model.tracker`; ``aacmm tip --reference-frame`` predicts the instrument's coordinates).
 
 The covariance file (:func:`write_covariance`, :func:`read_covariance`) is a CSV: one row a free
 parameter of the fit, columns ``parameter``, ``unit``, ``value``, ``u`` (in that row's unit) and one
@@ -38,6 +41,7 @@ from .description import (MODEL_KEYS, ArmDescription, TomlReader, description_da
                           in_unit, nearest, toml_text)
 from .effects import EFFECTS, Effect
 from .model import ArmModel, AuxData
+from .tracker import Tracker, tracker_from_tables, tracker_tables
 
 __all__ = ["Arm", "PARAM_UNITS", "parse_model", "load_model", "format_model", "effect_tables",
            "effects_from_tables", "write_covariance", "read_covariance", "Covariance", "check_calibration_table",
@@ -68,7 +72,7 @@ PARAM_QUANTITY: dict[str, str] = {
 #: computed from the description, e.g. gravity and contact torques)
 EFFECT_COLUMNS: dict[str, str | None] = {"temperature": "temperature_C", "tau_gravity": None, "tau_contact": None}
 
-STATES = ("free", "fixed", "held")
+STATES = ("free", "prior-dominated", "fixed", "held")
 
 
 def _unit_of(si: str) -> tuple[str, float]:
@@ -89,7 +93,8 @@ class Arm:
     of the parameter vector is zero), with standard uncertainties and states when a fit wrote them.
     ``covariance``: the covariance file named by the model file (resolved path) or None;
     ``probing_scatter``: the calibration's estimate of the scatter of one probed ball centre per axis [m]
-    (``[calibration] probing_scatter_um``) or None."""
+    (``[calibration] probing_scatter_um``) or None; ``tracker``: the reference instrument's frames and the
+    markers' offsets (``[[reference_frame]]``, ``[[marker]]``) or None."""
     desc: ArmDescription
     effects: tuple[Effect, ...] = ()
     values: dict = field(default_factory=dict)
@@ -97,6 +102,7 @@ class Arm:
     states: dict = field(default_factory=dict)
     covariance: Path | None = None
     probing_scatter: float | None = None
+    tracker: Tracker | None = None
 
     @property
     def model(self) -> ArmModel:
@@ -208,7 +214,7 @@ def effect_tables(desc: ArmDescription, effects, values: dict, uncertainties: di
     for e in effects:
         tbl: dict = {"kind": e.key}
         if e.joints is not None:
-            tbl["joints"] = [desc.joints[i].name for i in e.joints]
+            tbl["joints"] = [desc.joint_names[i] for i in e.joints]
         for f in _options(e):
             if getattr(e, f.name) is not None:          # TOML has no null: an absent option takes its default
                 tbl[f.name] = _plain(getattr(e, f.name))
@@ -374,10 +380,11 @@ def parse_model(text: str, path: str = "<string>") -> Arm:
             covariance = (Path(path).parent / cov) if path != "<string>" else Path(cov)
         if "probing_scatter_um" in data["calibration"]:
             scatter = float(data["calibration"]["probing_scatter_um"]) * 1e-6
+    tracker = tracker_from_tables(data, r)
     if "effect" not in data:
-        return Arm(desc, covariance=covariance, probing_scatter=scatter)
+        return Arm(desc, covariance=covariance, probing_scatter=scatter, tracker=tracker)
     effects, values, u, states = effects_from_tables(desc, data["effect"], r)
-    return Arm(desc, effects, values, u, states, covariance, scatter)
+    return Arm(desc, effects, values, u, states, covariance, scatter, tracker)
 
 
 def load_model(path, tip_frame: str | None = None, probe: dict | None = None, masses=None) -> Arm:
@@ -400,9 +407,10 @@ def load_model(path, tip_frame: str | None = None, probe: dict | None = None, ma
 
 def format_model(desc: ArmDescription, effects=(), values: dict | None = None, uncertainties: dict | None = None,
                  states: dict | None = None, *, covariance: str | None = None, written_by: str | None = None,
-                 probing_scatter: float | None = None, comment: str | None = None) -> str:
+                 probing_scatter: float | None = None, tracker: Tracker | None = None,
+                 comment: str | None = None) -> str:
     """TOML text of a model file that :func:`parse_model` reads back exactly (``probing_scatter`` [m]:
-    written in um to 4 significant digits)."""
+    written in um to 4 significant digits; ``tracker``: the reference frames and marker offsets)."""
     data = description_data(desc)
     if effects:
         data["effect"] = effect_tables(desc, effects, values or {}, uncertainties, states)
@@ -411,6 +419,8 @@ def format_model(desc: ArmDescription, effects=(), values: dict | None = None, u
                              ("probing_scatter_um", scatter)) if v not in (None, "")}     # a scatter of 0 is kept
     if cal:
         data["calibration"] = cal
+    if tracker is not None:
+        data.update(tracker_tables(tracker))
     return toml_text(data, comment)
 
 

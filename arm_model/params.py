@@ -1,7 +1,8 @@
 """Named model parameters: the vector ``p`` that calibration identifies.
 
 ``p`` holds *errors* added to the description's values, so ``p = 0`` is the description itself.
-Order, stated once and kept everywhere: for each joint, base first,
+Order, stated once and kept everywhere: for each joint of the chain (revolute or prismatic, a mimicking
+joint too: its geometry is its own), base first,
 ``theta_offset [rad], d [m], a [m], alpha [rad]`` (DH and MDH) or ``origin_x, origin_y, origin_z [m],
 origin_roll, origin_pitch, origin_yaw [rad]`` (URDF chains); then ``probe.x, probe.y, probe.z [m]``; then
 ``probe.compliance_x, probe.compliance_y, probe.compliance_z [m/N]``.
@@ -78,7 +79,7 @@ def split_params(desc: ArmDescription, p=None):
     rows = [[float(v) for v in r] for r in table]
     if p is None:
         return rows, p_last, compliance
-    n, m = desc.n_joints, len(desc.row_fields)
+    n, m = len(desc.joints), len(desc.row_fields)
     rows = [[rows[i][k] + p[m * i + k] for k in range(m)] for i in range(n)]
     p_last = [p_last[k] + p[m * n + k] for k in range(3)]
     compliance = [compliance[k] + p[m * n + 3 + k] for k in range(3)]

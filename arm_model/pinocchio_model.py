@@ -32,22 +32,27 @@ class PinocchioArm:
         self.model.gravity.linear = GRAVITY.copy()
         self.data = self.model.createData()
         self.ball_id = self.model.getFrameId(BALL_FRAME)
+        # every row of the chain is its own joint here (a mimic's too): ``coupling`` maps the encoder
+        # columns to them, row value = coupling @ q + offsets (the URDF's <mimic>)
         self.arm_idx = np.array([self.model.joints[self.model.getJointId(j.name)].idx_q
                                  for j in desc.joints])
+        cj = desc.chain_joints
+        self.coupling = np.zeros((len(cj), desc.n_joints))
+        self.coupling[np.arange(len(cj)), [j.column for j in cj]] = [j.multiplier for j in cj]
+        self.offsets = np.array([j.offset for j in cj])
         self.elastic_idx = np.array([self.model.joints[self.model.getJointId(name)].idx_q
                                      for name in ELASTIC_JOINTS])
         p = desc.probe
         lever = p.stylus_length
-        # compliance of the elastic joints, K^-1 = diag(c_x / L^2, c_y / L^2, c_z)
-        self.joint_compliance = np.array([p.bending_compliance_x / lever**2,
-                                          p.bending_compliance_y / lever**2,
-                                          p.axial_compliance])
+        # compliance of the elastic joints, K^-1 = diag(c_x / L^2, c_y / L^2, c_z); none without a stylus
+        self.joint_compliance = np.zeros(3) if lever == 0.0 else np.array(
+            [p.bending_compliance_x / lever**2, p.bending_compliance_y / lever**2, p.axial_compliance])
 
     # -- configuration ------------------------------------------------------------------------
     def full_q(self, q, q_e=None) -> np.ndarray:
-        """Pinocchio configuration from arm angles ``q`` [rad] and elastic displacement ``q_e``."""
+        """Pinocchio configuration from the encoder readings ``q`` [rad] or [m] and elastic displacement ``q_e``."""
         x = np.zeros(self.model.nq)
-        x[self.arm_idx] = q
+        x[self.arm_idx] = self.coupling @ np.asarray(q, dtype=float) + self.offsets
         if q_e is not None:
             x[self.elastic_idx] = q_e
         return x
@@ -85,20 +90,22 @@ class PinocchioArm:
         return self.data.oMf[self.ball_id].homogeneous.copy()
 
     def jacobians(self, q, wrench=None) -> tuple[np.ndarray, np.ndarray]:
-        """(d ball / d q  (3, J) [m/rad], d ball / d w  (3, 6) [m/N, m/(N m)]), base frame axes."""
+        """(d ball / d q  (3, J) [m/rad] ([m/m] for a prismatic joint), d ball / d w  (3, 6) [m/N, m/(N m)]),
+        base frame axes, by encoder column."""
         pin = self._pin
         w = np.zeros(6) if wrench is None else np.pad(np.asarray(wrench, float), (0, 6 - len(wrench)))
         x = self.full_q(q, self.elastic_q(q, w))
         j = self._ball_jacobian(x, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3]
         j_e0 = self._ball_jacobian(self.full_q(q), pin.ReferenceFrame.LOCAL)[:, self.elastic_idx]
         dqe_dw = self.joint_compliance[:, None] * j_e0.T
-        return j[:, self.arm_idx], j[:, self.elastic_idx] @ dqe_dw
+        return j[:, self.arm_idx] @ self.coupling, j[:, self.elastic_idx] @ dqe_dw
 
     def gravity_torques(self, q) -> np.ndarray:
-        """Torque [N m] each arm joint holds against gravity, RNEA(q, 0, 0) (Pinocchio's sign):
-        the generalized force gravity exerts on the joints is its negative."""
+        """Torque [N m] (force [N] for a prismatic joint) each encoder column's joint holds against gravity,
+        RNEA(q, 0, 0) (Pinocchio's sign): the generalized force gravity exerts on the joints is its negative
+        (a mimicking joint's share carried to its master by the multiplier)."""
         g = self._pin.computeGeneralizedGravity(self.model, self.data, self.full_q(q))
-        return g[self.arm_idx].copy()
+        return self.coupling.T @ g[self.arm_idx]
 
     def contact_torques(self, q, wrench) -> np.ndarray:
         """Generalized force [N m] a wrench at the ball (probe frame) exerts on the arm joints,
@@ -106,7 +113,7 @@ class PinocchioArm:
         w = np.zeros(6)
         w[: len(wrench)] = wrench
         j_local = self._ball_jacobian(self.full_q(q), self._pin.ReferenceFrame.LOCAL)
-        return (j_local.T @ w)[self.arm_idx]
+        return self.coupling.T @ (j_local.T @ w)[self.arm_idx]
 
     def torques(self, q, wrench=None) -> tuple[np.ndarray, np.ndarray]:
         """For (N, J) angles and (N, 3|6) wrenches: (tau_gravity (N, J), tau_contact (N, J)) [N m]

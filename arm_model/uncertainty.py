@@ -54,7 +54,8 @@ class InputUncertainty:
     """Standard uncertainties of the inputs (SI) and where each comes from.
 
     Attributes:
-        encoder: (J,) per joint [rad] (the resolution / sqrt(12) of a rectangular quantisation).
+        encoder: (J,) per encoder column [rad] ([m] for a prismatic joint): the resolution / sqrt(12) of a
+            rectangular quantisation.
         force: (3,) force along probe x, y, z [N]; torque: (3,) [N m].
         compliance: (3,) of the probe compliances along x, y, z [m/N] (used only for compliances the
             parameter covariance does not hold).
@@ -98,7 +99,8 @@ def default_inputs(desc, *, encoder=None, force=None, torque=None, compliance=No
     """The input uncertainties of ``desc`` with their sources; any argument overrides its default.
 
     Args:
-        encoder: standard uncertainty [rad], one value or one a joint (default: each joint's
+        encoder: standard uncertainty [rad] ([m] for a prismatic joint), one value or one an encoder column
+            (default: each joint's
             ``encoder_resolution`` of the description / sqrt(12), 0 where not given).
         force: [N], one value or (x, y, z) (default :data:`FORCE_SENSOR_U_N`).
         torque: [N m] (default 0: no torque is measured by the seed paper's sensor).
@@ -112,9 +114,9 @@ def default_inputs(desc, *, encoder=None, force=None, torque=None, compliance=No
     j = desc.n_joints
     src = {}
     if encoder is None:
-        res = np.array([getattr(jt, "encoder_resolution", None) or 0.0 for jt in desc.joints])
+        res = np.array([getattr(jt, "encoder_resolution", None) or 0.0 for jt in desc.encoders])
         enc = res / math.sqrt(12.0)
-        given = [jt.name for jt in desc.joints if getattr(jt, "encoder_resolution", None)]
+        given = [jt.name for jt in desc.encoders if getattr(jt, "encoder_resolution", None)]
         src["encoders"] = ("resolution / sqrt(12) from the description's encoder_resolution"
                            + ("" if len(given) == j else f" (given for {len(given)} of {j} joints; 0 elsewhere)")
                            if given else "none: the description gives no encoder_resolution (0 assumed)")
@@ -220,6 +222,95 @@ def _prepare(model: ArmModel, q, wrench, aux):
     return q, w, aux
 
 
+@dataclass(frozen=True)
+class _Plan:
+    """What :func:`propagate` sets up once for all chunks: the directions of the total Jacobian (the
+    parameters in the covariance, the encoder columns, the wrench) and the matrix ``S`` mapping them to
+    the rows of one stacked product ``A = S T`` (each block of rows of ``A`` squared and summed gives one
+    contribution)."""
+    pidx: list
+    lfac: np.ndarray
+    directions: list
+    d_index: dict
+    s_mat: np.ndarray
+    spans: dict
+    comp_cols: list
+    use_compliance: bool
+
+
+def _plan(model: ArmModel, parameters, inputs: InputUncertainty, n_q: int) -> _Plan:
+    spec = model.spec
+    pnames = () if parameters is None else tuple(parameters.names)
+    pidx = [spec.index(nm) for nm in pnames]
+    lfac = parameters.factor() if parameters is not None and len(pnames) else np.zeros((0, 0))
+    use_compliance = bool(not _compliance_covered(pnames) and np.any(inputs.compliance > 0))
+    u_w = np.concatenate([inputs.force, inputs.torque])
+    entries = geometry_entries(model.desc.convention, len(model.desc.joints), n_q)
+    directions = [("p", i) for i in pidx] + [("q", i) for i in range(n_q)] + [("w", k) for k in range(6)]
+    blocks = {"parameters": lfac.T, "encoders": np.diag(inputs.encoder), "force sensor": np.diag(u_w)}
+    s_mat = np.zeros((sum(b.shape[0] for b in blocks.values()), len(directions)))
+    spans, r0, c0 = {}, 0, 0
+    for name, b in blocks.items():
+        s_mat[r0: r0 + b.shape[0], c0: c0 + b.shape[1]] = b
+        spans[name] = slice(r0, r0 + b.shape[0])
+        r0, c0 = r0 + b.shape[0], c0 + b.shape[1]
+    return _Plan(pidx, lfac, directions, {d: k for k, d in enumerate(directions)}, s_mat, spans,
+                 [entries.index(("compliance", k)) for k in range(3)], use_compliance)
+
+
+def _chunk_jacobian(model: ArmModel, plan: _Plan, p, q, w, aux: AuxData):
+    """For one chunk of points: (centres (n, 3) [m], the chain's Jacobian g (E, 3, n) by geometry entry,
+    the chain rule from the directions to the entries: a constant matrix M (directions x E) and per-point
+    coefficients {direction: (3, n) slab}), by dual numbers through the effects' own code."""
+    nj = q.shape[1]
+    seeded, wanted = set(plan.pidx), model.needs()
+    pd = [Dual(float(v), {("p", i): 1.0}) if i in seeded else float(v) for i, v in enumerate(p)]
+    inp = ModelInputs(
+        q=[Dual(q[:, i], {("q", i): 1.0}) for i in range(nj)],
+        wrench=[Dual(w[:, k], {("w", k): 1.0}) for k in range(6)],
+        temperature=aux.temperature,
+        tau_gravity=None if aux.tau_gravity is None or "tau_gravity" not in wanted else list(aux.tau_gravity.T),
+        tau_contact=None if aux.tau_contact is None or "tau_contact" not in wanted else list(aux.tau_contact.T))
+    geom = model._apply_effects(pd, inp, DUAL_OPS)
+    flat = [x for r in geom.rows for x in r] + list(geom.p_last) + list(geom.compliance) + list(inp.q) \
+        + list(inp.wrench)
+    vals = [value(x) for x in flat]
+    m, nr = len(geom.rows[0]), len(geom.rows)
+    k0 = m * nr
+    desc = model.desc
+    cen, g = chain_jacobian(desc.convention, [vals[m * i: m * i + m] for i in range(nr)], vals[k0: k0 + 3],
+                            vals[k0 + 3: k0 + 6], vals[k0 + 6: k0 + 6 + nj], vals[k0 + 6 + nj:], desc.chain_joints,
+                            desc.probe.rotation, desc.probe.lever)
+    mmat = np.zeros((len(plan.directions), len(flat)))
+    per_point = {}
+    for col, x in enumerate(flat):
+        if not isinstance(x, Dual):
+            continue
+        for key, coef in x.der.items():
+            k = plan.d_index.get(key)
+            if k is None:
+                continue
+            if np.ndim(coef) == 0:
+                mmat[k, col] += coef
+            else:
+                t = g[col] * coef
+                per_point[k] = per_point[k] + t if k in per_point else t
+    return cen, g, mmat, per_point
+
+
+_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+
+def _add_squares(a, out_cov, contribution) -> None:
+    """Add sum_r a[r, i] a[r, j] (a: (R, 3, n)) to the covariance (3, 3, n); its diagonal is also the
+    ``contribution`` (n, 3)."""
+    for i, j in _PAIRS:
+        v = np.einsum("rn,rn->n", a[:, i], a[:, j])
+        out_cov[i, j] += v
+        if i == j:
+            contribution[:, i] = v
+
+
 def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
               parameters: ParameterCovariance | None = None, inputs: InputUncertainty,
               threads: int | None = None, chunk: int = 8192, systematic: bool = False) -> Propagation:
@@ -227,7 +318,8 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
 
     Args:
         model: the arm model (every effect applied); p: its full parameter vector [SI] (None: zeros).
-        q: (N, J) encoder readings [rad]; wrench: (N, 3) or (N, 6) measured wrench (probe frame) or None.
+        q: (N, J) encoder readings [rad] (prismatic joints [m]); wrench: (N, 3) or (N, 6) measured wrench
+            (probe frame) or None.
         aux: per-point temperature / joint torques when the model's effects need them.
         parameters: the covariance of named parameters (None: the parameters are taken as exact).
         inputs: :func:`default_inputs`.
@@ -240,118 +332,67 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
     p = np.zeros(spec.size) if p is None else np.asarray(p, dtype=float)
     if p.shape != (spec.size,):
         raise ValueError(f"p has shape {p.shape}, expected ({spec.size},)")
-    pnames = () if parameters is None else tuple(parameters.names)
-    pidx = [spec.index(nm) for nm in pnames]
-    lfac = parameters.factor() if parameters is not None and len(pnames) else np.zeros((0, 0))
-    use_compliance = not _compliance_covered(pnames) and np.any(inputs.compliance > 0)
-    u_w = np.concatenate([inputs.force, inputs.torque])
-    entries = geometry_entries(model.desc.convention, nj)
-    comp_cols = [entries.index(("compliance", k)) for k in range(3)]
-    # directions of the total Jacobian: the parameters in the covariance, the encoders, the wrench
-    directions = [("p", i) for i in pidx] + [("q", i) for i in range(nj)] + [("w", k) for k in range(6)]
-    d_index = {d: k for k, d in enumerate(directions)}
-    npar = len(pidx)
-    # S maps the directions to the rows of one stacked product A = S T (T the total Jacobian): each
-    # block of rows of A squared and summed gives one contribution
-    blocks = {"parameters": lfac.T, "encoders": np.diag(inputs.encoder), "force sensor": np.diag(u_w)}
-    s_mat = np.zeros((sum(b.shape[0] for b in blocks.values()), len(directions)))
-    spans, r0, c0 = {}, 0, 0
-    for name, b in blocks.items():
-        s_mat[r0: r0 + b.shape[0], c0: c0 + b.shape[1]] = b
-        spans[name] = slice(r0, r0 + b.shape[0])
-        r0, c0 = r0 + b.shape[0], c0 + b.shape[1]
+    plan = _plan(model, parameters, inputs, nj)
+    npar = len(plan.pidx)
     cov = np.empty((n, 3, 3))
     contrib = {k: np.zeros((n, 3)) for k in CONTRIBUTIONS}
     centres = np.empty((n, 3))
-    n_sys = npar + 3
-    sys_rows = np.zeros((n, n_sys, 3)) if systematic else None
-    seeded = set(pidx)
-    wanted = model.needs()
-    pairs = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
-
-    def squares(a, out_cov, name, s, e):
-        """Add sum_r a[r, i] a[r, j] to the covariance; the diagonal is the contribution ``name``."""
-        for i, j in pairs:
-            v = np.einsum("rn,rn->n", a[:, i], a[:, j])
-            out_cov[i, j] += v
-            if i == j:
-                contrib[name][s:e, i] = v
+    sys_rows = np.zeros((n, npar + 3, 3)) if systematic else None
 
     def work(s: int) -> None:
         e = min(s + chunk, n)
-        pd = [Dual(float(v), {("p", i): 1.0}) if i in seeded else float(v) for i, v in enumerate(p)]
-        inp = ModelInputs(
-            q=[Dual(q[s:e, i], {("q", i): 1.0}) for i in range(nj)],
-            wrench=[Dual(w[s:e, k], {("w", k): 1.0}) for k in range(6)],
-            temperature=None if aux.temperature is None else aux.temperature[s:e],
-            tau_gravity=None if aux.tau_gravity is None or "tau_gravity" not in wanted else list(aux.tau_gravity[s:e].T),
-            tau_contact=None if aux.tau_contact is None or "tau_contact" not in wanted else list(aux.tau_contact[s:e].T))
-        geom = model._apply_effects(pd, inp, DUAL_OPS)
-        flat = [x for r in geom.rows for x in r] + list(geom.p_last) + list(geom.compliance) + list(inp.q) \
-            + list(inp.wrench)
-        vals = [value(x) for x in flat]
-        m = len(geom.rows[0])
-        rows = [vals[m * i: m * i + m] for i in range(nj)]
-        k0 = m * nj
-        cen, g = chain_jacobian(model.desc.convention, rows, vals[k0: k0 + 3], vals[k0 + 3: k0 + 6],
-                                vals[k0 + 6: k0 + 6 + nj], vals[k0 + 6 + nj:], model.desc.axes,
-                                model.desc.probe.rotation, model.desc.probe.lever)
+        cen, g, mmat, per_point = _chunk_jacobian(model, plan, p, q[s:e], w[s:e], aux.select(slice(s, e)))
         centres[s:e] = cen
-        # the chain rule: T = M g for constant coefficients, plus per-point coefficients separately
-        mmat = np.zeros((len(directions), len(flat)))
-        per_point = {}
-        for col, x in enumerate(flat):
-            if not isinstance(x, Dual):
-                continue
-            for key, coef in x.der.items():
-                k = d_index.get(key)
-                if k is None:
-                    continue
-                if np.ndim(coef) == 0:
-                    mmat[k, col] += coef
-                else:
-                    t = g[col] * coef
-                    per_point[k] = per_point[k] + t if k in per_point else t
-        b = s_mat @ mmat
-        gf = g.reshape(len(flat), -1)
+        b = plan.s_mat @ mmat
+        gf = g.reshape(g.shape[0], -1)
         pp = np.stack([per_point[k] for k in per_point]).reshape(len(per_point), -1) if per_point else None
         cv = np.zeros((3, 3, e - s))
-        for name, sl in spans.items():
+        for name, sl in plan.spans.items():
             blk = b[sl]
             if not blk.shape[0]:
                 continue
             nz = np.flatnonzero(np.any(blk != 0, axis=0))
             a = blk[:, nz] @ gf[nz]
             if pp is not None:
-                a += s_mat[sl][:, list(per_point)] @ pp
+                a += plan.s_mat[sl][:, list(per_point)] @ pp
             a = a.reshape(len(blk), 3, e - s)
             if sys_rows is not None and name == "parameters":
                 sys_rows[s:e, :npar] = a.transpose(2, 0, 1)
-            squares(a, cv, name, s, e)
-        if use_compliance:
-            a = g[comp_cols] * inputs.compliance[:, None, None]
+            _add_squares(a, cv, contrib[name][s:e])
+        if plan.use_compliance:
+            a = g[plan.comp_cols] * inputs.compliance[:, None, None]
             if sys_rows is not None:
                 sys_rows[s:e, npar:] = a.transpose(2, 0, 1)
-            squares(a, cv, "compliance", s, e)
+            _add_squares(a, cv, contrib["compliance"][s:e])
         if inputs.probing > 0:
             var = inputs.probing ** 2
             for i in range(3):
                 cv[i, i] += var
             contrib["probing"][s:e] = var
-        for i, j in pairs:
+        for i, j in _PAIRS:
             cov[s:e, i, j] = cv[i, j]
             cov[s:e, j, i] = cv[i, j]
 
-    from threadpoolctl import threadpool_limits
-
     # the products are thin (tens x chunk): one BLAS thread each; more spin-wait on a busy machine
-    with threadpool_limits(limits=1, user_api="blas"):
+    with _blas_controller().limit(limits=1, user_api="blas"):
         run_chunks(work, n, chunk, threads)
     sources = dict(inputs.sources)
     sources["parameters"] = "none (parameters taken as exact)" if parameters is None else parameters.source
-    if _compliance_covered(pnames):
+    if _compliance_covered(tuple(() if parameters is None else parameters.names)):
         sources["compliance"] = "in the parameter covariance (calibrated)"
     return Propagation(centres, cov, contrib, sources, sys_rows)
+
+
+_CONTROLLER = []
+
+
+def _blas_controller():
+    """threadpoolctl's controller, made once (finding the loaded BLAS libraries takes milliseconds: too
+    long for every point of a live session)."""
+    if not _CONTROLLER:
+        from threadpoolctl import ThreadpoolController
+        _CONTROLLER.append(ThreadpoolController())
+    return _CONTROLLER[0]
 
 
 def monte_carlo(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,

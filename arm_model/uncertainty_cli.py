@@ -13,7 +13,7 @@ from .uncertainty import (COMPLIANCE_U_RELATIVE, CONTRIBUTIONS, InputUncertainty
                           propagate)
 
 __all__ = ["add_input_options", "inputs_from_args", "add_tip_options", "wants_uncertainty", "tip_columns",
-           "contribution_lines"]
+           "contribution_lines", "u_columns", "parameters_of"]
 
 
 #: the largest values the input-uncertainty options take (their plausible ranges, docs/uncertainty.md):
@@ -117,6 +117,13 @@ def parameters_of(arm) -> ParameterCovariance | None:
     return out
 
 
+def u_columns(res) -> dict:
+    """The standard uncertainty columns ``u_x_mm, u_y_mm, u_z_mm`` of ``aacmm tip`` for a
+    :class:`~arm_model.uncertainty.Propagation`."""
+    u = res.u
+    return {f"u_{a}_mm": u[:, k] * 1e3 for k, a in enumerate("xyz")}
+
+
 def tip_columns(arm, points, parameters, args) -> tuple[dict, list[str]]:
     """The uncertainty columns of ``aacmm tip`` (mm, um^2) for an :class:`~arm_model.model_file.Arm`
     and a :class:`~arm_model.io.PointSet`, and the lines it prints."""
@@ -125,7 +132,7 @@ def tip_columns(arm, points, parameters, args) -> tuple[dict, list[str]]:
     points_q = points.q
     res = propagate(model, p, points_q, wrench, aux, parameters=parameters, inputs=inputs)
     u = res.u
-    cols = {f"u_{a}_mm": u[:, k] * 1e3 for k, a in enumerate("xyz")}
+    cols = u_columns(res)
     if args.covariance:
         cols.update(covariance_columns(res.cov))
     lines = ["uncertainty of the corrected centres (linear, exact Jacobians); RMS over the points [um]:",

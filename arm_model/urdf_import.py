@@ -1,17 +1,26 @@
 """An arm given as a URDF (docs/formats.md §2): the chain from the root link to the tip frame.
 
 The file is read with lxml (so that every error names its line) and modelled with yourdfpy. The chain
-runs from the root link to ``tip_frame``; other branches (fingers, sensors) are held at zero. Fixed
-joints on the chain are folded into the next revolute joint's origin; those after the last revolute
-joint into the probe pose: the tip frame's full pose in the last joint frame gives the ball centre and
-the probe frame (its z axis along the stylus, towards the ball), whatever its orientation. The virtual
-bending hinge sits where the stylus line passes closest to the last joint origin; if the tip frame's z
-points back past that origin, |p| behind the ball. The project's
-own virtual elastic probe joints (``probe_bend_y``, ``probe_bend_x``, ``probe_axial`` of
-``aacmm urdf``) are recognised: they are held at zero and their hinge sets the stylus length.
+runs from the root link to ``tip_frame``; other branches (fingers, sensors) are held at zero. Its moving
+joints are revolute, continuous (revolute without limits) and prismatic; a ``<mimic>`` joint follows its
+master as the URDF says (``multiplier``, ``offset``): it takes no encoder column when its master is on the
+chain, and reads its master's column when the master is off it (a gripper finger mimicking the other
+finger); a multiplier of 0 holds it at its offset. Fixed joints on the chain are folded into the next
+moving joint's origin; those after the last moving joint into the probe pose: the tip frame's full pose in
+the last joint frame gives the ball centre and the probe frame (its z axis along the stylus, towards the
+ball), whatever its orientation. The virtual bending hinge sits where the stylus line passes closest to
+the last joint origin; if the tip frame's z points back past that origin, |p| behind the ball. A tip frame
+at the last joint's origin (a robot's flange, a wrist link) is a tip without a stylus: rigid, its
+compliances 0. The project's own virtual elastic probe joints (``probe_bend_y``, ``probe_bend_x``,
+``probe_axial`` of ``aacmm urdf``) are recognised: they are held at zero and their hinge sets the stylus
+length.
 
-Masses: each revolute joint of the chain carries the mass and centre of mass of everything it moves
-up to the next revolute joint of the chain: its child link's ``<inertial>`` plus those of every link
+Only what the chain uses is checked beyond being numbers: joint origins, axes, limits and mimics when the
+file is read, the masses of the links folded into the chain when they are folded. Visual and collision
+content (meshes, mirrored scales, missing mesh files), inertia tensors, efforts and damping are never used.
+
+Masses: each moving joint of the chain carries the mass and centre of mass of everything it moves
+up to the next moving joint of the chain: its child link's ``<inertial>`` plus those of every link
 hanging from it through fixed joints or side branches (held at zero), folded into the child link's
 frame. A masses file (:func:`load_masses`, ``--masses``) gives or replaces link inertials for URDFs
 without them.
@@ -22,6 +31,7 @@ one; the force range and compliances from the caller (default: the seed paper's 
 from __future__ import annotations
 
 import io
+import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,9 +41,12 @@ import numpy as np
 from ._csv import parse_number
 from ._errors import InputError, open_input, parse_toml, read_text
 from ._units import implausible
-from .description import ArmDescription, JointRow, Probe, TomlReader, load_description
+from .description import (MIN_STYLUS, ArmDescription, JointRow, Mimic, Probe, TomlReader, Visual, default_lever,
+                          load_description)
 from .shipped import arm_path
 from .urdf import ELASTIC_JOINTS, _origin_matrix
+
+log = logging.getLogger(__name__)
 
 __all__ = ["description_from_urdf", "load_arm", "load_masses", "calibrated_urdf_text", "PAPER_PROBE",
            "LinkMass"]
@@ -43,7 +56,8 @@ PAPER_PROBE = dict(ball_diameter=0.004, max_force=13.0, bending_compliance_x=1.4
                    bending_compliance_y=1.42e-5, axial_compliance=8.76e-8)
 
 _JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
-#: numeric attributes of URDF elements: tag -> {attribute: count}
+#: numeric attributes of URDF elements: tag -> {attribute: count}; every one must be that many numbers
+#: (a file whose numbers are not numbers is broken for every reader)
 _NUMERIC = {
     "origin": {"xyz": 3, "rpy": 3}, "axis": {"xyz": 3}, "mass": {"value": 1},
     "limit": {"lower": 1, "upper": 1, "effort": 1, "velocity": 1},
@@ -53,14 +67,17 @@ _NUMERIC = {
     "mimic": {"multiplier": 1, "offset": 1}, "calibration": {"rising": 1, "falling": 1},
     "safety_controller": {"soft_lower_limit": 1, "soft_upper_limit": 1, "k_position": 1, "k_velocity": 1},
 }
-#: (tag, attribute) -> the quantity whose plausible range (arm_model._units.PLAUSIBLE_SI) its numbers keep
-_QUANTITY = {("origin", "xyz"): "length", ("origin", "rpy"): "angle", ("mass", "value"): "mass", ("axis", "xyz"): "ratio",
-             ("sphere", "radius"): "length", ("cylinder", "radius"): "length", ("cylinder", "length"): "length",
-             ("box", "size"): "length"}
-#: (tag, attribute) whose numbers are sizes, masses, or colours: never negative
-_NOT_NEGATIVE = {("mass", "value"), ("sphere", "radius"), ("cylinder", "radius"), ("cylinder", "length"),
-                 ("box", "size"), ("mesh", "scale"), ("color", "rgba"), ("inertia", "ixx"), ("inertia", "iyy"),
-                 ("inertia", "izz")}
+#: the numbers the kinematics use, by (parent tag, tag, attribute) -> the quantity whose plausible range
+#: (arm_model._units.PLAUSIBLE_SI) they keep (None: finite only). Only these are checked beyond being
+#: numbers when the file is read; the masses and centres of mass of the links folded into the chain when
+#: they are folded (:func:`_fold_masses`); visual and collision geometry, inertia tensors, efforts,
+#: velocities, damping are never used here (an inertia of -5e-20, a mirrored mesh's negative scale are no
+#: errors).
+_USED = {("joint", "origin", "xyz"): "length", ("joint", "origin", "rpy"): "angle", ("joint", "axis", "xyz"): "ratio",
+         ("joint", "limit", "lower"): None, ("joint", "limit", "upper"): None, ("joint", "mimic", "multiplier"): "ratio",
+         ("joint", "mimic", "offset"): None}
+#: a negative mass [kg] smaller than this is rounding noise (taken as 0)
+_MASS_NOISE = 1e-9
 _ELASTIC_TYPES = dict(zip(ELASTIC_JOINTS, ("revolute", "revolute", "prismatic")))
 
 
@@ -112,43 +129,31 @@ def _parse_xml(path: Path, data: bytes):
     return tree
 
 
-def _read_urdf(path: str | Path) -> _Urdf:
-    """Read and check a URDF; every problem is an InputError naming the file and the line."""
-    import yourdfpy
-
-    path = Path(path)
-    with open_input(path, "the URDF") as fh:
-        try:
-            data = fh.read()
-        except OSError as exc:
-            raise InputError(f"cannot read the URDF: {exc.strerror}", path) from None
-    tree = _parse_xml(path, data)
-    root = tree.getroot()
-    if root.tag != "robot":
-        raise InputError(f"a URDF's root element is <robot>, got <{root.tag}>", path, root.sourceline)
-    if not root.get("name"):
-        raise InputError("<robot> has no name", path, root.sourceline)
-    for el in root.iter():
-        if not isinstance(el.tag, str):
-            continue
-        for attr, n in _NUMERIC.get(el.tag, {}).items():
+def _check_numbers(root, path: Path) -> None:
+    """Every numeric attribute holds numbers (count and syntax); those the kinematics use (:data:`_USED`)
+    are finite and plausible too."""
+    for el in root.iter(*_NUMERIC):
+        parent = el.getparent()
+        ptag = None if parent is None else parent.tag
+        for attr, n in _NUMERIC[el.tag].items():
             text = el.get(attr)
             if text is None:
                 continue
-            vals = [parse_number(v) for v in text.split()]
-            if len(vals) != n or not all(v is not None and math.isfinite(v) for v in vals):
+            parts = text.split()
+            vals = [parse_number(v) for v in parts] if len(parts) == n else None
+            used = (ptag, el.tag, attr) in _USED
+            if vals is None or None in vals or (used and not all(map(math.isfinite, vals))):
                 raise InputError(f"<{el.tag} {attr}=...> must be {n} finite number{'s' if n > 1 else ''}, "
                                  f"got {text!r}", path, el.sourceline, f"key '{el.tag}.{attr}'")
-            quantity = _QUANTITY.get((el.tag, attr))
+            quantity = _USED.get((ptag, el.tag, attr)) if used else None
             wrong = implausible(vals, quantity) if quantity else None
             if wrong:
                 raise InputError(f"<{el.tag} {attr}=...>: {wrong[1]}", path, el.sourceline, f"key '{el.tag}.{attr}'")
-            if (el.tag, attr) in _NOT_NEGATIVE and min(vals) < 0:
-                raise InputError(f"<{el.tag} {attr}=...> must not be negative, got {text!r}", path, el.sourceline,
-                                 f"key '{el.tag}.{attr}'")
-            if el.tag == "color" and max(vals) > 1:
-                raise InputError(f"<color rgba=...> takes four numbers in [0, 1], got {text!r}", path,
-                                 el.sourceline, f"key '{el.tag}.{attr}'")
+
+
+def _check_tree(root, path: Path) -> tuple[dict, dict]:
+    """(links, joints) by name, lxml elements; names unique, joint types known, every parent and child
+    defined, each link the child of one joint at most."""
     links, joints = {}, {}
     for el in root.findall("link"):
         name = el.get("name")
@@ -184,10 +189,28 @@ def _read_urdf(path: str | Path) -> _Urdf:
         if jtype in ("revolute", "prismatic") and el.find("limit") is None:
             raise InputError(f"joint '{name}' ({jtype}) has no <limit>", path, el.sourceline)
         joints[name] = el
-    for el in root.iter("geometry"):
-        kids = [k for k in el if isinstance(k.tag, str)]
-        if len(kids) != 1 or kids[0].tag not in ("box", "cylinder", "sphere", "mesh"):
-            raise InputError("<geometry> must hold one <box>, <cylinder>, <sphere> or <mesh>", path, el.sourceline)
+    return links, joints
+
+
+def _read_urdf(path: str | Path) -> _Urdf:
+    """Read and check a URDF; every problem is an InputError naming the file and the line. Visual and
+    collision content (meshes, their scales and files) is not checked: the kinematics never use it."""
+    import yourdfpy
+
+    path = Path(path)
+    with open_input(path, "the URDF") as fh:
+        try:
+            data = fh.read()
+        except OSError as exc:
+            raise InputError(f"cannot read the URDF: {exc.strerror}", path) from None
+    tree = _parse_xml(path, data)
+    root = tree.getroot()
+    if root.tag != "robot":
+        raise InputError(f"a URDF's root element is <robot>, got <{root.tag}>", path, root.sourceline)
+    if not root.get("name"):
+        raise InputError("<robot> has no name", path, root.sourceline)
+    _check_numbers(root, path)
+    links, joints = _check_tree(root, path)
     try:
         model = yourdfpy.URDF.load(io.BytesIO(data), build_scene_graph=False, load_meshes=False,
                                    load_collision_meshes=False)
@@ -211,22 +234,61 @@ def _T(origin) -> np.ndarray:
 class _Chain:
     """The chain root -> tip of a URDF.
 
-    ``moving``: the revolute joints, each with ``prefix`` = the product of the fixed (or held)
-    joints' origins between the previous moving frame and it; ``tool_prefix``: the same from the
-    last moving frame to the tip joint's parent; ``tip_joint``: the joint whose child is the tip.
-    ``hinge``: T_last_hinge of the project's elastic probe joints, None without them.
+    ``moving``: the revolute, continuous and prismatic joints, each with ``prefix`` = the product of the
+    fixed (or held) joints' origins between the previous moving frame and it, and its :class:`Mimic` (None
+    for a joint read by its own encoder); ``tool_prefix``: the same from the last moving frame to the tip
+    joint's parent; ``tip_joint``: the joint whose child is the tip. ``hinge``: T_last_hinge of the
+    project's elastic probe joints, None without them.
     """
-    moving: list            # (joint, prefix 4x4)
+    moving: list            # (joint, prefix 4x4, Mimic | None)
     tool_prefix: np.ndarray
     tip_joint: object
     T_last_tip: np.ndarray
     hinge: np.ndarray | None
 
 
-def _chain(u: _Urdf, tip_frame: str) -> _Chain:
-    if tip_frame not in u.link_elements:
-        raise InputError(f"no link named '{tip_frame}' (links: {', '.join(u.link_elements)})", u.path, None,
-                         "key '--tip-frame'")
+def _kind(jtype: str) -> str:
+    return "prismatic" if jtype == "prismatic" else "revolute"
+
+
+def _mimic(u: _Urdf, j) -> Mimic | None:
+    """The URDF ``<mimic>`` of joint ``j`` resolved to a joint read by an encoder (a mimic of a mimic: the
+    multipliers and offsets composed), or an error naming the joint."""
+    if j.mimic is None or j.type == "fixed":
+        return None
+    by_name = {k.name: k for k in u.robot.joints}
+    mult = 1.0 if j.mimic.multiplier is None else float(j.mimic.multiplier)
+    off = 0.0 if j.mimic.offset is None else float(j.mimic.offset)
+    name, seen = j.mimic.joint, {j.name}
+    while True:
+        master = by_name.get(name)
+        if master is None:
+            raise u.error(f"joint '{j.name}' mimics '{name}', which the URDF does not define", j.name)
+        if master.name in seen:
+            raise u.error(f"joint '{j.name}': its <mimic> joints form a loop through '{name}'", j.name)
+        if master.type not in ("revolute", "continuous", "prismatic"):
+            raise u.error(f"joint '{j.name}' mimics the {master.type} joint '{name}': a mimic follows a moving "
+                          "joint", j.name)
+        if _kind(master.type) != _kind(j.type):
+            raise u.error(f"joint '{j.name}' ({_kind(j.type)}) mimics '{name}' ({_kind(master.type)}): the "
+                          "toolkit follows a joint of the same kind only", j.name)
+        if master.mimic is None:
+            return Mimic(name, mult, off)
+        seen.add(name)
+        m2 = 1.0 if master.mimic.multiplier is None else float(master.mimic.multiplier)
+        o2 = 0.0 if master.mimic.offset is None else float(master.mimic.offset)
+        mult, off, name = mult * m2, mult * o2 + off, master.mimic.joint
+
+
+def _held(j, value: float) -> np.ndarray:
+    """T_parent_child of joint ``j`` held at ``value`` [rad] or [m]: its origin times its motion."""
+    from .jacobian import _motion
+    axis = np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0), dtype=float)
+    axis = axis / np.linalg.norm(axis)
+    return _T(j.origin) @ _motion("T" if j.type == "prismatic" else "R", tuple(axis), value)
+
+
+def _walk_to_root(u: _Urdf, tip_frame: str) -> list:
     by_child = {j.child: j for j in u.robot.joints}
     chain, link, seen = [], tip_frame, set()
     while link in by_child:
@@ -236,6 +298,14 @@ def _chain(u: _Urdf, tip_frame: str) -> _Chain:
         chain.append(by_child[link])
         link = by_child[link].parent
     chain.reverse()
+    return chain
+
+
+def _chain(u: _Urdf, tip_frame: str) -> _Chain:
+    if tip_frame not in u.link_elements:
+        raise InputError(f"no link named '{tip_frame}' (links: {', '.join(u.link_elements)})", u.path, None,
+                         "key '--tip-frame'")
+    chain = _walk_to_root(u, tip_frame)
     elastic = [j for j in chain if _ELASTIC_TYPES.get(j.name) == j.type]
     held = {j.name for j in elastic} if len(elastic) == len(ELASTIC_JOINTS) else set()
     moving, pending, tool_prefix, hinge = [], np.eye(4), np.eye(4), None
@@ -247,14 +317,20 @@ def _chain(u: _Urdf, tip_frame: str) -> _Chain:
         if j.type == "fixed" or j.name in held:
             pending = pending @ _T(j.origin)
             continue
-        if j.type not in ("revolute", "continuous"):
+        if j.type not in ("revolute", "continuous", "prismatic"):
             raise u.error(f"joint '{j.name}' on the chain to '{tip_frame}' is {j.type}: the toolkit models "
-                          "revolute joints only", j.name)
-        moving.append((j, pending))
+                          "revolute, continuous and prismatic joints (a floating or planar joint is a base the "
+                          "URDF moves freely: start the chain after it)", j.name)
+        mimic = _mimic(u, j)
+        if mimic is not None and mimic.multiplier == 0.0:         # held at its offset: a fixed joint
+            pending = pending @ _held(j, mimic.offset)
+            continue
+        moving.append((j, pending, mimic))
         pending = np.eye(4)
         hinge = None
     if not moving:
-        raise InputError(f"no revolute joint between the root and '{tip_frame}'", u.path, None, "key '--tip-frame'")
+        raise InputError(f"no revolute, continuous or prismatic joint between the root and '{tip_frame}'", u.path,
+                         None, "key '--tip-frame'")
     tip_joint = chain[-1]
     if tip_joint.type != "fixed" and tip_joint.name not in held:
         tool_prefix = None
@@ -265,35 +341,57 @@ def _chain(u: _Urdf, tip_frame: str) -> _Chain:
 # masses
 
 def _inertials(u: _Urdf, masses: dict | None) -> dict[str, tuple[float, np.ndarray]]:
-    """Link -> (mass [kg], centre of mass [m] in the link frame): the URDF's, replaced by ``masses``."""
+    """Link -> (mass [kg], centre of mass [m] in the link frame): the URDF's, replaced by ``masses``
+    (unchecked: :func:`_fold_masses` checks those it uses)."""
     out = {}
     for link in u.robot.links:
         inert = link.inertial
         if inert is not None and inert.mass:
-            if inert.mass < 0:
-                raise u.error(f"link '{link.name}' has a negative mass", link.name, "link")
             out[link.name] = (float(inert.mass), _T(inert.origin)[:3, 3].copy())
     for name, m in (masses or {}).items():
         out[name] = (m.mass, np.asarray(m.com, dtype=float))
     return out
 
 
+def _checked_mass(u: _Urdf, link: str, mass: float, com: np.ndarray) -> float:
+    """A link's ``<inertial>`` as the chain uses it: a finite, plausible mass, not negative beyond rounding
+    noise (a negative rounding residue is 0), and a finite, plausible centre of mass; an error names the
+    element's line."""
+    inertial = u.link_elements[link].find("inertial")
+    for tag, attr, vals, quantity in (("mass", "value", [mass], "mass"), ("origin", "xyz", list(com), "length")):
+        el = inertial.find(tag) if inertial is not None else None
+        line = (el if el is not None else u.link_elements[link]).sourceline
+        if not all(map(math.isfinite, vals)):
+            raise InputError(f"<{tag} {attr}=...> of link '{link}' must be finite numbers, got "
+                             f"{el.get(attr) if el is not None else vals!r}", u.path, line, f"key '{tag}.{attr}'")
+        wrong = implausible(vals, quantity)
+        if wrong:
+            raise InputError(f"<{tag} {attr}=...> of link '{link}': {wrong[1]}", u.path, line, f"key '{tag}.{attr}'")
+    if mass < -_MASS_NOISE:
+        el = inertial.find("mass")
+        raise InputError(f"<mass value=...> of link '{link}' must not be negative, got {el.get('value')!r}", u.path,
+                         el.sourceline, "key 'mass.value'")
+    return max(mass, 0.0)
+
+
 def _fold_masses(u: _Urdf, ch: _Chain, masses: dict | None) -> list[tuple[float, tuple]]:
     """(mass, com in the joint's child frame) of each moving joint: its child link and everything
     hanging from it (fixed joints, side branches at zero) up to the next moving joint."""
     inert = _inertials(u, masses)
-    moving_names = {j.name for j, _ in ch.moving}
+    moving_names = {j.name for j, _, _ in ch.moving}
     kids: dict[str, list] = {}
     for j in u.robot.joints:
         kids.setdefault(j.parent, []).append(j)
     out = []
-    for j, _ in ch.moving:
+    for j, _, _ in ch.moving:
         total, first = 0.0, np.zeros(3)
         stack = [(j.child, np.eye(4))]
         while stack:
             link, T = stack.pop()
             if link in inert:
                 m, c = inert[link]
+                if link not in (masses or {}):          # a masses file's values are checked when it is read
+                    m = _checked_mass(u, link, m, c)
                 total += m
                 first += m * (T[:3, :3] @ c + T[:3, 3])
             for k in kids.get(link, ()):
@@ -343,12 +441,162 @@ def load_masses(path: str | Path) -> dict[str, LinkMass]:
 # the description
 
 def _ball_diameter(u: _Urdf, tip_frame: str) -> float | None:
-    """Diameter [m] of a sphere centred on the tip link (visual or collision), if there is one."""
-    link = next(l for l in u.robot.links if l.name == tip_frame)
-    for g in list(link.visuals) + list(link.collisions):
-        if g.geometry is not None and g.geometry.sphere is not None and np.allclose(_T(g.origin)[:3, 3], 0, atol=1e-9):
-            return 2.0 * float(g.geometry.sphere.radius)
+    """Diameter [m] of a sphere centred on the tip link (visual or collision), if there is one: the ball."""
+    for g in u.link_elements[tip_frame]:
+        if not isinstance(g.tag, str) or g.tag not in ("visual", "collision"):
+            continue
+        sphere, origin = g.find("geometry/sphere"), g.find("origin")
+        xyz = [parse_number(v) for v in (origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split()]
+        if sphere is None or sphere.get("radius") is None or not all(v is not None and abs(v) <= 1e-9 for v in xyz):
+            continue
+        radius = parse_number(sphere.get("radius"))
+        wrong = None if radius is None or not math.isfinite(radius) else implausible(radius, "length")
+        if radius is None or not math.isfinite(radius) or wrong or radius <= 0:
+            why = ("must not be negative" if radius is not None and radius < 0 else "must be > 0" if radius == 0
+                   else wrong[1] if wrong else "must be a finite number")
+            raise InputError(f"<sphere radius=...> of the tip link '{tip_frame}' (the probe ball) {why}, got "
+                             f"{sphere.get('radius')!r}", u.path, sphere.sourceline, "key 'sphere.radius'")
+        return 2.0 * radius
     return None
+
+
+def _row(u: _Urdf, j, prefix: np.ndarray, mimic: Mimic | None, mass: float, com: tuple) -> JointRow:
+    """A moving joint of the chain as a row: its origin after the fixed joints folded before it (``prefix``),
+    its unit axis, kind, limits ([rad] or [m]; none for a continuous joint) and mimic."""
+    T = prefix @ _T(j.origin)
+    axis = np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0), dtype=float)
+    if np.linalg.norm(axis) < 1e-9:
+        raise u.error(f"joint '{j.name}' has a zero axis", j.name)
+    lower = upper = None
+    if j.type != "continuous" and j.limit is not None and j.limit.lower is not None and j.limit.upper is not None:
+        lower, upper = float(j.limit.lower), float(j.limit.upper)
+        if lower > upper:
+            raise u.error(f"joint '{j.name}': lower limit {lower:g} is above upper limit {upper:g}", j.name)
+        if lower == upper:          # a joint declared locked: its value still comes from the data
+            lower = upper = None
+    roll, pitch, yaw = _rpy(T)
+    return JointRow(name=j.name, origin=(float(T[0, 3]), float(T[1, 3]), float(T[2, 3]), roll, pitch, yaw),
+                    axis=tuple(float(v) for v in axis / np.linalg.norm(axis)), lower=lower, upper=upper,
+                    mass=mass, com=com, kind=_kind(j.type), mimic=mimic)
+
+
+def _probe_of(u: _Urdf, ch: _Chain, tip_frame: str, probe: dict | None) -> Probe:
+    """The probe of the tip frame: its pose in the last joint frame; the stylus hinge of the project's
+    elastic joints, else where the stylus line passes closest to the last joint origin, else (a tool
+    pointing back past or across that origin) |p| behind the ball; no stylus (rigid, compliances 0) for a
+    tip at the last joint's origin (a flange, a wrist link, a tracker marker on it)."""
+    T_tip = ch.T_last_tip
+    p_last = tuple(float(v) for v in T_tip[:3, 3])
+    rpy = tuple(float(v) + 0.0 for v in _rpy(T_tip))
+    if np.allclose(T_tip[:3, :3], np.eye(3), atol=0, rtol=0):
+        rpy = (0.0, 0.0, 0.0)
+    if ch.hinge is not None:
+        lever = float((T_tip[:3, 3] - ch.hinge[:3, 3]) @ T_tip[:3, 2])
+    else:
+        lever = default_lever(p_last, T_tip[:3, :3])
+    pr = dict(PAPER_PROBE)
+    ball = _ball_diameter(u, tip_frame)
+    if ball is not None:
+        pr["ball_diameter"] = ball
+    if lever == 0.0:
+        pr.update(bending_compliance_x=0.0, bending_compliance_y=0.0, axial_compliance=0.0)
+    pr.update(probe or {})
+    pro = Probe(p_last=p_last, rpy=rpy, lever=lever, **pr)
+    if lever == 0.0 and pro.compliance.any():
+        raise InputError(f"the tip frame '{tip_frame}' lies at the origin of the last joint frame: a tip without a "
+                         "stylus, which no force bends; a compliant probe needs its ball beyond the last joint "
+                         "(give a tip frame there, or zero compliances)", u.path, u.line(ch.tip_joint.name),
+                         "key '--tip-frame'")
+    if lever != 0.0 and not pro.stylus_length >= MIN_STYLUS:
+        raise InputError(f"the tip frame '{tip_frame}' lies at the stylus hinge of the probe's elastic joints: a "
+                         "probe needs its ball beyond its hinge", u.path, u.line(ch.tip_joint.name), "key '--tip-frame'")
+    return pro
+
+
+# ---------------------------------------------------------------------------------------------
+# the user's visuals, for the viewer
+
+def _link_frames(u: _Urdf, ch: _Chain) -> dict[str, tuple[int, np.ndarray]]:
+    """link -> (row, T_row_link): the links that move with each chain row (from its joint's child up to
+    the next moving joint of the chain, side branches at zero) and, as row -1, those before the first."""
+    moving = {j.name: i for i, (j, _, _) in enumerate(ch.moving)}
+    kids: dict[str, list] = {}
+    for j in u.robot.joints:
+        kids.setdefault(j.parent, []).append(j)
+    root = _walk_to_root(u, ch.moving[0][0].child)[0].parent
+    stack = [(root, -1, np.eye(4))] + [(j.child, i, np.eye(4)) for j, i in ((j, moving[j.name]) for j, _, _ in ch.moving)]
+    out = {}
+    while stack:
+        link, row, T = stack.pop()
+        out[link] = (row, T)
+        for k in kids.get(link, ()):
+            if k.name not in moving:
+                stack.append((k.child, row, T @ _T(k.origin)))
+    return out
+
+
+def _mesh_file(u: _Urdf, name: str) -> Path | None:
+    """The file of a ``<mesh filename>``: ``package://pkg/...`` found in a folder ``pkg`` beside the URDF or
+    above it, ``file://`` and absolute paths as they are, others relative to the URDF; None if absent."""
+    if name.startswith("file://"):
+        name = name[len("file://"):]
+    here = u.path.resolve().parent
+    if name.startswith("package://"):
+        pkg, _, rest = name[len("package://"):].partition("/")
+        for d in (here, *here.parents):
+            for cand in (d / pkg / rest, d / rest if d.name == pkg else None):
+                if cand is not None and cand.is_file():
+                    return cand.resolve()
+        return None
+    cand = (Path(name) if Path(name).is_absolute() else here / name).resolve()
+    return cand if cand.is_file() else None
+
+
+def _rgba_of(u: _Urdf, visual) -> tuple | None:
+    mat = visual.find("material")
+    if mat is None:
+        return None
+    color = mat.find("color")
+    if color is None and mat.get("name"):
+        named = u.tree.getroot().find(f"material[@name='{mat.get('name')}']") if "'" not in mat.get("name") else None
+        color = None if named is None else named.find("color")
+    vals = None if color is None else [parse_number(v) for v in color.get("rgba", "").split()]
+    return tuple(vals) if vals and len(vals) == 4 and all(v is not None and 0 <= v <= 1 for v in vals) else None
+
+
+def _visuals(u: _Urdf, ch: _Chain) -> tuple[Visual, ...]:
+    """The user's ``<visual>`` elements on the links the chain moves (and its base), each in its row's
+    link frame, for the viewer; a mesh whose file is missing, or a visual with numbers that are not
+    finite, is left out (the kinematics never use them)."""
+    from copy import deepcopy
+
+    from lxml import etree
+    from .urdf import _origin_matrix
+    out, missing = [], 0
+    for link, (row, T) in _link_frames(u, ch).items():
+        for vis in u.link_elements[link].findall("visual"):
+            geom, origin = vis.find("geometry"), vis.find("origin")
+            shape = None if geom is None else next((k for k in geom if isinstance(k.tag, str)), None)
+            if shape is None or shape.tag not in ("box", "cylinder", "sphere", "mesh"):
+                continue
+            nums = [parse_number(v) for v in ((origin.get("xyz", "0 0 0") + " " + origin.get("rpy", "0 0 0"))
+                                               if origin is not None else "0 0 0 0 0 0").split()]
+            if len(nums) != 6 or not all(v is not None and math.isfinite(v) for v in nums):
+                continue
+            shape = deepcopy(shape)
+            if shape.tag == "mesh":
+                found = _mesh_file(u, shape.get("filename", ""))
+                if found is None:
+                    missing += 1
+                    continue
+                shape.set("filename", str(found))
+            pose = T @ _origin_matrix(nums)
+            out.append(Visual(row, tuple(map(tuple, pose.tolist())),
+                              f"<geometry>{etree.tostring(shape, encoding='unicode').strip()}</geometry>",
+                              _rgba_of(u, vis)))
+    if missing:
+        log.debug(f"{u.path}: {missing} mesh file(s) not found: the viewer draws the arm without them")
+    return tuple(out)
 
 
 def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None = None,
@@ -357,8 +605,9 @@ def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None =
 
     Args:
         path: URDF file.
-        tip_frame: the link at the ball centre; its orientation is the probe frame's (z along the
-            stylus, towards the ball).
+        tip_frame: the link at the ball centre (or the tool point: a flange, a marker); its orientation is
+            the probe frame's (z along the stylus, towards the ball). At the origin of the last moving joint
+            it is a tip without a stylus (rigid: compliances 0).
         probe: ball_diameter [m], max_force [N], bending_compliance_x/_y, axial_compliance [m/N]
             (default :data:`PAPER_PROBE`, the ball diameter from a sphere on the tip link).
         masses: link -> :class:`LinkMass` (see :func:`load_masses`), replacing the URDF's inertials.
@@ -372,45 +621,11 @@ def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None =
                                  f"(links: {', '.join(u.link_elements)})", where[0], where[1],
                                  "key 'link.name'")
     ch = _chain(u, tip_frame)
-    folded = _fold_masses(u, ch, masses)
-    rows = []
-    for (j, prefix), (mass, com) in zip(ch.moving, folded):
-        T = prefix @ _T(j.origin)
-        axis = np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0), dtype=float)
-        if np.linalg.norm(axis) < 1e-9:
-            raise u.error(f"joint '{j.name}' has a zero axis", j.name)
-        lower = upper = None
-        if j.type == "revolute" and j.limit is not None and j.limit.lower is not None and j.limit.upper is not None:
-            lower, upper = float(j.limit.lower), float(j.limit.upper)
-            if not lower < upper:
-                raise u.error(f"joint '{j.name}': lower limit {lower:g} is not below upper limit {upper:g}", j.name)
-        roll, pitch, yaw = _rpy(T)
-        rows.append(JointRow(name=j.name, origin=(float(T[0, 3]), float(T[1, 3]), float(T[2, 3]), roll, pitch, yaw),
-                             axis=tuple(float(v) for v in axis / np.linalg.norm(axis)), lower=lower, upper=upper,
-                             mass=mass, com=com))
-    T_tip = ch.T_last_tip
-    p_last = tuple(float(v) for v in T_tip[:3, 3])
-    rpy = tuple(float(v) + 0.0 for v in _rpy(T_tip))
-    if np.allclose(T_tip[:3, :3], np.eye(3), atol=0, rtol=0):
-        rpy = (0.0, 0.0, 0.0)
-    lever = None
-    if ch.hinge is not None:
-        lever = float((T_tip[:3, 3] - ch.hinge[:3, 3]) @ T_tip[:3, 2])
-    elif T_tip[:3, 2] @ T_tip[:3, 3] < 1e-3 * np.linalg.norm(T_tip[:3, 3]):
-        # the tool points back past (or across) the last joint origin: hang the stylus |p| behind the ball
-        lever = float(np.linalg.norm(T_tip[:3, 3]))
-    pr = dict(PAPER_PROBE)
-    ball = _ball_diameter(u, tip_frame)
-    if ball is not None:
-        pr["ball_diameter"] = ball
-    pr.update(probe or {})
-    pro = Probe(p_last=p_last, rpy=rpy, lever=lever, **pr)
-    if not pro.stylus_length > 1e-6:
-        raise InputError(f"the tip frame '{tip_frame}' lies at the origin of the last joint frame (or its stylus "
-                         f"hinge): a probe needs a ball beyond the last joint", u.path, u.line(ch.tip_joint.name),
-                         "key '--tip-frame'")
+    rows = [_row(u, j, prefix, mimic, mass, com)
+            for (j, prefix, mimic), (mass, com) in zip(ch.moving, _fold_masses(u, ch, masses))]
     return ArmDescription(name=name or u.robot.name or Path(path).stem, convention="urdf", joints=tuple(rows),
-                          probe=pro, source=str(path), tip_frame=tip_frame)
+                          probe=_probe_of(u, ch, tip_frame, probe), source=str(path), tip_frame=tip_frame,
+                          visuals=_visuals(u, ch))
 
 
 def load_arm(path: str | Path, tip_frame: str | None = None, probe: dict | None = None,
@@ -446,13 +661,41 @@ def _set_origin(joint_el, T: np.ndarray, xyz_only: bool = False) -> None:
         o.set("rpy", " ".join(_fmt(v) for v in _rpy(T)))
 
 
+def _add_tool_frame(u: _Urdf, tip: str, probe: Probe) -> str:
+    """A fixed child link of the tip link at the calibrated tool point (a tip that hangs from a moving
+    joint, a flange, has no fixed joint whose origin could take it): ``<tip>_calibrated``; its name."""
+    from lxml import etree
+    root = u.tree.getroot()
+    name = f"{tip}_calibrated"
+    while name in u.link_elements or name + "_joint" in u.joint_elements:
+        name += "_"
+    root.append(etree.Comment(f" aacmm calibrate: the calibrated tool point of '{_comment_safe(tip)}', link "
+                              f"'{_comment_safe(name)}': give it as the tip frame "))
+    etree.SubElement(root, "link", name=name)
+    joint = etree.SubElement(root, "joint", name=name + "_joint", type="fixed")
+    etree.SubElement(joint, "parent", link=tip)
+    etree.SubElement(joint, "child", link=name)
+    T = np.eye(4)
+    T[:3, 3] = probe.p_last
+    if probe.rotation is not None:
+        T[:3, :3] = probe.rotation
+    _set_origin(joint, T)
+    log.info(f"calibrated URDF: the tool point is the new link '{name}' on '{tip}' (--tip-frame {name})")
+    return name
+
+
+def _comment_safe(text: str) -> str:
+    return str(text).replace("--", "- -")
+
+
 def calibrated_urdf_text(nominal: ArmDescription, calibrated: ArmDescription) -> str:
     """The calibrated arm as a URDF.
 
     For an arm read from a URDF (``nominal.tip_frame``): the user's own file, with only the origins
-    of the chain's revolute joints whose row changed and the tip joint's xyz (the tool offset)
-    rewritten; names, meshes, inertials, limits, comments, other joints and frames are kept. For a
-    description TOML: the generated URDF (:func:`arm_model.urdf.urdf_text`).
+    of the chain's moving joints whose row changed and the tip joint's xyz (the tool offset)
+    rewritten; names, meshes, inertials, limits, comments, other joints and frames are kept. A tip that
+    hangs from a moving joint (a flange) gets a fixed child link at the calibrated tool point,
+    ``<tip>_calibrated``. For a description TOML: the generated URDF (:func:`arm_model.urdf.urdf_text`).
     """
     from lxml import etree
     from .urdf import urdf_text
@@ -461,19 +704,18 @@ def calibrated_urdf_text(nominal: ArmDescription, calibrated: ArmDescription) ->
         return urdf_text(calibrated)
     u = _read_urdf(nominal.source)
     ch = _chain(u, nominal.tip_frame)
-    names = [j.name for j, _ in ch.moving]
-    if names != list(nominal.joint_names) or names != list(calibrated.joint_names):
+    names = [j.name for j, _, _ in ch.moving]
+    if names != [j.name for j in nominal.joints] or names != [j.name for j in calibrated.joints]:
         raise InputError("the URDF's chain no longer matches the arm that was calibrated (was it edited?)",
                          u.path)
-    for (j, prefix), row_nom, row_cal in zip(ch.moving, nominal.joints, calibrated.joints):
+    for (j, prefix, _), row_nom, row_cal in zip(ch.moving, nominal.joints, calibrated.joints):
         if row_cal.origin == row_nom.origin:
             continue
         T = np.linalg.inv(prefix) @ _origin_matrix(row_cal.origin)
         _set_origin(u.joint_elements[j.name], T)
-    if calibrated.probe.p_last != nominal.probe.p_last:
-        if ch.tool_prefix is None:
-            raise InputError(f"the tip frame '{nominal.tip_frame}' hangs from a moving joint: the tool offset "
-                             "cannot be written", u.path)
+    if calibrated.probe.p_last != nominal.probe.p_last and ch.tool_prefix is None:
+        _add_tool_frame(u, nominal.tip_frame, calibrated.probe)
+    elif calibrated.probe.p_last != nominal.probe.p_last:
         el = u.joint_elements[ch.tip_joint.name]
         T = _T(ch.tip_joint.origin).copy()
         T[:3, 3] = (np.linalg.inv(ch.tool_prefix) @ np.array([*calibrated.probe.p_last, 1.0]))[:3]

@@ -2,15 +2,23 @@
 effects, split by measurement (never by point) into training and held-out sets."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from arm_model import InputError
 from arm_model.io import Artefacts, PointSet, check_features
 from arm_model.model import ArmModel, AuxData
+from arm_model.tracker import DEFAULT_SESSION, Tracker
 
-__all__ = ["Weights", "CalibrationData", "make_data", "merge_points", "split_holdout"]
+__all__ = ["Weights", "CalibrationData", "make_data", "merge_points", "split_holdout", "NO_ARTEFACTS",
+           "MARKER_OFFSETS"]
+
+#: the artefacts of a campaign without an artefacts file (tracker points only)
+NO_ARTEFACTS = Artefacts("<no artefacts file>", {}, ())
+#: how the reference instrument's markers sit on the tip frame: "fit" (each at an unknown offset, estimated)
+#: or "zero" (the instrument sees the tip point itself: a tracker's reflector in the probe's place)
+MARKER_OFFSETS = ("fit", "zero")
 
 
 @dataclass(frozen=True)
@@ -78,11 +86,24 @@ class CalibrationData:
     ``points`` may join several files (:func:`merge_points`: e.g. the artefact points and the tracker
     points); ``points.ref`` is NaN on rows without reference coordinates and ``files`` names each
     row's file (for messages, with ``points.lines``).
+
+    Reference coordinates (:mod:`arm_model.tracker`): a row carries one marker's (``marker``: its
+    0-based marker, None: marker 0 everywhere; :func:`make_data` turns a row of K markers into K rows);
+    ``marker_offsets`` says whether the markers sit at unknown offsets on the tip frame ("fit") or the
+    instrument sees the tip point itself ("zero"); ``tracker``: frames and offsets held at given values
+    (a prediction with those of another fit, :meth:`with_tracker`), None: estimated.
     """
     points: PointSet
     artefacts: Artefacts
     aux: AuxData | None = None
     files: np.ndarray | None = None
+    marker: np.ndarray | None = None
+    marker_offsets: str = "zero"
+    tracker: Tracker | None = None
+
+    def __post_init__(self):
+        if self.marker_offsets not in MARKER_OFFSETS:
+            raise ValueError(f"marker_offsets must be one of {MARKER_OFFSETS}, got {self.marker_offsets!r}")
 
     def file_of(self, i: int) -> str:
         return str(self.files[i]) if self.files is not None else self.points.path
@@ -99,6 +120,29 @@ class CalibrationData:
         return self.points.measurements()
 
     @property
+    def sessions(self) -> np.ndarray:
+        """(N,) the session of each row (:data:`~arm_model.tracker.DEFAULT_SESSION` without a session column)."""
+        s = self.points.session
+        return np.full(len(self), DEFAULT_SESSION, dtype=object) if s is None else s
+
+    @property
+    def markers(self) -> np.ndarray:
+        """(N,) the 0-based marker of each row's reference coordinates."""
+        return np.zeros(len(self), int) if self.marker is None else self.marker
+
+    @property
+    def reference(self) -> np.ndarray | None:
+        """(N, 3) each row's reference coordinates (of its marker) [m], NaN where it has none; None without
+        reference columns."""
+        ref = self.points.ref
+        return None if ref is None else ref[np.arange(len(self)), self.markers]
+
+    def with_tracker(self, tracker: Tracker | None) -> "CalibrationData":
+        """These data with the reference frames and marker offsets held at ``tracker``'s (a session it has
+        no frame for keeps its frame unknown)."""
+        return replace(self, tracker=tracker)
+
+    @property
     def wrench(self) -> np.ndarray:
         """(N, 6) wrench at the ball, probe frame [N, N m] (zeros without force columns)."""
         w = self.points.wrench
@@ -108,7 +152,8 @@ class CalibrationData:
         """The rows where ``mask`` holds (bool array or indices), file order kept."""
         return CalibrationData(self.points.select(mask), self.artefacts,
                                None if self.aux is None else self.aux.select(mask),
-                               None if self.files is None else self.files[mask])
+                               None if self.files is None else self.files[mask],
+                               None if self.marker is None else self.marker[mask], self.marker_offsets, self.tracker)
 
     def with_measurements(self, ids) -> "CalibrationData":
         """Only the measurements ``ids``."""
@@ -118,8 +163,8 @@ class CalibrationData:
 
 def merge_points(*sets: PointSet) -> tuple[PointSet, np.ndarray]:
     """Join point sets (file order kept, one after the other) into one; returns it and the file of
-    each row. Absent force/torque columns are zero, absent reference coordinates, temperature and
-    time are NaN; text and extra columns are kept where every set has them."""
+    each row. Absent force/torque columns are zero, absent reference coordinates (and markers beyond a
+    file's own), temperature and time are NaN, an absent session column is the default session."""
     sets = [s for s in sets if s is not None]
     if len(sets) == 1:
         return sets[0], np.full(len(sets[0]), sets[0].path, dtype=object)
@@ -134,9 +179,14 @@ def merge_points(*sets: PointSet) -> tuple[PointSet, np.ndarray]:
         parts = []
         for s in sets:
             v = getattr(s, attr)
-            parts.append(np.full((len(s),) + width, fill) if v is None else v)
+            parts.append(np.full((len(s),) + width, fill, dtype=object if isinstance(fill, str) else float)
+                         if v is None else v)
         return np.concatenate(parts)
 
+    k = max(s.n_markers for s in sets)
+    ref = None if not k else np.concatenate(
+        [np.concatenate([s.ref, np.full((len(s), k - s.n_markers, 3), np.nan)], axis=1) if s.ref is not None
+         else np.full((len(s), k, 3), np.nan) for s in sets])
     kinds = {s.force_kind for s in sets if s.force_kind is not None}
     merged = PointSet(
         path=sets[0].path, measurement=np.concatenate([s.measurement for s in sets]),
@@ -144,18 +194,24 @@ def merge_points(*sets: PointSet) -> tuple[PointSet, np.ndarray]:
         force=stack("force", (3,), 0.0), torque=stack("torque", (3,), 0.0),
         force_kind=None if not kinds else (kinds.pop() if len(kinds) == 1 else "mixed"),
         temperature=stack("temperature", (), np.nan), time=stack("time", (), np.nan),
-        ref=stack("ref", (3,), np.nan),
+        ref=ref, session=stack("session", (), DEFAULT_SESSION),
         lines=np.concatenate([s.lines if s.lines is not None else np.arange(1, len(s) + 1) for s in sets]))
     files = np.concatenate([np.full(len(s), s.path, dtype=object) for s in sets])
     return merged, files
 
 
-def make_data(points: PointSet, artefacts: Artefacts, model: ArmModel | None = None,
-              aux: AuxData | None = None, reference: PointSet | None = None) -> CalibrationData:
+def make_data(points: PointSet, artefacts: Artefacts | None, model: ArmModel | None = None,
+              aux: AuxData | None = None, reference: PointSet | None = None,
+              marker_offsets: str | None = None) -> CalibrationData:
     """Check the points against the artefacts and attach the aux inputs ``model.needs()``.
 
-    ``reference``: a second points file with reference coordinates (e.g. the tracker nests of
-    ``aacmm simulate``'s ``points-ref.csv``), joined after ``points``.
+    ``artefacts``: None without an artefacts file (a tracker campaign: every row a free point with
+    reference coordinates). ``reference``: a second points file with reference coordinates (e.g. the
+    tracker nests of ``aacmm simulate``'s ``points-ref.csv``), joined after ``points``. A row with K
+    markers (``x1_ref_mm`` ... ``xK_ref_mm``) becomes K rows, one a marker (``marker``), on the same line.
+    ``marker_offsets`` (:data:`MARKER_OFFSETS`): None chooses "fit" without an artefacts file (a robot's
+    markers sit where nobody measured them) and "zero" with one (the instrument sees the probe's ball
+    itself); several markers need "fit".
 
     Temperatures come from the points' ``temperature_C`` column; gravity and contact torques, when
     an effect needs them and ``aux`` does not give them, from ``PinocchioArm(model.desc).torques``
@@ -167,12 +223,53 @@ def make_data(points: PointSet, artefacts: Artefacts, model: ArmModel | None = N
         if reference.ref is None:
             raise InputError("the reference points file has no reference columns (x_ref_mm, y_ref_mm, z_ref_mm)",
                              reference.path, 1)
+    if artefacts is None and reference is None and points.ref is None:
+        raise InputError("no artefacts file and no reference columns (x_ref_mm, y_ref_mm, z_ref_mm): nothing to "
+                         "calibrate on; give the artefacts the points touch, or the reference instrument's "
+                         "coordinates", points.path, 1)
+    offsets = marker_offsets or ("fit" if artefacts is None else "zero")
+    if offsets not in MARKER_OFFSETS:
+        raise ValueError(f"marker_offsets must be one of {MARKER_OFFSETS}, got {offsets!r}")
     points, files = merge_points(points, reference)
+    points, files, marker = _one_marker_a_row(points, files, offsets)
+    artefacts = NO_ARTEFACTS if artefacts is None else artefacts
+    data = CalibrationData(points, artefacts, aux, files, marker, offsets)
     if model is None:
-        return CalibrationData(points, artefacts, aux, files)
+        return data
     if points.n_joints != model.desc.n_joints:
         raise InputError(f"{points.n_joints} joint columns, but the arm has {model.desc.n_joints} joints",
                          points.path)
+    return replace(data, aux=_aux_inputs(model, points, files, aux))
+
+
+def _one_marker_a_row(points: PointSet, files: np.ndarray, offsets: str):
+    """``(points, files, marker)``: every row with K > 1 markers repeated K times, one a marker (file order
+    kept; ``marker`` None with one marker). Markers sit on the tip frame: a row on an artefact feature (a
+    tracker nest on a seat) has one reference point, that of the feature."""
+    k = points.n_markers
+    if k <= 1:
+        return points, files, None
+    if offsets != "fit":
+        raise InputError(f"{k} markers (x1_ref_mm ... x{k}_ref_mm) at the tip point itself (marker offsets "
+                         "'zero'): several markers sit at their own offsets; let them be estimated (--marker-offset "
+                         "fit)", points.path, 1, f"x{k}_ref_mm")
+    on_feature = np.flatnonzero((points.feature != "") & np.any(np.isfinite(points.ref[:, :, 0]), axis=1))
+    if len(on_feature):
+        i = on_feature[0]
+        raise InputError(f"a row on the feature '{points.feature[i]}' with {k} markers: a reference point on an "
+                         "artefact feature (a tracker nest) is the feature's own; give it as marker 1 only, or "
+                         "leave the feature cell empty", files[i], None if points.lines is None
+                         else int(points.lines[i]), "feature")
+    has = np.any(np.isfinite(points.ref[:, :, 0]), axis=1)
+    reps = np.where(has, k, 1)
+    rows = np.repeat(np.arange(len(points)), reps)
+    marker = np.concatenate([np.arange(n) for n in reps])
+    return points.select(rows), files[rows], marker
+
+
+def _aux_inputs(model: ArmModel, points: PointSet, files: np.ndarray, aux: AuxData | None) -> AuxData | None:
+    """The per-point inputs ``model.needs()``: ``aux``'s, else the temperatures of the points and the
+    gravity and contact torques of the nominal description."""
     needs = model.needs()
     temperature = None if aux is None else aux.temperature
     tau_g = None if aux is None else aux.tau_gravity
@@ -189,8 +286,8 @@ def make_data(points: PointSet, artefacts: Artefacts, model: ArmModel | None = N
         tau_g = g if tau_g is None else tau_g
         tau_c = c if tau_c is None else tau_c
     if temperature is None and tau_g is None and tau_c is None:
-        return CalibrationData(points, artefacts, None, files)
-    return CalibrationData(points, artefacts, AuxData(temperature, tau_g, tau_c), files)
+        return None
+    return AuxData(temperature, tau_g, tau_c)
 
 
 def split_holdout(data: CalibrationData, holdout, seed: int = 0) -> tuple[CalibrationData, CalibrationData]:
@@ -238,7 +335,7 @@ def split_holdout(data: CalibrationData, holdout, seed: int = 0) -> tuple[Calibr
 
 
 def concat(a: CalibrationData, b: CalibrationData) -> CalibrationData:
-    """``a``'s rows then ``b``'s (same artefacts), files and aux inputs kept."""
+    """``a``'s rows then ``b``'s (same artefacts and marker setting), files, markers and aux inputs kept."""
     pts, _ = merge_points(a.points, b.points)
     files = np.concatenate([a.files if a.files is not None else np.full(len(a), a.points.path, dtype=object),
                             b.files if b.files is not None else np.full(len(b), b.points.path, dtype=object)])
@@ -253,7 +350,8 @@ def concat(a: CalibrationData, b: CalibrationData) -> CalibrationData:
                 raise ValueError(f"aux input '{name}' is given for one part only")
             return np.concatenate([va, vb])
         aux = AuxData(join("temperature", ()), join("tau_gravity", None), join("tau_contact", None))
-    return CalibrationData(pts, a.artefacts, aux, files)
+    marker = None if a.marker is None and b.marker is None else np.concatenate([a.markers, b.markers])
+    return CalibrationData(pts, a.artefacts, aux, files, marker, a.marker_offsets, a.tracker)
 
 
 def split_poses(data: CalibrationData, fraction: float, seed: int = 0, keep=None) -> np.ndarray:
@@ -280,7 +378,8 @@ def pose_groups(data: CalibrationData) -> list[tuple[str, np.ndarray]]:
     """``(kind, point indices)`` of every artefact instance (a feature within a measurement) and of the
     reference points (one group, kind "reference"), in file order; unused points are in none."""
     pts, arte = data.points, data.artefacts
-    ref = np.all(np.isfinite(pts.ref), axis=1) if pts.ref is not None else np.zeros(len(pts), bool)
+    xref = data.reference
+    ref = np.all(np.isfinite(xref), axis=1) if xref is not None else np.zeros(len(pts), bool)
     groups: dict[tuple, list[int]] = {}
     for i in range(len(pts)):
         f = pts.feature[i]

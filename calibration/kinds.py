@@ -19,6 +19,8 @@ Kinds (docs/formats.md §4; ``b`` = ball diameter):
 * ``reference``: ``T_ref_base x - x_ref`` (3 rows a point); state ``(R0, t0)``, ``theta = (dt, w)``
   with ``R = Rz(w3) Ry(w2) Rx(w1) R0``.
 * ``distance``: ``|c_A - c_B| - L`` between two centres (seat or sphere) of one measurement.
+* ``marker``: no rows of its own; state and ``theta`` the offset ``o`` [m] of a marker on the tip frame,
+  which moves the ball centres of its reference rows (:class:`calibration.problem.Problem`).
 """
 from __future__ import annotations
 
@@ -30,7 +32,8 @@ from scipy.spatial.transform import Rotation
 
 from arm_model import NumericalError, geometry
 
-__all__ = ["Kind", "KINDS", "kind_function", "distance_function", "initial_state", "retract", "centre_of"]
+__all__ = ["Kind", "KINDS", "kind_function", "distance_function", "initial_state", "retract", "centre_of",
+           "frame_state", "frame_of", "tracker_start"]
 
 
 @dataclass(frozen=True)
@@ -50,6 +53,7 @@ KINDS = {
     "cylinder": Kind("cylinder", 1, 4, 13),
     "plane": Kind("plane", 1, 3, 10),
     "reference": Kind("reference", 3, 6, 12),
+    "marker": Kind("marker", 0, 3, 3),
 }
 
 
@@ -156,14 +160,107 @@ def initial_state(kind: str, x: np.ndarray, radius: float | None = None, x_ref: 
         return np.concatenate([n0, e1, e2, [h]])
     if kind == "reference":
         rot, t = geometry.kabsch(x, x_ref)
-        return np.concatenate([rot.reshape(-1, order="F"), t])
+        return frame_state(_transform(rot, t))
     raise ValueError(f"unknown residual kind {kind!r}")
+
+
+def _transform(rot, t) -> np.ndarray:
+    out = np.eye(4)
+    out[:3, :3], out[:3, 3] = rot, t
+    return out
+
+
+def frame_state(transform) -> np.ndarray:
+    """The packed ``reference`` state (12,) of a 4x4 transform ``T_ref_base``."""
+    t = np.asarray(transform, float)
+    return np.concatenate([t[:3, :3].reshape(-1, order="F"), t[:3, 3]])
+
+
+def frame_of(state) -> np.ndarray:
+    """The 4x4 transform of a packed ``reference`` state (the inverse of :func:`frame_state`)."""
+    return _transform(np.asarray(state[0:9]).reshape(3, 3, order="F"), state[9:12])
+
+
+#: most rounds of :func:`tracker_start`'s alternation, and the change of every offset [m] that ends it
+TRACKER_ROUNDS, TRACKER_TOL = 200, 1e-8
+
+
+def tracker_start(base, turn, x_ref, frame, marker, frames, markers, held_frames, held_offsets):
+    """Starting states of the reference frames and marker offsets (the algebraic first fit).
+
+    Row ``j`` of the reference rows sees ``x_ref[j] = R_s (base[j] + turn[j] o_m) + t_s`` with ``s =
+    frame[j]`` and ``m = marker[j]`` (instance indices; -1: no marker, ``turn[j]`` zero), ``base`` [m] the
+    tip point (or a seat centre), ``turn`` (n, 3, 3) d x / d o (the tip frame's axes in the base frame).
+    Alternating least squares, each step exact in its block so that the cost never rises: every rotation
+    ``R_s`` by Kabsch (:func:`arm_model.geometry.kabsch`) with the offsets held, then every translation
+    ``t_s`` and offset ``o_m`` together by linear least squares with the rotations held (the translations
+    and offsets are strongly coupled; the rotations far less), from offsets zero, until no offset moves by
+    more than :data:`TRACKER_TOL` (at most :data:`TRACKER_ROUNDS` rounds; the Levenberg-Marquardt fit
+    that follows polishes the rest). Held frames / offsets (``held_*`` not None, in the order of
+    ``frames`` / ``markers``) stay as given. Returns (frame states, offset states) in the order of
+    ``frames``, ``markers``."""
+    fidx = np.array([frames.index(f) for f in frame], dtype=int)
+    midx = np.array([markers.index(m) if m >= 0 else -1 for m in marker], dtype=int)
+    offsets = np.array([np.zeros(3) if h is None else np.asarray(h, float) for h in held_offsets]).reshape(-1, 3)
+    free_f = [k for k, h in enumerate(held_frames) if h is None]
+    free_o = [k for k, h in enumerate(held_offsets) if h is None]
+    tf = [None if h is None else frame_of(h) for h in held_frames]
+    for _ in range(TRACKER_ROUNDS):
+        x = base + np.einsum("nij,nj->ni", turn, _row_offsets(offsets, midx))
+        for k in free_f:
+            sel = fidx == k
+            tf[k] = _transform(*geometry.kabsch(x[sel], x_ref[sel]))
+        if not free_o:
+            break
+        new = _translations_and_offsets(base, turn, x_ref, fidx, midx, tf, free_f, offsets, free_o)
+        moved = float(np.max(np.abs(new - offsets)))
+        offsets = new
+        if moved <= TRACKER_TOL:
+            break
+    return [frame_state(t) for t in tf], list(offsets)
+
+
+def _row_offsets(offsets, midx) -> np.ndarray:
+    """(n, 3) each row's marker offset (zero for a row without a marker)."""
+    if not len(offsets):
+        return np.zeros((len(midx), 3))
+    return np.where((midx >= 0)[:, None], offsets[np.maximum(midx, 0)], 0.0)
+
+
+def _translations_and_offsets(base, turn, x_ref, fidx, midx, tf, free_f, offsets, free_o) -> np.ndarray:
+    """The offsets of :func:`tracker_start`'s linear step: ``x_ref - R_s base = t_s + R_s turn o_m`` in least
+    squares over the free translations and offsets, the rotations (and the held parts) fixed; the free
+    frames' translations in ``tf`` are updated in place; returns the new offsets (K, 3)."""
+    rot = np.array([t[:3, :3] for t in tf])[fidx]
+    rhs = x_ref - np.einsum("nij,nj->ni", rot, base)
+    a_o = np.einsum("nij,njk->nik", rot, turn)                           # (n, 3, 3): d / d o_m
+    cols = 3 * (len(free_f) + len(free_o))
+    a = np.zeros((len(base), 3, cols))
+    for c, k in enumerate(free_f):
+        a[fidx == k, :, 3 * c:3 * c + 3] = np.eye(3)
+    held_t = np.array([np.zeros(3) if k in free_f else tf[k][:3, 3] for k in range(len(tf))])[fidx]
+    rhs = rhs - held_t
+    held_o = [k for k in range(len(offsets)) if k not in free_o]
+    for k in held_o:
+        sel = midx == k
+        rhs[sel] -= np.einsum("nij,j->ni", a_o[sel], offsets[k])
+    for c, k in enumerate(free_o):
+        sel = midx == k
+        a[sel, :, 3 * (len(free_f) + c):3 * (len(free_f) + c) + 3] = a_o[sel]
+    sol = np.linalg.lstsq(a.reshape(-1, cols), rhs.reshape(-1), rcond=None)[0]
+    for c, k in enumerate(free_f):
+        tf[k] = tf[k].copy()
+        tf[k][:3, 3] = sol[3 * c:3 * c + 3]
+    new = offsets.copy()
+    for c, k in enumerate(free_o):
+        new[k] = sol[3 * (len(free_f) + c):3 * (len(free_f) + c) + 3]
+    return new
 
 
 def retract(kind: str, state: np.ndarray, theta: np.ndarray) -> np.ndarray:
     """New packed state after the increment ``theta`` (evaluated at zero by the residuals)."""
     s = state.copy()
-    if kind == "seat":
+    if kind in ("seat", "marker"):
         return s + theta[:3]
     if kind == "sphere":
         s[:3] += theta[:3]

@@ -62,16 +62,19 @@ from .diagnostics import (GroupTest, ResidualSpace, binned_estimates, candidate_
                           measurement_folds, pose_folds, remaining_structure, residual_space, screen_candidates,
                           structure_tests)
 from .identifiability import DEFAULT_RANK_TOL, prior_scales
+from .options import FitOptions
 from .problem import MIN_POINTS, Problem
 from .solver import levenberg_marquardt
 from .synthesis import RESIDUAL, synthesise
-from .validation import BOOTSTRAP_SAMPLES, FIGURES, bootstrap, resamples, validate
+from .validation import BOOTSTRAP_SAMPLES, FIGURES, bootstrap, heldout_residuals, resamples, validate
 
 log = logging.getLogger(__name__)
 
 __all__ = ["LoopSettings", "CVResult", "Stage", "LoopResult", "close_loop", "heldout_residuals",
            "heldout_figures", "cross_validate", "display", "effect_summary"]
 
+#: the practical-resolution rule the loop's fits without a prior keep (calibrate's default before its prior)
+LEGACY_RESOLUTION = 0.1
 #: share of a candidate's signature inside another's above which the data cannot tell them apart
 SAME_SIGNATURE = 0.99
 #: the start of the reason of a candidate included as physics (:func:`_physics_inclusion`)
@@ -135,47 +138,6 @@ class LoopSettings:
 
 # ---------------------------------------------------------------------------------------------------
 # held-out evaluation
-
-def heldout_residuals(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit",
-                      train=None) -> dict:
-    """Residual rows of held-out points with the parameters ``p`` held: ``r`` weighted (n,), ``e`` [m] (n,),
-    ``measurement``, ``kind`` and ``point`` (index into ``data``, -1 for a length) per row.
-
-    ``train`` None: every point of ``data`` is held out and every nuisance unknown (centre, axis, plane,
-    ``T_ref_base``) is solved on ``data`` alone. ``train`` a mask: the points where it holds are the
-    training poses; the nuisance unknowns are solved on them, and the rows of the other points are
-    returned (a held-out pose against the centre fitted on the rest of its feature's poses); the
-    lengths then belong to training."""
-    prob = Problem(model, data, weights, [], reference=reference)
-    if train is None:
-        states = levenberg_marquardt(prob, p, prob.initial_states(p)).states
-        keep = np.ones(prob.n_rows, bool)
-    else:
-        train = np.asarray(train, bool)
-        sub = Problem(model, data.select(train), weights, [], reference=reference)
-        fitted = {(it.measurement, it.feature): st for it, st in
-                  zip(sub.instances, levenberg_marquardt(sub, p, sub.initial_states(p)).states)}
-        start = prob.initial_states(p)
-        states = [fitted.get((it.measurement, it.feature), s0) for it, s0 in zip(prob.instances, start)]
-        missing = [f"{it.measurement} {it.feature}" for it in prob.instances
-                   if (it.measurement, it.feature) not in fitted]
-        if missing:
-            raise ValueError(f"no training pose on {', '.join(missing)}: its centre cannot be predicted")
-        keep = (prob.row_distance < 0) & ~train[np.maximum(prob.row_point, 0)]
-    r = prob.evaluate(p, states, jac=False).r
-    pts = data.points
-    meas = np.empty(len(r), dtype=object)
-    kind = np.empty(len(r), dtype=object)
-    ok = prob.row_distance < 0
-    meas[ok] = pts.measurement[prob.row_point[ok]]
-    kind[ok] = [prob.instances[i].kind for i in prob.row_instance[ok]]
-    for row in np.flatnonzero(~ok):
-        meas[row] = prob.distance_items[prob.row_distance[row]].measurement
-        kind[row] = "length"
-    point = np.where(ok, prob.row_point, -1)
-    return {"r": r[keep], "e": (r * prob.sigma)[keep], "measurement": meas[keep], "kind": kind[keep],
-            "point": point[keep]}
-
 
 def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit",
                     train=None) -> dict:
@@ -586,18 +548,22 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
             names = [model.spec.names[i] for i in resolve_parameters(model.spec, free)]
             names += [n for n in model.spec.names[model.base_size:] if n not in names]
         if hold:
-            names = [n for n in (names or default_free(model)) if n not in hold]
-        return calibrate(model, d, free=names, values=values, weights=weights, rank_tol=settings.rank_tol,
-                         priors={**priors, **(extra_priors or {})}, outlier_threshold=settings.outlier_threshold,
-                         weights_from_data=reweight and settings.weights_from_data, prior_scale=prior_scale)
+            names = [n for n in (names or default_free(model, d)) if n not in hold]
+        return calibrate(model, d, FitOptions(free=names, values=values, weights=weights, rank_tol=settings.rank_tol,
+                                              priors={**priors, **(extra_priors or {})},
+                                              outlier_threshold=settings.outlier_threshold,
+                                              weights_from_data=reweight and settings.weights_from_data,
+                                              prior_scale=prior_scale, min_resolution=LEGACY_RESOLUTION
+                                              if prior_scale is None else None))
 
     prior_scale = settings.prior_scale
     if prior_scale == "evidence":
         model0 = ArmModel(desc, tuple(effects))
         names0 = None if free is None else [model0.spec.names[i] for i in resolve_parameters(model0.spec, free)]
-        prior_scale, _ = evidence_scale(model0, design, names0, values=values, weights=weights,
-                                        rank_tol=settings.rank_tol, priors=priors)
-        say(f"prior scale from the evidence of the design set: {prior_scale:g} x the plausible error sizes")
+        prior_scale, _ = evidence_scale(model0, design, FitOptions(free=names0, values=values, weights=weights,
+                                                                   rank_tol=settings.rank_tol, priors=priors))
+        say("prior scales from the evidence of the design set: "
+            + ", ".join(f"{g} {v:.3g}" for g, v in prior_scale.items()) + " x the plausible error sizes")
 
     def noise(res: CalibrationResult) -> str:
         parts = [f"{v['group']} {v['sigma_um']:.3g} um" for v in res.variance

@@ -107,9 +107,9 @@ def run(args: argparse.Namespace) -> int:
     effects = model_effects(arm, args.effect).effects
     if effects and families is None:
         families = tuple(f for f in DEFAULT_FAMILIES if f not in {e.key for e in effects})
-    points = read_points(args.points, desc.n_joints)
-    artefacts = read_artefacts(args.artefacts)
-    reference = read_points(args.reference_points, desc.n_joints) if args.reference_points else None
+    points = read_points(args.points, desc.joint_quantities)
+    artefacts = None if args.artefacts is None else read_artefacts(args.artefacts)
+    reference = read_points(args.reference_points, desc.joint_quantities) if args.reference_points else None
     warnings = []
     for pts in (points, reference):
         if pts is not None:
@@ -131,12 +131,12 @@ def run(args: argparse.Namespace) -> int:
                           free=args.free,
                           weights=weights, settings=settings, families_=families)
         # the model written is loop.model_fit (every point) or else the last stage's fit: refine that one
-        opts = dict(rank_tol=settings.rank_tol, outlier_threshold=settings.outlier_threshold)
         if loop.model_fit is not None:
-            loop.model_fit = refine_torques(loop.model_fit, **opts)
+            loop.model_fit = refine_torques(loop.model_fit)
         else:
-            loop.stages[-1].result = refine_torques(loop.stages[-1].result, **opts)
-        names = {"points": str(args.points), "artefacts": str(args.artefacts), "arm": str(args.arm),
+            loop.stages[-1].result = refine_torques(loop.stages[-1].result)
+        names = {"points": str(args.points), "artefacts": None if args.artefacts is None else str(args.artefacts),
+                 "arm": str(args.arm),
                  "reference_points": None if args.reference_points is None else str(args.reference_points)}
         conf = _conformance(loop, _mpe(args))
         write_loop_report(loop, out.dir, inputs=inputs, input_names=names, warnings=warnings, conformance=conf)
@@ -156,7 +156,10 @@ def run(args: argparse.Namespace) -> int:
 def _check_folds(folds: int, points, reference) -> None:
     """``--folds`` at most the poses the data hold (points on a feature, reference points): each fold of the
     decisions holds out at least one pose, whether folded by measurement or by pose."""
-    poses = int((points.feature != "").sum()) + (0 if reference is None else len(reference))
+    import numpy as np
+    seen = (np.zeros(len(points), bool) if points.ref is None
+            else np.any(np.all(np.isfinite(points.ref), axis=2), axis=1))          # reference columns in the file
+    poses = int(((points.feature != "") | seen).sum()) + (0 if reference is None else len(reference))
     if folds > poses:
         raise InputError(f"--folds {folds}: the data hold {poses} poses (points on a feature and reference points), "
                          f"and each fold holds out at least one: ask for at most {poses} folds")

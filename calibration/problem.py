@@ -4,8 +4,11 @@ Built once per problem structure (model, data, weights, which kinds): the ball c
 Jacobian with respect to the parameters come from the model's CasADi Function mapped over the
 points, the artefact residuals and their Jacobians from the kind functions of
 :mod:`calibration.kinds`; the chain rule joins them. Unknowns are the free parameters and the
-nuisance increments of every artefact instance (a feature within one measurement) and of the
-reference transform ``T_ref_base``.
+nuisance increments of every artefact instance (a feature within one measurement), of the reference
+instrument's frame ``T_ref_base`` of each session and of the markers' offsets on the tip frame when they
+are unknown (``data.marker_offsets`` "fit"; :mod:`arm_model.tracker`). A marker at offset ``o`` is the
+model's own tip point with the probe point moved by ``o``, so its Jacobian comes from the same CasADi
+Function.
 
 Residual rows, in this order: each point kind (seat, sphere, ring, cylinder, plane, reference)
 with ``rows`` rows a point, then the distances. Every row is divided by its standard uncertainty
@@ -18,9 +21,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from arm_model import InputError
+from arm_model import InputError, NumericalError
 from arm_model.geometry import ball_centre_radius
 from arm_model.model import ArmModel
+from arm_model.tracker import DEFAULT_SESSION, Tracker, offset_matrix
 
 from . import kinds as geo
 from .data import CalibrationData, Weights
@@ -37,7 +41,9 @@ MIN_POINTS = {"seat": (1, 1), "sphere": (4, 5), "ring": (5, 6), "cylinder": (5, 
 
 @dataclass
 class Instance:
-    """One artefact feature within one measurement (or the reference transform)."""
+    """One artefact feature within one measurement, or the reference instrument's frame of one session
+    (kind ``reference``, ``feature`` the session), or one marker's offset on the tip frame (kind
+    ``marker``, ``feature`` "marker k"; no rows of its own: its points are the marker's reference rows)."""
     measurement: str
     feature: str
     kind: str
@@ -46,6 +52,7 @@ class Instance:
     n_theta: int                # 0 for a frozen instance (reference transform held at identity)
     radius: float | None        # offset radius [m] of sphere / ring / cylinder, None if fitted
     free_radius: bool = False
+    state: np.ndarray | None = None     # the state of a held instance (n_theta 0): a given frame or offset
 
 
 @dataclass
@@ -81,8 +88,9 @@ class Problem:
         free_radius: fit the radius of spheres, rings and cylinders (validation) instead of using
             the certified diameter.
         distances: include the certified distances.
-        reference: "fit" (``T_ref_base`` a nuisance unknown), "identity" (reference coordinates are
-            base coordinates) or "off" (reference columns ignored).
+        reference: "fit" (``T_ref_base`` of each session a nuisance unknown, or held at the frame of
+            ``data.tracker`` when it has one), "identity" (reference coordinates are base coordinates) or
+            "off" (reference columns ignored).
     """
     model: ArmModel
     data: CalibrationData
@@ -98,23 +106,46 @@ class Problem:
 
     # -- structure --------------------------------------------------------------------------------
     def _build(self) -> None:
+        """The residual structure, in named steps: the artefact instances, the reference instrument's
+        frames and markers, the certified distances, the rows grouped by kind, the CasADi ball centres,
+        and each row's weight and origin."""
+        pts = self.data.points
+        self._lines = pts.lines if pts.lines is not None else np.arange(1, len(pts) + 1)
+        xref = self.data.reference
+        self._has_ref = (np.all(np.isfinite(xref), axis=1) if xref is not None and self.reference != "off"
+                         else np.zeros(len(pts), bool))
+        self._xref_all = xref
+        self.instances: list[Instance] = []
+        self.n_nuisance = 0
+        by_key = self._artefact_instances()
+        self._reference_instances(by_key)
+        self.distance_items = self._distances(by_key)
+        self._dist_fn = geo.distance_function().map(len(self.distance_items)) if self.distance_items else None
+        self._point_groups()
+        self._centre_functions()
+        self._row_weights()
+
+    def _add(self, inst: Instance) -> int:
+        """Append an instance, its increments after the others'; returns its index."""
+        inst.offset = self.n_nuisance
+        self.instances.append(inst)
+        self.n_nuisance += inst.n_theta
+        return len(self.instances) - 1
+
+    def _artefact_instances(self) -> dict:
+        """One instance a feature within a measurement; ``self.unused``: free points without a reference.
+        Returns ``{(measurement, feature): instance index}``."""
         pts, arte, data = self.data.points, self.data.artefacts, self.data
         ball = self.model.desc.probe.ball_diameter
-        n = len(pts)
-        lines = pts.lines if pts.lines is not None else np.arange(1, n + 1)
-        has_ref = (np.all(np.isfinite(pts.ref), axis=1) if pts.ref is not None and self.reference != "off"
-                   else np.zeros(n, bool))
-        instances: list[Instance] = []
         by_key: dict[tuple[str, str], int] = {}
         unused = []
-        offset = 0
         for m in pts.measurements():
             rows_m = np.flatnonzero(pts.measurement == m)
             for f in dict.fromkeys(pts.feature[rows_m].tolist()):
                 rows = rows_m[pts.feature[rows_m] == f]
                 kind = arte.features[f].kind if f else "point"
                 if kind == "point":
-                    unused.append(rows[~has_ref[rows]])
+                    unused.append(rows[~self._has_ref[rows]])
                     continue
                 feat = arte.features[f]
                 radius = None
@@ -125,138 +156,186 @@ class Problem:
                                          f"the ball ({ball * 1e3:g} mm)", arte.path, None, f"key 'feature {f}'")
                 free_r = self.free_radius and kind in ("sphere", "ring", "cylinder")
                 need = MIN_POINTS[kind][1 if free_r else 0]
+                where = (data.file_of(rows[0]), int(self._lines[rows[0]]), "feature")
                 if len(rows) < need:
                     raise InputError(f"measurement '{m}', feature '{f}' ({kind}): {len(rows)} point(s), at least "
-                                     f"{need} needed", data.file_of(rows[0]), int(lines[rows[0]]), "feature")
+                                     f"{need} needed", *where)
                 distinct = len(np.unique(pts.q[rows], axis=0))
                 if kind != "seat" and distinct < need:
                     raise InputError(f"measurement '{m}', feature '{f}' ({kind}): {len(rows)} points but only "
                                      f"{distinct} distinct pose(s) (the same encoder angles repeated): the {kind}'s "
-                                     f"unknowns are unidentifiable; at least {need} distinct points needed",
-                                     data.file_of(rows[0]), int(lines[rows[0]]), "feature")
-                nt = geo.n_theta(kind, free_r)
-                by_key[(m, f)] = len(instances)
-                instances.append(Instance(m, f, kind, rows, offset, nt, None if free_r else radius, free_r))
-                offset += nt
-        # reference rows: on a free point the ball centre, on a seat the seat's centre (a tracker nest)
-        ref_rows, anchor = [], []
-        for i in np.flatnonzero(has_ref):
+                                     f"unknowns are unidentifiable; at least {need} distinct points needed", *where)
+                by_key[(m, f)] = self._add(Instance(m, f, kind, rows, 0, geo.n_theta(kind, free_r),
+                                                    None if free_r else radius, free_r))
+        self.unused = np.sort(np.concatenate(unused)) if unused else np.zeros(0, int)
+        return by_key
+
+    def _reference_instances(self, by_key: dict) -> None:
+        """The reference rows: on a free point the marker (the tip point, or a marker at its offset on the
+        tip frame), on a seat the seat's centre (a tracker nest). One ``reference`` instance a session
+        (its frame ``T_ref_base``), one ``marker`` instance a marker when the offsets are unknowns.
+        ``self._ref_anchor`` / ``self._ref_marker``: {row: seat instance} / {row: marker instance}."""
+        pts, arte, data = self.data.points, self.data.artefacts, self.data
+        given = data.tracker
+        self._ref_anchor, self._ref_marker = {}, {}
+        rows = []
+        for i in np.flatnonzero(self._has_ref):
             f = pts.feature[i]
             kind = arte.features[f].kind if f else "point"
-            if kind == "point":
-                ref_rows.append(i)
-                anchor.append(-1)
-            elif kind == "seat":
-                ref_rows.append(i)
-                anchor.append(by_key[(pts.measurement[i], f)])
-        self.ref_anchor = np.array(anchor, dtype=int)
-        if ref_rows:
-            rows = np.array(ref_rows)
-            if len(rows) < 3:
-                raise InputError(f"{len(rows)} reference point(s): a rigid transform needs at least 3",
-                                 data.file_of(rows[0]), int(lines[rows[0]]), "x_ref_mm")
-            nt = 6 if self.reference == "fit" else 0
-            instances.append(Instance("*", "", "reference", rows, offset, nt, None))
-            offset += nt
-        self.n_nuisance = offset
-        self.instances = instances
-        self.unused = np.sort(np.concatenate(unused)) if unused else np.zeros(0, int)
-        # distances
+            if kind in ("point", "seat"):
+                rows.append(i)
+                self._ref_anchor[i] = by_key[(pts.measurement[i], f)] if kind == "seat" else -1
+        rows = np.array(rows, dtype=int)
+        sessions = data.sessions
+        for s in dict.fromkeys(sessions[rows].tolist()):
+            sr = rows[sessions[rows] == s]
+            frame = None if self.reference == "fit" else np.eye(4)
+            if frame is None and given is not None:
+                frame = given.frame(s)
+            if frame is None and len(sr) < MIN_POINTS["reference"][0]:
+                what = "" if s == DEFAULT_SESSION else f" in session '{s}'"
+                column = "x_ref_mm" if pts.n_markers == 1 else f"x{data.markers[sr[0]] + 1}_ref_mm"
+                raise InputError(f"{len(sr)} reference point(s){what}: a rigid transform needs at least 3",
+                                 data.file_of(sr[0]), int(self._lines[sr[0]]), column)
+            held = None if frame is None else geo.frame_state(frame)
+            self._add(Instance("*", s, "reference", sr, 0, 6 if held is None else 0, None, state=held))
+        if data.marker_offsets != "fit":
+            return
+        on_point = np.array([i for i in rows if self._ref_anchor[i] < 0], dtype=int)
+        marker = data.markers
+        for k in sorted(set(marker[on_point].tolist())):
+            mr = on_point[marker[on_point] == k]
+            held = None if given is None or given.offsets is None else given.offset(k).copy()
+            idx = self._add(Instance("*", f"marker {k + 1}", "marker", mr, 0, 3 if held is None else 0, None,
+                                     state=held))
+            self._ref_marker.update(dict.fromkeys(mr.tolist(), idx))
+
+    def _distances(self, by_key: dict) -> list[DistanceItem]:
+        """The certified lengths between the centres of two instances of one measurement."""
+        arte, pts = self.data.artefacts, self.data.points
         items: list[DistanceItem] = []
-        if self.distances:
-            for dist in arte.distances:
-                fa, fb = dist.between
-                for m in pts.measurements():
-                    if (m, fa) in by_key and (m, fb) in by_key:
-                        ia, ib = by_key[(m, fa)], by_key[(m, fb)]
-                        for i, fid in ((ia, fa), (ib, fb)):
-                            if instances[i].kind not in ("seat", "sphere"):
-                                raise InputError(f"a distance needs feature centres: '{fid}' is a "
-                                                 f"{instances[i].kind} (use seats or spheres)", arte.path, None,
-                                                 "key 'distance.between'")
-                        items.append(DistanceItem(m, (fa, fb), ia, ib, dist.length,
-                                                  self.weights.length_sigma(dist.u_length)))
-        self.distance_items = items
-        # point rows, grouped by kind
+        if not self.distances:
+            return items
+        for dist in arte.distances:
+            fa, fb = dist.between
+            for m in pts.measurements():
+                if (m, fa) in by_key and (m, fb) in by_key:
+                    ia, ib = by_key[(m, fa)], by_key[(m, fb)]
+                    for i, fid in ((ia, fa), (ib, fb)):
+                        if self.instances[i].kind not in ("seat", "sphere"):
+                            raise InputError(f"a distance needs feature centres: '{fid}' is a "
+                                             f"{self.instances[i].kind} (use seats or spheres)", arte.path, None,
+                                             "key 'distance.between'")
+                    items.append(DistanceItem(m, (fa, fb), ia, ib, dist.length,
+                                              self.weights.length_sigma(dist.u_length)))
+        return items
+
+    def _point_groups(self) -> None:
+        """The point rows grouped by kind (and free radius), in :data:`POINT_KINDS` order; the used points
+        and their positions in the centre arrays."""
         self.groups = []
         row = 0
         used = []
         for kind in POINT_KINDS:
             for fr in (False, True):
-                insts = [i for i, it in enumerate(instances) if it.kind == kind and it.free_radius == fr]
+                insts = [i for i, it in enumerate(self.instances) if it.kind == kind and it.free_radius == fr]
                 if not insts:
                     continue
-                pidx = np.concatenate([instances[i].points for i in insts])
-                iidx = np.concatenate([np.full(len(instances[i].points), i) for i in insts])
-                local = np.concatenate([np.full(len(instances[i].points), k) for k, i in enumerate(insts)])
+                members = [self.instances[i].points for i in insts]
+                pidx = np.concatenate(members)
                 rows = geo.KINDS[kind].rows
-                g = dict(kind=kind, free_radius=fr, inst=iidx, uinst=insts, local=local, points=pidx, row0=row,
-                         rows=rows, fn=geo.kind_function(kind, fr).map(len(pidx)))
+                g = dict(kind=kind, free_radius=fr, uinst=insts, points=pidx, row0=row, rows=rows,
+                         inst=np.concatenate([np.full(len(m), i) for m, i in zip(members, insts)]),
+                         local=np.concatenate([np.full(len(m), k) for k, m in enumerate(members)]),
+                         fn=geo.kind_function(kind, fr).map(len(pidx)))
                 if kind == "reference":
-                    g["anchor"] = self.ref_anchor
-                    g["on_point"] = self.ref_anchor < 0
+                    g["anchor"] = np.array([self._ref_anchor[i] for i in pidx], dtype=int)
+                    g["marker"] = np.array([self._ref_marker.get(i, -1) for i in pidx], dtype=int)
+                    g["on_point"] = g["anchor"] < 0
                     used.append(pidx[g["on_point"]])
                 else:
                     used.append(pidx)
                 self.groups.append(g)
                 row += rows * len(pidx)
         self.n_point_rows = row
-        self.n_rows = row + len(items)
+        self.n_rows = row + len(self.distance_items)
         self.used = np.unique(np.concatenate(used)) if used else np.zeros(0, int)
         if self.n_rows == 0:
             raise InputError("no usable points: no point belongs to a seat, sphere, ring, cylinder or plane, "
-                             "and there are no reference coordinates", pts.path)
-        # positions of used points in the centre arrays
-        self._pos = np.full(n, -1)
+                             "and there are no reference coordinates", self.data.points.path)
+        self._pos = np.full(len(self.data), -1)
         self._pos[self.used] = np.arange(len(self.used))
         for g in self.groups:
             g["pos"] = self._pos[g["points"]]
-        self._dist_fn = geo.distance_function().map(len(items)) if items else None
-        # CasADi ball centres of the used points
-        f = self.model.casadi_function()
+        self._used_marker = np.array([self._ref_marker.get(i, -1) for i in self.used], dtype=int)
+        self._marker_unknowns = any(it.kind == "marker" and it.n_theta for it in self.instances)
+
+    def _centre_functions(self) -> None:
+        """CasADi ball centres of the used points: ``x(q, w, aux, p, o)``, the tip point moved by ``o`` [m]
+        in the tip frame (a marker's offset; zero for a probed point), mapped over the used points."""
         import casadi as ca
+        f = self.model.casadi_function()
         q, w, aux, p = (ca.SX.sym(nm, f.size1_in(i)) for i, nm in enumerate(("q", "w", "aux", "p")))
-        x = f(q, w, aux, p)
+        o = ca.SX.sym("o", 3)
+        x = f(q, w, aux, p + ca.DM(offset_matrix(self.model)) @ o)
         nu = len(self.used)
-        self._fx = ca.Function("x", [q, w, aux, p], [x]).map(nu)
-        self._fxj_full = ca.Function("xj", [q, w, aux, p], [x, ca.jacobian(x, p)]).map(nu)
-        self._sym = (q, w, aux, p, x)
-        self._fxj_cache = {}          # free set -> mapped Function of (x, d x / d p[free]), shared by copies
-        jn = self.model.desc.n_joints
-        self._q = np.ascontiguousarray(pts.q[self.used].T)
+        self._fx = ca.Function("x", [q, w, aux, p, o], [x]).map(nu)
+        self._fxj_full = ca.Function("xj", [q, w, aux, p, o], [x, ca.jacobian(x, p), ca.jacobian(x, o)]).map(nu)
+        self._sym = (q, w, aux, p, o, x)
+        self._fxj_cache = {}          # free set -> mapped Function of (x, d x / d p[free], d x / d o), shared by copies
+        n, jn = len(self.data), self.model.desc.n_joints
+        self._q = np.ascontiguousarray(self.data.points.q[self.used].T)
         self._w = np.ascontiguousarray(self.data.wrench[self.used].T)
         self._aux = np.ascontiguousarray(ArmModel.aux_matrix(self.data.aux, n, jn)[self.used].T)
-        self._xref_all = pts.ref if pts.ref is not None else None
+
+    def _row_weights(self) -> None:
+        """The standard uncertainty of every row (``sigma``) and the point, instance and distance it comes from."""
+        w = self.weights
         sig = np.empty(self.n_rows)
-        for g in self.groups:
-            sl = slice(g["row0"], g["row0"] + g["rows"] * len(g["points"]))
-            if g["kind"] == "reference":
-                sig[sl] = np.repeat(np.where(g["on_point"], self.weights.reference_sigma, self.weights.reference), 3)
-            else:
-                sig[sl] = self.weights.probe
-            sig[sl] *= self.weights.factor(g["kind"])
-        sig[self.n_point_rows:] = [d.sigma * self.weights.factor("length") for d in items]
-        self.sigma = sig
-        # row metadata
         self.row_point = np.full(self.n_rows, -1)
         self.row_instance = np.full(self.n_rows, -1)
         for g in self.groups:
             sl = slice(g["row0"], g["row0"] + g["rows"] * len(g["points"]))
+            if g["kind"] == "reference":
+                sig[sl] = np.repeat(np.where(g["on_point"], w.reference_sigma, w.reference), 3)
+            else:
+                sig[sl] = w.probe
+            sig[sl] *= w.factor(g["kind"])
             self.row_point[sl] = np.repeat(g["points"], g["rows"])
             self.row_instance[sl] = np.repeat(g["inst"], g["rows"])
+        sig[self.n_point_rows:] = [d.sigma * w.factor("length") for d in self.distance_items]
+        self.sigma = sig
         self.row_distance = np.full(self.n_rows, -1)
-        self.row_distance[self.n_point_rows:] = np.arange(len(items))
+        self.row_distance[self.n_point_rows:] = np.arange(len(self.distance_items))
 
     # -- evaluation -------------------------------------------------------------------------------
-    def centres(self, p, jac: bool = False, columns=None):
+    def centres(self, p, jac: bool = False, columns=None, offsets=None):
         """Ball centres (n_used, 3) [m] of the used points and, with ``jac``, d x / d p (n_used, 3, P),
-        or only the ``columns`` (indices into p) of it."""
+        or only the ``columns`` (indices into p) of it. ``offsets``: (n_used, 3) each point's marker
+        offset in the tip frame [m] (:meth:`marker_offsets`; None: the tip point itself)."""
+        x, dx, _ = self._centres(p, jac, columns, offsets)
+        return x, dx
+
+    def marker_offsets(self, states) -> np.ndarray | None:
+        """(n_used, 3) the marker offset [m] of each used point at ``states`` (zero for probed points), or
+        None when no point is a marker at an offset."""
+        if not (self._used_marker >= 0).any():
+            return None
+        out = np.zeros((len(self.used), 3))
+        on = self._used_marker >= 0
+        out[on] = np.array([states[i][:3] for i in self._used_marker[on]])
+        return out
+
+    def _centres(self, p, jac: bool, columns, offsets):
+        """(x, d x / d p[columns] or None, d x / d o (n_used, 3, 3) or None) of :meth:`centres`."""
         p = np.asarray(p, dtype=float)
         ncol = len(p) if columns is None else len(columns)
-        if len(self.used) == 0:
-            return np.zeros((0, 3)), (np.zeros((0, 3, ncol)) if jac else None)
+        nu = len(self.used)
+        if nu == 0:
+            return np.zeros((0, 3)), (np.zeros((0, 3, ncol)) if jac else None), (np.zeros((0, 3, 3)) if jac else None)
+        o = np.zeros((3, nu)) if offsets is None else np.ascontiguousarray(np.asarray(offsets, float).T)
         if not jac:
-            return np.asarray(self._fx(self._q, self._w, self._aux, p)).T, None
+            return np.asarray(self._fx(self._q, self._w, self._aux, p, o)).T, None, None
         if columns is None:
             fn = self._fxj_full
         else:
@@ -264,14 +343,15 @@ class Problem:
             fn = self._fxj_cache.get(key)
             if fn is None:
                 import casadi as ca
-                q, w, aux, ps, x = self._sym
+                q, w, aux, ps, os_, x = self._sym
                 jcols = ca.jacobian(x, ps)[:, list(key)] if key else ca.DM.zeros(3, 0)
-                fn = ca.Function("xj", [q, w, aux, ps], [x, jcols]).map(len(self.used))
+                fn = ca.Function("xj", [q, w, aux, ps, os_], [x, jcols, ca.jacobian(x, os_)]).map(nu)
                 self._fxj_cache[key] = fn
-        x, dx = fn(self._q, self._w, self._aux, p)
+        x, dx, dxo = fn(self._q, self._w, self._aux, p, o)
         x = np.asarray(x).T
-        dx = np.asarray(dx).reshape(3, len(self.used), ncol).transpose(1, 0, 2)
-        return x, dx
+        dx = np.asarray(dx).reshape(3, nu, ncol).transpose(1, 0, 2)
+        dxo = np.asarray(dxo).reshape(3, nu, 3).transpose(1, 0, 2)
+        return x, dx, dxo
 
     def _group_inputs(self, g, x, states):
         """(x_in (3, n), states (k, n), xref (3, n)) of a group: reference rows anchored on a seat take
@@ -287,22 +367,35 @@ class Problem:
         return xin, kst, self._xref_all[g["points"]].T
 
     def initial_states(self, p) -> list[np.ndarray]:
-        """Starting nuisance states from the ball centres at ``p`` (algebraic fits)."""
-        x, _ = self.centres(p)
-        states = []
-        for it in self.instances:
-            if it.kind == "reference":
-                if it.n_theta == 0:
-                    states.append(np.concatenate([np.eye(3).reshape(-1, order="F"), np.zeros(3)]))
-                    continue
-                pos = self._pos[it.points]
-                xi = np.where((pos >= 0)[:, None], x[np.maximum(pos, 0)], 0.0)
-                for k, a in enumerate(self.ref_anchor):
-                    if a >= 0:
-                        xi[k] = states[a][:3]
-                states.append(geo.initial_state("reference", xi, None, self._xref_all[it.points]))
-                continue
-            states.append(geo.initial_state(it.kind, x[self._pos[it.points]], it.radius))
+        """Starting nuisance states from the ball centres at ``p``: the algebraic fits of the artefacts,
+        then the reference frames and marker offsets (:func:`calibration.kinds.tracker_start`); held
+        instances keep their state."""
+        markers = (self._used_marker >= 0).any()
+        x, _, dxo = self._centres(p, markers, [] if markers else None, None)
+        states: list = [None] * len(self.instances)
+        for i, it in enumerate(self.instances):
+            if it.kind not in ("reference", "marker"):
+                states[i] = geo.initial_state(it.kind, x[self._pos[it.points]], it.radius)
+        ref = [g for g in self.groups if g["kind"] == "reference"]
+        if not ref:
+            return states
+        g = ref[0]
+        on = g["on_point"]
+        base = np.empty((len(g["points"]), 3))
+        base[on] = x[g["pos"][on]]
+        if (~on).any():
+            base[~on] = np.array([states[a][:3] for a in g["anchor"][~on]])
+        turn = np.zeros((len(base), 3, 3))
+        if dxo is not None:
+            turn[on] = dxo[g["pos"][on]]
+        frames = [i for i, it in enumerate(self.instances) if it.kind == "reference"]
+        markers = [i for i, it in enumerate(self.instances) if it.kind == "marker"]
+        held_f = [self.instances[i].state for i in frames]
+        held_o = [self.instances[i].state for i in markers]
+        fstates, ostates = geo.tracker_start(base, turn, self._xref_all[g["points"]], g["inst"], g["marker"],
+                                             frames, markers, held_f, held_o)
+        for i, st in zip(frames + markers, fstates + ostates):
+            states[i] = st
         return states
 
     def retract(self, states: list[np.ndarray], dtheta: np.ndarray) -> list[np.ndarray]:
@@ -314,68 +407,82 @@ class Problem:
     def evaluate(self, p, states: list[np.ndarray], jac: bool = True) -> Evaluation:
         """Weighted residuals (and Jacobians) at parameters ``p`` (full vector, SI) and ``states``."""
         nf = len(self.free)
-        x, dx = self.centres(p, jac and nf > 0, self.free)
+        x, dx, dxo = self._centres(p, jac and (nf > 0 or self._marker_unknowns), self.free,
+                                   self.marker_offsets(states))
         r = np.empty(self.n_rows)
-        if jac:
-            jp = np.zeros((self.n_rows, nf))
-            ti, tj, tv = [], [], []
-
-        def add(rows_idx, cols_idx, vals):
-            ti.append(rows_idx.reshape(-1))
-            tj.append(cols_idx.reshape(-1))
-            tv.append(vals.reshape(-1))
-
+        jp = np.zeros((self.n_rows, nf)) if jac else None
+        sparse = ([], [], [])
         for g in self.groups:
-            kind, rows, npt = g["kind"], g["rows"], len(g["points"])
-            nt = geo.n_theta(kind, g["free_radius"])
-            xin, kst, xref = self._group_inputs(g, x, states)
-            res, drdx, drdt = g["fn"](xin, np.zeros((nt, npt)), kst, xref)
-            sl = slice(g["row0"], g["row0"] + rows * npt)
-            r[sl] = np.asarray(res).T.reshape(-1)
-            if not jac:
-                continue
-            drdx = np.asarray(drdx).reshape(rows, npt, 3).transpose(1, 0, 2)        # (npt, rows, 3)
-            rr = g["row0"] + np.arange(npt * rows).reshape(npt, rows)
-            on = g.get("on_point", np.ones(npt, bool))
-            if nf and on.any():
-                blk = np.einsum("nrk,nkp->nrp", drdx[on], dx[g["pos"][on]])
-                jp[rr[on].reshape(-1)] = blk.reshape(-1, nf)
-            if (~on).any():            # reference rows on a seat: d r / d (seat centre)
-                off = np.array([self.instances[a].offset for a in g["anchor"][~on]])
-                cols = off[:, None, None] + np.arange(3)[None, None, :]
-                add(np.broadcast_to(rr[~on][:, :, None], (len(off), rows, 3)),
-                    np.broadcast_to(cols, (len(off), rows, 3)), drdx[~on])
-            drdt = np.asarray(drdt).reshape(rows, npt, nt).transpose(1, 0, 2)         # (npt, rows, nt)
-            off = np.array([self.instances[i].offset for i in g["inst"]])
-            active = np.array([self.instances[i].n_theta > 0 for i in g["inst"]])
-            if active.any():
-                cols = off[active][:, None, None] + np.arange(nt)[None, None, :]
-                add(np.broadcast_to(rr[active][:, :, None], (int(active.sum()), rows, nt)),
-                    np.broadcast_to(cols, (int(active.sum()), rows, nt)), drdt[active])
+            self._group_rows(g, x, dx, dxo, states, r, jp if jac else None, sparse)
         if self.distance_items:
-            items = self.distance_items
-            ca_ = np.array([states[d.a][:3] for d in items]).T
-            cb_ = np.array([states[d.b][:3] for d in items]).T
-            res, da, db = self._dist_fn(ca_, cb_, np.array([d.length for d in items]))
-            r[self.n_point_rows:] = np.asarray(res).reshape(-1)
-            if jac:
-                rows = self.n_point_rows + np.arange(len(items))
-                for attr, d in (("a", da), ("b", db)):
-                    d = np.asarray(d).reshape(len(items), 3)
-                    offs = np.array([self.instances[getattr(it, attr)].offset for it in items])
-                    add(np.repeat(rows, 3), offs[:, None] + np.arange(3)[None, :], d)
+            self._distance_rows(states, r, sparse if jac else None)
         r /= self.sigma
         if not jac:
             return Evaluation(r, x)
         jp /= self.sigma[:, None]
-        if ti:
-            ti, tj, tv = np.concatenate(ti), np.concatenate(tj), np.concatenate(tv)
-            tv = tv / self.sigma[ti]
-        else:
-            ti = tj = np.zeros(0, int)
-            tv = np.zeros(0)
+        ti, tj, tv = (np.concatenate(a) if a else np.zeros(0, int) for a in sparse)
+        tv = tv.astype(float) / self.sigma[ti] if len(ti) else np.zeros(0)
         jt = sp.csr_matrix((tv, (ti, tj)), shape=(self.n_rows, self.n_nuisance))
         return Evaluation(r, x, jp, jt)
+
+    def _group_rows(self, g, x, dx, dxo, states, r, jp, sparse) -> None:
+        """The rows of one group into ``r`` and, with ``jp``, their Jacobians: d r / d p[free] into ``jp``,
+        d r / d (nuisance) as triplets into ``sparse`` (rows, columns, values)."""
+        def add(rows_idx, cols_idx, vals):
+            for lst, a in zip(sparse, (rows_idx, cols_idx, vals)):
+                lst.append(np.reshape(a, -1))
+
+        kind, rows, npt = g["kind"], g["rows"], len(g["points"])
+        nt = geo.n_theta(kind, g["free_radius"])
+        xin, kst, xref = self._group_inputs(g, x, states)
+        res, drdx, drdt = g["fn"](xin, np.zeros((nt, npt)), kst, xref)
+        r[g["row0"]: g["row0"] + rows * npt] = np.asarray(res).T.reshape(-1)
+        if jp is None:
+            return
+        nf = jp.shape[1]
+        drdx = np.asarray(drdx).reshape(rows, npt, 3).transpose(1, 0, 2)        # (npt, rows, 3)
+        rr = g["row0"] + np.arange(npt * rows).reshape(npt, rows)
+        on = g.get("on_point", np.ones(npt, bool))
+        if nf and on.any():
+            blk = np.einsum("nrk,nkp->nrp", drdx[on], dx[g["pos"][on]])
+            jp[rr[on].reshape(-1)] = blk.reshape(-1, nf)
+        if (~on).any():            # reference rows on a seat: d r / d (seat centre)
+            off = np.array([self.instances[a].offset for a in g["anchor"][~on]])
+            cols = off[:, None, None] + np.arange(3)[None, None, :]
+            add(np.broadcast_to(rr[~on][:, :, None], (len(off), rows, 3)),
+                np.broadcast_to(cols, (len(off), rows, 3)), drdx[~on])
+        mk = g.get("marker")
+        if mk is not None:         # reference rows of a marker at an unknown offset: d r / d (offset)
+            sel = np.flatnonzero((mk >= 0) & np.array([self.instances[m].n_theta > 0 if m >= 0 else False
+                                                       for m in mk], bool))
+            if len(sel):
+                off = np.array([self.instances[m].offset for m in mk[sel]])
+                blk = np.einsum("nrk,nkj->nrj", drdx[sel], dxo[g["pos"][sel]])
+                add(np.broadcast_to(rr[sel][:, :, None], (len(sel), rows, 3)),
+                    np.broadcast_to(off[:, None, None] + np.arange(3)[None, None, :], (len(sel), rows, 3)), blk)
+        drdt = np.asarray(drdt).reshape(rows, npt, nt).transpose(1, 0, 2)         # (npt, rows, nt)
+        off = np.array([self.instances[i].offset for i in g["inst"]])
+        active = np.array([self.instances[i].n_theta > 0 for i in g["inst"]])
+        if active.any():
+            cols = off[active][:, None, None] + np.arange(nt)[None, None, :]
+            add(np.broadcast_to(rr[active][:, :, None], (int(active.sum()), rows, nt)),
+                np.broadcast_to(cols, (int(active.sum()), rows, nt)), drdt[active])
+
+    def _distance_rows(self, states, r, sparse) -> None:
+        """The certified-length rows into ``r`` and, with ``sparse``, their Jacobian triplets."""
+        items = self.distance_items
+        ca_ = np.array([states[d.a][:3] for d in items]).T
+        cb_ = np.array([states[d.b][:3] for d in items]).T
+        res, da, db = self._dist_fn(ca_, cb_, np.array([d.length for d in items]))
+        r[self.n_point_rows:] = np.asarray(res).reshape(-1)
+        if sparse is None:
+            return
+        rows = self.n_point_rows + np.arange(len(items))
+        for attr, d in (("a", da), ("b", db)):
+            d = np.asarray(d).reshape(len(items), 3)
+            offs = np.array([self.instances[getattr(it, attr)].offset for it in items])
+            for lst, a in zip(sparse, (np.repeat(rows, 3), offs[:, None] + np.arange(3)[None, :], d)):
+                lst.append(np.reshape(a, -1))
 
     def with_free(self, free) -> "Problem":
         """The same structure with another free set (CasADi functions are reused)."""
@@ -393,7 +500,7 @@ class Problem:
         ``vector`` (n, 3) [m] in the base frame (a scalar residual times its gradient direction),
         ``distance`` (k,) [m] of the distances (measured minus certified).
         """
-        x, _ = self.centres(p)
+        x, _ = self.centres(p, offsets=self.marker_offsets(states))
         pts, kinds, insts, vals, vecs = [], [], [], [], []
         for g in self.groups:
             kind, rows, npt = g["kind"], g["rows"], len(g["points"])
@@ -422,3 +529,44 @@ class Problem:
         return {"point": cat(pts, (0,)).astype(int), "kind": np.array(kinds, dtype=object),
                 "instance": cat(insts, (0,)).astype(int), "value": cat(vals, (0,)),
                 "vector": cat(vecs, (0, 3)), "distance": dist}
+
+    def check_tracker(self, p, states, rtol: float = 1e-9) -> None:
+        """A :class:`NumericalError` when the data at ``p`` and ``states`` do not determine the unknown frames
+        and marker offsets apart (their weighted Jacobian columns, each scaled to unit length, have a
+        singular value below ``rtol`` of the largest): poses whose tip frame turns about one axis only, say,
+        cannot tell a marker's offset along that axis from the frame's translation."""
+        inst = [it for it in self.instances if it.kind in ("reference", "marker") and it.n_theta]
+        if not inst:
+            return
+        cols = np.concatenate([np.arange(it.offset, it.offset + it.n_theta) for it in inst])
+        j = self.with_free([]).evaluate(p, states).jt[:, cols].toarray()
+        norm = np.linalg.norm(j, axis=0)
+        s = np.linalg.svd(j / np.where(norm > 0, norm, 1.0), compute_uv=False) if len(j) else np.zeros(1)
+        if len(j) < len(cols) or not (norm > 0).all() or s[-1] < rtol * s[0]:
+            what = " and the markers' offsets" if any(it.kind == "marker" for it in inst) else ""
+            raise NumericalError(f"the reference points do not determine the instrument's frame{what}: "
+                                 f"{len(cols)} unknowns, condition {s[0] / max(s[-1], 1e-300):.3g}. The poses must turn "
+                                 "the tip frame about more than one axis (a marker's offset along the only axis "
+                                 "of rotation moves it as the frame's translation does), in every session; or, "
+                                 "where the instrument sees the tip point itself, --marker-offset zero")
+
+    def tracker(self, states, u: dict | None = None) -> Tracker | None:
+        """The :class:`~arm_model.tracker.Tracker` at ``states``: each session's frame and, when the
+        markers sit at unknown offsets, their offsets (else None: the instrument sees the tip point);
+        ``u``: {instance index: standard uncertainties of its increments} (a fit's), for every frame and
+        marker or none. None without reference rows."""
+        frames = [i for i, it in enumerate(self.instances) if it.kind == "reference"]
+        if not frames:
+            return None
+        markers = [i for i, it in enumerate(self.instances) if it.kind == "marker"]
+        numbers = [int(self.data.markers[self.instances[i].points[0]]) for i in markers]
+        if numbers != list(range(len(numbers))):
+            missing = min(set(range(max(numbers) + 1)) - set(numbers))
+            raise NumericalError(f"marker {missing + 1} has no reference point left (the others have): its offset "
+                                 "is unknown")
+        u = u or {}
+        have_u = all(i in u for i in frames + markers)
+        return Tracker(tuple(self.instances[i].feature for i in frames), [geo.frame_of(states[i]) for i in frames],
+                       None if not markers or self.data.marker_offsets != "fit" else [states[i][:3] for i in markers],
+                       [u[i] for i in frames] if have_u else None,
+                       [u[i] for i in markers] if have_u and markers else None)

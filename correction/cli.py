@@ -89,7 +89,7 @@ def run_ring(args: argparse.Namespace) -> int:
     with output_folder(args.output, [*inputs.values(), *arm_inputs(args), args.signals], "ring") as out:
         arm = model_from_args(args)
         desc = arm.desc
-        points = read_points(args.points, desc.n_joints)
+        points = read_points(args.points, desc.joint_quantities)
         artefacts = read_artefacts(args.artefacts)
         check_features(points, artefacts)
         compliance = None if args.compliance is None else args.compliance * 1e-3

@@ -11,7 +11,8 @@ Per-point forces, defined once here and used by every model:
 * ``axial`` (N,) [N]: ``|fz|``.
 
 Peak picking (:func:`find_point_forces`): the paper takes absolute values and the force maximum of each
-contact. The signal's force magnitude is searched with ``scipy.signal.find_peaks``; the prominence
+contact. The signal's force magnitude is searched by :func:`arm_model.peaks.force_peaks` (the one peak
+finder, which a live session uses too); the prominence
 threshold comes from the signal itself: ten times its noise (a robust estimate from second
 differences, so smooth contacts do not inflate it). If more candidates than points stand above the
 noise, the points' peaks must stand clearly apart from the rest (the n-th most prominent at least twice
@@ -22,10 +23,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import find_peaks
 
 from arm_model import InputError
 from arm_model.io import ForceSignal
+from arm_model.peaks import force_magnitude, force_peaks, signal_noise
 
 __all__ = ["PointForces", "ForceSummary", "find_point_forces", "forces_from_columns", "force_summary",
            "signal_noise", "NOISE_FACTOR", "SEPARATION"]
@@ -97,15 +98,6 @@ def force_summary(values, top: int = 10) -> ForceSummary:
     return ForceSummary(mean=float(v.mean()), max=float(v.max()), max10=float(largest.mean()))
 
 
-def signal_noise(x) -> float:
-    """Robust noise standard deviation of a sampled signal [its unit]: 1.4826 MAD of the second
-    differences / sqrt(6) (the second difference of white noise has variance 6 sigma^2)."""
-    d2 = np.diff(np.asarray(x, float), n=2)
-    if len(d2) == 0:
-        return 0.0
-    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
-
-
 def find_point_forces(signal: ForceSignal, n_points: int, measurement: str | None = None) -> PointForces:
     """One peak of the force magnitude a captured point; the force vector at each peak.
 
@@ -118,18 +110,13 @@ def find_point_forces(signal: ForceSignal, n_points: int, measurement: str | Non
         InputError: the number of peaks differs from ``n_points`` (both counts and the file named), or
             the peaks of the points are not clearly separated from other bumps of the signal.
     """
-    f = np.abs(np.asarray(signal.force, float))        # the paper takes absolute values of each channel
-    m = np.linalg.norm(f, axis=1)
+    m = force_magnitude(signal.force)          # the paper takes absolute values of each channel
     what = f" of measurement '{measurement}'" if measurement else ""
     if len(m) < 3:
         raise InputError(f"force signal{what} has {len(m)} samples: too short for peaks", signal.path)
     sigma = signal_noise(m)
     floor = NOISE_FACTOR * sigma if sigma > 0 else 1e-12 * max(float(m.max()), 1e-300)
-    # pad with the end values so a contact at the very start or end still counts as a peak
-    padded = np.r_[m.min(), m, m.min()]
-    idx, props = find_peaks(padded, prominence=floor)
-    idx = idx - 1
-    prom = props["prominences"]
+    idx, prom = force_peaks(m, floor)
     found = len(idx)
     if found > n_points:
         order = np.argsort(prom)[::-1]

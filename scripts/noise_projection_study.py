@@ -40,9 +40,11 @@ def sensitivity(res, name: str) -> tuple[np.ndarray, np.ndarray]:
     ev = prob.evaluate(res.p, states)
     jr = reduced_jacobian(ev.jp, ev.jt)
     g = -np.linalg.solve(jr.T @ jr, jr.T)[res.free.index(name)]     # d estimate / d weighted residual
-    own = prob.centres
+    # every ball centre the residuals see comes from Problem._centres (the markers' offsets beside): shift them
+    own = prob._centres
     shift = np.zeros((len(prob.used), 3))
-    prob.centres = lambda p, jac=False, columns=None: (lambda x, d: (x + shift, d))(*own(p, jac, columns))
+    prob._centres = lambda p, jac, columns, offsets: (lambda x, d, do: (x + shift, d, do))(*own(p, jac, columns,
+                                                                                                 offsets))
     h = 1e-9
     a = np.zeros_like(shift)
     for i in range(len(shift)):
@@ -59,14 +61,14 @@ def sensitivity(res, name: str) -> tuple[np.ndarray, np.ndarray]:
 def one(campaign, seed: int, name: str, draws: int) -> dict:
     from arm_model.model import ArmModel
     from arm_model.sim import simulate
-    from calibration.calibrate import calibrate
+    from calibration.calibrate import FitOptions, calibrate
     from calibration.data import make_data, split_holdout
 
     sim = simulate(campaign, seed=seed, progress=lambda m: None)
     model = ArmModel(campaign.arm, ())
     data = make_data(sim.points, sim.artefacts, model, reference=sim.reference_points)
     train, _ = split_holdout(data, 0.25, seed)
-    res = calibrate(model, train, None, weights_from_data=True)
+    res = calibrate(model, train, FitOptions(weights_from_data=True))
     spec = model.spec
     k = res.free.index(name)
     p_true = spec.vector({n: v for n, v in sim.truth["p"].items() if n in spec.names})

@@ -258,3 +258,253 @@ def test_rotated_probe_deflects_along_its_own_axes(nominal, tool):
         assert_close(rigid[i], ref, atol=1e-12)
         # second order: c F^2 c / L < 2e-8 m at 2 N
         assert_close(moved[i], T[:3, :3] @ R_last_probe @ (c * F[i]), atol=2e-8)
+
+
+# ---------------------------------------------------------------------------------------------
+# prismatic and mimic joints (a URDF robot as it ships: a lift, a gripper finger following another)
+
+#: a URDF-convention arm: a prismatic lift along an oblique axis, a joint mimicking another joint of the
+#: chain (it takes no encoder column), and a prismatic finger mimicking a joint off the chain (its column
+#: holds that master's value)
+SLIDER = """name = "slider"
+convention = "urdf"
+[[joint]]
+name = "base"
+origin_x_mm = 0.0
+origin_y_mm = 0.0
+origin_z_mm = 150.0
+origin_roll_deg = 0.0
+origin_pitch_deg = 0.0
+origin_yaw_deg = 0.0
+axis = [0.0, 0.0, 1.0]
+lower_deg = -170.0
+upper_deg = 170.0
+[[joint]]
+name = "lift"
+type = "prismatic"
+origin_x_mm = 50.0
+origin_y_mm = 10.0
+origin_z_mm = 100.0
+origin_roll_deg = 5.0
+origin_pitch_deg = -3.0
+origin_yaw_deg = 20.0
+axis = [0.3, -0.2, 0.9]
+lower_mm = -100.0
+upper_mm = 400.0
+encoder_resolution_mm = 0.001
+[[joint]]
+name = "elbow"
+origin_x_mm = 300.0
+origin_y_mm = 0.0
+origin_z_mm = 20.0
+origin_roll_deg = 90.0
+origin_pitch_deg = 0.0
+origin_yaw_deg = 0.0
+axis = [1.0, 0.0, 0.0]
+lower_deg = -120.0
+upper_deg = 120.0
+[[joint]]
+name = "elbow_follower"
+origin_x_mm = 250.0
+origin_y_mm = -30.0
+origin_z_mm = 0.0
+origin_roll_deg = 0.0
+origin_pitch_deg = 40.0
+origin_yaw_deg = 0.0
+axis = [0.0, 0.6, 0.8]
+mimic_joint = "elbow"
+mimic_multiplier = -0.7
+mimic_offset_deg = 12.0
+[[joint]]
+name = "wrist"
+origin_x_mm = 80.0
+origin_y_mm = 0.0
+origin_z_mm = 40.0
+origin_roll_deg = 0.0
+origin_pitch_deg = 0.0
+origin_yaw_deg = -30.0
+axis = [0.0, 1.0, 0.0]
+[[joint]]
+name = "finger"
+type = "prismatic"
+origin_x_mm = 0.0
+origin_y_mm = 20.0
+origin_z_mm = 60.0
+origin_roll_deg = 0.0
+origin_pitch_deg = 0.0
+origin_yaw_deg = 0.0
+axis = [0.0, -1.0, 0.0]
+lower_mm = 0.0
+upper_mm = 40.0
+mimic_joint = "gripper"
+mimic_multiplier = 0.5
+mimic_offset_mm = 3.0
+[probe]
+x_mm = 10.0
+y_mm = 5.0
+z_mm = 80.0
+roll_deg = 10.0
+pitch_deg = -20.0
+yaw_deg = 0.0
+ball_diameter_mm = 4.0
+max_force_N = 13.0
+bending_compliance_mm_per_N = 0.0142
+axial_compliance_mm_per_N = 0.0000876
+"""
+
+
+def _dh_with_prismatic(nominal, convention):
+    """The nominal arm with its joint 3 prismatic (d + q, lower/upper -50..250 mm), as a DH or MDH table."""
+    from dataclasses import replace
+    joints = list(nominal.joints)
+    joints[2] = replace(joints[2], kind="prismatic", lower=-0.05, upper=0.25, encoder_resolution=1e-6)
+    return replace(nominal, joints=tuple(joints), convention=convention, name=f"prismatic-{convention}")
+
+
+def _q_within(desc, rng, n):
+    from arm_model.sim.ik import random_q
+    return random_q(desc, n, rng)
+
+
+def _arms(nominal):
+    from arm_model.description import parse_description
+    return {"dh": _dh_with_prismatic(nominal, "dh"), "mdh": _dh_with_prismatic(nominal, "mdh"),
+            "urdf": parse_description(SLIDER, "slider.toml")}
+
+
+@pytest.mark.parametrize("arm", ["dh", "mdh", "urdf"])
+def test_three_evaluators_agree_with_prismatic_and_mimic_joints(nominal, arm):
+    """Batch, CasADi and Pinocchio (built from the generated URDF, prismatic joints as Pinocchio's own)
+    agree to 1e-12 m with parameter errors and a wrench; the model file written reads back to the same
+    centres."""
+    from arm_model.description import format_description, parse_description
+    desc = _arms(nominal)[arm]
+    rng = np.random.default_rng(31)
+    f = casadi_ball_centre(desc)
+    q = _q_within(desc, rng, 12)
+    _, w = random_inputs(rng, 12, desc)
+    for trial in range(2):
+        p = random_params(rng, desc)
+        pin_arm = PinocchioArm(apply_params(desc, p))
+        batch = ball_centres(desc, q, w, p)
+        for i in range(len(q)):
+            assert_close(pin_arm.ball_centre(q[i], w[i]), batch[i], atol=1e-12)
+            assert_close(np.array(f(q[i], w[i], p)).ravel(), batch[i], atol=1e-12)
+    back = parse_description(format_description(desc))
+    assert [j.kind for j in back.joints] == [j.kind for j in desc.joints] and back.joint_names == desc.joint_names
+    assert_close(ball_centres(back, q, w), ball_centres(desc, q, w), atol=1e-12)
+
+
+def test_prismatic_dh_row_by_hand(nominal):
+    """A prismatic DH row slides by q along z: Rz(theta_offset) Tz(d + q) Tx(a) Rx(alpha), by hand."""
+    desc = _dh_with_prismatic(nominal, "dh")
+    q = _q_within(desc, np.random.default_rng(5), 10)
+    for qi, x in zip(q, ball_centres(desc, q)):
+        T = np.eye(4)
+        for k, j in enumerate(desc.joints):
+            theta, d = (j.theta_offset, j.d + qi[k]) if j.prismatic else (j.theta_offset + qi[k], j.d)
+            c, s, ca, sa = math.cos(theta), math.sin(theta), math.cos(j.alpha), math.sin(j.alpha)
+            T = T @ np.array([[c, -s * ca, s * sa, j.a * c], [s, c * ca, -c * sa, j.a * s], [0, sa, ca, d],
+                              [0, 0, 0, 1.0]])
+        assert_close(x, (T @ np.array([*desc.probe.p_last, 1.0]))[:3], atol=1e-12)
+
+
+def test_mimic_joint_on_the_chain_is_applied_not_an_encoder(nominal, tmp_path):
+    """Issue 22 item 3: a <mimic> joint on the chain follows its master as the URDF says (multiplier,
+    offset) and takes no column: the arm has one column fewer than moving joints, a points file with a
+    column for it is refused, and the ball equals Pinocchio's own mimic model of the user's URDF."""
+    import pinocchio as pin
+
+    from arm_model.cli import main
+    from arm_model.urdf import urdf_text
+    from arm_model.urdf_import import description_from_urdf
+    desc = _arms(nominal)["urdf"]
+    assert desc.n_joints == 5 and len(desc.joints) == 6 and desc.coupled
+    assert desc.joint_names == ("base", "lift", "elbow", "wrist", "gripper")
+    urdf = tmp_path / "slider.urdf"
+    text = urdf_text(desc)
+    assert '<mimic joint="elbow" multiplier="-0.7"' in text and '<mimic joint="gripper"' not in text
+    # a gripper joint off the chain for the finger to follow (ahead of it: Pinocchio's mimic model needs
+    # the master parsed first)
+    base = text.index("</link>", text.index('<link name="base_link">')) + len("</link>")
+    text = (text[:base] + '<link name="gripper_link"/><joint name="gripper" type="prismatic">'
+            '<parent link="base_link"/><child link="gripper_link"/><axis xyz="1 0 0"/>'
+            '<limit lower="0" upper="0.08" effort="1" velocity="1"/></joint>' + text[base:])
+    text = text.replace('<joint name="finger" type="prismatic">', '<joint name="finger" type="prismatic">'
+                        '<mimic joint="gripper" multiplier="0.5" offset="0.003"/>', 1)
+    urdf.write_text(text)
+    d = description_from_urdf(urdf, "ball")
+    assert d.joint_names == desc.joint_names and d.joints[3].mimic.joint == "elbow"
+    # Pinocchio's mimic model follows the elbow; it takes masters on the mimic's own branch only, so the
+    # finger (its master on another branch) is set here by the URDF's formula, 0.5 q + 3 mm
+    model = pin.buildModelFromXML(text.replace('<mimic joint="gripper" multiplier="0.5" offset="0.003"/>', ""),
+                                  mimic=True)
+    data = model.createData()
+    q = _q_within(d, np.random.default_rng(6), 8)
+    for qi, x in zip(q, ball_centres(d, q)):
+        cfg = pin.neutral(model)
+        for name, v in zip(d.joint_names, qi):
+            cfg[model.joints[model.getJointId(name)].idx_q] = v
+        cfg[model.joints[model.getJointId("finger")].idx_q] = 0.5 * qi[4] + 0.003
+        pin.framesForwardKinematics(model, data, cfg)
+        assert_close(x, data.oMf[model.getFrameId("ball")].translation, atol=1e-12)
+    units = d.joint_column_units
+    header = "measurement,feature," + ",".join(f"q{k + 1}_{u}" for k, (u, _) in enumerate(units))
+    rows = [",".join(["m", ""] + [repr(float(v * f)) for v, (_, f) in zip(qi, units)]) for qi in q]
+    (tmp_path / "p.csv").write_text(header + "\n" + "\n".join(rows) + "\n")
+    out = tmp_path / "tips.csv"
+    assert main(["tip", str(tmp_path / "p.csv"), "--arm", str(urdf), "--tip-frame", "ball", "-o", str(out), "-q"]) == 0
+    got = np.loadtxt(out, delimiter=",", skiprows=1, usecols=(2, 3, 4)) * 1e-3
+    assert_close(got, ball_centres(d, q), atol=1e-9)            # the file's resolution: 1e-6 mm
+    wrong = header + ",q6_deg\n" + "\n".join(r + ",0.0" for r in rows) + "\n"     # a column for the mimic
+    (tmp_path / "p6.csv").write_text(wrong)
+    assert main(["tip", str(tmp_path / "p6.csv"), "--arm", str(urdf), "--tip-frame", "ball", "-o",
+                 str(tmp_path / "t6.csv"), "-q"]) == 2
+    assert not (tmp_path / "t6.csv").exists()
+
+
+@pytest.mark.parametrize("arm", ["mdh", "urdf"])
+def test_jacobians_with_prismatic_and_mimic_joints_match_finite_differences(nominal, arm):
+    """The exact chain Jacobian (uncertainty), the joint screws (inverse kinematics) and Pinocchio's,
+    by encoder column, against central differences of the batch evaluator."""
+    from arm_model.jacobian import chain_jacobian, joint_screws, point_jacobian
+    from arm_model.params import split_params
+    desc = _arms(nominal)[arm]
+    rng = np.random.default_rng(41)
+    q = _q_within(desc, rng, 4)
+    _, w = random_inputs(rng, 4, desc)
+    rows, pl, c = split_params(desc)
+    cen, g = chain_jacobian(desc.convention, rows, pl, c, list(q.T), list(w.T), desc.chain_joints,
+                            desc.probe.rotation, desc.probe.lever)
+    nq, nr, m = desc.n_joints, len(desc.joints), len(desc.row_fields)
+    jq = g[m * nr + 6: m * nr + 6 + nq]                     # (J, 3, N)
+    _, o, u, cc = joint_screws(desc.convention, rows, q, desc.chain_joints)
+    rigid = ball_centres(desc, q)
+    screws = point_jacobian(u, cc, rigid, desc.chain_joints, nq)
+    pin_arm = PinocchioArm(desc)
+    for i in range(len(q)):
+        fd = fd_jacobian(lambda x: ball_centres(desc, x, w[i]), q[i], eps=1e-7)
+        assert_close(jq[:, :, i].T, fd, atol=1e-7)
+        assert_close(pin_arm.jacobians(q[i], w[i])[0], fd, atol=1e-7)
+        assert_close(screws[i], fd_jacobian(lambda x: ball_centres(desc, x), q[i], eps=1e-7), atol=1e-7)
+    rest = np.zeros(6)                     # the probe's errors, zero
+    fd_p = fd_jacobian(lambda x: ball_centres(desc, q[0], w[0], np.concatenate([x, rest])), np.zeros(m * nr), eps=1e-7)
+    assert_close(g[: m * nr, :, 0].T, fd_p, atol=1e-7)
+
+
+def test_joint_angle_effects_skip_prismatic_joints_and_refuse_a_coupled_arm(nominal):
+    """An effect on a joint angle (eccentricity, joint compliance) acts on the revolute joints: by default it
+    leaves a prismatic joint out, named it is refused; per-joint effects on an arm with a joint mimicking
+    another of its chain are refused (its rows and columns differ); probe effects still apply there."""
+    from arm_model.effects import EncoderEccentricity, JointCompliance, ProbeCompliance
+    from arm_model.model import ArmModel
+    arms = _arms(nominal)
+    m = ArmModel(arms["dh"], (EncoderEccentricity(harmonics=(1,)),))
+    assert [n for n in m.spec.names if "ecc" in n] == [f"j{i}.ecc1_{t}" for i in (1, 2, 4, 5, 6, 7) for t in ("cos", "sin")]
+    with pytest.raises(ValueError, match="'j3' is prismatic"):
+        ArmModel(arms["dh"], (JointCompliance(joints=(2,)),))
+    with pytest.raises(ValueError, match="mimics another joint"):
+        ArmModel(arms["urdf"], (EncoderEccentricity(),))
+    m = ArmModel(arms["urdf"], (ProbeCompliance(),))
+    q = _q_within(arms["urdf"], np.random.default_rng(3), 4)
+    assert_close(m.ball_centres(q), ball_centres(arms["urdf"], q), atol=1e-15)

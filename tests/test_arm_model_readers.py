@@ -31,7 +31,7 @@ def test_description_roundtrip_exact(nominal):
     (lambda t: t.replace("d_mm = 420.0", 'd_mm = "420"'), "joint[3].d_mm"),
     (lambda t: t.replace("d_mm = 420.0", "d_mm = nan"), "joint[3].d_mm"),
     (lambda t: t.replace("d_mm = 420.0\n", ""), "joint[3]"),
-    (lambda t: t.replace("z_mm = 85.0", "z_mm = -85.0"), "probe.z_mm"),
+    (lambda t: t.replace("z_mm = 85.0", "z_mm = 0.0"), "probe.z_mm"),     # a compliant probe at the joint origin
     (lambda t: t.replace('convention = "dh"', 'convention = "xyz"'), "convention"),
     (lambda t: t.replace("ball_diameter_mm = 4.0\n", ""), "probe"),
 ])
@@ -68,6 +68,25 @@ def test_points_two_channel_sensor_sets_probe_y_to_zero():
     assert pts.temperature.tolist() == [20.5]
 
 
+def test_prismatic_joint_columns_are_lengths():
+    """A prismatic joint's column is a length (q3_mm, q3_m, q3_um) read to metres; an angle there, or a
+    length for a revolute joint, is refused naming the column; without the arm's kinds the unit decides."""
+    kinds = ("angle", "angle", "length") + ("angle",) * 4
+    text = HEADER.replace("q3_deg", "q3_mm") + "\n" + row(q=(90, 0, 250, 0, 0, 0, 0)) + "\n"
+    pts = parse_points(text, "p.csv", kinds)
+    assert pts.q[0, 2] == 0.25 and pts.q[0, 0] == pytest.approx(math.pi / 2)
+    assert parse_points(text.replace("q3_mm", "q3_m").replace(",250.0,", ",0.25,"), "p.csv", kinds).q[0, 2] == 0.25
+    with pytest.raises(InputError, match="prismatic: its column is a length") as exc:
+        parse_points(HEADER + "\n" + row() + "\n", "p.csv", kinds)
+    assert exc.value.column == "q3_deg" and exc.value.line == 1
+    with pytest.raises(InputError, match="plausible length") as exc:
+        parse_points(text.replace(",250.0,", ",1e7,"), "p.csv", kinds)
+    assert exc.value.column == "q3_mm" and exc.value.line == 2
+    assert parse_points(text, "p.csv", 7).q[0, 2] == 0.25
+    with pytest.raises(InputError, match="angle .* or, for a prismatic joint, a length"):
+        parse_points(HEADER.replace("q3_deg", "q3_N") + "\n" + row() + "\n", "p.csv", 7)
+
+
 @pytest.mark.parametrize("text, line, column, words", [
     ("", 1, None, "empty"),
     (HEADER + "\n", 2, None, "no points"),
@@ -83,7 +102,7 @@ def test_points_two_channel_sensor_sets_probe_y_to_zero():
 ])
 def test_points_errors_name_line_and_column(text, line, column, words):
     with pytest.raises(InputError) as exc:
-        parse_points(text, "pts.csv", 7)
+        parse_points(text, "pts.csv", ("angle",) * 7)
     e = exc.value
     assert e.path == "pts.csv" and e.line == line and e.column == column, str(e)
     assert words in str(e)
@@ -177,3 +196,27 @@ u_length_mm = 0.0008
     with pytest.raises(InputError) as exc:
         parse_artefacts(bad, "a.toml")
     assert exc.value.line == 28 and "sphere-C" in str(exc.value)
+
+
+def test_every_description_written_reads_back_or_is_not_written(nominal):
+    """The writer and the reader share one rule: a probe whose z points back up the arm with its stylus
+    length (the issue's `z_mm = -78.39`), a rigid tip (stylus 0) and a prismatic joint are written and read
+    back; a joint origin beyond the reader's 1 km is a NumericalError naming it, never a file."""
+    from dataclasses import replace
+
+    from arm_model import NumericalError
+    from arm_model.description import format_description, parse_description
+    for probe in (dict(p_last=(0.0, 0.0, -0.07839), lever=0.07839), dict(p_last=(0.01, 0.0, 0.0), lever=0.0,
+                  bending_compliance_x=0.0, bending_compliance_y=0.0, axial_compliance=0.0)):
+        d = nominal.with_probe(**probe)
+        assert parse_description(format_description(d)).probe == d.probe
+    joints = list(nominal.joints)
+    joints[2] = replace(joints[2], kind="prismatic", lower=-0.05, upper=0.25)
+    d = replace(nominal, joints=tuple(joints))
+    back = parse_description(format_description(d))
+    assert back.joints[2].prismatic and back.joints[2].upper == pytest.approx(0.25, abs=1e-15)
+    joints[2] = replace(joints[2], d=1500.0)
+    with pytest.raises(NumericalError, match="joint 'j3'.*its d value"):
+        format_description(replace(nominal, joints=tuple(joints)))
+    with pytest.raises(NumericalError, match="no stylus"):
+        format_description(nominal.with_probe(lever=0.0))

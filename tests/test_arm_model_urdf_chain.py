@@ -76,12 +76,22 @@ def test_urdf_description_roundtrips_through_toml(nominal, tmp_path):
     assert_close(ball_centres(back, q), ball_centres(d, q), atol=1e-12)
 
 
-@pytest.mark.parametrize("tip, words", [("nowhere", "no link named"), ("link_7", "at the origin of the last joint")])
-def test_urdf_bad_tip_frame(nominal, tmp_path, tip, words):
+def test_urdf_bad_tip_frame(nominal, tmp_path):
     path = tmp_path / "arm.urdf"
     path.write_text(arm_urdf(nominal))
-    with pytest.raises(InputError, match=words):
-        description_from_urdf(path, tip)
+    with pytest.raises(InputError, match="no link named"):
+        description_from_urdf(path, "nowhere")
+
+
+def test_urdf_tip_at_the_last_joint_is_a_rigid_tip(nominal, tmp_path):
+    """The last joint's own link (a flange) as the tip: no stylus, compliances 0, the joint origin."""
+    path = tmp_path / "arm.urdf"
+    path.write_text(arm_urdf(nominal))
+    d = description_from_urdf(path, "link_7")
+    assert d.probe.lever == 0.0 and d.probe.stylus_length == 0.0 and not d.probe.compliance.any()
+    assert d.probe.p_last == (0.0, 0.0, 0.0)
+    q = np.random.default_rng(4).uniform(-3, 3, (5, 7))
+    assert_close(ball_centres(d, q, np.ones((5, 3))), ball_centres(d, q), atol=0)   # no stylus, nothing bends
 
 
 def test_urdf_without_tip_frame_and_bad_xml(tmp_path):

@@ -4,6 +4,7 @@ the user's own file with only the identified origins changed."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -121,8 +122,10 @@ def test_any_tip_orientation_is_read(tmp_path_factory, rpy, xy):
 
 
 def test_tip_frame_pointing_back_and_at_the_joint(tmp_path):
-    """A tip frame whose z points back to the robot is still read (the hinge then |p| behind the ball);
-    a tip frame at the last joint's origin is refused with the line of its joint."""
+    """A tip frame whose z points back to the robot is still read (the hinge then |p| behind the ball) and
+    the model file written of it reads back; a tip frame at the last joint's origin (a flange) is a tip
+    without a stylus: rigid, compliances 0, equal to Pinocchio's frame, and a compliant probe there is
+    refused with the line of its joint."""
     path = _tool_urdf(tmp_path, (0.0, 0.0, 0.05), (math.pi, 0.0, 0.0))    # z points back to the robot
     d = description_from_urdf(path, "ball_link")
     assert abs(d.probe.stylus_length - np.linalg.norm(d.probe.p_last)) < 1e-15
@@ -131,14 +134,23 @@ def test_tip_frame_pointing_back_and_at_the_joint(tmp_path):
     T = _user_tip(model, d, q, "ball_link")
     assert_close(ball_centres(d, q), T[:3, 3], atol=1e-12)
     assert_close(ball_centres(d, q, [0, 0, 1.0]) - ball_centres(d, q), d.probe.axial_compliance * T[:3, 2], atol=1e-15)
+    back = parse_description(format_description(d))       # the model file written of it reads back
+    assert back.probe == d.probe
+    assert_close(ball_centres(back, q, [0, 0, 1.0]), ball_centres(d, q, [0, 0, 1.0]), atol=1e-15)
+    flipped = d.with_probe(rpy=(0.0, 0.0, 0.0), p_last=(0.0, 0.0, -0.07839), lever=0.07839)   # the issue's file
+    assert parse_description(format_description(flipped)).probe == flipped.probe
     text = PANDA.read_text()
     start = text.index('<joint name="ball_joint"')
     end = text.index("</joint>", start) + len("</joint>")
     text = (text[:start] + '<joint name="ball_joint" type="fixed"><origin xyz="0 0 0"/><parent link="panda_link7"/>'
             '<child link="ball_link"/></joint>' + text[end:])
     path.write_text(text)
+    d = description_from_urdf(path, "ball_link")
+    assert d.probe.lever == 0.0 and not d.probe.compliance.any()
+    assert parse_description(format_description(d)).probe == d.probe
+    assert_close(ball_centres(d, q), _user_tip(_pin_model(path), d, q, "ball_link")[:3, 3], atol=1e-12)
     with pytest.raises(InputError, match="at the origin of the last joint") as exc:
-        description_from_urdf(path, "ball_link")
+        description_from_urdf(path, "ball_link", probe=dict(axial_compliance=1e-7))
     assert exc.value.line is not None
 
 
@@ -149,9 +161,14 @@ def test_probe_orientation_keys_in_the_toml(nominal):
     assert_close(d.probe.rpy, [0, math.pi / 2, 0], atol=1e-15)
     assert abs(d.probe.stylus_length - 0.100) < 1e-15          # along x of the last joint frame
     assert parse_description(format_description(d)) == d
-    bad = NOMINAL.read_text().replace("z_mm = 85.0", "z_mm = 85.0\npitch_deg = 180.0")
-    with pytest.raises(InputError, match="ahead along the probe z axis"):
-        parse_description(bad)
+    # the probe z turned back up the arm: one rule with the URDF route, the hinge |p| behind the ball
+    back = parse_description(NOMINAL.read_text().replace("z_mm = 85.0", "z_mm = 85.0\npitch_deg = 180.0"))
+    assert back.probe.lever == pytest.approx(0.085, abs=1e-15)
+    assert parse_description(format_description(back)).probe == back.probe
+    # at the joint origin: a tip without a stylus, which a compliant probe cannot be
+    with pytest.raises(InputError, match="from the last joint origin, a tip without a stylus") as exc:
+        parse_description(NOMINAL.read_text().replace("z_mm = 85.0", "z_mm = 0.0"))
+    assert exc.value.column == "key 'probe.z_mm'"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -411,6 +428,89 @@ def test_calibrate_writes_the_users_urdf(tmp_path):
     assert "mesh" in urdf.read_text() and "panda_finger_joint1" in urdf.read_text()
 
 
+def test_calibrate_a_robot_with_a_prismatic_joint_at_its_flange(nominal, tmp_path, capsys):
+    """A robot's URDF with a prismatic joint, its tip the last joint's own link (a flange: no stylus), a
+    tracker: calibrate runs to the end; the model file reads back (a prismatic joint, a rigid tip with the
+    fitted tool offset), and the calibrated URDF carries that offset on a new link on the flange, giving the
+    model file's centres; tip with force columns says that nothing bends."""
+    from dataclasses import replace as dc_replace
+
+    from arm_model.model import ArmModel
+    from arm_model.model_file import load_model
+    from arm_model.sim.quick import SynthSpec, make_campaign
+    from arm_model.urdf import urdf_text
+    joints = list(nominal.joints)
+    joints[2] = dc_replace(joints[2], kind="prismatic", lower=-0.05, upper=0.25)
+    text = urdf_text(dc_replace(nominal, joints=tuple(joints), name="lift"))
+    urdf = tmp_path / "lift.urdf"
+    urdf.write_text(text[: text.index('  <joint name="stylus_root_joint"')] + "</robot>\n")
+    arm = load_arm(urdf, "link_7")
+    assert arm.probe.lever == 0.0 and arm.joint_quantities[2] == "length"
+    c = make_campaign(ArmModel(arm), SynthSpec(ballbars=6, ballbar_points=4, seats=2, articulations=6, spheres=0,
+                                               reference_points=30, force=0.0, noise=2e-6, reference_noise=3e-6),
+                      seed=5)
+    f = c.write(tmp_path)
+    assert "q3_mm" in f["points"].read_text().splitlines()[0]
+    out = tmp_path / "cal"
+    assert main(["calibrate", str(f["points"]), str(f["artefacts"]), "--arm", str(urdf), "--tip-frame", "link_7",
+                 "--reference-points", str(f["reference"]), "--sigma-probe-um", "2", "--sigma-ref-um", "3",
+                 "--no-plots", "-q", "-o", str(out)]) == 0
+    cal = load_model(out / "lift-calibrated.toml").desc
+    assert cal.joints[2].prismatic and cal.probe.lever == 0.0 and cal.probe.p_last != (0.0, 0.0, 0.0)
+    tool = load_arm(out / "lift-calibrated.urdf", "link_7_calibrated")
+    q = c.points.q[:10]
+    assert_close(ball_centres(tool, q), ball_centres(cal, q), atol=1e-12)
+    pts = tmp_path / "forces.csv"
+    lines = f["points"].read_text().splitlines()
+    pts.write_text("\n".join([lines[0] + ",fx_N,fy_N,fz_N"] + [ln + ",1,2,3" for ln in lines[1:6]]) + "\n")
+    capsys.readouterr()
+    assert main(["tip", str(pts), "--arm", str(urdf), "--tip-frame", "link_7", "-o", str(tmp_path / "t.csv")]) == 0
+    assert "the tip has no stylus" in capsys.readouterr().err
+
+
+def test_user_meshes_are_kept_for_the_viewer(tmp_path):
+    """The Panda's meshes, found beside the URDF (relative, package:// and a mirrored scale), are drawn by the
+    viewer's model where Pinocchio places them in the user's own file (hand and finger meshes folded onto
+    the last row's link); a missing mesh is left out, the kinematics untouched."""
+    import pinocchio as pin
+    import trimesh
+
+    from arm_model import PinocchioArm
+    text = PANDA.read_text()
+    (tmp_path / "meshes" / "panda").mkdir(parents=True)
+    (tmp_path / "robot").mkdir()
+    for k, name in enumerate(["link0", "link1", "link2", "link3", "link4", "link5", "link6", "link7", "hand",
+                              "finger"]):
+        trimesh.creation.box((0.02 + 0.01 * k, 0.03, 0.04)).export(tmp_path / "meshes" / "panda" / f"{name}.stl")
+        text = text.replace(f"../meshes/panda/{name}.dae", f"../meshes/panda/{name}.stl")
+    text = text.replace('"../meshes/panda/link3.stl"', '"package://meshes/panda/link3.stl"')
+    text = text.replace('"../meshes/panda/link5.stl"/>', '"../meshes/panda/link5.stl" scale="1 -1 1"/>')
+    user = tmp_path / "robot" / "panda.urdf"
+    user.write_text(text)
+    d = load_arm(user, "ball_link")
+    meshes = [v for v in d.visuals if "<mesh" in v.geometry]
+    assert len(meshes) == 11 and {v.row for v in meshes} == set(range(-1, 7))
+    arm = PinocchioArm(d)
+    ours = pin.buildGeomFromUrdfString(arm.model, arm.urdf, pin.GeometryType.VISUAL)
+    ref_model = pin.buildModelFromUrdf(str(user))
+    ref = pin.buildGeomFromUrdf(ref_model, str(user), pin.GeometryType.VISUAL,
+                                package_dirs=[str(user.parent), str(tmp_path)])
+    q = np.random.default_rng(4).uniform(-2, 2, 7)
+    placed = {}
+    for model, geom, x in ((arm.model, ours, arm.full_q(q)), (ref_model, ref, _q_full(ref_model, d, q))):
+        data, gdata = model.createData(), pin.GeometryData(geom)
+        pin.updateGeometryPlacements(model, data, geom, gdata, x)
+        placed[id(geom)] = sorted((Path(o.meshPath).name, tuple(np.round(o.meshScale, 9)),
+                                   tuple(np.round(gdata.oMg[k].homogeneous.ravel(), 9)))
+                                  for k, o in enumerate(geom.geometryObjects) if o.meshPath.endswith(".stl"))
+    assert placed[id(ours)] == placed[id(ref)] and len(placed[id(ours)]) == 11
+    assert any(s == (1.0, -1.0, 1.0) for _, s, _ in placed[id(ours)])
+    (tmp_path / "meshes" / "panda" / "link4.stl").unlink()
+    d2 = load_arm(user, "ball_link")
+    assert len([v for v in d2.visuals if "<mesh" in v.geometry]) == 10
+    assert_close(ball_centres(d2, q), ball_centres(d, q), atol=0)
+
+
 # ---------------------------------------------------------------------------------------------
 # bad URDF: located, exit 2, no traceback
 
@@ -441,11 +541,26 @@ def test_bad_urdf_is_located(tmp_path, capsys, edit, words, line):
     assert words.split()[0] in err and "Traceback" not in err and not out.exists()
 
 
-def test_prismatic_joint_on_the_chain_is_refused_with_its_line():
-    with pytest.raises(InputError, match="revolute joints only") as exc:
-        load_arm(PANDA, "panda_leftfinger")
-    lines = PANDA.read_text().splitlines()
-    assert exc.value.line == 1 + next(i for i, t in enumerate(lines) if 'joint name="panda_finger_joint1"' in t)
+def test_prismatic_finger_and_its_mimic_equal_pinocchio():
+    """The Panda's fingers: panda_finger_joint1 (prismatic) on the chain to the left finger; the right
+    finger's joint mimics it (off its chain), so its column holds the master's value. Both tips equal
+    Pinocchio's frames on the user's file, positions in metres."""
+    import pinocchio as pin
+    model = _pin_model(PANDA)
+    data = model.createData()
+    rng = np.random.default_rng(8)
+    for tip, joint in (("panda_leftfinger", "panda_finger_joint1"), ("panda_rightfinger", "panda_finger_joint2")):
+        d = load_arm(PANDA, tip)
+        assert d.n_joints == 8 and d.joints[-1].prismatic and d.joint_quantities[-1] == "length"
+        assert d.joint_names[-1] == "panda_finger_joint1"       # the mimic reads its master's column
+        assert d.joints[-1].name == joint
+        q = np.column_stack([rng.uniform(-2, 2, (6, 7)), rng.uniform(0.0, 0.04, 6)])
+        for i in range(len(q)):
+            x = np.zeros(model.nq)
+            for name, v in zip([j.name for j in d.joints], q[i]):
+                x[model.joints[model.getJointId(name)].idx_q] = v
+            pin.framesForwardKinematics(model, data, x)
+            assert_close(ball_centres(d, q[i]), data.oMf[model.getFrameId(tip)].translation, atol=1e-12)
 
 
 def test_every_effect_with_a_rotated_tool_three_evaluators(tmp_path):

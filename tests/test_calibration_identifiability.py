@@ -6,7 +6,7 @@ import pytest
 
 from arm_model import NumericalError
 from arm_model.model import ArmModel
-from calibration import analyse, calibrate, make_data, Weights
+from calibration import FitOptions, analyse, calibrate, make_data, Weights
 from arm_model.sim.quick import SynthSpec, make_campaign
 from conftest import assert_close
 
@@ -51,7 +51,7 @@ def test_base_pose_not_observable_from_artefacts(artefact_data):
     about the base z) and j1.d (translation along it) and names the exact equivalences of the chain's end
     (probe offset vs j7), without being told."""
     model, c, data = artefact_data
-    res = calibrate(model, data, weights=Weights(probe=1e-6))
+    res = calibrate(model, data, FitOptions(weights=Weights(probe=1e-6)))
     fixed = {f.name: f for f in res.fixed}
     assert {"j1.theta_offset", "j1.d"} <= set(fixed)
     for name in ("j1.theta_offset", "j1.d"):
@@ -75,35 +75,34 @@ def test_reference_in_base_frame_makes_the_base_pose_identifiable(nominal):
     c = make_campaign(model, SynthSpec(ballbars=4, seats=2, spheres=0, reference_points=60, noise=1e-6,
                                        reference_noise=1e-6), seed=6, T_ref_base=np.eye(4))
     data = make_data(c.points, c.artefacts, model, reference=c.reference_points)
-    res = calibrate(model, data, weights=Weights(probe=1e-6, reference=1e-6), reference="identity")
+    res = calibrate(model, data, FitOptions(weights=Weights(probe=1e-6, reference=1e-6), reference="identity"))
     assert "j1.theta_offset" in res.free and "j1.d" in res.free
     for n in ("j1.theta_offset", "j1.d"):
         assert abs(res.value(n) - c.truth[n]) < 4 * res.uncertainty(n)
-    res2 = calibrate(model, data, weights=Weights(probe=1e-6, reference=1e-6), reference="fit")
+    res2 = calibrate(model, data, FitOptions(weights=Weights(probe=1e-6, reference=1e-6), reference="fit"))
     assert {"j1.theta_offset", "j1.d"} <= {f.name for f in res2.fixed}
 
 
 def test_stop_policy_lists_the_combinations(artefact_data):
     model, _, data = artefact_data
     with pytest.raises(NumericalError) as exc:
-        calibrate(model, data, on_unidentifiable="stop")
+        calibrate(model, data, FitOptions(on_unidentifiable="stop"))
     msg = str(exc.value)
     assert "j1.theta_offset" in msg and "probe.z" in msg or "j7.d" in msg
 
 
 def test_compliance_without_force_has_no_effect(artefact_data):
     model, _, data = artefact_data
-    res = calibrate(model, data, free=["j2.*", "probe.compliance_*"], weights=Weights(probe=1e-6))
+    res = calibrate(model, data, FitOptions(free=["j2.*", "probe.compliance_*"], weights=Weights(probe=1e-6)))
     fixed = {f.name: f.reason for f in res.fixed}
     for n in ("probe.compliance_x", "probe.compliance_y", "probe.compliance_z"):
         assert "no effect" in fixed[n]
     assert set(res.free) == {"j2.theta_offset", "j2.d", "j2.a", "j2.alpha"}
 
 
-def test_urdf_arm_origin_errors(nominal, tmp_path):
-    """An arm given as a URDF (per-joint origin xyz/rpy errors, 6 a joint): the same code finds the
-    redundant origin parameters (the first joint's 6 are rigid motions of the base) and recovers the
-    rest in the identifiable parameterization."""
+def _urdf_arm(nominal, tmp_path):
+    """The nominal arm written as a URDF (its stylus replaced by a fixed tip 85 mm out) and read back: six
+    errors a joint origin."""
     from arm_model.urdf import urdf_text
     from arm_model.urdf_import import description_from_urdf
     text = urdf_text(nominal)
@@ -112,13 +111,19 @@ def test_urdf_arm_origin_errors(nominal, tmp_path):
              '<origin xyz="0.002 -0.001 0.085" rpy="0 0 0"/></joint>\n  <link name="tip"/>\n</robot>\n')
     path = tmp_path / "arm.urdf"
     path.write_text(text)
-    desc = description_from_urdf(path, "tip")
-    model = ArmModel(desc)
+    return description_from_urdf(path, "tip")
+
+
+def test_urdf_arm_origin_errors(nominal, tmp_path):
+    """An arm given as a URDF (per-joint origin xyz/rpy errors, 6 a joint): the same code finds the
+    redundant origin parameters (the first joint's 6 are rigid motions of the base) and recovers the
+    rest in the identifiable parameterization."""
+    model = ArmModel(_urdf_arm(nominal, tmp_path))
     assert model.spec.names[:6] == ("j1.origin_x", "j1.origin_y", "j1.origin_z", "j1.origin_roll",
                                     "j1.origin_pitch", "j1.origin_yaw")
     c = make_campaign(model, SynthSpec(ballbars=8, ballbar_points=5, seats=3, articulations=10, spheres=1,
                                        noise=1e-6), seed=8)
-    res = calibrate(model, make_data(c.points, c.artefacts, model), weights=Weights(probe=1e-6))
+    res = calibrate(model, make_data(c.points, c.artefacts, model), FitOptions(weights=Weights(probe=1e-6)))
     j1 = {f"j1.origin_{k}" for k in ("x", "y", "z", "roll", "pitch", "yaw")}
     assert j1 <= set(res.identifiability.gauge)          # all six rigid motions found
     rigid = {f.name for f in res.fixed if "rigid motion" in f.reason}
@@ -138,9 +143,29 @@ def test_modified_dh_arm(nominal):
     model = ArmModel(replace(nominal, convention="mdh"))
     c = make_campaign(model, SynthSpec(ballbars=8, ballbar_points=5, seats=3, articulations=8, spheres=1,
                                        noise=1e-6), seed=9)
-    res = calibrate(model, make_data(c.points, c.artefacts, model), weights=Weights(probe=1e-6))
+    res = calibrate(model, make_data(c.points, c.artefacts, model), FitOptions(weights=Weights(probe=1e-6)))
     assert {"j1.theta_offset", "j1.d", "j1.a", "j1.alpha"} <= set(res.identifiability.gauge)
     assert {"j1.theta_offset", "j1.d", "j1.a", "j1.alpha"} <= {f.name for f in res.fixed}
     peq = res.equivalent(c.p_true)
     z = [(res.value(n) - peq[model.spec.index(n)]) / res.uncertainty(n) for n in res.free]
     assert np.max(np.abs(z)) < 3.5 and len(res.free) >= 18
+
+
+def test_base_set_of_the_full_origin_errors_is_the_literature_count(nominal, tmp_path):
+    """The same 7-joint arm as a URDF (six errors a joint origin, three of the tip: 45) reduces, by the rank of
+    the identification Jacobian and pivoted QR, to the base set the literature counts for revolute joints
+    measured by a point: 4R + 2P + 6 (Everett, Driels and Mooring 1987) less the tool's orientation (3), so
+    31 with the base pose known (reference points in the base frame) and 25 with it unknown (its 6 rigid
+    motions a gauge). As DH rows (four errors a row) the base frame lacks two errors: 25 and 23."""
+    spec = SynthSpec(ballbars=8, ballbar_points=5, seats=3, articulations=10, spheres=1, noise=1e-6,
+                     reference_points=12)
+    counts = {}
+    for label, desc in (("urdf", _urdf_arm(nominal, tmp_path)), ("dh", nominal)):
+        model = ArmModel(desc)
+        c = make_campaign(model, spec, seed=8, T_ref_base=np.eye(4))
+        data = make_data(c.points, c.artefacts, model, reference=c.reference_points)
+        for ref in ("fit", "identity"):
+            res = calibrate(model, data, FitOptions(weights=Weights(1e-6, 1e-6), reference=ref, prior_scale=None))
+            assert res.identifiability_final.rank == len(res.free)
+            counts[label, ref] = len(res.free)
+    assert counts == {("urdf", "fit"): 25, ("urdf", "identity"): 31, ("dh", "fit"): 23, ("dh", "identity"): 25}

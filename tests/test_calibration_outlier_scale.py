@@ -10,7 +10,7 @@ import pytest
 
 from arm_model.model import ArmModel
 from arm_model.sim.quick import SynthSpec, make_campaign
-from calibration import Weights, calibrate, make_data
+from calibration import FitOptions, Weights, calibrate, make_data
 from calibration.calibrate import row_groups
 
 # probe 2 um, tracker 20 um per axis; the fit is told 2 um for both (--weights stated)
@@ -28,7 +28,7 @@ def campaign(nominal):
 def _fit(model, c, points=None, reference=None):
     data = make_data(c.points if points is None else points, c.artefacts, model,
                      reference=c.reference_points if reference is None else reference)
-    return calibrate(model, data, weights=STATED)
+    return calibrate(model, data, FitOptions(weights=STATED))
 
 
 def test_clean_campaign_with_unequal_group_noise_flags_nothing(campaign):
@@ -53,7 +53,7 @@ def test_gross_errors_in_either_group_are_flagged(campaign):
     q[bad_seat, 1] += 5e-4                                 # 0.5 mrad on the shoulder: ~0.3 mm, 100 probe sigmas
     x_ref = c.reference_points.ref.copy()
     bad_ref = 17
-    x_ref[bad_ref] += [0.0, 4e-4, 0.0]                     # 0.4 mm: 20 tracker sigmas
+    x_ref[bad_ref, 0] += [0.0, 4e-4, 0.0]                     # 0.4 mm: 20 tracker sigmas
     res = _fit(model, c, replace(c.points, q=q), replace(c.reference_points, ref=x_ref))
     kinds = {(o.kind, o.measurement) for o in res.outliers if abs(o.standardized) > 10}
     assert ("seat", c.points.measurement[bad_seat]) in kinds

@@ -30,12 +30,18 @@ def _casadi_jacobians(model: ArmModel):
 
 
 def _arms(nominal, tmp_path):
+    from arm_model.description import parse_description
+    from test_arm_model_evaluators import SLIDER, _dh_with_prismatic
     path = tmp_path / "arm.urdf"
     path.write_text(arm_urdf(nominal).replace('<axis xyz="0.0 0.0 1.0"/>', '<axis xyz="0 0.6 0.8"/>', 1))
-    return {"dh": nominal, "mdh": replace(nominal, convention="mdh"), "urdf": load_arm(path, "tip")}
+    return {"dh": nominal, "mdh": replace(nominal, convention="mdh"), "urdf": load_arm(path, "tip"),
+            "mdh-prismatic": _dh_with_prismatic(nominal, "mdh"), "urdf-prismatic-mimic": parse_description(SLIDER)}
 
 
-@pytest.mark.parametrize("convention", ["dh", "mdh", "urdf"])
+CONVENTIONS = ["dh", "mdh", "urdf", "mdh-prismatic", "urdf-prismatic-mimic"]
+
+
+@pytest.mark.parametrize("convention", CONVENTIONS)
 def test_chain_jacobian_is_the_casadi_jacobian(nominal, tmp_path, convention):
     desc = _arms(nominal, tmp_path)[convention]
     model = ArmModel(desc)
@@ -45,7 +51,7 @@ def test_chain_jacobian_is_the_casadi_jacobian(nominal, tmp_path, convention):
     w = np.column_stack([rng.normal(0, 3, (n, 3)), rng.normal(0, 0.1, (n, 3))])
     p = rng.normal(0, 1e-3, model.spec.size) * np.array([1e-3 if u == "m/N" else 1.0 for u in model.spec.units])
     rows, pl, c = split_params(desc, p)
-    cen, g = chain_jacobian(desc.convention, rows, pl, c, list(q.T), list(w.T), desc.axes,
+    cen, g = chain_jacobian(desc.convention, rows, pl, c, list(q.T), list(w.T), desc.chain_joints,
                             desc.probe.rotation, desc.probe.lever)
     jac = _casadi_jacobians(model)
     size = model.spec.size
@@ -57,7 +63,7 @@ def test_chain_jacobian_is_the_casadi_jacobian(nominal, tmp_path, convention):
     assert g.shape[0] == size + j + 6
 
 
-@pytest.mark.parametrize("convention", ["dh", "mdh", "urdf"])
+@pytest.mark.parametrize("convention", CONVENTIONS)
 def test_joint_screws_give_pinocchios_and_finite_difference_jacobians(nominal, tmp_path, convention):
     """The q-only Jacobian of the inverse kinematics: the last frame against the chain (a second
     implementation), the ball's Jacobian against Pinocchio's frame Jacobian and central differences, the
@@ -74,19 +80,20 @@ def test_joint_screws_give_pinocchios_and_finite_difference_jacobians(nominal, t
 
     def frame(qq):
         qt = list(np.atleast_2d(qq).T)
-        o = np.column_stack(chain_point(desc.convention, rows, qt, (0.0, 0.0, 0.0), axes=desc.axes))
-        return np.stack([np.column_stack(chain_point(desc.convention, rows, qt, tuple(e), axes=desc.axes)) - o
+        o = np.column_stack(chain_point(desc.convention, rows, qt, (0.0, 0.0, 0.0), joints=desc.chain_joints))
+        return np.stack([np.column_stack(chain_point(desc.convention, rows, qt, tuple(e), joints=desc.chain_joints)) - o
                          for e in np.eye(3)], axis=2), o
 
-    r, o, u, c = joint_screws(desc.convention, rows, q, desc.axes)
-    columns = joint_screws(desc.convention, [[np.full(n, v) for v in row] for row in rows], q, desc.axes)
+    r, o, u, c = joint_screws(desc.convention, rows, q, desc.chain_joints)
+    columns = joint_screws(desc.convention, [[np.full(n, v) for v in row] for row in rows], q, desc.chain_joints)
     for a, b in zip(columns, (r, o, u, c)):      # rows as columns (a geometry per point, e.g. thermal)
         assert_close(a, b, atol=1e-15)
     r_ref, o_ref = frame(q)
     assert_close(r, r_ref, atol=1e-14)
     assert_close(o, o_ref, atol=1e-14)
     ball = rigid_centres(desc, q)
-    jb = point_jacobian(u, c, ball)
+    jn = desc.chain_joints
+    jb = point_jacobian(u, c, ball, jn, j)
     arm = PinocchioArm(desc)
     for i in range(n):
         ref = arm.jacobians(q[i])[0]
@@ -95,7 +102,7 @@ def test_joint_screws_give_pinocchios_and_finite_difference_jacobians(nominal, t
         assert_close(jb[i], fd, atol=1e-9 * np.abs(fd).max(), msg=f"point {i}")
         for k in range(3):
             fd = fd_jacobian(lambda x: frame(x)[0][0, :, k], q[i])
-            assert_close(direction_jacobian(u[i:i + 1], r[i:i + 1, :, k])[0], fd, atol=1e-9, msg=f"axis {k}")
+            assert_close(direction_jacobian(u[i:i + 1], r[i:i + 1, :, k], jn, j)[0], fd, atol=1e-9, msg=f"axis {k}")
 
 
 def _effect_model(nominal):
@@ -326,3 +333,22 @@ def test_tip_refuses_a_covariance_that_is_not_one(tmp_path, nominal, capsys):
         assert main(["tip", str(pts), "--arm", str(tmp_path / "arm.toml"), "-o", str(out)]) == 2
         err = capsys.readouterr().err
         assert "c.csv" in err and words in err and not out.exists(), err
+
+
+def test_propagation_with_prismatic_and_mimic_joints(nominal, tmp_path):
+    """The encoder contribution of an arm with a prismatic lift (its resolution a length) and a mimic joint
+    (no encoder of its own) is J_q diag(u^2) J_q^T with J_q CasADi's, by encoder column."""
+    desc = _arms(nominal, tmp_path)["urdf-prismatic-mimic"]
+    model = ArmModel(desc)
+    inputs = default_inputs(desc, encoder=[1e-5, 2e-6, 1e-5, 1e-5, 5e-6])
+    assert default_inputs(desc).encoder[1] == pytest.approx(1e-6 / np.sqrt(12))    # encoder_resolution_mm
+    rng = np.random.default_rng(7)
+    q = np.column_stack([rng.uniform(-1, 1, 5), rng.uniform(0, 0.3, 5), rng.uniform(-1, 1, (5, 2)),
+                         rng.uniform(0, 0.04, 5)])
+    w = np.column_stack([rng.normal(0, 2, (5, 3)), np.zeros((5, 3))])
+    prop = propagate(model, None, q, w, inputs=inputs)
+    jac = _casadi_jacobians(model)
+    for i in range(5):
+        jq = np.array(jac(q[i], w[i], np.zeros(1 + 2 * desc.n_joints), np.zeros(model.spec.size))[2])
+        ref = jq @ np.diag(inputs.encoder ** 2) @ jq.T
+        assert_close(prop.contributions["encoders"][i], np.diag(ref), atol=1e-6 * np.abs(ref).max())

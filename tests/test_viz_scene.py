@@ -282,3 +282,18 @@ def test_ellipsoid_mesh_vertices_lie_on_the_95_percent_ellipsoid():
     assert np.all(np.abs(d[0]).max(axis=0) <= 2000 * k * np.array([1e-6, 2e-6, 3e-6]) * (1 + 1e-12))
     with pytest.raises(ValueError, match="level"):
         ellipsoid_mesh(c, cov, 1.0, level=1.5)
+
+
+def test_transform_frames_are_meshcats_own():
+    """The set_transform frames packed by the live view are byte for byte those meshcat's Visualizer
+    sends (umsgpack of its command)."""
+    import umsgpack
+    from meshcat.commands import SetTransform
+    from meshcat.path import Path as MPath
+    from viz.scene import transform_frames
+    rng = np.random.default_rng(0)
+    for name in ("a", "aacmm/arm/link_3_0", "x" * 40, "long/" * 60):
+        path = MPath(("meshcat",) + tuple(name.split("/")))
+        m = rng.normal(size=(4, 4))
+        cmd = SetTransform(m, path).lower()
+        assert transform_frames(path.lower(), m) == [b"set_transform", path.lower().encode(), umsgpack.packb(cmd)]

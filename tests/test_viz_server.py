@@ -208,7 +208,7 @@ def test_docs_example_runs(tmp_path, monkeypatch, capsys):
 def test_a_server_that_stops_answering_is_a_clear_error(nominal):
     """A frozen server (SIGSTOP: its ports stay taken, so no other server can answer in its place)."""
     server = MeshcatServer().start()     # the default start-up wait: a loaded CI machine may need > 2 s
-    server.timeout = 2.0                 # replies: the View connects after this, with a 2 s wait
+    server.timeout = 2.0                 # each reply from now on (the connected socket too): a 2 s wait
     try:
         with View(nominal, server=server) as view:
             os.kill(server.pid, signal.SIGSTOP)
@@ -227,3 +227,36 @@ def test_a_server_that_died_is_a_clear_error(nominal):
             time.sleep(0.02)
         with pytest.raises(ViewerError, match="has stopped"):
             view.show_pose(Q, W)
+
+
+def test_a_robot_urdf_with_its_meshes_and_a_flange_tip(tmp_path):
+    """A robot's URDF as it ships, its tip the flange (the last joint's own link: a rigid tip): the viewer
+    draws the URDF's own mesh where it is found (missing ones left out), the ball at the tip; a mesh that
+    cannot be loaded falls back to the generated links, saying so."""
+    import trimesh
+
+    from arm_model.urdf_import import load_arm
+    text = (ROOT / "examples" / "data" / "real-panda-seats" / "panda.urdf").read_text()
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "robot").mkdir()
+    trimesh.creation.box((0.05, 0.05, 0.2)).export(tmp_path / "meshes" / "link1.stl")
+    urdf = tmp_path / "robot" / "panda.urdf"
+    urdf.write_text(text.replace("../meshes/panda/link1.dae", "../meshes/link1.stl"))
+    d = load_arm(urdf, "panda_link7")
+    assert d.probe.lever == 0.0
+    q = np.radians([0, 30, 0, -60, 0, 45, 0])
+    with View(d) as view:
+        info = view.show_pose(q)
+        cmds = page_commands(view.html())
+    assert_close(info.rigid, ball_centres(d, q[None])[0], 1e-12)
+    meshes = [c["path"] for c in cmds if c["type"] == "set_object" and "geometries" in c["object"]
+              and c["object"]["geometries"][0]["type"] == "_meshfile"]
+    assert meshes == ["/meshcat/aacmm/arm/visuals/link_1_0"]
+    assert any("its URDF's own visuals" in line for line in view.legend)
+    (tmp_path / "meshes" / "link2.stl").write_text("not a mesh")
+    urdf.write_text(text.replace("../meshes/panda/link1.dae", "../meshes/link1.stl")
+                    .replace("../meshes/panda/link2.dae", "../meshes/link2.stl"))
+    with View(load_arm(urdf, "panda_link7")) as view:
+        info = view.show_pose(q)
+    assert any("links orange" in line for line in view.legend)
+    assert_close(info.rigid, ball_centres(d, q[None])[0], 1e-12)

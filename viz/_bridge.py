@@ -3,7 +3,8 @@
 meshcat's own ZMQ-to-websocket bridge, with three changes: the web server listens on the given
 host only (meshcat's listens on every interface), a busy ``--port`` is reported on stdout as one
 ``error=`` line instead of a traceback, and the process stops by itself when its parent is gone
-(so that a killed parent cannot leave a server behind). Protocol on stdout: ``zmq_url=...`` then
+(so that a killed parent cannot leave a server behind); it also serves the page of a live session at
+``/live/`` (:data:`LIVE_PAGE`: meshcat's viewer with a text panel). Protocol on stdout: ``zmq_url=...`` then
 ``web_url=...``, or ``error=<kind> <message>``.
 """
 from __future__ import annotations
@@ -15,12 +16,47 @@ import signal
 import sys
 
 
+#: the scene node whose object carries the text of the live page's panel (``userData.lines``)
+PANEL_NODE = "aacmm/live/panel"
+#: the live page (``/live/``): meshcat's viewer plus a text panel. Commands that set the panel node's
+#: object fill the panel instead of the scene; everything else is meshcat's own.
+LIVE_PAGE = """<!DOCTYPE html>
+<html><head><meta charset=utf-8><title>aacmm live</title>
+<style>body{margin:0}#meshcat-pane{width:100vw;height:100vh;overflow:hidden}
+#aacmm-panel{position:absolute;left:8px;top:8px;z-index:10;max-width:70%;margin:0;padding:6px 9px;
+font:13px/1.35 monospace;color:#fff;background:rgba(0,0,0,0.6);border-radius:4px;white-space:pre-wrap}</style>
+</head><body><div id="meshcat-pane"></div><pre id="aacmm-panel">waiting for the session ...</pre>
+<script type="text/javascript" src="/static/main.min.js"></script>
+<script>
+var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
+var meshcatCommand = viewer.handle_command.bind(viewer);
+viewer.handle_command = function (cmd) {
+  if (cmd.type === "set_object" && String(cmd.path).endsWith("/PANEL_NODE")) {
+    var data = (cmd.object && cmd.object.object && cmd.object.object.userData) || {};
+    document.getElementById("aacmm-panel").textContent = (data.lines || []).join("\\n");
+    return;
+  }
+  meshcatCommand(cmd);
+};
+try { viewer.connect(); } catch (e) { console.info("not connected to the meshcat server: ", e); }
+</script></body></html>
+""".replace("PANEL_NODE", PANEL_NODE)
+
+
 def _bridge_class():
+    import tornado.web
     from meshcat.servers.zmqserver import ZMQWebSocketBridge
+
+    class LivePage(tornado.web.RequestHandler):
+        def get(self):
+            self.set_header("Content-Type", "text/html; charset=utf-8")
+            self.set_header("Cache-Control", "no-store")
+            self.write(LIVE_PAGE)
 
     class Bridge(ZMQWebSocketBridge):
         def make_app(self):
             app = super().make_app()
+            app.add_handlers(r".*", [(r"/live/?", LivePage)])
             listen = app.listen
             app.listen = lambda port, **kw: listen(port, address=self.host, **kw)
             return app

@@ -19,7 +19,7 @@ from arm_model.urdf import ARM_RGBA
 
 from ._errors import ViewerError
 
-__all__ = ["find_chromium", "screenshot", "load_png", "colour_mask", "arm_mask", "CHROMIUM_NAMES"]
+__all__ = ["find_chromium", "screenshot", "screenshot_and_dom", "load_png", "colour_mask", "arm_mask", "CHROMIUM_NAMES"]
 
 CHROMIUM_NAMES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 _FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--use-gl=swiftshader", "--enable-unsafe-swiftshader",
@@ -56,6 +56,17 @@ def screenshot(page: str | Path, out_png: str | Path, *, width: int = 800, heigh
         browser: Chromium to use (see :func:`find_chromium`).
         timeout: wall-clock limit [s].
     """
+    return _chromium(page, out_png, width, height, budget_ms, browser, timeout, False)[0]
+
+
+def screenshot_and_dom(page: str | Path, out_png: str | Path, *, width: int = 800, height: int = 600,
+                       budget_ms: int = 5000, browser: str | Path | None = None,
+                       timeout: float = 90.0) -> tuple[Path, str]:
+    """:func:`screenshot`, and the page's document (HTML) as the browser had it then, from one run."""
+    return _chromium(page, out_png, width, height, budget_ms, browser, timeout, True)
+
+
+def _chromium(page, out_png, width, height, budget_ms, browser, timeout, dom: bool) -> tuple[Path, str]:
     exe = find_chromium(browser)
     page_s = str(page)
     if "://" not in page_s:
@@ -68,11 +79,12 @@ def screenshot(page: str | Path, out_png: str | Path, *, width: int = 800, heigh
     with tempfile.TemporaryDirectory(prefix="aacmm-chromium-") as profile:
         shot = Path(profile) / "shot.png"
         cmd = [exe, *_FLAGS, f"--user-data-dir={profile}/profile", f"--window-size={width},{height}",
-               f"--virtual-time-budget={int(budget_ms)}", f"--screenshot={shot}", page_s]
+               f"--virtual-time-budget={int(budget_ms)}", f"--screenshot={shot}", *(["--dump-dom"] if dom else []),
+               page_s]
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL,
                                 start_new_session=True)
         try:
-            _, err = proc.communicate(timeout=timeout)
+            out, err = proc.communicate(timeout=timeout)
         except subprocess.TimeoutExpired:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.communicate()
@@ -87,7 +99,7 @@ def screenshot(page: str | Path, out_png: str | Path, *, width: int = 800, heigh
         tmp = out_png.with_name(f".{out_png.name}.tmp")
         shutil.copyfile(shot, tmp)
         os.replace(tmp, out_png)
-    return out_png
+    return out_png, out.decode("utf-8", "replace")
 
 
 def load_png(path: str | Path) -> np.ndarray:

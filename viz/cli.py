@@ -140,7 +140,7 @@ def _run(args, inputs, outputs, tmp) -> int:
     # read everything first: a bad file stops here, before a server starts or a file is written
     arm = model_from_args(args)
     desc = arm.desc
-    points = read_points(args.points, desc.n_joints)
+    points = read_points(args.points, desc.joint_quantities)
     arm.check_points(points)
     artefacts = read_artefacts(args.artefacts) if args.artefacts else None
     if artefacts is not None:

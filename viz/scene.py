@@ -13,7 +13,9 @@ Every scaled quantity is named with its scale in the scene tree (``deflection x1
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import logging
+import struct
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -21,8 +23,10 @@ import numpy as np
 from arm_model import ArmDescription, load_description
 from arm_model.geometry import frame_along
 
+log = logging.getLogger(__name__)
+
 __all__ = ["ArmScene", "Camera", "PoseInfo", "ROOT", "DEFLECTION_RGB", "RESIDUAL_RGB", "POINTS_RGB",
-           "ARTEFACT_RGB", "ELLIPSOID_RGB", "ellipsoid_mesh", "coverage_factor"]
+           "ARTEFACT_RGB", "ELLIPSOID_RGB", "ellipsoid_mesh", "coverage_factor", "transform_frames", "send_transform"]
 
 ROOT = "aacmm"
 DEFLECTION_RGB = 0x18C018     # green arrow
@@ -157,6 +161,39 @@ def ellipsoid_mesh(centres, cov, scale: float, level: float = 0.95, subdivisions
     return verts.reshape(-1, 3), faces.reshape(-1, 3), k
 
 
+def _msgpack_str(b: bytes) -> bytes:
+    n = len(b)
+    if n < 32:
+        return bytes([0xA0 | n]) + b
+    if n < 256:
+        return bytes([0xD9, n]) + b
+    return b"\xda" + n.to_bytes(2, "big") + b
+
+
+_MATRIX_HEAD = _msgpack_str(b"matrix") + b"\xdc\x00\x10"      # an array of 16 (msgpack array 16)
+_FLOATS = struct.Struct(">" + "Bd" * 16)
+
+
+def transform_frames(path: str, matrix: np.ndarray) -> list[bytes]:
+    """The ZMQ frames of meshcat's ``set_transform`` command for the node ``path`` (its full path, as
+    ``meshcat.path.Path.lower`` gives it) and the (4, 4) ``matrix``: the bytes ``Visualizer.set_transform``
+    sends (msgpack of ``{"type", "path", "matrix"}``, the matrix column-major in doubles), packed here
+    directly (a live view sends hundreds a second)."""
+    pb = path.encode("utf-8")
+    m = np.asarray(matrix, dtype=float).T.reshape(-1).tolist()
+    body = (b"\x83" + _msgpack_str(b"type") + _msgpack_str(b"set_transform") + _msgpack_str(b"path")
+            + _msgpack_str(pb) + _MATRIX_HEAD + _FLOATS.pack(*[x for v in m for x in (0xCB, v)]))
+    return [b"set_transform", pb, body]
+
+
+def send_transform(vis, path: str, matrix: np.ndarray) -> None:
+    """Set the transform of the node ``path`` (full path) of a :class:`meshcat.Visualizer` (one round
+    trip to its server, as ``set_transform``)."""
+    sock = vis.window.zmq_socket
+    sock.send_multipart(transform_frames(path, matrix))
+    sock.recv()
+
+
 def _dots(mg, p: np.ndarray, rgb: int, size: float):
     """A meshcat points object (meshcat's PointsMaterial always uses per-vertex colours)."""
     colour = np.array([(rgb >> 16) & 255, (rgb >> 8) & 255, rgb & 255], dtype=np.float32) / 255
@@ -222,11 +259,12 @@ class ArmScene:
         self.desc = None if arm is None else self.arm.desc
         self._pv = None
         if self.arm is not None:
-            geom = pin.buildGeomFromUrdfString(self.arm.model, self.arm.urdf, pin.GeometryType.VISUAL)
+            geom = self._visual_model(pin)
             self._pv = MeshcatVisualizer(self.arm.model, None, geom)
             self._pv.initViewer(viewer=vis)
             self._pv.loadViewerModel(rootNodeName=f"{root}/arm")
-            self._legend(f"arm '{self.desc.name}': links orange, probe ball red (marker 24 mm wide)")
+            self._legend(f"arm '{self.desc.name}': " + ("its URDF's own visuals" if self.desc.visuals else
+                                                          "links orange") + ", probe ball red (marker 24 mm wide)")
         vis["/Axes"].set_property("visible", False)   # its x axis fades to orange, the arm's colour
         vis[f"{root}/base frame"].set_object(mg.LineSegments(
             mg.PointsGeometry(position=(0.15 * np.array([[0, 0, 0], [1, 0, 0], [0, 0, 0], [0, 1, 0],
@@ -235,6 +273,22 @@ class ArmScene:
                                               [0, 0, 1], [0, 0, 1]]).T.astype(np.float32)),
             mg.LineBasicMaterial(vertexColors=True)))
         self._arrow_path = None
+        self._nodes = None
+
+    def _visual_model(self, pin):
+        """Pinocchio's visual model of the arm: the URDF's own visuals where the arm was read from one and its
+        meshes load; else (a mesh Pinocchio cannot read) the generated links, saying so."""
+        try:
+            return pin.buildGeomFromUrdfString(self.arm.model, self.arm.urdf, pin.GeometryType.VISUAL)
+        except (RuntimeError, ValueError) as exc:
+            if not self.desc.visuals:
+                raise
+            why = " ".join(str(exc).split())
+            log.warning(f"the URDF's own visuals cannot be drawn ({why[:300]}): the arm is drawn as generated links")
+            from arm_model import PinocchioArm
+            self.arm = PinocchioArm(replace(self.desc, visuals=()))
+            self.desc = self.arm.desc
+            return pin.buildGeomFromUrdfString(self.arm.model, self.arm.urdf, pin.GeometryType.VISUAL)
 
     # -- poses --------------------------------------------------------------------------------
     def pose(self, q, wrench=None) -> tuple[np.ndarray, PoseInfo]:
@@ -250,6 +304,26 @@ class ArmScene:
             return self.arm.full_q(q), PoseInfo(rigid, rigid.copy())
         x = self.arm.full_q(q, self.arm.elastic_q(q, np.asarray(wrench, dtype=float)))
         return x, PoseInfo(rigid, self.arm.ball_centre(q, np.asarray(wrench, dtype=float)))
+
+    def move(self, q, wrench=None, redraw: bool = True, extent: bool = False) -> PoseInfo:
+        """Put the arm at ``q`` [rad] deflected by ``wrench`` and nothing else (no arrow): a live view's
+        frame, many a second. ``redraw=False``: only compute the pose; ``extent``: add the arm's joints to
+        the extent the camera frames. The same transforms as the visualiser's ``display``, sent directly
+        (:func:`send_transform`)."""
+        x, info = self.pose(q, wrench)
+        if redraw:
+            pin, pv = self._pin, self._pv
+            if self._nodes is None:     # (geometry id, node path, mesh scale) of every visual
+                self._nodes = [(pv.visual_model.getGeometryId(g.name),
+                                pv.viewer[pv.getViewerNodeName(g, pin.GeometryType.VISUAL)].path.lower(),
+                                np.diag([*g.meshScale, 1.0])) for g in pv.visual_model.geometryObjects]
+            pin.forwardKinematics(pv.model, pv.data, x)
+            pin.updateGeometryPlacements(pv.model, pv.data, pv.visual_model, pv.visual_data)
+            for gid, path, scale in self._nodes:
+                send_transform(self.vis, path, pv.visual_data.oMg[gid].homogeneous @ scale)
+        if extent:
+            self._extent.append(self._joint_points(x))
+        return info
 
     def _joint_points(self, x) -> np.ndarray:
         pin = self._pin

@@ -139,8 +139,8 @@ def cone_directions(rng, axis, half_angle: float, n: int) -> np.ndarray:
 def shoulder(desc) -> np.ndarray:
     """Origin [m] of the first joint frame at q = 0 (for a DH arm: the shoulder), base frame."""
     rows = [list(r) for r in desc.row_table()[:1]]
-    return np.array(chain_point(desc.convention, rows, [0.0], (0.0, 0.0, 0.0), NUMPY_OPS,
-                                None if desc.axes is None else desc.axes[:1]), float)
+    return np.array(chain_point(desc.convention, rows, [0.0] * desc.n_joints, (0.0, 0.0, 0.0), NUMPY_OPS,
+                                desc.chain_joints[:1]), float)
 
 
 def _candidate(rng, o: dict, k: int, n: int, shoulder, spread=None):

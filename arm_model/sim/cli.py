@@ -36,6 +36,10 @@ def register(sub) -> None:
                    help="output folder (created if needed; files are replaced atomically, never an input)")
     p.add_argument("--seed", type=seed, default=None, help="random seed (default: the campaign's 'seed')")
     p.add_argument("--no-signals", action="store_true", help="do not write the force-signal files")
+    p.add_argument("--samples", action="store_true",
+                   help="also write the campaign as a live sample stream, samples.csv (1 kHz: time, joint angles, "
+                        "force, trigger; for aacmm live), and its session plan, plan.toml, when every feature is "
+                        "probed in one run (docs/simulator.md)")
     p.set_defaults(func=run)
 
 
@@ -96,6 +100,28 @@ def _simulate(args, campaign, out):
         campaign = replace(campaign, signals=dict(campaign.signals, enabled=False))
 
     result = simulate(campaign, seed=args.seed)
+    if getattr(args, "samples", False):
+        if args.no_signals:
+            from .._errors import InputError
+            raise InputError("--samples needs the force signals: leave out --no-signals")
+        _add_stream(result)
     written = result.write(out.dir, campaign.inputs)
     log.info(f"{counted(len(written), 'file')} written to {args.output}", extra=PROGRESS)
     return result, written
+
+
+def _add_stream(result) -> None:
+    """The sample stream and its plan, among the files the result writes."""
+    from .._errors import InputError
+    from ..live.plan import format_plan
+    from .stream import PLAN_FILE, SAMPLES_FILE, sample_stream, stream_plan
+    try:
+        result.texts[SAMPLES_FILE] = sample_stream(result, result.campaign.seed or 0)
+    except ValueError as exc:
+        raise InputError(f"--samples: {exc}", result.campaign.source) from None
+    plan = stream_plan(result)
+    if plan is not None:
+        result.texts[PLAN_FILE] = format_plan(plan)
+    else:
+        log.warning("--samples: a feature is probed in two separate runs, so no plan.toml is written "
+                    "(a plan takes each feature once)")

@@ -80,17 +80,27 @@ class IKResult:
     x_dir: np.ndarray
 
 
+#: the travel [m] taken for a prismatic joint without limits
+_FREE_TRAVEL = 0.1
+
+
 def joint_limits(desc) -> tuple[np.ndarray, np.ndarray]:
-    """(lower, upper) [rad]; a joint without limits gets (-pi, pi)."""
-    lo = np.array([-np.pi if j.lower is None else j.lower for j in desc.joints])
-    hi = np.array([np.pi if j.upper is None else j.upper for j in desc.joints])
+    """(lower, upper) [rad] ([m] for a prismatic joint) of each encoder column; a joint without limits gets
+    (-pi, pi) (a prismatic one +-0.1 m)."""
+    free = [_FREE_TRAVEL if j.prismatic else np.pi for j in desc.encoders]
+    lo = np.array([-f if j.lower is None else j.lower for j, f in zip(desc.encoders, free)])
+    hi = np.array([f if j.upper is None else j.upper for j, f in zip(desc.encoders, free)])
     return lo, hi
 
 
 def random_q(desc, n: int, rng, margin: float = 0.05) -> np.ndarray:
-    """(n, J) joint angles [rad] uniform within the limits less ``margin`` (full turns clipped to +-pi)."""
+    """(n, J) joint values uniform within the limits less ``margin`` [rad] (full turns clipped to +-pi; a
+    prismatic joint keeps ``margin`` of its travel from each end)."""
     lo, hi = joint_limits(desc)
-    lo, hi = np.maximum(lo, -np.pi) + margin, np.minimum(hi, np.pi) - margin
+    prismatic = np.array([j.prismatic for j in desc.encoders])
+    gap = np.where(prismatic, margin * (hi - lo), margin)
+    lo = np.where(prismatic, lo, np.maximum(lo, -np.pi)) + gap
+    hi = np.where(prismatic, hi, np.minimum(hi, np.pi)) - gap
     return rng.uniform(lo, hi, size=(n, desc.n_joints))
 
 

@@ -82,31 +82,34 @@ class SynthCampaign:
     reference_points: PointSet | None = None     # tracker points (feature "", with ref)
     reference_true: np.ndarray | None = None     # their true ball centres [m]
     T_ref_base: np.ndarray | None = None
+    #: per joint column: its unit suffix and factor from SI (ArmDescription.joint_column_units; () all degrees)
+    column_units: tuple = ()
 
     def write(self, out_dir) -> dict:
         """Write ``points.csv``, ``points-ref.csv`` (with reference points) and ``artefacts.toml``
         (docs/formats.md §3, §4); returns ``{role: Path}``."""
         out = Path(out_dir)
-        files = {"points": _write_points(out / "points.csv", self.points)}
+        files = {"points": _write_points(out / "points.csv", self.points, self.column_units)}
         if self.reference_points is not None:
-            files["reference"] = _write_points(out / "points-ref.csv", self.reference_points)
+            files["reference"] = _write_points(out / "points-ref.csv", self.reference_points, self.column_units)
         text = format_artefacts(self.artefacts.features.values(), self.artefacts.distances)
         files["artefacts"] = atomic_write_text(out / "artefacts.toml", text)
         return files
 
 
-def _write_points(path, pts: PointSet) -> Path:
+def _write_points(path, pts: PointSet, column_units=()) -> Path:
     cols = {"measurement": pts.measurement, "feature": pts.feature}
     for j in range(pts.n_joints):
-        cols[f"q{j + 1}_deg"] = np.degrees(pts.q[:, j])
+        unit, factor = column_units[j] if column_units else ("deg", None)
+        cols[f"q{j + 1}_{unit}"] = np.degrees(pts.q[:, j]) if factor is None else pts.q[:, j] * factor
     if pts.force is not None:
         for k, a in enumerate("xyz"):
             cols[f"f{a}_N"] = pts.force[:, k]
     if pts.temperature is not None:
         cols["temperature_C"] = pts.temperature
-    if pts.ref is not None:
+    for m in range(pts.n_markers):
         for k, a in enumerate("xyz"):
-            cols[f"{a}_ref_mm"] = pts.ref[:, k] * 1e3
+            cols[f"{a}{'' if pts.n_markers == 1 else m + 1}_ref_mm"] = pts.ref[:, m, k] * 1e3
     return write_csv(path, cols, fmt="%.15g")
 
 
@@ -129,6 +132,27 @@ def random_truth(model: ArmModel, rng, length: float = 50e-6, angle: float = 1e-
 
 #: the sphere points' normals: uniform on the cap of this half angle about the base z axis (cos = 0.2)
 SPHERE_CAP = float(np.arccos(0.2))
+
+
+def _tracker_points(model: ArmModel, p_true, spec: SynthSpec, rng, T_ref_base=None):
+    """``(points, T_ref_base, true ball centres)`` of ``spec.reference_points`` free points a tracker sees
+    (the ball centre itself, marker 1), in ``T_ref_base`` (default: drawn at random)."""
+    desc, nr = model.desc, spec.reference_points
+    needs_t = "temperature" in model.needs()
+    q_ref = random_q(desc, nr, rng)
+    x_true = model.ball_centres(q_ref, None, p_true, AuxData(temperature=np.full(nr, 20.0)) if needs_t else None)
+    if T_ref_base is None:
+        T_ref_base = np.eye(4)
+        T_ref_base[:3, :3] = rotation_xyz(rng.uniform(-np.pi, np.pi, 3))
+        T_ref_base[:3, 3] = rng.uniform(-2, 2, 3)
+    t_ref = np.asarray(T_ref_base, float)
+    seen = x_true + rng.normal(0, spec.noise, (nr, 3))
+    x_ref = seen @ t_ref[:3, :3].T + t_ref[:3, 3] + rng.normal(0, spec.reference_noise, (nr, 3))
+    points = PointSet(path="<synthetic reference>", measurement=np.array(["tracker"] * nr, dtype=object),
+                      feature=np.array([""] * nr, dtype=object), q=q_ref,
+                      temperature=np.full(nr, 20.0) if needs_t else None, ref=x_ref[:, None, :],
+                      lines=np.arange(2, nr + 2))
+    return points, t_ref, x_true
 
 
 def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0, p_true=None,
@@ -238,22 +262,9 @@ def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0,
                       force=w_art[:, :3].copy() if spec.force > 0 else None,
                       force_kind="xyz" if spec.force > 0 else None,
                       temperature=np.full(n, 20.0) if needs_t else None, lines=np.arange(2, n + 2))
-    reference_points, t_ref, x_true = None, None, None
-    if spec.reference_points:
-        nr = spec.reference_points
-        q_ref = random_q(desc, nr, rng)
-        x_true = model.ball_centres(q_ref, None, p_true, AuxData(temperature=np.full(nr, 20.0)) if needs_t else None)
-        if T_ref_base is None:
-            T_ref_base = np.eye(4)
-            T_ref_base[:3, :3] = rotation_xyz(rng.uniform(-np.pi, np.pi, 3))
-            T_ref_base[:3, 3] = rng.uniform(-2, 2, 3)
-        t_ref = np.asarray(T_ref_base, float)
-        seen = x_true + rng.normal(0, spec.noise, (nr, 3))
-        x_ref = seen @ t_ref[:3, :3].T + t_ref[:3, 3] + rng.normal(0, spec.reference_noise, (nr, 3))
-        reference_points = PointSet(path="<synthetic reference>", measurement=np.array(["tracker"] * nr, dtype=object),
-                                    feature=np.array([""] * nr, dtype=object), q=q_ref,
-                                    temperature=np.full(nr, 20.0) if needs_t else None, ref=x_ref,
-                                    lines=np.arange(2, nr + 2))
+    reference_points, t_ref, x_true = (_tracker_points(model, p_true, spec, rng, T_ref_base)
+                                       if spec.reference_points else (None, None, None))
     artefacts = Artefacts("<synthetic artefacts>", features, tuple(distances))
     truth = {name: float(v) for name, v in zip(model.spec.names, p_true)}
-    return SynthCampaign(points, artefacts, truth, p_true, targets, reference_points, x_true, t_ref)
+    return SynthCampaign(points, artefacts, truth, p_true, targets, reference_points, x_true, t_ref,
+                         desc.joint_column_units)

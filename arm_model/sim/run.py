@@ -10,7 +10,6 @@ import csv
 import io
 import json
 import logging
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,7 +41,6 @@ SIGNALS_DIR = "signals"
 TRUTH_HEADER = ("# TRUTH of a simulated campaign. No analysis reads this file: it holds the hidden true arm, "
                 "its effects and the artefacts' placement, only to score results.")
 
-_DEG = 180.0 / math.pi
 _FMT = {"q": "%.12f", "force": "%.6f", "temperature": "%.6f", "time": "%.3f", "ref": "%.9f"}
 
 
@@ -204,6 +202,98 @@ def _x_directions(plan: Plan, force: np.ndarray, rng) -> np.ndarray:
     return x
 
 
+def _truth_check(desc, truth, plan, q_enc, wrench, aux, labels):
+    """The truth check: the core model evaluated on exact readings lands on the target surface; (the true
+    ball centres (n, 3) [m], their distance from the targets (n,) [m]) or a NumericalError."""
+    no_sensor = [e for e in truth.model.effects if e.key != "force_sensor"]
+    from ..model import ArmModel
+    check_model = ArmModel(desc, tuple(no_sensor))
+    keep = np.concatenate([np.arange(truth.model.base_size)] +
+                          [np.arange(sl.start, sl.stop) for e, sl in truth.model.effect_slices()
+                           if e.key != "force_sensor"]).astype(int)
+    centres = check_model.ball_centres(q_enc, wrench, truth.p[keep], aux)
+    residual = np.linalg.norm(centres - plan.position, axis=1)
+    if residual.max() > 1e-9:
+        i = int(np.argmax(residual))
+        raise NumericalError(f"truth check failed: the true ball centre of {labels[i]} is "
+                             f"{residual[i] * 1e9:.3g} nm off its target")
+    return centres, residual
+
+
+def _readings(nz: dict, nrng, truth, q_true, q_enc, draw, wrench):
+    """The noisy readings (encoders, temperature, force sensor) of the exact ones."""
+    n = len(q_enc)
+    q_read = q_enc.copy()
+    if nz["probing_repeatability"] > 0:
+        jac = ball_jacobian(truth, q_true, draw.temperature, wrench)
+        dx = nrng.normal(0.0, nz["probing_repeatability"], (n, 3))
+        q_read += np.einsum("nij,nj->ni", np.linalg.pinv(jac), dx)
+    if nz["encoder_noise"] > 0:
+        q_read += nrng.normal(0.0, nz["encoder_noise"], q_read.shape)
+    if nz["encoder_resolution"] > 0:
+        q_read = np.round(q_read / nz["encoder_resolution"]) * nz["encoder_resolution"]
+    temp_read = draw.temperature + (nrng.normal(0.0, nz["temperature_noise"], n)
+                                    if nz["temperature_noise"] > 0 else 0.0)
+    f_read = truth.sensor_reading(wrench[:, :3])
+    if nz["force_noise"] > 0:
+        f_read = f_read + nrng.normal(0.0, nz["force_noise"], f_read.shape)
+    return q_read, temp_read, f_read
+
+
+def _signals(campaign, plan, draw, truth, f_read, srng, texts: dict) -> dict:
+    """The force signal of every measurement (its text added to ``texts``), read back as the reader does."""
+    sensor, nz = campaign.sensor, campaign.noise
+    chans = (0, 2) if sensor == "two-channel" else (0, 1, 2)
+    names = ("f_bend_N", "f_axial_N") if sensor == "two-channel" else ("fx_N", "fy_N", "fz_N")
+    signals = {}
+    for mid, idx in measurement_slices(plan.measurement).items():
+        peaks = np.array([[float(_FMT["force"] % v) for v in f_read[i, list(chans)]] for i in idx])
+        t, f = force_signal(draw.time[idx], peaks, truth.force_offset[list(chans)], draw.windows[mid],
+                            campaign.signals, nz["force_noise"], srng)
+        cols = {"time_s": (t, _FMT["time"])}
+        for c, name in enumerate(names):
+            cols[name] = (f[:, c], _FMT["force"])
+        text = _fast_csv(cols)
+        rel = f"{SIGNALS_DIR}/{safe_name(mid, '.csv')}"
+        if rel in texts:
+            raise InputError(f"two measurement ids give the same signal file name {rel}; rename the task "
+                             "ids (letters, digits and . _ + - keep a name as it is)", campaign.source)
+        texts[rel] = text
+        arr = np.loadtxt(io.StringIO(text), delimiter=",", skiprows=1, ndmin=2)
+        force = arr[:, 1:]
+        if sensor == "two-channel":
+            force = np.column_stack([force[:, 0], np.zeros(len(force)), force[:, 1]])
+        signals[mid] = ForceSignal(rel, arr[:, 0], force, "two-channel" if sensor == "two-channel" else "xyz")
+    return signals
+
+
+def _stats(campaign, plan, ik, residual, f_true) -> dict:
+    """The campaign's counts and checks, for the truth file."""
+    per_task = {t.id: len(set(plan.measurement[plan.task == k])) for k, t in enumerate(campaign.tasks)}
+    return {"points": int(len(plan)), "measurements": len(set(plan.measurement)), "measurements_per_task": per_task,
+            "ik_attempts_mean": float(ik.attempts.mean()), "ik_attempts_max": int(ik.attempts.max()),
+            "truth_residual_max_m": float(residual.max()),
+            "force_mean_N": float(np.linalg.norm(f_true, axis=1).mean()),
+            "force_max_N": float(np.linalg.norm(f_true, axis=1).max())}
+
+
+def _truth_columns(desc, plan, q_true, q_enc, centres, f_true, draw) -> dict:
+    """The columns of the truth points file: true and encoder joint values (each in its unit), true ball
+    centres, forces and temperature."""
+    cols = {"measurement": (plan.measurement, None), "feature": (plan.feature, None),
+            "file": (np.where(plan.reference, REFERENCE_FILE, POINTS_FILE), None)}
+    for k, (unit, factor) in enumerate(desc.joint_column_units):
+        cols[f"q{k + 1}_true_{unit}"] = (q_true[:, k] * factor, "%.12f")
+    for k, (unit, factor) in enumerate(desc.joint_column_units):
+        cols[f"q{k + 1}_enc_{unit}"] = (q_enc[:, k] * factor, "%.12f")
+    for k, a in enumerate("xyz"):
+        cols[f"{a}_true_mm"] = (centres[:, k] * 1e3, "%.9f")
+    for k, a in enumerate("xyz"):
+        cols[f"f{a}_true_N"] = (f_true[:, k], "%.9f")
+    cols["temperature_true_C"] = (draw.temperature, "%.6f")
+    return cols
+
+
 def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimResult:
     """Simulate ``campaign`` (seed: the campaign's unless given). ``progress``: optional callable
     taking a message, called at each stage (default: a progress record of this module's logger). Raises :class:`~arm_model.NumericalError` if a point
@@ -235,35 +325,9 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
         tau_g = tau_c = np.zeros_like(q_true)
     aux = truth.aux(draw.temperature, tau_g, tau_c)
     q_enc = truth.encoder_readings(q_true, aux)
-    # the truth check: the core model evaluated on exact readings lands on the target surface
-    no_sensor = [e for e in truth.model.effects if e.key != "force_sensor"]
-    from ..model import ArmModel
-    check_model = ArmModel(desc, tuple(no_sensor))
-    keep = np.concatenate([np.arange(truth.model.base_size)] +
-                          [np.arange(sl.start, sl.stop) for e, sl in truth.model.effect_slices()
-                           if e.key != "force_sensor"]).astype(int)
-    centres = check_model.ball_centres(q_enc, wrench, truth.p[keep], aux)
-    residual = np.linalg.norm(centres - plan.position, axis=1)
-    if residual.max() > 1e-9:
-        i = int(np.argmax(residual))
-        raise NumericalError(f"truth check failed: the true ball centre of {labels[i]} is "
-                             f"{residual[i] * 1e9:.3g} nm off its target")
-    # noise on the readings
-    nz, nrng = campaign.noise, rng["noise"]
-    q_read = q_enc.copy()
-    if nz["probing_repeatability"] > 0:
-        jac = ball_jacobian(truth, q_true, draw.temperature, wrench)
-        dx = nrng.normal(0.0, nz["probing_repeatability"], (n, 3))
-        q_read += np.einsum("nij,nj->ni", np.linalg.pinv(jac), dx)
-    if nz["encoder_noise"] > 0:
-        q_read += nrng.normal(0.0, nz["encoder_noise"], q_read.shape)
-    if nz["encoder_resolution"] > 0:
-        q_read = np.round(q_read / nz["encoder_resolution"]) * nz["encoder_resolution"]
-    temp_read = draw.temperature + (nrng.normal(0.0, nz["temperature_noise"], n)
-                                    if nz["temperature_noise"] > 0 else 0.0)
-    f_read = truth.sensor_reading(wrench[:, :3])
-    if nz["force_noise"] > 0:
-        f_read = f_read + nrng.normal(0.0, nz["force_noise"], f_read.shape)
+    centres, residual = _truth_check(desc, truth, plan, q_enc, wrench, aux, labels)
+    nz = campaign.noise
+    q_read, temp_read, f_read = _readings(nz, rng["noise"], truth, q_true, q_enc, draw, wrench)
     # files
     say("writing files in memory ...")
     sensor = campaign.sensor
@@ -272,8 +336,8 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
 
     def points_columns(rows, with_ref):
         cols = {"measurement": (plan.measurement[rows], None), "feature": (plan.feature[rows], None)}
-        for k in range(desc.n_joints):
-            cols[f"q{k + 1}_deg"] = (q_read[rows, k] * _DEG, _FMT["q"])
+        for k, (unit, factor) in enumerate(desc.joint_column_units):
+            cols[f"q{k + 1}_{unit}"] = (q_read[rows, k] * factor, _FMT["q"])
         if sensor == "xyz":
             for k, a in enumerate("xyz"):
                 cols[f"f{a}_N"] = (f_read[rows, k], _FMT["force"])
@@ -299,58 +363,22 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
     points = ref_points = None
     if main_rows.size:
         texts[POINTS_FILE] = _csv_text(points_columns(main_rows, False))
-        points = parse_points(texts[POINTS_FILE], POINTS_FILE, desc.n_joints)
+        points = parse_points(texts[POINTS_FILE], POINTS_FILE, desc.joint_quantities)
     if ref_rows.size:
         texts[REFERENCE_FILE] = _csv_text(points_columns(ref_rows, True))
-        ref_points = parse_points(texts[REFERENCE_FILE], REFERENCE_FILE, desc.n_joints)
+        ref_points = parse_points(texts[REFERENCE_FILE], REFERENCE_FILE, desc.joint_quantities)
     texts[ARTEFACTS_FILE] = _artefacts_text(plan, campaign)
     artefacts = parse_artefacts(texts[ARTEFACTS_FILE], ARTEFACTS_FILE)
     # force signals, one a measurement
     signals = {}
     if sensor != "none" and campaign.signals["enabled"]:
         say("force signals ...")
-        chans = (0, 2) if sensor == "two-channel" else (0, 1, 2)
-        names = ("f_bend_N", "f_axial_N") if sensor == "two-channel" else ("fx_N", "fy_N", "fz_N")
-        srng = rng["signals"]
-        for mid, idx in measurement_slices(plan.measurement).items():
-            peaks = np.array([[float(_FMT["force"] % v) for v in f_read[i, list(chans)]] for i in idx])
-            t, f = force_signal(draw.time[idx], peaks, truth.force_offset[list(chans)], draw.windows[mid],
-                                campaign.signals, nz["force_noise"], srng)
-            cols = {"time_s": (t, _FMT["time"])}
-            for c, name in enumerate(names):
-                cols[name] = (f[:, c], _FMT["force"])
-            text = _fast_csv(cols)
-            rel = f"{SIGNALS_DIR}/{safe_name(mid, '.csv')}"
-            if rel in texts:
-                raise InputError(f"two measurement ids give the same signal file name {rel}; rename the task "
-                                 "ids (letters, digits and . _ + - keep a name as it is)", campaign.source)
-            texts[rel] = text
-            arr = np.loadtxt(io.StringIO(text), delimiter=",", skiprows=1, ndmin=2)
-            force = arr[:, 1:]
-            if sensor == "two-channel":
-                force = np.column_stack([force[:, 0], np.zeros(len(force)), force[:, 1]])
-            signals[mid] = ForceSignal(rel, arr[:, 0], force, "two-channel" if sensor == "two-channel" else "xyz")
+        signals = _signals(campaign, plan, draw, truth, f_read, rng["signals"], texts)
     f_true = wrench[:, :3]
-    per_task = {t.id: len(set(plan.measurement[plan.task == k])) for k, t in enumerate(campaign.tasks)}
-    stats = {"points": int(n), "measurements": len(set(plan.measurement)), "measurements_per_task": per_task,
-             "ik_attempts_mean": float(ik.attempts.mean()), "ik_attempts_max": int(ik.attempts.max()),
-             "truth_residual_max_m": float(residual.max()),
-             "force_mean_N": float(np.linalg.norm(f_true, axis=1).mean()),
-             "force_max_N": float(np.linalg.norm(f_true, axis=1).max())}
+    stats = _stats(campaign, plan, ik, residual, f_true)
     texts[TRUTH_FILE] = _truth_text(campaign, truth, plan, draw, stats)
-    tcols = {"measurement": (plan.measurement, None), "feature": (plan.feature, None),
-             "file": (np.where(is_ref, REFERENCE_FILE, POINTS_FILE), None)}
-    for k in range(desc.n_joints):
-        tcols[f"q{k + 1}_true_deg"] = (q_true[:, k] * _DEG, "%.12f")
-    for k in range(desc.n_joints):
-        tcols[f"q{k + 1}_enc_deg"] = (q_enc[:, k] * _DEG, "%.12f")
-    for k, a in enumerate("xyz"):
-        tcols[f"{a}_true_mm"] = (centres[:, k] * 1e3, "%.9f")
-    for k, a in enumerate("xyz"):
-        tcols[f"f{a}_true_N"] = (f_true[:, k], "%.9f")
-    tcols["temperature_true_C"] = (draw.temperature, "%.6f")
     texts[TRUTH_POINTS_FILE] = "# TRUTH: true values per captured point; no analysis reads this file.\n" + \
-        _csv_text(tcols)
+        _csv_text(_truth_columns(desc, plan, q_true, q_enc, centres, f_true, draw))
     truth_dict = {"p": truth.values, "aliases": truth.aliases, "p_vector": truth.p.copy(), "spec": truth.model.spec, "model": truth.model,
                   "effects": truth.settings, "effects_on": truth.effects_on(), "noise": dict(campaign.noise),
                   "placements": plan.placements, "T_ref_base": dict(plan.T_ref_base),

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._errors import NumericalError
-from ..chain import NUMPY_OPS, ball_in_last_frame, chain_point, elastic_displacement, probe_lever
+from ..chain import NUMPY_OPS, ball_in_last_frame, chain_point, elastic_displacement, has_stylus, probe_lever
 from ..description import ArmDescription
 from ..effects import (ApproachOffset, EncoderEccentricity, ForceSensorError, Geometry, JointCompliance,
                        JointHarmonics, LateralCompliance, ModelInputs, ProbeComplianceMatrix, ProbeThermalGrowth,
@@ -141,7 +141,7 @@ class Truth:
         if wrench is not None:
             geom = self._pose_geometry(q, geom, wrench)
         rot, lever = d.probe.rotation, d.probe.lever
-        if wrench is None:
+        if wrench is None or not has_stylus(lever):        # no stylus: nothing bends
             qe = (0.0, 0.0, 0.0)
         else:
             qe = elastic_displacement(geom.p_last, geom.compliance, list(np.asarray(wrench).T),
@@ -152,7 +152,7 @@ class Truth:
         rm = np.eye(3) if rot is None else np.array(rot)
         pts = tuple(np.concatenate([b, zero, zero + rm[k, 2], zero + rm[k, 0]]) for k, b in enumerate((bx, by, bz)))
         rows = [[np.tile(v, 4) if isinstance(v, np.ndarray) else v for v in r] for r in geom.rows]
-        x, y, z = chain_point(d.convention, rows, list(np.tile(q, (4, 1)).T), pts, NUMPY_OPS, d.axes)
+        x, y, z = chain_point(d.convention, rows, list(np.tile(q, (4, 1)).T), pts, NUMPY_OPS, d.chain_joints)
         p = np.column_stack([x, y, z]).reshape(4, n, 3)
         return p[0], p[2] - p[1], p[3] - p[1]
 
@@ -171,14 +171,14 @@ class Truth:
         q = np.asarray(q, dtype=float)
         n = q.shape[0]
         rot, lever = d.probe.rotation, d.probe.lever
-        r, o, u, c = joint_screws(d.convention, geom.rows, q, d.axes)
+        r, o, u, c = joint_screws(d.convention, geom.rows, q, d.chain_joints)
         rm = np.eye(3) if rot is None else np.array(rot, dtype=float)
         z, x = r @ rm[:, 2], r @ rm[:, 0]
         if load is not None:
             from .ik import probe_wrench
 
             wrench = probe_wrench(load[0], load[1], z, x)
-        if wrench is None:
+        if wrench is None or not has_stylus(lever):
             qe = (0.0, 0.0, 0.0)
         else:
             geom = self._pose_geometry(q, geom, wrench)      # their own derivative left out, as in pose
@@ -187,7 +187,9 @@ class Truth:
         b = np.column_stack([np.broadcast_to(v, (n,)) for v in ball_in_last_frame(geom.p_last, qe, NUMPY_OPS, rot, lever)])
         ball = o + np.einsum("nij,nj->ni", r, b)
         w = np.zeros((n, 6)) if wrench is None else np.asarray(wrench, dtype=float)
-        return (ball, z, x, point_jacobian(u, c, ball), direction_jacobian(u, z), direction_jacobian(u, x), w)
+        jn, nq = d.chain_joints, d.n_joints
+        return (ball, z, x, point_jacobian(u, c, ball, jn, nq), direction_jacobian(u, z, jn, nq),
+                direction_jacobian(u, x, jn, nq), w)
 
     def rotation(self, q, temperature) -> np.ndarray:
         """(N, 3, 3) rotation R_base_probe (columns: probe x, y, z in the base frame) at true angles."""
@@ -252,13 +254,13 @@ class Truth:
 def _random_base(rng, desc: ArmDescription, t: dict) -> np.ndarray:
     spec = param_spec(desc)
     p = np.zeros(spec.size)
-    m = len(desc.row_fields)
-    for i in range(desc.n_joints):
+    m, rows = len(desc.row_fields), len(desc.joints)
+    for i in range(rows):
         for k, unit in enumerate(spec.units[m * i: m * (i + 1)]):
             sigma = t["length_error"] if unit == "m" else t["angle_error"]
             p[m * i + k] = rng.normal(0.0, sigma)
     for k in range(3):
-        p[m * desc.n_joints + k] = rng.normal(0.0, t["probe_error"])
+        p[m * rows + k] = rng.normal(0.0, t["probe_error"])
     for name, value in t["errors"].items():
         p[spec.index(name)] = value
     return p

@@ -1,0 +1,523 @@
+"""A live measurement session: samples in, contacts, corrected points with their uncertainty, events and
+feature fits out (docs/live.md).
+
+    from arm_model.live import Session
+    with Session("aacmm7", "out/session-1") as session:        # the folder: the record (optional)
+        for t, q, wrench in my_sdk_stream():                    # [s], (J,) [rad], (3,) or (6,) [N, N m]
+            for item in session.push(t, q, wrench):
+                print(item)                                     # Contact, LivePoint, Event, FeatureFit
+
+Each contact gives one point at its force peak (:mod:`arm_model.live.contacts`), computed by the code of
+``aacmm tip`` (:func:`arm_model.commands.tip_centres`, every effect of a model file applied) and its
+uncertainty by :func:`arm_model.uncertainty.propagate`, so ``aacmm tip points.csv --arm ARM
+--uncertainty`` on the session's ``points.csv`` writes the session's ``tips.csv`` byte for byte.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+from .._csv import format_row
+from ..checks import limit_bounds
+from ..io import Feature, PointSet
+from .contacts import Contact, ContactDetector, ContactOptions
+from ..uncertainty import InputUncertainty
+from .features import FeatureFit, FeatureTracker
+from .plan import SessionPlan
+from .record import FILES, SessionRecord
+from .samples import Sample, SampleLayout, sample_header
+
+__all__ = ["Session", "LivePoint", "Event", "EVENT_KINDS", "PERIOD_SAMPLES", "GAP_FACTOR", "LIMIT_MARGIN_RAD",
+           "TIP_COLUMNS", "CONTACT_COLUMNS", "EVENT_COLUMNS", "FEATURE_COLUMNS", "points_columns"]
+
+#: the kinds of :class:`Event`
+EVENT_KINDS = ("over_force", "joint_limit", "dropped", "late", "bad_line", "bump", "plan", "end")
+#: intervals from which the nominal sample period is estimated (their median), unless given
+PERIOD_SAMPLES = 16
+#: a gap longer than this many nominal periods holds dropped samples
+GAP_FACTOR = 1.5
+#: a joint back inside its limits by this much re-arms its joint-limit event [rad] (0.05 deg)
+LIMIT_MARGIN_RAD = math.radians(0.05)
+
+
+@dataclass(frozen=True)
+class Event:
+    """Something the operator must know, as it happens: ``time`` [s] (the sample's), ``kind`` (one of
+    :data:`EVENT_KINDS`), ``message`` and ``count`` (dropped samples: how many)."""
+    time: float
+    kind: str
+    message: str
+    count: int = 1
+
+    def __str__(self) -> str:
+        return f"[{self.time:10.3f} s] {self.kind}: {self.message}"
+
+
+@dataclass(frozen=True)
+class LivePoint:
+    """The point of a contact. Lengths in metres, base frame.
+
+    Attributes:
+        index: 1-based (the contact's); contact: the :class:`Contact`; measurement, feature: its ids.
+        rigid, corrected: (3,) ball centres (``aacmm tip``'s); deflection: corrected - rigid.
+        u: (3,) standard uncertainties of ``corrected``; cov: (3, 3) its covariance.
+        over_force: |F| at the peak beyond the probe's range; beyond_limits: joints beyond their limits.
+        row: the row of ``tips.csv`` (``aacmm tip``'s columns); latency: seconds from the start of the
+        ``push`` of the sample that ended the contact to the point.
+    """
+    index: int
+    contact: Contact
+    measurement: str
+    feature: str
+    rigid: np.ndarray
+    corrected: np.ndarray
+    u: np.ndarray
+    cov: np.ndarray
+    over_force: bool
+    beyond_limits: tuple
+    row: dict
+    latency: float
+
+    @property
+    def deflection(self) -> np.ndarray:
+        return self.corrected - self.rigid
+
+    def __str__(self) -> str:
+        c, u = self.corrected * 1e3, self.u * 1e6
+        return (f"point {self.index}{' ' + self.feature if self.feature else ''}: ({c[0]:.4f}, {c[1]:.4f}, "
+                f"{c[2]:.4f}) mm, u ({u[0]:.1f}, {u[1]:.1f}, {u[2]:.1f}) um, |F| {self.contact.peak_force:.2f} N, "
+                f"deflection {np.linalg.norm(self.deflection) * 1e6:.1f} um"
+                + (" OVER-FORCE" if self.over_force else ""))
+
+
+class Session:
+    """A live session on one arm (see the module doc and docs/live.md).
+
+    Args:
+        arm: an :class:`~arm_model.model_file.Arm`, a description, or what ``--arm`` takes (a shipped
+            arm's name, a description or model file).
+        folder: the session folder (a new or empty folder; None: nothing recorded).
+        plan: a :class:`~arm_model.live.plan.SessionPlan` (features in order), or None (free points;
+            :meth:`begin_feature` adds features ad hoc).
+        contact: :class:`~arm_model.live.contacts.ContactOptions`.
+        inputs: the input uncertainties (:func:`arm_model.uncertainty.default_inputs` of the arm when None).
+        measurement: the points' measurement id (default: the plan's, else the folder's name, else "live").
+        rate: the nominal sample rate [Hz] (None: estimated from the first intervals).
+        layout: the stream's :class:`~arm_model.live.samples.SampleLayout` (its header is recorded and
+            raw lines are recorded as received); None: samples pushed from Python, recorded in SI.
+        inputs_files: files the session reads (never written over); status: more ``session.json`` keys.
+    """
+
+    def __init__(self, arm: Any, folder: str | Path | None = None, *, plan: SessionPlan | None = None,
+                 contact: ContactOptions = ContactOptions(), inputs: InputUncertainty | None = None,
+                 measurement: str | None = None, rate: float | None = None, layout: SampleLayout | None = None,
+                 inputs_files: Iterable = (), status: dict | None = None):
+        from ..model_file import Arm, load_model
+        from ..uncertainty import default_inputs
+        from ..uncertainty_cli import parameters_of
+        if not isinstance(arm, Arm):
+            arm = Arm(arm) if hasattr(arm, "joints") else load_model(arm, None)
+        self.arm, self.desc = arm, arm.desc
+        self.model, self.p = arm.model, arm.p
+        self.parameters = parameters_of(arm)
+        self.max_force = float(self.desc.probe.max_force)
+        self.contact_options = contact
+        self._detector = ContactDetector(contact)
+        self._force_kind = None if layout is None else layout.force_kind
+        self.inputs = inputs
+        self._default_inputs = (lambda has_force: default_inputs(self.desc, has_force=has_force,
+                                                                 model_probing=arm.probing_scatter))
+        self.plan = plan or SessionPlan()
+        self.measurement = measurement or self.plan.measurement or (Path(folder).name if folder else "live")
+        npar = 0 if self.parameters is None else len(self.parameters.names)
+        self.tracker = FeatureTracker(self.plan, self.desc.probe.ball_diameter, npar)
+        self._period = None if rate is None else 1.0 / float(rate)
+        self._gap_limit = -math.inf if rate is None else GAP_FACTOR * self._period    # learning: every interval
+        self._first_gaps: list = []
+        self._bounds = [(i, lo, hi) for i, (lo, hi) in enumerate(limit_bounds(self.desc))
+                        if math.isfinite(lo) or math.isfinite(hi)]
+        self._beyond: set = set()
+        self._over = False
+        self._last_t: float | None = None
+        self._t_push = 0.0
+        self.latest: Sample | None = None
+        self.latest_magnitude = 0.0
+        self.counts = dict.fromkeys(("samples", "contacts", "points", "bumps", "over_force", "joint_limit",
+                                     "dropped", "late", "bad_lines"), 0)
+        self.points: list[LivePoint] = []
+        self.events: list[Event] = []
+        self.layout = layout
+        self.record = None if folder is None else SessionRecord(folder, inputs_files, self._status(status))
+        if self.record is not None and self.plan.entries:
+            self.record.write_file("artefacts", self.plan.artefacts_text())
+        if layout is not None:
+            self._open_record(layout)
+
+    # -- samples in -----------------------------------------------------------------------------
+    def push(self, t: float, q: Sequence[float], wrench: Sequence[float] | None = None, trigger: bool | None = None,
+             temperature: float | None = None) -> tuple:
+        """One sample: time ``t`` [s], joint angles ``q`` (J,) [rad], the wrench of the part on the ball
+        (3,) [N] or (6,) [N, N m] in the probe frame (None: no force sensor), the trigger (the button
+        held) and the temperature [°C] when the stream has them. Returns what it brought, in order:
+        :class:`Event`, :class:`~arm_model.live.contacts.Contact`, :class:`LivePoint`,
+        :class:`~arm_model.live.features.FeatureFit` (mostly nothing)."""
+        q = tuple(float(x) for x in q)
+        if len(q) != self.desc.n_joints:
+            raise ValueError(f"q must have {self.desc.n_joints} angles, got {len(q)}")
+        w = None
+        if wrench is not None:
+            w = tuple(float(x) for x in wrench)
+            if len(w) not in (3, 6) or not all(map(math.isfinite, w)):
+                raise ValueError(f"wrench must be 3 or 6 finite numbers, got {wrench!r}")
+            w = w + (0.0, 0.0, 0.0) if len(w) == 3 else w
+        s = Sample(float(t), q, w, None if trigger is None else bool(trigger),
+                   None if temperature is None else float(temperature))
+        if self.layout is None:
+            self._layout_from(s, wrench)
+        return self.push_sample(s, self._sample_text(s))
+
+    def push_sample(self, s: Sample, raw: str | None = None, line: int | None = None) -> tuple:
+        """One :class:`~arm_model.live.samples.Sample` (SI); ``raw``: its text as received (recorded
+        verbatim), ``line``: its line in the stream."""
+        detector = self._detector
+        was_in = detector.in_contact
+        if was_in:                          # this sample may end the contact: the latency starts here
+            self._t_push = time.perf_counter()
+        t = s.t
+        last = self._last_t
+        out = ()
+        if last is not None:
+            if not t > last:
+                return self._late(s, raw, last)
+            if t - last > self._gap_limit:
+                out = self._gap(last, t)
+        self._last_t = t
+        self.counts["samples"] += 1
+        self.latest = s
+        rec = self.record
+        if rec is not None:
+            if raw is not None:
+                self._samples_buf.append(raw + "\n")
+            if time.monotonic() >= rec.next_flush:
+                rec.flush(self._progress())
+        w = s.wrench
+        m = 0.0 if w is None else math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+        self.latest_magnitude = m
+        if m > self.max_force or self._over:
+            out = out + self._watch_force(s, m)
+        if self._bounds:
+            q = s.q
+            for i, lo, hi in self._bounds:
+                x = q[i]
+                if x < lo or x > hi:
+                    out = out + self._watch_joints(s)
+                    break
+            else:
+                if self._beyond:
+                    out = out + self._watch_joints(s)
+        contact = detector.feed(s, m, line)
+        if contact is not None:
+            out = out + self._on_contact(contact)
+        elif was_in and not detector.in_contact:
+            self.counts["bumps"] = detector.bumps
+        return out
+
+    def _late(self, s: Sample, raw: str | None, last: float) -> tuple:
+        self.counts["late"] += 1
+        if self.record is not None and raw is not None:
+            self._samples_buf.append(raw + "\n")
+        return (self._event(s.t, "late", f"a sample at t = {s.t!r} s after one at {last!r} s: out of order or "
+                                         "repeated, skipped"),)
+
+    def bad_line(self, error: Exception, raw: str | None = None) -> Event:
+        """Count a line of the stream that is not a sample (its :class:`~arm_model.InputError`): it is
+        recorded in ``events.csv`` and skipped (never in ``samples.csv``)."""
+        self.counts["bad_lines"] += 1
+        return self._event(self._last_t if self._last_t is not None else math.nan, "bad_line", str(error))
+
+    def begin_feature(self, id: str, kind: str, diameter: float | None = None, points: int | None = None,
+                      u_diameter: float | None = None, form_error: float | None = None) -> None:
+        """Start an ad hoc feature now: the next ``points`` points (None: until the next one) belong to
+        it. ``diameter``, ``u_diameter``, ``form_error`` [m]: its certificate, if any."""
+        from ..io import FEATURE_KINDS
+        if kind not in FEATURE_KINDS:
+            raise ValueError(f"kind must be one of {', '.join(FEATURE_KINDS)}, got {kind!r}")
+        if kind in ("ring", "cylinder", "sphere") and diameter is None:
+            raise ValueError(f"a {kind} needs its diameter")
+        values = {k: v for k, v in (("diameter", diameter), ("u_diameter", u_diameter),
+                                    ("form_error", form_error)) if v is not None}
+        self.tracker.begin(Feature(id, kind, diameter, u_diameter, form_error, values), points)
+
+    def tick(self) -> None:
+        """Flush the record when it is due (call it when no sample came for a while)."""
+        if self.record is not None and not self.record.closed and time.monotonic() >= self.record.next_flush:
+            self.record.flush(self._progress())
+
+    # -- what it found -------------------------------------------------------------------------
+    @property
+    def fits(self) -> dict[str, FeatureFit]:
+        """The latest fit of every feature (and certified distance) by id."""
+        return self.tracker.fits
+
+    @property
+    def in_contact(self) -> bool:
+        return self._detector.in_contact
+
+    def thresholds(self) -> dict:
+        """The contact thresholds in force [N] (``on``, ``off``: the options', raised to the noise when it
+        demands) and ``noise``, the smoothed force's noise [N] (None before it is estimated)."""
+        d = self._detector
+        return {"on": d.on, "off": d.off, "noise": d.noise}
+
+    def noise(self) -> np.ndarray | None:
+        """(3,) the force sensor's noise per channel [N] from the samples out of contact
+        (:func:`arm_model.peaks.signal_noise`, as the contact detector last estimated it), or None before."""
+        return self._detector.raw_noise
+
+    def close(self, status: str = "complete", message: str = "the stream ended") -> tuple:
+        """End the session: the open contact, if any, gives its point; the record is flushed and closed
+        with ``status`` (``complete``, ``interrupted``, ``terminated``, ``stopped``) and ``message``."""
+        out = ()
+        if self.record is None or not self.record.closed:
+            self._t_push = time.perf_counter()
+            contact = self._detector.finish()
+            if contact is not None:
+                out = (self._event(contact.end, "end", f"the stream ended during contact {contact.index}: its point "
+                                                       "is taken at its peak so far"),) + self._on_contact(contact)
+        self.counts["bumps"] = self._detector.bumps
+        if self.record is not None and not self.record.closed:
+            self.record.close(status, message, self._progress())
+        return out
+
+    def __enter__(self) -> "Session":
+        return self
+
+    def __exit__(self, exc_type: type | None, exc: BaseException | None, tb: object) -> None:
+        if exc_type is None:
+            self.close()
+        elif issubclass(exc_type, KeyboardInterrupt):
+            self.close("interrupted", "interrupted (Ctrl-C)")
+        else:
+            self.close("stopped", f"stopped by an error: {exc_type.__name__}: {exc}")
+
+    # -- inside ---------------------------------------------------------------------------------
+    def _event(self, t: float, kind: str, message: str, count: int = 1) -> Event:
+        ev = Event(t, kind, message, count)
+        self.events.append(ev)
+        if self.record is not None:
+            self.record.append("events", _csv_line([_num(t), kind, count, message]))
+        return ev
+
+    def _gap(self, last: float, t: float) -> tuple:
+        """Dropped samples between ``last`` and ``t``: the gap against the nominal period (estimated from
+        the first :data:`PERIOD_SAMPLES` intervals, which are then checked too)."""
+        if self._period is None:
+            self._first_gaps.append((last, t))
+            if len(self._first_gaps) < PERIOD_SAMPLES:
+                return ()
+            self._period = float(np.median([b - a for a, b in self._first_gaps]))
+            self._gap_limit = GAP_FACTOR * self._period
+            gaps, self._first_gaps = self._first_gaps, []
+            return tuple(e for a, b in gaps for e in self._gap(a, b))
+        n = int(round((t - last) / self._period)) - 1
+        if n < 1:
+            return ()
+        self.counts["dropped"] += n
+        return (self._event(t, "dropped", f"{n} sample(s) missing between t = {last!r} and {t!r} s (nominal "
+                                          f"period {self._period * 1e3:.4g} ms)", n),)
+
+    def _watch_force(self, s: Sample, m: float) -> tuple:
+        """Over-force: one event a contact (re-armed once the contact, or bump, has ended)."""
+        if m > self.max_force:
+            if not self._over:
+                self._over = True
+                self.counts["over_force"] += 1
+                ev = self._event(s.t, "over_force", f"|F| = {m:.3f} N beyond the probe's calibrated range "
+                                                    f"({self.max_force:g} N)")
+                if self.record is not None:
+                    self.record.flush()
+                return (ev,)
+        elif not self._detector.in_contact:
+            self._over = False
+        return ()
+
+    def _watch_joints(self, s: Sample) -> tuple:
+        """Joint limits: one event each time a joint leaves its limits (re-armed once it is back inside by
+        :data:`LIMIT_MARGIN_RAD`)."""
+        out = ()
+        for i, lo, hi in self._bounds:
+            x = s.q[i]
+            if x < lo or x > hi:
+                if i not in self._beyond:
+                    self._beyond.add(i)
+                    self.counts["joint_limit"] += 1
+                    j = self.desc.joints[i]
+                    out = out + (self._event(s.t, "joint_limit", f"{j.name} at {math.degrees(x):.4f} deg, beyond "
+                                                                 f"its limits {math.degrees(lo):.4f} to "
+                                                                 f"{math.degrees(hi):.4f} deg"),)
+            elif i in self._beyond and lo + LIMIT_MARGIN_RAD <= x <= hi - LIMIT_MARGIN_RAD:
+                self._beyond.discard(i)
+        return out
+
+    def _point_set(self, c: Contact, feature: str) -> PointSet:
+        s = c.peak
+        w = s.wrench
+        kind = self._force_kind if w is not None else None
+        torque = None
+        if w is not None and self.layout is not None and self.layout.has_torque:
+            torque = np.array([w[3:]])
+        return PointSet(path=FILES["points"], measurement=np.array([self.measurement]), feature=np.array([feature]),
+                        q=np.array([s.q]), force=None if w is None else np.array([w[:3]]), torque=torque,
+                        force_kind=kind or ("xyz" if w is not None else None),
+                        temperature=None if s.temperature is None else np.array([s.temperature]),
+                        time=np.array([s.t]), lines=np.array([self.counts["points"] + 2]))
+
+    def _on_contact(self, c: Contact) -> tuple:
+        """The point of contact ``c``: ``aacmm tip``'s centres and uncertainty, recorded, then the fits."""
+        from ..commands import tip_centres, tip_table
+        from ..uncertainty import propagate
+        from ..uncertainty_cli import u_columns
+        feature = self.tracker.current
+        ps = self._point_set(c, feature)
+        centres = tip_centres(self.arm, ps)
+        row = tip_table(self.arm, ps, centres)
+        inputs = self.inputs if self.inputs is not None else self._default_inputs(ps.wrench is not None)
+        prop = propagate(self.model, self.p, ps.q, ps.wrench, self.arm.aux(ps), parameters=self.parameters,
+                         inputs=inputs, threads=1, systematic=True)
+        row.update(u_columns(prop))
+        beyond = tuple(self.desc.joints[i].name for i, lo, hi in self._bounds if not lo <= c.peak.q[i] <= hi)
+        point = LivePoint(c.index, c, self.measurement, feature, centres[0][0], centres[1][0], prop.u[0],
+                          prop.cov[0], bool(row["over_force"][0]), beyond, row, time.perf_counter() - self._t_push)
+        self.points.append(point)
+        self.counts["contacts"] += 1
+        self.counts["points"] += 1
+        self._record_point(point, ps)
+        fits = tuple(self.tracker.add(feature, point.corrected, prop.cov[0], prop.systematic[0]))
+        if self.record is not None:
+            for fit in fits:
+                r = fit.row(point.index)
+                self.record.append("features", _csv_line(r.values()))
+            self.record.flush()
+        return (c, point) + fits
+
+    def _record_point(self, point: LivePoint, ps: PointSet) -> None:
+        rec = self.record
+        if rec is None:
+            return
+        rec.append("points", format_row({k: v[0] for k, v in _points_values(ps).items()}, "%.17g"))
+        rec.append("tips", format_row({k: v[0] for k, v in point.row.items()}, "%.6f"))
+        c = point.contact
+        rec.append("contacts", _csv_line([c.index, point.measurement, point.feature, _num(c.start), _num(c.peak.t),
+                                          _num(c.end), c.samples, f"{c.peak_force:.6f}", int(point.over_force),
+                                          " ".join(point.beyond_limits), "" if c.line is None else c.line,
+                                          f"{point.latency * 1e3:.3f}"]))
+
+    def _progress(self) -> dict:
+        noise = self.noise()
+        return {"counts": dict(self.counts), "last_sample_time_s": self._last_t,
+                "force_noise_N": None if noise is None else [round(float(v), 6) for v in noise],
+                "thresholds_N": self.thresholds()}
+
+    def _status(self, extra: dict | None) -> dict:
+        from ..shipped import version
+        c = self.contact_options
+        return {"aacmm_version": version(), "arm": self.desc.name, "measurement": self.measurement,
+                "contact": {"source": c.source, "on_N": c.on, "off_N": c.off, "dwell_s": c.dwell,
+                            "smooth_s": c.smooth, "baseline_s": c.baseline},
+                "max_force_N": self.max_force, "files": dict(FILES), **(extra or {})}
+
+    def _open_record(self, layout: SampleLayout) -> None:
+        """Create the record's files once the stream's columns are known, each with its header."""
+        rec = self.record
+        if rec is None:
+            return
+        rec.open("samples", ",".join(layout.header))
+        self._samples_buf = rec.queue("samples")
+        rec.open("events", ",".join(EVENT_COLUMNS))
+        rec.open("points", ",".join(points_columns(self.desc.n_joints, layout)))
+        rec.open("tips", ",".join(TIP_COLUMNS))
+        rec.open("contacts", ",".join(CONTACT_COLUMNS))
+        rec.open("features", ",".join(FEATURE_COLUMNS))
+        rec.flush()
+
+    def _layout_from(self, s: Sample, wrench: Sequence[float] | None) -> None:
+        """The first sample pushed from Python sets the recorded columns (SI)."""
+        torque = wrench is not None and len(wrench) == 6
+        header = sample_header(self.desc.n_joints, "xyz" if s.wrench is not None else None, torque,
+                               s.trigger is not None, s.temperature is not None)
+        self.layout = SampleLayout(header, self.desc.n_joints, "<python>")
+        self._force_kind = self.layout.force_kind
+        self._open_record(self.layout)
+
+    def _sample_text(self, s: Sample) -> str:
+        lay = self.layout
+        if (s.wrench is not None) != (lay.force_kind is not None) or (s.trigger is not None) != lay.has_trigger \
+                or (s.temperature is not None) != lay.has_temperature:
+            raise ValueError("every sample pushed must have the same parts (wrench, trigger, temperature) as the first")
+        v = [s.t, *s.q]
+        if s.wrench is not None:
+            v += s.wrench[:6] if lay.has_torque else s.wrench[:3]
+        if s.temperature is not None:
+            v.append(s.temperature)
+        text = ",".join(map(repr, v))
+        return text if s.trigger is None else f"{text},{int(s.trigger)}"
+
+
+#: columns of ``contacts.csv``
+CONTACT_COLUMNS = ("contact", "measurement", "feature", "start_s", "peak_s", "end_s", "samples", "peak_force_N",
+                   "over_force", "beyond_limits", "line", "latency_ms")
+#: columns of ``events.csv``
+EVENT_COLUMNS = ("time_s", "kind", "count", "message")
+#: columns of ``features.csv``
+FEATURE_COLUMNS = ("point", "feature", "kind", "points", "size_mm", "u_size_mm", "certified_mm", "deviation_mm",
+                   "agrees", "form_mm", "u_form_mm", "note")
+
+
+#: columns of ``tips.csv``: those of ``aacmm tip --uncertainty`` (docs/formats.md §7)
+TIP_COLUMNS = ("measurement", "feature", "x_rigid_mm", "y_rigid_mm", "z_rigid_mm", "x_mm", "y_mm", "z_mm",
+               "dx_um", "dy_um", "dz_um", "deflection_um", "over_force", "u_x_mm", "u_y_mm", "u_z_mm")
+
+
+def points_columns(n_joints: int, layout: SampleLayout) -> list[str]:
+    """The columns of a session's ``points.csv`` (docs/formats.md §3) for a stream of ``layout``: the
+    angles in rad and the forces in N, torques in N m, so that each value is the sample's exactly."""
+    cols = ["measurement", "feature"] + [f"q{j + 1}_rad" for j in range(n_joints)]
+    cols += {"xyz": ["fx_N", "fy_N", "fz_N"], "two-channel": ["f_bend_N", "f_axial_N"]}.get(layout.force_kind, [])
+    cols += ["mx_Nm", "my_Nm", "mz_Nm"] if layout.has_torque else []
+    cols += ["temperature_C"] if layout.has_temperature else []
+    return cols + ["time_s"]
+
+
+def _points_values(ps: PointSet) -> dict:
+    """The points-format columns of a one-row point set (SI units: exact values of the samples)."""
+    cols = {"measurement": ps.measurement, "feature": ps.feature}
+    for j in range(ps.q.shape[1]):
+        cols[f"q{j + 1}_rad"] = ps.q[:, j]
+    if ps.force is not None:
+        if ps.force_kind == "two-channel":
+            cols["f_bend_N"], cols["f_axial_N"] = ps.force[:, 0], ps.force[:, 2]
+        else:
+            cols["fx_N"], cols["fy_N"], cols["fz_N"] = ps.force.T
+    if ps.torque is not None:
+        cols["mx_Nm"], cols["my_Nm"], cols["mz_Nm"] = ps.torque.T
+    if ps.temperature is not None:
+        cols["temperature_C"] = ps.temperature
+    cols["time_s"] = ps.time
+    return cols
+
+
+def _num(x: float) -> str:
+    return "" if x is None or not math.isfinite(x) else repr(float(x))
+
+
+def _csv_line(values: Iterable) -> str:
+    import csv
+    import io
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerow(list(values))
+    return buf.getvalue()

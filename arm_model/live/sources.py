@@ -1,0 +1,209 @@
+"""Where the samples of a live session come from (``aacmm live SOURCE``, docs/live.md):
+
+* a file: a recorded stream, replayed at its own time stamps (``--speed``, see :class:`Pacer`);
+* ``-``: standard input (a vendor SDK's adapter printing CSV lines, ``adapter | aacmm live - ...``);
+* ``tcp://HOST:PORT``: the session connects to a server that sends the lines (the header first);
+* ``udp://HOST:PORT``: the session listens on that address; each datagram holds one or more whole
+  lines. The header may be sent again (a repeated header line is skipped), so that a session started
+  late can join; data before the first header are counted and skipped.
+
+Every source yields ``(line number, bytes of the line without its end)`` and, while nothing comes, an
+idle ``None`` at least every :data:`TICK_S` seconds (so that the session flushes its record and the
+view stays alive). A stream ends at its end (end of file, the connection closed); a UDP source never
+ends by itself (``--stop-after-idle-s``, Ctrl-C or SIGTERM end it).
+"""
+from __future__ import annotations
+
+import os
+import re
+import selectors
+import socket
+import time
+from pathlib import Path
+from typing import Callable
+
+from .._errors import InputError, open_input
+
+__all__ = ["open_source", "LineSource", "Pacer", "TICK_S", "AHEAD_S"]
+
+#: the longest wait without a sign of life [s]
+TICK_S = 0.25
+#: a replayed sample is released at most this early [s]
+AHEAD_S = 0.01
+_CHUNK = 1 << 16
+
+
+class LineSource:
+    """Lines of one stream (see the module doc). ``name``: the stream for messages; ``replay``: True
+    for a file (paced at its time stamps); ``datagrams``: True for UDP (headers may repeat)."""
+    name = "<stream>"
+    replay = False
+    datagrams = False
+    _it = None
+
+    def lines(self):
+        """The one iterator over the stream (every call continues where the last stopped)."""
+        if self._it is None:
+            self._it = self._lines()
+        return self._it
+
+    def _lines(self):
+        raise NotImplementedError
+
+    def close(self) -> None:
+        pass
+
+
+class _FileSource(LineSource):
+    replay = True
+
+    def __init__(self, path: Path):
+        self.name = str(path)
+        self._fh = open_input(path, "the sample stream")
+
+    def _lines(self):
+        no = 0
+        for raw in self._fh:
+            no += 1
+            yield no, raw.rstrip(b"\r\n") if raw.endswith(b"\n") else raw
+
+    def close(self) -> None:
+        self._fh.close()
+
+
+class _FdSource(LineSource):
+    """Lines read from a file descriptor (standard input, a TCP socket) with idle ticks."""
+
+    def __init__(self, fd: int, name: str, owner: socket.socket | None = None):
+        self.fd, self.name, self._owner = fd, name, owner
+
+    def _read(self) -> bytes:
+        return os.read(self.fd, _CHUNK)
+
+    def _lines(self):
+        sel = selectors.DefaultSelector()
+        sel.register(self.fd, selectors.EVENT_READ)
+        rest, no = b"", 0
+        try:
+            while True:
+                if not sel.select(TICK_S):
+                    yield None
+                    continue
+                data = self._read()
+                if not data:
+                    break
+                parts = (rest + data).split(b"\n")
+                rest = parts.pop()
+                for raw in parts:
+                    no += 1
+                    yield no, raw.rstrip(b"\r")
+            if rest:
+                yield no + 1, rest.rstrip(b"\r")
+        finally:
+            sel.close()
+
+    def close(self) -> None:
+        if self._owner is not None:
+            self._owner.close()
+
+
+class _TcpSource(_FdSource):
+    def __init__(self, host: str, port: int, spec: str):
+        try:
+            sock = socket.create_connection((host, port), timeout=10)
+        except OSError as exc:
+            raise InputError(f"cannot connect to {spec}: {exc.strerror or exc}") from None
+        sock.settimeout(None)
+        super().__init__(sock.fileno(), spec, sock)
+        self._sock = sock
+
+    def _read(self) -> bytes:
+        try:
+            return self._sock.recv(_CHUNK)
+        except ConnectionError:
+            return b""
+
+
+class _UdpSource(LineSource):
+    datagrams = True
+
+    def __init__(self, host: str, port: int, spec: str):
+        self.name = spec
+        self._sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self._sock.bind((host, port))
+        except OSError as exc:
+            self._sock.close()
+            raise InputError(f"cannot listen on {spec}: {exc.strerror or exc}") from None
+        self._sock.settimeout(TICK_S)
+
+    @property
+    def address(self) -> tuple:
+        """The (host, port) bound (port 0 in the spec takes a free one)."""
+        return self._sock.getsockname()[:2]
+
+    def _lines(self):
+        no = 0
+        while True:
+            try:
+                data = self._sock.recv(65536)
+            except socket.timeout:
+                yield None
+                continue
+            for raw in data.split(b"\n"):
+                raw = raw.rstrip(b"\r")
+                if raw:
+                    no += 1
+                    yield no, raw
+
+    def close(self) -> None:
+        self._sock.close()
+
+
+_NET = re.compile(r"(tcp|udp)://(\[[^\]]+\]|[^:/\[\]]+):([0-9]{1,5})/?")
+
+
+def open_source(spec: str) -> LineSource:
+    """The source named on the command line (see the module doc); an InputError for what cannot be
+    opened (a missing file, a refused connection, an address in use)."""
+    if spec == "-":
+        import sys
+        return _FdSource(sys.stdin.fileno(), "<stdin>")
+    m = _NET.fullmatch(spec)
+    if m:
+        kind, host, port = m.group(1), m.group(2).strip("[]"), int(m.group(3))
+        if not 0 <= port <= 65535 or (kind == "tcp" and port == 0):
+            raise InputError(f"{spec}: the port must be from {0 if kind == 'udp' else 1} to 65535")
+        return (_TcpSource if kind == "tcp" else _UdpSource)(host, port, spec)
+    if re.match(r"[a-z]+://", spec):
+        raise InputError(f"{spec}: not a source: give a file, '-' (standard input), tcp://HOST:PORT or "
+                         "udp://HOST:PORT")
+    return _FileSource(Path(spec))
+
+
+class Pacer:
+    """Replays time stamps at ``speed`` times real time (0: as fast as possible): :meth:`wait` returns
+    when the sample of time ``t`` [s] is due (up to :data:`AHEAD_S` early: the samples of the next 10 ms
+    go in one batch, not one sleep each), waiting in slices of at most :data:`TICK_S` and calling
+    ``idle()`` between them (``idle`` returns True to stop waiting: an interruption)."""
+
+    def __init__(self, speed: float):
+        self.speed = float(speed)
+        self._t0 = None
+        self._w0 = 0.0
+
+    def wait(self, t: float, idle: Callable[[], bool] | None = None) -> bool:
+        """True once due; False when ``idle()`` asked to stop."""
+        if self.speed <= 0:
+            return True
+        if self._t0 is None:
+            self._t0, self._w0 = t, time.monotonic()
+            return True
+        due = self._w0 + (t - self._t0) / self.speed
+        while True:
+            left = due - time.monotonic()
+            if left <= AHEAD_S:
+                return True
+            time.sleep(min(left, TICK_S))
+            if idle is not None and idle():
+                return False

@@ -1,0 +1,329 @@
+"""``aacmm live``: a live measurement session from a sample stream (docs/live.md).
+
+A thin layer over :class:`arm_model.live.Session`: it opens the source (:mod:`arm_model.live.sources`),
+reads the header, pushes each line's sample, prints points and events as they come, draws the live view
+(:mod:`viz.live`) and closes the session folder with how it ended. Ctrl-C and SIGTERM end the session
+cleanly (the folder is complete up to the last sample read; exit 130 / 143); a bad line is counted and
+skipped (``--strict``: it stops the session, exit 2).
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import logging
+import signal
+import time
+from pathlib import Path
+
+from arm_model import InputError
+from arm_model.cli import command_help
+from typing import TYPE_CHECKING
+
+from arm_model.commands import add_arm_options, arm_inputs, model_from_args, non_negative, number_in, port, positive
+
+if TYPE_CHECKING:          # only for the annotations: the live modules load when the command runs
+    from arm_model.live import SampleLayout, Session
+    from arm_model.live.sources import LineSource
+
+    from .live import LiveView
+
+__all__ = ["register", "run_live", "WARN_FIRST"]
+
+log = logging.getLogger(__name__)
+
+#: events of one kind (dropped, late, bad lines) printed one by one before they are only counted
+WARN_FIRST = 5
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "live", help=command_help("live"),
+        description="Run a live measurement session: read samples (time, joint angles, force, optional torque, "
+                    "temperature and trigger: docs/formats.md §8) from SOURCE, find each contact, write one "
+                    "deflection-corrected point a contact at its force peak with its uncertainty, flag over-force "
+                    "and joint-limit events as they happen, refit the features of a plan after each point, and "
+                    "record everything in the session folder as it goes (docs/live.md).",
+        epilog="Exit status: 0 the stream ended; 2 a bad header, option or file (nothing written), or a bad line "
+               "with --strict (the session is kept); 130/143 Ctrl-C/SIGTERM (the session is kept, complete up "
+               "to the last sample read).")
+    p.add_argument("source", help="a recorded stream (a file: replayed at its time stamps, see --speed), '-' "
+                                  "(standard input), tcp://HOST:PORT (connect to a server sending the lines) or "
+                                  "udp://HOST:PORT (listen for datagrams of whole lines)")
+    add_arm_options(p)
+    p.add_argument("-o", "--output", type=Path, required=True,
+                   help="the session folder: a new (or empty) folder, written as the session runs")
+    p.add_argument("--plan", type=Path, default=None, help="session plan TOML: the features in order, their kind, "
+                                                          "certificate and number of points (docs/formats.md §9)")
+    p.add_argument("--feature", default=None, metavar="KIND:ID[:DIAMETER_MM]",
+                   help="ad hoc: every point belongs to one feature of this kind (instead of --plan)")
+    p.add_argument("--measurement", default=None, help="the points' measurement id (default: the plan's, else "
+                                                        "the session folder's name)")
+    p.add_argument("--speed", type=number_in(0, 1e6), default=1.0,
+                   help="replay a file at this many times real time (default 1; 0: as fast as possible)")
+    p.add_argument("--rate-Hz", type=positive(), default=None,
+                   help="the nominal sample rate (default: estimated from the first intervals); longer gaps "
+                        "count as dropped samples")
+    p.add_argument("--strict", action="store_true", help="stop the session at the first bad line (default: "
+                                                          "count it, say where, and skip it)")
+    p.add_argument("--stop-after-idle-s", type=positive(), default=None, metavar="S",
+                   help="end the session when no line came for S seconds (a network stream that does not end)")
+    g = p.add_argument_group("contacts (docs/live.md)")
+    g.add_argument("--contact", choices=("force", "trigger"), default="force",
+                   help="find contacts from the force (default) or from the trigger column (the arm's button)")
+    g.add_argument("--contact-on-N", type=number_in(0, 1e5, low_open=True), default=0.1,
+                   help="the smoothed force, its zero removed, that starts a contact (default 0.1; raised to 8 "
+                        "times the noise the sensor shows out of contact)")
+    g.add_argument("--contact-off-N", type=number_in(0, 1e5, low_open=True), default=0.05,
+                   help="below it the contact ends (default 0.05, less than --contact-on-N; raised to 4 times "
+                        "the noise)")
+    g.add_argument("--min-dwell-s", type=number_in(0, 1e4), default=0.02,
+                   help="how long the force must stay at or above --contact-on-N for a point (default 0.02)")
+    g.add_argument("--smooth-s", type=number_in(0, 10), default=0.005,
+                   help="time constant of the force's smoothing for contacts (default 0.005; 0: none)")
+    g.add_argument("--baseline-s", type=number_in(0, 1e4), default=2.0,
+                   help="time constant of the zero that follows the sensor out of contact (default 2; 0: the "
+                        "force is not zeroed)")
+    v = p.add_argument_group("live view (docs/viewer.md)")
+    v.add_argument("--view", action="store_true", help="serve the live view on 127.0.0.1 (the URL is printed)")
+    v.add_argument("--port", type=port, default=None, help="the view's web port (default: the first free from 7000)")
+    v.add_argument("--fps", type=number_in(0.5, 60), default=10.0, help="display frames a second (default 10)")
+    v.add_argument("--linger-s", type=non_negative(), default=0.0, metavar="S",
+                   help="keep serving the view S seconds after the stream ended (Ctrl-C ends it)")
+    from arm_model.uncertainty_cli import add_input_options
+    add_input_options(p)
+    p.set_defaults(func=run_live)
+
+
+class _Stop:
+    """Ctrl-C and SIGTERM set a flag that the loop reads (the session then closes cleanly)."""
+
+    def __init__(self):
+        self.reason: str | None = None
+        self._old = {}
+
+    def __enter__(self) -> "_Stop":
+        for sig, reason in ((signal.SIGINT, "interrupted"), (signal.SIGTERM, "terminated")):
+            try:
+                self._old[sig] = signal.signal(sig, lambda *_, r=reason: self._set(r))
+            except ValueError:          # not the main thread
+                pass
+        return self
+
+    def _set(self, reason: str) -> None:
+        self.reason = self.reason or reason
+
+    def __exit__(self, *exc) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+
+
+def _header(source: LineSource, stop: _Stop) -> tuple:
+    """(line number, cells) of the stream's header: its first line that is not blank (UDP: the first that
+    is not a number, lines before it skipped and counted)."""
+    skipped = 0
+    for item in source.lines():
+        if stop.reason:
+            return None, None, skipped
+        if item is None:
+            continue
+        no, raw = item
+        text = _text(raw, source.name, no)
+        if not text.strip():
+            continue
+        cells = next(csv.reader([text.lstrip("\ufeff")]))
+        if source.datagrams and cells and _looks_numeric(cells[0]):
+            skipped += 1
+            continue
+        return no, cells, skipped
+    raise InputError("the stream ended before its header line (time_s, q1_deg ...)", source.name)
+
+
+def _looks_numeric(cell: str) -> bool:
+    try:
+        float(cell)
+        return True
+    except ValueError:
+        return False
+
+
+def _text(raw: bytes, name: str, no: int) -> str:
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise InputError("not UTF-8 text", name, no) from None
+
+
+def run_live(args: argparse.Namespace) -> int:
+    from arm_model.live import ContactOptions, Session, read_plan, single_feature_plan
+    from arm_model.live.record import check_new_folder
+    from arm_model.live.samples import SampleLayout
+    from arm_model.live.sources import open_source
+    from arm_model.uncertainty_cli import inputs_from_args
+    if args.plan is not None and args.feature is not None:
+        raise InputError("give --plan or --feature, not both")
+    try:
+        contact = ContactOptions(args.contact_on_N, args.contact_off_N, args.min_dwell_s, args.contact,
+                                 args.smooth_s, args.baseline_s)
+    except ValueError as exc:
+        raise InputError(f"contact options: {exc}") from None
+    arm = model_from_args(args)
+    plan = read_plan(args.plan) if args.plan else (single_feature_plan(args.feature) if args.feature else None)
+    files = [args.plan, *arm_inputs(args)] + ([Path(args.source)] if _is_file(args.source) else [])
+    check_new_folder(args.output, files)
+    source = open_source(args.source)
+    try:
+        with _Stop() as stop:
+            line, cells, skipped = _header(source, stop)
+            if cells is None:
+                log.info(f"{stop.reason} before the header: nothing written")
+                return 130 if stop.reason == "interrupted" else 143
+            layout = SampleLayout(cells, arm.desc.n_joints, source.name, line)
+            session = Session(arm, args.output, plan=plan, contact=contact, layout=layout,
+                              inputs=inputs_from_args(arm, args, layout.force_kind is not None),
+                              measurement=args.measurement, rate=args.rate_Hz, inputs_files=files,
+                              status=_status(args, source, files))
+            return _run(args, source, session, layout, stop, skipped)
+    finally:
+        source.close()
+
+
+def _is_file(spec: str) -> bool:
+    return spec != "-" and "://" not in spec
+
+
+def _status(args: argparse.Namespace, source: LineSource, files: list) -> dict:
+    from arm_model.shipped import provenance
+    tip = ["aacmm", "tip", "points.csv", "--arm", str(args.arm)]
+    tip += ["--tip-frame", args.tip_frame] if args.tip_frame else []
+    tip += ["--masses", str(args.masses)] if args.masses else []
+    for opt in ("encoder_resolution_deg", "u_compliance_rel", "u_probing_um"):
+        if getattr(args, opt, None) is not None:
+            tip += ["--" + opt.replace("_", "-"), repr(getattr(args, opt))]
+    if getattr(args, "u_force_N", None) is not None:
+        tip += ["--u-force-N", *map(repr, args.u_force_N)]
+    return {"source": source.name, "speed": args.speed if source.replay else None,
+            "plan": None if args.plan is None else str(args.plan), "feature": args.feature,
+            "reproduce": " ".join(tip + ["--uncertainty", "-o", "tips-again.csv"]),
+            **provenance([f for f in files if f is not None])}
+
+
+def _run(args: argparse.Namespace, source: LineSource, session: Session, layout: SampleLayout, stop: _Stop,
+         skipped: int) -> int:
+    """The session's loop: push every line's sample, show what it brings, keep the view drawn."""
+    from arm_model.live.sources import Pacer
+    view = _start_view(args, session)
+    pacer = Pacer(args.speed if source.replay else 0.0)
+    said: dict[str, int] = {}
+    header_text = ",".join(layout.header)
+    idle_since = time.monotonic()
+    watch_idle, datagrams, paced = args.stop_after_idle_s is not None, source.datagrams, pacer.speed > 0
+    status, message, code = "complete", "the stream ended", 0
+
+    def idle() -> bool:
+        session.tick()
+        if view is not None:
+            view.update()
+        return stop.reason is not None
+    try:
+        for item in source.lines():
+            if stop.reason:
+                break
+            if item is None:
+                if idle() or (args.stop_after_idle_s and time.monotonic() - idle_since > args.stop_after_idle_s):
+                    break
+                continue
+            if watch_idle:
+                idle_since = time.monotonic()
+            no, raw = item
+            try:
+                text = raw.decode("utf-8")
+                if not text or (datagrams and text == header_text) or not text.strip():
+                    continue
+                sample = layout.parse(text, no)
+            except (InputError, UnicodeDecodeError) as exc:
+                if isinstance(exc, UnicodeDecodeError):
+                    exc = InputError("not UTF-8 text", source.name, no)
+                _show(session.bad_line(exc), said)
+                if args.strict:
+                    status, message, code = "stopped", f"stopped at a bad line (--strict): {exc}", 2
+                    break
+                continue
+            if paced and not pacer.wait(sample.t, idle):
+                break
+            out = session.push_sample(sample, text, no)
+            if out:
+                for o in out:
+                    _show(o, said)
+            if view is not None:
+                view.update()
+    except OSError as exc:
+        status, message, code = "stopped", f"the stream failed: {exc.strerror or exc}", 2
+    if stop.reason and code == 0:
+        status = stop.reason
+        message = "interrupted (Ctrl-C)" if status == "interrupted" else "terminated (SIGTERM)"
+        code = 130 if status == "interrupted" else 143
+    for out in session.close(status, message):
+        _show(out, said)
+    _summary(session, said, skipped, status, message)
+    if view is not None:
+        _finish_view(args, session, view, stop)
+    if code == 2:
+        raise InputError(message.split(": ", 1)[1] if message.startswith("stopped at") else message)
+    return code
+
+
+def _start_view(args: argparse.Namespace, session: Session) -> LiveView | None:
+    if not args.view:
+        return None
+    from .live import LiveView
+    view = LiveView(session, port=args.port, fps=args.fps)
+    print(f"live view: {view.url}", flush=True)
+    return view
+
+
+def _finish_view(args: argparse.Namespace, session: Session, view: LiveView, stop: _Stop) -> None:
+    try:
+        view.update(force=True)
+        page = view.write_html(session.record.folder / "view.html")
+        log.info(f"the last view as a page -> {page}")
+        end = time.monotonic() + args.linger_s
+        if args.linger_s and not stop.reason:
+            log.info(f"serving the live view {args.linger_s:g} s more: {view.url} (Ctrl-C ends)")
+        while not stop.reason and time.monotonic() < end:
+            time.sleep(0.1)
+    finally:
+        view.close()
+
+
+def _show(out: object, said: dict) -> None:
+    """Print what the session brought: points (and fits) as info, events as warnings (dropped, late and
+    bad lines one by one :data:`WARN_FIRST` times, then only counted)."""
+    from arm_model.live import Event, FeatureFit, LivePoint
+    if isinstance(out, LivePoint):
+        log.info(str(out))
+    elif isinstance(out, FeatureFit):
+        log.info(f"  {out.describe()}")
+    elif isinstance(out, Event):
+        n = said[out.kind] = said.get(out.kind, 0) + 1
+        if out.kind in ("over_force", "joint_limit", "end") or n <= WARN_FIRST:
+            log.warning(str(out))
+        elif n == WARN_FIRST + 1:
+            log.warning(f"more '{out.kind}' events are counted, not shown (events.csv has each)")
+
+
+def _summary(session: Session, said: dict, skipped: int, status: str, message: str) -> None:
+    c = session.counts
+    folder = session.record.folder
+    log.info(f"{c['samples']} samples, {c['points']} points ({c['over_force']} over-force), {c['bumps']} touches "
+             f"shorter than {session.contact_options.dwell:g} s, dropped {c['dropped']}, late {c['late']}, bad lines "
+             f"{c['bad_lines']}" + (f", {skipped} datagram line(s) before the header" if skipped else "")
+             + f" -> {folder}")
+    noise = session.noise()
+    if noise is not None:
+        d = session.thresholds()
+        log.info(f"force noise out of contact: {', '.join(f'{v:.4f}' for v in noise)} N (x, y, z); contact "
+                 f"thresholds {d['on']:.3g} / {d['off']:.3g} N"
+                 + (" (raised to the noise)" if d["on"] > session.contact_options.on else ""))
+    if status != "complete":
+        log.warning(f"session {status}: {message}; {folder} holds every sample read until then "
+                    f"(session.json: status '{status}')")
