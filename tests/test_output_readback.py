@@ -12,7 +12,8 @@ file of a fit must also reproduce the fit (:func:`calibration.model_output.check
   the published model file gives the fit's own ball centres (an independent route: the reader, the command,
   its CSV at 1 nm resolution);
 - a physically valid arm whose model file the reader's bounds refuse is marked ``xfail(strict=True)``: the
-  bound belongs to the reader rules (helper "urdf"), and the test turns green when they are fixed.
+  bound belongs to the reader rules (helper "urdf"), and the test turns green when they are fixed (the tip
+  frame pointing back up the arm was such a case, fixed since).
 """
 from __future__ import annotations
 
@@ -58,8 +59,9 @@ BAD_FILES = [
     # the three cases found on real data
     ("arm-calibrated.toml", _model_with(JOINT_COMPLIANCE.format(v=2.9e6)), "model file",
      "not a plausible angular compliance"),
-    ("arm-calibrated.toml", re.sub(r"\nz_mm = [0-9.]+", "\nz_mm = -85.0", NOMINAL_TEXT, count=1), "model file",
-     "z of the probe must be > 0"),
+    ("arm-calibrated.toml", NOMINAL_TEXT.replace("bending_compliance_mm_per_N = 0.0142",
+                                                 "bending_compliance_mm_per_N = -0.0142"), "model file",
+     "must not be negative"),
     ("arm-calibrated.toml", re.sub(r"\nd_mm = [0-9.]+", "\nd_mm = 2.0e6", NOMINAL_TEXT, count=1), "model file",
      "not a plausible length"),
     # the other kinds
@@ -90,6 +92,15 @@ def test_a_file_its_reader_refuses_is_never_published(tmp_path, name, text, kind
     assert msg.startswith(f"{final / name}: this command wrote a {kind} that its reader refuses"), msg
     assert words in msg, msg
     assert tree(tmp_path) == set()                      # nothing published, no temporary folder left
+
+
+def test_a_probe_behind_the_last_joint_is_published(tmp_path):
+    """The third case found on real data, a model file with a negative probe z (the tip frame pointing back
+    up the arm): a valid arm since the reader's stylus rule takes it (the stylus hinge |p| behind the ball)."""
+    final = tmp_path / "out"
+    with output_folder(final, (), "calibrate") as out:
+        (out.dir / "arm.toml").write_text(re.sub(r"\nz_mm = [0-9.]+", "\nz_mm = -85.0", NOMINAL_TEXT, count=1))
+    assert (final / "arm.toml").is_file()
 
 
 def test_files_no_reader_takes_are_published_as_they_are(tmp_path):
@@ -243,11 +254,11 @@ def _z_of(turn_deg) -> np.ndarray:
     return rotation_xyz(np.radians(turn_deg))[:, 2]
 
 
-@pytest.mark.xfail(strict=True, reason="reader bound (helper urdf, arm_model/description.py probe rule): a model file "
-                   "whose probe lies behind the last joint with an unturned tip frame (z_mm < 0, no roll/pitch/yaw, "
-                   "stylus_length_mm given) is refused ('z of the probe must be > 0'), though the URDF reader takes the "
-                   "same arm; the output mechanism therefore refuses to publish it (exit 3)")
 def test_a_tip_frame_pointing_back_up_the_arm_is_published(tmp_path):
+    """Found by the property (a reader bound, helper urdf's): the model file of a URDF arm whose tip frame,
+    unturned, lies behind the last joint (probe z < 0, no roll/pitch/yaw) was refused by the reader
+    ('z of the probe must be > 0') and so never published (exit 3); marked xfail(strict) until the reader's
+    stylus rule took it (main d6b3abe)."""
     desc = _urdf_arm(tmp_path, (0.01, 0.0, -0.2), (0.0, 0.0, 0.0))     # 105 mm behind joint 7, frame unturned
     assert desc.probe.p_last[2] < 0
     fit, campaign = _fit(desc, 3, (), 2.0, 0)
