@@ -10,9 +10,13 @@ kind                      recognised by                              read back b
 ========================  =========================================  ===========================================
 model file                ``.toml`` with a ``convention`` key        ``load_model`` as every ``--arm`` reads it,
                                                                      with its covariance file as ``tip`` reads it
+session plan              ``.toml`` with ``measurement`` or a         ``read_plan`` (``aacmm live --plan``)
+                          feature's ``points``
 artefacts file            ``.toml`` with ``feature`` / ``distance``   ``read_artefacts``
 covariance file           ``.csv``, header ``parameter,unit,value,u``  ``read_covariance``
 points file               ``.csv``, header ``measurement,feature,``   ``read_points``
+                          and joint columns ``q1_...``
+sample stream             ``.csv``, header ``time_s`` (or ``t_s``)    ``aacmm live``'s line reader
                           and joint columns ``q1_...``
 force signal              ``.csv``, header starting ``time_s``        ``read_force_signal``
 residuals file            ``.csv`` with ``line`` and ``dx_um``, or     ``aacmm view --residuals``'s reader
@@ -31,6 +35,7 @@ from __future__ import annotations
 
 import importlib
 import json
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -53,12 +58,13 @@ class UnreadableOutput(RuntimeError):
 
 @dataclass(frozen=True)
 class Kind:
-    """A kind of output file: its ``name``, the file ``suffix``, ``matches(first_line)`` (the file's first
-    line, for the suffixes that several kinds share) and its reader (``"module:function"``, imported when
-    a file of the kind is read: ``function(path)`` returns what it read or raises an InputError)."""
+    """A kind of output file: its ``name``, the file ``suffix``, ``matches`` (of the file's top-level TOML
+    table for ``.toml``, of its first line otherwise: for the suffixes several kinds share) and its reader
+    (``"module:function"``, imported when a file of the kind is read: ``function(path)`` returns what it
+    read or raises an InputError)."""
     name: str
     suffix: str
-    matches: object
+    matches: Callable[[object], bool]
     reader: str
 
 
@@ -66,13 +72,23 @@ def _header(line: str) -> list[str]:
     return [c.strip() for c in line.split(",")]
 
 
+def _is_plan(data: dict) -> bool:
+    features = data.get("feature")
+    return "measurement" in data or (isinstance(features, list) and
+                                     any(isinstance(f, dict) and "points" in f for f in features))
+
+
 KINDS: tuple[Kind, ...] = (
-    Kind("model file", ".toml", lambda text: _toml_has(text, "convention"), "arm_model._readback:read_model"),
-    Kind("artefacts file", ".toml", lambda text: _toml_has(text, "feature", "distance"), "arm_model.io:read_artefacts"),
+    Kind("model file", ".toml", lambda data: "convention" in data, "arm_model._readback:read_model"),
+    Kind("session plan", ".toml", _is_plan, "arm_model.live.plan:read_plan"),
+    Kind("artefacts file", ".toml", lambda data: "feature" in data or "distance" in data,
+         "arm_model.io:read_artefacts"),
     Kind("covariance file", ".csv", lambda line: _header(line)[:4] == ["parameter", "unit", "value", "u"],
          "arm_model.model_file:read_covariance"),
     Kind("points file", ".csv", lambda line: _header(line)[:2] == ["measurement", "feature"]
          and any(h.startswith("q1_") for h in _header(line)), "arm_model.io:read_points"),
+    Kind("sample stream", ".csv", lambda line: _header(line)[0] in ("time_s", "t_s")
+         and any(h.startswith("q1_") for h in _header(line)), "arm_model._readback:read_samples"),
     Kind("force signal", ".csv", lambda line: _header(line)[0] == "time_s", "arm_model.io:read_force_signal"),
     # the viewer's reader (a floor above: imported by name, as arm_model.cli names every command's module)
     Kind("residuals file", ".csv", lambda line: {"line", "dx_um"} <= set(_header(line)) or "rx_um" in _header(line),
@@ -80,17 +96,17 @@ KINDS: tuple[Kind, ...] = (
     Kind("URDF", ".urdf", lambda line: True, "arm_model.urdf_import:_read_urdf"),
     Kind("JSON file", ".json", lambda line: True, "arm_model._readback:read_json"),
 )
+#: a TOML file of none of the kinds above (the simulator's truth): it must still be TOML
+OTHER_TOML = Kind("TOML file", ".toml", lambda data: True, "arm_model._readback:read_toml")
 
 
-def _toml_has(text: str, *keys: str) -> bool:
-    """Whether the TOML text has one of ``keys`` at its top level (a text that is not TOML has none: it is
-    then read back as TOML, and refused, by :func:`read_toml`)."""
+def _toml_data(path: Path) -> dict | None:
+    """The TOML at ``path`` (None when it is not TOML: it is then read back, and refused, as TOML)."""
     import tomllib
     try:
-        data = tomllib.loads(text)
-    except (tomllib.TOMLDecodeError, RecursionError):
-        return False
-    return any(k in data for k in keys)
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, RecursionError, UnicodeDecodeError):
+        return None
 
 
 def read_model(path: Path):
@@ -100,6 +116,24 @@ def read_model(path: Path):
     arm = load_model(path)
     parameters_of(arm)
     return arm
+
+
+def read_samples(path: Path) -> int:
+    """A sample stream (docs/formats.md §8) as ``aacmm live`` reads it, line by line; the number of samples."""
+    import re
+
+    from ._errors import read_text
+    from .live.samples import SampleLayout
+    lines = read_text(path, "the sample stream").splitlines()
+    header = _header(lines[0]) if lines else []
+    layout = SampleLayout(header, len({m.group(1) for h in header if (m := re.fullmatch(r"q(\d+)_\w+", h))}),
+                          str(path))
+    n = 0
+    for no, text in enumerate(lines[1:], start=2):
+        if text.strip():
+            layout.parse(text, no)
+            n += 1
+    return n
 
 
 def read_json(path: Path):
@@ -131,11 +165,11 @@ def kind_of(path: Path, name: str | None = None) -> Kind | None:
     kinds = [k for k in KINDS if k.suffix == suffix]
     if not kinds:
         return None
-    probe = path.read_text(encoding="utf-8", errors="replace") if suffix == ".toml" else _first_line(path)
-    hit = next((k for k in kinds if k.matches(probe)), None)
-    if hit is None and suffix == ".toml":
-        return Kind("TOML file", ".toml", None, "arm_model._readback:read_toml")
-    return hit
+    if suffix == ".toml":
+        data = _toml_data(path)
+        return next((k for k in kinds if data is not None and k.matches(data)), OTHER_TOML)
+    line = _first_line(path)
+    return next((k for k in kinds if k.matches(line)), None)
 
 
 def read_back(path: str | Path, published: str | Path | None = None):

@@ -91,7 +91,7 @@ def check_reproduces(result, back: Arm, path, urdf=None) -> None:
         from arm_model.urdf import BALL_FRAME
         from arm_model.urdf_import import load_arm
         try:
-            arm = load_arm(urdf, result.model.desc.tip_frame or BALL_FRAME)
+            arm = load_arm(urdf, _urdf_tip(urdf, result.model.desc.tip_frame or BALL_FRAME))
         except InputError as exc:
             raise UnreadableOutput(f"the URDF written is refused with its tip frame: {exc}", urdf) from None
         _same(rigid_centres(arm, pts.q), rigid_centres(back.desc, pts.q), REPRODUCE_TOL_M, pts,
@@ -105,6 +105,18 @@ def check_reproduces(result, back: Arm, path, urdf=None) -> None:
     if list(cov.names) != free or not np.all(np.abs(cov.matrix - result.cov) <= REPRODUCE_COV_REL * np.outer(u, u)):
         raise UnreadableOutput(f"the covariance file read back is not the fit's covariance of its free parameters "
                                f"({', '.join(free)})", back.covariance)
+
+
+def _urdf_tip(urdf, tip: str) -> str:
+    """The tip frame of a calibrated URDF: the link ``<tip>_calibrated`` (``_`` appended while taken) that
+    :func:`~arm_model.urdf_import.calibrated_urdf_text` adds for a tool offset no fixed joint could take, else
+    ``tip``."""
+    import re
+
+    from lxml import etree
+    names = [el.get("name") or "" for el in etree.parse(str(urdf)).getroot().findall("link")]
+    added = [n for n in names if re.fullmatch(re.escape(tip) + "_calibrated_*", n)]
+    return max(added, key=len) if added else tip
 
 
 def _same(got, want, tol: float, pts, what: str, path) -> None:
