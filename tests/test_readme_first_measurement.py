@@ -51,11 +51,6 @@ def test_readme_section_blocks_are_commands_then_their_output():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="calibration's estimate (helper calib): on the README's ring example the default "
-                   "calibrate moves probe.z by -176.6 mm (free, u 1.7 mm: the data cannot see it), through the flange to "
-                   "z = -91.6 mm, and evaluates the stylus deflection with a negative lever; the model file cannot say "
-                   "that (read back, the reader's stylus rule hangs the hinge |p| behind the ball: the fitted centres move "
-                   "by 76 nm), so the output mechanism refuses to publish it (exit 3, issue 22/25)")
 def test_readme_first_own_measurement_runs_as_written(tmp_path):
     """About 10 s of CPU (two calibrations); the commands run through a shim for the `aacmm` entry point
     that runs this checkout."""
