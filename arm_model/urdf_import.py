@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from ._csv import parse_number
-from ._errors import InputError, open_input, parse_toml, read_text
+from ._errors import InputError, did_you_mean, open_input, parse_toml, read_text
 from ._units import implausible
 from .description import (MIN_STYLUS, ArmDescription, JointRow, Mimic, Probe, TomlReader, Visual, default_lever,
                           load_description)
@@ -303,8 +303,8 @@ def _walk_to_root(u: _Urdf, tip_frame: str) -> list:
 
 def _chain(u: _Urdf, tip_frame: str) -> _Chain:
     if tip_frame not in u.link_elements:
-        raise InputError(f"no link named '{tip_frame}' (links: {', '.join(u.link_elements)})", u.path, None,
-                         "key '--tip-frame'")
+        raise InputError(f"no link named '{tip_frame}'{did_you_mean(tip_frame, u.link_elements)} (links: "
+                         f"{', '.join(u.link_elements)})", u.path, None, "key '--tip-frame'")
     chain = _walk_to_root(u, tip_frame)
     elastic = [j for j in chain if _ELASTIC_TYPES.get(j.name) == j.type]
     held = {j.name for j in elastic} if len(elastic) == len(ELASTIC_JOINTS) else set()
