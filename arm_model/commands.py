@@ -112,7 +112,7 @@ def model_from_args(args: argparse.Namespace) -> Arm:
         arm = load_model(*key[:2], masses=key[2])
         args._arm_loaded = (key, arm)
         log.debug(f"arm {args.arm}: '{arm.desc.name}', {arm.desc.n_joints} joints, effects: "
-                  f"{', '.join(e.describe() for e in arm.effects) or 'none'}"
+                  f"{', '.join(e.describe(arm.desc) for e in arm.effects) or 'none'}"
                   + (f", covariance {arm.covariance}" if arm.covariance else ""))
     return args._arm_loaded[1]
 
@@ -365,7 +365,7 @@ def run_tip(args: argparse.Namespace) -> int:
         log.info(f"reference instrument: {k} marker(s) predicted in the frame of each row's session "
                  f"({', '.join(repr(s) for s in arm.tracker.sessions)})")
     if arm.effects:
-        log.info("effects applied: " + ", ".join(e.describe() for e in arm.effects))
+        log.info("effects applied: " + ", ".join(e.describe(arm.desc) for e in arm.effects))
     if kinds == {None}:
         log.info("no force columns: corrected = rigid (no deflection applied)")
     elif desc.probe.lever == 0.0:
@@ -403,5 +403,5 @@ def run_urdf(args: argparse.Namespace) -> int:
     log.info(f"URDF of '{desc.name}' ({desc.n_joints} joints + 3 elastic probe joints) -> {args.output}")
     if arm.effects:
         log.info("note: a URDF holds the geometry only; the model's effects ("
-              + ", ".join(e.describe() for e in arm.effects) + ") are not in it")
+              + ", ".join(e.describe(arm.desc) for e in arm.effects) + ") are not in it")
     return 0

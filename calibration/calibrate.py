@@ -448,7 +448,8 @@ def _dependent_reason(idf: Identifiability, name: str) -> str:
     if len(comb.terms) == 1 and name in idf.gauge:
         return "a rigid motion of the base frame: not observable from these data"
     if len(comb.terms) == 1:
-        return "absorbed by the artefacts' unknowns (centres, axes, transforms)"
+        return ("absorbed by the nuisance unknowns (the artefacts' centres, axes and transforms, the reference "
+                "instrument's frames, the markers' offsets)")
     return "not separable from the free parameters: " + comb.text()
 
 

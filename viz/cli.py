@@ -230,7 +230,7 @@ def _report(arm, sel, centres, d_um, shown, wrench, args, view, notes) -> None:
         log.info("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not measured and "
               "is taken as zero")
     if arm.effects:
-        log.info("effects applied to the ball centres: " + ", ".join(e.describe() for e in arm.effects)
+        log.info("effects applied to the ball centres: " + ", ".join(e.describe(arm.desc) for e in arm.effects)
               + " (the arm is drawn with its description's geometry)")
     if len(shown) == 1:
         i = shown[0]
