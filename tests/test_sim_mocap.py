@@ -194,3 +194,35 @@ def test_the_obvious_commands_on_a_simulated_motion_capture_campaign(robot_dir, 
     assert main(["view", points, "--arm", str(model), "--residuals", str(cal / "residuals.csv"),
                  "--html", str(tmp_path / "view.html")]) == 0
     assert (tmp_path / "view.html").stat().st_size > 10_000
+
+
+def test_view_draws_each_marker_and_where_the_instrument_saw_it(robot_dir, tmp_path, capsys):
+    """A model file holding the truth (description, sessions' frames, markers' offsets) and noise-free points:
+    the instrument's coordinates mapped back into the base frame by the model's frames land on the markers
+    the model places (1e-9 m), calibrate's reference residuals start at those markers, and ``aacmm view``
+    draws both with a scale from the data."""
+    from arm_model.tracker import Tracker
+    from viz.cli import _markers
+    from viz.residuals import parse_residuals, residual_origins
+
+    res = _simulate(robot_dir, compliance=False)
+    truth = res.truth
+    sessions = tuple(dict.fromkeys(res.points.session))
+    tracker = Tracker(sessions, [truth["T_ref_base"][s] for s in sessions], truth["marker_offsets"]["pose"])
+    model = tmp_path / "truth-model.toml"
+    model.write_text(format_model(truth["description"], tracker=tracker))
+    res.write(tmp_path / "sim")
+    arm = load_model(model)
+    points = read_points(tmp_path / "sim" / "points.csv", arm.desc.joint_quantities)
+    predicted, seen = _markers(arm, points)
+    assert predicted.shape == (len(points), 2, 3)
+    assert_close(seen, predicted, atol=1e-9)
+    text = ("measurement,feature,kind,line,residual_um,dx_um,dy_um,dz_um,standardized\n"
+            "pose-01,,reference,2,1,1,0,0,1\npose-01,,reference,2,1,0,1,0,1\n")
+    origins, _, skipped = residual_origins(parse_residuals(text), points, arm.ball_centres(points), predicted)
+    assert skipped == 0
+    assert_close(origins, predicted[0], atol=1e-12)
+    assert main(["view", str(tmp_path / "sim" / "points.csv"), "--arm", str(model), "--html",
+                 str(tmp_path / "view.html")]) == 0
+    out = capsys.readouterr().out
+    assert f"pink dots: {2 * len(points)} marker(s)" in out and "cyan lines" in out
