@@ -399,6 +399,14 @@ def _baseline_entry(base) -> dict:
             "tracker": None if base.tracker is None else base.tracker.to_dict()}
 
 
+def sessions_without_frame(res, test) -> list[str]:
+    """The sessions of the held-out data ``test`` (reference rows) that the fit ``res`` has no frame for."""
+    if test is None or res.tracker is None or test.reference is None:
+        return []
+    rows = np.all(np.isfinite(test.reference), axis=1)
+    return [s for s in dict.fromkeys(test.sessions[rows].astype(str).tolist()) if res.tracker.frame(s) is None]
+
+
 def _log_calibration(res, data, train, test, poses, warnings, validation, files) -> None:
     """The console report of ``aacmm calibrate``."""
     from .report import poorly_determined
@@ -432,6 +440,12 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
             for r in rows:
                 log.info(f"  {r['label']}: {with_u(r['before'], r['u_before'])} -> {with_u(r['after'], r['u_after'])} "
                          f"{r['unit']} ({r['ratio']:.2f}x)")
+    new = sessions_without_frame(res, test)
+    if new:
+        log.info(f"note: held-out session(s) {', '.join(repr(s) for s in new)} have no frame from the training data: "
+                 "'frames and markers of the training fit' fits their frame on the held-out points themselves (the "
+                 "model and the markers' offsets as trained; another placement of the instrument is always "
+                 "registered anew), and the model file holds the frames of the training sessions only")
     if worse:
         log.warning("on the held-out data the calibrated model is WORSE than the nominal: "
                     + "; ".join(f"{r['label']} {r['before']:.4g} -> {r['after']:.4g} {r['unit']}" for r in worse))

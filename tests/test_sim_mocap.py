@@ -226,3 +226,23 @@ def test_view_draws_each_marker_and_where_the_instrument_saw_it(robot_dir, tmp_p
                  str(tmp_path / "view.html")]) == 0
     out = capsys.readouterr().out
     assert f"pink dots: {2 * len(points)} marker(s)" in out and "cyan lines" in out
+
+
+def test_a_held_out_session_is_registered_anew_and_said_so(robot_dir, tmp_path, capsys):
+    """Holding out a whole session (another placement of the instrument): the held-out figure fits that
+    session's frame on its own points and says so; ``tip --reference-frame`` names the session the model file
+    has no frame for, and what to do."""
+    res = _simulate(robot_dir, postures=30, markers=1, sessions=2, noise_mm=0.1, compliance=False)
+    res.write(tmp_path / "sim")
+    urdf = tmp_path / "liftarm.urdf"
+    urdf.write_text(LIFT_ARM_URDF)
+    points = str(tmp_path / "sim" / "points.csv")
+    second = [m for m, s in zip(res.points.measurement, res.points.session) if s == "pose-s2"]
+    assert main(["calibrate", points, "--arm", str(urdf), "--tip-frame", TIP, "--holdout", ",".join(second),
+                 "-o", str(tmp_path / "cal")]) == 0
+    assert "held-out session(s) 'pose-s2' have no frame from the training data" in capsys.readouterr().out
+    assert main(["tip", points, "--arm", str(tmp_path / "cal" / "liftarm-calibrated.toml"), "--reference-frame",
+                 "-o", str(tmp_path / "tips.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "no reference frame for session 'pose-s2'" in err and "calibrated on" in err
+    assert not (tmp_path / "tips.csv").exists()
