@@ -815,7 +815,8 @@ def _dof(prob: Problem, n_rows: int, n_kept: int) -> tuple[int, int]:
     dof = n_rows - n_kept - n_nuis
     if dof <= 0:
         raise NumericalError(f"{n_rows} residuals for {n_kept} parameters and {n_nuis} nuisance unknowns: "
-                             "not enough data for a fit with redundancy")
+                             "not enough data for a fit with redundancy: give more points (poses), fewer free "
+                             "parameters (--hold, --free) or a smaller --holdout")
     return dof, n_nuis
 
 
