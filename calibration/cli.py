@@ -388,6 +388,9 @@ def run_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+#: a standardized residual this large is no noise but a wrong reading (the console says how to refit without it)
+GROSS_STANDARDIZED = 8.0
+
 NOMINAL_NOTE = ("nominal = the description with only the tip offset (probe or marker) fitted, the artefacts' "
                 "unknowns and the reference frame solved as for the calibrated model")
 
@@ -433,6 +436,11 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
         log.info(f"{len(res.outliers)} outlier(s) ({'dropped and refitted' if res.dropped else 'kept'}):")
         for o in res.outliers[:10]:
             log.info(f"  {o.measurement} {o.feature} line {o.line}: standardized {o.standardized:+.1f}")
+        gross = [o for o in res.outliers if abs(o.standardized) >= GROSS_STANDARDIZED]
+        if gross and not res.dropped:
+            log.warning(f"{len(gross)} outlier(s) at {GROSS_STANDARDIZED:g} standard deviations or more: a wrong "
+                        "reading (a swapped marker, a slipped ball) pulls every parameter towards it; "
+                        "--drop-outliers refits without them")
     for title, rows in (("training", val_train), ("held-out", val_test)):
         if rows:
             log.info(f"validation on {title} data (nominal -> calibrated; {NOMINAL_NOTE}; ± standard uncertainty, "

@@ -274,3 +274,23 @@ def test_a_held_out_session_is_registered_anew_and_said_so(robot_dir, tmp_path, 
     err = capsys.readouterr().err
     assert "no reference frame for session 'pose-s2'" in err and "calibrated on" in err
     assert not (tmp_path / "tips.csv").exists()
+
+
+def test_a_gross_reading_is_named_with_the_way_to_refit_without_it(robot_dir, tmp_path, capsys):
+    """A marker 30 mm off in one posture (a swapped marker): calibrate lists it and says how to refit without
+    it (kept by default, it pulls every parameter towards it)."""
+    res = _simulate(robot_dir, postures=30, markers=1, sessions=1, noise_mm=0.2, compliance=False)
+    res.write(tmp_path / "sim")
+    lines = (tmp_path / "sim" / "points.csv").read_text().splitlines()
+    cells = lines[6].split(",")
+    k = lines[0].split(",").index("x_ref_mm")
+    cells[k] = f"{float(cells[k]) + 30.0:.9f}"
+    lines[6] = ",".join(cells)
+    (tmp_path / "bad.csv").write_text("\n".join(lines) + "\n")
+    urdf = tmp_path / "liftarm.urdf"
+    urdf.write_text(LIFT_ARM_URDF)
+    assert main(["calibrate", str(tmp_path / "bad.csv"), "--arm", str(urdf), "--tip-frame", TIP, "--no-plots",
+                 "-o", str(tmp_path / "cal")]) == 0
+    out = capsys.readouterr()
+    assert f"{res.points.measurement[5]}  line 7: standardized" in out.out
+    assert "--drop-outliers refits without them" in out.err
