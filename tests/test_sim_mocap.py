@@ -294,3 +294,20 @@ def test_a_gross_reading_is_named_with_the_way_to_refit_without_it(robot_dir, tm
     out = capsys.readouterr()
     assert f"{res.points.measurement[5]}  line 7: standardized" in out.out
     assert "--drop-outliers refits without them" in out.err
+
+
+def test_close_loop_on_a_robot_with_a_prismatic_joint_runs_to_the_end(robot_dir, tmp_path, capsys):
+    """``close-loop`` the obvious way on postures of the lift arm (a prismatic lift; revolute joints sagging
+    under gravity): the library offers angle effects on the revolute joints only (an eccentricity of the lift
+    was a traceback) and the model file it writes reads back with its frame and marker."""
+    res = _simulate(robot_dir, postures=30, markers=1, sessions=1, noise_mm=0.1)
+    res.write(tmp_path / "sim")
+    urdf = tmp_path / "liftarm.urdf"
+    urdf.write_text(LIFT_ARM_URDF)
+    assert main(["close-loop", str(tmp_path / "sim" / "points.csv"), "--arm", str(urdf), "--tip-frame", TIP,
+                 "--max-effects", "1", "--library-only", "-o", str(tmp_path / "loop")]) == 0
+    out = capsys.readouterr().out
+    assert "per-joint effects lift not offered: a prismatic joint" in out
+    arm = load_model(next((tmp_path / "loop").glob("*-calibrated.toml")))
+    assert arm.tracker is not None and arm.tracker.offsets.shape == (1, 3)
+    assert all(not arm.desc.encoders[i].prismatic for e in arm.effects for i in (e.joints or ()))
