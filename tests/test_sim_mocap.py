@@ -17,6 +17,7 @@ import pytest
 
 from arm_model import InputError, PinocchioArm, read_points
 from arm_model.cli import main
+from arm_model.kinematics import probe_rotations
 from arm_model.model_file import format_model, load_model
 from arm_model.sim import campaign_from_dict, load_campaign, simulate
 from conftest import assert_close
@@ -311,3 +312,54 @@ def test_close_loop_on_a_robot_with_a_prismatic_joint_runs_to_the_end(robot_dir,
     arm = load_model(next((tmp_path / "loop").glob("*-calibrated.toml")))
     assert arm.tracker is not None and arm.tracker.offsets.shape == (1, 3)
     assert all(not arm.desc.encoders[i].prismatic for e in arm.effects for i in (e.joints or ()))
+
+
+#: the lift arm on a free-flying base (a floating joint at the root, as some exported URDFs have)
+FLOATING_URDF = LIFT_ARM_URDF.replace('<robot name="liftarm">', '<robot name="liftarm">\n  <link name="world"/>\n'
+                                      '  <joint name="world_joint" type="floating"><parent link="world"/>'
+                                      '<child link="base_link"/><origin xyz="1 2 0.3" rpy="0 0 0.4"/></joint>')
+
+
+def test_base_frame_starts_the_chain_after_a_floating_joint(tmp_path, capsys):
+    """A floating joint on the chain is refused with the option that helps (``--base-frame``); with it the tip
+    in the base link's frame is Pinocchio's placement of the tip relative to that link in the user's own file
+    (1e-12 m), the points file takes the chain's joints after the base only, the simulator takes the same key,
+    and the calibrated URDF is the user's file with only the chain's origins changed."""
+    import pinocchio as pin
+    urdf = tmp_path / "floating.urdf"
+    urdf.write_text(FLOATING_URDF)
+    with pytest.raises(InputError) as e:
+        load_model(urdf, TIP)
+    assert "--base-frame base_link" in str(e.value)
+    arm = load_model(urdf, TIP, base_frame="base_link")
+    assert arm.desc.joint_names == ("lift", "shoulder_yaw", "shoulder_pitch", "elbow", "wrist_roll", "wrist_pitch")
+    model = pin.buildModelFromUrdf(str(urdf))
+    data = model.createData()
+    q = np.random.default_rng(2).uniform(-1.0, 1.0, (5, arm.desc.n_joints))
+    q[:, 0] = np.abs(q[:, 0]) * 0.3
+    x, r = arm.model.ball_centres(q, None, arm.p), probe_rotations(arm.desc, q)
+    for qi, xi, ri in zip(q, x, r):
+        full = pin.neutral(model)
+        for name, v in zip(arm.desc.joint_names, qi):
+            jm = model.joints[model.getJointId(name)]
+            full[jm.idx_q: jm.idx_q + jm.nq] = [math.cos(v), math.sin(v)] if jm.nq == 2 else [v]   # continuous
+        pin.framesForwardKinematics(model, data, full)
+        T = data.oMf[model.getFrameId("base_link")].inverse() * data.oMf[model.getFrameId(TIP)]
+        assert_close(xi, T.translation, atol=1e-12)
+        assert_close(ri, T.rotation, atol=1e-12)
+    with pytest.raises(InputError) as e:
+        load_model(urdf, TIP, base_frame="finger")
+    assert e.value.column == "key '--base-frame'" and "not on the chain" in str(e.value)
+    # the simulator's key, then the user's commands with the option
+    (tmp_path / "c.toml").write_text('arm = "floating.urdf"\ntip_frame = "flange"\nbase_frame = "base_link"\n'
+                                     'sensor = "none"\n[truth]\nlength_error_mm = 0.5\n[[task]]\nkind = "mocap"\n'
+                                     'postures = 25\nnoise_mm = 0.1\n')
+    assert main(["simulate", str(tmp_path / "c.toml"), "-o", str(tmp_path / "sim")]) == 0
+    assert main(["calibrate", str(tmp_path / "sim" / "points.csv"), "--arm", str(urdf), "--tip-frame", TIP,
+                 "--base-frame", "base_link", "--no-plots", "-o", str(tmp_path / "cal")]) == 0
+    written = (tmp_path / "cal" / "liftarm-calibrated.urdf").read_text()
+    assert '<joint name="world_joint" type="floating"><parent link="world"/><child link="base_link"/><origin ' \
+           'xyz="1 2 0.3" rpy="0 0 0.4"/></joint>' in written
+    cal = load_model(tmp_path / "cal" / "liftarm-calibrated.urdf", TIP, base_frame="base_link")
+    fitted = load_model(tmp_path / "cal" / "liftarm-calibrated.toml")
+    assert_close(cal.model.ball_centres(q, None, cal.p), fitted.model.ball_centres(q, None, fitted.p), atol=1e-9)

@@ -57,7 +57,7 @@ def _split(key: str) -> tuple[str, str] | None:
 
 _S = {
     "top": {"name": ("text", "campaign", None), "seed": ("count", 0, None), "arm": ("text", None, None),
-            "tip_frame": ("text", None, None),
+            "tip_frame": ("text", None, None), "base_frame": ("text", None, None),
             "sensor": ("text", "xyz", None), "truth": ("table", None, None), "noise": ("table", None, None),
             "environment": ("table", None, None), "operator": ("table", None, None),
             "signals": ("table", None, None), "task": ("table", None, None),
@@ -419,15 +419,17 @@ def _joint_indices(ctx, desc: ArmDescription, names, table, revolute: bool) -> t
     return tuple(_joint_index(ctx, desc, n, table, "joints", revolute) for n in names)
 
 
-def _load_arm(ctx, arm_path: Path, tip_frame: str | None) -> ArmDescription:
-    """The campaign's arm; a tip frame the URDF refuses is the campaign's ``tip_frame`` key's error (the
-    command-line option a command would name does not exist here)."""
+def _load_arm(ctx, arm_path: Path, tip_frame: str | None, base_frame: str | None) -> ArmDescription:
+    """The campaign's arm; a tip or base frame the URDF refuses is the campaign's ``tip_frame`` or
+    ``base_frame`` key's error (the command-line option a command would name does not exist here)."""
     try:
-        return load_arm(arm_path, tip_frame)
+        return load_arm(arm_path, tip_frame, base_frame=base_frame)
     except InputError as exc:
-        if exc.column != "key '--tip-frame'":
+        keys = {"key '--tip-frame'": "tip_frame", "key '--base-frame'": "base_frame"}
+        if exc.column not in keys:
             raise
-        raise ctx.error(f"{exc.reason} (in the URDF {arm_path})", (), "tip_frame") from None
+        reason = exc.reason.replace("--base-frame", "base_frame")
+        raise ctx.error(f"{reason} (in the URDF {arm_path})", (), keys[exc.column]) from None
 
 
 def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm=None) -> Campaign:
@@ -453,7 +455,7 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
             raise ctx.error(f"arm description not found: {arm_path}", (), "arm")
         if arm_path.suffix.lower() == ".urdf" and not top["tip_frame"]:
             raise ctx.error("an arm given as a URDF needs 'tip_frame' (the link at the ball centre)", (), "arm")
-        desc = _load_arm(ctx, arm_path, top["tip_frame"])
+        desc = _load_arm(ctx, arm_path, top["tip_frame"], top["base_frame"])
     # truth and its effects
     truth = _section(ctx, data.get("truth"), _S["truth"], ("truth",))
     for k in ("length_error", "angle_error", "probe_error"):
