@@ -97,6 +97,10 @@ def add_arm_options(p, help_arm: str = "the arm: a shipped arm's name (aacmm7), 
                    help="for an arm given as a URDF: the link at the ball centre, in any orientation (its z axis "
                         "is the probe's, along the tool; the chain runs from the root to it; force range and "
                         "compliances default to the seed paper's probe)")
+    p.add_argument("--base-frame", default=None, metavar="LINK",
+                   help="for an arm given as a URDF: the link its chain starts at (default the URDF's root; its "
+                        "frame is the base frame of every output), e.g. after a floating joint, or an arm on a torso "
+                        "whose joints the points do not give")
     p.add_argument("--masses", type=Path, default=None, metavar="TOML",
                    help="for a URDF arm: link masses and centres of mass ([[link]] name, mass_kg, com_x_mm, "
                         "com_y_mm, com_z_mm), replacing the URDF's <inertial>; gravity torques (joint "
@@ -106,13 +110,13 @@ def add_arm_options(p, help_arm: str = "the arm: a shipped arm's name (aacmm7), 
 def model_from_args(args: argparse.Namespace) -> Arm:
     """The arm named by :func:`add_arm_options`: description, effects and their parameter values
     (:class:`arm_model.model_file.Arm`), read by the one loader every subcommand uses."""
-    key = (args.arm, args.tip_frame, getattr(args, "masses", None))
+    key = (args.arm, args.tip_frame, getattr(args, "masses", None), getattr(args, "base_frame", None))
     cached = getattr(args, "_arm_loaded", None)
     if cached is None or cached[0] != key:        # read once per command line (arm_inputs reads it first)
-        arm = load_model(*key[:2], masses=key[2])
+        arm = load_model(*key[:2], masses=key[2], base_frame=key[3])
         args._arm_loaded = (key, arm)
         log.debug(f"arm {args.arm}: '{arm.desc.name}', {arm.desc.n_joints} joints, effects: "
-                  f"{', '.join(e.describe() for e in arm.effects) or 'none'}"
+                  f"{', '.join(e.describe(arm.desc) for e in arm.effects) or 'none'}"
                   + (f", covariance {arm.covariance}" if arm.covariance else ""))
     return args._arm_loaded[1]
 
@@ -162,6 +166,8 @@ def register(sub) -> None:
                                           "--tip-frame, to see the chain the toolkit reads from it "
                                           "(docs/formats.md §2)")
     u.add_argument("--tip-frame", default=None, metavar="LINK", help="for a URDF arm: the link at the ball centre")
+    u.add_argument("--base-frame", default=None, metavar="LINK",
+                   help="for a URDF arm: the link its chain starts at (default the root)")
     u.add_argument("-o", "--output", type=Path, required=True, help="output URDF")
     u.set_defaults(func=run_urdf)
 
@@ -365,7 +371,7 @@ def run_tip(args: argparse.Namespace) -> int:
         log.info(f"reference instrument: {k} marker(s) predicted in the frame of each row's session "
                  f"({', '.join(repr(s) for s in arm.tracker.sessions)})")
     if arm.effects:
-        log.info("effects applied: " + ", ".join(e.describe() for e in arm.effects))
+        log.info("effects applied: " + ", ".join(e.describe(arm.desc) for e in arm.effects))
     if kinds == {None}:
         log.info("no force columns: corrected = rigid (no deflection applied)")
     elif desc.probe.lever == 0.0:
@@ -403,5 +409,5 @@ def run_urdf(args: argparse.Namespace) -> int:
     log.info(f"URDF of '{desc.name}' ({desc.n_joints} joints + 3 elastic probe joints) -> {args.output}")
     if arm.effects:
         log.info("note: a URDF holds the geometry only; the model's effects ("
-              + ", ".join(e.describe() for e in arm.effects) + ") are not in it")
+              + ", ".join(e.describe(arm.desc) for e in arm.effects) + ") are not in it")
     return 0

@@ -142,6 +142,8 @@ class ArmDescription:
     source: str | None = field(default=None, compare=False)
     #: the URDF link at the ball centre when the arm was read from a URDF (``source``)
     tip_frame: str | None = field(default=None, compare=False)
+    #: the URDF link the chain starts at, when not the root (``--base-frame``)
+    base_frame: str | None = field(default=None, compare=False)
     #: the user's visuals when the arm was read from a URDF, for the viewer (:class:`Visual`); never written
     #: to a description TOML
     visuals: tuple = field(default=(), compare=False, repr=False)

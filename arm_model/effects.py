@@ -50,6 +50,12 @@ class Geometry:
     compliance: list              # 3 [m/N]
 
 
+def _joint(desc, i: int, prefix: str = "j") -> str:
+    """Encoder column ``i`` (0-based) as a person reads it: the joint's name in ``desc``, else ``j<i+1>``."""
+    names = getattr(desc, "joint_names", ())
+    return names[i] if 0 <= i < len(names) else f"{prefix}{i + 1}"
+
+
 @dataclass(frozen=True)
 class Effect:
     """Base class. Subclasses set ``key``, implement :meth:`param_defs` and :meth:`apply`.
@@ -97,8 +103,9 @@ class Effect:
         """Modify ``inputs`` and ``geom`` in place (lists of columns/expressions)."""
         raise NotImplementedError
 
-    def describe(self) -> str:
-        return self.key if self.joints is None else f"{self.key}({', '.join(f'j{i + 1}' for i in self.joints)})"
+    def describe(self, desc=None) -> str:
+        """The effect and its joints: ``j3`` by encoder column, or by name with the arm's description ``desc``."""
+        return self.key if self.joints is None else f"{self.key}({', '.join(_joint(desc, i) for i in self.joints)})"
 
 
 @dataclass(frozen=True)
@@ -382,9 +389,9 @@ class JointHarmonics(Effect):
                 k += 2
         inputs.q = q
 
-    def describe(self):
-        src = "" if self.source is None else f" of q{self.source + 1}"
-        js = "" if self.joints is None else ", ".join(f"j{i + 1}" for i in self.joints)
+    def describe(self, desc=None):
+        src = "" if self.source is None else f" of {_joint(desc, self.source, 'q')}"
+        js = "" if self.joints is None else ", ".join(_joint(desc, i) for i in self.joints)
         return f"{self.key}({js}; h {','.join(map(str, self.harmonics))}{src})"
 
 

@@ -387,15 +387,16 @@ def parse_model(text: str, path: str = "<string>") -> Arm:
     return Arm(desc, effects, values, u, states, covariance, scatter, tracker)
 
 
-def load_model(path, tip_frame: str | None = None, probe: dict | None = None, masses=None) -> Arm:
+def load_model(path, tip_frame: str | None = None, probe: dict | None = None, masses=None,
+               base_frame: str | None = None) -> Arm:
     """The arm of an ``--arm`` option: a model file or description TOML (effects applied), or a URDF
-    with ``tip_frame`` (no effects) and optionally a masses file (:func:`arm_model.urdf_import.load_masses`),
-    or a shipped arm's name (``aacmm7``)."""
+    with ``tip_frame`` (no effects), optionally a masses file (:func:`arm_model.urdf_import.load_masses`) and
+    the link its chain starts at (``base_frame``), or a shipped arm's name (``aacmm7``)."""
     from .shipped import arm_path
     path = arm_path(path)
-    if path.suffix.lower() == ".urdf" or masses is not None:   # masses with a TOML arm: load_arm says why not
+    if path.suffix.lower() == ".urdf" or masses is not None or base_frame is not None:   # load_arm says why not
         from .urdf_import import load_arm
-        return Arm(load_arm(path, tip_frame, probe, masses))
+        return Arm(load_arm(path, tip_frame, probe, masses, base_frame))
     if tip_frame:
         raise InputError("--tip-frame is for an arm given as a URDF; this arm is a TOML file", path)
     if not path.exists():

@@ -209,8 +209,10 @@ def check_sessions(tracker: Tracker, sessions, path) -> None:
     missing = [s for s in dict.fromkeys(np.asarray(sessions).tolist()) if tracker.frame(s) is None]
     if missing:
         have = ", ".join(repr(s) for s in tracker.sessions)
-        what = ("rows without a session column" if missing[0] == DEFAULT_SESSION
-                else f"session '{missing[0]}'")
-        raise InputError(f"the model file has no reference frame for {what} (its frames: {have}); a points file of "
-                         "a model with several sessions names each row's session in a 'session' column", path, None,
-                         "session")
+        if missing[0] == DEFAULT_SESSION:
+            raise InputError(f"the model file has no reference frame for rows without a session column (its frames: "
+                             f"{have}); a points file of a model with several sessions names each row's session in a "
+                             "'session' column", path, None, "session")
+        raise InputError(f"the model file has no reference frame for session '{missing[0]}' (its frames: {have}): "
+                         "it knows the frames of the sessions it was calibrated on; give the rows of those sessions, "
+                         "or calibrate with this session's points too", path, None, "session")

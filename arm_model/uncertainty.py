@@ -147,7 +147,8 @@ def default_inputs(desc, *, encoder=None, force=None, torque=None, compliance=No
         src["probing"] = (f"the model file's probing_scatter_um {model_probing * 1e6:.4g} um (its calibration's "
                           "variance components, net of the encoder and force-sensor noise)")
     else:
-        src["probing"] = "none (0): the arm gives no probing_scatter_um (a model file from calibrate does)"
+        src["probing"] = ("none (0): the arm gives no probing_scatter_um (a model file from calibrate on probed "
+                          "points does; a reference instrument's own noise is not the probe's)")
     for name, arr in (("encoder", enc), ("force", f), ("torque", t), ("compliance", c)):
         if not np.all(np.isfinite(arr)) or np.any(arr < 0):
             raise ValueError(f"{name} uncertainty must be finite and >= 0, got {arr}")

@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from ._csv import parse_number
-from ._errors import InputError, open_input, parse_toml, read_text
+from ._errors import InputError, did_you_mean, open_input, parse_toml, read_text
 from ._units import implausible
 from .description import (MIN_STYLUS, ArmDescription, JointRow, Mimic, Probe, TomlReader, Visual, default_lever,
                           load_description)
@@ -245,6 +245,7 @@ class _Chain:
     tip_joint: object
     T_last_tip: np.ndarray
     hinge: np.ndarray | None
+    base: str = ""          # the link the chain starts at (its frame is the arm's base frame)
 
 
 def _kind(jtype: str) -> str:
@@ -288,10 +289,11 @@ def _held(j, value: float) -> np.ndarray:
     return _T(j.origin) @ _motion("T" if j.type == "prismatic" else "R", tuple(axis), value)
 
 
-def _walk_to_root(u: _Urdf, tip_frame: str) -> list:
+def _walk_to_root(u: _Urdf, tip_frame: str, base_frame: str | None = None) -> list:
+    """The joints from the root (or from ``base_frame``, a link on the way) to ``tip_frame``, in order."""
     by_child = {j.child: j for j in u.robot.joints}
     chain, link, seen = [], tip_frame, set()
-    while link in by_child:
+    while link in by_child and link != base_frame:
         if link in seen:
             raise u.error(f"the joints form a loop through link '{link}'", by_child[link].name)
         seen.add(link)
@@ -301,11 +303,18 @@ def _walk_to_root(u: _Urdf, tip_frame: str) -> list:
     return chain
 
 
-def _chain(u: _Urdf, tip_frame: str) -> _Chain:
-    if tip_frame not in u.link_elements:
-        raise InputError(f"no link named '{tip_frame}' (links: {', '.join(u.link_elements)})", u.path, None,
-                         "key '--tip-frame'")
-    chain = _walk_to_root(u, tip_frame)
+def _chain(u: _Urdf, tip_frame: str, base_frame: str | None = None) -> _Chain:
+    for frame, key in ((tip_frame, "key '--tip-frame'"), (base_frame, "key '--base-frame'")):
+        if frame is not None and frame not in u.link_elements:
+            raise InputError(f"no link named '{frame}'{did_you_mean(frame, u.link_elements)} (links: "
+                             f"{', '.join(u.link_elements)})", u.path, None, key)
+    chain = _walk_to_root(u, tip_frame, base_frame)
+    base = chain[0].parent if chain else tip_frame
+    if base_frame is not None and base != base_frame:
+        ancestors = [j.parent for j in chain]
+        raise InputError(f"link '{base_frame}' is not on the chain from the root to '{tip_frame}' (its links: "
+                         f"{', '.join(ancestors + [tip_frame])}): the base frame is a link the chain passes "
+                         "through", u.path, None, "key '--base-frame'")
     elastic = [j for j in chain if _ELASTIC_TYPES.get(j.name) == j.type]
     held = {j.name for j in elastic} if len(elastic) == len(ELASTIC_JOINTS) else set()
     moving, pending, tool_prefix, hinge = [], np.eye(4), np.eye(4), None
@@ -320,7 +329,7 @@ def _chain(u: _Urdf, tip_frame: str) -> _Chain:
         if j.type not in ("revolute", "continuous", "prismatic"):
             raise u.error(f"joint '{j.name}' on the chain to '{tip_frame}' is {j.type}: the toolkit models "
                           "revolute, continuous and prismatic joints (a floating or planar joint is a base the "
-                          "URDF moves freely: start the chain after it)", j.name)
+                          f"URDF moves freely: start the chain after it, --base-frame {j.child})", j.name)
         mimic = _mimic(u, j)
         if mimic is not None and mimic.multiplier == 0.0:         # held at its offset: a fixed joint
             pending = pending @ _held(j, mimic.offset)
@@ -329,12 +338,12 @@ def _chain(u: _Urdf, tip_frame: str) -> _Chain:
         pending = np.eye(4)
         hinge = None
     if not moving:
-        raise InputError(f"no revolute, continuous or prismatic joint between the root and '{tip_frame}'", u.path,
+        raise InputError(f"no revolute, continuous or prismatic joint between '{base}' and '{tip_frame}'", u.path,
                          None, "key '--tip-frame'")
     tip_joint = chain[-1]
     if tip_joint.type != "fixed" and tip_joint.name not in held:
         tool_prefix = None
-    return _Chain(moving, tool_prefix, tip_joint, pending, hinge)
+    return _Chain(moving, tool_prefix, tip_joint, pending, hinge, base)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -523,8 +532,7 @@ def _link_frames(u: _Urdf, ch: _Chain) -> dict[str, tuple[int, np.ndarray]]:
     kids: dict[str, list] = {}
     for j in u.robot.joints:
         kids.setdefault(j.parent, []).append(j)
-    root = _walk_to_root(u, ch.moving[0][0].child)[0].parent
-    stack = [(root, -1, np.eye(4))] + [(j.child, i, np.eye(4)) for j, i in ((j, moving[j.name]) for j, _, _ in ch.moving)]
+    stack = [(ch.base, -1, np.eye(4))] + [(j.child, i, np.eye(4)) for j, i in ((j, moving[j.name]) for j, _, _ in ch.moving)]
     out = {}
     while stack:
         link, row, T = stack.pop()
@@ -600,7 +608,8 @@ def _visuals(u: _Urdf, ch: _Chain) -> tuple[Visual, ...]:
 
 
 def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None = None,
-                          name: str | None = None, masses: dict | None = None) -> ArmDescription:
+                          name: str | None = None, masses: dict | None = None,
+                          base_frame: str | None = None) -> ArmDescription:
     """Read the serial chain root -> ``tip_frame`` (a link name) of a URDF as a description.
 
     Args:
@@ -608,6 +617,8 @@ def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None =
         tip_frame: the link at the ball centre (or the tool point: a flange, a marker); its orientation is
             the probe frame's (z along the stylus, towards the ball). At the origin of the last moving joint
             it is a tip without a stylus (rigid: compliances 0).
+        base_frame: a link on the way from the root to ``tip_frame`` where the chain starts instead (its frame
+            is then the arm's base frame; the joints before it are not the arm's).
         probe: ball_diameter [m], max_force [N], bending_compliance_x/_y, axial_compliance [m/N]
             (default :data:`PAPER_PROBE`, the ball diameter from a sphere on the tip link).
         masses: link -> :class:`LinkMass` (see :func:`load_masses`), replacing the URDF's inertials.
@@ -620,23 +631,28 @@ def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None =
                 raise InputError(f"the masses name link '{lname}', which the URDF {u.path} does not have "
                                  f"(links: {', '.join(u.link_elements)})", where[0], where[1],
                                  "key 'link.name'")
-    ch = _chain(u, tip_frame)
+    ch = _chain(u, tip_frame, base_frame)
     rows = [_row(u, j, prefix, mimic, mass, com)
             for (j, prefix, mimic), (mass, com) in zip(ch.moving, _fold_masses(u, ch, masses))]
     return ArmDescription(name=name or u.robot.name or Path(path).stem, convention="urdf", joints=tuple(rows),
                           probe=_probe_of(u, ch, tip_frame, probe), source=str(path), tip_frame=tip_frame,
-                          visuals=_visuals(u, ch))
+                          visuals=_visuals(u, ch), base_frame=base_frame)
 
 
 def load_arm(path: str | Path, tip_frame: str | None = None, probe: dict | None = None,
-             masses: str | Path | None = None) -> ArmDescription:
+             masses: str | Path | None = None, base_frame: str | None = None) -> ArmDescription:
     """An arm from a description TOML, a shipped arm's name (``aacmm7``) or, with ``tip_frame``, a URDF
-    file; ``masses``: a masses file (:func:`load_masses`) for a URDF arm."""
+    file; ``masses``: a masses file (:func:`load_masses`) for a URDF arm; ``base_frame``: for a URDF, the link
+    the chain starts at (default its root)."""
     path = arm_path(path)
     if path.suffix.lower() == ".urdf":
         if not tip_frame:
             raise InputError("an arm given as a URDF needs --tip-frame (the link at the ball centre)", path)
-        return description_from_urdf(path, tip_frame, probe, masses=None if masses is None else load_masses(masses))
+        return description_from_urdf(path, tip_frame, probe, masses=None if masses is None else load_masses(masses),
+                                     base_frame=base_frame)
+    if base_frame is not None:
+        raise InputError("--base-frame is for an arm given as a URDF (where its chain starts); this arm is a TOML "
+                         "file", path)
     if masses is not None:
         raise InputError("--masses is for an arm given as a URDF; a description TOML carries its masses in its "
                          "[[joint]] rows (mass_kg, com_x_mm, com_y_mm, com_z_mm)", masses)
@@ -703,7 +719,7 @@ def calibrated_urdf_text(nominal: ArmDescription, calibrated: ArmDescription) ->
     if not nominal.tip_frame or not nominal.source or Path(nominal.source).suffix.lower() != ".urdf":
         return urdf_text(calibrated)
     u = _read_urdf(nominal.source)
-    ch = _chain(u, nominal.tip_frame)
+    ch = _chain(u, nominal.tip_frame, nominal.base_frame)
     names = [j.name for j, _, _ in ch.moving]
     if names != [j.name for j in nominal.joints] or names != [j.name for j in calibrated.joints]:
         raise InputError("the URDF's chain no longer matches the arm that was calibrated (was it edited?)",

@@ -448,7 +448,8 @@ def _dependent_reason(idf: Identifiability, name: str) -> str:
     if len(comb.terms) == 1 and name in idf.gauge:
         return "a rigid motion of the base frame: not observable from these data"
     if len(comb.terms) == 1:
-        return "absorbed by the artefacts' unknowns (centres, axes, transforms)"
+        return ("absorbed by the nuisance unknowns (the artefacts' centres, axes and transforms, the reference "
+                "instrument's frames, the markers' offsets)")
     return "not separable from the free parameters: " + comb.text()
 
 
@@ -814,7 +815,8 @@ def _dof(prob: Problem, n_rows: int, n_kept: int) -> tuple[int, int]:
     dof = n_rows - n_kept - n_nuis
     if dof <= 0:
         raise NumericalError(f"{n_rows} residuals for {n_kept} parameters and {n_nuis} nuisance unknowns: "
-                             "not enough data for a fit with redundancy")
+                             "not enough data for a fit with redundancy: give more points (poses), fewer free "
+                             "parameters (--hold, --free) or a smaller --holdout")
     return dof, n_nuis
 
 

@@ -131,6 +131,21 @@ def no_torque_reason(desc: ArmDescription, data: CalibrationData) -> str | None:
             "description)")
 
 
+def _per_joint_columns(desc: ArmDescription, skipped: list) -> dict[int, str]:
+    """{encoder column: joint name} of the joints a per-joint effect of the library (an angle's error or
+    compliance) may act on: the revolute ones; none on an arm whose chain has a joint following another
+    (rows and encoder columns differ there). What is left out goes to ``skipped``."""
+    if desc.coupled:
+        skipped.append(Skipped("per-joint effects", "a joint of the chain follows another (<mimic>): per-joint "
+                                                    "effects are not supported on such an arm"))
+        return {}
+    for i, j in enumerate(desc.encoders):
+        if j.prismatic:
+            skipped.append(Skipped(f"per-joint effects {j.name}", "a prismatic joint: the library's per-joint "
+                                                                 "effects model a joint angle"))
+    return {i: desc.encoders[i].name for i in desc.revolute_columns}
+
+
 def library_candidates(desc: ArmDescription, data: CalibrationData, families=None,
                        extra=()) -> tuple[list[Candidate], list[Skipped]]:
     """The library's candidates for ``desc`` and ``data``, and those left out with the reason.
@@ -145,24 +160,24 @@ def library_candidates(desc: ArmDescription, data: CalibrationData, families=Non
         raise ValueError(f"unknown candidate famil{'y' if len(unknown) == 1 else 'ies'} "
                          f"{', '.join(sorted(unknown))}; known: {', '.join(FAMILIES)}")
     pts = data.points
-    names = [j.name for j in desc.joints]
     out: list[Candidate] = []
     skipped: list[Skipped] = []
+    names = _per_joint_columns(desc, skipped)
     force = pts.force if pts.force is not None else np.zeros((len(pts), 3))
     axes_used = [a for a in range(3) if np.max(np.abs(force[:, a]), initial=0.0) > _ZERO_FORCE]
     if "eccentricity" in families:
-        for i, n in enumerate(names):
+        for i, n in names.items():
             out.append(Candidate(f"eccentricity {n}", EncoderEccentricity(joints=(i,), harmonics=(1, 2)),
                                  "eccentricity", n))
     if "joint_gain" in families:
-        for i, n in enumerate(names):
+        for i, n in names.items():
             out.append(Candidate(f"gain {n}", JointGain(joints=(i,)), "joint_gain", n))
     if "joint_compliance" in families and no_torque_reason(desc, data):
         skipped.append(Skipped("joint compliance", no_torque_reason(desc, data)))
     elif "joint_compliance" in families:
         tau_g, tau_c = torques_of(desc, data)
         loaded = []
-        for i, n in enumerate(names):
+        for i, n in names.items():
             g = np.max(np.abs(tau_g[:, i]), initial=0.0)
             c = np.max(np.abs(tau_c[:, i]), initial=0.0)
             if g <= _ZERO_TORQUE and c <= _ZERO_TORQUE:

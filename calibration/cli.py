@@ -387,6 +387,9 @@ def run_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+#: a standardized residual this large is no noise but a wrong reading (the console says how to refit without it)
+GROSS_STANDARDIZED = 8.0
+
 NOMINAL_NOTE = ("nominal = the description with only the tip offset (probe or marker) fitted, the artefacts' "
                 "unknowns and the reference frame solved as for the calibrated model")
 
@@ -396,6 +399,14 @@ def _baseline_entry(base) -> dict:
     return {"definition": NOMINAL_NOTE, "fitted": list(base.free),
             "values_mm": {n: base.value(n) * 1e3 for n in base.free}, "s0": base.s0,
             "tracker": None if base.tracker is None else base.tracker.to_dict()}
+
+
+def sessions_without_frame(res, test) -> list[str]:
+    """The sessions of the held-out data ``test`` (reference rows) that the fit ``res`` has no frame for."""
+    if test is None or res.tracker is None or test.reference is None:
+        return []
+    rows = np.all(np.isfinite(test.reference), axis=1)
+    return [s for s in dict.fromkeys(test.sessions[rows].astype(str).tolist()) if res.tracker.frame(s) is None]
 
 
 def _log_calibration(res, data, train, test, poses, warnings, validation, files) -> None:
@@ -424,6 +435,11 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
         log.info(f"{len(res.outliers)} outlier(s) ({'dropped and refitted' if res.dropped else 'kept'}):")
         for o in res.outliers[:10]:
             log.info(f"  {o.measurement} {o.feature} line {o.line}: standardized {o.standardized:+.1f}")
+        gross = [o for o in res.outliers if abs(o.standardized) >= GROSS_STANDARDIZED]
+        if gross and not res.dropped:
+            log.warning(f"{len(gross)} outlier(s) at {GROSS_STANDARDIZED:g} standard deviations or more: a wrong "
+                        "reading (a swapped marker, a slipped ball) pulls every parameter towards it; "
+                        "--drop-outliers refits without them")
     for title, rows in (("training", val_train), ("held-out", val_test)):
         if rows:
             log.info(f"validation on {title} data (nominal -> calibrated; {NOMINAL_NOTE}; ± standard uncertainty, "
@@ -431,6 +447,12 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
             for r in rows:
                 log.info(f"  {r['label']}: {with_u(r['before'], r['u_before'])} -> {with_u(r['after'], r['u_after'])} "
                          f"{r['unit']} ({r['ratio']:.2f}x)")
+    new = sessions_without_frame(res, test)
+    if new:
+        log.info(f"note: held-out session(s) {', '.join(repr(s) for s in new)} have no frame from the training data: "
+                 "'frames and markers of the training fit' fits their frame on the held-out points themselves (the "
+                 "model and the markers' offsets as trained; another placement of the instrument is always "
+                 "registered anew), and the model file holds the frames of the training sessions only")
     if worse:
         log.warning("on the held-out data the calibrated model is WORSE than the nominal: "
                     + "; ".join(f"{r['label']} {r['before']:.4g} -> {r['after']:.4g} {r['unit']}" for r in worse))

@@ -115,7 +115,7 @@ def run_ring(args: argparse.Namespace) -> int:
           f"{counted(sum(r.n_points for r in campaign.measurements), 'point')}; forces from "
           f"{'signals in ' + str(args.signals) if args.signals else 'the points file'}")
     if arm.effects:
-        log.info("effects applied to every ball centre: " + ", ".join(e.describe() for e in arm.effects))
+        log.info("effects applied to every ball centre: " + ", ".join(e.describe(arm.desc) for e in arm.effects))
     for n in campaign.notes:
         log.info(f"note: {n}")
     log_warnings(warnings)

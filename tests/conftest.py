@@ -1,6 +1,14 @@
-"""Shared test helpers: paths, the nominal arm, one array comparison that also rejects NaN."""
+"""Shared test helpers: paths, the nominal arm, one array comparison that also rejects NaN, the field's robot
+set (example-robot-data's URDFs, fetched once into a cache outside the repository)."""
 from __future__ import annotations
 
+import fcntl
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +22,9 @@ settings.register_profile("explore", derandomize=False)
 settings.load_profile("ci")
 
 ROOT = Path(__file__).resolve().parents[1]
+#: the field's robot set (tests/test_robot_set.py): the version of the example-robot-data wheel, where its URDFs lie
+ROBOT_SET_VERSION = "4.1.0"
+_ROBOT_SET_PREFIX = "cmeel.prefix/share/example-robot-data/robots/"
 NOMINAL = ROOT / "urdf" / "aacmm7.dh.toml"
 
 
@@ -85,3 +96,47 @@ def loop_fit_options():
     from calibration.loop import LEGACY_RESOLUTION
     from calibration.options import FitOptions
     return FitOptions(weights_from_data=True, prior_scale=None, min_resolution=LEGACY_RESOLUTION)
+
+
+# ---------------------------------------------------------------------------------------------
+# the field's robot set: example-robot-data's URDFs, downloaded once outside the repository
+
+def robot_set_cache() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "aacmm-toolkit" / f"example-robot-data-{ROBOT_SET_VERSION}"
+
+
+def _fetch_robot_set(dest: Path) -> None:
+    """Download the wheel with pip and keep its URDFs under ``dest`` (written whole, then renamed)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [sys.executable, "-m", "pip", "download", f"example-robot-data=={ROBOT_SET_VERSION}", "--no-deps",
+               "--only-binary=:all:", "--retries", "1", "--timeout", "30", "-q", "-d", tmp]
+        run = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+        wheels = list(Path(tmp).glob("*.whl"))
+        if run.returncode != 0 or not wheels:
+            pytest.skip(f"example-robot-data {ROBOT_SET_VERSION} could not be downloaded (offline?): "
+                        f"{(run.stderr or run.stdout).strip().splitlines()[-1:] or 'no wheel'}")
+        part = Path(tmp) / "robots"
+        with zipfile.ZipFile(wheels[0]) as zf:
+            for name in zf.namelist():
+                if name.startswith(_ROBOT_SET_PREFIX) and name.endswith(".urdf"):
+                    target = part / name[len(_ROBOT_SET_PREFIX):]
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    target.write_bytes(zf.read(name))
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        shutil.move(str(part), str(dest))
+
+
+@pytest.fixture(scope="session")
+def robots() -> Path:
+    """The folder of the package's URDFs (downloaded once; the lock keeps two test workers from both
+    downloading)."""
+    cache = robot_set_cache()
+    dest = cache / "robots"
+    if not dest.is_dir():
+        cache.mkdir(parents=True, exist_ok=True)
+        with open(cache / ".lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            if not dest.is_dir():
+                _fetch_robot_set(dest)
+    return dest

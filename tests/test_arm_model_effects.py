@@ -2,15 +2,16 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from arm_model import PinocchioArm, ball_centres
-from arm_model.effects import (EncoderEccentricity, ForceSensorError, JointCompliance, JointGain, ProbeCompliance,
-                               ThermalGrowth)
+from arm_model import PinocchioArm, ball_centres, load_description
+from arm_model.effects import (EncoderEccentricity, ForceSensorError, JointCompliance, JointGain, JointHarmonics,
+                               ProbeCompliance, ThermalGrowth)
 from arm_model.model import ArmModel, AuxData
-from conftest import assert_close
+from conftest import NOMINAL, assert_close
 
 ALL = (EncoderEccentricity(), JointGain(), JointCompliance(), ThermalGrowth(), ForceSensorError(),
        ProbeCompliance(anisotropic=True, axial=True))
@@ -100,3 +101,13 @@ def test_force_sensor_error_maps_reading_back(nominal):
     f_true = np.array([[2.0, 0.0, 0.0]])
     f_meas = f_true * 1.1 + [0.2, 0, 0]
     assert_close(model.ball_centres(q, f_meas, p), ball_centres(nominal, q, f_true), atol=1e-15)
+
+
+def test_an_effect_names_its_joints_by_the_arm_s_names():
+    """Console lines name a URDF robot's joints as its file does (``arm_left_7_joint``), not by column."""
+    desc = load_description(NOMINAL)
+    renamed = replace(desc, joints=tuple(replace(j, name=f"arm_{k}") for k, j in enumerate(desc.joints)))
+    assert EncoderEccentricity(joints=(1, 6)).describe() == "eccentricity(j2, j7)"
+    assert EncoderEccentricity(joints=(1, 6)).describe(renamed) == "eccentricity(arm_1, arm_6)"
+    assert JointHarmonics(joints=(2,), source=0, harmonics=(1,)).describe(renamed) == \
+        "joint_harmonics(arm_2; h 1 of arm_0)"

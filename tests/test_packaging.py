@@ -63,6 +63,10 @@ def test_examples_copies_campaigns_data_docs_and_licence(tmp_path, capsys):
     assert main(["examples", str(dest)]) == 0
     lic = dest / "data" / "real-panda-seats" / "LICENSE-MUKCa.txt"
     assert lic.read_bytes() == (ROOT / "examples" / "data" / "real-panda-seats" / "LICENSE-MUKCa.txt").read_bytes()
+    for name in ("points.csv", "LICENSE-figaroh.txt", "README.md"):      # the tracker walkthrough's campaign
+        talos = ROOT / "examples" / "data" / "real-talos-mocap" / name
+        assert (dest / "data" / "real-talos-mocap" / name).read_bytes() == talos.read_bytes()
+    assert not list((dest / "data" / "real-talos-mocap").glob("*.urdf"))
     assert (dest / "docs" / "formats.md").is_file()
     assert (dest / "arms" / "aacmm7.dh.toml").read_bytes() == NOMINAL.read_bytes()
     for c in (ROOT / "examples" / "campaigns").glob("*.toml"):
@@ -126,6 +130,9 @@ def test_wheel_installed_use_without_the_checkout(tmp_path):
     names = zipfile.ZipFile(whl).namelist()
     assert "arm_model/_shipped/urdf/aacmm7.dh.toml" in names
     assert "arm_model/_shipped/examples/data/real-panda-seats/LICENSE-MUKCa.txt" in names
+    assert "arm_model/_shipped/examples/data/real-talos-mocap/LICENSE-figaroh.txt" in names
+    assert any(n.endswith("licenses/examples/data/real-talos-mocap/LICENSE-figaroh.txt") for n in names)
+    assert not any("talos" in n and n.endswith(".urdf") for n in names)       # PAL's licence: never shipped
     assert any(n.endswith("licenses/LICENSE") for n in names)
     site = tmp_path / "site"
     subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site), str(whl)],

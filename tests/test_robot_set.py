@@ -15,14 +15,7 @@ the one this sweep finds.
 """
 from __future__ import annotations
 
-import fcntl
 import math
-import os
-import shutil
-import subprocess
-import sys
-import tempfile
-import zipfile
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,10 +23,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import ROOT
+from conftest import ROBOT_SET_VERSION as VERSION, ROOT
 
-VERSION = "4.1.0"
-PREFIX = "cmeel.prefix/share/example-robot-data/robots/"
 #: one robot of each difficulty the set holds
 QUICK = {
     "tiago_description/robots/tiago.urdf": "prismatic torso, a wrist origin 5e-12 rad from gimbal lock",
@@ -46,47 +37,6 @@ QUICK = {
 }
 TABLE_START = "<!-- robot-set table: written from tests/test_robot_set.py (test_every_robot checks it) -->"
 TABLE_END = "<!-- end of the robot-set table -->"
-
-
-def _cache_dir() -> Path:
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "aacmm-toolkit" / f"example-robot-data-{VERSION}"
-
-
-def _fetch(dest: Path) -> None:
-    """Download the wheel with pip and keep its URDFs under ``dest`` (written whole, then renamed)."""
-    with tempfile.TemporaryDirectory() as tmp:
-        cmd = [sys.executable, "-m", "pip", "download", f"example-robot-data=={VERSION}", "--no-deps",
-               "--only-binary=:all:", "--retries", "1", "--timeout", "30", "-q", "-d", tmp]
-        run = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
-        wheels = list(Path(tmp).glob("*.whl"))
-        if run.returncode != 0 or not wheels:
-            pytest.skip(f"example-robot-data {VERSION} could not be downloaded (offline?): "
-                        f"{(run.stderr or run.stdout).strip().splitlines()[-1:] or 'no wheel'}")
-        part = Path(tmp) / "robots"
-        with zipfile.ZipFile(wheels[0]) as zf:
-            for name in zf.namelist():
-                if name.startswith(PREFIX) and name.endswith(".urdf"):
-                    target = part / name[len(PREFIX):]
-                    target.parent.mkdir(parents=True, exist_ok=True)
-                    target.write_bytes(zf.read(name))
-        dest.parent.mkdir(parents=True, exist_ok=True)
-        shutil.move(str(part), str(dest))
-
-
-@pytest.fixture(scope="session")
-def robots() -> Path:
-    """The folder of the package's URDFs (downloaded once; the lock keeps two test workers from both
-    downloading)."""
-    cache = _cache_dir()
-    dest = cache / "robots"
-    if not dest.is_dir():
-        cache.mkdir(parents=True, exist_ok=True)
-        with open(cache / ".lock", "w") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
-            if not dest.is_dir():
-                _fetch(dest)
-    return dest
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,6 +1,6 @@
 """docs/own-arm.md, "A robot with a tracker": its commands run as written on the real TALOS motion-capture
-campaign (read from ``../shared``: its URDF's licence forbids a copy in the project), and the held-out
-figures its table states are the ones they give."""
+campaign (the points bundled in ``examples/data/real-talos-mocap``; the URDF, whose licence forbids a copy in
+the project, read from ``../shared``), and the held-out figures its table states are the ones they give."""
 from __future__ import annotations
 
 import json
@@ -15,6 +15,7 @@ from arm_model.model_file import load_model
 from conftest import ROOT
 
 TALOS = ROOT.parent / "shared" / "data" / "real-talos-mocap"
+BUNDLED = ROOT / "examples" / "data" / "real-talos-mocap"
 DOC = ROOT / "docs" / "own-arm.md"
 
 pytestmark = pytest.mark.skipif(not (TALOS / "talos_full_v2.urdf").exists(),
@@ -28,13 +29,15 @@ def _section() -> str:
 
 
 def _commands(tmp_path) -> list[list[str]]:
-    block = re.search(r"```\n(aacmm calibrate talos/.*?)```", _section(), flags=re.S).group(1)
+    """The section's aacmm commands after ``aacmm examples ex``, with the bundled points, the URDF from
+    ``../shared`` and the outputs in ``tmp_path``."""
+    block = re.search(r"```\n(aacmm calibrate ex/.*?)```", _section(), flags=re.S).group(1)
     out = []
     for line in block.strip().splitlines():
         argv = shlex.split(line)[1:]
-        argv = [str(TALOS / a.split("/", 1)[1]) if a.startswith("talos/") else a for a in argv]
-        argv = [str(tmp_path / a) if a.startswith("talos-") else a.replace("talos-cal/", f"{tmp_path}/talos-cal/")
-                for a in argv]
+        argv = [str(BUNDLED / a.removeprefix("ex/data/real-talos-mocap/")) if a.startswith("ex/data/") else
+                str(TALOS / a) if a == "talos_full_v2.urdf" else
+                str(tmp_path / a) if a.startswith("talos-") else a for a in argv]
         out.append(argv)
     return out
 
@@ -46,8 +49,14 @@ def _stated(row: str) -> tuple[float, float]:
     return float(rms), float(mx)
 
 
+def test_the_bundled_points_are_the_shared_campaign():
+    assert (BUNDLED / "points.csv").read_bytes() == (TALOS / "points.csv").read_bytes()
+    assert (BUNDLED / "LICENSE-figaroh.txt").read_bytes() == (TALOS / "LICENSE-figaroh.txt").read_bytes()
+
+
 def test_the_tracker_walkthrough_runs_and_gives_the_figures_it_states(tmp_path):
-    calibrate, tip = _commands(tmp_path)
+    calibrate, tip, view = _commands(tmp_path)
+    assert view[0] == "view" and "--html" in view
     assert calibrate[0] == "calibrate" and "--no-plots" not in calibrate
     assert main(calibrate + ["--no-plots"]) == 0
     assert main(tip) == 0
@@ -63,3 +72,4 @@ def test_the_tracker_walkthrough_runs_and_gives_the_figures_it_states(tmp_path):
     t = np.genfromtxt(tmp_path / "talos-tips.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
     held = np.isin(t["measurement"], summary["holdout"])
     assert np.sqrt(np.mean(t["error_ref_um"][held] ** 2)) == pytest.approx(rms["after"], rel=1e-6)
+    assert main(view) == 0 and (tmp_path / "talos-view.html").stat().st_size > 10_000

@@ -61,8 +61,10 @@ def register(sub) -> None:
     p.add_argument("--residuals", type=Path, help="residuals CSV: x_mm, y_mm, z_mm, rx_um, ry_um, rz_um, or the "
                    "residuals.csv of aacmm calibrate (line, dx_um, dy_um, dz_um; see docs/viewer.md): draw "
                    "each residual vector")
-    p.add_argument("--residual-scale", type=SCALE, default=1000.0,
-                   help="length of a residual line per length of residual (default 1000)")
+    p.add_argument("--residual-scale", type=SCALE, default=None,
+                   help="length of a residual line (and of the line from a tracker's marker to where the "
+                        "instrument saw it) per length of residual; default: from the data, so that the median "
+                        f"one is drawn about {ARROW_TARGET_M * 1e3:g} mm long (a 1-2-5 number, printed)")
     p.add_argument("--ellipsoids", action="store_true",
                    help="draw the 95 %% uncertainty ellipsoid of every corrected ball centre of the selection, from "
                         "the model's parameter covariance (a model file from calibrate; a plain description: "
@@ -175,16 +177,24 @@ def _run(args, inputs, outputs, tmp) -> int:
             view.show_artefacts(placements, artefacts.distances)
         if args.ellipsoids:
             _ellipsoids(arm, sel, args, view)
+        markers = None if arm.tracker is None else _markers(arm, sel, notes)
         if residuals is not None:
             if args.measurement is not None:   # the selected measurement's (and those of no measurement)
                 residuals = residuals.select(np.isin(residuals.measurement, ["", args.measurement]))
-            all_centres = arm.ball_centres(points)
-            origins, vectors, skipped = residual_origins(residuals, points, all_centres)
+            all_markers = None if arm.tracker is None else _markers(arm, points)[0]
+            origins, vectors, skipped = residual_origins(residuals, points, arm.ball_centres(points), all_markers)
             if skipped:
                 notes.append(f"{skipped} residual(s) of {residuals.path} name lines that are not points of "
                              f"{points.path} with the same measurement and feature; not drawn")
             if len(vectors):
+                _default_scale(args, vectors)
                 view.show_residuals(origins, vectors, scale=args.residual_scale)
+        if markers is not None:
+            predicted, seen = markers
+            if seen is not None:
+                _default_scale(args, (seen - predicted).reshape(-1, 3))
+            view.show_markers(predicted.reshape(-1, 3), None if seen is None else seen.reshape(-1, 3),
+                              scale=args.residual_scale or 1.0)
         _report(arm, sel, centres, d_um, shown, wrench, args, view, notes)
         if args.html is not None:
             view.write_html(tmp["html"], inputs=inputs)
@@ -198,6 +208,40 @@ def _run(args, inputs, outputs, tmp) -> int:
         if serve:
             _serve(view, args.open_seconds)
     return 0
+
+
+def _default_scale(args, vectors) -> None:
+    """``--residual-scale`` from the data when not given: the median of ``vectors`` (N, 3) [m] drawn about
+    :data:`ARROW_TARGET_M` long."""
+    if args.residual_scale is None:
+        args.residual_scale = nice_scale(np.linalg.norm(vectors, axis=1), ARROW_TARGET_M)
+
+
+def _markers(arm, sel, notes: list | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+    """A tracker's markers in the points ``sel`` (a model file with ``[[reference_frame]]``): where the model
+    puts them, (N, K, 3) [m] base frame, and where the instrument saw them (the points' reference columns
+    mapped into the base frame by the model's frame of each row's session), or None when the points do not
+    carry them (said in ``notes``)."""
+    from arm_model.tracker import DEFAULT_SESSION, Tracker, marker_positions
+    tr = arm.tracker
+    n = len(sel)
+    on_tip = Tracker((DEFAULT_SESSION,), np.eye(4), tr.offsets)
+    predicted = marker_positions(arm.model, arm.p, sel.q, on_tip, [DEFAULT_SESSION] * n,
+                                 arm.aux(sel, wrench=np.zeros((n, 6)), contact=False))
+    if sel.ref is None:
+        return predicted, None
+    sessions = sel.session if sel.session is not None else np.full(n, DEFAULT_SESSION, object)
+    missing = sorted({str(s) for s in sessions if tr.frame(s) is None})
+    why = (f"{sel.n_markers} marker(s) in the points, {tr.n_markers} in the model file" if sel.n_markers != tr.n_markers
+           else f"the model file has no frame for session(s) {', '.join(repr(s) for s in missing)}" if missing
+           else None)
+    if why is not None:
+        if notes is not None:
+            notes.append(f"the instrument's coordinates of {sel.path} are not drawn: {why}")
+        return predicted, None
+    inv = np.array([np.linalg.inv(tr.frame(s)) for s in sessions])
+    seen = np.einsum("nij,nkj->nki", inv[:, :3, :3], sel.ref) + inv[:, None, :3, 3]
+    return predicted, seen
 
 
 def _ellipsoids(arm, sel, args, view) -> None:
@@ -230,7 +274,7 @@ def _report(arm, sel, centres, d_um, shown, wrench, args, view, notes) -> None:
         log.info("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not measured and "
               "is taken as zero")
     if arm.effects:
-        log.info("effects applied to the ball centres: " + ", ".join(e.describe() for e in arm.effects)
+        log.info("effects applied to the ball centres: " + ", ".join(e.describe(arm.desc) for e in arm.effects)
               + " (the arm is drawn with its description's geometry)")
     if len(shown) == 1:
         i = shown[0]

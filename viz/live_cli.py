@@ -195,6 +195,7 @@ def _status(args: argparse.Namespace, source: LineSource, files: list) -> dict:
     from arm_model.shipped import provenance
     tip = ["aacmm", "tip", "points.csv", "--arm", str(args.arm)]
     tip += ["--tip-frame", args.tip_frame] if args.tip_frame else []
+    tip += ["--base-frame", args.base_frame] if getattr(args, "base_frame", None) else []
     tip += ["--masses", str(args.masses)] if args.masses else []
     for opt in ("encoder_resolution_deg", "u_compliance_rel", "u_probing_um"):
         if getattr(args, opt, None) is not None:

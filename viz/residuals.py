@@ -43,8 +43,8 @@ _LENGTHS = _POINT + _VECTORS[0] + _VECTORS[1] + ("residual",)           # a leng
 @dataclass(frozen=True)
 class Residuals:
     """Residual vectors ``vectors`` (N, 3) [m], base frame, starting at ``points`` (N, 3) [m] or, when
-    the file gives none, at the points-file lines ``point_lines`` (N,); ``measurement`` and
-    ``feature`` (N,) text ("" when absent); ``lines`` (N,) the file line of each row."""
+    the file gives none, at the points-file lines ``point_lines`` (N,); ``measurement``, ``feature`` and
+    ``kind`` (N,) text ("" when absent); ``lines`` (N,) the file line of each row."""
     path: str
     points: np.ndarray | None
     vectors: np.ndarray
@@ -52,6 +52,7 @@ class Residuals:
     feature: np.ndarray
     lines: np.ndarray
     point_lines: np.ndarray | None = None
+    kind: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.vectors)
@@ -61,7 +62,7 @@ class Residuals:
         def take(a):
             return None if a is None else a[mask]
         return Residuals(self.path, take(self.points), self.vectors[mask], self.measurement[mask],
-                         self.feature[mask], self.lines[mask], take(self.point_lines))
+                         self.feature[mask], self.lines[mask], take(self.point_lines), take(self.kind))
 
 
 def read_residuals(path: str | Path) -> Residuals:
@@ -134,16 +135,20 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
             point_lines[i] = int(cell)
     return Residuals(path, np.column_stack([column(b) for b in _POINT]) if has_xyz else None,
                      np.column_stack([column(b) for b in vector]), text("measurement"), text("feature"),
-                     np.array([no for no, _ in data]), point_lines)
+                     np.array([no for no, _ in data]), point_lines, text("kind"))
 
 
-def residual_origins(res: Residuals, points, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+def residual_origins(res: Residuals, points, centres: np.ndarray,
+                     markers: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int]:
     """Start points and vectors [m] of the residuals that can be drawn.
 
     Args:
         res: the residuals read.
         points: the :class:`~arm_model.PointSet` shown (for residuals given by ``line``).
         centres: (N, 3) its deflection-corrected ball centres [m].
+        markers: (N, K, 3) [m] the markers of a tracker where the model puts them (base frame), or None: a
+            ``reference`` residual of a line then starts at its marker (the k-th row of that line at marker
+            k), not at the tip point.
 
     Returns:
         (origins (M, 3), vectors (M, 3), skipped): ``skipped`` counts rows given by a line that is not a
@@ -152,14 +157,19 @@ def residual_origins(res: Residuals, points, centres: np.ndarray) -> tuple[np.nd
     if res.points is not None:
         return res.points, res.vectors, 0
     row_of = {int(line): i for i, line in enumerate(points.lines)}
-    keep, origins = [], []
+    keep, origins, seen = [], [], {}
     for k, line in enumerate(res.point_lines):
         i = row_of.get(int(line))
         if i is None or (res.measurement[k] and res.measurement[k] != points.measurement[i]) \
                 or (res.feature[k] and res.feature[k] != points.feature[i]):
             continue
         keep.append(k)
-        origins.append(centres[i])
+        if markers is not None and res.kind is not None and res.kind[k] == "reference":
+            m = seen.get(i, 0)
+            seen[i] = m + 1
+            origins.append(markers[i, m % markers.shape[1]])
+        else:
+            origins.append(centres[i])
     return np.reshape(origins, (-1, 3)), res.vectors[keep], len(res.vectors) - len(keep)
 
 

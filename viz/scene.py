@@ -35,6 +35,8 @@ POINTS_RGB = 0xFFFFFF         # measured ball centres
 ARTEFACT_RGB = 0xB0C4DE       # light steel blue, translucent
 BALL_MARKER_RGB = 0xD01818
 ELLIPSOID_RGB = 0xFFD700      # yellow, translucent uncertainty ellipsoids
+MARKER_RGB = 0xFFA0FF         # pink: a tracker's markers where the model puts them
+SEEN_RGB = 0x20D0F0           # cyan: where the instrument saw them
 _ARROW_RADIUS = 0.005         # [m] shaft radius of the deflection arrow
 _HEAD = (0.012, 0.035)        # [m] head radius and length
 
@@ -428,6 +430,28 @@ class ArmScene:
         self.vis[f"{name}/points"].set_object(_dots(mg, p, RESIDUAL_RGB, 0.004))
         self._extent.append(seg)
         self._legend(f"magenta lines: {len(p)} residual vector(s), drawn x{scale:g}")
+
+    def show_markers(self, predicted, seen=None, scale: float = 1.0) -> None:
+        """Draw markers (N, 3) [m] where the model puts them as pink dots, and where the instrument saw them,
+        ``seen`` (N, 3) [m] (base frame; or None), as cyan lines from each predicted marker ``scale`` times the
+        difference long, a cyan dot at their end."""
+        mg = self._mg
+        p = np.atleast_2d(np.asarray(predicted, dtype=float))
+        self.vis[f"{self.root}/markers"].set_object(_dots(mg, p, MARKER_RGB, 0.008))
+        self._extent.append(p)
+        self._legend(f"pink dots: {len(p)} marker(s) where the model puts them")
+        if seen is None:
+            return
+        end = p + scale * (np.atleast_2d(np.asarray(seen, dtype=float)) - p)
+        seg = np.empty((2 * len(p), 3))
+        seg[0::2], seg[1::2] = p, end
+        name = f"{self.root}/instrument x{scale:g}"
+        self.vis[f"{name}/lines"].set_object(mg.LineSegments(
+            mg.PointsGeometry(seg.T.astype(np.float32)), mg.LineBasicMaterial(color=SEEN_RGB, linewidth=2)))
+        self.vis[f"{name}/points"].set_object(_dots(mg, end, SEEN_RGB, 0.004))
+        self._extent.append(end)
+        self._legend(f"cyan lines: to where the instrument saw each marker (base frame, by the model's frame of "
+                     f"its session), the difference drawn x{scale:g}")
 
     def show_ellipsoids(self, centres, cov, scale: float, level: float = 0.95) -> None:
         """Draw the ``level`` uncertainty ellipsoids (:func:`ellipsoid_mesh`) of points (N, 3) [m] with

@@ -111,6 +111,13 @@ class View:
             self.scene.show_residuals(points, residuals, scale)
             self._reframe()
 
+    def show_markers(self, predicted, seen=None, scale: float = 1.0) -> None:
+        """A tracker's markers (N, 3) [m] where the model puts them and, ``seen`` (N, 3) [m] or None, where the
+        instrument saw them (base frame), the difference drawn ``scale`` times long."""
+        with _answering(self.server):
+            self.scene.show_markers(predicted, seen, scale)
+            self._reframe()
+
     def show_ellipsoids(self, centres, cov, scale: float, level: float = 0.95) -> None:
         """The ``level`` uncertainty ellipsoids of points (N, 3) [m] with covariances (N, 3, 3) [m^2],
         drawn ``scale`` times larger."""

@@ -14,6 +14,9 @@ For each task of a campaign this draws the points an operator takes (docs/format
   positions spread over the arm's volume.
 * tracker nests: seats at random places whose ball centre a laser tracker also sees in its own
   frame, ``p_ref = T_ref_base p_base`` + noise (T_ref_base is unknown to the analysis).
+* motion capture (``mocap``): no artefact and no contact: the robot holds random postures within its
+  joint limits while an instrument (motion capture, laser tracker) sees markers fixed on the tip frame at
+  offsets unknown to the analysis, in one frame of its own a session; one measurement a posture.
 
 Everything is in the arm's base frame, SI.
 """
@@ -33,7 +36,8 @@ __all__ = ["Plan", "make_plan", "cone_directions", "shoulder"]
 
 #: per-point fields of a plan, in order
 ROW_FIELDS = ("measurement", "feature", "task", "position", "normal", "cone", "lever", "stylus", "stylus_axis",
-              "stylus_cone", "roll_along_force", "roll_jitter", "reference", "redraw", "q_start")
+              "stylus_cone", "roll_along_force", "roll_jitter", "reference", "redraw", "q_start", "posture",
+              "frame")
 
 
 @dataclass
@@ -56,12 +60,17 @@ class Plan:
         redraw: None, or how to draw another contact on the same feature when the arm cannot reach
             this one (sphere and plane points; the operator probes elsewhere).
         q_start: (J,) true joint angles [rad] of an articulation found without contact force (NaN:
-            none yet); the final inverse kinematics starts there.
+            none yet); the final inverse kinematics starts there. For a posture: its true joint values.
+        posture: True for a posture of a motion-capture task: ``q_start`` holds the true joint values, no
+            contact, no inverse kinematics; ``position`` is the true tip once the truth has placed it.
+        frame: the instrument frame (a key of ``T_ref_base``) of a reference row, "" for other rows.
 
     Artefacts: ``features`` (dicts for artefacts.toml: id, kind, SI values), ``distances``
     ((between, length [m], u_length [m] or None, true length [m])), ``placements`` (per task id, where
-    the artefact truly is), ``T_ref_base`` (per tracker task id, the (4, 4) transform from the arm base
-    to the tracker), ``ref_noise`` (per tracker task id, its noise [m], 1 sigma per axis).
+    the artefact truly is), ``T_ref_base`` (per instrument frame, the (4, 4) transform from the arm base
+    to the instrument: a tracker task's id, a motion-capture task's id or ``<id>-s<k>`` for its session k),
+    ``ref_noise`` (per instrument frame, its noise [m], 1 sigma per axis), ``markers`` (per motion-capture
+    task id, (K, 3) the true markers' offsets [m] in the tip frame).
     """
     measurement: list = field(default_factory=list)
     feature: list = field(default_factory=list)
@@ -78,27 +87,32 @@ class Plan:
     reference: list = field(default_factory=list)
     redraw: list = field(default_factory=list)
     q_start: list = field(default_factory=list)
+    posture: list = field(default_factory=list)
+    frame: list = field(default_factory=list)
     features: list = field(default_factory=list)
     distances: list = field(default_factory=list)
     placements: dict = field(default_factory=dict)
     T_ref_base: dict = field(default_factory=dict)
     ref_noise: dict = field(default_factory=dict)
+    markers: dict = field(default_factory=dict)
 
     def add(self, measurement, feature, task, position, normal, cone, lever, stylus, roll=False,
-            roll_jitter=0.0, reference=False, stylus_axis=None, stylus_cone=0.0, redraw=None):
+            roll_jitter=0.0, reference=False, stylus_axis=None, stylus_cone=0.0, redraw=None, frame="",
+            posture=None):
         row = dict(measurement=measurement, feature=feature, task=task, position=np.asarray(position, float),
                    normal=np.asarray(normal, float), cone=float(cone), lever=float(lever),
                    stylus=np.asarray(stylus, float),
                    stylus_axis=np.asarray(stylus if stylus_axis is None else stylus_axis, float),
                    stylus_cone=float(stylus_cone), roll_along_force=bool(roll), roll_jitter=float(roll_jitter),
-                   reference=bool(reference), redraw=redraw, q_start=None)
+                   reference=bool(reference), redraw=redraw, q_start=posture, posture=posture is not None,
+                   frame=str(frame))
         for name in ROW_FIELDS:
             getattr(self, name).append(row[name])
 
     def arrays(self, n_joints: int = 7) -> "Plan":
         """The same plan with numpy arrays for the per-point fields."""
         kinds = {"measurement": object, "feature": object, "task": int, "roll_along_force": bool, "reference": bool,
-                 "redraw": object}
+                 "redraw": object, "posture": bool, "frame": object}
         out = {}
         for name in ROW_FIELDS:
             v = getattr(self, name)
@@ -112,7 +126,7 @@ class Plan:
             else:
                 out[name] = np.array(v, dtype=kinds.get(name, float))
         return Plan(**out, features=self.features, distances=self.distances, placements=self.placements,
-                    T_ref_base=self.T_ref_base, ref_noise=self.ref_noise)
+                    T_ref_base=self.T_ref_base, ref_noise=self.ref_noise, markers=self.markers)
 
     def __len__(self) -> int:
         return len(self.measurement)
@@ -301,11 +315,11 @@ def _plane(plan, k, t, rng, ball_d):
                      ball_d / 2, stylus, stylus_axis=-nrm, stylus_cone=o["stylus_cone"], redraw=redraw)
 
 
-def _seat_points(plan, mid, fid, k, t, rng, position, axis, n, reference=False):
+def _seat_points(plan, mid, fid, k, t, rng, position, axis, n, reference=False, frame=""):
     for _ in range(n):
         stylus = cone_directions(rng, -np.asarray(axis), t.opts["stylus_cone"], 1)[0]
         plan.add(mid, fid, k, position, axis, np.tan(t.opts["force_cone"]), 0.0, stylus, reference=reference,
-                 stylus_axis=-np.asarray(axis), stylus_cone=t.opts["stylus_cone"])
+                 stylus_axis=-np.asarray(axis), stylus_cone=t.opts["stylus_cone"], frame=frame)
 
 
 def _seat(plan, k, t, rng, ball_d):
@@ -344,14 +358,20 @@ def _ballbar(plan, k, t, rng, ball_d, desc, truth):
                              "certified_length_m": o["length"], "positions": placed}
 
 
-def _tracker(plan, k, t, rng, ball_d, desc, truth):
-    o = t.opts
+def _instrument_frame(rng, distance: float) -> np.ndarray:
+    """A random (4, 4) ``T_ref_base``: any orientation, the base at ``distance`` [m] from the instrument."""
     rot = random_rotation(rng)
     d = rng.normal(size=3)
     d /= np.linalg.norm(d)
     T = np.eye(4)
     T[:3, :3] = rot
-    T[:3, 3] = d * o["distance"]
+    T[:3, 3] = d * distance
+    return T
+
+
+def _tracker(plan, k, t, rng, ball_d, desc, truth):
+    o = t.opts
+    T = _instrument_frame(rng, o["distance"])
     plan.T_ref_base[t.id] = T
     plan.ref_noise[t.id] = o["noise"]
     up = np.array([0.0, 0.0, 1.0])
@@ -360,13 +380,46 @@ def _tracker(plan, k, t, rng, ball_d, desc, truth):
         fid = f"{t.id}-{m + 1:02d}"
         for rep in range(t.measurements):
             mid = fid if t.measurements == 1 else f"{fid}-{rep + 1:02d}"
-            _seat_points(part, mid, fid, k, t, rng, c, up, o["articulations"], reference=True)
+            _seat_points(part, mid, fid, k, t, rng, c, up, o["articulations"], reference=True, frame=t.id)
         return {"feature": fid, "position_m": c.tolist()}
 
     placed = _place(plan, rng, o, o["nests"], shoulder(desc), None, make, truth)
     plan.features += [{"id": p["feature"], "kind": "seat"} for p in placed]
     plan.placements[t.id] = {"kind": "tracker", "nests": placed, "T_ref_base": T.tolist(),
                              "noise_m": o["noise"]}
+
+
+def mocap_sessions(t: Task) -> list[str]:
+    """The instrument frames (session ids) of a motion-capture task: its id alone, or ``<id>-s1`` ...."""
+    n = t.opts["sessions"]
+    return [t.id] if n == 1 else [f"{t.id}-s{s + 1}" for s in range(n)]
+
+
+def _mocap(plan, k, t, rng, desc):
+    """Random postures within the joint limits (one measurement each, no feature, no contact), split in
+    order into the sessions, each seen in a random instrument frame; the markers at ``marker_distance``
+    from the tip frame's origin in random directions."""
+    from .ik import random_q
+
+    o = t.opts
+    n = o["postures"]
+    q = random_q(desc, n, rng, margin=o["limit_margin"])
+    u = rng.normal(size=(o["markers"], 3))
+    offsets = u / np.linalg.norm(u, axis=1, keepdims=True) * o["marker_distance"]
+    plan.markers[t.id] = offsets
+    sessions = mocap_sessions(t)
+    frames = {}
+    for s in sessions:
+        plan.T_ref_base[s] = frames[s] = _instrument_frame(rng, o["distance"])
+        plan.ref_noise[s] = o["noise"]
+    width = max(2, len(str(n)))
+    nan3 = np.full(3, np.nan)
+    for s, rows in zip(sessions, np.array_split(np.arange(n), len(sessions))):
+        for i in rows:
+            plan.add(f"{t.id}-{i + 1:0{width}d}", "", k, nan3, nan3, 0.0, 0.0, nan3, reference=True, frame=s,
+                     posture=q[i])
+    plan.placements[t.id] = {"kind": "mocap", "marker_offsets_m": offsets.tolist(),
+                             "T_ref_base": {s: T.tolist() for s, T in frames.items()}, "noise_m": o["noise"]}
 
 
 def make_plan(campaign: Campaign, rng: np.random.Generator, truth=None) -> Plan:
@@ -384,6 +437,8 @@ def make_plan(campaign: Campaign, rng: np.random.Generator, truth=None) -> Plan:
             _plane(plan, k, t, rng, ball_d)
         elif t.kind == "seat":
             _seat(plan, k, t, rng, ball_d)
+        elif t.kind == "mocap":
+            _mocap(plan, k, t, rng, campaign.arm)
         else:
             try:
                 (_ballbar if t.kind == "ballbar" else _tracker)(plan, k, t, rng, ball_d, campaign.arm, truth)

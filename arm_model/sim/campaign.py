@@ -26,7 +26,7 @@ __all__ = ["Campaign", "Task", "load_campaign", "campaign_from_dict", "TASK_KIND
            "DEFAULT_ARM"]
 
 DEFAULT_ARM = shipped_path(SHIPPED_ARMS["aacmm7"])
-TASK_KINDS = ("ring", "sphere", "plane", "seat", "ballbar", "tracker")
+TASK_KINDS = ("ring", "sphere", "plane", "seat", "ballbar", "tracker", "mocap")
 SENSORS = ("xyz", "two-channel", "none")
 
 # unit suffix -> (quantity, factor to SI); the longest suffix wins ("_Nm_per_rad" before "_rad")
@@ -57,7 +57,7 @@ def _split(key: str) -> tuple[str, str] | None:
 
 _S = {
     "top": {"name": ("text", "campaign", None), "seed": ("count", 0, None), "arm": ("text", None, None),
-            "tip_frame": ("text", None, None),
+            "tip_frame": ("text", None, None), "base_frame": ("text", None, None),
             "sensor": ("text", "xyz", None), "truth": ("table", None, None), "noise": ("table", None, None),
             "environment": ("table", None, None), "operator": ("table", None, None),
             "signals": ("table", None, None), "task": ("table", None, None),
@@ -129,11 +129,16 @@ _TASKS = {
                 "height": ("length", (-0.2, 0.6), 2), "reach": ("length", 0.85, None),
                 "force_cone": ("angle", math.radians(30.0), None),
                 "distance": ("length", 3.0, None)},
+    "mocap": {"postures": ("count", 40, None), "markers": ("count", 1, None),
+              "marker_distance": ("length", 0.05, None), "sessions": ("count", 1, None),
+              "noise": ("length", 0.2e-3, None), "distance": ("length", 3.0, None),
+              "limit_margin": ("angle", 0.05, None)},
 }
 _DEFAULT_CONE = {"ring": 0.0, "sphere": math.radians(30.0), "plane": math.radians(30.0),
-                 "seat": math.radians(60.0), "ballbar": math.radians(45.0), "tracker": math.radians(45.0)}
+                 "seat": math.radians(60.0), "ballbar": math.radians(45.0), "tracker": math.radians(45.0),
+                 "mocap": 0.0}
 _ID = {"ring": "ring", "sphere": "sphere", "plane": "plane", "seat": "seat", "ballbar": "bar",
-       "tracker": "nest"}
+       "tracker": "nest", "mocap": "pose"}
 
 
 @dataclass(frozen=True)
@@ -226,8 +231,8 @@ def _harmonics(ctx, raw, desc) -> list[dict]:
             raise ctx.error("a harmonic needs 'joint', 'harmonic' and 'amplitude_<angle unit>'", tbl)
         if not 1 <= e["harmonic"] <= 4:
             raise ctx.error(f"'harmonic' must be 1 to 4, got {e['harmonic']}", tbl, "harmonic")
-        e["index"] = _joint_index(ctx, desc, e["joint"], tbl, "joint")
-        e["source"] = None if e["of"] is None else _joint_index(ctx, desc, e["of"], tbl, "of")
+        e["index"] = _joint_index(ctx, desc, e["joint"], tbl, "joint", revolute=True)
+        e["source"] = None if e["of"] is None else _joint_index(ctx, desc, e["of"], tbl, "of", revolute=True)
         if e["source"] == e["index"]:
             e["source"] = None
         if any((r["index"], r["source"], r["harmonic"]) == (e["index"], e["source"], e["harmonic"]) for r in rows):
@@ -394,10 +399,37 @@ def _unitless(ctx, v, quantity, shape, table, key):
 
 # ---------------------------------------------------------------------------------------------
 
-def _joint_index(ctx, desc: ArmDescription, name: str, table, key) -> int:
+def _joint_index(ctx, desc: ArmDescription, name: str, table, key, revolute: bool = False) -> int:
+    """The encoder column of joint ``name``; ``revolute``: for an effect on a joint's angle, which a
+    prismatic joint has not."""
     if name not in desc.joint_names:
         raise ctx.error(f"unknown joint '{name}'{did_you_mean(name, desc.joint_names)} (the arm has: {', '.join(desc.joint_names)})", table, key)
-    return desc.joint_names.index(name)
+    i = desc.joint_names.index(name)
+    if revolute and desc.encoders[i].prismatic:
+        raise ctx.error(f"joint '{name}' is prismatic: '{table[1]}' acts on a joint's angle (revolute joints: "
+                        f"{', '.join(desc.joint_names[k] for k in desc.revolute_columns)})", table, key)
+    return i
+
+
+def _joint_indices(ctx, desc: ArmDescription, names, table, revolute: bool) -> tuple[int, ...]:
+    """The encoder columns of ``names``; none given: every joint (every revolute one for an effect on a
+    joint's angle)."""
+    if not names:
+        return desc.revolute_columns if revolute else tuple(range(desc.n_joints))
+    return tuple(_joint_index(ctx, desc, n, table, "joints", revolute) for n in names)
+
+
+def _load_arm(ctx, arm_path: Path, tip_frame: str | None, base_frame: str | None) -> ArmDescription:
+    """The campaign's arm; a tip or base frame the URDF refuses is the campaign's ``tip_frame`` or
+    ``base_frame`` key's error (the command-line option a command would name does not exist here)."""
+    try:
+        return load_arm(arm_path, tip_frame, base_frame=base_frame)
+    except InputError as exc:
+        keys = {"key '--tip-frame'": "tip_frame", "key '--base-frame'": "base_frame"}
+        if exc.column not in keys:
+            raise
+        reason = exc.reason.replace("--base-frame", "base_frame")
+        raise ctx.error(f"{reason} (in the URDF {arm_path})", (), keys[exc.column]) from None
 
 
 def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm=None) -> Campaign:
@@ -423,7 +455,7 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
             raise ctx.error(f"arm description not found: {arm_path}", (), "arm")
         if arm_path.suffix.lower() == ".urdf" and not top["tip_frame"]:
             raise ctx.error("an arm given as a URDF needs 'tip_frame' (the link at the ball centre)", (), "arm")
-        desc = load_arm(arm_path, top["tip_frame"])
+        desc = _load_arm(ctx, arm_path, top["tip_frame"], top["base_frame"])
     # truth and its effects
     truth = _section(ctx, data.get("truth"), _S["truth"], ("truth",))
     for k in ("length_error", "angle_error", "probe_error"):
@@ -444,7 +476,7 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
             e = _section(ctx, t, _S["eccentricity"], tbl)
             if e["joint"] is None or e["amplitude"] is None:
                 raise ctx.error("an eccentricity needs 'joint' and 'amplitude_<angle unit>'", tbl)
-            e["index"] = _joint_index(ctx, desc, e["joint"], tbl, "joint")
+            e["index"] = _joint_index(ctx, desc, e["joint"], tbl, "joint", revolute=True)
             if any(r["index"] == e["index"] for r in rows):
                 raise ctx.error(f"joint '{e['joint']}' has two eccentricity tables", tbl, "joint")
             rows.append(e)
@@ -458,8 +490,7 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
         tbl = ("truth", name)
         e = _section(ctx, raw_truth[name], _S[name], tbl)
         if name in ("joint_compliance", "thermal"):
-            names = e["joints"] or desc.joint_names
-            e["indices"] = tuple(_joint_index(ctx, desc, n, tbl, "joints") for n in names)
+            e["indices"] = _joint_indices(ctx, desc, e["joints"], tbl, name == "joint_compliance")
             key = "stiffness" if name == "joint_compliance" else "alpha"
             vals = e[key]
             if vals is None:
@@ -470,8 +501,7 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
                 raise ctx.error("stiffness must be > 0", tbl, key)
             e[key] = tuple(vals) * (len(e["indices"]) if len(vals) == 1 else 1)
         if name == "lateral_compliance":
-            names = e["joints"] or desc.joint_names
-            e["indices"] = tuple(_joint_index(ctx, desc, n, tbl, "joints") for n in names)
+            e["indices"] = _joint_indices(ctx, desc, e["joints"], tbl, True)
             if len(set(e["indices"])) != len(e["indices"]):
                 raise ctx.error("a joint is named twice", tbl, "joints")
             if e["stiffness_x"] is None and e["stiffness_y"] is None:
@@ -572,17 +602,24 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
         n_meas = o.pop("measurements")
         if kind == "ballbar" and "measurements" in t:
             raise ctx.error("a ball bar makes one measurement a position: give 'positions'", tbl, "measurements")
+        if kind == "mocap" and ("measurements" in t or any(k.startswith("stylus_cone") for k in t)):
+            raise ctx.error("a motion-capture task makes one measurement a posture, without contact: give "
+                            "'postures'", tbl, "measurements" if "measurements" in t else
+                            next(k for k in t if k.startswith("stylus_cone")))
         if kind == "ring" and any(k.startswith("stylus_cone") for k in t):
             raise ctx.error("a ring's stylus is parallel to its axis: tilt it with 'stylus_tilt_<angle unit>'",
                             tbl, next(k for k in t if k.startswith("stylus_cone")))
         if kind == "ballbar":
             n_meas = o["positions"]
+        if kind == "mocap":
+            n_meas = o["postures"]
         if o["stylus_cone"] is None:
             o["stylus_cone"] = _DEFAULT_CONE[kind]
         _check_task(ctx, kind, o, tbl, top["sensor"])
         if n_meas < 1:
             raise ctx.error("need at least one measurement", tbl, "measurements")
         tasks.append(Task(kind, tid, n_meas, o, ctx.lines.get((tbl, ""))))
+    _check_mocap(ctx, tasks)
     _check_size(ctx, tasks, op, sg)
     return Campaign(name=top["name"], seed=top["seed"], arm=desc, arm_path=arm_path, sensor=top["sensor"],
                     truth=truth, noise=sections["noise"], environment=sections["environment"],
@@ -601,6 +638,8 @@ def points_per_measurement(kind: str, o: dict) -> int:
         return len(o["depths"]) * int(o["points_per_row"])
     if kind in ("sphere", "plane"):
         return int(o["points"])
+    if kind == "mocap":
+        return 1
     if kind == "seat":
         return int(o["articulations"])
     if kind == "ballbar":
@@ -626,10 +665,17 @@ def _check_task(ctx, kind, o, tbl, sensor):
     positive = {"ring": ("diameter", "points_per_row"), "sphere": ("diameter", "points"),
                 "plane": ("points",), "seat": ("articulations",),
                 "ballbar": ("length", "positions", "sphere_diameter", "reach"),
-                "tracker": ("nests", "articulations", "reach")}[kind]
+                "tracker": ("nests", "articulations", "reach"),
+                "mocap": ("postures", "markers", "sessions")}[kind]
     for k in positive:
         if o[k] <= 0:
             raise ctx.error(f"'{k}' must be > 0", tbl, k)
+    if kind == "mocap":
+        if o["sessions"] > o["postures"]:
+            raise ctx.error(f"{o['sessions']} sessions for {o['postures']} postures: each session needs postures",
+                            tbl, "sessions")
+        if o["limit_margin"] < 0:
+            raise ctx.error("'limit_margin' must not be negative", tbl, "limit_margin")
     if kind == "ring":
         if o["roll"] is None:   # the paper's sensor sees one bending axis: its operator keeps it on the force
             o["roll"] = "bend-along-force" if sensor == "two-channel" else "random"
@@ -646,6 +692,19 @@ def _check_task(ctx, kind, o, tbl, sensor):
         for k in ("radius", "height"):
             if o[k][0] >= o[k][1]:
                 raise ctx.error(f"'{k}' must be [low, high] with low < high", tbl, k)
+
+
+def _check_mocap(ctx, tasks) -> None:
+    """One motion-capture task a campaign (its markers are the points file's markers); several markers
+    cannot share the reference columns with tracker nests, which the instrument sees at the ball centre."""
+    mocap = [k for k, t in enumerate(tasks) if t.kind == "mocap"]
+    if len(mocap) > 1:
+        raise ctx.error("one motion-capture task a campaign (its markers are the points file's markers); for "
+                        "several placements of the instrument give 'sessions'", ("task", mocap[1]), "kind")
+    if mocap and tasks[mocap[0]].opts["markers"] > 1 and any(t.kind == "tracker" for t in tasks):
+        raise ctx.error("several markers cannot share the reference columns with tracker nests (a nest is seen "
+                        "at the ball centre, one marker): give 'markers = 1' or simulate them apart",
+                        ("task", mocap[0]), "markers")
 
 
 _PARAM_QUANTITY = {"m": "length", "rad": "angle", "m/N": "compliance"}

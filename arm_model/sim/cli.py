@@ -26,7 +26,7 @@ def register(sub) -> None:
         "simulate", help=command_help("simulate"),
         description="Simulate a campaign (examples/campaigns/*.toml): a true arm (nominal + parameter errors + "
                     "the effects the campaign switches on), an operator (contact forces like the seed paper's), "
-                    "artefacts (ring gauge, spheres, ball bar, seats, plane, tracker nests). Writes "
+                    "artefacts (ring gauge, spheres, ball bar, seats, plane, tracker nests) or postures seen by motion capture. Writes "
                     f"{POINTS_FILE} (and {REFERENCE_FILE} for tracker rows), {ARTEFACTS_FILE}, "
                     f"{SIGNALS_DIR}/<measurement>.csv (1 kHz force), and the hidden truth {TRUTH_FILE} and "
                     f"{TRUTH_POINTS_FILE}, which no analysis reads. The same seed gives identical bytes.",
@@ -56,8 +56,13 @@ def summary(result, elapsed: float | None = None) -> str:
                      f"({', '.join(meas[:3])}{' ...' if len(meas) > 3 else ''})")
     per_task = result.stats.get("measurements_per_task", {})
     for t in c.tasks:
-        lines.append(f"  task {t.kind:8s} id {t.id:10s} {per_task.get(t.id, t.measurements)} measurement(s)")
-    if result.points is not None and len(result.points):
+        seen = ""
+        if t.kind == "mocap":
+            o = t.opts
+            seen = (f": {counted(o['markers'], 'marker')} {o['marker_distance'] * 1e3:g} mm from the tip frame, "
+                    f"{counted(o['sessions'], 'session')}, instrument noise {o['noise'] * 1e6:g} um")
+        lines.append(f"  task {t.kind:8s} id {t.id:10s} {per_task.get(t.id, t.measurements)} measurement(s){seen}")
+    if result.points is not None and len(result.points) and np.any(result.true_wrench):
         f = np.linalg.norm(result.true_wrench[:, :3], axis=1)
         per = {}
         for m, v in zip(result.points.measurement, f):
@@ -73,9 +78,11 @@ def summary(result, elapsed: float | None = None) -> str:
     nz = [f"{k} {v * shown[k][0]:.3g} {shown[k][1]}" for k, v in result.truth["noise"].items() if v]
     lines.append("noise (1 sigma): " + (", ".join(nz) if nz else "none"))
     s = result.stats
-    lines.append(f"inverse kinematics: {s['ik_attempts_mean']:.2f} random starts a point on average "
-                 f"(max {s['ik_attempts_max']}); truth check: ball centres on their surfaces within "
-                 f"{s['truth_residual_max_m'] * 1e9:.2g} nm")
+    ik = (f"inverse kinematics: {s['ik_attempts_mean']:.2f} random starts a point on average "
+          f"(max {s['ik_attempts_max']}); " if "ik_attempts_mean" in s else "postures only: no inverse kinematics; ")
+    lines.append(ik + f"truth check: ball centres on their surfaces within {s['truth_residual_max_m'] * 1e9:.2g} nm"
+                 + (" (postures: the core model at the readings on the true tip and markers)"
+                    if result.truth.get("marker_offsets") else ""))
     if elapsed is not None:
         lines.append(f"time: {elapsed:.1f} s")
     return "\n".join(lines)
@@ -115,6 +122,10 @@ def _add_stream(result) -> None:
     from .._errors import InputError
     from ..live.plan import format_plan
     from .stream import PLAN_FILE, SAMPLES_FILE, sample_stream, stream_plan
+    if any(t.kind == "mocap" for t in result.campaign.tasks):
+        raise InputError("--samples writes what a measuring arm streams while it touches artefacts; a "
+                         "motion-capture task's postures touch nothing: leave out --samples",
+                         result.campaign.source)
     try:
         result.texts[SAMPLES_FILE] = sample_stream(result, result.campaign.seed or 0)
     except ValueError as exc:

@@ -73,7 +73,8 @@ def _directions(rng, normal, cone) -> np.ndarray:
 def draw_operator(plan: Plan, operator: dict, environment: dict, signals: dict,
                   rng: np.random.Generator) -> OperatorDraw:
     """Forces, times and temperatures for every point of ``plan`` (measurements in plan order,
-    one after the other with ``measurement_gap`` between them)."""
+    one after the other with ``measurement_gap`` between them); a posture (``plan.posture``) has no contact
+    force."""
     n = len(plan.measurement)
     force = np.empty((n, 3))
     time = np.empty(n)
@@ -81,9 +82,12 @@ def draw_operator(plan: Plan, operator: dict, environment: dict, signals: dict,
     t0 = 0.0
     lead = signals["rise"] + 0.5
     for mid, idx in measurement_slices(plan.measurement).items():
-        level, mag = _magnitudes(rng, operator, idx.size)
-        levels[mid] = level
-        force[idx] = mag[:, None] * _directions(rng, plan.normal[idx], plan.cone[idx])
+        if plan.posture[idx].all():           # a posture seen by motion capture: nothing touched
+            levels[mid], force[idx] = 0.0, 0.0
+        else:
+            level, mag = _magnitudes(rng, operator, idx.size)
+            levels[mid] = level
+            force[idx] = mag[:, None] * _directions(rng, plan.normal[idx], plan.cone[idx])
         gaps = operator["point_period"] * rng.uniform(0.7, 1.3, idx.size)
         gaps[0] = lead
         # capture times on the sample grid, so the signal's peak sample is the capture

@@ -50,13 +50,17 @@ class SimResult:
 
     Attributes:
         campaign: the campaign simulated.
-        points: the points file as :func:`arm_model.read_points` reads it (all rows but the tracker's).
-        reference_points: the tracker rows (with ``ref``), or None without a tracker task.
-        artefacts: the artefacts file as :func:`arm_model.read_artefacts` reads it.
+        points: the points file as :func:`arm_model.read_points` reads it (all rows but the tracker's; when
+            every row is seen by the instrument, as in a campaign of postures only, all of them, with ``ref``).
+        reference_points: the tracker rows (with ``ref``) when the campaign also has rows without, else None.
+        artefacts: the artefacts file as :func:`arm_model.read_artefacts` reads it; None when the campaign
+            touches no artefact (postures only).
         signals: measurement id -> :class:`arm_model.io.ForceSignal` (as read back from its CSV).
         truth: the hidden truth: ``p`` (name -> true value, SI), ``p_vector``, ``spec``, ``model``
             (the core ArmModel of the truth), ``effects`` (settings), ``noise``, ``placements``,
-            ``T_ref_base`` (tracker task id -> (4, 4)), ``operator`` (per-measurement force levels).
+            ``T_ref_base`` (instrument frame -> (4, 4): a tracker task's id, a motion-capture task's id or
+            ``<id>-s<k>`` for its session k), ``marker_offsets`` (motion-capture task id -> (K, 3) [m], tip
+            frame), ``operator`` (per-measurement force levels).
         true_centres: (N, 3) [m] true deflected ball centres of ``points`` rows (base frame).
         true_q: (N, J) [rad] true joint angles of ``points`` rows.
         true_wrench: (N, 6) true wrench (probe frame) of ``points`` rows.
@@ -202,22 +206,53 @@ def _x_directions(plan: Plan, force: np.ndarray, rng) -> np.ndarray:
     return x
 
 
-def _truth_check(desc, truth, plan, q_enc, wrench, aux, labels):
-    """The truth check: the core model evaluated on exact readings lands on the target surface; (the true
-    ball centres (n, 3) [m], their distance from the targets (n,) [m]) or a NumericalError."""
-    no_sensor = [e for e in truth.model.effects if e.key != "force_sensor"]
+def _check_model(truth):
+    """The core model of the truth without its force-sensor effect and its parameters: what the true
+    geometry gives at the exact readings and the true wrench."""
     from ..model import ArmModel
-    check_model = ArmModel(desc, tuple(no_sensor))
+    no_sensor = [e for e in truth.model.effects if e.key != "force_sensor"]
     keep = np.concatenate([np.arange(truth.model.base_size)] +
                           [np.arange(sl.start, sl.stop) for e, sl in truth.model.effect_slices()
                            if e.key != "force_sensor"]).astype(int)
-    centres = check_model.ball_centres(q_enc, wrench, truth.p[keep], aux)
+    return ArmModel(truth.model.desc, tuple(no_sensor)), truth.p[keep]
+
+
+def _truth_check(truth, plan, q_enc, wrench, aux, labels):
+    """The truth check: the core model evaluated on exact readings lands on the target surface (a
+    posture: on the true tip); (the true ball centres (n, 3) [m], their distance from the targets (n,) [m])
+    or a NumericalError."""
+    check_model, p = _check_model(truth)
+    centres = check_model.ball_centres(q_enc, wrench, p, aux)
     residual = np.linalg.norm(centres - plan.position, axis=1)
     if residual.max() > 1e-9:
         i = int(np.argmax(residual))
         raise NumericalError(f"truth check failed: the true ball centre of {labels[i]} is "
                              f"{residual[i] * 1e9:.3g} nm off its target")
     return centres, residual
+
+
+def _true_markers(truth, plan, campaign, q_true, q_enc, aux) -> np.ndarray | None:
+    """(N, K, 3) [m] the true markers of the posture rows in the base frame (NaN elsewhere): the true tip
+    frame at the true joint values moved by each marker's offset; checked against the core model at the
+    exact readings (``arm_model.tracker.marker_positions``) to 1 nm. None without a motion-capture task."""
+    if not plan.markers:
+        return None
+    from ..tracker import Tracker, marker_positions
+    tid, offsets = next(iter(plan.markers.items()))
+    rows = np.flatnonzero(plan.posture)
+    n = len(rows)
+    geom = truth.geometry(aux.temperature[rows])
+    ball, z, x = truth.pose(q_true[rows], geom, np.zeros((n, 6)))
+    rot = np.stack([x, np.cross(z, x), z], axis=2)
+    out = np.full((len(plan), len(offsets), 3), np.nan)
+    out[rows] = ball[:, None, :] + np.einsum("nij,kj->nki", rot, offsets)
+    model, p = _check_model(truth)
+    core = marker_positions(model, p, q_enc[rows], Tracker(("",), np.eye(4), offsets), [""] * n, aux.select(rows))
+    worst = float(np.max(np.linalg.norm(core - out[rows], axis=2), initial=0.0))
+    if worst > 1e-9:
+        raise NumericalError(f"truth check failed: a marker of task '{tid}' is {worst * 1e9:.3g} nm off where the "
+                             "core model puts it")
+    return out
 
 
 def _readings(nz: dict, nrng, truth, q_true, q_enc, draw, wrench):
@@ -247,6 +282,8 @@ def _signals(campaign, plan, draw, truth, f_read, srng, texts: dict) -> dict:
     names = ("f_bend_N", "f_axial_N") if sensor == "two-channel" else ("fx_N", "fy_N", "fz_N")
     signals = {}
     for mid, idx in measurement_slices(plan.measurement).items():
+        if plan.posture[idx].all():          # a posture touches nothing: no pulse to record
+            continue
         peaks = np.array([[float(_FMT["force"] % v) for v in f_read[i, list(chans)]] for i in idx])
         t, f = force_signal(draw.time[idx], peaks, truth.force_offset[list(chans)], draw.windows[mid],
                             campaign.signals, nz["force_noise"], srng)
@@ -267,12 +304,14 @@ def _signals(campaign, plan, draw, truth, f_read, srng, texts: dict) -> dict:
     return signals
 
 
-def _stats(campaign, plan, ik, residual, f_true) -> dict:
-    """The campaign's counts and checks, for the truth file."""
+def _stats(campaign, plan, attempts, residual, f_true) -> dict:
+    """The campaign's counts and checks, for the truth file (``attempts``: the inverse kinematics' random
+    starts of each contact row; none for a campaign of postures only)."""
     per_task = {t.id: len(set(plan.measurement[plan.task == k])) for k, t in enumerate(campaign.tasks)}
+    ik = {} if not len(attempts) else {"ik_attempts_mean": float(attempts.mean()),
+                                       "ik_attempts_max": int(attempts.max())}
     return {"points": int(len(plan)), "measurements": len(set(plan.measurement)), "measurements_per_task": per_task,
-            "ik_attempts_mean": float(ik.attempts.mean()), "ik_attempts_max": int(ik.attempts.max()),
-            "truth_residual_max_m": float(residual.max()),
+            **ik, "truth_residual_max_m": float(residual.max()),
             "force_mean_N": float(np.linalg.norm(f_true, axis=1).mean()),
             "force_max_N": float(np.linalg.norm(f_true, axis=1).max())}
 
@@ -280,8 +319,8 @@ def _stats(campaign, plan, ik, residual, f_true) -> dict:
 def _truth_columns(desc, plan, q_true, q_enc, centres, f_true, draw) -> dict:
     """The columns of the truth points file: true and encoder joint values (each in its unit), true ball
     centres, forces and temperature."""
-    cols = {"measurement": (plan.measurement, None), "feature": (plan.feature, None),
-            "file": (np.where(plan.reference, REFERENCE_FILE, POINTS_FILE), None)}
+    files = np.where(plan.reference & ~plan.reference.all(), REFERENCE_FILE, POINTS_FILE)
+    cols = {"measurement": (plan.measurement, None), "feature": (plan.feature, None), "file": (files, None)}
     for k, (unit, factor) in enumerate(desc.joint_column_units):
         cols[f"q{k + 1}_true_{unit}"] = (q_true[:, k] * factor, "%.12f")
     for k, (unit, factor) in enumerate(desc.joint_column_units):
@@ -291,6 +330,75 @@ def _truth_columns(desc, plan, q_true, q_enc, centres, f_true, draw) -> dict:
     for k, a in enumerate("xyz"):
         cols[f"f{a}_true_N"] = (f_true[:, k], "%.9f")
     cols["temperature_true_C"] = (draw.temperature, "%.6f")
+    return cols
+
+
+def _solve(truth, plan, draw, x_dir, labels, rng, say):
+    """True joint angles (N, J) [rad], wrenches (N, 6) and the inverse kinematics' random starts of the
+    contact rows: the inverse kinematics on the true arm for the rows that touch something, a posture's own
+    joint values (no contact)."""
+    n = len(plan)
+    q_true, wrench = plan.q_start.copy(), np.zeros((n, 6))
+    rows = np.flatnonzero(~plan.posture)
+    if not rows.size:
+        return q_true, wrench, np.zeros(0, int)
+    targets = IKTargets(plan.position, plan.stylus, x_dir, draw.force, draw.torque, draw.temperature,
+                        plan.stylus_axis, plan.stylus_cone).take(rows)
+    say("inverse kinematics on the true arm ...")
+    ik = solve_ik(truth, targets, rng, labels=[labels[i] for i in rows], starts=plan.q_start[rows])
+    q_true[rows], wrench[rows] = ik.q, ik.wrench
+    return q_true, wrench, ik.attempts
+
+
+def _reference(plan, campaign, rows, centres, markers, trng) -> tuple[np.ndarray, int]:
+    """(rows, K, 3) [m] what the instrument reports for ``rows``: a nest's ball centre or a posture's K
+    markers, in the row's instrument frame, plus its noise (drawn frame by frame, in the plan's order)."""
+    k = 1 if markers is None else markers.shape[1]
+    seen = np.broadcast_to(centres[rows, None, :], (rows.size, k, 3)).copy()
+    if markers is not None:
+        posture = plan.posture[rows]
+        seen[posture] = markers[rows[posture]]
+    ref = np.empty_like(seen)
+    for frame, T in plan.T_ref_base.items():
+        sel = plan.frame[rows] == frame
+        p = seen[sel] @ T[:3, :3].T + T[:3, 3]
+        ref[sel] = p + trng.normal(0.0, plan.ref_noise[frame], (int(sel.sum()), 3) if k == 1 else p.shape
+                                   ).reshape(p.shape)
+    return ref
+
+
+def _temperature_told(campaign) -> bool:
+    """Whether a temperature column tells anything: a varying environment, its noise or a thermal truth."""
+    env = campaign.environment
+    return bool(env["drift"] or env["cycle_amplitude"] or campaign.noise["temperature_noise"]
+                or campaign.truth["thermal"] is not None)
+
+
+def _points_columns(campaign, plan, rows, readings, draw, ref) -> dict:
+    """The points file's columns of ``rows``: ids (and each row's session where the reference rows have
+    several instrument frames), encoder readings, force and temperature readings, capture time, and the
+    reference columns ``ref`` (rows, K, 3) [m] (None: a file without them)."""
+    desc, sensor = campaign.arm, campaign.sensor
+    q_read, temp_read, f_read = readings
+    cols = {"measurement": (plan.measurement[rows], None), "feature": (plan.feature[rows], None)}
+    if ref is not None and len(set(plan.frame[plan.reference])) > 1:
+        cols["session"] = (plan.frame[rows], None)
+    for k, (unit, factor) in enumerate(desc.joint_column_units):
+        cols[f"q{k + 1}_{unit}"] = (q_read[rows, k] * factor, _FMT["q"])
+    if sensor == "xyz":
+        for k, a in enumerate("xyz"):
+            cols[f"f{a}_N"] = (f_read[rows, k], _FMT["force"])
+    elif sensor == "two-channel":
+        cols["f_bend_N"] = (f_read[rows, 0], _FMT["force"])
+        cols["f_axial_N"] = (f_read[rows, 2], _FMT["force"])
+    if not plan.posture[rows].all() or _temperature_told(campaign):
+        cols["temperature_C"] = (temp_read[rows], _FMT["temperature"])
+    cols["time_s"] = (draw.time[rows], _FMT["time"])
+    if ref is not None:
+        names = [""] if ref.shape[1] == 1 else [str(m + 1) for m in range(ref.shape[1])]
+        for m, tag in enumerate(names):
+            for k, a in enumerate("xyz"):
+                cols[f"{a}{tag}_ref_mm"] = (ref[:, m, k] * 1e3, _FMT["ref"])
     return cols
 
 
@@ -307,16 +415,11 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
     desc = campaign.arm
     truth = build_truth(desc, campaign.truth, rng["truth"], campaign.sensor)
     plan = make_plan(campaign, rng["plan"], truth)
-    n = len(plan)
-    say(f"{counted(n, 'point')} in {counted(len(set(plan.measurement)), 'measurement')} planned")
+    say(f"{counted(len(plan), 'point')} in {counted(len(set(plan.measurement)), 'measurement')} planned")
     draw = draw_operator(plan, campaign.operator, campaign.environment, campaign.signals, rng["operator"])
     x_dir = _x_directions(plan, draw.force, rng["operator"])
-    targets = IKTargets(plan.position, plan.stylus, x_dir, draw.force, draw.torque, draw.temperature,
-                        plan.stylus_axis, plan.stylus_cone)
     labels = [f"{m} row {i + 1} (feature {f})" for i, (m, f) in enumerate(zip(plan.measurement, plan.feature))]
-    say("inverse kinematics on the true arm ...")
-    ik = solve_ik(truth, targets, rng["ik"], labels=labels, starts=plan.q_start)
-    q_true, wrench = ik.q, ik.wrench
+    q_true, wrench, attempts = _solve(truth, plan, draw, x_dir, labels, rng["ik"], say)
     # physical torques and the readings the encoders give
     if truth.needs_torques():
         say("gravity and contact torques (Pinocchio, true arm) ...")
@@ -325,70 +428,55 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
         tau_g = tau_c = np.zeros_like(q_true)
     aux = truth.aux(draw.temperature, tau_g, tau_c)
     q_enc = truth.encoder_readings(q_true, aux)
-    centres, residual = _truth_check(desc, truth, plan, q_enc, wrench, aux, labels)
-    nz = campaign.noise
-    q_read, temp_read, f_read = _readings(nz, rng["noise"], truth, q_true, q_enc, draw, wrench)
+    posture = np.flatnonzero(plan.posture)
+    if posture.size:          # a posture's target is the true tip
+        plan.position[posture] = truth.pose(q_true[posture], truth.geometry(draw.temperature[posture]),
+                                            np.zeros((posture.size, 6)))[0]
+    centres, residual = _truth_check(truth, plan, q_enc, wrench, aux, labels)
+    markers = _true_markers(truth, plan, campaign, q_true, q_enc, aux)
+    readings = _readings(campaign.noise, rng["noise"], truth, q_true, q_enc, draw, wrench)
     # files
     say("writing files in memory ...")
-    sensor = campaign.sensor
-    is_ref = plan.reference
     texts = {}
-
-    def points_columns(rows, with_ref):
-        cols = {"measurement": (plan.measurement[rows], None), "feature": (plan.feature[rows], None)}
-        for k, (unit, factor) in enumerate(desc.joint_column_units):
-            cols[f"q{k + 1}_{unit}"] = (q_read[rows, k] * factor, _FMT["q"])
-        if sensor == "xyz":
-            for k, a in enumerate("xyz"):
-                cols[f"f{a}_N"] = (f_read[rows, k], _FMT["force"])
-        elif sensor == "two-channel":
-            cols["f_bend_N"] = (f_read[rows, 0], _FMT["force"])
-            cols["f_axial_N"] = (f_read[rows, 2], _FMT["force"])
-        cols["temperature_C"] = (temp_read[rows], _FMT["temperature"])
-        cols["time_s"] = (draw.time[rows], _FMT["time"])
-        if with_ref:
-            ref = np.empty((rows.size, 3))
-            trng = rng["tracker"]
-            for tid, T in plan.T_ref_base.items():
-                k = [i for i, t in enumerate(campaign.tasks) if t.id == tid][0]
-                sel = plan.task[rows] == k
-                p = centres[rows[sel]] @ T[:3, :3].T + T[:3, 3]
-                ref[sel] = p + trng.normal(0.0, plan.ref_noise[tid], p.shape)
-            for k, a in enumerate("xyz"):
-                cols[f"{a}_ref_mm"] = (ref[:, k] * 1e3, _FMT["ref"])
-        return cols
-
-    main_rows = np.flatnonzero(~is_ref)
-    ref_rows = np.flatnonzero(is_ref)
+    ref_rows = np.flatnonzero(plan.reference)
+    main_rows = np.flatnonzero(~plan.reference)
     points = ref_points = None
     if main_rows.size:
-        texts[POINTS_FILE] = _csv_text(points_columns(main_rows, False))
+        texts[POINTS_FILE] = _csv_text(_points_columns(campaign, plan, main_rows, readings, draw, None))
         points = parse_points(texts[POINTS_FILE], POINTS_FILE, desc.joint_quantities)
-    if ref_rows.size:
-        texts[REFERENCE_FILE] = _csv_text(points_columns(ref_rows, True))
-        ref_points = parse_points(texts[REFERENCE_FILE], REFERENCE_FILE, desc.joint_quantities)
-    texts[ARTEFACTS_FILE] = _artefacts_text(plan, campaign)
-    artefacts = parse_artefacts(texts[ARTEFACTS_FILE], ARTEFACTS_FILE)
-    # force signals, one a measurement
+    if ref_rows.size:           # beside the points file, or the points file itself when every row has them
+        name = REFERENCE_FILE if main_rows.size else POINTS_FILE
+        ref = _reference(plan, campaign, ref_rows, centres, markers, rng["tracker"])
+        texts[name] = _csv_text(_points_columns(campaign, plan, ref_rows, readings, draw, ref))
+        ref_points = parse_points(texts[name], name, desc.joint_quantities)
+        if not main_rows.size:
+            points, ref_points, main_rows = ref_points, None, ref_rows
+    artefacts = None
+    if plan.features or plan.distances:
+        texts[ARTEFACTS_FILE] = _artefacts_text(plan, campaign)
+        artefacts = parse_artefacts(texts[ARTEFACTS_FILE], ARTEFACTS_FILE)
+    # force signals, one a measurement that touches something
     signals = {}
-    if sensor != "none" and campaign.signals["enabled"]:
+    if campaign.sensor != "none" and campaign.signals["enabled"]:
         say("force signals ...")
-        signals = _signals(campaign, plan, draw, truth, f_read, rng["signals"], texts)
+        signals = _signals(campaign, plan, draw, truth, readings[2], rng["signals"], texts)
     f_true = wrench[:, :3]
-    stats = _stats(campaign, plan, ik, residual, f_true)
+    stats = _stats(campaign, plan, attempts, residual, f_true)
     texts[TRUTH_FILE] = _truth_text(campaign, truth, plan, draw, stats)
     texts[TRUTH_POINTS_FILE] = "# TRUTH: true values per captured point; no analysis reads this file.\n" + \
         _csv_text(_truth_columns(desc, plan, q_true, q_enc, centres, f_true, draw))
     truth_dict = {"p": truth.values, "aliases": truth.aliases, "p_vector": truth.p.copy(), "spec": truth.model.spec, "model": truth.model,
                   "effects": truth.settings, "effects_on": truth.effects_on(), "noise": dict(campaign.noise),
                   "placements": plan.placements, "T_ref_base": dict(plan.T_ref_base),
+                  "marker_offsets": {k: v.copy() for k, v in plan.markers.items()},
                   "operator": dict(draw.level), "cross_talk": truth.cross_talk.copy(),
                   "description": truth.description, "truth": truth,
                   "tau_gravity": tau_g, "tau_contact": tau_c, "q_enc": q_enc, "temperature": draw.temperature,
                   "force_base": draw.force}
+    has_ref = ref_points is not None
     return SimResult(campaign, points, ref_points, artefacts, signals, truth_dict,
                      centres[main_rows], q_true[main_rows], wrench[main_rows],
-                     centres[ref_rows] if ref_rows.size else None, q_true[ref_rows] if ref_rows.size else None,
+                     centres[ref_rows] if has_ref else None, q_true[ref_rows] if has_ref else None,
                      stats, texts)
 
 

@@ -1,0 +1,365 @@
+"""The simulator's motion-capture campaigns (``kind = "mocap"``): a robot holds random postures while an
+instrument sees markers on its tip link at unknown offsets, in an unknown frame a session; then the commands
+a robot engineer runs on such data, with the URDF as it ships and the marker's link as the tip.
+
+Independent references: Pinocchio's placement of the tip frame in the TRUE description (the nominal URDF with
+the drawn errors folded in) at the true joint values, for where each marker is; the campaign's own noise level
+for the spread of the instrument's coordinates; the truth's figures (its frames and markers fitted on the
+same training postures) for how close a calibration comes."""
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+
+import numpy as np
+import pytest
+
+from arm_model import InputError, PinocchioArm, read_points
+from arm_model.cli import main
+from arm_model.kinematics import probe_rotations
+from arm_model.model_file import format_model, load_model
+from arm_model.sim import campaign_from_dict, load_campaign, simulate
+from conftest import assert_close
+
+#: a small mobile manipulator written here: a prismatic lift, revolute and continuous joints, a flange link
+#: turned by a fixed joint (the marker's link), a finger branch with a mirrored mesh, inertials throughout
+LIFT_ARM_URDF = """<?xml version="1.0"?>
+<robot name="liftarm">
+  <link name="base_link"><inertial><mass value="20"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="torso"><inertial><origin xyz="0 0 0.1"/><mass value="6"/><inertia ixx="0.1" iyy="0.1" izz="0.1" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="shoulder"><inertial><mass value="2.5"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="upper_arm"><inertial><origin xyz="0.15 0 0"/><mass value="2.0"/><inertia ixx="0.01" iyy="0.02" izz="0.02" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="forearm"><inertial><origin xyz="0.12 0 0"/><mass value="1.5"/><inertia ixx="0.01" iyy="0.02" izz="0.02" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="wrist"><inertial><mass value="0.6"/><inertia ixx="0.001" iyy="0.001" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="hand"><inertial><origin xyz="0.04 0 0"/><mass value="0.8"/><inertia ixx="0.001" iyy="0.001" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="flange"/>
+  <link name="finger"><visual><geometry><mesh filename="package://nowhere/finger.stl" scale="1 -1 1"/></geometry></visual></link>
+  <joint name="lift" type="prismatic"><parent link="base_link"/><child link="torso"/>
+    <origin xyz="0 0 0.4"/><axis xyz="0 0 1"/><limit lower="0" upper="0.35" effort="100" velocity="0.1"/></joint>
+  <joint name="shoulder_yaw" type="revolute"><parent link="torso"/><child link="shoulder"/>
+    <origin xyz="0.05 0 0.3" rpy="0 0 0.2"/><axis xyz="0 0 1"/><limit lower="-2.5" upper="2.5" effort="50" velocity="1"/></joint>
+  <joint name="shoulder_pitch" type="revolute"><parent link="shoulder"/><child link="upper_arm"/>
+    <origin xyz="0 0.08 0.05"/><axis xyz="0 1 0"/><limit lower="-1.5" upper="1.5" effort="50" velocity="1"/></joint>
+  <joint name="elbow" type="revolute"><parent link="upper_arm"/><child link="forearm"/>
+    <origin xyz="0.3 0 0"/><axis xyz="0 1 0"/><limit lower="-2.2" upper="2.2" effort="30" velocity="1"/></joint>
+  <joint name="wrist_roll" type="continuous"><parent link="forearm"/><child link="wrist"/>
+    <origin xyz="0.25 0 0"/><axis xyz="1 0 0"/></joint>
+  <joint name="wrist_pitch" type="revolute"><parent link="wrist"/><child link="hand"/>
+    <origin xyz="0.03 0 0"/><axis xyz="0 1 0"/><limit lower="-1.8" upper="1.8" effort="10" velocity="1"/></joint>
+  <joint name="flange_joint" type="fixed"><parent link="hand"/><child link="flange"/>
+    <origin xyz="0.09 0 0" rpy="0 1.5708 0"/></joint>
+  <joint name="finger_joint" type="prismatic"><parent link="hand"/><child link="finger"/>
+    <origin xyz="0.1 0.02 0"/><axis xyz="0 1 0"/><limit lower="0" upper="0.04" effort="5" velocity="0.1"/></joint>
+</robot>
+"""
+TIP = "flange"
+
+
+def _campaign(postures=24, markers=2, sessions=2, noise_mm=0.0, seed=3, compliance=True, **truth):
+    task = {"kind": "mocap", "postures": postures, "markers": markers, "sessions": sessions, "noise_mm": noise_mm}
+    t = {"length_error_mm": 0.5, "angle_error_deg": 0.2, **truth}
+    if compliance:
+        t["joint_compliance"] = {"stiffness_Nm_per_rad": 2000.0, "gravity": True, "contact": False}
+    return {"name": "liftarm-mocap", "seed": seed, "arm": "liftarm.urdf", "tip_frame": TIP, "sensor": "none",
+            "truth": t, "task": [task]}
+
+
+@pytest.fixture(scope="module")
+def robot_dir(tmp_path_factory):
+    d = tmp_path_factory.mktemp("liftarm")
+    (d / "liftarm.urdf").write_text(LIFT_ARM_URDF)
+    return d
+
+
+def _simulate(robot_dir, **kw):
+    return simulate(campaign_from_dict(_campaign(**kw), base_dir=robot_dir))
+
+
+def test_markers_are_where_pinocchio_puts_the_true_tip_frame(robot_dir):
+    """No noise: each marker is ``T_ref_base[session] @ T_base_tip(q_true) @ offset`` with the tip frame
+    placed by Pinocchio in the true description (the drawn errors folded in) at the true joint values, which
+    the gravity-loaded joints hold away from their readings."""
+    res = _simulate(robot_dir)
+    pts, truth = res.points, res.truth
+    assert res.reference_points is None and res.artefacts is None       # every row is seen: one points file
+    assert sorted(res.texts) == ["points.csv", "truth-points.csv", "truth.toml"]
+    assert pts.n_markers == 2 and list(dict.fromkeys(pts.session)) == ["pose-s1", "pose-s2"]
+    assert list(pts.measurement[:3]) == ["pose-01", "pose-02", "pose-03"] and set(pts.feature) == {""}
+    offsets = truth["marker_offsets"]["pose"]
+    assert_close(np.linalg.norm(offsets, axis=1), [0.05, 0.05], atol=1e-12)
+    pin = PinocchioArm(truth["description"])
+    assert np.abs(res.true_q - truth["q_enc"]).max() > 1e-5         # the compliance shows in the readings
+    for i in range(len(pts)):
+        T = truth["T_ref_base"][pts.session[i]]
+        tip = pin.T_base_ball(res.true_q[i])
+        for k, o in enumerate(offsets):
+            expected = T[:3, :3] @ (tip[:3, :3] @ o + tip[:3, 3]) + T[:3, 3]
+            assert_close(pts.ref[i, k], expected, atol=2e-9, msg=f"row {i}, marker {k + 1}")
+    assert_close(pts.q, truth["q_enc"], atol=1e-12)                  # no encoder noise asked
+    header = res.texts["points.csv"].splitlines()[0].split(",")
+    assert header[:3] == ["measurement", "feature", "session"] and "temperature_C" not in header
+    assert header[-6:] == [f"{a}{k}_ref_mm" for k in (1, 2) for a in "xyz"]
+    assert pts.wrench is None and not res.signals
+
+
+def test_the_instrument_noise_is_the_campaign_s(robot_dir):
+    """The same seed with noise: the postures and truth are the same; the coordinates scatter by the
+    campaign's ``noise`` per axis (80 x 2 markers x 3 axes: the estimate within 15 %)."""
+    exact = _simulate(robot_dir, postures=80, noise_mm=0.0, compliance=False)
+    noisy = _simulate(robot_dir, postures=80, noise_mm=0.25, compliance=False)
+    assert_close(noisy.points.q, exact.points.q, atol=0)
+    d = (noisy.points.ref - exact.points.ref).ravel()
+    assert abs(d.mean()) < 3 * 0.25e-3 / math.sqrt(d.size)
+    assert d.std() == pytest.approx(0.25e-3, rel=0.15)
+
+
+def test_truth_file_holds_the_markers_and_frames(robot_dir, tmp_path):
+    res = _simulate(robot_dir, sessions=1, markers=1)
+    res.write(tmp_path)
+    truth = tomllib.loads((tmp_path / "truth.toml").read_text())
+    place = truth["artefact"]["pose"]
+    assert place["kind"] == "mocap" and list(place["T_ref_base"]) == ["pose"]
+    assert_close(place["marker_offsets_m"], res.truth["marker_offsets"]["pose"], atol=0)
+    pts = read_points(tmp_path / "points.csv", res.campaign.arm.joint_quantities)
+    assert pts.session is None and pts.n_markers == 1     # one session, one marker: x_ref_mm, no session column
+    assert_close(pts.ref, res.points.ref, atol=0)
+
+
+@pytest.mark.parametrize("change, key, words", [
+    (lambda c: c["task"].append(dict(c["task"][0], id="more")), "task[2].kind", "one motion-capture task"),
+    (lambda c: c["task"].append({"kind": "tracker", "nests": 3}), "task[1].markers", "several markers"),
+    (lambda c: c["task"][0].update(measurements=3), "task[1].measurements", "give 'postures'"),
+    (lambda c: c["task"][0].update(sessions=30), "task[1].sessions", "each session needs postures"),
+    (lambda c: c["task"][0].update(postures=0), "task[1].postures", "must be > 0"),
+    (lambda c: c.update(tip_frame="flang"), "tip_frame", "did you mean 'flange'"),
+    (lambda c: c["truth"]["joint_compliance"].update(joints=["lift", "elbow"]), "truth.joint_compliance.joints",
+     "joint 'lift' is prismatic"),
+    (lambda c: c["truth"].update(eccentricity=[{"joint": "lift", "amplitude_deg": 0.01}]),
+     "truth.eccentricity[1].joint", "joint 'lift' is prismatic"),
+])
+def test_bad_motion_capture_tasks_name_their_key(robot_dir, change, key, words):
+    c = _campaign()
+    change(c)
+    with pytest.raises(InputError) as e:
+        campaign_from_dict(c, base_dir=robot_dir)
+    assert e.value.column == f"key '{key}'" and words in str(e.value)
+
+
+def test_samples_are_refused_for_postures(robot_dir, tmp_path, capsys):
+    (tmp_path / "liftarm.urdf").write_text(LIFT_ARM_URDF)
+    (tmp_path / "c.toml").write_text('arm = "liftarm.urdf"\ntip_frame = "flange"\nsensor = "none"\n'
+                                     '[[task]]\nkind = "mocap"\npostures = 5\n')
+    assert main(["simulate", str(tmp_path / "c.toml"), "--samples", "-o", str(tmp_path / "out")]) == 2
+    assert "leave out --samples" in capsys.readouterr().err and not (tmp_path / "out").exists()
+
+
+def _holdout_rms(summary: dict, key: str = "reference_rms_predicted") -> tuple[float, float]:
+    row = next(r for r in summary["validation_holdout"] if r["key"] == key)
+    return row["before"], row["after"]
+
+
+def _obvious_commands(tmp_path, urdf, tip: str, postures: int = 40, seed: int = 5) -> tuple[float, float, float]:
+    """``aacmm simulate`` a campaign of ``postures`` postures on ``urdf`` (1 mm and 0.3 deg errors, one marker,
+    0.2 mm noise), then the user's commands with the URDF as it ships and the marker's link ``tip`` as the tip:
+    calibrate (no artefacts file, postures held out), tip --reference-frame, view. Every output reads back.
+    Returns the held-out RMS [um] of the nominal URDF (its own frame and marker fitted), of the calibration,
+    and of the truth (the true description as a model file, its frame and marker fitted the same way)."""
+    (tmp_path / "c.toml").write_text(f'name = "mocap"\nseed = {seed}\narm = "{urdf}"\ntip_frame = "{tip}"\n'
+                                     'sensor = "none"\n[truth]\nlength_error_mm = 1.0\nangle_error_deg = 0.3\n'
+                                     f'[[task]]\nkind = "mocap"\npostures = {postures}\nnoise_mm = 0.2\n')
+    sim, cal, floor = tmp_path / "sim", tmp_path / "cal", tmp_path / "floor"
+    assert main(["simulate", str(tmp_path / "c.toml"), "-o", str(sim)]) == 0
+    points = str(sim / "points.csv")
+    assert main(["calibrate", points, "--arm", str(urdf), "--tip-frame", tip, "--holdout", "0.3", "-o", str(cal)]) == 0
+    model = next(cal.glob("*-calibrated.toml"))
+    arm = load_model(model)
+    assert arm.tracker is not None and arm.tracker.offsets.shape == (1, 3)
+    summary = json.loads((cal / "summary.json").read_text())
+    nominal, calibrated = _holdout_rms(summary)
+    truth = simulate(load_campaign(tmp_path / "c.toml")).truth
+    (tmp_path / "truth.toml").write_text(format_model(truth["description"]))
+    assert main(["calibrate", points, "--arm", str(tmp_path / "truth.toml"), "--holdout", "0.3", "-o", str(floor)]) == 0
+    floor_summary = json.loads((floor / "summary.json").read_text())
+    assert floor_summary["holdout"] == summary["holdout"]
+    # the prediction of the instrument's coordinates, row by row, and the calibrated URDF read back
+    tips = tmp_path / "tips.csv"
+    assert main(["tip", points, "--arm", str(model), "--reference-frame", "-o", str(tips)]) == 0
+    rows = np.genfromtxt(tips, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    held = np.isin(rows["measurement"], summary["holdout"])
+    assert_close(np.sqrt(np.mean(rows["error_ref_um"][held] ** 2)), calibrated, atol=1e-3)
+    again = tmp_path / "tips-urdf.csv"
+    assert main(["tip", points, "--arm", str(model.with_suffix(".urdf")), "--tip-frame", tip, "-o", str(again)]) == 0
+    by_urdf = np.genfromtxt(again, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    for c in ("x_mm", "y_mm", "z_mm"):
+        assert_close(by_urdf[c], rows[c], atol=2e-6)
+    assert main(["view", points, "--arm", str(model), "--residuals", str(cal / "residuals.csv"),
+                 "--html", str(tmp_path / "view.html")]) == 0
+    assert (tmp_path / "view.html").stat().st_size > 10_000
+    return nominal, calibrated, _holdout_rms(floor_summary)[0]
+
+
+def test_the_obvious_commands_on_a_simulated_motion_capture_campaign(tmp_path):
+    """The commands end to end on the lift arm: the held-out prediction beats the nominal URDF (its own frame
+    and marker fitted) and comes within 25 % of the truth's."""
+    (tmp_path / "liftarm.urdf").write_text(LIFT_ARM_URDF)
+    nominal, calibrated, best = _obvious_commands(tmp_path, tmp_path / "liftarm.urdf", TIP)
+    assert 0.2 * math.sqrt(3) * 1e3 * 0.8 < best < calibrated < 1.25 * best < nominal / 5
+
+
+#: robots of the field's set, of other shapes than the shared TALOS arm: (URDF, the marker's link)
+SET_ROBOTS = {
+    "ur5": ("ur_description/urdf/ur5_robot.urdf", "tool0"),                     # industrial arm, 6 joints
+    "tiago": ("tiago_description/robots/tiago.urdf", "arm_7_link"),            # prismatic torso, 7-joint arm
+    "icub": ("icub_description/robots/icub.urdf", "r_hand"),                   # humanoid: torso and arm, 10
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(SET_ROBOTS))
+def test_the_obvious_commands_on_the_robot_set(robots, tmp_path, name):
+    """The same on robots of example-robot-data as they ship (40 postures): the held-out prediction within
+    35 % of the truth's and at least 4 times better than the nominal URDF's."""
+    rel, tip = SET_ROBOTS[name]
+    nominal, calibrated, best = _obvious_commands(tmp_path, robots / rel, tip, seed=1)
+    assert best < calibrated < 1.35 * best < nominal / 4
+
+
+def test_view_draws_each_marker_and_where_the_instrument_saw_it(robot_dir, tmp_path, capsys):
+    """A model file holding the truth (description, sessions' frames, markers' offsets) and noise-free points:
+    the instrument's coordinates mapped back into the base frame by the model's frames land on the markers
+    the model places (1e-9 m), calibrate's reference residuals start at those markers, and ``aacmm view``
+    draws both with a scale from the data."""
+    from arm_model.tracker import Tracker
+    from viz.cli import _markers
+    from viz.residuals import parse_residuals, residual_origins
+
+    res = _simulate(robot_dir, compliance=False)
+    truth = res.truth
+    sessions = tuple(dict.fromkeys(res.points.session))
+    tracker = Tracker(sessions, [truth["T_ref_base"][s] for s in sessions], truth["marker_offsets"]["pose"])
+    model = tmp_path / "truth-model.toml"
+    model.write_text(format_model(truth["description"], tracker=tracker))
+    res.write(tmp_path / "sim")
+    arm = load_model(model)
+    points = read_points(tmp_path / "sim" / "points.csv", arm.desc.joint_quantities)
+    predicted, seen = _markers(arm, points)
+    assert predicted.shape == (len(points), 2, 3)
+    assert_close(seen, predicted, atol=1e-9)
+    text = ("measurement,feature,kind,line,residual_um,dx_um,dy_um,dz_um,standardized\n"
+            "pose-01,,reference,2,1,1,0,0,1\npose-01,,reference,2,1,0,1,0,1\n")
+    origins, _, skipped = residual_origins(parse_residuals(text), points, arm.ball_centres(points), predicted)
+    assert skipped == 0
+    assert_close(origins, predicted[0], atol=1e-12)
+    assert main(["view", str(tmp_path / "sim" / "points.csv"), "--arm", str(model), "--html",
+                 str(tmp_path / "view.html")]) == 0
+    out = capsys.readouterr().out
+    assert f"pink dots: {2 * len(points)} marker(s)" in out and "cyan lines" in out
+
+
+def test_a_held_out_session_is_registered_anew_and_said_so(robot_dir, tmp_path, capsys):
+    """Holding out a whole session (another placement of the instrument): the held-out figure fits that
+    session's frame on its own points and says so; ``tip --reference-frame`` names the session the model file
+    has no frame for, and what to do."""
+    res = _simulate(robot_dir, postures=30, markers=1, sessions=2, noise_mm=0.1, compliance=False)
+    res.write(tmp_path / "sim")
+    urdf = tmp_path / "liftarm.urdf"
+    urdf.write_text(LIFT_ARM_URDF)
+    points = str(tmp_path / "sim" / "points.csv")
+    second = [m for m, s in zip(res.points.measurement, res.points.session) if s == "pose-s2"]
+    assert main(["calibrate", points, "--arm", str(urdf), "--tip-frame", TIP, "--holdout", ",".join(second),
+                 "-o", str(tmp_path / "cal")]) == 0
+    assert "held-out session(s) 'pose-s2' have no frame from the training data" in capsys.readouterr().out
+    assert main(["tip", points, "--arm", str(tmp_path / "cal" / "liftarm-calibrated.toml"), "--reference-frame",
+                 "-o", str(tmp_path / "tips.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "no reference frame for session 'pose-s2'" in err and "calibrated on" in err
+    assert not (tmp_path / "tips.csv").exists()
+
+
+def test_a_gross_reading_is_named_with_the_way_to_refit_without_it(robot_dir, tmp_path, capsys):
+    """A marker 30 mm off in one posture (a swapped marker): calibrate lists it and says how to refit without
+    it (kept by default, it pulls every parameter towards it)."""
+    res = _simulate(robot_dir, postures=30, markers=1, sessions=1, noise_mm=0.2, compliance=False)
+    res.write(tmp_path / "sim")
+    lines = (tmp_path / "sim" / "points.csv").read_text().splitlines()
+    cells = lines[6].split(",")
+    k = lines[0].split(",").index("x_ref_mm")
+    cells[k] = f"{float(cells[k]) + 30.0:.9f}"
+    lines[6] = ",".join(cells)
+    (tmp_path / "bad.csv").write_text("\n".join(lines) + "\n")
+    urdf = tmp_path / "liftarm.urdf"
+    urdf.write_text(LIFT_ARM_URDF)
+    assert main(["calibrate", str(tmp_path / "bad.csv"), "--arm", str(urdf), "--tip-frame", TIP, "--no-plots",
+                 "-o", str(tmp_path / "cal")]) == 0
+    out = capsys.readouterr()
+    assert f"{res.points.measurement[5]}  line 7: standardized" in out.out
+    assert "--drop-outliers refits without them" in out.err
+
+
+def test_close_loop_on_a_robot_with_a_prismatic_joint_runs_to_the_end(robot_dir, tmp_path, capsys):
+    """``close-loop`` the obvious way on postures of the lift arm (a prismatic lift; revolute joints sagging
+    under gravity): the library offers angle effects on the revolute joints only (an eccentricity of the lift
+    was a traceback) and the model file it writes reads back with its frame and marker."""
+    res = _simulate(robot_dir, postures=30, markers=1, sessions=1, noise_mm=0.1)
+    res.write(tmp_path / "sim")
+    urdf = tmp_path / "liftarm.urdf"
+    urdf.write_text(LIFT_ARM_URDF)
+    assert main(["close-loop", str(tmp_path / "sim" / "points.csv"), "--arm", str(urdf), "--tip-frame", TIP,
+                 "--max-effects", "1", "--library-only", "-o", str(tmp_path / "loop")]) == 0
+    out = capsys.readouterr().out
+    assert "per-joint effects lift not offered: a prismatic joint" in out
+    arm = load_model(next((tmp_path / "loop").glob("*-calibrated.toml")))
+    assert arm.tracker is not None and arm.tracker.offsets.shape == (1, 3)
+    assert all(not arm.desc.encoders[i].prismatic for e in arm.effects for i in (e.joints or ()))
+
+
+#: the lift arm on a free-flying base (a floating joint at the root, as some exported URDFs have)
+FLOATING_URDF = LIFT_ARM_URDF.replace('<robot name="liftarm">', '<robot name="liftarm">\n  <link name="world"/>\n'
+                                      '  <joint name="world_joint" type="floating"><parent link="world"/>'
+                                      '<child link="base_link"/><origin xyz="1 2 0.3" rpy="0 0 0.4"/></joint>')
+
+
+def test_base_frame_starts_the_chain_after_a_floating_joint(tmp_path, capsys):
+    """A floating joint on the chain is refused with the option that helps (``--base-frame``); with it the tip
+    in the base link's frame is Pinocchio's placement of the tip relative to that link in the user's own file
+    (1e-12 m), the points file takes the chain's joints after the base only, the simulator takes the same key,
+    and the calibrated URDF is the user's file with only the chain's origins changed."""
+    import pinocchio as pin
+    urdf = tmp_path / "floating.urdf"
+    urdf.write_text(FLOATING_URDF)
+    with pytest.raises(InputError) as e:
+        load_model(urdf, TIP)
+    assert "--base-frame base_link" in str(e.value)
+    arm = load_model(urdf, TIP, base_frame="base_link")
+    assert arm.desc.joint_names == ("lift", "shoulder_yaw", "shoulder_pitch", "elbow", "wrist_roll", "wrist_pitch")
+    model = pin.buildModelFromUrdf(str(urdf))
+    data = model.createData()
+    q = np.random.default_rng(2).uniform(-1.0, 1.0, (5, arm.desc.n_joints))
+    q[:, 0] = np.abs(q[:, 0]) * 0.3
+    x, r = arm.model.ball_centres(q, None, arm.p), probe_rotations(arm.desc, q)
+    for qi, xi, ri in zip(q, x, r):
+        full = pin.neutral(model)
+        for name, v in zip(arm.desc.joint_names, qi):
+            jm = model.joints[model.getJointId(name)]
+            full[jm.idx_q: jm.idx_q + jm.nq] = [math.cos(v), math.sin(v)] if jm.nq == 2 else [v]   # continuous
+        pin.framesForwardKinematics(model, data, full)
+        T = data.oMf[model.getFrameId("base_link")].inverse() * data.oMf[model.getFrameId(TIP)]
+        assert_close(xi, T.translation, atol=1e-12)
+        assert_close(ri, T.rotation, atol=1e-12)
+    with pytest.raises(InputError) as e:
+        load_model(urdf, TIP, base_frame="finger")
+    assert e.value.column == "key '--base-frame'" and "not on the chain" in str(e.value)
+    # the simulator's key, then the user's commands with the option
+    (tmp_path / "c.toml").write_text('arm = "floating.urdf"\ntip_frame = "flange"\nbase_frame = "base_link"\n'
+                                     'sensor = "none"\n[truth]\nlength_error_mm = 0.5\n[[task]]\nkind = "mocap"\n'
+                                     'postures = 25\nnoise_mm = 0.1\n')
+    assert main(["simulate", str(tmp_path / "c.toml"), "-o", str(tmp_path / "sim")]) == 0
+    assert main(["calibrate", str(tmp_path / "sim" / "points.csv"), "--arm", str(urdf), "--tip-frame", TIP,
+                 "--base-frame", "base_link", "--no-plots", "-o", str(tmp_path / "cal")]) == 0
+    written = (tmp_path / "cal" / "liftarm-calibrated.urdf").read_text()
+    assert '<joint name="world_joint" type="floating"><parent link="world"/><child link="base_link"/><origin ' \
+           'xyz="1 2 0.3" rpy="0 0 0.4"/></joint>' in written
+    cal = load_model(tmp_path / "cal" / "liftarm-calibrated.urdf", TIP, base_frame="base_link")
+    fitted = load_model(tmp_path / "cal" / "liftarm-calibrated.toml")
+    assert_close(cal.model.ball_centres(q, None, cal.p), fitted.model.ball_centres(q, None, fitted.p), atol=1e-9)
