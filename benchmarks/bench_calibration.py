@@ -23,7 +23,7 @@ from scipy.spatial.transform import Rotation
 from arm_model import load_description
 from arm_model.effects import EncoderEccentricity
 from arm_model.model import ArmModel
-from calibration import Problem, Weights, calibrate, levenberg_marquardt, make_data
+from calibration import FitOptions, Problem, Weights, calibrate, levenberg_marquardt, make_data
 from calibration.solver import blas_threads
 from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 
@@ -140,7 +140,7 @@ def _best(fun, repeats):
 
 def compare(model: ArmModel, n: int, scipy_methods=("lm", "trf-sparse")) -> dict:
     data = campaign(model, n)
-    t_full, res = _best(lambda: calibrate(model, data, weights=WEIGHTS), 2)
+    t_full, res = _best(lambda: calibrate(model, data, FitOptions(weights=WEIGHTS)), 2)
     free = [model.spec.index(nm) for nm in res.free]
     prob = Problem(model, data, WEIGHTS, free)
     p0 = np.zeros(model.spec.size)

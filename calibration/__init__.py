@@ -4,23 +4,23 @@ Typical use::
 
     from arm_model import load_description, read_points, read_artefacts
     from arm_model.model import ArmModel
-    from calibration import make_data, split_holdout, calibrate, Weights
+    from calibration import make_data, split_holdout, calibrate, FitOptions, Weights
 
     model = ArmModel(load_description("aacmm7"))          # effects optional
     data = make_data(read_points("points.csv", 7), read_artefacts("artefacts.toml"), model,
                      reference=read_points("points-ref.csv", 7))        # tracker points optional
     train, test = split_holdout(data, 0.2, seed=0)                      # by measurement
-    res = calibrate(model, train, free=["j*", "probe.x", "probe.y", "probe.z"],
-                    weights=Weights(probe=5e-6, reference=10e-6))
+    res = calibrate(model, train, FitOptions(free=("j*", "probe.x", "probe.y", "probe.z"),
+                                             weights=Weights(probe=5e-6, reference=10e-6)))
     res.p, res.free, res.u, res.corr, res.fixed, res.status            # by name, SI
     res.compare(test)                                                   # nominal vs calibrated, held out
     res.predict(test)                                                   # residuals on other data
 
 API for the close-the-loop work (issue 7):
 
-* :func:`calibrate` ``(model, data, free=None, values=None, start=None, weights=...) ->``
-  :class:`CalibrationResult`: ``p`` (full vector of ``model.spec``), ``free``, ``cov``, ``u``,
-  ``corr``, ``s0``, ``status``, ``iterations``, ``fixed`` (:class:`FixedParameter` with the named
+* :func:`calibrate` ``(model, data, FitOptions(free=None, values=None, start=None, weights=...)) ->``
+  :class:`CalibrationResult` (a variant of a fit: ``dataclasses.replace(options, ...)``): ``p`` (full
+  vector of ``model.spec``), ``free``, ``cov``, ``u``, ``corr``, ``s0``, ``status``, ``iterations``, ``fixed`` (:class:`FixedParameter` with the named
   combination the data cannot see), ``identifiability`` / ``identifiability_final``
   (:class:`Identifiability`), ``residuals`` (per point: ``point`` index, ``kind``, ``instance``,
   ``value`` [m], ``vector`` (n, 3) [m] base frame, ``standardized``, ``measurement``, ``feature``,
@@ -42,6 +42,7 @@ docs/calibration.md.
 from .calibrate import (CalibrationResult, FixedParameter, Outlier, calibrate, default_free, display_unit,
                         identify, resolve_parameters, rigid_gauge)
 from .data import CalibrationData, Weights, make_data, merge_points, split_holdout
+from .options import FitOptions
 from .identifiability import (DEFAULT_RANK_TOL, PRIOR_SCALES, Combination, Identifiability, analyse, prior_scales,
                               reduced_jacobian, weakly_determined)
 from .problem import Problem
@@ -53,7 +54,7 @@ from .loop import LoopResult, LoopSettings, close_loop
 from .loop_report import before_after_text, write_loop_report
 
 __all__ = [
-    "calibrate", "CalibrationResult", "FixedParameter", "Outlier", "default_free", "resolve_parameters",
+    "calibrate", "FitOptions", "CalibrationResult", "FixedParameter", "Outlier", "default_free", "resolve_parameters",
     "rigid_gauge", "display_unit", "identify",
     "CalibrationData", "Weights", "make_data", "merge_points", "split_holdout",
     "Identifiability", "Combination", "analyse", "reduced_jacobian", "DEFAULT_RANK_TOL", "prior_scales",

@@ -1,4 +1,8 @@
-"""``calibrate(model, data, free=...) -> CalibrationResult``: the whole fit, checked at each step.
+"""``calibrate(model, data, FitOptions(...)) -> CalibrationResult``: the whole fit, checked at each step.
+
+The options are one frozen :class:`~calibration.options.FitOptions`; the stages below are named functions
+(:func:`_setup`, :func:`_solve`, :func:`_fit`; the outlier rounds :func:`_without_outliers`, the noise
+estimate :func:`reweighted`, the prior's scale :func:`evidence_scale`).
 
 1. Free set: names or glob patterns over ``model.spec`` (the rest held at ``values``, default 0).
 2. Nuisance start: algebraic fits of every feature, polished with the parameters held.
@@ -30,16 +34,17 @@ from arm_model import InputError, NumericalError
 from arm_model.model import ArmModel
 
 from .data import CalibrationData, Weights
-from .identifiability import (DEFAULT_RANK_TOL, Combination, Identifiability, _compress, analyse, point_noise,
+from .identifiability import (Combination, Identifiability, _compress, analyse, point_noise,
                               prior_scales,
                               reduced_jacobian, weakly_determined)
+from .options import FitOptions
 from .problem import Problem
 from .solver import Prior, blas_threads, levenberg_marquardt, normal_factor
 
 __all__ = ["FixedParameter", "Outlier", "CalibrationResult", "calibrate", "resolve_parameters",
            "default_free", "rigid_gauge", "display_unit", "blas_threads", "identify", "variance_components",
            "reweighted", "MIN_REDUNDANCY", "row_groups", "row_kinds", "kind_groups", "standardized_residuals",
-           "grouped_standardized"]
+           "grouped_standardized", "FitOptions", "evidence_scale", "EVIDENCE_GRID"]
 
 
 def display_unit(unit: str) -> tuple[str, float]:
@@ -188,6 +193,7 @@ class CalibrationResult:
     log_evidence: float | None = None         # Laplace log evidence of the fit with its prior (weights as given)
     evidence: list = field(default_factory=list)   # the scales tried when the prior scale came from the evidence
     model_check: dict | None = None           # model_output.model_check of this fit, when refine_torques made it
+    options: FitOptions | None = None         # the options of the fit (calibrate's, as given)
 
     # -- access by name ----------------------------------------------------------------------------
     @property
@@ -337,61 +343,45 @@ def _leverage(j: sp.csc_matrix, solve, chunk: int = 2000) -> np.ndarray:
     return np.clip(h, 0.0, 1.0 - 1e-12)
 
 
-def identify(problem: Problem, p, states, candidates, *, stage: str = "start", rank_tol: float = DEFAULT_RANK_TOL,
-             min_resolution: float | None = 0.1, priors: dict | None = None, stop: bool = False,
-             prior_length: float | None = None):
+def identify(problem: Problem, p, states, candidates, options: FitOptions = FitOptions(), *,
+             stage: str = "start"):
     """Which of the ``candidates`` (indices into ``problem.model.spec``) the data identify at ``p`` and
     ``states``: ``(kept indices, [FixedParameter], Identifiability)``.
 
     Two tests, in order: linear dependence (SVD rank of the reduced Jacobian with the base frame's rigid
     motions projected out; pivoted QR, columns scaled by plausible error sizes, chooses which to hold),
-    then practical resolution (``min_resolution``, :func:`~calibration.identifiability.weakly_determined`).
-    ``stop``: raise :class:`NumericalError` with the list instead of holding them.
+    then practical resolution (``options.min_resolution``,
+    :func:`~calibration.identifiability.weakly_determined`). With ``options.on_unidentifiable == "stop"``:
+    raise :class:`NumericalError` with the list instead of holding them.
     """
     model = problem.model
     spec = model.spec
+    stop = options.on_unidentifiable == "stop"
     kept = list(candidates)
     prob = problem.with_free(kept)
     ev = prob.evaluate(p, states)
     gauge = rigid_gauge(prob, p, kept)
     jred = reduced_jacobian(ev.jp, ev.jt)
     names = [spec.names[i] for i in kept]
-    sizes = functools.partial(prior_scales, model, priors=priors, noise=point_noise(problem), length=prior_length)
-    idf = analyse(jred, ev.jp, names, rank_tol, sizes(names), gauge=gauge)
+    sizes = functools.partial(prior_scales, model, priors=options.priors, noise=point_noise(problem),
+                              length=options.prior_length)
+    idf = analyse(jred, ev.jp, names, options.rank_tol, sizes(names), gauge=gauge)
     fixed = []
     if idf.dependent:
         if stop:
             lines = [f"  {k}: {c.text()}" for k, c in idf.combinations.items()]
             raise NumericalError(f"{len(idf.dependent)} parameter combination(s) the data cannot identify "
-                                 f"({stage}; rank {idf.rank} of {len(kept)}, rank_tol {rank_tol:g}):\n"
+                                 f"({stage}; rank {idf.rank} of {len(kept)}, rank_tol {options.rank_tol:g}):\n"
                                  + "\n".join(lines) + "\nfix these parameters or use on_unidentifiable='fix'")
         for name in idf.dependent:
-            comb = idf.combinations[name]
-            if name in idf.no_effect:
-                reason = "no effect on the data (its Jacobian column is zero)"
-            elif len(comb.terms) == 1 and name in idf.gauge:
-                reason = "a rigid motion of the base frame: not observable from these data"
-            elif len(comb.terms) == 1:
-                reason = "absorbed by the artefacts' unknowns (centres, axes, transforms)"
-            else:
-                reason = "not separable from the free parameters: " + comb.text()
-            fixed.append(FixedParameter(name, float(p[spec.index(name)]), reason, comb, stage))
+            fixed.append(FixedParameter(name, float(p[spec.index(name)]), _dependent_reason(idf, name),
+                                        idf.combinations[name], stage))
         kept = [i for i in kept if spec.names[i] not in idf.dependent]
-    if min_resolution is not None and kept:
-        names = [spec.names[i] for i in kept]
-        sel = [idf.names.index(n) for n in names]
-        # only the description's parameters are held for being weak: an effect's parameters were asked for
-        # (an --effect, a loop candidate) and are estimated with their uncertainty (a joint compliance seen
-        # through one plate placement is resolved to tens of percent, and holding it at zero would keep
-        # its whole signature in the geometry)
-        # (an effect of the geometry kind, an encoder's eccentricity or gain, is held as the description's
-        # parameters are: left free, a weak one wanders at each fit and the identifiable set never settles)
-        geometric = {k for e, sl in model.effect_slices() if e.held_when_weak for k in range(sl.start, sl.stop)}
-        weak = [w for w in weakly_determined(jred[:, sel], names, sizes(names), min_resolution)
-                if spec.index(w[0]) < model.base_size or spec.index(w[0]) in geometric]
+    if options.min_resolution is not None and kept:
+        weak = _weak(model, jred, idf, kept, sizes, options.min_resolution)
         if weak and stop:
             raise NumericalError("parameters the data resolve to worse than "
-                                 f"{min_resolution:g} of a plausible size ({stage}): "
+                                 f"{options.min_resolution:g} of a plausible size ({stage}): "
                                  + ", ".join(f"{n} (u ~ {u:.3g} {spec.units[spec.index(n)]})" for n, u, _ in weak)
                                  + "\nhold them or use on_unidentifiable='fix'")
         for name, u, comb in weak:
@@ -399,201 +389,243 @@ def identify(problem: Problem, p, states, candidates, *, stage: str = "start", r
             fixed.append(FixedParameter(name, float(p[spec.index(name)]),
                                         f"weakly determined: the data would resolve it only to u ~ {u * fac:.3g}"
                                         f"{'' if du == '1' else ' ' + du}, "
-                                        f"more than {min_resolution:g} of a plausible size; its effect is below "
-                                        "the noise", comb, stage))
+                                        f"more than {options.min_resolution:g} of a plausible size; its effect is "
+                                        "below the noise", comb, stage))
         kept = [i for i in kept if spec.names[i] not in {w[0] for w in weak}]
     return kept, fixed, idf
 
 
-def _with_blas_limit(fn):
-    @functools.wraps(fn)
-    def wrapper(*args, blas: int | None = 1, **kwargs):
-        with blas_threads(blas):
-            return fn(*args, **kwargs)
-    return wrapper
+def _dependent_reason(idf: Identifiability, name: str) -> str:
+    """Why a parameter of ``idf.dependent`` is held."""
+    comb = idf.combinations[name]
+    if name in idf.no_effect:
+        return "no effect on the data (its Jacobian column is zero)"
+    if len(comb.terms) == 1 and name in idf.gauge:
+        return "a rigid motion of the base frame: not observable from these data"
+    if len(comb.terms) == 1:
+        return "absorbed by the artefacts' unknowns (centres, axes, transforms)"
+    return "not separable from the free parameters: " + comb.text()
 
 
-@_with_blas_limit
-def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict | None = None,
-              start: dict | None = None, weights: Weights | None = None, on_unidentifiable: str = "fix",
-              rank_tol: float = DEFAULT_RANK_TOL, outlier_threshold: float = 4.0, drop_outliers: bool = False,
-              covariance: str = "residual", reference: str = "fit", max_iter: int = 200,
-              min_resolution: float | None = 0.1, priors: dict | None = None, prior_length: float | None = None,
-              weights_from_data: bool = False, prior_scale: float | str | None = None,
-              prior_centre: np.ndarray | None = None, _depth: int = 0) -> CalibrationResult:
-    """Identify the parameters ``free`` of ``model`` from ``data``.
+def _weak(model: ArmModel, jred, idf: Identifiability, kept, sizes, min_resolution: float) -> list:
+    """The parameters of ``kept`` held for being weakly determined (:func:`weakly_determined`)."""
+    spec = model.spec
+    names = [spec.names[i] for i in kept]
+    sel = [idf.names.index(n) for n in names]
+    # only the description's parameters are held for being weak: an effect's parameters were asked for
+    # (an --effect, a loop candidate) and are estimated with their uncertainty (a joint compliance seen
+    # through one plate placement is resolved to tens of percent, and holding it at zero would keep
+    # its whole signature in the geometry)
+    # (an effect of the geometry kind, an encoder's eccentricity or gain, is held as the description's
+    # parameters are: left free, a weak one wanders at each fit and the identifiable set never settles)
+    geometric = {k for e, sl in model.effect_slices() if e.held_when_weak for k in range(sl.start, sl.stop)}
+    return [w for w in weakly_determined(jred[:, sel], names, sizes(names), min_resolution)
+            if spec.index(w[0]) < model.base_size or spec.index(w[0]) in geometric]
+
+
+def calibrate(model: ArmModel, data: CalibrationData, options: FitOptions = FitOptions()) -> CalibrationResult:
+    """Identify the parameters ``options.free`` of ``model`` from ``data``.
 
     Args:
         model: the arm model; p = 0 is its description (parameters are errors).
         data: :class:`~calibration.data.CalibrationData` (``make_data``).
-        free: names or glob patterns (``["j*.d", "probe.*"]``); default :func:`default_free`.
-        values: values [SI] of parameters that are not free (default 0).
-        start: starting values [SI] of free parameters (default their ``values`` or 0).
-        weights: standard uncertainties of the residuals.
-        on_unidentifiable: "fix" (hold and list dependent parameters) or "stop" (raise with the list).
-        rank_tol: relative singular value below which a direction is not identifiable.
-        outlier_threshold: standardized residual beyond which a point is an outlier.
-        drop_outliers: drop outlier points and refit, in rounds (the worst first: a gross error pulls
-            its neighbours out too) until none is left; they are listed in ``dropped`` (indices into
-            ``data``) and ``data`` of the result holds the points kept.
-        covariance: "residual" (scaled by the residual variance factor) or "stated".
-        reference: "fit" (``T_ref_base`` unknown), "identity" (reference coordinates are base
-            coordinates: then the base pose is identifiable) or "off".
-        min_resolution: hold parameters the data would resolve only to worse than this fraction of a
-            plausible error size (:func:`~calibration.identifiability.prior_scales`, ``priors``):
-            their effect is below the noise (e.g. the handle's theta offset seen only through the
-            stylus deflection). None keeps every linearly independent parameter.
-        priors: plausible error sizes [SI] by parameter name or glob pattern (overrides). They also
-            choose which of two equivalent parameters is kept: the one whose plausible error moves
-            the data more.
-        prior_length: plausible size [m] of a length error (angles: 10 rad/m times it); default the
-            larger of 1 mm and ten times the noise of one point (stated, or estimated with
-            ``weights_from_data``): a robot's lengths are not held for being resolved to a few tenths
-            of a millimetre.
-        prior_scale: None, "evidence" (the scale of :func:`evidence_scale`, the scales tried listed in the
-            result's ``evidence``), or fit with a Gaussian prior on every free parameter: centred on ``values``,
-            standard deviation ``prior_scale`` times its plausible error size (``priors``,
-            ``prior_length``): the maximum a posteriori estimate, which shrinks the directions the data
-            resolve poorly instead of holding them (``min_resolution`` is then not applied). The result
-            carries ``log_evidence`` (Laplace) to choose the scale (:func:`evidence_scale`).
-        prior_centre: the prior's centre (full vector [SI]) if not ``values`` (a refit of a result keeps
-            its centre).
-        weights_from_data: take ``weights`` as starting values only: estimate the noise of each row
-            group (every point kind, the reference points, the lengths) from the fit's residuals and
-            redundancy (variance components, :func:`variance_components`), re-weight and refit until the
-            factors settle (``weights_history`` lists the rounds).
-        blas: BLAS threads during the fit (default 1, see :func:`blas_threads`; None: unchanged).
+        options: :class:`~calibration.options.FitOptions`, among them:
+
+            * ``min_resolution``: hold parameters the data would resolve only to worse than this fraction
+              of a plausible error size (:func:`~calibration.identifiability.prior_scales`, ``priors``):
+              their effect is below the noise. None keeps every linearly independent parameter.
+            * ``prior_scale``: None, "evidence" (the scale of :func:`evidence_scale`, the scales tried
+              listed in the result's ``evidence``), or fit with a Gaussian prior on every free parameter:
+              centred on ``values`` (or ``prior_centre``), standard deviation ``prior_scale`` times its
+              plausible error size: the maximum a posteriori estimate, which shrinks the directions the
+              data resolve poorly instead of holding them (``min_resolution`` is then not applied). The
+              result carries ``log_evidence`` (Laplace).
+            * ``weights_from_data``: take ``weights`` as starting values only: estimate the noise of each
+              row group from the fit's residuals and redundancy (:func:`variance_components`), re-weight
+              and refit until the factors settle (:func:`reweighted`).
+            * ``drop_outliers``: drop outlier points and refit, in rounds (:func:`_without_outliers`);
+              they are listed in ``dropped`` (indices into ``data``) and ``data`` of the result holds the
+              points kept.
 
     Raises:
         NumericalError: no convergence, too few residuals, or unidentifiable parameters with "stop".
     """
-    if on_unidentifiable not in ("fix", "stop"):
-        raise ValueError(f"on_unidentifiable must be 'fix' or 'stop', got {on_unidentifiable!r}")
-    if covariance not in ("residual", "stated"):
-        raise ValueError(f"covariance must be 'residual' or 'stated', got {covariance!r}")
-    weights = weights or Weights()
-    if prior_scale == "evidence":
-        common = dict(values=values, start=start, on_unidentifiable=on_unidentifiable, rank_tol=rank_tol,
-                      outlier_threshold=outlier_threshold, covariance=covariance, reference=reference,
-                      max_iter=max_iter, priors=priors, prior_length=prior_length)
-        tau, rows = evidence_scale(model, data, free, weights=weights, **common)
-        res = calibrate(model, data, free, weights=weights, drop_outliers=drop_outliers, prior_scale=tau,
-                        weights_from_data=weights_from_data, _depth=_depth, **common)
-        res.evidence = rows
-        return res
-    if weights_from_data:
-        def once(w, st):
-            return calibrate(model, data, free, values=values, start={**(start or {}), **st}, weights=w,
-                             on_unidentifiable=on_unidentifiable, rank_tol=rank_tol,
-                             outlier_threshold=outlier_threshold, drop_outliers=drop_outliers, covariance=covariance,
-                             reference=reference, max_iter=max_iter, min_resolution=min_resolution, priors=priors,
-                             prior_length=prior_length, prior_scale=prior_scale, prior_centre=prior_centre)
-        return reweighted(once, weights)
-    spec = model.spec
-    cand = resolve_parameters(spec, default_free(model) if free is None else free)
-    nominal = spec.vector(values or {})      # a held parameter's value (``start`` only warm-starts the free)
-    p0 = nominal.copy()
-    for name, v in (start or {}).items():
-        p0[spec.index(name)] = v
-    problem = Problem(model, data, weights, cand, reference=reference)
-    states = levenberg_marquardt(problem.with_free([]), p0, problem.initial_states(p0), max_iter=max_iter).states
-    prior = None
-    if prior_scale is not None:
-        if not (math.isfinite(prior_scale) and prior_scale > 0):
-            raise ValueError(f"prior_scale must be a positive number, got {prior_scale!r}")
-        size = prior_scales(model, spec.names, priors=priors, noise=point_noise(problem), length=prior_length)
-        centre = nominal.copy() if prior_centre is None else np.array(prior_centre, dtype=float)
-        prior = Prior(centre, size * prior_scale)
-        min_resolution = None             # the prior shrinks what the data resolve poorly
+    with blas_threads(options.blas):
+        if options.prior_scale == "evidence":
+            tau, rows = evidence_scale(model, data, options)
+            res = calibrate(model, data, replace(options, prior_scale=tau))
+            res.evidence = rows
+            res.options = options
+            return res
+        if options.weights_from_data:
+            return reweighted(model, data, options)
+        return _without_outliers(model, data, options)
 
-    fixed: list[FixedParameter] = []
-    kept = list(cand)
 
-    def check(p, states, stage) -> Identifiability:
-        nonlocal kept
-        kept, new, idf = identify(problem, p, states, kept, stage=stage, rank_tol=rank_tol,
-                                  min_resolution=min_resolution, priors=priors, stop=on_unidentifiable == "stop",
-                                  prior_length=prior_length)
-        # a held parameter goes back to its given value (not a warm start's, not where a fit moved it along a
-        # direction the data do not see or see only below the noise): that value would be carried into every
-        # pose the model is used at; the others are refitted with it held
-        for k, f in enumerate(new):
-            i = spec.index(f.name)
-            p[i] = nominal[i]
-            new[k] = replace(f, value=float(nominal[i]))
-        fixed.extend(new)
-        return idf
+#: rounds of outlier dropping before the fit gives up
+DROP_ROUNDS = 10
 
-    idf0 = check(p0, states, "start")
-    p = p0
-    n_start = len(fixed)
-    for _ in range(4):
-        prob = problem.with_free(kept)
-        sol = levenberg_marquardt(prob, p, states, max_iter=max_iter, prior=prior)
-        p, states = sol.p, sol.states
-        # the artefacts' unknowns started from the nominal arm can settle in another basin (large errors):
-        # started again from the fitted arm, do they fit better? then the parameters are refitted from there
-        fresh = levenberg_marquardt(problem.with_free([]), p, problem.initial_states(p), max_iter=max_iter)
-        if fresh.cost < sol.cost * (1.0 - 1e-6):
-            sol = levenberg_marquardt(prob, p, fresh.states, max_iter=max_iter, prior=prior)
-            p, states = sol.p, sol.states
-        n_before = len(kept)
-        idf1 = check(p, states, "solution")
-        if len(kept) == n_before:
+
+def _without_outliers(model: ArmModel, data: CalibrationData, options: FitOptions) -> CalibrationResult:
+    """:func:`_fit` and, with ``options.drop_outliers``, the outlier points dropped (the worst first: a gross
+    error also pulls its neighbours out, those go only if they stay out) and refitted, until none is left
+    (at most :data:`DROP_ROUNDS` rounds)."""
+    index = np.arange(len(data))
+    dropped: list[Outlier] = []
+    for k in range(DROP_ROUNDS + 1):
+        res = _fit(model, data, options)
+        point_outliers = [o for o in res.outliers if o.point is not None]
+        if not (options.drop_outliers and point_outliers):
+            res.dropped = dropped
+            return res
+        if k == DROP_ROUNDS:
             break
-    else:
-        raise NumericalError("the identifiable set kept changing between fits (held in turn: "
-                             + ", ".join(f.name for f in fixed[n_start:])
-                             + "); raise rank_tol or fix parameters")
-    prob = problem.with_free(kept)
-    ev = sol.evaluation
-    n_rows = len(ev.r)
-    n_nuis = sum(it.n_theta for it in prob.instances)
-    dof = n_rows - len(kept) - n_nuis
-    if dof <= 0:
-        raise NumericalError(f"{n_rows} residuals for {len(kept)} parameters and {n_nuis} nuisance unknowns: "
-                             "not enough data for a fit with redundancy")
-    s0 = math.sqrt(2 * sol.cost / dof)
-    kept_arr = np.asarray(kept, dtype=int)
-    prec = (1.0 / prior.size[kept_arr] ** 2) if prior is not None else np.zeros(len(kept))   # prior precision
-    var = s0 ** 2 if covariance == "residual" else 1.0
-    source = (f"a posteriori: s0^2 = {s0 ** 2:.4g} (weighted residual variance, dof {dof})" if covariance == "residual"
-              else "stated uncertainties (s0 = 1)")
-    # covariance of the free parameters from the reduced Jacobian
+        worst = max(abs(o.standardized) for o in point_outliers)
+        drop = [o for o in point_outliers if abs(o.standardized) >= max(options.outlier_threshold, 0.5 * worst)]
+        keep = np.setdiff1d(np.arange(len(data)), [o.point for o in drop])
+        # the dropped points with indices into the data given
+        dropped += [replace(o, point=int(index[o.point])) for o in drop]
+        index = index[keep]
+        data = data.select(keep)
+    raise NumericalError(f"outliers remain after {DROP_ROUNDS} rounds of dropping; check the data")
+
+
+@dataclass
+class _Setup:
+    """What a fit starts from: the problem over the candidate parameters, the given (``nominal``) and the
+    starting (``p0``) parameter vectors [SI], the nuisance states fitted at ``p0``, the prior or None."""
+    problem: Problem
+    candidates: list
+    nominal: np.ndarray
+    p0: np.ndarray
+    states: list
+    prior: Prior | None
+    min_resolution: float | None
+
+
+def _setup(model: ArmModel, data: CalibrationData, options: FitOptions) -> _Setup:
+    spec = model.spec
+    cand = resolve_parameters(spec, default_free(model) if options.free is None else options.free)
+    nominal = spec.vector(options.values or {})  # a held parameter's value (``start`` only warm-starts the free)
+    p0 = nominal.copy()
+    for name, v in (options.start or {}).items():
+        p0[spec.index(name)] = v
+    problem = Problem(model, data, options.weights, cand, reference=options.reference)
+    states = levenberg_marquardt(problem.with_free([]), p0, problem.initial_states(p0),
+                                 max_iter=options.max_iter).states
+    prior, min_resolution = None, options.min_resolution
+    if options.prior_scale is not None:
+        size = prior_scales(model, spec.names, priors=options.priors, noise=point_noise(problem),
+                            length=options.prior_length)
+        centre = nominal.copy() if options.prior_centre is None else np.array(options.prior_centre, dtype=float)
+        prior = Prior(centre, size * options.prior_scale)
+        min_resolution = None             # the prior shrinks what the data resolve poorly
+    return _Setup(problem, cand, nominal, p0, states, prior, min_resolution)
+
+
+def _held(s: _Setup, p, states, kept, stage: str, options: FitOptions):
+    """:func:`identify` over ``kept``: (kept, the new FixedParameters, Identifiability). A held parameter goes
+    back to its given value (not a warm start's, not where a fit moved it along a direction the data do not
+    see or see only below the noise: that value would be carried into every pose the model is used at);
+    ``p`` is changed in place."""
+    kept, new, idf = identify(s.problem, p, states, kept, replace(options, min_resolution=s.min_resolution),
+                              stage=stage)
+    spec = s.problem.model.spec
+    for k, f in enumerate(new):
+        i = spec.index(f.name)
+        p[i] = s.nominal[i]
+        new[k] = replace(f, value=float(s.nominal[i]))
+    return kept, new, idf
+
+
+def _restarted(s: _Setup, prob: Problem, sol, options: FitOptions):
+    """The solution ``sol`` of ``prob``, or, when the artefacts' unknowns started again from the fitted arm
+    (they were started from the nominal arm and can settle in another basin with large errors) fit better,
+    the parameters refitted from there."""
+    fresh = levenberg_marquardt(s.problem.with_free([]), sol.p, s.problem.initial_states(sol.p),
+                                max_iter=options.max_iter)
+    if fresh.cost < sol.cost * (1.0 - 1e-6):
+        return levenberg_marquardt(prob, sol.p, fresh.states, max_iter=options.max_iter, prior=s.prior)
+    return sol
+
+
+#: fits with a new identifiability analysis at the solution before the identifiable set must have settled
+SETTLE_ROUNDS = 4
+
+
+def _solve(s: _Setup, options: FitOptions):
+    """Identifiability at the start, the fit (with :func:`_restarted`), identifiability at the solution, and
+    the fit again while the identifiable set changes. Returns (solution, kept, fixed, idf0, idf1)."""
+    p = s.p0.copy()
+    kept, fixed, idf0 = _held(s, p, s.states, list(s.candidates), "start", options)
+    n_start = len(fixed)
+    states = s.states
+    for _ in range(SETTLE_ROUNDS):
+        prob = s.problem.with_free(kept)
+        sol = _restarted(s, prob, levenberg_marquardt(prob, p, states, max_iter=options.max_iter, prior=s.prior),
+                         options)
+        p, states = sol.p, sol.states
+        n_before = len(kept)
+        kept, new, idf1 = _held(s, p, states, kept, "solution", options)
+        fixed += new
+        if len(kept) == n_before:
+            return sol, kept, fixed, idf0, idf1
+    raise NumericalError("the identifiable set kept changing between fits (held in turn: "
+                         + ", ".join(f.name for f in fixed[n_start:])
+                         + "); raise rank_tol or fix parameters")
+
+
+def _covariance(s: _Setup, ev, kept, var: float) -> np.ndarray:
+    """Covariance [SI^2] of the free parameters ``kept`` from the reduced Jacobian at the solution (with the
+    prior's information when there is one), times ``var``."""
     jred = reduced_jacobian(ev.jp, ev.jt)
     scale = _scale(ev.jp)
-    if prior is None:
-        _, s, vt = np.linalg.svd(_compress(jred / scale), full_matrices=False)
-        if len(kept) and s[-1] <= 0:
+    if s.prior is None:
+        _, sv, vt = np.linalg.svd(_compress(jred / scale), full_matrices=False)
+        if len(kept) and sv[-1] <= 0:
             raise NumericalError("singular covariance: a free parameter has no effect on the residuals")
-        cov = var * (vt.T / s ** 2) @ vt / np.outer(scale, scale) if len(kept) else np.zeros((0, 0))
-    else:                                 # posterior covariance: data and prior information together
-        js_red = jred / scale
-        cov = var * np.linalg.inv(js_red.T @ js_red + np.diag(prec / scale ** 2)) / np.outer(scale, scale)
-        cov = 0.5 * (cov + cov.T)
-    u = np.sqrt(np.diag(cov))
-    corr = cov / np.outer(u, u) if len(kept) else cov
-    # leverage, standardized residuals, outliers
+        return var * (vt.T / sv ** 2) @ vt / np.outer(scale, scale) if len(kept) else np.zeros((0, 0))
+    prec = 1.0 / s.prior.size[np.asarray(kept, dtype=int)] ** 2
+    js_red = jred / scale
+    cov = var * np.linalg.inv(js_red.T @ js_red + np.diag(prec / scale ** 2)) / np.outer(scale, scale)
+    return 0.5 * (cov + cov.T)
+
+
+@dataclass
+class _Normal:
+    """The column-scaled full Jacobian (parameters and nuisance) at the solution: ``js``, its column scale
+    ``jscale``, the LU of its normal matrix (prior information included), the rows' leverage ``h`` and the
+    Laplace log evidence (None without a prior)."""
+    js: sp.csc_matrix
+    jscale: np.ndarray
+    lu: object
+    h: np.ndarray
+    log_evidence: float | None
+
+
+def _normal(s: _Setup, sol, kept) -> _Normal:
+    ev = sol.evaluation
     j = sp.hstack([sp.csr_matrix(ev.jp), ev.jt], format="csc") if len(kept) else ev.jt.tocsc()
     jscale = np.sqrt(np.asarray(j.multiply(j).sum(axis=0)).ravel())
     jscale[jscale == 0] = 1.0
     js = (j @ sp.diags(1.0 / jscale)).tocsc()
+    kept_arr = np.asarray(kept, dtype=int)
     damp = np.zeros(js.shape[1])
-    damp[:len(kept)] = prec / jscale[:len(kept)] ** 2
+    if s.prior is not None:
+        damp[:len(kept)] = 1.0 / s.prior.size[kept_arr] ** 2 / jscale[:len(kept)] ** 2
     lu = normal_factor(js, damp)
-    solve = lu.solve
-    h = _leverage(js, solve)
     log_ev = None
-    if prior is not None:                 # Laplace: -cost - 0.5 log det(H) + log of the prior's normalisation
+    if s.prior is not None:                 # Laplace: -cost - 0.5 log det(H) + log of the prior's normalisation
         logdet = float(np.sum(np.log(np.abs(lu.U.diagonal())))) + 2.0 * float(np.sum(np.log(jscale)))
-        log_ev = -(sol.cost + sol.prior_cost) - 0.5 * logdet - float(np.sum(np.log(prior.size[kept_arr])))
-    variance = variance_components(prob, ev.r, h, weights)
-    z = standardized_residuals(prob, ev.r, h)
+        log_ev = -(sol.cost + sol.prior_cost) - 0.5 * logdet - float(np.sum(np.log(s.prior.size[kept_arr])))
+    return _Normal(js, jscale, lu, _leverage(js, lu.solve), log_ev)
+
+
+def _point_table(prob: Problem, data: CalibrationData, p, states, z: np.ndarray) -> dict:
+    """:meth:`Problem.residual_table` with each point's standardized residual (the largest |z| of its rows,
+    signed for one-row kinds), measurement, feature and file line."""
     table = prob.residual_table(p, states)
     pts = data.points
-    lines = pts.lines
-    npr = prob.n_point_rows
-    # per point: the largest |z| of its rows (signed for one-row kinds)
     zp = np.zeros(len(table["point"]))
     k = 0
     for g in prob.groups:
@@ -605,36 +637,29 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
     table["standardized"] = zp
     table["measurement"] = pts.measurement[table["point"]]
     table["feature"] = pts.feature[table["point"]]
-    table["line"] = (lines[table["point"]] if lines is not None else table["point"] + 1)
-    zd = z[npr:]
-    outliers = []
-    for i in np.flatnonzero(np.abs(zp) > outlier_threshold):
+    table["line"] = (pts.lines[table["point"]] if pts.lines is not None else table["point"] + 1)
+    return table
+
+
+def _outliers(prob: Problem, data: CalibrationData, table: dict, zd: np.ndarray, threshold: float) -> list:
+    """The points and distances whose standardized residual exceeds ``threshold``."""
+    pts = data.points
+    out = []
+    for i in np.flatnonzero(np.abs(table["standardized"]) > threshold):
         pi = int(table["point"][i])
-        outliers.append(Outlier(str(table["kind"][i]), str(pts.measurement[pi]), str(pts.feature[pi]), pi,
-                                None if lines is None else int(lines[pi]), float(zp[i]), float(table["value"][i])))
-    for i in np.flatnonzero(np.abs(zd) > outlier_threshold):
+        out.append(Outlier(str(table["kind"][i]), str(pts.measurement[pi]), str(pts.feature[pi]), pi,
+                           None if pts.lines is None else int(pts.lines[pi]), float(table["standardized"][i]),
+                           float(table["value"][i])))
+    for i in np.flatnonzero(np.abs(zd) > threshold):
         d = prob.distance_items[i]
-        outliers.append(Outlier("distance", d.measurement, " - ".join(d.between), None, None, float(zd[i]),
-                                float(table["distance"][i])))
-    point_outliers = [o for o in outliers if o.point is not None]
-    if drop_outliers and point_outliers:
-        if _depth >= 10:
-            raise NumericalError("outliers remain after 10 rounds of dropping; check the data")
-        # drop the worst (a gross error also pulls its neighbours: those go only if they stay out)
-        worst = max(abs(o.standardized) for o in point_outliers)
-        drop = [o for o in point_outliers if abs(o.standardized) >= max(outlier_threshold, 0.5 * worst)]
-        keep = np.setdiff1d(np.arange(len(data)), [o.point for o in drop])
-        res = calibrate(model, data.select(keep), free, values=values, start=start, weights=weights,
-                        on_unidentifiable=on_unidentifiable, rank_tol=rank_tol, outlier_threshold=outlier_threshold,
-                        drop_outliers=True, covariance=covariance, reference=reference, max_iter=max_iter,
-                        min_resolution=min_resolution, priors=priors, prior_length=prior_length,
-                        prior_scale=prior_scale, prior_centre=prior_centre, _depth=_depth + 1)
-        kept_index = np.flatnonzero(np.isin(np.arange(len(data)), keep))
-        # report the dropped points with indices into the data given at this level
-        res.dropped = [o for o in drop] + [replace(o, point=int(kept_index[o.point])) for o in res.dropped]
-        return res
-    # per-instance scalars
-    instances = []
+        out.append(Outlier("distance", d.measurement, " - ".join(d.between), None, None, float(zd[i]),
+                           float(table["distance"][i])))
+    return out
+
+
+def _instances(prob: Problem, table: dict, states) -> list[dict]:
+    """Per artefact instance: its points, residual RMS and largest residual, and its fitted geometry."""
+    out = []
     for i, it in enumerate(prob.instances):
         sel = table["instance"] == i
         v = table["value"][sel]
@@ -649,34 +674,69 @@ def calibrate(model: ArmModel, data: CalibrationData, free=None, *, values: dict
             item["axis_point"], item["axis_direction"] = st[0:3].tolist(), st[3:6].tolist()
         elif it.kind == "plane":
             item["normal"], item["offset"] = st[0:3].tolist(), float(st[9])
-        instances.append(item)
-    distances = [{"measurement": d.measurement, "between": list(d.between), "certified": d.length,
-                  "residual": float(table["distance"][i]), "standardized": float(zd[i]), "sigma": d.sigma}
-                 for i, d in enumerate(prob.distance_items)]
-    ref = None
+        out.append(item)
+    return out
+
+
+def _reference(prob: Problem, states, nrm: _Normal, n_kept: int, var: float) -> dict | None:
+    """The fitted ``T_ref_base`` with the standard uncertainties of its increments, or None."""
     for i, it in enumerate(prob.instances):
-        if it.kind == "reference":
-            t = np.eye(4)
-            t[:3, :3] = states[i][0:9].reshape(3, 3, order="F")
-            t[:3, 3] = states[i][9:12]
-            ref = {"T_ref_base": t.tolist(), "fitted": it.n_theta > 0}
-            if it.n_theta:
-                cols = len(kept) + it.offset + np.arange(6)
-                e = np.zeros((js.shape[1], 6))
-                e[cols, np.arange(6)] = 1.0
-                blk = solve(e)[cols] / np.outer(jscale[cols], jscale[cols]) * var
-                uu = np.sqrt(np.diag(blk))
-                ref["u_translation"] = uu[:3].tolist()
-                ref["u_rotation"] = uu[3:].tolist()
+        if it.kind != "reference":
+            continue
+        t = np.eye(4)
+        t[:3, :3] = states[i][0:9].reshape(3, 3, order="F")
+        t[:3, 3] = states[i][9:12]
+        ref = {"T_ref_base": t.tolist(), "fitted": it.n_theta > 0}
+        if it.n_theta:
+            cols = n_kept + it.offset + np.arange(6)
+            e = np.zeros((nrm.js.shape[1], 6))
+            e[cols, np.arange(6)] = 1.0
+            blk = nrm.lu.solve(e)[cols] / np.outer(nrm.jscale[cols], nrm.jscale[cols]) * var
+            uu = np.sqrt(np.diag(blk))
+            ref["u_translation"] = uu[:3].tolist()
+            ref["u_rotation"] = uu[3:].tolist()
+        return ref
+    return None
+
+
+def _fit(model: ArmModel, data: CalibrationData, options: FitOptions) -> CalibrationResult:
+    """One fit at the weights given: :func:`_setup`, :func:`_solve`, then the covariance, the leverage, the
+    standardized residuals and outliers, and the per-instance figures."""
+    s = _setup(model, data, options)
+    sol, kept, fixed, idf0, idf1 = _solve(s, options)
+    spec = model.spec
+    prob = s.problem.with_free(kept)
+    ev = sol.evaluation
+    n_rows = len(ev.r)
+    n_nuis = sum(it.n_theta for it in prob.instances)
+    dof = n_rows - len(kept) - n_nuis
+    if dof <= 0:
+        raise NumericalError(f"{n_rows} residuals for {len(kept)} parameters and {n_nuis} nuisance unknowns: "
+                             "not enough data for a fit with redundancy")
+    s0 = math.sqrt(2 * sol.cost / dof)
+    var = s0 ** 2 if options.covariance == "residual" else 1.0
+    source = (f"a posteriori: s0^2 = {s0 ** 2:.4g} (weighted residual variance, dof {dof})"
+              if options.covariance == "residual" else "stated uncertainties (s0 = 1)")
+    cov = _covariance(s, ev, kept, var)
+    u = np.sqrt(np.diag(cov))
+    corr = cov / np.outer(u, u) if len(kept) else cov
+    nrm = _normal(s, sol, kept)
+    z = standardized_residuals(prob, ev.r, nrm.h)
+    table = _point_table(prob, data, sol.p, sol.states, z)
+    outliers = _outliers(prob, data, table, z[prob.n_point_rows:], options.outlier_threshold)
+    distances = [{"measurement": d.measurement, "between": list(d.between), "certified": d.length,
+                  "residual": float(table["distance"][i]), "standardized": float(z[prob.n_point_rows + i]),
+                  "sigma": d.sigma} for i, d in enumerate(prob.distance_items)]
     return CalibrationResult(
-        model=model, p=p, free=tuple(spec.names[i] for i in kept), fixed=tuple(fixed),
-        held=tuple(n for i, n in enumerate(spec.names) if i not in cand), cov=cov, u=u, corr=corr, s0=s0,
+        model=model, p=sol.p, free=tuple(spec.names[i] for i in kept), fixed=tuple(fixed),
+        held=tuple(n for i, n in enumerate(spec.names) if i not in s.candidates), cov=cov, u=u, corr=corr, s0=s0,
         covariance_source=source, status=sol.status, iterations=sol.iterations, evaluations=sol.evaluations,
         cost=sol.cost, n_residuals=n_rows, n_nuisance=n_nuis, dof=dof, identifiability=idf0,
-        identifiability_final=idf1, residuals=table, instances=instances, distances=distances, reference=ref,
-        outliers=outliers, dropped=[], data=data, weights=weights, reference_mode=reference, unused=prob.unused,
-        variance=variance, prior_scale=prior_scale, log_evidence=log_ev,
-        prior_centre=None if prior is None else prior.centre)
+        identifiability_final=idf1, residuals=table, instances=_instances(prob, table, sol.states),
+        distances=distances, reference=_reference(prob, sol.states, nrm, len(kept), var), outliers=outliers,
+        dropped=[], data=data, weights=options.weights, reference_mode=options.reference, unused=prob.unused,
+        variance=variance_components(prob, ev.r, nrm.h, options.weights), prior_scale=options.prior_scale,
+        log_evidence=nrm.log_evidence, prior_centre=None if s.prior is None else s.prior.centre, options=options)
 
 
 #: fewest redundant rows (rows minus their share of the unknowns) for a group's noise to be estimated
@@ -771,15 +831,19 @@ def variance_components(problem: Problem, r: np.ndarray, leverage: np.ndarray, w
     return out
 
 
-def reweighted(fit, weights: Weights, tol: float = 0.03, rounds: int = 12) -> CalibrationResult:
-    """Iterated variance-component estimation: ``fit(weights, start)`` (start: the free parameters' values
-    of the previous round) with every group's factor updated from the fit, until all change by less than
-    ``tol``. From the fifth round on the updates are damped (square root of the factor), since a parameter
-    held or freed by the practical-resolution rule can make the estimates alternate. The result carries
-    ``weights_history`` (factors and s0 of each round; the last entry says whether they settled)."""
+def reweighted(model: ArmModel, data: CalibrationData, options: FitOptions, tol: float = 0.03,
+               rounds: int = 12) -> CalibrationResult:
+    """Iterated variance-component estimation: the fit of ``options`` (outliers dropped if asked) with every
+    group's factor updated from the fit (the free parameters started from the previous round's values),
+    until all change by less than ``tol``. From the fifth round on the updates are damped (square root of
+    the factor), since a parameter held or freed by the practical-resolution rule can make the estimates
+    alternate. The result carries ``weights_history`` (factors and s0 of each round; the last entry says
+    whether they settled) and ``options`` as given."""
     history, st = [], {}
+    weights = options.weights
     for k in range(rounds):
-        res = fit(weights, st)
+        res = _without_outliers(model, data, replace(options, weights=weights, weights_from_data=False,
+                                                     start={**(options.start or {}), **st}))
         est = {v["group"]: v["factor"] for v in res.variance if v["estimated"]}
         history.append({"round": k + 1, "factors": dict(weights.factors), "s0": res.s0})
         if all(abs(f - 1.0) <= tol for f in est.values()):
@@ -795,6 +859,7 @@ def reweighted(fit, weights: Weights, tol: float = 0.03, rounds: int = 12) -> Ca
                                f"ratios {', '.join(f'{g} {f:.3g}' for g, f in est.items())}); the last round's "
                                "weights are used")
     res.weights_history = history
+    res.options = options
     return res
 
 
@@ -807,22 +872,26 @@ def _scale(jp: np.ndarray) -> np.ndarray:
 EVIDENCE_GRID = (0.05, 0.1, 0.2, 0.3, 0.5, 1.0, 2.0, 5.0)
 
 
-def evidence_scale(model: ArmModel, data: CalibrationData, free=None, *, weights: Weights | None = None,
-                   grid=EVIDENCE_GRID, **kw) -> tuple[float, list[dict]]:
+def evidence_scale(model: ArmModel, data: CalibrationData, options: FitOptions = FitOptions(),
+                   grid=EVIDENCE_GRID) -> tuple[float, list[dict]]:
     """The prior scale the data support best (empirical Bayes): the noise of each row group estimated
     first (a fit without prior, :func:`variance_components`), then one maximum a posteriori fit per scale
     of ``grid`` with those weights, and the scale of the largest Laplace log evidence
     ``-cost - prior cost - 0.5 log det(H) - sum log(prior sizes)``: too small a scale pulls the fit away
     from the data, too large a one pays for the volume of parameter space the data do not use.
 
-    Returns ``(scale, rows)``; rows: ``scale``, ``log_evidence`` (None where the fit failed, with
-    ``error``), ``s0``. ``kw``: options of :func:`calibrate`. Raises :class:`NumericalError` if no scale
-    gives a fit."""
-    base = calibrate(model, data, free, weights=weights, weights_from_data=True, **kw)
+    ``options``: of the fits (free set, values, weights as the start of the noise estimate, rank_tol,
+    priors, ...); their outlier dropping, prior centre and ``min_resolution`` are not used (the default
+    rule for the noise fit). Returns ``(scale, rows)``; rows: ``scale``, ``log_evidence`` (None where the
+    fit failed, with ``error``), ``s0``. Raises :class:`NumericalError` if no scale gives a fit."""
+    common = replace(options, drop_outliers=False, prior_centre=None,
+                     min_resolution=FitOptions.min_resolution)
+    base = calibrate(model, data, replace(common, weights_from_data=True, prior_scale=None))
     rows = []
     for tau in grid:
         try:
-            r = calibrate(model, data, free, weights=base.weights, prior_scale=float(tau), **kw)
+            r = calibrate(model, data, replace(common, weights=base.weights, weights_from_data=False,
+                                               prior_scale=float(tau)))
             rows.append({"scale": float(tau), "log_evidence": r.log_evidence, "s0": r.s0})
         except NumericalError as exc:
             rows.append({"scale": float(tau), "log_evidence": None, "s0": None, "error": str(exc)})

@@ -19,7 +19,7 @@ from arm_model.checks import point_warnings, log_warnings
 from arm_model.io import read_artefacts, read_points
 from arm_model.model_file import Arm
 
-__all__ = ["register", "run_calibrate", "run_montecarlo", "run_poses"]
+__all__ = ["register", "run_calibrate", "run_montecarlo", "run_poses", "fit_options"]
 
 log = logging.getLogger(__name__)
 
@@ -236,17 +236,18 @@ def _weights(args):
                    length=None if args.sigma_length_um is None else args.sigma_length_um * 1e-6)
 
 
-def _fit_kwargs(args) -> dict:
-    kw = {"min_resolution": args.min_resolution or None}
+def fit_options(args, **fields):
+    """The :class:`~calibration.options.FitOptions` of the fit options on the command line (``--min-resolution``,
+    ``--plausible-length-mm``, ``--weights``, ``--prior-scale``, ``--rank-tol``), with ``fields`` set too."""
+    from .options import FitOptions
+    kw = {"min_resolution": args.min_resolution or None,
+          "weights_from_data": getattr(args, "weights", "stated") == "data",
+          "prior_scale": getattr(args, "prior_scale", None)}
     if getattr(args, "plausible_length_mm", None) is not None:
         kw["prior_length"] = args.plausible_length_mm * 1e-3
-    if getattr(args, "weights", "stated") == "data":
-        kw["weights_from_data"] = True
-    if getattr(args, "prior_scale", None) is not None:
-        kw["prior_scale"] = args.prior_scale
     if args.rank_tol is not None:
         kw["rank_tol"] = args.rank_tol
-    return kw
+    return FitOptions(**{**kw, **fields})
 
 
 def _free(model, args):
@@ -305,12 +306,10 @@ def run_calibrate(args: argparse.Namespace) -> int:
                 log.warning(f"joint compliance cannot be identified: {why}")
         holdout = _holdout(args.holdout)
         train, test = (data, None) if holdout is None else split_holdout(data, holdout, args.seed)
-        kw = _fit_kwargs(args)
-        res = calibrate(model, train, _free(model, args), values=values, weights=_weights(args),
-                        on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
-                        drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference, **kw)
-        res = refine_torques(res, covariance=args.covariance, outlier_threshold=args.outlier_threshold,
-                             **{k: v for k, v in kw.items() if k == "rank_tol"})
+        options = fit_options(args, free=_free(model, args), values=values, weights=_weights(args),
+                              on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
+                              drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference)
+        res = refine_torques(calibrate(model, train, options))
         val_train, val_test, conf = conformance_entry(_mpe(args), (res, res.data),
                                                       None if test is None else (res, test))
         files = write_outputs(res, out.dir, inputs=inputs, validation_training=val_train,
@@ -435,8 +434,8 @@ def run_montecarlo(args: argparse.Namespace) -> int:
     with output_folder(args.output, camp.inputs, "study montecarlo") as out:
         from arm_model.model import ArmModel
         model = ArmModel(camp.arm, _effects(args.effect))
-        settings = RunSettings(free=tuple(_free(model, args)), weights=_weights(args), holdout=args.holdout,
-                               fit=_fit_kwargs(args), effects=_effects(args.effect))
+        settings = RunSettings(holdout=args.holdout, effects=_effects(args.effect),
+                               fit=fit_options(args, free=_free(model, args), weights=_weights(args)))
         mc = monte_carlo(SimSource(str(args.campaign)), args.runs, seed=args.seed, settings=settings,
                          scheduler=args.scheduler, workers=args.workers)
         from arm_model.shipped import provenance
@@ -475,10 +474,9 @@ def run_poses(args: argparse.Namespace) -> int:
         n = len(data.measurements())
         if args.count > n:
             raise InputError(f"--count {args.count}: the points file has {n} measurement(s)", args.points)
-        fit = _fit_kwargs(args)
-        fit.pop("weights_from_data", None)            # the choice is made at the nominal, before any fit
-        sel = select_measurements(model, data, args.count, _free(model, args), weights=_weights(args),
-                                  fit=fit)
+        # the choice is made at the nominal, before any fit
+        fit = fit_options(args, free=_free(model, args), weights=_weights(args), weights_from_data=False)
+        sel = select_measurements(model, data, args.count, fit)
         from arm_model.shipped import provenance
         (out.dir / "poses.json").write_text(json.dumps({**sel.to_dict(), **provenance(inputs)}, indent=1) + "\n",
                                             encoding="utf-8")

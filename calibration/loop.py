@@ -62,6 +62,7 @@ from .diagnostics import (GroupTest, ResidualSpace, binned_estimates, candidate_
                           measurement_folds, pose_folds, remaining_structure, residual_space, screen_candidates,
                           structure_tests)
 from .identifiability import DEFAULT_RANK_TOL, prior_scales
+from .options import FitOptions
 from .problem import MIN_POINTS, Problem
 from .solver import levenberg_marquardt
 from .synthesis import RESIDUAL, synthesise
@@ -587,16 +588,18 @@ def _close_loop(points, artefacts, desc, reference, effects, free, weights, sett
             names += [n for n in model.spec.names[model.base_size:] if n not in names]
         if hold:
             names = [n for n in (names or default_free(model)) if n not in hold]
-        return calibrate(model, d, free=names, values=values, weights=weights, rank_tol=settings.rank_tol,
-                         priors={**priors, **(extra_priors or {})}, outlier_threshold=settings.outlier_threshold,
-                         weights_from_data=reweight and settings.weights_from_data, prior_scale=prior_scale)
+        return calibrate(model, d, FitOptions(free=names, values=values, weights=weights, rank_tol=settings.rank_tol,
+                                              priors={**priors, **(extra_priors or {})},
+                                              outlier_threshold=settings.outlier_threshold,
+                                              weights_from_data=reweight and settings.weights_from_data,
+                                              prior_scale=prior_scale))
 
     prior_scale = settings.prior_scale
     if prior_scale == "evidence":
         model0 = ArmModel(desc, tuple(effects))
         names0 = None if free is None else [model0.spec.names[i] for i in resolve_parameters(model0.spec, free)]
-        prior_scale, _ = evidence_scale(model0, design, names0, values=values, weights=weights,
-                                        rank_tol=settings.rank_tol, priors=priors)
+        prior_scale, _ = evidence_scale(model0, design, FitOptions(free=names0, values=values, weights=weights,
+                                                                   rank_tol=settings.rank_tol, priors=priors))
         say(f"prior scale from the evidence of the design set: {prior_scale:g} x the plausible error sizes")
 
     def noise(res: CalibrationResult) -> str:

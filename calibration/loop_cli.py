@@ -130,11 +130,10 @@ def run(args: argparse.Namespace) -> int:
                           free=args.free,
                           weights=weights, settings=settings, families_=families)
         # the model written is loop.model_fit (every point) or else the last stage's fit: refine that one
-        opts = dict(rank_tol=settings.rank_tol, outlier_threshold=settings.outlier_threshold)
         if loop.model_fit is not None:
-            loop.model_fit = refine_torques(loop.model_fit, **opts)
+            loop.model_fit = refine_torques(loop.model_fit)
         else:
-            loop.stages[-1].result = refine_torques(loop.stages[-1].result, **opts)
+            loop.stages[-1].result = refine_torques(loop.stages[-1].result)
         names = {"points": str(args.points), "artefacts": str(args.artefacts), "arm": str(args.arm),
                  "reference_points": None if args.reference_points is None else str(args.reference_points)}
         conf = _conformance(loop, _mpe(args))

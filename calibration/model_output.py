@@ -78,17 +78,17 @@ def model_check(result, arm: Arm | None = None) -> dict:
             "rms_difference_nm": float(np.sqrt(np.mean(d ** 2)) * 1e9) if len(d) else 0.0}
 
 
-def refine_torques(result, rounds: int = 5, tol_nm: float = 1.0, **fit):
+def refine_torques(result, rounds: int = 5, tol_nm: float = 1.0):
     """The fit refined with the gravity and contact torques evaluated on its calibrated description (the
     fit evaluated them on the nominal one), so that the model file, which evaluates them on the description
     it holds, gives the fit's own ball centres (:func:`model_check`): repeated (a fixed point: each refit
     moves the description a little) until they agree within ``tol_nm`` or ``rounds`` refits are done.
 
     Only for models with an effect that needs the torques; the same free parameters, started at the
-    fit's values; the fixed, held and dropped parameters and points and the identifiability analyses
-    of ``result`` are kept; the last round's :func:`model_check` is the result's ``model_check`` (the
-    writers report it without computing it again). ``fit``: options of the fit to keep (``covariance``, ``rank_tol``,
-    ``outlier_threshold``)."""
+    fit's values, with the fit's own options (``result.options``: covariance, rank_tol, outlier threshold,
+    prior) at its final weights; the fixed, held and dropped parameters and points and the identifiability
+    analyses of ``result`` are kept; the last round's :func:`model_check` is the result's ``model_check``
+    (the writers report it without computing it again)."""
     model = result.model
     if not ({"tau_gravity", "tau_contact"} & model.needs()):
         return result
@@ -96,18 +96,20 @@ def refine_torques(result, rounds: int = 5, tol_nm: float = 1.0, **fit):
     from arm_model.pinocchio_model import PinocchioArm
 
     from .calibrate import calibrate
+    from .options import FitOptions
     data = result.data
     keep = {f: getattr(result, f) for f in ("fixed", "held", "dropped", "identifiability", "evidence",
-                                             "weights_history")}
+                                             "weights_history", "options")}
+    base = replace(result.options or FitOptions(), weights=result.weights, reference=result.reference_mode,
+                   min_resolution=None, drop_outliers=False, weights_from_data=False, start=None,
+                   prior_scale=result.prior_scale, prior_centre=result.prior_centre)
     cur = result
     for _ in range(rounds):
         tau_g, tau_c = PinocchioArm(cur.described()).torques(data.points.q, data.wrench)
         aux = AuxData(None if data.aux is None else data.aux.temperature, tau_g, tau_c)
         values = dict(zip(model.spec.names, (float(v) for v in cur.p)))
         cur = dataclasses.replace(
-            calibrate(model, replace(data, aux=aux), free=list(cur.free), values=values, weights=result.weights,
-                      reference=result.reference_mode, min_resolution=None, drop_outliers=False,
-                      prior_scale=result.prior_scale, prior_centre=result.prior_centre, **fit), **keep)
+            calibrate(model, replace(data, aux=aux), replace(base, free=tuple(cur.free), values=values)), **keep)
         cur = dataclasses.replace(cur, model_check=model_check(cur))
         if cur.model_check["max_difference_nm"] <= tol_nm:
             break

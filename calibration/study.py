@@ -21,7 +21,7 @@ import logging
 import math
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -30,8 +30,9 @@ from arm_model._log import Progress
 from arm_model.model import ArmModel
 
 from .calibrate import calibrate, resolve_parameters
-from .data import CalibrationData, Weights, make_data, split_holdout
+from .data import CalibrationData, make_data, split_holdout
 from .identifiability import reduced_jacobian
+from .options import FitOptions
 from .problem import Problem
 from .solver import blas_threads
 
@@ -156,11 +157,10 @@ class SynthSource:
 
 @dataclass(frozen=True)
 class RunSettings:
-    """How each run calibrates and validates."""
-    free: tuple | None = None
-    weights: Weights = field(default_factory=Weights)
+    """How each run calibrates (``fit``: free set, weights and every option of the fit) and validates
+    (``holdout``: the share of measurements held out); ``effects``: added to the campaign's arm."""
     holdout: float = 0.25
-    fit: dict = field(default_factory=dict)      # more keyword arguments of calibrate
+    fit: FitOptions = field(default_factory=FitOptions)
     effects: tuple = ()
 
 
@@ -182,7 +182,7 @@ def _run(source, settings, seed, t0) -> dict:
     model = ArmModel(desc, tuple(settings.effects))
     data = make_data(points, artefacts, model, reference=reference)
     train, test = split_holdout(data, settings.holdout, seed)
-    res = calibrate(model, train, settings.free, weights=settings.weights, **settings.fit)
+    res = calibrate(model, train, settings.fit)
     p_true = model.spec.vector({k: v for k, v in truth.items() if k in model.spec.names})
     p_eq = res.equivalent(p_true)
     idx = [model.spec.index(n) for n in res.free]
@@ -311,13 +311,14 @@ class Selection:
                 "u_pool": self.u_pool}
 
 
-def select_measurements(model: ArmModel, data: CalibrationData, count: int, free=None, *,
-                        weights: Weights | None = None, p=None, random_draws: int = 20, seed: int = 0,
-                        progress: bool = True, always=(), fit: dict | None = None) -> Selection:
+def select_measurements(model: ArmModel, data: CalibrationData, count: int, options: FitOptions = FitOptions(), *,
+                        p=None, random_draws: int = 20, seed: int = 0, progress: bool = True,
+                        always=()) -> Selection:
     """Choose ``count`` measurements of ``data`` that best identify the parameters.
 
     The pool is first reduced to its identifiable parameters (:func:`calibration.calibrate.identify`,
-    with the options ``fit``, at ``p``, default the nominal, on the whole pool with the nuisance
+    with the fit's ``options``: free set, weights, rank and resolution rules (none with a prior), at ``p``,
+    default the nominal, on the whole pool with the nuisance
     fitted); then each measurement's
     rows of the reduced, column-scaled Jacobian give an information block and measurements are added
     one at a time, each time the one that maximises O1 (a shared reference transform is eliminated
@@ -326,13 +327,14 @@ def select_measurements(model: ArmModel, data: CalibrationData, count: int, free
     from .calibrate import _scale, default_free, identify
     from .solver import levenberg_marquardt
 
-    weights = weights or Weights()
     spec = model.spec
-    cand = resolve_parameters(spec, default_free(model) if free is None else free)
+    cand = resolve_parameters(spec, default_free(model) if options.free is None else options.free)
     p = np.zeros(spec.size) if p is None else np.asarray(p, float)
-    prob = Problem(model, data, weights, cand)
+    prob = Problem(model, data, options.weights, cand, reference=options.reference)
     states = levenberg_marquardt(prob.with_free([]), p, prob.initial_states(p)).states
-    kept, _, _ = identify(prob, p, states, cand, **(fit or {}))
+    if options.prior_scale is not None:           # a prior shrinks what the data resolve poorly: nothing is weak
+        options = replace(options, min_resolution=None)
+    kept, _, _ = identify(prob, p, states, cand, options)
     prob = prob.with_free(kept)
     ev = prob.evaluate(p, states)
     jred = reduced_jacobian(ev.jp, ev.jt) / _scale(ev.jp)

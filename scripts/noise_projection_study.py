@@ -59,14 +59,14 @@ def sensitivity(res, name: str) -> tuple[np.ndarray, np.ndarray]:
 def one(campaign, seed: int, name: str, draws: int) -> dict:
     from arm_model.model import ArmModel
     from arm_model.sim import simulate
-    from calibration.calibrate import calibrate
+    from calibration.calibrate import FitOptions, calibrate
     from calibration.data import make_data, split_holdout
 
     sim = simulate(campaign, seed=seed, progress=lambda m: None)
     model = ArmModel(campaign.arm, ())
     data = make_data(sim.points, sim.artefacts, model, reference=sim.reference_points)
     train, _ = split_holdout(data, 0.25, seed)
-    res = calibrate(model, train, None, weights_from_data=True)
+    res = calibrate(model, train, FitOptions(weights_from_data=True))
     spec = model.spec
     k = res.free.index(name)
     p_true = spec.vector({n: v for n, v in sim.truth["p"].items() if n in spec.names})

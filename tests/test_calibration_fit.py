@@ -9,7 +9,7 @@ import pytest
 
 from arm_model.effects import ProbeCompliance
 from arm_model.model import ArmModel
-from calibration import Weights, calibrate, make_data, split_holdout, validate
+from calibration import FitOptions, Weights, calibrate, make_data, split_holdout, validate
 from calibration.validation import _articulation
 from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 from conftest import assert_close
@@ -34,14 +34,14 @@ def test_noise_free_campaign_is_recovered_exactly(model):
     spec = replace(SPEC, noise=0.0, reference_noise=0.0)
     c = make_campaign(model, spec, seed=21)
     w = Weights(probe=1e-6, reference=1e-6)
-    res = calibrate(model, _data(model, c), weights=w)
+    res = calibrate(model, _data(model, c), FitOptions(weights=w))
     # the fixed parameters' true errors map into the kept ones to first order only: the second-order
     # remainder (~(1e-4 rad)^2 x lever) leaves nanometres; with them zero in the truth the recovery is exact
     assert np.sqrt(np.mean(res.residuals["value"] ** 2)) < 2e-8 and res.status.startswith("converged")
     truth = c.p_true.copy()
     truth[[model.spec.index(f.name) for f in res.fixed]] = 0.0
     c2 = make_campaign(model, spec, seed=21, p_true=truth, T_ref_base=c.T_ref_base)
-    res2 = calibrate(model, _data(model, c2), list(res.free), weights=w)
+    res2 = calibrate(model, _data(model, c2), FitOptions(free=list(res.free), weights=w))
     assert res2.free == res.free and not res2.fixed
     idx = [model.spec.index(n) for n in res2.free]
     assert_close(res2.p[idx], truth[idx], atol=1e-11)
@@ -54,7 +54,7 @@ def noisy(model):
     c = make_campaign(model, SPEC, seed=22)
     data = _data(model, c)
     train, test = split_holdout(data, 0.3, seed=1)
-    res = calibrate(model, train, weights=Weights(probe=2e-6, reference=3e-6))
+    res = calibrate(model, train, FitOptions(weights=Weights(probe=2e-6, reference=3e-6)))
     return c, train, test, res
 
 
@@ -94,12 +94,12 @@ def test_outlier_is_reported_with_its_line_and_kept(model):
     q[bad, 1] += 5e-4                                    # 0.5 mrad on the shoulder: ~0.3 mm off
     pts = replace(c.points, q=q)
     data = make_data(pts, c.artefacts, model)
-    res = calibrate(model, data, weights=Weights(probe=2e-6))
+    res = calibrate(model, data, FitOptions(weights=Weights(probe=2e-6)))
     o = max(res.outliers, key=lambda o: abs(o.standardized))      # the gross error is the worst
     assert o.point == bad and o.line == pts.lines[bad] and o.measurement == pts.measurement[bad]
     assert abs(o.standardized) > 10
     assert bad in res.residuals["point"] and len(res.data) == len(data)          # reported, kept
-    dropped = calibrate(model, data, weights=Weights(probe=2e-6), drop_outliers=True)
+    dropped = calibrate(model, data, FitOptions(weights=Weights(probe=2e-6), drop_outliers=True))
     assert [o.point for o in dropped.dropped] == [bad]          # only the bad one: its neighbours come back
     assert len(dropped.data) == len(data) - 1 and not dropped.outliers
     assert dropped.s0 < res.s0
@@ -111,7 +111,7 @@ def test_effect_parameters_are_calibrated(nominal):
     truth = random_truth(model, np.random.default_rng(24))
     truth[model.spec.index("probe.dcompliance_bend")] = 3e-6
     c = make_campaign(model, replace(SPEC, force=3.0, reference_points=0), seed=24, p_true=truth)
-    res = calibrate(model, make_data(c.points, c.artefacts, model), weights=Weights(probe=2e-6))
+    res = calibrate(model, make_data(c.points, c.artefacts, model), FitOptions(weights=Weights(probe=2e-6)))
     assert "probe.dcompliance_bend" in res.free
     u = res.uncertainty("probe.dcompliance_bend")
     assert abs(res.value("probe.dcompliance_bend") - 3e-6) < 3 * u and u < 5e-7

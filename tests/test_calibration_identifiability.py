@@ -6,7 +6,7 @@ import pytest
 
 from arm_model import NumericalError
 from arm_model.model import ArmModel
-from calibration import analyse, calibrate, make_data, Weights
+from calibration import FitOptions, analyse, calibrate, make_data, Weights
 from arm_model.sim.quick import SynthSpec, make_campaign
 from conftest import assert_close
 
@@ -51,7 +51,7 @@ def test_base_pose_not_observable_from_artefacts(artefact_data):
     about the base z) and j1.d (translation along it) and names the exact equivalences of the chain's end
     (probe offset vs j7), without being told."""
     model, c, data = artefact_data
-    res = calibrate(model, data, weights=Weights(probe=1e-6))
+    res = calibrate(model, data, FitOptions(weights=Weights(probe=1e-6)))
     fixed = {f.name: f for f in res.fixed}
     assert {"j1.theta_offset", "j1.d"} <= set(fixed)
     for name in ("j1.theta_offset", "j1.d"):
@@ -75,25 +75,25 @@ def test_reference_in_base_frame_makes_the_base_pose_identifiable(nominal):
     c = make_campaign(model, SynthSpec(ballbars=4, seats=2, spheres=0, reference_points=60, noise=1e-6,
                                        reference_noise=1e-6), seed=6, T_ref_base=np.eye(4))
     data = make_data(c.points, c.artefacts, model, reference=c.reference_points)
-    res = calibrate(model, data, weights=Weights(probe=1e-6, reference=1e-6), reference="identity")
+    res = calibrate(model, data, FitOptions(weights=Weights(probe=1e-6, reference=1e-6), reference="identity"))
     assert "j1.theta_offset" in res.free and "j1.d" in res.free
     for n in ("j1.theta_offset", "j1.d"):
         assert abs(res.value(n) - c.truth[n]) < 4 * res.uncertainty(n)
-    res2 = calibrate(model, data, weights=Weights(probe=1e-6, reference=1e-6), reference="fit")
+    res2 = calibrate(model, data, FitOptions(weights=Weights(probe=1e-6, reference=1e-6), reference="fit"))
     assert {"j1.theta_offset", "j1.d"} <= {f.name for f in res2.fixed}
 
 
 def test_stop_policy_lists_the_combinations(artefact_data):
     model, _, data = artefact_data
     with pytest.raises(NumericalError) as exc:
-        calibrate(model, data, on_unidentifiable="stop")
+        calibrate(model, data, FitOptions(on_unidentifiable="stop"))
     msg = str(exc.value)
     assert "j1.theta_offset" in msg and "probe.z" in msg or "j7.d" in msg
 
 
 def test_compliance_without_force_has_no_effect(artefact_data):
     model, _, data = artefact_data
-    res = calibrate(model, data, free=["j2.*", "probe.compliance_*"], weights=Weights(probe=1e-6))
+    res = calibrate(model, data, FitOptions(free=["j2.*", "probe.compliance_*"], weights=Weights(probe=1e-6)))
     fixed = {f.name: f.reason for f in res.fixed}
     for n in ("probe.compliance_x", "probe.compliance_y", "probe.compliance_z"):
         assert "no effect" in fixed[n]
@@ -118,7 +118,7 @@ def test_urdf_arm_origin_errors(nominal, tmp_path):
                                     "j1.origin_pitch", "j1.origin_yaw")
     c = make_campaign(model, SynthSpec(ballbars=8, ballbar_points=5, seats=3, articulations=10, spheres=1,
                                        noise=1e-6), seed=8)
-    res = calibrate(model, make_data(c.points, c.artefacts, model), weights=Weights(probe=1e-6))
+    res = calibrate(model, make_data(c.points, c.artefacts, model), FitOptions(weights=Weights(probe=1e-6)))
     j1 = {f"j1.origin_{k}" for k in ("x", "y", "z", "roll", "pitch", "yaw")}
     assert j1 <= set(res.identifiability.gauge)          # all six rigid motions found
     rigid = {f.name for f in res.fixed if "rigid motion" in f.reason}
@@ -138,7 +138,7 @@ def test_modified_dh_arm(nominal):
     model = ArmModel(replace(nominal, convention="mdh"))
     c = make_campaign(model, SynthSpec(ballbars=8, ballbar_points=5, seats=3, articulations=8, spheres=1,
                                        noise=1e-6), seed=9)
-    res = calibrate(model, make_data(c.points, c.artefacts, model), weights=Weights(probe=1e-6))
+    res = calibrate(model, make_data(c.points, c.artefacts, model), FitOptions(weights=Weights(probe=1e-6)))
     assert {"j1.theta_offset", "j1.d", "j1.a", "j1.alpha"} <= set(res.identifiability.gauge)
     assert {"j1.theta_offset", "j1.d", "j1.a", "j1.alpha"} <= {f.name for f in res.fixed}
     peq = res.equivalent(c.p_true)

@@ -10,7 +10,7 @@ import pytest
 
 from arm_model.model import ArmModel
 from arm_model.sim.quick import SynthSpec, make_campaign
-from calibration import Weights, calibrate, make_data
+from calibration import FitOptions, Weights, calibrate, make_data
 from calibration.calibrate import row_groups
 
 # probe 2 um, tracker 20 um per axis; the fit is told 2 um for both (--weights stated)
@@ -28,7 +28,7 @@ def campaign(nominal):
 def _fit(model, c, points=None, reference=None):
     data = make_data(c.points if points is None else points, c.artefacts, model,
                      reference=c.reference_points if reference is None else reference)
-    return calibrate(model, data, weights=STATED)
+    return calibrate(model, data, FitOptions(weights=STATED))
 
 
 def test_clean_campaign_with_unequal_group_noise_flags_nothing(campaign):

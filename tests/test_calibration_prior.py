@@ -10,7 +10,7 @@ import pytest
 
 from arm_model.model import ArmModel
 from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
-from calibration import Weights, calibrate, make_data
+from calibration import FitOptions, Weights, calibrate, make_data
 from calibration.calibrate import EVIDENCE_GRID, evidence_scale
 from calibration.identifiability import prior_scales
 
@@ -36,13 +36,13 @@ def _campaign(model, scale, seed):
 
 def test_wide_prior_is_the_plain_fit_and_narrow_prior_the_nominal(model):
     data, _ = _campaign(model, 0.1, 3)
-    plain = calibrate(model, data, weights=W, min_resolution=None)
-    wide = calibrate(model, data, list(plain.free), weights=W, prior_scale=1e4)
+    plain = calibrate(model, data, FitOptions(weights=W, min_resolution=None))
+    wide = calibrate(model, data, FitOptions(free=list(plain.free), weights=W, prior_scale=1e4))
     idx = [model.spec.index(n) for n in plain.free]
     # a prior 1e4 times the plausible sizes moves the estimate by a negligible share of its uncertainty
     assert np.max(np.abs(wide.p[idx] - plain.p[idx]) / plain.u) < 1e-3
     assert np.allclose(wide.u, plain.u, rtol=1e-3)
-    narrow = calibrate(model, data, list(plain.free), weights=W, prior_scale=1e-6)
+    narrow = calibrate(model, data, FitOptions(free=list(plain.free), weights=W, prior_scale=1e-6))
     size = prior_scales(model, list(plain.free), noise=5e-6)
     assert np.max(np.abs(narrow.p[idx]) / size) < 1e-5
     # the posterior uncertainty cannot exceed the prior's
@@ -53,7 +53,7 @@ def test_map_is_the_minimum_of_data_plus_prior_cost(model):
     """Each free parameter moved by +-0.3 of its posterior uncertainty (the others and the artefacts'
     unknowns refitted) raises data plus prior cost: checked with fits holding that one parameter."""
     data, _ = _campaign(model, 0.1, 5)
-    res = calibrate(model, data, weights=W, prior_scale=0.3)
+    res = calibrate(model, data, FitOptions(weights=W, prior_scale=0.3))
     total = res.cost + 0.5 * float(np.sum(((res.p - res.prior_centre)[[model.spec.index(n) for n in res.free]]
                                           / (0.3 * prior_scales(model, list(res.free), noise=5e-6))) ** 2))
     rng = np.random.default_rng(0)
@@ -63,8 +63,8 @@ def test_map_is_the_minimum_of_data_plus_prior_cost(model):
             values = dict(zip(model.spec.names, res.p))
             values[name] += sign * 0.3 * res.u[k]
             others = [n for n in res.free if n != name]
-            r2 = calibrate(model, data, others, values=values, weights=W, prior_scale=0.3,
-                           prior_centre=res.prior_centre, min_resolution=None)
+            r2 = calibrate(model, data, FitOptions(free=others, values=values, weights=W, prior_scale=0.3,
+                                                   prior_centre=res.prior_centre, min_resolution=None))
             size = 0.3 * prior_scales(model, list(res.free), noise=5e-6)
             d = np.array([r2.p[model.spec.index(n)] - res.prior_centre[model.spec.index(n)] for n in res.free])
             assert r2.cost + 0.5 * float(np.sum((d / size) ** 2)) > total
@@ -73,7 +73,7 @@ def test_map_is_the_minimum_of_data_plus_prior_cost(model):
 @pytest.mark.parametrize("scale,seed", [(0.05, 11), (0.2, 12)])
 def test_evidence_finds_the_scale_the_errors_were_drawn_at(model, scale, seed):
     data, _ = _campaign(model, scale, seed)
-    tau, rows = evidence_scale(model, data, weights=W)
+    tau, rows = evidence_scale(model, data, FitOptions(weights=W))
     assert [r["scale"] for r in rows] == list(EVIDENCE_GRID)
     grid = list(EVIDENCE_GRID)
     assert abs(grid.index(tau) - grid.index(scale)) <= 1, (tau, rows)
@@ -109,5 +109,5 @@ def test_large_errors_converge_to_the_noise(model):
     every campaign of this size: of seeds 0-11, the restart brought 4 from s0 50-125 to the noise and 3
     stayed in another basin (s0 40-114; measured)."""
     data, _ = _campaign(model, 0.3, 1)
-    res = calibrate(model, data, weights=W)
+    res = calibrate(model, data, FitOptions(weights=W))
     assert 0.8 < res.s0 < 1.2 and res.status.startswith("converged")

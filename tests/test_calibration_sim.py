@@ -19,7 +19,7 @@ sim = pytest.importorskip("arm_model.sim")
 
 from arm_model.effects import ForceSensorError  # noqa: E402
 from arm_model.model import ArmModel  # noqa: E402
-from calibration import Weights, calibrate, make_data, split_holdout  # noqa: E402
+from calibration import FitOptions, Weights, calibrate, make_data, split_holdout  # noqa: E402
 
 CAMPAIGN = Path(__file__).resolve().parents[1] / "examples" / "campaigns" / "calibration.toml"
 pytestmark = pytest.mark.slow
@@ -39,7 +39,7 @@ def test_simulated_campaign_acceptance(campaign):
     data = make_data(run.points, run.artefacts, model, reference=run.reference_points)
     train, test = split_holdout(data, 0.25, seed=1)
     free = ["j*", "probe.x", "probe.y", "probe.z", "probe.compliance_*", "force.*"]
-    res = calibrate(model, train, free, weights=Weights(probe=2e-6, reference=10e-6))
+    res = calibrate(model, train, FitOptions(free=free, weights=Weights(probe=2e-6, reference=10e-6)))
     assert res.status.startswith("converged")
     assert 0.7 < res.s0 < 1.4, res.s0
     truth = model.spec.vector({k: v for k, v in run.truth["p"].items() if k in model.spec.names})

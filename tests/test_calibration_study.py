@@ -8,7 +8,7 @@ import pytest
 
 from calibration.study import (RunSettings, SynthSource, monte_carlo, observability_index, run_tasks)
 from arm_model.sim.quick import SynthSpec
-from calibration import Weights
+from calibration import FitOptions, Weights
 from conftest import assert_close
 
 
@@ -38,7 +38,7 @@ def test_monte_carlo_local(nominal):
     """Three runs in local processes: every run succeeds, held-out figures improve, and the reported
     uncertainties are of the size of the actual errors."""
     mc = monte_carlo(SynthSource(nominal, SOURCE_SPEC), 3, seed=40, workers=2, progress=False,
-                     settings=RunSettings(weights=Weights(probe=2e-6), holdout=0.3))
+                     settings=RunSettings(fit=FitOptions(weights=Weights(probe=2e-6)), holdout=0.3))
     assert not mc.failures
     assert [r["seed"] for r in mc.runs] == [40, 41, 42]
     assert mc.accuracy["length_error_max"]["after_median"] < mc.accuracy["length_error_max"]["before_median"] / 5
@@ -58,14 +58,15 @@ def test_monte_carlo_on_a_dask_local_cluster(nominal):
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         with distributed.Client(cluster) as client:
             mc = monte_carlo(SynthSource(nominal, SOURCE_SPEC), 2, seed=50, scheduler=client, progress=False,
-                             settings=RunSettings(weights=Weights(probe=2e-6), holdout=0.3))
+                             settings=RunSettings(fit=FitOptions(weights=Weights(probe=2e-6)), holdout=0.3))
             by_address = monte_carlo(SynthSource(nominal, SOURCE_SPEC), 1, seed=50, scheduler=cluster.scheduler_address,
-                                     progress=False, settings=RunSettings(weights=Weights(probe=2e-6), holdout=0.3))
+                                     progress=False,
+                                     settings=RunSettings(fit=FitOptions(weights=Weights(probe=2e-6)), holdout=0.3))
     assert not mc.failures and [r["seed"] for r in mc.runs] == [50, 51]
     # the same seed gives the same result wherever it runs
     assert_close(by_address.runs[0]["p"], mc.runs[0]["p"], atol=1e-15)
     local = monte_carlo(SynthSource(nominal, SOURCE_SPEC), 1, seed=50, workers=1, progress=False,
-                        settings=RunSettings(weights=Weights(probe=2e-6), holdout=0.3))
+                        settings=RunSettings(fit=FitOptions(weights=Weights(probe=2e-6)), holdout=0.3))
     assert_close(local.runs[0]["p"], mc.runs[0]["p"], atol=1e-15)
 
 

@@ -78,7 +78,7 @@ def test_trained_on_one_placement_the_loop_is_no_worse_than_calibrate_on_the_oth
     from arm_model.io import read_artefacts, read_points
     from arm_model.model import ArmModel
     from arm_model.urdf_import import load_arm
-    from calibration.calibrate import calibrate
+    from calibration.calibrate import FitOptions, calibrate
     from calibration.data import make_data
     from calibration.loop import close_loop
     from conftest import seat_figures_of
@@ -86,7 +86,7 @@ def test_trained_on_one_placement_the_loop_is_no_worse_than_calibrate_on_the_oth
     desc = load_arm(REAL / "panda-with-inertials.urdf", "ball_link")
     art = read_artefacts(REAL / "artefacts.toml")
     pts = {p: read_points(REAL / p / "points.csv", 7) for p in ("front", "right", "back-high")}
-    plain = calibrate(ArmModel(desc), make_data(pts["front"], art, ArmModel(desc)), weights_from_data=True)
+    plain = calibrate(ArmModel(desc), make_data(pts["front"], art, ArmModel(desc)), FitOptions(weights_from_data=True))
     loop = close_loop(pts["front"], art, desc)
     assert loop.model_fit is not None and len(loop.model_fit.data) == len(pts["front"])
 

@@ -49,9 +49,9 @@ def _compare(desc, art, pts, train: str, loop, held) -> tuple[list, list, list]:
     """Plain calibrate trained on ``pts[train]`` against the loop's model, on the placements ``held``:
     (plain's seat figures, the loop's, the two mean spreads [mm])."""
     from arm_model.model import ArmModel
-    from calibration.calibrate import calibrate
+    from calibration.calibrate import FitOptions, calibrate
     from calibration.data import make_data
-    plain = calibrate(ArmModel(desc), make_data(pts[train], art, ArmModel(desc)), weights_from_data=True)
+    plain = calibrate(ArmModel(desc), make_data(pts[train], art, ArmModel(desc)), FitOptions(weights_from_data=True))
     a = [seat_figures_of(plain, desc, pts[p]) for p in held]
     b = [seat_figures_of(loop.model_fit, desc, pts[p]) for p in held]
     return a, b, [np.mean([f["spread_mean_mm"] for f in x]) for x in (a, b)]
@@ -76,7 +76,7 @@ def test_trained_on_back_high_joint_compliance_is_included_and_the_other_placeme
 def test_a_compliance_injected_into_the_real_angles_is_found_recovered_and_carries_over(setup):
     from arm_model.effects import JointCompliance
     from arm_model.model import ArmModel
-    from calibration.calibrate import calibrate
+    from calibration.calibrate import FitOptions, calibrate
     from calibration.data import make_data
     from calibration.loop import close_loop
     desc, art, pts = setup
@@ -90,7 +90,7 @@ def test_a_compliance_injected_into_the_real_angles_is_found_recovered_and_carri
     # arm's own apparent compliance), within 3 sigma on every joint both fits resolve
     model = ArmModel(desc, (loop.added[0].effect,))
     assert isinstance(loop.added[0].effect, JointCompliance)
-    ref = calibrate(model, make_data(pts["front"], art, model), weights_from_data=True)
+    ref = calibrate(model, make_data(pts["front"], art, model), FitOptions(weights_from_data=True))
     fit = loop.model_fit
     both = [n for n in fit.free if n.endswith(".compliance") and n in ref.free]
     assert len(both) >= 3
@@ -110,7 +110,7 @@ def test_a_joint_gain_injected_into_the_real_angles_is_found_recovered_and_carri
     import dataclasses
 
     from arm_model.model import ArmModel
-    from calibration.calibrate import calibrate
+    from calibration.calibrate import FitOptions, calibrate
     from calibration.data import make_data
     from calibration.candidates import FAMILIES
     from calibration.loop import close_loop
@@ -127,7 +127,7 @@ def test_a_joint_gain_injected_into_the_real_angles_is_found_recovered_and_carri
     # measured: 5.57 -> 1.14 mm (distance error 1.65 -> 0.71 mm)
     assert spread[1] <= 0.5 * spread[0], (a, b)
     model = ArmModel(desc, (loop.added[0].effect,))
-    ref = calibrate(model, make_data(pts["front"], art, model), weights_from_data=True)
+    ref = calibrate(model, make_data(pts["front"], art, model), FitOptions(weights_from_data=True))
     n = "panda_joint2.gain"
     diff, u = loop.model_fit.value(n) - ref.value(n), np.hypot(loop.model_fit.uncertainty(n), ref.uncertainty(n))
     # measured: 0.501 % +- 0.047 %
@@ -140,11 +140,11 @@ def test_a_joint_gain_the_data_cannot_resolve_is_held(setup):
     estimated."""
     from arm_model.effects import JointGain
     from arm_model.model import ArmModel
-    from calibration.calibrate import calibrate
+    from calibration.calibrate import FitOptions, calibrate
     from calibration.data import make_data
     desc, art, pts = setup
     model = ArmModel(desc, (JointGain(),))
-    res = calibrate(model, make_data(pts["front"], art, model), weights_from_data=True)
+    res = calibrate(model, make_data(pts["front"], art, model), FitOptions(weights_from_data=True))
     held = {f.name: f.reason for f in res.fixed}
     assert "weakly determined" in held["panda_joint7.gain"] and res.value("panda_joint7.gain") == 0.0
     assert "panda_joint2.gain" in res.free and res.uncertainty("panda_joint2.gain") < 1e-3
@@ -158,11 +158,11 @@ def test_an_eccentricity_the_data_cannot_resolve_is_held_and_the_fit_converges(s
     are estimated."""
     from arm_model.effects import EncoderEccentricity
     from arm_model.model import ArmModel
-    from calibration.calibrate import calibrate
+    from calibration.calibrate import FitOptions, calibrate
     from calibration.data import make_data
     desc, art, pts = setup
     model = ArmModel(desc, (EncoderEccentricity(),))
-    res = calibrate(model, make_data(pts["front"], art, model), weights_from_data=True)
+    res = calibrate(model, make_data(pts["front"], art, model), FitOptions(weights_from_data=True))
     held = {f.name: f.reason for f in res.fixed}
     # measured: u ~ 17-21 deg (ecc1), ~ 9.5 deg (ecc2) against a plausible angle error of about 1 deg
     for n in ("panda_joint7.ecc1_sin", "panda_joint7.ecc2_cos", "panda_joint7.ecc2_sin"):
@@ -179,10 +179,10 @@ def test_an_identifiable_set_that_never_settles_is_reported_with_the_parameters(
     from arm_model._errors import NumericalError
     from arm_model.effects import EncoderEccentricity
     from arm_model.model import ArmModel
-    from calibration.calibrate import calibrate
+    from calibration.calibrate import FitOptions, calibrate
     from calibration.data import make_data
     desc, art, pts = setup
     monkeypatch.setattr(EncoderEccentricity, "held_when_weak", False)
     model = ArmModel(desc, (EncoderEccentricity(),))
     with pytest.raises(NumericalError, match=r"kept changing between fits \(held in turn: .*panda_joint7\.ecc"):
-        calibrate(model, make_data(pts["front"], art, model), weights_from_data=True)
+        calibrate(model, make_data(pts["front"], art, model), FitOptions(weights_from_data=True))

@@ -16,7 +16,7 @@ from arm_model.io import read_artefacts
 from arm_model.model import ArmModel, AuxData
 from arm_model.sim import campaign_from_dict, simulate
 from arm_model.urdf_import import load_arm
-from calibration.calibrate import calibrate
+from calibration.calibrate import FitOptions, calibrate
 from calibration.data import make_data
 from calibration.loop import close_loop
 from calibration.placements import seat_figures
@@ -68,7 +68,7 @@ def heldout_spread(result, pts, places) -> float:
 def study(seed: int, stiffness: float | None):
     desc, pts, art = campaign(seed, stiffness)
     train = pts.select(pts.measurement == "p1")
-    plain = calibrate(ArmModel(desc), make_data(train, art, ArmModel(desc)), weights_from_data=True)
+    plain = calibrate(ArmModel(desc), make_data(train, art, ArmModel(desc)), FitOptions(weights_from_data=True))
     loop = close_loop(train, art, desc)
     rest = ["p2", "p3", "p4", "p5"]
     return heldout_spread(plain, pts, rest), heldout_spread(loop.model_fit, pts, rest), loop

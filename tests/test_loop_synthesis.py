@@ -86,8 +86,7 @@ def tip_gives_the_loops_points(loop, points_csv, tmp_path):
     more than 0.1 um somewhere (so a tip that left it out would fail)."""
     from arm_model.model_file import load_model
 
-    s = loop.settings
-    final = refine_torques(loop.model_fit, rank_tol=s.rank_tol, outlier_threshold=s.outlier_threshold)
+    final = refine_torques(loop.model_fit)
     files = write_loop_model(dataclasses.replace(loop, model_fit=final), tmp_path / "loop")
     built = [c for c in loop.added if c.origin == RESIDUAL]
     assert built

@@ -24,7 +24,7 @@ import pytest
 from arm_model.effects import EncoderEccentricity
 from arm_model.model import ArmModel
 from arm_model.uncertainty import FORCE_SENSOR_U_N, ParameterCovariance, default_inputs, propagate
-from calibration import Weights, calibrate, make_data
+from calibration import FitOptions, Weights, calibrate, make_data
 from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 
 pytestmark = pytest.mark.slow
@@ -53,8 +53,8 @@ def _one(nominal, case: str, seed: int) -> np.ndarray:
     free = [n for n in model.spec.names if not n.startswith("probe.compliance")]
     if force:
         free += ["probe.compliance_x", "probe.compliance_y"]
-    res = calibrate(model, make_data(_measured(train.points, resolution, rng), train.artefacts, model), free,
-                    weights=Weights(probe=2e-6))
+    res = calibrate(model, make_data(_measured(train.points, resolution, rng), train.artefacts, model),
+                    FitOptions(free=free, weights=Weights(probe=2e-6)))
     pts = _measured(test.points, resolution, rng)
     inputs = default_inputs(nominal, probing=res.probing_scatter(), has_force=pts.force is not None)
     out = propagate(model, res.p, pts.q, pts.wrench, parameters=ParameterCovariance(res.free, res.cov), inputs=inputs)

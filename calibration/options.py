@@ -1,0 +1,119 @@
+"""``FitOptions``: every option of :func:`calibration.calibrate.calibrate` in one frozen, validated object.
+
+A variant of a fit (a refit with other weights, the evidence's fits at each prior scale, a fit with one
+parameter held) is ``dataclasses.replace(options, ...)``, never a call with re-spelt keywords.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .data import Weights
+from .identifiability import DEFAULT_RANK_TOL
+
+__all__ = ["FitOptions", "UNIDENTIFIABLE", "COVARIANCE", "REFERENCE"]
+
+#: what :func:`~calibration.calibrate.calibrate` does with parameters the data cannot identify
+UNIDENTIFIABLE = ("fix", "stop")
+#: how the covariance is scaled
+COVARIANCE = ("residual", "stated")
+#: how reference coordinates enter the fit
+REFERENCE = ("fit", "identity", "off")
+
+
+def _positive(name: str, v, allow_none: bool = False) -> None:
+    if v is None and allow_none:
+        return
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v) \
+            or v <= 0:
+        raise ValueError(f"{name} must be a positive finite number{' or None' if allow_none else ''}, got {v!r}")
+
+
+def _choice(name: str, v, choices) -> None:
+    if v not in choices:
+        raise ValueError(f"{name} must be one of {', '.join(repr(c) for c in choices)}, got {v!r}")
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """How :func:`~calibration.calibrate.calibrate` fits (all SI).
+
+    Attributes:
+        free: parameter names or glob patterns to identify (``("j*.d", "probe.*")``); None:
+            :func:`~calibration.calibrate.default_free`.
+        values: values [SI] of the parameters that are not free, by name (default 0).
+        start: starting values [SI] of free parameters, by name (default their ``values`` or 0).
+        weights: standard uncertainties of the residuals (:class:`~calibration.data.Weights`).
+        on_unidentifiable: "fix" (hold and list the parameters the data cannot identify) or "stop" (raise
+            with the list).
+        rank_tol: relative singular value below which a direction is not identifiable.
+        outlier_threshold: standardized residual beyond which a point is an outlier.
+        drop_outliers: drop the outlier points and refit, in rounds (the worst first) until none is left.
+        covariance: "residual" (scaled by the residual variance factor) or "stated".
+        reference: "fit" (``T_ref_base`` unknown), "identity" (reference coordinates are base
+            coordinates) or "off" (reference columns ignored).
+        max_iter: iterations of each Levenberg-Marquardt solve.
+        min_resolution: hold parameters the data would resolve only to worse than this fraction of a
+            plausible error size; None keeps every linearly independent parameter.
+        priors: plausible error sizes [SI] by parameter name or glob pattern (overrides).
+        prior_length: plausible size [m] of a length error (angles: 10 rad/m times it).
+        weights_from_data: estimate the noise of each row group from the fit (variance components) and
+            refit until the factors settle.
+        prior_scale: None (no prior), "evidence" (the scale of the largest Laplace evidence) or a positive
+            factor of the plausible error sizes: a Gaussian prior on every free parameter.
+        prior_centre: the prior's centre (full parameter vector [SI]); None: ``values``.
+        blas: BLAS threads during the fit (None: unchanged).
+    """
+    free: tuple[str, ...] | None = None
+    values: dict | None = None
+    start: dict | None = None
+    weights: Weights = field(default_factory=Weights)
+    on_unidentifiable: str = "fix"
+    rank_tol: float = DEFAULT_RANK_TOL
+    outlier_threshold: float = 4.0
+    drop_outliers: bool = False
+    covariance: str = "residual"
+    reference: str = "fit"
+    max_iter: int = 200
+    min_resolution: float | None = 0.1
+    priors: dict | None = None
+    prior_length: float | None = None
+    weights_from_data: bool = False
+    prior_scale: float | str | None = None
+    prior_centre: np.ndarray | None = field(default=None, compare=False)
+    blas: int | None = 1
+
+    def __post_init__(self):
+        set_ = object.__setattr__
+        if self.free is not None:
+            if isinstance(self.free, str):
+                raise ValueError(f"free must be a sequence of names or patterns, got the string {self.free!r}")
+            set_(self, "free", tuple(str(n) for n in self.free))
+        for name in ("values", "start", "priors"):
+            v = getattr(self, name)
+            if v is not None:
+                set_(self, name, {str(k): float(x) for k, x in dict(v).items()})
+        if self.weights is None:
+            set_(self, "weights", Weights())
+        elif not isinstance(self.weights, Weights):
+            raise ValueError(f"weights must be a calibration.Weights, got {type(self.weights).__name__}")
+        _choice("on_unidentifiable", self.on_unidentifiable, UNIDENTIFIABLE)
+        _choice("covariance", self.covariance, COVARIANCE)
+        _choice("reference", self.reference, REFERENCE)
+        _positive("rank_tol", self.rank_tol)
+        if not self.rank_tol < 1:
+            raise ValueError(f"rank_tol must be below 1, got {self.rank_tol!r}")
+        _positive("outlier_threshold", self.outlier_threshold)
+        if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, (int, np.integer)) or self.max_iter < 1:
+            raise ValueError(f"max_iter must be a positive integer, got {self.max_iter!r}")
+        _positive("min_resolution", self.min_resolution, allow_none=True)
+        _positive("prior_length", self.prior_length, allow_none=True)
+        if self.prior_scale != "evidence":
+            _positive("prior_scale", self.prior_scale, allow_none=True)
+        if self.prior_centre is not None:
+            set_(self, "prior_centre", np.array(self.prior_centre, dtype=float))
+        if self.blas is not None and (isinstance(self.blas, bool) or not isinstance(self.blas, (int, np.integer))
+                                      or self.blas < 1):
+            raise ValueError(f"blas must be a positive integer or None, got {self.blas!r}")
