@@ -12,8 +12,8 @@ from arm_model.checks import point_warnings, log_warnings
 from arm_model.io import read_artefacts, read_points
 from arm_model.model_file import Arm
 
-from .cli import _holdout, _mpe, campaign_inputs, conformance_entry, log_conformance, model_effects, mpe_options, \
-    sigma_options
+from .cli import _holdout, _mpe, campaign_inputs, conformance_entry, log_conformance, model_effects, \
+    model_options, mpe_options, sigma_options
 
 __all__ = ["register", "run"]
 
@@ -77,11 +77,7 @@ def register(sub) -> None:
                         "joint compliance under gravity as physics when its signature is significant, its "
                         "compliances resolve positive and the held-out data are not significantly worse; see "
                         "docs/close-loop.md)")
-    p.add_argument("--effect", action="append", metavar="KEY",
-                   help="an effect already in the base model (repeatable; not a candidate then), e.g. thermal")
-    p.add_argument("--free", action="append", metavar="PATTERN",
-                   help="base parameters to identify, by name or glob (repeatable); default every joint-row error "
-                        "and probe.x/y/z (probe compliances are candidates instead); effect parameters are always free")
+    model_options(p)
     sigma_options(p)
     mpe_options(p)
     p.set_defaults(func=run)
@@ -127,8 +123,7 @@ def run(args: argparse.Namespace) -> int:
                             prior_scale=args.prior_scale)
     with output_folder(args.output, inputs, "close-loop") as out:
         loop = close_loop(points, artefacts, desc, reference=reference, effects=tuple(effects), values=arm.values,
-                          free=args.free,
-                          weights=weights, settings=settings, families_=families)
+                          free=args.free, hold=args.hold, weights=weights, settings=settings, families_=families)
         # the model written is loop.model_fit (every point) or else the last stage's fit: refine that one
         if loop.model_fit is not None:
             loop.model_fit = refine_torques(loop.model_fit)

@@ -122,3 +122,33 @@ def test_effect_built_from_the_residual_and_library_only(tmp_path, capsys):
     s = json.loads((tmp_path / "library" / "summary.json").read_text())
     assert s["effects_added"] == [] and s["settings"]["synthesise"] is False
     capsys.readouterr()
+
+
+def test_free_hold_and_effect_are_one_option_in_calibrate_and_close_loop():
+    """One definition each (calibration.cli.model_options): the same flags, metavar, action and help."""
+    from arm_model.cli import build_parser
+    sub = next(a for a in build_parser()._actions if a.choices and "calibrate" in a.choices).choices
+
+    def option(cmd, flag):
+        a = next(a for a in sub[cmd]._actions if flag in a.option_strings)
+        return a.option_strings, a.metavar, a.help, type(a).__name__, a.default
+    for flag in ("--free", "--hold", "--effect"):
+        assert option("calibrate", flag) == option("close-loop", flag), flag
+
+
+def test_the_loop_frees_what_calibrate_would_and_every_effect_it_adds(nominal):
+    """close-loop's --free and --hold mean calibrate's: an effect of the base model (thermal) is free only if
+    named; the parameters of an effect the loop added (a joint compliance) are free whatever --free says; a
+    held name is never free, and None keeps calibrate's default set."""
+    from arm_model.effects import JointCompliance, ThermalGrowth
+    from arm_model.model import ArmModel
+    from calibration.loop.state import fitted_names
+    base = ArmModel(nominal, (ThermalGrowth(),))
+    grown = base.with_effects(JointCompliance(joints=(1,)))
+    size = base.spec.size
+    assert fitted_names(grown, None, (), size) is None
+    assert fitted_names(grown, ("j*.d",), ("j2.d",), size) == (
+        [f"j{i}.d" for i in range(1, 8) if i != 2] + ["j2.compliance"])
+    assert "links.thermal_alpha" in fitted_names(grown, None, ("j1.*",), size)
+    assert "links.thermal_alpha" not in fitted_names(grown, ("j*.d",), (), size)
+    assert "j2.compliance" not in fitted_names(grown, None, (), size, held=("j2.compliance",))

@@ -121,9 +121,9 @@ def test_final_model_holds_a_significantly_negative_joint_compliance():
     -2 u is not significant, and the probe's compliances are not joint compliances."""
     from types import SimpleNamespace
 
-    from calibration.loop import _negative_compliances
+    from calibration.loop import negative_compliances
     vals = {"j2.compliance": (-3.0e-6, 1e-6), "j3.compliance": (-2.0e-6, 1e-6), "probe.compliance_x": (-5.0, 1.0)}
     res = SimpleNamespace(free=tuple(vals), value=lambda n: vals[n][0], uncertainty=lambda n: vals[n][1])
-    assert _negative_compliances(res, 0.01) == ["j2.compliance"]
+    assert negative_compliances(res, 0.01) == ["j2.compliance"]
     vals["j2.compliance"] = (-2.80e-6, 1e-6)
-    assert _negative_compliances(res, 0.01) == []
+    assert negative_compliances(res, 0.01) == []

@@ -9,7 +9,7 @@ from arm_model import load_description
 from arm_model.effects import ApproachOffset, EncoderEccentricity
 from arm_model.model import ArmModel
 from calibration.candidates import Candidate
-from calibration.loop import LoopSettings, _verdict
+from calibration.loop import LoopSettings, verdict_text
 from calibration.synthesis import RESIDUAL
 from conftest import NOMINAL
 
@@ -32,7 +32,7 @@ def test_verdict_names_what_was_added_built_and_what_remains():
              {"name": "harmonics j6 of q2 (h 1)", "added": False,
               "why_not_added": "not significant on held-out data (Wilcoxon p = 0.2 >= 0.005)"}]
     remains = [_family("q2 harmonics on j6", "cos/sin(1 q2)"), _family("time", "time: base x")]
-    v = _verdict(stages, remains, "", LoopSettings(), built, model)
+    v = verdict_text(stages, remains, "", LoopSettings(), built, model)
     assert v == ("effects added: eccentricity j2, approach offset (found from the residual); held-out test RMS "
                  "6.00 -> 2.00 um, max 20.00 -> 6.00 um. Built from the residual, not supported, not added: "
                  "harmonics j6 of q2 (h 1) (not significant on held-out data (Wilcoxon p = 0.2 >= 0.005)). "
@@ -43,12 +43,12 @@ def test_verdict_names_what_was_added_built_and_what_remains():
 
 def test_verdict_when_nothing_remains_and_when_the_library_alone_ran():
     stages = [_stage(None, 2.0, 5.0)]
-    assert _verdict(stages, [], "", LoopSettings(), [], None) == (
+    assert verdict_text(stages, [], "", LoopSettings(), [], None) == (
         "no effect added. No structured residual remains (no regressor family is significant after Bonferroni's "
         "correction).")
-    v = _verdict(stages, [_family("q2 harmonics", "cos/sin(3 q2)")], "", LoopSettings(synthesise=False), [], None)
+    v = verdict_text(stages, [_family("q2 harmonics", "cos/sin(3 q2)")], "", LoopSettings(synthesise=False), [], None)
     assert v == ("no effect added. Structured residual remains, not explained by the effect library (effects are "
                  "not built from the residual: library only): it correlates with q2 harmonics (cos/sin(3 q2)). "
                  "No fix is claimed for it.")
-    v = _verdict([_stage(None, 2.0, 5.0, s0=4.0)], [], "", LoopSettings(), [], None)
+    v = verdict_text([_stage(None, 2.0, 5.0, s0=4.0)], [], "", LoopSettings(), [], None)
     assert v.startswith("no effect added. The final residual is s0 = 4 times the stated uncertainties")

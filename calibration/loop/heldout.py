@@ -1,0 +1,105 @@
+"""Held-out evaluation: the residual rows of points a model was not fitted to (whole measurements, or poses
+predicted against their feature as fitted on its other poses), and the figures of the before/after table."""
+from __future__ import annotations
+
+import numpy as np
+
+from arm_model import InputError
+from arm_model.model import ArmModel
+
+from ..data import CalibrationData, Weights
+from ..problem import Problem
+from ..solver import levenberg_marquardt
+from ..validation import BOOTSTRAP_SAMPLES, FIGURES, bootstrap, resamples, validate
+
+__all__ = ["heldout_residuals", "heldout_figures", "bootstrap_rows"]
+
+
+def heldout_residuals(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit",
+                      train=None) -> dict:
+    """Residual rows of held-out points with the parameters ``p`` held: ``r`` weighted (n,), ``e`` [m] (n,),
+    ``measurement``, ``kind`` and ``point`` (index into ``data``, -1 for a length) per row.
+
+    ``train`` None: every point of ``data`` is held out and every nuisance unknown (centre, axis, plane,
+    ``T_ref_base``) is solved on ``data`` alone. ``train`` a mask: the points where it holds are the
+    training poses; the nuisance unknowns are solved on them, and the rows of the other points are
+    returned (a held-out pose against the centre fitted on the rest of its feature's poses); the
+    lengths then belong to training."""
+    prob = Problem(model, data, weights, [], reference=reference)
+    if train is None:
+        states = levenberg_marquardt(prob, p, prob.initial_states(p)).states
+        keep = np.ones(prob.n_rows, bool)
+    else:
+        train = np.asarray(train, bool)
+        sub = Problem(model, data.select(train), weights, [], reference=reference)
+        fitted = {(it.measurement, it.feature): st for it, st in
+                  zip(sub.instances, levenberg_marquardt(sub, p, sub.initial_states(p)).states)}
+        start = prob.initial_states(p)
+        states = [fitted.get((it.measurement, it.feature), s0) for it, s0 in zip(prob.instances, start)]
+        missing = [f"{it.measurement} {it.feature}" for it in prob.instances
+                   if (it.measurement, it.feature) not in fitted]
+        if missing:
+            raise ValueError(f"no training pose on {', '.join(missing)}: its centre cannot be predicted")
+        keep = (prob.row_distance < 0) & ~train[np.maximum(prob.row_point, 0)]
+    r = prob.evaluate(p, states, jac=False).r
+    pts = data.points
+    meas = np.empty(len(r), dtype=object)
+    kind = np.empty(len(r), dtype=object)
+    ok = prob.row_distance < 0
+    meas[ok] = pts.measurement[prob.row_point[ok]]
+    kind[ok] = [prob.instances[i].kind for i in prob.row_instance[ok]]
+    for row in np.flatnonzero(~ok):
+        meas[row] = prob.distance_items[prob.row_distance[row]].measurement
+        kind[row] = "length"
+    point = np.where(ok, prob.row_point, -1)
+    return {"r": r[keep], "e": (r * prob.sigma)[keep], "measurement": meas[keep], "kind": kind[keep],
+            "point": point[keep]}
+
+
+def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit",
+                    train=None) -> dict:
+    """Figures of ``(model, p)`` on held-out data [um] (``train``: see :func:`heldout_residuals`): RMS and
+    max |residual| over the artefact rows (each row a residual component: a sphere/ring/plane distance, a
+    seat coordinate, a length error; the reference-instrument rows only when there is nothing else, since
+    their noise is the instrument's), the same per kind, the weighted RMS of all rows, and the standard
+    test figures (:data:`calibration.validation.FIGURES`) of the held-out points."""
+    h = heldout_residuals(model, p, data, weights, reference, train)
+    e = h["e"]
+    art = h["kind"] != "reference"
+    head = e[art] if art.any() else e
+    out = {"rms_um": float(np.sqrt(np.mean(head ** 2))) * 1e6, "max_um": float(np.max(np.abs(head))) * 1e6,
+           "headline_rows": ("reference points" if not art.any() else "artefact points and lengths"
+                             if (h["kind"] == "length").any() else "artefact points"),
+           "rms_weighted": float(np.sqrt(np.mean(h["r"] ** 2))), "rows": int(len(e)), "by_kind": {}}
+    for k in dict.fromkeys(h["kind"].tolist()):
+        ek = e[h["kind"] == k]
+        out["by_kind"][k] = {"rows": int(len(ek)), "rms_um": float(np.sqrt(np.mean(ek ** 2))) * 1e6,
+                             "max_um": float(np.max(np.abs(ek))) * 1e6}
+    u = bootstrap_rows(head, h["measurement"][art] if art.any() else h["measurement"])
+    out["u_rms_um"], out["u_max_um"] = (None, None) if u is None else (u[0] * 1e6, u[1] * 1e6)
+    held = data if train is None else data.select(~np.asarray(train, bool))
+    try:
+        val = validate(model, p, held, weights, reference)
+        summary, u_std = val.summary(), bootstrap(val)
+    except InputError:                # held-out poses too few on some feature for its own fit
+        summary, u_std = {}, {}
+    out["standard"] = {k: summary[k] * FIGURES[k][2] for k in FIGURES if k in summary}
+    out["u_standard"] = {k: None if u_std.get(k) is None else u_std[k] * FIGURES[k][2] for k in out["standard"]}
+    return out
+
+
+def bootstrap_rows(e: np.ndarray, measurement: np.ndarray, samples: int = BOOTSTRAP_SAMPLES, seed: int = 0):
+    """Standard uncertainties [m] of the RMS and the max |e| of residual rows, by the bootstrap of
+    :func:`calibration.validation.bootstrap` (whole measurements resampled with replacement); None
+    with fewer than two measurements."""
+    groups = [e[measurement == m] for m in dict.fromkeys(measurement.tolist())]
+    if len(groups) < 2:
+        return None
+    rms, mx = np.empty(samples), np.empty(samples)
+    for k, idx in enumerate(resamples(len(groups), samples, seed)):
+        x = np.concatenate([groups[i] for i in idx])
+        rms[k], mx[k] = np.sqrt(np.mean(x ** 2)), np.max(np.abs(x))
+    return float(rms.std(ddof=1)), float(mx.std(ddof=1))
+
+
+# ---------------------------------------------------------------------------------------------------
