@@ -20,14 +20,39 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import warnings
+import math
+import re
 import sys
 import time
+import warnings
 
-__all__ = ["PACKAGES", "PROGRESS", "console", "Progress", "progress_line", "level_from_flags", "counted"]
+__all__ = ["PACKAGES", "PROGRESS", "console", "Progress", "progress_line", "level_from_flags", "counted", "escaped"]
 
 #: the packages whose loggers the command line configures
 PACKAGES = ("arm_model", "calibration", "correction", "viz")
+#: libraries that log: their records go through the same console handler (never Python's bare fallback)
+LIBRARIES = ("yourdfpy",)
+
+#: control characters (C0, DEL, C1, the Unicode line and paragraph separators) but the tab
+_CONTROL = re.compile("[\x00-\x08\x0a-\x1f\x7f-\x9f\u2028\u2029]")
+_ESCAPES = {"\n": "\\n", "\r": "\\r"}
+
+
+def _escape(m: re.Match) -> str:
+    c = m.group()
+    return _ESCAPES.get(c) or (f"\\x{ord(c):02x}" if ord(c) < 0x100 else f"\\u{ord(c):04x}")
+
+
+def escaped(text: str, keep_newlines: bool = False) -> str:
+    """``text`` with every control character shown as its escape (a newline as ``\\n``, ESC as ``\\x1b``),
+    so that a name holding one (a file name with a newline) cannot split a message or forge another line
+    (``warning: ...``), nor drive the terminal. ``keep_newlines``: the text's own line breaks kept (a
+    summary of several lines); every other control character escaped. The tab is kept."""
+    if keep_newlines:
+        return "\n".join(_CONTROL.sub(_escape, line) for line in text.split("\n"))
+    return _CONTROL.sub(_escape, text)
+
+
 #: ``extra=`` of a progress record
 PROGRESS = {"progress": True}
 
@@ -49,7 +74,10 @@ class _ConsoleFormatter(logging.Formatter):
         self.t0 = t0
 
     def format(self, record: logging.LogRecord) -> str:
-        text = record.getMessage()
+        # a warning, an error, a progress step and a debug line are one line each: any control character in
+        # them (a newline in a file name) is escaped; the summary (INFO) keeps its own line breaks
+        plain = record.levelno == logging.INFO and not getattr(record, "progress", False)
+        text = escaped(record.getMessage(), keep_newlines=plain)
         if record.levelno >= logging.ERROR:
             return f"error: {text}"
         if record.levelno >= logging.WARNING:
@@ -97,11 +125,11 @@ def console(level: int = logging.INFO):
         log.warning(f"{category.__name__}: {message}")
         log.debug(f"  (raised at {filename}:{lineno})")
     warnings.showwarning = show
-    for name in PACKAGES:
+    for name in PACKAGES + LIBRARIES:
         logger = logging.getLogger(name)
         saved.append((logger, logger.level, logger.handlers[:], logger.propagate))
         logger.handlers = [handler]
-        logger.setLevel(level)
+        logger.setLevel(level if name in PACKAGES else max(level, logging.WARNING))
         logger.propagate = False
     try:
         yield handler
@@ -126,6 +154,15 @@ def _is_tty(stream) -> bool:
         return False
 
 
+def _duration(seconds: float) -> str:
+    """``"40 s"``, ``"17 min"``, ``"2.3 h"``: a duration to the precision an estimate has."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
 class Progress:
     """A progress display for ``total`` steps: ``label [#####.....] k/n  elapsed``.
 
@@ -133,19 +170,26 @@ class Progress:
     configured logging) and ``enabled`` is true. On a terminal (standard error a tty, or ``stream`` given
     and a tty) the line is redrawn in place with ``\\r``; otherwise one progress record is logged at the
     first step past every ``every_pct`` percent and at the end, so a log file gets plain lines.
+
+    ``estimate``: also the time left, from the rate so far (``about 16 min left``); in a log file then also
+    a line ``first_s`` seconds after the start and every ``every_s`` seconds between the percent steps, so
+    that a long run says early how long it will take.
     """
 
     def __init__(self, total: int, label: str = "", logger: logging.Logger | None = None,
-                 enabled: bool = True, stream=None, width: int = 30, every_pct: float = 10.0):
+                 enabled: bool = True, stream=None, width: int = 30, every_pct: float = 10.0,
+                 estimate: bool = False, first_s: float = 2.0, every_s: float = 30.0):
         self.total, self.label, self.width = int(total), label, width
         self.logger = logger or logging.getLogger("arm_model")
         self.stream = stream
         self.enabled = bool(enabled) and self.logger.isEnabledFor(logging.INFO)
         self.tty = self.enabled and _is_tty(self._stream())
         self.every = max(float(every_pct), 1e-9)
+        self.estimate, self.every_s = estimate, every_s
         self.done = 0
         self._next_pct = 0.0
         self.t0 = time.perf_counter()
+        self._next_time = self.t0 + first_s if estimate else math.inf
         self._draw()
 
     def _stream(self):
@@ -155,21 +199,29 @@ class Progress:
         k = int(self.width * min(self.done, self.total) / max(self.total, 1))
         return f"{self.label} [{'#' * k}{'.' * (self.width - k)}] {self.done}/{self.total}"
 
+    def _left(self, now: float) -> str:
+        if not self.estimate or not 0 < self.done < self.total:
+            return ""
+        return f", about {_duration((now - self.t0) * (self.total - self.done) / self.done)} left"
+
     def _draw(self) -> None:
         if not self.enabled:
             return
+        now = time.perf_counter()
         if self.tty:
             stream = self._stream()
-            stream.write(f"\r{self._bar()}  {time.perf_counter() - self.t0:.1f} s")
+            stream.write(f"\r{self._bar()}  {now - self.t0:.1f} s{self._left(now)}\033[K")
             if self.done >= self.total:
                 stream.write("\n")
             stream.flush()
             return
         pct = 100.0 * self.done / max(self.total, 1)
-        if self.done and (pct >= self._next_pct or self.done >= self.total):
-            self.logger.info(f"{self.label} {self.done}/{self.total} ({pct:.0f} %)", extra=PROGRESS)
+        if self.done and (pct >= self._next_pct or self.done >= self.total or now >= self._next_time):
+            self.logger.info(f"{self.label} {self.done}/{self.total} ({pct:.0f} %){self._left(now)}", extra=PROGRESS)
             while self._next_pct <= pct:
                 self._next_pct += self.every
+            if self.estimate:
+                self._next_time = now + self.every_s
 
     def update(self, n: int = 1) -> None:
         self.done += n

@@ -13,18 +13,21 @@ wins, each complete). On any error, Ctrl-C or SIGTERM the temporary folder is re
 it was. A command that writes one file uses :func:`output_file` (temporary file, then ``os.replace``).
 
 Refused before any work, with an :class:`InputError` (exit 2): ``-o`` that is an input, holds an input,
-is a file where a folder is expected (or the reverse), sits below a file, cannot be written, or is a
-non-empty folder that is not an earlier output of the same command (``-o .`` never empties a folder of
-the user's). File names built from input text (arm names, measurement ids) go through :func:`safe_name`
+is a file where a folder is expected (or the reverse), sits below a file, cannot be written, is not a
+regular file or folder (a device such as ``/dev/null``, a FIFO, a socket: never replaced, never written
+into), or is a non-empty folder that is not an earlier output of the same command (``-o .`` never
+empties a folder of the user's). File names built from input text (arm names, measurement ids) go through :func:`safe_name`
 and are checked by :meth:`Output.path` to stay inside the folder.
 """
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import errno
 import logging
 import os
 import shutil
+import stat
 import tempfile
 import unicodedata
 import zlib
@@ -33,13 +36,36 @@ from pathlib import Path
 from ._errors import InputError
 
 __all__ = ["output_folder", "output_file", "Output", "safe_name", "guard_output", "atomic_write_bytes",
-           "MARKER"]
+           "MARKER", "published_outputs"]
 
 log = logging.getLogger(__name__)
 
 #: the file that marks a folder as an output of ``aacmm <command>`` (its text: ``aacmm <command>``)
 MARKER = ".aacmm-output"
 _MAX_NAME = 120
+
+
+#: the temporary folders being written (a file written into one is part of that output, not an output of its
+#: own) and the list that :func:`published_outputs` fills, for the current command
+_STAGES: contextvars.ContextVar[tuple] = contextvars.ContextVar("aacmm_stages", default=())
+_PUBLISHED: contextvars.ContextVar[list | None] = contextvars.ContextVar("aacmm_published", default=None)
+
+
+@contextlib.contextmanager
+def published_outputs(into: list):
+    """Append to ``into`` every output (``-o`` file or folder) published while the block runs, so that
+    what ends the command later (Ctrl-C, an error) can say what is already in place."""
+    token = _PUBLISHED.set(into)
+    try:
+        yield into
+    finally:
+        _PUBLISHED.reset(token)
+
+
+def _published(final: Path) -> None:
+    into = _PUBLISHED.get()
+    if into is not None and not any(_inside(final, s) for s in _STAGES.get()):
+        into.append(final)
 
 
 def safe_name(text: str, suffix: str = "") -> str:
@@ -95,11 +121,58 @@ def _mode(umask_mode: int) -> int:
     return umask_mode & ~umask
 
 
+def _special(path: Path) -> str | None:
+    """What ``path`` is when it exists (links followed) and is neither a regular file nor a folder: "a
+    device", "a FIFO (named pipe)", "a socket" (or "not a regular file"); else None."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    return "a FIFO (named pipe)" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode) else \
+        "not a regular file"
+
+
+def _refuse_special(path: Path, what: str) -> None:
+    kind = _special(path)
+    if kind is not None:
+        raise InputError(f"the output exists and is {kind}, not {what}: it is never replaced nor written into; "
+                         f"name a new {what.removeprefix('a ')}", path)
+
+
 def _oserror(exc: OSError, what: str, path: Path) -> InputError:
     reason = exc.strerror or str(exc)
     if exc.errno == errno.ENOTDIR:
         reason = "a file is in the way (a folder is expected)"
     return InputError(f"cannot {what}: {reason}", path)
+
+
+#: errors of a write that the output's place causes (disk full, quota, file size limit): named after the output
+_WRITE_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
+
+
+def _write_error(exc: OSError, stage: Path, final: Path, what: str) -> InputError | None:
+    """The InputError of an OSError raised while the output was being written into ``stage`` (the
+    temporary folder or file), naming where the file would have been published (the system names the
+    temporary path, or nothing: a full disk fails a write, not an open); None for an OSError of
+    something else (an input)."""
+    name = None if exc.filename is None else Path(os.path.abspath(os.fsdecode(exc.filename)))
+    inside = name is not None and _inside(name, stage)
+    if not inside and exc.errno not in _WRITE_ERRNOS:
+        return None
+    where = final / name.relative_to(stage) if inside and name != stage else final
+    return InputError(f"cannot write {what}: {exc.strerror or exc}; nothing written", where)
+
+
+def _published_error(exc: InputError, stage: Path, final: Path) -> InputError | None:
+    """``exc`` naming where its file would have been published, when it names a file of the temporary
+    folder (a file of the output refused while being written); else None."""
+    if exc.path is None or not _inside(Path(os.path.abspath(exc.path)), stage):
+        return None
+    return InputError(exc.reason, final / Path(os.path.abspath(exc.path)).relative_to(stage), exc.line, exc.column)
 
 
 def _make_parents(folder: Path) -> list[Path]:
@@ -183,6 +256,7 @@ def _not_ours(final: Path, owner: str | None, command: str) -> InputError:
 def _check_folder(final: Path, command: str) -> None:
     if not final.exists():
         return
+    _refuse_special(final, "a folder")
     if not final.is_dir():
         raise InputError("the output must be a folder, but a file of that name exists", final)
     if _inside(Path.cwd().resolve(), final):
@@ -259,10 +333,23 @@ def output_folder(final: str | Path, inputs=(), command: str = ""):
     try:
         os.chmod(stage, _mode(0o777))
         (stage / MARKER).write_text(f"aacmm {command}\n", encoding="utf-8")
-        yield Output(stage, final)
+        token = _STAGES.set(_STAGES.get() + (stage,))
+        try:
+            yield Output(stage, final)
+        finally:
+            _STAGES.reset(token)
         n_files = sum(1 for p in stage.rglob("*") if p.is_file()) - 1     # counted before another run may
         _publish(stage, final, command)                                     # replace the published folder
+        _published(final)
         log.debug(f"{final}: {n_files} file(s) written")
+    except (OSError, InputError) as exc:
+        shutil.rmtree(stage, ignore_errors=True)
+        _remove_empty(created)
+        named = _write_error(exc, stage, final, "the output folder") if isinstance(exc, OSError) else \
+            _published_error(exc, stage, final)
+        if named is None:
+            raise
+        raise named from None
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         _remove_empty(created)
@@ -272,13 +359,17 @@ def output_folder(final: str | Path, inputs=(), command: str = ""):
 @contextlib.contextmanager
 def output_file(final: str | Path, inputs=()):
     """Write one output file complete or not at all: yields a temporary path beside ``final``;
-    when the block ends normally it replaces ``final`` (``os.replace``), else it is removed."""
+    when the block ends normally it replaces ``final`` (``os.replace``), else it is removed. A symbolic
+    link at ``final`` is followed: its target is replaced, the link stays."""
     final = Path(final)
     guard_output(final, inputs)
+    if final.is_symlink():              # written through the link (as a shell's > does), the link kept
+        final = resolved(final)
     if final.is_dir():
         raise InputError("the output is a file, but a folder of that name exists", final)
     if final.name in ("", ".", ".."):
         raise InputError("name an output file", final)
+    _refuse_special(final, "a regular file")
     created = _make_parents(final.parent)
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.tmp-", suffix=final.suffix, dir=final.parent)
@@ -292,13 +383,18 @@ def output_file(final: str | Path, inputs=()):
         yield tmp
         if final.is_dir():
             raise InputError("the output is a file, but a folder of that name exists", final)
+        _refuse_special(final, "a regular file")        # made meanwhile
         os.replace(tmp, final)
+        _published(final)
         log.debug(f"{final}: written ({final.stat().st_size} bytes)")
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             tmp.unlink()
         _remove_empty(created)
-        raise
+        named = _write_error(exc, tmp, final, "the output file") if isinstance(exc, OSError) else None
+        if named is None:
+            raise
+        raise named from None
 
 
 def atomic_write_bytes(path: str | Path, data: bytes, inputs=()) -> Path:

@@ -3,7 +3,8 @@
 
 - bad input (:class:`~arm_model.InputError` and the toolkit's other errors), a file or folder the
   system refuses (``OSError``), too little memory: the message, exit 2;
-- Ctrl-C or SIGTERM: "interrupted", exit 130 (143 for SIGTERM), nothing written;
+- Ctrl-C or SIGTERM: "interrupted", exit 130 (143 for SIGTERM), nothing written (or, when the output was
+  already published, that it was: :func:`arm_model._output.published_outputs`);
 - a closed standard output (``aacmm tip ... | head -1``): quiet;
 - anything else is a bug: a message asking for a report, exit 3; ``--debug`` adds the traceback.
 
@@ -27,7 +28,8 @@ import time
 import traceback
 
 from ._errors import AacmmError
-from ._log import console, level_from_flags
+from ._log import console, escaped, level_from_flags
+from ._output import published_outputs
 from .shipped import version
 
 __all__ = ["main", "COMMAND_MODULES", "EXIT_INPUT", "EXIT_INTERNAL"]
@@ -89,7 +91,7 @@ def _add_common(parser: argparse.ArgumentParser, top: bool) -> None:
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The ``aacmm`` parser. With ``argv`` (the command line), only the subcommand it names is built in
     full (the others are listed for ``--help``); without, every subcommand."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="aacmm",
         description="Portable measuring arm toolkit: deflection-aware ball centres from encoder angles and "
                     "contact force, simulation, ring-gauge analysis, calibration and closing the loop. "
@@ -113,6 +115,14 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
             sub.add_parser(name, help=text, add_help=False)     # listed only: not the one that runs
     _add_common(parser, True)
     return parser
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser whose error message (it may quote an argument: a file name with a newline) is one
+    line, control characters escaped (subcommands' parsers are of the same class)."""
+
+    def error(self, message: str):
+        super().error(escaped(message))
 
 
 class _Version(argparse.Action):
@@ -162,7 +172,7 @@ def main(argv: list[str] | None = None) -> int:
 
     def error(text: str) -> None:
         try:
-            print(f"{name}: error: {text}", file=sys.stderr, flush=True)
+            print(f"{name}: error: {escaped(text)}", file=sys.stderr, flush=True)
         except (OSError, ValueError):
             pass
 
@@ -171,8 +181,15 @@ def main(argv: list[str] | None = None) -> int:
         previous = signal.signal(signal.SIGTERM, _on_sigterm)
     except ValueError:          # not the main thread: leave SIGTERM alone
         pass
+    written: list = []          # the outputs already published when something ends the command
+
+    def done() -> str:
+        if not written:
+            return "nothing written"
+        return f"the output was already written completely: {', '.join(str(p) for p in written)}"
+
     try:
-        with console(level_from_flags(args.quiet, args.verbose)):
+        with console(level_from_flags(args.quiet, args.verbose)), published_outputs(written):
             t0 = time.perf_counter()
             log.debug(f"aacmm-toolkit {version()}, Python {platform.python_version()}: {name}")
             code = int(args.func(args) or 0)
@@ -189,16 +206,16 @@ def main(argv: list[str] | None = None) -> int:
         _quiet_stdout()
         return 141
     except KeyboardInterrupt:
-        error("interrupted; nothing written")
+        error(f"interrupted; {done()}")
         return 130
     except Terminated:
-        error("terminated; nothing written")
+        error(f"terminated; {done()}")
         return 143
     except MemoryError:
-        error("out of memory: the input is too large for this machine; nothing written")
+        error(f"out of memory: the input is too large for this machine; {done()}")
         return EXIT_INPUT
     except OSError as exc:
-        error(_os_message(exc) + "; nothing written")
+        error(f"{_os_message(exc)}; {done()}")
         return EXIT_INPUT
     except Exception as exc:        # a bug: say so, never a bare traceback
         if getattr(args, "debug", False):
@@ -206,7 +223,7 @@ def main(argv: list[str] | None = None) -> int:
         error(f"internal error ({type(exc).__name__}: {exc}). This is a bug: please report it with the "
               "command line and its input files" + ("" if getattr(args, "debug", False)
                                                     else " (add --debug for the traceback)")
-              + "; nothing written")
+              + f"; {done()}")
         return EXIT_INTERNAL
     finally:
         if previous is not None:

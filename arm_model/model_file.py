@@ -8,7 +8,7 @@ One TOML file (``aacmm calibrate`` and ``aacmm close-loop`` write it, every ``--
   ``joints`` (joint names; absent: all joints), the effect's other options (its dataclass fields,
   e.g. ``harmonics``, ``gravity``) and ``parameter``, one entry a parameter of the effect
   (``param_defs``): ``name``, ``value_<unit>``, ``u_<unit>`` (standard uncertainty; 0 when not
-  estimated) and ``state`` ("free", "fixed" or "held") — units from :data:`PARAM_UNITS`;
+  estimated) and ``state`` ("free", "prior-dominated", "fixed" or "held") — units from :data:`PARAM_UNITS`;
 * an optional ``[calibration]`` table: ``covariance`` (the covariance file, relative to the TOML),
   ``written_by`` and ``probing_scatter_um`` (the scatter of the contact itself per axis that the
   calibration's variance components estimated, net of the encoder and force-sensor noise:
@@ -68,7 +68,7 @@ PARAM_QUANTITY: dict[str, str] = {
 #: computed from the description, e.g. gravity and contact torques)
 EFFECT_COLUMNS: dict[str, str | None] = {"temperature": "temperature_C", "tau_gravity": None, "tau_contact": None}
 
-STATES = ("free", "fixed", "held")
+STATES = ("free", "prior-dominated", "fixed", "held")
 
 
 def _unit_of(si: str) -> tuple[str, float]:
@@ -421,12 +421,14 @@ def format_model(desc: ArmDescription, effects=(), values: dict | None = None, u
 class Covariance:
     """Covariance of the free parameters of a fit, SI: ``names``, SI ``units``, ``values`` (the
     estimates: errors of the nominal description for the base parameters, the values of the effect
-    parameters), standard uncertainties ``u`` and correlations ``corr``."""
+    parameters), standard uncertainties ``u`` and correlations ``corr``; ``lines``: the line of each row
+    of the file read (empty when not read from a file)."""
     names: tuple[str, ...]
     units: tuple[str, ...]
     values: np.ndarray
     u: np.ndarray
     corr: np.ndarray
+    lines: tuple[int, ...] = ()          # the file line of each parameter's row (as read)
 
     @property
     def matrix(self) -> np.ndarray:
@@ -460,18 +462,32 @@ def write_covariance(path, names, units, values, cov, inputs=()) -> Path:
     return write_csv(path, cols, inputs, fmt="%.17g")
 
 
+#: the largest deviation of a correlation coefficient from [-1, 1], from 1 on the diagonal and from
+#: symmetry that the covariance reader accepts (the writer's rounding is far below it)
+CORRELATION_TOLERANCE = 1e-9
+
+
 def read_covariance(path) -> Covariance:
-    """Read a covariance file written by :func:`write_covariance` (SI inside)."""
+    """Read a covariance file written by :func:`write_covariance` (SI inside). Every cell is checked
+    (docs/formats.md, "The covariance file"): the unit one of :data:`PARAM_UNITS`; numbers plain
+    decimals (no ``4_5``, ``nan`` or ``inf``); ``value`` and ``u`` in the plausible range of the unit's
+    quantity, ``u`` not negative; correlations in [-1, 1], 1 on the diagonal, symmetric. A cell that is
+    not is an InputError naming the file, the line and the column."""
+    from ._csv import parse_number
     from .io import csv_records
     text = read_text(path, "the covariance file")
     recs = csv_records(text, str(path))
     if not recs:
         raise InputError("the covariance file is empty", path, 1)
     hl, header = recs[0]
+    header = [h.strip() for h in header]
     head = ["parameter", "unit", "value", "u"]
-    if [h.strip() for h in header[:4]] != head:
+    if header[:4] != head:
         raise InputError(f"the header must start with {', '.join(head)}", path, hl)
-    names = tuple(h.strip() for h in header[4:])
+    names = tuple(header[4:])
+    twice = next((n for k, n in enumerate(names) if n in names[:k]), None)
+    if twice is not None:
+        raise InputError(f"parameter '{twice}' has two columns", path, hl, twice)
     rows = recs[1:]
     if len(rows) != len(names):
         raise InputError(f"{len(rows)} rows for {len(names)} parameter columns", path, hl)
@@ -484,12 +500,35 @@ def read_covariance(path) -> Covariance:
         if r[0].strip() != names[i]:
             raise InputError(f"row {i + 1} is '{r[0].strip()}', but column {i + 5} is '{names[i]}'", path, no,
                              "parameter")
-        si, f = si_of.get(r[1].strip(), (r[1].strip(), 1.0))
+        unit = r[1].strip()
+        if unit not in si_of:
+            raise InputError(f"unknown unit '{unit}' (known: {', '.join(si_of)}){nearest(unit, si_of)}", path, no,
+                             "unit")
+        si, f = si_of[unit]
         units.append(si)
-        try:
-            nums = [float(c) for c in r[2:]]
-        except ValueError:
-            raise InputError("expected numbers after the unit", path, no) from None
+        nums = []
+        for cell, column in zip(r[2:], header[2:]):
+            v = parse_number(cell.strip())
+            if v is None or not math.isfinite(v):
+                raise InputError(f"expected a finite number, got {cell.strip()!r}", path, no, column)
+            nums.append(v)
         values[i], u[i] = nums[0] * f, nums[1] * f
+        for column, x in (("value", values[i]), ("u", u[i])):
+            wrong = implausible(x, PARAM_QUANTITY.get(si, ""))
+            if wrong:
+                raise InputError(wrong[1], path, no, column)
+        if u[i] < 0:
+            raise InputError(f"a standard uncertainty must not be negative, got {nums[1]!r}", path, no, "u")
         corr[i] = nums[2:]
-    return Covariance(names, tuple(units), values, u, corr)
+        bad = np.flatnonzero((np.abs(corr[i]) > 1 + CORRELATION_TOLERANCE)
+                            | (np.arange(len(rows)) == i) & (np.abs(corr[i] - 1) > CORRELATION_TOLERANCE))
+        if len(bad):
+            k = int(bad[0])
+            raise InputError(f"a correlation coefficient must be {'1 on the diagonal' if k == i else 'in [-1, 1]'}, "
+                             f"got {float(corr[i, k])!r}", path, no, names[k])
+    asym = np.argwhere(np.abs(corr - corr.T) > CORRELATION_TOLERANCE)
+    if len(asym):
+        i, k = (int(x) for x in asym[0])
+        raise InputError(f"the correlations are not symmetric: {float(corr[i, k])!r} here, {float(corr[k, i])!r} in row "
+                         f"'{names[k]}' (line {rows[k][0]}), column '{names[i]}'", path, rows[i][0], names[k])
+    return Covariance(names, tuple(units), values, u, corr, tuple(no for no, _ in rows))

@@ -19,6 +19,7 @@ Everything here is SI: metres, radians, newtons, m/N.
 """
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, field
 
@@ -28,10 +29,13 @@ from .jacobian import Dual, DUAL_OPS, chain_jacobian, geometry_entries, value
 from .kinematics import run_chunks
 from .effects import ModelInputs
 from .model import ArmModel, AuxData
+from ._log import Progress
 
 __all__ = ["FORCE_SENSOR_U_N", "COMPLIANCE_U_RELATIVE", "CONTRIBUTIONS", "InputUncertainty",
            "ParameterCovariance", "Propagation", "default_inputs", "propagate", "monte_carlo",
            "covariance_columns", "directional_ratio"]
+
+log = logging.getLogger(__name__)
 
 #: standard uncertainty [N] of the force along probe x, y (bending) and z (axial): the seed paper's
 #: Table 1, the root-sum-square of its printed terms (the printed bending total, 0.00723 N, is a
@@ -352,11 +356,13 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
 
 def monte_carlo(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
                 parameters: ParameterCovariance | None = None, inputs: InputUncertainty, samples: int = 1000,
-                seed: int = 0) -> Propagation:
+                seed: int = 0, progress: bool = True) -> Propagation:
     """The covariance of the corrected centres by sampling the inputs of :func:`propagate`: the
     parameters from their covariance (normal), each encoder reading uniformly within +-sqrt(3) u
     (its quantisation), the wrench and the compliances normal, the probing scatter normal.
-    ``contributions`` is empty (the samples do not separate them)."""
+    ``contributions`` is empty (the samples do not separate them). ``progress``: a progress display with
+    the time left (:class:`arm_model._log.Progress`, shown when logging is configured for INFO: a
+    million samples take minutes)."""
     if samples < 2:
         raise ValueError(f"samples must be at least 2, got {samples}")
     q, w, aux = _prepare(model, q, wrench, aux)
@@ -374,7 +380,12 @@ def monte_carlo(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, 
     s1 = np.zeros((n, 3))
     s2 = np.zeros((n, 3, 3))
     half = math.sqrt(3.0) * inputs.encoder
-    for _ in range(samples):
+    bar = Progress(samples, f"Monte Carlo, {n} point{'s' * (n != 1)}: samples", logger=log, enabled=progress,
+                   estimate=True)
+    step = max(1, samples // 1000)            # the display updated a thousand times at most
+    for k in range(samples):
+        if k and k % step == 0:
+            bar.update(step)
         ps = p.copy()
         if len(pidx):
             ps[pidx] += lfac @ rng.standard_normal(lfac.shape[1])
@@ -387,6 +398,7 @@ def monte_carlo(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, 
             d += inputs.probing * rng.standard_normal(d.shape)
         s1 += d
         s2 += d[:, :, None] * d[:, None, :]
+    bar.update(samples - bar.done)
     mean = s1 / samples
     cov = (s2 - samples * mean[:, :, None] * mean[:, None, :]) / (samples - 1)
     sources = dict(inputs.sources)

@@ -100,10 +100,15 @@ def parameters_of(arm) -> ParameterCovariance | None:
     from .model_file import read_covariance
     cov = read_covariance(arm.covariance)
     names = arm.model.spec.names
+    spec = arm.model.spec
     for i, n in enumerate(cov.names):
+        line = cov.lines[i] if cov.lines else None
         if n not in names:
             raise InputError(f"parameter '{n}' of the covariance file is not a parameter of the model "
-                             f"(known: {', '.join(names)})", arm.covariance, i + 2, "parameter")
+                             f"(known: {', '.join(names)})", arm.covariance, line, "parameter")
+        if cov.units[i] != spec.units[spec.index(n)]:
+            raise InputError(f"parameter '{n}' is a '{spec.units[spec.index(n)]}' quantity, but its unit is one of "
+                             f"'{cov.units[i]}'", arm.covariance, line, "unit")
     try:
         out = ParameterCovariance(tuple(cov.names), cov.matrix, source=f"the model's covariance file {arm.covariance.name}")
         out.factor()

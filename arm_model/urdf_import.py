@@ -94,12 +94,22 @@ class _Urdf:
 
 
 def _parse_xml(path: Path, data: bytes):
+    """The lxml tree of a URDF, parsed safely: no entity resolved, nothing fetched; a DOCTYPE that declares
+    entities or names an external DTD is refused (a URDF needs neither, and yourdfpy, which parses the file
+    again, would print its parse errors on standard error)."""
     from lxml import etree
     try:
-        return etree.parse(io.BytesIO(data), etree.XMLParser(remove_comments=False, resolve_entities=False))
+        tree = etree.parse(io.BytesIO(data), etree.XMLParser(remove_comments=False, resolve_entities=False,
+                                                              no_network=True, load_dtd=False))
     except etree.XMLSyntaxError as exc:
         line, col = exc.position if exc.position else (None, None)
         raise InputError(f"not valid XML: {exc.msg}", path, line, None if col is None else f"column {col}") from None
+    info = tree.docinfo
+    if info.system_url or info.public_id or (info.internalDTD is not None and any(info.internalDTD.iterentities())):
+        raise InputError("a <!DOCTYPE> that declares entities or names an external DTD: a URDF needs neither (entities "
+                         "could read other files or the network); remove it", path,
+                         data[: max(data.find(b"<!DOCTYPE"), 0)].count(b"\n") + 1)
+    return tree
 
 
 def _read_urdf(path: str | Path) -> _Urdf:

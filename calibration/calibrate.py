@@ -1,24 +1,30 @@
 """``calibrate(model, data, FitOptions(...)) -> CalibrationResult``: the whole fit, checked at each step.
 
 The options are one frozen :class:`~calibration.options.FitOptions`; the stages below are named functions
-(:func:`_setup`, :func:`_solve`, :func:`_fit`; the outlier rounds :func:`_without_outliers`, the noise
-estimate :func:`reweighted`, the prior's scale :func:`evidence_scale`).
+(:func:`_setup`, :func:`_solve`, :func:`_result`; the prior's scales and the noise :func:`_evidence`, the
+noise without a prior :func:`reweighted`, the outlier rounds :func:`_without_outliers`).
 
 1. Free set: names or glob patterns over ``model.spec`` (the rest held at ``values``, default 0).
 2. Nuisance start: algebraic fits of every feature, polished with the parameters held.
 3. Identifiability at the start (:mod:`calibration.identifiability`): the reduced Jacobian, with the
    rigid motions of the base frame (exact symmetries of artefact residuals, and of reference points
-   when ``T_ref_base`` is fitted) projected out; dependent parameters are fixed and listed
-   (``on_unidentifiable="fix"``) or the fit stops with the list (``"stop"``).
-4. Levenberg-Marquardt (:mod:`calibration.solver`), exact CasADi Jacobians, checked exit status.
-5. Identifiability again at the solution (a new deficiency is fixed and the fit repeated).
-6. Covariance ``s0^2 (J_red^T J_red)^-1`` of the free parameters, ``s0^2`` the residual variance
-   factor ``2 cost / dof`` (``covariance="residual"``) or 1 (``"stated"``: the stated uncertainties
-   are taken as true); standard uncertainties and correlations by name.
-7. Outliers: standardized residuals ``r_w / (s_rob sqrt(1 - h))`` (``h`` the leverage, ``s_rob`` the
-   robust scale of the row's observation group: 1.4826 times the median, the larger of its kind's
-   and its stated uncertainty's (probe, reference, lengths), :func:`standardized_residuals`) beyond ``outlier_threshold`` are reported with
-   measurement, feature and file line; they are kept unless ``drop_outliers`` (then dropped, worst first, and refitted).
+   when ``T_ref_base`` is fitted) projected out; one parameter of every exact dependence is held and
+   listed with its combination (the base parameters; ``on_unidentifiable="fix"``) or the fit stops with the
+   list (``"stop"``).
+4. Levenberg-Marquardt (:mod:`calibration.solver`), exact CasADi Jacobians, checked exit status, damped
+   restarts, with the Gaussian prior of :mod:`calibration.prior` (default): the maximum a posteriori
+   estimate; compliances held at their bound 0 when the data pull them below.
+5. Identifiability again at the solution (a new deficiency is held and the fit repeated).
+6. With ``prior_scale="evidence"`` (default): the prior's group scales and, with ``weights_from_data``, the
+   noise of each row group estimated together by the evidence (:func:`_evidence`).
+7. Covariance: the posterior ``(J_red^T J_red / s0^2 + prior precision)^-1`` of the free parameters
+   (without a prior ``s0^2 (J_red^T J_red)^-1``), ``s0^2`` the residual variance factor ``2 cost / dof``
+   (``covariance="residual"``) or 1 (``"stated"``); standard uncertainties, correlations and each
+   parameter's state (free / prior-dominated / fixed / held) by name.
+8. Outliers: standardized residuals ``r_w / (s_rob sqrt(1 - h))`` (``h`` the leverage, ``s_rob`` the robust
+   scale of the row's observation group, :func:`standardized_residuals`) beyond ``outlier_threshold`` are
+   reported with measurement, feature and file line; they are kept unless ``drop_outliers`` (then dropped,
+   worst first, and refitted).
 """
 from __future__ import annotations
 
@@ -38,13 +44,14 @@ from .identifiability import (Combination, Identifiability, _compress, analyse, 
                               prior_scales,
                               reduced_jacobian, weakly_determined)
 from .options import FitOptions
+from .prior import PRIOR_DOMINATED, PriorSpec, prior_spec, update_scales, variance_ratio
 from .problem import Problem
 from .solver import Prior, blas_threads, levenberg_marquardt, normal_factor
 
 __all__ = ["FixedParameter", "Outlier", "CalibrationResult", "calibrate", "resolve_parameters",
            "default_free", "rigid_gauge", "display_unit", "blas_threads", "identify", "variance_components",
            "reweighted", "MIN_REDUNDANCY", "row_groups", "row_kinds", "kind_groups", "standardized_residuals",
-           "grouped_standardized", "FitOptions", "evidence_scale", "EVIDENCE_GRID"]
+           "grouped_standardized", "FitOptions", "evidence_scale", "nominal_baseline"]
 
 
 def display_unit(unit: str) -> tuple[str, float]:
@@ -188,10 +195,13 @@ class CalibrationResult:
     unused: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     variance: list = field(default_factory=list)
     weights_history: list = field(default_factory=list)
-    prior_scale: float | None = None          # the Gaussian prior's scale (None: no prior)
+    prior_scales: dict | None = None          # the Gaussian prior's scale of each group (None: no prior)
     prior_centre: np.ndarray | None = None    # its centre (full parameter vector [SI])
     log_evidence: float | None = None         # Laplace log evidence of the fit with its prior (weights as given)
-    evidence: list = field(default_factory=list)   # the scales tried when the prior scale came from the evidence
+    evidence: list = field(default_factory=list)   # the rounds of the evidence's estimate of scales and noise
+    prior_sd: np.ndarray | None = None        # the prior's standard deviation of each free parameter [SI]
+    prior_ratio: np.ndarray | None = None     # posterior / prior variance of each free parameter
+    prior_groups: dict = field(default_factory=dict)   # per group: scale, parameters, effective parameters
     model_check: dict | None = None           # model_output.model_check of this fit, when refine_torques made it
     options: FitOptions | None = None         # the options of the fit (calibrate's, as given)
 
@@ -254,16 +264,30 @@ class CalibrationResult:
         """Standard uncertainty [SI] of a free parameter (0 for a fixed or held one)."""
         return float(self.u[self.free.index(name)]) if name in self.free else 0.0
 
+    def state(self, name: str) -> str:
+        """``free`` (estimated, the data dominate), ``prior-dominated`` (estimated, its posterior variance at
+        least :data:`calibration.prior.PRIOR_DOMINATED` of its prior's: the data add no more than the prior),
+        ``fixed`` (held by the rank test or at a bound, see ``fixed``) or ``held`` (not freed by the user)."""
+        if name in self.free:
+            k = self.free.index(name)
+            ratio = None if self.prior_ratio is None else float(self.prior_ratio[k])
+            return "prior-dominated" if ratio is not None and ratio >= PRIOR_DOMINATED else "free"
+        return "fixed" if name in {f.name for f in self.fixed} else "held"
+
     def parameter_rows(self) -> list[dict]:
-        """One row a parameter: name, SI unit, value, u, state (free / fixed / held), display values."""
+        """One row a parameter: name, SI unit, value, u, state (:meth:`state`), the prior's standard deviation
+        and the posterior/prior variance ratio (estimated parameters with a prior), display values."""
         rows = []
-        fixed = {f.name: f for f in self.fixed}
         for i, (n, unit) in enumerate(zip(self.model.spec.names, self.model.spec.units)):
             du, fac = display_unit(unit)
-            state = "free" if n in self.free else ("fixed" if n in fixed else "held")
             u = self.uncertainty(n)
-            rows.append({"name": n, "unit": unit, "value": float(self.p[i]), "u": u, "state": state,
-                         "display_unit": du, "display_value": float(self.p[i]) * fac, "display_u": u * fac})
+            k = self.free.index(n) if n in self.free else None
+            prior_u = None if k is None or self.prior_sd is None else float(self.prior_sd[k])
+            ratio = None if k is None or self.prior_ratio is None else float(self.prior_ratio[k])
+            rows.append({"name": n, "unit": unit, "value": float(self.p[i]), "u": u, "state": self.state(n),
+                         "prior_u": prior_u, "prior_ratio": ratio, "display_unit": du,
+                         "display_value": float(self.p[i]) * fac, "display_u": u * fac,
+                         "display_prior_u": None if prior_u is None else prior_u * fac})
         return rows
 
     def described(self):
@@ -325,8 +349,10 @@ class CalibrationResult:
                         "from_data": bool(self.weights_history)},
             "variance_components": self.variance, "weights_history": self.weights_history,
             "probing_scatter": self._budget_um(),
-            "prior": None if self.prior_scale is None else {
-                "scale": self.prior_scale, "log_evidence": self.log_evidence, "scales_tried": self.evidence},
+            "prior": None if self.prior_scales is None else {
+                "scales": dict(self.prior_scales), "groups": self.prior_groups, "log_evidence": self.log_evidence,
+                "prior_dominated_ratio": PRIOR_DOMINATED, "evidence_rounds": self.evidence,
+                "prior_dominated": [n for n in self.free if self.state(n) == "prior-dominated"]},
             "outliers": [o.to_dict() for o in self.outliers], "dropped": [o.to_dict() for o in self.dropped],
             "instances": self.instances, "distances": self.distances,
             "unused_points": [int(i) for i in self.unused],
@@ -349,7 +375,10 @@ def identify(problem: Problem, p, states, candidates, options: FitOptions = FitO
     ``states``: ``(kept indices, [FixedParameter], Identifiability)``.
 
     Two tests, in order: linear dependence (SVD rank of the reduced Jacobian with the base frame's rigid
-    motions projected out; pivoted QR, columns scaled by plausible error sizes, chooses which to hold),
+    motions projected out; pivoted QR, columns scaled by the plausible error sizes of
+    :func:`~calibration.identifiability.prior_scales`, chooses which to hold: of two equivalent parameters
+    the one whose plausible error moves the data more is kept, an exact tie going to the later one in the
+    spec's order, so that the choice never depends on rounding),
     then practical resolution (``options.min_resolution``,
     :func:`~calibration.identifiability.weakly_determined`). With ``options.on_unidentifiable == "stop"``:
     raise :class:`NumericalError` with the list instead of holding them.
@@ -365,14 +394,16 @@ def identify(problem: Problem, p, states, candidates, options: FitOptions = FitO
     names = [spec.names[i] for i in kept]
     sizes = functools.partial(prior_scales, model, priors=options.priors, noise=point_noise(problem),
                               length=options.prior_length)
-    idf = analyse(jred, ev.jp, names, options.rank_tol, sizes(names), gauge=gauge)
+    pivot = sizes(names) * (1.0 + TIE_BREAK * np.asarray(kept, dtype=float) / max(spec.size, 1))
+    idf = analyse(jred, ev.jp, names, options.rank_tol, pivot, gauge=gauge)
     fixed = []
     if idf.dependent:
         if stop:
             lines = [f"  {k}: {c.text()}" for k, c in idf.combinations.items()]
             raise NumericalError(f"{len(idf.dependent)} parameter combination(s) the data cannot identify "
                                  f"({stage}; rank {idf.rank} of {len(kept)}, rank_tol {options.rank_tol:g}):\n"
-                                 + "\n".join(lines) + "\nfix these parameters or use on_unidentifiable='fix'")
+                                 + "\n".join(lines) + "\nhold these parameters (--hold) or let them be held and listed "
+                                 "(--on-unidentifiable fix, FitOptions.on_unidentifiable='fix')")
         for name in idf.dependent:
             fixed.append(FixedParameter(name, float(p[spec.index(name)]), _dependent_reason(idf, name),
                                         idf.combinations[name], stage))
@@ -383,7 +414,8 @@ def identify(problem: Problem, p, states, candidates, options: FitOptions = FitO
             raise NumericalError("parameters the data resolve to worse than "
                                  f"{options.min_resolution:g} of a plausible size ({stage}): "
                                  + ", ".join(f"{n} (u ~ {u:.3g} {spec.units[spec.index(n)]})" for n, u, _ in weak)
-                                 + "\nhold them or use on_unidentifiable='fix'")
+                                 + "\nhold them (--hold) or let them be held and listed (--on-unidentifiable fix, "
+                                 "FitOptions.on_unidentifiable='fix')")
         for name, u, comb in weak:
             du, fac = display_unit(spec.units[spec.index(name)])
             fixed.append(FixedParameter(name, float(p[spec.index(name)]),
@@ -393,6 +425,10 @@ def identify(problem: Problem, p, states, candidates, options: FitOptions = FitO
                                         "below the noise", comb, stage))
         kept = [i for i in kept if spec.names[i] not in {w[0] for w in weak}]
     return kept, fixed, idf
+
+
+#: relative weight given to a parameter's place in the spec when two equivalent ones are tied for the pivot
+TIE_BREAK = 1e-6
 
 
 def _dependent_reason(idf: Identifiability, name: str) -> str:
@@ -431,18 +467,18 @@ def calibrate(model: ArmModel, data: CalibrationData, options: FitOptions = FitO
         data: :class:`~calibration.data.CalibrationData` (``make_data``).
         options: :class:`~calibration.options.FitOptions`, among them:
 
-            * ``min_resolution``: hold parameters the data would resolve only to worse than this fraction
-              of a plausible error size (:func:`~calibration.identifiability.prior_scales`, ``priors``):
-              their effect is below the noise. None keeps every linearly independent parameter.
-            * ``prior_scale``: None, "evidence" (the scale of :func:`evidence_scale`, the scales tried
-              listed in the result's ``evidence``), or fit with a Gaussian prior on every free parameter:
-              centred on ``values`` (or ``prior_centre``), standard deviation ``prior_scale`` times its
-              plausible error size: the maximum a posteriori estimate, which shrinks the directions the
-              data resolve poorly instead of holding them (``min_resolution`` is then not applied). The
-              result carries ``log_evidence`` (Laplace).
+            * ``prior_scale``: "evidence" (default): a Gaussian prior on every free parameter, centred on
+              ``values`` (or ``prior_centre``), standard deviation its group's scale times its plausible
+              error size (:mod:`calibration.prior`), the scales (and with ``weights_from_data`` the noise)
+              chosen by the evidence (:func:`_evidence`): the maximum a posteriori estimate shrinks what
+              the data resolve poorly instead of holding it; a number or a dict {group: scale}: those
+              scales; None: no prior.
+            * ``min_resolution``: without a prior only, hold parameters the data would resolve only to worse
+              than this fraction of a plausible error size (:func:`~calibration.identifiability.
+              prior_scales`); None (default) keeps every linearly independent parameter.
             * ``weights_from_data``: take ``weights`` as starting values only: estimate the noise of each
-              row group from the fit's residuals and redundancy (:func:`variance_components`), re-weight
-              and refit until the factors settle (:func:`reweighted`).
+              row group from the fit's residuals and redundancy (:func:`variance_components`): jointly with
+              the prior scales, or without a prior by :func:`reweighted`.
             * ``drop_outliers``: drop outlier points and refit, in rounds (:func:`_without_outliers`);
               they are listed in ``dropped`` (indices into ``data``) and ``data`` of the result holds the
               points kept.
@@ -450,30 +486,31 @@ def calibrate(model: ArmModel, data: CalibrationData, options: FitOptions = FitO
     Raises:
         NumericalError: no convergence, too few residuals, or unidentifiable parameters with "stop".
     """
+    if options.prior_scale == "evidence":
+        estimate = _evidence
+    elif options.weights_from_data:
+        estimate = reweighted
+    else:
+        estimate = _fit
     with blas_threads(options.blas):
-        if options.prior_scale == "evidence":
-            tau, rows = evidence_scale(model, data, options)
-            res = calibrate(model, data, replace(options, prior_scale=tau))
-            res.evidence = rows
-            res.options = options
-            return res
-        if options.weights_from_data:
-            return reweighted(model, data, options)
-        return _without_outliers(model, data, options)
+        res = _without_outliers(model, data, options, estimate)
+    res.options = options
+    return res
 
 
 #: rounds of outlier dropping before the fit gives up
 DROP_ROUNDS = 10
 
 
-def _without_outliers(model: ArmModel, data: CalibrationData, options: FitOptions) -> CalibrationResult:
-    """:func:`_fit` and, with ``options.drop_outliers``, the outlier points dropped (the worst first: a gross
+def _without_outliers(model: ArmModel, data: CalibrationData, options: FitOptions, estimate) -> CalibrationResult:
+    """``estimate(model, data, options)`` (:func:`_fit`, :func:`reweighted` or :func:`_evidence`) and, with
+    ``options.drop_outliers``, the outlier points dropped (the worst first: a gross
     error also pulls its neighbours out, those go only if they stay out) and refitted, until none is left
     (at most :data:`DROP_ROUNDS` rounds)."""
     index = np.arange(len(data))
     dropped: list[Outlier] = []
     for k in range(DROP_ROUNDS + 1):
-        res = _fit(model, data, options)
+        res = estimate(model, data, options)
         point_outliers = [o for o in res.outliers if o.point is not None]
         if not (options.drop_outliers and point_outliers):
             res.dropped = dropped
@@ -493,7 +530,8 @@ def _without_outliers(model: ArmModel, data: CalibrationData, options: FitOption
 @dataclass
 class _Setup:
     """What a fit starts from: the problem over the candidate parameters, the given (``nominal``) and the
-    starting (``p0``) parameter vectors [SI], the nuisance states fitted at ``p0``, the prior or None."""
+    starting (``p0``) parameter vectors [SI], the nuisance states fitted at ``p0``, the prior (None without
+    one) with its groups, sizes and bounds (``spec``) and group scales, and the hold rule's resolution."""
     problem: Problem
     candidates: list
     nominal: np.ndarray
@@ -501,6 +539,30 @@ class _Setup:
     states: list
     prior: Prior | None
     min_resolution: float | None
+    spec: PriorSpec | None = None
+    scales: dict = field(default_factory=dict)
+
+
+def _prior_spec(model: ArmModel, data: CalibrationData, options: FitOptions) -> PriorSpec:
+    """:func:`calibration.prior.prior_spec` with ``options.prior_length`` setting the size of a length error
+    (and of an angle: 1 rad/m times it) when given."""
+    priors = dict(options.priors or {})
+    if options.prior_length is not None:
+        spec = model.spec
+        for i in range(model.base_size):
+            n = spec.names[i]
+            if not n.startswith("probe.") and spec.units[i] in ("m", "rad"):
+                priors.setdefault(n, options.prior_length)        # [m], and [rad] at 1 rad/m
+    return prior_spec(model, data, priors)
+
+
+def _scales(options: FitOptions, groups) -> dict:
+    """The group scales of ``options.prior_scale``: a dict as given (groups it lacks at 1), one factor for every
+    group, or "evidence": 1 for every group (the start of :func:`_evidence`)."""
+    ps = options.prior_scale
+    if isinstance(ps, dict):
+        return {g: float(ps.get(g, 1.0)) for g in dict.fromkeys(groups)}
+    return {g: 1.0 if ps == "evidence" else float(ps) for g in dict.fromkeys(groups)}
 
 
 def _setup(model: ArmModel, data: CalibrationData, options: FitOptions) -> _Setup:
@@ -513,14 +575,13 @@ def _setup(model: ArmModel, data: CalibrationData, options: FitOptions) -> _Setu
     problem = Problem(model, data, options.weights, cand, reference=options.reference)
     states = levenberg_marquardt(problem.with_free([]), p0, problem.initial_states(p0),
                                  max_iter=options.max_iter).states
-    prior, min_resolution = None, options.min_resolution
-    if options.prior_scale is not None:
-        size = prior_scales(model, spec.names, priors=options.priors, noise=point_noise(problem),
-                            length=options.prior_length)
-        centre = nominal.copy() if options.prior_centre is None else np.array(options.prior_centre, dtype=float)
-        prior = Prior(centre, size * options.prior_scale)
-        min_resolution = None             # the prior shrinks what the data resolve poorly
-    return _Setup(problem, cand, nominal, p0, states, prior, min_resolution)
+    if options.prior_scale is None:
+        return _Setup(problem, cand, nominal, p0, states, None, options.min_resolution)
+    pspec = _prior_spec(model, data, options)
+    scales = _scales(options, [pspec.group[i] for i in cand])
+    centre = nominal.copy() if options.prior_centre is None else np.array(options.prior_centre, dtype=float)
+    # the prior shrinks what the data resolve poorly: nothing is held for being weak
+    return _Setup(problem, cand, nominal, p0, states, Prior(centre, pspec.sizes(scales)), None, pspec, scales)
 
 
 def _held(s: _Setup, p, states, kept, stage: str, options: FitOptions):
@@ -538,6 +599,26 @@ def _held(s: _Setup, p, states, kept, stage: str, options: FitOptions):
     return kept, new, idf
 
 
+def _at_bounds(s: _Setup, p, kept, stage: str):
+    """The estimated parameters beyond their lower bound (a compliance that would be negative in total): held
+    at the bound (``p`` changed in place). Returns (kept, [FixedParameter])."""
+    if s.spec is None:
+        return kept, []
+    spec = s.problem.model.spec
+    low = s.spec.lower
+    out, fixed = [], []
+    for i in kept:
+        if p[i] < low[i]:
+            du, fac = display_unit(spec.units[i])
+            fixed.append(FixedParameter(spec.names[i], float(low[i]),
+                                        f"at its lower bound {low[i] * fac:.4g} {du} (a compliance cannot be "
+                                        f"negative): the data pull it to {p[i] * fac:.4g} {du}", None, stage))
+            p[i] = low[i]
+        else:
+            out.append(i)
+    return out, fixed
+
+
 def _restarted(s: _Setup, prob: Problem, sol, options: FitOptions):
     """The solution ``sol`` of ``prob``, or, when the artefacts' unknowns started again from the fitted arm
     (they were started from the nominal arm and can settle in another basin with large errors) fit better,
@@ -549,35 +630,58 @@ def _restarted(s: _Setup, prob: Problem, sol, options: FitOptions):
     return sol
 
 
+#: prior scales (times the fit's) of the continuation when a fit does not converge from the nominal
+CONTINUATION = (1e-2, 1e-1, 1.0)
+
+
+def _lm(s: _Setup, prob: Problem, p, states, options: FitOptions):
+    """Levenberg-Marquardt of ``prob`` from ``p``, ``states`` with the setup's prior (damped restarts inside);
+    when that does not converge and there is a prior, a continuation in the prior's scale: the fit with the
+    prior narrowed to :data:`CONTINUATION` of its size (near the nominal, well conditioned), each started from
+    the one before, ending at the prior itself."""
+    try:
+        return levenberg_marquardt(prob, p, states, max_iter=options.max_iter, prior=s.prior)
+    except NumericalError:
+        if s.prior is None:
+            raise
+    for f in CONTINUATION:
+        narrowed = Prior(s.prior.centre, s.prior.size * f)
+        sol = levenberg_marquardt(prob, p, states, max_iter=options.max_iter, prior=narrowed)
+        p, states = sol.p, sol.states
+    return sol
+
+
 #: fits with a new identifiability analysis at the solution before the identifiable set must have settled
 SETTLE_ROUNDS = 4
 
 
 def _solve(s: _Setup, options: FitOptions):
-    """Identifiability at the start, the fit (with :func:`_restarted`), identifiability at the solution, and
-    the fit again while the identifiable set changes. Returns (solution, kept, fixed, idf0, idf1)."""
+    """Identifiability at the start, the fit (with :func:`_restarted`), the bounds (:func:`_at_bounds`) and
+    identifiability at the solution, and the fit again while the identifiable set changes. Returns (solution,
+    kept, fixed, idf0, idf1)."""
     p = s.p0.copy()
     kept, fixed, idf0 = _held(s, p, s.states, list(s.candidates), "start", options)
     n_start = len(fixed)
     states = s.states
     for _ in range(SETTLE_ROUNDS):
         prob = s.problem.with_free(kept)
-        sol = _restarted(s, prob, levenberg_marquardt(prob, p, states, max_iter=options.max_iter, prior=s.prior),
-                         options)
+        sol = _restarted(s, prob, _lm(s, prob, p, states, options), options)
         p, states = sol.p, sol.states
         n_before = len(kept)
+        kept, bound = _at_bounds(s, p, kept, "solution")
         kept, new, idf1 = _held(s, p, states, kept, "solution", options)
-        fixed += new
+        fixed += bound + new
         if len(kept) == n_before:
             return sol, kept, fixed, idf0, idf1
     raise NumericalError("the identifiable set kept changing between fits (held in turn: "
                          + ", ".join(f.name for f in fixed[n_start:])
-                         + "); raise rank_tol or fix parameters")
+                         + "); raise the rank tolerance (--rank-tol) or hold some of these parameters (--hold)")
 
 
 def _covariance(s: _Setup, ev, kept, var: float) -> np.ndarray:
-    """Covariance [SI^2] of the free parameters ``kept`` from the reduced Jacobian at the solution (with the
-    prior's information when there is one), times ``var``."""
+    """Covariance [SI^2] of the free parameters ``kept`` from the reduced Jacobian at the solution, the data's
+    weighted rows with variance ``var`` (s0^2 or 1): ``(J_red^T J_red / var)^-1``, or with a prior the
+    posterior ``(J_red^T J_red / var + diag(1 / size^2))^-1``."""
     jred = reduced_jacobian(ev.jp, ev.jt)
     scale = _scale(ev.jp)
     if s.prior is None:
@@ -587,7 +691,7 @@ def _covariance(s: _Setup, ev, kept, var: float) -> np.ndarray:
         return var * (vt.T / sv ** 2) @ vt / np.outer(scale, scale) if len(kept) else np.zeros((0, 0))
     prec = 1.0 / s.prior.size[np.asarray(kept, dtype=int)] ** 2
     js_red = jred / scale
-    cov = var * np.linalg.inv(js_red.T @ js_red + np.diag(prec / scale ** 2)) / np.outer(scale, scale)
+    cov = np.linalg.inv(js_red.T @ js_red / var + np.diag(prec / scale ** 2)) / np.outer(scale, scale)
     return 0.5 * (cov + cov.T)
 
 
@@ -699,20 +803,26 @@ def _reference(prob: Problem, states, nrm: _Normal, n_kept: int, var: float) -> 
     return None
 
 
-def _fit(model: ArmModel, data: CalibrationData, options: FitOptions) -> CalibrationResult:
-    """One fit at the weights given: :func:`_setup`, :func:`_solve`, then the covariance, the leverage, the
-    standardized residuals and outliers, and the per-instance figures."""
-    s = _setup(model, data, options)
-    sol, kept, fixed, idf0, idf1 = _solve(s, options)
+def _dof(prob: Problem, n_rows: int, n_kept: int) -> tuple[int, int]:
+    """(degrees of freedom, nuisance unknowns) of a fit; raises when there is no redundancy."""
+    n_nuis = sum(it.n_theta for it in prob.instances)
+    dof = n_rows - n_kept - n_nuis
+    if dof <= 0:
+        raise NumericalError(f"{n_rows} residuals for {n_kept} parameters and {n_nuis} nuisance unknowns: "
+                             "not enough data for a fit with redundancy")
+    return dof, n_nuis
+
+
+def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> CalibrationResult:
+    """The :class:`CalibrationResult` of the solution ``sol`` (free parameters ``kept``): the covariance, the
+    leverage, the standardized residuals and outliers, the per-instance figures and, with a prior, each free
+    parameter's prior standard deviation and posterior/prior variance ratio."""
+    model, data = s.problem.model, s.problem.data
     spec = model.spec
     prob = s.problem.with_free(kept)
     ev = sol.evaluation
     n_rows = len(ev.r)
-    n_nuis = sum(it.n_theta for it in prob.instances)
-    dof = n_rows - len(kept) - n_nuis
-    if dof <= 0:
-        raise NumericalError(f"{n_rows} residuals for {len(kept)} parameters and {n_nuis} nuisance unknowns: "
-                             "not enough data for a fit with redundancy")
+    dof, n_nuis = _dof(prob, n_rows, len(kept))
     s0 = math.sqrt(2 * sol.cost / dof)
     var = s0 ** 2 if options.covariance == "residual" else 1.0
     source = (f"a posteriori: s0^2 = {s0 ** 2:.4g} (weighted residual variance, dof {dof})"
@@ -727,16 +837,120 @@ def _fit(model: ArmModel, data: CalibrationData, options: FitOptions) -> Calibra
     distances = [{"measurement": d.measurement, "between": list(d.between), "certified": d.length,
                   "residual": float(table["distance"][i]), "standardized": float(z[prob.n_point_rows + i]),
                   "sigma": d.sigma} for i, d in enumerate(prob.distance_items)]
+    prior_sd = None if s.prior is None else s.prior.size[np.asarray(kept, dtype=int)]
     return CalibrationResult(
         model=model, p=sol.p, free=tuple(spec.names[i] for i in kept), fixed=tuple(fixed),
         held=tuple(n for i, n in enumerate(spec.names) if i not in s.candidates), cov=cov, u=u, corr=corr, s0=s0,
         covariance_source=source, status=sol.status, iterations=sol.iterations, evaluations=sol.evaluations,
-        cost=sol.cost, n_residuals=n_rows, n_nuisance=n_nuis, dof=dof, identifiability=idf0,
-        identifiability_final=idf1, residuals=table, instances=_instances(prob, table, sol.states),
+        cost=sol.cost, n_residuals=n_rows, n_nuisance=n_nuis, dof=dof, identifiability=idfs[0],
+        identifiability_final=idfs[1], residuals=table, instances=_instances(prob, table, sol.states),
         distances=distances, reference=_reference(prob, sol.states, nrm, len(kept), var), outliers=outliers,
-        dropped=[], data=data, weights=options.weights, reference_mode=options.reference, unused=prob.unused,
-        variance=variance_components(prob, ev.r, nrm.h, options.weights), prior_scale=options.prior_scale,
-        log_evidence=nrm.log_evidence, prior_centre=None if s.prior is None else s.prior.centre, options=options)
+        dropped=[], data=data, weights=prob.weights, reference_mode=options.reference, unused=prob.unused,
+        variance=variance_components(prob, ev.r, nrm.h, prob.weights),
+        prior_scales=None if s.prior is None else dict(s.scales), log_evidence=nrm.log_evidence,
+        prior_centre=None if s.prior is None else s.prior.centre, options=options, prior_sd=prior_sd,
+        prior_ratio=None if prior_sd is None else variance_ratio(u ** 2, prior_sd),
+        prior_groups=_group_table(s, kept, u))
+
+
+def _group_table(s: _Setup, kept, u) -> dict:
+    """{group: scale, parameters, effective (gamma: the parameters the data determine), size source} of the
+    prior's groups over the free parameters ``kept``."""
+    if s.prior is None:
+        return {}
+    spec = s.problem.model.spec
+    kept = np.asarray(kept, dtype=int)
+    out = {}
+    for g, idx in s.spec.groups_of(kept).items():
+        sel = np.isin(kept, idx)
+        rho = variance_ratio(u[sel] ** 2, s.prior.size[idx])
+        out[g] = {"scale": s.scales.get(g, 1.0), "parameters": [spec.names[i] for i in idx],
+                  "effective_parameters": float(np.sum(1.0 - rho)),
+                  "size_at_scale_1": {spec.names[i]: float(s.spec.size[i]) for i in idx},
+                  "size_source": sorted({s.spec.source[i] for i in idx})}
+    return out
+
+
+def _fit(model: ArmModel, data: CalibrationData, options: FitOptions) -> CalibrationResult:
+    """One fit at the weights and prior scales given: :func:`_setup`, :func:`_solve`, :func:`_result`."""
+    s = _setup(model, data, options)
+    sol, kept, fixed, idf0, idf1 = _solve(s, options)
+    return _result(s, sol, kept, fixed, (idf0, idf1), options)
+
+
+def _reweighted_problem(problem: Problem, weights: Weights) -> Problem:
+    """``problem`` with the group factors of ``weights`` (same stated uncertainties): each row's sigma rescaled."""
+    new = problem.with_free(problem.free)
+    kinds = row_kinds(problem)
+    old = np.array([problem.weights.factor(k) for k in kinds])
+    now = np.array([weights.factor(k) for k in kinds])
+    new.sigma = problem.sigma / old * now
+    new.weights = weights
+    return new
+
+
+#: rounds of the evidence's joint estimate of the prior scales and the noise
+EVIDENCE_ROUNDS = 40
+#: the estimate has settled when every scale and noise factor changes by less than this (relative)
+EVIDENCE_TOL = 0.02
+
+
+def _evidence(model: ArmModel, data: CalibrationData, options: FitOptions) -> CalibrationResult:
+    """The fit whose prior scales (one a group) and, with ``weights_from_data``, noise (one factor a row group)
+    maximise the evidence together (:func:`_evidence_rounds`), from scale 1 and the given weights, on the base
+    set of :func:`_solve`. The result carries the rounds in ``evidence`` and the final scales in
+    ``prior_scales``."""
+    s = _setup(model, data, options)
+    sol, kept, fixed, idf0, idf1 = _solve(s, options)
+    s, sol, kept, fixed, history = _evidence_rounds(s, sol, kept, fixed, options)
+    res = _result(s, sol, kept, fixed, (idf0, idf1), options)
+    res.evidence = history
+    if options.weights_from_data:
+        res.weights_history = [{"round": h["round"], "factors": h["noise_factors"], "s0": h["s0"]} for h in history]
+        res.weights_history[-1].update({k: v for k, v in history[-1].items() if k in ("settled", "note")})
+    return res
+
+
+def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
+    """From the fit ``sol`` of the base set ``kept``: each round updates every group's scale by MacKay's fixed
+    point (:func:`calibration.prior.update_scales`) and, with ``weights_from_data``, every row group's noise
+    by its variance component (:func:`variance_components`, the leverages including the prior), and refits
+    from the previous solution, until all change by less than :data:`EVIDENCE_TOL` (damped from the tenth
+    round). Returns (setup, solution, kept, fixed, rounds)."""
+    history = []
+    for k in range(EVIDENCE_ROUNDS):
+        prob = s.problem.with_free(kept)
+        ev = sol.evaluation
+        dof, _ = _dof(prob, len(ev.r), len(kept))
+        var = 2 * sol.cost / dof if options.covariance == "residual" and not options.weights_from_data else 1.0
+        post = np.diag(_covariance(s, ev, kept, var))
+        kept_arr = np.asarray(kept, dtype=int)
+        rho = variance_ratio(post, s.prior.size[kept_arr])
+        damping = 1.0 if k < 10 else 0.5
+        scales, gamma = update_scales(s.scales, s.spec, kept_arr, sol.p[kept_arr] - s.prior.centre[kept_arr], rho,
+                                      damping)
+        factors = {}
+        if options.weights_from_data:
+            nrm = _normal(s, sol, kept)
+            factors = {v["group"]: v["factor"] ** damping for v in variance_components(prob, ev.r, nrm.h, prob.weights)
+                       if v["estimated"]}
+        change = max([abs(math.log(scales[g] / s.scales[g])) for g in scales] +
+                     [abs(math.log(f)) for f in factors.values()] + [0.0])
+        history.append({"round": k + 1, "scales": dict(s.scales), "effective_parameters": gamma,
+                        "noise_factors": dict(prob.weights.factors), "s0": math.sqrt(2 * sol.cost / dof)})
+        if change <= EVIDENCE_TOL:
+            history[-1]["settled"] = True
+            return s, sol, kept, fixed, history
+        s = replace(s, scales=scales, prior=Prior(s.prior.centre, s.spec.sizes(scales)),
+                    problem=_reweighted_problem(s.problem, prob.weights.scaled(factors)))
+        p = sol.p.copy()
+        kept, bound = _at_bounds(s, p, kept, "evidence")
+        fixed = fixed + bound
+        sol = _lm(s, s.problem.with_free(kept), p, sol.states, options)
+    history[-1]["settled"] = False
+    history[-1]["note"] = (f"the prior scales and noise did not settle in {EVIDENCE_ROUNDS} rounds; the last "
+                           "round's are used")
+    return s, sol, kept, fixed, history
 
 
 #: fewest redundant rows (rows minus their share of the unknowns) for a group's noise to be estimated
@@ -833,7 +1047,7 @@ def variance_components(problem: Problem, r: np.ndarray, leverage: np.ndarray, w
 
 def reweighted(model: ArmModel, data: CalibrationData, options: FitOptions, tol: float = 0.03,
                rounds: int = 12) -> CalibrationResult:
-    """Iterated variance-component estimation: the fit of ``options`` (outliers dropped if asked) with every
+    """Iterated variance-component estimation without a prior: the fit of ``options`` with every
     group's factor updated from the fit (the free parameters started from the previous round's values),
     until all change by less than ``tol``. From the fifth round on the updates are damped (square root of
     the factor), since a parameter held or freed by the practical-resolution rule can make the estimates
@@ -842,8 +1056,8 @@ def reweighted(model: ArmModel, data: CalibrationData, options: FitOptions, tol:
     history, st = [], {}
     weights = options.weights
     for k in range(rounds):
-        res = _without_outliers(model, data, replace(options, weights=weights, weights_from_data=False,
-                                                     start={**(options.start or {}), **st}))
+        res = _fit(model, data, replace(options, weights=weights, weights_from_data=False,
+                                        start={**(options.start or {}), **st}))
         est = {v["group"]: v["factor"] for v in res.variance if v["estimated"]}
         history.append({"round": k + 1, "factors": dict(weights.factors), "s0": res.s0})
         if all(abs(f - 1.0) <= tol for f in est.values()):
@@ -868,35 +1082,24 @@ def _scale(jp: np.ndarray) -> np.ndarray:
     return np.where(s > 0, s, 1.0)
 
 
-#: prior scales tried by :func:`evidence_scale` (times the plausible error sizes)
-EVIDENCE_GRID = (0.05, 0.1, 0.2, 0.3, 0.5, 1.0, 2.0, 5.0)
+def nominal_baseline(model: ArmModel, data: CalibrationData, options: FitOptions = FitOptions()) -> CalibrationResult:
+    """The nominal model given the same nuisance unknowns as a calibration with ``options``: the description
+    (``options.values``) with only the tip offset fitted (probe.x/y/z, where free: a probe's ball or a tracker
+    marker whose place on the last link may not be known) by least squares, the artefacts' unknowns and the
+    reference frame solved as in every fit, at the same weights (no noise estimate of its own). Its
+    ``p``/``reference`` are the baseline every "nominal -> calibrated" figure compares against."""
+    spec = model.spec
+    cand = resolve_parameters(spec, default_free(model) if options.free is None else options.free)
+    tip = [spec.names[i] for i in cand if spec.names[i] in ("probe.x", "probe.y", "probe.z")]
+    return calibrate(model, data, replace(options, free=tuple(tip), prior_scale=None, min_resolution=None,
+                                          weights_from_data=False, drop_outliers=False, start=None,
+                                          on_unidentifiable="fix"))
 
 
-def evidence_scale(model: ArmModel, data: CalibrationData, options: FitOptions = FitOptions(),
-                   grid=EVIDENCE_GRID) -> tuple[float, list[dict]]:
-    """The prior scale the data support best (empirical Bayes): the noise of each row group estimated
-    first (a fit without prior, :func:`variance_components`), then one maximum a posteriori fit per scale
-    of ``grid`` with those weights, and the scale of the largest Laplace log evidence
-    ``-cost - prior cost - 0.5 log det(H) - sum log(prior sizes)``: too small a scale pulls the fit away
-    from the data, too large a one pays for the volume of parameter space the data do not use.
-
-    ``options``: of the fits (free set, values, weights as the start of the noise estimate, rank_tol,
-    priors, ...); their outlier dropping, prior centre and ``min_resolution`` are not used (the default
-    rule for the noise fit). Returns ``(scale, rows)``; rows: ``scale``, ``log_evidence`` (None where the
-    fit failed, with ``error``), ``s0``. Raises :class:`NumericalError` if no scale gives a fit."""
-    common = replace(options, drop_outliers=False, prior_centre=None,
-                     min_resolution=FitOptions.min_resolution)
-    base = calibrate(model, data, replace(common, weights_from_data=True, prior_scale=None))
-    rows = []
-    for tau in grid:
-        try:
-            r = calibrate(model, data, replace(common, weights=base.weights, weights_from_data=False,
-                                               prior_scale=float(tau)))
-            rows.append({"scale": float(tau), "log_evidence": r.log_evidence, "s0": r.s0})
-        except NumericalError as exc:
-            rows.append({"scale": float(tau), "log_evidence": None, "s0": None, "error": str(exc)})
-    ok = [r for r in rows if r["log_evidence"] is not None]
-    if not ok:
-        raise NumericalError("no prior scale gives a fit: " + "; ".join(f"{r['scale']:g}: {r['error']}" for r in rows))
-    best = max(ok, key=lambda r: r["log_evidence"])
-    return best["scale"], rows
+def evidence_scale(model: ArmModel, data: CalibrationData, options: FitOptions = FitOptions()) -> tuple[dict, list]:
+    """The prior scale of each group that the data support best, with the noise when
+    ``options.weights_from_data`` (:func:`_evidence`): ``(scales {group: scale}, the rounds)``. A fit with
+    ``prior_scale=scales`` reproduces that fit without estimating them again (e.g. on the folds of a
+    cross-validation)."""
+    res = calibrate(model, data, replace(options, prior_scale="evidence", drop_outliers=False))
+    return dict(res.prior_scales), res.evidence

@@ -5,6 +5,7 @@ import argparse
 import json
 import math
 import logging
+from dataclasses import replace
 from arm_model.cli import command_help
 from pathlib import Path
 
@@ -66,8 +67,9 @@ def campaign_inputs(p) -> None:
 SIGMA_UM = number_in(1e-6, 1e5)
 
 
-def sigma_options(p) -> None:
-    """The stated uncertainties that weight the residuals (shared with ``aacmm close-loop``)."""
+def sigma_options(p, prior_default: str | None = None) -> None:
+    """The stated uncertainties that weight the residuals and the prior (shared with ``aacmm close-loop``, whose
+    ``--prior-scale`` defaults to ``prior_default``)."""
     p.add_argument("--sigma-probe-um", type=SIGMA_UM, default=10.0,
                    help="standard uncertainty of a probed ball centre per axis [um] (default 10)")
     p.add_argument("--sigma-ref-um", type=SIGMA_UM, default=10.0,
@@ -78,18 +80,22 @@ def sigma_options(p) -> None:
     p.add_argument("--weights", choices=("data", "stated"), default="data",
                    help="data (default): the sigmas above are starting values; the noise of each group of rows "
                         "(points per artefact kind, reference points, lengths) is estimated from the fit's residuals "
-                        "(variance components), the rows re-weighted and the fit repeated until it settles; "
-                        "stated: use the sigmas as given")
+                        "(variance components), jointly with the prior's scales, the rows re-weighted and the fit "
+                        "repeated until it settles; stated: use the sigmas as given")
     p.add_argument("--plausible-length-mm", type=number_in(1e-6, 1e6), default=None,
-                   help="plausible size of a length error [mm] (angles: 0.01 rad per mm of it), for the rule that "
-                        "holds parameters the data resolve to worse than --min-resolution of it; default the larger "
-                        "of 1 mm and ten times the noise of one point (so a robot's lengths are not held)")
-    p.add_argument("--prior-scale", type=prior_scale, default=None, metavar="evidence|off|FACTOR",
-                   help="off (default): parameters the data resolve poorly are held (--min-resolution); evidence: "
-                        "a Gaussian prior on every free parameter instead (centred on the description, standard "
-                        "deviation a factor times its plausible error size), the factor the one of the largest "
-                        "Laplace evidence of the data (empirical Bayes, tried from 0.05 to 5); FACTOR: that factor. "
-                        "Poorly resolved directions are then shrunk, not held (docs/calibration.md)")
+                   help="plausible size of a joint row's length error [mm] (angles: 1 mrad per mm of it) at prior "
+                        "scale 1 (default 1 mm, 1 mrad; the evidence scales them); with --prior-scale off, the size "
+                        "the --min-resolution rule judges against (default there: the larger of 1 mm and ten times "
+                        "the noise of one point, angles 0.01 rad per mm)")
+    default = "off" if prior_default is None else prior_default
+    p.add_argument("--prior-scale", type=prior_scale, default=prior_default, metavar="evidence|off|FACTOR",
+                   help=f"evidence: a Gaussian prior on every free parameter, centred on the nominal value, standard "
+                        "deviation its group's scale times its plausible error size (groups: lengths, joint offsets, "
+                        "axis angles, the tip or marker offset, the probe's compliance, each effect), each scale "
+                        "chosen by the evidence (type-II maximum likelihood) together with the noise: poorly "
+                        "resolved parameters are shrunk towards the nominal and reported as prior-dominated, never "
+                        "held; FACTOR: every group at that scale; off: no prior (--min-resolution may then hold "
+                        f"weak parameters). Default {default} (docs/calibration.md)")
 
 
 def prior_scale(text: str):
@@ -126,17 +132,15 @@ def model_options(p) -> None:
 
 def _common_fit_options(p) -> None:
     model_options(p)
-    sigma_options(p)
+    sigma_options(p, prior_default="evidence")
     p.add_argument("--rank-tol", type=fraction, default=None,
                    help="relative singular value below which a parameter combination counts as not "
                         "identifiable (default 1e-4)")
-    p.add_argument("--min-resolution", type=non_negative(), default=0.1, metavar="FRACTION",
-                   help="hold parameters of the description (joint rows, probe) and of the encoders' reading errors "
-                        "(eccentricity, joint_gain: geometry like a joint offset) the data would resolve only to "
-                        "worse than this fraction of a plausible error size (lengths: --plausible-length-mm; angles "
-                        "0.01 rad per mm of it; 10x the nominal probe compliance): their effect is below the noise "
-                        "(default 0.1; 0 keeps every linearly independent parameter). Other effects' parameters "
-                        "are always estimated when linearly identifiable")
+    p.add_argument("--min-resolution", type=non_negative(), default=0.0, metavar="FRACTION",
+                   help="with --prior-scale off only: hold parameters of the description (joint rows, probe) and of "
+                        "the encoders' reading errors (eccentricity, joint_gain) the data would resolve only to worse "
+                        "than this fraction of a plausible error size (the practical-resolution rule of earlier "
+                        "versions: 0.1). Default 0: every linearly independent parameter is estimated")
 
 
 def register(sub) -> None:
@@ -156,8 +160,15 @@ def register(sub) -> None:
     campaign_inputs(c)
     _common_fit_options(c)
     c.add_argument("--holdout", default=None,
-                   help="measurements kept out of the fit for validation: a fraction (0.2) drawn at random per "
-                        "artefact kind, or a comma-separated list of measurement ids")
+                   help="data kept out of the fit for validation: a fraction (0.2) drawn at random, or (with "
+                        "--holdout-by measurement) a comma-separated list of measurement ids")
+    c.add_argument("--holdout-by", choices=("measurement", "pose"), default="measurement",
+                   help="measurement (default): whole measurements held out (the fraction drawn per artefact kind), "
+                        "their features and reference frame fitted on themselves, the reference points also "
+                        "predicted with the training fit's T_ref_base; pose: that fraction of every feature's poses "
+                        "held out, each predicted against its feature as fitted on the training poses (reference "
+                        "points: with the training fit's T_ref_base), so one placement of one artefact can be "
+                        "validated")
     c.add_argument("--seed", type=seed, default=0, help="seed of the random --holdout draw (default 0)")
     c.add_argument("--reference", choices=("fit", "identity", "off"), default="fit",
                    help="reference coordinates: fit T_ref_base (default), take them as base coordinates "
@@ -250,9 +261,12 @@ def fit_options(args, **fields):
     """The :class:`~calibration.options.FitOptions` of the fit options on the command line (``--min-resolution``,
     ``--plausible-length-mm``, ``--weights``, ``--prior-scale``, ``--rank-tol``), with ``fields`` set too."""
     from .options import FitOptions
+    prior = getattr(args, "prior_scale", None)
+    if args.min_resolution and prior is not None:
+        raise InputError(f"--min-resolution holds weak parameters without a prior: give --prior-scale off with it "
+                         f"(the prior, --prior-scale {prior}, shrinks them instead)")
     kw = {"min_resolution": args.min_resolution or None,
-          "weights_from_data": getattr(args, "weights", "stated") == "data",
-          "prior_scale": getattr(args, "prior_scale", None)}
+          "weights_from_data": getattr(args, "weights", "stated") == "data", "prior_scale": prior}
     if getattr(args, "plausible_length_mm", None) is not None:
         kw["prior_length"] = args.plausible_length_mm * 1e-3
     if args.rank_tol is not None:
@@ -300,12 +314,33 @@ def _load_data(args):
     return model, make_data(points, artefacts, model, reference=reference), arm.values, warnings
 
 
+def _split(args, data):
+    """(training data, held-out data or None, held-out pose mask over ``data`` or None) of ``--holdout``:
+    whole measurements (``--holdout-by measurement``) or a share of every feature's poses (``pose``)."""
+    from .data import split_holdout, split_poses
+    holdout = _holdout(args.holdout)
+    if holdout is None:
+        if args.holdout_by == "pose":
+            raise InputError("--holdout-by pose needs --holdout FRACTION (the share of every feature's poses)")
+        return data, None, None
+    if args.holdout_by == "measurement":
+        train, test = split_holdout(data, holdout, args.seed)
+        return train, test, None
+    if not isinstance(holdout, float):
+        raise InputError(f"--holdout-by pose takes a fraction of every feature's poses, not measurement ids "
+                         f"(got {args.holdout!r})")
+    mask = split_poses(data, holdout, args.seed)
+    if not mask.any():
+        raise InputError(f"--holdout {args.holdout} --holdout-by pose holds out no pose: every feature has too few "
+                         "poses to spare one (a feature keeps the fewest its fit needs, plus one)")
+    return data.select(~mask), None, mask
+
+
 def run_calibrate(args: argparse.Namespace) -> int:
-    from .calibrate import calibrate
-    from .data import split_holdout
+    from .calibrate import calibrate, nominal_baseline
     from .model_output import refine_torques
-    from .report import poorly_determined, write_outputs
-    from .validation import with_u
+    from .report import write_outputs
+    from .validation import worse_than_nominal
     inputs = [args.points, args.artefacts, *arm_inputs(args), args.reference_points]
     with output_folder(args.output, inputs, "calibrate") as out:
         model, data, values, warnings = _load_data(args)
@@ -314,34 +349,61 @@ def run_calibrate(args: argparse.Namespace) -> int:
             why = no_torque_reason(model.desc, data)
             if why:
                 log.warning(f"joint compliance cannot be identified: {why}")
-        holdout = _holdout(args.holdout)
-        train, test = (data, None) if holdout is None else split_holdout(data, holdout, args.seed)
+        train, test, poses = _split(args, data)
         options = fit_options(args, free=_free(model, args), values=values, weights=_weights(args),
                               on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
                               drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference)
         res = refine_torques(calibrate(model, train, options))
-        val_train, val_test, conf = conformance_entry(_mpe(args), (res, res.data),
-                                                      None if test is None else (res, test))
+        base = nominal_baseline(model, res.data, replace(res.options, weights=res.weights))
+        held = (None if test is None and poses is None else
+                (res, test, base) if poses is None else (res, data, base, ~poses))
+        val_train, val_test, conf = conformance_entry(_mpe(args), (res, res.data, base), held)
+        worse = worse_than_nominal(val_test or [])
         files = write_outputs(res, out.dir, inputs=inputs, validation_training=val_train,
                               validation_holdout=val_test, plots=not args.no_plots,
                               extra={"inputs": {"points": str(args.points), "artefacts": str(args.artefacts),
                                                 "arm": str(args.arm),
                                                 "reference_points": None if args.reference_points is None
                                                 else str(args.reference_points)},
-                                     "holdout": None if test is None else test.measurements(),
+                                     "holdout": (None if test is None else test.measurements()),
+                                     "holdout_by": args.holdout_by,
+                                     "holdout_poses": None if poses is None else [int(i) for i in np.flatnonzero(poses)],
+                                     "nominal_baseline": _baseline_entry(base),
+                                     "heldout_worse_than_nominal": worse,
                                      "conformance": conf,
                                      "warnings": [w.as_dict() for w in warnings]})
     files = {k: out.published(v) for k, v in files.items()}
-    log.info(f"{counted(len(train), 'training point')} in {counted(len(train.measurements()), 'measurement')}"
-             + (f", {counted(len(test), 'held-out point')} in {counted(len(test.measurements()), 'measurement')}"
-                if test is not None else ""))
+    _log_calibration(res, data, train, test, poses, warnings, (val_train, val_test, conf, worse), files)
+    return 0
+
+
+NOMINAL_NOTE = ("nominal = the description with only the tip offset (probe or marker) fitted, the artefacts' "
+                "unknowns and the reference frame solved as for the calibrated model")
+
+
+def _baseline_entry(base) -> dict:
+    """summary.json's ``nominal_baseline``: what the nominal of every figure is, and its fitted tip offset."""
+    return {"definition": NOMINAL_NOTE, "fitted": list(base.free),
+            "values_mm": {n: base.value(n) * 1e3 for n in base.free}, "s0": base.s0,
+            "T_ref_base": None if base.reference is None else base.reference["T_ref_base"]}
+
+
+def _log_calibration(res, data, train, test, poses, warnings, validation, files) -> None:
+    """The console report of ``aacmm calibrate``."""
+    from .report import poorly_determined
+    from .validation import with_u
+    val_train, val_test, conf, worse = validation
+    held = ("" if test is None and poses is None else
+            f", {counted(len(test), 'held-out point')} in {counted(len(test.measurements()), 'measurement')}"
+            if poses is None else f", {counted(int(poses.sum()), 'held-out pose')} (a share of every feature's)")
+    log.info(f"{counted(len(train), 'training point')} in {counted(len(train.measurements()), 'measurement')}" + held)
     if data.points.force_kind == "two-channel":
         log.info("two-channel force sensor: the probe-y force is not measured and is taken as zero")
     log_warnings(warnings)
     for line in noise_lines(res):
         log.info(line)
     log.info(f"solver: {res.status} after {res.iterations} iterations; s0 = {res.s0:.3f}; "
-          f"{len(res.free)} parameters free, {res.n_nuisance} nuisance unknowns, dof {res.dof}")
+             f"{len(res.free)} parameters free, {res.n_nuisance} nuisance unknowns, dof {res.dof}")
     idf = res.identifiability_final
     log.info(f"identifiability: rank {idf.rank}/{len(idf.names)} at the solution, condition number {idf.condition:.3g}")
     for f in res.fixed:
@@ -354,11 +416,14 @@ def run_calibrate(args: argparse.Namespace) -> int:
             log.info(f"  {o.measurement} {o.feature} line {o.line}: standardized {o.standardized:+.1f}")
     for title, rows in (("training", val_train), ("held-out", val_test)):
         if rows:
-            log.info(f"validation on {title} data (nominal -> calibrated; ± standard uncertainty, bootstrap over "
-                  "its measurements):")
+            log.info(f"validation on {title} data (nominal -> calibrated; {NOMINAL_NOTE}; ± standard uncertainty, "
+                     "bootstrap over its measurements):")
             for r in rows:
                 log.info(f"  {r['label']}: {with_u(r['before'], r['u_before'])} -> {with_u(r['after'], r['u_after'])} "
-                      f"{r['unit']} ({r['ratio']:.1f}x)")
+                         f"{r['unit']} ({r['ratio']:.2f}x)")
+    if worse:
+        log.warning("on the held-out data the calibrated model is WORSE than the nominal: "
+                    + "; ".join(f"{r['label']} {r['before']:.4g} -> {r['after']:.4g} {r['unit']}" for r in worse))
     log_conformance(conf)
     budget = res.probing_budget()
     if budget is not None:
@@ -369,17 +434,17 @@ def run_calibrate(args: argparse.Namespace) -> int:
             log.warning("the propagated encoder and force-sensor noise alone exceed the residual scatter: the probing "
                         "scatter is set to 0 (their stated uncertainties are larger than this campaign shows)")
     log.info(f"model file -> {files['description']} (covariance {files['covariance'].name}); report -> {files['report']}")
-    return 0
 
 
 def conformance_entry(mpe: dict, training: tuple, holdout: tuple | None = None, sets: str = "") -> tuple:
     """The standard tests of ``calibrate`` and ``close-loop`` (one implementation): ``training`` and
-    ``holdout`` each ``(result, data)``, the fit whose calibrated model is tested and the data it is tested
-    on (``holdout`` None: none). Returns (validation rows on training, on holdout or None, the summary's
+    ``holdout`` each ``(result, data)`` or ``(result, data, baseline[, train_mask])`` (:func:`_validation`), the
+    fit whose calibrated model is tested, the data it is tested on (``holdout`` None: none) and the nominal
+    baseline it is compared with. Returns (validation rows on training, on holdout or None, the summary's
     ``conformance`` entry: ``mpe_given``, ``mpe_um``, ``note`` (``sets`` appended: what the two data sets
     are), ``training``, ``holdout``)."""
-    val_train, conf_train = _validation(*training, mpe)
-    val_test, conf_test = _validation(*holdout, mpe) if holdout is not None else (None, None)
+    val_train, conf_train = _validation(*training, mpe=mpe)
+    val_test, conf_test = _validation(*holdout, mpe=mpe) if holdout is not None else (None, None)
     conf = {"mpe_given": bool(mpe), "mpe_um": {k: v * 1e6 for k, v in mpe.items()},
             "note": ("PASS: every tested item of the calibrated model within the MPE given by its "
                      "--mpe-*-um option; FAIL: at least one beyond." if mpe else
@@ -399,13 +464,51 @@ def log_conformance(conf: dict) -> None:
             log.info(line)
 
 
-def _validation(res, data, mpe):
+def _validation(res, data, base=None, train_mask=None, mpe=None):
     """The before/after figure rows and the standard tests (:func:`calibration.validation.conformance`) of
-    the calibrated model on ``data``."""
-    from .validation import conformance, figure_rows, validate
-    before = validate(res.model, np.zeros(res.model.spec.size), data, res.weights, res.reference_mode)
-    after = res.validate(data)
+    the calibrated model on ``data``. Before: ``base`` (a :func:`calibration.calibrate.nominal_baseline` fit)
+    or, without one, the nominal description (p = 0). The reference points are also predicted with each fit's
+    own ``T_ref_base`` when ``data`` is not the fit's. ``train_mask``: only the poses outside it are held out,
+    each against its feature fitted on the poses inside (:func:`calibration.validation.validate_poses`; no
+    standard tests)."""
+    from .validation import conformance, figure_rows, validate, validate_poses
+    m, w, mode = res.model, res.weights, res.reference_mode
+    p0 = np.zeros(m.spec.size) if base is None else base.p
+    if train_mask is not None:
+        return figure_rows(validate_poses(m, p0, data, train_mask, w, mode),
+                           validate_poses(m, res.p, data, train_mask, w, mode)), None
+    own = data is res.data
+
+    def frame(fit):
+        return None if own or fit is None or fit.reference is None else fit.reference["T_ref_base"]
+    before = validate(m, p0, data, w, mode, T_ref_base=frame(base))
+    after = validate(m, res.p, data, w, mode, T_ref_base=frame(res))
     return figure_rows(before, after), conformance(after, mpe, before)
+
+
+def prior_lines(res) -> list[str]:
+    """Console lines: the prior's scale of each group (chosen by the evidence or given) and the parameters the
+    prior dominates."""
+    if res.prior_scales is None:
+        return []
+    from .calibrate import display_unit
+    evidence = bool(res.evidence)
+    out = ["prior: each free parameter ~ N(nominal, (its group's scale x its plausible size)^2)"
+           + (f", the scales chosen by the evidence ({len(res.evidence)} rounds"
+              + ("" if res.evidence[-1].get("settled", True) else "; " + res.evidence[-1]["note"]) + ")"
+              if evidence else " (scales given)") + ":"]
+    for g, v in res.prior_groups.items():
+        out.append(f"  {g}: scale {v['scale']:.3g}; the data determine {v['effective_parameters']:.1f} of its "
+                   f"{len(v['parameters'])} parameters")
+    dominated = [r for r in res.parameter_rows() if r["state"] == "prior-dominated"]
+    if dominated:
+        out.append(f"prior-dominated ({len(dominated)}: the data add less than the prior; they stay near the nominal "
+                   "with about the prior's uncertainty, which the covariance carries):")
+        for r in dominated:
+            du, _ = display_unit(r["unit"])
+            out.append(f"  {r['name']}: {r['display_value']:.4g} ± {r['display_u']:.3g} {du} (prior ± "
+                       f"{r['display_prior_u']:.3g}, posterior/prior variance {r['prior_ratio']:.2f})")
+    return out
 
 
 def noise_lines(res) -> list[str]:
@@ -415,10 +518,6 @@ def noise_lines(res) -> list[str]:
         out.append(f"noise from the data (variance components, {len(res.weights_history)} fit(s)):")
         if not res.weights_history[-1].get("settled", True):
             out.append("  warning: " + res.weights_history[-1]["note"])
-    if res.prior_scale is not None:
-        tried = ", ".join(f"{r['scale']:g}" for r in res.evidence if r["log_evidence"] is not None)
-        out.append(f"prior: each free parameter ~ N(nominal, ({res.prior_scale:g} x its plausible error size)^2)"
-                   + (f", the scale of the largest evidence among {tried}" if tried else " (scale given)"))
     for v in res.variance:
         what = f"{v['group']} points" if v["group"] != "length" else "lengths"
         used = res.weights.factor(v["group"])
@@ -434,7 +533,7 @@ def noise_lines(res) -> list[str]:
         else:
             out.append(f"  {what}: residual/stated ratio {v['factor']:.3g} (redundancy {v['redundancy']:.1f} of "
                        f"{v['rows']} rows); --weights data would use it")
-    return out
+    return out + prior_lines(res)
 
 
 def run_montecarlo(args: argparse.Namespace) -> int:

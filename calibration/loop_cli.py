@@ -111,6 +111,7 @@ def run(args: argparse.Namespace) -> int:
         if pts is not None:
             Arm(desc, effects).check_points(pts)
             warnings += point_warnings(desc, pts)
+    _check_folds(args.folds, points, reference)
     weights = Weights(args.sigma_probe_um * 1e-6, args.sigma_ref_um * 1e-6,
                       None if args.sigma_length_um is None else args.sigma_length_um * 1e-6)
     holdout = _holdout(args.holdout)
@@ -144,6 +145,15 @@ def run(args: argparse.Namespace) -> int:
     log.info(f"model file: {model_paths(args.output, loop_model_name(loop))['model']} (every --arm applies it)")
     log.info(f"report: {args.output / 'report.html'}; machine summary: {args.output / 'summary.json'}")
     return 0
+
+
+def _check_folds(folds: int, points, reference) -> None:
+    """``--folds`` at most the poses the data hold (points on a feature, reference points): each fold of the
+    decisions holds out at least one pose, whether folded by measurement or by pose."""
+    poses = int((points.feature != "").sum()) + (0 if reference is None else len(reference))
+    if folds > poses:
+        raise InputError(f"--folds {folds}: the data hold {poses} poses (points on a feature and reference points), "
+                         f"and each fold holds out at least one: ask for at most {poses} folds")
 
 
 def _conformance(loop, mpe: dict) -> dict:

@@ -102,7 +102,7 @@ def refine_torques(result, rounds: int = 5, tol_nm: float = 1.0):
                                              "weights_history", "options")}
     base = replace(result.options or FitOptions(), weights=result.weights, reference=result.reference_mode,
                    min_resolution=None, drop_outliers=False, weights_from_data=False, start=None,
-                   prior_scale=result.prior_scale, prior_centre=result.prior_centre)
+                   prior_scale=result.prior_scales, prior_centre=result.prior_centre)
     cur = result
     for _ in range(rounds):
         tau_g, tau_c = PinocchioArm(cur.described()).torques(data.points.q, data.wrench)

@@ -55,14 +55,16 @@ class FitOptions:
         reference: "fit" (``T_ref_base`` unknown), "identity" (reference coordinates are base
             coordinates) or "off" (reference columns ignored).
         max_iter: iterations of each Levenberg-Marquardt solve.
-        min_resolution: hold parameters the data would resolve only to worse than this fraction of a
-            plausible error size; None keeps every linearly independent parameter.
+        min_resolution: without a prior, hold parameters the data would resolve only to worse than this
+            fraction of a plausible error size (the practical-resolution rule); None (default) keeps every
+            linearly independent parameter.
         priors: plausible error sizes [SI] by parameter name or glob pattern (overrides).
         prior_length: plausible size [m] of a length error (angles: 10 rad/m times it).
         weights_from_data: estimate the noise of each row group from the fit (variance components) and
             refit until the factors settle.
-        prior_scale: None (no prior), "evidence" (the scale of the largest Laplace evidence) or a positive
-            factor of the plausible error sizes: a Gaussian prior on every free parameter.
+        prior_scale: "evidence" (default: a Gaussian prior on every free parameter, one scale a parameter
+            group chosen by the evidence, :mod:`calibration.prior`), a positive factor (every group's
+            scale), a dict {group: scale} (e.g. the ``prior_scales`` of an earlier fit), or None (no prior).
         prior_centre: the prior's centre (full parameter vector [SI]); None: ``values``.
         blas: BLAS threads during the fit (None: unchanged).
     """
@@ -77,11 +79,11 @@ class FitOptions:
     covariance: str = "residual"
     reference: str = "fit"
     max_iter: int = 200
-    min_resolution: float | None = 0.1
+    min_resolution: float | None = None
     priors: dict | None = None
     prior_length: float | None = None
     weights_from_data: bool = False
-    prior_scale: float | str | None = None
+    prior_scale: float | str | dict | None = "evidence"
     prior_centre: np.ndarray | None = field(default=None, compare=False)
     blas: int | None = 1
 
@@ -110,7 +112,11 @@ class FitOptions:
             raise ValueError(f"max_iter must be a positive integer, got {self.max_iter!r}")
         _positive("min_resolution", self.min_resolution, allow_none=True)
         _positive("prior_length", self.prior_length, allow_none=True)
-        if self.prior_scale != "evidence":
+        if isinstance(self.prior_scale, dict):
+            for g, v in self.prior_scale.items():
+                _positive(f"prior_scale[{g!r}]", v)
+            set_(self, "prior_scale", {str(g): float(v) for g, v in self.prior_scale.items()})
+        elif self.prior_scale != "evidence":
             _positive("prior_scale", self.prior_scale, allow_none=True)
         if self.prior_centre is not None:
             set_(self, "prior_centre", np.array(self.prior_centre, dtype=float))

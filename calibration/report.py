@@ -94,7 +94,7 @@ def plot_residuals(result: CalibrationResult) -> bytes:
 
 def plot_parameters(result: CalibrationResult) -> bytes:
     """PNG: free parameter estimates with 2u error bars, one panel per display unit."""
-    rows = [r for r in result.parameter_rows() if r["state"] == "free"]
+    rows = [r for r in result.parameter_rows() if r["state"] in ("free", "prior-dominated")]
     units = list(dict.fromkeys(r["display_unit"] for r in rows)) or ["-"]
     import matplotlib
     matplotlib.use("Agg", force=False)
@@ -245,8 +245,10 @@ def _fmt(v, digits=4):
 
 
 def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
+    estimated = ("free", "prior-dominated")
     par = [(r["name"], r["state"], r["display_unit"], _fmt(r["display_value"], 6),
-            _fmt(r["display_u"], 3) if r["state"] == "free" else "-") for r in result.parameter_rows()]
+            _fmt(r["display_u"], 3) if r["state"] in estimated else "-", _fmt(r["display_prior_u"], 3),
+            _fmt(r["prior_ratio"], 2)) for r in result.parameter_rows()]
     fixed = [(f.name, f.stage, f.reason) for f in result.fixed]
     idf = result.identifiability_final
     parts = [
@@ -270,15 +272,28 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
                        ("validation_holdout", "Validation on held-out data (never seen by the fit)")):
         rows = summary.get(key)
         if rows:
+            base = summary.get("nominal_baseline")
             parts += [f"<h2>{title}</h2>", "<p>± the standard uncertainty of each figure: a bootstrap over the "
                       "measurements (whole measurements resampled); '-' with fewer than two "
-                      "measurements of its kind.</p>",
+                      "measurements of its kind."
+                      + (f" The nominal: {html.escape(base['definition'])}." if base else "") + "</p>",
                       _table(["figure", "unit", "nominal", "calibrated", "ratio"],
                              [(r["label"], r["unit"], with_u(r["before"], r.get("u_before")),
                                with_u(r["after"], r.get("u_after")), _fmt(r["ratio"], 3)) for r in rows])]
+    worse = summary.get("heldout_worse_than_nominal")
+    if worse:
+        parts.append("<p><b>On the held-out data the calibrated model is worse than the nominal</b>: "
+                     + html.escape("; ".join(f"{r['label']} {r['before']:.4g} -> {r['after']:.4g} {r['unit']}"
+                                             for r in worse)) + ".</p>")
     if summary.get("conformance"):
         parts += conformance_html(summary["conformance"], files)
-    parts += ["<h2>Parameters</h2>", _table(["parameter", "state", "unit", "estimate", "u"], par)]
+    parts += prior_html(result)
+    parts += ["<h2>Parameters</h2>",
+              "<p>state: free (estimated, the data dominate), prior-dominated (estimated, but its posterior "
+              "variance is at least half its prior's: it stays near the nominal with about the prior's "
+              "uncertainty), fixed (not separable from the others, or at a bound; see above), held (not freed). "
+              "'prior u': the prior's standard deviation; 'ratio': posterior / prior variance.</p>",
+              _table(["parameter", "state", "unit", "estimate", "u", "prior u", "ratio"], par)]
     if result.outliers:
         parts += ["<h2>Outliers (kept)</h2>" if not result.dropped else "<h2>Outliers</h2>",
                   _table(["kind", "measurement", "feature", "line", "standardized", "residual [um]"],
@@ -294,6 +309,22 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
             parts += [f"<h2>{title}</h2>", f"<img src='{html.escape(files[name].name)}' style='max-width:100%'>"]
     parts.append("</body></html>")
     return "\n".join(parts)
+
+
+def prior_html(result: CalibrationResult) -> list[str]:
+    """The report's section on the prior: each group's scale and how many of its parameters the data
+    determine."""
+    if result.prior_scales is None:
+        return []
+    rows = [(g, _fmt(v["scale"], 3), len(v["parameters"]), _fmt(v["effective_parameters"], 3),
+             "; ".join(v["size_source"])) for g, v in result.prior_groups.items()]
+    how = (f"chosen by the evidence together with the noise ({len(result.evidence)} rounds)" if result.evidence
+           else "given")
+    return ["<h2>Prior</h2>",
+            f"<p>Each free parameter ~ N(nominal, (scale x plausible size)^2), one scale a group, {how}. "
+            "'determined': the number of the group's parameters the data determine (sum of 1 - posterior/prior "
+            "variance).</p>",
+            _table(["group", "scale", "parameters", "determined", "plausible size at scale 1"], rows)]
 
 
 def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_training=None,

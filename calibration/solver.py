@@ -4,7 +4,8 @@ Unknowns: the free parameters and every nuisance increment, solved jointly. The 
 (a dense block for the parameters, small blocks for each artefact instance); each step solves the
 damped normal equations of the column-scaled Jacobian with a sparse LU (SuperLU). Columns are
 scaled by their norms (Marquardt), so metres, radians and m/N mix without hand-set weights.
-The exit status is always checked: no convergence raises :class:`arm_model.NumericalError`.
+The exit status is always checked: an attempt that runs out of iterations starts again from its best point
+with the damping reset (a damped restart); no convergence after that raises :class:`arm_model.NumericalError`.
 """
 from __future__ import annotations
 
@@ -19,7 +20,8 @@ from arm_model import NumericalError
 
 from .problem import Evaluation, Problem
 
-__all__ = ["LMResult", "Prior", "levenberg_marquardt", "normal_solver", "normal_factor", "blas_threads"]
+__all__ = ["LMResult", "Prior", "levenberg_marquardt", "normal_solver", "normal_factor", "blas_threads",
+           "RESTARTS"]
 
 
 @dataclass
@@ -30,7 +32,7 @@ class LMResult:
     cost: float                   # 0.5 * sum(r_w**2) of the data rows
     iterations: int
     evaluations: int
-    status: str                   # why it stopped (always a convergence reason)
+    status: str | None            # why it stopped (a convergence reason; None only inside an attempt)
     prior_cost: float = 0.0       # 0.5 * sum(((p - centre) / size)**2) over the free parameters (with a prior)
 
 
@@ -82,6 +84,10 @@ def normal_factor(j: sp.spmatrix, damping: np.ndarray | float = 0.0) -> spla.Sup
     return lu
 
 
+#: fresh starts of Levenberg-Marquardt from its best point when an attempt runs out of iterations
+RESTARTS = 3
+
+
 def levenberg_marquardt(problem: Problem, p0, states0, *, max_iter: int = 200, xtol: float = 1e-10,
                         ftol: float = 1e-15, prior: Prior | None = None) -> LMResult:
     """Minimise ``0.5 |r_w|^2`` over the free parameters and the nuisance increments (plus the prior's
@@ -90,12 +96,32 @@ def levenberg_marquardt(problem: Problem, p0, states0, *, max_iter: int = 200, x
     Args:
         p0: full parameter vector [SI]; entries not in ``problem.free`` stay as given.
         states0: starting nuisance states (``problem.initial_states``).
+        max_iter: iterations of one attempt; an attempt that runs out starts again from its best point with
+            the damping reset (a damped restart), up to :data:`RESTARTS` times.
         xtol: stop when the scaled step (its effect on the weighted residuals) is below ``xtol``.
         ftol: stop when the predicted and actual relative cost reductions are below ``ftol``.
         prior: a Gaussian prior on the free parameters, or None.
 
-    The result's ``evaluation`` and ``cost`` are the data rows' (the prior's part is ``prior_cost``).
+    The result's ``evaluation`` and ``cost`` are the data rows' (the prior's part is ``prior_cost``); its
+    ``iterations`` count every attempt's.
     """
+    p, states, done = np.array(p0, dtype=float), list(states0), 0
+    for attempt in range(RESTARTS + 1):
+        out = _lm_attempt(problem, p, states, max_iter, xtol, ftol, prior)
+        done += out.iterations
+        if out.status is not None:
+            out.iterations = done
+            return out
+        p, states = out.p, out.states
+    raise NumericalError(f"Levenberg-Marquardt did not converge in {done} iterations ({RESTARTS} damped restarts "
+                         f"from its best point; cost {out.cost:.6g}): the data may not determine the unknowns "
+                         "(a feature probed at too few distinct poses, poses repeated, or an arm far from its "
+                         "description); check the points and the arm")
+
+
+def _lm_attempt(problem: Problem, p, states, max_iter: int, xtol: float, ftol: float, prior) -> LMResult:
+    """One run of Levenberg-Marquardt from ``p``, ``states``: its result, with ``status`` None when it ran out
+    of iterations (``p``, ``states`` then its best point)."""
     free = problem.free
     n_data = problem.n_rows
 
@@ -103,8 +129,8 @@ def levenberg_marquardt(problem: Problem, p0, states0, *, max_iter: int = 200, x
         ev = problem.evaluate(p, states, jac=jac)
         return ev if prior is None else prior.augment(ev, p, free)
 
-    p = np.array(p0, dtype=float)
-    states = list(states0)
+    p = np.array(p, dtype=float)
+    states = list(states)
     ev = evaluate(p, states)
     cost = 0.5 * float(ev.r @ ev.r)
     n_eval = 1
@@ -114,11 +140,11 @@ def levenberg_marquardt(problem: Problem, p0, states0, *, max_iter: int = 200, x
     scale[scale == 0] = 1.0
     lam, nu = 1e-3, 2.0
     status = None
+    it = 0
     for it in range(1, max_iter + 1):
         js = j @ sp.diags(1.0 / scale)
         g = js.T @ ev.r
-        solve = normal_solver(js, lam)
-        ds = -solve(g)
+        ds = -normal_solver(js, lam)(g)
         jds = js @ ds
         pred = -(g @ ds) - 0.5 * float(jds @ jds)
         if pred <= ftol * cost or not np.isfinite(pred):
@@ -156,9 +182,6 @@ def levenberg_marquardt(problem: Problem, p0, states0, *, max_iter: int = 200, x
             if lam > 1e20:
                 raise NumericalError(f"Levenberg-Marquardt stalled after {it} iterations (no step reduces the "
                                      f"cost {cost:.6g}); the problem may be ill-posed")
-    if status is None:
-        raise NumericalError(f"Levenberg-Marquardt did not converge in {max_iter} iterations "
-                             f"(cost {cost:.6g}); raise max_iter or check the data")
     if prior is None:
         return LMResult(p, states, ev, cost, it, n_eval, status)
     data = Evaluation(ev.r[:n_data], ev.x, ev.jp[:n_data], ev.jt[:n_data])

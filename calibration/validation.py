@@ -12,7 +12,11 @@ is used to place a centre) and the standard figures are computed:
   with the radius free (instances with at least :data:`DIAMETER_MIN_POINTS` points: a ball-bar
   sphere probed 6 times gives a centre, not a diameter);
 * planes: flatness (max - min of the signed distances); reference points: the errors after the
-  best-fit rigid transform ``T_ref_base`` (RMS and max).
+  best-fit rigid transform ``T_ref_base`` (RMS and max), and, given the transform of a fit on other data
+  (the training data of the same instrument station), the errors with that transform: a prediction;
+* held-out poses (:func:`validate_poses`): each pose held out of a feature is predicted against that
+  feature as fitted on its training poses (a seat's centre, a sphere, a plane; reference points with the
+  training fit's ``T_ref_base``): the RMS and largest distance.
 
 :func:`before_after` tabulates the figures of two parameter vectors (nominal and calibrated), each
 with a standard uncertainty from :func:`bootstrap`: the figures of the calibrated model are fixed
@@ -33,8 +37,9 @@ from .data import CalibrationData, Weights
 from .problem import MIN_POINTS, Problem
 from .solver import blas_threads, levenberg_marquardt
 
-__all__ = ["Validation", "validate", "before_after", "figure_rows", "bootstrap", "with_u", "FIGURES",
-           "DIAMETER_MIN_POINTS", "BOOTSTRAP_SAMPLES", "MpeTest", "MPE_TESTS", "conformance"]
+__all__ = ["Validation", "validate", "validate_poses", "heldout_residuals", "before_after", "figure_rows",
+           "bootstrap", "with_u", "FIGURES", "DIAMETER_MIN_POINTS", "BOOTSTRAP_SAMPLES", "MpeTest", "MPE_TESTS",
+           "conformance", "worse_than_nominal"]
 
 #: resamples of :func:`bootstrap` (the relative precision of a standard deviation from B resamples
 #: is about 1 / sqrt(2 B): 3 % for 500)
@@ -57,6 +62,10 @@ FIGURES = {
     "flatness_max": ("plane flatness: max (max - min)", "um", 1e6),
     "reference_rms": ("reference points: RMS 3D error after best-fit transform", "um", 1e6),
     "reference_max": ("reference points: max 3D error after best-fit transform", "um", 1e6),
+    "reference_rms_predicted": ("reference points: RMS 3D error, T_ref_base of the training fit", "um", 1e6),
+    "reference_max_predicted": ("reference points: max 3D error, T_ref_base of the training fit", "um", 1e6),
+    "pose_rms": ("held-out poses: RMS distance from their feature fitted on the training poses", "um", 1e6),
+    "pose_max": ("held-out poses: max distance from their feature fitted on the training poses", "um", 1e6),
 }
 
 
@@ -70,6 +79,12 @@ class Validation:
     reference: dict | None = None
     #: the reference points' errors [m] and their measurements (for :func:`bootstrap`; not in :meth:`to_dict`)
     reference_errors: tuple | None = field(default=None, repr=False)
+    #: reference points with the ``T_ref_base`` of another fit: n, RMS, max [m]
+    reference_predicted: dict | None = None
+    reference_predicted_errors: tuple | None = field(default=None, repr=False)
+    #: held-out poses against their features fitted on the training poses: n, RMS, max [m]
+    poses: dict | None = None
+    pose_errors: tuple | None = field(default=None, repr=False)
 
     def summary(self) -> dict:
         """Key figures (SI) by :data:`FIGURES` key; absent kinds are left out."""
@@ -95,6 +110,10 @@ class Validation:
         if self.reference:
             out["reference_rms"] = self.reference["rms"]
             out["reference_max"] = self.reference["max"]
+        for key, item in (("reference", self.reference_predicted), ("pose", self.poses)):
+            if item:
+                suffix = "_predicted" if key == "reference" else ""
+                out[f"{key}_rms{suffix}"], out[f"{key}_max{suffix}"] = item["rms"], item["max"]
         return out
 
     def to_dict(self) -> dict:
@@ -109,7 +128,8 @@ class Validation:
                 return [clean(x) for x in v]
             return v
         return clean({"summary": self.summary(), "articulation": self.articulation, "lengths": self.lengths,
-                      "diameters": self.diameters, "planes": self.planes, "reference": self.reference})
+                      "diameters": self.diameters, "planes": self.planes, "reference": self.reference,
+                      "reference_predicted": self.reference_predicted, "poses": self.poses})
 
 
 def _articulation(x: np.ndarray) -> dict:
@@ -123,10 +143,27 @@ def _articulation(x: np.ndarray) -> dict:
 
 
 def validate(model: ArmModel, p, data: CalibrationData, weights: Weights | None = None,
-             reference: str = "fit") -> Validation:
-    """Validation figures of ``model`` with parameters ``p`` (full vector, SI) on ``data``."""
+             reference: str = "fit", T_ref_base=None) -> Validation:
+    """Validation figures of ``model`` with parameters ``p`` (full vector, SI) on ``data``; ``T_ref_base``
+    (4x4, of a fit on other data of the same instrument station) adds the reference points' errors with that
+    transform (``reference_predicted``) beside those after their own best-fit one."""
     with blas_threads(1):
-        return _validate(model, p, data, weights, reference)
+        val = _validate(model, p, data, weights, reference)
+        if T_ref_base is not None and reference == "fit" and val.reference is not None:
+            pred = _validate(model, p, _in_base(data, T_ref_base), weights, "identity")
+            val.reference_predicted = {k: pred.reference[k] for k in ("n", "rms", "max")}
+            val.reference_predicted_errors = pred.reference_errors
+        return val
+
+
+def _in_base(data: CalibrationData, T_ref_base) -> CalibrationData:
+    """``data`` with its reference coordinates mapped into the base frame by the inverse of ``T_ref_base``
+    (distances are kept: the errors in the base frame are those in the reference frame)."""
+    from dataclasses import replace
+    t = np.asarray(T_ref_base, dtype=float)
+    ref = data.points.ref
+    mapped = (ref - t[:3, 3]) @ t[:3, :3]
+    return replace(data, points=replace(data.points, ref=mapped))
 
 
 def _validate(model, p, data, weights, reference) -> Validation:
@@ -184,30 +221,98 @@ def _validate(model, p, data, weights, reference) -> Validation:
     return val
 
 
+def heldout_residuals(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit",
+                      train=None) -> dict:
+    """Residual rows of held-out points with the parameters ``p`` held: ``r`` weighted (n,), ``e`` [m] (n,),
+    ``measurement``, ``kind`` and ``point`` (index into ``data``, -1 for a length) per row.
+
+    ``train`` None: every point of ``data`` is held out and every nuisance unknown (centre, axis, plane,
+    ``T_ref_base``) is solved on ``data`` alone. ``train`` a mask: the points where it holds are the
+    training poses; the nuisance unknowns are solved on them, and the rows of the other points are
+    returned (a held-out pose against the centre fitted on the rest of its feature's poses); the
+    lengths then belong to training."""
+    prob = Problem(model, data, weights, [], reference=reference)
+    if train is None:
+        states = levenberg_marquardt(prob, p, prob.initial_states(p)).states
+        keep = np.ones(prob.n_rows, bool)
+    else:
+        train = np.asarray(train, bool)
+        sub = Problem(model, data.select(train), weights, [], reference=reference)
+        fitted = {(it.measurement, it.feature): st for it, st in
+                  zip(sub.instances, levenberg_marquardt(sub, p, sub.initial_states(p)).states)}
+        start = prob.initial_states(p)
+        states = [fitted.get((it.measurement, it.feature), s0) for it, s0 in zip(prob.instances, start)]
+        missing = [f"{it.measurement} {it.feature}" for it in prob.instances
+                   if (it.measurement, it.feature) not in fitted]
+        if missing:
+            raise ValueError(f"no training pose on {', '.join(missing)}: its centre cannot be predicted")
+        keep = (prob.row_distance < 0) & ~train[np.maximum(prob.row_point, 0)]
+    r = prob.evaluate(p, states, jac=False).r
+    pts = data.points
+    meas = np.empty(len(r), dtype=object)
+    kind = np.empty(len(r), dtype=object)
+    ok = prob.row_distance < 0
+    meas[ok] = pts.measurement[prob.row_point[ok]]
+    kind[ok] = [prob.instances[i].kind for i in prob.row_instance[ok]]
+    for row in np.flatnonzero(~ok):
+        meas[row] = prob.distance_items[prob.row_distance[row]].measurement
+        kind[row] = "length"
+    point = np.where(ok, prob.row_point, -1)
+    return {"r": r[keep], "e": (r * prob.sigma)[keep], "measurement": meas[keep], "kind": kind[keep],
+            "point": point[keep]}
+
+
+def validate_poses(model: ArmModel, p, data: CalibrationData, train, weights: Weights | None = None,
+                   reference: str = "fit") -> Validation:
+    """Figures of the poses of ``data`` outside the mask ``train``, each predicted against its feature as
+    fitted on the training poses (a seat's centre, a sphere, a plane, a ring's axis; the reference points
+    with the ``T_ref_base`` fitted on the training reference points): ``poses`` = n, RMS and max of each
+    held-out point's distance [m] (the norm of its residual rows), with the errors by measurement for
+    :func:`bootstrap`."""
+    with blas_threads(1):
+        h = heldout_residuals(model, p, data, weights or Weights(), reference, train)
+    pts = h["point"]
+    idx = np.unique(pts[pts >= 0])
+    e = np.array([np.sqrt(np.sum(h["e"][pts == i] ** 2)) for i in idx])
+    val = Validation()
+    if len(e):
+        val.poses = {"n": int(len(e)), "rms": float(np.sqrt(np.mean(e ** 2))), "max": float(e.max())}
+        val.pose_errors = (e, np.asarray(data.points.measurement)[idx])
+    return val
+
+
+def worse_than_nominal(rows: list[dict]) -> list[dict]:
+    """The rows of :func:`figure_rows` (nominal before, calibrated after) where the calibrated model is worse
+    than the nominal: ``after > before``."""
+    return [r for r in rows if r["after"] > r["before"]]
+
+
 def _units(val: Validation) -> dict:
     """Measurement id -> its items: (list name, item); ``"reference"`` items are the errors [m]."""
     out: dict = {}
     for name in ("articulation", "lengths", "diameters", "planes"):
         for item in getattr(val, name):
             out.setdefault(item["measurement"], []).append((name, item))
-    if val.reference_errors is not None:
-        e, meas = val.reference_errors
-        for m in dict.fromkeys(meas.tolist()):
-            out.setdefault(m, []).append(("reference", e[meas == m]))
+    for name, errors in (("reference", val.reference_errors), ("reference_predicted", val.reference_predicted_errors),
+                         ("poses", val.pose_errors)):
+        if errors is not None:
+            e, meas = errors
+            for m in dict.fromkeys(meas.tolist()):
+                out.setdefault(m, []).append((name, e[meas == m]))
     return out
 
 
 def _summary_of(items) -> dict:
     v = Validation()
-    ref = []
+    errors: dict = {}
     for name, item in items:
-        if name == "reference":
-            ref.append(item)
+        if name in ("reference", "reference_predicted", "poses"):
+            errors.setdefault(name, []).append(item)
         else:
             getattr(v, name).append(item)
-    if ref:
-        e = np.concatenate(ref)
-        v.reference = {"n": len(e), "rms": float(np.sqrt(np.mean(e ** 2))), "max": float(e.max())}
+    for name, parts in errors.items():
+        e = np.concatenate(parts)
+        setattr(v, name, {"n": len(e), "rms": float(np.sqrt(np.mean(e ** 2))), "max": float(np.max(np.abs(e)))})
     return v.summary()
 
 

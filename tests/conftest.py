@@ -77,3 +77,11 @@ def seat_figures_of(res, desc, points) -> dict:
         aux = AuxData(None, g, c)
     return seat_figures(m.ball_centres(points.q, points.wrench, res.p, aux), points.feature, ("hole-0", "hole-1"),
                         0.05)
+
+
+def loop_fit_options():
+    """The options of ``close-loop``'s own fits (no prior; the practical-resolution rule holds weak parameters):
+    plain ``calibrate`` compared with the loop at the same estimation."""
+    from calibration.loop import LEGACY_RESOLUTION
+    from calibration.options import FitOptions
+    return FitOptions(weights_from_data=True, prior_scale=None, min_resolution=LEGACY_RESOLUTION)

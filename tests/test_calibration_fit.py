@@ -29,24 +29,28 @@ def _data(model, c):
 
 
 def test_noise_free_campaign_is_recovered_exactly(model):
-    """Without noise the fit returns the truth to 1e-11 (m, rad) and residuals below 1e-11 m when the
-    unidentifiable parameters are zero in the truth."""
+    """Without noise the least-squares fit (no prior) returns the truth to 1e-11 (m, rad) and residuals below
+    1e-11 m when the unidentifiable parameters are zero in the truth; the default fit (a prior, the noise
+    estimated with it) to 1e-9: the noise it finds is nil, so the prior's pull is too."""
     spec = replace(SPEC, noise=0.0, reference_noise=0.0)
     c = make_campaign(model, spec, seed=21)
     w = Weights(probe=1e-6, reference=1e-6)
-    res = calibrate(model, _data(model, c), FitOptions(weights=w))
+    res = calibrate(model, _data(model, c), FitOptions(weights=w, prior_scale=None))
     # the fixed parameters' true errors map into the kept ones to first order only: the second-order
     # remainder (~(1e-4 rad)^2 x lever) leaves nanometres; with them zero in the truth the recovery is exact
     assert np.sqrt(np.mean(res.residuals["value"] ** 2)) < 2e-8 and res.status.startswith("converged")
     truth = c.p_true.copy()
     truth[[model.spec.index(f.name) for f in res.fixed]] = 0.0
     c2 = make_campaign(model, spec, seed=21, p_true=truth, T_ref_base=c.T_ref_base)
-    res2 = calibrate(model, _data(model, c2), FitOptions(free=list(res.free), weights=w))
+    res2 = calibrate(model, _data(model, c2), FitOptions(free=list(res.free), weights=w, prior_scale=None))
     assert res2.free == res.free and not res2.fixed
     idx = [model.spec.index(n) for n in res2.free]
     assert_close(res2.p[idx], truth[idx], atol=1e-11)
     assert_close(res2.p, truth, atol=1e-11)
     assert np.sqrt(np.mean(res2.residuals["value"] ** 2)) < 1e-11
+    res3 = calibrate(model, _data(model, c2), FitOptions(free=list(res.free), weights=w, weights_from_data=True))
+    assert res3.free == res.free and res3.prior_scales is not None
+    assert_close(res3.p, truth, atol=1e-9)
 
 
 @pytest.fixture(scope="module")

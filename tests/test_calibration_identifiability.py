@@ -144,3 +144,31 @@ def test_modified_dh_arm(nominal):
     peq = res.equivalent(c.p_true)
     z = [(res.value(n) - peq[model.spec.index(n)]) / res.uncertainty(n) for n in res.free]
     assert np.max(np.abs(z)) < 3.5 and len(res.free) >= 18
+
+
+def test_base_set_of_the_full_origin_errors_is_the_literature_count(nominal, tmp_path):
+    """The same 7-joint arm as a URDF (six errors a joint origin, three of the tip: 45) reduces, by the rank of
+    the identification Jacobian and pivoted QR, to the base set the literature counts for revolute joints
+    measured by a point: 4R + 2P + 6 (Everett, Driels and Mooring 1987) less the tool's orientation (3), so
+    31 with the base pose known (reference points in the base frame) and 25 with it unknown (its 6 rigid
+    motions a gauge). As DH rows (four errors a row) the base frame lacks two errors: 25 and 23."""
+    from arm_model.urdf import urdf_text
+    from arm_model.urdf_import import description_from_urdf
+    text = urdf_text(nominal)
+    text = text[: text.index('  <joint name="stylus_root_joint"')]
+    text += ('  <joint name="tip_joint" type="fixed"><parent link="flange"/><child link="tip"/>'
+             '<origin xyz="0.002 -0.001 0.085" rpy="0 0 0"/></joint>\n  <link name="tip"/>\n</robot>\n')
+    path = tmp_path / "arm.urdf"
+    path.write_text(text)
+    spec = SynthSpec(ballbars=8, ballbar_points=5, seats=3, articulations=10, spheres=1, noise=1e-6,
+                     reference_points=12)
+    counts = {}
+    for label, desc in (("urdf", description_from_urdf(path, "tip")), ("dh", nominal)):
+        model = ArmModel(desc)
+        c = make_campaign(model, spec, seed=8, T_ref_base=np.eye(4))
+        data = make_data(c.points, c.artefacts, model, reference=c.reference_points)
+        for ref in ("fit", "identity"):
+            res = calibrate(model, data, FitOptions(weights=Weights(1e-6, 1e-6), reference=ref, prior_scale=None))
+            assert res.identifiability_final.rank == len(res.free)
+            counts[label, ref] = len(res.free)
+    assert counts == {("urdf", "fit"): 25, ("urdf", "identity"): 31, ("dh", "fit"): 23, ("dh", "identity"): 25}

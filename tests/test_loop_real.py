@@ -81,12 +81,12 @@ def test_trained_on_one_placement_the_loop_is_no_worse_than_calibrate_on_the_oth
     from calibration.calibrate import FitOptions, calibrate
     from calibration.data import make_data
     from calibration.loop import close_loop
-    from conftest import seat_figures_of
+    from conftest import loop_fit_options, seat_figures_of
 
     desc = load_arm(REAL / "panda-with-inertials.urdf", "ball_link")
     art = read_artefacts(REAL / "artefacts.toml")
     pts = {p: read_points(REAL / p / "points.csv", 7) for p in ("front", "right", "back-high")}
-    plain = calibrate(ArmModel(desc), make_data(pts["front"], art, ArmModel(desc)), FitOptions(weights_from_data=True))
+    plain = calibrate(ArmModel(desc), make_data(pts["front"], art, ArmModel(desc)), loop_fit_options())
     loop = close_loop(pts["front"], art, desc)
     assert loop.model_fit is not None and len(loop.model_fit.data) == len(pts["front"])
 

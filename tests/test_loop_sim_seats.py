@@ -20,6 +20,7 @@ from calibration.calibrate import FitOptions, calibrate
 from calibration.data import make_data
 from calibration.loop import close_loop
 from calibration.placements import seat_figures
+from conftest import loop_fit_options
 
 REAL = Path(__file__).resolve().parents[1] / "examples" / "data" / "real-panda-seats"
 #: plate placements in the robot's base frame [m] and the direction from hole-0 to hole-1
@@ -68,7 +69,7 @@ def heldout_spread(result, pts, places) -> float:
 def study(seed: int, stiffness: float | None):
     desc, pts, art = campaign(seed, stiffness)
     train = pts.select(pts.measurement == "p1")
-    plain = calibrate(ArmModel(desc), make_data(train, art, ArmModel(desc)), FitOptions(weights_from_data=True))
+    plain = calibrate(ArmModel(desc), make_data(train, art, ArmModel(desc)), loop_fit_options())
     loop = close_loop(train, art, desc)
     rest = ["p2", "p3", "p4", "p5"]
     return heldout_spread(plain, pts, rest), heldout_spread(loop.model_fit, pts, rest), loop

@@ -311,13 +311,19 @@ def test_tip_refuses_a_covariance_that_is_not_one(tmp_path, nominal, capsys):
     from arm_model.model_file import format_model, write_covariance
 
     spec = ArmModel(nominal).spec
-    names = ["j2.d", "j3.a"]
-    cov = np.array([[1e-12, 2e-12], [2e-12, 1e-12]])          # correlation 2: not positive semi-definite
-    write_covariance(tmp_path / "c.csv", names, [spec.units[spec.index(n)] for n in names], np.zeros(2), cov)
-    (tmp_path / "arm.toml").write_text(format_model(nominal, covariance="c.csv"))
     pts = tmp_path / "p.csv"
     pts.write_text("measurement,feature," + ",".join(f"q{i}_deg" for i in range(1, 8)) + "\nm,," + "10," * 6 + "10\n")
     out = tmp_path / "t.csv"
-    assert main(["tip", str(pts), "--arm", str(tmp_path / "arm.toml"), "-o", str(out)]) == 2
-    err = capsys.readouterr().err
-    assert "c.csv" in err and "positive semi-definite" in err and not out.exists()
+    # a correlation of 2 (refused with its cell); correlations of 0.9, 0.9, -0.9 (each in [-1, 1], together
+    # not positive semi-definite)
+    for names, corr, words in ((["j2.d", "j3.a"], [[1, 2], [2, 1]], "line 2, column 'j3.a': a correlation "
+                                "coefficient must be in [-1, 1]"),
+                               (["j2.d", "j3.a", "j4.d"], [[1, .9, .9], [.9, 1, -.9], [.9, -.9, 1]],
+                                "positive semi-definite")):
+        cov = np.asarray(corr, float) * 1e-12
+        write_covariance(tmp_path / "c.csv", names, [spec.units[spec.index(n)] for n in names],
+                         np.zeros(len(names)), cov)
+        (tmp_path / "arm.toml").write_text(format_model(nominal, covariance="c.csv"))
+        assert main(["tip", str(pts), "--arm", str(tmp_path / "arm.toml"), "-o", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert "c.csv" in err and words in err and not out.exists(), err

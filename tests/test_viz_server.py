@@ -208,7 +208,7 @@ def test_docs_example_runs(tmp_path, monkeypatch, capsys):
 def test_a_server_that_stops_answering_is_a_clear_error(nominal):
     """A frozen server (SIGSTOP: its ports stay taken, so no other server can answer in its place)."""
     server = MeshcatServer().start()     # the default start-up wait: a loaded CI machine may need > 2 s
-    server.timeout = 2.0                 # replies: the View connects after this, with a 2 s wait
+    server.timeout = 2.0                 # each reply from now on (the connected socket too): a 2 s wait
     try:
         with View(nominal, server=server) as view:
             os.kill(server.pid, signal.SIGSTOP)

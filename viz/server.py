@@ -44,11 +44,29 @@ class MeshcatServer:
             raise ViewerError(f"--port must be between 1 and 65535, got {port}")
         self.port = None if port is None else int(port)
         self.host = host
-        self.timeout = float(timeout)
+        self._timeout = float(timeout)
         self.url: str | None = None
         self.zmq_url: str | None = None
         self._proc: subprocess.Popen | None = None
         self._vis = None
+
+    @property
+    def timeout(self) -> float:
+        """Seconds to wait for the server to start and for each reply [s]; a new value applies at once to
+        the connected visualizer's socket."""
+        return self._timeout
+
+    @timeout.setter
+    def timeout(self, seconds: float) -> None:
+        self._timeout = float(seconds)
+        if self._vis is not None:
+            self._set_socket_timeouts(self._vis.window.zmq_socket)
+
+    def _set_socket_timeouts(self, sock) -> None:
+        import zmq
+
+        sock.setsockopt(zmq.RCVTIMEO, int(self._timeout * 1000))
+        sock.setsockopt(zmq.SNDTIMEO, int(self._timeout * 1000))
 
     # -- lifecycle --------------------------------------------------------------------------
     def start(self) -> "MeshcatServer":
@@ -114,8 +132,7 @@ class MeshcatServer:
         with contextlib.redirect_stdout(io.StringIO()):   # meshcat prints its URL: the caller decides
             vis = meshcat.Visualizer(zmq_url=self.zmq_url)
         sock = vis.window.zmq_socket
-        sock.setsockopt(zmq.RCVTIMEO, int(self.timeout * 1000))
-        sock.setsockopt(zmq.SNDTIMEO, int(self.timeout * 1000))
+        self._set_socket_timeouts(sock)
         sock.setsockopt(zmq.LINGER, 0)
         return vis
 

@@ -57,14 +57,14 @@ from .decide import negative_compliances
 from .heldout import bootstrap_rows, heldout_figures, heldout_residuals
 from .outliers import drop_test_outliers
 from .result import LoopResult, Stage, display, effect_summary
-from .settings import PHYSICS, LoopSettings, wilcoxon_units_needed
+from .settings import LEGACY_RESOLUTION, PHYSICS, LoopSettings, wilcoxon_units_needed
 from .stages import Campaign, prepare, report, run
 from .state import log
 from .verdict import verdict_text
 
 __all__ = ["LoopSettings", "CVResult", "Stage", "LoopResult", "close_loop", "heldout_residuals",
            "heldout_figures", "cross_validate", "display", "effect_summary", "wilcoxon_units_needed", "PHYSICS",
-           "bootstrap_rows", "drop_test_outliers", "negative_compliances", "verdict_text"]
+           "bootstrap_rows", "drop_test_outliers", "negative_compliances", "verdict_text", "LEGACY_RESOLUTION"]
 
 
 def close_loop(points: PointSet, artefacts: Artefacts, desc: ArmDescription, *, reference: PointSet | None = None,

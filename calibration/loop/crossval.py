@@ -12,8 +12,8 @@ from scipy import stats
 from arm_model.model import ArmModel
 
 from ..data import CalibrationData
+from ..validation import heldout_residuals
 from .folds import Folds
-from .heldout import heldout_residuals
 
 __all__ = ["FoldFit", "CVResult", "fold_fit", "cross_validate"]
 

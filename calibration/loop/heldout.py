@@ -1,5 +1,6 @@
-"""Held-out evaluation: the residual rows of points a model was not fitted to (whole measurements, or poses
-predicted against their feature as fitted on its other poses), and the figures of the before/after table."""
+"""Held-out evaluation: the figures of the before/after table on points a model was not fitted to (whole
+measurements, or poses predicted against their feature as fitted on its other poses), from their residual rows
+(:func:`calibration.validation.heldout_residuals`)."""
 from __future__ import annotations
 
 import numpy as np
@@ -8,52 +9,9 @@ from arm_model import InputError
 from arm_model.model import ArmModel
 
 from ..data import CalibrationData, Weights
-from ..problem import Problem
-from ..solver import levenberg_marquardt
-from ..validation import BOOTSTRAP_SAMPLES, FIGURES, bootstrap, resamples, validate
+from ..validation import BOOTSTRAP_SAMPLES, FIGURES, bootstrap, heldout_residuals, resamples, validate
 
 __all__ = ["heldout_residuals", "heldout_figures", "bootstrap_rows"]
-
-
-def heldout_residuals(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit",
-                      train=None) -> dict:
-    """Residual rows of held-out points with the parameters ``p`` held: ``r`` weighted (n,), ``e`` [m] (n,),
-    ``measurement``, ``kind`` and ``point`` (index into ``data``, -1 for a length) per row.
-
-    ``train`` None: every point of ``data`` is held out and every nuisance unknown (centre, axis, plane,
-    ``T_ref_base``) is solved on ``data`` alone. ``train`` a mask: the points where it holds are the
-    training poses; the nuisance unknowns are solved on them, and the rows of the other points are
-    returned (a held-out pose against the centre fitted on the rest of its feature's poses); the
-    lengths then belong to training."""
-    prob = Problem(model, data, weights, [], reference=reference)
-    if train is None:
-        states = levenberg_marquardt(prob, p, prob.initial_states(p)).states
-        keep = np.ones(prob.n_rows, bool)
-    else:
-        train = np.asarray(train, bool)
-        sub = Problem(model, data.select(train), weights, [], reference=reference)
-        fitted = {(it.measurement, it.feature): st for it, st in
-                  zip(sub.instances, levenberg_marquardt(sub, p, sub.initial_states(p)).states)}
-        start = prob.initial_states(p)
-        states = [fitted.get((it.measurement, it.feature), s0) for it, s0 in zip(prob.instances, start)]
-        missing = [f"{it.measurement} {it.feature}" for it in prob.instances
-                   if (it.measurement, it.feature) not in fitted]
-        if missing:
-            raise ValueError(f"no training pose on {', '.join(missing)}: its centre cannot be predicted")
-        keep = (prob.row_distance < 0) & ~train[np.maximum(prob.row_point, 0)]
-    r = prob.evaluate(p, states, jac=False).r
-    pts = data.points
-    meas = np.empty(len(r), dtype=object)
-    kind = np.empty(len(r), dtype=object)
-    ok = prob.row_distance < 0
-    meas[ok] = pts.measurement[prob.row_point[ok]]
-    kind[ok] = [prob.instances[i].kind for i in prob.row_instance[ok]]
-    for row in np.flatnonzero(~ok):
-        meas[row] = prob.distance_items[prob.row_distance[row]].measurement
-        kind[row] = "length"
-    point = np.where(ok, prob.row_point, -1)
-    return {"r": r[keep], "e": (r * prob.sigma)[keep], "measurement": meas[keep], "kind": kind[keep],
-            "point": point[keep]}
 
 
 def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit",

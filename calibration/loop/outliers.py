@@ -7,7 +7,7 @@ import numpy as np
 from ..calibrate import CalibrationResult, grouped_standardized
 from ..data import CalibrationData, concat
 from ..problem import MIN_POINTS
-from .heldout import heldout_residuals
+from ..validation import heldout_residuals
 
 __all__ = ["drop_design_outliers", "drop_test_outliers"]
 

@@ -6,8 +6,11 @@ from dataclasses import dataclass
 
 from ..identifiability import DEFAULT_RANK_TOL
 
-__all__ = ["LoopSettings", "wilcoxon_units_needed", "SAME_SIGNATURE", "PHYSICS", "PARSIMONY", "NOISE_OFF", "FOLD_BY"]
+__all__ = ["LoopSettings", "wilcoxon_units_needed", "SAME_SIGNATURE", "PHYSICS", "PARSIMONY", "NOISE_OFF", "FOLD_BY",
+           "LEGACY_RESOLUTION"]
 
+#: the practical-resolution rule the loop's fits without a prior keep (calibrate's default before its prior)
+LEGACY_RESOLUTION = 0.1
 #: share of a candidate's signature inside another's above which the data cannot tell them apart
 SAME_SIGNATURE = 0.99
 #: the start of the reason of a candidate included as physics (:func:`calibration.loop.decide.physics_inclusion`)

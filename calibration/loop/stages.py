@@ -38,7 +38,7 @@ from .decide import Decision, candidate_priors, choose, heldout_test, negative_c
 from .folds import choose_folds, outer_split
 from .outliers import drop_design_outliers, drop_test_outliers
 from .result import LoopResult, Stage
-from .settings import NOISE_OFF, LoopSettings
+from .settings import LEGACY_RESOLUTION, NOISE_OFF, LoopSettings
 from .state import LoopState, Screening, fitted_names, log
 from .verdict import ADDED, verdict_text
 
@@ -83,8 +83,9 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
     _say_split(say, data, design, test, test_by, len(cands), settings)
     stated = camp.weights or Weights()
     model = ArmModel(desc, tuple(camp.effects))
+    scale = _prior_scale(model, design, camp, stated, settings, say)
     options = FitOptions(values=camp.values, rank_tol=settings.rank_tol, outlier_threshold=settings.outlier_threshold,
-                         prior_scale=_prior_scale(model, design, camp, stated, settings, say))
+                         prior_scale=scale, min_resolution=LEGACY_RESOLUTION if scale is None else None)
     state = LoopState(settings, desc, say, data, design, test, test_by, options, camp.free, camp.hold, model.spec.size,
                       stated, cands, skipped, model, stated, remaining=list(cands))
     say("calibrating the base model on the design set")
@@ -136,7 +137,8 @@ def _prior_scale(model: ArmModel, design, camp: Campaign, stated: Weights, setti
     names = fitted_names(model, camp.free, camp.hold, model.spec.size)
     scale, _ = evidence_scale(model, design, FitOptions(free=names, values=camp.values, weights=stated,
                                                         rank_tol=settings.rank_tol, priors={}))
-    say(f"prior scale from the evidence of the design set: {scale:g} x the plausible error sizes")
+    say("prior scales from the evidence of the design set: "
+        + ", ".join(f"{g} {v:.3g}" for g, v in scale.items()) + " x the plausible error sizes")
     return scale
 
 

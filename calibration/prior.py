@@ -1,0 +1,266 @@
+"""The Gaussian prior of :func:`calibration.calibrate.calibrate`: parameter groups, plausible sizes, bounds,
+the evidence's update of each group's scale, and the state of each parameter.
+
+Every free parameter ``p_k`` carries ``p_k ~ N(c_k, (tau_G s_k)^2)``: ``c_k`` the nominal value (the
+description, or the values given), ``s_k`` its plausible error size at scale 1 (:func:`prior_spec`) and
+``tau_G`` the scale of its **group** G (:func:`parameter_groups`: the joint rows' lengths, their joint
+offsets, their axis angles, the tip (probe or marker) offset, the probe's compliances, and each effect's parameters apart). The scales
+are chosen by the evidence (type-II maximum likelihood, MacKay 1992): at the maximum a posteriori fit,
+with ``gamma_G = sum_k in G (1 - rho_k)`` the number of the group's parameters the data determine
+(``rho_k``: posterior over prior variance, :func:`variance_ratio`), the Laplace evidence is stationary in
+``tau_G`` where ``tau_G^2 = sum_k in G ((p_k - c_k) / s_k)^2 / gamma_G`` (:func:`update_scales`).
+
+A parameter is **prior-dominated** when ``rho_k >= PRIOR_DOMINATED`` (0.5): its posterior variance is at
+least half its prior's, i.e. the data's own information on it is at most the prior's (for one parameter,
+``1 / u_post^2 = 1 / u_prior^2 + 1 / u_data^2``, so ``rho >= 0.5`` iff ``u_data >= u_prior``). Such a
+parameter stays near its nominal value with about its prior's uncertainty, and that uncertainty is part of
+the posterior covariance every propagation uses.
+"""
+from __future__ import annotations
+
+import fnmatch
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["GROUP_LENGTHS", "GROUP_OFFSETS", "GROUP_ANGLES", "GROUP_TIP", "GROUP_PROBE_COMPLIANCE", "BASE_SIZES",
+           "PRIOR_DOMINATED", "SCALE_RANGE", "MIN_EFFECTIVE", "PriorSpec", "parameter_groups", "prior_spec", "robot_size",
+           "variance_ratio", "update_scales", "NONNEGATIVE_UNITS"]
+
+GROUP_LENGTHS = "lengths"
+GROUP_OFFSETS = "joint offsets"
+GROUP_ANGLES = "axis angles"
+GROUP_TIP = "tip offset"
+GROUP_PROBE_COMPLIANCE = "probe compliance"
+
+#: plausible error size at scale 1 [SI] of a joint row's length [m] and angle [rad] (1 mm, 1 mrad: one
+#: millimetre at a metre); the evidence scales each group from there
+BASE_SIZES = {"m": 1e-3, "rad": 1e-3}
+#: plausible size at scale 1 of an effect parameter with no size of its own, by SI unit
+UNIT_SIZES = {"m": 1e-3, "rad": 1e-3, "1": 0.1, "N": 1.0, "N m": 0.1, "1/K": 1e-4, "m/N": 1e-6}
+#: the plausible angular deflection [rad] of a joint under the torque the data give it (a compliance's size)
+DEFLECTION = 1e-3
+#: the largest plausible size of an angular compliance [rad/(N m)] (a tenth of what a model file may hold)
+MAX_ANGULAR_COMPLIANCE = 0.1
+#: posterior/prior variance ratio from which a parameter is prior-dominated
+PRIOR_DOMINATED = 0.5
+#: range of a group's scale (times the plausible sizes)
+SCALE_RANGE = (1e-2, 1e2)
+#: fewest parameters the data must determine in a group (``gamma_G``) for its scale to be estimated
+MIN_EFFECTIVE = 0.5
+#: units of parameters that cannot be negative in total (compliances): lower bound ``-nominal``
+NONNEGATIVE_UNITS = ("rad/(N m)", "m/N")
+
+
+#: |cos| of the angle between an origin angle's rotation axis and the joint axis from which it is the joint's
+#: offset (rotation about its own axis)
+ALIGNED = math.cos(math.radians(1.0))
+
+
+def _rotation_axes(rpy) -> np.ndarray:
+    """Rows: the axes (parent frame) about which a small change of roll, pitch and yaw turns the origin
+    ``Rz(yaw) Ry(pitch) Rx(roll)``."""
+    r, p, y = rpy
+    rz = np.array([[math.cos(y), -math.sin(y), 0.0], [math.sin(y), math.cos(y), 0.0], [0.0, 0.0, 1.0]])
+    ry = np.array([[math.cos(p), 0.0, math.sin(p)], [0.0, 1.0, 0.0], [-math.sin(p), 0.0, math.cos(p)]])
+    return np.array([rz @ ry @ np.array([1.0, 0.0, 0.0]), rz @ np.array([0.0, 1.0, 0.0]), [0.0, 0.0, 1.0]])
+
+
+def _angle_group(desc, joint: int, field: str) -> str:
+    """``joint offsets`` for the angle about the joint's own axis (DH/MDH ``theta_offset``; the URDF origin
+    angle whose rotation axis is the joint axis, within 1 degree), else ``axis angles`` (the axis' tilt)."""
+    if field == "theta_offset":
+        return GROUP_OFFSETS
+    row = desc.joints[joint]
+    if desc.convention != "urdf" or field not in ("origin_roll", "origin_pitch", "origin_yaw") \
+            or row.axis is None or row.origin is None:
+        return GROUP_ANGLES
+    roll, pitch, yaw = row.origin[3:6]
+    c, sn = math.cos, math.sin
+    rot = (np.array([[c(yaw), -sn(yaw), 0.0], [sn(yaw), c(yaw), 0.0], [0.0, 0.0, 1.0]])
+           @ np.array([[c(pitch), 0.0, sn(pitch)], [0.0, 1.0, 0.0], [-sn(pitch), 0.0, c(pitch)]])
+           @ np.array([[1.0, 0.0, 0.0], [0.0, c(roll), -sn(roll)], [0.0, sn(roll), c(roll)]]))
+    axis = rot @ np.asarray(row.axis, dtype=float)              # the joint axis in the parent frame
+    axis = axis / np.linalg.norm(axis)
+    origin = _rotation_axes(row.origin[3:6])
+    k = ("origin_roll", "origin_pitch", "origin_yaw").index(field)
+    return GROUP_OFFSETS if abs(float(origin[k] @ axis)) >= ALIGNED else GROUP_ANGLES
+
+
+def parameter_groups(model, names) -> list[str]:
+    """The prior group of each parameter ``names`` of ``model``: the joint rows' ``lengths`` [m], ``joint
+    offsets`` (the angle about a joint's own axis: its zero) and ``axis angles`` (the other angles: the axis'
+    tilt) [rad] (other units of a joint row: a group of their unit), the ``tip offset`` (probe.x/y/z: a
+    probe's or a tracker marker's position on the last link), the ``probe compliance`` (probe.compliance_*),
+    and one group a model effect (``effect <its description>``)."""
+    spec = model.spec
+    desc = model.desc
+    effect_of = {}
+    for e, sl in model.effect_slices():
+        for k in range(sl.start, sl.stop):
+            effect_of[k] = f"effect {e.describe()}"
+    joint_of = {j.name: i for i, j in enumerate(desc.joints)}
+    out = []
+    for n in names:
+        i = spec.index(n)
+        unit = spec.units[i]
+        if i in effect_of:
+            out.append(effect_of[i])
+        elif n.startswith("probe.compliance"):
+            out.append(GROUP_PROBE_COMPLIANCE)
+        elif n.startswith("probe."):
+            out.append(GROUP_TIP)
+        elif unit == "rad":
+            jname, _, field = n.rpartition(".")
+            out.append(_angle_group(desc, joint_of[jname], field) if jname in joint_of else GROUP_ANGLES)
+        else:
+            out.append({"m": GROUP_LENGTHS}.get(unit, f"joint rows [{unit}]"))
+    return out
+
+
+def robot_size(model, data) -> float:
+    """The robot's size [m]: the largest distance from the base origin of a ball centre of ``data`` with the
+    nominal model, at least 0.1 m (the plausible size of an unknown tip or marker offset)."""
+    x = model.ball_centres(data.points.q, data.wrench, np.zeros(model.spec.size), data.aux)
+    return max(float(np.max(np.linalg.norm(x, axis=1))) if len(x) else 0.0, 0.1)
+
+
+@dataclass(frozen=True)
+class PriorSpec:
+    """The prior of every parameter of a model (full-length vectors in ``model.spec`` order).
+
+    Attributes:
+        group: each parameter's group (:func:`parameter_groups`).
+        size: plausible error size at scale 1 [SI] (the prior's standard deviation at ``tau = 1``).
+        lower: lower bound of the parameter [SI] (``-inf``: none; a compliance: minus its nominal value).
+        source: how each size was set (for the report).
+    """
+    group: tuple
+    size: np.ndarray
+    lower: np.ndarray
+    source: tuple
+
+    def sizes(self, scales: dict | float) -> np.ndarray:
+        """The prior's standard deviations [SI] at group ``scales`` (a dict, or one factor for every group)."""
+        if not isinstance(scales, dict):
+            return self.size * float(scales)
+        return self.size * np.array([scales.get(g, 1.0) for g in self.group])
+
+    def groups_of(self, indices) -> dict[str, np.ndarray]:
+        """{group: the entries of ``indices`` (indices into the spec) in it}, groups in first-seen order."""
+        indices = np.asarray(indices, dtype=int)
+        names = [self.group[i] for i in indices]
+        return {g: indices[[k for k, n in enumerate(names) if n == g]] for g in dict.fromkeys(names)}
+
+
+def _torque_reference(model, data, joint: int) -> float:
+    """RMS over ``data`` of the torque [N m] joint ``joint`` carries (gravity from the description's masses and
+    the contact torque), 0 when the data give none."""
+    aux = data.aux
+    if aux is None:
+        return 0.0
+    t = np.zeros(len(data))
+    for part in (aux.tau_gravity, aux.tau_contact):
+        if part is not None:
+            t = t + np.asarray(part)[:, joint]
+    return float(np.sqrt(np.mean(t ** 2))) if len(t) else 0.0
+
+
+def _effect_sizes(model, data) -> dict[int, tuple[float, str]]:
+    """{spec index: (size at scale 1, source)} of every effect parameter."""
+    desc = model.desc
+    out = {}
+    for e, sl in model.effect_slices():
+        defs = e.param_defs(desc)
+        joints = list(e.joint_indices(desc)) if hasattr(e, "joint_indices") else []
+        for k, (name, unit) in zip(range(sl.start, sl.stop), defs):
+            if unit == "rad/(N m)":
+                j = next((i for i in joints if name.startswith(desc.joints[i].name + ".")), None)
+                tau = 0.0 if j is None else _torque_reference(model, data, j)
+                size = MAX_ANGULAR_COMPLIANCE if tau <= 0 else min(DEFLECTION / tau, MAX_ANGULAR_COMPLIANCE)
+                out[k] = (size, f"{DEFLECTION * 1e3:g} mrad under the joint's RMS torque in the data "
+                                f"({tau:.3g} N m)" if tau > 0 else "no torque in the data")
+            elif e.plausible_size is not None:
+                out[k] = (float(e.plausible_size), "the effect's plausible size")
+            else:
+                out[k] = (UNIT_SIZES.get(unit, 1.0), f"by unit ({unit})")
+    return out
+
+
+def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
+    """The groups, plausible sizes and bounds of every parameter of ``model`` for ``data``.
+
+    Sizes at scale 1: a joint row's length 1 mm and angle 1 mrad (:data:`BASE_SIZES`); the tip offset the
+    robot's size (:func:`robot_size`: a tracker marker's place on the last link may be unknown); the probe's
+    compliance 10 times its nominal value (at least 1e-8 m/N); an angular compliance [rad/(N m)] the one that
+    turns the joint by :data:`DEFLECTION` under the RMS torque the data give it (gravity from the
+    description's masses, contact torques from the forces; at most :data:`MAX_ANGULAR_COMPLIANCE`); another
+    effect parameter the effect's own plausible size or a size by unit (:data:`UNIT_SIZES`). ``priors``
+    (names or glob patterns -> size [SI]) override. Compliances (:data:`NONNEGATIVE_UNITS`) cannot be negative
+    in total: their lower bound is minus their nominal value."""
+    spec = model.spec
+    probe = model.desc.probe
+    eff = _effect_sizes(model, data)
+    tip = None
+    size, lower, source = np.empty(spec.size), np.full(spec.size, -np.inf), []
+    for i, (n, unit) in enumerate(zip(spec.names, spec.units)):
+        hit = [v for pat, v in (priors or {}).items() if fnmatch.fnmatchcase(n, pat)]
+        if hit:
+            size[i], src = float(hit[0]), "given"
+        elif i in eff:
+            size[i], src = eff[i]
+        elif n.startswith("probe.compliance"):
+            c = probe.axial_compliance if n.endswith("_z") else max(probe.bending_compliance_x,
+                                                                    probe.bending_compliance_y)
+            size[i], src = max(10.0 * c, 1e-8), "10 x the nominal probe compliance"
+        elif n.startswith("probe."):
+            tip = robot_size(model, data) if tip is None else tip
+            size[i], src = tip, f"the robot's size ({tip * 1e3:.4g} mm)"
+        else:
+            size[i], src = BASE_SIZES.get(unit, UNIT_SIZES.get(unit, 1.0)), f"by unit ({unit})"
+        source.append(src)
+        if unit in NONNEGATIVE_UNITS:
+            lower[i] = 0.0 - _nominal_compliance(model, n)
+    return PriorSpec(tuple(parameter_groups(model, spec.names)), size, lower, tuple(source))
+
+
+def _nominal_compliance(model, name: str) -> float:
+    """The description's own value of a compliance parameter (errors add to it; 0 for an effect's)."""
+    probe = model.desc.probe
+    return {"probe.compliance_x": probe.bending_compliance_x, "probe.compliance_y": probe.bending_compliance_y,
+            "probe.compliance_z": probe.axial_compliance}.get(name, 0.0)
+
+
+def variance_ratio(post_var: np.ndarray, prior_sd: np.ndarray) -> np.ndarray:
+    """``rho = u_post^2 / u_prior^2`` of each parameter: 1 where the data add nothing, 0 where they fix it."""
+    return np.clip(np.asarray(post_var) / np.asarray(prior_sd) ** 2, 0.0, 1.0)
+
+
+def update_scales(scales: dict, spec: PriorSpec, kept, delta: np.ndarray, rho: np.ndarray,
+                  damping: float = 1.0) -> tuple[dict, dict]:
+    """One evidence update of the group scales (MacKay's fixed point, see the module docstring).
+
+    Args:
+        scales: current scale of each group.
+        kept: spec indices of the estimated parameters; ``delta`` their ``p - centre`` [SI] at the maximum a
+            posteriori fit, ``rho`` their posterior/prior variance ratios (:func:`variance_ratio`).
+        damping: the new log scale is ``damping`` of the way to the fixed point's (1: all of it).
+
+    Returns ``(new scales, {group: gamma_G})``; a group whose data determine fewer than
+    :data:`MIN_EFFECTIVE` parameters keeps its scale (its evidence is flat), every scale stays in
+    :data:`SCALE_RANGE`."""
+    kept = np.asarray(kept, dtype=int)
+    new, gamma = dict(scales), {}
+    for g, idx in spec.groups_of(kept).items():
+        sel = np.isin(kept, idx)
+        gam = float(np.sum(1.0 - rho[sel]))
+        gamma[g] = gam
+        if gam < MIN_EFFECTIVE:
+            continue
+        z2 = float(np.sum((delta[sel] / spec.size[kept[sel]]) ** 2))
+        target = math.sqrt(max(z2 / gam, SCALE_RANGE[0] ** 2))
+        old = scales.get(g, 1.0)
+        tau = math.exp(math.log(old) + damping * (math.log(target) - math.log(old)))
+        new[g] = float(min(max(tau, SCALE_RANGE[0]), SCALE_RANGE[1]))
+    return new, gamma

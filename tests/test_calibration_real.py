@@ -1,0 +1,175 @@
+"""calibrate's default estimation on real robots measured by others (docs/calibration.md, "Real data").
+
+* Panda seats (examples/data/real-panda-seats, the same as ../shared/data/real-panda-seats): trained on one
+  plate placement, the other two predicted. The published tool's figures are MUKCa's method (its
+  ``ParameterOptimizer.optimize()`` defaults) re-run on these data outside the project: mean held-out seat
+  spread 2.073 mm, mean |distance error| 0.666 mm (docs/calibration.md says how).
+* TALOS motion capture (../shared/data/real-talos-mocap; its URDF may not be copied into the project, so the
+  test reads it there and skips when it is absent): fit on the odd postures, predict the even ones with the
+  training fit's frame and marker offset. The README of the data states the nominal (frames and marker
+  fitted) at 5.84 mm and FIGAROH at 1.26 mm.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from arm_model.io import read_artefacts, read_points
+from arm_model.model import ArmModel
+from arm_model.urdf_import import load_arm
+from calibration import FitOptions, calibrate, make_data
+from calibration.calibrate import nominal_baseline
+from calibration.data import split_holdout
+from calibration.placements import seat_figures
+
+ROOT = Path(__file__).resolve().parents[1]
+PANDA = ROOT / "examples" / "data" / "real-panda-seats"
+TALOS = ROOT.parent / "shared" / "data" / "real-talos-mocap"
+PLACES = ("front", "right", "back-high")
+#: MUKCa (platonics-delft/kinematics_calibration) on these data: mean held-out spread, mean |distance error| [mm]
+MUKCA_SPREAD, MUKCA_DISTANCE = 2.073, 0.666
+
+
+def _panda(effects=()):
+    desc = load_arm(PANDA / "panda-with-inertials.urdf", "ball_link")
+    model = ArmModel(desc, tuple(effects))
+    art = read_artefacts(PANDA / "artefacts.toml")
+    return model, {p: make_data(read_points(PANDA / p / "points.csv", 7), art, model) for p in PLACES}
+
+
+def _placements(model, data):
+    """Every placement trained on, the other two predicted: (fits, [(spread [mm], distance error [mm])])."""
+    fits, out = {}, []
+    for tr in PLACES:
+        fits[tr] = res = calibrate(model, data[tr], FitOptions(weights_from_data=True))
+        for te in PLACES:
+            if te != tr:
+                d = data[te]
+                f = seat_figures(model.ball_centres(d.points.q, d.wrench, res.p, d.aux), d.points.feature,
+                                 ("hole-0", "hole-1"), 0.05)
+                out.append((f["spread_mean_mm"], f["distance_error_mm"]))
+    return fits, np.array(out)
+
+
+def test_panda_geometry_ties_the_published_tool_and_nothing_is_held_for_being_weak():
+    """Default calibrate (geometry only), each placement predicting the other two: mean held-out spread at
+    most MUKCa's (measured 2.05 mm, 0.99x), distance error within 0.1 mm of it (measured 0.71 mm); no
+    parameter held for being weak, the held ones exact rank deficiencies with their combination; the noise
+    estimated with the scales (0.13-0.2 mm per axis)."""
+    model, data = _panda()
+    fits, fig = _placements(model, data)
+    assert fig[:, 0].mean() <= MUKCA_SPREAD, fig
+    assert np.abs(fig[:, 1]).mean() <= MUKCA_DISTANCE + 0.1, fig
+    for res in fits.values():
+        assert res.evidence[-1]["settled"] and len(res.free) == 23
+        assert all("weakly" not in f.reason for f in res.fixed)
+        assert all(f.combination is not None for f in res.fixed)
+        sigma = [v["sigma_um"] for v in res.variance if v["group"] == "seat"][0]
+        assert 100 < sigma < 250, sigma
+
+
+def test_panda_joint_compliance_is_non_negative_and_its_prior_comes_from_the_masses(tmp_path):
+    """With the joint compliance effect (the URDF's link masses): every compliance is non-negative (held at
+    its bound 0 when the data pull it below, and said so), its prior size is 1 mrad over the RMS gravity torque
+    the data give the joint, none strays beyond three prior sizes; the held-out spread falls to at most 0.9x
+    MUKCa's (measured 1.72 mm, 0.83x); the model file written reads back in tip."""
+    from arm_model.effects import JointCompliance
+    from calibration.prior import DEFLECTION
+    model, data = _panda((JointCompliance(),))
+    fits, fig = _placements(model, data)
+    assert fig[:, 0].mean() <= 0.9 * MUKCA_SPREAD, fig
+    for tr, res in fits.items():
+        tau = data[tr].aux.tau_gravity
+        for k, n in enumerate(res.free):
+            if n.endswith(".compliance"):
+                j = [jr.name for jr in model.desc.joints].index(n.split(".")[0])
+                rms = np.sqrt(np.mean(tau[:, j] ** 2))
+                assert res.prior_sd[k] == pytest.approx(res.prior_scales["effect joint_compliance"] * DEFLECTION / rms,
+                                                        rel=1e-9)
+                assert res.value(n) >= 0.0
+                assert abs(res.value(n)) <= 3 * res.prior_sd[k]
+        for f in res.fixed:
+            if f.name.endswith(".compliance"):
+                assert f.value == 0.0 and ("bound" in f.reason or f.combination is not None), f
+    from arm_model.cli import main
+    out = tmp_path / "cal"
+    assert main(["calibrate", str(PANDA / "front" / "points.csv"), str(PANDA / "artefacts.toml"), "--arm",
+                 str(PANDA / "panda-with-inertials.urdf"), "--tip-frame", "ball_link", "--effect",
+                 "joint_compliance", "--no-plots", "-q", "-o", str(out)]) == 0
+    assert main(["tip", str(PANDA / "right" / "points.csv"), "--arm", str(out / "panda-calibrated.toml"),
+                 "-o", str(tmp_path / "tip.csv"), "-q"]) == 0
+
+
+@pytest.fixture(scope="module")
+def talos(tmp_path_factory):
+    """The TALOS chain (torso, left arm, gripper) from ../shared, its visual and collision meshes dropped
+    (the test has no meshes; the kinematics are untouched), and the README's split."""
+    urdf = TALOS / "talos_full_v2.urdf"
+    if not urdf.exists():
+        pytest.skip(f"the TALOS motion-capture data are not here ({TALOS}): they are read from ../shared, "
+                    "never copied into the project (the URDF's licence)")
+    text = re.sub(r"<(visual|collision)\b.*?</\1>", "", urdf.read_text(), flags=re.S)
+    path = tmp_path_factory.mktemp("talos") / "talos.urdf"
+    path.write_text(text)
+    art = tmp_path_factory.mktemp("talos") / "artefacts.toml"
+    art.write_text('[[feature]]\nid = "unused"\nkind = "seat"\n')     # tracker-only: no artefact is probed
+    desc = load_arm(path, "gripper_left_base_link")
+    model = ArmModel(desc)
+    data = make_data(read_points(TALOS / "points.csv", desc.n_joints), read_artefacts(art), model)
+    train, test = split_holdout(data, [f"pose-{i:02d}" for i in range(2, 62, 2)])
+    return model, train, test
+
+
+def _predicted_rms(res, test) -> float:
+    """RMS [mm] over the held-out postures of the marker's 3D error, frame and marker offset of the fit."""
+    t = np.array(res.reference["T_ref_base"])
+    x = res.model.ball_centres(test.points.q, test.wrench, res.p, test.aux)
+    return float(np.sqrt(np.mean(np.sum((x @ t[:3, :3].T + t[:3, 3] - test.points.ref) ** 2, axis=1)))) * 1e3
+
+
+def test_talos_nominal_baseline_is_the_readmes_and_calibrate_beats_it(talos):
+    """The like-for-like nominal (frame and marker offset fitted, nothing else) gives the README's 5.84 mm;
+    default calibrate predicts the held-out postures to 1.36 mm (measured; FIGAROH 1.26 mm), never holding
+    the unknown marker offset for being weak, with the noise estimated at the capture's 0.2 mm per axis."""
+    model, train, test = talos
+    base = nominal_baseline(model, train, FitOptions(weights_from_data=True))
+    assert set(base.free) == {"probe.x", "probe.y", "probe.z"}
+    assert _predicted_rms(base, test) == pytest.approx(5.84, abs=0.01)
+    res = calibrate(model, train, FitOptions(weights_from_data=True))
+    rms = _predicted_rms(res, test)
+    assert rms <= 1.45, rms
+    assert not [f for f in res.fixed if f.name.startswith("probe.") and "weakly" in f.reason]
+    sigma = [v["sigma_um"] for v in res.variance if v["group"] == "reference"][0]
+    assert 150 < sigma < 300, sigma
+
+
+def test_panda_heldout_uncertainty_coverage(tmp_path):
+    """Each placement's model file applied by ``aacmm tip`` to the other two placements;
+    each corrected centre's deviation from its seat's mean lies within 1.96 u (tip's u: the posterior
+    covariance, prior-dominated parameters included, and the probing scatter) for at least 85 % of the axis
+    values pooled (measured 86.2 %, 76-97 % per placement; the hold rule of earlier versions: 73.6 %,
+    58-91 %)."""
+    import csv
+    from arm_model.cli import main
+    inside = []
+    for tr in PLACES:
+        out = tmp_path / tr
+        assert main(["calibrate", str(PANDA / tr / "points.csv"), str(PANDA / "artefacts.toml"), "--arm",
+                     str(PANDA / "panda-with-inertials.urdf"), "--tip-frame", "ball_link", "--no-plots", "-q",
+                     "-o", str(out)]) == 0
+        for te in PLACES:
+            if te == tr:
+                continue
+            tip = tmp_path / f"{tr}-{te}.csv"
+            assert main(["tip", str(PANDA / te / "points.csv"), "--arm", str(out / "panda-calibrated.toml"), "-q",
+                         "-o", str(tip)]) == 0
+            rows = list(csv.DictReader(open(tip)))
+            x = np.array([[float(r[f"{a}_mm"]) for a in "xyz"] for r in rows])
+            u = np.array([[float(r[f"u_{a}_mm"]) for a in "xyz"] for r in rows])
+            f = np.array([r["feature"] for r in rows])
+            for h in set(f):
+                inside.append((np.abs(x[f == h] - x[f == h].mean(axis=0)) <= 1.96 * u[f == h]).ravel())
+    assert np.concatenate(inside).mean() >= 0.85
