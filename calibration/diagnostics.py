@@ -47,7 +47,7 @@ from .identifiability import DEFAULT_RANK_TOL, point_noise, prior_scales, reduce
 from .problem import Problem
 from .solver import levenberg_marquardt
 
-__all__ = ["JointAngleOffset", "measurement_folds", "pose_folds", "ResidualSpace", "residual_space", "GroupTest",
+__all__ = ["JointAngleOffset", "measurement_groups", "measurement_folds", "pose_folds", "ResidualSpace", "residual_space", "GroupTest",
            "Family", "families", "candidate_family", "test_group", "screen_candidates", "structure_tests",
            "remaining_structure",
            "binned_estimates", "holm"]
@@ -82,51 +82,55 @@ class JointAngleOffset(Effect):
 # ---------------------------------------------------------------------------------------------------
 # folds of whole measurements
 
-def measurement_folds(data: CalibrationData, k: int, seed: int = 0) -> dict[str, int]:
-    """Measurement id -> fold (0..k-1), drawn at random (seeded) within each group of measurements
-    that touch the same feature kinds, so that every fold holds each kind as far as possible."""
+def measurement_groups(data: CalibrationData) -> list[list[str]]:
+    """The measurement ids in groups that touch the same feature kinds (the groups by their kinds, each
+    group's ids sorted): the strata of a split by measurement, so that every part holds each kind as far as
+    possible."""
+    pts, arte = data.points, data.artefacts
+    groups: dict[tuple, list[str]] = {}
+    for m in data.measurements():
+        feats = set(pts.feature[pts.measurement == m])
+        kinds = tuple(sorted(arte.features[f].kind if f else "free" for f in feats))
+        groups.setdefault(kinds, []).append(m)
+    return [sorted(groups[key]) for key in sorted(groups)]
+
+
+def measurement_folds(data: CalibrationData, k: int) -> dict[str, int]:
+    """Measurement id -> fold (0..k-1): the measurements of each group (:func:`measurement_groups`, ids
+    sorted) dealt to the folds in turn, continuing from group to group. A function of the ids and the kinds
+    alone: no seed, no dependence on the order of the rows."""
     if k < 2:
         raise ValueError(f"cross-validation needs at least 2 folds, got {k}")
     ids = data.measurements()
     if len(ids) < k:
         raise ValueError(f"{len(ids)} measurement(s) cannot make {k} folds")
-    rng = np.random.default_rng(seed)
-    pts, arte = data.points, data.artefacts
-    groups: dict[tuple, list[str]] = {}
-    for m in ids:
-        feats = set(pts.feature[pts.measurement == m])
-        kinds = tuple(sorted(arte.features[f].kind if f else "free" for f in feats))
-        groups.setdefault(kinds, []).append(m)
     out, start = {}, 0
-    for key in sorted(groups):
-        members = list(groups[key])
-        rng.shuffle(members)
+    for members in measurement_groups(data):
         for i, m in enumerate(members):
             out[m] = (start + i) % k
         start += len(members)
     return out
 
 
-def pose_folds(data: CalibrationData, k: int, seed: int = 0) -> np.ndarray:
+def pose_folds(data: CalibrationData, k: int) -> np.ndarray:
     """Fold (0..k-1) of every point, -1 for points never held out: inside each artefact instance (a
-    feature within a measurement; the reference points as one) the poses are shuffled (seeded) and dealt
-    to the folds in turn, so that a held-out pose is predicted against the instance's centre (axis,
-    plane, ``T_ref_base``) fitted on the instance's other poses. An instance whose training part would
-    have fewer points than its fit needs is never held out."""
+    feature within a measurement; the reference points as one) the poses, in
+    :func:`~calibration.data.pose_order`, are dealt to the folds in turn (continuing from instance to
+    instance), so that each fold spans the instance's poses and a held-out pose is predicted against the
+    instance's centre (axis, plane, ``T_ref_base``) fitted on the instance's other poses. An instance whose
+    training part would have fewer points than its fit needs is never held out. No seed: the folds are a
+    function of the poses."""
     from .problem import MIN_POINTS
-    from .data import pose_groups
+    from .data import pose_groups, pose_order
     if k < 2:
         raise ValueError(f"cross-validation needs at least 2 folds, got {k}")
-    rng = np.random.default_rng(seed)
     out = np.full(len(data), -1)
     start = 0
     for kind, rows in pose_groups(data):
         n = len(rows)
         if n - math.ceil(n / k) < MIN_POINTS[kind][0] or n < 2:
             continue
-        rows = rows.copy()
-        rng.shuffle(rows)
-        out[rows] = (start + np.arange(n)) % k
+        out[rows[pose_order(data.points.q[rows])]] = (start + np.arange(n)) % k
         start += n
     return out
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from arm_model.cli import main
@@ -152,3 +153,35 @@ def test_the_loop_frees_what_calibrate_would_and_every_effect_it_adds(nominal):
     assert "links.thermal_alpha" in fitted_names(grown, None, ("j1.*",), size)
     assert "links.thermal_alpha" not in fitted_names(grown, ("j*.d",), (), size)
     assert "j2.compliance" not in fitted_names(grown, None, (), size, held=("j2.compliance",))
+
+
+def test_holdout_keeps_its_rows_out_of_the_model_which_is_calibrates_with_its_reference_frame(tmp_path, capsys):
+    """``--holdout IDS``: the model written is fitted without the held-out measurements, as ``calibrate
+    --holdout``'s is; with nothing added (``--max-effects 0``) it is calibrate's model: the same parameter
+    values in the model files and the same fitted ``T_ref_base`` in both summaries (``reference_frame``)."""
+    from arm_model.io import read_points
+    from arm_model.model_file import load_model
+
+    camp = {**CAMPAIGN, "task": CAMPAIGN["task"] + [{"kind": "tracker", "nests": 6, "articulations": 2,
+                                                      "noise_um": 10.0}]}
+    sim = tmp_path / "sim"
+    simulate(campaign_from_dict(camp)).write(sim)
+    held = ["bar-pos-02", "seat-03", "sphere-03"]
+    common = [str(sim / "points.csv"), str(sim / "artefacts.toml"), "--arm", str(NOMINAL), "--reference-points",
+              str(sim / "points-ref.csv"), "--sigma-probe-um", "2", "--holdout", ",".join(held), "--quiet"]
+    assert main(["close-loop", *common, "--max-effects", "0", "-o", str(tmp_path / "loop")]) == 0
+    # calibrate at the loop's estimation (no prior, the practical-resolution rule: tests/conftest.py loop_fit_options)
+    assert main(["calibrate", *common, "--prior-scale", "off", "--min-resolution", "0.1", "-o", str(tmp_path / "cal")]) == 0
+    loop, cal = (json.loads((tmp_path / d / "summary.json").read_text()) for d in ("loop", "cal"))
+    assert loop["measurements"]["test"] == held and loop["effects_added"] == []
+    pts = read_points(sim / "points.csv", 7)
+    n_ref = len(read_points(sim / "points-ref.csv", 7))     # the tracker rows, none in a held-out measurement
+    assert loop["model"]["points"] == cal["n_points"] == int(sum(m not in held for m in pts.measurement)) + n_ref
+    assert "held-out" in loop["model"]["fitted_on"]
+    t_loop, t_cal = (np.array(s["reference_frame"]["T_ref_base"]) for s in (loop, cal))
+    assert t_loop.shape == (4, 4) and loop["reference_frame"]["fitted"]
+    np.testing.assert_allclose(t_loop, t_cal, atol=1e-9)
+    a, b = (load_model(tmp_path / d / "aacmm7-calibrated.toml") for d in ("loop", "cal"))
+    np.testing.assert_allclose(a.desc.row_table(), b.desc.row_table(), atol=1e-12)
+    np.testing.assert_allclose(a.desc.probe.p_last, b.desc.probe.p_last, atol=1e-12)
+    capsys.readouterr()

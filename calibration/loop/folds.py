@@ -9,11 +9,11 @@ import numpy as np
 
 from arm_model import InputError
 
-from ..data import CalibrationData, split_holdout, split_poses
-from ..diagnostics import measurement_folds, pose_folds
+from ..data import CalibrationData, split_holdout, split_poses, spread
+from ..diagnostics import measurement_folds, measurement_groups, pose_folds
 from .settings import LoopSettings, wilcoxon_units_needed
 
-__all__ = ["Folds", "outer_split", "choose_folds"]
+__all__ = ["Folds", "outer_split", "spread_measurements", "choose_folds"]
 
 
 
@@ -52,23 +52,33 @@ class Folds:
 
 
 def outer_split(data: CalibrationData, settings: LoopSettings):
-    """(design, test, "measurement" | "pose"): the measurements ``settings.holdout`` if named, else a share
-    ``test_fraction`` of the measurements (per feature kind), else, with too few measurements for that, the
-    same share of the poses of every feature."""
-    if settings.holdout:
-        design, test = split_holdout(data, list(settings.holdout))
-        return design, test, "measurement"
-    try:
-        design, test = split_holdout(data, settings.test_fraction, settings.seed)
-        return design, test, "measurement"
-    except InputError:
-        pass
-    held = split_poses(data, settings.test_fraction, settings.seed)
+    """(design, test, "measurement" | "pose", the test rows of ``data`` (N,) bool): the measurements
+    ``settings.holdout`` if named, else a share ``test_fraction`` of the measurements
+    (:func:`spread_measurements`), else, with too few measurements for that, the same share of the poses of
+    every feature (:func:`calibration.data.split_poses`). No seed: the test set is a function of the data, so
+    the loop's verdict on the same data is the same."""
+    ids = list(settings.holdout) or spread_measurements(data, settings.test_fraction)
+    if ids:
+        design, test = split_holdout(data, ids)
+        return design, test, "measurement", np.isin(data.points.measurement, test.measurements())
+    held = split_poses(data, settings.test_fraction)
     if not held.any():
         raise InputError(f"the test set is empty: {len(data.measurements())} measurement(s) and no feature has "
                          "enough poses to hold some out; give more measurements or name a test measurement "
                          "(--holdout ID)", data.points.path, None, "measurement")
-    return data.select(~held), data.select(held), "pose"
+    return data.select(~held), data.select(held), "pose", held
+
+
+def spread_measurements(data: CalibrationData, fraction: float) -> list[str]:
+    """A share ``fraction`` of the measurements of each group that touches the same feature kinds
+    (:func:`calibration.diagnostics.measurement_groups`, ids sorted), at evenly spaced ranks
+    (:func:`calibration.data.spread`); every group keeps one measurement at least. Empty when no group has
+    enough measurements to give one."""
+    out = []
+    for members in measurement_groups(data):
+        k = min(int(round(fraction * len(members))), len(members) - 1)
+        out += [members[i] for i in spread(len(members), k)] if k > 0 else []
+    return out
 
 
 def choose_folds(design: CalibrationData, settings: LoopSettings) -> tuple[Folds, dict]:
@@ -85,23 +95,26 @@ def choose_folds(design: CalibrationData, settings: LoopSettings) -> tuple[Folds
         if n_meas < 2:
             raise InputError(f"{n_meas} design measurement(s): folds of whole measurements need at least 2; "
                              "fold by pose (--fold-by pose)")
-        k = min(settings.folds, n_meas)
-        assign = measurement_folds(design, k, settings.seed)
+        k = min(settings.folds, n_meas)          # said in the note when fewer than asked
+        assign = measurement_folds(design, k)
         per_pose = settings.fold_by == "auto" and n_meas < need
         n_poses = int(sum(np.sum(design.points.feature[design.points.measurement == m] != "") for m in assign))
         folds = Folds("measurement", k, assign, per_pose, n_poses)
     else:
-        folds = Folds("pose", settings.folds, pose_folds(design, settings.folds, settings.seed))
+        folds = Folds("pose", settings.folds, pose_folds(design, settings.folds))
+        if folds.units < folds.k:
+            raise InputError(f"--folds {folds.k}: the design set has {folds.units} poses that can be held out (a "
+                             "feature keeps the poses its own fit needs); give at most that many folds by pose")
     n = folds.units
     smallest = 0.5 ** n if n else 1.0
     ok = smallest < level
     power = {"fold_by": folds.by, "folds": folds.k, "units": n, "unit": folds.unit_name, "needed": need,
              "smallest_p": smallest, "level": level, "can_reach": ok}
-    why = ""
+    why = "" if folds.k == settings.folds else f" (--folds {settings.folds}: only {n_meas} design measurements)"
     if folds.by == "pose" and settings.fold_by == "auto":
         why = f" (only {n_meas} design measurement: whole measurements cannot be held out)"
     elif folds.per_pose:
-        why = (f", {folds.k} of {n_meas} measurements held out in turn, the test over their poses (each against "
+        why += (f", {folds.k} of {n_meas} measurements held out in turn, the test over their poses (each against "
                f"its measurement's own centre: {n_meas} measurements are too few units)")
     if ok:
         power["note"] = (f"decisions: {folds.k} folds by {by}{why}; one-sided Wilcoxon over {n} {folds.unit_name} "

@@ -15,12 +15,13 @@ __all__ = ["heldout_residuals", "heldout_figures", "bootstrap_rows"]
 
 
 def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit",
-                    train=None) -> dict:
+                    train=None, seed: int = 0) -> dict:
     """Figures of ``(model, p)`` on held-out data [um] (``train``: see :func:`heldout_residuals`): RMS and
     max |residual| over the artefact rows (each row a residual component: a sphere/ring/plane distance, a
     seat coordinate, a length error; the reference-instrument rows only when there is nothing else, since
     their noise is the instrument's), the same per kind, the weighted RMS of all rows, and the standard
-    test figures (:data:`calibration.validation.FIGURES`) of the held-out points."""
+    test figures (:data:`calibration.validation.FIGURES`) of the held-out points; ``seed``: the seed of the
+    bootstrap of their standard uncertainties."""
     h = heldout_residuals(model, p, data, weights, reference, train)
     e = h["e"]
     art = h["kind"] != "reference"
@@ -33,12 +34,12 @@ def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights,
         ek = e[h["kind"] == k]
         out["by_kind"][k] = {"rows": int(len(ek)), "rms_um": float(np.sqrt(np.mean(ek ** 2))) * 1e6,
                              "max_um": float(np.max(np.abs(ek))) * 1e6}
-    u = bootstrap_rows(head, h["measurement"][art] if art.any() else h["measurement"])
+    u = bootstrap_rows(head, h["measurement"][art] if art.any() else h["measurement"], seed=seed)
     out["u_rms_um"], out["u_max_um"] = (None, None) if u is None else (u[0] * 1e6, u[1] * 1e6)
     held = data if train is None else data.select(~np.asarray(train, bool))
     try:
         val = validate(model, p, held, weights, reference)
-        summary, u_std = val.summary(), bootstrap(val)
+        summary, u_std = val.summary(), bootstrap(val, seed=seed)
     except InputError:                # held-out poses too few on some feature for its own fit
         summary, u_std = {}, {}
     out["standard"] = {k: summary[k] * FIGURES[k][2] for k in FIGURES if k in summary}
@@ -61,3 +62,4 @@ def bootstrap_rows(e: np.ndarray, measurement: np.ndarray, samples: int = BOOTST
 
 
 # ---------------------------------------------------------------------------------------------------
+

@@ -12,6 +12,7 @@ from arm_model.model import ArmModel
 
 from ..calibrate import CalibrationResult, display_unit
 from ..candidates import Candidate
+from ..data import CalibrationData
 from .settings import LoopSettings
 
 __all__ = ["Stage", "LoopResult", "display", "effect_summary"]
@@ -68,6 +69,9 @@ class LoopResult:
         built: every effect built from the residual (:mod:`calibration.synthesis`), in the order offered:
             name, family, joint, effect, ``added`` and, if not, ``why_not_added`` (the held-out test's or
             the screening's reason).
+        data: every point of the campaign (outliers included).
+        vetoed: candidates that passed the held-out folds of the design set but made the outer test set worse:
+            name, origin, ``heldout_rms_before_um``, ``heldout_rms_after_um``, the cross-validation's reason.
     """
     stages: list
     final_screening: list
@@ -88,6 +92,8 @@ class LoopResult:
     power: dict = field(default_factory=dict)
     model_fit: CalibrationResult | None = None
     built: list = field(default_factory=list)
+    vetoed: list = field(default_factory=list)
+    data: CalibrationData | None = None
 
     @property
     def final(self) -> Stage:

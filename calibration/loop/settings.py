@@ -32,11 +32,13 @@ def wilcoxon_units_needed(alpha: float, tests: int) -> int:
     return int(math.floor(math.log2(tests / alpha))) + 1
 
 
-
-
 @dataclass(frozen=True)
 class LoopSettings:
-    """Options of :func:`close_loop` (see its docstring)."""
+    """Options of :func:`close_loop` (see its docstring). ``seed``: the seed of the bootstrap of the held-out
+    figures' uncertainties only (the test set and the folds are functions of the data, drawn from no seed).
+    ``test_in_model``: the final model is fitted on every point, design and test (default); False (``aacmm
+    close-loop --holdout``), the outer test set's rows are kept out of it, as ``calibrate --holdout`` keeps its
+    held-out measurements out of its model."""
     folds: int = 4
     test_fraction: float = 0.25
     alpha: float = 0.01
@@ -54,6 +56,7 @@ class LoopSettings:
     synthesise: bool = True
     physics: bool = True
     prior_scale: float | str | None = None
+    test_in_model: bool = True
 
     def __post_init__(self):
         object.__setattr__(self, "holdout", tuple(self.holdout or ()))

@@ -42,7 +42,8 @@ from .settings import LEGACY_RESOLUTION, NOISE_OFF, LoopSettings
 from .state import LoopState, Screening, fitted_names, log
 from .verdict import ADDED, verdict_text
 
-__all__ = ["Campaign", "Stop", "prepare", "screen", "test", "synthesise", "add", "run_stage", "run", "report"]
+__all__ = ["Campaign", "Stop", "prepare", "screen", "test", "synthesise", "decide", "fit_stage", "outer_test_worse", "add", "run_stage", "run",
+           "report"]
 
 
 @dataclass(frozen=True)
@@ -79,15 +80,15 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
             + [c.effect for c in camp.extra])
     data = make_data(points, camp.artefacts, needs_model(desc, need), reference=camp.reference)
     cands, skipped = library_candidates(desc, data, camp.families, camp.extra)
-    design, test, test_by = outer_split(data, settings)
+    design, test, test_by, test_rows = outer_split(data, settings)
     _say_split(say, data, design, test, test_by, len(cands), settings)
     stated = camp.weights or Weights()
     model = ArmModel(desc, tuple(camp.effects))
     scale = _prior_scale(model, design, camp, stated, settings, say)
     options = FitOptions(values=camp.values, rank_tol=settings.rank_tol, outlier_threshold=settings.outlier_threshold,
                          prior_scale=scale, min_resolution=LEGACY_RESOLUTION if scale is None else None)
-    state = LoopState(settings, desc, say, data, design, test, test_by, options, camp.free, camp.hold, model.spec.size,
-                      stated, cands, skipped, model, stated, remaining=list(cands))
+    state = LoopState(settings, desc, say, data, design, test, test_by, test_rows, options, camp.free, camp.hold,
+                      model.spec.size, stated, cands, skipped, model, stated, remaining=list(cands))
     say("calibrating the base model on the design set")
     result = state.fit(model, state.design)
     if settings.drop_outliers:
@@ -222,10 +223,11 @@ def synthesise(state: LoopState) -> bool:
     return True
 
 
-def run_stage(state: LoopState) -> tuple[Decision, Screening] | Stop:
-    """One stage: screen and test the library's candidates; if none passes, once, the effects built from the
-    residual join them and they are screened and tested again (those already tested at the stage are not).
-    Returns the decision (and the screening it came from) or why nothing is added."""
+def run_stage(state: LoopState) -> tuple[Decision, Stage, Screening] | Stop:
+    """One stage: screen and test the library's candidates; if none passes (or every one that passes makes the
+    outer test set worse), once, the effects built from the residual join them and they are screened and
+    tested again (those already tested at the stage are not). Returns the decision, the stage it makes and
+    the screening it came from, or why nothing is added."""
     physics = state.settings.physics and state.power["can_reach"]
     for built in (False, True):
         scr = screen(state)
@@ -242,39 +244,82 @@ def run_stage(state: LoopState) -> tuple[Decision, Screening] | Stop:
         else:
             passing = test(state, scr, physics)
             physics = False                          # weighed at most once a stage
-            if passing:
-                return choose(state, scr, passing), scr
-            stop = Stop("no screened candidate improves the held-out data significantly")
+            staged = decide(state, scr, passing)
+            if staged is not None:
+                return (*staged, scr)
+            stop = Stop("every candidate that passed the held-out folds made the outer test set worse" if passing
+                        else "no screened candidate improves the held-out data significantly")
             state.cv_here = state.last_cv
         if built or not synthesise(state):
             return stop
     raise AssertionError("unreachable")
 
 
-def add(state: LoopState, decision: Decision, scr: Screening) -> None:
+def fit_stage(state: LoopState, decision: Decision, scr: Screening) -> Stage:
     """The model with the decision's candidate, recalibrated on the design set (the noise re-estimated if the
-    loop estimates it), a new stage with its held-out test figures and the plots of its signature before and
-    after; the candidates that share its parameters leave the remaining ones."""
-    s, say = state.settings, state.say
-    cand, cv = decision.candidate, decision.cv
+    loop estimates it; the candidate's parameters with their plausible sizes), as a new stage with its figures
+    on the outer test set and the plots of its signature before and after. The state is not changed."""
+    cand = decision.candidate
     fam_name, before = plot_family(scr.space, cand)
-    state.model = model = state.model.with_effects(cand.effect)
-    state.priors.update(candidate_priors(model, cand, scr.test_of(cand)))
-    say(f"adding {cand.name}; recalibrating")
-    old_weights = state.weights
-    state.result = result = state.fit(model, state.design, reweight=state.weights != state.stated)
-    state.weights = result.weights
+    model = state.model.with_effects(cand.effect)
+    state.say(f"adding {cand.name}; recalibrating")
+    result = state.fit(model, state.design, candidate_priors(model, cand, scr.test_of(cand)),
+                       reweight=state.weights != state.stated)
     after = None
     if fam_name is not None:
         sp2 = residual_space(result)
         fam2 = next((f for f in families(sp2) if f.name == fam_name), None) or candidate_family(sp2, cand)
         after = binned_estimates(sp2, fam2) if fam2 is not None else None
-    stage = Stage(len(state.stages), model, result, cand, state.last_tests, state.cv_here + scr.cvs, decision.nested,
-                  decision.alternatives, state.test_figures(model, result.p, result.reference_mode), fam_name, before,
-                  after)
+    heldout = state.test_figures(model, result.p, result.reference_mode, result.weights)
+    return Stage(len(state.stages), model, result, cand, state.last_tests, state.cv_here + scr.cvs, decision.nested,
+                 decision.alternatives, heldout, fam_name, before, after)
+
+
+def decide(state: LoopState, scr: Screening, passing: list) -> tuple[Decision, Stage] | None:
+    """The candidate to add among the passing ones (:func:`~calibration.loop.decide.choose`) and its stage
+    (:func:`fit_stage`); an effect is never added when the outer test set gets worse with it
+    (:func:`outer_test_worse`): then the next choice among the passing candidates left (without it, and
+    without the candidate it stood in for). None: none is left."""
+    passing = list(passing)
+    while passing:
+        decision = choose(state, scr, passing)
+        stage = fit_stage(state, decision, scr)
+        if not outer_test_worse(state, stage, decision.cv):
+            return decision, stage
+        top = max(passing, key=lambda x: x[1].improvement)[0]
+        passing = [(c, v) for c, v in passing if c is not decision.candidate and c is not top]
+    return None
+
+
+def outer_test_worse(state: LoopState, stage: Stage, cv) -> bool:
+    """Whether the stage's RMS on the outer test set is above the current model's (an effect is never added
+    when the outer test gets worse, so the before/after table never shows a step up); if so its candidate's
+    held-out test no longer passes (its reason says why), and it is recorded in ``state.vetoed``."""
+    now, new = state.stages[-1].heldout["rms_um"], stage.heldout["rms_um"]
+    if not new > now:
+        return False
+    name = stage.added.name
+    why = f"the outer test set got worse with it (RMS {now:.4g} -> {new:.4g} um)"
+    state.say(f"  {name} passed the held-out folds, but {why}: not added")
+    state.vetoed.append({"name": name, "origin": stage.added.origin, "heldout_rms_before_um": now,
+                         "heldout_rms_after_um": new, "cross_validation": cv.reason})
+    cv.passed, cv.reason = False, f"{cv.reason}; but {why}"
+    if stage.added.origin == RESIDUAL:
+        state.fate[name] = f"passed the held-out folds, but {why}"
+    return True
+
+
+def add(state: LoopState, decision: Decision, stage: Stage, scr: Screening) -> None:
+    """The stage's model becomes the current one (its effect's parameters keep their plausible sizes in every
+    later fit); the candidates that share its parameters leave the remaining ones."""
+    cand, cv = decision.candidate, decision.cv
+    model, result = stage.model, stage.result
+    state.priors.update(candidate_priors(model, cand, scr.test_of(cand)))
+    old_weights = state.weights
+    state.model, state.result, state.weights = model, result, result.weights
     state.stages.append(stage)
-    say(f"  + {cand.name}: held-out test RMS {stage.heldout['rms_um']:.2f} um "
-        f"(base {state.stages[0].heldout['rms_um']:.2f} um)")
+    state.say(f"  + {cand.name}: held-out test RMS {stage.heldout['rms_um']:.2f} um "
+              f"(base {state.stages[0].heldout['rms_um']:.2f} um)")
     state.base_folds = cv.folds if state.weights == old_weights else None      # compared at the same weights
     state.cv_here = []
     have = set(model.spec.names)      # e.g. the other harmonic orders of a joint once one is in
@@ -316,16 +361,18 @@ def report(state: LoopState) -> LoopResult:
     built = [{"name": c.name, "family": c.family, "joint": c.joint, "effect": c.effect.describe(),
               "added": fate.get(c.name) == ADDED, "why_not_added": None if fate.get(c.name) == ADDED else
               fate.get(c.name, "not screened")} for c in state.synthesised]
-    verdict = verdict_text(state.stages, significant, state.stop, s, built, state.model)
+    verdict = verdict_text(state.stages, significant, state.stop, s, built, state.model, state.vetoed)
     say(verdict)
-    say("calibrating the final model on every point (design and test; outliers kept, as calibrate does)")
-    model_fit = state.fit(state.model, state.data, reweight=True, weights=state.stated)
+    data = state.data if s.test_in_model else state.data.select(~state.test_rows)
+    say("calibrating the final model on every point (" + ("design and test" if s.test_in_model else
+        "but the held-out test set's") + "; outliers kept, as calibrate does)")
+    model_fit = state.fit(state.model, data, reweight=True, weights=state.stated)
     negative = negative_compliances(model_fit, s.alpha)
     if negative:
         say(f"  joint compliance resolved significantly negative in the final fit ({', '.join(negative)}): a "
             "compliance cannot be negative, so it is held at zero and the final model refitted")
-        model_fit = state.fit(state.model, state.data, reweight=True, hold=tuple(negative), weights=state.stated)
+        model_fit = state.fit(state.model, data, reweight=True, hold=tuple(negative), weights=state.stated)
     return LoopResult(state.stages, state.last_tests, state.last_cv, state.stop, structure, significant, verdict,
                       state.candidates + state.synthesised, state.skipped, state.design.measurements(),
                       state.test.measurements(), s, state.desc, plots, state.dropped, state.test_by, state.power,
-                      model_fit, built)
+                      model_fit, built, state.vetoed, state.data)

@@ -52,7 +52,8 @@ class LoopState:
     Fixed once the data are split (:func:`~calibration.loop.stages.prepare`):
         settings, desc, say: the options, the nominal arm, the progress printer.
         data: every point; design, test: the design set and the outer test set (outliers dropped);
-        test_by: the test set holds whole "measurement"s or the "pose"s of every feature.
+        test_by: the test set holds whole "measurement"s or the "pose"s of every feature; test_rows: the rows
+            of ``data`` in the outer test set (outliers included).
         options: the fit's options common to every fit of the loop (values, prior scale ...);
         free, hold: the user's patterns of the parameters to free (None:
             :func:`~calibration.calibrate.default_free`) and to hold; base_size: the size of the base model's
@@ -71,6 +72,8 @@ class LoopState:
         base_folds: the current model's fold fits (None: not computed at the current weights).
         cv_here: held-out tests run at the current stage (its candidates are not tested again there).
         last_tests, last_cv: the last screening and held-out tests; stop: why the loop stopped.
+        vetoed: candidates that passed the held-out folds but would have made the outer test set worse (not
+            added; the loop stops there).
     """
     settings: LoopSettings
     desc: ArmDescription
@@ -79,6 +82,7 @@ class LoopState:
     design: CalibrationData
     test: CalibrationData
     test_by: str
+    test_rows: np.ndarray
     options: FitOptions
     free: tuple | None
     hold: tuple
@@ -102,6 +106,7 @@ class LoopState:
     last_tests: list = field(default_factory=list)
     last_cv: list = field(default_factory=list)
     stop: str = ""
+    vetoed: list = field(default_factory=list)
 
     def fit(self, model: ArmModel, data: CalibrationData, extra_priors: dict | None = None, reweight: bool = False,
             hold: tuple = (), weights: Weights | None = None) -> CalibrationResult:
@@ -115,13 +120,16 @@ class LoopState:
             priors={**self.priors, **(extra_priors or {})},
             weights_from_data=reweight and self.settings.weights_from_data))
 
-    def test_figures(self, model: ArmModel, p, reference: str) -> dict:
+    def test_figures(self, model: ArmModel, p, reference: str, weights: Weights | None = None) -> dict:
         """Figures of ``(model, p)`` on the outer test set (:func:`~calibration.loop.heldout.heldout_figures`):
-        nuisance solved on the test measurements, or each test pose against its feature's design poses."""
+        nuisance solved on the test measurements, or each test pose against its feature's design poses, weighted
+        by ``weights`` (default the current ones); the bootstrap of their uncertainties seeded by
+        ``settings.seed``."""
+        seed, weights = self.settings.seed, self.weights if weights is None else weights
         if self.test_by == "measurement":
-            return heldout_figures(model, p, self.test, self.weights, reference)
-        return heldout_figures(model, p, concat(self.design, self.test), self.weights, reference,
-                               np.arange(len(self.design) + len(self.test)) < len(self.design))
+            return heldout_figures(model, p, self.test, weights, reference, seed=seed)
+        return heldout_figures(model, p, concat(self.design, self.test), weights, reference,
+                               np.arange(len(self.design) + len(self.test)) < len(self.design), seed)
 
 
 @dataclass
@@ -153,3 +161,4 @@ class Screening:
     def cv_of(self, cand) -> CVResult | None:
         """The held-out test of a gated candidate, None if it has none."""
         return next((v for (c, _), v in zip(self.gated, self.cvs) if c is cand), None)
+

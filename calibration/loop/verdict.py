@@ -16,9 +16,10 @@ S0_LIMIT = 3.0
 ADDED = "added"
 
 
-def verdict_text(stages, significant, stop, settings, built=(), model: ArmModel | None = None) -> str:
-    """What was added (and how much the held-out error dropped), what was built from the residual and not
-    added (and why), and what structure remains unexplained."""
+def verdict_text(stages, significant, stop, settings, built=(), model: ArmModel | None = None, vetoed=()) -> str:
+    """What was added (and how much the held-out error dropped), what passed the held-out folds but was not
+    added because the outer test set got worse, what was built from the residual and not added (and why), and
+    what structure remains unexplained."""
     def label(s):
         if any(cv.candidate == s.added.name and cv.reason.startswith(PHYSICS) for cv in s.cv):
             return " (included as physics, not for a held-out gain)"
@@ -31,7 +32,10 @@ def verdict_text(stages, significant, stop, settings, built=(), model: ArmModel 
     if added:
         out += (f"; held-out test RMS {base['rms_um']:.2f} -> {last['rms_um']:.2f} um, "
                 f"max {base['max_um']:.2f} -> {last['max_um']:.2f} um")
-    not_added = [b for b in built if not b["added"]]
+    for v in vetoed:
+        out += (f". Not added, the outer test set got worse with it: {v['name']} (RMS "
+                f"{v['heldout_rms_before_um']:.2f} -> {v['heldout_rms_after_um']:.2f} um)")
+    not_added = [b for b in built if not b["added"] and b["name"] not in {v["name"] for v in vetoed}]
     if not_added:
         out += (". Built from the residual, not supported, not added: "
                 + "; ".join(f"{b['name']} ({b['why_not_added']})" for b in not_added))
