@@ -120,9 +120,10 @@ def before_after_text(loop: LoopResult) -> str:
     w = 16
     head = f"{'model':<{name_w}}  " + "  ".join(f"{h:>{w}}" for _, h, _ in cols)
     units = f"{'':<{name_w}}  " + "  ".join(f"{'[' + u + ']':>{w}}" for _, _, u in cols)
-    what = (f"{len(loop.test)} measurements never used for a decision" if loop.test_by == "measurement" else
-            "poses of each feature never used for a decision, each predicted against its feature's centre "
-            "fitted on the design poses")
+    what = (f"{len(loop.test)} measurements no model of this table was fitted to" if loop.test_by == "measurement"
+            else "poses of each feature no model of this table was fitted to, each predicted against its "
+            "feature's centre fitted on the design poses")
+    what += "; an effect that makes it worse is not added"
     lines = [f"held-out test set: {what} (rows: {loop.stages[0].heldout.get('headline_rows', '')}); "
              "± the standard uncertainty of each figure (bootstrap over the test measurements)", head, units]
     for r in rows:
