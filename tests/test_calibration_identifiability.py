@@ -100,10 +100,9 @@ def test_compliance_without_force_has_no_effect(artefact_data):
     assert set(res.free) == {"j2.theta_offset", "j2.d", "j2.a", "j2.alpha"}
 
 
-def test_urdf_arm_origin_errors(nominal, tmp_path):
-    """An arm given as a URDF (per-joint origin xyz/rpy errors, 6 a joint): the same code finds the
-    redundant origin parameters (the first joint's 6 are rigid motions of the base) and recovers the
-    rest in the identifiable parameterization."""
+def _urdf_arm(nominal, tmp_path):
+    """The nominal arm written as a URDF (its stylus replaced by a fixed tip 85 mm out) and read back: six
+    errors a joint origin."""
     from arm_model.urdf import urdf_text
     from arm_model.urdf_import import description_from_urdf
     text = urdf_text(nominal)
@@ -112,8 +111,14 @@ def test_urdf_arm_origin_errors(nominal, tmp_path):
              '<origin xyz="0.002 -0.001 0.085" rpy="0 0 0"/></joint>\n  <link name="tip"/>\n</robot>\n')
     path = tmp_path / "arm.urdf"
     path.write_text(text)
-    desc = description_from_urdf(path, "tip")
-    model = ArmModel(desc)
+    return description_from_urdf(path, "tip")
+
+
+def test_urdf_arm_origin_errors(nominal, tmp_path):
+    """An arm given as a URDF (per-joint origin xyz/rpy errors, 6 a joint): the same code finds the
+    redundant origin parameters (the first joint's 6 are rigid motions of the base) and recovers the
+    rest in the identifiable parameterization."""
+    model = ArmModel(_urdf_arm(nominal, tmp_path))
     assert model.spec.names[:6] == ("j1.origin_x", "j1.origin_y", "j1.origin_z", "j1.origin_roll",
                                     "j1.origin_pitch", "j1.origin_yaw")
     c = make_campaign(model, SynthSpec(ballbars=8, ballbar_points=5, seats=3, articulations=10, spheres=1,
@@ -152,18 +157,10 @@ def test_base_set_of_the_full_origin_errors_is_the_literature_count(nominal, tmp
     measured by a point: 4R + 2P + 6 (Everett, Driels and Mooring 1987) less the tool's orientation (3), so
     31 with the base pose known (reference points in the base frame) and 25 with it unknown (its 6 rigid
     motions a gauge). As DH rows (four errors a row) the base frame lacks two errors: 25 and 23."""
-    from arm_model.urdf import urdf_text
-    from arm_model.urdf_import import description_from_urdf
-    text = urdf_text(nominal)
-    text = text[: text.index('  <joint name="stylus_root_joint"')]
-    text += ('  <joint name="tip_joint" type="fixed"><parent link="flange"/><child link="tip"/>'
-             '<origin xyz="0.002 -0.001 0.085" rpy="0 0 0"/></joint>\n  <link name="tip"/>\n</robot>\n')
-    path = tmp_path / "arm.urdf"
-    path.write_text(text)
     spec = SynthSpec(ballbars=8, ballbar_points=5, seats=3, articulations=10, spheres=1, noise=1e-6,
                      reference_points=12)
     counts = {}
-    for label, desc in (("urdf", description_from_urdf(path, "tip")), ("dh", nominal)):
+    for label, desc in (("urdf", _urdf_arm(nominal, tmp_path)), ("dh", nominal)):
         model = ArmModel(desc)
         c = make_campaign(model, spec, seed=8, T_ref_base=np.eye(4))
         data = make_data(c.points, c.artefacts, model, reference=c.reference_points)
