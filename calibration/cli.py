@@ -123,16 +123,26 @@ def prior_scale(text: str):
     return v
 
 
-def _common_fit_options(p) -> None:
+def model_options(p) -> None:
+    """``--effect``, ``--free`` and ``--hold``: the model and which of its parameters are fitted (one definition,
+    one meaning, for ``aacmm calibrate``, ``aacmm close-loop`` and the studies)."""
+    from arm_model.effects import EFFECTS
+    p.add_argument("--effect", action="append", metavar="KEY",
+                   help="add an effect of arm_model.effects to the model (repeatable): "
+                        f"{', '.join(EFFECTS)}. Its parameters are fitted (see --free); close-loop: it is part of "
+                        "the base model, not a candidate")
     p.add_argument("--free", action="append", metavar="PATTERN",
                    help="parameters to identify, by name or glob (repeatable), e.g. 'j*.d', 'probe.*', "
-                        "'j3.theta_offset'. Default: every joint-row error, probe.x/y/z and the parameters of "
-                        "the --effect options (probe compliances only when named)")
+                        "'j3.theta_offset'. Default: every joint-row error, probe.x/y/z and the parameters of the "
+                        "model's effects (--effect, and those of a model file given as --arm; probe compliances "
+                        "only when named). close-loop also frees the parameters of every effect it adds")
     p.add_argument("--hold", action="append", metavar="PATTERN",
-                   help="parameters to hold at the nominal value (removed from the free set; repeatable)")
-    p.add_argument("--effect", action="append", metavar="KEY",
-                   help="add an effect of arm_model.effects to the model (repeatable): eccentricity, "
-                        "joint_gain, joint_compliance, thermal, force_sensor, probe_compliance")
+                   help="parameters to hold at their value in --arm (the nominal's, or a model file's), removed "
+                        "from the free set (repeatable)")
+
+
+def _common_fit_options(p) -> None:
+    model_options(p)
     sigma_options(p, prior_default="evidence")
     p.add_argument("--rank-tol", type=fraction, default=None,
                    help="relative singular value below which a parameter combination counts as not "

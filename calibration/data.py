@@ -354,24 +354,45 @@ def concat(a: CalibrationData, b: CalibrationData) -> CalibrationData:
     return CalibrationData(pts, a.artefacts, aux, files, marker, a.marker_offsets, a.tracker)
 
 
-def split_poses(data: CalibrationData, fraction: float, seed: int = 0, keep=None) -> np.ndarray:
+def split_poses(data: CalibrationData, fraction: float, keep=None) -> np.ndarray:
     """Held-out mask (N,) of a share ``fraction`` of the poses (points) of every artefact instance (a
-    feature within a measurement; the reference points as one instance), drawn at random (seeded). An
-    instance keeps at least ``keep[kind]`` points (default the fewest its fit needs, plus one) outside the
-    mask, so that its centre (axis, plane) can still be fitted on the rest; smaller instances are never held.
+    feature within a measurement; the reference points as one instance): the poses of the instance in
+    :func:`pose_order`, and of them the ones at evenly spaced ranks (:func:`spread`), so the held-out poses
+    span the instance's range of poses and are a function of the poses alone (not of their order in the file
+    or of a seed). An instance keeps at least ``keep[kind]`` points (default the fewest its fit needs, plus
+    one) outside the mask, so that its centre (axis, plane) can still be fitted on the rest; smaller
+    instances are never held.
     """
     from .problem import MIN_POINTS
     if not 0.0 < fraction < 1.0:
         raise ValueError(f"the held-out share of poses must be in (0, 1), got {fraction}")
     keep = keep or {k: v[0] + 1 for k, v in MIN_POINTS.items()}
-    rng = np.random.default_rng(seed)
     out = np.zeros(len(data), bool)
     for kind, rows in pose_groups(data):
         n = len(rows)
         k = min(int(round(fraction * n)), n - keep.get(kind, 1))
         if k >= 1:
-            out[rng.choice(rows, size=k, replace=False)] = True
+            out[rows[pose_order(data.points.q[rows])][spread(n, k)]] = True
     return out
+
+
+def pose_order(q: np.ndarray) -> np.ndarray:
+    """Order (indices) of poses ``q`` (n, joints) [rad] along their main direction of variation: the first
+    principal axis of the joint angles, its sign fixed so that its largest component is positive; equal
+    projections in their given order. Dealt in turn along this order, every part of a split spans the range
+    of the poses, and the split depends on the poses, not on the order of the rows."""
+    q = np.asarray(q, dtype=float)
+    x = q - q.mean(axis=0)
+    if len(q) < 2 or not np.any(x):
+        return np.arange(len(q))
+    axis = np.linalg.svd(x, full_matrices=False)[2][0]
+    axis = axis * np.sign(axis[np.argmax(np.abs(axis))])
+    return np.argsort(x @ axis, kind="stable")
+
+
+def spread(n: int, k: int) -> np.ndarray:
+    """``k`` of ``n`` ranks evenly spaced (the middle of each of ``k`` equal parts): ``floor((j + 1/2) n / k)``."""
+    return np.floor((np.arange(k) + 0.5) * n / k).astype(int)
 
 
 def pose_groups(data: CalibrationData) -> list[tuple[str, np.ndarray]]:

@@ -47,7 +47,7 @@ from .identifiability import DEFAULT_RANK_TOL, point_noise, prior_scales, reduce
 from .problem import Problem
 from .solver import levenberg_marquardt
 
-__all__ = ["JointAngleOffset", "measurement_folds", "pose_folds", "ResidualSpace", "residual_space", "GroupTest",
+__all__ = ["JointAngleOffset", "measurement_groups", "measurement_folds", "pose_folds", "ResidualSpace", "residual_space", "GroupTest",
            "Family", "families", "candidate_family", "test_group", "screen_candidates", "structure_tests",
            "remaining_structure",
            "binned_estimates", "holm"]
@@ -82,51 +82,55 @@ class JointAngleOffset(Effect):
 # ---------------------------------------------------------------------------------------------------
 # folds of whole measurements
 
-def measurement_folds(data: CalibrationData, k: int, seed: int = 0) -> dict[str, int]:
-    """Measurement id -> fold (0..k-1), drawn at random (seeded) within each group of measurements
-    that touch the same feature kinds, so that every fold holds each kind as far as possible."""
+def measurement_groups(data: CalibrationData) -> list[list[str]]:
+    """The measurement ids in groups that touch the same feature kinds (the groups by their kinds, each
+    group's ids sorted): the strata of a split by measurement, so that every part holds each kind as far as
+    possible."""
+    pts, arte = data.points, data.artefacts
+    groups: dict[tuple, list[str]] = {}
+    for m in data.measurements():
+        feats = set(pts.feature[pts.measurement == m])
+        kinds = tuple(sorted(arte.features[f].kind if f else "free" for f in feats))
+        groups.setdefault(kinds, []).append(m)
+    return [sorted(groups[key]) for key in sorted(groups)]
+
+
+def measurement_folds(data: CalibrationData, k: int) -> dict[str, int]:
+    """Measurement id -> fold (0..k-1): the measurements of each group (:func:`measurement_groups`, ids
+    sorted) dealt to the folds in turn, continuing from group to group. A function of the ids and the kinds
+    alone: no seed, no dependence on the order of the rows."""
     if k < 2:
         raise ValueError(f"cross-validation needs at least 2 folds, got {k}")
     ids = data.measurements()
     if len(ids) < k:
         raise ValueError(f"{len(ids)} measurement(s) cannot make {k} folds")
-    rng = np.random.default_rng(seed)
-    pts, arte = data.points, data.artefacts
-    groups: dict[tuple, list[str]] = {}
-    for m in ids:
-        feats = set(pts.feature[pts.measurement == m])
-        kinds = tuple(sorted(arte.features[f].kind if f else "free" for f in feats))
-        groups.setdefault(kinds, []).append(m)
     out, start = {}, 0
-    for key in sorted(groups):
-        members = list(groups[key])
-        rng.shuffle(members)
+    for members in measurement_groups(data):
         for i, m in enumerate(members):
             out[m] = (start + i) % k
         start += len(members)
     return out
 
 
-def pose_folds(data: CalibrationData, k: int, seed: int = 0) -> np.ndarray:
+def pose_folds(data: CalibrationData, k: int) -> np.ndarray:
     """Fold (0..k-1) of every point, -1 for points never held out: inside each artefact instance (a
-    feature within a measurement; the reference points as one) the poses are shuffled (seeded) and dealt
-    to the folds in turn, so that a held-out pose is predicted against the instance's centre (axis,
-    plane, ``T_ref_base``) fitted on the instance's other poses. An instance whose training part would
-    have fewer points than its fit needs is never held out."""
+    feature within a measurement; the reference points as one) the poses, in
+    :func:`~calibration.data.pose_order`, are dealt to the folds in turn (continuing from instance to
+    instance), so that each fold spans the instance's poses and a held-out pose is predicted against the
+    instance's centre (axis, plane, ``T_ref_base``) fitted on the instance's other poses. An instance whose
+    training part would have fewer points than its fit needs is never held out. No seed: the folds are a
+    function of the poses."""
     from .problem import MIN_POINTS
-    from .data import pose_groups
+    from .data import pose_groups, pose_order
     if k < 2:
         raise ValueError(f"cross-validation needs at least 2 folds, got {k}")
-    rng = np.random.default_rng(seed)
     out = np.full(len(data), -1)
     start = 0
     for kind, rows in pose_groups(data):
         n = len(rows)
         if n - math.ceil(n / k) < MIN_POINTS[kind][0] or n < 2:
             continue
-        rows = rows.copy()
-        rng.shuffle(rows)
-        out[rows] = (start + np.arange(n)) % k
+        out[rows[pose_order(data.points.q[rows])]] = (start + np.arange(n)) % k
         start += n
     return out
 
@@ -542,116 +546,193 @@ def _lateral_loads(res: CalibrationResult, x: np.ndarray) -> list[tuple[list, np
     return out
 
 
-def families(space: ResidualSpace) -> list[Family]:
-    """The generic structure families for the fit of ``space`` (those the data can express)."""
+@dataclass(frozen=True)
+class _FamilyInputs:
+    """What every family builder reads from a fit: its residual space, the probe and base directions of a
+    ball displacement (weighted Jacobian columns), the per-point probe rotations and ball centres, torques
+    and forces."""
+    space: ResidualSpace
+    rot: np.ndarray
+    x: np.ndarray
+    probe_dirs: list
+    base_cols: list
+    tau_g: np.ndarray
+    tau_c: np.ndarray
+    force: np.ndarray
+    has_force: bool
+
+    @property
+    def desc(self):
+        return self.space.result.model.desc
+
+    @property
+    def points(self):
+        return self.space.result.data.points
+
+    @property
+    def base_dirs(self) -> list:
+        return [(f"base {a}", "m", self.base_cols[i]) for i, a in enumerate("xyz")]
+
+    def joint_dir(self, j: int) -> tuple:
+        """The direction of joint j's angle error: (name, unit, weighted column)."""
+        return ("angle " + self.desc.joints[j].name, "rad", self.space.jp[:, self.space.offset_slice.start + j])
+
+
+def _family_inputs(space: ResidualSpace) -> _FamilyInputs:
     res = space.result
-    desc = res.model.desc
-    data = res.data
-    pts = data.points
-    spec = space.model.spec
-    jp = space.jp
-    out: list[Family] = []
+    spec, jp = space.model.spec, space.jp
     rot, x = _point_frames(space)
     probe_dirs = [(f"probe {a}", "m", jp[:, spec.index(f"probe.{a}")]) for a in "xyz"]
     base_cols = [sum(probe_dirs[a][2] * space.per_row(rot[:, ax, a]) for a in range(3)) for ax in range(3)]
-    base_dirs = [(f"base {a}", "m", base_cols[i]) for i, a in enumerate("xyz")]
-    scale_dir = ("scale (position x 1)", "1", sum(base_cols[i] * space.per_row(x[:, i]) for i in range(3)))
-    tau_g, tau_c = torques_of(desc, data)
-    force = data.wrench[:, :3]
-    has_force = pts.force is not None and np.max(np.abs(force), initial=0.0) > 1e-9
-    for j, jr in enumerate(desc.joints):
-        dq = ("angle " + jr.name, "rad", jp[:, space.offset_slice.start + j])
-        qj = pts.q[:, j]
-        basis = []
-        for h in HARMONICS:
-            basis += [(f"cos({h} q{j + 1})", np.cos(h * qj)), (f"sin({h} q{j + 1})", np.sin(h * qj))]
-        sub = {f"cos/sin({h} q{j + 1})": [2 * i, 2 * i + 1] for i, h in enumerate(HARMONICS)}
+    tau_g, tau_c = torques_of(res.model.desc, res.data)
+    force = res.data.wrench[:, :3]
+    has_force = res.data.points.force is not None and np.max(np.abs(force), initial=0.0) > 1e-9
+    return _FamilyInputs(space, rot, x, probe_dirs, base_cols, tau_g, tau_c, force, has_force)
+
+
+def _harmonic_basis(q: np.ndarray, k: int, harmonics) -> tuple[list, dict]:
+    """cos/sin(h q_k) for each harmonic h, and the subgroup of each harmonic's pair of columns."""
+    basis = []
+    for h in harmonics:
+        basis += [(f"cos({h} q{k + 1})", np.cos(h * q)), (f"sin({h} q{k + 1})", np.sin(h * q))]
+    return basis, {f"cos/sin({h} q{k + 1})": [2 * i, 2 * i + 1] for i, h in enumerate(harmonics)}
+
+
+def _joint_families(f: _FamilyInputs) -> list[Family]:
+    """Per joint: its angle error as harmonics of its own angle, proportional to its gravity torque and to
+    its contact torque (where it holds one)."""
+    out = []
+    for j, jr in enumerate(f.desc.joints):
+        dq, qj = f.joint_dir(j), f.points.q[:, j]
+        basis, sub = _harmonic_basis(qj, j, HARMONICS)
         out.append(Family(f"q{j + 1} harmonics", f"error of joint {jr.name}'s angle periodic in q{j + 1} "
                           f"(harmonics {', '.join(map(str, HARMONICS))})", "field", [dq], basis,
                           (f"q{j + 1}", "deg", 180 / math.pi, qj), sub))
-        if np.max(np.abs(tau_g[:, j]), initial=0.0) > 1e-6:
+        if np.max(np.abs(f.tau_g[:, j]), initial=0.0) > 1e-6:
             out.append(Family(f"{jr.name} gravity torque", f"error of joint {jr.name}'s angle proportional to the "
-                              "torque it holds against gravity", "field", [dq], [(f"tau_g{j + 1}", tau_g[:, j])],
-                              (f"gravity torque {jr.name}", "N m", 1.0, tau_g[:, j])))
-        if has_force and np.max(np.abs(tau_c[:, j]), initial=0.0) > 1e-6:
+                              "torque it holds against gravity", "field", [dq], [(f"tau_g{j + 1}", f.tau_g[:, j])],
+                              (f"gravity torque {jr.name}", "N m", 1.0, f.tau_g[:, j])))
+        if f.has_force and np.max(np.abs(f.tau_c[:, j]), initial=0.0) > 1e-6:
             out.append(Family(f"{jr.name} contact torque", f"error of joint {jr.name}'s angle proportional to the "
-                              "contact force's torque on it", "field", [dq], [(f"tau_c{j + 1}", tau_c[:, j])],
-                              (f"contact torque {jr.name}", "N m", 1.0, tau_c[:, j])))
-    # cross-coupling: joint j's angle error periodic in another joint's angle q_k (a cable, a counterbalance)
-    for k in range(desc.n_joints):
-        qk = pts.q[:, k]
+                              "contact force's torque on it", "field", [dq], [(f"tau_c{j + 1}", f.tau_c[:, j])],
+                              (f"contact torque {jr.name}", "N m", 1.0, f.tau_c[:, j])))
+    return out
+
+
+def _cross_families(f: _FamilyInputs) -> list[Family]:
+    """Cross-coupling: joint j's angle error periodic in another joint's angle q_k (a cable, a
+    counterbalance)."""
+    out = []
+    for k in range(f.desc.n_joints):
+        qk = f.points.q[:, k]
         if np.ptp(qk) <= 0:
             continue
-        basis = []
-        for h in CROSS_HARMONICS:
-            basis += [(f"cos({h} q{k + 1})", np.cos(h * qk)), (f"sin({h} q{k + 1})", np.sin(h * qk))]
-        sub = {f"cos/sin({h} q{k + 1})": [2 * i, 2 * i + 1] for i, h in enumerate(CROSS_HARMONICS)}
-        for j, jr in enumerate(desc.joints):
+        basis, sub = _harmonic_basis(qk, k, CROSS_HARMONICS)
+        for j, jr in enumerate(f.desc.joints):
             if j == k:
                 continue
-            dq = ("angle " + jr.name, "rad", jp[:, space.offset_slice.start + j])
             out.append(Family(f"q{k + 1} harmonics on {jr.name}", f"error of joint {jr.name}'s angle periodic in "
                               f"q{k + 1} (harmonics {', '.join(map(str, CROSS_HARMONICS))}): a cross-coupling", "field",
-                              [dq], basis, (f"q{k + 1}", "deg", 180 / math.pi, qk), sub))
-    for j, (tilt, moment) in enumerate(_lateral_loads(res, x)):
+                              [f.joint_dir(j)], basis, (f"q{k + 1}", "deg", 180 / math.pi, qk), sub))
+    return out
+
+
+def _lateral_families(f: _FamilyInputs) -> list[Family]:
+    """Per joint with a moment across it: the tilt of its axis proportional to that moment."""
+    out = []
+    for j, (tilt, moment) in enumerate(_lateral_loads(f.space.result, f.x)):
         if np.max(np.abs(moment), initial=0.0) <= 1e-6:
             continue
-        jn = desc.joints[j].name
-        dirs = [(f"tilt of {jn} about its {a}", "rad", sum(base_cols[ax] * space.per_row(tilt[k][:, ax]) for ax in range(3)))
-                for k, a in enumerate("xy")]
+        jn = f.desc.joints[j].name
+        dirs = [(f"tilt of {jn} about its {a}", "rad",
+                 sum(f.base_cols[ax] * f.space.per_row(tilt[k][:, ax]) for ax in range(3))) for k, a in enumerate("xy")]
         basis = [(f"M{a}{j + 1}", moment[:, k]) for k, a in enumerate("xy")]
         mag = np.hypot(moment[:, 0], moment[:, 1])
         out.append(Family(f"{jn} lateral load", f"tilt of joint {jn}'s axis proportional to the moment across it "
                           "(gravity on the links it moves and the contact wrench): a lateral compliance", "field",
                           dirs, basis, (f"moment across {jn}", "N m", 1.0, mag)))
-    if has_force:
-        axes = [a for a in range(3) if np.max(np.abs(force[:, a]), initial=0.0) > 1e-9]
-        basis = [(f"f{'xyz'[a]}", force[:, a]) for a in axes]
-        nb = len(basis)
-        sub = {f"f{'xyz'[a]} (probe frame)": [d * nb + i for d in range(3)] for i, a in enumerate(axes)}
-        big = axes[int(np.argmax([np.std(force[:, a]) for a in axes]))]
-        out.append(Family("contact force", "ball displacement along the probe axes linear in the contact force "
-                          "components (a full compliance matrix)", "field", probe_dirs, basis,
-                          (f"f{'xyz'[big]}", "N", 1.0, force[:, big]), sub))
-        mag = np.linalg.norm(force, axis=1)
-        out.append(Family("force magnitude", "ball displacement along the probe axes proportional to |f|", "field",
-                          probe_dirs, [("|f|", mag)], ("|f|", "N", 1.0, mag)))
+    return out
+
+
+def _force_families(f: _FamilyInputs) -> list[Family]:
+    """With force data: the ball moving along the probe axes linearly in the force components and with |f|."""
+    if not f.has_force:
+        return []
+    force = f.force
+    axes = [a for a in range(3) if np.max(np.abs(force[:, a]), initial=0.0) > 1e-9]
+    basis = [(f"f{'xyz'[a]}", force[:, a]) for a in axes]
+    nb = len(basis)
+    sub = {f"f{'xyz'[a]} (probe frame)": [d * nb + i for d in range(3)] for i, a in enumerate(axes)}
+    big = axes[int(np.argmax([np.std(force[:, a]) for a in axes]))]
+    mag = np.linalg.norm(force, axis=1)
+    return [Family("contact force", "ball displacement along the probe axes linear in the contact force "
+                   "components (a full compliance matrix)", "field", f.probe_dirs, basis,
+                   (f"f{'xyz'[big]}", "N", 1.0, force[:, big]), sub),
+            Family("force magnitude", "ball displacement along the probe axes proportional to |f|", "field",
+                   f.probe_dirs, [("|f|", mag)], ("|f|", "N", 1.0, mag))]
+
+
+def _drift_families(f: _FamilyInputs) -> list[Family]:
+    """The ball moving along the base axes, and a scale, linearly in the temperature and in the time; each link
+    and the probe growing with the temperature at its own rate."""
+    out = []
+    pts = f.points
+    scale_dir = ("scale (position x 1)", "1", sum(f.base_cols[i] * f.space.per_row(f.x[:, i]) for i in range(3)))
     for label, values, unit in (("temperature", pts.temperature, "C"), ("time", pts.time, "s")):
         if values is None or not np.all(np.isfinite(values)) or np.ptp(values) <= 0:
             continue
-        v = values - values.mean()
-        dirs = base_dirs + [scale_dir]
+        dirs = f.base_dirs + [scale_dir]
         sub = {f"{label}: {dn}": [i] for i, (dn, _, _) in enumerate(dirs)}
         out.append(Family(label, f"ball displacement along the base axes, and a scale, linear in the {label}",
-                          "field", dirs, [(f"d{label}", v)], (label, unit, 1.0, values), sub))
+                          "field", dirs, [(f"d{label}", values - values.mean())], (label, unit, 1.0, values), sub))
     t = pts.temperature
     if t is not None and np.all(np.isfinite(t)) and np.ptp(t) > 0:
-        # each link's length and the probe's, each scaled on its own: d x / d(relative length) times dT
-        rows, fields = desc.row_table(), desc.row_fields
-        dirs = [(f"length of {jr.name}", "1", sum(jp[:, spec.index(f"{jr.name}.{fields[m]}")] * rows[i, m]
-                                               for m in desc.length_indices))
-                for i, jr in enumerate(desc.joints) if np.any(rows[i, list(desc.length_indices)] != 0)]
-        dirs.append(("probe length", "1", sum(jp[:, spec.index(f"probe.{a}")] * desc.probe.p_last[k]
-                                             for k, a in enumerate("xyz"))))
-        sub = {f"temperature: {dn}": [i] for i, (dn, _, _) in enumerate(dirs)}
-        out.append(Family("temperature per link", "each link length and the probe growing with the temperature at "
-                          "its own rate", "field", dirs, [("dtemperature", t - t.mean())], ("temperature", "C", 1.0, t),
-                          sub))
-    stylus = rot[:, :, 2]
+        out.append(_link_growth_family(f, t))
+    return out
+
+
+def _link_growth_family(f: _FamilyInputs, t: np.ndarray) -> Family:
+    """Each link's length and the probe's, each scaled on its own: d x / d(relative length) times dT."""
+    desc, spec, jp = f.desc, f.space.model.spec, f.space.jp
+    rows, fields = desc.row_table(), desc.row_fields
+    dirs = [(f"length of {jr.name}", "1", sum(jp[:, spec.index(f"{jr.name}.{fields[m]}")] * rows[i, m]
+                                           for m in desc.length_indices))
+            for i, jr in enumerate(desc.joints) if np.any(rows[i, list(desc.length_indices)] != 0)]
+    dirs.append(("probe length", "1", sum(jp[:, spec.index(f"probe.{a}")] * desc.probe.p_last[k]
+                                         for k, a in enumerate("xyz"))))
+    sub = {f"temperature: {dn}": [i] for i, (dn, _, _) in enumerate(dirs)}
+    return Family("temperature per link", "each link length and the probe growing with the temperature at its own "
+                  "rate", "field", dirs, [("dtemperature", t - t.mean())], ("temperature", "C", 1.0, t), sub)
+
+
+def _approach_and_group_families(f: _FamilyInputs) -> list[Family]:
+    """The ball moving along the base axes linearly in the stylus direction; one offset per measurement and
+    per artefact feature (or certified length)."""
+    stylus = f.rot[:, :, 2]
     basis = [(f"stylus {a}", stylus[:, i]) for i, a in enumerate("xyz")]
     sub = {f"stylus {a} component": [d * 3 + i for d in range(3)] for i, a in enumerate("xyz")}
-    out.append(Family("approach direction", "ball displacement along the base axes linear in the stylus direction "
-                      "(base frame)", "field", base_dirs, basis, ("stylus z (base frame)", "1", 1.0, stylus[:, 2]),
-                      sub))
-    meas = list(dict.fromkeys(space.row_measurement.tolist()))
+    out = [Family("approach direction", "ball displacement along the base axes linear in the stylus direction "
+                  "(base frame)", "field", f.base_dirs, basis, ("stylus z (base frame)", "1", 1.0, stylus[:, 2]), sub)]
+    meas = list(dict.fromkeys(f.space.row_measurement.tolist()))
     if len(meas) > 1:
         out.append(Family("measurement", "one offset of the residual per measurement (one-way ANOVA)", "groups", [],
                           [], None, {m: [i] for i, m in enumerate(meas)}, meas))
-    feats = list(dict.fromkeys(space.row_feature.tolist()))
+    feats = list(dict.fromkeys(f.space.row_feature.tolist()))
     if len(feats) > 1:
         out.append(Family("artefact", "one offset of the residual per artefact feature and per certified length",
-                          "groups", [], [], None, {f: [i] for i, f in enumerate(feats)}, feats))
+                          "groups", [], [], None, {g: [i] for i, g in enumerate(feats)}, feats))
     return out
+
+
+#: the family builders, in the order the families are listed
+_FAMILY_BUILDERS = (_joint_families, _cross_families, _lateral_families, _force_families, _drift_families,
+                    _approach_and_group_families)
+
+
+def families(space: ResidualSpace) -> list[Family]:
+    """The generic structure families for the fit of ``space`` (those the data can express)."""
+    f = _family_inputs(space)
+    return [fam for build in _FAMILY_BUILDERS for fam in build(f)]
 
 
 def structure_tests(space: ResidualSpace, folds: "dict[str, int] | np.ndarray | None",

@@ -12,8 +12,8 @@ from arm_model.checks import point_warnings, log_warnings
 from arm_model.io import read_artefacts, read_points
 from arm_model.model_file import Arm
 
-from .cli import _holdout, _mpe, campaign_inputs, conformance_entry, log_conformance, model_effects, mpe_options, \
-    sigma_options
+from .cli import _holdout, _mpe, campaign_inputs, conformance_entry, log_conformance, model_effects, \
+    model_options, mpe_options, sigma_options
 
 __all__ = ["register", "run"]
 
@@ -44,11 +44,14 @@ def register(sub) -> None:
                "--reference-points points-ref.csv -o out/loop. Method and outputs: docs/close-loop.md")
     campaign_inputs(p)
     p.add_argument("--folds", type=at_least(2), default=4,
-                   help="cross-validation folds of whole measurements for each decision (default 4)")
+                   help="cross-validation folds of the design set for each decision, of whole measurements or of "
+                        "poses (--fold-by) (default 4; by measurement at most the design measurements, by pose at "
+                        "most the poses that can be held out)")
     p.add_argument("--holdout", default=None, metavar="IDS|FRACTION",
                    help="the outer test set, kept out of every decision for the before/after figures: a "
                         "comma-separated list of measurement ids, or a fraction of the measurements drawn per "
-                        "artefact kind (default 0.25; with too few measurements, that share of each feature's poses)")
+                        "artefact kind (default 0.25; with too few measurements, that share of each feature's poses). "
+                        "Given, the held-out rows are also kept out of the model written, as in calibrate")
     p.add_argument("--fold-by", choices=("auto", "measurement", "pose"), default="auto",
                    help="folds of the held-out decisions: whole measurements, or poses inside each feature "
                         "(predicted against the feature's centre fitted on its other poses); auto (default): by "
@@ -63,7 +66,10 @@ def register(sub) -> None:
     p.add_argument("--max-effects", type=at_least(0), default=4, help="most effects to add (default 4)")
     p.add_argument("--cv-top", type=at_least(1), default=3,
                    help="candidates cross-validated at each step, the best screened first (default 3)")
-    p.add_argument("--seed", type=seed, default=0, help="seed of the test-set and fold draws (default 0)")
+    p.add_argument("--seed", type=seed, default=0,
+                   help="seed of the bootstrap of the held-out figures' uncertainties (default 0). The test set and "
+                        "the folds are not drawn at random: they are a function of the data (docs/close-loop.md), "
+                        "so the verdict does not depend on the seed")
     p.add_argument("--candidates", default=None, metavar="KEYS",
                    help="comma-separated candidate families: eccentricity, joint_gain, joint_compliance, thermal, "
                         "force_sensor, probe_compliance (default every one but joint_gain, the encoder scale "
@@ -77,11 +83,7 @@ def register(sub) -> None:
                         "joint compliance under gravity as physics when its signature is significant, its "
                         "compliances resolve positive and the held-out data are not significantly worse; see "
                         "docs/close-loop.md)")
-    p.add_argument("--effect", action="append", metavar="KEY",
-                   help="an effect already in the base model (repeatable; not a candidate then), e.g. thermal")
-    p.add_argument("--free", action="append", metavar="PATTERN",
-                   help="base parameters to identify, by name or glob (repeatable); default every joint-row error "
-                        "and probe.x/y/z (probe compliances are candidates instead); effect parameters are always free")
+    model_options(p)
     sigma_options(p)
     mpe_options(p)
     p.set_defaults(func=run)
@@ -125,11 +127,10 @@ def run(args: argparse.Namespace) -> int:
                             screen_alpha=args.screen_alpha, min_improvement=args.min_improvement,
                             max_effects=args.max_effects, cv_top=args.cv_top, seed=args.seed,
                             synthesise=not args.library_only, physics=not args.held_out_gain_only,
-                            prior_scale=args.prior_scale)
+                            prior_scale=args.prior_scale, test_in_model=args.holdout is None)
     with output_folder(args.output, inputs, "close-loop") as out:
         loop = close_loop(points, artefacts, desc, reference=reference, effects=tuple(effects), values=arm.values,
-                          free=args.free,
-                          weights=weights, settings=settings, families_=families)
+                          free=args.free, hold=args.hold, weights=weights, settings=settings, families_=families)
         # the model written is loop.model_fit (every point) or else the last stage's fit: refine that one
         if loop.model_fit is not None:
             loop.model_fit = refine_torques(loop.model_fit)
@@ -168,13 +169,19 @@ def _check_folds(folds: int, points, reference) -> None:
 def _conformance(loop, mpe: dict) -> dict:
     """The standard tests (:func:`calibration.cli.conformance_entry`) of the model written: on "training"
     the final model on every point it was fitted to; on "holdout", when the outer test set holds whole
-    measurements, the final model fitted on the design set alone (the last stage) on that test set."""
+    measurements, the model written on it if it was kept out of the model (``--holdout``), else the final
+    model fitted on the design set alone (the last stage)."""
     from .data import split_holdout
     final = loop.model_fit or loop.final.result
-    holdout = None
+    holdout, sets = None, "close-loop: training = the final model on the points it was fitted to; no held-out set."
     if loop.model_fit is not None and loop.test_by == "measurement":
-        holdout = (loop.final.result, split_holdout(final.data, list(loop.test))[1])
-    sets = ("close-loop: training = the final model on every point (design and test); held-out = the final "
-            "model fitted on the design set, on the outer test set." if holdout is not None else
-            "close-loop: training = the final model on the points it was fitted to; no held-out set.")
+        test = split_holdout(loop.data, list(loop.test))[1]
+        if loop.settings.test_in_model:
+            holdout = (loop.final.result, test)
+            sets = ("close-loop: training = the final model on every point (design and test); held-out = the final "
+                    "model fitted on the design set, on the outer test set.")
+        else:
+            holdout = (final, test)
+            sets = ("close-loop: training = the final model on every point but the held-out measurements "
+                    "(--holdout); held-out = the same model on them.")
     return conformance_entry(mpe, (final, final.data), holdout, sets)[2]

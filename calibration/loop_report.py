@@ -106,6 +106,7 @@ def summary_dict(loop: LoopResult, inputs: dict | None = None) -> dict:
         "remaining_structure": [{"family": f.name, "best_regressor": t.best, "p_value_holm": a,
                                  "explained_heldout": t.explained_cv} for f, t, a in loop.remaining],
         "built_from_residual": loop.built,
+        "vetoed_by_outer_test": loop.vetoed,
         "verdict": loop.verdict,
     })
 
@@ -118,9 +119,10 @@ def before_after_text(loop: LoopResult) -> str:
     w = 16
     head = f"{'model':<{name_w}}  " + "  ".join(f"{h:>{w}}" for _, h, _ in cols)
     units = f"{'':<{name_w}}  " + "  ".join(f"{'[' + u + ']':>{w}}" for _, _, u in cols)
-    what = (f"{len(loop.test)} measurements never used for a decision" if loop.test_by == "measurement" else
-            "poses of each feature never used for a decision, each predicted against its feature's centre "
-            "fitted on the design poses")
+    what = (f"{len(loop.test)} measurements no model of this table was fitted to" if loop.test_by == "measurement"
+            else "poses of each feature no model of this table was fitted to, each predicted against its "
+            "feature's centre fitted on the design poses")
+    what += "; an effect that makes it worse is not added"
     lines = [f"held-out test set: {what} (rows: {loop.stages[0].heldout.get('headline_rows', '')}); "
              "± the standard uncertainty of each figure (bootstrap over the test measurements)", head, units]
     for r in rows:
@@ -278,10 +280,18 @@ def write_loop_model(loop: LoopResult, out_dir, inputs=()) -> dict:
     added = [s.added.name for s in loop.stages[1:]]
     comment = (f"Model of '{loop.desc.name}' found by aacmm close-loop: the description with the final fit's values "
                f"folded in and the effects " + (f"added ({', '.join(added)})" if added else "of the base model")
-               + f" with their parameters.\nFitted on {len(res.data)} points (design and test); s0 = "
+               + f" with their parameters.\nFitted on {len(res.data)} points ({_fitted_on(loop)}); s0 = "
                f"{res.s0:.4g}. Read by every --arm option; format: docs/calibration.md.")
     return write_model(res, out_dir, loop_model_name(loop), inputs=inputs, written_by="aacmm close-loop",
                        comment=comment)
+
+
+def _fitted_on(loop: LoopResult) -> str:
+    """What the model written was fitted on, in words."""
+    if loop.model_fit is None:
+        return "the design set"
+    return ("every point, design and test" if loop.settings.test_in_model else
+            "every point but the held-out test set's (--holdout)")
 
 
 def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | None = None,
@@ -365,8 +375,11 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
             + "".join(sections) + "</body></html>")
     summary = summary_dict(loop, input_names)
     summary["warnings"] = [w.as_dict() for w in warnings]
+    final = loop.model_fit or loop.final.result
     summary["model"] = {"file": model_files["model"].name, "covariance": model_files["covariance"].name,
-                        "urdf": model_files["urdf"].name, "check": model_check(loop.model_fit or loop.final.result)}
+                        "urdf": model_files["urdf"].name, "check": model_check(final),
+                        "fitted_on": _fitted_on(loop), "points": len(final.data)}
+    summary["reference_frame"] = final.reference
     if conformance:
         summary["conformance"] = conformance
     summary.update(provenance(inputs))

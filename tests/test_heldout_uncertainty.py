@@ -4,7 +4,7 @@ Var(e^2) = k v^2, RMS = sqrt(mean e^2) has, to first order, u = sqrt(k / n) v / 
 import numpy as np
 import pytest
 
-from calibration.loop import _bootstrap_rows
+from calibration.loop import bootstrap_rows
 from calibration.validation import Validation, bootstrap, with_u
 
 
@@ -35,14 +35,14 @@ def test_reference_rms_uncertainty_resamples_whole_measurements():
     u = bootstrap(val, samples=2000)
     assert u["reference_rms"] == pytest.approx(sigma / np.sqrt(2 * m * k), rel=0.15)
     # the close-loop rows: the same estimator on residual rows
-    u_rms, _ = _bootstrap_rows(e, meas, samples=2000)
+    u_rms, _ = bootstrap_rows(e, meas, samples=2000)
     assert u_rms == pytest.approx(sigma / np.sqrt(2 * m * k), rel=0.15)
 
 
 def test_one_measurement_gives_no_uncertainty_and_seeded_is_repeatable():
     val = Validation(lengths=_lengths([3e-6]))
     assert bootstrap(val) == {"length_error_max": None, "length_error_rms": None}
-    assert _bootstrap_rows(np.array([1e-6, 2e-6]), np.array(["a", "a"])) is None
+    assert bootstrap_rows(np.array([1e-6, 2e-6]), np.array(["a", "a"])) is None
     val = Validation(lengths=_lengths([3e-6, -1e-6, 2e-6, 4e-6]))
     assert bootstrap(val) == bootstrap(val)
     assert with_u(12.3, 0.456) == "12.30 ± 0.46" and with_u(1.0, None) == "1.00"

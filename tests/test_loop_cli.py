@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from arm_model.cli import main
@@ -121,4 +122,66 @@ def test_effect_built_from_the_residual_and_library_only(tmp_path, capsys):
     assert main(args + ["--library-only", "-o", str(tmp_path / "library")]) == 0
     s = json.loads((tmp_path / "library" / "summary.json").read_text())
     assert s["effects_added"] == [] and s["settings"]["synthesise"] is False
+    capsys.readouterr()
+
+
+def test_free_hold_and_effect_are_one_option_in_calibrate_and_close_loop():
+    """One definition each (calibration.cli.model_options): the same flags, metavar, action and help."""
+    from arm_model.cli import build_parser
+    sub = next(a for a in build_parser()._actions if a.choices and "calibrate" in a.choices).choices
+
+    def option(cmd, flag):
+        a = next(a for a in sub[cmd]._actions if flag in a.option_strings)
+        return a.option_strings, a.metavar, a.help, type(a).__name__, a.default
+    for flag in ("--free", "--hold", "--effect"):
+        assert option("calibrate", flag) == option("close-loop", flag), flag
+
+
+def test_the_loop_frees_what_calibrate_would_and_every_effect_it_adds(nominal):
+    """close-loop's --free and --hold mean calibrate's: an effect of the base model (thermal) is free only if
+    named; the parameters of an effect the loop added (a joint compliance) are free whatever --free says; a
+    held name is never free, and None keeps calibrate's default set."""
+    from arm_model.effects import JointCompliance, ThermalGrowth
+    from arm_model.model import ArmModel
+    from calibration.loop.state import fitted_names
+    base = ArmModel(nominal, (ThermalGrowth(),))
+    grown = base.with_effects(JointCompliance(joints=(1,)))
+    size = base.spec.size
+    assert fitted_names(grown, None, (), size) is None
+    assert fitted_names(grown, ("j*.d",), ("j2.d",), size) == (
+        [f"j{i}.d" for i in range(1, 8) if i != 2] + ["j2.compliance"])
+    assert "links.thermal_alpha" in fitted_names(grown, None, ("j1.*",), size)
+    assert "links.thermal_alpha" not in fitted_names(grown, ("j*.d",), (), size)
+    assert "j2.compliance" not in fitted_names(grown, None, (), size, held=("j2.compliance",))
+
+
+def test_holdout_keeps_its_rows_out_of_the_model_which_is_calibrates_with_its_reference_frame(tmp_path, capsys):
+    """``--holdout IDS``: the model written is fitted without the held-out measurements, as ``calibrate
+    --holdout``'s is; with nothing added (``--max-effects 0``) it is calibrate's model: the same parameter
+    values in the model files and the same fitted ``T_ref_base`` in both summaries (``reference_frame``)."""
+    from arm_model.io import read_points
+    from arm_model.model_file import load_model
+
+    camp = {**CAMPAIGN, "task": CAMPAIGN["task"] + [{"kind": "tracker", "nests": 6, "articulations": 2,
+                                                      "noise_um": 10.0}]}
+    sim = tmp_path / "sim"
+    simulate(campaign_from_dict(camp)).write(sim)
+    held = ["bar-pos-02", "seat-03", "sphere-03"]
+    common = [str(sim / "points.csv"), str(sim / "artefacts.toml"), "--arm", str(NOMINAL), "--reference-points",
+              str(sim / "points-ref.csv"), "--sigma-probe-um", "2", "--holdout", ",".join(held), "--quiet"]
+    assert main(["close-loop", *common, "--max-effects", "0", "-o", str(tmp_path / "loop")]) == 0
+    # calibrate at the loop's estimation (no prior, the practical-resolution rule: tests/conftest.py loop_fit_options)
+    assert main(["calibrate", *common, "--prior-scale", "off", "--min-resolution", "0.1", "-o", str(tmp_path / "cal")]) == 0
+    loop, cal = (json.loads((tmp_path / d / "summary.json").read_text()) for d in ("loop", "cal"))
+    assert loop["measurements"]["test"] == held and loop["effects_added"] == []
+    pts = read_points(sim / "points.csv", 7)
+    n_ref = len(read_points(sim / "points-ref.csv", 7))     # the tracker rows, none in a held-out measurement
+    assert loop["model"]["points"] == cal["n_points"] == int(sum(m not in held for m in pts.measurement)) + n_ref
+    assert "held-out" in loop["model"]["fitted_on"]
+    t_loop, t_cal = (np.array(s["reference_frame"]["T_ref_base"]) for s in (loop, cal))
+    assert t_loop.shape == (4, 4) and loop["reference_frame"]["fitted"]
+    np.testing.assert_allclose(t_loop, t_cal, atol=1e-9)
+    a, b = (load_model(tmp_path / d / "aacmm7-calibrated.toml") for d in ("loop", "cal"))
+    np.testing.assert_allclose(a.desc.row_table(), b.desc.row_table(), atol=1e-12)
+    np.testing.assert_allclose(a.desc.probe.p_last, b.desc.probe.p_last, atol=1e-12)
     capsys.readouterr()

@@ -76,13 +76,49 @@ def test_residual_space_is_orthogonal_to_the_fit(nominal):
 
 def test_folds_hold_whole_measurements(nominal):
     _, data, _ = fitted(nominal)
-    a = measurement_folds(data, 3, seed=2)
-    assert a == measurement_folds(data, 3, seed=2)
+    a = measurement_folds(data, 3)
     assert set(a) == set(data.measurements()) and set(a.values()) == {0, 1, 2}
     counts = np.bincount(list(a.values()))
     assert counts.max() - counts.min() <= 3      # one stratum may leave one extra in a fold
     with pytest.raises(ValueError):
         measurement_folds(data, 1)
+
+
+def _shuffled(data, seed):
+    """The same data with its rows in another order."""
+    return data.select(np.random.default_rng(seed).permutation(len(data)))
+
+
+def test_splits_are_functions_of_the_data_not_of_the_row_order(nominal):
+    """The loop's test set and folds (no seed): the rows shuffled give the same measurements in each fold and
+    the same poses held out (compared by their joint angles)."""
+    from calibration.data import split_poses
+    from calibration.diagnostics import pose_folds
+    from calibration.loop.folds import spread_measurements
+    _, data, _ = fitted(nominal)
+
+    def poses(d, mask):
+        return sorted(map(tuple, np.round(d.points.q[mask], 12)))
+    for seed in (1, 2):
+        other = _shuffled(data, seed)
+        assert measurement_folds(other, 3) == measurement_folds(data, 3)
+        assert spread_measurements(other, 0.25) == spread_measurements(data, 0.25)
+        assert poses(other, split_poses(other, 0.25)) == poses(data, split_poses(data, 0.25))
+        fa, fb = pose_folds(data, 4), pose_folds(other, 4)
+        for f in range(4):
+            assert poses(other, fb == f) == poses(data, fa == f), f
+
+
+def test_pose_order_and_spread_by_hand():
+    """Poses t v on a line in joint space, v = (0.2, -0.9, 0.1), given out of order: ordered along the axis
+    whose largest component (q2) is positive, -v, so by decreasing t (whatever the sign the SVD gives);
+    the poses -t v in the reverse order. spread(8, 2) takes ranks 2 and 6, spread(10, 3) ranks 1, 5, 8."""
+    from calibration.data import pose_order, spread
+    t = np.array([3.0, -1.0, 0.0, 2.0, 1.0])
+    q = np.outer(t, [0.2, -0.9, 0.1])
+    assert list(pose_order(q)) == [0, 3, 4, 2, 1]
+    assert list(pose_order(-q)) == [1, 2, 4, 3, 0]
+    assert list(spread(8, 2)) == [2, 6] and list(spread(10, 3)) == [1, 5, 8]
 
 
 def test_holm_by_hand():

@@ -103,12 +103,19 @@ def test_force_gain_and_compliance_signatures_are_reported_as_indistinguishable(
 def test_loop_names_the_effect_on_other_seeds(case, seed):
     """Not tuned to one draw: on other seeds (new errors, poses, noise, test set) the loop names the same
     effect and joint and lowers the held-out error. (How much depends on the draw: where the effect is
-    small next to the 2 um probing noise the RMS cannot halve; see docs/close-loop.md.)"""
+    small next to the 2 um probing noise the RMS cannot halve; see docs/close-loop.md.) Where the outer test
+    set cannot show it (its RMS already at the noise, measured: thermal growth at seed 4, 1.71 -> 1.83 um)
+    the effect, which passed the held-out folds, is named as not added, never added."""
     camp = campaign_from_dict(campaign(CASES[case][0], seed=seed))
     sim = simulate(camp)
     loop = close_loop(sim.points, sim.artefacts, camp.arm, reference=sim.reference_points,
                       weights=Weights(probe=NOISE_UM * 1e-6), cv_top=2)
     _, name, joint = CASES[case]
+    if not loop.added and [v["name"] for v in loop.vetoed][:1] == [name]:
+        # it passed the held-out folds, but an outer test set that cannot show it (a few measurements at the
+        # noise) got worse with it: never added then, and said
+        assert f"Not added, the outer test set got worse with it: {name}" in loop.verdict
+        return
     assert [c.name for c in loop.added] == [name], loop.verdict
     assert loop.added[0].joint == joint
     rows = loop.before_after()
@@ -121,9 +128,9 @@ def test_final_model_holds_a_significantly_negative_joint_compliance():
     -2 u is not significant, and the probe's compliances are not joint compliances."""
     from types import SimpleNamespace
 
-    from calibration.loop import _negative_compliances
+    from calibration.loop import negative_compliances
     vals = {"j2.compliance": (-3.0e-6, 1e-6), "j3.compliance": (-2.0e-6, 1e-6), "probe.compliance_x": (-5.0, 1.0)}
     res = SimpleNamespace(free=tuple(vals), value=lambda n: vals[n][0], uncertainty=lambda n: vals[n][1])
-    assert _negative_compliances(res, 0.01) == ["j2.compliance"]
+    assert negative_compliances(res, 0.01) == ["j2.compliance"]
     vals["j2.compliance"] = (-2.80e-6, 1e-6)
-    assert _negative_compliances(res, 0.01) == []
+    assert negative_compliances(res, 0.01) == []

@@ -5,11 +5,13 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
+import numpy as np
+
 from arm_model import load_description
 from arm_model.effects import ApproachOffset, EncoderEccentricity
 from arm_model.model import ArmModel
 from calibration.candidates import Candidate
-from calibration.loop import LoopSettings, _verdict
+from calibration.loop import LoopSettings, verdict_text
 from calibration.synthesis import RESIDUAL
 from conftest import NOMINAL
 
@@ -32,7 +34,7 @@ def test_verdict_names_what_was_added_built_and_what_remains():
              {"name": "harmonics j6 of q2 (h 1)", "added": False,
               "why_not_added": "not significant on held-out data (Wilcoxon p = 0.2 >= 0.005)"}]
     remains = [_family("q2 harmonics on j6", "cos/sin(1 q2)"), _family("time", "time: base x")]
-    v = _verdict(stages, remains, "", LoopSettings(), built, model)
+    v = verdict_text(stages, remains, "", LoopSettings(), built, model)
     assert v == ("effects added: eccentricity j2, approach offset (found from the residual); held-out test RMS "
                  "6.00 -> 2.00 um, max 20.00 -> 6.00 um. Built from the residual, not supported, not added: "
                  "harmonics j6 of q2 (h 1) (not significant on held-out data (Wilcoxon p = 0.2 >= 0.005)). "
@@ -43,12 +45,60 @@ def test_verdict_names_what_was_added_built_and_what_remains():
 
 def test_verdict_when_nothing_remains_and_when_the_library_alone_ran():
     stages = [_stage(None, 2.0, 5.0)]
-    assert _verdict(stages, [], "", LoopSettings(), [], None) == (
+    assert verdict_text(stages, [], "", LoopSettings(), [], None) == (
         "no effect added. No structured residual remains (no regressor family is significant after Bonferroni's "
         "correction).")
-    v = _verdict(stages, [_family("q2 harmonics", "cos/sin(3 q2)")], "", LoopSettings(synthesise=False), [], None)
+    v = verdict_text(stages, [_family("q2 harmonics", "cos/sin(3 q2)")], "", LoopSettings(synthesise=False), [], None)
     assert v == ("no effect added. Structured residual remains, not explained by the effect library (effects are "
                  "not built from the residual: library only): it correlates with q2 harmonics (cos/sin(3 q2)). "
                  "No fix is claimed for it.")
-    v = _verdict([_stage(None, 2.0, 5.0, s0=4.0)], [], "", LoopSettings(), [], None)
+    v = verdict_text([_stage(None, 2.0, 5.0, s0=4.0)], [], "", LoopSettings(), [], None)
     assert v.startswith("no effect added. The final residual is s0 = 4 times the stated uncertainties")
+
+
+def test_an_effect_that_makes_the_outer_test_worse_is_not_added_and_said():
+    """The outer test set vetoes: an effect that passed the held-out folds but raises the outer test's RMS
+    (2.00 -> 2.10 um) no longer passes (its reason says why), is recorded with both figures and the folds'
+    reason, and the verdict says so; an equal or lower RMS passes."""
+    from calibration.loop.stages import outer_test_worse
+    ecc = Candidate("eccentricity j2", EncoderEccentricity(joints=(1,)), "eccentricity", "j2")
+    why = "held-out RMS 5.0 % lower, Wilcoxon p = 0.001 < 0.01"
+    cv = SimpleNamespace(candidate="eccentricity j2", reason=why, passed=True)
+    state = SimpleNamespace(stages=[_stage(None, 2.0, 5.0)], vetoed=[], fate={}, say=lambda s: None)
+    for rms in (2.0, 1.9):
+        assert not outer_test_worse(state, SimpleNamespace(added=ecc, heldout={"rms_um": rms}), cv)
+    assert state.vetoed == [] and cv.passed
+    assert outer_test_worse(state, SimpleNamespace(added=ecc, heldout={"rms_um": 2.1}), cv)
+    assert not cv.passed and cv.reason == why + "; but the outer test set got worse with it (RMS 2 -> 2.1 um)"
+    assert state.vetoed == [{"name": "eccentricity j2", "origin": "library", "heldout_rms_before_um": 2.0,
+                             "heldout_rms_after_um": 2.1, "cross_validation": why}]
+    v = verdict_text(state.stages, [], "", LoopSettings(), [], None, state.vetoed)
+    assert v == ("no effect added. Not added, the outer test set got worse with it: eccentricity j2 (RMS 2.00 -> "
+                 "2.10 um). No structured residual remains (no regressor family is significant after Bonferroni's "
+                 "correction).")
+
+
+def test_the_test_set_and_the_folds_do_not_depend_on_the_seed(nominal):
+    """The seed is the bootstrap's only: the outer test set and the folds of the decisions are the same for
+    seeds 0-4, by measurement and (one measurement) by pose."""
+    from dataclasses import replace
+
+    from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
+    from calibration.data import make_data
+    from calibration.loop.folds import choose_folds, outer_split
+    truth = ArmModel(nominal)
+    p = random_truth(truth, np.random.default_rng(0), length=30e-6, angle=5e-5, probe=30e-6)
+    camp = make_campaign(truth, SynthSpec(ballbars=6, ballbar_points=4, seats=3, articulations=8, spheres=3,
+                                          sphere_points=8, noise=2e-6), seed=0, p_true=p)
+    data = make_data(camp.points, camp.artefacts, truth)
+    one = data.select(data.points.measurement == data.points.measurement[-1])
+    for d in (data, one):
+        runs = []
+        for seed in range(5):
+            s = replace(LoopSettings(), seed=seed)
+            design, test, by, rows = outer_split(d, s)
+            folds, power = choose_folds(design, s)
+            runs.append((by, rows.tolist(), folds.by, folds.k, folds.assign if by == "measurement" else
+                         folds.assign.tolist(), power["note"]))
+        assert all(r == runs[0] for r in runs[1:])
+        assert runs[0][0] == ("measurement" if d is data else "pose")

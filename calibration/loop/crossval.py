@@ -1,0 +1,117 @@
+"""Cross-validation of one candidate: the current model and the model with the candidate calibrated on each
+fold's training part, their held-out residuals per unit, and the one-sided Wilcoxon signed-rank test that
+compares them (:class:`CVResult`)."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from arm_model.model import ArmModel
+
+from ..data import CalibrationData
+from ..validation import heldout_residuals
+from .folds import Folds
+
+__all__ = ["FoldFit", "CVResult", "fold_fit", "cross_validate"]
+
+
+@dataclass
+class FoldFit:
+    """The fits of one model on each fold's training part and their held-out residual rows."""
+    results: list                     # CalibrationResult per fold
+    sse: dict                         # measurement -> (sum of squared weighted residuals, rows)
+
+
+@dataclass
+class CVResult:
+    """Held-out evidence for adding one candidate.
+
+    Attributes:
+        rms_base, rms_new: pooled held-out weighted RMS of the current model and with the candidate.
+        improvement: ``1 - rms_new / rms_base``.
+        p_value: one-sided Wilcoxon signed-rank test over held-out measurements (mean squared weighted
+            residual of each); threshold: the level it was held to (``alpha / tested``).
+        wins: measurements improved, of ``n_measurements``.
+    """
+    candidate: str
+    rms_base: float
+    rms_new: float
+    improvement: float
+    p_value: float
+    threshold: float
+    n_measurements: int
+    wins: int
+    passed: bool
+    reason: str
+    score_p: float = float("nan")
+    folds: FoldFit | None = field(default=None, repr=False)
+    held: bool = False            # its parameters were held (not resolved) in some fold's training part
+
+    def to_dict(self) -> dict:
+        def num(v):
+            return float(v) if v is not None and math.isfinite(float(v)) else None
+        return {"candidate": self.candidate, "heldout_rms_weighted_before": num(self.rms_base),
+                "heldout_rms_weighted_after": num(self.rms_new), "relative_improvement": num(self.improvement),
+                "wilcoxon_p_value": num(self.p_value), "threshold": num(self.threshold),
+                "measurements": self.n_measurements, "measurements_improved": self.wins, "passed": self.passed,
+                "reason": self.reason, "screening_p_value": num(self.score_p)}
+
+def fold_fit(model: ArmModel, design: CalibrationData, folds: Folds, fit) -> FoldFit:
+    results, sse = [], {}
+    if folds.by == "pose":
+        for f in range(folds.k):
+            train = np.asarray(folds.assign) != f
+            res = fit(model, design.select(train))
+            h = heldout_residuals(model, res.p, design, res.weights, res.reference_mode, train=train)
+            for i in np.unique(h["point"]):
+                sel = h["point"] == i
+                sse[int(i)] = (float(np.sum(h["r"][sel] ** 2)), int(sel.sum()))
+            results.append(res)
+        return FoldFit(results, sse)
+    present = set(design.measurements())
+    for f in range(folds.k):
+        held = [m for m, g in folds.assign.items() if g == f and m in present]
+        train = design.with_measurements([m for m, g in folds.assign.items() if g != f and m in present])
+        res = fit(model, train)
+        h = heldout_residuals(model, res.p, design.with_measurements(held), res.weights, res.reference_mode)
+        keys = [(m, int(i)) for m, i in zip(h["measurement"], h["point"])] if folds.per_pose else h["measurement"]
+        for key in dict.fromkeys(keys):
+            sel = np.array([k == key for k in keys]) if folds.per_pose else h["measurement"] == key
+            sse[key] = (float(np.sum(h["r"][sel] ** 2)), int(sel.sum()))
+        results.append(res)
+    return FoldFit(results, sse)
+
+
+def cross_validate(name: str, base: FoldFit, new: FoldFit | None, threshold: float, min_improvement: float,
+                   error: str | None = None) -> CVResult:
+    """Compare the held-out residuals of two fold fits (see :class:`CVResult`)."""
+    nan = float("nan")
+    if new is None:
+        return CVResult(name, nan, nan, nan, nan, threshold, 0, 0, False, f"a fold fit failed: {error}")
+    ms = sorted(base.sse)
+    b = np.array([base.sse[m][0] / base.sse[m][1] for m in ms])
+    a = np.array([new.sse[m][0] / new.sse[m][1] for m in ms])
+    rows = sum(base.sse[m][1] for m in ms)
+    rms_b = math.sqrt(sum(base.sse[m][0] for m in ms) / rows)
+    rms_a = math.sqrt(sum(new.sse[m][0] for m in ms) / rows)
+    imp = 1.0 - rms_a / rms_b if rms_b > 0 else 0.0
+    d = b - a
+    if np.all(d == 0):
+        p = 1.0
+    else:
+        p = float(stats.wilcoxon(d, alternative="greater", zero_method="wilcox").pvalue)
+    wins = int(np.sum(d > 0))
+    passed = p < threshold and imp >= min_improvement
+    if passed:
+        reason = f"held-out RMS {100 * imp:.1f} % lower, Wilcoxon p = {p:.2g} < {threshold:.2g}"
+    elif p >= threshold:
+        reason = f"not significant on held-out data (Wilcoxon p = {p:.2g} >= {threshold:.2g})"
+    else:
+        reason = (f"significant but too small: held-out RMS {100 * imp:.1f} % lower "
+                  f"(at least {100 * min_improvement:g} % required)")
+    return CVResult(name, rms_b, rms_a, imp, p, threshold, len(ms), wins, passed, reason, folds=new)
+
+

@@ -1,0 +1,65 @@
+"""Held-out evaluation: the figures of the before/after table on points a model was not fitted to (whole
+measurements, or poses predicted against their feature as fitted on its other poses), from their residual rows
+(:func:`calibration.validation.heldout_residuals`)."""
+from __future__ import annotations
+
+import numpy as np
+
+from arm_model import InputError
+from arm_model.model import ArmModel
+
+from ..data import CalibrationData, Weights
+from ..validation import BOOTSTRAP_SAMPLES, FIGURES, bootstrap, heldout_residuals, resamples, validate
+
+__all__ = ["heldout_residuals", "heldout_figures", "bootstrap_rows"]
+
+
+def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit",
+                    train=None, seed: int = 0) -> dict:
+    """Figures of ``(model, p)`` on held-out data [um] (``train``: see :func:`heldout_residuals`): RMS and
+    max |residual| over the artefact rows (each row a residual component: a sphere/ring/plane distance, a
+    seat coordinate, a length error; the reference-instrument rows only when there is nothing else, since
+    their noise is the instrument's), the same per kind, the weighted RMS of all rows, and the standard
+    test figures (:data:`calibration.validation.FIGURES`) of the held-out points; ``seed``: the seed of the
+    bootstrap of their standard uncertainties."""
+    h = heldout_residuals(model, p, data, weights, reference, train)
+    e = h["e"]
+    art = h["kind"] != "reference"
+    head = e[art] if art.any() else e
+    out = {"rms_um": float(np.sqrt(np.mean(head ** 2))) * 1e6, "max_um": float(np.max(np.abs(head))) * 1e6,
+           "headline_rows": ("reference points" if not art.any() else "artefact points and lengths"
+                             if (h["kind"] == "length").any() else "artefact points"),
+           "rms_weighted": float(np.sqrt(np.mean(h["r"] ** 2))), "rows": int(len(e)), "by_kind": {}}
+    for k in dict.fromkeys(h["kind"].tolist()):
+        ek = e[h["kind"] == k]
+        out["by_kind"][k] = {"rows": int(len(ek)), "rms_um": float(np.sqrt(np.mean(ek ** 2))) * 1e6,
+                             "max_um": float(np.max(np.abs(ek))) * 1e6}
+    u = bootstrap_rows(head, h["measurement"][art] if art.any() else h["measurement"], seed=seed)
+    out["u_rms_um"], out["u_max_um"] = (None, None) if u is None else (u[0] * 1e6, u[1] * 1e6)
+    held = data if train is None else data.select(~np.asarray(train, bool))
+    try:
+        val = validate(model, p, held, weights, reference)
+        summary, u_std = val.summary(), bootstrap(val, seed=seed)
+    except InputError:                # held-out poses too few on some feature for its own fit
+        summary, u_std = {}, {}
+    out["standard"] = {k: summary[k] * FIGURES[k][2] for k in FIGURES if k in summary}
+    out["u_standard"] = {k: None if u_std.get(k) is None else u_std[k] * FIGURES[k][2] for k in out["standard"]}
+    return out
+
+
+def bootstrap_rows(e: np.ndarray, measurement: np.ndarray, samples: int = BOOTSTRAP_SAMPLES, seed: int = 0):
+    """Standard uncertainties [m] of the RMS and the max |e| of residual rows, by the bootstrap of
+    :func:`calibration.validation.bootstrap` (whole measurements resampled with replacement); None
+    with fewer than two measurements."""
+    groups = [e[measurement == m] for m in dict.fromkeys(measurement.tolist())]
+    if len(groups) < 2:
+        return None
+    rms, mx = np.empty(samples), np.empty(samples)
+    for k, idx in enumerate(resamples(len(groups), samples, seed)):
+        x = np.concatenate([groups[i] for i in idx])
+        rms[k], mx[k] = np.sqrt(np.mean(x ** 2)), np.max(np.abs(x))
+    return float(rms.std(ddof=1)), float(mx.std(ddof=1))
+
+
+# ---------------------------------------------------------------------------------------------------
+

@@ -1,0 +1,78 @@
+"""The options of the closed loop (:class:`LoopSettings`) and the constants its decisions use."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ..identifiability import DEFAULT_RANK_TOL
+
+__all__ = ["LoopSettings", "wilcoxon_units_needed", "SAME_SIGNATURE", "PHYSICS", "PARSIMONY", "NOISE_OFF", "FOLD_BY",
+           "LEGACY_RESOLUTION"]
+
+#: the practical-resolution rule the loop's fits without a prior keep (calibrate's default before its prior)
+LEGACY_RESOLUTION = 0.1
+#: share of a candidate's signature inside another's above which the data cannot tell them apart
+SAME_SIGNATURE = 0.99
+#: the start of the reason of a candidate included as physics (:func:`calibration.loop.decide.physics_inclusion`)
+PHYSICS = "included as physics"
+#: held-out improvement (fraction) within which a smaller nested candidate is preferred
+PARSIMONY = 0.01
+#: the loop's decisions use the noise estimated from the data when a group's residual differs from its
+#: stated sigma by more than this factor (the stated sigmas are wrong); within it the stated sigmas are kept,
+#: since a missing effect inflates the residual of the groups it acts on and re-weighting would hide it
+NOISE_OFF = 2.0
+#: how the decisions' folds are made: by whole measurement, by pose inside each feature, or the first
+#: that can reach the significance level
+FOLD_BY = ("auto", "measurement", "pose")
+
+
+def wilcoxon_units_needed(alpha: float, tests: int) -> int:
+    """Fewest paired units for which a one-sided Wilcoxon signed-rank test can reach ``p < alpha / tests``:
+    its smallest p-value over n units is ``1 / 2^n`` (every difference positive)."""
+    return int(math.floor(math.log2(tests / alpha))) + 1
+
+
+@dataclass(frozen=True)
+class LoopSettings:
+    """Options of :func:`close_loop` (see its docstring). ``seed``: the seed of the bootstrap of the held-out
+    figures' uncertainties only (the test set and the folds are functions of the data, drawn from no seed).
+    ``test_in_model``: the final model is fitted on every point, design and test (default); False (``aacmm
+    close-loop --holdout``), the outer test set's rows are kept out of it, as ``calibrate --holdout`` keeps its
+    held-out measurements out of its model."""
+    folds: int = 4
+    test_fraction: float = 0.25
+    alpha: float = 0.01
+    screen_alpha: float = 0.05
+    min_improvement: float = 0.02
+    max_effects: int = 4
+    cv_top: int = 3
+    seed: int = 0
+    rank_tol: float = DEFAULT_RANK_TOL
+    drop_outliers: bool = True
+    outlier_threshold: float = 4.0
+    holdout: tuple = ()
+    fold_by: str = "auto"
+    weights_from_data: bool = True
+    synthesise: bool = True
+    physics: bool = True
+    prior_scale: float | str | None = None
+    test_in_model: bool = True
+
+    def __post_init__(self):
+        object.__setattr__(self, "holdout", tuple(self.holdout or ()))
+        if self.fold_by not in FOLD_BY:
+            raise ValueError(f"fold_by must be one of {', '.join(FOLD_BY)}, got {self.fold_by!r}")
+        if self.folds < 2:
+            raise ValueError(f"folds must be at least 2, got {self.folds}")
+        if not 0.0 < self.test_fraction < 1.0:
+            raise ValueError(f"test_fraction must be in (0, 1), got {self.test_fraction}")
+        for name in ("alpha", "screen_alpha"):
+            v = getattr(self, name)
+            if not 0.0 < v < 1.0:
+                raise ValueError(f"{name} must be in (0, 1), got {v}")
+        if self.min_improvement < 0 or self.max_effects < 0 or self.cv_top < 1:
+            raise ValueError("min_improvement and max_effects must be >= 0 and cv_top >= 1")
+
+    def to_dict(self) -> dict:
+        return dict(self.__dict__)
+

@@ -1,0 +1,378 @@
+"""The stages of the closed loop, each a function of the one :class:`~calibration.loop.state.LoopState`:
+
+* :func:`prepare`: the data, the outer test set, the base fit on the design set, outliers, the noise, the
+  folds of the decisions;
+* one stage per effect added (:func:`run_stage`), in at most two passes (the library's candidates, then,
+  if nothing passes, those built from the residual as well):
+
+  - :func:`screen`: the score test of every remaining candidate at the current fit, the gate;
+  - :func:`test`: the held-out test of the gated candidates (and joint compliance as physics);
+  - :func:`synthesise`: effects built from the structure still in the residual, offered as candidates;
+  - :func:`~calibration.loop.decide.choose`: the one candidate to add;
+  - :func:`add`: the model with it, recalibrated on the design set;
+
+* :func:`report`: the structure tests on the final fit, the verdict, the final model on every point.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from arm_model._log import counted
+from arm_model.description import ArmDescription
+from arm_model.effects import JointCompliance, ThermalGrowth
+from arm_model.io import Artefacts, PointSet
+from arm_model.model import ArmModel
+
+from ..calibrate import CalibrationResult, evidence_scale
+from ..candidates import library_candidates, needs_model
+from ..data import Weights, make_data
+from ..diagnostics import (families, binned_estimates, candidate_family, holm, remaining_structure, residual_space,
+                           screen_candidates, structure_tests)
+from ..options import FitOptions
+from ..synthesis import RESIDUAL, synthesise as build_effects
+from .crossval import fold_fit
+from .decide import Decision, candidate_priors, choose, heldout_test, negative_compliances, physics_inclusion, \
+    plot_family
+from .folds import choose_folds, outer_split
+from .outliers import drop_design_outliers, drop_test_outliers
+from .result import LoopResult, Stage
+from .settings import LEGACY_RESOLUTION, NOISE_OFF, LoopSettings
+from .state import LoopState, Screening, fitted_names, log
+from .verdict import ADDED, verdict_text
+
+__all__ = ["Campaign", "Stop", "prepare", "screen", "test", "synthesise", "decide", "fit_stage", "outer_test_worse", "add", "run_stage", "run",
+           "report"]
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """What :func:`~calibration.loop.close_loop` is given: the points, artefacts and nominal arm, the reference
+    points, the effects already in the base model, starting values, the base parameters to free (names or
+    globs), the stated uncertainties, the candidate families and user candidates."""
+    points: PointSet
+    artefacts: Artefacts
+    desc: ArmDescription
+    reference: PointSet | None = None
+    effects: tuple = ()
+    values: dict | None = None
+    free: tuple | None = None
+    hold: tuple = ()
+    weights: Weights | None = None
+    families: tuple | None = None
+    extra: tuple = ()
+
+
+@dataclass(frozen=True)
+class Stop:
+    """Why a stage added nothing: the loop stops."""
+    reason: str
+
+
+def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
+    """The data and their split, the base model calibrated on the design set (outliers dropped, the noise
+    estimated when the stated uncertainties are off), the test set's outliers, the folds of the decisions
+    (and whether their test can reach its level), and the base stage."""
+    points, desc = camp.points, camp.desc
+    has_t = points.temperature is not None and np.all(np.isfinite(points.temperature))
+    need = ([JointCompliance()] + ([ThermalGrowth()] if has_t else []) + list(camp.effects)
+            + [c.effect for c in camp.extra])
+    data = make_data(points, camp.artefacts, needs_model(desc, need), reference=camp.reference)
+    cands, skipped = library_candidates(desc, data, camp.families, camp.extra)
+    design, test, test_by, test_rows = outer_split(data, settings)
+    _say_split(say, data, design, test, test_by, len(cands), settings)
+    stated = camp.weights or Weights()
+    model = ArmModel(desc, tuple(camp.effects))
+    scale = _prior_scale(model, design, camp, stated, settings, say)
+    options = FitOptions(values=camp.values, rank_tol=settings.rank_tol, outlier_threshold=settings.outlier_threshold,
+                         prior_scale=scale, min_resolution=LEGACY_RESOLUTION if scale is None else None)
+    state = LoopState(settings, desc, say, data, design, test, test_by, test_rows, options, camp.free, camp.hold,
+                      model.spec.size, stated, cands, skipped, model, stated, remaining=list(cands))
+    say("calibrating the base model on the design set")
+    result = state.fit(model, state.design)
+    if settings.drop_outliers:
+        result, state.design, state.dropped["design"] = drop_design_outliers(result, state.design, state.fit)
+        if state.dropped["design"]:
+            say(f"  {len(state.dropped['design'])} outlier point(s) of the design set dropped (base model, robust "
+                f"standardized residual > {settings.outlier_threshold:g}); they stay out of every later fit")
+    off = [v for v in result.variance if v["estimated"] and not 1 / NOISE_OFF < v["factor"] < NOISE_OFF]
+    if settings.weights_from_data and off:
+        result = state.fit(model, state.design, reweight=True)
+        state.weights = result.weights
+        if _noise(result):
+            say("  " + _noise(result)[2:] + " (the stated uncertainties are starting values)")
+    if settings.drop_outliers:
+        state.test, state.dropped["test"] = drop_test_outliers(
+            model, result.p, state.test, state.weights, result.reference_mode, settings.outlier_threshold,
+            None if test_by == "measurement" else state.design)
+        if state.dropped["test"]:
+            say(f"  {len(state.dropped['test'])} outlier point(s) of the test set dropped (base model)")
+    state.folds, state.power = choose_folds(state.design, settings)
+    if state.power["note"].startswith("WARNING: "):        # shown with --quiet too
+        log.warning(state.power["note"][len("WARNING: "):])
+    else:
+        say(state.power["note"])
+    state.result = result
+    state.stages = [Stage(0, model, result, heldout=state.test_figures(model, result.p, result.reference_mode))]
+    say(f"  base model: s0 {result.s0:.3g}, held-out test RMS {state.stages[0].heldout['rms_um']:.2f} um")
+    return state
+
+
+def _say_split(say, data, design, test, test_by: str, n_cands: int, settings: LoopSettings) -> None:
+    if test_by == "measurement":
+        say(f"{counted(len(data), 'point')}, {counted(len(data.measurements()), 'measurement')}: "
+            f"{len(design.measurements())} for design, {len(test.measurements())} held out for the test "
+            f"({', '.join(test.measurements())}); {counted(n_cands, 'candidate')}")
+    else:
+        say(f"{len(data)} points in {len(data.measurements())} measurement(s): too few to hold whole measurements "
+            f"out, so the test set is {len(test)} poses ({100 * settings.test_fraction:g} % of each feature's), "
+            f"each predicted against its feature's centre fitted on the design poses; {n_cands} candidates")
+
+
+def _prior_scale(model: ArmModel, design, camp: Campaign, stated: Weights, settings: LoopSettings, say):
+    """The prior scale of every fit: the setting, or with "evidence" the one of the largest evidence of the base
+    model on the design set."""
+    if settings.prior_scale != "evidence":
+        return settings.prior_scale
+    names = fitted_names(model, camp.free, camp.hold, model.spec.size, data=design)
+    scale, _ = evidence_scale(model, design, FitOptions(free=names, values=camp.values, weights=stated,
+                                                        rank_tol=settings.rank_tol, priors={}))
+    say("prior scales from the evidence of the design set: "
+        + ", ".join(f"{g} {v:.3g}" for g, v in scale.items()) + " x the plausible error sizes")
+    return scale
+
+
+def _noise(res: CalibrationResult) -> str:
+    parts = [f"{v['group']} {v['sigma_um']:.3g} um" for v in res.variance
+             if v["estimated"] and v["sigma_um"] is not None]
+    return "; noise from the data: " + ", ".join(parts) if parts and res.weights_history else ""
+
+
+def screen(state: LoopState) -> Screening:
+    """The score test of every remaining candidate at the current fit; the gate is ``screen_alpha`` over the
+    identifiable ones (Bonferroni) and the best ``cv_top`` below it, not yet tested at this stage, go on.
+    Records why each candidate built from the residual is not (yet) added."""
+    s = state.settings
+    state.say(f"screening {len(state.remaining)} candidate(s) at stage {len(state.stages) - 1}")
+    tests, space = screen_candidates(state.result, state.remaining, state.folds.assign, s.rank_tol)
+    ranked = sorted(zip(state.remaining, tests), key=lambda ct: (ct[1].p_value if np.isfinite(ct[1].p_value) else 2,
+                                                                 -ct[1].delta_chi2))
+    state.last_tests, state.last_cv = [t for _, t in ranked], list(state.cv_here)
+    ident = [(c, t) for c, t in ranked if t.identifiable]
+    gate = s.screen_alpha / max(len(ident), 1)
+    tried = {cv.candidate for cv in state.cv_here}
+    gated = [(c, t) for c, t in ident if t.p_value < gate and c.name not in tried][: s.cv_top]
+    for c, t in ranked:               # why each effect built from the residual is not (yet) added
+        if c.origin == RESIDUAL:
+            state.fate[c.name] = ("absorbed by the fit (the data cannot tell it from what is fitted)"
+                                  if not t.identifiable else
+                                  f"not significant at the screening (score p = {t.p_value:.2g} >= {gate:.2g})"
+                                  if not t.p_value < gate else
+                                  f"significant at the screening but not among the --cv-top {s.cv_top} best")
+    return Screening(list(state.remaining), tests, space, ranked, gate, gated)
+
+
+def test(state: LoopState, scr: Screening, physics: bool) -> list:
+    """The held-out test of every gated candidate (the current model's fold fits first, if not at hand), at
+    ``alpha`` over every candidate tested at the stage; with ``physics`` and nothing passing, joint
+    compliance as physics (:func:`~calibration.loop.decide.physics_inclusion`). Returns the passing
+    ``(candidate, CVResult)``."""
+    s = state.settings
+    if state.base_folds is None:
+        state.say(f"  cross-validating the current model ({state.folds.k} folds by {state.folds.by})")
+        state.base_folds = fold_fit(state.model, state.design, state.folds, state.fit)
+    scr.threshold = s.alpha / (len(state.cv_here) + len(scr.gated))
+    for c, t in scr.gated:
+        state.say(f"  cross-validating + {c.name} (score p = {t.p_value:.2g})")
+        cv = heldout_test(state, scr, c)
+        state.say(f"    {cv.reason}")
+        scr.cvs.append(cv)
+        if c.origin == RESIDUAL:
+            state.fate[c.name] = cv.reason if not cv.passed else "passed, but another candidate was added"
+    passing = [(c, cv) for (c, _), cv in zip(scr.gated, scr.cvs) if cv.passed]
+    if not passing and physics:
+        got = physics_inclusion(state, scr, s.alpha / max(len(scr.gated), 1))
+        if got is not None:
+            passing = [got]
+            if all(c is not got[0] for c, _ in scr.gated):
+                scr.gated.append((got[0], scr.test_of(got[0])))
+    state.last_cv = state.cv_here + scr.cvs
+    return passing
+
+
+def synthesise(state: LoopState) -> bool:
+    """When the library is exhausted: the structure families still significant at the current fit (forward
+    selection, Bonferroni, held-out explained variance > 0) become candidate effects
+    (:func:`calibration.synthesis.synthesise`), appended to ``remaining`` (and ``synthesised``) to be
+    screened and cross-validated like any candidate. Returns whether any new candidate was offered."""
+    s = state.settings
+    if not s.synthesise:
+        return False
+    kept = remaining_structure(residual_space(state.result), state.folds.assign, s.alpha, s.rank_tol)
+    if not kept:
+        return False
+    known = {c.name for c in state.remaining} | {c.name for c in state.synthesised}
+    new = [c for c in build_effects([f.name for f, _ in kept], state.model) if c.name not in known]
+    if not new:
+        return False
+    state.say(f"  structure remains ({', '.join(f.name for f, _ in kept)}): offering "
+              f"{', '.join(c.name for c in new)} (built from the residual)")
+    state.remaining.extend(new)
+    state.synthesised.extend(new)
+    return True
+
+
+def run_stage(state: LoopState) -> tuple[Decision, Stage, Screening] | Stop:
+    """One stage: screen and test the library's candidates; if none passes (or every one that passes makes the
+    outer test set worse), once, the effects built from the residual join them and they are screened and
+    tested again (those already tested at the stage are not). Returns the decision, the stage it makes and
+    the screening it came from, or why nothing is added."""
+    physics = state.settings.physics and state.power["can_reach"]
+    for built in (False, True):
+        scr = screen(state)
+        if not scr.gated:
+            stop = Stop("no screened candidate improves the held-out data significantly" if state.cv_here else
+                        f"no candidate passes the screening (score-test p < {scr.gate:.2g}): nothing significant "
+                        "remains that the library or an effect built from the residual explains")
+        elif len(state.stages) - 1 >= state.settings.max_effects:
+            stop = Stop(f"the maximum number of effects ({state.settings.max_effects}) was added")
+            for c, _ in scr.gated:
+                if c.origin == RESIDUAL:
+                    state.fate[c.name] = f"not cross-validated: {stop.reason}"
+            return stop
+        else:
+            passing = test(state, scr, physics)
+            physics = False                          # weighed at most once a stage
+            staged = decide(state, scr, passing)
+            if staged is not None:
+                return (*staged, scr)
+            stop = Stop("every candidate that passed the held-out folds made the outer test set worse" if passing
+                        else "no screened candidate improves the held-out data significantly")
+            state.cv_here = state.last_cv
+        if built or not synthesise(state):
+            return stop
+    raise AssertionError("unreachable")
+
+
+def fit_stage(state: LoopState, decision: Decision, scr: Screening) -> Stage:
+    """The model with the decision's candidate, recalibrated on the design set (the noise re-estimated if the
+    loop estimates it; the candidate's parameters with their plausible sizes), as a new stage with its figures
+    on the outer test set and the plots of its signature before and after. The state is not changed."""
+    cand = decision.candidate
+    fam_name, before = plot_family(scr.space, cand)
+    model = state.model.with_effects(cand.effect)
+    state.say(f"adding {cand.name}; recalibrating")
+    result = state.fit(model, state.design, candidate_priors(model, cand, scr.test_of(cand)),
+                       reweight=state.weights != state.stated)
+    after = None
+    if fam_name is not None:
+        sp2 = residual_space(result)
+        fam2 = next((f for f in families(sp2) if f.name == fam_name), None) or candidate_family(sp2, cand)
+        after = binned_estimates(sp2, fam2) if fam2 is not None else None
+    heldout = state.test_figures(model, result.p, result.reference_mode, result.weights)
+    return Stage(len(state.stages), model, result, cand, state.last_tests, state.cv_here + scr.cvs, decision.nested,
+                 decision.alternatives, heldout, fam_name, before, after)
+
+
+def decide(state: LoopState, scr: Screening, passing: list) -> tuple[Decision, Stage] | None:
+    """The candidate to add among the passing ones (:func:`~calibration.loop.decide.choose`) and its stage
+    (:func:`fit_stage`); an effect is never added when the outer test set gets worse with it
+    (:func:`outer_test_worse`): then the next choice among the passing candidates left (without it, and
+    without the candidate it stood in for). None: none is left."""
+    passing = list(passing)
+    while passing:
+        decision = choose(state, scr, passing)
+        stage = fit_stage(state, decision, scr)
+        if not outer_test_worse(state, stage, decision.cv):
+            return decision, stage
+        top = max(passing, key=lambda x: x[1].improvement)[0]
+        passing = [(c, v) for c, v in passing if c is not decision.candidate and c is not top]
+    return None
+
+
+def outer_test_worse(state: LoopState, stage: Stage, cv) -> bool:
+    """Whether the stage's RMS on the outer test set is above the current model's (an effect is never added
+    when the outer test gets worse, so the before/after table never shows a step up); if so its candidate's
+    held-out test no longer passes (its reason says why), and it is recorded in ``state.vetoed``."""
+    now, new = state.stages[-1].heldout["rms_um"], stage.heldout["rms_um"]
+    if not new > now:
+        return False
+    name = stage.added.name
+    why = f"the outer test set got worse with it (RMS {now:.4g} -> {new:.4g} um)"
+    state.say(f"  {name} passed the held-out folds, but {why}: not added")
+    state.vetoed.append({"name": name, "origin": stage.added.origin, "heldout_rms_before_um": now,
+                         "heldout_rms_after_um": new, "cross_validation": cv.reason})
+    cv.passed, cv.reason = False, f"{cv.reason}; but {why}"
+    if stage.added.origin == RESIDUAL:
+        state.fate[name] = f"passed the held-out folds, but {why}"
+    return True
+
+
+def add(state: LoopState, decision: Decision, stage: Stage, scr: Screening) -> None:
+    """The stage's model becomes the current one (its effect's parameters keep their plausible sizes in every
+    later fit); the candidates that share its parameters leave the remaining ones."""
+    cand, cv = decision.candidate, decision.cv
+    model, result = stage.model, stage.result
+    state.priors.update(candidate_priors(model, cand, scr.test_of(cand)))
+    old_weights = state.weights
+    state.model, state.result, state.weights = model, result, result.weights
+    state.stages.append(stage)
+    state.say(f"  + {cand.name}: held-out test RMS {stage.heldout['rms_um']:.2f} um "
+              f"(base {state.stages[0].heldout['rms_um']:.2f} um)")
+    state.base_folds = cv.folds if state.weights == old_weights else None      # compared at the same weights
+    state.cv_here = []
+    have = set(model.spec.names)      # e.g. the other harmonic orders of a joint once one is in
+    state.fate[cand.name] = ADDED
+    for c in state.remaining:
+        if c is not cand and c.origin == RESIDUAL and set(c.param_names(state.desc)) & have:
+            state.fate[c.name] = f"shares parameters with {cand.name}, which was added"
+    state.remaining = [c for c in state.remaining if c is not cand and not set(c.param_names(state.desc)) & have]
+
+
+def run(state: LoopState) -> None:
+    """Stages until one adds nothing or every candidate was added; sets ``state.stop``."""
+    while True:
+        outcome = run_stage(state)
+        if isinstance(outcome, Stop):
+            state.stop = outcome.reason
+            return
+        add(state, *outcome)
+        if not state.remaining:
+            state.stop = "every candidate was added"
+            state.last_tests, state.last_cv = [], []
+            return
+
+
+def report(state: LoopState) -> LoopResult:
+    """The structure tests on the final fit (Holm-adjusted, and the forward selection of what remains), the
+    effects built from the residual and their fate, the verdict, and the final model calibrated on every
+    point from the stated uncertainties (a joint compliance resolved significantly negative held at zero)."""
+    s, say = state.settings, state.say
+    say("structure tests on the final fit")
+    space = residual_space(state.result)
+    st = structure_tests(space, state.folds.assign, s.rank_tol)
+    adj = holm([t.p_value for _, t in st])
+    structure = [(f, t, float(a)) for (f, t), a in zip(st, adj)]
+    significant = [(f, t, min(1.0, t.p_value * len(structure)))
+                   for f, t in remaining_structure(space, state.folds.assign, s.alpha, s.rank_tol)]
+    plots = {f.name: binned_estimates(space, f) for f, _, _ in significant[:4]}
+    fate = state.fate
+    built = [{"name": c.name, "family": c.family, "joint": c.joint, "effect": c.effect.describe(),
+              "added": fate.get(c.name) == ADDED, "why_not_added": None if fate.get(c.name) == ADDED else
+              fate.get(c.name, "not screened")} for c in state.synthesised]
+    verdict = verdict_text(state.stages, significant, state.stop, s, built, state.model, state.vetoed)
+    say(verdict)
+    data = state.data if s.test_in_model else state.data.select(~state.test_rows)
+    say("calibrating the final model on every point (" + ("design and test" if s.test_in_model else
+        "but the held-out test set's") + "; outliers kept, as calibrate does)")
+    model_fit = state.fit(state.model, data, reweight=True, weights=state.stated)
+    negative = negative_compliances(model_fit, s.alpha)
+    if negative:
+        say(f"  joint compliance resolved significantly negative in the final fit ({', '.join(negative)}): a "
+            "compliance cannot be negative, so it is held at zero and the final model refitted")
+        model_fit = state.fit(state.model, data, reweight=True, hold=tuple(negative), weights=state.stated)
+    return LoopResult(state.stages, state.last_tests, state.last_cv, state.stop, structure, significant, verdict,
+                      state.candidates + state.synthesised, state.skipped, state.design.measurements(),
+                      state.test.measurements(), s, state.desc, plots, state.dropped, state.test_by, state.power,
+                      model_fit, built, state.vetoed, state.data)

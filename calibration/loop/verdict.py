@@ -1,0 +1,57 @@
+"""The loop's verdict: a sentence saying what was added, what was built from the residual and not added (and
+why), and what structure remains unexplained."""
+from __future__ import annotations
+
+from arm_model.model import ArmModel
+
+from ..synthesis import RESIDUAL, synthesise
+from .settings import PHYSICS
+
+__all__ = ["verdict_text", "S0_LIMIT", "ADDED"]
+
+
+#: residual standard deviation factor above which the residual is not noise at the stated level
+S0_LIMIT = 3.0
+#: the fate of a synthesised candidate that was added
+ADDED = "added"
+
+
+def verdict_text(stages, significant, stop, settings, built=(), model: ArmModel | None = None, vetoed=()) -> str:
+    """What was added (and how much the held-out error dropped), what passed the held-out folds but was not
+    added because the outer test set got worse, what was built from the residual and not added (and why), and
+    what structure remains unexplained."""
+    def label(s):
+        if any(cv.candidate == s.added.name and cv.reason.startswith(PHYSICS) for cv in s.cv):
+            return " (included as physics, not for a held-out gain)"
+        return " (found from the residual)" if s.added.origin == RESIDUAL else ""
+
+    added = [s.added.name + label(s) for s in stages[1:]]
+    s0 = stages[-1].result.s0
+    out = ("effects added: " + ", ".join(added) if added else "no effect added")
+    base, last = stages[0].heldout, stages[-1].heldout
+    if added:
+        out += (f"; held-out test RMS {base['rms_um']:.2f} -> {last['rms_um']:.2f} um, "
+                f"max {base['max_um']:.2f} -> {last['max_um']:.2f} um")
+    for v in vetoed:
+        out += (f". Not added, the outer test set got worse with it: {v['name']} (RMS "
+                f"{v['heldout_rms_before_um']:.2f} -> {v['heldout_rms_after_um']:.2f} um)")
+    not_added = [b for b in built if not b["added"] and b["name"] not in {v["name"] for v in vetoed}]
+    if not_added:
+        out += (". Built from the residual, not supported, not added: "
+                + "; ".join(f"{b['name']} ({b['why_not_added']})" for b in not_added))
+    if not significant and s0 > S0_LIMIT:
+        return out + (f". The final residual is s0 = {s0:.3g} times the stated uncertainties: it is not noise at the "
+                      "stated level, but no tested regressor family explains it (wrong weights, or structure "
+                      "beyond the tests). No fix is claimed.")
+    if not significant:
+        return out + (". No structured residual remains (no regressor family is significant after Bonferroni's "
+                      "correction).")
+    fams = "; ".join(f"{f.name} ({t.best})" if t.best else f.name for f, t, _ in significant)
+    nothing = []
+    if settings.synthesise and model is not None:
+        nothing = [f.name for f, _, _ in significant if not synthesise([f.name], model)]
+    why = (" (effects are not built from the residual: library only)" if not settings.synthesise else
+           f" (no further effect is built for {', '.join(nothing)})" if nothing else "")
+    built_by = " nor by the effects built from it" if not_added else ""
+    return (out + f". Structured residual remains, not explained by the effect library{built_by}{why}: it "
+            f"correlates with {fams}. No fix is claimed for it.")
