@@ -41,6 +41,7 @@ from arm_model.model import ArmModel
 from arm_model.tracker import Tracker
 
 from .data import CalibrationData, Weights
+from .discrepancy import Discrepancy, model_discrepancy
 from .identifiability import (Combination, Identifiability, _compress, analyse, point_noise,
                               prior_scales,
                               reduced_jacobian, weakly_determined)
@@ -210,6 +211,7 @@ class CalibrationResult:
     prior_ratio: np.ndarray | None = None     # posterior / prior variance of each free parameter
     prior_groups: dict = field(default_factory=dict)   # per group: scale, parameters, effective parameters
     model_check: dict | None = None           # model_output.model_check of this fit, when refine_torques made it
+    discrepancy: Discrepancy | None = None    # the error beyond the fit's own prediction away from its poses
     options: FitOptions | None = None         # the options of the fit (calibrate's, as given)
 
     # -- access by name ----------------------------------------------------------------------------
@@ -358,6 +360,7 @@ class CalibrationResult:
                         "from_data": bool(self.weights_history)},
             "variance_components": self.variance, "weights_history": self.weights_history,
             "probing_scatter": self._budget_um(),
+            "model_discrepancy": None if self.discrepancy is None else self.discrepancy.to_dict(),
             "prior": None if self.prior_scales is None else {
                 "scales": dict(self.prior_scales), "groups": self.prior_groups, "log_evidence": self.log_evidence,
                 "prior_dominated_ratio": PRIOR_DOMINATED, "evidence_rounds": self.evidence,
@@ -855,7 +858,7 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         prior_scales=None if s.prior is None else dict(s.scales), log_evidence=nrm.log_evidence,
         prior_centre=None if s.prior is None else s.prior.centre, options=options, prior_sd=prior_sd,
         prior_ratio=None if prior_sd is None else variance_ratio(u ** 2, prior_sd),
-        prior_groups=_group_table(s, kept, u))
+        prior_groups=_group_table(s, kept, u), discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var))
 
 
 def _group_table(s: _Setup, kept, u) -> dict:

@@ -145,9 +145,9 @@ def test_talos_nominal_baseline_is_the_readmes_and_calibrate_beats_it(talos):
 def test_panda_heldout_uncertainty_coverage(tmp_path):
     """Each placement's model file applied by ``aacmm tip`` to the other two placements;
     each corrected centre's deviation from its seat's mean lies within 1.96 u (tip's u: the posterior
-    covariance, prior-dominated parameters included, and the probing scatter) for at least 85 % of the axis
-    values pooled (measured 86.2 %, 76-97 % per placement; the hold rule of earlier versions: 73.6 %,
-    58-91 %)."""
+    covariance, prior-dominated parameters included, the probing scatter and the model discrepancy of the
+    extrapolative cross-validation) for at least 88 % of the axis values pooled (measured 89.0 %, 76-100 % per
+    placement; without the discrepancy 86.2 %; the hold rule of earlier versions: 73.6 %, 58-91 %)."""
     import csv
     from arm_model.cli import main
     inside = []
@@ -168,4 +168,4 @@ def test_panda_heldout_uncertainty_coverage(tmp_path):
             f = np.array([r["feature"] for r in rows])
             for h in set(f):
                 inside.append((np.abs(x[f == h] - x[f == h].mean(axis=0)) <= 1.96 * u[f == h]).ravel())
-    assert np.concatenate(inside).mean() >= 0.85
+    assert np.concatenate(inside).mean() >= 0.88
