@@ -664,7 +664,9 @@ def _lm(s: _Setup, prob: Problem, p, states, options: FitOptions):
     return sol
 
 
-#: fits with a new identifiability analysis at the solution before the identifiable set must have settled
+#: fits whose identifiability analysis at the solution holds more parameters, before the identifiable set must
+#: have settled (holds at a bound do not count: a parameter is held at its bound once and for all, so those
+#: rounds end by themselves)
 SETTLE_ROUNDS = 4
 
 
@@ -676,7 +678,8 @@ def _solve(s: _Setup, options: FitOptions):
     kept, fixed, idf0 = _held(s, p, s.states, list(s.candidates), "start", options)
     n_start = len(fixed)
     states = s.states
-    for _ in range(SETTLE_ROUNDS):
+    rank_rounds = 0
+    while rank_rounds < SETTLE_ROUNDS:
         prob = s.problem.with_free(kept)
         sol = _restarted(s, prob, _lm(s, prob, p, states, options), options)
         p, states = sol.p, sol.states
@@ -686,6 +689,7 @@ def _solve(s: _Setup, options: FitOptions):
         fixed += bound + new
         if len(kept) == n_before:
             return sol, kept, fixed, idf0, idf1
+        rank_rounds += bool(new)
     raise NumericalError("the identifiable set kept changing between fits (held in turn: "
                          + ", ".join(f.name for f in fixed[n_start:])
                          + "); raise the rank tolerance (--rank-tol) or hold some of these parameters (--hold)")
