@@ -12,6 +12,11 @@ file of an earlier run survives, and two runs into one ``-o`` at once never mix:
 wins, each complete). On any error, Ctrl-C or SIGTERM the temporary folder is removed and ``-o`` is as
 it was. A command that writes one file uses :func:`output_file` (temporary file, then ``os.replace``).
 
+Before anything is published, every file is read back by the reader that will read it
+(:mod:`arm_model._readback`: a model file as ``--arm`` reads it, points as ``read_points`` ...); a file its
+reader refuses is a bug of the toolkit, :class:`~arm_model._readback.UnreadableOutput` (exit 3), and
+nothing is published.
+
 Refused before any work, with an :class:`InputError` (exit 2): ``-o`` that is an input, holds an input,
 is a file where a folder is expected (or the reverse), sits below a file, cannot be written, is not a
 regular file or folder (a device such as ``/dev/null``, a FIFO, a socket: never replaced, never written
@@ -34,6 +39,7 @@ import zlib
 from pathlib import Path
 
 from ._errors import InputError
+from ._readback import UnreadableOutput, check_output
 
 __all__ = ["output_folder", "output_file", "Output", "safe_name", "guard_output", "atomic_write_bytes",
            "MARKER", "published_outputs"]
@@ -167,12 +173,15 @@ def _write_error(exc: OSError, stage: Path, final: Path, what: str) -> InputErro
     return InputError(f"cannot write {what}: {exc.strerror or exc}; nothing written", where)
 
 
-def _published_error(exc: InputError, stage: Path, final: Path) -> InputError | None:
+def _published_error(exc: InputError | UnreadableOutput, stage: Path, final: Path):
     """``exc`` naming where its file would have been published, when it names a file of the temporary
-    folder (a file of the output refused while being written); else None."""
+    folder (a file of the output refused while being written or read back); else None."""
     if exc.path is None or not _inside(Path(os.path.abspath(exc.path)), stage):
         return None
-    return InputError(exc.reason, final / Path(os.path.abspath(exc.path)).relative_to(stage), exc.line, exc.column)
+    where = final / Path(os.path.abspath(exc.path)).relative_to(stage)
+    if isinstance(exc, UnreadableOutput):
+        return UnreadableOutput(exc.reason, where)
+    return InputError(exc.reason, where, exc.line, exc.column)
 
 
 def _make_parents(folder: Path) -> list[Path]:
@@ -339,10 +348,11 @@ def output_folder(final: str | Path, inputs=(), command: str = ""):
         finally:
             _STAGES.reset(token)
         n_files = sum(1 for p in stage.rglob("*") if p.is_file()) - 1     # counted before another run may
-        _publish(stage, final, command)                                     # replace the published folder
+        check_output(stage, final)                                          # replace the published folder
+        _publish(stage, final, command)
         _published(final)
         log.debug(f"{final}: {n_files} file(s) written")
-    except (OSError, InputError) as exc:
+    except (OSError, InputError, UnreadableOutput) as exc:
         shutil.rmtree(stage, ignore_errors=True)
         _remove_empty(created)
         named = _write_error(exc, stage, final, "the output folder") if isinstance(exc, OSError) else \
@@ -384,6 +394,8 @@ def output_file(final: str | Path, inputs=()):
         if final.is_dir():
             raise InputError("the output is a file, but a folder of that name exists", final)
         _refuse_special(final, "a regular file")        # made meanwhile
+        if not any(_inside(final, s) for s in _STAGES.get()):      # else read back with its folder
+            check_output(tmp, final)
         os.replace(tmp, final)
         _published(final)
         log.debug(f"{final}: written ({final.stat().st_size} bytes)")

@@ -6,6 +6,7 @@ over an input.
 """
 from __future__ import annotations
 
+import json
 import logging
 import math
 import re
@@ -17,6 +18,7 @@ import numpy as np
 from ._csv import BLOCK_BYTES, csv_records, format_csv, iter_csv_blocks
 from ._errors import InputError, parse_toml, read_text, unknown_key
 from ._output import atomic_write_bytes, guard_output
+from ._readback import UnreadableOutput, read_back
 from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
 log = logging.getLogger(__name__)
@@ -24,7 +26,7 @@ log = logging.getLogger(__name__)
 __all__ = ["PointSet", "Feature", "Distance", "Artefacts", "ForceSignal", "read_points",
            "read_artefacts", "read_force_signal", "check_features", "atomic_write_text",
            "atomic_write_bytes", "write_csv", "guard_output", "csv_records", "FEATURE_KINDS", "iter_points",
-           "concat_points", "POINT_COLUMNS", "format_artefacts"]
+           "concat_points", "POINT_COLUMNS", "format_artefacts", "read_back", "UnreadableOutput", "json_text"]
 
 FEATURE_KINDS = ("ring", "cylinder", "sphere", "seat", "plane", "point")
 _TEXT_COLUMNS = ("measurement", "feature")
@@ -619,6 +621,29 @@ def format_artefacts(features, distances=(), comment: str | None = None) -> str:
                          **({} if d.u_length is None else {"u_length_mm": d.u_length * 1e3})}
                         for d in distances]}
     return toml_text({k: v for k, v in doc.items() if v}, comment)
+
+
+def _json_plain(o):
+    """``o`` with numpy scalars and arrays as Python numbers and lists, tuples as lists, and every non-finite
+    number as None."""
+    if isinstance(o, np.ndarray):
+        o = o.tolist()
+    elif isinstance(o, np.generic):
+        o = o.item()
+    if isinstance(o, float):
+        return o if math.isfinite(o) else None
+    if isinstance(o, dict):
+        return {k: _json_plain(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_json_plain(v) for v in o]
+    return o
+
+
+def json_text(obj, indent: int = 1) -> str:
+    """Standard JSON text of ``obj`` with a final newline (the one writer of the toolkit's JSON files): numpy
+    numbers and arrays as numbers and lists; a number that is not finite (a value nobody resolved) as
+    ``null``, never ``NaN`` or ``Infinity``, which Python's json writes and other tools refuse."""
+    return json.dumps(_json_plain(obj), indent=indent, allow_nan=False) + "\n"
 
 
 def write_csv(path: str | Path, columns: dict, inputs=(), fmt="%.9g") -> Path:

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import logging
 from dataclasses import replace
@@ -17,7 +16,7 @@ from arm_model.commands import (add_arm_options, arm_inputs, at_least, fraction,
 from arm_model._log import counted
 from arm_model._output import output_folder
 from arm_model.checks import point_warnings, log_warnings
-from arm_model.io import read_artefacts, read_points
+from arm_model.io import json_text, read_artefacts, read_points
 from arm_model.model_file import Arm
 
 __all__ = ["register", "run_calibrate", "run_montecarlo", "run_poses", "fit_options"]
@@ -567,8 +566,7 @@ def run_montecarlo(args: argparse.Namespace) -> int:
         mc = monte_carlo(SimSource(str(args.campaign)), args.runs, seed=args.seed, settings=settings,
                          scheduler=args.scheduler, workers=args.workers)
         from arm_model.shipped import provenance
-        (out.dir / "study.json").write_text(json.dumps({**mc.to_dict(), **provenance(camp.inputs)}, indent=1,
-                                                       default=float) + "\n", encoding="utf-8")
+        (out.dir / "study.json").write_text(json_text({**mc.to_dict(), **provenance(camp.inputs)}), encoding="utf-8")
     log.info(f"{args.runs - len(mc.failures)} of {counted(args.runs, 'run')} succeeded")
     for f in mc.failures[:5]:
         log.info(f"  seed {f['seed']}: {f['error']}")
@@ -606,8 +604,7 @@ def run_poses(args: argparse.Namespace) -> int:
         fit = fit_options(args, free=_free(model, args, data), weights=_weights(args), weights_from_data=False)
         sel = select_measurements(model, data, args.count, fit)
         from arm_model.shipped import provenance
-        (out.dir / "poses.json").write_text(json.dumps({**sel.to_dict(), **provenance(inputs)}, indent=1) + "\n",
-                                            encoding="utf-8")
+        (out.dir / "poses.json").write_text(json_text({**sel.to_dict(), **provenance(inputs)}), encoding="utf-8")
     log_warnings(warnings)
     log.info(f"{len(sel.parameters)} identifiable parameters; chosen measurements (O1, random sets' O1):")
     for m, o, r, n in zip(sel.chosen, sel.o1, sel.o1_random, sel.n_points):

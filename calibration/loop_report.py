@@ -5,14 +5,13 @@ from __future__ import annotations
 
 import html
 import io
-import json
 import math
 from pathlib import Path
 
 import numpy as np
 
 from arm_model.checks import warnings_html
-from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output
+from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, json_text
 from arm_model.shipped import provenance
 
 from .loop import LoopResult, Stage, effect_summary
@@ -371,7 +370,7 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
     if conformance:
         summary["conformance"] = conformance
     summary.update(provenance(inputs))
-    written.append(atomic_write_text(out / "summary.json", json.dumps(summary, indent=1) + "\n", inputs))
+    written.append(atomic_write_text(out / "summary.json", json_text(summary), inputs))
     written.append(atomic_write_text(out / "before-after.txt", table + "\n", inputs))
     written.append(atomic_write_text(out / "report.html", page, inputs))
     return written

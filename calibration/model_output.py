@@ -12,11 +12,20 @@ from pathlib import Path
 import numpy as np
 
 from arm_model._output import safe_name
+from arm_model import InputError
 from arm_model.model_file import Arm, format_model, write_covariance
-from arm_model.io import atomic_write_text, guard_output
+from arm_model.io import UnreadableOutput, atomic_write_text, guard_output, read_back
 from arm_model.urdf_import import calibrated_urdf_text
 
-__all__ = ["model_paths", "fitted_arm", "write_model", "model_check", "refine_torques"]
+__all__ = ["model_paths", "fitted_arm", "write_model", "model_check", "refine_torques", "check_reproduces",
+           "REPRODUCE_TOL_M"]
+
+#: how far beyond :func:`model_check`'s difference (the torques evaluated on the calibrated description, which
+#: the summary reports) the model file read back may put a fitted point from the fit's own ball centre [m]:
+#: the file's decimal text costs below 1e-12 m
+REPRODUCE_TOL_M = 1e-9
+#: how far the covariance read back may differ from the fit's, relative to u_i u_k
+REPRODUCE_COV_REL = 1e-9
 
 
 def model_paths(out_dir, name: str) -> dict:
@@ -61,6 +70,7 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
                                                    comment=comment, model_discrepancy=_discrepancy(result)),
                       inputs)
     atomic_write_text(files["urdf"], calibrated_urdf_text(result.model.desc, arm.desc), inputs)
+    check_reproduces(result, read_back(files["model"]), files["model"], urdf=files["urdf"])
     return files
 
 
@@ -68,6 +78,59 @@ def _discrepancy(result) -> float | None:
     """The model discrepancy [m] per axis a result carries (:mod:`calibration.discrepancy`), or None."""
     d = getattr(result, "discrepancy", None)
     return None if d is None else d.sigma
+
+
+def check_reproduces(result, back: Arm, path, urdf=None) -> None:
+    """The model file read back (``back``: as every ``--arm`` reads it) must reproduce the fit: on every
+    fitted point its ball centre within :data:`REPRODUCE_TOL_M` of the fit's own beyond the difference
+    :func:`model_check` reports, and its covariance file the fit's covariance of the free parameters
+    (:data:`REPRODUCE_COV_REL`). ``urdf``: the URDF written beside it, read with the fitted arm's tip frame (the
+    generated ball frame for a description), must give the model file's rigid ball centres. Else
+    :class:`~arm_model.io.UnreadableOutput` (a bug: exit 3, nothing written)."""
+    pts = result.data.points
+    own = result.model.ball_centres(pts.q, result.data.wrench, result.p, result.data.aux)
+    _same(back.ball_centres(pts, wrench=result.data.wrench), own,
+          REPRODUCE_TOL_M + model_check(result)["max_difference_nm"] * 1e-9, pts,
+          "the model file read back does not reproduce the fit", path)
+    if urdf is not None:
+        from arm_model.kinematics import rigid_centres
+        from arm_model.urdf import BALL_FRAME
+        from arm_model.urdf_import import load_arm
+        try:
+            arm = load_arm(urdf, _urdf_tip(urdf, result.model.desc.tip_frame or BALL_FRAME))
+        except InputError as exc:
+            raise UnreadableOutput(f"the URDF written is refused with its tip frame: {exc}", urdf) from None
+        _same(rigid_centres(arm, pts.q), rigid_centres(back.desc, pts.q), REPRODUCE_TOL_M, pts,
+              "the URDF read back is not the model file's arm", urdf)
+    if back.covariance is None:
+        return
+    from arm_model.model_file import read_covariance
+    cov = read_covariance(back.covariance)
+    free = list(result.free)
+    u = np.sqrt(np.clip(np.diag(result.cov), 0.0, None))
+    if list(cov.names) != free or not np.all(np.abs(cov.matrix - result.cov) <= REPRODUCE_COV_REL * np.outer(u, u)):
+        raise UnreadableOutput(f"the covariance file read back is not the fit's covariance of its free parameters "
+                               f"({', '.join(free)})", back.covariance)
+
+
+def _urdf_tip(urdf, tip: str) -> str:
+    """The tip frame of a calibrated URDF: the link ``<tip>_calibrated`` (``_`` appended while taken) that
+    :func:`~arm_model.urdf_import.calibrated_urdf_text` adds for a tool offset no fixed joint could take, else
+    ``tip``."""
+    import re
+
+    from lxml import etree
+    names = [el.get("name") or "" for el in etree.parse(str(urdf)).getroot().findall("link")]
+    added = [n for n in names if re.fullmatch(re.escape(tip) + "_calibrated_*", n)]
+    return max(added, key=len) if added else tip
+
+
+def _same(got, want, tol: float, pts, what: str, path) -> None:
+    d = np.linalg.norm(got - want, axis=1) if len(pts) else np.zeros(0)
+    if len(d) and not d.max() <= tol:
+        i = int(np.nanargmax(d)) if np.isfinite(d).any() else 0
+        raise UnreadableOutput(f"{what}: the ball centre of {pts.path}, line {pts.lines[i]} moves by "
+                               f"{d[i] * 1e9:.3g} nm (at most {tol * 1e9:.3g} nm)", path)
 
 
 def model_check(result, arm: Arm | None = None) -> dict:

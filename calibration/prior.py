@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["GROUP_LENGTHS", "GROUP_OFFSETS", "GROUP_ANGLES", "GROUP_TIP", "GROUP_PROBE_COMPLIANCE", "BASE_SIZES",
-           "PRIOR_DOMINATED", "SCALE_RANGE", "MIN_EFFECTIVE", "PriorSpec", "parameter_groups", "prior_spec", "robot_size",
+           "PRIOR_DOMINATED", "SCALE_RANGE", "MIN_EFFECTIVE", "PriorSpec", "parameter_groups", "prior_spec",
            "variance_ratio", "update_scales", "NONNEGATIVE_UNITS"]
 
 GROUP_LENGTHS = "lengths"
@@ -119,13 +119,6 @@ def parameter_groups(model, names) -> list[str]:
     return out
 
 
-def robot_size(model, data) -> float:
-    """The robot's size [m]: the largest distance from the base origin of a ball centre of ``data`` with the
-    nominal model, at least 0.1 m (the plausible size of an unknown tip or marker offset)."""
-    x = model.ball_centres(data.points.q, data.wrench, np.zeros(model.spec.size), data.aux)
-    return max(float(np.max(np.linalg.norm(x, axis=1))) if len(x) else 0.0, 0.1)
-
-
 @dataclass(frozen=True)
 class PriorSpec:
     """The prior of every parameter of a model (full-length vectors in ``model.spec`` order).
@@ -196,8 +189,9 @@ def _effect_sizes(model, data) -> dict[int, tuple[float, str]]:
 def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
     """The groups, plausible sizes and bounds of every parameter of ``model`` for ``data``.
 
-    Sizes at scale 1: a joint row's length 1 mm and angle 1 mrad (:data:`BASE_SIZES`); the tip offset the
-    robot's size (:func:`robot_size`: a tracker marker's place on the last link may be unknown); the probe's
+    Sizes at scale 1: a joint row's length 1 mm and angle 1 mrad (:data:`BASE_SIZES`); the tip offset
+    (probe.x/y/z) 1 mm too (the tip's nominal place is known: a marker at an unknown place is a nuisance
+    unknown of its own, without a prior, :mod:`arm_model.tracker`); the probe's
     compliance 10 times its nominal value (at least 1e-8 m/N); an angular compliance [rad/(N m)] the one that
     turns the joint by :data:`DEFLECTION` under the RMS torque the data give it (gravity from the
     description's masses, contact torques from the forces; an off-axis compliance, the RMS moment of gravity
@@ -208,7 +202,6 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
     spec = model.spec
     probe = model.desc.probe
     eff = _effect_sizes(model, data)
-    tip = None
     size, lower, source = np.empty(spec.size), np.full(spec.size, -np.inf), []
     for i, (n, unit) in enumerate(zip(spec.names, spec.units)):
         hit = [v for pat, v in (priors or {}).items() if fnmatch.fnmatchcase(n, pat)]
@@ -221,8 +214,7 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
                                                                     probe.bending_compliance_y)
             size[i], src = max(10.0 * c, 1e-8), "10 x the nominal probe compliance"
         elif n.startswith("probe."):
-            tip = robot_size(model, data) if tip is None else tip
-            size[i], src = tip, f"the robot's size ({tip * 1e3:.4g} mm)"
+            size[i], src = BASE_SIZES["m"], "a length's plausible error (the tip's nominal place is known)"
         else:
             size[i], src = BASE_SIZES.get(unit, UNIT_SIZES.get(unit, 1.0)), f"by unit ({unit})"
         source.append(src)

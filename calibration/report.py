@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import html
 import io
-import json
-import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -14,7 +12,7 @@ import numpy as np
 
 from arm_model import InputError
 from arm_model.checks import warnings_html
-from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, write_csv
+from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, json_text, write_csv
 from arm_model._log import counted
 from arm_model.shipped import provenance
 
@@ -24,25 +22,6 @@ from .validation import with_u
 
 __all__ = ["write_outputs", "plot_residuals", "plot_parameters", "plot_correlation", "plot_conformance",
            "conformance_lines", "conformance_pngs", "write_conformance_pngs", "conformance_html", "CONFORMANCE_SETS"]
-
-
-def _json_default(o):
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer, np.bool_)):
-        return o.item()
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
-
-
-def _finite(o):
-    """Replace inf/nan by None (JSON has no such numbers)."""
-    if isinstance(o, float) and not math.isfinite(o):
-        return None
-    if isinstance(o, dict):
-        return {k: _finite(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_finite(v) for v in o]
-    return o
 
 
 def _png(fig) -> bytes:
@@ -402,7 +381,7 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
         atomic_write_bytes(files["parameters_png"], plot_parameters(result), inputs)
         atomic_write_bytes(files["correlation_png"], plot_correlation(result), inputs)
         write_conformance_pngs(conf, files, inputs)
-    atomic_write_text(files["summary"], json.dumps(_finite(summary), indent=1, default=_json_default) + "\n", inputs)
+    atomic_write_text(files["summary"], json_text(summary), inputs)
     atomic_write_text(files["report"], _html(result, summary, files), inputs)
     return files
 

@@ -372,12 +372,15 @@ def test_tip_with_the_loops_model_reproduces_the_loops_corrected_points(nominal,
     loop.model_fit = final = refine_torques(unrefined)
     assert final.model_check["max_difference_nm"] < 1.0
     out = tmp_path / "loop"
-    # the check the refinement ended on is the one summary.json reports: the writer does not evaluate the
-    # model file's ball centres again
+    # the check the refinement ended on is the one summary.json reports: the writer evaluates the model's ball
+    # centres once, on the model file read back (it must reproduce the fit: issue 25), not the in-memory arm again
     from arm_model.model_file import Arm
+    evaluated = []
+    real = Arm.ball_centres
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(Arm, "ball_centres", lambda *a, **k: pytest.fail("model checked twice"))
+        mp.setattr(Arm, "ball_centres", lambda self, *a, **k: evaluated.append(self.desc.source) or real(self, *a, **k))
         write_loop_report(loop, out, inputs=[sim / "points.csv"])
+    assert len(evaluated) == 1 and evaluated[0].endswith("aacmm7-calibrated.toml")
     s = json.loads((out / "summary.json").read_text())
     assert s["model"]["file"] == "aacmm7-calibrated.toml" and s["model"]["check"]["max_difference_nm"] < 0.1
     assert s["model"]["check"] == final.model_check
