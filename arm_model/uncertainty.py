@@ -150,22 +150,11 @@ def default_inputs(desc, *, encoder=None, force=None, torque=None, compliance=No
     else:
         c = np.broadcast_to(np.asarray(compliance, dtype=float), (3,)).copy()
         src["compliance"] = "given"
-    if probing is not None:
-        src["probing"] = "given"
-    elif model_probing is not None:
-        probing = model_probing
-        src["probing"] = (f"the model file's probing_scatter_um {model_probing * 1e6:.4g} um (its calibration's "
-                          "variance components, net of the encoder and force-sensor noise)")
-    else:
-        src["probing"] = "none (0): the arm gives no probing_scatter_um (a model file from calibrate does)"
-    if discrepancy is not None:
-        src["model discrepancy"] = "given"
-    elif model_discrepancy is not None:
-        discrepancy = model_discrepancy
-        src["model discrepancy"] = (f"the model file's model_discrepancy_um {model_discrepancy * 1e6:.4g} um (its "
-                                    "calibration's extrapolative cross-validation)")
-    else:
-        src["model discrepancy"] = "none (0): the arm gives no model_discrepancy_um (a model file from calibrate does)"
+    probing, src["probing"] = _model_input(probing, model_probing, "probing_scatter_um",
+                                           "its calibration's variance components, net of the encoder and "
+                                           "force-sensor noise")
+    discrepancy, src["model discrepancy"] = _model_input(discrepancy, model_discrepancy, "model_discrepancy_um",
+                                                         "its calibration's extrapolative cross-validation")
     for name, arr in (("encoder", enc), ("force", f), ("torque", t), ("compliance", c)):
         if not np.all(np.isfinite(arr)) or np.any(arr < 0):
             raise ValueError(f"{name} uncertainty must be finite and >= 0, got {arr}")
@@ -175,6 +164,16 @@ def default_inputs(desc, *, encoder=None, force=None, torque=None, compliance=No
         if not (math.isfinite(v) and v >= 0):
             raise ValueError(f"{name} uncertainty must be finite and >= 0, got {given}")
     return InputUncertainty(enc, f, t, c, pr, src, dr)
+
+
+def _model_input(given, from_model, key: str, how: str) -> tuple:
+    """(value [m] or None, source) of an input a model file may carry as ``key`` [um]: ``given`` when given,
+    else the model file's, else none."""
+    if given is not None:
+        return given, "given"
+    if from_model is not None:
+        return from_model, f"the model file's {key} {from_model * 1e6:.4g} um ({how})"
+    return None, f"none (0): the arm gives no {key} (a model file from calibrate does)"
 
 
 @dataclass
