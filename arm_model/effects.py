@@ -510,6 +510,25 @@ class LateralCompliance(Effect):
                     (f"{desc.joint_names[i]}.lateral_compliance_y", "rad/(N m)")]
         return out
 
+    def gravity_loads(self, desc, q) -> list:
+        """The load each parameter multiplies at the description's own geometry: per joint of the effect,
+        the moment [N m] of gravity on the links it moves about its frame's x and about its y axis, one
+        array (N,) a parameter, for angles ``q`` (N, J) [rad] (the size of a compliance's prior:
+        :mod:`calibration.prior`)."""
+        import numpy as np
+        from .chain import NUMPY_OPS
+        from .params import split_params
+        rows, p_last, compliance = split_params(desc, None)
+        geom = Geometry([list(r) for r in rows], list(p_last), list(compliance))
+        cols = list(np.asarray(q, dtype=float).T)
+        out = []
+        for i in self.joint_indices(desc):
+            o, (ux, uy, _) = joint_frame(desc, geom, cols, i, NUMPY_OPS)
+            m = gravity_moment(desc, geom, cols, i, o, NUMPY_OPS)
+            out += [np.asarray(_dot(m, ux), dtype=float) * np.ones(len(cols[0])),
+                    np.asarray(_dot(m, uy), dtype=float) * np.ones(len(cols[0]))]
+        return out
+
     def apply(self, desc, params, inputs, geom, ops):
         q = inputs.q
         last = last_frame(desc, geom, q, ops)

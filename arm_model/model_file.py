@@ -12,7 +12,9 @@ One TOML file (``aacmm calibrate`` and ``aacmm close-loop`` write it, every ``--
 * an optional ``[calibration]`` table: ``covariance`` (the covariance file, relative to the TOML),
   ``written_by`` and ``probing_scatter_um`` (the scatter of the contact itself per axis that the
   calibration's variance components estimated, net of the encoder and force-sensor noise:
-  :meth:`calibration.CalibrationResult.probing_scatter`; ``aacmm tip``'s default probing uncertainty);
+  :meth:`calibration.CalibrationResult.probing_scatter`; ``aacmm tip``'s default probing uncertainty) and
+  ``model_discrepancy_um`` (the error per axis beyond the fit's own prediction on poses away from those it was
+  fitted on, by extrapolative cross-validation: :mod:`calibration.discrepancy`; ``aacmm tip`` adds it);
 * optional ``[[reference_frame]]`` and ``[[marker]]`` tables: the reference instrument's frame of each
   session and the markers' offsets on the tip frame that a calibration on tracker data estimated
   (:mod:`arm_model.tracker`; ``aacmm tip --reference-frame`` predicts the instrument's coordinates).
@@ -94,7 +96,8 @@ class Arm:
     ``covariance``: the covariance file named by the model file (resolved path) or None;
     ``probing_scatter``: the calibration's estimate of the scatter of one probed ball centre per axis [m]
     (``[calibration] probing_scatter_um``) or None; ``tracker``: the reference instrument's frames and the
-    markers' offsets (``[[reference_frame]]``, ``[[marker]]``) or None."""
+    markers' offsets (``[[reference_frame]]``, ``[[marker]]``) or None; ``model_discrepancy``: the
+    calibration's model discrepancy per axis [m] (``[calibration] model_discrepancy_um``) or None."""
     desc: ArmDescription
     effects: tuple[Effect, ...] = ()
     values: dict = field(default_factory=dict)
@@ -103,6 +106,7 @@ class Arm:
     covariance: Path | None = None
     probing_scatter: float | None = None
     tracker: Tracker | None = None
+    model_discrepancy: float | None = None
 
     @property
     def model(self) -> ArmModel:
@@ -169,16 +173,17 @@ MAX_PROBING_SCATTER_UM = 1.0e5
 
 def check_calibration_table(tbl, r: TomlReader) -> None:
     """The ``[calibration]`` table of a model file: text keys ``covariance`` and ``written_by``, the
-    number ``probing_scatter_um`` (>= 0: a calibration whose encoder and force-sensor noise alone account for
-    its residual scatter writes 0; at most :data:`MAX_PROBING_SCATTER_UM`)."""
+    numbers ``probing_scatter_um`` (>= 0: a calibration whose encoder and force-sensor noise alone account for
+    its residual scatter writes 0; at most :data:`MAX_PROBING_SCATTER_UM`) and ``model_discrepancy_um`` (the
+    same range)."""
     if not isinstance(tbl, dict):
         raise r.error("'calibration' must be a table", "calibration")
-    known = ("covariance", "written_by", "probing_scatter_um")
+    known = ("covariance", "written_by", "probing_scatter_um", "model_discrepancy_um")
     for key, value in tbl.items():
         if key not in known:
             raise r.error(f"unknown key '{key}' (known: {', '.join(known)}){nearest(key, known)}",
                           "calibration", key)
-        if key == "probing_scatter_um":
+        if key in ("probing_scatter_um", "model_discrepancy_um"):
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
                     or not 0 <= value <= MAX_PROBING_SCATTER_UM:
                 raise r.error(f"'{key}' must be a number in [0, {MAX_PROBING_SCATTER_UM:g}] um, got {value!r}",
@@ -372,7 +377,7 @@ def parse_model(text: str, path: str = "<string>") -> Arm:
     data = parse_toml(text, path)
     r = TomlReader(path, text)
     desc = description_from_data(data, r, MODEL_KEYS)
-    covariance = scatter = None
+    covariance = scatter = discrepancy = None
     if "calibration" in data:
         check_calibration_table(data["calibration"], r)
         cov = data["calibration"].get("covariance")
@@ -380,11 +385,14 @@ def parse_model(text: str, path: str = "<string>") -> Arm:
             covariance = (Path(path).parent / cov) if path != "<string>" else Path(cov)
         if "probing_scatter_um" in data["calibration"]:
             scatter = float(data["calibration"]["probing_scatter_um"]) * 1e-6
+        if "model_discrepancy_um" in data["calibration"]:
+            discrepancy = float(data["calibration"]["model_discrepancy_um"]) * 1e-6
     tracker = tracker_from_tables(data, r)
     if "effect" not in data:
-        return Arm(desc, covariance=covariance, probing_scatter=scatter, tracker=tracker)
+        return Arm(desc, covariance=covariance, probing_scatter=scatter, tracker=tracker,
+                   model_discrepancy=discrepancy)
     effects, values, u, states = effects_from_tables(desc, data["effect"], r)
-    return Arm(desc, effects, values, u, states, covariance, scatter, tracker)
+    return Arm(desc, effects, values, u, states, covariance, scatter, tracker, discrepancy)
 
 
 def load_model(path, tip_frame: str | None = None, probe: dict | None = None, masses=None,
@@ -409,15 +417,16 @@ def load_model(path, tip_frame: str | None = None, probe: dict | None = None, ma
 def format_model(desc: ArmDescription, effects=(), values: dict | None = None, uncertainties: dict | None = None,
                  states: dict | None = None, *, covariance: str | None = None, written_by: str | None = None,
                  probing_scatter: float | None = None, tracker: Tracker | None = None,
-                 comment: str | None = None) -> str:
-    """TOML text of a model file that :func:`parse_model` reads back exactly (``probing_scatter`` [m]:
-    written in um to 4 significant digits; ``tracker``: the reference frames and marker offsets)."""
+                 comment: str | None = None, model_discrepancy: float | None = None) -> str:
+    """TOML text of a model file that :func:`parse_model` reads back exactly (``probing_scatter`` and
+    ``model_discrepancy`` [m]: written in um to 4 significant digits; ``tracker``: the reference frames and
+    marker offsets)."""
     data = description_data(desc)
     if effects:
         data["effect"] = effect_tables(desc, effects, values or {}, uncertainties, states)
-    scatter = None if probing_scatter is None else float(f"{probing_scatter * 1e6:.4g}")
-    cal = {k: v for k, v in (("covariance", covariance), ("written_by", written_by),
-                             ("probing_scatter_um", scatter)) if v not in (None, "")}     # a scatter of 0 is kept
+    scatter, discrepancy = (None if v is None else float(f"{v * 1e6:.4g}") for v in (probing_scatter, model_discrepancy))
+    cal = {k: v for k, v in (("covariance", covariance), ("written_by", written_by), ("probing_scatter_um", scatter),
+                             ("model_discrepancy_um", discrepancy)) if v not in (None, "")}     # a 0 is kept
     if cal:
         data["calibration"] = cal
     if tracker is not None:

@@ -9,6 +9,8 @@ wrench ``w``. Its covariance, to first order, is the sum of named contributions
     force sensor    J_w diag(u_w^2) J_w^T     (probe frame: bending x, y and axial z)
     compliance      J_c diag(u_c^2) J_c^T     (the probe's compliances, unless the covariance has them)
     probing         u_probe^2 I               (the scatter of the contact itself, per axis)
+    model discrepancy  u_d^2 I                (the error of the model away from its calibration's poses, per
+                                               axis: calibration.discrepancy)
 
 with the Jacobians exact (:mod:`arm_model.jacobian`: the geometric Jacobian of the chain and dual
 numbers through the effects' own code), evaluated for N points in chunks on two threads.
@@ -46,7 +48,7 @@ FORCE_SENSOR_U_N = (0.0723, 0.0723, 0.0464)
 #: through the origin) relative to the paper's FEM bending compliance (0.0142 mm/N)
 COMPLIANCE_U_RELATIVE = 0.2
 #: the contributions, in report order
-CONTRIBUTIONS = ("parameters", "encoders", "force sensor", "compliance", "probing")
+CONTRIBUTIONS = ("parameters", "encoders", "force sensor", "compliance", "probing", "model discrepancy")
 
 
 @dataclass(frozen=True)
@@ -61,6 +63,8 @@ class InputUncertainty:
             parameter covariance does not hold).
         probing: per axis [m], the scatter of the contact itself.
         sources: contribution name -> a sentence saying where the value comes from.
+        discrepancy: per axis [m], the model discrepancy (the error of the model beyond its parameters'
+            uncertainty away from the poses it was calibrated on; independent from point to point).
     """
     encoder: np.ndarray
     force: np.ndarray
@@ -68,6 +72,7 @@ class InputUncertainty:
     compliance: np.ndarray
     probing: float = 0.0
     sources: dict = field(default_factory=dict)
+    discrepancy: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -95,7 +100,8 @@ class ParameterCovariance:
 
 
 def default_inputs(desc, *, encoder=None, force=None, torque=None, compliance=None, probing=None,
-                   has_force: bool = True, model_probing: float | None = None) -> InputUncertainty:
+                   has_force: bool = True, model_probing: float | None = None, discrepancy=None,
+                   model_discrepancy: float | None = None) -> InputUncertainty:
     """The input uncertainties of ``desc`` with their sources; any argument overrides its default.
 
     Args:
@@ -110,6 +116,10 @@ def default_inputs(desc, *, encoder=None, force=None, torque=None, compliance=No
         has_force: False when the points carry no force (then no force-sensor contribution).
         model_probing: [m] the probing scatter a model file carries (``[calibration]
             probing_scatter_um``: its calibration's variance components), the default of ``probing``.
+        discrepancy: [m] per axis (default ``model_discrepancy``, else 0).
+        model_discrepancy: [m] the model discrepancy a model file carries (``[calibration]
+            model_discrepancy_um``: its calibration's extrapolative cross-validation), the default of
+            ``discrepancy``.
     """
     j = desc.n_joints
     src = {}
@@ -140,22 +150,31 @@ def default_inputs(desc, *, encoder=None, force=None, torque=None, compliance=No
     else:
         c = np.broadcast_to(np.asarray(compliance, dtype=float), (3,)).copy()
         src["compliance"] = "given"
-    if probing is not None:
-        src["probing"] = "given"
-    elif model_probing is not None:
-        probing = model_probing
-        src["probing"] = (f"the model file's probing_scatter_um {model_probing * 1e6:.4g} um (its calibration's "
-                          "variance components, net of the encoder and force-sensor noise)")
-    else:
-        src["probing"] = ("none (0): the arm gives no probing_scatter_um (a model file from calibrate on probed "
-                          "points does; a reference instrument's own noise is not the probe's)")
+    probing, src["probing"] = _model_input(
+        probing, model_probing, "probing_scatter_um",
+        "its calibration's variance components, net of the encoder and force-sensor noise",
+        "a model file from calibrate on probed points does; a reference instrument's own noise is not the probe's")
+    discrepancy, src["model discrepancy"] = _model_input(discrepancy, model_discrepancy, "model_discrepancy_um",
+                                                         "its calibration's extrapolative cross-validation")
     for name, arr in (("encoder", enc), ("force", f), ("torque", t), ("compliance", c)):
         if not np.all(np.isfinite(arr)) or np.any(arr < 0):
             raise ValueError(f"{name} uncertainty must be finite and >= 0, got {arr}")
     pr = 0.0 if probing is None else float(probing)
-    if not (math.isfinite(pr) and pr >= 0):
-        raise ValueError(f"probing uncertainty must be finite and >= 0, got {probing}")
-    return InputUncertainty(enc, f, t, c, pr, src)
+    dr = 0.0 if discrepancy is None else float(discrepancy)
+    for name, v, given in (("probing", pr, probing), ("model discrepancy", dr, discrepancy)):
+        if not (math.isfinite(v) and v >= 0):
+            raise ValueError(f"{name} uncertainty must be finite and >= 0, got {given}")
+    return InputUncertainty(enc, f, t, c, pr, src, dr)
+
+
+def _model_input(given, from_model, key: str, how: str, who: str = "a model file from calibrate does") -> tuple:
+    """(value [m] or None, source) of an input a model file may carry as ``key`` [um]: ``given`` when given,
+    else the model file's (``how`` it was found), else none (``who`` would give it)."""
+    if given is not None:
+        return given, "given"
+    if from_model is not None:
+        return from_model, f"the model file's {key} {from_model * 1e6:.4g} um ({how})"
+    return None, f"none (0): the arm gives no {key} ({who})"
 
 
 @dataclass
@@ -365,11 +384,11 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
             if sys_rows is not None:
                 sys_rows[s:e, npar:] = a.transpose(2, 0, 1)
             _add_squares(a, cv, contrib["compliance"][s:e])
-        if inputs.probing > 0:
-            var = inputs.probing ** 2
-            for i in range(3):
-                cv[i, i] += var
-            contrib["probing"][s:e] = var
+        for name, sd in (("probing", inputs.probing), ("model discrepancy", inputs.discrepancy)):
+            if sd > 0:
+                for i in range(3):
+                    cv[i, i] += sd ** 2
+                contrib[name][s:e] = sd ** 2
         for i, j in _PAIRS:
             cov[s:e, i, j] = cv[i, j]
             cov[s:e, j, i] = cv[i, j]
@@ -436,8 +455,9 @@ def monte_carlo(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, 
         qs = q + rng.uniform(-1.0, 1.0, q.shape) * half
         ws = w + rng.standard_normal(w.shape) * u_w if wrench is not None else None
         d = model.ball_centres(qs, ws, ps, aux) - nominal
-        if inputs.probing > 0:
-            d += inputs.probing * rng.standard_normal(d.shape)
+        for sd in (inputs.probing, inputs.discrepancy):
+            if sd > 0:
+                d += sd * rng.standard_normal(d.shape)
         s1 += d
         s2 += d[:, :, None] * d[:, None, :]
     bar.update(samples - bar.done)

@@ -42,6 +42,10 @@ def add_input_options(p, force: bool = True) -> None:
                    help="probing scatter of a ball centre per axis [um] (default: the model file's "
                         "probing_scatter_um, which calibrate and close-loop write: their residual scatter net of the "
                         "encoder and force-sensor noise propagated with the default inputs; 0 without one)")
+    g.add_argument("--u-model-discrepancy-um", type=number_in(0, MAX_U_PROBING_UM), default=None, metavar="U",
+                   help="model discrepancy per axis [um]: the model's error beyond its parameters' uncertainty "
+                        "away from the poses it was calibrated on (default: the model file's model_discrepancy_um, "
+                        "which calibrate writes from an extrapolative cross-validation; 0 without one)")
 
 
 def inputs_from_args(arm, args, has_force: bool) -> InputUncertainty:
@@ -53,8 +57,10 @@ def inputs_from_args(arm, args, has_force: bool) -> InputUncertainty:
     force = None if u_force is None else (u_force[0], u_force[0], u_force[1])
     comp = None if args.u_compliance_rel is None else args.u_compliance_rel * np.asarray(desc.probe.compliance)
     probing = None if args.u_probing_um is None else args.u_probing_um * 1e-6
+    u_disc = getattr(args, "u_model_discrepancy_um", None)
     inputs = default_inputs(desc, encoder=enc, force=force, compliance=comp, probing=probing, has_force=has_force,
-                            model_probing=arm.probing_scatter)
+                            model_probing=arm.probing_scatter, discrepancy=None if u_disc is None else u_disc * 1e-6,
+                            model_discrepancy=getattr(arm, "model_discrepancy", None))
     if args.u_compliance_rel is not None:
         inputs.sources["compliance"] = f"given: {args.u_compliance_rel:g} of the declared compliances"
     return inputs
@@ -86,7 +92,7 @@ def contribution_lines(res) -> list[str]:
         v = res.summary().get(name)
         if v is None:
             continue
-        lines.append(f"  {name:<13} {v[0] * 1e6:8.3f} {v[1] * 1e6:8.3f} {v[2] * 1e6:8.3f}   "
+        lines.append(f"  {name:<17} {v[0] * 1e6:8.3f} {v[1] * 1e6:8.3f} {v[2] * 1e6:8.3f}   "
                      f"{res.sources.get(name, '')}")
     return lines
 
@@ -136,9 +142,9 @@ def tip_columns(arm, points, parameters, args) -> tuple[dict, list[str]]:
     if args.covariance:
         cols.update(covariance_columns(res.cov))
     lines = ["uncertainty of the corrected centres (linear, exact Jacobians); RMS over the points [um]:",
-             f"  {'contribution':<13} {'x':>8} {'y':>8} {'z':>8}   source"] + contribution_lines(res)
+             f"  {'contribution':<17} {'x':>8} {'y':>8} {'z':>8}   source"] + contribution_lines(res)
     tot = np.sqrt(np.mean(u ** 2, axis=0)) * 1e6
-    lines.append(f"  {'total':<13} {tot[0]:8.3f} {tot[1]:8.3f} {tot[2]:8.3f}")
+    lines.append(f"  {'total':<17} {tot[0]:8.3f} {tot[1]:8.3f} {tot[2]:8.3f}")
     if args.mc:
         mc = monte_carlo(model, p, points_q, wrench, aux, parameters=parameters, inputs=inputs,
                          samples=args.mc, seed=args.seed)

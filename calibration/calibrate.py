@@ -41,6 +41,7 @@ from arm_model.model import ArmModel
 from arm_model.tracker import Tracker
 
 from .data import CalibrationData, Weights
+from .discrepancy import Discrepancy, model_discrepancy
 from .identifiability import (Combination, Identifiability, _compress, analyse, point_noise,
                               prior_scales,
                               reduced_jacobian, weakly_determined)
@@ -210,6 +211,7 @@ class CalibrationResult:
     prior_ratio: np.ndarray | None = None     # posterior / prior variance of each free parameter
     prior_groups: dict = field(default_factory=dict)   # per group: scale, parameters, effective parameters
     model_check: dict | None = None           # model_output.model_check of this fit, when refine_torques made it
+    discrepancy: Discrepancy | None = None    # the error beyond the fit's own prediction away from its poses
     options: FitOptions | None = None         # the options of the fit (calibrate's, as given)
 
     # -- access by name ----------------------------------------------------------------------------
@@ -358,6 +360,7 @@ class CalibrationResult:
                         "from_data": bool(self.weights_history)},
             "variance_components": self.variance, "weights_history": self.weights_history,
             "probing_scatter": self._budget_um(),
+            "model_discrepancy": None if self.discrepancy is None else self.discrepancy.to_dict(),
             "prior": None if self.prior_scales is None else {
                 "scales": dict(self.prior_scales), "groups": self.prior_groups, "log_evidence": self.log_evidence,
                 "prior_dominated_ratio": PRIOR_DOMINATED, "evidence_rounds": self.evidence,
@@ -662,7 +665,9 @@ def _lm(s: _Setup, prob: Problem, p, states, options: FitOptions):
     return sol
 
 
-#: fits with a new identifiability analysis at the solution before the identifiable set must have settled
+#: fits whose identifiability analysis at the solution holds more parameters, before the identifiable set must
+#: have settled (holds at a bound do not count: a parameter is held at its bound once and for all, so those
+#: rounds end by themselves)
 SETTLE_ROUNDS = 4
 
 
@@ -674,7 +679,8 @@ def _solve(s: _Setup, options: FitOptions):
     kept, fixed, idf0 = _held(s, p, s.states, list(s.candidates), "start", options)
     n_start = len(fixed)
     states = s.states
-    for _ in range(SETTLE_ROUNDS):
+    rank_rounds = 0
+    while rank_rounds < SETTLE_ROUNDS:
         prob = s.problem.with_free(kept)
         sol = _restarted(s, prob, _lm(s, prob, p, states, options), options)
         p, states = sol.p, sol.states
@@ -684,6 +690,7 @@ def _solve(s: _Setup, options: FitOptions):
         fixed += bound + new
         if len(kept) == n_before:
             return sol, kept, fixed, idf0, idf1
+        rank_rounds += bool(new)
     raise NumericalError("the identifiable set kept changing between fits (held in turn: "
                          + ", ".join(f.name for f in fixed[n_start:])
                          + "); raise the rank tolerance (--rank-tol) or hold some of these parameters (--hold)")
@@ -857,7 +864,7 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         prior_scales=None if s.prior is None else dict(s.scales), log_evidence=nrm.log_evidence,
         prior_centre=None if s.prior is None else s.prior.centre, options=options, prior_sd=prior_sd,
         prior_ratio=None if prior_sd is None else variance_ratio(u ** 2, prior_sd),
-        prior_groups=_group_table(s, kept, u))
+        prior_groups=_group_table(s, kept, u), discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var))
 
 
 def _group_table(s: _Setup, kept, u) -> dict:

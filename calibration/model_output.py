@@ -49,7 +49,7 @@ def fitted_arm(result, name: str | None = None) -> Arm:
     rows = {r["name"]: r for r in result.parameter_rows()}
     return Arm(desc, tuple(model.effects), {n: result.value(n) for n in names},
                {n: result.uncertainty(n) for n in names}, {n: rows[n]["state"] for n in names},
-               tracker=result.tracker)
+               tracker=result.tracker, model_discrepancy=_discrepancy(result))
 
 
 def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aacmm calibrate",
@@ -67,11 +67,17 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
     atomic_write_text(files["model"], format_model(arm.desc, arm.effects, arm.values, arm.uncertainties, arm.states,
                                                    covariance=files["covariance"].name, written_by=written_by,
                                                    probing_scatter=result.probing_scatter(), tracker=arm.tracker,
-                                                   comment=comment),
+                                                   comment=comment, model_discrepancy=_discrepancy(result)),
                       inputs)
     atomic_write_text(files["urdf"], calibrated_urdf_text(result.model.desc, arm.desc), inputs)
     check_reproduces(result, read_back(files["model"]), files["model"], urdf=files["urdf"])
     return files
+
+
+def _discrepancy(result) -> float | None:
+    """The model discrepancy [m] per axis a result carries (:mod:`calibration.discrepancy`), or None."""
+    d = getattr(result, "discrepancy", None)
+    return None if d is None else d.sigma
 
 
 def check_reproduces(result, back: Arm, path, urdf=None) -> None:

@@ -167,13 +167,18 @@ def _effect_sizes(model, data) -> dict[int, tuple[float, str]]:
     for e, sl in model.effect_slices():
         defs = e.param_defs(desc)
         joints = list(e.joint_indices(desc)) if hasattr(e, "joint_indices") else []
-        for k, (name, unit) in zip(range(sl.start, sl.stop), defs):
+        loads = e.gravity_loads(desc, data.points.q) if hasattr(e, "gravity_loads") and len(data) else None
+        for n, (k, (name, unit)) in enumerate(zip(range(sl.start, sl.stop), defs)):
             if unit == "rad/(N m)":
                 j = next((i for i in joints if name.startswith(desc.joints[i].name + ".")), None)
-                tau = 0.0 if j is None else _torque_reference(model, data, j)
+                if loads is not None:           # an off-axis compliance: the moment it multiplies
+                    tau = float(np.sqrt(np.mean(np.asarray(loads[n]) ** 2)))
+                else:
+                    tau = 0.0 if j is None else _torque_reference(model, data, j)
                 size = MAX_ANGULAR_COMPLIANCE if tau <= 0 else min(DEFLECTION / tau, MAX_ANGULAR_COMPLIANCE)
-                out[k] = (size, f"{DEFLECTION * 1e3:g} mrad under the joint's RMS torque in the data "
-                                f"({tau:.3g} N m)" if tau > 0 else "no torque in the data")
+                load = "torque" if loads is None else "gravity moment"
+                out[k] = (size, f"{DEFLECTION * 1e3:g} mrad under the joint's RMS {load} in the data "
+                                f"({tau:.3g} N m)" if tau > 0 else f"no {load} in the data")
             elif e.plausible_size is not None:
                 out[k] = (float(e.plausible_size), "the effect's plausible size")
             else:
@@ -189,7 +194,8 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
     unknown of its own, without a prior, :mod:`arm_model.tracker`); the probe's
     compliance 10 times its nominal value (at least 1e-8 m/N); an angular compliance [rad/(N m)] the one that
     turns the joint by :data:`DEFLECTION` under the RMS torque the data give it (gravity from the
-    description's masses, contact torques from the forces; at most :data:`MAX_ANGULAR_COMPLIANCE`); another
+    description's masses, contact torques from the forces; an off-axis compliance, the RMS moment of gravity
+    about its axis that the effect's ``gravity_loads`` give; at most :data:`MAX_ANGULAR_COMPLIANCE`); another
     effect parameter the effect's own plausible size or a size by unit (:data:`UNIT_SIZES`). ``priors``
     (names or glob patterns -> size [SI]) override. Compliances (:data:`NONNEGATIVE_UNITS`) cannot be negative
     in total: their lower bound is minus their nominal value."""

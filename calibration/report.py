@@ -266,7 +266,7 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
                                              for r in worse)) + ".</p>")
     if summary.get("conformance"):
         parts += conformance_html(summary["conformance"], files)
-    parts += prior_html(result)
+    parts += prior_html(result) + discrepancy_html(result)
     parts += ["<h2>Parameters</h2>",
               "<p>state: free (estimated, the data dominate), prior-dominated (estimated, but its posterior "
               "variance is at least half its prior's: it stays near the nominal with about the prior's "
@@ -304,6 +304,18 @@ def prior_html(result: CalibrationResult) -> list[str]:
             "'determined': the number of the group's parameters the data determine (sum of 1 - posterior/prior "
             "variance).</p>",
             _table(["group", "scale", "parameters", "determined", "plausible size at scale 1"], rows)]
+
+
+def discrepancy_html(result: CalibrationResult) -> list[str]:
+    """The report's sentence on the model discrepancy (:mod:`calibration.discrepancy`)."""
+    d = result.discrepancy
+    if d is None:
+        return []
+    return ["<h2>Model discrepancy</h2>",
+            f"<p>{_fmt(d.sigma * 1e6, 4)} um per axis: the poses at either end of each joint's range "
+            f"({d.share:.0%} of the poses each end, {d.folds} folds) held out in turn and predicted by the fit on the "
+            f"rest err {_fmt(d.ratio, 3)} x what that fit predicts (noise and posterior); the excess is the model "
+            "discrepancy, which the model file carries and tip adds to every point's uncertainty.</p>"]
 
 
 def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_training=None,

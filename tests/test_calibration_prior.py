@@ -139,3 +139,35 @@ def test_large_errors_converge_to_the_noise(model):
     data, _ = _campaign(model, 1, length=0.3e-3, angle=3e-3, probe=0.3e-3)
     res = calibrate(model, data, FitOptions(weights=W))
     assert 0.8 < res.s0 < 1.2 and res.status.startswith("converged")
+
+
+def test_an_off_axis_compliance_prior_comes_from_the_gravity_moment_about_its_axis():
+    """Lateral compliance of the Panda (URDF masses): each parameter's prior size is 1 mrad over the RMS, over
+    the data's poses, of the moment of gravity on the links its joint moves about that joint frame's x or y
+    axis; the moments agree with Pinocchio's RNEA (the model's own evaluator of them) to 1e-9 N m. (Before,
+    the axial torque was used: joint 1, whose axial gravity torque is nil, got the largest size, 0.1.)"""
+    from conftest import ROOT
+    from arm_model.chain import NUMPY_OPS
+    from arm_model.effects import LateralCompliance, Geometry, joint_frame
+    from arm_model.io import read_artefacts, read_points
+    from arm_model.params import split_params
+    from arm_model.urdf_import import load_arm
+    from calibration.prior import DEFLECTION
+    panda = ROOT / "examples" / "data" / "real-panda-seats"
+    desc = load_arm(panda / "panda-with-inertials.urdf", "ball_link")
+    model = ArmModel(desc, (LateralCompliance(),))
+    data = make_data(read_points(panda / "front" / "points.csv", 7), read_artefacts(panda / "artefacts.toml"), model)
+    spec = prior_spec(model, data)
+    loads = LateralCompliance().gravity_loads(desc, data.points.q)
+    rows, p_last, comp = split_params(desc, None)
+    geom = Geometry([list(r) for r in rows], list(p_last), list(comp))
+    for n, name in enumerate(model.spec.names[model.base_size:]):
+        rms = np.sqrt(np.mean(loads[n] ** 2))
+        assert spec.size[model.base_size + n] == pytest.approx(DEFLECTION / rms, rel=1e-12), name
+    for k in (0, 17, 40):
+        q = data.points.q[k]
+        for i in range(7):
+            o, (ux, uy, _) = joint_frame(desc, geom, list(q), i, NUMPY_OPS)
+            mg, _ = model._pinocchio_moments(geom, list(q), i, o, [0.0] * 6)
+            assert float(np.dot(mg, ux)) == pytest.approx(loads[2 * i][k], abs=1e-9)
+            assert float(np.dot(mg, uy)) == pytest.approx(loads[2 * i + 1][k], abs=1e-9)

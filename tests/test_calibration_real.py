@@ -55,7 +55,7 @@ def _placements(model, data):
 
 def test_panda_geometry_ties_the_published_tool_and_nothing_is_held_for_being_weak():
     """Default calibrate (geometry only), each placement predicting the other two: mean held-out spread at
-    most MUKCa's (measured 2.05 mm, 0.99x), distance error within 0.1 mm of it (measured 0.71 mm); no
+    most MUKCa's (measured 2.04 mm, 0.99x), distance error within 0.1 mm of it (measured 0.71 mm); no
     parameter held for being weak, the held ones exact rank deficiencies with their combination; the noise
     estimated with the scales (0.13-0.2 mm per axis)."""
     model, data = _panda()
@@ -74,7 +74,7 @@ def test_panda_joint_compliance_is_non_negative_and_its_prior_comes_from_the_mas
     """With the joint compliance effect (the URDF's link masses): every compliance is non-negative (held at
     its bound 0 when the data pull it below, and said so), its prior size is 1 mrad over the RMS gravity torque
     the data give the joint, none strays beyond three prior sizes; the held-out spread falls to at most 0.9x
-    MUKCa's (measured 1.72 mm, 0.83x); the model file written reads back in tip."""
+    MUKCa's (measured 1.71 mm, 0.83x); the model file written reads back in tip."""
     from arm_model.effects import JointCompliance
     from calibration.prior import DEFLECTION
     model, data = _panda((JointCompliance(),))
@@ -145,9 +145,9 @@ def test_talos_nominal_baseline_is_the_readmes_and_calibrate_beats_it(talos):
 def test_panda_heldout_uncertainty_coverage(tmp_path):
     """Each placement's model file applied by ``aacmm tip`` to the other two placements;
     each corrected centre's deviation from its seat's mean lies within 1.96 u (tip's u: the posterior
-    covariance, prior-dominated parameters included, and the probing scatter) for at least 85 % of the axis
-    values pooled (measured 86.2 %, 76-97 % per placement; the hold rule of earlier versions: 73.6 %,
-    58-91 %)."""
+    covariance, prior-dominated parameters included, the probing scatter and the model discrepancy of the
+    extrapolative cross-validation) for at least 88 % of the axis values pooled (measured 88.9 %, 76-100 % per
+    placement; without the discrepancy 86.2 %; the hold rule of earlier versions: 73.6 %, 58-91 %)."""
     import csv
     from arm_model.cli import main
     inside = []
@@ -168,4 +168,53 @@ def test_panda_heldout_uncertainty_coverage(tmp_path):
             f = np.array([r["feature"] for r in rows])
             for h in set(f):
                 inside.append((np.abs(x[f == h] - x[f == h].mean(axis=0)) <= 1.96 * u[f == h]).ravel())
-    assert np.concatenate(inside).mean() >= 0.85
+    assert np.concatenate(inside).mean() >= 0.88
+
+
+#: FIGAROH 1.0.2 (its TALOS example settings: Levenberg-Marquardt, a ridge of 1e-3 on the joint parameters, frame
+#: and marker free) re-run outside the project on the same random splits (seeds as below): held-out RMS [mm]
+FIGAROH_HALVES = {0: 0.851, 1: 0.768}
+
+
+def _talos_split(talos_all, n, seed):
+    """A random training set of ``n`` postures (numpy default_rng(seed)), the rest held out."""
+    model, data = talos_all
+    ids = list(dict.fromkeys(data.points.measurement.tolist()))
+    train = set(np.random.default_rng(seed).choice(ids, n, replace=False))
+    return split_holdout(data, [m for m in ids if m not in train])
+
+
+@pytest.fixture(scope="module")
+def talos_all(talos):
+    from arm_model.effects import JointCompliance
+    model = ArmModel(talos[0].desc, (JointCompliance(),))
+    return model, make_data(read_points(TALOS / "points.csv", model.desc.n_joints), None, model)
+
+
+def test_talos_joint_compliance_carries_over_to_random_halves(talos_all):
+    """On random halves of the 61 postures (scripts/mocap_study.py's seeds 100, 101) joint compliance with
+    its mass-based prior predicts the held-out postures at most 0.9x FIGAROH's error on the same split
+    (measured 0.683 and 0.674 mm against 0.851 and 0.768: 0.84x), the compliance of arm_left_3 estimated
+    non-negative and several standard uncertainties from 0 (measured about 1 mrad/(N m))."""
+    model, _ = talos_all
+    ratios = []
+    for s, fig in FIGAROH_HALVES.items():
+        train, test = _talos_split(talos_all, 31, 100 + s)
+        res = calibrate(model, train, FitOptions(weights_from_data=True))
+        ratios.append(_predicted_rms(res, test) / fig)
+        k = res.free.index("arm_left_3_joint.compliance")
+        assert res.p[model.spec.index("arm_left_3_joint.compliance")] > 3 * res.u[k] > 0
+    assert np.mean(ratios) <= 0.9, ratios
+
+
+def test_talos_17_postures_never_worse_than_the_nominal(talos, talos_all):
+    """Trained on 17 random postures (seeds 17000-17002), the other 44 predicted: default calibrate and
+    calibrate with joint compliance both beat the like-for-like nominal by at least 4x (measured 5.76 mm
+    nominal, 1.12 and 0.99 mm)."""
+    plain = talos[0]
+    for seed in (17000, 17001, 17002):
+        train, test = _talos_split(talos_all, 17, seed)
+        base = _predicted_rms(nominal_baseline(plain, train, FitOptions(weights_from_data=True)), test)
+        for model in (plain, talos_all[0]):
+            rms = _predicted_rms(calibrate(model, train, FitOptions(weights_from_data=True)), test)
+            assert rms <= base / 4, (seed, rms, base)

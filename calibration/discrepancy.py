@@ -1,0 +1,145 @@
+"""Model discrepancy: how much more a fit errs on poses beyond those it was fitted on than its posterior says.
+
+The posterior covariance of a fit covers the parameters' uncertainty under the model; an error the model lacks
+(an effect nobody declared, a geometry the chain cannot represent) is absorbed by the parameters near the
+training poses and comes back away from them. Its size is estimated from the data by **extrapolative
+cross-validation**: for each joint, the poses at either end of the range the data span in that joint
+(:data:`EXTREME_SHARE` of the poses each end, :func:`extreme_folds`) are held out in turn, the fit is
+repeated on the rest and each held-out pose is predicted (against its feature fitted on the remaining poses:
+a seat's centre, a sphere, a plane; a tracker's frame and marker); the discrepancy variance is the excess
+of the squared prediction errors over what the fit itself predicts for them (noise and posterior), per
+axis, pooled over the folds (a method-of-moments estimate, floored at 0)::
+
+    sigma_d^2 = max(0, sum_O sum_i (e_i^2 - v_i) / sum_O n_O)
+
+Each fold's fit is the full fit with the held-out rows deleted, computed exactly for the model linearised at
+the solution (the prior's scales and the noise held): with ``H = J A^-1 J^T`` the hat matrix of the joint
+fit (parameters and every nuisance unknown, ``A`` its normal matrix with the prior's precision) and ``r_O``
+the weighted residuals of the held-out rows, the held-out prediction errors are ``(I - H_OO)^-1 r_O`` and
+their predicted covariance ``s0^2 (I - H_OO)^-1`` (noise plus the posterior of the fit without them; the
+group-deletion identity of linear regression, Cook and Weisberg 1982, "Residuals and Influence in
+Regression", ch. 3). A fold keeps every feature's fewest points plus one (as :func:`calibration.data.
+split_poses`), so that its centre (axis, plane, frame) stays determined.
+
+``sigma_d`` is what :func:`arm_model.uncertainty.propagate` adds, per axis, to every corrected point of the
+calibrated model (the model file's ``[calibration] model_discrepancy_um``, ``aacmm tip``'s
+``model discrepancy`` contribution). It is 0 (to its sampling scatter) when the model holds the physics of
+the data, and grows with what the model lacks where the data reach beyond the training poses; it cannot
+see an error that shows only beyond the range the data span.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["EXTREME_SHARE", "Discrepancy", "extreme_folds", "fold_errors", "holdable", "model_discrepancy"]
+
+#: share of the poses held out at each end of a joint's range
+EXTREME_SHARE = 0.15
+
+
+@dataclass(frozen=True)
+class Discrepancy:
+    """The model discrepancy of a fit (:func:`model_discrepancy`).
+
+    Attributes:
+        sigma: standard deviation per axis [m] of the error beyond the fit's own prediction (0 when the
+            held-out poses are predicted as well as the fit says).
+        ratio: RMS held-out prediction error over the RMS the fit predicts for it (1 when the model holds).
+        folds: number of folds (held-out ends of joint ranges); rows: held-out residual rows, pooled.
+        share: share of the poses held out at each end of a joint's range.
+    """
+    sigma: float
+    ratio: float
+    folds: int
+    rows: int
+    share: float = EXTREME_SHARE
+
+    def to_dict(self) -> dict:
+        return {"sigma_um": self.sigma * 1e6, "ratio": self.ratio, "folds": self.folds, "rows": self.rows,
+                "share": self.share,
+                "method": "extrapolative cross-validation: the poses at each end of every joint's range held out "
+                          "in turn (group deletion at the solution), the excess of their squared prediction "
+                          "errors over the fit's own prediction (noise and posterior), per axis"}
+
+
+def extreme_folds(q: np.ndarray, share: float = EXTREME_SHARE) -> list[np.ndarray]:
+    """Index arrays into the rows of ``q`` (N, J) [rad]: for each joint whose angle varies, the
+    ``round(share * N)`` (at least 1) rows of its smallest and of its largest angles (measured from their
+    circular mean, so that a range across +-pi is one interval), ties broken by row order."""
+    q = np.asarray(q, dtype=float)
+    n = len(q)
+    out = []
+    if n < 2:
+        return out
+    k = max(1, int(round(share * n)))
+    for j in range(q.shape[1]):
+        centre = np.angle(np.mean(np.exp(1j * q[:, j])))
+        a = np.angle(np.exp(1j * (q[:, j] - centre)))
+        if np.ptp(a) <= 1e-9:
+            continue
+        order = np.argsort(a, kind="stable")
+        out += [order[:k], order[-k:]]
+    return out
+
+
+def holdable(prob, held) -> set:
+    """``held`` (point indices of ``prob``'s data) less, for every instance (feature, frame, marker) that
+    would keep fewer than its fewest points plus one, its first held points: what a fold may hold out."""
+    from .problem import MIN_POINTS
+    out = {int(i) for i in held}
+    for it in prob.instances:
+        pts = [int(i) for i in it.points]
+        inter = [i for i in pts if i in out]
+        spare = len(pts) - (MIN_POINTS.get(it.kind, (3, 3))[0] + 1)
+        for i in inter[:max(len(inter) - max(spare, 0), 0)]:
+            out.discard(i)
+    return out
+
+
+def fold_errors(prob, r: np.ndarray, js, solve, var: float, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The prediction errors [m] of the residual ``rows`` of a fit of ``prob`` by the fit without them, and the
+    variances [m^2] that fit predicts for them (noise and posterior), for the model linearised at the solution:
+    ``(I - H_OO)^-1 r_O`` and the diagonal of ``var (I - H_OO)^-1``, in metres (each row times its sigma).
+    Arguments as :func:`model_discrepancy`."""
+    jo = js.tocsr()[rows]
+    h = np.asarray(jo @ solve(np.asarray(jo.T.todense())))
+    m = np.linalg.inv(np.eye(len(rows)) - 0.5 * (h + h.T))
+    sig = prob.sigma[rows]
+    return sig * (m @ r[rows]), var * np.diag(m) * sig ** 2
+
+
+def model_discrepancy(prob, r: np.ndarray, js, solve, var: float, share: float = EXTREME_SHARE) -> Discrepancy | None:
+    """The model discrepancy of a fit of ``prob`` (see the module docstring).
+
+    Args:
+        prob: the :class:`~calibration.problem.Problem` fitted (its rows, their points and sigmas [m]).
+        r: (rows,) weighted residuals at the solution.
+        js: the column-scaled Jacobian (rows x unknowns: free parameters and nuisance), sparse.
+        solve: ``b -> A^-1 b`` with ``A = js^T js`` plus the prior's precision (scaled alike).
+        var: the variance of a weighted row (``s0^2``, or 1 with stated uncertainties).
+
+    Returns None when no fold can be formed (no joint varies, too few points)."""
+    rp = prob.row_point
+    point_rows = (prob.row_distance < 0) & (rp >= 0)
+    used = np.unique(rp[point_rows])
+    if len(used) < 2:
+        return None
+    observed = predicted = 0.0
+    n_rows = n_folds = 0
+    for fold in extreme_folds(prob.data.points.q[used], share):
+        held = holdable(prob, used[fold])
+        rows = np.flatnonzero(point_rows & np.isin(rp, sorted(held)))
+        if not len(rows):
+            continue
+        e, v = fold_errors(prob, r, js, solve, var, rows)
+        observed += float(e @ e)
+        predicted += float(np.sum(v))
+        n_rows += len(rows)
+        n_folds += 1
+    if not n_rows:
+        return None
+    return Discrepancy(math.sqrt(max((observed - predicted) / n_rows, 0.0)),
+                       math.sqrt(observed / predicted) if predicted > 0 else float("nan"), n_folds, n_rows, share)

@@ -1,0 +1,94 @@
+#!/usr/bin/env python3
+"""Held-out postures of a motion-capture (tracker) campaign: fit ``calibrate`` on some postures, predict the
+others with the training fit's instrument frame and marker offset, report the RMS and max of the markers' 3D
+errors [mm], for the like-for-like nominal (frame and marker fitted, nothing else) and for each model asked.
+
+Splits (a posture is one measurement of the points file): ``--holdout ID,ID`` (the data's own split, if it
+states one), random halves (``--halves`` seeds), and random subsamples of ``--sizes`` postures (``--seeds``
+seeds each), the rest held out. Seeds are numpy's default_rng; the same seeds give the same splits.
+
+    python scripts/mocap_study.py ../shared/data/real-talos-mocap/points.csv \\
+        --arm ../shared/data/real-talos-mocap/talos_full_v2.urdf --tip-frame gripper_left_base_link \\
+        --holdout pose-02,pose-04,...  --effects none,joint_compliance
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from arm_model.effects import effect_from_name  # noqa: E402
+from arm_model.io import read_points  # noqa: E402
+from arm_model.model import ArmModel  # noqa: E402
+from arm_model.tracker import marker_positions  # noqa: E402
+from arm_model.urdf_import import load_arm  # noqa: E402
+from calibration import FitOptions, calibrate, make_data  # noqa: E402
+from calibration.calibrate import nominal_baseline  # noqa: E402
+from calibration.data import split_holdout  # noqa: E402
+
+
+def splits(ids: list, holdout: list | None, halves: int, sizes: list, seeds: int) -> list:
+    """(name, held-out ids) of every split asked."""
+    out = [("stated", list(holdout))] if holdout else []
+    for s in range(halves):
+        train = set(np.random.default_rng(100 + s).choice(ids, len(ids) // 2 + len(ids) % 2, replace=False))
+        out.append((f"half{s}", [m for m in ids if m not in train]))
+    for n in sizes:
+        for s in range(seeds):
+            train = set(np.random.default_rng(1000 * n + s).choice(ids, n, replace=False))
+            out.append((f"n{n}s{s}", [m for m in ids if m not in train]))
+    return out
+
+
+def errors(res, test) -> np.ndarray:
+    """Each held-out posture's marker 3D error [mm], frame and marker offset of the training fit."""
+    x = marker_positions(res.model, res.p, test.points.q, res.tracker, test.sessions, test.aux)[:, 0]
+    return np.linalg.norm(x - test.reference, axis=1) * 1e3
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("points", type=Path, help="points file: one measurement a posture, reference coordinates")
+    p.add_argument("--arm", type=Path, required=True, help="the robot's URDF")
+    p.add_argument("--tip-frame", required=True, help="the link the marker is fixed on")
+    p.add_argument("--holdout", default="", help="the data's own held-out postures (comma-separated ids)")
+    p.add_argument("--halves", type=int, default=5, help="random halves (seeds 100...)")
+    p.add_argument("--sizes", default="17,25,45", help="sizes of the random training subsamples")
+    p.add_argument("--seeds", type=int, default=3, help="seeds of each subsample size")
+    p.add_argument("--effects", default="none,joint_compliance",
+                   help="models to compare: 'none' (geometry) or effect names joined by '+', comma-separated")
+    p.add_argument("-o", "--output", type=Path, default=None, help="write the results as JSON here")
+    args = p.parse_args(argv)
+    desc = load_arm(args.arm, args.tip_frame)
+    pts = read_points(args.points, desc.n_joints)
+    ids = list(dict.fromkeys(pts.measurement.tolist()))
+    models = {name: ArmModel(desc, tuple(effect_from_name(e) for e in name.split("+") if e != "none"))
+              for name in args.effects.split(",")}
+    data = {name: make_data(pts, None, m) for name, m in models.items()}
+    sizes = [int(v) for v in args.sizes.split(",") if v]
+    results = {}
+    for split, held in splits(ids, [h for h in args.holdout.split(",") if h], args.halves, sizes, args.seeds):
+        row = {}
+        first = next(iter(models))
+        train, test = split_holdout(data[first], held)
+        row["nominal"] = errors(nominal_baseline(models[first], train, FitOptions(weights_from_data=True)), test)
+        for name, m in models.items():
+            train, test = split_holdout(data[name], held)
+            row[name] = errors(calibrate(m, train, FitOptions(weights_from_data=True)), test)
+        results[split] = {k: {"rms_mm": float(np.sqrt(np.mean(e ** 2))), "max_mm": float(e.max()),
+                              "errors_mm": e.tolist()} for k, e in row.items()}
+        print(f"{split:8s} train {len(ids) - len(held):3d}  " + "  ".join(
+            f"{k} {v['rms_mm']:.3f}" for k, v in results[split].items()), flush=True)
+    if args.output:
+        args.output.write_text(json.dumps(results, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
