@@ -340,6 +340,13 @@ class CalibrationResult:
         before = np.zeros(self.model.spec.size) if p_before is None else p_before
         return before_after(self.model, before, self.p, data, self.weights, self.reference_mode)
 
+    def reference_frame(self) -> dict | None:
+        """JSON-ready reference instrument's frames ``T_ref_base`` and markers' offsets, or None without them."""
+        if self.tracker is None:
+            return None
+        return {**self.tracker.to_dict(), "fitted": self.reference_mode == "fit",
+                "marker_offsets": self.data.marker_offsets}
+
     def to_dict(self) -> dict:
         """JSON-ready summary (SI values, plus display units in the parameter rows)."""
         return {
@@ -351,9 +358,7 @@ class CalibrationResult:
             "correlation": {"names": list(self.free), "matrix": self.corr.tolist()},
             "identifiability_start": self.identifiability.to_dict(),
             "identifiability_final": self.identifiability_final.to_dict(),
-            "reference_frame": None if self.tracker is None else {
-                **self.tracker.to_dict(), "fitted": self.reference_mode == "fit",
-                "marker_offsets": self.data.marker_offsets},
+            "reference_frame": self.reference_frame(),
             "weights": {"probe_um": self.weights.probe * 1e6, "reference_um": self.weights.reference * 1e6,
                         "length_um": None if self.weights.length is None else self.weights.length * 1e6,
                         "factors": dict(self.weights.factors),

@@ -379,7 +379,7 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
     summary["model"] = {"file": model_files["model"].name, "covariance": model_files["covariance"].name,
                         "urdf": model_files["urdf"].name, "check": model_check(final),
                         "fitted_on": _fitted_on(loop), "points": len(final.data)}
-    summary["reference_frame"] = final.reference
+    summary["reference_frame"] = final.reference_frame()
     if conformance:
         summary["conformance"] = conformance
     summary.update(provenance(inputs))

@@ -178,7 +178,7 @@ def test_holdout_keeps_its_rows_out_of_the_model_which_is_calibrates_with_its_re
     n_ref = len(read_points(sim / "points-ref.csv", 7))     # the tracker rows, none in a held-out measurement
     assert loop["model"]["points"] == cal["n_points"] == int(sum(m not in held for m in pts.measurement)) + n_ref
     assert "held-out" in loop["model"]["fitted_on"]
-    t_loop, t_cal = (np.array(s["reference_frame"]["T_ref_base"]) for s in (loop, cal))
+    t_loop, t_cal = (np.array(s["reference_frame"]["frames"][0]["T_ref_base"]) for s in (loop, cal))
     assert t_loop.shape == (4, 4) and loop["reference_frame"]["fitted"]
     np.testing.assert_allclose(t_loop, t_cal, atol=1e-9)
     a, b = (load_model(tmp_path / d / "aacmm7-calibrated.toml") for d in ("loop", "cal"))
