@@ -24,6 +24,12 @@ demo: $(STAMP)
 test: $(STAMP) browser
 	$(PY) -m pytest -n 2 -q tests
 
+# The lint and type gate (configuration in pyproject.toml): ruff, then mypy.
+.PHONY: lint
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy
+
 bench: $(STAMP)
 	$(PY) -m benchmarks.run $(BENCH)
 
