@@ -18,7 +18,6 @@ fall back to Python's ``%`` formatting.
 from __future__ import annotations
 
 import csv
-from decimal import ROUND_HALF_EVEN, Decimal
 import io
 import math
 import os
@@ -26,6 +25,7 @@ import re
 import stat
 import warnings
 from dataclasses import dataclass
+from decimal import ROUND_HALF_EVEN, Decimal
 from pathlib import Path
 
 import numpy as np

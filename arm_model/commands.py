@@ -6,7 +6,6 @@ import logging
 import math
 import os
 import shutil
-from .cli import command_help
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +14,7 @@ from ._csv import format_csv
 from ._errors import InputError
 from ._output import output_file
 from .checks import JointLimitTally, log_warnings
+from .cli import command_help
 from .io import concat_points, iter_points
 from .model_file import Arm, load_model
 from .urdf import urdf_text
@@ -270,7 +270,7 @@ class _TipTally:
         self.flagged_count += int(cols["over_force"].sum())
         self.limits.add(block.q, block.lines)
 
-    def merge(self, other: "_TipTally") -> None:
+    def merge(self, other: _TipTally) -> None:
         self.n += other.n
         self.measurements.update(other.measurements)
         self.kinds |= other.kinds

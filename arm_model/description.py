@@ -228,7 +228,7 @@ class ArmDescription:
             return np.array([j.origin for j in self.joints], dtype=float)
         return np.array([[j.theta_offset, j.d, j.a, j.alpha] for j in self.joints], dtype=float)
 
-    def with_row_table(self, table: np.ndarray) -> "ArmDescription":
+    def with_row_table(self, table: np.ndarray) -> ArmDescription:
         table = np.asarray(table, dtype=float)
         if self.convention == "urdf":
             joints = tuple(replace(j, origin=tuple(float(v) for v in r)) for j, r in zip(self.joints, table))
@@ -247,7 +247,7 @@ class ArmDescription:
         """Indices of the row values that are lengths (thermal growth scales them)."""
         return (0, 1, 2) if self.convention == "urdf" else (1, 2)
 
-    def with_probe(self, **changes) -> "ArmDescription":
+    def with_probe(self, **changes) -> ArmDescription:
         return replace(self, probe=replace(self.probe, **changes))
 
 
@@ -535,7 +535,7 @@ def _probe(r: TomlReader, ptab) -> Probe:
         probe = replace(probe, lever=default_lever(probe.p_last, probe.rotation))
     if probe.lever == 0.0 and probe.compliance.any():
         given = "stylus_length" in pv
-        raise r.error((f"a tip without a stylus (stylus_length_mm = 0)" if given else
+        raise r.error(("a tip without a stylus (stylus_length_mm = 0)" if given else
                        f"the ball lies {float(np.linalg.norm(probe.p_last)) * 1e3:.3g} mm from the last joint origin, "
                        "a tip without a stylus") + " bends under no force: its compliances must be 0 (a compliant "
                       "stylus is at least 0.001 mm long: give its length, stylus_length_mm)", "probe",

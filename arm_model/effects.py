@@ -516,6 +516,7 @@ class LateralCompliance(Effect):
         array (N,) a parameter, for angles ``q`` (N, J) [rad] (the size of a compliance's prior:
         :mod:`calibration.prior`)."""
         import numpy as np
+
         from .chain import NUMPY_OPS
         from .params import split_params
         rows, p_last, compliance = split_params(desc, None)

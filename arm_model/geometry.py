@@ -341,7 +341,7 @@ def _normalised(p: np.ndarray, what: str) -> tuple[np.ndarray, float, np.ndarray
 def _solve(fun, jac, x0, what: str, names: tuple[str, ...], **kw):
     """Levenberg-Marquardt to tight tolerances, its status and the rank of its Jacobian checked:
     ``(result, standard uncertainties of the parameters)``."""
-    from scipy.optimize import least_squares          # here: a command that fits nothing starts faster
+    from scipy.optimize import least_squares  # here: a command that fits nothing starts faster
     res = least_squares(fun, x0, jac=jac, method="lm", xtol=1e-14, ftol=1e-14, gtol=1e-14, **kw)
     _check_status(res, what)
     jac_x = jac(res.x)

@@ -101,7 +101,7 @@ class PointSet:
         """Measurement ids in order of first appearance."""
         return list(dict.fromkeys(self.measurement.tolist()))
 
-    def select(self, mask) -> "PointSet":
+    def select(self, mask) -> PointSet:
         """The rows where ``mask`` (bool array or index array) holds, file order kept."""
         def take(a):
             return None if a is None else a[mask]

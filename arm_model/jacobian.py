@@ -27,7 +27,6 @@ relative:
 """
 from __future__ import annotations
 
-import math
 from functools import lru_cache
 from types import SimpleNamespace
 

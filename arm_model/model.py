@@ -26,7 +26,7 @@ class AuxData:
     tau_gravity: np.ndarray | None = None
     tau_contact: np.ndarray | None = None
 
-    def select(self, mask) -> "AuxData":
+    def select(self, mask) -> AuxData:
         return AuxData(*(None if a is None else a[mask] for a in (self.temperature, self.tau_gravity, self.tau_contact)))
 
 
@@ -50,7 +50,7 @@ class ArmModel:
         object.__setattr__(self, "base_size", base.size)
 
     # -- structure ----------------------------------------------------------------------------
-    def with_effects(self, *effects: Effect) -> "ArmModel":
+    def with_effects(self, *effects: Effect) -> ArmModel:
         return ArmModel(self.desc, tuple(self.effects) + tuple(effects))
 
     def needs(self) -> set[str]:

@@ -39,8 +39,16 @@ import numpy as np
 
 from ._errors import InputError, parse_toml, read_text
 from ._units import implausible
-from .description import (MODEL_KEYS, ArmDescription, TomlReader, description_data, description_from_data,
-                          in_unit, nearest, toml_text)
+from .description import (
+    MODEL_KEYS,
+    ArmDescription,
+    TomlReader,
+    description_data,
+    description_from_data,
+    in_unit,
+    nearest,
+    toml_text,
+)
 from .effects import EFFECTS, Effect
 from .model import ArmModel, AuxData
 from .tracker import Tracker, tracker_from_tables, tracker_tables

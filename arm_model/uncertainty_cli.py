@@ -7,10 +7,17 @@ import math
 import numpy as np
 
 from .commands import number_in, seed
-
-from .uncertainty import (COMPLIANCE_U_RELATIVE, CONTRIBUTIONS, InputUncertainty, ParameterCovariance,
-                          covariance_columns, default_inputs, directional_ratio, monte_carlo,
-                          propagate)
+from .uncertainty import (
+    COMPLIANCE_U_RELATIVE,
+    CONTRIBUTIONS,
+    InputUncertainty,
+    ParameterCovariance,
+    covariance_columns,
+    default_inputs,
+    directional_ratio,
+    monte_carlo,
+    propagate,
+)
 
 __all__ = ["add_input_options", "inputs_from_args", "add_tip_options", "wants_uncertainty", "tip_columns",
            "contribution_lines", "u_columns", "parameters_of"]

@@ -39,7 +39,7 @@ def _comment(text: str) -> str:
 
 def _rot(axis: str, angle: float) -> np.ndarray:
     """4x4 rotation about base ``axis`` ('x' or 'z')."""
-    from scipy.spatial.transform import Rotation     # here: `aacmm --help` imports this module, not scipy
+    from scipy.spatial.transform import Rotation  # here: `aacmm --help` imports this module, not scipy
     t = np.eye(4)
     t[:3, :3] = Rotation.from_euler(axis, angle).as_matrix()
     return t

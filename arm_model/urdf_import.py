@@ -41,8 +41,17 @@ import numpy as np
 from ._csv import parse_number
 from ._errors import InputError, did_you_mean, open_input, parse_toml, read_text
 from ._units import implausible
-from .description import (MIN_STYLUS, ArmDescription, JointRow, Mimic, Probe, TomlReader, Visual, default_lever,
-                          load_description)
+from .description import (
+    MIN_STYLUS,
+    ArmDescription,
+    JointRow,
+    Mimic,
+    Probe,
+    TomlReader,
+    Visual,
+    default_lever,
+    load_description,
+)
 from .shipped import arm_path
 from .urdf import ELASTIC_JOINTS, _origin_matrix
 
@@ -579,6 +588,7 @@ def _visuals(u: _Urdf, ch: _Chain) -> tuple[Visual, ...]:
     from copy import deepcopy
 
     from lxml import etree
+
     from .urdf import _origin_matrix
     out, missing = [], 0
     for link, (row, T) in _link_frames(u, ch).items():
@@ -714,6 +724,7 @@ def calibrated_urdf_text(nominal: ArmDescription, calibrated: ArmDescription) ->
     ``<tip>_calibrated``. For a description TOML: the generated URDF (:func:`arm_model.urdf.urdf_text`).
     """
     from lxml import etree
+
     from .urdf import urdf_text
 
     if not nominal.tip_frame or not nominal.source or Path(nominal.source).suffix.lower() != ".urdf":

@@ -39,20 +39,37 @@ API for the close-the-loop work (issue 7):
 Command line: ``aacmm calibrate`` and ``aacmm study {montecarlo, poses}``. Reference:
 docs/calibration.md.
 """
-from .calibrate import (CalibrationResult, FixedParameter, Outlier, calibrate, default_free, display_unit,
-                        identify, resolve_parameters, rigid_gauge)
-from .data import CalibrationData, Weights, make_data, merge_points, split_holdout
-from .tracking import fit_tracker
-from .options import FitOptions
-from .identifiability import (DEFAULT_RANK_TOL, PRIOR_SCALES, Combination, Identifiability, analyse, prior_scales,
-                              reduced_jacobian, weakly_determined)
-from .problem import Problem
-from .solver import LMResult, blas_threads, levenberg_marquardt
-from .validation import FIGURES, Validation, before_after, validate
+from .calibrate import (
+                        CalibrationResult,
+                        FixedParameter,
+                        Outlier,
+                        calibrate,
+                        default_free,
+                        display_unit,
+                        identify,
+                        resolve_parameters,
+                        rigid_gauge,
+)
 from .candidates import Candidate, library_candidates
+from .data import CalibrationData, Weights, make_data, merge_points, split_holdout
 from .diagnostics import remaining_structure, residual_space, screen_candidates, structure_tests
+from .identifiability import (
+                        DEFAULT_RANK_TOL,
+                        PRIOR_SCALES,
+                        Combination,
+                        Identifiability,
+                        analyse,
+                        prior_scales,
+                        reduced_jacobian,
+                        weakly_determined,
+)
 from .loop import LoopResult, LoopSettings, close_loop
 from .loop_report import before_after_text, write_loop_report
+from .options import FitOptions
+from .problem import Problem
+from .solver import LMResult, blas_threads, levenberg_marquardt
+from .tracking import fit_tracker
+from .validation import FIGURES, Validation, before_after, validate
 
 __all__ = [
     "calibrate", "FitOptions", "CalibrationResult", "FixedParameter", "Outlier", "default_free", "resolve_parameters",

@@ -42,9 +42,16 @@ from arm_model.tracker import Tracker
 
 from .data import CalibrationData, Weights
 from .discrepancy import Discrepancy, model_discrepancy
-from .identifiability import (Combination, Identifiability, _compress, analyse, point_noise,
-                              prior_scales,
-                              reduced_jacobian, weakly_determined)
+from .identifiability import (
+    Combination,
+    Identifiability,
+    _compress,
+    analyse,
+    point_noise,
+    prior_scales,
+    reduced_jacobian,
+    weakly_determined,
+)
 from .options import FitOptions
 from .prior import PRIOR_DOMINATED, PriorSpec, prior_spec, update_scales, variance_ratio
 from .problem import Problem

@@ -31,8 +31,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from arm_model.description import ArmDescription
-from arm_model.effects import (Effect, EncoderEccentricity, ForceSensorError, JointCompliance, JointGain,
-                               ProbeCompliance, ThermalGrowth)
+from arm_model.effects import (
+    Effect,
+    EncoderEccentricity,
+    ForceSensorError,
+    JointCompliance,
+    JointGain,
+    ProbeCompliance,
+    ThermalGrowth,
+)
 from arm_model.model import ArmModel
 
 from .data import CalibrationData

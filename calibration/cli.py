@@ -2,20 +2,28 @@
 from __future__ import annotations
 
 import argparse
-import math
 import logging
 from dataclasses import replace
-from arm_model.cli import command_help
 from pathlib import Path
 
 import numpy as np
 
 from arm_model import InputError
-from arm_model.commands import (add_arm_options, arm_inputs, at_least, fraction, model_from_args, non_negative,
-                                number_in, positive, seed)
 from arm_model._log import counted
 from arm_model._output import output_folder
-from arm_model.checks import point_warnings, log_warnings
+from arm_model.checks import log_warnings, point_warnings
+from arm_model.cli import command_help
+from arm_model.commands import (
+    add_arm_options,
+    arm_inputs,
+    at_least,
+    fraction,
+    model_from_args,
+    non_negative,
+    number_in,
+    positive,
+    seed,
+)
 from arm_model.io import json_text, read_artefacts, read_points
 from arm_model.model_file import Arm
 
@@ -587,8 +595,9 @@ def noise_lines(res) -> list[str]:
 
 
 def run_montecarlo(args: argparse.Namespace) -> int:
-    from .study import RunSettings, SimSource, monte_carlo
     from arm_model.sim import load_campaign
+
+    from .study import RunSettings, SimSource, monte_carlo
     camp = load_campaign(args.campaign)            # checks the file before any run starts
     with output_folder(args.output, camp.inputs, "study montecarlo") as out:
         from arm_model.model import ArmModel

@@ -120,8 +120,8 @@ def pose_folds(data: CalibrationData, k: int) -> np.ndarray:
     instance's centre (axis, plane, ``T_ref_base``) fitted on the instance's other poses. An instance whose
     training part would have fewer points than its fit needs is never held out. No seed: the folds are a
     function of the poses."""
-    from .problem import MIN_POINTS
     from .data import pose_groups, pose_order
+    from .problem import MIN_POINTS
     if k < 2:
         raise ValueError(f"cross-validation needs at least 2 folds, got {k}")
     out = np.full(len(data), -1)
@@ -192,7 +192,7 @@ class ResidualSpace:
         red = reduced_jacobian(cols, self.jt)
         return red - self.basis @ (self.basis.T @ red)
 
-    def with_columns(self, cols: np.ndarray, rank_tol: float = DEFAULT_RANK_TOL) -> "ResidualSpace":
+    def with_columns(self, cols: np.ndarray, rank_tol: float = DEFAULT_RANK_TOL) -> ResidualSpace:
         """The same space with ``cols`` (raw) fitted too: their projected directions join the basis,
         the residual loses its part along them and the dof their rank (for conditional tests)."""
         c = self.project(cols)
@@ -450,7 +450,7 @@ def _batches(desc, base_names, candidates) -> list[list[int]]:
     return [m for _, m in batches]
 
 
-def screen_candidates(result: CalibrationResult, candidates, folds: "dict[str, int] | np.ndarray | None" = None,
+def screen_candidates(result: CalibrationResult, candidates, folds: dict[str, int] | np.ndarray | None = None,
                       rank_tol: float = DEFAULT_RANK_TOL) -> tuple[list[GroupTest], ResidualSpace]:
     """Score test of every candidate at the fit ``result`` (one :class:`GroupTest` each, in the order
     of ``candidates``) and the residual space (of the first batch) for further tests."""
@@ -735,7 +735,7 @@ def families(space: ResidualSpace) -> list[Family]:
     return [fam for build in _FAMILY_BUILDERS for fam in build(f)]
 
 
-def structure_tests(space: ResidualSpace, folds: "dict[str, int] | np.ndarray | None",
+def structure_tests(space: ResidualSpace, folds: dict[str, int] | np.ndarray | None,
                     rank_tol: float = DEFAULT_RANK_TOL) -> list[tuple[Family, GroupTest]]:
     """Every generic family tested against the residual of ``space``; sorted by p-value."""
     fr = row_folds(space, folds) if folds is not None and len(folds) else None
@@ -749,7 +749,7 @@ def structure_tests(space: ResidualSpace, folds: "dict[str, int] | np.ndarray | 
     return out
 
 
-def remaining_structure(space: ResidualSpace, folds: "dict[str, int] | np.ndarray | None", alpha: float,
+def remaining_structure(space: ResidualSpace, folds: dict[str, int] | np.ndarray | None, alpha: float,
                         rank_tol: float = DEFAULT_RANK_TOL, most: int = 5) -> list[tuple[Family, GroupTest]]:
     """Forward selection of the structure families that the residual still holds: the most significant
     family is kept if its p-value passes ``alpha`` after Bonferroni over the families tested and its

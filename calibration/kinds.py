@@ -25,7 +25,7 @@ Kinds (docs/formats.md §4; ``b`` = ball diameter):
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -75,7 +75,7 @@ def _rot_xyz_ca(ca, w):
     return rz @ ry @ rx
 
 
-@lru_cache(maxsize=None)
+@cache
 def kind_function(kind: str, free_radius: bool = False):
     """CasADi ``f(x[3], theta[n], k[m], xref[3]) -> (r[rows], dr_dx[rows x 3], dr_dtheta[rows x n])``
     of one point of ``kind`` (``xref`` is used by ``reference`` only)."""
@@ -114,7 +114,7 @@ def kind_function(kind: str, free_radius: bool = False):
                        ["x", "theta", "k", "xref"], ["r", "dr_dx", "dr_dtheta"])
 
 
-@lru_cache(maxsize=None)
+@cache
 def distance_function():
     """CasADi ``d(ca[3], cb[3], L) -> (r, dr_dca[1x3], dr_dcb[1x3])``, ``r = |ca - cb| - L`` [m]."""
     import casadi as ca

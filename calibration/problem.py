@@ -484,7 +484,7 @@ class Problem:
             for lst, a in zip(sparse, (np.repeat(rows, 3), offs[:, None] + np.arange(3)[None, :], d)):
                 lst.append(np.reshape(a, -1))
 
-    def with_free(self, free) -> "Problem":
+    def with_free(self, free) -> Problem:
         """The same structure with another free set (CasADi functions are reused)."""
         new = object.__new__(Problem)
         new.__dict__.update(self.__dict__)

@@ -8,8 +8,18 @@ docs/ring-pipeline.md.
 """
 from .correlation import Correlation, campaign_correlations, correlate
 from .gum import Budget, BudgetResult, Term, ring_budget, student_k
-from .models import (MODEL_LABELS, MODELS, PAPER_MODELS, RingCampaign, RingMeasurement, analyse_ring_campaign,
-                     campaign_summary, correct_ring, paper_correction, table2)
+from .models import (
+                     MODEL_LABELS,
+                     MODELS,
+                     PAPER_MODELS,
+                     RingCampaign,
+                     RingMeasurement,
+                     analyse_ring_campaign,
+                     campaign_summary,
+                     correct_ring,
+                     paper_correction,
+                     table2,
+)
 from .paper import close_loop, implied_forces, load_paper_table2, table1_reproduction, table3_reproduction
 from .signals import ForceSummary, PointForces, find_point_forces, force_summary, forces_from_columns
 

@@ -4,16 +4,16 @@ from __future__ import annotations
 
 import argparse
 import logging
-from arm_model.cli import command_help
 from pathlib import Path
 
 import numpy as np
 
 from arm_model import InputError, NumericalError, read_artefacts, read_points
-from arm_model.commands import add_arm_options, arm_inputs, model_from_args, number_in
 from arm_model._log import counted
 from arm_model._output import output_folder
 from arm_model.checks import log_warnings
+from arm_model.cli import command_help
+from arm_model.commands import add_arm_options, arm_inputs, model_from_args, number_in
 from arm_model.io import check_features
 from arm_model.uncertainty_cli import add_input_options
 
@@ -80,6 +80,7 @@ def run_ring(args: argparse.Namespace) -> int:
 
     from arm_model.uncertainty import FORCE_SENSOR_U_N
     from arm_model.uncertainty_cli import inputs_from_args, parameters_of
+
     from .models import analyse_ring_campaign, campaign_summary, check_reportable, ring_uncertainties, ring_warnings
     from .report import DEFAULT_U_FORCE, ring_budgets, ring_report
 
@@ -136,8 +137,8 @@ def run_ring(args: argparse.Namespace) -> int:
 
 
 def run_paper(args: argparse.Namespace) -> int:
-    from .report import paper_report, paper_summary
     from .paper import load_paper_table2
+    from .report import paper_report, paper_summary
 
     with output_folder(args.output, [args.table2], "paper") as out:
         table = load_paper_table2(args.table2)

@@ -23,7 +23,7 @@ import numpy as np
 
 from arm_model import InputError
 from arm_model._output import safe_name
-from arm_model.geometry import CylinderFit, RingFit, ring_fit
+from arm_model.geometry import CylinderFit, ring_fit
 from arm_model.io import PointSet, read_force_signal
 
 from .signals import ForceSummary, PointForces, find_point_forces, force_summary, forces_from_columns

@@ -285,7 +285,7 @@ def _budget_html(b: BudgetResult) -> str:
              ("effective degrees of freedom (Welch-Satterthwaite)", "", "", "", "",
               "inf" if b.dof == math.inf else f"{b.dof:.1f}", ""),
              (f"coverage factor k (Student t, {b.probability:g} %)", "", "", "", "", f"{b.k:.3f}", ""),
-             (f"expanded uncertainty U", "", "", "", "", f"{b.U:.4g}", "")]
+             ("expanded uncertainty U", "", "", "", "", f"{b.U:.4g}", "")]
     return (f"<h4>{html.escape(b.name)} [{html.escape(b.unit)}]</h4>"
             + _table_html(("term", "type", "distribution", "dof", "sensitivity", f"u [{b.unit}]", "from"), rows))
 
@@ -405,7 +405,7 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
         rows.append(row)
     parts.append("<h2>Diameter error per measurement [mm] (improvement %)</h2>"
                  + _table_html(["measurement"] + [MODEL_LABELS[m] for m in models], rows))
-    rows = [[r.id] + [f"{t2[f'form_error_{m}_mm'][i]:.4f}" for m in models] + 
+    rows = [[r.id] + [f"{t2[f'form_error_{m}_mm'][i]:.4f}" for m in models] +
             [f"{r.summary.mean:.3f}", f"{r.summary.max10:.3f}", f"{r.summary.max:.3f}"]
             for i, r in enumerate(campaign.measurements)]
     parts.append("<h2>Form error [mm] and force values [N] per measurement</h2>"

@@ -8,8 +8,15 @@ import numpy as np
 import pytest
 
 from arm_model import PinocchioArm, ball_centres, load_description
-from arm_model.effects import (EncoderEccentricity, ForceSensorError, JointCompliance, JointGain, JointHarmonics,
-                               ProbeCompliance, ThermalGrowth)
+from arm_model.effects import (
+    EncoderEccentricity,
+    ForceSensorError,
+    JointCompliance,
+    JointGain,
+    JointHarmonics,
+    ProbeCompliance,
+    ThermalGrowth,
+)
 from arm_model.model import ArmModel, AuxData
 from conftest import NOMINAL, assert_close
 

@@ -1,7 +1,6 @@
 """Arms given as a URDF: the chain to --tip-frame, origin-error parameters, three evaluators agree."""
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 

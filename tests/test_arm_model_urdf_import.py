@@ -332,9 +332,9 @@ def test_masses_naming_an_unknown_link_or_for_a_toml_arm(tmp_path):
 
 
 def test_joint_compliance_skip_says_why():
+    from arm_model.io import read_artefacts, read_points
     from calibration.candidates import library_candidates
     from calibration.data import make_data
-    from arm_model.io import read_artefacts, read_points
     data_dir = PANDA.parent
     pts = read_points(data_dir / "front" / "points.csv", 7)
     arts = read_artefacts(data_dir / "artefacts.toml")

@@ -9,9 +9,9 @@ import pytest
 
 from arm_model.effects import ProbeCompliance
 from arm_model.model import ArmModel
+from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 from calibration import FitOptions, Weights, calibrate, make_data, split_holdout, validate
 from calibration.validation import _articulation
-from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 from conftest import assert_close
 
 SPEC = SynthSpec(ballbars=10, ballbar_points=5, seats=3, articulations=10, spheres=1, sphere_points=12, rings=1,

@@ -4,7 +4,6 @@ from __future__ import annotations
 import json
 import tomllib
 
-import numpy as np
 import pytest
 
 from arm_model import load_description, read_artefacts, read_points

@@ -4,15 +4,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+from test_correction_synth import RING_D, ring_measurement
 
 from arm_model import InputError, ball_centres
+from arm_model.geometry import fit_cylinder
 from arm_model.io import parse_artefacts, parse_points
 from conftest import assert_close
-from arm_model.geometry import fit_cylinder
-from correction.models import (MODELS, analyse_ring_campaign, campaign_summary, correct_ring, paper_correction,
-                               table2)
+from correction.models import MODELS, analyse_ring_campaign, campaign_summary, correct_ring, paper_correction, table2
 from correction.signals import PointForces
-from test_correction_synth import RING_D, ring_measurement
 
 ARTEFACTS = f"""
 [[feature]]

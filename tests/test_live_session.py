@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, strategies as st
 
 from arm_model.cli import main
-from arm_model.io import read_artefacts, read_points, check_features
+from arm_model.io import check_features, read_artefacts, read_points
 from arm_model.live import ContactOptions, Session, read_status
 from arm_model.live.plan import format_plan
 from arm_model.sim import simulate

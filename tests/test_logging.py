@@ -8,12 +8,11 @@ import subprocess
 import sys
 
 import pytest
+from test_reliability_inputs import RING, run, small  # noqa: F401  (the CLI runner and small campaign)
 
 from arm_model._log import Progress, console, counted
 from arm_model.cli import COMMANDS, build_parser, main
 from conftest import NOMINAL, ROOT
-
-from test_reliability_inputs import RING, run, small  # noqa: F401  (the CLI runner and small campaign)
 
 
 def _subcommand_parsers(parser):

@@ -8,7 +8,6 @@ import pytest
 
 from arm_model.cli import main
 from arm_model.sim import campaign_from_dict, simulate
-
 from conftest import NOMINAL
 
 CAMPAIGN = {"seed": 11, "sensor": "xyz", "signals": {"enabled": False},

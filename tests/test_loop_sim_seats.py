@@ -16,7 +16,7 @@ from arm_model.io import read_artefacts
 from arm_model.model import ArmModel, AuxData
 from arm_model.sim import campaign_from_dict, simulate
 from arm_model.urdf_import import load_arm
-from calibration.calibrate import FitOptions, calibrate
+from calibration.calibrate import calibrate
 from calibration.data import make_data
 from calibration.loop import close_loop
 from calibration.placements import seat_figures

@@ -25,13 +25,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, Phase, given, reject, settings
-from hypothesis import strategies as st
+from hypothesis import HealthCheck, Phase, given, reject, settings, strategies as st
 
 from arm_model import NumericalError
+from arm_model._output import output_folder
 from arm_model.cli import main
 from arm_model.io import UnreadableOutput
-from arm_model._output import output_folder
 from conftest import NOMINAL, ROOT
 
 NOMINAL_TEXT = NOMINAL.read_text(encoding="utf-8")

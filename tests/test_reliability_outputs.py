@@ -10,8 +10,7 @@ import threading
 from pathlib import Path
 
 import pytest
-from hypothesis import given
-from hypothesis import strategies as st
+from hypothesis import given, strategies as st
 
 from arm_model import InputError
 from arm_model._output import MARKER, output_file, output_folder, safe_name

@@ -16,7 +16,6 @@ from viz import Camera, ViewerError, colour_mask, find_chromium, page_with_legen
 from viz.residuals import parse_residuals, residual_origins
 from viz.scene import _arrow_parts, _rotation_y_to, coverage_factor, ellipsoid_mesh
 
-
 # --- camera --------------------------------------------------------------------------------------
 
 def test_camera_projection_by_hand():
@@ -290,6 +289,7 @@ def test_transform_frames_are_meshcats_own():
     import umsgpack
     from meshcat.commands import SetTransform
     from meshcat.path import Path as MPath
+
     from viz.scene import transform_frames
     rng = np.random.default_rng(0)
     for name in ("a", "aacmm/arm/link_3_0", "x" * 40, "long/" * 60):

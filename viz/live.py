@@ -20,12 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ._bridge import PANEL_NODE
-from .placement import Placement
-from .scene import _arrow_parts, _matrix, _rotation_y_to, send_transform
 from arm_model.live import Sample, Session
 
-from .scene import Camera
+from ._bridge import PANEL_NODE
+from .placement import Placement
+from .scene import Camera, _arrow_parts, _matrix, _rotation_y_to, send_transform
 from .view import View, page_with_legend
 
 __all__ = ["LiveView", "LIVE_POINTS_RGB", "FORCE_COLOURS", "FORCE_MM_PER_N", "DEFAULT_FPS", "panel_lines"]
@@ -221,7 +220,7 @@ class LiveView:
     def close(self) -> None:
         self.view.close()
 
-    def __enter__(self) -> "LiveView":
+    def __enter__(self) -> LiveView:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -57,7 +57,7 @@ class Residuals:
     def __len__(self) -> int:
         return len(self.vectors)
 
-    def select(self, mask) -> "Residuals":
+    def select(self, mask) -> Residuals:
         """The rows where ``mask`` holds."""
         def take(a):
             return None if a is None else a[mask]

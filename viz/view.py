@@ -155,7 +155,7 @@ class View:
         if self._own:
             self.server.close()
 
-    def __enter__(self) -> "View":
+    def __enter__(self) -> View:
         return self
 
     def __exit__(self, *exc) -> None:

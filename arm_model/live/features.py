@@ -32,10 +32,23 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._errors import NumericalError
-from ..feature_uncertainty import (cylinder_jacobian, diameter_uncertainty, fit_sensitivity, plane_jacobian,
-                                   residual_form_uncertainty, sphere_jacobian)
-from ..geometry import (CylinderFit, feature_diameter, fit_circle_2d, fit_cylinder, fit_plane, fit_sphere,
-                        perpendicular_basis)
+from ..feature_uncertainty import (
+    cylinder_jacobian,
+    diameter_uncertainty,
+    fit_sensitivity,
+    plane_jacobian,
+    residual_form_uncertainty,
+    sphere_jacobian,
+)
+from ..geometry import (
+    CylinderFit,
+    feature_diameter,
+    fit_circle_2d,
+    fit_cylinder,
+    fit_plane,
+    fit_sphere,
+    perpendicular_basis,
+)
 from ..io import Distance, Feature
 from .plan import PlanFeature, SessionPlan
 

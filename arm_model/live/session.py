@@ -16,17 +16,18 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any
 
 import numpy as np
 
 from .._csv import format_row
 from ..checks import limit_bounds
 from ..io import Feature, PointSet
-from .contacts import Contact, ContactDetector, ContactOptions
 from ..uncertainty import InputUncertainty
+from .contacts import Contact, ContactDetector, ContactOptions
 from .features import FeatureFit, FeatureTracker
 from .plan import SessionPlan
 from .record import FILES, SessionRecord
@@ -294,7 +295,7 @@ class Session:
             self.record.close(status, message, self._progress())
         return out
 
-    def __enter__(self) -> "Session":
+    def __enter__(self) -> Session:
         return self
 
     def __exit__(self, exc_type: type | None, exc: BaseException | None, tb: object) -> None:

@@ -109,7 +109,7 @@ class Plan:
         for name in ROW_FIELDS:
             getattr(self, name).append(row[name])
 
-    def arrays(self, n_joints: int = 7) -> "Plan":
+    def arrays(self, n_joints: int = 7) -> Plan:
         """The same plan with numpy arrays for the per-point fields."""
         kinds = {"measurement": object, "feature": object, "task": int, "roll_along_force": bool, "reference": bool,
                  "redraw": object, "posture": bool, "frame": object}
@@ -131,7 +131,7 @@ class Plan:
     def __len__(self) -> int:
         return len(self.measurement)
 
-    def extend(self, other: "Plan") -> None:
+    def extend(self, other: Plan) -> None:
         """Append the per-point rows of ``other`` (lists) to this plan."""
         for name in ROW_FIELDS:
             getattr(self, name).extend(getattr(other, name))

@@ -4,17 +4,16 @@ from __future__ import annotations
 import argparse
 import logging
 import time
-from ..cli import command_help
 from pathlib import Path
 
 import numpy as np
 
 from .._log import PROGRESS, counted
 from .._output import output_folder
+from ..cli import command_help
 from ..commands import seed
 from .campaign import load_campaign
-from .run import (ARTEFACTS_FILE, POINTS_FILE, REFERENCE_FILE, SIGNALS_DIR, TRUTH_FILE, TRUTH_POINTS_FILE,
-                  simulate)
+from .run import ARTEFACTS_FILE, POINTS_FILE, REFERENCE_FILE, SIGNALS_DIR, TRUTH_FILE, TRUTH_POINTS_FILE, simulate
 
 __all__ = ["register", "run", "summary"]
 

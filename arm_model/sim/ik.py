@@ -60,7 +60,7 @@ class IKTargets:
     stylus_axis: np.ndarray | None = None
     stylus_cone: np.ndarray | None = None
 
-    def take(self, idx) -> "IKTargets":
+    def take(self, idx) -> IKTargets:
         return IKTargets(*(None if a is None else a[idx]
                            for a in (self.position, self.stylus, self.x_dir, self.force, self.torque,
                                      self.temperature, self.stylus_axis, self.stylus_cone)))

@@ -16,9 +16,19 @@ import numpy as np
 from .._errors import NumericalError
 from ..chain import NUMPY_OPS, ball_in_last_frame, chain_point, elastic_displacement, has_stylus, probe_lever
 from ..description import ArmDescription
-from ..effects import (ApproachOffset, EncoderEccentricity, ForceSensorError, Geometry, JointCompliance,
-                       JointHarmonics, LateralCompliance, ModelInputs, ProbeComplianceMatrix, ProbeThermalGrowth,
-                       ThermalGrowth)
+from ..effects import (
+    ApproachOffset,
+    EncoderEccentricity,
+    ForceSensorError,
+    Geometry,
+    JointCompliance,
+    JointHarmonics,
+    LateralCompliance,
+    ModelInputs,
+    ProbeComplianceMatrix,
+    ProbeThermalGrowth,
+    ThermalGrowth,
+)
 from ..model import ArmModel, AuxData
 from ..params import apply_params, param_spec
 

@@ -28,13 +28,28 @@ from arm_model.model import ArmModel
 from ..calibrate import CalibrationResult, evidence_scale
 from ..candidates import library_candidates, needs_model
 from ..data import Weights, make_data
-from ..diagnostics import (families, binned_estimates, candidate_family, holm, remaining_structure, residual_space,
-                           screen_candidates, structure_tests)
+from ..diagnostics import (
+    binned_estimates,
+    candidate_family,
+    families,
+    holm,
+    remaining_structure,
+    residual_space,
+    screen_candidates,
+    structure_tests,
+)
 from ..options import FitOptions
 from ..synthesis import RESIDUAL, synthesise as build_effects
 from .crossval import fold_fit
-from .decide import Decision, candidate_priors, choose, heldout_test, negative_compliances, physics_inclusion, \
-    plot_family
+from .decide import (
+    Decision,
+    candidate_priors,
+    choose,
+    heldout_test,
+    negative_compliances,
+    physics_inclusion,
+    plot_family,
+)
 from .folds import choose_folds, outer_split
 from .outliers import drop_design_outliers, drop_test_outliers
 from .result import LoopResult, Stage
