@@ -193,7 +193,7 @@ def _points_layout(header: list[str], line: int, path: str, joints) -> _PointsLa
     if idx != list(range(1, len(idx) + 1)):
         missing = sorted(set(range(1, max(idx) + 1)) - set(idx))
         raise InputError(f"joint columns are not q1..q{max(idx)}: missing "
-                         f"{', '.join('q%d' % i for i in missing)}", path, line)
+                         f"{', '.join(f'q{i}' for i in missing)}", path, line)
     if n_joints is not None and len(idx) != n_joints:
         raise InputError(f"{len(idx)} joint columns, but the arm has {n_joints} joints", path, line,
                          header[cols[f"q{idx[-1]}"][0]])

@@ -146,7 +146,7 @@ def _per_joint_columns(desc: ArmDescription, skipped: list) -> dict[int, str]:
         skipped.append(Skipped("per-joint effects", "a joint of the chain follows another (<mimic>): per-joint "
                                                     "effects are not supported on such an arm"))
         return {}
-    for i, j in enumerate(desc.encoders):
+    for j in desc.encoders:
         if j.prismatic:
             skipped.append(Skipped(f"per-joint effects {j.name}", "a prismatic joint: the library's per-joint "
                                                                  "effects model a joint angle"))

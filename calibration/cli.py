@@ -50,7 +50,8 @@ def _holdout(text: str | None):
     except ValueError:
         ids = [t.strip() for t in text.split(",") if t.strip()]
         if not ids:
-            raise InputError(f"--holdout names no measurement (got {text!r}): give measurement ids or a fraction")
+            raise InputError(f"--holdout names no measurement (got {text!r}): give measurement ids or a fraction"
+                             ) from None
         return ids
     if not 0.0 < v < 1.0:
         raise InputError(f"--holdout fraction must be in (0, 1), got {text}")

@@ -525,7 +525,10 @@ class Problem:
             vals.append(val)
             vecs.append(vec)
         dist = np.array([np.linalg.norm(states[d.a][:3] - states[d.b][:3]) - d.length for d in self.distance_items])
-        cat = (lambda a, shape: np.concatenate(a) if a else np.zeros(shape))
+
+        def cat(a: list[np.ndarray], shape: tuple[int, ...]) -> np.ndarray:
+            return np.concatenate(a) if a else np.zeros(shape)
+
         return {"point": cat(pts, (0,)).astype(int), "kind": np.array(kinds, dtype=object),
                 "instance": cat(insts, (0,)).astype(int), "value": cat(vals, (0,)),
                 "vector": cat(vecs, (0, 3)), "distance": dist}

@@ -106,7 +106,7 @@ def levenberg_marquardt(problem: Problem, p0, states0, *, max_iter: int = 200, x
     ``iterations`` count every attempt's.
     """
     p, states, done = np.array(p0, dtype=float), list(states0), 0
-    for attempt in range(RESTARTS + 1):
+    for _attempt in range(RESTARTS + 1):
         out = _lm_attempt(problem, p, states, max_iter, xtol, ftol, prior)
         done += out.iterations
         if out.status is not None:

@@ -251,7 +251,7 @@ def test_fixed_format_of_large_values_equals_python(values, decimals):
     v = np.array(values)
     got = format_csv({"a": v}, f"%.{decimals}f", header=False).decode().splitlines()
     want = [(f"%.{decimals}f" % x).replace("-0." + "0" * decimals, "0." + "0" * decimals) if decimals
-            else ("%.0f" % x if "%.0f" % x != "-0" else "0") for x in v]
+            else ("%.0f" % x if "%.0f" % x != "-0" else "0") for x in v]  # noqa: UP031 (printf: the reference)
     assert got == want
 
 

@@ -59,7 +59,8 @@ def test_urdf_chain_three_evaluators_with_origin_errors(nominal, tmp_path):
     dp = apply_params(d, p)
     arm, f = PinocchioArm(dp), casadi_ball_centre(d)
     q = rng.uniform(-3, 3, (10, 7))
-    w = np.zeros((10, 6)); w[:, :3] = rng.normal(0, 3, (10, 3))
+    w = np.zeros((10, 6))
+    w[:, :3] = rng.normal(0, 3, (10, 3))
     batch = ball_centres(d, q, w, p)
     for i in range(10):
         assert_close(arm.ball_centre(q[i], w[i]), batch[i], atol=1e-12)

@@ -64,7 +64,7 @@ def test_ring_report_with_signals(small_campaign, tmp_path):
     header = lines[0].split(",")
     assert header[0] == "measurement" and "diameter_error_wrench_mm" in header and "force_max_N" in header
     col = header.index("diameter_error_initial_mm")
-    assert_close([float(l.split(",")[col]) for l in lines[1:]],
+    assert_close([float(line.split(",")[col]) for line in lines[1:]],
                  [m["models"]["initial"]["diameter_error_mm"] for m in s["measurements"]], atol=1e-6)
 
 

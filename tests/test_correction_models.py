@@ -65,7 +65,7 @@ def test_uniform_shift_shrinks_the_diameter_by_2d_and_keeps_the_form():
 
 def test_full_wrench_recovers_the_true_ring_the_paper_models_do_what_they_say(nominal, campaign_data):
     c = nominal.probe.bending_compliance_x
-    for mid, q, f in campaign_data:
+    for _mid, q, f in campaign_data:
         forces = PointForces(f, "xyz", "synthetic")
         fits = correct_ring(ball_centres(nominal, q), nominal.probe.ball_diameter, RING_D, c, forces,
                             ball_centres(nominal, q, f))

@@ -169,7 +169,7 @@ def test_a_library_warning_is_one_console_line_without_its_source(capsys):
         err = capsys.readouterr().err
         assert err.splitlines() == ["warning: RuntimeWarning: overflow encountered in multiply"], err
         with console(logging.DEBUG):
-            warnings.warn("plain", UserWarning)
+            warnings.warn("plain", UserWarning, stacklevel=1)
         err = capsys.readouterr().err
         assert "warning: UserWarning: plain" in err and "test_logging.py" in err
         assert warnings.showwarning is before

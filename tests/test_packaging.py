@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from arm_model import InputError
 from arm_model.cli import main
 from arm_model.shipped import SHIPPED_ARMS, arm_path, provenance, shipped_path, version
 from conftest import NOMINAL, ROOT
@@ -37,7 +38,7 @@ def test_load_description_takes_a_shipped_arm_by_name(tmp_path, monkeypatch):
     by_name, by_path = load_description("aacmm7"), load_description(NOMINAL)
     assert by_name.joints == by_path.joints and by_name.probe == by_path.probe
     (tmp_path / "aacmm7").write_text("not toml [")  # an existing file of that name is read as given
-    with pytest.raises(Exception):
+    with pytest.raises(InputError, match="not valid TOML"):
         load_description("aacmm7")
 
 

@@ -120,7 +120,7 @@ def test_refusals(tmp_path):
     foreign.mkdir()
     (foreign / "thesis.tex").write_text("precious")
     other = tmp_path / "other"
-    with output_folder(other, (), "simulate") as out:
+    with output_folder(other, (), "simulate"):
         pass
     cases = [(data, [inp], "holds the input"), (inp, [inp], "over an input"),
              (afile, [], "a file of that name exists"), (afile / "sub", [], "below a file"),

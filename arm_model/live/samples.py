@@ -142,7 +142,7 @@ class SampleLayout:
         joints = sorted(int(b[1:]) for b in cols if b.startswith("q") and b[1:].isdigit())
         if joints != list(range(1, len(joints) + 1)) or len(joints) != n_joints:
             raise InputError(f"the joint columns must be q1 ... q{n_joints} (the arm has {n_joints} joints), got "
-                             f"{', '.join('q%d' % i for i in joints) or 'none'}", path, line)
+                             f"{', '.join(f'q{i}' for i in joints) or 'none'}", path, line)
         for group in _GROUPS.values():
             present = [b for b in group if b in cols]
             if present and len(present) != len(group):

@@ -328,7 +328,7 @@ def _section(ctx: _Ctx, data: Any, spec: dict, table: tuple) -> dict:
             out[base] = _scaled(ctx, v, _UNITS[unit][1], shape, table, key, quantity)
         else:
             out[base] = _unitless(ctx, v, quantity, shape, table, key)
-    for base, (quantity, default, shape) in spec.items():
+    for base, (quantity, default, _shape) in spec.items():
         if base not in out and quantity != "table":
             out[base] = default
     return out

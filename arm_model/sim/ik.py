@@ -315,7 +315,7 @@ def solve_positions(model, p, targets, rng, force_base=None, tol: float = 1e-12,
     aux[0] = 20.0
     fn = _model_jacobian(model, n)
     todo = np.ones(n, bool)
-    for attempt in range(tries):
+    for _attempt in range(tries):
         for it in range(100):
             if force_base is not None:
                 w[:, :3] = np.einsum("nji,nj->ni", probe_rotations(desc, q, p[: model.base_size]), force_base)
