@@ -21,8 +21,8 @@ Refused before any work, with an :class:`InputError` (exit 2): ``-o`` that is an
 is a file where a folder is expected (or the reverse), sits below a file, cannot be written, is not a
 regular file or folder (a device such as ``/dev/null``, a FIFO, a socket: never replaced, never written
 into), or is a non-empty folder that is not an earlier output of the same command (``-o .`` never
-empties a folder of the user's). File names built from input text (arm names, measurement ids) go through :func:`safe_name`
-and are checked by :meth:`Output.path` to stay inside the folder.
+empties a folder of the user's). File names built from input text (arm names, measurement ids) go through
+:func:`safe_name` and are checked by :meth:`Output.path` to stay inside the folder.
 """
 from __future__ import annotations
 

@@ -32,6 +32,6 @@ def casadi_ball_centre(desc: ArmDescription, name: str = "ball_centre"):
     p = ca.SX.sym("p", spec.size)
     rows, p_last, compliance = split_params(desc, p)
     x, y, z = ball_centre_expr(desc.convention, rows, p_last, compliance,
-                               [q[i] for i in range(desc.n_joints)], [w[i] for i in range(6)], _ops(), desc.chain_joints,
-                               desc.probe.rotation, desc.probe.lever)
+                               [q[i] for i in range(desc.n_joints)], [w[i] for i in range(6)], _ops(),
+                               desc.chain_joints, desc.probe.rotation, desc.probe.lever)
     return ca.Function(name, [q, w, p], [ca.vertcat(x, y, z)], ["q", "w", "p"], ["p_base"])

@@ -27,7 +27,8 @@ Geometry (all SI):
 The probe's compliance is a virtual elastic joint in the chain: the stylus hangs from a hinge at
 ``p_last - L z_probe`` (for an unrotated probe with the default lever: ``(x, y, 0)`` of the last joint
 frame, the flange plane). Two revolute DOF bend it (``theta_y`` about probe y, then ``theta_x`` about
-probe x) and one prismatic DOF ``s`` shortens it along probe z. A wrench ``w = (F, M)`` at the ball (probe frame, force first [N], then torque [N m])
+probe x) and one prismatic DOF ``s`` shortens it along probe z. A wrench ``w = (F, M)`` at the ball (probe frame, force
+first [N], then torque [N m])
 sets the joint displacement by statics, ``q_e = K^-1 J_e^T w`` with ``J_e`` the ball's Jacobian with
 respect to ``q_e`` at ``q_e = 0`` (probe frame) and ``K = diag(L^2/c_x, L^2/c_y, 1/c_z)``:
 

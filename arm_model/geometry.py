@@ -36,7 +36,8 @@ from ._errors import NumericalError
 __all__ = ["CircleFit", "CylinderFit", "RingFit", "SphereFit", "PlaneFit", "kasa_circle", "fit_circle_2d",
            "fit_cylinder", "fit_row_circles", "split_rows", "ring_fit", "fit_ring_axis", "fit_sphere",
            "fit_plane", "smallest_enclosing_sphere", "ball_centre_radius", "feature_diameter",
-           "perpendicular_basis", "angle_frame", "rotation_xyz", "rpy_from_matrix", "frame_along", "random_rotation", "kabsch", "sphere_seed"]
+           "perpendicular_basis", "angle_frame", "rotation_xyz", "rpy_from_matrix", "frame_along", "random_rotation",
+           "kabsch", "sphere_seed"]
 
 
 # ---------------------------------------------------------------------------------------------

@@ -189,7 +189,8 @@ def _points_layout(header: list[str], line: int, path: str, joints) -> _PointsLa
         cols[base] = (k, unit)
     idx = sorted(int(b[1:]) for b in cols if b.startswith("q") and b[1:].isdigit())
     if not idx:
-        raise InputError("no joint columns (q1_deg ... or q1_rad ...; a prismatic joint's q<i>_mm or q<i>_m)", path, line)
+        raise InputError("no joint columns (q1_deg ... or q1_rad ...; a prismatic joint's q<i>_mm or q<i>_m)",
+                         path, line)
     if idx != list(range(1, len(idx) + 1)):
         missing = sorted(set(range(1, max(idx) + 1)) - set(idx))
         raise InputError(f"joint columns are not q1..q{max(idx)}: missing "

@@ -17,7 +17,8 @@ relative:
 * :func:`joint_screws`: the cheap q-only companion of :func:`chain_jacobian` (for inverse kinematics): the
   last joint frame and, for every joint, its axis ``u`` and a point ``c`` on it in the base frame, from
   one forward pass on homogeneous matrices (each row's fixed motions multiplied once and cached), without
-  the geometry entries (measured: 0.12 ms for one point, 0.3 ms for 300; chain_jacobian 0.45 and 0.56 ms). A point fixed in the last frame moves by
+  the geometry entries (measured: 0.12 ms for one point, 0.3 ms for 300; chain_jacobian 0.45 and 0.56 ms). A point fixed
+  in the last frame moves by
   ``u x (p - c)`` per radian of that joint, a direction ``v`` by ``u x v`` (:func:`point_jacobian`,
   :func:`direction_jacobian`).
 * :class:`Dual`: forward-mode dual numbers with sparse derivatives (a dict ``direction ->

@@ -27,7 +27,8 @@ class AuxData:
     tau_contact: np.ndarray | None = None
 
     def select(self, mask) -> AuxData:
-        return AuxData(*(None if a is None else a[mask] for a in (self.temperature, self.tau_gravity, self.tau_contact)))
+        return AuxData(*(None if a is None else a[mask]
+                         for a in (self.temperature, self.tau_gravity, self.tau_contact)))
 
 
 @dataclass(frozen=True)

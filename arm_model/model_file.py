@@ -361,7 +361,8 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
                 if wrong:
                     raise r.error(f"'{key}': {wrong[1]}", *pw, key)
             if "value" not in got:
-                raise r.error(f"parameter '{name}' has no 'value_<unit>' (e.g. value_{PARAM_UNITS[expected[name]][0][0]})",
+                raise r.error(f"parameter '{name}' has no 'value_<unit>' (e.g. "
+                              f"value_{PARAM_UNITS[expected[name]][0][0]})",
                               *pw)
             if got.get("u", 0.0) < 0:
                 raise r.error("a standard uncertainty must not be negative", *pw)
@@ -432,7 +433,8 @@ def format_model(desc: ArmDescription, effects=(), values: dict | None = None, u
     data = description_data(desc)
     if effects:
         data["effect"] = effect_tables(desc, effects, values or {}, uncertainties, states)
-    scatter, discrepancy = (None if v is None else float(f"{v * 1e6:.4g}") for v in (probing_scatter, model_discrepancy))
+    scatter, discrepancy = (None if v is None else float(f"{v * 1e6:.4g}")
+                            for v in (probing_scatter, model_discrepancy))
     cal = {k: v for k, v in (("covariance", covariance), ("written_by", written_by), ("probing_scatter_um", scatter),
                              ("model_discrepancy_um", discrepancy)) if v not in (None, "")}     # a 0 is kept
     if cal:
@@ -557,6 +559,6 @@ def read_covariance(path) -> Covariance:
     asym = np.argwhere(np.abs(corr - corr.T) > CORRELATION_TOLERANCE)
     if len(asym):
         i, k = (int(x) for x in asym[0])
-        raise InputError(f"the correlations are not symmetric: {float(corr[i, k])!r} here, {float(corr[k, i])!r} in row "
-                         f"'{names[k]}' (line {rows[k][0]}), column '{names[i]}'", path, rows[i][0], names[k])
+        raise InputError(f"the correlations are not symmetric: {float(corr[i, k])!r} here, {float(corr[k, i])!r} in "
+                         f"row '{names[k]}' (line {rows[k][0]}), column '{names[i]}'", path, rows[i][0], names[k])
     return Covariance(names, tuple(units), values, u, corr, tuple(no for no, _ in rows))

@@ -83,8 +83,8 @@ _NUMERIC = {
 #: velocities, damping are never used here (an inertia of -5e-20, a mirrored mesh's negative scale are no
 #: errors).
 _USED = {("joint", "origin", "xyz"): "length", ("joint", "origin", "rpy"): "angle", ("joint", "axis", "xyz"): "ratio",
-         ("joint", "limit", "lower"): None, ("joint", "limit", "upper"): None, ("joint", "mimic", "multiplier"): "ratio",
-         ("joint", "mimic", "offset"): None}
+         ("joint", "limit", "lower"): None, ("joint", "limit", "upper"): None,
+         ("joint", "mimic", "multiplier"): "ratio", ("joint", "mimic", "offset"): None}
 #: a negative mass [kg] smaller than this is rounding noise (taken as 0)
 _MASS_NOISE = 1e-9
 _ELASTIC_TYPES = dict(zip(ELASTIC_JOINTS, ("revolute", "revolute", "prismatic")))
@@ -527,7 +527,8 @@ def _probe_of(u: _Urdf, ch: _Chain, tip_frame: str, probe: dict | None) -> Probe
                          "key '--tip-frame'")
     if lever != 0.0 and not pro.stylus_length >= MIN_STYLUS:
         raise InputError(f"the tip frame '{tip_frame}' lies at the stylus hinge of the probe's elastic joints: a "
-                         "probe needs its ball beyond its hinge", u.path, u.line(ch.tip_joint.name), "key '--tip-frame'")
+                         "probe needs its ball beyond its hinge", u.path, u.line(ch.tip_joint.name),
+                         "key '--tip-frame'")
     return pro
 
 
@@ -541,7 +542,7 @@ def _link_frames(u: _Urdf, ch: _Chain) -> dict[str, tuple[int, np.ndarray]]:
     kids: dict[str, list] = {}
     for j in u.robot.joints:
         kids.setdefault(j.parent, []).append(j)
-    stack = [(ch.base, -1, np.eye(4))] + [(j.child, i, np.eye(4)) for j, i in ((j, moving[j.name]) for j, _, _ in ch.moving)]
+    stack = [(ch.base, -1, np.eye(4))] + [(j.child, moving[j.name], np.eye(4)) for j, _, _ in ch.moving]
     out = {}
     while stack:
         link, row, T = stack.pop()

@@ -20,7 +20,8 @@ API for the close-the-loop work (issue 7):
 
 * :func:`calibrate` ``(model, data, FitOptions(free=None, values=None, start=None, weights=...)) ->``
   :class:`CalibrationResult` (a variant of a fit: ``dataclasses.replace(options, ...)``): ``p`` (full
-  vector of ``model.spec``), ``free``, ``cov``, ``u``, ``corr``, ``s0``, ``status``, ``iterations``, ``fixed`` (:class:`FixedParameter` with the named
+  vector of ``model.spec``), ``free``, ``cov``, ``u``, ``corr``, ``s0``, ``status``, ``iterations``, ``fixed``
+  (:class:`FixedParameter` with the named
   combination the data cannot see), ``identifiability`` / ``identifiability_final``
   (:class:`Identifiability`), ``residuals`` (per point: ``point`` index, ``kind``, ``instance``,
   ``value`` [m], ``vector`` (n, 3) [m] base frame, ``standardized``, ``measurement``, ``feature``,
@@ -34,7 +35,8 @@ API for the close-the-loop work (issue 7):
   rigid motions projected out, then practical resolution against :func:`prior_scales`);
   :func:`validate` / :func:`before_after` for ASME B89.4.22 figures of any p.
 * Studies (:mod:`calibration.study`): Monte Carlo over simulated campaigns, pose-set choice by the
-  observability index O1; small campaigns from a known true model: the simulator's fast path, :mod:`arm_model.sim.quick`.
+  observability index O1; small campaigns from a known true model: the simulator's fast path,
+  :mod:`arm_model.sim.quick`.
 
 Command line: ``aacmm calibrate`` and ``aacmm study {montecarlo, poses}``. Reference:
 docs/calibration.md.

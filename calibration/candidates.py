@@ -44,8 +44,8 @@ from arm_model.model import ArmModel
 
 from .data import CalibrationData
 
-__all__ = ["Candidate", "Skipped", "FAMILIES", "DEFAULT_FAMILIES", "MIN_TEMPERATURE_SPAN", "library_candidates", "needs_model",
-           "torques_of", "no_torque_reason"]
+__all__ = ["Candidate", "Skipped", "FAMILIES", "DEFAULT_FAMILIES", "MIN_TEMPERATURE_SPAN", "library_candidates",
+           "needs_model", "torques_of", "no_torque_reason"]
 
 #: candidate families of the library, by effect key (the CLI's ``--candidates`` names)
 FAMILIES = ("eccentricity", "joint_gain", "joint_compliance", "thermal", "force_sensor", "probe_compliance")

@@ -396,7 +396,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
                                                 else str(args.reference_points)},
                                      "holdout": (None if test is None else test.measurements()),
                                      "holdout_by": args.holdout_by,
-                                     "holdout_poses": None if poses is None else [int(i) for i in np.flatnonzero(poses)],
+                                     "holdout_poses": (None if poses is None
+                                                       else [int(i) for i in np.flatnonzero(poses)]),
                                      "nominal_baseline": _baseline_entry(base),
                                      "heldout_worse_than_nominal": worse,
                                      "conformance": conf,
@@ -479,16 +480,17 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
     budget = res.probing_budget()
     if budget is not None:
         log.info(f"probing scatter per axis: {budget['gross'] * 1e6:.4g} um in the residuals, of which encoders "
-                 f"{budget['encoders'] * 1e6:.3g} um and force sensor {budget['force sensor'] * 1e6:.3g} um (propagated, "
-                 f"default inputs) -> {budget['net'] * 1e6:.4g} um of the contact itself (tip's default)")
+                 f"{budget['encoders'] * 1e6:.3g} um and force sensor {budget['force sensor'] * 1e6:.3g} um "
+                 f"(propagated, default inputs) -> {budget['net'] * 1e6:.4g} um of the contact itself (tip's default)")
         if budget["floored"]:
             log.warning("the propagated encoder and force-sensor noise alone exceed the residual scatter: the probing "
                         "scatter is set to 0 (their stated uncertainties are larger than this campaign shows)")
     if res.discrepancy is not None:
         d = res.discrepancy
-        log.info(f"model discrepancy per axis: {d.sigma * 1e6:.4g} um (poses at the ends of each joint's range held out "
-                 f"in turn: their errors {d.ratio:.2f} x what the fit predicts; tip adds it to every point's u)")
-    log.info(f"model file -> {files['description']} (covariance {files['covariance'].name}); report -> {files['report']}")
+        log.info(f"model discrepancy per axis: {d.sigma * 1e6:.4g} um (poses at the ends of each joint's range held "
+                 f"out in turn: their errors {d.ratio:.2f} x what the fit predicts; tip adds it to every point's u)")
+    log.info(f"model file -> {files['description']} (covariance {files['covariance'].name}); report -> "
+             f"{files['report']}")
 
 
 def conformance_entry(mpe: dict, training: tuple, holdout: tuple | None = None, sets: str = "") -> tuple:
@@ -619,7 +621,8 @@ def run_montecarlo(args: argparse.Namespace) -> int:
     from .calibrate import display_unit
     if mc.s0:
         s0 = np.array(mc.s0)
-        log.info(f"residual scale factor s0 over the runs: median {np.median(s0):.2f} (range {s0.min():.2f}-{s0.max():.2f})"
+        log.info(f"residual scale factor s0 over the runs: median {np.median(s0):.2f} (range "
+                 f"{s0.min():.2f}-{s0.max():.2f})"
               + ("; far from 1: the stated --sigma-* do not match the residuals, and one factor cannot rescale "
                  "residual groups that are mis-stated differently (docs/uncertainty.md)"
                  if abs(np.median(s0) - 1) > 0.2 else ""))
@@ -628,7 +631,8 @@ def run_montecarlo(args: argparse.Namespace) -> int:
           f"give {lo:.2f}-{hi:.2f} for {len(mc.s0)} runs, 95 %) and mean (bias), verdict:")
     for n, v in mc.parameters.items():
         du, fac = display_unit(model.spec.units[model.spec.index(n)])
-        log.info(f"  {n:22s} {v['rms_error'] * fac:10.4g} {v['mean_u'] * fac:10.4g} {du:5s} {100 * v['within_3u']:5.0f} %"
+        log.info(f"  {n:22s} {v['rms_error'] * fac:10.4g} {v['mean_u'] * fac:10.4g} {du:5s} "
+                 f"{100 * v['within_3u']:5.0f} %"
               f" {v['z_rms']:6.2f} {v['z_mean']:+6.2f}  {v['verdict']}")
     log.info(f"-> {args.output / 'study.json'}")
     return 0 if not mc.failures else 1

@@ -24,7 +24,8 @@ other joint j (a cross-coupling, "qK harmonics on jJ"); the gravity torque and t
 joint j times ``D_j``; contact force components and magnitude times the probe axes; temperature and
 time times the base axes and the position vector (a scale); the temperature times each link's length
 and the probe's ("temperature per link"); the tilt of joint j about its frame's x and y axes times the
-moment across it ("jN lateral load"); the stylus direction (approach) times the base axes; one offset per measurement (one-way ANOVA) and per artefact feature or certified length.
+moment across it ("jN lateral load"); the stylus direction (approach) times the base axes; one offset per measurement
+(one-way ANOVA) and per artefact feature or certified length.
 """
 from __future__ import annotations
 
@@ -47,10 +48,9 @@ from .identifiability import DEFAULT_RANK_TOL, point_noise, prior_scales, reduce
 from .problem import Problem
 from .solver import levenberg_marquardt
 
-__all__ = ["JointAngleOffset", "measurement_groups", "measurement_folds", "pose_folds", "ResidualSpace", "residual_space", "GroupTest",
-           "Family", "families", "candidate_family", "test_group", "screen_candidates", "structure_tests",
-           "remaining_structure",
-           "binned_estimates", "holm"]
+__all__ = ["JointAngleOffset", "measurement_groups", "measurement_folds", "pose_folds", "ResidualSpace",
+           "residual_space", "GroupTest", "Family", "families", "candidate_family", "test_group", "screen_candidates",
+           "structure_tests", "remaining_structure", "binned_estimates", "holm"]
 
 #: harmonics of each joint angle tested by the structure tests
 HARMONICS = (1, 2, 3)

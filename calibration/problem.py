@@ -548,8 +548,8 @@ class Problem:
         if len(j) < len(cols) or not (norm > 0).all() or s[-1] < rtol * s[0]:
             what = " and the markers' offsets" if any(it.kind == "marker" for it in inst) else ""
             raise NumericalError(f"the reference points do not determine the instrument's frame{what}: "
-                                 f"{len(cols)} unknowns, condition {s[0] / max(s[-1], 1e-300):.3g}. The poses must turn "
-                                 "the tip frame about more than one axis (a marker's offset along the only axis "
+                                 f"{len(cols)} unknowns, condition {s[0] / max(s[-1], 1e-300):.3g}. The poses must "
+                                 "turn the tip frame about more than one axis (a marker's offset along the only axis "
                                  "of rotation moves it as the frame's translation does), in every session; or, "
                                  "where the instrument sees the tip point itself, --marker-offset zero")
 

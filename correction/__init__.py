@@ -1,7 +1,8 @@
 """The seed paper's ring-gauge pipeline, reproduced and surpassed.
 
 Force peaks (:mod:`.signals`), the ring fits (orthogonal-distance cylinder and circles, ball compensation:
-:mod:`arm_model.geometry`), the paper's four correction models and the full-wrench correction (:mod:`.models`), correlations (:mod:`.correlation`),
+:mod:`arm_model.geometry`), the paper's four correction models and the full-wrench correction (:mod:`.models`),
+correlations (:mod:`.correlation`),
 GUM budgets on GTC (:mod:`.gum`), the paper's own numbers reproduced and the loop closed on its Table 2
 (:mod:`.paper`), and the reports of ``aacmm ring`` / ``aacmm paper`` (:mod:`.report`). See
 docs/ring-pipeline.md.

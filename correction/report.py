@@ -431,13 +431,14 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
     parts.append("<h2>Uncertainty budgets (GUM, paper Table 3)</h2><img src='figures/budgets.png' alt='budgets'>")
     parts += [_budget_html(b) for b in budgets]
     if point_uncertainty is not None:
-        parts.append("<h2>Diameter and form uncertainty from the points' covariances (k = 1, beside the GUM budgets)</h2>"
+        parts.append("<h2>Diameter and form uncertainty from the points' covariances (k = 1, beside the GUM "
+                     "budgets)</h2>"
                      f"<p>Parameters: {html.escape(parameters_source or 'none (taken as exact)')}. Each corrected "
                      "ball centre's covariance is propagated through the cylinder fit; errors the points share "
                      "(parameters, compliance) do not average out. 'if independent' is what the naive sum of "
-                     "independent point variances would give. The form error (max - min of the residuals) is sampled: its "
-                     "standard deviation is u(form), and the mean of the samples minus the measured form is how much the "
-                     "point errors alone add to a form error. See docs/ring-pipeline.md.</p>" + _table_html(
+                     "independent point variances would give. The form error (max - min of the residuals) is sampled: "
+                     "its standard deviation is u(form), and the mean of the samples minus the measured form is how "
+                     "much the point errors alone add to a form error. See docs/ring-pipeline.md.</p>" + _table_html(
                          ("measurement", "u(D) [mm]", "point-alone errors [mm]", "parameters [mm]",
                           "compliance [mm]", "if independent [mm]", "form error [mm]", "u(form) [mm]",
                           "inflation by the errors [mm]"),
@@ -486,7 +487,8 @@ def paper_summary(table: P.PaperTable2 | None = None) -> dict:
                                 "loo_rms_after_mm": L.rms_after * 1e3},
                 "r_residual_force": L.r, "p_value": L.p_value,
                 "rms_before_mm": L.rms_before * 1e3, "loo_rms_after_mm": L.origin["rms_after"] * 1e3,
-                "mean_abs_before_mm": L.mean_abs_before * 1e3, "loo_mean_abs_after_mm": L.origin["mean_abs_after"] * 1e3}
+                "mean_abs_before_mm": L.mean_abs_before * 1e3,
+                "loo_mean_abs_after_mm": L.origin["mean_abs_after"] * 1e3}
     return _num({
         "source": "Gonzalez-Madruga et al., Sensors 2013, 13, 10430-10448, Tables 1-3",
         "table2_file": table.source,
@@ -661,7 +663,8 @@ def paper_report(out: str | Path, table_path: str | Path | None = None) -> list[
     parts.append("<h3>Diameter error per measurement [mm]</h3>" + _table_html(
         ("measurement", "initial", "after FEM (mean force)", "after FEM + series compliance (LOO)"), rows))
     files = {"report.html": _page("The seed paper reproduced and the loop closed", parts),
-             "summary.json": json.dumps({**s, **provenance([P.TABLE2_PATH if table_path is None else table_path])}, indent=1, allow_nan=False) + "\n",
+             "summary.json": json.dumps({**s, **provenance([P.TABLE2_PATH if table_path is None else table_path])},
+                                        indent=1, allow_nan=False) + "\n",
              "table2_implied.csv": _csv_text(t2cols),
              "findings.csv": _csv_text({k: np.array([str(f[k]) for f in findings], dtype=object)
                                         for k in ("table", "item", "printed", "computed", "consistent", "note")})}

@@ -139,7 +139,8 @@ HALVES = [0.125, 2.675, 1.005, 0.5, 1.5, 2.5, -0.5, -2.5, 703688.3466426451, 1e-
 @example(HALVES, 8)
 def test_vectorised_fixed_format_equals_python(values, decimals):
     v = np.array(values, dtype=float)
-    got = format_csv({"a_mm": v, "n": np.arange(len(v)), "t": np.array(["x,y", 'q"', "plain"] * 14, dtype=object)[: len(v)]},
+    got = format_csv({"a_mm": v, "n": np.arange(len(v)),
+                      "t": np.array(["x,y", 'q"', "plain"] * 14, dtype=object)[: len(v)]},
                      fmt=f"%.{decimals}f", header=False).decode()
     import csv
     import io

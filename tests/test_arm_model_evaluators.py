@@ -504,7 +504,8 @@ def test_joint_angle_effects_skip_prismatic_joints_and_refuse_a_coupled_arm(nomi
     from arm_model.model import ArmModel
     arms = _arms(nominal)
     m = ArmModel(arms["dh"], (EncoderEccentricity(harmonics=(1,)),))
-    assert [n for n in m.spec.names if "ecc" in n] == [f"j{i}.ecc1_{t}" for i in (1, 2, 4, 5, 6, 7) for t in ("cos", "sin")]
+    assert [n for n in m.spec.names if "ecc" in n] == [f"j{i}.ecc1_{t}" for i in (1, 2, 4, 5, 6, 7)
+                                                       for t in ("cos", "sin")]
     with pytest.raises(ValueError, match="'j3' is prismatic"):
         ArmModel(arms["dh"], (JointCompliance(joints=(2,)),))
     with pytest.raises(ValueError, match="mimics another joint"):

@@ -19,7 +19,8 @@ def arm_urdf(nominal) -> str:
     text += ('  <joint name="tip_joint" type="fixed"><parent link="flange"/><child link="tip"/>'
              '<origin xyz="0.001 -0.002 0.085" rpy="0.3 0 0"/></joint>\n  <link name="tip"/>\n'
              '  <joint name="finger" type="revolute"><parent link="link_3"/><child link="finger_link"/>'
-             '<origin xyz="0.1 0 0" rpy="0 0 0"/><axis xyz="1 0 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>\n'
+             '<origin xyz="0.1 0 0" rpy="0 0 0"/><axis xyz="1 0 0"/><limit lower="-1" upper="1" effort="1" '
+             'velocity="1"/></joint>\n'
              '  <link name="finger_link"/>\n</robot>\n')
     return text
 

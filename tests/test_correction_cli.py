@@ -14,7 +14,8 @@ from correction.models import analyse_ring_campaign
 
 RING_FILES = {"report.html", "summary.json", "table2.csv", "correlations.csv", "budgets.csv", "roundness.csv",
               "figures/point_errors.png", "figures/diameters.png", "figures/form_errors.png", "figures/forces.png",
-              "figures/correlation_diameter.png", "figures/correlation_form.png", "figures/budgets.png", "figures/roundness.png"}
+              "figures/correlation_diameter.png", "figures/correlation_form.png", "figures/budgets.png",
+              "figures/roundness.png"}
 
 
 @pytest.fixture(scope="module")

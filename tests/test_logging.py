@@ -91,7 +91,8 @@ def test_quiet_and_verbose_together_are_refused(capsys):
 def test_errors_go_to_stderr_with_exit_2_even_quiet(tmp_path, capsys):
     code, out, err = run(["tip", tmp_path / "missing.csv", "--arm", NOMINAL, "-o", tmp_path / "t.csv", "-q"], capsys)
     assert code == 2 and out == ""
-    assert err == f"aacmm tip: error: {tmp_path / 'missing.csv'}: cannot read the points file: No such file or directory\n"
+    assert err == (f"aacmm tip: error: {tmp_path / 'missing.csv'}: cannot read the points file: "
+                   "No such file or directory\n")
 
 
 def test_the_loggers_are_left_as_they_were(tmp_path, capsys):

@@ -105,7 +105,8 @@ GAIN = 5e-3                # encoder scale error injected on the shoulder (panda
 def test_a_joint_gain_injected_into_the_real_angles_is_found_recovered_and_carries_over(setup):
     """Encoder readings of joint 2 divided by 1 + g (so the true angle is (1 + g) times the reading, the
     convention of :class:`arm_model.effects.JointGain`), independent of the effect code: the loop trained
-    on ``front`` with every candidate family (gains are offered on request) adds ``gain panda_joint2``, recovers g against the same fit on the recorded angles, and
+    on ``front`` with every candidate family (gains are offered on request) adds ``gain panda_joint2``, recovers g
+    against the same fit on the recorded angles, and
     the other placements spread less."""
     import dataclasses
 

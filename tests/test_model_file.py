@@ -40,8 +40,8 @@ EFFECT_SETS = {
     "thermal_per_joint": (ThermalGrowth(joints=(0, 3), per_joint=True),),
     "force_sensor": (ForceSensorError(axes=(0, 2)),),
     "probe_compliance": (ProbeCompliance(anisotropic=True, axial=True),),
-    "all": (EncoderEccentricity(joints=(2,)), JointGain(joints=(5,)), JointCompliance(joints=(1,)), ThermalGrowth(), ForceSensorError(),
-            ProbeCompliance()),
+    "all": (EncoderEccentricity(joints=(2,)), JointGain(joints=(5,)), JointCompliance(joints=(1,)), ThermalGrowth(),
+            ForceSensorError(), ProbeCompliance()),
 }
 
 #: plausible sizes [SI] of effect parameters by SI unit (values drawn at this scale)
@@ -345,7 +345,8 @@ def test_view_applies_the_models_effects(nominal, tmp_path, capsys):
     pts = points_file(tmp_path, n=5, temperature=False)
     shown = {}
     for name, arm in (("model", model), ("equivalent", equivalent), ("nominal", NOMINAL)):
-        assert main(["view", str(pts), "--arm", str(arm), "--point", "3", "--html", str(tmp_path / f"{name}.html")]) == 0
+        assert main(["view", str(pts), "--arm", str(arm), "--point", "3",
+                     "--html", str(tmp_path / f"{name}.html")]) == 0
         out = capsys.readouterr().out
         shown[name] = next(line for line in out.splitlines() if line.startswith("point 3:"))
         if name == "model":

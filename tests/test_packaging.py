@@ -104,7 +104,8 @@ def test_calibrate_summary_carries_version_and_input_hashes(tmp_path):
     s = json.loads((tmp_path / "cal" / "summary.json").read_text())
     assert s["aacmm_version"] == version()
     assert s["input_sha256"][str(pts)] == hashlib.sha256(pts.read_bytes()).hexdigest()
-    assert s["input_sha256"][str(shipped_path("urdf/aacmm7.dh.toml"))] == hashlib.sha256(NOMINAL.read_bytes()).hexdigest()
+    nominal_sha = hashlib.sha256(NOMINAL.read_bytes()).hexdigest()
+    assert s["input_sha256"][str(shipped_path("urdf/aacmm7.dh.toml"))] == nominal_sha
 
 
 def test_pyproject_licence_is_an_spdx_string():

@@ -122,7 +122,8 @@ class FeatureFit:
         parts = []
         if self.size is not None:
             parts.append(f"{'length' if self.kind == 'distance' else 'D'} {self.size * 1e3:.4f} mm"
-                         + (f" ± {self.u_size * 1e6:.1f} um" if self.u_size is not None and math.isfinite(self.u_size) else ""))
+                         + (f" ± {self.u_size * 1e6:.1f} um"
+                            if self.u_size is not None and math.isfinite(self.u_size) else ""))
         if self.deviation is not None:
             parts.append(f"vs certified {self.deviation * 1e6:+.1f} um"
                          + ("" if self.agrees is None else (" (agrees)" if self.agrees else " (DIFFERS)")))

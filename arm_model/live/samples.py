@@ -114,7 +114,8 @@ class SampleLayout:
         """base name -> (index, unit factor) of every column; every header error here."""
         path, line = self.path, self.header_line
         cols: dict[str, tuple[int, float]] = {}
-        known = "time_s, q1_deg ... (or _rad), fx_N, fy_N, fz_N (or f_bend_N, f_axial_N), mx_Nm ..., temperature_C, trigger"
+        known = ("time_s, q1_deg ... (or _rad), fx_N, fy_N, fz_N (or f_bend_N, f_axial_N), mx_Nm ..., temperature_C, "
+                 "trigger")
         for k, h in enumerate(self.header):
             if not h:
                 raise InputError("empty column name in the header", path, line)

@@ -403,7 +403,8 @@ def _joint_index(ctx, desc: ArmDescription, name: str, table, key, revolute: boo
     """The encoder column of joint ``name``; ``revolute``: for an effect on a joint's angle, which a
     prismatic joint has not."""
     if name not in desc.joint_names:
-        raise ctx.error(f"unknown joint '{name}'{did_you_mean(name, desc.joint_names)} (the arm has: {', '.join(desc.joint_names)})", table, key)
+        raise ctx.error(f"unknown joint '{name}'{did_you_mean(name, desc.joint_names)} (the arm has: "
+                        f"{', '.join(desc.joint_names)})", table, key)
     i = desc.joint_names.index(name)
     if revolute and desc.encoders[i].prismatic:
         raise ctx.error(f"joint '{name}' is prismatic: '{table[1]}' acts on a joint's angle (revolute joints: "
@@ -724,8 +725,8 @@ def _errors(ctx, tbl, desc) -> dict[str, float]:
     for key, v in tbl.items():
         parts = _split(key)
         if parts is None or parts[0] not in spec.names:
-            raise ctx.error(f"unknown parameter key '{key}'{did_you_mean(key, spec.names)} (expected a parameter name with a unit, e.g. "
-                            f"\"{spec.names[1]}_um\"; names: {', '.join(spec.names)})", where, key)
+            raise ctx.error(f"unknown parameter key '{key}'{did_you_mean(key, spec.names)} (expected a parameter name "
+                            f"with a unit, e.g. \"{spec.names[1]}_um\"; names: {', '.join(spec.names)})", where, key)
         base, unit = parts
         quantity = _PARAM_QUANTITY[spec.units[spec.index(base)]]
         if _UNITS[unit][0] != quantity:

@@ -188,8 +188,8 @@ def _truth_text(campaign: Campaign, truth: Truth, plan: Plan, draw: OperatorDraw
         "artefact": plan.placements,
         "stats": stats,
     }
-    comment = (TRUTH_HEADER.removeprefix("# ") + f"\nCampaign '{campaign.name}', seed {campaign.seed}. SI units, named in "
-               "every key; [parameters] is the true parameter vector of the core ArmModel(nominal arm, effects on), "
+    comment = (TRUTH_HEADER.removeprefix("# ") + f"\nCampaign '{campaign.name}', seed {campaign.seed}. SI units, named "
+               "in every key; [parameters] is the true parameter vector of the core ArmModel(nominal arm, effects on), "
                "errors added to the nominal description.")
     return toml_text(_plain(doc), comment)
 
@@ -413,7 +413,8 @@ def _points_columns(campaign, plan, rows, readings, draw, ref) -> dict:
 
 def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimResult:
     """Simulate ``campaign`` (seed: the campaign's unless given). ``progress``: optional callable
-    taking a message, called at each stage (default: a progress record of this module's logger). Raises :class:`~arm_model.NumericalError` if a point
+    taking a message, called at each stage (default: a progress record of this module's logger). Raises
+    :class:`~arm_model.NumericalError` if a point
     cannot be reached or the truth check fails."""
     say = progress or progress_line(logging.getLogger(__name__))
     seed = campaign.seed if seed is None else int(seed)
@@ -474,7 +475,8 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
     texts[TRUTH_FILE] = _truth_text(campaign, truth, plan, draw, stats)
     texts[TRUTH_POINTS_FILE] = "# TRUTH: true values per captured point; no analysis reads this file.\n" + \
         _csv_text(_truth_columns(desc, plan, q_true, q_enc, centres, f_true, draw))
-    truth_dict = {"p": truth.values, "aliases": truth.aliases, "p_vector": truth.p.copy(), "spec": truth.model.spec, "model": truth.model,
+    truth_dict = {"p": truth.values, "aliases": truth.aliases, "p_vector": truth.p.copy(), "spec": truth.model.spec,
+                  "model": truth.model,
                   "effects": truth.settings, "effects_on": truth.effects_on(), "noise": dict(campaign.noise),
                   "placements": plan.placements, "T_ref_base": dict(plan.T_ref_base),
                   "marker_offsets": {k: v.copy() for k, v in plan.markers.items()},

@@ -125,8 +125,8 @@ class Truth:
 
     def _pose_geometry(self, q, geom: Geometry, wrench) -> Geometry:
         """``geom`` with the pose-dependent effects (:data:`POSE_EFFECTS`) applied at the true angles ``q``
-        (N, J) and the true ``wrench`` (N, 6), in the model's order (a copy). Their derivative (a micrometre shift's) is left out
-        of the inverse kinematics' Newton steps (:meth:`pose_jacobian`), which only slows convergence
+        (N, J) and the true ``wrench`` (N, 6), in the model's order (a copy). Their derivative (a micrometre shift's) is
+        left out of the inverse kinematics' Newton steps (:meth:`pose_jacobian`), which only slows convergence
         negligibly."""
         pose_effects = [(e, sl) for e, sl in self.model.effect_slices() if isinstance(e, POSE_EFFECTS)]
         if not pose_effects:
@@ -194,7 +194,8 @@ class Truth:
             geom = self._pose_geometry(q, geom, wrench)      # their own derivative left out, as in pose
             qe = elastic_displacement(geom.p_last, geom.compliance, list(np.asarray(wrench).T),
                                       probe_lever(geom.p_last, rot, lever))
-        b = np.column_stack([np.broadcast_to(v, (n,)) for v in ball_in_last_frame(geom.p_last, qe, NUMPY_OPS, rot, lever)])
+        b = np.column_stack([np.broadcast_to(v, (n,))
+                             for v in ball_in_last_frame(geom.p_last, qe, NUMPY_OPS, rot, lever)])
         ball = o + np.einsum("nij,nj->ni", r, b)
         w = np.zeros((n, 6)) if wrench is None else np.asarray(wrench, dtype=float)
         jn, nq = d.chain_joints, d.n_joints

@@ -57,8 +57,8 @@ from .settings import LEGACY_RESOLUTION, NOISE_OFF, LoopSettings
 from .state import LoopState, Screening, fitted_names, log
 from .verdict import ADDED, verdict_text
 
-__all__ = ["Campaign", "Stop", "prepare", "screen", "test", "synthesise", "decide", "fit_stage", "outer_test_worse", "add", "run_stage", "run",
-           "report"]
+__all__ = ["Campaign", "Stop", "prepare", "screen", "test", "synthesise", "decide", "fit_stage", "outer_test_worse",
+           "add", "run_stage", "run", "report"]
 
 
 @dataclass(frozen=True)
