@@ -425,7 +425,7 @@ def iter_csv_blocks(path: str | Path, what: str, header_check, block_bytes: int 
         if start:
             while block := read(start):
                 line_no += block.count(b"\n")
-            header_line, header = known_header
+            header_line, header = known_header  # type: ignore[misc]
             num_idx, txt_idx = header_check(header, header_line)
             first = False
         while True:

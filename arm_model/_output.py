@@ -382,11 +382,11 @@ def output_file(final: str | Path, inputs=()):
     _refuse_special(final, "a regular file")
     created = _make_parents(final.parent)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.tmp-", suffix=final.suffix, dir=final.parent)
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{final.name}.tmp-", suffix=final.suffix, dir=final.parent)
     except OSError as exc:
         _remove_empty(created)
         raise _oserror(exc, "write the output file", final) from None
-    tmp = Path(tmp)
+    tmp = Path(tmp_name)
     try:
         os.fchmod(fd, _mode(0o666))      # mkstemp makes 0600; outputs get the usual mode
         os.close(fd)

@@ -113,7 +113,7 @@ def frame_along(v, axis: int) -> np.ndarray:
     n = np.linalg.norm(v)
     u = np.eye(3)[axis] if n < 1e-15 else v / n
     e1, e2 = perpendicular_basis(u)
-    cols = [None, None, None]
+    cols: list[np.ndarray] = [u, u, u]
     cols[axis], cols[(axis + 1) % 3], cols[(axis + 2) % 3] = u, e1, e2
     return np.column_stack(cols)
 
@@ -178,6 +178,8 @@ _RANK_TOL = 1e-9
 
 class _RadialFit:
     """Diameter and form error of a fit with ``radius`` and radial ``residuals`` [m]."""
+    radius: float
+    residuals: np.ndarray
 
     @property
     def diameter(self) -> float:

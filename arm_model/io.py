@@ -201,7 +201,7 @@ def _points_layout(header: list[str], line: int, path: str, joints) -> _PointsLa
     for group in _GROUPS:
         present = [b for b in group if b in cols]
         if present and len(present) != len(group):
-            missing = [b for b in group if b not in cols]
+            missing = [b for b in group if b not in cols]  # type: ignore[misc]
             raise InputError(f"columns {', '.join(missing)} missing beside {', '.join(present)}", path, line,
                              header[cols[present[0]][0]])
     if "fx" in cols and "f_bend" in cols:
@@ -261,7 +261,7 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
         return values
 
     def group(bases) -> np.ndarray | None:
-        return None if bases[0] not in lay.cols else np.column_stack([col(b) for b in bases])
+        return None if bases[0] not in lay.cols else np.column_stack([col(b) for b in bases])  # type: ignore[misc]
 
     measurement = blk.texts[:, 0]
     empty = np.flatnonzero(measurement == "")
@@ -278,8 +278,8 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
         force_kind = "xyz"
     elif "f_bend" in lay.cols:
         force_kind = "two-channel"
-        force = np.column_stack([col("f_bend"), np.zeros(len(q)), col("f_axial")])
-    ref = np.stack([group(m) for m in lay.markers], axis=1) if lay.markers else None
+        force = np.column_stack([col("f_bend"), np.zeros(len(q)), col("f_axial")])  # type: ignore[list-item]
+    ref = np.stack([group(m) for m in lay.markers], axis=1) if lay.markers else None  # type: ignore[misc]
     session = blk.texts[:, 2] if blk.texts.shape[1] > 2 else None
     if session is not None and (empty := np.flatnonzero(session == "")).size:
         raise InputError("empty session id (a session column names the session of every row)", path,

@@ -35,6 +35,7 @@ import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -106,8 +107,8 @@ class LinkMass:
 class _Urdf:
     """A checked URDF: the lxml tree (for lines and for writing back) and the yourdfpy model."""
     path: Path
-    tree: object                 # lxml ElementTree
-    robot: object                # yourdfpy Robot
+    tree: Any                    # lxml ElementTree
+    robot: Any                   # yourdfpy Robot
     joint_elements: dict         # name -> lxml element
     link_elements: dict
 
@@ -251,7 +252,7 @@ class _Chain:
     """
     moving: list            # (joint, prefix 4x4, Mimic | None)
     tool_prefix: np.ndarray
-    tip_joint: object
+    tip_joint: Any                # yourdfpy Joint
     T_last_tip: np.ndarray
     hinge: np.ndarray | None
     base: str = ""          # the link the chain starts at (its frame is the arm's base frame)

@@ -500,8 +500,8 @@ def conformance_entry(mpe: dict, training: tuple, holdout: tuple | None = None, 
     baseline it is compared with. Returns (validation rows on training, on holdout or None, the summary's
     ``conformance`` entry: ``mpe_given``, ``mpe_um``, ``note`` (``sets`` appended: what the two data sets
     are), ``training``, ``holdout``)."""
-    val_train, conf_train = _validation(*training, mpe=mpe)
-    val_test, conf_test = _validation(*holdout, mpe=mpe) if holdout is not None else (None, None)
+    val_train, conf_train = _validation(*training, mpe=mpe)  # type: ignore[misc]
+    val_test, conf_test = _validation(*holdout, mpe=mpe) if holdout is not None else (None, None)  # type: ignore[misc]
     conf = {"mpe_given": bool(mpe), "mpe_um": {k: v * 1e6 for k, v in mpe.items()},
             "note": ("PASS: every tested item of the calibrated model within the MPE given by its "
                      "--mpe-*-um option; FAIL: at least one beyond." if mpe else

@@ -469,7 +469,7 @@ def screen_candidates(result: CalibrationResult, candidates, folds: dict[str, in
                                   min_resolution=SCREEN_RESOLUTION)
     if first is None:
         first = residual_space(result)
-    return tests, first
+    return tests, first  # type: ignore[return-value]
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -826,7 +826,7 @@ def binned_estimates(space: ResidualSpace, fam: Family, bins: int = 12, rank_tol
         cols, names = fam.columns(space)
         t = test_group(space, cols, names, fam.name, None, rank_tol=rank_tol)
         return {"kind": "groups", "names": list(names), "value": t.estimate, "u": t.u}
-    label, unit, factor, v = fam.variable
+    label, unit, factor, v = fam.variable  # type: ignore[misc]
     ok_pts = np.isfinite(v)
     lo, hi = np.nanmin(v), np.nanmax(v)
     if unit == "deg":            # angles: equal-width bins
@@ -838,8 +838,8 @@ def binned_estimates(space: ResidualSpace, fam: Family, bins: int = 12, rank_tol
     cols = []
     for _, _, d in fam.directions:
         for b in range(nb):
-            cols.append(d * space.per_row((which == b).astype(float)))
-    cols = np.column_stack(cols)
+            cols.append(d * space.per_row((which == b).astype(float)))  # type: ignore[attr-defined]
+    cols = np.column_stack(cols)  # type: ignore[call-overload]
     names = [f"{dn} bin {b}" for dn, _, _ in fam.directions for b in range(nb)]
     t = test_group(space, cols, names, fam.name, None, rank_tol=rank_tol)
     centres = np.array([np.mean(v[which == b]) if np.any(which == b) else nan for b in range(nb)])

@@ -96,7 +96,7 @@ def _compress(a: np.ndarray) -> np.ndarray:
     and least-squares relations between columns, in ``n`` rows instead of thousands."""
     if a.shape[0] <= a.shape[1]:
         return a
-    return np.linalg.qr(a, mode="r")
+    return np.linalg.qr(a, mode="r")  # type: ignore[return-value]
 
 
 def reduced_jacobian(jp: np.ndarray, jt: sp.spmatrix) -> np.ndarray:

@@ -251,9 +251,9 @@ def _ring_figures(c: RingCampaign, budgets) -> dict:
             xv = c.force_values(fv)
             k = corr[f"{fv}_force_N"]
             line = ax.plot(np.r_[0, xv], np.r_[0, y], mk, ms=5,
-                           label=f"{fv}: r = {k.r:.3f}, R² = {k.r2:.2f}")[0]
+                           label=f"{fv}: r = {k.r:.3f}, R² = {k.r2:.2f}")[0]  # type: ignore[attr-defined]
             xs = np.linspace(0, xv.max() * 1.05, 10)
-            ax.plot(xs, k.intercept + k.slope * xs, "-", lw=0.8, color=line.get_color())
+            ax.plot(xs, k.intercept + k.slope * xs, "-", lw=0.8, color=line.get_color())  # type: ignore[attr-defined]
         ax.set(xlabel="force value [N]", ylabel=f"initial {what.replace('_', ' ')} [mm]",
                title=f"{what.replace('_', ' ').capitalize()} against force (with the 0 N, 0 mm point)")
         ax.legend(fontsize=8)
@@ -383,7 +383,7 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
     s = summary["summary"]
     models = campaign.models
     parts = [f"<p>Ring <b>{html.escape(campaign.feature)}</b>, certified diameter "
-             f"{campaign.reference_diameter * 1e3:.4f} mm, ball {campaign.ball_diameter * 1e3:g} mm, "
+             f"{campaign.reference_diameter * 1e3:.4f} mm, ball {campaign.ball_diameter * 1e3:g} mm, "  # type: ignore[operator]
              f"{len(campaign.measurements)} measurements, force sensor: {html.escape(campaign.force_kind)}. "
              f"The paper's models move each point by f x {campaign.compliance * 1e3:.4f} mm/N towards the axis; "
              "the full-wrench model evaluates the ball centres again through the probe's elastic joint with "

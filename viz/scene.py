@@ -321,7 +321,7 @@ class ArmScene:
                                 np.diag([*g.meshScale, 1.0])) for g in pv.visual_model.geometryObjects]
             pin.forwardKinematics(pv.model, pv.data, x)
             pin.updateGeometryPlacements(pv.model, pv.data, pv.visual_model, pv.visual_data)
-            for gid, path, scale in self._nodes:
+            for gid, path, scale in self._nodes:  # type: ignore[attr-defined]
                 send_transform(self.vis, path, pv.visual_data.oMg[gid].homogeneous @ scale)
         if extent:
             self._extent.append(self._joint_points(x))

@@ -77,7 +77,7 @@ class View:
 
     @property
     def url(self) -> str:
-        return self.server.url
+        return self.server.url  # type: ignore[return-value]
 
     @property
     def legend(self) -> list[str]:

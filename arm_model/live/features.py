@@ -172,7 +172,7 @@ class FeatureTracker:
 
     def _advance(self) -> None:
         while (self._entry < len(self.entries) and self.entries[self._entry].points is not None
-               and self._taken >= self.entries[self._entry].points):
+               and self._taken >= self.entries[self._entry].points):  # type: ignore[operator]
             self._entry, self._taken = self._entry + 1, 0
 
     @property
@@ -322,14 +322,14 @@ class FeatureTracker:
         if a is None or b is None or a.centre_sens is None or b.centre_sens is None:
             return FeatureFit(**base, n_points=sum(len(x.points) for x in (a, b) if x is not None),
                               note="needs both features placed")
-        v = b.centre - a.centre
+        v = b.centre - a.centre  # type: ignore[operator]
         length = float(np.linalg.norm(v))
         e = v / length
         sens = np.concatenate([-np.einsum("i,nij->nj", e, a.centre_sens), np.einsum("i,nij->nj", e, b.centre_sens)])
         cov = np.concatenate([np.array(a.cov), np.array(b.cov)])
         shared = np.concatenate([np.array(a.shared), np.array(b.shared)])
         u = diameter_uncertainty(sens, cov, shared, self.n_parameters).u
-        return FeatureFit(**base, n_points=len(cov), size=length, u_size=u, centre=(a.centre + b.centre) / 2, axis=e,
+        return FeatureFit(**base, n_points=len(cov), size=length, u_size=u, centre=(a.centre + b.centre) / 2, axis=e,  # type: ignore[operator]
                           extent=np.zeros(2))
 
 

@@ -228,7 +228,7 @@ class SampleLayout:
         elif self.force_kind is not None:
             f = [0.0 if c is None else v[c[0]] * c[1] for c in self._force]
             m = [v[k] * f_ for k, f_ in self._torque] if self._torque else [0.0, 0.0, 0.0]
-            wrench = (*f, *m)
+            wrench = (*f, *m)  # type: ignore[misc]
         trigger = None if self._trigger is None else v[self._trigger] != 0.0
         temperature = None if self._temperature is None else v[self._temperature]
         return Sample(v[self._time], q, wrench, trigger, temperature)

@@ -138,7 +138,7 @@ class Session:
         npar = 0 if self.parameters is None else len(self.parameters.names)
         self.tracker = FeatureTracker(self.plan, self.desc.probe.ball_diameter, npar)
         self._period = None if rate is None else 1.0 / float(rate)
-        self._gap_limit = -math.inf if rate is None else GAP_FACTOR * self._period    # learning: every interval
+        self._gap_limit = -math.inf if rate is None else GAP_FACTOR * self._period  # type: ignore[operator]  # learning: every interval
         self._first_gaps: list = []
         self._bounds = [(i, lo, hi) for i, (lo, hi) in enumerate(limit_bounds(self.desc))
                         if math.isfinite(lo) or math.isfinite(hi)]

@@ -474,7 +474,7 @@ def settle(plan: Plan, truth, rng, rounds: int = 8) -> None:
     from .._errors import NumericalError
     from .ik import IKTargets, solve_points
 
-    todo = np.flatnonzero(np.isnan(plan.q_start[:, 0]))
+    todo = np.flatnonzero(np.isnan(plan.q_start[:, 0]))  # type: ignore[call-overload]
     for _ in range(rounds):
         if todo.size == 0:
             return

@@ -591,7 +591,7 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
         if kind not in TASK_KINDS:
             raise ctx.error(f"'kind' must be one of {', '.join(TASK_KINDS)}, got {kind!r}", tbl, "kind")
         spec = dict(_COMMON_TASK)
-        spec.update(_TASKS[kind])
+        spec.update(_TASKS[kind])  # type: ignore[call-overload]
         o = _section(ctx, t, spec, tbl)
         tid = o.pop("id") or _ID[kind]
         if not re.fullmatch(r"[A-Za-z0-9_.\-]+", tid):

@@ -359,7 +359,7 @@ def _solve(truth, plan, draw, x_dir, labels, rng, say):
     return q_true, wrench, ik.attempts
 
 
-def _reference(plan, campaign, rows, centres, markers, trng) -> tuple[np.ndarray, int]:
+def _reference(plan, campaign, rows, centres, markers, trng) -> np.ndarray:
     """(rows, K, 3) [m] what the instrument reports for ``rows``: a nest's ball centre or a posture's K
     markers, in the row's instrument frame, plus its noise (drawn frame by frame, in the plan's order)."""
     k = 1 if markers is None else markers.shape[1]
@@ -449,7 +449,7 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
     say("writing files in memory ...")
     texts = {}
     ref_rows = np.flatnonzero(plan.reference)
-    main_rows = np.flatnonzero(~plan.reference)
+    main_rows = np.flatnonzero(~plan.reference)  # type: ignore[operator]
     points = ref_points = None
     if main_rows.size:
         texts[POINTS_FILE] = _csv_text(_points_columns(campaign, plan, main_rows, readings, draw, None))

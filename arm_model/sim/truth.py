@@ -321,7 +321,7 @@ def build_truth(desc: ArmDescription, t: dict, rng: np.random.Generator, sensor:
         if th.get("probe_alpha"):
             effects.append(ProbeThermalGrowth())
             values.append(th["probe_alpha"])
-            settings["thermal"]["probe_alpha"] = th["probe_alpha"]
+            settings["thermal"]["probe_alpha"] = th["probe_alpha"]  # type: ignore[call-overload]
     pc = t["probe_compliance"]
     if pc is not None:
         declared = desc.probe.compliance
@@ -360,7 +360,7 @@ def build_truth(desc: ArmDescription, t: dict, rng: np.random.Generator, sensor:
         terms = tuple(a for a in ("xy", "xz", "yz") if pc.get(f"coupling_{a}"))
         effects.append(ProbeComplianceMatrix(terms=terms))
         values += [pc[f"coupling_{a}"] for a in terms]
-        settings["probe_compliance"].update({f"coupling_{a}": pc[f"coupling_{a}"] for a in terms})
+        settings["probe_compliance"].update({f"coupling_{a}": pc[f"coupling_{a}"] for a in terms})  # type: ignore[attr-defined]
     ap = t.get("approach_offset")
     if ap is not None:
         effects.append(ApproachOffset())
