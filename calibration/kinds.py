@@ -185,7 +185,9 @@ def frame_of(state) -> np.ndarray:
 TRACKER_ROUNDS, TRACKER_TOL = 200, 1e-8
 
 
-def tracker_start(base, turn, x_ref, frame, marker, frames, markers, held_frames, held_offsets):
+def tracker_start(base: np.ndarray, turn: np.ndarray, x_ref: np.ndarray, frame: np.ndarray, marker: np.ndarray,
+                  frames: list[int], markers: list[int], held_frames: list[np.ndarray | None],
+                  held_offsets: list[np.ndarray | None]) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Starting states of the reference frames and marker offsets (the algebraic first fit).
 
     Row ``j`` of the reference rows sees ``x_ref[j] = R_s (base[j] + turn[j] o_m) + t_s`` with ``s =
