@@ -38,9 +38,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ._csv import parse_number
-from ._errors import InputError, did_you_mean, open_input, parse_toml, read_text
-from ._units import implausible
+from .csv_io import parse_number
+from .errors import InputError, did_you_mean, open_input, parse_toml, read_text
+from .units import implausible
 from .description import (MIN_STYLUS, ArmDescription, JointRow, Mimic, Probe, TomlReader, Visual, default_lever,
                           load_description)
 from .shipped import arm_path
@@ -68,7 +68,7 @@ _NUMERIC = {
     "safety_controller": {"soft_lower_limit": 1, "soft_upper_limit": 1, "k_position": 1, "k_velocity": 1},
 }
 #: the numbers the kinematics use, by (parent tag, tag, attribute) -> the quantity whose plausible range
-#: (arm_model._units.PLAUSIBLE_SI) they keep (None: finite only). Only these are checked beyond being
+#: (arm_model.units.PLAUSIBLE_SI) they keep (None: finite only). Only these are checked beyond being
 #: numbers when the file is read; the masses and centres of mass of the links folded into the chain when
 #: they are folded (:func:`_fold_masses`); visual and collision geometry, inertia tensors, efforts,
 #: velocities, damping are never used here (an inertia of -5e-20, a mirrored mesh's negative scale are no

@@ -12,7 +12,7 @@
 
 Runs go to local processes (:class:`concurrent.futures.ProcessPoolExecutor`) by default, or to a
 Dask cluster when a scheduler address (or a ``distributed.Client``) is given. Progress is shown by
-:class:`arm_model._log.Progress` (this module's logger: redrawn in place on a terminal, plain lines in a log
+:class:`arm_model.log.Progress` (this module's logger: redrawn in place on a terminal, plain lines in a log
 file; silent unless logging is enabled for INFO, as under ``aacmm`` without ``--quiet``).
 """
 from __future__ import annotations
@@ -26,7 +26,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from arm_model import AacmmError, InputError
-from arm_model._log import Progress
+from arm_model.log import Progress
 from arm_model.model import ArmModel
 
 from .calibrate import calibrate, resolve_parameters

@@ -8,7 +8,7 @@ comes (cyan dots), the fitted features (light blue, with their measured size, pl
 text panel: the force, the deflection, the last point and its uncertainty, the current feature's fit, the
 counts of dropped, late and bad samples, the last event.
 
-The page with the panel is the server's ``/live/`` (:data:`viz._bridge.LIVE_PAGE`); meshcat's own page
+The page with the panel is the server's ``/live/`` (:data:`viz.bridge.LIVE_PAGE`); meshcat's own page
 (``/static/``) shows the same scene without it. :meth:`LiveView.write_html` writes the scene as one
 self-contained page, the panel's last text as its legend.
 """
@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._bridge import PANEL_NODE
+from .bridge import PANEL_NODE
 from .placement import Placement
 from .scene import _arrow_parts, _matrix, _rotation_y_to, send_transform
 from arm_model.live import Sample, Session
