@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._errors import InputError, decode_text, open_input
+from .errors import InputError, decode_text, open_input
 
 __all__ = ["parse_number", "csv_records", "CsvBlock", "iter_csv_blocks", "csv_spans", "format_csv", "format_row"]
 
