@@ -15,8 +15,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._errors import InputError, parse_toml, read_text
-from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
+from .errors import InputError, parse_toml, read_text
+from .units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
 if TYPE_CHECKING:
     from .chain import Joint
@@ -628,11 +628,11 @@ def in_unit(value_si: float, factor: float) -> float:
 
 
 def _check_writable(desc: ArmDescription) -> None:
-    """The description obeys the reader's rules on numbers (:func:`arm_model._units.implausible`), so that
+    """The description obeys the reader's rules on numbers (:func:`arm_model.units.implausible`), so that
     what is written reads back: a value beyond them (a joint origin of more than 1 km, say, from a fit
     that ran away along a direction the data do not see) is a :class:`NumericalError` naming it, never a
     file its reader refuses."""
-    from ._errors import NumericalError
+    from .errors import NumericalError
     for j in desc.joints:
         length = "length" if j.prismatic else "angle"
         values = ([("origin", v, "length") for v in _origin(j)[:3]] + [("origin", v, "angle") for v in _origin(j)[3:]]

@@ -37,8 +37,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ._errors import InputError, parse_toml, read_text
-from ._units import implausible
 from .description import (
     MODEL_KEYS,
     ArmDescription,
@@ -50,8 +48,10 @@ from .description import (
     toml_text,
 )
 from .effects import EFFECTS, Effect
+from .errors import InputError, parse_toml, read_text
 from .model import ArmModel, AuxData
 from .tracker import Tracker, tracker_from_tables, tracker_tables
+from .units import implausible
 
 __all__ = ["Arm", "PARAM_UNITS", "parse_model", "load_model", "format_model", "effect_tables",
            "effects_from_tables", "write_covariance", "read_covariance", "Covariance", "check_calibration_table",
@@ -72,7 +72,7 @@ PARAM_UNITS: dict[str, tuple[tuple[str, float], ...]] = {
     "s": (("s", 1.0),),
     "kg": (("kg", 1.0),),
 }
-#: SI unit of an effect parameter -> its quantity, for the plausible range (arm_model._units.PLAUSIBLE_SI)
+#: SI unit of an effect parameter -> its quantity, for the plausible range (arm_model.units.PLAUSIBLE_SI)
 PARAM_QUANTITY: dict[str, str] = {
     "m": "length", "rad": "angle", "m/N": "compliance", "rad/(N m)": "angular compliance", "1/K": "expansion",
     "1": "ratio", "N": "force", "N m": "torque", "K": "temperature difference", "s": "time", "kg": "mass",
@@ -503,7 +503,7 @@ def read_covariance(path) -> Covariance:
     decimals (no ``4_5``, ``nan`` or ``inf``); ``value`` and ``u`` in the plausible range of the unit's
     quantity, ``u`` not negative; correlations in [-1, 1], 1 on the diagonal, symmetric. A cell that is
     not is an InputError naming the file, the line and the column."""
-    from ._csv import parse_number
+    from .csv_io import parse_number
     from .io import csv_records
     text = read_text(path, "the covariance file")
     recs = csv_records(text, str(path))

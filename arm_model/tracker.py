@@ -20,8 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._errors import InputError
 from .description import TomlReader, in_unit
+from .errors import InputError
 from .geometry import rotation_xyz, rpy_from_matrix
 
 __all__ = ["Tracker", "offset_matrix", "marker_positions", "tracker_tables", "tracker_from_tables",

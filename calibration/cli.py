@@ -9,8 +9,6 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError
-from arm_model._log import counted
-from arm_model._output import output_folder
 from arm_model.checks import log_warnings, point_warnings
 from arm_model.cli import command_help
 from arm_model.commands import (
@@ -25,7 +23,9 @@ from arm_model.commands import (
     seed,
 )
 from arm_model.io import json_text, read_artefacts, read_points
+from arm_model.log import counted
 from arm_model.model_file import Arm
+from arm_model.output import output_folder
 
 __all__ = ["register", "run_calibrate", "run_montecarlo", "run_poses", "fit_options"]
 

@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError
-from arm_model._output import safe_name
 from arm_model.geometry import CylinderFit, ring_fit
 from arm_model.io import PointSet, read_force_signal
+from arm_model.output import safe_name
 
 from .signals import ForceSummary, PointForces, find_point_forces, force_summary, forces_from_columns
 

@@ -10,8 +10,8 @@ import sys
 import pytest
 from test_reliability_inputs import RING, run, small  # noqa: F401  (the CLI runner and small campaign)
 
-from arm_model._log import Progress, console, counted
 from arm_model.cli import COMMANDS, build_parser, main
+from arm_model.log import Progress, console, counted
 from conftest import NOMINAL, ROOT
 
 
@@ -133,7 +133,7 @@ def test_progress_in_a_file_has_plain_lines(capsys):
     assert capsys.readouterr() == ("", "") and not bar.enabled
 
 
-def test_study_progress_into_a_log_file_has_no_carriage_return(small, tmp_path):
+def test_study_progress_into_a_log_file_has_no_carriage_return(small, tmp_path):  # noqa: F811 (the imported fixture)
     """A real command, its standard error a file (as `aacmm ... 2> log`)."""
     log = tmp_path / "log.txt"
     with open(log, "w") as fh:

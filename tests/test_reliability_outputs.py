@@ -13,8 +13,8 @@ import pytest
 from hypothesis import given, strategies as st
 
 from arm_model import InputError
-from arm_model._output import MARKER, output_file, output_folder, safe_name
 from arm_model.cli import main
+from arm_model.output import MARKER, output_file, output_folder, safe_name
 from conftest import NOMINAL, ROOT
 
 POINTS = ROOT / "examples" / "data" / "paper-ring-xyz" / "points.csv"

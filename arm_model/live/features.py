@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._errors import NumericalError
+from ..errors import NumericalError
 from ..feature_uncertainty import (
     cylinder_jacobian,
     diameter_uncertainty,

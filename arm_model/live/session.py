@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from .._csv import format_row
 from ..checks import limit_bounds
+from ..csv_io import format_row
 from ..io import Feature, PointSet
 from ..uncertainty import InputUncertainty
 from .contacts import Contact, ContactDetector, ContactOptions

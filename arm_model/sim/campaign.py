@@ -16,10 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from .._errors import InputError, did_you_mean, parse_toml, read_text
-from .._units import implausible
 from ..description import ArmDescription
+from ..errors import InputError, did_you_mean, parse_toml, read_text
 from ..shipped import SHIPPED_ARMS, shipped_path
+from ..units import implausible
 from ..urdf_import import load_arm
 
 __all__ = ["Campaign", "Task", "load_campaign", "campaign_from_dict", "TASK_KINDS", "SENSORS",

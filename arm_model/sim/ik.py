@@ -25,8 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._errors import NumericalError
 from ..effects import Geometry
+from ..errors import NumericalError
 from .truth import Truth
 
 __all__ = ["IKTargets", "IKResult", "solve_ik", "solve_points", "solve_positions", "joint_limits",

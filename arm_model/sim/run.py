@@ -15,10 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._errors import InputError, NumericalError
-from .._log import counted, progress_line
-from .._output import safe_name
 from ..description import toml_text
+from ..errors import InputError, NumericalError
 from ..io import (
     Artefacts,
     Distance,
@@ -31,6 +29,8 @@ from ..io import (
     parse_artefacts,
     parse_points,
 )
+from ..log import counted, progress_line
+from ..output import safe_name
 from .artefacts import Plan, make_plan
 from .campaign import Campaign
 from .ik import IKTargets, ball_jacobian, solve_ik

@@ -13,7 +13,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._errors import NumericalError
 from ..chain import NUMPY_OPS, ball_in_last_frame, chain_point, elastic_displacement, has_stylus, probe_lever
 from ..description import ArmDescription
 from ..effects import (
@@ -29,6 +28,7 @@ from ..effects import (
     ProbeThermalGrowth,
     ThermalGrowth,
 )
+from ..errors import NumericalError
 from ..model import ArmModel, AuxData
 from ..params import apply_params, param_spec
 

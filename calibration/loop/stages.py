@@ -19,10 +19,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from arm_model._log import counted
 from arm_model.description import ArmDescription
 from arm_model.effects import JointCompliance, ThermalGrowth
 from arm_model.io import Artefacts, PointSet
+from arm_model.log import counted
 from arm_model.model import ArmModel
 
 from ..calibrate import CalibrationResult, evidence_scale
