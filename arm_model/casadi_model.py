@@ -6,6 +6,7 @@ which calibration identifies. Inputs and outputs of the Function are named.
 from __future__ import annotations
 
 from types import SimpleNamespace
+from typing import Any
 
 from .chain import ball_centre_expr
 from .description import ArmDescription
@@ -14,12 +15,12 @@ from .params import param_spec, split_params
 __all__ = ["casadi_ball_centre"]
 
 
-def _ops():
+def _ops() -> SimpleNamespace:
     import casadi as ca
     return SimpleNamespace(sin=ca.sin, cos=ca.cos)
 
 
-def casadi_ball_centre(desc: ArmDescription, name: str = "ball_centre"):
+def casadi_ball_centre(desc: ArmDescription, name: str = "ball_centre") -> Any:
     """CasADi Function ``ball_centre(q[J], w[6], p[P]) -> (p_base[3])`` [m].
 
     ``w`` is the wrench at the ball in the probe frame (force [N], then torque [N m]).
