@@ -17,7 +17,8 @@ from .errors import InputError, parse_toml, read_text
 from .units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
 __all__ = ["JointRow", "Mimic", "Probe", "Visual", "ArmDescription", "load_description", "parse_description",
-           "format_description", "GRAVITY", "MIN_STYLUS", "default_lever", "DH_ROW_FIELDS", "URDF_ROW_FIELDS"]
+           "format_description", "GRAVITY", "MIN_STYLUS", "default_lever", "DH_ROW_FIELDS", "URDF_ROW_FIELDS",
+           "check_calibration_table", "MAX_PROBING_SCATTER_UM"]
 
 DH_ROW_FIELDS = ("theta_offset", "d", "a", "alpha")
 URDF_ROW_FIELDS = ("origin_x", "origin_y", "origin_z", "origin_roll", "origin_pitch", "origin_yaw")
@@ -407,6 +408,32 @@ DESCRIPTION_KEYS = ("name", "convention", "joint", "probe")
 MODEL_KEYS = ("effect", "calibration", "reference_frame", "marker")
 
 
+#: the largest probing scatter a model file may give [um]: 100 mm is a unit mistake, while a poor fit of a
+#: robot can estimate more than a millimetre, and every model file calibrate writes must read back
+MAX_PROBING_SCATTER_UM = 1.0e5
+
+
+def check_calibration_table(tbl, r: TomlReader) -> None:
+    """The ``[calibration]`` table of a model file: text keys ``covariance`` and ``written_by``, the
+    numbers ``probing_scatter_um`` (>= 0: a calibration whose encoder and force-sensor noise alone account for
+    its residual scatter writes 0; at most :data:`MAX_PROBING_SCATTER_UM`) and ``model_discrepancy_um`` (the
+    same range)."""
+    if not isinstance(tbl, dict):
+        raise r.error("'calibration' must be a table", "calibration")
+    known = ("covariance", "written_by", "probing_scatter_um", "model_discrepancy_um")
+    for key, value in tbl.items():
+        if key not in known:
+            raise r.error(f"unknown key '{key}' (known: {', '.join(known)}){nearest(key, known)}",
+                          "calibration", key)
+        if key in ("probing_scatter_um", "model_discrepancy_um"):
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                    or not 0 <= value <= MAX_PROBING_SCATTER_UM:
+                raise r.error(f"'{key}' must be a number in [0, {MAX_PROBING_SCATTER_UM:g}] um, got {value!r}",
+                              "calibration", key)
+        elif not isinstance(value, str) or not value.strip():
+            raise r.error(f"'{key}' must be a non-empty text", "calibration", key)
+
+
 def parse_description(text: str, path: str = "<string>") -> ArmDescription:
     """Parse an arm description from TOML text; raise :class:`InputError` naming line and key.
 
@@ -420,7 +447,6 @@ def parse_description(text: str, path: str = "<string>") -> ArmDescription:
                       "carry: give it to an --arm option (tip, ring, view, calibrate, close-loop apply them; in "
                       "Python arm_model.model_file.load_model)", "effect", 0)
     if "calibration" in data:
-        from .model_file import check_calibration_table
         check_calibration_table(data["calibration"], r)
     return description_from_data({k: v for k, v in data.items() if k not in MODEL_KEYS}, r)
 

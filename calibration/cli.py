@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError
-from arm_model.commands import (add_arm_options, arm_inputs, at_least, fraction, model_from_args, non_negative,
+from arm_model.cli_options import (add_arm_options, arm_inputs, at_least, fraction, model_from_args, non_negative,
                                 number_in, positive, seed)
 from arm_model.log import counted
 from arm_model.output import output_folder

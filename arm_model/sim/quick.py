@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry import perpendicular_basis, rotation_xyz
+from ..geometry import cone_directions, perpendicular_basis, rotation_xyz
 from ..io import Artefacts, Distance, Feature, PointSet, atomic_write_text, format_artefacts, write_csv
 from ..model import ArmModel, AuxData
-from .artefacts import cone_directions, shoulder
+from .artefacts import shoulder
 from .ik import random_q, solve_positions
 
 __all__ = ["SynthSpec", "SynthCampaign", "random_truth", "random_q", "make_campaign"]
