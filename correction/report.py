@@ -344,21 +344,9 @@ def _csv_text(columns: dict, fmt: str = "%.6f") -> str:
     return buf.getvalue()
 
 
-def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: list[BudgetResult],
-                warnings=(), point_uncertainty=None, parameters_source=None) -> list[Path]:
-    """Write the report of an analysed ring campaign into folder ``out``: ``report.html``,
-    ``summary.json``, ``table2.csv``, ``correlations.csv``, ``budgets.csv``, ``roundness.csv`` and
-    ``figures/*.png``.
-
-    Args:
-        campaign: :func:`correction.models.analyse_ring_campaign`'s result.
-        inputs: {role: path} of the input files (never written over, listed in the summary).
-        budgets: :func:`ring_budgets`'s result.
-    Returns: the files written.
-    """
-    out = Path(out)
-    in_paths = [p for p in inputs.values() if p is not None]
-    guard_output(out, in_paths)
+def _ring_summary(campaign: RingCampaign, inputs: dict, budgets, warnings, point_uncertainty,
+                  parameters_source) -> dict:
+    """``summary.json`` of :func:`ring_report` (without its provenance)."""
     summary = ring_summary(campaign, budgets, {k: None if v is None else str(v) for k, v in inputs.items()})
     summary["warnings"] = [w.as_dict() for w in warnings]
     if point_uncertainty is not None:
@@ -375,27 +363,19 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
             "model": "wrench" if campaign.measurements and "wrench" in campaign.measurements[0].fits else "initial",
             "measurements": [dict(measurement=r.id, **f.as_dict())
                              for r, (_, f) in zip(campaign.measurements, point_uncertainty)]}
-    summary.update(provenance(in_paths))
-    t2 = table2(campaign)
-    corr = campaign_correlations(campaign)
-    figs = _ring_figures(campaign, budgets)
-    # HTML
+    return summary
+
+
+def _ring_tables_html(campaign: RingCampaign, summary: dict, t2: dict) -> list[str]:
+    """The report's tables per model and per measurement."""
     s = summary["summary"]
     models = campaign.models
-    parts = [f"<p>Ring <b>{html.escape(campaign.feature)}</b>, certified diameter "
-             f"{campaign.reference_diameter * 1e3:.4f} mm, ball {campaign.ball_diameter * 1e3:g} mm, "
-             f"{len(campaign.measurements)} measurements, force sensor: {html.escape(campaign.force_kind)}. "
-             f"The paper's models move each point by f x {campaign.compliance * 1e3:.4f} mm/N towards the axis; "
-             "the full-wrench model evaluates the ball centres again through the probe's elastic joint with "
-             "each point's force vector.</p>"]
-    parts += [f"<p class='bad'>{html.escape(n)}</p>" for n in campaign.notes]
-    parts.append(warnings_html(warnings))
-    parts.append("<h2>Summary per model</h2>" + _table_html(
+    parts = ["<h2>Summary per model</h2>" + _table_html(
         ("model", "mean |diameter error| [mm]", "reduction [%]", "mean form error [mm]", "form change [%]",
          "largest form increase [mm]"),
         [(MODEL_LABELS[m], f"{s[m]['mean_abs_diameter_error_mm']:.4f}", f"{s[m]['diameter_error_reduction_pct']:.1f}",
           f"{s[m]['mean_form_error_mm']:.4f}", f"{s[m]['form_error_change_pct']:+.1f}",
-          f"{s[m]['max_form_error_increase_mm']:+.4f}") for m in models]))
+          f"{s[m]['max_form_error_increase_mm']:+.4f}") for m in models])]
     rows = []
     for i, r in enumerate(campaign.measurements):
         row = [r.id]
@@ -411,6 +391,12 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
     parts.append("<h2>Form error [mm] and force values [N] per measurement</h2>"
                  + _table_html(["measurement"] + [MODEL_LABELS[m] for m in models] + ["mean F", "10Max F", "max F"],
                                rows))
+    return parts
+
+
+def _ring_figures_html(campaign: RingCampaign, corr) -> list[str]:
+    """The report's figures, the correlations with the force and their table."""
+    parts = []
     for name, cap in (("point_errors.png", "Contact point errors against angular position (paper Fig. 6, 12)"),
                       ("diameters.png", "Initial and corrected diameter errors (paper Fig. 13)"),
                       ("form_errors.png", "Initial and corrected form errors (paper Fig. 8, 14)"),
@@ -428,23 +414,61 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
           f"{k.p_value:.2g}", f"{k.slope:.4f}") for k in corr]))
     parts.append("<img src='figures/correlation_diameter.png' alt='diameter error against force'>"
                  "<img src='figures/correlation_form.png' alt='form error against force'>")
+    return parts
+
+
+def _point_uncertainty_html(campaign: RingCampaign, point_uncertainty, parameters_source) -> str:
+    """The diameter and form uncertainty from the points' covariances, as a section of the report."""
+    return ("<h2>Diameter and form uncertainty from the points' covariances (k = 1, beside the GUM budgets)</h2>"
+            f"<p>Parameters: {html.escape(parameters_source or 'none (taken as exact)')}. Each corrected "
+            "ball centre's covariance is propagated through the cylinder fit; errors the points share "
+            "(parameters, compliance) do not average out. 'if independent' is what the naive sum of "
+            "independent point variances would give. The form error (max - min of the residuals) is sampled: its "
+            "standard deviation is u(form), and the mean of the samples minus the measured form is how much the "
+            "point errors alone add to a form error. See docs/ring-pipeline.md.</p>" + _table_html(
+                ("measurement", "u(D) [mm]", "point-alone errors [mm]", "parameters [mm]",
+                 "compliance [mm]", "if independent [mm]", "form error [mm]", "u(form) [mm]",
+                 "inflation by the errors [mm]"),
+                [(r.id, f"{u.u * 1e3:.4f}", f"{u.independent * 1e3:.4f}", f"{u.parameters * 1e3:.4f}",
+                  f"{u.compliance * 1e3:.4f}", f"{u.if_independent * 1e3:.4f}", f"{f.form * 1e3:.4f}",
+                  f"{f.u * 1e3:.4f}", f"{f.inflation * 1e3:.4f}")
+                 for r, (u, f) in zip(campaign.measurements, point_uncertainty)]))
+
+
+def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: list[BudgetResult],
+                warnings=(), point_uncertainty=None, parameters_source=None) -> list[Path]:
+    """Write the report of an analysed ring campaign into folder ``out``: ``report.html``,
+    ``summary.json``, ``table2.csv``, ``correlations.csv``, ``budgets.csv``, ``roundness.csv`` and
+    ``figures/*.png``.
+
+    Args:
+        campaign: :func:`correction.models.analyse_ring_campaign`'s result.
+        inputs: {role: path} of the input files (never written over, listed in the summary).
+        budgets: :func:`ring_budgets`'s result.
+    Returns: the files written.
+    """
+    out = Path(out)
+    in_paths = [p for p in inputs.values() if p is not None]
+    guard_output(out, in_paths)
+    summary = _ring_summary(campaign, inputs, budgets, warnings, point_uncertainty, parameters_source)
+    summary.update(provenance(in_paths))
+    t2 = table2(campaign)
+    corr = campaign_correlations(campaign)
+    figs = _ring_figures(campaign, budgets)
+    parts = [f"<p>Ring <b>{html.escape(campaign.feature)}</b>, certified diameter "
+             f"{campaign.reference_diameter * 1e3:.4f} mm, ball {campaign.ball_diameter * 1e3:g} mm, "
+             f"{len(campaign.measurements)} measurements, force sensor: {html.escape(campaign.force_kind)}. "
+             f"The paper's models move each point by f x {campaign.compliance * 1e3:.4f} mm/N towards the axis; "
+             "the full-wrench model evaluates the ball centres again through the probe's elastic joint with "
+             "each point's force vector.</p>"]
+    parts += [f"<p class='bad'>{html.escape(n)}</p>" for n in campaign.notes]
+    parts.append(warnings_html(warnings))
+    parts += _ring_tables_html(campaign, summary, t2)
+    parts += _ring_figures_html(campaign, corr)
     parts.append("<h2>Uncertainty budgets (GUM, paper Table 3)</h2><img src='figures/budgets.png' alt='budgets'>")
     parts += [_budget_html(b) for b in budgets]
     if point_uncertainty is not None:
-        parts.append("<h2>Diameter and form uncertainty from the points' covariances (k = 1, beside the GUM budgets)</h2>"
-                     f"<p>Parameters: {html.escape(parameters_source or 'none (taken as exact)')}. Each corrected "
-                     "ball centre's covariance is propagated through the cylinder fit; errors the points share "
-                     "(parameters, compliance) do not average out. 'if independent' is what the naive sum of "
-                     "independent point variances would give. The form error (max - min of the residuals) is sampled: its "
-                     "standard deviation is u(form), and the mean of the samples minus the measured form is how much the "
-                     "point errors alone add to a form error. See docs/ring-pipeline.md.</p>" + _table_html(
-                         ("measurement", "u(D) [mm]", "point-alone errors [mm]", "parameters [mm]",
-                          "compliance [mm]", "if independent [mm]", "form error [mm]", "u(form) [mm]",
-                          "inflation by the errors [mm]"),
-                         [(r.id, f"{u.u * 1e3:.4f}", f"{u.independent * 1e3:.4f}", f"{u.parameters * 1e3:.4f}",
-                           f"{u.compliance * 1e3:.4f}", f"{u.if_independent * 1e3:.4f}", f"{f.form * 1e3:.4f}",
-                           f"{f.u * 1e3:.4f}", f"{f.inflation * 1e3:.4f}")
-                          for r, (u, f) in zip(campaign.measurements, point_uncertainty)]))
+        parts.append(_point_uncertainty_html(campaign, point_uncertainty, parameters_source))
     files = {"report.html": _page("Ring-gauge campaign: force correction", parts),
              "summary.json": json.dumps(summary, indent=1, allow_nan=False) + "\n",
              "table2.csv": _csv_text(t2),

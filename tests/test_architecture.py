@@ -245,3 +245,37 @@ def test_the_cycle_check_sees_a_cycle_through_a_function_level_import(tmp_path):
     assert import_cycles(graph) == [["pkg.a", "pkg.sub.b", "pkg.c", "pkg.a"]]
     (pkg / "c.py").write_text("def f():\n    import os\n")
     assert import_cycles(module_graph(tmp_path, ("pkg",))) == []
+
+
+# -- no function over 100 lines ------------------------------------------------------------------------
+
+#: the longest function (or method) the source may hold, in lines from its ``def`` to its last line
+MAX_FUNCTION_LINES = 100
+
+
+def long_functions(root=ROOT, packages=tuple(FLOORS), limit: int = MAX_FUNCTION_LINES) -> list[str]:
+    """``path:line name (n lines)`` of every function of ``packages`` longer than ``limit`` lines (nested
+    functions are counted within their parent and on their own)."""
+    out = []
+    for pkg in packages:
+        for path in sorted((root / pkg).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    n = node.end_lineno - node.lineno + 1
+                    if n > limit:
+                        out.append(f"{path.relative_to(root)}:{node.lineno} {node.name} ({n} lines)")
+    return out
+
+
+def test_no_function_over_100_lines():
+    long = long_functions()
+    assert not long, f"functions over {MAX_FUNCTION_LINES} lines (split them into named steps): {long}"
+
+
+def test_the_length_check_sees_a_long_function(tmp_path):
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    (pkg / "m.py").write_text("def short():\n    return 1\n\n\nclass C:\n    def long(self):\n"
+                              + "        x = 1\n" * 100 + "        return x\n")
+    assert long_functions(tmp_path, ("pkg",)) == ["pkg/m.py:6 long (102 lines)"]
+    assert long_functions(tmp_path, ("pkg",), limit=102) == []
