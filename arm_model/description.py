@@ -4,7 +4,6 @@ Inside, everything is SI: lengths [m], angles [rad], forces [N], compliances [m/
 """
 from __future__ import annotations
 
-import difflib
 import math
 import re
 from dataclasses import dataclass, field, replace
@@ -13,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, parse_toml, read_text
+from .errors import InputError, did_you_mean, parse_toml, read_text
 from .units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
 __all__ = ["JointRow", "Mimic", "Probe", "Visual", "ArmDescription", "load_description", "parse_description",
@@ -370,13 +369,13 @@ class TomlReader:
                 continue
             parts = split_unit(key)
             if parts is None:
-                near = nearest(key, [f"{b}_<unit>" for b in spec] + list(text_keys))
+                near = did_you_mean(key, [f"{b}_<unit>" for b in spec] + list(text_keys))
                 raise self.error(f"'{key}' has no known unit suffix (a numeric key carries its unit: "
                                  f"_mm, _m, _um, _deg, _rad, _N, _mm_per_N, _kg ...){near}", *where, key)
             base, unit = parts
             if base not in spec:
                 raise self.error(f"unknown key '{key}' (known: {', '.join(sorted(spec))})"
-                                 f"{nearest(base, list(spec))}", *where, key)
+                                 f"{did_you_mean(base, list(spec))}", *where, key)
             quantity = spec[base][0]
             if QUANTITY_OF_UNIT[unit] != quantity:
                 raise self.error(f"'{key}' is a {quantity}, but '_{unit}' is a unit of "
@@ -395,12 +394,6 @@ class TomlReader:
             if required and base not in out:
                 raise self.error(f"missing key '{base}_<unit>' ({quantity})", *where)
         return out
-
-
-def nearest(word: str, known) -> str:
-    """`` (did you mean 'x'?)`` for the closest of ``known``, or an empty text."""
-    hit = difflib.get_close_matches(word, list(known), n=1, cutoff=0.6)
-    return f" (did you mean '{hit[0]}'?)" if hit else ""
 
 
 #: top-level keys of a description; a model file (arm_model.model_file) adds its effects and calibration tables
@@ -423,7 +416,7 @@ def check_calibration_table(tbl, r: TomlReader) -> None:
     known = ("covariance", "written_by", "probing_scatter_um", "model_discrepancy_um")
     for key, value in tbl.items():
         if key not in known:
-            raise r.error(f"unknown key '{key}' (known: {', '.join(known)}){nearest(key, known)}",
+            raise r.error(f"unknown key '{key}' (known: {', '.join(known)}){did_you_mean(key, known)}",
                           "calibration", key)
         if key in ("probing_scatter_um", "model_discrepancy_um"):
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
@@ -578,7 +571,7 @@ def description_from_data(data: dict, r: TomlReader, extra_keys: tuple[str, ...]
     known = DESCRIPTION_KEYS + tuple(extra_keys)
     for key in data:
         if key not in known:
-            raise r.error(f"unknown top-level key '{key}' (known: {', '.join(known)}){nearest(key, known)}", key)
+            raise r.error(f"unknown top-level key '{key}' (known: {', '.join(known)}){did_you_mean(key, known)}", key)
     name = data.get("name")
     if not isinstance(name, str) or not name.strip():
         raise r.error("missing or empty 'name'" if name is None or name == "" else

@@ -37,10 +37,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, parse_toml, read_text
+from .errors import InputError, did_you_mean, parse_toml, read_text
 from .units import implausible
 from .description import (MAX_PROBING_SCATTER_UM, MODEL_KEYS, ArmDescription, TomlReader, check_calibration_table,
-                          description_data, description_from_data, in_unit, nearest, toml_text)
+                          description_data, description_from_data, in_unit, toml_text)
 from .effects import EFFECTS, Effect
 from .model import ArmModel, AuxData
 from .tracker import Tracker, tracker_from_tables, tracker_tables
@@ -256,7 +256,7 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
         if not isinstance(kind, str):
             raise r.error(f"missing 'kind' (one of: {', '.join(EFFECTS)})", *where)
         if kind not in EFFECTS:
-            raise r.error(f"unknown effect kind '{kind}' (known: {', '.join(EFFECTS)}){nearest(kind, EFFECTS)}",
+            raise r.error(f"unknown effect kind '{kind}' (known: {', '.join(EFFECTS)}){did_you_mean(kind, EFFECTS)}",
                           *where, "kind")
         cls = EFFECTS[kind]
         fields = {f.name: f for f in dataclasses.fields(cls) if f.init and f.name not in ("key", "joints")}
@@ -271,14 +271,14 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
                 idx = []
                 for x in value:
                     if x not in jnames:
-                        raise r.error(f"no joint named '{x}' (joints: {', '.join(jnames)}){nearest(x, jnames)}",
+                        raise r.error(f"no joint named '{x}' (joints: {', '.join(jnames)}){did_you_mean(x, jnames)}",
                                       *where, key)
                     idx.append(jnames.index(x))
                 kwargs["joints"] = tuple(idx)
                 continue
             if key not in fields:
                 raise r.error(f"unknown key '{key}' of a '{kind}' effect (known: {', '.join(known)})"
-                              f"{nearest(key, known)}", *where, key)
+                              f"{did_you_mean(key, known)}", *where, key)
             f = fields[key]
             default = f.default if f.default is not dataclasses.MISSING else None
             kwargs[key] = _option_value(value, default, r, where + (key,))
@@ -300,7 +300,7 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
                 raise r.error("a parameter needs a 'name'", *pw)
             if name not in expected:
                 raise r.error(f"'{name}' is not a parameter of this '{kind}' effect (its parameters: "
-                              f"{', '.join(expected)}){nearest(name, expected)}", *pw, "name")
+                              f"{', '.join(expected)}){did_you_mean(name, expected)}", *pw, "name")
             if name in seen or name in values:
                 raise r.error(f"parameter '{name}' is given twice", *pw, "name")
             seen.add(name)
@@ -318,7 +318,7 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
                 if base not in ("value", "u") or suffix not in units:
                     allowed = [f"{b}_{s}" for b in ("value", "u") for s in units] + ["state"]
                     raise r.error(f"unknown key '{key}' (a '{expected[name]}' parameter takes "
-                                  f"{', '.join(allowed)}){nearest(key, allowed)}", *pw, key)
+                                  f"{', '.join(allowed)}){did_you_mean(key, allowed)}", *pw, key)
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                     raise r.error(f"'{key}' must be a finite number, got {v!r}", *pw, key)
                 if base in got:
@@ -497,7 +497,7 @@ def read_covariance(path) -> Covariance:
                              "parameter")
         unit = r[1].strip()
         if unit not in si_of:
-            raise InputError(f"unknown unit '{unit}' (known: {', '.join(si_of)}){nearest(unit, si_of)}", path, no,
+            raise InputError(f"unknown unit '{unit}' (known: {', '.join(si_of)}){did_you_mean(unit, si_of)}", path, no,
                              "unit")
         si, f = si_of[unit]
         units.append(si)
