@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError, did_you_mean, parse_toml, read_text
+from .toml_lines import key_path_text, toml_key_lines
 from .units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
 __all__ = ["JointRow", "Mimic", "Probe", "Visual", "ArmDescription", "load_description", "parse_description",
@@ -275,71 +276,6 @@ _PROBE_KEYS = {
     "roll": ("angle", False), "pitch": ("angle", False), "yaw": ("angle", False),
     "stylus_length": ("length", False),
 }
-
-
-def _split_key(text: str) -> tuple[str, ...]:
-    """``a."b.c".d`` -> ("a", "b.c", "d")."""
-    return tuple(p.strip().strip('"') for p in re.findall(r'"[^"]*"|[^.]+', text))
-
-
-def toml_key_lines(text: str) -> dict[tuple, int]:
-    """Map a key path to its 1-based line, for messages.
-
-    A path is a tuple of table names, 0-based indices of array-of-tables entries and the key, e.g.
-    ``("joint", 2, "d_mm")``, ``("effect", 0, "parameter", 3, "value_urad")``; a table or array entry
-    itself maps without a key (``("probe",)``, ``("joint", 2)``). Arrays of tables written as
-    ``[[name]]`` headers and as inline tables one a line (``name = [`` then ``{ k = v, ... },``) are
-    both followed.
-    """
-    lines: dict[tuple, int] = {}
-    counts: dict[tuple, int] = {}
-    prefix: tuple = ()
-    array: tuple | None = None          # inside "key = [" over several lines: the array's path
-    for no, raw in enumerate(text.split("\n"), start=1):
-        line = re.sub(r"#[^\"']*$", "", raw).strip()
-        if array is not None:
-            if line.startswith("]"):
-                array = None
-                continue
-            if line.startswith("{"):
-                counts[array] = counts.get(array, -1) + 1
-                item = array + (counts[array],)
-                lines[item] = no
-                for key in re.findall(r'(?:^\{|,)\s*("[^"]*"|[\w-]+)\s*=', line):
-                    lines[item + (key.strip('"'),)] = no
-            continue
-        m = re.match(r"^\[\[\s*(.+?)\s*\]\]$", line) or re.match(r"^\[\s*(.+?)\s*\]$", line)
-        if m:
-            names = _split_key(m.group(1))
-            path: tuple = ()
-            for k, name in enumerate(names):
-                path += (name,)
-                if k < len(names) - 1 and path in counts:
-                    path += (counts[path],)
-            if line.startswith("[["):
-                counts[path] = counts.get(path, -1) + 1
-                path += (counts[path],)
-            prefix = path
-            lines[prefix] = no
-            continue
-        m = re.match(r'^("[^"]*"|[\w-]+)\s*=\s*(.*)$', line)
-        if m:
-            key = m.group(1).strip('"')
-            lines[prefix + (key,)] = no
-            if m.group(2) == "[":
-                array = prefix + (key,)
-    return lines
-
-
-def key_path_text(path: tuple) -> str:
-    """``("joint", 2, "d_mm")`` -> ``joint[3].d_mm`` (1-based entries, as users count)."""
-    out = ""
-    for p in path:
-        if isinstance(p, int):
-            out += f"[{p + 1}]"
-        else:
-            out += ("." if out else "") + p
-    return out or "top level"
 
 
 class TomlReader:

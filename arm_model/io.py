@@ -19,6 +19,7 @@ from .csv_io import BLOCK_BYTES, csv_records, format_csv, iter_csv_blocks
 from .errors import InputError, parse_toml, read_text, unknown_key
 from .output import atomic_write_bytes, guard_output
 from .readback import UnreadableOutput, read_back
+from .toml_lines import toml_key_lines, top_key_line
 from .units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
 log = logging.getLogger(__name__)
@@ -382,34 +383,8 @@ class Artefacts:
         return [f for f in self.features.values() if f.kind in kinds]
 
 
-def _toml_key_line(text: str, table: str, index: int, key: str | None) -> int | None:
-    count, inside = -1, False
-    for no, raw in enumerate(text.splitlines(), start=1):
-        line = raw.split("#", 1)[0].strip()
-        if re.fullmatch(r"\[\[\s*" + re.escape(table) + r"\s*\]\]", line):
-            count += 1
-            inside = count == index
-            if inside and key is None:
-                return no
-            continue
-        if line.startswith("["):
-            inside = False
-            continue
-        if inside and key is not None and re.match(re.escape(key) + r"\s*=", line):
-            return no
-    return None
-
-
 #: the numeric keys of a feature (lengths; each with its unit suffix)
 _FEATURE_LENGTHS = ("diameter", "u_diameter", "form_error")
-
-
-def _toml_top_line(text: str, key: str) -> int | None:
-    for no, raw in enumerate(text.splitlines(), start=1):
-        line = raw.split("#", 1)[0].strip()
-        if re.match(r"^\[*\s*\"?" + re.escape(key) + r"\"?\s*(\]|=|\.)", line):
-            return no
-    return None
 
 
 def read_artefacts(path: str | Path) -> Artefacts:
@@ -421,12 +396,12 @@ def read_artefacts(path: str | Path) -> Artefacts:
     return art
 
 
-def _artefacts_error(text: str, path: str):
+def _artefacts_error(lines: dict, path: str):
     """``err(msg, table, index, key=None)``: the InputError at the line of ``[[table]]`` number ``index``
-    (and its ``key``) of the artefacts text."""
+    (and its ``key``) of the artefacts text (``lines``: its :func:`~arm_model.toml_lines.toml_key_lines`)."""
     def err(msg, table, index, key=None):
         col = f"key '{table}[{index + 1}].{key}'" if key else f"key '{table}[{index + 1}]'"
-        return InputError(msg, path, _toml_key_line(text, table, index, key), col)
+        return InputError(msg, path, lines.get((table, index, key) if key else (table, index)), col)
     return err
 
 
@@ -524,13 +499,14 @@ def parse_artefacts(text: str, path: str = "<string>", *, extra_keys: tuple = ()
     ``extra_feature_keys`` (in a ``[[feature]]``) are left to a caller whose file extends the format
     (a live session's plan); every other unknown key is an error."""
     data = parse_toml(text, path)
-    err = _artefacts_error(text, path)
+    lines = toml_key_lines(text)
+    err = _artefacts_error(lines, path)
     for key in data:
         if key not in ("feature", "distance") + tuple(extra_keys):
             raise InputError(unknown_key(key, ("feature", "distance") + tuple(extra_keys)), path,
-                             _toml_top_line(text, key), f"key '{key}'")
+                             top_key_line(lines, key), f"key '{key}'")
     if not isinstance(data.get("distance", []), list):
-        raise InputError("'distance' must be [[distance]] tables", path, _toml_top_line(text, "distance"),
+        raise InputError("'distance' must be [[distance]] tables", path, top_key_line(lines, "distance"),
                          "key 'distance'")
     feats = data.get("feature", [])
     if not isinstance(feats, list) or not feats:

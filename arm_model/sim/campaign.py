@@ -20,6 +20,7 @@ from ..errors import InputError, did_you_mean, parse_toml, read_text
 from ..units import implausible
 from ..description import ArmDescription
 from ..shipped import SHIPPED_ARMS, shipped_path
+from ..toml_lines import key_path_text, toml_key_lines
 from ..urdf_import import load_arm
 
 __all__ = ["Campaign", "Task", "load_campaign", "campaign_from_dict", "TASK_KINDS", "SENSORS",
@@ -177,43 +178,6 @@ class Campaign:
         return tuple(p for p in (self.source, self.arm_path) if p is not None)
 
 
-# ---------------------------------------------------------------------------------------------
-# line lookup for messages
-
-def _key_lines(text: str) -> dict[tuple, int]:
-    """Map (table path, key) to its 1-based line. A table path is a tuple like ("task", 2) or
-    ("truth", "thermal"); arrays of tables carry their 0-based index."""
-    lines: dict[tuple, int] = {}
-    counts: dict[tuple, int] = {}
-    table: tuple = ()
-    for no, raw in enumerate(text.splitlines(), start=1):
-        line = raw.split("#", 1)[0].strip()
-        m = re.match(r"^\[\[\s*([\w.\-\" ]+?)\s*\]\]$", line) or re.match(r"^\[\s*([\w.\-\" ]+?)\s*\]$", line)
-        if m:
-            names = tuple(p.strip().strip('"') for p in m.group(1).split("."))
-            if line.startswith("[["):
-                counts[names] = counts.get(names, -1) + 1
-                table = names[:-1] + ((names[-1], counts[names]),)
-            else:
-                table = names
-            lines[(_flat(table), "")] = no
-            continue
-        m = re.match(r'^("?[\w.\-]+"?)\s*=', line)
-        if m:
-            lines[(_flat(table), m.group(1).strip('"'))] = no
-    return lines
-
-
-def _flat(table: tuple) -> tuple:
-    out = []
-    for t in table:
-        if isinstance(t, tuple):
-            out.extend(t)
-        else:
-            out.append(t)
-    return tuple(out)
-
-
 def _harmonics(ctx, raw, desc) -> list[dict]:
     """``[[truth.harmonics]]``: joint-angle errors ``a sin(h q_of + phi)`` of ``joint`` (``of``: the joint
     whose angle drives it, the joint itself by default), harmonic h of 1..4."""
@@ -273,24 +237,18 @@ def _check_compliance_matrix(ctx, e: dict, desc, tbl, raw: dict) -> None:
 
 
 class _Ctx:
-    """Where a value came from: builds errors that name file, line and key."""
+    """Where a value came from: builds errors that name file, line and key (``lines``: the campaign
+    text's :func:`~arm_model.toml_lines.toml_key_lines`)."""
 
     def __init__(self, path: str, lines: dict | None):
         self.path = path
         self.lines = lines or {}
 
     def error(self, msg: str, table: tuple, key: str | None = None) -> InputError:
-        line = self.lines.get((table, key or ""))
+        line = self.lines.get(table + (key,)) if key else None
         if line is None:
-            line = self.lines.get((table, ""))
-        parts = []
-        for t in table:
-            if isinstance(t, int):
-                parts[-1] = f"{parts[-1]}[{t + 1}]"
-            else:
-                parts.append(str(t))
-        where = ".".join(parts + ([key] if key else []))
-        return InputError(msg, self.path, line, f"key '{where or 'top level'}'")
+            line = self.lines.get(table)
+        return InputError(msg, self.path, line, f"key '{key_path_text(table + ((key,) if key else ()))}'")
 
 
 def _number(ctx, v, table, key) -> float:
@@ -647,7 +605,7 @@ def _task(ctx, t, i: int, ids: dict[str, str], sensor: str) -> Task:
     _check_task(ctx, kind, o, tbl, sensor)
     if n_meas < 1:
         raise ctx.error("need at least one measurement", tbl, "measurements")
-    return Task(kind, tid, n_meas, o, ctx.lines.get((tbl, "")))
+    return Task(kind, tid, n_meas, o, ctx.lines.get(tbl))
 
 
 def _tasks(ctx, data: dict, sensor: str) -> list[Task]:
@@ -794,7 +752,7 @@ def load_campaign(path: str | Path) -> Campaign:
     path = Path(path)
     text = read_text(path, "the campaign file")
     data = parse_toml(text, str(path))
-    return _parse(data, str(path), _key_lines(text), path.resolve().parent)
+    return _parse(data, str(path), toml_key_lines(text), path.resolve().parent)
 
 
 def campaign_from_dict(data: dict, arm: str | Path | ArmDescription | None = None,
