@@ -279,3 +279,50 @@ def test_the_length_check_sees_a_long_function(tmp_path):
                               + "        x = 1\n" * 100 + "        return x\n")
     assert long_functions(tmp_path, ("pkg",)) == ["pkg/m.py:6 long (102 lines)"]
     assert long_functions(tmp_path, ("pkg",), limit=102) == []
+
+
+# -- shared plumbing is public -------------------------------------------------------------------------
+
+def private_imports(root=ROOT, packages=tuple(FLOORS)) -> list[str]:
+    """``path:line`` of every import, in ``packages``, of a ``_private`` module of the project or of a
+    ``_private`` name of another module (a name shared across modules is public)."""
+    paths = {_module_name(p, root): p for pkg in packages for p in sorted((root / pkg).rglob("*.py"))}
+    out = []
+    for module, path in paths.items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                names = [(a.name, None) for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = module.split(".")
+                    base = base[:len(base) - node.level + (1 if path.name == "__init__.py" else 0)]
+                    src = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    src = node.module or ""
+                names = [(src, a.name) for a in node.names]
+            else:
+                continue
+            for src, name in names:
+                if src.split(".")[0] not in packages:
+                    continue
+                private_module = any(p.startswith("_") and not p.startswith("__") for p in src.split("."))
+                private_name = name is not None and name.startswith("_") and not name.startswith("__")
+                if private_module or private_name:
+                    out.append(f"{path.relative_to(root)}:{node.lineno} imports {src}"
+                               + (f".{name}" if name else ""))
+    return out
+
+
+def test_no_private_module_or_name_is_imported_across_modules():
+    bad = private_imports()
+    assert not bad, f"private modules or names used by other modules (make them public): {bad}"
+
+
+def test_the_privacy_check_sees_private_imports(tmp_path):
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "_hidden.py").write_text("X = 1\n")
+    (pkg / "a.py").write_text("def _f():\n    pass\n")
+    (pkg / "b.py").write_text("import os\nfrom . import _hidden\nfrom .a import _f\nfrom pkg.a import __doc__\n")
+    assert private_imports(tmp_path, ("pkg",)) == ["pkg/b.py:2 imports pkg._hidden", "pkg/b.py:3 imports pkg.a._f"]
