@@ -109,6 +109,16 @@ def _module_name(path, root=ROOT) -> str:
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
+def _source(module: str, is_package: bool, node: ast.ImportFrom) -> str:
+    """The module a ``from ... import`` statement of ``module`` (a package's ``__init__`` when
+    ``is_package``) reads from, its relative dots resolved."""
+    if not node.level:
+        return node.module or ""
+    base = module.split(".")
+    base = base[:len(base) - node.level + (1 if is_package else 0)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
 def _import_targets(module: str, is_package: bool, tree: ast.AST, modules: set[str]):
     """(line, imported module) of every import statement anywhere in ``tree`` (inside functions, under
     ``if TYPE_CHECKING`` too) that lands in ``modules``. A relative import is resolved against ``module``;
@@ -124,12 +134,7 @@ def _import_targets(module: str, is_package: bool, tree: ast.AST, modules: set[s
             for a in node.names:
                 yield node.lineno, landing(a.name)
         elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = module.split(".")
-                base = base[:len(base) - node.level + (1 if is_package else 0)]
-                src = ".".join(base + ([node.module] if node.module else []))
-            else:
-                src = node.module
+            src = _source(module, is_package, node)
             for a in node.names:
                 sub = f"{src}.{a.name}"
                 yield node.lineno, sub if sub in modules else landing(src)
@@ -293,12 +298,7 @@ def private_imports(root=ROOT, packages=tuple(FLOORS)) -> list[str]:
             if isinstance(node, ast.Import):
                 names = [(a.name, None) for a in node.names]
             elif isinstance(node, ast.ImportFrom):
-                if node.level:
-                    base = module.split(".")
-                    base = base[:len(base) - node.level + (1 if path.name == "__init__.py" else 0)]
-                    src = ".".join(base + ([node.module] if node.module else []))
-                else:
-                    src = node.module or ""
+                src = _source(module, path.name == "__init__.py", node)
                 names = [(src, a.name) for a in node.names]
             else:
                 continue
