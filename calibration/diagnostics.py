@@ -120,7 +120,7 @@ def pose_folds(data: CalibrationData, k: int) -> np.ndarray:
     instance's centre (axis, plane, ``T_ref_base``) fitted on the instance's other poses. An instance whose
     training part would have fewer points than its fit needs is never held out. No seed: the folds are a
     function of the poses."""
-    from .problem import MIN_POINTS
+    from .kinds import MIN_POINTS
     from .data import pose_groups, pose_order
     if k < 2:
         raise ValueError(f"cross-validation needs at least 2 folds, got {k}")

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..log import PROGRESS, counted
 from ..output import output_folder
-from ..commands import seed
+from ..cli_options import seed
 from .campaign import load_campaign
 from .run import (ARTEFACTS_FILE, POINTS_FILE, REFERENCE_FILE, SIGNALS_DIR, TRUTH_FILE, TRUTH_POINTS_FILE,
                   simulate)
