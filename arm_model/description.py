@@ -4,9 +4,7 @@ Inside, everything is SI: lengths [m], angles [rad], forces [N], compliances [m/
 """
 from __future__ import annotations
 
-import difflib
 import math
-import re
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
@@ -15,14 +13,16 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .errors import InputError, parse_toml, read_text
+from .errors import InputError, did_you_mean, parse_toml, read_text
+from .toml_lines import key_path_text, toml_key_lines
 from .units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
 if TYPE_CHECKING:
     from .chain import Joint
 
 __all__ = ["JointRow", "Mimic", "Probe", "Visual", "ArmDescription", "load_description", "parse_description",
-           "format_description", "GRAVITY", "MIN_STYLUS", "default_lever", "DH_ROW_FIELDS", "URDF_ROW_FIELDS"]
+           "format_description", "GRAVITY", "MIN_STYLUS", "default_lever", "DH_ROW_FIELDS", "URDF_ROW_FIELDS",
+           "check_calibration_table", "MAX_PROBING_SCATTER_UM"]
 
 DH_ROW_FIELDS = ("theta_offset", "d", "a", "alpha")
 URDF_ROW_FIELDS = ("origin_x", "origin_y", "origin_z", "origin_roll", "origin_pitch", "origin_yaw")
@@ -303,71 +303,6 @@ _PROBE_KEYS = {
 }
 
 
-def _split_key(text: str) -> tuple[str, ...]:
-    """``a."b.c".d`` -> ("a", "b.c", "d")."""
-    return tuple(p.strip().strip('"') for p in re.findall(r'"[^"]*"|[^.]+', text))
-
-
-def toml_key_lines(text: str) -> dict[tuple[Any, ...], int]:
-    """Map a key path to its 1-based line, for messages.
-
-    A path is a tuple of table names, 0-based indices of array-of-tables entries and the key, e.g.
-    ``("joint", 2, "d_mm")``, ``("effect", 0, "parameter", 3, "value_urad")``; a table or array entry
-    itself maps without a key (``("probe",)``, ``("joint", 2)``). Arrays of tables written as
-    ``[[name]]`` headers and as inline tables one a line (``name = [`` then ``{ k = v, ... },``) are
-    both followed.
-    """
-    lines: dict[tuple[Any, ...], int] = {}
-    counts: dict[tuple[Any, ...], int] = {}
-    prefix: tuple[Any, ...] = ()
-    array: tuple[Any, ...] | None = None          # inside "key = [" over several lines: the array's path
-    for no, raw in enumerate(text.split("\n"), start=1):
-        line = re.sub(r"#[^\"']*$", "", raw).strip()
-        if array is not None:
-            if line.startswith("]"):
-                array = None
-                continue
-            if line.startswith("{"):
-                counts[array] = counts.get(array, -1) + 1
-                item = array + (counts[array],)
-                lines[item] = no
-                for key in re.findall(r'(?:^\{|,)\s*("[^"]*"|[\w-]+)\s*=', line):
-                    lines[item + (key.strip('"'),)] = no
-            continue
-        m = re.match(r"^\[\[\s*(.+?)\s*\]\]$", line) or re.match(r"^\[\s*(.+?)\s*\]$", line)
-        if m:
-            names = _split_key(m.group(1))
-            path: tuple[Any, ...] = ()
-            for k, name in enumerate(names):
-                path += (name,)
-                if k < len(names) - 1 and path in counts:
-                    path += (counts[path],)
-            if line.startswith("[["):
-                counts[path] = counts.get(path, -1) + 1
-                path += (counts[path],)
-            prefix = path
-            lines[prefix] = no
-            continue
-        m = re.match(r'^("[^"]*"|[\w-]+)\s*=\s*(.*)$', line)
-        if m:
-            key = m.group(1).strip('"')
-            lines[prefix + (key,)] = no
-            if m.group(2) == "[":
-                array = prefix + (key,)
-    return lines
-
-
-def key_path_text(path: tuple[Any, ...]) -> str:
-    """``("joint", 2, "d_mm")`` -> ``joint[3].d_mm`` (1-based entries, as users count)."""
-    out = ""
-    for p in path:
-        if isinstance(p, int):
-            out += f"[{p + 1}]"
-        else:
-            out += ("." if out else "") + p
-    return out or "top level"
-
-
 class TomlReader:
     """Messages naming the file, the line and the key path of a parsed TOML text."""
 
@@ -396,13 +331,13 @@ class TomlReader:
                 continue
             parts = split_unit(key)
             if parts is None:
-                near = nearest(key, [f"{b}_<unit>" for b in spec] + list(text_keys))
+                near = did_you_mean(key, [f"{b}_<unit>" for b in spec] + list(text_keys))
                 raise self.error(f"'{key}' has no known unit suffix (a numeric key carries its unit: "
                                  f"_mm, _m, _um, _deg, _rad, _N, _mm_per_N, _kg ...){near}", *where, key)
             base, unit = parts
             if base not in spec:
                 raise self.error(f"unknown key '{key}' (known: {', '.join(sorted(spec))})"
-                                 f"{nearest(base, list(spec))}", *where, key)
+                                 f"{did_you_mean(base, list(spec))}", *where, key)
             quantity = spec[base][0]
             if QUANTITY_OF_UNIT[unit] != quantity:
                 raise self.error(f"'{key}' is a {quantity}, but '_{unit}' is a unit of "
@@ -423,15 +358,35 @@ class TomlReader:
         return out
 
 
-def nearest(word: str, known: Any) -> str:
-    """`` (did you mean 'x'?)`` for the closest of ``known``, or an empty text."""
-    hit = difflib.get_close_matches(word, list(known), n=1, cutoff=0.6)
-    return f" (did you mean '{hit[0]}'?)" if hit else ""
-
-
 #: top-level keys of a description; a model file (arm_model.model_file) adds its effects and calibration tables
 DESCRIPTION_KEYS = ("name", "convention", "joint", "probe")
 MODEL_KEYS = ("effect", "calibration", "reference_frame", "marker")
+
+
+#: the largest probing scatter a model file may give [um]: 100 mm is a unit mistake, while a poor fit of a
+#: robot can estimate more than a millimetre, and every model file calibrate writes must read back
+MAX_PROBING_SCATTER_UM = 1.0e5
+
+
+def check_calibration_table(tbl: Any, r: TomlReader) -> None:
+    """The ``[calibration]`` table of a model file: text keys ``covariance`` and ``written_by``, the
+    numbers ``probing_scatter_um`` (>= 0: a calibration whose encoder and force-sensor noise alone account for
+    its residual scatter writes 0; at most :data:`MAX_PROBING_SCATTER_UM`) and ``model_discrepancy_um`` (the
+    same range)."""
+    if not isinstance(tbl, dict):
+        raise r.error("'calibration' must be a table", "calibration")
+    known = ("covariance", "written_by", "probing_scatter_um", "model_discrepancy_um")
+    for key, value in tbl.items():
+        if key not in known:
+            raise r.error(f"unknown key '{key}' (known: {', '.join(known)}){did_you_mean(key, known)}",
+                          "calibration", key)
+        if key in ("probing_scatter_um", "model_discrepancy_um"):
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                    or not 0 <= value <= MAX_PROBING_SCATTER_UM:
+                raise r.error(f"'{key}' must be a number in [0, {MAX_PROBING_SCATTER_UM:g}] um, got {value!r}",
+                              "calibration", key)
+        elif not isinstance(value, str) or not value.strip():
+            raise r.error(f"'{key}' must be a non-empty text", "calibration", key)
 
 
 def parse_description(text: str, path: str = "<string>") -> ArmDescription:
@@ -447,7 +402,6 @@ def parse_description(text: str, path: str = "<string>") -> ArmDescription:
                       "carry: give it to an --arm option (tip, ring, view, calibrate, close-loop apply them; in "
                       "Python arm_model.model_file.load_model)", "effect", 0)
     if "calibration" in data:
-        from .model_file import check_calibration_table
         check_calibration_table(data["calibration"], r)
     return description_from_data({k: v for k, v in data.items() if k not in MODEL_KEYS}, r)
 
@@ -579,7 +533,7 @@ def description_from_data(data: dict[str, Any], r: TomlReader, extra_keys: tuple
     known = DESCRIPTION_KEYS + tuple(extra_keys)
     for key in data:
         if key not in known:
-            raise r.error(f"unknown top-level key '{key}' (known: {', '.join(known)}){nearest(key, known)}", key)
+            raise r.error(f"unknown top-level key '{key}' (known: {', '.join(known)}){did_you_mean(key, known)}", key)
     name = data.get("name")
     if not isinstance(name, str) or not name.strip():
         raise r.error("missing or empty 'name'" if name is None or name == "" else

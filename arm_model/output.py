@@ -39,10 +39,10 @@ import zlib
 from pathlib import Path
 
 from .errors import InputError
-from .readback import UnreadableOutput, check_output
+from .readback import UnreadableOutput, read_back
 
 __all__ = ["output_folder", "output_file", "Output", "safe_name", "guard_output", "atomic_write_bytes",
-           "MARKER", "published_outputs"]
+           "MARKER", "published_outputs", "check_output"]
 
 log = logging.getLogger(__name__)
 
@@ -310,6 +310,15 @@ def _publish(stage: Path, final: Path, command: str) -> None:
     finally:
         for old in aside:
             shutil.rmtree(old, ignore_errors=True)
+
+
+def check_output(stage: Path, final: Path) -> None:
+    """Read back every file of a command's output before it is published: ``stage`` the temporary folder
+    (or file), ``final`` where it will be published. Raises :class:`UnreadableOutput` for the first
+    file refused (in name order)."""
+    files = [stage] if stage.is_file() else sorted(p for p in stage.rglob("*") if p.is_file() and p.name != MARKER)
+    for p in files:
+        read_back(p, final if p == stage else final / p.relative_to(stage))
 
 
 @contextlib.contextmanager

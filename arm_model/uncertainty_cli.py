@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from .commands import number_in, seed
+from .cli_options import number_in, seed
 from .uncertainty import (
     COMPLIANCE_U_RELATIVE,
     CONTRIBUTIONS,
@@ -20,7 +20,7 @@ from .uncertainty import (
 )
 
 __all__ = ["add_input_options", "inputs_from_args", "add_tip_options", "wants_uncertainty", "tip_columns",
-           "contribution_lines", "u_columns", "parameters_of"]
+           "contribution_lines", "u_columns"]
 
 
 #: the largest values the input-uncertainty options take (their plausible ranges, docs/uncertainty.md):
@@ -104,33 +104,6 @@ def contribution_lines(res) -> list[str]:
         lines.append(f"  {name:<17} {v[0] * 1e6:8.3f} {v[1] * 1e6:8.3f} {v[2] * 1e6:8.3f}   "
                      f"{res.sources.get(name, '')}")
     return lines
-
-
-def parameters_of(arm) -> ParameterCovariance | None:
-    """The parameter covariance of an :class:`~arm_model.model_file.Arm` (its model file's covariance
-    file), or None when it names none. A parameter the model does not have is an InputError."""
-    if getattr(arm, "covariance", None) is None:
-        return None
-    from .errors import InputError
-    from .model_file import read_covariance
-    cov = read_covariance(arm.covariance)
-    names = arm.model.spec.names
-    spec = arm.model.spec
-    for i, n in enumerate(cov.names):
-        line = cov.lines[i] if cov.lines else None
-        if n not in names:
-            raise InputError(f"parameter '{n}' of the covariance file is not a parameter of the model "
-                             f"(known: {', '.join(names)})", arm.covariance, line, "parameter")
-        if cov.units[i] != spec.units[spec.index(n)]:
-            raise InputError(f"parameter '{n}' is a '{spec.units[spec.index(n)]}' quantity, but its unit is one of "
-                             f"'{cov.units[i]}'", arm.covariance, line, "unit")
-    try:
-        out = ParameterCovariance(tuple(cov.names), cov.matrix, source="the model's covariance file "
-                                                                       f"{arm.covariance.name}")
-        out.factor()
-    except ValueError as exc:
-        raise InputError(f"not a usable covariance: {exc}", arm.covariance) from None
-    return out
 
 
 def u_columns(res) -> dict:

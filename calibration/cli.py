@@ -11,7 +11,7 @@ import numpy as np
 from arm_model import InputError
 from arm_model.checks import log_warnings, point_warnings
 from arm_model.cli import command_help
-from arm_model.commands import (
+from arm_model.cli_options import (
     add_arm_options,
     arm_inputs,
     at_least,
@@ -42,7 +42,8 @@ def _effects(keys):
     return tuple(out)
 
 
-def _holdout(text: str | None):
+def parse_holdout(text: str | None):
+    """``--holdout`` (of calibrate and close-loop): None, a fraction in (0, 1) or a list of measurement ids."""
     if text is None:
         return None
     try:
@@ -265,7 +266,7 @@ def mpe_options(p) -> None:
                        help=f"{t.standard} {t.name}: {t.what}")
 
 
-def _mpe(args) -> dict:
+def mpe_from_args(args) -> dict:
     """{test key: MPE [m]} of the given ``--mpe-*-um`` options."""
     from .validation import MPE_TESTS
     out = {}
@@ -346,7 +347,7 @@ def _split(args, data):
     """(training data, held-out data or None, held-out pose mask over ``data`` or None) of ``--holdout``:
     whole measurements (``--holdout-by measurement``) or a share of every feature's poses (``pose``)."""
     from .data import split_holdout, split_poses
-    holdout = _holdout(args.holdout)
+    holdout = parse_holdout(args.holdout)
     if holdout is None:
         if args.holdout_by == "pose":
             raise InputError("--holdout-by pose needs --holdout FRACTION (the share of every feature's poses)")
@@ -385,7 +386,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
         base = nominal_baseline(model, res.data, replace(res.options, weights=res.weights))
         held = (None if test is None and poses is None else
                 (res, test, base) if poses is None else (res, data, base, ~poses))
-        val_train, val_test, conf = conformance_entry(_mpe(args), (res, res.data, base), held)
+        val_train, val_test, conf = conformance_entry(mpe_from_args(args), (res, res.data, base), held)
         worse = worse_than_nominal(val_test or [])
         files = write_outputs(res, out.dir, inputs=inputs, validation_training=val_train,
                               validation_holdout=val_test, plots=not args.no_plots,

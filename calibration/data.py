@@ -363,7 +363,7 @@ def split_poses(data: CalibrationData, fraction: float, keep=None) -> np.ndarray
     one) outside the mask, so that its centre (axis, plane) can still be fitted on the rest; smaller
     instances are never held.
     """
-    from .problem import MIN_POINTS
+    from .kinds import MIN_POINTS
     if not 0.0 < fraction < 1.0:
         raise ValueError(f"the held-out share of poses must be in (0, 1), got {fraction}")
     keep = keep or {k: v[0] + 1 for k, v in MIN_POINTS.items()}

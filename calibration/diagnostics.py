@@ -121,7 +121,7 @@ def pose_folds(data: CalibrationData, k: int) -> np.ndarray:
     training part would have fewer points than its fit needs is never held out. No seed: the folds are a
     function of the poses."""
     from .data import pose_groups, pose_order
-    from .problem import MIN_POINTS
+    from .kinds import MIN_POINTS
     if k < 2:
         raise ValueError(f"cross-validation needs at least 2 folds, got {k}")
     out = np.full(len(data), -1)

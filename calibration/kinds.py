@@ -34,7 +34,7 @@ from scipy.spatial.transform import Rotation
 
 from arm_model import NumericalError, geometry
 
-__all__ = ["Kind", "KINDS", "kind_function", "distance_function", "initial_state", "retract", "centre_of",
+__all__ = ["Kind", "KINDS", "MIN_POINTS", "kind_function", "distance_function", "initial_state", "retract", "centre_of",
            "frame_state", "frame_of", "tracker_start"]
 
 
@@ -57,6 +57,12 @@ KINDS = {
     "reference": Kind("reference", 3, 6, 12),
     "marker": Kind("marker", 0, 3, 3),
 }
+
+#: fewest points an instance of each kind needs in a fit (known radius, free radius): one more than its
+#: unknowns for the one-row kinds, so that the fit has a residual (viz.placement.NEEDED_POINTS, the fewest
+#: that determine a feature for drawing, is a different, smaller count)
+MIN_POINTS = {"seat": (1, 1), "sphere": (4, 5), "ring": (5, 6), "cylinder": (5, 6), "plane": (4, 4),
+              "reference": (3, 3)}
 
 
 def n_theta(kind: str, free_radius: bool) -> int:

@@ -30,16 +30,12 @@ from arm_model.tracker import DEFAULT_SESSION, Tracker, offset_matrix
 
 from . import kinds as geo
 from .data import CalibrationData, Weights
+from .kinds import MIN_POINTS
 
-__all__ = ["Instance", "DistanceItem", "Problem", "Evaluation", "MIN_POINTS", "POINT_KINDS"]
+__all__ = ["Instance", "DistanceItem", "Problem", "Evaluation", "POINT_KINDS"]
 
 #: point kinds in row order
 POINT_KINDS = ("seat", "sphere", "ring", "cylinder", "plane", "reference")
-
-#: fewest points an instance needs (known radius, free radius)
-MIN_POINTS = {"seat": (1, 1), "sphere": (4, 5), "ring": (5, 6), "cylinder": (5, 6), "plane": (4, 4),
-              "reference": (3, 3)}
-
 
 #: a group of point rows of one kind (:meth:`Problem._point_groups`): its instances, points, rows and CasADi map
 Group = dict[str, Any]

@@ -11,7 +11,7 @@ import numpy as np
 from arm_model import InputError, NumericalError, read_artefacts, read_points
 from arm_model.checks import log_warnings
 from arm_model.cli import command_help
-from arm_model.commands import add_arm_options, arm_inputs, model_from_args, number_in
+from arm_model.cli_options import add_arm_options, arm_inputs, model_from_args, number_in
 from arm_model.io import check_features
 from arm_model.log import counted
 from arm_model.output import output_folder
@@ -81,8 +81,9 @@ def register(sub) -> None:
 def run_ring(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
+    from arm_model.model_file import parameters_of
     from arm_model.uncertainty import FORCE_SENSOR_U_N
-    from arm_model.uncertainty_cli import inputs_from_args, parameters_of
+    from arm_model.uncertainty_cli import inputs_from_args
 
     from .models import analyse_ring_campaign, campaign_summary, check_reportable, ring_uncertainties, ring_warnings
     from .report import DEFAULT_U_FORCE, ring_budgets, ring_report

@@ -231,8 +231,7 @@ def test_cone_directions_uniform_on_the_cap():
     the uniform sphere (an independent reference; two-sample KS on cos theta and on the azimuth, seeded)."""
     from scipy import stats
 
-    from arm_model.geometry import perpendicular_basis
-    from arm_model.sim.artefacts import cone_directions
+    from arm_model.geometry import cone_directions, perpendicular_basis
     rng = np.random.default_rng(7)
     axis = np.array([0.3, -0.4, 0.866])
     axis /= np.linalg.norm(axis)

@@ -15,7 +15,7 @@ import numpy as np
 from arm_model import InputError, NumericalError, check_features, read_artefacts, read_points
 from arm_model.checks import log_warnings, point_warnings
 from arm_model.cli import command_help
-from arm_model.commands import add_arm_options, arm_inputs, model_from_args, number_in, port, positive
+from arm_model.cli_options import add_arm_options, arm_inputs, model_from_args, number_in, port, positive
 from arm_model.output import output_file
 from arm_model.uncertainty_cli import add_input_options
 
@@ -246,8 +246,9 @@ def _markers(arm, sel, notes: list | None = None) -> tuple[np.ndarray, np.ndarra
 
 def _ellipsoids(arm, sel, args, view) -> None:
     """The 95 % uncertainty ellipsoids of the selection's corrected centres (arm_model.uncertainty)."""
+    from arm_model.model_file import parameters_of
     from arm_model.uncertainty import propagate
-    from arm_model.uncertainty_cli import inputs_from_args, parameters_of
+    from arm_model.uncertainty_cli import inputs_from_args
 
     from .scene import coverage_factor
     parameters = parameters_of(arm)

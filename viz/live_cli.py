@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 
 from arm_model import InputError
 from arm_model.cli import command_help
-from arm_model.commands import add_arm_options, arm_inputs, model_from_args, non_negative, number_in, port, positive
+from arm_model.cli_options import add_arm_options, arm_inputs, model_from_args, non_negative, number_in, port, positive
 
 if TYPE_CHECKING:          # only for the annotations: the live modules load when the command runs
     from arm_model.live import SampleLayout, Session

@@ -118,9 +118,8 @@ class Session:
                  contact: ContactOptions = ContactOptions(), inputs: InputUncertainty | None = None,
                  measurement: str | None = None, rate: float | None = None, layout: SampleLayout | None = None,
                  inputs_files: Iterable = (), status: dict | None = None):
-        from ..model_file import Arm, load_model
+        from ..model_file import Arm, load_model, parameters_of
         from ..uncertainty import default_inputs
-        from ..uncertainty_cli import parameters_of
         if not isinstance(arm, Arm):
             arm = Arm(arm) if hasattr(arm, "joints") else load_model(arm, None)
         self.arm, self.desc = arm, arm.desc

@@ -28,10 +28,10 @@ import numpy as np
 
 from ..chain import NUMPY_OPS, chain_point
 from ..errors import InputError
-from ..geometry import ball_centre_radius, perpendicular_basis, random_rotation
+from ..geometry import ball_centre_radius, cone_directions, perpendicular_basis, random_rotation
 from .campaign import Campaign, Task
 
-__all__ = ["Plan", "make_plan", "cone_directions", "shoulder"]
+__all__ = ["Plan", "make_plan", "shoulder"]
 
 
 #: per-point fields of a plan, in order
@@ -139,16 +139,6 @@ class Plan:
 
 # ---------------------------------------------------------------------------------------------
 # sampling helpers (frames and rotations: :mod:`arm_model.geometry`)
-
-def cone_directions(rng, axis, half_angle: float, n: int) -> np.ndarray:
-    """(n, 3) unit directions uniform on the spherical cap of ``half_angle`` [rad] about ``axis``."""
-    axis = np.asarray(axis, float)
-    e1, e2 = perpendicular_basis(axis)
-    cos_t = rng.uniform(np.cos(half_angle), 1.0, n)
-    phi = rng.uniform(0, 2 * np.pi, n)
-    sin_t = np.sqrt(np.maximum(0.0, 1 - cos_t ** 2))
-    return (cos_t[:, None] * axis + sin_t[:, None] * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2))
-
 
 def shoulder(desc) -> np.ndarray:
     """Origin [m] of the first joint frame at q = 0 (for a DH arm: the shoulder), base frame."""

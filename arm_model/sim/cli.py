@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..cli import command_help
-from ..commands import seed
+from ..cli_options import seed
 from ..log import PROGRESS, counted
 from ..output import output_folder
 from .campaign import load_campaign

@@ -27,10 +27,11 @@ import numpy as np
 
 from ..effects import Geometry
 from ..errors import NumericalError
+from ..geometry import cone_directions
 from .truth import Truth
 
 __all__ = ["IKTargets", "IKResult", "solve_ik", "solve_points", "solve_positions", "joint_limits",
-           "random_q", "wrap_into_limits", "ball_jacobian", "probe_wrench"]
+           "random_q", "wrap_into_limits", "ball_jacobian"]
 
 _L0 = 0.1        # position scale [m] of the residual
 
@@ -125,13 +126,6 @@ def _take_geom(geom: Geometry, idx, reps: int = 1) -> Geometry:
                     [t(v) for v in geom.compliance])
 
 
-def probe_wrench(force, torque, z, x) -> np.ndarray:
-    """(N, 6) wrench in the probe frame from base-frame force/torque and the probe axes."""
-    y = np.cross(z, x)
-    r = np.stack([x, y, z], axis=1)           # rows: probe axes in base -> R_probe_base
-    return np.concatenate([np.einsum("nij,nj->ni", r, force), np.einsum("nij,nj->ni", r, torque)], axis=1)
-
-
 def ball_jacobian(truth: Truth, q, temperature, wrench) -> np.ndarray:
     """(N, 3, J) d ball / d q [m/rad] of the true arm at true angles ``q`` (N, J) with a fixed
     probe-frame ``wrench`` (N, 6) (exact: :meth:`Truth.pose_jacobian`)."""
@@ -193,8 +187,6 @@ def _solve_batch(truth: Truth, q, tg: IKTargets, tol: float, max_iter: int):
 
 def _redraw(targets: IKTargets, idx, rng) -> IKTargets:
     """New stylus directions (uniform in each point's cone) for the points ``idx``."""
-    from .artefacts import cone_directions
-
     stylus, x_dir = targets.stylus.copy(), targets.x_dir.copy()
     for i in idx:
         if targets.stylus_cone[i] <= 0:

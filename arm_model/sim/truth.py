@@ -32,7 +32,7 @@ from ..errors import NumericalError
 from ..model import ArmModel, AuxData
 from ..params import apply_params, param_spec
 
-__all__ = ["Truth", "build_truth", "si_key", "POSE_EFFECTS"]
+__all__ = ["Truth", "build_truth", "si_key", "POSE_EFFECTS", "probe_wrench"]
 
 #: effects whose change of the geometry depends on the pose and the wrench (applied by :meth:`Truth.pose` at
 #: the true angles, not by :meth:`Truth.geometry`)
@@ -46,6 +46,13 @@ _SUFFIX = {"m": "m", "rad": "rad", "m/N": "m_per_N", "rad/(N m)": "rad_per_Nm", 
 def si_key(name: str, unit: str) -> str:
     """``("j2.d", "m") -> "j2.d_m"``: a parameter name with its SI unit as a key suffix."""
     return f"{name}_{_SUFFIX.get(unit, unit.replace('/', '_per_').replace(' ', ''))}"
+
+
+def probe_wrench(force, torque, z, x) -> np.ndarray:
+    """(N, 6) wrench in the probe frame from base-frame force/torque and the probe axes."""
+    y = np.cross(z, x)
+    r = np.stack([x, y, z], axis=1)           # rows: probe axes in base -> R_probe_base
+    return np.concatenate([np.einsum("nij,nj->ni", r, force), np.einsum("nij,nj->ni", r, torque)], axis=1)
 
 
 @dataclass(frozen=True)
@@ -185,8 +192,6 @@ class Truth:
         rm = np.eye(3) if rot is None else np.array(rot, dtype=float)
         z, x = r @ rm[:, 2], r @ rm[:, 0]
         if load is not None:
-            from .ik import probe_wrench
-
             wrench = probe_wrench(load[0], load[1], z, x)
         if wrench is None or not has_stylus(lever):
             qe = (0.0, 0.0, 0.0)
