@@ -56,8 +56,8 @@ def register(sub) -> None:
                    default=95.0, metavar="P",
                    help="coverage probability of the expanded uncertainties (default 95)")
     add_input_options(r, force=False)
-    r.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created; never an "
-                                                                                   "input)")
+    r.add_argument("-o", "--output", type=Path, required=True, metavar="DIR",
+                   help="output folder (created; never an input)")
     r.set_defaults(func=run_ring)
 
     p = sub.add_parser(
@@ -73,8 +73,8 @@ def register(sub) -> None:
     p.add_argument("--table2", type=Path, default=None, metavar="CSV",
                    help="a Table 2 CSV in the bundled format (default: the bundled correction/data/paper_table2.csv; "
                         "docs/ring-pipeline.md)")
-    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created; never an "
-                                                                                   "input)")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR",
+                   help="output folder (created; never an input)")
     p.set_defaults(func=run_paper)
 
 
