@@ -26,9 +26,12 @@ uses metres); angles [rad].
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from .errors import NumericalError
@@ -43,7 +46,7 @@ __all__ = ["CircleFit", "CylinderFit", "RingFit", "SphereFit", "PlaneFit", "kasa
 # ---------------------------------------------------------------------------------------------
 # frames and rotations
 
-def perpendicular_basis(u) -> tuple[np.ndarray, np.ndarray]:
+def perpendicular_basis(u: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors ``(e1, e2)`` completing the unit vector ``u`` to a right-handed orthonormal
     frame ``(e1, e2, u)``: ``e1 = u x ref / |u x ref|`` with ref = base x (base y when ``u`` is within
     26 degrees of x), ``e2 = u x e1``."""
@@ -54,7 +57,7 @@ def perpendicular_basis(u) -> tuple[np.ndarray, np.ndarray]:
     return e1, np.cross(u, e1)
 
 
-def angle_frame(a) -> tuple[np.ndarray, np.ndarray]:
+def angle_frame(a: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Reference directions for angular positions about the unit axis ``a``: the projection of base x
     (or of base y when x is nearly parallel to ``a``), then ``a x e1``."""
     a = np.asarray(a, float)
@@ -66,12 +69,13 @@ def angle_frame(a) -> tuple[np.ndarray, np.ndarray]:
     raise AssertionError("unreachable: base x and y cannot both be parallel to a unit axis")
 
 
-def rotation_xyz(w) -> np.ndarray:
+def rotation_xyz(w: ArrayLike) -> np.ndarray:
     """``Rz(w[2]) Ry(w[1]) Rx(w[0])`` (3x3): fixed-axis x-y-z angles [rad] (roll, pitch, yaw)."""
-    return Rotation.from_euler("xyz", np.asarray(w, float)).as_matrix()
+    rot: np.ndarray = Rotation.from_euler("xyz", np.asarray(w, float)).as_matrix()
+    return rot
 
 
-def rpy_from_matrix(r) -> tuple[float, float, float]:
+def rpy_from_matrix(r: ArrayLike) -> tuple[float, float, float]:
     """The angles ``(roll, pitch, yaw)`` [rad] of a rotation matrix, ``r = Rz(yaw) Ry(pitch) Rx(roll)``
     (the inverse of :func:`rotation_xyz`, URDF's ``rpy``), exact to rounding everywhere: near gimbal lock
     (pitch +-90 degrees) roll and yaw are each ill-determined but the matrix fixes their difference (or sum)
@@ -105,7 +109,7 @@ def rpy_from_matrix(r) -> tuple[float, float, float]:
     return roll, pitch, yaw
 
 
-def frame_along(v, axis: int) -> np.ndarray:
+def frame_along(v: ArrayLike, axis: int) -> np.ndarray:
     """A rotation matrix (3, 3) whose column ``axis`` (0 x, 1 y, 2 z) is along the vector ``v`` (base
     ``axis`` when ``v`` is zero); the other two columns from :func:`perpendicular_basis` (a right-handed
     frame)."""
@@ -118,24 +122,26 @@ def frame_along(v, axis: int) -> np.ndarray:
     return np.column_stack(cols)
 
 
-def random_rotation(rng) -> np.ndarray:
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
     """A (3, 3) rotation drawn uniformly: a unit quaternion ``(w, x, y, z)`` from four normal draws of
     ``rng`` (the same draws, in the same order, whatever scipy's own sampler does)."""
     qv = rng.normal(size=4)
-    return Rotation.from_quat(qv[[1, 2, 3, 0]]).as_matrix()
+    rot: np.ndarray = Rotation.from_quat(qv[[1, 2, 3, 0]]).as_matrix()
+    return rot
 
 
-def cone_directions(rng, axis, half_angle: float, n: int) -> np.ndarray:
+def cone_directions(rng: np.random.Generator, axis: ArrayLike, half_angle: float, n: int) -> np.ndarray:
     """(n, 3) unit directions uniform on the spherical cap of ``half_angle`` [rad] about ``axis``."""
     axis = np.asarray(axis, float)
     e1, e2 = perpendicular_basis(axis)
     cos_t = rng.uniform(np.cos(half_angle), 1.0, n)
     phi = rng.uniform(0, 2 * np.pi, n)
     sin_t = np.sqrt(np.maximum(0.0, 1 - cos_t ** 2))
-    return (cos_t[:, None] * axis + sin_t[:, None] * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2))
+    out: np.ndarray = cos_t[:, None] * axis + sin_t[:, None] * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2)
+    return out
 
 
-def kabsch(x_from, x_to) -> tuple[np.ndarray, np.ndarray]:
+def kabsch(x_from: ArrayLike, x_to: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Rigid ``(R, t)`` with ``x_to ~ R x_from + t`` in least squares, ``R`` a proper rotation (Kabsch,
     :meth:`scipy.spatial.transform.Rotation.align_vectors`). Fewer than three non-collinear points do
     not determine ``R``; the answer is then one of the rotations that fit."""
@@ -230,7 +236,7 @@ class CylinderFit(_RadialFit):
     nfev: int
     u_radius: float = math.nan
 
-    def to_axis(self, p) -> np.ndarray:
+    def to_axis(self, p: ArrayLike) -> np.ndarray:
         """(N, 3) unit vectors from points ``p`` (N, 3) towards the axis, perpendicular to it (Eq. 3-7 of
         the seed paper: the intersection of the plane through the point normal to the axis)."""
         d = np.asarray(p, float) - self.point
@@ -238,7 +244,8 @@ class CylinderFit(_RadialFit):
         n = np.linalg.norm(perp, axis=1)
         if np.any(n == 0):
             raise NumericalError("a point lies on the cylinder axis: no direction to the axis")
-        return -perp / n[:, None]
+        out: np.ndarray = -perp / n[:, None]
+        return out
 
 
 @dataclass(frozen=True)
@@ -278,9 +285,11 @@ class RingFit:
     reference_diameter: float | None
     centres: np.ndarray | None = None
 
-    def rows(self, rows=None) -> list[dict]:
+    def rows(self, rows: int | None = None) -> list[dict[str, float | None]]:
         """Circles per row (see :func:`fit_row_circles`), lowest first: ``height`` along the axis,
         ``diameter`` (ball compensated) and ``form_error`` [m]."""
+        if self.centres is None:
+            raise ValueError("this ring fit keeps no ball centres to split in rows")
         return [{"height": c.height, "diameter": c.diameter + self.ball_diameter, "form_error": c.form_error}
                 for c in fit_row_circles(self.centres, self.cylinder, rows)]
 
@@ -319,10 +328,11 @@ def _param_std(jac: np.ndarray, resid: np.ndarray) -> np.ndarray:
     if n <= k:
         return np.full(k, np.nan)
     s2 = float(resid @ resid) / (n - k)
-    return np.sqrt(np.maximum(np.diag(np.linalg.pinv(jac.T @ jac)), 0.0) * s2)
+    std: np.ndarray = np.sqrt(np.maximum(np.diag(np.linalg.pinv(jac.T @ jac)), 0.0) * s2)
+    return std
 
 
-def _check_status(res, what: str) -> None:
+def _check_status(res: Any, what: str) -> None:
     if not res.success or res.status <= 0:
         raise NumericalError(f"{what}: the least-squares solver did not converge "
                              f"(status {res.status}: {res.message})")
@@ -351,7 +361,10 @@ def _normalised(p: np.ndarray, what: str) -> tuple[np.ndarray, float, np.ndarray
     return o, scale, (p - o) / scale
 
 
-def _solve(fun, jac, x0, what: str, names: tuple[str, ...], **kw):
+Fn = Callable[[np.ndarray], np.ndarray]
+
+
+def _solve(fun: Fn, jac: Fn, x0: ArrayLike, what: str, names: tuple[str, ...], **kw: Any) -> tuple[Any, np.ndarray]:
     """Levenberg-Marquardt to tight tolerances, its status and the rank of its Jacobian checked:
     ``(result, standard uncertainties of the parameters)``."""
     from scipy.optimize import least_squares  # here: a command that fits nothing starts faster
@@ -362,7 +375,7 @@ def _solve(fun, jac, x0, what: str, names: tuple[str, ...], **kw):
     return res, _param_std(jac_x, res.fun)
 
 
-def fit_circle_2d(xy) -> CircleFit:
+def fit_circle_2d(xy: ArrayLike) -> CircleFit:
     """Geometric least-squares circle through 2-D points (N >= 3), Kasa seed then Levenberg-Marquardt.
 
     Args:
@@ -374,11 +387,12 @@ def fit_circle_2d(xy) -> CircleFit:
     o, s, z = _normalised(xy, "circle")
     c0, r0 = kasa_circle(z)
 
-    def fun(x):
+    def fun(x: np.ndarray) -> np.ndarray:
         d = z - x[:2]
-        return np.hypot(d[:, 0], d[:, 1]) - x[2]
+        r: np.ndarray = np.hypot(d[:, 0], d[:, 1]) - x[2]
+        return r
 
-    def jac(x):
+    def jac(x: np.ndarray) -> np.ndarray:
         d = z - x[:2]
         rho = np.hypot(d[:, 0], d[:, 1])
         return np.column_stack([-d / rho[:, None], -np.ones(len(z))])
@@ -388,7 +402,7 @@ def fit_circle_2d(xy) -> CircleFit:
     return CircleFit(centre=centre, radius=float(s * res.x[2]), residuals=s * fun(res.x), u_radius=float(s * u[2]))
 
 
-def fit_cylinder(points, axis_hint=None) -> CylinderFit:
+def fit_cylinder(points: ArrayLike, axis_hint: ArrayLike | None = None) -> CylinderFit:
     """Orthogonal-distance least-squares cylinder through points (N >= 5).
 
     Args:
@@ -430,9 +444,9 @@ def fit_cylinder(points, axis_hint=None) -> CylinderFit:
     _, a0, e1, e2, c2, r0 = best
     c0 = c2[0] * e1 + c2[1] * e2
 
-    def geometry(x):
+    def geometry(x: np.ndarray) -> tuple[np.ndarray, float, np.ndarray, np.ndarray, np.ndarray]:
         w = a0 + x[2] * e1 + x[3] * e2
-        nw = np.linalg.norm(w)
+        nw = float(np.linalg.norm(w))
         a = w / nw
         c = c0 + x[0] * e1 + x[1] * e2
         d = z - c
@@ -441,10 +455,11 @@ def fit_cylinder(points, axis_hint=None) -> CylinderFit:
         rho = np.linalg.norm(perp, axis=1)
         return a, nw, t, perp, rho
 
-    def fun(x):
-        return geometry(x)[4] - x[4]
+    def fun(x: np.ndarray) -> np.ndarray:
+        r: np.ndarray = geometry(x)[4] - x[4]
+        return r
 
-    def jac(x):
+    def jac(x: np.ndarray) -> np.ndarray:
         a, nw, t, perp, rho = geometry(x)
         if np.any(rho == 0):
             raise NumericalError("cylinder fit: a point lies on the current axis estimate")
@@ -471,7 +486,7 @@ def fit_cylinder(points, axis_hint=None) -> CylinderFit:
                        nfev=int(res.nfev), u_radius=float(scale * u[4]))
 
 
-def split_rows(heights, rows: int | None = None) -> np.ndarray:
+def split_rows(heights: ArrayLike, rows: int | None = None) -> np.ndarray:
     """Row label (0 = lowest) of each point from its height along the axis.
 
     Args:
@@ -509,7 +524,7 @@ def split_rows(heights, rows: int | None = None) -> np.ndarray:
     return out
 
 
-def fit_row_circles(points, cylinder: CylinderFit, rows=None) -> list[CircleFit]:
+def fit_row_circles(points: ArrayLike, cylinder: CylinderFit, rows: int | None = None) -> list[CircleFit]:
     """Circles per row: the points of each row projected on the plane normal to the cylinder axis, a
     geometric circle fitted there (as arm software reports circles of a cylinder's sections).
 
@@ -540,8 +555,8 @@ def fit_row_circles(points, cylinder: CylinderFit, rows=None) -> list[CircleFit]
     return out
 
 
-def ring_fit(ball_centres, ball_diameter: float, reference_diameter: float | None = None,
-             axis_hint=None) -> RingFit:
+def ring_fit(ball_centres: ArrayLike, ball_diameter: float, reference_diameter: float | None = None,
+             axis_hint: ArrayLike | None = None) -> RingFit:
     """Fit an inner ring measured from inside with ball centres (the centres lie on a cylinder of
     diameter D - ball diameter, :func:`ball_centre_radius`).
 
@@ -560,7 +575,7 @@ def ring_fit(ball_centres, ball_diameter: float, reference_diameter: float | Non
                    centres=np.asarray(ball_centres, float))
 
 
-def fit_ring_axis(points) -> tuple[np.ndarray, np.ndarray, float]:
+def fit_ring_axis(points: ArrayLike) -> tuple[np.ndarray, np.ndarray, float]:
     """(point on the axis [m], unit axis, radius [m]) of ball centres on a ring or cylinder: the
     cylinder fit, or, when the points lie in one plane (one row: the tilt of the axis is not
     determined) or do not determine a cylinder, the plane's normal and the circle fitted in it.
@@ -617,8 +632,8 @@ class PlaneFit:
         return float(self.residuals.max() - self.residuals.min())
 
 
-def _points(p, need: int, what: str) -> np.ndarray:
-    p = np.asarray(p, dtype=float)
+def _points(points: ArrayLike, need: int, what: str) -> np.ndarray:
+    p = np.asarray(points, dtype=float)
     if p.ndim != 2 or p.shape[1] != 3:
         raise ValueError(f"points must have shape (N, 3), got {p.shape}")
     if len(p) < need:
@@ -626,7 +641,7 @@ def _points(p, need: int, what: str) -> np.ndarray:
     return p
 
 
-def fit_plane(points) -> PlaneFit:
+def fit_plane(points: ArrayLike) -> PlaneFit:
     """Least-squares (orthogonal) plane through >= 3 non-collinear points."""
     p = _points(points, 3, "plane")
     c = p.mean(axis=0)
@@ -636,7 +651,7 @@ def fit_plane(points) -> PlaneFit:
     return PlaneFit(point=c, normal=vt[2], residuals=(p - c) @ vt[2])
 
 
-def sphere_seed(points) -> tuple[np.ndarray, float]:
+def sphere_seed(points: ArrayLike) -> tuple[np.ndarray, float]:
     """Algebraic sphere (linear least squares of ``|x|^2 = 2 c.x + k``): (centre, radius) [m].
 
     Raises:
@@ -653,7 +668,7 @@ def sphere_seed(points) -> tuple[np.ndarray, float]:
     return o + c, float(np.sqrt(max(sol[3] + c @ c, 0.0)))
 
 
-def fit_sphere(points, radius: float | None = None, centre=None) -> SphereFit:
+def fit_sphere(points: ArrayLike, radius: float | None = None, centre: ArrayLike | None = None) -> SphereFit:
     """Geometric least-squares sphere through points, from the algebraic seed (:func:`sphere_seed`).
 
     Args:
@@ -674,11 +689,13 @@ def fit_sphere(points, radius: float | None = None, centre=None) -> SphereFit:
     scale = float(np.sqrt(((p - c0) ** 2).sum(axis=1).mean())) or 1.0
     z = (p - c0) / scale
     known = radius is not None
+    r_known = radius / scale if radius is not None else math.nan
 
-    def fun(x):
-        return np.linalg.norm(z - x[:3], axis=1) - (radius / scale if known else x[3])
+    def fun(x: np.ndarray) -> np.ndarray:
+        r: np.ndarray = np.linalg.norm(z - x[:3], axis=1) - (r_known if known else x[3])
+        return r
 
-    def jac(x):
+    def jac(x: np.ndarray) -> np.ndarray:
         d = z - x[:3]
         n = d / np.linalg.norm(d, axis=1)[:, None]
         return -n if known else np.column_stack([-n, -np.ones(len(z))])
@@ -686,12 +703,12 @@ def fit_sphere(points, radius: float | None = None, centre=None) -> SphereFit:
     x0 = np.zeros(3) if known else np.r_[np.zeros(3), r0 / scale]
     res, u = _solve(fun, jac, x0, "sphere fit", ("centre x", "centre y", "centre z", "radius")[: len(x0)])
     u = scale * u
-    r = float(radius) if known else float(scale * res.x[3])
+    r = float(radius) if radius is not None else float(scale * res.x[3])
     return SphereFit(centre=c0 + scale * res.x[:3], radius=r, residuals=scale * res.fun, u_centre=u[:3],
                      u_radius=0.0 if known else float(u[3]))
 
 
-def smallest_enclosing_sphere(points) -> tuple[np.ndarray, float]:
+def smallest_enclosing_sphere(points: ArrayLike) -> tuple[np.ndarray, float]:
     """Centre (3,) and radius of the smallest sphere enclosing ``points`` (N, 3) (Welzl's algorithm, the
     points visited in a fixed order: deterministic; exact up to rounding)."""
     x = np.asarray(points, float)
@@ -699,7 +716,7 @@ def smallest_enclosing_sphere(points) -> tuple[np.ndarray, float]:
     scale = float(np.max(np.linalg.norm(x - mean, axis=1))) or 1.0
     y = (x - mean) / scale                          # centred and scaled: no cancellation
 
-    def ball(r):
+    def ball(r: list[np.ndarray]) -> tuple[np.ndarray, float]:
         if not r:
             return np.zeros(3), -1.0
         p0 = r[0]
@@ -712,7 +729,7 @@ def smallest_enclosing_sphere(points) -> tuple[np.ndarray, float]:
         c = p0 + a.T @ lam
         return c, float(np.linalg.norm(c - p0))
 
-    def welzl(n, r):
+    def welzl(n: int, r: list[np.ndarray]) -> tuple[np.ndarray, float]:
         if n == 0 or len(r) == 4:
             return ball(r)
         c, rad = welzl(n - 1, r)

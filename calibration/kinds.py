@@ -168,6 +168,8 @@ def initial_state(kind: str, x: np.ndarray, radius: float | None = None, x_ref: 
         e1, e2 = geometry.perpendicular_basis(n0)
         return np.concatenate([n0, e1, e2, [h]])
     if kind == "reference":
+        if x_ref is None:
+            raise ValueError("a reference instance starts from its reference coordinates x_ref")
         rot, t = geometry.kabsch(x, x_ref)
         return frame_state(_transform(rot, t))
     raise ValueError(f"unknown residual kind {kind!r}")
