@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 OUT    ?= out
 
-.PHONY: install demo test bench browser urdf clean
+.PHONY: install demo test test-slow bench browser urdf clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -21,8 +21,12 @@ browser:
 demo: $(STAMP)
 	$(PY) -m arm_model.demo --out $(OUT)/demo
 
+# the suite without the long studies (-m "not slow", about 3 min on 2 cores); test-slow: the rest (.ci/run runs both)
 test: $(STAMP) browser
-	$(PY) -m pytest -n 2 -q tests
+	$(PY) -m pytest -n 2 --dist worksteal -q -m "not slow" tests
+
+test-slow: $(STAMP) browser
+	$(PY) -m pytest -n 2 --dist worksteal -q -m slow tests
 
 bench: $(STAMP)
 	$(PY) -m benchmarks.run $(BENCH)

@@ -475,7 +475,7 @@ def _fixed_chars(v: np.ndarray, decimals: int) -> np.ndarray | None:
     value, more than 15 digits, many values within an ulp of a half)."""
     v = np.asarray(v, dtype=float)
     n = len(v)
-    if not np.all(np.isfinite(v)) or (n and np.max(np.abs(v)) * 10.0 ** decimals > 9e15):
+    if not np.all(np.isfinite(v)) or (n and np.max(np.abs(v)) > 9e15 / 10.0 ** decimals):
         return None
     scale = 10 ** decimals
     prod = np.abs(v) * scale
