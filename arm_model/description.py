@@ -5,7 +5,6 @@ Inside, everything is SI: lengths [m], angles [rad], forces [N], compliances [m/
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path

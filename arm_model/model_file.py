@@ -39,7 +39,7 @@ import numpy as np
 
 from .errors import InputError, did_you_mean, parse_toml, read_text
 from .units import implausible
-from .description import (MAX_PROBING_SCATTER_UM, MODEL_KEYS, ArmDescription, TomlReader, check_calibration_table,
+from .description import (MODEL_KEYS, ArmDescription, TomlReader, check_calibration_table,
                           description_data, description_from_data, in_unit, toml_text)
 from .effects import EFFECTS, Effect
 from .model import ArmModel, AuxData
