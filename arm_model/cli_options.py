@@ -11,8 +11,8 @@ from pathlib import Path
 from .errors import InputError
 from .model_file import Arm, load_model
 
-__all__ = ["add_arm_options", "add_frame_options", "arm_from_args", "arm_inputs", "model_from_args", "number_in", "positive",
-           "non_negative", "at_least", "fraction", "finite", "seed", "port"]
+__all__ = ["add_arm_options", "add_frame_options", "arm_from_args", "arm_inputs", "model_from_args", "number_in",
+           "positive", "non_negative", "at_least", "fraction", "finite", "seed", "port"]
 
 log = logging.getLogger(__name__)
 

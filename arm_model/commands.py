@@ -5,18 +5,18 @@ import argparse
 import logging
 import os
 import shutil
-from .cli import command_help
 from pathlib import Path
 
 import numpy as np
 
+from .checks import JointLimitTally, log_warnings
+from .cli import command_help
+from .cli_options import add_arm_options, add_frame_options, arm_inputs, model_from_args
 from .csv_io import format_csv
 from .errors import InputError
-from .output import output_file
-from .checks import JointLimitTally, log_warnings
-from .cli_options import add_arm_options, add_frame_options, arm_inputs, model_from_args
 from .io import concat_points, iter_points
 from .model_file import Arm
+from .output import output_file
 from .urdf import urdf_text
 
 __all__ = ["register", "tip_table", "tip_centres"]
@@ -154,7 +154,7 @@ class _TipTally:
         self.flagged_count += int(cols["over_force"].sum())
         self.limits.add(block.q, block.lines)
 
-    def merge(self, other: "_TipTally") -> None:
+    def merge(self, other: _TipTally) -> None:
         self.n += other.n
         self.measurements.update(other.measurements)
         self.kinds |= other.kinds

@@ -34,10 +34,10 @@ from scipy.spatial.transform import Rotation
 from .errors import NumericalError
 
 __all__ = ["CircleFit", "CylinderFit", "RingFit", "SphereFit", "PlaneFit", "kasa_circle", "fit_circle_2d",
-           "fit_cylinder", "fit_row_circles", "split_rows", "ring_fit", "fit_ring_axis", "fit_sphere",
-           "fit_plane", "smallest_enclosing_sphere", "ball_centre_radius", "feature_diameter",
-           "perpendicular_basis", "angle_frame", "rotation_xyz", "rpy_from_matrix", "frame_along", "random_rotation", "kabsch", "sphere_seed",
-           "cone_directions"]
+           "fit_cylinder", "fit_row_circles", "split_rows", "ring_fit", "fit_ring_axis", "fit_sphere", "fit_plane",
+           "smallest_enclosing_sphere", "ball_centre_radius", "feature_diameter", "perpendicular_basis",
+           "angle_frame", "rotation_xyz", "rpy_from_matrix", "frame_along", "random_rotation", "kabsch",
+           "sphere_seed", "cone_directions"]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -113,7 +113,7 @@ def frame_along(v, axis: int) -> np.ndarray:
     n = np.linalg.norm(v)
     u = np.eye(3)[axis] if n < 1e-15 else v / n
     e1, e2 = perpendicular_basis(u)
-    cols = [None, None, None]
+    cols: list[np.ndarray] = [u, u, u]
     cols[axis], cols[(axis + 1) % 3], cols[(axis + 2) % 3] = u, e1, e2
     return np.column_stack(cols)
 
@@ -188,6 +188,8 @@ _RANK_TOL = 1e-9
 
 class _RadialFit:
     """Diameter and form error of a fit with ``radius`` and radial ``residuals`` [m]."""
+    radius: float
+    residuals: np.ndarray
 
     @property
     def diameter(self) -> float:
@@ -352,7 +354,7 @@ def _normalised(p: np.ndarray, what: str) -> tuple[np.ndarray, float, np.ndarray
 def _solve(fun, jac, x0, what: str, names: tuple[str, ...], **kw):
     """Levenberg-Marquardt to tight tolerances, its status and the rank of its Jacobian checked:
     ``(result, standard uncertainties of the parameters)``."""
-    from scipy.optimize import least_squares          # here: a command that fits nothing starts faster
+    from scipy.optimize import least_squares  # here: a command that fits nothing starts faster
     res = least_squares(fun, x0, jac=jac, method="lm", xtol=1e-14, ftol=1e-14, gtol=1e-14, **kw)
     _check_status(res, what)
     jac_x = jac(res.x)

@@ -102,7 +102,7 @@ class PointSet:
         """Measurement ids in order of first appearance."""
         return list(dict.fromkeys(self.measurement.tolist()))
 
-    def select(self, mask) -> "PointSet":
+    def select(self, mask) -> PointSet:
         """The rows where ``mask`` (bool array or index array) holds, file order kept."""
         def take(a):
             return None if a is None else a[mask]
@@ -190,18 +190,19 @@ def _points_layout(header: list[str], line: int, path: str, joints) -> _PointsLa
         cols[base] = (k, unit)
     idx = sorted(int(b[1:]) for b in cols if b.startswith("q") and b[1:].isdigit())
     if not idx:
-        raise InputError("no joint columns (q1_deg ... or q1_rad ...; a prismatic joint's q<i>_mm or q<i>_m)", path, line)
+        raise InputError("no joint columns (q1_deg ... or q1_rad ...; a prismatic joint's q<i>_mm or q<i>_m)",
+                         path, line)
     if idx != list(range(1, len(idx) + 1)):
         missing = sorted(set(range(1, max(idx) + 1)) - set(idx))
         raise InputError(f"joint columns are not q1..q{max(idx)}: missing "
-                         f"{', '.join('q%d' % i for i in missing)}", path, line)
+                         f"{', '.join(f'q{i}' for i in missing)}", path, line)
     if n_joints is not None and len(idx) != n_joints:
         raise InputError(f"{len(idx)} joint columns, but the arm has {n_joints} joints", path, line,
                          header[cols[f"q{idx[-1]}"][0]])
     for group in _GROUPS:
         present = [b for b in group if b in cols]
         if present and len(present) != len(group):
-            missing = [b for b in group if b not in cols]
+            missing = [b for b in group if b not in cols]  # type: ignore[misc]
             raise InputError(f"columns {', '.join(missing)} missing beside {', '.join(present)}", path, line,
                              header[cols[present[0]][0]])
     if "fx" in cols and "f_bend" in cols:
@@ -261,7 +262,7 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
         return values
 
     def group(bases) -> np.ndarray | None:
-        return None if bases[0] not in lay.cols else np.column_stack([col(b) for b in bases])
+        return None if bases[0] not in lay.cols else np.column_stack([col(b) for b in bases])  # type: ignore[misc]
 
     measurement = blk.texts[:, 0]
     empty = np.flatnonzero(measurement == "")
@@ -278,8 +279,8 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
         force_kind = "xyz"
     elif "f_bend" in lay.cols:
         force_kind = "two-channel"
-        force = np.column_stack([col("f_bend"), np.zeros(len(q)), col("f_axial")])
-    ref = np.stack([group(m) for m in lay.markers], axis=1) if lay.markers else None
+        force = np.column_stack([col("f_bend"), np.zeros(len(q)), col("f_axial")])  # type: ignore[list-item]
+    ref = np.stack([group(m) for m in lay.markers], axis=1) if lay.markers else None  # type: ignore[misc]
     session = blk.texts[:, 2] if blk.texts.shape[1] > 2 else None
     if session is not None and (empty := np.flatnonzero(session == "")).size:
         raise InputError("empty session id (a session column names the session of every row)", path,

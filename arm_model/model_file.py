@@ -37,14 +37,22 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, did_you_mean, parse_toml, read_text
-from .units import implausible
-from .description import (MODEL_KEYS, ArmDescription, TomlReader, check_calibration_table,
-                          description_data, description_from_data, in_unit, toml_text)
+from .description import (
+    MODEL_KEYS,
+    ArmDescription,
+    TomlReader,
+    check_calibration_table,
+    description_data,
+    description_from_data,
+    in_unit,
+    toml_text,
+)
 from .effects import EFFECTS, Effect
+from .errors import InputError, did_you_mean, parse_toml, read_text
 from .model import ArmModel, AuxData
 from .tracker import Tracker, tracker_from_tables, tracker_tables
 from .uncertainty import ParameterCovariance
+from .units import implausible
 
 __all__ = ["Arm", "PARAM_UNITS", "parse_model", "load_model", "format_model", "effect_tables",
            "effects_from_tables", "write_covariance", "read_covariance", "Covariance", "EFFECT_COLUMNS",
@@ -328,7 +336,8 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
                 if wrong:
                     raise r.error(f"'{key}': {wrong[1]}", *pw, key)
             if "value" not in got:
-                raise r.error(f"parameter '{name}' has no 'value_<unit>' (e.g. value_{PARAM_UNITS[expected[name]][0][0]})",
+                raise r.error(f"parameter '{name}' has no 'value_<unit>' (e.g. "
+                              f"value_{PARAM_UNITS[expected[name]][0][0]})",
                               *pw)
             if got.get("u", 0.0) < 0:
                 raise r.error("a standard uncertainty must not be negative", *pw)
@@ -399,7 +408,8 @@ def format_model(desc: ArmDescription, effects=(), values: dict | None = None, u
     data = description_data(desc)
     if effects:
         data["effect"] = effect_tables(desc, effects, values or {}, uncertainties, states)
-    scatter, discrepancy = (None if v is None else float(f"{v * 1e6:.4g}") for v in (probing_scatter, model_discrepancy))
+    scatter, discrepancy = (None if v is None else float(f"{v * 1e6:.4g}")
+                            for v in (probing_scatter, model_discrepancy))
     cal = {k: v for k, v in (("covariance", covariance), ("written_by", written_by), ("probing_scatter_um", scatter),
                              ("model_discrepancy_um", discrepancy)) if v not in (None, "")}     # a 0 is kept
     if cal:
@@ -524,8 +534,8 @@ def read_covariance(path) -> Covariance:
     asym = np.argwhere(np.abs(corr - corr.T) > CORRELATION_TOLERANCE)
     if len(asym):
         i, k = (int(x) for x in asym[0])
-        raise InputError(f"the correlations are not symmetric: {float(corr[i, k])!r} here, {float(corr[k, i])!r} in row "
-                         f"'{names[k]}' (line {rows[k][0]}), column '{names[i]}'", path, rows[i][0], names[k])
+        raise InputError(f"the correlations are not symmetric: {float(corr[i, k])!r} here, {float(corr[k, i])!r} in "
+                         f"row '{names[k]}' (line {rows[k][0]}), column '{names[i]}'", path, rows[i][0], names[k])
     return Covariance(names, tuple(units), values, u, corr, tuple(no for no, _ in rows))
 
 
@@ -546,7 +556,8 @@ def parameters_of(arm) -> ParameterCovariance | None:
             raise InputError(f"parameter '{n}' is a '{spec.units[spec.index(n)]}' quantity, but its unit is one of "
                              f"'{cov.units[i]}'", arm.covariance, line, "unit")
     try:
-        out = ParameterCovariance(tuple(cov.names), cov.matrix, source=f"the model's covariance file {arm.covariance.name}")
+        out = ParameterCovariance(tuple(cov.names), cov.matrix,
+                                  source=f"the model's covariance file {arm.covariance.name}")
         out.factor()
     except ValueError as exc:
         raise InputError(f"not a usable covariance: {exc}", arm.covariance) from None

@@ -79,9 +79,9 @@ def _is_plan(data: dict) -> bool:
 
 
 KINDS: tuple[Kind, ...] = (
-    Kind("model file", ".toml", lambda data: "convention" in data, "arm_model.model_file:read_model_file"),
+    Kind("model file", ".toml", lambda data: "convention" in data, "arm_model.model_file:read_model_file"),  # type: ignore[operator]
     Kind("session plan", ".toml", _is_plan, "arm_model.live.plan:read_plan"),
-    Kind("artefacts file", ".toml", lambda data: "feature" in data or "distance" in data,
+    Kind("artefacts file", ".toml", lambda data: "feature" in data or "distance" in data,  # type: ignore[operator]
          "arm_model.io:read_artefacts"),
     Kind("covariance file", ".csv", lambda line: _header(line)[:4] == ["parameter", "unit", "value", "u"],
          "arm_model.model_file:read_covariance"),

@@ -7,10 +7,17 @@ import math
 import numpy as np
 
 from .cli_options import number_in, seed
-
-from .uncertainty import (COMPLIANCE_U_RELATIVE, CONTRIBUTIONS, InputUncertainty, ParameterCovariance,
-                          covariance_columns, default_inputs, directional_ratio, monte_carlo,
-                          propagate)
+from .uncertainty import (
+    COMPLIANCE_U_RELATIVE,
+    CONTRIBUTIONS,
+    InputUncertainty,
+    ParameterCovariance,
+    covariance_columns,
+    default_inputs,
+    directional_ratio,
+    monte_carlo,
+    propagate,
+)
 
 __all__ = ["add_input_options", "inputs_from_args", "add_tip_options", "wants_uncertainty", "tip_columns",
            "contribution_lines", "u_columns"]
@@ -31,7 +38,8 @@ def add_input_options(p, force: bool = True) -> None:
                    help="encoder resolution of every joint [deg] (u = R / sqrt(12)); default: each joint's "
                         "encoder_resolution of the description, 0 where not given")
     if force:
-        g.add_argument("--u-force-N", type=number_in(0, MAX_U_FORCE_N), nargs=2, default=None, metavar=("BENDING", "AXIAL"),
+        g.add_argument("--u-force-N", type=number_in(0, MAX_U_FORCE_N), nargs=2, default=None,
+                       metavar=("BENDING", "AXIAL"),
                        help="standard uncertainty of the force [N] across (probe x, y) and along (z) the stylus; "
                             "default 0.0723 0.0464 (the seed paper's Table 1)")
     g.add_argument("--u-compliance-rel", type=number_in(0, MAX_U_COMPLIANCE_REL), default=None, metavar="R",
@@ -72,7 +80,8 @@ def add_tip_options(p) -> None:
                    help="write u_x_mm, u_y_mm, u_z_mm even when the model carries no parameter covariance "
                         "(the parameters are then taken as exact); with a covariance they are always written")
     g.add_argument("--covariance", action="store_true",
-                   help="also write the six terms of each point's 3x3 covariance [um^2] (cov_xx_um2, cov_yy_um2, cov_zz_um2, cov_xy_um2, cov_xz_um2, cov_yz_um2)")
+                   help="also write the six terms of each point's 3x3 covariance [um^2] (cov_xx_um2, cov_yy_um2, "
+                        "cov_zz_um2, cov_xy_um2, cov_xz_um2, cov_yz_um2)")
     g.add_argument("--mc", type=number_in(2, MAX_MC, kind=int), default=None, metavar="N",
                    help="also a Monte Carlo of N samples of the same inputs: columns u_x_mc_mm ... (with "
                         "--covariance also cov_xx_mc_um2 ...) and the largest relative difference to the linear "

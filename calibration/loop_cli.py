@@ -4,16 +4,25 @@ from __future__ import annotations
 import argparse
 import logging
 
-from arm_model.cli import command_help
 from arm_model import InputError
+from arm_model.checks import log_warnings, point_warnings
+from arm_model.cli import command_help
 from arm_model.cli_options import arm_inputs, at_least, model_from_args, number_in, seed
-from arm_model.output import output_folder
-from arm_model.checks import point_warnings, log_warnings
 from arm_model.io import read_artefacts, read_points
 from arm_model.model_file import Arm
+from arm_model.output import output_folder
 
-from .cli import campaign_inputs, conformance_entry, log_conformance, model_effects, model_options, mpe_from_args, \
-    mpe_options, parse_holdout, sigma_options
+from .cli import (
+    campaign_inputs,
+    conformance_entry,
+    log_conformance,
+    model_effects,
+    model_options,
+    mpe_from_args,
+    mpe_options,
+    parse_holdout,
+    sigma_options,
+)
 
 __all__ = ["register", "run"]
 

@@ -1,6 +1,6 @@
-"""Outputs of the closed loop: the model file (description, effects, covariance, URDF), ``summary.json`` (for machines), ``report.html`` with PNG plots (for
-people) and the before/after table printed by ``aacmm close-loop``. Every file is written atomically
-and refused if it would overwrite an input."""
+"""Outputs of the closed loop: the model file (description, effects, covariance, URDF), ``summary.json`` (for machines),
+``report.html`` with PNG plots (for people) and the before/after table printed by ``aacmm close-loop``. Every file is
+written atomically and refused if it would overwrite an input."""
 from __future__ import annotations
 
 import html
@@ -19,8 +19,8 @@ from .model_output import model_check, model_paths, write_model
 from .report import conformance_html, conformance_pngs, write_conformance_pngs
 from .validation import with_u
 
-__all__ = ["summary_dict", "before_after_text", "write_loop_report", "write_loop_model", "loop_model_name", "plot_signature", "plot_screening",
-           "plot_before_after"]
+__all__ = ["summary_dict", "before_after_text", "write_loop_report", "write_loop_model", "loop_model_name",
+           "plot_signature", "plot_screening", "plot_before_after"]
 
 #: columns of the before/after table: key, header, unit
 TABLE = (("rms_um", "RMS", "um"), ("max_um", "max", "um"), ("length_error_max", "length max", "um"),
@@ -63,7 +63,8 @@ def _stage_dict(s: Stage) -> dict:
            "heldout_test": s.heldout}
     if s.added is not None:
         out["added"] = {"name": s.added.name, "family": s.added.family, "joint": s.added.joint,
-                        "origin": s.added.origin, "effect": s.added.effect.describe(), "parameters": effect_summary(r, s.added),
+                        "origin": s.added.origin, "effect": s.added.effect.describe(),
+                        "parameters": effect_summary(r, s.added),
                         "indistinguishable_nested": s.nested, "indistinguishable_alternatives": s.alternatives}
         out["screening"] = [t.to_dict() for t in s.screening]
         out["cross_validation"] = [c.to_dict() for c in s.cv]
@@ -319,13 +320,16 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
             parts.append("<p>The data cannot tell it from: "
                          + html.escape(", ".join(dict.fromkeys(s.nested + s.alternatives)))
                          + " (same residual signature).</p>")
-        parts.append("<h3>Screening at the previous fit</h3>" + reports.html_table(_SCREEN_HEAD, _screening_rows(s.screening)))
+        parts.append("<h3>Screening at the previous fit</h3>"
+                     + reports.html_table(_SCREEN_HEAD, _screening_rows(s.screening)))
         img = png(f"stage-{s.index}-screening.png", plot_screening(s.screening, f"stage {s.index}: screening", gate))
         parts.append(f"<img src='{img}'>")
-        parts.append("<h3>Cross-validation (held-out folds of the design set)</h3>" + reports.html_table(_CV_HEAD, _cv_rows(s.cv)))
+        parts.append("<h3>Cross-validation (held-out folds of the design set)</h3>"
+                     + reports.html_table(_CV_HEAD, _cv_rows(s.cv)))
         if s.plot_before is not None:
             img = png(f"stage-{s.index}-signature.png",
-                      plot_signature(s.plot_before, s.plot_after, f"{s.plot_family}: before and after + {s.added.name}"))
+                      plot_signature(s.plot_before, s.plot_after,
+                                     f"{s.plot_family}: before and after + {s.added.name}"))
             parts.append(f"<h3>The residual that led to it</h3><img src='{img}'>")
         sections.append("".join(parts))
     parts = ["<h2>Final screening</h2>"]

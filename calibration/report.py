@@ -4,7 +4,6 @@ atomically and refused if it would overwrite an input."""
 from __future__ import annotations
 
 import html
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -142,7 +141,8 @@ def conformance_lines(conf: dict) -> list[str]:
                 out.append(f"  {r['standard']} {r['test']} on {what}: no item in this data set (MPE {r['mpe_um']:g} um "
                            "not tested)")
                 continue
-            head = f"  {r['standard']} {r['test']} on {what} ({counted(r['n'], 'item')}): max |value| {r['max_abs_um']:.2f} um"
+            head = (f"  {r['standard']} {r['test']} on {what} ({counted(r['n'], 'item')}): "
+                    f"max |value| {r['max_abs_um']:.2f} um")
             if r["result"] is None:
                 out.append(head + " (no MPE given)")
             else:
@@ -295,7 +295,8 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
 
     Files: the model file ``<name>-calibrated.toml`` (the base errors folded into a new description, the
     model's effects with their parameters; :mod:`calibration.model_output`), its covariance file
-    ``<name>-calibrated-covariance.csv`` and ``<name>-calibrated.urdf``, ``summary.json``, ``parameters.csv``, ``residuals.csv``, ``report.html`` and three PNG plots, plus
+    ``<name>-calibrated-covariance.csv`` and ``<name>-calibrated.urdf``, ``summary.json``, ``parameters.csv``,
+    ``residuals.csv``, ``report.html`` and three PNG plots, plus
     ``conformance_training.png`` / ``conformance_holdout.png`` when ``extra`` holds a ``conformance`` entry
     (:func:`calibration.validation.conformance` tables under ``training`` / ``holdout``).
     ``inputs``: files that must never be overwritten (points, artefacts, the nominal arm).
@@ -319,7 +320,8 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
     comment = (f"Calibrated model of '{result.model.desc.name}' written by aacmm calibrate: the description with the "
                f"fitted values folded in"
                + (", and the model's effects with their parameters" if effects else "") + ".\n"
-               f"Solver: {result.status}; s0 = {result.s0:.4g}. Read by every --arm option; format: docs/calibration.md.")
+               f"Solver: {result.status}; s0 = {result.s0:.4g}. Read by every --arm option; format: "
+               "docs/calibration.md.")
     write_model(result, out, name, inputs=inputs, written_by="aacmm calibrate", comment=comment)
     rows = result.parameter_rows()
     write_csv(files["parameters"], {

@@ -238,9 +238,9 @@ def _ring_figures(c: RingCampaign, budgets) -> dict:
             xv = c.force_values(fv)
             k = corr[f"{fv}_force_N"]
             line = ax.plot(np.r_[0, xv], np.r_[0, y], mk, ms=5,
-                           label=f"{fv}: r = {k.r:.3f}, R² = {k.r2:.2f}")[0]
+                           label=f"{fv}: r = {k.r:.3f}, R² = {k.r2:.2f}")[0]  # type: ignore[attr-defined]
             xs = np.linspace(0, xv.max() * 1.05, 10)
-            ax.plot(xs, k.intercept + k.slope * xs, "-", lw=0.8, color=line.get_color())
+            ax.plot(xs, k.intercept + k.slope * xs, "-", lw=0.8, color=line.get_color())  # type: ignore[attr-defined]
         ax.set(xlabel="force value [N]", ylabel=f"initial {what.replace('_', ' ')} [mm]",
                title=f"{what.replace('_', ' ').capitalize()} against force (with the 0 N, 0 mm point)")
         ax.legend(fontsize=8)
@@ -266,7 +266,7 @@ def _budget_html(b: BudgetResult) -> str:
              ("effective degrees of freedom (Welch-Satterthwaite)", "", "", "", "",
               "inf" if b.dof == math.inf else f"{b.dof:.1f}", ""),
              (f"coverage factor k (Student t, {b.probability:g} %)", "", "", "", "", f"{b.k:.3f}", ""),
-             (f"expanded uncertainty U", "", "", "", "", f"{b.U:.4g}", "")]
+             ("expanded uncertainty U", "", "", "", "", f"{b.U:.4g}", "")]
     return (f"<h4>{html.escape(b.name)} [{html.escape(b.unit)}]</h4>"
             + reports.html_table(("term", "type", "distribution", "dof", "sensitivity", f"u [{b.unit}]", "from"), rows))
 
@@ -366,12 +366,12 @@ def _ring_tables_html(campaign: RingCampaign, summary: dict, t2: dict) -> list[s
         rows.append(row)
     parts.append("<h2>Diameter error per measurement [mm] (improvement %)</h2>"
                  + reports.html_table(["measurement"] + [MODEL_LABELS[m] for m in models], rows))
-    rows = [[r.id] + [f"{t2[f'form_error_{m}_mm'][i]:.4f}" for m in models] + 
+    rows = [[r.id] + [f"{t2[f'form_error_{m}_mm'][i]:.4f}" for m in models] +
             [f"{r.summary.mean:.3f}", f"{r.summary.max10:.3f}", f"{r.summary.max:.3f}"]
             for i, r in enumerate(campaign.measurements)]
     parts.append("<h2>Form error [mm] and force values [N] per measurement</h2>"
-                 + reports.html_table(["measurement"] + [MODEL_LABELS[m] for m in models] + ["mean F", "10Max F", "max F"],
-                               rows))
+                 + reports.html_table(["measurement"] + [MODEL_LABELS[m] for m in models]
+                                      + ["mean F", "10Max F", "max F"], rows))
     return parts
 
 
@@ -437,7 +437,7 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
     corr = campaign_correlations(campaign)
     figs = _ring_figures(campaign, budgets)
     parts = [f"<p>Ring <b>{html.escape(campaign.feature)}</b>, certified diameter "
-             f"{campaign.reference_diameter * 1e3:.4f} mm, ball {campaign.ball_diameter * 1e3:g} mm, "
+             f"{campaign.reference_diameter * 1e3:.4f} mm, ball {campaign.ball_diameter * 1e3:g} mm, "  # type: ignore[operator]
              f"{len(campaign.measurements)} measurements, force sensor: {html.escape(campaign.force_kind)}. "
              f"The paper's models move each point by f x {campaign.compliance * 1e3:.4f} mm/N towards the axis; "
              "the full-wrench model evaluates the ball centres again through the probe's elastic joint with "
@@ -491,7 +491,8 @@ def paper_summary(table: P.PaperTable2 | None = None) -> dict:
                                 "loo_rms_after_mm": L.rms_after * 1e3},
                 "r_residual_force": L.r, "p_value": L.p_value,
                 "rms_before_mm": L.rms_before * 1e3, "loo_rms_after_mm": L.origin["rms_after"] * 1e3,
-                "mean_abs_before_mm": L.mean_abs_before * 1e3, "loo_mean_abs_after_mm": L.origin["mean_abs_after"] * 1e3}
+                "mean_abs_before_mm": L.mean_abs_before * 1e3,
+                "loo_mean_abs_after_mm": L.origin["mean_abs_after"] * 1e3}
     return _num({
         "source": "Gonzalez-Madruga et al., Sensors 2013, 13, 10430-10448, Tables 1-3",
         "table2_file": table.source,
@@ -666,7 +667,8 @@ def paper_report(out: str | Path, table_path: str | Path | None = None) -> list[
     parts.append("<h3>Diameter error per measurement [mm]</h3>" + reports.html_table(
         ("measurement", "initial", "after FEM (mean force)", "after FEM + series compliance (LOO)"), rows))
     files = {"report.html": _page("The seed paper reproduced and the loop closed", parts),
-             "summary.json": json.dumps({**s, **provenance([P.TABLE2_PATH if table_path is None else table_path])}, indent=1, allow_nan=False) + "\n",
+             "summary.json": json.dumps({**s, **provenance([P.TABLE2_PATH if table_path is None else table_path])},
+                                        indent=1, allow_nan=False) + "\n",
              "table2_implied.csv": _csv_text(t2cols),
              "findings.csv": _csv_text({k: np.array([str(f[k]) for f in findings], dtype=object)
                                         for k in ("table", "item", "printed", "computed", "consistent", "note")})}

@@ -66,7 +66,7 @@ class SessionPlan:
         return format_artefacts([e.feature for e in self.entries], self.distances,
                                 "The features of a live session's plan (docs/formats.md §4), for aacmm calibrate.")
 
-    def with_feature(self, feature: Feature, points: int | None = None) -> "SessionPlan":
+    def with_feature(self, feature: Feature, points: int | None = None) -> SessionPlan:
         """This plan with one more entry (an ad hoc feature); its id must be new."""
         if feature.id in {e.feature.id for e in self.entries}:
             raise ValueError(f"feature id '{feature.id}' is already in the plan")

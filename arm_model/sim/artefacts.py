@@ -26,8 +26,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import InputError
 from ..chain import NUMPY_OPS, chain_point
+from ..errors import InputError
 from ..geometry import ball_centre_radius, cone_directions, perpendicular_basis, random_rotation
 from .campaign import Campaign, Task
 
@@ -109,7 +109,7 @@ class Plan:
         for name in ROW_FIELDS:
             getattr(self, name).append(row[name])
 
-    def arrays(self, n_joints: int = 7) -> "Plan":
+    def arrays(self, n_joints: int = 7) -> Plan:
         """The same plan with numpy arrays for the per-point fields."""
         kinds = {"measurement": object, "feature": object, "task": int, "roll_along_force": bool, "reference": bool,
                  "redraw": object, "posture": bool, "frame": object}
@@ -131,7 +131,7 @@ class Plan:
     def __len__(self) -> int:
         return len(self.measurement)
 
-    def extend(self, other: "Plan") -> None:
+    def extend(self, other: Plan) -> None:
         """Append the per-point rows of ``other`` (lists) to this plan."""
         for name in ROW_FIELDS:
             getattr(self, name).extend(getattr(other, name))
@@ -464,7 +464,7 @@ def settle(plan: Plan, truth, rng, rounds: int = 8) -> None:
     from ..errors import NumericalError
     from .ik import IKTargets, solve_points
 
-    todo = np.flatnonzero(np.isnan(plan.q_start[:, 0]))
+    todo = np.flatnonzero(np.isnan(plan.q_start[:, 0]))  # type: ignore[call-overload]
     for _ in range(rounds):
         if todo.size == 0:
             return

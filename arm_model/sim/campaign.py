@@ -16,11 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError, did_you_mean, parse_toml, read_text
-from ..units import implausible
 from ..description import ArmDescription
+from ..errors import InputError, did_you_mean, parse_toml, read_text
 from ..shipped import SHIPPED_ARMS, shipped_path
 from ..toml_lines import key_path_text, toml_key_lines
+from ..units import implausible
 from ..urdf_import import load_arm
 
 __all__ = ["Campaign", "Task", "load_campaign", "campaign_from_dict", "TASK_KINDS", "SENSORS",
@@ -286,7 +286,7 @@ def _section(ctx: _Ctx, data: Any, spec: dict, table: tuple) -> dict:
             out[base] = _scaled(ctx, v, _UNITS[unit][1], shape, table, key, quantity)
         else:
             out[base] = _unitless(ctx, v, quantity, shape, table, key)
-    for base, (quantity, default, shape) in spec.items():
+    for base, (quantity, default, _shape) in spec.items():
         if base not in out and quantity != "table":
             out[base] = default
     return out
@@ -361,7 +361,8 @@ def _joint_index(ctx, desc: ArmDescription, name: str, table, key, revolute: boo
     """The encoder column of joint ``name``; ``revolute``: for an effect on a joint's angle, which a
     prismatic joint has not."""
     if name not in desc.joint_names:
-        raise ctx.error(f"unknown joint '{name}'{did_you_mean(name, desc.joint_names)} (the arm has: {', '.join(desc.joint_names)})", table, key)
+        raise ctx.error(f"unknown joint '{name}'{did_you_mean(name, desc.joint_names)} (the arm has: "
+                        f"{', '.join(desc.joint_names)})", table, key)
     i = desc.joint_names.index(name)
     if revolute and desc.encoders[i].prismatic:
         raise ctx.error(f"joint '{name}' is prismatic: '{table[1]}' acts on a joint's angle (revolute joints: "
@@ -577,7 +578,7 @@ def _task(ctx, t, i: int, ids: dict[str, str], sensor: str) -> Task:
     if kind not in TASK_KINDS:
         raise ctx.error(f"'kind' must be one of {', '.join(TASK_KINDS)}, got {kind!r}", tbl, "kind")
     spec = dict(_COMMON_TASK)
-    spec.update(_TASKS[kind])
+    spec.update(_TASKS[kind])  # type: ignore[call-overload]
     o = _section(ctx, t, spec, tbl)
     tid = o.pop("id") or _ID[kind]
     if not re.fullmatch(r"[A-Za-z0-9_.\-]+", tid):
@@ -737,8 +738,8 @@ def _errors(ctx, tbl, desc) -> dict[str, float]:
     for key, v in tbl.items():
         parts = _split(key)
         if parts is None or parts[0] not in spec.names:
-            raise ctx.error(f"unknown parameter key '{key}'{did_you_mean(key, spec.names)} (expected a parameter name with a unit, e.g. "
-                            f"\"{spec.names[1]}_um\"; names: {', '.join(spec.names)})", where, key)
+            raise ctx.error(f"unknown parameter key '{key}'{did_you_mean(key, spec.names)} (expected a parameter name "
+                            f"with a unit, e.g. \"{spec.names[1]}_um\"; names: {', '.join(spec.names)})", where, key)
         base, unit = parts
         quantity = _PARAM_QUANTITY[spec.units[spec.index(base)]]
         if _UNITS[unit][0] != quantity:

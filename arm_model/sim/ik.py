@@ -25,8 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import NumericalError
 from ..effects import Geometry
+from ..errors import NumericalError
 from ..geometry import cone_directions
 from .truth import Truth
 
@@ -61,7 +61,7 @@ class IKTargets:
     stylus_axis: np.ndarray | None = None
     stylus_cone: np.ndarray | None = None
 
-    def take(self, idx) -> "IKTargets":
+    def take(self, idx) -> IKTargets:
         return IKTargets(*(None if a is None else a[idx]
                            for a in (self.position, self.stylus, self.x_dir, self.force, self.torque,
                                      self.temperature, self.stylus_axis, self.stylus_cone)))
@@ -307,7 +307,7 @@ def solve_positions(model, p, targets, rng, force_base=None, tol: float = 1e-12,
     aux[0] = 20.0
     fn = _model_jacobian(model, n)
     todo = np.ones(n, bool)
-    for attempt in range(tries):
+    for _attempt in range(tries):
         for it in range(100):
             if force_base is not None:
                 w[:, :3] = np.einsum("nji,nj->ni", probe_rotations(desc, q, p[: model.base_size]), force_base)

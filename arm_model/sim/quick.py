@@ -170,7 +170,7 @@ class _Targets:
         self.distances: list[Distance] = []
 
     def reachable(self, x) -> bool:
-        return 0.35 <= np.linalg.norm(x - self.origin) <= 0.85
+        return bool(0.35 <= np.linalg.norm(x - self.origin) <= 0.85)
 
     def place(self) -> np.ndarray:
         while True:
@@ -272,12 +272,12 @@ def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0,
     n_art = len(targets)
     targets = np.array(targets).reshape(-1, 3)
     normals = np.array(normals).reshape(-1, 3)
-    noise = rng.normal(0, spec.noise, targets.shape)
+    noise = rng.normal(0, spec.noise, targets.shape)  # type: ignore[attr-defined]
     force_base = None
     if spec.force > 0:
         mag = rng.gamma(4.0, spec.force / 4.0, n_art)
         force_base = normals * mag[:, None]
-    q_art, w_art = (solve_positions(model, p_true, targets + noise, rng, force_base) if n_art
+    q_art, w_art = (solve_positions(model, p_true, targets + noise, rng, force_base) if n_art  # type: ignore[operator]
                     else (np.zeros((0, desc.n_joints)), np.zeros((0, 6))))
     n = len(meas)
     needs_t = "temperature" in model.needs()
