@@ -11,8 +11,8 @@ from pathlib import Path
 from .errors import InputError
 from .model_file import Arm, load_model
 
-__all__ = ["add_arm_options", "arm_from_args", "arm_inputs", "model_from_args", "number_in", "positive",
-           "non_negative", "at_least", "fraction", "finite", "seed", "port"]
+__all__ = ["add_arm_options", "add_frame_options", "arm_from_args", "arm_inputs", "model_from_args", "number_in",
+           "positive", "non_negative", "at_least", "fraction", "finite", "seed", "port"]
 
 log = logging.getLogger(__name__)
 
@@ -83,8 +83,17 @@ port = number_in(1, 65535, kind=int)
 def add_arm_options(p, help_arm: str = "the arm: a shipped arm's name (aacmm7), a model file or description TOML "
                                        "(the effects a model file holds are applied) or a URDF with --tip-frame "
                                        "(docs/formats.md §2, docs/own-arm.md)") -> None:
-    """``--arm`` and ``--tip-frame``, the same for every subcommand."""
+    """``--arm`` with :func:`add_frame_options` and ``--masses``, the same for every subcommand."""
     p.add_argument("--arm", type=Path, required=True, help=help_arm)
+    add_frame_options(p)
+    p.add_argument("--masses", type=Path, default=None, metavar="TOML",
+                   help="for a URDF arm: link masses and centres of mass ([[link]] name, mass_kg, com_x_mm, "
+                        "com_y_mm, com_z_mm), replacing the URDF's <inertial>; gravity torques (joint "
+                        "compliance) need masses")
+
+
+def add_frame_options(p) -> None:
+    """``--tip-frame`` and ``--base-frame``: the chain of an arm given as a URDF."""
     p.add_argument("--tip-frame", default=None, metavar="LINK",
                    help="for an arm given as a URDF: the link at the ball centre, in any orientation (its z axis "
                         "is the probe's, along the tool; the chain runs from the root to it; force range and "
@@ -93,10 +102,6 @@ def add_arm_options(p, help_arm: str = "the arm: a shipped arm's name (aacmm7), 
                    help="for an arm given as a URDF: the link its chain starts at (default the URDF's root; its "
                         "frame is the base frame of every output), e.g. after a floating joint, or an arm on a torso "
                         "whose joints the points do not give")
-    p.add_argument("--masses", type=Path, default=None, metavar="TOML",
-                   help="for a URDF arm: link masses and centres of mass ([[link]] name, mass_kg, com_x_mm, "
-                        "com_y_mm, com_z_mm), replacing the URDF's <inertial>; gravity torques (joint "
-                        "compliance) need masses")
 
 
 def model_from_args(args: argparse.Namespace) -> Arm:

@@ -11,7 +11,7 @@ import numpy as np
 
 from .checks import JointLimitTally, log_warnings
 from .cli import command_help
-from .cli_options import add_arm_options, arm_inputs, model_from_args
+from .cli_options import add_arm_options, add_frame_options, arm_inputs, model_from_args
 from .csv_io import format_csv
 from .errors import InputError
 from .io import concat_points, iter_points
@@ -51,9 +51,7 @@ def register(sub) -> None:
     u.add_argument("arm", type=Path, help="arm description TOML or a shipped arm's name (aacmm7), or a URDF with "
                                           "--tip-frame, to see the chain the toolkit reads from it "
                                           "(docs/formats.md §2)")
-    u.add_argument("--tip-frame", default=None, metavar="LINK", help="for a URDF arm: the link at the ball centre")
-    u.add_argument("--base-frame", default=None, metavar="LINK",
-                   help="for a URDF arm: the link its chain starts at (default the root)")
+    add_frame_options(u)
     u.add_argument("-o", "--output", type=Path, required=True, help="output URDF")
     u.set_defaults(func=run_urdf)
 

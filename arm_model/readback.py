@@ -88,7 +88,7 @@ KINDS: tuple[Kind, ...] = (
     Kind("points file", ".csv", lambda line: _header(line)[:2] == ["measurement", "feature"]
          and any(h.startswith("q1_") for h in _header(line)), "arm_model.io:read_points"),
     Kind("sample stream", ".csv", lambda line: _header(line)[0] in ("time_s", "t_s")
-         and any(h.startswith("q1_") for h in _header(line)), "arm_model.readback:read_samples"),
+         and any(h.startswith("q1_") for h in _header(line)), "arm_model.live.samples:read_samples"),
     Kind("force signal", ".csv", lambda line: _header(line)[0] == "time_s", "arm_model.io:read_force_signal"),
     # the viewer's reader (a floor above: imported by name, as arm_model.cli names every command's module)
     Kind("residuals file", ".csv", lambda line: {"line", "dx_um"} <= set(_header(line)) or "rx_um" in _header(line),
@@ -107,24 +107,6 @@ def _toml_data(path: Path) -> dict | None:
         return tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, RecursionError, UnicodeDecodeError):
         return None
-
-
-def read_samples(path: Path) -> int:
-    """A sample stream (docs/formats.md §8) as ``aacmm live`` reads it, line by line; the number of samples."""
-    import re
-
-    from .errors import read_text
-    from .live.samples import SampleLayout
-    lines = read_text(path, "the sample stream").splitlines()
-    header = _header(lines[0]) if lines else []
-    layout = SampleLayout(header, len({m.group(1) for h in header if (m := re.fullmatch(r"q(\d+)_\w+", h))}),
-                          str(path))
-    n = 0
-    for no, text in enumerate(lines[1:], start=2):
-        if text.strip():
-            layout.parse(text, no)
-            n += 1
-    return n
 
 
 def read_json(path: Path):

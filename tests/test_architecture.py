@@ -326,3 +326,40 @@ def test_the_privacy_check_sees_private_imports(tmp_path):
     (pkg / "a.py").write_text("def _f():\n    pass\n")
     (pkg / "b.py").write_text("import os\nfrom . import _hidden\nfrom .a import _f\nfrom pkg.a import __doc__\n")
     assert private_imports(tmp_path, ("pkg",)) == ["pkg/b.py:2 imports pkg._hidden", "pkg/b.py:3 imports pkg.a._f"]
+
+
+def _arm_model_floors() -> list[list[str]]:
+    """The floors of the doc's block under "The floors inside `arm_model`", bottom first: each a list of
+    module names (``io``), packages (``sim/``) or modules of a package (``sim/cli``)."""
+    text = DOC.read_text(encoding="utf-8")
+    block = re.search(r"### The floors inside `arm_model`.*?```\n(.*?)```", text, flags=re.S).group(1)
+    texts: list[str] = []
+    for line in block.splitlines():
+        if line[:14].strip():
+            texts.append("")
+        texts[-1] += " " + line[14:]
+    return [[n.strip() for n in re.sub(r"\([^)]*\)", "", s).split(",") if n.strip()] for s in texts]
+
+
+def test_the_floors_inside_arm_model_are_the_docs():
+    floors = _arm_model_floors()
+    assert len(floors) >= 5
+    where = {name: k for k, floor in enumerate(floors) for name in floor}
+    for name in where:
+        assert (ROOT / "arm_model" / f"{name.rstrip('/')}{'' if name.endswith('/') else '.py'}").exists(), name
+
+    def floor(module: str) -> int | None:
+        parts = module.split(".")[1:]
+        if not parts:
+            return -1                       # the package's __init__: lazy names only
+        for key in ("/".join(parts[:2]), parts[0] + "/", parts[0]):
+            if key in where:
+                return where[key]
+        return None
+
+    graph = module_graph()
+    unplaced = [m for m in graph if m.startswith("arm_model") and floor(m) is None]
+    assert not unplaced, f"modules of arm_model on no floor of docs/architecture.md: {unplaced}"
+    up = [f"{m} (floor {floor(m)}) imports {t} (floor {floor(t)})" for m, targets in graph.items()
+          if m.startswith("arm_model") for t in targets if t.startswith("arm_model") and floor(t) > floor(m)]
+    assert not up, f"imports that run up the floors of arm_model in docs/architecture.md: {up}"

@@ -23,10 +23,10 @@ import re
 from typing import NamedTuple
 
 from ..csv_io import parse_number
-from ..errors import InputError, did_you_mean
+from ..errors import InputError, did_you_mean, read_text
 from ..units import ABSOLUTE_ZERO_C, PLAUSIBLE_SI, QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
-__all__ = ["Sample", "SampleLayout", "TIME_COLUMNS", "sample_header"]
+__all__ = ["Sample", "SampleLayout", "TIME_COLUMNS", "sample_header", "read_samples"]
 
 #: the names the time column may have (one of them, once)
 TIME_COLUMNS = ("time_s", "t_s")
@@ -232,3 +232,18 @@ class SampleLayout:
         trigger = None if self._trigger is None else v[self._trigger] != 0.0
         temperature = None if self._temperature is None else v[self._temperature]
         return Sample(v[self._time], q, wrench, trigger, temperature)
+
+
+def read_samples(path) -> int:
+    """A sample stream file (docs/formats.md §8) as ``aacmm live`` reads it, line by line; the number of samples
+    (the read-back of :mod:`arm_model.readback`)."""
+    lines = read_text(path, "the sample stream").splitlines()
+    header = [c.strip() for c in lines[0].split(",")] if lines else []
+    layout = SampleLayout(header, len({m.group(1) for h in header if (m := re.fullmatch(r"q(\d+)_\w+", h))}),
+                          str(path))
+    n = 0
+    for no, text in enumerate(lines[1:], start=2):
+        if text.strip():
+            layout.parse(text, no)
+            n += 1
+    return n
