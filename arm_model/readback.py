@@ -38,6 +38,7 @@ import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from .errors import InputError
 
@@ -64,7 +65,7 @@ class Kind:
     read or raises an InputError)."""
     name: str
     suffix: str
-    matches: Callable[[object], bool]
+    matches: Callable[[Any], bool]        # the TOML data (a dict) or the first line (a str)
     reader: str
 
 
@@ -79,9 +80,9 @@ def _is_plan(data: dict) -> bool:
 
 
 KINDS: tuple[Kind, ...] = (
-    Kind("model file", ".toml", lambda data: "convention" in data, "arm_model.model_file:read_model_file"),  # type: ignore[operator]
+    Kind("model file", ".toml", lambda data: "convention" in data, "arm_model.model_file:read_model_file"),
     Kind("session plan", ".toml", _is_plan, "arm_model.live.plan:read_plan"),
-    Kind("artefacts file", ".toml", lambda data: "feature" in data or "distance" in data,  # type: ignore[operator]
+    Kind("artefacts file", ".toml", lambda data: "feature" in data or "distance" in data,
          "arm_model.io:read_artefacts"),
     Kind("covariance file", ".csv", lambda line: _header(line)[:4] == ["parameter", "unit", "value", "u"],
          "arm_model.model_file:read_covariance"),

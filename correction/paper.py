@@ -24,6 +24,7 @@ import csv
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy import stats
@@ -258,7 +259,7 @@ def close_loop(table: PaperTable2, force_model: str = "mean_force", residual_mod
 # Tables 1 and 3 as printed
 
 #: Table 1 of the paper as printed [N]: (term, type, distribution, dof, sensitivity label, axial, bending)
-PAPER_TABLE1 = {
+PAPER_TABLE1: dict[str, Any] = {
     "terms": [("u_stw", "B", "rectangular", math.inf, "1", 0.0040, 0.0040),
               ("u_cre", "B", "rectangular", math.inf, "1", 0.0001, 0.0001),
               ("u_Eo", "B", "rectangular", math.inf, "1", 0.0081, 0.0081),
@@ -274,7 +275,7 @@ PAPER_TABLE1 = {
 }
 
 #: Table 3 of the paper as printed [mm]: columns (without/with model) x (diameter/form)
-PAPER_TABLE3 = {
+PAPER_TABLE3: dict[str, Any] = {
     "columns": ("without_diameter", "without_form", "with_diameter", "with_form"),
     "terms": [("u_ring", "B", "rectangular", math.inf, "1", (0.00105, 0.00230, 0.00105, 0.00230)),
               ("u_r", "A", "normal", 16, "1", (0.01233, 0.00746, 0.01012, 0.00821)),
@@ -342,7 +343,7 @@ def table1_reproduction() -> dict:
     budgets, at_printed, findings = {}, {}, []
     for col, j in (("axial", 5), ("bending", 6)):
         terms = tuple(Term(row[0], row[1], row[2], row[j], 1.0, row[3], sensitivity_label=row[4],
-                           source="as printed") for row in PAPER_TABLE1["terms"])  # type: ignore[attr-defined]
+                           source="as printed") for row in PAPER_TABLE1["terms"])
         b = Budget(f"Table 1 {col} force", terms, "N", PAPER_TABLE1["probability"])
         res = b.evaluate()
         budgets[col] = res
@@ -405,7 +406,7 @@ def table3_reproduction(table2: PaperTable2 | None = None) -> dict:
                      for m in ("initial",) + TABLE2_MODELS}
     for j, col in enumerate(cols):
         terms = []
-        for name, typ, dist, dof, lab, vals in PAPER_TABLE3["terms"]:  # type: ignore[attr-defined]
+        for name, typ, dist, dof, lab, vals in PAPER_TABLE3["terms"]:
             if vals[j] is None:
                 continue
             terms.append(Term(name, typ, dist, vals[j], 1.0, dof, sensitivity_label=lab, source="as printed"))
@@ -469,7 +470,7 @@ def table3_reproduction(table2: PaperTable2 | None = None) -> dict:
     # recomputed budgets: u_r from Table 2 (mean-force model for 'with'), u_cor from the bending sensor
     for j, col in enumerate(cols):
         terms = []
-        for name, typ, dist, dof, lab, vals in PAPER_TABLE3["terms"]:  # type: ignore[attr-defined]
+        for name, typ, dist, dof, lab, vals in PAPER_TABLE3["terms"]:
             v = vals[j]
             if v is None:
                 continue

@@ -236,11 +236,11 @@ def _ring_figures(c: RingCampaign, budgets) -> dict:
         corr = {k.x_name: k for k in campaign_correlations(c) if k.y_name == f"{what}_mm" and k.with_reference}
         for fv, mk in zip(FORCE_VALUES, ("o", "s", "^")):
             xv = c.force_values(fv)
-            k = corr[f"{fv}_force_N"]
+            cr = corr[f"{fv}_force_N"]
             line = ax.plot(np.r_[0, xv], np.r_[0, y], mk, ms=5,
-                           label=f"{fv}: r = {k.r:.3f}, R² = {k.r2:.2f}")[0]  # type: ignore[attr-defined]
+                           label=f"{fv}: r = {cr.r:.3f}, R² = {cr.r2:.2f}")[0]
             xs = np.linspace(0, xv.max() * 1.05, 10)
-            ax.plot(xs, k.intercept + k.slope * xs, "-", lw=0.8, color=line.get_color())  # type: ignore[attr-defined]
+            ax.plot(xs, cr.intercept + cr.slope * xs, "-", lw=0.8, color=line.get_color())
         ax.set(xlabel="force value [N]", ylabel=f"initial {what.replace('_', ' ')} [mm]",
                title=f"{what.replace('_', ' ').capitalize()} against force (with the 0 N, 0 mm point)")
         ax.legend(fontsize=8)
