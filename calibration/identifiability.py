@@ -103,7 +103,7 @@ def compress_rows(a: np.ndarray) -> np.ndarray:
     and least-squares relations between columns, in ``n`` rows instead of thousands."""
     if a.shape[0] <= a.shape[1]:
         return a
-    return np.linalg.qr(a, mode="r")  # type: ignore[return-value]
+    return np.linalg.qr(a, mode="r")  # type: ignore[return-value]  # numpy 2.4 stubs: mode "r" returns R alone
 
 
 def reduced_jacobian(jp: np.ndarray, jt: sp.spmatrix) -> np.ndarray:
