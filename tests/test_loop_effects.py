@@ -3,7 +3,7 @@ truth, absent from the model): the loop must name the effect and its joint, reco
 3 sigma, and at least halve the held-out error of the outer test set."""
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
@@ -41,7 +41,7 @@ def campaign(sections: dict, seed: int = 3) -> dict:
     return d
 
 
-@lru_cache(maxsize=None)
+@cache
 def run(case: str):
     camp = campaign_from_dict(campaign(CASES[case][0]))
     sim = simulate(camp)

@@ -9,9 +9,9 @@ import pytest
 from arm_model.effects import EncoderEccentricity
 from arm_model.model import ArmModel
 from arm_model.sim import campaign_from_dict, simulate
+from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 from calibration.data import Weights
 from calibration.loop import close_loop
-from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 
 #: tiny campaign: about 100 points, 14 measurements
 TINY = [{"kind": "ballbar", "positions": 6, "length_mm": 600.0, "points_per_sphere": 4},

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import ROBOT_SET_VERSION as VERSION, ROOT
+from conftest import ROOT
 
 #: one robot of each difficulty the set holds
 QUICK = {
