@@ -35,16 +35,26 @@ import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from ._csv import parse_number
-from ._errors import InputError, did_you_mean, open_input, parse_toml, read_text
-from ._units import implausible
-from .description import (MIN_STYLUS, ArmDescription, JointRow, Mimic, Probe, TomlReader, Visual, default_lever,
-                          load_description)
+from .csv_io import parse_number
+from .description import (
+    MIN_STYLUS,
+    ArmDescription,
+    JointRow,
+    Mimic,
+    Probe,
+    TomlReader,
+    Visual,
+    default_lever,
+    load_description,
+)
+from .errors import InputError, did_you_mean, open_input, parse_toml, read_text
 from .shipped import arm_path
-from .urdf import ELASTIC_JOINTS, _origin_matrix
+from .units import implausible
+from .urdf import ELASTIC_JOINTS, origin_matrix
 
 log = logging.getLogger(__name__)
 
@@ -68,14 +78,14 @@ _NUMERIC = {
     "safety_controller": {"soft_lower_limit": 1, "soft_upper_limit": 1, "k_position": 1, "k_velocity": 1},
 }
 #: the numbers the kinematics use, by (parent tag, tag, attribute) -> the quantity whose plausible range
-#: (arm_model._units.PLAUSIBLE_SI) they keep (None: finite only). Only these are checked beyond being
+#: (arm_model.units.PLAUSIBLE_SI) they keep (None: finite only). Only these are checked beyond being
 #: numbers when the file is read; the masses and centres of mass of the links folded into the chain when
 #: they are folded (:func:`_fold_masses`); visual and collision geometry, inertia tensors, efforts,
 #: velocities, damping are never used here (an inertia of -5e-20, a mirrored mesh's negative scale are no
 #: errors).
 _USED = {("joint", "origin", "xyz"): "length", ("joint", "origin", "rpy"): "angle", ("joint", "axis", "xyz"): "ratio",
-         ("joint", "limit", "lower"): None, ("joint", "limit", "upper"): None, ("joint", "mimic", "multiplier"): "ratio",
-         ("joint", "mimic", "offset"): None}
+         ("joint", "limit", "lower"): None, ("joint", "limit", "upper"): None,
+         ("joint", "mimic", "multiplier"): "ratio", ("joint", "mimic", "offset"): None}
 #: a negative mass [kg] smaller than this is rounding noise (taken as 0)
 _MASS_NOISE = 1e-9
 _ELASTIC_TYPES = dict(zip(ELASTIC_JOINTS, ("revolute", "revolute", "prismatic")))
@@ -97,8 +107,8 @@ class LinkMass:
 class _Urdf:
     """A checked URDF: the lxml tree (for lines and for writing back) and the yourdfpy model."""
     path: Path
-    tree: object                 # lxml ElementTree
-    robot: object                # yourdfpy Robot
+    tree: Any                    # lxml ElementTree
+    robot: Any                   # yourdfpy Robot
     joint_elements: dict         # name -> lxml element
     link_elements: dict
 
@@ -242,7 +252,7 @@ class _Chain:
     """
     moving: list            # (joint, prefix 4x4, Mimic | None)
     tool_prefix: np.ndarray
-    tip_joint: object
+    tip_joint: Any                # yourdfpy Joint
     T_last_tip: np.ndarray
     hinge: np.ndarray | None
     base: str = ""          # the link the chain starts at (its frame is the arm's base frame)
@@ -283,10 +293,10 @@ def _mimic(u: _Urdf, j) -> Mimic | None:
 
 def _held(j, value: float) -> np.ndarray:
     """T_parent_child of joint ``j`` held at ``value`` [rad] or [m]: its origin times its motion."""
-    from .jacobian import _motion
+    from .jacobian import elementary_motion
     axis = np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0), dtype=float)
     axis = axis / np.linalg.norm(axis)
-    return _T(j.origin) @ _motion("T" if j.type == "prismatic" else "R", tuple(axis), value)
+    return _T(j.origin) @ elementary_motion("T" if j.type == "prismatic" else "R", tuple(axis), value)
 
 
 def _walk_to_root(u: _Urdf, tip_frame: str, base_frame: str | None = None) -> list:
@@ -518,7 +528,8 @@ def _probe_of(u: _Urdf, ch: _Chain, tip_frame: str, probe: dict | None) -> Probe
                          "key '--tip-frame'")
     if lever != 0.0 and not pro.stylus_length >= MIN_STYLUS:
         raise InputError(f"the tip frame '{tip_frame}' lies at the stylus hinge of the probe's elastic joints: a "
-                         "probe needs its ball beyond its hinge", u.path, u.line(ch.tip_joint.name), "key '--tip-frame'")
+                         "probe needs its ball beyond its hinge", u.path, u.line(ch.tip_joint.name),
+                         "key '--tip-frame'")
     return pro
 
 
@@ -532,7 +543,7 @@ def _link_frames(u: _Urdf, ch: _Chain) -> dict[str, tuple[int, np.ndarray]]:
     kids: dict[str, list] = {}
     for j in u.robot.joints:
         kids.setdefault(j.parent, []).append(j)
-    stack = [(ch.base, -1, np.eye(4))] + [(j.child, i, np.eye(4)) for j, i in ((j, moving[j.name]) for j, _, _ in ch.moving)]
+    stack = [(ch.base, -1, np.eye(4))] + [(j.child, moving[j.name], np.eye(4)) for j, _, _ in ch.moving]
     out = {}
     while stack:
         link, row, T = stack.pop()
@@ -579,7 +590,8 @@ def _visuals(u: _Urdf, ch: _Chain) -> tuple[Visual, ...]:
     from copy import deepcopy
 
     from lxml import etree
-    from .urdf import _origin_matrix
+
+    from .urdf import origin_matrix
     out, missing = [], 0
     for link, (row, T) in _link_frames(u, ch).items():
         for vis in u.link_elements[link].findall("visual"):
@@ -598,7 +610,7 @@ def _visuals(u: _Urdf, ch: _Chain) -> tuple[Visual, ...]:
                     missing += 1
                     continue
                 shape.set("filename", str(found))
-            pose = T @ _origin_matrix(nums)
+            pose = T @ origin_matrix(nums)
             out.append(Visual(row, tuple(map(tuple, pose.tolist())),
                               f"<geometry>{etree.tostring(shape, encoding='unicode').strip()}</geometry>",
                               _rgba_of(u, vis)))
@@ -714,6 +726,7 @@ def calibrated_urdf_text(nominal: ArmDescription, calibrated: ArmDescription) ->
     ``<tip>_calibrated``. For a description TOML: the generated URDF (:func:`arm_model.urdf.urdf_text`).
     """
     from lxml import etree
+
     from .urdf import urdf_text
 
     if not nominal.tip_frame or not nominal.source or Path(nominal.source).suffix.lower() != ".urdf":
@@ -727,7 +740,7 @@ def calibrated_urdf_text(nominal: ArmDescription, calibrated: ArmDescription) ->
     for (j, prefix, _), row_nom, row_cal in zip(ch.moving, nominal.joints, calibrated.joints):
         if row_cal.origin == row_nom.origin:
             continue
-        T = np.linalg.inv(prefix) @ _origin_matrix(row_cal.origin)
+        T = np.linalg.inv(prefix) @ origin_matrix(row_cal.origin)
         _set_origin(u.joint_elements[j.name], T)
     if calibrated.probe.p_last != nominal.probe.p_last and ch.tool_prefix is None:
         _add_tool_frame(u, nominal.tip_frame, calibrated.probe)

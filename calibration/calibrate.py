@@ -42,9 +42,16 @@ from arm_model.tracker import Tracker
 
 from .data import CalibrationData, Weights
 from .discrepancy import Discrepancy, model_discrepancy
-from .identifiability import (Combination, Identifiability, _compress, analyse, point_noise,
-                              prior_scales,
-                              reduced_jacobian, weakly_determined)
+from .identifiability import (
+    Combination,
+    Identifiability,
+    analyse,
+    compress_rows,
+    point_noise,
+    prior_scales,
+    reduced_jacobian,
+    weakly_determined,
+)
 from .options import FitOptions
 from .prior import PRIOR_DOMINATED, PriorSpec, prior_spec, update_scales, variance_ratio
 from .problem import Problem
@@ -706,9 +713,9 @@ def _covariance(s: _Setup, ev, kept, var: float) -> np.ndarray:
     weighted rows with variance ``var`` (s0^2 or 1): ``(J_red^T J_red / var)^-1``, or with a prior the
     posterior ``(J_red^T J_red / var + diag(1 / size^2))^-1``."""
     jred = reduced_jacobian(ev.jp, ev.jt)
-    scale = _scale(ev.jp)
+    scale = column_scale(ev.jp)
     if s.prior is None:
-        _, sv, vt = np.linalg.svd(_compress(jred / scale), full_matrices=False)
+        _, sv, vt = np.linalg.svd(compress_rows(jred / scale), full_matrices=False)
         if len(kept) and sv[-1] <= 0:
             raise NumericalError("singular covariance: a free parameter has no effect on the residuals")
         return var * (vt.T / sv ** 2) @ vt / np.outer(scale, scale) if len(kept) else np.zeros((0, 0))
@@ -816,7 +823,7 @@ def _tracker(prob: Problem, p, states, nrm: _Normal, n_kept: int, var: float) ->
             cols = n_kept + it.offset + np.arange(it.n_theta)
             e = np.zeros((nrm.js.shape[1], it.n_theta))
             e[cols, np.arange(it.n_theta)] = 1.0
-            blk = nrm.lu.solve(e)[cols] / np.outer(nrm.jscale[cols], nrm.jscale[cols]) * var
+            blk = nrm.lu.solve(e)[cols] / np.outer(nrm.jscale[cols], nrm.jscale[cols]) * var  # type: ignore[attr-defined]
             u[i] = np.sqrt(np.diag(blk))
     return prob.tracker(states, u)
 
@@ -869,7 +876,7 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         prior_scales=None if s.prior is None else dict(s.scales), log_evidence=nrm.log_evidence,
         prior_centre=None if s.prior is None else s.prior.centre, options=options, prior_sd=prior_sd,
         prior_ratio=None if prior_sd is None else variance_ratio(u ** 2, prior_sd),
-        prior_groups=_group_table(s, kept, u), discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var))
+        prior_groups=_group_table(s, kept, u), discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var))  # type: ignore[attr-defined]
 
 
 def _group_table(s: _Setup, kept, u) -> dict:
@@ -1096,7 +1103,7 @@ def reweighted(model: ArmModel, data: CalibrationData, options: FitOptions, tol:
     return res
 
 
-def _scale(jp: np.ndarray) -> np.ndarray:
+def column_scale(jp: np.ndarray) -> np.ndarray:
     s = np.linalg.norm(jp, axis=0)
     return np.where(s > 0, s, 1.0)
 

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import example, given, settings, strategies as st
 
 from arm_model import InputError
-from arm_model._csv import _slow_block, format_csv, iter_csv_blocks, parse_number
+from arm_model.csv_io import _slow_block, format_csv, iter_csv_blocks, parse_number
 from arm_model.io import iter_points, parse_points, read_force_signal
 
 Q = ",".join(f"q{i}_deg" for i in range(1, 8))
@@ -139,7 +139,8 @@ HALVES = [0.125, 2.675, 1.005, 0.5, 1.5, 2.5, -0.5, -2.5, 703688.3466426451, 1e-
 @example(HALVES, 8)
 def test_vectorised_fixed_format_equals_python(values, decimals):
     v = np.array(values, dtype=float)
-    got = format_csv({"a_mm": v, "n": np.arange(len(v)), "t": np.array(["x,y", 'q"', "plain"] * 14, dtype=object)[: len(v)]},
+    got = format_csv({"a_mm": v, "n": np.arange(len(v)),
+                      "t": np.array(["x,y", 'q"', "plain"] * 14, dtype=object)[: len(v)]},
                      fmt=f"%.{decimals}f", header=False).decode()
     import csv
     import io
@@ -191,7 +192,7 @@ _ids = st.text(st.sampled_from("ab 1-_é,"), min_size=0, max_size=6)
        st.lists(st.sampled_from(["", "\r", " ", "x", ",", ",,"]), min_size=1, max_size=25),
        st.sampled_from(["\n", "\r\n"]))
 def test_fast_block_agrees_with_the_careful_reader(rows, extras, eol):
-    from arm_model._csv import _fast_block
+    from arm_model.csv_io import _fast_block
     header = ["measurement", "feature", "a_mm", "b_mm"]
     lines = []
     for (m, f, v), extra in zip(rows, extras * len(rows)):
@@ -251,7 +252,7 @@ def test_fixed_format_of_large_values_equals_python(values, decimals):
     v = np.array(values)
     got = format_csv({"a": v}, f"%.{decimals}f", header=False).decode().splitlines()
     want = [(f"%.{decimals}f" % x).replace("-0." + "0" * decimals, "0." + "0" * decimals) if decimals
-            else ("%.0f" % x if "%.0f" % x != "-0" else "0") for x in v]
+            else ("%.0f" % x if "%.0f" % x != "-0" else "0") for x in v]  # noqa: UP031 (printf: the reference)
     assert got == want
 
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from arm_model.io import atomic_write_text
 
-from ._errors import ViewerError
+from .errors import ViewerError
 from .scene import ArmScene, Camera, PoseInfo
 from .server import MeshcatServer
 
@@ -77,7 +77,7 @@ class View:
 
     @property
     def url(self) -> str:
-        return self.server.url
+        return self.server.url  # type: ignore[return-value]
 
     @property
     def legend(self) -> list[str]:
@@ -155,7 +155,7 @@ class View:
         if self._own:
             self.server.close()
 
-    def __enter__(self) -> "View":
+    def __enter__(self) -> View:
         return self
 
     def __exit__(self, *exc) -> None:

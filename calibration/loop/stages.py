@@ -20,22 +20,37 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from arm_model._log import counted
 from arm_model.description import ArmDescription
 from arm_model.effects import JointCompliance, ThermalGrowth
 from arm_model.io import Artefacts, PointSet
+from arm_model.log import counted
 from arm_model.model import ArmModel
 
 from ..calibrate import CalibrationResult
 from ..candidates import library_candidates, needs_model
 from ..data import Weights, make_data
-from ..diagnostics import (families, binned_estimates, candidate_family, holm, remaining_structure, residual_space,
-                           screen_candidates, structure_tests)
+from ..diagnostics import (
+    binned_estimates,
+    candidate_family,
+    families,
+    holm,
+    remaining_structure,
+    residual_space,
+    screen_candidates,
+    structure_tests,
+)
 from ..options import FitOptions
 from ..synthesis import RESIDUAL, synthesise as build_effects
 from .crossval import fold_fit
-from .decide import Decision, candidate_priors, choose, heldout_test, negative_compliances, physics_inclusion, \
-    plot_family
+from .decide import (
+    Decision,
+    candidate_priors,
+    choose,
+    heldout_test,
+    negative_compliances,
+    physics_inclusion,
+    plot_family,
+)
 from .folds import choose_folds, outer_split
 from .outliers import drop_design_outliers, drop_test_outliers
 from .result import LoopResult, Stage
@@ -43,8 +58,8 @@ from .settings import LEGACY_RESOLUTION, NOISE_OFF, LoopSettings
 from .state import LoopState, Screening, fitted_names, log
 from .verdict import ADDED, verdict_text
 
-__all__ = ["Campaign", "Stop", "prepare", "screen", "test", "physics", "synthesise", "decide", "fit_stage", "outer_test_worse", "add", "run_stage", "run",
-           "report"]
+__all__ = ["Campaign", "Stop", "prepare", "screen", "test", "physics", "synthesise", "decide", "fit_stage",
+           "outer_test_worse", "add", "run_stage", "run", "report"]
 
 
 @dataclass(frozen=True)

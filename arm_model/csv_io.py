@@ -18,7 +18,6 @@ fall back to Python's ``%`` formatting.
 from __future__ import annotations
 
 import csv
-from decimal import ROUND_HALF_EVEN, Decimal
 import io
 import math
 import os
@@ -26,11 +25,12 @@ import re
 import stat
 import warnings
 from dataclasses import dataclass
+from decimal import ROUND_HALF_EVEN, Decimal
 from pathlib import Path
 
 import numpy as np
 
-from ._errors import InputError, decode_text, open_input
+from .errors import InputError, decode_text, open_input
 
 __all__ = ["parse_number", "csv_records", "CsvBlock", "iter_csv_blocks", "csv_spans", "format_csv", "format_row"]
 
@@ -425,7 +425,7 @@ def iter_csv_blocks(path: str | Path, what: str, header_check, block_bytes: int 
         if start:
             while block := read(start):
                 line_no += block.count(b"\n")
-            header_line, header = known_header
+            header_line, header = known_header  # type: ignore[misc]
             num_idx, txt_idx = header_check(header, header_line)
             first = False
         while True:
@@ -475,7 +475,7 @@ def _fixed_chars(v: np.ndarray, decimals: int) -> np.ndarray | None:
     value, more than 15 digits, many values within an ulp of a half)."""
     v = np.asarray(v, dtype=float)
     n = len(v)
-    if not np.all(np.isfinite(v)) or (n and np.max(np.abs(v)) * 10.0 ** decimals > 9e15):
+    if not np.all(np.isfinite(v)) or (n and np.max(np.abs(v)) > 9e15 / 10.0 ** decimals):
         return None
     scale = 10 ** decimals
     prod = np.abs(v) * scale
