@@ -55,7 +55,7 @@ from .folds import choose_folds, outer_split
 from .outliers import drop_design_outliers, drop_test_outliers
 from .result import LoopResult, Stage
 from .settings import LEGACY_RESOLUTION, NOISE_OFF, LoopSettings
-from .state import LoopState, Screening, fitted_names, log
+from .state import LoopState, Screening, log
 from .verdict import ADDED, verdict_text
 
 __all__ = ["Campaign", "Stop", "prepare", "screen", "test", "physics", "synthesise", "decide", "fit_stage",
