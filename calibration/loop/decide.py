@@ -40,7 +40,8 @@ class Decision:
 def heldout_test(state: LoopState, scr: Screening, cand: Candidate) -> CVResult:
     """Cross-validate the current model plus ``cand`` against the current model (``state.base_folds``) on
     the folds of the decisions, at the level of this pass (``scr.threshold``); a candidate whose parameters
-    were held in some fold's training part does not pass."""
+    were all held in some fold's training part (not separable there; held at a bound counts as estimated) does not
+    pass."""
     t = scr.test_of(cand)
     model = state.model.with_effects(cand.effect)
     cp = candidate_priors(model, cand, t)
@@ -48,7 +49,8 @@ def heldout_test(state: LoopState, scr: Screening, cand: Candidate) -> CVResult:
     try:
         new = fold_fit(model, state.design, state.folds, partial(state.fit, extra_priors=cp))
         cv = cross_validate(cand.name, state.base_folds, new, scr.threshold, s.min_improvement)
-        held = [k for k, r in enumerate(new.results) if not set(cand.param_names(state.desc)) & set(r.free)]
+        names = cand.param_names(state.desc)
+        held = [k for k, r in enumerate(new.results) if not set(names) & (set(r.free) | at_bound(r))]
         cv.held = bool(held)
         if held and cv.passed:
             cv.passed = False
@@ -58,6 +60,16 @@ def heldout_test(state: LoopState, scr: Screening, cand: Candidate) -> CVResult:
         cv = cross_validate(cand.name, state.base_folds, None, scr.threshold, s.min_improvement, str(exc))
     cv.score_p = t.p_value
     return cv
+
+
+#: how calibrate's reason for a parameter held at its lower bound begins (a compliance the data pull below 0)
+AT_BOUND = "at its lower bound"
+
+
+def at_bound(res: CalibrationResult) -> set[str]:
+    """The parameters of ``res`` held at their lower bound: estimated (at the bound: a compliance the data put
+    at zero), not left unresolved."""
+    return {f.name for f in res.fixed if f.reason.startswith(AT_BOUND)}
 
 
 def fit_on_design(state: LoopState, scr: Screening, cand: Candidate) -> CalibrationResult:
@@ -192,16 +204,18 @@ def physics_inclusion(state: LoopState, scr: Screening, level: float, tested: li
     if every is None:
         return None
     t = scr.test_of(every)
-    if not (t.identifiable and t.p_value < scr.gate):
+    support = _physics_support(state, scr, every, t)
+    if support is None:
         return None
-    res = fit_on_design(state, scr, every)
+    res, why = support
     names = [n for n in every.param_names(res.model.desc) if n in res.free]
     if not names:
         return None
     z, neg, pos = resolved(res, names, level)
-    say(f"  physics check of {every.name}: score p = {t.p_value:.2g} < {scr.gate:.2g}; resolved positive: "
+    say(f"  physics check of {every.name}: {why}; resolved positive: "
         f"{', '.join(pos) or 'none'}; significantly negative: {', '.join(neg) or 'none'} (z = {z:.2f})")
-    if neg or not pos:
+    # with the prior, the evidence has weighed the compliances (never negative) against their physical size
+    if neg or not (pos or state.options.prior_scale is not None):
         return None
     got = scr.cv_of(every) or next((v for v in tested if v.candidate == every.name), None)
     if got is None:
@@ -212,11 +226,35 @@ def physics_inclusion(state: LoopState, scr: Screening, level: float, tested: li
         say(f"    held-out poses significantly worse (p = {p_worse:.2g}) or parameters held: not included")
         return None
     got.passed = True
-    got.reason = (f"{PHYSICS}: its gravity signature is significant (score p = {t.p_value:.2g}), the "
-                  f"compliances {', '.join(pos)} are resolved positive and none is negative; held-out poses of "
+    got.reason = (f"{PHYSICS}: {why}, "
+                  f"{'the compliances ' + ', '.join(pos) + ' are resolved positive and ' if pos else ''}none is "
+                  f"negative; held-out poses of "
                   f"this placement {100 * got.improvement:+.1f} % (not significantly worse, p = {p_worse:.2g})")
     say(f"    {got.reason}")
     return every, got
+
+
+def _physics_support(state: LoopState, scr: Screening, every: Candidate, t: GroupTest):
+    """Whether the design set supports joint compliance at all, and its fit there: ``(result, why)`` or None.
+    Without a prior its score test must pass the screening's gate; with the prior (its size the deflection
+    under the data's gravity torques, never negative) the evidence must favour the model with it: its log
+    evidence (each model at its own evidence-chosen scales, the same noise) above the current model's."""
+    if state.options.prior_scale is None:
+        if not (t.identifiable and t.p_value < scr.gate):
+            return None
+        return fit_on_design(state, scr, every), f"its gravity signature is significant (score p = {t.p_value:.2g})"
+    res = fit_on_design(state, scr, every)
+    base = state.fit(state.model, state.design)
+    if res.log_evidence is None or base.log_evidence is None or not res.log_evidence > base.log_evidence:
+        state.say(f"  physics check of {every.name}: the evidence does not favour it (log evidence "
+                  f"{_num(res.log_evidence)} vs {_num(base.log_evidence)} without)")
+        return None
+    return res, (f"the evidence favours it (log evidence {res.log_evidence:.1f} vs {base.log_evidence:.1f} "
+                 "without)")
+
+
+def _num(v) -> str:
+    return "n/a" if v is None else f"{v:.1f}"
 
 
 def candidate_priors(model: ArmModel, cand: Candidate, test: GroupTest) -> dict[str, float]:

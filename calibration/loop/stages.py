@@ -26,7 +26,7 @@ from arm_model.io import Artefacts, PointSet
 from arm_model.log import counted
 from arm_model.model import ArmModel
 
-from ..calibrate import CalibrationResult, evidence_scale
+from ..calibrate import CalibrationResult
 from ..candidates import library_candidates, needs_model
 from ..data import Weights, make_data
 from ..diagnostics import (
@@ -55,7 +55,7 @@ from .folds import choose_folds, outer_split
 from .outliers import drop_design_outliers, drop_test_outliers
 from .result import LoopResult, Stage
 from .settings import LEGACY_RESOLUTION, NOISE_OFF, LoopSettings
-from .state import LoopState, Screening, fitted_names, log
+from .state import LoopState, Screening, log
 from .verdict import ADDED, verdict_text
 
 __all__ = ["Campaign", "Stop", "prepare", "screen", "test", "physics", "synthesise", "decide", "fit_stage",
@@ -147,16 +147,13 @@ def _say_split(say, data, design, test, test_by: str, n_cands: int, settings: Lo
 
 
 def _prior_scale(model: ArmModel, design, camp: Campaign, stated: Weights, settings: LoopSettings, say):
-    """The prior scale of every fit: the setting, or with "evidence" the one of the largest evidence of the base
-    model on the design set."""
-    if settings.prior_scale != "evidence":
-        return settings.prior_scale
-    names = fitted_names(model, camp.free, camp.hold, model.spec.size, data=design)
-    scale, _ = evidence_scale(model, design, FitOptions(free=names, values=camp.values, weights=stated,
-                                                        rank_tol=settings.rank_tol, priors={}))
-    say("prior scales from the evidence of the design set: "
-        + ", ".join(f"{g} {v:.3g}" for g, v in scale.items()) + " x the plausible error sizes")
-    return scale
+    """The prior scale of every fit: "evidence" (every fit chooses its groups' scales by its own evidence, as
+    ``calibrate`` does, on the data it is given: a fold's training part chooses them without the fold), a
+    factor, or None (no prior: the practical-resolution rule holds weak parameters)."""
+    if settings.prior_scale == "evidence":
+        say("estimation: a Gaussian prior on every free parameter, its groups' scales chosen by the evidence of "
+            "each fit's own data (prior-dominated parameters are shrunk, not held; compliances >= 0)")
+    return settings.prior_scale
 
 
 def _noise(res: CalibrationResult) -> str:

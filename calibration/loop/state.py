@@ -116,9 +116,11 @@ class LoopState:
         added, less the user's ``hold`` and the names ``hold``; the noise re-estimated from the data only with
         ``reweight``."""
         names = fitted_names(model, self.free, self.hold, self.base_size, hold, data)
+        # the added effects' plausible sizes serve the practical-resolution rule without a prior; with one,
+        # the prior's own sizes (calibration.prior.prior_spec) and the evidence's scales apply
+        priors = {**self.priors, **(extra_priors or {})} if self.options.prior_scale is None else None
         return calibrate(model, data, replace(
-            self.options, free=names, weights=self.weights if weights is None else weights,
-            priors={**self.priors, **(extra_priors or {})},
+            self.options, free=names, weights=self.weights if weights is None else weights, priors=priors,
             weights_from_data=reweight and self.settings.weights_from_data))
 
     def test_figures(self, model: ArmModel, p, reference: str, weights: Weights | None = None) -> dict:
