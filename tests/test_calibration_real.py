@@ -126,7 +126,8 @@ def _predicted_rms(res, test) -> float:
 
 def test_talos_nominal_baseline_is_the_readmes_and_calibrate_beats_it(talos):
     """The like-for-like nominal (frame and marker offset fitted, nothing else) gives the README's 5.84 mm;
-    default calibrate predicts the held-out postures to 1.37 mm (measured; FIGAROH 1.26 mm), never holding
+    calibrate of the geometry alone (the command's ``--effect none``; its default adds the joint compliance,
+    below) predicts the held-out postures to 1.37 mm (measured; FIGAROH 1.26 mm), never holding
     the unknown marker offset for being weak, with the noise estimated at the capture's 0.2 mm per axis."""
     model, train, test = talos
     base = nominal_baseline(model, train, FitOptions(weights_from_data=True))
