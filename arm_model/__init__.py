@@ -8,8 +8,8 @@ Conventions: docs/CONVENTIONS.md.
 # Every public name loads on first use (PEP 562), so `aacmm --help` and `import arm_model.cli` do not
 # import numpy, the readers or the URDF writer: name -> the submodule that defines it.
 _HOME = {
-    "AacmmError": "_errors", "InputError": "_errors", "NumericalError": "_errors", "read_text": "_errors",
-    "QUANTITY_OF_UNIT": "_units", "UNIT_FACTORS": "_units", "split_unit": "_units", "to_si": "_units",
+    "AacmmError": "errors", "InputError": "errors", "NumericalError": "errors", "read_text": "errors",
+    "QUANTITY_OF_UNIT": "units", "UNIT_FACTORS": "units", "split_unit": "units", "to_si": "units",
     "ArmDescription": "description", "JointRow": "description", "Probe": "description",
     "load_description": "description", "parse_description": "description", "format_description": "description",
     "ParamSpec": "params", "param_spec": "params", "split_params": "params", "apply_params": "params",

@@ -4,14 +4,14 @@
 - bad input (:class:`~arm_model.InputError` and the toolkit's other errors), a file or folder the
   system refuses (``OSError``), too little memory: the message, exit 2;
 - Ctrl-C or SIGTERM: "interrupted", exit 130 (143 for SIGTERM), nothing written (or, when the output was
-  already published, that it was: :func:`arm_model._output.published_outputs`);
+  already published, that it was: :func:`arm_model.output.published_outputs`);
 - a closed standard output (``aacmm tip ... | head -1``): quiet;
 - anything else is a bug: a message asking for a report, exit 3; ``--debug`` adds the traceback.
 
 Every subcommand accepts ``-q/--quiet`` (warnings and errors only) and ``-v/--verbose`` (debug messages
-too), defined once here; the messages go through :mod:`logging` (:mod:`arm_model._log`).
+too), defined once here; the messages go through :mod:`logging` (:mod:`arm_model.log`).
 
-Outputs are written complete or not at all (:mod:`arm_model._output`), so no error leaves a partial
+Outputs are written complete or not at all (:mod:`arm_model.output`), so no error leaves a partial
 output behind.
 """
 from __future__ import annotations
@@ -27,9 +27,9 @@ import sys
 import time
 import traceback
 
-from ._errors import AacmmError
-from ._log import console, escaped, level_from_flags
-from ._output import published_outputs
+from .errors import AacmmError
+from .log import console, escaped, level_from_flags
+from .output import published_outputs
 from .shipped import version
 
 __all__ = ["main", "COMMAND_MODULES", "EXIT_INPUT", "EXIT_INTERNAL"]

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ._csv import format_csv
-from ._errors import InputError
-from ._output import output_file
+from .csv_io import format_csv
+from .errors import InputError
+from .output import output_file
 from .checks import JointLimitTally, log_warnings
 from .io import concat_points, iter_points
 from .model_file import Arm, load_model
@@ -123,7 +123,7 @@ def model_from_args(args: argparse.Namespace) -> Arm:
 
 def arm_inputs(args: argparse.Namespace) -> list:
     """Every file the ``--arm`` options read: the arm, the ``--masses`` file and the covariance file a model
-    file names. Outputs are never written over any of them (:func:`arm_model._output.guard_output`)."""
+    file names. Outputs are never written over any of them (:func:`arm_model.output.guard_output`)."""
     files = [args.arm, getattr(args, "masses", None)]
     try:
         cov = model_from_args(args).covariance
@@ -325,8 +325,8 @@ def run_tip(args: argparse.Namespace) -> int:
     # block by block: a file of millions of rows in bounded memory; a large file is read in parts by
     # worker processes (one a core, up to 2), each part written to its own file and the parts joined in
     # order; nothing is written on an error (the first error in file order is the one reported)
-    from ._csv import csv_spans
-    from ._parallel import fork_map, workers
+    from .csv_io import csv_spans
+    from .parallel import fork_map, workers
     with output_file(args.output, [args.points, *arm_inputs(args)]) as tmp:
         arm = model_from_args(args)
         desc = arm.desc

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._errors import InputError, parse_toml, read_text
-from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
+from .errors import InputError, parse_toml, read_text
+from .units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
 __all__ = ["JointRow", "Mimic", "Probe", "Visual", "ArmDescription", "load_description", "parse_description",
            "format_description", "GRAVITY", "MIN_STYLUS", "default_lever", "DH_ROW_FIELDS", "URDF_ROW_FIELDS"]
@@ -601,11 +601,11 @@ def in_unit(value_si: float, factor: float) -> float:
 
 
 def _check_writable(desc: ArmDescription) -> None:
-    """The description obeys the reader's rules on numbers (:func:`arm_model._units.implausible`), so that
+    """The description obeys the reader's rules on numbers (:func:`arm_model.units.implausible`), so that
     what is written reads back: a value beyond them (a joint origin of more than 1 km, say, from a fit
     that ran away along a direction the data do not see) is a :class:`NumericalError` naming it, never a
     file its reader refuses."""
-    from ._errors import NumericalError
+    from .errors import NumericalError
     for j in desc.joints:
         length = "length" if j.prismatic else "angle"
         values = ([("origin", v, "length") for v in j.origin[:3]] + [("origin", v, "angle") for v in j.origin[3:]]

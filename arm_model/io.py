@@ -15,11 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ._csv import BLOCK_BYTES, csv_records, format_csv, iter_csv_blocks
-from ._errors import InputError, parse_toml, read_text, unknown_key
-from ._output import atomic_write_bytes, guard_output
-from ._readback import UnreadableOutput, read_back
-from ._units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
+from .csv_io import BLOCK_BYTES, csv_records, format_csv, iter_csv_blocks
+from .errors import InputError, parse_toml, read_text, unknown_key
+from .output import atomic_write_bytes, guard_output
+from .readback import UnreadableOutput, read_back
+from .units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
 log = logging.getLogger(__name__)
 
@@ -295,7 +295,7 @@ def iter_points(path: str | Path, joints=None, data: bytes | None = None,
     order, so that a file of millions of rows is processed in bounded memory. Same checks and
     errors as :func:`read_points` (an error in a later block comes after earlier blocks were yielded).
     ``data``: the file's bytes instead of reading ``path``. ``span``, ``known_header``: one part of
-    the file (see :func:`arm_model._csv.csv_spans`); a part may hold no rows (the caller checks the
+    the file (see :func:`arm_model.csv_io.csv_spans`); a part may hold no rows (the caller checks the
     whole file's count)."""
     path = str(path)
     layout = []

@@ -231,7 +231,7 @@ _I4 = np.eye(4)
 _I4.setflags(write=False)
 
 
-def _motion(kind, axis, amount) -> np.ndarray:
+def elementary_motion(kind, axis, amount) -> np.ndarray:
     """Homogeneous matrix (4, 4), or (N, 4, 4) for a column ``amount``, of one elementary motion."""
     a = np.asarray(amount, dtype=float)
     m = np.zeros(a.shape + (4, 4))
@@ -262,11 +262,11 @@ def _row_parts(convention: str, row, joint):
         if is_q:
             moving = (kind, ax)
             if not (isinstance(amount, float) and amount == 0.0):    # a fixed offset (DH/MDH theta_offset, d)
-                after = after @ _motion(kind, ax, amount)
+                after = after @ elementary_motion(kind, ax, amount)
         elif moving is None:
-            before = before @ _motion(kind, ax, amount)
+            before = before @ elementary_motion(kind, ax, amount)
         else:
-            after = after @ _motion(kind, ax, amount)
+            after = after @ elementary_motion(kind, ax, amount)
     return before, after, moving
 
 
@@ -316,7 +316,7 @@ def joint_screws(convention: str, rows, q, joints=None):
             t = t.copy()
             t[:, :, a], t[:, :, b] = cq * t[:, :, a] + sq * t[:, :, b], cq * t[:, :, b] - sq * t[:, :, a]
         else:
-            t = t @ _motion(kind, axis, qi)
+            t = t @ elementary_motion(kind, axis, qi)
         t = _times(t, after)
     return t[:, :3, :3], t[:, :3, 3].copy(), u, c
 

@@ -37,8 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._errors import InputError, parse_toml, read_text
-from ._units import implausible
+from .errors import InputError, parse_toml, read_text
+from .units import implausible
 from .description import (MODEL_KEYS, ArmDescription, TomlReader, description_data, description_from_data,
                           in_unit, nearest, toml_text)
 from .effects import EFFECTS, Effect
@@ -64,7 +64,7 @@ PARAM_UNITS: dict[str, tuple[tuple[str, float], ...]] = {
     "s": (("s", 1.0),),
     "kg": (("kg", 1.0),),
 }
-#: SI unit of an effect parameter -> its quantity, for the plausible range (arm_model._units.PLAUSIBLE_SI)
+#: SI unit of an effect parameter -> its quantity, for the plausible range (arm_model.units.PLAUSIBLE_SI)
 PARAM_QUANTITY: dict[str, str] = {
     "m": "length", "rad": "angle", "m/N": "compliance", "rad/(N m)": "angular compliance", "1/K": "expansion",
     "1": "ratio", "N": "force", "N m": "torque", "K": "temperature difference", "s": "time", "kg": "mass",
@@ -493,7 +493,7 @@ def read_covariance(path) -> Covariance:
     decimals (no ``4_5``, ``nan`` or ``inf``); ``value`` and ``u`` in the plausible range of the unit's
     quantity, ``u`` not negative; correlations in [-1, 1], 1 on the diagonal, symmetric. A cell that is
     not is an InputError naming the file, the line and the column."""
-    from ._csv import parse_number
+    from .csv_io import parse_number
     from .io import csv_records
     text = read_text(path, "the covariance file")
     recs = csv_records(text, str(path))

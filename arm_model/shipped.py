@@ -75,7 +75,7 @@ def copy_examples(dest: str | Path) -> list[Path]:
     """Copy the example campaigns and data (with their licences), the shipped arm descriptions (``arms/``,
     a template for your own DH table) and the user docs into ``dest``; refuses to write over existing
     files. Returns the top-level entries written."""
-    from ._errors import InputError
+    from .errors import InputError
     dest = Path(dest)
     src = shipped_path("examples")
     if not src.is_dir():

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._errors import InputError
+from .errors import InputError
 from .description import TomlReader, in_unit
 from .geometry import rotation_xyz, rpy_from_matrix
 

@@ -31,7 +31,7 @@ from .jacobian import Dual, DUAL_OPS, chain_jacobian, geometry_entries, value
 from .kinematics import run_chunks
 from .effects import ModelInputs
 from .model import ArmModel, AuxData
-from ._log import Progress
+from .log import Progress
 
 __all__ = ["FORCE_SENSOR_U_N", "COMPLIANCE_U_RELATIVE", "CONTRIBUTIONS", "InputUncertainty",
            "ParameterCovariance", "Propagation", "default_inputs", "propagate", "monte_carlo",
@@ -422,7 +422,7 @@ def monte_carlo(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, 
     parameters from their covariance (normal), each encoder reading uniformly within +-sqrt(3) u
     (its quantisation), the wrench and the compliances normal, the probing scatter normal.
     ``contributions`` is empty (the samples do not separate them). ``progress``: a progress display with
-    the time left (:class:`arm_model._log.Progress`, shown when logging is configured for INFO: a
+    the time left (:class:`arm_model.log.Progress`, shown when logging is configured for INFO: a
     million samples take minutes)."""
     if samples < 2:
         raise ValueError(f"samples must be at least 2, got {samples}")

@@ -102,7 +102,7 @@ def parameters_of(arm) -> ParameterCovariance | None:
     file), or None when it names none. A parameter the model does not have is an InputError."""
     if getattr(arm, "covariance", None) is None:
         return None
-    from ._errors import InputError
+    from .errors import InputError
     from .model_file import read_covariance
     cov = read_covariance(arm.covariance)
     names = arm.model.spec.names

@@ -59,7 +59,7 @@ def _tr(x, y, z):
     return t
 
 
-def _origin_matrix(origin) -> np.ndarray:
+def origin_matrix(origin) -> np.ndarray:
     """4x4 of a URDF origin (x, y, z, roll, pitch, yaw): T(xyz) Rz(yaw) Ry(pitch) Rx(roll)."""
     x, y, z, roll, pitch, yaw = origin
     from .geometry import rotation_xyz
@@ -132,8 +132,8 @@ def _row_frames(desc: ArmDescription, i: int, tail_prev: np.ndarray):
     j, n = desc.joints[i], len(desc.joints)
     nxt = desc.joints[i + 1] if i + 1 < n else None
     if desc.convention == "urdf":
-        waypoints = [(0, 0, 0), tuple(_origin_matrix(nxt.origin)[:3, 3])] if nxt else [(0, 0, 0)]
-        return _origin_matrix(j.origin), np.eye(4), j.axis, waypoints, np.eye(4)
+        waypoints = [(0, 0, 0), tuple(origin_matrix(nxt.origin)[:3, 3])] if nxt else [(0, 0, 0)]
+        return origin_matrix(j.origin), np.eye(4), j.axis, waypoints, np.eye(4)
     z = (0.0, 0.0, 1.0)
     if desc.convention == "dh":
         # a revolute joint turns by theta_offset + q before Tz(d); a prismatic one slides by d + q after Rz

@@ -38,13 +38,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ._csv import parse_number
-from ._errors import InputError, did_you_mean, open_input, parse_toml, read_text
-from ._units import implausible
+from .csv_io import parse_number
+from .errors import InputError, did_you_mean, open_input, parse_toml, read_text
+from .units import implausible
 from .description import (MIN_STYLUS, ArmDescription, JointRow, Mimic, Probe, TomlReader, Visual, default_lever,
                           load_description)
 from .shipped import arm_path
-from .urdf import ELASTIC_JOINTS, _origin_matrix
+from .urdf import ELASTIC_JOINTS, origin_matrix
 
 log = logging.getLogger(__name__)
 
@@ -68,7 +68,7 @@ _NUMERIC = {
     "safety_controller": {"soft_lower_limit": 1, "soft_upper_limit": 1, "k_position": 1, "k_velocity": 1},
 }
 #: the numbers the kinematics use, by (parent tag, tag, attribute) -> the quantity whose plausible range
-#: (arm_model._units.PLAUSIBLE_SI) they keep (None: finite only). Only these are checked beyond being
+#: (arm_model.units.PLAUSIBLE_SI) they keep (None: finite only). Only these are checked beyond being
 #: numbers when the file is read; the masses and centres of mass of the links folded into the chain when
 #: they are folded (:func:`_fold_masses`); visual and collision geometry, inertia tensors, efforts,
 #: velocities, damping are never used here (an inertia of -5e-20, a mirrored mesh's negative scale are no
@@ -283,10 +283,10 @@ def _mimic(u: _Urdf, j) -> Mimic | None:
 
 def _held(j, value: float) -> np.ndarray:
     """T_parent_child of joint ``j`` held at ``value`` [rad] or [m]: its origin times its motion."""
-    from .jacobian import _motion
+    from .jacobian import elementary_motion
     axis = np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0), dtype=float)
     axis = axis / np.linalg.norm(axis)
-    return _T(j.origin) @ _motion("T" if j.type == "prismatic" else "R", tuple(axis), value)
+    return _T(j.origin) @ elementary_motion("T" if j.type == "prismatic" else "R", tuple(axis), value)
 
 
 def _walk_to_root(u: _Urdf, tip_frame: str, base_frame: str | None = None) -> list:
@@ -579,7 +579,7 @@ def _visuals(u: _Urdf, ch: _Chain) -> tuple[Visual, ...]:
     from copy import deepcopy
 
     from lxml import etree
-    from .urdf import _origin_matrix
+    from .urdf import origin_matrix
     out, missing = [], 0
     for link, (row, T) in _link_frames(u, ch).items():
         for vis in u.link_elements[link].findall("visual"):
@@ -598,7 +598,7 @@ def _visuals(u: _Urdf, ch: _Chain) -> tuple[Visual, ...]:
                     missing += 1
                     continue
                 shape.set("filename", str(found))
-            pose = T @ _origin_matrix(nums)
+            pose = T @ origin_matrix(nums)
             out.append(Visual(row, tuple(map(tuple, pose.tolist())),
                               f"<geometry>{etree.tostring(shape, encoding='unicode').strip()}</geometry>",
                               _rgba_of(u, vis)))
@@ -727,7 +727,7 @@ def calibrated_urdf_text(nominal: ArmDescription, calibrated: ArmDescription) ->
     for (j, prefix, _), row_nom, row_cal in zip(ch.moving, nominal.joints, calibrated.joints):
         if row_cal.origin == row_nom.origin:
             continue
-        T = np.linalg.inv(prefix) @ _origin_matrix(row_cal.origin)
+        T = np.linalg.inv(prefix) @ origin_matrix(row_cal.origin)
         _set_origin(u.joint_elements[j.name], T)
     if calibrated.probe.p_last != nominal.probe.p_last and ch.tool_prefix is None:
         _add_tool_frame(u, nominal.tip_frame, calibrated.probe)

@@ -31,7 +31,7 @@ try:
     rc = main(sys.argv[1:])
 finally:
     hwm = [l.split()[1] for l in open('/proc/self/status') if l.startswith('VmHWM:')]
-    from arm_model._parallel import workers
+    from arm_model.parallel import workers
     child = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     open(os.environ['AACMM_BENCH_HWM'], 'w').write(str(int(hwm[0]) + workers() * child) if hwm else '')
 sys.exit(rc)
@@ -67,7 +67,7 @@ def best(args, repeat=3, cwd=None, one_core: bool = False) -> tuple[float, float
 def points_file(path: Path, n: int, seed: int = 0) -> None:
     """A points file of ``n`` rows, 1000 a measurement: 7 joint angles inside the shipped arm's limits
     (6 decimals, deg), three-axis force (4 decimals, N)."""
-    from arm_model._csv import format_csv
+    from arm_model.csv_io import format_csv
     from arm_model.model_file import load_model
     desc = load_model("aacmm7").desc
     low = np.array([np.degrees(j.lower) for j in desc.joints])
@@ -90,7 +90,7 @@ def phases(path: Path) -> dict:
     """CPU time [s] of each phase of ``aacmm tip`` on ``path``, read whole in this process: reading the
     points, the rigid and corrected centres, formatting, writing (the start-up is in the whole command's
     figures)."""
-    from arm_model._csv import format_csv
+    from arm_model.csv_io import format_csv
     from arm_model.commands import tip_table
     from arm_model.io import iter_points
     from arm_model.model_file import load_model

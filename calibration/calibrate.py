@@ -42,7 +42,7 @@ from arm_model.tracker import Tracker
 
 from .data import CalibrationData, Weights
 from .discrepancy import Discrepancy, model_discrepancy
-from .identifiability import (Combination, Identifiability, _compress, analyse, point_noise,
+from .identifiability import (Combination, Identifiability, compress_rows, analyse, point_noise,
                               prior_scales,
                               reduced_jacobian, weakly_determined)
 from .options import FitOptions
@@ -731,9 +731,9 @@ def _covariance(s: _Setup, ev, kept, var: float) -> np.ndarray:
     weighted rows with variance ``var`` (s0^2 or 1): ``(J_red^T J_red / var)^-1``, or with a prior the
     posterior ``(J_red^T J_red / var + diag(1 / size^2))^-1``."""
     jred = reduced_jacobian(ev.jp, ev.jt)
-    scale = _scale(ev.jp)
+    scale = column_scale(ev.jp)
     if s.prior is None:
-        _, sv, vt = np.linalg.svd(_compress(jred / scale), full_matrices=False)
+        _, sv, vt = np.linalg.svd(compress_rows(jred / scale), full_matrices=False)
         if len(kept) and sv[-1] <= 0:
             raise NumericalError("singular covariance: a free parameter has no effect on the residuals")
         return var * (vt.T / sv ** 2) @ vt / np.outer(scale, scale) if len(kept) else np.zeros((0, 0))
@@ -1122,7 +1122,7 @@ def reweighted(model: ArmModel, data: CalibrationData, options: FitOptions, tol:
     return res
 
 
-def _scale(jp: np.ndarray) -> np.ndarray:
+def column_scale(jp: np.ndarray) -> np.ndarray:
     s = np.linalg.norm(jp, axis=0)
     return np.where(s > 0, s, 1.0)
 

@@ -13,8 +13,8 @@ import numpy as np
 from arm_model import InputError
 from arm_model.commands import (add_arm_options, arm_inputs, at_least, fraction, model_from_args, non_negative,
                                 number_in, positive, seed)
-from arm_model._log import counted
-from arm_model._output import output_folder
+from arm_model.log import counted
+from arm_model.output import output_folder
 from arm_model.checks import point_warnings, log_warnings
 from arm_model.io import json_text, read_artefacts, read_points
 from arm_model.model_file import Arm

@@ -91,7 +91,7 @@ class Identifiability:
                 "no_effect": list(self.no_effect), "rigid_motion_parameters": list(self.gauge)}
 
 
-def _compress(a: np.ndarray) -> np.ndarray:
+def compress_rows(a: np.ndarray) -> np.ndarray:
     """``R`` of ``a = Q R`` (Q orthonormal): the same column norms, inner products, singular values
     and least-squares relations between columns, in ``n`` rows instead of thousands."""
     if a.shape[0] <= a.shape[1]:
@@ -138,7 +138,7 @@ def analyse(jred: np.ndarray, jp: np.ndarray, names, rank_tol: float = DEFAULT_R
     n = len(names)
     if n == 0:
         return Identifiability(names, np.zeros(0), np.zeros(0), 0, rank_tol, 1.0, ())
-    jred = _compress(jred)            # the same column geometry in n rows: every step below is cheap
+    jred = compress_rows(jred)            # the same column geometry in n rows: every step below is cheap
     full_norm = np.linalg.norm(jp, axis=0)
     tiny = full_norm <= 1e-12 * max(full_norm.max(), 1e-300)
     scale = np.where(tiny, 1.0, full_norm)
@@ -247,7 +247,7 @@ def weakly_determined(jred: np.ndarray, names, prior: np.ndarray, min_resolution
     names = list(names)
     if not names:
         return []
-    a = _compress(jred) * prior
+    a = compress_rows(jred) * prior
     _, r, piv = sla.qr(a, mode="economic", pivoting=True)
     d = np.abs(np.diag(r))
     cut = int(np.sum(d >= 1.0 / min_resolution))

@@ -7,7 +7,7 @@ import logging
 from arm_model.cli import command_help
 from arm_model import InputError
 from arm_model.commands import arm_inputs, at_least, model_from_args, number_in, seed
-from arm_model._output import output_folder
+from arm_model.output import output_folder
 from arm_model.checks import point_warnings, log_warnings
 from arm_model.io import read_artefacts, read_points
 from arm_model.model_file import Arm

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from arm_model._output import safe_name
+from arm_model.output import safe_name
 from arm_model import InputError
 from arm_model.model_file import Arm, format_model, write_covariance
 from arm_model.io import UnreadableOutput, atomic_write_text, guard_output, read_back
@@ -30,7 +30,7 @@ REPRODUCE_COV_REL = 1e-9
 
 def model_paths(out_dir, name: str) -> dict:
     """``{"model": <name>.toml, "covariance": <name>-covariance.csv, "urdf": <name>.urdf}`` in ``out_dir``
-    (the name made safe as a file name: :func:`arm_model._output.safe_name`)."""
+    (the name made safe as a file name: :func:`arm_model.output.safe_name`)."""
     out = Path(out_dir)
     stem = safe_name(name)
     return {"model": out / f"{stem}.toml", "covariance": out / f"{stem}-covariance.csv",

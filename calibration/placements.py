@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError
-from arm_model._log import progress_line
+from arm_model.log import progress_line
 
 __all__ = ["seat_figures", "PlacementRow", "placement_study", "markdown_table"]
 

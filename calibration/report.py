@@ -13,7 +13,7 @@ import numpy as np
 from arm_model import InputError
 from arm_model.checks import warnings_html
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, json_text, write_csv
-from arm_model._log import counted
+from arm_model.log import counted
 from arm_model.shipped import provenance
 
 from .calibrate import CalibrationResult, display_unit

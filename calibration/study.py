@@ -12,7 +12,7 @@
 
 Runs go to local processes (:class:`concurrent.futures.ProcessPoolExecutor`) by default, or to a
 Dask cluster when a scheduler address (or a ``distributed.Client``) is given. Progress is shown by
-:class:`arm_model._log.Progress` (this module's logger: redrawn in place on a terminal, plain lines in a log
+:class:`arm_model.log.Progress` (this module's logger: redrawn in place on a terminal, plain lines in a log
 file; silent unless logging is enabled for INFO, as under ``aacmm`` without ``--quiet``).
 """
 from __future__ import annotations
@@ -26,7 +26,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from arm_model import AacmmError, InputError
-from arm_model._log import Progress
+from arm_model.log import Progress
 from arm_model.model import ArmModel
 
 from .calibrate import calibrate, resolve_parameters
@@ -324,7 +324,7 @@ def select_measurements(model: ArmModel, data: CalibrationData, count: int, opti
     one at a time, each time the one that maximises O1 (a shared reference transform is eliminated
     over the whole pool, a stated approximation). ``always``: measurements kept from the start.
     """
-    from .calibrate import _scale, default_free, identify
+    from .calibrate import column_scale, default_free, identify
     from .solver import levenberg_marquardt
 
     spec = model.spec
@@ -337,7 +337,7 @@ def select_measurements(model: ArmModel, data: CalibrationData, count: int, opti
     kept, _, _ = identify(prob, p, states, cand, options)
     prob = prob.with_free(kept)
     ev = prob.evaluate(p, states)
-    jred = reduced_jacobian(ev.jp, ev.jt) / _scale(ev.jp)
+    jred = reduced_jacobian(ev.jp, ev.jt) / column_scale(ev.jp)
     meas_of_row = np.where(prob.row_point >= 0, data.points.measurement[np.maximum(prob.row_point, 0)], None)
     for k, d in enumerate(prob.distance_items):
         meas_of_row[prob.n_point_rows + k] = d.measurement
@@ -378,7 +378,7 @@ def select_measurements(model: ArmModel, data: CalibrationData, count: int, opti
             mat = sum((info[ids[i]] for i in pick), np.zeros((len(kept),) * 2))
             vals.append(observability_index(mat + reg, sum(npts[ids[i]] for i in pick)))
         o1r.append(float(np.mean(vals)))
-    scale = _scale(ev.jp)
+    scale = column_scale(ev.jp)
     names = [spec.names[i] for i in kept]
 
     def u_of(mat):

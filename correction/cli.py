@@ -11,8 +11,8 @@ import numpy as np
 
 from arm_model import InputError, NumericalError, read_artefacts, read_points
 from arm_model.commands import add_arm_options, arm_inputs, model_from_args, number_in
-from arm_model._log import counted
-from arm_model._output import output_folder
+from arm_model.log import counted
+from arm_model.output import output_folder
 from arm_model.checks import log_warnings
 from arm_model.io import check_features
 from arm_model.uncertainty_cli import add_input_options

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError
-from arm_model._output import safe_name
+from arm_model.output import safe_name
 from arm_model.geometry import CylinderFit, RingFit, ring_fit
 from arm_model.io import PointSet, read_force_signal
 

@@ -29,7 +29,7 @@ import numpy as np
 from scipy import stats
 
 from arm_model import InputError
-from arm_model._errors import read_text, unknown_key
+from arm_model.errors import read_text, unknown_key
 
 from .correlation import Correlation, correlate
 from .gum import Budget, Term, student_k

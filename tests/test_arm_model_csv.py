@@ -9,7 +9,7 @@ import pytest
 from hypothesis import example, given, settings, strategies as st
 
 from arm_model import InputError
-from arm_model._csv import _slow_block, format_csv, iter_csv_blocks, parse_number
+from arm_model.csv_io import _slow_block, format_csv, iter_csv_blocks, parse_number
 from arm_model.io import iter_points, parse_points, read_force_signal
 
 Q = ",".join(f"q{i}_deg" for i in range(1, 8))
@@ -191,7 +191,7 @@ _ids = st.text(st.sampled_from("ab 1-_é,"), min_size=0, max_size=6)
        st.lists(st.sampled_from(["", "\r", " ", "x", ",", ",,"]), min_size=1, max_size=25),
        st.sampled_from(["\n", "\r\n"]))
 def test_fast_block_agrees_with_the_careful_reader(rows, extras, eol):
-    from arm_model._csv import _fast_block
+    from arm_model.csv_io import _fast_block
     header = ["measurement", "feature", "a_mm", "b_mm"]
     lines = []
     for (m, f, v), extra in zip(rows, extras * len(rows)):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from arm_model import load_description, read_artefacts, read_points
-from arm_model._output import MARKER
+from arm_model.output import MARKER
 from arm_model.cli import build_parser, main
 from conftest import NOMINAL, ROOT, assert_close
 from correction.models import analyse_ring_campaign

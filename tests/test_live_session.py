@@ -348,7 +348,7 @@ def test_the_bundled_example_is_its_generator_output(tmp_path):
        st.sampled_from(["%.6f", "%.17g", "%.3f"]))
 def test_format_row_is_format_csv_of_one_row(values, fmt):
     """The row a session appends is the row format_csv (aacmm tip's writer) makes of the same values."""
-    from arm_model._csv import format_csv, format_row
+    from arm_model.csv_io import format_csv, format_row
     cols = {f"c{k}": np.array([v]) if not isinstance(v, str) else np.array([v], dtype=object)
             for k, v in enumerate(values)}
     row = {k: v[0] for k, v in cols.items()}

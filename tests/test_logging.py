@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from arm_model._log import Progress, console, counted
+from arm_model.log import Progress, console, counted
 from arm_model.cli import COMMANDS, build_parser, main
 from conftest import NOMINAL, ROOT
 

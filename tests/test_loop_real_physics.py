@@ -187,7 +187,7 @@ def test_an_identifiable_set_that_never_settles_is_reported_with_the_parameters(
     happens: with the eccentricity's weak harmonics left free (no prior, the rule switched off for them), calibrate
     stops with a NumericalError naming the parameters the rank test held one fit after another (the last
     joint's harmonics)."""
-    from arm_model._errors import NumericalError
+    from arm_model.errors import NumericalError
     from arm_model.effects import EncoderEccentricity
     from arm_model.model import ArmModel
     from calibration.calibrate import FitOptions, calibrate

@@ -1,7 +1,7 @@
 """Every file a command writes passes the reader that will read it (issue 22, the class; issue 25 item 6).
 
-The output mechanism (:mod:`arm_model._output`) reads back every file of an output before publishing it
-(:mod:`arm_model._readback`); a refusal is an internal error (exit 3) and nothing is published. The model
+The output mechanism (:mod:`arm_model.output`) reads back every file of an output before publishing it
+(:mod:`arm_model.readback`); a refusal is an internal error (exit 3) and nothing is published. The model
 file of a fit must also reproduce the fit (:func:`calibration.model_output.check_reproduces`).
 
 - the mechanism: a file of each kind that its reader refuses is never published (the cases found on real
@@ -31,7 +31,7 @@ from hypothesis import strategies as st
 from arm_model import NumericalError
 from arm_model.cli import main
 from arm_model.io import UnreadableOutput
-from arm_model._output import output_folder
+from arm_model.output import output_folder
 from conftest import NOMINAL, ROOT
 
 NOMINAL_TEXT = NOMINAL.read_text(encoding="utf-8")
@@ -269,7 +269,7 @@ def test_a_tip_frame_pointing_back_up_the_arm_is_published(tmp_path):
 
 
 def test_json_text_writes_null_for_a_value_nobody_resolved(tmp_path):
-    from arm_model._readback import read_json
+    from arm_model.readback import read_json
     from arm_model.io import json_text
     text = json_text({"rms_um": np.float64("nan"), "u": np.array([1.5, np.inf]), "n": np.int64(3), "t": (1, 2.0)})
     assert json.loads(text) == {"rms_um": None, "u": [1.5, None], "n": 3, "t": [1, 2.0]}

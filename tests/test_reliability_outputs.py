@@ -14,7 +14,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from arm_model import InputError
-from arm_model._output import MARKER, output_file, output_folder, safe_name
+from arm_model.output import MARKER, output_file, output_folder, safe_name
 from arm_model.cli import main
 from conftest import NOMINAL, ROOT
 

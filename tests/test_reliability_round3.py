@@ -177,7 +177,7 @@ def test_item5_disk_full_names_the_output_folder(tmp_path, filename):
     import errno
 
     from arm_model import InputError
-    from arm_model._output import output_folder
+    from arm_model.output import output_folder
     final = tmp_path / "out"
     with pytest.raises(InputError) as info:
         with output_folder(final, (), "demo") as out:
@@ -191,7 +191,7 @@ def test_item5_disk_full_names_the_output_folder(tmp_path, filename):
 
 def test_item5_an_input_error_inside_the_output_is_not_renamed(tmp_path):
     from arm_model import InputError
-    from arm_model._output import output_folder
+    from arm_model.output import output_folder
     with pytest.raises(InputError, match="^elsewhere.csv, line 3: bad$"):
         with output_folder(tmp_path / "out", (), "demo"):
             raise InputError("bad", "elsewhere.csv", 3)
@@ -231,7 +231,7 @@ def test_item6_interrupt_before_publishing_says_nothing_written(tmp_path, few_po
 
 
 def test_item6_files_written_inside_an_output_folder_are_not_outputs_of_their_own(tmp_path):
-    from arm_model._output import output_folder, published_outputs
+    from arm_model.output import output_folder, published_outputs
     from arm_model.io import atomic_write_text
     written = []
     with published_outputs(written):
@@ -283,7 +283,7 @@ def test_item7_a_plain_doctype_is_accepted(tmp_path):
 def test_item7_library_log_records_go_through_the_console(capsys):
     import logging
 
-    from arm_model._log import console
+    from arm_model.log import console
     with console():
         logging.getLogger("yourdfpy.urdf").error("Entity 'ext' not defined\nUsing different parsing approach.")
         logging.getLogger("yourdfpy.urdf").info("not shown")
@@ -354,7 +354,7 @@ def test_item8_monte_carlo_shows_progress_and_time_left(few_points, tmp_path, ca
 def test_item8_progress_estimate_is_the_rate_so_far(monkeypatch):
     import logging
 
-    import arm_model._log as _log
+    import arm_model.log as _log
     clock = iter([0.0, 0.0, 10.0, 20.0])            # created (and drawn) at 0 s; 1/4 done at 10 s; 2/4 at 20 s
     monkeypatch.setattr(_log.time, "perf_counter", lambda: next(clock))
     records = []

@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import arm_model._csv as csvmod
-import arm_model._parallel as par
+import arm_model.csv_io as csvmod
+import arm_model.parallel as par
 from arm_model import InputError
-from arm_model._csv import csv_spans, iter_csv_blocks
+from arm_model.csv_io import csv_spans, iter_csv_blocks
 from arm_model.cli import main
 from arm_model.model_file import load_model
 

@@ -142,7 +142,7 @@ def test_tracker_start_holds_what_is_given():
 
 
 def _text(cols) -> str:
-    from arm_model._csv import format_csv
+    from arm_model.csv_io import format_csv
     return format_csv(cols, "%.12g").decode()
 
 

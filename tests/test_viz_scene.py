@@ -14,7 +14,7 @@ from arm_model.urdf import ARM_RGBA, BALL_RGBA
 from conftest import assert_close
 from viz import Camera, ViewerError, colour_mask, find_chromium, page_with_legend, place_features
 from viz.residuals import parse_residuals, residual_origins
-from viz.scene import _arrow_parts, _rotation_y_to, coverage_factor, ellipsoid_mesh
+from viz.scene import arrow_parts, rotation_y_to, coverage_factor, ellipsoid_mesh
 
 
 # --- camera --------------------------------------------------------------------------------------
@@ -59,7 +59,7 @@ def test_framing_rejects_a_vertical_view():
 
 @pytest.mark.parametrize("length", [0.5, 0.1, 0.035, 0.01, 0.0])
 def test_arrow_parts_span_the_length(length):
-    parts = _arrow_parts(length)
+    parts = arrow_parts(length)
     (shaft_pos, shaft_scale), (head_pos, head_scale) = parts["shaft"], parts["head"]
     tip = head_pos[1] + head_scale[1] / 2
     assert tip == pytest.approx(max(length, 2e-9), abs=1e-9)
@@ -69,7 +69,7 @@ def test_arrow_parts_span_the_length(length):
 
 @given(st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda v: np.linalg.norm(v) > 1e-6))
 def test_rotation_puts_y_along_the_vector(v):
-    r = _rotation_y_to(np.array(v))
+    r = rotation_y_to(np.array(v))
     assert_close(r.T @ r, np.eye(3), 1e-12)
     assert np.linalg.det(r) == pytest.approx(1.0)
     assert_close(r[:, 1], np.array(v) / np.linalg.norm(v), 1e-12)

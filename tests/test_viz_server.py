@@ -52,12 +52,12 @@ def wait_gone(pid: int, seconds: float = 5.0) -> bool:
 
 
 def bridge_children(pid: int) -> list[int]:
-    """Server processes (viz._bridge) started by process ``pid``."""
+    """Server processes (viz.bridge) started by process ``pid``."""
     out = []
     for task in Path(f"/proc/{pid}/task").iterdir():
         for child in (task / "children").read_text().split():
             with open(f"/proc/{child}/cmdline", "rb") as fh:
-                if b"viz._bridge" in fh.read().split(b"\0"):
+                if b"viz.bridge" in fh.read().split(b"\0"):
                     out.append(int(child))
     return out
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from arm_model.urdf import ARM_RGBA
 
-from ._errors import ViewerError
+from .errors import ViewerError
 
 __all__ = ["find_chromium", "screenshot", "screenshot_and_dom", "load_png", "colour_mask", "arm_mask", "CHROMIUM_NAMES"]
 

@@ -15,11 +15,11 @@ import numpy as np
 
 from arm_model import InputError, NumericalError, check_features, read_artefacts, read_points
 from arm_model.commands import add_arm_options, arm_inputs, model_from_args, number_in, port, positive
-from arm_model._output import output_file
+from arm_model.output import output_file
 from arm_model.checks import point_warnings, log_warnings
 from arm_model.uncertainty_cli import add_input_options
 
-from ._errors import ViewerError
+from .errors import ViewerError
 from .placement import place_features
 from .residuals import read_residuals, residual_origins
 

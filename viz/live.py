@@ -8,7 +8,7 @@ comes (cyan dots), the fitted features (light blue, with their measured size, pl
 text panel: the force, the deflection, the last point and its uncertainty, the current feature's fit, the
 counts of dropped, late and bad samples, the last event.
 
-The page with the panel is the server's ``/live/`` (:data:`viz._bridge.LIVE_PAGE`); meshcat's own page
+The page with the panel is the server's ``/live/`` (:data:`viz.bridge.LIVE_PAGE`); meshcat's own page
 (``/static/``) shows the same scene without it. :meth:`LiveView.write_html` writes the scene as one
 self-contained page, the panel's last text as its legend.
 """
@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ._bridge import PANEL_NODE
+from .bridge import PANEL_NODE
 from .placement import Placement
-from .scene import _arrow_parts, _matrix, _rotation_y_to, send_transform
+from .scene import arrow_parts, transform_matrix, rotation_y_to, send_transform
 from arm_model.live import Sample, Session
 
 from .scene import Camera
@@ -183,9 +183,9 @@ class LiveView:
         if self._arrow_paths is None:
             self._arrow_paths = {k: self.vis[n].path.lower() for k, n in
                                  (("", node), ("shaft", f"{node}/shaft"), ("head", f"{node}/head"))}
-        send_transform(self.vis, self._arrow_paths[""], _matrix(ball, _rotation_y_to(vec) if length > 0 else None))
-        for part, (pos, scl) in _arrow_parts(max(length, 1e-6)).items():
-            send_transform(self.vis, self._arrow_paths[part], _matrix(pos, None, scl))
+        send_transform(self.vis, self._arrow_paths[""], transform_matrix(ball, rotation_y_to(vec) if length > 0 else None))
+        for part, (pos, scl) in arrow_parts(max(length, 1e-6)).items():
+            send_transform(self.vis, self._arrow_paths[part], transform_matrix(pos, None, scl))
 
     def _points(self) -> None:
         pts = np.array([p.corrected for p in self.session.points])

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import QUANTITY_OF_UNIT, UNIT_FACTORS, InputError, csv_records, read_text, split_unit
-from arm_model._errors import unknown_key
+from arm_model.errors import unknown_key
 
 __all__ = ["Residuals", "read_residuals", "parse_residuals", "residual_origins"]
 

@@ -110,12 +110,12 @@ class Camera:
 # -------------------------------------------------------------------------------------------------
 # arrows
 
-def _rotation_y_to(v: np.ndarray) -> np.ndarray:
+def rotation_y_to(v: np.ndarray) -> np.ndarray:
     """A rotation whose y axis is along ``v`` (meshcat cylinders and cones lie along y)."""
     return frame_along(v, 1)
 
 
-def _arrow_parts(length: float) -> dict[str, tuple[list, list]]:
+def arrow_parts(length: float) -> dict[str, tuple[list, list]]:
     """Local (position, scale) of the unit shaft and unit head of an arrow of ``length`` [m]."""
     head_len = min(_HEAD[1], 0.5 * length)
     k = head_len / _HEAD[1]
@@ -211,7 +211,7 @@ def _tube(mg, height: float, radius: float):
     return tube
 
 
-def _matrix(position, rotation=None, scale=(1.0, 1.0, 1.0)) -> np.ndarray:
+def transform_matrix(position, rotation=None, scale=(1.0, 1.0, 1.0)) -> np.ndarray:
     t = np.eye(4)
     t[:3, :3] = (np.eye(3) if rotation is None else rotation) @ np.diag(scale)
     t[:3, 3] = position
@@ -359,10 +359,10 @@ class ArmScene:
         self._pv.display(x)
         name = self._arrow_node(scale)
         vec = scale * info.deflection
-        self.vis[name].set_transform(_matrix(info.rigid, _rotation_y_to(vec)))
-        for part, (pos, scl) in _arrow_parts(float(np.linalg.norm(vec))).items():
-            self.vis[f"{name}/{part}"].set_transform(_matrix(pos, None, scl))
-        self.vis[f"{self.root}/probe ball marker"].set_transform(_matrix(info.corrected))
+        self.vis[name].set_transform(transform_matrix(info.rigid, rotation_y_to(vec)))
+        for part, (pos, scl) in arrow_parts(float(np.linalg.norm(vec))).items():
+            self.vis[f"{name}/{part}"].set_transform(transform_matrix(pos, None, scl))
+        self.vis[f"{self.root}/probe ball marker"].set_transform(transform_matrix(info.corrected))
         self._extent += [self._joint_points(x), (info.rigid + vec)[None]]
         return info
 
@@ -394,11 +394,11 @@ class ArmScene:
                     frame[pv.getViewerNodeName(g, pin.GeometryType.VISUAL)].set_transform(
                         t @ np.diag([*g.meshScale, 1.0]))
                 vec = scale * info.deflection
-                frame[name].set_transform(_matrix(info.rigid, _rotation_y_to(vec)))
-                for part, (pos, scl) in _arrow_parts(float(np.linalg.norm(vec))).items():
+                frame[name].set_transform(transform_matrix(info.rigid, rotation_y_to(vec)))
+                for part, (pos, scl) in arrow_parts(float(np.linalg.norm(vec))).items():
                     frame[f"{name}/{part}"].set_property("position", "vector3", pos)
                     frame[f"{name}/{part}"].set_property("scale", "vector3", scl)
-                frame[f"{self.root}/probe ball marker"].set_transform(_matrix(info.corrected))
+                frame[f"{self.root}/probe ball marker"].set_transform(transform_matrix(info.corrected))
             self._extent += [self._joint_points(x), (info.rigid + vec)[None]]
         self.vis.set_animation(anim, play=True, repetitions=int(repetitions))
         self._legend(f"animation: {len(qs)} pose(s), {fps:g} per second")
@@ -477,19 +477,19 @@ class ArmScene:
             if pl.kind in ("ring", "cylinder"):
                 height = max(float(pl.size[0]) + 0.01, 0.015)
                 node.set_object(_tube(mg, height, radius), mat)
-                node.set_transform(_matrix(pl.centre, _rotation_y_to(pl.axis)))
+                node.set_transform(transform_matrix(pl.centre, rotation_y_to(pl.axis)))
                 self._extent.append(pl.centre + radius * np.eye(3))
             elif pl.kind == "sphere":
                 node.set_object(mg.Sphere(radius), mat)
-                node.set_transform(_matrix(pl.centre))
+                node.set_transform(transform_matrix(pl.centre))
             elif pl.kind == "plane":
                 size = np.asarray(pl.size) + 0.04
                 node.set_object(mg.Box([size[0], 0.001, size[1]]), mat)
-                rot = _rotation_y_to(pl.axis)
-                node.set_transform(_matrix(pl.centre, rot))
+                rot = rotation_y_to(pl.axis)
+                node.set_transform(transform_matrix(pl.centre, rot))
             else:  # seat: a small marker at the ball centre
                 node.set_object(mg.Sphere(0.008), mat)
-                node.set_transform(_matrix(pl.centre))
+                node.set_transform(transform_matrix(pl.centre))
             self._extent.append(pl.centre[None])
         for d in distances:
             for meas in dict.fromkeys(pl.measurement for pl in placements):
@@ -499,7 +499,7 @@ class ArmScene:
                 v = b.centre - a.centre
                 node = self.vis[f"{self.root}/artefacts/{meas}/{d.between[0]}--{d.between[1]}"]
                 node.set_object(mg.Cylinder(float(np.linalg.norm(v)), 0.004), mat)
-                node.set_transform(_matrix((a.centre + b.centre) / 2, _rotation_y_to(v)))
+                node.set_transform(transform_matrix((a.centre + b.centre) / 2, rotation_y_to(v)))
         if placements:
             self._legend(f"blue: {len(placements)} artefact feature(s), certified size, placed by fitting "
                          "the ball centres")
@@ -513,7 +513,7 @@ class ArmScene:
     def set_camera(self, camera: Camera | None = None, aspect: float = 4 / 3) -> Camera:
         """Place meshcat's camera (default: framing everything drawn so far) and return it."""
         camera = camera or Camera.framing(self.extent, aspect=aspect)
-        shift = _matrix(-np.asarray(camera.target, dtype=float))
+        shift = transform_matrix(-np.asarray(camera.target, dtype=float))
         self.vis[self.root].set_transform(shift)
         self.vis["/Grid"].set_transform(shift)
         self.vis["/Cameras/default/rotated/<object>"].set_property("position", camera.meshcat_position())

@@ -1,6 +1,6 @@
 """A headless meshcat server in a child process, with a connected :class:`meshcat.Visualizer`.
 
-The server is meshcat's own ZMQ/websocket bridge (:mod:`viz._bridge`), listening on 127.0.0.1.
+The server is meshcat's own ZMQ/websocket bridge (:mod:`viz.bridge`), listening on 127.0.0.1.
 It stops when :meth:`MeshcatServer.close` is called, when the ``with`` block ends, at interpreter
 exit (atexit), on SIGTERM/Ctrl-C of the parent, and by itself when the parent process is gone.
 """
@@ -17,7 +17,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from ._errors import ViewerError
+from .errors import ViewerError
 
 __all__ = ["MeshcatServer"]
 
@@ -73,7 +73,7 @@ class MeshcatServer:
         """Start the server process and connect a visualizer; raises :class:`ViewerError`."""
         if self._proc is not None:
             return self
-        cmd = [sys.executable, "-u", "-m", "viz._bridge", "--host", self.host,
+        cmd = [sys.executable, "-u", "-m", "viz.bridge", "--host", self.host,
                "--parent-pid", str(os.getpid())]
         if self.port is not None:
             cmd += ["--port", str(self.port)]

@@ -16,7 +16,7 @@ import numpy as np
 
 from arm_model.io import atomic_write_text
 
-from ._errors import ViewerError
+from .errors import ViewerError
 from .scene import ArmScene, Camera, PoseInfo
 from .server import MeshcatServer
 

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._errors import NumericalError
+from ..errors import NumericalError
 from ..feature_uncertainty import (cylinder_jacobian, diameter_uncertainty, fit_sensitivity, plane_jacobian,
                                    residual_form_uncertainty, sphere_jacobian)
 from ..geometry import (CylinderFit, feature_diameter, fit_circle_2d, fit_cylinder, fit_plane, fit_sphere,

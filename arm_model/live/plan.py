@@ -28,7 +28,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from .._errors import InputError, parse_toml, read_text
+from ..errors import InputError, parse_toml, read_text
 from ..io import Artefacts, Feature, format_artefacts, parse_artefacts
 
 __all__ = ["PlanFeature", "SessionPlan", "read_plan", "parse_plan", "format_plan", "single_feature_plan",

@@ -1,6 +1,6 @@
 """The folder of a live session, written as the session runs (docs/live.md, "What a session promises").
 
-Unlike every other output of the toolkit (written whole or not at all, :mod:`arm_model._output`), a
+Unlike every other output of the toolkit (written whole or not at all, :mod:`arm_model.output`), a
 session folder grows while the operator measures, so that a crash loses as little as possible:
 
 * the folder is created new: an existing folder that is not empty is never used (a restarted session
@@ -26,8 +26,8 @@ import time
 from pathlib import Path
 from typing import Iterable
 
-from .._errors import InputError
-from .._output import MARKER, guard_output, resolved
+from ..errors import InputError
+from ..output import MARKER, guard_output, resolved
 
 __all__ = ["SessionRecord", "FILES", "FLUSH_S", "read_status", "STATUS_FILE", "check_new_folder"]
 

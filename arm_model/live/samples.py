@@ -22,9 +22,9 @@ import math
 import re
 from typing import NamedTuple
 
-from .._csv import parse_number
-from .._errors import InputError, did_you_mean
-from .._units import ABSOLUTE_ZERO_C, PLAUSIBLE_SI, QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
+from ..csv_io import parse_number
+from ..errors import InputError, did_you_mean
+from ..units import ABSOLUTE_ZERO_C, PLAUSIBLE_SI, QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
 __all__ = ["Sample", "SampleLayout", "TIME_COLUMNS", "sample_header"]
 

@@ -22,7 +22,7 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from .._csv import format_row
+from ..csv_io import format_row
 from ..checks import limit_bounds
 from ..io import Feature, PointSet
 from .contacts import Contact, ContactDetector, ContactOptions

@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 from typing import Callable
 
-from .._errors import InputError, open_input
+from ..errors import InputError, open_input
 
 __all__ = ["open_source", "LineSource", "Pacer", "TICK_S", "AHEAD_S"]
 

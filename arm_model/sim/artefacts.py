@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._errors import InputError
+from ..errors import InputError
 from ..chain import NUMPY_OPS, chain_point
 from ..geometry import ball_centre_radius, perpendicular_basis, random_rotation
 from .campaign import Campaign, Task
@@ -471,7 +471,7 @@ def settle(plan: Plan, truth, rng, rounds: int = 8) -> None:
     """Find an articulation (no contact force) for every row without ``q_start``; a sphere or plane
     point the arm cannot reach is moved elsewhere on its feature, as an operator would. Rows that stay
     out of reach raise :class:`~arm_model.NumericalError` naming them."""
-    from .._errors import NumericalError
+    from ..errors import NumericalError
     from .ik import IKTargets, solve_points
 
     todo = np.flatnonzero(np.isnan(plan.q_start[:, 0]))

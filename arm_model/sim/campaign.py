@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from .._errors import InputError, did_you_mean, parse_toml, read_text
-from .._units import implausible
+from ..errors import InputError, did_you_mean, parse_toml, read_text
+from ..units import implausible
 from ..description import ArmDescription
 from ..shipped import SHIPPED_ARMS, shipped_path
 from ..urdf_import import load_arm

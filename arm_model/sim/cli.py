@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._log import PROGRESS, counted
-from .._output import output_folder
+from ..log import PROGRESS, counted
+from ..output import output_folder
 from ..commands import seed
 from .campaign import load_campaign
 from .run import (ARTEFACTS_FILE, POINTS_FILE, REFERENCE_FILE, SIGNALS_DIR, TRUTH_FILE, TRUTH_POINTS_FILE,
@@ -109,7 +109,7 @@ def _simulate(args, campaign, out):
     result = simulate(campaign, seed=args.seed)
     if getattr(args, "samples", False):
         if args.no_signals:
-            from .._errors import InputError
+            from ..errors import InputError
             raise InputError("--samples needs the force signals: leave out --no-signals")
         _add_stream(result)
     written = result.write(out.dir, campaign.inputs)
@@ -119,7 +119,7 @@ def _simulate(args, campaign, out):
 
 def _add_stream(result) -> None:
     """The sample stream and its plan, among the files the result writes."""
-    from .._errors import InputError
+    from ..errors import InputError
     from ..live.plan import format_plan
     from .stream import PLAN_FILE, SAMPLES_FILE, sample_stream, stream_plan
     if any(t.kind == "mocap" for t in result.campaign.tasks):

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._errors import NumericalError
+from ..errors import NumericalError
 from ..effects import Geometry
 from .truth import Truth
 

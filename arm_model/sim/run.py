@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._errors import InputError, NumericalError
-from .._output import safe_name
+from ..errors import InputError, NumericalError
+from ..output import safe_name
 from ..description import toml_text
 from ..io import (Artefacts, Distance, Feature, ForceSignal, PointSet, atomic_write_text, format_artefacts,
                   guard_output, parse_points)
@@ -26,7 +26,7 @@ from .campaign import Campaign
 from .ik import IKTargets, ball_jacobian, solve_ik
 from .operator import OperatorDraw, draw_operator, force_signal, measurement_slices
 from .truth import Truth, build_truth, si_key
-from .._log import counted, progress_line
+from ..log import counted, progress_line
 
 __all__ = ["SimResult", "simulate", "TRUTH_HEADER", "POINTS_FILE", "REFERENCE_FILE", "ARTEFACTS_FILE",
            "TRUTH_FILE", "TRUTH_POINTS_FILE", "SUMMARY_FILE", "SIGNALS_DIR"]

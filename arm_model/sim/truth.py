@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._errors import NumericalError
+from ..errors import NumericalError
 from ..chain import NUMPY_OPS, ball_in_last_frame, chain_point, elastic_displacement, has_stylus, probe_lever
 from ..description import ArmDescription
 from ..effects import (ApproachOffset, EncoderEccentricity, ForceSensorError, Geometry, JointCompliance,

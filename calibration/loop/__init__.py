@@ -47,7 +47,7 @@ test of a candidate and the rules that choose the effect to add), :mod:`~calibra
 """
 from __future__ import annotations
 
-from arm_model._log import progress_line
+from arm_model.log import progress_line
 from arm_model.description import ArmDescription
 from arm_model.io import Artefacts, PointSet
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from arm_model._log import counted
+from arm_model.log import counted
 from arm_model.description import ArmDescription
 from arm_model.effects import JointCompliance, ThermalGrowth
 from arm_model.io import Artefacts, PointSet

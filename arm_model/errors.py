@@ -131,7 +131,7 @@ def did_you_mean(word: str, known) -> str:
 
     A key with a unit suffix (``u_diamter_mm``) is matched by its base name and offered with the
     user's unit (``u_diameter_mm``); ``known`` may hold bases (``"u_diameter"``) or whole keys."""
-    from ._units import split_unit
+    from .units import split_unit
     known = list(dict.fromkeys(known))
     best = []
     parts = split_unit(word)

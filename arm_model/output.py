@@ -13,8 +13,8 @@ wins, each complete). On any error, Ctrl-C or SIGTERM the temporary folder is re
 it was. A command that writes one file uses :func:`output_file` (temporary file, then ``os.replace``).
 
 Before anything is published, every file is read back by the reader that will read it
-(:mod:`arm_model._readback`: a model file as ``--arm`` reads it, points as ``read_points`` ...); a file its
-reader refuses is a bug of the toolkit, :class:`~arm_model._readback.UnreadableOutput` (exit 3), and
+(:mod:`arm_model.readback`: a model file as ``--arm`` reads it, points as ``read_points`` ...); a file its
+reader refuses is a bug of the toolkit, :class:`~arm_model.readback.UnreadableOutput` (exit 3), and
 nothing is published.
 
 Refused before any work, with an :class:`InputError` (exit 2): ``-o`` that is an input, holds an input,
@@ -38,8 +38,8 @@ import unicodedata
 import zlib
 from pathlib import Path
 
-from ._errors import InputError
-from ._readback import UnreadableOutput, check_output
+from .errors import InputError
+from .readback import UnreadableOutput, check_output
 
 __all__ = ["output_folder", "output_file", "Output", "safe_name", "guard_output", "atomic_write_bytes",
            "MARKER", "published_outputs"]

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._errors import InputError, decode_text, open_input
+from .errors import InputError, decode_text, open_input
 
 __all__ = ["parse_number", "csv_records", "CsvBlock", "iter_csv_blocks", "csv_spans", "format_csv", "format_row"]
 
@@ -475,7 +475,7 @@ def _fixed_chars(v: np.ndarray, decimals: int) -> np.ndarray | None:
     value, more than 15 digits, many values within an ulp of a half)."""
     v = np.asarray(v, dtype=float)
     n = len(v)
-    if not np.all(np.isfinite(v)) or (n and np.max(np.abs(v)) * 10.0 ** decimals > 9e15):
+    if not np.all(np.isfinite(v)) or (n and np.max(np.abs(v)) > 9e15 / 10.0 ** decimals):
         return None
     scale = 10 ** decimals
     prod = np.abs(v) * scale

@@ -1,6 +1,6 @@
 """Every file a command writes passes the reader that will read it: checked before it is published.
 
-:func:`arm_model._output.output_folder` and :func:`~arm_model._output.output_file` hand every file they
+:func:`arm_model.output.output_folder` and :func:`~arm_model.output.output_file` hand every file they
 are about to publish to :func:`check_output`, which finds the file's kind (:data:`KINDS`: by its suffix
 and its first bytes, never by the writer's say-so, so that no writer can forget it) and reads it with
 that kind's reader, the very function a command uses to read such a file:
@@ -39,7 +39,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from ._errors import InputError
+from .errors import InputError
 
 __all__ = ["UnreadableOutput", "KINDS", "kind_of", "read_back", "check_output"]
 
@@ -79,7 +79,7 @@ def _is_plan(data: dict) -> bool:
 
 
 KINDS: tuple[Kind, ...] = (
-    Kind("model file", ".toml", lambda data: "convention" in data, "arm_model._readback:read_model"),
+    Kind("model file", ".toml", lambda data: "convention" in data, "arm_model.readback:read_model"),
     Kind("session plan", ".toml", _is_plan, "arm_model.live.plan:read_plan"),
     Kind("artefacts file", ".toml", lambda data: "feature" in data or "distance" in data,
          "arm_model.io:read_artefacts"),
@@ -88,16 +88,16 @@ KINDS: tuple[Kind, ...] = (
     Kind("points file", ".csv", lambda line: _header(line)[:2] == ["measurement", "feature"]
          and any(h.startswith("q1_") for h in _header(line)), "arm_model.io:read_points"),
     Kind("sample stream", ".csv", lambda line: _header(line)[0] in ("time_s", "t_s")
-         and any(h.startswith("q1_") for h in _header(line)), "arm_model._readback:read_samples"),
+         and any(h.startswith("q1_") for h in _header(line)), "arm_model.readback:read_samples"),
     Kind("force signal", ".csv", lambda line: _header(line)[0] == "time_s", "arm_model.io:read_force_signal"),
     # the viewer's reader (a floor above: imported by name, as arm_model.cli names every command's module)
     Kind("residuals file", ".csv", lambda line: {"line", "dx_um"} <= set(_header(line)) or "rx_um" in _header(line),
          "viz.residuals:read_residuals"),
     Kind("URDF", ".urdf", lambda line: True, "arm_model.urdf_import:_read_urdf"),
-    Kind("JSON file", ".json", lambda line: True, "arm_model._readback:read_json"),
+    Kind("JSON file", ".json", lambda line: True, "arm_model.readback:read_json"),
 )
 #: a TOML file of none of the kinds above (the simulator's truth): it must still be TOML
-OTHER_TOML = Kind("TOML file", ".toml", lambda data: True, "arm_model._readback:read_toml")
+OTHER_TOML = Kind("TOML file", ".toml", lambda data: True, "arm_model.readback:read_toml")
 
 
 def _toml_data(path: Path) -> dict | None:
@@ -122,7 +122,7 @@ def read_samples(path: Path) -> int:
     """A sample stream (docs/formats.md §8) as ``aacmm live`` reads it, line by line; the number of samples."""
     import re
 
-    from ._errors import read_text
+    from .errors import read_text
     from .live.samples import SampleLayout
     lines = read_text(path, "the sample stream").splitlines()
     header = _header(lines[0]) if lines else []
@@ -149,7 +149,7 @@ def read_json(path: Path):
 
 def read_toml(path: Path):
     """Any other TOML the toolkit writes must still be TOML."""
-    from ._errors import parse_toml, read_text
+    from .errors import parse_toml, read_text
     return parse_toml(read_text(path, "the file"), path)
 
 
@@ -196,7 +196,7 @@ def check_output(stage: Path, final: Path) -> None:
     """Read back every file of a command's output before it is published: ``stage`` the temporary folder
     (or file), ``final`` where it will be published. Raises :class:`UnreadableOutput` for the first
     file refused (in name order)."""
-    from ._output import MARKER
+    from .output import MARKER
     files = [stage] if stage.is_file() else sorted(p for p in stage.rglob("*") if p.is_file() and p.name != MARKER)
     for p in files:
         read_back(p, final if p == stage else final / p.relative_to(stage))
