@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 OUT    ?= out
 
-.PHONY: install demo test bench browser urdf clean
+.PHONY: install demo test test-slow bench browser urdf clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -21,8 +21,20 @@ browser:
 demo: $(STAMP)
 	$(PY) -m arm_model.demo --out $(OUT)/demo
 
+# the suite without the long studies (-m "not slow", about 3 min on 2 cores); test-slow: the rest (.ci/run runs both)
 test: $(STAMP) browser
-	$(PY) -m pytest -n 2 -q tests
+	$(PY) -m pytest -n 2 --dist worksteal -q -m "not slow" tests
+
+test-slow: $(STAMP) browser
+	$(PY) -m pytest -n 2 --dist worksteal -q -m slow tests
+
+# The lint and type gate (configuration in pyproject.toml): ruff, then mypy; `make test` runs it before
+# pytest and stops on a finding (about 20 s on 2 cores from a fresh clone, most of it mypy).
+.PHONY: lint
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy
+test: lint
 
 bench: $(STAMP)
 	$(PY) -m benchmarks.run $(BENCH)

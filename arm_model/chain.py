@@ -27,7 +27,8 @@ Geometry (all SI):
 The probe's compliance is a virtual elastic joint in the chain: the stylus hangs from a hinge at
 ``p_last - L z_probe`` (for an unrotated probe with the default lever: ``(x, y, 0)`` of the last joint
 frame, the flange plane). Two revolute DOF bend it (``theta_y`` about probe y, then ``theta_x`` about
-probe x) and one prismatic DOF ``s`` shortens it along probe z. A wrench ``w = (F, M)`` at the ball (probe frame, force first [N], then torque [N m])
+probe x) and one prismatic DOF ``s`` shortens it along probe z. A wrench ``w = (F, M)`` at the ball (probe frame, force
+first [N], then torque [N m])
 sets the joint displacement by statics, ``q_e = K^-1 J_e^T w`` with ``J_e`` the ball's Jacobian with
 respect to ``q_e`` at ``q_e = 0`` (probe frame) and ``K = diag(L^2/c_x, L^2/c_y, 1/c_z)``:
 
@@ -39,8 +40,10 @@ and the ball centre is the forward kinematics of ``(q, q_e)``: for small forces 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 
@@ -48,6 +51,13 @@ __all__ = ["NUMPY_OPS", "Joint", "joint_value", "elastic_displacement", "ball_in
            "chain_point", "ball_centre_expr", "probe_lever", "has_stylus"]
 
 NUMPY_OPS = SimpleNamespace(sin=np.sin, cos=np.cos)
+
+#: A number of the chain: a float, a numpy array (one entry a point) or a CasADi SX/MX expression.
+Scalar = Any
+#: A short vector of them: a sequence, or a numpy array whose first axis is the component.
+Vector = Sequence[Scalar] | np.ndarray
+#: One elementary motion of a row (:func:`row_motions`): kind, axis, amount, row indices, is_joint.
+Motion = tuple[str, "int | tuple[float, ...]", Scalar, tuple[int, ...], bool]
 
 
 @dataclass(frozen=True)
@@ -66,7 +76,7 @@ class Joint:
     offset: float = 0.0
 
 
-def joint_value(joints, i: int, q):
+def joint_value(joints: Sequence[Joint] | None, i: int, q: Vector) -> Scalar:
     """The joint value of row ``i`` from the encoder columns ``q`` (``joints`` None: ``q[i]``)."""
     if joints is None:
         return q[i]
@@ -79,17 +89,18 @@ def joint_value(joints, i: int, q):
     return v
 
 
-def _is_const(x) -> bool:
+def _is_const(x: object) -> bool:
     return isinstance(x, (int, float))
 
 
-def _cos_sin(angle, ops):
+def _cos_sin(angle: Scalar, ops: Any) -> tuple[Scalar, Scalar]:
     if _is_const(angle):
         return math.cos(angle), math.sin(angle)
     return ops.cos(angle), ops.sin(angle)
 
 
-def probe_lever(p_last, rotation=None, lever=None):
+def probe_lever(p_last: Vector, rotation: Sequence[Sequence[float]] | None = None,
+                lever: Scalar | None = None) -> Scalar:
     """The stylus length L [m]: ``lever`` if given, else the ball's coordinate along probe z seen
     from the last joint origin (``z_probe . p_last``)."""
     if lever is not None:
@@ -99,7 +110,8 @@ def probe_lever(p_last, rotation=None, lever=None):
     return rotation[0][2] * p_last[0] + rotation[1][2] * p_last[1] + rotation[2][2] * p_last[2]
 
 
-def elastic_displacement(p_last, compliance, wrench, lever=None):
+def elastic_displacement(p_last: Vector, compliance: Vector, wrench: Vector,
+                         lever: Scalar | None = None) -> tuple[Scalar, Scalar, Scalar]:
     """Virtual elastic joint displacement ``(theta_y [rad], theta_x [rad], s [m])`` under ``wrench``.
 
     ``wrench`` is a sequence of 3 (force) or 6 (force, torque) components in the probe frame, each a
@@ -116,7 +128,9 @@ def elastic_displacement(p_last, compliance, wrench, lever=None):
     return theta_y, theta_x, s
 
 
-def ball_in_last_frame(p_last, q_e, ops=NUMPY_OPS, rotation=None, lever=None):
+def ball_in_last_frame(p_last: Vector, q_e: Vector, ops: Any = NUMPY_OPS,
+                       rotation: Sequence[Sequence[float]] | None = None,
+                       lever: Scalar | None = None) -> tuple[Scalar, Scalar, Scalar]:
     """Ball centre (x, y, z) [m] in the last joint frame for elastic displacement ``q_e``.
 
     Forward kinematics of the virtual joints: the hinge at ``p_last - L z_probe`` with the probe's
@@ -135,11 +149,11 @@ def ball_in_last_frame(p_last, q_e, ops=NUMPY_OPS, rotation=None, lever=None):
     u = (length * cx_ * sy_, -length * sx_, length * cx_ * cy_ - big_l)   # ball - p_last, probe frame
     if rotation is None:
         return p_last[0] + u[0], p_last[1] + u[1], p_last[2] + u[2]
-    return tuple(p_last[k] + rotation[k][0] * u[0] + rotation[k][1] * u[1] + rotation[k][2] * u[2]
-                 for k in range(3))
+    x, y, z = (p_last[k] + rotation[k][0] * u[0] + rotation[k][1] * u[1] + rotation[k][2] * u[2] for k in range(3))
+    return x, y, z
 
 
-def row_motions(convention: str, row, q, joint: Joint | None = None) -> list[tuple]:
+def row_motions(convention: str, row: Vector, q: Scalar, joint: Joint | None = None) -> list[Motion]:
     """The one description of each joint convention: the elementary motions of one row of the chain,
     in application order from its parent frame (the chain is their product).
 
@@ -158,6 +172,8 @@ def row_motions(convention: str, row, q, joint: Joint | None = None) -> list[tup
     """
     prismatic = joint is not None and joint.prismatic
     if convention in ("dh", "mdh"):
+        turn: Motion
+        slide: Motion
         if prismatic:
             turn, slide = ("R", 2, row[0], (0,), False), ("T", 2, row[1] + q, (1,), True)
         else:
@@ -166,15 +182,19 @@ def row_motions(convention: str, row, q, joint: Joint | None = None) -> list[tup
             return [turn, slide, ("T", 0, row[2], (2,), False), ("R", 0, row[3], (3,), False)]
         return [("R", 0, row[3], (3,), False), ("T", 0, row[2], (2,), False), turn, slide]
     if convention == "urdf":
+        if joint is None or joint.axis is None:
+            raise ValueError("a URDF row needs its joint's axis")
         ax = tuple(float(a) for a in joint.axis)
-        local = 2 if ax == (0.0, 0.0, 1.0) else 0 if ax == (1.0, 0.0, 0.0) else 1 if ax == (0.0, 1.0, 0.0) else ax
+        local: int | tuple[float, ...] = (2 if ax == (0.0, 0.0, 1.0) else 0 if ax == (1.0, 0.0, 0.0)
+                                          else 1 if ax == (0.0, 1.0, 0.0) else ax)
         return [("T", 0, row[0], (0,), False), ("T", 1, row[1], (1,), False), ("T", 2, row[2], (2,), False),
                 ("R", 2, row[5], (5,), False), ("R", 1, row[4], (4,), False), ("R", 0, row[3], (3,), False),
                 ("T" if prismatic else "R", local, q, (), True)]
     raise ValueError(f"unknown convention {convention!r}")
 
 
-def chain_point(convention: str, rows, q, point, ops=NUMPY_OPS, joints=None):
+def chain_point(convention: str, rows: Sequence[Vector] | np.ndarray, q: Vector, point: Vector,
+                ops: Any = NUMPY_OPS, joints: Sequence[Joint] | None = None) -> tuple[Scalar, Scalar, Scalar]:
     """Map ``point`` (x, y, z) given in the last joint frame to the base frame.
 
     ``rows[i]`` = (theta_offset, d, a, alpha) of joint i for DH/MDH, or (x, y, z, roll, pitch, yaw)
@@ -197,7 +217,7 @@ def chain_point(convention: str, rows, q, point, ops=NUMPY_OPS, joints=None):
                     y = y + amount
                 elif axis == 2:
                     z = z + amount
-                else:
+                elif isinstance(axis, tuple):
                     x, y, z = x + amount * axis[0], y + amount * axis[1], z + amount * axis[2]
                 continue
             c, s = (math.cos(amount), math.sin(amount)) if const else (ops.cos(amount), ops.sin(amount))
@@ -207,7 +227,7 @@ def chain_point(convention: str, rows, q, point, ops=NUMPY_OPS, joints=None):
                 y, z = c * y - s * z, s * y + c * z
             elif axis == 1:
                 x, z = c * x + s * z, c * z - s * x
-            else:                 # Rodrigues about a constant unit axis
+            elif isinstance(axis, tuple):         # Rodrigues about a constant unit axis
                 kx, ky, kz = axis
                 dot = (kx * x + ky * y + kz * z) * (1 - c)
                 x, y, z = (x * c + (ky * z - kz * y) * s + kx * dot,
@@ -216,8 +236,11 @@ def chain_point(convention: str, rows, q, point, ops=NUMPY_OPS, joints=None):
     return x, y, z
 
 
-def ball_centre_expr(convention: str, rows, p_last, compliance, q, wrench=None, ops=NUMPY_OPS, joints=None,
-                     rotation=None, lever=None):
+def ball_centre_expr(convention: str, rows: Sequence[Vector] | np.ndarray, p_last: Vector,
+                     compliance: Vector, q: Vector, wrench: Vector | None = None,
+                     ops: Any = NUMPY_OPS, joints: Sequence[Joint] | None = None,
+                     rotation: Sequence[Sequence[float]] | None = None,
+                     lever: Scalar | None = None) -> tuple[Scalar, Scalar, Scalar]:
     """Deflection-aware ball centre (x, y, z) [m] in the base frame: FK of (q, q_e(wrench)).
 
     ``rotation``, ``lever``: the probe frame (see :class:`arm_model.description.Probe`); a ``lever`` of
@@ -228,6 +251,6 @@ def ball_centre_expr(convention: str, rows, p_last, compliance, q, wrench=None, 
     return chain_point(convention, rows, q, ball_in_last_frame(p_last, q_e, ops, rotation, lever), ops, joints)
 
 
-def has_stylus(lever) -> bool:
+def has_stylus(lever: Scalar | None) -> bool:
     """False for a tip without a stylus (a stylus length ``lever`` of exactly 0): no elastic joint."""
     return lever is None or lever != 0.0

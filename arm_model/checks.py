@@ -4,8 +4,8 @@
   description). Such points are used and flagged, never dropped.
 - ``joint_limits``: an encoder angle beyond the joint's declared limits (``lower_deg``/``upper_deg``).
 
-Every command that reads points logs these at WARNING (``warning: ...`` on standard error) and, when it writes a summary and a
-report, lists them there too (``"warnings"`` of summary.json, a "Warnings" section of report.html).
+Every command that reads points logs these at WARNING (``warning: ...`` on standard error) and, when it writes a summary
+and a report, lists them there too (``"warnings"`` of summary.json, a "Warnings" section of report.html).
 """
 from __future__ import annotations
 
@@ -16,8 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["InputWarning", "over_force_warning", "joint_limit_warning", "JointLimitTally", "point_warnings", "log_warnings",
-           "warnings_html", "LIMIT_TOLERANCE_RAD", "limit_bounds"]
+__all__ = ["InputWarning", "over_force_warning", "joint_limit_warning", "JointLimitTally", "point_warnings",
+           "log_warnings", "warnings_html", "LIMIT_TOLERANCE_RAD", "limit_bounds"]
 
 log = logging.getLogger(__name__)
 

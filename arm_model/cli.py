@@ -49,8 +49,10 @@ COMMANDS = {
     "examples": ("arm_model.commands", "copy the example campaigns, data and docs into a folder"),
     "simulate": ("arm_model.sim.cli", "simulate a measurement campaign on a virtual arm with a hidden truth"),
     "view": ("viz.cli", "show the arm, probe deflection, artefacts and residuals in a headless meshcat viewer"),
-    "ring": ("correction.cli", "ring-gauge campaign: force peaks, cylinder fits, the paper's four models and the full-wrench correction, correlations, GUM budgets, HTML report"),
-    "paper": ("correction.cli", "the seed paper's Tables 1-3 reproduced from its own data and budgets; the loop closed"),
+    "ring": ("correction.cli", "ring-gauge campaign: force peaks, cylinder fits, the paper's four models and the "
+                               "full-wrench correction, correlations, GUM budgets, HTML report"),
+    "paper": ("correction.cli",
+              "the seed paper's Tables 1-3 reproduced from its own data and budgets; the loop closed"),
     "calibrate": ("calibration.cli", "identify the arm's kinematic parameters from artefact measurements"),
     "study": ("calibration.cli", "plan a calibration campaign: Monte Carlo runs, pose-set choice"),
     "close-loop": ("calibration.loop_cli", "find what the model lacks: calibrate, diagnose, add the effect, repeat"),

@@ -3,139 +3,25 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 import os
 import shutil
-from .cli import command_help
 from pathlib import Path
 
 import numpy as np
 
+from .checks import JointLimitTally, log_warnings
+from .cli import command_help
+from .cli_options import add_arm_options, add_frame_options, arm_inputs, model_from_args
 from .csv_io import format_csv
 from .errors import InputError
-from .output import output_file
-from .checks import JointLimitTally, log_warnings
 from .io import concat_points, iter_points
-from .model_file import Arm, load_model
+from .model_file import Arm
+from .output import output_file
 from .urdf import urdf_text
 
-__all__ = ["register", "tip_table", "tip_centres", "add_arm_options", "arm_from_args", "model_from_args", "number_in",
-           "positive", "non_negative", "at_least", "fraction", "finite", "seed", "port"]
+__all__ = ["register", "tip_table", "tip_centres"]
 
 log = logging.getLogger(__name__)
-
-
-def _number(text: str, kind=float):
-    """``text`` as a finite float or a whole number: no underscores ("4_5" is not 45), no nan or inf."""
-    what = "a whole number" if kind is int else "a finite number"
-    try:
-        if "_" in text:
-            raise ValueError
-        v = kind(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
-    if kind is float and not math.isfinite(v):
-        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
-    return v
-
-
-def number_in(low=None, high=None, *, low_open=False, high_open=False, kind=float):
-    """argparse type: a finite number (``kind`` float or int) in the interval from ``low`` to ``high``
-    (either may be None: unbounded; ``*_open``: the end itself excluded)."""
-    lo = "" if low is None else ("(" if low_open else "[") + f"{low:g}"
-    hi = "" if high is None else f"{high:g}" + (")" if high_open else "]")
-    if low is not None and high is not None:
-        want = f"in {lo}, {hi}"
-    elif low is not None:
-        want = f"{'>' if low_open else '>='} {low:g}"
-    elif high is not None:
-        want = f"{'<' if high_open else '<='} {high:g}"
-    else:
-        want = ""
-
-    def parse(text: str):
-        v = _number(text, kind)
-        if ((low is not None and (v < low or (low_open and v == low)))
-                or (high is not None and (v > high or (high_open and v == high)))):
-            raise argparse.ArgumentTypeError(f"must be {want}, got {text}")
-        return v
-    parse.__name__ = "whole number" if kind is int else "number"     # argparse names the type in messages
-    return parse
-
-
-def positive(kind=float):
-    """argparse type: a finite number > 0 (``kind`` float or int)."""
-    return number_in(0, low_open=True, kind=kind)
-
-
-def non_negative(kind=float):
-    """argparse type: a finite number >= 0."""
-    return number_in(0, kind=kind)
-
-
-def at_least(minimum: int):
-    """argparse type: a whole number >= ``minimum``."""
-    return number_in(minimum, kind=int)
-
-
-#: argparse type: a number in (0, 1)
-fraction = number_in(0, 1, low_open=True, high_open=True)
-#: argparse type: a finite number (any sign)
-finite = number_in()
-#: argparse type: a random seed (a whole number >= 0)
-seed = number_in(0, kind=int)
-#: argparse type: a TCP port
-port = number_in(1, 65535, kind=int)
-
-
-def add_arm_options(p, help_arm: str = "the arm: a shipped arm's name (aacmm7), a model file or description TOML "
-                                       "(the effects a model file holds are applied) or a URDF with --tip-frame "
-                                       "(docs/formats.md §2, docs/own-arm.md)") -> None:
-    """``--arm`` and ``--tip-frame``, the same for every subcommand."""
-    p.add_argument("--arm", type=Path, required=True, help=help_arm)
-    p.add_argument("--tip-frame", default=None, metavar="LINK",
-                   help="for an arm given as a URDF: the link at the ball centre, in any orientation (its z axis "
-                        "is the probe's, along the tool; the chain runs from the root to it; force range and "
-                        "compliances default to the seed paper's probe)")
-    p.add_argument("--base-frame", default=None, metavar="LINK",
-                   help="for an arm given as a URDF: the link its chain starts at (default the URDF's root; its "
-                        "frame is the base frame of every output), e.g. after a floating joint, or an arm on a torso "
-                        "whose joints the points do not give")
-    p.add_argument("--masses", type=Path, default=None, metavar="TOML",
-                   help="for a URDF arm: link masses and centres of mass ([[link]] name, mass_kg, com_x_mm, "
-                        "com_y_mm, com_z_mm), replacing the URDF's <inertial>; gravity torques (joint "
-                        "compliance) need masses")
-
-
-def model_from_args(args: argparse.Namespace) -> Arm:
-    """The arm named by :func:`add_arm_options`: description, effects and their parameter values
-    (:class:`arm_model.model_file.Arm`), read by the one loader every subcommand uses."""
-    key = (args.arm, args.tip_frame, getattr(args, "masses", None), getattr(args, "base_frame", None))
-    cached = getattr(args, "_arm_loaded", None)
-    if cached is None or cached[0] != key:        # read once per command line (arm_inputs reads it first)
-        arm = load_model(*key[:2], masses=key[2], base_frame=key[3])
-        args._arm_loaded = (key, arm)
-        log.debug(f"arm {args.arm}: '{arm.desc.name}', {arm.desc.n_joints} joints, effects: "
-                  f"{', '.join(e.describe(arm.desc) for e in arm.effects) or 'none'}"
-                  + (f", covariance {arm.covariance}" if arm.covariance else ""))
-    return args._arm_loaded[1]
-
-
-def arm_inputs(args: argparse.Namespace) -> list:
-    """Every file the ``--arm`` options read: the arm, the ``--masses`` file and the covariance file a model
-    file names. Outputs are never written over any of them (:func:`arm_model.output.guard_output`)."""
-    files = [args.arm, getattr(args, "masses", None)]
-    try:
-        cov = model_from_args(args).covariance
-    except InputError:
-        cov = None          # the command reports the bad arm itself when it loads it
-    return [f for f in files + [cov] if f is not None]
-
-
-def arm_from_args(args: argparse.Namespace):
-    """The description of the arm named by :func:`add_arm_options` (its effects, if any, left out:
-    commands that evaluate points use :func:`model_from_args`)."""
-    return model_from_args(args).desc
 
 
 def register(sub) -> None:
@@ -165,9 +51,7 @@ def register(sub) -> None:
     u.add_argument("arm", type=Path, help="arm description TOML or a shipped arm's name (aacmm7), or a URDF with "
                                           "--tip-frame, to see the chain the toolkit reads from it "
                                           "(docs/formats.md §2)")
-    u.add_argument("--tip-frame", default=None, metavar="LINK", help="for a URDF arm: the link at the ball centre")
-    u.add_argument("--base-frame", default=None, metavar="LINK",
-                   help="for a URDF arm: the link its chain starts at (default the root)")
+    add_frame_options(u)
     u.add_argument("-o", "--output", type=Path, required=True, help="output URDF")
     u.set_defaults(func=run_urdf)
 
@@ -270,7 +154,7 @@ class _TipTally:
         self.flagged_count += int(cols["over_force"].sum())
         self.limits.add(block.q, block.lines)
 
-    def merge(self, other: "_TipTally") -> None:
+    def merge(self, other: _TipTally) -> None:
         self.n += other.n
         self.measurements.update(other.measurements)
         self.kinds |= other.kinds
@@ -333,7 +217,8 @@ def run_tip(args: argparse.Namespace) -> int:
         ref = args.reference_frame
         if ref:
             _check_tracker(arm, args.arm)
-        from .uncertainty_cli import parameters_of, tip_columns, wants_uncertainty
+        from .model_file import parameters_of
+        from .uncertainty_cli import tip_columns, wants_uncertainty
         parameters = parameters_of(arm)
         uncertain = wants_uncertainty(args, parameters)
         split = None if uncertain else csv_spans(args.points, workers())

@@ -18,7 +18,6 @@ fall back to Python's ``%`` formatting.
 from __future__ import annotations
 
 import csv
-from decimal import ROUND_HALF_EVEN, Decimal
 import io
 import math
 import os
@@ -26,6 +25,7 @@ import re
 import stat
 import warnings
 from dataclasses import dataclass
+from decimal import ROUND_HALF_EVEN, Decimal
 from pathlib import Path
 
 import numpy as np
@@ -425,7 +425,7 @@ def iter_csv_blocks(path: str | Path, what: str, header_check, block_bytes: int 
         if start:
             while block := read(start):
                 line_no += block.count(b"\n")
-            header_line, header = known_header
+            header_line, header = known_header  # type: ignore[misc]
             num_idx, txt_idx = header_check(header, header_line)
             first = False
         while True:

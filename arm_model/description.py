@@ -4,20 +4,25 @@ Inside, everything is SI: lengths [m], angles [rad], forces [N], compliances [m/
 """
 from __future__ import annotations
 
-import difflib
 import math
-import re
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from .errors import InputError, parse_toml, read_text
+from .errors import InputError, did_you_mean, parse_toml, read_text
+from .toml_lines import key_path_text, toml_key_lines
 from .units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
+if TYPE_CHECKING:
+    from .chain import Joint
+
 __all__ = ["JointRow", "Mimic", "Probe", "Visual", "ArmDescription", "load_description", "parse_description",
-           "format_description", "GRAVITY", "MIN_STYLUS", "default_lever", "DH_ROW_FIELDS", "URDF_ROW_FIELDS"]
+           "format_description", "GRAVITY", "MIN_STYLUS", "default_lever", "DH_ROW_FIELDS", "URDF_ROW_FIELDS",
+           "check_calibration_table", "MAX_PROBING_SCATTER_UM"]
 
 DH_ROW_FIELDS = ("theta_offset", "d", "a", "alpha")
 URDF_ROW_FIELDS = ("origin_x", "origin_y", "origin_z", "origin_roll", "origin_pitch", "origin_yaw")
@@ -79,6 +84,26 @@ class JointRow:
         return self.kind == "prismatic"
 
 
+def _six(values: ArrayLike) -> tuple[float, float, float, float, float, float]:
+    """A URDF joint origin (x, y, z [m], roll, pitch, yaw [rad]) as six floats."""
+    x, y, z, roll, pitch, yaw = (float(v) for v in np.asarray(values, dtype=float))
+    return x, y, z, roll, pitch, yaw
+
+
+def _origin(j: JointRow) -> tuple[float, float, float, float, float, float]:
+    """The origin of a URDF row (every row of a URDF chain has one)."""
+    if j.origin is None:
+        raise ValueError(f"joint '{j.name}' of a URDF chain has no origin")
+    return j.origin
+
+
+def _axis(j: JointRow) -> tuple[float, float, float]:
+    """The axis of a URDF row (every row of a URDF chain has one)."""
+    if j.axis is None:
+        raise ValueError(f"joint '{j.name}' of a URDF chain has no axis")
+    return j.axis
+
+
 @dataclass(frozen=True)
 class Visual:
     """One visual of a URDF the arm was read from, for the viewer only: ``row`` the chain row whose moving
@@ -86,9 +111,9 @@ class Visual:
     frame (nested tuples [m]), ``geometry`` the ``<geometry>`` element's XML (mesh file names absolute),
     ``rgba`` its colour or None."""
     row: int
-    pose: tuple
+    pose: tuple[float, ...]
     geometry: str
-    rgba: tuple | None = None
+    rgba: tuple[float, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -113,7 +138,7 @@ class Probe:
     lever: float | None = None
 
     @property
-    def rotation(self) -> tuple | None:
+    def rotation(self) -> tuple[tuple[float, ...], ...] | None:
         """R_last_probe as a 3x3 nested tuple, None for an unrotated probe."""
         from .geometry import rotation_xyz
         return None if not any(self.rpy) else tuple(map(tuple, rotation_xyz(self.rpy).tolist()))
@@ -146,7 +171,7 @@ class ArmDescription:
     base_frame: str | None = field(default=None, compare=False)
     #: the user's visuals when the arm was read from a URDF, for the viewer (:class:`Visual`); never written
     #: to a description TOML
-    visuals: tuple = field(default=(), compare=False, repr=False)
+    visuals: tuple[Visual, ...] = field(default=(), compare=False, repr=False)
 
     @cached_property
     def encoders(self) -> tuple[JointRow, ...]:
@@ -166,6 +191,7 @@ class ArmDescription:
                 out[source] = rows[source]
                 continue
             m = j.mimic
+            assert m is not None              # a joint without <mimic> is its own source
             lims = None if j.lower is None or j.upper is None else sorted(((j.lower - m.offset) / m.multiplier,
                                                                           (j.upper - m.offset) / m.multiplier))
             out[source] = JointRow(name=source, kind=j.kind, lower=None if lims is None else lims[0],
@@ -173,7 +199,7 @@ class ArmDescription:
         return tuple(out.values())
 
     @cached_property
-    def chain_joints(self) -> tuple:
+    def chain_joints(self) -> tuple[Joint, ...]:
         """How each row moves (:class:`arm_model.chain.Joint`): axis, revolute or prismatic, and the
         encoder column it reads (with a mimic's multiplier and offset)."""
         from .chain import Joint
@@ -228,17 +254,17 @@ class ArmDescription:
             return np.array([j.origin for j in self.joints], dtype=float)
         return np.array([[j.theta_offset, j.d, j.a, j.alpha] for j in self.joints], dtype=float)
 
-    def with_row_table(self, table: np.ndarray) -> "ArmDescription":
+    def with_row_table(self, table: np.ndarray) -> ArmDescription:
         table = np.asarray(table, dtype=float)
         if self.convention == "urdf":
-            joints = tuple(replace(j, origin=tuple(float(v) for v in r)) for j, r in zip(self.joints, table))
+            joints = tuple(replace(j, origin=_six(r)) for j, r in zip(self.joints, table))
         else:
             joints = tuple(replace(j, theta_offset=float(r[0]), d=float(r[1]), a=float(r[2]), alpha=float(r[3]))
                            for j, r in zip(self.joints, table))
         return replace(self, joints=joints)
 
     @property
-    def axes(self) -> tuple | None:
+    def axes(self) -> tuple[tuple[float, float, float] | None, ...] | None:
         """Joint axes (URDF chains), None for DH/MDH (z)."""
         return tuple(j.axis for j in self.joints) if self.convention == "urdf" else None
 
@@ -247,7 +273,7 @@ class ArmDescription:
         """Indices of the row values that are lengths (thermal growth scales them)."""
         return (0, 1, 2) if self.convention == "urdf" else (1, 2)
 
-    def with_probe(self, **changes) -> "ArmDescription":
+    def with_probe(self, **changes: Any) -> ArmDescription:
         return replace(self, probe=replace(self.probe, **changes))
 
 
@@ -277,71 +303,6 @@ _PROBE_KEYS = {
 }
 
 
-def _split_key(text: str) -> tuple[str, ...]:
-    """``a."b.c".d`` -> ("a", "b.c", "d")."""
-    return tuple(p.strip().strip('"') for p in re.findall(r'"[^"]*"|[^.]+', text))
-
-
-def toml_key_lines(text: str) -> dict[tuple, int]:
-    """Map a key path to its 1-based line, for messages.
-
-    A path is a tuple of table names, 0-based indices of array-of-tables entries and the key, e.g.
-    ``("joint", 2, "d_mm")``, ``("effect", 0, "parameter", 3, "value_urad")``; a table or array entry
-    itself maps without a key (``("probe",)``, ``("joint", 2)``). Arrays of tables written as
-    ``[[name]]`` headers and as inline tables one a line (``name = [`` then ``{ k = v, ... },``) are
-    both followed.
-    """
-    lines: dict[tuple, int] = {}
-    counts: dict[tuple, int] = {}
-    prefix: tuple = ()
-    array: tuple | None = None          # inside "key = [" over several lines: the array's path
-    for no, raw in enumerate(text.split("\n"), start=1):
-        line = re.sub(r"#[^\"']*$", "", raw).strip()
-        if array is not None:
-            if line.startswith("]"):
-                array = None
-                continue
-            if line.startswith("{"):
-                counts[array] = counts.get(array, -1) + 1
-                item = array + (counts[array],)
-                lines[item] = no
-                for key in re.findall(r'(?:^\{|,)\s*("[^"]*"|[\w-]+)\s*=', line):
-                    lines[item + (key.strip('"'),)] = no
-            continue
-        m = re.match(r"^\[\[\s*(.+?)\s*\]\]$", line) or re.match(r"^\[\s*(.+?)\s*\]$", line)
-        if m:
-            names = _split_key(m.group(1))
-            path: tuple = ()
-            for k, name in enumerate(names):
-                path += (name,)
-                if k < len(names) - 1 and path in counts:
-                    path += (counts[path],)
-            if line.startswith("[["):
-                counts[path] = counts.get(path, -1) + 1
-                path += (counts[path],)
-            prefix = path
-            lines[prefix] = no
-            continue
-        m = re.match(r'^("[^"]*"|[\w-]+)\s*=\s*(.*)$', line)
-        if m:
-            key = m.group(1).strip('"')
-            lines[prefix + (key,)] = no
-            if m.group(2) == "[":
-                array = prefix + (key,)
-    return lines
-
-
-def key_path_text(path: tuple) -> str:
-    """``("joint", 2, "d_mm")`` -> ``joint[3].d_mm`` (1-based entries, as users count)."""
-    out = ""
-    for p in path:
-        if isinstance(p, int):
-            out += f"[{p + 1}]"
-        else:
-            out += ("." if out else "") + p
-    return out or "top level"
-
-
 class TomlReader:
     """Messages naming the file, the line and the key path of a parsed TOML text."""
 
@@ -349,7 +310,7 @@ class TomlReader:
         self.path = path
         self.lines = toml_key_lines(text)
 
-    def error(self, msg: str, *path) -> InputError:
+    def error(self, msg: str, *path: Any) -> InputError:
         """An InputError at ``path`` (the key path; its line, else its table's, else none)."""
         line = None
         for k in range(len(path), -1, -1):
@@ -358,7 +319,8 @@ class TomlReader:
                 break
         return InputError(msg, self.path, line, f"key '{key_path_text(path)}'")
 
-    def values(self, tbl: dict, spec: dict, where: tuple, text_keys: tuple[str, ...] = ()) -> dict[str, float]:
+    def values(self, tbl: dict[str, Any], spec: dict[str, Any], where: tuple[Any, ...],
+               text_keys: tuple[str, ...] = ()) -> dict[str, float]:
         """Numeric keys with unit suffixes of ``tbl`` (at key path ``where``) in SI by base name;
         ``spec``: base name -> (quantity, required)."""
         out: dict[str, float] = {}
@@ -369,13 +331,13 @@ class TomlReader:
                 continue
             parts = split_unit(key)
             if parts is None:
-                near = nearest(key, [f"{b}_<unit>" for b in spec] + list(text_keys))
+                near = did_you_mean(key, [f"{b}_<unit>" for b in spec] + list(text_keys))
                 raise self.error(f"'{key}' has no known unit suffix (a numeric key carries its unit: "
                                  f"_mm, _m, _um, _deg, _rad, _N, _mm_per_N, _kg ...){near}", *where, key)
             base, unit = parts
             if base not in spec:
                 raise self.error(f"unknown key '{key}' (known: {', '.join(sorted(spec))})"
-                                 f"{nearest(base, list(spec))}", *where, key)
+                                 f"{did_you_mean(base, list(spec))}", *where, key)
             quantity = spec[base][0]
             if QUANTITY_OF_UNIT[unit] != quantity:
                 raise self.error(f"'{key}' is a {quantity}, but '_{unit}' is a unit of "
@@ -396,15 +358,35 @@ class TomlReader:
         return out
 
 
-def nearest(word: str, known) -> str:
-    """`` (did you mean 'x'?)`` for the closest of ``known``, or an empty text."""
-    hit = difflib.get_close_matches(word, list(known), n=1, cutoff=0.6)
-    return f" (did you mean '{hit[0]}'?)" if hit else ""
-
-
 #: top-level keys of a description; a model file (arm_model.model_file) adds its effects and calibration tables
 DESCRIPTION_KEYS = ("name", "convention", "joint", "probe")
 MODEL_KEYS = ("effect", "calibration", "reference_frame", "marker")
+
+
+#: the largest probing scatter a model file may give [um]: 100 mm is a unit mistake, while a poor fit of a
+#: robot can estimate more than a millimetre, and every model file calibrate writes must read back
+MAX_PROBING_SCATTER_UM = 1.0e5
+
+
+def check_calibration_table(tbl: Any, r: TomlReader) -> None:
+    """The ``[calibration]`` table of a model file: text keys ``covariance`` and ``written_by``, the
+    numbers ``probing_scatter_um`` (>= 0: a calibration whose encoder and force-sensor noise alone account for
+    its residual scatter writes 0; at most :data:`MAX_PROBING_SCATTER_UM`) and ``model_discrepancy_um`` (the
+    same range)."""
+    if not isinstance(tbl, dict):
+        raise r.error("'calibration' must be a table", "calibration")
+    known = ("covariance", "written_by", "probing_scatter_um", "model_discrepancy_um")
+    for key, value in tbl.items():
+        if key not in known:
+            raise r.error(f"unknown key '{key}' (known: {', '.join(known)}){did_you_mean(key, known)}",
+                          "calibration", key)
+        if key in ("probing_scatter_um", "model_discrepancy_um"):
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                    or not 0 <= value <= MAX_PROBING_SCATTER_UM:
+                raise r.error(f"'{key}' must be a number in [0, {MAX_PROBING_SCATTER_UM:g}] um, got {value!r}",
+                              "calibration", key)
+        elif not isinstance(value, str) or not value.strip():
+            raise r.error(f"'{key}' must be a non-empty text", "calibration", key)
 
 
 def parse_description(text: str, path: str = "<string>") -> ArmDescription:
@@ -420,12 +402,11 @@ def parse_description(text: str, path: str = "<string>") -> ArmDescription:
                       "carry: give it to an --arm option (tip, ring, view, calibrate, close-loop apply them; in "
                       "Python arm_model.model_file.load_model)", "effect", 0)
     if "calibration" in data:
-        from .model_file import check_calibration_table
         check_calibration_table(data["calibration"], r)
     return description_from_data({k: v for k, v in data.items() if k not in MODEL_KEYS}, r)
 
 
-def _joint_kind_keys(convention: str, kind: str) -> dict:
+def _joint_kind_keys(convention: str, kind: str) -> dict[str, Any]:
     """The numeric keys of a [[joint]] row: limits, resolution and mimic offset are angles for a revolute
     joint, lengths for a prismatic one."""
     spec = dict(_URDF_JOINT_KEYS if convention == "urdf" else _JOINT_KEYS)
@@ -435,7 +416,7 @@ def _joint_kind_keys(convention: str, kind: str) -> dict:
     return spec
 
 
-def _joint_row(r: TomlReader, convention: str, i: int, row: dict) -> JointRow:
+def _joint_row(r: TomlReader, convention: str, i: int, row: dict[str, Any]) -> JointRow:
     """One [[joint]] table (number ``i``) as a :class:`JointRow`."""
     row = dict(row)
     kind = row.pop("type", "revolute")
@@ -473,7 +454,7 @@ def _joint_row(r: TomlReader, convention: str, i: int, row: dict) -> JointRow:
                   encoder_resolution=v.get("encoder_resolution"), kind=kind,
                   mimic=None if master is None else Mimic(master, float(multiplier), v.get("mimic_offset", 0.0)))
     if convention == "urdf":
-        return JointRow(origin=tuple(v[k] for k in URDF_ROW_FIELDS), axis=axis, **common)
+        return JointRow(origin=_six([v[k] for k in URDF_ROW_FIELDS]), axis=axis, **common)
     return JointRow(theta_offset=v["theta_offset"], d=v["d"], a=v["a"], alpha=v["alpha"], **common)
 
 
@@ -495,7 +476,7 @@ def _check_mimics(r: TomlReader, joints: list[JointRow]) -> None:
                           "joint of its own kind", "joint", i, "mimic_joint")
 
 
-def default_lever(p_last, rotation=None) -> float | None:
+def default_lever(p_last: ArrayLike, rotation: ArrayLike | None = None) -> float | None:
     """The stylus length a probe gets when none is given, one rule for every route (a description TOML, a
     URDF's tip frame): None (the lever is the ball's coordinate along probe z, ``z_probe . p``) when that is
     a length, at least :data:`MIN_STYLUS` and 1/1000 of the ball's distance from the last joint origin;
@@ -509,7 +490,7 @@ def default_lever(p_last, rotation=None) -> float | None:
     return dist if dist >= MIN_STYLUS else 0.0
 
 
-def _probe(r: TomlReader, ptab) -> Probe:
+def _probe(r: TomlReader, ptab: Any) -> Probe:
     """The [probe] table. What the probe model needs, and nothing a measuring arm merely suggests: a
     compliant stylus needs a length (its bending hinge lies that far behind the ball along probe z,
     wherever the ball is: default :func:`default_lever`); ``stylus_length_mm = 0`` is a tip without a
@@ -535,7 +516,7 @@ def _probe(r: TomlReader, ptab) -> Probe:
         probe = replace(probe, lever=default_lever(probe.p_last, probe.rotation))
     if probe.lever == 0.0 and probe.compliance.any():
         given = "stylus_length" in pv
-        raise r.error((f"a tip without a stylus (stylus_length_mm = 0)" if given else
+        raise r.error(("a tip without a stylus (stylus_length_mm = 0)" if given else
                        f"the ball lies {float(np.linalg.norm(probe.p_last)) * 1e3:.3g} mm from the last joint origin, "
                        "a tip without a stylus") + " bends under no force: its compliances must be 0 (a compliant "
                       "stylus is at least 0.001 mm long: give its length, stylus_length_mm)", "probe",
@@ -546,13 +527,13 @@ def _probe(r: TomlReader, ptab) -> Probe:
     return probe
 
 
-def description_from_data(data: dict, r: TomlReader, extra_keys: tuple[str, ...] = ()) -> ArmDescription:
+def description_from_data(data: dict[str, Any], r: TomlReader, extra_keys: tuple[str, ...] = ()) -> ArmDescription:
     """The description of parsed TOML ``data``; keys of ``extra_keys`` are left to the caller."""
     path = r.path
     known = DESCRIPTION_KEYS + tuple(extra_keys)
     for key in data:
         if key not in known:
-            raise r.error(f"unknown top-level key '{key}' (known: {', '.join(known)}){nearest(key, known)}", key)
+            raise r.error(f"unknown top-level key '{key}' (known: {', '.join(known)}){did_you_mean(key, known)}", key)
     name = data.get("name")
     if not isinstance(name, str) or not name.strip():
         raise r.error("missing or empty 'name'" if name is None or name == "" else
@@ -608,7 +589,7 @@ def _check_writable(desc: ArmDescription) -> None:
     from .errors import NumericalError
     for j in desc.joints:
         length = "length" if j.prismatic else "angle"
-        values = ([("origin", v, "length") for v in j.origin[:3]] + [("origin", v, "angle") for v in j.origin[3:]]
+        values = ([("origin", v, "length") for v in _origin(j)[:3]] + [("origin", v, "angle") for v in _origin(j)[3:]]
                   if desc.convention == "urdf" else
                   [("theta_offset", j.theta_offset, "angle"), ("d", j.d, "length"), ("a", j.a, "length"),
                    ("alpha", j.alpha, "angle")])
@@ -631,7 +612,7 @@ def _check_writable(desc: ArmDescription) -> None:
                              f"{p.compliance.tolist()} m/N: a tip without a stylus bends under no force")
 
 
-def description_data(desc: ArmDescription) -> dict:
+def description_data(desc: ArmDescription) -> dict[str, Any]:
     """The TOML tables of a description (mm and degrees) as plain data for ``tomli_w``; read back,
     every value is the same float. A description its reader would refuse is a :class:`NumericalError`
     (:func:`_check_writable`)."""
@@ -639,13 +620,13 @@ def description_data(desc: ArmDescription) -> dict:
     mm, deg = UNIT_FACTORS["mm"], UNIT_FACTORS["deg"]
     joints = []
     for j in desc.joints:
-        row: dict = {"name": j.name}
+        row: dict[str, Any] = {"name": j.name}
         if j.prismatic:
             row["type"] = "prismatic"
         if desc.convention == "urdf":
-            row.update({f"origin_{k}_mm": in_unit(v, mm) for k, v in zip("xyz", j.origin[:3])})
-            row.update({f"origin_{k}_deg": in_unit(v, deg) for k, v in zip(("roll", "pitch", "yaw"), j.origin[3:])})
-            row["axis"] = [float(a) for a in j.axis]
+            row.update({f"origin_{k}_mm": in_unit(v, mm) for k, v in zip("xyz", _origin(j)[:3])})
+            row.update({f"origin_{k}_deg": in_unit(v, deg) for k, v in zip(("roll", "pitch", "yaw"), _origin(j)[3:])})
+            row["axis"] = [float(a) for a in _axis(j)]
         else:
             row.update({"theta_offset_deg": in_unit(j.theta_offset, deg), "d_mm": in_unit(j.d, mm),
                         "a_mm": in_unit(j.a, mm), "alpha_deg": in_unit(j.alpha, deg)})
@@ -689,7 +670,7 @@ def comment_block(comment: str | None) -> str:
     return "".join(f"# {line}".rstrip() + "\n" for line in clean.split("\n"))
 
 
-def toml_text(data: dict, comment: str | None = None) -> str:
+def toml_text(data: dict[str, Any], comment: str | None = None) -> str:
     """TOML text of ``data`` written by ``tomli_w`` (every name and text quoted as TOML needs), with
     ``comment`` as a header."""
     import tomli_w

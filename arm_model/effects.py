@@ -33,11 +33,11 @@ REFERENCE_TEMPERATURE_C = 20.0
 @dataclass
 class ModelInputs:
     """Per-point inputs; each entry a column (numpy array), a scalar or an SX."""
-    q: list                       # J encoder angles [rad]
-    wrench: list                  # 6: force [N], torque [N m], probe frame
+    q: list[Any]                  # J encoder angles [rad]
+    wrench: list[Any]             # 6: force [N], torque [N m], probe frame
     temperature: Any = None       # [°C]
-    tau_gravity: list | None = None   # J [N m]
-    tau_contact: list | None = None   # J [N m]
+    tau_gravity: list[Any] | None = None   # J [N m]
+    tau_contact: list[Any] | None = None   # J [N m]
     #: optional provider of joint moments, ``f(geom, q, i, origin) -> (M_gravity, M_contact)`` (base frame,
     #: about ``origin``, [N m]); :class:`LateralCompliance` computes them itself when None
     moments: Any = None
@@ -45,12 +45,19 @@ class ModelInputs:
 
 @dataclass
 class Geometry:
-    rows: list                    # J x (theta_offset [rad], d [m], a [m], alpha [rad])
-    p_last: list                  # 3 [m]
-    compliance: list              # 3 [m/N]
+    rows: list[list[Any]]         # J x (theta_offset [rad], d [m], a [m], alpha [rad])
+    p_last: list[Any]             # 3 [m]
+    compliance: list[Any]         # 3 [m/N]
 
 
-def _joint(desc, i: int, prefix: str = "j") -> str:
+def _torques(tau: list[Any] | None, name: str) -> list[Any]:
+    """The per-joint torques of ``inputs`` an effect reads (an evaluator supplies what :meth:`Effect.needs`)."""
+    if tau is None:
+        raise ValueError(f"the effect needs the per-point joint torques '{name}'")
+    return tau
+
+
+def _joint(desc: ArmDescription | None, i: int, prefix: str = "j") -> str:
     """Encoder column ``i`` (0-based) as a person reads it: the joint's name in ``desc``, else ``j<i+1>``."""
     names = getattr(desc, "joint_names", ())
     return names[i] if 0 <= i < len(names) else f"{prefix}{i + 1}"
@@ -99,11 +106,11 @@ class Effect:
         """(name, SI unit) of each parameter, in the order :meth:`apply` reads them."""
         raise NotImplementedError
 
-    def apply(self, desc: ArmDescription, params: list, inputs: ModelInputs, geom: Geometry, ops) -> None:
+    def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
         """Modify ``inputs`` and ``geom`` in place (lists of columns/expressions)."""
         raise NotImplementedError
 
-    def describe(self, desc=None) -> str:
+    def describe(self, desc: ArmDescription | None = None) -> str:
         """The effect and its joints: ``j3`` by encoder column, or by name with the arm's description ``desc``."""
         return self.key if self.joints is None else f"{self.key}({', '.join(_joint(desc, i) for i in self.joints)})"
 
@@ -121,14 +128,14 @@ class EncoderEccentricity(Effect):
     revolute_only: ClassVar[bool] = True
     held_when_weak: ClassVar[bool] = True
 
-    def param_defs(self, desc):
+    def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
         out = []
         for i in self.joint_indices(desc):
             for h in self.harmonics:
                 out += [(f"{desc.joint_names[i]}.ecc{h}_cos", "rad"), (f"{desc.joint_names[i]}.ecc{h}_sin", "rad")]
         return out
 
-    def apply(self, desc, params, inputs, geom, ops):
+    def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
         k = 0
         q = list(inputs.q)
         for i in self.joint_indices(desc):
@@ -153,10 +160,10 @@ class JointGain(Effect):
     plausible_size: ClassVar[float] = 1e-2     # a 1 % scale error of an encoder is already large
     held_when_weak: ClassVar[bool] = True
 
-    def param_defs(self, desc):
+    def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
         return [(f"{desc.joint_names[i]}.gain", "1") for i in self.joint_indices(desc)]
 
-    def apply(self, desc, params, inputs, geom, ops):
+    def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
         q = list(inputs.q)
         for k, i in enumerate(self.joint_indices(desc)):
             q[i] = q[i] + params[k] * inputs.q[i]
@@ -172,20 +179,20 @@ class JointCompliance(Effect):
     key: str = field(default="joint_compliance", init=False, repr=False)
     revolute_only: ClassVar[bool] = True
 
-    def needs(self):
+    def needs(self) -> tuple[str, ...]:
         return tuple(n for n, on in (("tau_gravity", self.gravity), ("tau_contact", self.contact)) if on)
 
-    def param_defs(self, desc):
+    def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
         return [(f"{desc.joint_names[i]}.compliance", "rad/(N m)") for i in self.joint_indices(desc)]
 
-    def apply(self, desc, params, inputs, geom, ops):
+    def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
         q = list(inputs.q)
         for k, i in enumerate(self.joint_indices(desc)):
             load = 0.0
             if self.contact:
-                load = load + inputs.tau_contact[i]
+                load = load + _torques(inputs.tau_contact, "tau_contact")[i]
             if self.gravity:
-                load = load - inputs.tau_gravity[i]
+                load = load - _torques(inputs.tau_gravity, "tau_gravity")[i]
             q[i] = q[i] + params[k] * load
         inputs.q = q
 
@@ -197,15 +204,15 @@ class ThermalGrowth(Effect):
     per_joint: bool = False
     key: str = field(default="thermal", init=False, repr=False)
 
-    def needs(self):
+    def needs(self) -> tuple[str, ...]:
         return ("temperature",)
 
-    def param_defs(self, desc):
+    def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
         if self.per_joint:
             return [(f"{desc.joint_names[i]}.thermal_alpha", "1/K") for i in self.joint_indices(desc)]
         return [("links.thermal_alpha", "1/K")]
 
-    def apply(self, desc, params, inputs, geom, ops):
+    def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
         dt = inputs.temperature - REFERENCE_TEMPERATURE_C
         rows = [list(r) for r in geom.rows]
         for k, i in enumerate(self.joint_indices(desc)):
@@ -224,13 +231,13 @@ class ForceSensorError(Effect):
     offsets: bool = True
     key: str = field(default="force_sensor", init=False, repr=False)
 
-    def param_defs(self, desc):
+    def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
         out = [(f"force.gain_{'xyz'[a]}", "1") for a in self.axes]
         if self.offsets:
             out += [(f"force.offset_{'xyz'[a]}", "N") for a in self.axes]
         return out
 
-    def apply(self, desc, params, inputs, geom, ops):
+    def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
         w = list(inputs.wrench)
         n = len(self.axes)
         for k, a in enumerate(self.axes):
@@ -247,14 +254,14 @@ class ProbeCompliance(Effect):
     axial: bool = False
     key: str = field(default="probe_compliance", init=False, repr=False)
 
-    def param_defs(self, desc):
+    def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
         out = ([("probe.dcompliance_x", "m/N"), ("probe.dcompliance_y", "m/N")] if self.anisotropic
                else [("probe.dcompliance_bend", "m/N")])
         if self.axial:
             out.append(("probe.dcompliance_z", "m/N"))
         return out
 
-    def apply(self, desc, params, inputs, geom, ops):
+    def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
         c = list(geom.compliance)
         if self.anisotropic:
             c[0], c[1] = c[0] + params[0], c[1] + params[1]
@@ -265,11 +272,12 @@ class ProbeCompliance(Effect):
         geom.compliance = c
 
 
-EFFECTS = {cls.__dataclass_fields__["key"].default: cls for cls in
-           (EncoderEccentricity, JointGain, JointCompliance, ThermalGrowth, ForceSensorError, ProbeCompliance)}
+EFFECTS: dict[str, type[Effect]] = {
+    str(cls.__dataclass_fields__["key"].default): cls
+    for cls in (EncoderEccentricity, JointGain, JointCompliance, ThermalGrowth, ForceSensorError, ProbeCompliance)}
 
 
-def effect_from_name(key: str, **kwargs) -> Effect:
+def effect_from_name(key: str, **kwargs: Any) -> Effect:
     """An effect by its key (``"eccentricity"``, ``"joint_compliance"``, ``"thermal"``,
     ``"force_sensor"``, ``"probe_compliance"``)."""
     try:
@@ -281,13 +289,13 @@ def effect_from_name(key: str, **kwargs) -> Effect:
 # ---------------------------------------------------------------------------------------------
 # effects the closed loop synthesises from the residual's structure (beyond the library above)
 
-def _chain(desc: ArmDescription, geom: Geometry, q, upto: int, point, ops):
+def _chain(desc: ArmDescription, geom: Geometry, q: Any, upto: int, point: Any, ops: Any) -> list[Any]:
     """``point`` given in frame ``upto - 1`` (the end of row ``upto - 1``) in base coordinates."""
     from .chain import chain_point
-    return chain_point(desc.convention, geom.rows[:upto], q, point, ops, desc.chain_joints[:upto])
+    return list(chain_point(desc.convention, geom.rows[:upto], q, point, ops, desc.chain_joints[:upto]))
 
 
-def _perpendicular(axis) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+def _perpendicular(axis: Any) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
     """Two constant unit vectors (u, v) with (u, v, axis) right-handed and orthonormal."""
     import numpy as np
     a = np.asarray(axis, dtype=float)
@@ -296,22 +304,26 @@ def _perpendicular(axis) -> tuple[tuple[float, float, float], tuple[float, float
     u = e - (e @ a) * a
     u /= np.linalg.norm(u)
     v = np.cross(a, u)
-    return tuple(float(x) for x in u), tuple(float(x) for x in v)
+    return (float(u[0]), float(u[1]), float(u[2])), (float(v[0]), float(v[1]), float(v[2]))
 
 
-def _sub(a, b):
+def _sub(a: Any, b: Any) -> list[Any]:
     return [a[k] - b[k] for k in range(3)]
 
 
-def _cross(a, b):
+def _cross(a: Any, b: Any) -> list[Any]:
     return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 
 
-def _dot(a, b):
+def _dot(a: Any, b: Any) -> Any:
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-def joint_frame(desc: ArmDescription, geom: Geometry, q, i: int, ops):
+#: an origin and the axes (x, y, z) of a frame, in the base frame
+Frame = tuple[list[Any], list[list[Any]]]
+
+
+def joint_frame(desc: ArmDescription, geom: Geometry, q: Any, i: int, ops: Any) -> Frame:
     """Origin and axes (x, y, z) [m, unit] in the base frame of joint ``i``'s frame, the frame that turns
     with the joint: for standard DH the frame ``i - 1`` turned by ``Rz(theta_offset + q)`` (x along the
     common normal); for modified DH and URDF the joint's child frame (for URDF x, y are a fixed pair of
@@ -324,15 +336,18 @@ def joint_frame(desc: ArmDescription, geom: Geometry, q, i: int, ops):
         return o, [_sub(_chain(desc, geom, q, i, e, ops), o) for e in (ex, ey, ez)]
     o = _chain(desc, geom, q, i + 1, (0.0, 0.0, 0.0), ops)
     if desc.convention == "urdf":
-        axis = desc.axes[i]
+        axes = desc.axes
+        axis = None if axes is None else axes[i]
+        if axis is None:
+            raise ValueError(f"joint {i} of a URDF chain has no axis")
         u, v = _perpendicular(axis)
-        vecs = (u, v, tuple(axis))
+        vecs: tuple[tuple[float, float, float], ...] = (u, v, axis)
     else:
         vecs = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
     return o, [_sub(_chain(desc, geom, q, i + 1, e, ops), o) for e in vecs]
 
 
-def last_frame(desc: ArmDescription, geom: Geometry, q, ops):
+def last_frame(desc: ArmDescription, geom: Geometry, q: Any, ops: Any) -> Frame:
     """Origin and axes (x, y, z) of the last joint frame in the base frame (the probe frame's axes:
     :func:`probe_axes`)."""
     n = len(desc.joints)
@@ -341,7 +356,7 @@ def last_frame(desc: ArmDescription, geom: Geometry, q, ops):
                                                                     (0.0, 0.0, 1.0))]
 
 
-def probe_axes(desc: ArmDescription, axes):
+def probe_axes(desc: ArmDescription, axes: list[list[Any]]) -> list[list[Any]]:
     """The probe frame's axes (x, y, z) in the base frame from the last joint frame's ``axes``
     (the probe's rotation R_last_probe of the description; the same axes for an unrotated probe)."""
     r = desc.probe.rotation
@@ -350,7 +365,8 @@ def probe_axes(desc: ArmDescription, axes):
     return [[sum(axes[m][a] * r[m][k] for m in range(3)) for a in range(3)] for k in range(3)]
 
 
-def _shift_ball(desc, geom: Geometry, q, d_base, ops, frame=None) -> None:
+def _shift_ball(desc: ArmDescription, geom: Geometry, q: Any, d_base: list[Any], ops: Any,
+                frame: Frame | None = None) -> None:
     """Move the ball by ``d_base`` (base frame) at this pose: ``p_last += R^T d``."""
     _, axes = last_frame(desc, geom, q, ops) if frame is None else frame
     geom.p_last = [geom.p_last[k] + _dot(axes[k], d_base) for k in range(3)]
@@ -366,10 +382,10 @@ class JointHarmonics(Effect):
     key: str = field(default="joint_harmonics", init=False, repr=False)
     revolute_only: ClassVar[bool] = True
 
-    def _suffix(self, desc, i):
+    def _suffix(self, desc: ArmDescription, i: int) -> str:
         return "" if self.source is None or self.source == i else f"_by_{desc.joint_names[self.source]}"
 
-    def param_defs(self, desc):
+    def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
         out = []
         for i in self.joint_indices(desc):
             sfx = self._suffix(desc, i)
@@ -378,7 +394,7 @@ class JointHarmonics(Effect):
                         (f"{desc.joint_names[i]}.harm{h}_sin{sfx}", "rad")]
         return out
 
-    def apply(self, desc, params, inputs, geom, ops):
+    def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
         q0 = list(inputs.q)
         q = list(inputs.q)
         k = 0
@@ -389,7 +405,7 @@ class JointHarmonics(Effect):
                 k += 2
         inputs.q = q
 
-    def describe(self, desc=None):
+    def describe(self, desc: ArmDescription | None = None) -> str:
         src = "" if self.source is None else f" of {_joint(desc, self.source, 'q')}"
         js = "" if self.joints is None else ", ".join(_joint(desc, i) for i in self.joints)
         return f"{self.key}({js}; h {','.join(map(str, self.harmonics))}{src})"
@@ -400,13 +416,13 @@ class ProbeThermalGrowth(Effect):
     """The probe (ball centre ``p_last`` in the last joint frame) grows by ``(1 + alpha (T - 20 °C))``."""
     key: str = field(default="probe_thermal", init=False, repr=False)
 
-    def needs(self):
+    def needs(self) -> tuple[str, ...]:
         return ("temperature",)
 
-    def param_defs(self, desc):
+    def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
         return [("probe.thermal_alpha", "1/K")]
 
-    def apply(self, desc, params, inputs, geom, ops):
+    def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
         scale = 1.0 + params[0] * (inputs.temperature - REFERENCE_TEMPERATURE_C)
         geom.p_last = [v * scale for v in geom.p_last]
 
@@ -425,15 +441,15 @@ class ProbeComplianceMatrix(Effect):
     terms: tuple[str, ...] = _MATRIX_TERMS
     key: str = field(default="probe_compliance_matrix", init=False, repr=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         bad = set(self.terms) - set(_MATRIX_TERMS)
         if bad or len(set(self.terms)) != len(self.terms) or not self.terms:
             raise ValueError(f"terms must be distinct entries of {_MATRIX_TERMS}, got {self.terms}")
 
-    def param_defs(self, desc):
+    def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
         return [(f"probe.dcompliance_{t}", "m/N") for t in _MATRIX_TERMS if t in self.terms]
 
-    def apply(self, desc, params, inputs, geom, ops):
+    def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
         it = iter(params)
         cxx, cyy, czz, cxy, cxz, cyz = (next(it) if t in self.terms else 0.0 for t in _MATRIX_TERMS)
         fx, fy, fz = inputs.wrench[0], inputs.wrench[1], inputs.wrench[2]
@@ -454,17 +470,17 @@ class ApproachOffset(Effect):
     (the probe offset absorbs it)."""
     key: str = field(default="approach_offset", init=False, repr=False)
 
-    def param_defs(self, desc):
+    def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
         return [(f"approach.d{a}_u{b}", "m") for a in "xyz" for b in "xyz"]
 
-    def apply(self, desc, params, inputs, geom, ops):
+    def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
         frame = last_frame(desc, geom, inputs.q, ops)
         u = probe_axes(desc, frame[1])[2]
         d = [params[3 * a] * u[0] + params[3 * a + 1] * u[1] + params[3 * a + 2] * u[2] for a in range(3)]
         _shift_ball(desc, geom, inputs.q, d, ops, frame)
 
 
-def gravity_moment(desc: ArmDescription, geom: Geometry, q, i: int, origin, ops):
+def gravity_moment(desc: ArmDescription, geom: Geometry, q: Any, i: int, origin: Any, ops: Any) -> list[Any]:
     """Moment [N m] (base frame) of gravity on the links joint ``i`` moves, about ``origin``."""
     from .description import GRAVITY
     g = [float(v) for v in GRAVITY]
@@ -479,7 +495,8 @@ def gravity_moment(desc: ArmDescription, geom: Geometry, q, i: int, origin, ops)
     return m
 
 
-def contact_moment(desc: ArmDescription, geom: Geometry, q, wrench, origin, ops, frame=None):
+def contact_moment(desc: ArmDescription, geom: Geometry, q: Any, wrench: Any, origin: Any, ops: Any,
+                   frame: Frame | None = None) -> list[Any]:
     """Moment [N m] (base frame) about ``origin`` of the contact wrench at the ball (probe frame)."""
     o_last, axes = last_frame(desc, geom, q, ops) if frame is None else frame
     ball = [o_last[a] + sum(axes[k][a] * geom.p_last[k] for k in range(3)) for a in range(3)]
@@ -503,19 +520,20 @@ class LateralCompliance(Effect):
     key: str = field(default="lateral_compliance", init=False, repr=False)
     revolute_only: ClassVar[bool] = True
 
-    def param_defs(self, desc):
+    def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
         out = []
         for i in self.joint_indices(desc):
             out += [(f"{desc.joint_names[i]}.lateral_compliance_x", "rad/(N m)"),
                     (f"{desc.joint_names[i]}.lateral_compliance_y", "rad/(N m)")]
         return out
 
-    def gravity_loads(self, desc, q) -> list:
+    def gravity_loads(self, desc: ArmDescription, q: Any) -> list[Any]:
         """The load each parameter multiplies at the description's own geometry: per joint of the effect,
         the moment [N m] of gravity on the links it moves about its frame's x and about its y axis, one
         array (N,) a parameter, for angles ``q`` (N, J) [rad] (the size of a compliance's prior:
         :mod:`calibration.prior`)."""
         import numpy as np
+
         from .chain import NUMPY_OPS
         from .params import split_params
         rows, p_last, compliance = split_params(desc, None)
@@ -529,7 +547,7 @@ class LateralCompliance(Effect):
                     np.asarray(_dot(m, uy), dtype=float) * np.ones(len(cols[0]))]
         return out
 
-    def apply(self, desc, params, inputs, geom, ops):
+    def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
         q = inputs.q
         last = last_frame(desc, geom, q, ops)
         ball = [last[0][a] + sum(last[1][k][a] * geom.p_last[k] for k in range(3)) for a in range(3)]
@@ -552,5 +570,5 @@ class LateralCompliance(Effect):
         _shift_ball(desc, geom, q, shift, ops, last)
 
 
-EFFECTS.update({cls.__dataclass_fields__["key"].default: cls for cls in
+EFFECTS.update({str(cls.__dataclass_fields__["key"].default): cls for cls in
                 (JointHarmonics, ProbeThermalGrowth, ProbeComplianceMatrix, ApproachOffset, LateralCompliance)})

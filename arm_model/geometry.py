@@ -15,7 +15,7 @@ its nuisance states), the ring pipeline (:mod:`correction`) and the viewer:
   about the fitted shape, nothing else: the uncertainty of the ball diameter is not included);
 * rotations through :class:`scipy.spatial.transform.Rotation` (:func:`rotation_xyz` and its inverse
   :func:`rpy_from_matrix`, :func:`random_rotation`, :func:`kabsch`), frames from a direction
-  (:func:`perpendicular_basis`, :func:`frame_along`).
+  (:func:`perpendicular_basis`, :func:`frame_along`), random directions in a cone (:func:`cone_directions`).
 
 Geometric fits minimise orthogonal distances with Levenberg-Marquardt (scipy ``least_squares``,
 analytic Jacobians) from an algebraic seed; the solver status and the rank of the Jacobian at the
@@ -34,9 +34,10 @@ from scipy.spatial.transform import Rotation
 from .errors import NumericalError
 
 __all__ = ["CircleFit", "CylinderFit", "RingFit", "SphereFit", "PlaneFit", "kasa_circle", "fit_circle_2d",
-           "fit_cylinder", "fit_row_circles", "split_rows", "ring_fit", "fit_ring_axis", "fit_sphere",
-           "fit_plane", "smallest_enclosing_sphere", "ball_centre_radius", "feature_diameter",
-           "perpendicular_basis", "angle_frame", "rotation_xyz", "rpy_from_matrix", "frame_along", "random_rotation", "kabsch", "sphere_seed"]
+           "fit_cylinder", "fit_row_circles", "split_rows", "ring_fit", "fit_ring_axis", "fit_sphere", "fit_plane",
+           "smallest_enclosing_sphere", "ball_centre_radius", "feature_diameter", "perpendicular_basis",
+           "angle_frame", "rotation_xyz", "rpy_from_matrix", "frame_along", "random_rotation", "kabsch",
+           "sphere_seed", "cone_directions"]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -112,7 +113,7 @@ def frame_along(v, axis: int) -> np.ndarray:
     n = np.linalg.norm(v)
     u = np.eye(3)[axis] if n < 1e-15 else v / n
     e1, e2 = perpendicular_basis(u)
-    cols = [None, None, None]
+    cols: list[np.ndarray] = [u, u, u]
     cols[axis], cols[(axis + 1) % 3], cols[(axis + 2) % 3] = u, e1, e2
     return np.column_stack(cols)
 
@@ -122,6 +123,16 @@ def random_rotation(rng) -> np.ndarray:
     ``rng`` (the same draws, in the same order, whatever scipy's own sampler does)."""
     qv = rng.normal(size=4)
     return Rotation.from_quat(qv[[1, 2, 3, 0]]).as_matrix()
+
+
+def cone_directions(rng, axis, half_angle: float, n: int) -> np.ndarray:
+    """(n, 3) unit directions uniform on the spherical cap of ``half_angle`` [rad] about ``axis``."""
+    axis = np.asarray(axis, float)
+    e1, e2 = perpendicular_basis(axis)
+    cos_t = rng.uniform(np.cos(half_angle), 1.0, n)
+    phi = rng.uniform(0, 2 * np.pi, n)
+    sin_t = np.sqrt(np.maximum(0.0, 1 - cos_t ** 2))
+    return (cos_t[:, None] * axis + sin_t[:, None] * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2))
 
 
 def kabsch(x_from, x_to) -> tuple[np.ndarray, np.ndarray]:
@@ -177,6 +188,8 @@ _RANK_TOL = 1e-9
 
 class _RadialFit:
     """Diameter and form error of a fit with ``radius`` and radial ``residuals`` [m]."""
+    radius: float
+    residuals: np.ndarray
 
     @property
     def diameter(self) -> float:
@@ -341,7 +354,7 @@ def _normalised(p: np.ndarray, what: str) -> tuple[np.ndarray, float, np.ndarray
 def _solve(fun, jac, x0, what: str, names: tuple[str, ...], **kw):
     """Levenberg-Marquardt to tight tolerances, its status and the rank of its Jacobian checked:
     ``(result, standard uncertainties of the parameters)``."""
-    from scipy.optimize import least_squares          # here: a command that fits nothing starts faster
+    from scipy.optimize import least_squares  # here: a command that fits nothing starts faster
     res = least_squares(fun, x0, jac=jac, method="lm", xtol=1e-14, ftol=1e-14, gtol=1e-14, **kw)
     _check_status(res, what)
     jac_x = jac(res.x)

@@ -19,6 +19,7 @@ from .csv_io import BLOCK_BYTES, csv_records, format_csv, iter_csv_blocks
 from .errors import InputError, parse_toml, read_text, unknown_key
 from .output import atomic_write_bytes, guard_output
 from .readback import UnreadableOutput, read_back
+from .toml_lines import toml_key_lines, top_key_line
 from .units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
 log = logging.getLogger(__name__)
@@ -101,7 +102,7 @@ class PointSet:
         """Measurement ids in order of first appearance."""
         return list(dict.fromkeys(self.measurement.tolist()))
 
-    def select(self, mask) -> "PointSet":
+    def select(self, mask) -> PointSet:
         """The rows where ``mask`` (bool array or index array) holds, file order kept."""
         def take(a):
             return None if a is None else a[mask]
@@ -189,18 +190,19 @@ def _points_layout(header: list[str], line: int, path: str, joints) -> _PointsLa
         cols[base] = (k, unit)
     idx = sorted(int(b[1:]) for b in cols if b.startswith("q") and b[1:].isdigit())
     if not idx:
-        raise InputError("no joint columns (q1_deg ... or q1_rad ...; a prismatic joint's q<i>_mm or q<i>_m)", path, line)
+        raise InputError("no joint columns (q1_deg ... or q1_rad ...; a prismatic joint's q<i>_mm or q<i>_m)",
+                         path, line)
     if idx != list(range(1, len(idx) + 1)):
         missing = sorted(set(range(1, max(idx) + 1)) - set(idx))
         raise InputError(f"joint columns are not q1..q{max(idx)}: missing "
-                         f"{', '.join('q%d' % i for i in missing)}", path, line)
+                         f"{', '.join(f'q{i}' for i in missing)}", path, line)
     if n_joints is not None and len(idx) != n_joints:
         raise InputError(f"{len(idx)} joint columns, but the arm has {n_joints} joints", path, line,
                          header[cols[f"q{idx[-1]}"][0]])
     for group in _GROUPS:
         present = [b for b in group if b in cols]
         if present and len(present) != len(group):
-            missing = [b for b in group if b not in cols]
+            missing = [b for b in group if b not in cols]  # type: ignore[misc]
             raise InputError(f"columns {', '.join(missing)} missing beside {', '.join(present)}", path, line,
                              header[cols[present[0]][0]])
     if "fx" in cols and "f_bend" in cols:
@@ -260,7 +262,7 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
         return values
 
     def group(bases) -> np.ndarray | None:
-        return None if bases[0] not in lay.cols else np.column_stack([col(b) for b in bases])
+        return None if bases[0] not in lay.cols else np.column_stack([col(b) for b in bases])  # type: ignore[misc]
 
     measurement = blk.texts[:, 0]
     empty = np.flatnonzero(measurement == "")
@@ -277,8 +279,8 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
         force_kind = "xyz"
     elif "f_bend" in lay.cols:
         force_kind = "two-channel"
-        force = np.column_stack([col("f_bend"), np.zeros(len(q)), col("f_axial")])
-    ref = np.stack([group(m) for m in lay.markers], axis=1) if lay.markers else None
+        force = np.column_stack([col("f_bend"), np.zeros(len(q)), col("f_axial")])  # type: ignore[list-item]
+    ref = np.stack([group(m) for m in lay.markers], axis=1) if lay.markers else None  # type: ignore[misc]
     session = blk.texts[:, 2] if blk.texts.shape[1] > 2 else None
     if session is not None and (empty := np.flatnonzero(session == "")).size:
         raise InputError("empty session id (a session column names the session of every row)", path,
@@ -382,34 +384,8 @@ class Artefacts:
         return [f for f in self.features.values() if f.kind in kinds]
 
 
-def _toml_key_line(text: str, table: str, index: int, key: str | None) -> int | None:
-    count, inside = -1, False
-    for no, raw in enumerate(text.splitlines(), start=1):
-        line = raw.split("#", 1)[0].strip()
-        if re.fullmatch(r"\[\[\s*" + re.escape(table) + r"\s*\]\]", line):
-            count += 1
-            inside = count == index
-            if inside and key is None:
-                return no
-            continue
-        if line.startswith("["):
-            inside = False
-            continue
-        if inside and key is not None and re.match(re.escape(key) + r"\s*=", line):
-            return no
-    return None
-
-
 #: the numeric keys of a feature (lengths; each with its unit suffix)
 _FEATURE_LENGTHS = ("diameter", "u_diameter", "form_error")
-
-
-def _toml_top_line(text: str, key: str) -> int | None:
-    for no, raw in enumerate(text.splitlines(), start=1):
-        line = raw.split("#", 1)[0].strip()
-        if re.match(r"^\[*\s*\"?" + re.escape(key) + r"\"?\s*(\]|=|\.)", line):
-            return no
-    return None
 
 
 def read_artefacts(path: str | Path) -> Artefacts:
@@ -421,111 +397,126 @@ def read_artefacts(path: str | Path) -> Artefacts:
     return art
 
 
+def _artefacts_error(lines: dict, path: str):
+    """``err(msg, table, index, key=None)``: the InputError at the line of ``[[table]]`` number ``index``
+    (and its ``key``) of the artefacts text (``lines``: its :func:`~arm_model.toml_lines.toml_key_lines`)."""
+    def err(msg, table, index, key=None):
+        col = f"key '{table}[{index + 1}].{key}'" if key else f"key '{table}[{index + 1}]'"
+        return InputError(msg, path, lines.get((table, index, key) if key else (table, index)), col)
+    return err
+
+
+def _artefact_feature(err, t, i: int, features: dict, extra_feature_keys: tuple) -> Feature:
+    """[[feature]] table number ``i`` (``features``: the ones before it)."""
+    if not isinstance(t, dict):
+        raise err("expected a [[feature]] table", "feature", i)
+    fid = t.get("id")
+    if not isinstance(fid, str) or not fid.strip():
+        raise err("missing or empty 'id'", "feature", i, "id")
+    if fid in features:
+        raise err(f"feature id '{fid}' is used twice", "feature", i, "id")
+    kind = t.get("kind")
+    if kind not in FEATURE_KINDS:
+        raise err(f"unknown kind {kind!r} (known: {', '.join(FEATURE_KINDS)})", "feature", i, "kind")
+    values = {}
+    for key, v in t.items():
+        if key in ("id", "kind") or key in extra_feature_keys:
+            continue
+        parts = split_unit(key)
+        if parts is None or parts[0] not in _FEATURE_LENGTHS:
+            raise err(unknown_key(key, ("id", "kind") + _FEATURE_LENGTHS + tuple(extra_feature_keys),
+                                  ["id", "kind"] + [f"{b}_<length unit>" for b in _FEATURE_LENGTHS]
+                                  + list(extra_feature_keys)),
+                      "feature", i, key)
+        if QUANTITY_OF_UNIT[parts[1]] != "length":
+            raise err(f"'{key}' must be a length (_mm, _m, _um)", "feature", i, key)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise err(f"'{key}' must be a finite number, got {v!r}", "feature", i, key)
+        if parts[0] in values:
+            raise err(f"'{parts[0]}' is given twice (with two units)", "feature", i, key)
+        values[parts[0]] = float(v) * UNIT_FACTORS[parts[1]]
+        wrong = implausible(values[parts[0]], "length")
+        if wrong:
+            raise err(f"'{key}': {wrong[1]}", "feature", i, key)
+        if parts[0] != "diameter" and values[parts[0]] < 0:
+            raise err(f"'{key}' must not be negative, got {v!r}", "feature", i, key)
+    if kind in ("ring", "cylinder", "sphere") and "diameter" not in values:
+        raise err(f"a {kind} needs 'diameter_mm'", "feature", i)
+    if "diameter" in values and values["diameter"] <= 0:
+        raise err("diameter must be > 0", "feature", i, "diameter_mm")
+    return Feature(fid, kind, values.get("diameter"), values.get("u_diameter"),
+                   values.get("form_error"), values)
+
+
+def _artefact_distance(err, t, i: int, features: dict) -> Distance:
+    """[[distance]] table number ``i`` between two of ``features``."""
+    if not isinstance(t, dict):
+        raise err("expected a [[distance]] table", "distance", i)
+    between = t.get("between")
+    if (not isinstance(between, list) or len(between) != 2
+            or not all(isinstance(b, str) for b in between)):
+        raise err("'between' must name two features", "distance", i, "between")
+    for b in between:
+        if b not in features:
+            raise err(f"unknown feature '{b}' (known: {', '.join(features)})", "distance", i, "between")
+    if between[0] == between[1]:
+        raise err(f"'between' names '{between[0]}' twice; a distance joins two features", "distance", i,
+                  "between")
+    length = u = None
+    for key, v in t.items():
+        if key == "between":
+            continue
+        parts = split_unit(key)
+        if parts is None or parts[0] not in ("length", "u_length"):
+            raise err(unknown_key(key, ("between", "length", "u_length"),
+                                  ["between", "length_<length unit>", "u_length_<length unit>"]),
+                      "distance", i, key)
+        if QUANTITY_OF_UNIT[parts[1]] != "length":
+            raise err(f"'{key}' must be a length (_mm, _m, _um)", "distance", i, key)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise err(f"'{key}' must be a finite number, got {v!r}", "distance", i, key)
+        if (length if parts[0] == "length" else u) is not None:
+            raise err(f"'{parts[0]}' is given twice (with two units)", "distance", i, key)
+        wrong = implausible(float(v) * UNIT_FACTORS[parts[1]], "length")
+        if wrong:
+            raise err(f"'{key}': {wrong[1]}", "distance", i, key)
+        if parts[0] == "length":
+            length = float(v) * UNIT_FACTORS[parts[1]]
+            if not length > 0:
+                raise err(f"'{key}' must be > 0, got {v!r}", "distance", i, key)
+        else:
+            u = float(v) * UNIT_FACTORS[parts[1]]
+            if not u > 0:
+                raise err(f"'{key}' must be > 0 (a certified length has an uncertainty; leave the key "
+                          f"out to use --sigma-length-um), got {v!r}", "distance", i, key)
+    if length is None:
+        raise err("missing 'length_mm'", "distance", i)
+    return Distance((between[0], between[1]), length, u)
+
+
 def parse_artefacts(text: str, path: str = "<string>", *, extra_keys: tuple = (),
                     extra_feature_keys: tuple = ()) -> Artefacts:
     """Parse artefacts TOML text (docs/formats.md §4). ``extra_keys`` (top level) and
     ``extra_feature_keys`` (in a ``[[feature]]``) are left to a caller whose file extends the format
     (a live session's plan); every other unknown key is an error."""
     data = parse_toml(text, path)
-
-    def err(msg, table, index, key=None):
-        col = f"key '{table}[{index + 1}].{key}'" if key else f"key '{table}[{index + 1}]'"
-        return InputError(msg, path, _toml_key_line(text, table, index, key), col)
-
+    lines = toml_key_lines(text)
+    err = _artefacts_error(lines, path)
     for key in data:
         if key not in ("feature", "distance") + tuple(extra_keys):
             raise InputError(unknown_key(key, ("feature", "distance") + tuple(extra_keys)), path,
-                             _toml_top_line(text, key), f"key '{key}'")
+                             top_key_line(lines, key), f"key '{key}'")
     if not isinstance(data.get("distance", []), list):
-        raise InputError("'distance' must be [[distance]] tables", path, _toml_top_line(text, "distance"),
+        raise InputError("'distance' must be [[distance]] tables", path, top_key_line(lines, "distance"),
                          "key 'distance'")
     feats = data.get("feature", [])
     if not isinstance(feats, list) or not feats:
         raise InputError("no [[feature]] tables", path, 1)
     features: dict[str, Feature] = {}
     for i, t in enumerate(feats):
-        if not isinstance(t, dict):
-            raise err("expected a [[feature]] table", "feature", i)
-        fid = t.get("id")
-        if not isinstance(fid, str) or not fid.strip():
-            raise err("missing or empty 'id'", "feature", i, "id")
-        if fid in features:
-            raise err(f"feature id '{fid}' is used twice", "feature", i, "id")
-        kind = t.get("kind")
-        if kind not in FEATURE_KINDS:
-            raise err(f"unknown kind {kind!r} (known: {', '.join(FEATURE_KINDS)})", "feature", i, "kind")
-        values = {}
-        for key, v in t.items():
-            if key in ("id", "kind") or key in extra_feature_keys:
-                continue
-            parts = split_unit(key)
-            if parts is None or parts[0] not in _FEATURE_LENGTHS:
-                raise err(unknown_key(key, ("id", "kind") + _FEATURE_LENGTHS + tuple(extra_feature_keys),
-                                      ["id", "kind"] + [f"{b}_<length unit>" for b in _FEATURE_LENGTHS]
-                                      + list(extra_feature_keys)),
-                          "feature", i, key)
-            if QUANTITY_OF_UNIT[parts[1]] != "length":
-                raise err(f"'{key}' must be a length (_mm, _m, _um)", "feature", i, key)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise err(f"'{key}' must be a finite number, got {v!r}", "feature", i, key)
-            if parts[0] in values:
-                raise err(f"'{parts[0]}' is given twice (with two units)", "feature", i, key)
-            values[parts[0]] = float(v) * UNIT_FACTORS[parts[1]]
-            wrong = implausible(values[parts[0]], "length")
-            if wrong:
-                raise err(f"'{key}': {wrong[1]}", "feature", i, key)
-            if parts[0] != "diameter" and values[parts[0]] < 0:
-                raise err(f"'{key}' must not be negative, got {v!r}", "feature", i, key)
-        if kind in ("ring", "cylinder", "sphere") and "diameter" not in values:
-            raise err(f"a {kind} needs 'diameter_mm'", "feature", i)
-        if "diameter" in values and values["diameter"] <= 0:
-            raise err("diameter must be > 0", "feature", i, "diameter_mm")
-        features[fid] = Feature(fid, kind, values.get("diameter"), values.get("u_diameter"),
-                                values.get("form_error"), values)
-    distances = []
-    for i, t in enumerate(data.get("distance", [])):
-        if not isinstance(t, dict):
-            raise err("expected a [[distance]] table", "distance", i)
-        between = t.get("between")
-        if (not isinstance(between, list) or len(between) != 2
-                or not all(isinstance(b, str) for b in between)):
-            raise err("'between' must name two features", "distance", i, "between")
-        for b in between:
-            if b not in features:
-                raise err(f"unknown feature '{b}' (known: {', '.join(features)})", "distance", i, "between")
-        if between[0] == between[1]:
-            raise err(f"'between' names '{between[0]}' twice; a distance joins two features", "distance", i,
-                      "between")
-        length = u = None
-        for key, v in t.items():
-            if key == "between":
-                continue
-            parts = split_unit(key)
-            if parts is None or parts[0] not in ("length", "u_length"):
-                raise err(unknown_key(key, ("between", "length", "u_length"),
-                                      ["between", "length_<length unit>", "u_length_<length unit>"]),
-                          "distance", i, key)
-            if QUANTITY_OF_UNIT[parts[1]] != "length":
-                raise err(f"'{key}' must be a length (_mm, _m, _um)", "distance", i, key)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise err(f"'{key}' must be a finite number, got {v!r}", "distance", i, key)
-            if (length if parts[0] == "length" else u) is not None:
-                raise err(f"'{parts[0]}' is given twice (with two units)", "distance", i, key)
-            wrong = implausible(float(v) * UNIT_FACTORS[parts[1]], "length")
-            if wrong:
-                raise err(f"'{key}': {wrong[1]}", "distance", i, key)
-            if parts[0] == "length":
-                length = float(v) * UNIT_FACTORS[parts[1]]
-                if not length > 0:
-                    raise err(f"'{key}' must be > 0, got {v!r}", "distance", i, key)
-            else:
-                u = float(v) * UNIT_FACTORS[parts[1]]
-                if not u > 0:
-                    raise err(f"'{key}' must be > 0 (a certified length has an uncertainty; leave the key "
-                              f"out to use --sigma-length-um), got {v!r}", "distance", i, key)
-        if length is None:
-            raise err("missing 'length_mm'", "distance", i)
-        distances.append(Distance((between[0], between[1]), length, u))
+        feature = _artefact_feature(err, t, i, features, extra_feature_keys)
+        features[feature.id] = feature
+    distances = [_artefact_distance(err, t, i, features) for i, t in enumerate(data.get("distance", []))]
     return Artefacts(path, features, tuple(distances))
 
 

@@ -17,7 +17,8 @@ relative:
 * :func:`joint_screws`: the cheap q-only companion of :func:`chain_jacobian` (for inverse kinematics): the
   last joint frame and, for every joint, its axis ``u`` and a point ``c`` on it in the base frame, from
   one forward pass on homogeneous matrices (each row's fixed motions multiplied once and cached), without
-  the geometry entries (measured: 0.12 ms for one point, 0.3 ms for 300; chain_jacobian 0.45 and 0.56 ms). A point fixed in the last frame moves by
+  the geometry entries (measured: 0.12 ms for one point, 0.3 ms for 300; chain_jacobian 0.45 and 0.56 ms). A point fixed
+  in the last frame moves by
   ``u x (p - c)`` per radian of that joint, a direction ``v`` by ``u x v`` (:func:`point_jacobian`,
   :func:`direction_jacobian`).
 * :class:`Dual`: forward-mode dual numbers with sparse derivatives (a dict ``direction ->
@@ -27,13 +28,24 @@ relative:
 """
 from __future__ import annotations
 
-import math
+from collections.abc import Sequence
 from functools import lru_cache
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 
-from .chain import Joint, ball_in_last_frame, elastic_displacement, has_stylus, joint_value, probe_lever, row_motions
+from .chain import (
+    Joint,
+    Scalar,
+    Vector,
+    ball_in_last_frame,
+    elastic_displacement,
+    has_stylus,
+    joint_value,
+    probe_lever,
+    row_motions,
+)
 
 __all__ = ["Dual", "DUAL_OPS", "chain_jacobian", "geometry_entries", "joint_screws", "point_jacobian",
            "direction_jacobian"]
@@ -45,15 +57,15 @@ class Dual:
     __slots__ = ("val", "der")
     __array_priority__ = 1000          # numpy arrays defer to Dual's reflected operators
 
-    def __init__(self, val, der=None):
+    def __init__(self, val: Any, der: dict[Any, Any] | None = None) -> None:
         self.val = val
         self.der = der or {}
 
     @staticmethod
-    def _parts(x):
+    def _parts(x: Any) -> tuple[Any, dict[Any, Any]]:
         return (x.val, x.der) if isinstance(x, Dual) else (x, {})
 
-    def __add__(self, other):
+    def __add__(self, other: Any) -> Dual:
         v, d = self._parts(other)
         der = dict(self.der)
         for k, c in d.items():
@@ -62,16 +74,16 @@ class Dual:
 
     __radd__ = __add__
 
-    def __neg__(self):
+    def __neg__(self) -> Dual:
         return Dual(-self.val, {k: -c for k, c in self.der.items()})
 
-    def __sub__(self, other):
-        return self + (-other if isinstance(other, Dual) else -other)
+    def __sub__(self, other: Any) -> Dual:
+        return self.__add__(-other)
 
-    def __rsub__(self, other):
-        return (-self) + other
+    def __rsub__(self, other: Any) -> Dual:
+        return (-self).__add__(other)
 
-    def __mul__(self, other):
+    def __mul__(self, other: Any) -> Dual:
         v, d = self._parts(other)
         der = {k: c * v for k, c in self.der.items()}
         for k, c in d.items():
@@ -80,7 +92,7 @@ class Dual:
 
     __rmul__ = __mul__
 
-    def __truediv__(self, other):
+    def __truediv__(self, other: Any) -> Dual:
         v, d = self._parts(other)
         inv = 1.0 / v
         out = Dual(self.val * inv, {k: c * inv for k, c in self.der.items()})
@@ -90,25 +102,25 @@ class Dual:
                 out.der[k] = out.der[k] - c * q if k in out.der else -c * q
         return out
 
-    def __rtruediv__(self, other):
+    def __rtruediv__(self, other: Any) -> Dual:
         inv = 1.0 / self.val
         val = other * inv
         return Dual(val, {k: -c * val * inv for k, c in self.der.items()})
 
-    def sin(self):
+    def sin(self) -> Dual:
         c = np.cos(self.val)
         return Dual(np.sin(self.val), {k: d * c for k, d in self.der.items()})
 
-    def cos(self):
+    def cos(self) -> Dual:
         s = -np.sin(self.val)
         return Dual(np.cos(self.val), {k: d * s for k, d in self.der.items()})
 
 
-def _sin(x):
+def _sin(x: Scalar) -> Scalar:
     return x.sin() if isinstance(x, Dual) else np.sin(x)
 
 
-def _cos(x):
+def _cos(x: Scalar) -> Scalar:
     return x.cos() if isinstance(x, Dual) else np.cos(x)
 
 
@@ -116,12 +128,12 @@ def _cos(x):
 DUAL_OPS = SimpleNamespace(sin=_sin, cos=_cos)
 
 
-def value(x):
+def value(x: Scalar) -> Scalar:
     """The value of a Dual (or the number itself)."""
     return x.val if isinstance(x, Dual) else x
 
 
-def geometry_entries(convention: str, n_rows: int, n_q: int | None = None) -> list[tuple]:
+def geometry_entries(convention: str, n_rows: int, n_q: int | None = None) -> list[tuple[Any, ...]]:
     """Names of the columns of :func:`chain_jacobian`: ``("row", i, k)`` (row i, its k-th value in
     :meth:`~arm_model.description.ArmDescription.row_table` order), ``("p_last", k)``,
     ``("compliance", k)``, ``("q", i)`` (encoder column i; ``n_q`` of them, default one a row), ``("w", k)``
@@ -132,7 +144,11 @@ def geometry_entries(convention: str, n_rows: int, n_q: int | None = None) -> li
             + [("w", k) for k in range(6)])
 
 
-def _rotate_frame(cols, axis, angle):
+#: the columns (x, y, z axes) of a rotation, each three scalars
+Frame = tuple[Vector, Vector, Vector]
+
+
+def _rotate_frame(cols: Frame, axis: int | tuple[float, ...], angle: Scalar) -> Frame:
     """Columns of ``R Rot(axis, angle)`` from the columns (X, Y, Z) of R."""
     X, Y, Z = cols
     c, s = np.cos(angle), np.sin(angle)
@@ -142,27 +158,31 @@ def _rotate_frame(cols, axis, angle):
         return (X, tuple(c * y + s * z for y, z in zip(Y, Z)), tuple(c * z - s * y for y, z in zip(Y, Z)))
     if axis == 1:
         return (tuple(c * x - s * z for x, z in zip(X, Z)), Y, tuple(s * x + c * z for x, z in zip(X, Z)))
+    assert not isinstance(axis, int)
     kx, ky, kz = axis             # Rodrigues: Rot = c I + s [k]x + (1 - c) k k^T
     k = (kx, ky, kz)
     skew = ((0.0, -kz, ky), (kz, 0.0, -kx), (-ky, kx, 0.0))
     t = 1.0 - c
     rot = [[(c if a == b else 0.0) + s * skew[a][b] + t * k[a] * k[b] for b in range(3)] for a in range(3)]
-    return tuple(tuple(X[e] * rot[0][j] + Y[e] * rot[1][j] + Z[e] * rot[2][j] for e in range(3))
-                 for j in range(3))
+    x_, y_, z_ = (tuple(X[e] * rot[0][j] + Y[e] * rot[1][j] + Z[e] * rot[2][j] for e in range(3))
+                  for j in range(3))
+    return x_, y_, z_
 
 
-def _base_axis(cols, axis):
+def _base_axis(cols: Frame, axis: int | tuple[float, ...]) -> Vector:
     if isinstance(axis, int):
         return cols[axis]
     return tuple(cols[0][e] * axis[0] + cols[1][e] * axis[1] + cols[2][e] * axis[2] for e in range(3))
 
 
-def _cross(u, v):
+def _cross(u: Vector, v: Vector) -> tuple[Scalar, Scalar, Scalar]:
     return (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
 
 
-def chain_jacobian(convention: str, rows, p_last, compliance, q, wrench=None, joints=None, rotation=None,
-                   lever=None):
+def chain_jacobian(convention: str, rows: Sequence[Vector] | np.ndarray, p_last: Vector, compliance: Vector,
+                   q: Vector, wrench: Vector | None = None, joints: Sequence[Joint] | None = None,
+                   rotation: Sequence[Sequence[float]] | None = None,
+                   lever: Scalar | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Ball centres and their exact Jacobian for N points.
 
     Args:
@@ -184,6 +204,7 @@ def chain_jacobian(convention: str, rows, p_last, compliance, q, wrench=None, jo
     # the probe: local derivatives by dual numbers through the chain's own code
     pl = [Dual(v, {("p_last", k): 1.0}) for k, v in enumerate(p_last)]
     cp = [Dual(v, {("compliance", k): 1.0}) for k, v in enumerate(compliance)]
+    q_e: tuple[Scalar, Scalar, Scalar]
     if wrench is None or not has_stylus(lever):
         q_e = (0.0, 0.0, 0.0)
     else:
@@ -191,9 +212,9 @@ def chain_jacobian(convention: str, rows, p_last, compliance, q, wrench=None, jo
         q_e = elastic_displacement(pl, cp, w, probe_lever(pl, rotation, lever))
     ball = ball_in_last_frame(pl, q_e, DUAL_OPS, rotation, lever) if has_stylus(lever) else pl
     # forward pass: record (u, o) of each elementary motion and the entries it moves with their coefficients
-    cols = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
-    origin = (0.0, 0.0, 0.0)
-    motions = []                  # (kind, u, o, [(entry index, coefficient)])
+    cols: Frame = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+    origin: tuple[Scalar, ...] = (0.0, 0.0, 0.0)
+    motions: list[tuple[str, Vector, Vector | None, list[tuple[int, float]]]] = []   # (kind, u, o, [(entry, coef)])
     for i in range(nj):
         joint = None if joints is None else joints[i]
         q_col = (m * nj + 6 + (i if joint is None else joint.column), 1.0 if joint is None else joint.multiplier)
@@ -209,7 +230,7 @@ def chain_jacobian(convention: str, rows, p_last, compliance, q, wrench=None, jo
     b = [value(v) for v in ball]
     centre = [origin[e] + cols[0][e] * b[0] + cols[1][e] * b[1] + cols[2][e] * b[2] for e in range(3)]
     for kind, u, o, moved in motions:
-        d = u if kind == "T" else _cross(u, [centre[e] - o[e] for e in range(3)])
+        d = u if kind == "T" or o is None else _cross(u, [centre[e] - o[e] for e in range(3)])
         for c, coef in moved:
             for e in range(3):
                 jac[c, e] += d[e] if coef == 1.0 else coef * d[e]
@@ -231,7 +252,7 @@ _I4 = np.eye(4)
 _I4.setflags(write=False)
 
 
-def elementary_motion(kind, axis, amount) -> np.ndarray:
+def elementary_motion(kind: str, axis: int | tuple[float, ...], amount: Scalar) -> np.ndarray:
     """Homogeneous matrix (4, 4), or (N, 4, 4) for a column ``amount``, of one elementary motion."""
     a = np.asarray(amount, dtype=float)
     m = np.zeros(a.shape + (4, 4))
@@ -254,10 +275,14 @@ def elementary_motion(kind, axis, amount) -> np.ndarray:
     return m
 
 
-def _row_parts(convention: str, row, joint):
+RowParts = tuple[np.ndarray, np.ndarray, tuple[str, "int | tuple[float, ...]"]]
+
+
+def _row_parts(convention: str, row: Vector, joint: Joint | None) -> RowParts:
     """One row of the chain as (fixed motion before the joint's motion, fixed motion after it, the joint's
     motion ``(kind, local axis)``): homogeneous matrices, (4, 4) or (N, 4, 4) for column entries."""
-    before, after, moving = _I4, _I4, None
+    before, after = _I4, _I4
+    moving: tuple[str, int | tuple[float, ...]] | None = None
     for kind, ax, amount, _, is_q in row_motions(convention, row, 0.0, joint):
         if is_q:
             moving = (kind, ax)
@@ -267,18 +292,21 @@ def _row_parts(convention: str, row, joint):
             before = before @ elementary_motion(kind, ax, amount)
         else:
             after = after @ elementary_motion(kind, ax, amount)
+    if moving is None:
+        raise ValueError("a row of the chain without a joint motion")
     return before, after, moving
 
 
 @lru_cache(maxsize=256)
-def _row_parts_cached(convention: str, row: tuple, joint):
+def _row_parts_cached(convention: str, row: tuple[float, ...], joint: Joint | None) -> RowParts:
     before, after, moving = _row_parts(convention, row, joint)
     before.setflags(write=False)
     after.setflags(write=False)
     return before, after, moving
 
 
-def joint_screws(convention: str, rows, q, joints=None):
+def joint_screws(convention: str, rows: Sequence[Vector] | np.ndarray, q: Any, joints: Sequence[Joint] | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The last joint frame and the joints' axes for N points: one forward pass of the chain on
     homogeneous matrices, joint values only (no geometry entries, no dual numbers).
 
@@ -300,7 +328,8 @@ def joint_screws(convention: str, rows, q, joints=None):
     for i in range(nr):
         joint = None if joints is None else joints[i]
         # the row's motion alone (its column and mimic apply to the value below): one cache entry per shape
-        local = None if joint is None else Joint(0, None if joint.axis is None else tuple(map(float, joint.axis)),
+        local = None if joint is None else Joint(0, None if joint.axis is None else
+                                                 (float(joint.axis[0]), float(joint.axis[1]), float(joint.axis[2])),
                                                  joint.prismatic)
         if all(isinstance(v, float) for v in rows[i]):
             before, after, (kind, axis) = _row_parts_cached(convention, tuple(rows[i]), local)
@@ -321,14 +350,13 @@ def joint_screws(convention: str, rows, q, joints=None):
     return t[:, :3, :3], t[:, :3, 3].copy(), u, c
 
 
-def _times(t, m):
+def _times(t: np.ndarray, m: np.ndarray) -> np.ndarray:
     """t @ m for a stack t (N, 4, 4) and one matrix (4, 4) (one matrix product) or a stack."""
-    if m.ndim == 2:
-        return (t.reshape(-1, 4) @ m).reshape(t.shape)
-    return t @ m
+    out: np.ndarray = (t.reshape(-1, 4) @ m).reshape(t.shape) if m.ndim == 2 else t @ m
+    return out
 
 
-def _to_columns(per_row: np.ndarray, joints, n_q: int | None) -> np.ndarray:
+def _to_columns(per_row: np.ndarray, joints: Sequence[Joint] | None, n_q: int | None) -> np.ndarray:
     """(N, 3, R) derivatives by row -> (N, 3, J) by encoder column (a mimic's multiplier applied)."""
     if joints is None:
         return per_row
@@ -339,7 +367,8 @@ def _to_columns(per_row: np.ndarray, joints, n_q: int | None) -> np.ndarray:
     return out
 
 
-def point_jacobian(u, c, p, joints=None, n_q: int | None = None) -> np.ndarray:
+def point_jacobian(u: np.ndarray, c: np.ndarray, p: np.ndarray, joints: Sequence[Joint] | None = None,
+                   n_q: int | None = None) -> np.ndarray:
     """(N, 3, J) d p / d q [m/rad, or m/m for a prismatic joint] of points ``p`` (N, 3) [m] fixed in the last
     frame, from the joint axes ``u`` and points ``c`` on them (N, R, 3) of :func:`joint_screws`; ``joints``
     (:class:`arm_model.chain.Joint`, None: revolute rows, one column each) and ``n_q`` map the rows to the
@@ -352,7 +381,8 @@ def point_jacobian(u, c, p, joints=None, n_q: int | None = None) -> np.ndarray:
     return _to_columns(d.transpose(0, 2, 1), joints, n_q)
 
 
-def direction_jacobian(u, v, joints=None, n_q: int | None = None) -> np.ndarray:
+def direction_jacobian(u: np.ndarray, v: np.ndarray, joints: Sequence[Joint] | None = None,
+                       n_q: int | None = None) -> np.ndarray:
     """(N, 3, J) d v / d q [1/rad; 0 for a prismatic joint] of directions ``v`` (N, 3) fixed in the last
     frame (``joints``, ``n_q`` as :func:`point_jacobian`)."""
     d = np.cross(u, v[:, None, :])

@@ -7,9 +7,12 @@ memory is the output plus a few chunk-sized temporaries, linear in N.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .chain import NUMPY_OPS, ball_centre_expr
 from .description import ArmDescription
@@ -23,7 +26,7 @@ _CHUNK = 16384
 THREADS: int | None = None
 
 
-def as_wrench(wrench, n: int | None = None) -> np.ndarray | None:
+def as_wrench(wrench: ArrayLike | None, n: int | None = None) -> np.ndarray | None:
     """Check a wrench array: (N, 3) force [N] or (N, 6) force [N] then torque [N m], probe frame."""
     if wrench is None:
         return None
@@ -43,7 +46,7 @@ def _default_threads() -> int:
     return max(1, min(2, os.cpu_count() or 1))
 
 
-def run_chunks(work, n: int, chunk: int, threads: int | None = None) -> None:
+def run_chunks(work: Callable[[int], None], n: int, chunk: int, threads: int | None = None) -> None:
     """Call ``work(start)`` for every chunk start of ``range(0, n, chunk)``: in a thread pool of
     ``threads`` (default :func:`_default_threads`) when there is more than one chunk, else in line.
     ``work`` writes its own slice of a preallocated output (numpy releases the GIL)."""
@@ -56,7 +59,8 @@ def run_chunks(work, n: int, chunk: int, threads: int | None = None) -> None:
             list(pool.map(work, starts))
 
 
-def ball_centres(desc: ArmDescription, q, wrench=None, p=None, *, threads: int | None = None,
+def ball_centres(desc: ArmDescription, q: ArrayLike, wrench: ArrayLike | None = None, p: ArrayLike | None = None, *,
+                 threads: int | None = None,
                  chunk: int = _CHUNK) -> np.ndarray:
     """Deflection-aware ball centres [m] in the base frame.
 
@@ -97,17 +101,18 @@ def ball_centres(desc: ArmDescription, q, wrench=None, p=None, *, threads: int |
     return out[0] if single else out
 
 
-def rigid_centres(desc: ArmDescription, q, p=None, **kw) -> np.ndarray:
+def rigid_centres(desc: ArmDescription, q: ArrayLike, p: ArrayLike | None = None, **kw: Any) -> np.ndarray:
     """Ball centres [m] with a rigid stylus (zero wrench)."""
     return ball_centres(desc, q, None, p, **kw)
 
 
-def probe_rotations(desc: ArmDescription, q, p=None) -> np.ndarray:
+def probe_rotations(desc: ArmDescription, q: ArrayLike, p: ArrayLike | None = None) -> np.ndarray:
     """(N, 3, 3) rotation R_base_probe (columns: the probe frame's x, y, z axes in the base frame) at joint
     angles ``q`` (N, J) [rad] with base parameter errors ``p`` (rigid chain;
     :func:`arm_model.jacobian.joint_screws`)."""
     from .jacobian import joint_screws
 
     rows, _, _ = split_params(desc, None if p is None else np.asarray(p, dtype=float))
-    rot = joint_screws(desc.convention, rows, np.atleast_2d(np.asarray(q, dtype=float)), desc.chain_joints)[0]
+    rot: np.ndarray = joint_screws(desc.convention, rows, np.atleast_2d(np.asarray(q, dtype=float)),
+                                   desc.chain_joints)[0]
     return rot if desc.probe.rotation is None else rot @ np.asarray(desc.probe.rotation, dtype=float)

@@ -8,8 +8,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .chain import NUMPY_OPS, ball_centre_expr
 from .description import ArmDescription
@@ -26,8 +28,9 @@ class AuxData:
     tau_gravity: np.ndarray | None = None
     tau_contact: np.ndarray | None = None
 
-    def select(self, mask) -> "AuxData":
-        return AuxData(*(None if a is None else a[mask] for a in (self.temperature, self.tau_gravity, self.tau_contact)))
+    def select(self, mask: np.ndarray | slice) -> AuxData:
+        return AuxData(*(None if a is None else a[mask]
+                         for a in (self.temperature, self.tau_gravity, self.tau_contact)))
 
 
 @dataclass(frozen=True)
@@ -37,7 +40,7 @@ class ArmModel:
     spec: ParamSpec = field(init=False)
     base_size: int = field(init=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         base = param_spec(self.desc)
         names, units = list(base.names), list(base.units)
         for e in self.effects:
@@ -50,7 +53,7 @@ class ArmModel:
         object.__setattr__(self, "base_size", base.size)
 
     # -- structure ----------------------------------------------------------------------------
-    def with_effects(self, *effects: Effect) -> "ArmModel":
+    def with_effects(self, *effects: Effect) -> ArmModel:
         return ArmModel(self.desc, tuple(self.effects) + tuple(effects))
 
     def needs(self) -> set[str]:
@@ -65,7 +68,7 @@ class ArmModel:
         return out
 
     # -- the one evaluation -------------------------------------------------------------------
-    def _apply_effects(self, p, inputs: ModelInputs, ops) -> Geometry:
+    def _apply_effects(self, p: Any, inputs: ModelInputs, ops: Any) -> Geometry:
         """The geometry of ``p`` with every effect applied; ``inputs`` are modified in place."""
         rows, p_last, compliance = split_params(self.desc, p[: self.base_size] if p is not None else None)
         geom = Geometry([list(r) for r in rows], list(p_last), list(compliance))
@@ -74,7 +77,7 @@ class ArmModel:
             e.apply(self.desc, params, inputs, geom, ops)
         return geom
 
-    def _evaluate(self, p, inputs: ModelInputs, ops):
+    def _evaluate(self, p: Any, inputs: ModelInputs, ops: Any) -> tuple[Any, Any, Any]:
         geom = self._apply_effects(p, inputs, ops)
         return ball_centre_expr(self.desc.convention, geom.rows, geom.p_last, geom.compliance,
                                 inputs.q, inputs.wrench, ops, self.desc.chain_joints,
@@ -92,17 +95,18 @@ class ArmModel:
         return aux
 
     # -- numpy batch ----------------------------------------------------------------------------
-    def ball_centres(self, q, wrench=None, p=None, aux: AuxData | None = None) -> np.ndarray:
+    def ball_centres(self, q: ArrayLike, wrench: ArrayLike | None = None, p: ArrayLike | None = None,
+                     aux: AuxData | None = None) -> np.ndarray:
         """(N, 3) deflection-aware ball centres [m]; ``p`` of size ``spec.size`` (None: zeros)."""
         q = np.atleast_2d(np.asarray(q, dtype=float))
         n = q.shape[0]
         aux = self._check_aux(aux, n)
-        p = None if p is None else np.asarray(p, dtype=float)
-        if p is not None and p.shape != (self.spec.size,):
-            raise ValueError(f"p has shape {p.shape}, expected ({self.spec.size},)")
+        pv = None if p is None else np.asarray(p, dtype=float)
+        if pv is not None and pv.shape != (self.spec.size,):
+            raise ValueError(f"p has shape {pv.shape}, expected ({self.spec.size},)")
         if not self.effects:
             from .kinematics import ball_centres
-            return ball_centres(self.desc, q, wrench, p)
+            return ball_centres(self.desc, q, wrench, pv)
         w = np.zeros((n, 6))
         if wrench is not None:
             wr = np.atleast_2d(np.asarray(wrench, dtype=float))
@@ -116,12 +120,12 @@ class ArmModel:
                 temperature=None if aux.temperature is None else aux.temperature[s:e],
                 tau_gravity=None if aux.tau_gravity is None else list(aux.tau_gravity[s:e].T),
                 tau_contact=None if aux.tau_contact is None else list(aux.tau_contact[s:e].T))
-            x, y, z = self._evaluate(p, inputs, NUMPY_OPS)
+            x, y, z = self._evaluate(pv, inputs, NUMPY_OPS)
             out[s:e, 0], out[s:e, 1], out[s:e, 2] = x, y, z
         return out
 
     # -- CasADi -------------------------------------------------------------------------------
-    def casadi_function(self, name: str = "ball_centre"):
+    def casadi_function(self, name: str = "ball_centre") -> Any:
         """``f(q[J], w[6], aux[1 + 2J], p[P]) -> p_base[3]`` with aux = (temperature [°C],
         tau_gravity[J], tau_contact[J]) (zeros where no effect needs them)."""
         import casadi as ca
@@ -151,32 +155,36 @@ class ArmModel:
         return m
 
     # -- Pinocchio ------------------------------------------------------------------------------
-    def pinocchio_ball_centre(self, q, wrench=None, p=None, aux_row: dict | None = None) -> np.ndarray:
+    def pinocchio_ball_centre(self, q: ArrayLike, wrench: ArrayLike | None = None, p: ArrayLike | None = None,
+                              aux_row: dict[str, Any] | None = None) -> np.ndarray:
         """One point through Pinocchio: the effects transform the inputs and geometry (same code),
         Pinocchio evaluates the chain of the resulting description."""
         from .pinocchio_model import PinocchioArm
 
         j = self.desc.n_joints
-        p = np.zeros(self.spec.size) if p is None else np.asarray(p, dtype=float)
+        pv = np.zeros(self.spec.size) if p is None else np.asarray(p, dtype=float)
         w = np.zeros(6)
         if wrench is not None:
-            w[: len(wrench)] = wrench
+            wr = np.asarray(wrench, dtype=float)
+            w[: len(wr)] = wr
         aux_row = aux_row or {}
-        inputs = ModelInputs(q=[float(v) for v in q], wrench=[float(v) for v in w],
+        inputs = ModelInputs(q=[float(v) for v in np.asarray(q, dtype=float)], wrench=[float(v) for v in w],
                              temperature=aux_row.get("temperature"),
                              tau_gravity=None if aux_row.get("tau_gravity") is None else list(aux_row["tau_gravity"]),
                              tau_contact=None if aux_row.get("tau_contact") is None else list(aux_row["tau_contact"]))
         inputs.moments = lambda geom, q, i, origin: self._pinocchio_moments(geom, q, i, origin, inputs.wrench)
-        geom = self._apply_effects([float(v) for v in p], inputs, NUMPY_OPS)
-        return PinocchioArm(self._geometry_description(geom)).ball_centre(np.array(inputs.q, dtype=float)[:j],
-                                                                         np.array(inputs.wrench, dtype=float))
+        geom = self._apply_effects([float(v) for v in pv], inputs, NUMPY_OPS)
+        arm = PinocchioArm(self._geometry_description(geom))
+        centre: np.ndarray = arm.ball_centre(np.array(inputs.q, dtype=float)[:j], np.array(inputs.wrench, dtype=float))
+        return centre
 
-    def _geometry_description(self, geom) -> ArmDescription:
+    def _geometry_description(self, geom: Geometry) -> ArmDescription:
         return self.desc.with_row_table(np.array(geom.rows, dtype=float)).with_probe(
             p_last=tuple(float(v) for v in geom.p_last), bending_compliance_x=float(geom.compliance[0]),
             bending_compliance_y=float(geom.compliance[1]), axial_compliance=float(geom.compliance[2]))
 
-    def _pinocchio_moments(self, geom, q, i: int, origin, wrench):
+    def _pinocchio_moments(self, geom: Geometry, q: Any, i: int, origin: ArrayLike,
+                           wrench: Any) -> tuple[np.ndarray, np.ndarray]:
         """(M_gravity, M_contact) [N m], base frame, about ``origin``: the wrench that gravity on the links
         joint ``i`` moves, and the contact wrench at the (rigid) ball, put on them, from Pinocchio's RNEA
         (the spatial force its joint transmits, in equilibrium with them)."""
@@ -206,6 +214,6 @@ class ArmModel:
             out.append(moment)
         return out[0], out[1]
 
-    def described(self, p) -> ArmDescription:
+    def described(self, p: ArrayLike) -> ArmDescription:
         """The description with the base part of ``p`` folded in (effects are not representable)."""
         return apply_params(self.desc, np.asarray(p, dtype=float)[: self.base_size])

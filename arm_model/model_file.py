@@ -37,17 +37,26 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, parse_toml, read_text
-from .units import implausible
-from .description import (MODEL_KEYS, ArmDescription, TomlReader, description_data, description_from_data,
-                          in_unit, nearest, toml_text)
+from .description import (
+    MODEL_KEYS,
+    ArmDescription,
+    TomlReader,
+    check_calibration_table,
+    description_data,
+    description_from_data,
+    in_unit,
+    toml_text,
+)
 from .effects import EFFECTS, Effect
+from .errors import InputError, did_you_mean, parse_toml, read_text
 from .model import ArmModel, AuxData
 from .tracker import Tracker, tracker_from_tables, tracker_tables
+from .uncertainty import ParameterCovariance
+from .units import implausible
 
 __all__ = ["Arm", "PARAM_UNITS", "parse_model", "load_model", "format_model", "effect_tables",
-           "effects_from_tables", "write_covariance", "read_covariance", "Covariance", "check_calibration_table",
-           "EFFECT_COLUMNS"]
+           "effects_from_tables", "write_covariance", "read_covariance", "Covariance", "EFFECT_COLUMNS",
+           "parameters_of", "read_model_file"]
 
 #: SI unit of an effect parameter -> the unit suffixes a model file may use, (suffix, factor to SI); the
 #: first is the one written. A new effect whose parameters have a new SI unit adds an entry here.
@@ -166,32 +175,6 @@ class Arm:
         return self.model.ball_centres(points.q, w, self.p, aux)
 
 
-#: the largest probing scatter a model file may give [um]: 100 mm is a unit mistake, while a poor fit of a
-#: robot can estimate more than a millimetre, and every model file calibrate writes must read back
-MAX_PROBING_SCATTER_UM = 1.0e5
-
-
-def check_calibration_table(tbl, r: TomlReader) -> None:
-    """The ``[calibration]`` table of a model file: text keys ``covariance`` and ``written_by``, the
-    numbers ``probing_scatter_um`` (>= 0: a calibration whose encoder and force-sensor noise alone account for
-    its residual scatter writes 0; at most :data:`MAX_PROBING_SCATTER_UM`) and ``model_discrepancy_um`` (the
-    same range)."""
-    if not isinstance(tbl, dict):
-        raise r.error("'calibration' must be a table", "calibration")
-    known = ("covariance", "written_by", "probing_scatter_um", "model_discrepancy_um")
-    for key, value in tbl.items():
-        if key not in known:
-            raise r.error(f"unknown key '{key}' (known: {', '.join(known)}){nearest(key, known)}",
-                          "calibration", key)
-        if key in ("probing_scatter_um", "model_discrepancy_um"):
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                    or not 0 <= value <= MAX_PROBING_SCATTER_UM:
-                raise r.error(f"'{key}' must be a number in [0, {MAX_PROBING_SCATTER_UM:g}] um, got {value!r}",
-                              "calibration", key)
-        elif not isinstance(value, str) or not value.strip():
-            raise r.error(f"'{key}' must be a non-empty text", "calibration", key)
-
-
 # ---------------------------------------------------------------------------------------------
 # effects <-> TOML tables (generic over Effect subclasses)
 
@@ -281,7 +264,7 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
         if not isinstance(kind, str):
             raise r.error(f"missing 'kind' (one of: {', '.join(EFFECTS)})", *where)
         if kind not in EFFECTS:
-            raise r.error(f"unknown effect kind '{kind}' (known: {', '.join(EFFECTS)}){nearest(kind, EFFECTS)}",
+            raise r.error(f"unknown effect kind '{kind}' (known: {', '.join(EFFECTS)}){did_you_mean(kind, EFFECTS)}",
                           *where, "kind")
         cls = EFFECTS[kind]
         fields = {f.name: f for f in dataclasses.fields(cls) if f.init and f.name not in ("key", "joints")}
@@ -296,14 +279,14 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
                 idx = []
                 for x in value:
                     if x not in jnames:
-                        raise r.error(f"no joint named '{x}' (joints: {', '.join(jnames)}){nearest(x, jnames)}",
+                        raise r.error(f"no joint named '{x}' (joints: {', '.join(jnames)}){did_you_mean(x, jnames)}",
                                       *where, key)
                     idx.append(jnames.index(x))
                 kwargs["joints"] = tuple(idx)
                 continue
             if key not in fields:
                 raise r.error(f"unknown key '{key}' of a '{kind}' effect (known: {', '.join(known)})"
-                              f"{nearest(key, known)}", *where, key)
+                              f"{did_you_mean(key, known)}", *where, key)
             f = fields[key]
             default = f.default if f.default is not dataclasses.MISSING else None
             kwargs[key] = _option_value(value, default, r, where + (key,))
@@ -325,7 +308,7 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
                 raise r.error("a parameter needs a 'name'", *pw)
             if name not in expected:
                 raise r.error(f"'{name}' is not a parameter of this '{kind}' effect (its parameters: "
-                              f"{', '.join(expected)}){nearest(name, expected)}", *pw, "name")
+                              f"{', '.join(expected)}){did_you_mean(name, expected)}", *pw, "name")
             if name in seen or name in values:
                 raise r.error(f"parameter '{name}' is given twice", *pw, "name")
             seen.add(name)
@@ -343,7 +326,7 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
                 if base not in ("value", "u") or suffix not in units:
                     allowed = [f"{b}_{s}" for b in ("value", "u") for s in units] + ["state"]
                     raise r.error(f"unknown key '{key}' (a '{expected[name]}' parameter takes "
-                                  f"{', '.join(allowed)}){nearest(key, allowed)}", *pw, key)
+                                  f"{', '.join(allowed)}){did_you_mean(key, allowed)}", *pw, key)
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                     raise r.error(f"'{key}' must be a finite number, got {v!r}", *pw, key)
                 if base in got:
@@ -353,7 +336,8 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
                 if wrong:
                     raise r.error(f"'{key}': {wrong[1]}", *pw, key)
             if "value" not in got:
-                raise r.error(f"parameter '{name}' has no 'value_<unit>' (e.g. value_{PARAM_UNITS[expected[name]][0][0]})",
+                raise r.error(f"parameter '{name}' has no 'value_<unit>' (e.g. "
+                              f"value_{PARAM_UNITS[expected[name]][0][0]})",
                               *pw)
             if got.get("u", 0.0) < 0:
                 raise r.error("a standard uncertainty must not be negative", *pw)
@@ -424,7 +408,8 @@ def format_model(desc: ArmDescription, effects=(), values: dict | None = None, u
     data = description_data(desc)
     if effects:
         data["effect"] = effect_tables(desc, effects, values or {}, uncertainties, states)
-    scatter, discrepancy = (None if v is None else float(f"{v * 1e6:.4g}") for v in (probing_scatter, model_discrepancy))
+    scatter, discrepancy = (None if v is None else float(f"{v * 1e6:.4g}")
+                            for v in (probing_scatter, model_discrepancy))
     cal = {k: v for k, v in (("covariance", covariance), ("written_by", written_by), ("probing_scatter_um", scatter),
                              ("model_discrepancy_um", discrepancy)) if v not in (None, "")}     # a 0 is kept
     if cal:
@@ -522,7 +507,7 @@ def read_covariance(path) -> Covariance:
                              "parameter")
         unit = r[1].strip()
         if unit not in si_of:
-            raise InputError(f"unknown unit '{unit}' (known: {', '.join(si_of)}){nearest(unit, si_of)}", path, no,
+            raise InputError(f"unknown unit '{unit}' (known: {', '.join(si_of)}){did_you_mean(unit, si_of)}", path, no,
                              "unit")
         si, f = si_of[unit]
         units.append(si)
@@ -549,6 +534,39 @@ def read_covariance(path) -> Covariance:
     asym = np.argwhere(np.abs(corr - corr.T) > CORRELATION_TOLERANCE)
     if len(asym):
         i, k = (int(x) for x in asym[0])
-        raise InputError(f"the correlations are not symmetric: {float(corr[i, k])!r} here, {float(corr[k, i])!r} in row "
-                         f"'{names[k]}' (line {rows[k][0]}), column '{names[i]}'", path, rows[i][0], names[k])
+        raise InputError(f"the correlations are not symmetric: {float(corr[i, k])!r} here, {float(corr[k, i])!r} in "
+                         f"row '{names[k]}' (line {rows[k][0]}), column '{names[i]}'", path, rows[i][0], names[k])
     return Covariance(names, tuple(units), values, u, corr, tuple(no for no, _ in rows))
+
+
+def parameters_of(arm) -> ParameterCovariance | None:
+    """The parameter covariance of an :class:`~arm_model.model_file.Arm` (its model file's covariance
+    file), or None when it names none. A parameter the model does not have is an InputError."""
+    if getattr(arm, "covariance", None) is None:
+        return None
+    cov = read_covariance(arm.covariance)
+    names = arm.model.spec.names
+    spec = arm.model.spec
+    for i, n in enumerate(cov.names):
+        line = cov.lines[i] if cov.lines else None
+        if n not in names:
+            raise InputError(f"parameter '{n}' of the covariance file is not a parameter of the model "
+                             f"(known: {', '.join(names)})", arm.covariance, line, "parameter")
+        if cov.units[i] != spec.units[spec.index(n)]:
+            raise InputError(f"parameter '{n}' is a '{spec.units[spec.index(n)]}' quantity, but its unit is one of "
+                             f"'{cov.units[i]}'", arm.covariance, line, "unit")
+    try:
+        out = ParameterCovariance(tuple(cov.names), cov.matrix,
+                                  source=f"the model's covariance file {arm.covariance.name}")
+        out.factor()
+    except ValueError as exc:
+        raise InputError(f"not a usable covariance: {exc}", arm.covariance) from None
+    return out
+
+
+def read_model_file(path: Path) -> Arm:
+    """A model file as ``--arm`` reads it and, when it names one, its covariance file as ``tip`` reads it
+    (the read-back of :mod:`arm_model.readback`)."""
+    arm = load_model(path)
+    parameters_of(arm)
+    return arm

@@ -21,8 +21,8 @@ Refused before any work, with an :class:`InputError` (exit 2): ``-o`` that is an
 is a file where a folder is expected (or the reverse), sits below a file, cannot be written, is not a
 regular file or folder (a device such as ``/dev/null``, a FIFO, a socket: never replaced, never written
 into), or is a non-empty folder that is not an earlier output of the same command (``-o .`` never
-empties a folder of the user's). File names built from input text (arm names, measurement ids) go through :func:`safe_name`
-and are checked by :meth:`Output.path` to stay inside the folder.
+empties a folder of the user's). File names built from input text (arm names, measurement ids) go through
+:func:`safe_name` and are checked by :meth:`Output.path` to stay inside the folder.
 """
 from __future__ import annotations
 
@@ -39,10 +39,10 @@ import zlib
 from pathlib import Path
 
 from .errors import InputError
-from .readback import UnreadableOutput, check_output
+from .readback import UnreadableOutput, read_back
 
 __all__ = ["output_folder", "output_file", "Output", "safe_name", "guard_output", "atomic_write_bytes",
-           "MARKER", "published_outputs"]
+           "MARKER", "published_outputs", "check_output"]
 
 log = logging.getLogger(__name__)
 
@@ -312,6 +312,15 @@ def _publish(stage: Path, final: Path, command: str) -> None:
             shutil.rmtree(old, ignore_errors=True)
 
 
+def check_output(stage: Path, final: Path) -> None:
+    """Read back every file of a command's output before it is published: ``stage`` the temporary folder
+    (or file), ``final`` where it will be published. Raises :class:`UnreadableOutput` for the first
+    file refused (in name order)."""
+    files = [stage] if stage.is_file() else sorted(p for p in stage.rglob("*") if p.is_file() and p.name != MARKER)
+    for p in files:
+        read_back(p, final if p == stage else final / p.relative_to(stage))
+
+
 @contextlib.contextmanager
 def output_folder(final: str | Path, inputs=(), command: str = ""):
     """Write a command's output folder complete or not at all (see the module's doc).
@@ -382,11 +391,11 @@ def output_file(final: str | Path, inputs=()):
     _refuse_special(final, "a regular file")
     created = _make_parents(final.parent)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.tmp-", suffix=final.suffix, dir=final.parent)
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{final.name}.tmp-", suffix=final.suffix, dir=final.parent)
     except OSError as exc:
         _remove_empty(created)
         raise _oserror(exc, "write the output file", final) from None
-    tmp = Path(tmp)
+    tmp = Path(tmp_name)
     try:
         os.fchmod(fd, _mode(0o666))      # mkstemp makes 0600; outputs get the usual mode
         os.close(fd)

@@ -10,8 +10,10 @@ origin_roll, origin_pitch, origin_yaw [rad]`` (URDF chains); then ``probe.x, pro
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .description import ArmDescription
 
@@ -66,7 +68,7 @@ def param_spec(desc: ArmDescription) -> ParamSpec:
     return ParamSpec(tuple(names), tuple(units), desc.n_joints)
 
 
-def split_params(desc: ArmDescription, p=None):
+def split_params(desc: ArmDescription, p: Any = None) -> tuple[list[list[Any]], list[Any], list[Any]]:
     """(rows, p_last, compliance) of ``desc`` plus the errors ``p``.
 
     ``p`` may be None (the description itself), a numpy vector or a CasADi SX/MX column; the
@@ -74,9 +76,9 @@ def split_params(desc: ArmDescription, p=None):
     """
     table = desc.row_table()
     probe = desc.probe
-    p_last = list(probe.p_last)
-    compliance = list(probe.compliance)
-    rows = [[float(v) for v in r] for r in table]
+    p_last: list[Any] = list(probe.p_last)
+    compliance: list[Any] = list(probe.compliance)
+    rows: list[list[Any]] = [[float(v) for v in r] for r in table]
     if p is None:
         return rows, p_last, compliance
     n, m = len(desc.joints), len(desc.row_fields)
@@ -86,7 +88,7 @@ def split_params(desc: ArmDescription, p=None):
     return rows, p_last, compliance
 
 
-def apply_params(desc: ArmDescription, p) -> ArmDescription:
+def apply_params(desc: ArmDescription, p: ArrayLike) -> ArmDescription:
     """A new description with the errors ``p`` (numeric) folded into its values."""
     p = np.asarray(p, dtype=float)
     spec = param_spec(desc)

@@ -7,7 +7,10 @@ displacement is computed here by statics from Pinocchio's own Jacobian of the ba
 """
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .description import GRAVITY, ArmDescription
 from .urdf import BALL_FRAME, ELASTIC_JOINTS, urdf_text
@@ -49,7 +52,7 @@ class PinocchioArm:
             [p.bending_compliance_x / lever**2, p.bending_compliance_y / lever**2, p.axial_compliance])
 
     # -- configuration ------------------------------------------------------------------------
-    def full_q(self, q, q_e=None) -> np.ndarray:
+    def full_q(self, q: ArrayLike, q_e: ArrayLike | None = None) -> np.ndarray:
         """Pinocchio configuration from the encoder readings ``q`` [rad] or [m] and elastic displacement ``q_e``."""
         x = np.zeros(self.model.nq)
         x[self.arm_idx] = self.coupling @ np.asarray(q, dtype=float) + self.offsets
@@ -57,65 +60,69 @@ class PinocchioArm:
             x[self.elastic_idx] = q_e
         return x
 
-    def _ball_jacobian(self, x: np.ndarray, frame) -> np.ndarray:
+    def _ball_jacobian(self, x: np.ndarray, frame: Any) -> np.ndarray:
         pin = self._pin
         pin.computeJointJacobians(self.model, self.data, x)
         pin.updateFramePlacements(self.model, self.data)
-        return pin.getFrameJacobian(self.model, self.data, self.ball_id, frame)
+        jac: np.ndarray = pin.getFrameJacobian(self.model, self.data, self.ball_id, frame)
+        return jac
 
-    def elastic_q(self, q, wrench) -> np.ndarray:
+    def elastic_q(self, q: ArrayLike, wrench: ArrayLike) -> np.ndarray:
         """Elastic joint displacement (theta_y [rad], theta_x [rad], s [m]) by statics.
 
         ``wrench``: (3,) force [N] or (6,) force [N] and torque [N m] at the ball, probe frame.
         """
-        w = np.zeros(6)
-        w[: len(wrench)] = wrench
+        w = _six(wrench)
         j_local = self._ball_jacobian(self.full_q(q), self._pin.ReferenceFrame.LOCAL)
         j_e = j_local[:, self.elastic_idx]
-        return self.joint_compliance * (j_e.T @ w)
+        q_e: np.ndarray = self.joint_compliance * (j_e.T @ w)
+        return q_e
 
     # -- evaluation ---------------------------------------------------------------------------
-    def ball_centre(self, q, wrench=None) -> np.ndarray:
+    def ball_centre(self, q: ArrayLike, wrench: ArrayLike | None = None) -> np.ndarray:
         """Deflection-aware ball centre [m] in the base frame for one point."""
         pin = self._pin
         q_e = None if wrench is None else self.elastic_q(q, wrench)
         pin.framesForwardKinematics(self.model, self.data, self.full_q(q, q_e))
-        return self.data.oMf[self.ball_id].translation.copy()
+        centre: np.ndarray = self.data.oMf[self.ball_id].translation.copy()
+        return centre
 
-    def T_base_ball(self, q, wrench=None) -> np.ndarray:
+    def T_base_ball(self, q: ArrayLike, wrench: ArrayLike | None = None) -> np.ndarray:
         """4x4 pose of the (deflected) ball frame in the base frame."""
         pin = self._pin
         q_e = None if wrench is None else self.elastic_q(q, wrench)
         pin.framesForwardKinematics(self.model, self.data, self.full_q(q, q_e))
-        return self.data.oMf[self.ball_id].homogeneous.copy()
+        T_base_ball: np.ndarray = self.data.oMf[self.ball_id].homogeneous.copy()
+        return T_base_ball
 
-    def jacobians(self, q, wrench=None) -> tuple[np.ndarray, np.ndarray]:
+    def jacobians(self, q: ArrayLike, wrench: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(d ball / d q  (3, J) [m/rad] ([m/m] for a prismatic joint), d ball / d w  (3, 6) [m/N, m/(N m)]),
         base frame axes, by encoder column."""
         pin = self._pin
-        w = np.zeros(6) if wrench is None else np.pad(np.asarray(wrench, float), (0, 6 - len(wrench)))
+        w = _six(wrench)
         x = self.full_q(q, self.elastic_q(q, w))
         j = self._ball_jacobian(x, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3]
         j_e0 = self._ball_jacobian(self.full_q(q), pin.ReferenceFrame.LOCAL)[:, self.elastic_idx]
         dqe_dw = self.joint_compliance[:, None] * j_e0.T
         return j[:, self.arm_idx] @ self.coupling, j[:, self.elastic_idx] @ dqe_dw
 
-    def gravity_torques(self, q) -> np.ndarray:
+    def gravity_torques(self, q: ArrayLike) -> np.ndarray:
         """Torque [N m] (force [N] for a prismatic joint) each encoder column's joint holds against gravity,
         RNEA(q, 0, 0) (Pinocchio's sign): the generalized force gravity exerts on the joints is its negative
         (a mimicking joint's share carried to its master by the multiplier)."""
         g = self._pin.computeGeneralizedGravity(self.model, self.data, self.full_q(q))
-        return self.coupling.T @ g[self.arm_idx]
+        tau: np.ndarray = self.coupling.T @ g[self.arm_idx]
+        return tau
 
-    def contact_torques(self, q, wrench) -> np.ndarray:
+    def contact_torques(self, q: ArrayLike, wrench: ArrayLike) -> np.ndarray:
         """Generalized force [N m] a wrench at the ball (probe frame) exerts on the arm joints,
         ``J_local^T w``."""
-        w = np.zeros(6)
-        w[: len(wrench)] = wrench
+        w = _six(wrench)
         j_local = self._ball_jacobian(self.full_q(q), self._pin.ReferenceFrame.LOCAL)
-        return self.coupling.T @ (j_local.T @ w)[self.arm_idx]
+        tau: np.ndarray = self.coupling.T @ (j_local.T @ w)[self.arm_idx]
+        return tau
 
-    def torques(self, q, wrench=None) -> tuple[np.ndarray, np.ndarray]:
+    def torques(self, q: ArrayLike, wrench: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
         """For (N, J) angles and (N, 3|6) wrenches: (tau_gravity (N, J), tau_contact (N, J)) [N m]
         (see :mod:`arm_model.effects` for the signs); tau_contact is zero without a wrench."""
         q = np.atleast_2d(np.asarray(q, dtype=float))
@@ -127,3 +134,12 @@ class PinocchioArm:
             if w is not None:
                 tc[i] = self.contact_torques(q[i], w[i])
         return tg, tc
+
+
+def _six(wrench: ArrayLike | None) -> np.ndarray:
+    """A wrench of 3 (force [N]) or 6 (force, torque [N m]) components as 6, the torque zero if absent."""
+    w = np.zeros(6)
+    if wrench is not None:
+        v = np.asarray(wrench, dtype=float).reshape(-1)
+        w[: len(v)] = v
+    return w

@@ -1,7 +1,7 @@
 """Every file a command writes passes the reader that will read it: checked before it is published.
 
 :func:`arm_model.output.output_folder` and :func:`~arm_model.output.output_file` hand every file they
-are about to publish to :func:`check_output`, which finds the file's kind (:data:`KINDS`: by its suffix
+are about to publish to :func:`arm_model.output.check_output`, which finds the file's kind (:data:`KINDS`: by its suffix
 and its first bytes, never by the writer's say-so, so that no writer can forget it) and reads it with
 that kind's reader, the very function a command uses to read such a file:
 
@@ -41,7 +41,7 @@ from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["UnreadableOutput", "KINDS", "kind_of", "read_back", "check_output"]
+__all__ = ["UnreadableOutput", "KINDS", "kind_of", "read_back"]
 
 
 class UnreadableOutput(RuntimeError):
@@ -79,16 +79,16 @@ def _is_plan(data: dict) -> bool:
 
 
 KINDS: tuple[Kind, ...] = (
-    Kind("model file", ".toml", lambda data: "convention" in data, "arm_model.readback:read_model"),
+    Kind("model file", ".toml", lambda data: "convention" in data, "arm_model.model_file:read_model_file"),  # type: ignore[operator]
     Kind("session plan", ".toml", _is_plan, "arm_model.live.plan:read_plan"),
-    Kind("artefacts file", ".toml", lambda data: "feature" in data or "distance" in data,
+    Kind("artefacts file", ".toml", lambda data: "feature" in data or "distance" in data,  # type: ignore[operator]
          "arm_model.io:read_artefacts"),
     Kind("covariance file", ".csv", lambda line: _header(line)[:4] == ["parameter", "unit", "value", "u"],
          "arm_model.model_file:read_covariance"),
     Kind("points file", ".csv", lambda line: _header(line)[:2] == ["measurement", "feature"]
          and any(h.startswith("q1_") for h in _header(line)), "arm_model.io:read_points"),
     Kind("sample stream", ".csv", lambda line: _header(line)[0] in ("time_s", "t_s")
-         and any(h.startswith("q1_") for h in _header(line)), "arm_model.readback:read_samples"),
+         and any(h.startswith("q1_") for h in _header(line)), "arm_model.live.samples:read_samples"),
     Kind("force signal", ".csv", lambda line: _header(line)[0] == "time_s", "arm_model.io:read_force_signal"),
     # the viewer's reader (a floor above: imported by name, as arm_model.cli names every command's module)
     Kind("residuals file", ".csv", lambda line: {"line", "dx_um"} <= set(_header(line)) or "rx_um" in _header(line),
@@ -107,33 +107,6 @@ def _toml_data(path: Path) -> dict | None:
         return tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, RecursionError, UnicodeDecodeError):
         return None
-
-
-def read_model(path: Path):
-    """A model file as ``--arm`` reads it and, when it names one, its covariance file as ``tip`` reads it."""
-    from .model_file import load_model
-    from .uncertainty_cli import parameters_of
-    arm = load_model(path)
-    parameters_of(arm)
-    return arm
-
-
-def read_samples(path: Path) -> int:
-    """A sample stream (docs/formats.md §8) as ``aacmm live`` reads it, line by line; the number of samples."""
-    import re
-
-    from .errors import read_text
-    from .live.samples import SampleLayout
-    lines = read_text(path, "the sample stream").splitlines()
-    header = _header(lines[0]) if lines else []
-    layout = SampleLayout(header, len({m.group(1) for h in header if (m := re.fullmatch(r"q(\d+)_\w+", h))}),
-                          str(path))
-    n = 0
-    for no, text in enumerate(lines[1:], start=2):
-        if text.strip():
-            layout.parse(text, no)
-            n += 1
-    return n
 
 
 def read_json(path: Path):
@@ -190,13 +163,3 @@ def read_back(path: str | Path, published: str | Path | None = None):
                                       exc.column) if w)
         raise UnreadableOutput(f"this command wrote a {kind.name} that its reader refuses"
                                f"{' (' + where + ')' if where else ''}: {exc.reason}", published) from None
-
-
-def check_output(stage: Path, final: Path) -> None:
-    """Read back every file of a command's output before it is published: ``stage`` the temporary folder
-    (or file), ``final`` where it will be published. Raises :class:`UnreadableOutput` for the first
-    file refused (in name order)."""
-    from .output import MARKER
-    files = [stage] if stage.is_file() else sorted(p for p in stage.rglob("*") if p.is_file() and p.name != MARKER)
-    for p in files:
-        read_back(p, final if p == stage else final / p.relative_to(stage))

@@ -16,12 +16,15 @@ acts on a marker as on the tip.
 """
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from .errors import InputError
 from .description import TomlReader, in_unit
+from .errors import InputError
 from .geometry import rotation_xyz, rpy_from_matrix
 
 __all__ = ["Tracker", "offset_matrix", "marker_positions", "tracker_tables", "tracker_from_tables",
@@ -45,13 +48,13 @@ class Tracker:
             rotation [rad] about the instrument's x, y, z axes), or None.
         u_offsets: (K, 3) standard uncertainties of the offsets [m], or None.
     """
-    sessions: tuple
+    sessions: tuple[str, ...]
     frames: np.ndarray
     offsets: np.ndarray | None = None
     u_frames: np.ndarray | None = None
     u_offsets: np.ndarray | None = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         object.__setattr__(self, "sessions", tuple(str(s) for s in self.sessions))
         object.__setattr__(self, "frames", np.asarray(self.frames, float).reshape(len(self.sessions), 4, 4))
         if len(set(self.sessions)) != len(self.sessions):
@@ -73,7 +76,7 @@ class Tracker:
         """Marker ``k`` (0-based) in the tip frame [m] (zeros when the instrument sees the tip point)."""
         return np.zeros(3) if self.offsets is None else self.offsets[k]
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """JSON-ready (SI: m, rad): ``frames`` (one a session: ``session``, ``T_ref_base``, ``u_translation``,
         ``u_rotation``) and ``markers`` (one a marker: ``marker`` (1-based), ``offset``, ``u``), or None
         for markers when the instrument sees the tip point."""
@@ -89,7 +92,7 @@ class Tracker:
         return {"frames": frames, "markers": markers}
 
 
-def offset_matrix(model) -> np.ndarray:
+def offset_matrix(model: Any) -> np.ndarray:
     """(P, 3) ``M`` with ``model.ball_centres(q, p + M o)`` the point at ``o`` [m] in the tip frame: ``o``
     turned into the last joint frame and added to the probe point (``probe.x``, ``probe.y``, ``probe.z``)."""
     spec = model.spec
@@ -100,7 +103,8 @@ def offset_matrix(model) -> np.ndarray:
     return m
 
 
-def marker_positions(model, p, q, tracker: Tracker, sessions, aux=None) -> np.ndarray:
+def marker_positions(model: Any, p: ArrayLike, q: ArrayLike, tracker: Tracker, sessions: Iterable[str],
+                     aux: Any = None) -> np.ndarray:
     """(N, K, 3) the markers of ``tracker`` as the instrument would see them [m], in each row's session's
     frame (``sessions`` (N,) ids; every one must have a frame), at joint angles ``q`` (N, J) [rad] and
     parameters ``p`` (full vector, SI), no contact force."""
@@ -127,13 +131,13 @@ _MARKER_KEYS = {"x": ("length", True), "y": ("length", True), "z": ("length", Tr
                 "u_y": ("length", False), "u_z": ("length", False)}
 
 
-def tracker_tables(tracker: Tracker) -> dict:
+def tracker_tables(tracker: Tracker) -> dict[str, Any]:
     """The model file's ``reference_frame`` and ``marker`` arrays of tables (mm, degrees) of ``tracker``;
     :func:`tracker_from_tables` reads them back exactly."""
     frames = []
     for i, s in enumerate(tracker.sessions):
         t = tracker.frames[i]
-        row = {} if s == DEFAULT_SESSION else {"session": s}
+        row: dict[str, Any] = {} if s == DEFAULT_SESSION else {"session": s}
         row.update({f"{a}_mm": in_unit(v, _MM) for a, v in zip("xyz", t[:3, 3])})
         row.update({f"{a}_deg": in_unit(v, _DEG) for a, v in zip(("roll", "pitch", "yaw"), rpy_from_matrix(t[:3, :3]))})
         if tracker.u_frames is not None:
@@ -141,7 +145,7 @@ def tracker_tables(tracker: Tracker) -> dict:
             row.update({f"u_{a}_mm": in_unit(v, _MM) for a, v in zip("xyz", u[:3])})
             row.update({f"u_r{a}_deg": in_unit(v, _DEG) for a, v in zip("xyz", u[3:])})
         frames.append(row)
-    out = {"reference_frame": frames}
+    out: dict[str, Any] = {"reference_frame": frames}
     if tracker.offsets is not None:
         marks = []
         for k, o in enumerate(tracker.offsets):
@@ -153,14 +157,14 @@ def tracker_tables(tracker: Tracker) -> dict:
     return out
 
 
-def _table_list(data: dict, key: str, r: TomlReader) -> list:
+def _table_list(data: dict[str, Any], key: str, r: TomlReader) -> list[Any]:
     tables = data.get(key, [])
     if not isinstance(tables, list) or not tables or not all(isinstance(t, dict) for t in tables):
         raise r.error(f"'{key}' must be an array of tables ([[{key}]])", key)
     return tables
 
 
-def _uncertainties(values: dict, names, r: TomlReader, where: tuple) -> np.ndarray | None:
+def _uncertainties(values: dict[str, Any], names: Any, r: TomlReader, where: tuple[Any, ...]) -> np.ndarray | None:
     got = [n for n in names if n in values]
     if not got:
         return None
@@ -172,7 +176,7 @@ def _uncertainties(values: dict, names, r: TomlReader, where: tuple) -> np.ndarr
     return u
 
 
-def tracker_from_tables(data: dict, r: TomlReader) -> Tracker | None:
+def tracker_from_tables(data: dict[str, Any], r: TomlReader) -> Tracker | None:
     """The :class:`Tracker` of a parsed model file's ``[[reference_frame]]`` and ``[[marker]]`` tables
     (None without them); errors name the file, line and key."""
     if not any(k in data for k in TRACKER_KEYS):
@@ -204,7 +208,7 @@ def tracker_from_tables(data: dict, r: TomlReader) -> Tracker | None:
     return Tracker(tuple(sessions), np.array(frames), offsets, None if any(u is None for u in uf) else np.array(uf), uo)
 
 
-def check_sessions(tracker: Tracker, sessions, path) -> None:
+def check_sessions(tracker: Tracker, sessions: ArrayLike, path: Any) -> None:
     """An :class:`InputError` when a session of ``sessions`` has no frame in ``tracker``."""
     missing = [s for s in dict.fromkeys(np.asarray(sessions).tolist()) if tracker.frame(s) is None]
     if missing:

@@ -27,11 +27,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .jacobian import Dual, DUAL_OPS, chain_jacobian, geometry_entries, value
-from .kinematics import run_chunks
 from .effects import ModelInputs
-from .model import ArmModel, AuxData
+from .jacobian import DUAL_OPS, Dual, chain_jacobian, geometry_entries, value
+from .kinematics import run_chunks
 from .log import Progress
+from .model import ArmModel, AuxData
 
 __all__ = ["FORCE_SENSOR_U_N", "COMPLIANCE_U_RELATIVE", "CONTRIBUTIONS", "InputUncertainty",
            "ParameterCovariance", "Propagation", "default_inputs", "propagate", "monte_carlo",

@@ -6,14 +6,21 @@ import math
 
 import numpy as np
 
-from .commands import number_in, seed
-
-from .uncertainty import (COMPLIANCE_U_RELATIVE, CONTRIBUTIONS, InputUncertainty, ParameterCovariance,
-                          covariance_columns, default_inputs, directional_ratio, monte_carlo,
-                          propagate)
+from .cli_options import number_in, seed
+from .uncertainty import (
+    COMPLIANCE_U_RELATIVE,
+    CONTRIBUTIONS,
+    InputUncertainty,
+    ParameterCovariance,
+    covariance_columns,
+    default_inputs,
+    directional_ratio,
+    monte_carlo,
+    propagate,
+)
 
 __all__ = ["add_input_options", "inputs_from_args", "add_tip_options", "wants_uncertainty", "tip_columns",
-           "contribution_lines", "u_columns", "parameters_of"]
+           "contribution_lines", "u_columns"]
 
 
 #: the largest values the input-uncertainty options take (their plausible ranges, docs/uncertainty.md):
@@ -31,7 +38,8 @@ def add_input_options(p, force: bool = True) -> None:
                    help="encoder resolution of every joint [deg] (u = R / sqrt(12)); default: each joint's "
                         "encoder_resolution of the description, 0 where not given")
     if force:
-        g.add_argument("--u-force-N", type=number_in(0, MAX_U_FORCE_N), nargs=2, default=None, metavar=("BENDING", "AXIAL"),
+        g.add_argument("--u-force-N", type=number_in(0, MAX_U_FORCE_N), nargs=2, default=None,
+                       metavar=("BENDING", "AXIAL"),
                        help="standard uncertainty of the force [N] across (probe x, y) and along (z) the stylus; "
                             "default 0.0723 0.0464 (the seed paper's Table 1)")
     g.add_argument("--u-compliance-rel", type=number_in(0, MAX_U_COMPLIANCE_REL), default=None, metavar="R",
@@ -72,7 +80,8 @@ def add_tip_options(p) -> None:
                    help="write u_x_mm, u_y_mm, u_z_mm even when the model carries no parameter covariance "
                         "(the parameters are then taken as exact); with a covariance they are always written")
     g.add_argument("--covariance", action="store_true",
-                   help="also write the six terms of each point's 3x3 covariance [um^2] (cov_xx_um2, cov_yy_um2, cov_zz_um2, cov_xy_um2, cov_xz_um2, cov_yz_um2)")
+                   help="also write the six terms of each point's 3x3 covariance [um^2] (cov_xx_um2, cov_yy_um2, "
+                        "cov_zz_um2, cov_xy_um2, cov_xz_um2, cov_yz_um2)")
     g.add_argument("--mc", type=number_in(2, MAX_MC, kind=int), default=None, metavar="N",
                    help="also a Monte Carlo of N samples of the same inputs: columns u_x_mc_mm ... (with "
                         "--covariance also cov_xx_mc_um2 ...) and the largest relative difference to the linear "
@@ -95,32 +104,6 @@ def contribution_lines(res) -> list[str]:
         lines.append(f"  {name:<17} {v[0] * 1e6:8.3f} {v[1] * 1e6:8.3f} {v[2] * 1e6:8.3f}   "
                      f"{res.sources.get(name, '')}")
     return lines
-
-
-def parameters_of(arm) -> ParameterCovariance | None:
-    """The parameter covariance of an :class:`~arm_model.model_file.Arm` (its model file's covariance
-    file), or None when it names none. A parameter the model does not have is an InputError."""
-    if getattr(arm, "covariance", None) is None:
-        return None
-    from .errors import InputError
-    from .model_file import read_covariance
-    cov = read_covariance(arm.covariance)
-    names = arm.model.spec.names
-    spec = arm.model.spec
-    for i, n in enumerate(cov.names):
-        line = cov.lines[i] if cov.lines else None
-        if n not in names:
-            raise InputError(f"parameter '{n}' of the covariance file is not a parameter of the model "
-                             f"(known: {', '.join(names)})", arm.covariance, line, "parameter")
-        if cov.units[i] != spec.units[spec.index(n)]:
-            raise InputError(f"parameter '{n}' is a '{spec.units[spec.index(n)]}' quantity, but its unit is one of "
-                             f"'{cov.units[i]}'", arm.covariance, line, "unit")
-    try:
-        out = ParameterCovariance(tuple(cov.names), cov.matrix, source=f"the model's covariance file {arm.covariance.name}")
-        out.factor()
-    except ValueError as exc:
-        raise InputError(f"not a usable covariance: {exc}", arm.covariance) from None
-    return out
 
 
 def u_columns(res) -> dict:

@@ -1,7 +1,8 @@
 """URDF generated from the arm description, with the probe's virtual elastic joints and visuals.
 
 Chain: ``base_link -> j1 ... jJ (revolute, z) -> flange (the last joint frame, fixed) -> stylus_root
-(the bending hinge, in the probe frame's orientation, fixed; at (x, y, 0) for an unrotated probe) -> probe_bend_y (revolute, y) -> probe_bend_x (revolute, x) ->
+(the bending hinge, in the probe frame's orientation, fixed; at (x, y, 0) for an unrotated probe) -> probe_bend_y
+(revolute, y) -> probe_bend_x (revolute, x) ->
 probe_axial (prismatic, z) -> ball (fixed, at (0, 0, L))``. The elastic joints carry no limits of
 interest; they are set by statics from the measured wrench (see :mod:`arm_model.chain`).
 """
@@ -39,7 +40,7 @@ def _comment(text: str) -> str:
 
 def _rot(axis: str, angle: float) -> np.ndarray:
     """4x4 rotation about base ``axis`` ('x' or 'z')."""
-    from scipy.spatial.transform import Rotation     # here: `aacmm --help` imports this module, not scipy
+    from scipy.spatial.transform import Rotation  # here: `aacmm --help` imports this module, not scipy
     t = np.eye(4)
     t[:3, :3] = Rotation.from_euler(axis, angle).as_matrix()
     return t
@@ -175,7 +176,8 @@ def urdf_text(desc: ArmDescription) -> str:
             mimic = (f'<mimic joint="{escape(j.mimic.joint)}" multiplier="{_f(j.mimic.multiplier)}" '
                      f'offset="{_f(j.mimic.offset)}"/>')
         lines.append(f'  <joint name="{escape(j.name)}" type="{j.kind}"><parent link="{parent}"/>'
-                     f'<child link="link_{i + 1}"/>{_origin(origin)}<axis xyz="{_f(axis[0])} {_f(axis[1])} {_f(axis[2])}"/>'
+                     f'<child link="link_{i + 1}"/>{_origin(origin)}<axis xyz="{_f(axis[0])} {_f(axis[1])} '
+                     f'{_f(axis[2])}"/>'
                      f'<limit lower="{_f(lower)}" upper="{_f(upper)}" effort="100" velocity="3"/>{mimic}</joint>')
         visuals = [_user_visuals(desc, i)] if _user_visuals(desc, i) else [_joint_housing(float(radii[i]) * 1.3)] + [
             _cylinder_between(a, b, float(radii[i]), "arm") for a, b in zip(waypoints[:-1], waypoints[1:])]
@@ -198,14 +200,19 @@ def urdf_text(desc: ArmDescription) -> str:
         f'<child link="stylus_root"/>{_origin(hinge)}</joint>',
         '  <link name="stylus_root"/>',
         '  <joint name="probe_bend_y" type="revolute"><parent link="stylus_root"/><child link="probe_bend_y_link"/>'
-        '<origin xyz="0 0 0" rpy="0 0 0"/><axis xyz="0 1 0"/><limit lower="-0.1" upper="0.1" effort="1" velocity="1"/></joint>',
+        '<origin xyz="0 0 0" rpy="0 0 0"/><axis xyz="0 1 0"/><limit lower="-0.1" upper="0.1" effort="1" '
+        'velocity="1"/></joint>',
         '  <link name="probe_bend_y_link"/>',
-        '  <joint name="probe_bend_x" type="revolute"><parent link="probe_bend_y_link"/><child link="probe_bend_x_link"/>'
-        '<origin xyz="0 0 0" rpy="0 0 0"/><axis xyz="1 0 0"/><limit lower="-0.1" upper="0.1" effort="1" velocity="1"/></joint>',
+        '  <joint name="probe_bend_x" type="revolute"><parent link="probe_bend_y_link"/>'
+        '<child link="probe_bend_x_link"/>'
+        '<origin xyz="0 0 0" rpy="0 0 0"/><axis xyz="1 0 0"/><limit lower="-0.1" upper="0.1" effort="1" '
+        'velocity="1"/></joint>',
         '  <link name="probe_bend_x_link"/>',
         '  <joint name="probe_axial" type="prismatic"><parent link="probe_bend_x_link"/><child link="stylus"/>'
-        '<origin xyz="0 0 0" rpy="0 0 0"/><axis xyz="0 0 1"/><limit lower="-0.001" upper="0.001" effort="1" velocity="1"/></joint>',
-        f'  <link name="stylus">{_cylinder_between((0, 0, 0), (0, 0, max(lever - p.ball_diameter / 2, 0.0)), 0.003, "probe")}</link>',
+        '<origin xyz="0 0 0" rpy="0 0 0"/><axis xyz="0 0 1"/><limit lower="-0.001" upper="0.001" effort="1" '
+        'velocity="1"/></joint>',
+        '  <link name="stylus">'
+        f'{_cylinder_between((0, 0, 0), (0, 0, max(lever - p.ball_diameter / 2, 0.0)), 0.003, "probe")}</link>',
         f'  <joint name="{BALL_FRAME}_joint" type="fixed"><parent link="stylus"/><child link="{BALL_FRAME}"/>'
         f'<origin xyz="0 0 {_f(lever)}" rpy="0 0 0"/></joint>',
         f'  <link name="{BALL_FRAME}"><visual><origin xyz="0 0 0" rpy="0 0 0"/><geometry>'

@@ -35,15 +35,25 @@ import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from .csv_io import parse_number
+from .description import (
+    MIN_STYLUS,
+    ArmDescription,
+    JointRow,
+    Mimic,
+    Probe,
+    TomlReader,
+    Visual,
+    default_lever,
+    load_description,
+)
 from .errors import InputError, did_you_mean, open_input, parse_toml, read_text
-from .units import implausible
-from .description import (MIN_STYLUS, ArmDescription, JointRow, Mimic, Probe, TomlReader, Visual, default_lever,
-                          load_description)
 from .shipped import arm_path
+from .units import implausible
 from .urdf import ELASTIC_JOINTS, origin_matrix
 
 log = logging.getLogger(__name__)
@@ -74,8 +84,8 @@ _NUMERIC = {
 #: velocities, damping are never used here (an inertia of -5e-20, a mirrored mesh's negative scale are no
 #: errors).
 _USED = {("joint", "origin", "xyz"): "length", ("joint", "origin", "rpy"): "angle", ("joint", "axis", "xyz"): "ratio",
-         ("joint", "limit", "lower"): None, ("joint", "limit", "upper"): None, ("joint", "mimic", "multiplier"): "ratio",
-         ("joint", "mimic", "offset"): None}
+         ("joint", "limit", "lower"): None, ("joint", "limit", "upper"): None,
+         ("joint", "mimic", "multiplier"): "ratio", ("joint", "mimic", "offset"): None}
 #: a negative mass [kg] smaller than this is rounding noise (taken as 0)
 _MASS_NOISE = 1e-9
 _ELASTIC_TYPES = dict(zip(ELASTIC_JOINTS, ("revolute", "revolute", "prismatic")))
@@ -97,8 +107,8 @@ class LinkMass:
 class _Urdf:
     """A checked URDF: the lxml tree (for lines and for writing back) and the yourdfpy model."""
     path: Path
-    tree: object                 # lxml ElementTree
-    robot: object                # yourdfpy Robot
+    tree: Any                    # lxml ElementTree
+    robot: Any                   # yourdfpy Robot
     joint_elements: dict         # name -> lxml element
     link_elements: dict
 
@@ -242,7 +252,7 @@ class _Chain:
     """
     moving: list            # (joint, prefix 4x4, Mimic | None)
     tool_prefix: np.ndarray
-    tip_joint: object
+    tip_joint: Any                # yourdfpy Joint
     T_last_tip: np.ndarray
     hinge: np.ndarray | None
     base: str = ""          # the link the chain starts at (its frame is the arm's base frame)
@@ -518,7 +528,8 @@ def _probe_of(u: _Urdf, ch: _Chain, tip_frame: str, probe: dict | None) -> Probe
                          "key '--tip-frame'")
     if lever != 0.0 and not pro.stylus_length >= MIN_STYLUS:
         raise InputError(f"the tip frame '{tip_frame}' lies at the stylus hinge of the probe's elastic joints: a "
-                         "probe needs its ball beyond its hinge", u.path, u.line(ch.tip_joint.name), "key '--tip-frame'")
+                         "probe needs its ball beyond its hinge", u.path, u.line(ch.tip_joint.name),
+                         "key '--tip-frame'")
     return pro
 
 
@@ -532,7 +543,7 @@ def _link_frames(u: _Urdf, ch: _Chain) -> dict[str, tuple[int, np.ndarray]]:
     kids: dict[str, list] = {}
     for j in u.robot.joints:
         kids.setdefault(j.parent, []).append(j)
-    stack = [(ch.base, -1, np.eye(4))] + [(j.child, i, np.eye(4)) for j, i in ((j, moving[j.name]) for j, _, _ in ch.moving)]
+    stack = [(ch.base, -1, np.eye(4))] + [(j.child, moving[j.name], np.eye(4)) for j, _, _ in ch.moving]
     out = {}
     while stack:
         link, row, T = stack.pop()
@@ -579,6 +590,7 @@ def _visuals(u: _Urdf, ch: _Chain) -> tuple[Visual, ...]:
     from copy import deepcopy
 
     from lxml import etree
+
     from .urdf import origin_matrix
     out, missing = [], 0
     for link, (row, T) in _link_frames(u, ch).items():
@@ -714,6 +726,7 @@ def calibrated_urdf_text(nominal: ArmDescription, calibrated: ArmDescription) ->
     ``<tip>_calibrated``. For a description TOML: the generated URDF (:func:`arm_model.urdf.urdf_text`).
     """
     from lxml import etree
+
     from .urdf import urdf_text
 
     if not nominal.tip_frame or not nominal.source or Path(nominal.source).suffix.lower() != ".urdf":

@@ -23,9 +23,9 @@ from scipy.spatial.transform import Rotation
 from arm_model import load_description
 from arm_model.effects import EncoderEccentricity
 from arm_model.model import ArmModel
+from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 from calibration import FitOptions, Problem, Weights, calibrate, levenberg_marquardt, make_data
 from calibration.solver import blas_threads
-from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 
 ARM = "urdf/aacmm7.dh.toml"
 WEIGHTS = Weights(probe=2e-6, reference=5e-6)

@@ -90,8 +90,8 @@ def phases(path: Path) -> dict:
     """CPU time [s] of each phase of ``aacmm tip`` on ``path``, read whole in this process: reading the
     points, the rigid and corrected centres, formatting, writing (the start-up is in the whole command's
     figures)."""
-    from arm_model.csv_io import format_csv
     from arm_model.commands import tip_table
+    from arm_model.csv_io import format_csv
     from arm_model.io import iter_points
     from arm_model.model_file import load_model
     t = {"reading": 0.0, "centres": 0.0, "formatting": 0.0, "writing": 0.0}

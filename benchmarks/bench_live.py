@@ -132,7 +132,7 @@ def main(repeats: int = 4, latency_rounds: int = 12) -> dict:
               f"with the view {w0v:.2f} s, {c0v:.2f} s")
         res = {}
         window = (0.15 * duration, 0.9 * duration)
-        for view, (ws, cs) in ((False, (w0, c0)), (True, (w0v, c0v))):
+        for view, (_ws, cs) in ((False, (w0, c0)), (True, (w0v, c0v))):
             wall, cpu, steady = run(src, 1.0, view, tmp, window)
             frac = (cpu - cs) / (duration - d0)
             res["cpu_fraction_view" if view else "cpu_fraction"] = steady

@@ -6,7 +6,6 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-
 from arm_model.sim import load_campaign, simulate
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "campaigns"

@@ -22,11 +22,12 @@ def machine() -> str:
     except OSError:
         pass
     try:
-        load = "load average {:.1f} {:.1f} {:.1f} (1, 5, 15 min; above the core count, wall times are stretched)".format(
-            *os.getloadavg())
+        load = ("load average {:.1f} {:.1f} {:.1f} (1, 5, 15 min; above the core count, wall times are "
+                "stretched)").format(*os.getloadavg())
     except OSError:
         load = "load average unknown"
-    return (f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, {platform.system()} {platform.machine()}"
+    return (f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, {platform.system()} "
+            f"{platform.machine()}"
             f"; {load}")
 
 

@@ -20,7 +20,8 @@ API for the close-the-loop work (issue 7):
 
 * :func:`calibrate` ``(model, data, FitOptions(free=None, values=None, start=None, weights=...)) ->``
   :class:`CalibrationResult` (a variant of a fit: ``dataclasses.replace(options, ...)``): ``p`` (full
-  vector of ``model.spec``), ``free``, ``cov``, ``u``, ``corr``, ``s0``, ``status``, ``iterations``, ``fixed`` (:class:`FixedParameter` with the named
+  vector of ``model.spec``), ``free``, ``cov``, ``u``, ``corr``, ``s0``, ``status``, ``iterations``, ``fixed``
+  (:class:`FixedParameter` with the named
   combination the data cannot see), ``identifiability`` / ``identifiability_final``
   (:class:`Identifiability`), ``residuals`` (per point: ``point`` index, ``kind``, ``instance``,
   ``value`` [m], ``vector`` (n, 3) [m] base frame, ``standardized``, ``measurement``, ``feature``,
@@ -34,25 +35,43 @@ API for the close-the-loop work (issue 7):
   rigid motions projected out, then practical resolution against :func:`prior_scales`);
   :func:`validate` / :func:`before_after` for ASME B89.4.22 figures of any p.
 * Studies (:mod:`calibration.study`): Monte Carlo over simulated campaigns, pose-set choice by the
-  observability index O1; small campaigns from a known true model: the simulator's fast path, :mod:`arm_model.sim.quick`.
+  observability index O1; small campaigns from a known true model: the simulator's fast path,
+  :mod:`arm_model.sim.quick`.
 
 Command line: ``aacmm calibrate`` and ``aacmm study {montecarlo, poses}``. Reference:
 docs/calibration.md.
 """
-from .calibrate import (CalibrationResult, FixedParameter, Outlier, calibrate, default_free, display_unit,
-                        identify, resolve_parameters, rigid_gauge)
-from .data import CalibrationData, Weights, make_data, merge_points, split_holdout
-from .tracking import fit_tracker
-from .options import FitOptions
-from .identifiability import (DEFAULT_RANK_TOL, PRIOR_SCALES, Combination, Identifiability, analyse, prior_scales,
-                              reduced_jacobian, weakly_determined)
-from .problem import Problem
-from .solver import LMResult, blas_threads, levenberg_marquardt
-from .validation import FIGURES, Validation, before_after, validate
+from .calibrate import (
+                        CalibrationResult,
+                        FixedParameter,
+                        Outlier,
+                        calibrate,
+                        default_free,
+                        display_unit,
+                        identify,
+                        resolve_parameters,
+                        rigid_gauge,
+)
 from .candidates import Candidate, library_candidates
+from .data import CalibrationData, Weights, make_data, merge_points, split_holdout
 from .diagnostics import remaining_structure, residual_space, screen_candidates, structure_tests
+from .identifiability import (
+                        DEFAULT_RANK_TOL,
+                        PRIOR_SCALES,
+                        Combination,
+                        Identifiability,
+                        analyse,
+                        prior_scales,
+                        reduced_jacobian,
+                        weakly_determined,
+)
 from .loop import LoopResult, LoopSettings, close_loop
 from .loop_report import before_after_text, write_loop_report
+from .options import FitOptions
+from .problem import Problem
+from .solver import LMResult, blas_threads, levenberg_marquardt
+from .tracking import fit_tracker
+from .validation import FIGURES, Validation, before_after, validate
 
 __all__ = [
     "calibrate", "FitOptions", "CalibrationResult", "FixedParameter", "Outlier", "default_free", "resolve_parameters",

@@ -42,9 +42,16 @@ from arm_model.tracker import Tracker
 
 from .data import CalibrationData, Weights
 from .discrepancy import Discrepancy, model_discrepancy
-from .identifiability import (Combination, Identifiability, compress_rows, analyse, point_noise,
-                              prior_scales,
-                              reduced_jacobian, weakly_determined)
+from .identifiability import (
+    Combination,
+    Identifiability,
+    analyse,
+    compress_rows,
+    point_noise,
+    prior_scales,
+    reduced_jacobian,
+    weakly_determined,
+)
 from .options import FitOptions
 from .prior import PRIOR_DOMINATED, PriorSpec, prior_spec, update_scales, variance_ratio
 from .problem import Problem
@@ -841,7 +848,7 @@ def _tracker(prob: Problem, p, states, nrm: _Normal, n_kept: int, var: float) ->
             cols = n_kept + it.offset + np.arange(it.n_theta)
             e = np.zeros((nrm.js.shape[1], it.n_theta))
             e[cols, np.arange(it.n_theta)] = 1.0
-            blk = nrm.lu.solve(e)[cols] / np.outer(nrm.jscale[cols], nrm.jscale[cols]) * var
+            blk = nrm.lu.solve(e)[cols] / np.outer(nrm.jscale[cols], nrm.jscale[cols]) * var  # type: ignore[attr-defined]
             u[i] = np.sqrt(np.diag(blk))
     return prob.tracker(states, u)
 
@@ -894,7 +901,7 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         prior_scales=None if s.prior is None else dict(s.scales), log_evidence=nrm.log_evidence,
         prior_centre=None if s.prior is None else s.prior.centre, options=options, prior_sd=prior_sd,
         prior_ratio=None if prior_sd is None else variance_ratio(u ** 2, prior_sd),
-        prior_groups=_group_table(s, kept, u), discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var))
+        prior_groups=_group_table(s, kept, u), discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var))  # type: ignore[attr-defined]
 
 
 def _group_table(s: _Setup, kept, u) -> dict:

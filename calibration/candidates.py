@@ -31,14 +31,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from arm_model.description import ArmDescription
-from arm_model.effects import (Effect, EncoderEccentricity, ForceSensorError, JointCompliance, JointGain,
-                               ProbeCompliance, ThermalGrowth)
+from arm_model.effects import (
+    Effect,
+    EncoderEccentricity,
+    ForceSensorError,
+    JointCompliance,
+    JointGain,
+    ProbeCompliance,
+    ThermalGrowth,
+)
 from arm_model.model import ArmModel
 
 from .data import CalibrationData
 
-__all__ = ["Candidate", "Skipped", "FAMILIES", "DEFAULT_FAMILIES", "MIN_TEMPERATURE_SPAN", "library_candidates", "needs_model",
-           "torques_of", "no_torque_reason"]
+__all__ = ["Candidate", "Skipped", "FAMILIES", "DEFAULT_FAMILIES", "MIN_TEMPERATURE_SPAN", "library_candidates",
+           "needs_model", "torques_of", "no_torque_reason"]
 
 #: candidate families of the library, by effect key (the CLI's ``--candidates`` names)
 FAMILIES = ("eccentricity", "joint_gain", "joint_compliance", "thermal", "force_sensor", "probe_compliance")
@@ -139,7 +146,7 @@ def _per_joint_columns(desc: ArmDescription, skipped: list) -> dict[int, str]:
         skipped.append(Skipped("per-joint effects", "a joint of the chain follows another (<mimic>): per-joint "
                                                     "effects are not supported on such an arm"))
         return {}
-    for i, j in enumerate(desc.encoders):
+    for j in desc.encoders:
         if j.prismatic:
             skipped.append(Skipped(f"per-joint effects {j.name}", "a prismatic joint: the library's per-joint "
                                                                  "effects model a joint angle"))

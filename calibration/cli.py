@@ -2,22 +2,30 @@
 from __future__ import annotations
 
 import argparse
-import math
 import logging
 from dataclasses import replace
-from arm_model.cli import command_help
 from pathlib import Path
 
 import numpy as np
 
 from arm_model import InputError
-from arm_model.commands import (add_arm_options, arm_inputs, at_least, fraction, model_from_args, non_negative,
-                                number_in, positive, seed)
-from arm_model.log import counted
-from arm_model.output import output_folder
-from arm_model.checks import point_warnings, log_warnings
+from arm_model.checks import log_warnings, point_warnings
+from arm_model.cli import command_help
+from arm_model.cli_options import (
+    add_arm_options,
+    arm_inputs,
+    at_least,
+    fraction,
+    model_from_args,
+    non_negative,
+    number_in,
+    positive,
+    seed,
+)
 from arm_model.io import json_text, read_artefacts, read_points
+from arm_model.log import counted
 from arm_model.model_file import Arm
+from arm_model.output import output_folder
 
 __all__ = ["register", "run_calibrate", "run_montecarlo", "run_poses", "fit_options"]
 
@@ -36,7 +44,8 @@ def _effects(keys):
     return tuple(out)
 
 
-def _holdout(text: str | None):
+def parse_holdout(text: str | None):
+    """``--holdout`` (of calibrate and close-loop): None, a fraction in (0, 1) or a list of measurement ids."""
     if text is None:
         return None
     try:
@@ -44,7 +53,8 @@ def _holdout(text: str | None):
     except ValueError:
         ids = [t.strip() for t in text.split(",") if t.strip()]
         if not ids:
-            raise InputError(f"--holdout names no measurement (got {text!r}): give measurement ids or a fraction")
+            raise InputError(f"--holdout names no measurement (got {text!r}): give measurement ids or a fraction"
+                             ) from None
         return ids
     if not 0.0 < v < 1.0:
         raise InputError(f"--holdout fraction must be in (0, 1), got {text}")
@@ -260,7 +270,7 @@ def mpe_options(p) -> None:
                        help=f"{t.standard} {t.name}: {t.what}")
 
 
-def _mpe(args) -> dict:
+def mpe_from_args(args) -> dict:
     """{test key: MPE [m]} of the given ``--mpe-*-um`` options."""
     from .validation import MPE_TESTS
     out = {}
@@ -352,7 +362,7 @@ def _split(args, data):
     """(training data, held-out data or None, held-out pose mask over ``data`` or None) of ``--holdout``:
     whole measurements (``--holdout-by measurement``) or a share of every feature's poses (``pose``)."""
     from .data import split_holdout, split_poses
-    holdout = _holdout(args.holdout)
+    holdout = parse_holdout(args.holdout)
     if holdout is None:
         if args.holdout_by == "pose":
             raise InputError("--holdout-by pose needs --holdout FRACTION (the share of every feature's poses)")
@@ -393,7 +403,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
         test, data = with_fitted_torques(test, res), with_fitted_torques(data, res)
         held = (None if test is None and poses is None else
                 (res, test, base) if poses is None else (res, data, base, ~poses))
-        val_train, val_test, conf = conformance_entry(_mpe(args), (res, res.data, base), held)
+        val_train, val_test, conf = conformance_entry(mpe_from_args(args), (res, res.data, base), held)
         worse = worse_than_nominal(val_test or [])
         files = write_outputs(res, out.dir, inputs=inputs, validation_training=val_train,
                               validation_holdout=val_test, plots=not args.no_plots,
@@ -404,7 +414,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
                                                 else str(args.reference_points)},
                                      "holdout": (None if test is None else test.measurements()),
                                      "holdout_by": args.holdout_by,
-                                     "holdout_poses": None if poses is None else [int(i) for i in np.flatnonzero(poses)],
+                                     "holdout_poses": (None if poses is None
+                                                       else [int(i) for i in np.flatnonzero(poses)]),
                                      "nominal_baseline": _baseline_entry(base),
                                      "heldout_worse_than_nominal": worse,
                                      "conformance": conf,
@@ -487,16 +498,17 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
     budget = res.probing_budget()
     if budget is not None:
         log.info(f"probing scatter per axis: {budget['gross'] * 1e6:.4g} um in the residuals, of which encoders "
-                 f"{budget['encoders'] * 1e6:.3g} um and force sensor {budget['force sensor'] * 1e6:.3g} um (propagated, "
-                 f"default inputs) -> {budget['net'] * 1e6:.4g} um of the contact itself (tip's default)")
+                 f"{budget['encoders'] * 1e6:.3g} um and force sensor {budget['force sensor'] * 1e6:.3g} um "
+                 f"(propagated, default inputs) -> {budget['net'] * 1e6:.4g} um of the contact itself (tip's default)")
         if budget["floored"]:
             log.warning("the propagated encoder and force-sensor noise alone exceed the residual scatter: the probing "
                         "scatter is set to 0 (their stated uncertainties are larger than this campaign shows)")
     if res.discrepancy is not None:
         d = res.discrepancy
-        log.info(f"model discrepancy per axis: {d.sigma * 1e6:.4g} um (poses at the ends of each joint's range held out "
-                 f"in turn: their errors {d.ratio:.2f} x what the fit predicts; tip adds it to every point's u)")
-    log.info(f"model file -> {files['description']} (covariance {files['covariance'].name}); report -> {files['report']}")
+        log.info(f"model discrepancy per axis: {d.sigma * 1e6:.4g} um (poses at the ends of each joint's range held "
+                 f"out in turn: their errors {d.ratio:.2f} x what the fit predicts; tip adds it to every point's u)")
+    log.info(f"model file -> {files['description']} (covariance {files['covariance'].name}); report -> "
+             f"{files['report']}")
 
 
 def conformance_entry(mpe: dict, training: tuple, holdout: tuple | None = None, sets: str = "") -> tuple:
@@ -506,8 +518,8 @@ def conformance_entry(mpe: dict, training: tuple, holdout: tuple | None = None, 
     baseline it is compared with. Returns (validation rows on training, on holdout or None, the summary's
     ``conformance`` entry: ``mpe_given``, ``mpe_um``, ``note`` (``sets`` appended: what the two data sets
     are), ``training``, ``holdout``)."""
-    val_train, conf_train = _validation(*training, mpe=mpe)
-    val_test, conf_test = _validation(*holdout, mpe=mpe) if holdout is not None else (None, None)
+    val_train, conf_train = _validation(*training, mpe=mpe)  # type: ignore[misc]
+    val_test, conf_test = _validation(*holdout, mpe=mpe) if holdout is not None else (None, None)  # type: ignore[misc]
     conf = {"mpe_given": bool(mpe), "mpe_um": {k: v * 1e6 for k, v in mpe.items()},
             "note": ("PASS: every tested item of the calibrated model within the MPE given by its "
                      "--mpe-*-um option; FAIL: at least one beyond." if mpe else
@@ -605,8 +617,9 @@ def noise_lines(res) -> list[str]:
 
 
 def run_montecarlo(args: argparse.Namespace) -> int:
-    from .study import RunSettings, SimSource, monte_carlo
     from arm_model.sim import load_campaign
+
+    from .study import RunSettings, SimSource, monte_carlo
     camp = load_campaign(args.campaign)            # checks the file before any run starts
     with output_folder(args.output, camp.inputs, "study montecarlo") as out:
         from arm_model.model import ArmModel
@@ -627,7 +640,8 @@ def run_montecarlo(args: argparse.Namespace) -> int:
     from .calibrate import display_unit
     if mc.s0:
         s0 = np.array(mc.s0)
-        log.info(f"residual scale factor s0 over the runs: median {np.median(s0):.2f} (range {s0.min():.2f}-{s0.max():.2f})"
+        log.info(f"residual scale factor s0 over the runs: median {np.median(s0):.2f} (range "
+                 f"{s0.min():.2f}-{s0.max():.2f})"
               + ("; far from 1: the stated --sigma-* do not match the residuals, and one factor cannot rescale "
                  "residual groups that are mis-stated differently (docs/uncertainty.md)"
                  if abs(np.median(s0) - 1) > 0.2 else ""))
@@ -636,7 +650,8 @@ def run_montecarlo(args: argparse.Namespace) -> int:
           f"give {lo:.2f}-{hi:.2f} for {len(mc.s0)} runs, 95 %) and mean (bias), verdict:")
     for n, v in mc.parameters.items():
         du, fac = display_unit(model.spec.units[model.spec.index(n)])
-        log.info(f"  {n:22s} {v['rms_error'] * fac:10.4g} {v['mean_u'] * fac:10.4g} {du:5s} {100 * v['within_3u']:5.0f} %"
+        log.info(f"  {n:22s} {v['rms_error'] * fac:10.4g} {v['mean_u'] * fac:10.4g} {du:5s} "
+                 f"{100 * v['within_3u']:5.0f} %"
               f" {v['z_rms']:6.2f} {v['z_mean']:+6.2f}  {v['verdict']}")
     log.info(f"-> {args.output / 'study.json'}")
     return 0 if not mc.failures else 1

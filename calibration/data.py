@@ -54,7 +54,7 @@ class Weights:
         """The factor of a row group (1 if not estimated)."""
         return dict(self.factors).get(group, 1.0)
 
-    def scaled(self, factors: dict) -> "Weights":
+    def scaled(self, factors: dict) -> Weights:
         """These weights with the group factors multiplied by ``factors``."""
         new = dict(self.factors)
         for g, f in factors.items():
@@ -137,7 +137,7 @@ class CalibrationData:
         ref = self.points.ref
         return None if ref is None else ref[np.arange(len(self)), self.markers]
 
-    def with_tracker(self, tracker: Tracker | None) -> "CalibrationData":
+    def with_tracker(self, tracker: Tracker | None) -> CalibrationData:
         """These data with the reference frames and marker offsets held at ``tracker``'s (a session it has
         no frame for keeps its frame unknown)."""
         return replace(self, tracker=tracker)
@@ -148,14 +148,14 @@ class CalibrationData:
         w = self.points.wrench
         return np.zeros((len(self), 6)) if w is None else w
 
-    def select(self, mask) -> "CalibrationData":
+    def select(self, mask) -> CalibrationData:
         """The rows where ``mask`` holds (bool array or indices), file order kept."""
         return CalibrationData(self.points.select(mask), self.artefacts,
                                None if self.aux is None else self.aux.select(mask),
                                None if self.files is None else self.files[mask],
                                None if self.marker is None else self.marker[mask], self.marker_offsets, self.tracker)
 
-    def with_measurements(self, ids) -> "CalibrationData":
+    def with_measurements(self, ids) -> CalibrationData:
         """Only the measurements ``ids``."""
         ids = set(ids)
         return self.select(np.array([m in ids for m in self.points.measurement], bool))
@@ -363,7 +363,7 @@ def split_poses(data: CalibrationData, fraction: float, keep=None) -> np.ndarray
     one) outside the mask, so that its centre (axis, plane) can still be fitted on the rest; smaller
     instances are never held.
     """
-    from .problem import MIN_POINTS
+    from .kinds import MIN_POINTS
     if not 0.0 < fraction < 1.0:
         raise ValueError(f"the held-out share of poses must be in (0, 1), got {fraction}")
     keep = keep or {k: v[0] + 1 for k, v in MIN_POINTS.items()}

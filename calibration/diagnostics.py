@@ -24,7 +24,8 @@ other joint j (a cross-coupling, "qK harmonics on jJ"); the gravity torque and t
 joint j times ``D_j``; contact force components and magnitude times the probe axes; temperature and
 time times the base axes and the position vector (a scale); the temperature times each link's length
 and the probe's ("temperature per link"); the tilt of joint j about its frame's x and y axes times the
-moment across it ("jN lateral load"); the stylus direction (approach) times the base axes; one offset per measurement (one-way ANOVA) and per artefact feature or certified length.
+moment across it ("jN lateral load"); the stylus direction (approach) times the base axes; one offset per measurement
+(one-way ANOVA) and per artefact feature or certified length.
 """
 from __future__ import annotations
 
@@ -47,10 +48,9 @@ from .identifiability import DEFAULT_RANK_TOL, point_noise, prior_scales, reduce
 from .problem import Problem
 from .solver import levenberg_marquardt
 
-__all__ = ["JointAngleOffset", "measurement_groups", "measurement_folds", "pose_folds", "ResidualSpace", "residual_space", "GroupTest",
-           "Family", "families", "candidate_family", "test_group", "screen_candidates", "structure_tests",
-           "remaining_structure",
-           "binned_estimates", "holm"]
+__all__ = ["JointAngleOffset", "measurement_groups", "measurement_folds", "pose_folds", "ResidualSpace",
+           "residual_space", "GroupTest", "Family", "families", "candidate_family", "test_group", "screen_candidates",
+           "structure_tests", "remaining_structure", "binned_estimates", "holm"]
 
 #: harmonics of each joint angle tested by the structure tests
 HARMONICS = (1, 2, 3)
@@ -120,8 +120,8 @@ def pose_folds(data: CalibrationData, k: int) -> np.ndarray:
     instance's centre (axis, plane, ``T_ref_base``) fitted on the instance's other poses. An instance whose
     training part would have fewer points than its fit needs is never held out. No seed: the folds are a
     function of the poses."""
-    from .problem import MIN_POINTS
     from .data import pose_groups, pose_order
+    from .kinds import MIN_POINTS
     if k < 2:
         raise ValueError(f"cross-validation needs at least 2 folds, got {k}")
     out = np.full(len(data), -1)
@@ -192,7 +192,7 @@ class ResidualSpace:
         red = reduced_jacobian(cols, self.jt)
         return red - self.basis @ (self.basis.T @ red)
 
-    def with_columns(self, cols: np.ndarray, rank_tol: float = DEFAULT_RANK_TOL) -> "ResidualSpace":
+    def with_columns(self, cols: np.ndarray, rank_tol: float = DEFAULT_RANK_TOL) -> ResidualSpace:
         """The same space with ``cols`` (raw) fitted too: their projected directions join the basis,
         the residual loses its part along them and the dof their rank (for conditional tests)."""
         c = self.project(cols)
@@ -450,7 +450,7 @@ def _batches(desc, base_names, candidates) -> list[list[int]]:
     return [m for _, m in batches]
 
 
-def screen_candidates(result: CalibrationResult, candidates, folds: "dict[str, int] | np.ndarray | None" = None,
+def screen_candidates(result: CalibrationResult, candidates, folds: dict[str, int] | np.ndarray | None = None,
                       rank_tol: float = DEFAULT_RANK_TOL) -> tuple[list[GroupTest], ResidualSpace]:
     """Score test of every candidate at the fit ``result`` (one :class:`GroupTest` each, in the order
     of ``candidates``) and the residual space (of the first batch) for further tests."""
@@ -469,7 +469,7 @@ def screen_candidates(result: CalibrationResult, candidates, folds: "dict[str, i
                                   min_resolution=SCREEN_RESOLUTION)
     if first is None:
         first = residual_space(result)
-    return tests, first
+    return tests, first  # type: ignore[return-value]
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -735,7 +735,7 @@ def families(space: ResidualSpace) -> list[Family]:
     return [fam for build in _FAMILY_BUILDERS for fam in build(f)]
 
 
-def structure_tests(space: ResidualSpace, folds: "dict[str, int] | np.ndarray | None",
+def structure_tests(space: ResidualSpace, folds: dict[str, int] | np.ndarray | None,
                     rank_tol: float = DEFAULT_RANK_TOL) -> list[tuple[Family, GroupTest]]:
     """Every generic family tested against the residual of ``space``; sorted by p-value."""
     fr = row_folds(space, folds) if folds is not None and len(folds) else None
@@ -749,7 +749,7 @@ def structure_tests(space: ResidualSpace, folds: "dict[str, int] | np.ndarray | 
     return out
 
 
-def remaining_structure(space: ResidualSpace, folds: "dict[str, int] | np.ndarray | None", alpha: float,
+def remaining_structure(space: ResidualSpace, folds: dict[str, int] | np.ndarray | None, alpha: float,
                         rank_tol: float = DEFAULT_RANK_TOL, most: int = 5) -> list[tuple[Family, GroupTest]]:
     """Forward selection of the structure families that the residual still holds: the most significant
     family is kept if its p-value passes ``alpha`` after Bonferroni over the families tested and its
@@ -826,7 +826,7 @@ def binned_estimates(space: ResidualSpace, fam: Family, bins: int = 12, rank_tol
         cols, names = fam.columns(space)
         t = test_group(space, cols, names, fam.name, None, rank_tol=rank_tol)
         return {"kind": "groups", "names": list(names), "value": t.estimate, "u": t.u}
-    label, unit, factor, v = fam.variable
+    label, unit, factor, v = fam.variable  # type: ignore[misc]
     ok_pts = np.isfinite(v)
     lo, hi = np.nanmin(v), np.nanmax(v)
     if unit == "deg":            # angles: equal-width bins
@@ -838,8 +838,8 @@ def binned_estimates(space: ResidualSpace, fam: Family, bins: int = 12, rank_tol
     cols = []
     for _, _, d in fam.directions:
         for b in range(nb):
-            cols.append(d * space.per_row((which == b).astype(float)))
-    cols = np.column_stack(cols)
+            cols.append(d * space.per_row((which == b).astype(float)))  # type: ignore[attr-defined]
+    cols = np.column_stack(cols)  # type: ignore[call-overload]
     names = [f"{dn} bin {b}" for dn, _, _ in fam.directions for b in range(nb)]
     t = test_group(space, cols, names, fam.name, None, rank_tol=rank_tol)
     centres = np.array([np.mean(v[which == b]) if np.any(which == b) else nan for b in range(nb)])

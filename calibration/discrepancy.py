@@ -91,7 +91,7 @@ def extreme_folds(q: np.ndarray, share: float = EXTREME_SHARE) -> list[np.ndarra
 def holdable(prob, held) -> set:
     """``held`` (point indices of ``prob``'s data) less, for every instance (feature, frame, marker) that
     would keep fewer than its fewest points plus one, its first held points: what a fold may hold out."""
-    from .problem import MIN_POINTS
+    from .kinds import MIN_POINTS
     out = {int(i) for i in held}
     for it in prob.instances:
         pts = [int(i) for i in it.points]

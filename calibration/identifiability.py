@@ -13,13 +13,20 @@ without reference coordinates, shows as a near-zero column) and decomposed:
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
 from .solver import normal_solver
+
+if TYPE_CHECKING:
+    from arm_model.model import ArmModel
+
+    from .problem import Problem
 
 __all__ = ["Combination", "Identifiability", "reduced_jacobian", "analyse", "DEFAULT_RANK_TOL", "prior_scales",
            "point_noise", "weakly_determined", "NOISE_MULTIPLE"]
@@ -47,7 +54,7 @@ class Combination:
             out.append(f"{sign}{coef}{name}")
         return "".join(out)
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {"text": self.text(), "terms": {n: c for n, c in self.terms},
                 "singular_value": self.singular_value}
 
@@ -74,13 +81,13 @@ class Identifiability:
     rank_tol: float
     condition: float
     dependent: tuple[str, ...]
-    combinations: dict = field(default_factory=dict)
+    combinations: dict[str, Combination] = field(default_factory=dict)
     null: tuple[Combination, ...] = ()
     weakest: tuple[Combination, ...] = ()
     no_effect: tuple[str, ...] = ()
     gauge: tuple[str, ...] = ()
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {"parameters": list(self.names), "rank": self.rank, "rank_tol": self.rank_tol,
                 "condition_number": self.condition,
                 "singular_values": [float(s) for s in self.singular_values],
@@ -96,7 +103,7 @@ def compress_rows(a: np.ndarray) -> np.ndarray:
     and least-squares relations between columns, in ``n`` rows instead of thousands."""
     if a.shape[0] <= a.shape[1]:
         return a
-    return np.linalg.qr(a, mode="r")
+    return np.linalg.qr(a, mode="r")  # type: ignore[return-value]
 
 
 def reduced_jacobian(jp: np.ndarray, jt: sp.spmatrix) -> np.ndarray:
@@ -108,20 +115,22 @@ def reduced_jacobian(jp: np.ndarray, jt: sp.spmatrix) -> np.ndarray:
     red = jp - jt @ x
     # one refinement step (iterative refinement of the projection)
     x2 = solve(np.asarray(jt.T @ red))
-    return red - jt @ x2
+    out: np.ndarray = red - jt @ x2
+    return out
 
 
-def _terms(names, vec, scale_in_si, rel: float = 1e-3, lead: int | None = None, most: int = 12) -> tuple:
+def _terms(names: Sequence[str], vec: np.ndarray, scale_in_si: np.ndarray | float, rel: float = 1e-3,
+           lead: int | None = None, most: int = 12) -> tuple[tuple[str, float], ...]:
     """Named terms of a direction ``vec`` (SI) whose scaled size exceeds ``rel`` of the largest
     (at most ``most``, the largest first, ``lead`` first if given)."""
     mag = np.abs(vec) * scale_in_si
     keep = np.flatnonzero(mag > rel * mag.max())
-    order = sorted(keep, key=lambda k: (k != lead, -mag[k]))[:most]
+    order = sorted((int(k) for k in keep), key=lambda k: (k != lead, -mag[k]))[:most]
     norm = vec[order[0]]
     return tuple((names[k], float(vec[k] / norm)) for k in order)
 
 
-def analyse(jred: np.ndarray, jp: np.ndarray, names, rank_tol: float = DEFAULT_RANK_TOL,
+def analyse(jred: np.ndarray, jp: np.ndarray, names: Sequence[str], rank_tol: float = DEFAULT_RANK_TOL,
             pivot_scale: np.ndarray | None = None, n_weak: int = 3, gauge: np.ndarray | None = None) -> Identifiability:
     """Identifiability of the parameters ``names`` from the reduced (``jred``) and full (``jp``)
     weighted Jacobians (rows x len(names)).
@@ -144,7 +153,7 @@ def analyse(jred: np.ndarray, jp: np.ndarray, names, rank_tol: float = DEFAULT_R
     scale = np.where(tiny, 1.0, full_norm)
     a = jred / scale
     a[:, tiny] = 0.0
-    gauge_names: set = set()
+    gauge_names: set[str] = set()
     if gauge is not None and gauge.size:
         gs = gauge * scale[:, None]
         q, _ = np.linalg.qr(gs)
@@ -166,7 +175,7 @@ def analyse(jred: np.ndarray, jp: np.ndarray, names, rank_tol: float = DEFAULT_R
     for j, k in enumerate(dep):
         v = np.zeros(n)
         v[k] = 1.0
-        if rank:
+        if coefs is not None:          # rank > 0 (``dep`` is not empty here)
             v[kept] = -coefs[:, j]
         v_si = v / scale * scale[k]
         combos[names[k]] = Combination(_terms(names, v_si, scale, lead=k),
@@ -193,14 +202,15 @@ PRIOR_SCALES = {"m": 1e-3, "rad": 1e-2, "1": 0.1, "N": 1.0, "N m": 0.1, "rad/(N 
 NOISE_MULTIPLE = 10.0
 
 
-def point_noise(problem) -> float | None:
+def point_noise(problem: Problem) -> float | None:
     """The largest standard uncertainty [m] of a point of ``problem`` (stated, times the group's factor)."""
-    sig = [problem.weights.sigma_of(g["kind"]) for g in problem.groups]
-    sig = [v for v in sig if v is not None]
+    stated = (problem.weights.sigma_of(g["kind"]) for g in problem.groups)
+    sig = [v for v in stated if v is not None]
     return max(sig) if sig else None
 
 
-def prior_scales(model, names, priors: dict | None = None, noise: float | None = None,
+def prior_scales(model: ArmModel, names: Sequence[str], priors: dict[str, float] | None = None,
+                 noise: float | None = None,
                  length: float | None = None) -> np.ndarray:
     """Plausible error size [SI] of each parameter: ``priors`` (names or glob patterns -> value) first,
     then the effect's own (``Effect.plausible_size``, e.g. 1 % for a joint gain), then :data:`PRIOR_SCALES`
@@ -236,7 +246,8 @@ def prior_scales(model, names, priors: dict | None = None, noise: float | None =
     return np.array(out)
 
 
-def weakly_determined(jred: np.ndarray, names, prior: np.ndarray, min_resolution: float = 0.1):
+def weakly_determined(jred: np.ndarray, names: Sequence[str], prior: np.ndarray, min_resolution: float = 0.1
+                      ) -> list[tuple[str, float, Combination]]:
     """Parameters whose standard uncertainty (stated weights, the others free) would exceed
     ``min_resolution * prior``: pivoted QR of ``J_red diag(prior)``; a column whose remaining norm
     ``|R_kk|`` (residual change, in sigmas, over one prior size, beyond what the better-determined
@@ -257,7 +268,7 @@ def weakly_determined(jred: np.ndarray, names, prior: np.ndarray, min_resolution
     for j, k in enumerate(weak):
         v = np.zeros(len(names))
         v[k] = 1.0
-        if len(kept):
+        if coefs is not None:          # ``kept`` is not empty (``weak`` is not, here)
             v[kept] = -coefs[:, j]
         v_si = v * prior / prior[k]
         u = prior[k] / max(d[list(piv).index(k)], 1e-300)

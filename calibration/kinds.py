@@ -25,14 +25,16 @@ Kinds (docs/formats.md §4; ``b`` = ball diameter):
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from arm_model import NumericalError, geometry
 
-__all__ = ["Kind", "KINDS", "kind_function", "distance_function", "initial_state", "retract", "centre_of",
+__all__ = ["Kind", "KINDS", "MIN_POINTS", "kind_function", "distance_function", "initial_state", "retract", "centre_of",
            "frame_state", "frame_of", "tracker_start"]
 
 
@@ -56,17 +58,23 @@ KINDS = {
     "marker": Kind("marker", 0, 3, 3),
 }
 
+#: fewest points an instance of each kind needs in a fit (known radius, free radius): one more than its
+#: unknowns for the one-row kinds, so that the fit has a residual (viz.placement.NEEDED_POINTS, the fewest
+#: that determine a feature for drawing, is a different, smaller count)
+MIN_POINTS = {"seat": (1, 1), "sphere": (4, 5), "ring": (5, 6), "cylinder": (5, 6), "plane": (4, 4),
+              "reference": (3, 3)}
+
 
 def n_theta(kind: str, free_radius: bool) -> int:
     k = KINDS[kind]
     return k.n_theta + (1 if free_radius and kind in ("sphere", "ring", "cylinder") else 0)
 
 
-def _normalize(ca, v):
+def _normalize(ca: Any, v: Any) -> Any:
     return v / ca.sqrt(ca.dot(v, v))
 
 
-def _rot_xyz_ca(ca, w):
+def _rot_xyz_ca(ca: Any, w: Any) -> Any:
     """CasADi twin of :func:`arm_model.geometry.rotation_xyz` (``Rz Ry Rx``; symbolic, so hand-written)."""
     cx, sx, cy, sy, cz, sz = ca.cos(w[0]), ca.sin(w[0]), ca.cos(w[1]), ca.sin(w[1]), ca.cos(w[2]), ca.sin(w[2])
     rx = ca.vertcat(ca.horzcat(1, 0, 0), ca.horzcat(0, cx, -sx), ca.horzcat(0, sx, cx))
@@ -75,8 +83,8 @@ def _rot_xyz_ca(ca, w):
     return rz @ ry @ rx
 
 
-@lru_cache(maxsize=None)
-def kind_function(kind: str, free_radius: bool = False):
+@cache
+def kind_function(kind: str, free_radius: bool = False) -> Any:
     """CasADi ``f(x[3], theta[n], k[m], xref[3]) -> (r[rows], dr_dx[rows x 3], dr_dtheta[rows x n])``
     of one point of ``kind`` (``xref`` is used by ``reference`` only)."""
     import casadi as ca
@@ -114,8 +122,8 @@ def kind_function(kind: str, free_radius: bool = False):
                        ["x", "theta", "k", "xref"], ["r", "dr_dx", "dr_dtheta"])
 
 
-@lru_cache(maxsize=None)
-def distance_function():
+@cache
+def distance_function() -> Any:
     """CasADi ``d(ca[3], cb[3], L) -> (r, dr_dca[1x3], dr_dcb[1x3])``, ``r = |ca - cb| - L`` [m]."""
     import casadi as ca
 
@@ -135,7 +143,8 @@ def initial_state(kind: str, x: np.ndarray, radius: float | None = None, x_ref: 
     ``radius``: the offset radius of sphere, ring, cylinder [m] (None: fitted).
     """
     if kind == "seat":
-        return x.mean(axis=0)
+        seat: np.ndarray = x.mean(axis=0)
+        return seat
     if kind == "sphere":
         try:
             fit = geometry.fit_sphere(x, radius)
@@ -164,28 +173,31 @@ def initial_state(kind: str, x: np.ndarray, radius: float | None = None, x_ref: 
     raise ValueError(f"unknown residual kind {kind!r}")
 
 
-def _transform(rot, t) -> np.ndarray:
+def _transform(rot: ArrayLike, t: ArrayLike) -> np.ndarray:
     out = np.eye(4)
     out[:3, :3], out[:3, 3] = rot, t
     return out
 
 
-def frame_state(transform) -> np.ndarray:
+def frame_state(transform: ArrayLike) -> np.ndarray:
     """The packed ``reference`` state (12,) of a 4x4 transform ``T_ref_base``."""
     t = np.asarray(transform, float)
     return np.concatenate([t[:3, :3].reshape(-1, order="F"), t[:3, 3]])
 
 
-def frame_of(state) -> np.ndarray:
+def frame_of(state: ArrayLike) -> np.ndarray:
     """The 4x4 transform of a packed ``reference`` state (the inverse of :func:`frame_state`)."""
-    return _transform(np.asarray(state[0:9]).reshape(3, 3, order="F"), state[9:12])
+    s = np.asarray(state)
+    return _transform(s[0:9].reshape(3, 3, order="F"), s[9:12])
 
 
 #: most rounds of :func:`tracker_start`'s alternation, and the change of every offset [m] that ends it
 TRACKER_ROUNDS, TRACKER_TOL = 200, 1e-8
 
 
-def tracker_start(base, turn, x_ref, frame, marker, frames, markers, held_frames, held_offsets):
+def tracker_start(base: np.ndarray, turn: np.ndarray, x_ref: np.ndarray, frame: np.ndarray, marker: np.ndarray,
+                  frames: list[int], markers: list[int], held_frames: list[np.ndarray | None],
+                  held_offsets: list[np.ndarray | None]) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Starting states of the reference frames and marker offsets (the algebraic first fit).
 
     Row ``j`` of the reference rows sees ``x_ref[j] = R_s (base[j] + turn[j] o_m) + t_s`` with ``s =
@@ -204,7 +216,7 @@ def tracker_start(base, turn, x_ref, frame, marker, frames, markers, held_frames
     offsets = np.array([np.zeros(3) if h is None else np.asarray(h, float) for h in held_offsets]).reshape(-1, 3)
     free_f = [k for k, h in enumerate(held_frames) if h is None]
     free_o = [k for k, h in enumerate(held_offsets) if h is None]
-    tf = [None if h is None else frame_of(h) for h in held_frames]
+    tf = [np.eye(4) if h is None else frame_of(h) for h in held_frames]    # a free frame: set by the first round
     for _ in range(TRACKER_ROUNDS):
         x = base + np.einsum("nij,nj->ni", turn, _row_offsets(offsets, midx))
         for k in free_f:
@@ -220,14 +232,16 @@ def tracker_start(base, turn, x_ref, frame, marker, frames, markers, held_frames
     return [frame_state(t) for t in tf], list(offsets)
 
 
-def _row_offsets(offsets, midx) -> np.ndarray:
+def _row_offsets(offsets: np.ndarray, midx: np.ndarray) -> np.ndarray:
     """(n, 3) each row's marker offset (zero for a row without a marker)."""
     if not len(offsets):
         return np.zeros((len(midx), 3))
     return np.where((midx >= 0)[:, None], offsets[np.maximum(midx, 0)], 0.0)
 
 
-def _translations_and_offsets(base, turn, x_ref, fidx, midx, tf, free_f, offsets, free_o) -> np.ndarray:
+def _translations_and_offsets(base: np.ndarray, turn: np.ndarray, x_ref: np.ndarray, fidx: np.ndarray,
+                              midx: np.ndarray, tf: list[np.ndarray], free_f: list[int], offsets: np.ndarray,
+                              free_o: list[int]) -> np.ndarray:
     """The offsets of :func:`tracker_start`'s linear step: ``x_ref - R_s base = t_s + R_s turn o_m`` in least
     squares over the free translations and offsets, the rotations (and the held parts) fixed; the free
     frames' translations in ``tf`` are updated in place; returns the new offsets (K, 3)."""
@@ -251,7 +265,7 @@ def _translations_and_offsets(base, turn, x_ref, fidx, midx, tf, free_f, offsets
     for c, k in enumerate(free_f):
         tf[k] = tf[k].copy()
         tf[k][:3, 3] = sol[3 * c:3 * c + 3]
-    new = offsets.copy()
+    new: np.ndarray = offsets.copy()
     for c, k in enumerate(free_o):
         new[k] = sol[3 * (len(free_f) + c):3 * (len(free_f) + c) + 3]
     return new
@@ -261,7 +275,8 @@ def retract(kind: str, state: np.ndarray, theta: np.ndarray) -> np.ndarray:
     """New packed state after the increment ``theta`` (evaluated at zero by the residuals)."""
     s = state.copy()
     if kind in ("seat", "marker"):
-        return s + theta[:3]
+        moved: np.ndarray = s + theta[:3]
+        return moved
     if kind == "sphere":
         s[:3] += theta[:3]
         if len(theta) > 3:

@@ -4,16 +4,25 @@ from __future__ import annotations
 import argparse
 import logging
 
-from arm_model.cli import command_help
 from arm_model import InputError
-from arm_model.commands import arm_inputs, at_least, model_from_args, number_in, seed
-from arm_model.output import output_folder
-from arm_model.checks import point_warnings, log_warnings
+from arm_model.checks import log_warnings, point_warnings
+from arm_model.cli import command_help
+from arm_model.cli_options import arm_inputs, at_least, model_from_args, number_in, seed
 from arm_model.io import read_artefacts, read_points
 from arm_model.model_file import Arm
+from arm_model.output import output_folder
 
-from .cli import _holdout, _mpe, campaign_inputs, conformance_entry, log_conformance, model_effects, \
-    model_options, mpe_options, sigma_options
+from .cli import (
+    campaign_inputs,
+    conformance_entry,
+    log_conformance,
+    model_effects,
+    model_options,
+    mpe_from_args,
+    mpe_options,
+    parse_holdout,
+    sigma_options,
+)
 
 __all__ = ["register", "run"]
 
@@ -120,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
     _check_folds(args.folds, points, reference)
     weights = Weights(args.sigma_probe_um * 1e-6, args.sigma_ref_um * 1e-6,
                       None if args.sigma_length_um is None else args.sigma_length_um * 1e-6)
-    holdout = _holdout(args.holdout)
+    holdout = parse_holdout(args.holdout)
     settings = LoopSettings(folds=args.folds, alpha=args.alpha, fold_by=args.fold_by,
                             **({"holdout": tuple(holdout)} if isinstance(holdout, list) else
                                {"test_fraction": holdout} if holdout is not None else {}),
@@ -139,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
         names = {"points": str(args.points), "artefacts": None if args.artefacts is None else str(args.artefacts),
                  "arm": str(args.arm),
                  "reference_points": None if args.reference_points is None else str(args.reference_points)}
-        conf = _conformance(loop, _mpe(args))
+        conf = _conformance(loop, mpe_from_args(args))
         write_loop_report(loop, out.dir, inputs=inputs, input_names=names, warnings=warnings, conformance=conf)
     log_warnings(warnings)
     log.info(before_after_text(loop))

@@ -1,15 +1,15 @@
-"""Outputs of the closed loop: the model file (description, effects, covariance, URDF), ``summary.json`` (for machines), ``report.html`` with PNG plots (for
-people) and the before/after table printed by ``aacmm close-loop``. Every file is written atomically
-and refused if it would overwrite an input."""
+"""Outputs of the closed loop: the model file (description, effects, covariance, URDF), ``summary.json`` (for machines),
+``report.html`` with PNG plots (for people) and the before/after table printed by ``aacmm close-loop``. Every file is
+written atomically and refused if it would overwrite an input."""
 from __future__ import annotations
 
 import html
-import io
 import math
 from pathlib import Path
 
 import numpy as np
 
+from arm_model import reports
 from arm_model.checks import warnings_html
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, json_text
 from arm_model.shipped import provenance
@@ -19,8 +19,8 @@ from .model_output import model_check, model_paths, write_model
 from .report import conformance_html, conformance_pngs, write_conformance_pngs
 from .validation import with_u
 
-__all__ = ["summary_dict", "before_after_text", "write_loop_report", "write_loop_model", "loop_model_name", "plot_signature", "plot_screening",
-           "plot_before_after"]
+__all__ = ["summary_dict", "before_after_text", "write_loop_report", "write_loop_model", "loop_model_name",
+           "plot_signature", "plot_screening", "plot_before_after"]
 
 #: columns of the before/after table: key, header, unit
 TABLE = (("rms_um", "RMS", "um"), ("max_um", "max", "um"), ("length_error_max", "length max", "um"),
@@ -63,7 +63,8 @@ def _stage_dict(s: Stage) -> dict:
            "heldout_test": s.heldout}
     if s.added is not None:
         out["added"] = {"name": s.added.name, "family": s.added.family, "joint": s.added.joint,
-                        "origin": s.added.origin, "effect": s.added.effect.describe(), "parameters": effect_summary(r, s.added),
+                        "origin": s.added.origin, "effect": s.added.effect.describe(),
+                        "parameters": effect_summary(r, s.added),
                         "indistinguishable_nested": s.nested, "indistinguishable_alternatives": s.alternatives}
         out["screening"] = [t.to_dict() for t in s.screening]
         out["cross_validation"] = [c.to_dict() for c in s.cv]
@@ -137,19 +138,8 @@ def before_after_text(loop: LoopResult) -> str:
 # ---------------------------------------------------------------------------------------------------
 # plots
 
-def _figure(w, h, ncols=1):
-    import matplotlib
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-    return plt.subplots(1, ncols, figsize=(w, h), squeeze=False)
-
-
-def _png(fig) -> bytes:
-    import matplotlib.pyplot as plt
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
-    plt.close(fig)
-    return buf.getvalue()
+#: the close-loop report's figures are drawn at a lower resolution than the other reports' (reports.DPI)
+_DPI = 100
 
 
 def _plot_unit(unit: str) -> tuple[str, float]:
@@ -162,7 +152,7 @@ def plot_signature(before: dict | None, after: dict | None, title: str) -> bytes
     data = [(lab, d) for lab, d in (("before", before), ("after", after)) if d is not None]
     first = data[0][1]
     if first["kind"] == "groups":
-        fig, axs = _figure(10, 3.2)
+        fig, axs = reports.figure(10, 3.2, cols=1)
         ax = axs[0, 0]
         for k, (lab, d) in enumerate(data):
             x = np.arange(len(d["names"])) + (k - 0.5 * (len(data) - 1)) * 0.35
@@ -176,9 +166,9 @@ def plot_signature(before: dict | None, after: dict | None, title: str) -> bytes
         ax.set_ylabel("offset [um] (2u bars)")
         ax.legend(fontsize=8)
         ax.set_title(title, fontsize=10)
-        return _png(fig)
+        return reports.png(fig, _DPI)
     nd = len(first["directions"])
-    fig, axs = _figure(4.2 * nd, 3.2, nd)
+    fig, axs = reports.figure(4.2 * nd, 3.2, cols=nd)
     colours = {"before": "tab:red", "after": "tab:blue"}
     for j, (dname, dunit) in enumerate(first["directions"]):
         ax = axs[0, j]
@@ -198,13 +188,13 @@ def plot_signature(before: dict | None, after: dict | None, title: str) -> bytes
         ax.set_ylabel(f"{dname} error [{pu}]")
         ax.legend(fontsize=7)
     fig.suptitle(title, fontsize=10)
-    return _png(fig)
+    return reports.png(fig, _DPI)
 
 
 def plot_screening(tests, title: str, gate: float | None = None) -> bytes:
     """PNG: -log10(p) of each candidate's score test (absorbed candidates grey at 0)."""
     tests = list(tests)[:30]
-    fig, axs = _figure(7, 0.25 * len(tests) + 1.2)
+    fig, axs = reports.figure(7, 0.25 * len(tests) + 1.2, cols=1)
     ax = axs[0, 0]
     y = np.arange(len(tests))[::-1]
     vals = [-math.log10(max(t.p_value, 1e-300)) if t.identifiable and math.isfinite(t.p_value) else 0.0
@@ -217,14 +207,14 @@ def plot_screening(tests, title: str, gate: float | None = None) -> bytes:
         ax.legend(fontsize=7)
     ax.set_xlabel("-log10(p) of the score test")
     ax.set_title(title, fontsize=10)
-    return _png(fig)
+    return reports.png(fig, _DPI)
 
 
 def plot_before_after(loop: LoopResult) -> bytes:
     """PNG: held-out test-set figures of every stage."""
     rows = loop.before_after()
     keys = [(k, h) for k, h, _ in TABLE if all(k in r and r[k] is not None for r in rows)]
-    fig, axs = _figure(1.4 * len(keys) * max(len(rows), 2) / 2 + 2, 3.2)
+    fig, axs = reports.figure(1.4 * len(keys) * max(len(rows), 2) / 2 + 2, 3.2, cols=1)
     ax = axs[0, 0]
     w = 0.8 / len(rows)
     for i, r in enumerate(rows):
@@ -234,17 +224,11 @@ def plot_before_after(loop: LoopResult) -> bytes:
     ax.set_ylabel("um")
     ax.set_title("held-out test set, stage by stage", fontsize=10)
     ax.legend(fontsize=7)
-    return _png(fig)
+    return reports.png(fig, _DPI)
 
 
 # ---------------------------------------------------------------------------------------------------
 # HTML
-
-def _table(headers, rows) -> str:
-    h = "".join(f"<th>{html.escape(str(x))}</th>" for x in headers)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>" for r in rows)
-    return f"<table><tr>{h}</tr>{body}</table>"
-
 
 def _g(v, fmt=".3g"):
     return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, fmt)
@@ -320,7 +304,7 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
                     f"{html.escape(loop.stop_reason)}.</p><h2>Before and after (held-out test set)</h2>"
                     f"<pre>{html.escape(table)}</pre><img src='{img}'>")
     if loop.built:
-        sections.append("<h2>Effects built from the residual</h2>" + _table(
+        sections.append("<h2>Effects built from the residual</h2>" + reports.html_table(
             ("effect", "family", "added", "why not"),
             [(b["name"], b["family"], "yes" if b["added"] else "no", b["why_not_added"] or "") for b in loop.built]))
     for s in loop.stages[1:]:
@@ -328,7 +312,7 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
         found = " (found from the residual)" if s.added.origin == "residual" else ""
         parts = [f"<h2>Stage {s.index}: + {html.escape(s.added.name)}{found}</h2>"]
         prm = effect_summary(s.result, s.added)
-        parts.append(_table(("parameter", "value", "u (1 sigma)", "unit", "state"),
+        parts.append(reports.html_table(("parameter", "value", "u (1 sigma)", "unit", "state"),
                             [(r["name"], _g(r["display_value"], ".5g"), _g(r["display_u"], ".2g"), r["display_unit"],
                               r["state"] + (f", phase {r['phase_deg']:.1f} deg" if "phase_deg" in r else ""))
                              for r in prm]))
@@ -336,25 +320,28 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
             parts.append("<p>The data cannot tell it from: "
                          + html.escape(", ".join(dict.fromkeys(s.nested + s.alternatives)))
                          + " (same residual signature).</p>")
-        parts.append("<h3>Screening at the previous fit</h3>" + _table(_SCREEN_HEAD, _screening_rows(s.screening)))
+        parts.append("<h3>Screening at the previous fit</h3>"
+                     + reports.html_table(_SCREEN_HEAD, _screening_rows(s.screening)))
         img = png(f"stage-{s.index}-screening.png", plot_screening(s.screening, f"stage {s.index}: screening", gate))
         parts.append(f"<img src='{img}'>")
-        parts.append("<h3>Cross-validation (held-out folds of the design set)</h3>" + _table(_CV_HEAD, _cv_rows(s.cv)))
+        parts.append("<h3>Cross-validation (held-out folds of the design set)</h3>"
+                     + reports.html_table(_CV_HEAD, _cv_rows(s.cv)))
         if s.plot_before is not None:
             img = png(f"stage-{s.index}-signature.png",
-                      plot_signature(s.plot_before, s.plot_after, f"{s.plot_family}: before and after + {s.added.name}"))
+                      plot_signature(s.plot_before, s.plot_after,
+                                     f"{s.plot_family}: before and after + {s.added.name}"))
             parts.append(f"<h3>The residual that led to it</h3><img src='{img}'>")
         sections.append("".join(parts))
     parts = ["<h2>Final screening</h2>"]
     if loop.final_screening:
-        parts.append(_table(_SCREEN_HEAD, _screening_rows(loop.final_screening)))
+        parts.append(reports.html_table(_SCREEN_HEAD, _screening_rows(loop.final_screening)))
         gate = loop.settings.screen_alpha / max(sum(t.identifiable for t in loop.final_screening), 1)
         img = png("final-screening.png", plot_screening(loop.final_screening, "final screening", gate))
         parts.append(f"<img src='{img}'>")
     if loop.final_cv:
-        parts.append("<h3>Cross-validation</h3>" + _table(_CV_HEAD, _cv_rows(loop.final_cv)))
+        parts.append("<h3>Cross-validation</h3>" + reports.html_table(_CV_HEAD, _cv_rows(loop.final_cv)))
     parts.append("<h2>Structure tests on the final fit</h2>")
-    parts.append(_table(("family", "columns", "rank", "delta chi2", "p", "p (Holm)", "explained (held-out)",
+    parts.append(reports.html_table(("family", "columns", "rank", "delta chi2", "p", "p (Holm)", "explained (held-out)",
                          "best regressor", "what"),
                         [(f.name, t.k, t.rank, _g(t.delta_chi2, ".1f"), _g(t.p_value, ".2g"), _g(a, ".2g"),
                           _g(t.explained_cv, ".3f"), t.best, f.what) for f, t, a in loop.structure]))
@@ -362,7 +349,7 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
         img = png(f"structure-{_slug(name)}.png", plot_signature(d, None, f"remaining structure: {name}"))
         parts.append(f"<img src='{img}'>")
     if loop.skipped:
-        parts.append("<h3>Candidates not offered</h3>" + _table(("candidate", "why"),
+        parts.append("<h3>Candidates not offered</h3>" + reports.html_table(("candidate", "why"),
                                                                [(s.name, s.reason) for s in loop.skipped]))
     sections.append("".join(parts))
     if conformance:

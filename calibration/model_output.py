@@ -11,10 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
-from arm_model.output import safe_name
 from arm_model import InputError
-from arm_model.model_file import Arm, format_model, write_covariance
 from arm_model.io import UnreadableOutput, atomic_write_text, guard_output, read_back
+from arm_model.model_file import Arm, format_model, write_covariance
+from arm_model.output import safe_name
 from arm_model.urdf_import import calibrated_urdf_text
 
 __all__ = ["model_paths", "fitted_arm", "write_model", "model_check", "refine_torques", "check_reproduces",

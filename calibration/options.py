@@ -23,7 +23,7 @@ COVARIANCE = ("residual", "stated")
 REFERENCE = ("fit", "identity", "off")
 
 
-def _positive(name: str, v, allow_none: bool = False) -> None:
+def _positive(name: str, v: object, allow_none: bool = False) -> None:
     if v is None and allow_none:
         return
     if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v) \
@@ -31,7 +31,7 @@ def _positive(name: str, v, allow_none: bool = False) -> None:
         raise ValueError(f"{name} must be a positive finite number{' or None' if allow_none else ''}, got {v!r}")
 
 
-def _choice(name: str, v, choices) -> None:
+def _choice(name: str, v: object, choices: tuple[str, ...]) -> None:
     if v not in choices:
         raise ValueError(f"{name} must be one of {', '.join(repr(c) for c in choices)}, got {v!r}")
 
@@ -69,8 +69,8 @@ class FitOptions:
         blas: BLAS threads during the fit (None: unchanged).
     """
     free: tuple[str, ...] | None = None
-    values: dict | None = None
-    start: dict | None = None
+    values: dict[str, float] | None = None
+    start: dict[str, float] | None = None
     weights: Weights = field(default_factory=Weights)
     on_unidentifiable: str = "fix"
     rank_tol: float = DEFAULT_RANK_TOL
@@ -80,14 +80,14 @@ class FitOptions:
     reference: str = "fit"
     max_iter: int = 200
     min_resolution: float | None = None
-    priors: dict | None = None
+    priors: dict[str, float] | None = None
     prior_length: float | None = None
     weights_from_data: bool = False
-    prior_scale: float | str | dict | None = "evidence"
+    prior_scale: float | str | dict[str, float] | None = "evidence"
     prior_centre: np.ndarray | None = field(default=None, compare=False)
     blas: int | None = 1
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         set_ = object.__setattr__
         if self.free is not None:
             if isinstance(self.free, str):

@@ -4,7 +4,8 @@ the evidence's update of each group's scale, and the state of each parameter.
 Every free parameter ``p_k`` carries ``p_k ~ N(c_k, (tau_G s_k)^2)``: ``c_k`` the nominal value (the
 description, or the values given), ``s_k`` its plausible error size at scale 1 (:func:`prior_spec`) and
 ``tau_G`` the scale of its **group** G (:func:`parameter_groups`: the joint rows' lengths, their joint
-offsets, their axis angles, the tip (probe or marker) offset, the probe's compliances, and each effect's parameters apart). The scales
+offsets, their axis angles, the tip (probe or marker) offset, the probe's compliances, and each effect's parameters
+apart). The scales
 are chosen by the evidence (type-II maximum likelihood, MacKay 1992): at the maximum a posteriori fit,
 with ``gamma_G = sum_k in G (1 - rho_k)`` the number of the group's parameters the data determine
 (``rho_k``: posterior over prior variance, :func:`variance_ratio`), the Laplace evidence is stationary in

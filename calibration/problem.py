@@ -17,9 +17,11 @@ with ``rows`` rows a point, then the distances. Every row is divided by its stan
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
+from numpy.typing import ArrayLike
 
 from arm_model import InputError, NumericalError
 from arm_model.geometry import ball_centre_radius
@@ -28,15 +30,17 @@ from arm_model.tracker import DEFAULT_SESSION, Tracker, offset_matrix
 
 from . import kinds as geo
 from .data import CalibrationData, Weights
+from .kinds import MIN_POINTS
 
-__all__ = ["Instance", "DistanceItem", "Problem", "Evaluation", "MIN_POINTS", "POINT_KINDS"]
+__all__ = ["Instance", "DistanceItem", "Problem", "Evaluation", "POINT_KINDS"]
 
 #: point kinds in row order
 POINT_KINDS = ("seat", "sphere", "ring", "cylinder", "plane", "reference")
 
-#: fewest points an instance needs (known radius, free radius)
-MIN_POINTS = {"seat": (1, 1), "sphere": (4, 5), "ring": (5, 6), "cylinder": (5, 6), "plane": (4, 4),
-              "reference": (3, 3)}
+#: a group of point rows of one kind (:meth:`Problem._point_groups`): its instances, points, rows and CasADi map
+Group = dict[str, Any]
+#: Jacobian triplets (rows, columns, values) of the nuisance increments, as lists of arrays
+Triplets = tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]
 
 
 @dataclass
@@ -100,7 +104,7 @@ class Problem:
     distances: bool = True
     reference: str = "fit"
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.free = np.asarray(self.free, dtype=int)
         self._build()
 
@@ -132,13 +136,13 @@ class Problem:
         self.n_nuisance += inst.n_theta
         return len(self.instances) - 1
 
-    def _artefact_instances(self) -> dict:
+    def _artefact_instances(self) -> dict[tuple[str, str], int]:
         """One instance a feature within a measurement; ``self.unused``: free points without a reference.
         Returns ``{(measurement, feature): instance index}``."""
         pts, arte, data = self.data.points, self.data.artefacts, self.data
         ball = self.model.desc.probe.ball_diameter
         by_key: dict[tuple[str, str], int] = {}
-        unused = []
+        unused: list[np.ndarray] = []
         for m in pts.measurements():
             rows_m = np.flatnonzero(pts.measurement == m)
             for f in dict.fromkeys(pts.feature[rows_m].tolist()):
@@ -170,22 +174,23 @@ class Problem:
         self.unused = np.sort(np.concatenate(unused)) if unused else np.zeros(0, int)
         return by_key
 
-    def _reference_instances(self, by_key: dict) -> None:
+    def _reference_instances(self, by_key: dict[tuple[str, str], int]) -> None:
         """The reference rows: on a free point the marker (the tip point, or a marker at its offset on the
         tip frame), on a seat the seat's centre (a tracker nest). One ``reference`` instance a session
         (its frame ``T_ref_base``), one ``marker`` instance a marker when the offsets are unknowns.
         ``self._ref_anchor`` / ``self._ref_marker``: {row: seat instance} / {row: marker instance}."""
         pts, arte, data = self.data.points, self.data.artefacts, self.data
         given = data.tracker
-        self._ref_anchor, self._ref_marker = {}, {}
-        rows = []
+        self._ref_anchor: dict[int, int] = {}
+        self._ref_marker: dict[int, int] = {}
+        ref_rows: list[int] = []
         for i in np.flatnonzero(self._has_ref):
             f = pts.feature[i]
             kind = arte.features[f].kind if f else "point"
             if kind in ("point", "seat"):
-                rows.append(i)
-                self._ref_anchor[i] = by_key[(pts.measurement[i], f)] if kind == "seat" else -1
-        rows = np.array(rows, dtype=int)
+                ref_rows.append(int(i))
+                self._ref_anchor[int(i)] = by_key[(pts.measurement[i], f)] if kind == "seat" else -1
+        rows = np.array(ref_rows, dtype=int)
         sessions = data.sessions
         for s in dict.fromkeys(sessions[rows].tolist()):
             sr = rows[sessions[rows] == s]
@@ -210,7 +215,7 @@ class Problem:
                                      state=held))
             self._ref_marker.update(dict.fromkeys(mr.tolist(), idx))
 
-    def _distances(self, by_key: dict) -> list[DistanceItem]:
+    def _distances(self, by_key: dict[tuple[str, str], int]) -> list[DistanceItem]:
         """The certified lengths between the centres of two instances of one measurement."""
         arte, pts = self.data.artefacts, self.data.points
         items: list[DistanceItem] = []
@@ -233,9 +238,9 @@ class Problem:
     def _point_groups(self) -> None:
         """The point rows grouped by kind (and free radius), in :data:`POINT_KINDS` order; the used points
         and their positions in the centre arrays."""
-        self.groups = []
+        self.groups: list[Group] = []
         row = 0
-        used = []
+        used: list[np.ndarray] = []
         for kind in POINT_KINDS:
             for fr in (False, True):
                 insts = [i for i, it in enumerate(self.instances) if it.kind == kind and it.free_radius == fr]
@@ -282,7 +287,8 @@ class Problem:
         self._fx = ca.Function("x", [q, w, aux, p, o], [x]).map(nu)
         self._fxj_full = ca.Function("xj", [q, w, aux, p, o], [x, ca.jacobian(x, p), ca.jacobian(x, o)]).map(nu)
         self._sym = (q, w, aux, p, o, x)
-        self._fxj_cache = {}          # free set -> mapped Function of (x, d x / d p[free], d x / d o), shared by copies
+        # free set -> mapped Function of (x, d x / d p[free], d x / d o), shared by copies
+        self._fxj_cache: dict[tuple[int, ...], Any] = {}
         n, jn = len(self.data), self.model.desc.n_joints
         self._q = np.ascontiguousarray(self.data.points.q[self.used].T)
         self._w = np.ascontiguousarray(self.data.wrench[self.used].T)
@@ -309,14 +315,15 @@ class Problem:
         self.row_distance[self.n_point_rows:] = np.arange(len(self.distance_items))
 
     # -- evaluation -------------------------------------------------------------------------------
-    def centres(self, p, jac: bool = False, columns=None, offsets=None):
+    def centres(self, p: ArrayLike, jac: bool = False, columns: ArrayLike | None = None,
+                offsets: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         """Ball centres (n_used, 3) [m] of the used points and, with ``jac``, d x / d p (n_used, 3, P),
         or only the ``columns`` (indices into p) of it. ``offsets``: (n_used, 3) each point's marker
         offset in the tip frame [m] (:meth:`marker_offsets`; None: the tip point itself)."""
         x, dx, _ = self._centres(p, jac, columns, offsets)
         return x, dx
 
-    def marker_offsets(self, states) -> np.ndarray | None:
+    def marker_offsets(self, states: list[np.ndarray]) -> np.ndarray | None:
         """(n_used, 3) the marker offset [m] of each used point at ``states`` (zero for probed points), or
         None when no point is a marker at an offset."""
         if not (self._used_marker >= 0).any():
@@ -326,20 +333,23 @@ class Problem:
         out[on] = np.array([states[i][:3] for i in self._used_marker[on]])
         return out
 
-    def _centres(self, p, jac: bool, columns, offsets):
+    def _centres(self, p: ArrayLike, jac: bool, columns: ArrayLike | None, offsets: ArrayLike | None
+                 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
         """(x, d x / d p[columns] or None, d x / d o (n_used, 3, 3) or None) of :meth:`centres`."""
         p = np.asarray(p, dtype=float)
-        ncol = len(p) if columns is None else len(columns)
+        cols = None if columns is None else [int(c) for c in np.asarray(columns).reshape(-1)]
+        ncol = len(p) if cols is None else len(cols)
         nu = len(self.used)
         if nu == 0:
             return np.zeros((0, 3)), (np.zeros((0, 3, ncol)) if jac else None), (np.zeros((0, 3, 3)) if jac else None)
         o = np.zeros((3, nu)) if offsets is None else np.ascontiguousarray(np.asarray(offsets, float).T)
         if not jac:
             return np.asarray(self._fx(self._q, self._w, self._aux, p, o)).T, None, None
-        if columns is None:
+        fn: Any
+        if cols is None:
             fn = self._fxj_full
         else:
-            key = tuple(int(c) for c in columns)
+            key = tuple(cols)
             fn = self._fxj_cache.get(key)
             if fn is None:
                 import casadi as ca
@@ -353,7 +363,8 @@ class Problem:
         dxo = np.asarray(dxo).reshape(3, nu, 3).transpose(1, 0, 2)
         return x, dx, dxo
 
-    def _group_inputs(self, g, x, states):
+    def _group_inputs(self, g: Group, x: np.ndarray, states: list[np.ndarray]
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(x_in (3, n), states (k, n), xref (3, n)) of a group: reference rows anchored on a seat take
         the seat's centre instead of the ball centre."""
         kst = np.stack([states[i] for i in g["uinst"]])[g["local"]].T
@@ -364,15 +375,16 @@ class Problem:
         xin[:, on] = x[g["pos"][on]].T
         if (~on).any():
             xin[:, ~on] = np.array([states[a][:3] for a in g["anchor"][~on]]).T
+        assert self._xref_all is not None, "reference rows come with reference coordinates"
         return xin, kst, self._xref_all[g["points"]].T
 
-    def initial_states(self, p) -> list[np.ndarray]:
+    def initial_states(self, p: ArrayLike) -> list[np.ndarray]:
         """Starting nuisance states from the ball centres at ``p``: the algebraic fits of the artefacts,
         then the reference frames and marker offsets (:func:`calibration.kinds.tracker_start`); held
         instances keep their state."""
-        markers = (self._used_marker >= 0).any()
-        x, _, dxo = self._centres(p, markers, [] if markers else None, None)
-        states: list = [None] * len(self.instances)
+        has_markers = bool((self._used_marker >= 0).any())
+        x, _, dxo = self._centres(p, has_markers, [] if has_markers else None, None)
+        states: list[Any] = [None] * len(self.instances)
         for i, it in enumerate(self.instances):
             if it.kind not in ("reference", "marker"):
                 states[i] = geo.initial_state(it.kind, x[self._pos[it.points]], it.radius)
@@ -392,6 +404,7 @@ class Problem:
         markers = [i for i, it in enumerate(self.instances) if it.kind == "marker"]
         held_f = [self.instances[i].state for i in frames]
         held_o = [self.instances[i].state for i in markers]
+        assert self._xref_all is not None, "reference rows come with reference coordinates"
         fstates, ostates = geo.tracker_start(base, turn, self._xref_all[g["points"]], g["inst"], g["marker"],
                                              frames, markers, held_f, held_o)
         for i, st in zip(frames + markers, fstates + ostates):
@@ -404,20 +417,20 @@ class Problem:
             out.append(s if it.n_theta == 0 else geo.retract(it.kind, s, dtheta[it.offset: it.offset + it.n_theta]))
         return out
 
-    def evaluate(self, p, states: list[np.ndarray], jac: bool = True) -> Evaluation:
+    def evaluate(self, p: ArrayLike, states: list[np.ndarray], jac: bool = True) -> Evaluation:
         """Weighted residuals (and Jacobians) at parameters ``p`` (full vector, SI) and ``states``."""
         nf = len(self.free)
         x, dx, dxo = self._centres(p, jac and (nf > 0 or self._marker_unknowns), self.free,
                                    self.marker_offsets(states))
         r = np.empty(self.n_rows)
         jp = np.zeros((self.n_rows, nf)) if jac else None
-        sparse = ([], [], [])
+        sparse: Triplets = ([], [], [])
         for g in self.groups:
-            self._group_rows(g, x, dx, dxo, states, r, jp if jac else None, sparse)
+            self._group_rows(g, x, dx, dxo, states, r, jp, sparse)
         if self.distance_items:
             self._distance_rows(states, r, sparse if jac else None)
         r /= self.sigma
-        if not jac:
+        if jp is None:
             return Evaluation(r, x)
         jp /= self.sigma[:, None]
         ti, tj, tv = (np.concatenate(a) if a else np.zeros(0, int) for a in sparse)
@@ -425,10 +438,11 @@ class Problem:
         jt = sp.csr_matrix((tv, (ti, tj)), shape=(self.n_rows, self.n_nuisance))
         return Evaluation(r, x, jp, jt)
 
-    def _group_rows(self, g, x, dx, dxo, states, r, jp, sparse) -> None:
+    def _group_rows(self, g: Group, x: np.ndarray, dx: np.ndarray | None, dxo: np.ndarray | None,
+                    states: list[np.ndarray], r: np.ndarray, jp: np.ndarray | None, sparse: Triplets) -> None:
         """The rows of one group into ``r`` and, with ``jp``, their Jacobians: d r / d p[free] into ``jp``,
         d r / d (nuisance) as triplets into ``sparse`` (rows, columns, values)."""
-        def add(rows_idx, cols_idx, vals):
+        def add(rows_idx: np.ndarray, cols_idx: np.ndarray, vals: np.ndarray) -> None:
             for lst, a in zip(sparse, (rows_idx, cols_idx, vals)):
                 lst.append(np.reshape(a, -1))
 
@@ -444,6 +458,7 @@ class Problem:
         rr = g["row0"] + np.arange(npt * rows).reshape(npt, rows)
         on = g.get("on_point", np.ones(npt, bool))
         if nf and on.any():
+            assert dx is not None, "d x / d p with the Jacobians"
             blk = np.einsum("nrk,nkp->nrp", drdx[on], dx[g["pos"][on]])
             jp[rr[on].reshape(-1)] = blk.reshape(-1, nf)
         if (~on).any():            # reference rows on a seat: d r / d (seat centre)
@@ -456,6 +471,7 @@ class Problem:
             sel = np.flatnonzero((mk >= 0) & np.array([self.instances[m].n_theta > 0 if m >= 0 else False
                                                        for m in mk], bool))
             if len(sel):
+                assert dxo is not None, "d x / d o with the Jacobians"
                 off = np.array([self.instances[m].offset for m in mk[sel]])
                 blk = np.einsum("nrk,nkj->nrj", drdx[sel], dxo[g["pos"][sel]])
                 add(np.broadcast_to(rr[sel][:, :, None], (len(sel), rows, 3)),
@@ -468,9 +484,10 @@ class Problem:
             add(np.broadcast_to(rr[active][:, :, None], (int(active.sum()), rows, nt)),
                 np.broadcast_to(cols, (int(active.sum()), rows, nt)), drdt[active])
 
-    def _distance_rows(self, states, r, sparse) -> None:
+    def _distance_rows(self, states: list[np.ndarray], r: np.ndarray, sparse: Triplets | None) -> None:
         """The certified-length rows into ``r`` and, with ``sparse``, their Jacobian triplets."""
         items = self.distance_items
+        assert self._dist_fn is not None, "the distance function of the distance rows"
         ca_ = np.array([states[d.a][:3] for d in items]).T
         cb_ = np.array([states[d.b][:3] for d in items]).T
         res, da, db = self._dist_fn(ca_, cb_, np.array([d.length for d in items]))
@@ -484,7 +501,7 @@ class Problem:
             for lst, a in zip(sparse, (np.repeat(rows, 3), offs[:, None] + np.arange(3)[None, :], d)):
                 lst.append(np.reshape(a, -1))
 
-    def with_free(self, free) -> "Problem":
+    def with_free(self, free: ArrayLike) -> Problem:
         """The same structure with another free set (CasADi functions are reused)."""
         new = object.__new__(Problem)
         new.__dict__.update(self.__dict__)
@@ -492,7 +509,7 @@ class Problem:
         return new
 
     # -- per-point and per-instance views -------------------------------------------------------
-    def residual_table(self, p, states) -> dict:
+    def residual_table(self, p: ArrayLike, states: list[np.ndarray]) -> dict[str, np.ndarray]:
         """Unweighted residuals by point and by distance at ``p`` and ``states``.
 
         Returns a dict of arrays: ``point`` (n,) indices into the data, ``kind``, ``instance``,
@@ -501,7 +518,11 @@ class Problem:
         ``distance`` (k,) [m] of the distances (measured minus certified).
         """
         x, _ = self.centres(p, offsets=self.marker_offsets(states))
-        pts, kinds, insts, vals, vecs = [], [], [], [], []
+        pts: list[np.ndarray] = []
+        kinds: list[str] = []
+        insts: list[np.ndarray] = []
+        vals: list[np.ndarray] = []
+        vecs: list[np.ndarray] = []
         for g in self.groups:
             kind, rows, npt = g["kind"], g["rows"], len(g["points"])
             nt = geo.n_theta(kind, g["free_radius"])
@@ -525,12 +546,15 @@ class Problem:
             vals.append(val)
             vecs.append(vec)
         dist = np.array([np.linalg.norm(states[d.a][:3] - states[d.b][:3]) - d.length for d in self.distance_items])
-        cat = (lambda a, shape: np.concatenate(a) if a else np.zeros(shape))
+
+        def cat(a: list[np.ndarray], shape: tuple[int, ...]) -> np.ndarray:
+            return np.concatenate(a) if a else np.zeros(shape)
+
         return {"point": cat(pts, (0,)).astype(int), "kind": np.array(kinds, dtype=object),
                 "instance": cat(insts, (0,)).astype(int), "value": cat(vals, (0,)),
                 "vector": cat(vecs, (0, 3)), "distance": dist}
 
-    def check_tracker(self, p, states, rtol: float = 1e-9) -> None:
+    def check_tracker(self, p: ArrayLike, states: list[np.ndarray], rtol: float = 1e-9) -> None:
         """A :class:`NumericalError` when the data at ``p`` and ``states`` do not determine the unknown frames
         and marker offsets apart (their weighted Jacobian columns, each scaled to unit length, have a
         singular value below ``rtol`` of the largest): poses whose tip frame turns about one axis only, say,
@@ -539,18 +563,20 @@ class Problem:
         if not inst:
             return
         cols = np.concatenate([np.arange(it.offset, it.offset + it.n_theta) for it in inst])
-        j = self.with_free([]).evaluate(p, states).jt[:, cols].toarray()
+        jt = self.with_free([]).evaluate(p, states).jt
+        assert jt is not None, "an evaluation with its Jacobians"
+        j = jt[:, cols].toarray()
         norm = np.linalg.norm(j, axis=0)
         s = np.linalg.svd(j / np.where(norm > 0, norm, 1.0), compute_uv=False) if len(j) else np.zeros(1)
         if len(j) < len(cols) or not (norm > 0).all() or s[-1] < rtol * s[0]:
             what = " and the markers' offsets" if any(it.kind == "marker" for it in inst) else ""
             raise NumericalError(f"the reference points do not determine the instrument's frame{what}: "
-                                 f"{len(cols)} unknowns, condition {s[0] / max(s[-1], 1e-300):.3g}. The poses must turn "
-                                 "the tip frame about more than one axis (a marker's offset along the only axis "
+                                 f"{len(cols)} unknowns, condition {s[0] / max(s[-1], 1e-300):.3g}. The poses must "
+                                 "turn the tip frame about more than one axis (a marker's offset along the only axis "
                                  "of rotation moves it as the frame's translation does), in every session; or, "
                                  "where the instrument sees the tip point itself, --marker-offset zero")
 
-    def tracker(self, states, u: dict | None = None) -> Tracker | None:
+    def tracker(self, states: list[np.ndarray], u: dict[int, np.ndarray] | None = None) -> Tracker | None:
         """The :class:`~arm_model.tracker.Tracker` at ``states``: each session's frame and, when the
         markers sit at unknown offsets, their offsets (else None: the instrument sees the tip point);
         ``u``: {instance index: standard uncertainties of its increments} (a fit's), for every frame and
@@ -566,7 +592,9 @@ class Problem:
                                  "is unknown")
         u = u or {}
         have_u = all(i in u for i in frames + markers)
-        return Tracker(tuple(self.instances[i].feature for i in frames), [geo.frame_of(states[i]) for i in frames],
-                       None if not markers or self.data.marker_offsets != "fit" else [states[i][:3] for i in markers],
-                       [u[i] for i in frames] if have_u else None,
-                       [u[i] for i in markers] if have_u and markers else None)
+        return Tracker(tuple(self.instances[i].feature for i in frames),
+                       np.array([geo.frame_of(states[i]) for i in frames]),
+                       None if not markers or self.data.marker_offsets != "fit"
+                       else np.array([states[i][:3] for i in markers]),
+                       np.array([u[i] for i in frames]) if have_u else None,
+                       np.array([u[i] for i in markers]) if have_u and markers else None)

@@ -4,13 +4,11 @@ atomically and refused if it would overwrite an input."""
 from __future__ import annotations
 
 import html
-import io
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from arm_model import InputError
+from arm_model import InputError, reports
 from arm_model.checks import warnings_html
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, json_text, write_csv
 from arm_model.log import counted
@@ -24,26 +22,11 @@ __all__ = ["write_outputs", "plot_residuals", "plot_parameters", "plot_correlati
            "conformance_lines", "conformance_pngs", "write_conformance_pngs", "conformance_html", "CONFORMANCE_SETS"]
 
 
-def _png(fig) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
-    import matplotlib.pyplot as plt
-    plt.close(fig)
-    return buf.getvalue()
-
-
-def _figure(w, h):
-    import matplotlib
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-    return plt.subplots(figsize=(w, h))
-
-
 def plot_residuals(result: CalibrationResult) -> bytes:
     """PNG: residuals [um] of every point, grouped by artefact instance, coloured by kind; certified
     distances as their own group."""
     t = result.residuals
-    fig, ax = _figure(max(6.0, 0.12 * len(result.instances) + 4), 4.0)
+    fig, ax = reports.figure(max(6.0, 0.12 * len(result.instances) + 4), 4.0)
     colours = {"seat": "C0", "sphere": "C1", "ring": "C2", "cylinder": "C2", "plane": "C3", "reference": "C4"}
     labels = []
     for i, inst in enumerate(result.instances):
@@ -68,18 +51,14 @@ def plot_residuals(result: CalibrationResult) -> bytes:
     else:
         ax.set_xlabel("artefact instance")
     ax.legend(fontsize=7, loc="best")
-    return _png(fig)
+    return reports.png(fig)
 
 
 def plot_parameters(result: CalibrationResult) -> bytes:
     """PNG: free parameter estimates with 2u error bars, one panel per display unit."""
     rows = [r for r in result.parameter_rows() if r["state"] in ("free", "prior-dominated")]
     units = list(dict.fromkeys(r["display_unit"] for r in rows)) or ["-"]
-    import matplotlib
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(len(units), 1, figsize=(max(6.0, 0.25 * len(rows) + 3), 2.6 * len(units)),
-                             squeeze=False)
+    fig, axes = reports.figure(max(6.0, 0.25 * len(rows) + 3), 2.6 * len(units), rows=len(units))
     for ax, unit in zip(axes[:, 0], units):
         rr = [r for r in rows if r["display_unit"] == unit]
         x = np.arange(len(rr))
@@ -91,13 +70,13 @@ def plot_parameters(result: CalibrationResult) -> bytes:
         ax.set_ylabel(f"[{unit}]")
     axes[0, 0].set_title("estimated errors (p = 0 is the nominal description), bars: 2 u")
     fig.tight_layout()
-    return _png(fig)
+    return reports.png(fig)
 
 
 def plot_correlation(result: CalibrationResult) -> bytes:
     """PNG: correlation matrix of the free parameters."""
     n = len(result.free)
-    fig, ax = _figure(max(4.0, 0.22 * n + 2), max(3.5, 0.22 * n + 1.5))
+    fig, ax = reports.figure(max(4.0, 0.22 * n + 2), max(3.5, 0.22 * n + 1.5))
     im = ax.imshow(result.corr if n else np.zeros((1, 1)), vmin=-1, vmax=1, cmap="RdBu_r")
     ax.set_xticks(range(n))
     ax.set_yticks(range(n))
@@ -105,7 +84,7 @@ def plot_correlation(result: CalibrationResult) -> bytes:
     ax.set_yticklabels(result.free, fontsize=6)
     fig.colorbar(im, ax=ax, shrink=0.8)
     ax.set_title("correlation of the estimates")
-    return _png(fig)
+    return reports.png(fig)
 
 
 #: the data sets a conformance table can be on: summary key -> title
@@ -116,11 +95,8 @@ def plot_conformance(rows: list[dict], title: str) -> bytes:
     """PNG: one panel a test of ``rows`` (:func:`calibration.validation.conformance`): each item's value
     [um] of the calibrated model, the MPE band (+-MPE for errors, 0..MPE for sizes) shaded when given,
     items beyond it in red, the verdict in the panel's title."""
-    import matplotlib
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
     rows = [r for r in rows if r["n"]]
-    fig, axes = plt.subplots(len(rows), 1, figsize=(9.0, 2.2 * len(rows) + 0.5), squeeze=False)
+    fig, axes = reports.figure(9.0, 2.2 * len(rows) + 0.5, rows=len(rows))
     for ax, r in zip(axes[:, 0], rows):
         v = np.array([it["value_um"] for it in r["items"]])
         x = np.arange(len(v))
@@ -153,7 +129,7 @@ def plot_conformance(rows: list[dict], title: str) -> bytes:
             ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     axes[0, 0].figure.suptitle(title, fontsize=10)
     fig.tight_layout(rect=(0, 0, 1, 1 - 0.3 / fig.get_figheight()))
-    return _png(fig)
+    return reports.png(fig)
 
 
 def conformance_lines(conf: dict) -> list[str]:
@@ -165,7 +141,8 @@ def conformance_lines(conf: dict) -> list[str]:
                 out.append(f"  {r['standard']} {r['test']} on {what}: no item in this data set (MPE {r['mpe_um']:g} um "
                            "not tested)")
                 continue
-            head = f"  {r['standard']} {r['test']} on {what} ({counted(r['n'], 'item')}): max |value| {r['max_abs_um']:.2f} um"
+            head = (f"  {r['standard']} {r['test']} on {what} ({counted(r['n'], 'item')}): "
+                    f"max |value| {r['max_abs_um']:.2f} um")
             if r["result"] is None:
                 out.append(head + " (no MPE given)")
             else:
@@ -198,7 +175,7 @@ def conformance_html(conf: dict, files: dict) -> list[str]:
         if not rows:
             continue
         parts.append(f"<h3>On {what}</h3>")
-        parts.append(_table(["standard", "test", "what is tested", "items", "max |value| [um]", "MPE [um]",
+        parts.append(reports.html_table(["standard", "test", "what is tested", "items", "max |value| [um]", "MPE [um]",
                              "result"],
                             [(r["standard"], r["test"], r["what"], r["n"], _fmt(r["max_abs_um"], 4),
                               _fmt(r["mpe_um"], 4), (r["result"] or ("- (no MPE)" if r["n"] else "no item"))
@@ -207,12 +184,6 @@ def conformance_html(conf: dict, files: dict) -> list[str]:
         if png is not None:
             parts.append(f"<img src='{html.escape(png.name)}' style='max-width:100%'>")
     return parts
-
-
-def _table(headers, rows) -> str:
-    h = "".join(f"<th>{html.escape(str(x))}</th>" for x in headers)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>" for r in rows)
-    return f"<table><tr>{h}</tr>{body}</table>"
 
 
 def _fmt(v, digits=4):
@@ -242,7 +213,7 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
         f"<p>Identifiability at the solution: rank {idf.rank} of {len(idf.names)}, condition number "
         f"{idf.condition:.4g} (columns scaled by their norms), rank tolerance {idf.rank_tol:g}.</p>",
         "<h2>Fixed parameters (not identifiable from these data)</h2>",
-        _table(["parameter", "stage", "reason"], fixed) if fixed else "<p>none</p>",
+        reports.html_table(["parameter", "stage", "reason"], fixed) if fixed else "<p>none</p>",
     ]
     if summary.get("poorly_determined"):
         parts.append("<p>Poorly determined (large uncertainty; consider fixing): "
@@ -256,7 +227,7 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
                       "measurements (whole measurements resampled); '-' with fewer than two "
                       "measurements of its kind."
                       + (f" The nominal: {html.escape(base['definition'])}." if base else "") + "</p>",
-                      _table(["figure", "unit", "nominal", "calibrated", "ratio"],
+                      reports.html_table(["figure", "unit", "nominal", "calibrated", "ratio"],
                              [(r["label"], r["unit"], with_u(r["before"], r.get("u_before")),
                                with_u(r["after"], r.get("u_after")), _fmt(r["ratio"], 3)) for r in rows])]
     worse = summary.get("heldout_worse_than_nominal")
@@ -272,15 +243,15 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
               "variance is at least half its prior's: it stays near the nominal with about the prior's "
               "uncertainty), fixed (not separable from the others, or at a bound; see above), held (not freed). "
               "'prior u': the prior's standard deviation; 'ratio': posterior / prior variance.</p>",
-              _table(["parameter", "state", "unit", "estimate", "u", "prior u", "ratio"], par)]
+              reports.html_table(["parameter", "state", "unit", "estimate", "u", "prior u", "ratio"], par)]
     if result.outliers:
         parts += ["<h2>Outliers (kept)</h2>" if not result.dropped else "<h2>Outliers</h2>",
-                  _table(["kind", "measurement", "feature", "line", "standardized", "residual [um]"],
+                  reports.html_table(["kind", "measurement", "feature", "line", "standardized", "residual [um]"],
                          [(o.kind, o.measurement, o.feature, o.line, _fmt(o.standardized, 3),
                            _fmt(o.residual * 1e6, 4)) for o in result.outliers])]
     if result.dropped:
         parts += ["<h2>Dropped points (refitted without them)</h2>",
-                  _table(["measurement", "feature", "line", "standardized"],
+                  reports.html_table(["measurement", "feature", "line", "standardized"],
                          [(o.measurement, o.feature, o.line, _fmt(o.standardized, 3)) for o in result.dropped])]
     for name, title in (("residuals_png", "Residuals"), ("parameters_png", "Estimates"),
                         ("correlation_png", "Correlations")):
@@ -304,7 +275,7 @@ def prior_html(result: CalibrationResult) -> list[str]:
             f"<p>Each free parameter ~ N(nominal, (scale x plausible size)^2), one scale a group, {how}. "
             "'determined': the number of the group's parameters the data determine (sum of 1 - posterior/prior "
             "variance).</p>",
-            _table(["group", "scale", "parameters", "determined", "plausible size at scale 1"], rows)]
+            reports.html_table(["group", "scale", "parameters", "determined", "plausible size at scale 1"], rows)]
 
 
 def discrepancy_html(result: CalibrationResult) -> list[str]:
@@ -325,7 +296,8 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
 
     Files: the model file ``<name>-calibrated.toml`` (the base errors folded into a new description, the
     model's effects with their parameters; :mod:`calibration.model_output`), its covariance file
-    ``<name>-calibrated-covariance.csv`` and ``<name>-calibrated.urdf``, ``summary.json``, ``parameters.csv``, ``residuals.csv``, ``report.html`` and three PNG plots, plus
+    ``<name>-calibrated-covariance.csv`` and ``<name>-calibrated.urdf``, ``summary.json``, ``parameters.csv``,
+    ``residuals.csv``, ``report.html`` and three PNG plots, plus
     ``conformance_training.png`` / ``conformance_holdout.png`` when ``extra`` holds a ``conformance`` entry
     (:func:`calibration.validation.conformance` tables under ``training`` / ``holdout``).
     ``inputs``: files that must never be overwritten (points, artefacts, the nominal arm).
@@ -349,7 +321,8 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
     comment = (f"Calibrated model of '{result.model.desc.name}' written by aacmm calibrate: the description with the "
                f"fitted values folded in"
                + (", and the model's effects with their parameters" if effects else "") + ".\n"
-               f"Solver: {result.status}; s0 = {result.s0:.4g}. Read by every --arm option; format: docs/calibration.md.")
+               f"Solver: {result.status}; s0 = {result.s0:.4g}. Read by every --arm option; format: "
+               "docs/calibration.md.")
     write_model(result, out, name, inputs=inputs, written_by="aacmm calibrate", comment=comment)
     rows = result.parameter_rows()
     write_csv(files["parameters"], {

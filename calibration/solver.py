@@ -10,11 +10,15 @@ with the damping reset (a damped restart); no convergence after that raises :cla
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Callable
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from numpy.typing import ArrayLike
 
 from arm_model import NumericalError
 
@@ -27,7 +31,7 @@ __all__ = ["LMResult", "Prior", "levenberg_marquardt", "normal_solver", "normal_
 @dataclass
 class LMResult:
     p: np.ndarray                 # full parameter vector [SI]
-    states: list                  # nuisance states
+    states: list[np.ndarray]      # nuisance states
     evaluation: Evaluation        # residuals and Jacobians at the solution
     cost: float                   # 0.5 * sum(r_w**2) of the data rows
     iterations: int
@@ -44,29 +48,31 @@ class Prior:
     centre: np.ndarray
     size: np.ndarray
 
-    def rows(self, p, free) -> tuple[np.ndarray, np.ndarray]:
+    def rows(self, p: ArrayLike, free: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(residual rows (nf,), their Jacobian's diagonal (nf,)) for the free indices ``free``."""
         s = self.size[free]
         return (np.asarray(p)[free] - self.centre[free]) / s, 1.0 / s
 
-    def augment(self, ev: Evaluation, p, free) -> Evaluation:
+    def augment(self, ev: Evaluation, p: ArrayLike, free: np.ndarray) -> Evaluation:
         """``ev`` with the prior rows appended (below the data rows)."""
         r, d = self.rows(p, free)
-        if ev.jp is None:
+        if ev.jp is None or ev.jt is None:
             return Evaluation(np.concatenate([ev.r, r]), ev.x)
         return Evaluation(np.concatenate([ev.r, r]), ev.x, np.vstack([ev.jp, np.diag(d)]),
                           sp.vstack([ev.jt, sp.csr_matrix((len(r), ev.jt.shape[1]))], format="csr"))
 
 
 def _full_jacobian(ev: Evaluation) -> sp.csc_matrix:
+    assert ev.jp is not None and ev.jt is not None, "an evaluation with its Jacobians"
     if ev.jp.shape[1] == 0:
         return ev.jt.tocsc()
     return sp.hstack([sp.csr_matrix(ev.jp), ev.jt], format="csc")
 
 
-def normal_solver(j: sp.spmatrix, damping: np.ndarray | float = 0.0):
+def normal_solver(j: sp.spmatrix, damping: np.ndarray | float = 0.0) -> Callable[[np.ndarray], np.ndarray]:
     """A solver ``b -> (J^T J + diag(damping))^-1 b`` (sparse LU of the normal matrix)."""
-    return normal_factor(j, damping).solve
+    solve: Callable[[np.ndarray], np.ndarray] = normal_factor(j, damping).solve
+    return solve
 
 
 def normal_factor(j: sp.spmatrix, damping: np.ndarray | float = 0.0) -> spla.SuperLU:
@@ -88,8 +94,8 @@ def normal_factor(j: sp.spmatrix, damping: np.ndarray | float = 0.0) -> spla.Sup
 RESTARTS = 3
 
 
-def levenberg_marquardt(problem: Problem, p0, states0, *, max_iter: int = 200, xtol: float = 1e-10,
-                        ftol: float = 1e-15, prior: Prior | None = None) -> LMResult:
+def levenberg_marquardt(problem: Problem, p0: ArrayLike, states0: list[np.ndarray], *, max_iter: int = 200,
+                        xtol: float = 1e-10, ftol: float = 1e-15, prior: Prior | None = None) -> LMResult:
     """Minimise ``0.5 |r_w|^2`` over the free parameters and the nuisance increments (plus the prior's
     ``0.5 |(p - centre) / size|^2`` with a :class:`Prior`: the maximum a posteriori estimate).
 
@@ -106,7 +112,7 @@ def levenberg_marquardt(problem: Problem, p0, states0, *, max_iter: int = 200, x
     ``iterations`` count every attempt's.
     """
     p, states, done = np.array(p0, dtype=float), list(states0), 0
-    for attempt in range(RESTARTS + 1):
+    for _attempt in range(RESTARTS + 1):
         out = _lm_attempt(problem, p, states, max_iter, xtol, ftol, prior)
         done += out.iterations
         if out.status is not None:
@@ -119,13 +125,14 @@ def levenberg_marquardt(problem: Problem, p0, states0, *, max_iter: int = 200, x
                          "description); check the points and the arm")
 
 
-def _lm_attempt(problem: Problem, p, states, max_iter: int, xtol: float, ftol: float, prior) -> LMResult:
+def _lm_attempt(problem: Problem, p: ArrayLike, states: list[np.ndarray], max_iter: int, xtol: float, ftol: float,
+                prior: Prior | None) -> LMResult:
     """One run of Levenberg-Marquardt from ``p``, ``states``: its result, with ``status`` None when it ran out
     of iterations (``p``, ``states`` then its best point)."""
     free = problem.free
     n_data = problem.n_rows
 
-    def evaluate(p, states, jac=True):
+    def evaluate(p: np.ndarray, states: list[np.ndarray], jac: bool = True) -> Evaluation:
         ev = problem.evaluate(p, states, jac=jac)
         return ev if prior is None else prior.augment(ev, p, free)
 
@@ -184,16 +191,18 @@ def _lm_attempt(problem: Problem, p, states, max_iter: int, xtol: float, ftol: f
                                      f"cost {cost:.6g}); the problem may be ill-posed")
     if prior is None:
         return LMResult(p, states, ev, cost, it, n_eval, status)
+    assert ev.jp is not None and ev.jt is not None, "an evaluation with its Jacobians"
     data = Evaluation(ev.r[:n_data], ev.x, ev.jp[:n_data], ev.jt[:n_data])
     rd = data.r
     return LMResult(p, states, data, 0.5 * float(rd @ rd), it, n_eval, status, cost - 0.5 * float(rd @ rd))
 
 
-def blas_threads(n: int | None = 1):
+def blas_threads(n: int | None = 1) -> AbstractContextManager[Any]:
     """Context limiting the BLAS threads (threadpoolctl) to ``n`` (None: unchanged). The matrices here
     are thin (thousands x tens): one thread is as fast, and several threads on a busy machine are
     slower by orders of magnitude (OpenBLAS spin-waits)."""
     if n is None:
         return contextlib.nullcontext()
     from threadpoolctl import threadpool_limits
-    return threadpool_limits(limits=n, user_api="blas")
+    limits: AbstractContextManager[Any] = threadpool_limits(limits=n, user_api="blas")
+    return limits

@@ -342,7 +342,7 @@ def select_measurements(model: ArmModel, data: CalibrationData, count: int, opti
     for k, d in enumerate(prob.distance_items):
         meas_of_row[prob.n_point_rows + k] = d.measurement
     ids = data.measurements()
-    blocks = {m: jred[meas_of_row == m] for m in ids}
+    blocks = {m: jred[meas_of_row == m] for m in ids}  # type: ignore[comparison-overlap]
     info = {m: b.T @ b for m, b in blocks.items()}
     npts = {m: int(np.sum(data.points.measurement == m)) for m in ids}
     total = sum(info.values())

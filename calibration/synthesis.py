@@ -27,8 +27,16 @@ import re
 
 import numpy as np
 
-from arm_model.effects import (ApproachOffset, EncoderEccentricity, JointHarmonics, LateralCompliance,
-                               ProbeCompliance, ProbeComplianceMatrix, ProbeThermalGrowth, ThermalGrowth)
+from arm_model.effects import (
+    ApproachOffset,
+    EncoderEccentricity,
+    JointHarmonics,
+    LateralCompliance,
+    ProbeCompliance,
+    ProbeComplianceMatrix,
+    ProbeThermalGrowth,
+    ThermalGrowth,
+)
 from arm_model.model import ArmModel
 
 from .candidates import Candidate

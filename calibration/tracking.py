@@ -14,7 +14,8 @@ from arm_model.model import ArmModel
 from arm_model.tracker import Tracker
 
 from .data import CalibrationData, Weights
-from .problem import MIN_POINTS, Problem
+from .kinds import MIN_POINTS
+from .problem import Problem
 from .solver import levenberg_marquardt
 
 __all__ = ["fit_tracker", "has_reference", "own_frames_fit"]
@@ -28,7 +29,7 @@ def has_reference(data: CalibrationData) -> bool:
 
 def own_frames_fit(data: CalibrationData) -> bool:
     """True when every session of ``data`` has the reference points a frame of its own needs
-    (:data:`calibration.problem.MIN_POINTS`)."""
+    (:data:`calibration.kinds.MIN_POINTS`)."""
     ref = data.reference
     rows = np.all(np.isfinite(ref), axis=1) if ref is not None else np.zeros(len(data), bool)
     _, counts = np.unique(data.sessions[rows].astype(str), return_counts=True)

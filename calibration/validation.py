@@ -33,7 +33,8 @@ from arm_model.model import ArmModel
 from arm_model.tracker import Tracker
 
 from .data import CalibrationData, Weights
-from .problem import MIN_POINTS, Problem
+from .kinds import MIN_POINTS
+from .problem import Problem
 from .solver import blas_threads, levenberg_marquardt
 
 __all__ = ["Validation", "validate", "validate_poses", "heldout_residuals", "before_after", "figure_rows",

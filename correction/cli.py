@@ -4,17 +4,17 @@ from __future__ import annotations
 
 import argparse
 import logging
-from arm_model.cli import command_help
 from pathlib import Path
 
 import numpy as np
 
 from arm_model import InputError, NumericalError, read_artefacts, read_points
-from arm_model.commands import add_arm_options, arm_inputs, model_from_args, number_in
+from arm_model.checks import log_warnings
+from arm_model.cli import command_help
+from arm_model.cli_options import add_arm_options, arm_inputs, model_from_args, number_in
+from arm_model.io import check_features
 from arm_model.log import counted
 from arm_model.output import output_folder
-from arm_model.checks import log_warnings
-from arm_model.io import check_features
 from arm_model.uncertainty_cli import add_input_options
 
 __all__ = ["register", "run_ring", "run_paper"]
@@ -52,10 +52,12 @@ def register(sub) -> None:
                         "the paper's bending sensor, Table 1 terms combined; the axial stays 0.0464 N)")
     r.add_argument("--delta-T-C", type=number_in(0, 1e4), dest="delta_t", default=0.5, metavar="DT",
                    help="temperature variation during the test for the budgets' u_t (default 0.5 C, the paper's)")
-    r.add_argument("--probability-pct", type=number_in(0, 100, low_open=True, high_open=True), dest="probability", default=95.0, metavar="P",
+    r.add_argument("--probability-pct", type=number_in(0, 100, low_open=True, high_open=True), dest="probability",
+                   default=95.0, metavar="P",
                    help="coverage probability of the expanded uncertainties (default 95)")
     add_input_options(r, force=False)
-    r.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created; never an input)")
+    r.add_argument("-o", "--output", type=Path, required=True, metavar="DIR",
+                   help="output folder (created; never an input)")
     r.set_defaults(func=run_ring)
 
     p = sub.add_parser(
@@ -71,15 +73,18 @@ def register(sub) -> None:
     p.add_argument("--table2", type=Path, default=None, metavar="CSV",
                    help="a Table 2 CSV in the bundled format (default: the bundled correction/data/paper_table2.csv; "
                         "docs/ring-pipeline.md)")
-    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder (created; never an input)")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR",
+                   help="output folder (created; never an input)")
     p.set_defaults(func=run_paper)
 
 
 def run_ring(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
+    from arm_model.model_file import parameters_of
     from arm_model.uncertainty import FORCE_SENSOR_U_N
-    from arm_model.uncertainty_cli import inputs_from_args, parameters_of
+    from arm_model.uncertainty_cli import inputs_from_args
+
     from .models import analyse_ring_campaign, campaign_summary, check_reportable, ring_uncertainties, ring_warnings
     from .report import DEFAULT_U_FORCE, ring_budgets, ring_report
 
@@ -125,8 +130,9 @@ def run_ring(args: argparse.Namespace) -> int:
               f"{v['mean_form_error_mm']:>15.4f}")
     u = [d.u for d, _ in point_unc]
     uf = [f.u for _, f in point_unc]
-    log.info(f"from the points' covariances (k = 1; "
-          f"{'parameters from ' + parameters.source if parameters is not None else 'no parameter covariance: parameters exact'}):"
+    log.info("from the points' covariances (k = 1; "
+          + ('parameters from ' + parameters.source if parameters is not None
+             else 'no parameter covariance: parameters exact') + "):"
           f"\n  diameter uncertainty {min(u) * 1e3:.4f} .. {max(u) * 1e3:.4f} mm; form-error uncertainty "
           f"{min(uf) * 1e3:.4f} .. {max(uf) * 1e3:.4f} mm")
     if args.u_force is None:
@@ -136,8 +142,8 @@ def run_ring(args: argparse.Namespace) -> int:
 
 
 def run_paper(args: argparse.Namespace) -> int:
-    from .report import paper_report, paper_summary
     from .paper import load_paper_table2
+    from .report import paper_report, paper_summary
 
     with output_folder(args.output, [args.table2], "paper") as out:
         table = load_paper_table2(args.table2)
@@ -145,12 +151,15 @@ def run_paper(args: argparse.Namespace) -> int:
     s = paper_summary(table)
     bad = [f for f in s["findings"] if not f["consistent"]]
     log.info(f"Table 2 ({len(table.initial)} measurements): Pearson r with the (0, 0) point: "
-          + ", ".join(f"{c['force'].replace('_force_N', '')} {c['r']:.3f}" for c in s["pearson"] if c["with_reference"]))
+          + ", ".join(f"{c['force'].replace('_force_N', '')} {c['r']:.3f}"
+                      for c in s["pearson"] if c["with_reference"]))
     log.info("improvement (reduction of the mean |diameter error|): "
-          + ", ".join(f"{m.replace('_force', '')} {d['mean_abs_reduction_pct']:.1f}%" for m, d in s["improvement"].items()))
+          + ", ".join(f"{m.replace('_force', '')} {d['mean_abs_reduction_pct']:.1f}%"
+                      for m, d in s["improvement"].items()))
     log.info(f"{len(bad)} printed figures of Tables 1 and 3 do not follow from their own terms (see findings.csv)")
     L = s["loop"]
-    log.info(f"loop: residual after the FEM correction vs mean force r = {L['r_residual_force']:.3f}; series compliance "
-          f"{L['series_compliance_mm_per_N']:.4f} mm/N; LOO RMS {L['rms_before_mm']:.4f} -> {L['loo_rms_after_mm']:.4f} mm")
+    log.info(f"loop: residual after the FEM correction vs mean force r = {L['r_residual_force']:.3f}; series "
+             f"compliance {L['series_compliance_mm_per_N']:.4f} mm/N; LOO RMS {L['rms_before_mm']:.4f} -> "
+          f"{L['loo_rms_after_mm']:.4f} mm")
     log.info(f"{counted(len(written), 'file')} -> {args.output}/")
     return 0

@@ -63,30 +63,30 @@ class Term:
 
     # -- constructors: each states how the standard uncertainty follows from its input -----------
     @classmethod
-    def normal(cls, name, u, dof=math.inf, type="B", sensitivity=1.0, **kw) -> "Term":
+    def normal(cls, name, u, dof=math.inf, type="B", sensitivity=1.0, **kw) -> Term:
         """A standard uncertainty given directly (normal distribution)."""
         return cls(name, type, "normal", float(u), sensitivity, dof, **kw)
 
     @classmethod
-    def expanded(cls, name, U, k, sensitivity=1.0, **kw) -> "Term":
+    def expanded(cls, name, U, k, sensitivity=1.0, **kw) -> Term:
         """From an expanded uncertainty ``U`` with coverage factor ``k`` (a certificate): u = U / k."""
         kw.setdefault("source", f"U/k = {U:g} / {k:g}")
         return cls(name, "B", "normal", float(U) / float(k), sensitivity, math.inf, **kw)
 
     @classmethod
-    def rectangular(cls, name, half_width, sensitivity=1.0, **kw) -> "Term":
+    def rectangular(cls, name, half_width, sensitivity=1.0, **kw) -> Term:
         """Rectangular distribution of half-width ``a``: u = a / sqrt(3) (``GTC.type_b.uniform``)."""
         kw.setdefault("source", f"a/sqrt(3), a = {half_width:g}")
         return cls(name, "B", "rectangular", float(GTC.type_b.uniform(half_width)), sensitivity, math.inf, **kw)
 
     @classmethod
-    def rectangular_width(cls, name, width, sensitivity=1.0, **kw) -> "Term":
+    def rectangular_width(cls, name, width, sensitivity=1.0, **kw) -> Term:
         """Rectangular distribution of full width ``w`` (a resolution step): u = w / sqrt(12)."""
         kw.setdefault("source", f"w/sqrt(12), w = {width:g}")
         return cls(name, "B", "rectangular", float(GTC.type_b.uniform(width / 2.0)), sensitivity, math.inf, **kw)
 
     @classmethod
-    def type_a(cls, name, samples, sensitivity=1.0, **kw) -> "Term":
+    def type_a(cls, name, samples, sensitivity=1.0, **kw) -> Term:
         """Type A from repeated observations: u = s / sqrt(n), n - 1 degrees of freedom
         (``GTC.type_a.estimate``)."""
         est = GTC.type_a.estimate(list(map(float, samples)))

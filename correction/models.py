@@ -22,14 +22,15 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError
-from arm_model.output import safe_name
-from arm_model.geometry import CylinderFit, RingFit, ring_fit
+from arm_model.geometry import CylinderFit, ring_fit
 from arm_model.io import PointSet, read_force_signal
+from arm_model.output import safe_name
 
 from .signals import ForceSummary, PointForces, find_point_forces, force_summary, forces_from_columns
 
 __all__ = ["PAPER_MODELS", "MODELS", "MODEL_LABELS", "paper_correction", "correct_ring", "RingMeasurement",
-           "RingCampaign", "analyse_ring_campaign", "ring_uncertainties", "measurement_forces", "table2", "campaign_summary"]
+           "RingCampaign", "analyse_ring_campaign", "ring_uncertainties", "measurement_forces", "table2",
+           "campaign_summary"]
 
 #: the paper's four models, in the order of its Table 2 (point, mean, max, 10Max) kept as labelled
 PAPER_MODELS = ("point", "mean", "max", "max10")

@@ -342,7 +342,7 @@ def table1_reproduction() -> dict:
     budgets, at_printed, findings = {}, {}, []
     for col, j in (("axial", 5), ("bending", 6)):
         terms = tuple(Term(row[0], row[1], row[2], row[j], 1.0, row[3], sensitivity_label=row[4],
-                           source="as printed") for row in PAPER_TABLE1["terms"])
+                           source="as printed") for row in PAPER_TABLE1["terms"])  # type: ignore[attr-defined]
         b = Budget(f"Table 1 {col} force", terms, "N", PAPER_TABLE1["probability"])
         res = b.evaluate()
         budgets[col] = res
@@ -405,7 +405,7 @@ def table3_reproduction(table2: PaperTable2 | None = None) -> dict:
                      for m in ("initial",) + TABLE2_MODELS}
     for j, col in enumerate(cols):
         terms = []
-        for name, typ, dist, dof, lab, vals in PAPER_TABLE3["terms"]:
+        for name, typ, dist, dof, lab, vals in PAPER_TABLE3["terms"]:  # type: ignore[attr-defined]
             if vals[j] is None:
                 continue
             terms.append(Term(name, typ, dist, vals[j], 1.0, dof, sensitivity_label=lab, source="as printed"))
@@ -469,7 +469,7 @@ def table3_reproduction(table2: PaperTable2 | None = None) -> dict:
     # recomputed budgets: u_r from Table 2 (mean-force model for 'with'), u_cor from the bending sensor
     for j, col in enumerate(cols):
         terms = []
-        for name, typ, dist, dof, lab, vals in PAPER_TABLE3["terms"]:
+        for name, typ, dist, dof, lab, vals in PAPER_TABLE3["terms"]:  # type: ignore[attr-defined]
             v = vals[j]
             if v is None:
                 continue

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from arm_model import reports
 from arm_model.checks import warnings_html
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output
 from arm_model.shipped import provenance
@@ -39,20 +40,6 @@ _COLOURS = {"initial": "#444444", "point": "#1f77b4", "mean": "#17becf", "max": 
             "max10_force": "#ff7f0e"}
 _T2_LABELS = {"point_force": "point force", "mean_force": "mean force", "max_force": "max force",
               "max10_force": "10Max force"}
-
-
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
-def _png(fig) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
-    _plt().close(fig)
-    return buf.getvalue()
 
 
 def _num(x):
@@ -171,7 +158,7 @@ def roundness_csv(data: dict) -> dict:
 def _roundness_figure(c: RingCampaign, data: dict) -> bytes:
     """A grid of polar plots, one a measurement: the radial deviations of :func:`roundness_data` against
     angle, the fitted cylinder the dashed circle (deviation 0), one radial scale for all."""
-    plt = _plt()
+    plt = reports.pyplot()
     models = roundness_models(c)
     n = len(data)
     cols = min(n, 4)
@@ -197,11 +184,11 @@ def _roundness_figure(c: RingCampaign, data: dict) -> bytes:
     fig.suptitle("Radial deviation from the fitted cylinder [µm] against angle (dashed: the fitted cylinder)",
                  fontsize=10)
     fig.tight_layout(rect=(0, 0, 1, 1 - 0.35 / fig.get_figheight()))
-    return _png(fig)
+    return reports.png(fig)
 
 
 def _ring_figures(c: RingCampaign, budgets) -> dict:
-    plt = _plt()
+    plt = reports.pyplot()
     figs = {}
     ids = [r.id for r in c.measurements]
     x = np.arange(len(ids))
@@ -220,7 +207,7 @@ def _ring_figures(c: RingCampaign, budgets) -> dict:
     ax.set(xlabel="angular position of the point [deg]", ylabel="contact point radial error [µm]",
            title=f"Contact point errors, measurement {worst.id} (0 = certified radius)", xlim=(0, 360))
     ax.legend(fontsize=8)
-    figs["point_errors.png"] = _png(fig)
+    figs["point_errors.png"] = reports.png(fig)
     # 2-3. diameter and form error per measurement (Figures 7, 8, 13, 14)
     for what, fname, title in (("diameter_error", "diameters.png", "Diameter error, initial and corrected"),
                                ("form_error", "form_errors.png", "Form error, initial and corrected")):
@@ -233,7 +220,7 @@ def _ring_figures(c: RingCampaign, budgets) -> dict:
         ax.set_xticks(x, ids, rotation=60 if len(ids) > 10 else 0, fontsize=7)
         ax.set(xlabel="measurement", ylabel=f"{what.replace('_', ' ')} [mm]", title=title)
         ax.legend(fontsize=8, ncol=3)
-        figs[fname] = _png(fig)
+        figs[fname] = reports.png(fig)
     # 4. force values per measurement (Figure 9)
     fig, ax = plt.subplots(figsize=(9, 3.5))
     for fv, mk in zip(FORCE_VALUES, ("o", "s", "^")):
@@ -241,7 +228,7 @@ def _ring_figures(c: RingCampaign, budgets) -> dict:
     ax.set_xticks(x, ids, rotation=60 if len(ids) > 10 else 0, fontsize=7)
     ax.set(xlabel="measurement", ylabel="bending force [N]", title="Contact force values per measurement")
     ax.legend(fontsize=8)
-    figs["forces.png"] = _png(fig)
+    figs["forces.png"] = reports.png(fig)
     # 5-6. correlations (Figures 10, 11), with the (0, 0) reference point
     for what, fname in (("diameter_error", "correlation_diameter.png"), ("form_error", "correlation_form.png")):
         fig, ax = plt.subplots(figsize=(6.5, 4.5))
@@ -251,13 +238,13 @@ def _ring_figures(c: RingCampaign, budgets) -> dict:
             xv = c.force_values(fv)
             k = corr[f"{fv}_force_N"]
             line = ax.plot(np.r_[0, xv], np.r_[0, y], mk, ms=5,
-                           label=f"{fv}: r = {k.r:.3f}, R² = {k.r2:.2f}")[0]
+                           label=f"{fv}: r = {k.r:.3f}, R² = {k.r2:.2f}")[0]  # type: ignore[attr-defined]
             xs = np.linspace(0, xv.max() * 1.05, 10)
-            ax.plot(xs, k.intercept + k.slope * xs, "-", lw=0.8, color=line.get_color())
+            ax.plot(xs, k.intercept + k.slope * xs, "-", lw=0.8, color=line.get_color())  # type: ignore[attr-defined]
         ax.set(xlabel="force value [N]", ylabel=f"initial {what.replace('_', ' ')} [mm]",
                title=f"{what.replace('_', ' ').capitalize()} against force (with the 0 N, 0 mm point)")
         ax.legend(fontsize=8)
-        figs[fname] = _png(fig)
+        figs[fname] = reports.png(fig)
     # 7. budgets: expanded uncertainty per model
     fig, ax = plt.subplots(figsize=(8, 3.5))
     names = [b.name for b in budgets]
@@ -266,16 +253,10 @@ def _ring_figures(c: RingCampaign, budgets) -> dict:
     ax.set_yticks(np.arange(len(names)), names, fontsize=7)
     ax.invert_yaxis()
     ax.set(xlabel=f"expanded uncertainty U ({budgets[0].probability:g} %) [mm]", title="Uncertainty budgets")
-    figs["budgets.png"] = _png(fig)
+    figs["budgets.png"] = reports.png(fig)
     # 8. polar roundness plots, one a measurement
     figs["roundness.png"] = _roundness_figure(c, roundness_data(c))
     return figs
-
-
-def _table_html(header, rows) -> str:
-    h = "".join(f"<th>{html.escape(str(c))}</th>" for c in header)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>" for r in rows)
-    return f"<table><thead><tr>{h}</tr></thead><tbody>{body}</tbody></table>"
 
 
 def _budget_html(b: BudgetResult) -> str:
@@ -285,9 +266,9 @@ def _budget_html(b: BudgetResult) -> str:
              ("effective degrees of freedom (Welch-Satterthwaite)", "", "", "", "",
               "inf" if b.dof == math.inf else f"{b.dof:.1f}", ""),
              (f"coverage factor k (Student t, {b.probability:g} %)", "", "", "", "", f"{b.k:.3f}", ""),
-             (f"expanded uncertainty U", "", "", "", "", f"{b.U:.4g}", "")]
+             ("expanded uncertainty U", "", "", "", "", f"{b.U:.4g}", "")]
     return (f"<h4>{html.escape(b.name)} [{html.escape(b.unit)}]</h4>"
-            + _table_html(("term", "type", "distribution", "dof", "sensitivity", f"u [{b.unit}]", "from"), rows))
+            + reports.html_table(("term", "type", "distribution", "dof", "sensitivity", f"u [{b.unit}]", "from"), rows))
 
 
 _CSS = ("body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}"
@@ -344,21 +325,9 @@ def _csv_text(columns: dict, fmt: str = "%.6f") -> str:
     return buf.getvalue()
 
 
-def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: list[BudgetResult],
-                warnings=(), point_uncertainty=None, parameters_source=None) -> list[Path]:
-    """Write the report of an analysed ring campaign into folder ``out``: ``report.html``,
-    ``summary.json``, ``table2.csv``, ``correlations.csv``, ``budgets.csv``, ``roundness.csv`` and
-    ``figures/*.png``.
-
-    Args:
-        campaign: :func:`correction.models.analyse_ring_campaign`'s result.
-        inputs: {role: path} of the input files (never written over, listed in the summary).
-        budgets: :func:`ring_budgets`'s result.
-    Returns: the files written.
-    """
-    out = Path(out)
-    in_paths = [p for p in inputs.values() if p is not None]
-    guard_output(out, in_paths)
+def _ring_summary(campaign: RingCampaign, inputs: dict, budgets, warnings, point_uncertainty,
+                  parameters_source) -> dict:
+    """``summary.json`` of :func:`ring_report` (without its provenance)."""
     summary = ring_summary(campaign, budgets, {k: None if v is None else str(v) for k, v in inputs.items()})
     summary["warnings"] = [w.as_dict() for w in warnings]
     if point_uncertainty is not None:
@@ -375,27 +344,19 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
             "model": "wrench" if campaign.measurements and "wrench" in campaign.measurements[0].fits else "initial",
             "measurements": [dict(measurement=r.id, **f.as_dict())
                              for r, (_, f) in zip(campaign.measurements, point_uncertainty)]}
-    summary.update(provenance(in_paths))
-    t2 = table2(campaign)
-    corr = campaign_correlations(campaign)
-    figs = _ring_figures(campaign, budgets)
-    # HTML
+    return summary
+
+
+def _ring_tables_html(campaign: RingCampaign, summary: dict, t2: dict) -> list[str]:
+    """The report's tables per model and per measurement."""
     s = summary["summary"]
     models = campaign.models
-    parts = [f"<p>Ring <b>{html.escape(campaign.feature)}</b>, certified diameter "
-             f"{campaign.reference_diameter * 1e3:.4f} mm, ball {campaign.ball_diameter * 1e3:g} mm, "
-             f"{len(campaign.measurements)} measurements, force sensor: {html.escape(campaign.force_kind)}. "
-             f"The paper's models move each point by f x {campaign.compliance * 1e3:.4f} mm/N towards the axis; "
-             "the full-wrench model evaluates the ball centres again through the probe's elastic joint with "
-             "each point's force vector.</p>"]
-    parts += [f"<p class='bad'>{html.escape(n)}</p>" for n in campaign.notes]
-    parts.append(warnings_html(warnings))
-    parts.append("<h2>Summary per model</h2>" + _table_html(
+    parts = ["<h2>Summary per model</h2>" + reports.html_table(
         ("model", "mean |diameter error| [mm]", "reduction [%]", "mean form error [mm]", "form change [%]",
          "largest form increase [mm]"),
         [(MODEL_LABELS[m], f"{s[m]['mean_abs_diameter_error_mm']:.4f}", f"{s[m]['diameter_error_reduction_pct']:.1f}",
           f"{s[m]['mean_form_error_mm']:.4f}", f"{s[m]['form_error_change_pct']:+.1f}",
-          f"{s[m]['max_form_error_increase_mm']:+.4f}") for m in models]))
+          f"{s[m]['max_form_error_increase_mm']:+.4f}") for m in models])]
     rows = []
     for i, r in enumerate(campaign.measurements):
         row = [r.id]
@@ -404,13 +365,19 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
             row.append(f"{v:.4f}" if m == "initial" else f"{v:.4f} ({t2[f'improvement_{m}_pct'][i]:.0f})")
         rows.append(row)
     parts.append("<h2>Diameter error per measurement [mm] (improvement %)</h2>"
-                 + _table_html(["measurement"] + [MODEL_LABELS[m] for m in models], rows))
-    rows = [[r.id] + [f"{t2[f'form_error_{m}_mm'][i]:.4f}" for m in models] + 
+                 + reports.html_table(["measurement"] + [MODEL_LABELS[m] for m in models], rows))
+    rows = [[r.id] + [f"{t2[f'form_error_{m}_mm'][i]:.4f}" for m in models] +
             [f"{r.summary.mean:.3f}", f"{r.summary.max10:.3f}", f"{r.summary.max:.3f}"]
             for i, r in enumerate(campaign.measurements)]
     parts.append("<h2>Form error [mm] and force values [N] per measurement</h2>"
-                 + _table_html(["measurement"] + [MODEL_LABELS[m] for m in models] + ["mean F", "10Max F", "max F"],
-                               rows))
+                 + reports.html_table(["measurement"] + [MODEL_LABELS[m] for m in models]
+                                      + ["mean F", "10Max F", "max F"], rows))
+    return parts
+
+
+def _ring_figures_html(campaign: RingCampaign, corr) -> list[str]:
+    """The report's figures, the correlations with the force and their table."""
+    parts = []
     for name, cap in (("point_errors.png", "Contact point errors against angular position (paper Fig. 6, 12)"),
                       ("diameters.png", "Initial and corrected diameter errors (paper Fig. 13)"),
                       ("form_errors.png", "Initial and corrected form errors (paper Fig. 8, 14)"),
@@ -422,29 +389,67 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
                  f"max - min is the form error) against its angle about the fitted axis, "
                  f"{' and '.join(MODEL_LABELS[m] for m in rm)}; the data are in roundness.csv.</p>"
                  "<img src='figures/roundness.png' alt='polar roundness plots'>")
-    parts.append("<h2>Correlation with the force (initial errors)</h2>" + _table_html(
+    parts.append("<h2>Correlation with the force (initial errors)</h2>" + reports.html_table(
         ("error", "force value", "with (0, 0)", "n", "Pearson r", "R²", "p", "slope [mm/N]"),
         [(k.y_name, k.x_name, "yes" if k.with_reference else "no", k.n, f"{k.r:.3f}", f"{k.r2:.3f}",
           f"{k.p_value:.2g}", f"{k.slope:.4f}") for k in corr]))
     parts.append("<img src='figures/correlation_diameter.png' alt='diameter error against force'>"
                  "<img src='figures/correlation_form.png' alt='form error against force'>")
+    return parts
+
+
+def _point_uncertainty_html(campaign: RingCampaign, point_uncertainty, parameters_source) -> str:
+    """The diameter and form uncertainty from the points' covariances, as a section of the report."""
+    return ("<h2>Diameter and form uncertainty from the points' covariances (k = 1, beside the GUM budgets)</h2>"
+            f"<p>Parameters: {html.escape(parameters_source or 'none (taken as exact)')}. Each corrected "
+            "ball centre's covariance is propagated through the cylinder fit; errors the points share "
+            "(parameters, compliance) do not average out. 'if independent' is what the naive sum of "
+            "independent point variances would give. The form error (max - min of the residuals) is sampled: its "
+            "standard deviation is u(form), and the mean of the samples minus the measured form is how much the "
+            "point errors alone add to a form error. See docs/ring-pipeline.md.</p>" + reports.html_table(
+                ("measurement", "u(D) [mm]", "point-alone errors [mm]", "parameters [mm]",
+                 "compliance [mm]", "if independent [mm]", "form error [mm]", "u(form) [mm]",
+                 "inflation by the errors [mm]"),
+                [(r.id, f"{u.u * 1e3:.4f}", f"{u.independent * 1e3:.4f}", f"{u.parameters * 1e3:.4f}",
+                  f"{u.compliance * 1e3:.4f}", f"{u.if_independent * 1e3:.4f}", f"{f.form * 1e3:.4f}",
+                  f"{f.u * 1e3:.4f}", f"{f.inflation * 1e3:.4f}")
+                 for r, (u, f) in zip(campaign.measurements, point_uncertainty)]))
+
+
+def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: list[BudgetResult],
+                warnings=(), point_uncertainty=None, parameters_source=None) -> list[Path]:
+    """Write the report of an analysed ring campaign into folder ``out``: ``report.html``,
+    ``summary.json``, ``table2.csv``, ``correlations.csv``, ``budgets.csv``, ``roundness.csv`` and
+    ``figures/*.png``.
+
+    Args:
+        campaign: :func:`correction.models.analyse_ring_campaign`'s result.
+        inputs: {role: path} of the input files (never written over, listed in the summary).
+        budgets: :func:`ring_budgets`'s result.
+    Returns: the files written.
+    """
+    out = Path(out)
+    in_paths = [p for p in inputs.values() if p is not None]
+    guard_output(out, in_paths)
+    summary = _ring_summary(campaign, inputs, budgets, warnings, point_uncertainty, parameters_source)
+    summary.update(provenance(in_paths))
+    t2 = table2(campaign)
+    corr = campaign_correlations(campaign)
+    figs = _ring_figures(campaign, budgets)
+    parts = [f"<p>Ring <b>{html.escape(campaign.feature)}</b>, certified diameter "
+             f"{campaign.reference_diameter * 1e3:.4f} mm, ball {campaign.ball_diameter * 1e3:g} mm, "  # type: ignore[operator]
+             f"{len(campaign.measurements)} measurements, force sensor: {html.escape(campaign.force_kind)}. "
+             f"The paper's models move each point by f x {campaign.compliance * 1e3:.4f} mm/N towards the axis; "
+             "the full-wrench model evaluates the ball centres again through the probe's elastic joint with "
+             "each point's force vector.</p>"]
+    parts += [f"<p class='bad'>{html.escape(n)}</p>" for n in campaign.notes]
+    parts.append(warnings_html(warnings))
+    parts += _ring_tables_html(campaign, summary, t2)
+    parts += _ring_figures_html(campaign, corr)
     parts.append("<h2>Uncertainty budgets (GUM, paper Table 3)</h2><img src='figures/budgets.png' alt='budgets'>")
     parts += [_budget_html(b) for b in budgets]
     if point_uncertainty is not None:
-        parts.append("<h2>Diameter and form uncertainty from the points' covariances (k = 1, beside the GUM budgets)</h2>"
-                     f"<p>Parameters: {html.escape(parameters_source or 'none (taken as exact)')}. Each corrected "
-                     "ball centre's covariance is propagated through the cylinder fit; errors the points share "
-                     "(parameters, compliance) do not average out. 'if independent' is what the naive sum of "
-                     "independent point variances would give. The form error (max - min of the residuals) is sampled: its "
-                     "standard deviation is u(form), and the mean of the samples minus the measured form is how much the "
-                     "point errors alone add to a form error. See docs/ring-pipeline.md.</p>" + _table_html(
-                         ("measurement", "u(D) [mm]", "point-alone errors [mm]", "parameters [mm]",
-                          "compliance [mm]", "if independent [mm]", "form error [mm]", "u(form) [mm]",
-                          "inflation by the errors [mm]"),
-                         [(r.id, f"{u.u * 1e3:.4f}", f"{u.independent * 1e3:.4f}", f"{u.parameters * 1e3:.4f}",
-                           f"{u.compliance * 1e3:.4f}", f"{u.if_independent * 1e3:.4f}", f"{f.form * 1e3:.4f}",
-                           f"{f.u * 1e3:.4f}", f"{f.inflation * 1e3:.4f}")
-                          for r, (u, f) in zip(campaign.measurements, point_uncertainty)]))
+        parts.append(_point_uncertainty_html(campaign, point_uncertainty, parameters_source))
     files = {"report.html": _page("Ring-gauge campaign: force correction", parts),
              "summary.json": json.dumps(summary, indent=1, allow_nan=False) + "\n",
              "table2.csv": _csv_text(t2),
@@ -486,7 +491,8 @@ def paper_summary(table: P.PaperTable2 | None = None) -> dict:
                                 "loo_rms_after_mm": L.rms_after * 1e3},
                 "r_residual_force": L.r, "p_value": L.p_value,
                 "rms_before_mm": L.rms_before * 1e3, "loo_rms_after_mm": L.origin["rms_after"] * 1e3,
-                "mean_abs_before_mm": L.mean_abs_before * 1e3, "loo_mean_abs_after_mm": L.origin["mean_abs_after"] * 1e3}
+                "mean_abs_before_mm": L.mean_abs_before * 1e3,
+                "loo_mean_abs_after_mm": L.origin["mean_abs_after"] * 1e3}
     return _num({
         "source": "Gonzalez-Madruga et al., Sensors 2013, 13, 10430-10448, Tables 1-3",
         "table2_file": table.source,
@@ -507,7 +513,7 @@ def paper_summary(table: P.PaperTable2 | None = None) -> dict:
 
 
 def _paper_figures(table: P.PaperTable2, summary: dict) -> dict:
-    plt = _plt()
+    plt = reports.pyplot()
     figs = {}
     ids = [str(i) for i in table.measurement]
     x = np.arange(len(ids))
@@ -520,7 +526,7 @@ def _paper_figures(table: P.PaperTable2, summary: dict) -> dict:
     ax.set(xlabel="measurement", ylabel="diameter error [mm]",
            title="Paper Table 2: initial and corrected diameter errors (real arm)")
     ax.legend(fontsize=8, ncol=3)
-    figs["paper_table2.png"] = _png(fig)
+    figs["paper_table2.png"] = reports.png(fig)
     forces = P.implied_forces(table)
     fig, ax = plt.subplots(figsize=(9, 3.5))
     for m, mk in (("mean_force", "o"), ("max10_force", "s"), ("max_force", "^")):
@@ -530,7 +536,7 @@ def _paper_figures(table: P.PaperTable2, summary: dict) -> dict:
     ax.set(xlabel="measurement", ylabel="implied force [N]",
            title="Forces implied by Table 2: (initial - corrected) / (2 x 0.0142 mm/N), rounding bars")
     ax.legend(fontsize=8)
-    figs["paper_implied_forces.png"] = _png(fig)
+    figs["paper_implied_forces.png"] = reports.png(fig)
     fig, ax = plt.subplots(figsize=(6.5, 4.5))
     corr = {(c["force"], c["with_reference"]): c for c in summary["pearson"]}
     for m, key, mk in (("mean_force", "mean", "o"), ("max10_force", "max10", "s"), ("max_force", "max", "^")):
@@ -543,7 +549,7 @@ def _paper_figures(table: P.PaperTable2, summary: dict) -> dict:
     ax.set(xlabel="implied force [N]", ylabel="initial diameter error [mm]",
            title="Paper Fig. 10 reproduced from Table 2 (with the 0 N, 0 mm point)")
     ax.legend(fontsize=8)
-    figs["paper_correlation.png"] = _png(fig)
+    figs["paper_correlation.png"] = reports.png(fig)
     L = P.close_loop(table)
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(12, 4.2))
     a1.plot(L.force, L.residual * 1e3, "o", color=_COLOURS["mean_force"], label="after the FEM (stylus) correction")
@@ -565,7 +571,7 @@ def _paper_figures(table: P.PaperTable2, summary: dict) -> dict:
     a2.set(xlabel="measurement", ylabel="diameter error [mm]",
            title=f"RMS {L.rms_before * 1e3:.4f} -> {L.origin['rms_after'] * 1e3:.4f} mm (cross-validated)")
     a2.legend(fontsize=8)
-    figs["paper_loop.png"] = _png(fig)
+    figs["paper_loop.png"] = reports.png(fig)
     return figs
 
 
@@ -603,7 +609,7 @@ def paper_report(out: str | Path, table_path: str | Path | None = None) -> list[
     rows = [(str(table.measurement[i]), f"{table.initial[i] * 1e3:.3f}")
             + tuple(f"{forces[m][i]:.2f}" for m in ("point_force", "mean_force", "max10_force", "max_force"))
             for i in range(len(table.initial))]
-    parts.append(_table_html(("measurement", "initial [mm]", "point F [N]", "mean F [N]", "10Max F [N]",
+    parts.append(reports.html_table(("measurement", "initial [mm]", "point F [N]", "mean F [N]", "10Max F [N]",
                               "max F [N]"), rows))
     parts.append("<img src='figures/paper_table2.png' alt='Table 2'><img src='figures/paper_implied_forces.png' "
                  "alt='implied forces'>")
@@ -611,11 +617,11 @@ def paper_report(out: str | Path, table_path: str | Path | None = None) -> list[
              f"{P.PAPER_PEARSON[c['force'].replace('_force_N', '')]:.2f}" if c["with_reference"] else "")
             for c in s["pearson"]]
     parts.append("<h3>Pearson r of the diameter error with the force</h3>"
-                 + _table_html(("force", "with (0, 0)", "r", "R²", "paper"), rows)
+                 + reports.html_table(("force", "with (0, 0)", "r", "R²", "paper"), rows)
                  + "<img src='figures/paper_correlation.png' alt='correlation'>")
     rows = [(_T2_LABELS[m], f"{d['mean_abs_reduction_pct']:.1f}", f"{d['mean_pct']:.1f}", f"{d['median_pct']:.1f}",
              f"{P.PAPER_IMPROVEMENT[m]:.0f}") for m, d in imp.items()]
-    parts.append("<h3>Improvement of the diameter error [%]</h3>" + _table_html(
+    parts.append("<h3>Improvement of the diameter error [%]</h3>" + reports.html_table(
         ("model", "reduction of mean |error|", "mean of per-measurement", "median", "paper's conclusion"), rows)
         + "<p>The table supports max &gt; 10Max (as the paper's §4.2 says: the max-force model achieved the "
           "largest reduction); the conclusion's '60 % and 55 %' for 10Max and max assigns the two figures the "
@@ -625,7 +631,7 @@ def paper_report(out: str | Path, table_path: str | Path | None = None) -> list[
                                                         else str(f["computed"])),
              "yes" if f["consistent"] else "NO", f["note"]) for f in findings]
     parts.append("<h2>Tables 1 and 3: every printed figure recomputed (GTC)</h2>"
-                 + _table_html(("table", "figure", "printed", "recomputed", "consistent", "what follows"), rows))
+                 + reports.html_table(("table", "figure", "printed", "recomputed", "consistent", "what follows"), rows))
     t1, t3 = P.table1_reproduction(), P.table3_reproduction(table)
     parts.append("<h3>Table 1 evaluated from its terms</h3>" + "".join(_budget_html(b) for b in t1["budgets"].values()))
     parts.append("<h3>Table 3 evaluated from its terms</h3>" + "".join(_budget_html(b) for b in t3["budgets"].values()))
@@ -658,10 +664,11 @@ def paper_report(out: str | Path, table_path: str | Path | None = None) -> list[
         "<img src='figures/paper_loop.png' alt='closing the loop'>")
     rows = [(p["measurement"], f"{p['initial_mm']:.3f}", f"{p['after_fem_mean_force_mm']:.3f}",
              f"{p['after_fem_plus_series_compliance_loo_mm']:+.4f}") for p in s["per_measurement"]]
-    parts.append("<h3>Diameter error per measurement [mm]</h3>" + _table_html(
+    parts.append("<h3>Diameter error per measurement [mm]</h3>" + reports.html_table(
         ("measurement", "initial", "after FEM (mean force)", "after FEM + series compliance (LOO)"), rows))
     files = {"report.html": _page("The seed paper reproduced and the loop closed", parts),
-             "summary.json": json.dumps({**s, **provenance([P.TABLE2_PATH if table_path is None else table_path])}, indent=1, allow_nan=False) + "\n",
+             "summary.json": json.dumps({**s, **provenance([P.TABLE2_PATH if table_path is None else table_path])},
+                                        indent=1, allow_nan=False) + "\n",
              "table2_implied.csv": _csv_text(t2cols),
              "findings.csv": _csv_text({k: np.array([str(f[k]) for f in findings], dtype=object)
                                         for k in ("table", "item", "printed", "computed", "consistent", "note")})}

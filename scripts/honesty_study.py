@@ -8,8 +8,8 @@ noise), analysed by ``close_loop`` with its defaults (effects built from the res
     python scripts/honesty_study.py --shape tiny --seeds 0-19 -o out/honesty
 
 Shapes (probing noise 2 um, the temperature drifting 8 K/h with a 5-min gap between measurements, so 9 K
-(tiny) to 17 K (synthesis) over the campaign, and a 3 N mean contact force, so the thermal, force and approach families have
-something to look at):
+(tiny) to 17 K (synthesis) over the campaign, and a 3 N mean contact force, so the thermal, force and approach families
+have something to look at):
 
 * ``synthesis``: 280 points, 26 measurements (12 ball-bar positions of 5 points a sphere, 4 seats of 10
   articulations, 10 spheres of 12 points), the size of tests/test_loop_synthesis.py;

@@ -99,3 +99,267 @@ def test_the_import_check_sees_an_upward_import(tmp_path):
     f = tmp_path / "m.py"
     f.write_text("def f():\n    from calibration.loop import close_loop\n    import viz.scene\n")
     assert list(_imports(f)) == [(2, "calibration"), (3, "viz")]
+
+
+# -- the module graph: no cycle, counting imports inside functions -------------------------------------
+
+def _module_name(path, root=ROOT) -> str:
+    """``arm_model/sim/ik.py`` -> ``arm_model.sim.ik``; a package's ``__init__.py`` is the package."""
+    parts = path.relative_to(root).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _source(module: str, is_package: bool, node: ast.ImportFrom) -> str:
+    """The module a ``from ... import`` statement of ``module`` (a package's ``__init__`` when
+    ``is_package``) reads from, its relative dots resolved."""
+    if not node.level:
+        return node.module or ""
+    base = module.split(".")
+    base = base[:len(base) - node.level + (1 if is_package else 0)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def _import_targets(module: str, is_package: bool, tree: ast.AST, modules: set[str]):
+    """(line, imported module) of every import statement anywhere in ``tree`` (inside functions, under
+    ``if TYPE_CHECKING`` too) that lands in ``modules``. A relative import is resolved against ``module``;
+    ``from pkg import name`` is an edge to ``pkg.name`` when that is a module, else to ``pkg``; ``import
+    a.b.c`` is an edge to ``a.b.c`` (or its longest prefix that is a module of the project)."""
+    def landing(name):
+        while name and name not in modules:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                yield node.lineno, landing(a.name)
+        elif isinstance(node, ast.ImportFrom):
+            src = _source(module, is_package, node)
+            for a in node.names:
+                sub = f"{src}.{a.name}"
+                yield node.lineno, sub if sub in modules else landing(src)
+
+
+def module_graph(root=ROOT, packages=tuple(FLOORS)) -> dict[str, dict[str, int]]:
+    """module -> {imported module: line of the first such import} over every module of ``packages``."""
+    paths = {_module_name(p, root): p for pkg in packages for p in sorted((root / pkg).rglob("*.py"))}
+    graph: dict[str, dict[str, int]] = {}
+    for module, path in paths.items():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        edges = graph.setdefault(module, {})
+        for line, target in _import_targets(module, path.name == "__init__.py", tree, set(paths)):
+            if target is not None and target != module:
+                edges.setdefault(target, line)
+    return graph
+
+
+def import_groups(graph: dict[str, dict[str, int]]) -> list[set[str]]:
+    """The strongly connected groups of more than one module (each module of a group imports every other
+    one, directly or not): Tarjan's algorithm, iterative."""
+    index, low, on_stack, stack, groups, counter = {}, {}, set(), [], [], [0]
+    for start in sorted(graph):
+        if start in index:
+            continue
+        work = [(start, iter(sorted(graph[start])))]
+        index[start] = low[start] = counter[0]
+        counter[0] += 1
+        stack.append(start)
+        on_stack.add(start)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = counter[0]
+                    counter[0] += 1
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph.get(child, ())))))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                group = set()
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    group.add(member)
+                    if member == node:
+                        break
+                if len(group) > 1:
+                    groups.append(group)
+    return groups
+
+
+def import_cycles(graph: dict[str, dict[str, int]]) -> list[list[str]]:
+    """One cycle (``[a, b, ..., a]``) for each group of :func:`import_groups`: a shortest path from the
+    group's first module back to it."""
+    cycles = []
+    for group in import_groups(graph):
+        first = min(group)
+        paths, frontier = {first: [first]}, [first]         # breadth first inside the group, back to first
+        cycle = None
+        while frontier and cycle is None:
+            nxt = []
+            for node in frontier:
+                for child in sorted(graph[node]):
+                    if child == first:
+                        cycle = paths[node] + [first]
+                        break
+                    if child in group and child not in paths:
+                        paths[child] = paths[node] + [child]
+                        nxt.append(child)
+                if cycle:
+                    break
+            frontier = nxt
+        cycles.append(cycle)
+    return sorted(cycles)
+
+
+def _describe(cycle: list[str], graph) -> str:
+    steps = [f"{a} (line {graph[a][b]}) -> {b}" for a, b in zip(cycle, cycle[1:])]
+    return "\n    ".join(steps)
+
+
+def test_no_import_cycle_between_modules():
+    graph = module_graph()
+    assert len(graph) > 80 and sum(map(len, graph.values())) > 200       # the graph found the modules
+    groups = sorted(import_groups(graph), key=min)
+    assert not groups, "import cycles between modules (imports inside functions count):\n  " + "\n  ".join(
+        f"{len(g)} modules tied: {', '.join(sorted(g))}\n  one cycle:\n    {_describe(c, graph)}"
+        for g, c in zip(groups, import_cycles(graph)))
+
+
+def test_the_cycle_check_sees_a_cycle_through_a_function_level_import(tmp_path):
+    """The check itself, on a small tree: a relative import at the top, a submodule named by ``from pkg
+    import name``, and the import inside a function that closes the circle."""
+    pkg = tmp_path / "pkg"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "sub" / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("from .sub import b\n")
+    (pkg / "sub" / "b.py").write_text("import os\nfrom pkg import c\n")
+    (pkg / "c.py").write_text("def f():\n    from .a import g\n")
+    (pkg / "d.py").write_text("from pkg.sub import b\n")
+    graph = module_graph(tmp_path, ("pkg",))
+    assert graph["pkg.a"] == {"pkg.sub.b": 1} and graph["pkg.sub.b"] == {"pkg.c": 2}
+    assert graph["pkg.c"] == {"pkg.a": 2} and graph["pkg.d"] == {"pkg.sub.b": 1}
+    assert import_cycles(graph) == [["pkg.a", "pkg.sub.b", "pkg.c", "pkg.a"]]
+    (pkg / "c.py").write_text("def f():\n    import os\n")
+    assert import_cycles(module_graph(tmp_path, ("pkg",))) == []
+
+
+# -- no function over 100 lines ------------------------------------------------------------------------
+
+#: the longest function (or method) the source may hold, in lines from its ``def`` to its last line
+MAX_FUNCTION_LINES = 100
+
+
+def long_functions(root=ROOT, packages=tuple(FLOORS), limit: int = MAX_FUNCTION_LINES) -> list[str]:
+    """``path:line name (n lines)`` of every function of ``packages`` longer than ``limit`` lines (nested
+    functions are counted within their parent and on their own)."""
+    out = []
+    for pkg in packages:
+        for path in sorted((root / pkg).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    n = node.end_lineno - node.lineno + 1
+                    if n > limit:
+                        out.append(f"{path.relative_to(root)}:{node.lineno} {node.name} ({n} lines)")
+    return out
+
+
+def test_no_function_over_100_lines():
+    long = long_functions()
+    assert not long, f"functions over {MAX_FUNCTION_LINES} lines (split them into named steps): {long}"
+
+
+def test_the_length_check_sees_a_long_function(tmp_path):
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    (pkg / "m.py").write_text("def short():\n    return 1\n\n\nclass C:\n    def long(self):\n"
+                              + "        x = 1\n" * 100 + "        return x\n")
+    assert long_functions(tmp_path, ("pkg",)) == ["pkg/m.py:6 long (102 lines)"]
+    assert long_functions(tmp_path, ("pkg",), limit=102) == []
+
+
+# -- shared plumbing is public -------------------------------------------------------------------------
+
+def private_imports(root=ROOT, packages=tuple(FLOORS)) -> list[str]:
+    """``path:line`` of every import, in ``packages``, of a ``_private`` module of the project or of a
+    ``_private`` name of another module (a name shared across modules is public)."""
+    paths = {_module_name(p, root): p for pkg in packages for p in sorted((root / pkg).rglob("*.py"))}
+    out = []
+    for module, path in paths.items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                names = [(a.name, None) for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                src = _source(module, path.name == "__init__.py", node)
+                names = [(src, a.name) for a in node.names]
+            else:
+                continue
+            for src, name in names:
+                if src.split(".")[0] not in packages:
+                    continue
+                private_module = any(p.startswith("_") and not p.startswith("__") for p in src.split("."))
+                private_name = name is not None and name.startswith("_") and not name.startswith("__")
+                if private_module or private_name:
+                    out.append(f"{path.relative_to(root)}:{node.lineno} imports {src}"
+                               + (f".{name}" if name else ""))
+    return out
+
+
+def test_no_private_module_or_name_is_imported_across_modules():
+    bad = private_imports()
+    assert not bad, f"private modules or names used by other modules (make them public): {bad}"
+
+
+def test_the_privacy_check_sees_private_imports(tmp_path):
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "_hidden.py").write_text("X = 1\n")
+    (pkg / "a.py").write_text("def _f():\n    pass\n")
+    (pkg / "b.py").write_text("import os\nfrom . import _hidden\nfrom .a import _f\nfrom pkg.a import __doc__\n")
+    assert private_imports(tmp_path, ("pkg",)) == ["pkg/b.py:2 imports pkg._hidden", "pkg/b.py:3 imports pkg.a._f"]
+
+
+def _arm_model_floors() -> list[list[str]]:
+    """The floors of the doc's block under "The floors inside `arm_model`", bottom first: each a list of
+    module names (``io``), packages (``sim/``) or modules of a package (``sim/cli``)."""
+    text = DOC.read_text(encoding="utf-8")
+    block = re.search(r"### The floors inside `arm_model`.*?```\n(.*?)```", text, flags=re.S).group(1)
+    texts: list[str] = []
+    for line in block.splitlines():
+        if line[:14].strip():
+            texts.append("")
+        texts[-1] += " " + line[14:]
+    return [[n.strip() for n in re.sub(r"\([^)]*\)", "", s).split(",") if n.strip()] for s in texts]
+
+
+def test_the_floors_inside_arm_model_are_the_docs():
+    floors = _arm_model_floors()
+    assert len(floors) >= 5
+    where = {name: k for k, floor in enumerate(floors) for name in floor}
+    for name in where:
+        assert (ROOT / "arm_model" / f"{name.rstrip('/')}{'' if name.endswith('/') else '.py'}").exists(), name
+
+    def floor(module: str) -> int | None:
+        parts = module.split(".")[1:]
+        if not parts:
+            return -1                       # the package's __init__: lazy names only
+        for key in ("/".join(parts[:2]), parts[0] + "/", parts[0]):
+            if key in where:
+                return where[key]
+        return None
+
+    graph = module_graph()
+    unplaced = [m for m in graph if m.startswith("arm_model") and floor(m) is None]
+    assert not unplaced, f"modules of arm_model on no floor of docs/architecture.md: {unplaced}"
+    up = [f"{m} (floor {floor(m)}) imports {t} (floor {floor(t)})" for m, targets in graph.items()
+          if m.startswith("arm_model") for t in targets if t.startswith("arm_model") and floor(t) > floor(m)]
+    assert not up, f"imports that run up the floors of arm_model in docs/architecture.md: {up}"

@@ -139,7 +139,8 @@ HALVES = [0.125, 2.675, 1.005, 0.5, 1.5, 2.5, -0.5, -2.5, 703688.3466426451, 1e-
 @example(HALVES, 8)
 def test_vectorised_fixed_format_equals_python(values, decimals):
     v = np.array(values, dtype=float)
-    got = format_csv({"a_mm": v, "n": np.arange(len(v)), "t": np.array(["x,y", 'q"', "plain"] * 14, dtype=object)[: len(v)]},
+    got = format_csv({"a_mm": v, "n": np.arange(len(v)),
+                      "t": np.array(["x,y", 'q"', "plain"] * 14, dtype=object)[: len(v)]},
                      fmt=f"%.{decimals}f", header=False).decode()
     import csv
     import io
@@ -251,7 +252,7 @@ def test_fixed_format_of_large_values_equals_python(values, decimals):
     v = np.array(values)
     got = format_csv({"a": v}, f"%.{decimals}f", header=False).decode().splitlines()
     want = [(f"%.{decimals}f" % x).replace("-0." + "0" * decimals, "0." + "0" * decimals) if decimals
-            else ("%.0f" % x if "%.0f" % x != "-0" else "0") for x in v]
+            else ("%.0f" % x if "%.0f" % x != "-0" else "0") for x in v]  # noqa: UP031 (printf: the reference)
     assert got == want
 
 

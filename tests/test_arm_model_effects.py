@@ -8,8 +8,15 @@ import numpy as np
 import pytest
 
 from arm_model import PinocchioArm, ball_centres, load_description
-from arm_model.effects import (EncoderEccentricity, ForceSensorError, JointCompliance, JointGain, JointHarmonics,
-                               ProbeCompliance, ThermalGrowth)
+from arm_model.effects import (
+    EncoderEccentricity,
+    ForceSensorError,
+    JointCompliance,
+    JointGain,
+    JointHarmonics,
+    ProbeCompliance,
+    ThermalGrowth,
+)
 from arm_model.model import ArmModel, AuxData
 from conftest import NOMINAL, assert_close
 
@@ -85,11 +92,13 @@ def test_joint_compliance_turns_joint_by_load(nominal, pin_arm):
     model = ArmModel(nominal, (JointCompliance(joints=(1,)),))
     c = 2e-6  # rad/(N m)
     p = model.spec.vector({"j2.compliance": c})
-    q = np.zeros((1, 7)); q[0, 1] = 1.0
+    q = np.zeros((1, 7))
+    q[0, 1] = 1.0
     w = np.array([[0.0, 0.0, -3.0]])
     tg, tc = pin_arm.torques(q, w)
     got = model.ball_centres(q, w, p, AuxData(tau_gravity=tg, tau_contact=tc))
-    q_true = q.copy(); q_true[0, 1] += c * (tc[0, 1] - tg[0, 1])
+    q_true = q.copy()
+    q_true[0, 1] += c * (tc[0, 1] - tg[0, 1])
     assert_close(got, ball_centres(nominal, q_true, w), atol=1e-15)
     assert abs(c * (tc[0, 1] - tg[0, 1])) > 1e-6      # a real turn, not a no-op
 

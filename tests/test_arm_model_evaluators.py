@@ -22,10 +22,14 @@ def hand_dh_point(desc, q, p_last):
         return np.array([[1, 0, 0, 0], [0, c, -s, 0], [0, s, c, 0], [0, 0, 0, 1.0]])
 
     def tz(d):
-        m = np.eye(4); m[2, 3] = d; return m
+        m = np.eye(4)
+        m[2, 3] = d
+        return m
 
     def tx(a):
-        m = np.eye(4); m[0, 3] = a; return m
+        m = np.eye(4)
+        m[0, 3] = a
+        return m
 
     T = np.eye(4)
     for j, qi in zip(desc.joints, q):
@@ -57,7 +61,7 @@ def test_three_evaluators_agree_to_1e12(nominal, convention):
     rng = np.random.default_rng(11)
     desc = nominal if convention == "dh" else _mdh_variant(nominal)
     f = casadi_ball_centre(desc)
-    for trial in range(3):
+    for _trial in range(3):
         p = random_params(rng, desc)
         d_p = apply_params(desc, p)
         arm = PinocchioArm(d_p)
@@ -383,7 +387,7 @@ def test_three_evaluators_agree_with_prismatic_and_mimic_joints(nominal, arm):
     f = casadi_ball_centre(desc)
     q = _q_within(desc, rng, 12)
     _, w = random_inputs(rng, 12, desc)
-    for trial in range(2):
+    for _trial in range(2):
         p = random_params(rng, desc)
         pin_arm = PinocchioArm(apply_params(desc, p))
         batch = ball_centres(desc, q, w, p)
@@ -500,7 +504,8 @@ def test_joint_angle_effects_skip_prismatic_joints_and_refuse_a_coupled_arm(nomi
     from arm_model.model import ArmModel
     arms = _arms(nominal)
     m = ArmModel(arms["dh"], (EncoderEccentricity(harmonics=(1,)),))
-    assert [n for n in m.spec.names if "ecc" in n] == [f"j{i}.ecc1_{t}" for i in (1, 2, 4, 5, 6, 7) for t in ("cos", "sin")]
+    assert [n for n in m.spec.names if "ecc" in n] == [f"j{i}.ecc1_{t}" for i in (1, 2, 4, 5, 6, 7)
+                                                       for t in ("cos", "sin")]
     with pytest.raises(ValueError, match="'j3' is prismatic"):
         ArmModel(arms["dh"], (JointCompliance(joints=(2,)),))
     with pytest.raises(ValueError, match="mimics another joint"):

@@ -44,7 +44,8 @@ def test_description_errors_name_line_and_key(edit, line_key):
 
 
 def test_description_accepts_other_units():
-    text = NOMINAL.read_text().replace("d_mm = 420.0", "d_m = 0.42").replace("alpha_deg = 90.0", "alpha_rad = 1.5707963267948966", 1)
+    text = NOMINAL.read_text().replace("d_mm = 420.0", "d_m = 0.42").replace("alpha_deg = 90.0",
+                                                                             "alpha_rad = 1.5707963267948966", 1)
     d = parse_description(text)
     assert d.joints[2].d == pytest.approx(0.42, abs=1e-15)
     assert d.joints[0].alpha == pytest.approx(math.pi / 2, abs=1e-15)
@@ -95,7 +96,8 @@ def test_prismatic_joint_columns_are_lengths():
     (HEADER + "\n" + row() + "\n" + row().replace("0.5", "inf") + "\n", 3, "fx_N", "finite"),
     (HEADER + "\n" + row().replace("0.5", "abc") + "\n", 2, "fx_N", "number"),
     (HEADER + "\n" + row().replace("0.5", "") + "\n", 2, "fx_N", "empty cell"),
-    (HEADER.replace(",q7_deg", "") + "\n" + row()[: row().rindex(",0.0,0.5")] + ",0.5,-0.2,0.1\n", 1, "q6_deg", "arm has 7"),
+    (HEADER.replace(",q7_deg", "") + "\n" + row()[: row().rindex(",0.0,0.5")] + ",0.5,-0.2,0.1\n", 1, "q6_deg",
+     "arm has 7"),
     (HEADER + "\n" + row() + ",9\n", 2, None, "cells"),
     (HEADER.replace("measurement,", "id,") + "\n" + row() + "\n", 1, "measurement", "missing"),
     (HEADER.replace("q3_deg", "q3_mm") + "\n" + row() + "\n", 1, "q3_mm", "angle"),
@@ -122,7 +124,8 @@ def test_forces_over_range_are_flagged_not_dropped():
     assert len(pts) == 2 and pts.over_force(13.0).tolist() == [False, True]
 
 
-finite = st.floats(-1e4, 1e4, allow_nan=False, allow_infinity=False)    # within the plausible ranges (docs/formats.md §1)
+# within the plausible ranges (docs/formats.md §1)
+finite = st.floats(-1e4, 1e4, allow_nan=False, allow_infinity=False)
 
 
 @settings(max_examples=60, deadline=None)

@@ -11,8 +11,15 @@ import numpy as np
 import pytest
 
 from arm_model import PinocchioArm, ball_centres
-from arm_model.effects import (EFFECTS, ApproachOffset, JointHarmonics, LateralCompliance, ProbeComplianceMatrix,
-                               ProbeThermalGrowth, ThermalGrowth)
+from arm_model.effects import (
+    EFFECTS,
+    ApproachOffset,
+    JointHarmonics,
+    LateralCompliance,
+    ProbeComplianceMatrix,
+    ProbeThermalGrowth,
+    ThermalGrowth,
+)
 from arm_model.model import ArmModel, AuxData
 from arm_model.urdf import urdf_text
 from arm_model.urdf_import import load_arm

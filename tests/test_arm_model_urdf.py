@@ -11,7 +11,8 @@ from conftest import ROOT, assert_close
 def test_committed_urdf_is_not_stale(nominal):
     committed = (ROOT / "urdf" / "aacmm7.urdf").read_text()
     assert committed == urdf_text(nominal), (
-        "urdf/aacmm7.urdf differs from its generator: run `make urdf` (aacmm urdf urdf/aacmm7.dh.toml -o urdf/aacmm7.urdf)")
+        "urdf/aacmm7.urdf differs from its generator: run `make urdf` (aacmm urdf urdf/aacmm7.dh.toml -o "
+        "urdf/aacmm7.urdf)")
 
 
 def test_urdf_loads_in_yourdfpy_and_matches_chain(nominal):

@@ -1,7 +1,6 @@
 """Arms given as a URDF: the chain to --tip-frame, origin-error parameters, three evaluators agree."""
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
@@ -20,7 +19,8 @@ def arm_urdf(nominal) -> str:
     text += ('  <joint name="tip_joint" type="fixed"><parent link="flange"/><child link="tip"/>'
              '<origin xyz="0.001 -0.002 0.085" rpy="0.3 0 0"/></joint>\n  <link name="tip"/>\n'
              '  <joint name="finger" type="revolute"><parent link="link_3"/><child link="finger_link"/>'
-             '<origin xyz="0.1 0 0" rpy="0 0 0"/><axis xyz="1 0 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>\n'
+             '<origin xyz="0.1 0 0" rpy="0 0 0"/><axis xyz="1 0 0"/><limit lower="-1" upper="1" effort="1" '
+             'velocity="1"/></joint>\n'
              '  <link name="finger_link"/>\n</robot>\n')
     return text
 
@@ -60,7 +60,8 @@ def test_urdf_chain_three_evaluators_with_origin_errors(nominal, tmp_path):
     dp = apply_params(d, p)
     arm, f = PinocchioArm(dp), casadi_ball_centre(d)
     q = rng.uniform(-3, 3, (10, 7))
-    w = np.zeros((10, 6)); w[:, :3] = rng.normal(0, 3, (10, 3))
+    w = np.zeros((10, 6))
+    w[:, :3] = rng.normal(0, 3, (10, 3))
     batch = ball_centres(d, q, w, p)
     for i in range(10):
         assert_close(arm.ball_centre(q[i], w[i]), batch[i], atol=1e-12)

@@ -332,9 +332,9 @@ def test_masses_naming_an_unknown_link_or_for_a_toml_arm(tmp_path):
 
 
 def test_joint_compliance_skip_says_why():
+    from arm_model.io import read_artefacts, read_points
     from calibration.candidates import library_candidates
     from calibration.data import make_data
-    from arm_model.io import read_artefacts, read_points
     data_dir = PANDA.parent
     pts = read_points(data_dir / "front" / "points.csv", 7)
     arts = read_artefacts(data_dir / "artefacts.toml")
@@ -518,7 +518,8 @@ def test_user_meshes_are_kept_for_the_viewer(tmp_path):
     (('xyz="0 0 0.333"', 'xyz="0 0 zero"'), "must be 3 finite numbers", 20),
     (('<parent link="panda_link0" />', '<parent link="panda_link_zero" />'), "is not defined", 21),
     (('<link name="panda_link2">', '<link name="panda_link1">'), "defined twice", 28),
-    (('type="revolute">\n    <origin rpy="0 0 0" xyz="0 0 0.333" />', 'type="hinge">\n    <origin rpy="0 0 0" xyz="0 0 0.333" />'),
+    (('type="revolute">\n    <origin rpy="0 0 0" xyz="0 0 0.333" />', 'type="hinge">\n    <origin rpy="0 0 0" xyz="0 0 '
+                                                                      '0.333" />'),
      "type must be one of", 19),
     (('</robot>', '</robt>'), "not valid XML", None),
     (('<mass value="4.97068" />', '<mass value="nan" />'), "finite", 16),

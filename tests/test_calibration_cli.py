@@ -108,6 +108,7 @@ def test_study_poses(files, tmp_path, capsys):
     assert set(sel["u_chosen"]) == set(sel["parameters"])
     assert all(sel["u_chosen"][k] >= sel["u_pool"][k] * (1 - 1e-9) for k in sel["parameters"])
     import hashlib
+
     from arm_model.shipped import version
     assert sel["aacmm_version"] == version()
     assert sel["input_sha256"][str(f["points"])] == hashlib.sha256(f["points"].read_bytes()).hexdigest()

@@ -119,6 +119,7 @@ def test_the_model_file_carries_the_discrepancy_into_tip(tmp_path, model):
     --u-model-discrepancy-um 0 takes it out."""
     import csv
     import json
+
     from arm_model.cli import main
     from arm_model.model_file import load_model
     from conftest import ROOT

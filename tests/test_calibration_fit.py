@@ -9,9 +9,9 @@ import pytest
 
 from arm_model.effects import ProbeCompliance
 from arm_model.model import ArmModel
+from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 from calibration import FitOptions, Weights, calibrate, make_data, split_holdout, validate
 from calibration.validation import _articulation
-from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 from conftest import assert_close
 
 SPEC = SynthSpec(ballbars=10, ballbar_points=5, seats=3, articulations=10, spheres=1, sphere_points=12, rings=1,
@@ -176,6 +176,7 @@ def test_probing_scatter_is_net_of_the_propagated_encoder_and_force_noise(nomina
     assert 0.1e-6 < b["encoders"] < 1e-6 and 0.1e-6 < b["force sensor"] < 1e-6
     assert b["net"] == pytest.approx(np.sqrt(b["gross"] ** 2 - var_q - var_f), rel=1e-6)
     assert res.probing_scatter() == b["net"] and not b["floored"] and b["net"] < b["gross"]
-    coarse = dc_replace(nominal, joints=tuple(dc_replace(j, encoder_resolution=np.radians(0.01)) for j in nominal.joints))
+    coarse = dc_replace(nominal, joints=tuple(dc_replace(j, encoder_resolution=np.radians(0.01))
+                                              for j in nominal.joints))
     floored = dc_replace(res, model=ArmModel(coarse)).probing_budget()
     assert floored["floored"] and floored["net"] == 0.0 and floored["encoders"] > floored["gross"]

@@ -6,8 +6,8 @@ import pytest
 
 from arm_model import NumericalError
 from arm_model.model import ArmModel
-from calibration import FitOptions, analyse, calibrate, make_data, Weights
 from arm_model.sim.quick import SynthSpec, make_campaign
+from calibration import FitOptions, Weights, analyse, calibrate, make_data
 from conftest import assert_close
 
 

@@ -4,7 +4,6 @@ prior cost, the evidence's choice of each group's scale against campaigns whose 
 known scales, no bias on well-determined parameters, the parameter groups, and the command line."""
 from __future__ import annotations
 
-import json
 import numpy as np
 import pytest
 
@@ -12,8 +11,15 @@ from arm_model.model import ArmModel
 from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 from calibration import FitOptions, Weights, calibrate, make_data
 from calibration.calibrate import evidence_scale
-from calibration.prior import (GROUP_ANGLES, GROUP_LENGTHS, GROUP_OFFSETS, GROUP_TIP, PRIOR_DOMINATED,
-                               parameter_groups, prior_spec)
+from calibration.prior import (
+    GROUP_ANGLES,
+    GROUP_LENGTHS,
+    GROUP_OFFSETS,
+    GROUP_TIP,
+    PRIOR_DOMINATED,
+    parameter_groups,
+    prior_spec,
+)
 
 SPEC = SynthSpec(ballbars=6, ballbar_points=5, seats=3, articulations=8, spheres=1, sphere_points=10, rings=0,
                  ring_points=0, planes=0, plane_points=0, reference_points=0, force=0.0, noise=5e-6,
@@ -46,8 +52,8 @@ def test_groups_of_a_urdf_arm_follow_each_joint_axis():
     """URDF origins: of roll, pitch and yaw the one turning about the joint's own axis (whatever the origin's
     orientation) is the joint offset. Panda joint 1 (rpy 0, axis z): yaw; joint 2 (roll -90 deg, axis z: the
     parent's y axis): pitch; joint 3 (roll +90 deg): pitch."""
-    from conftest import ROOT
     from arm_model.urdf_import import load_arm
+    from conftest import ROOT
     desc = load_arm(ROOT / "examples" / "data" / "real-panda-seats" / "panda.urdf", "ball_link")
     m = ArmModel(desc)
     for j, offset in (("panda_joint1", "yaw"), ("panda_joint2", "pitch"), ("panda_joint3", "pitch")):
@@ -146,13 +152,13 @@ def test_an_off_axis_compliance_prior_comes_from_the_gravity_moment_about_its_ax
     the data's poses, of the moment of gravity on the links its joint moves about that joint frame's x or y
     axis; the moments agree with Pinocchio's RNEA (the model's own evaluator of them) to 1e-9 N m. (Before,
     the axial torque was used: joint 1, whose axial gravity torque is nil, got the largest size, 0.1.)"""
-    from conftest import ROOT
     from arm_model.chain import NUMPY_OPS
-    from arm_model.effects import LateralCompliance, Geometry, joint_frame
+    from arm_model.effects import Geometry, LateralCompliance, joint_frame
     from arm_model.io import read_artefacts, read_points
     from arm_model.params import split_params
     from arm_model.urdf_import import load_arm
     from calibration.prior import DEFLECTION
+    from conftest import ROOT
     panda = ROOT / "examples" / "data" / "real-panda-seats"
     desc = load_arm(panda / "panda-with-inertials.urdf", "ball_link")
     model = ArmModel(desc, (LateralCompliance(),))

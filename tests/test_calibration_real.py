@@ -150,6 +150,7 @@ def test_panda_heldout_uncertainty_coverage(tmp_path):
     extrapolative cross-validation) for at least 88 % of the axis values pooled (measured 88.9 %, 76-100 % per
     placement; without the discrepancy 86.2 %; the hold rule of earlier versions: 73.6 %, 58-91 %)."""
     import csv
+
     from arm_model.cli import main
     inside = []
     for tr in PLACES:

@@ -9,11 +9,10 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from arm_model.effects import EncoderEccentricity, ProbeCompliance, ThermalGrowth
-from arm_model.model import ArmModel
-from calibration import Problem, Weights, make_data
 from arm_model.geometry import perpendicular_basis, rotation_xyz
-from calibration import kinds as geo
+from arm_model.model import ArmModel
 from arm_model.sim.quick import SynthSpec, make_campaign
+from calibration import Problem, Weights, kinds as geo, make_data
 from conftest import assert_close
 
 

@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from calibration.study import (RunSettings, SynthSource, monte_carlo, observability_index, run_tasks)
 from arm_model.sim.quick import SynthSpec
 from calibration import FitOptions, Weights
+from calibration.study import RunSettings, SynthSource, monte_carlo, observability_index, run_tasks
 from conftest import assert_close
 
 

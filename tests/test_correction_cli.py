@@ -4,18 +4,18 @@ from __future__ import annotations
 import json
 import tomllib
 
-import numpy as np
 import pytest
 
 from arm_model import load_description, read_artefacts, read_points
-from arm_model.output import MARKER
 from arm_model.cli import build_parser, main
+from arm_model.output import MARKER
 from conftest import NOMINAL, ROOT, assert_close
 from correction.models import analyse_ring_campaign
 
 RING_FILES = {"report.html", "summary.json", "table2.csv", "correlations.csv", "budgets.csv", "roundness.csv",
               "figures/point_errors.png", "figures/diameters.png", "figures/form_errors.png", "figures/forces.png",
-              "figures/correlation_diameter.png", "figures/correlation_form.png", "figures/budgets.png", "figures/roundness.png"}
+              "figures/correlation_diameter.png", "figures/correlation_form.png", "figures/budgets.png",
+              "figures/roundness.png"}
 
 
 @pytest.fixture(scope="module")
@@ -65,7 +65,7 @@ def test_ring_report_with_signals(small_campaign, tmp_path):
     header = lines[0].split(",")
     assert header[0] == "measurement" and "diameter_error_wrench_mm" in header and "force_max_N" in header
     col = header.index("diameter_error_initial_mm")
-    assert_close([float(l.split(",")[col]) for l in lines[1:]],
+    assert_close([float(line.split(",")[col]) for line in lines[1:]],
                  [m["models"]["initial"]["diameter_error_mm"] for m in s["measurements"]], atol=1e-6)
 
 

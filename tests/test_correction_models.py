@@ -4,15 +4,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+from test_correction_synth import RING_D, ring_measurement
 
 from arm_model import InputError, ball_centres
+from arm_model.geometry import fit_cylinder
 from arm_model.io import parse_artefacts, parse_points
 from conftest import assert_close
-from arm_model.geometry import fit_cylinder
-from correction.models import (MODELS, analyse_ring_campaign, campaign_summary, correct_ring, paper_correction,
-                               table2)
+from correction.models import MODELS, analyse_ring_campaign, campaign_summary, correct_ring, paper_correction, table2
 from correction.signals import PointForces
-from test_correction_synth import RING_D, ring_measurement
 
 ARTEFACTS = f"""
 [[feature]]
@@ -66,7 +65,7 @@ def test_uniform_shift_shrinks_the_diameter_by_2d_and_keeps_the_form():
 
 def test_full_wrench_recovers_the_true_ring_the_paper_models_do_what_they_say(nominal, campaign_data):
     c = nominal.probe.bending_compliance_x
-    for mid, q, f in campaign_data:
+    for _mid, q, f in campaign_data:
         forces = PointForces(f, "xyz", "synthetic")
         fits = correct_ring(ball_centres(nominal, q), nominal.probe.ball_diameter, RING_D, c, forces,
                             ball_centres(nominal, q, f))

@@ -7,8 +7,15 @@ from hypothesis import given, settings, strategies as st
 
 from arm_model import InputError
 from conftest import assert_close
-from correction.paper import (IMPLIED_FORCE_HALF_WIDTH, TABLE2_MODELS, close_loop, implied_forces,
-                              improvements, load_paper_table2, paper_correlations)
+from correction.paper import (
+    IMPLIED_FORCE_HALF_WIDTH,
+    TABLE2_MODELS,
+    close_loop,
+    implied_forces,
+    improvements,
+    load_paper_table2,
+    paper_correlations,
+)
 
 # the improvement percentages printed in brackets in the paper's Table 2 (an independent check of the data)
 PRINTED_IMPROVEMENT = {

@@ -6,11 +6,9 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from arm_model import InputError
-from arm_model.io import parse_points
-from arm_model.io import ForceSignal
+from arm_model.io import ForceSignal, parse_points
 from conftest import assert_close
-from correction.signals import (PointForces, find_point_forces, force_summary, forces_from_columns,
-                                signal_noise)
+from correction.signals import PointForces, find_point_forces, force_summary, forces_from_columns, signal_noise
 
 
 def synthetic_signal(forces, rng, period=1e-3, gap=0.6, width=0.08, noise=0.005, tremor=0.0, kind="xyz",

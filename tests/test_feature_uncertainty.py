@@ -115,7 +115,7 @@ def test_form_uncertainty_against_monte_carlo_of_the_fit():
     for _ in range(1500):
         e = _draw(rng, m, sysr)
         forms.append(fit_cylinder(p + e, cyl.axis).form_error)
-    print(f"form {f.form * 1e6:.3f} um: u sampled-linear {f.u * 1e6:.3f} um, refits {np.std(forms, ddof=1) * 1e6:.3f} um; "
-          f"inflation {f.inflation * 1e6:.3f} vs {(np.mean(forms) - f.form) * 1e6:.3f} um")
+    print(f"form {f.form * 1e6:.3f} um: u sampled-linear {f.u * 1e6:.3f} um, refits {np.std(forms, ddof=1) * 1e6:.3f} "
+          f"um; inflation {f.inflation * 1e6:.3f} vs {(np.mean(forms) - f.form) * 1e6:.3f} um")
     assert f.u == pytest.approx(np.std(forms, ddof=1), rel=0.1)
     assert f.inflation == pytest.approx(np.mean(forms) - f.form, abs=0.1 * f.u)

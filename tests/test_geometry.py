@@ -13,11 +13,27 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from arm_model import NumericalError
+from arm_model.geometry import (
+    ball_centre_radius,
+    feature_diameter,
+    fit_circle_2d,
+    fit_cylinder,
+    fit_plane,
+    fit_ring_axis,
+    fit_row_circles,
+    fit_sphere,
+    frame_along,
+    kabsch,
+    kasa_circle,
+    perpendicular_basis,
+    random_rotation,
+    ring_fit,
+    rotation_xyz,
+    rpy_from_matrix,
+    smallest_enclosing_sphere,
+    split_rows,
+)
 from conftest import assert_close
-from arm_model.geometry import (ball_centre_radius, feature_diameter, fit_circle_2d, fit_cylinder, fit_plane,
-                                fit_ring_axis, fit_row_circles, fit_sphere, kabsch, kasa_circle, perpendicular_basis,
-                                random_rotation, ring_fit, rotation_xyz, rpy_from_matrix, split_rows,
-                                frame_along, smallest_enclosing_sphere)
 
 
 def cylinder_points(radius, heights, per_row, arc=2 * np.pi, start=0.0, jitter=None, rng=None):

@@ -9,10 +9,10 @@ import re
 
 import numpy as np
 import pytest
+from test_viz_server import no_server_left  # noqa: F401  (checks that no server is left)
 
 from arm_model.live import SampleLayout, Session
 from conftest import ROOT
-from test_viz_server import no_server_left  # noqa: F401  (checks that no server is left)
 from viz import Camera, colour_mask, load_png
 from viz.browser import screenshot_and_dom
 from viz.live import LIVE_POINTS_RGB, LiveView

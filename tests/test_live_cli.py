@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import signal
 import socket
 import subprocess
@@ -130,7 +129,8 @@ def _feed_then(sig, tmp_path, n_lines: int = 3001):
     return proc.returncode, err.decode(), out
 
 
-@pytest.mark.parametrize("sig, code, status", [(signal.SIGTERM, 143, "terminated"), (signal.SIGINT, 130, "interrupted")])
+@pytest.mark.parametrize("sig, code, status",
+                         [(signal.SIGTERM, 143, "terminated"), (signal.SIGINT, 130, "interrupted")])
 def test_a_stopped_session_is_kept_and_says_so(sig, code, status, tmp_path):
     rc, err, out = _feed_then(sig, tmp_path)
     assert rc == code, err

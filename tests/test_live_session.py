@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, strategies as st
 
 from arm_model.cli import main
-from arm_model.io import read_artefacts, read_points, check_features
+from arm_model.io import check_features, read_artefacts, read_points
 from arm_model.live import ContactOptions, Session, read_status
 from arm_model.live.plan import format_plan
 from arm_model.sim import simulate
@@ -278,7 +278,8 @@ def _sphere_cap(rng, centre, radius, n):
 def _tracker(kind_rows):
     from arm_model.io import Distance, Feature
     from arm_model.live import FeatureTracker, PlanFeature, SessionPlan
-    entries = tuple(PlanFeature(Feature(fid, kind, d, 1e-6 if d else None, None, {}), n) for fid, kind, d, n in kind_rows)
+    entries = tuple(PlanFeature(Feature(fid, kind, d, 1e-6 if d else None, None, {}), n)
+                    for fid, kind, d, n in kind_rows)
     dist = (Distance(("A", "B"), 0.05, 5e-7),) if any(r[0] == "B" for r in kind_rows) else ()
     return FeatureTracker(SessionPlan(entries, dist), ball_diameter=0.004)
 

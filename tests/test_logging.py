@@ -8,12 +8,11 @@ import subprocess
 import sys
 
 import pytest
-
-from arm_model.log import Progress, console, counted
-from arm_model.cli import COMMANDS, build_parser, main
-from conftest import NOMINAL, ROOT
-
 from test_reliability_inputs import RING, run, small  # noqa: F401  (the CLI runner and small campaign)
+
+from arm_model.cli import COMMANDS, build_parser, main
+from arm_model.log import Progress, console, counted
+from conftest import NOMINAL, ROOT
 
 
 def _subcommand_parsers(parser):
@@ -92,7 +91,8 @@ def test_quiet_and_verbose_together_are_refused(capsys):
 def test_errors_go_to_stderr_with_exit_2_even_quiet(tmp_path, capsys):
     code, out, err = run(["tip", tmp_path / "missing.csv", "--arm", NOMINAL, "-o", tmp_path / "t.csv", "-q"], capsys)
     assert code == 2 and out == ""
-    assert err == f"aacmm tip: error: {tmp_path / 'missing.csv'}: cannot read the points file: No such file or directory\n"
+    assert err == (f"aacmm tip: error: {tmp_path / 'missing.csv'}: cannot read the points file: "
+                   "No such file or directory\n")
 
 
 def test_the_loggers_are_left_as_they_were(tmp_path, capsys):
@@ -133,7 +133,7 @@ def test_progress_in_a_file_has_plain_lines(capsys):
     assert capsys.readouterr() == ("", "") and not bar.enabled
 
 
-def test_study_progress_into_a_log_file_has_no_carriage_return(small, tmp_path):
+def test_study_progress_into_a_log_file_has_no_carriage_return(small, tmp_path):  # noqa: F811 (the imported fixture)
     """A real command, its standard error a file (as `aacmm ... 2> log`)."""
     log = tmp_path / "log.txt"
     with open(log, "w") as fh:
@@ -170,7 +170,7 @@ def test_a_library_warning_is_one_console_line_without_its_source(capsys):
         err = capsys.readouterr().err
         assert err.splitlines() == ["warning: RuntimeWarning: overflow encountered in multiply"], err
         with console(logging.DEBUG):
-            warnings.warn("plain", UserWarning)
+            warnings.warn("plain", UserWarning, stacklevel=1)
         err = capsys.readouterr().err
         assert "warning: UserWarning: plain" in err and "test_logging.py" in err
         assert warnings.showwarning is before

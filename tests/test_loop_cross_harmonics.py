@@ -5,16 +5,16 @@ residual), recovers its size within 3 sigma and brings the held-out RMS within 1
 campaign without it."""
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 
 from arm_model import load_description
 from arm_model.effects import JointHarmonics
 from arm_model.model import ArmModel
+from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 from calibration.data import Weights
 from calibration.loop import close_loop
-from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 from calibration.synthesis import RESIDUAL, synthesise
 from conftest import NOMINAL
 
@@ -24,7 +24,7 @@ SPEC = SynthSpec(ballbars=10, ballbar_points=4, seats=4, articulations=8, sphere
 TRUE = {"j2.harm2_cos_by_j4": 1.75e-5, "j2.harm2_sin_by_j4": 3.0e-5}
 
 
-@lru_cache(maxsize=None)
+@cache
 def run(hidden: bool, synthesise_: bool = True):
     nominal = load_description(NOMINAL)
     truth = ArmModel(nominal, (JointHarmonics(joints=(1,), source=3, harmonics=(2,)),) if hidden else ())

@@ -2,22 +2,21 @@
 the joint-angle columns against finite differences, folds, Holm's adjustment by hand, candidates."""
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
 
 from arm_model.effects import EncoderEccentricity, JointCompliance
 from arm_model.model import ArmModel
+from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 from calibration.calibrate import FitOptions, calibrate
 from calibration.candidates import library_candidates, needs_model
 from calibration.data import Weights, make_data
-from calibration.diagnostics import (JointAngleOffset, holm, measurement_folds, residual_space,
-                                     screen_candidates)
-from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
+from calibration.diagnostics import JointAngleOffset, holm, measurement_folds, residual_space, screen_candidates
 
 
-@lru_cache(maxsize=None)
+@cache
 def fitted(desc):
     """A synthetic campaign with a hidden j2 eccentricity, fitted without it."""
     truth = ArmModel(desc, (EncoderEccentricity(joints=(1,), harmonics=(1,)),))

@@ -3,7 +3,7 @@ truth, absent from the model): the loop must name the effect and its joint, reco
 3 sigma, and at least halve the held-out error of the outer test set."""
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
@@ -41,7 +41,7 @@ def campaign(sections: dict, seed: int = 3) -> dict:
     return d
 
 
-@lru_cache(maxsize=None)
+@cache
 def run(case: str):
     camp = campaign_from_dict(campaign(CASES[case][0]))
     sim = simulate(camp)
@@ -98,14 +98,14 @@ def test_force_gain_and_compliance_signatures_are_reported_as_indistinguishable(
     assert "probe compliance (anisotropic)" in stage.nested + stage.alternatives
 
 
-@pytest.mark.parametrize("seed", [4, 5])
+@pytest.mark.parametrize("seed", [4, pytest.param(5, marks=pytest.mark.slow)])
 @pytest.mark.parametrize("case", list(CASES))
 def test_loop_names_the_effect_on_other_seeds(case, seed):
-    """Not tuned to one draw: on other seeds (new errors, poses, noise, test set) the loop names the same
-    effect and joint and lowers the held-out error. (How much depends on the draw: where the effect is
-    small next to the 2 um probing noise the RMS cannot halve; see docs/close-loop.md.) Where the outer test
-    set cannot show it (its RMS already at the noise, measured: thermal growth at seed 4, 1.71 -> 1.83 um)
-    the effect, which passed the held-out folds, is named as not added, never added."""
+    """Not tuned to one draw (seed 5 in the slow suite): on other seeds (new errors, poses, noise, test set)
+    the loop names the same effect and joint and lowers the held-out error. (How much depends on the draw:
+    where the effect is small next to the 2 um probing noise the RMS cannot halve; see docs/close-loop.md.)
+    Where the outer test set cannot show it (its RMS already at the noise, measured: thermal growth at seed
+    4, 1.71 -> 1.83 um) the effect, which passed the held-out folds, is named as not added, never added."""
     camp = campaign_from_dict(campaign(CASES[case][0], seed=seed))
     sim = simulate(camp)
     loop = close_loop(sim.points, sim.artefacts, camp.arm, reference=sim.reference_points,

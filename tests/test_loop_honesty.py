@@ -4,13 +4,14 @@ library) it reports structured residual, names the regressor, and claims no fix.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from arm_model.effects import EncoderEccentricity
 from arm_model.model import ArmModel
 from arm_model.sim import campaign_from_dict, simulate
+from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 from calibration.data import Weights
 from calibration.loop import close_loop
-from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 
 #: tiny campaign: about 100 points, 14 measurements
 TINY = [{"kind": "ballbar", "positions": 6, "length_mm": 600.0, "points_per_sphere": 4},
@@ -18,7 +19,10 @@ TINY = [{"kind": "ballbar", "positions": 6, "length_mm": 600.0, "points_per_sphe
         {"kind": "sphere", "points": 7, "measurements": 4}]
 
 
+@pytest.mark.slow
 def test_no_missing_effect_adds_nothing_in_19_of_20_seeds():
+    """(slow: 20 campaigns, about 40 s; the normal suite checks one clean seed end to end in
+    test_honesty_study_counts_what_the_loop_added_built_and_claimed)"""
     added, claims = [], []
     for seed in range(20):
         camp = campaign_from_dict({"seed": seed, "sensor": "xyz", "signals": {"enabled": False},

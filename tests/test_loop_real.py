@@ -78,7 +78,7 @@ def test_trained_on_one_placement_the_loop_is_no_worse_than_calibrate_on_the_oth
     from arm_model.io import read_artefacts, read_points
     from arm_model.model import ArmModel
     from arm_model.urdf_import import load_arm
-    from calibration.calibrate import FitOptions, calibrate
+    from calibration.calibrate import calibrate
     from calibration.data import make_data
     from calibration.loop import close_loop
     from conftest import loop_fit_options, seat_figures_of

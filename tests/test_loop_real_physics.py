@@ -49,7 +49,7 @@ def _compare(desc, art, pts, train: str, loop, held) -> tuple[list, list, list]:
     """Plain calibrate trained on ``pts[train]`` against the loop's model, on the placements ``held``:
     (plain's seat figures, the loop's, the two mean spreads [mm])."""
     from arm_model.model import ArmModel
-    from calibration.calibrate import FitOptions, calibrate
+    from calibration.calibrate import calibrate
     from calibration.data import make_data
     plain = calibrate(ArmModel(desc), make_data(pts[train], art, ArmModel(desc)), loop_fit_options())
     a = [seat_figures_of(plain, desc, pts[p]) for p in held]
@@ -76,7 +76,7 @@ def test_trained_on_back_high_joint_compliance_is_included_and_the_other_placeme
 def test_a_compliance_injected_into_the_real_angles_is_found_recovered_and_carries_over(setup):
     from arm_model.effects import JointCompliance
     from arm_model.model import ArmModel
-    from calibration.calibrate import FitOptions, calibrate
+    from calibration.calibrate import calibrate
     from calibration.data import make_data
     from calibration.loop import close_loop
     desc, art, pts = setup
@@ -105,14 +105,15 @@ GAIN = 5e-3                # encoder scale error injected on the shoulder (panda
 def test_a_joint_gain_injected_into_the_real_angles_is_found_recovered_and_carries_over(setup):
     """Encoder readings of joint 2 divided by 1 + g (so the true angle is (1 + g) times the reading, the
     convention of :class:`arm_model.effects.JointGain`), independent of the effect code: the loop trained
-    on ``front`` with every candidate family (gains are offered on request) adds ``gain panda_joint2``, recovers g against the same fit on the recorded angles, and
+    on ``front`` with every candidate family (gains are offered on request) adds ``gain panda_joint2``, recovers g
+    against the same fit on the recorded angles, and
     the other placements spread less."""
     import dataclasses
 
     from arm_model.model import ArmModel
-    from calibration.calibrate import FitOptions, calibrate
-    from calibration.data import make_data
+    from calibration.calibrate import calibrate
     from calibration.candidates import FAMILIES
+    from calibration.data import make_data
     from calibration.loop import close_loop
     desc, art, pts = setup
 
@@ -187,10 +188,10 @@ def test_an_identifiable_set_that_never_settles_is_reported_with_the_parameters(
     happens: with the eccentricity's weak harmonics left free (no prior, the rule switched off for them), calibrate
     stops with a NumericalError naming the parameters the rank test held one fit after another (the last
     joint's harmonics)."""
-    from arm_model.errors import NumericalError
     from arm_model.effects import EncoderEccentricity
+    from arm_model.errors import NumericalError
     from arm_model.model import ArmModel
-    from calibration.calibrate import FitOptions, calibrate
+    from calibration.calibrate import calibrate
     from calibration.data import make_data
     desc, art, pts = setup
     monkeypatch.setattr(EncoderEccentricity, "held_when_weak", False)

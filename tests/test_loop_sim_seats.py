@@ -16,7 +16,7 @@ from arm_model.io import read_artefacts
 from arm_model.model import ArmModel, AuxData
 from arm_model.sim import campaign_from_dict, simulate
 from arm_model.urdf_import import load_arm
-from calibration.calibrate import FitOptions, calibrate
+from calibration.calibrate import calibrate
 from calibration.data import make_data
 from calibration.loop import close_loop
 from calibration.placements import seat_figures
@@ -35,7 +35,8 @@ def campaign(seed: int, stiffness: float | None):
     for k, (p, d) in enumerate(PLACES):
         d = np.asarray(d, float) / np.linalg.norm(d)
         for h, off in (("hole-0", 0.0), ("hole-1", 0.05)):
-            tasks.append({"kind": "seat", "id": f"p{k + 1}-{h}", "position_mm": ((np.array(p) + off * d) * 1e3).tolist(),
+            tasks.append({"kind": "seat", "id": f"p{k + 1}-{h}",
+                          "position_mm": ((np.array(p) + off * d) * 1e3).tolist(),
                           "articulations": 30, "stylus_cone_deg": 60.0})
     c = {"seed": seed, "sensor": "none", "signals": {"enabled": False},
          "truth": {"length_error_um": 300.0, "angle_error_deg": 0.05, "probe_error_um": 300.0,

@@ -14,7 +14,7 @@ around it (chi-square of all added free parameters, 99.73 %)."""
 from __future__ import annotations
 
 import dataclasses
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
@@ -22,8 +22,13 @@ from scipy import stats
 
 from arm_model import load_description
 from arm_model.cli import main
-from arm_model.effects import (ApproachOffset, EncoderEccentricity, JointHarmonics, LateralCompliance,
-                               ProbeComplianceMatrix)
+from arm_model.effects import (
+    ApproachOffset,
+    EncoderEccentricity,
+    JointHarmonics,
+    LateralCompliance,
+    ProbeComplianceMatrix,
+)
 from arm_model.model import ArmModel
 from arm_model.sim import campaign_from_dict, simulate
 from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
@@ -69,7 +74,7 @@ def _truth(effects, values, seed=1):
     return nominal, truth, p
 
 
-@lru_cache(maxsize=None)
+@cache
 def run(case: str | None, force: float = 0.0):
     """(truth model, true p, the loop, the campaign) on a synthetic campaign with ``case`` hidden (None: the
     same campaign, same base errors, without it)."""

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-import math
 
 import numpy as np
 import pytest
@@ -11,12 +10,25 @@ from hypothesis import given, settings, strategies as st
 from arm_model import InputError, parse_description
 from arm_model.cli import main
 from arm_model.description import format_description
-from arm_model.effects import (EFFECTS, EncoderEccentricity, ForceSensorError, JointCompliance, JointGain,
-                               ProbeCompliance, ThermalGrowth)
-from arm_model.io import parse_points, read_points
-from arm_model.model_file import (PARAM_UNITS, Arm, format_model, load_model, parse_model, read_covariance,
-                                  write_covariance)
-
+from arm_model.effects import (
+    EFFECTS,
+    EncoderEccentricity,
+    ForceSensorError,
+    JointCompliance,
+    JointGain,
+    ProbeCompliance,
+    ThermalGrowth,
+)
+from arm_model.io import read_points
+from arm_model.model_file import (
+    PARAM_UNITS,
+    Arm,
+    format_model,
+    load_model,
+    parse_model,
+    read_covariance,
+    write_covariance,
+)
 from conftest import NOMINAL, assert_close
 
 EFFECT_SETS = {
@@ -28,8 +40,8 @@ EFFECT_SETS = {
     "thermal_per_joint": (ThermalGrowth(joints=(0, 3), per_joint=True),),
     "force_sensor": (ForceSensorError(axes=(0, 2)),),
     "probe_compliance": (ProbeCompliance(anisotropic=True, axial=True),),
-    "all": (EncoderEccentricity(joints=(2,)), JointGain(joints=(5,)), JointCompliance(joints=(1,)), ThermalGrowth(), ForceSensorError(),
-            ProbeCompliance()),
+    "all": (EncoderEccentricity(joints=(2,)), JointGain(joints=(5,)), JointCompliance(joints=(1,)), ThermalGrowth(),
+            ForceSensorError(), ProbeCompliance()),
 }
 
 #: plausible sizes [SI] of effect parameters by SI unit (values drawn at this scale)
@@ -270,11 +282,10 @@ def test_calibrate_writes_a_model_that_tip_and_calibrate_read(tmp_path, capsys):
         bound = float(np.max(u1[f"u_{a}_mm"] + u0[f"u_{a}_mm"])) * 1e-6
         assert_close(u1[f"u_{a}_mm"] ** 2 - u0[f"u_{a}_mm"] ** 2, (arm.probing_scatter * 1e3) ** 2, atol=bound)
     got = np.genfromtxt(tip, delimiter=",", names=True, dtype=None, encoding="utf-8")
-    from calibration.model_output import fitted_arm
-    from calibration.cli import _load_data  # noqa: F401  (the CLI path is what is tested above)
     from arm_model.io import read_points as rp
     from arm_model.model import ArmModel
     from arm_model.model_file import Arm as A
+    from calibration.cli import _load_data  # noqa: F401  (the CLI path is what is tested above)
     pts = rp(sim / "points.csv", 7)
     own = ArmModel(load_model(NOMINAL).desc, arm.effects)
     p = own.spec.vector({r["name"]: r["value"] for r in s["parameters"]})
@@ -307,6 +318,7 @@ def equivalent_pair(nominal, tmp_path, delta=3e-6):
 
 def test_ring_applies_the_models_effects(nominal, tmp_path):
     import tomllib
+
     from arm_model.sim import campaign_from_dict, simulate
     from conftest import ROOT
     data = tomllib.loads((ROOT / "examples/campaigns/paper-ring-xyz.toml").read_text())
@@ -333,7 +345,8 @@ def test_view_applies_the_models_effects(nominal, tmp_path, capsys):
     pts = points_file(tmp_path, n=5, temperature=False)
     shown = {}
     for name, arm in (("model", model), ("equivalent", equivalent), ("nominal", NOMINAL)):
-        assert main(["view", str(pts), "--arm", str(arm), "--point", "3", "--html", str(tmp_path / f"{name}.html")]) == 0
+        assert main(["view", str(pts), "--arm", str(arm), "--point", "3",
+                     "--html", str(tmp_path / f"{name}.html")]) == 0
         out = capsys.readouterr().out
         shown[name] = next(line for line in out.splitlines() if line.startswith("point 3:"))
         if name == "model":

@@ -66,7 +66,8 @@ points = 15
 
 
 def test_reading_noise_projected_on_the_sensitivity_is_the_error(tmp_path):
-    spec = importlib.util.spec_from_file_location("noise_projection_study", ROOT / "scripts" / "noise_projection_study.py")
+    spec = importlib.util.spec_from_file_location("noise_projection_study",
+                                                  ROOT / "scripts" / "noise_projection_study.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     from arm_model.sim import load_campaign

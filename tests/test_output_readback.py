@@ -25,8 +25,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, Phase, given, reject, settings
-from hypothesis import strategies as st
+from hypothesis import HealthCheck, Phase, given, reject, settings, strategies as st
 
 from arm_model import NumericalError
 from arm_model.cli import main
@@ -162,9 +161,11 @@ def _dh_arm(tmp_dir, rpy_deg, length_mm, lateral=(0.0, 0.0)):
     from arm_model.geometry import rotation_xyz
     p = rotation_xyz(np.radians(rpy_deg)) @ np.array([lateral[0], lateral[1], length_mm])
     probe = "".join(f"{k} = {float(v)!r}\n" for k, v in (("x_mm", p[0]), ("y_mm", p[1]), ("z_mm", p[2]))) + \
-        ("".join(f"{k} = {float(v)!r}\n" for k, v in zip(("roll_deg", "pitch_deg", "yaw_deg"), rpy_deg)) if any(rpy_deg) else "")
+        ("".join(f"{k} = {float(v)!r}\n" for k, v in zip(("roll_deg", "pitch_deg", "yaw_deg"), rpy_deg))
+         if any(rpy_deg) else "")
     text = NOMINAL_TEXT.split("[probe]")[0] + "[probe]\n" + probe + \
-        "ball_diameter_mm = 4.0\nmax_force_N = 13.0\nbending_compliance_mm_per_N = 0.0142\naxial_compliance_mm_per_N = 0.0000876\n"
+        "ball_diameter_mm = 4.0\nmax_force_N = 13.0\nbending_compliance_mm_per_N = 0.0142\n" \
+        "axial_compliance_mm_per_N = 0.0000876\n"
     return parse_description(text, "arm.toml")
 
 
@@ -175,7 +176,8 @@ def _urdf_arm(tmp_dir: Path, xyz_m, rpy_rad):
     keep = [ln for ln in URDF_TEXT.splitlines()
             if not re.search(r'stylus_root|probe_bend|probe_axial|name="stylus"|ball_joint|<link name="ball"', ln)]
     tip = (f'  <joint name="ball_joint" type="fixed"><parent link="flange"/><child link="ball"/>'
-           f'<origin xyz="{" ".join(repr(float(v)) for v in xyz_m)}" rpy="{" ".join(repr(float(v)) for v in rpy_rad)}"/></joint>\n'
+           f'<origin xyz="{" ".join(repr(float(v)) for v in xyz_m)}" '
+           f'rpy="{" ".join(repr(float(v)) for v in rpy_rad)}"/></joint>\n'
            '  <link name="ball"/>\n</robot>')
     path = tmp_dir / "arm.urdf"
     path.write_text("\n".join(keep).replace("</robot>", tip), encoding="utf-8")
@@ -225,7 +227,8 @@ def _published_model_reproduces_the_fit(tmp_path: Path, fit, campaign) -> None:
     assert d.max() <= 2e-9 + model_check(fit)["max_difference_nm"] * 1e-9, d.max()
 
 
-FAST = settings(max_examples=3, deadline=None, phases=[Phase.explicit, Phase.generate],       # a fit a case: no shrinking
+# a fit a case: no shrinking
+FAST = settings(max_examples=3, deadline=None, phases=[Phase.explicit, Phase.generate],
                 suppress_health_check=[HealthCheck.function_scoped_fixture])
 EFFECTS_DRAWN = st.lists(st.sampled_from(["probe_compliance", "force_sensor", "thermal", "joint_gain"]),
                          max_size=2, unique=True)
@@ -269,8 +272,8 @@ def test_a_tip_frame_pointing_back_up_the_arm_is_published(tmp_path):
 
 
 def test_json_text_writes_null_for_a_value_nobody_resolved(tmp_path):
-    from arm_model.readback import read_json
     from arm_model.io import json_text
+    from arm_model.readback import read_json
     text = json_text({"rms_um": np.float64("nan"), "u": np.array([1.5, np.inf]), "n": np.int64(3), "t": (1, 2.0)})
     assert json.loads(text) == {"rms_um": None, "u": [1.5, None], "n": 3, "t": [1, 2.0]}
     (tmp_path / "s.json").write_text(text)

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from arm_model import InputError
 from arm_model.cli import main
 from arm_model.shipped import SHIPPED_ARMS, arm_path, provenance, shipped_path, version
 from conftest import NOMINAL, ROOT
@@ -37,7 +38,7 @@ def test_load_description_takes_a_shipped_arm_by_name(tmp_path, monkeypatch):
     by_name, by_path = load_description("aacmm7"), load_description(NOMINAL)
     assert by_name.joints == by_path.joints and by_name.probe == by_path.probe
     (tmp_path / "aacmm7").write_text("not toml [")  # an existing file of that name is read as given
-    with pytest.raises(Exception):
+    with pytest.raises(InputError, match="not valid TOML"):
         load_description("aacmm7")
 
 
@@ -103,7 +104,8 @@ def test_calibrate_summary_carries_version_and_input_hashes(tmp_path):
     s = json.loads((tmp_path / "cal" / "summary.json").read_text())
     assert s["aacmm_version"] == version()
     assert s["input_sha256"][str(pts)] == hashlib.sha256(pts.read_bytes()).hexdigest()
-    assert s["input_sha256"][str(shipped_path("urdf/aacmm7.dh.toml"))] == hashlib.sha256(NOMINAL.read_bytes()).hexdigest()
+    nominal_sha = hashlib.sha256(NOMINAL.read_bytes()).hexdigest()
+    assert s["input_sha256"][str(shipped_path("urdf/aacmm7.dh.toml"))] == nominal_sha
 
 
 def test_pyproject_licence_is_an_spdx_string():

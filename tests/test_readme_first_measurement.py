@@ -76,7 +76,8 @@ def test_readme_first_own_measurement_runs_as_written(tmp_path):
             for want in body.splitlines():
                 if want.strip() == "...":
                     continue
-                assert any(same_line(want, got) for got in lines), f"README output line not printed: {want!r}\n{printed}"
+                assert any(same_line(want, got) for got in lines), \
+                    f"README output line not printed: {want!r}\n{printed}"
     # what the section says it writes is there
     for f in ("cal/panda-calibrated.toml", "cal/panda-calibrated-covariance.csv", "cal/report.html", "tips.csv",
               "view.html", "cal-ring/aacmm7-calibrated.toml", "ring-tips.csv"):

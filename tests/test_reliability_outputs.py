@@ -10,12 +10,11 @@ import threading
 from pathlib import Path
 
 import pytest
-from hypothesis import given
-from hypothesis import strategies as st
+from hypothesis import given, strategies as st
 
 from arm_model import InputError
-from arm_model.output import MARKER, output_file, output_folder, safe_name
 from arm_model.cli import main
+from arm_model.output import MARKER, output_file, output_folder, safe_name
 from conftest import NOMINAL, ROOT
 
 POINTS = ROOT / "examples" / "data" / "paper-ring-xyz" / "points.csv"
@@ -121,7 +120,7 @@ def test_refusals(tmp_path):
     foreign.mkdir()
     (foreign / "thesis.tex").write_text("precious")
     other = tmp_path / "other"
-    with output_folder(other, (), "simulate") as out:
+    with output_folder(other, (), "simulate"):
         pass
     cases = [(data, [inp], "holds the input"), (inp, [inp], "over an input"),
              (afile, [], "a file of that name exists"), (afile / "sub", [], "below a file"),

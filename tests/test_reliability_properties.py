@@ -10,12 +10,11 @@ import tempfile
 from pathlib import Path
 
 import pytest
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
+from hypothesis import HealthCheck, given, settings, strategies as st
 
 from arm_model import InputError
 from arm_model.cli import build_parser, main
-from arm_model.commands import at_least, finite, fraction, non_negative, number_in, port, positive, seed
+from arm_model.cli_options import at_least, finite, fraction, non_negative, number_in, port, positive, seed
 from arm_model.io import parse_artefacts
 from arm_model.sim.campaign import campaign_from_dict, load_campaign
 from conftest import NOMINAL, ROOT

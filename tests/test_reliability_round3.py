@@ -231,8 +231,8 @@ def test_item6_interrupt_before_publishing_says_nothing_written(tmp_path, few_po
 
 
 def test_item6_files_written_inside_an_output_folder_are_not_outputs_of_their_own(tmp_path):
-    from arm_model.output import output_folder, published_outputs
     from arm_model.io import atomic_write_text
+    from arm_model.output import output_folder, published_outputs
     written = []
     with published_outputs(written):
         with output_folder(tmp_path / "out", (), "demo") as out:

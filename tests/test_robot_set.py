@@ -9,9 +9,10 @@ where Pinocchio's own mimic model builds, also through it.
 
 The package is downloaded once (``pip download``, one 96 MB wheel) into a cache outside the repository
 (``$XDG_CACHE_HOME/aacmm-toolkit``, default ``~/.cache/aacmm-toolkit``), only its URDFs kept; the tests
-skip, saying why, when it cannot be fetched. ``test_quick_subset`` (one robot of each difficulty) runs in
-the normal suite; ``test_every_robot`` (all of them, slow) also checks that the table of docs/robots.md is
-the one this sweep finds.
+skip, saying why, when it cannot be fetched. Both tests are in the slow suite (``make test-slow``), which
+keeps ``make test`` off the network: ``test_quick_subset`` (one robot of each difficulty) and
+``test_every_robot`` (all of them), which also checks that the table of docs/robots.md is the one this sweep
+finds.
 """
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import ROBOT_SET_VERSION as VERSION, ROOT
+from conftest import ROOT
 
 #: one robot of each difficulty the set holds
 QUICK = {
@@ -210,6 +211,7 @@ def _check_tip_command(path: Path, leaf: str, desc, q, x, tmp: Path) -> None:
 # ---------------------------------------------------------------------------------------------
 # the tests
 
+@pytest.mark.slow
 def test_quick_subset(robots, tmp_path):
     """One robot of each difficulty (:data:`QUICK`): every chain through the API, the longest through
     ``aacmm tip``; the one Pinocchio refuses is refused here too."""

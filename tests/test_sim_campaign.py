@@ -205,7 +205,8 @@ def test_other_arm_conventions(tmp_path, nominal):
     tasks = [{"kind": "sphere", "points": 4, "centre_mm": [450.0, 200.0, 150.0]},
              {"kind": "seat", "articulations": 4, "position_mm": [450.0, -200.0, 100.0]}]
     truth = {"eccentricity": [{"joint": "j2", "amplitude_deg": 0.002}], "thermal": {"alpha_per_K": 1e-5}}
-    mdh = simulate(campaign_from_dict({"seed": 1, "truth": truth, "task": tasks}, arm=replace(nominal, convention="mdh")))
+    mdh = simulate(campaign_from_dict({"seed": 1, "truth": truth, "task": tasks},
+                                      arm=replace(nominal, convention="mdh")))
     assert mdh.stats["truth_residual_max_m"] < 1e-9 and len(mdh.points) == 8
     # a URDF chain: the nominal arm's URDF up to the flange, a fixed ball 85 mm further
     text = (ROOT / "urdf" / "aacmm7.urdf").read_text()
@@ -229,8 +230,8 @@ def test_cone_directions_uniform_on_the_cap():
     vectors within the half angle, and uniform on the cap: the same distribution as rejection sampling from
     the uniform sphere (an independent reference; two-sample KS on cos theta and on the azimuth, seeded)."""
     from scipy import stats
-    from arm_model.sim.artefacts import cone_directions
-    from arm_model.geometry import perpendicular_basis
+
+    from arm_model.geometry import cone_directions, perpendicular_basis
     rng = np.random.default_rng(7)
     axis = np.array([0.3, -0.4, 0.866])
     axis /= np.linalg.norm(axis)

@@ -28,19 +28,28 @@ from conftest import assert_close
 #: turned by a fixed joint (the marker's link), a finger branch with a mirrored mesh, inertials throughout
 LIFT_ARM_URDF = """<?xml version="1.0"?>
 <robot name="liftarm">
-  <link name="base_link"><inertial><mass value="20"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link>
-  <link name="torso"><inertial><origin xyz="0 0 0.1"/><mass value="6"/><inertia ixx="0.1" iyy="0.1" izz="0.1" ixy="0" ixz="0" iyz="0"/></inertial></link>
-  <link name="shoulder"><inertial><mass value="2.5"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
-  <link name="upper_arm"><inertial><origin xyz="0.15 0 0"/><mass value="2.0"/><inertia ixx="0.01" iyy="0.02" izz="0.02" ixy="0" ixz="0" iyz="0"/></inertial></link>
-  <link name="forearm"><inertial><origin xyz="0.12 0 0"/><mass value="1.5"/><inertia ixx="0.01" iyy="0.02" izz="0.02" ixy="0" ixz="0" iyz="0"/></inertial></link>
-  <link name="wrist"><inertial><mass value="0.6"/><inertia ixx="0.001" iyy="0.001" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial></link>
-  <link name="hand"><inertial><origin xyz="0.04 0 0"/><mass value="0.8"/><inertia ixx="0.001" iyy="0.001" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="base_link"><inertial><mass value="20"/>
+    <inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="torso"><inertial><origin xyz="0 0 0.1"/><mass value="6"/>
+    <inertia ixx="0.1" iyy="0.1" izz="0.1" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="shoulder"><inertial><mass value="2.5"/>
+    <inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="upper_arm"><inertial><origin xyz="0.15 0 0"/><mass value="2.0"/>
+    <inertia ixx="0.01" iyy="0.02" izz="0.02" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="forearm"><inertial><origin xyz="0.12 0 0"/><mass value="1.5"/>
+    <inertia ixx="0.01" iyy="0.02" izz="0.02" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="wrist"><inertial><mass value="0.6"/>
+    <inertia ixx="0.001" iyy="0.001" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="hand"><inertial><origin xyz="0.04 0 0"/><mass value="0.8"/>
+    <inertia ixx="0.001" iyy="0.001" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial></link>
   <link name="flange"/>
-  <link name="finger"><visual><geometry><mesh filename="package://nowhere/finger.stl" scale="1 -1 1"/></geometry></visual></link>
+  <link name="finger"><visual><geometry>
+    <mesh filename="package://nowhere/finger.stl" scale="1 -1 1"/></geometry></visual></link>
   <joint name="lift" type="prismatic"><parent link="base_link"/><child link="torso"/>
     <origin xyz="0 0 0.4"/><axis xyz="0 0 1"/><limit lower="0" upper="0.35" effort="100" velocity="0.1"/></joint>
   <joint name="shoulder_yaw" type="revolute"><parent link="torso"/><child link="shoulder"/>
-    <origin xyz="0.05 0 0.3" rpy="0 0 0.2"/><axis xyz="0 0 1"/><limit lower="-2.5" upper="2.5" effort="50" velocity="1"/></joint>
+    <origin xyz="0.05 0 0.3" rpy="0 0 0.2"/><axis xyz="0 0 1"/>
+      <limit lower="-2.5" upper="2.5" effort="50" velocity="1"/></joint>
   <joint name="shoulder_pitch" type="revolute"><parent link="shoulder"/><child link="upper_arm"/>
     <origin xyz="0 0.08 0.05"/><axis xyz="0 1 0"/><limit lower="-1.5" upper="1.5" effort="50" velocity="1"/></joint>
   <joint name="elbow" type="revolute"><parent link="upper_arm"/><child link="forearm"/>

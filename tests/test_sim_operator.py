@@ -16,7 +16,8 @@ from conftest import assert_close
 
 def _draw(op=None, measurements=17, points=24, seed=0, kind="ring"):
     task = {"kind": kind, "measurements": measurements}
-    task.update({"ring": {"points_per_row": points // 3}, "seat": {"articulations": points}}.get(kind, {"points": points}))
+    task.update({"ring": {"points_per_row": points // 3}, "seat": {"articulations": points}}.get(
+        kind, {"points": points}))
     c = campaign_from_dict({"seed": seed, "operator": op or {}, "task": [task]})
     rng = np.random.default_rng(seed)
     plan = make_plan(c, rng)             # no truth: the points are not settled (no inverse kinematics)

@@ -126,18 +126,24 @@ points_per_sphere = 4
 [[task]]
 kind = "seat"
 articulations = 8
-measurements = 4
+measurements = 8
 
 [[task]]
 kind = "sphere"
 points = 8
-measurements = 5
+measurements = 8
 """
 
 
 def test_lobing_hidden_by_aacmm_simulate_is_found_by_aacmm_close_loop(tmp_path):
     """From the command line only: a campaign file hides a lobing offset, ``aacmm close-loop`` builds the
-    approach offset from the residual, adds it and recovers each term within 3 sigma."""
+    approach offset from the residual, adds it and recovers each term within 3 sigma.
+
+    The held-out test's units are whole measurements, and the offset shows mostly on the seats and spheres (a
+    ball bar's few points per sphere leave little of it once its centres are fitted): with 4 seat and 5 sphere
+    measurements the design set held 7 informative units and the Wilcoxon p of the offset spread over
+    0.00006-0.03 across simulation seeds (3 of 7 seeds under the level). With 8 of each it is below 0.002 at
+    seeds 1-7 and the offset alone is added at every one."""
     from conftest import simulate_and_close_loop
 
     sim, _, s = simulate_and_close_loop(tmp_path, LOBING, "--cv-top", "2")

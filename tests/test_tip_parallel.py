@@ -9,8 +9,8 @@ import pytest
 import arm_model.csv_io as csvmod
 import arm_model.parallel as par
 from arm_model import InputError
-from arm_model.csv_io import csv_spans, iter_csv_blocks
 from arm_model.cli import main
+from arm_model.csv_io import csv_spans, iter_csv_blocks
 from arm_model.model_file import load_model
 
 Q = ",".join(f"q{i}_deg" for i in range(1, 8))

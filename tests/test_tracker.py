@@ -154,7 +154,7 @@ def _numpy_marker_residuals(prob, model, data, p, states):
     m = offset_matrix(model)
     out = []
     for g in prob.groups:
-        for k, (pi, ii, mk) in enumerate(zip(g["points"], g["inst"], g["marker"])):
+        for pi, ii, mk in zip(g["points"], g["inst"], g["marker"]):
             o = states[mk][:3] if mk >= 0 else np.zeros(3)
             x = model.ball_centres(data.points.q[pi:pi + 1], None, p + m @ o)[0]
             s = states[ii]

@@ -7,17 +7,34 @@ from dataclasses import replace
 import casadi as ca
 import numpy as np
 import pytest
+from test_arm_model_urdf_chain import arm_urdf
 
-from arm_model.effects import (ApproachOffset, EncoderEccentricity, ForceSensorError, JointCompliance, JointHarmonics,
-                               LateralCompliance, ProbeCompliance, ProbeComplianceMatrix, ProbeThermalGrowth, ThermalGrowth)
+from arm_model.effects import (
+    ApproachOffset,
+    EncoderEccentricity,
+    ForceSensorError,
+    JointCompliance,
+    JointHarmonics,
+    LateralCompliance,
+    ProbeCompliance,
+    ProbeComplianceMatrix,
+    ProbeThermalGrowth,
+    ThermalGrowth,
+)
 from arm_model.jacobian import chain_jacobian, direction_jacobian, joint_screws, point_jacobian
 from arm_model.model import ArmModel, AuxData
 from arm_model.params import split_params
-from arm_model.uncertainty import (FORCE_SENSOR_U_N, COMPLIANCE_U_RELATIVE, ParameterCovariance, default_inputs,
-                                   directional_ratio, monte_carlo, propagate)
+from arm_model.uncertainty import (
+    COMPLIANCE_U_RELATIVE,
+    FORCE_SENSOR_U_N,
+    ParameterCovariance,
+    default_inputs,
+    directional_ratio,
+    monte_carlo,
+    propagate,
+)
 from arm_model.urdf_import import load_arm
 from conftest import assert_close, fd_jacobian
-from test_arm_model_urdf_chain import arm_urdf
 
 
 def _casadi_jacobians(model: ArmModel):
@@ -30,8 +47,9 @@ def _casadi_jacobians(model: ArmModel):
 
 
 def _arms(nominal, tmp_path):
-    from arm_model.description import parse_description
     from test_arm_model_evaluators import SLIDER, _dh_with_prismatic
+
+    from arm_model.description import parse_description
     path = tmp_path / "arm.urdf"
     path.write_text(arm_urdf(nominal).replace('<axis xyz="0.0 0.0 1.0"/>', '<axis xyz="0 0.6 0.8"/>', 1))
     return {"dh": nominal, "mdh": replace(nominal, convention="mdh"), "urdf": load_arm(path, "tip"),

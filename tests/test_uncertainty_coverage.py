@@ -23,9 +23,9 @@ import pytest
 
 from arm_model.effects import EncoderEccentricity
 from arm_model.model import ArmModel
+from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 from arm_model.uncertainty import FORCE_SENSOR_U_N, ParameterCovariance, default_inputs, propagate
 from calibration import FitOptions, Weights, calibrate, make_data
-from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 
 pytestmark = pytest.mark.slow
 

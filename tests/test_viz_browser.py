@@ -11,10 +11,10 @@ import time
 
 import numpy as np
 import pytest
+from test_viz_server import no_server_left  # noqa: F401  (checks that no server is left)
 
 from arm_model import PinocchioArm
 from arm_model.urdf import ARM_RGBA
-from test_viz_server import no_server_left  # noqa: F401  (checks that no server is left)
 from viz import Camera, View, arm_mask, colour_mask, load_png, screenshot
 
 pytestmark = pytest.mark.browser

@@ -10,11 +10,11 @@ import sys
 import numpy as np
 import pytest
 from scipy.optimize import least_squares
+from test_viz_server import bridge_children, no_server_left, page_commands, transforms, wait_gone  # noqa: F401
 
 from arm_model import ball_centres
 from arm_model.cli import main
 from conftest import NOMINAL, ROOT
-from test_viz_server import bridge_children, no_server_left, page_commands, transforms, wait_gone  # noqa: F401
 
 HEADER = "measurement,feature," + ",".join(f"q{i}_deg" for i in range(1, 8)) + ",fx_N,fy_N,fz_N"
 Q0 = np.radians([0, 30, 0, 60, 0, 45, 0])

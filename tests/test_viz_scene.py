@@ -14,8 +14,7 @@ from arm_model.urdf import ARM_RGBA, BALL_RGBA
 from conftest import assert_close
 from viz import Camera, ViewerError, colour_mask, find_chromium, page_with_legend, place_features
 from viz.residuals import parse_residuals, residual_origins
-from viz.scene import arrow_parts, rotation_y_to, coverage_factor, ellipsoid_mesh
-
+from viz.scene import arrow_parts, coverage_factor, ellipsoid_mesh, rotation_y_to
 
 # --- camera --------------------------------------------------------------------------------------
 
@@ -290,6 +289,7 @@ def test_transform_frames_are_meshcats_own():
     import umsgpack
     from meshcat.commands import SetTransform
     from meshcat.path import Path as MPath
+
     from viz.scene import transform_frames
     rng = np.random.default_rng(0)
     for name in ("a", "aacmm/arm/link_3_0", "x" * 40, "long/" * 60):

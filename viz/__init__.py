@@ -7,8 +7,8 @@ ball and the deflection arrow (scaled, the scale written in the scene and on the
 command line (:mod:`viz.cli`); :mod:`viz.browser` renders pages in headless Chromium.
 Heavy backends (meshcat, Pinocchio) load when a view is made, not at import.
 """
-from .errors import ViewerError
 from .browser import arm_mask, colour_mask, find_chromium, load_png, screenshot
+from .errors import ViewerError
 from .placement import Placement, place_features
 from .residuals import Residuals, read_residuals, residual_origins
 from .scene import ArmScene, Camera, PoseInfo

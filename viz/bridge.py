@@ -15,7 +15,6 @@ import os
 import signal
 import sys
 
-
 #: the scene node whose object carries the text of the live page's panel (``userData.lines``)
 PANEL_NODE = "aacmm/live/panel"
 #: the live page (``/live/``): meshcat's viewer plus a text panel. Commands that set the panel node's

@@ -8,15 +8,15 @@ import logging
 import signal
 import tempfile
 import time
-from arm_model.cli import command_help
 from pathlib import Path
 
 import numpy as np
 
 from arm_model import InputError, NumericalError, check_features, read_artefacts, read_points
-from arm_model.commands import add_arm_options, arm_inputs, model_from_args, number_in, port, positive
+from arm_model.checks import log_warnings, point_warnings
+from arm_model.cli import command_help
+from arm_model.cli_options import add_arm_options, arm_inputs, model_from_args, number_in, port, positive
 from arm_model.output import output_file
-from arm_model.checks import point_warnings, log_warnings
 from arm_model.uncertainty_cli import add_input_options
 
 from .errors import ViewerError
@@ -159,7 +159,7 @@ def _run(args, inputs, outputs, tmp) -> int:
         args.scale = arrow_scale(d_um if args.animate else d_um[args.point - 1:args.point])
     serve = args.serve or args.open_seconds is not None or (args.html is None and args.screenshot is None)
 
-    from .view import View   # heavy backends from here on
+    from .view import View  # heavy backends from here on
 
     with View(desc, port=args.port) as view:
         if args.animate:
@@ -246,8 +246,10 @@ def _markers(arm, sel, notes: list | None = None) -> tuple[np.ndarray, np.ndarra
 
 def _ellipsoids(arm, sel, args, view) -> None:
     """The 95 % uncertainty ellipsoids of the selection's corrected centres (arm_model.uncertainty)."""
+    from arm_model.model_file import parameters_of
     from arm_model.uncertainty import propagate
-    from arm_model.uncertainty_cli import inputs_from_args, parameters_of
+    from arm_model.uncertainty_cli import inputs_from_args
+
     from .scene import coverage_factor
     parameters = parameters_of(arm)
     inputs = inputs_from_args(arm, args, sel.wrench is not None)

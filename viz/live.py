@@ -20,12 +20,17 @@ from pathlib import Path
 
 import numpy as np
 
-from .bridge import PANEL_NODE
-from .placement import Placement
-from .scene import arrow_parts, transform_matrix, rotation_y_to, send_transform
 from arm_model.live import Sample, Session
 
-from .scene import Camera
+from .bridge import PANEL_NODE
+from .placement import Placement
+from .scene import (
+    Camera,
+    arrow_parts,
+    rotation_y_to,
+    send_transform,
+    transform_matrix,
+)
 from .view import View, page_with_legend
 
 __all__ = ["LiveView", "LIVE_POINTS_RGB", "FORCE_COLOURS", "FORCE_MM_PER_N", "DEFAULT_FPS", "panel_lines"]
@@ -183,7 +188,8 @@ class LiveView:
         if self._arrow_paths is None:
             self._arrow_paths = {k: self.vis[n].path.lower() for k, n in
                                  (("", node), ("shaft", f"{node}/shaft"), ("head", f"{node}/head"))}
-        send_transform(self.vis, self._arrow_paths[""], transform_matrix(ball, rotation_y_to(vec) if length > 0 else None))
+        send_transform(self.vis, self._arrow_paths[""],
+                       transform_matrix(ball, rotation_y_to(vec) if length > 0 else None))
         for part, (pos, scl) in arrow_parts(max(length, 1e-6)).items():
             send_transform(self.vis, self._arrow_paths[part], transform_matrix(pos, None, scl))
 
@@ -221,7 +227,7 @@ class LiveView:
     def close(self) -> None:
         self.view.close()
 
-    def __enter__(self) -> "LiveView":
+    def __enter__(self) -> LiveView:
         return self
 
     def __exit__(self, *exc) -> None:

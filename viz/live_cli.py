@@ -14,12 +14,11 @@ import logging
 import signal
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from arm_model import InputError
 from arm_model.cli import command_help
-from typing import TYPE_CHECKING
-
-from arm_model.commands import add_arm_options, arm_inputs, model_from_args, non_negative, number_in, port, positive
+from arm_model.cli_options import add_arm_options, arm_inputs, model_from_args, non_negative, number_in, port, positive
 
 if TYPE_CHECKING:          # only for the annotations: the live modules load when the command runs
     from arm_model.live import SampleLayout, Session
@@ -101,7 +100,7 @@ class _Stop:
         self.reason: str | None = None
         self._old = {}
 
-    def __enter__(self) -> "_Stop":
+    def __enter__(self) -> _Stop:
         for sig, reason in ((signal.SIGINT, "interrupted"), (signal.SIGTERM, "terminated")):
             try:
                 self._old[sig] = signal.signal(sig, lambda *_, r=reason: self._set(r))

@@ -3,7 +3,8 @@
 The artefacts file gives sizes, not placements: each (measurement, feature) group of measured ball
 centres is fitted with :mod:`arm_model.geometry` (ring/cylinder: axis, centre and radius by
 :func:`~arm_model.geometry.fit_ring_axis`, i.e. the cylinder fit, or for a ring probed in one plane the plane's
-normal and a circle in it; sphere: centre; plane: centroid and normal; seat: the mean point) and drawn with the certified size. A sphere's centre is
+normal and a circle in it; sphere: centre; plane: centroid and normal; seat: the mean point) and drawn with the
+certified size. A sphere's centre is
 fitted at the known radius of its ball centres when the ball diameter is given. For drawing only.
 """
 from __future__ import annotations

@@ -57,7 +57,7 @@ class Residuals:
     def __len__(self) -> int:
         return len(self.vectors)
 
-    def select(self, mask) -> "Residuals":
+    def select(self, mask) -> Residuals:
         """The rows where ``mask`` holds."""
         def take(a):
             return None if a is None else a[mask]
@@ -118,7 +118,7 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
             out[i] = v
         return out * UNIT_FACTORS[split_unit(h)[1]]
 
-    def text(name: str) -> np.ndarray:
+    def text_column(name: str) -> np.ndarray:
         if name not in header:
             return np.full(len(data), "", dtype=object)
         k = header.index(name)
@@ -134,8 +134,8 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
                 raise InputError(f"expected a line number (1, 2, ...), got {cell!r}", path, no, "line")
             point_lines[i] = int(cell)
     return Residuals(path, np.column_stack([column(b) for b in _POINT]) if has_xyz else None,
-                     np.column_stack([column(b) for b in vector]), text("measurement"), text("feature"),
-                     np.array([no for no, _ in data]), point_lines, text("kind"))
+                     np.column_stack([column(b) for b in vector]), text_column("measurement"), text_column("feature"),
+                     np.array([no for no, _ in data]), point_lines, text_column("kind"))
 
 
 def residual_origins(res: Residuals, points, centres: np.ndarray,

@@ -80,7 +80,7 @@ class Camera:
 
     @classmethod
     def framing(cls, p_base, direction=(0.45, -1.0, 0.45), aspect: float = 4 / 3,
-                fill: float = 0.8, pad: float = 0.06, fov_deg: float = 75.0) -> "Camera":
+                fill: float = 0.8, pad: float = 0.06, fov_deg: float = 75.0) -> Camera:
         """The camera looking along ``-direction`` at the middle of the points ``p_base`` (N, 3) [m],
         as close as keeps them, grown by ``pad`` [m] on every axis, within ``fill`` of the
         half-width and half-height of a page of the given aspect."""
@@ -321,7 +321,7 @@ class ArmScene:
                                 np.diag([*g.meshScale, 1.0])) for g in pv.visual_model.geometryObjects]
             pin.forwardKinematics(pv.model, pv.data, x)
             pin.updateGeometryPlacements(pv.model, pv.data, pv.visual_model, pv.visual_data)
-            for gid, path, scale in self._nodes:
+            for gid, path, scale in self._nodes:  # type: ignore[attr-defined]
                 send_transform(self.vis, path, pv.visual_data.oMg[gid].homogeneous @ scale)
         if extent:
             self._extent.append(self._joint_points(x))

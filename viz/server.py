@@ -69,7 +69,7 @@ class MeshcatServer:
         sock.setsockopt(zmq.SNDTIMEO, int(self._timeout * 1000))
 
     # -- lifecycle --------------------------------------------------------------------------
-    def start(self) -> "MeshcatServer":
+    def start(self) -> MeshcatServer:
         """Start the server process and connect a visualizer; raises :class:`ViewerError`."""
         if self._proc is not None:
             return self
@@ -180,7 +180,7 @@ class MeshcatServer:
         if proc.stdout is not None and not proc.stdout.closed:
             proc.stdout.close()
 
-    def __enter__(self) -> "MeshcatServer":
+    def __enter__(self) -> MeshcatServer:
         return self.start()
 
     def __exit__(self, *exc) -> None:

@@ -77,7 +77,7 @@ class View:
 
     @property
     def url(self) -> str:
-        return self.server.url
+        return self.server.url  # type: ignore[return-value]
 
     @property
     def legend(self) -> list[str]:
@@ -155,7 +155,7 @@ class View:
         if self._own:
             self.server.close()
 
-    def __enter__(self) -> "View":
+    def __enter__(self) -> View:
         return self
 
     def __exit__(self, *exc) -> None:

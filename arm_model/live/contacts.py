@@ -238,7 +238,7 @@ class ContactDetector:
         x = np.array(idle, float)[:, :3]
         self.raw_noise = np.array([signal_noise(x[:, k]) for k in range(3)])
         a = self._a_smooth
-        self.noise = float(self.raw_noise.max() * math.sqrt(a / (2.0 - a)))
+        self.noise = float(self.raw_noise.max() * math.sqrt(a / (2.0 - a)))  # type: ignore[attr-defined]
         self.on = max(self.options.on, NOISE_ON * self.noise)
         self.off = max(self.options.off, NOISE_OFF * self.noise, 0.0)
         if self.off >= self.on:

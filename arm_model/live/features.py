@@ -32,10 +32,23 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import NumericalError
-from ..feature_uncertainty import (cylinder_jacobian, diameter_uncertainty, fit_sensitivity, plane_jacobian,
-                                   residual_form_uncertainty, sphere_jacobian)
-from ..geometry import (CylinderFit, feature_diameter, fit_circle_2d, fit_cylinder, fit_plane, fit_sphere,
-                        perpendicular_basis)
+from ..feature_uncertainty import (
+    cylinder_jacobian,
+    diameter_uncertainty,
+    fit_sensitivity,
+    plane_jacobian,
+    residual_form_uncertainty,
+    sphere_jacobian,
+)
+from ..geometry import (
+    CylinderFit,
+    feature_diameter,
+    fit_circle_2d,
+    fit_cylinder,
+    fit_plane,
+    fit_sphere,
+    perpendicular_basis,
+)
 from ..io import Distance, Feature
 from .plan import PlanFeature, SessionPlan
 
@@ -109,7 +122,8 @@ class FeatureFit:
         parts = []
         if self.size is not None:
             parts.append(f"{'length' if self.kind == 'distance' else 'D'} {self.size * 1e3:.4f} mm"
-                         + (f" ± {self.u_size * 1e6:.1f} um" if self.u_size is not None and math.isfinite(self.u_size) else ""))
+                         + (f" ± {self.u_size * 1e6:.1f} um"
+                            if self.u_size is not None and math.isfinite(self.u_size) else ""))
         if self.deviation is not None:
             parts.append(f"vs certified {self.deviation * 1e6:+.1f} um"
                          + ("" if self.agrees is None else (" (agrees)" if self.agrees else " (DIFFERS)")))
@@ -158,7 +172,7 @@ class FeatureTracker:
 
     def _advance(self) -> None:
         while (self._entry < len(self.entries) and self.entries[self._entry].points is not None
-               and self._taken >= self.entries[self._entry].points):
+               and self._taken >= self.entries[self._entry].points):  # type: ignore[operator]
             self._entry, self._taken = self._entry + 1, 0
 
     @property
@@ -308,14 +322,14 @@ class FeatureTracker:
         if a is None or b is None or a.centre_sens is None or b.centre_sens is None:
             return FeatureFit(**base, n_points=sum(len(x.points) for x in (a, b) if x is not None),
                               note="needs both features placed")
-        v = b.centre - a.centre
+        v = b.centre - a.centre  # type: ignore[operator]
         length = float(np.linalg.norm(v))
         e = v / length
         sens = np.concatenate([-np.einsum("i,nij->nj", e, a.centre_sens), np.einsum("i,nij->nj", e, b.centre_sens)])
         cov = np.concatenate([np.array(a.cov), np.array(b.cov)])
         shared = np.concatenate([np.array(a.shared), np.array(b.shared)])
         u = diameter_uncertainty(sens, cov, shared, self.n_parameters).u
-        return FeatureFit(**base, n_points=len(cov), size=length, u_size=u, centre=(a.centre + b.centre) / 2, axis=e,
+        return FeatureFit(**base, n_points=len(cov), size=length, u_size=u, centre=(a.centre + b.centre) / 2, axis=e,  # type: ignore[operator]
                           extent=np.zeros(2))
 
 

@@ -30,6 +30,7 @@ from pathlib import Path
 
 from ..errors import InputError, parse_toml, read_text
 from ..io import Artefacts, Feature, format_artefacts, parse_artefacts
+from ..toml_lines import toml_key_lines, top_key_line
 
 __all__ = ["PlanFeature", "SessionPlan", "read_plan", "parse_plan", "format_plan", "single_feature_plan",
            "MAX_PLAN_POINTS"]
@@ -65,7 +66,7 @@ class SessionPlan:
         return format_artefacts([e.feature for e in self.entries], self.distances,
                                 "The features of a live session's plan (docs/formats.md §4), for aacmm calibrate.")
 
-    def with_feature(self, feature: Feature, points: int | None = None) -> "SessionPlan":
+    def with_feature(self, feature: Feature, points: int | None = None) -> SessionPlan:
         """This plan with one more entry (an ad hoc feature); its id must be new."""
         if feature.id in {e.feature.id for e in self.entries}:
             raise ValueError(f"feature id '{feature.id}' is already in the plan")
@@ -79,23 +80,23 @@ def read_plan(path: str | Path) -> SessionPlan:
 
 def parse_plan(text: str, path: str = "<plan>") -> SessionPlan:
     """Parse a plan's TOML text (see :func:`read_plan`)."""
-    from ..io import _toml_key_line, _toml_top_line
     art = parse_artefacts(text, path, extra_keys=("measurement",), extra_feature_keys=("points",))
     data = parse_toml(text, path)
+    lines = toml_key_lines(text)
     measurement = data.get("measurement")
     if measurement is not None and (not isinstance(measurement, str) or not measurement.strip()):
-        raise InputError("'measurement' must be a non-empty text", path, _toml_top_line(text, "measurement"),
+        raise InputError("'measurement' must be a non-empty text", path, top_key_line(lines, "measurement"),
                          "key 'measurement'")
     entries = []
     tables = data["feature"]
     for i, (t, feature) in enumerate(zip(tables, art.features.values())):
         n = t.get("points")
-        where = (path, _toml_key_line(text, "feature", i, "points"), f"key 'feature[{i + 1}].points'")
+        where = (path, lines.get(("feature", i, "points")), f"key 'feature[{i + 1}].points'")
         if n is None:
             if i != len(tables) - 1:
                 raise InputError(f"feature '{feature.id}' needs 'points' (how many contacts it takes); only the last "
                                  "feature may leave it out and take every remaining contact",
-                                 path, _toml_key_line(text, "feature", i, None), f"key 'feature[{i + 1}]'")
+                                 path, lines.get(("feature", i)), f"key 'feature[{i + 1}]'")
         elif isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_PLAN_POINTS:
             raise InputError(f"'points' must be a whole number from 1 to {MAX_PLAN_POINTS}, got {n!r}", *where)
         entries.append(PlanFeature(feature, n))

@@ -23,8 +23,8 @@ import datetime
 import json
 import os
 import time
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 from ..errors import InputError
 from ..output import MARKER, guard_output, resolved
@@ -188,4 +188,4 @@ def _write_all(fd: int, data: bytes) -> None:
 
 
 def _now() -> str:
-    return datetime.datetime.now(datetime.timezone.utc).astimezone().isoformat(timespec="milliseconds")
+    return datetime.datetime.now(datetime.UTC).astimezone().isoformat(timespec="milliseconds")

@@ -23,10 +23,10 @@ import re
 from typing import NamedTuple
 
 from ..csv_io import parse_number
-from ..errors import InputError, did_you_mean
+from ..errors import InputError, did_you_mean, read_text
 from ..units import ABSOLUTE_ZERO_C, PLAUSIBLE_SI, QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
-__all__ = ["Sample", "SampleLayout", "TIME_COLUMNS", "sample_header"]
+__all__ = ["Sample", "SampleLayout", "TIME_COLUMNS", "sample_header", "read_samples"]
 
 #: the names the time column may have (one of them, once)
 TIME_COLUMNS = ("time_s", "t_s")
@@ -114,7 +114,8 @@ class SampleLayout:
         """base name -> (index, unit factor) of every column; every header error here."""
         path, line = self.path, self.header_line
         cols: dict[str, tuple[int, float]] = {}
-        known = "time_s, q1_deg ... (or _rad), fx_N, fy_N, fz_N (or f_bend_N, f_axial_N), mx_Nm ..., temperature_C, trigger"
+        known = ("time_s, q1_deg ... (or _rad), fx_N, fy_N, fz_N (or f_bend_N, f_axial_N), mx_Nm ..., temperature_C, "
+                 "trigger")
         for k, h in enumerate(self.header):
             if not h:
                 raise InputError("empty column name in the header", path, line)
@@ -142,7 +143,7 @@ class SampleLayout:
         joints = sorted(int(b[1:]) for b in cols if b.startswith("q") and b[1:].isdigit())
         if joints != list(range(1, len(joints) + 1)) or len(joints) != n_joints:
             raise InputError(f"the joint columns must be q1 ... q{n_joints} (the arm has {n_joints} joints), got "
-                             f"{', '.join('q%d' % i for i in joints) or 'none'}", path, line)
+                             f"{', '.join(f'q{i}' for i in joints) or 'none'}", path, line)
         for group in _GROUPS.values():
             present = [b for b in group if b in cols]
             if present and len(present) != len(group):
@@ -227,7 +228,22 @@ class SampleLayout:
         elif self.force_kind is not None:
             f = [0.0 if c is None else v[c[0]] * c[1] for c in self._force]
             m = [v[k] * f_ for k, f_ in self._torque] if self._torque else [0.0, 0.0, 0.0]
-            wrench = (*f, *m)
+            wrench = (*f, *m)  # type: ignore[misc]
         trigger = None if self._trigger is None else v[self._trigger] != 0.0
         temperature = None if self._temperature is None else v[self._temperature]
         return Sample(v[self._time], q, wrench, trigger, temperature)
+
+
+def read_samples(path) -> int:
+    """A sample stream file (docs/formats.md §8) as ``aacmm live`` reads it, line by line; the number of samples
+    (the read-back of :mod:`arm_model.readback`)."""
+    lines = read_text(path, "the sample stream").splitlines()
+    header = [c.strip() for c in lines[0].split(",")] if lines else []
+    layout = SampleLayout(header, len({m.group(1) for h in header if (m := re.fullmatch(r"q(\d+)_\w+", h))}),
+                          str(path))
+    n = 0
+    for no, text in enumerate(lines[1:], start=2):
+        if text.strip():
+            layout.parse(text, no)
+            n += 1
+    return n

@@ -16,17 +16,18 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any
 
 import numpy as np
 
-from ..csv_io import format_row
 from ..checks import limit_bounds
+from ..csv_io import format_row
 from ..io import Feature, PointSet
-from .contacts import Contact, ContactDetector, ContactOptions
 from ..uncertainty import InputUncertainty
+from .contacts import Contact, ContactDetector, ContactOptions
 from .features import FeatureFit, FeatureTracker
 from .plan import SessionPlan
 from .record import FILES, SessionRecord
@@ -117,9 +118,8 @@ class Session:
                  contact: ContactOptions = ContactOptions(), inputs: InputUncertainty | None = None,
                  measurement: str | None = None, rate: float | None = None, layout: SampleLayout | None = None,
                  inputs_files: Iterable = (), status: dict | None = None):
-        from ..model_file import Arm, load_model
+        from ..model_file import Arm, load_model, parameters_of
         from ..uncertainty import default_inputs
-        from ..uncertainty_cli import parameters_of
         if not isinstance(arm, Arm):
             arm = Arm(arm) if hasattr(arm, "joints") else load_model(arm, None)
         self.arm, self.desc = arm, arm.desc
@@ -137,7 +137,7 @@ class Session:
         npar = 0 if self.parameters is None else len(self.parameters.names)
         self.tracker = FeatureTracker(self.plan, self.desc.probe.ball_diameter, npar)
         self._period = None if rate is None else 1.0 / float(rate)
-        self._gap_limit = -math.inf if rate is None else GAP_FACTOR * self._period    # learning: every interval
+        self._gap_limit = -math.inf if rate is None else GAP_FACTOR * self._period  # type: ignore[operator]  # learning: every interval
         self._first_gaps: list = []
         self._bounds = [(i, lo, hi) for i, (lo, hi) in enumerate(limit_bounds(self.desc))
                         if math.isfinite(lo) or math.isfinite(hi)]
@@ -294,7 +294,7 @@ class Session:
             self.record.close(status, message, self._progress())
         return out
 
-    def __enter__(self) -> "Session":
+    def __enter__(self) -> Session:
         return self
 
     def __exit__(self, exc_type: type | None, exc: BaseException | None, tb: object) -> None:

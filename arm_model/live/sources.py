@@ -19,8 +19,8 @@ import re
 import selectors
 import socket
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from ..errors import InputError, open_input
 
@@ -147,7 +147,7 @@ class _UdpSource(LineSource):
         while True:
             try:
                 data = self._sock.recv(65536)
-            except socket.timeout:
+            except TimeoutError:
                 yield None
                 continue
             for raw in data.split(b"\n"):

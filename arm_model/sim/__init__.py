@@ -28,7 +28,7 @@ errors, then the parameters of each effect that is on), so analysis and truth sh
 force-sensor cross-talk, encoder quantisation and probing repeatability live here only.
 Command line: ``aacmm simulate campaign.toml -o out/``. Reference: docs/simulator.md.
 """
-from .campaign import Campaign, Task, TASK_KINDS, SENSORS, campaign_from_dict, load_campaign
+from .campaign import SENSORS, TASK_KINDS, Campaign, Task, campaign_from_dict, load_campaign
 from .run import SimResult, simulate
 from .truth import Truth, build_truth
 

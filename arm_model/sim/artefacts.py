@@ -26,12 +26,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import InputError
 from ..chain import NUMPY_OPS, chain_point
-from ..geometry import ball_centre_radius, perpendicular_basis, random_rotation
+from ..errors import InputError
+from ..geometry import ball_centre_radius, cone_directions, perpendicular_basis, random_rotation
 from .campaign import Campaign, Task
 
-__all__ = ["Plan", "make_plan", "cone_directions", "shoulder"]
+__all__ = ["Plan", "make_plan", "shoulder"]
 
 
 #: per-point fields of a plan, in order
@@ -109,7 +109,7 @@ class Plan:
         for name in ROW_FIELDS:
             getattr(self, name).append(row[name])
 
-    def arrays(self, n_joints: int = 7) -> "Plan":
+    def arrays(self, n_joints: int = 7) -> Plan:
         """The same plan with numpy arrays for the per-point fields."""
         kinds = {"measurement": object, "feature": object, "task": int, "roll_along_force": bool, "reference": bool,
                  "redraw": object, "posture": bool, "frame": object}
@@ -131,7 +131,7 @@ class Plan:
     def __len__(self) -> int:
         return len(self.measurement)
 
-    def extend(self, other: "Plan") -> None:
+    def extend(self, other: Plan) -> None:
         """Append the per-point rows of ``other`` (lists) to this plan."""
         for name in ROW_FIELDS:
             getattr(self, name).extend(getattr(other, name))
@@ -139,16 +139,6 @@ class Plan:
 
 # ---------------------------------------------------------------------------------------------
 # sampling helpers (frames and rotations: :mod:`arm_model.geometry`)
-
-def cone_directions(rng, axis, half_angle: float, n: int) -> np.ndarray:
-    """(n, 3) unit directions uniform on the spherical cap of ``half_angle`` [rad] about ``axis``."""
-    axis = np.asarray(axis, float)
-    e1, e2 = perpendicular_basis(axis)
-    cos_t = rng.uniform(np.cos(half_angle), 1.0, n)
-    phi = rng.uniform(0, 2 * np.pi, n)
-    sin_t = np.sqrt(np.maximum(0.0, 1 - cos_t ** 2))
-    return (cos_t[:, None] * axis + sin_t[:, None] * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2))
-
 
 def shoulder(desc) -> np.ndarray:
     """Origin [m] of the first joint frame at q = 0 (for a DH arm: the shoulder), base frame."""
@@ -474,7 +464,7 @@ def settle(plan: Plan, truth, rng, rounds: int = 8) -> None:
     from ..errors import NumericalError
     from .ik import IKTargets, solve_points
 
-    todo = np.flatnonzero(np.isnan(plan.q_start[:, 0]))
+    todo = np.flatnonzero(np.isnan(plan.q_start[:, 0]))  # type: ignore[call-overload]
     for _ in range(rounds):
         if todo.size == 0:
             return

@@ -16,10 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError, did_you_mean, parse_toml, read_text
-from ..units import implausible
 from ..description import ArmDescription
+from ..errors import InputError, did_you_mean, parse_toml, read_text
 from ..shipped import SHIPPED_ARMS, shipped_path
+from ..toml_lines import key_path_text, toml_key_lines
+from ..units import implausible
 from ..urdf_import import load_arm
 
 __all__ = ["Campaign", "Task", "load_campaign", "campaign_from_dict", "TASK_KINDS", "SENSORS",
@@ -177,43 +178,6 @@ class Campaign:
         return tuple(p for p in (self.source, self.arm_path) if p is not None)
 
 
-# ---------------------------------------------------------------------------------------------
-# line lookup for messages
-
-def _key_lines(text: str) -> dict[tuple, int]:
-    """Map (table path, key) to its 1-based line. A table path is a tuple like ("task", 2) or
-    ("truth", "thermal"); arrays of tables carry their 0-based index."""
-    lines: dict[tuple, int] = {}
-    counts: dict[tuple, int] = {}
-    table: tuple = ()
-    for no, raw in enumerate(text.splitlines(), start=1):
-        line = raw.split("#", 1)[0].strip()
-        m = re.match(r"^\[\[\s*([\w.\-\" ]+?)\s*\]\]$", line) or re.match(r"^\[\s*([\w.\-\" ]+?)\s*\]$", line)
-        if m:
-            names = tuple(p.strip().strip('"') for p in m.group(1).split("."))
-            if line.startswith("[["):
-                counts[names] = counts.get(names, -1) + 1
-                table = names[:-1] + ((names[-1], counts[names]),)
-            else:
-                table = names
-            lines[(_flat(table), "")] = no
-            continue
-        m = re.match(r'^("?[\w.\-]+"?)\s*=', line)
-        if m:
-            lines[(_flat(table), m.group(1).strip('"'))] = no
-    return lines
-
-
-def _flat(table: tuple) -> tuple:
-    out = []
-    for t in table:
-        if isinstance(t, tuple):
-            out.extend(t)
-        else:
-            out.append(t)
-    return tuple(out)
-
-
 def _harmonics(ctx, raw, desc) -> list[dict]:
     """``[[truth.harmonics]]``: joint-angle errors ``a sin(h q_of + phi)`` of ``joint`` (``of``: the joint
     whose angle drives it, the joint itself by default), harmonic h of 1..4."""
@@ -273,24 +237,18 @@ def _check_compliance_matrix(ctx, e: dict, desc, tbl, raw: dict) -> None:
 
 
 class _Ctx:
-    """Where a value came from: builds errors that name file, line and key."""
+    """Where a value came from: builds errors that name file, line and key (``lines``: the campaign
+    text's :func:`~arm_model.toml_lines.toml_key_lines`)."""
 
     def __init__(self, path: str, lines: dict | None):
         self.path = path
         self.lines = lines or {}
 
     def error(self, msg: str, table: tuple, key: str | None = None) -> InputError:
-        line = self.lines.get((table, key or ""))
+        line = self.lines.get(table + (key,)) if key else None
         if line is None:
-            line = self.lines.get((table, ""))
-        parts = []
-        for t in table:
-            if isinstance(t, int):
-                parts[-1] = f"{parts[-1]}[{t + 1}]"
-            else:
-                parts.append(str(t))
-        where = ".".join(parts + ([key] if key else []))
-        return InputError(msg, self.path, line, f"key '{where or 'top level'}'")
+            line = self.lines.get(table)
+        return InputError(msg, self.path, line, f"key '{key_path_text(table + ((key,) if key else ()))}'")
 
 
 def _number(ctx, v, table, key) -> float:
@@ -328,7 +286,7 @@ def _section(ctx: _Ctx, data: Any, spec: dict, table: tuple) -> dict:
             out[base] = _scaled(ctx, v, _UNITS[unit][1], shape, table, key, quantity)
         else:
             out[base] = _unitless(ctx, v, quantity, shape, table, key)
-    for base, (quantity, default, shape) in spec.items():
+    for base, (quantity, default, _shape) in spec.items():
         if base not in out and quantity != "table":
             out[base] = default
     return out
@@ -403,7 +361,8 @@ def _joint_index(ctx, desc: ArmDescription, name: str, table, key, revolute: boo
     """The encoder column of joint ``name``; ``revolute``: for an effect on a joint's angle, which a
     prismatic joint has not."""
     if name not in desc.joint_names:
-        raise ctx.error(f"unknown joint '{name}'{did_you_mean(name, desc.joint_names)} (the arm has: {', '.join(desc.joint_names)})", table, key)
+        raise ctx.error(f"unknown joint '{name}'{did_you_mean(name, desc.joint_names)} (the arm has: "
+                        f"{', '.join(desc.joint_names)})", table, key)
     i = desc.joint_names.index(name)
     if revolute and desc.encoders[i].prismatic:
         raise ctx.error(f"joint '{name}' is prismatic: '{table[1]}' acts on a joint's angle (revolute joints: "
@@ -432,31 +391,136 @@ def _load_arm(ctx, arm_path: Path, tip_frame: str | None, base_frame: str | None
         raise ctx.error(f"{reason} (in the URDF {arm_path})", (), keys[exc.column]) from None
 
 
-def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm=None) -> Campaign:
-    ctx = _Ctx(path, lines)
-    top = _section(ctx, data, _S["top"], ())
-    if top["sensor"] not in SENSORS:
-        raise ctx.error(f"'sensor' must be one of {', '.join(SENSORS)}, got {top['sensor']!r}", (), "sensor")
-    # the arm
+def _campaign_arm(ctx, top: dict, base_dir: Path | None, arm) -> tuple[ArmDescription, Path | None]:
+    """The campaign's arm (``arm``: a description, a path given by the caller, or None: the campaign's
+    'arm' key, a shipped arm's name or a path relative to the campaign, default the nominal arm) and the
+    path it was read from."""
     arm_path = None
     if isinstance(arm, ArmDescription):
-        desc = arm
-    else:
-        arm_path = Path(arm) if arm is not None else None
-        if arm_path is None and top["arm"] is not None:
-            arm_path = Path(top["arm"])
-            if not arm_path.is_absolute() and base_dir is not None:
-                arm_path = base_dir / arm_path
-            if top["arm"] in SHIPPED_ARMS and not arm_path.exists():     # a shipped arm by name
-                arm_path = shipped_path(SHIPPED_ARMS[top["arm"]])
-        if arm_path is None:
-            arm_path = DEFAULT_ARM
-        if not arm_path.exists():
-            raise ctx.error(f"arm description not found: {arm_path}", (), "arm")
-        if arm_path.suffix.lower() == ".urdf" and not top["tip_frame"]:
-            raise ctx.error("an arm given as a URDF needs 'tip_frame' (the link at the ball centre)", (), "arm")
-        desc = _load_arm(ctx, arm_path, top["tip_frame"], top["base_frame"])
-    # truth and its effects
+        return arm, arm_path
+    arm_path = Path(arm) if arm is not None else None
+    if arm_path is None and top["arm"] is not None:
+        arm_path = Path(top["arm"])
+        if not arm_path.is_absolute() and base_dir is not None:
+            arm_path = base_dir / arm_path
+        if top["arm"] in SHIPPED_ARMS and not arm_path.exists():     # a shipped arm by name
+            arm_path = shipped_path(SHIPPED_ARMS[top["arm"]])
+    if arm_path is None:
+        arm_path = DEFAULT_ARM
+    if not arm_path.exists():
+        raise ctx.error(f"arm description not found: {arm_path}", (), "arm")
+    if arm_path.suffix.lower() == ".urdf" and not top["tip_frame"]:
+        raise ctx.error("an arm given as a URDF needs 'tip_frame' (the link at the ball centre)", (), "arm")
+    return _load_arm(ctx, arm_path, top["tip_frame"], top["base_frame"]), arm_path
+
+
+def _eccentricities(ctx, ecc, desc) -> list[dict]:
+    """The [[truth.eccentricity]] tables (one a revolute joint)."""
+    if isinstance(ecc, dict):
+        ecc = [ecc]
+    if not isinstance(ecc, list):
+        raise ctx.error("'eccentricity' must be [[truth.eccentricity]] tables", ("truth",), "eccentricity")
+    rows = []
+    for i, t in enumerate(ecc):
+        tbl = ("truth", "eccentricity", i)
+        e = _section(ctx, t, _S["eccentricity"], tbl)
+        if e["joint"] is None or e["amplitude"] is None:
+            raise ctx.error("an eccentricity needs 'joint' and 'amplitude_<angle unit>'", tbl)
+        e["index"] = _joint_index(ctx, desc, e["joint"], tbl, "joint", revolute=True)
+        if any(r["index"] == e["index"] for r in rows):
+            raise ctx.error(f"joint '{e['joint']}' has two eccentricity tables", tbl, "joint")
+        rows.append(e)
+    return rows
+
+
+def _joint_values(ctx, e: dict, name: str, desc, tbl) -> None:
+    """joint_compliance / thermal: the joints and one stiffness (alpha) for all or one a joint."""
+    e["indices"] = _joint_indices(ctx, desc, e["joints"], tbl, name == "joint_compliance")
+    key = "stiffness" if name == "joint_compliance" else "alpha"
+    vals = e[key]
+    if vals is None:
+        raise ctx.error(f"'{name}' needs '{key}_<unit>'", tbl)
+    if len(vals) not in (1, len(e["indices"])):
+        raise ctx.error(f"'{key}' has {len(vals)} values for {len(e['indices'])} joints", tbl, key)
+    if name == "joint_compliance" and min(vals) <= 0:
+        raise ctx.error("stiffness must be > 0", tbl, key)
+    e[key] = tuple(vals) * (len(e["indices"]) if len(vals) == 1 else 1)
+
+
+def _lateral_compliance(ctx, e: dict, desc, tbl, raw: dict) -> None:
+    e["indices"] = _joint_indices(ctx, desc, e["joints"], tbl, True)
+    if len(set(e["indices"])) != len(e["indices"]):
+        raise ctx.error("a joint is named twice", tbl, "joints")
+    if e["stiffness_x"] is None and e["stiffness_y"] is None:
+        raise ctx.error("'lateral_compliance' needs 'stiffness_x_<unit>' and/or 'stiffness_y_<unit>' "
+                        "(about the joint frame's x and y axes)", tbl)
+    if not (e["gravity"] or e["contact"]):
+        raise ctx.error("'gravity' and 'contact' are both false: the compliance would carry no load", tbl)
+    for key in ("stiffness_x", "stiffness_y"):
+        vals = e[key]
+        if vals is None:
+            e[key] = (None,) * len(e["indices"])
+            continue
+        if len(vals) not in (1, len(e["indices"])):
+            raise ctx.error(f"'{key}' has {len(vals)} values for {len(e['indices'])} joints", tbl,
+                            _given_key(raw, key))
+        if min(vals) <= 0:
+            raise ctx.error(f"'{key}' must be > 0", tbl, _given_key(raw, key))
+        e[key] = tuple(vals) * (len(e["indices"]) if len(vals) == 1 else 1)
+
+
+def _approach_offset(ctx, e: dict, tbl, raw: dict) -> None:
+    for key, v in e.items():
+        if abs(v) > APPROACH_MAX:
+            raise ctx.error(f"'{key}' is {v * 1e3:g} mm: an approach (lobing) offset must be within "
+                            f"+-{APPROACH_MAX * 1e3:g} mm", tbl, _given_key(raw, key))
+
+
+def _probe_compliance(ctx, e: dict, desc, tbl, raw: dict) -> None:
+    if e["bending"] is not None and (e["bending_x"] is not None or e["bending_y"] is not None):
+        raise ctx.error("give 'bending' or 'bending_x'/'bending_y', not both", tbl)
+    if all(e[k] is None for k in ("bending", "bending_x", "bending_y", "axial")) and \
+            not any(e[f"coupling_{a}"] for a in ("xy", "xz", "yz")):
+        raise ctx.error("probe_compliance needs the true 'bending_<unit>' (or bending_x/_y), "
+                        "'axial_<unit>' and/or a coupling term 'coupling_xy_<unit>' (xz, yz)", tbl)
+    for k in ("bending", "bending_x", "bending_y", "axial"):
+        if e[k] is not None and e[k] < 0:
+            raise ctx.error(f"'{k}' must not be negative", tbl, k)
+    _check_compliance_matrix(ctx, e, desc, tbl, raw)
+
+
+def _force_sensor(ctx, e: dict, tbl, sensor: str) -> None:
+    if e["cross_talk"] is None:
+        e["cross_talk"] = np.zeros((3, 3))
+    if np.any(np.diag(e["cross_talk"]) != 0):
+        raise ctx.error("the diagonal of 'cross_talk' must be 0 (gains are 'gain')", tbl, "cross_talk")
+    if min(e["gain"]) <= -1:
+        raise ctx.error("'gain' must be > -1 (reading = (1 + gain) force)", tbl, "gain")
+    if sensor == "two-channel" and (e["gain"][1] or e["offset"][1] or np.any(e["cross_talk"][1])):
+        raise ctx.error("the two-channel sensor does not measure probe y: its gain, offset and "
+                        "cross-talk row must be 0", tbl)
+
+
+def _truth_effect(ctx, name: str, raw: dict, desc, sensor: str) -> dict:
+    """One effect table of [truth] (joint_compliance, thermal, probe_compliance, force_sensor,
+    lateral_compliance, approach_offset), read and checked."""
+    tbl = ("truth", name)
+    e = _section(ctx, raw, _S[name], tbl)
+    if name in ("joint_compliance", "thermal"):
+        _joint_values(ctx, e, name, desc, tbl)
+    if name == "lateral_compliance":
+        _lateral_compliance(ctx, e, desc, tbl, raw)
+    if name == "approach_offset":
+        _approach_offset(ctx, e, tbl, raw)
+    if name == "probe_compliance":
+        _probe_compliance(ctx, e, desc, tbl, raw)
+    if name == "force_sensor":
+        _force_sensor(ctx, e, tbl, sensor)
+    return e
+
+
+def _truth(ctx, data: dict, desc, sensor: str) -> dict:
+    """The [truth] table: random error sizes, given errors and every effect of the true arm."""
     truth = _section(ctx, data.get("truth"), _S["truth"], ("truth",))
     for k in ("length_error", "angle_error", "probe_error"):
         if truth[k] < 0:
@@ -466,89 +530,19 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
     truth["errors"] = _errors(ctx, raw_truth.get("errors"), desc)
     ecc = raw_truth.get("eccentricity")
     if ecc is not None:
-        if isinstance(ecc, dict):
-            ecc = [ecc]
-        if not isinstance(ecc, list):
-            raise ctx.error("'eccentricity' must be [[truth.eccentricity]] tables", ("truth",), "eccentricity")
-        rows = []
-        for i, t in enumerate(ecc):
-            tbl = ("truth", "eccentricity", i)
-            e = _section(ctx, t, _S["eccentricity"], tbl)
-            if e["joint"] is None or e["amplitude"] is None:
-                raise ctx.error("an eccentricity needs 'joint' and 'amplitude_<angle unit>'", tbl)
-            e["index"] = _joint_index(ctx, desc, e["joint"], tbl, "joint", revolute=True)
-            if any(r["index"] == e["index"] for r in rows):
-                raise ctx.error(f"joint '{e['joint']}' has two eccentricity tables", tbl, "joint")
-            rows.append(e)
-        truth["eccentricity"] = rows
+        truth["eccentricity"] = _eccentricities(ctx, ecc, desc)
     truth["harmonics"] = _harmonics(ctx, raw_truth.get("harmonics"), desc)
     for name in ("joint_compliance", "thermal", "probe_compliance", "force_sensor", "lateral_compliance",
                  "approach_offset"):
-        if raw_truth.get(name) is None:
-            truth[name] = None
-            continue
-        tbl = ("truth", name)
-        e = _section(ctx, raw_truth[name], _S[name], tbl)
-        if name in ("joint_compliance", "thermal"):
-            e["indices"] = _joint_indices(ctx, desc, e["joints"], tbl, name == "joint_compliance")
-            key = "stiffness" if name == "joint_compliance" else "alpha"
-            vals = e[key]
-            if vals is None:
-                raise ctx.error(f"'{name}' needs '{key}_<unit>'", tbl)
-            if len(vals) not in (1, len(e["indices"])):
-                raise ctx.error(f"'{key}' has {len(vals)} values for {len(e['indices'])} joints", tbl, key)
-            if name == "joint_compliance" and min(vals) <= 0:
-                raise ctx.error("stiffness must be > 0", tbl, key)
-            e[key] = tuple(vals) * (len(e["indices"]) if len(vals) == 1 else 1)
-        if name == "lateral_compliance":
-            e["indices"] = _joint_indices(ctx, desc, e["joints"], tbl, True)
-            if len(set(e["indices"])) != len(e["indices"]):
-                raise ctx.error("a joint is named twice", tbl, "joints")
-            if e["stiffness_x"] is None and e["stiffness_y"] is None:
-                raise ctx.error("'lateral_compliance' needs 'stiffness_x_<unit>' and/or 'stiffness_y_<unit>' "
-                                "(about the joint frame's x and y axes)", tbl)
-            if not (e["gravity"] or e["contact"]):
-                raise ctx.error("'gravity' and 'contact' are both false: the compliance would carry no load", tbl)
-            for key in ("stiffness_x", "stiffness_y"):
-                vals = e[key]
-                if vals is None:
-                    e[key] = (None,) * len(e["indices"])
-                    continue
-                if len(vals) not in (1, len(e["indices"])):
-                    raise ctx.error(f"'{key}' has {len(vals)} values for {len(e['indices'])} joints", tbl,
-                                    _given_key(raw_truth[name], key))
-                if min(vals) <= 0:
-                    raise ctx.error(f"'{key}' must be > 0", tbl, _given_key(raw_truth[name], key))
-                e[key] = tuple(vals) * (len(e["indices"]) if len(vals) == 1 else 1)
-        if name == "approach_offset":
-            for key, v in e.items():
-                if abs(v) > APPROACH_MAX:
-                    raise ctx.error(f"'{key}' is {v * 1e3:g} mm: an approach (lobing) offset must be within "
-                                    f"+-{APPROACH_MAX * 1e3:g} mm", tbl, _given_key(raw_truth[name], key))
-        if name == "probe_compliance":
-            if e["bending"] is not None and (e["bending_x"] is not None or e["bending_y"] is not None):
-                raise ctx.error("give 'bending' or 'bending_x'/'bending_y', not both", tbl)
-            if all(e[k] is None for k in ("bending", "bending_x", "bending_y", "axial")) and \
-                    not any(e[f"coupling_{a}"] for a in ("xy", "xz", "yz")):
-                raise ctx.error("probe_compliance needs the true 'bending_<unit>' (or bending_x/_y), "
-                                "'axial_<unit>' and/or a coupling term 'coupling_xy_<unit>' (xz, yz)", tbl)
-            for k in ("bending", "bending_x", "bending_y", "axial"):
-                if e[k] is not None and e[k] < 0:
-                    raise ctx.error(f"'{k}' must not be negative", tbl, k)
-            _check_compliance_matrix(ctx, e, desc, tbl, raw_truth[name])
-        if name == "force_sensor":
-            if e["cross_talk"] is None:
-                e["cross_talk"] = np.zeros((3, 3))
-            if np.any(np.diag(e["cross_talk"]) != 0):
-                raise ctx.error("the diagonal of 'cross_talk' must be 0 (gains are 'gain')", tbl, "cross_talk")
-            if min(e["gain"]) <= -1:
-                raise ctx.error("'gain' must be > -1 (reading = (1 + gain) force)", tbl, "gain")
-            if top["sensor"] == "two-channel" and (e["gain"][1] or e["offset"][1] or np.any(e["cross_talk"][1])):
-                raise ctx.error("the two-channel sensor does not measure probe y: its gain, offset and "
-                                "cross-talk row must be 0", tbl)
-        truth[name] = e
+        truth[name] = None if raw_truth.get(name) is None else _truth_effect(ctx, name, raw_truth[name], desc,
+                                                                              sensor)
     if ecc is None:
         truth["eccentricity"] = []
+    return truth
+
+
+def _sections(ctx, data: dict) -> dict:
+    """The [noise], [environment], [operator] and [signals] tables, checked."""
     sections = {}
     for name in ("noise", "environment", "operator", "signals"):
         sections[name] = _section(ctx, data.get(name), _S[name], (name,))
@@ -572,7 +566,51 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
         raise ctx.error(f"'point_period' must be at least 1.5 x (rise + decay) = "
                         f"{1.5 * (sg['rise'] + sg['decay']):.3g} s so that pulses do not overlap",
                         ("operator",), "point_period_s")
-    # tasks
+    return sections
+
+
+def _task(ctx, t, i: int, ids: dict[str, str], sensor: str) -> Task:
+    """One [[task]] table (number ``i``); ``ids``: the task ids so far (this one is added)."""
+    tbl = ("task", i)
+    if not isinstance(t, dict):
+        raise ctx.error("expected a table", tbl)
+    kind = t.get("kind")
+    if kind not in TASK_KINDS:
+        raise ctx.error(f"'kind' must be one of {', '.join(TASK_KINDS)}, got {kind!r}", tbl, "kind")
+    spec = dict(_COMMON_TASK)
+    spec.update(_TASKS[kind])  # type: ignore[call-overload]
+    o = _section(ctx, t, spec, tbl)
+    tid = o.pop("id") or _ID[kind]
+    if not re.fullmatch(r"[A-Za-z0-9_.\-]+", tid):
+        raise ctx.error(f"'id' {tid!r} may hold letters, digits, '_', '.', '-' only", tbl, "id")
+    if tid in ids:
+        raise ctx.error(f"task id '{tid}' is used twice", tbl, "id")
+    ids[tid] = kind
+    o.pop("kind")
+    n_meas = o.pop("measurements")
+    if kind == "ballbar" and "measurements" in t:
+        raise ctx.error("a ball bar makes one measurement a position: give 'positions'", tbl, "measurements")
+    if kind == "mocap" and ("measurements" in t or any(k.startswith("stylus_cone") for k in t)):
+        raise ctx.error("a motion-capture task makes one measurement a posture, without contact: give "
+                        "'postures'", tbl, "measurements" if "measurements" in t else
+                        next(k for k in t if k.startswith("stylus_cone")))
+    if kind == "ring" and any(k.startswith("stylus_cone") for k in t):
+        raise ctx.error("a ring's stylus is parallel to its axis: tilt it with 'stylus_tilt_<angle unit>'",
+                        tbl, next(k for k in t if k.startswith("stylus_cone")))
+    if kind == "ballbar":
+        n_meas = o["positions"]
+    if kind == "mocap":
+        n_meas = o["postures"]
+    if o["stylus_cone"] is None:
+        o["stylus_cone"] = _DEFAULT_CONE[kind]
+    _check_task(ctx, kind, o, tbl, sensor)
+    if n_meas < 1:
+        raise ctx.error("need at least one measurement", tbl, "measurements")
+    return Task(kind, tid, n_meas, o, ctx.lines.get(tbl))
+
+
+def _tasks(ctx, data: dict, sensor: str) -> list[Task]:
+    """The [[task]] tables (at least one)."""
     raw_tasks = data.get("task")
     if raw_tasks is None:
         raw_tasks = []
@@ -580,45 +618,21 @@ def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm
         raise ctx.error("'task' must be [[task]] tables", (), "task")
     if not raw_tasks:
         raise ctx.error("no [[task]] tables: nothing to simulate", ())
-    tasks = []
     ids: dict[str, str] = {}
-    for i, t in enumerate(raw_tasks):
-        tbl = ("task", i)
-        if not isinstance(t, dict):
-            raise ctx.error("expected a table", tbl)
-        kind = t.get("kind")
-        if kind not in TASK_KINDS:
-            raise ctx.error(f"'kind' must be one of {', '.join(TASK_KINDS)}, got {kind!r}", tbl, "kind")
-        spec = dict(_COMMON_TASK)
-        spec.update(_TASKS[kind])
-        o = _section(ctx, t, spec, tbl)
-        tid = o.pop("id") or _ID[kind]
-        if not re.fullmatch(r"[A-Za-z0-9_.\-]+", tid):
-            raise ctx.error(f"'id' {tid!r} may hold letters, digits, '_', '.', '-' only", tbl, "id")
-        if tid in ids:
-            raise ctx.error(f"task id '{tid}' is used twice", tbl, "id")
-        ids[tid] = kind
-        o.pop("kind")
-        n_meas = o.pop("measurements")
-        if kind == "ballbar" and "measurements" in t:
-            raise ctx.error("a ball bar makes one measurement a position: give 'positions'", tbl, "measurements")
-        if kind == "mocap" and ("measurements" in t or any(k.startswith("stylus_cone") for k in t)):
-            raise ctx.error("a motion-capture task makes one measurement a posture, without contact: give "
-                            "'postures'", tbl, "measurements" if "measurements" in t else
-                            next(k for k in t if k.startswith("stylus_cone")))
-        if kind == "ring" and any(k.startswith("stylus_cone") for k in t):
-            raise ctx.error("a ring's stylus is parallel to its axis: tilt it with 'stylus_tilt_<angle unit>'",
-                            tbl, next(k for k in t if k.startswith("stylus_cone")))
-        if kind == "ballbar":
-            n_meas = o["positions"]
-        if kind == "mocap":
-            n_meas = o["postures"]
-        if o["stylus_cone"] is None:
-            o["stylus_cone"] = _DEFAULT_CONE[kind]
-        _check_task(ctx, kind, o, tbl, top["sensor"])
-        if n_meas < 1:
-            raise ctx.error("need at least one measurement", tbl, "measurements")
-        tasks.append(Task(kind, tid, n_meas, o, ctx.lines.get((tbl, ""))))
+    return [_task(ctx, t, i, ids, sensor) for i, t in enumerate(raw_tasks)]
+
+
+def _parse(data: dict, path: str, lines: dict | None, base_dir: Path | None, arm=None) -> Campaign:
+    """A campaign from its TOML ``data``: the top table, the arm, the truth, the sections, the tasks."""
+    ctx = _Ctx(path, lines)
+    top = _section(ctx, data, _S["top"], ())
+    if top["sensor"] not in SENSORS:
+        raise ctx.error(f"'sensor' must be one of {', '.join(SENSORS)}, got {top['sensor']!r}", (), "sensor")
+    desc, arm_path = _campaign_arm(ctx, top, base_dir, arm)
+    truth = _truth(ctx, data, desc, top["sensor"])
+    sections = _sections(ctx, data)
+    op, sg = sections["operator"], sections["signals"]
+    tasks = _tasks(ctx, data, top["sensor"])
     _check_mocap(ctx, tasks)
     _check_size(ctx, tasks, op, sg)
     return Campaign(name=top["name"], seed=top["seed"], arm=desc, arm_path=arm_path, sensor=top["sensor"],
@@ -724,8 +738,8 @@ def _errors(ctx, tbl, desc) -> dict[str, float]:
     for key, v in tbl.items():
         parts = _split(key)
         if parts is None or parts[0] not in spec.names:
-            raise ctx.error(f"unknown parameter key '{key}'{did_you_mean(key, spec.names)} (expected a parameter name with a unit, e.g. "
-                            f"\"{spec.names[1]}_um\"; names: {', '.join(spec.names)})", where, key)
+            raise ctx.error(f"unknown parameter key '{key}'{did_you_mean(key, spec.names)} (expected a parameter name "
+                            f"with a unit, e.g. \"{spec.names[1]}_um\"; names: {', '.join(spec.names)})", where, key)
         base, unit = parts
         quantity = _PARAM_QUANTITY[spec.units[spec.index(base)]]
         if _UNITS[unit][0] != quantity:
@@ -739,7 +753,7 @@ def load_campaign(path: str | Path) -> Campaign:
     path = Path(path)
     text = read_text(path, "the campaign file")
     data = parse_toml(text, str(path))
-    return _parse(data, str(path), _key_lines(text), path.resolve().parent)
+    return _parse(data, str(path), toml_key_lines(text), path.resolve().parent)
 
 
 def campaign_from_dict(data: dict, arm: str | Path | ArmDescription | None = None,

@@ -4,17 +4,16 @@ from __future__ import annotations
 import argparse
 import logging
 import time
-from ..cli import command_help
 from pathlib import Path
 
 import numpy as np
 
+from ..cli import command_help
+from ..cli_options import seed
 from ..log import PROGRESS, counted
 from ..output import output_folder
-from ..commands import seed
 from .campaign import load_campaign
-from .run import (ARTEFACTS_FILE, POINTS_FILE, REFERENCE_FILE, SIGNALS_DIR, TRUTH_FILE, TRUTH_POINTS_FILE,
-                  simulate)
+from .run import ARTEFACTS_FILE, POINTS_FILE, REFERENCE_FILE, SIGNALS_DIR, TRUTH_FILE, TRUTH_POINTS_FILE, simulate
 
 __all__ = ["register", "run", "summary"]
 
@@ -26,11 +25,12 @@ def register(sub) -> None:
         "simulate", help=command_help("simulate"),
         description="Simulate a campaign (examples/campaigns/*.toml): a true arm (nominal + parameter errors + "
                     "the effects the campaign switches on), an operator (contact forces like the seed paper's), "
-                    "artefacts (ring gauge, spheres, ball bar, seats, plane, tracker nests) or postures seen by motion capture. Writes "
-                    f"{POINTS_FILE} (and {REFERENCE_FILE} for tracker rows), {ARTEFACTS_FILE}, "
+                    "artefacts (ring gauge, spheres, ball bar, seats, plane, tracker nests) or postures seen by motion "
+                    f"capture. Writes {POINTS_FILE} (and {REFERENCE_FILE} for tracker rows), {ARTEFACTS_FILE}, "
                     f"{SIGNALS_DIR}/<measurement>.csv (1 kHz force), and the hidden truth {TRUTH_FILE} and "
                     f"{TRUTH_POINTS_FILE}, which no analysis reads. The same seed gives identical bytes.",
-        epilog="Campaign file: docs/formats.md §6; every key and its unit: docs/simulator.md. Output files: docs/formats.md §7.")
+        epilog="Campaign file: docs/formats.md §6; every key and its unit: docs/simulator.md. Output files: "
+               "docs/formats.md §7.")
     p.add_argument("campaign", type=Path, help="campaign TOML file")
     p.add_argument("-o", "--output", type=Path, required=True,
                    help="output folder (created if needed; files are replaced atomically, never an input)")

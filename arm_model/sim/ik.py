@@ -25,12 +25,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import NumericalError
 from ..effects import Geometry
+from ..errors import NumericalError
+from ..geometry import cone_directions
 from .truth import Truth
 
 __all__ = ["IKTargets", "IKResult", "solve_ik", "solve_points", "solve_positions", "joint_limits",
-           "random_q", "wrap_into_limits", "ball_jacobian", "probe_wrench"]
+           "random_q", "wrap_into_limits", "ball_jacobian"]
 
 _L0 = 0.1        # position scale [m] of the residual
 
@@ -60,7 +61,7 @@ class IKTargets:
     stylus_axis: np.ndarray | None = None
     stylus_cone: np.ndarray | None = None
 
-    def take(self, idx) -> "IKTargets":
+    def take(self, idx) -> IKTargets:
         return IKTargets(*(None if a is None else a[idx]
                            for a in (self.position, self.stylus, self.x_dir, self.force, self.torque,
                                      self.temperature, self.stylus_axis, self.stylus_cone)))
@@ -125,13 +126,6 @@ def _take_geom(geom: Geometry, idx, reps: int = 1) -> Geometry:
                     [t(v) for v in geom.compliance])
 
 
-def probe_wrench(force, torque, z, x) -> np.ndarray:
-    """(N, 6) wrench in the probe frame from base-frame force/torque and the probe axes."""
-    y = np.cross(z, x)
-    r = np.stack([x, y, z], axis=1)           # rows: probe axes in base -> R_probe_base
-    return np.concatenate([np.einsum("nij,nj->ni", r, force), np.einsum("nij,nj->ni", r, torque)], axis=1)
-
-
 def ball_jacobian(truth: Truth, q, temperature, wrench) -> np.ndarray:
     """(N, 3, J) d ball / d q [m/rad] of the true arm at true angles ``q`` (N, J) with a fixed
     probe-frame ``wrench`` (N, 6) (exact: :meth:`Truth.pose_jacobian`)."""
@@ -193,8 +187,6 @@ def _solve_batch(truth: Truth, q, tg: IKTargets, tol: float, max_iter: int):
 
 def _redraw(targets: IKTargets, idx, rng) -> IKTargets:
     """New stylus directions (uniform in each point's cone) for the points ``idx``."""
-    from .artefacts import cone_directions
-
     stylus, x_dir = targets.stylus.copy(), targets.x_dir.copy()
     for i in idx:
         if targets.stylus_cone[i] <= 0:
@@ -315,7 +307,7 @@ def solve_positions(model, p, targets, rng, force_base=None, tol: float = 1e-12,
     aux[0] = 20.0
     fn = _model_jacobian(model, n)
     todo = np.ones(n, bool)
-    for attempt in range(tries):
+    for _attempt in range(tries):
         for it in range(100):
             if force_base is not None:
                 w[:, :3] = np.einsum("nji,nj->ni", probe_rotations(desc, q, p[: model.base_size]), force_base)

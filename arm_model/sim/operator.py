@@ -97,7 +97,7 @@ def draw_operator(plan: Plan, operator: dict, environment: dict, signals: dict,
         windows[mid] = (t0, end)
         t0 = end + operator["measurement_gap"]
     if operator["friction_torque"]:
-        torque = np.cross(-plan.normal * plan.lever[:, None], force)
+        torque = np.cross(-plan.normal * plan.lever[:, None], force)  # type: ignore[call-overload, operator]
     else:
         torque = np.zeros((n, 3))
     env = environment

@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry import perpendicular_basis, rotation_xyz
+from ..geometry import cone_directions, perpendicular_basis, rotation_xyz
 from ..io import Artefacts, Distance, Feature, PointSet, atomic_write_text, format_artefacts, write_csv
 from ..model import ArmModel, AuxData
-from .artefacts import cone_directions, shoulder
+from .artefacts import shoulder
 from .ik import random_q, solve_positions
 
 __all__ = ["SynthSpec", "SynthCampaign", "random_truth", "random_q", "make_campaign"]
@@ -155,78 +155,85 @@ def _tracker_points(model: ArmModel, p_true, spec: SynthSpec, rng, T_ref_base=No
     return points, t_ref, x_true
 
 
-def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0, p_true=None,
-                  T_ref_base=None) -> SynthCampaign:
-    """Make a campaign on the true arm ``(model, p_true)`` (default: :func:`random_truth`)."""
-    rng = np.random.default_rng(seed)
-    desc = model.desc
-    p_true = random_truth(model, rng) if p_true is None else np.asarray(p_true, float)
-    ball = desc.probe.ball_diameter
-    centre, spread = np.asarray(spec.centre), np.asarray(spec.spread)
-    meas, feat, targets, normals = [], [], [], []
-    features: dict[str, Feature] = {}
-    distances = []
+class _Targets:
+    """The artefact points of a synthetic campaign as they are laid out: measurement and feature of each
+    point, its target ball centre [m] and surface normal, the features and distances (random draws from
+    ``rng`` in the order of the steps)."""
 
-    origin = shoulder(desc)
+    def __init__(self, desc, spec: SynthSpec, rng):
+        self.spec, self.rng = spec, rng
+        self.ball = desc.probe.ball_diameter
+        self.centre, self.spread = np.asarray(spec.centre), np.asarray(spec.spread)
+        self.origin = shoulder(desc)
+        self.meas, self.feat, self.targets, self.normals = [], [], [], []
+        self.features: dict[str, Feature] = {}
+        self.distances: list[Distance] = []
 
-    def reachable(x) -> bool:
-        return 0.35 <= np.linalg.norm(x - origin) <= 0.85
+    def reachable(self, x) -> bool:
+        return bool(0.35 <= np.linalg.norm(x - self.origin) <= 0.85)
 
-    def place() -> np.ndarray:
+    def place(self) -> np.ndarray:
         while True:
-            x = centre + rng.uniform(-1, 1, 3) * spread
-            if reachable(x):
+            x = self.centre + self.rng.uniform(-1, 1, 3) * self.spread
+            if self.reachable(x):
                 return x
 
-    def add(m, f, pts, nrm):
-        meas.extend([m] * len(pts))
-        feat.extend([f] * len(pts))
-        targets.extend(pts)
-        normals.extend(nrm)
+    def add(self, m, f, pts, nrm) -> None:
+        self.meas.extend([m] * len(pts))
+        self.feat.extend([f] * len(pts))
+        self.targets.extend(pts)
+        self.normals.extend(nrm)
 
-    def sphere_points(c, diameter, k):
-        nrm = cone_directions(rng, (0.0, 0.0, 1.0), SPHERE_CAP, k)
-        return c + nrm * (diameter + ball) / 2, nrm
+    def sphere_points(self, c, diameter, k):
+        nrm = cone_directions(self.rng, (0.0, 0.0, 1.0), SPHERE_CAP, k)
+        return c + nrm * (diameter + self.ball) / 2, nrm
 
-    if spec.ballbars:
+    def ballbars(self) -> None:
+        spec, rng = self.spec, self.rng
         if spec.ballbar_kind == "sphere":
-            features["bar-A"] = Feature("bar-A", "sphere", spec.sphere_diameter)
-            features["bar-B"] = Feature("bar-B", "sphere", spec.sphere_diameter)
+            self.features["bar-A"] = Feature("bar-A", "sphere", spec.sphere_diameter)
+            self.features["bar-B"] = Feature("bar-B", "sphere", spec.sphere_diameter)
         else:
-            features["bar-A"] = Feature("bar-A", "seat")
-            features["bar-B"] = Feature("bar-B", "seat")
-        distances.append(Distance(("bar-A", "bar-B"), spec.ballbar_length, spec.u_length))
+            self.features["bar-A"] = Feature("bar-A", "seat")
+            self.features["bar-B"] = Feature("bar-B", "seat")
+        self.distances.append(Distance(("bar-A", "bar-B"), spec.ballbar_length, spec.u_length))
         for i in range(spec.ballbars):
             while True:
                 d = rng.normal(size=3)
                 d[2] *= 0.5
                 d /= np.linalg.norm(d)
-                a = place() - d * spec.ballbar_length / 2
+                a = self.place() - d * spec.ballbar_length / 2
                 b = a + d * spec.ballbar_length
-                if reachable(a) and reachable(b):
+                if self.reachable(a) and self.reachable(b):
                     break
             for fid, c in (("bar-A", a), ("bar-B", b)):
                 if spec.ballbar_kind == "sphere":
-                    pts, nrm = sphere_points(c, spec.sphere_diameter, spec.ballbar_points)
+                    pts, nrm = self.sphere_points(c, spec.sphere_diameter, spec.ballbar_points)
                 else:
                     pts, nrm = np.tile(c, (spec.ballbar_points, 1)), np.tile([0, 0, 1.0], (spec.ballbar_points, 1))
-                add(f"bar-{i + 1:02d}", fid, pts, nrm)
-    if spec.seats:
-        features["seat"] = Feature("seat", "seat")
+                self.add(f"bar-{i + 1:02d}", fid, pts, nrm)
+
+    def seats(self) -> None:
+        spec = self.spec
+        self.features["seat"] = Feature("seat", "seat")
         for i in range(spec.seats):
-            c = place()
-            add(f"seat-{i + 1:02d}", "seat", np.tile(c, (spec.articulations, 1)),
-                np.tile([0, 0, 1.0], (spec.articulations, 1)))
-    if spec.spheres:
-        features["sphere"] = Feature("sphere", "sphere", spec.sphere_diameter)
+            c = self.place()
+            self.add(f"seat-{i + 1:02d}", "seat", np.tile(c, (spec.articulations, 1)),
+                     np.tile([0, 0, 1.0], (spec.articulations, 1)))
+
+    def spheres(self) -> None:
+        spec = self.spec
+        self.features["sphere"] = Feature("sphere", "sphere", spec.sphere_diameter)
         for i in range(spec.spheres):
-            pts, nrm = sphere_points(place(), spec.sphere_diameter, spec.sphere_points)
-            add(f"sphere-{i + 1:02d}", "sphere", pts, nrm)
-    if spec.rings:
-        features["ring"] = Feature("ring", "ring", spec.ring_diameter)
-        rad = (spec.ring_diameter - ball) / 2
+            pts, nrm = self.sphere_points(self.place(), spec.sphere_diameter, spec.sphere_points)
+            self.add(f"sphere-{i + 1:02d}", "sphere", pts, nrm)
+
+    def rings(self) -> None:
+        spec, rng = self.spec, self.rng
+        self.features["ring"] = Feature("ring", "ring", spec.ring_diameter)
+        rad = (spec.ring_diameter - self.ball) / 2
         for i in range(spec.rings):
-            c = place()
+            c = self.place()
             axis = np.array([0, 0, 1.0]) + rng.normal(0, 0.05, 3)
             axis /= np.linalg.norm(axis)
             e1, e2 = perpendicular_basis(axis)
@@ -234,26 +241,43 @@ def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0,
             ang = np.linspace(0, 2 * np.pi, k, endpoint=False) + rng.uniform(0, 2 * np.pi)
             h = np.repeat([-0.01, 0.0, 0.01], int(np.ceil(k / 3)))[:k]
             radial = np.outer(np.cos(ang), e1) + np.outer(np.sin(ang), e2)
-            add(f"ring-{i + 1:02d}", "ring", c + rad * radial + np.outer(h, axis), -radial)
-    if spec.planes:
-        features["plane"] = Feature("plane", "plane")
+            self.add(f"ring-{i + 1:02d}", "ring", c + rad * radial + np.outer(h, axis), -radial)
+
+    def planes(self) -> None:
+        spec, rng = self.spec, self.rng
+        self.features["plane"] = Feature("plane", "plane")
         for i in range(spec.planes):
-            c = place()
+            c = self.place()
             nrm = np.array([0, 0, 1.0]) + rng.normal(0, 0.1, 3)
             nrm /= np.linalg.norm(nrm)
             e1, e2 = perpendicular_basis(nrm)
             uv = rng.uniform(-0.1, 0.1, (spec.plane_points, 2))
-            pts = c + uv[:, :1] * e1 + uv[:, 1:] * e2 + nrm * ball / 2
-            add(f"plane-{i + 1:02d}", "plane", pts, np.tile(nrm, (spec.plane_points, 1)))
+            pts = c + uv[:, :1] * e1 + uv[:, 1:] * e2 + nrm * self.ball / 2
+            self.add(f"plane-{i + 1:02d}", "plane", pts, np.tile(nrm, (spec.plane_points, 1)))
+
+
+def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0, p_true=None,
+                  T_ref_base=None) -> SynthCampaign:
+    """Make a campaign on the true arm ``(model, p_true)`` (default: :func:`random_truth`)."""
+    rng = np.random.default_rng(seed)
+    desc = model.desc
+    p_true = random_truth(model, rng) if p_true is None else np.asarray(p_true, float)
+    lay = _Targets(desc, spec, rng)
+    for count, step in ((spec.ballbars, lay.ballbars), (spec.seats, lay.seats), (spec.spheres, lay.spheres),
+                        (spec.rings, lay.rings), (spec.planes, lay.planes)):
+        if count:
+            step()
+    meas, feat, targets, normals = lay.meas, lay.feat, lay.targets, lay.normals
+    features, distances = lay.features, lay.distances
     n_art = len(targets)
     targets = np.array(targets).reshape(-1, 3)
     normals = np.array(normals).reshape(-1, 3)
-    noise = rng.normal(0, spec.noise, targets.shape)
+    noise = rng.normal(0, spec.noise, targets.shape)  # type: ignore[attr-defined]
     force_base = None
     if spec.force > 0:
         mag = rng.gamma(4.0, spec.force / 4.0, n_art)
         force_base = normals * mag[:, None]
-    q_art, w_art = (solve_positions(model, p_true, targets + noise, rng, force_base) if n_art
+    q_art, w_art = (solve_positions(model, p_true, targets + noise, rng, force_base) if n_art  # type: ignore[operator]
                     else (np.zeros((0, desc.n_joints)), np.zeros((0, 6))))
     n = len(meas)
     needs_t = "temperature" in model.needs()

@@ -15,18 +15,27 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, NumericalError
-from ..output import safe_name
 from ..description import toml_text
-from ..io import (Artefacts, Distance, Feature, ForceSignal, PointSet, atomic_write_text, format_artefacts,
-                  guard_output, parse_points)
-from ..io import parse_artefacts
+from ..errors import InputError, NumericalError
+from ..io import (
+    Artefacts,
+    Distance,
+    Feature,
+    ForceSignal,
+    PointSet,
+    atomic_write_text,
+    format_artefacts,
+    guard_output,
+    parse_artefacts,
+    parse_points,
+)
+from ..log import counted, progress_line
+from ..output import safe_name
 from .artefacts import Plan, make_plan
 from .campaign import Campaign
 from .ik import IKTargets, ball_jacobian, solve_ik
 from .operator import OperatorDraw, draw_operator, force_signal, measurement_slices
 from .truth import Truth, build_truth, si_key
-from ..log import counted, progress_line
 
 __all__ = ["SimResult", "simulate", "TRUTH_HEADER", "POINTS_FILE", "REFERENCE_FILE", "ARTEFACTS_FILE",
            "TRUTH_FILE", "TRUTH_POINTS_FILE", "SUMMARY_FILE", "SIGNALS_DIR"]
@@ -179,8 +188,8 @@ def _truth_text(campaign: Campaign, truth: Truth, plan: Plan, draw: OperatorDraw
         "artefact": plan.placements,
         "stats": stats,
     }
-    comment = (TRUTH_HEADER.removeprefix("# ") + f"\nCampaign '{campaign.name}', seed {campaign.seed}. SI units, named in "
-               "every key; [parameters] is the true parameter vector of the core ArmModel(nominal arm, effects on), "
+    comment = (TRUTH_HEADER.removeprefix("# ") + f"\nCampaign '{campaign.name}', seed {campaign.seed}. SI units, named "
+               "in every key; [parameters] is the true parameter vector of the core ArmModel(nominal arm, effects on), "
                "errors added to the nominal description.")
     return toml_text(_plain(doc), comment)
 
@@ -350,7 +359,7 @@ def _solve(truth, plan, draw, x_dir, labels, rng, say):
     return q_true, wrench, ik.attempts
 
 
-def _reference(plan, campaign, rows, centres, markers, trng) -> tuple[np.ndarray, int]:
+def _reference(plan, campaign, rows, centres, markers, trng) -> np.ndarray:
     """(rows, K, 3) [m] what the instrument reports for ``rows``: a nest's ball centre or a posture's K
     markers, in the row's instrument frame, plus its noise (drawn frame by frame, in the plan's order)."""
     k = 1 if markers is None else markers.shape[1]
@@ -404,7 +413,8 @@ def _points_columns(campaign, plan, rows, readings, draw, ref) -> dict:
 
 def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimResult:
     """Simulate ``campaign`` (seed: the campaign's unless given). ``progress``: optional callable
-    taking a message, called at each stage (default: a progress record of this module's logger). Raises :class:`~arm_model.NumericalError` if a point
+    taking a message, called at each stage (default: a progress record of this module's logger). Raises
+    :class:`~arm_model.NumericalError` if a point
     cannot be reached or the truth check fails."""
     say = progress or progress_line(logging.getLogger(__name__))
     seed = campaign.seed if seed is None else int(seed)
@@ -439,7 +449,7 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
     say("writing files in memory ...")
     texts = {}
     ref_rows = np.flatnonzero(plan.reference)
-    main_rows = np.flatnonzero(~plan.reference)
+    main_rows = np.flatnonzero(~plan.reference)  # type: ignore[operator]
     points = ref_points = None
     if main_rows.size:
         texts[POINTS_FILE] = _csv_text(_points_columns(campaign, plan, main_rows, readings, draw, None))
@@ -465,7 +475,8 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
     texts[TRUTH_FILE] = _truth_text(campaign, truth, plan, draw, stats)
     texts[TRUTH_POINTS_FILE] = "# TRUTH: true values per captured point; no analysis reads this file.\n" + \
         _csv_text(_truth_columns(desc, plan, q_true, q_enc, centres, f_true, draw))
-    truth_dict = {"p": truth.values, "aliases": truth.aliases, "p_vector": truth.p.copy(), "spec": truth.model.spec, "model": truth.model,
+    truth_dict = {"p": truth.values, "aliases": truth.aliases, "p_vector": truth.p.copy(), "spec": truth.model.spec,
+                  "model": truth.model,
                   "effects": truth.settings, "effects_on": truth.effects_on(), "noise": dict(campaign.noise),
                   "placements": plan.placements, "T_ref_base": dict(plan.T_ref_base),
                   "marker_offsets": {k: v.copy() for k, v in plan.markers.items()},

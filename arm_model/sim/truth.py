@@ -13,16 +13,26 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import NumericalError
 from ..chain import NUMPY_OPS, ball_in_last_frame, chain_point, elastic_displacement, has_stylus, probe_lever
 from ..description import ArmDescription
-from ..effects import (ApproachOffset, EncoderEccentricity, ForceSensorError, Geometry, JointCompliance,
-                       JointHarmonics, LateralCompliance, ModelInputs, ProbeComplianceMatrix, ProbeThermalGrowth,
-                       ThermalGrowth)
+from ..effects import (
+    ApproachOffset,
+    EncoderEccentricity,
+    ForceSensorError,
+    Geometry,
+    JointCompliance,
+    JointHarmonics,
+    LateralCompliance,
+    ModelInputs,
+    ProbeComplianceMatrix,
+    ProbeThermalGrowth,
+    ThermalGrowth,
+)
+from ..errors import NumericalError
 from ..model import ArmModel, AuxData
 from ..params import apply_params, param_spec
 
-__all__ = ["Truth", "build_truth", "si_key", "POSE_EFFECTS"]
+__all__ = ["Truth", "build_truth", "si_key", "POSE_EFFECTS", "probe_wrench"]
 
 #: effects whose change of the geometry depends on the pose and the wrench (applied by :meth:`Truth.pose` at
 #: the true angles, not by :meth:`Truth.geometry`)
@@ -36,6 +46,13 @@ _SUFFIX = {"m": "m", "rad": "rad", "m/N": "m_per_N", "rad/(N m)": "rad_per_Nm", 
 def si_key(name: str, unit: str) -> str:
     """``("j2.d", "m") -> "j2.d_m"``: a parameter name with its SI unit as a key suffix."""
     return f"{name}_{_SUFFIX.get(unit, unit.replace('/', '_per_').replace(' ', ''))}"
+
+
+def probe_wrench(force, torque, z, x) -> np.ndarray:
+    """(N, 6) wrench in the probe frame from base-frame force/torque and the probe axes."""
+    y = np.cross(z, x)
+    r = np.stack([x, y, z], axis=1)           # rows: probe axes in base -> R_probe_base
+    return np.concatenate([np.einsum("nij,nj->ni", r, force), np.einsum("nij,nj->ni", r, torque)], axis=1)
 
 
 @dataclass(frozen=True)
@@ -115,8 +132,8 @@ class Truth:
 
     def _pose_geometry(self, q, geom: Geometry, wrench) -> Geometry:
         """``geom`` with the pose-dependent effects (:data:`POSE_EFFECTS`) applied at the true angles ``q``
-        (N, J) and the true ``wrench`` (N, 6), in the model's order (a copy). Their derivative (a micrometre shift's) is left out
-        of the inverse kinematics' Newton steps (:meth:`pose_jacobian`), which only slows convergence
+        (N, J) and the true ``wrench`` (N, 6), in the model's order (a copy). Their derivative (a micrometre shift's) is
+        left out of the inverse kinematics' Newton steps (:meth:`pose_jacobian`), which only slows convergence
         negligibly."""
         pose_effects = [(e, sl) for e, sl in self.model.effect_slices() if isinstance(e, POSE_EFFECTS)]
         if not pose_effects:
@@ -175,8 +192,6 @@ class Truth:
         rm = np.eye(3) if rot is None else np.array(rot, dtype=float)
         z, x = r @ rm[:, 2], r @ rm[:, 0]
         if load is not None:
-            from .ik import probe_wrench
-
             wrench = probe_wrench(load[0], load[1], z, x)
         if wrench is None or not has_stylus(lever):
             qe = (0.0, 0.0, 0.0)
@@ -184,7 +199,8 @@ class Truth:
             geom = self._pose_geometry(q, geom, wrench)      # their own derivative left out, as in pose
             qe = elastic_displacement(geom.p_last, geom.compliance, list(np.asarray(wrench).T),
                                       probe_lever(geom.p_last, rot, lever))
-        b = np.column_stack([np.broadcast_to(v, (n,)) for v in ball_in_last_frame(geom.p_last, qe, NUMPY_OPS, rot, lever)])
+        b = np.column_stack([np.broadcast_to(v, (n,))
+                             for v in ball_in_last_frame(geom.p_last, qe, NUMPY_OPS, rot, lever)])
         ball = o + np.einsum("nij,nj->ni", r, b)
         w = np.zeros((n, 6)) if wrench is None else np.asarray(wrench, dtype=float)
         jn, nq = d.chain_joints, d.n_joints
@@ -310,7 +326,7 @@ def build_truth(desc: ArmDescription, t: dict, rng: np.random.Generator, sensor:
         if th.get("probe_alpha"):
             effects.append(ProbeThermalGrowth())
             values.append(th["probe_alpha"])
-            settings["thermal"]["probe_alpha"] = th["probe_alpha"]
+            settings["thermal"]["probe_alpha"] = th["probe_alpha"]  # type: ignore[call-overload]
     pc = t["probe_compliance"]
     if pc is not None:
         declared = desc.probe.compliance
@@ -349,7 +365,7 @@ def build_truth(desc: ArmDescription, t: dict, rng: np.random.Generator, sensor:
         terms = tuple(a for a in ("xy", "xz", "yz") if pc.get(f"coupling_{a}"))
         effects.append(ProbeComplianceMatrix(terms=terms))
         values += [pc[f"coupling_{a}"] for a in terms]
-        settings["probe_compliance"].update({f"coupling_{a}": pc[f"coupling_{a}"] for a in terms})
+        settings["probe_compliance"].update({f"coupling_{a}": pc[f"coupling_{a}"] for a in terms})  # type: ignore[attr-defined]
     ap = t.get("approach_offset")
     if ap is not None:
         effects.append(ApproachOffset())

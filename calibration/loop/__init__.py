@@ -30,8 +30,8 @@
    and cross-validated in steps 3-4 exactly like the library's, against a Bonferroni level over every
    candidate then offered (screening) and every candidate held-out tested at the stage (Wilcoxon): the
    candidates that already failed the held-out test at this stage are not tested again, so the built
-   effects reach it even when failed library candidates rank above them. One that passes is added and reported as found from the residual; one that
-   does not is reported with its held-out evidence and not added.
+   effects reach it even when failed library candidates rank above them. One that passes is added and reported as found
+   from the residual; one that does not is reported with its held-out evidence and not added.
 6. The generic structure tests (:func:`calibration.diagnostics.structure_tests`) on the final fit, and a
    forward selection among them (:func:`calibration.diagnostics.remaining_structure`): a family
    significant after Bonferroni's correction (``alpha``), given the families kept before it, with a
@@ -47,9 +47,9 @@ test of a candidate and the rules that choose the effect to add), :mod:`~calibra
 """
 from __future__ import annotations
 
-from arm_model.log import progress_line
 from arm_model.description import ArmDescription
 from arm_model.io import Artefacts, PointSet
+from arm_model.log import progress_line
 
 from ..data import Weights
 from .crossval import CVResult, cross_validate

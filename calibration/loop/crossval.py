@@ -73,8 +73,8 @@ def fold_fit(model: ArmModel, design: CalibrationData, folds: Folds, fit) -> Fol
         return FoldFit(results, sse)
     present = set(design.measurements())
     for f in range(folds.k):
-        held = [m for m, g in folds.assign.items() if g == f and m in present]
-        train = design.with_measurements([m for m, g in folds.assign.items() if g != f and m in present])
+        held = [m for m, g in folds.assign.items() if g == f and m in present]  # type: ignore[attr-defined]
+        train = design.with_measurements([m for m, g in folds.assign.items() if g != f and m in present])  # type: ignore[attr-defined]
         res = fit(model, train)
         h = heldout_residuals(model, res.p, design.with_measurements(held), res.weights, res.reference_mode)
         keys = [(m, int(i)) for m, i in zip(h["measurement"], h["point"])] if folds.per_pose else h["measurement"]

@@ -168,9 +168,11 @@ def negative_compliances(res: CalibrationResult, level: float) -> list[str]:
     return resolved(res, names, level)[1] if names else []
 
 
-def physics_inclusion(state: LoopState, scr: Screening, level: float) -> tuple[Candidate, CVResult] | None:
+def physics_inclusion(state: LoopState, scr: Screening, level: float, tested: list = ()
+                      ) -> tuple[Candidate, CVResult] | None:
     """Joint compliance under gravity (every loaded joint, the arm's masses) when no candidate improves the
-    held-out poses significantly: every arm bends under its own weight, and held-out poses of the same
+    held-out poses significantly (neither the library's nor those built from the residual,
+    :func:`calibration.loop.stages.physics`): every arm bends under its own weight, and held-out poses of the same
     plate placement cannot show what a compliance is worth elsewhere (their gravity torques differ little
     from the training poses', so the geometry absorbs most of its signature there; on the real Panda data,
     trained on one placement, the compliances make the held-out poses of that placement 6 % worse and the
@@ -182,7 +184,7 @@ def physics_inclusion(state: LoopState, scr: Screening, level: float) -> tuple[C
       significantly negative (``|c| > z u``, z two-sided at ``level`` with Bonferroni over the joints):
       a negative compliance is not a compliance, the signature would be something else's;
     * the held-out poses are not significantly worse (one-sided Wilcoxon ``p_worse >= level``) and its
-      parameters were resolved in every fold.
+      parameters were resolved in every fold (its held-out test at this stage, among ``tested``, or run now).
 
     Returns ``(candidate, CVResult)`` (passed, its reason saying why) or None."""
     say = state.say
@@ -201,7 +203,7 @@ def physics_inclusion(state: LoopState, scr: Screening, level: float) -> tuple[C
         f"{', '.join(pos) or 'none'}; significantly negative: {', '.join(neg) or 'none'} (z = {z:.2f})")
     if neg or not pos:
         return None
-    got = scr.cv_of(every)
+    got = scr.cv_of(every) or next((v for v in tested if v.candidate == every.name), None)
     if got is None:
         got = heldout_test(state, scr, every)
         scr.cvs.append(got)

@@ -6,7 +6,7 @@ import numpy as np
 
 from ..calibrate import CalibrationResult, grouped_standardized
 from ..data import CalibrationData, concat
-from ..problem import MIN_POINTS
+from ..kinds import MIN_POINTS
 from ..validation import heldout_residuals
 
 __all__ = ["drop_design_outliers", "drop_test_outliers"]

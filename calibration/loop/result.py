@@ -63,7 +63,8 @@ class LoopResult:
         dropped: outlier points left out ("design": by the base fit, "test": by the base model's
             held-out residuals), with measurement, feature, line.
         test_by: the outer test set holds whole "measurement"s or "pose"s of every feature.
-        power: the folds of the decisions and whether their test can reach its level (see :func:`~calibration.loop.folds.choose_folds`).
+        power: the folds of the decisions and whether their test can reach its level (see
+        :func:`~calibration.loop.folds.choose_folds`).
         model_fit: the final model calibrated on every point (design and test, as ``calibrate`` would with the
             same options): the model to use.
         built: every effect built from the residual (:mod:`calibration.synthesis`), in the order offered:
@@ -132,7 +133,8 @@ def display(value: float, unit: str) -> tuple[float, str]:
 
 def effect_summary(result: CalibrationResult, cand: Candidate) -> list[dict]:
     """The added effect's parameters: name, SI value and u, display value and u, and for an eccentricity or
-    joint harmonics the amplitude and phase of each harmonic (``a sin(h q + phi)``, amplitude u by linear propagation)."""
+    joint harmonics the amplitude and phase of each harmonic (``a sin(h q + phi)``, amplitude u by linear
+    propagation)."""
     desc = result.model.desc
     rows = []
     for name, unit in cand.effect.param_defs(desc):

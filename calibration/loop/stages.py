@@ -6,8 +6,9 @@
   if nothing passes, those built from the residual as well):
 
   - :func:`screen`: the score test of every remaining candidate at the current fit, the gate;
-  - :func:`test`: the held-out test of the gated candidates (and joint compliance as physics);
+  - :func:`test`: the held-out test of the gated candidates;
   - :func:`synthesise`: effects built from the structure still in the residual, offered as candidates;
+  - :func:`physics`: joint compliance as physics, when nothing passed (library or built from the residual);
   - :func:`~calibration.loop.decide.choose`: the one candidate to add;
   - :func:`add`: the model with it, recalibrated on the design set;
 
@@ -19,22 +20,37 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from arm_model.log import counted
 from arm_model.description import ArmDescription
 from arm_model.effects import JointCompliance, ThermalGrowth
 from arm_model.io import Artefacts, PointSet
+from arm_model.log import counted
 from arm_model.model import ArmModel
 
 from ..calibrate import CalibrationResult, evidence_scale
 from ..candidates import library_candidates, needs_model
 from ..data import Weights, make_data
-from ..diagnostics import (families, binned_estimates, candidate_family, holm, remaining_structure, residual_space,
-                           screen_candidates, structure_tests)
+from ..diagnostics import (
+    binned_estimates,
+    candidate_family,
+    families,
+    holm,
+    remaining_structure,
+    residual_space,
+    screen_candidates,
+    structure_tests,
+)
 from ..options import FitOptions
 from ..synthesis import RESIDUAL, synthesise as build_effects
 from .crossval import fold_fit
-from .decide import Decision, candidate_priors, choose, heldout_test, negative_compliances, physics_inclusion, \
-    plot_family
+from .decide import (
+    Decision,
+    candidate_priors,
+    choose,
+    heldout_test,
+    negative_compliances,
+    physics_inclusion,
+    plot_family,
+)
 from .folds import choose_folds, outer_split
 from .outliers import drop_design_outliers, drop_test_outliers
 from .result import LoopResult, Stage
@@ -42,8 +58,8 @@ from .settings import LEGACY_RESOLUTION, NOISE_OFF, LoopSettings
 from .state import LoopState, Screening, fitted_names, log
 from .verdict import ADDED, verdict_text
 
-__all__ = ["Campaign", "Stop", "prepare", "screen", "test", "synthesise", "decide", "fit_stage", "outer_test_worse", "add", "run_stage", "run",
-           "report"]
+__all__ = ["Campaign", "Stop", "prepare", "screen", "test", "physics", "synthesise", "decide", "fit_stage",
+           "outer_test_worse", "add", "run_stage", "run", "report"]
 
 
 @dataclass(frozen=True)
@@ -173,15 +189,11 @@ def screen(state: LoopState) -> Screening:
     return Screening(list(state.remaining), tests, space, ranked, gate, gated)
 
 
-def test(state: LoopState, scr: Screening, physics: bool) -> list:
+def test(state: LoopState, scr: Screening) -> list:
     """The held-out test of every gated candidate (the current model's fold fits first, if not at hand), at
-    ``alpha`` over every candidate tested at the stage; with ``physics`` and nothing passing, joint
-    compliance as physics (:func:`~calibration.loop.decide.physics_inclusion`). Returns the passing
-    ``(candidate, CVResult)``."""
+    ``alpha`` over every candidate tested at the stage. Returns the passing ``(candidate, CVResult)``."""
     s = state.settings
-    if state.base_folds is None:
-        state.say(f"  cross-validating the current model ({state.folds.k} folds by {state.folds.by})")
-        state.base_folds = fold_fit(state.model, state.design, state.folds, state.fit)
+    _current_folds(state)
     scr.threshold = s.alpha / (len(state.cv_here) + len(scr.gated))
     for c, t in scr.gated:
         state.say(f"  cross-validating + {c.name} (score p = {t.p_value:.2g})")
@@ -190,15 +202,33 @@ def test(state: LoopState, scr: Screening, physics: bool) -> list:
         scr.cvs.append(cv)
         if c.origin == RESIDUAL:
             state.fate[c.name] = cv.reason if not cv.passed else "passed, but another candidate was added"
-    passing = [(c, cv) for (c, _), cv in zip(scr.gated, scr.cvs) if cv.passed]
-    if not passing and physics:
-        got = physics_inclusion(state, scr, s.alpha / max(len(scr.gated), 1))
-        if got is not None:
-            passing = [got]
-            if all(c is not got[0] for c, _ in scr.gated):
-                scr.gated.append((got[0], scr.test_of(got[0])))
     state.last_cv = state.cv_here + scr.cvs
-    return passing
+    return [(c, cv) for (c, _), cv in zip(scr.gated, scr.cvs) if cv.passed]
+
+
+def _current_folds(state: LoopState) -> None:
+    """The current model's fold fits, computed if not at hand (``state.base_folds``)."""
+    if state.base_folds is None:
+        state.say(f"  cross-validating the current model ({state.folds.k} folds by {state.folds.by})")
+        state.base_folds = fold_fit(state.model, state.design, state.folds, state.fit)
+
+
+def physics(state: LoopState, scr: Screening) -> list:
+    """Joint compliance as physics (:func:`~calibration.loop.decide.physics_inclusion`), weighed once a stage
+    and only when no candidate passed the held-out test, neither the library's nor those built from the
+    residual: a compliance would otherwise absorb part of the signature of an effect the library lacks.
+    Returns ``[(candidate, CVResult)]`` or ``[]``."""
+    _current_folds(state)
+    tested = state.cv_here + [cv for cv in scr.cvs if cv not in state.cv_here]
+    got = physics_inclusion(state, scr, state.settings.alpha / max(len(tested), 1), tested)
+    if got is None:
+        return []
+    if all(c is not got[0] for c, _ in scr.gated):
+        scr.gated.append((got[0], scr.test_of(got[0])))
+    if got[1] not in scr.cvs:
+        scr.cvs.append(got[1])
+    state.last_cv = state.cv_here + [cv for cv in scr.cvs if cv not in state.cv_here]
+    return [got]
 
 
 def synthesise(state: LoopState) -> bool:
@@ -228,30 +258,34 @@ def run_stage(state: LoopState) -> tuple[Decision, Stage, Screening] | Stop:
     outer test set worse), once, the effects built from the residual join them and they are screened and
     tested again (those already tested at the stage are not). Returns the decision, the stage it makes and
     the screening it came from, or why nothing is added."""
-    physics = state.settings.physics and state.power["can_reach"]
+    weigh_physics = state.settings.physics and state.power["can_reach"]
     for built in (False, True):
         scr = screen(state)
-        if not scr.gated:
-            stop = Stop("no screened candidate improves the held-out data significantly" if state.cv_here else
-                        f"no candidate passes the screening (score-test p < {scr.gate:.2g}): nothing significant "
-                        "remains that the library or an effect built from the residual explains")
-        elif len(state.stages) - 1 >= state.settings.max_effects:
+        if scr.gated and len(state.stages) - 1 >= state.settings.max_effects:
             stop = Stop(f"the maximum number of effects ({state.settings.max_effects}) was added")
             for c, _ in scr.gated:
                 if c.origin == RESIDUAL:
                     state.fate[c.name] = f"not cross-validated: {stop.reason}"
             return stop
-        else:
-            passing = test(state, scr, physics)
-            physics = False                          # weighed at most once a stage
-            staged = decide(state, scr, passing)
-            if staged is not None:
-                return (*staged, scr)
+        passing = test(state, scr) if scr.gated else []
+        staged = decide(state, scr, passing)
+        if staged is not None:
+            return (*staged, scr)
+        if scr.gated:
             stop = Stop("every candidate that passed the held-out folds made the outer test set worse" if passing
                         else "no screened candidate improves the held-out data significantly")
             state.cv_here = state.last_cv
-        if built or not synthesise(state):
-            return stop
+        else:
+            stop = Stop("no screened candidate improves the held-out data significantly" if state.cv_here else
+                        f"no candidate passes the screening (score-test p < {scr.gate:.2g}): nothing significant "
+                        "remains that the library or an effect built from the residual explains")
+        if not built and synthesise(state):
+            continue
+        staged = decide(state, scr, physics(state, scr)) if weigh_physics else None
+        if staged is not None:
+            return (*staged, scr)
+        state.cv_here = state.last_cv if weigh_physics else state.cv_here
+        return stop
     raise AssertionError("unreachable")
 
 

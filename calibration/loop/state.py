@@ -3,8 +3,8 @@ calls through it (:meth:`LoopState.fit`)."""
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Callable
 
 import numpy as np
 
