@@ -195,10 +195,10 @@ def test_a_physical_group_keeps_its_scale_while_the_evidence_moves_the_others():
 def test_joint_compliance_groups_are_physical_and_given_sizes_are_not():
     """prior_spec marks the joint compliance effect's group physical (every parameter sized by the data's
     torque); a size given for one of its parameters makes the group an ordinary one (the user's size)."""
-    from conftest import ROOT
     from arm_model.effects import JointCompliance
     from arm_model.io import read_artefacts, read_points
     from arm_model.urdf_import import load_arm
+    from conftest import ROOT
     panda = ROOT / "examples" / "data" / "real-panda-seats"
     model = ArmModel(load_arm(panda / "panda-with-inertials.urdf", "ball_link"), (JointCompliance(),))
     data = make_data(read_points(panda / "front" / "points.csv", 7), read_artefacts(panda / "artefacts.toml"), model)

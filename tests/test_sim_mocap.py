@@ -388,6 +388,7 @@ def test_a_robot_with_masses_seen_by_a_tracker_gets_joint_compliance_by_default(
     1/2000 rad/(N m) in the truth predicts the held-out postures worse (measured 0.18 mm with the default,
     1.49 mm without)."""
     from dataclasses import replace as dc_replace
+
     from arm_model.effects import JointCompliance
     from arm_model.model import ArmModel
     from arm_model.urdf_import import load_arm
