@@ -36,8 +36,10 @@ def _effects(keys):
     from arm_model.effects import EFFECTS
     out = []
     for k in keys or ():
+        if k == "none":
+            continue
         if k not in EFFECTS:
-            raise InputError(f"unknown effect '{k}' (known: {', '.join(EFFECTS)})")
+            raise InputError(f"unknown effect '{k}' (known: {', '.join(EFFECTS)}, or none)")
         out.append(EFFECTS[k]())
     return tuple(out)
 
@@ -140,7 +142,9 @@ def model_options(p) -> None:
     p.add_argument("--effect", action="append", metavar="KEY",
                    help="add an effect of arm_model.effects to the model (repeatable): "
                         f"{', '.join(EFFECTS)}. Its parameters are fitted (see --free); close-loop: it is part of "
-                        "the base model, not a candidate")
+                        "the base model, not a candidate. calibrate without --effect adds joint_compliance for a "
+                        "robot whose URDF gives link masses seen by a tracker only (no artefacts file); "
+                        "'--effect none': the geometry alone")
     p.add_argument("--free", action="append", metavar="PATTERN",
                    help="parameters to identify, by name or glob (repeatable), e.g. 'j*.d', 'probe.*', "
                         "'j3.theta_offset'. Default: every joint-row error, probe.x/y/z and the parameters of the "
@@ -326,7 +330,10 @@ def model_effects(arm, keys):
         raise InputError(f"--effect: {exc}", arm.desc.source) from None
 
 
-def _load_data(args):
+def _load_data(args, defaults: bool = False):
+    """(model, data, the arm's values, warnings) of the command's inputs; with ``defaults`` (calibrate) and no
+    ``--effect``, the model with :func:`calibration.calibrate.default_effects` added (said on the console)."""
+    from .calibrate import default_effects
     from .data import make_data
     arm = model_from_args(args)
     desc = arm.desc
@@ -340,6 +347,14 @@ def _load_data(args):
             Arm(desc, model.effects).check_points(pts)
             warnings += point_warnings(desc, pts)
     data = make_data(points, artefacts, model, reference=reference, marker_offsets=args.marker_offset)
+    added = default_effects(model, data) if defaults and args.effect is None else ()
+    if added:
+        from arm_model.model import ArmModel
+        model = ArmModel(desc, tuple(model.effects) + added)
+        data = make_data(points, artefacts, model, reference=reference, marker_offsets=args.marker_offset)
+        log.info(f"effect {', '.join(e.describe() for e in added)} added: a robot whose links carry masses, seen "
+                 "by a tracker, bends under its own weight (each compliance's prior: at most 10 mrad under its "
+                 "joint's RMS gravity torque); --effect none for the geometry alone")
     return model, data, arm.values, warnings
 
 
@@ -367,12 +382,12 @@ def _split(args, data):
 
 def run_calibrate(args: argparse.Namespace) -> int:
     from .calibrate import calibrate, nominal_baseline
-    from .model_output import refine_torques
+    from .model_output import refine_torques, with_fitted_torques
     from .report import write_outputs
     from .validation import worse_than_nominal
     inputs = [args.points, args.artefacts, *arm_inputs(args), args.reference_points]
     with output_folder(args.output, inputs, "calibrate") as out:
-        model, data, values, warnings = _load_data(args)
+        model, data, values, warnings = _load_data(args, defaults=True)
         if any(e.key == "joint_compliance" for e in model.effects):
             from .candidates import no_torque_reason
             why = no_torque_reason(model.desc, data)
@@ -384,6 +399,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
                               drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference)
         res = refine_torques(calibrate(model, train, options))
         base = nominal_baseline(model, res.data, replace(res.options, weights=res.weights))
+        # the held-out rows' torques on the calibrated description, as the model file (tip) evaluates them
+        test, data = with_fitted_torques(test, res), with_fitted_torques(data, res)
         held = (None if test is None and poses is None else
                 (res, test, base) if poses is None else (res, data, base, ~poses))
         val_train, val_test, conf = conformance_entry(mpe_from_args(args), (res, res.data, base), held)
@@ -560,8 +577,9 @@ def prior_lines(res) -> list[str]:
               + ("" if res.evidence[-1].get("settled", True) else "; " + res.evidence[-1]["note"]) + ")"
               if evidence else " (scales given)") + ":"]
     for g, v in res.prior_groups.items():
-        out.append(f"  {g}: scale {v['scale']:.3g}; the data determine {v['effective_parameters']:.1f} of its "
-                   f"{len(v['parameters'])} parameters")
+        physical = " (a physical prior: not chosen by the evidence)" if v.get("physical") else ""
+        out.append(f"  {g}: scale {v['scale']:.3g}{physical}; the data determine {v['effective_parameters']:.1f} of "
+                   f"its {len(v['parameters'])} parameters")
     dominated = [r for r in res.parameter_rows() if r["state"] == "prior-dominated"]
     if dominated:
         out.append(f"prior-dominated ({len(dominated)}: the data add less than the prior; they stay near the nominal "

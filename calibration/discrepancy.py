@@ -50,16 +50,19 @@ class Discrepancy:
         ratio: RMS held-out prediction error over the RMS the fit predicts for it (1 when the model holds).
         folds: number of folds (held-out ends of joint ranges); rows: held-out residual rows, pooled.
         share: share of the poses held out at each end of a joint's range.
+        rms: RMS per axis [m] of the held-out prediction errors themselves (noise, posterior and
+            discrepancy together): the extrapolative cross-validation error of the fit.
     """
     sigma: float
     ratio: float
     folds: int
     rows: int
     share: float = EXTREME_SHARE
+    rms: float = float("nan")
 
     def to_dict(self) -> dict:
         return {"sigma_um": self.sigma * 1e6, "ratio": self.ratio, "folds": self.folds, "rows": self.rows,
-                "share": self.share,
+                "share": self.share, "rms_um": self.rms * 1e6,
                 "method": "extrapolative cross-validation: the poses at each end of every joint's range held out "
                           "in turn (group deletion at the solution), the excess of their squared prediction "
                           "errors over the fit's own prediction (noise and posterior), per axis"}
@@ -142,4 +145,5 @@ def model_discrepancy(prob, r: np.ndarray, js, solve, var: float, share: float =
     if not n_rows:
         return None
     return Discrepancy(math.sqrt(max((observed - predicted) / n_rows, 0.0)),
-                       math.sqrt(observed / predicted) if predicted > 0 else float("nan"), n_folds, n_rows, share)
+                       math.sqrt(observed / predicted) if predicted > 0 else float("nan"), n_folds, n_rows, share,
+                       math.sqrt(observed / n_rows))

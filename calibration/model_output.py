@@ -150,6 +150,18 @@ def model_check(result, arm: Arm | None = None) -> dict:
             "rms_difference_nm": float(np.sqrt(np.mean(d ** 2)) * 1e9) if len(d) else 0.0}
 
 
+def with_fitted_torques(data, result):
+    """``data`` with the gravity and contact torques evaluated on the calibrated description of ``result`` (as
+    the model file evaluates them), when its model needs them; else ``data`` (None stays None). Held-out data
+    are predicted with these, so that the held-out figures are those ``tip`` gives with the model file."""
+    if data is None or not ({"tau_gravity", "tau_contact"} & result.model.needs()):
+        return data
+    from arm_model.model import AuxData
+    from arm_model.pinocchio_model import PinocchioArm
+    tau_g, tau_c = PinocchioArm(result.described()).torques(data.points.q, data.wrench)
+    return replace(data, aux=AuxData(None if data.aux is None else data.aux.temperature, tau_g, tau_c))
+
+
 def refine_torques(result, rounds: int = 5, tol_nm: float = 1.0):
     """The fit refined with the gravity and contact torques evaluated on its calibrated description (the
     fit evaluated them on the nominal one), so that the model file, which evaluates them on the description
@@ -164,9 +176,6 @@ def refine_torques(result, rounds: int = 5, tol_nm: float = 1.0):
     model = result.model
     if not ({"tau_gravity", "tau_contact"} & model.needs()):
         return result
-    from arm_model.model import AuxData
-    from arm_model.pinocchio_model import PinocchioArm
-
     from .calibrate import calibrate
     from .options import FitOptions
     data = result.data
@@ -177,11 +186,9 @@ def refine_torques(result, rounds: int = 5, tol_nm: float = 1.0):
                    prior_scale=result.prior_scales, prior_centre=result.prior_centre)
     cur = result
     for _ in range(rounds):
-        tau_g, tau_c = PinocchioArm(cur.described()).torques(data.points.q, data.wrench)
-        aux = AuxData(None if data.aux is None else data.aux.temperature, tau_g, tau_c)
         values = dict(zip(model.spec.names, (float(v) for v in cur.p)))
-        cur = dataclasses.replace(
-            calibrate(model, replace(data, aux=aux), replace(base, free=tuple(cur.free), values=values)), **keep)
+        cur = dataclasses.replace(calibrate(model, with_fitted_torques(data, cur),
+                                            replace(base, free=tuple(cur.free), values=values)), **keep)
         cur = dataclasses.replace(cur, model_check=model_check(cur))
         if cur.model_check["max_difference_nm"] <= tol_nm:
             break

@@ -11,6 +11,14 @@ with ``gamma_G = sum_k in G (1 - rho_k)`` the number of the group's parameters t
 (``rho_k``: posterior over prior variance, :func:`variance_ratio`), the Laplace evidence is stationary in
 ``tau_G`` where ``tau_G^2 = sum_k in G ((p_k - c_k) / s_k)^2 / gamma_G`` (:func:`update_scales`).
 
+An angular compliance's prior is physical, not scaled by the evidence: its size is the compliance that turns
+the joint by :data:`DEFLECTION` (10 mrad, the largest plausible deflection) under the torque the data give it,
+and its lower bound keeps it non-negative. Its group's scale stays at 1 (:attr:`PriorSpec.physical`): the
+Laplace evidence is no guide for a group whose posterior is cut by its bound (some of its parameters held at 0,
+the others' posterior far from Gaussian), and its MacKay fixed point shrinks a compliance the training poses
+see only weakly to zero, leaving its signature to the geometry, which then errs where the poses reach beyond
+the training range (measured in docs/calibration.md).
+
 A parameter is **prior-dominated** when ``rho_k >= PRIOR_DOMINATED`` (0.5): its posterior variance is at
 least half its prior's, i.e. the data's own information on it is at most the prior's (for one parameter,
 ``1 / u_post^2 = 1 / u_prior^2 + 1 / u_data^2``, so ``rho >= 0.5`` iff ``u_data >= u_prior``). Such a
@@ -40,8 +48,9 @@ GROUP_PROBE_COMPLIANCE = "probe compliance"
 BASE_SIZES = {"m": 1e-3, "rad": 1e-3}
 #: plausible size at scale 1 of an effect parameter with no size of its own, by SI unit
 UNIT_SIZES = {"m": 1e-3, "rad": 1e-3, "1": 0.1, "N": 1.0, "N m": 0.1, "1/K": 1e-4, "m/N": 1e-6}
-#: the plausible angular deflection [rad] of a joint under the torque the data give it (a compliance's size)
-DEFLECTION = 1e-3
+#: the largest plausible angular deflection [rad] of a joint under the RMS torque the data give it: the size of
+#: an angular compliance's physical prior (its group's scale is not estimated, :attr:`PriorSpec.physical`)
+DEFLECTION = 1e-2
 #: the largest plausible size of an angular compliance [rad/(N m)] (a tenth of what a model file may hold)
 MAX_ANGULAR_COMPLIANCE = 0.1
 #: posterior/prior variance ratio from which a parameter is prior-dominated
@@ -129,11 +138,14 @@ class PriorSpec:
         size: plausible error size at scale 1 [SI] (the prior's standard deviation at ``tau = 1``).
         lower: lower bound of the parameter [SI] (``-inf``: none; a compliance: minus its nominal value).
         source: how each size was set (for the report).
+        physical: the groups whose prior is physical (every parameter an angular compliance sized by the data's
+            torque): the evidence leaves their scale as given (1 by default).
     """
     group: tuple
     size: np.ndarray
     lower: np.ndarray
     source: tuple
+    physical: frozenset = frozenset()
 
     def sizes(self, scales: dict | float) -> np.ndarray:
         """The prior's standard deviations [SI] at group ``scales`` (a dict, or one factor for every group)."""
@@ -194,7 +206,8 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
     (probe.x/y/z) 1 mm too (the tip's nominal place is known: a marker at an unknown place is a nuisance
     unknown of its own, without a prior, :mod:`arm_model.tracker`); the probe's
     compliance 10 times its nominal value (at least 1e-8 m/N); an angular compliance [rad/(N m)] the one that
-    turns the joint by :data:`DEFLECTION` under the RMS torque the data give it (gravity from the
+    turns the joint by :data:`DEFLECTION` (its largest plausible deflection; the group is physical, its scale
+    not estimated) under the RMS torque the data give it (gravity from the
     description's masses, contact torques from the forces; an off-axis compliance, the RMS moment of gravity
     about its axis that the effect's ``gravity_loads`` give; at most :data:`MAX_ANGULAR_COMPLIANCE`); another
     effect parameter the effect's own plausible size or a size by unit (:data:`UNIT_SIZES`). ``priors``
@@ -221,7 +234,11 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
         source.append(src)
         if unit in NONNEGATIVE_UNITS:
             lower[i] = 0.0 - _nominal_compliance(model, n)
-    return PriorSpec(tuple(parameter_groups(model, spec.names)), size, lower, tuple(source))
+    groups = tuple(parameter_groups(model, spec.names))
+    torque_sized = [i in eff and spec.units[i] == "rad/(N m)" and source[i] != "given" for i in range(spec.size)]
+    physical = frozenset(g for g in set(groups)
+                         if all(torque_sized[i] for i in range(spec.size) if groups[i] == g))
+    return PriorSpec(groups, size, lower, tuple(source), physical)
 
 
 def _nominal_compliance(model, name: str) -> float:
@@ -247,15 +264,15 @@ def update_scales(scales: dict, spec: PriorSpec, kept, delta: np.ndarray, rho: n
         damping: the new log scale is ``damping`` of the way to the fixed point's (1: all of it).
 
     Returns ``(new scales, {group: gamma_G})``; a group whose data determine fewer than
-    :data:`MIN_EFFECTIVE` parameters keeps its scale (its evidence is flat), every scale stays in
-    :data:`SCALE_RANGE`."""
+    :data:`MIN_EFFECTIVE` parameters keeps its scale (its evidence is flat), and so does a physical group
+    (:attr:`PriorSpec.physical`); every scale stays in :data:`SCALE_RANGE`."""
     kept = np.asarray(kept, dtype=int)
     new, gamma = dict(scales), {}
     for g, idx in spec.groups_of(kept).items():
         sel = np.isin(kept, idx)
         gam = float(np.sum(1.0 - rho[sel]))
         gamma[g] = gam
-        if gam < MIN_EFFECTIVE:
+        if gam < MIN_EFFECTIVE or g in spec.physical:
             continue
         z2 = float(np.sum((delta[sel] / spec.size[kept[sel]]) ** 2))
         target = math.sqrt(max(z2 / gam, SCALE_RANGE[0] ** 2))

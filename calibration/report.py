@@ -266,7 +266,8 @@ def prior_html(result: CalibrationResult) -> list[str]:
     determine."""
     if result.prior_scales is None:
         return []
-    rows = [(g, _fmt(v["scale"], 3), len(v["parameters"]), _fmt(v["effective_parameters"], 3),
+    rows = [(g, _fmt(v["scale"], 3) + (" (physical)" if v.get("physical") else ""), len(v["parameters"]),
+             _fmt(v["effective_parameters"], 3),
              "; ".join(v["size_source"])) for g, v in result.prior_groups.items()]
     how = (f"chosen by the evidence together with the noise ({len(result.evidence)} rounds)" if result.evidence
            else "given")

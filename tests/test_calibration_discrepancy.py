@@ -98,6 +98,9 @@ def test_an_exact_model_has_no_discrepancy_and_a_missing_effect_has_one(model, n
     exact = calibrate(model, _campaign(model, 2), FitOptions(weights=W, weights_from_data=True))
     d = exact.discrepancy
     assert d is not None and d.folds == 14 and 0.85 <= d.ratio <= 1.2 and d.sigma < 3e-6, d
+    # the cross-validation error itself: the 5 um noise per axis and a little posterior
+    assert 5e-6 * 0.8 < d.rms < 5e-6 * 1.5, d
+    assert d.to_dict()["rms_um"] == pytest.approx(d.rms * 1e6, rel=1e-12)
     truth = ArmModel(nominal, (EncoderEccentricity(joints=(1, 3)),))
     p = np.zeros(truth.spec.size)
     p[:model.spec.size] = random_truth(model, np.random.default_rng(2), length=1e-4, angle=1e-4, probe=1e-4)
@@ -105,6 +108,9 @@ def test_an_exact_model_has_no_discrepancy_and_a_missing_effect_has_one(model, n
     lacking = calibrate(model, _campaign(model, 2, truth, p), FitOptions(weights=W, weights_from_data=True))
     d = lacking.discrepancy
     assert d.ratio > 1.03 and d.sigma > 5e-6, d
+    # rms^2 = sigma^2 + the fit's own predicted variance (ratio^2 = rms^2 / that): one definition of the three
+    assert d.rms ** 2 == pytest.approx(d.sigma ** 2 * d.ratio ** 2 / (d.ratio ** 2 - 1.0), rel=1e-9)
+    assert d.rms > exact.discrepancy.rms
 
 
 def test_the_model_file_carries_the_discrepancy_into_tip(tmp_path, model):

@@ -148,7 +148,7 @@ def test_large_errors_converge_to_the_noise(model):
 
 
 def test_an_off_axis_compliance_prior_comes_from_the_gravity_moment_about_its_axis():
-    """Lateral compliance of the Panda (URDF masses): each parameter's prior size is 1 mrad over the RMS, over
+    """Lateral compliance of the Panda (URDF masses): each parameter's prior size is 10 mrad over the RMS, over
     the data's poses, of the moment of gravity on the links its joint moves about that joint frame's x or y
     axis; the moments agree with Pinocchio's RNEA (the model's own evaluator of them) to 1e-9 N m. (Before,
     the axial torque was used: joint 1, whose axial gravity torque is nil, got the largest size, 0.1.)"""
@@ -177,3 +177,30 @@ def test_an_off_axis_compliance_prior_comes_from_the_gravity_moment_about_its_ax
             mg, _ = model._pinocchio_moments(geom, list(q), i, o, [0.0] * 6)
             assert float(np.dot(mg, ux)) == pytest.approx(loads[2 * i][k], abs=1e-9)
             assert float(np.dot(mg, uy)) == pytest.approx(loads[2 * i + 1][k], abs=1e-9)
+
+
+def test_a_physical_group_keeps_its_scale_while_the_evidence_moves_the_others():
+    """MacKay's fixed point on two groups of two parameters each, both fully determined (rho = 0) and 3 prior
+    sizes from the centre: the ordinary group's scale goes to sqrt((9 + 9) / 2) = 3 (hand-derived), the
+    physical one (an angular compliance's, :attr:`PriorSpec.physical`) stays at its given scale."""
+    from calibration.prior import PriorSpec, update_scales
+    spec = PriorSpec(("lengths", "lengths", "effect c", "effect c"), np.array([1e-3, 1e-3, 2e-4, 2e-4]),
+                     np.array([-np.inf, -np.inf, 0.0, 0.0]), ("a",) * 4, frozenset({"effect c"}))
+    delta = np.array([3e-3, -3e-3, 6e-4, 6e-4])
+    new, gamma = update_scales({"lengths": 1.0, "effect c": 1.0}, spec, [0, 1, 2, 3], delta, np.zeros(4))
+    assert new["lengths"] == pytest.approx(3.0, rel=1e-12)
+    assert new["effect c"] == 1.0 and gamma == {"lengths": 2.0, "effect c": 2.0}
+
+
+def test_joint_compliance_groups_are_physical_and_given_sizes_are_not():
+    """prior_spec marks the joint compliance effect's group physical (every parameter sized by the data's
+    torque); a size given for one of its parameters makes the group an ordinary one (the user's size)."""
+    from arm_model.effects import JointCompliance
+    from arm_model.io import read_artefacts, read_points
+    from arm_model.urdf_import import load_arm
+    from conftest import ROOT
+    panda = ROOT / "examples" / "data" / "real-panda-seats"
+    model = ArmModel(load_arm(panda / "panda-with-inertials.urdf", "ball_link"), (JointCompliance(),))
+    data = make_data(read_points(panda / "front" / "points.csv", 7), read_artefacts(panda / "artefacts.toml"), model)
+    assert prior_spec(model, data).physical == frozenset({"effect joint_compliance"})
+    assert prior_spec(model, data, {"panda_joint2.compliance": 1e-3}).physical == frozenset()
