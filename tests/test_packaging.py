@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shutil
 import subprocess
 import sys
 import zipfile
@@ -122,7 +123,11 @@ def test_wheel_installed_use_without_the_checkout(tmp_path):
     """Build the wheel, install it (no deps: they are in this venv) into a folder that shadows the
     checkout, and run from an unrelated folder: --version, --arm aacmm7, aacmm examples."""
     wheels = tmp_path / "wheels"
-    r = subprocess.run([sys.executable, "-m", "pip", "wheel", str(ROOT), "--no-deps", "-q", "-w", str(wheels)],
+    # built from a copy: setuptools leaves build/ and *.egg-info in the folder it builds
+    src = tmp_path / "src"
+    shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(".venv", ".git", "build", "out", "*.egg-info",
+                                                             "__pycache__", ".*_cache"))
+    r = subprocess.run([sys.executable, "-m", "pip", "wheel", str(src), "--no-deps", "-q", "-w", str(wheels)],
                        capture_output=True, text=True, timeout=600)
     if r.returncode != 0 and ("Could not find a version" in r.stderr or "connection" in r.stderr.lower()):
         pytest.skip("no package index to build the wheel: " + r.stderr[-200:])
