@@ -34,10 +34,43 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["EXTREME_SHARE", "Discrepancy", "extreme_folds", "fold_errors", "holdable", "model_discrepancy"]
+from arm_model import NumericalError
+from arm_model.discrepancy import TrainingRange, excess_distance, joint_levers, training_range
+
+__all__ = ["EXTREME_SHARE", "Discrepancy", "Growth", "extreme_folds", "fit_growth", "fold_errors", "holdable",
+           "model_discrepancy"]
 
 #: share of the poses held out at each end of a joint's range
 EXTREME_SHARE = 0.15
+
+
+@dataclass(frozen=True)
+class Growth:
+    """The growing discrepancy ``sigma_d(q)^2 = sigma0^2 + (growth * d(q))^2`` fitted to the held-out rows of
+    the extrapolative folds (:func:`fit_growth`, :mod:`arm_model.discrepancy`).
+
+    Attributes:
+        sigma0: [m] the discrepancy at the training poses (``d = 0``); growth: [1] its growth per metre of ball
+            travel beyond the training range; both floored at 0.
+        u_sigma0, u_growth: their standard uncertainties, by the delete-one-fold jackknife (the folds share
+            poses and a fold's rows are correlated, which the jackknife over folds respects).
+        lr: twice the log-likelihood gained over a constant discrepancy (0 when the growth is floored at 0;
+            about chi-square with 1 degree of freedom when there is no growth).
+        d_max, d_rms: [m] the largest and RMS ``d`` of the held-out rows: the reach over which the growth was
+            measured (beyond ``d_max`` it is an extrapolation).
+    """
+    sigma0: float
+    growth: float
+    u_sigma0: float
+    u_growth: float
+    lr: float
+    d_max: float
+    d_rms: float
+
+    def to_dict(self) -> dict:
+        return {"sigma0_um": self.sigma0 * 1e6, "growth_um_per_mm": self.growth * 1e3,
+                "u_sigma0_um": self.u_sigma0 * 1e6, "u_growth_um_per_mm": self.u_growth * 1e3,
+                "likelihood_ratio": self.lr, "d_max_mm": self.d_max * 1e3, "d_rms_mm": self.d_rms * 1e3}
 
 
 @dataclass(frozen=True)
@@ -52,6 +85,9 @@ class Discrepancy:
         share: share of the poses held out at each end of a joint's range.
         rms: RMS per axis [m] of the held-out prediction errors themselves (noise, posterior and
             discrepancy together): the extrapolative cross-validation error of the fit.
+        growth: the discrepancy growing beyond the training range (:class:`Growth`), fitted to the same
+            held-out rows; None when it could not be fitted.
+        training: the range each joint spans over the fit's poses (what the growth is measured beyond).
     """
     sigma: float
     ratio: float
@@ -59,13 +95,61 @@ class Discrepancy:
     rows: int
     share: float = EXTREME_SHARE
     rms: float = float("nan")
+    growth: Growth | None = None
+    training: TrainingRange | None = None
 
     def to_dict(self) -> dict:
         return {"sigma_um": self.sigma * 1e6, "ratio": self.ratio, "folds": self.folds, "rows": self.rows,
                 "share": self.share, "rms_um": self.rms * 1e6,
+                "growth": None if self.growth is None else self.growth.to_dict(),
                 "method": "extrapolative cross-validation: the poses at each end of every joint's range held out "
                           "in turn (group deletion at the solution), the excess of their squared prediction "
                           "errors over the fit's own prediction (noise and posterior), per axis"}
+
+
+def _neg_log_likelihood(x, e2, v, d2) -> float:
+    """Half the negative Gaussian log-likelihood of errors with squares ``e2`` and variances ``v + a + b d2``."""
+    tot = v + x[0] + x[1] * d2
+    return 0.5 * float(np.sum(np.log(tot) + e2 / tot))
+
+
+def _ml(e2, v, d2, growing: bool) -> tuple[np.ndarray, float]:
+    """(a, b) [m^2, 1] maximising the likelihood of ``e2`` under variances ``v + a + b d2`` (a, b >= 0; b = 0
+    unless ``growing``), and the minimised :func:`_neg_log_likelihood`. The unknowns are scaled to order 1 and
+    started from the non-negative least squares of ``e2 - v`` on ``(1, d2)`` (the method of moments)."""
+    from scipy.optimize import minimize, nnls
+    scale = np.array([max(float(np.mean(v)), 1e-30), 1.0])
+    md2 = float(np.mean(d2))
+    growing = growing and md2 > 0
+    if growing:
+        scale[1] = scale[0] / md2
+    cols = np.column_stack([np.ones_like(d2), d2])[:, : 2 if growing else 1] * scale[: 2 if growing else 1]
+    x0 = nnls(cols, e2 - v)[0] + 1e-3
+    x0 = np.append(x0, 0.0) if not growing else x0
+    bounds = [(0.0, None), (0.0, None) if growing else (0.0, 0.0)]
+    res = minimize(lambda x: _neg_log_likelihood(x * scale, e2, v, d2), x0, method="L-BFGS-B", bounds=bounds)
+    if not res.success:
+        raise NumericalError(f"the model discrepancy's likelihood was not maximised: {res.message}")
+    return res.x * scale, float(res.fun)
+
+
+def fit_growth(e, v, d, fold) -> Growth:
+    """The :class:`Growth` of held-out errors ``e`` (rows,) [m] whose fit predicts the variances ``v`` [m^2]
+    (noise and posterior), at ball travels ``d`` [m] beyond the range of the poses each was predicted from, in
+    folds ``fold`` (rows,): the maximum likelihood of ``e ~ N(0, v + sigma0^2 + growth^2 d^2)`` (rows taken as
+    independent), ``sigma0`` and ``growth`` floored at 0, with their delete-one-fold jackknife uncertainties."""
+    e2, v, d2, fold = np.asarray(e) ** 2, np.asarray(v, dtype=float), np.asarray(d, dtype=float) ** 2, np.asarray(fold)
+    (a, b), nll = _ml(e2, v, d2, True)
+    _, nll0 = _ml(e2, v, d2, False)
+    folds = np.unique(fold)
+    jack = []
+    for f in folds if len(folds) > 2 else ():
+        keep = fold != f
+        jack.append(np.sqrt(_ml(e2[keep], v[keep], d2[keep], True)[0]))
+    u = np.sqrt((len(jack) - 1) / len(jack) * np.sum((np.array(jack) - np.mean(jack, axis=0)) ** 2, axis=0)) \
+        if jack else np.full(2, float("nan"))
+    return Growth(math.sqrt(a), math.sqrt(b), float(u[0]), float(u[1]), max(2 * (nll0 - nll), 0.0),
+                  float(np.sqrt(d2.max())) if len(d2) else 0.0, float(np.sqrt(d2.mean())) if len(d2) else 0.0)
 
 
 def extreme_folds(q: np.ndarray, share: float = EXTREME_SHARE) -> list[np.ndarray]:
@@ -130,20 +214,29 @@ def model_discrepancy(prob, r: np.ndarray, js, solve, var: float, share: float =
     used = np.unique(rp[point_rows])
     if len(used) < 2:
         return None
-    observed = predicted = 0.0
-    n_rows = n_folds = 0
-    for fold in extreme_folds(prob.data.points.q[used], share):
+    desc = prob.model.desc
+    q = prob.data.points.q
+    circular = [not j.prismatic for j in desc.encoders]
+    levers = np.zeros((len(q), q.shape[1]))
+    levers[used] = joint_levers(desc, q[used])
+    errors, variances, dists, fold_of = [], [], [], []
+    for fold in extreme_folds(q[used], share):
         held = holdable(prob, used[fold])
         rows = np.flatnonzero(point_rows & np.isin(rp, sorted(held)))
         if not len(rows):
             continue
         e, v = fold_errors(prob, r, js, solve, var, rows)
-        observed += float(e @ e)
-        predicted += float(np.sum(v))
-        n_rows += len(rows)
-        n_folds += 1
-    if not n_rows:
+        rest = used[~np.isin(used, sorted(held))]
+        rng = training_range(q[rest], desc.joint_names, circular)
+        errors.append(e)
+        variances.append(v)
+        dists.append(excess_distance(desc, q[rp[rows]], rng, levers[rp[rows]]))
+        fold_of.append(np.full(len(rows), len(fold_of)))
+    if not errors:
         return None
+    e, v = np.concatenate(errors), np.concatenate(variances)
+    observed, predicted, n_rows = float(e @ e), float(np.sum(v)), len(e)
+    growth = fit_growth(e, v, np.concatenate(dists), np.concatenate(fold_of))
     return Discrepancy(math.sqrt(max((observed - predicted) / n_rows, 0.0)),
-                       math.sqrt(observed / predicted) if predicted > 0 else float("nan"), n_folds, n_rows, share,
-                       math.sqrt(observed / n_rows))
+                       math.sqrt(observed / predicted) if predicted > 0 else float("nan"), len(errors), n_rows, share,
+                       math.sqrt(observed / n_rows), growth, training_range(q[used], desc.joint_names, circular))
