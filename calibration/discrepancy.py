@@ -21,11 +21,17 @@ group-deletion identity of linear regression, Cook and Weisberg 1982, "Residuals
 Regression", ch. 3). A fold keeps every feature's fewest points plus one (as :func:`calibration.data.
 split_poses`), so that its centre (axis, plane, frame) stays determined.
 
-``sigma_d`` is what :func:`arm_model.uncertainty.propagate` adds, per axis, to every corrected point of the
-calibrated model (the model file's ``[calibration] model_discrepancy_um``, ``aacmm tip``'s
-``model discrepancy`` contribution). It is 0 (to its sampling scatter) when the model holds the physics of
-the data, and grows with what the model lacks where the data reach beyond the training poses; it cannot
-see an error that shows only beyond the range the data span.
+The same held-out rows also show how the error grows with the distance ``d`` of each held-out pose from the
+poses left in its fold (:func:`arm_model.discrepancy.pose_distance`: how far the joint motions from the
+nearest of them carry the ball): :func:`fit_growth` fits ``e_i ~ N(0, v_i + sigma_0^2 + g^2 d_i^2)`` by maximum
+likelihood (``sigma_0, g >= 0``; started from the method of moments, the least squares of ``e_i^2 - v_i`` on
+``(1, d_i^2)``), with delete-one-fold jackknife uncertainties and the likelihood ratio over the constant.
+That growing ``sigma_d(q)`` is what :func:`arm_model.uncertainty.propagate` adds, per axis, to every corrected
+point of the calibrated model (the model file's ``[calibration] model_discrepancy_um`` = ``sigma_0``,
+``model_discrepancy_growth_um_per_mm`` = ``g`` and its training poses; ``aacmm tip``'s ``model discrepancy``
+contribution). Both are 0 (to their sampling scatter) when the model holds the physics of the data; they
+grow with what the model lacks as far as the data reach beyond their own poses: an error that shows only far
+beyond what the folds span is an extrapolation of ``g``.
 """
 from __future__ import annotations
 
@@ -35,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from arm_model import NumericalError
-from arm_model.discrepancy import TrainingRange, excess_distance, joint_levers, training_range
+from arm_model.discrepancy import TrainingPoses, joint_levers, pose_distance
 
 __all__ = ["EXTREME_SHARE", "Discrepancy", "Growth", "extreme_folds", "fit_growth", "fold_errors", "holdable",
            "model_discrepancy"]
@@ -51,13 +57,14 @@ class Growth:
 
     Attributes:
         sigma0: [m] the discrepancy at the training poses (``d = 0``); growth: [1] its growth per metre of ball
-            travel beyond the training range; both floored at 0.
+            travel from the nearest training pose (:func:`arm_model.discrepancy.pose_distance`); both floored at 0.
         u_sigma0, u_growth: their standard uncertainties, by the delete-one-fold jackknife (the folds share
             poses and a fold's rows are correlated, which the jackknife over folds respects).
         lr: twice the log-likelihood gained over a constant discrepancy (0 when the growth is floored at 0;
             about chi-square with 1 degree of freedom when there is no growth).
-        d_max, d_rms: [m] the largest and RMS ``d`` of the held-out rows: the reach over which the growth was
-            measured (beyond ``d_max`` it is an extrapolation).
+        d_max, d_rms: [m] the largest and RMS ``d`` (:func:`arm_model.discrepancy.pose_distance` from the poses
+            left in the fold) of the held-out rows: the reach over which the growth was measured (beyond
+            ``d_max`` it is an extrapolation).
     """
     sigma0: float
     growth: float
@@ -85,9 +92,10 @@ class Discrepancy:
         share: share of the poses held out at each end of a joint's range.
         rms: RMS per axis [m] of the held-out prediction errors themselves (noise, posterior and
             discrepancy together): the extrapolative cross-validation error of the fit.
-        growth: the discrepancy growing beyond the training range (:class:`Growth`), fitted to the same
+        growth: the discrepancy growing away from the training poses (:class:`Growth`), fitted to the same
             held-out rows; None when it could not be fitted.
-        training: the range each joint spans over the fit's poses (what the growth is measured beyond).
+        training: the poses of the fit (what the growth is measured away from); training_rows: their rows in
+            the fit's points.
     """
     sigma: float
     ratio: float
@@ -96,7 +104,8 @@ class Discrepancy:
     share: float = EXTREME_SHARE
     rms: float = float("nan")
     growth: Growth | None = None
-    training: TrainingRange | None = None
+    training: TrainingPoses | None = None
+    training_rows: np.ndarray | None = None
 
     def to_dict(self) -> dict:
         return {"sigma_um": self.sigma * 1e6, "ratio": self.ratio, "folds": self.folds, "rows": self.rows,
@@ -216,7 +225,6 @@ def model_discrepancy(prob, r: np.ndarray, js, solve, var: float, share: float =
         return None
     desc = prob.model.desc
     q = prob.data.points.q
-    circular = [not j.prismatic for j in desc.encoders]
     levers = np.zeros((len(q), q.shape[1]))
     levers[used] = joint_levers(desc, q[used])
     errors, variances, dists, fold_of = [], [], [], []
@@ -227,10 +235,9 @@ def model_discrepancy(prob, r: np.ndarray, js, solve, var: float, share: float =
             continue
         e, v = fold_errors(prob, r, js, solve, var, rows)
         rest = used[~np.isin(used, sorted(held))]
-        rng = training_range(q[rest], desc.joint_names, circular)
         errors.append(e)
         variances.append(v)
-        dists.append(excess_distance(desc, q[rp[rows]], rng, levers[rp[rows]]))
+        dists.append(pose_distance(desc, q[rp[rows]], TrainingPoses.of(desc, q[rest]), levers[rp[rows]]))
         fold_of.append(np.full(len(rows), len(fold_of)))
     if not errors:
         return None
@@ -239,4 +246,4 @@ def model_discrepancy(prob, r: np.ndarray, js, solve, var: float, share: float =
     growth = fit_growth(e, v, np.concatenate(dists), np.concatenate(fold_of))
     return Discrepancy(math.sqrt(max((observed - predicted) / n_rows, 0.0)),
                        math.sqrt(observed / predicted) if predicted > 0 else float("nan"), len(errors), n_rows, share,
-                       math.sqrt(observed / n_rows), growth, training_range(q[used], desc.joint_names, circular))
+                       math.sqrt(observed / n_rows), growth, TrainingPoses.of(desc, q[used]), used)

@@ -287,7 +287,22 @@ def discrepancy_html(result: CalibrationResult) -> list[str]:
             f"<p>{_fmt(d.sigma * 1e6, 4)} um per axis: the poses at either end of each joint's range "
             f"({d.share:.0%} of the poses each end, {d.folds} folds) held out in turn and predicted by the fit on the "
             f"rest err {_fmt(d.ratio, 3)} x what that fit predicts (noise and posterior); the excess is the model "
-            "discrepancy, which the model file carries and tip adds to every point's uncertainty.</p>"]
+            "discrepancy.</p>"] + _growth_html(d)
+
+
+def _growth_html(d) -> list[str]:
+    """The report's sentence on the discrepancy's growth away from the training poses (:class:`calibration.
+    discrepancy.Growth`)."""
+    g = d.growth
+    if g is None:
+        return ["<p>The model file carries it and tip adds it to every point's uncertainty.</p>"]
+    return [f"<p>Fitted to the same held-out poses as growing with how far the joint motions from the nearest of "
+            f"the poses each was predicted from carry the ball (d): sigma_d<sup>2</sup> = sigma_0<sup>2</sup> + (g d)"
+            f"<sup>2</sup> with sigma_0 = {_fmt(g.sigma0 * 1e6, 4)} &plusmn; {_fmt(g.u_sigma0 * 1e6, 2)} um and g = "
+            f"{_fmt(g.growth * 1e3, 4)} &plusmn; {_fmt(g.u_growth * 1e3, 2)} um per mm (maximum likelihood, "
+            f"uncertainties by the delete-one-fold jackknife; d up to {_fmt(g.d_max * 1e3, 4)} mm in the folds, "
+            f"likelihood ratio over a constant {_fmt(g.lr, 3)}). The model file carries sigma_0, g and the "
+            "training poses (a points file beside it); tip adds sigma_d of each point's pose to its uncertainty.</p>"]
 
 
 def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_training=None,

@@ -114,9 +114,10 @@ def test_an_exact_model_has_no_discrepancy_and_a_missing_effect_has_one(model, n
 
 
 def test_the_model_file_carries_the_discrepancy_into_tip(tmp_path, model):
-    """calibrate writes model_discrepancy_um (summary.json and the model file, 4 digits); the model file reads
-    it back; tip adds it to every point's variance per axis as the 'model discrepancy' contribution, and
-    --u-model-discrepancy-um 0 takes it out."""
+    """calibrate writes the growing discrepancy (summary.json; the model file's model_discrepancy_um = sigma0 and
+    model_discrepancy_growth_um_per_mm to 4 digits, and the training poses' points file); the model file reads
+    them back; tip adds sigma_d(q)^2 to every point's variance per axis as the 'model discrepancy' contribution,
+    and --u-model-discrepancy-um 0 takes it out."""
     import csv
     import json
 
@@ -129,17 +130,24 @@ def test_the_model_file_carries_the_discrepancy_into_tip(tmp_path, model):
                  str(panda / "panda-with-inertials.urdf"), "--tip-frame", "ball_link", "--no-plots", "-q",
                  "-o", str(out)]) == 0
     summary = json.loads((out / "summary.json").read_text())
-    sigma = summary["model_discrepancy"]["sigma_um"]
-    assert sigma > 0
+    growth = summary["model_discrepancy"]["growth"]
+    assert summary["model_discrepancy"]["sigma_um"] > 0 and growth["growth_um_per_mm"] > 0
     arm = load_model(out / "panda-calibrated.toml")
-    assert arm.model_discrepancy == pytest.approx(sigma * 1e-6, rel=1e-3)
+    assert arm.model_discrepancy == pytest.approx(growth["sigma0_um"] * 1e-6, rel=1e-3, abs=1e-10)
+    assert arm.discrepancy_growth == pytest.approx(growth["growth_um_per_mm"] * 1e-3, rel=1e-3)
+    from arm_model.io import read_points
+    training = read_points(arm.training_poses).q
+    np.testing.assert_allclose(training, read_points(panda / "right" / "points.csv").q, rtol=0, atol=1e-12)
+    q_front = read_points(panda / "front" / "points.csv").q
     u = {}
     for label, extra in (("with", []), ("without", ["--u-model-discrepancy-um", "0"])):
         tip = tmp_path / f"{label}.csv"
         assert main(["tip", str(panda / "front" / "points.csv"), "--arm", str(out / "panda-calibrated.toml"),
                      "-q", "-o", str(tip), *extra]) == 0
         u[label] = np.array([[float(r[f"u_{a}_mm"]) for a in "xyz"] for r in csv.DictReader(open(tip))])
-    np.testing.assert_allclose(u["with"] ** 2 - u["without"] ** 2, (arm.model_discrepancy * 1e3) ** 2, rtol=1e-4)
+    sd = arm.discrepancy.sd(arm.desc, q_front) * 1e3
+    assert sd.max() > 1.5 * sd.min()                      # the front poses lie at various distances from right's
+    np.testing.assert_allclose(u["with"] ** 2 - u["without"] ** 2, np.repeat(sd[:, None] ** 2, 3, axis=1), rtol=1e-4)
 
 
 @pytest.mark.parametrize("value", ["-1.0", "1e9", "\"big\""])
