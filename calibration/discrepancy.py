@@ -116,10 +116,12 @@ class Discrepancy:
                           "errors over the fit's own prediction (noise and posterior), per axis"}
 
 
-def _neg_log_likelihood(x, e2, v, d2) -> float:
-    """Half the negative Gaussian log-likelihood of errors with squares ``e2`` and variances ``v + a + b d2``."""
+def _neg_log_likelihood(x, e2, v, d2) -> tuple[float, np.ndarray]:
+    """Half the negative Gaussian log-likelihood of errors with squares ``e2`` and variances ``v + a + b d2``
+    (``x = (a, b)``), and its gradient with respect to ``x``."""
     tot = v + x[0] + x[1] * d2
-    return 0.5 * float(np.sum(np.log(tot) + e2 / tot))
+    w = 0.5 * (1.0 / tot - e2 / tot ** 2)
+    return 0.5 * float(np.sum(np.log(tot) + e2 / tot)), np.array([np.sum(w), np.sum(w * d2)])
 
 
 def _ml(e2, v, d2, growing: bool) -> tuple[np.ndarray, float]:
@@ -136,7 +138,10 @@ def _ml(e2, v, d2, growing: bool) -> tuple[np.ndarray, float]:
     x0 = nnls(cols, e2 - v)[0] + 1e-3
     x0 = np.append(x0, 0.0) if not growing else x0
     bounds = [(0.0, None), (0.0, None) if growing else (0.0, 0.0)]
-    res = minimize(lambda x: _neg_log_likelihood(x * scale, e2, v, d2), x0, method="L-BFGS-B", bounds=bounds)
+    def cost(x):
+        f, grad = _neg_log_likelihood(x * scale, e2, v, d2)
+        return f, grad * scale
+    res = minimize(cost, x0, jac=True, method="L-BFGS-B", bounds=bounds)
     if not res.success:
         raise NumericalError(f"the model discrepancy's likelihood was not maximised: {res.message}")
     return res.x * scale, float(res.fun)
@@ -147,14 +152,17 @@ def fit_growth(e, v, d, fold) -> Growth:
     (noise and posterior), at ball travels ``d`` [m] beyond the range of the poses each was predicted from, in
     folds ``fold`` (rows,): the maximum likelihood of ``e ~ N(0, v + sigma0^2 + growth^2 d^2)`` (rows taken as
     independent), ``sigma0`` and ``growth`` floored at 0, with their delete-one-fold jackknife uncertainties."""
+    from threadpoolctl import threadpool_limits
     e2, v, d2, fold = np.asarray(e) ** 2, np.asarray(v, dtype=float), np.asarray(d, dtype=float) ** 2, np.asarray(fold)
-    (a, b), nll = _ml(e2, v, d2, True)
-    _, nll0 = _ml(e2, v, d2, False)
     folds = np.unique(fold)
     jack = []
-    for f in folds if len(folds) > 2 else ():
-        keep = fold != f
-        jack.append(np.sqrt(_ml(e2[keep], v[keep], d2[keep], True)[0]))
+    # two unknowns: the solver's tiny products spin-wait on every BLAS thread (15 x slower on a busy machine)
+    with threadpool_limits(limits=1, user_api="blas"):
+        (a, b), nll = _ml(e2, v, d2, True)
+        _, nll0 = _ml(e2, v, d2, False)
+        for f in folds if len(folds) > 2 else ():
+            keep = fold != f
+            jack.append(np.sqrt(_ml(e2[keep], v[keep], d2[keep], True)[0]))
     u = np.sqrt((len(jack) - 1) / len(jack) * np.sum((np.array(jack) - np.mean(jack, axis=0)) ** 2, axis=0)) \
         if jack else np.full(2, float("nan"))
     return Growth(math.sqrt(a), math.sqrt(b), float(u[0]), float(u[1]), max(2 * (nll0 - nll), 0.0),
