@@ -298,3 +298,73 @@ def test_an_undeclared_gain_widens_u_beyond_the_training_poses(model, nominal):
         assert abs(cov["growing"][0] - cov["constant"][0]) < 0.05, cov
         gains.append(cov["growing"][1] - cov["constant"][1])
     assert np.mean(gains) >= 0.03, gains
+
+
+def test_an_old_model_file_reads_with_a_constant_discrepancy(tmp_path, nominal):
+    """A model file from before the growth (model_discrepancy_um only) reads as a constant discrepancy: tip adds
+    the same 25 um per axis at every pose, as it did."""
+    from arm_model.model_file import parse_model
+    from arm_model.uncertainty import default_inputs, propagate
+    from conftest import NOMINAL
+    arm = parse_model(NOMINAL.read_text() + "\n[calibration]\nmodel_discrepancy_um = 25.0\n", str(tmp_path / "m.toml"))
+    assert arm.discrepancy == pytest.approx(25e-6) and arm.discrepancy_growth is None and arm.training_poses is None
+    q = np.random.default_rng(0).uniform(-1.0, 1.0, (5, nominal.n_joints))
+    res = propagate(arm.model, arm.p, q, inputs=default_inputs(arm.desc, has_force=False,
+                                                               model_discrepancy=arm.discrepancy))
+    np.testing.assert_allclose(res.contributions["model discrepancy"], (25e-6) ** 2, rtol=1e-12)
+
+
+def _poses_file(path, nominal, q):
+    cols = ",".join(f"q{k + 1}_deg" for k in range(nominal.n_joints))
+    rows = "".join("m,seat," + ",".join(f"{np.degrees(x):.12g}" for x in r) + "\n" for r in q)
+    path.write_text(f"measurement,feature,{cols}\n{rows}")
+
+
+def test_a_model_file_with_a_growth_reads_and_grows(tmp_path, nominal):
+    """sigma0, the growth and a training-poses points file beside the model file: the discrepancy read is
+    sigma0 at a training pose and grows away from it as sqrt(sigma0^2 + (g d)^2) (d by the lever of joint 1)."""
+    from arm_model.kinematics import ball_centres
+    from arm_model.model_file import load_model, read_model_file
+    from conftest import NOMINAL
+    q = np.array([[0.3, 0.4, -0.2, 0.9, 0.1, -0.5, 0.2]])
+    _poses_file(tmp_path / "poses.csv", nominal, q)
+    (tmp_path / "m.toml").write_text(NOMINAL.read_text() + "\n[calibration]\nmodel_discrepancy_um = 5.0\n"
+                                     "model_discrepancy_growth_um_per_mm = 20.0\ntraining_poses = \"poses.csv\"\n")
+    arm = read_model_file(tmp_path / "m.toml")
+    disc = load_model(tmp_path / "m.toml").discrepancy
+    assert disc.sd(nominal, q)[0] == pytest.approx(5e-6, rel=1e-9)
+    moved = q.copy()
+    moved[0, 0] += 0.1
+    r = np.hypot(*ball_centres(nominal, moved)[0, :2])
+    assert disc.sd(arm.desc, moved)[0] == pytest.approx(np.hypot(5e-6, 0.02 * r * 0.1), rel=1e-7)
+
+
+@pytest.mark.parametrize("extra, match", [
+    ("model_discrepancy_um = 5.0\nmodel_discrepancy_growth_um_per_mm = -1.0\n", "model_discrepancy_growth_um_per_mm"),
+    ("model_discrepancy_um = 5.0\nmodel_discrepancy_growth_um_per_mm = 1e9\n", "model_discrepancy_growth_um_per_mm"),
+    ("model_discrepancy_um = 5.0\nmodel_discrepancy_growth_um_per_mm = 2.0\n", "training_poses"),
+    ("model_discrepancy_growth_um_per_mm = 2.0\ntraining_poses = \"p.csv\"\n", "model_discrepancy_um"),
+    ("model_discrepancy_um = 5.0\nmodel_discrepancy_grwth_um_per_mm = 2.0\n", "unknown key"),
+    ("model_discrepancy_um = 5.0\ntraining_poses = 3\n", "training_poses"),
+])
+def test_a_bad_growth_in_a_model_file_is_refused(tmp_path, extra, match):
+    from arm_model import InputError
+    from arm_model.model_file import parse_model
+    from conftest import NOMINAL
+    with pytest.raises(InputError, match=match):
+        parse_model(NOMINAL.read_text() + "\n[calibration]\n" + extra, str(tmp_path / "m.toml"))
+
+
+def test_a_missing_or_wrong_training_poses_file_is_refused(tmp_path, nominal):
+    """The training poses' points file is read as every points file (its joints the arm's): absent, or with a
+    joint column too few, it is an InputError naming it."""
+    from arm_model import InputError
+    from arm_model.model_file import read_model_file
+    from conftest import NOMINAL
+    (tmp_path / "m.toml").write_text(NOMINAL.read_text() + "\n[calibration]\nmodel_discrepancy_um = 5.0\n"
+                                     "model_discrepancy_growth_um_per_mm = 20.0\ntraining_poses = \"poses.csv\"\n")
+    with pytest.raises(InputError, match="poses.csv"):
+        read_model_file(tmp_path / "m.toml")
+    (tmp_path / "poses.csv").write_text("measurement,feature,q1_deg,q2_deg\nm,seat,1,2\n")
+    with pytest.raises(InputError, match="poses.csv"):
+        read_model_file(tmp_path / "m.toml")
