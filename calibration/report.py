@@ -338,7 +338,9 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
                + (", and the model's effects with their parameters" if effects else "") + ".\n"
                f"Solver: {result.status}; s0 = {result.s0:.4g}. Read by every --arm option; format: "
                "docs/calibration.md.")
-    write_model(result, out, name, inputs=inputs, written_by="aacmm calibrate", comment=comment)
+    written = write_model(result, out, name, inputs=inputs, written_by="aacmm calibrate", comment=comment)
+    if "training_poses" in written:
+        files["training_poses"] = written["training_poses"]
     rows = result.parameter_rows()
     write_csv(files["parameters"], {
         "name": np.array([r["name"] for r in rows], dtype=object),
@@ -358,6 +360,7 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
     summary["calibrated_description"] = files["description"].name
     summary["calibrated_covariance"] = files["covariance"].name
     summary["calibrated_urdf"] = files["urdf"].name
+    summary["calibrated_training_poses"] = files["training_poses"].name if "training_poses" in files else None
     summary["validation_training"] = validation_training
     summary["validation_holdout"] = validation_holdout
     summary["poorly_determined"] = poorly_determined(result)
