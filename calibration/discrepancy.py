@@ -35,6 +35,7 @@ beyond what the folds span is an extrapolation of ``g``.
 """
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass
 
@@ -45,6 +46,8 @@ from arm_model.discrepancy import TrainingPoses, joint_levers, pose_distance
 
 __all__ = ["EXTREME_SHARE", "Discrepancy", "Growth", "extreme_folds", "fit_growth", "fold_errors", "holdable",
            "model_discrepancy"]
+
+log = logging.getLogger(__name__)
 
 #: share of the poses held out at each end of a joint's range
 EXTREME_SHARE = 0.15
@@ -129,7 +132,9 @@ def _ml(e2, v, d2, growing: bool) -> tuple[np.ndarray, float]:
     unless ``growing``), and the minimised :func:`_neg_log_likelihood`. The unknowns are scaled to order 1 and
     started from the non-negative least squares of ``e2 - v`` on ``(1, d2)`` (the method of moments)."""
     from scipy.optimize import minimize, nnls
-    scale = np.array([max(float(np.mean(v)), 1e-30), 1.0])
+    # a floor far below any error (1e-12 of the mean square), so that a noise-free fit keeps a finite likelihood
+    v = np.maximum(v, max(1e-12 * float(np.mean(e2 + v)), 1e-100))
+    scale = np.array([float(np.mean(v)), 1.0])
     md2 = float(np.mean(d2))
     growing = growing and md2 > 0
     if growing:
@@ -251,7 +256,11 @@ def model_discrepancy(prob, r: np.ndarray, js, solve, var: float, share: float =
         return None
     e, v = np.concatenate(errors), np.concatenate(variances)
     observed, predicted, n_rows = float(e @ e), float(np.sum(v)), len(e)
-    growth = fit_growth(e, v, np.concatenate(dists), np.concatenate(fold_of))
+    try:
+        growth = fit_growth(e, v, np.concatenate(dists), np.concatenate(fold_of))
+    except NumericalError as exc:
+        log.warning(f"{exc}: the model discrepancy is written as a constant (no growth away from the training poses)")
+        growth = None
     return Discrepancy(math.sqrt(max((observed - predicted) / n_rows, 0.0)),
                        math.sqrt(observed / predicted) if predicted > 0 else float("nan"), len(errors), n_rows, share,
                        math.sqrt(observed / n_rows), growth, TrainingPoses.of(desc, q[used]), used)

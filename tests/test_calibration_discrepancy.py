@@ -368,3 +368,14 @@ def test_a_missing_or_wrong_training_poses_file_is_refused(tmp_path, nominal):
     (tmp_path / "poses.csv").write_text("measurement,feature,q1_deg,q2_deg\nm,seat,1,2\n")
     with pytest.raises(InputError, match="poses.csv"):
         read_model_file(tmp_path / "m.toml")
+
+
+def test_fit_growth_of_noise_free_rows_is_zero():
+    """Held-out errors and predicted variances all 0 (a noise-free simulation): sigma0 = g = 0, no warning."""
+    import warnings
+
+    from calibration.discrepancy import fit_growth
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        g = fit_growth(np.zeros(60), np.zeros(60), np.linspace(0.0, 1e-2, 60), np.repeat(np.arange(6), 10))
+    assert g.sigma0 == 0 and g.growth == 0 and g.lr == 0, g
