@@ -41,7 +41,7 @@ LEVER_STEP = 1e-6
 _BLOCK = 2_000_000
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class TrainingPoses:
     """The poses a calibration was fitted on: ``names`` the joints (the description's encoder columns), ``q``
     (T, J) their readings [rad] ([m] for a prismatic joint, ``circular`` False)."""
@@ -123,4 +123,8 @@ class GrowingDiscrepancy:
         q = np.atleast_2d(np.asarray(q, dtype=float))
         if self.growth == 0 or self.training is None:
             return np.full(len(q), self.sigma0)
-        return np.sqrt(self.sigma0 ** 2 + (self.growth * pose_distance(desc, q, self.training)) ** 2)
+        return self.sd_at(pose_distance(desc, q, self.training))
+
+    def sd_at(self, d) -> np.ndarray:
+        """``sigma_d`` [m] at distances ``d`` [m] from the nearest training pose (:meth:`distance`)."""
+        return np.sqrt(self.sigma0 ** 2 + (self.growth * np.asarray(d, dtype=float)) ** 2)

@@ -243,10 +243,9 @@ def directional_ratio(cov_ref: np.ndarray, cov: np.ndarray) -> np.ndarray:
     return out
 
 
-def beyond_note(desc, q, growing: GrowingDiscrepancy) -> str:
-    """``"; these points lie d = M mm (median), up to D mm from the nearest training pose"`` for the poses ``q``
-    (:func:`arm_model.discrepancy.pose_distance`)."""
-    d = growing.distance(desc, q)
+def beyond_note(d) -> str:
+    """``"; these points lie M mm (median), up to D mm from the nearest training pose"`` for the distances ``d``
+    [m] of the points from it (:func:`arm_model.discrepancy.pose_distance`)."""
     if not len(d):
         return ""
     return (f"; these points lie {np.median(d) * 1e3:.4g} mm (median), up to {d.max() * 1e3:.4g} mm from the nearest "
@@ -383,6 +382,11 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
     if p.shape != (spec.size,):
         raise ValueError(f"p has shape {p.shape}, expected ({spec.size},)")
     plan = _plan(model, parameters, inputs, nj)
+    # the model discrepancy at each pose, once for all chunks (its distance from the training poses is blocked)
+    growing, dist, sd_disc = inputs.growing, None, np.full(n, inputs.discrepancy)
+    if growing is not None:
+        dist = growing.distance(model.desc, q)
+        sd_disc = growing.sd_at(dist)
     npar = len(plan.pidx)
     cov = np.empty((n, 3, 3))
     contrib = {k: np.zeros((n, 3)) for k in CONTRIBUTIONS}
@@ -414,8 +418,7 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
             if sys_rows is not None:
                 sys_rows[s:e, npar:] = a.transpose(2, 0, 1)
             _add_squares(a, cv, contrib["compliance"][s:e])
-        for name, sd in (("probing", np.full(e - s, inputs.probing)),
-                         ("model discrepancy", inputs.discrepancy_sd(model.desc, q[s:e]))):
+        for name, sd in (("probing", np.full(e - s, inputs.probing)), ("model discrepancy", sd_disc[s:e])):
             for i in range(3):
                 cv[i, i] += sd ** 2
             contrib[name][s:e] = sd[:, None] ** 2
@@ -428,8 +431,8 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
         run_chunks(work, n, chunk, threads)
     sources = dict(inputs.sources)
     sources["parameters"] = "none (parameters taken as exact)" if parameters is None else parameters.source
-    if inputs.growing is not None:
-        sources["model discrepancy"] += beyond_note(model.desc, q, inputs.growing)
+    if dist is not None:
+        sources["model discrepancy"] += beyond_note(dist)
     if _compliance_covered(tuple(() if parameters is None else parameters.names)):
         sources["compliance"] = "in the parameter covariance (calibrated)"
     return Propagation(centres, cov, contrib, sources, sys_rows)

@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -107,8 +107,8 @@ class Discrepancy:
     share: float = EXTREME_SHARE
     rms: float = float("nan")
     growth: Growth | None = None
-    training: TrainingPoses | None = None
-    training_rows: np.ndarray | None = None
+    training: TrainingPoses | None = field(default=None, compare=False)
+    training_rows: np.ndarray | None = field(default=None, compare=False)
 
     def to_dict(self) -> dict:
         return {"sigma_um": self.sigma * 1e6, "ratio": self.ratio, "folds": self.folds, "rows": self.rows,
@@ -143,6 +143,7 @@ def _ml(e2, v, d2, growing: bool) -> tuple[np.ndarray, float]:
     x0 = nnls(cols, e2 - v)[0] + 1e-3
     x0 = np.append(x0, 0.0) if not growing else x0
     bounds = [(0.0, None), (0.0, None) if growing else (0.0, 0.0)]
+
     def cost(x):
         f, grad = _neg_log_likelihood(x * scale, e2, v, d2)
         return f, grad * scale
@@ -154,9 +155,10 @@ def _ml(e2, v, d2, growing: bool) -> tuple[np.ndarray, float]:
 
 def fit_growth(e, v, d, fold) -> Growth:
     """The :class:`Growth` of held-out errors ``e`` (rows,) [m] whose fit predicts the variances ``v`` [m^2]
-    (noise and posterior), at ball travels ``d`` [m] beyond the range of the poses each was predicted from, in
-    folds ``fold`` (rows,): the maximum likelihood of ``e ~ N(0, v + sigma0^2 + growth^2 d^2)`` (rows taken as
-    independent), ``sigma0`` and ``growth`` floored at 0, with their delete-one-fold jackknife uncertainties."""
+    (noise and posterior), at distances ``d`` [m] from the nearest of the poses each was predicted from
+    (:func:`arm_model.discrepancy.pose_distance`), in folds ``fold`` (rows,): the maximum likelihood of
+    ``e ~ N(0, v + sigma0^2 + growth^2 d^2)`` (rows taken as independent), ``sigma0`` and ``growth`` floored at 0,
+    with their delete-one-fold jackknife uncertainties."""
     from threadpoolctl import threadpool_limits
     e2, v, d2, fold = np.asarray(e) ** 2, np.asarray(v, dtype=float), np.asarray(d, dtype=float) ** 2, np.asarray(fold)
     folds = np.unique(fold)
