@@ -414,6 +414,9 @@ def training_poses_of(arm: Arm) -> TrainingPoses | None:
     if arm.training_poses is None:
         return None
     from .io import read_points
+    if not arm.training_poses.is_file():
+        raise InputError("no such file: the model file's [calibration] training_poses names it (the poses its model "
+                         "discrepancy grows away from; keep it beside the model file)", arm.training_poses)
     pts = read_points(arm.training_poses, arm.desc.joint_quantities)
     if not len(pts.q):
         raise InputError("the training poses file holds no pose", arm.training_poses)
