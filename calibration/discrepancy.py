@@ -68,6 +68,8 @@ class Growth:
         d_max, d_rms: [m] the largest and RMS ``d`` (:func:`arm_model.discrepancy.pose_distance` from the poses
             left in the fold) of the held-out rows: the reach over which the growth was measured (beyond
             ``d_max`` it is an extrapolation).
+        d, e, v: (rows,) the held-out rows it was fitted to: distance [m], error [m], predicted variance [m^2]
+            (for the report's plot).
     """
     sigma0: float
     growth: float
@@ -76,6 +78,9 @@ class Growth:
     lr: float
     d_max: float
     d_rms: float
+    d: np.ndarray = field(default_factory=lambda: np.zeros(0), compare=False, repr=False)
+    e: np.ndarray = field(default_factory=lambda: np.zeros(0), compare=False, repr=False)
+    v: np.ndarray = field(default_factory=lambda: np.zeros(0), compare=False, repr=False)
 
     def to_dict(self) -> dict:
         return {"sigma0_um": self.sigma0 * 1e6, "growth_um_per_mm": self.growth * 1e3,
@@ -173,7 +178,8 @@ def fit_growth(e, v, d, fold) -> Growth:
     u = np.sqrt((len(jack) - 1) / len(jack) * np.sum((np.array(jack) - np.mean(jack, axis=0)) ** 2, axis=0)) \
         if jack else np.full(2, float("nan"))
     return Growth(math.sqrt(a), math.sqrt(b), float(u[0]), float(u[1]), max(2 * (nll0 - nll), 0.0),
-                  float(np.sqrt(d2.max())) if len(d2) else 0.0, float(np.sqrt(d2.mean())) if len(d2) else 0.0)
+                  float(np.sqrt(d2.max())) if len(d2) else 0.0, float(np.sqrt(d2.mean())) if len(d2) else 0.0,
+                  np.sqrt(d2), np.asarray(e, dtype=float), v)
 
 
 def extreme_folds(q: np.ndarray, share: float = EXTREME_SHARE) -> list[np.ndarray]:

@@ -254,7 +254,8 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
                   reports.html_table(["measurement", "feature", "line", "standardized"],
                          [(o.measurement, o.feature, o.line, _fmt(o.standardized, 3)) for o in result.dropped])]
     for name, title in (("residuals_png", "Residuals"), ("parameters_png", "Estimates"),
-                        ("correlation_png", "Correlations")):
+                        ("correlation_png", "Correlations"), ("discrepancy_png", "Model discrepancy away from the "
+                                                                                  "training poses")):
         if name in files:
             parts += [f"<h2>{title}</h2>", f"<img src='{html.escape(files[name].name)}' style='max-width:100%'>"]
     parts.append("</body></html>")
@@ -276,6 +277,29 @@ def prior_html(result: CalibrationResult) -> list[str]:
             "'determined': the number of the group's parameters the data determine (sum of 1 - posterior/prior "
             "variance).</p>",
             reports.html_table(["group", "scale", "parameters", "determined", "plausible size at scale 1"], rows)]
+
+
+def plot_discrepancy(result: CalibrationResult) -> bytes:
+    """PNG: the extrapolative folds' held-out errors [um] (absolute, per residual row) against their distance
+    from the nearest pose left in the fold [mm], with the 1.96-sigma envelopes of the fit's own prediction
+    (noise and posterior, their mean), of the constant discrepancy and of the growing one."""
+    d = result.discrepancy
+    g = d.growth if d is not None else None
+    fig, ax = reports.figure(6.0, 4.0)
+    if g is None or not len(g.d):
+        return reports.png(fig)
+    ax.plot(g.d * 1e3, np.abs(g.e) * 1e6, ".", ms=3, color="C0", label="held-out error (per row)")
+    x = np.linspace(0.0, max(float(g.d.max()), 1e-9), 100)
+    v = float(np.mean(g.v))
+    for label, sd, style in (("fit's own prediction", np.full_like(x, np.sqrt(v)), "k:"),
+                             ("constant discrepancy", np.full_like(x, np.sqrt(v + d.sigma ** 2)), "C1--"),
+                             ("growing discrepancy", np.sqrt(v + g.sigma0 ** 2 + (g.growth * x) ** 2), "C3-")):
+        ax.plot(x * 1e3, 1.96 * sd * 1e6, style, label=f"1.96 sigma: {label}")
+    ax.set_xlabel("distance from the nearest pose left in the fold [mm of ball travel]")
+    ax.set_ylabel("|held-out error| [um]")
+    ax.set_title("model discrepancy: the poses at the ends of each joint's range held out")
+    ax.legend(fontsize=7, loc="best")
+    return reports.png(fig)
 
 
 def discrepancy_html(result: CalibrationResult) -> list[str]:
@@ -330,6 +354,8 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
         files.update({"residuals_png": out / "residuals.png", "parameters_png": out / "parameters.png",
                       "correlation_png": out / "correlation.png"})
         files.update(conformance_pngs(conf, out))
+        if result.discrepancy is not None and result.discrepancy.growth is not None:
+            files["discrepancy_png"] = out / "discrepancy.png"
     for f in files.values():
         guard_output(f, inputs)
     effects = [e.describe() for e in result.model.effects]
@@ -372,6 +398,8 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
         atomic_write_bytes(files["residuals_png"], plot_residuals(result), inputs)
         atomic_write_bytes(files["parameters_png"], plot_parameters(result), inputs)
         atomic_write_bytes(files["correlation_png"], plot_correlation(result), inputs)
+        if "discrepancy_png" in files:
+            atomic_write_bytes(files["discrepancy_png"], plot_discrepancy(result), inputs)
         write_conformance_pngs(conf, files, inputs)
     atomic_write_text(files["summary"], json_text(summary), inputs)
     atomic_write_text(files["report"], _html(result, summary, files), inputs)

@@ -298,6 +298,9 @@ def test_an_undeclared_gain_widens_u_beyond_the_training_poses(model, nominal):
         assert abs(cov["growing"][0] - cov["constant"][0]) < 0.05, cov
         gains.append(cov["growing"][1] - cov["constant"][1])
     assert np.mean(gains) >= 0.03, gains
+    from calibration.report import plot_discrepancy
+    g = res.discrepancy.growth
+    assert len(g.d) == len(g.e) == len(g.v) == res.discrepancy.rows and plot_discrepancy(res)[:4] == b"\x89PNG"
 
 
 def test_an_old_model_file_reads_with_a_constant_discrepancy(tmp_path, nominal):
