@@ -22,7 +22,7 @@ if TYPE_CHECKING:
 
 __all__ = ["JointRow", "Mimic", "Probe", "Visual", "ArmDescription", "load_description", "parse_description",
            "format_description", "GRAVITY", "MIN_STYLUS", "default_lever", "DH_ROW_FIELDS", "URDF_ROW_FIELDS",
-           "check_calibration_table", "MAX_PROBING_SCATTER_UM"]
+           "check_calibration_table", "MAX_PROBING_SCATTER_UM", "MAX_DISCREPANCY_GROWTH_UM_PER_MM"]
 
 DH_ROW_FIELDS = ("theta_offset", "d", "a", "alpha")
 URDF_ROW_FIELDS = ("origin_x", "origin_y", "origin_z", "origin_roll", "origin_pitch", "origin_yaw")
@@ -366,27 +366,40 @@ MODEL_KEYS = ("effect", "calibration", "reference_frame", "marker")
 #: the largest probing scatter a model file may give [um]: 100 mm is a unit mistake, while a poor fit of a
 #: robot can estimate more than a millimetre, and every model file calibrate writes must read back
 MAX_PROBING_SCATTER_UM = 1.0e5
+#: the largest growth of the model discrepancy a model file may give [um per mm of ball travel beyond the
+#: nearest training pose]: 100 times the travel itself is a unit mistake, not an estimate
+MAX_DISCREPANCY_GROWTH_UM_PER_MM = 1.0e5
 
 
 def check_calibration_table(tbl: Any, r: TomlReader) -> None:
     """The ``[calibration]`` table of a model file: text keys ``covariance`` and ``written_by``, the
     numbers ``probing_scatter_um`` (>= 0: a calibration whose encoder and force-sensor noise alone account for
     its residual scatter writes 0; at most :data:`MAX_PROBING_SCATTER_UM`) and ``model_discrepancy_um`` (the
-    same range)."""
+    same range), ``model_discrepancy_growth_um_per_mm`` (in [0, :data:`MAX_DISCREPANCY_GROWTH_UM_PER_MM`]; above 0
+    it needs ``model_discrepancy_um`` and ``training_poses``, the text naming the training poses' points file)."""
     if not isinstance(tbl, dict):
         raise r.error("'calibration' must be a table", "calibration")
-    known = ("covariance", "written_by", "probing_scatter_um", "model_discrepancy_um")
+    known = ("covariance", "written_by", "probing_scatter_um", "model_discrepancy_um",
+             "model_discrepancy_growth_um_per_mm", "training_poses")
+    top = {"probing_scatter_um": MAX_PROBING_SCATTER_UM, "model_discrepancy_um": MAX_PROBING_SCATTER_UM,
+           "model_discrepancy_growth_um_per_mm": MAX_DISCREPANCY_GROWTH_UM_PER_MM}
     for key, value in tbl.items():
         if key not in known:
             raise r.error(f"unknown key '{key}' (known: {', '.join(known)}){did_you_mean(key, known)}",
                           "calibration", key)
-        if key in ("probing_scatter_um", "model_discrepancy_um"):
+        if key in top:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                    or not 0 <= value <= MAX_PROBING_SCATTER_UM:
-                raise r.error(f"'{key}' must be a number in [0, {MAX_PROBING_SCATTER_UM:g}] um, got {value!r}",
+                    or not 0 <= value <= top[key]:
+                unit = key.rsplit("_", 1)[-1] if not key.endswith("per_mm") else "um/mm"
+                raise r.error(f"'{key}' must be a number in [0, {top[key]:g}] {unit}, got {value!r}",
                               "calibration", key)
         elif not isinstance(value, str) or not value.strip():
             raise r.error(f"'{key}' must be a non-empty text", "calibration", key)
+    lacking = [k for k in ("model_discrepancy_um", "training_poses") if k not in tbl]
+    if tbl.get("model_discrepancy_growth_um_per_mm", 0) > 0 and lacking:
+        raise r.error(f"'model_discrepancy_growth_um_per_mm' needs '{lacking[0]}' (the discrepancy at the training "
+                      "poses, and the points file of those poses it grows away from)", "calibration",
+                      "model_discrepancy_growth_um_per_mm")
 
 
 def parse_description(text: str, path: str = "<string>") -> ArmDescription:

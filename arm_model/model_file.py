@@ -14,7 +14,10 @@ One TOML file (``aacmm calibrate`` and ``aacmm close-loop`` write it, every ``--
   calibration's variance components estimated, net of the encoder and force-sensor noise:
   :meth:`calibration.CalibrationResult.probing_scatter`; ``aacmm tip``'s default probing uncertainty) and
   ``model_discrepancy_um`` (the error per axis beyond the fit's own prediction on poses away from those it was
-  fitted on, by extrapolative cross-validation: :mod:`calibration.discrepancy`; ``aacmm tip`` adds it);
+  fitted on, by extrapolative cross-validation: :mod:`calibration.discrepancy`; ``aacmm tip`` adds it),
+  ``model_discrepancy_growth_um_per_mm`` (how that error grows per mm the joint motions from the nearest
+  training pose carry the ball: :mod:`arm_model.discrepancy`) and ``training_poses`` (the points file of the
+  poses the calibration was fitted on, relative to the TOML; read by :func:`training_poses_of`), all optional;
 * optional ``[[reference_frame]]`` and ``[[marker]]`` tables: the reference instrument's frame of each
   session and the markers' offsets on the tip frame that a calibration on tracker data estimated
   (:mod:`arm_model.tracker`; ``aacmm tip --reference-frame`` predicts the instrument's coordinates).
@@ -47,6 +50,7 @@ from .description import (
     in_unit,
     toml_text,
 )
+from .discrepancy import GrowingDiscrepancy, TrainingPoses
 from .effects import EFFECTS, Effect
 from .errors import InputError, did_you_mean, parse_toml, read_text
 from .model import ArmModel, AuxData
@@ -54,7 +58,7 @@ from .tracker import Tracker, tracker_from_tables, tracker_tables
 from .uncertainty import ParameterCovariance
 from .units import implausible
 
-__all__ = ["Arm", "PARAM_UNITS", "parse_model", "load_model", "format_model", "effect_tables",
+__all__ = ["Arm", "PARAM_UNITS", "parse_model", "load_model", "format_model", "effect_tables", "training_poses_of",
            "effects_from_tables", "write_covariance", "read_covariance", "Covariance", "EFFECT_COLUMNS",
            "parameters_of", "read_model_file"]
 
@@ -106,7 +110,10 @@ class Arm:
     ``probing_scatter``: the calibration's estimate of the scatter of one probed ball centre per axis [m]
     (``[calibration] probing_scatter_um``) or None; ``tracker``: the reference instrument's frames and the
     markers' offsets (``[[reference_frame]]``, ``[[marker]]``) or None; ``model_discrepancy``: the
-    calibration's model discrepancy per axis [m] (``[calibration] model_discrepancy_um``) or None."""
+    calibration's model discrepancy per axis [m] at its training poses (``[calibration] model_discrepancy_um``)
+    or None; ``discrepancy_growth``: its growth [1] (m per m of ``d`` from the nearest training pose;
+    ``model_discrepancy_growth_um_per_mm``) or None; ``training_poses``: the points file of the calibration's
+    poses (resolved path; ``training_poses``) or None."""
     desc: ArmDescription
     effects: tuple[Effect, ...] = ()
     values: dict = field(default_factory=dict)
@@ -116,6 +123,18 @@ class Arm:
     probing_scatter: float | None = None
     tracker: Tracker | None = None
     model_discrepancy: float | None = None
+    discrepancy_growth: float | None = None
+    training_poses: Path | None = None
+
+    @property
+    def discrepancy(self) -> GrowingDiscrepancy | float | None:
+        """The model discrepancy as :func:`arm_model.uncertainty.default_inputs` takes it: a
+        :class:`~arm_model.discrepancy.GrowingDiscrepancy` (its training poses read from their file:
+        :func:`training_poses_of`) when the file gives a growth, else the constant ``model_discrepancy`` [m] or
+        None."""
+        if self.model_discrepancy is None or not self.discrepancy_growth:
+            return self.model_discrepancy
+        return GrowingDiscrepancy(self.model_discrepancy, self.discrepancy_growth, training_poses_of(self))
 
     @property
     def model(self) -> ArmModel:
@@ -361,22 +380,47 @@ def parse_model(text: str, path: str = "<string>") -> Arm:
     data = parse_toml(text, path)
     r = TomlReader(path, text)
     desc = description_from_data(data, r, MODEL_KEYS)
-    covariance = scatter = discrepancy = None
+    covariance = scatter = discrepancy = growth = training = None
     if "calibration" in data:
         check_calibration_table(data["calibration"], r)
+        if "training_poses" in data["calibration"]:
+            training = _beside(path, data["calibration"]["training_poses"])
         cov = data["calibration"].get("covariance")
         if cov is not None:
-            covariance = (Path(path).parent / cov) if path != "<string>" else Path(cov)
+            covariance = _beside(path, cov)
         if "probing_scatter_um" in data["calibration"]:
             scatter = float(data["calibration"]["probing_scatter_um"]) * 1e-6
         if "model_discrepancy_um" in data["calibration"]:
             discrepancy = float(data["calibration"]["model_discrepancy_um"]) * 1e-6
+        if "model_discrepancy_growth_um_per_mm" in data["calibration"]:
+            growth = float(data["calibration"]["model_discrepancy_growth_um_per_mm"]) * 1e-3
     tracker = tracker_from_tables(data, r)
     if "effect" not in data:
         return Arm(desc, covariance=covariance, probing_scatter=scatter, tracker=tracker,
-                   model_discrepancy=discrepancy)
+                   model_discrepancy=discrepancy, discrepancy_growth=growth, training_poses=training)
     effects, values, u, states = effects_from_tables(desc, data["effect"], r)
-    return Arm(desc, effects, values, u, states, covariance, scatter, tracker, discrepancy)
+    return Arm(desc, effects, values, u, states, covariance, scatter, tracker, discrepancy, growth, training)
+
+
+def _beside(model_path: str, name: str) -> Path:
+    """A file a model file names (``covariance``, ``training_poses``): relative to the model file's folder."""
+    return (Path(model_path).parent / name) if model_path != "<string>" else Path(name)
+
+
+def training_poses_of(arm: Arm) -> TrainingPoses | None:
+    """The training poses of an :class:`Arm` (its model file's ``training_poses`` points file, read by
+    :func:`arm_model.io.read_points` with the arm's joints), or None when it names none; a file that is not
+    such a points file is an InputError naming it."""
+    if arm.training_poses is None:
+        return None
+    from .io import read_points
+    if not arm.training_poses.is_file():
+        raise InputError("no such file: the model file's [calibration] training_poses names it (the poses its model "
+                         "discrepancy grows away from; keep it beside the model file)", arm.training_poses)
+    pts = read_points(arm.training_poses, arm.desc.joint_quantities)
+    if not len(pts.q):
+        raise InputError("the training poses file holds no pose", arm.training_poses)
+    return TrainingPoses.of(arm.desc, pts.q)
 
 
 def load_model(path, tip_frame: str | None = None, probe: dict | None = None, masses=None,
@@ -401,17 +445,22 @@ def load_model(path, tip_frame: str | None = None, probe: dict | None = None, ma
 def format_model(desc: ArmDescription, effects=(), values: dict | None = None, uncertainties: dict | None = None,
                  states: dict | None = None, *, covariance: str | None = None, written_by: str | None = None,
                  probing_scatter: float | None = None, tracker: Tracker | None = None,
-                 comment: str | None = None, model_discrepancy: float | None = None) -> str:
+                 comment: str | None = None, model_discrepancy: float | None = None,
+                 discrepancy_growth: float | None = None, training_poses: str | None = None) -> str:
     """TOML text of a model file that :func:`parse_model` reads back exactly (``probing_scatter`` and
-    ``model_discrepancy`` [m]: written in um to 4 significant digits; ``tracker``: the reference frames and
-    marker offsets)."""
+    ``model_discrepancy`` [m]: written in um to 4 significant digits, ``discrepancy_growth`` [1] in um/mm to 4
+    digits; ``training_poses``: the name of the training poses' points file; ``tracker``: the reference frames
+    and marker offsets)."""
     data = description_data(desc)
     if effects:
         data["effect"] = effect_tables(desc, effects, values or {}, uncertainties, states)
     scatter, discrepancy = (None if v is None else float(f"{v * 1e6:.4g}")
                             for v in (probing_scatter, model_discrepancy))
+    growth = None if discrepancy_growth is None else float(f"{discrepancy_growth * 1e3:.4g}")
     cal = {k: v for k, v in (("covariance", covariance), ("written_by", written_by), ("probing_scatter_um", scatter),
-                             ("model_discrepancy_um", discrepancy)) if v not in (None, "")}     # a 0 is kept
+                             ("model_discrepancy_um", discrepancy), ("model_discrepancy_growth_um_per_mm", growth),
+                             ("training_poses", training_poses))
+           if v not in (None, "")}     # a 0 is kept
     if cal:
         data["calibration"] = cal
     if tracker is not None:
@@ -569,4 +618,5 @@ def read_model_file(path: Path) -> Arm:
     (the read-back of :mod:`arm_model.readback`)."""
     arm = load_model(path)
     parameters_of(arm)
+    training_poses_of(arm)
     return arm

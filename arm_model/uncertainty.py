@@ -9,8 +9,9 @@ wrench ``w``. Its covariance, to first order, is the sum of named contributions
     force sensor    J_w diag(u_w^2) J_w^T     (probe frame: bending x, y and axial z)
     compliance      J_c diag(u_c^2) J_c^T     (the probe's compliances, unless the covariance has them)
     probing         u_probe^2 I               (the scatter of the contact itself, per axis)
-    model discrepancy  u_d^2 I                (the error of the model away from its calibration's poses, per
-                                               axis: calibration.discrepancy)
+    model discrepancy  u_d(q)^2 I             (the error of the model away from its calibration's poses, per
+                                               axis: calibration.discrepancy; it grows with how far the pose
+                                               lies from the training poses: arm_model.discrepancy)
 
 with the Jacobians exact (:mod:`arm_model.jacobian`: the geometric Jacobian of the chain and dual
 numbers through the effects' own code), evaluated for N points in chunks on two threads.
@@ -27,6 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .discrepancy import GrowingDiscrepancy
 from .effects import ModelInputs
 from .jacobian import DUAL_OPS, Dual, chain_jacobian, geometry_entries, value
 from .kinematics import run_chunks
@@ -65,6 +67,8 @@ class InputUncertainty:
         sources: contribution name -> a sentence saying where the value comes from.
         discrepancy: per axis [m], the model discrepancy (the error of the model beyond its parameters'
             uncertainty away from the poses it was calibrated on; independent from point to point).
+        growing: the model discrepancy growing away from the training poses (:class:`~arm_model.discrepancy.
+            GrowingDiscrepancy`, its ``sigma0`` = ``discrepancy``) or None (``discrepancy`` at every pose).
     """
     encoder: np.ndarray
     force: np.ndarray
@@ -73,6 +77,13 @@ class InputUncertainty:
     probing: float = 0.0
     sources: dict = field(default_factory=dict)
     discrepancy: float = 0.0
+    growing: GrowingDiscrepancy | None = None
+
+    def discrepancy_sd(self, desc, q) -> np.ndarray:
+        """(N,) [m] the model discrepancy per axis at each pose of ``q`` (N, J)."""
+        if self.growing is not None:
+            return self.growing.sd(desc, q)
+        return np.full(len(np.atleast_2d(q)), self.discrepancy)
 
 
 @dataclass(frozen=True)
@@ -101,7 +112,7 @@ class ParameterCovariance:
 
 def default_inputs(desc, *, encoder=None, force=None, torque=None, compliance=None, probing=None,
                    has_force: bool = True, model_probing: float | None = None, discrepancy=None,
-                   model_discrepancy: float | None = None) -> InputUncertainty:
+                   model_discrepancy: float | GrowingDiscrepancy | None = None) -> InputUncertainty:
     """The input uncertainties of ``desc`` with their sources; any argument overrides its default.
 
     Args:
@@ -118,8 +129,10 @@ def default_inputs(desc, *, encoder=None, force=None, torque=None, compliance=No
             probing_scatter_um``: its calibration's variance components), the default of ``probing``.
         discrepancy: [m] per axis (default ``model_discrepancy``, else 0).
         model_discrepancy: [m] the model discrepancy a model file carries (``[calibration]
-            model_discrepancy_um``: its calibration's extrapolative cross-validation), the default of
-            ``discrepancy``.
+            model_discrepancy_um``: its calibration's extrapolative cross-validation), or the
+            :class:`~arm_model.discrepancy.GrowingDiscrepancy` it carries (with
+            ``model_discrepancy_growth_um_per_mm`` and the training poses), the default of ``discrepancy`` (a
+            given ``discrepancy`` is a constant: it replaces the growth too).
     """
     j = desc.n_joints
     src = {}
@@ -154,8 +167,15 @@ def default_inputs(desc, *, encoder=None, force=None, torque=None, compliance=No
         probing, model_probing, "probing_scatter_um",
         "its calibration's variance components, net of the encoder and force-sensor noise",
         "a model file from calibrate on probed points does; a reference instrument's own noise is not the probe's")
-    discrepancy, src["model discrepancy"] = _model_input(discrepancy, model_discrepancy, "model_discrepancy_um",
+    growing = model_discrepancy if isinstance(model_discrepancy, GrowingDiscrepancy) else None
+    sigma0 = growing.sigma0 if growing is not None else model_discrepancy
+    if discrepancy is not None or growing is None or growing.growth == 0:   # a given value is a constant
+        growing = None
+    discrepancy, src["model discrepancy"] = _model_input(discrepancy, sigma0, "model_discrepancy_um",
                                                          "its calibration's extrapolative cross-validation")
+    if growing is not None:
+        src["model discrepancy"] += (f", growing by {growing.growth * 1e3:.4g} um per mm from the nearest training "
+                                     "pose (model_discrepancy_growth_um_per_mm)")
     for name, arr in (("encoder", enc), ("force", f), ("torque", t), ("compliance", c)):
         if not np.all(np.isfinite(arr)) or np.any(arr < 0):
             raise ValueError(f"{name} uncertainty must be finite and >= 0, got {arr}")
@@ -164,7 +184,7 @@ def default_inputs(desc, *, encoder=None, force=None, torque=None, compliance=No
     for name, v, given in (("probing", pr, probing), ("model discrepancy", dr, discrepancy)):
         if not (math.isfinite(v) and v >= 0):
             raise ValueError(f"{name} uncertainty must be finite and >= 0, got {given}")
-    return InputUncertainty(enc, f, t, c, pr, src, dr)
+    return InputUncertainty(enc, f, t, c, pr, src, dr, growing)
 
 
 def _model_input(given, from_model, key: str, how: str, who: str = "a model file from calibrate does") -> tuple:
@@ -221,6 +241,15 @@ def directional_ratio(cov_ref: np.ndarray, cov: np.ndarray) -> np.ndarray:
         ev = np.linalg.eigvalsh(li @ cov[ok] @ np.swapaxes(li, 1, 2))
         out[ok] = np.sqrt(np.clip(ev[:, [0, -1]], 0.0, None))
     return out
+
+
+def beyond_note(d) -> str:
+    """``"; these points lie M mm (median), up to D mm from the nearest training pose"`` for the distances ``d``
+    [m] of the points from it (:func:`arm_model.discrepancy.pose_distance`)."""
+    if not len(d):
+        return ""
+    return (f"; these points lie {np.median(d) * 1e3:.4g} mm (median), up to {d.max() * 1e3:.4g} mm from the nearest "
+            "training pose (ball travel of the joint motions)")
 
 
 def _compliance_covered(names) -> bool:
@@ -353,6 +382,11 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
     if p.shape != (spec.size,):
         raise ValueError(f"p has shape {p.shape}, expected ({spec.size},)")
     plan = _plan(model, parameters, inputs, nj)
+    # the model discrepancy at each pose, once for all chunks (its distance from the training poses is blocked)
+    growing, dist, sd_disc = inputs.growing, None, np.full(n, inputs.discrepancy)
+    if growing is not None:
+        dist = growing.distance(model.desc, q)
+        sd_disc = growing.sd_at(dist)
     npar = len(plan.pidx)
     cov = np.empty((n, 3, 3))
     contrib = {k: np.zeros((n, 3)) for k in CONTRIBUTIONS}
@@ -384,11 +418,10 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
             if sys_rows is not None:
                 sys_rows[s:e, npar:] = a.transpose(2, 0, 1)
             _add_squares(a, cv, contrib["compliance"][s:e])
-        for name, sd in (("probing", inputs.probing), ("model discrepancy", inputs.discrepancy)):
-            if sd > 0:
-                for i in range(3):
-                    cv[i, i] += sd ** 2
-                contrib[name][s:e] = sd ** 2
+        for name, sd in (("probing", np.full(e - s, inputs.probing)), ("model discrepancy", sd_disc[s:e])):
+            for i in range(3):
+                cv[i, i] += sd ** 2
+            contrib[name][s:e] = sd[:, None] ** 2
         for i, j in _PAIRS:
             cov[s:e, i, j] = cv[i, j]
             cov[s:e, j, i] = cv[i, j]
@@ -398,6 +431,8 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
         run_chunks(work, n, chunk, threads)
     sources = dict(inputs.sources)
     sources["parameters"] = "none (parameters taken as exact)" if parameters is None else parameters.source
+    if dist is not None:
+        sources["model discrepancy"] += beyond_note(dist)
     if _compliance_covered(tuple(() if parameters is None else parameters.names)):
         sources["compliance"] = "in the parameter covariance (calibrated)"
     return Propagation(centres, cov, contrib, sources, sys_rows)
@@ -441,6 +476,7 @@ def monte_carlo(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, 
     s1 = np.zeros((n, 3))
     s2 = np.zeros((n, 3, 3))
     half = math.sqrt(3.0) * inputs.encoder
+    sd_disc = inputs.discrepancy_sd(model.desc, q)
     bar = Progress(samples, f"Monte Carlo, {n} point{'s' * (n != 1)}: samples", logger=log, enabled=progress,
                    estimate=True)
     step = max(1, samples // 1000)            # the display updated a thousand times at most
@@ -455,9 +491,9 @@ def monte_carlo(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, 
         qs = q + rng.uniform(-1.0, 1.0, q.shape) * half
         ws = w + rng.standard_normal(w.shape) * u_w if wrench is not None else None
         d = model.ball_centres(qs, ws, ps, aux) - nominal
-        for sd in (inputs.probing, inputs.discrepancy):
-            if sd > 0:
-                d += sd * rng.standard_normal(d.shape)
+        for sd in (inputs.probing, sd_disc):
+            if np.any(sd > 0):
+                d += np.reshape(sd, (-1, 1)) * rng.standard_normal(d.shape)
         s1 += d
         s2 += d[:, :, None] * d[:, None, :]
     bar.update(samples - bar.done)

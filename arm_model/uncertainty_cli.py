@@ -52,8 +52,10 @@ def add_input_options(p, force: bool = True) -> None:
                         "encoder and force-sensor noise propagated with the default inputs; 0 without one)")
     g.add_argument("--u-model-discrepancy-um", type=number_in(0, MAX_U_PROBING_UM), default=None, metavar="U",
                    help="model discrepancy per axis [um]: the model's error beyond its parameters' uncertainty "
-                        "away from the poses it was calibrated on (default: the model file's model_discrepancy_um, "
-                        "which calibrate writes from an extrapolative cross-validation; 0 without one)")
+                        "away from the poses it was calibrated on, the same at every pose (default: the model "
+                        "file's model_discrepancy_um, which calibrate writes from an extrapolative cross-validation, "
+                        "grown by its model_discrepancy_growth_um_per_mm for each mm the joint motions from the "
+                        "nearest training pose carry the ball; 0 without one)")
 
 
 def inputs_from_args(arm, args, has_force: bool) -> InputUncertainty:
@@ -68,7 +70,7 @@ def inputs_from_args(arm, args, has_force: bool) -> InputUncertainty:
     u_disc = getattr(args, "u_model_discrepancy_um", None)
     inputs = default_inputs(desc, encoder=enc, force=force, compliance=comp, probing=probing, has_force=has_force,
                             model_probing=arm.probing_scatter, discrepancy=None if u_disc is None else u_disc * 1e-6,
-                            model_discrepancy=getattr(arm, "model_discrepancy", None))
+                            model_discrepancy=getattr(arm, "discrepancy", None))
     if args.u_compliance_rel is not None:
         inputs.sources["compliance"] = f"given: {args.u_compliance_rel:g} of the declared compliances"
     return inputs

@@ -506,7 +506,13 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
     if res.discrepancy is not None:
         d = res.discrepancy
         log.info(f"model discrepancy per axis: {d.sigma * 1e6:.4g} um (poses at the ends of each joint's range held "
-                 f"out in turn: their errors {d.ratio:.2f} x what the fit predicts; tip adds it to every point's u)")
+                 f"out in turn: their errors {d.ratio:.2f} x what the fit predicts)")
+        if d.growth is not None:
+            g = d.growth
+            log.info(f"  growing away from the training poses: {g.sigma0 * 1e6:.4g} +- {g.u_sigma0 * 1e6:.2g} um at "
+                     f"them + {g.growth * 1e3:.4g} +- {g.u_growth * 1e3:.2g} um per mm of ball travel from the nearest "
+                     f"(measured up to {g.d_max * 1e3:.4g} mm; likelihood ratio over a constant {g.lr:.3g}); tip adds "
+                     "it to every point's u")
     log.info(f"model file -> {files['description']} (covariance {files['covariance'].name}); report -> "
              f"{files['report']}")
 

@@ -21,23 +21,71 @@ group-deletion identity of linear regression, Cook and Weisberg 1982, "Residuals
 Regression", ch. 3). A fold keeps every feature's fewest points plus one (as :func:`calibration.data.
 split_poses`), so that its centre (axis, plane, frame) stays determined.
 
-``sigma_d`` is what :func:`arm_model.uncertainty.propagate` adds, per axis, to every corrected point of the
-calibrated model (the model file's ``[calibration] model_discrepancy_um``, ``aacmm tip``'s
-``model discrepancy`` contribution). It is 0 (to its sampling scatter) when the model holds the physics of
-the data, and grows with what the model lacks where the data reach beyond the training poses; it cannot
-see an error that shows only beyond the range the data span.
+The same held-out rows also show how the error grows with the distance ``d`` of each held-out pose from the
+poses left in its fold (:func:`arm_model.discrepancy.pose_distance`: how far the joint motions from the
+nearest of them carry the ball): :func:`fit_growth` fits ``e_i ~ N(0, v_i + sigma_0^2 + g^2 d_i^2)`` by maximum
+likelihood (``sigma_0, g >= 0``; started from the method of moments, the least squares of ``e_i^2 - v_i`` on
+``(1, d_i^2)``), with delete-one-fold jackknife uncertainties and the likelihood ratio over the constant.
+That growing ``sigma_d(q)`` is what :func:`arm_model.uncertainty.propagate` adds, per axis, to every corrected
+point of the calibrated model (the model file's ``[calibration] model_discrepancy_um`` = ``sigma_0``,
+``model_discrepancy_growth_um_per_mm`` = ``g`` and its training poses; ``aacmm tip``'s ``model discrepancy``
+contribution). Both are 0 (to their sampling scatter) when the model holds the physics of the data; they
+grow with what the model lacks as far as the data reach beyond their own poses: an error that shows only far
+beyond what the folds span is an extrapolation of ``g``.
 """
 from __future__ import annotations
 
+import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["EXTREME_SHARE", "Discrepancy", "extreme_folds", "fold_errors", "holdable", "model_discrepancy"]
+from arm_model import NumericalError
+from arm_model.discrepancy import TrainingPoses, joint_levers, pose_distance
+
+__all__ = ["EXTREME_SHARE", "Discrepancy", "Growth", "extreme_folds", "fit_growth", "fold_errors", "holdable",
+           "model_discrepancy"]
+
+log = logging.getLogger(__name__)
 
 #: share of the poses held out at each end of a joint's range
 EXTREME_SHARE = 0.15
+
+
+@dataclass(frozen=True)
+class Growth:
+    """The growing discrepancy ``sigma_d(q)^2 = sigma0^2 + (growth * d(q))^2`` fitted to the held-out rows of
+    the extrapolative folds (:func:`fit_growth`, :mod:`arm_model.discrepancy`).
+
+    Attributes:
+        sigma0: [m] the discrepancy at the training poses (``d = 0``); growth: [1] its growth per metre of ball
+            travel from the nearest training pose (:func:`arm_model.discrepancy.pose_distance`); both floored at 0.
+        u_sigma0, u_growth: their standard uncertainties, by the delete-one-fold jackknife (the folds share
+            poses and a fold's rows are correlated, which the jackknife over folds respects).
+        lr: twice the log-likelihood gained over a constant discrepancy (0 when the growth is floored at 0;
+            about chi-square with 1 degree of freedom when there is no growth).
+        d_max, d_rms: [m] the largest and RMS ``d`` (:func:`arm_model.discrepancy.pose_distance` from the poses
+            left in the fold) of the held-out rows: the reach over which the growth was measured (beyond
+            ``d_max`` it is an extrapolation).
+        d, e, v: (rows,) the held-out rows it was fitted to: distance [m], error [m], predicted variance [m^2]
+            (for the report's plot).
+    """
+    sigma0: float
+    growth: float
+    u_sigma0: float
+    u_growth: float
+    lr: float
+    d_max: float
+    d_rms: float
+    d: np.ndarray = field(default_factory=lambda: np.zeros(0), compare=False, repr=False)
+    e: np.ndarray = field(default_factory=lambda: np.zeros(0), compare=False, repr=False)
+    v: np.ndarray = field(default_factory=lambda: np.zeros(0), compare=False, repr=False)
+
+    def to_dict(self) -> dict:
+        return {"sigma0_um": self.sigma0 * 1e6, "growth_um_per_mm": self.growth * 1e3,
+                "u_sigma0_um": self.u_sigma0 * 1e6, "u_growth_um_per_mm": self.u_growth * 1e3,
+                "likelihood_ratio": self.lr, "d_max_mm": self.d_max * 1e3, "d_rms_mm": self.d_rms * 1e3}
 
 
 @dataclass(frozen=True)
@@ -52,6 +100,10 @@ class Discrepancy:
         share: share of the poses held out at each end of a joint's range.
         rms: RMS per axis [m] of the held-out prediction errors themselves (noise, posterior and
             discrepancy together): the extrapolative cross-validation error of the fit.
+        growth: the discrepancy growing away from the training poses (:class:`Growth`), fitted to the same
+            held-out rows; None when it could not be fitted.
+        training: the poses of the fit (what the growth is measured away from); training_rows: their rows in
+            the fit's points.
     """
     sigma: float
     ratio: float
@@ -59,13 +111,75 @@ class Discrepancy:
     rows: int
     share: float = EXTREME_SHARE
     rms: float = float("nan")
+    growth: Growth | None = None
+    training: TrainingPoses | None = field(default=None, compare=False)
+    training_rows: np.ndarray | None = field(default=None, compare=False)
 
     def to_dict(self) -> dict:
         return {"sigma_um": self.sigma * 1e6, "ratio": self.ratio, "folds": self.folds, "rows": self.rows,
                 "share": self.share, "rms_um": self.rms * 1e6,
+                "growth": None if self.growth is None else self.growth.to_dict(),
                 "method": "extrapolative cross-validation: the poses at each end of every joint's range held out "
                           "in turn (group deletion at the solution), the excess of their squared prediction "
                           "errors over the fit's own prediction (noise and posterior), per axis"}
+
+
+def _neg_log_likelihood(x, e2, v, d2) -> tuple[float, np.ndarray]:
+    """Half the negative Gaussian log-likelihood of errors with squares ``e2`` and variances ``v + a + b d2``
+    (``x = (a, b)``), and its gradient with respect to ``x``."""
+    tot = v + x[0] + x[1] * d2
+    w = 0.5 * (1.0 / tot - e2 / tot ** 2)
+    return 0.5 * float(np.sum(np.log(tot) + e2 / tot)), np.array([np.sum(w), np.sum(w * d2)])
+
+
+def _ml(e2, v, d2, growing: bool) -> tuple[np.ndarray, float]:
+    """(a, b) [m^2, 1] maximising the likelihood of ``e2`` under variances ``v + a + b d2`` (a, b >= 0; b = 0
+    unless ``growing``), and the minimised :func:`_neg_log_likelihood`. The unknowns are scaled to order 1 and
+    started from the non-negative least squares of ``e2 - v`` on ``(1, d2)`` (the method of moments)."""
+    from scipy.optimize import minimize, nnls
+    # a floor far below any error (1e-12 of the mean square), so that a noise-free fit keeps a finite likelihood
+    v = np.maximum(v, max(1e-12 * float(np.mean(e2 + v)), 1e-100))
+    scale = np.array([float(np.mean(v)), 1.0])
+    md2 = float(np.mean(d2))
+    growing = growing and md2 > 0
+    if growing:
+        scale[1] = scale[0] / md2
+    cols = np.column_stack([np.ones_like(d2), d2])[:, : 2 if growing else 1] * scale[: 2 if growing else 1]
+    x0 = nnls(cols, e2 - v)[0] + 1e-3
+    x0 = np.append(x0, 0.0) if not growing else x0
+    bounds = [(0.0, None), (0.0, None) if growing else (0.0, 0.0)]
+
+    def cost(x):
+        f, grad = _neg_log_likelihood(x * scale, e2, v, d2)
+        return f, grad * scale
+    res = minimize(cost, x0, jac=True, method="L-BFGS-B", bounds=bounds)
+    if not res.success:
+        raise NumericalError(f"the model discrepancy's likelihood was not maximised: {res.message}")
+    return res.x * scale, float(res.fun)
+
+
+def fit_growth(e, v, d, fold) -> Growth:
+    """The :class:`Growth` of held-out errors ``e`` (rows,) [m] whose fit predicts the variances ``v`` [m^2]
+    (noise and posterior), at distances ``d`` [m] from the nearest of the poses each was predicted from
+    (:func:`arm_model.discrepancy.pose_distance`), in folds ``fold`` (rows,): the maximum likelihood of
+    ``e ~ N(0, v + sigma0^2 + growth^2 d^2)`` (rows taken as independent), ``sigma0`` and ``growth`` floored at 0,
+    with their delete-one-fold jackknife uncertainties."""
+    from threadpoolctl import threadpool_limits
+    e2, v, d2, fold = np.asarray(e) ** 2, np.asarray(v, dtype=float), np.asarray(d, dtype=float) ** 2, np.asarray(fold)
+    folds = np.unique(fold)
+    jack = []
+    # two unknowns: the solver's tiny products spin-wait on every BLAS thread (15 x slower on a busy machine)
+    with threadpool_limits(limits=1, user_api="blas"):
+        (a, b), nll = _ml(e2, v, d2, True)
+        _, nll0 = _ml(e2, v, d2, False)
+        for f in folds if len(folds) > 2 else ():
+            keep = fold != f
+            jack.append(np.sqrt(_ml(e2[keep], v[keep], d2[keep], True)[0]))
+    u = np.sqrt((len(jack) - 1) / len(jack) * np.sum((np.array(jack) - np.mean(jack, axis=0)) ** 2, axis=0)) \
+        if jack else np.full(2, float("nan"))
+    return Growth(math.sqrt(a), math.sqrt(b), float(u[0]), float(u[1]), max(2 * (nll0 - nll), 0.0),
+                  float(np.sqrt(d2.max())) if len(d2) else 0.0, float(np.sqrt(d2.mean())) if len(d2) else 0.0,
+                  np.sqrt(d2), np.asarray(e, dtype=float), v)
 
 
 def extreme_folds(q: np.ndarray, share: float = EXTREME_SHARE) -> list[np.ndarray]:
@@ -130,20 +244,31 @@ def model_discrepancy(prob, r: np.ndarray, js, solve, var: float, share: float =
     used = np.unique(rp[point_rows])
     if len(used) < 2:
         return None
-    observed = predicted = 0.0
-    n_rows = n_folds = 0
-    for fold in extreme_folds(prob.data.points.q[used], share):
+    desc = prob.model.desc
+    q = prob.data.points.q
+    levers = np.zeros((len(q), q.shape[1]))
+    levers[used] = joint_levers(desc, q[used])
+    errors, variances, dists, fold_of = [], [], [], []
+    for fold in extreme_folds(q[used], share):
         held = holdable(prob, used[fold])
         rows = np.flatnonzero(point_rows & np.isin(rp, sorted(held)))
         if not len(rows):
             continue
         e, v = fold_errors(prob, r, js, solve, var, rows)
-        observed += float(e @ e)
-        predicted += float(np.sum(v))
-        n_rows += len(rows)
-        n_folds += 1
-    if not n_rows:
+        rest = used[~np.isin(used, sorted(held))]
+        errors.append(e)
+        variances.append(v)
+        dists.append(pose_distance(desc, q[rp[rows]], TrainingPoses.of(desc, q[rest]), levers[rp[rows]]))
+        fold_of.append(np.full(len(rows), len(fold_of)))
+    if not errors:
         return None
+    e, v = np.concatenate(errors), np.concatenate(variances)
+    observed, predicted, n_rows = float(e @ e), float(np.sum(v)), len(e)
+    try:
+        growth = fit_growth(e, v, np.concatenate(dists), np.concatenate(fold_of))
+    except NumericalError as exc:
+        log.warning(f"{exc}: the model discrepancy is written as a constant (no growth away from the training poses)")
+        growth = None
     return Discrepancy(math.sqrt(max((observed - predicted) / n_rows, 0.0)),
-                       math.sqrt(observed / predicted) if predicted > 0 else float("nan"), n_folds, n_rows, share,
-                       math.sqrt(observed / n_rows))
+                       math.sqrt(observed / predicted) if predicted > 0 else float("nan"), len(errors), n_rows, share,
+                       math.sqrt(observed / n_rows), growth, TrainingPoses.of(desc, q[used]), used)

@@ -363,8 +363,10 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
     summary = summary_dict(loop, input_names)
     summary["warnings"] = [w.as_dict() for w in warnings]
     final = loop.model_fit or loop.final.result
+    poses = model_files.get("training_poses")
     summary["model"] = {"file": model_files["model"].name, "covariance": model_files["covariance"].name,
                         "urdf": model_files["urdf"].name, "check": model_check(final),
+                        "training_poses": None if poses is None else poses.name,
                         "fitted_on": _fitted_on(loop), "points": len(final.data)}
     summary["reference_frame"] = final.reference_frame()
     if conformance:

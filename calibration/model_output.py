@@ -18,7 +18,7 @@ from arm_model.output import safe_name
 from arm_model.urdf_import import calibrated_urdf_text
 
 __all__ = ["model_paths", "fitted_arm", "write_model", "model_check", "refine_torques", "check_reproduces",
-           "REPRODUCE_TOL_M"]
+           "REPRODUCE_TOL_M", "discrepancy_fields"]
 
 #: how far beyond :func:`model_check`'s difference (the torques evaluated on the calibrated description, which
 #: the summary reports) the model file read back may put a fitted point from the fit's own ball centre [m]:
@@ -29,12 +29,13 @@ REPRODUCE_COV_REL = 1e-9
 
 
 def model_paths(out_dir, name: str) -> dict:
-    """``{"model": <name>.toml, "covariance": <name>-covariance.csv, "urdf": <name>.urdf}`` in ``out_dir``
-    (the name made safe as a file name: :func:`arm_model.output.safe_name`)."""
+    """``{"model": <name>.toml, "covariance": <name>-covariance.csv, "urdf": <name>.urdf, "training_poses":
+    <name>-training-poses.csv}`` in ``out_dir`` (the name made safe as a file name:
+    :func:`arm_model.output.safe_name`)."""
     out = Path(out_dir)
     stem = safe_name(name)
     return {"model": out / f"{stem}.toml", "covariance": out / f"{stem}-covariance.csv",
-            "urdf": out / f"{stem}.urdf"}
+            "urdf": out / f"{stem}.urdf", "training_poses": out / f"{stem}-training-poses.csv"}
 
 
 def fitted_arm(result, name: str | None = None) -> Arm:
@@ -49,13 +50,14 @@ def fitted_arm(result, name: str | None = None) -> Arm:
     rows = {r["name"]: r for r in result.parameter_rows()}
     return Arm(desc, tuple(model.effects), {n: result.value(n) for n in names},
                {n: result.uncertainty(n) for n in names}, {n: rows[n]["state"] for n in names},
-               tracker=result.tracker, model_discrepancy=_discrepancy(result))
+               tracker=result.tracker, **discrepancy_fields(result))
 
 
 def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aacmm calibrate",
                 comment: str | None = None) -> dict:
-    """Write the model file, its covariance file and the URDF of ``result`` into ``out_dir``;
-    returns :func:`model_paths`. ``inputs``: files never to be overwritten."""
+    """Write the model file, its covariance file, the URDF of ``result`` and, when its model discrepancy grows
+    away from the training poses, their points file into ``out_dir``; returns :func:`model_paths` of the files
+    written. ``inputs``: files never to be overwritten."""
     files = model_paths(out_dir, name)
     for f in files.values():
         guard_output(f, inputs)
@@ -64,20 +66,47 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
     free = list(result.free)
     idx = [spec.index(n) for n in free]
     write_covariance(files["covariance"], free, [spec.units[i] for i in idx], result.p[idx], result.cov, inputs)
+    poses = _write_training_poses(result, files.pop("training_poses"), inputs)
+    if poses is not None:
+        files["training_poses"] = poses
     atomic_write_text(files["model"], format_model(arm.desc, arm.effects, arm.values, arm.uncertainties, arm.states,
                                                    covariance=files["covariance"].name, written_by=written_by,
                                                    probing_scatter=result.probing_scatter(), tracker=arm.tracker,
-                                                   comment=comment, model_discrepancy=_discrepancy(result)),
+                                                   comment=comment, **discrepancy_fields(result),
+                                                   training_poses=None if poses is None else poses.name),
                       inputs)
     atomic_write_text(files["urdf"], calibrated_urdf_text(result.model.desc, arm.desc), inputs)
     check_reproduces(result, read_back(files["model"]), files["model"], urdf=files["urdf"])
     return files
 
 
-def _discrepancy(result) -> float | None:
-    """The model discrepancy [m] per axis a result carries (:mod:`calibration.discrepancy`), or None."""
+def discrepancy_fields(result) -> dict:
+    """The model discrepancy a result carries (:mod:`calibration.discrepancy`) as the keywords of
+    :class:`~arm_model.model_file.Arm` and :func:`~arm_model.model_file.format_model`: ``model_discrepancy`` [m]
+    per axis at the training poses (the growing fit's ``sigma0``) and ``discrepancy_growth`` [1]; None without
+    one, no growth when it could not be fitted."""
     d = getattr(result, "discrepancy", None)
-    return None if d is None else d.sigma
+    if d is None:
+        return {"model_discrepancy": None, "discrepancy_growth": None}
+    if d.growth is None:
+        return {"model_discrepancy": d.sigma, "discrepancy_growth": None}
+    return {"model_discrepancy": d.growth.sigma0, "discrepancy_growth": d.growth.growth}
+
+
+def _write_training_poses(result, path: Path, inputs) -> Path | None:
+    """The points file of the fit's poses (``measurement``, ``feature``, the joint columns in the description's
+    units) that a growing model discrepancy is measured from, or None (nothing written) without growth."""
+    d = getattr(result, "discrepancy", None)
+    if d is None or d.growth is None or d.training_rows is None:
+        return None
+    pts = result.data.points
+    rows = np.asarray(d.training_rows, dtype=int)
+    cols = {"measurement": np.asarray(pts.measurement)[rows].astype(object),
+            "feature": np.asarray(pts.feature)[rows].astype(object)}
+    for k, (suffix, factor) in enumerate(result.model.desc.joint_column_units):
+        cols[f"q{k + 1}_{suffix}"] = pts.q[rows, k] * factor
+    from arm_model.io import write_csv
+    return write_csv(path, cols, inputs, fmt="%.15g")
 
 
 def check_reproduces(result, back: Arm, path, urdf=None) -> None:
@@ -103,6 +132,7 @@ def check_reproduces(result, back: Arm, path, urdf=None) -> None:
             raise UnreadableOutput(f"the URDF written is refused with its tip frame: {exc}", urdf) from None
         _same(rigid_centres(arm, pts.q), rigid_centres(back.desc, pts.q), REPRODUCE_TOL_M, pts,
               "the URDF read back is not the model file's arm", urdf)
+    _same_discrepancy(result, back, path)
     if back.covariance is None:
         return
     from arm_model.model_file import read_covariance
@@ -112,6 +142,27 @@ def check_reproduces(result, back: Arm, path, urdf=None) -> None:
     if list(cov.names) != free or not np.all(np.abs(cov.matrix - result.cov) <= REPRODUCE_COV_REL * np.outer(u, u)):
         raise UnreadableOutput(f"the covariance file read back is not the fit's covariance of its free parameters "
                                f"({', '.join(free)})", back.covariance)
+
+
+def _same_discrepancy(result, back: Arm, path) -> None:
+    """The model discrepancy read back must be the fit's (to the 4 digits written; the training poses to 1e-9
+    rad or m): else :class:`~arm_model.io.UnreadableOutput`."""
+    want = discrepancy_fields(result)
+    got = {"model_discrepancy": back.model_discrepancy, "discrepancy_growth": back.discrepancy_growth}
+    for key, v in got.items():
+        w = want[key]
+        if (v is None) != (w is None) or (w is not None and not abs(v - w) <= 6e-4 * w + 1e-15):
+            raise UnreadableOutput(f"the model file read back gives {key} {v!r}, the fit {w!r}", path)
+    from arm_model.model_file import training_poses_of
+    d = getattr(result, "discrepancy", None)
+    want_q = None if d is None or d.growth is None else d.training.q
+    try:
+        got_q = training_poses_of(back)
+    except InputError as exc:
+        raise UnreadableOutput(f"the training poses read back are refused: {exc}", back.training_poses) from None
+    if (got_q is None) != (want_q is None) or (want_q is not None and not (
+            got_q.q.shape == want_q.shape and np.allclose(got_q.q, want_q, rtol=0, atol=1e-9))):
+        raise UnreadableOutput("the model file read back does not give the fit's training poses", path)
 
 
 def _urdf_tip(urdf, tip: str) -> str:

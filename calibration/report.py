@@ -254,7 +254,8 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
                   reports.html_table(["measurement", "feature", "line", "standardized"],
                          [(o.measurement, o.feature, o.line, _fmt(o.standardized, 3)) for o in result.dropped])]
     for name, title in (("residuals_png", "Residuals"), ("parameters_png", "Estimates"),
-                        ("correlation_png", "Correlations")):
+                        ("correlation_png", "Correlations"), ("discrepancy_png", "Model discrepancy away from the "
+                                                                                  "training poses")):
         if name in files:
             parts += [f"<h2>{title}</h2>", f"<img src='{html.escape(files[name].name)}' style='max-width:100%'>"]
     parts.append("</body></html>")
@@ -278,6 +279,29 @@ def prior_html(result: CalibrationResult) -> list[str]:
             reports.html_table(["group", "scale", "parameters", "determined", "plausible size at scale 1"], rows)]
 
 
+def plot_discrepancy(result: CalibrationResult) -> bytes:
+    """PNG: the extrapolative folds' held-out errors [um] (absolute, per residual row) against their distance
+    from the nearest pose left in the fold [mm], with the 1.96-sigma envelopes of the fit's own prediction
+    (noise and posterior, their mean), of the constant discrepancy and of the growing one."""
+    d = result.discrepancy
+    g = d.growth if d is not None else None
+    fig, ax = reports.figure(6.0, 4.0)
+    if g is None or not len(g.d):
+        return reports.png(fig)
+    ax.plot(g.d * 1e3, np.abs(g.e) * 1e6, ".", ms=3, color="C0", label="held-out error (per row)")
+    x = np.linspace(0.0, max(float(g.d.max()), 1e-9), 100)
+    v = float(np.mean(g.v))
+    for label, sd, style in (("fit's own prediction", np.full_like(x, np.sqrt(v)), "k:"),
+                             ("constant discrepancy", np.full_like(x, np.sqrt(v + d.sigma ** 2)), "C1--"),
+                             ("growing discrepancy", np.sqrt(v + g.sigma0 ** 2 + (g.growth * x) ** 2), "C3-")):
+        ax.plot(x * 1e3, 1.96 * sd * 1e6, style, label=f"1.96 sigma: {label}")
+    ax.set_xlabel("distance from the nearest pose left in the fold [mm of ball travel]")
+    ax.set_ylabel("|held-out error| [um]")
+    ax.set_title("model discrepancy: the poses at the ends of each joint's range held out")
+    ax.legend(fontsize=7, loc="best")
+    return reports.png(fig)
+
+
 def discrepancy_html(result: CalibrationResult) -> list[str]:
     """The report's sentence on the model discrepancy (:mod:`calibration.discrepancy`)."""
     d = result.discrepancy
@@ -287,7 +311,22 @@ def discrepancy_html(result: CalibrationResult) -> list[str]:
             f"<p>{_fmt(d.sigma * 1e6, 4)} um per axis: the poses at either end of each joint's range "
             f"({d.share:.0%} of the poses each end, {d.folds} folds) held out in turn and predicted by the fit on the "
             f"rest err {_fmt(d.ratio, 3)} x what that fit predicts (noise and posterior); the excess is the model "
-            "discrepancy, which the model file carries and tip adds to every point's uncertainty.</p>"]
+            "discrepancy.</p>"] + _growth_html(d)
+
+
+def _growth_html(d) -> list[str]:
+    """The report's sentence on the discrepancy's growth away from the training poses (:class:`calibration.
+    discrepancy.Growth`)."""
+    g = d.growth
+    if g is None:
+        return ["<p>The model file carries it and tip adds it to every point's uncertainty.</p>"]
+    return [f"<p>Fitted to the same held-out poses as growing with how far the joint motions from the nearest of "
+            f"the poses each was predicted from carry the ball (d): sigma_d<sup>2</sup> = sigma_0<sup>2</sup> + (g d)"
+            f"<sup>2</sup> with sigma_0 = {_fmt(g.sigma0 * 1e6, 4)} &plusmn; {_fmt(g.u_sigma0 * 1e6, 2)} um and g = "
+            f"{_fmt(g.growth * 1e3, 4)} &plusmn; {_fmt(g.u_growth * 1e3, 2)} um per mm (maximum likelihood, "
+            f"uncertainties by the delete-one-fold jackknife; d up to {_fmt(g.d_max * 1e3, 4)} mm in the folds, "
+            f"likelihood ratio over a constant {_fmt(g.lr, 3)}). The model file carries sigma_0, g and the "
+            "training poses (a points file beside it); tip adds sigma_d of each point's pose to its uncertainty.</p>"]
 
 
 def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_training=None,
@@ -315,6 +354,8 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
         files.update({"residuals_png": out / "residuals.png", "parameters_png": out / "parameters.png",
                       "correlation_png": out / "correlation.png"})
         files.update(conformance_pngs(conf, out))
+        if result.discrepancy is not None and result.discrepancy.growth is not None:
+            files["discrepancy_png"] = out / "discrepancy.png"
     for f in files.values():
         guard_output(f, inputs)
     effects = [e.describe() for e in result.model.effects]
@@ -323,7 +364,9 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
                + (", and the model's effects with their parameters" if effects else "") + ".\n"
                f"Solver: {result.status}; s0 = {result.s0:.4g}. Read by every --arm option; format: "
                "docs/calibration.md.")
-    write_model(result, out, name, inputs=inputs, written_by="aacmm calibrate", comment=comment)
+    written = write_model(result, out, name, inputs=inputs, written_by="aacmm calibrate", comment=comment)
+    if "training_poses" in written:
+        files["training_poses"] = written["training_poses"]
     rows = result.parameter_rows()
     write_csv(files["parameters"], {
         "name": np.array([r["name"] for r in rows], dtype=object),
@@ -343,6 +386,7 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
     summary["calibrated_description"] = files["description"].name
     summary["calibrated_covariance"] = files["covariance"].name
     summary["calibrated_urdf"] = files["urdf"].name
+    summary["calibrated_training_poses"] = files["training_poses"].name if "training_poses" in files else None
     summary["validation_training"] = validation_training
     summary["validation_holdout"] = validation_holdout
     summary["poorly_determined"] = poorly_determined(result)
@@ -354,6 +398,8 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
         atomic_write_bytes(files["residuals_png"], plot_residuals(result), inputs)
         atomic_write_bytes(files["parameters_png"], plot_parameters(result), inputs)
         atomic_write_bytes(files["correlation_png"], plot_correlation(result), inputs)
+        if "discrepancy_png" in files:
+            atomic_write_bytes(files["discrepancy_png"], plot_discrepancy(result), inputs)
         write_conformance_pngs(conf, files, inputs)
     atomic_write_text(files["summary"], json_text(summary), inputs)
     atomic_write_text(files["report"], _html(result, summary, files), inputs)

@@ -114,9 +114,10 @@ def test_an_exact_model_has_no_discrepancy_and_a_missing_effect_has_one(model, n
 
 
 def test_the_model_file_carries_the_discrepancy_into_tip(tmp_path, model):
-    """calibrate writes model_discrepancy_um (summary.json and the model file, 4 digits); the model file reads
-    it back; tip adds it to every point's variance per axis as the 'model discrepancy' contribution, and
-    --u-model-discrepancy-um 0 takes it out."""
+    """calibrate writes the growing discrepancy (summary.json; the model file's model_discrepancy_um = sigma0 and
+    model_discrepancy_growth_um_per_mm to 4 digits, and the training poses' points file); the model file reads
+    them back; tip adds sigma_d(q)^2 to every point's variance per axis as the 'model discrepancy' contribution,
+    and --u-model-discrepancy-um 0 takes it out."""
     import csv
     import json
 
@@ -129,17 +130,24 @@ def test_the_model_file_carries_the_discrepancy_into_tip(tmp_path, model):
                  str(panda / "panda-with-inertials.urdf"), "--tip-frame", "ball_link", "--no-plots", "-q",
                  "-o", str(out)]) == 0
     summary = json.loads((out / "summary.json").read_text())
-    sigma = summary["model_discrepancy"]["sigma_um"]
-    assert sigma > 0
+    growth = summary["model_discrepancy"]["growth"]
+    assert summary["model_discrepancy"]["sigma_um"] > 0 and growth["growth_um_per_mm"] > 0
     arm = load_model(out / "panda-calibrated.toml")
-    assert arm.model_discrepancy == pytest.approx(sigma * 1e-6, rel=1e-3)
+    assert arm.model_discrepancy == pytest.approx(growth["sigma0_um"] * 1e-6, rel=1e-3, abs=1e-10)
+    assert arm.discrepancy_growth == pytest.approx(growth["growth_um_per_mm"] * 1e-3, rel=1e-3)
+    from arm_model.io import read_points
+    training = read_points(arm.training_poses).q
+    np.testing.assert_allclose(training, read_points(panda / "right" / "points.csv").q, rtol=0, atol=1e-12)
+    q_front = read_points(panda / "front" / "points.csv").q
     u = {}
     for label, extra in (("with", []), ("without", ["--u-model-discrepancy-um", "0"])):
         tip = tmp_path / f"{label}.csv"
         assert main(["tip", str(panda / "front" / "points.csv"), "--arm", str(out / "panda-calibrated.toml"),
                      "-q", "-o", str(tip), *extra]) == 0
         u[label] = np.array([[float(r[f"u_{a}_mm"]) for a in "xyz"] for r in csv.DictReader(open(tip))])
-    np.testing.assert_allclose(u["with"] ** 2 - u["without"] ** 2, (arm.model_discrepancy * 1e3) ** 2, rtol=1e-4)
+    sd = arm.discrepancy.sd(arm.desc, q_front) * 1e3
+    assert sd.max() > 1.5 * sd.min()                      # the front poses lie at various distances from right's
+    np.testing.assert_allclose(u["with"] ** 2 - u["without"] ** 2, np.repeat(sd[:, None] ** 2, 3, axis=1), rtol=1e-4)
 
 
 @pytest.mark.parametrize("value", ["-1.0", "1e9", "\"big\""])
@@ -150,3 +158,227 @@ def test_a_bad_model_discrepancy_in_a_model_file_is_refused(tmp_path, value):
     text = NOMINAL.read_text() + f"\n[calibration]\nmodel_discrepancy_um = {value}\n"
     with pytest.raises(InputError, match="model_discrepancy_um"):
         parse_model(text, str(tmp_path / "m.toml"))
+
+
+# -- the discrepancy growing away from the training poses (arm_model.discrepancy) ----------------------------------
+
+def test_pose_distance_by_hand():
+    """d = min over training poses of sqrt(sum_j (L_j dq_j)^2), a revolute difference the short way round, a
+    prismatic one not wrapped; hand values with given levers."""
+    from arm_model.discrepancy import TrainingPoses, pose_distance
+    train = TrainingPoses(("a", "b"), [[0.0, 0.0], [1.0, 0.0]], (True, True))
+    d = pose_distance(None, [[0.5, 0.2], [1.2, 0.0]], train, levers=[[2.0, 3.0], [0.5, 1.0]])
+    np.testing.assert_allclose(d, [np.sqrt(1.0 + 0.36), 0.1], rtol=1e-12)
+    across = TrainingPoses(("a",), [[3.0]], (True,))
+    np.testing.assert_allclose(pose_distance(None, [[-3.0]], across, levers=[[2.0]]), [2 * (2 * np.pi - 6.0)],
+                               rtol=1e-12)
+    prismatic = TrainingPoses(("a",), [[3.0]], (False,))
+    np.testing.assert_allclose(pose_distance(None, [[-3.0]], prismatic, levers=[[1.0]]), [6.0], rtol=1e-12)
+
+
+def test_growth_formula_on_the_first_joint_by_hand(nominal):
+    """A pose that differs from its only training pose by delta in joint 1 (whose axis is the base z axis of the
+    DH arm) lies d = r delta from it, r the ball's horizontal distance from that axis; sigma_d^2 = sigma0^2 +
+    (g d)^2; the lever of joint 1 is r (central differences against the hand value to 1e-9 relative)."""
+    from arm_model.discrepancy import GrowingDiscrepancy, TrainingPoses, joint_levers
+    from arm_model.kinematics import ball_centres
+    q = np.array([[0.3, 0.4, -0.2, 0.9, 0.1, -0.5, 0.2]])
+    x = ball_centres(nominal, q)[0]
+    r = float(np.hypot(x[0], x[1]))
+    assert joint_levers(nominal, q)[0, 0] == pytest.approx(r, rel=1e-9)
+    delta = 0.25
+    t = q.copy()
+    t[0, 0] -= delta
+    g = GrowingDiscrepancy(4e-6, 0.03, TrainingPoses.of(nominal, t))
+    assert g.distance(nominal, q)[0] == pytest.approx(r * delta, rel=1e-9)
+    assert g.sd(nominal, q)[0] == pytest.approx(np.sqrt(16e-12 + (0.03 * r * delta) ** 2), rel=1e-9)
+    assert g.sd(nominal, t)[0] == pytest.approx(4e-6, rel=1e-12)          # at a training pose: sigma0
+    with pytest.raises(ValueError, match="training poses"):
+        GrowingDiscrepancy(1e-6, 0.1, None)
+
+
+def test_fit_growth_recovers_a_known_growth():
+    """Errors drawn with variances v + sigma0^2 + g^2 d^2 (v = (5 um)^2, sigma0 10 um, d up to 3 mm, 40 folds of
+    30 rows), 12 seeds: with g = 0.02 the maximum likelihood's mean growth is within 5 % of it, each growth and
+    sigma0 within 4 of their jackknife uncertainties, every likelihood ratio over a constant above 30; with
+    g = 0 the growth is floored at 0 or small (g d_rms under half sigma0) and the likelihood ratio exceeds
+    chi-square's 95 % point (3.84) on at most 2 of the 12 seeds (a boundary mixture: about 2.5 % expected)."""
+    from calibration.discrepancy import fit_growth
+    n, fold = 1200, np.repeat(np.arange(40), 30)
+    v = np.full(n, (5e-6) ** 2)
+    for g_true in (0.02, 0.0):
+        fits = []
+        for seed in range(12):
+            rng = np.random.default_rng(seed)
+            d = rng.uniform(0.0, 3e-3, n)
+            g = fit_growth(rng.normal(0.0, np.sqrt(v + (10e-6) ** 2 + (g_true * d) ** 2)), v, d, fold)
+            assert g.d_max == pytest.approx(d.max())
+            fits.append(g)
+        growth = np.array([g.growth for g in fits])
+        if g_true:
+            assert abs(growth.mean() - g_true) < 0.05 * g_true, growth
+            assert all(abs(g.growth - g_true) <= 4 * g.u_growth for g in fits), fits
+            assert all(abs(g.sigma0 - 10e-6) <= 4 * g.u_sigma0 and g.lr > 30 for g in fits), fits
+        else:
+            assert all(g.growth * g.d_rms < 0.5 * g.sigma0 for g in fits), fits
+            assert sum(g.lr > 3.84 for g in fits) <= 2, [g.lr for g in fits]
+
+
+def _band_campaign(model, nominal, seed, gain):
+    """A calibration on seats whose poses keep joint 2 in the middle half of its range, a test campaign of seats
+    over its whole range; the truth with an encoder gain error ``gain`` on joint 2 the model does not have."""
+    from dataclasses import replace
+
+    from arm_model.effects import JointGain
+    spec = SynthSpec(ballbars=2, ballbar_kind="seat", ballbar_length=0.3, ballbar_points=30, seats=4,
+                     articulations=30, spheres=0, rings=0, planes=0, reference_points=0, force=0.0, noise=5e-6)
+    truth = ArmModel(nominal, (JointGain(joints=(1,)),)) if gain else model
+    p = np.zeros(truth.spec.size)
+    p[:model.spec.size] = random_truth(model, np.random.default_rng(seed), length=1e-4, angle=1e-4, probe=1e-4)
+    p[model.spec.size:] = gain
+    c = make_campaign(truth, spec, seed=seed, p_true=p)
+    lo, hi = np.percentile(c.points.q[:, 1], [25, 75])
+    keep = (c.points.q[:, 1] >= lo) & (c.points.q[:, 1] <= hi)
+    res = calibrate(model, make_data(c.points, c.artefacts, model).select(keep),
+                    FitOptions(weights=W, weights_from_data=True))
+    test = make_campaign(truth, replace(spec, ballbars=0, seats=6), seed=100 + seed, p_true=p).points
+    return res, test, (lo, hi)
+
+
+def _growing(res):
+    from arm_model.discrepancy import GrowingDiscrepancy
+    return GrowingDiscrepancy(res.discrepancy.growth.sigma0, res.discrepancy.growth.growth, res.discrepancy.training)
+
+
+def _seat_coverage(model, nominal, res, test, band):
+    """Coverage of each test point's deviation from its seat's mean by 1.96 u (parameters, probing and the model
+    discrepancy, constant or growing), for the points with joint 2 inside and beyond the training band."""
+    from arm_model.uncertainty import ParameterCovariance, default_inputs, propagate
+    seat = np.array([f"{m}/{f}" for m, f in zip(test.measurement, test.feature)])
+    x = model.ball_centres(test.q, None, res.p)
+    dev = np.empty_like(x)
+    for s in np.unique(seat):
+        dev[seat == s] = x[seat == s] - x[seat == s].mean(axis=0)
+    beyond = (test.q[:, 1] < band[0]) | (test.q[:, 1] > band[1])
+    d = res.discrepancy
+    out = {}
+    for kind, disc in (("constant", d.sigma), ("growing", _growing(res))):
+        inputs = default_inputs(nominal, has_force=False, model_discrepancy=disc, model_probing=res.probing_scatter())
+        u = propagate(model, res.p, test.q, parameters=ParameterCovariance(res.free, res.cov), inputs=inputs).u
+        inside = np.abs(dev) <= 1.96 * u
+        out[kind] = (inside[~beyond].mean(), inside[beyond].mean())
+    return out
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_an_exact_model_keeps_nominal_coverage_away_from_its_poses(model, nominal, seed):
+    """The model holds the truth: sigma0 and the growth stay at their sampling scatter (sigma0 under 2 um, the
+    growth adding under 2.5 um, half the noise, at the median test pose), and the test seats' deviations are
+    covered near the nominal 95 % inside and beyond the training band (measured 94-99 % over seeds 0-7)."""
+    res, test, band = _band_campaign(model, nominal, seed, 0.0)
+    g = res.discrepancy.growth
+    dist = np.median(_growing(res).distance(nominal, test.q))
+    assert g.sigma0 < 2e-6 and g.growth * dist < 2.5e-6, (g, dist)
+    cov = _seat_coverage(model, nominal, res, test, band)
+    for inside, beyond in cov.values():
+        assert 0.9 <= inside <= 0.995 and 0.9 <= beyond <= 0.995, cov
+
+
+def test_an_undeclared_gain_widens_u_beyond_the_training_poses(model, nominal):
+    """The truth has an encoder gain error of 2e-3 on joint 2 that the model lacks and the training poses keep
+    that joint in the middle half of its range: the folds find a growth (likelihood ratio over a constant > 2 on
+    every seed), and the coverage of the test seats' deviations beyond the band rises on every seed (measured
+    +2 to +7 points over seeds 0-7, from 58-81 %), while inside it moves by less than 5 points."""
+    gains = []
+    for seed in (0, 2, 3):
+        res, test, band = _band_campaign(model, nominal, seed, 2e-3)
+        assert res.discrepancy.growth.lr > 2.0 and res.discrepancy.growth.growth > 0, res.discrepancy.growth
+        cov = _seat_coverage(model, nominal, res, test, band)
+        assert cov["growing"][1] >= cov["constant"][1] + 0.015, cov
+        assert abs(cov["growing"][0] - cov["constant"][0]) < 0.05, cov
+        gains.append(cov["growing"][1] - cov["constant"][1])
+    assert np.mean(gains) >= 0.03, gains
+    from calibration.report import plot_discrepancy
+    g = res.discrepancy.growth
+    assert len(g.d) == len(g.e) == len(g.v) == res.discrepancy.rows and plot_discrepancy(res)[:4] == b"\x89PNG"
+
+
+def test_an_old_model_file_reads_with_a_constant_discrepancy(tmp_path, nominal):
+    """A model file from before the growth (model_discrepancy_um only) reads as a constant discrepancy: tip adds
+    the same 25 um per axis at every pose, as it did."""
+    from arm_model.model_file import parse_model
+    from arm_model.uncertainty import default_inputs, propagate
+    from conftest import NOMINAL
+    arm = parse_model(NOMINAL.read_text() + "\n[calibration]\nmodel_discrepancy_um = 25.0\n", str(tmp_path / "m.toml"))
+    assert arm.discrepancy == pytest.approx(25e-6) and arm.discrepancy_growth is None and arm.training_poses is None
+    q = np.random.default_rng(0).uniform(-1.0, 1.0, (5, nominal.n_joints))
+    res = propagate(arm.model, arm.p, q, inputs=default_inputs(arm.desc, has_force=False,
+                                                               model_discrepancy=arm.discrepancy))
+    np.testing.assert_allclose(res.contributions["model discrepancy"], (25e-6) ** 2, rtol=1e-12)
+
+
+def _poses_file(path, nominal, q):
+    cols = ",".join(f"q{k + 1}_deg" for k in range(nominal.n_joints))
+    rows = "".join("m,seat," + ",".join(f"{np.degrees(x):.12g}" for x in r) + "\n" for r in q)
+    path.write_text(f"measurement,feature,{cols}\n{rows}")
+
+
+def test_a_model_file_with_a_growth_reads_and_grows(tmp_path, nominal):
+    """sigma0, the growth and a training-poses points file beside the model file: the discrepancy read is
+    sigma0 at a training pose and grows away from it as sqrt(sigma0^2 + (g d)^2) (d by the lever of joint 1)."""
+    from arm_model.kinematics import ball_centres
+    from arm_model.model_file import load_model, read_model_file
+    from conftest import NOMINAL
+    q = np.array([[0.3, 0.4, -0.2, 0.9, 0.1, -0.5, 0.2]])
+    _poses_file(tmp_path / "poses.csv", nominal, q)
+    (tmp_path / "m.toml").write_text(NOMINAL.read_text() + "\n[calibration]\nmodel_discrepancy_um = 5.0\n"
+                                     "model_discrepancy_growth_um_per_mm = 20.0\ntraining_poses = \"poses.csv\"\n")
+    arm = read_model_file(tmp_path / "m.toml")
+    disc = load_model(tmp_path / "m.toml").discrepancy
+    assert disc.sd(nominal, q)[0] == pytest.approx(5e-6, rel=1e-9)
+    moved = q.copy()
+    moved[0, 0] += 0.1
+    r = np.hypot(*ball_centres(nominal, moved)[0, :2])
+    assert disc.sd(arm.desc, moved)[0] == pytest.approx(np.hypot(5e-6, 0.02 * r * 0.1), rel=1e-7)
+
+
+@pytest.mark.parametrize("extra, match", [
+    ("model_discrepancy_um = 5.0\nmodel_discrepancy_growth_um_per_mm = -1.0\n", "model_discrepancy_growth_um_per_mm"),
+    ("model_discrepancy_um = 5.0\nmodel_discrepancy_growth_um_per_mm = 1e9\n", "model_discrepancy_growth_um_per_mm"),
+    ("model_discrepancy_um = 5.0\nmodel_discrepancy_growth_um_per_mm = 2.0\n", "training_poses"),
+    ("model_discrepancy_growth_um_per_mm = 2.0\ntraining_poses = \"p.csv\"\n", "model_discrepancy_um"),
+    ("model_discrepancy_um = 5.0\nmodel_discrepancy_grwth_um_per_mm = 2.0\n", "unknown key"),
+    ("model_discrepancy_um = 5.0\ntraining_poses = 3\n", "training_poses"),
+])
+def test_a_bad_growth_in_a_model_file_is_refused(tmp_path, extra, match):
+    from arm_model import InputError
+    from arm_model.model_file import parse_model
+    from conftest import NOMINAL
+    with pytest.raises(InputError, match=match):
+        parse_model(NOMINAL.read_text() + "\n[calibration]\n" + extra, str(tmp_path / "m.toml"))
+
+
+def test_a_missing_or_wrong_training_poses_file_is_refused(tmp_path, nominal):
+    """The training poses' points file is read as every points file (its joints the arm's): absent, or with a
+    joint column too few, it is an InputError naming it."""
+    from arm_model import InputError
+    from arm_model.model_file import read_model_file
+    from conftest import NOMINAL
+    (tmp_path / "m.toml").write_text(NOMINAL.read_text() + "\n[calibration]\nmodel_discrepancy_um = 5.0\n"
+                                     "model_discrepancy_growth_um_per_mm = 20.0\ntraining_poses = \"poses.csv\"\n")
+    with pytest.raises(InputError, match="poses.csv"):
+        read_model_file(tmp_path / "m.toml")
+    (tmp_path / "poses.csv").write_text("measurement,feature,q1_deg,q2_deg\nm,seat,1,2\n")
+    with pytest.raises(InputError, match="poses.csv"):
+        read_model_file(tmp_path / "m.toml")
+
+
+def test_fit_growth_of_noise_free_rows_is_zero():
+    """Held-out errors and predicted variances all 0 (a noise-free simulation): sigma0 = g = 0, no warning."""
+    import warnings
+
+    from calibration.discrepancy import fit_growth
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        g = fit_growth(np.zeros(60), np.zeros(60), np.linspace(0.0, 1e-2, 60), np.repeat(np.arange(6), 10))
+    assert g.sigma0 == 0 and g.growth == 0 and g.lr == 0, g

@@ -147,8 +147,9 @@ def test_panda_heldout_uncertainty_coverage(tmp_path):
     """Each placement's model file applied by ``aacmm tip`` to the other two placements;
     each corrected centre's deviation from its seat's mean lies within 1.96 u (tip's u: the posterior
     covariance, prior-dominated parameters included, the probing scatter and the model discrepancy of the
-    extrapolative cross-validation) for at least 88 % of the axis values pooled (measured 88.9 %, 76-100 % per
-    placement; without the discrepancy 86.2 %; the hold rule of earlier versions: 73.6 %, 58-91 %)."""
+    extrapolative cross-validation, growing with each pose's distance from the nearest training pose) for 90-97 %
+    of the axis values pooled (measured 94.1 %, 77-100 % per pair; with a constant discrepancy 88.9 %, without
+    one 86.2 %; the hold rule of earlier versions: 73.6 %, 58-91 %)."""
     import csv
 
     from arm_model.cli import main
@@ -170,7 +171,8 @@ def test_panda_heldout_uncertainty_coverage(tmp_path):
             f = np.array([r["feature"] for r in rows])
             for h in set(f):
                 inside.append((np.abs(x[f == h] - x[f == h].mean(axis=0)) <= 1.96 * u[f == h]).ravel())
-    assert np.concatenate(inside).mean() >= 0.88
+    pooled = np.concatenate(inside).mean()
+    assert 0.90 <= pooled <= 0.97, pooled
 
 
 #: FIGAROH 1.0.2 (its TALOS example settings: Levenberg-Marquardt, a ridge of 1e-3 on the joint parameters, frame

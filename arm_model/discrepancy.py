@@ -1,0 +1,130 @@
+"""A model discrepancy that grows with how far a pose lies from the poses a calibration was fitted on.
+
+A calibrated model errs, beyond what its parameters' covariance says, by what it lacks (an effect nobody
+declared, a geometry the chain cannot represent). At the training poses the fit has absorbed most of that
+error; away from them it comes back, the more the further the arm is from every pose it was calibrated on. The
+standard uncertainty per axis of that error at a pose ``q`` is modelled as::
+
+    sigma_d(q)^2 = sigma_0^2 + (g * d(q))^2
+    d(q) = min over training poses t of sqrt(sum_j (L_j(q) * (q_j - t_j))^2)
+
+* ``q_j - t_j`` [rad] ([m] for a prismatic joint): the joint's difference from the training pose (a revolute one
+  taken the short way round);
+* ``L_j`` [m/rad] (1 for a prismatic joint): the lever of joint ``j`` at ``q``, the norm of d(ball centre)/d q_j
+  of the rigid chain (the ball's distance from the joint's axis): :func:`joint_levers`. ``d`` [m] is thus, to
+  first order, how far the joint motions from the nearest training pose carry the ball: the same unit and
+  meaning on every arm (a wrist joint's difference counts less than a shoulder's);
+* ``sigma_0`` [m]: the discrepancy at the training poses, ``g`` [1]: its growth per metre of ``d``.
+
+Both are estimated by :mod:`calibration.discrepancy` from the extrapolative folds of the constant discrepancy
+(the poses held out at the ends of each joint's range, each at its ``d`` from the poses left in the fold). The
+nearest training pose was chosen over how far a pose lies beyond the box of the training joint ranges (the
+same lever weighting) because, on the shared real seat data, it explains the held-out errors better (likelihood
+ratio over a constant 129 and 10 where the box gives 111 and 3; docs/uncertainty.md): a pose inside every
+joint's range can still be far from any pose the fit saw. A model file carries ``sigma_0`` and ``g``
+(``[calibration] model_discrepancy_um``, ``model_discrepancy_growth_um_per_mm``) and the training poses (a
+points file named by ``training_poses``: docs/formats.md), and ``aacmm tip`` adds ``sigma_d(q)^2`` to each
+point's variance per axis (:func:`arm_model.uncertainty.propagate`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["TrainingPoses", "GrowingDiscrepancy", "joint_levers", "pose_distance", "LEVER_STEP"]
+
+#: step [rad] ([m] for a prismatic joint) of the central differences of :func:`joint_levers`
+LEVER_STEP = 1e-6
+#: the most elements (query poses x training poses x joints) :func:`pose_distance` holds at once
+_BLOCK = 2_000_000
+
+
+@dataclass(frozen=True, eq=False)
+class TrainingPoses:
+    """The poses a calibration was fitted on: ``names`` the joints (the description's encoder columns), ``q``
+    (T, J) their readings [rad] ([m] for a prismatic joint, ``circular`` False)."""
+    names: tuple[str, ...]
+    q: np.ndarray
+    circular: tuple[bool, ...]
+
+    def __post_init__(self):
+        q = np.atleast_2d(np.asarray(self.q, dtype=float))
+        if q.shape[1] != len(self.names) or len(self.circular) != len(self.names) or not len(q):
+            raise ValueError(f"training poses need at least one pose of {len(self.names)} joints, got {q.shape}")
+        if not np.all(np.isfinite(q)):
+            raise ValueError("training poses must be finite")
+        object.__setattr__(self, "q", q)
+        object.__setattr__(self, "circular", tuple(bool(c) for c in self.circular))
+
+    @classmethod
+    def of(cls, desc, q) -> TrainingPoses:
+        """The training poses ``q`` (T, J) of the arm ``desc`` (its encoder columns: revolute ones circular)."""
+        return cls(tuple(desc.joint_names), q, tuple(not j.prismatic for j in desc.encoders))
+
+
+def joint_levers(desc, q) -> np.ndarray:
+    """(N, J) [m/rad] (1 for a prismatic joint along its axis): the norm of the derivative of the rigid ball
+    centre of ``desc`` (zero wrench, the description's own geometry) with respect to each encoder reading, by
+    central differences of step :data:`LEVER_STEP`: the ball's distance from a revolute joint's axis."""
+    from .kinematics import ball_centres
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    n, nj = q.shape
+    out = np.empty((n, nj))
+    for j in range(nj):
+        dq = np.zeros(nj)
+        dq[j] = LEVER_STEP
+        diff = ball_centres(desc, q + dq) - ball_centres(desc, q - dq)
+        out[:, j] = np.linalg.norm(diff, axis=1) / (2 * LEVER_STEP)
+    return out
+
+
+def pose_distance(desc, q, train: TrainingPoses, levers=None) -> np.ndarray:
+    """(N,) [m]: ``d(q)``, how far the joint motions from the nearest of the ``train`` poses carry the ball
+    (see the module docstring); ``levers`` (N, J) [m/rad] of ``q`` when already computed."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    if q.shape[1] != len(train.names):
+        raise ValueError(f"q has {q.shape[1]} joints, the training poses {len(train.names)}")
+    lev = joint_levers(desc, q) if levers is None else np.asarray(levers, dtype=float)
+    circ = np.asarray(train.circular, dtype=bool)
+    out = np.empty(len(q))
+    step = max(1, _BLOCK // max(1, train.q.size))
+    for s in range(0, len(q), step):
+        diff = q[s: s + step, None, :] - train.q[None, :, :]
+        diff[..., circ] = np.angle(np.exp(1j * diff[..., circ]))
+        out[s: s + step] = np.sqrt(np.min(np.sum((lev[s: s + step, None, :] * diff) ** 2, axis=2), axis=1))
+    return out
+
+
+@dataclass(frozen=True)
+class GrowingDiscrepancy:
+    """``sigma_d(q)^2 = sigma0^2 + (growth * d(q))^2`` (see the module docstring): ``sigma0`` [m] at the
+    training poses, ``growth`` [1] per metre of ``d`` from the nearest of the ``training`` poses (None: no
+    growth, the constant ``sigma0`` everywhere)."""
+    sigma0: float
+    growth: float = 0.0
+    training: TrainingPoses | None = None
+
+    def __post_init__(self):
+        for name, v in (("sigma0", self.sigma0), ("growth", self.growth)):
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"the model discrepancy's {name} must be finite and >= 0, got {v!r}")
+        if self.growth > 0 and self.training is None:
+            raise ValueError("a growing model discrepancy needs the training poses it grows away from")
+
+    def distance(self, desc, q) -> np.ndarray:
+        """(N,) [m] ``d`` of each pose of ``q`` (N, J) (zeros without training poses)."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        return np.zeros(len(q)) if self.training is None else pose_distance(desc, q, self.training)
+
+    def sd(self, desc, q) -> np.ndarray:
+        """(N,) [m]: ``sigma_d`` per axis at each pose of ``q`` (N, J)."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        if self.growth == 0 or self.training is None:
+            return np.full(len(q), self.sigma0)
+        return self.sd_at(pose_distance(desc, q, self.training))
+
+    def sd_at(self, d) -> np.ndarray:
+        """``sigma_d`` [m] at distances ``d`` [m] from the nearest training pose (:meth:`distance`)."""
+        return np.sqrt(self.sigma0 ** 2 + (self.growth * np.asarray(d, dtype=float)) ** 2)
