@@ -114,13 +114,13 @@ def sigma_options(p, prior_default: str | None = None) -> None:
     auto = prior_default == "auto"
     p.add_argument("--prior-scale", type=loop_prior_scale if auto else prior_scale, default=prior_default,
                    metavar="auto|evidence|off|FACTOR" if auto else "evidence|off|FACTOR",
-                   help=f"evidence: a Gaussian prior on every free parameter, centred on the nominal value, standard "
+                   help="evidence: a Gaussian prior on every free parameter, centred on the nominal value, standard "
                         "deviation its group's scale times its plausible error size (groups: lengths, joint offsets, "
                         "axis angles, the tip or marker offset, the probe's compliance, each effect), each scale "
                         "chosen by the evidence (type-II maximum likelihood) together with the noise: poorly "
                         "resolved parameters are shrunk towards the nominal and reported as prior-dominated, never "
                         "held; FACTOR: every group at that scale; off: no prior (--min-resolution may then hold "
-                        f"weak parameters)" + ("; auto: evidence when the base model holds a joint compliance "
+                        "weak parameters)" + ("; auto: evidence when the base model holds a joint compliance "
                                                 "(its prior is physical), else off" if auto else "")
                    + f". Default {default} (docs/calibration.md)")
 
