@@ -709,9 +709,12 @@ def _lm(s: _Setup, prob: Problem, p, states, options: FitOptions):
     return sol
 
 
-#: fits whose identifiability analysis at the solution holds more parameters, before the identifiable set must
-#: have settled (holds at a bound do not count: a parameter is held at its bound once and for all, so those
-#: rounds end by themselves)
+#: without a prior: fits whose identifiability analysis at the solution holds more parameters, before the
+#: identifiable set must have settled (holds at a bound do not count: a parameter is held at its bound once and
+#: for all, so those rounds end by themselves). With a prior every fit is well posed whatever the data resolve,
+#: so a combination that falls below the rank test only at the next solution (a harmonic of a joint whose axis
+#: passes near the tip) is held in its turn until the set settles: the free set only shrinks, so that ends
+#: within as many rounds as there are candidates.
 SETTLE_ROUNDS = 4
 
 
@@ -724,7 +727,8 @@ def _solve(s: _Setup, options: FitOptions):
     n_start = len(fixed)
     states = s.states
     rank_rounds = 0
-    while rank_rounds < SETTLE_ROUNDS:
+    limit = SETTLE_ROUNDS if s.prior is None else len(s.candidates) + 1
+    while rank_rounds < limit:
         prob = s.problem.with_free(kept)
         sol = _restarted(s, prob, _lm(s, prob, p, states, options), options)
         p, states = sol.p, sol.states
