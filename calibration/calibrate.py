@@ -61,7 +61,7 @@ __all__ = ["FixedParameter", "Outlier", "CalibrationResult", "calibrate", "resol
            "default_free", "rigid_gauge", "display_unit", "blas_threads", "identify", "variance_components",
            "reweighted", "MIN_REDUNDANCY", "row_groups", "row_kinds", "kind_groups", "standardized_residuals",
            "grouped_standardized", "FitOptions", "evidence_scale", "nominal_baseline", "tracker_only",
-           "default_effects"]
+           "default_effects", "gravity_compliance"]
 
 
 def display_unit(unit: str) -> tuple[str, float]:
@@ -127,15 +127,22 @@ def default_free(model: ArmModel, data: CalibrationData | None = None) -> list[s
 
 def default_effects(model: ArmModel, data: CalibrationData) -> tuple:
     """The effects a default calibration adds to ``model`` for ``data``: the joint compliance under gravity
-    (:class:`arm_model.effects.JointCompliance`, each compliance with its physical prior,
-    :mod:`calibration.prior`) for a robot whose links carry masses seen by a tracker only
+    (:func:`gravity_compliance`) for a robot whose links carry masses seen by a tracker only
     (:func:`tracker_only`) when the model holds no effect yet; else none. A robot held in postures bends under
     its own weight by an amount its geometry cannot represent; the prior (10 mrad at most under each
     joint's RMS gravity torque, non-negative) keeps a compliance the data do not see at 0 (measured in
     docs/calibration.md: on the shared TALOS campaign the held-out error falls on every split, the README's
     1.37 -> 1.00 mm; on simulated robots without compliance it costs 1-10 %)."""
+    return gravity_compliance(model) if tracker_only(data) else ()
+
+
+def gravity_compliance(model: ArmModel) -> tuple:
+    """``(JointCompliance(),)``, the compliance of every joint under the gravity torques of the description's
+    masses (each with its physical prior, :mod:`calibration.prior`), for a model that holds no effect yet, whose
+    links carry masses and whose joints are not coupled; else ``()``. The base model of ``calibrate`` for tracker
+    data (:func:`default_effects`) and of ``close-loop`` for a robot read from a URDF (docs/close-loop.md)."""
     from arm_model.effects import JointCompliance
-    if model.effects or not tracker_only(data) or not any(j.mass > 0 for j in model.desc.joints):
+    if model.effects or not any(j.mass > 0 for j in model.desc.joints):
         return ()
     effect = JointCompliance()
     try:

@@ -111,14 +111,23 @@ def sigma_options(p, prior_default: str | None = None) -> None:
                         "the --min-resolution rule judges against (default there: the larger of 1 mm and ten times "
                         "the noise of one point, angles 0.01 rad per mm)")
     default = "off" if prior_default is None else prior_default
-    p.add_argument("--prior-scale", type=prior_scale, default=prior_default, metavar="evidence|off|FACTOR",
-                   help=f"evidence: a Gaussian prior on every free parameter, centred on the nominal value, standard "
+    auto = prior_default == "auto"
+    p.add_argument("--prior-scale", type=loop_prior_scale if auto else prior_scale, default=prior_default,
+                   metavar="auto|evidence|off|FACTOR" if auto else "evidence|off|FACTOR",
+                   help="evidence: a Gaussian prior on every free parameter, centred on the nominal value, standard "
                         "deviation its group's scale times its plausible error size (groups: lengths, joint offsets, "
                         "axis angles, the tip or marker offset, the probe's compliance, each effect), each scale "
                         "chosen by the evidence (type-II maximum likelihood) together with the noise: poorly "
                         "resolved parameters are shrunk towards the nominal and reported as prior-dominated, never "
                         "held; FACTOR: every group at that scale; off: no prior (--min-resolution may then hold "
-                        f"weak parameters). Default {default} (docs/calibration.md)")
+                        "weak parameters)" + ("; auto: evidence when the base model holds a joint compliance "
+                                                "(its prior is physical), else off" if auto else "")
+                   + f". Default {default} (docs/calibration.md)")
+
+
+def loop_prior_scale(text: str):
+    """``close-loop --prior-scale``: "auto" (:class:`calibration.loop.LoopSettings`) or :func:`prior_scale`'s."""
+    return "auto" if text.strip().lower() == "auto" else prior_scale(text)
 
 
 def prior_scale(text: str):
@@ -143,7 +152,8 @@ def model_options(p) -> None:
                    help="add an effect of arm_model.effects to the model (repeatable): "
                         f"{', '.join(EFFECTS)}. Its parameters are fitted (see --free); close-loop: it is part of "
                         "the base model, not a candidate. calibrate without --effect adds joint_compliance for a "
-                        "robot whose URDF gives link masses seen by a tracker only (no artefacts file); "
+                        "robot whose URDF gives link masses seen by a tracker only (no artefacts file), close-loop "
+                        "for a robot whose URDF gives link masses, whatever the data; "
                         "'--effect none': the geometry alone")
     p.add_argument("--free", action="append", metavar="PATTERN",
                    help="parameters to identify, by name or glob (repeatable), e.g. 'j*.d', 'probe.*', "

@@ -93,7 +93,7 @@ def register(sub) -> None:
                         "compliances resolve positive and the held-out data are not significantly worse; see "
                         "docs/close-loop.md)")
     model_options(p)
-    sigma_options(p)
+    sigma_options(p, prior_default="auto")
     mpe_options(p)
     p.set_defaults(func=run)
 
@@ -116,6 +116,16 @@ def run(args: argparse.Namespace) -> int:
     arm = model_from_args(args)
     desc = arm.desc
     effects = model_effects(arm, args.effect).effects
+    if args.effect is None and desc.convention == "urdf":
+        from arm_model.model import ArmModel
+
+        from .calibrate import gravity_compliance
+        added = gravity_compliance(ArmModel(desc, tuple(effects)))
+        effects = tuple(effects) + added
+        if added:
+            log.info("base model: joint compliance under gravity (a robot read from a URDF whose links carry masses "
+                     "bends under its own weight; each compliance's physical prior: non-negative, at most 10 mrad "
+                     "under its joint's RMS gravity torque); --effect none for the geometry alone")
     if effects and families is None:
         families = tuple(f for f in DEFAULT_FAMILIES if f not in {e.key for e in effects})
     points = read_points(args.points, desc.joint_quantities)

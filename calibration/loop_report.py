@@ -89,6 +89,8 @@ def summary_dict(loop: LoopResult, inputs: dict | None = None) -> dict:
         "inputs": inputs or {},
         "arm": loop.desc.name,
         "settings": loop.settings.to_dict(),
+        "base_effects": [e.describe() for e in loop.stages[0].model.effects],
+        "estimation": {"prior_scale": _prior_used(loop.stages[0].result)},
         "measurements": {"design": loop.design, "test": loop.test, "test_by": loop.test_by},
         "decision_power": loop.power,
         "candidates": [{"name": c.name, "family": c.family, "joint": c.joint, "effect": c.effect.describe(),
@@ -380,3 +382,8 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
 
 def _slug(name: str) -> str:
     return "".join(c if c.isalnum() else "-" for c in name).strip("-").lower()
+
+
+def _prior_used(res) -> str | float | None:
+    """The prior scale the loop's fits used (``--prior-scale auto`` resolved): "evidence", a factor or None."""
+    return None if res.options is None else res.options.prior_scale

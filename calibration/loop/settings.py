@@ -38,7 +38,9 @@ class LoopSettings:
     figures' uncertainties only (the test set and the folds are functions of the data, drawn from no seed).
     ``test_in_model``: the final model is fitted on every point, design and test (default); False (``aacmm
     close-loop --holdout``), the outer test set's rows are kept out of it, as ``calibrate --holdout`` keeps its
-    held-out measurements out of its model."""
+    held-out measurements out of its model. ``prior_scale``: "auto" (default: the prior with the evidence's scales,
+    "evidence", when the base model holds a joint compliance, whose prior is physical, else None: no prior, the
+    practical-resolution rule), "evidence", a factor, or None."""
     folds: int = 4
     test_fraction: float = 0.25
     alpha: float = 0.01
@@ -55,7 +57,7 @@ class LoopSettings:
     weights_from_data: bool = True
     synthesise: bool = True
     physics: bool = True
-    prior_scale: float | str | None = None
+    prior_scale: float | str | None = "auto"
     test_in_model: bool = True
 
     def __post_init__(self):
@@ -70,6 +72,10 @@ class LoopSettings:
             v = getattr(self, name)
             if not 0.0 < v < 1.0:
                 raise ValueError(f"{name} must be in (0, 1), got {v}")
+        if not (self.prior_scale in (None, "auto", "evidence") or isinstance(self.prior_scale, (int, float))
+                and not isinstance(self.prior_scale, bool) and 0 < self.prior_scale < math.inf):
+            raise ValueError(f"prior_scale must be 'auto', 'evidence', a positive factor or None, got "
+                             f"{self.prior_scale!r}")
         if self.min_improvement < 0 or self.max_effects < 0 or self.cv_top < 1:
             raise ValueError("min_improvement and max_effects must be >= 0 and cv_top >= 1")
 

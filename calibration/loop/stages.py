@@ -149,11 +149,18 @@ def _say_split(say, data, design, test, test_by: str, n_cands: int, settings: Lo
 def _prior_scale(model: ArmModel, design, camp: Campaign, stated: Weights, settings: LoopSettings, say):
     """The prior scale of every fit: "evidence" (every fit chooses its groups' scales by its own evidence, as
     ``calibrate`` does, on the data it is given: a fold's training part chooses them without the fold), a
-    factor, or None (no prior: the practical-resolution rule holds weak parameters)."""
-    if settings.prior_scale == "evidence":
+    factor, or None (no prior: the practical-resolution rule holds weak parameters). "auto": "evidence" when the
+    base model holds a joint compliance, else None. A compliance needs its physical prior (non-negative, at most
+    a plausible deflection under the data's torques): without it nothing bounds a compliance the data see
+    weakly (on the real Panda seats, trained on one placement, joint 7's reached 1.75 rad/(N m), a model file
+    ``tip`` refuses), and the evidence's scales for the geometry come with it (docs/close-loop.md)."""
+    scale = settings.prior_scale
+    if scale == "auto":
+        scale = "evidence" if any(isinstance(e, JointCompliance) for e in model.effects) else None
+    if scale == "evidence":
         say("estimation: a Gaussian prior on every free parameter, its groups' scales chosen by the evidence of "
             "each fit's own data (prior-dominated parameters are shrunk, not held; compliances >= 0)")
-    return settings.prior_scale
+    return scale
 
 
 def _noise(res: CalibrationResult) -> str:
