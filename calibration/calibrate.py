@@ -125,22 +125,27 @@ def default_free(model: ArmModel, data: CalibrationData | None = None) -> list[s
     return [n for n in model.spec.names if not n.startswith(drop)]
 
 
-def default_effects(model: ArmModel, data: CalibrationData) -> tuple:
-    """The effects a default calibration adds to ``model`` for ``data``: the joint compliance under gravity
-    (:func:`gravity_compliance`) for a robot whose links carry masses seen by a tracker only
-    (:func:`tracker_only`) when the model holds no effect yet; else none. A robot held in postures bends under
-    its own weight by an amount its geometry cannot represent; the prior (10 mrad at most under each
-    joint's RMS gravity torque, non-negative) keeps a compliance the data do not see at 0 (measured in
-    docs/calibration.md: on the shared TALOS campaign the held-out error falls on every split, the README's
-    1.37 -> 1.00 mm; on simulated robots without compliance it costs 1-10 %)."""
-    return gravity_compliance(model) if tracker_only(data) else ()
+def default_effects(model: ArmModel, data: CalibrationData | None = None) -> tuple:
+    """The effects a default calibration (``calibrate``, ``close-loop``) adds to ``model``: the joint compliance
+    under gravity (:func:`gravity_compliance`) when the model holds no effect yet and it is a robot whose links
+    carry masses: a description read from a URDF, or any description seen by a tracker only
+    (:func:`tracker_only`); else none. A robot held in postures bends under its own weight by an amount its
+    geometry cannot represent, on every pose and every placement alike, so held-out poses of one placement
+    cannot say what it is worth elsewhere: it is part of the model, not a per-campaign decision. The prior
+    (10 mrad at most under each joint's RMS gravity torque, non-negative) keeps a compliance the data do not
+    see at 0 (measured in docs/calibration.md: on the shared TALOS campaign the held-out error falls on every
+    split, the README's 1.37 -> 1.00 mm; on the shared Panda seats, trained on one placement, the other two's
+    seat spread 2.04 -> 1.71 mm; on simulated robots without compliance it costs 1-10 %)."""
+    if model.desc.convention != "urdf" and not tracker_only(data):
+        return ()
+    return gravity_compliance(model)
 
 
 def gravity_compliance(model: ArmModel) -> tuple:
     """``(JointCompliance(),)``, the compliance of every joint under the gravity torques of the description's
     masses (each with its physical prior, :mod:`calibration.prior`), for a model that holds no effect yet, whose
-    links carry masses and whose joints are not coupled; else ``()``. The base model of ``calibrate`` for tracker
-    data (:func:`default_effects`) and of ``close-loop`` for a robot read from a URDF (docs/close-loop.md)."""
+    links carry masses and whose joints are not coupled; else ``()``. The base model of ``calibrate`` and
+    ``close-loop`` for a robot (:func:`default_effects`)."""
     from arm_model.effects import JointCompliance
     if model.effects or not any(j.mass > 0 for j in model.desc.joints):
         return ()

@@ -151,9 +151,9 @@ def model_options(p) -> None:
     p.add_argument("--effect", action="append", metavar="KEY",
                    help="add an effect of arm_model.effects to the model (repeatable): "
                         f"{', '.join(EFFECTS)}. Its parameters are fitted (see --free); close-loop: it is part of "
-                        "the base model, not a candidate. calibrate without --effect adds joint_compliance for a "
-                        "robot whose URDF gives link masses seen by a tracker only (no artefacts file), close-loop "
-                        "for a robot whose URDF gives link masses, whatever the data; "
+                        "the base model, not a candidate. Without --effect both add joint_compliance for a robot "
+                        "whose links carry masses (a URDF with <inertial> tags, or any arm seen by a tracker only), "
+                        "with its physical prior; "
                         "'--effect none': the geometry alone")
     p.add_argument("--free", action="append", metavar="PATTERN",
                    help="parameters to identify, by name or glob (repeatable), e.g. 'j*.d', 'probe.*', "
@@ -362,9 +362,9 @@ def _load_data(args, defaults: bool = False):
         from arm_model.model import ArmModel
         model = ArmModel(desc, tuple(model.effects) + added)
         data = make_data(points, artefacts, model, reference=reference, marker_offsets=args.marker_offset)
-        log.info(f"effect {', '.join(e.describe() for e in added)} added: a robot whose links carry masses, seen "
-                 "by a tracker, bends under its own weight (each compliance's prior: at most 10 mrad under its "
-                 "joint's RMS gravity torque); --effect none for the geometry alone")
+        log.info(f"effect {', '.join(e.describe() for e in added)} added: a robot whose links carry masses bends "
+                 "under its own weight (each compliance's prior: non-negative, at most 10 mrad under its joint's RMS "
+                 "gravity torque); --effect none for the geometry alone")
     return model, data, arm.values, warnings
 
 

@@ -116,11 +116,11 @@ def run(args: argparse.Namespace) -> int:
     arm = model_from_args(args)
     desc = arm.desc
     effects = model_effects(arm, args.effect).effects
-    if args.effect is None and desc.convention == "urdf":
+    if args.effect is None:
         from arm_model.model import ArmModel
 
-        from .calibrate import gravity_compliance
-        added = gravity_compliance(ArmModel(desc, tuple(effects)))
+        from .calibrate import default_effects
+        added = default_effects(ArmModel(desc, tuple(effects)))
         effects = tuple(effects) + added
         if added:
             log.info("base model: joint compliance under gravity (a robot read from a URDF whose links carry masses "

@@ -411,7 +411,9 @@ def _tip_joint(path, tip):
 
 def test_calibrate_writes_the_users_urdf(tmp_path):
     """aacmm calibrate on the real Panda data: the written URDF is the user's file, loadable in Pinocchio
-    with the same joint and frame names, and gives the calibrated description's ball centres."""
+    with the same joint and frame names, and gives the calibrated description's ball centres (its geometry:
+    the joint compliance a robot with masses gets by default has no place in a URDF)."""
+    from arm_model.model_file import load_model
     data_dir = PANDA.parent
     out = tmp_path / "cal"
     rc = main(["calibrate", str(data_dir / "front" / "points.csv"), str(data_dir / "artefacts.toml"),
@@ -421,7 +423,9 @@ def test_calibrate_writes_the_users_urdf(tmp_path):
     model, orig = _pin_model(urdf), _pin_model(PANDA_INERTIAL)
     assert list(model.names) == list(orig.names)
     assert [f.name for f in model.frames] == [f.name for f in orig.frames]
-    cal = load_arm(next(out.glob("*.toml")))
+    arm = load_model(next(out.glob("*.toml")))
+    assert [e.key for e in arm.effects] == ["joint_compliance"]
+    cal = arm.desc
     q = np.random.default_rng(12).uniform(-2, 2, (10, 7))
     for qi in q:
         assert_close(_user_tip(model, cal, qi, "ball_link")[:3, 3], ball_centres(cal, qi), atol=1e-9)

@@ -382,8 +382,9 @@ def test_base_frame_starts_the_chain_after_a_floating_joint(tmp_path, capsys):
 
 def test_a_robot_with_masses_seen_by_a_tracker_gets_joint_compliance_by_default(tmp_path, capsys):
     """default_effects: the lift arm's URDF gives link masses and its campaign is markers only: the joint
-    compliance (on the revolute joints: the prismatic lift has none); not when the instrument sees the
-    probe's ball itself (markers at zero offset), not without masses, not when the model holds an effect. The
+    compliance (on the revolute joints: the prismatic lift has none), as for any robot read from a URDF with
+    masses whatever its data (markers at zero offset, artefacts); not without masses, not when the model holds
+    an effect, not for an arm described by DH rows (a measuring arm) unless a tracker alone sees it. The
     command says so and fits it; ``--effect none`` fits the geometry alone, and with a compliance of
     1/2000 rad/(N m) in the truth predicts the held-out postures worse (measured 0.18 mm with the default,
     1.49 mm without)."""
@@ -391,6 +392,7 @@ def test_a_robot_with_masses_seen_by_a_tracker_gets_joint_compliance_by_default(
 
     from arm_model.effects import JointCompliance
     from arm_model.model import ArmModel
+    from arm_model.model_file import load_model
     from arm_model.urdf_import import load_arm
     from calibration import make_data
     from calibration.calibrate import default_effects
@@ -408,7 +410,11 @@ def test_a_robot_with_masses_seen_by_a_tracker_gets_joint_compliance_by_default(
     assert default_effects(ArmModel(desc, (JointCompliance(),)), data) == ()
     massless = dc_replace(desc, joints=tuple(dc_replace(j, mass=0.0) for j in desc.joints))
     assert default_effects(ArmModel(massless), data) == ()
-    assert default_effects(ArmModel(desc), dc_replace(data, marker_offsets="zero")) == ()
+    assert default_effects(ArmModel(desc), dc_replace(data, marker_offsets="zero")) == (effect,)
+    assert default_effects(ArmModel(desc)) == (effect,)
+    dh = load_model("aacmm7").desc
+    assert dh.convention == "dh" and all(j.mass > 0 for j in dh.joints)
+    assert default_effects(ArmModel(dh)) == ()
     capsys.readouterr()
     figures = {}
     for extra in ([], ["--effect", "none"]):
