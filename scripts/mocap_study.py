@@ -7,6 +7,11 @@ Splits (a posture is one measurement of the points file): ``--holdout ID,ID`` (t
 states one), random halves (``--halves`` seeds), and random subsamples of ``--sizes`` postures (``--seeds``
 seeds each), the rest held out. Seeds are numpy's default_rng; the same seeds give the same splits.
 
+``--floor`` also says how much of a held-out error is the instrument's noise: each model fitted on every
+posture (its residual RMS per axis of the instrument and in 3D, and that 3D figure with the fit's degrees of
+freedom counted: the noise floor no prediction of a posture beats) and each posture predicted from all the
+others (the leave-one-out RMS: the held-out error with as much data as the campaign has).
+
     python scripts/mocap_study.py ../shared/data/real-talos-mocap/points.csv \\
         --arm ../shared/data/real-talos-mocap/talos_full_v2.urdf --tip-frame gripper_left_base_link \\
         --holdout pose-02,pose-04,...  --effects none,joint_compliance
@@ -47,10 +52,40 @@ def splits(ids: list, holdout: list | None, halves: int, sizes: list, seeds: int
     return out
 
 
+def error_vectors(res, test) -> np.ndarray:
+    """Each posture's marker error (N, 3) [mm] along the instrument's axes, frame and marker offset of the fit."""
+    x = marker_positions(res.model, res.p, test.points.q, res.tracker, test.sessions, test.aux)[:, 0]
+    return (x - test.reference) * 1e3
+
+
 def errors(res, test) -> np.ndarray:
     """Each held-out posture's marker 3D error [mm], frame and marker offset of the training fit."""
-    x = marker_positions(res.model, res.p, test.points.q, res.tracker, test.sessions, test.aux)[:, 0]
-    return np.linalg.norm(x - test.reference, axis=1) * 1e3
+    return np.linalg.norm(error_vectors(res, test), axis=1)
+
+
+def fitted(model, train):
+    """``calibrate``'s default fit of ``model`` on ``train`` as ``aacmm calibrate`` makes it: the noise from the
+    data, the torques refined on the calibrated description."""
+    return refine_torques(calibrate(model, train, FitOptions(weights_from_data=True)))
+
+
+def predicted(res, test) -> np.ndarray:
+    """The held-out postures' 3D errors [mm] of the fit ``res`` (their torques refined as the fit's)."""
+    return errors(res, with_fitted_torques(test, res))
+
+
+def noise_floor(model, data, ids: list) -> dict:
+    """The fit of ``model`` on every posture of ``data``: its residual RMS per axis [mm] and in 3D, the 3D
+    figure times sqrt(residuals / degrees of freedom) (the noise floor), and the leave-one-out RMS [mm] over
+    the postures ``ids``, each predicted from all the others."""
+    res = fitted(model, data)
+    e = error_vectors(res, with_fitted_torques(data, res))
+    loo = np.concatenate([predicted(fitted(model, train), test)
+                          for train, test in (split_holdout(data, [m]) for m in ids)])
+    rms3 = float(np.sqrt(np.mean(np.sum(e ** 2, axis=1))))
+    return {"fit_rms_axes_mm": np.sqrt(np.mean(e ** 2, axis=0)).tolist(), "fit_rms_mm": rms3,
+            "floor_mm": rms3 * float(np.sqrt(res.n_residuals / res.dof)), "dof": int(res.dof),
+            "loo_rms_mm": float(np.sqrt(np.mean(loo ** 2))), "loo_errors_mm": loo.tolist()}
 
 
 def main(argv=None) -> int:
@@ -64,6 +99,8 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", type=int, default=3, help="seeds of each subsample size")
     p.add_argument("--effects", default="none,joint_compliance",
                    help="models to compare: 'none' (geometry) or effect names joined by '+', comma-separated")
+    p.add_argument("--floor", action="store_true",
+                   help="also the noise floor (each model fitted on every posture) and the leave-one-out RMS")
     p.add_argument("-o", "--output", type=Path, default=None, help="write the results as JSON here")
     args = p.parse_args(argv)
     desc = load_arm(args.arm, args.tip_frame)
@@ -81,13 +118,17 @@ def main(argv=None) -> int:
         row["nominal"] = errors(nominal_baseline(models[first], train, FitOptions(weights_from_data=True)), test)
         for name, m in models.items():
             train, test = split_holdout(data[name], held)
-            # as aacmm calibrate: the torques refined on the calibrated description, the held-out rows' too
-            res = refine_torques(calibrate(m, train, FitOptions(weights_from_data=True)))
-            row[name] = errors(res, with_fitted_torques(test, res))
+            row[name] = predicted(fitted(m, train), test)
         results[split] = {k: {"rms_mm": float(np.sqrt(np.mean(e ** 2))), "max_mm": float(e.max()),
                               "errors_mm": e.tolist()} for k, e in row.items()}
         print(f"{split:8s} train {len(ids) - len(held):3d}  " + "  ".join(
             f"{k} {v['rms_mm']:.3f}" for k, v in results[split].items()), flush=True)
+    if args.floor:
+        results["floor"] = {name: noise_floor(m, data[name], ids) for name, m in models.items()}
+        for name, f in results["floor"].items():
+            print(f"{name}: fitted on all {len(ids)} postures {f['fit_rms_mm']:.3f} mm RMS 3D (per axis " +
+                  ", ".join(f"{v:.3f}" for v in f["fit_rms_axes_mm"]) + f"), noise floor {f['floor_mm']:.3f} mm "
+                  f"(dof {f['dof']}); leave-one-out {f['loo_rms_mm']:.3f} mm", flush=True)
     if args.output:
         args.output.write_text(json.dumps(results, indent=1) + "\n")
     return 0
