@@ -29,17 +29,26 @@ from arm_model.log import progress_line
 __all__ = ["seat_figures", "PlacementRow", "placement_study", "markdown_table"]
 
 
-def seat_figures(x: np.ndarray, feature: np.ndarray, holes: tuple[str, str], length: float) -> dict:
+def seat_figures(x: np.ndarray, feature: np.ndarray, holes: tuple[str, str], length: float,
+                 u: np.ndarray | None = None) -> dict:
     """Spread (2 sigma) of each hole and the distance error, from ball centres ``x`` (N, 3) [m] and the
-    feature of each point; values [mm]."""
+    feature of each point; values [mm]. With the centres' standard uncertainties ``u`` (N, 3) [m], also the
+    coverage: ``inside`` of the ``values`` axis deviations from their hole's mean centre lie within 1.96 u."""
     out, centre = {}, {}
+    inside = values = 0
     for h in holes:
-        xi = x[np.asarray(feature) == h]
+        sel = np.asarray(feature) == h
+        xi = x[sel]
         if len(xi) < 2:
             raise InputError(f"hole '{h}': {len(xi)} point(s), a spread needs at least 2")
         d = xi - xi.mean(axis=0)
         out[f"spread_{h}_mm"] = float(2 * np.sqrt(np.sum(d ** 2) / (len(xi) - 1))) * 1e3
         centre[h] = xi.mean(axis=0)
+        if u is not None:
+            inside += int(np.sum(np.abs(d) <= 1.96 * u[sel]))
+            values += d.size
+    if u is not None:
+        out["inside"], out["values"] = inside, values
     out["spread_mean_mm"] = float(np.mean([out[f"spread_{h}_mm"] for h in holes]))
     dist = float(np.linalg.norm(centre[holes[0]] - centre[holes[1]]))
     out["distance_mm"] = dist * 1e3
@@ -73,7 +82,8 @@ def _cli(argv: list[str]) -> str:
 
 
 def _tip(points: Path, arm: Path, out: Path, tip_frame: str | None = None):
-    """``aacmm tip`` of ``points`` with the model ``arm``: (ball centres (N, 3) [m], features)."""
+    """``aacmm tip`` of ``points`` with the model ``arm``: (ball centres (N, 3) [m], features, their standard
+    uncertainties (N, 3) [m] or None when the model carries none)."""
     argv = ["tip", str(points), "--arm", str(arm), "-o", str(out)]
     if tip_frame:
         argv += ["--tip-frame", tip_frame]
@@ -82,7 +92,8 @@ def _tip(points: Path, arm: Path, out: Path, tip_frame: str | None = None):
     with open(out, newline="") as fh:
         rows = list(csv.DictReader(fh))
     x = np.array([[float(r[f"{a}_mm"]) for a in "xyz"] for r in rows]) * 1e-3
-    return x, np.array([r["feature"] for r in rows])
+    u = np.array([[float(r[f"u_{a}_mm"]) for a in "xyz"] for r in rows]) * 1e-3 if rows and "u_x_mm" in rows[0] else None
+    return x, np.array([r["feature"] for r in rows]), u
 
 
 def _loop_model(folder: Path) -> Path | None:
@@ -96,7 +107,9 @@ def placement_study(root: Path, arm: Path, tip_frame: str | None, out: Path, tra
     """Train on each placement (folders of ``root`` with a points.csv; ``train``: only these, ``"a+b"``
     trains on placements a and b together, their points in one file), predict the others; outputs of every
     command under ``out``. ``root`` holds the ``artefacts.toml`` (two seats and
-    one certified distance between them). ``options``: extra command-line options per method (lists)."""
+    one certified distance between them). ``methods``: ``close-loop`` runs ``aacmm close-loop``, any other name
+    ``aacmm calibrate`` (``calibrate`` with its defaults; e.g. ``geometry`` with ``--effect none`` given in
+    ``options``). ``options``: extra command-line options per method (lists)."""
     from arm_model.io import read_artefacts
     root, out = Path(root), Path(out)
     say = progress or progress_line(logging.getLogger(__name__))
@@ -122,12 +135,12 @@ def placement_study(root: Path, arm: Path, tip_frame: str | None, out: Path, tra
             pts.parent.mkdir(parents=True, exist_ok=True)
             pts.write_text("\n".join(parts[0] + [ln for p in parts[1:] for ln in p[1:] if ln.strip()]) + "\n")
         models = {}
-        if "calibrate" in methods:
-            say(f"{tr}: aacmm calibrate")
-            dst = out / tr / "calibrate"
+        for method in (m for m in methods if m != "close-loop"):      # calibrate, with that method's options
+            say(f"{tr}: aacmm calibrate ({method})")
+            dst = out / tr / method
             _cli(["calibrate", str(pts), str(artefacts), *arm_opts, "-o", str(dst), "--no-plots",
-                  *(options or {}).get("calibrate", [])])
-            models["calibrate"] = (next(dst.glob("*-calibrated.toml")), ())
+                  *(options or {}).get(method, [])])
+            models[method] = (next(dst.glob("*-calibrated.toml")), ())
         if "close-loop" in methods:
             say(f"{tr}: aacmm close-loop")
             dst = out / tr / "close-loop"
@@ -144,8 +157,8 @@ def placement_study(root: Path, arm: Path, tip_frame: str | None, out: Path, tra
             for te in places:
                 if te in group:
                     continue
-                x, feat = _tip(root / te / "points.csv", model, out / tr / f"{method}-tip-{te}.csv")
-                rows.append(PlacementRow(tr, method, te, seat_figures(x, feat, holes, length), effects))
+                x, feat, u = _tip(root / te / "points.csv", model, out / tr / f"{method}-tip-{te}.csv")
+                rows.append(PlacementRow(tr, method, te, seat_figures(x, feat, holes, length, u), effects))
                 say(f"  {method} -> {te}: spread {rows[-1].figures['spread_mean_mm']:.3f} mm, distance error "
                     f"{rows[-1].figures['distance_error_mm']:+.3f} mm")
     return rows
