@@ -13,6 +13,8 @@ the coverage of tip's u (axis deviations from the seat's mean within 1.96 u), fo
 * ``close-loop`` and ``calibrate`` with their default options,
 * ``geometry``: ``calibrate --effect none`` (the geometry alone, no joint compliance),
 * ``nominal-tip``: the nominal URDF with only the tool offset (probe.x/y/z) and the seats fitted,
+* ``oracle``: ``calibrate`` told the truth's effects (joint compliance if the truth has it, the eccentricity or
+  gain of the truth's joints only): what the right structure gives on these data,
 * ``truth``: the hidden truth applied to the same readings (the figures' floor: the scatter alone).
 
 A gain error ``q_true = (1 + g) q_enc`` is put into the readings after the simulation (``q_enc / (1 + g)``
@@ -45,7 +47,7 @@ LENGTH = 0.05            # [m] certified distance between the seats
 PLACES = {"front": ([0.383, 0.003, 0.001], [0, -1, 0], [0, 0, 1]),
           "right": ([0.382, 0.432, 0.007], [0, 1, 0], [0, 0, 1]),
           "back-high": ([-0.450, -0.009, 0.880], [0, 1, 0], [1, 0, 0])}
-METHODS = ("close-loop", "calibrate", "geometry", "nominal-tip")
+METHODS = ("close-loop", "calibrate", "geometry", "nominal-tip", "oracle")
 
 
 @dataclass(frozen=True)
@@ -58,7 +60,7 @@ class Robot:
     angle_mrad: float                     # 1 sigma of the joint-origin rotation errors
     noise_um: float                       # probing scatter, 1 sigma per axis
     stiffness: float | list | None = None     # joint stiffness under gravity [N m/rad], None: rigid joints
-    eccentricity: dict | None = None      # {"joint": ..., "amplitude_mrad": ..., "phase_deg": ...}
+    eccentricity: tuple = ()              # ({"joint": ..., "amplitude_mrad": ..., "phase_deg": ...}, ...)
     gain: dict = field(default_factory=dict)  # joint index (0-based) -> gain error [1]
 
     def truth_text(self) -> str:
@@ -69,9 +71,8 @@ class Robot:
             out.append(f"stiffness {self.stiffness / 1e3:.0f} kN m/rad")
         else:
             out.append("stiffness " + "/".join(f"{k / 1e3:.0f}" for k in self.stiffness) + " kN m/rad")
-        if self.eccentricity:
-            e = self.eccentricity
-            out.append(f"eccentricity {e['joint']} {e['amplitude_mrad']} mrad")
+        for e in self.eccentricity:
+            out.append(f"eccentricity {e['joint'].replace('panda_joint', 'j')} {e['amplitude_mrad']} mrad")
         for j, g in self.gain.items():
             out.append(f"gain j{j + 1} {g:.0e}")
         out.append(f"noise {self.noise_um:.0f} um")
@@ -83,11 +84,14 @@ ROBOTS = (
     Robot("r2", "right", 12, 300.0, 0.20, 120.0, stiffness=12000.0),
     Robot("r3", "back-high", 13, 200.0, 0.30, 100.0, stiffness=[15000, 9000, 12000, 7000, 5000, 5000, 5000]),
     Robot("r4", "front", 14, 250.0, 0.25, 120.0, stiffness=10000.0,
-          eccentricity={"joint": "panda_joint1", "amplitude_mrad": 0.3, "phase_deg": 30.0}),
+          eccentricity=({"joint": "panda_joint1", "amplitude_mrad": 0.3, "phase_deg": 30.0},)),
     Robot("r5", "right", 15, 200.0, 0.20, 150.0,
-          eccentricity={"joint": "panda_joint2", "amplitude_mrad": 0.4, "phase_deg": -60.0}),
+          eccentricity=({"joint": "panda_joint2", "amplitude_mrad": 0.4, "phase_deg": -60.0},)),
     Robot("r6", "back-high", 16, 400.0, 0.40, 120.0, stiffness=15000.0, gain={3: 5e-4}),
     Robot("r7", "right", 17, 500.0, 0.50, 150.0, stiffness=25000.0),
+    Robot("r8", "front", 18, 300.0, 0.30, 150.0, stiffness=12000.0,      # the real Panda's j1 eccentricity (1 mrad)
+          eccentricity=({"joint": "panda_joint1", "amplitude_mrad": 1.0, "phase_deg": 120.0},
+                        {"joint": "panda_joint3", "amplitude_mrad": 0.3, "phase_deg": 0.0})),
 )
 
 
@@ -105,9 +109,8 @@ def campaign_dict(robot: Robot) -> dict:
     if robot.stiffness is not None:
         truth["joint_compliance"] = {"stiffness_Nm_per_rad": robot.stiffness, "gravity": True, "contact": False}
     if robot.eccentricity:
-        e = robot.eccentricity
         truth["eccentricity"] = [{"joint": e["joint"], "amplitude_deg": float(np.degrees(e["amplitude_mrad"] * 1e-3)),
-                                  "phase_deg": e["phase_deg"]}]
+                                  "phase_deg": e["phase_deg"]} for e in robot.eccentricity]
     return {"seed": robot.seed, "sensor": "none", "signals": {"enabled": False}, "truth": truth,
             "noise": {"probing_repeatability_um": robot.noise_um},
             "operator": {"force_mean_N": 0.3, "max_force_N": 1.0}, "task": tasks}
@@ -151,37 +154,67 @@ OPTIONS = {"close-loop": [], "calibrate": [], "geometry": ["--effect", "none"],
            "nominal-tip": ["--effect", "none", "--free", "probe.x", "--free", "probe.y", "--free", "probe.z"]}
 
 
-def study_robot(robot: Robot, out: Path, methods=METHODS, progress=None) -> dict:
-    """Simulate ``robot``, train every method on its training placement, predict the other two."""
+def oracle_options(robot: Robot) -> list[str]:
+    """``calibrate`` options of the truth's own effects (each effect's parameters on the truth's joints only)."""
+    out = ["--effect", "joint_compliance"] if robot.stiffness is not None else []
+    for key, joints, pattern in (("eccentricity", {e["joint"] for e in robot.eccentricity}, "ecc*"),
+                                 ("joint_gain", {f"panda_joint{j + 1}" for j in robot.gain}, "gain")):
+        if joints:
+            out += ["--effect", key] + [a for j in range(1, 8) if f"panda_joint{j}" not in joints
+                                        for a in ("--hold", f"panda_joint{j}.{pattern}")]
+    return out or ["--effect", "none"]
+
+
+def study_robot(robot: Robot, out: Path, methods=METHODS, train=None, progress=None) -> dict:
+    """Simulate ``robot``, train every method on its training placement (``train``: these placements
+    instead), predict the others."""
     truth = simulate_robot(robot, out / "data")
-    rows = placement_study(out / "data", URDF, TIP, out / "runs", train=[robot.train], progress=progress,
-                           methods=tuple(methods), options=OPTIONS)
-    return {"robot": robot.name, "truth_text": robot.truth_text(), "train": robot.train,
-            "truth": {pl: f for pl, f in truth["figures"].items() if pl != robot.train},
-            "rows": [r.to_dict() for r in rows]}
+    train = train or [robot.train]
+    rows = placement_study(out / "data", URDF, TIP, out / "runs", train=train, progress=progress,
+                           methods=tuple(methods), options={**OPTIONS, "oracle": oracle_options(robot)})
+    return {"robot": robot.name, "truth_text": robot.truth_text(), "train": "/".join(train),
+            "truth": truth["figures"], "rows": [r.to_dict() for r in rows]}
 
 
-def summary_table(results: list[dict]) -> str:
-    """Per robot: effects the loop added, and per method the mean held-out spread, mean |distance error| and
-    the pooled coverage of u; the truth's own spread and distance error."""
-    head = ("| robot (trained on) | truth | loop added | spread 2σ [mm]: truth / close-loop / calibrate / geometry / "
-            "nominal-tip | abs. distance error [mm]: truth / close-loop / calibrate / geometry / nominal-tip "
-            "| coverage within 1.96 u: close-loop / calibrate |")
-    lines = [head, "|---|---|---|---|---|---|"]
+def summary_rows(results: list[dict]) -> list[dict]:
+    """One row per robot and training placement: the effects the loop added and, per method (and the truth
+    on the same held-out placements), the mean held-out spread [mm], the mean |distance error| [mm] and the
+    pooled coverage of u [%]."""
+    out = []
     for r in results:
-        by = {m: [x for x in r["rows"] if x["method"] == m] for m in METHODS}
-        sp = [np.mean([f["spread_mean_mm"] for f in r["truth"].values()])]
-        de = [np.mean([abs(f["distance_error_mm"]) for f in r["truth"].values()])]
-        for m in METHODS:
-            sp.append(np.mean([x["spread_mean_mm"] for x in by[m]]) if by[m] else np.nan)
-            de.append(np.mean([abs(x["distance_error_mm"]) for x in by[m]]) if by[m] else np.nan)
-        cov = [sum(x["inside"] for x in by[m]) / max(1, sum(x["values"] for x in by[m])) * 100
-               if by[m] and "inside" in by[m][0] else np.nan for m in ("close-loop", "calibrate")]
-        added = ", ".join(by["close-loop"][0]["effects"]) if by["close-loop"] and by["close-loop"][0]["effects"] else "-"
-        lines.append(f"| {r['robot']} ({r['train']}) | {r['truth_text']} | {added} | "
-                     + " / ".join(f"{v:.3f}" for v in sp) + " | " + " / ".join(f"{v:.3f}" for v in de)
-                     + " | " + " / ".join(f"{v:.1f} %" for v in cov) + " |")
-    return "\n".join(lines)
+        for tr in dict.fromkeys(x["train"] for x in r["rows"]):
+            rows = [x for x in r["rows"] if x["train"] == tr]
+            tests = list(dict.fromkeys(x["test"] for x in rows))
+            figs = {"truth": [r["truth"][t] for t in tests]}
+            figs.update({m: [x for x in rows if x["method"] == m] for m in METHODS})
+            line = {"robot": r["robot"], "truth_text": r["truth_text"], "train": tr, "tests": tests,
+                    "added": next((x["effects"] for x in rows if x["method"] == "close-loop"), [])}
+            for m, fs in figs.items():
+                if not fs:
+                    continue
+                line[m] = {"spread_mm": float(np.mean([f["spread_mean_mm"] for f in fs])),
+                           "distance_mm": float(np.mean([abs(f["distance_error_mm"]) for f in fs]))}
+                if "inside" in fs[0]:
+                    line[m]["coverage"] = 100.0 * sum(f["inside"] for f in fs) / sum(f["values"] for f in fs)
+            out.append(line)
+    return out
+
+
+def summary_table(lines: list[dict]) -> str:
+    """Markdown of :func:`summary_rows`."""
+    cols = ["truth"] + [m for m in METHODS if any(m in ln for ln in lines)]
+    head = (f"| robot | truth | trained on | loop added | spread 2σ [mm]: {' / '.join(cols)} "
+            f"| abs. distance error [mm]: {' / '.join(cols)} | within 1.96 u [%]: {' / '.join(cols[1:])} |")
+    md = [head, "|---|---|---|---|---|---|---|"]
+    for ln in lines:
+        def val(m, k, fmt):
+            return fmt.format(ln[m][k]) if m in ln and k in ln[m] else "-"
+        md.append(f"| {ln['robot']} | {ln['truth_text']} | {ln['train']} | "
+                  + (", ".join(e.replace("panda_joint", "j") for e in ln["added"]) or "-") + " | "
+                  + " / ".join(val(m, "spread_mm", "{:.3f}") for m in cols) + " | "
+                  + " / ".join(val(m, "distance_mm", "{:.3f}") for m in cols) + " | "
+                  + " / ".join(val(m, "coverage", "{:.1f}") for m in cols[1:]) + " |")
+    return "\n".join(md)
 
 
 def main(argv=None) -> int:
@@ -189,6 +222,8 @@ def main(argv=None) -> int:
     p.add_argument("--robots", default=None, help="comma-separated robot names (default every one: "
                    + ", ".join(r.name for r in ROBOTS) + ")")
     p.add_argument("--methods", default=",".join(METHODS), help="comma-separated subset of " + ", ".join(METHODS))
+    p.add_argument("--every-placement", action="store_true",
+                   help="train each robot on each placement in turn (default: its own training placement)")
     p.add_argument("-o", "--output", type=Path, default=Path("out/sim-seats"), help="output folder")
     args = p.parse_args(argv)
     names = args.robots.split(",") if args.robots else [r.name for r in ROBOTS]
@@ -201,9 +236,12 @@ def main(argv=None) -> int:
         robot = known[n]
         print(f"{n}: {robot.truth_text()}; trained on {robot.train}", file=sys.stderr, flush=True)
         results.append(study_robot(robot, args.output / n, args.methods.split(","),
+                                   train=list(PLACES) if args.every_placement else None,
                                    progress=lambda m: print("  " + m, file=sys.stderr, flush=True)))
         (args.output / "results.json").write_text(json.dumps(results, indent=1) + "\n")
-    print(summary_table(results))
+    lines = summary_rows(results)
+    (args.output / "summary.json").write_text(json.dumps(lines, indent=1) + "\n")
+    print(summary_table(lines))
     return 0
 
 
