@@ -5,7 +5,7 @@ candidate passes (:func:`physics_inclusion`), parsimony among candidates of the 
 candidates the data cannot tell from the one added."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 
 import numpy as np
@@ -23,7 +23,8 @@ from .crossval import CVResult, cross_validate, fold_fit
 from .settings import PARSIMONY, PHYSICS, SAME_SIGNATURE
 from .state import LoopState, Screening
 
-__all__ = ["Decision", "heldout_test", "fit_on_design", "choose", "whole_family", "physics_inclusion",
+__all__ = ["Decision", "heldout_test", "fit_on_design", "choose", "whole_family", "tied_rivals", "merge_tied",
+           "physics_inclusion",
            "negative_compliances", "resolved", "candidate_priors", "signature_overlap", "plot_family"]
 
 
@@ -104,8 +105,72 @@ def choose(state: LoopState, scr: Screening, passing: list) -> Decision:
                 signature_overlap(scr.space, wcols, c2cols, rank_tol) >= SAME_SIGNATURE:
             cand, cv = c2, cv2
             break
+    cand, cv = merge_tied(state, scr, cand, cv, passing)
     nested, alternatives = _same_signature(scr, cand, rank_tol)
     return Decision(cand, cv, nested, alternatives)
+
+
+#: effect families with one candidate a joint whose tied candidates :func:`merge_tied` joins into one
+PER_JOINT = ("eccentricity", "joint_gain")
+
+
+def tied_rivals(cand: Candidate, cv: CVResult, passing: list, level: float) -> list:
+    """The passing candidates of ``cand``'s family on other joints whose held-out errors the decisions' units
+    do not tell from ``cand``'s: a one-sided paired Wilcoxon test of (rival's - winner's) mean squared held-out
+    error per unit does not reach ``level`` (the winner is not significantly better)."""
+    if cand.family not in PER_JOINT or cand.joint is None or cand.origin != "library" or cv.folds is None:
+        return []
+    units = sorted(cv.folds.sse)
+    mine = np.array([cv.folds.sse[u][0] / cv.folds.sse[u][1] for u in units])
+    out = []
+    for c2, cv2 in passing:
+        if c2 is cand or c2.family != cand.family or c2.joint in (None, cand.joint) or c2.origin != "library" \
+                or cv2.folds is None or sorted(cv2.folds.sse) != units:
+            continue
+        d = np.array([cv2.folds.sse[u][0] / cv2.folds.sse[u][1] for u in units]) - mine
+        p = 1.0 if np.all(d == 0) else float(stats.wilcoxon(d, alternative="greater", zero_method="wilcox").pvalue)
+        if not p < level:
+            out.append((c2, p))
+    return out
+
+
+def merge_tied(state: LoopState, scr: Screening, cand: Candidate, cv: CVResult, passing: list
+               ) -> tuple[Candidate, CVResult]:
+    """When the held-out data cannot tell the winner from another passing candidate of its family on another
+    joint (:func:`tied_rivals`; e.g. the eccentricities of two joints that are nearly coaxial over one plate
+    placement's poses), choosing one of them is a guess that another placement may punish: both joints'
+    effect is offered as one candidate (their parameters shrunk by the prior, the data sharing the signature
+    between them) and taken if it passes the held-out test itself; else the winner stays."""
+    rivals = tied_rivals(cand, cv, passing, scr.threshold)
+    if not rivals:
+        return cand, cv
+    desc = state.desc
+    named = {j: c.joint for c in [cand] + [c2 for c2, _ in rivals] for j in c.effect.joints}
+    joints = tuple(sorted(named))
+    prefix = cand.name[:-len(cand.joint)].rstrip()            # "eccentricity", "gain"
+    merged = Candidate(f"{prefix} {', '.join(named[j] for j in joints)}", replace(cand.effect, joints=joints),
+                       cand.family)
+    tests = [scr.test_of(cand)] + [scr.test_of(c2) for c2, _ in rivals]
+    est = {n: (b, u) for t in tests for n, b, u in zip(t.names, t.estimate, t.u)}
+    pnames = merged.param_names(desc)
+    nan = (float("nan"), float("nan"))
+    t0 = tests[0]
+    test = replace(t0, name=merged.name, k=sum(t.k for t in tests), rank=sum(t.rank for t in tests),
+                   absorbed=tuple(a for t in tests for a in t.absorbed), names=tuple(pnames),
+                   estimate=np.array([est.get(n, nan)[0] for n in pnames]),
+                   u=np.array([est.get(n, nan)[1] for n in pnames]), p_value=min(t.p_value for t in tests))
+    scr.candidates.append(merged)
+    scr.tests.append(test)
+    state.say(f"  {cand.name} is not told from {', '.join(f'{c2.name} (paired p = {p:.2g})' for c2, p in rivals)} "
+              f"on held-out data: cross-validating + {merged.name}")
+    got = heldout_test(state, scr, merged)
+    state.say(f"    {got.reason}")
+    scr.gated.append((merged, test))
+    scr.cvs.append(got)
+    if got.passed:
+        return merged, got
+    state.say(f"  keeping {cand.name}")
+    return cand, cv
 
 
 def _same_signature(scr: Screening, cand: Candidate, rank_tol: float) -> tuple[list, list]:
