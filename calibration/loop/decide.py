@@ -105,7 +105,6 @@ def choose(state: LoopState, scr: Screening, passing: list) -> Decision:
                 signature_overlap(scr.space, wcols, c2cols, rank_tol) >= SAME_SIGNATURE:
             cand, cv = c2, cv2
             break
-    cand, cv = merge_tied(state, scr, cand, cv, passing)
     nested, alternatives = _same_signature(scr, cand, rank_tol)
     return Decision(cand, cv, nested, alternatives)
 
@@ -140,7 +139,9 @@ def merge_tied(state: LoopState, scr: Screening, cand: Candidate, cv: CVResult, 
     joint (:func:`tied_rivals`; e.g. the eccentricities of two joints that are nearly coaxial over one plate
     placement's poses), choosing one of them is a guess that another placement may punish: both joints'
     effect is offered as one candidate (their parameters shrunk by the prior, the data sharing the signature
-    between them) and taken if it passes the held-out test itself; else the winner stays."""
+    between them). Returns it and its held-out test if it passes that test, else the winner and its own.
+    The loop offers it only once the winner itself is to be added (:func:`calibration.loop.stages.decide`):
+    a tie decides how a supported signature is shared between the joints, never whether one is added."""
     rivals = tied_rivals(cand, cv, passing, scr.threshold)
     if not rivals:
         return cand, cv

@@ -47,6 +47,7 @@ from .decide import (
     candidate_priors,
     choose,
     heldout_test,
+    merge_tied,
     negative_compliances,
     physics_inclusion,
     plot_family,
@@ -323,10 +324,26 @@ def decide(state: LoopState, scr: Screening, passing: list) -> tuple[Decision, S
         decision = choose(state, scr, passing)
         stage = fit_stage(state, decision, scr)
         if not outer_test_worse(state, stage, decision.cv):
-            return decision, stage
+            return shared(state, scr, passing, decision, stage)
         top = max(passing, key=lambda x: x[1].improvement)[0]
         passing = [(c, v) for c, v in passing if c is not decision.candidate and c is not top]
     return None
+
+
+def shared(state: LoopState, scr: Screening, passing: list, decision: Decision, stage: Stage
+           ) -> tuple[Decision, Stage]:
+    """The decision to add, its effect shared with the passing candidates the held-out data cannot tell from it
+    (:func:`~calibration.loop.decide.merge_tied`) when that joint candidate passes the held-out folds and
+    does not make the outer test set worse; else ``decision`` and ``stage`` as they are."""
+    cand, cv = merge_tied(state, scr, decision.candidate, decision.cv, passing)
+    if cand is decision.candidate:
+        return decision, stage
+    joint = Decision(cand, cv, [], [])
+    joint_stage = fit_stage(state, joint, scr)
+    if outer_test_worse(state, joint_stage, cv):
+        state.say(f"  keeping {decision.candidate.name}")
+        return decision, stage
+    return joint, joint_stage
 
 
 def outer_test_worse(state: LoopState, stage: Stage, cv) -> bool:

@@ -1,0 +1,83 @@
+"""scripts/sim_seats_study.py (docs/close-loop.md, "Simulated Panda robots"): simulated robots in the real seat
+study's shape, trained on one plate placement with the default options, predicting the other two; and the
+loop's rule for candidates the held-out data cannot tell apart (:func:`calibration.loop.decide.tied_rivals`)."""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+
+from arm_model.effects import EncoderEccentricity, JointGain
+from calibration.candidates import Candidate
+from calibration.loop.crossval import CVResult, FoldFit
+from calibration.loop.decide import tied_rivals
+from conftest import ROOT
+
+sys.path.insert(0, str(ROOT / "scripts"))
+import sim_seats_study as study  # noqa: E402
+
+
+def _cv(name: str, errors) -> CVResult:
+    """A passing held-out test whose units' mean squared errors are ``errors``."""
+    sse = {i: (float(e), 1) for i, e in enumerate(errors)}
+    return CVResult(name, 1.0, 0.8, 0.2, 1e-6, 0.005, len(sse), len(sse), True, "", folds=FoldFit([], sse))
+
+
+def _ecc(j: int) -> Candidate:
+    return Candidate(f"eccentricity j{j + 1}", EncoderEccentricity(joints=(j,), harmonics=(1, 2)), "eccentricity",
+                     f"j{j + 1}")
+
+
+def test_tied_rivals_by_hand():
+    """A rival of the same family on another joint is tied when the winner is not significantly better per
+    unit (one-sided paired Wilcoxon at the level); better on all 40 units (p = 2^-40) it is not; another
+    family, or the same joint, is never a rival."""
+    rng = np.random.default_rng(0)
+    base = rng.uniform(1.0, 2.0, 40)
+    win, cv = _ecc(0), _cv("w", base)
+    tied = (_ecc(2), _cv("t", base + rng.normal(0, 0.05, 40)))            # differences of both signs
+    beaten = (_ecc(3), _cv("b", base + 0.1))                               # worse on every unit
+    gain = (Candidate("gain j3", JointGain(joints=(2,)), "joint_gain", "j3"), _cv("g", base))
+    got = tied_rivals(win, cv, [(win, cv), tied, beaten, gain], 0.005)
+    assert [c.name for c, _ in got] == ["eccentricity j3"]
+    assert got[0][1] > 0.005
+    assert tied_rivals(win, cv, [(win, cv), beaten], 0.005) == []
+
+
+def test_coaxial_eccentricities_are_shared_not_guessed(tmp_path):
+    """Robot r8 (eccentricities of joints 1 (1 mrad) and 3 (0.3 mrad), joint compliance, 0.15 mm scatter),
+    trained on ``front``: over that placement the two joints' eccentricities explain the residual alike (held-out
+    drops 22 % and 20 %, paired p 0.27); the loop added the one ahead by a hair, joint 3, and the other two
+    placements' seat spread rose from 1.08 mm (calibrate) to 1.49 mm. Offered together, both are added and the
+    other placements are predicted better than by calibrate (measured 0.94 mm; joint 1 alone, the truth's
+    larger one, 0.91 mm)."""
+    r8 = next(r for r in study.ROBOTS if r.name == "r8")
+    res = study.study_robot(r8, tmp_path, methods=("close-loop", "calibrate"), train=["front"])
+    rows = {m: [x for x in res["rows"] if x["method"] == m] for m in ("close-loop", "calibrate")}
+    assert rows["close-loop"][0]["effects"] == ["eccentricity panda_joint1, panda_joint3"]
+    loop, plain = (np.mean([x["spread_mean_mm"] for x in rows[m]]) for m in ("close-loop", "calibrate"))
+    assert loop < 0.95 * plain, (loop, plain)
+
+
+@pytest.mark.slow
+def test_defaults_on_simulated_panda_robots(tmp_path):
+    """Eight simulated robots, each trained on its own placement (the table of docs/close-loop.md): the default
+    close-loop's held-out seat spread is below the nominal's with only the tool fitted on every robot (measured
+    0.13-0.57x) and within 2.2x the truth's own (the scatter alone; measured 1.2-1.9x); the loop adds no
+    effect on a joint the truth's effects do not act on; the pooled coverage of tip's u on the held-out
+    placements is 90-100 % (measured 97.8 %)."""
+    results = [study.study_robot(r, tmp_path / r.name, methods=("close-loop", "nominal-tip")) for r in study.ROBOTS]
+    inside = values = 0
+    for robot, res in zip(study.ROBOTS, results):
+        line = study.summary_rows([res])[0]
+        assert line["close-loop"]["spread_mm"] < line["nominal-tip"]["spread_mm"], line
+        assert line["close-loop"]["spread_mm"] < 2.2 * line["truth"]["spread_mm"], line
+        truth_joints = {e["joint"] for e in robot.eccentricity} | {f"panda_joint{j + 1}" for j in robot.gain}
+        for name in line["added"]:
+            joints = {w.strip(",") for w in name.split() if w.startswith("panda_joint")}
+            assert joints and joints <= truth_joints, (robot.name, name)
+        loop = [x for x in res["rows"] if x["method"] == "close-loop"]
+        inside += sum(x["inside"] for x in loop)
+        values += sum(x["values"] for x in loop)
+    assert 0.90 <= inside / values <= 1.0, inside / values
