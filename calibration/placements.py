@@ -92,7 +92,9 @@ def _tip(points: Path, arm: Path, out: Path, tip_frame: str | None = None):
     with open(out, newline="") as fh:
         rows = list(csv.DictReader(fh))
     x = np.array([[float(r[f"{a}_mm"]) for a in "xyz"] for r in rows]) * 1e-3
-    u = np.array([[float(r[f"u_{a}_mm"]) for a in "xyz"] for r in rows]) * 1e-3 if rows and "u_x_mm" in rows[0] else None
+    u = None
+    if rows and "u_x_mm" in rows[0]:
+        u = np.array([[float(r[f"u_{a}_mm"]) for a in "xyz"] for r in rows]) * 1e-3
     return x, np.array([r["feature"] for r in rows]), u
 
 

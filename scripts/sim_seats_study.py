@@ -206,14 +206,14 @@ def summary_table(lines: list[dict]) -> str:
     head = (f"| robot | truth | trained on | loop added | spread 2σ [mm]: {' / '.join(cols)} "
             f"| abs. distance error [mm]: {' / '.join(cols)} | within 1.96 u [%]: {' / '.join(cols[1:])} |")
     md = [head, "|---|---|---|---|---|---|---|"]
+    def val(ln, m, k, fmt):
+        return fmt.format(ln[m][k]) if m in ln and k in ln[m] else "-"
     for ln in lines:
-        def val(m, k, fmt):
-            return fmt.format(ln[m][k]) if m in ln and k in ln[m] else "-"
         md.append(f"| {ln['robot']} | {ln['truth_text']} | {ln['train']} | "
                   + (", ".join(e.replace("panda_joint", "j") for e in ln["added"]) or "-") + " | "
-                  + " / ".join(val(m, "spread_mm", "{:.3f}") for m in cols) + " | "
-                  + " / ".join(val(m, "distance_mm", "{:.3f}") for m in cols) + " | "
-                  + " / ".join(val(m, "coverage", "{:.1f}") for m in cols[1:]) + " |")
+                  + " / ".join(val(ln, m, "spread_mm", "{:.3f}") for m in cols) + " | "
+                  + " / ".join(val(ln, m, "distance_mm", "{:.3f}") for m in cols) + " | "
+                  + " / ".join(val(ln, m, "coverage", "{:.1f}") for m in cols[1:]) + " |")
     return "\n".join(md)
 
 
