@@ -23,7 +23,7 @@ MUKCA = {("front", "right"): (0.562, 1.348, -0.261), ("front", "back-high"): (2.
          ("back-high", "front"): (3.141, 3.575, 1.171), ("back-high", "right"): (1.997, 3.530, -0.262)}
 #: the effects the loop adds on the base model, per training placement (measured at --seed 0, 1 and 2)
 #: (on ``right`` the eccentricities of joints 1 and 3 explain its held-out poses alike, so they are added together)
-ADDED = {"front": (), "right": ("eccentricity panda_joint1, panda_joint3",), "back-high": ()}
+ADDED = {"front": (), "right": ("eccentricity panda_joint1+panda_joint3",), "back-high": ()}
 
 
 def _study(tmp_path, train, options=()):

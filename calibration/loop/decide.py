@@ -149,7 +149,7 @@ def merge_tied(state: LoopState, scr: Screening, cand: Candidate, cv: CVResult, 
     named = {j: c.joint for c in [cand] + [c2 for c2, _ in rivals] for j in c.effect.joints}
     joints = tuple(sorted(named))
     prefix = cand.name[:-len(cand.joint)].rstrip()            # "eccentricity", "gain"
-    merged = Candidate(f"{prefix} {', '.join(named[j] for j in joints)}", replace(cand.effect, joints=joints),
+    merged = Candidate(f"{prefix} {'+'.join(named[j] for j in joints)}", replace(cand.effect, joints=joints),
                        cand.family)
     tests = [scr.test_of(cand)] + [scr.test_of(c2) for c2, _ in rivals]
     est = {n: (b, u) for t in tests for n, b, u in zip(t.names, t.estimate, t.u)}
