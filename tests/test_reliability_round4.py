@@ -8,8 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
+from hypothesis import HealthCheck, given, settings, strategies as st
 
 from arm_model import InputError
 from arm_model.cli import main
@@ -80,3 +79,168 @@ def test_ring_output_folder_holding_the_training_poses_is_refused(folder, capsys
     err = capsys.readouterr().err
     assert "over an input" in err and "tp.csv" in err, err
     assert (sub / "tp.csv").read_text() == points_text(Q_DEG)
+
+
+# ---------------------------------------------------------------------------------------------
+# what training_poses may name
+
+def _refused(folder, arm, capsys, *needles) -> str:
+    out = folder / "out.csv"
+    assert tip(folder, arm, out) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and not out.exists(), err
+    for n in needles:
+        assert n in err, err
+    return err
+
+
+def test_training_poses_naming_the_model_file_itself_is_refused(folder, capsys):
+    arm = model(folder, GROWTH + 'training_poses = "m.toml"\n')
+    _refused(folder, arm, capsys, "m.toml", "training_poses", "the model file itself")
+
+
+def test_training_poses_naming_the_covariance_file_is_refused(folder, capsys):
+    (folder / "c.csv").write_text("parameter,unit,value,u\n")
+    arm = model(folder, GROWTH + 'covariance = "c.csv"\ntraining_poses = "c.csv"\n')
+    _refused(folder, arm, capsys, "m.toml", "training_poses", "covariance file")
+
+
+def test_training_poses_as_an_absolute_path_is_refused(folder, capsys):
+    arm = model(folder, GROWTH + f'training_poses = "{folder / "tp.csv"}"\n')
+    _refused(folder, arm, capsys, "m.toml", "training_poses", "relative to the model file")
+
+
+@pytest.mark.parametrize("name", ["sub", "."])
+def test_training_poses_naming_a_folder_says_it_is_a_folder(folder, capsys, name):
+    (folder / "sub").mkdir()
+    arm = model(folder, GROWTH + f'training_poses = "{name}"\n')
+    err = _refused(folder, arm, capsys, "a folder")
+    assert "no such file" not in err
+
+
+def test_training_poses_naming_a_fifo_is_refused_without_waiting(folder, capsys):
+    import os
+    os.mkfifo(folder / "f")
+    arm = model(folder, GROWTH + 'training_poses = "f"\n')
+    err = _refused(folder, arm, capsys, "not a regular file")
+    assert "no such file" not in err
+
+
+def test_training_poses_above_the_model_folder_are_read(folder):
+    """'..' is a relative path like any other: a model file in a sub-folder reads its poses above it."""
+    from arm_model.model_file import read_model_file
+    sub = folder / "models"
+    sub.mkdir()
+    arm = read_model_file(model(sub, GROWTH + 'training_poses = "../tp.csv"\n'))
+    assert arm.discrepancy.training.q.shape == Q_DEG.shape
+
+
+@pytest.mark.parametrize("rows, needle", [
+    ("", "empty"),
+    ("measurement,feature," + ",".join(f"q{k + 1}_deg" for k in range(7)) + "\n", "no points"),
+])
+def test_training_poses_without_a_pose_are_refused(folder, capsys, rows, needle):
+    (folder / "tp.csv").write_text(rows)
+    arm = model(folder, GROWTH + 'training_poses = "tp.csv"\n')
+    _refused(folder, arm, capsys, "tp.csv", needle)
+
+
+@pytest.mark.parametrize("cell, needle", [("nan", "finite"), ("inf", "finite"), ("1e300", "plausible"),
+                                          ("-1e6", "plausible"), ("x", "")])
+def test_training_poses_with_a_bad_angle_name_the_line_and_column(folder, capsys, cell, needle):
+    text = points_text(Q_DEG).splitlines()
+    cells = text[2].split(",")
+    cells[4] = cell
+    text[2] = ",".join(cells)
+    (folder / "tp.csv").write_text("\n".join(text) + "\n")
+    arm = model(folder, GROWTH + 'training_poses = "tp.csv"\n')
+    _refused(folder, arm, capsys, "tp.csv, line 3", "q3_deg", needle)
+
+
+@pytest.mark.parametrize("q", [Q_DEG[:, :6], np.hstack([Q_DEG, Q_DEG[:, :1]])])
+def test_training_poses_of_another_joint_count_are_refused(folder, capsys, q):
+    (folder / "tp.csv").write_text(points_text(q))
+    arm = model(folder, GROWTH + 'training_poses = "tp.csv"\n')
+    _refused(folder, arm, capsys, "tp.csv, line 1", "the arm has 7 joints")
+
+
+def test_duplicate_training_poses_read_as_one(folder):
+    """A pose given twice (a seat probed twice) is a training pose like any other: d is the same."""
+    from arm_model.model_file import load_model
+    one = load_model(model(folder, GROWTH + 'training_poses = "tp.csv"\n')).discrepancy
+    (folder / "tp2.csv").write_text(points_text(np.vstack([Q_DEG, Q_DEG])))
+    two = load_model(model(folder, GROWTH + 'training_poses = "tp2.csv"\n', "m2.toml")).discrepancy
+    q = np.radians(Q_DEG + 7.0)
+    np.testing.assert_array_equal(one.sd(load_model(folder / "m.toml").desc, q),
+                                  two.sd(load_model(folder / "m.toml").desc, q))
+
+
+# ---------------------------------------------------------------------------------------------
+# the Python API
+
+@pytest.mark.parametrize("kw, match", [
+    ({"discrepancy_growth": 0.02, "training_poses": "tp.csv"}, "model_discrepancy"),
+    ({"model_discrepancy": 5e-6, "discrepancy_growth": 0.02}, "training_poses"),
+    ({"model_discrepancy": 5e-6, "discrepancy_growth": -0.02, "training_poses": "tp.csv"}, "growth"),
+    ({"model_discrepancy": 5e-6, "discrepancy_growth": math.nan, "training_poses": "tp.csv"}, "growth"),
+    ({"model_discrepancy": 5e-6, "discrepancy_growth": math.inf, "training_poses": "tp.csv"}, "growth"),
+    ({"model_discrepancy": 5e-6, "discrepancy_growth": 1e3, "training_poses": "tp.csv"}, "growth"),
+    ({"model_discrepancy": math.nan}, "model_discrepancy"),
+    ({"model_discrepancy": 1.0}, "model_discrepancy"),
+    ({"model_discrepancy": 5e-6, "discrepancy_growth": 0.02, "training_poses": "/abs/tp.csv"}, "training_poses"),
+])
+def test_format_model_never_writes_a_discrepancy_its_reader_refuses(kw, match):
+    """format_model (the API every writer uses) refuses what parse_model would refuse, instead of writing a model
+    file that no command reads."""
+    from arm_model.model_file import format_model, parse_model
+    desc = parse_model(NOMINAL.read_text(), str(NOMINAL)).desc
+    with pytest.raises(ValueError, match=match):
+        format_model(desc, **kw)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(sigma=st.floats(0, 1e5), growth=st.floats(0, 1e5), name=st.from_regex(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,20}",
+                                                                             fullmatch=True))
+def test_a_written_discrepancy_reads_back(sigma, growth, name):
+    """Any sigma0 [um] and growth [um/mm] in range and any plain file name: format_model's text reads back to the
+    same values (4 significant digits) and the same file name."""
+    from arm_model.model_file import format_model, parse_model
+    desc = parse_model(NOMINAL.read_text(), str(NOMINAL)).desc
+    text = format_model(desc, model_discrepancy=sigma * 1e-6, discrepancy_growth=growth * 1e-3, training_poses=name)
+    arm = parse_model(text, "/nowhere/m.toml")
+    assert arm.model_discrepancy == pytest.approx(sigma * 1e-6, rel=6e-4, abs=1e-300)
+    assert arm.discrepancy_growth == pytest.approx(growth * 1e-3, rel=6e-4, abs=1e-300)
+    assert arm.training_poses.name == name
+
+
+_VALUES = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10**20, 10**20), st.booleans(),
+                    st.text(max_size=12), st.just(""), st.just("m.toml"), st.just("/etc/passwd"), st.just(".."),
+                    st.lists(st.integers(), max_size=2))
+
+
+@settings(max_examples=150, deadline=None)
+@given(cal=st.dictionaries(st.sampled_from(["model_discrepancy_um", "model_discrepancy_growth_um_per_mm",
+                                            "training_poses", "covariance", "probing_scatter_um", "bogus_key"]),
+                           _VALUES, max_size=4))
+def test_any_calibration_table_reads_or_says_where(cal):
+    """Any [calibration] table of the discrepancy keys (any TOML value): the model file reads, or an InputError
+    names the file and the key; the discrepancy of what reads is either None, a finite constant or a growth with
+    its training poses named."""
+    import tomllib
+
+    from arm_model.description import toml_text
+    from arm_model.model_file import parse_model
+    try:
+        text = NOMINAL.read_text() + "\n" + toml_text({"calibration": cal}, None)
+        tomllib.loads(text)
+    except (ValueError, TypeError):
+        return                          # not writable as TOML (e.g. a NUL in a string)
+    try:
+        arm = parse_model(text, "/nowhere/m.toml")
+    except InputError as exc:
+        assert exc.path == "/nowhere/m.toml" and "calibration" in (exc.column or ""), exc
+        return
+    for v in (arm.model_discrepancy, arm.discrepancy_growth):
+        assert v is None or (math.isfinite(v) and v >= 0)
+    if arm.discrepancy_growth:
+        assert arm.model_discrepancy is not None and arm.training_poses is not None
