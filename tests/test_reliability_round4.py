@@ -244,3 +244,29 @@ def test_any_calibration_table_reads_or_says_where(cal):
         assert v is None or (math.isfinite(v) and v >= 0)
     if arm.discrepancy_growth:
         assert arm.model_discrepancy is not None and arm.training_poses is not None
+
+
+# ---------------------------------------------------------------------------------------------
+# --prior-scale at the boundary
+
+@pytest.mark.parametrize("command", ["calibrate", "close-loop"])
+@pytest.mark.parametrize("value", ["1e-300", "5e-324", "1e-7"])
+def test_a_prior_scale_factor_too_small_to_weigh_is_refused(tmp_path, capsys, command, value):
+    """A factor below 1e-6 (1 nm on a 1 mm plausible size) divides by zero in the prior's weights (1e-300) or
+    stalls the fit on NaN (5e-324): refused at the option, exit 2, nothing written."""
+    from conftest import ROOT
+    ring = ROOT / "examples" / "data" / "paper-ring-xyz"
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as exc:
+        main([command, str(ring / "points.csv"), str(ring / "artefacts.toml"), "--arm", str(NOMINAL),
+              "-o", str(out), "--prior-scale", value])
+    assert exc.value.code == 2 and not out.exists()
+    assert "--prior-scale" in capsys.readouterr().err
+
+
+def test_close_loop_prior_scale_error_lists_auto(capsys):
+    """close-loop's --prior-scale takes auto (its default): a bad value's message lists it with the others."""
+    with pytest.raises(SystemExit):
+        main(["close-loop", "p.csv", "a.toml", "--arm", str(NOMINAL), "-o", "out", "--prior-scale", "often"])
+    err = capsys.readouterr().err
+    assert "expected auto, evidence, off or a number" in err, err
