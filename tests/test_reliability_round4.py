@@ -270,3 +270,27 @@ def test_close_loop_prior_scale_error_lists_auto(capsys):
         main(["close-loop", "p.csv", "a.toml", "--arm", str(NOMINAL), "-o", "out", "--prior-scale", "often"])
     err = capsys.readouterr().err
     assert "expected auto, evidence, off or a number" in err, err
+
+
+# ---------------------------------------------------------------------------------------------
+# the discrepancy's Python API
+
+def test_training_poses_beyond_plausible_joint_values_are_refused_by_the_api(nominal):
+    """TrainingPoses range-checks as the points reader does (|angle| <= 10000 deg, |length| <= 1000 m): at 1e300
+    rad the levers' central differences vanish (q + 1e-6 == q) and every pose would lie at d = 0."""
+    from arm_model.discrepancy import TrainingPoses
+    with pytest.raises(ValueError, match="plausible"):
+        TrainingPoses.of(nominal, np.full((1, nominal.n_joints), 1e300))
+    TrainingPoses.of(nominal, np.full((1, nominal.n_joints), math.radians(9999.0)))
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, 1e300])
+def test_a_growing_discrepancy_refuses_poses_it_cannot_measure(nominal, bad):
+    """sd and distance at a NaN, infinite or implausible pose: a ValueError, never a NaN or a silent d = 0."""
+    from arm_model.discrepancy import GrowingDiscrepancy, TrainingPoses
+    g = GrowingDiscrepancy(5e-6, 0.02, TrainingPoses.of(nominal, np.zeros((2, nominal.n_joints))))
+    q = np.zeros((3, nominal.n_joints))
+    q[1, 2] = bad
+    for f in (g.sd, g.distance):
+        with pytest.raises(ValueError, match="pose"):
+            f(nominal, q)
