@@ -294,3 +294,19 @@ def test_a_growing_discrepancy_refuses_poses_it_cannot_measure(nominal, bad):
     for f in (g.sd, g.distance):
         with pytest.raises(ValueError, match="pose"):
             f(nominal, q)
+
+
+# ---------------------------------------------------------------------------------------------
+# the files a calibration writes, named after the arm
+
+@pytest.mark.parametrize("name", ["語" * 100, "𝒜" * 120, "é" * 119 + "x", "a" * 300],
+                         ids=["cjk-100", "math-script-120", "accented-120", "ascii-300"])
+def test_the_model_files_of_a_long_arm_name_in_any_script_fit_a_file_name(name):
+    """An arm named by 100 CJK characters (300 bytes in UTF-8) made calibrate fit, then fail on writing
+    '<name>-calibrated-covariance.csv' (File name too long): every file named after the arm (model, covariance,
+    URDF, training poses) stays within the 255 bytes of a file name."""
+    from arm_model.output import safe_name
+    from calibration.model_output import model_paths
+    for path in model_paths("/x", name + "-calibrated").values():
+        assert len(path.name.encode("utf-8")) <= 255, path.name
+    assert safe_name(name) == safe_name(name) and len(safe_name(name).encode("utf-8")) <= 120
