@@ -310,3 +310,23 @@ def test_the_model_files_of_a_long_arm_name_in_any_script_fit_a_file_name(name):
     for path in model_paths("/x", name + "-calibrated").values():
         assert len(path.name.encode("utf-8")) <= 255, path.name
     assert safe_name(name) == safe_name(name) and len(safe_name(name).encode("utf-8")) <= 120
+
+
+# ---------------------------------------------------------------------------------------------
+# the default joint compliance of a robot with masses
+
+def test_a_robot_without_a_revolute_joint_gets_no_default_joint_compliance():
+    """A gantry (every joint prismatic) whose links carry masses: the joint compliance (revolute joints only) would
+    hold no parameter, yet be logged and listed in summary.json's base_effects, and turn close-loop's
+    --prior-scale auto to evidence. The default adds none."""
+    import re
+
+    from arm_model.model import ArmModel
+    from arm_model.model_file import parse_model
+    from calibration.calibrate import gravity_compliance
+    text = NOMINAL.read_text().replace("[[joint]]\n", '[[joint]]\ntype = "prismatic"\n')
+    text = re.sub(r"(lower|upper)_deg = .*\n", "", text).replace("encoder_resolution_deg", "encoder_resolution_mm")
+    desc = parse_model(text, "gantry.toml").desc
+    assert all(j.prismatic for j in desc.encoders) and any(j.mass > 0 for j in desc.joints)
+    assert gravity_compliance(ArmModel(desc)) == ()
+    assert gravity_compliance(ArmModel(parse_model(NOMINAL.read_text(), str(NOMINAL)).desc)) != ()
