@@ -435,7 +435,11 @@ def training_poses_of(arm: Arm) -> TrainingPoses | None:
                          "discrepancy grows away from; keep it beside the model file)", arm.training_poses)
     with open_input(arm.training_poses, what):          # a folder, a FIFO, a device: said so, never waited on
         pass
-    pts = read_points(arm.training_poses, arm.desc.joint_quantities)
+    try:
+        pts = read_points(arm.training_poses, arm.desc.joint_quantities)
+    except InputError as exc:       # not on the command line: say whose file it is
+        raise InputError(f"{exc.reason} (the training poses of the model file's [calibration] training_poses: a "
+                         "points file of the arm's joints)", exc.path, exc.line, exc.column) from None
     if not len(pts.q):
         raise InputError("the training poses file holds no pose", arm.training_poses)
     return TrainingPoses.of(arm.desc, pts.q)

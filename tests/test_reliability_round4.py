@@ -96,18 +96,18 @@ def _refused(folder, arm, capsys, *needles) -> str:
 
 def test_training_poses_naming_the_model_file_itself_is_refused(folder, capsys):
     arm = model(folder, GROWTH + 'training_poses = "m.toml"\n')
-    _refused(folder, arm, capsys, "m.toml", "training_poses", "the model file itself")
+    _refused(folder, arm, capsys, "m.toml", "key 'calibration.training_poses'", "the model file itself")
 
 
 def test_training_poses_naming_the_covariance_file_is_refused(folder, capsys):
     (folder / "c.csv").write_text("parameter,unit,value,u\n")
     arm = model(folder, GROWTH + 'covariance = "c.csv"\ntraining_poses = "c.csv"\n')
-    _refused(folder, arm, capsys, "m.toml", "training_poses", "covariance file")
+    _refused(folder, arm, capsys, "m.toml", "key 'calibration.training_poses'", "covariance file")
 
 
 def test_training_poses_as_an_absolute_path_is_refused(folder, capsys):
     arm = model(folder, GROWTH + f'training_poses = "{folder / "tp.csv"}"\n')
-    _refused(folder, arm, capsys, "m.toml", "training_poses", "relative to the model file")
+    _refused(folder, arm, capsys, "m.toml", "key 'calibration.training_poses'", "relative to the model file")
 
 
 @pytest.mark.parametrize("name", ["sub", "."])
@@ -330,3 +330,13 @@ def test_a_robot_without_a_revolute_joint_gets_no_default_joint_compliance():
     assert all(j.prismatic for j in desc.encoders) and any(j.mass > 0 for j in desc.joints)
     assert gravity_compliance(ArmModel(desc)) == ()
     assert gravity_compliance(ArmModel(parse_model(NOMINAL.read_text(), str(NOMINAL)).desc)) != ()
+
+
+@pytest.mark.parametrize("text", ["root:x:0:0:root:/root:/bin/bash\n",
+                                  "measurement,feature,q1_deg\nm,s,1\n"], ids=["not-a-points-file", "one-joint"])
+def test_a_bad_training_poses_file_says_whose_it_is(folder, capsys, text):
+    """The training poses' points file is not on the command line: its error names it, the line and the column,
+    and says it is the model file's training poses (a user looking for 'tp.csv' among their inputs finds why)."""
+    (folder / "tp.csv").write_text(text)
+    arm = model(folder, GROWTH + 'training_poses = "tp.csv"\n')
+    _refused(folder, arm, capsys, "tp.csv, line 1", "[calibration] training_poses")
