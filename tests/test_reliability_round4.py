@@ -340,3 +340,21 @@ def test_a_bad_training_poses_file_says_whose_it_is(folder, capsys, text):
     (folder / "tp.csv").write_text(text)
     arm = model(folder, GROWTH + 'training_poses = "tp.csv"\n')
     _refused(folder, arm, capsys, "tp.csv, line 1", "[calibration] training_poses")
+
+
+@pytest.mark.parametrize("command", ["view", "ring", "live"])
+def test_other_commands_with_a_missing_training_poses_file_exit_2_and_write_nothing(folder, capsys, command):
+    """view --ellipsoids, ring and live add the model discrepancy as tip does: a model file whose training poses
+    are gone is one error naming the file, exit 2, nothing written."""
+    from conftest import ROOT
+    ring = ROOT / "examples" / "data" / "paper-ring-xyz"
+    arm = model(folder, GROWTH + 'training_poses = "gone.csv"\n')
+    out = folder / "out"
+    argv = {"view": ["view", str(ring / "points.csv"), "--ellipsoids", "--html", str(out)],
+            "ring": ["ring", str(ring / "points.csv"), str(ring / "artefacts.toml"), "-o", str(out)],
+            "live": ["live", str(ROOT / "examples" / "live" / "samples.csv"), "-o", str(out)]}[command]
+    assert main([*argv, "--arm", str(arm)]) == 2
+    err = capsys.readouterr().err       # (pytest shows the viewer's libraries' deprecation warnings: not counted)
+    errors = [line for line in err.splitlines() if not line.startswith("warning: DeprecationWarning")]
+    assert len(errors) == 1 and "gone.csv" in errors[0] and "no such file" in errors[0] and "Traceback" not in err, err
+    assert not out.exists()
