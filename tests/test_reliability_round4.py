@@ -358,3 +358,23 @@ def test_other_commands_with_a_missing_training_poses_file_exit_2_and_write_noth
     errors = [line for line in err.splitlines() if not line.startswith("warning: DeprecationWarning")]
     assert len(errors) == 1 and "gone.csv" in errors[0] and "no such file" in errors[0] and "Traceback" not in err, err
     assert not out.exists()
+
+
+def test_training_poses_linked_to_the_model_file_is_refused(folder, capsys):
+    """A symbolic link to the model file is the model file: refused at the key, as its own name is."""
+    import os
+    os.symlink("m.toml", folder / "link.csv")
+    arm = model(folder, GROWTH + 'training_poses = "link.csv"\n')
+    _refused(folder, arm, capsys, "m.toml", "key 'calibration.training_poses'", "the model file itself")
+
+
+def test_training_poses_linked_to_a_points_file_elsewhere_are_read(folder, tmp_path_factory):
+    """A link to a real points file (a folder of shared poses) reads like the file itself."""
+    import os
+
+    from arm_model.model_file import read_model_file
+    other = tmp_path_factory.mktemp("shared") / "poses.csv"
+    other.write_text(points_text(Q_DEG))
+    os.symlink(other, folder / "link.csv")
+    arm = read_model_file(model(folder, GROWTH + 'training_poses = "link.csv"\n'))
+    np.testing.assert_allclose(arm.discrepancy.training.q, np.radians(Q_DEG), rtol=0, atol=1e-12)
