@@ -35,6 +35,9 @@ log = logging.getLogger(__name__)
 def _effects(keys):
     from arm_model.effects import EFFECTS
     out = []
+    if "none" in (keys or ()) and len(set(keys)) > 1:
+        raise InputError(f"--effect none is the geometry alone: it takes no other --effect (got "
+                         f"{', '.join(k for k in keys if k != 'none')})")
     for k in keys or ():
         if k == "none":
             continue

@@ -378,3 +378,15 @@ def test_training_poses_linked_to_a_points_file_elsewhere_are_read(folder, tmp_p
     os.symlink(other, folder / "link.csv")
     arm = read_model_file(model(folder, GROWTH + 'training_poses = "link.csv"\n'))
     np.testing.assert_allclose(arm.discrepancy.training.q, np.radians(Q_DEG), rtol=0, atol=1e-12)
+
+
+def test_effect_none_with_another_effect_is_refused(tmp_path, capsys):
+    """'--effect none' is the geometry alone: with another --effect it contradicts itself (it was ignored and the
+    other effect fitted)."""
+    from conftest import ROOT
+    ring = ROOT / "examples" / "data" / "paper-ring-xyz"
+    for command in ("calibrate", "close-loop"):
+        rc = main([command, str(ring / "points.csv"), str(ring / "artefacts.toml"), "--arm", str(NOMINAL), "-o",
+                   str(tmp_path / command), "--effect", "none", "--effect", "joint_compliance"])
+        assert rc == 2 and not (tmp_path / command).exists()
+        assert "--effect none" in capsys.readouterr().err
