@@ -390,3 +390,19 @@ def test_effect_none_with_another_effect_is_refused(tmp_path, capsys):
                    str(tmp_path / command), "--effect", "none", "--effect", "joint_compliance"])
         assert rc == 2 and not (tmp_path / command).exists()
         assert "--effect none" in capsys.readouterr().err
+
+
+def test_a_live_session_from_python_adds_the_model_files_discrepancy(folder):
+    """Session(arm=<model file>) without inputs takes the arm's default input uncertainties: with the model file's
+    probing scatter, also its model discrepancy (constant and growing), as `aacmm live` and `tip` do (it was left
+    out: every point's uncertainty without the discrepancy)."""
+    from arm_model.live.session import Session
+    from arm_model.model_file import load_model
+    path = model(folder, GROWTH + 'training_poses = "tp.csv"\n')
+    session = Session(path)
+    inputs = session._default_inputs(False)
+    assert inputs.discrepancy == pytest.approx(5e-6)
+    assert inputs.growing is not None and inputs.growing.growth == pytest.approx(0.02)
+    q = np.radians(Q_DEG + 3.0)
+    np.testing.assert_allclose(inputs.discrepancy_sd(session.desc, q),
+                               load_model(path).discrepancy.sd(session.desc, q), rtol=1e-12)
