@@ -406,3 +406,14 @@ def test_a_live_session_from_python_adds_the_model_files_discrepancy(folder):
     q = np.radians(Q_DEG + 3.0)
     np.testing.assert_allclose(inputs.discrepancy_sd(session.desc, q),
                                load_model(path).discrepancy.sd(session.desc, q), rtol=1e-12)
+
+
+def test_a_given_model_discrepancy_does_not_need_the_training_poses(folder, capsys):
+    """--u-model-discrepancy-um replaces the model file's discrepancy, its growth too (docs/uncertainty.md): tip then
+    has no use for the training poses and runs without them (it stopped at the missing file)."""
+    arm = model(folder, GROWTH + 'training_poses = "gone.csv"\n')
+    out = folder / "out.csv"
+    assert tip(folder, arm, out, "--u-model-discrepancy-um", "7") == 0
+    assert "model discrepancy    7.000    7.000    7.000   given" in capsys.readouterr().out
+    out.unlink()
+    assert _refused(folder, arm, capsys, "gone.csv")        # without it, the growth needs them
