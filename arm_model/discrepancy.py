@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["TrainingPoses", "GrowingDiscrepancy", "joint_levers", "pose_distance", "LEVER_STEP"]
+__all__ = ["TrainingPoses", "GrowingDiscrepancy", "joint_levers", "pose_distance", "checked_poses", "LEVER_STEP"]
 
 #: step [rad] ([m] for a prismatic joint) of the central differences of :func:`joint_levers`
 LEVER_STEP = 1e-6
@@ -53,8 +53,7 @@ class TrainingPoses:
         q = np.atleast_2d(np.asarray(self.q, dtype=float))
         if q.shape[1] != len(self.names) or len(self.circular) != len(self.names) or not len(q):
             raise ValueError(f"training poses need at least one pose of {len(self.names)} joints, got {q.shape}")
-        if not np.all(np.isfinite(q)):
-            raise ValueError("training poses must be finite")
+        checked_poses(q, self.circular, "training poses")
         object.__setattr__(self, "q", q)
         object.__setattr__(self, "circular", tuple(bool(c) for c in self.circular))
 
@@ -62,6 +61,21 @@ class TrainingPoses:
     def of(cls, desc, q) -> TrainingPoses:
         """The training poses ``q`` (T, J) of the arm ``desc`` (its encoder columns: revolute ones circular)."""
         return cls(tuple(desc.joint_names), q, tuple(not j.prismatic for j in desc.encoders))
+
+
+def checked_poses(q: np.ndarray, circular, what: str) -> None:
+    """A ValueError naming ``what`` unless every joint value of ``q`` (N, J) is finite and plausible (an angle for a
+    ``circular`` joint, else a length: :data:`arm_model.units.PLAUSIBLE_SI`, the points reader's range); beyond it
+    the levers' central differences vanish (q + :data:`LEVER_STEP` == q) and a pose would lie at d = 0."""
+    from .units import implausible
+    bad = np.argwhere(~np.isfinite(q))
+    if len(bad):
+        raise ValueError(f"{what}: pose {bad[0][0]}, joint {bad[0][1] + 1} is {q[tuple(bad[0])]!r}, not a finite value")
+    for circ in (True, False):
+        cols = np.flatnonzero(np.asarray(circular, dtype=bool) == circ)
+        wrong = implausible(q[:, cols], "angle" if circ else "length") if len(cols) and len(q) else None
+        if wrong:
+            raise ValueError(f"{what}: pose {wrong[0][0]}, joint {cols[wrong[0][1]] + 1}: {wrong[1]}")
 
 
 def joint_levers(desc, q) -> np.ndarray:
@@ -86,6 +100,7 @@ def pose_distance(desc, q, train: TrainingPoses, levers=None) -> np.ndarray:
     q = np.atleast_2d(np.asarray(q, dtype=float))
     if q.shape[1] != len(train.names):
         raise ValueError(f"q has {q.shape[1]} joints, the training poses {len(train.names)}")
+    checked_poses(q, train.circular, "the poses whose distance from the training poses is asked")
     lev = joint_levers(desc, q) if levers is None else np.asarray(levers, dtype=float)
     circ = np.asarray(train.circular, dtype=bool)
     out = np.empty(len(q))

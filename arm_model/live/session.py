@@ -106,7 +106,9 @@ class Session:
         plan: a :class:`~arm_model.live.plan.SessionPlan` (features in order), or None (free points;
             :meth:`begin_feature` adds features ad hoc).
         contact: :class:`~arm_model.live.contacts.ContactOptions`.
-        inputs: the input uncertainties (:func:`arm_model.uncertainty.default_inputs` of the arm when None).
+        inputs: the input uncertainties (None: :func:`arm_model.uncertainty.default_inputs` of the arm, with its
+            model file's probing scatter and model discrepancy, growing away from its training poses, as
+            ``aacmm live`` takes them).
         measurement: the points' measurement id (default: the plan's, else the folder's name, else "live").
         rate: the nominal sample rate [Hz] (None: estimated from the first intervals).
         layout: the stream's :class:`~arm_model.live.samples.SampleLayout` (its header is recorded and
@@ -130,8 +132,10 @@ class Session:
         self._detector = ContactDetector(contact)
         self._force_kind = None if layout is None else layout.force_kind
         self.inputs = inputs
+        discrepancy = arm.discrepancy       # read once (a growth's training poses file), as the command does
         self._default_inputs = (lambda has_force: default_inputs(self.desc, has_force=has_force,
-                                                                 model_probing=arm.probing_scatter))
+                                                                 model_probing=arm.probing_scatter,
+                                                                 model_discrepancy=discrepancy))
         self.plan = plan or SessionPlan()
         self.measurement = measurement or self.plan.measurement or (Path(folder).name if folder else "live")
         npar = 0 if self.parameters is None else len(self.parameters.names)
