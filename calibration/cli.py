@@ -527,7 +527,10 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
         d = res.discrepancy
         log.info(f"model discrepancy per axis: {d.sigma * 1e6:.4g} um (poses at the ends of each joint's range held "
                  f"out in turn: their errors {d.ratio:.2f} x what the fit predicts)")
-        if d.growth is not None:
+        if d.growth is not None and d.written_growth is None:
+            log.info("  not growing away from the training poses (the fitted growth is floored at 0): written as a "
+                     "constant")
+        elif d.growth is not None:
             g = d.growth
             log.info(f"  growing away from the training poses: {g.sigma0 * 1e6:.4g} +- {g.u_sigma0 * 1e6:.2g} um at "
                      f"them + {g.growth * 1e3:.4g} +- {g.u_growth * 1e3:.2g} um per mm of ball travel from the nearest "

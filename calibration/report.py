@@ -317,9 +317,12 @@ def discrepancy_html(result: CalibrationResult) -> list[str]:
 def _growth_html(d) -> list[str]:
     """The report's sentence on the discrepancy's growth away from the training poses (:class:`calibration.
     discrepancy.Growth`)."""
-    g = d.growth
+    g = d.written_growth
     if g is None:
-        return ["<p>The model file carries it and tip adds it to every point's uncertainty.</p>"]
+        floored = " It does not grow away from the training poses (the growth fitted to the same held-out poses is " \
+            "floored at 0)." if d.growth is not None else ""
+        return [f"<p>{floored} The model file carries it as a constant and tip adds it to every point's "
+                "uncertainty.</p>"]
     return [f"<p>Fitted to the same held-out poses as growing with how far the joint motions from the nearest of "
             f"the poses each was predicted from carry the ball (d): sigma_d<sup>2</sup> = sigma_0<sup>2</sup> + (g d)"
             f"<sup>2</sup> with sigma_0 = {_fmt(g.sigma0 * 1e6, 4)} &plusmn; {_fmt(g.u_sigma0 * 1e6, 2)} um and g = "

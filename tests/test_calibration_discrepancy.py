@@ -382,3 +382,23 @@ def test_fit_growth_of_noise_free_rows_is_zero():
         warnings.simplefilter("error")
         g = fit_growth(np.zeros(60), np.zeros(60), np.linspace(0.0, 1e-2, 60), np.repeat(np.arange(6), 10))
     assert g.sigma0 == 0 and g.growth == 0 and g.lr == 0, g
+
+
+def test_a_growth_floored_at_zero_is_written_as_a_constant():
+    """A growth fitted at its floor (g = 0, likelihood ratio 0: the held-out errors do not grow with distance)
+    resolves nothing: the model file gets the constant discrepancy of the same folds and no training poses,
+    never "growth 0 +- 0" as if measured; a growth above 0 is written with its sigma0."""
+    from types import SimpleNamespace
+
+    from calibration.discrepancy import Discrepancy, Growth
+    from calibration.model_output import discrepancy_fields
+    flat = Growth(sigma0=31e-6, growth=0.0, u_sigma0=5e-6, u_growth=0.0, lr=0.0, d_max=0.4, d_rms=0.2)
+    d = Discrepancy(sigma=30e-6, ratio=1.2, folds=14, rows=90, growth=flat)
+    assert d.written_growth is None
+    assert discrepancy_fields(SimpleNamespace(discrepancy=d)) == {"model_discrepancy": 30e-6,
+                                                                  "discrepancy_growth": None}
+    grows = Growth(sigma0=12e-6, growth=7e-4, u_sigma0=4e-6, u_growth=2e-4, lr=9.0, d_max=0.4, d_rms=0.2)
+    d = Discrepancy(sigma=30e-6, ratio=1.2, folds=14, rows=90, growth=grows)
+    assert d.written_growth is grows
+    assert discrepancy_fields(SimpleNamespace(discrepancy=d)) == {"model_discrepancy": 12e-6,
+                                                                  "discrepancy_growth": 7e-4}
