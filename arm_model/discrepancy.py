@@ -101,7 +101,7 @@ def pose_distance(desc, q, train: TrainingPoses, levers=None) -> np.ndarray:
     circ = np.asarray(train.circular, dtype=bool)
     turn = np.where(circ, 2 * math.pi, 1.0)                 # revolute joints in turns, prismatic ones in metres
     qn, tn, wn = q / turn, train.q / turn, lev * turn       # wn: metres per turn (per metre)
-    used = [j for j in range(q.shape[1]) if np.any(wn[:, j] != 0)]
+    used = np.flatnonzero(np.any(wn != 0, axis=0))        # a joint whose lever is 0 at every query adds nothing
     best = np.full(len(q), np.inf)
     tb = max(1, min(len(tn), _CACHE_BLOCK))
     qb = max(1, _CACHE_BLOCK // tb)
