@@ -244,6 +244,24 @@ def test_python_session_record_is_tip_byte_for_byte(tmp_path):
     assert (tmp_path / "r" / "tips.csv").read_bytes() == (tmp_path / "s" / "tips.csv").read_bytes()
 
 
+def test_the_reproduce_line_keeps_a_given_model_discrepancy(tmp_path, monkeypatch):
+    """``aacmm live --u-model-discrepancy-um 7``: session.json's reproduce command (run in the session folder)
+    writes the session's tips.csv byte for byte, and the 7 um per axis are in it (u above the session without)."""
+    t, f = pulses([2.0, 5.0], seed=5)
+    s, _ = run(t, f, folder=tmp_path / "s")
+    u0 = np.array([p.u for p in s.points])
+    out = tmp_path / "r"
+    assert main(["live", str(tmp_path / "s" / "samples.csv"), "--arm", "aacmm7", "-o", str(out), "--speed", "0",
+                 "--u-model-discrepancy-um", "7", "-q"]) == 0
+    cmd = read_status(out)["reproduce"].split()
+    assert cmd[:2] == ["aacmm", "tip"] and "--u-model-discrepancy-um" in cmd
+    monkeypatch.chdir(out)
+    assert main(cmd[1:] + ["-q"]) == 0
+    assert (out / "tips.csv").read_bytes() == (out / "tips-again.csv").read_bytes()
+    u = np.array([[float(r[f"u_{a}_mm"]) * 1e-3 for a in "xyz"] for r in rows(out / "tips.csv")])
+    np.testing.assert_allclose(u ** 2 - u0 ** 2, (7e-6) ** 2, rtol=0, atol=2 * 10e-6 * 0.5e-9)   # u written to 1 nm
+
+
 def test_torque_temperature_and_a_model_file(tmp_path, nominal):
     """Every effect of a model file applies (a thermal effect reads the temperature column, a joint
     compliance the contact torques); the points equal aacmm tip's."""
