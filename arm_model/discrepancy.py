@@ -91,9 +91,9 @@ def pose_distance(desc, q, train: TrainingPoses, levers=None) -> np.ndarray:
     An exhaustive search, in blocks of query and training poses (a few hundred kB each, so that every pass stays
     in the cache), joint by joint: a revolute joint's difference is wrapped to [-pi, pi] in turns (``x -
     rint(x)``), then weighted by the query's lever and squared. The weights are the query pose's own levers (and a
-    joint whose axis passes through the ball weighs nothing), so no fixed metric of a k-d tree gives the nearest
-    pose exactly; the exhaustive search is exact. Measured on 2 cores: 1e4 poses against 1e4 training poses in
-    about a second (``make bench``, ``bench_uncertainty``)."""
+    joint whose axis passes through the ball weighs nothing), so the metric is no fixed one a k-d tree is built
+    for; an exact tree search through a lower bound of it was measured slower (docs/uncertainty.md, "Speed").
+    Measured on 2 cores: 1e4 poses against 1e4 training poses in 0.8-1 s (``make bench``, ``bench_uncertainty``)."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     if q.shape[1] != len(train.names):
         raise ValueError(f"q has {q.shape[1]} joints, the training poses {len(train.names)}")

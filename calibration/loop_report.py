@@ -344,26 +344,7 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
                                      f"{s.plot_family}: before and after + {s.added.name}"))
             parts.append(f"<h3>The residual that led to it</h3><img src='{img}'>")
         sections.append("".join(parts))
-    parts = ["<h2>Final screening</h2>"]
-    if loop.final_screening:
-        parts.append(reports.html_table(_SCREEN_HEAD, _screening_rows(loop.final_screening)))
-        gate = loop.settings.screen_alpha / max(sum(t.identifiable for t in loop.final_screening), 1)
-        img = png("final-screening.png", plot_screening(loop.final_screening, "final screening", gate))
-        parts.append(f"<img src='{img}'>")
-    if loop.final_cv:
-        parts.append("<h3>Cross-validation</h3>" + reports.html_table(_CV_HEAD, _cv_rows(loop.final_cv)))
-    parts.append("<h2>Structure tests on the final fit</h2>")
-    parts.append(reports.html_table(("family", "columns", "rank", "delta chi2", "p", "p (Holm)", "explained (held-out)",
-                         "best regressor", "what"),
-                        [(f.name, t.k, t.rank, _g(t.delta_chi2, ".1f"), _g(t.p_value, ".2g"), _g(a, ".2g"),
-                          _g(t.explained_cv, ".3f"), t.best, f.what) for f, t, a in loop.structure]))
-    for name, d in loop.structure_plots.items():
-        img = png(f"structure-{_slug(name)}.png", plot_signature(d, None, f"remaining structure: {name}"))
-        parts.append(f"<img src='{img}'>")
-    if loop.skipped:
-        parts.append("<h3>Candidates not offered</h3>" + reports.html_table(("candidate", "why"),
-                                                               [(s.name, s.reason) for s in loop.skipped]))
-    sections.append("".join(parts))
+    sections.append(_final_html(loop, png))
     if conformance:
         written += write_conformance_pngs(conformance, conf_files, inputs)
         sections.append("".join(conformance_html(conformance, conf_files)))
@@ -390,6 +371,31 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
     written.append(atomic_write_text(out / "before-after.txt", table + "\n", inputs))
     written.append(atomic_write_text(out / "report.html", page, inputs))
     return written
+
+
+def _final_html(loop: LoopResult, png) -> str:
+    """The report's section on the final fit (its screening, cross-validation, structure tests and the candidates
+    not offered); ``png(name, data)`` writes a plot and returns its name."""
+    parts = ["<h2>Final screening</h2>"]
+    if loop.final_screening:
+        parts.append(reports.html_table(_SCREEN_HEAD, _screening_rows(loop.final_screening)))
+        gate = loop.settings.screen_alpha / max(sum(t.identifiable for t in loop.final_screening), 1)
+        img = png("final-screening.png", plot_screening(loop.final_screening, "final screening", gate))
+        parts.append(f"<img src='{img}'>")
+    if loop.final_cv:
+        parts.append("<h3>Cross-validation</h3>" + reports.html_table(_CV_HEAD, _cv_rows(loop.final_cv)))
+    parts.append("<h2>Structure tests on the final fit</h2>")
+    parts.append(reports.html_table(("family", "columns", "rank", "delta chi2", "p", "p (Holm)", "explained (held-out)",
+                         "best regressor", "what"),
+                        [(f.name, t.k, t.rank, _g(t.delta_chi2, ".1f"), _g(t.p_value, ".2g"), _g(a, ".2g"),
+                          _g(t.explained_cv, ".3f"), t.best, f.what) for f, t, a in loop.structure]))
+    for name, d in loop.structure_plots.items():
+        img = png(f"structure-{_slug(name)}.png", plot_signature(d, None, f"remaining structure: {name}"))
+        parts.append(f"<img src='{img}'>")
+    if loop.skipped:
+        parts.append("<h3>Candidates not offered</h3>" + reports.html_table(("candidate", "why"),
+                                                               [(s.name, s.reason) for s in loop.skipped]))
+    return "".join(parts)
 
 
 def _slug(name: str) -> str:
