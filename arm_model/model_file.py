@@ -34,6 +34,7 @@ dataclass fields and its parameters its ``param_defs``, so a new effect class ne
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -55,7 +56,7 @@ from .effects import EFFECTS, Effect
 from .errors import InputError, did_you_mean, open_input, parse_toml, read_text
 from .model import ArmModel, AuxData
 from .tracker import Tracker, tracker_from_tables, tracker_tables
-from .uncertainty import ParameterCovariance
+from .uncertainty import InputUncertainty, ParameterCovariance, default_inputs
 from .units import implausible
 
 __all__ = ["Arm", "PARAM_UNITS", "parse_model", "load_model", "format_model", "effect_tables", "training_poses_of",
@@ -126,15 +127,26 @@ class Arm:
     discrepancy_growth: float | None = None
     training_poses: Path | None = None
 
-    @property
+    @functools.cached_property
     def discrepancy(self) -> GrowingDiscrepancy | float | None:
         """The model discrepancy as :func:`arm_model.uncertainty.default_inputs` takes it: a
-        :class:`~arm_model.discrepancy.GrowingDiscrepancy` (its training poses read from their file:
+        :class:`~arm_model.discrepancy.GrowingDiscrepancy` (its training poses read from their file, once:
         :func:`training_poses_of`) when the file gives a growth, else the constant ``model_discrepancy`` [m] or
         None."""
         if self.model_discrepancy is None or not self.discrepancy_growth:
             return self.model_discrepancy
         return GrowingDiscrepancy(self.model_discrepancy, self.discrepancy_growth, training_poses_of(self))
+
+    def input_uncertainty(self, has_force: bool = True, **given) -> InputUncertainty:
+        """The input uncertainties of this arm's points: :func:`arm_model.uncertainty.default_inputs` with the
+        model file's probing scatter and model discrepancy (growing away from its training poses when it says
+        so) as their defaults, ``given`` overriding any of them (``default_inputs``' keywords). The one
+        place every command that reports a point's uncertainty (``tip``, ``ring``, ``view``, ``live`` and the
+        :class:`~arm_model.live.Session` of Python) takes them from, so that one model file gives one ``u``."""
+        # a given discrepancy replaces the model file's, its growth too: the training poses are then not read
+        model_disc = self.model_discrepancy if given.get("discrepancy") is not None else self.discrepancy
+        return default_inputs(self.desc, has_force=has_force, model_probing=self.probing_scatter,
+                              model_discrepancy=model_disc, **given)
 
     @property
     def model(self) -> ArmModel:
