@@ -119,14 +119,15 @@ def model_from_args(args: argparse.Namespace) -> Arm:
 
 
 def arm_inputs(args: argparse.Namespace) -> list:
-    """Every file the ``--arm`` options read: the arm, the ``--masses`` file and the covariance file a model
-    file names. Outputs are never written over any of them (:func:`arm_model.output.guard_output`)."""
+    """Every file the ``--arm`` options read: the arm, the ``--masses`` file and the covariance and training poses
+    files a model file names. Outputs are never written over any of them (:func:`arm_model.output.guard_output`)."""
     files = [args.arm, getattr(args, "masses", None)]
     try:
-        cov = model_from_args(args).covariance
+        arm = model_from_args(args)
+        named = [arm.covariance, arm.training_poses]
     except InputError:
-        cov = None          # the command reports the bad arm itself when it loads it
-    return [f for f in files + [cov] if f is not None]
+        named = []          # the command reports the bad arm itself when it loads it
+    return [f for f in files + named if f is not None]
 
 
 def arm_from_args(args: argparse.Namespace):

@@ -369,6 +369,8 @@ MAX_PROBING_SCATTER_UM = 1.0e5
 #: the largest growth of the model discrepancy a model file may give [um per mm of ball travel beyond the
 #: nearest training pose]: 100 times the travel itself is a unit mistake, not an estimate
 MAX_DISCREPANCY_GROWTH_UM_PER_MM = 1.0e5
+#: the keys of ``[calibration]`` that name a file, relative to the model file's folder
+FILE_KEYS = ("covariance", "training_poses")
 
 
 def check_calibration_table(tbl: Any, r: TomlReader) -> None:
@@ -376,7 +378,8 @@ def check_calibration_table(tbl: Any, r: TomlReader) -> None:
     numbers ``probing_scatter_um`` (>= 0: a calibration whose encoder and force-sensor noise alone account for
     its residual scatter writes 0; at most :data:`MAX_PROBING_SCATTER_UM`) and ``model_discrepancy_um`` (the
     same range), ``model_discrepancy_growth_um_per_mm`` (in [0, :data:`MAX_DISCREPANCY_GROWTH_UM_PER_MM`]; above 0
-    it needs ``model_discrepancy_um`` and ``training_poses``, the text naming the training poses' points file)."""
+    it needs ``model_discrepancy_um`` and ``training_poses``, the text naming the training poses' points file); the
+    files (:data:`FILE_KEYS`) relative to the model file's folder, never an absolute path."""
     if not isinstance(tbl, dict):
         raise r.error("'calibration' must be a table", "calibration")
     known = ("covariance", "written_by", "probing_scatter_um", "model_discrepancy_um",
@@ -395,6 +398,9 @@ def check_calibration_table(tbl: Any, r: TomlReader) -> None:
                               "calibration", key)
         elif not isinstance(value, str) or not value.strip():
             raise r.error(f"'{key}' must be a non-empty text", "calibration", key)
+        elif key in FILE_KEYS and Path(value).is_absolute():
+            raise r.error(f"'{key}' must name a file relative to the model file's folder (the model file and the "
+                          f"files it names move together), got the absolute path {value!r}", "calibration", key)
     lacking = [k for k in ("model_discrepancy_um", "training_poses") if k not in tbl]
     if tbl.get("model_discrepancy_growth_um_per_mm", 0) > 0 and lacking:
         raise r.error(f"'model_discrepancy_growth_um_per_mm' needs '{lacking[0]}' (the discrepancy at the training "

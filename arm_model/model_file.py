@@ -34,6 +34,7 @@ dataclass fields and its parameters its ``param_defs``, so a new effect class ne
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -52,10 +53,10 @@ from .description import (
 )
 from .discrepancy import GrowingDiscrepancy, TrainingPoses
 from .effects import EFFECTS, Effect
-from .errors import InputError, did_you_mean, parse_toml, read_text
+from .errors import InputError, did_you_mean, open_input, parse_toml, read_text
 from .model import ArmModel, AuxData
 from .tracker import Tracker, tracker_from_tables, tracker_tables
-from .uncertainty import ParameterCovariance
+from .uncertainty import InputUncertainty, ParameterCovariance, default_inputs
 from .units import implausible
 
 __all__ = ["Arm", "PARAM_UNITS", "parse_model", "load_model", "format_model", "effect_tables", "training_poses_of",
@@ -126,15 +127,26 @@ class Arm:
     discrepancy_growth: float | None = None
     training_poses: Path | None = None
 
-    @property
+    @functools.cached_property
     def discrepancy(self) -> GrowingDiscrepancy | float | None:
         """The model discrepancy as :func:`arm_model.uncertainty.default_inputs` takes it: a
-        :class:`~arm_model.discrepancy.GrowingDiscrepancy` (its training poses read from their file:
+        :class:`~arm_model.discrepancy.GrowingDiscrepancy` (its training poses read from their file, once:
         :func:`training_poses_of`) when the file gives a growth, else the constant ``model_discrepancy`` [m] or
         None."""
         if self.model_discrepancy is None or not self.discrepancy_growth:
             return self.model_discrepancy
         return GrowingDiscrepancy(self.model_discrepancy, self.discrepancy_growth, training_poses_of(self))
+
+    def input_uncertainty(self, has_force: bool = True, **given) -> InputUncertainty:
+        """The input uncertainties of this arm's points: :func:`arm_model.uncertainty.default_inputs` with the
+        model file's probing scatter and model discrepancy (growing away from its training poses when it says
+        so) as their defaults, ``given`` overriding any of them (``default_inputs``' keywords). The one
+        place every command that reports a point's uncertainty (``tip``, ``ring``, ``view``, ``live`` and the
+        :class:`~arm_model.live.Session` of Python) takes them from, so that one model file gives one ``u``."""
+        # a given discrepancy replaces the model file's, its growth too: the training poses are then not read
+        model_disc = self.model_discrepancy if given.get("discrepancy") is not None else self.discrepancy
+        return default_inputs(self.desc, has_force=has_force, model_probing=self.probing_scatter,
+                              model_discrepancy=model_disc, **given)
 
     @property
     def model(self) -> ArmModel:
@@ -383,11 +395,11 @@ def parse_model(text: str, path: str = "<string>") -> Arm:
     covariance = scatter = discrepancy = growth = training = None
     if "calibration" in data:
         check_calibration_table(data["calibration"], r)
-        if "training_poses" in data["calibration"]:
-            training = _beside(path, data["calibration"]["training_poses"])
-        cov = data["calibration"].get("covariance")
-        if cov is not None:
-            covariance = _beside(path, cov)
+        cal = data["calibration"]
+        covariance, training = (_beside(path, cal.get(k), r, k) for k in ("covariance", "training_poses"))
+        if training is not None and covariance is not None and _same_file(training, covariance):
+            raise r.error("'training_poses' names the covariance file: the training poses are a points file of "
+                          "their own (measurement, feature and the joint columns)", "calibration", "training_poses")
         if "probing_scatter_um" in data["calibration"]:
             scatter = float(data["calibration"]["probing_scatter_um"]) * 1e-6
         if "model_discrepancy_um" in data["calibration"]:
@@ -402,9 +414,24 @@ def parse_model(text: str, path: str = "<string>") -> Arm:
     return Arm(desc, effects, values, u, states, covariance, scatter, tracker, discrepancy, growth, training)
 
 
-def _beside(model_path: str, name: str) -> Path:
-    """A file a model file names (``covariance``, ``training_poses``): relative to the model file's folder."""
-    return (Path(model_path).parent / name) if model_path != "<string>" else Path(name)
+def _beside(model_path: str, name: str | None, r: TomlReader, key: str) -> Path | None:
+    """A file a model file names (``covariance``, ``training_poses``; None: not named): relative to the model
+    file's folder; the model file itself is an InputError at ``key``."""
+    if name is None:
+        return None
+    out = (Path(model_path).parent / name) if model_path != "<string>" else Path(name)
+    if model_path != "<string>" and _same_file(out, Path(model_path)):
+        raise r.error(f"'{key}' names the model file itself: it names the {key.replace('_', ' ')} file written "
+                      "beside it", "calibration", key)
+    return out
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """``a`` and ``b`` are one file (links followed; by name when either does not exist)."""
+    try:
+        return a.samefile(b)
+    except OSError:
+        return a.resolve() == b.resolve()
 
 
 def training_poses_of(arm: Arm) -> TrainingPoses | None:
@@ -414,10 +441,17 @@ def training_poses_of(arm: Arm) -> TrainingPoses | None:
     if arm.training_poses is None:
         return None
     from .io import read_points
-    if not arm.training_poses.is_file():
+    what = "the training poses file (the model file's [calibration] training_poses)"
+    if not arm.training_poses.exists():
         raise InputError("no such file: the model file's [calibration] training_poses names it (the poses its model "
                          "discrepancy grows away from; keep it beside the model file)", arm.training_poses)
-    pts = read_points(arm.training_poses, arm.desc.joint_quantities)
+    with open_input(arm.training_poses, what):          # a folder, a FIFO, a device: said so, never waited on
+        pass
+    try:
+        pts = read_points(arm.training_poses, arm.desc.joint_quantities)
+    except InputError as exc:       # not on the command line: say whose file it is
+        raise InputError(f"{exc.reason} (the training poses of the model file's [calibration] training_poses: a "
+                         "points file of the arm's joints)", exc.path, exc.line, exc.column) from None
     if not len(pts.q):
         raise InputError("the training poses file holds no pose", arm.training_poses)
     return TrainingPoses.of(arm.desc, pts.q)
@@ -462,6 +496,10 @@ def format_model(desc: ArmDescription, effects=(), values: dict | None = None, u
                              ("training_poses", training_poses))
            if v not in (None, "")}     # a 0 is kept
     if cal:
+        try:                            # never a file parse_model refuses
+            check_calibration_table(cal, TomlReader("<model file>", ""))
+        except InputError as exc:
+            raise ValueError(f"cannot write the model file's [calibration] table: {exc.reason}") from None
         data["calibration"] = cal
     if tracker is not None:
         data.update(tracker_tables(tracker))

@@ -79,8 +79,9 @@ def safe_name(text: str, suffix: str = "") -> str:
 
     Letters, digits and ``. _ + -`` are kept; every other character (``/``, ``\\``, ``:``, spaces,
     control characters, markup) becomes ``_``; a leading dot becomes ``_`` (no hidden files, no
-    ``..``); an empty text gives ``_``; a name longer than 120 characters is cut and given a checksum of
-    the whole text. The same text always gives the same name, so a reader finds what a writer wrote.
+    ``..``); an empty text gives ``_``; a name longer than 120 bytes (UTF-8: 40 CJK characters) is cut
+    and given a checksum of the whole text, so that the suffixes of a command's files still fit a file
+    name's 255 bytes. The same text always gives the same name, so a reader finds what a writer wrote.
     """
     text = unicodedata.normalize("NFC", str(text))
     name = "".join(c if (c.isalnum() or c in "._+-") and c.isprintable() else "_" for c in text)
@@ -88,8 +89,9 @@ def safe_name(text: str, suffix: str = "") -> str:
         name = "_" + name[1:]
     if not name:
         name = "_"
-    if len(name) > _MAX_NAME:
-        name = f"{name[:_MAX_NAME - 9]}-{zlib.crc32(text.encode('utf-8')):08x}"
+    raw = name.encode("utf-8")
+    if len(raw) > _MAX_NAME:            # bytes, not characters: a file name holds 255 bytes
+        name = f"{raw[:_MAX_NAME - 9].decode('utf-8', 'ignore')}-{zlib.crc32(text.encode('utf-8')):08x}"
     return name + suffix
 
 

@@ -13,7 +13,6 @@ from .uncertainty import (
     InputUncertainty,
     ParameterCovariance,
     covariance_columns,
-    default_inputs,
     directional_ratio,
     monte_carlo,
     propagate,
@@ -68,9 +67,8 @@ def inputs_from_args(arm, args, has_force: bool) -> InputUncertainty:
     comp = None if args.u_compliance_rel is None else args.u_compliance_rel * np.asarray(desc.probe.compliance)
     probing = None if args.u_probing_um is None else args.u_probing_um * 1e-6
     u_disc = getattr(args, "u_model_discrepancy_um", None)
-    inputs = default_inputs(desc, encoder=enc, force=force, compliance=comp, probing=probing, has_force=has_force,
-                            model_probing=arm.probing_scatter, discrepancy=None if u_disc is None else u_disc * 1e-6,
-                            model_discrepancy=getattr(arm, "discrepancy", None))
+    inputs = arm.input_uncertainty(has_force, encoder=enc, force=force, compliance=comp, probing=probing,
+                                   discrepancy=None if u_disc is None else u_disc * 1e-6)
     if args.u_compliance_rel is not None:
         inputs.sources["compliance"] = f"given: {args.u_compliance_rel:g} of the declared compliances"
     return inputs

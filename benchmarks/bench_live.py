@@ -7,6 +7,8 @@
 * sample-to-point latency under 5 ms at the 99th percentile: from the start of the ``push`` of the sample
   that ends a contact to the point with its uncertainty (:attr:`LivePoint.latency`), and the whole
   ``push`` that brought it (the feature fits too), in process;
+* the same latency with a model file whose model discrepancy grows away from its training poses (300 and
+  10 000 of them): each point's distance from the nearest is part of its uncertainty, as in ``aacmm tip``;
 * replay at 50 times real time or better: ``aacmm live --speed 0`` on the same stream, its wall time less
   that of the same command on the stream's first second (start-up, a first point, closing), against the
   rest of the stream's duration (and the same in CPU time, which a busy machine does not stretch).
@@ -26,7 +28,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "live" / "samples.csv"
 
-QUICK = {"repeats": 1, "latency_rounds": 3}     # make bench BENCH=--quick
+QUICK = {"repeats": 1, "latency_rounds": 3, "growth": (300,)}     # make bench BENCH=--quick
 
 
 def stream(repeats: int, out: Path) -> float:
@@ -89,15 +91,34 @@ def run(src: Path, speed: float, view: bool, tmp: Path, window: tuple[float, flo
     return wall, usage.ru_utime + usage.ru_stime, steady
 
 
-def latency(rounds: int) -> dict:
-    """In-process latencies over ``rounds`` replays of the example [s]."""
+def growth_model(tmp: Path, training: int) -> Path:
+    """A model file of the bundled arm whose model discrepancy grows (5 um, 20 um per mm of ball travel) away
+    from ``training`` poses drawn uniformly within its joint limits (seeded), the poses' points file beside it."""
+    from arm_model import load_description
+    from arm_model.checks import limit_bounds
+    from arm_model.shipped import arm_path
+    path = arm_path("aacmm7")
+    desc = load_description(path)
+    lo, hi = np.clip(np.array(limit_bounds(desc)).T, -np.pi, np.pi)
+    q = np.random.default_rng(0).uniform(lo, hi, (training, desc.n_joints))
+    cols = ",".join(f"q{k + 1}_rad" for k in range(desc.n_joints))
+    (tmp / "poses.csv").write_text(f"measurement,feature,{cols}\n"
+                                   + "".join("m,seat," + ",".join(map(repr, r.tolist())) + "\n" for r in q))
+    model = tmp / "aacmm7-growth.toml"
+    model.write_text(Path(path).read_text() + "\n[calibration]\nmodel_discrepancy_um = 5.0\n"
+                     "model_discrepancy_growth_um_per_mm = 20.0\ntraining_poses = \"poses.csv\"\n")
+    return model
+
+
+def latency(rounds: int, arm: str = "aacmm7") -> dict:
+    """In-process latencies over ``rounds`` replays of the example [s] (a :class:`Session` on ``arm``)."""
     from arm_model.live import SampleLayout, Session
     lines = EXAMPLE.read_text().splitlines()
     layout = SampleLayout(lines[0].split(","), 7, str(EXAMPLE))
     samples = [(no, x, layout.parse(x, no)) for no, x in enumerate(lines[1:], start=2)]
     point, push, cpu, per_sample = [], [], [], []
     for r in range(rounds):
-        s = Session("aacmm7", layout=layout)
+        s = Session(arm, layout=layout)
         t_all = time.process_time()
         for no, x, smp in samples:
             t, c = time.perf_counter(), time.thread_time()
@@ -116,7 +137,7 @@ def latency(rounds: int) -> dict:
             "cpu_per_sample": float(np.median(per_sample))}
 
 
-def main(repeats: int = 4, latency_rounds: int = 12) -> dict:
+def main(repeats: int = 4, latency_rounds: int = 12, growth: tuple = (300, 10_000)) -> dict:
     with tempfile.TemporaryDirectory(prefix="bench-live-") as tmp:
         tmp = Path(tmp)
         src = tmp / "stream.csv"
@@ -154,6 +175,15 @@ def main(repeats: int = 4, latency_rounds: int = 12) -> dict:
           f"it, fits included: median {np.median(q):.2f}, p99 {np.percentile(q, 99):.2f} ms, in CPU time median "
           f"{np.median(lat['cpu']) * 1e3:.2f}, p99 {np.percentile(lat['cpu'], 99) * 1e3:.2f} ms; "
           f"CPU a sample (Session only) {lat['cpu_per_sample'] * 1e6:.1f} us")
+    with tempfile.TemporaryDirectory(prefix="bench-live-growth-") as tmp:
+        for training in growth:
+            lat = latency(latency_rounds, str(growth_model(Path(tmp), training)))
+            p, c = lat["point"] * 1e3, lat["cpu"] * 1e3
+            res[f"latency_growth_{training}_p99_ms"] = float(np.percentile(p, 99))
+            print(f"the same with a model discrepancy growing away from {training} training poses (each point's "
+                  f"distance from the nearest): latency median {np.median(p):.2f} ms, p99 {np.percentile(p, 99):.2f} "
+                  f"ms, max {p.max():.2f} ms; CPU time of the push median {np.median(c):.2f}, p99 "
+                  f"{np.percentile(c, 99):.2f} ms")
     ru = resource.getrusage(resource.RUSAGE_SELF)
     print(f"(bench process peak memory {ru.ru_maxrss / 1024:.0f} MiB)")
     return res

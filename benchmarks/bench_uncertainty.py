@@ -1,13 +1,23 @@
 """Uncertainty of the corrected ball centres against the centres alone: linear propagation with exact
 Jacobians (every base parameter in the covariance, encoders, force sensor, compliance, probing) for N
-points, as a multiple of the time of the deflection-corrected centres (target: under 10x at 10^6)."""
+points, as a multiple of the time of the deflection-corrected centres (target: under 10x at 10^6).
+
+Then ``aacmm tip --uncertainty`` end to end (a subprocess: reading, propagating, writing) on 10^4 points with a
+model file whose discrepancy grows away from 10^3 and 10^4 training poses (each point's distance from the nearest
+of them: :func:`arm_model.discrepancy.pose_distance`), against the same model file with a constant discrepancy,
+and the distance search alone in process."""
 from __future__ import annotations
 
+import os
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
 from arm_model import ball_centres, load_description
+from arm_model.checks import limit_bounds
 from arm_model.model import ArmModel
 from arm_model.uncertainty import ParameterCovariance, default_inputs, monte_carlo, propagate
 
@@ -24,10 +34,62 @@ def _best(fun, repeats: int) -> tuple[float, float]:
     return wall, cpu
 
 
-QUICK = {"sizes": (10**4, 10**5)}   # make bench BENCH=--quick
+QUICK = {"sizes": (10**4, 10**5), "tip_points": 10**3, "training": (10**3,)}   # make bench BENCH=--quick
 
 
-def main(sizes=(10**4, 10**5, 10**6)) -> dict:
+def _tip(points: Path, model: Path, out: Path) -> tuple[float, float]:
+    """(wall [s], CPU [s] of the process) of ``aacmm tip POINTS --arm MODEL --uncertainty -o OUT``."""
+    cmd = [sys.executable, "-m", "arm_model.cli", "tip", str(points), "--arm", str(model), "--uncertainty", "-o",
+           str(out), "-q"]
+    t0 = time.perf_counter()
+    pid = os.spawnv(os.P_NOWAIT, sys.executable, cmd)
+    _, status, usage = os.wait4(pid, 0)
+    wall = time.perf_counter() - t0
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise SystemExit(f"bench_uncertainty: {' '.join(cmd)} failed")
+    return wall, usage.ru_utime + usage.ru_stime
+
+
+def tip_growth(n_points: int, training: tuple) -> dict:
+    """``aacmm tip --uncertainty`` on ``n_points`` random poses within the joint limits (2 N forces) with a model
+    discrepancy growing away from each number of ``training`` poses, and constant (the model file without the
+    growth); the distance search alone (levers and nearest pose) in process."""
+    from arm_model.discrepancy import joint_levers, pose_distance
+    from arm_model.model_file import load_model
+
+    from .bench_live import growth_model
+    rows = {}
+    with tempfile.TemporaryDirectory(prefix="bench-tip-growth-") as tmp:
+        tmp = Path(tmp)
+        const = growth_model(tmp, 1)
+        const.write_text(const.read_text().replace("model_discrepancy_growth_um_per_mm = 20.0\n", ""))
+        arm = load_model(str(const), None)
+        q = np.random.default_rng(1).uniform(*np.clip(np.array(limit_bounds(arm.desc)).T, -np.pi, np.pi),
+                                             (n_points, arm.desc.n_joints))
+        w = np.random.default_rng(2).normal(0.0, 2.0, (n_points, 3))
+        cols = ",".join(f"q{k + 1}_rad" for k in range(arm.desc.n_joints))
+        (tmp / "points.csv").write_text(f"measurement,feature,{cols},fx_N,fy_N,fz_N\n" + "".join(
+            "m,p," + ",".join(map(repr, [*a.tolist(), *b.tolist()])) + "\n" for a, b in zip(q, w)))
+        wall, cpu = _tip(tmp / "points.csv", const, tmp / "tips.csv")
+        rows[0] = dict(wall_s=wall, cpu_s=cpu)
+        print(f"aacmm tip --uncertainty, {n_points:,} points, model discrepancy constant: {wall:.2f} s wall, "
+              f"{cpu:.2f} s CPU")
+        for t in training:
+            (tmp / f"t{t}").mkdir()
+            model = growth_model(tmp / f"t{t}", t)
+            wall, cpu = _tip(tmp / "points.csv", model, tmp / "tips.csv")
+            disc = load_model(str(model), None).discrepancy
+            lev_s = _best(lambda: joint_levers(arm.desc, q), 1)[0]
+            lev = joint_levers(arm.desc, q)
+            d_s = _best(lambda: pose_distance(arm.desc, q, disc.training, lev), 1)[0]
+            rows[t] = dict(wall_s=wall, cpu_s=cpu, levers_s=lev_s, nearest_s=d_s)
+            print(f"  growing away from {t:,} training poses: {wall:.2f} s wall, {cpu:.2f} s CPU; in process the "
+                  f"levers {lev_s:.3f} s and the nearest training pose {d_s:.3f} s "
+                  f"({d_s / (n_points * t) * 1e9:.1f} ns a pair)")
+    return rows
+
+
+def main(sizes=(10**4, 10**5, 10**6), tip_points: int = 10**4, training: tuple = (10**3, 10**4)) -> dict:
     desc = load_description(ARM)
     model = ArmModel(desc)
     names = tuple(n for n in model.spec.names if not n.startswith("probe.compliance"))
@@ -54,7 +116,7 @@ def main(sizes=(10**4, 10**5, 10**6)) -> dict:
     w = rng.normal(0, 2.0, (n, 3))
     t = _best(lambda: monte_carlo(model, None, q, w, parameters=pc, inputs=inputs, samples=samples), 1)[0]
     print(f"Monte Carlo, {n} points x {samples} samples: {t:.2f} s")
-    return dict(rows=rows, monte_carlo_s=t)
+    return dict(rows=rows, monte_carlo_s=t, tip_growth=tip_growth(tip_points, training))
 
 
 if __name__ == "__main__":

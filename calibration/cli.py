@@ -35,6 +35,9 @@ log = logging.getLogger(__name__)
 def _effects(keys):
     from arm_model.effects import EFFECTS
     out = []
+    if "none" in (keys or ()) and len(set(keys)) > 1:
+        raise InputError(f"--effect none is the geometry alone: it takes no other --effect (got "
+                         f"{', '.join(k for k in keys if k != 'none')})")
     for k in keys or ():
         if k == "none":
             continue
@@ -125,22 +128,29 @@ def sigma_options(p, prior_default: str | None = None) -> None:
                    + f". Default {default} (docs/calibration.md)")
 
 
+#: the range of a ``--prior-scale`` factor: below 1e-6 (1 nm on a 1 mm plausible size, far below any arm's
+#: resolution) the prior's weights overflow (a factor of 1e-300 divides by zero, 5e-324 stalls the fit on NaN)
+PRIOR_FACTOR_RANGE = (1e-6, 1e3)
+
+
 def loop_prior_scale(text: str):
     """``close-loop --prior-scale``: "auto" (:class:`calibration.loop.LoopSettings`) or :func:`prior_scale`'s."""
-    return "auto" if text.strip().lower() == "auto" else prior_scale(text)
+    return "auto" if text.strip().lower() == "auto" else prior_scale(text, words="auto, evidence, off")
 
 
-def prior_scale(text: str):
-    """``--prior-scale``: None (off), "evidence" or a positive finite factor."""
+def prior_scale(text: str, words: str = "evidence, off"):
+    """``--prior-scale``: None (off), "evidence" or a finite factor in :data:`PRIOR_FACTOR_RANGE`; ``words``: the
+    words the option takes, for the message."""
     t = text.strip().lower()
     if t == "off":
         return None
     if t == "evidence":
         return "evidence"
+    lo, hi = PRIOR_FACTOR_RANGE
     try:
-        v = number_in(0, 1e3, low_open=True)(t)
+        v = number_in(lo, hi)(t)
     except argparse.ArgumentTypeError as exc:
-        raise argparse.ArgumentTypeError(f"expected evidence, off or a number in (0, 1000]: {exc}") from None
+        raise argparse.ArgumentTypeError(f"expected {words} or a number in [{lo:g}, {hi:g}]: {exc}") from None
     return v
 
 
@@ -517,7 +527,10 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
         d = res.discrepancy
         log.info(f"model discrepancy per axis: {d.sigma * 1e6:.4g} um (poses at the ends of each joint's range held "
                  f"out in turn: their errors {d.ratio:.2f} x what the fit predicts)")
-        if d.growth is not None:
+        if d.growth is not None and d.written_growth is None:
+            log.info("  not growing away from the training poses (the fitted growth is floored at 0): written as a "
+                     "constant")
+        elif d.growth is not None:
             g = d.growth
             log.info(f"  growing away from the training poses: {g.sigma0 * 1e6:.4g} +- {g.u_sigma0 * 1e6:.2g} um at "
                      f"them + {g.growth * 1e3:.4g} +- {g.u_growth * 1e3:.2g} um per mm of ball travel from the nearest "

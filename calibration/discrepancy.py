@@ -115,6 +115,14 @@ class Discrepancy:
     training: TrainingPoses | None = field(default=None, compare=False)
     training_rows: np.ndarray | None = field(default=None, compare=False)
 
+    @property
+    def written_growth(self) -> Growth | None:
+        """The growth the model file carries: :attr:`growth` when it was fitted and is above 0; None when it
+        could not be fitted or is floored at 0 (the held-out errors do not grow with distance: nothing was
+        resolved, so the discrepancy is written as a constant, never as a measured zero growth)."""
+        g = self.growth
+        return g if g is not None and g.growth > 0 else None
+
     def to_dict(self) -> dict:
         return {"sigma_um": self.sigma * 1e6, "ratio": self.ratio, "folds": self.folds, "rows": self.rows,
                 "share": self.share, "rms_um": self.rms * 1e6,

@@ -1,5 +1,6 @@
 """Outputs of the closed loop: the model file (description, effects, covariance, URDF), ``summary.json`` (for machines),
-``report.html`` with PNG plots (for people) and the before/after table printed by ``aacmm close-loop``. Every file is
+``report.html`` with PNG plots (for people; the model discrepancy's section and plot are calibrate's:
+:func:`calibration.report.discrepancy_html`) and the before/after table printed by ``aacmm close-loop``. Every file is
 written atomically and refused if it would overwrite an input."""
 from __future__ import annotations
 
@@ -16,7 +17,14 @@ from arm_model.shipped import provenance
 
 from .loop import LoopResult, Stage, effect_summary
 from .model_output import model_check, model_paths, write_model
-from .report import conformance_html, conformance_pngs, write_conformance_pngs
+from .report import (
+    conformance_html,
+    conformance_pngs,
+    discrepancy_html,
+    discrepancy_pngs,
+    write_conformance_pngs,
+    write_discrepancy_png,
+)
 from .validation import with_u
 
 __all__ = ["summary_dict", "before_after_text", "write_loop_report", "write_loop_model", "loop_model_name",
@@ -289,8 +297,10 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
     out = Path(out_dir)
     inputs = [Path(p) for p in inputs]
     conf_files = conformance_pngs(conformance, out) if conformance else {}
+    final = loop.model_fit or loop.final.result            # the fit the model file is written from
+    disc_files = discrepancy_pngs(final, out)
     for name in ("summary.json", "report.html", "before-after.txt", *model_paths(out, loop_model_name(loop)).values(),
-                 *(f.name for f in conf_files.values())):
+                 *(f.name for f in conf_files.values()), *(f.name for f in disc_files.values())):
         guard_output(out / name, inputs)
     model_files = write_loop_model(loop, out, inputs)
     written = list(model_files.values())
@@ -334,6 +344,38 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
                                      f"{s.plot_family}: before and after + {s.added.name}"))
             parts.append(f"<h3>The residual that led to it</h3><img src='{img}'>")
         sections.append("".join(parts))
+    sections.append(_final_html(loop, png))
+    if conformance:
+        written += write_conformance_pngs(conformance, conf_files, inputs)
+        sections.append("".join(conformance_html(conformance, conf_files)))
+    written += write_discrepancy_png(final, disc_files, inputs)
+    sections.append("".join(discrepancy_html(final, disc_files)))
+    page = ("<!doctype html><html><head><meta charset='utf-8'><title>close-loop report</title><style>"
+            "body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;font-size:12px}"
+            "td,th{border:1px solid #ccc;padding:2px 6px}pre{background:#f6f6f6;padding:6px}</style></head><body>"
+            f"<h1>Closing the loop: {html.escape(loop.desc.name)}</h1>" + warnings_html(warnings)
+            + "".join(sections) + "</body></html>")
+    summary = summary_dict(loop, input_names)
+    summary["warnings"] = [w.as_dict() for w in warnings]
+    poses = model_files.get("training_poses")
+    summary["model"] = {"file": model_files["model"].name, "covariance": model_files["covariance"].name,
+                        "urdf": model_files["urdf"].name, "check": model_check(final),
+                        "training_poses": None if poses is None else poses.name,
+                        "model_discrepancy": None if final.discrepancy is None else final.discrepancy.to_dict(),
+                        "fitted_on": _fitted_on(loop), "points": len(final.data)}
+    summary["reference_frame"] = final.reference_frame()
+    if conformance:
+        summary["conformance"] = conformance
+    summary.update(provenance(inputs))
+    written.append(atomic_write_text(out / "summary.json", json_text(summary), inputs))
+    written.append(atomic_write_text(out / "before-after.txt", table + "\n", inputs))
+    written.append(atomic_write_text(out / "report.html", page, inputs))
+    return written
+
+
+def _final_html(loop: LoopResult, png) -> str:
+    """The report's section on the final fit (its screening, cross-validation, structure tests and the candidates
+    not offered); ``png(name, data)`` writes a plot and returns its name."""
     parts = ["<h2>Final screening</h2>"]
     if loop.final_screening:
         parts.append(reports.html_table(_SCREEN_HEAD, _screening_rows(loop.final_screening)))
@@ -353,31 +395,7 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
     if loop.skipped:
         parts.append("<h3>Candidates not offered</h3>" + reports.html_table(("candidate", "why"),
                                                                [(s.name, s.reason) for s in loop.skipped]))
-    sections.append("".join(parts))
-    if conformance:
-        written += write_conformance_pngs(conformance, conf_files, inputs)
-        sections.append("".join(conformance_html(conformance, conf_files)))
-    page = ("<!doctype html><html><head><meta charset='utf-8'><title>close-loop report</title><style>"
-            "body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;font-size:12px}"
-            "td,th{border:1px solid #ccc;padding:2px 6px}pre{background:#f6f6f6;padding:6px}</style></head><body>"
-            f"<h1>Closing the loop: {html.escape(loop.desc.name)}</h1>" + warnings_html(warnings)
-            + "".join(sections) + "</body></html>")
-    summary = summary_dict(loop, input_names)
-    summary["warnings"] = [w.as_dict() for w in warnings]
-    final = loop.model_fit or loop.final.result
-    poses = model_files.get("training_poses")
-    summary["model"] = {"file": model_files["model"].name, "covariance": model_files["covariance"].name,
-                        "urdf": model_files["urdf"].name, "check": model_check(final),
-                        "training_poses": None if poses is None else poses.name,
-                        "fitted_on": _fitted_on(loop), "points": len(final.data)}
-    summary["reference_frame"] = final.reference_frame()
-    if conformance:
-        summary["conformance"] = conformance
-    summary.update(provenance(inputs))
-    written.append(atomic_write_text(out / "summary.json", json_text(summary), inputs))
-    written.append(atomic_write_text(out / "before-after.txt", table + "\n", inputs))
-    written.append(atomic_write_text(out / "report.html", page, inputs))
-    return written
+    return "".join(parts)
 
 
 def _slug(name: str) -> str:

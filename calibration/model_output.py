@@ -84,20 +84,22 @@ def discrepancy_fields(result) -> dict:
     """The model discrepancy a result carries (:mod:`calibration.discrepancy`) as the keywords of
     :class:`~arm_model.model_file.Arm` and :func:`~arm_model.model_file.format_model`: ``model_discrepancy`` [m]
     per axis at the training poses (the growing fit's ``sigma0``) and ``discrepancy_growth`` [1]; None without
-    one, no growth when it could not be fitted."""
+    one, no growth when it could not be fitted or is floored at 0 (:attr:`~calibration.discrepancy.Discrepancy.
+    written_growth`)."""
     d = getattr(result, "discrepancy", None)
     if d is None:
         return {"model_discrepancy": None, "discrepancy_growth": None}
-    if d.growth is None:
+    g = d.written_growth
+    if g is None:
         return {"model_discrepancy": d.sigma, "discrepancy_growth": None}
-    return {"model_discrepancy": d.growth.sigma0, "discrepancy_growth": d.growth.growth}
+    return {"model_discrepancy": g.sigma0, "discrepancy_growth": g.growth}
 
 
 def _write_training_poses(result, path: Path, inputs) -> Path | None:
     """The points file of the fit's poses (``measurement``, ``feature``, the joint columns in the description's
     units) that a growing model discrepancy is measured from, or None (nothing written) without growth."""
     d = getattr(result, "discrepancy", None)
-    if d is None or d.growth is None or d.training_rows is None:
+    if d is None or d.written_growth is None or d.training_rows is None:
         return None
     pts = result.data.points
     rows = np.asarray(d.training_rows, dtype=int)
@@ -155,7 +157,7 @@ def _same_discrepancy(result, back: Arm, path) -> None:
             raise UnreadableOutput(f"the model file read back gives {key} {v!r}, the fit {w!r}", path)
     from arm_model.model_file import training_poses_of
     d = getattr(result, "discrepancy", None)
-    want_q = None if d is None or d.growth is None else d.training.q
+    want_q = None if d is None or d.written_growth is None else d.training.q
     try:
         got_q = training_poses_of(back)
     except InputError as exc:

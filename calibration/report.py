@@ -19,7 +19,8 @@ from .model_output import model_check, model_paths, write_model
 from .validation import with_u
 
 __all__ = ["write_outputs", "plot_residuals", "plot_parameters", "plot_correlation", "plot_conformance",
-           "conformance_lines", "conformance_pngs", "write_conformance_pngs", "conformance_html", "CONFORMANCE_SETS"]
+           "conformance_lines", "conformance_pngs", "write_conformance_pngs", "conformance_html", "CONFORMANCE_SETS",
+           "plot_discrepancy", "discrepancy_pngs", "write_discrepancy_png", "discrepancy_html"]
 
 
 def plot_residuals(result: CalibrationResult) -> bytes:
@@ -237,7 +238,7 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
                                              for r in worse)) + ".</p>")
     if summary.get("conformance"):
         parts += conformance_html(summary["conformance"], files)
-    parts += prior_html(result) + discrepancy_html(result)
+    parts += prior_html(result) + discrepancy_html(result, files)
     parts += ["<h2>Parameters</h2>",
               "<p>state: free (estimated, the data dominate), prior-dominated (estimated, but its posterior "
               "variance is at least half its prior's: it stays near the nominal with about the prior's "
@@ -254,8 +255,7 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
                   reports.html_table(["measurement", "feature", "line", "standardized"],
                          [(o.measurement, o.feature, o.line, _fmt(o.standardized, 3)) for o in result.dropped])]
     for name, title in (("residuals_png", "Residuals"), ("parameters_png", "Estimates"),
-                        ("correlation_png", "Correlations"), ("discrepancy_png", "Model discrepancy away from the "
-                                                                                  "training poses")):
+                        ("correlation_png", "Correlations")):
         if name in files:
             parts += [f"<h2>{title}</h2>", f"<img src='{html.escape(files[name].name)}' style='max-width:100%'>"]
     parts.append("</body></html>")
@@ -302,24 +302,46 @@ def plot_discrepancy(result: CalibrationResult) -> bytes:
     return reports.png(fig)
 
 
-def discrepancy_html(result: CalibrationResult) -> list[str]:
-    """The report's sentence on the model discrepancy (:mod:`calibration.discrepancy`)."""
+def discrepancy_pngs(result: CalibrationResult, out) -> dict:
+    """``{"discrepancy_png": path}`` in ``out`` when the model discrepancy of ``result`` was fitted as growing
+    (:func:`plot_discrepancy` has rows to show), else ``{}``: the plot's path in calibrate's and close-loop's
+    outputs alike."""
+    d = result.discrepancy
+    return {"discrepancy_png": Path(out) / "discrepancy.png"} if d is not None and d.growth is not None else {}
+
+
+def write_discrepancy_png(result: CalibrationResult, files: dict, inputs=()) -> list[Path]:
+    """Write the plot of :func:`discrepancy_pngs` (``files`` holds its path, if any); returns the paths written."""
+    if "discrepancy_png" not in files:
+        return []
+    return [atomic_write_bytes(files["discrepancy_png"], plot_discrepancy(result), inputs)]
+
+
+def discrepancy_html(result: CalibrationResult, files: dict | None = None) -> list[str]:
+    """The report's section on the model discrepancy (:mod:`calibration.discrepancy`), with its plot when
+    ``files`` holds it (:func:`discrepancy_pngs`): calibrate's and close-loop's reports alike."""
     d = result.discrepancy
     if d is None:
         return []
+    png = (files or {}).get("discrepancy_png")
     return ["<h2>Model discrepancy</h2>",
             f"<p>{_fmt(d.sigma * 1e6, 4)} um per axis: the poses at either end of each joint's range "
             f"({d.share:.0%} of the poses each end, {d.folds} folds) held out in turn and predicted by the fit on the "
             f"rest err {_fmt(d.ratio, 3)} x what that fit predicts (noise and posterior); the excess is the model "
-            "discrepancy.</p>"] + _growth_html(d)
+            "discrepancy.</p>"] + _growth_html(d) + (
+        [] if png is None else ["<h3>Model discrepancy away from the training poses</h3>",
+                                f"<img src='{html.escape(Path(png).name)}' style='max-width:100%'>"])
 
 
 def _growth_html(d) -> list[str]:
     """The report's sentence on the discrepancy's growth away from the training poses (:class:`calibration.
     discrepancy.Growth`)."""
-    g = d.growth
+    g = d.written_growth
     if g is None:
-        return ["<p>The model file carries it and tip adds it to every point's uncertainty.</p>"]
+        floored = " It does not grow away from the training poses (the growth fitted to the same held-out poses is " \
+            "floored at 0)." if d.growth is not None else ""
+        return [f"<p>{floored} The model file carries it as a constant and tip adds it to every point's "
+                "uncertainty.</p>"]
     return [f"<p>Fitted to the same held-out poses as growing with how far the joint motions from the nearest of "
             f"the poses each was predicted from carry the ball (d): sigma_d<sup>2</sup> = sigma_0<sup>2</sup> + (g d)"
             f"<sup>2</sup> with sigma_0 = {_fmt(g.sigma0 * 1e6, 4)} &plusmn; {_fmt(g.u_sigma0 * 1e6, 2)} um and g = "
@@ -354,8 +376,7 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
         files.update({"residuals_png": out / "residuals.png", "parameters_png": out / "parameters.png",
                       "correlation_png": out / "correlation.png"})
         files.update(conformance_pngs(conf, out))
-        if result.discrepancy is not None and result.discrepancy.growth is not None:
-            files["discrepancy_png"] = out / "discrepancy.png"
+        files.update(discrepancy_pngs(result, out))
     for f in files.values():
         guard_output(f, inputs)
     effects = [e.describe() for e in result.model.effects]
@@ -398,8 +419,7 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
         atomic_write_bytes(files["residuals_png"], plot_residuals(result), inputs)
         atomic_write_bytes(files["parameters_png"], plot_parameters(result), inputs)
         atomic_write_bytes(files["correlation_png"], plot_correlation(result), inputs)
-        if "discrepancy_png" in files:
-            atomic_write_bytes(files["discrepancy_png"], plot_discrepancy(result), inputs)
+        write_discrepancy_png(result, files, inputs)
         write_conformance_pngs(conf, files, inputs)
     atomic_write_text(files["summary"], json_text(summary), inputs)
     atomic_write_text(files["report"], _html(result, summary, files), inputs)

@@ -4,6 +4,8 @@ model is exact (no discrepancy) or lacks an effect of the truth (a discrepancy),
 into ``aacmm tip``'s uncertainty."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -382,3 +384,78 @@ def test_fit_growth_of_noise_free_rows_is_zero():
         warnings.simplefilter("error")
         g = fit_growth(np.zeros(60), np.zeros(60), np.linspace(0.0, 1e-2, 60), np.repeat(np.arange(6), 10))
     assert g.sigma0 == 0 and g.growth == 0 and g.lr == 0, g
+
+
+def test_a_growth_floored_at_zero_is_written_as_a_constant():
+    """A growth fitted at its floor (g = 0, likelihood ratio 0: the held-out errors do not grow with distance)
+    resolves nothing: the model file gets the constant discrepancy of the same folds and no training poses,
+    never "growth 0 +- 0" as if measured; a growth above 0 is written with its sigma0."""
+    from types import SimpleNamespace
+
+    from calibration.discrepancy import Discrepancy, Growth
+    from calibration.model_output import discrepancy_fields
+    flat = Growth(sigma0=31e-6, growth=0.0, u_sigma0=5e-6, u_growth=0.0, lr=0.0, d_max=0.4, d_rms=0.2)
+    d = Discrepancy(sigma=30e-6, ratio=1.2, folds=14, rows=90, growth=flat)
+    assert d.written_growth is None
+    assert discrepancy_fields(SimpleNamespace(discrepancy=d)) == {"model_discrepancy": 30e-6,
+                                                                  "discrepancy_growth": None}
+    grows = Growth(sigma0=12e-6, growth=7e-4, u_sigma0=4e-6, u_growth=2e-4, lr=9.0, d_max=0.4, d_rms=0.2)
+    d = Discrepancy(sigma=30e-6, ratio=1.2, folds=14, rows=90, growth=grows)
+    assert d.written_growth is grows
+    assert discrepancy_fields(SimpleNamespace(discrepancy=d)) == {"model_discrepancy": 12e-6,
+                                                                  "discrepancy_growth": 7e-4}
+
+
+@pytest.mark.parametrize("block", [7, 32_768])
+def test_pose_distance_is_a_plain_loop_over_the_training_poses(monkeypatch, nominal, block):
+    """The blocked search (blocks of 7 elements or the default) gives every query's distance to its nearest training
+    pose as a plain loop over them does (math per pose and joint: a revolute difference wrapped by atan2, the
+    prismatic one not; levers given, one of them 0), to 1e-12 relative; a training pose a whole turn of every
+    revolute joint away from a query is at distance 0."""
+    import arm_model.discrepancy as dm
+    monkeypatch.setattr(dm, "_CACHE_BLOCK", block)
+    rng = np.random.default_rng(3)
+    q, t = rng.uniform(-7.0, 7.0, (40, 7)), rng.uniform(-7.0, 7.0, (23, 7))
+    t[5] = q[3] + np.r_[2 * np.pi, -2 * np.pi, 4 * np.pi, 0.0, 2 * np.pi, 0.0, 0.0]
+    lev = rng.uniform(0.0, 1.0, (40, 7))
+    lev[:, 2], lev[:, 6] = 0.0, 1.0
+    circ = (True,) * 6 + (False,)
+    got = dm.pose_distance(nominal, q, dm.TrainingPoses(tuple(f"j{k}" for k in range(7)), t, circ), lev)
+
+    def diff(a, b, c):
+        return math.atan2(math.sin(a - b), math.cos(a - b)) if c else a - b
+    want = [min(math.sqrt(sum((lev[i, j] * diff(q[i, j], tp[j], circ[j])) ** 2 for j in range(7))) for tp in t)
+            for i in range(len(q))]
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-13)
+    assert got[3] < 1e-13
+
+
+def test_joint_levers_are_each_joints_own_differences(nominal):
+    """The levers from one chain call of the 2 J shifted poses are those of each joint's own central differences
+    (1e-12 relative), and joint 1's is the ball's distance from its vertical axis (by hand, 1e-9)."""
+    from arm_model.discrepancy import LEVER_STEP, joint_levers
+    from arm_model.kinematics import ball_centres
+    q = np.random.default_rng(4).uniform(-2.0, 2.0, (9, nominal.n_joints))
+    want = np.empty_like(q)
+    for j in range(q.shape[1]):
+        dq = np.zeros(q.shape[1])
+        dq[j] = LEVER_STEP
+        diff = ball_centres(nominal, q + dq) - ball_centres(nominal, q - dq)
+        want[:, j] = np.linalg.norm(diff, axis=1) / (2 * LEVER_STEP)
+    got = joint_levers(nominal, q)
+    np.testing.assert_allclose(got, want, rtol=1e-12)
+    np.testing.assert_allclose(got[:, 0], np.hypot(*ball_centres(nominal, q)[:, :2].T), rtol=1e-9)
+
+
+def test_no_output_over_the_training_poses_file(tmp_path, nominal):
+    """The training poses file a model file names is an input of every --arm command: ``aacmm tip -o`` over it is
+    refused (exit 2) and leaves it as it was."""
+    from arm_model.cli import main
+    from conftest import NOMINAL
+    _poses_file(tmp_path / "poses.csv", nominal, np.array([[0.3, 0.4, -0.2, 0.9, 0.1, -0.5, 0.2]]))
+    (tmp_path / "m.toml").write_text(NOMINAL.read_text() + "\n[calibration]\nmodel_discrepancy_um = 5.0\n"
+                                     "model_discrepancy_growth_um_per_mm = 20.0\ntraining_poses = \"poses.csv\"\n")
+    before = (tmp_path / "poses.csv").read_bytes()
+    assert main(["tip", str(tmp_path / "poses.csv"), "--arm", str(tmp_path / "m.toml"), "--uncertainty", "-o",
+                 str(tmp_path / "poses.csv"), "-q"]) == 2
+    assert (tmp_path / "poses.csv").read_bytes() == before

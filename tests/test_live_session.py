@@ -244,6 +244,24 @@ def test_python_session_record_is_tip_byte_for_byte(tmp_path):
     assert (tmp_path / "r" / "tips.csv").read_bytes() == (tmp_path / "s" / "tips.csv").read_bytes()
 
 
+def test_the_reproduce_line_keeps_a_given_model_discrepancy(tmp_path, monkeypatch):
+    """``aacmm live --u-model-discrepancy-um 7``: session.json's reproduce command (run in the session folder)
+    writes the session's tips.csv byte for byte, and the 7 um per axis are in it (u above the session without)."""
+    t, f = pulses([2.0, 5.0], seed=5)
+    s, _ = run(t, f, folder=tmp_path / "s")
+    u0 = np.array([p.u for p in s.points])
+    out = tmp_path / "r"
+    assert main(["live", str(tmp_path / "s" / "samples.csv"), "--arm", "aacmm7", "-o", str(out), "--speed", "0",
+                 "--u-model-discrepancy-um", "7", "-q"]) == 0
+    cmd = read_status(out)["reproduce"].split()
+    assert cmd[:2] == ["aacmm", "tip"] and "--u-model-discrepancy-um" in cmd
+    monkeypatch.chdir(out)
+    assert main(cmd[1:] + ["-q"]) == 0
+    assert (out / "tips.csv").read_bytes() == (out / "tips-again.csv").read_bytes()
+    u = np.array([[float(r[f"u_{a}_mm"]) * 1e-3 for a in "xyz"] for r in rows(out / "tips.csv")])
+    np.testing.assert_allclose(u ** 2 - u0 ** 2, (7e-6) ** 2, rtol=0, atol=2 * 10e-6 * 0.5e-9)   # u written to 1 nm
+
+
 def test_torque_temperature_and_a_model_file(tmp_path, nominal):
     """Every effect of a model file applies (a thermal effect reads the temperature column, a joint
     compliance the contact torques); the points equal aacmm tip's."""
@@ -354,3 +372,39 @@ def test_format_row_is_format_csv_of_one_row(values, fmt):
             for k, v in enumerate(values)}
     row = {k: v[0] for k, v in cols.items()}
     assert format_row(row, fmt).encode() == format_csv(cols, fmt, header=False)
+
+
+def test_a_growing_model_discrepancy_is_added_as_tip_adds_it(tmp_path, nominal):
+    """A model file whose discrepancy grows away from its one training pose (Q0; sigma0 5 um, 20 um per mm): the
+    Python session (no inputs given) and ``aacmm live`` add it to every point as ``aacmm tip`` does (the
+    session's tips.csv is tip's byte for byte: u to 1 nm), and by hand: a point whose joint 1 is turned by dq from
+    Q0 lies d = r dq from it (r the ball's distance from joint 1's vertical axis), so its variance per axis exceeds
+    that of the same point on the plain description by sigma0^2 + (g d)^2 (1e-9 relative)."""
+    from arm_model.kinematics import ball_centres
+    from conftest import NOMINAL
+    cols = ",".join(f"q{k + 1}_rad" for k in range(7))
+    (tmp_path / "poses.csv").write_text(f"measurement,feature,{cols}\nm,seat,{','.join(map(repr, Q0.tolist()))}\n")
+    model = tmp_path / "m.toml"
+    model.write_text(NOMINAL.read_text() + "\n[calibration]\nmodel_discrepancy_um = 5.0\n"
+                     "model_discrepancy_growth_um_per_mm = 20.0\ntraining_poses = \"poses.csv\"\n")
+    t, f = pulses([2.0, 5.0, 1.0, 8.0], seed=4, period=0.6)
+    grown, plain = Session(model, tmp_path / "s"), Session(nominal)
+    for ti, fi in zip(t, f):
+        q = Q0.copy()
+        q[0] += 0.002 * math.floor(ti / 0.6)            # pulse k (centred at (k + 1) 0.6 s) at dq = 0.002 (k + 1)
+        for s in (grown, plain):
+            s.push(float(ti), q, fi)
+    for s in (grown, plain):
+        s.close()
+    assert grown.counts["points"] == plain.counts["points"] == 4
+    for k, (a, b) in enumerate(zip(grown.points, plain.points)):
+        qa = np.array(a.contact.peak.q)
+        assert qa[0] - Q0[0] == pytest.approx(0.002 * (k + 1), abs=1e-12)
+        d = np.hypot(*ball_centres(nominal, qa)[:2]) * (qa[0] - Q0[0])
+        np.testing.assert_allclose(np.diag(a.cov) - np.diag(b.cov), (5e-6) ** 2 + (0.02 * d) ** 2, rtol=1e-9)
+    assert main(["tip", str(tmp_path / "s" / "points.csv"), "--arm", str(model), "--uncertainty", "-o",
+                 str(tmp_path / "tip.csv"), "-q"]) == 0
+    assert (tmp_path / "s" / "tips.csv").read_bytes() == (tmp_path / "tip.csv").read_bytes()
+    assert main(["live", str(tmp_path / "s" / "samples.csv"), "--arm", str(model), "-o", str(tmp_path / "r"),
+                 "--speed", "0", "--measurement", "s", "-q"]) == 0
+    assert (tmp_path / "r" / "tips.csv").read_bytes() == (tmp_path / "s" / "tips.csv").read_bytes()

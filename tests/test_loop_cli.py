@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from arm_model.cli import main
+from arm_model.model_file import load_model
 from arm_model.sim import campaign_from_dict, simulate
 from conftest import NOMINAL
 
@@ -51,6 +52,18 @@ def test_close_loop_writes_the_report(files, tmp_path, capsys):
     for png in ("before-after.png", "stage-1-screening.png", "stage-1-signature.png"):
         assert (out / png).stat().st_size > 1000 and png in html
     assert (out / "before-after.txt").read_text().startswith("held-out test set")
+    # the model discrepancy of the model file written, reported as calibrate reports it (its section and plot)
+    disc, growth = s["model"]["model_discrepancy"], s["model"]["model_discrepancy"]["growth"]
+    arm = load_model(out / s["model"]["file"], None)
+    if growth["growth_um_per_mm"] > 0:
+        assert arm.model_discrepancy == pytest.approx(growth["sigma0_um"] * 1e-6, rel=1e-3, abs=1e-10)
+        assert arm.discrepancy_growth == pytest.approx(growth["growth_um_per_mm"] * 1e-3, rel=1e-3, abs=1e-10)
+        assert s["model"]["training_poses"] == arm.training_poses.name
+    else:                               # a growth floored at 0 resolves nothing: written as a constant
+        assert arm.model_discrepancy == pytest.approx(disc["sigma_um"] * 1e-6, rel=1e-3, abs=1e-10)
+        assert arm.discrepancy_growth is None and s["model"]["training_poses"] is None
+    assert "<h2>Model discrepancy</h2>" in html and f"{disc['sigma_um']:.4g} um per axis" in html
+    assert (out / "discrepancy.png").read_bytes()[:4] == b"\x89PNG" and "src='discrepancy.png'" in html
     # the standard tests as calibrate gives them (--mpe-*-um): the final model on every point, the design fit
     # on the outer test set; each verdict follows from the items written next to it
     conf = s["conformance"]

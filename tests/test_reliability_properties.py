@@ -54,12 +54,16 @@ def _mutate_lines(text: str, data, cells=True) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _tip(points_text: str, arm_text: str = ARM) -> tuple[int, set, str]:
+def _tip(points_text: str, arm_text: str = ARM, files: dict | None = None, options=()) -> tuple[int, set, str]:
+    """tip on ``points_text`` with the arm ``arm_text`` and further input ``files`` (name -> text) beside it."""
     d = Path(tempfile.mkdtemp(prefix="aacmm-prop-"))
     try:
         (d / "p.csv").write_text(points_text, encoding="utf-8", errors="surrogateescape")
         (d / "arm.toml").write_text(arm_text, encoding="utf-8", errors="surrogateescape")
-        code = main(["tip", str(d / "p.csv"), "--arm", str(d / "arm.toml"), "-o", str(d / "out" / "t.csv")])
+        for name, text in (files or {}).items():
+            (d / name).write_text(text, encoding="utf-8", errors="surrogateescape")
+        code = main(["tip", str(d / "p.csv"), "--arm", str(d / "arm.toml"), "-o", str(d / "out" / "t.csv"),
+                     *options])
         files = {str(p.relative_to(d)) for p in d.rglob("*")}
         text = (d / "out" / "t.csv").read_text() if code == 0 else ""
         return code, files, text
@@ -67,7 +71,7 @@ def _tip(points_text: str, arm_text: str = ARM) -> tuple[int, set, str]:
         shutil.rmtree(d)
 
 
-def _check(code, files, text, capsys, n_rows=None):
+def _check(code, files, text, capsys, n_rows=None, inputs=("p.csv", "arm.toml")):
     err = capsys.readouterr().err
     assert "Traceback" not in err
     if code == 0:
@@ -77,7 +81,7 @@ def _check(code, files, text, capsys, n_rows=None):
             assert len(rows) - 1 == n_rows
     else:
         assert code == 2 and err.startswith("aacmm tip: error: ") and err.count("\n") == 1, err
-        assert files == {"p.csv", "arm.toml"}                        # nothing written
+        assert files == set(inputs)                                  # nothing written
 
 
 @FAST
@@ -94,6 +98,29 @@ def test_tip_on_any_arm_description(capsys, data):
     text = _mutate_lines(ARM, data, cells=False)
     code, files, out = _tip(POINTS, text)
     _check(code, files, out, capsys, n_rows=5)
+
+
+#: a model file's growing discrepancy (docs/formats.md, [calibration]) and its training poses, for the mutations
+GROWTH = ("\n[calibration]\nmodel_discrepancy_um = 5.0\nmodel_discrepancy_growth_um_per_mm = 20.0\n"
+          'training_poses = "tp.csv"\n')
+TRAINING = "measurement,feature," + ",".join(f"q{k}_deg" for k in range(1, 8)) + "\n" + "".join(
+    f"m,s,{10 * i},{20 + i},-30,{40 - i},5,-15,{25 + 3 * i}\n" for i in range(3))
+
+
+@FAST
+@given(data=st.data())
+def test_tip_on_any_growing_discrepancy(capsys, data):
+    """A model file with a growth and its training poses, either mutated (the [calibration] values and names, the
+    poses' cells and lines): tip with its uncertainty exits 0 with every row, or 2 with one message and nothing
+    written."""
+    arm, tp = ARM + GROWTH, TRAINING
+    if data.draw(st.booleans()):
+        head, cal = arm.split("[calibration]")
+        arm = head + "[calibration]" + _mutate_lines(cal, data, cells=False)
+    if data.draw(st.booleans()):
+        tp = _mutate_lines(tp, data)
+    code, files, out = _tip(POINTS, arm, {"tp.csv": tp}, ("--uncertainty",))
+    _check(code, files, out, capsys, n_rows=5, inputs=("p.csv", "arm.toml", "tp.csv"))
 
 
 @FAST

@@ -196,7 +196,7 @@ def _status(args: argparse.Namespace, source: LineSource, files: list) -> dict:
     tip += ["--tip-frame", args.tip_frame] if args.tip_frame else []
     tip += ["--base-frame", args.base_frame] if getattr(args, "base_frame", None) else []
     tip += ["--masses", str(args.masses)] if args.masses else []
-    for opt in ("encoder_resolution_deg", "u_compliance_rel", "u_probing_um"):
+    for opt in ("encoder_resolution_deg", "u_compliance_rel", "u_probing_um", "u_model_discrepancy_um"):
         if getattr(args, opt, None) is not None:
             tip += ["--" + opt.replace("_", "-"), repr(getattr(args, opt))]
     if getattr(args, "u_force_N", None) is not None:

@@ -106,7 +106,8 @@ class Session:
         plan: a :class:`~arm_model.live.plan.SessionPlan` (features in order), or None (free points;
             :meth:`begin_feature` adds features ad hoc).
         contact: :class:`~arm_model.live.contacts.ContactOptions`.
-        inputs: the input uncertainties (:func:`arm_model.uncertainty.default_inputs` of the arm when None).
+        inputs: the input uncertainties (None: the arm's own, :meth:`~arm_model.model_file.Arm.input_uncertainty`,
+            as ``aacmm tip`` takes them: its model file's probing scatter and model discrepancy included).
         measurement: the points' measurement id (default: the plan's, else the folder's name, else "live").
         rate: the nominal sample rate [Hz] (None: estimated from the first intervals).
         layout: the stream's :class:`~arm_model.live.samples.SampleLayout` (its header is recorded and
@@ -119,7 +120,6 @@ class Session:
                  measurement: str | None = None, rate: float | None = None, layout: SampleLayout | None = None,
                  inputs_files: Iterable = (), status: dict | None = None):
         from ..model_file import Arm, load_model, parameters_of
-        from ..uncertainty import default_inputs
         if not isinstance(arm, Arm):
             arm = Arm(arm) if hasattr(arm, "joints") else load_model(arm, None)
         self.arm, self.desc = arm, arm.desc
@@ -130,8 +130,8 @@ class Session:
         self._detector = ContactDetector(contact)
         self._force_kind = None if layout is None else layout.force_kind
         self.inputs = inputs
-        self._default_inputs = (lambda has_force: default_inputs(self.desc, has_force=has_force,
-                                                                 model_probing=arm.probing_scatter))
+        # the arm's own inputs (its model discrepancy read once, here), with and without a force sensor
+        self._default_inputs = None if inputs is not None else {f: arm.input_uncertainty(f) for f in (True, False)}
         self.plan = plan or SessionPlan()
         self.measurement = measurement or self.plan.measurement or (Path(folder).name if folder else "live")
         npar = 0 if self.parameters is None else len(self.parameters.names)
@@ -386,7 +386,7 @@ class Session:
         ps = self._point_set(c, feature)
         centres = tip_centres(self.arm, ps)
         row = tip_table(self.arm, ps, centres)
-        inputs = self.inputs if self.inputs is not None else self._default_inputs(ps.wrench is not None)
+        inputs = self.inputs if self._default_inputs is None else self._default_inputs[ps.wrench is not None]
         prop = propagate(self.model, self.p, ps.q, ps.wrench, self.arm.aux(ps), parameters=self.parameters,
                          inputs=inputs, threads=1, systematic=True)
         row.update(u_columns(prop))
