@@ -92,6 +92,8 @@ ROBOTS = (
     Robot("r8", "front", 18, 300.0, 0.30, 150.0, stiffness=12000.0,      # the real Panda's j1 eccentricity (1 mrad)
           eccentricity=({"joint": "panda_joint1", "amplitude_mrad": 1.0, "phase_deg": 120.0},
                         {"joint": "panda_joint3", "amplitude_mrad": 0.3, "phase_deg": 0.0})),
+    Robot("r9", "front", 21, 300.0, 0.30, 150.0, stiffness=12000.0,      # joint 1's alone
+          eccentricity=({"joint": "panda_joint1", "amplitude_mrad": 1.0, "phase_deg": 120.0},)),
 )
 
 
