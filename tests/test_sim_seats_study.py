@@ -46,6 +46,7 @@ def test_tied_rivals_by_hand():
     assert tied_rivals(win, cv, [(win, cv), beaten], 0.005) == []
 
 
+@pytest.mark.slow
 def test_coaxial_eccentricities_are_shared_not_guessed(tmp_path):
     """Robot r8 (eccentricities of joints 1 (1 mrad) and 3 (0.3 mrad), joint compliance, 0.15 mm scatter),
     trained on ``front``: over that placement the two joints' eccentricities explain the residual alike (held-out
