@@ -58,6 +58,7 @@ def test_an_empty_or_impossible_test_set_stops_with_one_message(tmp_path, capsys
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_a_test_that_cannot_reach_its_level_is_reported_before_it_runs(tmp_path, capsys):
     out = tmp_path / "loop"
     code = main(["close-loop", str(all_placements(tmp_path)), str(REAL / "artefacts.toml"), *ARM,

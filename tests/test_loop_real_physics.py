@@ -57,6 +57,7 @@ def _compare(desc, art, pts, train: str, loop, held) -> tuple[list, list, list]:
     return a, b, [np.mean([f["spread_mean_mm"] for f in x]) for x in (a, b)]
 
 
+@pytest.mark.slow
 def test_trained_on_back_high_joint_compliance_is_included_and_the_other_placements_spread_less(setup):
     from calibration.loop import PHYSICS, close_loop
     desc, art, pts = setup

@@ -209,6 +209,7 @@ def test_truth_in_fit_terms_maps_one_parameterization_onto_another(nominal):
     assert left > 0.5
 
 
+@pytest.mark.slow
 def test_two_links_growing_at_different_rates_over_10_K(tmp_path, capsys):
     """Simulator: links j3 and j5 grow at 12 and 23 ppm/K over about 10 K. The library's common growth
     comes first, then each link's own rate from the residual ('temperature per link')."""
