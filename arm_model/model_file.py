@@ -53,7 +53,7 @@ from .description import (
 )
 from .discrepancy import GrowingDiscrepancy, TrainingPoses
 from .effects import EFFECTS, Effect
-from .errors import InputError, did_you_mean, open_input, parse_toml, read_text
+from .errors import InputError, did_you_mean, parse_toml, read_text
 from .model import ArmModel, AuxData
 from .tracker import Tracker, tracker_from_tables, tracker_tables
 from .uncertainty import InputUncertainty, ParameterCovariance, default_inputs
@@ -441,13 +441,10 @@ def training_poses_of(arm: Arm) -> TrainingPoses | None:
     if arm.training_poses is None:
         return None
     from .io import read_points
-    what = "the training poses file (the model file's [calibration] training_poses)"
     if not arm.training_poses.exists():
         raise InputError("no such file: the model file's [calibration] training_poses names it (the poses its model "
                          "discrepancy grows away from; keep it beside the model file)", arm.training_poses)
-    with open_input(arm.training_poses, what):          # a folder, a FIFO, a device: said so, never waited on
-        pass
-    try:
+    try:                    # read_points opens it with open_input: a folder, a FIFO, a device said so, never waited on
         pts = read_points(arm.training_poses, arm.desc.joint_quantities)
     except InputError as exc:       # not on the command line: say whose file it is
         raise InputError(f"{exc.reason} (the training poses of the model file's [calibration] training_poses: a "
