@@ -37,3 +37,35 @@ def test_an_arm_with_its_growth_and_poses_is_accepted(tmp_path):
     assert arm.discrepancy == 5e-6
     arm = dataclasses.replace(arm, discrepancy_growth=0.02, training_poses=tmp_path / "tp.csv")
     assert arm.discrepancy_growth == 0.02
+
+
+# ---------------------------------------------------------------------------------------------
+# a long text cell: memory in proportion to the file, not to the square of the cell
+
+def test_a_long_measurement_id_reads_and_writes_in_memory_in_proportion_to_the_file(tmp_path):
+    """A 10 000-character measurement id in a 2000-row points file: the fast reader built a (width + 1, width)
+    mask table (800 MB here, 20 GB for a 100 kB id in a 30-row file: `tip` ended "out of memory") and both the
+    reader and the CSV writer a (rows, widest cell) matrix (a 17 MB file with one 100 kB id: 94 s, 4.9 GB)."""
+    import tracemalloc
+
+    import numpy as np
+
+    from arm_model.csv_io import format_csv
+    from arm_model.io import read_points
+    from arm_model.model_file import load_model
+    joints = load_model(str(NOMINAL)).desc.joint_quantities
+    long_id = "m" * 10_000
+    cols = ",".join(f"q{k + 1}_deg" for k in range(7))
+    rows = [f"{long_id if i == 0 else 'short'},seat," + ",".join(f"{10 + k + i * 1e-3:.6f}" for k in range(7)) + "\n"
+            for i in range(2000)]
+    (tmp_path / "p.csv").write_text(f"measurement,feature,{cols}\n" + "".join(rows))
+    tracemalloc.start()
+    try:
+        pts = read_points(tmp_path / "p.csv", joints)
+        text = format_csv({"measurement": np.asarray(pts.measurement, dtype=object), "x_mm": pts.q[:, 0]})
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert pts.measurement[0] == long_id and pts.measurement[1] == "short" and len(pts.q) == 2000
+    assert text.decode().splitlines()[1].startswith(long_id + ",")
+    assert peak < 30e6, f"peak {peak / 1e6:.0f} MB for a {(tmp_path / 'p.csv').stat().st_size / 1e6:.1f} MB file"
