@@ -69,3 +69,18 @@ def test_a_long_measurement_id_reads_and_writes_in_memory_in_proportion_to_the_f
     assert pts.measurement[0] == long_id and pts.measurement[1] == "short" and len(pts.q) == 2000
     assert text.decode().splitlines()[1].startswith(long_id + ",")
     assert peak < 30e6, f"peak {peak / 1e6:.0f} MB for a {(tmp_path / 'p.csv').stat().st_size / 1e6:.1f} MB file"
+
+
+def test_a_megabyte_value_in_an_error_is_cut_in_its_middle(tmp_path, capsys):
+    """A key holding a 1 MB text where a number belongs: the error quoted it whole (one 1 MB line on standard
+    error); the line keeps its start (file, line, key) and end, the middle cut and counted."""
+    from arm_model.log import MAX_LINE
+    text = NOMINAL.read_text().replace("d_mm = 200.0", 'd_mm = "' + "a" * 1_000_000 + '"', 1)
+    (tmp_path / "arm.toml").write_text(text)
+    (tmp_path / "p.csv").write_text("measurement,feature," + ",".join(f"q{k}_deg" for k in range(1, 8)) + "\n"
+                                    "m,f,1,2,3,4,5,6,7\n")
+    assert main(["tip", str(tmp_path / "p.csv"), "--arm", str(tmp_path / "arm.toml"), "-o", str(tmp_path / "o.csv")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and len(err) < MAX_LINE + 100, len(err)
+    assert "arm.toml, line 11, key 'joint[1].d_mm'" in err and "characters left out" in err
+    assert not (tmp_path / "o.csv").exists()
