@@ -10,7 +10,6 @@ import pytest
 from arm_model.cli import main
 from conftest import NOMINAL
 
-
 # ---------------------------------------------------------------------------------------------
 # the Python API: an Arm refuses what its model file's reader would refuse
 
@@ -79,8 +78,63 @@ def test_a_megabyte_value_in_an_error_is_cut_in_its_middle(tmp_path, capsys):
     (tmp_path / "arm.toml").write_text(text)
     (tmp_path / "p.csv").write_text("measurement,feature," + ",".join(f"q{k}_deg" for k in range(1, 8)) + "\n"
                                     "m,f,1,2,3,4,5,6,7\n")
-    assert main(["tip", str(tmp_path / "p.csv"), "--arm", str(tmp_path / "arm.toml"), "-o", str(tmp_path / "o.csv")]) == 2
+    assert main(["tip", str(tmp_path / "p.csv"), "--arm", str(tmp_path / "arm.toml"),
+                 "-o", str(tmp_path / "o.csv")]) == 2
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and len(err) < MAX_LINE + 100, len(err)
     assert "arm.toml, line 11, key 'joint[1].d_mm'" in err and "characters left out" in err
     assert not (tmp_path / "o.csv").exists()
+
+
+# ---------------------------------------------------------------------------------------------
+# hostile URDFs
+
+def _urdf(tmp_path, lim='<limit lower="-3" upper="3" effort="1" velocity="1"/>', extra="", xyz="0 0 0.1"):
+    joints = "".join(f'<joint name="j{i}" type="revolute"><parent link="l{i - 1}"/><child link="l{i}"/>'
+                     f'<origin xyz="{xyz}" rpy="0 0 0"/><axis xyz="0 0 1"/>{lim}</joint><link name="l{i}"/>\n'
+                     for i in range(1, 4))
+    path = tmp_path / "r.urdf"
+    path.write_text(f'<?xml version="1.0"?>\n<robot name="r" {extra}>\n<link name="l0"/>\n{joints}</robot>\n')
+    return path
+
+
+def test_urdf_limits_beyond_plausible_are_no_limits_and_the_model_file_reads_back(tmp_path):
+    """<limit lower="-1e308" upper="1e308"> (URDFs from SDF write +-1e16 for "unlimited") were kept: a model file
+    of that arm could not be written (its lower_deg -inf: a NumericalError blaming the fit) and no point was
+    ever beyond them. Now they are no limits, as for a continuous joint."""
+    from arm_model.model_file import format_model, load_model, parse_model
+    arm = load_model(str(_urdf(tmp_path, '<limit lower="-1e308" upper="1e308" effort="1" velocity="1"/>')),
+                     tip_frame="l3")
+    assert all(j.lower is None and j.upper is None for j in arm.desc.joints)
+    back = parse_model(format_model(arm.desc), "m.toml")
+    assert all(j.lower is None for j in back.desc.joints)
+    arm = load_model(str(_urdf(tmp_path)), tip_frame="l3")         # ordinary limits are kept
+    assert arm.desc.joints[0].lower == -3.0
+
+
+@pytest.mark.parametrize("extra, xyz, words", [
+    ('xmlns:xacro="http://www.ros.org/wiki/xacro"><xacro:property name="l" value="0.1"/', "0 0 0.1",
+     ("line 2", "<property> of the xacro namespace", "expand it first")),
+    ("", "0 0 ${l}", ("line 4", "key 'origin.xyz'", "a xacro expression")),
+    ("", "0 0 $(arg l)", ("line 4", "a xacro expression")),
+])
+def test_an_unexpanded_xacro_file_is_refused_with_its_line(tmp_path, capsys, extra, xyz, words):
+    """A xacro file given as a URDF was read (its macros and properties silently ignored) or refused at a number
+    that is an expression as "must be 3 finite numbers"; it is one error naming xacro."""
+    path = _urdf(tmp_path, extra=extra, xyz=xyz)
+    (tmp_path / "p.csv").write_text("measurement,feature,q1_deg,q2_deg,q3_deg\nm,f,1,2,3\n")
+    rc = main(["tip", str(tmp_path / "p.csv"), "--arm", str(path), "--tip-frame", "l3", "-o", str(tmp_path / "o.csv")])
+    err = capsys.readouterr().err
+    assert rc == 2 and not (tmp_path / "o.csv").exists(), err
+    for w in words:
+        assert w in err, err
+
+
+def test_an_implausible_number_too_large_for_the_display_unit_is_shown_as_written(tmp_path, capsys):
+    """<origin xyz="0 0 1e308"> said "inf mm is not a plausible length": the value the file holds is shown."""
+    path = _urdf(tmp_path, xyz="0 0 1e308")
+    (tmp_path / "p.csv").write_text("measurement,feature,q1_deg,q2_deg,q3_deg\nm,f,1,2,3\n")
+    assert main(["tip", str(tmp_path / "p.csv"), "--arm", str(path), "--tip-frame", "l3",
+                 "-o", str(tmp_path / "o.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "1e+308 m is not a plausible length" in err and "inf" not in err, err
