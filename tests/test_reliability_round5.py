@@ -138,3 +138,61 @@ def test_an_implausible_number_too_large_for_the_display_unit_is_shown_as_writte
                  "-o", str(tmp_path / "o.csv")]) == 2
     err = capsys.readouterr().err
     assert "1e+308 m is not a plausible length" in err and "inf" not in err, err
+
+
+# ---------------------------------------------------------------------------------------------
+# live sources: a line that never ends
+
+def _sample_lines(n: int = 60) -> list[str]:
+    from conftest import ROOT
+    return (ROOT / "examples" / "live" / "samples.csv").read_text().splitlines(keepends=True)[:n]
+
+
+def test_a_stream_line_that_never_ends_is_one_bad_line_in_bounded_memory():
+    """A peer (standard input, TCP) that sends 8 MB without a newline: the source kept the whole line and copied it
+    at every chunk (a peer never sending a newline filled the memory). It keeps its first bytes, counts the rest,
+    and gives one line the session calls bad; the lines around it are read as sent."""
+    import os
+    import threading
+    import tracemalloc
+
+    from arm_model import InputError
+    from arm_model.live.sources import MAX_LINE_BYTES, LongLine, _FdSource, line_text
+    lines = _sample_lines(4)
+    r, w = os.pipe()
+    sevens, eights = b"7" * 1_000_000, b"8" * 1_000_000         # made before the memory is traced
+    payload = ["".join(lines[:2]).encode()] + [sevens] * 3 + [eights] * 5 + [
+        b"\r\n" + "".join(lines[2:]).encode(), b"9" * (MAX_LINE_BYTES + 1)]
+
+    def write():
+        with os.fdopen(w, "wb") as fh:
+            for part in payload:
+                fh.write(part)
+    tracemalloc.start()
+    threading.Thread(target=write, daemon=True).start()
+    try:
+        got = [item for item in _FdSource(r, "<pipe>").lines() if item is not None]
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+        os.close(r)
+    assert [no for no, _ in got] == [1, 2, 3, 4, 5, 6]
+    assert [raw.decode() for _, raw in got[:2]] + [got[3][1].decode(), got[4][1].decode()] == \
+        [x.rstrip("\n") for x in lines]
+    assert isinstance(got[2][1], LongLine) and got[2][1].length == 8_000_001 and got[2][1].startswith(b"777")
+    assert isinstance(got[5][1], LongLine) and got[5][1].length == MAX_LINE_BYTES + 1
+    with pytest.raises(InputError, match=r"<pipe>, line 3: a line of 8000001 bytes or more"):
+        line_text(got[2][1], "<pipe>", 3)
+    assert peak < 3 * MAX_LINE_BYTES, f"peak {peak / 1e6:.1f} MB"
+
+
+def test_a_recorded_stream_with_a_huge_line_counts_it_and_goes_on(tmp_path, capsys):
+    lines = _sample_lines()
+    (tmp_path / "s.csv").write_text("".join(lines[:30]) + "1," * 1_000_000 + "\n" + "".join(lines[30:]))
+    out = tmp_path / "session"
+    assert main(["live", str(tmp_path / "s.csv"), "--arm", "aacmm7", "-o", str(out), "--speed", "0",
+                 "--feature", "plane:p"]) == 0
+    err = capsys.readouterr().err
+    assert "line 31: a line of 2000001 bytes or more" in err, err
+    import json
+    assert json.loads((out / "session.json").read_text())["counts"]["bad_lines"] == 1

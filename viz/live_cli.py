@@ -119,6 +119,7 @@ class _Stop:
 def _header(source: LineSource, stop: _Stop) -> tuple:
     """(line number, cells) of the stream's header: its first line that is not blank (UDP: the first that
     is not a number, lines before it skipped and counted)."""
+    from arm_model.live.sources import line_text
     skipped = 0
     for item in source.lines():
         if stop.reason:
@@ -126,7 +127,7 @@ def _header(source: LineSource, stop: _Stop) -> tuple:
         if item is None:
             continue
         no, raw = item
-        text = _text(raw, source.name, no)
+        text = line_text(raw, source.name, no)
         if not text.strip():
             continue
         cells = next(csv.reader([text.lstrip("\ufeff")]))
@@ -143,13 +144,6 @@ def _looks_numeric(cell: str) -> bool:
         return True
     except ValueError:
         return False
-
-
-def _text(raw: bytes, name: str, no: int) -> str:
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError:
-        raise InputError("not UTF-8 text", name, no) from None
 
 
 def run_live(args: argparse.Namespace) -> int:
@@ -210,7 +204,7 @@ def _status(args: argparse.Namespace, source: LineSource, files: list) -> dict:
 def _run(args: argparse.Namespace, source: LineSource, session: Session, layout: SampleLayout, stop: _Stop,
          skipped: int) -> int:
     """The session's loop: push every line's sample, show what it brings, keep the view drawn."""
-    from arm_model.live.sources import Pacer
+    from arm_model.live.sources import Pacer, line_text
     view = _start_view(args, session)
     pacer = Pacer(args.speed if source.replay else 0.0)
     said: dict[str, int] = {}
@@ -236,13 +230,11 @@ def _run(args: argparse.Namespace, source: LineSource, session: Session, layout:
                 idle_since = time.monotonic()
             no, raw = item
             try:
-                text = raw.decode("utf-8")
+                text = line_text(raw, source.name, no)
                 if not text or (datagrams and text == header_text) or not text.strip():
                     continue
                 sample = layout.parse(text, no)
-            except (InputError, UnicodeDecodeError) as exc:
-                if isinstance(exc, UnicodeDecodeError):
-                    exc = InputError("not UTF-8 text", source.name, no)
+            except InputError as exc:
                 _show(session.bad_line(exc), said)
                 if args.strict:
                     status, message, code = "stopped", f"stopped at a bad line (--strict): {exc}", 2
