@@ -196,3 +196,26 @@ def test_a_recorded_stream_with_a_huge_line_counts_it_and_goes_on(tmp_path, caps
     assert "line 31: a line of 2000001 bytes or more" in err, err
     import json
     assert json.loads((out / "session.json").read_text())["counts"]["bad_lines"] == 1
+
+
+# ---------------------------------------------------------------------------------------------
+# a model file edited by hand
+
+@pytest.mark.parametrize("old, new, key", [
+    ("ball_diameter_mm = 4.0", "ball_diameter_mm = -4.0", "ball_diameter_mm"),
+    ("max_force_N = 13.0                      # calibrated range of the force sensor", "max_force_N = 0",
+     "max_force_N"),
+    ("axial_compliance_mm_per_N = 0.0000876", "axial_compliance_mm_per_N = -1e-5", "axial_compliance_mm_per_N"),
+])
+def test_a_bad_probe_value_names_its_own_line_and_key(old, new, key):
+    """ball_diameter_mm = -4 was reported at the [probe] table's line as key 'probe.ball_diameter' (no such key in
+    the file): the line and the key are the value's own."""
+    from arm_model import InputError
+    from arm_model.description import parse_description
+    text = NOMINAL.read_text()
+    assert old in text
+    text = text.replace(old, new)
+    line = text.splitlines().index(new) + 1
+    with pytest.raises(InputError) as exc:
+        parse_description(text, "arm.toml")
+    assert exc.value.line == line and key in str(exc.value) and f"'probe.{key}'" in str(exc.value), str(exc.value)
