@@ -219,3 +219,27 @@ def test_a_bad_probe_value_names_its_own_line_and_key(old, new, key):
     with pytest.raises(InputError) as exc:
         parse_description(text, "arm.toml")
     assert exc.value.line == line and key in str(exc.value) and f"'probe.{key}'" in str(exc.value), str(exc.value)
+
+
+# ---------------------------------------------------------------------------------------------
+# the correction API: a NaN in is an error, never a NaN out
+
+@pytest.mark.parametrize("x, y, match", [
+    ([1.0, 2.0, float("nan"), 4.0], [1.0, 3.0, 4.0, 5.0], "x: value 2 is nan, not finite"),
+    ([1.0, 2.0, 3.0, 4.0], [1.0, float("inf"), 4.0, 5.0], "y: value 1 is inf, not finite"),
+    ([1.0, 2.0, 3.0, 4.0], [1.0, 2.0, 3.0], "one length"),
+])
+def test_correlate_refuses_what_would_give_a_nan_r(x, y, match):
+    """correlate returned r = p = slope = NaN for one NaN force: a numerical failure returned silently."""
+    from correction import correlate
+    with pytest.raises(ValueError, match=match):
+        correlate(x, y)
+
+
+@pytest.mark.parametrize("dof, p", [(0, 95.0), (-3, 95.0), (math.nan, 95.0), (5, math.nan), (5, 100.0), (5, 0.0)])
+def test_student_k_refuses_what_has_no_coverage_factor(dof, p):
+    """student_k(5, nan) returned NaN, student_k(0, 95) raised GTC's RuntimeError: both a ValueError."""
+    from correction import student_k
+    with pytest.raises(ValueError):
+        student_k(dof, p)
+    assert student_k(math.inf, 95.0) == pytest.approx(1.959963984540054)
