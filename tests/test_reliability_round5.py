@@ -243,3 +243,52 @@ def test_student_k_refuses_what_has_no_coverage_factor(dof, p):
     with pytest.raises(ValueError):
         student_k(dof, p)
     assert student_k(math.inf, 95.0) == pytest.approx(1.959963984540054)
+
+
+# ---------------------------------------------------------------------------------------------
+# the paper's Table 2 and the residuals file: the toolkit's number rule and range
+
+def _table2(tmp_path, cell: str):
+    from correction.paper import TABLE2_PATH
+    rows = [line for line in TABLE2_PATH.read_text().splitlines(keepends=True) if not line.startswith("#")]
+    first = rows[1].split(",")
+    first[2] = cell
+    path = tmp_path / "t2.csv"
+    path.write_text(rows[0] + ",".join(first) + "".join(rows[2:]))
+    return path
+
+
+@pytest.mark.parametrize("cell, words", [
+    ("1e308", "1e+308 mm is not a plausible length"),     # overflowed the fits: exit 3 after publishing
+    ("１", "expected a number, got '１'"),                  # float() reads a full-width digit
+])
+def test_paper_table2_cells_follow_the_number_rule_and_range(tmp_path, capsys, cell, words):
+    out = tmp_path / "out"
+    assert main(["paper", "--table2", str(_table2(tmp_path, cell)), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "t2.csv, line 2, column 'point_force_mm'" in err and words in err and not out.exists(), err
+
+
+def _residuals(tmp_path, cells: dict):
+    header = ["measurement", "feature", "line", "dx_um", "dy_um", "dz_um"]
+    row = {"measurement": "m", "feature": "f", "line": "2", "dx_um": "1.5", "dy_um": "-2", "dz_um": "0.5", **cells}
+    path = tmp_path / "residuals.csv"
+    path.write_text(",".join(header) + "\n" + ",".join(row[h] for h in header) + "\n")
+    (tmp_path / "p.csv").write_text("measurement,feature," + ",".join(f"q{k}_deg" for k in range(1, 8)) + "\n"
+                                    "m,f,10,20,-30,40,5,-15,25\n")
+    return path
+
+
+@pytest.mark.parametrize("cells, column, words", [
+    ({"line": "²"}, "line", "expected a line number"),                 # isdigit() yet no int(): exit 3
+    ({"dx_um": "1e308"}, "dx_um", "not a plausible length"),           # overflowed the drawing
+    ({"dy_um": "1_0"}, "dy_um", "expected a finite number, got '1_0'"),
+])
+def test_view_residuals_cells_are_checked(tmp_path, capsys, cells, column, words):
+    from arm_model import InputError
+    from viz.residuals import read_residuals
+    path = _residuals(tmp_path, cells)
+    with pytest.raises(InputError) as exc:
+        read_residuals(path)
+    assert exc.value.line == 2 and column in str(exc.value) and words in str(exc.value), str(exc.value)
+    read_residuals(_residuals(tmp_path, {}))
