@@ -292,3 +292,16 @@ def test_view_residuals_cells_are_checked(tmp_path, capsys, cells, column, words
         read_residuals(path)
     assert exc.value.line == 2 and column in str(exc.value) and words in str(exc.value), str(exc.value)
     read_residuals(_residuals(tmp_path, {}))
+
+
+@pytest.mark.parametrize("rate", [1e308, 5e-324, 2e6])
+def test_a_live_sample_rate_beyond_its_range_is_refused(tmp_path, capsys, rate):
+    """--rate-Hz 1e308 counted 1e305 dropped samples a millisecond gap; 5e-324 made the period infinite."""
+    from arm_model.live import Session
+    with pytest.raises(ValueError, match="nominal sample rate"):
+        Session("aacmm7", rate=rate)
+    with pytest.raises(SystemExit) as exc:
+        main(["live", "x.csv", "--arm", "aacmm7", "-o", str(tmp_path / "s"), "--rate-Hz", repr(rate)])
+    assert exc.value.code == 2
+    assert "--rate-Hz: must be in [0.001, 1e+06]" in capsys.readouterr().err
+    assert not (tmp_path / "s").exists()

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING
 from arm_model import InputError
 from arm_model.cli import command_help
 from arm_model.cli_options import add_arm_options, arm_inputs, model_from_args, non_negative, number_in, port, positive
+from arm_model.live.session import RATE_HZ_RANGE
 
 if TYPE_CHECKING:          # only for the annotations: the live modules load when the command runs
     from arm_model.live import SampleLayout, Session
@@ -59,7 +60,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                                         "the session folder's name)")
     p.add_argument("--speed", type=number_in(0, 1e6), default=1.0,
                    help="replay a file at this many times real time (default 1; 0: as fast as possible)")
-    p.add_argument("--rate-Hz", type=positive(), default=None,
+    p.add_argument("--rate-Hz", type=number_in(*RATE_HZ_RANGE), default=None,
                    help="the nominal sample rate (default: estimated from the first intervals); longer gaps "
                         "count as dropped samples")
     p.add_argument("--strict", action="store_true", help="stop the session at the first bad line (default: "
