@@ -305,3 +305,37 @@ def test_a_live_sample_rate_beyond_its_range_is_refused(tmp_path, capsys, rate):
     assert exc.value.code == 2
     assert "--rate-Hz: must be in [0.001, 1e+06]" in capsys.readouterr().err
     assert not (tmp_path / "s").exists()
+
+
+# ---------------------------------------------------------------------------------------------
+# aacmm examples: whole or nothing, never through a link
+
+def test_examples_never_writes_through_a_link_in_the_folder(tmp_path, capsys):
+    """DIR/docs a symbolic link to a folder elsewhere: the copy wrote the docs there (outside DIR). An existing
+    entry (file, folder or link) of those examples writes is refused, and nothing is written."""
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    dest = tmp_path / "ex"
+    dest.mkdir()
+    (dest / "docs").symlink_to(elsewhere)
+    assert main(["examples", str(dest)]) == 2
+    assert "ex/docs" in capsys.readouterr().err
+    assert not list(elsewhere.iterdir()) and sorted(p.name for p in dest.iterdir()) == ["docs"]
+
+
+def test_examples_is_whole_or_nothing(tmp_path, monkeypatch, capsys):
+    """A copy that fails part way (disk full) left part of the examples in DIR; now nothing, not DIR either."""
+    import shutil as sh
+    calls = {"n": 0}
+    real = sh.copy2
+
+    def failing(src, dst, *a, **k):
+        calls["n"] += 1
+        if calls["n"] == 20:
+            raise OSError(28, "No space left on device")
+        return real(src, dst, *a, **k)
+    monkeypatch.setattr(sh, "copy2", failing)
+    dest = tmp_path / "ex"
+    assert main(["examples", str(dest)]) == 2
+    assert "No space left on device" in capsys.readouterr().err
+    assert not dest.exists() and list(tmp_path.iterdir()) == []
