@@ -6,6 +6,7 @@ import dataclasses
 import math
 
 import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
 
 from arm_model.cli import main
 from conftest import NOMINAL
@@ -339,3 +340,66 @@ def test_examples_is_whole_or_nothing(tmp_path, monkeypatch, capsys):
     assert main(["examples", str(dest)]) == 2
     assert "No space left on device" in capsys.readouterr().err
     assert not dest.exists() and list(tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------------------------------------------
+# hypothesis: the readers this round fixed return or say where
+
+CELL = st.one_of(st.text(alphabet="0123456789.-+eE_ xnaif,\"'²１\u00a0", max_size=8),
+                 st.sampled_from(["nan", "inf", "1e308", "-1e308", "1e999", "4_5", "", " ", '"', "0x10", "²"]),
+                 st.floats(allow_nan=True, allow_infinity=True).map(repr))
+
+
+def _mutated(text: str, data) -> str:
+    """A few cells of ``text`` replaced, or a line dropped, repeated or replaced by any text."""
+    lines = text.splitlines()
+    for _ in range(data.draw(st.integers(1, 3))):
+        i = data.draw(st.integers(0, len(lines) - 1))
+        action = data.draw(st.sampled_from(["cell", "cell", "cell", "drop", "repeat", "garbage"]))
+        if action == "drop" and len(lines) > 1:
+            del lines[i]
+        elif action == "repeat":
+            lines.insert(i, lines[i])
+        elif action == "garbage":
+            lines[i] = data.draw(st.text(max_size=20))
+        elif "," in lines[i]:
+            parts = lines[i].split(",")
+            parts[data.draw(st.integers(0, len(parts) - 1))] = data.draw(CELL)
+            lines[i] = ",".join(parts)
+    return "\n".join(lines) + "\n"
+
+
+def _hostile_reader_case(tmp_path_factory, data, text: str, name: str, read):
+    from arm_model import InputError
+    path = tmp_path_factory.mktemp("r") / name
+    path.write_text(_mutated(text, data), encoding="utf-8", errors="surrogateescape")
+    try:
+        return read(path)
+    except InputError as exc:
+        assert str(exc).startswith(str(path)), str(exc)
+        return None
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_the_residuals_reader_returns_finite_plausible_vectors_or_says_where(tmp_path_factory, data):
+    import numpy as np
+
+    from viz.residuals import read_residuals
+    text = "measurement,feature,x_mm,y_mm,z_mm,dx_um,dy_um,dz_um\n" + "".join(
+        f"m{i % 2},f,{100 + i},{-20 + i},{300 - i},{1.5 * i},-2,{0.5 + i}\n" for i in range(6))
+    res = _hostile_reader_case(tmp_path_factory, data, text, "residuals.csv", read_residuals)
+    if res is not None:
+        assert np.all(np.isfinite(res.vectors)) and np.all(np.abs(res.vectors) <= 1e3)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_the_table2_reader_returns_finite_plausible_errors_or_says_where(tmp_path_factory, data):
+    import numpy as np
+
+    from correction.paper import TABLE2_PATH, load_paper_table2
+    table = _hostile_reader_case(tmp_path_factory, data, TABLE2_PATH.read_text(), "t2.csv", load_paper_table2)
+    if table is not None:
+        for v in table.columns.values():
+            assert np.all(np.isfinite(v)) and np.all(np.abs(v) <= 1e3)
