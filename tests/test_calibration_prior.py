@@ -67,11 +67,14 @@ SLIDE_URDF = """<?xml version="1.0"?>
 <robot name="slide">
   <link name="base"/><link name="carriage"/><link name="upper"/><link name="fore"/><link name="tool"/>
   <joint name="lift" type="prismatic"><parent link="base"/><child link="carriage"/>
-    <origin xyz="0 0 0.5" rpy="0 0 0.3"/><axis xyz="0 0 1"/><limit lower="0" upper="0.4" effort="1" velocity="1"/></joint>
+    <origin xyz="0 0 0.5" rpy="0 0 0.3"/><axis xyz="0 0 1"/>
+    <limit lower="0" upper="0.4" effort="1" velocity="1"/></joint>
   <joint name="shoulder" type="revolute"><parent link="carriage"/><child link="upper"/>
-    <origin xyz="0.1 0 0" rpy="0 0 0.2"/><axis xyz="0 0 1"/><limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+    <origin xyz="0.1 0 0" rpy="0 0 0.2"/><axis xyz="0 0 1"/>
+    <limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
   <joint name="reach" type="prismatic"><parent link="upper"/><child link="fore"/>
-    <origin xyz="0.3 0 0" rpy="0.1 0 0"/><axis xyz="1 0 0"/><limit lower="0" upper="0.2" effort="1" velocity="1"/></joint>
+    <origin xyz="0.3 0 0" rpy="0.1 0 0"/><axis xyz="1 0 0"/>
+    <limit lower="0" upper="0.2" effort="1" velocity="1"/></joint>
   <joint name="tool_joint" type="fixed"><parent link="fore"/><child link="tool"/><origin xyz="0.05 0 0"/></joint>
 </robot>
 """
