@@ -790,8 +790,9 @@ def calibrated_urdf_text(nominal: ArmDescription, calibrated: ArmDescription) ->
     hung = _hung_from(u, nominal.base_frame, nominal.tip_frame)
     if hung is not u:
         log.info(f"calibrated URDF: the chain runs from '{nominal.base_frame}' against the URDF's tree (joints "
-                 "walked backwards), which the file's own origins cannot take: written as the chain's own URDF")
-        return urdf_text(calibrated)
+                 "walked backwards), which the file's own origins cannot take: written as the chain's own URDF "
+                 f"('{nominal.base_frame}' to '{nominal.tip_frame}')")
+        return urdf_text(calibrated, base_link=nominal.base_frame, tip_link=nominal.tip_frame)
     ch = _chain(u, nominal.tip_frame, nominal.base_frame)
     names = [j.name for j, _, _ in ch.moving]
     if names != [j.name for j in nominal.joints] or names != [j.name for j in calibrated.joints]:

@@ -869,11 +869,13 @@ def _tracker(prob: Problem, p, states, nrm: _Normal, n_kept: int, var: float) ->
     return prob.tracker(states, u)
 
 
-def _dof(prob: Problem, n_rows: int, n_kept: int) -> tuple[int, int]:
-    """(degrees of freedom, nuisance unknowns) of a fit; raises when there is no redundancy."""
+def _dof(prob: Problem, n_rows: int, n_kept: int, prior: bool = False) -> tuple[int, int]:
+    """(degrees of freedom, nuisance unknowns) of a fit; raises when there is no redundancy: rows minus free
+    parameters and nuisance unknowns, or with a prior (which determines what the data leave open) rows minus
+    nuisance unknowns (the redundancy itself then comes from the leverages, :func:`_result`)."""
     n_nuis = sum(it.n_theta for it in prob.instances)
     dof = n_rows - n_kept - n_nuis
-    if dof <= 0:
+    if (n_rows - n_nuis if prior else dof) <= 0:
         raise NumericalError(f"{n_rows} residuals for {n_kept} parameters and {n_nuis} nuisance unknowns: "
                              "not enough data for a fit with redundancy: give more points (poses), fewer free "
                              "parameters (--hold, --free) or a smaller --holdout")
@@ -889,15 +891,20 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
     prob = s.problem.with_free(kept)
     ev = sol.evaluation
     n_rows = len(ev.r)
-    dof, n_nuis = _dof(prob, n_rows, len(kept))
-    s0 = math.sqrt(2 * sol.cost / dof)
+    dof, n_nuis = _dof(prob, n_rows, len(kept), prior=s.prior is not None)
+    nrm = _normal(s, sol, kept)
+    # with a prior the residuals' share of the unknowns is the leverages' (the prior determines what the data
+    # leave open), as in the noise's variance components: s0 = 1 when the noise estimate holds
+    red = float(np.sum(1.0 - nrm.h)) if s.prior is not None else float(dof)
+    s0 = math.sqrt(2 * sol.cost / red)
     var = s0 ** 2 if options.covariance == "residual" else 1.0
-    source = (f"a posteriori: s0^2 = {s0 ** 2:.4g} (weighted residual variance, dof {dof})"
+    source = ((f"a posteriori: s0^2 = {s0 ** 2:.4g} (weighted residual variance, dof {dof})" if s.prior is None else
+               f"a posteriori: s0^2 = {s0 ** 2:.4g} (weighted residual variance over the redundancy {red:.3g}: rows "
+               "less their share of the unknowns, the prior included)")
               if options.covariance == "residual" else "stated uncertainties (s0 = 1)")
     cov = _covariance(s, ev, kept, var)
     u = np.sqrt(np.diag(cov))
     corr = cov / np.outer(u, u) if len(kept) else cov
-    nrm = _normal(s, sol, kept)
     z = standardized_residuals(prob, ev.r, nrm.h)
     table = _point_table(prob, data, sol.p, sol.states, z)
     outliers = _outliers(prob, data, table, z[prob.n_point_rows:], options.outlier_threshold)
@@ -989,8 +996,10 @@ def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
     for k in range(EVIDENCE_ROUNDS):
         prob = s.problem.with_free(kept)
         ev = sol.evaluation
-        dof, _ = _dof(prob, len(ev.r), len(kept))
-        var = 2 * sol.cost / dof if options.covariance == "residual" and not options.weights_from_data else 1.0
+        _dof(prob, len(ev.r), len(kept), prior=True)
+        nrm = _normal(s, sol, kept)
+        red = float(np.sum(1.0 - nrm.h))          # the redundancy with the prior, as in :func:`_result`
+        var = 2 * sol.cost / red if options.covariance == "residual" and not options.weights_from_data else 1.0
         post = np.diag(_covariance(s, ev, kept, var))
         kept_arr = np.asarray(kept, dtype=int)
         rho = variance_ratio(post, s.prior.size[kept_arr])
@@ -999,13 +1008,12 @@ def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
                                       damping)
         factors = {}
         if options.weights_from_data:
-            nrm = _normal(s, sol, kept)
             factors = {v["group"]: v["factor"] ** damping for v in variance_components(prob, ev.r, nrm.h, prob.weights)
                        if v["estimated"]}
         change = max([abs(math.log(scales[g] / s.scales[g])) for g in scales] +
                      [abs(math.log(f)) for f in factors.values()] + [0.0])
         history.append({"round": k + 1, "scales": dict(s.scales), "effective_parameters": gamma,
-                        "noise_factors": dict(prob.weights.factors), "s0": math.sqrt(2 * sol.cost / dof)})
+                        "noise_factors": dict(prob.weights.factors), "s0": math.sqrt(2 * sol.cost / red)})
         if change <= EVIDENCE_TOL:
             history[-1]["settled"] = True
             return s, sol, kept, fixed, history
@@ -1023,6 +1031,11 @@ def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
 
 #: fewest redundant rows (rows minus their share of the unknowns) for a group's noise to be estimated
 MIN_REDUNDANCY = 5.0
+#: below :data:`MIN_REDUNDANCY` (and from one redundant row on) a group's noise is still estimated when its
+#: residuals refute the stated uncertainty: chi-square of its weighted residuals on its redundancy beyond this
+#: probability in either tail (a humanoid touching a table on 21 poses with 18 parameters: 3 redundant rows,
+#: residuals of millimetres against a stated 10 um; kept, the stated value made the evidence interpolate)
+REFUTED_P = 1e-6
 #: rows whose residual exceeds this many robust standard deviations of their group (1.4826 times the median
 #: of ``|r| / sqrt(1 - h)``) are gross errors: left out of the group's noise estimate
 OUTLIER_ROWS = 4.0
@@ -1090,7 +1103,8 @@ def variance_components(problem: Problem, r: np.ndarray, leverage: np.ndarray, w
     of each row that the unknowns absorb), ``factor_g = sqrt(|r_g|^2 / red_g)`` estimates by how much its
     stated uncertainty must be multiplied. Rows beyond :data:`OUTLIER_ROWS` robust standard deviations of
     their group are left out (a gross error would inflate the estimate). Groups with less than
-    :data:`MIN_REDUNDANCY` redundant rows are not estimated (``estimated`` False, factor 1).
+    :data:`MIN_REDUNDANCY` redundant rows are not estimated (``estimated`` False, factor 1), unless their
+    residuals refute the stated uncertainty (:func:`_refutes`; ``stated_refuted`` True).
 
     Returns one dict a group: ``group``, ``rows``, ``redundancy``, ``factor``, ``estimated``, and
     ``sigma_um`` (the current uncertainty of a point of the group, per axis, factor applied) and
@@ -1103,14 +1117,23 @@ def variance_components(problem: Problem, r: np.ndarray, leverage: np.ndarray, w
         gross = z > OUTLIER_ROWS * s_rob if s_rob > 0 else np.zeros(len(idx), bool)
         idx = idx[~gross]
         red = float(np.sum(1.0 - leverage[idx]))
-        ok = red >= MIN_REDUNDANCY
+        refuted = MIN_REDUNDANCY > red >= 1.0 and _refutes(float(r[idx] @ r[idx]), red)
+        ok = red >= MIN_REDUNDANCY or refuted
         factor = math.sqrt(float(r[idx] @ r[idx]) / red) if ok else 1.0
         sig = weights.sigma_of(name)
         out.append({"group": name, "rows": int(len(idx)), "redundancy": red, "factor": factor, "estimated": ok,
-                    "gross_rows_left_out": int(gross.sum()),
+                    "stated_refuted": bool(refuted), "gross_rows_left_out": int(gross.sum()),
                     "sigma_um": None if sig is None else sig * 1e6,
                     "estimate_um": None if sig is None else sig * factor * 1e6})
     return out
+
+
+def _refutes(chi2: float, red: float) -> bool:
+    """Whether a weighted residual sum of squares ``chi2`` on ``red`` redundant rows refutes the stated
+    uncertainty: beyond :data:`REFUTED_P` in either tail of the chi-square distribution with ``red`` degrees
+    of freedom."""
+    from scipy.stats import chi2 as chi2_dist
+    return bool(chi2_dist.sf(chi2, red) < REFUTED_P or chi2_dist.cdf(chi2, red) < REFUTED_P)
 
 
 def reweighted(model: ArmModel, data: CalibrationData, options: FitOptions, tol: float = 0.03,

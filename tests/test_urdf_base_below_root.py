@@ -122,7 +122,7 @@ def test_calibrated_urdf_of_a_chain_from_a_foot_is_the_chains_own(tmp_path):
     out = tmp_path / "cal.urdf"
     out.write_text(text)
     assert 'name="l_sole~' not in text and "l_hip_o" not in text
-    back = load_model(out, "ball")                       # the generated URDF's tip: the probe's ball
+    back = load_model(out, "tool", base_frame="l_sole")    # the generated chain keeps its base's and tip's names
     assert back.desc.joint_names == arm.desc.joint_names
     q = np.random.default_rng(5).uniform(-1.0, 1.0, (4, 6))
     np.testing.assert_allclose(back.model.ball_centres(q, None, back.p), arm.model.ball_centres(q, None, arm.p),
