@@ -493,6 +493,23 @@ def sessions_without_frame(res, test) -> list[str]:
     return [s for s in dict.fromkeys(test.sessions[rows].astype(str).tolist()) if res.tracker.frame(s) is None]
 
 
+#: fixed parameters listed one a line on the console (all of them with -v, and always in summary.json); a humanoid
+#: touching one plane holds about 90 of its 105 candidates, each with a combination of a dozen terms
+MAX_FIXED_LINES = 12
+
+
+def _log_fixed(fixed) -> None:
+    """The fixed parameters, one a line: those at a bound first (what the data wanted), then the rank's, at most
+    :data:`MAX_FIXED_LINES` in all unless verbose; the rest counted, pointing to where they are listed."""
+    order = sorted(fixed, key=lambda f: "bound" not in f.reason)
+    shown = order if log.isEnabledFor(logging.DEBUG) else order[:MAX_FIXED_LINES]
+    for f in shown:
+        log.info(f"  fixed {f.name}: {f.reason}")
+    if len(order) > len(shown):
+        log.info(f"  ... and {len(order) - len(shown)} more fixed parameters, each with the combination the data "
+                 "cannot see: summary.json 'fixed', parameters.csv (-v lists them here)")
+
+
 def _log_calibration(res, data, train, test, poses, warnings, validation, files) -> None:
     """The console report of ``aacmm calibrate``."""
     from .report import poorly_determined
@@ -514,8 +531,7 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
              f"{len(res.free)} parameters free, {res.n_nuisance} nuisance unknowns, dof {res.dof}")
     idf = res.identifiability_final
     log.info(f"identifiability: rank {idf.rank}/{len(idf.names)} at the solution, condition number {idf.condition:.3g}")
-    for f in res.fixed:
-        log.info(f"  fixed {f.name}: {f.reason}")
+    _log_fixed(res.fixed)
     for text in poorly_determined(res):
         log.info(f"  poorly determined: {text}")
     if res.outliers:
