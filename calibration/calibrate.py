@@ -257,6 +257,7 @@ class CalibrationResult:
     model_check: dict | None = None           # model_output.model_check of this fit, when refine_torques made it
     discrepancy: Discrepancy | None = None    # the error beyond the fit's own prediction away from its poses
     options: FitOptions | None = None         # the options of the fit (calibrate's, as given)
+    redundancy: float | None = None           # with a prior: rows less their share of the unknowns (s0's divisor)
 
     # -- access by name ----------------------------------------------------------------------------
     @property
@@ -397,7 +398,7 @@ class CalibrationResult:
             "status": self.status, "iterations": self.iterations, "evaluations": self.evaluations,
             "cost": self.cost, "s0": self.s0, "covariance_source": self.covariance_source,
             "n_points": len(self.data), "n_residuals": self.n_residuals, "n_nuisance": self.n_nuisance,
-            "dof": self.dof, "parameters": self.parameter_rows(), "free": list(self.free),
+            "dof": self.dof, "redundancy": self.redundancy, "parameters": self.parameter_rows(), "free": list(self.free),
             "fixed": [f.to_dict() for f in self.fixed], "held": list(self.held),
             "correlation": {"names": list(self.free), "matrix": self.corr.tolist()},
             "identifiability_start": self.identifiability.to_dict(),
@@ -647,12 +648,43 @@ def _setup(model: ArmModel, data: CalibrationData, options: FitOptions) -> _Setu
     return _Setup(problem, cand, nominal, p0, states, Prior(centre, pspec.sizes(scales)), None, pspec, scales)
 
 
+#: the structural rank test (:func:`_structural`) evaluates about this many times as many rows as candidates
+STRUCTURAL_ROWS = 4
+
+
+def _structural(s: _Setup, kept) -> Problem | None:
+    """With a prior, when the data have fewer degrees of freedom (rows less nuisance unknowns) than there are
+    candidates (``kept``), the same problem (the same instances: artefacts, frames, markers) over poses drawn
+    across the data's joint ranges (each widened by a tenth, at least 0.05 rad or m; seeded), several times as
+    many rows: its rank deficiencies are those of the chain and the kind of measurement (a base frame's rigid
+    motion, a tool offset along a plane's normal), not those of too few poses. Those are the ones to hold; what
+    the data are merely too few to separate stays free under the prior, prior-dominated where the data add
+    nothing (a humanoid touching one table on 21 poses: 105 candidates, 18 data dimensions; held by the data's
+    rank, the tool offset went and the held-out touches got worse than the nominal's). None otherwise."""
+    prob = s.problem
+    n_nuis = sum(it.n_theta for it in prob.with_free(list(kept)).instances)
+    if s.prior is None or prob.n_rows - n_nuis >= len(kept):
+        return None
+    data = prob.data
+    q = data.points.q
+    reps = int(math.ceil(STRUCTURAL_ROWS * len(kept) / max(prob.n_rows, 1))) + 1
+    rows = np.tile(np.arange(len(q)), reps)
+    lo, hi = q.min(axis=0), q.max(axis=0)
+    pad = np.maximum(0.1 * (hi - lo), 0.05)
+    rich = data.select(rows)
+    qr = np.random.default_rng(0).uniform(lo - pad, hi + pad, (len(rows), q.shape[1]))
+    rich = replace(rich, points=replace(rich.points, q=qr))
+    return Problem(prob.model, rich, prob.weights, list(prob.free), reference=prob.reference)
+
+
 def _held(s: _Setup, p, states, kept, stage: str, options: FitOptions):
     """:func:`identify` over ``kept``: (kept, the new FixedParameters, Identifiability). A held parameter goes
     back to its given value (not a warm start's, not where a fit moved it along a direction the data do not
     see or see only below the noise: that value would be carried into every pose the model is used at);
-    ``p`` is changed in place."""
-    kept, new, idf = identify(s.problem, p, states, kept, replace(options, min_resolution=s.min_resolution),
+    ``p`` is changed in place. With a prior and fewer data dimensions than candidates, the rank test is the
+    structural one (:func:`_structural`)."""
+    problem = _structural(s, kept) or s.problem
+    kept, new, idf = identify(problem, p, states, kept, replace(options, min_resolution=s.min_resolution),
                               stage=stage)
     spec = s.problem.model.spec
     for k, f in enumerate(new):
@@ -924,7 +956,7 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         prior_scales=None if s.prior is None else dict(s.scales), log_evidence=nrm.log_evidence,
         prior_centre=None if s.prior is None else s.prior.centre, options=options, prior_sd=prior_sd,
         prior_ratio=None if prior_sd is None else variance_ratio(u ** 2, prior_sd),
-        prior_groups=_group_table(s, kept, u), discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var))  # type: ignore[attr-defined]
+        prior_groups=_group_table(s, kept, u), redundancy=None if s.prior is None else red, discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var))  # type: ignore[attr-defined]
 
 
 def _group_table(s: _Setup, kept, u) -> dict:

@@ -528,7 +528,9 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
     for line in noise_lines(res):
         log.info(line)
     log.info(f"solver: {res.status} after {res.iterations} iterations; s0 = {res.s0:.3f}; "
-             f"{len(res.free)} parameters free, {res.n_nuisance} nuisance unknowns, dof {res.dof}")
+             f"{len(res.free)} parameters free, {res.n_nuisance} nuisance unknowns, "
+             + (f"dof {res.dof}" if res.redundancy is None else
+                f"redundancy {res.redundancy:.3g} of {res.n_residuals} rows (the prior included)"))
     idf = res.identifiability_final
     log.info(f"identifiability: rank {idf.rank}/{len(idf.names)} at the solution, condition number {idf.condition:.3g}")
     _log_fixed(res.fixed)
