@@ -545,6 +545,11 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
             log.warning(f"{len(gross)} outlier(s) at {GROSS_STANDARDIZED:g} standard deviations or more: a wrong "
                         "reading (a swapped marker, a slipped ball) pulls every parameter towards it; "
                         "--drop-outliers refits without them")
+    if res.redundancy is not None and res.redundancy < 1.0:
+        log.warning(f"the fit passes through its training points (redundancy {res.redundancy:.2g} rows, the prior "
+                    "included: more parameters than the data have dimensions): its training figures say nothing of "
+                    "its accuracy; judge it on held-out data (--holdout, --holdout-points) and by the model "
+                    "discrepancy")
     for title, rows in (("training", val_train), ("held-out", val_test)):
         if rows:
             log.info(f"validation on {title} data (nominal -> calibrated; {NOMINAL_NOTE}; ± standard uncertainty, "

@@ -137,8 +137,9 @@ def test_too_few_touches_hold_only_what_the_chain_cannot_separate(campaign, caps
     for name in ("walker.urdf", "table.toml", "validation.csv"):
         (few / name).write_text((campaign / name).read_text())
     assert _calibrate(few, "--holdout-points", str(few / "validation.csv"), "-o", str(few / "cal")) == 0
+    assert "the fit passes through its training points" in capsys.readouterr().err
     assert _calibrate(campaign, "-o", str(campaign / "all")) == 0
-    capsys.readouterr()
+    assert "passes through its training points" not in capsys.readouterr().err
     s = json.loads((few / "cal" / "summary.json").read_text())
     full = json.loads((campaign / "all" / "summary.json").read_text())
     assert s["n_points"] == 14 and len(s["free"]) > 14 - 3
