@@ -398,7 +398,8 @@ class CalibrationResult:
             "status": self.status, "iterations": self.iterations, "evaluations": self.evaluations,
             "cost": self.cost, "s0": self.s0, "covariance_source": self.covariance_source,
             "n_points": len(self.data), "n_residuals": self.n_residuals, "n_nuisance": self.n_nuisance,
-            "dof": self.dof, "redundancy": self.redundancy, "parameters": self.parameter_rows(), "free": list(self.free),
+            "dof": self.dof, "redundancy": self.redundancy, "parameters": self.parameter_rows(),
+            "free": list(self.free),
             "fixed": [f.to_dict() for f in self.fixed], "held": list(self.held),
             "correlation": {"names": list(self.free), "matrix": self.corr.tolist()},
             "identifiability_start": self.identifiability.to_dict(),
@@ -956,7 +957,8 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         prior_scales=None if s.prior is None else dict(s.scales), log_evidence=nrm.log_evidence,
         prior_centre=None if s.prior is None else s.prior.centre, options=options, prior_sd=prior_sd,
         prior_ratio=None if prior_sd is None else variance_ratio(u ** 2, prior_sd),
-        prior_groups=_group_table(s, kept, u), redundancy=None if s.prior is None else red, discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var))  # type: ignore[attr-defined]
+        prior_groups=_group_table(s, kept, u), redundancy=None if s.prior is None else red,
+        discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var))  # type: ignore[attr-defined]
 
 
 def _group_table(s: _Setup, kept, u) -> dict:
@@ -1063,10 +1065,11 @@ def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
 
 #: fewest redundant rows (rows minus their share of the unknowns) for a group's noise to be estimated
 MIN_REDUNDANCY = 5.0
-#: below :data:`MIN_REDUNDANCY` (and from one redundant row on) a group's noise is still estimated when its
-#: residuals refute the stated uncertainty: chi-square of its weighted residuals on its redundancy beyond this
-#: probability in either tail (a humanoid touching a table on 21 poses with 18 parameters: 3 redundant rows,
-#: residuals of millimetres against a stated 10 um; kept, the stated value made the evidence interpolate)
+#: below :data:`MIN_REDUNDANCY` (and from one redundant row on) a group of points' noise is still estimated when
+#: its residuals refute the stated uncertainty (a certified length's stays the certificate's): chi-square of its
+#: weighted residuals on its redundancy beyond this probability in either tail (a humanoid touching a table on 21
+#: poses with 18 parameters: 3 redundant rows, residuals of millimetres against a stated 10 um; kept, the stated
+#: value made the evidence interpolate)
 REFUTED_P = 1e-6
 #: rows whose residual exceeds this many robust standard deviations of their group (1.4826 times the median
 #: of ``|r| / sqrt(1 - h)``) are gross errors: left out of the group's noise estimate
@@ -1149,7 +1152,9 @@ def variance_components(problem: Problem, r: np.ndarray, leverage: np.ndarray, w
         gross = z > OUTLIER_ROWS * s_rob if s_rob > 0 else np.zeros(len(idx), bool)
         idx = idx[~gross]
         red = float(np.sum(1.0 - leverage[idx]))
-        refuted = MIN_REDUNDANCY > red >= 1.0 and _refutes(float(r[idx] @ r[idx]), red)
+        # a certified length's uncertainty is its certificate's, not a starting guess: kept (what refutes it is
+        # an effect the model lacks, which its weight must keep visible)
+        refuted = name != "length" and MIN_REDUNDANCY > red >= 1.0 and _refutes(float(r[idx] @ r[idx]), red)
         ok = red >= MIN_REDUNDANCY or refuted
         factor = math.sqrt(float(r[idx] @ r[idx]) / red) if ok else 1.0
         sig = weights.sigma_of(name)
