@@ -100,8 +100,8 @@ def add_frame_options(p) -> None:
                         "compliances default to the seed paper's probe)")
     p.add_argument("--base-frame", default=None, metavar="LINK",
                    help="for an arm given as a URDF: the link its chain starts at (default the URDF's root; its "
-                        "frame is the base frame of every output), e.g. after a floating joint, or an arm on a torso "
-                        "whose joints the points do not give")
+                        "frame is the base frame of every output), e.g. after a floating joint, an arm on a torso "
+                        "whose joints the points do not give, or a humanoid's sole (the leg walked backwards)")
 
 
 def model_from_args(args: argparse.Namespace) -> Arm:

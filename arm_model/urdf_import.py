@@ -33,8 +33,9 @@ from __future__ import annotations
 import io
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -314,6 +315,57 @@ def _held(j, value: float) -> np.ndarray:
     axis = np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0), dtype=float)
     axis = axis / np.linalg.norm(axis)
     return _T(j.origin) @ elementary_motion("T" if j.type == "prismatic" else "R", tuple(axis), value)
+
+
+@dataclass
+class _Turned:
+    """A URDF joint walked from its child to its parent, for a chain whose base frame lies below another
+    branch of the tree (a humanoid's foot, the hand on a table). ``T_parent_child(q) = T_origin M(axis, q)``
+    walked backwards is ``M(axis, q)^-1 T_origin^-1 = M(-axis, q) T_origin^-1``: a moving joint at the child's
+    frame about the opposite axis (same encoder value, limits and mimic), then a fixed joint with the inverse
+    origin. The attributes are those of yourdfpy's Joint that the chain reads."""
+    name: str
+    type: str
+    parent: str
+    child: str
+    origin: np.ndarray
+    axis: Any = None
+    mimic: Any = None
+    limit: Any = None
+
+
+def _hung_from(u: _Urdf, base_frame: str | None, tip_frame: str) -> _Urdf:
+    """``u`` with its tree hung from ``base_frame`` when that link is not on the way from the root to
+    ``tip_frame`` (else ``u`` itself): every joint between the root and ``base_frame`` is turned
+    (:class:`_Turned`), so the chain base -> tip, the masses each joint carries and the links each row moves
+    follow from the same tree walk as for a chain from the root. A robot standing on one foot: the masses
+    are then those it carries over that foot."""
+    by_child = {j.child: j for j in u.robot.joints}
+    if base_frame is None or base_frame not in u.link_elements:
+        return u
+    link, up = tip_frame, set()
+    while link in by_child and link not in up:
+        up.add(link)
+        link = by_child[link].parent
+    if base_frame in up or base_frame == link:
+        return u
+    path, link = [], base_frame
+    while link in by_child and len(path) <= len(by_child):
+        path.append(by_child[link])
+        link = by_child[link].parent
+    turned = {j.name for j in path}
+    joints = [j for j in u.robot.joints if j.name not in turned]
+    for j in path:
+        back = np.linalg.inv(_T(j.origin))
+        if j.type == "fixed":
+            joints.append(_Turned(j.name, "fixed", j.child, j.parent, back))
+            continue
+        axis = np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0), dtype=float)
+        mid = f"{j.child}~{j.name}"
+        joints.append(_Turned(j.name, j.type, j.child, mid, np.eye(4), -axis, j.mimic, j.limit))
+        joints.append(_Turned(f"{j.name}~origin", "fixed", mid, j.parent, back))
+    log.debug(f"{u.path}: the chain starts at '{base_frame}', below the root: {len(path)} joints walked backwards")
+    return replace(u, robot=SimpleNamespace(name=u.robot.name, joints=joints, links=u.robot.links))
 
 
 def _walk_to_root(u: _Urdf, tip_frame: str, base_frame: str | None = None) -> list:
@@ -614,6 +666,8 @@ def _visuals(u: _Urdf, ch: _Chain) -> tuple[Visual, ...]:
     from .urdf import origin_matrix
     out, missing = [], 0
     for link, (row, T) in _link_frames(u, ch).items():
+        if link not in u.link_elements:          # the frame between a turned joint's motion and its origin
+            continue
         for vis in u.link_elements[link].findall("visual"):
             geom, origin = vis.find("geometry"), vis.find("origin")
             shape = None if geom is None else next((k for k in geom if isinstance(k.tag, str)), None)
@@ -663,6 +717,7 @@ def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None =
                 raise InputError(f"the masses name link '{lname}', which the URDF {u.path} does not have "
                                  f"(links: {', '.join(u.link_elements)})", where[0], where[1],
                                  "key 'link.name'")
+    u = _hung_from(u, base_frame, tip_frame)
     ch = _chain(u, tip_frame, base_frame)
     rows = [_row(u, j, prefix, mimic, mass, com)
             for (j, prefix, mimic), (mass, com) in zip(ch.moving, _fold_masses(u, ch, masses))]
@@ -752,6 +807,12 @@ def calibrated_urdf_text(nominal: ArmDescription, calibrated: ArmDescription) ->
     if not nominal.tip_frame or not nominal.source or Path(nominal.source).suffix.lower() != ".urdf":
         return urdf_text(calibrated)
     u = _read_urdf(nominal.source)
+    hung = _hung_from(u, nominal.base_frame, nominal.tip_frame)
+    if hung is not u:
+        log.info(f"calibrated URDF: the chain runs from '{nominal.base_frame}' against the URDF's tree (joints "
+                 "walked backwards), which the file's own origins cannot take: written as the chain's own URDF "
+                 f"('{nominal.base_frame}' to '{nominal.tip_frame}')")
+        return urdf_text(calibrated, base_link=nominal.base_frame, tip_link=nominal.tip_frame)
     ch = _chain(u, nominal.tip_frame, nominal.base_frame)
     names = [j.name for j, _, _ in ch.moving]
     if names != [j.name for j in nominal.joints] or names != [j.name for j in calibrated.joints]:

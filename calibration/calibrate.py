@@ -257,6 +257,7 @@ class CalibrationResult:
     model_check: dict | None = None           # model_output.model_check of this fit, when refine_torques made it
     discrepancy: Discrepancy | None = None    # the error beyond the fit's own prediction away from its poses
     options: FitOptions | None = None         # the options of the fit (calibrate's, as given)
+    redundancy: float | None = None           # with a prior: rows less their share of the unknowns (s0's divisor)
 
     # -- access by name ----------------------------------------------------------------------------
     @property
@@ -397,7 +398,8 @@ class CalibrationResult:
             "status": self.status, "iterations": self.iterations, "evaluations": self.evaluations,
             "cost": self.cost, "s0": self.s0, "covariance_source": self.covariance_source,
             "n_points": len(self.data), "n_residuals": self.n_residuals, "n_nuisance": self.n_nuisance,
-            "dof": self.dof, "parameters": self.parameter_rows(), "free": list(self.free),
+            "dof": self.dof, "redundancy": self.redundancy, "parameters": self.parameter_rows(),
+            "free": list(self.free),
             "fixed": [f.to_dict() for f in self.fixed], "held": list(self.held),
             "correlation": {"names": list(self.free), "matrix": self.corr.tolist()},
             "identifiability_start": self.identifiability.to_dict(),
@@ -647,12 +649,43 @@ def _setup(model: ArmModel, data: CalibrationData, options: FitOptions) -> _Setu
     return _Setup(problem, cand, nominal, p0, states, Prior(centre, pspec.sizes(scales)), None, pspec, scales)
 
 
+#: the structural rank test (:func:`_structural`) evaluates about this many times as many rows as candidates
+STRUCTURAL_ROWS = 4
+
+
+def _structural(s: _Setup, kept) -> Problem | None:
+    """With a prior, when the data have fewer degrees of freedom (rows less nuisance unknowns) than there are
+    candidates (``kept``), the same problem (the same instances: artefacts, frames, markers) over poses drawn
+    across the data's joint ranges (each widened by a tenth, at least 0.05 rad or m; seeded), several times as
+    many rows: its rank deficiencies are those of the chain and the kind of measurement (a base frame's rigid
+    motion, a tool offset along a plane's normal), not those of too few poses. Those are the ones to hold; what
+    the data are merely too few to separate stays free under the prior, prior-dominated where the data add
+    nothing (a humanoid touching one table on 21 poses: 105 candidates, 18 data dimensions; held by the data's
+    rank, the tool offset went and the held-out touches got worse than the nominal's). None otherwise."""
+    prob = s.problem
+    n_nuis = sum(it.n_theta for it in prob.with_free(list(kept)).instances)
+    if s.prior is None or prob.n_rows - n_nuis >= len(kept):
+        return None
+    data = prob.data
+    q = data.points.q
+    reps = int(math.ceil(STRUCTURAL_ROWS * len(kept) / max(prob.n_rows, 1))) + 1
+    rows = np.tile(np.arange(len(q)), reps)
+    lo, hi = q.min(axis=0), q.max(axis=0)
+    pad = np.maximum(0.1 * (hi - lo), 0.05)
+    rich = data.select(rows)
+    qr = np.random.default_rng(0).uniform(lo - pad, hi + pad, (len(rows), q.shape[1]))
+    rich = replace(rich, points=replace(rich.points, q=qr))
+    return Problem(prob.model, rich, prob.weights, list(prob.free), reference=prob.reference)
+
+
 def _held(s: _Setup, p, states, kept, stage: str, options: FitOptions):
     """:func:`identify` over ``kept``: (kept, the new FixedParameters, Identifiability). A held parameter goes
     back to its given value (not a warm start's, not where a fit moved it along a direction the data do not
     see or see only below the noise: that value would be carried into every pose the model is used at);
-    ``p`` is changed in place."""
-    kept, new, idf = identify(s.problem, p, states, kept, replace(options, min_resolution=s.min_resolution),
+    ``p`` is changed in place. With a prior and fewer data dimensions than candidates, the rank test is the
+    structural one (:func:`_structural`)."""
+    problem = _structural(s, kept) or s.problem
+    kept, new, idf = identify(problem, p, states, kept, replace(options, min_resolution=s.min_resolution),
                               stage=stage)
     spec = s.problem.model.spec
     for k, f in enumerate(new):
@@ -869,11 +902,13 @@ def _tracker(prob: Problem, p, states, nrm: _Normal, n_kept: int, var: float) ->
     return prob.tracker(states, u)
 
 
-def _dof(prob: Problem, n_rows: int, n_kept: int) -> tuple[int, int]:
-    """(degrees of freedom, nuisance unknowns) of a fit; raises when there is no redundancy."""
+def _dof(prob: Problem, n_rows: int, n_kept: int, prior: bool = False) -> tuple[int, int]:
+    """(degrees of freedom, nuisance unknowns) of a fit; raises when there is no redundancy: rows minus free
+    parameters and nuisance unknowns, or with a prior (which determines what the data leave open) rows minus
+    nuisance unknowns (the redundancy itself then comes from the leverages, :func:`_result`)."""
     n_nuis = sum(it.n_theta for it in prob.instances)
     dof = n_rows - n_kept - n_nuis
-    if dof <= 0:
+    if (n_rows - n_nuis if prior else dof) <= 0:
         raise NumericalError(f"{n_rows} residuals for {n_kept} parameters and {n_nuis} nuisance unknowns: "
                              "not enough data for a fit with redundancy: give more points (poses), fewer free "
                              "parameters (--hold, --free) or a smaller --holdout")
@@ -889,15 +924,20 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
     prob = s.problem.with_free(kept)
     ev = sol.evaluation
     n_rows = len(ev.r)
-    dof, n_nuis = _dof(prob, n_rows, len(kept))
-    s0 = math.sqrt(2 * sol.cost / dof)
+    dof, n_nuis = _dof(prob, n_rows, len(kept), prior=s.prior is not None)
+    nrm = _normal(s, sol, kept)
+    # with a prior the residuals' share of the unknowns is the leverages' (the prior determines what the data
+    # leave open), as in the noise's variance components: s0 = 1 when the noise estimate holds
+    red = float(np.sum(1.0 - nrm.h)) if s.prior is not None else float(dof)
+    s0 = math.sqrt(2 * sol.cost / red)
     var = s0 ** 2 if options.covariance == "residual" else 1.0
-    source = (f"a posteriori: s0^2 = {s0 ** 2:.4g} (weighted residual variance, dof {dof})"
+    source = ((f"a posteriori: s0^2 = {s0 ** 2:.4g} (weighted residual variance, dof {dof})" if s.prior is None else
+               f"a posteriori: s0^2 = {s0 ** 2:.4g} (weighted residual variance over the redundancy {red:.3g}: rows "
+               "less their share of the unknowns, the prior included)")
               if options.covariance == "residual" else "stated uncertainties (s0 = 1)")
     cov = _covariance(s, ev, kept, var)
     u = np.sqrt(np.diag(cov))
     corr = cov / np.outer(u, u) if len(kept) else cov
-    nrm = _normal(s, sol, kept)
     z = standardized_residuals(prob, ev.r, nrm.h)
     table = _point_table(prob, data, sol.p, sol.states, z)
     outliers = _outliers(prob, data, table, z[prob.n_point_rows:], options.outlier_threshold)
@@ -917,7 +957,8 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         prior_scales=None if s.prior is None else dict(s.scales), log_evidence=nrm.log_evidence,
         prior_centre=None if s.prior is None else s.prior.centre, options=options, prior_sd=prior_sd,
         prior_ratio=None if prior_sd is None else variance_ratio(u ** 2, prior_sd),
-        prior_groups=_group_table(s, kept, u), discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var))  # type: ignore[attr-defined]
+        prior_groups=_group_table(s, kept, u), redundancy=None if s.prior is None else red,
+        discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var))  # type: ignore[attr-defined]
 
 
 def _group_table(s: _Setup, kept, u) -> dict:
@@ -989,8 +1030,10 @@ def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
     for k in range(EVIDENCE_ROUNDS):
         prob = s.problem.with_free(kept)
         ev = sol.evaluation
-        dof, _ = _dof(prob, len(ev.r), len(kept))
-        var = 2 * sol.cost / dof if options.covariance == "residual" and not options.weights_from_data else 1.0
+        _dof(prob, len(ev.r), len(kept), prior=True)
+        nrm = _normal(s, sol, kept)
+        red = float(np.sum(1.0 - nrm.h))          # the redundancy with the prior, as in :func:`_result`
+        var = 2 * sol.cost / red if options.covariance == "residual" and not options.weights_from_data else 1.0
         post = np.diag(_covariance(s, ev, kept, var))
         kept_arr = np.asarray(kept, dtype=int)
         rho = variance_ratio(post, s.prior.size[kept_arr])
@@ -999,13 +1042,12 @@ def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
                                       damping)
         factors = {}
         if options.weights_from_data:
-            nrm = _normal(s, sol, kept)
             factors = {v["group"]: v["factor"] ** damping for v in variance_components(prob, ev.r, nrm.h, prob.weights)
                        if v["estimated"]}
         change = max([abs(math.log(scales[g] / s.scales[g])) for g in scales] +
                      [abs(math.log(f)) for f in factors.values()] + [0.0])
         history.append({"round": k + 1, "scales": dict(s.scales), "effective_parameters": gamma,
-                        "noise_factors": dict(prob.weights.factors), "s0": math.sqrt(2 * sol.cost / dof)})
+                        "noise_factors": dict(prob.weights.factors), "s0": math.sqrt(2 * sol.cost / red)})
         if change <= EVIDENCE_TOL:
             history[-1]["settled"] = True
             return s, sol, kept, fixed, history
@@ -1023,6 +1065,12 @@ def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
 
 #: fewest redundant rows (rows minus their share of the unknowns) for a group's noise to be estimated
 MIN_REDUNDANCY = 5.0
+#: below :data:`MIN_REDUNDANCY` (and from one redundant row on) a group of points' noise is still estimated when
+#: its residuals refute the stated uncertainty (a certified length's stays the certificate's): chi-square of its
+#: weighted residuals on its redundancy beyond this probability in either tail (a humanoid touching a table on 21
+#: poses with 18 parameters: 3 redundant rows, residuals of millimetres against a stated 10 um; kept, the stated
+#: value made the evidence interpolate)
+REFUTED_P = 1e-6
 #: rows whose residual exceeds this many robust standard deviations of their group (1.4826 times the median
 #: of ``|r| / sqrt(1 - h)``) are gross errors: left out of the group's noise estimate
 OUTLIER_ROWS = 4.0
@@ -1090,7 +1138,8 @@ def variance_components(problem: Problem, r: np.ndarray, leverage: np.ndarray, w
     of each row that the unknowns absorb), ``factor_g = sqrt(|r_g|^2 / red_g)`` estimates by how much its
     stated uncertainty must be multiplied. Rows beyond :data:`OUTLIER_ROWS` robust standard deviations of
     their group are left out (a gross error would inflate the estimate). Groups with less than
-    :data:`MIN_REDUNDANCY` redundant rows are not estimated (``estimated`` False, factor 1).
+    :data:`MIN_REDUNDANCY` redundant rows are not estimated (``estimated`` False, factor 1), unless their
+    residuals refute the stated uncertainty (:func:`_refutes`; ``stated_refuted`` True).
 
     Returns one dict a group: ``group``, ``rows``, ``redundancy``, ``factor``, ``estimated``, and
     ``sigma_um`` (the current uncertainty of a point of the group, per axis, factor applied) and
@@ -1103,14 +1152,25 @@ def variance_components(problem: Problem, r: np.ndarray, leverage: np.ndarray, w
         gross = z > OUTLIER_ROWS * s_rob if s_rob > 0 else np.zeros(len(idx), bool)
         idx = idx[~gross]
         red = float(np.sum(1.0 - leverage[idx]))
-        ok = red >= MIN_REDUNDANCY
+        # a certified length's uncertainty is its certificate's, not a starting guess: kept (what refutes it is
+        # an effect the model lacks, which its weight must keep visible)
+        refuted = name != "length" and MIN_REDUNDANCY > red >= 1.0 and _refutes(float(r[idx] @ r[idx]), red)
+        ok = red >= MIN_REDUNDANCY or refuted
         factor = math.sqrt(float(r[idx] @ r[idx]) / red) if ok else 1.0
         sig = weights.sigma_of(name)
         out.append({"group": name, "rows": int(len(idx)), "redundancy": red, "factor": factor, "estimated": ok,
-                    "gross_rows_left_out": int(gross.sum()),
+                    "stated_refuted": bool(refuted), "gross_rows_left_out": int(gross.sum()),
                     "sigma_um": None if sig is None else sig * 1e6,
                     "estimate_um": None if sig is None else sig * factor * 1e6})
     return out
+
+
+def _refutes(chi2: float, red: float) -> bool:
+    """Whether a weighted residual sum of squares ``chi2`` on ``red`` redundant rows refutes the stated
+    uncertainty: beyond :data:`REFUTED_P` in either tail of the chi-square distribution with ``red`` degrees
+    of freedom."""
+    from scipy.stats import chi2 as chi2_dist
+    return bool(chi2_dist.sf(chi2, red) < REFUTED_P or chi2_dist.cdf(chi2, red) < REFUTED_P)
 
 
 def reweighted(model: ArmModel, data: CalibrationData, options: FitOptions, tol: float = 0.03,

@@ -217,6 +217,10 @@ def register(sub) -> None:
                         "held out, each predicted against its feature as fitted on the training poses (reference "
                         "points: with the training fit's T_ref_base), so one placement of one artefact can be "
                         "validated")
+    c.add_argument("--holdout-points", type=Path, default=None, metavar="FILE",
+                   help="a points CSV of poses kept out of the fit (a stated validation set, the same columns as "
+                        "the points file), each predicted against its feature (measurement and feature ids of the "
+                        "points file) as fitted on the training points, as --holdout-by pose does")
     c.add_argument("--seed", type=seed, default=0, help="seed of the random --holdout draw (default 0)")
     c.add_argument("--reference", choices=("fit", "identity", "off"), default="fit",
                    help="reference coordinates: fit T_ref_base (default), take them as base coordinates "
@@ -361,27 +365,47 @@ def _load_data(args, defaults: bool = False):
     points = read_points(args.points, desc.joint_quantities)
     artefacts = None if args.artefacts is None else read_artefacts(args.artefacts)
     reference = None if args.reference_points is None else read_points(args.reference_points, desc.joint_quantities)
+    heldout = _heldout_points(args, desc)
     warnings = []
-    for pts in (points, reference):
+    for pts in (points, reference, heldout):
         if pts is not None:
             Arm(desc, model.effects).check_points(pts)
             warnings += point_warnings(desc, pts)
-    data = make_data(points, artefacts, model, reference=reference, marker_offsets=args.marker_offset)
+    data = make_data(points, artefacts, model, reference=reference, marker_offsets=args.marker_offset,
+                     heldout=heldout)
     added = default_effects(model, data) if defaults and args.effect is None else ()
     if added:
         from arm_model.model import ArmModel
         model = ArmModel(desc, tuple(model.effects) + added)
-        data = make_data(points, artefacts, model, reference=reference, marker_offsets=args.marker_offset)
+        data = make_data(points, artefacts, model, reference=reference, marker_offsets=args.marker_offset,
+                         heldout=heldout)
         log.info(f"effect {', '.join(e.describe() for e in added)} added: a robot whose links carry masses bends "
                  "under its own weight (each compliance's prior: non-negative, at most 10 mrad under its joint's RMS "
                  "gravity torque); --effect none for the geometry alone")
     return model, data, arm.values, warnings
 
 
+def _heldout_points(args, desc):
+    """The ``--holdout-points`` file read (None without it); refused beside ``--holdout`` or as the points file."""
+    path = getattr(args, "holdout_points", None)
+    if path is None:
+        return None
+    if args.holdout is not None:
+        raise InputError("--holdout-points and --holdout both choose the held-out data: give one of them")
+    if Path(path).resolve() == Path(args.points).resolve():
+        raise InputError("--holdout-points names the points file itself: the held-out poses are a file of their own",
+                         path)
+    return read_points(path, desc.joint_quantities)
+
+
 def _split(args, data):
     """(training data, held-out data or None, held-out pose mask over ``data`` or None) of ``--holdout``:
-    whole measurements (``--holdout-by measurement``) or a share of every feature's poses (``pose``)."""
-    from .data import split_holdout, split_poses
+    whole measurements (``--holdout-by measurement``) or a share of every feature's poses (``pose``); of
+    ``--holdout-points``: that file's rows, each predicted against its feature fitted on the training rows."""
+    from .data import heldout_mask, split_holdout, split_poses
+    if getattr(args, "holdout_points", None) is not None:
+        mask = heldout_mask(data, str(args.holdout_points))
+        return data.select(~mask), None, mask
     holdout = parse_holdout(args.holdout)
     if holdout is None:
         if args.holdout_by == "pose":
@@ -405,7 +429,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     from .model_output import refine_torques, with_fitted_torques
     from .report import write_outputs
     from .validation import worse_than_nominal
-    inputs = [args.points, args.artefacts, *arm_inputs(args), args.reference_points]
+    inputs = [args.points, args.artefacts, *arm_inputs(args), args.reference_points, args.holdout_points]
     with output_folder(args.output, inputs, "calibrate") as out:
         model, data, values, warnings = _load_data(args, defaults=True)
         if any(e.key == "joint_compliance" for e in model.effects):
@@ -431,9 +455,11 @@ def run_calibrate(args: argparse.Namespace) -> int:
                                                 "artefacts": None if args.artefacts is None else str(args.artefacts),
                                                 "arm": str(args.arm),
                                                 "reference_points": None if args.reference_points is None
-                                                else str(args.reference_points)},
+                                                else str(args.reference_points),
+                                                "holdout_points": None if args.holdout_points is None
+                                                else str(args.holdout_points)},
                                      "holdout": (None if test is None else test.measurements()),
-                                     "holdout_by": args.holdout_by,
+                                     "holdout_by": "pose" if args.holdout_points is not None else args.holdout_by,
                                      "holdout_poses": (None if poses is None
                                                        else [int(i) for i in np.flatnonzero(poses)]),
                                      "nominal_baseline": _baseline_entry(base),
@@ -467,6 +493,23 @@ def sessions_without_frame(res, test) -> list[str]:
     return [s for s in dict.fromkeys(test.sessions[rows].astype(str).tolist()) if res.tracker.frame(s) is None]
 
 
+#: fixed parameters listed one a line on the console (all of them with -v, and always in summary.json); a humanoid
+#: touching one plane holds about 90 of its 105 candidates, each with a combination of a dozen terms
+MAX_FIXED_LINES = 12
+
+
+def _log_fixed(fixed) -> None:
+    """The fixed parameters, one a line: those at a bound first (what the data wanted), then the rank's, at most
+    :data:`MAX_FIXED_LINES` in all unless verbose; the rest counted, pointing to where they are listed."""
+    order = sorted(fixed, key=lambda f: "bound" not in f.reason)
+    shown = order if log.isEnabledFor(logging.DEBUG) else order[:MAX_FIXED_LINES]
+    for f in shown:
+        log.info(f"  fixed {f.name}: {f.reason}")
+    if len(order) > len(shown):
+        log.info(f"  ... and {len(order) - len(shown)} more fixed parameters, each with the combination the data "
+                 "cannot see: summary.json 'fixed', parameters.csv (-v lists them here)")
+
+
 def _log_calibration(res, data, train, test, poses, warnings, validation, files) -> None:
     """The console report of ``aacmm calibrate``."""
     from .report import poorly_determined
@@ -474,7 +517,10 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
     val_train, val_test, conf, worse = validation
     held = ("" if test is None and poses is None else
             f", {counted(len(test), 'held-out point')} in {counted(len(test.measurements()), 'measurement')}"
-            if poses is None else f", {counted(int(poses.sum()), 'held-out pose')} (a share of every feature's)")
+            if poses is None else f", {counted(int(poses.sum()), 'held-out pose')} ("
+            + ("the --holdout-points file's" if np.any(data.files[poses] != data.files[~poses][0]) and
+               np.all(data.files[poses] == data.files[poses][0]) and data.files[poses][0] != data.points.path
+               else "a share of every feature's") + ")")
     log.info(f"{counted(len(train), 'training point')} in {counted(len(train.measurements()), 'measurement')}" + held)
     if data.points.force_kind == "two-channel":
         log.info("two-channel force sensor: the probe-y force is not measured and is taken as zero")
@@ -482,11 +528,12 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
     for line in noise_lines(res):
         log.info(line)
     log.info(f"solver: {res.status} after {res.iterations} iterations; s0 = {res.s0:.3f}; "
-             f"{len(res.free)} parameters free, {res.n_nuisance} nuisance unknowns, dof {res.dof}")
+             f"{len(res.free)} parameters free, {res.n_nuisance} nuisance unknowns, "
+             + (f"dof {res.dof}" if res.redundancy is None else
+                f"redundancy {res.redundancy:.3g} of {res.n_residuals} rows (the prior included)"))
     idf = res.identifiability_final
     log.info(f"identifiability: rank {idf.rank}/{len(idf.names)} at the solution, condition number {idf.condition:.3g}")
-    for f in res.fixed:
-        log.info(f"  fixed {f.name}: {f.reason}")
+    _log_fixed(res.fixed)
     for text in poorly_determined(res):
         log.info(f"  poorly determined: {text}")
     if res.outliers:
@@ -498,6 +545,11 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
             log.warning(f"{len(gross)} outlier(s) at {GROSS_STANDARDIZED:g} standard deviations or more: a wrong "
                         "reading (a swapped marker, a slipped ball) pulls every parameter towards it; "
                         "--drop-outliers refits without them")
+    if res.redundancy is not None and res.redundancy < 1.0:
+        log.warning(f"the fit passes through its training points (redundancy {res.redundancy:.2g} rows, the prior "
+                    "included: more parameters than the data have dimensions): its training figures say nothing of "
+                    "its accuracy; judge it on held-out data (--holdout, --holdout-points) and by the model "
+                    "discrepancy")
     for title, rows in (("training", val_train), ("held-out", val_test)):
         if rows:
             log.info(f"validation on {title} data (nominal -> calibrated; {NOMINAL_NOTE}; ± standard uncertainty, "
@@ -638,7 +690,9 @@ def noise_lines(res) -> list[str]:
             out.append(f"  {what}: {size}; not estimated (redundancy {v['redundancy']:.2g} of {v['rows']} rows, "
                        f"too little)")
         elif res.weights_history:
-            out.append(f"  {what}: {size}; redundancy {v['redundancy']:.1f} of {v['rows']} rows")
+            out.append(f"  {what}: {size}; redundancy {v['redundancy']:.1f} of {v['rows']} rows"
+                       + ("; estimated from few redundant rows because the stated uncertainty is refuted by the "
+                          "residuals (chi-square beyond 1e-6)" if v.get("stated_refuted") else ""))
         else:
             out.append(f"  {what}: residual/stated ratio {v['factor']:.3g} (redundancy {v['redundancy']:.1f} of "
                        f"{v['rows']} rows); --weights data would use it")

@@ -202,7 +202,7 @@ def merge_points(*sets: PointSet) -> tuple[PointSet, np.ndarray]:
 
 def make_data(points: PointSet, artefacts: Artefacts | None, model: ArmModel | None = None,
               aux: AuxData | None = None, reference: PointSet | None = None,
-              marker_offsets: str | None = None) -> CalibrationData:
+              marker_offsets: str | None = None, heldout: PointSet | None = None) -> CalibrationData:
     """Check the points against the artefacts and attach the aux inputs ``model.needs()``.
 
     ``artefacts``: None without an artefacts file (a tracker campaign: every row a free point with
@@ -211,13 +211,16 @@ def make_data(points: PointSet, artefacts: Artefacts | None, model: ArmModel | N
     markers (``x1_ref_mm`` ... ``xK_ref_mm``) becomes K rows, one a marker (``marker``), on the same line.
     ``marker_offsets`` (:data:`MARKER_OFFSETS`): None chooses "fit" without an artefacts file (a robot's
     markers sit where nobody measured them) and "zero" with one (the instrument sees the probe's ball
-    itself); several markers need "fit".
+    itself); several markers need "fit". ``heldout``: a points file of poses kept out of the fit (a stated
+    validation set), joined last: its rows are those whose ``files`` entry is its path (:func:`heldout_mask`).
 
     Temperatures come from the points' ``temperature_C`` column; gravity and contact torques, when
     an effect needs them and ``aux`` does not give them, from ``PinocchioArm(model.desc).torques``
     at the measured angles and wrenches with the nominal description.
     """
     check_features(points, artefacts)
+    if heldout is not None:
+        check_features(heldout, artefacts)
     if reference is not None:
         check_features(reference, artefacts)
         if reference.ref is None:
@@ -230,7 +233,7 @@ def make_data(points: PointSet, artefacts: Artefacts | None, model: ArmModel | N
     offsets = marker_offsets or ("fit" if artefacts is None else "zero")
     if offsets not in MARKER_OFFSETS:
         raise ValueError(f"marker_offsets must be one of {MARKER_OFFSETS}, got {offsets!r}")
-    points, files = merge_points(points, reference)
+    points, files = merge_points(points, reference, heldout)
     points, files, marker = _one_marker_a_row(points, files, offsets)
     artefacts = NO_ARTEFACTS if artefacts is None else artefacts
     data = CalibrationData(points, artefacts, aux, files, marker, offsets)
@@ -393,6 +396,44 @@ def pose_order(q: np.ndarray) -> np.ndarray:
 def spread(n: int, k: int) -> np.ndarray:
     """``k`` of ``n`` ranks evenly spaced (the middle of each of ``k`` equal parts): ``floor((j + 1/2) n / k)``."""
     return np.floor((np.arange(k) + 0.5) * n / k).astype(int)
+
+
+def heldout_mask(data: CalibrationData, path: str) -> np.ndarray:
+    """The rows of ``data`` (:func:`make_data` with ``heldout``) that come from the held-out points file
+    ``path`` (as read: its ``PointSet.path``), (N,)
+    bool; each must lie on an artefact instance (a feature within a measurement; the reference points) that the
+    training rows fit, with at least the fewest points that fit needs, else an InputError naming the held-out
+    file's line."""
+    from .kinds import MIN_POINTS
+    mask = np.asarray(data.files == path, bool)
+    kind_of = {}
+    for kind, rows in pose_groups(data):
+        for i in rows:
+            kind_of[i] = kind
+    train_count: dict[tuple, int] = {}
+    keys = {}
+    for i in range(len(data.points)):
+        kind = kind_of.get(i)
+        if kind is None:
+            continue
+        keys[i] = ("*", "") if kind == "reference" else (data.points.measurement[i], data.points.feature[i])
+        if not mask[i]:
+            train_count[keys[i]] = train_count.get(keys[i], 0) + 1
+    for i in np.flatnonzero(mask):
+        kind = kind_of.get(i)
+        if kind is None:
+            raise InputError("a held-out pose that nothing measures: no feature and no reference coordinates",
+                             path, int(data.points.lines[i]), "feature")
+        need = 3 if kind == "reference" else MIN_POINTS[kind][0]
+        have = train_count.get(keys[i], 0)
+        if have < need:
+            what = ("the reference points" if kind == "reference" else
+                    f"the {kind} '{keys[i][1]}' of measurement '{keys[i][0]}'")
+            raise InputError(f"a held-out pose on {what}, which the training points fit on {have} point(s): a "
+                             f"held-out pose is predicted against its feature as fitted on the training points, "
+                             f"which needs {need}", path, int(data.points.lines[i]),
+                             "measurement" if kind != "reference" else None)
+    return mask
 
 
 def pose_groups(data: CalibrationData) -> list[tuple[str, np.ndarray]]:

@@ -209,7 +209,8 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
         f"<h1>Calibration of {html.escape(result.model.desc.name)}</h1>",
         f"<p>Solver: {html.escape(result.status)}; {result.iterations} iterations; "
         f"{result.n_residuals} residuals, {len(result.free)} parameters, {result.n_nuisance} nuisance unknowns, "
-        f"dof {result.dof}; s0 = {result.s0:.4g}. Covariance: {html.escape(result.covariance_source)}.</p>",
+        + (f"dof {result.dof}" if result.redundancy is None else f"redundancy {result.redundancy:.3g} (the prior "
+           "included)") + f"; s0 = {result.s0:.4g}. Covariance: {html.escape(result.covariance_source)}.</p>",
         warnings_html(summary.get("warnings", ())),
         f"<p>Identifiability at the solution: rank {idf.rank} of {len(idf.names)}, condition number "
         f"{idf.condition:.4g} (columns scaled by their norms), rank tolerance {idf.rank_tol:g}.</p>",
