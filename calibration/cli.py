@@ -366,16 +366,15 @@ def _load_data(args, defaults: bool = False):
         if pts is not None:
             Arm(desc, model.effects).check_points(pts)
             warnings += point_warnings(desc, pts)
-    data = make_data(points, artefacts, model, reference=reference, marker_offsets=args.marker_offset)
+    data = make_data(points, artefacts, reference=reference, marker_offsets=args.marker_offset)
     added = default_effects(model, data) if defaults and args.effect is None else ()
     if added:
         from arm_model.model import ArmModel
         model = ArmModel(desc, tuple(model.effects) + added)
-        data = make_data(points, artefacts, model, reference=reference, marker_offsets=args.marker_offset)
         log.info(f"effect {', '.join(e.describe() for e in added)} added: a robot whose links carry masses bends "
                  "under its own weight (each compliance's prior: non-negative, at most 10 mrad under its joint's RMS "
                  "gravity torque); --effect none for the geometry alone")
-    return model, data, arm.values, warnings
+    return model, data.for_model(model), arm.values, warnings
 
 
 def _split(args, data):

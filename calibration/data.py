@@ -137,6 +137,16 @@ class CalibrationData:
         ref = self.points.ref
         return None if ref is None else ref[np.arange(len(self)), self.markers]
 
+    def for_model(self, model: ArmModel) -> CalibrationData:
+        """These data with the per-point inputs ``model.needs()`` attached (the aux inputs already given are
+        kept; temperatures from the points, gravity and contact torques of the nominal description); an
+        :class:`InputError` when the points' joint count is not the model's."""
+        if self.points.n_joints != model.desc.n_joints:
+            raise InputError(f"{self.points.n_joints} joint columns, but the arm has {model.desc.n_joints} joints",
+                             self.points.path)
+        files = self.files if self.files is not None else np.full(len(self), self.points.path, dtype=object)
+        return replace(self, aux=_aux_inputs(model, self.points, files, self.aux))
+
     def with_tracker(self, tracker: Tracker | None) -> CalibrationData:
         """These data with the reference frames and marker offsets held at ``tracker``'s (a session it has
         no frame for keeps its frame unknown)."""
@@ -234,12 +244,7 @@ def make_data(points: PointSet, artefacts: Artefacts | None, model: ArmModel | N
     points, files, marker = _one_marker_a_row(points, files, offsets)
     artefacts = NO_ARTEFACTS if artefacts is None else artefacts
     data = CalibrationData(points, artefacts, aux, files, marker, offsets)
-    if model is None:
-        return data
-    if points.n_joints != model.desc.n_joints:
-        raise InputError(f"{points.n_joints} joint columns, but the arm has {model.desc.n_joints} joints",
-                         points.path)
-    return replace(data, aux=_aux_inputs(model, points, files, aux))
+    return data if model is None else data.for_model(model)
 
 
 def _one_marker_a_row(points: PointSet, files: np.ndarray, offsets: str):
