@@ -238,7 +238,7 @@ def run_tip(args: argparse.Namespace) -> int:
             parts = [tmp] + [tmp.with_name(f"{tmp.name}.part{k}") for k in range(1, len(spans))]
             try:
                 tallies = fork_map(_tip_part, [(arm, str(args.points), part, span, known_header, ref)
-                                               for part, span in zip(parts, spans)])
+                                               for part, span in zip(parts, spans, strict=True)])
                 for part in parts[1:]:
                     _append(tmp, part)
             finally:

@@ -386,9 +386,9 @@ def csv_spans(path: str | Path, parts: int, min_bytes: int | None = None) -> tup
     except (OSError, InputError):
         return None                                       # the serial reader says what is wrong
     bounds.append(size)
-    if any(b >= c for b, c in zip(bounds[:-1], bounds[1:])):
+    if any(b >= c for b, c in zip(bounds[:-1], bounds[1:], strict=True)):
         return None
-    return (line, names), list(zip(bounds[:-1], bounds[1:]))
+    return (line, names), list(zip(bounds[:-1], bounds[1:], strict=True))
 
 
 def iter_csv_blocks(path: str | Path, what: str, header_check, block_bytes: int = BLOCK_BYTES,
@@ -575,7 +575,7 @@ def _slow_rows(columns: list[np.ndarray], fmts: list[str]) -> bytes:
         return [str(v) for v in c]
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerows(zip(*(cells(c, f) for c, f in zip(columns, fmts))))
+    w.writerows(zip(*(cells(c, f) for c, f in zip(columns, fmts, strict=True)), strict=True))
     return buf.getvalue().encode("utf-8")
 
 
@@ -594,9 +594,9 @@ def format_row(values: dict, fmt="%.9g") -> str:
             m = _FIXED.fullmatch(f)
             return m is not None and math.isfinite(v) and abs(float(v)) * 10.0 ** int(m.group(1)) <= 9e15
         return True
-    if all(fast(v, f) for v, f in zip(vals, fmts)):
+    if all(fast(v, f) for v, f in zip(vals, fmts, strict=True)):
         cells = []
-        for v, f in zip(vals, fmts):
+        for v, f in zip(vals, fmts, strict=True):
             if isinstance(v, (bool, int, np.integer, np.bool_)):
                 cells.append(str(int(v)))
             elif isinstance(v, (float, np.floating)):
@@ -610,7 +610,7 @@ def format_row(values: dict, fmt="%.9g") -> str:
     buf = io.StringIO()
     csv.writer(buf, lineterminator="\n").writerow(
         [str(int(v)) if isinstance(v, (bool, int, np.integer, np.bool_)) else
-         f % v if isinstance(v, (float, np.floating)) else str(v) for v, f in zip(vals, fmts)])
+         f % v if isinstance(v, (float, np.floating)) else str(v) for v, f in zip(vals, fmts, strict=True)])
     return buf.getvalue()
 
 
@@ -631,7 +631,7 @@ def format_csv(columns: dict, fmt="%.9g", header: bool = True, chunk: int = 16_3
         out.append(buf.getvalue().encode("utf-8"))
     for a in range(0, n, chunk):
         cols = [np.asarray(columns[k])[a:a + chunk] for k in names]
-        mats = [_column_chars(c, f) for c, f in zip(cols, fmts)]
+        mats = [_column_chars(c, f) for c, f in zip(cols, fmts, strict=True)]
         if any(m is None for m in mats):
             out.append(_slow_rows(cols, fmts))
             continue

@@ -700,7 +700,7 @@ def run_poses(args: argparse.Namespace) -> int:
         (out.dir / "poses.json").write_text(json_text({**sel.to_dict(), **provenance(inputs)}), encoding="utf-8")
     log_warnings(warnings)
     log.info(f"{len(sel.parameters)} identifiable parameters; chosen measurements (O1, random sets' O1):")
-    for m, o, r, n in zip(sel.chosen, sel.o1, sel.o1_random, sel.n_points):
+    for m, o, r, n in zip(sel.chosen, sel.o1, sel.o1_random, sel.n_points, strict=True):
         log.info(f"  {m:20s} O1 {o:10.4g}   random {r:10.4g}   ({counted(n, 'point')})")
     log.info(f"-> {args.output / 'poses.json'}")
     return 0

@@ -241,9 +241,9 @@ def heldout_residuals(model: ArmModel, p, data: CalibrationData, weights: Weight
         train = np.asarray(train, bool)
         sub = Problem(model, data.select(train), weights, [], reference=reference)
         fitted = {(it.measurement, it.feature): st for it, st in
-                  zip(sub.instances, levenberg_marquardt(sub, p, sub.initial_states(p)).states)}
+                  zip(sub.instances, levenberg_marquardt(sub, p, sub.initial_states(p)).states, strict=True)}
         start = prob.initial_states(p)
-        states = [fitted.get((it.measurement, it.feature), s0) for it, s0 in zip(prob.instances, start)]
+        states = [fitted.get((it.measurement, it.feature), s0) for it, s0 in zip(prob.instances, start, strict=True)]
         missing = [f"{it.measurement} {it.feature}" for it in prob.instances
                    if (it.measurement, it.feature) not in fitted]
         if missing:

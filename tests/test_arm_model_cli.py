@@ -26,7 +26,7 @@ def test_tip_writes_rigid_corrected_and_deflection(tmp_path, nominal, capsys):
     q = rng.uniform(-90, 90, (6, 7))
     f = rng.normal(0, 2, (6, 3))
     f[5] = [10.0, 9.0, 0.0]                         # 13.45 N > 13 N: flagged, kept
-    pts = write_points(tmp_path / "p.csv", [["m1", "ring", *qi, *fi] for qi, fi in zip(q, f)])
+    pts = write_points(tmp_path / "p.csv", [["m1", "ring", *qi, *fi] for qi, fi in zip(q, f, strict=True)])
     out = tmp_path / "tips.csv"
     assert main(["tip", str(pts), "--arm", str(NOMINAL), "-o", str(out)]) == 0
     rows = list(csv.DictReader(out.open()))

@@ -383,7 +383,7 @@ class ArmScene:
         pv = self._pv
         anim = ma.Animation(default_framerate=fps)   # frame i is shown at time i / fps
         infos = []
-        for i, (q, w) in enumerate(zip(qs, ws)):
+        for i, (q, w) in enumerate(zip(qs, ws, strict=True)):
             x, info = self.pose(q, w)
             infos.append(info)
             pin.forwardKinematics(pv.model, pv.data, x)

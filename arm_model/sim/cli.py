@@ -65,7 +65,7 @@ def summary(result, elapsed: float | None = None) -> str:
     if result.points is not None and len(result.points) and np.any(result.true_wrench):
         f = np.linalg.norm(result.true_wrench[:, :3], axis=1)
         per = {}
-        for m, v in zip(result.points.measurement, f):
+        for m, v in zip(result.points.measurement, f, strict=True):
             per.setdefault(m, []).append(v)
         means = np.array([np.mean(v) for v in per.values()])
         maxes = np.array([np.max(v) for v in per.values()])

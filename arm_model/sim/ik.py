@@ -89,8 +89,8 @@ def joint_limits(desc) -> tuple[np.ndarray, np.ndarray]:
     """(lower, upper) [rad] ([m] for a prismatic joint) of each encoder column; a joint without limits gets
     (-pi, pi) (a prismatic one +-0.1 m)."""
     free = [_FREE_TRAVEL if j.prismatic else np.pi for j in desc.encoders]
-    lo = np.array([-f if j.lower is None else j.lower for j, f in zip(desc.encoders, free)])
-    hi = np.array([f if j.upper is None else j.upper for j, f in zip(desc.encoders, free)])
+    lo = np.array([-f if j.lower is None else j.lower for j, f in zip(desc.encoders, free, strict=True)])
+    hi = np.array([f if j.upper is None else j.upper for j, f in zip(desc.encoders, free, strict=True)])
     return lo, hi
 
 

@@ -118,7 +118,7 @@ def random_truth(model: ArmModel, rng, length: float = 50e-6, angle: float = 1e-
     """Random base errors: lengths N(0, length) [m], angles N(0, angle) [rad], probe offset
     N(0, probe) [m]; compliances and effect parameters zero."""
     p = np.zeros(model.spec.size)
-    for i, (n, u) in enumerate(zip(model.spec.names, model.spec.units)):
+    for i, (n, u) in enumerate(zip(model.spec.names, model.spec.units, strict=True)):
         if n.startswith("probe.compliance") or i >= model.base_size:
             continue
         if n.startswith("probe."):
@@ -289,6 +289,6 @@ def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0,
     reference_points, t_ref, x_true = (_tracker_points(model, p_true, spec, rng, T_ref_base)
                                        if spec.reference_points else (None, None, None))
     artefacts = Artefacts("<synthetic artefacts>", features, tuple(distances))
-    truth = {name: float(v) for name, v in zip(model.spec.names, p_true)}
+    truth = {name: float(v) for name, v in zip(model.spec.names, p_true, strict=True)}
     return SynthCampaign(points, artefacts, truth, p_true, targets, reference_points, x_true, t_ref,
                          desc.joint_column_units)
