@@ -520,7 +520,7 @@ def parse_artefacts(text: str, path: str = "<string>", *, extra_keys: tuple = ()
     return Artefacts(path, features, tuple(distances))
 
 
-def check_features(points: PointSet, artefacts: Artefacts) -> None:
+def check_features(points: PointSet, artefacts: Artefacts | None) -> None:
     """Every non-empty feature id of the points must exist in the artefacts file (``artefacts`` None: no
     artefacts file, every row a free point)."""
     for i, fid in enumerate(points.feature):

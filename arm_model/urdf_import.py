@@ -251,7 +251,7 @@ class _Chain:
     project's elastic probe joints, None without them.
     """
     moving: list            # (joint, prefix 4x4, Mimic | None)
-    tool_prefix: np.ndarray
+    tool_prefix: np.ndarray | None     # None: the tip joint moves (no fixed tool frame to rewrite)
     tip_joint: Any                # yourdfpy Joint
     T_last_tip: np.ndarray
     hinge: np.ndarray | None

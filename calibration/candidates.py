@@ -179,8 +179,9 @@ def library_candidates(desc: ArmDescription, data: CalibrationData, families=Non
     if "joint_gain" in families:
         for i, n in names.items():
             out.append(Candidate(f"gain {n}", JointGain(joints=(i,)), "joint_gain", n))
-    if "joint_compliance" in families and no_torque_reason(desc, data):
-        skipped.append(Skipped("joint compliance", no_torque_reason(desc, data)))
+    no_torque = no_torque_reason(desc, data) if "joint_compliance" in families else None
+    if no_torque:
+        skipped.append(Skipped("joint compliance", no_torque))
     elif "joint_compliance" in families:
         tau_g, tau_c = torques_of(desc, data)
         loaded = []

@@ -171,11 +171,11 @@ class CalibrationData:
         return self.select(np.array([m in ids for m in self.points.measurement], bool))
 
 
-def merge_points(*sets: PointSet) -> tuple[PointSet, np.ndarray]:
-    """Join point sets (file order kept, one after the other) into one; returns it and the file of
+def merge_points(*given: PointSet | None) -> tuple[PointSet, np.ndarray]:
+    """Join point sets (file order kept, one after the other; None: none) into one; returns it and the file of
     each row. Absent force/torque columns are zero, absent reference coordinates (and markers beyond a
     file's own), temperature and time are NaN, an absent session column is the default session."""
-    sets = [s for s in sets if s is not None]
+    sets = [s for s in given if s is not None]
     if len(sets) == 1:
         return sets[0], np.full(len(sets[0]), sets[0].path, dtype=object)
     jn = {s.n_joints for s in sets}
