@@ -205,7 +205,7 @@ def merge_points(*given: PointSet | None) -> tuple[PointSet, np.ndarray]:
         force_kind=None if not kinds else (kinds.pop() if len(kinds) == 1 else "mixed"),
         temperature=stack("temperature", (), np.nan), time=stack("time", (), np.nan),
         ref=ref, session=stack("session", (), DEFAULT_SESSION),
-        lines=np.concatenate([s.lines if s.lines is not None else np.arange(1, len(s) + 1) for s in sets]))
+        lines=np.concatenate([s.line_numbers for s in sets]))
     files = np.concatenate([np.full(len(s), s.path, dtype=object) for s in sets])
     return merged, files
 
@@ -258,14 +258,16 @@ def _one_marker_a_row(points: PointSet, files: np.ndarray, offsets: str):
         raise InputError(f"{k} markers (x1_ref_mm ... x{k}_ref_mm) at the tip point itself (marker offsets "
                          "'zero'): several markers sit at their own offsets; let them be estimated (--marker-offset "
                          "fit)", points.path, 1, f"x{k}_ref_mm")
-    on_feature = np.flatnonzero((points.feature != "") & np.any(np.isfinite(points.ref[:, :, 0]), axis=1))
+    ref = points.ref
+    assert ref is not None, "k > 1 markers come with reference columns"
+    on_feature = np.flatnonzero((points.feature != "") & np.any(np.isfinite(ref[:, :, 0]), axis=1))
     if len(on_feature):
         i = on_feature[0]
         raise InputError(f"a row on the feature '{points.feature[i]}' with {k} markers: a reference point on an "
                          "artefact feature (a tracker nest) is the feature's own; give it as marker 1 only, or "
                          "leave the feature cell empty", files[i], None if points.lines is None
                          else int(points.lines[i]), "feature")
-    has = np.any(np.isfinite(points.ref[:, :, 0]), axis=1)
+    has = np.any(np.isfinite(ref[:, :, 0]), axis=1)
     reps = np.where(has, k, 1)
     rows = np.repeat(np.arange(len(points)), reps)
     marker = np.concatenate([np.arange(n) for n in reps])

@@ -225,6 +225,7 @@ def residual_space(result: CalibrationResult, extra=()) -> ResidualSpace:
     prob = Problem(sup, result.data, result.weights, np.arange(size), reference=result.reference_mode)
     states = levenberg_marquardt(prob.with_free([]), p, prob.initial_states(p)).states
     ev = prob.evaluate(p, states)
+    assert ev.jp is not None, "every parameter is free in prob: its Jacobian is evaluated"
     free = np.array([sup.spec.index(n) for n in result.free], dtype=int)
     if len(free):
         red = reduced_jacobian(ev.jp[:, free], ev.jt)

@@ -155,6 +155,7 @@ def validate(model: ArmModel, p, data: CalibrationData, weights: Weights | None 
         pred = _validate(model, p, data.with_tracker(tracker), weights, reference)
         val = _validate(model, p, data, weights, reference) if own_frames_fit(data) else replace(pred, reference=None,
                                                                                                reference_errors=None)
+        assert pred.reference is not None, "data with reference points are validated on them"
         val.reference_predicted = {k: pred.reference[k] for k in ("n", "rms", "max")}
         val.reference_predicted_errors = pred.reference_errors
         return val

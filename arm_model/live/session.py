@@ -406,6 +406,7 @@ class Session:
         self.counts["contacts"] += 1
         self.counts["points"] += 1
         self._record_point(point, ps)
+        assert prop.systematic is not None, "propagated with systematic=True"
         fits = tuple(self.tracker.add(feature, point.corrected, prop.cov[0], prop.systematic[0]))
         if self.record is not None:
             for fit in fits:

@@ -107,9 +107,10 @@ def _write_points(path, pts: PointSet, column_units=()) -> Path:
             cols[f"f{a}_N"] = pts.force[:, k]
     if pts.temperature is not None:
         cols["temperature_C"] = pts.temperature
-    for m in range(pts.n_markers):
+    ref = np.zeros((len(pts), 0, 3)) if pts.ref is None else pts.ref
+    for m in range(ref.shape[1]):
         for k, a in enumerate("xyz"):
-            cols[f"{a}{'' if pts.n_markers == 1 else m + 1}_ref_mm"] = pts.ref[:, m, k] * 1e3
+            cols[f"{a}{'' if ref.shape[1] == 1 else m + 1}_ref_mm"] = ref[:, m, k] * 1e3
     return write_csv(path, cols, fmt="%.15g")
 
 
