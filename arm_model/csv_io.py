@@ -131,10 +131,13 @@ def _keep_bytes(lanes: np.ndarray, count: np.ndarray, low: bool) -> None:
     ``low``) of each row of ``lanes`` ((m, W/8) uint64 view of (m, W) bytes, little-endian);
     ``count`` is clipped to 0 .. W."""
     width = 8 * lanes.shape[1]
+    count = np.clip(count, 0, width)
     table = _MASKS.get((width, low))
-    if table is None:
-        table = _byte_masks(width, low)
-    lanes &= table.take(np.clip(count, 0, width), axis=0)
+    if table is None:       # a wide text cell: one mask a row (a table of width + 1 rows grows as width^2)
+        keep = (np.arange(width)[None, :] < count[:, None]) == low
+        lanes &= np.ascontiguousarray(keep.astype(np.uint8) * np.uint8(255)).view(np.uint64)
+        return
+    lanes &= table.take(count, axis=0)
 
 
 def _all_bytes(flags: np.ndarray) -> np.ndarray:
@@ -324,6 +327,9 @@ def _cells_text(arr: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     width = -(-int((b - a).max()) // 8) * 8 if len(a) else 0
     if width == 0:
         return np.full(len(a), "", dtype=object)
+    if width * len(a) > 4 * len(arr) + (1 << 20):   # a few cells much wider than the rest: the (n, width)
+        return np.array([arr[x:y].tobytes().decode("utf-8").strip()   # matrix would outgrow the file itself
+                         for x, y in zip(a.tolist(), b.tolist(), strict=True)] + [None], dtype=object)[:-1]
     cells = _windows(arr, width, before=False)[a]
     lanes = cells.view(np.uint64)
     _keep_bytes(lanes, b - a, low=True)
@@ -518,9 +524,10 @@ def _fixed_chars(v: np.ndarray, decimals: int) -> np.ndarray | None:
     return m
 
 
-def _text_chars(values) -> np.ndarray:
+def _text_chars(values) -> np.ndarray | None:
     """(W, n) uint8 matrix of the CSV cells of text values (quoted where needed), 0 where no
-    character. Equal neighbours (a measurement's rows) are encoded once."""
+    character, or None when a few cells are much wider than the rest (the row-by-row writer then). Equal
+    neighbours (a measurement's rows) are encoded once."""
     vals = np.asarray(values, dtype=object)
     n = len(vals)
     new = np.ones(n, bool)
@@ -535,6 +542,8 @@ def _text_chars(values) -> np.ndarray:
         return s.encode("utf-8")
     enc = [cell(u) for u in uniq.tolist()]
     width = max([len(e) for e in enc] + [1])
+    if width * n > 4 * int(np.array([len(e) for e in enc] + [0])[inv].sum()) + (1 << 20):
+        return None         # a few cells much wider than the rest: the (width, n) matrix would outgrow the text
     table = np.zeros((width, len(enc)), np.uint8)
     for i, e in enumerate(enc):
         table[: len(e), i] = np.frombuffer(e, np.uint8)

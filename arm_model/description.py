@@ -520,12 +520,14 @@ def _probe(r: TomlReader, ptab: Any) -> Probe:
     rpy = (pv.get("roll", 0.0), pv.get("pitch", 0.0), pv.get("yaw", 0.0))
     if pv.get("stylus_length", 0.0) < 0:
         raise r.error("'stylus_length' must not be negative (0: a tip without a stylus)", "probe", "stylus_length_mm")
+    def written(key: str) -> str:      # the key as the file spells it, with its unit (ball_diameter_mm): its line
+        return next((k for k in ptab if k.startswith(key + "_") and k[len(key) + 1:] in UNIT_FACTORS), key)
     for key in ("ball_diameter", "max_force"):
         if pv[key] <= 0:
-            raise r.error(f"'{key}' must be > 0", "probe", key)
+            raise r.error(f"'{written(key)}' must be > 0", "probe", written(key))
     for key in ("bending_compliance", "axial_compliance", "bending_compliance_x", "bending_compliance_y"):
         if pv.get(key, 0.0) < 0:
-            raise r.error(f"'{key}' must not be negative", "probe", key)
+            raise r.error(f"'{written(key)}' must not be negative", "probe", written(key))
     probe = Probe(
         p_last=(pv["x"], pv["y"], pv["z"]), ball_diameter=pv["ball_diameter"], max_force=pv["max_force"],
         bending_compliance_x=pv.get("bending_compliance_x", pv["bending_compliance"]),

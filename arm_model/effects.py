@@ -514,11 +514,12 @@ class LateralCompliance(Effect):
     [N m] there of gravity on those links and of the contact wrench (``gravity``/``contact`` select);
     the ball moves by ``e x (ball - origin)`` (small rotation ``e``). The moments come from the masses
     and centres of mass of the description (the axial part of ``M`` is ``tau_contact - tau_gravity``).
-    An evaluator may supply them through ``ModelInputs.moments`` (Pinocchio does, by RNEA)."""
+    An evaluator may supply them through ``ModelInputs.moments`` (Pinocchio does, by RNEA). A prismatic
+    joint has it too: its carriage (the joint's child frame, where the slide has put it) tilts under the
+    moment of what it carries, as a lift column or a linear axis' carriage does."""
     gravity: bool = True
     contact: bool = True
     key: str = field(default="lateral_compliance", init=False, repr=False)
-    revolute_only: ClassVar[bool] = True
 
     def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
         out = []

@@ -36,6 +36,8 @@ LIBRARIES = ("yourdfpy",)
 #: control characters (C0, DEL, C1, the Unicode line and paragraph separators) but the tab
 _CONTROL = re.compile("[\x00-\x08\x0a-\x1f\x7f-\x9f\u2028\u2029]")
 _ESCAPES = {"\n": "\\n", "\r": "\\r"}
+#: the most characters of a one-line message (an error, a warning, a progress or debug line): beyond, its middle is cut
+MAX_LINE = 4000
 
 
 def _escape(m: re.Match) -> str:
@@ -47,9 +49,14 @@ def escaped(text: str, keep_newlines: bool = False) -> str:
     """``text`` with every control character shown as its escape (a newline as ``\\n``, ESC as ``\\x1b``),
     so that a name holding one (a file name with a newline) cannot split a message or forge another line
     (``warning: ...``), nor drive the terminal. ``keep_newlines``: the text's own line breaks kept (a
-    summary of several lines); every other control character escaped. The tab is kept."""
+    summary of several lines); every other control character escaped. The tab is kept. A one-line message
+    longer than :data:`MAX_LINE` characters (a value of a megabyte quoted in an error) keeps its start (the file,
+    line and column) and its end, the middle left out and counted."""
     if keep_newlines:
         return "\n".join(_CONTROL.sub(_escape, line) for line in text.split("\n"))
+    if len(text) > MAX_LINE:
+        head, tail = MAX_LINE * 2 // 3, MAX_LINE // 4
+        text = f"{text[:head]} ... [{len(text) - head - tail} characters left out] ... {text[-tail:]}"
     return _CONTROL.sub(_escape, text)
 
 

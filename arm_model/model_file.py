@@ -127,6 +127,22 @@ class Arm:
     discrepancy_growth: float | None = None
     training_poses: Path | None = None
 
+    def __post_init__(self):
+        """A ValueError for what a model file's reader would refuse (:func:`check_calibration_table`): a scatter,
+        discrepancy or growth not finite or out of its range, or a growth above 0 without the discrepancy it grows
+        from and the training poses it grows away from (it would otherwise be silently ignored)."""
+        cal = {k: v * f for k, v, f in (("probing_scatter_um", self.probing_scatter, 1e6),
+                                         ("model_discrepancy_um", self.model_discrepancy, 1e6),
+                                         ("model_discrepancy_growth_um_per_mm", self.discrepancy_growth, 1e3))
+               if v is not None}
+        if self.training_poses is not None:
+            cal["training_poses"] = Path(self.training_poses).name or "training_poses"
+        try:
+            check_calibration_table(cal, TomlReader("<Arm>", ""))
+        except InputError as exc:
+            raise ValueError(f"Arm: {exc.reason} (given in SI: probing_scatter and model_discrepancy in m, "
+                             "discrepancy_growth in m/m, training_poses the path of a points file)") from None
+
     @functools.cached_property
     def discrepancy(self) -> GrowingDiscrepancy | float | None:
         """The model discrepancy as :func:`arm_model.uncertainty.default_inputs` takes it: a

@@ -73,24 +73,50 @@ def provenance(inputs) -> dict:
 
 def copy_examples(dest: str | Path) -> list[Path]:
     """Copy the example campaigns and data (with their licences), the shipped arm descriptions (``arms/``,
-    a template for your own DH table) and the user docs into ``dest``; refuses to write over existing
-    files. Returns the top-level entries written."""
+    a template for your own DH table) and the user docs into ``dest`` (created if needed), whole or not at all:
+    copied into a temporary folder beside them first, the top-level entries (``campaigns/``, ``data/``, ``live/``,
+    ``arms/``, ``docs/``) then renamed into ``dest``. Refuses an entry that exists already (a file, a folder, a
+    symbolic link, which would lead the copy outside ``dest``): nothing is written over or through. Returns the
+    top-level entries written."""
+    import os
+    import tempfile
+
     from .errors import InputError
     dest = Path(dest)
     src = shipped_path("examples")
     if not src.is_dir():
         raise InputError("the example files are not installed with this copy of the toolkit", src)
-    pairs = [(sub, dest / sub.name) for sub in sorted(src.iterdir()) if not sub.name.startswith((".", "__"))]
-    pairs += [(shipped_path(rel), dest / "arms" / Path(rel).name) for rel in SHIPPED_ARMS.values()]
+    pairs = [(sub, Path(sub.name)) for sub in sorted(src.iterdir()) if not sub.name.startswith((".", "__"))]
+    pairs += [(shipped_path(rel), Path("arms") / Path(rel).name) for rel in SHIPPED_ARMS.values()]
     if shipped_path("docs").is_dir():
-        pairs.append((shipped_path("docs"), dest / "docs"))
+        pairs.append((shipped_path("docs"), Path("docs")))
     files = [(f, t / f.relative_to(s)) for s, t in pairs if s.is_dir() for f in s.rglob("*")
              if f.is_file() and "__pycache__" not in f.parts]
     files += [(s, t) for s, t in pairs if s.is_file()]
-    clashes = [t for _, t in files if t.exists()]
+    tops = list(dict.fromkeys(t.parts[0] for _, t in files))
+    clashes = [dest / t for t in tops if os.path.lexists(dest / t)]
     if clashes:
-        raise InputError(f"refusing to write over {len(clashes)} existing file(s), e.g. {clashes[0]}", dest)
-    for f, t in files:
-        t.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copy2(f, t)
-    return list(dict.fromkeys(t if s.is_dir() else t.parent for s, t in pairs))
+        raise InputError(f"refusing to write over or into {len(clashes)} existing entr"
+                         f"{'y' if len(clashes) == 1 else 'ies'}, e.g. {clashes[0]}: choose a new folder", dest)
+    new_dest = not os.path.lexists(dest)
+    dest.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=".examples.tmp-", dir=dest))
+    moved: list[Path] = []
+    try:
+        for f, t in files:
+            (stage / t).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(f, stage / t)
+        for t in tops:
+            if os.path.lexists(dest / t):       # made meanwhile: never replaced
+                raise InputError("refusing to write over an entry made while copying", dest / t)
+            os.rename(stage / t, dest / t)
+            moved.append(dest / t)
+    except BaseException:
+        for m in moved:
+            shutil.rmtree(m, ignore_errors=True)
+        shutil.rmtree(stage, ignore_errors=True)
+        if new_dest:
+            shutil.rmtree(dest, ignore_errors=True)
+        raise
+    shutil.rmtree(stage, ignore_errors=True)
+    return [dest / t for t in tops]

@@ -90,5 +90,7 @@ def implausible(value_si, quantity: str):
                "time": (1.0, "s"), "mass": (1.0, "kg"), "angular compliance": (1.0, "rad/(N m)"),
                "expansion": (1.0, "1/K"), "ratio": (1.0, ""), "temperature difference": (1.0, "K"),
                "stiffness": (1.0, "N m/rad"), "temperature_rate": (1.0, "C/s")}[quantity]
-    return idx, (f"{x * f:g} {unit} is not a plausible {quantity} (|value| at most {bound * f:g} {unit}); "
+    si = {"length": "m", "angle": "rad", "compliance": "m/N"}.get(quantity, unit)
+    shown = f"{x * f:g} {unit}" if math.isfinite(x * f) else f"{x:g} {si}"     # 1e308 m is no "inf mm"
+    return idx, (f"{shown} is not a plausible {quantity} (|value| at most {bound * f:g} {unit}); "
                  "check the number and its unit")

@@ -161,6 +161,22 @@ def _check_numbers(root, path: Path) -> None:
                 raise InputError(f"<{el.tag} {attr}=...>: {wrong[1]}", path, el.sourceline, f"key '{el.tag}.{attr}'")
 
 
+def _check_not_xacro(root, path: Path) -> None:
+    """An InputError at the first trace of an unexpanded xacro file: an element of the xacro namespace
+    (``<xacro:macro>``, ``<xacro:include>``) or an attribute holding ``${...}`` or ``$(...)``. Read as a URDF it
+    would lose what the macros and includes define, or fail later at a number that is an expression."""
+    from lxml import etree
+    for el in root.iter(etree.Element):
+        if "xacro" in (etree.QName(el).namespace or "") or str(el.tag).startswith("xacro:"):
+            raise InputError(f"<{etree.QName(el).localname}> of the xacro namespace: this is a xacro file, not a "
+                             "URDF; expand it first (xacro robot.urdf.xacro > robot.urdf)", path, el.sourceline)
+        for attr, value in el.attrib.items():
+            if "${" in value or "$(" in value:
+                raise InputError(f"<{el.tag} {attr}={value!r}>: a xacro expression: this is a xacro file, not a URDF; "
+                                 "expand it first (xacro robot.urdf.xacro > robot.urdf)", path, el.sourceline,
+                                 f"key '{el.tag}.{attr}'")
+
+
 def _check_tree(root, path: Path) -> tuple[dict, dict]:
     """(links, joints) by name, lxml elements; names unique, joint types known, every parent and child
     defined, each link the child of one joint at most."""
@@ -219,6 +235,7 @@ def _read_urdf(path: str | Path) -> _Urdf:
         raise InputError(f"a URDF's root element is <robot>, got <{root.tag}>", path, root.sourceline)
     if not root.get("name"):
         raise InputError("<robot> has no name", path, root.sourceline)
+    _check_not_xacro(root, path)
     _check_numbers(root, path)
     links, joints = _check_tree(root, path)
     try:
@@ -481,7 +498,8 @@ def _ball_diameter(u: _Urdf, tip_frame: str) -> float | None:
 
 def _row(u: _Urdf, j, prefix: np.ndarray, mimic: Mimic | None, mass: float, com: tuple) -> JointRow:
     """A moving joint of the chain as a row: its origin after the fixed joints folded before it (``prefix``),
-    its unit axis, kind, limits ([rad] or [m]; none for a continuous joint) and mimic."""
+    its unit axis, kind, limits ([rad] or [m]; none for a continuous joint, a locked one, or limits beyond the
+    plausible range of an angle or a length) and mimic."""
     T = prefix @ _T(j.origin)
     axis = np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0), dtype=float)
     if np.linalg.norm(axis) < 1e-9:
@@ -493,6 +511,8 @@ def _row(u: _Urdf, j, prefix: np.ndarray, mimic: Mimic | None, mass: float, com:
             raise u.error(f"joint '{j.name}': lower limit {lower:g} is above upper limit {upper:g}", j.name)
         if lower == upper:          # a joint declared locked: its value still comes from the data
             lower = upper = None
+        elif implausible([lower, upper], "length" if j.type == "prismatic" else "angle"):
+            lower = upper = None    # "unlimited" as URDFs made from SDF write it (+-1e16): no limit, never written
     roll, pitch, yaw = _rpy(T)
     return JointRow(name=j.name, origin=(float(T[0, 3]), float(T[1, 3]), float(T[2, 3]), roll, pitch, yaw),
                     axis=tuple(float(v) for v in axis / np.linalg.norm(axis)), lower=lower, upper=upper,

@@ -149,7 +149,7 @@ def _per_joint_columns(desc: ArmDescription, skipped: list) -> dict[int, str]:
     for j in desc.encoders:
         if j.prismatic:
             skipped.append(Skipped(f"per-joint effects {j.name}", "a prismatic joint: the library's per-joint "
-                                                                 "effects model a joint angle"))
+                                                                 "effects model a joint angle (but its gain)"))
     return {i: desc.encoders[i].name for i in desc.revolute_columns}
 
 
@@ -176,9 +176,10 @@ def library_candidates(desc: ArmDescription, data: CalibrationData, families=Non
         for i, n in names.items():
             out.append(Candidate(f"eccentricity {n}", EncoderEccentricity(joints=(i,), harmonics=(1, 2)),
                                  "eccentricity", n))
-    if "joint_gain" in families:
-        for i, n in names.items():
-            out.append(Candidate(f"gain {n}", JointGain(joints=(i,)), "joint_gain", n))
+    if "joint_gain" in families and not desc.coupled:
+        # a scale error of any joint's reading, a slide's (a lift's screw pitch) as a gear ratio's
+        for i, j in enumerate(desc.encoders):
+            out.append(Candidate(f"gain {j.name}", JointGain(joints=(i,)), "joint_gain", j.name))
     no_torque = no_torque_reason(desc, data) if "joint_compliance" in families else None
     if no_torque:
         skipped.append(Skipped("joint compliance", no_torque))

@@ -38,19 +38,26 @@ def model_paths(out_dir, name: str) -> dict:
             "urdf": out / f"{stem}.urdf", "training_poses": out / f"{stem}-training-poses.csv"}
 
 
-def fitted_arm(result, name: str | None = None) -> Arm:
+def fitted_arm(result, name: str | None = None, training_poses: Path | None = None) -> Arm:
     """The :class:`~arm_model.model_file.Arm` of a :class:`~calibration.calibrate.CalibrationResult`:
     the base errors folded into the description, the effects with their fitted values, uncertainties
-    and states (free / fixed / held), and the reference instrument's frames and markers (``result.tracker``)."""
+    and states (free / fixed / held), the reference instrument's frames and markers (``result.tracker``) and the
+    model discrepancy; its growth away from the training poses only with ``training_poses``, the points file of
+    those poses (:func:`write_model` writes it), else the discrepancy at the training poses alone (an Arm refuses a
+    growth without the poses it grows away from)."""
     desc = result.described()
     if name:
         desc = replace(desc, name=name)
     model = result.model
     names = model.spec.names[model.base_size:]
     rows = {r["name"]: r for r in result.parameter_rows()}
+    fields = discrepancy_fields(result)
+    if training_poses is None:
+        fields["discrepancy_growth"] = None
     return Arm(desc, tuple(model.effects), {n: result.value(n) for n in names},
                {n: result.uncertainty(n) for n in names}, {n: rows[n]["state"] for n in names},
-               tracker=result.tracker, **discrepancy_fields(result))
+               tracker=result.tracker, training_poses=training_poses if fields["discrepancy_growth"] else None,
+               **fields)
 
 
 def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aacmm calibrate",
@@ -61,7 +68,7 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
     files = model_paths(out_dir, name)
     for f in files.values():
         guard_output(f, inputs)
-    arm = fitted_arm(result, name)
+    arm = fitted_arm(result, name, files["training_poses"])
     spec = result.model.spec
     free = list(result.free)
     idx = [spec.index(n) for n in free]

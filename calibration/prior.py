@@ -78,11 +78,15 @@ def _rotation_axes(rpy) -> np.ndarray:
 
 
 def _angle_group(desc, joint: int, field: str) -> str:
-    """``joint offsets`` for the angle about the joint's own axis (DH/MDH ``theta_offset``; the URDF origin
-    angle whose rotation axis is the joint axis, within 1 degree), else ``axis angles`` (the axis' tilt)."""
+    """``joint offsets`` for the angle about a revolute joint's own axis (DH/MDH ``theta_offset``; the URDF
+    origin angle whose rotation axis is the joint axis, within 1 degree), else ``axis angles`` (the axis'
+    tilt). A prismatic joint's zero is a length (``d``, or its origin's translation along the axis): every
+    angle of its row orients the slide and the links it carries, an ``axis angle`` like a tilt."""
+    row = desc.joints[joint]
+    if row.prismatic:
+        return GROUP_ANGLES
     if field == "theta_offset":
         return GROUP_OFFSETS
-    row = desc.joints[joint]
     if desc.convention != "urdf" or field not in ("origin_roll", "origin_pitch", "origin_yaw") \
             or row.axis is None or row.origin is None:
         return GROUP_ANGLES

@@ -35,9 +35,17 @@ class Correlation:
 
 
 def correlate(x, y, with_reference: bool = False, x_name: str = "x", y_name: str = "y") -> Correlation:
-    """Pearson r of ``y`` with ``x`` (M,), optionally with the point (0, 0) added."""
+    """Pearson r of ``y`` with ``x`` (M,), optionally with the point (0, 0) added. A ValueError for fewer than 3
+    pairs, a constant ``x`` or ``y``, a value that is not finite or arrays of two lengths."""
     x = np.asarray(x, float)
     y = np.asarray(y, float)
+    if x.ndim != 1 or x.shape != y.shape:
+        raise ValueError(f"{x_name} and {y_name} must be two 1-D arrays of one length, got shapes {x.shape}, {y.shape}")
+    for name, v in ((x_name, x), (y_name, y)):
+        bad = np.flatnonzero(~np.isfinite(v))
+        if len(bad):
+            raise ValueError(f"{name}: value {int(bad[0])} is {float(v[bad[0]])!r}, not finite: no correlation (a NaN "
+                             "would make r, p and the slope NaN)")
     if with_reference:
         x, y = np.r_[0.0, x], np.r_[0.0, y]
     if len(x) < 3:

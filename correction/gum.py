@@ -21,7 +21,12 @@ __all__ = ["Term", "Budget", "BudgetResult", "student_k", "ring_budget"]
 
 
 def student_k(dof: float, probability: float = 95.0) -> float:
-    """Coverage factor from Student's t for ``dof`` degrees of freedom at ``probability`` [%]."""
+    """Coverage factor from Student's t for ``dof`` degrees of freedom (> 0, ``math.inf`` for the normal
+    distribution) at ``probability`` [%] (in (0, 100)); a ValueError for any other (a NaN would give a NaN k)."""
+    if not dof > 0:
+        raise ValueError(f"degrees of freedom must be > 0 (inf for a normal distribution), got {dof!r}")
+    if not 0 < probability < 100:
+        raise ValueError(f"the coverage probability must be in (0, 100) %, got {probability!r}")
     return float(GTC.reporting.k_factor(dof, probability))
 
 

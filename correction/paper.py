@@ -30,7 +30,9 @@ import numpy as np
 from scipy import stats
 
 from arm_model import InputError
+from arm_model.csv_io import parse_number
 from arm_model.errors import read_text, unknown_key
+from arm_model.units import implausible
 
 from .correlation import Correlation, correlate
 from .gum import Budget, Term, student_k
@@ -111,14 +113,14 @@ def load_paper_table2(path: str | Path | None = None) -> PaperTable2:
             raise InputError("empty measurement id", path, no, "measurement")
         for col in expected[1:]:
             cell = rec[header.index(col)]
-            try:
-                if "_" in cell:
-                    raise ValueError
-                v = float(cell)
-            except ValueError:
-                raise InputError(f"expected a number, got {cell!r}", path, no, col) from None
+            v = parse_number(cell)          # the toolkit's one number grammar (no '1_0', no '１', no NBSP)
+            if v is None:
+                raise InputError(f"expected a number, got {cell!r}", path, no, col)
             if not math.isfinite(v):
                 raise InputError(f"value must be finite, got {cell!r}", path, no, col)
+            wrong = implausible(v * 1e-3, "length")     # 1e308 mm overflowed the fits (exit 3 after publishing)
+            if wrong:
+                raise InputError(wrong[1], path, no, col)
             data[col].append(v * 1e-3)
     if len(ids) < MIN_ROWS:
         raise InputError(f"{len(ids)} measurement row(s); correlations and the cross-validated loop need at least "

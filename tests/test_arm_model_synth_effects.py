@@ -192,3 +192,51 @@ def test_lateral_compliance_gravity_and_contact_parts(nominal):
         model = ArmModel(desc, (eff,))
         p = model.spec.vector({"j2.lateral_compliance_x": 1e-5, "j2.lateral_compliance_y": 1e-5})
         assert_close(model.ball_centres(q, w, p), ball_centres(desc, q, w), atol=1e-15)
+
+
+#: a lift carrying a wrist and a hand, written here: the carriage massless, the hand 2 kg, 0.1 m out from the
+#: wrist axis, which stands 0.3 m out from the lift's; the tool point 0.2 m out from the wrist axis
+LIFT_URDF = """<?xml version="1.0"?>
+<robot name="lift">
+  <link name="base"/><link name="carriage"/>
+  <link name="hand"><inertial><mass value="2"/><origin xyz="0.1 0 0"/>
+    <inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial></link>
+  <link name="tool"/>
+  <joint name="lift" type="prismatic"><parent link="base"/><child link="carriage"/>
+    <origin xyz="0 0 0.5"/><axis xyz="0 0 1"/><limit lower="0" upper="0.4" effort="100" velocity="1"/></joint>
+  <joint name="wrist" type="revolute"><parent link="carriage"/><child link="hand"/>
+    <origin xyz="0.3 0 0"/><axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="10" velocity="1"/></joint>
+  <joint name="tool_joint" type="fixed"><parent link="hand"/><child link="tool"/><origin xyz="0.2 0 0"/></joint>
+</robot>
+"""
+
+
+def test_a_lift_s_carriage_tilts_under_what_it_carries(tmp_path):
+    """Lateral compliance of a prismatic joint, by hand: with the wrist at q (the hand's mass at 0.3 m + 0.1 m
+    turned by q from the lift's axis), gravity's moment about the carriage is m g r_perp (horizontal,
+    perpendicular to the mass' lever); tilting by c times it about the carriage's origin drops the tool point
+    (0.3 m + 0.2 m turned by q out) by c m g (lever of the mass . lever of the tool), its height's only move.
+    The three evaluators agree, and the lift's travel does not change the tilt (the carriage carries the same)."""
+    (tmp_path / "lift.urdf").write_text(LIFT_URDF)
+    desc = load_arm(tmp_path / "lift.urdf", "tool")
+    model = ArmModel(desc, (LateralCompliance(contact=False),))
+    assert [n for n in model.spec.names if "lateral" in n] == [
+        "lift.lateral_compliance_x", "lift.lateral_compliance_y", "wrist.lateral_compliance_x",
+        "wrist.lateral_compliance_y"]
+    c, mass, g = 1e-3, 2.0, 9.81
+    p = model.spec.vector({"lift.lateral_compliance_x": c, "lift.lateral_compliance_y": c})
+    q = np.array([[0.0, 0.0], [0.25, 0.7], [0.1, -2.0]])
+    rigid = model.ball_centres(q, None, None)
+    bent = model.ball_centres(q, None, p)
+    for k, (lift, wrist) in enumerate(q):
+        turn = np.array([math.cos(wrist), math.sin(wrist), 0.0])
+        lever_mass = np.array([0.3, 0, 0]) + 0.1 * turn
+        lever_tool = np.array([0.3, 0, 0]) + 0.2 * turn
+        assert_close(rigid[k], np.r_[lever_tool[:2], 0.5 + lift], atol=1e-15)
+        drop = c * mass * g * float(lever_mass @ lever_tool)
+        assert_close(bent[k] - rigid[k], [0.0, 0.0, -drop], atol=1e-9 * drop)
+    f = model.casadi_function()
+    a = ArmModel.aux_matrix(None, len(q), desc.n_joints)
+    for k in range(len(q)):
+        assert_close(np.array(f(q[k], np.zeros(6), a[k], p)).ravel(), bent[k], atol=1e-12)
+        assert_close(model.pinocchio_ball_centre(q[k], np.zeros(6), p, {}), bent[k], atol=1e-12)

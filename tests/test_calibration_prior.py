@@ -62,6 +62,39 @@ def test_groups_of_a_urdf_arm_follow_each_joint_axis():
         assert groups == [GROUP_OFFSETS if a == offset else GROUP_ANGLES for a in ("roll", "pitch", "yaw")], j
 
 
+#: a lift and two revolute joints, written here: every origin turned about its own joint's axis
+SLIDE_URDF = """<?xml version="1.0"?>
+<robot name="slide">
+  <link name="base"/><link name="carriage"/><link name="upper"/><link name="fore"/><link name="tool"/>
+  <joint name="lift" type="prismatic"><parent link="base"/><child link="carriage"/>
+    <origin xyz="0 0 0.5" rpy="0 0 0.3"/><axis xyz="0 0 1"/>
+    <limit lower="0" upper="0.4" effort="1" velocity="1"/></joint>
+  <joint name="shoulder" type="revolute"><parent link="carriage"/><child link="upper"/>
+    <origin xyz="0.1 0 0" rpy="0 0 0.2"/><axis xyz="0 0 1"/>
+    <limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+  <joint name="reach" type="prismatic"><parent link="upper"/><child link="fore"/>
+    <origin xyz="0.3 0 0" rpy="0.1 0 0"/><axis xyz="1 0 0"/>
+    <limit lower="0" upper="0.2" effort="1" velocity="1"/></joint>
+  <joint name="tool_joint" type="fixed"><parent link="fore"/><child link="tool"/><origin xyz="0.05 0 0"/></joint>
+</robot>
+"""
+
+
+def test_a_prismatic_joint_has_no_angular_offset(tmp_path):
+    """A slide's zero is a length (its origin's translation along the axis, a ``length``); the angle of its
+    origin about its own axis orients the slide and what it carries (an ``axis angle``), unlike a revolute
+    joint's, which is its encoder's zero (a ``joint offset``). The lift's axis is z (its yaw), the reach's x (its
+    roll), the shoulder's z (its yaw)."""
+    from arm_model.urdf_import import load_arm
+    (tmp_path / "slide.urdf").write_text(SLIDE_URDF)
+    m = ArmModel(load_arm(tmp_path / "slide.urdf", "tool"))
+    for j in ("lift", "reach"):
+        names = [f"{j}.origin_{a}" for a in ("x", "y", "z", "roll", "pitch", "yaw")]
+        assert parameter_groups(m, names) == [GROUP_LENGTHS] * 3 + [GROUP_ANGLES] * 3, j
+    names = [f"shoulder.origin_{a}" for a in ("roll", "pitch", "yaw")]
+    assert parameter_groups(m, names) == [GROUP_ANGLES, GROUP_ANGLES, GROUP_OFFSETS]
+
+
 def test_wide_prior_is_the_plain_fit_and_narrow_prior_the_nominal(model):
     data, _ = _campaign(model, 3)
     plain = calibrate(model, data, FitOptions(weights=W, prior_scale=None))

@@ -428,3 +428,32 @@ def test_a_robot_with_masses_seen_by_a_tracker_gets_joint_compliance_by_default(
         assert any(n.endswith(".compliance") and not n.startswith("probe") for n in names) == (not extra)
         figures[len(extra)] = _holdout_rms(summary)[1]
     assert figures[0] < figures[2] / 2, figures
+
+
+def test_a_lift_s_scale_error_is_a_gain_the_loop_offers_and_calibrate_finds(robot_dir):
+    """A slide's reading can be off in scale like a gear ratio (a lift's screw pitch): ``joint_gain`` acts on it
+    and the loop's ``joint_gain`` family offers it there (the angle families stay on the revolute joints). The
+    simulated lift readings divided by 1 + g (q_true = (1 + g) q_read, the effect's definition) give g back
+    from a calibration with the lift's gain free, within 3 standard uncertainties."""
+    from dataclasses import replace
+
+    from arm_model.effects import JointCompliance, JointGain
+    from arm_model.model import ArmModel
+    from arm_model.urdf_import import load_arm
+    from calibration import FitOptions, calibrate, make_data
+    from calibration.candidates import library_candidates
+
+    res = _simulate(robot_dir, postures=40, markers=1, sessions=1, noise_mm=0.05, seed=11)
+    g = 0.01
+    q = np.array(res.points.q, dtype=float)
+    q[:, 0] /= 1.0 + g
+    pts = replace(res.points, q=q)
+    desc = load_arm(robot_dir / "liftarm.urdf", TIP)
+    data = make_data(pts, None, ArmModel(desc))
+    names = [c.name for c in library_candidates(desc, data, ("joint_gain", "eccentricity"))[0]]
+    assert "gain lift" in names and "eccentricity lift" not in names and "eccentricity elbow" in names
+    assert "gain lift" not in [c.name for c in library_candidates(desc, data)[0]]    # on request only
+    model = ArmModel(desc, (JointCompliance(), JointGain(joints=(0,))))
+    fit = calibrate(model, make_data(pts, None, model), FitOptions(weights_from_data=True))
+    value, u = fit.p[model.spec.index("lift.gain")], fit.uncertainty("lift.gain")
+    assert abs(value - g) < 3 * u and u < g / 5, (value, u)

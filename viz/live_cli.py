@@ -28,6 +28,7 @@ from arm_model.cli_options import (
     port,
     positive,
 )
+from arm_model.live.session import RATE_HZ_RANGE
 
 if TYPE_CHECKING:          # only for the annotations: the live modules load when the command runs
     from arm_model.live import SampleLayout, Session
@@ -68,7 +69,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "session folder's name)")
     p.add_argument("--speed", type=number_in(0, 1e6), default=1.0,
                    help="replay a file at this many times real time (default 1; 0: as fast as possible)")
-    p.add_argument("--rate-Hz", type=positive(), default=None,
+    p.add_argument("--rate-Hz", type=number_in(*RATE_HZ_RANGE), default=None,
                    help="the nominal sample rate (default: estimated from the first intervals); longer gaps "
                         "count as dropped samples")
     p.add_argument("--strict", action="store_true", help="stop the session at the first bad line (default: "
@@ -130,6 +131,7 @@ class _Stop:
 def _header(source: LineSource, stop: _Stop) -> tuple:
     """(line number, cells) of the stream's header: its first line that is not blank (UDP: the first that
     is not a number, lines before it skipped and counted)."""
+    from arm_model.live.sources import line_text
     skipped = 0
     for item in source.lines():
         if stop.reason:
@@ -137,7 +139,7 @@ def _header(source: LineSource, stop: _Stop) -> tuple:
         if item is None:
             continue
         no, raw = item
-        text = _text(raw, source.name, no)
+        text = line_text(raw, source.name, no)
         if not text.strip():
             continue
         cells = next(csv.reader([text.lstrip("\ufeff")]))
@@ -154,13 +156,6 @@ def _looks_numeric(cell: str) -> bool:
         return True
     except ValueError:
         return False
-
-
-def _text(raw: bytes, name: str, no: int) -> str:
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError:
-        raise InputError("not UTF-8 text", name, no) from None
 
 
 def run_live(args: argparse.Namespace) -> int:
@@ -221,7 +216,7 @@ def _status(args: argparse.Namespace, source: LineSource, files: list) -> dict:
 def _run(args: argparse.Namespace, source: LineSource, session: Session, layout: SampleLayout, stop: _Stop,
          skipped: int) -> int:
     """The session's loop: push every line's sample, show what it brings, keep the view drawn."""
-    from arm_model.live.sources import Pacer
+    from arm_model.live.sources import Pacer, line_text
     view = _start_view(args, session)
     pacer = Pacer(args.speed if source.replay else 0.0)
     said: dict[str, int] = {}
@@ -247,13 +242,11 @@ def _run(args: argparse.Namespace, source: LineSource, session: Session, layout:
                 idle_since = time.monotonic()
             no, raw = item
             try:
-                text = raw.decode("utf-8")
+                text = line_text(raw, source.name, no)
                 if not text or (datagrams and text == header_text) or not text.strip():
                     continue
                 sample = layout.parse(text, no)
-            except (InputError, UnicodeDecodeError) as exc:
-                if isinstance(exc, UnicodeDecodeError):
-                    exc = InputError("not UTF-8 text", source.name, no)
+            except InputError as exc:
                 _show(session.bad_line(exc), said)
                 if args.strict:
                     status, message, code = "stopped", f"stopped at a bad line (--strict): {exc}", 2

@@ -30,8 +30,9 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import QUANTITY_OF_UNIT, UNIT_FACTORS, InputError, csv_records, read_text, split_unit
+from arm_model.csv_io import parse_number
 from arm_model.errors import unknown_key
-from arm_model.units import unit_of
+from arm_model.units import implausible, unit_of
 
 __all__ = ["Residuals", "read_residuals", "parse_residuals", "residual_origins"]
 
@@ -39,7 +40,6 @@ _POINT = ("x", "y", "z")
 _VECTORS = (("rx", "ry", "rz"), ("dx", "dy", "dz"))
 _TEXT = ("measurement", "feature", "kind", "line", "standardized")     # no unit: text, line number, ratio
 _LENGTHS = _POINT + _VECTORS[0] + _VECTORS[1] + ("residual",)           # a length unit each
-
 
 @dataclass(frozen=True)
 class Residuals:
@@ -65,11 +65,9 @@ class Residuals:
         return Residuals(self.path, take(self.points), self.vectors[mask], self.measurement[mask],
                          self.feature[mask], self.lines[mask], take(self.point_lines), take(self.kind))
 
-
 def read_residuals(path: str | Path) -> Residuals:
     """Read a residuals CSV (see the module documentation)."""
     return parse_residuals(read_text(path, "the residuals file"), str(path))
-
 
 def parse_residuals(text: str, path: str = "<string>") -> Residuals:
     """Parse residuals CSV text; see :func:`read_residuals`."""
@@ -113,9 +111,12 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
         k, h = by_base[base]
         out = np.empty(len(data))
         for i, (no, r) in enumerate(data):
-            v = _number(r[k].strip())
+            v = parse_number(r[k].strip())      # the toolkit's one number grammar (no '1_0', no '１')
             if v is None or not math.isfinite(v):
                 raise InputError(f"expected a finite number, got {r[k].strip()!r}", path, no, h)
+            wrong = implausible(v * UNIT_FACTORS[unit_of(h)], "length")    # 1e308 overflowed the drawing
+            if wrong:
+                raise InputError(wrong[1], path, no, h)
             out[i] = v
         return out * UNIT_FACTORS[unit_of(h)]
 
@@ -131,13 +132,12 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
         point_lines = np.empty(len(data), dtype=int)
         for i, (no, r) in enumerate(data):
             cell = r[k].strip()
-            if not cell.isdigit() or int(cell) < 1:
+            if not (cell.isascii() and cell.isdigit()) or int(cell) < 1:     # '²' is a digit to isdigit
                 raise InputError(f"expected a line number (1, 2, ...), got {cell!r}", path, no, "line")
             point_lines[i] = int(cell)
     return Residuals(path, np.column_stack([column(b) for b in _POINT]) if has_xyz else None,
                      np.column_stack([column(b) for b in vector]), text_column("measurement"), text_column("feature"),
                      np.array([no for no, _ in data]), point_lines, text_column("kind"))
-
 
 def residual_origins(res: Residuals, points, centres: np.ndarray,
                      markers: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int]:
@@ -173,9 +173,3 @@ def residual_origins(res: Residuals, points, centres: np.ndarray,
             origins.append(centres[i])
     return np.reshape(origins, (-1, 3)), res.vectors[keep], len(res.vectors) - len(keep)
 
-
-def _number(cell: str) -> float | None:
-    try:
-        return float(cell)
-    except ValueError:
-        return None

@@ -42,6 +42,9 @@ EVENT_KINDS = ("over_force", "joint_limit", "dropped", "late", "bad_line", "bump
 PERIOD_SAMPLES = 16
 #: a gap longer than this many nominal periods holds dropped samples
 GAP_FACTOR = 1.5
+#: the nominal sample rates a session takes [Hz]: a sample every 1000 s to a million a second (beyond, a gap of a
+#: millisecond counted 1e305 dropped samples, and a rate of 5e-324 Hz made the period infinite)
+RATE_HZ_RANGE = (1e-3, 1e6)
 #: a joint back inside its limits by this much re-arms its joint-limit event [rad] (0.05 deg)
 LIMIT_MARGIN_RAD = math.radians(0.05)
 
@@ -109,7 +112,7 @@ class Session:
         inputs: the input uncertainties (None: the arm's own, :meth:`~arm_model.model_file.Arm.input_uncertainty`,
             as ``aacmm tip`` takes them: its model file's probing scatter and model discrepancy included).
         measurement: the points' measurement id (default: the plan's, else the folder's name, else "live").
-        rate: the nominal sample rate [Hz] (None: estimated from the first intervals).
+        rate: the nominal sample rate [Hz] (None: estimated from the first intervals), in :data:`RATE_HZ_RANGE`.
         layout: the stream's :class:`~arm_model.live.samples.SampleLayout` (its header is recorded and
             raw lines are recorded as received); None: samples pushed from Python, recorded in SI.
         inputs_files: files the session reads (never written over); status: more ``session.json`` keys.
@@ -136,6 +139,9 @@ class Session:
         self.measurement = measurement or self.plan.measurement or (Path(folder).name if folder else "live")
         npar = 0 if self.parameters is None else len(self.parameters.names)
         self.tracker = FeatureTracker(self.plan, self.desc.probe.ball_diameter, npar)
+        if rate is not None and not RATE_HZ_RANGE[0] <= rate <= RATE_HZ_RANGE[1]:
+            raise ValueError(f"rate: the nominal sample rate must be in [{RATE_HZ_RANGE[0]:g}, "
+                             f"{RATE_HZ_RANGE[1]:g}] Hz, got {rate!r}")
         self._period = None if rate is None else 1.0 / float(rate)
         self._gap_limit = -math.inf if rate is None else GAP_FACTOR * self._period  # type: ignore[operator]  # learning: every interval
         self._first_gaps: list = []

@@ -24,13 +24,40 @@ from pathlib import Path
 
 from ..errors import InputError, open_input
 
-__all__ = ["open_source", "LineSource", "Pacer", "TICK_S", "AHEAD_S"]
+__all__ = ["open_source", "LineSource", "Pacer", "TICK_S", "AHEAD_S", "MAX_LINE_BYTES", "LongLine", "line_text"]
 
 #: the longest wait without a sign of life [s]
 TICK_S = 0.25
 #: a replayed sample is released at most this early [s]
 AHEAD_S = 0.01
 _CHUNK = 1 << 16
+#: the longest line a stream may send [bytes] (a sample line is a few hundred): a longer one is a bad line, its
+#: bytes dropped as they come (a peer that never sends a newline cannot fill the memory)
+MAX_LINE_BYTES = 1 << 20
+
+
+class LongLine(bytes):
+    """What a source yields for a line longer than :data:`MAX_LINE_BYTES`: its first bytes, ``length`` the
+    bytes it held (at least, when the stream ended inside it)."""
+    length = 0
+
+
+def _long(head: bytes, length: int) -> LongLine:
+    out = LongLine(head[:40])
+    out.length = length
+    return out
+
+
+def line_text(raw: bytes, name: str, no: int) -> str:
+    """The text of a line a source yielded: an InputError naming the stream and the line for one too long or
+    not UTF-8."""
+    if isinstance(raw, LongLine):
+        raise InputError(f"a line of {raw.length} bytes or more, beyond the {MAX_LINE_BYTES} a line may hold (a "
+                         f"sample line holds a few hundred; no line end?), starting {bytes(raw)!r}", name, no)
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise InputError("not UTF-8 text", name, no) from None
 
 
 class LineSource:
@@ -63,8 +90,15 @@ class _FileSource(LineSource):
 
     def _lines(self):
         no = 0
-        for raw in self._fh:
+        while raw := self._fh.readline(MAX_LINE_BYTES + 1):
             no += 1
+            if len(raw) > MAX_LINE_BYTES and not raw.endswith(b"\n"):
+                head, length = raw, len(raw)
+                while raw and not raw.endswith(b"\n"):     # the rest of it, a bounded piece at a time
+                    raw = self._fh.readline(MAX_LINE_BYTES)
+                    length += len(raw)
+                yield no, _long(head, length)
+                continue
             yield no, raw.rstrip(b"\r\n") if raw.endswith(b"\n") else raw
 
     def close(self) -> None:
@@ -83,7 +117,9 @@ class _FdSource(LineSource):
     def _lines(self):
         sel = selectors.DefaultSelector()
         sel.register(self.fd, selectors.EVENT_READ)
-        rest, no = b"", 0
+        # rest: the line begun and not ended (only its first bytes once it is longer than MAX_LINE_BYTES, so a peer
+        # that never sends a newline cannot fill the memory), length: its bytes so far
+        rest, length, too_long, no = bytearray(), 0, False, 0
         try:
             while True:
                 if not sel.select(TICK_S):
@@ -92,13 +128,24 @@ class _FdSource(LineSource):
                 data = self._read()
                 if not data:
                     break
-                parts = (rest + data).split(b"\n")
-                rest = parts.pop()
-                for raw in parts:
+                *ended, last = data.split(b"\n")
+                for part in ended:
                     no += 1
-                    yield no, raw.rstrip(b"\r")
-            if rest:
-                yield no + 1, rest.rstrip(b"\r")
+                    total = length + len(part)
+                    if too_long or total > MAX_LINE_BYTES:
+                        yield no, _long(bytes(rest) or part, total)
+                    else:
+                        yield no, (bytes(rest) + part).rstrip(b"\r")
+                    rest, length, too_long = bytearray(), 0, False
+                length += len(last)
+                if not too_long and length > MAX_LINE_BYTES:
+                    too_long, rest = True, (rest + last)[:40]
+                elif not too_long:
+                    rest += last
+            if too_long:
+                yield no + 1, _long(bytes(rest), length)
+            elif rest:
+                yield no + 1, bytes(rest).rstrip(b"\r")
         finally:
             sel.close()
 
