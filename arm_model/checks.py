@@ -102,7 +102,7 @@ def _joint_limit_message(desc, per_joint, lines, file: str) -> InputWarning | No
     if not len(lines):
         return None
     names = []
-    for joint, count in zip(desc.encoders, per_joint):
+    for joint, count in zip(desc.encoders, per_joint, strict=True):
         if count:
             names.append(f"{joint.name} ({int(count)}, limits {_limits_text(joint)})"
                          if joint.lower is not None and joint.upper is not None else f"{joint.name} ({int(count)})")

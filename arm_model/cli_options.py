@@ -1,6 +1,6 @@
 """The command-line toolbox every ``aacmm`` command uses: argparse types for numbers checked at the
-boundary (finite, in range, named in the message) and the ``--arm`` options with the one loader of the
-arm they name."""
+boundary (finite, in range, named in the message), the ``--arm`` options with the one loader of the
+arm they name, and the one ``-o/--output`` option."""
 from __future__ import annotations
 
 import argparse
@@ -11,8 +11,9 @@ from pathlib import Path
 from .errors import InputError
 from .model_file import Arm, load_model
 
-__all__ = ["add_arm_options", "add_frame_options", "arm_from_args", "arm_inputs", "model_from_args", "number_in",
-           "positive", "non_negative", "at_least", "fraction", "finite", "seed", "port"]
+__all__ = ["add_arm_options", "add_frame_options", "add_output_option", "output_path", "arm_from_args", "arm_inputs",
+           "model_from_args", "number_in", "positive", "non_negative", "at_least", "fraction", "finite", "seed",
+           "port"]
 
 log = logging.getLogger(__name__)
 
@@ -78,6 +79,31 @@ finite = number_in()
 seed = number_in(0, kind=int)
 #: argparse type: a TCP port
 port = number_in(1, 65535, kind=int)
+
+
+def output_path(text: str) -> Path:
+    """argparse type of ``-o``: a path; an empty one is refused (it would name the current folder)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a path, got an empty one")
+    return Path(text)
+
+
+def add_output_option(p, kind: str = "folder", what: str = "", *, as_it_runs: bool = False) -> None:
+    """``-o/--output``, the one output of every command, defined here for all: ``kind`` "folder" (metavar DIR) or
+    "file" (FILE); ``what`` names it in the help ("CSV", "session folder"). Its promises are kept by
+    :mod:`arm_model.output`, which every command writes through: never over an input (nor a folder holding
+    one), nothing written outside ``-o``, the whole output or nothing (``as_it_runs``: a folder written as the
+    command runs, ``aacmm live``'s session, which starts new or empty)."""
+    if kind not in ("folder", "file"):
+        raise ValueError(f"kind must be 'folder' or 'file', got {kind!r}")
+    folder = kind == "folder"
+    name = what or ("output folder" if folder else "output file")
+    how = ("a new (or empty) folder, written as the command runs" if as_it_runs else
+           "created, or an earlier output of this command replaced; written whole or not at all" if folder else
+           "written whole or not at all")
+    never = "never an input or a folder holding one" if folder else "never one of the inputs"
+    p.add_argument("-o", "--output", type=output_path, required=True, metavar="DIR" if folder else "FILE",
+                   help=f"{name} ({how}; {never}; nothing is written outside it)")
 
 
 def add_arm_options(p, help_arm: str = "the arm: a shipped arm's name (aacmm7), a model file or description TOML "

@@ -11,7 +11,7 @@ import numpy as np
 
 from .checks import JointLimitTally, log_warnings
 from .cli import command_help
-from .cli_options import add_arm_options, add_frame_options, arm_inputs, model_from_args
+from .cli_options import add_arm_options, add_frame_options, add_output_option, arm_inputs, model_from_args
 from .csv_io import format_csv
 from .errors import InputError
 from .io import concat_points, iter_points
@@ -33,7 +33,7 @@ def register(sub) -> None:
                     "never dropped.")
     p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3)")
     add_arm_options(p)
-    p.add_argument("-o", "--output", type=Path, required=True, help="output CSV (never one of the inputs)")
+    add_output_option(p, "file", "output CSV")
     p.add_argument("--reference-frame", action="store_true",
                    help="also write where the reference instrument (tracker, motion capture) would see each marker: "
                         "x_ref_mm, y_ref_mm, z_ref_mm (x1_ref_mm ... for several markers), in the instrument's frame "
@@ -52,7 +52,7 @@ def register(sub) -> None:
                                           "--tip-frame, to see the chain the toolkit reads from it "
                                           "(docs/formats.md §2)")
     add_frame_options(u)
-    u.add_argument("-o", "--output", type=Path, required=True, help="output URDF")
+    add_output_option(u, "file", "output URDF")
     u.set_defaults(func=run_urdf)
 
     e = sub.add_parser(
@@ -238,7 +238,7 @@ def run_tip(args: argparse.Namespace) -> int:
             parts = [tmp] + [tmp.with_name(f"{tmp.name}.part{k}") for k in range(1, len(spans))]
             try:
                 tallies = fork_map(_tip_part, [(arm, str(args.points), part, span, known_header, ref)
-                                               for part, span in zip(parts, spans)])
+                                               for part, span in zip(parts, spans, strict=True)])
                 for part in parts[1:]:
                     _append(tmp, part)
             finally:

@@ -329,7 +329,7 @@ def _cells_text(arr: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return np.full(len(a), "", dtype=object)
     if width * len(a) > 4 * len(arr) + (1 << 20):   # a few cells much wider than the rest: the (n, width)
         return np.array([arr[x:y].tobytes().decode("utf-8").strip()   # matrix would outgrow the file itself
-                         for x, y in zip(a.tolist(), b.tolist())] + [None], dtype=object)[:-1]
+                         for x, y in zip(a.tolist(), b.tolist(), strict=True)] + [None], dtype=object)[:-1]
     cells = _windows(arr, width, before=False)[a]
     lanes = cells.view(np.uint64)
     _keep_bytes(lanes, b - a, low=True)
@@ -392,9 +392,9 @@ def csv_spans(path: str | Path, parts: int, min_bytes: int | None = None) -> tup
     except (OSError, InputError):
         return None                                       # the serial reader says what is wrong
     bounds.append(size)
-    if any(b >= c for b, c in zip(bounds[:-1], bounds[1:])):
+    if any(b >= c for b, c in zip(bounds[:-1], bounds[1:], strict=True)):
         return None
-    return (line, names), list(zip(bounds[:-1], bounds[1:]))
+    return (line, names), list(zip(bounds[:-1], bounds[1:], strict=True))
 
 
 def iter_csv_blocks(path: str | Path, what: str, header_check, block_bytes: int = BLOCK_BYTES,
@@ -584,7 +584,7 @@ def _slow_rows(columns: list[np.ndarray], fmts: list[str]) -> bytes:
         return [str(v) for v in c]
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerows(zip(*(cells(c, f) for c, f in zip(columns, fmts))))
+    w.writerows(zip(*(cells(c, f) for c, f in zip(columns, fmts, strict=True)), strict=True))
     return buf.getvalue().encode("utf-8")
 
 
@@ -603,9 +603,9 @@ def format_row(values: dict, fmt="%.9g") -> str:
             m = _FIXED.fullmatch(f)
             return m is not None and math.isfinite(v) and abs(float(v)) * 10.0 ** int(m.group(1)) <= 9e15
         return True
-    if all(fast(v, f) for v, f in zip(vals, fmts)):
+    if all(fast(v, f) for v, f in zip(vals, fmts, strict=True)):
         cells = []
-        for v, f in zip(vals, fmts):
+        for v, f in zip(vals, fmts, strict=True):
             if isinstance(v, (bool, int, np.integer, np.bool_)):
                 cells.append(str(int(v)))
             elif isinstance(v, (float, np.floating)):
@@ -619,7 +619,7 @@ def format_row(values: dict, fmt="%.9g") -> str:
     buf = io.StringIO()
     csv.writer(buf, lineterminator="\n").writerow(
         [str(int(v)) if isinstance(v, (bool, int, np.integer, np.bool_)) else
-         f % v if isinstance(v, (float, np.floating)) else str(v) for v, f in zip(vals, fmts)])
+         f % v if isinstance(v, (float, np.floating)) else str(v) for v, f in zip(vals, fmts, strict=True)])
     return buf.getvalue()
 
 
@@ -640,7 +640,7 @@ def format_csv(columns: dict, fmt="%.9g", header: bool = True, chunk: int = 16_3
         out.append(buf.getvalue().encode("utf-8"))
     for a in range(0, n, chunk):
         cols = [np.asarray(columns[k])[a:a + chunk] for k in names]
-        mats = [_column_chars(c, f) for c, f in zip(cols, fmts)]
+        mats = [_column_chars(c, f) for c, f in zip(cols, fmts, strict=True)]
         if any(m is None for m in mats):
             out.append(_slow_rows(cols, fmts))
             continue

@@ -76,9 +76,9 @@ def _start_live(out: Path):
     return proc, log
 
 
-def _end_live(proc, log: Path) -> None:
+def _end_live(proc, log: Path | None) -> None:
     import signal
-    if proc is None:
+    if proc is None or log is None:
         return
     if proc.poll() is None:
         proc.send_signal(signal.SIGINT)     # the replay is over by now: only its view lingers

@@ -257,10 +257,10 @@ class ArmDescription:
     def with_row_table(self, table: np.ndarray) -> ArmDescription:
         table = np.asarray(table, dtype=float)
         if self.convention == "urdf":
-            joints = tuple(replace(j, origin=_six(r)) for j, r in zip(self.joints, table))
+            joints = tuple(replace(j, origin=_six(r)) for j, r in zip(self.joints, table, strict=True))
         else:
             joints = tuple(replace(j, theta_offset=float(r[0]), d=float(r[1]), a=float(r[2]), alpha=float(r[3]))
-                           for j, r in zip(self.joints, table))
+                           for j, r in zip(self.joints, table, strict=True))
         return replace(self, joints=joints)
 
     @property
@@ -645,8 +645,9 @@ def description_data(desc: ArmDescription) -> dict[str, Any]:
         if j.prismatic:
             row["type"] = "prismatic"
         if desc.convention == "urdf":
-            row.update({f"origin_{k}_mm": in_unit(v, mm) for k, v in zip("xyz", _origin(j)[:3])})
-            row.update({f"origin_{k}_deg": in_unit(v, deg) for k, v in zip(("roll", "pitch", "yaw"), _origin(j)[3:])})
+            row.update({f"origin_{k}_mm": in_unit(v, mm) for k, v in zip("xyz", _origin(j)[:3], strict=True)})
+            row.update({f"origin_{k}_deg": in_unit(v, deg)
+                        for k, v in zip(("roll", "pitch", "yaw"), _origin(j)[3:], strict=True)})
             row["axis"] = [float(a) for a in _axis(j)]
         else:
             row.update({"theta_offset_deg": in_unit(j.theta_offset, deg), "d_mm": in_unit(j.d, mm),
@@ -659,7 +660,7 @@ def description_data(desc: ArmDescription) -> dict[str, Any]:
         if j.mass:
             row["mass_kg"] = float(j.mass)
         if any(j.com):
-            row.update({f"com_{k}_mm": in_unit(v, mm) for k, v in zip("xyz", j.com)})
+            row.update({f"com_{k}_mm": in_unit(v, mm) for k, v in zip("xyz", j.com, strict=True)})
         if j.encoder_resolution is not None:
             row[f"encoder_resolution_{unit}"] = in_unit(j.encoder_resolution, factor)
         if j.mimic is not None:
@@ -677,7 +678,7 @@ def description_data(desc: ArmDescription) -> dict[str, Any]:
                       "bending_compliance_y_mm_per_N": in_unit(p.bending_compliance_y, mpn)})
     probe["axial_compliance_mm_per_N"] = in_unit(p.axial_compliance, mpn)
     if any(p.rpy):
-        probe.update({f"{k}_deg": in_unit(v, deg) for k, v in zip(("roll", "pitch", "yaw"), p.rpy)})
+        probe.update({f"{k}_deg": in_unit(v, deg) for k, v in zip(("roll", "pitch", "yaw"), p.rpy, strict=True)})
     if p.lever is not None:
         probe["stylus_length_mm"] = in_unit(p.lever, mm)
     return {"name": desc.name, "convention": desc.convention, "joint": joints, "probe": probe}

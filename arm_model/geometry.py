@@ -343,7 +343,8 @@ def _check_status(res: Any, what: str) -> None:
 def _check_rank(jac: np.ndarray, what: str, names: tuple[str, ...]) -> None:
     norms = np.linalg.norm(jac, axis=0)
     if np.any(norms == 0):
-        raise NumericalError(f"{what}: parameter(s) {', '.join(n for n, v in zip(names, norms) if v == 0)} "
+        zero = ", ".join(n for n, v in zip(names, norms, strict=True) if v == 0)
+        raise NumericalError(f"{what}: parameter(s) {zero} "
                              "not determined by the points (rank-deficient Jacobian)")
     s = np.linalg.svd(jac / norms, compute_uv=False)
     if s[-1] < _RANK_TOL * s[0]:

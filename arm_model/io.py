@@ -20,7 +20,7 @@ from .errors import InputError, parse_toml, read_text, unknown_key
 from .output import atomic_write_bytes, guard_output
 from .readback import UnreadableOutput, read_back
 from .toml_lines import toml_key_lines, top_key_line
-from .units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
+from .units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit, unit_of
 
 log = logging.getLogger(__name__)
 
@@ -80,6 +80,11 @@ class PointSet:
     @property
     def n_joints(self) -> int:
         return self.q.shape[1]
+
+    @property
+    def line_numbers(self) -> np.ndarray:
+        """(N,) ``lines``, or each row's 1-based position for points not read from a file."""
+        return np.arange(1, len(self) + 1) if self.lines is None else self.lines
 
     @property
     def n_markers(self) -> int:
@@ -268,7 +273,7 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
     empty = np.flatnonzero(measurement == "")
     if len(empty):
         raise InputError("empty measurement id", path, int(blk.lines[empty[0]]), "measurement")
-    units = [split_unit(lay.header[c])[1] for c in lay.joints]
+    units = [unit_of(lay.header[c]) for c in lay.joints]
     q = nums[:, [pos[c] for c in lay.joints]] * np.array([UNIT_FACTORS[u] for u in units])
     for k, unit in enumerate(units):
         wrong = implausible(q[:, k], QUANTITY_OF_UNIT[unit])
@@ -520,7 +525,7 @@ def parse_artefacts(text: str, path: str = "<string>", *, extra_keys: tuple = ()
     return Artefacts(path, features, tuple(distances))
 
 
-def check_features(points: PointSet, artefacts: Artefacts) -> None:
+def check_features(points: PointSet, artefacts: Artefacts | None) -> None:
     """Every non-empty feature id of the points must exist in the artefacts file (``artefacts`` None: no
     artefacts file, every row a free point)."""
     for i, fid in enumerate(points.feature):
@@ -578,7 +583,7 @@ def read_force_signal(path: str | Path) -> ForceSignal:
         i, k = np.argwhere(bad)[0]
         raise InputError(f"expected a finite number, got {float(arr[i, k])!r}", path, int(lines[i]), header[k])
     for k, h in enumerate(header):
-        wrong = implausible(arr[:, k], QUANTITY_OF_UNIT[split_unit(h)[1]])
+        wrong = implausible(arr[:, k], QUANTITY_OF_UNIT[unit_of(h)])
         if wrong:
             raise InputError(wrong[1], path, int(lines[wrong[0][0]]), h)
     kind, cols, _ = found[0]

@@ -153,11 +153,14 @@ def _rotate_frame(cols: Frame, axis: int | tuple[float, ...], angle: Scalar) -> 
     X, Y, Z = cols
     c, s = np.cos(angle), np.sin(angle)
     if axis == 2:
-        return (tuple(c * x + s * y for x, y in zip(X, Y)), tuple(c * y - s * x for x, y in zip(X, Y)), Z)
+        return (tuple(c * x + s * y for x, y in zip(X, Y, strict=True)),
+                tuple(c * y - s * x for x, y in zip(X, Y, strict=True)), Z)
     if axis == 0:
-        return (X, tuple(c * y + s * z for y, z in zip(Y, Z)), tuple(c * z - s * y for y, z in zip(Y, Z)))
+        return (X, tuple(c * y + s * z for y, z in zip(Y, Z, strict=True)),
+                tuple(c * z - s * y for y, z in zip(Y, Z, strict=True)))
     if axis == 1:
-        return (tuple(c * x - s * z for x, z in zip(X, Z)), Y, tuple(s * x + c * z for x, z in zip(X, Z)))
+        return (tuple(c * x - s * z for x, z in zip(X, Z, strict=True)), Y,
+                tuple(s * x + c * z for x, z in zip(X, Z, strict=True)))
     assert not isinstance(axis, int)
     kx, ky, kz = axis             # Rodrigues: Rot = c I + s [k]x + (1 - c) k k^T
     k = (kx, ky, kz)
@@ -226,7 +229,7 @@ def chain_jacobian(convention: str, rows: Sequence[Vector] | np.ndarray, p_last:
                 cols = _rotate_frame(cols, axis, amount)
             else:
                 motions.append(("T", u, None, moved))
-                origin = tuple(o + amount * a for o, a in zip(origin, u))
+                origin = tuple(o + amount * a for o, a in zip(origin, u, strict=True))
     b = [value(v) for v in ball]
     centre = [origin[e] + cols[0][e] * b[0] + cols[1][e] * b[1] + cols[2][e] * b[2] for e in range(3)]
     for kind, u, o, moved in motions:

@@ -560,8 +560,8 @@ def write_covariance(path, names, units, values, cov, inputs=()) -> Path:
     shown = [_display(si) for si in units]
     cols = {"parameter": np.array(list(names), dtype=object),
             "unit": np.array([s for s, _ in shown], dtype=object),
-            "value": np.array([v / f for v, (_, f) in zip(values, shown)]),
-            "u": np.array([x / f for x, (_, f) in zip(u, shown)])}
+            "value": np.array([v / f for v, (_, f) in zip(values, shown, strict=True)]),
+            "u": np.array([x / f for x, (_, f) in zip(u, shown, strict=True)])}
     for k, n in enumerate(names):
         cols[n] = corr[:, k]
     return write_csv(path, cols, inputs, fmt="%.17g")
@@ -612,7 +612,7 @@ def read_covariance(path) -> Covariance:
         si, f = si_of[unit]
         units.append(si)
         nums = []
-        for cell, column in zip(r[2:], header[2:]):
+        for cell, column in zip(r[2:], header[2:], strict=True):
             v = parse_number(cell.strip())
             if v is None or not math.isfinite(v):
                 raise InputError(f"expected a finite number, got {cell.strip()!r}", path, no, column)

@@ -40,7 +40,7 @@ class ParamSpec:
     @property
     def labels(self) -> tuple[str, ...]:
         """``"j3.d [m]"`` style labels for reports."""
-        return tuple(f"{n} [{u}]" for n, u in zip(self.names, self.units))
+        return tuple(f"{n} [{u}]" for n, u in zip(self.names, self.units, strict=True))
 
     def index(self, name: str) -> int:
         try:

@@ -138,20 +138,21 @@ def tracker_tables(tracker: Tracker) -> dict[str, Any]:
     for i, s in enumerate(tracker.sessions):
         t = tracker.frames[i]
         row: dict[str, Any] = {} if s == DEFAULT_SESSION else {"session": s}
-        row.update({f"{a}_mm": in_unit(v, _MM) for a, v in zip("xyz", t[:3, 3])})
-        row.update({f"{a}_deg": in_unit(v, _DEG) for a, v in zip(("roll", "pitch", "yaw"), rpy_from_matrix(t[:3, :3]))})
+        row.update({f"{a}_mm": in_unit(v, _MM) for a, v in zip("xyz", t[:3, 3], strict=True)})
+        row.update({f"{a}_deg": in_unit(v, _DEG)
+                    for a, v in zip(("roll", "pitch", "yaw"), rpy_from_matrix(t[:3, :3]), strict=True)})
         if tracker.u_frames is not None:
             u = tracker.u_frames[i]
-            row.update({f"u_{a}_mm": in_unit(v, _MM) for a, v in zip("xyz", u[:3])})
-            row.update({f"u_r{a}_deg": in_unit(v, _DEG) for a, v in zip("xyz", u[3:])})
+            row.update({f"u_{a}_mm": in_unit(v, _MM) for a, v in zip("xyz", u[:3], strict=True)})
+            row.update({f"u_r{a}_deg": in_unit(v, _DEG) for a, v in zip("xyz", u[3:], strict=True)})
         frames.append(row)
     out: dict[str, Any] = {"reference_frame": frames}
     if tracker.offsets is not None:
         marks = []
         for k, o in enumerate(tracker.offsets):
-            row = {f"{a}_mm": in_unit(v, _MM) for a, v in zip("xyz", o)}
+            row = {f"{a}_mm": in_unit(v, _MM) for a, v in zip("xyz", o, strict=True)}
             if tracker.u_offsets is not None:
-                row.update({f"u_{a}_mm": in_unit(v, _MM) for a, v in zip("xyz", tracker.u_offsets[k])})
+                row.update({f"u_{a}_mm": in_unit(v, _MM) for a, v in zip("xyz", tracker.u_offsets[k], strict=True)})
             marks.append(row)
         out["marker"] = marks
     return out

@@ -86,7 +86,7 @@ def add_tip_options(p) -> None:
                    help="also a Monte Carlo of N samples of the same inputs: columns u_x_mc_mm ... (with "
                         "--covariance also cov_xx_mc_um2 ...) and the largest relative difference to the linear "
                         "result, per axis and along any direction")
-    g.add_argument("--seed", type=seed, default=0, help="seed of the Monte Carlo (default 0)")
+    g.add_argument("--seed", type=seed, default=0, help="seed of the --mc Monte Carlo draws (default 0)")
     add_input_options(p)
 
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["UNIT_FACTORS", "QUANTITY_OF_UNIT", "PLAUSIBLE_SI", "split_unit", "to_si", "implausible"]
+__all__ = ["UNIT_FACTORS", "QUANTITY_OF_UNIT", "PLAUSIBLE_SI", "split_unit", "unit_of", "to_si", "implausible"]
 
 #: factor that converts a value in the suffix unit to SI (m, rad, N, N·m, m/N, °C, s)
 UNIT_FACTORS: dict[str, float] = {
@@ -36,6 +36,15 @@ def split_unit(name: str) -> tuple[str, str] | None:
         if name.endswith(suffix) and len(name) > len(suffix):
             return name[: -len(suffix)], unit
     return None
+
+
+def unit_of(name: str) -> str:
+    """The unit suffix of a column name already checked to carry one (``"d_mm"`` -> ``"mm"``); a ValueError
+    (a bug of the caller, not bad input) if it has none."""
+    parts = split_unit(name)
+    if parts is None:
+        raise ValueError(f"'{name}' has no unit suffix")
+    return parts[1]
 
 
 def to_si(value, unit: str):

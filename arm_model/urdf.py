@@ -181,7 +181,7 @@ def urdf_text(desc: ArmDescription, base_link: str = "base_link", tip_link: str 
                      f'{_f(axis[2])}"/>'
                      f'<limit lower="{_f(lower)}" upper="{_f(upper)}" effort="100" velocity="3"/>{mimic}</joint>')
         visuals = [_user_visuals(desc, i)] if _user_visuals(desc, i) else [_joint_housing(float(radii[i]) * 1.3)] + [
-            _cylinder_between(a, b, float(radii[i]), "arm") for a, b in zip(waypoints[:-1], waypoints[1:])]
+            _cylinder_between(a, b, float(radii[i]), "arm") for a, b in zip(waypoints[:-1], waypoints[1:], strict=True)]
         com = row_end @ np.array([*j.com, 1.0])
         lines.append(f'  <link name="link_{i + 1}">{_inertial(j.mass, com[:3])}{"".join(visuals)}</link>')
         parent = f"link_{i + 1}"

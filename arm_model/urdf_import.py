@@ -89,7 +89,7 @@ _USED = {("joint", "origin", "xyz"): "length", ("joint", "origin", "rpy"): "angl
          ("joint", "mimic", "multiplier"): "ratio", ("joint", "mimic", "offset"): None}
 #: a negative mass [kg] smaller than this is rounding noise (taken as 0)
 _MASS_NOISE = 1e-9
-_ELASTIC_TYPES = dict(zip(ELASTIC_JOINTS, ("revolute", "revolute", "prismatic")))
+_ELASTIC_TYPES = dict(zip(ELASTIC_JOINTS, ("revolute", "revolute", "prismatic"), strict=True))
 
 
 @dataclass(frozen=True)
@@ -269,7 +269,7 @@ class _Chain:
     project's elastic probe joints, None without them.
     """
     moving: list            # (joint, prefix 4x4, Mimic | None)
-    tool_prefix: np.ndarray
+    tool_prefix: np.ndarray | None     # None: the tip joint moves (no fixed tool frame to rewrite)
     tip_joint: Any                # yourdfpy Joint
     T_last_tip: np.ndarray
     hinge: np.ndarray | None
@@ -720,7 +720,7 @@ def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None =
     u = _hung_from(u, base_frame, tip_frame)
     ch = _chain(u, tip_frame, base_frame)
     rows = [_row(u, j, prefix, mimic, mass, com)
-            for (j, prefix, mimic), (mass, com) in zip(ch.moving, _fold_masses(u, ch, masses))]
+            for (j, prefix, mimic), (mass, com) in zip(ch.moving, _fold_masses(u, ch, masses), strict=True)]
     return ArmDescription(name=name or u.robot.name or Path(path).stem, convention="urdf", joints=tuple(rows),
                           probe=_probe_of(u, ch, tip_frame, probe), source=str(path), tip_frame=tip_frame,
                           visuals=_visuals(u, ch), base_frame=base_frame)
@@ -818,7 +818,7 @@ def calibrated_urdf_text(nominal: ArmDescription, calibrated: ArmDescription) ->
     if names != [j.name for j in nominal.joints] or names != [j.name for j in calibrated.joints]:
         raise InputError("the URDF's chain no longer matches the arm that was calibrated (was it edited?)",
                          u.path)
-    for (j, prefix, _), row_nom, row_cal in zip(ch.moving, nominal.joints, calibrated.joints):
+    for (j, prefix, _), row_nom, row_cal in zip(ch.moving, nominal.joints, calibrated.joints, strict=True):
         if row_cal.origin == row_nom.origin:
             continue
         T = np.linalg.inv(prefix) @ origin_matrix(row_cal.origin)

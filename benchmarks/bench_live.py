@@ -40,7 +40,7 @@ def stream(repeats: int, out: Path) -> float:
     with open(out, "w") as fh:
         fh.write(header + "\n")
         for r in range(repeats):
-            for t, x in zip(times, body):
+            for t, x in zip(times, body, strict=True):
                 fh.write(f"{t + r * period:.3f},{x.split(',', 1)[1]}\n")
     return repeats * period
 

@@ -69,7 +69,7 @@ def tip_growth(n_points: int, training: tuple) -> dict:
         w = np.random.default_rng(2).normal(0.0, 2.0, (n_points, 3))
         cols = ",".join(f"q{k + 1}_rad" for k in range(arm.desc.n_joints))
         (tmp / "points.csv").write_text(f"measurement,feature,{cols},fx_N,fy_N,fz_N\n" + "".join(
-            "m,p," + ",".join(map(repr, [*a.tolist(), *b.tolist()])) + "\n" for a, b in zip(q, w)))
+            "m,p," + ",".join(map(repr, [*a.tolist(), *b.tolist()])) + "\n" for a, b in zip(q, w, strict=True)))
         wall, cpu = _tip(tmp / "points.csv", const, tmp / "tips.csv")
         rows[0] = dict(wall_s=wall, cpu_s=cpu)
         print(f"aacmm tip --uncertainty, {n_points:,} points, model discrepancy constant: {wall:.2f} s wall, "

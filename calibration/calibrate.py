@@ -332,7 +332,7 @@ class CalibrationResult:
         """One row a parameter: name, SI unit, value, u, state (:meth:`state`), the prior's standard deviation
         and the posterior/prior variance ratio (estimated parameters with a prior), display values."""
         rows = []
-        for i, (n, unit) in enumerate(zip(self.model.spec.names, self.model.spec.units)):
+        for i, (n, unit) in enumerate(zip(self.model.spec.names, self.model.spec.units, strict=True)):
             du, fac = display_unit(unit)
             u = self.uncertainty(n)
             k = self.free.index(n) if n in self.free else None

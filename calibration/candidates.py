@@ -180,8 +180,9 @@ def library_candidates(desc: ArmDescription, data: CalibrationData, families=Non
         # a scale error of any joint's reading, a slide's (a lift's screw pitch) as a gear ratio's
         for i, j in enumerate(desc.encoders):
             out.append(Candidate(f"gain {j.name}", JointGain(joints=(i,)), "joint_gain", j.name))
-    if "joint_compliance" in families and no_torque_reason(desc, data):
-        skipped.append(Skipped("joint compliance", no_torque_reason(desc, data)))
+    no_torque = no_torque_reason(desc, data) if "joint_compliance" in families else None
+    if no_torque:
+        skipped.append(Skipped("joint compliance", no_torque))
     elif "joint_compliance" in families:
         tau_g, tau_c = torques_of(desc, data)
         loaded = []

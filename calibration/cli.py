@@ -13,6 +13,7 @@ from arm_model.checks import log_warnings, point_warnings
 from arm_model.cli import command_help
 from arm_model.cli_options import (
     add_arm_options,
+    add_output_option,
     arm_inputs,
     at_least,
     fraction,
@@ -73,10 +74,15 @@ def campaign_inputs(p) -> None:
                         "coordinates only: every row a free point with reference columns")
     add_arm_options(p, "nominal arm: a shipped arm's name (aacmm7), a description TOML or model file, or a URDF "
                        "with --tip-frame (docs/formats.md §2, docs/own-arm.md)")
+    reference_points_option(p)
+    add_output_option(p)
+
+
+def reference_points_option(p) -> None:
+    """``--reference-points``: a second points file of reference coordinates (calibrate, close-loop, study poses)."""
     p.add_argument("--reference-points", type=Path, default=None,
                    help="a second points CSV whose rows all carry reference coordinates (x_ref_mm ...), e.g. tracker "
                         "nests, joined to the points file (docs/formats.md §3)")
-    p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; never an input)")
 
 
 def marker_option(p) -> None:
@@ -207,7 +213,7 @@ def register(sub) -> None:
     campaign_inputs(c)
     marker_option(c)
     _common_fit_options(c)
-    c.add_argument("--holdout", default=None,
+    c.add_argument("--holdout", default=None, metavar="IDS|FRACTION",
                    help="data kept out of the fit for validation: a fraction (0.2) drawn at random, or (with "
                         "--holdout-by measurement) a comma-separated list of measurement ids")
     c.add_argument("--holdout-by", choices=("measurement", "pose"), default="measurement",
@@ -231,9 +237,11 @@ def register(sub) -> None:
                    help="standardized residual beyond which a point is reported as an outlier (default 4)")
     c.add_argument("--drop-outliers", action="store_true",
                    help="drop the outlier points and refit once (they are listed); default: report and keep")
-    c.add_argument("--covariance", choices=("residual", "stated"), default="residual",
-                   help="scale the covariance by the residual variance factor s0^2 (default) or trust the stated "
-                        "uncertainties (s0 = 1)")
+    c.add_argument("--covariance-scale", "--covariance", dest="covariance", choices=("residual", "stated"),
+                   default="residual",
+                   help="scale the parameters' covariance by the residual variance factor s0^2 (default) or trust "
+                        "the stated uncertainties (s0 = 1); --covariance is the older spelling (aacmm tip's "
+                        "--covariance is another option: it writes each point's covariance)")
     c.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     mpe_options(c)
     c.set_defaults(func=run_calibrate)
@@ -255,11 +263,13 @@ def register(sub) -> None:
     m.add_argument("campaign", type=Path, help="campaign TOML of the simulator (docs/formats.md §6)")
     m.add_argument("--runs", type=number_in(1, 100_000, kind=int), default=20,
                    help="number of runs (default 20; at most 100000)")
-    m.add_argument("--seed", type=seed, default=0, help="first seed (default 0)")
-    m.add_argument("--holdout", type=fraction, default=0.25, help="held-out fraction of measurements (default 0.25)")
+    m.add_argument("--seed", type=seed, default=0,
+                   help="seed of the first run's simulation (run i uses --seed + i; default 0)")
+    m.add_argument("--holdout", type=fraction, default=0.25, metavar="FRACTION",
+                   help="held-out fraction of measurements (default 0.25)")
     m.add_argument("--workers", type=at_least(1), default=None, help="local processes (default: CPU count)")
     m.add_argument("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://10.0.0.5:8786")
-    m.add_argument("-o", "--output", type=Path, required=True, help="output folder")
+    add_output_option(m)
     _common_fit_options(m)
     m.set_defaults(func=run_montecarlo)
     q = ss.add_parser("poses", help="choose measurements by the observability index O1",
@@ -271,10 +281,10 @@ def register(sub) -> None:
                    help="artefacts TOML (docs/formats.md §4); none for reference (tracker) points only")
     add_arm_options(q, "nominal arm: a shipped arm's name (aacmm7), a description TOML, or a URDF with --tip-frame "
                        "(docs/formats.md §2)")
-    q.add_argument("--reference-points", type=Path, default=None, help="reference points CSV (docs/formats.md §3)")
+    reference_points_option(q)
     marker_option(q)
     q.add_argument("--count", type=at_least(1), required=True, help="how many measurements to choose")
-    q.add_argument("-o", "--output", type=Path, required=True, help="output folder")
+    add_output_option(q)
     _common_fit_options(q)
     q.set_defaults(func=run_poses)
 
@@ -371,18 +381,15 @@ def _load_data(args, defaults: bool = False):
         if pts is not None:
             Arm(desc, model.effects).check_points(pts)
             warnings += point_warnings(desc, pts)
-    data = make_data(points, artefacts, model, reference=reference, marker_offsets=args.marker_offset,
-                     heldout=heldout)
+    data = make_data(points, artefacts, reference=reference, marker_offsets=args.marker_offset, heldout=heldout)
     added = default_effects(model, data) if defaults and args.effect is None else ()
     if added:
         from arm_model.model import ArmModel
         model = ArmModel(desc, tuple(model.effects) + added)
-        data = make_data(points, artefacts, model, reference=reference, marker_offsets=args.marker_offset,
-                         heldout=heldout)
         log.info(f"effect {', '.join(e.describe() for e in added)} added: a robot whose links carry masses bends "
                  "under its own weight (each compliance's prior: non-negative, at most 10 mrad under its joint's RMS "
                  "gravity torque); --effect none for the geometry alone")
-    return model, data, arm.values, warnings
+    return model, data.for_model(model), arm.values, warnings
 
 
 def _heldout_points(args, desc):
@@ -755,7 +762,7 @@ def run_poses(args: argparse.Namespace) -> int:
         (out.dir / "poses.json").write_text(json_text({**sel.to_dict(), **provenance(inputs)}), encoding="utf-8")
     log_warnings(warnings)
     log.info(f"{len(sel.parameters)} identifiable parameters; chosen measurements (O1, random sets' O1):")
-    for m, o, r, n in zip(sel.chosen, sel.o1, sel.o1_random, sel.n_points):
+    for m, o, r, n in zip(sel.chosen, sel.o1, sel.o1_random, sel.n_points, strict=True):
         log.info(f"  {m:20s} O1 {o:10.4g}   random {r:10.4g}   ({counted(n, 'point')})")
     log.info(f"-> {args.output / 'poses.json'}")
     return 0

@@ -137,6 +137,16 @@ class CalibrationData:
         ref = self.points.ref
         return None if ref is None else ref[np.arange(len(self)), self.markers]
 
+    def for_model(self, model: ArmModel) -> CalibrationData:
+        """These data with the per-point inputs ``model.needs()`` attached (the aux inputs already given are
+        kept; temperatures from the points, gravity and contact torques of the nominal description); an
+        :class:`InputError` when the points' joint count is not the model's."""
+        if self.points.n_joints != model.desc.n_joints:
+            raise InputError(f"{self.points.n_joints} joint columns, but the arm has {model.desc.n_joints} joints",
+                             self.points.path)
+        files = self.files if self.files is not None else np.full(len(self), self.points.path, dtype=object)
+        return replace(self, aux=_aux_inputs(model, self.points, files, self.aux))
+
     def with_tracker(self, tracker: Tracker | None) -> CalibrationData:
         """These data with the reference frames and marker offsets held at ``tracker``'s (a session it has
         no frame for keeps its frame unknown)."""
@@ -161,11 +171,11 @@ class CalibrationData:
         return self.select(np.array([m in ids for m in self.points.measurement], bool))
 
 
-def merge_points(*sets: PointSet) -> tuple[PointSet, np.ndarray]:
-    """Join point sets (file order kept, one after the other) into one; returns it and the file of
+def merge_points(*given: PointSet | None) -> tuple[PointSet, np.ndarray]:
+    """Join point sets (file order kept, one after the other; None: none) into one; returns it and the file of
     each row. Absent force/torque columns are zero, absent reference coordinates (and markers beyond a
     file's own), temperature and time are NaN, an absent session column is the default session."""
-    sets = [s for s in sets if s is not None]
+    sets = [s for s in given if s is not None]
     if len(sets) == 1:
         return sets[0], np.full(len(sets[0]), sets[0].path, dtype=object)
     jn = {s.n_joints for s in sets}
@@ -195,7 +205,7 @@ def merge_points(*sets: PointSet) -> tuple[PointSet, np.ndarray]:
         force_kind=None if not kinds else (kinds.pop() if len(kinds) == 1 else "mixed"),
         temperature=stack("temperature", (), np.nan), time=stack("time", (), np.nan),
         ref=ref, session=stack("session", (), DEFAULT_SESSION),
-        lines=np.concatenate([s.lines if s.lines is not None else np.arange(1, len(s) + 1) for s in sets]))
+        lines=np.concatenate([s.line_numbers for s in sets]))
     files = np.concatenate([np.full(len(s), s.path, dtype=object) for s in sets])
     return merged, files
 
@@ -237,12 +247,7 @@ def make_data(points: PointSet, artefacts: Artefacts | None, model: ArmModel | N
     points, files, marker = _one_marker_a_row(points, files, offsets)
     artefacts = NO_ARTEFACTS if artefacts is None else artefacts
     data = CalibrationData(points, artefacts, aux, files, marker, offsets)
-    if model is None:
-        return data
-    if points.n_joints != model.desc.n_joints:
-        raise InputError(f"{points.n_joints} joint columns, but the arm has {model.desc.n_joints} joints",
-                         points.path)
-    return replace(data, aux=_aux_inputs(model, points, files, aux))
+    return data if model is None else data.for_model(model)
 
 
 def _one_marker_a_row(points: PointSet, files: np.ndarray, offsets: str):
@@ -256,14 +261,16 @@ def _one_marker_a_row(points: PointSet, files: np.ndarray, offsets: str):
         raise InputError(f"{k} markers (x1_ref_mm ... x{k}_ref_mm) at the tip point itself (marker offsets "
                          "'zero'): several markers sit at their own offsets; let them be estimated (--marker-offset "
                          "fit)", points.path, 1, f"x{k}_ref_mm")
-    on_feature = np.flatnonzero((points.feature != "") & np.any(np.isfinite(points.ref[:, :, 0]), axis=1))
+    ref = points.ref
+    assert ref is not None, "k > 1 markers come with reference columns"
+    on_feature = np.flatnonzero((points.feature != "") & np.any(np.isfinite(ref[:, :, 0]), axis=1))
     if len(on_feature):
         i = on_feature[0]
         raise InputError(f"a row on the feature '{points.feature[i]}' with {k} markers: a reference point on an "
                          "artefact feature (a tracker nest) is the feature's own; give it as marker 1 only, or "
                          "leave the feature cell empty", files[i], None if points.lines is None
                          else int(points.lines[i]), "feature")
-    has = np.any(np.isfinite(points.ref[:, :, 0]), axis=1)
+    has = np.any(np.isfinite(ref[:, :, 0]), axis=1)
     reps = np.where(has, k, 1)
     rows = np.repeat(np.arange(len(points)), reps)
     marker = np.concatenate([np.arange(n) for n in reps])

@@ -225,6 +225,7 @@ def residual_space(result: CalibrationResult, extra=()) -> ResidualSpace:
     prob = Problem(sup, result.data, result.weights, np.arange(size), reference=result.reference_mode)
     states = levenberg_marquardt(prob.with_free([]), p, prob.initial_states(p)).states
     ev = prob.evaluate(p, states)
+    assert ev.jp is not None, "every parameter is free in prob: its Jacobian is evaluated"
     free = np.array([sup.spec.index(n) for n in result.free], dtype=int)
     if len(free):
         red = reduced_jacobian(ev.jp[:, free], ev.jt)
@@ -305,7 +306,8 @@ class GroupTest:
                 "delta_bic": num(self.delta_bic), "explained": num(self.explained),
                 "explained_heldout": num(self.explained_cv), "best_regressor": self.best,
                 "best_p_value": num(self.best_p), "note": self.note,
-                "estimate": {n: {"value": num(v), "u": num(u)} for n, v, u in zip(self.names, self.estimate, self.u)}}
+                "estimate": {n: {"value": num(v), "u": num(u)}
+                             for n, v, u in zip(self.names, self.estimate, self.u, strict=True)}}
 
 
 def _svd_scaled(c: np.ndarray, raw_norm: np.ndarray, rank_tol: float):
@@ -339,7 +341,7 @@ def test_group(space: ResidualSpace, cols: np.ndarray, names, name: str, fold_of
     k = c.shape[1]
     raw_norm = np.linalg.norm(raw, axis=0)
     frac = np.linalg.norm(c, axis=0) / np.where(raw_norm > 0, raw_norm, 1.0)
-    absorbed = [n for n, f_, rn in zip(names, frac, raw_norm) if f_ <= rank_tol or rn <= 0]
+    absorbed = [n for n, f_, rn in zip(names, frac, raw_norm, strict=True) if f_ <= rank_tol or rn <= 0]
     weak = []
     if prior is not None:
         ok = [i for i, n in enumerate(names) if n not in absorbed]
@@ -461,7 +463,7 @@ def screen_candidates(result: CalibrationResult, candidates, folds: dict[str, in
         space = residual_space(result, [candidates[i].effect for i in members])
         first = first or space
         fr = row_folds(space, folds) if folds is not None and len(folds) else None
-        for i, sl in zip(members, space.extra_slices):
+        for i, sl in zip(members, space.extra_slices, strict=True):
             c = candidates[i]
             names = c.param_names(desc)
             tests[i] = test_group(space, space.jp[:, sl], names, c.name, fr, rank_tol=rank_tol,
@@ -539,7 +541,7 @@ def _lateral_loads(res: CalibrationResult, x: np.ndarray) -> list[tuple[list, np
     for j in range(desc.n_joints):
         o, axes = joint_frame(desc, geom, q, j, NUMPY_OPS)
         m = [a + b for a, b in zip(gravity_moment(desc, geom, q, j, o, NUMPY_OPS),
-                                   contact_moment(desc, geom, q, w, o, NUMPY_OPS))]
+                                   contact_moment(desc, geom, q, w, o, NUMPY_OPS), strict=True)]
         o, m = col(o), col(m)
         u = [col(a) for a in axes[:2]]
         out.append(([np.cross(a, x - o) for a in u], np.column_stack([np.sum(m * a, axis=1) for a in u])))

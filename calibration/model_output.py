@@ -246,10 +246,11 @@ def refine_torques(result, rounds: int = 5, tol_nm: float = 1.0):
                    prior_scale=result.prior_scales, prior_centre=result.prior_centre)
     cur = result
     for _ in range(rounds):
-        values = dict(zip(model.spec.names, (float(v) for v in cur.p)))
+        values = dict(zip(model.spec.names, (float(v) for v in cur.p), strict=True))
         cur = dataclasses.replace(calibrate(model, with_fitted_torques(data, cur),
                                             replace(base, free=tuple(cur.free), values=values)), **keep)
-        cur = dataclasses.replace(cur, model_check=model_check(cur))
-        if cur.model_check["max_difference_nm"] <= tol_nm:
+        check = model_check(cur)
+        cur = dataclasses.replace(cur, model_check=check)
+        if check["max_difference_nm"] <= tol_nm:
             break
     return cur

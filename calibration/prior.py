@@ -185,7 +185,7 @@ def _effect_sizes(model, data) -> dict[int, tuple[float, str]]:
         defs = e.param_defs(desc)
         joints = list(e.joint_indices(desc)) if hasattr(e, "joint_indices") else []
         loads = e.gravity_loads(desc, data.points.q) if hasattr(e, "gravity_loads") and len(data) else None
-        for n, (k, (name, unit)) in enumerate(zip(range(sl.start, sl.stop), defs)):
+        for n, (k, (name, unit)) in enumerate(zip(range(sl.start, sl.stop), defs, strict=True)):
             if unit == "rad/(N m)":
                 j = next((i for i in joints if name.startswith(desc.joints[i].name + ".")), None)
                 if loads is not None:           # an off-axis compliance: the moment it multiplies
@@ -221,7 +221,7 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
     probe = model.desc.probe
     eff = _effect_sizes(model, data)
     size, lower, source = np.empty(spec.size), np.full(spec.size, -np.inf), []
-    for i, (n, unit) in enumerate(zip(spec.names, spec.units)):
+    for i, (n, unit) in enumerate(zip(spec.names, spec.units, strict=True)):
         hit = [v for pat, v in (priors or {}).items() if fnmatch.fnmatchcase(n, pat)]
         if hit:
             size[i], src = float(hit[0]), "given"

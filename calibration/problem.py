@@ -250,7 +250,7 @@ class Problem:
                 pidx = np.concatenate(members)
                 rows = geo.KINDS[kind].rows
                 g = dict(kind=kind, free_radius=fr, uinst=insts, points=pidx, row0=row, rows=rows,
-                         inst=np.concatenate([np.full(len(m), i) for m, i in zip(members, insts)]),
+                         inst=np.concatenate([np.full(len(m), i) for m, i in zip(members, insts, strict=True)]),
                          local=np.concatenate([np.full(len(m), k) for k, m in enumerate(members)]),
                          fn=geo.kind_function(kind, fr).map(len(pidx)))
                 if kind == "reference":
@@ -407,13 +407,13 @@ class Problem:
         assert self._xref_all is not None, "reference rows come with reference coordinates"
         fstates, ostates = geo.tracker_start(base, turn, self._xref_all[g["points"]], g["inst"], g["marker"],
                                              frames, markers, held_f, held_o)
-        for i, st in zip(frames + markers, fstates + ostates):
+        for i, st in zip(frames + markers, fstates + ostates, strict=True):
             states[i] = st
         return states
 
     def retract(self, states: list[np.ndarray], dtheta: np.ndarray) -> list[np.ndarray]:
         out = []
-        for it, s in zip(self.instances, states):
+        for it, s in zip(self.instances, states, strict=True):
             out.append(s if it.n_theta == 0 else geo.retract(it.kind, s, dtheta[it.offset: it.offset + it.n_theta]))
         return out
 
@@ -443,7 +443,7 @@ class Problem:
         """The rows of one group into ``r`` and, with ``jp``, their Jacobians: d r / d p[free] into ``jp``,
         d r / d (nuisance) as triplets into ``sparse`` (rows, columns, values)."""
         def add(rows_idx: np.ndarray, cols_idx: np.ndarray, vals: np.ndarray) -> None:
-            for lst, a in zip(sparse, (rows_idx, cols_idx, vals)):
+            for lst, a in zip(sparse, (rows_idx, cols_idx, vals), strict=True):
                 lst.append(np.reshape(a, -1))
 
         kind, rows, npt = g["kind"], g["rows"], len(g["points"])
@@ -498,7 +498,7 @@ class Problem:
         for attr, d in (("a", da), ("b", db)):
             d = np.asarray(d).reshape(len(items), 3)
             offs = np.array([self.instances[getattr(it, attr)].offset for it in items])
-            for lst, a in zip(sparse, (np.repeat(rows, 3), offs[:, None] + np.arange(3)[None, :], d)):
+            for lst, a in zip(sparse, (np.repeat(rows, 3), offs[:, None] + np.arange(3)[None, :], d), strict=True):
                 lst.append(np.reshape(a, -1))
 
     def with_free(self, free: ArrayLike) -> Problem:

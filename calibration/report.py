@@ -60,7 +60,7 @@ def plot_parameters(result: CalibrationResult) -> bytes:
     rows = [r for r in result.parameter_rows() if r["state"] in ("free", "prior-dominated")]
     units = list(dict.fromkeys(r["display_unit"] for r in rows)) or ["-"]
     fig, axes = reports.figure(max(6.0, 0.25 * len(rows) + 3), 2.6 * len(units), rows=len(units))
-    for ax, unit in zip(axes[:, 0], units):
+    for ax, unit in zip(axes[:, 0], units, strict=True):
         rr = [r for r in rows if r["display_unit"] == unit]
         x = np.arange(len(rr))
         ax.errorbar(x, [r["display_value"] for r in rr], yerr=[2 * r["display_u"] for r in rr], fmt="o", ms=3,
@@ -98,7 +98,7 @@ def plot_conformance(rows: list[dict], title: str) -> bytes:
     items beyond it in red, the verdict in the panel's title."""
     rows = [r for r in rows if r["n"]]
     fig, axes = reports.figure(9.0, 2.2 * len(rows) + 0.5, rows=len(rows))
-    for ax, r in zip(axes[:, 0], rows):
+    for ax, r in zip(axes[:, 0], rows, strict=True):
         v = np.array([it["value_um"] for it in r["items"]])
         x = np.arange(len(v))
         mpe = r["mpe_um"]

@@ -338,11 +338,13 @@ def select_measurements(model: ArmModel, data: CalibrationData, count: int, opti
     prob = prob.with_free(kept)
     ev = prob.evaluate(p, states)
     jred = reduced_jacobian(ev.jp, ev.jt) / column_scale(ev.jp)
-    meas_of_row = np.where(prob.row_point >= 0, data.points.measurement[np.maximum(prob.row_point, 0)], None)
+    meas_of_row = np.full(len(prob.row_point), None, dtype=object)
+    on_point = prob.row_point >= 0
+    meas_of_row[on_point] = data.points.measurement[prob.row_point[on_point]]
     for k, d in enumerate(prob.distance_items):
         meas_of_row[prob.n_point_rows + k] = d.measurement
     ids = data.measurements()
-    blocks = {m: jred[meas_of_row == m] for m in ids}  # type: ignore[comparison-overlap]
+    blocks = {m: jred[meas_of_row == m] for m in ids}
     info = {m: b.T @ b for m, b in blocks.items()}
     npts = {m: int(np.sum(data.points.measurement == m)) for m in ids}
     total = sum(info.values())
@@ -364,6 +366,7 @@ def select_measurements(model: ArmModel, data: CalibrationData, count: int, opti
             val = 0.5 * logdet / len(kept) - 0.5 * math.log(n_now + npts[m])
             if val > best_val:
                 best, best_val = m, val
+        assert best is not None, "an unchosen measurement is left while len(chosen) < count"
         chosen.append(best)
         cur = cur + info[best]
         o1s.append(observability_index(cur + reg, n_now + npts[best]))

@@ -155,6 +155,7 @@ def validate(model: ArmModel, p, data: CalibrationData, weights: Weights | None 
         pred = _validate(model, p, data.with_tracker(tracker), weights, reference)
         val = _validate(model, p, data, weights, reference) if own_frames_fit(data) else replace(pred, reference=None,
                                                                                                reference_errors=None)
+        assert pred.reference is not None, "data with reference points are validated on them"
         val.reference_predicted = {k: pred.reference[k] for k in ("n", "rms", "max")}
         val.reference_predicted_errors = pred.reference_errors
         return val
@@ -241,9 +242,9 @@ def heldout_residuals(model: ArmModel, p, data: CalibrationData, weights: Weight
         train = np.asarray(train, bool)
         sub = Problem(model, data.select(train), weights, [], reference=reference)
         fitted = {(it.measurement, it.feature): st for it, st in
-                  zip(sub.instances, levenberg_marquardt(sub, p, sub.initial_states(p)).states)}
+                  zip(sub.instances, levenberg_marquardt(sub, p, sub.initial_states(p)).states, strict=True)}
         start = prob.initial_states(p)
-        states = [fitted.get((it.measurement, it.feature), s0) for it, s0 in zip(prob.instances, start)]
+        states = [fitted.get((it.measurement, it.feature), s0) for it, s0 in zip(prob.instances, start, strict=True)]
         missing = [f"{it.measurement} {it.feature}" for it in prob.instances
                    if (it.measurement, it.feature) not in fitted]
         if missing:

@@ -11,7 +11,7 @@ import numpy as np
 from arm_model import InputError, NumericalError, read_artefacts, read_points
 from arm_model.checks import log_warnings
 from arm_model.cli import command_help
-from arm_model.cli_options import add_arm_options, arm_inputs, model_from_args, number_in
+from arm_model.cli_options import add_arm_options, add_output_option, arm_inputs, model_from_args, number_in
 from arm_model.io import check_features
 from arm_model.log import counted
 from arm_model.output import output_folder
@@ -46,18 +46,19 @@ def register(sub) -> None:
     r.add_argument("--compliance-mm-per-N", type=number_in(0, 1e3, low_open=True), dest="compliance", metavar="C",
                    help="compliance of the paper's four models (default: the arm's probe bending compliance, "
                         "0.0142 mm/N in the nominal arm)")
-    r.add_argument("--u-force-N", type=number_in(0, 1e5, low_open=True), dest="u_force", default=None, metavar="U",
+    r.add_argument("--u-force-N", type=number_in(0, 1e5, low_open=True), dest="u_force", default=None,
+                   metavar="BENDING",
                    help="standard uncertainty of a measured force for the budgets' u_cor = 2 c u_force "
                         "and of the bending force (probe x, y) in the points' covariances (default 0.0723 N: "
-                        "the paper's bending sensor, Table 1 terms combined; the axial stays 0.0464 N)")
+                        "the paper's bending sensor, Table 1 terms combined; the axial stays 0.0464 N: one value, "
+                        "where aacmm tip's --u-force-N takes the bending and the axial)")
     r.add_argument("--delta-T-C", type=number_in(0, 1e4), dest="delta_t", default=0.5, metavar="DT",
                    help="temperature variation during the test for the budgets' u_t (default 0.5 C, the paper's)")
     r.add_argument("--probability-pct", type=number_in(0, 100, low_open=True, high_open=True), dest="probability",
                    default=95.0, metavar="P",
                    help="coverage probability of the expanded uncertainties (default 95)")
     add_input_options(r, force=False)
-    r.add_argument("-o", "--output", type=Path, required=True, metavar="DIR",
-                   help="output folder (created; never an input)")
+    add_output_option(r)
     r.set_defaults(func=run_ring)
 
     p = sub.add_parser(
@@ -73,8 +74,7 @@ def register(sub) -> None:
     p.add_argument("--table2", type=Path, default=None, metavar="CSV",
                    help="a Table 2 CSV in the bundled format (default: the bundled correction/data/paper_table2.csv; "
                         "docs/ring-pipeline.md)")
-    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR",
-                   help="output folder (created; never an input)")
+    add_output_option(p)
     p.set_defaults(func=run_paper)
 
 

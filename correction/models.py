@@ -220,7 +220,7 @@ def analyse_ring_campaign(desc, points: PointSet, artefacts, feature: str | None
         idx = rows[sel]
         if len(idx) < 6:
             raise InputError(f"measurement '{mid}' has {len(idx)} points on the ring; a cylinder needs at "
-                             "least 6", points.path, int(points.lines[idx[0]]), "measurement")
+                             "least 6", points.path, int(points.line_numbers[idx[0]]), "measurement")
         sub = points.select(idx)
         rigid = arm.ball_centres(sub, rigid=True)
         wrench = forces.force
@@ -228,7 +228,7 @@ def analyse_ring_campaign(desc, points: PointSet, artefacts, feature: str | None
             wrench = np.column_stack([wrench, points.torque[idx]])
         wrench_centres = arm.ball_centres(sub, wrench=wrench) if "wrench" in models else None
         fits = correct_ring(rigid, desc.probe.ball_diameter, ring.diameter, c, forces, wrench_centres, models)
-        out.append(RingMeasurement(mid, forces, force_summary(forces.bending), fits, points.lines[idx], idx))
+        out.append(RingMeasurement(mid, forces, force_summary(forces.bending), fits, points.line_numbers[idx], idx))
     if kind == "two-channel":
         notes.append("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not "
                      "measured and is taken as zero; the full-wrench model sees the probe-x bending only")

@@ -148,7 +148,8 @@ def roundness_data(c: RingCampaign) -> dict:
 
 def roundness_csv(data: dict) -> dict:
     """Columns of ``roundness.csv``: one row a point and model of :func:`roundness_data`."""
-    rows = [(mid, m, a, d) for mid, per in data.items() for m, (ang, dev) in per.items() for a, d in zip(ang, dev)]
+    rows = [(mid, m, a, d) for mid, per in data.items() for m, (ang, dev) in per.items()
+            for a, d in zip(ang, dev, strict=True)]
     return {"measurement": np.array([r[0] for r in rows], dtype=object),
             "model": np.array([r[1] for r in rows], dtype=object),
             "angle_deg": np.array([r[2] for r in rows], float),
@@ -168,7 +169,8 @@ def _roundness_figure(c: RingCampaign, data: dict) -> bytes:
     big = max((float(np.max(np.abs(dev))) for per in data.values() for _, dev in per.values()), default=0.0) or 1.0
     lo, hi = -1.5 * big, 1.15 * big
     ring = np.linspace(0, 2 * np.pi, 181)
-    for ax, (mid, per) in zip(axes.flat, data.items()):
+    # the grid has up to cols - 1 cells more than measurements (hidden below): strict=False
+    for ax, (mid, per) in zip(axes.flat, data.items(), strict=False):
         ax.plot(ring, np.zeros_like(ring), "--", lw=0.7, color="k")
         for m in models:
             ang, dev = per[m]
@@ -223,7 +225,7 @@ def _ring_figures(c: RingCampaign, budgets) -> dict:
         figs[fname] = reports.png(fig)
     # 4. force values per measurement (Figure 9)
     fig, ax = plt.subplots(figsize=(9, 3.5))
-    for fv, mk in zip(FORCE_VALUES, ("o", "s", "^")):
+    for fv, mk in zip(FORCE_VALUES, ("o", "s", "^"), strict=True):
         ax.plot(x, c.force_values(fv), mk + "-", label={"mean": "mean", "max10": "10Max", "max": "max"}[fv])
     ax.set_xticks(x, ids, rotation=60 if len(ids) > 10 else 0, fontsize=7)
     ax.set(xlabel="measurement", ylabel="bending force [N]", title="Contact force values per measurement")
@@ -234,7 +236,7 @@ def _ring_figures(c: RingCampaign, budgets) -> dict:
         fig, ax = plt.subplots(figsize=(6.5, 4.5))
         y = c.column("initial", what) * 1e3
         corr = {k.x_name: k for k in campaign_correlations(c) if k.y_name == f"{what}_mm" and k.with_reference}
-        for fv, mk in zip(FORCE_VALUES, ("o", "s", "^")):
+        for fv, mk in zip(FORCE_VALUES, ("o", "s", "^"), strict=True):
             xv = c.force_values(fv)
             cr = corr[f"{fv}_force_N"]
             line = ax.plot(np.r_[0, xv], np.r_[0, y], mk, ms=5,
@@ -298,7 +300,7 @@ def _write_outputs(out: Path, files: dict, inputs) -> list[Path]:
     """Write {relative name: bytes | str} under ``out`` atomically; nothing over an input."""
     targets = [guard_output(out / name, inputs) for name in files]
     written = []
-    for name, target in zip(files, targets):
+    for name, target in zip(files, targets, strict=True):
         data = files[name]
         if isinstance(data, str):
             atomic_write_text(target, data, inputs)
@@ -336,14 +338,14 @@ def _ring_summary(campaign: RingCampaign, inputs: dict, budgets, warnings, point
                       "errors shared by the points (parameters, compliance) propagated jointly; k = 1",
             "parameters": parameters_source or "none (parameters taken as exact)",
             "measurements": [dict(measurement=r.id, **d.as_dict())
-                             for r, (d, _) in zip(campaign.measurements, point_uncertainty)]}
+                             for r, (d, _) in zip(campaign.measurements, point_uncertainty, strict=True)]}
         summary["form_uncertainty_from_points"] = {
             "method": "the point errors sampled from the same covariances (shared errors once per sample), mapped "
                       "to the residuals through the refit to first order, max - min of each sample; u_form_mm: "
                       "their standard deviation (k = 1), inflation_mm: their mean minus the measured form error",
             "model": "wrench" if campaign.measurements and "wrench" in campaign.measurements[0].fits else "initial",
             "measurements": [dict(measurement=r.id, **f.as_dict())
-                             for r, (_, f) in zip(campaign.measurements, point_uncertainty)]}
+                             for r, (_, f) in zip(campaign.measurements, point_uncertainty, strict=True)]}
     return summary
 
 
@@ -413,7 +415,7 @@ def _point_uncertainty_html(campaign: RingCampaign, point_uncertainty, parameter
                 [(r.id, f"{u.u * 1e3:.4f}", f"{u.independent * 1e3:.4f}", f"{u.parameters * 1e3:.4f}",
                   f"{u.compliance * 1e3:.4f}", f"{u.if_independent * 1e3:.4f}", f"{f.form * 1e3:.4f}",
                   f"{f.u * 1e3:.4f}", f"{f.inflation * 1e3:.4f}")
-                 for r, (u, f) in zip(campaign.measurements, point_uncertainty)]))
+                 for r, (u, f) in zip(campaign.measurements, point_uncertainty, strict=True)]))
 
 
 def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: list[BudgetResult],

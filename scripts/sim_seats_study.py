@@ -101,7 +101,7 @@ def campaign_dict(robot: Robot) -> dict:
     """The simulator's campaign: the truth and two seats a placement (feature ids ``<place>.<hole>``)."""
     tasks = []
     for place, (p, d, axis) in PLACES.items():
-        for h, off in zip(HOLES, (0.0, LENGTH)):
+        for h, off in zip(HOLES, (0.0, LENGTH), strict=True):
             tasks.append({"kind": "seat", "id": f"{place}.{h}", "axis": axis, "articulations": 30,
                           "position_mm": ((np.asarray(p) + off * np.asarray(d, float)) * 1e3).tolist(),
                           "stylus_cone_deg": 50.0})
@@ -146,7 +146,8 @@ def simulate_robot(robot: Robot, folder: Path, urdf: Path = URDF) -> dict:
         sel = place == pl
         (folder / pl).mkdir(exist_ok=True)
         lines = ["measurement,feature," + ",".join(f"q{j + 1}_rad" for j in range(q_read.shape[1]))]
-        lines += [f"{pl},{h}," + ",".join(f"{v:.17g}" for v in row) for h, row in zip(hole[sel], q_read[sel])]
+        lines += [f"{pl},{h}," + ",".join(f"{v:.17g}" for v in row)
+                  for h, row in zip(hole[sel], q_read[sel], strict=True)]
         (folder / pl / "points.csv").write_text("\n".join(lines) + "\n")
         figures[pl] = seat_figures(x_truth[sel], hole[sel], HOLES, LENGTH)
     return {"figures": figures, "p": {k: float(v) for k, v in sim.truth["p"].items()}}

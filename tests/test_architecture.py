@@ -220,7 +220,7 @@ def import_cycles(graph: dict[str, dict[str, int]]) -> list[list[str]]:
 
 
 def _describe(cycle: list[str], graph) -> str:
-    steps = [f"{a} (line {graph[a][b]}) -> {b}" for a, b in zip(cycle, cycle[1:])]
+    steps = [f"{a} (line {graph[a][b]}) -> {b}" for a, b in zip(cycle, cycle[1:], strict=True)]
     return "\n    ".join(steps)
 
 
@@ -230,7 +230,7 @@ def test_no_import_cycle_between_modules():
     groups = sorted(import_groups(graph), key=min)
     assert not groups, "import cycles between modules (imports inside functions count):\n  " + "\n  ".join(
         f"{len(g)} modules tied: {', '.join(sorted(g))}\n  one cycle:\n    {_describe(c, graph)}"
-        for g, c in zip(groups, import_cycles(graph)))
+        for g, c in zip(groups, import_cycles(graph), strict=True))
 
 
 def test_the_cycle_check_sees_a_cycle_through_a_function_level_import(tmp_path):

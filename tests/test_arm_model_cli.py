@@ -26,7 +26,7 @@ def test_tip_writes_rigid_corrected_and_deflection(tmp_path, nominal, capsys):
     q = rng.uniform(-90, 90, (6, 7))
     f = rng.normal(0, 2, (6, 3))
     f[5] = [10.0, 9.0, 0.0]                         # 13.45 N > 13 N: flagged, kept
-    pts = write_points(tmp_path / "p.csv", [["m1", "ring", *qi, *fi] for qi, fi in zip(q, f)])
+    pts = write_points(tmp_path / "p.csv", [["m1", "ring", *qi, *fi] for qi, fi in zip(q, f, strict=True)])
     out = tmp_path / "tips.csv"
     assert main(["tip", str(pts), "--arm", str(NOMINAL), "-o", str(out)]) == 0
     rows = list(csv.DictReader(out.open()))
@@ -115,3 +115,51 @@ def test_help_imports_no_subcommand_module():
             "print(heavy); print('close-loop' in out.getvalue() and 'tip' in out.getvalue())\n")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert res.stdout.split("\n")[:2] == ["[]", "True"], res.stdout + res.stderr
+
+
+def _subcommands(parser, path=()):
+    """(command words, parser) of every subcommand below ``parser`` (``study montecarlo`` included)."""
+    import argparse
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from [((*path, name), sub), *_subcommands(sub, (*path, name))]
+
+
+def test_every_output_option_is_the_one_helper():
+    """Every ``-o/--output`` of every subcommand comes from ``add_output_option``: one type (an empty path is
+    refused), one help of the same promises; the commands that write are the ones we know."""
+    from arm_model.cli import build_parser
+    from arm_model.cli_options import output_path
+    outputs = {}
+    for words, sub in _subcommands(build_parser()):
+        for action in sub._actions:
+            if "-o" in action.option_strings or "--output" in action.option_strings:
+                outputs[" ".join(words)] = action
+    assert set(outputs) == {"tip", "urdf", "simulate", "ring", "paper", "calibrate", "study montecarlo",
+                            "study poses", "close-loop", "live"}
+    for words, action in outputs.items():
+        assert action.option_strings == ["-o", "--output"] and action.required, words
+        assert action.type is output_path, words
+        assert "never" in action.help and "nothing is written outside it" in action.help, words
+        assert ("whole or not at all" in action.help) != (words == "live"), words
+
+
+def test_an_empty_output_path_is_refused(capsys):
+    from arm_model.cli import main
+    with pytest.raises(SystemExit) as e:
+        main(["paper", "-o", ""])
+    assert e.value.code == 2 and "empty" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("cmd, new, old, value, dest, expected", [
+    (["view", "p.csv", "--arm", "aacmm7"], "--points-per-s", "--fps", "4", "fps", 4.0),
+    (["view", "p.csv", "--arm", "aacmm7"], "--open-s", "--open-seconds", "60", "open_seconds", 60.0),
+    (["calibrate", "p.csv", "a.toml", "--arm", "aacmm7", "-o", "o"], "--covariance-scale", "--covariance", "stated",
+     "covariance", "stated")])
+def test_renamed_options_keep_their_older_spelling(cmd, new, old, value, dest, expected):
+    """Options renamed so that one name means one thing across commands still take their older spelling."""
+    from arm_model.cli import build_parser
+    for spelling in (new, old):
+        args = build_parser().parse_args([*cmd, spelling, value])
+        assert getattr(args, dest) == expected, spelling

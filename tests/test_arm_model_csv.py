@@ -195,7 +195,7 @@ def test_fast_block_agrees_with_the_careful_reader(rows, extras, eol):
     from arm_model.csv_io import _fast_block
     header = ["measurement", "feature", "a_mm", "b_mm"]
     lines = []
-    for (m, f, v), extra in zip(rows, extras * len(rows)):
+    for (m, f, v), extra in zip(rows, extras * len(rows), strict=False):   # extras repeated to cover the rows
         lines.append(",".join([m, f, *map(repr, v)]))
         if extra in ("", "\r"):
             lines.append(extra)                       # a blank line (kept out of the rows)
@@ -289,7 +289,7 @@ def test_plain_decimals_equal_python_float(rows, others):
     got = csv_numbers(text)
     want = np.array([[float(c) for c in r] for r in rows])
     np.testing.assert_array_equal(got, want)
-    assert all(math.copysign(1, a) == math.copysign(1, b) for a, b in zip(got.ravel(), want.ravel()))
+    assert all(math.copysign(1, a) == math.copysign(1, b) for a, b in zip(got.ravel(), want.ravel(), strict=True))
 
 
 @pytest.mark.parametrize("cell", ["9007199254740992", "9007199254740993", "900719925474099.3", "0.9007199254740993",

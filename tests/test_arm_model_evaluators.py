@@ -32,7 +32,7 @@ def hand_dh_point(desc, q, p_last):
         return m
 
     T = np.eye(4)
-    for j, qi in zip(desc.joints, q):
+    for j, qi in zip(desc.joints, q, strict=True):
         if desc.convention == "dh":
             T = T @ rz(j.theta_offset + qi) @ tz(j.d) @ tx(j.a) @ rx(j.alpha)
         else:
@@ -403,7 +403,7 @@ def test_prismatic_dh_row_by_hand(nominal):
     """A prismatic DH row slides by q along z: Rz(theta_offset) Tz(d + q) Tx(a) Rx(alpha), by hand."""
     desc = _dh_with_prismatic(nominal, "dh")
     q = _q_within(desc, np.random.default_rng(5), 10)
-    for qi, x in zip(q, ball_centres(desc, q)):
+    for qi, x in zip(q, ball_centres(desc, q), strict=True):
         T = np.eye(4)
         for k, j in enumerate(desc.joints):
             theta, d = (j.theta_offset, j.d + qi[k]) if j.prismatic else (j.theta_offset + qi[k], j.d)
@@ -445,16 +445,16 @@ def test_mimic_joint_on_the_chain_is_applied_not_an_encoder(nominal, tmp_path):
                                   mimic=True)
     data = model.createData()
     q = _q_within(d, np.random.default_rng(6), 8)
-    for qi, x in zip(q, ball_centres(d, q)):
+    for qi, x in zip(q, ball_centres(d, q), strict=True):
         cfg = pin.neutral(model)
-        for name, v in zip(d.joint_names, qi):
+        for name, v in zip(d.joint_names, qi, strict=True):
             cfg[model.joints[model.getJointId(name)].idx_q] = v
         cfg[model.joints[model.getJointId("finger")].idx_q] = 0.5 * qi[4] + 0.003
         pin.framesForwardKinematics(model, data, cfg)
         assert_close(x, data.oMf[model.getFrameId("ball")].translation, atol=1e-12)
     units = d.joint_column_units
     header = "measurement,feature," + ",".join(f"q{k + 1}_{u}" for k, (u, _) in enumerate(units))
-    rows = [",".join(["m", ""] + [repr(float(v * f)) for v, (_, f) in zip(qi, units)]) for qi in q]
+    rows = [",".join(["m", ""] + [repr(float(v * f)) for v, (_, f) in zip(qi, units, strict=True)]) for qi in q]
     (tmp_path / "p.csv").write_text(header + "\n" + "\n".join(rows) + "\n")
     out = tmp_path / "tips.csv"
     assert main(["tip", str(tmp_path / "p.csv"), "--arm", str(urdf), "--tip-frame", "ball", "-o", str(out), "-q"]) == 0

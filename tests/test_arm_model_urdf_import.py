@@ -33,7 +33,7 @@ def _pin_model(path_or_text):
 def _q_full(model, desc, q):
     """Pinocchio configuration of the user's whole URDF: the chain's joints at q, the rest at zero."""
     x = np.zeros(model.nq)
-    for name, v in zip(desc.joint_names, q):
+    for name, v in zip(desc.joint_names, q, strict=True):
         x[model.joints[model.getJointId(name)].idx_q] = v
     return x
 
@@ -383,7 +383,7 @@ def test_calibrated_urdf_keeps_everything_but_the_origins(tmp_path, path, tip):
     before, after = _elements(path.read_text()), _elements(text)
     assert len(before) == len(after)
     changed = {j.name for j in d.joints if j.name != d.joint_names[2]} | {ch for ch in _tip_joint(path, tip)}
-    for (tag0, a0, parent0), (tag1, a1, parent1) in zip(before, after):
+    for (tag0, a0, parent0), (tag1, a1, parent1) in zip(before, after, strict=True):
         assert (tag0, parent0) == (tag1, parent1)
         if tag0 == "origin" and parent0 in changed:
             assert set(a0) <= set(a1)
@@ -562,7 +562,7 @@ def test_prismatic_finger_and_its_mimic_equal_pinocchio():
         q = np.column_stack([rng.uniform(-2, 2, (6, 7)), rng.uniform(0.0, 0.04, 6)])
         for i in range(len(q)):
             x = np.zeros(model.nq)
-            for name, v in zip([j.name for j in d.joints], q[i]):
+            for name, v in zip([j.name for j in d.joints], q[i], strict=True):
                 x[model.joints[model.getJointId(name)].idx_q] = v
             pin.framesForwardKinematics(model, data, x)
             assert_close(ball_centres(d, q[i]), data.oMf[model.getFrameId(tip)].translation, atol=1e-12)

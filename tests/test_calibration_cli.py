@@ -104,7 +104,7 @@ def test_study_poses(files, tmp_path, capsys):
     sel = json.loads((tmp_path / "poses.json").read_text())
     assert len(sel["chosen"]) == 6 and len(set(sel["chosen"])) == 6
     # O1 is per pose (it may fall as poses are added); the greedy sets beat random ones of each size
-    assert all(o > r for o, r in zip(sel["o1"], sel["o1_random"]))
+    assert all(o > r for o, r in zip(sel["o1"], sel["o1_random"], strict=True))
     assert set(sel["u_chosen"]) == set(sel["parameters"])
     assert all(sel["u_chosen"][k] >= sel["u_pool"][k] * (1 - 1e-9) for k in sel["parameters"])
     import hashlib

@@ -78,7 +78,7 @@ def test_group_deletion_predicts_the_refit_without_the_held_out_poses(model):
     rows = np.flatnonzero((prob.row_distance < 0) & np.isin(prob.row_point, held))
     e, v = fold_errors(prob, r, js, solve, 1.0, rows)
     train = ~np.isin(np.arange(len(data)), held)
-    sizes = dict(zip(res.free, res.prior_sd))
+    sizes = dict(zip(res.free, res.prior_sd, strict=True))
     refit = calibrate(model, data.select(train), FitOptions(free=res.free, weights=res.weights, prior_scale=1.0,
                                                               priors=sizes, start={n: res.value(n) for n in res.free}))
     exact = heldout_residuals(model, refit.p, data, res.weights, res.reference_mode, train)["e"]
@@ -256,7 +256,7 @@ def _seat_coverage(model, nominal, res, test, band):
     """Coverage of each test point's deviation from its seat's mean by 1.96 u (parameters, probing and the model
     discrepancy, constant or growing), for the points with joint 2 inside and beyond the training band."""
     from arm_model.uncertainty import ParameterCovariance, default_inputs, propagate
-    seat = np.array([f"{m}/{f}" for m, f in zip(test.measurement, test.feature)])
+    seat = np.array([f"{m}/{f}" for m, f in zip(test.measurement, test.feature, strict=True)])
     x = model.ball_centres(test.q, None, res.p)
     dev = np.empty_like(x)
     for s in np.unique(seat):

@@ -66,7 +66,7 @@ def test_truth_within_three_sigma(noisy, model):
     c, _, _, res = noisy
     peq = res.equivalent(c.p_true)
     z = np.array([(res.value(n) - peq[model.spec.index(n)]) / res.uncertainty(n) for n in res.free])
-    assert np.all(np.abs(z) < 3.0), dict(zip(res.free, np.round(z, 2)))
+    assert np.all(np.abs(z) < 3.0), dict(zip(res.free, np.round(z, 2), strict=True))
     assert 0.3 < np.sqrt(np.mean(z ** 2)) < 1.7          # the uncertainties are about right, not inflated
     assert 0.8 < res.s0 < 1.2                             # weights equal to the noise: s0 about 1
     assert_close(np.diag(res.corr), 1.0, atol=1e-12)

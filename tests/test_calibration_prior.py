@@ -124,7 +124,7 @@ def test_map_is_the_minimum_of_data_plus_prior_cost(model):
     for name in rng.choice(list(res.free), 4, replace=False):
         k = list(res.free).index(name)
         for sign in (-1, 1):
-            values = dict(zip(model.spec.names, res.p))
+            values = dict(zip(model.spec.names, res.p, strict=True))
             values[name] += sign * 0.3 * res.u[k]
             others = [n for n in res.free if n != name]
             r2 = calibrate(model, data, FitOptions(free=others, values=values, weights=W, prior_scale=res.prior_scales,

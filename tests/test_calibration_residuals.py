@@ -79,7 +79,7 @@ def _numpy_residuals(prob: Problem, p, states) -> np.ndarray:
     x_all = model.ball_centres(data.points.q, data.wrench, p, data.aux)
     out = []
     for g in prob.groups:
-        for k, (pi, ii) in enumerate(zip(g["points"], g["inst"])):
+        for k, (pi, ii) in enumerate(zip(g["points"], g["inst"], strict=True)):
             s, x = states[ii], x_all[pi]
             kind = g["kind"]
             if kind == "seat":

@@ -53,7 +53,7 @@ def test_ring_report_with_signals(small_campaign, tmp_path):
     camp = analyse_ring_campaign(desc, read_points(small_campaign / "points.csv", 7),
                                  read_artefacts(small_campaign / "artefacts.toml"),
                                  signals=small_campaign / "signals")
-    for m, r in zip(s["measurements"], camp.measurements):
+    for m, r in zip(s["measurements"], camp.measurements, strict=True):
         for model, fit in r.fits.items():
             assert_close(m["models"][model]["diameter_error_mm"], fit.diameter_error * 1e3, atol=1e-12)
             assert_close(m["models"][model]["form_error_mm"], fit.form_error * 1e3, atol=1e-12)
@@ -88,7 +88,7 @@ def test_ring_report_from_point_columns_on_the_bundled_campaign(tmp_path):
     assert fu["model"] == "wrench" and len(fu["measurements"]) == 17
     table = (out / "table2.csv").read_text().splitlines()
     col = table[0].split(",").index("form_error_wrench_mm")
-    for f, row in zip(fu["measurements"], table[1:]):
+    for f, row in zip(fu["measurements"], table[1:], strict=True):
         assert_close(f["form_mm"], float(row.split(",")[col]), atol=5e-7)   # table2: 6 decimals
         assert 0 < f["u_form_mm"] < f["form_mm"] and f["samples"] == 2000
 
@@ -164,7 +164,7 @@ def test_ring_input_uncertainties_are_overridable(small_campaign, tmp_path):
 
     base, n = run("base")
     more, _ = run("more", "--u-compliance-rel", "0.4", "--u-probing-um", "3")
-    for a, b in zip(base, more):
+    for a, b in zip(base, more, strict=True):
         assert a["compliance_mm"] > 0
         assert_close(b["compliance_mm"], 2 * a["compliance_mm"], atol=1e-9 * a["compliance_mm"])
         added = b["independent_mm"] ** 2 - a["independent_mm"] ** 2

@@ -29,7 +29,7 @@ def points_csv(measurements, two_channel=False) -> str:
     cols += ["f_bend_N", "f_axial_N"] if two_channel else ["fx_N", "fy_N", "fz_N"]
     lines = [",".join(cols)]
     for mid, q, f in measurements:
-        for qi, fi in zip(np.degrees(q), f):
+        for qi, fi in zip(np.degrees(q), f, strict=True):
             force = [fi[0], fi[2]] if two_channel else list(fi)
             lines.append(",".join([mid, "ring"] + [repr(float(v)) for v in qi] + [repr(float(v)) for v in force]))
     return "\n".join(lines) + "\n"

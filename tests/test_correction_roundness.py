@@ -66,7 +66,7 @@ def test_plotted_deviations_are_the_lobing(campaign):
             ang_e, dev_e = expected(mid, m)
             assert_close(np.sort(ang), np.sort(ang_e), atol=1e-6, msg=f"{mid} {m} angles")
             # match each point by its angle (three rows share each angle and each deviation)
-            for a, d in zip(ang_e, dev_e):
+            for a, d in zip(ang_e, dev_e, strict=True):
                 near = np.abs(((ang - a + 180) % 360) - 180) < 1e-6
                 assert_close(dev[near], np.full(near.sum(), d), atol=1e-4, msg=f"{mid} {m} at {a:.1f} deg")
             # max - min of what is drawn is the fit's form error

@@ -255,7 +255,7 @@ def test_rpy_from_matrix_inverts_rotation_xyz_including_gimbal_lock():
     rng = np.random.default_rng(2)
     mats = list(Rotation.random(200, random_state=3).as_matrix())
     mats += [_rz(y) @ _ry(s * np.pi / 2) @ _rx(r)
-             for r, s, y in zip(rng.uniform(-3, 3, 20), rng.choice([-1, 1], 20), rng.uniform(-3, 3, 20))]
+             for r, s, y in zip(rng.uniform(-3, 3, 20), rng.choice([-1, 1], 20), rng.uniform(-3, 3, 20), strict=True)]
     for R in mats:
         r, p, y = rpy_from_matrix(R)
         assert_close(_rz(y) @ _ry(p) @ _rx(r), R, atol=1e-12)

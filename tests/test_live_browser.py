@@ -85,7 +85,7 @@ def test_the_live_page_shows_the_points_as_they_arrive(tmp_path, nominal):
         img = load_png(png)
         # every point, but those behind the probe that now stands on the last seat
         ball = camera.project([session.points[-1].corrected], W_PX, H_PX)[0]
-        seen = [cyan_near(img, p) for p, d in zip(xy, np.linalg.norm(xy - ball, axis=1)) if d > 15]
+        seen = [cyan_near(img, p) for p, d in zip(xy, np.linalg.norm(xy - ball, axis=1), strict=True) if d > 15]
         assert len(seen) >= 16 and all(seen)
         text = panel(dom)
         assert "points 19 " in text and "point 19 (plate-B)" in text and "seat 'plate-B' (3 pt)" in text

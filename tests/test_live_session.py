@@ -84,7 +84,7 @@ def test_replay_over_force_events_are_the_true_ones(replay):
     assert flagged == expected
     events = [e for e in rows(out / "events.csv") if e["kind"] == "over_force"]
     assert len(events) == len(expected)
-    for e, c in zip(events, sorted(expected)):         # each event during its contact, before its end
+    for e, c in zip(events, sorted(expected), strict=True):         # each event during its contact, before its end
         row = contacts[c - 1]
         assert float(row["start_s"]) <= float(e["time_s"]) <= float(row["end_s"])
 
@@ -148,7 +148,7 @@ def pulses(peaks, *, noise=0.03, offset=(0.0, 0.0, 0.0), drift=0.0, period=0.6, 
 def run(t, f, **kw) -> tuple[Session, list]:
     s = Session("aacmm7", **kw)
     out = []
-    for ti, fi in zip(t, f):
+    for ti, fi in zip(t, f, strict=True):
         out += s.push(float(ti), Q0, fi)
     out += s.close()
     return s, out
@@ -273,7 +273,7 @@ def test_torque_temperature_and_a_model_file(tmp_path, nominal):
                                                      "j4.compliance": 2e-6}))
     t, f = pulses([2.0, 5.0], seed=9)
     s = Session(model, tmp_path / "s")
-    for k, (ti, fi) in enumerate(zip(t, f)):
+    for k, (ti, fi) in enumerate(zip(t, f, strict=True)):
         s.push(float(ti), Q0, np.r_[fi, 0.01, -0.02, 0.005], temperature=22.5 + 1e-4 * k)
     s.close()
     assert s.counts["points"] == 2
@@ -281,7 +281,7 @@ def test_torque_temperature_and_a_model_file(tmp_path, nominal):
                  str(tmp_path / "tip.csv"), "-q"]) == 0
     assert (tmp_path / "s" / "tips.csv").read_bytes() == (tmp_path / "tip.csv").read_bytes()
     rigid = Session(nominal)
-    for ti, fi in zip(t, f):
+    for ti, fi in zip(t, f, strict=True):
         rigid.push(float(ti), Q0, np.r_[fi, 0.01, -0.02, 0.005], temperature=22.5)
     rigid.close()
     assert np.linalg.norm(s.points[0].corrected - rigid.points[0].corrected) > 1e-7   # the effects moved it
@@ -330,7 +330,7 @@ def test_fits_against_exact_geometry_and_a_monte_carlo():
     for p in c0 + rng.uniform(-0.05, 0.05, (4, 3)) * [1, 1, 0]:
         fit = tr.add("P", p, cov, shared)[0]
     assert fit.form == pytest.approx(0.0, abs=1e-12) and fit.u_form > 0
-    for seat, fid in zip(seats, "AB"):
+    for seat, fid in zip(seats, "AB", strict=True):
         for _ in range(3):
             fits = tr.add(fid, seat, cov, shared)
     dist = fits[-1]
@@ -344,7 +344,7 @@ def test_ad_hoc_features_from_python(tmp_path):
     t, f = pulses([1.0] * 5, seed=12)
     s = Session("aacmm7", tmp_path / "s")
     s.begin_feature("ball", "sphere", diameter=0.0254, points=2)
-    for ti, fi in zip(t, f):
+    for ti, fi in zip(t, f, strict=True):
         s.push(float(ti), Q0, fi)
     s.close()
     pts = read_points(tmp_path / "s" / "points.csv", 7)
@@ -389,7 +389,7 @@ def test_a_growing_model_discrepancy_is_added_as_tip_adds_it(tmp_path, nominal):
                      "model_discrepancy_growth_um_per_mm = 20.0\ntraining_poses = \"poses.csv\"\n")
     t, f = pulses([2.0, 5.0, 1.0, 8.0], seed=4, period=0.6)
     grown, plain = Session(model, tmp_path / "s"), Session(nominal)
-    for ti, fi in zip(t, f):
+    for ti, fi in zip(t, f, strict=True):
         q = Q0.copy()
         q[0] += 0.002 * math.floor(ti / 0.6)            # pulse k (centred at (k + 1) 0.6 s) at dq = 0.002 (k + 1)
         for s in (grown, plain):
@@ -397,7 +397,7 @@ def test_a_growing_model_discrepancy_is_added_as_tip_adds_it(tmp_path, nominal):
     for s in (grown, plain):
         s.close()
     assert grown.counts["points"] == plain.counts["points"] == 4
-    for k, (a, b) in enumerate(zip(grown.points, plain.points)):
+    for k, (a, b) in enumerate(zip(grown.points, plain.points, strict=True)):
         qa = np.array(a.contact.peak.q)
         assert qa[0] - Q0[0] == pytest.approx(0.002 * (k + 1), abs=1e-12)
         d = np.hypot(*ball_centres(nominal, qa)[:2]) * (qa[0] - Q0[0])

@@ -43,7 +43,7 @@ def test_score_statistic_matches_the_refit(nominal):
     drop = 2 * res.cost - 2 * refit.cost
     assert test.rank == 2
     assert test.delta_chi2 == pytest.approx(drop, rel=0.02)
-    for name, b in zip(test.names, test.estimate):
+    for name, b in zip(test.names, test.estimate, strict=True):
         assert b == pytest.approx(refit.value(name), abs=0.05 * abs(refit.value(name)) + 1e-7)
     assert test.p_value < 1e-10 and test.explained_cv > 0.5
 

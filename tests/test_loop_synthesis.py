@@ -161,7 +161,7 @@ def test_loop_builds_adds_and_recovers_the_hidden_effect(case, tmp_path, capsys)
     aux = (make_data(pts, final.data.artefacts, truth).aux, final.data.aux)
     theta, unexplained = hidden_in_fit_terms(final.model, names, truth, p, list(values), pts.q, final.data.wrench, aux)
     assert unexplained <= 0.05, ([c.name for c in loop.added], unexplained)
-    _within_3_sigma(final, dict(zip(names, theta)))
+    _within_3_sigma(final, dict(zip(names, theta, strict=True)))
     clean = run(None, force)[2]
     assert loop.final.heldout["rms_um"] <= 1.3 * clean.final.heldout["rms_um"], (
         loop.final.heldout["rms_um"], clean.final.heldout["rms_um"])

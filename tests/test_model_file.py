@@ -334,7 +334,7 @@ def test_ring_applies_the_models_effects(nominal, tmp_path):
         assert main(["ring", str(sim / "points.csv"), str(sim / "artefacts.toml"), "--arm", str(arm),
                      "-o", str(out)]) == 0
         runs[name] = json.loads((out / "summary.json").read_text())["measurements"]
-    for m, e, n in zip(runs["model"], runs["equivalent"], runs["nominal"]):
+    for m, e, n in zip(runs["model"], runs["equivalent"], runs["nominal"], strict=True):
         for key in ("diameter_error_mm", "form_error_mm"):
             assert_close(m["models"]["wrench"][key], e["models"]["wrench"][key], atol=1e-9)
         assert abs(m["models"]["wrench"]["diameter_error_mm"] - n["models"]["wrench"]["diameter_error_mm"]) > 1e-4

@@ -161,7 +161,7 @@ def _dh_arm(tmp_dir, rpy_deg, length_mm, lateral=(0.0, 0.0)):
     from arm_model.geometry import rotation_xyz
     p = rotation_xyz(np.radians(rpy_deg)) @ np.array([lateral[0], lateral[1], length_mm])
     probe = "".join(f"{k} = {float(v)!r}\n" for k, v in (("x_mm", p[0]), ("y_mm", p[1]), ("z_mm", p[2]))) + \
-        ("".join(f"{k} = {float(v)!r}\n" for k, v in zip(("roll_deg", "pitch_deg", "yaw_deg"), rpy_deg))
+        ("".join(f"{k} = {float(v)!r}\n" for k, v in zip(("roll_deg", "pitch_deg", "yaw_deg"), rpy_deg, strict=True))
          if any(rpy_deg) else "")
     text = NOMINAL_TEXT.split("[probe]")[0] + "[probe]\n" + probe + \
         "ball_diameter_mm = 4.0\nmax_force_N = 13.0\nbending_compliance_mm_per_N = 0.0142\n" \

@@ -30,7 +30,7 @@ def same_line(expected: str, line: str, rel: float = 0.01) -> bool:
     digit) and the same text between the numbers."""
     if _NUMBER.sub("#", expected).strip() != _NUMBER.sub("#", line).strip():
         return False
-    for e, g in zip(_NUMBER.findall(expected), _NUMBER.findall(line)):
+    for e, g in zip(_NUMBER.findall(expected), _NUMBER.findall(line), strict=True):
         digits = len(e.split(".")[1].split("e")[0]) if "." in e else 0
         if abs(float(g) - float(e)) > max(rel * abs(float(e)), 10.0 ** -digits):
             return False

@@ -400,7 +400,7 @@ def test_a_live_session_from_python_adds_the_model_files_discrepancy(folder):
     from arm_model.model_file import load_model
     path = model(folder, GROWTH + 'training_poses = "tp.csv"\n')
     session = Session(path)
-    inputs = session._default_inputs[False]
+    inputs = session.input_uncertainty(force=False)
     assert inputs.discrepancy == pytest.approx(5e-6)
     assert inputs.growing is not None and inputs.growing.growth == pytest.approx(0.02)
     q = np.radians(Q_DEG + 3.0)

@@ -178,7 +178,7 @@ def _check_robot(path: Path, rel: str, tmp: Path, cli: str) -> RobotResult:
         x, rot = ball_centres(desc, q), probe_rotations(desc, q)
         fid = model.getFrameId(leaf)
         for i in range(len(q)):
-            value = _urdf_joint_values(mimic, dict(zip(desc.joint_names, q[i])))
+            value = _urdf_joint_values(mimic, dict(zip(desc.joint_names, q[i], strict=True)))
             pin.framesForwardKinematics(model, data, _configuration(model, value))
             ref = data.oMf[fid]
             err = max(np.abs(x[i] - ref.translation).max(), np.abs(rot[i] - ref.rotation).max())
@@ -186,7 +186,7 @@ def _check_robot(path: Path, rel: str, tmp: Path, cli: str) -> RobotResult:
             assert err <= 1e-12, f"{rel} -> {leaf}: {err:.3g} from Pinocchio"
             if mimic_model is not None:             # Pinocchio's own mimic joints: only the columns set
                 md = mimic_model.createData()
-                cols = dict(zip(desc.joint_names, q[i]))
+                cols = dict(zip(desc.joint_names, q[i], strict=True))
                 pin.framesForwardKinematics(mimic_model, md, _configuration(mimic_model, lambda n: cols.get(n, 0.0)))
                 assert np.abs(md.oMf[mimic_model.getFrameId(leaf)].translation - x[i]).max() <= 1e-12, (rel, leaf)
         if cli == "all" or (cli == "one" and leaf == longest):
@@ -199,7 +199,7 @@ def _check_tip_command(path: Path, leaf: str, desc, q, x, tmp: Path) -> None:
     from arm_model.cli import main
     units = desc.joint_column_units
     header = ",".join(["measurement", "feature"] + [f"q{k + 1}_{u}" for k, (u, _) in enumerate(units)])
-    lines = [",".join(["m", ""] + [repr(float(v * f)) for v, (_, f) in zip(qi, units)]) for qi in q]
+    lines = [",".join(["m", ""] + [repr(float(v * f)) for v, (_, f) in zip(qi, units, strict=True)]) for qi in q]
     pts, out = tmp / "points.csv", tmp / "tips.csv"
     pts.write_text(header + "\n" + "\n".join(lines) + "\n")
     out.unlink(missing_ok=True)

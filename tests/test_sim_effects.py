@@ -62,7 +62,7 @@ def test_joint_compliance_contact_part_is_j_transpose_w():
     k = 1.0e4
     r = run({"joint_compliance": {"joints": ["j6"], "stiffness_Nm_per_rad": k, "gravity": False}})
     arm = PinocchioArm(r.truth["description"])
-    tau_c = np.array([arm.contact_torques(q, w)[5] for q, w in zip(r.true_q, r.true_wrench)])
+    tau_c = np.array([arm.contact_torques(q, w)[5] for q, w in zip(r.true_q, r.true_wrench, strict=True)])
     assert np.abs(tau_c).max() > 0.05
     assert_close(_true_minus_read(r)[:, 5], tau_c / k, atol=1e-13)
 
@@ -75,7 +75,7 @@ def test_thermal_growth_scales_the_link_lengths_with_temperature():
     assert temps.max() - temps.min() > 0.5, "the drift spreads the temperatures"
     base = r.truth["description"]
     # links scaled by hand: d and a grow by (1 + alpha (T - 20)); the readings are the true angles
-    for q, w, t, c in zip(r.points.q, r.true_wrench, temps, r.true_centres):
+    for q, w, t, c in zip(r.points.q, r.true_wrench, temps, r.true_centres, strict=True):
         table = base.row_table().copy()
         table[:, 1:3] *= 1 + alpha * (t - 20.0)
         assert_close(ball_centres(base.with_row_table(table), q[None], w[None, :3])[0], c, atol=1e-11)
@@ -164,7 +164,7 @@ def test_core_model_without_the_effect_leaves_a_periodic_residual():
     # the miss is the ball's motion under the eccentricity: J_q2 * (-a sin(q2 + phi))
     a, phi = math.radians(0.003), math.radians(10.0)
     arm = PinocchioArm(t["description"])
-    for q, w, m in zip(r.true_q, r.true_wrench, miss):
+    for q, w, m in zip(r.true_q, r.true_wrench, miss, strict=True):
         jq, _ = arm.jacobians(q, w[:3])
         e = a * math.sin(q[1] - a * math.sin(q[1] + phi) + phi)   # reading q2 = q_true - e(reading)
         assert_close(m, -jq[:, 1] * e, atol=2e-9)

@@ -280,7 +280,7 @@ def test_a_held_out_session_is_registered_anew_and_said_so(robot_dir, tmp_path, 
     urdf = tmp_path / "liftarm.urdf"
     urdf.write_text(LIFT_ARM_URDF)
     points = str(tmp_path / "sim" / "points.csv")
-    second = [m for m, s in zip(res.points.measurement, res.points.session) if s == "pose-s2"]
+    second = [m for m, s in zip(res.points.measurement, res.points.session, strict=True) if s == "pose-s2"]
     assert main(["calibrate", points, "--arm", str(urdf), "--tip-frame", TIP, "--holdout", ",".join(second),
                  "-o", str(tmp_path / "cal")]) == 0
     assert "held-out session(s) 'pose-s2' have no frame from the training data" in capsys.readouterr().out
@@ -352,9 +352,9 @@ def test_base_frame_starts_the_chain_after_a_floating_joint(tmp_path, capsys):
     q = np.random.default_rng(2).uniform(-1.0, 1.0, (5, arm.desc.n_joints))
     q[:, 0] = np.abs(q[:, 0]) * 0.3
     x, r = arm.model.ball_centres(q, None, arm.p), probe_rotations(arm.desc, q)
-    for qi, xi, ri in zip(q, x, r):
+    for qi, xi, ri in zip(q, x, r, strict=True):
         full = pin.neutral(model)
-        for name, v in zip(arm.desc.joint_names, qi):
+        for name, v in zip(arm.desc.joint_names, qi, strict=True):
             jm = model.joints[model.getJointId(name)]
             full[jm.idx_q: jm.idx_q + jm.nq] = [math.cos(v), math.sin(v)] if jm.nq == 2 else [v]   # continuous
         pin.framesForwardKinematics(model, data, full)

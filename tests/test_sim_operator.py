@@ -86,7 +86,7 @@ def test_signal_pulse_peaks_are_the_point_forces():
     offset = np.array([0.05, -0.02])
     t, f = force_signal(times, peaks, offset, (0.5, 3.8), sig, 0.0, np.random.default_rng(0))
     assert_close(np.diff(t), np.full(len(t) - 1, 1e-3), atol=1e-12)
-    for tc, p in zip(times, peaks):
+    for tc, p in zip(times, peaks, strict=True):
         k = int(round((tc - t[0]) / 1e-3))
         assert_close(f[k], p, atol=0)
         assert_close(f[k - 110], offset, atol=1e-15)       # before the rise: the sensor's zero

@@ -73,7 +73,7 @@ def test_defaults_on_simulated_panda_robots(tmp_path):
     results = [study.study_robot(r, tmp_path / r.name, methods=("close-loop", "nominal-tip")) for r in study.ROBOTS]
     inside = values = 0
     beyond = []
-    for robot, res in zip(study.ROBOTS, results):
+    for robot, res in zip(study.ROBOTS, results, strict=True):
         line = study.summary_rows([res])[0]
         assert line["close-loop"]["spread_mm"] < line["nominal-tip"]["spread_mm"], line
         assert line["close-loop"]["spread_mm"] < 2.2 * line["truth"]["spread_mm"], line

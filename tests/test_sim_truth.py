@@ -58,7 +58,7 @@ def _by_hand_true_angles(result):
     for row in range(len(q)):
         tau_g = arm.gravity_torques(result.true_q[row])
         tau_c = arm.contact_torques(result.true_q[row], result.true_wrench[row])
-        for name, k in zip(jc["joints"], jc["stiffness"]):
+        for name, k in zip(jc["joints"], jc["stiffness"], strict=True):
             i = names.index(name)
             q[row, i] += (tau_c[i] - tau_g[i]) / k
     return q
@@ -69,7 +69,7 @@ def _distance_to_surface(result, centres):
     pl = result.truth["placements"]
     ball = result.campaign.arm.probe.ball_diameter
     out = np.empty(len(centres))
-    for i, (fid, p) in enumerate(zip(result.points.feature, centres)):
+    for i, (fid, p) in enumerate(zip(result.points.feature, centres, strict=True)):
         a = pl[fid]
         if a["kind"] == "ring":   # distance to the (lobed) bore, in the plane across the axis
             v = p - np.array(a["centre_m"])
@@ -114,7 +114,7 @@ def test_truth_recomputed_independently_from_the_written_data(full):
     pc = t["effects"]["probe_compliance"]
     alpha = t["effects"]["thermal"]["alpha"][0]
     centres = np.empty((len(q_true), 3))
-    for i, (q, f, temp) in enumerate(zip(q_true, f_true, full.points.temperature)):
+    for i, (q, f, temp) in enumerate(zip(q_true, f_true, full.points.temperature, strict=True)):
         s = 1 + alpha * (temp - 20.0)
         table = base.row_table().copy()
         table[:, 1:3] *= s                       # d and a grow; angles do not

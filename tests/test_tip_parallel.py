@@ -86,16 +86,16 @@ def test_spans_cover_the_file_in_whole_lines_after_the_header(tmp_path):
         (line, names), spans = csv_spans(path, parts, 100)
         assert line == 3 and names == HEADER.split(",")
         assert spans[0][0] == 0 and spans[-1][1] == len(data)
-        assert all(a[1] == b[0] for a, b in zip(spans[:-1], spans[1:]))
+        assert all(a[1] == b[0] for a, b in zip(spans[:-1], spans[1:], strict=True))
         assert all(data[s - 1:s] == b"\n" for s, _ in spans[1:])
         # the parts' rows, with their physical lines, are the whole file's
         got = []
         for span in spans:
             for _, _, blk in iter_csv_blocks(path, "f", lambda h, ln: ([2, 3], [0]), 4096, None, span,
                                              None if span[0] == 0 else (line, names)):
-                got += list(zip(blk.lines.tolist(), blk.texts[:, 0].tolist()))
+                got += list(zip(blk.lines.tolist(), blk.texts[:, 0].tolist(), strict=True))
         whole = [(ln, t) for _, _, blk in iter_csv_blocks(path, "f", lambda h, ln: ([2, 3], [0]), 4096)
-                 for ln, t in zip(blk.lines.tolist(), blk.texts[:, 0].tolist())]
+                 for ln, t in zip(blk.lines.tolist(), blk.texts[:, 0].tolist(), strict=True)]
         assert got == whole and len(whole) == 500 and whole[0][0] == 4
 
 

@@ -109,7 +109,7 @@ def test_a_marker_is_the_tip_frame_point_pinocchio_places(nominal, rpy, o):
     q = random_q(desc, 3, np.random.default_rng(4))
     x = model.ball_centres(q, None, offset_matrix(model) @ np.array(o))
     pin = PinocchioArm(desc)
-    for qi, xi in zip(q, x):
+    for qi, xi in zip(q, x, strict=True):
         t = pin.T_base_ball(qi)
         assert_close(xi, t[:3, :3] @ o + t[:3, 3], atol=1e-12)
 
@@ -154,7 +154,7 @@ def _numpy_marker_residuals(prob, model, data, p, states):
     m = offset_matrix(model)
     out = []
     for g in prob.groups:
-        for pi, ii, mk in zip(g["points"], g["inst"], g["marker"]):
+        for pi, ii, mk in zip(g["points"], g["inst"], g["marker"], strict=True):
             o = states[mk][:3] if mk >= 0 else np.zeros(3)
             x = model.ball_centres(data.points.q[pi:pi + 1], None, p + m @ o)[0]
             s = states[ii]

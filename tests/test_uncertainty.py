@@ -104,7 +104,7 @@ def test_joint_screws_give_pinocchios_and_finite_difference_jacobians(nominal, t
 
     r, o, u, c = joint_screws(desc.convention, rows, q, desc.chain_joints)
     columns = joint_screws(desc.convention, [[np.full(n, v) for v in row] for row in rows], q, desc.chain_joints)
-    for a, b in zip(columns, (r, o, u, c)):      # rows as columns (a geometry per point, e.g. thermal)
+    for a, b in zip(columns, (r, o, u, c), strict=True):      # rows as columns (a geometry per point, e.g. thermal)
         assert_close(a, b, atol=1e-15)
     r_ref, o_ref = frame(q)
     assert_close(r, r_ref, atol=1e-14)
@@ -245,7 +245,8 @@ def test_tip_writes_uncertainty_columns_and_monte_carlo_agrees(tmp_path, nominal
     f = rng.normal(0, 2, (30, 3))
     pts = tmp_path / "p.csv"
     pts.write_text("measurement,feature," + ",".join(f"q{i}_deg" for i in range(1, 8)) + ",fx_N,fy_N,fz_N\n"
-                   + "\n".join(",".join(map(str, ["m1", "ring", *qi, *fi])) for qi, fi in zip(q, f)) + "\n")
+                   + "\n".join(",".join(map(str, ["m1", "ring", *qi, *fi]))
+                               for qi, fi in zip(q, f, strict=True)) + "\n")
     out = tmp_path / "tips.csv"
     assert main(["tip", str(pts), "--arm", str(NOMINAL), "-o", str(out), "--covariance", "--mc", "2000",
                  "--encoder-resolution-deg", "0.001", "--u-probing-um", "0.5"]) == 0
@@ -346,7 +347,7 @@ def test_tip_refuses_a_covariance_that_is_not_one(tmp_path, nominal, capsys):
                                 "positive semi-definite")):
         # written by hand: the project's writer reads back what it writes and would refuse the first
         (tmp_path / "c.csv").write_text("parameter,unit,value,u," + ",".join(names) + "\n" + "".join(
-            f"{n},um,0,1," + ",".join(map(str, row)) + "\n" for n, row in zip(names, corr)))
+            f"{n},um,0,1," + ",".join(map(str, row)) + "\n" for n, row in zip(names, corr, strict=True)))
         (tmp_path / "arm.toml").write_text(format_model(nominal, covariance="c.csv"))
         assert main(["tip", str(pts), "--arm", str(tmp_path / "arm.toml"), "-o", str(out)]) == 2
         err = capsys.readouterr().err

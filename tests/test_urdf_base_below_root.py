@@ -71,7 +71,7 @@ SOLE_ROOTED = ('<robot name="walker">' + LINK_XML
 
 def _full(model, names, qi):
     full = pin.neutral(model)
-    for name, v in zip(names, qi):
+    for name, v in zip(names, qi, strict=True):
         jm = model.joints[model.getJointId(name)]
         full[jm.idx_q: jm.idx_q + jm.nq] = [math.cos(v), math.sin(v)] if jm.nq == 2 else [v]
     knee = model.joints[model.getJointId("l_knee")]
@@ -97,7 +97,7 @@ def test_chain_from_a_foot_matches_the_robot_written_from_that_foot(tmp_path):
     pa = PinocchioArm(arm.desc)
     tau = np.array([pa.gravity_torques(qi) for qi in q])
     assert np.abs(tau).max() > 10.0                 # the pelvis, torso and other leg over the ankle: tens of N m
-    for qi, xi, ti in zip(q, x, tau):
+    for qi, xi, ti in zip(q, x, tau, strict=True):
         pin.framesForwardKinematics(ma, da, _full(ma, arm.desc.joint_names, qi))
         T = da.oMf[ma.getFrameId("l_sole")].inverse() * da.oMf[ma.getFrameId("tool")]
         np.testing.assert_allclose(xi, T.translation, rtol=0, atol=1e-12)

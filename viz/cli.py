@@ -41,16 +41,18 @@ def register(sub) -> None:
                     "ball, the deflection as a green arrow from the rigid to the corrected ball centre drawn "
                     "--scale times long, the measured ball centres, artefacts placed by fitting their points "
                     "(--artefacts) and residual vectors (--residuals). The scales are printed and written on "
-                    "the page. The server stops at Ctrl-C, at SIGTERM, or after --open-seconds.")
+                    "the page. The server stops at Ctrl-C, at SIGTERM, or after --open-s.")
     p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3)")
     add_arm_options(p)
-    p.add_argument("--measurement", metavar="ID", help="only the points of this measurement (default: all)")
+    p.add_argument("--measurement", metavar="ID", help="show only the points of this measurement id (default: all)")
     pose = p.add_mutually_exclusive_group()
     pose.add_argument("--point", type=positive(int), default=1, metavar="N",
                       help="show the arm at the N-th point of the selection, file order (default 1)")
     pose.add_argument("--animate", action="store_true",
                       help="animate the arm through every point of the selection (embedded in --html pages)")
-    p.add_argument("--fps", type=SCALE, default=2.0, help="points per second when animating (default 2)")
+    p.add_argument("--points-per-s", "--fps", dest="fps", type=SCALE, default=2.0, metavar="F",
+                   help="when animating: points shown a second (default 2; --fps is the older spelling; it is not "
+                        "the live view's display rate)")
     p.add_argument("--scale", type=SCALE, default=None,
                    help="length of the deflection arrow per length of deflection (e.g. 1000: 0.1 mm is drawn "
                         "100 mm long); default: from the data, so that the median deflection shown is drawn "
@@ -80,10 +82,11 @@ def register(sub) -> None:
                    "on PATH)")
     p.add_argument("--serve", action="store_true",
                    help="keep serving after writing --html/--screenshot (serving is the default without them, "
-                        "and with --open-seconds)")
-    p.add_argument("--port", type=port, help="web port of the server (default: the first free one from 7000)")
-    p.add_argument("--open-seconds", type=number_in(0, 1e7, low_open=True), metavar="N",
-                   help="stop the server after N seconds (default: run until Ctrl-C)")
+                        "and with --open-s)")
+    p.add_argument("--port", type=port, help="web port of the viewer (default: the first free one from 7000)")
+    p.add_argument("--open-s", "--open-seconds", dest="open_seconds", type=number_in(0, 1e7, low_open=True),
+                   metavar="S", help="stop the server after S seconds (default: run until Ctrl-C; --open-seconds is "
+                                     "the older spelling)")
     p.set_defaults(func=run)
 
 

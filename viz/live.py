@@ -185,13 +185,13 @@ class LiveView:
             return
         self._arrow = key
         length = float(np.linalg.norm(vec))
-        if self._arrow_paths is None:
-            self._arrow_paths = {k: self.vis[n].path.lower() for k, n in
-                                 (("", node), ("shaft", f"{node}/shaft"), ("head", f"{node}/head"))}
-        send_transform(self.vis, self._arrow_paths[""],
-                       transform_matrix(ball, rotation_y_to(vec) if length > 0 else None))
+        paths = self._arrow_paths
+        if paths is None:
+            paths = self._arrow_paths = {k: self.vis[n].path.lower() for k, n in
+                                         (("", node), ("shaft", f"{node}/shaft"), ("head", f"{node}/head"))}
+        send_transform(self.vis, paths[""], transform_matrix(ball, rotation_y_to(vec) if length > 0 else None))
         for part, (pos, scl) in arrow_parts(max(length, 1e-6)).items():
-            send_transform(self.vis, self._arrow_paths[part], transform_matrix(pos, None, scl))
+            send_transform(self.vis, paths[part], transform_matrix(pos, None, scl))
 
     def _points(self) -> None:
         pts = np.array([p.corrected for p in self.session.points])

@@ -18,7 +18,16 @@ from typing import TYPE_CHECKING
 
 from arm_model import InputError
 from arm_model.cli import command_help
-from arm_model.cli_options import add_arm_options, arm_inputs, model_from_args, non_negative, number_in, port, positive
+from arm_model.cli_options import (
+    add_arm_options,
+    add_output_option,
+    arm_inputs,
+    model_from_args,
+    non_negative,
+    number_in,
+    port,
+    positive,
+)
 from arm_model.live.session import RATE_HZ_RANGE
 
 if TYPE_CHECKING:          # only for the annotations: the live modules load when the command runs
@@ -50,14 +59,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                                   "(standard input), tcp://HOST:PORT (connect to a server sending the lines) or "
                                   "udp://HOST:PORT (listen for datagrams of whole lines)")
     add_arm_options(p)
-    p.add_argument("-o", "--output", type=Path, required=True,
-                   help="the session folder: a new (or empty) folder, written as the session runs")
+    add_output_option(p, "folder", "the session folder", as_it_runs=True)
     p.add_argument("--plan", type=Path, default=None, help="session plan TOML: the features in order, their kind, "
                                                           "certificate and number of points (docs/formats.md §9)")
     p.add_argument("--feature", default=None, metavar="KIND:ID[:DIAMETER_MM]",
                    help="ad hoc: every point belongs to one feature of this kind (instead of --plan)")
-    p.add_argument("--measurement", default=None, help="the points' measurement id (default: the plan's, else "
-                                                        "the session folder's name)")
+    p.add_argument("--measurement", default=None, metavar="ID",
+                   help="the measurement id written on every point of the session (default: the plan's, else the "
+                        "session folder's name)")
     p.add_argument("--speed", type=number_in(0, 1e6), default=1.0,
                    help="replay a file at this many times real time (default 1; 0: as fast as possible)")
     p.add_argument("--rate-Hz", type=number_in(*RATE_HZ_RANGE), default=None,
@@ -85,8 +94,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "force is not zeroed)")
     v = p.add_argument_group("live view (docs/viewer.md)")
     v.add_argument("--view", action="store_true", help="serve the live view on 127.0.0.1 (the URL is printed)")
-    v.add_argument("--port", type=port, default=None, help="the view's web port (default: the first free from 7000)")
-    v.add_argument("--fps", type=number_in(0.5, 60), default=10.0, help="display frames a second (default 10)")
+    v.add_argument("--port", type=port, default=None, help="web port of the viewer (default: the first free one "
+                                                            "from 7000)")
+    v.add_argument("--fps", type=number_in(0.5, 60), default=10.0, metavar="F",
+                   help="frames the live view draws a second (default 10)")
     v.add_argument("--linger-s", type=non_negative(), default=0.0, metavar="S",
                    help="keep serving the view S seconds after the stream ended (Ctrl-C ends it)")
     from arm_model.uncertainty_cli import add_input_options

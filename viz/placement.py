@@ -66,7 +66,7 @@ def place_features(artefacts, measurement: np.ndarray, feature: np.ndarray, cent
     """
     centres = np.asarray(centres, dtype=float)
     placements, notes = [], []
-    groups = dict.fromkeys(zip(measurement.tolist(), feature.tolist()))
+    groups = dict.fromkeys(zip(measurement.tolist(), feature.tolist(), strict=True))
     for meas, fid in groups:
         if not fid or fid not in artefacts.features:
             continue

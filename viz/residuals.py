@@ -32,7 +32,7 @@ import numpy as np
 from arm_model import QUANTITY_OF_UNIT, UNIT_FACTORS, InputError, csv_records, read_text, split_unit
 from arm_model.csv_io import parse_number
 from arm_model.errors import unknown_key
-from arm_model.units import implausible
+from arm_model.units import implausible, unit_of
 
 __all__ = ["Residuals", "read_residuals", "parse_residuals", "residual_origins"]
 
@@ -101,7 +101,7 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
         raise InputError("missing columns x_mm, y_mm, z_mm (where each vector starts) or 'line' (its line in "
                          "the points file)", path, hline)
     for base, (_, h) in by_base.items():
-        if QUANTITY_OF_UNIT[split_unit(h)[1]] != "length":
+        if QUANTITY_OF_UNIT[unit_of(h)] != "length":
             raise InputError(f"'{base}' must be a length (_mm, _m or _um)", path, hline, h)
     for no, r in data:
         if len(r) != len(header):
@@ -114,11 +114,11 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
             v = parse_number(r[k].strip())      # the toolkit's one number grammar (no '1_0', no '１')
             if v is None or not math.isfinite(v):
                 raise InputError(f"expected a finite number, got {r[k].strip()!r}", path, no, h)
-            wrong = implausible(v * UNIT_FACTORS[split_unit(h)[1]], "length")    # 1e308 overflowed the drawing
+            wrong = implausible(v * UNIT_FACTORS[unit_of(h)], "length")    # 1e308 overflowed the drawing
             if wrong:
                 raise InputError(wrong[1], path, no, h)
             out[i] = v
-        return out * UNIT_FACTORS[split_unit(h)[1]]
+        return out * UNIT_FACTORS[unit_of(h)]
 
     def text_column(name: str) -> np.ndarray:
         if name not in header:

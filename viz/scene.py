@@ -280,15 +280,17 @@ class ArmScene:
     def _visual_model(self, pin):
         """Pinocchio's visual model of the arm: the URDF's own visuals where the arm was read from one and its
         meshes load; else (a mesh Pinocchio cannot read) the generated links, saying so."""
+        desc = self.desc
+        assert desc is not None, "called for a scene with an arm"
         try:
             return pin.buildGeomFromUrdfString(self.arm.model, self.arm.urdf, pin.GeometryType.VISUAL)
         except (RuntimeError, ValueError) as exc:
-            if not self.desc.visuals:
+            if not desc.visuals:
                 raise
             why = " ".join(str(exc).split())
             log.warning(f"the URDF's own visuals cannot be drawn ({why[:300]}): the arm is drawn as generated links")
             from arm_model import PinocchioArm
-            self.arm = PinocchioArm(replace(self.desc, visuals=()))
+            self.arm = PinocchioArm(replace(desc, visuals=()))
             self.desc = self.arm.desc
             return pin.buildGeomFromUrdfString(self.arm.model, self.arm.urdf, pin.GeometryType.VISUAL)
 
@@ -383,7 +385,7 @@ class ArmScene:
         pv = self._pv
         anim = ma.Animation(default_framerate=fps)   # frame i is shown at time i / fps
         infos = []
-        for i, (q, w) in enumerate(zip(qs, ws)):
+        for i, (q, w) in enumerate(zip(qs, ws, strict=True)):
             x, info = self.pose(q, w)
             infos.append(info)
             pin.forwardKinematics(pv.model, pv.data, x)

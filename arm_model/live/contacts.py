@@ -252,6 +252,7 @@ class ContactDetector:
 
     def _close(self, end: float) -> Contact | None:
         buf, mags, lines = self._buf, self._mags, self._lines
+        assert buf is not None, "closed only while a contact is open"
         self._buf, self._mags, self._lines = None, [], []
         if self._by_force and self._held < self.options.dwell:
             self.bumps += 1

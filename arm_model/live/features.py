@@ -292,7 +292,8 @@ class FeatureTracker:
         g.centre = fit.centre
         return FeatureFit(**base, size=feature_diameter("sphere", fit.radius, self.ball_diameter),
                           u_size=diameter_uncertainty(sens, cov, shared, self.n_parameters).u,
-                          **dict(zip(("form", "u_form"), self._form_of(fit.residuals, n, jac, cov, shared))),
+                          **dict(zip(("form", "u_form"), self._form_of(fit.residuals, n, jac, cov, shared),
+                                     strict=True)),
                           centre=fit.centre, radius=fit.radius, extent=np.zeros(2))
 
     def _fit_plane(self, g: _Group, p: np.ndarray, cov: np.ndarray, shared: np.ndarray, base: dict) -> FeatureFit:

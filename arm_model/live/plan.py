@@ -89,7 +89,7 @@ def parse_plan(text: str, path: str = "<plan>") -> SessionPlan:
                          "key 'measurement'")
     entries = []
     tables = data["feature"]
-    for i, (t, feature) in enumerate(zip(tables, art.features.values())):
+    for i, (t, feature) in enumerate(zip(tables, art.features.values(), strict=True)):
         n = t.get("points")
         where = (path, lines.get(("feature", i, "points")), f"key 'feature[{i + 1}].points'")
         if n is None:

@@ -178,7 +178,8 @@ class SampleLayout:
                 values = [float(c) for c in cells]
             except ValueError:
                 values = self._checked(cells, line)
-        for v, lo, hi in zip(values, self._lows, self._highs):     # plain numbers are finite; far ones are typos
+        # plain numbers are finite; far ones are typos
+        for v, lo, hi in zip(values, self._lows, self._highs, strict=True):
             if not lo <= v <= hi:
                 self._range_error(values, line)
         return self._sample(values)

@@ -383,6 +383,15 @@ class Session:
                         temperature=None if s.temperature is None else np.array([s.temperature]),
                         time=np.array([s.t]), lines=np.array([self.counts["points"] + 2]))
 
+    def input_uncertainty(self, force: bool) -> InputUncertainty:
+        """The input uncertainties of a point with (``force``) or without a measured wrench: the ``inputs``
+        given, else the arm's own (:meth:`~arm_model.model_file.Arm.input_uncertainty`, its model file's
+        probing scatter and model discrepancy included, read once when the session starts)."""
+        if self._default_inputs is None:
+            assert self.inputs is not None     # set together in __init__: one of the two is None
+            return self.inputs
+        return self._default_inputs[bool(force)]
+
     def _on_contact(self, c: Contact) -> tuple:
         """The point of contact ``c``: ``aacmm tip``'s centres and uncertainty, recorded, then the fits."""
         from ..commands import tip_centres, tip_table
@@ -392,7 +401,7 @@ class Session:
         ps = self._point_set(c, feature)
         centres = tip_centres(self.arm, ps)
         row = tip_table(self.arm, ps, centres)
-        inputs = self.inputs if self._default_inputs is None else self._default_inputs[ps.wrench is not None]
+        inputs = self.input_uncertainty(ps.wrench is not None)
         prop = propagate(self.model, self.p, ps.q, ps.wrench, self.arm.aux(ps), parameters=self.parameters,
                          inputs=inputs, threads=1, systematic=True)
         row.update(u_columns(prop))
@@ -403,6 +412,7 @@ class Session:
         self.counts["contacts"] += 1
         self.counts["points"] += 1
         self._record_point(point, ps)
+        assert prop.systematic is not None, "propagated with systematic=True"
         fits = tuple(self.tracker.add(feature, point.corrected, prop.cov[0], prop.systematic[0]))
         if self.record is not None:
             for fit in fits:

@@ -213,7 +213,7 @@ def _place(plan, rng, o, n, shoulder, spread, make, truth, max_rounds: int = 40)
             cands.append((k, part, info))
         ok = _reachable(truth, [c[1] for c in cands], rng) if truth is not None and cands else \
             np.ones(len(cands), bool)
-        for (k, part, info), good in zip(cands, ok):
+        for (k, part, info), good in zip(cands, ok, strict=True):
             if good:
                 chosen[k] = (part, info)
     missing = [k + 1 for k in range(n) if chosen[k] is None]
@@ -404,7 +404,7 @@ def _mocap(plan, k, t, rng, desc):
         plan.ref_noise[s] = o["noise"]
     width = max(2, len(str(n)))
     nan3 = np.full(3, np.nan)
-    for s, rows in zip(sessions, np.array_split(np.arange(n), len(sessions))):
+    for s, rows in zip(sessions, np.array_split(np.arange(n), len(sessions)), strict=True):
         for i in rows:
             plan.add(f"{t.id}-{i + 1:0{width}d}", "", k, nan3, nan3, 0.0, 0.0, nan3, reference=True, frame=s,
                      posture=q[i])

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..cli import command_help
-from ..cli_options import seed
+from ..cli_options import add_output_option, seed
 from ..log import PROGRESS, counted
 from ..output import output_folder
 from .campaign import load_campaign
@@ -32,9 +32,9 @@ def register(sub) -> None:
         epilog="Campaign file: docs/formats.md §6; every key and its unit: docs/simulator.md. Output files: "
                "docs/formats.md §7.")
     p.add_argument("campaign", type=Path, help="campaign TOML file")
-    p.add_argument("-o", "--output", type=Path, required=True,
-                   help="output folder (created if needed; files are replaced atomically, never an input)")
-    p.add_argument("--seed", type=seed, default=None, help="random seed (default: the campaign's 'seed')")
+    add_output_option(p)
+    p.add_argument("--seed", type=seed, default=None,
+                   help="seed of every random draw of the simulation (default: the campaign's 'seed')")
     p.add_argument("--no-signals", action="store_true", help="do not write the force-signal files")
     p.add_argument("--samples", action="store_true",
                    help="also write the campaign as a live sample stream, samples.csv (1 kHz: time, joint angles, "
@@ -65,7 +65,7 @@ def summary(result, elapsed: float | None = None) -> str:
     if result.points is not None and len(result.points) and np.any(result.true_wrench):
         f = np.linalg.norm(result.true_wrench[:, :3], axis=1)
         per = {}
-        for m, v in zip(result.points.measurement, f):
+        for m, v in zip(result.points.measurement, f, strict=True):
             per.setdefault(m, []).append(v)
         means = np.array([np.mean(v) for v in per.values()])
         maxes = np.array([np.max(v) for v in per.values()])

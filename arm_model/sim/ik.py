@@ -89,8 +89,8 @@ def joint_limits(desc) -> tuple[np.ndarray, np.ndarray]:
     """(lower, upper) [rad] ([m] for a prismatic joint) of each encoder column; a joint without limits gets
     (-pi, pi) (a prismatic one +-0.1 m)."""
     free = [_FREE_TRAVEL if j.prismatic else np.pi for j in desc.encoders]
-    lo = np.array([-f if j.lower is None else j.lower for j, f in zip(desc.encoders, free)])
-    hi = np.array([f if j.upper is None else j.upper for j, f in zip(desc.encoders, free)])
+    lo = np.array([-f if j.lower is None else j.lower for j, f in zip(desc.encoders, free, strict=True)])
+    hi = np.array([f if j.upper is None else j.upper for j, f in zip(desc.encoders, free, strict=True)])
     return lo, hi
 
 
@@ -188,10 +188,13 @@ def _solve_batch(truth: Truth, q, tg: IKTargets, tol: float, max_iter: int):
 def _redraw(targets: IKTargets, idx, rng) -> IKTargets:
     """New stylus directions (uniform in each point's cone) for the points ``idx``."""
     stylus, x_dir = targets.stylus.copy(), targets.x_dir.copy()
+    cone, axis = targets.stylus_cone, targets.stylus_axis
+    if cone is None or axis is None:        # no cone: the stylus directions are fixed
+        return targets
     for i in idx:
-        if targets.stylus_cone[i] <= 0:
+        if cone[i] <= 0:
             continue
-        u = cone_directions(rng, targets.stylus_axis[i], targets.stylus_cone[i], 1)[0]
+        u = cone_directions(rng, axis[i], cone[i], 1)[0]
         stylus[i] = u
         if not np.isnan(x_dir[i, 0]):
             x = x_dir[i] - (x_dir[i] @ u) * u

@@ -61,7 +61,7 @@ def _magnitudes(rng, op: dict, n: int) -> tuple[float, np.ndarray]:
 
 def _directions(rng, normal, cone) -> np.ndarray:
     out = np.empty_like(normal)
-    for i, (nrm, mu) in enumerate(zip(normal, cone)):
+    for i, (nrm, mu) in enumerate(zip(normal, cone, strict=True)):
         e1, e2 = perpendicular_basis(nrm)
         phi = rng.uniform(0, 2 * np.pi)
         rho = mu * np.sqrt(rng.uniform())

@@ -107,9 +107,10 @@ def _write_points(path, pts: PointSet, column_units=()) -> Path:
             cols[f"f{a}_N"] = pts.force[:, k]
     if pts.temperature is not None:
         cols["temperature_C"] = pts.temperature
-    for m in range(pts.n_markers):
+    ref = np.zeros((len(pts), 0, 3)) if pts.ref is None else pts.ref
+    for m in range(ref.shape[1]):
         for k, a in enumerate("xyz"):
-            cols[f"{a}{'' if pts.n_markers == 1 else m + 1}_ref_mm"] = pts.ref[:, m, k] * 1e3
+            cols[f"{a}{'' if ref.shape[1] == 1 else m + 1}_ref_mm"] = ref[:, m, k] * 1e3
     return write_csv(path, cols, fmt="%.15g")
 
 
@@ -118,7 +119,7 @@ def random_truth(model: ArmModel, rng, length: float = 50e-6, angle: float = 1e-
     """Random base errors: lengths N(0, length) [m], angles N(0, angle) [rad], probe offset
     N(0, probe) [m]; compliances and effect parameters zero."""
     p = np.zeros(model.spec.size)
-    for i, (n, u) in enumerate(zip(model.spec.names, model.spec.units)):
+    for i, (n, u) in enumerate(zip(model.spec.names, model.spec.units, strict=True)):
         if n.startswith("probe.compliance") or i >= model.base_size:
             continue
         if n.startswith("probe."):
@@ -289,6 +290,6 @@ def make_campaign(model: ArmModel, spec: SynthSpec = SynthSpec(), seed: int = 0,
     reference_points, t_ref, x_true = (_tracker_points(model, p_true, spec, rng, T_ref_base)
                                        if spec.reference_points else (None, None, None))
     artefacts = Artefacts("<synthetic artefacts>", features, tuple(distances))
-    truth = {name: float(v) for name, v in zip(model.spec.names, p_true)}
+    truth = {name: float(v) for name, v in zip(model.spec.names, p_true, strict=True)}
     return SynthCampaign(points, artefacts, truth, p_true, targets, reference_points, x_true, t_ref,
                          desc.joint_column_units)

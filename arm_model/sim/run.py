@@ -132,7 +132,7 @@ def _csv_text(columns: dict) -> str:
     for name in names:
         values, fmt = columns[name]
         cells.append([str(v) for v in values] if fmt is None else [fmt % v for v in values])
-    w.writerows(zip(*cells))
+    w.writerows(zip(*cells, strict=True))
     return buf.getvalue()
 
 
@@ -181,7 +181,7 @@ def _truth_text(campaign: Campaign, truth: Truth, plan: Plan, draw: OperatorDraw
     doc = {
         "campaign": campaign.name, "seed": campaign.seed, "arm": campaign.arm.name, "sensor": campaign.sensor,
         "effects_on": truth.effects_on(),
-        "parameters": {si_key(n, u): float(v) for n, u, v in zip(spec.names, spec.units, truth.p)},
+        "parameters": {si_key(n, u): float(v) for n, u, v in zip(spec.names, spec.units, truth.p, strict=True)},
         "effects": _with_units(truth.settings),
         "noise": {f"{k}_{noise_units[k]}": v for k, v in campaign.noise.items()},
         "operator": {"measurements": list(draw.level), "level_N": [draw.level[m] for m in draw.level]},
@@ -199,7 +199,7 @@ def _truth_text(campaign: Campaign, truth: Truth, plan: Plan, draw: OperatorDraw
 def _rng_streams(seed: int) -> dict[str, np.random.Generator]:
     names = ("truth", "plan", "operator", "ik", "noise", "signals", "tracker")
     seqs = np.random.SeedSequence(seed).spawn(len(names))
-    return {n: np.random.default_rng(s) for n, s in zip(names, seqs)}
+    return {n: np.random.default_rng(s) for n, s in zip(names, seqs, strict=True)}
 
 
 def _x_directions(plan: Plan, force: np.ndarray, rng) -> np.ndarray:
@@ -428,7 +428,8 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
     say(f"{counted(len(plan), 'point')} in {counted(len(set(plan.measurement)), 'measurement')} planned")
     draw = draw_operator(plan, campaign.operator, campaign.environment, campaign.signals, rng["operator"])
     x_dir = _x_directions(plan, draw.force, rng["operator"])
-    labels = [f"{m} row {i + 1} (feature {f})" for i, (m, f) in enumerate(zip(plan.measurement, plan.feature))]
+    labels = [f"{m} row {i + 1} (feature {f})"
+              for i, (m, f) in enumerate(zip(plan.measurement, plan.feature, strict=True))]
     q_true, wrench, attempts = _solve(truth, plan, draw, x_dir, labels, rng["ik"], say)
     # physical torques and the readings the encoders give
     if truth.needs_torques():

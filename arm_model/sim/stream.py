@@ -117,7 +117,7 @@ def sample_stream(result: SimResult, seed: int = 0) -> str:
         names += ["fx_N", "fy_N", "fz_N"]
     cols.append([str(v) for v in trigger])
     names.append("trigger")
-    return ",".join(names) + "\n" + "".join(",".join(row) + "\n" for row in zip(*cols))
+    return ",".join(names) + "\n" + "".join(",".join(row) + "\n" for row in zip(*cols, strict=True))
 
 
 def stream_plan(result: SimResult) -> SessionPlan | None:

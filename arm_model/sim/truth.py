@@ -82,7 +82,7 @@ class Truth:
     @property
     def values(self) -> dict[str, float]:
         """True parameters by name (SI, see ``model.spec.units``)."""
-        return dict(zip(self.model.spec.names, (float(v) for v in self.p)))
+        return dict(zip(self.model.spec.names, (float(v) for v in self.p), strict=True))
 
     @property
     def aliases(self) -> dict[str, float]:
@@ -338,7 +338,7 @@ def build_truth(desc: ArmDescription, t: dict, rng: np.random.Generator, sensor:
         # the base parameters already hold the probe compliance errors: no extra effect is needed
         spec = param_spec(desc)
         for name, true, decl in zip(("probe.compliance_x", "probe.compliance_y", "probe.compliance_z"),
-                                    (cx, cy, cz), declared):
+                                    (cx, cy, cz), declared, strict=True):
             p_base[spec.index(name)] = true - decl
         settings["probe_compliance"] = {"bending_x": cx, "bending_y": cy, "axial": cz}
     fs = t["force_sensor"]
@@ -355,7 +355,7 @@ def build_truth(desc: ArmDescription, t: dict, rng: np.random.Generator, sensor:
     lc = t.get("lateral_compliance")
     if lc is not None:
         effects.append(LateralCompliance(joints=lc["indices"], gravity=lc["gravity"], contact=lc["contact"]))
-        for kx, ky in zip(lc["stiffness_x"], lc["stiffness_y"]):
+        for kx, ky in zip(lc["stiffness_x"], lc["stiffness_y"], strict=True):
             values += [0.0 if kx is None else 1.0 / kx, 0.0 if ky is None else 1.0 / ky]
         settings["lateral_compliance"] = {"joints": [desc.joint_names[i] for i in lc["indices"]],
                                           "stiffness_x": [k for k in lc["stiffness_x"] if k is not None],

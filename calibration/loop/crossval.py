@@ -77,7 +77,8 @@ def fold_fit(model: ArmModel, design: CalibrationData, folds: Folds, fit) -> Fol
         train = design.with_measurements([m for m, g in folds.assign.items() if g != f and m in present])  # type: ignore[attr-defined]
         res = fit(model, train)
         h = heldout_residuals(model, res.p, design.with_measurements(held), res.weights, res.reference_mode)
-        keys = [(m, int(i)) for m, i in zip(h["measurement"], h["point"])] if folds.per_pose else h["measurement"]
+        keys = ([(m, int(i)) for m, i in zip(h["measurement"], h["point"], strict=True)] if folds.per_pose
+                else h["measurement"])
         for key in dict.fromkeys(keys):
             sel = np.array([k == key for k in keys]) if folds.per_pose else h["measurement"] == key
             sse[key] = (float(np.sum(h["r"][sel] ** 2)), int(sel.sum()))

@@ -152,7 +152,7 @@ def merge_tied(state: LoopState, scr: Screening, cand: Candidate, cv: CVResult, 
     merged = Candidate(f"{prefix} {'+'.join(named[j] for j in joints)}", replace(cand.effect, joints=joints),
                        cand.family)
     tests = [scr.test_of(cand)] + [scr.test_of(c2) for c2, _ in rivals]
-    est = {n: (b, u) for t in tests for n, b, u in zip(t.names, t.estimate, t.u)}
+    est = {n: (b, u) for t in tests for n, b, u in zip(t.names, t.estimate, t.u, strict=True)}
     pnames = merged.param_names(desc)
     nan = (float("nan"), float("nan"))
     t0 = tests[0]
@@ -330,7 +330,7 @@ def candidate_priors(model: ArmModel, cand: Candidate, test: GroupTest) -> dict[
     names = cand.param_names(model.desc)
     default = prior_scales(model, names)
     out = {}
-    for n, d, b in zip(names, default, test.estimate):
+    for n, d, b in zip(names, default, test.estimate, strict=True):
         out[n] = float(max(d, 10.0 * abs(b))) if np.isfinite(b) else float(d)
     return out
 

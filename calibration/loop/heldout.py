@@ -29,10 +29,12 @@ def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights,
     out = {"rms_um": float(np.sqrt(np.mean(head ** 2))) * 1e6, "max_um": float(np.max(np.abs(head))) * 1e6,
            "headline_rows": ("reference points" if not art.any() else "artefact points and lengths"
                              if (h["kind"] == "length").any() else "artefact points"),
-           "rms_weighted": float(np.sqrt(np.mean(h["r"] ** 2))), "rows": int(len(e)), "by_kind": {}}
+           "rms_weighted": float(np.sqrt(np.mean(h["r"] ** 2))), "rows": int(len(e))}
+    by_kind: dict[str, dict] = {}
+    out["by_kind"] = by_kind
     for k in dict.fromkeys(h["kind"].tolist()):
         ek = e[h["kind"] == k]
-        out["by_kind"][k] = {"rows": int(len(ek)), "rms_um": float(np.sqrt(np.mean(ek ** 2))) * 1e6,
+        by_kind[k] = {"rows": int(len(ek)), "rms_um": float(np.sqrt(np.mean(ek ** 2))) * 1e6,
                              "max_um": float(np.max(np.abs(ek))) * 1e6}
     u = bootstrap_rows(head, h["measurement"][art] if art.any() else h["measurement"], seed=seed)
     out["u_rms_um"], out["u_max_um"] = (None, None) if u is None else (u[0] * 1e6, u[1] * 1e6)

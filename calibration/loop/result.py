@@ -145,7 +145,7 @@ def effect_summary(result: CalibrationResult, cand: Candidate) -> list[dict]:
                      "display_u": display(u, unit)[0], "display_unit": du, "state": state})
     if cand.family in ("eccentricity", "joint_harmonics"):
         defs = [n for n, _ in cand.effect.param_defs(desc)]
-        for nc, ns in zip(defs[0::2], defs[1::2]):         # (cos, sin) pairs of each harmonic
+        for nc, ns in zip(defs[0::2], defs[1::2], strict=True):         # (cos, sin) pairs of each harmonic
             c, s = result.value(nc), result.value(ns)
             a = math.hypot(c, s)
             ua = float("nan")

@@ -177,8 +177,8 @@ def screen(state: LoopState) -> Screening:
     s = state.settings
     state.say(f"screening {len(state.remaining)} candidate(s) at stage {len(state.stages) - 1}")
     tests, space = screen_candidates(state.result, state.remaining, state.folds.assign, s.rank_tol)
-    ranked = sorted(zip(state.remaining, tests), key=lambda ct: (ct[1].p_value if np.isfinite(ct[1].p_value) else 2,
-                                                                 -ct[1].delta_chi2))
+    ranked = sorted(zip(state.remaining, tests, strict=True),
+                    key=lambda ct: (ct[1].p_value if np.isfinite(ct[1].p_value) else 2, -ct[1].delta_chi2))
     state.last_tests, state.last_cv = [t for _, t in ranked], list(state.cv_here)
     ident = [(c, t) for c, t in ranked if t.identifiable]
     gate = s.screen_alpha / max(len(ident), 1)
@@ -208,7 +208,7 @@ def test(state: LoopState, scr: Screening) -> list:
         if c.origin == RESIDUAL:
             state.fate[c.name] = cv.reason if not cv.passed else "passed, but another candidate was added"
     state.last_cv = state.cv_here + scr.cvs
-    return [(c, cv) for (c, _), cv in zip(scr.gated, scr.cvs) if cv.passed]
+    return [(c, cv) for (c, _), cv in zip(scr.gated, scr.cvs, strict=True) if cv.passed]
 
 
 def _current_folds(state: LoopState) -> None:
@@ -408,7 +408,7 @@ def report(state: LoopState) -> LoopResult:
     space = residual_space(state.result)
     st = structure_tests(space, state.folds.assign, s.rank_tol)
     adj = holm([t.p_value for _, t in st])
-    structure = [(f, t, float(a)) for (f, t), a in zip(st, adj)]
+    structure = [(f, t, float(a)) for (f, t), a in zip(st, adj, strict=True)]
     significant = [(f, t, min(1.0, t.p_value * len(structure)))
                    for f, t in remaining_structure(space, state.folds.assign, s.alpha, s.rank_tol)]
     plots = {f.name: binned_estimates(space, f) for f, _, _ in significant[:4]}

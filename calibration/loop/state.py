@@ -163,5 +163,6 @@ class Screening:
 
     def cv_of(self, cand) -> CVResult | None:
         """The held-out test of a gated candidate, None if it has none."""
-        return next((v for (c, _), v in zip(self.gated, self.cvs) if c is cand), None)
+        # cvs may be shorter (tests still running) or longer (the decision's tests follow the gated ones)
+        return next((v for (c, _), v in zip(self.gated, self.cvs, strict=False) if c is cand), None)
 
