@@ -128,15 +128,37 @@ def add_frame_options(p) -> None:
                    help="for an arm given as a URDF: the link its chain starts at (default the URDF's root; its "
                         "frame is the base frame of every output), e.g. after a floating joint, an arm on a torso "
                         "whose joints the points do not give, or a humanoid's sole (the leg walked backwards)")
+    p.add_argument("--hold-joint", action="append", default=None, metavar="JOINT[=VALUE]", type=_hold_joint,
+                   help="for an arm given as a URDF: a moving joint of the chain the points do not give, held at "
+                        "VALUE (deg, or mm for a prismatic joint; default 0) as a fixed joint, e.g. a tool "
+                        "changer's joint between the last arm joint and the tip frame (repeat for several)")
+
+
+def _hold_joint(text: str) -> tuple[str, float]:
+    """``--hold-joint JOINT[=VALUE]`` -> (name, value in deg or mm)."""
+    name, _, value = text.partition("=")
+    if not name.strip():
+        raise argparse.ArgumentTypeError(f"'{text}': give a joint name, JOINT or JOINT=VALUE")
+    try:
+        v = float(value) if value.strip() else 0.0
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}': VALUE must be a number (deg, or mm)") from None
+    if not math.isfinite(v) or abs(v) > 1e4:
+        raise argparse.ArgumentTypeError(f"'{text}': VALUE must be finite and within +-10000 (deg, or mm)")
+    return name.strip(), v
 
 
 def model_from_args(args: argparse.Namespace) -> Arm:
     """The arm named by :func:`add_arm_options`: description, effects and their parameter values
     (:class:`arm_model.model_file.Arm`), read by the one loader every subcommand uses."""
-    key = (args.arm, args.tip_frame, getattr(args, "masses", None), getattr(args, "base_frame", None))
+    hold = tuple(getattr(args, "hold_joint", None) or ())
+    twice = sorted({n for n, _ in hold if [m for m, _ in hold].count(n) > 1})
+    if twice:
+        raise InputError(f"joint '{twice[0]}' is given twice to --hold-joint", None, None, "key '--hold-joint'")
+    key = (args.arm, args.tip_frame, getattr(args, "masses", None), getattr(args, "base_frame", None), hold)
     cached = getattr(args, "_arm_loaded", None)
     if cached is None or cached[0] != key:        # read once per command line (arm_inputs reads it first)
-        arm = load_model(*key[:2], masses=key[2], base_frame=key[3])
+        arm = load_model(*key[:2], masses=key[2], base_frame=key[3], hold=dict(hold) or None)
         args._arm_loaded = (key, arm)
         log.debug(f"arm {args.arm}: '{arm.desc.name}', {arm.desc.n_joints} joints, effects: "
                   f"{', '.join(e.describe(arm.desc) for e in arm.effects) or 'none'}"

@@ -471,15 +471,15 @@ def training_poses_of(arm: Arm) -> TrainingPoses | None:
 
 
 def load_model(path, tip_frame: str | None = None, probe: dict | None = None, masses=None,
-               base_frame: str | None = None) -> Arm:
+               base_frame: str | None = None, hold: dict | None = None) -> Arm:
     """The arm of an ``--arm`` option: a model file or description TOML (effects applied), or a URDF
     with ``tip_frame`` (no effects), optionally a masses file (:func:`arm_model.urdf_import.load_masses`) and
     the link its chain starts at (``base_frame``), or a shipped arm's name (``aacmm7``)."""
     from .shipped import arm_path
     path = arm_path(path)
-    if path.suffix.lower() == ".urdf" or masses is not None or base_frame is not None:   # load_arm says why not
+    if path.suffix.lower() == ".urdf" or masses is not None or base_frame is not None or hold:  # load_arm: why not
         from .urdf_import import load_arm
-        return Arm(load_arm(path, tip_frame, probe, masses, base_frame))
+        return Arm(load_arm(path, tip_frame, probe, masses, base_frame, hold))
     if tip_frame:
         raise InputError("--tip-frame is for an arm given as a URDF; this arm is a TOML file", path)
     if not path.exists():

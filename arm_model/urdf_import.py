@@ -274,6 +274,7 @@ class _Chain:
     T_last_tip: np.ndarray
     hinge: np.ndarray | None
     base: str = ""          # the link the chain starts at (its frame is the arm's base frame)
+    held: dict = field(default_factory=dict)   # joint name -> the value it is held at [rad] or [m]
 
 
 def _kind(jtype: str) -> str:
@@ -382,7 +383,24 @@ def _walk_to_root(u: _Urdf, tip_frame: str, base_frame: str | None = None) -> li
     return chain
 
 
-def _chain(u: _Urdf, tip_frame: str, base_frame: str | None = None) -> _Chain:
+def _held_values(u: _Urdf, chain: list, tip_frame: str, hold: dict | None) -> dict:
+    """``--hold-joint``: joint name -> value in the user's unit (deg, or mm for a prismatic joint), checked
+    to be a moving joint of the chain, as [rad] or [m]."""
+    on_chain = {j.name: j for j in chain}
+    out = {}
+    for name, value in (hold or {}).items():
+        j = on_chain.get(name)
+        if j is None or j.type not in ("revolute", "continuous", "prismatic"):
+            moving = [k.name for k in chain if k.type in ("revolute", "continuous", "prismatic")]
+            what = f"a {j.type} joint" if j is not None else "not a joint of the chain"
+            raise InputError(f"joint '{name}' is {what}{did_you_mean(name, moving) if j is None else ''}: "
+                             f"--hold-joint names a moving joint on the chain to '{tip_frame}' "
+                             f"(they are: {', '.join(moving)})", u.path, None, "key '--hold-joint'")
+        out[name] = value * 1e-3 if j.type == "prismatic" else np.radians(value)
+    return out
+
+
+def _chain(u: _Urdf, tip_frame: str, base_frame: str | None = None, hold: dict | None = None) -> _Chain:
     for frame, key in ((tip_frame, "key '--tip-frame'"), (base_frame, "key '--base-frame'")):
         if frame is not None and frame not in u.link_elements:
             raise InputError(f"no link named '{frame}'{did_you_mean(frame, u.link_elements)} (links: "
@@ -394,6 +412,7 @@ def _chain(u: _Urdf, tip_frame: str, base_frame: str | None = None) -> _Chain:
         raise InputError(f"link '{base_frame}' is not on the chain from the root to '{tip_frame}' (its links: "
                          f"{', '.join(ancestors + [tip_frame])}): the base frame is a link the chain passes "
                          "through", u.path, None, "key '--base-frame'")
+    held_at = _held_values(u, chain, tip_frame, hold)
     elastic = [j for j in chain if _ELASTIC_TYPES.get(j.name) == j.type]
     held = {j.name for j in elastic} if len(elastic) == len(ELASTIC_JOINTS) else set()
     moving, pending, tool_prefix, hinge = [], np.eye(4), np.eye(4), None
@@ -409,6 +428,9 @@ def _chain(u: _Urdf, tip_frame: str, base_frame: str | None = None) -> _Chain:
             raise u.error(f"joint '{j.name}' on the chain to '{tip_frame}' is {j.type}: the toolkit models "
                           "revolute, continuous and prismatic joints (a floating or planar joint is a base the "
                           f"URDF moves freely: start the chain after it, --base-frame {j.child})", j.name)
+        if j.name in held_at:                                       # --hold-joint: a fixed joint
+            pending = pending @ _held(j, held_at[j.name])
+            continue
         mimic = _mimic(u, j)
         if mimic is not None and mimic.multiplier == 0.0:         # held at its offset: a fixed joint
             pending = pending @ _held(j, mimic.offset)
@@ -420,9 +442,9 @@ def _chain(u: _Urdf, tip_frame: str, base_frame: str | None = None) -> _Chain:
         raise InputError(f"no revolute, continuous or prismatic joint between '{base}' and '{tip_frame}'", u.path,
                          None, "key '--tip-frame'")
     tip_joint = chain[-1]
-    if tip_joint.type != "fixed" and tip_joint.name not in held:
+    if tip_joint.type != "fixed" and tip_joint.name not in held and tip_joint.name not in held_at:
         tool_prefix = None
-    return _Chain(moving, tool_prefix, tip_joint, pending, hinge, base)
+    return _Chain(moving, tool_prefix, tip_joint, pending, hinge, base, held_at)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -484,7 +506,7 @@ def _fold_masses(u: _Urdf, ch: _Chain, masses: dict | None) -> list[tuple[float,
                 first += m * (T[:3, :3] @ c + T[:3, 3])
             for k in kids.get(link, ()):
                 if k.name not in moving_names:
-                    stack.append((k.child, T @ _T(k.origin)))
+                    stack.append((k.child, T @ (_held(k, ch.held[k.name]) if k.name in ch.held else _T(k.origin))))
         com = first / total if total > 0 else np.zeros(3)
         out.append((total, tuple(float(v) for v in com)))
     return out
@@ -695,7 +717,7 @@ def _visuals(u: _Urdf, ch: _Chain) -> tuple[Visual, ...]:
 
 def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None = None,
                           name: str | None = None, masses: dict | None = None,
-                          base_frame: str | None = None) -> ArmDescription:
+                          base_frame: str | None = None, hold: dict | None = None) -> ArmDescription:
     """Read the serial chain root -> ``tip_frame`` (a link name) of a URDF as a description.
 
     Args:
@@ -705,6 +727,8 @@ def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None =
             it is a tip without a stylus (rigid: compliances 0).
         base_frame: a link on the way from the root to ``tip_frame`` where the chain starts instead (its frame
             is then the arm's base frame; the joints before it are not the arm's).
+        hold: joint name -> value [deg, or mm for a prismatic joint]: moving joints of the chain the points do
+            not give (a tool changer's joint always at rest), held there as fixed joints.
         probe: ball_diameter [m], max_force [N], bending_compliance_x/_y, axial_compliance [m/N]
             (default :data:`PAPER_PROBE`, the ball diameter from a sphere on the tip link).
         masses: link -> :class:`LinkMass` (see :func:`load_masses`), replacing the URDF's inertials.
@@ -718,16 +742,18 @@ def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None =
                                  f"(links: {', '.join(u.link_elements)})", where[0], where[1],
                                  "key 'link.name'")
     u = _hung_from(u, base_frame, tip_frame)
-    ch = _chain(u, tip_frame, base_frame)
+    ch = _chain(u, tip_frame, base_frame, hold)
     rows = [_row(u, j, prefix, mimic, mass, com)
             for (j, prefix, mimic), (mass, com) in zip(ch.moving, _fold_masses(u, ch, masses), strict=True)]
     return ArmDescription(name=name or u.robot.name or Path(path).stem, convention="urdf", joints=tuple(rows),
                           probe=_probe_of(u, ch, tip_frame, probe), source=str(path), tip_frame=tip_frame,
-                          visuals=_visuals(u, ch), base_frame=base_frame)
+                          visuals=_visuals(u, ch), base_frame=base_frame,
+                          held_joints=tuple(sorted((hold or {}).items())))
 
 
 def load_arm(path: str | Path, tip_frame: str | None = None, probe: dict | None = None,
-             masses: str | Path | None = None, base_frame: str | None = None) -> ArmDescription:
+             masses: str | Path | None = None, base_frame: str | None = None,
+             hold: dict | None = None) -> ArmDescription:
     """An arm from a description TOML, a shipped arm's name (``aacmm7``) or, with ``tip_frame``, a URDF
     file; ``masses``: a masses file (:func:`load_masses`) for a URDF arm; ``base_frame``: for a URDF, the link
     the chain starts at (default its root)."""
@@ -736,7 +762,10 @@ def load_arm(path: str | Path, tip_frame: str | None = None, probe: dict | None 
         if not tip_frame:
             raise InputError("an arm given as a URDF needs --tip-frame (the link at the ball centre)", path)
         return description_from_urdf(path, tip_frame, probe, masses=None if masses is None else load_masses(masses),
-                                     base_frame=base_frame)
+                                     base_frame=base_frame, hold=hold)
+    if hold:
+        raise InputError("--hold-joint is for an arm given as a URDF (a joint of its chain); this arm is a TOML "
+                         "file", path)
     if base_frame is not None:
         raise InputError("--base-frame is for an arm given as a URDF (where its chain starts); this arm is a TOML "
                          "file", path)
@@ -813,7 +842,7 @@ def calibrated_urdf_text(nominal: ArmDescription, calibrated: ArmDescription) ->
                  "walked backwards), which the file's own origins cannot take: written as the chain's own URDF "
                  f"('{nominal.base_frame}' to '{nominal.tip_frame}')")
         return urdf_text(calibrated, base_link=nominal.base_frame, tip_link=nominal.tip_frame)
-    ch = _chain(u, nominal.tip_frame, nominal.base_frame)
+    ch = _chain(u, nominal.tip_frame, nominal.base_frame, dict(nominal.held_joints))
     names = [j.name for j, _, _ in ch.moving]
     if names != [j.name for j in nominal.joints] or names != [j.name for j in calibrated.joints]:
         raise InputError("the URDF's chain no longer matches the arm that was calibrated (was it edited?)",

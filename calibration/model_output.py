@@ -136,7 +136,7 @@ def check_reproduces(result, back: Arm, path, urdf=None) -> None:
         from arm_model.urdf_import import load_arm
         try:
             arm = load_arm(urdf, _urdf_tip(urdf, result.model.desc.tip_frame or BALL_FRAME),
-                           base_frame=result.model.desc.base_frame)
+                           base_frame=result.model.desc.base_frame, hold=dict(result.model.desc.held_joints) or None)
         except InputError as exc:
             raise UnreadableOutput(f"the URDF written is refused with its tip frame: {exc}", urdf) from None
         _same(rigid_centres(arm, pts.q), rigid_centres(back.desc, pts.q), REPRODUCE_TOL_M, pts,

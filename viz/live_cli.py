@@ -201,6 +201,7 @@ def _status(args: argparse.Namespace, source: LineSource, files: list) -> dict:
     tip = ["aacmm", "tip", "points.csv", "--arm", str(args.arm)]
     tip += ["--tip-frame", args.tip_frame] if args.tip_frame else []
     tip += ["--base-frame", args.base_frame] if getattr(args, "base_frame", None) else []
+    tip += [x for name, v in getattr(args, "hold_joint", None) or () for x in ("--hold-joint", f"{name}={v!r}")]
     tip += ["--masses", str(args.masses)] if args.masses else []
     for opt in ("encoder_resolution_deg", "u_compliance_rel", "u_probing_um", "u_model_discrepancy_um"):
         if getattr(args, opt, None) is not None:
