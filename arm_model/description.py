@@ -170,7 +170,7 @@ class ArmDescription:
     #: the URDF link the chain starts at, when not the root (``--base-frame``)
     base_frame: str | None = field(default=None, compare=False)
     #: the URDF's moving joints held at a value (``--hold-joint``): (name, deg or mm) pairs
-    held_joints: tuple = field(default=(), compare=False)
+    held_joints: tuple[tuple[str, float], ...] = field(default=(), compare=False)
     #: the user's visuals when the arm was read from a URDF, for the viewer (:class:`Visual`); never written
     #: to a description TOML
     visuals: tuple[Visual, ...] = field(default=(), compare=False, repr=False)

@@ -426,11 +426,11 @@ def heldout_mask(data: CalibrationData, path: str) -> np.ndarray:
         keys[i] = ("*", "") if kind == "reference" else (data.points.measurement[i], data.points.feature[i])
         if not mask[i]:
             train_count[keys[i]] = train_count.get(keys[i], 0) + 1
-    for i in np.flatnonzero(mask):
+    for i in (int(k) for k in np.flatnonzero(mask)):
         kind = kind_of.get(i)
         if kind is None:
             raise InputError("a held-out pose that nothing measures: no feature and no reference coordinates",
-                             path, int(data.points.lines[i]), "feature")
+                             path, int(data.points.line_numbers[i]), "feature")
         need = 3 if kind == "reference" else MIN_POINTS[kind][0]
         have = train_count.get(keys[i], 0)
         if have < need:
@@ -438,7 +438,7 @@ def heldout_mask(data: CalibrationData, path: str) -> np.ndarray:
                     f"the {kind} '{keys[i][1]}' of measurement '{keys[i][0]}'")
             raise InputError(f"a held-out pose on {what}, which the training points fit on {have} point(s): a "
                              f"held-out pose is predicted against its feature as fitted on the training points, "
-                             f"which needs {need}", path, int(data.points.lines[i]),
+                             f"which needs {need}", path, int(data.points.line_numbers[i]),
                              "measurement" if kind != "reference" else None)
     return mask
 
