@@ -20,7 +20,7 @@ from .errors import InputError, parse_toml, read_text, unknown_key
 from .output import atomic_write_bytes, guard_output
 from .readback import UnreadableOutput, read_back
 from .toml_lines import toml_key_lines, top_key_line
-from .units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit, unit_of
+from .units import PLAUSIBLE_SI, QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit, unit_of
 
 log = logging.getLogger(__name__)
 
@@ -73,6 +73,20 @@ class PointSet:
     ref: np.ndarray | None = None
     lines: np.ndarray | None = None
     session: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        # the readers refuse these with file, line and column; a PointSet built in Python is held to the same
+        # (a NaN or an absurd joint value would otherwise reach a fit and come back as a number)
+        q = np.asarray(self.q)
+        if q.ndim != 2:
+            raise ValueError(f"points '{self.path}': q must be (N, joints), got the shape {q.shape}")
+        bad = ~np.isfinite(q) | (np.abs(q) > PLAUSIBLE_SI["length"])
+        if bad.any():
+            i, k = (int(v) for v in np.argwhere(bad)[0])
+            line = "" if self.lines is None or len(self.lines) <= i else f", line {int(self.lines[i])}"
+            raise ValueError(f"points '{self.path}': joint {k + 1} of row {i + 1}{line} is {float(q[i, k])!r}: a joint value "
+                             f"must be finite and within +-{PLAUSIBLE_SI['length']:g} (rad, or m for a prismatic "
+                             "joint)")
 
     def __len__(self) -> int:
         return self.q.shape[0]

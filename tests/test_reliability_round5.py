@@ -403,3 +403,17 @@ def test_the_table2_reader_returns_finite_plausible_errors_or_says_where(tmp_pat
     if table is not None:
         for v in table.columns.values():
             assert np.all(np.isfinite(v)) and np.all(np.abs(v) <= 1e3)
+
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), -1e308, 2e3])
+def test_a_point_set_built_in_python_refuses_what_the_reader_refuses(bad):
+    """A PointSet made in Python with a joint value the points reader would refuse (not finite, beyond the
+    plausible +-1000 rad or m) is a ValueError naming the row and joint, not a number out of a fit."""
+    import numpy as np
+
+    from arm_model.io import PointSet
+    ids, feats = np.array(["m", "m"]), np.array(["f", "f"])
+    with pytest.raises(ValueError, match=r"joint 2 of row 2, line 7 is .*finite and within \+-1000"):
+        PointSet("p.csv", ids, feats, np.array([[0.1, 0.2, 0.3], [0.1, bad, 0.3]]), lines=np.array([6, 7]))
+    assert len(PointSet("p.csv", ids, feats, np.array([[0.1, 0.2, 0.3], [0.1, 999.0, -0.3]]))) == 2
