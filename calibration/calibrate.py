@@ -1286,14 +1286,15 @@ def nominal_baseline(model: ArmModel, data: CalibrationData, options: FitOptions
     (``options.values``) with only the tip offset fitted (probe.x/y/z, where free: a probe's ball whose place
     on the last link may not be known; a tracker's markers at unknown offsets are nuisance unknowns of every
     fit) by least squares, the artefacts' unknowns and the
-    reference frame solved as in every fit, at the same weights (no noise estimate of its own). Its
+    reference frame solved as in every fit, at the same weights (no noise estimate of its own), on every point
+    of ``data`` (give it the fit's ``data``: without the gross errors the fit left out). Its
     ``p``/``reference`` are the baseline every "nominal -> calibrated" figure compares against."""
     spec = model.spec
     cand = resolve_parameters(spec, default_free(model, data) if options.free is None else options.free)
     tip = [spec.names[i] for i in cand if spec.names[i] in ("probe.x", "probe.y", "probe.z")]
     return calibrate(model, data, replace(options, free=tuple(tip), prior_scale=None, min_resolution=None,
-                                          weights_from_data=False, drop_outliers=False, start=None,
-                                          on_unidentifiable="fix"))
+                                          weights_from_data=False, drop_outliers=False, gross_threshold=None,
+                                          start=None, on_unidentifiable="fix"))
 
 
 def evidence_scale(model: ArmModel, data: CalibrationData, options: FitOptions = FitOptions()) -> tuple[dict, list]:
