@@ -644,8 +644,9 @@ def _without_gross(model: ArmModel, data: CalibrationData, options: FitOptions, 
             without = None
         if without is None:
             res.gross_kept = (f"{o.measurement} line {o.line}: standardized {o.standardized:+.1f} (beyond {k:.2f}), "
-                              f"kept: leaving out more than {limit} point(s) ({GROSS_SHARE:.0%} of them) or a point "
-                              "its feature needs is an error of the model, not of the data")
+                              f"kept: leaving out more than {limit} point(s) ({GROSS_SHARE:.0%} of them), a point its "
+                              "feature needs, or one the fit cannot do without is an error of the model, not of the "
+                              "data")
             break
         gross.append(GrossError(replace(o, point=int(index[o.point])), k, _deletion_residual(without, res.data,
                                                                                             o.point)))
