@@ -257,6 +257,8 @@ class CalibrationResult:
     model_check: dict | None = None           # model_output.model_check of this fit, when refine_torques made it
     discrepancy: Discrepancy | None = None    # the error beyond the fit's own prediction away from its poses
     options: FitOptions | None = None         # the options of the fit (calibrate's, as given)
+    gross: list = field(default_factory=list)  # GrossError: points left out of the fit (indices into the data given)
+    gross_kept: str | None = None             # why a gross-looking point was kept (the model's error), or None
     redundancy: float | None = None           # with a prior: rows less their share of the unknowns (s0's divisor)
 
     # -- access by name ----------------------------------------------------------------------------
@@ -417,6 +419,7 @@ class CalibrationResult:
                 "prior_dominated_ratio": PRIOR_DOMINATED, "evidence_rounds": self.evidence,
                 "prior_dominated": [n for n in self.free if self.state(n) == "prior-dominated"]},
             "outliers": [o.to_dict() for o in self.outliers], "dropped": [o.to_dict() for o in self.dropped],
+            "gross_errors_removed": [g.to_dict() for g in self.gross], "gross_kept": self.gross_kept,
             "instances": self.instances, "distances": self.distances,
             "unused_points": [int(i) for i in self.unused],
         }
@@ -565,18 +568,36 @@ def calibrate(model: ArmModel, data: CalibrationData, options: FitOptions = FitO
 #: rounds of outlier dropping before the fit gives up
 DROP_ROUNDS = 10
 
+#: at most this share of the points (and at least one) is left out as gross errors; more is the model's error
+GROSS_SHARE = 0.05
+
+
+@dataclass
+class GrossError:
+    """A point left out of the fit as a gross error: its outlier entry in the fit that had it
+    (``outlier``), the critical value it exceeded (``threshold``) and its deletion residual (under the fit
+    without it, [m])."""
+    outlier: Outlier
+    threshold: float
+    residual: float
+
+    def to_dict(self) -> dict:
+        return {**self.outlier.to_dict(), "threshold": self.threshold, "deletion_residual_um": self.residual * 1e6}
+
 
 def _without_outliers(model: ArmModel, data: CalibrationData, options: FitOptions, estimate) -> CalibrationResult:
     """``estimate(model, data, options)`` (:func:`_fit`, :func:`reweighted` or :func:`_evidence`) and, with
     ``options.drop_outliers``, the outlier points dropped (the worst first: a gross
     error also pulls its neighbours out, those go only if they stay out) and refitted, until none is left
-    (at most :data:`DROP_ROUNDS` rounds)."""
+    (at most :data:`DROP_ROUNDS` rounds); otherwise the gross errors left out (:func:`_without_gross`)."""
+    if not options.drop_outliers:
+        return _without_gross(model, data, options, estimate)
     index = np.arange(len(data))
     dropped: list[Outlier] = []
     for k in range(DROP_ROUNDS + 1):
         res = estimate(model, data, options)
         point_outliers = [o for o in res.outliers if o.point is not None]
-        if not (options.drop_outliers and point_outliers):
+        if not point_outliers:
             res.dropped = dropped
             return res
         if k == DROP_ROUNDS:
@@ -589,6 +610,57 @@ def _without_outliers(model: ArmModel, data: CalibrationData, options: FitOption
         index = index[keep]
         data = data.select(keep)
     raise NumericalError(f"outliers remain after {DROP_ROUNDS} rounds of dropping; check the data")
+
+
+def _without_gross(model: ArmModel, data: CalibrationData, options: FitOptions, estimate) -> CalibrationResult:
+    """``estimate(model, data, options)`` with the gross errors left out, one at a time (data snooping):
+    while the point of the largest standardized residual (the robust scale and the leverage make it the
+    studentized deletion residual to first order) is at ``options.gross_threshold`` or beyond, it is left out
+    and the fit redone. Never more than :data:`GROSS_SHARE` of the points, nor a point its feature needs
+    (:data:`~calibration.kinds.MIN_POINTS`): past that the misfit is the model's, kept and said
+    (``gross_kept``). ``options.gross_threshold`` None keeps every point."""
+    from .kinds import MIN_POINTS
+    res = estimate(model, data, options)
+    k = options.gross_threshold
+    if k is None:
+        return res
+    index = np.arange(len(data))
+    gross: list[GrossError] = []
+    limit = max(1, int(GROSS_SHARE * len(data)))
+    while True:
+        flagged = sorted((o for o in res.outliers if o.point is not None and abs(o.standardized) >= k),
+                         key=lambda o: -abs(o.standardized))
+        if not flagged:
+            break
+        o = flagged[0]
+        pts = res.data.points
+        same = (pts.measurement == pts.measurement[o.point]) & (pts.feature == pts.feature[o.point])
+        need = MIN_POINTS.get(o.kind, (0, 0))[0] if pts.feature[o.point] != "" else 0
+        keep = np.setdiff1d(np.arange(len(res.data)), [o.point])
+        try:
+            without = None if len(gross) >= limit or int(same.sum()) - 1 < need else \
+                estimate(model, res.data.select(keep), options)
+        except NumericalError:
+            without = None
+        if without is None:
+            res.gross_kept = (f"{o.measurement} line {o.line}: standardized {o.standardized:+.1f} (beyond {k:.2f}), "
+                              f"kept: leaving out more than {limit} point(s) ({GROSS_SHARE:.0%} of them), a point its "
+                              "feature needs, or one the fit cannot do without is an error of the model, not of the "
+                              "data")
+            break
+        gross.append(GrossError(replace(o, point=int(index[o.point])), k, _deletion_residual(without, res.data,
+                                                                                            o.point)))
+        index = index[keep]
+        res = without
+    res.gross = gross
+    return res
+
+
+def _deletion_residual(res: CalibrationResult, data: CalibrationData, point: int) -> float:
+    """The residual [m] of ``data``'s point ``point`` under ``res``, a fit without it (its parameters held,
+    the features and frames refitted on ``data``)."""
+    table = res.predict(data)
+    return float(table["value"][int(np.flatnonzero(table["point"] == point)[0])])
 
 
 @dataclass
@@ -1215,14 +1287,15 @@ def nominal_baseline(model: ArmModel, data: CalibrationData, options: FitOptions
     (``options.values``) with only the tip offset fitted (probe.x/y/z, where free: a probe's ball whose place
     on the last link may not be known; a tracker's markers at unknown offsets are nuisance unknowns of every
     fit) by least squares, the artefacts' unknowns and the
-    reference frame solved as in every fit, at the same weights (no noise estimate of its own). Its
+    reference frame solved as in every fit, at the same weights (no noise estimate of its own), on every point
+    of ``data`` (give it the fit's ``data``: without the gross errors the fit left out). Its
     ``p``/``reference`` are the baseline every "nominal -> calibrated" figure compares against."""
     spec = model.spec
     cand = resolve_parameters(spec, default_free(model, data) if options.free is None else options.free)
     tip = [spec.names[i] for i in cand if spec.names[i] in ("probe.x", "probe.y", "probe.z")]
     return calibrate(model, data, replace(options, free=tuple(tip), prior_scale=None, min_resolution=None,
-                                          weights_from_data=False, drop_outliers=False, start=None,
-                                          on_unidentifiable="fix"))
+                                          weights_from_data=False, drop_outliers=False, gross_threshold=None,
+                                          start=None, on_unidentifiable="fix"))
 
 
 def evidence_scale(model: ArmModel, data: CalibrationData, options: FitOptions = FitOptions()) -> tuple[dict, list]:

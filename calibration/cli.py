@@ -28,6 +28,8 @@ from arm_model.log import counted
 from arm_model.model_file import Arm
 from arm_model.output import output_folder
 
+from .options import GROSS_THRESHOLD
+
 __all__ = ["register", "run_calibrate", "run_montecarlo", "run_poses", "fit_options"]
 
 log = logging.getLogger(__name__)
@@ -236,7 +238,13 @@ def register(sub) -> None:
     c.add_argument("--outlier-threshold", type=positive(), default=4.0,
                    help="standardized residual beyond which a point is reported as an outlier (default 4)")
     c.add_argument("--drop-outliers", action="store_true",
-                   help="drop the outlier points and refit once (they are listed); default: report and keep")
+                   help="drop every outlier point and refit, in rounds (they are listed); default: leave out the "
+                        "gross errors only (--gross-threshold), report and keep the others")
+    c.add_argument("--gross-threshold", type=positive(), default=GROSS_THRESHOLD,
+                   help=f"standardized residual from which a point is a gross error: left out and the fit redone, "
+                        f"one at a time, at most 5%% of the points, and listed (default {GROSS_THRESHOLD:g})")
+    c.add_argument("--keep-outliers", action="store_true",
+                   help="keep every point in the fit, gross errors too (they are reported)")
     c.add_argument("--covariance-scale", "--covariance", dest="covariance", choices=("residual", "stated"),
                    default="residual",
                    help="scale the parameters' covariance by the residual variance factor s0^2 (default) or trust "
@@ -447,7 +455,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
         train, test, poses = _split(args, data)
         options = fit_options(args, free=_free(model, args, data), values=values, weights=_weights(args),
                               on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
-                              drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference)
+                              drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference,
+                              gross_threshold=None if args.keep_outliers else args.gross_threshold)
         res = refine_torques(calibrate(model, train, options))
         base = nominal_baseline(model, res.data, replace(res.options, weights=res.weights))
         # the held-out rows' torques on the calibrated description, as the model file (tip) evaluates them
@@ -543,12 +552,20 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
     _log_fixed(res.fixed)
     for text in poorly_determined(res):
         log.info(f"  poorly determined: {text}")
+    for g in res.gross:
+        o = g.outlier
+        where = " ".join(x for x in (o.measurement, o.feature, f"line {o.line}") if x)
+        log.warning(f"gross error left out of the fit: {where}: standardized "
+                    f"{o.standardized:+.1f} (from {g.threshold:g}), {g.residual * 1e3:.3f} mm from the fit without "
+                    "it; --keep-outliers keeps it")
+    if res.gross_kept:
+        log.warning(f"gross-looking point kept: {res.gross_kept}")
     if res.outliers:
         log.info(f"{len(res.outliers)} outlier(s) ({'dropped and refitted' if res.dropped else 'kept'}):")
         for o in res.outliers[:10]:
             log.info(f"  {o.measurement} {o.feature} line {o.line}: standardized {o.standardized:+.1f}")
         gross = [o for o in res.outliers if abs(o.standardized) >= GROSS_STANDARDIZED]
-        if gross and not res.dropped:
+        if gross and not res.dropped and res.options is not None and res.options.gross_threshold is None:
             log.warning(f"{len(gross)} outlier(s) at {GROSS_STANDARDIZED:g} standard deviations or more: a wrong "
                         "reading (a swapped marker, a slipped ball) pulls every parameter towards it; "
                         "--drop-outliers refits without them")

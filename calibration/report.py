@@ -251,6 +251,17 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
                   reports.html_table(["kind", "measurement", "feature", "line", "standardized", "residual [um]"],
                          [(o.kind, o.measurement, o.feature, o.line, _fmt(o.standardized, 3),
                            _fmt(o.residual * 1e6, 4)) for o in result.outliers])]
+    if result.gross:
+        parts += ["<h2>Gross errors (left out of the fit)</h2>",
+                  "<p>points whose standardized residual reached the gross-error threshold, left out one at a time "
+                  "(the largest first) and the fit redone; 'deletion residual': the point's residual under the fit "
+                  "without it. <code>--keep-outliers</code> keeps them.</p>",
+                  reports.html_table(["measurement", "feature", "line", "standardized", "threshold",
+                                      "deletion residual [um]"],
+                         [(g.outlier.measurement, g.outlier.feature, g.outlier.line, _fmt(g.outlier.standardized, 3),
+                           _fmt(g.threshold, 3), _fmt(g.residual * 1e6, 4)) for g in result.gross])]
+    if result.gross_kept:
+        parts += [f"<p>Gross-looking point kept: {html.escape(result.gross_kept)}</p>"]
     if result.dropped:
         parts += ["<h2>Dropped points (refitted without them)</h2>",
                   reports.html_table(["measurement", "feature", "line", "standardized"],

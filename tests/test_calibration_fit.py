@@ -1,5 +1,5 @@
 """The fit: exact recovery without noise, uncertainties that cover the truth, outliers reported (not
-dropped), effects calibrated, validation figures by hand, held-out improvement."""
+dropped; gross errors left out), effects calibrated, validation figures by hand, held-out improvement."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -98,7 +98,7 @@ def test_outlier_is_reported_with_its_line_and_kept(model):
     q[bad, 1] += 5e-4                                    # 0.5 mrad on the shoulder: ~0.3 mm off
     pts = replace(c.points, q=q)
     data = make_data(pts, c.artefacts, model)
-    res = calibrate(model, data, FitOptions(weights=Weights(probe=2e-6)))
+    res = calibrate(model, data, FitOptions(weights=Weights(probe=2e-6), gross_threshold=None))
     o = max(res.outliers, key=lambda o: abs(o.standardized))      # the gross error is the worst
     assert o.point == bad and o.line == pts.lines[bad] and o.measurement == pts.measurement[bad]
     assert abs(o.standardized) > 10
@@ -107,6 +107,48 @@ def test_outlier_is_reported_with_its_line_and_kept(model):
     assert [o.point for o in dropped.dropped] == [bad]          # only the bad one: its neighbours come back
     assert len(dropped.data) == len(data) - 1 and not dropped.outliers
     assert dropped.s0 < res.s0
+
+
+def _seat_campaign(model, seed):
+    c = make_campaign(model, replace(SPEC, rings=0, planes=0, reference_points=0, force=0.0), seed=seed)
+    return c, make_data(c.points, c.artefacts, model)
+
+
+def test_gross_error_is_left_out_by_default(model):
+    """A 50 mm blunder (0.1 rad on the shoulder) on one seat point: the default leaves it out, says so (its
+    deletion residual of tens of millimetres) and returns the fit of the data without it; --keep-outliers's
+    fit is pulled far off; on the same campaign without the blunder nothing is left out."""
+    c, clean = _seat_campaign(model, 23)
+    q = c.points.q.copy()
+    bad = int(np.flatnonzero(c.points.feature == "seat")[4])
+    q[bad, 1] += 0.1
+    data = make_data(replace(c.points, q=q), c.artefacts, model)
+    opts = FitOptions(weights=Weights(probe=2e-6))
+    res = calibrate(model, data, opts)
+    assert [g.outlier.point for g in res.gross] == [bad] and res.gross_kept is None
+    assert abs(res.gross[0].outlier.standardized) >= opts.gross_threshold and res.gross[0].residual > 0.02
+    assert len(res.data) == len(data) - 1 and not res.dropped
+    ref = calibrate(model, data.select(np.setdiff1d(np.arange(len(data)), [bad])), opts)
+    assert np.max(np.abs(res.p - ref.p)) < 1e-9
+    kept = calibrate(model, data, replace(opts, gross_threshold=None))
+    assert not kept.gross and len(kept.data) == len(data) and np.max(np.abs(kept.p - ref.p)) > 1e-5
+    assert not calibrate(model, clean, opts).gross
+
+
+def test_gross_errors_beyond_a_small_share_are_the_models(model):
+    """More gross-looking points than 5 % of them: the first are left out, the rest kept and said (an error
+    of the model, not of the data)."""
+    c = make_campaign(model, replace(SPEC, ballbars=4, spheres=0, rings=0, planes=0, reference_points=0,
+                                     force=0.0), seed=23)
+    q = c.points.q.copy()
+    seats = np.flatnonzero(c.points.feature == "seat")
+    limit = max(1, int(0.05 * len(q)))
+    for k, i in enumerate(seats[:limit + 2]):
+        q[i, 1] += 0.02 * (1 + k)
+    data = make_data(replace(c.points, q=q), c.artefacts, model)
+    res = calibrate(model, data, FitOptions(weights=Weights(probe=2e-6)))
+    assert len(res.gross) == limit and res.gross_kept and "error of the model" in res.gross_kept
+    assert len(res.data) == len(data) - limit
 
 
 def test_effect_parameters_are_calibrated(nominal):

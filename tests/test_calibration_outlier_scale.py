@@ -26,9 +26,10 @@ def campaign(nominal):
 
 
 def _fit(model, c, points=None, reference=None):
+    """The fit with every point kept (what is flagged, not what is left out as a gross error)."""
     data = make_data(c.points if points is None else points, c.artefacts, model,
                      reference=c.reference_points if reference is None else reference)
-    return calibrate(model, data, FitOptions(weights=STATED))
+    return calibrate(model, data, FitOptions(weights=STATED, gross_threshold=None))
 
 
 def test_clean_campaign_with_unequal_group_noise_flags_nothing(campaign):

@@ -291,9 +291,10 @@ def test_a_held_out_session_is_registered_anew_and_said_so(robot_dir, tmp_path, 
     assert not (tmp_path / "tips.csv").exists()
 
 
-def test_a_gross_reading_is_named_with_the_way_to_refit_without_it(robot_dir, tmp_path, capsys):
-    """A marker 30 mm off in one posture (a swapped marker): calibrate lists it and says how to refit without
-    it (kept by default, it pulls every parameter towards it)."""
+def test_a_gross_reading_is_left_out_and_named(robot_dir, tmp_path, capsys):
+    """A marker 30 mm off in one posture (a swapped marker): calibrate leaves it out of the fit by default and
+    says so (console, summary.json); with --keep-outliers it is kept, listed, and the way to refit without it
+    is said."""
     res = _simulate(robot_dir, postures=30, markers=1, sessions=1, noise_mm=0.2, compliance=False)
     res.write(tmp_path / "sim")
     lines = (tmp_path / "sim" / "points.csv").read_text().splitlines()
@@ -304,11 +305,17 @@ def test_a_gross_reading_is_named_with_the_way_to_refit_without_it(robot_dir, tm
     (tmp_path / "bad.csv").write_text("\n".join(lines) + "\n")
     urdf = tmp_path / "liftarm.urdf"
     urdf.write_text(LIFT_ARM_URDF)
-    assert main(["calibrate", str(tmp_path / "bad.csv"), "--arm", str(urdf), "--tip-frame", TIP, "--no-plots",
-                 "-o", str(tmp_path / "cal")]) == 0
+    cmd = ["calibrate", str(tmp_path / "bad.csv"), "--arm", str(urdf), "--tip-frame", TIP, "--no-plots"]
+    assert main(cmd + ["-o", str(tmp_path / "cal")]) == 0
+    out = capsys.readouterr()
+    assert f"gross error left out of the fit: {res.points.measurement[5]} line 7: standardized" in out.err
+    gross = json.loads((tmp_path / "cal" / "summary.json").read_text())["gross_errors_removed"]
+    assert [g["line"] for g in gross] == [7] and 20e3 < gross[0]["deletion_residual_um"] < 40e3
+    assert main(cmd + ["--keep-outliers", "-o", str(tmp_path / "kept")]) == 0
     out = capsys.readouterr()
     assert f"{res.points.measurement[5]}  line 7: standardized" in out.out
     assert "--drop-outliers refits without them" in out.err
+    assert not json.loads((tmp_path / "kept" / "summary.json").read_text())["gross_errors_removed"]
 
 
 def test_close_loop_on_a_robot_with_a_prismatic_joint_runs_to_the_end(robot_dir, tmp_path, capsys):
