@@ -84,9 +84,9 @@ class PointSet:
         if bad.any():
             i, k = (int(v) for v in np.argwhere(bad)[0])
             line = "" if self.lines is None or len(self.lines) <= i else f", line {int(self.lines[i])}"
-            raise ValueError(f"points '{self.path}': joint {k + 1} of row {i + 1}{line} is {float(q[i, k])!r}: a joint value "
-                             f"must be finite and within +-{PLAUSIBLE_SI['length']:g} (rad, or m for a prismatic "
-                             "joint)")
+            raise ValueError(f"points '{self.path}': joint {k + 1} of row {i + 1}{line} is {float(q[i, k])!r}: a "
+                             f"joint value must be finite and within +-{PLAUSIBLE_SI['length']:g} (rad, or m for a "
+                             "prismatic joint)")
 
     def __len__(self) -> int:
         return self.q.shape[0]
