@@ -34,20 +34,21 @@ LINKS = [("pelvis", 10.0, (0.0, 0.01, 0.05)), ("l_thigh", 4.0, (0.01, 0.0, -0.2)
          ("torso", 8.0, (0.02, 0.0, 0.2)), ("upper", 2.0, (0.0, 0.03, -0.15)), ("fore", 1.5, (0.0, 0.0, -0.1)),
          ("hand", 0.5, (0.03, 0.0, -0.05)), ("tool", None, None)]
 LINK_XML = "".join(_link(n, m, c) for n, m, c in LINKS)
+# what lies above the pelvis (and the other leg), the same in both writings
+ABOVE_PELVIS = (_joint("r_hip", "revolute", "pelvis", "r_thigh", "0 -0.1 -0.05", "0 0 1")
+                + _joint("waist", "prismatic", "pelvis", "torso", "0 0 0.1", "0 0 1")
+                + _joint("shoulder", "revolute", "torso", "upper", "0 0.2 0.4", "0 1 0")
+                + _joint("elbow", "revolute", "upper", "fore", "0 0 -0.3", "0 1 0",
+                         '<mimic joint="l_knee" multiplier="0.5" offset="0.1"/>')
+                + _joint("wrist", "continuous", "fore", "hand", "0 0 -0.2", "1 0 0")
+                + _joint("tool_fix", "fixed", "hand", "tool", "0.05 0 -0.1"))
 # the robot as it is usually written: the pelvis at the root
 PELVIS_ROOTED = ('<robot name="walker">' + LINK_XML
                  + _joint("l_hip", "revolute", "pelvis", "l_thigh", "0 0.1 -0.05", "0 0 1")
                  + _joint("l_knee", "revolute", "l_thigh", "l_shin", "0 0 -0.4", "0 1 0")
                  + _joint("l_ankle", "revolute", "l_shin", "l_foot", "0 0 -0.4", "1 0 0")
                  + _joint("l_sole_fix", "fixed", "l_foot", "l_sole", "0.02 0 -0.05")
-                 + _joint("r_hip", "revolute", "pelvis", "r_thigh", "0 -0.1 -0.05", "0 0 1")
-                 + _joint("waist", "prismatic", "pelvis", "torso", "0 0 0.1", "0 0 1")
-                 + _joint("shoulder", "revolute", "torso", "upper", "0 0.2 0.4", "0 1 0")
-                 + _joint("elbow", "revolute", "upper", "fore", "0 0 -0.3", "0 1 0",
-                          '<mimic joint="l_knee" multiplier="0.5" offset="0.1"/>')
-                 + _joint("wrist", "continuous", "fore", "hand", "0 0 -0.2", "1 0 0")
-                 + _joint("tool_fix", "fixed", "hand", "tool", "0.05 0 -0.1")
-                 + "</robot>")
+                 + ABOVE_PELVIS + "</robot>")
 # the same robot written by hand from the sole: each leg joint's motion about the opposite axis at its child's
 # frame, then the negated translation of its origin
 SOLE_ROOTED = ('<robot name="walker">' + LINK_XML
@@ -59,14 +60,7 @@ SOLE_ROOTED = ('<robot name="walker">' + LINK_XML
                + _joint("l_knee_o", "fixed", "m_knee", "l_thigh", "0 0 0.4")
                + _joint("l_hip", "revolute", "l_thigh", "m_hip", "0 0 0", "0 0 -1")
                + _joint("l_hip_o", "fixed", "m_hip", "pelvis", "0 -0.1 0.05")
-               + _joint("r_hip", "revolute", "pelvis", "r_thigh", "0 -0.1 -0.05", "0 0 1")
-               + _joint("waist", "prismatic", "pelvis", "torso", "0 0 0.1", "0 0 1")
-               + _joint("shoulder", "revolute", "torso", "upper", "0 0.2 0.4", "0 1 0")
-               + _joint("elbow", "revolute", "upper", "fore", "0 0 -0.3", "0 1 0",
-                        '<mimic joint="l_knee" multiplier="0.5" offset="0.1"/>')
-               + _joint("wrist", "continuous", "fore", "hand", "0 0 -0.2", "1 0 0")
-               + _joint("tool_fix", "fixed", "hand", "tool", "0.05 0 -0.1")
-               + "</robot>")
+               + ABOVE_PELVIS + "</robot>")
 
 
 def _full(model, names, qi):
