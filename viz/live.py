@@ -89,8 +89,10 @@ def panel_lines(session: Session, deflection: float | None = None) -> list[str]:
     if nxt:
         left = session.tracker.remaining
         lines.append(f"next: {nxt}" + ("" if left is None else f" ({left} more)"))
+    jumps = "".join(f"{what} {c[k]}   " for k, what in (("time_jumps", "bad times"), ("clock_jumps", "clock jumps"))
+                    if c[k])
     lines.append(f"points {c['points']}   dropped {c['dropped']}   late {c['late']}   bad lines {c['bad_lines']}   "
-                 f"over-force {c['over_force']}   joint limits {c['joint_limit']}")
+                 f"{jumps}over-force {c['over_force']}   joint limits {c['joint_limit']}")
     if session.events:
         lines.append(f"last event: {session.events[-1]}"[:160])
     return lines

@@ -310,10 +310,16 @@ def _show(out: object, said: dict) -> None:
         log.info(f"  {out.describe()}")
     elif isinstance(out, Event):
         n = said[out.kind] = said.get(out.kind, 0) + 1
-        if out.kind in ("over_force", "joint_limit", "end") or n <= WARN_FIRST:
+        if out.kind in ("over_force", "joint_limit", "clock_jump", "end") or n <= WARN_FIRST:
             log.warning(str(out))
         elif n == WARN_FIRST + 1:
             log.warning(f"more '{out.kind}' events are counted, not shown (events.csv has each)")
+
+
+def _jumps(c: dict) -> str:
+    """The time stamps off the stream's clock, when there were any."""
+    return "".join(f", {c[k]} {what}" for k, what in (("time_jumps", "bad time stamp(s)"),
+                                                       ("clock_jumps", "clock jump(s)")) if c[k])
 
 
 def _summary(session: Session, said: dict, skipped: int, status: str, message: str) -> None:
@@ -321,7 +327,7 @@ def _summary(session: Session, said: dict, skipped: int, status: str, message: s
     folder = session.record.folder
     log.info(f"{c['samples']} samples, {c['points']} points ({c['over_force']} over-force), {c['bumps']} touches "
              f"shorter than {session.contact_options.dwell:g} s, dropped {c['dropped']}, late {c['late']}, bad lines "
-             f"{c['bad_lines']}" + (f", {skipped} datagram line(s) before the header" if skipped else "")
+             f"{c['bad_lines']}" + _jumps(c) + (f", {skipped} datagram line(s) before the header" if skipped else "")
              + f" -> {folder}")
     noise = session.noise()
     if noise is not None:

@@ -250,6 +250,14 @@ class ContactDetector:
             return None
         return self._close(self._buf[-1].t)
 
+    def shift(self, dt: float) -> None:
+        """The stream's clock jumped: move the detector's times by ``dt`` [s] so that the next sample follows
+        the last one by a nominal interval (its smoothing, baseline and warm-up go on across the jump)."""
+        if self._t is not None:
+            self._t += dt
+        if self._warm is not None:
+            self._warm += dt
+
     def _close(self, end: float) -> Contact | None:
         buf, mags, lines = self._buf, self._mags, self._lines
         assert buf is not None, "closed only while a contact is open"

@@ -34,14 +34,23 @@ from .record import FILES, SessionRecord
 from .samples import Sample, SampleLayout, sample_header
 
 __all__ = ["Session", "LivePoint", "Event", "EVENT_KINDS", "PERIOD_SAMPLES", "GAP_FACTOR", "LIMIT_MARGIN_RAD",
+           "JUMP_PERIODS", "JUMP_GAPS", "JUMP_BACK_PERIODS", "JUMP_CONFIRM",
            "TIP_COLUMNS", "CONTACT_COLUMNS", "EVENT_COLUMNS", "FEATURE_COLUMNS", "points_columns"]
 
 #: the kinds of :class:`Event`
-EVENT_KINDS = ("over_force", "joint_limit", "dropped", "late", "bad_line", "bump", "plan", "end")
+EVENT_KINDS = ("over_force", "joint_limit", "dropped", "late", "time_jump", "clock_jump", "bad_line", "bump", "plan",
+               "end")
 #: intervals from which the nominal sample period is estimated (their median), unless given
 PERIOD_SAMPLES = 16
 #: a gap longer than this many nominal periods holds dropped samples
 GAP_FACTOR = 1.5
+#: a time stamp this many nominal periods after the previous one (or :data:`JUMP_GAPS` times the widest interval
+#: taken so far, if more), or :data:`JUMP_BACK_PERIODS` before it, is off the stream's clock: one bad time stamp
+#: (skipped) if the next sample continues the old clock, a clock jump if :data:`JUMP_CONFIRM` samples in a row
+#: continue the new one. Less far back, a sample is late (out of order: skipped)
+JUMP_PERIODS, JUMP_GAPS, JUMP_BACK_PERIODS = 1000, 10, 100
+#: samples in a row (the first off the old clock included) that make a jump of the time stamps a new clock
+JUMP_CONFIRM = 4
 #: the nominal sample rates a session takes [Hz]: a sample every 1000 s to a million a second (beyond, a gap of a
 #: millisecond counted 1e305 dropped samples, and a rate of 5e-324 Hz made the period infinite)
 RATE_HZ_RANGE = (1e-3, 1e6)
@@ -145,6 +154,11 @@ class Session:
         self._period = None if rate is None else 1.0 / float(rate)
         self._gap_limit = -math.inf if rate is None else GAP_FACTOR * self._period  # type: ignore[operator]  # learning: every interval
         self._first_gaps: list = []
+        self._widest = 0.0                  # the widest interval taken beyond the gap limit [s]
+        self._jump_limit = self._jump_back = math.inf               # [s] ahead, back: set with the period
+        if self._period is not None:
+            self._clock_bounds(self._period)
+        self._held: list = []               # (sample, raw, line) off the old clock, until the next ones tell
         self._bounds = [(i, lo, hi) for i, (lo, hi) in enumerate(limit_bounds(self.desc))
                         if math.isfinite(lo) or math.isfinite(hi)]
         self._beyond: set = set()
@@ -154,7 +168,7 @@ class Session:
         self.latest: Sample | None = None
         self.latest_magnitude = 0.0
         self.counts = dict.fromkeys(("samples", "contacts", "points", "bumps", "over_force", "joint_limit",
-                                     "dropped", "late", "bad_lines"), 0)
+                                     "dropped", "late", "time_jumps", "clock_jumps", "bad_lines"), 0)
         self.points: list[LivePoint] = []
         self.events: list[Event] = []
         self.layout = layout
@@ -198,6 +212,8 @@ class Session:
         last = self._last_t
         out = ()
         if last is not None:
+            if self._held or not -self._jump_back <= t - last <= self._jump_limit:
+                return self._off_clock(s, raw, line)
             if not t > last:
                 return self._late(s, raw, last)
             if t - last > self._gap_limit:
@@ -239,6 +255,71 @@ class Session:
             self._samples_buf.append(raw + "\n")
         return (self._event(s.t, "late", f"a sample at t = {s.t!r} s after one at {last!r} s: out of order or "
                                          "repeated, skipped"),)
+
+    def _off_clock(self, s: Sample, raw: str | None, line: int | None) -> tuple:
+        """A time stamp off the stream's clock (beyond :data:`JUMP_PERIODS` nominal periods, or :data:`JUMP_GAPS`
+        widest intervals, from the last sample taken), or one after such: held until the next samples tell
+        whether it was one bad time stamp (they continue the old clock: it is skipped) or the clock jumped
+        (:data:`JUMP_CONFIRM` in a row continue the new one: the session follows it)."""
+        held, last, lim = self._held, self._last_t, self._jump_limit
+        assert last is not None, "off the clock only once a sample was taken"
+        if not held:
+            held.append((s, raw, line))
+            return ()
+        if -self._jump_back <= s.t - last <= lim:   # back on the old clock: what was held was bad
+            return self._drop_held("the next sample continues the old clock") + self.push_sample(s, raw, line)
+        if 0.0 < s.t - held[-1][0].t <= lim:        # on the new clock
+            held.append((s, raw, line))
+            return self._clock_jump() if len(held) >= JUMP_CONFIRM else ()
+        out = self._drop_held("the next sample is on neither clock")
+        self._held.append((s, raw, line))
+        return out
+
+    def _drop_held(self, why: str) -> tuple:
+        """The samples held off the clock are bad time stamps: counted, recorded in ``samples.csv``, skipped."""
+        held, self._held = self._held, []
+        out = ()
+        for s, raw, line in held:
+            self.counts["time_jumps"] += 1
+            if self.record is not None and raw is not None:
+                self._samples_buf.append(raw + "\n")
+            where = "a sample" if line is None else f"line {line}: a sample"
+            out = out + (self._event(s.t, "time_jump", f"{where} at t = {s.t!r} s, {s.t - self._last_t:+.6g} s from "
+                                                       f"the stream's clock (at {self._last_t!r} s, bounds "
+                                                       f"-{self._jump_back:.4g} / +{self._jump_limit:.4g} s) and "
+                                                       f"{why}: a bad time stamp, "
+                                                       "skipped"),)
+        return out
+
+    def _clock_jump(self) -> tuple:
+        """:data:`JUMP_CONFIRM` samples in a row on a new clock: said once, the open contact ends at its last
+        sample before the jump (its point, if it held long enough), and the session follows the new clock."""
+        held, self._held = self._held, []
+        last, (first, _, line) = self._last_t, held[0]
+        assert last is not None, "a jump needs a clock to jump from"
+        self.counts["clock_jumps"] += 1
+        where = "" if line is None else f"line {line}: "
+        out: tuple = (self._event(first.t, "clock_jump", f"{where}the time stamps jumped by {first.t - last:+.6g} s "
+                                                         f"(from {last!r} to {first.t!r} s) and {len(held)} samples "
+                                                         "in a row continue from there: the stream's clock was reset "
+                                                         "(or no sample came for that long); the session follows "
+                                                         "the new clock"),)
+        detector = self._detector
+        if detector.in_contact:
+            contact = detector.finish()
+            self.counts["bumps"] = detector.bumps
+            said = (f"its point is taken at its peak before the jump (contact {contact.index})" if contact else
+                    "it had not held the force long enough for a point (a bump)")
+            out = out + (self._event(last, "clock_jump", f"a contact was open at the clock jump: it ends at its last "
+                                                         f"sample before it; {said}"),)
+            if contact is not None:
+                self._t_push = time.perf_counter()
+                out = out + self._on_contact(contact)
+        detector.shift(first.t - last - (self._period or 0.0))
+        self._last_t = None
+        for s, raw, line in held:
+            out = out + self.push_sample(s, raw, line)
+        return out
 
     def bad_line(self, error: Exception, raw: str | None = None) -> Event:
         """Count a line of the stream that is not a sample (its :class:`~arm_model.InputError`): it is
@@ -288,7 +369,7 @@ class Session:
     def close(self, status: str = "complete", message: str = "the stream ended") -> tuple:
         """End the session: the open contact, if any, gives its point; the record is flushed and closed
         with ``status`` (``complete``, ``interrupted``, ``terminated``, ``stopped``) and ``message``."""
-        out = ()
+        out = self._drop_held("the stream ended before it was followed by a new clock") if self._held else ()
         if self.record is None or not self.record.closed:
             self._t_push = time.perf_counter()
             contact = self._detector.finish()
@@ -319,17 +400,28 @@ class Session:
             self.record.append("events", _csv_line([_num(t), kind, count, message]))
         return ev
 
+    def _clock_bounds(self, period: float) -> None:
+        """How far a time stamp may be from the last one taken, ahead and back, and stay on the stream's clock [s]."""
+        self._jump_limit = max(JUMP_PERIODS * period, JUMP_GAPS * self._widest)
+        self._jump_back = JUMP_BACK_PERIODS * period
+
     def _gap(self, last: float, t: float) -> tuple:
         """Dropped samples between ``last`` and ``t``: the gap against the nominal period (estimated from
         the first :data:`PERIOD_SAMPLES` intervals, which are then checked too)."""
         if self._period is None:
             self._first_gaps.append((last, t))
             if len(self._first_gaps) < PERIOD_SAMPLES:
+                if len(self._first_gaps) >= 3:      # provisional bounds for jumps while the period is learnt
+                    self._clock_bounds(float(np.median([b - a for a, b in self._first_gaps])))
                 return ()
             self._period = float(np.median([b - a for a, b in self._first_gaps]))
             self._gap_limit = GAP_FACTOR * self._period
+            self._clock_bounds(self._period)
             gaps, self._first_gaps = self._first_gaps, []
             return tuple(e for a, b in gaps for e in self._gap(a, b))
+        if t - last > self._widest:
+            self._widest = t - last
+            self._clock_bounds(self._period)
         n = int(round((t - last) / self._period)) - 1
         if n < 1:
             return ()
