@@ -36,6 +36,19 @@ def assert_close(actual, expected, atol: float, rtol: float = 0.0, msg: str = ""
     np.testing.assert_allclose(a, e, atol=atol, rtol=rtol, err_msg=msg)
 
 
+def pin_configuration(model, values) -> np.ndarray:
+    """Pinocchio's configuration vector of ``model`` with the named joints at ``values`` ((name, angle or
+    length) pairs; a continuous joint as its cos and sin), the others at neutral: the tests' independent route."""
+    import math
+
+    import pinocchio as pin
+    full = pin.neutral(model)
+    for name, v in values:
+        jm = model.joints[model.getJointId(name)]
+        full[jm.idx_q: jm.idx_q + jm.nq] = [math.cos(v), math.sin(v)] if jm.nq == 2 else [v]
+    return full
+
+
 def fd_jacobian(fun, x, eps: float = 1e-6) -> np.ndarray:
     """Central finite-difference Jacobian of fun: R^n -> R^m at x."""
     x = np.asarray(x, dtype=float)

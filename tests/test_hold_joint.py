@@ -12,7 +12,7 @@ from arm_model import InputError
 from arm_model.cli import main
 from arm_model.kinematics import probe_rotations
 from arm_model.model_file import load_model
-from conftest import assert_close
+from conftest import assert_close, pin_configuration
 
 CHANGER = """  <link name="mount"><inertial><origin xyz="0 0 0.02"/><mass value="0.3"/>
     <inertia ixx="0.001" iyy="0.001" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial></link>
@@ -47,10 +47,8 @@ def test_a_held_joint_is_pinocchio_s_placement_with_that_joint_at_the_value(urdf
     q[:, 0] = np.abs(q[:, 0]) * 0.3
     x, r = arm.model.ball_centres(q, None, arm.p), probe_rotations(arm.desc, q)
     for qi, xi, ri in zip(q, x, r, strict=True):
-        full = pin.neutral(model)
-        for name, v in [*zip(arm.desc.joint_names, qi, strict=True), ("tool_mount", math.radians(30.0))]:
-            jm = model.joints[model.getJointId(name)]
-            full[jm.idx_q: jm.idx_q + jm.nq] = [math.cos(v), math.sin(v)] if jm.nq == 2 else [v]
+        held = ("tool_mount", math.radians(30.0))
+        full = pin_configuration(model, [*zip(arm.desc.joint_names, qi, strict=True), held])
         pin.framesForwardKinematics(model, data, full)
         T = data.oMf[model.getFrameId("holder")]
         assert_close(xi, T.translation, atol=1e-12)

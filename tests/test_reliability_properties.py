@@ -32,8 +32,8 @@ cell = st.one_of(st.text(alphabet="0123456789.-+eE_ xnaif,\"'", max_size=8),
                  st.floats(allow_nan=True, allow_infinity=True).map(repr))
 
 
-def _mutate_lines(text: str, data, cells=True) -> str:
-    """Replace a few cells (or values after '='), or drop / repeat a line, of ``text``."""
+def _mutate_lines(text: str, data, cells=True, cell_values=cell) -> str:
+    """Replace a few cells (or values after '=') by ``cell_values``, or drop / repeat a line, of ``text``."""
     lines = text.splitlines()
     for _ in range(data.draw(st.integers(1, 3))):
         i = data.draw(st.integers(0, len(lines) - 1))
@@ -46,11 +46,11 @@ def _mutate_lines(text: str, data, cells=True) -> str:
             lines[i] = data.draw(st.text(max_size=20))
         elif cells and "," in lines[i]:
             parts = lines[i].split(",")
-            parts[data.draw(st.integers(0, len(parts) - 1))] = data.draw(cell)
+            parts[data.draw(st.integers(0, len(parts) - 1))] = data.draw(cell_values)
             lines[i] = ",".join(parts)
         elif "=" in lines[i]:
             key = lines[i].split("=", 1)[0]
-            lines[i] = f"{key}= {data.draw(cell)}"
+            lines[i] = f"{key}= {data.draw(cell_values)}"
     return "\n".join(lines) + "\n"
 
 

@@ -7,6 +7,7 @@ import math
 
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
+from test_reliability_properties import _mutate_lines
 
 from arm_model.cli import main
 from conftest import NOMINAL
@@ -350,29 +351,10 @@ CELL = st.one_of(st.text(alphabet="0123456789.-+eE_ xnaif,\"'²１\u00a0", max_s
                  st.floats(allow_nan=True, allow_infinity=True).map(repr))
 
 
-def _mutated(text: str, data) -> str:
-    """A few cells of ``text`` replaced, or a line dropped, repeated or replaced by any text."""
-    lines = text.splitlines()
-    for _ in range(data.draw(st.integers(1, 3))):
-        i = data.draw(st.integers(0, len(lines) - 1))
-        action = data.draw(st.sampled_from(["cell", "cell", "cell", "drop", "repeat", "garbage"]))
-        if action == "drop" and len(lines) > 1:
-            del lines[i]
-        elif action == "repeat":
-            lines.insert(i, lines[i])
-        elif action == "garbage":
-            lines[i] = data.draw(st.text(max_size=20))
-        elif "," in lines[i]:
-            parts = lines[i].split(",")
-            parts[data.draw(st.integers(0, len(parts) - 1))] = data.draw(CELL)
-            lines[i] = ",".join(parts)
-    return "\n".join(lines) + "\n"
-
-
 def _hostile_reader_case(tmp_path_factory, data, text: str, name: str, read):
     from arm_model import InputError
     path = tmp_path_factory.mktemp("r") / name
-    path.write_text(_mutated(text, data), encoding="utf-8", errors="surrogateescape")
+    path.write_text(_mutate_lines(text, data, cell_values=CELL), encoding="utf-8", errors="surrogateescape")
     try:
         return read(path)
     except InputError as exc:

@@ -22,7 +22,7 @@ from arm_model.kinematics import probe_rotations
 from arm_model.model import AuxData
 from arm_model.model_file import format_model, load_model
 from arm_model.sim import campaign_from_dict, load_campaign, simulate
-from conftest import assert_close
+from conftest import assert_close, pin_configuration
 
 #: a small mobile manipulator written here: a prismatic lift, revolute and continuous joints, a flange link
 #: turned by a fixed joint (the marker's link), a finger branch with a mirrored mesh, inertials throughout
@@ -360,10 +360,7 @@ def test_base_frame_starts_the_chain_after_a_floating_joint(tmp_path, capsys):
     q[:, 0] = np.abs(q[:, 0]) * 0.3
     x, r = arm.model.ball_centres(q, None, arm.p), probe_rotations(arm.desc, q)
     for qi, xi, ri in zip(q, x, r, strict=True):
-        full = pin.neutral(model)
-        for name, v in zip(arm.desc.joint_names, qi, strict=True):
-            jm = model.joints[model.getJointId(name)]
-            full[jm.idx_q: jm.idx_q + jm.nq] = [math.cos(v), math.sin(v)] if jm.nq == 2 else [v]   # continuous
+        full = pin_configuration(model, zip(arm.desc.joint_names, qi, strict=True))
         pin.framesForwardKinematics(model, data, full)
         T = data.oMf[model.getFrameId("base_link")].inverse() * data.oMf[model.getFrameId(TIP)]
         assert_close(xi, T.translation, atol=1e-12)

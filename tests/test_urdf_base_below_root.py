@@ -3,13 +3,13 @@ left foot, touching something with its hand (the chain foot -> leg walked backwa
 arm). The reference is a second URDF of the same robot written by hand with the foot as its root, evaluated
 by Pinocchio: its placements and its gravity torques (RNEA) are what the chain read from the pelvis-rooted
 file must give."""
-import math
 
 import numpy as np
 import pytest
 
 from arm_model.model_file import load_model
 from arm_model.pinocchio_model import PinocchioArm
+from conftest import pin_configuration
 
 pin = pytest.importorskip("pinocchio")
 
@@ -64,10 +64,7 @@ SOLE_ROOTED = ('<robot name="walker">' + LINK_XML
 
 
 def _full(model, names, qi):
-    full = pin.neutral(model)
-    for name, v in zip(names, qi, strict=True):
-        jm = model.joints[model.getJointId(name)]
-        full[jm.idx_q: jm.idx_q + jm.nq] = [math.cos(v), math.sin(v)] if jm.nq == 2 else [v]
+    full = pin_configuration(model, zip(names, qi, strict=True))
     knee = model.joints[model.getJointId("l_knee")]
     elbow = model.joints[model.getJointId("elbow")]
     full[elbow.idx_q] = 0.5 * full[knee.idx_q] + 0.1        # Pinocchio reads <mimic> as a joint of its own
