@@ -41,7 +41,7 @@ from arm_model.model import ArmModel
 from arm_model.tracker import Tracker
 
 from .data import CalibrationData, Weights
-from .discrepancy import Discrepancy, model_discrepancy
+from .discrepancy import Discrepancy, group_deletions, model_discrepancy
 from .identifiability import (
     Combination,
     Identifiability,
@@ -260,6 +260,7 @@ class CalibrationResult:
     gross: list = field(default_factory=list)  # GrossError: points left out of the fit (indices into the data given)
     gross_kept: str | None = None             # why a gross-looking point was kept (the model's error), or None
     redundancy: float | None = None           # with a prior: rows less their share of the unknowns (s0's divisor)
+    point_tests: dict | None = None           # every point's gross-error test (:func:`point_tests`), when asked
 
     # -- access by name ----------------------------------------------------------------------------
     @property
@@ -614,25 +615,21 @@ def _without_outliers(model: ArmModel, data: CalibrationData, options: FitOption
 
 def _without_gross(model: ArmModel, data: CalibrationData, options: FitOptions, estimate) -> CalibrationResult:
     """``estimate(model, data, options)`` with the gross errors left out, one at a time (data snooping):
-    while the point of the largest standardized residual (the robust scale and the leverage make it the
-    studentized deletion residual to first order) is at ``options.gross_threshold`` or beyond, it is left out
-    and the fit redone. Never more than :data:`GROSS_SHARE` of the points, nor a point its feature needs
-    (:data:`~calibration.kinds.MIN_POINTS`): past that the misfit is the model's, kept and said
-    (``gross_kept``). ``options.gross_threshold`` None keeps every point."""
+    while the point of the largest gross-error test (:func:`point_tests`: its rows' group-deletion residual
+    against the covariance the joint fit predicts for it, as a standardized residual of the same false-alarm
+    rate) is at ``options.gross_threshold`` (and ``outlier_threshold``) or beyond, it is left out and the fit
+    redone. Never more than :data:`GROSS_SHARE` of the points, nor a point its feature needs
+    (:data:`~calibration.kinds.MIN_POINTS`, or one whose deletion leaves an unknown undetermined): past that the
+    misfit is the model's, kept and said (``gross_kept``). ``options.gross_threshold`` None keeps every point."""
     from .kinds import MIN_POINTS
     res = estimate(model, data, options)
-    k = options.gross_threshold
-    if k is None:
+    if options.gross_threshold is None:
         return res
+    k = max(options.gross_threshold, options.outlier_threshold)
     index = np.arange(len(data))
     gross: list[GrossError] = []
     limit = max(1, int(GROSS_SHARE * len(data)))
-    while True:
-        flagged = sorted((o for o in res.outliers if o.point is not None and abs(o.standardized) >= k),
-                         key=lambda o: -abs(o.standardized))
-        if not flagged:
-            break
-        o = flagged[0]
+    while (o := _gross_candidate(res, k)) is not None:
         pts = res.data.points
         same = (pts.measurement == pts.measurement[o.point]) & (pts.feature == pts.feature[o.point])
         need = MIN_POINTS.get(o.kind, (0, 0))[0] if pts.feature[o.point] != "" else 0
@@ -654,6 +651,71 @@ def _without_gross(model: ArmModel, data: CalibrationData, options: FitOptions, 
         res = without
     res.gross = gross
     return res
+
+
+def _gross_candidate(res: CalibrationResult, k: float) -> Outlier | None:
+    """The point of ``res`` whose gross-error test (``res.point_tests``) is the largest, if at ``k`` or beyond:
+    an :class:`Outlier` whose ``standardized`` is the test's standardized equivalent (signed as its row of the
+    largest standardized residual) and ``residual`` that row's."""
+    t = res.point_tests
+    if t is None or not np.any(np.isfinite(t["sigma"])):
+        return None
+    i = int(np.nanargmax(t["sigma"]))
+    if t["sigma"][i] < k:
+        return None
+    pi, tab, pts = int(t["point"][i]), res.residuals, res.data.points
+    rows = np.flatnonzero(tab["point"] == pi)
+    row = int(rows[np.argmax(np.abs(tab["standardized"][rows]))])
+    return Outlier(str(tab["kind"][row]), str(pts.measurement[pi]), str(pts.feature[pi]), pi,
+                   None if pts.lines is None else int(pts.lines[pi]),
+                   math.copysign(float(t["sigma"][i]), float(tab["standardized"][row])), float(tab["value"][row]))
+
+
+def point_tests(prob: Problem, r: np.ndarray, js, solve, leverage: np.ndarray) -> dict:
+    """The gross-error test of every point of a fit of ``prob`` (``r`` its weighted residuals, ``js``,
+    ``solve`` and ``leverage`` as :func:`~calibration.discrepancy.model_discrepancy` and :func:`_normal`): the
+    point's residual rows ``O`` together (a seat's or a marker's three, a sphere's one, a point's reference rows
+    with its feature's) deleted from the joint fit (parameters, prior and every nuisance unknown:
+    :func:`~calibration.discrepancy.group_deletions`), ``e_O = (I - H_OO)^-1 r_O`` with covariance ``s^2 (I -
+    H_OO)^-1``, ``s`` the rows' robust scale (:func:`robust_scales`); the statistic is its squared Mahalanobis
+    norm ``T = r_O^T (I - H_OO)^-1 r_O / s^2``, chi-square with ``m = |O|`` degrees of freedom on clean Gaussian
+    data, given as the standardized residual of the same false-alarm rate (:func:`sigma_equivalent`; for one row
+    exactly ``|r| / (s sqrt(1 - h))``, the standardized residual).
+
+    Returns {``point`` (n,) indices into the data, ``rows`` (n,) m, ``chi2`` (n,) T, ``sigma`` (n,) its
+    standardized equivalent, ``deletion`` (n,) [m] the norm of the unweighted ``e_O``}, NaN for a point the fit
+    cannot do without (deleting it leaves an unknown undetermined)."""
+    rp = prob.row_point
+    rows = np.flatnonzero((prob.row_distance < 0) & (rp >= 0))
+    rows = rows[np.argsort(rp[rows], kind="stable")]
+    points, start = np.unique(rp[rows], return_index=True)
+    groups = np.split(rows, start[1:])
+    scale = robust_scales(r, leverage, row_kinds(prob))
+    chi2, dele = np.full(len(points), np.nan), np.full(len(points), np.nan)
+    for i, (o, (e, m)) in enumerate(zip(groups, group_deletions(js, solve, r, groups))):
+        if e is not None:
+            w = r[o] / scale[o]
+            chi2[i] = float(w @ m @ w)
+            dele[i] = float(np.linalg.norm(prob.sigma[o] * e))
+    m = np.array([len(o) for o in groups])
+    return {"point": points, "rows": m, "chi2": chi2, "deletion": dele,
+            "sigma": np.array([sigma_equivalent(c, n) if np.isfinite(c) else np.nan for c, n in zip(chi2, m)])}
+
+
+def sigma_equivalent(chi2: float, rows: int) -> float:
+    """The standardized residual ``k`` whose test on each of ``rows`` independent Gaussian rows flags a clean point
+    as often as ``chi2`` on ``rows`` degrees of freedom: ``1 - (1 - 2 Phi(-k))^rows = P(chi2_rows >= chi2)``. So
+    a point is a gross error at ``k`` at the false-alarm rate the row-by-row test of its largest standardized
+    residual had at ``k``; for one row it is ``sqrt(chi2)``. Computed in logarithms: finite far in the tail."""
+    from scipy.special import gammaincc, gammaln, ndtri_exp
+    a, x = 0.5 * rows, 0.5 * max(float(chi2), 0.0)
+    p = float(gammaincc(a, x))
+    if p > 1e-12:
+        log_alpha = math.log(-math.expm1(math.log1p(-p) / rows)) if p < 1.0 else 0.0
+    else:   # alpha = p / rows to 1e-12; the upper incomplete gamma's asymptote where p underflows
+        log_p = math.log(p) if p > 0 else (a - 1.0) * math.log(x) - x - float(gammaln(a))
+        log_alpha = log_p - math.log(rows)
+    return float(-ndtri_exp(log_alpha - math.log(2.0)))
 
 
 def _deletion_residual(res: CalibrationResult, data: CalibrationData, point: int) -> float:
@@ -1030,7 +1092,9 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         prior_centre=None if s.prior is None else s.prior.centre, options=options, prior_sd=prior_sd,
         prior_ratio=None if prior_sd is None else variance_ratio(u ** 2, prior_sd),
         prior_groups=_group_table(s, kept, u), redundancy=None if s.prior is None else red,
-        discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var))  # type: ignore[attr-defined]
+        discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var),  # type: ignore[attr-defined]
+        point_tests=point_tests(prob, ev.r, nrm.js, nrm.lu.solve, nrm.h)  # type: ignore[attr-defined]
+        if options.gross_threshold is not None and not options.drop_outliers else None)
 
 
 def _group_table(s: _Setup, kept, u) -> dict:
@@ -1192,6 +1256,12 @@ def grouped_standardized(r: np.ndarray, leverage, kinds) -> np.ndarray:
     with less than :data:`MIN_REDUNDANCY` redundant rows takes the scale of all rows together (a median of
     a few rows is no scale)."""
     leverage = np.broadcast_to(np.asarray(leverage, float), np.shape(r))
+    return r / np.sqrt(1.0 - leverage) / robust_scales(r, leverage, kinds)
+
+
+def robust_scales(r: np.ndarray, leverage, kinds) -> np.ndarray:
+    """The robust scale of each row of :func:`grouped_standardized` (weighted units, as ``r``)."""
+    leverage = np.broadcast_to(np.asarray(leverage, float), np.shape(r))
     zraw = r / np.sqrt(1.0 - leverage)
     pooled = 1.4826 * float(np.median(np.abs(zraw))) or 1.0
     scale = np.zeros_like(zraw)
@@ -1201,7 +1271,7 @@ def grouped_standardized(r: np.ndarray, leverage, kinds) -> np.ndarray:
             if float(np.sum(1.0 - leverage[idx])) < MIN_REDUNDANCY or s <= 0:
                 s = pooled
             scale[idx] = np.maximum(scale[idx], s)
-    return zraw / scale
+    return scale
 
 
 def variance_components(problem: Problem, r: np.ndarray, leverage: np.ndarray, weights: Weights) -> list[dict]:

@@ -44,8 +44,8 @@ import numpy as np
 from arm_model import NumericalError
 from arm_model.discrepancy import TrainingPoses, joint_levers, pose_distance
 
-__all__ = ["EXTREME_SHARE", "Discrepancy", "Growth", "extreme_folds", "fit_growth", "fold_errors", "holdable",
-           "model_discrepancy"]
+__all__ = ["EXTREME_SHARE", "Discrepancy", "Growth", "extreme_folds", "fit_growth", "fold_errors", "group_deletions",
+           "holdable", "model_discrepancy"]
 
 log = logging.getLogger(__name__)
 
@@ -224,16 +224,50 @@ def holdable(prob, held) -> set:
     return out
 
 
-def fold_errors(prob, r: np.ndarray, js, solve, var: float, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def group_deletions(js, solve, r: np.ndarray, groups, chunk: int = 2000, tol: float = 1e-9) -> list:
+    """The group-deletion identity of a linearised joint fit, for each group of residual rows ``O`` in ``groups``
+    (index arrays; Cook and Weisberg 1982, ch. 3): ``(e_O, M_O)`` with ``M_O = (I - H_OO)^-1``, ``H = J A^-1
+    J^T`` the hat matrix of the joint fit (``js`` the column-scaled Jacobian of every unknown, ``solve`` ``b ->
+    A^-1 b`` with the prior's precision in ``A``) and ``e_O = M_O r_O`` the group's prediction errors by the
+    fit without it, in weighted units (``r`` the weighted residuals); their covariance is ``var M_O``
+    (``var`` the variance of a weighted row). ``(None, None)`` for a group the fit cannot do without (an
+    eigenvalue of ``I - H_OO`` at ``tol`` or below: deleting it leaves an unknown undetermined). The
+    groups are taken ``chunk`` rows at a time (one dense solve each)."""
+    jr = js.tocsr()
+    out: list = []
+    i = 0
+    while i < len(groups):
+        batch, n = [], 0
+        while i < len(groups) and (not batch or n + len(groups[i]) <= chunk):
+            batch.append(np.asarray(groups[i], dtype=int))
+            n += len(batch[-1])
+            i += 1
+        jd = jr[np.concatenate(batch)].toarray()
+        z = solve(jd.T)
+        k = 0
+        for rows in batch:
+            sl = slice(k, k + len(rows))
+            k += len(rows)
+            h = jd[sl] @ z[:, sl]
+            ih = np.eye(len(rows)) - 0.5 * (h + h.T)
+            if np.linalg.eigvalsh(ih)[0] <= tol:
+                out.append((None, None))
+                continue
+            m = np.linalg.inv(ih)
+            out.append((m @ r[rows], m))
+    return out
+
+
+def fold_errors(prob, r: np.ndarray, js, solve, var: float, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """The prediction errors [m] of the residual ``rows`` of a fit of ``prob`` by the fit without them, and the
     variances [m^2] that fit predicts for them (noise and posterior), for the model linearised at the solution:
-    ``(I - H_OO)^-1 r_O`` and the diagonal of ``var (I - H_OO)^-1``, in metres (each row times its sigma).
-    Arguments as :func:`model_discrepancy`."""
-    jo = js.tocsr()[rows]
-    h = np.asarray(jo @ solve(np.asarray(jo.T.todense())))
-    m = np.linalg.inv(np.eye(len(rows)) - 0.5 * (h + h.T))
+    ``(I - H_OO)^-1 r_O`` and the diagonal of ``var (I - H_OO)^-1`` (:func:`group_deletions`), in metres (each
+    row times its sigma); None when the fit cannot do without the rows. Arguments as :func:`model_discrepancy`."""
+    e, m = group_deletions(js, solve, r, [rows])[0]
+    if e is None:
+        return None
     sig = prob.sigma[rows]
-    return sig * (m @ r[rows]), var * np.diag(m) * sig ** 2
+    return sig * e, var * np.diag(m) * sig ** 2
 
 
 def model_discrepancy(prob, r: np.ndarray, js, solve, var: float, share: float = EXTREME_SHARE) -> Discrepancy | None:
@@ -262,7 +296,10 @@ def model_discrepancy(prob, r: np.ndarray, js, solve, var: float, share: float =
         rows = np.flatnonzero(point_rows & np.isin(rp, sorted(held)))
         if not len(rows):
             continue
-        e, v = fold_errors(prob, r, js, solve, var, rows)
+        got = fold_errors(prob, r, js, solve, var, rows)
+        if got is None:
+            continue
+        e, v = got
         rest = used[~np.isin(used, sorted(held))]
         errors.append(e)
         variances.append(v)
