@@ -671,16 +671,20 @@ def _gross_candidate(res: CalibrationResult, k: float) -> Outlier | None:
                    math.copysign(float(t["sigma"][i]), float(tab["standardized"][row])), float(tab["value"][row]))
 
 
-def point_tests(prob: Problem, r: np.ndarray, js, solve, leverage: np.ndarray) -> dict:
+def point_tests(prob: Problem, r: np.ndarray, js, solve, leverage: np.ndarray, k: float = 0.0) -> dict:
     """The gross-error test of every point of a fit of ``prob`` (``r`` its weighted residuals, ``js``,
     ``solve`` and ``leverage`` as :func:`~calibration.discrepancy.model_discrepancy` and :func:`_normal`): the
     point's residual rows ``O`` together (a seat's or a marker's three, a sphere's one, a point's reference rows
     with its feature's) deleted from the joint fit (parameters, prior and every nuisance unknown:
     :func:`~calibration.discrepancy.group_deletions`), ``e_O = (I - H_OO)^-1 r_O`` with covariance ``s^2 (I -
-    H_OO)^-1``, ``s`` the rows' robust scale (:func:`robust_scales`); the statistic is its squared Mahalanobis
-    norm ``T = r_O^T (I - H_OO)^-1 r_O / s^2``, chi-square with ``m = |O|`` degrees of freedom on clean Gaussian
-    data, given as the standardized residual of the same false-alarm rate (:func:`sigma_equivalent`; for one row
-    exactly ``|r| / (s sqrt(1 - h))``, the standardized residual).
+    H_OO)^-1``; the statistic is its squared Mahalanobis norm ``T = r_O^T (I - H_OO)^-1 r_O / s^2``, chi-square
+    with ``m = |O|`` degrees of freedom on clean Gaussian data, given as the standardized residual of the same
+    false-alarm rate (:func:`sigma_equivalent`; for one row exactly ``|r| / (s sqrt(1 - h))``). ``s`` is the
+    rows' robust scale (:func:`robust_scales`) among the residuals of the fit without the point (``r + js
+    d_O``, the point's rows at their deletion residuals): a blunder that pulls a small session towards itself
+    spreads into every residual and would otherwise inflate the scale it is judged by. The scale without the
+    point is taken for the points at ``k / 2`` or beyond with the fit's own scale (below, a point would need to
+    halve the median of every other residual by its own pull to reach ``k``).
 
     Returns {``point`` (n,) indices into the data, ``rows`` (n,) m, ``chi2`` (n,) T, ``sigma`` (n,) its
     standardized equivalent, ``deletion`` (n,) [m] the norm of the unweighted ``e_O``}, NaN for a point the fit
@@ -690,16 +694,25 @@ def point_tests(prob: Problem, r: np.ndarray, js, solve, leverage: np.ndarray) -
     rows = rows[np.argsort(rp[rows], kind="stable")]
     points, start = np.unique(rp[rows], return_index=True)
     groups = np.split(rows, start[1:])
-    scale = robust_scales(r, leverage, row_kinds(prob))
-    chi2, dele = np.full(len(points), np.nan), np.full(len(points), np.nan)
-    for i, (o, (e, m)) in enumerate(zip(groups, group_deletions(js, solve, r, groups))):
-        if e is not None:
+    kinds = row_kinds(prob)
+    scale = robust_scales(r, leverage, kinds)
+    m_rows = np.array([len(o) for o in groups])
+    chi2, sigma, dele = (np.full(len(points), np.nan) for _ in range(3))
+    for i, (o, (e, m, d)) in enumerate(zip(groups, group_deletions(js, solve, r, groups), strict=True)):
+        if e is None:
+            continue
+        dele[i] = float(np.linalg.norm(prob.sigma[o] * e))
+        for pass_ in (0, 1):
             w = r[o] / scale[o]
             chi2[i] = float(w @ m @ w)
-            dele[i] = float(np.linalg.norm(prob.sigma[o] * e))
-    m = np.array([len(o) for o in groups])
-    return {"point": points, "rows": m, "chi2": chi2, "deletion": dele,
-            "sigma": np.array([sigma_equivalent(c, n) if np.isfinite(c) else np.nan for c, n in zip(chi2, m)])}
+            sigma[i] = sigma_equivalent(chi2[i], len(o))
+            if pass_ or sigma[i] < 0.5 * k:
+                break
+            r_without, h_without = r + js @ d, leverage.copy()
+            h_without[o] = 0.0
+            scale = scale.copy()
+            scale[o] = robust_scales(r_without, h_without, kinds)[o]
+    return {"point": points, "rows": m_rows, "chi2": chi2, "deletion": dele, "sigma": sigma}
 
 
 def sigma_equivalent(chi2: float, rows: int) -> float:
@@ -1093,7 +1106,8 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         prior_ratio=None if prior_sd is None else variance_ratio(u ** 2, prior_sd),
         prior_groups=_group_table(s, kept, u), redundancy=None if s.prior is None else red,
         discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var),  # type: ignore[attr-defined]
-        point_tests=point_tests(prob, ev.r, nrm.js, nrm.lu.solve, nrm.h)  # type: ignore[attr-defined]
+        point_tests=point_tests(prob, ev.r, nrm.js, nrm.lu.solve, nrm.h,  # type: ignore[attr-defined]
+                                max(options.gross_threshold, options.outlier_threshold))
         if options.gross_threshold is not None and not options.drop_outliers else None)
 
 

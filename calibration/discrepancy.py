@@ -230,9 +230,11 @@ def group_deletions(js, solve, r: np.ndarray, groups, chunk: int = 2000, tol: fl
     J^T`` the hat matrix of the joint fit (``js`` the column-scaled Jacobian of every unknown, ``solve`` ``b ->
     A^-1 b`` with the prior's precision in ``A``) and ``e_O = M_O r_O`` the group's prediction errors by the
     fit without it, in weighted units (``r`` the weighted residuals); their covariance is ``var M_O``
-    (``var`` the variance of a weighted row). ``(None, None)`` for a group the fit cannot do without (an
-    eigenvalue of ``I - H_OO`` at ``tol`` or below: deleting it leaves an unknown undetermined). The
-    groups are taken ``chunk`` rows at a time (one dense solve each)."""
+    (``var`` the variance of a weighted row); and ``d_O = A^-1 J_O^T e_O``, the change of the (scaled)
+    unknowns from the fit without the group to the fit with it (the other rows' residuals without it are
+    ``r + js d_O``). ``(None, None, None)`` for a group the fit cannot do without (an eigenvalue of ``I -
+    H_OO`` at ``tol`` or below: deleting it leaves an unknown undetermined). The groups are taken ``chunk``
+    rows at a time (one dense solve each)."""
     jr = js.tocsr()
     out: list = []
     i = 0
@@ -251,10 +253,11 @@ def group_deletions(js, solve, r: np.ndarray, groups, chunk: int = 2000, tol: fl
             h = jd[sl] @ z[:, sl]
             ih = np.eye(len(rows)) - 0.5 * (h + h.T)
             if np.linalg.eigvalsh(ih)[0] <= tol:
-                out.append((None, None))
+                out.append((None, None, None))
                 continue
             m = np.linalg.inv(ih)
-            out.append((m @ r[rows], m))
+            e = m @ r[rows]
+            out.append((e, m, z[:, sl] @ e))
     return out
 
 
@@ -263,7 +266,7 @@ def fold_errors(prob, r: np.ndarray, js, solve, var: float, rows: np.ndarray) ->
     variances [m^2] that fit predicts for them (noise and posterior), for the model linearised at the solution:
     ``(I - H_OO)^-1 r_O`` and the diagonal of ``var (I - H_OO)^-1`` (:func:`group_deletions`), in metres (each
     row times its sigma); None when the fit cannot do without the rows. Arguments as :func:`model_discrepancy`."""
-    e, m = group_deletions(js, solve, r, [rows])[0]
+    e, m, _ = group_deletions(js, solve, r, [rows])[0]
     if e is None:
         return None
     sig = prob.sigma[rows]

@@ -25,7 +25,9 @@ REFERENCE = ("fit", "identity", "off")
 #: standardized residual [robust standard deviations] from which a point is a gross error, left out by default:
 #: above Baarda's data-snooping critical value of a Gaussian campaign of up to 10^5 rows at a family-wise level
 #: of 0.001 (Bonferroni: 4.3 for 66 rows, 5.7 for 10^5), with a margin for the heavier tails an effect the
-#: model lacks gives real residuals (docs/calibration.md, Uncertainty and outliers)
+#: model lacks gives real residuals. A point's rows are tested together (their group-deletion residual's
+#: chi-square, :func:`calibration.calibrate.point_tests`) at the false-alarm rate this value has row by row:
+#: one row exactly at 6, three rows at chi-square 41.2 (docs/calibration.md, Uncertainty and outliers)
 GROSS_THRESHOLD = 6.0
 
 
@@ -57,9 +59,10 @@ class FitOptions:
         rank_tol: relative singular value below which a direction is not identifiable.
         outlier_threshold: standardized residual beyond which a point is an outlier.
         drop_outliers: drop the outlier points and refit, in rounds (the worst first) until none is left.
-        gross_threshold: without ``drop_outliers``, the standardized residual from which an outlier (beyond
-            ``outlier_threshold`` too: a gross error is an outlier) is a gross error, left out and the fit redone
-            (one at a time, the largest first, at most 5 % of the points); None keeps every point.
+        gross_threshold: without ``drop_outliers``, the standardized residual from which a point (its rows tested
+            together by their deletion residual, as the standardized residual of the same false-alarm rate;
+            beyond ``outlier_threshold`` too: a gross error is an outlier) is a gross error, left out and the fit
+            redone (one at a time, the largest first, at most 5 % of the points); None keeps every point.
         covariance: "residual" (scaled by the residual variance factor) or "stated".
         reference: "fit" (``T_ref_base`` unknown), "identity" (reference coordinates are base
             coordinates) or "off" (reference columns ignored).

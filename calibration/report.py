@@ -253,7 +253,8 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
                            _fmt(o.residual * 1e6, 4)) for o in result.outliers])]
     if result.gross:
         parts += ["<h2>Gross errors (left out of the fit)</h2>",
-                  "<p>points whose standardized residual reached the gross-error threshold, left out one at a time "
+                  "<p>points whose gross-error test (their rows' deletion residual together, as the standardized "
+                  "residual of the same false-alarm rate) reached the threshold, left out one at a time "
                   "(the largest first) and the fit redone; 'deletion residual': the point's residual under the fit "
                   "without it. <code>--keep-outliers</code> keeps them.</p>",
                   reports.html_table(["measurement", "feature", "line", "standardized", "threshold",
