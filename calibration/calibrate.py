@@ -671,7 +671,7 @@ def _gross_candidate(res: CalibrationResult, k: float) -> Outlier | None:
                    math.copysign(float(t["sigma"][i]), float(tab["standardized"][row])), float(tab["value"][row]))
 
 
-def point_tests(prob: Problem, r: np.ndarray, js, solve, leverage: np.ndarray, k: float = 0.0) -> dict:
+def point_tests(prob: Problem, r: np.ndarray, js, solve, leverage: np.ndarray, k: float) -> dict:
     """The gross-error test of every point of a fit of ``prob`` (``r`` its weighted residuals, ``js``,
     ``solve`` and ``leverage`` as :func:`~calibration.discrepancy.model_discrepancy` and :func:`_normal`): the
     point's residual rows ``O`` together (a seat's or a marker's three, a sphere's one, a point's reference rows
@@ -697,38 +697,41 @@ def point_tests(prob: Problem, r: np.ndarray, js, solve, leverage: np.ndarray, k
     kinds = row_kinds(prob)
     scale = robust_scales(r, leverage, kinds)
     m_rows = np.array([len(o) for o in groups])
-    chi2, sigma, dele = (np.full(len(points), np.nan) for _ in range(3))
-    for i, (o, (e, m, d)) in enumerate(zip(groups, group_deletions(js, solve, r, groups), strict=True)):
-        if e is None:
-            continue
-        dele[i] = float(np.linalg.norm(prob.sigma[o] * e))
-        for pass_ in (0, 1):
+    chi2, dele = np.full(len(points), np.nan), np.full(len(points), np.nan)
+    tests = group_deletions(js, solve, r, groups)
+    for i, (o, (e, m, _)) in enumerate(zip(groups, tests, strict=True)):
+        if e is not None:
             w = r[o] / scale[o]
             chi2[i] = float(w @ m @ w)
-            sigma[i] = sigma_equivalent(chi2[i], len(o))
-            if pass_ or sigma[i] < 0.5 * k:
-                break
-            r_without, h_without = r + js @ d, leverage.copy()
-            h_without[o] = 0.0
-            scale = scale.copy()
-            scale[o] = robust_scales(r_without, h_without, kinds)[o]
+            dele[i] = float(np.linalg.norm(prob.sigma[o] * e))
+    sigma = sigma_equivalent(chi2, m_rows)
+    for i in np.flatnonzero(np.nan_to_num(sigma) >= 0.5 * k):
+        o, (_, m, d) = groups[i], tests[i]
+        h_without = leverage.copy()
+        h_without[o] = 0.0
+        w = r[o] / robust_scales(r + js @ d, h_without, kinds)[o]
+        chi2[i] = float(w @ m @ w)
+        sigma[i] = sigma_equivalent(chi2[i], m_rows[i])
     return {"point": points, "rows": m_rows, "chi2": chi2, "deletion": dele, "sigma": sigma}
 
 
-def sigma_equivalent(chi2: float, rows: int) -> float:
+def sigma_equivalent(chi2, rows):
     """The standardized residual ``k`` whose test on each of ``rows`` independent Gaussian rows flags a clean point
     as often as ``chi2`` on ``rows`` degrees of freedom: ``1 - (1 - 2 Phi(-k))^rows = P(chi2_rows >= chi2)``. So
     a point is a gross error at ``k`` at the false-alarm rate the row-by-row test of its largest standardized
-    residual had at ``k``; for one row it is ``sqrt(chi2)``. Computed in logarithms: finite far in the tail."""
+    residual had at ``k``; for one row it is ``sqrt(chi2)``. Computed in logarithms: finite far in the tail.
+    Scalars or arrays (NaN stays NaN)."""
     from scipy.special import gammaincc, gammaln, ndtri_exp
-    a, x = 0.5 * rows, 0.5 * max(float(chi2), 0.0)
-    p = float(gammaincc(a, x))
-    if p > 1e-12:
-        log_alpha = math.log(-math.expm1(math.log1p(-p) / rows)) if p < 1.0 else 0.0
-    else:   # alpha = p / rows to 1e-12; the upper incomplete gamma's asymptote where p underflows
-        log_p = math.log(p) if p > 0 else (a - 1.0) * math.log(x) - x - float(gammaln(a))
-        log_alpha = log_p - math.log(rows)
-    return float(-ndtri_exp(log_alpha - math.log(2.0)))
+    m = np.asarray(rows, dtype=float)
+    a, x = 0.5 * m, 0.5 * np.maximum(np.asarray(chi2, dtype=float), 0.0)
+    p = gammaincc(a, x)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        exact = np.where(p < 1.0, np.log(-np.expm1(np.log1p(-p) / m)), 0.0)
+        # alpha = p / rows to 1e-12 below; the upper incomplete gamma's asymptote where p underflows
+        log_p = np.where(p > 0, np.log(p), (a - 1.0) * np.log(x) - x - gammaln(a))
+        log_alpha = np.where(p > 1e-12, exact, log_p - np.log(m))
+    k = -ndtri_exp(log_alpha - math.log(2.0))
+    return float(k) if np.ndim(k) == 0 else k
 
 
 def _deletion_residual(res: CalibrationResult, data: CalibrationData, point: int) -> float:

@@ -244,20 +244,29 @@ def group_deletions(js, solve, r: np.ndarray, groups, chunk: int = 2000, tol: fl
             batch.append(np.asarray(groups[i], dtype=int))
             n += len(batch[-1])
             i += 1
-        jd = jr[np.concatenate(batch)].toarray()
-        z = solve(jd.T)
-        k = 0
-        for rows in batch:
-            sl = slice(k, k + len(rows))
-            k += len(rows)
-            h = jd[sl] @ z[:, sl]
-            ih = np.eye(len(rows)) - 0.5 * (h + h.T)
-            if np.linalg.eigvalsh(ih)[0] <= tol:
-                out.append((None, None, None))
-                continue
-            m = np.linalg.inv(ih)
-            e = m @ r[rows]
-            out.append((e, m, z[:, sl] @ e))
+        out += _deletion_batch(jr, solve, r, batch, tol)
+    return out
+
+
+def _deletion_batch(jr, solve, r: np.ndarray, batch: list, tol: float) -> list:
+    """:func:`group_deletions` of the groups ``batch`` (one dense solve; the groups of one size together)."""
+    jd = jr[np.concatenate(batch)].toarray()
+    z = solve(jd.T).T                                   # (rows, unknowns): A^-1 J_O^T, row by row
+    start = np.cumsum([0] + [len(o) for o in batch])
+    out: list = [None] * len(batch)
+    for size in np.unique(np.diff(start)):
+        which = np.flatnonzero(np.diff(start) == size)
+        pos = start[which][:, None] + np.arange(size)   # (groups, size) positions in jd and z
+        h = np.einsum("giu,gju->gij", jd[pos], z[pos])
+        ih = np.eye(size) - 0.5 * (h + np.swapaxes(h, 1, 2))
+        ok = np.linalg.eigvalsh(ih)[:, 0] > tol
+        m = np.full_like(ih, np.nan)
+        m[ok] = np.linalg.inv(ih[ok])
+        rows = np.stack([batch[g] for g in which])
+        e = np.einsum("gij,gj->gi", m, r[rows])
+        d = np.einsum("giu,gi->gu", z[pos], e)
+        for g, k in enumerate(which):
+            out[k] = (e[g], m[g], d[g]) if ok[g] else (None, None, None)
     return out
 
 
