@@ -241,10 +241,9 @@ def register(sub) -> None:
                    help="drop every outlier point and refit, in rounds (they are listed); default: leave out the "
                         "gross errors only (--gross-threshold), report and keep the others")
     c.add_argument("--gross-threshold", type=positive(), default=GROSS_THRESHOLD,
-                   help=f"standardized residual from which a point (its rows tested together: their deletion "
-                        f"residual, at the false-alarm rate this value has row by row; beyond --outlier-threshold "
-                        f"too) is a gross error: left out and the fit redone, one at a time, at most 5%% of the "
-                        f"points, and listed (default {GROSS_THRESHOLD:g})")
+                   help=f"standardized residual from which a point (its rows' deletion residual together, at the "
+                        f"row-by-row false-alarm rate) is a gross error: left out and the fit redone, one at a time, "
+                        f"at most 5%% of the points, and listed (default {GROSS_THRESHOLD:g})")
     c.add_argument("--keep-outliers", action="store_true",
                    help="keep every point in the fit, gross errors too (they are reported)")
     c.add_argument("--covariance-scale", "--covariance", dest="covariance", choices=("residual", "stated"),
