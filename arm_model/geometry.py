@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -365,12 +366,44 @@ def _normalised(p: np.ndarray, what: str) -> tuple[np.ndarray, float, np.ndarray
 Fn = Callable[[np.ndarray], np.ndarray]
 
 
-def _solve(fun: Fn, jac: Fn, x0: ArrayLike, what: str, names: tuple[str, ...], **kw: Any) -> tuple[Any, np.ndarray]:
+#: Gauss-Newton steps :func:`_gauss_newton` takes at most, and the relative step that ends it
+GN_STEPS, GN_XTOL = 30, 1e-13
+
+
+def _gauss_newton(fun: Fn, jac: Fn, x0: ArrayLike) -> Any:
+    """Undamped Gauss-Newton from ``x0`` while every step lowers the cost, to a relative step below
+    :data:`GN_XTOL`: the result (``x``, ``fun``), or None when a step does not lower the cost, the Jacobian is
+    rank-deficient or it has not converged in :data:`GN_STEPS` steps (the caller then runs Levenberg-Marquardt).
+    From a good seed (the algebraic sphere) it reaches the same minimum in a few steps, at a fraction of the cost
+    of the general solver's set-up."""
+    x = np.array(x0, dtype=float)
+    r = fun(x)
+    cost = float(r @ r)
+    for _ in range(GN_STEPS):
+        step, _, rank, _ = np.linalg.lstsq(jac(x), -r, rcond=None)
+        if rank < len(x) or not np.all(np.isfinite(step)):
+            return None
+        x_new = x + step
+        r_new = fun(x_new)
+        cost_new = float(r_new @ r_new)
+        if not cost_new <= cost * (1 + 1e-12) + 1e-300:
+            return None
+        x, r, cost = x_new, r_new, cost_new
+        if np.linalg.norm(step) <= GN_XTOL * (1.0 + np.linalg.norm(x)):
+            return SimpleNamespace(x=x, fun=r)
+    return None
+
+
+def _solve(fun: Fn, jac: Fn, x0: ArrayLike, what: str, names: tuple[str, ...], gauss_newton: bool = False,
+           **kw: Any) -> tuple[Any, np.ndarray]:
     """Levenberg-Marquardt to tight tolerances, its status and the rank of its Jacobian checked:
-    ``(result, standard uncertainties of the parameters)``."""
-    from scipy.optimize import least_squares  # here: a command that fits nothing starts faster
-    res = least_squares(fun, x0, jac=jac, method="lm", xtol=1e-14, ftol=1e-14, gtol=1e-14, **kw)
-    _check_status(res, what)
+    ``(result, standard uncertainties of the parameters)``. ``gauss_newton``: try :func:`_gauss_newton` first
+    (Levenberg-Marquardt only when it does not converge)."""
+    res = _gauss_newton(fun, jac, x0) if gauss_newton else None
+    if res is None:
+        from scipy.optimize import least_squares  # here: a command that fits nothing starts faster
+        res = least_squares(fun, x0, jac=jac, method="lm", xtol=1e-14, ftol=1e-14, gtol=1e-14, **kw)
+        _check_status(res, what)
     jac_x = jac(res.x)
     _check_rank(jac_x, what, names)
     return res, _param_std(jac_x, res.fun)
@@ -702,7 +735,8 @@ def fit_sphere(points: ArrayLike, radius: float | None = None, centre: ArrayLike
         return -n if known else np.column_stack([-n, -np.ones(len(z))])
 
     x0 = np.zeros(3) if known else np.r_[np.zeros(3), r0 / scale]
-    res, u = _solve(fun, jac, x0, "sphere fit", ("centre x", "centre y", "centre z", "radius")[: len(x0)])
+    res, u = _solve(fun, jac, x0, "sphere fit", ("centre x", "centre y", "centre z", "radius")[: len(x0)],
+                    gauss_newton=True)
     u = scale * u
     r = float(radius) if radius is not None else float(scale * res.x[3])
     return SphereFit(centre=c0 + scale * res.x[:3], radius=r, residuals=scale * res.fun, u_centre=u[:3],

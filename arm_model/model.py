@@ -7,6 +7,7 @@ code (:meth:`ArmModel._evaluate`) and are tested to agree.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 from types import SimpleNamespace
 from typing import Any
 
@@ -18,7 +19,7 @@ from .description import ArmDescription
 from .effects import Effect, Geometry, ModelInputs
 from .params import ParamSpec, apply_params, param_spec, split_params
 
-__all__ = ["ArmModel", "AuxData"]
+__all__ = ["ArmModel", "AuxData", "CASADI_CACHE"]
 
 
 @dataclass(frozen=True)
@@ -127,7 +128,17 @@ class ArmModel:
     # -- CasADi -------------------------------------------------------------------------------
     def casadi_function(self, name: str = "ball_centre") -> Any:
         """``f(q[J], w[6], aux[1 + 2J], p[P]) -> p_base[3]`` with aux = (temperature [°C],
-        tau_gravity[J], tau_contact[J]) (zeros where no effect needs them)."""
+        tau_gravity[J], tau_contact[J]) (zeros where no effect needs them).
+
+        Built once for equal models (same description and effects; the model is immutable) and name: building
+        the expression graph costs more than a calibration's evaluations of it (:func:`_casadi_function`)."""
+        try:
+            hash(self)
+        except TypeError:           # an effect that cannot be hashed (a user's mutable one): built each time
+            return self._build_casadi_function(name)
+        return _casadi_function(self, name)
+
+    def _build_casadi_function(self, name: str) -> Any:
         import casadi as ca
 
         j = self.desc.n_joints
@@ -217,3 +228,13 @@ class ArmModel:
     def described(self, p: ArrayLike) -> ArmDescription:
         """The description with the base part of ``p`` folded in (effects are not representable)."""
         return apply_params(self.desc, np.asarray(p, dtype=float)[: self.base_size])
+
+
+#: models whose CasADi Function is kept (a loop compares a few models at a time, each many times)
+CASADI_CACHE = 32
+
+
+@lru_cache(maxsize=CASADI_CACHE)
+def _casadi_function(model: ArmModel, name: str) -> Any:
+    """:meth:`ArmModel.casadi_function`, built once for equal models (the least recently used dropped first)."""
+    return model._build_casadi_function(name)

@@ -1108,7 +1108,8 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         prior_centre=None if s.prior is None else s.prior.centre, options=options, prior_sd=prior_sd,
         prior_ratio=None if prior_sd is None else variance_ratio(u ** 2, prior_sd),
         prior_groups=_group_table(s, kept, u), redundancy=None if s.prior is None else red,
-        discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var),  # type: ignore[attr-defined]
+        discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var)  # type: ignore[attr-defined]
+        if options.discrepancy else None,
         point_tests=point_tests(prob, ev.r, nrm.js, nrm.lu.solve, nrm.h,  # type: ignore[attr-defined]
                                 max(options.gross_threshold, options.outlier_threshold))
         if options.gross_threshold is not None and not options.drop_outliers else None)

@@ -79,6 +79,8 @@ class FitOptions:
             scale), a dict {group: scale} (e.g. the ``prior_scales`` of an earlier fit), or None (no prior).
         prior_centre: the prior's centre (full parameter vector [SI]); None: ``values``.
         blas: BLAS threads during the fit (None: unchanged).
+        discrepancy: estimate the model discrepancy (:mod:`calibration.discrepancy`); False leaves the result's
+            ``discrepancy`` None (a fit that only predicts held-out data, as a cross-validation fold's).
     """
     free: tuple[str, ...] | None = None
     values: dict[str, float] | None = None
@@ -99,6 +101,7 @@ class FitOptions:
     prior_scale: float | str | dict[str, float] | None = "evidence"
     prior_centre: np.ndarray | None = field(default=None, compare=False)
     blas: int | None = 1
+    discrepancy: bool = True
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__

@@ -17,6 +17,7 @@ with ``rows`` rows a point, then the distances. Every row is divided by its stan
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -25,14 +26,14 @@ from numpy.typing import ArrayLike
 
 from arm_model import InputError, NumericalError
 from arm_model.geometry import ball_centre_radius
-from arm_model.model import ArmModel
+from arm_model.model import CASADI_CACHE, ArmModel
 from arm_model.tracker import DEFAULT_SESSION, Tracker, offset_matrix
 
 from . import kinds as geo
 from .data import CalibrationData, Weights
 from .kinds import MIN_POINTS
 
-__all__ = ["Instance", "DistanceItem", "Problem", "Evaluation", "POINT_KINDS"]
+__all__ = ["Instance", "DistanceItem", "Problem", "Evaluation", "POINT_KINDS", "CentreKernel", "centre_kernel"]
 
 #: point kinds in row order
 POINT_KINDS = ("seat", "sphere", "ring", "cylinder", "plane", "reference")
@@ -277,16 +278,12 @@ class Problem:
 
     def _centre_functions(self) -> None:
         """CasADi ball centres of the used points: ``x(q, w, aux, p, o)``, the tip point moved by ``o`` [m]
-        in the tip frame (a marker's offset; zero for a probed point), mapped over the used points."""
-        import casadi as ca
-        f = self.model.casadi_function()
-        q, w, aux, p = (ca.SX.sym(nm, f.size1_in(i)) for i, nm in enumerate(("q", "w", "aux", "p")))
-        o = ca.SX.sym("o", 3)
-        x = f(q, w, aux, p + ca.DM(offset_matrix(self.model)) @ o)
+        in the tip frame (a marker's offset; zero for a probed point), mapped over the used points (the
+        functions of one point are the model's :class:`CentreKernel`, built once for equal models)."""
         nu = len(self.used)
-        self._fx = ca.Function("x", [q, w, aux, p, o], [x]).map(nu)
-        self._fxj_full = ca.Function("xj", [q, w, aux, p, o], [x, ca.jacobian(x, p), ca.jacobian(x, o)]).map(nu)
-        self._sym = (q, w, aux, p, o, x)
+        self._kernel = centre_kernel(self.model)
+        self._fx = self._kernel.fx.map(nu)
+        self._fxj_full = self._kernel.columns(None).map(nu)
         # free set -> mapped Function of (x, d x / d p[free], d x / d o), shared by copies
         self._fxj_cache: dict[tuple[int, ...], Any] = {}
         n, jn = len(self.data), self.model.desc.n_joints
@@ -352,10 +349,7 @@ class Problem:
             key = tuple(cols)
             fn = self._fxj_cache.get(key)
             if fn is None:
-                import casadi as ca
-                q, w, aux, ps, os_, x = self._sym
-                jcols = ca.jacobian(x, ps)[:, list(key)] if key else ca.DM.zeros(3, 0)
-                fn = ca.Function("xj", [q, w, aux, ps, os_], [x, jcols, ca.jacobian(x, os_)]).map(nu)
+                fn = self._kernel.columns(key).map(nu)
                 self._fxj_cache[key] = fn
         x, dx, dxo = fn(self._q, self._w, self._aux, p, o)
         x = np.asarray(x).T
@@ -598,3 +592,45 @@ class Problem:
                        else np.array([states[i][:3] for i in markers]),
                        np.array([u[i] for i in frames]) if have_u else None,
                        np.array([u[i] for i in markers]) if have_u and markers else None)
+
+
+class CentreKernel:
+    """The CasADi functions of one point's ball centre under a model: ``fx(q, w, aux, p, o) -> x`` and, per
+    set of parameter columns, ``(x, d x / d p[columns], d x / d o)`` (:meth:`columns`), built on first use."""
+
+    def __init__(self, model: ArmModel) -> None:
+        import casadi as ca
+        f = model.casadi_function()
+        q, w, aux, p = (ca.SX.sym(nm, f.size1_in(i)) for i, nm in enumerate(("q", "w", "aux", "p")))
+        o = ca.SX.sym("o", 3)
+        x = f(q, w, aux, p + ca.DM(offset_matrix(model)) @ o)
+        self._sym = (q, w, aux, p, o, x)
+        self.fx = ca.Function("x", [q, w, aux, p, o], [x])
+        self._columns: dict[tuple[int, ...] | None, Any] = {}
+
+    def columns(self, key: tuple[int, ...] | None) -> Any:
+        """``(x, d x / d p[key], d x / d o)`` of one point (``key`` None: every parameter)."""
+        fn = self._columns.get(key)
+        if fn is None:
+            import casadi as ca
+            q, w, aux, p, o, x = self._sym
+            jp: Any = ca.jacobian(x, p)
+            if key is not None:
+                jp = jp[:, list(key)] if key else ca.DM.zeros(3, 0)
+            fn = self._columns[key] = ca.Function("xj", [q, w, aux, p, o], [x, jp, ca.jacobian(x, o)])
+        return fn
+
+
+@lru_cache(maxsize=CASADI_CACHE)
+def _kernel_of(model: ArmModel) -> CentreKernel:
+    return CentreKernel(model)
+
+
+def centre_kernel(model: ArmModel) -> CentreKernel:
+    """The :class:`CentreKernel` of ``model``, shared by the problems of equal models (same description and
+    effects), as :meth:`arm_model.model.ArmModel.casadi_function` is."""
+    try:
+        hash(model)
+    except TypeError:               # a model with an effect that cannot be hashed: its own kernel
+        return CentreKernel(model)
+    return _kernel_of(model)

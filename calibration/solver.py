@@ -78,8 +78,12 @@ def normal_solver(j: sp.spmatrix, damping: np.ndarray | float = 0.0) -> Callable
 def normal_factor(j: sp.spmatrix, damping: np.ndarray | float = 0.0) -> spla.SuperLU:
     """The sparse LU factors of the normal matrix ``J^T J + diag(damping)`` (``.solve``; ``|det|`` is the
     product of ``|U_ii|``)."""
-    n = j.shape[1]
-    a = (j.T @ j).tocsc()
+    return _damped_factor((j.T @ j).tocsc(), damping)
+
+
+def _damped_factor(a: sp.csc_matrix, damping: np.ndarray | float) -> spla.SuperLU:
+    """The sparse LU factors of the normal matrix ``a`` (``J^T J``) plus ``diag(damping)``."""
+    n = a.shape[1]
     a = a + sp.diags(np.broadcast_to(damping, (n,)).astype(float), format="csc")
     try:
         lu = spla.splu(a)
@@ -148,10 +152,13 @@ def _lm_attempt(problem: Problem, p: ArrayLike, states: list[np.ndarray], max_it
     lam, nu = 1e-3, 2.0
     status = None
     it = 0
+    scaled = None               # (js, its normal matrix, gradient) of j, scale: kept while a step is rejected
     for it in range(1, max_iter + 1):
-        js = j @ sp.diags(1.0 / scale)
-        g = js.T @ ev.r
-        ds = -normal_solver(js, lam)(g)
+        if scaled is None:
+            js = j @ sp.diags(1.0 / scale)
+            scaled = (js, (js.T @ js).tocsc(), js.T @ ev.r)
+        js, jtj, g = scaled
+        ds = -_damped_factor(jtj, lam).solve(g)
         jds = js @ ds
         pred = -(g @ ds) - 0.5 * float(jds @ jds)
         if pred <= ftol * cost or not np.isfinite(pred):
@@ -172,6 +179,7 @@ def _lm_attempt(problem: Problem, p: ArrayLike, states: list[np.ndarray], max_it
             n_eval += 1
             j = _full_jacobian(ev)
             scale = np.maximum(scale, np.sqrt(np.asarray(j.multiply(j).sum(axis=0)).ravel()))
+            scaled = None
             small_step = np.max(np.abs(ds)) < xtol
             small_cost = actual <= ftol * cost_new and pred <= ftol * cost
             cost = cost_new

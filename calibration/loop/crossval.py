@@ -60,11 +60,14 @@ class CVResult:
                 "reason": self.reason, "screening_p_value": num(self.score_p)}
 
 def fold_fit(model: ArmModel, design: CalibrationData, folds: Folds, fit) -> FoldFit:
+    """``model`` fitted on each fold's training part by ``fit(model, data, discrepancy=False)`` (the loop's
+    :meth:`~calibration.loop.state.LoopState.fit`; a fold's fit only predicts its held-out units, so it estimates
+    no model discrepancy) and its held-out residuals per unit."""
     results, sse = [], {}
     if folds.by == "pose":
         for f in range(folds.k):
             train = np.asarray(folds.assign) != f
-            res = fit(model, design.select(train))
+            res = fit(model, design.select(train), discrepancy=False)
             h = heldout_residuals(model, res.p, design, res.weights, res.reference_mode, train=train)
             for i in np.unique(h["point"]):
                 sel = h["point"] == i
@@ -75,7 +78,7 @@ def fold_fit(model: ArmModel, design: CalibrationData, folds: Folds, fit) -> Fol
     for f in range(folds.k):
         held = [m for m, g in folds.assign.items() if g == f and m in present]  # type: ignore[attr-defined]
         train = design.with_measurements([m for m, g in folds.assign.items() if g != f and m in present])  # type: ignore[attr-defined]
-        res = fit(model, train)
+        res = fit(model, train, discrepancy=False)
         h = heldout_residuals(model, res.p, design.with_measurements(held), res.weights, res.reference_mode)
         keys = ([(m, int(i)) for m, i in zip(h["measurement"], h["point"], strict=True)] if folds.per_pose
                 else h["measurement"])
