@@ -10,6 +10,7 @@ import numpy as np
 
 from arm_model import InputError
 from arm_model.checks import log_warnings, point_warnings
+from arm_model.csv_io import parse_number
 from arm_model.cli import command_help
 from arm_model.cli_options import (
     add_arm_options,
@@ -54,9 +55,8 @@ def parse_holdout(text: str | None):
     """``--holdout`` (of calibrate and close-loop): None, a fraction in (0, 1) or a list of measurement ids."""
     if text is None:
         return None
-    try:
-        v = float(text)
-    except ValueError:
+    v = parse_number(text.strip())
+    if v is None:                       # the files' number rule: "0.2", not "0_2" nor another script's digits
         ids = [t.strip() for t in text.split(",") if t.strip()]
         if not ids:
             raise InputError(f"--holdout names no measurement (got {text!r}): give measurement ids or a fraction"

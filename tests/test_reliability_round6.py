@@ -13,6 +13,14 @@ from conftest import NOMINAL
 QCOLS = ",".join(f"q{k}_deg" for k in range(1, 8))
 
 
+def _exit(argv) -> int:
+    """The exit status of ``aacmm argv`` (argparse's refusals raise SystemExit, the commands' return it)."""
+    try:
+        return main(argv)
+    except SystemExit as exc:
+        return exc.code
+
+
 def _points(tmp_path, rows=("m,f,10,20,30,40,50,60,70",)):
     path = tmp_path / "p.csv"
     path.write_text(f"measurement,feature,{QCOLS}\n" + "".join(r + "\n" for r in rows))
@@ -43,3 +51,44 @@ def test_an_output_file_named_as_another_format_is_refused_before_any_work(tmp_p
 def test_an_output_file_with_its_own_suffix_or_one_no_reader_takes_is_written(tmp_path, capsys, name):
     assert main(["urdf", "aacmm7", "-o", str(tmp_path / name)]) == 0
     assert (tmp_path / name).read_text().startswith("<?xml")
+
+
+# ---------------------------------------------------------------------------------------------
+# numbers on the command line follow the files' number rule
+
+@pytest.mark.parametrize("option, value", [
+    ("--sigma-probe-um", "١٠"), ("--sigma-probe-um", "１０"), ("--prior-scale", "٣"),
+    ("--hold-joint", "j7=1_0"), ("--hold-joint", "j7=٣"), ("--hold-joint", "j7="), ("--hold-joint", "j7=nan"),
+])
+def test_a_number_in_another_script_or_with_underscores_is_refused_on_the_command_line(tmp_path, capsys, option,
+                                                                                       value):
+    """`--prior-scale ٣` (Arabic-Indic three) and `--hold-joint j7=1_0` were read as 3 and 10 (Python's float takes
+    both), `--hold-joint j7=` as 0; a points file refuses the same cells. One rule: ASCII digits, exit 2."""
+    arm = ["--arm", "aacmm7"] if option != "--hold-joint" else ["--arm", str(NOMINAL.with_suffix("").with_suffix(
+        ".urdf")), "--tip-frame", "ball"]
+    rc = _exit(["calibrate", str(_points(tmp_path)), *arm, option, value, "-o", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and option in err and value in err, err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("value, expected", [("j7", ("j7", 0.0)), ("j7=-12.5", ("j7", -12.5)), (" j7 = 3 ", ("j7", 3.0)),
+                                             ("j7=1e2", ("j7", 100.0))])
+def test_a_hold_joint_value_in_ascii_digits_is_read(value, expected):
+    from arm_model.cli_options import _hold_joint
+    assert _hold_joint(value) == expected
+
+
+def test_whole_number_options_keep_refusing_fractions_and_take_signs():
+    import argparse
+
+    from arm_model.cli_options import number_in
+    assert number_in(kind=int)(" +7 ") == 7 and number_in(kind=int)("-3") == -3
+    for bad in ("7.0", "1e3", "٧", "7_0"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            number_in(kind=int)(bad)
+
+
+def test_a_holdout_in_another_scripts_digits_is_an_id_not_a_fraction():
+    from calibration.cli import parse_holdout
+    assert parse_holdout("0.2") == 0.2 and parse_holdout("٠.٢") == ["٠.٢"] and parse_holdout("0_2") == ["0_2"]
