@@ -481,6 +481,10 @@ def _artefact_distance(err, t, i: int, features: dict) -> Distance:
     if between[0] == between[1]:
         raise err(f"'between' names '{between[0]}' twice; a distance joins two features", "distance", i,
                   "between")
+    flat = next((b for b in between if features[b].kind == "plane"), None)
+    if flat is not None:
+        raise err(f"'{flat}' is a plane: a distance joins two features' centres, and a plane has none", "distance",
+                  i, "between")
     length = u = None
     for key, v in t.items():
         if key == "between":
@@ -536,6 +540,12 @@ def parse_artefacts(text: str, path: str = "<string>", *, extra_keys: tuple = ()
         feature = _artefact_feature(err, t, i, features, extra_feature_keys)
         features[feature.id] = feature
     distances = [_artefact_distance(err, t, i, features) for i, t in enumerate(data.get("distance", []))]
+    for i, d in enumerate(distances):
+        first = next((k for k in range(i) if set(distances[k].between) == set(d.between)), None)
+        if first is not None:
+            raise err(f"the distance between '{d.between[0]}' and '{d.between[1]}' is given twice (first in "
+                      f"[[distance]] {first + 1}, line {lines.get(('distance', first, 'between'), '?')}): one "
+                      "certified length a pair", "distance", i, "between")
     return Artefacts(path, features, tuple(distances))
 
 

@@ -92,3 +92,45 @@ def test_whole_number_options_keep_refusing_fractions_and_take_signs():
 def test_a_holdout_in_another_scripts_digits_is_an_id_not_a_fraction():
     from calibration.cli import parse_holdout
     assert parse_holdout("0.2") == 0.2 and parse_holdout("٠.٢") == ["٠.٢"] and parse_holdout("0_2") == ["0_2"]
+
+
+# ---------------------------------------------------------------------------------------------
+# artefacts: a distance given twice, a distance to a plane
+
+_ART = '''[[feature]]
+id = "A"
+kind = "sphere"
+diameter_mm = 25.0
+
+[[feature]]
+id = "B"
+kind = "sphere"
+diameter_mm = 25.0
+
+[[feature]]
+id = "table"
+kind = "plane"
+
+[[distance]]
+between = ["A", "B"]
+length_mm = 600.0
+'''
+
+
+@pytest.mark.parametrize("extra, line, words", [
+    ('\n[[distance]]\nbetween = ["A", "B"]\nlength_mm = 600.0\n', 20, ("given twice", "line 16")),
+    ('\n[[distance]]\nbetween = ["B", "A"]\nlength_mm = 500.0\n', 20, ("given twice", "line 16")),
+    ('\n[[distance]]\nbetween = ["A", "table"]\nlength_mm = 500.0\n', 20, ("'table' is a plane", "has none")),
+])
+def test_a_distance_given_twice_or_to_a_plane_is_refused_with_its_line(tmp_path, capsys, extra, line, words):
+    """The same pair twice made the fit's normal matrix singular ("unidentifiable", no file, no line) and with
+    two lengths (600 and 500 mm) the fit went on with both; a distance to a plane (which has no centre) was
+    silently unused when no measurement held both. Each is one error at the second table's line."""
+    (tmp_path / "a.toml").write_text(_ART + extra)
+    rc = main(["calibrate", str(_points(tmp_path, ("m,A,10,20,30,40,50,60,70",))), str(tmp_path / "a.toml"),
+               "--arm", "aacmm7", "-o", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and f"a.toml, line {line}, key 'distance[2].between'" in err, err
+    for w in words:
+        assert w in err, err
+    assert not (tmp_path / "o").exists()
