@@ -655,6 +655,7 @@ def parameters_of(arm) -> ParameterCovariance | None:
         if cov.units[i] != spec.units[spec.index(n)]:
             raise InputError(f"parameter '{n}' is a '{spec.units[spec.index(n)]}' quantity, but its unit is one of "
                              f"'{cov.units[i]}'", arm.covariance, line, "unit")
+    _check_agrees(arm, cov)
     try:
         out = ParameterCovariance(tuple(cov.names), cov.matrix,
                                   source=f"the model's covariance file {arm.covariance.name}")
@@ -662,6 +663,38 @@ def parameters_of(arm) -> ParameterCovariance | None:
     except ValueError as exc:
         raise InputError(f"not a usable covariance: {exc}", arm.covariance) from None
     return out
+
+
+#: the relative difference up to which a value or uncertainty of the model file and of its covariance file agree
+#: (both are written from one number: %.17g in the covariance file, the unit's factor applied in the model file)
+AGREEMENT_RTOL = 1e-9
+
+
+def _check_agrees(arm, cov: Covariance) -> None:
+    """The model file's ``[[effect]]`` parameters and its covariance file are one fit's: a parameter with a row in
+    the covariance file is estimated there (not ``fixed`` or ``held``), with the same value and uncertainty; an
+    estimated one (``free``, ``prior-dominated``) has a row. A hand-edited file that breaks this would give
+    points uncertainties of another model: an InputError naming the covariance file's line and column."""
+    row = {n: i for i, n in enumerate(cov.names)}
+    for name, i in row.items():
+        if name not in arm.values:
+            continue
+        line = cov.lines[i] if cov.lines else None
+        state = arm.states.get(name)
+        if state in ("fixed", "held"):
+            raise InputError(f"parameter '{name}' is '{state}' in the model file, but the covariance file gives it "
+                             "an uncertainty: the two files are not of one fit", arm.covariance, line, "parameter")
+        for column, ours, theirs in (("value", arm.values[name], cov.values[i]),
+                                     ("u", arm.uncertainties.get(name), cov.u[i])):
+            if ours is not None and abs(ours - theirs) > AGREEMENT_RTOL * max(abs(ours), abs(theirs)):
+                unit, f = _display(cov.units[i])
+                raise InputError(f"parameter '{name}': {float(theirs) / f:.10g} {unit} here, but {ours / f:.10g} "
+                                 f"{unit} in the model file: the two files are not of one fit", arm.covariance,
+                                 line, column)
+    missing = next((n for n, st in arm.states.items() if st in ("free", "prior-dominated") and n not in row), None)
+    if missing is not None:
+        raise InputError(f"parameter '{missing}' is '{arm.states[missing]}' (estimated) in the model file, but the "
+                         "covariance file has no row for it: the two files are not of one fit", arm.covariance)
 
 
 def read_model_file(path: Path) -> Arm:

@@ -134,3 +134,102 @@ def test_a_distance_given_twice_or_to_a_plane_is_refused_with_its_line(tmp_path,
     for w in words:
         assert w in err, err
     assert not (tmp_path / "o").exists()
+
+
+# ---------------------------------------------------------------------------------------------
+# a model file edited by hand so that its covariance file is of another fit
+
+@pytest.fixture(scope="module")
+def effect_model(tmp_path_factory):
+    """A model file with an effect and its covariance, written by the writers calibrate uses (no fit)."""
+    import numpy as np
+
+    from arm_model.effects import JointGain
+    from arm_model.model_file import format_model, load_model, write_covariance
+    folder = tmp_path_factory.mktemp("model")
+    desc = load_model(str(NOMINAL)).desc
+    names = ["j1.gain", "j2.gain", "j3.gain"]
+    values = {"j1.gain": 2e-6, "j2.gain": -1e-6, "j3.gain": 0.0}
+    u = {"j1.gain": 3e-7, "j2.gain": 4e-7, "j3.gain": 0.0}
+    states = {"j1.gain": "free", "j2.gain": "prior-dominated", "j3.gain": "fixed"}
+    (folder / "m.toml").write_text(format_model(desc, (JointGain(joints=(0, 1, 2)),), values, u, states,
+                                                covariance="m-cov.csv"))
+    cov = np.diag([3e-7 ** 2, 4e-7 ** 2])
+    write_covariance(folder / "m-cov.csv", names[:2], ["1", "1"], [2e-6, -1e-6], cov)
+    return folder
+
+
+@pytest.mark.parametrize("edit, column, words", [
+    (("value_ppm = 2.0", "value_ppm = 20.0"), "value", "2 ppm here, but 20 ppm in the model file"),
+    (("u_ppm = 0.3", "u_ppm = 3.0"), "u", "0.3 ppm here, but 3 ppm in the model file"),
+    (('u_ppm = 0.3, state = "free"', 'u_ppm = 0.3, state = "fixed"'), "parameter", "'fixed' in the model file"),
+    (('state = "prior-dominated"', 'state = "held"'), "parameter", "'held' in the model file"),
+    (('u_ppm = 0.0, state = "fixed"', 'u_ppm = 0.0, state = "free"'), None,
+     "'j3.gain' is 'free' (estimated) in the model file, but the covariance file has no row"),
+])
+def test_a_model_file_contradicting_its_covariance_file_is_refused(effect_model, tmp_path, capsys, edit, column,
+                                                                   words):
+    """A parameter's value, uncertainty or state edited in the model file (or its covariance file swapped for
+    another fit's) was read as it stood: `tip` propagated the covariance of one fit around the values of another
+    (a 'fixed' parameter with an uncertainty, an estimated one without). Now one error naming the covariance file's
+    line and column."""
+    import shutil
+    for f in ("m.toml", "m-cov.csv"):
+        shutil.copy(effect_model / f, tmp_path / f)
+    text = (tmp_path / "m.toml").read_text()
+    assert edit[0] in text
+    (tmp_path / "m.toml").write_text(text.replace(edit[0], edit[1], 1))
+    rc = main(["tip", str(_points(tmp_path)), "--arm", str(tmp_path / "m.toml"), "-o", str(tmp_path / "o.csv")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "m-cov.csv" in err and words in err, err
+    if column is not None:
+        assert f"line {2 if 'j1' in err else 3}, column '{column}'" in err, err
+    assert not (tmp_path / "o.csv").exists()
+
+
+def test_a_model_file_agreeing_with_its_covariance_file_is_read(effect_model, tmp_path, capsys):
+    out = tmp_path / "o.csv"
+    assert main(["tip", str(_points(tmp_path)), "--arm", str(effect_model / "m.toml"), "-o", str(out)]) == 0
+    assert "u_x_mm" in out.read_text().splitlines()[0]
+
+
+# ---------------------------------------------------------------------------------------------
+# the Python API: effects refuse joints and harmonics they cannot act on, when built
+
+@pytest.mark.parametrize("kind, kw, error, match", [
+    ("joint_gain", {"joints": ("j1",)}, TypeError, "joints must be a tuple of whole numbers"),
+    ("joint_gain", {"joints": (1.5,)}, TypeError, "joints must be a tuple of whole numbers"),
+    ("joint_gain", {"joints": (True,)}, TypeError, "joints must be a tuple of whole numbers"),
+    ("joint_gain", {"joints": 3}, TypeError, "joints must be a tuple of whole numbers"),
+    ("joint_gain", {"joints": (-1,)}, ValueError, "joints must be distinct whole numbers >= 0"),
+    ("joint_gain", {"joints": ()}, ValueError, "at least one"),
+    ("joint_gain", {"joints": (2, 2)}, ValueError, "distinct"),
+    ("eccentricity", {"harmonics": (0, 1)}, ValueError, "harmonics must be distinct whole numbers >= 1"),
+    ("eccentricity", {"harmonics": (1.5,)}, TypeError, "harmonics must be a tuple of whole numbers"),
+    ("eccentricity", {"harmonics": "12"}, TypeError, "harmonics must be a tuple of whole numbers"),
+    ("joint_harmonics", {"harmonics": (10 ** 6,)}, ValueError, "<= 1000"),
+    ("joint_harmonics", {"source": "j1"}, TypeError, "source must be a 0-based joint index"),
+])
+def test_an_effect_built_in_python_refuses_joints_and_harmonics_it_cannot_act_on(kind, kw, error, match):
+    """JointGain(joints=("j1",)) failed deep in param_defs ("tuple indices must be integers"), joints=(-1,) acted on
+    the last joint and (True,) on the second; Eccentricity(harmonics=(0,)) made a constant (an offset, a singular
+    fit) and (1.5,) a parameter 'j1.ecc1.5_cos'. Each is refused where the effect is built."""
+    from arm_model.effects import EFFECTS
+    with pytest.raises(error, match=match):
+        EFFECTS[kind](**kw)
+
+
+@pytest.mark.parametrize("kind, kw", [("joint_gain", {"joints": (99,)}),
+                                      ("joint_harmonics", {"joints": (1,), "source": 7})])
+def test_an_effect_on_a_joint_the_arm_lacks_says_so(nominal, kind, kw):
+    from arm_model.effects import EFFECTS
+    with pytest.raises(ValueError, match="but the arm has 7 joints"):
+        EFFECTS[kind](**kw).param_defs(nominal)
+
+
+def test_a_model_file_with_a_harmonic_zero_names_its_key(effect_model, tmp_path, capsys):
+    text = (effect_model / "m.toml").read_text().replace('kind = "joint_gain"', 'kind = "eccentricity"\nharmonics = [0]')
+    (tmp_path / "m.toml").write_text(text)
+    rc = main(["tip", str(_points(tmp_path)), "--arm", str(tmp_path / "m.toml"), "-o", str(tmp_path / "o.csv")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "m.toml, line" in err and "key 'effect[1]'" in err and "harmonics must be" in err, err
