@@ -237,15 +237,16 @@ def register(sub) -> None:
                    help="hold unidentifiable parameters fixed and list them (default), or stop with the list")
     c.add_argument("--outlier-threshold", type=positive(), default=4.0,
                    help="standardized residual beyond which a point is reported as an outlier (default 4)")
-    c.add_argument("--drop-outliers", action="store_true",
-                   help="drop every outlier point and refit, in rounds (they are listed); default: leave out the "
-                        "gross errors only (--gross-threshold), report and keep the others")
-    c.add_argument("--gross-threshold", type=positive(), default=GROSS_THRESHOLD,
+    which = c.add_mutually_exclusive_group()        # one rule for the outliers: drop them, keep them, or the default
+    which.add_argument("--drop-outliers", action="store_true",
+                       help="drop every outlier point and refit, in rounds (they are listed); default: leave out the "
+                            "gross errors only (--gross-threshold), report and keep the others")
+    c.add_argument("--gross-threshold", type=positive(), default=None,
                    help=f"standardized residual from which an outlier (beyond --outlier-threshold too) is a gross "
                         f"error: left out and the fit redone, one at a time, at most 5%% of the points, and listed "
                         f"(default {GROSS_THRESHOLD:g})")
-    c.add_argument("--keep-outliers", action="store_true",
-                   help="keep every point in the fit, gross errors too (they are reported)")
+    which.add_argument("--keep-outliers", action="store_true",
+                       help="keep every point in the fit, gross errors too (they are reported)")
     c.add_argument("--covariance-scale", "--covariance", dest="covariance", choices=("residual", "stated"),
                    default="residual",
                    help="scale the parameters' covariance by the residual variance factor s0^2 (default) or trust "
@@ -440,6 +441,18 @@ def _split(args, data):
     return data.select(~mask), None, mask
 
 
+def gross_threshold(args: argparse.Namespace) -> float | None:
+    """``--gross-threshold`` (default :data:`GROSS_THRESHOLD`), or None with ``--keep-outliers``; given beside
+    ``--keep-outliers`` or ``--drop-outliers``, which leave no point to it, it is an InputError."""
+    if args.gross_threshold is not None and (args.keep_outliers or args.drop_outliers):
+        other = "--keep-outliers keeps every point" if args.keep_outliers else "--drop-outliers drops every outlier"
+        raise InputError(f"--gross-threshold {args.gross_threshold:g} leaves out the gross errors, but {other}: give "
+                         "one of them")
+    if args.keep_outliers:
+        return None
+    return GROSS_THRESHOLD if args.gross_threshold is None else args.gross_threshold
+
+
 def run_calibrate(args: argparse.Namespace) -> int:
     from .calibrate import calibrate, nominal_baseline
     from .model_output import refine_torques, with_fitted_torques
@@ -457,7 +470,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
         options = fit_options(args, free=_free(model, args, data), values=values, weights=_weights(args),
                               on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
                               drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference,
-                              gross_threshold=None if args.keep_outliers else args.gross_threshold)
+                              gross_threshold=gross_threshold(args))
         res = refine_torques(calibrate(model, train, options))
         base = nominal_baseline(model, res.data, replace(res.options, weights=res.weights))
         # the held-out rows' torques on the calibrated description, as the model file (tip) evaluates them

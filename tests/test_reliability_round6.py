@@ -233,3 +233,34 @@ def test_a_model_file_with_a_harmonic_zero_names_its_key(effect_model, tmp_path,
     rc = main(["tip", str(_points(tmp_path)), "--arm", str(tmp_path / "m.toml"), "-o", str(tmp_path / "o.csv")])
     err = capsys.readouterr().err
     assert rc == 2 and "m.toml, line" in err and "key 'effect[1]'" in err and "harmonics must be" in err, err
+
+
+# ---------------------------------------------------------------------------------------------
+# calibrate: the outlier options that contradict each other
+
+@pytest.mark.parametrize("options, words", [
+    (["--drop-outliers", "--keep-outliers"], "not allowed with argument"),
+    (["--keep-outliers", "--gross-threshold", "8"], "--keep-outliers keeps every point"),
+    (["--drop-outliers", "--gross-threshold", "8"], "--drop-outliers drops every outlier"),
+])
+def test_outlier_options_that_contradict_each_other_are_refused(tmp_path, capsys, options, words):
+    """`--drop-outliers --keep-outliers` dropped every outlier (the keep silently lost), and `--gross-threshold 8`
+    beside either was silently unused."""
+    (tmp_path / "a.toml").write_text(_ART)
+    rc = _exit(["calibrate", str(_points(tmp_path, ("m,A,10,20,30,40,50,60,70",))), str(tmp_path / "a.toml"),
+                "--arm", "aacmm7", "-o", str(tmp_path / "o"), *options])
+    err = capsys.readouterr().err
+    assert rc == 2 and words in err, err
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_default_gross_threshold_and_keep_outliers_are_what_the_fit_gets():
+    import argparse
+
+    from calibration.cli import gross_threshold
+    from calibration.options import GROSS_THRESHOLD
+    ns = argparse.Namespace
+    assert gross_threshold(ns(gross_threshold=None, keep_outliers=False, drop_outliers=False)) == GROSS_THRESHOLD
+    assert gross_threshold(ns(gross_threshold=8.0, keep_outliers=False, drop_outliers=False)) == 8.0
+    assert gross_threshold(ns(gross_threshold=None, keep_outliers=True, drop_outliers=False)) is None
+    assert gross_threshold(ns(gross_threshold=None, keep_outliers=False, drop_outliers=True)) == GROSS_THRESHOLD
