@@ -136,8 +136,11 @@ def sigma_options(p, prior_default: str | None = None) -> None:
                    + f". Default {default} (docs/calibration.md)")
 
 
+
+
 #: the range of a ``--prior-scale`` factor: below 1e-6 (1 nm on a 1 mm plausible size, far below any arm's
-#: resolution) the prior's weights overflow (a factor of 1e-300 divides by zero, 5e-324 stalls the fit on NaN)
+#: resolution) the prior holds every parameter at its nominal value (FitOptions takes wider factors, up to the limits
+#: of its arithmetic, :data:`calibration.options.PRIOR_FACTOR_LIMITS`)
 PRIOR_FACTOR_RANGE = (1e-6, 1e3)
 
 

@@ -264,3 +264,60 @@ def test_the_default_gross_threshold_and_keep_outliers_are_what_the_fit_gets():
     assert gross_threshold(ns(gross_threshold=8.0, keep_outliers=False, drop_outliers=False)) == 8.0
     assert gross_threshold(ns(gross_threshold=None, keep_outliers=True, drop_outliers=False)) is None
     assert gross_threshold(ns(gross_threshold=None, keep_outliers=False, drop_outliers=True)) == GROSS_THRESHOLD
+
+
+# ---------------------------------------------------------------------------------------------
+# the Python API: FitOptions refuses what would fail deep in the fit
+
+@pytest.mark.parametrize("kw, match", [
+    ({"prior_scale": 1e-300}, r"prior_scale must be in \[1e-12, 1e\+12\]"),
+    ({"prior_scale": 5e-324}, r"prior_scale must be in"),
+    ({"prior_scale": 1e300}, r"prior_scale must be in"),
+    ({"prior_scale": {"lengths": 1e-300}}, r"prior_scale\['lengths'\] must be in"),
+    ({"values": {"j1.a": float("nan")}}, r"values\['j1.a'\] must be a finite number"),
+    ({"start": {"j1.a": float("inf")}}, r"start\['j1.a'\] must be a finite number"),
+    ({"values": {"j1.a": "x"}}, r"values\['j1.a'\] must be a finite number"),
+    ({"priors": {"j*.a": -1.0}}, r"priors\['j\*.a'\] must be a positive finite number"),
+    ({"free": [1, 2]}, "free must be a sequence of parameter names"),
+    ({"free": ("",)}, "free must be a sequence of parameter names"),
+    ({"prior_length": 1e300}, r"prior_length must be in \[1e-09, 1000\]"),
+    ({"prior_centre": [float("nan")]}, "prior_centre must be finite"),
+    ({"drop_outliers": "no"}, "drop_outliers must be True or False"),
+    ({"weights_from_data": "yes"}, "weights_from_data must be True or False"),
+])
+def test_fit_options_refuse_what_would_fail_deep_in_the_fit(kw, match):
+    """FitOptions(prior_scale=1e-300) ended in a NumericalError blaming the data ("the normal matrix is exactly
+    singular"), 5e-324 in a fit stalled on NaN, values={'j1.a': nan} and free=[1, 2] deep in the fit,
+    drop_outliers="no" dropped them. Each is a ValueError naming the option."""
+    from calibration.options import FitOptions
+    with pytest.raises(ValueError, match=match):
+        FitOptions(**kw)
+
+
+def test_fit_options_keep_taking_what_the_fits_use():
+    import numpy as np
+
+    from calibration.options import FitOptions
+    o = FitOptions(prior_scale=1e-9, values={"j1.a": np.float64(1e-4), "j2.d": np.array(2e-4)}, free=["j*.a"],
+                   priors={"j*.a": 1e-3})
+    assert o.values == {"j1.a": 1e-4, "j2.d": 2e-4} and o.free == ("j*.a",)
+    assert FitOptions(prior_scale=1e4).prior_scale == 1e4 and FitOptions(prior_scale=None).prior_scale is None
+
+
+@pytest.mark.parametrize("which", ["model", "data", "options"])
+def test_calibrate_called_with_the_wrong_kind_of_argument_says_which(which):
+    """calibrate("aacmm7", data) and calibrate(model, data, {"free": None}) ended in AttributeErrors deep in the fit
+    ("'str' object has no attribute 'spec'"); a TypeError names the argument and how to make it."""
+    from calibration import calibrate
+    args = {"model": "aacmm7", "data": "points.csv", "options": {"free": None}}
+    kw = {k: (args[k] if k == which else None) for k in args}
+    if which != "model":
+        from arm_model import load_description
+        from arm_model.model import ArmModel
+        kw["model"] = ArmModel(load_description(NOMINAL))
+    if which == "options":
+        from calibration.data import CalibrationData
+        kw["data"] = object.__new__(CalibrationData)     # never reached: the options are refused first
+    kw.pop("options") if which != "options" else None
+    with pytest.raises(TypeError, match=f"calibrate: {which} must be a"):
+        calibrate(**kw)
