@@ -321,3 +321,50 @@ def test_calibrate_called_with_the_wrong_kind_of_argument_says_which(which):
     kw.pop("options") if which != "options" else None
     with pytest.raises(TypeError, match=f"calibrate: {which} must be a"):
         calibrate(**kw)
+
+
+# ---------------------------------------------------------------------------------------------
+# aacmm live: a clock reset back by a little, and a bad time stamp among the first samples
+
+_Q = [0.17, 0.61, -0.09, 1.22, 0.05, 0.7, 0.14]
+
+
+def _session(times, rate=None):
+    from arm_model.live import Session
+    s = Session("aacmm7", rate=rate)
+    for t in times:
+        s.push(t, _Q, (0.0, 0.0, 0.0))
+    s.close()
+    return s.counts
+
+
+@pytest.mark.parametrize("back", [5, 50, 99])
+def test_a_clock_reset_back_by_less_than_the_bound_is_one_clock_jump_not_late_samples(back):
+    """A device clock that jumps back by 50 periods (less than the 100 that make a time stamp 'far off') made every
+    sample late until the new clock passed the old one's last time: 50 samples skipped. The samples after it keep
+    the new clock: one clock jump, none late, none lost."""
+    counts = _session([k * 1e-3 for k in range(200)] + [(200 - back + k) * 1e-3 for k in range(200)], rate=1000.0)
+    assert counts["clock_jumps"] == 1 and counts["late"] == 0 and counts["time_jumps"] == 0, counts
+    assert counts["samples"] == 400 and counts["dropped"] == 0, counts
+
+
+def test_samples_out_of_order_are_still_late_ones():
+    """Three datagrams that came late (fewer than a clock jump needs), then the stream on its clock: three late."""
+    from arm_model.live.session import JUMP_CONFIRM
+    times = [k * 1e-3 for k in range(101)] + [97e-3, 98e-3, 99e-3] + [k * 1e-3 for k in range(101, 200)]
+    assert JUMP_CONFIRM > 3
+    counts = _session(times, rate=1000.0)
+    assert counts["late"] == 3 and counts["clock_jumps"] == counts["time_jumps"] == 0, counts
+    assert counts["samples"] == 200, counts
+
+
+@pytest.mark.parametrize("bad_at", [0, 2])
+def test_a_bad_time_stamp_among_the_first_samples_does_not_make_the_session_late(bad_at):
+    """Without --rate-Hz, the first intervals are not judged (the period is learnt from them): a time stamp at 1e6 s
+    as the first or third sample was taken, and every later sample was late (the whole session lost). The samples
+    after it keep their own clock: one clock jump back, and every one of them taken."""
+    times = [k * 1e-3 for k in range(300)]
+    times.insert(bad_at, 1e6)
+    counts = _session(times)
+    assert counts["late"] == 0 and counts["clock_jumps"] == 1, counts
+    assert counts["samples"] == 301, counts
