@@ -141,7 +141,7 @@ def _hold_joint(text: str) -> tuple[str, float]:
     try:
         v = _number(value)
     except argparse.ArgumentTypeError:
-        raise argparse.ArgumentTypeError(f"'{text}': VALUE must be a finite number (deg, or mm; or leave out "
+        raise argparse.ArgumentTypeError(f"'{text}': VALUE must be a number (finite; deg, or mm; or leave out "
                                          "'=VALUE' for 0)") from None
     if abs(v) > 1e4:
         raise argparse.ArgumentTypeError(f"'{text}': VALUE must be within +-10000 (deg, or mm)")

@@ -368,3 +368,32 @@ def test_a_bad_time_stamp_among_the_first_samples_does_not_make_the_session_late
     counts = _session(times)
     assert counts["late"] == 0 and counts["clock_jumps"] == 1, counts
     assert counts["samples"] == 301, counts
+
+
+# ---------------------------------------------------------------------------------------------
+# --hold-joint: what it cannot hold
+
+_ARM_URDF = str(NOMINAL.with_suffix("").with_suffix(".urdf"))      # the toolkit's own URDF, with the probe's joints
+
+
+@pytest.mark.parametrize("hold, words", [
+    (["j7=400"], "joint 'j7' held at 400 deg, beyond its limits [-360, 360] deg"),
+    (["j2=-151"], "joint 'j2' held at -151 deg, beyond its limits [-150, 150] deg"),
+    (["probe_axial=0.5"], "joint 'probe_axial' is the probe's elastic joint"),
+    ([f"j{k}" for k in range(1, 8)], "--hold-joint holds every moving joint between 'base_link' and 'ball'"),
+])
+def test_a_joint_held_beyond_its_limits_or_the_probes_elastic_joint_is_refused(tmp_path, capsys, hold, words):
+    """`--hold-joint j7=400` held a joint where its URDF limits never let it go; `--hold-joint probe_axial=0.5` was
+    silently unused (the probe's elastic joints are its compliance, taken from the force); holding every joint
+    blamed --tip-frame."""
+    argv = ["urdf", _ARM_URDF, "--tip-frame", "ball", "-o", str(tmp_path / "a.urdf")]
+    for h in hold:
+        argv += ["--hold-joint", h]
+    rc = main(argv)
+    err = capsys.readouterr().err
+    assert rc == 2 and "key '--hold-joint'" in err and words in err, err
+    assert not (tmp_path / "a.urdf").exists()
+
+
+def test_a_joint_held_at_its_limit_is_taken(tmp_path):
+    assert main(["urdf", _ARM_URDF, "--tip-frame", "ball", "--hold-joint", "j2=150", "-o", str(tmp_path / "a.urdf")]) == 0
