@@ -33,14 +33,16 @@ def _points(tmp_path, rows=("m,f,10,20,30,40,50,60,70",)):
 @pytest.mark.parametrize("command, name, writes", [
     ("tip", "out.json", ".csv"), ("tip", "out.toml", ".csv"), ("tip", "out.urdf", ".csv"),
     ("urdf", "arm.toml", ".urdf"), ("urdf", "arm.JSON", ".urdf"), ("urdf", "arm.csv", ".urdf"),
+    ("view --html", "page.json", ".html"),
 ])
 def test_an_output_file_named_as_another_format_is_refused_before_any_work(tmp_path, capsys, command, name, writes):
     """`aacmm urdf aacmm7 -o arm.toml` wrote a URDF, then its own read-back (by the suffix: a .toml file is read as
     TOML by every --arm) refused it: exit 3, "internal error, please report it". The name is the user's input: exit
     2 naming the option and the suffix the command writes, nothing written."""
     out = tmp_path / "o" / name
-    argv = (["tip", str(_points(tmp_path)), "--arm", "aacmm7"] if command == "tip" else ["urdf", "aacmm7"])
-    rc = main(argv + ["-o", str(out)])
+    argv = {"tip": ["tip", str(_points(tmp_path)), "--arm", "aacmm7", "-o"], "urdf": ["urdf", "aacmm7", "-o"],
+            "view --html": ["view", str(_points(tmp_path)), "--arm", "aacmm7", "--html"]}[command]
+    rc = main(argv + [str(out)])
     err = capsys.readouterr().err
     assert rc == 2, err
     assert f"{out}:" in err and f"'{writes}'" in err and "internal error" not in err, err
