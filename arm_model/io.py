@@ -384,6 +384,23 @@ class Feature:
     form_error: float | None = None
     values: dict = field(default_factory=dict)
 
+    def __post_init__(self):
+        """A Feature built in Python is held to the artefacts reader's rule (a ValueError naming the field): a
+        non-empty id, a known kind, a diameter > 0 and an uncertainty and form error >= 0, each finite and a
+        plausible length."""
+        if not isinstance(self.id, str) or not self.id.strip():
+            raise ValueError(f"Feature: id must be a non-empty text, got {self.id!r}")
+        if self.kind not in FEATURE_KINDS:
+            raise ValueError(f"Feature: kind must be one of {', '.join(FEATURE_KINDS)}, got {self.kind!r}")
+        for name in _FEATURE_LENGTHS:
+            v = getattr(self, name)
+            if v is None:
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v) \
+                    or implausible(float(v), "length") or v < 0 or (name == "diameter" and v == 0):
+                raise ValueError(f"Feature: {name} must be a finite length [m] {'> 0' if name == 'diameter' else '>= 0'}"
+                                 f" and plausible, got {v!r}")
+
 
 @dataclass(frozen=True)
 class Distance:

@@ -399,3 +399,51 @@ def test_a_joint_held_beyond_its_limits_or_the_probes_elastic_joint_is_refused(t
 
 def test_a_joint_held_at_its_limit_is_taken(tmp_path):
     assert main(["urdf", _ARM_URDF, "--tip-frame", "ball", "--hold-joint", "j2=150", "-o", str(tmp_path / "a.urdf")]) == 0
+
+
+# ---------------------------------------------------------------------------------------------
+# the Python API of a live session: a sample pushed by hand is held to the stream reader's rule
+
+@pytest.mark.parametrize("args, kw, error, match", [
+    ((float("nan"), _Q, (0, 0, 0)), {}, ValueError, r"t must be a finite time"),
+    ((float("inf"), _Q, (0, 0, 0)), {}, ValueError, r"t must be a finite time"),
+    ((1e300, _Q, (0, 0, 0)), {}, ValueError, r"t must be a finite time in \[-1e\+10, 1e\+10\]"),
+    (("1", _Q, (0, 0, 0)), {}, TypeError, "t must be a number"),
+    ((0.0, [float("nan")] * 7, (0, 0, 0)), {}, ValueError, r"q\[0\] must be a finite angle"),
+    ((0.0, [1e9] * 7, (0, 0, 0)), {}, ValueError, r"q\[0\] must be a finite angle"),
+    ((0.0, _Q, (1e300, 0, 0)), {}, ValueError, r"wrench\[0\] must be a finite force"),
+    ((0.0, _Q, (0, 0, 0, 0, 0, float("inf"))), {}, ValueError, r"wrench\[5\] must be a finite torque"),
+    ((0.0, _Q, (0, 0, 0)), {"temperature": -500.0}, ValueError, r"temperature must be a finite temperature in \[-273.15"),
+    ((0.0, _Q, (0, 0, 0)), {"temperature": float("nan")}, ValueError, "temperature must be a finite temperature"),
+    ((0.0, _Q, (0, 0, 0)), {"trigger": "no"}, TypeError, "trigger must be True, False or None"),
+])
+def test_a_sample_pushed_in_python_is_held_to_the_stream_readers_rule(args, kw, error, match):
+    """Session.push(nan, ...) was taken: every later sample was then off the clock (the session lost); q = nan, a
+    force of 1e300 N, a temperature of -500 C were taken too, and trigger="no" was True. Each is refused where it
+    is pushed, as the stream reader refuses the same cell."""
+    from arm_model.live import Session
+    s = Session("aacmm7")
+    with pytest.raises(error, match=match):
+        s.push(*args, **kw)
+    assert s.counts["samples"] == 0
+
+
+@pytest.mark.parametrize("kw, match", [
+    ({"id": "", "kind": "plane"}, "id must be a non-empty text"),
+    ({"id": "s", "kind": "sphere", "diameter": -0.025}, "diameter must be a finite length"),
+    ({"id": "s", "kind": "sphere", "diameter": float("nan")}, "diameter must be a finite length"),
+    ({"id": "s", "kind": "sphere", "diameter": 0.025, "u_diameter": -1e-6}, "u_diameter must be a finite length"),
+    ({"id": "s", "kind": "ring", "diameter": 1e9}, "diameter must be a finite length"),
+])
+def test_a_feature_begun_in_python_is_held_to_the_artefacts_readers_rule(kw, match):
+    """Session.begin_feature("s", "sphere", diameter=-0.025) (or NaN, or an empty id) was taken; the fits of that
+    feature then compared the points with a negative certificate."""
+    from arm_model.live import Session
+    with pytest.raises(ValueError, match=match):
+        Session("aacmm7").begin_feature(**kw)
+
+
+def test_a_session_plan_given_as_a_path_says_how_to_read_it():
+    from arm_model.live import Session
+    with pytest.raises(TypeError, match=r"plan must be a SessionPlan \(arm_model.live.read_plan\(path\)\)"):
+        Session("aacmm7", plan="plan.toml")

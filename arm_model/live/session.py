@@ -31,7 +31,7 @@ from .contacts import Contact, ContactDetector, ContactOptions
 from .features import FeatureFit, FeatureTracker
 from .plan import SessionPlan
 from .record import FILES, SessionRecord
-from .samples import Sample, SampleLayout, sample_header
+from .samples import Sample, SampleLayout, checked_value, sample_header
 
 __all__ = ["Session", "LivePoint", "Event", "EVENT_KINDS", "PERIOD_SAMPLES", "GAP_FACTOR", "LIMIT_MARGIN_RAD",
            "JUMP_PERIODS", "JUMP_GAPS", "JUMP_BACK_PERIODS", "JUMP_CONFIRM",
@@ -145,6 +145,9 @@ class Session:
         self.inputs = inputs
         # the arm's own inputs (its model discrepancy read once, here), with and without a force sensor
         self._default_inputs = None if inputs is not None else {f: arm.input_uncertainty(f) for f in (True, False)}
+        if plan is not None and not isinstance(plan, SessionPlan):
+            raise TypeError(f"plan must be a SessionPlan (arm_model.live.read_plan(path)) or None, got "
+                            f"{type(plan).__name__}")
         self.plan = plan or SessionPlan()
         self.measurement = measurement or self.plan.measurement or (Path(folder).name if folder else "live")
         npar = 0 if self.parameters is None else len(self.parameters.names)
@@ -187,17 +190,20 @@ class Session:
         held) and the temperature [°C] when the stream has them. Returns what it brought, in order:
         :class:`Event`, :class:`~arm_model.live.contacts.Contact`, :class:`LivePoint`,
         :class:`~arm_model.live.features.FeatureFit` (mostly nothing)."""
-        q = tuple(float(x) for x in q)
         if len(q) != self.desc.n_joints:
             raise ValueError(f"q must have {self.desc.n_joints} angles, got {len(q)}")
+        q = tuple(checked_value(x, kind, f"q[{k}]") for k, (x, kind) in enumerate(zip(q, self.desc.joint_quantities,
+                                                                                      strict=True)))
         w = None
         if wrench is not None:
-            w = tuple(float(x) for x in wrench)
-            if len(w) not in (3, 6) or not all(map(math.isfinite, w)):
+            if len(wrench) not in (3, 6):
                 raise ValueError(f"wrench must be 3 or 6 finite numbers, got {wrench!r}")
+            w = tuple(checked_value(x, "force" if k < 3 else "torque", f"wrench[{k}]") for k, x in enumerate(wrench))
             w = w + (0.0, 0.0, 0.0) if len(w) == 3 else w
-        s = Sample(float(t), q, w, None if trigger is None else bool(trigger),
-                   None if temperature is None else float(temperature))
+        if trigger is not None and not isinstance(trigger, (bool, np.bool_)):
+            raise TypeError(f"trigger must be True, False or None, got {trigger!r}")
+        s = Sample(checked_value(t, "time", "t"), q, w, None if trigger is None else bool(trigger),
+                   None if temperature is None else checked_value(temperature, "temperature", "temperature"))
         if self.layout is None:
             self._layout_from(s, wrench)
         return self.push_sample(s, self._sample_text(s))
