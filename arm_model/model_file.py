@@ -474,8 +474,23 @@ def load_model(path, tip_frame: str | None = None, probe: dict | None = None, ma
                base_frame: str | None = None, hold: dict | None = None) -> Arm:
     """The arm of an ``--arm`` option: a model file or description TOML (effects applied), or a URDF
     with ``tip_frame`` (no effects), optionally a masses file (:func:`arm_model.urdf_import.load_masses`) and
-    the link its chain starts at (``base_frame``), or a shipped arm's name (``aacmm7``)."""
+    the link its chain starts at (``base_frame``), or a shipped arm's name (``aacmm7``); ``hold``: {joint name:
+    value (deg, or mm for a prismatic joint)} of the chain's joints held fixed (``--hold-joint``). An argument of
+    the wrong type is a TypeError, a held value not finite a ValueError."""
     from .shipped import arm_path
+    for name, frame in (("tip_frame", tip_frame), ("base_frame", base_frame)):
+        if frame is not None and not isinstance(frame, str):
+            raise TypeError(f"{name} must be a link name (str) or None, got {frame!r}")
+    if hold is not None:
+        if not isinstance(hold, dict) or not all(isinstance(k, str) for k in hold):
+            raise TypeError(f"hold must be a dict {{joint name: value (deg, or mm)}}, got {hold!r}")
+        bad = next((k for k, v in hold.items() if isinstance(v, bool) or not isinstance(v, (int, float, np.floating,
+                                                                                             np.integer))), None)
+        if bad is not None:
+            raise TypeError(f"hold[{bad!r}] must be a number (deg, or mm), got {hold[bad]!r}")
+        bad = next((k for k, v in hold.items() if not math.isfinite(v)), None)
+        if bad is not None:
+            raise ValueError(f"hold[{bad!r}] must be finite, got {hold[bad]!r}")
     path = arm_path(path)
     if path.suffix.lower() == ".urdf" or masses is not None or base_frame is not None or hold:  # load_arm: why not
         from .urdf_import import load_arm

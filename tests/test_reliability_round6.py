@@ -447,3 +447,20 @@ def test_a_session_plan_given_as_a_path_says_how_to_read_it():
     from arm_model.live import Session
     with pytest.raises(TypeError, match=r"plan must be a SessionPlan \(arm_model.live.read_plan\(path\)\)"):
         Session("aacmm7", plan="plan.toml")
+
+
+@pytest.mark.parametrize("kw, error, match", [
+    ({"hold": {"j7": float("nan")}}, ValueError, r"hold\['j7'\] must be finite"),
+    ({"hold": {"j7": "10"}}, TypeError, r"hold\['j7'\] must be a number"),
+    ({"hold": {7: 1.0}}, TypeError, "hold must be a dict"),
+    ({"hold": ["j7"]}, TypeError, "hold must be a dict"),
+    ({"base_frame": 3}, TypeError, "base_frame must be a link name"),
+    ({"tip_frame": ("ball",)}, TypeError, "tip_frame must be a link name"),
+])
+def test_load_model_refuses_a_hold_or_frame_of_the_wrong_kind(kw, error, match):
+    """load_model(urdf, tip_frame="ball", hold={"j7": "10"}) failed in numpy ("ufunc 'radians' not supported"),
+    hold={7: 1.0} and base_frame=3 with AttributeErrors; NaN passed wherever the joint has no limits."""
+    from arm_model.model_file import load_model
+    args = {"tip_frame": "ball", **kw}
+    with pytest.raises(error, match=match):
+        load_model(_ARM_URDF, **args)
