@@ -554,7 +554,7 @@ def calibrate(model: ArmModel, data: CalibrationData, options: FitOptions = FitO
         NumericalError: no convergence, too few residuals, or unidentifiable parameters with "stop".
         TypeError: an argument not of its type (a model file's path for ``model``, a dict for ``options``).
     """
-    for name, value, kind, how in (("model", model, ArmModel, "arm_model.ArmModel(load_description(...))"),
+    for name, value, kind, how in (("model", model, ArmModel, "arm_model.model.ArmModel(load_description(...))"),
                                    ("data", data, CalibrationData, "calibration.make_data(points, artefacts, model)"),
                                    ("options", options, FitOptions, "calibration.FitOptions(...)")):
         if not isinstance(value, kind):

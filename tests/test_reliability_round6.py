@@ -464,3 +464,28 @@ def test_load_model_refuses_a_hold_or_frame_of_the_wrong_kind(kw, error, match):
     args = {"tip_frame": "ball", **kw}
     with pytest.raises(error, match=match):
         load_model(_ARM_URDF, **args)
+
+
+@pytest.mark.parametrize("effects, match", [
+    (("thermal",), r"every effect must be an arm_model.effects.Effect \(e.g."),
+    ("thermal", "effects must be a tuple of effects"),
+    ("class", r"\(an instance: call it"),
+])
+def test_an_arm_model_with_effects_of_the_wrong_kind_says_so(nominal, effects, match):
+    """ArmModel(desc, ("thermal",)) failed with "'str' object has no attribute 'param_defs'"; an effect's class
+    instead of an instance with a missing argument deep in param_defs."""
+    from arm_model.effects import EFFECTS
+    from arm_model.model import ArmModel
+    with pytest.raises(TypeError, match=match):
+        ArmModel(nominal, (EFFECTS["thermal"],) if effects == "class" else effects)
+
+
+def test_an_arm_model_of_a_name_and_make_data_of_paths_say_what_they_need(nominal):
+    from arm_model.model import ArmModel
+    from calibration import make_data
+    with pytest.raises(TypeError, match="desc must be an ArmDescription"):
+        ArmModel("aacmm7")
+    with pytest.raises(TypeError, match="make_data: points must be a PointSet"):
+        make_data("points.csv", None, ArmModel(nominal))
+    with pytest.raises(TypeError, match="make_data: model must be an ArmModel or None"):
+        make_data(object.__new__(__import__("arm_model.io", fromlist=["PointSet"]).PointSet), None, nominal)
