@@ -64,7 +64,7 @@ def _joint(desc: ArmDescription | None, i: int, prefix: str = "j") -> str:
     return names[i] if 0 <= i < len(names) else f"{prefix}{i + 1}"
 
 
-def _indices(values, what: str, *, low: int = 0, high: int | None = None) -> tuple[int, ...]:
+def _indices(values: object, what: str, *, low: int = 0, high: int | None = None) -> tuple[int, ...]:
     """``values`` as a non-empty tuple of distinct whole numbers in [low, high] (an effect's joints, harmonics), or a
     TypeError/ValueError naming ``what``."""
     if not isinstance(values, (tuple, list)) or not all(isinstance(v, numbers.Integral) and not isinstance(v, bool)

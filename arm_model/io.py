@@ -398,8 +398,8 @@ class Feature:
                 continue
             if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v) \
                     or implausible(float(v), "length") or v < 0 or (name == "diameter" and v == 0):
-                raise ValueError(f"Feature: {name} must be a finite length [m] {'> 0' if name == 'diameter' else '>= 0'}"
-                                 f" and plausible, got {v!r}")
+                least = "> 0" if name == "diameter" else ">= 0"
+                raise ValueError(f"Feature: {name} must be a finite length [m] {least} and plausible, got {v!r}")
 
 
 @dataclass(frozen=True)

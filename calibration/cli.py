@@ -10,7 +10,6 @@ import numpy as np
 
 from arm_model import InputError
 from arm_model.checks import log_warnings, point_warnings
-from arm_model.csv_io import parse_number
 from arm_model.cli import command_help
 from arm_model.cli_options import (
     add_arm_options,
@@ -24,6 +23,7 @@ from arm_model.cli_options import (
     positive,
     seed,
 )
+from arm_model.csv_io import parse_number
 from arm_model.io import json_text, read_artefacts, read_points
 from arm_model.log import counted
 from arm_model.model_file import Arm

@@ -232,8 +232,10 @@ def make_data(points: PointSet, artefacts: Artefacts | None, model: ArmModel | N
                               ("model", model, ArmModel), ("reference", reference, PointSet),
                               ("heldout", heldout, PointSet)):
         if not isinstance(value, kind) and (value is not None or name == "points"):
-            raise TypeError(f"make_data: {name} must be {'an' if kind.__name__[0] in 'AEIOU' else 'a'} {kind.__name__}{'' if name == 'points' else ' or None'} "
-                            f"(arm_model.read_points, read_artefacts, ArmModel), got {type(value).__name__}")
+            what = f"{'an' if kind.__name__[0] in 'AEIOU' else 'a'} {kind.__name__}" + ("" if name == "points" else
+                                                                                    " or None")
+            raise TypeError(f"make_data: {name} must be {what} (arm_model.read_points, read_artefacts, ArmModel), "
+                            f"got {type(value).__name__}")
     check_features(points, artefacts)
     if heldout is not None:
         check_features(heldout, artefacts)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -52,7 +53,7 @@ def _in_range(name: str, v: object, low: float, high: float) -> None:
         raise ValueError(f"{name} must be in [{low:g}, {high:g}], got {v!r}")
 
 
-def _finite_values(name: str, v: dict, positive: bool = False) -> dict[str, float]:
+def _finite_values(name: str, v: dict[str, Any], positive: bool = False) -> dict[str, float]:
     """A {name: number} mapping with finite values (and > 0 for ``positive``), by str names, as floats."""
     out = {}
     for k, x in dict(v).items():

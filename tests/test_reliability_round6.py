@@ -74,7 +74,8 @@ def test_a_number_in_another_script_or_with_underscores_is_refused_on_the_comman
     assert not (tmp_path / "o").exists()
 
 
-@pytest.mark.parametrize("value, expected", [("j7", ("j7", 0.0)), ("j7=-12.5", ("j7", -12.5)), (" j7 = 3 ", ("j7", 3.0)),
+@pytest.mark.parametrize("value, expected", [("j7", ("j7", 0.0)), ("j7=-12.5", ("j7", -12.5)),
+                                             (" j7 = 3 ", ("j7", 3.0)),
                                              ("j7=1e2", ("j7", 100.0))])
 def test_a_hold_joint_value_in_ascii_digits_is_read(value, expected):
     from arm_model.cli_options import _hold_joint
@@ -230,7 +231,8 @@ def test_an_effect_on_a_joint_the_arm_lacks_says_so(nominal, kind, kw):
 
 
 def test_a_model_file_with_a_harmonic_zero_names_its_key(effect_model, tmp_path, capsys):
-    text = (effect_model / "m.toml").read_text().replace('kind = "joint_gain"', 'kind = "eccentricity"\nharmonics = [0]')
+    text = (effect_model / "m.toml").read_text().replace('kind = "joint_gain"',
+                                                         'kind = "eccentricity"\nharmonics = [0]')
     (tmp_path / "m.toml").write_text(text)
     rc = main(["tip", str(_points(tmp_path)), "--arm", str(tmp_path / "m.toml"), "-o", str(tmp_path / "o.csv")])
     err = capsys.readouterr().err
@@ -398,7 +400,8 @@ def test_a_joint_held_beyond_its_limits_or_the_probes_elastic_joint_is_refused(t
 
 
 def test_a_joint_held_at_its_limit_is_taken(tmp_path):
-    assert main(["urdf", _ARM_URDF, "--tip-frame", "ball", "--hold-joint", "j2=150", "-o", str(tmp_path / "a.urdf")]) == 0
+    out = tmp_path / "a.urdf"
+    assert main(["urdf", _ARM_URDF, "--tip-frame", "ball", "--hold-joint", "j2=150", "-o", str(out)]) == 0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -413,7 +416,8 @@ def test_a_joint_held_at_its_limit_is_taken(tmp_path):
     ((0.0, [1e9] * 7, (0, 0, 0)), {}, ValueError, r"q\[0\] must be a finite angle"),
     ((0.0, _Q, (1e300, 0, 0)), {}, ValueError, r"wrench\[0\] must be a finite force"),
     ((0.0, _Q, (0, 0, 0, 0, 0, float("inf"))), {}, ValueError, r"wrench\[5\] must be a finite torque"),
-    ((0.0, _Q, (0, 0, 0)), {"temperature": -500.0}, ValueError, r"temperature must be a finite temperature in \[-273.15"),
+    ((0.0, _Q, (0, 0, 0)), {"temperature": -500.0}, ValueError,
+     r"temperature must be a finite temperature in \[-273.15"),
     ((0.0, _Q, (0, 0, 0)), {"temperature": float("nan")}, ValueError, "temperature must be a finite temperature"),
     ((0.0, _Q, (0, 0, 0)), {"trigger": "no"}, TypeError, "trigger must be True, False or None"),
 ])
