@@ -240,10 +240,9 @@ def register(sub) -> None:
                    help="hold unidentifiable parameters fixed and list them (default), or stop with the list")
     c.add_argument("--outlier-threshold", type=positive(), default=4.0,
                    help="standardized residual beyond which a point is reported as an outlier (default 4)")
-    which = c.add_mutually_exclusive_group()        # one rule for the outliers: drop them, keep them, or the default
-    which.add_argument("--drop-outliers", action="store_true",
-                       help="drop every outlier point and refit, in rounds (they are listed); default: leave out the "
-                            "gross errors only (--gross-threshold), report and keep the others")
+    which = c.add_mutually_exclusive_group()        # the outliers: dropped, kept, or the gross ones left out
+    which.add_argument("--drop-outliers", action="store_true", help="drop every outlier point and refit, in "
+                       "rounds (listed); default: leave out the gross errors (--gross-threshold), keep the others")
     c.add_argument("--gross-threshold", type=positive(), default=None,
                    help=f"standardized residual from which an outlier (beyond --outlier-threshold too) is a gross "
                         f"error: left out and the fit redone, one at a time, at most 5%% of the points, and listed "
