@@ -388,7 +388,11 @@ def output_file(final: str | Path, inputs=(), writes: str | None = None):
     check_suffix(final, writes)
     guard_output(final, inputs)
     if final.is_symlink():              # written through the link (as a shell's > does), the link kept
-        final = resolved(final)
+        target = resolved(final)
+        if not target.parent.is_dir():  # as a shell's >: no folder is made for a link's target
+            raise InputError(f"the output is a symbolic link to {target}, whose folder does not exist (a link is "
+                             "written through, never a folder made for it elsewhere)", final)
+        final = target
     if final.is_dir():
         raise InputError("the output is a file, but a folder of that name exists", final)
     if final.name in ("", ".", ".."):

@@ -493,3 +493,25 @@ def test_an_arm_model_of_a_name_and_make_data_of_paths_say_what_they_need(nomina
         make_data("points.csv", None, ArmModel(nominal))
     with pytest.raises(TypeError, match="make_data: model must be an ArmModel or None"):
         make_data(object.__new__(__import__("arm_model.io", fromlist=["PointSet"]).PointSet), None, nominal)
+
+
+# ---------------------------------------------------------------------------------------------
+# -o: a dangling link
+
+def test_an_output_file_that_is_a_link_into_a_missing_folder_makes_no_folder_there(tmp_path, capsys):
+    """`tip -o out.csv` where out.csv is a link to /somewhere/missing/x.csv made the folders /somewhere/missing
+    (outside every folder the user named) and wrote there; a shell's > refuses. Now exit 2, nothing made."""
+    target = tmp_path / "elsewhere" / "deep" / "x.csv"
+    (tmp_path / "out.csv").symlink_to(target)
+    rc = main(["tip", str(_points(tmp_path)), "--arm", "aacmm7", "-o", str(tmp_path / "out.csv")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "whose folder does not exist" in err, err
+    assert not (tmp_path / "elsewhere").exists()
+
+
+def test_an_output_file_that_is_a_link_into_an_existing_folder_is_written_through(tmp_path):
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "out.csv").symlink_to(tmp_path / "elsewhere" / "x.csv")
+    assert main(["tip", str(_points(tmp_path)), "--arm", "aacmm7", "-o", str(tmp_path / "out.csv")]) == 0
+    assert (tmp_path / "out.csv").is_symlink()
+    assert (tmp_path / "elsewhere" / "x.csv").read_text().startswith("measurement")
