@@ -107,6 +107,19 @@ def resolved(path: str | Path) -> Path:
         raise InputError("cannot follow the path: a loop of symbolic links", path) from None
 
 
+def _through_link(final: Path) -> Path:
+    """The output path ``final``, or the target of the symbolic link it is (written through, the link kept); a link
+    whose target's folder does not exist is an InputError: as a shell's > does, no folder is made for it elsewhere,
+    outside every path the user named."""
+    if not final.is_symlink():
+        return final
+    target = resolved(final)
+    if not target.parent.is_dir():
+        raise InputError(f"the output is a symbolic link to {target}, whose folder does not exist (a link is "
+                         "written through, never a folder made for it elsewhere)", final)
+    return target
+
+
 def guard_output(out: str | Path, inputs=()) -> Path:
     """Refuse an output (file or folder) that is one of the inputs or holds one (by resolved path)."""
     out = Path(out)
@@ -339,8 +352,7 @@ def output_folder(final: str | Path, inputs=(), command: str = ""):
     final = Path(final)
     guard_output(final, inputs)
     final = Path(os.path.abspath(final))
-    if final.is_symlink():
-        final = resolved(final)
+    final = _through_link(final)
     if final.name in ("", ".", ".."):
         raise InputError("name an output folder", final)
     _check_folder(final, command)
@@ -387,12 +399,7 @@ def output_file(final: str | Path, inputs=(), writes: str | None = None):
     final = Path(final)
     check_suffix(final, writes)
     guard_output(final, inputs)
-    if final.is_symlink():              # written through the link (as a shell's > does), the link kept
-        target = resolved(final)
-        if not target.parent.is_dir():  # as a shell's >: no folder is made for a link's target
-            raise InputError(f"the output is a symbolic link to {target}, whose folder does not exist (a link is "
-                             "written through, never a folder made for it elsewhere)", final)
-        final = target
+    final = _through_link(final)        # written through the link (as a shell's > does), the link kept
     if final.is_dir():
         raise InputError("the output is a file, but a folder of that name exists", final)
     if final.name in ("", ".", ".."):

@@ -509,6 +509,16 @@ def test_an_output_file_that_is_a_link_into_a_missing_folder_makes_no_folder_the
     assert not (tmp_path / "elsewhere").exists()
 
 
+def test_an_output_folder_that_is_a_link_into_a_missing_folder_makes_no_folder_there(tmp_path, capsys):
+    (tmp_path / "o").symlink_to(tmp_path / "elsewhere" / "deep" / "o")
+    (tmp_path / "a.toml").write_text(_ART)
+    rc = main(["calibrate", str(_points(tmp_path, ("m,A,10,20,30,40,50,60,70",))), str(tmp_path / "a.toml"),
+               "--arm", "aacmm7", "-o", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "whose folder does not exist" in err, err
+    assert not (tmp_path / "elsewhere").exists()
+
+
 def test_an_output_file_that_is_a_link_into_an_existing_folder_is_written_through(tmp_path):
     (tmp_path / "elsewhere").mkdir()
     (tmp_path / "out.csv").symlink_to(tmp_path / "elsewhere" / "x.csv")
