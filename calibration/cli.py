@@ -28,6 +28,7 @@ from arm_model.io import json_text, read_artefacts, read_points
 from arm_model.log import counted
 from arm_model.model_file import Arm
 from arm_model.output import output_folder
+from arm_model.parallel import cores
 
 from .options import GROSS_THRESHOLD
 
@@ -279,7 +280,8 @@ def register(sub) -> None:
                    help="seed of the first run's simulation (run i uses --seed + i; default 0)")
     m.add_argument("--holdout", type=fraction, default=0.25, metavar="FRACTION",
                    help="held-out fraction of measurements (default 0.25)")
-    m.add_argument("--workers", type=at_least(1), default=None, help="local processes (default: CPU count)")
+    m.add_argument("--workers", type=number_in(1, cores(), kind=int), default=None,  # more: memory, no speed
+                   help=f"local processes, at most the cores this process may run on ({cores()} here; default: all)")
     m.add_argument("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://10.0.0.5:8786")
     add_output_option(m)
     _common_fit_options(m)

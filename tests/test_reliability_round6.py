@@ -525,3 +525,22 @@ def test_an_output_file_that_is_a_link_into_an_existing_folder_is_written_throug
     assert main(["tip", str(_points(tmp_path)), "--arm", "aacmm7", "-o", str(tmp_path / "out.csv")]) == 0
     assert (tmp_path / "out.csv").is_symlink()
     assert (tmp_path / "elsewhere" / "x.csv").read_text().startswith("measurement")
+
+
+# ---------------------------------------------------------------------------------------------
+# study montecarlo --workers: not more processes than cores
+
+def test_more_workers_than_cores_are_refused_before_any_run(tmp_path, capsys):
+    """`aacmm study montecarlo --workers 100000` forked 100000 worker processes (a load average of 1300 on a
+    2-core machine, 100 MB each): the option is range-checked against the cores this process may run on, and
+    run_tasks never starts more processes than those cores."""
+    from arm_model.parallel import cores
+    from calibration.study import run_tasks
+    campaign = NOMINAL.parents[1] / "examples" / "campaigns" / "calibration.toml"
+    rc = _exit(["study", "montecarlo", str(campaign), "--workers", str(cores() + 1), "-o", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and f"--workers: must be in [1, {cores()}]" in err, err
+    assert not (tmp_path / "o").exists()
+    with pytest.raises(ValueError, match="workers must be a whole number >= 1"):
+        run_tasks(abs, [1], workers=0)
+    assert run_tasks(abs, [-1, -2], workers=10 ** 6, progress=False) == [1, 2]
