@@ -397,8 +397,8 @@ def output_file(final: str | Path, inputs=(), writes: str | None = None):
     format written (".csv", ".urdf", ".html", ".png"); a name whose suffix the toolkit reads as another
     format (``tip -o out.json``: every reader would take it as JSON) is an InputError before any work."""
     final = Path(final)
+    guard_output(final, inputs)         # over an input: said first
     check_suffix(final, writes)
-    guard_output(final, inputs)
     final = _through_link(final)        # written through the link (as a shell's > does), the link kept
     if final.is_dir():
         raise InputError("the output is a file, but a folder of that name exists", final)
