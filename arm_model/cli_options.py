@@ -8,6 +8,7 @@ import logging
 import math
 from pathlib import Path
 
+from .csv_io import parse_number
 from .errors import InputError
 from .model_file import Arm, load_model
 
@@ -19,17 +20,13 @@ log = logging.getLogger(__name__)
 
 
 def _number(text: str, kind=float):
-    """``text`` as a finite float or a whole number: no underscores ("4_5" is not 45), no nan or inf."""
+    """``text`` as a finite float or a whole number, by the files' number rule (:func:`arm_model.csv_io.parse_number`:
+    ASCII digits only, so no "4_5" for 45 nor another script's digits; no nan or inf)."""
     what = "a whole number" if kind is int else "a finite number"
-    try:
-        if "_" in text:
-            raise ValueError
-        v = kind(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
-    if kind is float and not math.isfinite(v):
+    v = parse_number(text.strip())
+    if v is None or not math.isfinite(v) or (kind is int and not text.strip().lstrip("+-").isdecimal()):
         raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
-    return v
+    return int(text) if kind is int else v
 
 
 def number_in(low=None, high=None, *, low_open=False, high_open=False, kind=float):
@@ -136,15 +133,18 @@ def add_frame_options(p) -> None:
 
 def _hold_joint(text: str) -> tuple[str, float]:
     """``--hold-joint JOINT[=VALUE]`` -> (name, value in deg or mm)."""
-    name, _, value = text.partition("=")
+    name, sep, value = text.partition("=")
     if not name.strip():
         raise argparse.ArgumentTypeError(f"'{text}': give a joint name, JOINT or JOINT=VALUE")
+    if not sep:
+        return name.strip(), 0.0
     try:
-        v = float(value) if value.strip() else 0.0
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}': VALUE must be a number (deg, or mm)") from None
-    if not math.isfinite(v) or abs(v) > 1e4:
-        raise argparse.ArgumentTypeError(f"'{text}': VALUE must be finite and within +-10000 (deg, or mm)")
+        v = _number(value)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"'{text}': VALUE must be a number (finite; deg, or mm; or leave out "
+                                         "'=VALUE' for 0)") from None
+    if abs(v) > 1e4:
+        raise argparse.ArgumentTypeError(f"'{text}': VALUE must be within +-10000 (deg, or mm)")
     return name.strip(), v
 
 

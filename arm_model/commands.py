@@ -211,7 +211,7 @@ def run_tip(args: argparse.Namespace) -> int:
     # order; nothing is written on an error (the first error in file order is the one reported)
     from .csv_io import csv_spans
     from .parallel import fork_map, workers
-    with output_file(args.output, [args.points, *arm_inputs(args)]) as tmp:
+    with output_file(args.output, [args.points, *arm_inputs(args)], writes=".csv") as tmp:
         arm = model_from_args(args)
         desc = arm.desc
         ref = args.reference_frame
@@ -287,7 +287,7 @@ def run_examples(args: argparse.Namespace) -> int:
 
 
 def run_urdf(args: argparse.Namespace) -> int:
-    with output_file(args.output, arm_inputs(args)) as tmp:
+    with output_file(args.output, arm_inputs(args), writes=".urdf") as tmp:
         arm = model_from_args(args)
         desc = arm.desc
         tmp.write_text(urdf_text(desc), encoding="utf-8")

@@ -17,6 +17,7 @@ Sign conventions:
 """
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -63,6 +64,23 @@ def _joint(desc: ArmDescription | None, i: int, prefix: str = "j") -> str:
     return names[i] if 0 <= i < len(names) else f"{prefix}{i + 1}"
 
 
+def _indices(values: object, what: str, *, low: int = 0, high: int | None = None) -> tuple[int, ...]:
+    """``values`` as a non-empty tuple of distinct whole numbers in [low, high] (an effect's joints, harmonics), or a
+    TypeError/ValueError naming ``what``."""
+    if not isinstance(values, (tuple, list)) or not all(isinstance(v, numbers.Integral) and not isinstance(v, bool)
+                                                         for v in values):
+        raise TypeError(f"{what} must be a tuple of whole numbers, got {values!r}")
+    out = tuple(int(v) for v in values)
+    if not out or len(set(out)) != len(out) or min(out) < low or (high is not None and max(out) > high):
+        raise ValueError(f"{what} must be distinct whole numbers >= {low}{'' if high is None else f' and <= {high}'}"
+                         f" (at least one), got {values!r}")
+    return out
+
+
+#: the highest harmonic an effect takes (of a joint angle: a period of 0.36 deg, below any drive's)
+MAX_HARMONIC = 1000
+
+
 @dataclass(frozen=True)
 class Effect:
     """Base class. Subclasses set ``key``, implement :meth:`param_defs` and :meth:`apply`.
@@ -82,6 +100,11 @@ class Effect:
     #: revolute joints only (by default all of them; a prismatic joint named in ``joints`` is an error)
     revolute_only: ClassVar[bool] = False
 
+    def __post_init__(self) -> None:
+        """``joints``: None or distinct 0-based joint indices (a TypeError or ValueError here, not deep in a fit)."""
+        if self.joints is not None:
+            object.__setattr__(self, "joints", _indices(self.joints, f"{self.key}: joints"))
+
     def needs(self) -> tuple[str, ...]:
         """Per-point inputs the effect needs beyond q and the wrench."""
         return ()
@@ -97,7 +120,10 @@ class Effect:
         if self.joints is None:
             return desc.revolute_columns if self.revolute_only else tuple(range(desc.n_joints))
         for i in self.joints:
-            if self.revolute_only and 0 <= i < desc.n_joints and desc.encoders[i].prismatic:
+            if i >= desc.n_joints:
+                raise ValueError(f"the effect '{self.key}' acts on joint index {i} (0-based), but the arm has "
+                                 f"{desc.n_joints} joints")
+            if self.revolute_only and desc.encoders[i].prismatic:
                 raise ValueError(f"the effect '{self.key}' models a joint angle's error; joint "
                                  f"'{desc.encoders[i].name}' is prismatic")
         return tuple(self.joints)
@@ -127,6 +153,11 @@ class EncoderEccentricity(Effect):
     key: str = field(default="eccentricity", init=False, repr=False)
     revolute_only: ClassVar[bool] = True
     held_when_weak: ClassVar[bool] = True
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "harmonics", _indices(self.harmonics, "eccentricity: harmonics", low=1,
+                                                       high=MAX_HARMONIC))
 
     def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
         out = []
@@ -382,7 +413,19 @@ class JointHarmonics(Effect):
     key: str = field(default="joint_harmonics", init=False, repr=False)
     revolute_only: ClassVar[bool] = True
 
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "harmonics", _indices(self.harmonics, "joint_harmonics: harmonics", low=1,
+                                                       high=MAX_HARMONIC))
+        if self.source is not None:
+            if not isinstance(self.source, numbers.Integral) or isinstance(self.source, bool) or self.source < 0:
+                raise TypeError(f"joint_harmonics: source must be a 0-based joint index or None, got {self.source!r}")
+            object.__setattr__(self, "source", int(self.source))
+
     def _suffix(self, desc: ArmDescription, i: int) -> str:
+        if self.source is not None and self.source >= desc.n_joints:
+            raise ValueError(f"the effect '{self.key}' takes joint index {self.source} (0-based) as its source, but "
+                             f"the arm has {desc.n_joints} joints")
         return "" if self.source is None or self.source == i else f"_by_{desc.joint_names[self.source]}"
 
     def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
@@ -442,6 +485,7 @@ class ProbeComplianceMatrix(Effect):
     key: str = field(default="probe_compliance_matrix", init=False, repr=False)
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         bad = set(self.terms) - set(_MATRIX_TERMS)
         if bad or len(set(self.terms)) != len(self.terms) or not self.terms:
             raise ValueError(f"terms must be distinct entries of {_MATRIX_TERMS}, got {self.terms}")

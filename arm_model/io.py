@@ -384,6 +384,23 @@ class Feature:
     form_error: float | None = None
     values: dict = field(default_factory=dict)
 
+    def __post_init__(self):
+        """A Feature built in Python is held to the artefacts reader's rule (a ValueError naming the field): a
+        non-empty id, a known kind, a diameter > 0 and an uncertainty and form error >= 0, each finite and a
+        plausible length."""
+        if not isinstance(self.id, str) or not self.id.strip():
+            raise ValueError(f"Feature: id must be a non-empty text, got {self.id!r}")
+        if self.kind not in FEATURE_KINDS:
+            raise ValueError(f"Feature: kind must be one of {', '.join(FEATURE_KINDS)}, got {self.kind!r}")
+        for name in _FEATURE_LENGTHS:
+            v = getattr(self, name)
+            if v is None:
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v) \
+                    or implausible(float(v), "length") or v < 0 or (name == "diameter" and v == 0):
+                least = "> 0" if name == "diameter" else ">= 0"
+                raise ValueError(f"Feature: {name} must be a finite length [m] {least} and plausible, got {v!r}")
+
 
 @dataclass(frozen=True)
 class Distance:
@@ -481,6 +498,10 @@ def _artefact_distance(err, t, i: int, features: dict) -> Distance:
     if between[0] == between[1]:
         raise err(f"'between' names '{between[0]}' twice; a distance joins two features", "distance", i,
                   "between")
+    flat = next((b for b in between if features[b].kind == "plane"), None)
+    if flat is not None:
+        raise err(f"'{flat}' is a plane: a distance joins two features' centres, and a plane has none", "distance",
+                  i, "between")
     length = u = None
     for key, v in t.items():
         if key == "between":
@@ -536,6 +557,12 @@ def parse_artefacts(text: str, path: str = "<string>", *, extra_keys: tuple = ()
         feature = _artefact_feature(err, t, i, features, extra_feature_keys)
         features[feature.id] = feature
     distances = [_artefact_distance(err, t, i, features) for i, t in enumerate(data.get("distance", []))]
+    for i, d in enumerate(distances):
+        first = next((k for k in range(i) if set(distances[k].between) == set(d.between)), None)
+        if first is not None:
+            raise err(f"the distance between '{d.between[0]}' and '{d.between[1]}' is given twice (first in "
+                      f"[[distance]] {first + 1}, line {lines.get(('distance', first, 'between'), '?')}): one "
+                      "certified length a pair", "distance", i, "between")
     return Artefacts(path, features, tuple(distances))
 
 

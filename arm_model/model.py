@@ -42,6 +42,17 @@ class ArmModel:
     base_size: int = field(init=False)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.desc, ArmDescription):
+            raise TypeError(f"ArmModel: desc must be an ArmDescription (arm_model.load_description(...)), got "
+                            f"{type(self.desc).__name__}")
+        if isinstance(self.effects, (str, bytes)) or not isinstance(self.effects, (tuple, list)):
+            raise TypeError(f"ArmModel: effects must be a tuple of effects, got {self.effects!r}")
+        bad = next((e for e in self.effects if not isinstance(e, Effect)), None)
+        if bad is not None:
+            hint = " (an instance: call it, e.g. EFFECTS['thermal']())" if isinstance(bad, type) else \
+                " (e.g. arm_model.effects.EFFECTS['thermal']())" if isinstance(bad, str) else ""
+            raise TypeError(f"ArmModel: every effect must be an arm_model.effects.Effect{hint}, got {bad!r}")
+        object.__setattr__(self, "effects", tuple(self.effects))
         base = param_spec(self.desc)
         names, units = list(base.names), list(base.units)
         for e in self.effects:

@@ -474,8 +474,23 @@ def load_model(path, tip_frame: str | None = None, probe: dict | None = None, ma
                base_frame: str | None = None, hold: dict | None = None) -> Arm:
     """The arm of an ``--arm`` option: a model file or description TOML (effects applied), or a URDF
     with ``tip_frame`` (no effects), optionally a masses file (:func:`arm_model.urdf_import.load_masses`) and
-    the link its chain starts at (``base_frame``), or a shipped arm's name (``aacmm7``)."""
+    the link its chain starts at (``base_frame``), or a shipped arm's name (``aacmm7``); ``hold``: {joint name:
+    value (deg, or mm for a prismatic joint)} of the chain's joints held fixed (``--hold-joint``). An argument of
+    the wrong type is a TypeError, a held value not finite a ValueError."""
     from .shipped import arm_path
+    for name, frame in (("tip_frame", tip_frame), ("base_frame", base_frame)):
+        if frame is not None and not isinstance(frame, str):
+            raise TypeError(f"{name} must be a link name (str) or None, got {frame!r}")
+    if hold is not None:
+        if not isinstance(hold, dict) or not all(isinstance(k, str) for k in hold):
+            raise TypeError(f"hold must be a dict {{joint name: value (deg, or mm)}}, got {hold!r}")
+        bad = next((k for k, v in hold.items() if isinstance(v, bool) or not isinstance(v, (int, float, np.floating,
+                                                                                             np.integer))), None)
+        if bad is not None:
+            raise TypeError(f"hold[{bad!r}] must be a number (deg, or mm), got {hold[bad]!r}")
+        bad = next((k for k, v in hold.items() if not math.isfinite(v)), None)
+        if bad is not None:
+            raise ValueError(f"hold[{bad!r}] must be finite, got {hold[bad]!r}")
     path = arm_path(path)
     if path.suffix.lower() == ".urdf" or masses is not None or base_frame is not None or hold:  # load_arm: why not
         from .urdf_import import load_arm
@@ -655,6 +670,7 @@ def parameters_of(arm) -> ParameterCovariance | None:
         if cov.units[i] != spec.units[spec.index(n)]:
             raise InputError(f"parameter '{n}' is a '{spec.units[spec.index(n)]}' quantity, but its unit is one of "
                              f"'{cov.units[i]}'", arm.covariance, line, "unit")
+    _check_agrees(arm, cov)
     try:
         out = ParameterCovariance(tuple(cov.names), cov.matrix,
                                   source=f"the model's covariance file {arm.covariance.name}")
@@ -662,6 +678,38 @@ def parameters_of(arm) -> ParameterCovariance | None:
     except ValueError as exc:
         raise InputError(f"not a usable covariance: {exc}", arm.covariance) from None
     return out
+
+
+#: the relative difference up to which a value or uncertainty of the model file and of its covariance file agree
+#: (both are written from one number: %.17g in the covariance file, the unit's factor applied in the model file)
+AGREEMENT_RTOL = 1e-9
+
+
+def _check_agrees(arm, cov: Covariance) -> None:
+    """The model file's ``[[effect]]`` parameters and its covariance file are one fit's: a parameter with a row in
+    the covariance file is estimated there (not ``fixed`` or ``held``), with the same value and uncertainty; an
+    estimated one (``free``, ``prior-dominated``) has a row. A hand-edited file that breaks this would give
+    points uncertainties of another model: an InputError naming the covariance file's line and column."""
+    row = {n: i for i, n in enumerate(cov.names)}
+    for name, i in row.items():
+        if name not in arm.values:
+            continue
+        line = cov.lines[i] if cov.lines else None
+        state = arm.states.get(name)
+        if state in ("fixed", "held"):
+            raise InputError(f"parameter '{name}' is '{state}' in the model file, but the covariance file gives it "
+                             "an uncertainty: the two files are not of one fit", arm.covariance, line, "parameter")
+        for column, ours, theirs in (("value", arm.values[name], cov.values[i]),
+                                     ("u", arm.uncertainties.get(name), cov.u[i])):
+            if ours is not None and abs(ours - theirs) > AGREEMENT_RTOL * max(abs(ours), abs(theirs)):
+                unit, f = _display(cov.units[i])
+                raise InputError(f"parameter '{name}': {float(theirs) / f:.10g} {unit} here, but {ours / f:.10g} "
+                                 f"{unit} in the model file: the two files are not of one fit", arm.covariance,
+                                 line, column)
+    missing = next((n for n, st in arm.states.items() if st in ("free", "prior-dominated") and n not in row), None)
+    if missing is not None:
+        raise InputError(f"parameter '{missing}' is '{arm.states[missing]}' (estimated) in the model file, but the "
+                         "covariance file has no row for it: the two files are not of one fit", arm.covariance)
 
 
 def read_model_file(path: Path) -> Arm:

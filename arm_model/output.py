@@ -39,9 +39,9 @@ import zlib
 from pathlib import Path
 
 from .errors import InputError
-from .readback import UnreadableOutput, read_back
+from .readback import UnreadableOutput, read_as, read_back
 
-__all__ = ["output_folder", "output_file", "Output", "safe_name", "guard_output", "atomic_write_bytes",
+__all__ = ["output_folder", "output_file", "check_suffix", "Output", "safe_name", "guard_output", "atomic_write_bytes",
            "MARKER", "published_outputs", "check_output"]
 
 log = logging.getLogger(__name__)
@@ -105,6 +105,19 @@ def resolved(path: str | Path) -> Path:
         return Path(path).resolve()
     except (RuntimeError, OSError):     # Python < 3.13: RuntimeError on a loop; later: OSError ELOOP
         raise InputError("cannot follow the path: a loop of symbolic links", path) from None
+
+
+def _through_link(final: Path) -> Path:
+    """The output path ``final``, or the target of the symbolic link it is (written through, the link kept); a link
+    whose target's folder does not exist is an InputError: as a shell's > does, no folder is made for it elsewhere,
+    outside every path the user named."""
+    if not final.is_symlink():
+        return final
+    target = resolved(final)
+    if not target.parent.is_dir():
+        raise InputError(f"the output is a symbolic link to {target}, whose folder does not exist (a link is "
+                         "written through, never a folder made for it elsewhere)", final)
+    return target
 
 
 def guard_output(out: str | Path, inputs=()) -> Path:
@@ -339,8 +352,7 @@ def output_folder(final: str | Path, inputs=(), command: str = ""):
     final = Path(final)
     guard_output(final, inputs)
     final = Path(os.path.abspath(final))
-    if final.is_symlink():
-        final = resolved(final)
+    final = _through_link(final)
     if final.name in ("", ".", ".."):
         raise InputError("name an output folder", final)
     _check_folder(final, command)
@@ -378,14 +390,16 @@ def output_folder(final: str | Path, inputs=(), command: str = ""):
 
 
 @contextlib.contextmanager
-def output_file(final: str | Path, inputs=()):
+def output_file(final: str | Path, inputs=(), writes: str | None = None):
     """Write one output file complete or not at all: yields a temporary path beside ``final``;
     when the block ends normally it replaces ``final`` (``os.replace``), else it is removed. A symbolic
-    link at ``final`` is followed: its target is replaced, the link stays."""
+    link at ``final`` is followed: its target is replaced, the link stays. ``writes``: the suffix of the
+    format written (".csv", ".urdf", ".html", ".png"); a name whose suffix the toolkit reads as another
+    format (``tip -o out.json``: every reader would take it as JSON) is an InputError before any work."""
     final = Path(final)
-    guard_output(final, inputs)
-    if final.is_symlink():              # written through the link (as a shell's > does), the link kept
-        final = resolved(final)
+    guard_output(final, inputs)         # over an input: said first
+    check_suffix(final, writes)
+    final = _through_link(final)        # written through the link (as a shell's > does), the link kept
     if final.is_dir():
         raise InputError("the output is a file, but a folder of that name exists", final)
     if final.name in ("", ".", ".."):
@@ -418,6 +432,19 @@ def output_file(final: str | Path, inputs=()):
         if named is None:
             raise
         raise named from None
+
+
+def check_suffix(final: Path, writes: str | None) -> None:
+    """An output file named ``final`` holds a ``writes`` file (its suffix, e.g. ".csv"; None: any): its name
+    must not have the suffix of another format the toolkit reads (:func:`arm_model.readback.read_as`), or the
+    file would be refused by its own read-back and misread by every command given it."""
+    suffix = final.suffix.lower()
+    if writes is None or suffix == writes.lower():
+        return
+    other = read_as(suffix)
+    if other is not None:
+        raise InputError(f"a '{final.suffix}' file is read as {other} by the toolkit, but this command writes "
+                         f"{writes[1:].upper()}: name the output '{writes}' (or with a suffix no reader takes)", final)
 
 
 def atomic_write_bytes(path: str | Path, data: bytes, inputs=()) -> Path:

@@ -22,16 +22,20 @@ class WorkerDied(OSError):
     failure of the system, reported like one (``aacmm``: the message, exit 2, nothing written)."""
 
 
+def cores() -> int:
+    """The cores this process may run on (at least 1)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
 def workers(limit: int = 2) -> int:
     """How many worker processes to use: the cores this process may run on, at most ``limit``; 1
     where forking is not safe."""
     if not sys.platform.startswith("linux"):
         return 1
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        cores = os.cpu_count() or 1
-    return max(1, min(limit, cores))
+    return max(1, min(limit, cores()))
 
 
 def _child(conn, func, args) -> None:

@@ -42,7 +42,7 @@ from typing import Any
 
 from .errors import InputError
 
-__all__ = ["UnreadableOutput", "KINDS", "kind_of", "read_back"]
+__all__ = ["UnreadableOutput", "KINDS", "kind_of", "read_back", "read_as"]
 
 
 class UnreadableOutput(RuntimeError):
@@ -99,6 +99,13 @@ KINDS: tuple[Kind, ...] = (
 )
 #: a TOML file of none of the kinds above (the simulator's truth): it must still be TOML
 OTHER_TOML = Kind("TOML file", ".toml", lambda data: True, "arm_model.readback:read_toml")
+
+
+def read_as(suffix: str) -> str | None:
+    """What the toolkit reads a file named with ``suffix`` as ("TOML", "CSV", "URDF", "JSON": the readers of
+    :data:`KINDS` are chosen by the suffix), or None for a suffix no reader takes."""
+    suffix = suffix.lower()
+    return suffix[1:].upper() if suffix and any(k.suffix == suffix for k in KINDS) else None
 
 
 def _toml_data(path: Path) -> dict | None:

@@ -383,20 +383,41 @@ def _walk_to_root(u: _Urdf, tip_frame: str, base_frame: str | None = None) -> li
     return chain
 
 
-def _held_values(u: _Urdf, chain: list, tip_frame: str, hold: dict | None) -> dict:
+def _limits(u: _Urdf, j) -> tuple[float, float] | None:
+    """The (lower, upper) limits [rad or m] of a URDF joint, or None: a continuous joint, no <limit>, a joint declared
+    locked (lower = upper: its value still comes from the data), or limits beyond plausible ("unlimited" as URDFs
+    made from SDF write it, +-1e16: no limit)."""
+    if j.type == "continuous" or j.limit is None or j.limit.lower is None or j.limit.upper is None:
+        return None
+    lower, upper = float(j.limit.lower), float(j.limit.upper)
+    if lower > upper:
+        raise u.error(f"joint '{j.name}': lower limit {lower:g} is above upper limit {upper:g}", j.name)
+    if lower == upper or implausible([lower, upper], "length" if j.type == "prismatic" else "angle"):
+        return None
+    return lower, upper
+
+
+def _held_values(u: _Urdf, chain: list, tip_frame: str, hold: dict | None, elastic: set) -> dict:
     """``--hold-joint``: joint name -> value in the user's unit (deg, or mm for a prismatic joint), checked
-    to be a moving joint of the chain, as [rad] or [m]."""
+    to be a moving joint of the chain (not one of the probe's ``elastic`` joints, the toolkit's model of its
+    compliance) within the joint's limits, as [rad] or [m]."""
     on_chain = {j.name: j for j in chain}
     out = {}
     for name, value in (hold or {}).items():
         j = on_chain.get(name)
-        if j is None or j.type not in ("revolute", "continuous", "prismatic"):
-            moving = [k.name for k in chain if k.type in ("revolute", "continuous", "prismatic")]
-            what = f"a {j.type} joint" if j is not None else "not a joint of the chain"
+        moving = [k.name for k in chain if k.type in ("revolute", "continuous", "prismatic") and k.name not in elastic]
+        if j is None or j.type not in ("revolute", "continuous", "prismatic") or name in elastic:
+            what = ("the probe's elastic joint (its compliance, modelled from the force)" if name in elastic else
+                    f"a {j.type} joint" if j is not None else "not a joint of the chain")
             raise InputError(f"joint '{name}' is {what}{did_you_mean(name, moving) if j is None else ''}: "
                              f"--hold-joint names a moving joint on the chain to '{tip_frame}' "
                              f"(they are: {', '.join(moving)})", u.path, None, "key '--hold-joint'")
         out[name] = value * 1e-3 if j.type == "prismatic" else np.radians(value)
+        limits = _limits(u, j)
+        if limits is not None and not limits[0] - 1e-12 <= out[name] <= limits[1] + 1e-12:
+            f, unit = (1e3, "mm") if j.type == "prismatic" else (180.0 / np.pi, "deg")
+            raise InputError(f"joint '{name}' held at {value:g} {unit}, beyond its limits [{limits[0] * f:.6g}, "
+                             f"{limits[1] * f:.6g}] {unit} (the URDF's <limit>)", u.path, None, "key '--hold-joint'")
     return out
 
 
@@ -412,9 +433,9 @@ def _chain(u: _Urdf, tip_frame: str, base_frame: str | None = None, hold: dict |
         raise InputError(f"link '{base_frame}' is not on the chain from the root to '{tip_frame}' (its links: "
                          f"{', '.join(ancestors + [tip_frame])}): the base frame is a link the chain passes "
                          "through", u.path, None, "key '--base-frame'")
-    held_at = _held_values(u, chain, tip_frame, hold)
     elastic = [j for j in chain if _ELASTIC_TYPES.get(j.name) == j.type]
     held = {j.name for j in elastic} if len(elastic) == len(ELASTIC_JOINTS) else set()
+    held_at = _held_values(u, chain, tip_frame, hold, held)
     moving, pending, tool_prefix, hinge = [], np.eye(4), np.eye(4), None
     for j in chain:
         if j.child == tip_frame:
@@ -438,6 +459,10 @@ def _chain(u: _Urdf, tip_frame: str, base_frame: str | None = None, hold: dict |
         moving.append((j, pending, mimic))
         pending = np.eye(4)
         hinge = None
+    if not moving and held_at:
+        raise InputError(f"--hold-joint holds every moving joint between '{base}' and '{tip_frame}' "
+                         f"({', '.join(held_at)}): the chain needs one the points give", u.path, None,
+                         "key '--hold-joint'")
     if not moving:
         raise InputError(f"no revolute, continuous or prismatic joint between '{base}' and '{tip_frame}'", u.path,
                          None, "key '--tip-frame'")
@@ -578,15 +603,7 @@ def _row(u: _Urdf, j, prefix: np.ndarray, mimic: Mimic | None, mass: float, com:
     axis = np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0), dtype=float)
     if np.linalg.norm(axis) < 1e-9:
         raise u.error(f"joint '{j.name}' has a zero axis", j.name)
-    lower = upper = None
-    if j.type != "continuous" and j.limit is not None and j.limit.lower is not None and j.limit.upper is not None:
-        lower, upper = float(j.limit.lower), float(j.limit.upper)
-        if lower > upper:
-            raise u.error(f"joint '{j.name}': lower limit {lower:g} is above upper limit {upper:g}", j.name)
-        if lower == upper:          # a joint declared locked: its value still comes from the data
-            lower = upper = None
-        elif implausible([lower, upper], "length" if j.type == "prismatic" else "angle"):
-            lower = upper = None    # "unlimited" as URDFs made from SDF write it (+-1e16): no limit, never written
+    lower, upper = _limits(u, j) or (None, None)
     roll, pitch, yaw = _rpy(T)
     return JointRow(name=j.name, origin=(float(T[0, 3]), float(T[1, 3]), float(T[2, 3]), roll, pitch, yaw),
                     axis=tuple(float(v) for v in axis / np.linalg.norm(axis)), lower=lower, upper=upper,

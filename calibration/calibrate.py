@@ -553,7 +553,13 @@ def calibrate(model: ArmModel, data: CalibrationData, options: FitOptions = FitO
 
     Raises:
         NumericalError: no convergence, too few residuals, or unidentifiable parameters with "stop".
+        TypeError: an argument not of its type (a model file's path for ``model``, a dict for ``options``).
     """
+    for name, value, kind, how in (("model", model, ArmModel, "arm_model.model.ArmModel(load_description(...))"),
+                                   ("data", data, CalibrationData, "calibration.make_data(points, artefacts, model)"),
+                                   ("options", options, FitOptions, "calibration.FitOptions(...)")):
+        if not isinstance(value, kind):
+            raise TypeError(f"calibrate: {name} must be a {kind.__name__} ({how}), got {type(value).__name__}")
     if options.prior_scale == "evidence":
         estimate = _evidence
     elif options.weights_from_data:

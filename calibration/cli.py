@@ -23,10 +23,12 @@ from arm_model.cli_options import (
     positive,
     seed,
 )
+from arm_model.csv_io import parse_number
 from arm_model.io import json_text, read_artefacts, read_points
 from arm_model.log import counted
 from arm_model.model_file import Arm
 from arm_model.output import output_folder
+from arm_model.parallel import cores
 
 from .options import GROSS_THRESHOLD
 
@@ -54,9 +56,8 @@ def parse_holdout(text: str | None):
     """``--holdout`` (of calibrate and close-loop): None, a fraction in (0, 1) or a list of measurement ids."""
     if text is None:
         return None
-    try:
-        v = float(text)
-    except ValueError:
+    v = parse_number(text.strip())
+    if v is None:                       # the files' number rule: "0.2", not "0_2" nor another script's digits
         ids = [t.strip() for t in text.split(",") if t.strip()]
         if not ids:
             raise InputError(f"--holdout names no measurement (got {text!r}): give measurement ids or a fraction"
@@ -136,8 +137,11 @@ def sigma_options(p, prior_default: str | None = None) -> None:
                    + f". Default {default} (docs/calibration.md)")
 
 
+
+
 #: the range of a ``--prior-scale`` factor: below 1e-6 (1 nm on a 1 mm plausible size, far below any arm's
-#: resolution) the prior's weights overflow (a factor of 1e-300 divides by zero, 5e-324 stalls the fit on NaN)
+#: resolution) the prior holds every parameter at its nominal value (FitOptions takes wider factors, up to the limits
+#: of its arithmetic, :data:`calibration.options.PRIOR_FACTOR_LIMITS`)
 PRIOR_FACTOR_RANGE = (1e-6, 1e3)
 
 
@@ -237,15 +241,15 @@ def register(sub) -> None:
                    help="hold unidentifiable parameters fixed and list them (default), or stop with the list")
     c.add_argument("--outlier-threshold", type=positive(), default=4.0,
                    help="standardized residual beyond which a point is reported as an outlier (default 4)")
-    c.add_argument("--drop-outliers", action="store_true",
-                   help="drop every outlier point and refit, in rounds (they are listed); default: leave out the "
-                        "gross errors only (--gross-threshold), report and keep the others")
-    c.add_argument("--gross-threshold", type=positive(), default=GROSS_THRESHOLD,
+    which = c.add_mutually_exclusive_group()        # the outliers: dropped, kept, or the gross ones left out
+    which.add_argument("--drop-outliers", action="store_true", help="drop every outlier point and refit, in "
+                       "rounds (listed); default: leave out the gross errors (--gross-threshold), keep the others")
+    c.add_argument("--gross-threshold", type=positive(), default=None,
                    help=f"standardized residual from which a point (its rows' deletion residual together, at the "
                         f"row-by-row false-alarm rate) is a gross error: left out and the fit redone, one at a time, "
                         f"at most 5%% of the points, and listed (default {GROSS_THRESHOLD:g})")
-    c.add_argument("--keep-outliers", action="store_true",
-                   help="keep every point in the fit, gross errors too (they are reported)")
+    which.add_argument("--keep-outliers", action="store_true",
+                       help="keep every point in the fit, gross errors too (they are reported)")
     c.add_argument("--covariance-scale", "--covariance", dest="covariance", choices=("residual", "stated"),
                    default="residual",
                    help="scale the parameters' covariance by the residual variance factor s0^2 (default) or trust "
@@ -276,7 +280,8 @@ def register(sub) -> None:
                    help="seed of the first run's simulation (run i uses --seed + i; default 0)")
     m.add_argument("--holdout", type=fraction, default=0.25, metavar="FRACTION",
                    help="held-out fraction of measurements (default 0.25)")
-    m.add_argument("--workers", type=at_least(1), default=None, help="local processes (default: CPU count)")
+    m.add_argument("--workers", type=number_in(1, cores(), kind=int), default=None,  # more: memory, no speed
+                   help=f"local processes, at most the cores this process may run on ({cores()} here; default: all)")
     m.add_argument("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://10.0.0.5:8786")
     add_output_option(m)
     _common_fit_options(m)
@@ -440,6 +445,18 @@ def _split(args, data):
     return data.select(~mask), None, mask
 
 
+def gross_threshold(args: argparse.Namespace) -> float | None:
+    """``--gross-threshold`` (default :data:`GROSS_THRESHOLD`), or None with ``--keep-outliers``; given beside
+    ``--keep-outliers`` or ``--drop-outliers``, which leave no point to it, it is an InputError."""
+    if args.gross_threshold is not None and (args.keep_outliers or args.drop_outliers):
+        other = "--keep-outliers keeps every point" if args.keep_outliers else "--drop-outliers drops every outlier"
+        raise InputError(f"--gross-threshold {args.gross_threshold:g} leaves out the gross errors, but {other}: give "
+                         "one of them")
+    if args.keep_outliers:
+        return None
+    return GROSS_THRESHOLD if args.gross_threshold is None else args.gross_threshold
+
+
 def run_calibrate(args: argparse.Namespace) -> int:
     from .calibrate import calibrate, nominal_baseline
     from .model_output import refine_torques, with_fitted_torques
@@ -457,7 +474,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
         options = fit_options(args, free=_free(model, args, data), values=values, weights=_weights(args),
                               on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
                               drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference,
-                              gross_threshold=None if args.keep_outliers else args.gross_threshold)
+                              gross_threshold=gross_threshold(args))
         res = refine_torques(calibrate(model, train, options))
         base = nominal_baseline(model, res.data, replace(res.options, weights=res.weights))
         # the held-out rows' torques on the calibrated description, as the model file (tip) evaluates them

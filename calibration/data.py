@@ -228,6 +228,14 @@ def make_data(points: PointSet, artefacts: Artefacts | None, model: ArmModel | N
     an effect needs them and ``aux`` does not give them, from ``PinocchioArm(model.desc).torques``
     at the measured angles and wrenches with the nominal description.
     """
+    for name, value, kind in (("points", points, PointSet), ("artefacts", artefacts, Artefacts),
+                              ("model", model, ArmModel), ("reference", reference, PointSet),
+                              ("heldout", heldout, PointSet)):
+        if not isinstance(value, kind) and (value is not None or name == "points"):
+            what = f"{'an' if kind.__name__[0] in 'AEIOU' else 'a'} {kind.__name__}" + ("" if name == "points" else
+                                                                                    " or None")
+            raise TypeError(f"make_data: {name} must be {what} (arm_model.read_points, read_artefacts, ArmModel), "
+                            f"got {type(value).__name__}")
     check_features(points, artefacts)
     if heldout is not None:
         check_features(heldout, artefacts)

@@ -7,13 +7,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from .data import Weights
 from .identifiability import DEFAULT_RANK_TOL
 
-__all__ = ["FitOptions", "UNIDENTIFIABLE", "COVARIANCE", "REFERENCE"]
+__all__ = ["FitOptions", "UNIDENTIFIABLE", "COVARIANCE", "REFERENCE", "PRIOR_FACTOR_LIMITS", "PRIOR_LENGTH_RANGE"]
 
 #: what :func:`~calibration.calibrate.calibrate` does with parameters the data cannot identify
 UNIDENTIFIABLE = ("fix", "stop")
@@ -31,12 +32,46 @@ REFERENCE = ("fit", "identity", "off")
 GROSS_THRESHOLD = 6.0
 
 
+#: the prior scale factors a fit takes: beyond, the prior's weights overflow (a factor of 1e-300 made the normal
+#: matrix "exactly singular", 5e-324 stalled the fit on NaN, 1e300 overflowed the prior ratios); the command line's
+#: --prior-scale takes the narrower range of sensible factors (:data:`calibration.cli.PRIOR_FACTOR_RANGE`)
+PRIOR_FACTOR_LIMITS = (1e-12, 1e12)
+#: the range of the plausible size of a length error [m] (``--plausible-length-mm`` 1e-6 to 1e6)
+PRIOR_LENGTH_RANGE = (1e-9, 1e3)
+
+
 def _positive(name: str, v: object, allow_none: bool = False) -> None:
     if v is None and allow_none:
         return
     if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v) \
             or v <= 0:
         raise ValueError(f"{name} must be a positive finite number{' or None' if allow_none else ''}, got {v!r}")
+
+
+def _in_range(name: str, v: object, low: float, high: float) -> None:
+    """``v`` a finite number in [low, high] (as the command line's option of the same meaning takes it)."""
+    _positive(name, v)
+    if not low <= v <= high:  # type: ignore[operator]
+        raise ValueError(f"{name} must be in [{low:g}, {high:g}], got {v!r}")
+
+
+def _finite_values(name: str, v: dict[str, Any], positive: bool = False) -> dict[str, float]:
+    """A {name: number} mapping with finite values (and > 0 for ``positive``), by str names, as floats."""
+    out = {}
+    for k, x in dict(v).items():
+        try:
+            f = float(x) if not isinstance(x, (bool, str, bytes)) and np.ndim(x) == 0 else math.nan
+        except (TypeError, ValueError):
+            f = math.nan
+        if not math.isfinite(f) or (positive and f <= 0):
+            raise ValueError(f"{name}[{k!r}] must be a {'positive ' if positive else ''}finite number, got {x!r}")
+        out[str(k)] = f
+    return out
+
+
+def _flag(name: str, v: object) -> None:
+    if not isinstance(v, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False, got {v!r}")
 
 
 def _choice(name: str, v: object, choices: tuple[str, ...]) -> None:
@@ -108,11 +143,15 @@ class FitOptions:
         if self.free is not None:
             if isinstance(self.free, str):
                 raise ValueError(f"free must be a sequence of names or patterns, got the string {self.free!r}")
-            set_(self, "free", tuple(str(n) for n in self.free))
+            bad = next((n for n in self.free if not isinstance(n, str) or not n.strip()), None)
+            if bad is not None or not isinstance(self.free, (tuple, list)):
+                raise ValueError(f"free must be a sequence of parameter names or patterns (non-empty str), got "
+                                 f"{bad if bad is not None else self.free!r}")
+            set_(self, "free", tuple(self.free))
         for name in ("values", "start", "priors"):
             v = getattr(self, name)
             if v is not None:
-                set_(self, name, {str(k): float(x) for k, x in dict(v).items()})
+                set_(self, name, _finite_values(name, v, positive=name == "priors"))
         if self.weights is None:
             set_(self, "weights", Weights())
         elif not isinstance(self.weights, Weights):
@@ -128,15 +167,20 @@ class FitOptions:
         if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, (int, np.integer)) or self.max_iter < 1:
             raise ValueError(f"max_iter must be a positive integer, got {self.max_iter!r}")
         _positive("min_resolution", self.min_resolution, allow_none=True)
-        _positive("prior_length", self.prior_length, allow_none=True)
+        if self.prior_length is not None:
+            _in_range("prior_length", self.prior_length, *PRIOR_LENGTH_RANGE)
+        _flag("drop_outliers", self.drop_outliers)
+        _flag("weights_from_data", self.weights_from_data)
         if isinstance(self.prior_scale, dict):
             for g, v in self.prior_scale.items():
-                _positive(f"prior_scale[{g!r}]", v)
+                _in_range(f"prior_scale[{g!r}]", v, *PRIOR_FACTOR_LIMITS)
             set_(self, "prior_scale", {str(g): float(v) for g, v in self.prior_scale.items()})
-        elif self.prior_scale != "evidence":
-            _positive("prior_scale", self.prior_scale, allow_none=True)
+        elif self.prior_scale is not None and self.prior_scale != "evidence":
+            _in_range("prior_scale", self.prior_scale, *PRIOR_FACTOR_LIMITS)
         if self.prior_centre is not None:
             set_(self, "prior_centre", np.array(self.prior_centre, dtype=float))
+            if not np.isfinite(self.prior_centre).all():
+                raise ValueError("prior_centre must be finite")
         if self.blas is not None and (isinstance(self.blas, bool) or not isinstance(self.blas, (int, np.integer))
                                       or self.blas < 1):
             raise ValueError(f"blas must be a positive integer or None, got {self.blas!r}")

@@ -28,6 +28,7 @@ import numpy as np
 from arm_model import AacmmError, InputError
 from arm_model.log import Progress
 from arm_model.model import ArmModel
+from arm_model.parallel import cores
 
 from .calibrate import calibrate, resolve_parameters
 from .data import CalibrationData, make_data, split_holdout
@@ -93,7 +94,8 @@ def run_tasks(fn, items, *, scheduler=None, workers: int | None = None, progress
         fn: a picklable top-level function.
         scheduler: None (local processes), a Dask scheduler address (``"tcp://host:8786"``) or a
             ``distributed.Client``.
-        workers: local processes (default: the CPU count); 1 runs in this process.
+        workers: local processes (default: the CPU count; at most the cores this process may run on); 1 runs in
+            this process.
     """
     items = list(items)
     bar = Progress(len(items), label, logger=log, enabled=progress)
@@ -111,6 +113,10 @@ def run_tasks(fn, items, *, scheduler=None, workers: int | None = None, progress
             if client is not scheduler:
                 client.close()
         return out
+    if workers is not None:
+        if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+            raise ValueError(f"workers must be a whole number >= 1, got {workers!r}")
+        workers = min(workers, cores())     # more than the cores only cost memory (100000 forked 100000 processes)
     if workers == 1 or len(items) <= 1:
         for i, it in enumerate(items):
             out[i] = fn(it)

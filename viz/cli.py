@@ -109,8 +109,8 @@ def run(args: argparse.Namespace) -> int:
         from .browser import find_chromium
         find_chromium(args.browser)   # before any work: a missing browser is reported at once
     with contextlib.ExitStack() as outputs:    # --html and --screenshot: both complete, or neither
-        tmp = {k: outputs.enter_context(output_file(getattr(args, k), inputs))
-               for k in ("html", "screenshot") if getattr(args, k) is not None}
+        tmp = {k: outputs.enter_context(output_file(getattr(args, k), inputs, writes=suffix))
+               for k, suffix in (("html", ".html"), ("screenshot", ".png")) if getattr(args, k) is not None}
         return _run(args, inputs, outputs, tmp)
 
 

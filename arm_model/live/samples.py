@@ -26,7 +26,7 @@ from ..csv_io import parse_number
 from ..errors import InputError, did_you_mean, read_text
 from ..units import ABSOLUTE_ZERO_C, PLAUSIBLE_SI, QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
-__all__ = ["Sample", "SampleLayout", "TIME_COLUMNS", "sample_header", "read_samples"]
+__all__ = ["Sample", "SampleLayout", "TIME_COLUMNS", "sample_header", "read_samples", "sample_bounds", "checked_value"]
 
 #: the names the time column may have (one of them, once)
 TIME_COLUMNS = ("time_s", "t_s")
@@ -35,6 +35,25 @@ _QUANTITY = {"fx": "force", "fy": "force", "fz": "force", "f_bend": "force", "f_
              "mx": "torque", "my": "torque", "mz": "torque", "temperature": "temperature"}
 # characters of a line that the fast path reads with float(); any other takes the checked path
 _PLAIN = str.maketrans("", "", "0123456789.eE+-, ")
+
+
+def sample_bounds(quantity: str) -> tuple[float, float]:
+    """The lowest and highest value [SI] a sample's ``quantity`` ("time", "angle", "length", "force", "torque",
+    "temperature") takes: its plausible range, a temperature not below absolute zero."""
+    hi = PLAUSIBLE_SI[quantity]
+    return (ABSOLUTE_ZERO_C if quantity == "temperature" else -hi), hi
+
+
+def checked_value(value, quantity: str, what: str) -> float:
+    """``value`` as a float within :func:`sample_bounds` of ``quantity`` [SI], or a TypeError / ValueError naming
+    ``what`` (a sample given in Python is held to the stream reader's rule)."""
+    if isinstance(value, (str, bytes, bool)) or value is None:
+        raise TypeError(f"{what} must be a number, got {value!r}")
+    v = float(value)
+    lo, hi = sample_bounds(quantity)
+    if not lo <= v <= hi:           # nan too
+        raise ValueError(f"{what} must be a finite {quantity} in [{lo:g}, {hi:g}] (SI), got {value!r}")
+    return v
 
 
 class Sample(NamedTuple):
@@ -98,8 +117,7 @@ class SampleLayout:
         self._trigger = cols["trigger"][0] if self.has_trigger else None
         self._temperature = cols["temperature"][0] if self.has_temperature else None
         # (column, unit factor, lowest, highest [SI]) of every numeric cell, for the range check
-        self._checks = [(k, cols_f, -PLAUSIBLE_SI[q] if q != "temperature" else ABSOLUTE_ZERO_C, PLAUSIBLE_SI[q], q)
-                        for k, (q, cols_f) in self._quantities(cols).items()]
+        self._checks = [(k, cols_f, *sample_bounds(q), q) for k, (q, cols_f) in self._quantities(cols).items()]
         # the same bounds per cell in the file's units, narrowed by 1e-9 so that a value within them is within
         # the SI bounds whatever the rounding (one outside them is checked exactly); the trigger: any number
         self._lows, self._highs = [-math.inf] * self.n_cells, [math.inf] * self.n_cells

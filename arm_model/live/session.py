@@ -31,7 +31,7 @@ from .contacts import Contact, ContactDetector, ContactOptions
 from .features import FeatureFit, FeatureTracker
 from .plan import SessionPlan
 from .record import FILES, SessionRecord
-from .samples import Sample, SampleLayout, sample_header
+from .samples import Sample, SampleLayout, checked_value, sample_header
 
 __all__ = ["Session", "LivePoint", "Event", "EVENT_KINDS", "PERIOD_SAMPLES", "GAP_FACTOR", "LIMIT_MARGIN_RAD",
            "JUMP_PERIODS", "JUMP_GAPS", "JUMP_BACK_PERIODS", "JUMP_CONFIRM",
@@ -47,7 +47,8 @@ GAP_FACTOR = 1.5
 #: a time stamp this many nominal periods after the previous one (or :data:`JUMP_GAPS` times the widest interval
 #: taken so far, if more), or :data:`JUMP_BACK_PERIODS` before it, is off the stream's clock: one bad time stamp
 #: (skipped) if the next sample continues the old clock, a clock jump if :data:`JUMP_CONFIRM` samples in a row
-#: continue the new one. Less far back, a sample is late (out of order: skipped)
+#: continue the new one. Less far back, a sample is late (out of order: skipped) if the next sample continues the
+#: old clock, and a clock jump back as above if the next ones keep its own
 JUMP_PERIODS, JUMP_GAPS, JUMP_BACK_PERIODS = 1000, 10, 100
 #: samples in a row (the first off the old clock included) that make a jump of the time stamps a new clock
 JUMP_CONFIRM = 4
@@ -144,6 +145,9 @@ class Session:
         self.inputs = inputs
         # the arm's own inputs (its model discrepancy read once, here), with and without a force sensor
         self._default_inputs = None if inputs is not None else {f: arm.input_uncertainty(f) for f in (True, False)}
+        if plan is not None and not isinstance(plan, SessionPlan):
+            raise TypeError(f"plan must be a SessionPlan (arm_model.live.read_plan(path)) or None, got "
+                            f"{type(plan).__name__}")
         self.plan = plan or SessionPlan()
         self.measurement = measurement or self.plan.measurement or (Path(folder).name if folder else "live")
         npar = 0 if self.parameters is None else len(self.parameters.names)
@@ -186,17 +190,20 @@ class Session:
         held) and the temperature [°C] when the stream has them. Returns what it brought, in order:
         :class:`Event`, :class:`~arm_model.live.contacts.Contact`, :class:`LivePoint`,
         :class:`~arm_model.live.features.FeatureFit` (mostly nothing)."""
-        q = tuple(float(x) for x in q)
         if len(q) != self.desc.n_joints:
             raise ValueError(f"q must have {self.desc.n_joints} angles, got {len(q)}")
+        q = tuple(checked_value(x, kind, f"q[{k}]") for k, (x, kind) in enumerate(zip(q, self.desc.joint_quantities,
+                                                                                      strict=True)))
         w = None
         if wrench is not None:
-            w = tuple(float(x) for x in wrench)
-            if len(w) not in (3, 6) or not all(map(math.isfinite, w)):
+            if len(wrench) not in (3, 6):
                 raise ValueError(f"wrench must be 3 or 6 finite numbers, got {wrench!r}")
+            w = tuple(checked_value(x, "force" if k < 3 else "torque", f"wrench[{k}]") for k, x in enumerate(wrench))
             w = w + (0.0, 0.0, 0.0) if len(w) == 3 else w
-        s = Sample(float(t), q, w, None if trigger is None else bool(trigger),
-                   None if temperature is None else float(temperature))
+        if trigger is not None and not isinstance(trigger, (bool, np.bool_)):
+            raise TypeError(f"trigger must be True, False or None, got {trigger!r}")
+        s = Sample(checked_value(t, "time", "t"), q, w, None if trigger is None else bool(trigger),
+                   None if temperature is None else checked_value(temperature, "temperature", "temperature"))
         if self.layout is None:
             self._layout_from(s, wrench)
         return self.push_sample(s, self._sample_text(s))
@@ -212,10 +219,8 @@ class Session:
         last = self._last_t
         out = ()
         if last is not None:
-            if self._held or not -self._jump_back <= t - last <= self._jump_limit:
+            if self._held or not 0.0 < t - last <= self._jump_limit:     # behind, or far ahead: held
                 return self._off_clock(s, raw, line)
-            if not t > last:
-                return self._late(s, raw, last)
             if t - last > self._gap_limit:
                 out = self._gap(last, t)
         self._last_t = t
@@ -257,16 +262,17 @@ class Session:
                                          "repeated, skipped"),)
 
     def _off_clock(self, s: Sample, raw: str | None, line: int | None) -> tuple:
-        """A time stamp off the stream's clock (beyond :data:`JUMP_PERIODS` nominal periods, or :data:`JUMP_GAPS`
-        widest intervals, from the last sample taken), or one after such: held until the next samples tell
-        whether it was one bad time stamp (they continue the old clock: it is skipped) or the clock jumped
-        (:data:`JUMP_CONFIRM` in a row continue the new one: the session follows it)."""
+        """A time stamp not after the last sample taken, or far after it (beyond :data:`JUMP_PERIODS` nominal
+        periods, or :data:`JUMP_GAPS` widest intervals), or one after such: held until the next samples tell
+        whether it was one late sample or bad time stamp (they continue the old clock: it is skipped) or the clock
+        jumped, ahead or back by any amount (:data:`JUMP_CONFIRM` in a row continue the new one: the session
+        follows it)."""
         held, last, lim = self._held, self._last_t, self._jump_limit
         assert last is not None, "off the clock only once a sample was taken"
         if not held:
             held.append((s, raw, line))
             return ()
-        if -self._jump_back <= s.t - last <= lim:   # back on the old clock: what was held was bad
+        if 0.0 < s.t - last <= lim:                 # back on the old clock: what was held was late or bad
             return self._drop_held("the next sample continues the old clock") + self.push_sample(s, raw, line)
         if 0.0 < s.t - held[-1][0].t <= lim:        # on the new clock
             held.append((s, raw, line))
@@ -276,10 +282,17 @@ class Session:
         return out
 
     def _drop_held(self, why: str) -> tuple:
-        """The samples held off the clock are bad time stamps: counted, recorded in ``samples.csv``, skipped."""
+        """The samples held off the clock are late (behind the last sample taken by at most
+        :data:`JUMP_BACK_PERIODS` periods: out of order, or repeated) or bad time stamps: counted, recorded in
+        ``samples.csv``, skipped."""
         held, self._held = self._held, []
         out = ()
+        last = self._last_t
+        assert last is not None, "held only once a sample was taken"
         for s, raw, line in held:
+            if -self._jump_back <= s.t - last <= 0.0:
+                out = out + self._late(s, raw, last)
+                continue
             self.counts["time_jumps"] += 1
             if self.record is not None and raw is not None:
                 self._samples_buf.append(raw + "\n")
