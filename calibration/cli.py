@@ -239,17 +239,7 @@ def register(sub) -> None:
                         "(identity: the base pose becomes identifiable) or ignore them")
     c.add_argument("--on-unidentifiable", choices=("fix", "stop"), default="fix",
                    help="hold unidentifiable parameters fixed and list them (default), or stop with the list")
-    c.add_argument("--outlier-threshold", type=positive(), default=4.0,
-                   help="standardized residual beyond which a point is reported as an outlier (default 4)")
-    which = c.add_mutually_exclusive_group()        # the outliers: dropped, kept, or the gross ones left out
-    which.add_argument("--drop-outliers", action="store_true", help="drop every outlier point and refit, in "
-                       "rounds (listed); default: leave out the gross errors (--gross-threshold), keep the others")
-    c.add_argument("--gross-threshold", type=positive(), default=None,
-                   help=f"standardized residual from which a point (its rows' deletion residual together, at the "
-                        f"row-by-row false-alarm rate) is a gross error: left out and the fit redone, one at a time, "
-                        f"at most 5%% of the points, and listed (default {GROSS_THRESHOLD:g})")
-    which.add_argument("--keep-outliers", action="store_true",
-                       help="keep every point in the fit, gross errors too (they are reported)")
+    _outlier_options(c)
     c.add_argument("--covariance-scale", "--covariance", dest="covariance", choices=("residual", "stated"),
                    default="residual",
                    help="scale the parameters' covariance by the residual variance factor s0^2 (default) or trust "
@@ -443,6 +433,20 @@ def _split(args, data):
         raise InputError(f"--holdout {args.holdout} --holdout-by pose holds out no pose: every feature has too few "
                          "poses to spare one (a feature keeps the fewest its fit needs, plus one)")
     return data.select(~mask), None, mask
+
+def _outlier_options(c) -> None:
+    """The outliers' options: reported beyond ``--outlier-threshold``; dropped, kept, or the gross ones left out."""
+    c.add_argument("--outlier-threshold", type=positive(), default=4.0,
+                   help="standardized residual beyond which a point is reported as an outlier (default 4)")
+    which = c.add_mutually_exclusive_group()        # the outliers: dropped, kept, or the gross ones left out
+    which.add_argument("--drop-outliers", action="store_true", help="drop every outlier point and refit, in "
+                       "rounds (listed); default: leave out the gross errors (--gross-threshold), keep the others")
+    c.add_argument("--gross-threshold", type=positive(), default=None,
+                   help=f"standardized residual from which a point (its rows' deletion residual together, at the "
+                        f"row-by-row false-alarm rate) is a gross error: left out and the fit redone, one at a time, "
+                        f"at most 5%% of the points, and listed (default {GROSS_THRESHOLD:g})")
+    which.add_argument("--keep-outliers", action="store_true",
+                       help="keep every point in the fit, gross errors too (they are reported)")
 
 
 def gross_threshold(args: argparse.Namespace) -> float | None:
