@@ -259,9 +259,6 @@ SET_ROBOTS = {
     "panda": ("panda_description/urdf/panda.urdf", "panda_hand_tcp"),          # 7 joints, a tool frame past the flange
     "kinova": ("kinova_description/robots/kinova.urdf", "j2s6s200_end_effector"),   # continuous joints
     "z1": ("z1_description/urdf/z1.urdf", "link06"),                           # the tip at the last joint's origin
-    # a fingertip: two joints of the chain mimic the gripper's motor joint off the chain (one encoder column)
-    "talos-finger": ("talos_data/robots/talos_full_v2.urdf", "gripper_left_fingertip_1_link"),
-    "solo12-leg": ("solo_description/robots/solo12.urdf", "FL_FOOT"),          # a quadruped's leg: 3 joints
 }
 
 
