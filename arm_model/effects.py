@@ -99,6 +99,10 @@ class Effect:
     #: the effect models a joint angle's error (its unit rad, its physics a rotation): it acts on the
     #: revolute joints only (by default all of them; a prismatic joint named in ``joints`` is an error)
     revolute_only: ClassVar[bool] = False
+    #: the effect changes encoder readings only (``inputs.q``, one value an encoder column), never a row of the
+    #: chain: on an arm with a joint mimicking another of its chain, it acts on the master's reading and the
+    #: mimicking joint follows it through the ``<mimic>`` formula (the torques are per encoder column already)
+    acts_on_readings: ClassVar[bool] = False
 
     def __post_init__(self) -> None:
         """``joints``: None or distinct 0-based joint indices (a TypeError or ValueError here, not deep in a fit)."""
@@ -112,11 +116,11 @@ class Effect:
     def joint_indices(self, desc: ArmDescription) -> tuple[int, ...]:
         """The encoder columns the effect acts on (0-based): ``joints``, or by default every joint (every
         revolute joint for :attr:`revolute_only` effects). A ``ValueError`` names a prismatic joint given
-        to a revolute-only effect, or an arm with a joint mimicking another joint of its chain (its rows
-        and encoder columns differ: per-joint effects are not supported there)."""
-        if desc.coupled:
+        to a revolute-only effect, or, for an effect on the chain's rows (not :attr:`acts_on_readings`), an arm
+        with a joint mimicking another joint of its chain (its rows and encoder columns differ)."""
+        if desc.coupled and not self.acts_on_readings:
             raise ValueError(f"the effect '{self.key}' acts per joint, and the arm has a joint that mimics another "
-                             "joint of its chain: per-joint effects on such an arm are not supported")
+                             "joint of its chain: per-joint effects on the chain's rows are not supported there")
         if self.joints is None:
             return desc.revolute_columns if self.revolute_only else tuple(range(desc.n_joints))
         for i in self.joints:
@@ -151,6 +155,7 @@ class EncoderEccentricity(Effect):
     last joint's, when the ball is near that joint's axis), as the description's own parameters are."""
     harmonics: tuple[int, ...] = (1, 2)
     key: str = field(default="eccentricity", init=False, repr=False)
+    acts_on_readings: ClassVar[bool] = True
     revolute_only: ClassVar[bool] = True
     held_when_weak: ClassVar[bool] = True
 
@@ -188,6 +193,7 @@ class JointGain(Effect):
     ``--min-resolution`` of :attr:`plausible_size` is held at its value (e.g. the last joint's, when the
     ball is near that joint's axis), as the description's own parameters are."""
     key: str = field(default="joint_gain", init=False, repr=False)
+    acts_on_readings: ClassVar[bool] = True
     plausible_size: ClassVar[float] = 1e-2     # a 1 % scale error of an encoder is already large
     held_when_weak: ClassVar[bool] = True
 
@@ -208,6 +214,7 @@ class JointCompliance(Effect):
     gravity: bool = True
     contact: bool = True
     key: str = field(default="joint_compliance", init=False, repr=False)
+    acts_on_readings: ClassVar[bool] = True
     revolute_only: ClassVar[bool] = True
 
     def needs(self) -> tuple[str, ...]:
@@ -411,6 +418,7 @@ class JointHarmonics(Effect):
     source: int | None = None
     harmonics: tuple[int, ...] = (1, 2, 3)
     key: str = field(default="joint_harmonics", init=False, repr=False)
+    acts_on_readings: ClassVar[bool] = True
     revolute_only: ClassVar[bool] = True
 
     def __post_init__(self) -> None:

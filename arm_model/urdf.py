@@ -150,6 +150,26 @@ def _row_frames(desc: ArmDescription, i: int, tail_prev: np.ndarray):
     return origin, np.eye(4), z, waypoints, np.eye(4)
 
 
+def _off_chain_masters(desc: ArmDescription, base_link: str) -> list[str]:
+    """A joint for each master a ``<mimic>`` of the chain follows from off the chain (a gripper's motor joint
+    read by the encoder column named after it), on a branch of its own from the base link, with the column's
+    limits: without it the mimic tag has no master and the URDF read back would take the follower's value as
+    its own column (another column name, the multiplier and offset lost). Written ahead of the chain: Pinocchio
+    parses a master before the joints that mimic it."""
+    rows = {j.name for j in desc.joints}
+    masters = [e for e in desc.encoders if e.name not in rows]
+    out = []
+    for k, e in enumerate(masters):
+        unit_range = 1.0 if e.prismatic else 2 * math.pi
+        lower = e.lower if e.lower is not None else -unit_range
+        upper = e.upper if e.upper is not None else unit_range
+        out += [f'  <joint name="{escape(e.name)}" type="{e.kind}"><parent link="{escape(base_link)}"/>'
+                f'<child link="mimic_master_{k + 1}"/><origin xyz="0 0 0" rpy="0 0 0"/><axis xyz="0 0 1"/>'
+                f'<limit lower="{_f(lower)}" upper="{_f(upper)}" effort="100" velocity="3"/></joint>',
+                f'  <link name="mimic_master_{k + 1}"/>']
+    return out
+
+
 def urdf_text(desc: ArmDescription, base_link: str = "base_link", tip_link: str = BALL_FRAME) -> str:
     """The URDF of ``desc`` (standard or modified DH) as text; ``base_link`` and ``tip_link`` name its first link
     and its ball's (a chain generated for a URDF arm keeps the names of its base and tip frames)."""
@@ -163,17 +183,17 @@ def urdf_text(desc: ArmDescription, base_link: str = "base_link", tip_link: str 
              f'  <material name="probe"><color rgba="{_rgba(PROBE_RGBA)}"/></material>',
              f'  <material name="ball"><color rgba="{_rgba(BALL_RGBA)}"/></material>',
              f'  <link name="{escape(base_link)}">{_user_visuals(desc, -1) or BASE_VISUAL}</link>']
+    lines += _off_chain_masters(desc, base_link)
     radii = np.linspace(0.03, 0.018, n)
     parent = escape(base_link)
     tail_prev = np.eye(4)   # the previous row's tail, for standard DH
-    rows = {j.name for j in desc.joints}
     for i, j in enumerate(desc.joints):
         origin, tail, axis, waypoints, row_end = _row_frames(desc, i, tail_prev)
         unit_range = 1.0 if j.prismatic else 2 * math.pi
         lower = j.lower if j.lower is not None else -unit_range
         upper = j.upper if j.upper is not None else unit_range
         mimic = ""
-        if j.mimic is not None and j.mimic.joint in rows:         # a master off the chain is not in this URDF
+        if j.mimic is not None:
             mimic = (f'<mimic joint="{escape(j.mimic.joint)}" multiplier="{_f(j.mimic.multiplier)}" '
                      f'offset="{_f(j.mimic.offset)}"/>')
         lines.append(f'  <joint name="{escape(j.name)}" type="{j.kind}"><parent link="{parent}"/>'

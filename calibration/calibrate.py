@@ -144,16 +144,14 @@ def default_effects(model: ArmModel, data: CalibrationData | None = None) -> tup
 def gravity_compliance(model: ArmModel) -> tuple:
     """``(JointCompliance(),)``, the compliance of every joint under the gravity torques of the description's
     masses (each with its physical prior, :mod:`calibration.prior`), for a model that holds no effect yet, whose
-    links carry masses, whose joints are not coupled and at least one of which is revolute; else ``()``. The base
-    model of ``calibrate`` and ``close-loop`` for a robot (:func:`default_effects`)."""
+    links carry masses and at least one of whose joints is revolute (a joint mimicking another: the compliance of
+    the master's column, under its torque with the follower's share); else ``()``. The base model of
+    ``calibrate`` and ``close-loop`` for a robot (:func:`default_effects`)."""
     from arm_model.effects import JointCompliance
     if model.effects or not any(j.mass > 0 for j in model.desc.joints):
         return ()
     effect = JointCompliance()
-    try:
-        joints = effect.joint_indices(model.desc)
-    except ValueError:                  # a chain whose joints are coupled: no per-joint compliance
-        return ()
+    joints = effect.joint_indices(model.desc)
     return (effect,) if joints else ()  # no revolute joint (a gantry): a compliance of no parameter
 
 

@@ -140,12 +140,8 @@ def no_torque_reason(desc: ArmDescription, data: CalibrationData) -> str | None:
 
 def _per_joint_columns(desc: ArmDescription, skipped: list) -> dict[int, str]:
     """{encoder column: joint name} of the joints a per-joint effect of the library (an angle's error or
-    compliance) may act on: the revolute ones; none on an arm whose chain has a joint following another
-    (rows and encoder columns differ there). What is left out goes to ``skipped``."""
-    if desc.coupled:
-        skipped.append(Skipped("per-joint effects", "a joint of the chain follows another (<mimic>): per-joint "
-                                                    "effects are not supported on such an arm"))
-        return {}
+    compliance, each an error of a reading: on an arm whose chain has a joint following another it acts on the
+    master's column) may act on: the revolute ones. What is left out goes to ``skipped``."""
     for j in desc.encoders:
         if j.prismatic:
             skipped.append(Skipped(f"per-joint effects {j.name}", "a prismatic joint: the library's per-joint "
@@ -176,7 +172,7 @@ def library_candidates(desc: ArmDescription, data: CalibrationData, families=Non
         for i, n in names.items():
             out.append(Candidate(f"eccentricity {n}", EncoderEccentricity(joints=(i,), harmonics=(1, 2)),
                                  "eccentricity", n))
-    if "joint_gain" in families and not desc.coupled:
+    if "joint_gain" in families:
         # a scale error of any joint's reading, a slide's (a lift's screw pitch) as a gear ratio's
         for i, j in enumerate(desc.encoders):
             out.append(Candidate(f"gain {j.name}", JointGain(joints=(i,)), "joint_gain", j.name))

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 from scipy import stats
@@ -66,11 +67,13 @@ SCREEN_RESOLUTION = 1.0
 
 @dataclass(frozen=True)
 class JointAngleOffset(Effect):
-    """``q_j += dq_j`` for every joint (diagnostic only: its Jacobian at zero is ``dx/dq_j``)."""
+    """``q_j += dq_j`` for every encoder column (diagnostic only: its Jacobian at zero is ``dx/dq_j``; a
+    column a mimicking joint follows moves it too)."""
     key: str = field(default="diag_joint_offset", init=False, repr=False)
+    acts_on_readings: ClassVar[bool] = True
 
     def param_defs(self, desc):
-        return [(f"diag.{desc.joints[i].name}.dq", "rad") for i in self.joint_indices(desc)]
+        return [(f"diag.{desc.joint_names[i]}.dq", "rad") for i in self.joint_indices(desc)]
 
     def apply(self, desc, params, inputs, geom, ops):
         q = list(inputs.q)
@@ -538,7 +541,7 @@ def _lateral_loads(res: CalibrationResult, x: np.ndarray) -> list[tuple[list, np
         return np.column_stack([np.broadcast_to(np.asarray(c, dtype=float), (n,)) for c in v])
 
     out = []
-    for j in range(desc.n_joints):
+    for j in range(len(desc.joints)):         # every row of the chain (a mimicking joint's too)
         o, axes = joint_frame(desc, geom, q, j, NUMPY_OPS)
         m = [a + b for a, b in zip(gravity_moment(desc, geom, q, j, o, NUMPY_OPS),
                                    contact_moment(desc, geom, q, w, o, NUMPY_OPS), strict=True)]
@@ -577,7 +580,7 @@ class _FamilyInputs:
 
     def joint_dir(self, j: int) -> tuple:
         """The direction of joint j's angle error: (name, unit, weighted column)."""
-        return ("angle " + self.desc.joints[j].name, "rad", self.space.jp[:, self.space.offset_slice.start + j])
+        return ("angle " + self.desc.joint_names[j], "rad", self.space.jp[:, self.space.offset_slice.start + j])
 
 
 def _family_inputs(space: ResidualSpace) -> _FamilyInputs:
@@ -604,7 +607,7 @@ def _joint_families(f: _FamilyInputs) -> list[Family]:
     """Per joint: its angle error as harmonics of its own angle, proportional to its gravity torque and to
     its contact torque (where it holds one)."""
     out = []
-    for j, jr in enumerate(f.desc.joints):
+    for j, jr in enumerate(f.desc.encoders):
         dq, qj = f.joint_dir(j), f.points.q[:, j]
         basis, sub = _harmonic_basis(qj, j, HARMONICS)
         out.append(Family(f"q{j + 1} harmonics", f"error of joint {jr.name}'s angle periodic in q{j + 1} "
@@ -630,7 +633,7 @@ def _cross_families(f: _FamilyInputs) -> list[Family]:
         if np.ptp(qk) <= 0:
             continue
         basis, sub = _harmonic_basis(qk, k, CROSS_HARMONICS)
-        for j, jr in enumerate(f.desc.joints):
+        for j, jr in enumerate(f.desc.encoders):
             if j == k:
                 continue
             out.append(Family(f"q{k + 1} harmonics on {jr.name}", f"error of joint {jr.name}'s angle periodic in "
@@ -788,7 +791,7 @@ def candidate_family(space: ResidualSpace, cand: Candidate, fams: list[Family] |
     by = {f.name: f for f in fams}
     j = None
     if cand.joint is not None:
-        j = [jr.name for jr in space.result.model.desc.joints].index(cand.joint)
+        j = space.result.model.desc.joint_names.index(cand.joint)
     key = cand.family
     if key == "eccentricity" and j is not None:
         return by.get(f"q{j + 1} harmonics")
@@ -796,7 +799,7 @@ def candidate_family(space: ResidualSpace, cand: Candidate, fams: list[Family] |
         data = space.result.data
         tau_g, tau_c = torques_of(space.result.model.desc, data)
         load = tau_c[:, j] - tau_g[:, j]
-        jr = space.result.model.desc.joints[j]
+        jr = space.result.model.desc.encoders[j]
         dq = ("angle " + jr.name, "rad", space.jp[:, space.offset_slice.start + j])
         return Family(f"{jr.name} load torque", f"error of joint {jr.name}'s angle proportional to its load "
                       "(contact minus gravity torque)", "field", [dq], [(f"load{j + 1}", load)],

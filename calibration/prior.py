@@ -187,7 +187,7 @@ def _effect_sizes(model, data) -> dict[int, tuple[float, str]]:
         loads = e.gravity_loads(desc, data.points.q) if hasattr(e, "gravity_loads") and len(data) else None
         for n, (k, (name, unit)) in enumerate(zip(range(sl.start, sl.stop), defs, strict=True)):
             if unit == "rad/(N m)":
-                j = next((i for i in joints if name.startswith(desc.joints[i].name + ".")), None)
+                j = next((i for i in joints if name.startswith(desc.joint_names[i] + ".")), None)
                 if loads is not None:           # an off-axis compliance: the moment it multiplies
                     tau = float(np.sqrt(np.mean(np.asarray(loads[n]) ** 2)))
                 else:

@@ -80,7 +80,7 @@ def synthesise(family_names, model: ArmModel) -> list[Candidate]:
     """Candidates for the significant families ``family_names`` (in their order) given the current model;
     effects the model already holds are not offered again."""
     desc = model.desc
-    names = {jr.name: i for i, jr in enumerate(desc.joints)}
+    names = {n: i for i, n in enumerate(desc.joint_names)}      # encoder columns (a mimicking joint has none)
     held = {type(e) for e in model.effects}
     out: list[Candidate] = []
 
@@ -93,7 +93,7 @@ def synthesise(family_names, model: ArmModel) -> list[Candidate]:
         mc = re.fullmatch(r"q(\d+) harmonics on (.+)", fam)
         if m:
             j = int(m.group(1)) - 1
-            jn = desc.joints[j].name
+            jn = desc.joint_names[j]
             for hs in _harmonic_orders(_harmonics_present(model, j)):
                 add(f"harmonics {jn} (h {','.join(map(str, hs))})", JointHarmonics(joints=(j,), harmonics=hs),
                     "joint_harmonics", jn)
@@ -132,7 +132,7 @@ def synthesise(family_names, model: ArmModel) -> list[Candidate]:
                 add("approach offset", ApproachOffset(), "approach_offset")
         else:
             m = re.fullmatch(r"(.+) lateral load", fam)
-            if m and m.group(1) in names:
+            if m and m.group(1) in names and not desc.coupled:    # an effect on the rows: refused on a coupled chain
                 j = names[m.group(1)]
                 if not any(isinstance(e, LateralCompliance) and j in e.joint_indices(desc) for e in model.effects):
                     add(f"lateral compliance {m.group(1)}", LateralCompliance(joints=(j,)), "lateral_compliance",

@@ -427,15 +427,11 @@ def test_mimic_joint_on_the_chain_is_applied_not_an_encoder(nominal, tmp_path):
     assert desc.joint_names == ("base", "lift", "elbow", "wrist", "gripper")
     urdf = tmp_path / "slider.urdf"
     text = urdf_text(desc)
-    assert '<mimic joint="elbow" multiplier="-0.7"' in text and '<mimic joint="gripper"' not in text
-    # a gripper joint off the chain for the finger to follow (ahead of it: Pinocchio's mimic model needs
-    # the master parsed first)
-    base = text.index("</link>", text.index('<link name="base_link">')) + len("</link>")
-    text = (text[:base] + '<link name="gripper_link"/><joint name="gripper" type="prismatic">'
-            '<parent link="base_link"/><child link="gripper_link"/><axis xyz="1 0 0"/>'
-            '<limit lower="0" upper="0.08" effort="1" velocity="1"/></joint>' + text[base:])
-    text = text.replace('<joint name="finger" type="prismatic">', '<joint name="finger" type="prismatic">'
-                        '<mimic joint="gripper" multiplier="0.5" offset="0.003"/>', 1)
+    # the finger's master, off the chain, is written as a joint of its own branch (ahead of the chain:
+    # Pinocchio's mimic model needs the master parsed first), so that the mimic tag keeps its formula
+    assert '<mimic joint="elbow" multiplier="-0.7"' in text
+    assert '<mimic joint="gripper" multiplier="0.5" offset="0.003"/>' in text
+    assert text.index('<joint name="gripper" type="prismatic">') < text.index('<joint name="finger"')
     urdf.write_text(text)
     d = description_from_urdf(urdf, "ball")
     assert d.joint_names == desc.joint_names and d.joints[3].mimic.joint == "elbow"
@@ -496,12 +492,14 @@ def test_jacobians_with_prismatic_and_mimic_joints_match_finite_differences(nomi
     assert_close(g[: m * nr, :, 0].T, fd_p, atol=1e-7)
 
 
-def test_joint_angle_effects_skip_prismatic_joints_and_refuse_a_coupled_arm(nominal):
+def test_joint_angle_effects_skip_prismatic_joints_and_act_on_a_coupled_arm_s_readings(nominal):
     """An effect on a joint angle (eccentricity, joint compliance) acts on the revolute joints: by default it
-    leaves a prismatic joint out, named it is refused; per-joint effects on an arm with a joint mimicking
-    another of its chain are refused (its rows and columns differ); probe effects still apply there."""
-    from arm_model.effects import EncoderEccentricity, JointCompliance, ProbeCompliance
-    from arm_model.model import ArmModel
+    leaves a prismatic joint out, named it is refused. On an arm with a joint mimicking another of its chain
+    an effect on the readings acts on the master's column, the follower following through its formula (the
+    ball where the corrected readings put it); an effect on the chain's rows (thermal growth) is refused
+    there (its rows and columns differ); probe effects still apply."""
+    from arm_model.effects import EncoderEccentricity, JointCompliance, ProbeCompliance, ThermalGrowth
+    from arm_model.model import ArmModel, AuxData
     arms = _arms(nominal)
     m = ArmModel(arms["dh"], (EncoderEccentricity(harmonics=(1,)),))
     assert [n for n in m.spec.names if "ecc" in n] == [f"j{i}.ecc1_{t}" for i in (1, 2, 4, 5, 6, 7)
@@ -509,7 +507,59 @@ def test_joint_angle_effects_skip_prismatic_joints_and_refuse_a_coupled_arm(nomi
     with pytest.raises(ValueError, match="'j3' is prismatic"):
         ArmModel(arms["dh"], (JointCompliance(joints=(2,)),))
     with pytest.raises(ValueError, match="mimics another joint"):
-        ArmModel(arms["urdf"], (EncoderEccentricity(),))
-    m = ArmModel(arms["urdf"], (ProbeCompliance(),))
+        ArmModel(arms["urdf"], (ThermalGrowth(per_joint=True),))
+    desc = arms["urdf"]
+    rng = np.random.default_rng(8)
+    q = _q_within(desc, rng, 5)
+    tau = rng.normal(0.0, 20.0, q.shape)                    # N m, any numbers: the effect only reads them
+    m = ArmModel(desc, (JointCompliance(contact=False), EncoderEccentricity(harmonics=(1,))))
+    comp = {"base": 2e-4, "elbow": -3e-4, "wrist": 1e-4}    # rad/(N m); the prismatic lift and gripper: none
+    ecc = {"elbow": (1e-3, -2e-3)}
+    p = np.zeros(m.spec.size)
+    for k, name in enumerate(m.spec.names):
+        joint, _, par = name.partition(".")
+        cos_sin = ecc.get(joint, (0.0, 0.0))
+        p[k] = {"compliance": comp.get(joint, 0.0), "ecc1_cos": cos_sin[0], "ecc1_sin": cos_sin[1]}.get(par, 0.0)
+    assert sorted(n for n in m.spec.names if n.endswith(".compliance")) == [f"{j}.compliance" for j in sorted(comp)]
+    got = m.ball_centres(q, None, p, AuxData(None, tau, np.zeros_like(tau)))
+    q_true = q.copy()
+    for c, name in enumerate(desc.joint_names):             # the effects in the model's order
+        q_true[:, c] -= comp.get(name, 0.0) * tau[:, c]
+        cos_sin = ecc.get(name, (0.0, 0.0))
+        q_true[:, c] += cos_sin[0] * np.cos(q_true[:, c]) + cos_sin[1] * np.sin(q_true[:, c])
+    assert np.abs(q_true - q).max() > 1e-3
+    assert_close(got, ball_centres(desc, q_true), atol=1e-12)
+    m = ArmModel(desc, (ProbeCompliance(),))
     q = _q_within(arms["urdf"], np.random.default_rng(3), 4)
     assert_close(m.ball_centres(q), ball_centres(arms["urdf"], q), atol=1e-15)
+
+
+def test_gravity_torques_of_a_coupled_arm_are_the_potential_energy_s_slope_by_encoder_column(nominal):
+    """On an arm with a joint mimicking another of its chain (masses on every link), the torque each encoder
+    column holds against gravity (what joint compliance reads) is dV/dq of that column, V the potential energy
+    by Pinocchio at the joints the URDF's formula sets (the follower's share carried to its master), by central
+    differences: an energy route, independent of the RNEA and of the coupling matrix."""
+    from dataclasses import replace
+
+    import pinocchio as pin
+    desc = _arms(nominal)["urdf"]
+    joints = tuple(replace(j, mass=1.0 + k, com=(0.03 * k, -0.02, 0.05)) for k, j in enumerate(desc.joints))
+    desc = replace(desc, joints=joints)
+    arm = PinocchioArm(desc)
+    model, data = arm.model, arm.model.createData()
+    column = {n: c for c, n in enumerate(desc.joint_names)}
+
+    def energy(qc):
+        x = pin.neutral(model)
+        for j in desc.joints:
+            m = j.mimic
+            v = qc[column[j.name]] if m is None else m.multiplier * qc[column[m.joint]] + m.offset
+            x[model.joints[model.getJointId(j.name)].idx_q] = v
+        return pin.computePotentialEnergy(model, data, x)
+
+    for qc in _q_within(desc, np.random.default_rng(12), 3):
+        h = 1e-6
+        slope = [(energy(qc + h * e) - energy(qc - h * e)) / (2 * h) for e in np.eye(len(qc))]
+        tau = arm.gravity_torques(qc)
+        assert abs(tau[column["elbow"]]) > 0.1                   # a real load on the master [N m]
+        assert_close(tau, np.array(slope), atol=1e-6)
