@@ -53,6 +53,8 @@ def test_a_failed_run_is_reported_not_raised(nominal):
     assert len(mc.failures) == 1 and "Error" in mc.failures[0]["error"]
 
 
+# in make test-slow: a local dask cluster starts worker processes (about 10 s); the serial and process pool paths stay
+@pytest.mark.slow
 def test_monte_carlo_on_a_dask_local_cluster(nominal):
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:

@@ -147,8 +147,8 @@ def _within_3_sigma(result, truth_values: dict):
 
 
 #: in make test-slow: a harmonic built from the residual is held in make test by test_loop_honesty and
-#: test_loop_cross_harmonics
-SLOW_CASES = {"wrist third harmonic"}
+#: test_loop_cross_harmonics, a library effect by test_loop_effects (one seed each)
+SLOW_CASES = {"wrist third harmonic", "library and residual"}
 
 
 @pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow) if c in SLOW_CASES else c for c in CASES])

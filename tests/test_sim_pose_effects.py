@@ -135,6 +135,8 @@ measurements = 8
 """
 
 
+# in make test-slow: the loop finding lobing is held in make test by test_loop_synthesis[lobing]
+@pytest.mark.slow
 def test_lobing_hidden_by_aacmm_simulate_is_found_by_aacmm_close_loop(tmp_path):
     """From the command line only: a campaign file hides a lobing offset, ``aacmm close-loop`` builds the
     approach offset from the residual, adds it and recovers each term within 3 sigma.
