@@ -11,6 +11,7 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[test]'
+	$(PY) -m compileall -q arm_model calibration correction viz > /dev/null   # the editable install is not compiled
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -21,7 +22,7 @@ browser:
 demo: $(STAMP)
 	$(PY) -m arm_model.demo --out $(OUT)/demo
 
-# the suite without the long studies (-m "not slow"; 4.5 min on 2 idle cores before the speed-up of 2026-11-26, less since: README, Tests); test-slow: the rest (.ci/run runs both)
+# the suite without the long studies (-m "not slow"; timings: README, Tests); test-slow: the rest (.ci/run runs both)
 test: $(STAMP) browser
 	$(PY) -m pytest -n 2 --dist worksteal -q -m "not slow" tests
 
