@@ -74,6 +74,9 @@ class Joint:
     prismatic: bool = False
     multiplier: float = 1.0
     offset: float = 0.0
+    #: URDF rows: the origin's own (roll, pitch, yaw) [rad]; the row's angles turn the origin about its own
+    #: axes by their difference from these (never singular, unlike roll/pitch/yaw at pitch +-90 deg)
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 def joint_value(joints: Sequence[Joint] | None, i: int, q: Vector) -> Scalar:
@@ -167,8 +170,12 @@ def row_motions(convention: str, row: Vector, q: Scalar, joint: Joint | None = N
       prismatic: ``Rz(theta_offset) Tz(d + q) Tx(a) Rx(alpha)``;
     * ``"mdh"``:  ``Rx(alpha) Tx(a) Rz(theta_offset + q) Tz(d)``, same ``row``; prismatic:
       ``Rx(alpha) Tx(a) Rz(theta_offset) Tz(d + q)``;
-    * ``"urdf"``: ``T(x, y, z) Rz(yaw) Ry(pitch) Rx(roll) R(axis, q)`` (prismatic: ``T(axis q)``),
-      ``row`` = (x, y, z, roll, pitch, yaw) of the joint origin, ``joint.axis`` its constant unit axis.
+    * ``"urdf"``: ``T(x, y, z) Rz(yaw0) Ry(pitch0) Rx(roll0) Rz(yaw - yaw0) Ry(pitch - pitch0) Rx(roll - roll0)
+      R(axis, q)`` (prismatic: ``T(axis q)``), ``row`` = (x, y, z, roll, pitch, yaw) of the joint origin,
+      ``joint.rpy`` = (roll0, pitch0, yaw0) the origin's own angles (the description's), ``joint.axis`` its
+      constant unit axis: an angle error turns the origin about its own axes, three independent directions at
+      every orientation (roll, pitch and yaw added to the origin's own turn about one axis at pitch +-90 deg).
+      At the description's own angles this is URDF's ``T(x, y, z) Rz(yaw) Ry(pitch) Rx(roll) R(axis, q)``.
     """
     prismatic = joint is not None and joint.prismatic
     if convention in ("dh", "mdh"):
@@ -187,9 +194,11 @@ def row_motions(convention: str, row: Vector, q: Scalar, joint: Joint | None = N
         ax = tuple(float(a) for a in joint.axis)
         local: int | tuple[float, ...] = (2 if ax == (0.0, 0.0, 1.0) else 0 if ax == (1.0, 0.0, 0.0)
                                           else 1 if ax == (0.0, 1.0, 0.0) else ax)
+        r0, p0, y0 = joint.rpy
         return [("T", 0, row[0], (0,), False), ("T", 1, row[1], (1,), False), ("T", 2, row[2], (2,), False),
-                ("R", 2, row[5], (5,), False), ("R", 1, row[4], (4,), False), ("R", 0, row[3], (3,), False),
-                ("T" if prismatic else "R", local, q, (), True)]
+                ("R", 2, y0, (), False), ("R", 1, p0, (), False), ("R", 0, r0, (), False),
+                ("R", 2, row[5] - y0, (5,), False), ("R", 1, row[4] - p0, (4,), False),
+                ("R", 0, row[3] - r0, (3,), False), ("T" if prismatic else "R", local, q, (), True)]
     raise ValueError(f"unknown convention {convention!r}")
 
 

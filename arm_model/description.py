@@ -84,6 +84,20 @@ class JointRow:
         return self.kind == "prismatic"
 
 
+def _folded_origin(own: ArrayLike, row: ArrayLike) -> tuple[float, float, float, float, float, float]:
+    """The URDF origin (x, y, z, roll, pitch, yaw) of ``row``: its xyz, and the origin ``own`` turned about its
+    own axes by the angles' differences, ``R(own) Rz(dyaw) Ry(dpitch) Rx(droll)``, as roll, pitch, yaw (``own``'s
+    angles kept where the differences are zero)."""
+    row, own = np.asarray(row, dtype=float), np.asarray(own, dtype=float)
+    d = row[3:6] - own[3:6]
+    if not np.any(d):
+        return _six(row)
+    from .geometry import rotation_xyz, rpy_from_matrix
+    rot = rotation_xyz(own[3:6]) @ rotation_xyz((0.0, 0.0, d[2])) @ rotation_xyz((0.0, d[1], 0.0)) \
+        @ rotation_xyz((d[0], 0.0, 0.0))
+    return _six([*row[:3], *rpy_from_matrix(rot)])
+
+
 def _six(values: ArrayLike) -> tuple[float, float, float, float, float, float]:
     """A URDF joint origin (x, y, z [m], roll, pitch, yaw [rad]) as six floats."""
     x, y, z, roll, pitch, yaw = (float(v) for v in np.asarray(values, dtype=float))
@@ -209,9 +223,12 @@ class ArmDescription:
         out = []
         for j in self.joints:
             m = j.mimic
+            urdf = self.convention == "urdf"
             out.append(Joint(column=column[j.name if m is None else m.joint],
-                             axis=j.axis if self.convention == "urdf" else None, prismatic=j.prismatic,
-                             multiplier=1.0 if m is None else m.multiplier, offset=0.0 if m is None else m.offset))
+                             axis=j.axis if urdf else None, prismatic=j.prismatic,
+                             multiplier=1.0 if m is None else m.multiplier, offset=0.0 if m is None else m.offset,
+                             rpy=(float(j.origin[3]), float(j.origin[4]), float(j.origin[5]))
+                             if urdf and j.origin is not None else (0.0, 0.0, 0.0)))
         return tuple(out)
 
     @property
@@ -257,9 +274,13 @@ class ArmDescription:
         return np.array([[j.theta_offset, j.d, j.a, j.alpha] for j in self.joints], dtype=float)
 
     def with_row_table(self, table: np.ndarray) -> ArmDescription:
+        """The description with the row values ``table`` (this description's own plus errors): for a URDF chain
+        the angles' differences from the origin's own turn the origin about its own axes (:func:`~arm_model.
+        chain.row_motions`), folded here into the origin's new roll, pitch and yaw."""
         table = np.asarray(table, dtype=float)
         if self.convention == "urdf":
-            joints = tuple(replace(j, origin=_six(r)) for j, r in zip(self.joints, table, strict=True))
+            joints = tuple(replace(j, origin=_folded_origin(_origin(j), r)) for j, r in zip(self.joints, table,
+                                                                                            strict=True))
         else:
             joints = tuple(replace(j, theta_offset=float(r[0]), d=float(r[1]), a=float(r[2]), alpha=float(r[3]))
                            for j, r in zip(self.joints, table, strict=True))

@@ -330,10 +330,11 @@ def joint_screws(convention: str, rows: Sequence[Vector] | np.ndarray, q: Any, j
     c = np.empty((n, nr, 3))
     for i in range(nr):
         joint = None if joints is None else joints[i]
-        # the row's motion alone (its column and mimic apply to the value below): one cache entry per shape
+        # the row's motion alone (its column and mimic apply to the value below; its axis and the origin's own rpy,
+        # from which its angle errors turn it, stay): one cache entry per shape
         local = None if joint is None else Joint(0, None if joint.axis is None else
                                                  (float(joint.axis[0]), float(joint.axis[1]), float(joint.axis[2])),
-                                                 joint.prismatic)
+                                                 joint.prismatic, rpy=joint.rpy)
         if all(isinstance(v, float) for v in rows[i]):
             before, after, (kind, axis) = _row_parts_cached(convention, tuple(rows[i]), local)
         else:

@@ -4,8 +4,9 @@
 Order, stated once and kept everywhere: for each joint of the chain (revolute or prismatic, a mimicking
 joint too: its geometry is its own), base first,
 ``theta_offset [rad], d [m], a [m], alpha [rad]`` (DH and MDH) or ``origin_x, origin_y, origin_z [m],
-origin_roll, origin_pitch, origin_yaw [rad]`` (URDF chains); then ``probe.x, probe.y, probe.z [m]``; then
-``probe.compliance_x, probe.compliance_y, probe.compliance_z [m/N]``.
+origin_roll, origin_pitch, origin_yaw [rad]`` (URDF chains: the angles turn the origin about its own x, y, z axes,
+``R(rpy) Rz(yaw err) Ry(pitch err) Rx(roll err)``, :func:`arm_model.chain.row_motions`); then
+``probe.x, probe.y, probe.z [m]``; then ``probe.compliance_x, probe.compliance_y, probe.compliance_z [m/N]``.
 """
 from __future__ import annotations
 

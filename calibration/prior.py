@@ -68,19 +68,10 @@ NONNEGATIVE_UNITS = ("rad/(N m)", "m/N")
 ALIGNED = math.cos(math.radians(1.0))
 
 
-def _rotation_axes(rpy) -> np.ndarray:
-    """Rows: the axes (parent frame) about which a small change of roll, pitch and yaw turns the origin
-    ``Rz(yaw) Ry(pitch) Rx(roll)``."""
-    r, p, y = rpy
-    rz = np.array([[math.cos(y), -math.sin(y), 0.0], [math.sin(y), math.cos(y), 0.0], [0.0, 0.0, 1.0]])
-    ry = np.array([[math.cos(p), 0.0, math.sin(p)], [0.0, 1.0, 0.0], [-math.sin(p), 0.0, math.cos(p)]])
-    return np.array([rz @ ry @ np.array([1.0, 0.0, 0.0]), rz @ np.array([0.0, 1.0, 0.0]), [0.0, 0.0, 1.0]])
-
-
 def _angle_group(desc, joint: int, field: str) -> str:
     """``joint offsets`` for the angle about a revolute joint's own axis (DH/MDH ``theta_offset``; the URDF
-    origin angle whose rotation axis is the joint axis, within 1 degree), else ``axis angles`` (the axis'
-    tilt). A prismatic joint's zero is a length (``d``, or its origin's translation along the axis): every
+    origin angle whose axis, one of the origin's own, is the joint axis, within 1 degree), else ``axis angles``
+    (the axis' tilt). A prismatic joint's zero is a length (``d``, or its origin's translation along the axis): every
     angle of its row orients the slide and the links it carries, an ``axis angle`` like a tilt."""
     row = desc.joints[joint]
     if row.prismatic:
@@ -90,16 +81,11 @@ def _angle_group(desc, joint: int, field: str) -> str:
     if desc.convention != "urdf" or field not in ("origin_roll", "origin_pitch", "origin_yaw") \
             or row.axis is None or row.origin is None:
         return GROUP_ANGLES
-    roll, pitch, yaw = row.origin[3:6]
-    c, sn = math.cos, math.sin
-    rot = (np.array([[c(yaw), -sn(yaw), 0.0], [sn(yaw), c(yaw), 0.0], [0.0, 0.0, 1.0]])
-           @ np.array([[c(pitch), 0.0, sn(pitch)], [0.0, 1.0, 0.0], [-sn(pitch), 0.0, c(pitch)]])
-           @ np.array([[1.0, 0.0, 0.0], [0.0, c(roll), -sn(roll)], [0.0, sn(roll), c(roll)]]))
-    axis = rot @ np.asarray(row.axis, dtype=float)              # the joint axis in the parent frame
-    axis = axis / np.linalg.norm(axis)
-    origin = _rotation_axes(row.origin[3:6])
+    # an origin's angle errors turn it about its own x, y, z (arm_model.chain.row_motions): the joint axis is
+    # in that frame
+    axis = np.asarray(row.axis, dtype=float) / np.linalg.norm(row.axis)
     k = ("origin_roll", "origin_pitch", "origin_yaw").index(field)
-    return GROUP_OFFSETS if abs(float(origin[k] @ axis)) >= ALIGNED else GROUP_ANGLES
+    return GROUP_OFFSETS if abs(float(axis[k])) >= ALIGNED else GROUP_ANGLES
 
 
 def parameter_groups(model, names) -> list[str]:

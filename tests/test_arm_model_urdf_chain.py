@@ -103,3 +103,58 @@ def test_urdf_without_tip_frame_and_bad_xml(tmp_path):
     with pytest.raises(InputError) as exc:
         load_arm(path, "a")
     assert exc.value.line == 1
+
+
+#: three revolute joints, j2's origin at pitch +90 deg and turned in roll and yaw too (gimbal: roll and yaw
+#: of Rz Ry Rx turn about one axis there)
+GIMBAL_URDF = """<?xml version="1.0"?>
+<robot name="gimbal">
+  <link name="base_link"/><link name="l1"/><link name="l2"/><link name="l3"/><link name="tip"/>
+  <joint name="j1" type="revolute"><parent link="base_link"/><child link="l1"/><origin xyz="0 0 0.1"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/>
+    <origin xyz="0 0.1 0" rpy="0.3 1.5707963267948966 -0.2"/>
+    <axis xyz="0 1 0"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/><origin xyz="0 0 0.4" rpy="0.1 -0.4 0.7"/>
+    <axis xyz="0 1 0"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="tip_joint" type="fixed"><parent link="l3"/><child link="tip"/><origin xyz="0.05 0.02 0.35"/></joint>
+</robot>
+"""
+
+
+def test_urdf_origin_angle_errors_agree_in_every_evaluator_at_pitch_90_deg(tmp_path):
+    """Angle errors (turns about the origin's own axes) at an origin at pitch 90 deg: the batch evaluator, the
+    CasADi expression, the joint screws (inverse kinematics, probe rotations) and Pinocchio on the description
+    with the errors folded into roll/pitch/yaw (also written and read back as URDF) agree to 1e-12 m; the
+    reference: the origin matrix turned by Rz Ry Rx of the errors, by hand."""
+    from arm_model.geometry import rotation_xyz
+    from arm_model.jacobian import joint_screws
+    from arm_model.kinematics import probe_rotations
+    from arm_model.params import split_params
+    from arm_model.urdf import origin_matrix
+    (tmp_path / "g.urdf").write_text(GIMBAL_URDF)
+    d = load_arm(tmp_path / "g.urdf", "tip")
+    spec = param_spec(d)
+    rng = np.random.default_rng(7)
+    p = np.array([rng.normal(0, {"m": 1e-4, "rad": 3e-3, "m/N": 1e-6}[u]) for u in spec.units])
+    dp = apply_params(d, p)
+    # by hand: j2's origin turned about its own axes by its angle errors
+    k = spec.index("j2.origin_roll")
+    e = p[k: k + 3]
+    want = origin_matrix(d.joints[1].origin)[:3, :3] @ rotation_xyz((0, 0, e[2])) @ rotation_xyz((0, e[1], 0)) \
+        @ rotation_xyz((e[0], 0, 0))
+    assert_close(origin_matrix(dp.joints[1].origin)[:3, :3], want, atol=1e-15)
+    q = rng.uniform(-3, 3, (10, 3))
+    batch = ball_centres(d, q, None, p)
+    rows, p_last, _ = split_params(d, p)
+    rot, o, _, _ = joint_screws(d.convention, rows, q, d.chain_joints)
+    assert_close(o + rot @ np.asarray(p_last), batch, atol=1e-12)
+    assert_close(probe_rotations(d, q, p), probe_rotations(dp, q), atol=1e-12)
+    (tmp_path / "calibrated.urdf").write_text(urdf_text(dp))
+    again = load_arm(tmp_path / "calibrated.urdf", "ball")
+    arm, f = PinocchioArm(dp), casadi_ball_centre(d)
+    for i in range(len(q)):
+        assert_close(arm.ball_centre(q[i], np.zeros(6)), batch[i], atol=1e-12)
+        assert_close(np.array(f(q[i], np.zeros(6), p)).ravel(), batch[i], atol=1e-12)
+    assert_close(ball_centres(dp, q), batch, atol=1e-12)
+    assert_close(ball_centres(again, q), batch, atol=1e-12)

@@ -128,8 +128,12 @@ def test_urdf_arm_origin_errors(nominal, tmp_path):
     assert j1 <= set(res.identifiability.gauge)          # all six rigid motions found
     rigid = {f.name for f in res.fixed if "rigid motion" in f.reason}
     assert len(rigid) >= 6 and rigid <= set(res.identifiability.gauge)
-    # j2's origin z and yaw act along / about the j1 axis: rigid motions too (or exact equivalents)
-    assert {"j2.origin_z", "j2.origin_yaw"} <= set(res.identifiability.gauge)
+    # j2's origin z acts along the j1 axis, and of its angles (turns about its own axes) the one about the
+    # origin's own axis along j1's: rigid motions too (or exact equivalents)
+    from arm_model.urdf import origin_matrix
+    j1_axis, j2 = np.array(model.desc.joints[0].axis), model.desc.joints[1]
+    about_j1 = ("roll", "pitch", "yaw")[int(np.argmax(np.abs(origin_matrix(j2.origin)[:3, :3].T @ j1_axis)))]
+    assert {"j2.origin_z", f"j2.origin_{about_j1}"} <= set(res.identifiability.gauge)
     assert len(res.fixed) > 6 and res.identifiability_final.rank == len(res.free)
     peq = res.equivalent(c.p_true)
     z = [(res.value(n) - peq[model.spec.index(n)]) / res.uncertainty(n) for n in res.free]

@@ -49,17 +49,27 @@ def test_groups_of_a_dh_arm(model):
 
 
 def test_groups_of_a_urdf_arm_follow_each_joint_axis():
-    """URDF origins: of roll, pitch and yaw the one turning about the joint's own axis (whatever the origin's
-    orientation) is the joint offset. Panda joint 1 (rpy 0, axis z): yaw; joint 2 (roll -90 deg, axis z: the
-    parent's y axis): pitch; joint 3 (roll +90 deg): pitch."""
+    """URDF origins: an origin's angle errors turn it about its own axes, so of roll, pitch and yaw the one about
+    the joint's own axis (whatever the origin's orientation) is the joint offset: on the Panda (every axis z,
+    origins turned by roll +-90 deg) yaw, and a yaw error is the joint's own turn, the ball where that joint
+    turned by as much puts it."""
+    from arm_model import ball_centres
+    from arm_model.params import param_spec
     from arm_model.urdf_import import load_arm
     from conftest import ROOT
     desc = load_arm(ROOT / "examples" / "data" / "real-panda-seats" / "panda.urdf", "ball_link")
     m = ArmModel(desc)
-    for j, offset in (("panda_joint1", "yaw"), ("panda_joint2", "pitch"), ("panda_joint3", "pitch")):
+    q = np.random.default_rng(2).uniform(-1.0, 1.0, (4, desc.n_joints))
+    spec = list(param_spec(desc).names)
+    for k, j in enumerate(("panda_joint1", "panda_joint2", "panda_joint3")):
         names = [f"{j}.origin_{a}" for a in ("roll", "pitch", "yaw")]
         groups = parameter_groups(m, names)
-        assert groups == [GROUP_OFFSETS if a == offset else GROUP_ANGLES for a in ("roll", "pitch", "yaw")], j
+        assert groups == [GROUP_OFFSETS if a == "yaw" else GROUP_ANGLES for a in ("roll", "pitch", "yaw")], j
+        p = np.zeros(len(spec))
+        p[spec.index(f"{j}.origin_yaw")] = 0.01
+        turned = q.copy()
+        turned[:, k] += 0.01
+        assert np.abs(ball_centres(desc, q, None, p) - ball_centres(desc, turned)).max() < 1e-12
 
 
 #: a lift and two revolute joints, written here: every origin turned about its own joint's axis

@@ -200,12 +200,14 @@ def _holdout_rms(summary: dict, key: str = "reference_rms_predicted") -> tuple[f
     return row["before"], row["after"]
 
 
-def _obvious_commands(tmp_path, urdf, tip: str, postures: int = 40, seed: int = 5) -> tuple[float, float, float]:
+def _obvious_commands(tmp_path, urdf, tip: str, postures: int = 40, seed: int = 5
+                      ) -> tuple[float, float, float, float]:
     """``aacmm simulate`` a campaign of ``postures`` postures on ``urdf`` (1 mm and 0.3 deg errors, one marker,
     0.2 mm noise), then the user's commands with the URDF as it ships and the marker's link ``tip`` as the tip:
     calibrate (no artefacts file, postures held out), tip --reference-frame, view. Every output reads back.
     Returns the held-out RMS [um] of the nominal URDF (its own frame and marker fitted), of the calibration,
-    and of the truth (the true description as a model file, its frame and marker fitted the same way)."""
+    and of the truth (the true description as a model file, its frame and marker fitted the same way), and the
+    standard uncertainty of the truth's [um] (a fit may beat the truth on the few held-out postures by chance)."""
     (tmp_path / "c.toml").write_text(f'name = "mocap"\nseed = {seed}\narm = "{urdf}"\ntip_frame = "{tip}"\n'
                                      'sensor = "none"\n[truth]\nlength_error_mm = 1.0\nangle_error_deg = 0.3\n'
                                      f'[[task]]\nkind = "mocap"\npostures = {postures}\nnoise_mm = 0.2\n')
@@ -240,14 +242,15 @@ def _obvious_commands(tmp_path, urdf, tip: str, postures: int = 40, seed: int = 
     assert main(["view", points, "--arm", str(model), "--residuals", str(cal / "residuals.csv"),
                  "--html", str(tmp_path / "view.html")]) == 0
     assert (tmp_path / "view.html").stat().st_size > 10_000
-    return nominal, calibrated, _holdout_rms(floor_summary)[0]
+    truth_row = next(r for r in floor_summary["validation_holdout"] if r["key"] == "reference_rms_predicted")
+    return nominal, calibrated, truth_row["before"], truth_row["u_before"]
 
 
 def test_the_obvious_commands_on_a_simulated_motion_capture_campaign(tmp_path):
     """The commands end to end on the lift arm: the held-out prediction beats the nominal URDF (its own frame
     and marker fitted) and comes within 25 % of the truth's."""
     (tmp_path / "liftarm.urdf").write_text(LIFT_ARM_URDF)
-    nominal, calibrated, best = _obvious_commands(tmp_path, tmp_path / "liftarm.urdf", TIP)
+    nominal, calibrated, best, _ = _obvious_commands(tmp_path, tmp_path / "liftarm.urdf", TIP)
     assert 0.2 * math.sqrt(3) * 1e3 * 0.8 < best < calibrated < 1.25 * best < nominal / 5
 
 
@@ -266,10 +269,11 @@ SET_ROBOTS = {
 @pytest.mark.parametrize("name", sorted(SET_ROBOTS))
 def test_the_obvious_commands_on_the_robot_set(robots, tmp_path, name):
     """The same on robots of example-robot-data as they ship (40 postures): the held-out prediction within
-    35 % of the truth's and at least 4 times better than the nominal URDF's."""
+    35 % of the truth's and at least 4 times better than the nominal URDF's; below the truth's by no more than
+    the truth's own standard uncertainty on those 12 postures (Panda: 410.7 um against the truth's 412.1 +- 41.7)."""
     rel, tip = SET_ROBOTS[name]
-    nominal, calibrated, best = _obvious_commands(tmp_path, robots / rel, tip, seed=1)
-    assert best < calibrated < 1.35 * best < nominal / 4
+    nominal, calibrated, best, u_best = _obvious_commands(tmp_path, robots / rel, tip, seed=1)
+    assert best - u_best < calibrated < 1.35 * best < nominal / 4
 
 
 def test_view_draws_each_marker_and_where_the_instrument_saw_it(robot_dir, tmp_path, capsys):

@@ -1,9 +1,9 @@
 """A URDF joint origin at pitch +-90 deg (UR3/5/10's shoulder lift and wrist 1, TIAGo's arm 4-6, Baxter's e1 and
 w1): its orientation errors are parameters of roll, pitch and yaw added to the origin's own, and at that pitch
 roll and yaw turn about the same axis. Independent reference: Pinocchio, the origin turned about each of its own
-three axes (three independent directions of the ball). Known open problem, pinned here: the toolkit's three
-angle parameters of such an origin span two directions, so calibrate holds one ("not separable") and a real
-robot's tilt about the third axis stays in its model (scripts: the robot-set study's report)."""
+three axes (three independent directions of the ball). Until the origin's angle errors turned it about its
+own axes, the toolkit's three spanned two directions there, calibrate held the third ("not separable") and a
+real robot's tilt about it stayed (UR5: 1 mrad at the shoulder lift left 398 um RMS after the fit)."""
 from __future__ import annotations
 
 import numpy as np
@@ -30,7 +30,6 @@ def _rank(a: np.ndarray) -> int:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="URDF origin angles are roll/pitch/yaw increments: singular at pitch +-90 deg")
 def test_the_three_angle_errors_of_an_origin_at_pitch_90_deg_are_three_directions(tmp_path):
     import pinocchio as pin
 
