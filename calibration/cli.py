@@ -222,7 +222,7 @@ def register(sub) -> None:
     c.add_argument("--holdout", default=None, metavar="IDS|FRACTION",
                    help="data kept out of the fit for validation: a fraction (0.2) drawn at random, or (with "
                         "--holdout-by measurement) a comma-separated list of measurement ids")
-    c.add_argument("--holdout-by", choices=("measurement", "pose"), default="measurement",
+    c.add_argument("--holdout-by", choices=("measurement", "pose"), default=None,
                    help="measurement (default): whole measurements held out (the fraction drawn per artefact kind), "
                         "their features and reference frame fitted on themselves, the reference points also "
                         "predicted with the training fit's T_ref_base; pose: that fraction of every feature's poses "
@@ -403,6 +403,9 @@ def _heldout_points(args, desc):
         return None
     if args.holdout is not None:
         raise InputError("--holdout-points and --holdout both choose the held-out data: give one of them")
+    if args.holdout_by == "measurement":
+        raise InputError("--holdout-points predicts each held-out pose against its feature fitted on the training "
+                         "points (as --holdout-by pose), not whole measurements: leave --holdout-by out")
     if Path(path).resolve() == Path(args.points).resolve():
         raise InputError("--holdout-points names the points file itself: the held-out poses are a file of their own",
                          path)
@@ -422,7 +425,7 @@ def _split(args, data):
         if args.holdout_by == "pose":
             raise InputError("--holdout-by pose needs --holdout FRACTION (the share of every feature's poses)")
         return data, None, None
-    if args.holdout_by == "measurement":
+    if args.holdout_by in (None, "measurement"):
         train, test = split_holdout(data, holdout, args.seed)
         return train, test, None
     if not isinstance(holdout, float):
@@ -497,7 +500,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
                                                 "holdout_points": None if args.holdout_points is None
                                                 else str(args.holdout_points)},
                                      "holdout": (None if test is None else test.measurements()),
-                                     "holdout_by": "pose" if args.holdout_points is not None else args.holdout_by,
+                                     "holdout_by": ("pose" if args.holdout_points is not None
+                                                   else args.holdout_by or "measurement"),
                                      "holdout_poses": (None if poses is None
                                                        else [int(i) for i in np.flatnonzero(poses)]),
                                      "nominal_baseline": _baseline_entry(base),

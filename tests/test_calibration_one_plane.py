@@ -93,16 +93,20 @@ def test_a_stated_validation_file_is_predicted_against_the_plane_fitted_on_train
 
 @pytest.mark.parametrize("case, words", [
     ("with --holdout", "give one of them"),
+    ("with --holdout-by measurement", "leave --holdout-by out"),
     ("the points file", "the points file itself"),
     ("another plane", "which the training points fit on 0 point(s)"),
 ])
 def test_holdout_points_refused(campaign, capsys, case, words):
-    """A held-out file beside --holdout, the points file given again, or touches of a plane the training file
+    """A held-out file beside --holdout or --holdout-by measurement (ignored without a word before), the points
+    file given again, or touches of a plane the training file
     never touched (another measurement): one message (the last naming the held-out file and line), exit 2,
     nothing written."""
     other = campaign / "other.csv"
     _write(other, np.zeros((2, 6)) + [0, 0, 0, 0.1, 0, 0], measurement="session-2")
     extra = {"with --holdout": ["--holdout", "0.2", "--holdout-points", str(campaign / "validation.csv")],
+             "with --holdout-by measurement": ["--holdout-by", "measurement", "--holdout-points",
+                                               str(campaign / "validation.csv")],
              "the points file": ["--holdout-points", str(campaign / "train.csv")],
              "another plane": ["--holdout-points", str(other)]}[case]
     out = campaign / "refused"
