@@ -175,6 +175,10 @@ def _points_layout(header: list[str], line: int, path: str, joints) -> _PointsLa
         seen.add(h)
     for req in _TEXT_COLUMNS:
         if req not in header:
+            sep = next((f"{name}-separated" for c, name in (("\t", "tab"), (";", "semicolon")) if c in header[0]), None)
+            if len(header) == 1 and sep:
+                raise InputError(f"the header is {sep}: a points file's columns are separated by commas",
+                                 path, line)
             raise InputError(f"missing required column '{req}'", path, line, req)
     known = ("measurement, feature, session, q1_deg ..., " + ", ".join(f"{b}_<unit>" for b in POINT_COLUMNS)
              + ", x1_ref_mm ... (markers 1 to K)")

@@ -544,3 +544,17 @@ def test_more_workers_than_cores_are_refused_before_any_run(tmp_path, capsys):
     with pytest.raises(ValueError, match="workers must be a whole number >= 1"):
         run_tasks(abs, [1], workers=0)
     assert run_tasks(abs, [-1, -2], workers=10 ** 6, progress=False) == [1, 2]
+
+
+# ---------------------------------------------------------------------------------------------
+# a points file written with another separator is said as such, not as a missing column
+
+@pytest.mark.parametrize("sep, name", [("\t", "tab"), (";", "semicolon")])
+def test_a_points_file_of_another_separator_is_named(tmp_path, capsys, sep, name):
+    path = tmp_path / "p.csv"
+    path.write_text(sep.join(["measurement", "feature", *QCOLS.split(",")]) + "\n"
+                    + sep.join(["m", "f", "10", "20", "30", "40", "50", "60", "70"]) + "\n")
+    out = tmp_path / "tips.csv"
+    assert _exit(["tip", str(path), "--arm", str(NOMINAL), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"p.csv, line 1: the header is {name}-separated" in err and "commas" in err and not out.exists()
