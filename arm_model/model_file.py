@@ -25,7 +25,9 @@ One TOML file (``aacmm calibrate`` and ``aacmm close-loop`` write it, every ``--
 The covariance file (:func:`write_covariance`, :func:`read_covariance`) is a CSV: one row a free
 parameter of the fit, columns ``parameter``, ``unit``, ``value``, ``u`` (in that row's unit) and one
 column per parameter holding the correlation coefficients, so that
-``cov[i, k] = u[i] * u[k] * corr[i, k]``.
+``cov[i, k] = u[i] * u[k] * corr[i, k]``: the covariance of the parameters of the model read (its base errors
+turn a URDF origin about the model file's own origin axes; the writer expresses the fit's covariance in them:
+:func:`arm_model.params.folded_jacobian`).
 
 The serialisation is generic over :class:`arm_model.effects.Effect`: an effect's options are its
 dataclass fields and its parameters its ``param_defs``, so a new effect class needs no code here

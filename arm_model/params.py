@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike
 
 from .description import ArmDescription
 
-__all__ = ["ParamSpec", "param_spec", "split_params", "apply_params"]
+__all__ = ["ParamSpec", "param_spec", "split_params", "apply_params", "folded_jacobian"]
 
 _UNITS = {"theta_offset": "rad", "d": "m", "a": "m", "alpha": "rad", "origin_x": "m", "origin_y": "m",
           "origin_z": "m", "origin_roll": "rad", "origin_pitch": "rad", "origin_yaw": "rad"}
@@ -101,3 +101,30 @@ def apply_params(desc: ArmDescription, p: ArrayLike) -> ArmDescription:
                           bending_compliance_x=float(compliance[0]),
                           bending_compliance_y=float(compliance[1]),
                           axial_compliance=float(compliance[2]))
+
+
+def folded_jacobian(desc: ArmDescription, p: ArrayLike) -> np.ndarray:
+    """(n, n) ``d p' / d p`` [1] (n the base parameters of ``desc``): how a small change of the errors ``p`` of
+    ``desc`` moves the errors ``p'`` of the folded description ``apply_params(desc, p)``, at ``p' = 0``; so a
+    covariance ``C`` of ``p`` is ``T C T^T`` for ``p'`` (what a model file's covariance is read as, since its
+    description holds ``p`` folded in), to first order exactly: the chain of ``desc`` at ``p + dp`` is that of the
+    folded description at ``T dp`` to second order in ``dp``.
+
+    The identity but for a URDF origin's angle errors: they turn the origin about its own axes (``R(rpy0)
+    E(roll, pitch, yaw)``, ``E = Rz(yaw) Ry(pitch) Rx(roll)``, :func:`arm_model.chain.row_motions`), the folded
+    origin is ``R(rpy0) E(p)``, and ``E(p)^T E(p + dp)`` is the turn ``(dp'_roll, dp'_pitch, dp'_yaw)`` about
+    the folded origin's axes, the body angular velocity of ``E`` at ``p``: columns ``e_x``, ``Rx(roll)^T e_y``,
+    ``(Ry(pitch) Rx(roll))^T e_z`` (at ``p = 0`` the identity)."""
+    from .geometry import rotation_xyz
+    spec = param_spec(desc)
+    p = np.asarray(p, dtype=float)[: spec.size]
+    out = np.eye(spec.size)
+    if desc.convention != "urdf":
+        return out
+    m = len(desc.row_fields)
+    for i in range(len(desc.joints)):
+        roll, pitch, _ = p[m * i + 3: m * i + 6]
+        rx = rotation_xyz((roll, 0.0, 0.0))
+        out[m * i + 3: m * i + 6, m * i + 3: m * i + 6] = np.column_stack(
+            [(1.0, 0.0, 0.0), rx.T[:, 1], (rotation_xyz((0.0, pitch, 0.0)) @ rx).T[:, 2]])
+    return out

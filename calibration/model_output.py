@@ -17,8 +17,8 @@ from arm_model.model_file import Arm, format_model, write_covariance
 from arm_model.output import safe_name
 from arm_model.urdf_import import calibrated_urdf_text
 
-__all__ = ["model_paths", "fitted_arm", "write_model", "model_check", "refine_torques", "check_reproduces",
-           "REPRODUCE_TOL_M", "discrepancy_fields"]
+__all__ = ["model_paths", "fitted_arm", "write_model", "written_covariance", "model_check", "refine_torques",
+           "check_reproduces", "REPRODUCE_TOL_M", "discrepancy_fields"]
 
 #: how far beyond :func:`model_check`'s difference (the torques evaluated on the calibrated description, which
 #: the summary reports) the model file read back may put a fitted point from the fit's own ball centre [m]:
@@ -26,6 +26,10 @@ __all__ = ["model_paths", "fitted_arm", "write_model", "model_check", "refine_to
 REPRODUCE_TOL_M = 1e-9
 #: how far the covariance read back may differ from the fit's, relative to u_i u_k
 REPRODUCE_COV_REL = 1e-9
+#: how far the covariance of a fitted ball centre from the parameters alone, through the model file and
+#: covariance read back, may differ from the fit's own, relative to the point's largest variance (the torques
+#: the model file evaluates on its own description move it by about model_check's difference, far below)
+REPRODUCE_POINT_REL = 1e-6
 
 
 def model_paths(out_dir, name: str) -> dict:
@@ -69,10 +73,10 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
     for f in files.values():
         guard_output(f, inputs)
     arm = fitted_arm(result, name, files["training_poses"])
+    names, cov = written_covariance(result)
     spec = result.model.spec
-    free = list(result.free)
-    idx = [spec.index(n) for n in free]
-    write_covariance(files["covariance"], free, [spec.units[i] for i in idx], result.p[idx], result.cov, inputs)
+    idx = [spec.index(n) for n in names]
+    write_covariance(files["covariance"], names, [spec.units[i] for i in idx], result.p[idx], cov, inputs)
     poses = _write_training_poses(result, files.pop("training_poses"), inputs)
     if poses is not None:
         files["training_poses"] = poses
@@ -85,6 +89,24 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
     atomic_write_text(files["urdf"], calibrated_urdf_text(result.model.desc, arm.desc), inputs)
     check_reproduces(result, read_back(files["model"]), files["model"], urdf=files["urdf"])
     return files
+
+
+def written_covariance(result) -> tuple[list, np.ndarray]:
+    """(names, covariance [SI^2]) of the covariance file of ``result``: the fit's covariance of its free
+    parameters expressed in the parameters of the model file, whose description holds the base errors folded
+    in (:func:`arm_model.params.folded_jacobian`: ``T C T^T``; the same as the fit's but for a URDF origin's angle
+    errors, which the model file turns about the calibrated origin's own axes, the fit about the nominal's). A
+    parameter is written when it is free or, through ``T``, takes a variance from one (the other angles of an
+    origin with a fixed one); names in the parameters' order."""
+    from arm_model.params import folded_jacobian
+    spec, model = result.model.spec, result.model
+    idx = [spec.index(n) for n in result.free]
+    t = np.eye(spec.size)
+    t[: model.base_size, : model.base_size] = folded_jacobian(model.desc, result.p)
+    t_free = t[:, idx]
+    rows = [i for i in range(spec.size) if i in idx or np.any(t_free[i] != 0.0)]
+    cov = t_free[rows] @ result.cov @ t_free[rows].T
+    return [spec.names[i] for i in rows], 0.5 * (cov + cov.T)
 
 
 def discrepancy_fields(result) -> dict:
@@ -146,11 +168,36 @@ def check_reproduces(result, back: Arm, path, urdf=None) -> None:
         return
     from arm_model.model_file import read_covariance
     cov = read_covariance(back.covariance)
-    free = list(result.free)
-    u = np.sqrt(np.clip(np.diag(result.cov), 0.0, None))
-    if list(cov.names) != free or not np.all(np.abs(cov.matrix - result.cov) <= REPRODUCE_COV_REL * np.outer(u, u)):
+    names, want = written_covariance(result)
+    u = np.sqrt(np.clip(np.diag(want), 0.0, None))
+    if list(cov.names) != names or not np.all(np.abs(cov.matrix - want) <= REPRODUCE_COV_REL * np.outer(u, u)):
         raise UnreadableOutput(f"the covariance file read back is not the fit's covariance of its free parameters "
-                               f"({', '.join(free)})", back.covariance)
+                               f"({', '.join(result.free)}) in the model file's parameters", back.covariance)
+    _same_point_covariance(result, back, cov)
+
+
+def _same_point_covariance(result, back: Arm, cov, n: int = 64) -> None:
+    """The covariance of the ball centres from the parameters alone (:func:`arm_model.uncertainty.propagate`),
+    on the first ``n`` fitted points: the model file and covariance read back (``cov``) must give the fit's own
+    within :data:`REPRODUCE_POINT_REL` of each point's largest, else :class:`~arm_model.io.UnreadableOutput`."""
+    from arm_model.uncertainty import InputUncertainty, ParameterCovariance, propagate
+    pts, data = result.data.points, result.data
+    if not len(pts) or not len(result.free):
+        return
+    k = slice(0, min(n, len(pts)))
+    nj = pts.q.shape[1]
+    none = InputUncertainty(np.zeros(nj), np.zeros(3), np.zeros(3), np.zeros(3))
+    w = None if data.wrench is None else data.wrench[k]
+    own = propagate(result.model, result.p, pts.q[k], w, None if data.aux is None else data.aux.select(k),
+                    parameters=ParameterCovariance(tuple(result.free), result.cov), inputs=none).cov
+    aux = back.aux(pts, wrench=data.wrench)
+    got = propagate(back.model, back.p, pts.q[k], w, None if aux is None else aux.select(k),
+                    parameters=ParameterCovariance(tuple(cov.names), cov.matrix), inputs=none).cov
+    scale = np.max(np.abs(np.einsum("nii->ni", own)), axis=1)[:, None, None]
+    if not np.all(np.abs(got - own) <= REPRODUCE_POINT_REL * scale + 1e-30):
+        i = int(np.argmax(np.max(np.abs(got - own) / np.maximum(scale, 1e-300), axis=(1, 2))))
+        raise UnreadableOutput(f"the model file and covariance file read back do not give the fit's uncertainty of "
+                               f"the ball centre of {pts.path}, line {pts.lines[i]}", back.covariance)
 
 
 def _same_discrepancy(result, back: Arm, path) -> None:
