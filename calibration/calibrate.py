@@ -592,37 +592,63 @@ class GrossError:
 
 def _without_outliers(model: ArmModel, data: CalibrationData, options: FitOptions, estimate) -> CalibrationResult:
     """``estimate(model, data, options)`` (:func:`_fit`, :func:`reweighted` or :func:`_evidence`) and, with
-    ``options.drop_outliers``, the outlier points dropped (the worst first: a gross
-    error also pulls its neighbours out, those go only if they stay out) and refitted, until none is left
-    (at most :data:`DROP_ROUNDS` rounds); otherwise the gross errors left out (:func:`_without_gross`)."""
+    ``options.drop_outliers``, the points and certified lengths whose gross-error test (:func:`point_tests`, the
+    test the default leaves gross errors out by) is at ``options.outlier_threshold`` or beyond dropped (the worst
+    first, with those at half its statistic or more: a gross error also pulls its neighbours out, those go only if
+    they stay out) and refitted, until none is left (at most :data:`DROP_ROUNDS` rounds); otherwise the gross
+    errors left out (:func:`_without_gross`)."""
     if not options.drop_outliers:
         return _without_gross(model, data, options, estimate)
     index = np.arange(len(data))
     dropped: list[Outlier] = []
     for k in range(DROP_ROUNDS + 1):
         res = estimate(model, data, options)
-        point_outliers = [o for o in res.outliers if o.point is not None]
-        if not point_outliers:
+        cands = _tested(res, options.outlier_threshold)
+        if not cands:
             res.dropped = dropped
             return res
         if k == DROP_ROUNDS:
             break
-        worst = max(abs(o.standardized) for o in point_outliers)
-        drop = [o for o in point_outliers if abs(o.standardized) >= max(options.outlier_threshold, 0.5 * worst)]
-        keep = np.setdiff1d(np.arange(len(data)), [o.point for o in drop])
-        # the dropped points with indices into the data given
-        dropped += [replace(o, point=int(index[o.point])) for o in drop]
-        index = index[keep]
-        data = data.select(keep)
+        worst = abs(cands[0].outlier.standardized)
+        drop = [c for c in cands if abs(c.outlier.standardized) >= max(options.outlier_threshold, 0.5 * worst)]
+        dropped += [c.given(index) for c in drop]
+        data, index = _left_out(data, drop, index)
     raise NumericalError(f"outliers remain after {DROP_ROUNDS} rounds of dropping; check the data")
+
+
+@dataclass(frozen=True)
+class _Tested:
+    """A point or a certified length whose gross-error test reached a level: its :class:`Outlier` (``standardized``
+    the test's standardized equivalent, signed as its row of the largest standardized residual), and for a length
+    the features it is between, its index among the fit's lengths and its certified length [m] (None for a
+    point)."""
+    outlier: Outlier
+    between: tuple | None = None
+    item: int | None = None
+    certified: float | None = None
+
+    def given(self, index: np.ndarray) -> Outlier:
+        """The outlier with its point's index into the data given (``index``: of the data fitted)."""
+        o = self.outlier
+        return o if o.point is None else replace(o, point=int(index[o.point]))
+
+
+def _left_out(data: CalibrationData, items: list, index: np.ndarray) -> tuple[CalibrationData, np.ndarray]:
+    """``data`` without the points and certified lengths ``items`` (:class:`_Tested`), and ``index`` (the data
+    given's index of each point) of the points kept."""
+    for c in items:
+        if c.between is not None:
+            data = data.without_length(c.outlier.measurement, c.between)
+    keep = np.setdiff1d(np.arange(len(data)), [c.outlier.point for c in items if c.between is None])
+    return data.select(keep), index[keep]
 
 
 def _without_gross(model: ArmModel, data: CalibrationData, options: FitOptions, estimate) -> CalibrationResult:
     """``estimate(model, data, options)`` with the gross errors left out, one at a time (data snooping):
-    while the point of the largest gross-error test (:func:`point_tests`: its rows' group-deletion residual
-    against the covariance the joint fit predicts for it, as a standardized residual of the same false-alarm
-    rate) is at ``options.gross_threshold`` (and ``outlier_threshold``) or beyond, it is left out and the fit
-    redone. Never more than :data:`GROSS_SHARE` of the points, nor a point its feature needs
+    while the point or certified length of the largest gross-error test (:func:`point_tests`: its rows'
+    group-deletion residual against the covariance the joint fit predicts for it, as a standardized residual of the
+    same false-alarm rate) is at ``options.gross_threshold`` (and ``outlier_threshold``) or beyond, it is left out
+    and the fit redone. Never more than :data:`GROSS_SHARE` of the points, nor a point its feature needs
     (:data:`~calibration.kinds.MIN_POINTS`, or one whose deletion leaves an unknown undetermined): past that the
     misfit is the model's, kept and said (``gross_kept``). ``options.gross_threshold`` None keeps every point."""
     from .kinds import MIN_POINTS
@@ -633,82 +659,98 @@ def _without_gross(model: ArmModel, data: CalibrationData, options: FitOptions, 
     index = np.arange(len(data))
     gross: list[GrossError] = []
     limit = max(1, int(GROSS_SHARE * len(data)))
-    while (o := _gross_candidate(res, k)) is not None:
-        pts = res.data.points
-        same = (pts.measurement == pts.measurement[o.point]) & (pts.feature == pts.feature[o.point])
-        need = MIN_POINTS.get(o.kind, (0, 0))[0] if pts.feature[o.point] != "" else 0
-        keep = np.setdiff1d(np.arange(len(res.data)), [o.point])
+    while (c := _gross_candidate(res, k)) is not None:
+        o, pts = c.outlier, res.data.points
+        need = 0
+        if c.between is None and pts.feature[o.point] != "":
+            same = (pts.measurement == pts.measurement[o.point]) & (pts.feature == pts.feature[o.point])
+            need = int(same.sum()) - 1 < MIN_POINTS.get(o.kind, (0, 0))[0]
+        fewer, kept = _left_out(res.data, [c], index)
         try:
-            without = None if len(gross) >= limit or int(same.sum()) - 1 < need else \
-                estimate(model, res.data.select(keep), options)
+            without = None if len(gross) >= limit or need else estimate(model, fewer, options)
         except NumericalError:
             without = None
         if without is None:
-            res.gross_kept = (f"{o.measurement} line {o.line}: standardized {o.standardized:+.1f} (beyond {k:.2f}), "
+            where = f"{o.measurement} line {o.line}" if c.between is None else f"{o.measurement} length {o.feature}"
+            res.gross_kept = (f"{where}: standardized {o.standardized:+.1f} (beyond {k:.2f}), "
                               f"kept: leaving out more than {limit} point(s) ({GROSS_SHARE:.0%} of them), a point its "
                               "feature needs, or one the fit cannot do without is an error of the model, not of the "
                               "data")
             break
-        gross.append(GrossError(replace(o, point=int(index[o.point])), k, _deletion_residual(without, res.data,
-                                                                                            o.point)))
-        index = index[keep]
-        res = without
+        gross.append(GrossError(c.given(index), k, _deletion_residual(without, res.data, c)))
+        index, res = kept, without
     res.gross = gross
     return res
 
 
-def _gross_candidate(res: CalibrationResult, k: float) -> Outlier | None:
-    """The point of ``res`` whose gross-error test (``res.point_tests``) is the largest, if at ``k`` or beyond:
-    an :class:`Outlier` whose ``standardized`` is the test's standardized equivalent (signed as its row of the
-    largest standardized residual) and ``residual`` that row's."""
+def _tested(res: CalibrationResult, k: float) -> list[_Tested]:
+    """The points and certified lengths of ``res`` whose gross-error test (``res.point_tests``) is at ``k`` or
+    beyond, the largest first (:class:`_Tested`: ``standardized`` the test's standardized equivalent, signed as
+    its row of the largest standardized residual, ``residual`` that row's)."""
     t = res.point_tests
-    if t is None or not np.any(np.isfinite(t["sigma"])):
-        return None
-    i = int(np.nanargmax(t["sigma"]))
-    if t["sigma"][i] < k:
-        return None
-    pi, tab, pts = int(t["point"][i]), res.residuals, res.data.points
-    rows = np.flatnonzero(tab["point"] == pi)
-    row = int(rows[np.argmax(np.abs(tab["standardized"][rows]))])
-    return Outlier(str(tab["kind"][row]), str(pts.measurement[pi]), str(pts.feature[pi]), pi,
-                   None if pts.lines is None else int(pts.lines[pi]),
-                   math.copysign(float(t["sigma"][i]), float(tab["standardized"][row])), float(tab["value"][row]))
+    if t is None:
+        return []
+    tab, pts, out = res.residuals, res.data.points, []
+    for i in np.flatnonzero(np.nan_to_num(t["sigma"]) >= k):
+        pi = int(t["point"][i])
+        rows = np.flatnonzero(tab["point"] == pi)
+        row = int(rows[np.argmax(np.abs(tab["standardized"][rows]))])
+        out.append(_Tested(Outlier(str(tab["kind"][row]), str(pts.measurement[pi]), str(pts.feature[pi]), pi,
+                                   None if pts.lines is None else int(pts.lines[pi]),
+                                   math.copysign(float(t["sigma"][i]), float(tab["standardized"][row])),
+                                   float(tab["value"][row]))))
+    for i in np.flatnonzero(np.nan_to_num(t["length_sigma"]) >= k):
+        d = res.distances[int(t["length"][i])]
+        out.append(_Tested(Outlier("distance", d["measurement"], " - ".join(d["between"]), None, None,
+                                   math.copysign(float(t["length_sigma"][i]), d["standardized"]), d["residual"]),
+                           tuple(d["between"]), int(t["length"][i]), float(d["certified"])))
+    return sorted(out, key=lambda c: -abs(c.outlier.standardized))
+
+
+def _gross_candidate(res: CalibrationResult, k: float) -> _Tested | None:
+    """The point or certified length of ``res`` whose gross-error test is the largest, if at ``k`` or beyond
+    (:func:`_tested`)."""
+    cands = _tested(res, k)
+    return cands[0] if cands else None
 
 
 def point_tests(prob: Problem, r: np.ndarray, js, solve, leverage: np.ndarray, k: float) -> dict:
-    """The gross-error test of every point of a fit of ``prob`` (``r`` its weighted residuals, ``js``,
-    ``solve`` and ``leverage`` as :func:`~calibration.discrepancy.model_discrepancy` and :func:`_normal`): the
-    point's residual rows ``O`` together (a seat's or a marker's three, a sphere's one, a point's reference rows
-    with its feature's) deleted from the joint fit (parameters, prior and every nuisance unknown:
-    :func:`~calibration.discrepancy.group_deletions`), ``e_O = (I - H_OO)^-1 r_O`` with covariance ``s^2 (I -
-    H_OO)^-1``; the statistic is its squared Mahalanobis norm ``T = r_O^T (I - H_OO)^-1 r_O / s^2``, chi-square
-    with ``m = |O|`` degrees of freedom on clean Gaussian data, given as the standardized residual of the same
-    false-alarm rate (:func:`sigma_equivalent`; for one row exactly ``|r| / (s sqrt(1 - h))``). ``s`` is the
-    rows' robust scale (:func:`robust_scales`) among the residuals of the fit without the point (``r + js
-    d_O``, the point's rows at their deletion residuals): a blunder that pulls a small session towards itself
-    spreads into every residual and would otherwise inflate the scale it is judged by. The scale without the
-    point is taken for the points at ``k / 2`` or beyond with the fit's own scale (below, a point would need to
-    halve the median of every other residual by its own pull to reach ``k``).
+    """The gross-error test of every point and every certified length of a fit of ``prob`` (``r`` its weighted
+    residuals, ``js``, ``solve`` and ``leverage`` as :func:`~calibration.discrepancy.model_discrepancy` and
+    :func:`_normal`): the point's residual rows ``O`` together (a seat's or a marker's three, a sphere's one, a
+    point's reference rows with its feature's; a length's one) deleted from the joint fit (parameters, prior and
+    every nuisance unknown: :func:`~calibration.discrepancy.group_deletions`), ``e_O = (I - H_OO)^-1 r_O`` with
+    covariance ``s^2 (I - H_OO)^-1``; the statistic is its squared Mahalanobis norm ``T = r_O^T (I - H_OO)^-1 r_O
+    / s^2``, chi-square with ``m = |O|`` degrees of freedom on clean Gaussian data, given as the standardized
+    residual of the same false-alarm rate (:func:`sigma_equivalent`; for one row exactly ``|r| / (s sqrt(1 -
+    h))``). ``s`` is the rows' robust scale (:func:`robust_scales`) among the residuals of the fit without the
+    point (``r + js d_O``, the point's rows at their deletion residuals): a blunder that pulls a small session
+    towards itself spreads into every residual and would otherwise inflate the scale it is judged by. The scale
+    without the point is taken for the points at ``k / 2`` or beyond with the fit's own scale (below, a point
+    would need to halve the median of every other residual by its own pull to reach ``k``).
 
     Returns {``point`` (n,) indices into the data, ``rows`` (n,) m, ``chi2`` (n,) T, ``sigma`` (n,) its
-    standardized equivalent, ``deletion`` (n,) [m] the norm of the unweighted ``e_O``}, NaN for a point the fit
-    cannot do without (deleting it leaves an unknown undetermined)."""
+    standardized equivalent, ``deletion`` (n,) [m] the norm of the unweighted ``e_O``} and the same of the
+    certified lengths, ``length`` (l,) their indices among the fit's lengths (``prob.distance_items``),
+    ``length_chi2``, ``length_sigma``, ``length_deletion``; NaN for a point or length the fit cannot do without
+    (deleting it leaves an unknown undetermined: a campaign's only length, when it alone sets the scale)."""
     rp = prob.row_point
     rows = np.flatnonzero((prob.row_distance < 0) & (rp >= 0))
     rows = rows[np.argsort(rp[rows], kind="stable")]
     points, start = np.unique(rp[rows], return_index=True)
-    groups = np.split(rows, start[1:])
+    lengths = np.flatnonzero(prob.row_distance >= 0)
+    groups = (np.split(rows, start[1:]) if len(rows) else []) + [np.array([i]) for i in lengths]
     kinds = row_kinds(prob)
     scale = robust_scales(r, leverage, kinds)
-    m_rows = np.array([len(o) for o in groups])
-    chi2, dele = np.full(len(points), np.nan), np.full(len(points), np.nan)
+    m_rows = np.array([len(o) for o in groups], dtype=int)
+    chi2, dele = np.full(len(groups), np.nan), np.full(len(groups), np.nan)
     tests = group_deletions(js, solve, r, groups)
     for i, (o, (e, m, _)) in enumerate(zip(groups, tests, strict=True)):
         if e is not None:
             w = r[o] / scale[o]
             chi2[i] = float(w @ m @ w)
             dele[i] = float(np.linalg.norm(prob.sigma[o] * e))
-    sigma = sigma_equivalent(chi2, m_rows)
+    sigma = sigma_equivalent(chi2, m_rows) if len(groups) else np.zeros(0)
     for i in np.flatnonzero(np.nan_to_num(sigma) >= 0.5 * k):
         o, (_, m, d) = groups[i], tests[i]
         h_without = leverage.copy()
@@ -716,7 +758,10 @@ def point_tests(prob: Problem, r: np.ndarray, js, solve, leverage: np.ndarray, k
         w = r[o] / robust_scales(r + js @ d, h_without, kinds)[o]
         chi2[i] = float(w @ m @ w)
         sigma[i] = sigma_equivalent(chi2[i], m_rows[i])
-    return {"point": points, "rows": m_rows, "chi2": chi2, "deletion": dele, "sigma": sigma}
+    n = len(points)
+    return {"point": points, "rows": m_rows[:n], "chi2": chi2[:n], "deletion": dele[:n], "sigma": sigma[:n],
+            "length": prob.row_distance[lengths], "length_chi2": chi2[n:], "length_deletion": dele[n:],
+            "length_sigma": sigma[n:]}
 
 
 def sigma_equivalent(chi2, rows):
@@ -738,11 +783,17 @@ def sigma_equivalent(chi2, rows):
     return float(k) if np.ndim(k) == 0 else k
 
 
-def _deletion_residual(res: CalibrationResult, data: CalibrationData, point: int) -> float:
-    """The residual [m] of ``data``'s point ``point`` under ``res``, a fit without it (its parameters held,
-    the features and frames refitted on ``data``)."""
+def _deletion_residual(res: CalibrationResult, data: CalibrationData, c: _Tested) -> float:
+    """The residual [m] of ``data``'s point or certified length ``c`` under ``res``, a fit without it: a point's
+    with the fit's parameters held, the features and frames refitted on ``data``; a length's, the distance of the
+    two centres that fit found (on their points alone) less the certified length."""
+    if c.between is not None:
+        centre = {it["feature"]: np.asarray(it["centre"]) for it in res.instances
+                  if it["measurement"] == c.outlier.measurement and it["feature"] in c.between}
+        certified = math.nan if c.certified is None else c.certified
+        return float(np.linalg.norm(centre[c.between[0]] - centre[c.between[1]]) - certified)
     table = res.predict(data)
-    return float(table["value"][int(np.flatnonzero(table["point"] == point)[0])])
+    return float(table["value"][int(np.flatnonzero(table["point"] == c.outlier.point)[0])])
 
 
 @dataclass
@@ -1114,9 +1165,19 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         prior_groups=_group_table(s, kept, u), redundancy=None if s.prior is None else red,
         discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var)  # type: ignore[attr-defined]
         if options.discrepancy else None,
-        point_tests=point_tests(prob, ev.r, nrm.js, nrm.lu.solve, nrm.h,  # type: ignore[attr-defined]
-                                max(options.gross_threshold, options.outlier_threshold))
-        if options.gross_threshold is not None and not options.drop_outliers else None)
+        point_tests=None if _test_level(options) is None else point_tests(
+            prob, ev.r, nrm.js, nrm.lu.solve, nrm.h, _test_level(options)))  # type: ignore[attr-defined]
+
+
+def _test_level(options: FitOptions) -> float | None:
+    """The level the points' and lengths' gross-error tests (:func:`point_tests`) are taken at: ``--drop-outliers``
+    drops what reaches ``outlier_threshold``, the default leaves out what reaches ``gross_threshold`` (and
+    ``outlier_threshold``); None (no test) with neither (``--keep-outliers``)."""
+    if options.drop_outliers:
+        return options.outlier_threshold
+    if options.gross_threshold is None:
+        return None
+    return max(options.gross_threshold, options.outlier_threshold)
 
 
 def _group_table(s: _Setup, kept, u) -> dict:

@@ -580,14 +580,20 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
         log.info(f"  poorly determined: {text}")
     for g in res.gross:
         o = g.outlier
-        where = " ".join(x for x in (o.measurement, o.feature, f"line {o.line}") if x)
+        where = " ".join(x for x in (o.measurement, f"length {o.feature}" if o.point is None else o.feature,
+                                     None if o.line is None else f"line {o.line}") if x)
         log.warning(f"gross error left out of the fit: {where}: standardized "
                     f"{o.standardized:+.1f} (from {g.threshold:g}), {g.residual * 1e3:.3f} mm from the fit without "
                     "it; --keep-outliers keeps it")
     if res.gross_kept:
         log.warning(f"gross-looking point kept: {res.gross_kept}")
+    if res.dropped:
+        log.info(f"{len(res.dropped)} outlier(s) dropped and refitted (the gross-error test at --outlier-threshold):")
+        for o in res.dropped[:10]:
+            log.info(f"  {o.measurement} {o.feature} {'length' if o.point is None else f'line {o.line}'}: "
+                     f"standardized {o.standardized:+.1f}")
     if res.outliers:
-        log.info(f"{len(res.outliers)} outlier(s) ({'dropped and refitted' if res.dropped else 'kept'}):")
+        log.info(f"{len(res.outliers)} outlier(s) ({'flagged row by row, kept' if res.dropped else 'kept'}):")
         for o in res.outliers[:10]:
             log.info(f"  {o.measurement} {o.feature} line {o.line}: standardized {o.standardized:+.1f}")
         gross = [o for o in res.outliers if abs(o.standardized) >= GROSS_STANDARDIZED]

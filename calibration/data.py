@@ -91,7 +91,9 @@ class CalibrationData:
     0-based marker, None: marker 0 everywhere; :func:`make_data` turns a row of K markers into K rows);
     ``marker_offsets`` says whether the markers sit at unknown offsets on the tip frame ("fit") or the
     instrument sees the tip point itself ("zero"); ``tracker``: frames and offsets held at given values
-    (a prediction with those of another fit, :meth:`with_tracker`), None: estimated.
+    (a prediction with those of another fit, :meth:`with_tracker`), None: estimated. ``left_out_lengths``: the
+    certified lengths of the artefacts not fitted in one measurement each, ``(measurement, (feature a, feature
+    b))`` (a gross error left out, :meth:`without_length`).
     """
     points: PointSet
     artefacts: Artefacts
@@ -100,6 +102,7 @@ class CalibrationData:
     marker: np.ndarray | None = None
     marker_offsets: str = "zero"
     tracker: Tracker | None = None
+    left_out_lengths: tuple = ()
 
     def __post_init__(self):
         if self.marker_offsets not in MARKER_OFFSETS:
@@ -163,7 +166,12 @@ class CalibrationData:
         return CalibrationData(self.points.select(mask), self.artefacts,
                                None if self.aux is None else self.aux.select(mask),
                                None if self.files is None else self.files[mask],
-                               None if self.marker is None else self.marker[mask], self.marker_offsets, self.tracker)
+                               None if self.marker is None else self.marker[mask], self.marker_offsets, self.tracker,
+                               self.left_out_lengths)
+
+    def without_length(self, measurement: str, between: tuple) -> CalibrationData:
+        """These data with the certified length between the features ``between`` not fitted in ``measurement``."""
+        return replace(self, left_out_lengths=(*self.left_out_lengths, (str(measurement), tuple(between))))
 
     def with_measurements(self, ids) -> CalibrationData:
         """Only the measurements ``ids``."""
@@ -369,7 +377,8 @@ def concat(a: CalibrationData, b: CalibrationData) -> CalibrationData:
             return np.concatenate([va, vb])
         aux = AuxData(join("temperature", ()), join("tau_gravity", None), join("tau_contact", None))
     marker = None if a.marker is None and b.marker is None else np.concatenate([a.markers, b.markers])
-    return CalibrationData(pts, a.artefacts, aux, files, marker, a.marker_offsets, a.tracker)
+    return CalibrationData(pts, a.artefacts, aux, files, marker, a.marker_offsets, a.tracker,
+                           tuple(dict.fromkeys(a.left_out_lengths + b.left_out_lengths)))
 
 
 def split_poses(data: CalibrationData, fraction: float, keep=None) -> np.ndarray:

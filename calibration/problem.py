@@ -217,15 +217,17 @@ class Problem:
             self._ref_marker.update(dict.fromkeys(mr.tolist(), idx))
 
     def _distances(self, by_key: dict[tuple[str, str], int]) -> list[DistanceItem]:
-        """The certified lengths between the centres of two instances of one measurement."""
+        """The certified lengths between the centres of two instances of one measurement (but those the data
+        leave out, ``data.left_out_lengths``)."""
         arte, pts = self.data.artefacts, self.data.points
         items: list[DistanceItem] = []
         if not self.distances:
             return items
+        left_out = set(self.data.left_out_lengths)
         for dist in arte.distances:
             fa, fb = dist.between
             for m in pts.measurements():
-                if (m, fa) in by_key and (m, fb) in by_key:
+                if (m, fa) in by_key and (m, fb) in by_key and (m, (fa, fb)) not in left_out:
                     ia, ib = by_key[(m, fa)], by_key[(m, fb)]
                     for i, fid in ((ia, fa), (ib, fb)):
                         if self.instances[i].kind not in ("seat", "sphere"):

@@ -187,6 +187,11 @@ def conformance_html(conf: dict, files: dict) -> list[str]:
     return parts
 
 
+def _line(o) -> str:
+    """The file line of an outlier's point, or "length" for a certified length."""
+    return "length" if o.point is None else str(o.line)
+
+
 def _fmt(v, digits=4):
     if v is None:
         return "-"
@@ -253,20 +258,20 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
                            _fmt(o.residual * 1e6, 4)) for o in result.outliers])]
     if result.gross:
         parts += ["<h2>Gross errors (left out of the fit)</h2>",
-                  "<p>points whose gross-error test (their rows' deletion residual together, as the standardized "
-                  "residual of the same false-alarm rate) reached the threshold, left out one at a time "
-                  "(the largest first) and the fit redone; 'deletion residual': the point's residual under the fit "
-                  "without it. <code>--keep-outliers</code> keeps them.</p>",
+                  "<p>points and certified lengths whose gross-error test (their rows' deletion residual together, "
+                  "as the standardized residual of the same false-alarm rate) reached the threshold, left out one at a "
+                  "time (the largest first) and the fit redone; 'deletion residual': the point's (or length's) "
+                  "residual under the fit without it. <code>--keep-outliers</code> keeps them.</p>",
                   reports.html_table(["measurement", "feature", "line", "standardized", "threshold",
                                       "deletion residual [um]"],
-                         [(g.outlier.measurement, g.outlier.feature, g.outlier.line, _fmt(g.outlier.standardized, 3),
+                         [(g.outlier.measurement, g.outlier.feature, _line(g.outlier), _fmt(g.outlier.standardized, 3),
                            _fmt(g.threshold, 3), _fmt(g.residual * 1e6, 4)) for g in result.gross])]
     if result.gross_kept:
         parts += [f"<p>Gross-looking point kept: {html.escape(result.gross_kept)}</p>"]
     if result.dropped:
         parts += ["<h2>Dropped points (refitted without them)</h2>",
                   reports.html_table(["measurement", "feature", "line", "standardized"],
-                         [(o.measurement, o.feature, o.line, _fmt(o.standardized, 3)) for o in result.dropped])]
+                         [(o.measurement, o.feature, _line(o), _fmt(o.standardized, 3)) for o in result.dropped])]
     for name, title in (("residuals_png", "Residuals"), ("parameters_png", "Estimates"),
                         ("correlation_png", "Correlations")):
         if name in files:

@@ -123,3 +123,71 @@ def test_a_leveraged_blunder_in_a_small_session_is_found(nominal):
     assert abs(res.gross[0].outlier.standardized) >= 8.0
     assert res.gross[0].residual == pytest.approx(60e-6, rel=0.25)
     assert not calibrate(model, make_data(ref, None, model), FitOptions()).gross
+
+
+ART = SynthSpec(ballbars=3, ballbar_points=5, seats=3, articulations=8, spheres=1, sphere_points=12, rings=0,
+                planes=0, reference_points=0, force=0.0, noise=2e-6)
+
+
+def _bar_moved(model, seed, shift, bad_seat_sigma):
+    """A small artefact session (66 points) with two gross errors: in the first ball-bar placement the B end moved
+    ``shift`` [m] along the bar between the probing of its two ends (its sphere points consistent, the certified
+    length not: a gross error of the length alone), and one seat point whose shoulder angle reads
+    ``bad_seat_sigma`` noise sigmas of ball displacement off. Returns the data, the placement and the seat point."""
+    from arm_model.sim.ik import solve_positions
+    rng = np.random.default_rng(seed)
+    c = make_campaign(model, ART, seed=seed)
+    pts = c.points
+    m = sorted({m for m, f in zip(pts.measurement, pts.feature, strict=True) if f == "bar-B"})[0]
+    a, b = ((pts.measurement == m) & (pts.feature == f) for f in ("bar-A", "bar-B"))
+    xa, xb = (model.ball_centres(pts.q[s], None, c.p_true) for s in (a, b))
+    u = xb.mean(axis=0) - xa.mean(axis=0)
+    q = pts.q.copy()
+    q[b] = solve_positions(model, c.p_true, xb + shift * u / np.linalg.norm(u), rng)[0]
+    seat = int(rng.choice(np.flatnonzero(pts.feature == "seat")))
+    q1 = q[seat:seat + 1].copy()
+    q1[0, 1] += 1e-4
+    d0 = float(np.linalg.norm(np.diff(model.ball_centres(np.vstack([q[seat:seat + 1], q1]), None, c.p_true), axis=0)))
+    q[seat, 1] += 1e-4 * bad_seat_sigma * ART.noise / d0
+    return make_data(replace(pts, q=q), c.artefacts, model), m, seat
+
+
+@pytest.fixture(scope="module")
+def bar_moved(nominal):
+    """The session of :func:`_bar_moved` (seed 0, the B end 80 um along the bar, an 8-sigma seat blunder) and its
+    default fit."""
+    model = ArmModel(nominal)
+    data, bar, seat = _bar_moved(model, 0, 80e-6, 8.0)
+    return model, data, bar, seat, calibrate(model, data, FitOptions())
+
+
+def test_a_certified_length_is_tested_as_a_point(bar_moved):
+    """A ball-bar placement whose B end moved 80 um along the bar (its length 0.1 mm off under a 0.8 um
+    certificate; its sphere points are consistent, so no point's test can see it) and an 8-sigma seat blunder:
+    the default (level 6) leaves the length out, names it (measurement, the two features; its deletion residual,
+    the centres' distance found on their points alone less the certified length, is the shift to 25 %) and keeps
+    every point (the seat's test is below 6). Before, a length was never tested."""
+    _, data, bar, seat, res = bar_moved
+    assert [(g.outlier.kind, g.outlier.measurement, g.outlier.feature) for g in res.gross] == \
+        [("distance", bar, "bar-A - bar-B")]
+    assert res.data.left_out_lengths == ((bar, ("bar-A", "bar-B")),) and len(res.data) == len(data)
+    assert abs(res.gross[0].residual) == pytest.approx(80e-6, rel=0.25)
+    t = res.point_tests
+    assert len(t["length"]) == len(res.distances) == 2                # the two lengths kept, tested
+    assert np.all(t["length_sigma"] < 6.0)
+    assert 4.0 < t["sigma"][int(np.flatnonzero(t["point"] == seat)[0])] < 6.0
+
+
+def test_drop_outliers_drops_what_the_point_test_names(bar_moved):
+    """``--drop-outliers`` (level ``--outlier-threshold``, 4) drops the points and lengths the gross-error test
+    names at that level (the test's statistic is the default's), the length and the seat point of
+    :func:`bar_moved`, and nothing else; before, it judged rows one by one and never a length."""
+    model, data, _, seat, res = bar_moved
+    dropped = calibrate(model, data, FitOptions(drop_outliers=True, gross_threshold=None))
+    assert sorted((o.kind, -1 if o.point is None else o.point) for o in dropped.dropped) == \
+        [("distance", -1), ("seat", seat)]
+    length = next(o for o in dropped.dropped if o.kind == "distance")
+    assert length.standardized == pytest.approx(res.gross[0].outlier.standardized, rel=1e-9)
+    assert dropped.data.left_out_lengths == res.data.left_out_lengths and len(dropped.data) == len(data) - 1
+    assert not any(abs(s) >= 4.0 for s in np.nan_to_num(np.concatenate(
+        [dropped.point_tests["sigma"], dropped.point_tests["length_sigma"]])))
