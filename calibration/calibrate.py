@@ -594,9 +594,9 @@ def _without_outliers(model: ArmModel, data: CalibrationData, options: FitOption
     """``estimate(model, data, options)`` (:func:`_fit`, :func:`reweighted` or :func:`_evidence`) and, with
     ``options.drop_outliers``, the points and certified lengths whose gross-error test (:func:`point_tests`, the
     test the default leaves gross errors out by) is at ``options.outlier_threshold`` or beyond dropped (the worst
-    first, with those at half its statistic or more: a gross error also pulls its neighbours out, those go only if
-    they stay out) and refitted, until none is left (at most :data:`DROP_ROUNDS` rounds); otherwise the gross
-    errors left out (:func:`_without_gross`)."""
+    of each measurement at half the worst statistic or more, :func:`_one_a_measurement`: a gross error also pulls
+    its neighbours out, those go only if they stay out) and refitted, until none is left (at most
+    :data:`DROP_ROUNDS` rounds); otherwise the gross errors left out (:func:`_without_gross`)."""
     if not options.drop_outliers:
         return _without_gross(model, data, options, estimate)
     index = np.arange(len(data))
@@ -609,11 +609,51 @@ def _without_outliers(model: ArmModel, data: CalibrationData, options: FitOption
             return res
         if k == DROP_ROUNDS:
             break
-        worst = abs(cands[0].outlier.standardized)
-        drop = [c for c in cands if abs(c.outlier.standardized) >= max(options.outlier_threshold, 0.5 * worst)]
+        drop = _droppable(res.data, _one_a_measurement(cands, options.outlier_threshold))
+        if not drop:
+            o = cands[0].outlier
+            res.dropped = dropped
+            res.gross_kept = (f"{o.measurement} {o.feature} line {o.line}: standardized {o.standardized:+.1f}, kept: "
+                              "its feature needs it (no fewer points than its fit needs are left)")
+            return res
         dropped += [c.given(index) for c in drop]
         data, index = _left_out(data, drop, index)
     raise NumericalError(f"outliers remain after {DROP_ROUNDS} rounds of dropping; check the data")
+
+
+def _one_a_measurement(cands: list, level: float) -> list:
+    """Of ``cands`` (:class:`_Tested`, the largest first), what one round of ``--drop-outliers`` drops: the worst,
+    and those at ``level`` and at half its statistic or more, one a measurement and one length (the worst of each):
+    a gross error pulls its own measurement's points and lengths with its feature's unknowns, and a length every
+    other through the arm's scale, whose tests then stand high too (a ball bar's end moved along the bar: its
+    length, the points of its spheres, the other bars' lengths), and the next round tests them without it."""
+    worst = abs(cands[0].outlier.standardized)
+    out: list = []
+    for c in cands:
+        if abs(c.outlier.standardized) >= max(level, 0.5 * worst) and not any(
+                c.outlier.measurement == d.outlier.measurement or (c.between is not None and d.between is not None)
+                for d in out):
+            out.append(c)
+    return out
+
+
+def _droppable(data: CalibrationData, cands: list) -> list:
+    """Of ``cands`` (:class:`_Tested`, in order), those that can be dropped together: every length, and a point
+    while its feature instance keeps the fewest points its fit needs (:data:`~calibration.kinds.MIN_POINTS`)."""
+    from .kinds import MIN_POINTS
+    pts, out = data.points, []
+    left: dict = {}
+    for c in cands:
+        o = c.outlier
+        if c.between is None and pts.feature[o.point] != "":
+            key = (pts.measurement[o.point], pts.feature[o.point])
+            if key not in left:
+                left[key] = int(np.sum((pts.measurement == key[0]) & (pts.feature == key[1])))
+            if left[key] - 1 < MIN_POINTS.get(o.kind, (0, 0))[0]:
+                continue
+            left[key] -= 1
+        out.append(c)
+    return out
 
 
 @dataclass(frozen=True)
@@ -1442,13 +1482,14 @@ def nominal_baseline(model: ArmModel, data: CalibrationData, options: FitOptions
     fit) by least squares, the artefacts' unknowns and the
     reference frame solved as in every fit, at the same weights (no noise estimate of its own), on every point
     of ``data`` (give it the fit's ``data``: without the gross errors the fit left out). Its
-    ``p``/``reference`` are the baseline every "nominal -> calibrated" figure compares against."""
+    ``p``/``reference`` are the baseline every "nominal -> calibrated" figure compares against; it carries no
+    model discrepancy (nothing reads one of the baseline's: its extrapolative folds cost a fit's tenth)."""
     spec = model.spec
     cand = resolve_parameters(spec, default_free(model, data) if options.free is None else options.free)
     tip = [spec.names[i] for i in cand if spec.names[i] in ("probe.x", "probe.y", "probe.z")]
     return calibrate(model, data, replace(options, free=tuple(tip), prior_scale=None, min_resolution=None,
                                           weights_from_data=False, drop_outliers=False, gross_threshold=None,
-                                          start=None, on_unidentifiable="fix"))
+                                          start=None, on_unidentifiable="fix", discrepancy=False))
 
 
 def evidence_scale(model: ArmModel, data: CalibrationData, options: FitOptions = FitOptions()) -> tuple[dict, list]:

@@ -442,8 +442,9 @@ def _outlier_options(c) -> None:
     c.add_argument("--outlier-threshold", type=positive(), default=4.0,
                    help="standardized residual beyond which a point is reported as an outlier (default 4)")
     which = c.add_mutually_exclusive_group()        # the outliers: dropped, kept, or the gross ones left out
-    which.add_argument("--drop-outliers", action="store_true", help="drop every outlier point and refit, in "
-                       "rounds (listed); default: leave out the gross errors (--gross-threshold), keep the others")
+    which.add_argument("--drop-outliers", action="store_true", help="drop every point and certified length whose "
+                       "gross-error test reaches --outlier-threshold and refit, in rounds (listed); default: leave out "
+                       "the gross errors (--gross-threshold), keep the others")
     c.add_argument("--gross-threshold", type=positive(), default=None,
                    help=f"standardized residual from which a point (its rows' deletion residual together, at the "
                         f"row-by-row false-alarm rate) is a gross error: left out and the fit redone, one at a time, "

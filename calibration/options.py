@@ -93,11 +93,13 @@ class FitOptions:
             with the list).
         rank_tol: relative singular value below which a direction is not identifiable.
         outlier_threshold: standardized residual beyond which a point is an outlier.
-        drop_outliers: drop the outlier points and refit, in rounds (the worst first) until none is left.
-        gross_threshold: without ``drop_outliers``, the standardized residual from which a point (its rows tested
-            together by their deletion residual, as the standardized residual of the same false-alarm rate;
-            beyond ``outlier_threshold`` too: a gross error is an outlier) is a gross error, left out and the fit
-            redone (one at a time, the largest first, at most 5 % of the points); None keeps every point.
+        drop_outliers: drop the points and certified lengths whose gross-error test (``gross_threshold``'s) reaches
+            ``outlier_threshold`` and refit, in rounds (the worst first) until none is left.
+        gross_threshold: without ``drop_outliers``, the standardized residual from which a point or a certified
+            length (a point's rows tested together by their deletion residual, as the standardized residual of the
+            same false-alarm rate; beyond ``outlier_threshold`` too: a gross error is an outlier) is a gross error,
+            left out and the fit redone (one at a time, the largest first, at most 5 % of the points); None keeps
+            every point.
         covariance: "residual" (scaled by the residual variance factor) or "stated".
         reference: "fit" (``T_ref_base`` unknown), "identity" (reference coordinates are base
             coordinates) or "off" (reference columns ignored).
