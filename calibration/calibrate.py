@@ -754,7 +754,19 @@ def _gross_candidate(res: CalibrationResult, k: float) -> _Tested | None:
     return cands[0] if cands else None
 
 
-def point_tests(prob: Problem, r: np.ndarray, js, solve, leverage: np.ndarray, k: float) -> dict:
+def _test_groups(prob: Problem) -> tuple[np.ndarray, np.ndarray, list]:
+    """(points, lengths, groups) of :func:`point_tests`: the data's points with residual rows, the rows of the
+    certified lengths, and the rows of each (a point's together, in ``points`` order, then one a length)."""
+    rp = prob.row_point
+    rows = np.flatnonzero((prob.row_distance < 0) & (rp >= 0))
+    rows = rows[np.argsort(rp[rows], kind="stable")]
+    points, start = np.unique(rp[rows], return_index=True)
+    lengths = np.flatnonzero(prob.row_distance >= 0)
+    return points, lengths, (np.split(rows, start[1:]) if len(rows) else []) + [np.array([i]) for i in lengths]
+
+
+def point_tests(prob: Problem, r: np.ndarray, js, solve, leverage: np.ndarray, k: float,
+                deletions: list | None = None) -> dict:
     """The gross-error test of every point and every certified length of a fit of ``prob`` (``r`` its weighted
     residuals, ``js``, ``solve`` and ``leverage`` as :func:`~calibration.discrepancy.model_discrepancy` and
     :func:`_normal`): the point's residual rows ``O`` together (a seat's or a marker's three, a sphere's one, a
@@ -773,18 +785,14 @@ def point_tests(prob: Problem, r: np.ndarray, js, solve, leverage: np.ndarray, k
     standardized equivalent, ``deletion`` (n,) [m] the norm of the unweighted ``e_O``} and the same of the
     certified lengths, ``length`` (l,) their indices among the fit's lengths (``prob.distance_items``),
     ``length_chi2``, ``length_sigma``, ``length_deletion``; NaN for a point or length the fit cannot do without
-    (deleting it leaves an unknown undetermined: a campaign's only length, when it alone sets the scale)."""
-    rp = prob.row_point
-    rows = np.flatnonzero((prob.row_distance < 0) & (rp >= 0))
-    rows = rows[np.argsort(rp[rows], kind="stable")]
-    points, start = np.unique(rp[rows], return_index=True)
-    lengths = np.flatnonzero(prob.row_distance >= 0)
-    groups = (np.split(rows, start[1:]) if len(rows) else []) + [np.array([i]) for i in lengths]
+    (deleting it leaves an unknown undetermined: a campaign's only length, when it alone sets the scale).
+    ``deletions``: the groups' deletions already computed (:func:`_normal` with :func:`_test_groups`)."""
+    points, lengths, groups = _test_groups(prob)
     kinds = row_kinds(prob)
     scale = robust_scales(r, leverage, kinds)
     m_rows = np.array([len(o) for o in groups], dtype=int)
     chi2, dele = np.full(len(groups), np.nan), np.full(len(groups), np.nan)
-    tests = group_deletions(js, solve, r, groups)
+    tests = group_deletions(js, solve, r, groups) if deletions is None else deletions
     for i, (o, (e, m, _)) in enumerate(zip(groups, tests, strict=True)):
         if e is not None:
             w = r[o] / scale[o]
@@ -1054,9 +1062,13 @@ class _Normal:
     lu: object
     h: np.ndarray
     log_evidence: float | None
+    deletions: list | None = None
 
 
-def _normal(s: _Setup, sol, kept) -> _Normal:
+def _normal(s: _Setup, sol, kept, groups=None) -> _Normal:
+    """:class:`_Normal` of the solution ``sol``; with ``groups`` (of residual rows: :func:`_test_groups`) also their
+    deletions (:func:`~calibration.discrepancy.group_deletions`, ``deletions``), whose solve gives the leverage of
+    their rows (the other rows' by :func:`_leverage`)."""
     ev = sol.evaluation
     j = sp.hstack([sp.csr_matrix(ev.jp), ev.jt], format="csc") if len(kept) else ev.jt.tocsc()
     jscale = np.sqrt(np.asarray(j.multiply(j).sum(axis=0)).ravel())
@@ -1071,7 +1083,14 @@ def _normal(s: _Setup, sol, kept) -> _Normal:
     if s.prior is not None:                 # Laplace: -cost - 0.5 log det(H) + log of the prior's normalisation
         logdet = float(np.sum(np.log(np.abs(lu.U.diagonal())))) + 2.0 * float(np.sum(np.log(jscale)))
         log_ev = -(sol.cost + sol.prior_cost) - 0.5 * logdet - float(np.sum(np.log(s.prior.size[kept_arr])))
-    return _Normal(js, jscale, lu, _leverage(js, lu.solve), log_ev)
+    if groups is None:
+        return _Normal(js, jscale, lu, _leverage(js, lu.solve), log_ev)
+    h = np.full(js.shape[0], np.nan)
+    deletions = group_deletions(js, lu.solve, ev.r, groups, leverage=h)
+    rest = np.flatnonzero(np.isnan(h))
+    if len(rest):
+        h[rest] = _leverage(js[rest], lu.solve)
+    return _Normal(js, jscale, lu, np.clip(h, 0.0, 1.0 - 1e-12), log_ev, deletions)
 
 
 def _point_table(prob: Problem, data: CalibrationData, p, states, z: np.ndarray) -> dict:
@@ -1170,7 +1189,8 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
     ev = sol.evaluation
     n_rows = len(ev.r)
     dof, n_nuis = _dof(prob, n_rows, len(kept), prior=s.prior is not None)
-    nrm = _normal(s, sol, kept)
+    level = _test_level(options)
+    nrm = _normal(s, sol, kept, None if level is None else _test_groups(prob)[2])
     # with a prior the residuals' share of the unknowns is the leverages' (the prior determines what the data
     # leave open), as in the noise's variance components: s0 = 1 when the noise estimate holds
     red = float(np.sum(1.0 - nrm.h)) if s.prior is not None else float(dof)
@@ -1205,8 +1225,8 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         prior_groups=_group_table(s, kept, u), redundancy=None if s.prior is None else red,
         discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var)  # type: ignore[attr-defined]
         if options.discrepancy else None,
-        point_tests=None if _test_level(options) is None else point_tests(
-            prob, ev.r, nrm.js, nrm.lu.solve, nrm.h, _test_level(options)))  # type: ignore[attr-defined]
+        point_tests=None if level is None else point_tests(
+            prob, ev.r, nrm.js, nrm.lu.solve, nrm.h, level, nrm.deletions))  # type: ignore[attr-defined]
 
 
 def _test_level(options: FitOptions) -> float | None:

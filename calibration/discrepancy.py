@@ -224,7 +224,8 @@ def holdable(prob, held) -> set:
     return out
 
 
-def group_deletions(js, solve, r: np.ndarray, groups, chunk: int = 2000, tol: float = 1e-9) -> list:
+def group_deletions(js, solve, r: np.ndarray, groups, chunk: int = 2000, tol: float = 1e-9,
+                    leverage: np.ndarray | None = None) -> list:
     """The group-deletion identity of a linearised joint fit, for each group of residual rows ``O`` in ``groups``
     (index arrays; Cook and Weisberg 1982, ch. 3): ``(e_O, M_O)`` with ``M_O = (I - H_OO)^-1``, ``H = J A^-1
     J^T`` the hat matrix of the joint fit (``js`` the column-scaled Jacobian of every unknown, ``solve`` ``b ->
@@ -234,7 +235,8 @@ def group_deletions(js, solve, r: np.ndarray, groups, chunk: int = 2000, tol: fl
     unknowns from the fit without the group to the fit with it (the other rows' residuals without it are
     ``r + js d_O``). ``(None, None, None)`` for a group the fit cannot do without (an eigenvalue of ``I -
     H_OO`` at ``tol`` or below: deleting it leaves an unknown undetermined). The groups are taken ``chunk``
-    rows at a time (one dense solve each)."""
+    rows at a time (one dense solve each). ``leverage``: an array (rows,) whose groups' rows take the diagonal of
+    ``H_OO`` (their leverage, from the same solve)."""
     jr = js.tocsr()
     out: list = []
     i = 0
@@ -244,11 +246,11 @@ def group_deletions(js, solve, r: np.ndarray, groups, chunk: int = 2000, tol: fl
             batch.append(np.asarray(groups[i], dtype=int))
             n += len(batch[-1])
             i += 1
-        out += _deletion_batch(jr, solve, r, batch, tol)
+        out += _deletion_batch(jr, solve, r, batch, tol, leverage)
     return out
 
 
-def _deletion_batch(jr, solve, r: np.ndarray, batch: list, tol: float) -> list:
+def _deletion_batch(jr, solve, r: np.ndarray, batch: list, tol: float, leverage: np.ndarray | None) -> list:
     """:func:`group_deletions` of the groups ``batch`` (one dense solve; the groups of one size together)."""
     jd = jr[np.concatenate(batch)].toarray()
     z = solve(jd.T).T                                   # (rows, unknowns): A^-1 J_O^T, row by row
@@ -258,11 +260,13 @@ def _deletion_batch(jr, solve, r: np.ndarray, batch: list, tol: float) -> list:
         which = np.flatnonzero(np.diff(start) == size)
         pos = start[which][:, None] + np.arange(size)   # (groups, size) positions in jd and z
         h = np.einsum("giu,gju->gij", jd[pos], z[pos])
+        rows = np.stack([batch[g] for g in which])
+        if leverage is not None:
+            leverage[rows] = np.einsum("gii->gi", h)
         ih = np.eye(size) - 0.5 * (h + np.swapaxes(h, 1, 2))
         ok = np.linalg.eigvalsh(ih)[:, 0] > tol
         m = np.full_like(ih, np.nan)
         m[ok] = np.linalg.inv(ih[ok])
-        rows = np.stack([batch[g] for g in which])
         e = np.einsum("gij,gj->gi", m, r[rows])
         d = np.einsum("giu,gi->gu", z[pos], e)
         for g, k in enumerate(which):
