@@ -26,10 +26,13 @@ log = logging.getLogger(__name__)
 
 __all__ = ["PointSet", "Feature", "Distance", "Artefacts", "ForceSignal", "read_points",
            "read_artefacts", "read_force_signal", "check_features", "atomic_write_text",
-           "atomic_write_bytes", "write_csv", "guard_output", "csv_records", "FEATURE_KINDS", "iter_points",
+           "atomic_write_bytes", "write_csv", "guard_output", "csv_records", "FEATURE_KINDS", "CENTRE_KINDS", "iter_points",
            "concat_points", "POINT_COLUMNS", "format_artefacts", "read_back", "UnreadableOutput", "json_text"]
 
 FEATURE_KINDS = ("ring", "cylinder", "sphere", "seat", "plane", "point")
+#: the kinds whose centre is one point a fit determines: the only ends a certified [[distance]] can join (a ring's or
+#: cylinder's axis is a line, a plane has no centre, a free point is no artefact's)
+CENTRE_KINDS = ("seat", "sphere")
 _TEXT_COLUMNS = ("measurement", "feature")
 #: optional text column: rows of one session share one reference-instrument frame (docs/formats.md §3)
 SESSION_COLUMN = "session"
@@ -502,10 +505,13 @@ def _artefact_distance(err, t, i: int, features: dict) -> Distance:
     if between[0] == between[1]:
         raise err(f"'between' names '{between[0]}' twice; a distance joins two features", "distance", i,
                   "between")
-    flat = next((b for b in between if features[b].kind == "plane"), None)
-    if flat is not None:
-        raise err(f"'{flat}' is a plane: a distance joins two features' centres, and a plane has none", "distance",
-                  i, "between")
+    other = next((b for b in between if features[b].kind not in CENTRE_KINDS), None)
+    if other is not None:
+        kind = features[other].kind
+        why = {"plane": "a plane has none", "point": "a free point is no artefact's centre"}.get(
+            kind, f"a {kind}'s axis is a line, not a point")
+        raise err(f"'{other}' is a {kind}: a distance joins two features' centres (seats or spheres), and {why}",
+                  "distance", i, "between")
     length = u = None
     for key, v in t.items():
         if key == "between":
