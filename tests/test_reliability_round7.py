@@ -181,3 +181,32 @@ def test_montecarlo_runs_carry_the_campaign_read_not_its_path(campaign):
     assert len(points.measurement) == 8
     with pytest.raises(TypeError, match="SimSource: campaign must be a Campaign"):
         SimSource(42)
+
+
+# ---------------------------------------------------------------------------------------------
+# (a) joint limits: one rule for measured and held values, warned and used
+
+_ARM_URDF = str(NOMINAL.with_suffix("").with_suffix(".urdf"))      # the toolkit's own URDF, limits j2 +-150 deg
+
+
+@pytest.mark.parametrize("hold, words", [
+    ("j7=400", "joint 'j7' held at 400 deg, beyond its limits [-360, 360] deg"),
+    ("j2=-151", "joint 'j2' held at -151 deg, beyond its limits [-150, 150] deg"),
+])
+def test_a_joint_held_beyond_its_limits_is_warned_and_used_as_a_measured_one(tmp_path, capsys, hold, words):
+    """A points file's angle beyond its joint's limits was warned and used while the same value given by
+    `--hold-joint` was refused (exit 2). A limit is the description's claim; a value beyond it, measured or stated,
+    contradicts it, and either may be the wrong one: both are warned (also with --quiet) and used."""
+    from arm_model import load_arm
+    out = tmp_path / "a.urdf"
+    assert main(["urdf", _ARM_URDF, "--tip-frame", "ball", "--hold-joint", hold, "-o", str(out), "-q"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("warning:") == 1 and words in err and "used as given" in err, err
+    name, value = hold.split("=")
+    desc = load_arm(_ARM_URDF, "ball", hold={name: float(value)})
+    assert dict(desc.held_joints)[name] == pytest.approx(float(value))
+    # a measured angle beyond the same limit: the same kind of line
+    rows = ("m,f,10,-151,30,40,50,60,70",)
+    assert main(["tip", str(_points(tmp_path, rows)), "--arm", _ARM_URDF, "--tip-frame", "ball", "-q",
+                 "-o", str(tmp_path / "t.csv")]) == 0
+    assert "warning:" in capsys.readouterr().err
