@@ -309,7 +309,9 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
         where = ("effect", i)
         kind = tbl.get("kind")
         if not isinstance(kind, str):
-            raise r.error(f"missing 'kind' (one of: {', '.join(EFFECTS)})", *where)
+            if kind is None:
+                raise r.error(f"missing 'kind' (one of: {', '.join(EFFECTS)})", *where)
+            raise r.error(f"'kind' must be text, one of: {', '.join(EFFECTS)}; got {kind!r}", *where, "kind")
         if kind not in EFFECTS:
             raise r.error(f"unknown effect kind '{kind}' (known: {', '.join(EFFECTS)}){did_you_mean(kind, EFFECTS)}",
                           *where, "kind")
@@ -325,6 +327,8 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
                     raise r.error("'joints' must be a list of joint names", *where, key)
                 idx = []
                 for x in value:
+                    if value.count(x) > 1:
+                        raise r.error(f"joint '{x}' is named twice: an effect acts once on each joint", *where, key)
                     if x not in jnames:
                         raise r.error(f"no joint named '{x}' (joints: {', '.join(jnames)}){did_you_mean(x, jnames)}",
                                       *where, key)
@@ -388,6 +392,9 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
                               *pw)
             if got.get("u", 0.0) < 0:
                 raise r.error("a standard uncertainty must not be negative", *pw)
+            if expected[name] == "rad/(N m)" and got["value"] < 0:     # calibrate bounds it at 0 (docs/calibration.md)
+                raise r.error(f"'{name}' is {got['value']:.6g} rad/(N m): a joint's compliance cannot be negative (the "
+                              "joint would turn against its load)", *pw)
             values[name] = got["value"]
             uncertainties[name] = got.get("u", 0.0)
         missing = [n for n in expected if n not in seen]

@@ -71,7 +71,8 @@ def random_values(desc, effects, seed):
     out = {}
     for e in effects:
         for name, unit in e.param_defs(desc):
-            out[name] = float(rng.normal(0, SCALE[unit]))
+            v = float(rng.normal(0, SCALE[unit]))
+            out[name] = abs(v) if unit == "rad/(N m)" else v      # a joint's compliance is never negative
     return out
 
 

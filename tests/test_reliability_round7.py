@@ -210,3 +210,43 @@ def test_a_joint_held_beyond_its_limits_is_warned_and_used_as_a_measured_one(tmp
     assert main(["tip", str(_points(tmp_path, rows)), "--arm", _ARM_URDF, "--tip-frame", "ball", "-q",
                  "-o", str(tmp_path / "t.csv")]) == 0
     assert "warning:" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------------------------
+# model files: a negative joint compliance, a joint named twice, a 'kind' that is no text, a suggestion with a unit
+
+@pytest.fixture(scope="module")
+def model_text(nominal):
+    from arm_model.effects import EncoderEccentricity, JointCompliance
+    from arm_model.model_file import format_model
+    return format_model(nominal, (EncoderEccentricity(), JointCompliance()))
+
+
+@pytest.mark.parametrize("old, new, key, words", [
+    ('name = "j1.compliance", value_urad_per_Nm = 0.0', 'name = "j1.compliance", value_urad_per_Nm = -5.0',
+     "effect[2].parameter[1]", "'j1.compliance' is -5e-06 rad/(N m): a joint's compliance cannot be negative"),
+    ('kind = "joint_compliance"', 'kind = "joint_compliance"\njoints = ["j1", "j1"]', "effect[2].joints",
+     "joint 'j1' is named twice"),
+    ('kind = "eccentricity"', "kind = 3", "effect[1].kind", "'kind' must be text, one of: eccentricity"),
+    ('name = "j1.ecc1_cos", value_urad = 0.0', 'name = "j1.ecc1_cos", value_mm = 0.0', "effect[1].parameter[1].value_mm",
+     "did you mean 'value_rad'?"),
+])
+def test_a_model_file_effect_that_cannot_be_right_names_its_key(model_text, tmp_path, capsys, old, new, key, words):
+    """A joint compliance of -5 urad/(N m) was read and applied (the joint turning against its load; calibrate bounds
+    it at 0, so only a hand edit makes one); `joints = ["j1", "j1"]` was refused as "joints must be distinct whole
+    numbers, got (0, 0)" at the table's first line; `kind = 3` said "missing 'kind'"; `value_mm` on an angle was
+    answered "did you mean 'value_rad_mm'?" (a key that exists nowhere)."""
+    assert old in model_text
+    model = tmp_path / "m.toml"
+    model.write_text(model_text.replace(old, new, 1))
+    out = tmp_path / "t.csv"
+    rc = _exit(["tip", str(_points(tmp_path)), "--arm", str(model), "-o", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 2 and f"key '{key}'" in err and words in err, err
+    assert not out.exists()
+
+
+def test_did_you_mean_offers_a_whole_key_as_it_is_and_a_base_with_the_users_unit():
+    from arm_model.errors import did_you_mean
+    assert did_you_mean("value_mm", ["value_urad", "value_rad", "u_rad"]) == "; did you mean 'value_rad'?"
+    assert did_you_mean("u_diamter_mm", ["u_diameter", "diameter"]) == "; did you mean 'u_diameter_mm'?"
