@@ -250,3 +250,23 @@ def test_did_you_mean_offers_a_whole_key_as_it_is_and_a_base_with_the_users_unit
     from arm_model.errors import did_you_mean
     assert did_you_mean("value_mm", ["value_urad", "value_rad", "u_rad"]) == "; did you mean 'value_rad'?"
     assert did_you_mean("u_diamter_mm", ["u_diameter", "diameter"]) == "; did you mean 'u_diameter_mm'?"
+
+
+# ---------------------------------------------------------------------------------------------
+# live: an empty source, an event before the first sample
+
+def test_live_an_empty_source_is_named_as_such():
+    """`aacmm live ""` read the current folder ("'.': it is a folder, not a file")."""
+    from arm_model.errors import InputError
+    from arm_model.live.sources import open_source
+    for spec in ("", "  "):
+        with pytest.raises(InputError, match="not a source: give a file"):
+            open_source(spec)
+
+
+def test_live_an_event_before_the_first_sample_shows_no_nan_time():
+    """A bad line before any sample was logged as "warning: [       nan s] bad_line ..." (events.csv already left
+    its time empty): no time is shown as a dash, never as nan."""
+    from arm_model.live.session import Event
+    assert str(Event(float("nan"), "bad_line", "x")) == f"[{'-':>10} s] bad_line: x"
+    assert str(Event(1.5, "bad_line", "x")) == "[     1.500 s] bad_line: x"

@@ -68,8 +68,9 @@ class Event:
     message: str
     count: int = 1
 
-    def __str__(self) -> str:
-        return f"[{self.time:10.3f} s] {self.kind}: {self.message}"
+    def __str__(self) -> str:       # before the first sample there is no time: a dash, never "nan"
+        when = f"{self.time:10.3f}" if math.isfinite(self.time) else f"{'-':>10}"
+        return f"[{when} s] {self.kind}: {self.message}"
 
 
 @dataclass(frozen=True)
