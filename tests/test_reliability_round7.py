@@ -270,3 +270,18 @@ def test_live_an_event_before_the_first_sample_shows_no_nan_time():
     from arm_model.live.session import Event
     assert str(Event(float("nan"), "bad_line", "x")) == f"[{'-':>10} s] bad_line: x"
     assert str(Event(1.5, "bad_line", "x")) == "[     1.500 s] bad_line: x"
+
+
+# ---------------------------------------------------------------------------------------------
+# view --points-per-s: a rate the page can play
+
+@pytest.mark.parametrize("rate", ["1e-300", "5e-324", "0.0009", "1e5"])
+def test_view_an_animation_rate_the_page_cannot_play_is_refused(tmp_path, capsys, rate):
+    """`view --animate --points-per-s 1e-300 --html` wrote a page whose frames sat at 1e300 s (infinity in the
+    page's 32-bit clip times): exit 0 and an animation that never moved."""
+    out = tmp_path / "v.html"
+    rc = _exit(["view", str(_points(tmp_path)), "--arm", "aacmm7", "--animate", "--points-per-s", rate,
+                "--html", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--points-per-s" in err and "must be in [0.001, 10000]" in err, err
+    assert not out.exists()
