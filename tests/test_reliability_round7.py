@@ -285,3 +285,20 @@ def test_view_an_animation_rate_the_page_cannot_play_is_refused(tmp_path, capsys
     err = capsys.readouterr().err
     assert rc == 2 and "--points-per-s" in err and "must be in [0.001, 10000]" in err, err
     assert not out.exists()
+
+
+# ---------------------------------------------------------------------------------------------
+# ring --signals: a signal that is zero throughout
+
+def test_a_force_signal_of_zeros_says_so_not_a_noise_of_1e_312(tmp_path):
+    """A signal zero in every sample was refused as "0 peaks found (above 10 x the noise, 1e-312 N)": a noise
+    nobody measured, shown as a figure."""
+    from arm_model.errors import InputError
+    from arm_model.io import read_force_signal
+    from correction.signals import find_point_forces
+    path = tmp_path / "m.csv"
+    path.write_text("time_s,f_bend_N,f_axial_N\n" + "".join(f"{k / 1000:.3f},0,0\n" for k in range(200)))
+    with pytest.raises(InputError, match=r"m.csv: force signal of measurement 'm': the force is zero in every "
+                                         r"sample, but the points file has 3 points") as exc:
+        find_point_forces(read_force_signal(path), 3, "m")
+    assert "e-3" not in str(exc.value)
