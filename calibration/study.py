@@ -338,6 +338,10 @@ def monte_carlo(source, runs: int, *, seed: int = 0, settings: RunSettings | Non
                 workers: int | None = None, progress: bool = True) -> MonteCarloResult:
     """``runs`` Monte Carlo runs of ``source`` (:class:`SimSource` or :class:`SynthSource`) with
     seeds ``seed, seed + 1, ...``; see :func:`run_tasks` for ``scheduler`` and ``workers``."""
+    if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
+        raise ValueError(f"monte_carlo: runs must be a whole number >= 1, got {runs!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ValueError(f"monte_carlo: seed must be a whole number >= 0, got {seed!r}")
     settings = settings or RunSettings()
     tasks = [(source, settings, seed + i) for i in range(runs)]
     return _aggregate(run_tasks(run_once, tasks, scheduler=scheduler, workers=workers, progress=progress,

@@ -302,3 +302,45 @@ def test_a_force_signal_of_zeros_says_so_not_a_noise_of_1e_312(tmp_path):
                                          r"sample, but the points file has 3 points") as exc:
         find_point_forces(read_force_signal(path), 3, "m")
     assert "e-3" not in str(exc.value)
+
+
+# ---------------------------------------------------------------------------------------------
+# the public Python API called with what cannot be right
+
+@pytest.mark.parametrize("call, match", [
+    (lambda g: g.fit_cylinder([[float("nan")] * 3] * 10), "points must be finite: row 0"),
+    (lambda g: g.fit_sphere([[float("inf"), 0, 0]] * 10), "points must be finite: row 0"),
+    (lambda g: g.fit_plane([[0, 0, 0], [1, 0, 0], [0, 1, 0], [float("nan"), 1, 0]]), "points must be finite: row 3"),
+    (lambda g: g.fit_circle_2d([[float("inf"), 0], [1, 0], [0, 1]]), "points must be finite"),
+    (lambda g: g.fit_ring_axis([[float("nan")] * 3] * 6), "points must be finite"),
+    (lambda g: g.smallest_enclosing_sphere([[0, 0, float("nan")]] * 4), "points must be finite"),
+    (lambda g: g.kabsch([[float("nan")] * 3] * 3, [[0.0] * 3] * 3), "points must be finite"),
+    (lambda g: g.kabsch([[0.0] * 3] * 3, [[0.0] * 3] * 4), "must have one shape"),
+    (lambda g: g.fit_cylinder("abc"), r"an \(N, 3\) array of numbers"),
+])
+def test_a_geometry_fit_of_points_that_are_not_numbers_is_a_value_error(call, match, capfd):
+    """NaN or infinite points reached LAPACK, which printed "** On entry to DLASCL parameter number 4 had an illegal
+    value" on standard error and raised LinAlgError (neither a ValueError nor the toolkit's error). One check of the
+    point arrays for every fit."""
+    from arm_model import geometry
+    with pytest.raises(ValueError, match=match):
+        call(geometry)
+    assert "DLASCL" not in capfd.readouterr().err
+
+
+def test_simulate_and_monte_carlo_refuse_arguments_of_the_wrong_kind(nominal):
+    """`simulate("c.toml")` ended in AttributeError ('str' object has no attribute 'seed'); `simulate(c, seed=1.5)`
+    and `seed="3"` ran as seeds 1 and 3; `monte_carlo(source, 0)` and `runs=-1` returned an empty study."""
+    from arm_model.sim import load_campaign, simulate
+    from calibration.study import SynthSource, monte_carlo
+    with pytest.raises(TypeError, match="campaign must be a Campaign"):
+        simulate("c.toml")
+    camp = load_campaign(NOMINAL.parents[1] / "examples" / "campaigns" / "calibration.toml")
+    for bad in (1.5, "3", -1, True):
+        with pytest.raises(ValueError, match="seed must be a whole number >= 0"):
+            simulate(camp, seed=bad)
+    for runs in (0, -1, 2.0):
+        with pytest.raises(ValueError, match="runs must be a whole number >= 1"):
+            monte_carlo(SynthSource(nominal, None), runs, progress=False)
+    with pytest.raises(ValueError, match="seed must be a whole number >= 0"):
+        monte_carlo(SynthSource(nominal, None), 1, seed=-1, progress=False)
