@@ -344,3 +344,25 @@ def test_simulate_and_monte_carlo_refuse_arguments_of_the_wrong_kind(nominal):
             monte_carlo(SynthSource(nominal, None), runs, progress=False)
     with pytest.raises(ValueError, match="seed must be a whole number >= 0"):
         monte_carlo(SynthSource(nominal, None), 1, seed=-1, progress=False)
+
+
+# ---------------------------------------------------------------------------------------------
+# campaign files: cone half-angles and spreads in range; an error at the key's own line
+
+@pytest.mark.parametrize("task, line, key, words", [
+    ('kind = "seat"\nstylus_cone_deg = 200.0\n', 5, "task[1].stylus_cone_deg", "from 0 to 180 deg, got 200 deg"),
+    ('kind = "seat"\nstylus_cone_deg = -1.0\n', 5, "task[1].stylus_cone_deg", "from 0 to 180 deg, got -1 deg"),
+    ('kind = "sphere"\npolar_max_rad = 4.0\n', 5, "task[1].polar_max_rad", "got 229.183 deg"),
+    ('kind = "ring"\nangle_jitter_deg = -1\n', 5, "task[1].angle_jitter_deg", "must not be negative"),
+])
+def test_a_campaign_cone_beyond_a_half_turn_or_a_negative_spread_is_refused(tmp_path, capsys, task, line, key,
+                                                                            words):
+    """`stylus_cone_deg = 200` (or -1) drew the stylus from another cone than the one written (cos 200 deg is cos
+    160 deg), `angle_jitter_deg = -1` a spread of 1 deg; and errors of a key given with its unit named the line of
+    its table, not its own."""
+    camp = tmp_path / "c.toml"
+    camp.write_text(f'arm = "aacmm7"\nsensor = "none"\n[[task]]\n{task}')
+    rc = _exit(["simulate", str(camp), "-o", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and f"c.toml, line {line}, key '{key}'" in err and words in err, err
+    assert not (tmp_path / "o").exists()
