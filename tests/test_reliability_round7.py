@@ -366,3 +366,31 @@ def test_a_campaign_cone_beyond_a_half_turn_or_a_negative_spread_is_refused(tmp_
     err = capsys.readouterr().err
     assert rc == 2 and f"c.toml, line {line}, key '{key}'" in err and words in err, err
     assert not (tmp_path / "o").exists()
+
+
+# ---------------------------------------------------------------------------------------------
+# ids the toolkit writes into its CSV files are one line of text
+
+def test_a_session_measurement_id_with_a_line_break_is_refused_before_any_write(tmp_path, capsys):
+    """A plan with `measurement = "a\\nb"` ran a session whose points.csv its own points reader refuses ("not valid
+    CSV: unexpected end of data", so `aacmm tip` and `calibrate` could not read the session); the same from
+    --measurement or a session folder named with a line break."""
+    samples = NOMINAL.parents[1] / "examples" / "live" / "samples.csv"
+    plan = tmp_path / "plan.toml"
+    plan.write_text('measurement = "a\\nb"\n[[feature]]\nid = "s"\nkind = "seat"\n')
+    for extra, out, words in ((["--plan", str(plan)], "s1", "plan.toml, line 1, key 'measurement'"),
+                              (["--measurement", "a\tb"], "s2", "the measurement id (--measurement)"),
+                              ([], "s\n3", "the measurement id (the session folder's name)")):
+        rc = _exit(["live", str(samples), "--arm", "aacmm7", "--speed", "0", "-o", str(tmp_path / out), *extra])
+        err = capsys.readouterr().err
+        assert rc == 2 and words in err and "one line of text without control characters" in err, err
+        assert not (tmp_path / out).exists()
+
+
+def test_a_feature_id_with_a_line_break_is_refused_by_the_artefacts_reader_and_in_python():
+    from arm_model.errors import InputError
+    from arm_model.io import Feature, parse_artefacts
+    with pytest.raises(InputError, match=r"a.toml, line 2, key 'feature\[1\].id': 'id' must be one line"):
+        parse_artefacts('[[feature]]\nid = "x\\ny"\nkind = "seat"\n', "a.toml")
+    with pytest.raises(ValueError, match="Feature: id must be one line of text"):
+        Feature("x\ry", "seat")
