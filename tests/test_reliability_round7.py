@@ -394,3 +394,11 @@ def test_a_feature_id_with_a_line_break_is_refused_by_the_artefacts_reader_and_i
         parse_artefacts('[[feature]]\nid = "x\\ny"\nkind = "seat"\n', "a.toml")
     with pytest.raises(ValueError, match="Feature: id must be one line of text"):
         Feature("x\ry", "seat")
+
+
+def test_a_number_without_a_unit_out_of_range_is_said_without_a_stray_blank():
+    """`<mimic multiplier="1e300">` said "1e+300  is not a plausible ratio (|value| at most 1000 ); check the number
+    and its unit" (a ratio has no unit)."""
+    from arm_model.units import implausible
+    assert implausible(1e300, "ratio")[1] == "1e+300 is not a plausible ratio (|value| at most 1000); check the number"
+    assert implausible(2e3, "length")[1].startswith("2e+06 mm is not a plausible length (|value| at most 1e+06 mm)")
