@@ -27,7 +27,8 @@ log = logging.getLogger(__name__)
 
 __all__ = ["PointSet", "Feature", "Distance", "Artefacts", "ForceSignal", "read_points",
            "read_artefacts", "read_force_signal", "check_features", "atomic_write_text",
-           "atomic_write_bytes", "write_csv", "guard_output", "csv_records", "FEATURE_KINDS", "CENTRE_KINDS", "id_problem", "iter_points",
+           "atomic_write_bytes", "write_csv", "guard_output", "csv_records", "FEATURE_KINDS", "CENTRE_KINDS",
+           "id_problem", "iter_points",
            "concat_points", "POINT_COLUMNS", "format_artefacts", "read_back", "UnreadableOutput", "json_text"]
 
 FEATURE_KINDS = ("ring", "cylinder", "sphere", "seat", "plane", "point")

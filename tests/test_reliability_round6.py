@@ -386,8 +386,8 @@ _ARM_URDF = str(NOMINAL.with_suffix("").with_suffix(".urdf"))      # the toolkit
 ])
 def test_a_joint_held_beyond_its_limits_or_the_probes_elastic_joint_is_refused(tmp_path, capsys, hold, words):
     """(Round 7: a value beyond the limits is warned and used, as an encoder angle beyond them is:
-    tests/test_reliability_round7.py.) `--hold-joint probe_axial=0.5` was silently unused (the probe's elastic joints are its compliance, taken from the force); holding every joint
-    blamed --tip-frame."""
+    tests/test_reliability_round7.py.) `--hold-joint probe_axial=0.5` was silently unused (the probe's elastic
+    joints are its compliance, taken from the force); holding every joint blamed --tip-frame."""
     argv = ["urdf", _ARM_URDF, "--tip-frame", "ball", "-o", str(tmp_path / "a.urdf")]
     for h in hold:
         argv += ["--hold-joint", h]

@@ -120,9 +120,8 @@ def test_montecarlo_holdout_0_holds_nothing_out():
     """`--holdout 0` was refused ("must be in (0, 1)"), so a campaign too small to split (two measurements: the
     default 0.25 holds out none) could not be studied at all. 0 now means no held-out data: the parameters
     against the truth, no predicted accuracy. 1 stays refused (nothing left to fit)."""
-    from calibration.study import RunSettings
-    from calibration.cli import register  # noqa: F401  (the parser below is the command line's)
     from arm_model.cli import build_parser
+    from calibration.study import RunSettings
     parser = build_parser(["study", "montecarlo"])
     assert parser.parse_args(["study", "montecarlo", "c.toml", "--holdout", "0", "-o", "o"]).holdout == 0.0
     with pytest.raises(SystemExit):
@@ -228,8 +227,8 @@ def model_text(nominal):
     ('kind = "joint_compliance"', 'kind = "joint_compliance"\njoints = ["j1", "j1"]', "effect[2].joints",
      "joint 'j1' is named twice"),
     ('kind = "eccentricity"', "kind = 3", "effect[1].kind", "'kind' must be text, one of: eccentricity"),
-    ('name = "j1.ecc1_cos", value_urad = 0.0', 'name = "j1.ecc1_cos", value_mm = 0.0', "effect[1].parameter[1].value_mm",
-     "did you mean 'value_rad'?"),
+    ('name = "j1.ecc1_cos", value_urad = 0.0', 'name = "j1.ecc1_cos", value_mm = 0.0',
+     "effect[1].parameter[1].value_mm", "did you mean 'value_rad'?"),
 ])
 def test_a_model_file_effect_that_cannot_be_right_names_its_key(model_text, tmp_path, capsys, old, new, key, words):
     """A joint compliance of -5 urad/(N m) was read and applied (the joint turning against its load; calibrate bounds
