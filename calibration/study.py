@@ -23,6 +23,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -166,7 +167,7 @@ class SimSource:
     :func:`arm_model.sim.load_campaign` read it, or the path of its file, read here once), simulated with a new seed
     each run. The campaign read travels to the workers, so that a worker on another machine needs no file and every
     run simulates the same campaign, whatever happens to its file meanwhile."""
-    campaign: object
+    campaign: Any
 
     def __post_init__(self):
         from arm_model.sim import Campaign, load_campaign
