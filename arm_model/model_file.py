@@ -394,9 +394,6 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
                               *pw)
             if got.get("u", 0.0) < 0:
                 raise r.error("a standard uncertainty must not be negative", *pw)
-            if expected[name] == "rad/(N m)" and got["value"] < 0:     # calibrate bounds it at 0 (docs/calibration.md)
-                raise r.error(f"'{name}' is {got['value']:.6g} rad/(N m): a joint's compliance cannot be negative (the "
-                              "joint would turn against its load)", *pw)
             values[name] = got["value"]
             uncertainties[name] = got.get("u", 0.0)
         missing = [n for n in expected if n not in seen]

@@ -71,8 +71,7 @@ def random_values(desc, effects, seed):
     out = {}
     for e in effects:
         for name, unit in e.param_defs(desc):
-            v = float(rng.normal(0, SCALE[unit]))
-            out[name] = abs(v) if unit == "rad/(N m)" else v      # a joint's compliance is never negative
+            out[name] = float(rng.normal(0, SCALE[unit]))
     return out
 
 

@@ -212,7 +212,7 @@ def test_a_joint_held_beyond_its_limits_is_warned_and_used_as_a_measured_one(tmp
 
 
 # ---------------------------------------------------------------------------------------------
-# model files: a negative joint compliance, a joint named twice, a 'kind' that is no text, a suggestion with a unit
+# model files: a joint named twice, a 'kind' that is no text, a suggestion with a unit
 
 @pytest.fixture(scope="module")
 def model_text(nominal):
@@ -222,8 +222,6 @@ def model_text(nominal):
 
 
 @pytest.mark.parametrize("old, new, key, words", [
-    ('name = "j1.compliance", value_urad_per_Nm = 0.0', 'name = "j1.compliance", value_urad_per_Nm = -5.0',
-     "effect[2].parameter[1]", "'j1.compliance' is -5e-06 rad/(N m): a joint's compliance cannot be negative"),
     ('kind = "joint_compliance"', 'kind = "joint_compliance"\njoints = ["j1", "j1"]', "effect[2].joints",
      "joint 'j1' is named twice"),
     ('kind = "eccentricity"', "kind = 3", "effect[1].kind", "'kind' must be text, one of: eccentricity"),
@@ -231,8 +229,7 @@ def model_text(nominal):
      "effect[1].parameter[1].value_mm", "did you mean 'value_rad'?"),
 ])
 def test_a_model_file_effect_that_cannot_be_right_names_its_key(model_text, tmp_path, capsys, old, new, key, words):
-    """A joint compliance of -5 urad/(N m) was read and applied (the joint turning against its load; calibrate bounds
-    it at 0, so only a hand edit makes one); `joints = ["j1", "j1"]` was refused as "joints must be distinct whole
+    """`joints = ["j1", "j1"]` was refused as "joints must be distinct whole
     numbers, got (0, 0)" at the table's first line; `kind = 3` said "missing 'kind'"; `value_mm` on an angle was
     answered "did you mean 'value_rad_mm'?" (a key that exists nowhere)."""
     assert old in model_text
