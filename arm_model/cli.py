@@ -3,6 +3,8 @@
 
 - bad input (:class:`~arm_model.InputError` and the toolkit's other errors), a file or folder the
   system refuses (``OSError``), too little memory: the message, exit 2;
+- a numerical failure (:class:`~arm_model.NumericalError`: no convergence, rank deficiency, data that do not
+  determine the result): "numerical failure: ...", exit 4, nothing written;
 - Ctrl-C or SIGTERM: "interrupted", exit 130 (143 for SIGTERM), nothing written (or, when the output was
   already published, that it was: :func:`arm_model.output.published_outputs`);
 - a closed standard output (``aacmm tip ... | head -1``): quiet;
@@ -27,16 +29,24 @@ import sys
 import time
 import traceback
 
-from .errors import AacmmError
+from .errors import AacmmError, NumericalError
 from .log import console, escaped, level_from_flags
 from .output import published_outputs
 from .shipped import version
 
-__all__ = ["main", "COMMAND_MODULES", "EXIT_INPUT", "EXIT_INTERNAL"]
+__all__ = ["main", "COMMAND_MODULES", "EXIT_INPUT", "EXIT_INTERNAL", "EXIT_NUMERICAL", "EXIT_STATUS"]
 
 #: exit codes: 0 done, 1 done but some runs failed (study montecarlo), 2 bad input or a file/system
-#: error, 3 internal error (a bug), 130 Ctrl-C, 143 SIGTERM
-EXIT_INPUT, EXIT_INTERNAL = 2, 3
+#: error, 3 internal error (a bug), 4 numerical failure (inputs read, no result the toolkit stands by), 130 Ctrl-C,
+#: 143 SIGTERM
+EXIT_INPUT, EXIT_INTERNAL, EXIT_NUMERICAL = 2, 3, 4
+#: the exit statuses as ``aacmm --help`` states them (docs/guarantees.md, section 4, says the same)
+EXIT_STATUS = ("Exit status: 0 done; 1 study montecarlo: done, but some runs failed (listed); 2 bad input or a file "
+               "the system refuses (one message naming the file, line and column; nothing written); 3 internal "
+               "error (please report it); 4 numerical failure: the inputs were read, but the computation gave no "
+               "result to stand by (no convergence, rank deficiency, data that do not determine the fit; one "
+               "message saying what to try; nothing written); 130/143 interrupted by Ctrl-C/SIGTERM. "
+               "docs/guarantees.md")
 
 log = logging.getLogger(__name__)
 
@@ -101,8 +111,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
                     "contact force, simulation, ring-gauge analysis, calibration and closing the loop. "
                     "Files carry units in their column and key names (mm, deg, N ...); every format: "
                     "docs/formats.md (in a clone, or DIR/docs/formats.md after `aacmm examples DIR`).",
-        epilog="Exit status: 0 done; 2 bad input or a file the system refuses (one message, nothing "
-               "written); 3 internal error (please report it); 130 interrupted. docs/guarantees.md")
+        epilog=EXIT_STATUS)
     parser.add_argument("--version", action=_Version, nargs=0, help="show the toolkit's version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     wanted = _requested(argv) if argv is not None else None
@@ -203,6 +212,9 @@ def main(argv: list[str] | None = None) -> int:
         except BrokenPipeError:
             _quiet_stdout()
         return code
+    except NumericalError as exc:
+        error(f"numerical failure: {exc}; {done()}")
+        return EXIT_NUMERICAL
     except AacmmError as exc:
         error(str(exc))
         return EXIT_INPUT

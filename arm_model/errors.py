@@ -137,7 +137,8 @@ def did_you_mean(word: str, known) -> str:
     parts = split_unit(word)
     if parts is not None:
         near = difflib.get_close_matches(parts[0], known, n=1, cutoff=0.6)
-        best = [f"{near[0]}_{parts[1]}"] if near else []
+        # a base name takes the user's unit; a whole key (a unit of its own) is offered as it is
+        best = [near[0] if split_unit(near[0]) is not None else f"{near[0]}_{parts[1]}"] if near else []
     if not best:
         best = difflib.get_close_matches(word, known, n=1, cutoff=0.6)
     return f"; did you mean '{best[0]}'?" if best and best[0] != word else ""

@@ -148,7 +148,9 @@ def kabsch(x_from: ArrayLike, x_to: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     not determine ``R``; the answer is then one of the rotations that fit."""
     import warnings
 
-    x_from, x_to = np.asarray(x_from, float), np.asarray(x_to, float)
+    x_from, x_to = _points(x_from, 1, "rotation"), _points(x_to, 1, "rotation")
+    if x_from.shape != x_to.shape:
+        raise ValueError(f"x_from and x_to must have one shape, got {x_from.shape} and {x_to.shape}")
     mf, mt = x_from.mean(axis=0), x_to.mean(axis=0)
     with warnings.catch_warnings():     # rank-deficient sets: any of the optimal rotations will do
         warnings.simplefilter("ignore", UserWarning)
@@ -415,8 +417,8 @@ def fit_circle_2d(xy: ArrayLike) -> CircleFit:
     Args:
         xy: (N, 2) points [m].
     """
-    xy = np.asarray(xy, float)
-    if xy.ndim != 2 or xy.shape[1] != 2 or len(xy) < 3:
+    xy = _points(xy, 0, "circle", dim=2)
+    if len(xy) < 3:
         raise ValueError(f"need (N >= 3, 2) points, got {xy.shape}")
     o, s, z = _normalised(xy, "circle")
     c0, r0 = kasa_circle(z)
@@ -448,9 +450,7 @@ def fit_cylinder(points: ArrayLike, axis_hint: ArrayLike | None = None) -> Cylin
         NumericalError: the solver did not converge, or the points do not determine a cylinder (all in
             one plane normal to the axis, too few, collinear).
     """
-    p = np.asarray(points, float)
-    if p.ndim != 2 or p.shape[1] != 3:
-        raise ValueError(f"points must have shape (N, 3), got {p.shape}")
+    p = _points(points, 0, "cylinder")
     if len(p) < 5:
         raise NumericalError(f"a cylinder needs at least 5 points, got {len(p)}")
     centroid, scale, z = _normalised(p, "cylinder")
@@ -617,7 +617,7 @@ def fit_ring_axis(points: ArrayLike) -> tuple[np.ndarray, np.ndarray, float]:
     Raises:
         NumericalError: fewer than 3 points, or points on one line.
     """
-    p = np.asarray(points, float).reshape(-1, 3)
+    p = _points(np.reshape(points, (-1, 3)), 0, "ring axis")
     plane = fit_plane(p)
     u, v = perpendicular_basis(plane.normal)
     d = p - plane.point
@@ -666,10 +666,18 @@ class PlaneFit:
         return float(self.residuals.max() - self.residuals.min())
 
 
-def _points(points: ArrayLike, need: int, what: str) -> np.ndarray:
-    p = np.asarray(points, dtype=float)
-    if p.ndim != 2 or p.shape[1] != 3:
-        raise ValueError(f"points must have shape (N, 3), got {p.shape}")
+def _points(points: ArrayLike, need: int, what: str, dim: int = 3) -> np.ndarray:
+    """``points`` as an (N, ``dim``) float array of finite numbers (a ValueError: a NaN or an infinity reached
+    LAPACK, which printed its own lines and raised LinAlgError), at least ``need`` of them (a NumericalError)."""
+    try:
+        p = np.asarray(points, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"points must be an (N, {dim}) array of numbers, got {type(points).__name__}") from None
+    if p.ndim != 2 or p.shape[1] != dim:
+        raise ValueError(f"points must have shape (N, {dim}), got {p.shape}")
+    if not np.all(np.isfinite(p)):
+        raise ValueError(f"points must be finite: row {int(np.argmin(np.isfinite(p).all(axis=1)))} is "
+                         f"{p[np.argmin(np.isfinite(p).all(axis=1))].tolist()}")
     if len(p) < need:
         raise NumericalError(f"{len(p)} points cannot place a {what} (need at least {need})")
     return p
@@ -713,7 +721,7 @@ def fit_sphere(points: ArrayLike, radius: float | None = None, centre: ArrayLike
             for points on a small cap.
         centre: optional (3,) starting centre [m] instead of the algebraic seed.
     """
-    p = np.asarray(points, float)
+    p = _points(points, 0, "sphere")
     if centre is None:
         c0, r0 = sphere_seed(p)
     else:
@@ -746,7 +754,7 @@ def fit_sphere(points: ArrayLike, radius: float | None = None, centre: ArrayLike
 def smallest_enclosing_sphere(points: ArrayLike) -> tuple[np.ndarray, float]:
     """Centre (3,) and radius of the smallest sphere enclosing ``points`` (N, 3) (Welzl's algorithm, the
     points visited in a fixed order: deterministic; exact up to rounding)."""
-    x = np.asarray(points, float)
+    x = _points(points, 1, "sphere")
     mean = x.mean(axis=0)
     scale = float(np.max(np.linalg.norm(x - mean, axis=1))) or 1.0
     y = (x - mean) / scale                          # centred and scaled: no cancellation

@@ -10,6 +10,7 @@ import json
 import logging
 import math
 import re
+import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -26,10 +27,26 @@ log = logging.getLogger(__name__)
 
 __all__ = ["PointSet", "Feature", "Distance", "Artefacts", "ForceSignal", "read_points",
            "read_artefacts", "read_force_signal", "check_features", "atomic_write_text",
-           "atomic_write_bytes", "write_csv", "guard_output", "csv_records", "FEATURE_KINDS", "iter_points",
+           "atomic_write_bytes", "write_csv", "guard_output", "csv_records", "FEATURE_KINDS", "CENTRE_KINDS",
+           "id_problem", "iter_points",
            "concat_points", "POINT_COLUMNS", "format_artefacts", "read_back", "UnreadableOutput", "json_text"]
 
 FEATURE_KINDS = ("ring", "cylinder", "sphere", "seat", "plane", "point")
+def id_problem(text) -> str | None:
+    """Why ``text`` cannot be a measurement or feature id, or None: an id is one non-empty line of text (a line
+    break or another control character would split the row of every CSV file that carries it, which its reader
+    then refuses)."""
+    if not isinstance(text, str) or not text.strip():
+        return f"must be a non-empty text, got {text!r}"
+    bad = next((c for c in text if unicodedata.category(c) in ("Cc", "Zl", "Zp")), None)
+    if bad is not None:
+        return f"must be one line of text without control characters, got {text!r} (holding {bad!r})"
+    return None
+
+
+#: the kinds whose centre is one point a fit determines: the only ends a certified [[distance]] can join (a ring's or
+#: cylinder's axis is a line, a plane has no centre, a free point is no artefact's)
+CENTRE_KINDS = ("seat", "sphere")
 _TEXT_COLUMNS = ("measurement", "feature")
 #: optional text column: rows of one session share one reference-instrument frame (docs/formats.md §3)
 SESSION_COLUMN = "session"
@@ -392,8 +409,8 @@ class Feature:
         """A Feature built in Python is held to the artefacts reader's rule (a ValueError naming the field): a
         non-empty id, a known kind, a diameter > 0 and an uncertainty and form error >= 0, each finite and a
         plausible length."""
-        if not isinstance(self.id, str) or not self.id.strip():
-            raise ValueError(f"Feature: id must be a non-empty text, got {self.id!r}")
+        if id_problem(self.id):
+            raise ValueError(f"Feature: id {id_problem(self.id)}")
         if self.kind not in FEATURE_KINDS:
             raise ValueError(f"Feature: kind must be one of {', '.join(FEATURE_KINDS)}, got {self.kind!r}")
         for name in _FEATURE_LENGTHS:
@@ -451,8 +468,10 @@ def _artefact_feature(err, t, i: int, features: dict, extra_feature_keys: tuple)
     if not isinstance(t, dict):
         raise err("expected a [[feature]] table", "feature", i)
     fid = t.get("id")
-    if not isinstance(fid, str) or not fid.strip():
+    if fid is None or fid == "":
         raise err("missing or empty 'id'", "feature", i, "id")
+    if id_problem(fid):
+        raise err(f"'id' {id_problem(fid)}", "feature", i, "id")
     if fid in features:
         raise err(f"feature id '{fid}' is used twice", "feature", i, "id")
     kind = t.get("kind")
@@ -502,10 +521,13 @@ def _artefact_distance(err, t, i: int, features: dict) -> Distance:
     if between[0] == between[1]:
         raise err(f"'between' names '{between[0]}' twice; a distance joins two features", "distance", i,
                   "between")
-    flat = next((b for b in between if features[b].kind == "plane"), None)
-    if flat is not None:
-        raise err(f"'{flat}' is a plane: a distance joins two features' centres, and a plane has none", "distance",
-                  i, "between")
+    other = next((b for b in between if features[b].kind not in CENTRE_KINDS), None)
+    if other is not None:
+        kind = features[other].kind
+        why = {"plane": "a plane has none", "point": "a free point is no artefact's centre"}.get(
+            kind, f"a {kind}'s axis is a line, not a point")
+        raise err(f"'{other}' is a {kind}: a distance joins two features' centres (seats or spheres), and {why}",
+                  "distance", i, "between")
     length = u = None
     for key, v in t.items():
         if key == "between":

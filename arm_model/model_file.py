@@ -301,6 +301,18 @@ def _option_value(value, default, r: TomlReader, where: tuple):
     return value
 
 
+def _joint_indices(value, jnames: list, r: TomlReader, where: tuple) -> tuple:
+    """The indices of an effect's ``joints`` (a list of joint names, each once) among ``jnames``."""
+    if not isinstance(value, list) or not value or not all(isinstance(x, str) for x in value):
+        raise r.error("'joints' must be a list of joint names", *where)
+    for x in value:
+        if value.count(x) > 1:
+            raise r.error(f"joint '{x}' is named twice: an effect acts once on each joint", *where)
+        if x not in jnames:
+            raise r.error(f"no joint named '{x}' (joints: {', '.join(jnames)}){did_you_mean(x, jnames)}", *where)
+    return tuple(jnames.index(x) for x in value)
+
+
 def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
     """Effects, values, uncertainties and states [SI] of the ``[[effect]]`` tables of a model file."""
     if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
@@ -311,7 +323,9 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
         where = ("effect", i)
         kind = tbl.get("kind")
         if not isinstance(kind, str):
-            raise r.error(f"missing 'kind' (one of: {', '.join(EFFECTS)})", *where)
+            if kind is None:
+                raise r.error(f"missing 'kind' (one of: {', '.join(EFFECTS)})", *where)
+            raise r.error(f"'kind' must be text, one of: {', '.join(EFFECTS)}; got {kind!r}", *where, "kind")
         if kind not in EFFECTS:
             raise r.error(f"unknown effect kind '{kind}' (known: {', '.join(EFFECTS)}){did_you_mean(kind, EFFECTS)}",
                           *where, "kind")
@@ -323,15 +337,7 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
             if key in ("kind", "parameter"):
                 continue
             if key == "joints":
-                if not isinstance(value, list) or not value or not all(isinstance(x, str) for x in value):
-                    raise r.error("'joints' must be a list of joint names", *where, key)
-                idx = []
-                for x in value:
-                    if x not in jnames:
-                        raise r.error(f"no joint named '{x}' (joints: {', '.join(jnames)}){did_you_mean(x, jnames)}",
-                                      *where, key)
-                    idx.append(jnames.index(x))
-                kwargs["joints"] = tuple(idx)
+                kwargs["joints"] = _joint_indices(value, jnames, r, where + (key,))
                 continue
             if key not in fields:
                 raise r.error(f"unknown key '{key}' of a '{kind}' effect (known: {', '.join(known)})"

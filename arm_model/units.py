@@ -91,6 +91,7 @@ def implausible(value_si, quantity: str):
                "expansion": (1.0, "1/K"), "ratio": (1.0, ""), "temperature difference": (1.0, "K"),
                "stiffness": (1.0, "N m/rad"), "temperature_rate": (1.0, "C/s")}[quantity]
     si = {"length": "m", "angle": "rad", "compliance": "m/N"}.get(quantity, unit)
-    shown = f"{x * f:g} {unit}" if math.isfinite(x * f) else f"{x:g} {si}"     # 1e308 m is no "inf mm"
-    return idx, (f"{shown} is not a plausible {quantity} (|value| at most {bound * f:g} {unit}); "
-                 "check the number and its unit")
+    sep, sep_si = (" " if unit else ""), (" " if si else "")    # a ratio has no unit: no blank before none
+    shown = f"{x * f:g}{sep}{unit}" if math.isfinite(x * f) else f"{x:g}{sep_si}{si}"     # 1e308 m is no "inf mm"
+    return idx, (f"{shown} is not a plausible {quantity} (|value| at most {bound * f:g}{sep}{unit}); "
+                 + ("check the number and its unit" if unit else "check the number"))

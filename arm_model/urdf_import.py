@@ -400,7 +400,9 @@ def _limits(u: _Urdf, j) -> tuple[float, float] | None:
 def _held_values(u: _Urdf, chain: list, tip_frame: str, hold: dict | None, elastic: set) -> dict:
     """``--hold-joint``: joint name -> value in the user's unit (deg, or mm for a prismatic joint), checked
     to be a moving joint of the chain (not one of the probe's ``elastic`` joints, the toolkit's model of its
-    compliance) within the joint's limits, as [rad] or [m]."""
+    compliance), as [rad] or [m]. A value beyond the joint's declared limits is warned and used, as an encoder
+    angle beyond them is (docs/guarantees.md, section 3): the limits are the description's claim, the held value
+    the user's statement of where the joint is."""
     on_chain = {j.name: j for j in chain}
     out = {}
     for name, value in (hold or {}).items():
@@ -416,8 +418,9 @@ def _held_values(u: _Urdf, chain: list, tip_frame: str, hold: dict | None, elast
         limits = _limits(u, j)
         if limits is not None and not limits[0] - 1e-12 <= out[name] <= limits[1] + 1e-12:
             f, unit = (1e3, "mm") if j.type == "prismatic" else (180.0 / np.pi, "deg")
-            raise InputError(f"joint '{name}' held at {value:g} {unit}, beyond its limits [{limits[0] * f:.6g}, "
-                             f"{limits[1] * f:.6g}] {unit} (the URDF's <limit>)", u.path, None, "key '--hold-joint'")
+            log.warning(f"{u.path}: --hold-joint: joint '{name}' held at {value:g} {unit}, beyond its limits "
+                        f"[{limits[0] * f:.6g}, {limits[1] * f:.6g}] {unit} (the URDF's <limit>): used as given, as "
+                        "an encoder angle beyond its limits is; check the value or the limits")
     return out
 
 

@@ -268,11 +268,15 @@ def register(sub) -> None:
                    help="number of runs (default 20; at most 100000)")
     m.add_argument("--seed", type=seed, default=0,
                    help="seed of the first run's simulation (run i uses --seed + i; default 0)")
-    m.add_argument("--holdout", type=fraction, default=0.25, metavar="FRACTION",
-                   help="held-out fraction of measurements (default 0.25)")
+    m.add_argument("--holdout", type=number_in(0, 1, high_open=True), default=0.25, metavar="FRACTION",
+                   help="held-out fraction of measurements, in [0, 1) (default 0.25; 0: none, every run fits all "
+                        "its measurements, and the study reports the parameters against the truth without a "
+                        "predicted accuracy)")
     m.add_argument("--workers", type=number_in(1, cores(), kind=int), default=None,  # more: memory, no speed
                    help=f"local processes, at most the cores this process may run on ({cores()} here; default: all)")
-    m.add_argument("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://10.0.0.5:8786")
+    m.add_argument("--scheduler", default=None,
+                   help="Dask scheduler address, e.g. tcp://10.0.0.5:8786 (instead of --workers: the cluster's "
+                        "workers run the runs; each needs this toolkit installed, not the campaign's files)")
     add_output_option(m)
     _common_fit_options(m)
     m.set_defaults(func=run_montecarlo)
@@ -761,19 +765,24 @@ def run_montecarlo(args: argparse.Namespace) -> int:
 
     from .study import RunSettings, SimSource, monte_carlo
     camp = load_campaign(args.campaign)            # checks the file before any run starts
+    if args.scheduler is not None and args.workers is not None:
+        raise InputError("--workers counts local processes, and --scheduler sends the runs to a Dask cluster's "
+                         "workers instead: give one of them")
     with output_folder(args.output, camp.inputs, "study montecarlo") as out:
         from arm_model.model import ArmModel
         model = ArmModel(camp.arm, _effects(args.effect))
         settings = RunSettings(holdout=args.holdout, effects=_effects(args.effect),
                                fit=fit_options(args, free=_free(model, args), weights=_weights(args)))
-        mc = monte_carlo(SimSource(str(args.campaign)), args.runs, seed=args.seed, settings=settings,
+        mc = monte_carlo(SimSource(camp), args.runs, seed=args.seed, settings=settings,
                          scheduler=args.scheduler, workers=args.workers)
+        mc.check()
         from arm_model.shipped import provenance
         (out.dir / "study.json").write_text(json_text({**mc.to_dict(), **provenance(camp.inputs)}), encoding="utf-8")
     log.info(f"{args.runs - len(mc.failures)} of {counted(args.runs, 'run')} succeeded")
     for f in mc.failures[:5]:
         log.info(f"  seed {f['seed']}: {f['error']}")
-    log.info("predicted accuracy on held-out data (median / 95th percentile):")
+    log.info("predicted accuracy on held-out data (median / 95th percentile):" if args.holdout else
+             "no predicted accuracy: --holdout 0 holds no data out")
     for a in mc.accuracy.values():
         log.info(f"  {a['label']}: nominal {a['before_median']:.2f}/{a['before_p95']:.2f} -> calibrated "
               f"{a['after_median']:.2f}/{a['after_p95']:.2f} {a['unit']}")

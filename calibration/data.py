@@ -316,13 +316,19 @@ def _aux_inputs(model: ArmModel, points: PointSet, files: np.ndarray, aux: AuxDa
     return AuxData(temperature, tau_g, tau_c)
 
 
-def split_holdout(data: CalibrationData, holdout, seed: int = 0) -> tuple[CalibrationData, CalibrationData]:
+#: what to change when a --holdout leaves the held-out set empty (calibrate, close-loop)
+EMPTY_HOLDOUT_REMEDY = "name the measurements to hold out (--holdout ID,ID) or give more measurements"
+
+
+def split_holdout(data: CalibrationData, holdout, seed: int = 0,
+                  remedy: str = EMPTY_HOLDOUT_REMEDY) -> tuple[CalibrationData, CalibrationData]:
     """Split by measurement into (training, held-out).
 
     Args:
         holdout: a list of measurement ids, or a fraction in (0, 1) of the measurements drawn at
             random (seeded) within each feature kind, so that every kind stays in training.
         seed: for the random draw.
+        remedy: what the message of an empty held-out set tells the user to change.
     """
     ids = data.measurements()
     if isinstance(holdout, (float, int)) and not isinstance(holdout, bool):
@@ -351,8 +357,8 @@ def split_holdout(data: CalibrationData, holdout, seed: int = 0) -> tuple[Calibr
                              data.points.path, None, "measurement")
     if not held:
         raise InputError(f"the held-out set is empty ({len(ids)} measurement(s): "
-                         f"{', '.join(ids[:6])}{' ...' if len(ids) > 6 else ''}); name the measurements to hold out "
-                         "(--holdout ID,ID) or give more measurements", data.points.path, None, "measurement")
+                         f"{', '.join(ids[:6])}{' ...' if len(ids) > 6 else ''}); {remedy}", data.points.path, None,
+                         "measurement")
     if held == set(ids):
         raise InputError("every measurement is held out: nothing left to calibrate on", data.points.path, None,
                          "measurement")

@@ -33,6 +33,7 @@ from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from arm_model import NumericalError, geometry
+from arm_model.io import CENTRE_KINDS
 
 __all__ = ["Kind", "KINDS", "MIN_POINTS", "kind_function", "distance_function", "initial_state", "retract", "centre_of",
            "frame_state", "frame_of", "tracker_start"]
@@ -308,4 +309,4 @@ def retract(kind: str, state: np.ndarray, theta: np.ndarray) -> np.ndarray:
 
 def centre_of(kind: str, state: np.ndarray) -> np.ndarray | None:
     """The centre [m] of a seat or sphere state (the point a distance refers to), else None."""
-    return state[:3].copy() if kind in ("seat", "sphere") else None
+    return state[:3].copy() if kind in CENTRE_KINDS else None

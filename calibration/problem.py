@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike
 
 from arm_model import InputError, NumericalError
 from arm_model.geometry import ball_centre_radius
+from arm_model.io import CENTRE_KINDS
 from arm_model.model import CASADI_CACHE, ArmModel
 from arm_model.tracker import DEFAULT_SESSION, Tracker, offset_matrix
 
@@ -230,7 +231,7 @@ class Problem:
                 if (m, fa) in by_key and (m, fb) in by_key and (m, (fa, fb)) not in left_out:
                     ia, ib = by_key[(m, fa)], by_key[(m, fb)]
                     for i, fid in ((ia, fa), (ib, fb)):
-                        if self.instances[i].kind not in ("seat", "sphere"):
+                        if self.instances[i].kind not in CENTRE_KINDS:
                             raise InputError(f"a distance needs feature centres: '{fid}' is a "
                                              f"{self.instances[i].kind} (use seats or spheres)", arte.path, None,
                                              "key 'distance.between'")

@@ -22,11 +22,13 @@ import math
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from arm_model import AacmmError, InputError
-from arm_model.log import Progress
+from arm_model import AacmmError, InputError, NumericalError
+from arm_model.log import Progress, counted
 from arm_model.model import ArmModel
 from arm_model.parallel import cores
 
@@ -107,8 +109,11 @@ def run_tasks(fn, items, *, scheduler=None, workers: int | None = None, progress
             futures = client.map(fn, items, pure=False)
             index = {f.key: i for i, f in enumerate(futures)}
             for fut in dask_completed(futures):
-                out[index[fut.key]] = fut.result()
+                out[index[fut.key]] = _dask_result(fut, client)
                 bar.update()
+        except BaseException:
+            client.cancel(futures)
+            raise
         finally:
             if client is not scheduler:
                 client.close()
@@ -124,10 +129,33 @@ def run_tasks(fn, items, *, scheduler=None, workers: int | None = None, progress
         return out
     with ProcessPoolExecutor(max_workers=workers) as pool:
         futs = {pool.submit(fn, it): i for i, it in enumerate(items)}
-        for fut in as_completed(futs):
-            out[futs[fut]] = fut.result()
-            bar.update()
+        try:
+            for fut in as_completed(futs):
+                out[futs[fut]] = fut.result()
+                bar.update()
+        except BaseException:       # an error (or Ctrl-C) ends the work: the items not started are not run
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
     return out
+
+
+def _dask_result(fut, client):
+    """The result of a Dask future; an error of the toolkit as it is (a run's input error stops the study as it
+    would locally), any other error of a worker (the toolkit missing or of another version there, a worker lost)
+    as one message naming the scheduler."""
+    try:
+        return fut.result()
+    except AacmmError:
+        raise
+    except Exception as exc:
+        raise InputError(f"a Dask worker of the scheduler at {client.scheduler.address!r} failed: "
+                         f"{type(exc).__name__}: {exc} (does every worker run this toolkit, version "
+                         f"{_version()}, and reach the scheduler?)") from None
+
+
+def _version() -> str:
+    from arm_model.shipped import version
+    return version()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -135,14 +163,24 @@ def run_tasks(fn, items, *, scheduler=None, workers: int | None = None, progress
 
 @dataclass(frozen=True)
 class SimSource:
-    """Campaigns from :mod:`arm_model.sim`: a campaign file, simulated with a new seed each run."""
-    path: str
+    """Campaigns from :mod:`arm_model.sim`: a campaign (an :class:`arm_model.sim.Campaign` as
+    :func:`arm_model.sim.load_campaign` read it, or the path of its file, read here once), simulated with a new seed
+    each run. The campaign read travels to the workers, so that a worker on another machine needs no file and every
+    run simulates the same campaign, whatever happens to its file meanwhile."""
+    campaign: Any
+
+    def __post_init__(self):
+        from arm_model.sim import Campaign, load_campaign
+        if isinstance(self.campaign, (str, Path)):
+            object.__setattr__(self, "campaign", load_campaign(self.campaign))
+        elif not isinstance(self.campaign, Campaign):
+            raise TypeError(f"SimSource: campaign must be a Campaign or the path of its file, got "
+                            f"{type(self.campaign).__name__}")
 
     def make(self, seed: int):
-        from arm_model.sim import load_campaign, simulate
-        camp = load_campaign(self.path)
-        sim = simulate(camp, seed=seed)
-        return camp.arm, sim.points, sim.artefacts, sim.reference_points, dict(sim.truth["p"])
+        from arm_model.sim import simulate
+        sim = simulate(self.campaign, seed=seed)
+        return self.campaign.arm, sim.points, sim.artefacts, sim.reference_points, dict(sim.truth["p"])
 
 
 @dataclass(frozen=True)
@@ -164,20 +202,29 @@ class SynthSource:
 @dataclass(frozen=True)
 class RunSettings:
     """How each run calibrates (``fit``: free set, weights and every option of the fit) and validates
-    (``holdout``: the share of measurements held out); ``effects``: added to the campaign's arm."""
+    (``holdout``: the share of measurements held out, in [0, 1); 0: none, every run fits all its measurements and
+    reports no predicted accuracy); ``effects``: added to the campaign's arm."""
     holdout: float = 0.25
     fit: FitOptions = field(default_factory=FitOptions)
     effects: tuple = ()
 
+    def __post_init__(self):
+        h = self.holdout
+        if isinstance(h, bool) or not isinstance(h, (int, float)) or not 0.0 <= h < 1.0:
+            raise ValueError(f"RunSettings: holdout must be a fraction in [0, 1) (0: no held-out data), got {h!r}")
+
 
 def run_once(task) -> dict:
-    """One Monte Carlo run: ``task = (source, settings, seed)``. Never raises: a failed run is
-    reported with its error."""
+    """One Monte Carlo run: ``task = (source, settings, seed)``. A run that fails numerically is reported with its
+    error; an :class:`~arm_model.InputError` is raised: the campaign or the settings are wrong (a held-out set
+    that would be empty), the same in every run, and the study stops there."""
     source, settings, seed = task
     t0 = time.perf_counter()
     try:
         with blas_threads(1):
             return _run(source, settings, seed, t0)
+    except InputError:
+        raise
     except (AacmmError, ValueError) as exc:
         return {"seed": seed, "ok": False, "error": f"{type(exc).__name__}: {exc}",
                 "seconds": time.perf_counter() - t0}
@@ -187,14 +234,18 @@ def _run(source, settings, seed, t0) -> dict:
     desc, points, artefacts, reference, truth = source.make(seed)
     model = ArmModel(desc, tuple(settings.effects))
     data = make_data(points, artefacts, model, reference=reference)
-    train, test = split_holdout(data, settings.holdout, seed)
+    try:
+        train, test = (split_holdout(data, settings.holdout, seed, remedy="give a larger --holdout, or 0 to hold "
+                                     "nothing out") if settings.holdout else (data, None))
+    except InputError as exc:       # the simulated points file is no user's: name the option instead
+        raise InputError(f"--holdout {settings.holdout:g}: {exc.reason}") from None
     res = calibrate(model, train, settings.fit)
     p_true = model.spec.vector({k: v for k, v in truth.items() if k in model.spec.names})
     p_eq = res.equivalent(p_true)
     idx = [model.spec.index(n) for n in res.free]
     return {"seed": seed, "ok": True, "free": list(res.free), "p": res.p[idx].tolist(),
             "u": res.u.tolist(), "truth": p_eq[idx].tolist(), "fixed": [f.name for f in res.fixed],
-            "s0": res.s0, "iterations": res.iterations, "validation": res.compare(test),
+            "s0": res.s0, "iterations": res.iterations, "validation": [] if test is None else res.compare(test),
             "seconds": time.perf_counter() - t0}
 
 
@@ -224,6 +275,14 @@ class MonteCarloResult:
     @property
     def failures(self) -> list:
         return [r for r in self.runs if not r["ok"]]
+
+    def check(self) -> None:
+        """Raise a NumericalError when no run succeeded: a study without a result is a failure, never an empty
+        table (some runs failing is a result: they are listed)."""
+        if self.runs and len(self.failures) == len(self.runs):
+            errors = list(dict.fromkeys(r["error"] for r in self.runs))
+            raise NumericalError(f"no run succeeded ({counted(len(self.runs), 'run')}): " + "; ".join(errors[:3])
+                                 + (" ..." if len(errors) > 3 else ""))
 
     def to_dict(self) -> dict:
         return {"runs": self.runs, "parameters": self.parameters, "accuracy": self.accuracy,
@@ -280,6 +339,10 @@ def monte_carlo(source, runs: int, *, seed: int = 0, settings: RunSettings | Non
                 workers: int | None = None, progress: bool = True) -> MonteCarloResult:
     """``runs`` Monte Carlo runs of ``source`` (:class:`SimSource` or :class:`SynthSource`) with
     seeds ``seed, seed + 1, ...``; see :func:`run_tasks` for ``scheduler`` and ``workers``."""
+    if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
+        raise ValueError(f"monte_carlo: runs must be a whole number >= 1, got {runs!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ValueError(f"monte_carlo: seed must be a whole number >= 0, got {seed!r}")
     settings = settings or RunSettings()
     tasks = [(source, settings, seed + i) for i in range(runs)]
     return _aggregate(run_tasks(run_once, tasks, scheduler=scheduler, workers=workers, progress=progress,

@@ -110,8 +110,8 @@ def run_ring(args: argparse.Namespace) -> int:
                                  sources=unc_inputs.sources | {"force sensor": f"given: {args.u_force:g} N bending"})
         try:
             point_unc = ring_uncertainties(arm, points, campaign, parameters, unc_inputs)
-        except NumericalError as exc:
-            raise InputError(f"diameter uncertainty from the points: {exc}", args.points) from None
+        except NumericalError as exc:   # the points passed their reader: a numerical failure (exit 4), file named
+            raise NumericalError(f"{args.points}: diameter uncertainty from the points: {exc}") from None
         inputs["signals"] = args.signals
         written = ring_report(campaign, out.dir, inputs, budgets, warnings, point_unc,
                               parameters.source if parameters is not None else None)

@@ -129,6 +129,9 @@ def find_point_forces(signal: ForceSignal, n_points: int, measurement: str | Non
                 f"{extra:.3g} N); expected exactly one peak a captured point", signal.path)
         keep = np.sort(order[:n_points])
         idx, prom = idx[keep], prom[keep]
+    elif found < n_points and not m.any():
+        raise InputError(f"force signal{what}: the force is zero in every sample, but the points file has "
+                         f"{n_points} points for this measurement (one peak a captured point)", signal.path)
     elif found < n_points:
         raise InputError(f"force signal{what}: {found} peaks found (above {NOISE_FACTOR:g} x the noise, "
                          f"{floor:.3g} N) but the points file has {n_points} points for this measurement; "

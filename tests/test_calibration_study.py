@@ -48,9 +48,17 @@ def test_monte_carlo_local(nominal):
 
 
 def test_a_failed_run_is_reported_not_raised(nominal):
+    """A run that fails numerically (far too little data for the fit) is reported; the study's check says that
+    no run succeeded. A held-out set the campaign cannot give is bad input, the same in every run: raised."""
+    from arm_model import InputError, NumericalError
     spec = SynthSpec(ballbars=0, seats=1, articulations=3, spheres=0)    # far too little data
-    mc = monte_carlo(SynthSource(nominal, spec), 1, workers=1, progress=False)
-    assert len(mc.failures) == 1 and "Error" in mc.failures[0]["error"]
+    mc = monte_carlo(SynthSource(nominal, spec), 1, workers=1, progress=False,
+                     settings=RunSettings(holdout=0.0, fit=FitOptions(prior_scale=None)))
+    assert len(mc.failures) == 1 and "NumericalError" in mc.failures[0]["error"]
+    with pytest.raises(NumericalError, match=r"no run succeeded \(1 run\): NumericalError"):
+        mc.check()
+    with pytest.raises(InputError, match=r"--holdout 0.25: the held-out set is empty"):
+        monte_carlo(SynthSource(nominal, spec), 1, workers=1, progress=False)
 
 
 # in make test-slow: a local dask cluster starts worker processes (about 10 s); the serial and process pool paths stay

@@ -29,6 +29,9 @@ log = logging.getLogger(__name__)
 
 #: argparse type of a drawing scale or a frame rate: a finite number in (0, 1e9]
 SCALE = number_in(0, 1e9, low_open=True)
+#: points an animation shows a second: one every 1000 s to 10000 a second (the page's clip keeps each frame's time
+#: in a 32-bit float: 1e-300 a second put every frame at infinity, a page that never moved)
+POINTS_PER_S = number_in(1e-3, 1e4)
 
 
 def register(sub) -> None:
@@ -50,9 +53,9 @@ def register(sub) -> None:
                       help="show the arm at the N-th point of the selection, file order (default 1)")
     pose.add_argument("--animate", action="store_true",
                       help="animate the arm through every point of the selection (embedded in --html pages)")
-    p.add_argument("--points-per-s", "--fps", dest="fps", type=SCALE, default=2.0, metavar="F",
-                   help="when animating: points shown a second (default 2; --fps is the older spelling; it is not "
-                        "the live view's display rate)")
+    p.add_argument("--points-per-s", "--fps", dest="fps", type=POINTS_PER_S, default=2.0, metavar="F",
+                   help="when animating: points shown a second, 0.001 to 10000 (default 2; --fps is the older "
+                        "spelling; it is not the live view's display rate)")
     p.add_argument("--scale", type=SCALE, default=None,
                    help="length of the deflection arrow per length of deflection (e.g. 1000: 0.1 mm is drawn "
                         "100 mm long); default: from the data, so that the median deflection shown is drawn "

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import InputError, parse_toml, read_text
-from ..io import Artefacts, Feature, format_artefacts, parse_artefacts
+from ..io import Artefacts, Feature, format_artefacts, id_problem, parse_artefacts
 from ..toml_lines import toml_key_lines, top_key_line
 
 __all__ = ["PlanFeature", "SessionPlan", "read_plan", "parse_plan", "format_plan", "single_feature_plan",
@@ -84,8 +84,8 @@ def parse_plan(text: str, path: str = "<plan>") -> SessionPlan:
     data = parse_toml(text, path)
     lines = toml_key_lines(text)
     measurement = data.get("measurement")
-    if measurement is not None and (not isinstance(measurement, str) or not measurement.strip()):
-        raise InputError("'measurement' must be a non-empty text", path, top_key_line(lines, "measurement"),
+    if measurement is not None and id_problem(measurement):
+        raise InputError(f"'measurement' {id_problem(measurement)}", path, top_key_line(lines, "measurement"),
                          "key 'measurement'")
     entries = []
     tables = data["feature"]

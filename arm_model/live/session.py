@@ -25,7 +25,8 @@ import numpy as np
 
 from ..checks import limit_bounds
 from ..csv_io import format_row
-from ..io import Feature, PointSet
+from ..errors import InputError
+from ..io import Feature, PointSet, id_problem
 from ..uncertainty import InputUncertainty
 from .contacts import Contact, ContactDetector, ContactOptions
 from .features import FeatureFit, FeatureTracker
@@ -68,8 +69,9 @@ class Event:
     message: str
     count: int = 1
 
-    def __str__(self) -> str:
-        return f"[{self.time:10.3f} s] {self.kind}: {self.message}"
+    def __str__(self) -> str:       # before the first sample there is no time: a dash, never "nan"
+        when = f"{self.time:10.3f}" if math.isfinite(self.time) else f"{'-':>10}"
+        return f"[{when} s] {self.kind}: {self.message}"
 
 
 @dataclass(frozen=True)
@@ -150,6 +152,11 @@ class Session:
                             f"{type(plan).__name__}")
         self.plan = plan or SessionPlan()
         self.measurement = measurement or self.plan.measurement or (Path(folder).name if folder else "live")
+        if id_problem(self.measurement):       # it is written on every point: the points file must read it back
+            source = ("--measurement" if measurement else "the plan's 'measurement'" if self.plan.measurement
+                      else "the session folder's name")
+            raise InputError(f"the measurement id ({source}) {id_problem(self.measurement)}", None, None,
+                             "key 'measurement'")
         npar = 0 if self.parameters is None else len(self.parameters.names)
         self.tracker = FeatureTracker(self.plan, self.desc.probe.ball_diameter, npar)
         if rate is not None and not RATE_HZ_RANGE[0] <= rate <= RATE_HZ_RANGE[1]:

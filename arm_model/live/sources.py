@@ -222,8 +222,8 @@ def open_source(spec: str) -> LineSource:
         if not 0 <= port <= 65535 or (kind == "tcp" and port == 0):
             raise InputError(f"{spec}: the port must be from {0 if kind == 'udp' else 1} to 65535")
         return (_TcpSource if kind == "tcp" else _UdpSource)(host, port, spec)
-    if re.match(r"[a-z]+://", spec):
-        raise InputError(f"{spec}: not a source: give a file, '-' (standard input), tcp://HOST:PORT or "
+    if re.match(r"[a-z]+://", spec) or not spec.strip():
+        raise InputError(f"{spec or repr(spec)}: not a source: give a file, '-' (standard input), tcp://HOST:PORT or "
                          "udp://HOST:PORT")
     return _FileSource(Path(spec))
 

@@ -20,7 +20,7 @@ from ..description import ArmDescription
 from ..errors import InputError, did_you_mean, parse_toml, read_text
 from ..shipped import SHIPPED_ARMS, shipped_path
 from ..toml_lines import key_path_text, toml_key_lines
-from ..units import implausible
+from ..units import implausible, split_unit
 from ..urdf_import import load_arm
 
 __all__ = ["Campaign", "Task", "load_campaign", "campaign_from_dict", "TASK_KINDS", "SENSORS",
@@ -245,6 +245,11 @@ class _Ctx:
         self.lines = lines or {}
 
     def error(self, msg: str, table: tuple, key: str | None = None) -> InputError:
+        """The error at ``key`` of ``table``; a key named by its base (``stylus_cone``) is found with the unit
+        the file gives it (``stylus_cone_deg``), and named so."""
+        if key and table + (key,) not in self.lines:
+            key = next((k[-1] for k in self.lines if len(k) == len(table) + 1 and k[:-1] == table
+                        and isinstance(k[-1], str) and (split_unit(k[-1]) or ("",))[0] == key), key)
         line = self.lines.get(table + (key,)) if key else None
         if line is None:
             line = self.lines.get(table)
@@ -675,7 +680,20 @@ def _check_size(ctx, tasks, op, sg) -> None:
                     ("task", tasks.index(big)))
 
 
+#: a task's half-angles of cones (a direction within that angle of an axis): from 0 to 180 deg; its random angle
+#: spreads (1 sigma): not negative
+_CONE_KEYS = ("stylus_cone", "stylus_tilt", "polar_max", "force_cone")
+_SPREAD_KEYS = ("angle_jitter", "roll_jitter")
+
+
 def _check_task(ctx, kind, o, tbl, sensor):
+    for k in _CONE_KEYS:
+        if k in o and not 0.0 <= o[k] <= math.pi:
+            raise ctx.error(f"'{k}' is a cone's half-angle: from 0 to 180 deg, got {math.degrees(o[k]):.6g} deg",
+                            tbl, k)
+    for k in _SPREAD_KEYS:
+        if k in o and o[k] < 0:
+            raise ctx.error(f"'{k}' (a spread, 1 sigma) must not be negative", tbl, k)
     positive = {"ring": ("diameter", "points_per_row"), "sphere": ("diameter", "points"),
                 "plane": ("points",), "seat": ("articulations",),
                 "ballbar": ("length", "positions", "sphere_diameter", "reach"),

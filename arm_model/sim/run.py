@@ -416,6 +416,11 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
     taking a message, called at each stage (default: a progress record of this module's logger). Raises
     :class:`~arm_model.NumericalError` if a point
     cannot be reached or the truth check fails."""
+    if not isinstance(campaign, Campaign):
+        raise TypeError(f"simulate: campaign must be a Campaign (arm_model.sim.load_campaign reads a file), got "
+                        f"{type(campaign).__name__}")
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0):
+        raise ValueError(f"simulate: seed must be a whole number >= 0 (as --seed), got {seed!r}")
     say = progress or progress_line(logging.getLogger(__name__))
     seed = campaign.seed if seed is None else int(seed)
     if seed != campaign.seed:
