@@ -164,7 +164,6 @@ class ArmModel:
         from .pinocchio_model import PinocchioArm
 
         q = np.atleast_2d(np.asarray(q, dtype=float))
-        n = q.shape[0]
         temp = None if temperature is None else np.asarray(temperature, dtype=float)
         arm = PinocchioArm(self.described(np.zeros(self.spec.size) if p is None else p))
         w = None if wrench is None or not contact else np.atleast_2d(np.asarray(wrench, dtype=float))
