@@ -245,7 +245,7 @@ def _first(draw, tries: int = 1000):
 def _fill(chosen: list, rng, rounds: int, truth, make, draw) -> None:
     """Fill the empty entries ``k`` of ``chosen`` with (part plan, info) of a candidate ``draw(k)`` -> (centre,
     direction, seat axis) or None, whose points the true arm reaches (:func:`_reachable`), in up to ``rounds``
-    rounds."""
+    rounds (fewer when a round draws no candidate at all)."""
     for _ in range(rounds):
         todo = [k for k in range(len(chosen)) if chosen[k] is None]
         if not todo:
@@ -258,6 +258,8 @@ def _fill(chosen: list, rng, rounds: int, truth, make, draw) -> None:
             part = Plan()
             info = make(k, cand[0], cand[1], cand[2], part)
             cands.append((k, part, info))
+        if not cands:                   # nothing to draw from: more rounds would not change that
+            return
         ok = _reachable(truth, [c[1] for c in cands], rng) if truth is not None and cands else \
             np.ones(len(cands), bool)
         for (k, part, info), good in zip(cands, ok, strict=True):
