@@ -194,6 +194,8 @@ def _reachable(truth, parts: list, rng) -> np.ndarray:
 
 #: rounds a task's default region is tried before the positions it cannot hold are drawn from the workspace
 REGION_ROUNDS = 40
+#: rounds in a row that place nothing after which a default region is given up for the workspace
+REGION_PATIENCE = 10
 #: postures sampled for a chain's workspace (:func:`_workspace`)
 WORKSPACE_SAMPLES = 4000
 
@@ -203,7 +205,8 @@ def _place(plan, rng, o, n, shoulder, spread, make, truth, max_rounds: int = 40)
     ``u`` the bar's direction, ``axis`` the seats' axis, out of the seat); a position whose points the true arm
     cannot reach is drawn again. Inside the task's region (:func:`_candidate`, seats facing up); when the task
     gives no region (``o["region_given"]`` false), a position the default region cannot hold after
-    :data:`REGION_ROUNDS` rounds is drawn from the chain's own workspace instead (:func:`_workspace_candidate`),
+    :data:`REGION_ROUNDS` rounds (or :data:`REGION_PATIENCE` rounds in a row placing nothing) is drawn from the
+    chain's own workspace instead (:func:`_workspace_candidate`),
     so that any chain, whatever its size and wherever its base, gets its positions."""
     chosen: list = [None] * n
     up = np.array([0.0, 0.0, 1.0])
@@ -214,7 +217,7 @@ def _place(plan, rng, o, n, shoulder, spread, make, truth, max_rounds: int = 40)
         cand = _first(lambda: _candidate(rng, o, k, n, shoulder, spread))
         return None if cand is None else (cand[0], cand[1], up)
 
-    _fill(chosen, rng, rounds, truth, make, in_region)
+    _fill(chosen, rng, rounds, truth, make, in_region, REGION_PATIENCE if fallback else None)
     if fallback and any(c is None for c in chosen):
         ws = _workspace(truth, o, rng)
         if ws is not None:
@@ -242,13 +245,15 @@ def _first(draw, tries: int = 1000):
     return None
 
 
-def _fill(chosen: list, rng, rounds: int, truth, make, draw) -> None:
+def _fill(chosen: list, rng, rounds: int, truth, make, draw, patience: int | None = None) -> None:
     """Fill the empty entries ``k`` of ``chosen`` with (part plan, info) of a candidate ``draw(k)`` -> (centre,
     direction, seat axis) or None, whose points the true arm reaches (:func:`_reachable`), in up to ``rounds``
-    rounds (fewer when a round draws no candidate at all)."""
+    rounds: fewer when a round draws no candidate at all, or after ``patience`` rounds in a row that place
+    nothing (None: no such limit)."""
+    idle = 0
     for _ in range(rounds):
         todo = [k for k in range(len(chosen)) if chosen[k] is None]
-        if not todo:
+        if not todo or (patience is not None and idle >= patience):
             return
         cands = []
         for k in todo:
@@ -260,11 +265,11 @@ def _fill(chosen: list, rng, rounds: int, truth, make, draw) -> None:
             cands.append((k, part, info))
         if not cands:                   # nothing to draw from: more rounds would not change that
             return
-        ok = _reachable(truth, [c[1] for c in cands], rng) if truth is not None and cands else \
-            np.ones(len(cands), bool)
+        ok = _reachable(truth, [c[1] for c in cands], rng) if truth is not None else np.ones(len(cands), bool)
         for (k, part, info), good in zip(cands, ok, strict=True):
             if good:
                 chosen[k] = (part, info)
+        idle = 0 if ok.any() else idle + 1
 
 
 def _workspace(truth, o: dict, rng, n: int = WORKSPACE_SAMPLES):
