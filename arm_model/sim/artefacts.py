@@ -194,7 +194,8 @@ def _reachable(truth, parts: list, rng) -> np.ndarray:
 
 #: rounds a task's default region is tried before the positions it cannot hold are drawn from the workspace
 REGION_ROUNDS = 40
-#: rounds in a row that place nothing after which a default region is given up for the workspace
+#: rounds in a row that place nothing after which a default region is given up for the workspace (and the
+#: workspace itself)
 REGION_PATIENCE = 10
 #: postures sampled for a chain's workspace (:func:`_workspace`)
 WORKSPACE_SAMPLES = 4000
@@ -221,7 +222,8 @@ def _place(plan, rng, o, n, shoulder, spread, make, truth, max_rounds: int = 40)
     if fallback and any(c is None for c in chosen):
         ws = _workspace(truth, o, rng)
         if ws is not None:
-            _fill(chosen, rng, max_rounds, truth, make, lambda k: _workspace_candidate(rng, ws, k, n, spread))
+            _fill(chosen, rng, max_rounds, truth, make, lambda k: _workspace_candidate(rng, ws, k, n, spread),
+                  REGION_PATIENCE)
     missing = [k + 1 for k in range(n) if chosen[k] is None]
     if missing:
         where = (f"inside the region (radius_mm {[round(v * 1e3) for v in o['radius']]}, height_mm "
@@ -229,7 +231,8 @@ def _place(plan, rng, o, n, shoulder, spread, make, truth, max_rounds: int = 40)
                  "from the shoulder); widen the region, or give none: the chain's own workspace is then used"
                  if not fallback else "in the default region or anywhere in the chain's workspace with the "
                  "stylus in its cone about the seats' axis; a shorter bar, fewer articulations or a wider "
-                 "'stylus_cone'")
+                 f"'stylus_cone' (a chain of {truth.nominal.n_joints} moving joints: with fewer than six, a seat's "
+                 "articulations may have no room to turn the stylus about the ball)")
         raise ValueError(f"could not place position(s) {missing} of {n} {where}")
     for part, _ in chosen:
         plan.extend(part)
