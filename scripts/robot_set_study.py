@@ -117,6 +117,8 @@ def command(args: list, log: Path) -> tuple[int, float]:
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         code = main([str(a) for a in args])
     dt = time.perf_counter() - t
+    if code in (130, 143):          # Ctrl-C or SIGTERM ended the command (the CLI catches them): end the study too
+        raise SystemExit(code)
     log.write_text(f"$ aacmm {' '.join(map(str, args))}\n# exit {code} in {dt:.1f} s\n{out.getvalue()}{err.getvalue()}")
     return code, dt
 
