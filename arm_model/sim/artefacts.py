@@ -220,7 +220,7 @@ def _place(plan, rng, o, n, shoulder, spread, make, truth, max_rounds: int = 40)
 
     _fill(chosen, rng, rounds, truth, make, in_region, REGION_PATIENCE if fallback else None)
     if fallback and any(c is None for c in chosen):
-        ws = _workspace(truth, o, rng)
+        ws = _workspace(truth, rng)
         if ws is not None:
             _fill(chosen, rng, max_rounds, truth, make, lambda k: _workspace_candidate(rng, ws, k, n, spread),
                   REGION_PATIENCE)
@@ -275,7 +275,7 @@ def _fill(chosen: list, rng, rounds: int, truth, make, draw, patience: int | Non
         idle = 0 if ok.any() else idle + 1
 
 
-def _workspace(truth, o: dict, rng, n: int = WORKSPACE_SAMPLES):
+def _workspace(truth, rng, n: int = WORKSPACE_SAMPLES):
     """The chain's own workspace: (tip positions (M, 3) [m], stylus directions (M, 3)) of ``n`` random postures
     within the joint limits (the true arm, no contact), stylus = probe z (flange towards ball); None if the
     chain has no posture."""
