@@ -19,7 +19,12 @@ from .description import ArmDescription
 from .effects import Effect, Geometry, ModelInputs
 from .params import ParamSpec, apply_params, param_spec, split_params
 
-__all__ = ["ArmModel", "AuxData", "CASADI_CACHE"]
+__all__ = ["ArmModel", "AuxData", "CASADI_CACHE", "EQUILIBRIUM_TOL", "EQUILIBRIUM_MAX_ITER"]
+
+#: the static equilibrium's tolerance [rad] (m for a prismatic joint): a joint angle's last step
+EQUILIBRIUM_TOL = 1e-12
+#: its fixed-point passes at most (a sag of 30 mrad converges in about 10)
+EQUILIBRIUM_MAX_ITER = 60
 
 
 @dataclass(frozen=True)
@@ -119,22 +124,61 @@ class ArmModel:
         if not self.effects:
             from .kinematics import ball_centres
             return ball_centres(self.desc, q, wrench, pv)
-        w = np.zeros((n, 6))
-        if wrench is not None:
-            wr = np.atleast_2d(np.asarray(wrench, dtype=float))
-            w[:, : wr.shape[1]] = wr
+        w = _six_columns(wrench, n)
         out = np.empty((n, 3))
         chunk = 16384
         for s in range(0, n, chunk):
             e = min(s + chunk, n)
-            inputs = ModelInputs(
-                q=list(q[s:e].T), wrench=list(w[s:e].T),
-                temperature=None if aux.temperature is None else aux.temperature[s:e],
-                tau_gravity=None if aux.tau_gravity is None else list(aux.tau_gravity[s:e].T),
-                tau_contact=None if aux.tau_contact is None else list(aux.tau_contact[s:e].T))
-            x, y, z = self._evaluate(pv, inputs, NUMPY_OPS)
+            x, y, z = self._evaluate(pv, _batch_inputs(q, w, aux, s, e), NUMPY_OPS)
             out[s:e, 0], out[s:e, 1], out[s:e, 2] = x, y, z
         return out
+
+    def joint_angles(self, q: ArrayLike, wrench: ArrayLike | None = None, p: ArrayLike | None = None,
+                     aux: AuxData | None = None) -> np.ndarray:
+        """(N, J) the angles [rad] (lengths [m] of a prismatic joint) the joints take: the readings ``q`` with every
+        effect on them applied (eccentricity, gain, harmonics, compliance under ``aux``'s torques), in the model's
+        order, by the batch path's own effect code."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        n = q.shape[0]
+        aux = self._check_aux(aux, n)
+        inputs = _batch_inputs(q, _six_columns(wrench, n), aux, 0, n)
+        self._apply_effects(None if p is None else np.asarray(p, dtype=float), inputs, NUMPY_OPS)
+        return np.column_stack([np.broadcast_to(np.asarray(c, dtype=float), (n,)) for c in inputs.q])
+
+    def equilibrium_aux(self, q: ArrayLike, wrench: ArrayLike | None = None, p: ArrayLike | None = None,
+                        temperature: ArrayLike | None = None, *, contact: bool = True, tol: float = EQUILIBRIUM_TOL,
+                        max_iter: int = EQUILIBRIUM_MAX_ITER) -> AuxData:
+        """The per-point inputs at the static equilibrium the arm sits in: gravity and contact torques [N m] at
+        the angles ``theta`` the joints take, not at the readings ``q``:
+        ``theta = F(q) + C (tau_contact(theta) - tau_gravity(theta))`` (``F``: the other effects on the readings,
+        ``C``: the joint compliances of ``p``; the wrench ``wrench`` (N, 3|6) [N, N m] stays in the probe frame;
+        ``contact=False``: no contact torques). The torques are Pinocchio's RNEA on the description of ``p``
+        (:meth:`described`, the description's masses); ``temperature`` (N,) [°C] where an effect needs it.
+
+        Solved by fixed-point iteration from ``theta = q`` until ``theta`` moves less than ``tol`` [rad] (or m):
+        one pass (the torques at the readings) when no compliance turns a joint, a few for a sag of a few mrad
+        (each pass shrinks the error by about C dtau/dtheta, the sag's own relative change). The iteration
+        converges while the arm is stable under its load (C dtau/dtheta < 1); otherwise, or after ``max_iter``
+        passes, a :class:`~arm_model.errors.NumericalError`."""
+        from .errors import NumericalError
+        from .pinocchio_model import PinocchioArm
+
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        temp = None if temperature is None else np.asarray(temperature, dtype=float)
+        arm = PinocchioArm(self.described(np.zeros(self.spec.size) if p is None else p))
+        w = None if wrench is None or not contact else np.atleast_2d(np.asarray(wrench, dtype=float))
+        theta, step = q, np.inf
+        for _ in range(max_iter):
+            tau_g, tau_c = arm.torques(theta, w)
+            aux = AuxData(temp, tau_g, tau_c)
+            new = self.joint_angles(q, wrench, p, aux)
+            step = float(np.max(np.abs(new - theta), initial=0.0))
+            theta = new
+            if step <= tol:
+                return aux
+        raise NumericalError(f"the arm's static equilibrium under its load was not found: the joint angles still "
+                             f"moved by {step:.3g} after {max_iter} passes (is a joint compliance so large that the "
+                             "arm buckles under its own weight?)")
 
     # -- CasADi -------------------------------------------------------------------------------
     def casadi_function(self, name: str = "ball_centre") -> Any:
@@ -239,6 +283,23 @@ class ArmModel:
     def described(self, p: ArrayLike) -> ArmDescription:
         """The description with the base part of ``p`` folded in (effects are not representable)."""
         return apply_params(self.desc, np.asarray(p, dtype=float)[: self.base_size])
+
+
+def _six_columns(wrench: ArrayLike | None, n: int) -> np.ndarray:
+    """(N, 6) wrench rows (force [N], torque [N m]; zeros where absent) of a (N, 3|6) wrench or None."""
+    w = np.zeros((n, 6))
+    if wrench is not None:
+        wr = np.atleast_2d(np.asarray(wrench, dtype=float))
+        w[:, : wr.shape[1]] = wr
+    return w
+
+
+def _batch_inputs(q: np.ndarray, w: np.ndarray, aux: AuxData, s: int, e: int) -> ModelInputs:
+    """The batch path's inputs of rows ``s:e``: columns of the readings, wrench and ``aux``."""
+    return ModelInputs(q=list(q[s:e].T), wrench=list(w[s:e].T),
+                       temperature=None if aux.temperature is None else aux.temperature[s:e],
+                       tau_gravity=None if aux.tau_gravity is None else list(aux.tau_gravity[s:e].T),
+                       tau_contact=None if aux.tau_contact is None else list(aux.tau_contact[s:e].T))
 
 
 #: models whose CasADi Function is kept (a loop compares a few models at a time, each many times)

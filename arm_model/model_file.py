@@ -198,20 +198,19 @@ class Arm:
 
     def aux(self, points, wrench=None, contact: bool = True) -> AuxData | None:
         """Per-point inputs of the effects for a :class:`~arm_model.io.PointSet` (temperature from its
-        column; gravity and contact torques from this description by Pinocchio at the points' angles
-        and ``wrench``, default the points' own). A column an effect needs and the points lack is an
-        :class:`InputError` naming the effect and the column. ``contact=False``: contact torques zero."""
+        column; gravity and contact torques from this description by Pinocchio at the angles the joints take
+        under them, the static equilibrium :meth:`~arm_model.model.ArmModel.equilibrium_aux`, and ``wrench``,
+        default the points' own). A column an effect needs and the points lack is an :class:`InputError` naming
+        the effect and the column. ``contact=False``: contact torques zero."""
         self.check_points(points)
         needs = self.model.needs()
         if not needs:
             return None
         temperature = points.temperature if "temperature" in needs else None
-        tau_g = tau_c = None
         if needs & {"tau_gravity", "tau_contact"}:
-            from .pinocchio_model import PinocchioArm
             w = points.wrench if wrench is None else wrench
-            tau_g, tau_c = PinocchioArm(self.desc).torques(points.q, w if contact else None)
-        return AuxData(temperature, tau_g, tau_c)
+            return self.model.equilibrium_aux(points.q, w, self.p, temperature, contact=contact)
+        return AuxData(temperature)
 
     def ball_centres(self, points, wrench=None, rigid: bool = False) -> np.ndarray:
         """(N, 3) ball centres [m] of a :class:`~arm_model.io.PointSet` with every effect applied, from

@@ -258,15 +258,14 @@ def model_check(result, arm: Arm | None = None) -> dict:
 
 
 def with_fitted_torques(data, result):
-    """``data`` with the gravity and contact torques evaluated on the calibrated description of ``result`` (as
-    the model file evaluates them), when its model needs them; else ``data`` (None stays None). Held-out data
-    are predicted with these, so that the held-out figures are those ``tip`` gives with the model file."""
+    """``data`` with the gravity and contact torques evaluated on the calibrated description of ``result`` at the
+    static equilibrium its compliances give (:meth:`~arm_model.model.ArmModel.equilibrium_aux`, as the model file
+    evaluates them), when its model needs them; else ``data`` (None stays None). Held-out data are predicted with
+    these, so that the held-out figures are those ``tip`` gives with the model file."""
     if data is None or not ({"tau_gravity", "tau_contact"} & result.model.needs()):
         return data
-    from arm_model.model import AuxData
-    from arm_model.pinocchio_model import PinocchioArm
-    tau_g, tau_c = PinocchioArm(result.described()).torques(data.points.q, data.wrench)
-    return replace(data, aux=AuxData(None if data.aux is None else data.aux.temperature, tau_g, tau_c))
+    temperature = None if data.aux is None else data.aux.temperature
+    return replace(data, aux=result.model.equilibrium_aux(data.points.q, data.wrench, result.p, temperature))
 
 
 def refine_torques(result, rounds: int = 5, tol_nm: float = 1.0):

@@ -79,11 +79,26 @@ stiffness_Nm_per_rad = {stiffness}
 gravity = true
 contact = false
 
-[[task]]
+{task}"""
+
+#: the instrument of each kind of campaign: a motion-capture marker, or seat pairs a bar apart probed by the ball
+TASKS = {
+    "mocap": """[[task]]
 kind = "mocap"
 postures = {postures}
 noise_mm = 0.15
-"""
+""",
+    "seats": """[noise]
+probing_repeatability_mm = 0.1
+
+[[task]]
+kind = "ballbar"
+ends = "seat"
+length_mm = {bar_mm}
+positions = {positions}
+articulations = {articulations}
+""",
+}
 
 
 def robot_set() -> Path:
@@ -102,61 +117,81 @@ def command(args: list, log: Path) -> tuple[int, float]:
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         code = main([str(a) for a in args])
     dt = time.perf_counter() - t
+    if code in (130, 143):          # Ctrl-C or SIGTERM ended the command (the CLI catches them): end the study too
+        raise SystemExit(code)
     log.write_text(f"$ aacmm {' '.join(map(str, args))}\n# exit {code} in {dt:.1f} s\n{out.getvalue()}{err.getvalue()}")
     return code, dt
 
 
-def held_out_rms(summary: Path, which: str) -> float:
-    """The held-out RMS 3D error [um] with the training fit's frames and markers, ``before`` (the nominal) or
-    ``after`` (the model fitted)."""
+#: the held-out figure of each kind of campaign (a key of summary.json's ``validation_holdout``) [um]
+FIGURE = {"mocap": "reference_rms_predicted", "seats": "articulation_2sigma"}
+#: a second held-out figure reported beside it, where there is one
+SECOND = {"seats": "length_error_rms"}
+
+
+def held_out(summary: Path, which: str, key: str) -> float:
+    """A held-out figure [um] (``key``; for motion capture the RMS 3D error with the training fit's frames and
+    markers), ``before`` (the nominal) or ``after`` (the model fitted)."""
     rows = json.loads(summary.read_text())["validation_holdout"]
-    return float(next(r for r in rows if r["key"] == "reference_rms_predicted")[which])
+    return float(next(r for r in rows if r["key"] == key)[which])
 
 
-def study(name: str, robots: Path, out: Path, seed: int, postures: int, stiffness: float) -> dict:
+def study(name: str, robots: Path, out: Path, a: argparse.Namespace) -> dict:
     """One chain: simulate, calibrate with the defaults, read the model back, the truth's floor."""
     rel, tip, base = CHAINS[name]
     d = out / name
     d.mkdir(parents=True, exist_ok=True)
     urdf = robots / rel
     campaign = d / "campaign.toml"
-    campaign.write_text(CAMPAIGN.format(name=name, seed=seed, urdf=urdf, tip=tip, postures=postures,
-                                        stiffness=stiffness, base=f'base_frame = "{base}"\n' if base else ""))
+    task = TASKS[a.campaign].format(postures=a.postures, bar_mm=a.bar_mm, positions=a.positions,
+                                    articulations=a.articulations)
+    campaign.write_text(CAMPAIGN.format(name=name, seed=a.seed, urdf=urdf, tip=tip, stiffness=a.stiffness, task=task,
+                                        base=f'base_frame = "{base}"\n' if base else ""))
     res: dict = {"chain": name, "urdf": rel, "tip": tip, "base": base}
-    code, _ = command(["simulate", campaign, "-o", d / "sim"], d / "simulate.log")
+    code, dt = command(["simulate", campaign, "-o", d / "sim"], d / "simulate.log")
+    res["simulate_s"] = round(dt, 1)
     if code:
         return {**res, "simulate_exit": code}
     points = d / "sim" / "points.csv"
+    inputs = [points] + ([d / "sim" / "artefacts.toml"] if a.campaign == "seats" else [])
+    keys = [FIGURE[a.campaign]] + ([SECOND[a.campaign]] if a.campaign in SECOND else [])
     base_args = ["--base-frame", base] if base else []
-    code, dt = command(["calibrate", points, "--arm", urdf, "--tip-frame", tip, *base_args, "--holdout", "0.3",
+    code, dt = command(["calibrate", *inputs, "--arm", urdf, "--tip-frame", tip, *base_args, "--holdout", "0.3",
                         "-o", d / "cal"], d / "calibrate.log")
     res.update(calibrate_exit=code, calibrate_s=round(dt, 1))
     if code == 0:
         s = d / "cal" / "summary.json"
-        res.update(nominal_um=held_out_rms(s, "before"), default_um=held_out_rms(s, "after"),
-                   fixed=len(json.loads(s.read_text())["fixed"]))
+        for n, key in enumerate(keys):
+            tag = "" if n == 0 else "_2"
+            res.update({f"nominal{tag}_um": held_out(s, "before", key), f"default{tag}_um": held_out(s, "after", key)})
+        res["fixed"] = len(json.loads(s.read_text())["fixed"])
         model = next((d / "cal").glob("*-calibrated.toml"))
-        res["tip_exit"], _ = command(["tip", points, "--arm", model, "--reference-frame", "-o", d / "tips.csv"],
-                                     d / "tip.log")
+        ref = ["--reference-frame"] if a.campaign == "mocap" else []
+        res["tip_exit"], _ = command(["tip", points, "--arm", model, *ref, "-o", d / "tips.csv"], d / "tip.log")
     truth = simulate(load_campaign(campaign)).truth
     (d / "truth.toml").write_text(format_model(truth["description"], truth["model"].effects, truth["p"]))
-    code, _ = command(["calibrate", points, "--arm", d / "truth.toml", "--holdout", "0.3", "--hold", "*",
+    code, _ = command(["calibrate", *inputs, "--arm", d / "truth.toml", "--holdout", "0.3", "--hold", "*",
                        "-o", d / "floor"], d / "floor.log")
     res["floor_exit"] = code
     if code == 0:
-        res["truth_um"] = held_out_rms(d / "floor" / "summary.json", "before")
+        for n, key in enumerate(keys):
+            res["truth_um" if n == 0 else "truth_2_um"] = held_out(d / "floor" / "summary.json", "before", key)
     return res
 
 
 def table(results: list) -> str:
-    """The Markdown table of the results."""
-    lines = ["| chain | calibrate exit | time [s] | nominal [um] | default [um] | truth [um] | default / truth |",
-             "|---|---:|---:|---:|---:|---:|---:|"]
+    """The Markdown table of the results (seats: the length test's held-out RMS beside the articulation's 2 s)."""
+    second = any("default_2_um" in r for r in results)
+    head = "| chain | calibrate exit | time [s] | nominal [um] | default [um] | truth [um] | default / truth |"
+    lines = [head + (" length RMS: nominal / default / truth [um] |" if second else ""),
+             "|---|---:|---:|---:|---:|---:|---:|" + ("---:|" if second else "")]
     for r in results:
         um = [f"{r[k]:.0f}" if k in r else "-" for k in ("nominal_um", "default_um", "truth_um")]
         ratio = f"{r['default_um'] / r['truth_um']:.2f}" if "default_um" in r and "truth_um" in r else "-"
-        lines.append(f"| {r['chain']} | {r.get('calibrate_exit', r.get('simulate_exit'))} | "
-                     f"{r.get('calibrate_s', '-')} | {' | '.join(um)} | {ratio} |")
+        status = r["calibrate_exit"] if "calibrate_exit" in r else f"simulate {r.get('simulate_exit')}"
+        extra = " / ".join(f"{r[k]:.0f}" if k in r else "-" for k in ("nominal_2_um", "default_2_um", "truth_2_um"))
+        lines.append(f"| {r['chain']} | {status} | {r.get('calibrate_s', '-')} | {' | '.join(um)} | {ratio} |"
+                     + (f" {extra} |" if second else ""))
     return "\n".join(lines) + "\n"
 
 
@@ -167,6 +202,11 @@ def main_study(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--postures", type=int, default=50)
     ap.add_argument("--stiffness", type=float, default=20000.0, help="joint stiffness of the truth [N m/rad]")
+    ap.add_argument("--campaign", choices=sorted(TASKS), default="mocap",
+                    help="motion capture (one marker, unknown frame), or seat pairs a bar apart (docs/robots.md)")
+    ap.add_argument("--bar-mm", type=float, default=100.0, help="seats: the bar's length [mm]")
+    ap.add_argument("--positions", type=int, default=12, help="seats: the bar's positions")
+    ap.add_argument("--articulations", type=int, default=6, help="seats: articulations a seat and position")
     a = ap.parse_args(argv)
     unknown = [c for c in a.chains if c not in CHAINS]
     if unknown:
@@ -175,7 +215,7 @@ def main_study(argv=None) -> int:
     a.output.mkdir(parents=True, exist_ok=True)
     results = []
     for name in a.chains or list(CHAINS):
-        results.append(study(name, robots, a.output, a.seed, a.postures, a.stiffness))
+        results.append(study(name, robots, a.output, a))
         print(json.dumps(results[-1]), flush=True)
     (a.output / "results.json").write_text(json.dumps(results, indent=1) + "\n")
     (a.output / "table.md").write_text(table(results))

@@ -289,7 +289,7 @@ def test_calibrate_writes_a_model_that_tip_and_calibrate_read(tmp_path, capsys):
     pts = rp(sim / "points.csv", 7)
     own = ArmModel(load_model(NOMINAL).desc, arm.effects)
     p = own.spec.vector({r["name"]: r["value"] for r in s["parameters"]})
-    aux = A(arm.desc, arm.effects).aux(pts)
+    aux = A(arm.desc, arm.effects, arm.values).aux(pts)      # the torques at its sagged equilibrium
     expected = own.ball_centres(pts.q, pts.wrench, p, aux) * 1e3
     assert_close(np.column_stack([got["x_mm"], got["y_mm"], got["z_mm"]]), expected, atol=1e-6)
     # calibrate given the model starts from its effects (the file's values), and finds them again

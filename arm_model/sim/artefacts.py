@@ -192,39 +192,125 @@ def _reachable(truth, parts: list, rng) -> np.ndarray:
     return ok
 
 
+#: rounds a task's default region is tried before the positions it cannot hold are drawn from the workspace
+REGION_ROUNDS = 40
+#: rounds in a row that place nothing after which a default region is given up for the workspace (and the
+#: workspace itself)
+REGION_PATIENCE = 10
+#: postures sampled for a chain's workspace (:func:`_workspace`)
+WORKSPACE_SAMPLES = 4000
+
+
 def _place(plan, rng, o, n, shoulder, spread, make, truth, max_rounds: int = 40):
-    """Place n positions (see :func:`_candidate`) whose points ``make(k, c, u, part)`` draws into a
-    part plan; a position whose points the true arm cannot reach is drawn again."""
+    """Place n positions whose points ``make(k, c, u, axis, part)`` draws into a part plan (``c`` the centre,
+    ``u`` the bar's direction, ``axis`` the seats' axis, out of the seat); a position whose points the true arm
+    cannot reach is drawn again. Inside the task's region (:func:`_candidate`, seats facing up); when the task
+    gives no region (``o["region_given"]`` false), a position the default region cannot hold after
+    :data:`REGION_ROUNDS` rounds (or :data:`REGION_PATIENCE` rounds in a row placing nothing) is drawn from the
+    chain's own workspace instead (:func:`_workspace_candidate`),
+    so that any chain, whatever its size and wherever its base, gets its positions."""
     chosen: list = [None] * n
-    for _ in range(max_rounds):
-        todo = [k for k in range(n) if chosen[k] is None]
-        if not todo:
-            break
-        cands = []
-        for k in todo:
-            for _ in range(1000):
-                cand = _candidate(rng, o, k, n, shoulder, spread)
-                if cand is not None:
-                    break
-            else:
-                continue
-            part = Plan()
-            info = make(k, cand[0], cand[1], part)
-            cands.append((k, part, info))
-        ok = _reachable(truth, [c[1] for c in cands], rng) if truth is not None and cands else \
-            np.ones(len(cands), bool)
-        for (k, part, info), good in zip(cands, ok, strict=True):
-            if good:
-                chosen[k] = (part, info)
+    up = np.array([0.0, 0.0, 1.0])
+    fallback = truth is not None and not o.get("region_given", True)
+    rounds = REGION_ROUNDS if fallback else max_rounds
+
+    def in_region(k):
+        cand = _first(lambda: _candidate(rng, o, k, n, shoulder, spread))
+        return None if cand is None else (cand[0], cand[1], up)
+
+    _fill(chosen, rng, rounds, truth, make, in_region, REGION_PATIENCE if fallback else None)
+    if fallback and any(c is None for c in chosen):
+        ws = _workspace(truth, rng)
+        if ws is not None:
+            _fill(chosen, rng, max_rounds, truth, make, lambda k: _workspace_candidate(rng, ws, k, n, spread),
+                  REGION_PATIENCE)
     missing = [k + 1 for k in range(n) if chosen[k] is None]
     if missing:
-        raise ValueError(f"could not place position(s) {missing} of {n} inside the region (radius_mm "
-                         f"{[round(v * 1e3) for v in o['radius']]}, height_mm "
-                         f"{[round(v * 1e3) for v in o['height']]}) within reach of the arm "
-                         f"(reach_mm = {o['reach'] * 1e3:g} from the shoulder); widen the region")
+        where = (f"inside the region (radius_mm {[round(v * 1e3) for v in o['radius']]}, height_mm "
+                 f"{[round(v * 1e3) for v in o['height']]}) within reach of the arm (reach_mm = {o['reach'] * 1e3:g} "
+                 "from the shoulder); widen the region, or give none: the chain's own workspace is then used"
+                 if not fallback else "in the default region or anywhere in the chain's workspace with the "
+                 "stylus in its cone about the seats' axis; a shorter bar, fewer articulations or a wider "
+                 f"'stylus_cone' (a chain of {truth.nominal.n_joints} moving joints: with fewer than six, a seat's "
+                 "articulations may have no room to turn the stylus about the ball)")
+        raise ValueError(f"could not place position(s) {missing} of {n} {where}")
     for part, _ in chosen:
         plan.extend(part)
     return [info for _, info in chosen]
+
+
+def _first(draw, tries: int = 1000):
+    """The first of ``tries`` draws that is not None (None if all are)."""
+    for _ in range(tries):
+        cand = draw()
+        if cand is not None:
+            return cand
+    return None
+
+
+def _fill(chosen: list, rng, rounds: int, truth, make, draw, patience: int | None = None) -> None:
+    """Fill the empty entries ``k`` of ``chosen`` with (part plan, info) of a candidate ``draw(k)`` -> (centre,
+    direction, seat axis) or None, whose points the true arm reaches (:func:`_reachable`), in up to ``rounds``
+    rounds: fewer when a round draws no candidate at all, or after ``patience`` rounds in a row that place
+    nothing (None: no such limit)."""
+    idle = 0
+    for _ in range(rounds):
+        todo = [k for k in range(len(chosen)) if chosen[k] is None]
+        if not todo or (patience is not None and idle >= patience):
+            return
+        cands = []
+        for k in todo:
+            cand = draw(k)
+            if cand is None:
+                continue
+            part = Plan()
+            info = make(k, cand[0], cand[1], cand[2], part)
+            cands.append((k, part, info))
+        if not cands:                   # nothing to draw from: more rounds would not change that
+            return
+        ok = _reachable(truth, [c[1] for c in cands], rng) if truth is not None else np.ones(len(cands), bool)
+        for (k, part, info), good in zip(cands, ok, strict=True):
+            if good:
+                chosen[k] = (part, info)
+        idle = 0 if ok.any() else idle + 1
+
+
+def _workspace(truth, rng, n: int = WORKSPACE_SAMPLES):
+    """The chain's own workspace: (tip positions (M, 3) [m], stylus directions (M, 3)) of ``n`` random postures
+    within the joint limits (the true arm, no contact), stylus = probe z (flange towards ball); None if the
+    chain has no posture."""
+    from .ik import random_q
+
+    q = random_q(truth.nominal, n, rng)
+    ball, z, _ = truth.pose(q, truth.geometry(np.full(n, 20.0)))
+    good = np.all(np.isfinite(ball), axis=1) & np.all(np.isfinite(z), axis=1)
+    return (ball[good], z[good]) if good.any() else None
+
+
+def _workspace_candidate(rng, ws, k: int, n: int, spread):
+    """A position for stratum k of n from the workspace ``ws`` (:func:`_workspace`): a posture's tip, stratified
+    by azimuth about the workspace's centroid, whose stylus gives the seats' axis (against it); for a bar of
+    half length ``spread``, its other end towards another posture's tip at about the bar's length whose stylus
+    lies within 45 deg of the first's (so one articulation cone serves both seats). Returns (centre, unit
+    direction, seat axis) or None."""
+    ball, z = ws
+    rel = ball - ball.mean(axis=0)
+    az = np.arctan2(rel[:, 1], rel[:, 0])
+    lo, hi = -np.pi + 2 * np.pi * k / n, -np.pi + 2 * np.pi * (k + 1) / n
+    stratum = np.flatnonzero((az >= lo) & (az < hi))
+    i = int(rng.choice(stratum if stratum.size else np.arange(len(ball))))
+    a, axis = ball[i], -z[i]
+    if spread is None:
+        u = rng.normal(size=3)
+        return a, u / np.linalg.norm(u), axis
+    d = np.linalg.norm(ball - a, axis=1)
+    alike = np.flatnonzero((z @ z[i] >= np.cos(np.radians(45.0))) & (d > 0))
+    if not alike.size:
+        return None
+    near = alike[np.argsort(np.abs(d[alike] - 2 * spread))[:8]]      # a few of the closest to the length
+    j = int(rng.choice(near))
+    u = (ball[j] - a) / d[j]
+    return a + spread * u, u, axis
 
 
 # ---------------------------------------------------------------------------------------------
@@ -267,12 +353,13 @@ def _ring(plan, k, t: Task, rng, ball_d):
                          stylus_cone=o["stylus_tilt"])
 
 
-def _sphere_points(plan, mid, fid, k, t, rng, centre, diameter, n, polar_max, ball_d):
-    """The pole, then points uniform on the cap of ``polar_max`` about the base z axis."""
-    up = np.array([0.0, 0.0, 1.0])
+def _sphere_points(plan, mid, fid, k, t, rng, centre, diameter, n, polar_max, ball_d, pole=None):
+    """The pole (default the base z axis), then points uniform on the cap of ``polar_max`` about it."""
+    up = np.array([0.0, 0.0, 1.0]) if pole is None else np.asarray(pole, dtype=float)
     r = ball_centre_radius("sphere", diameter, ball_d)
     normals = np.vstack([up[None, :], cone_directions(rng, up, polar_max, n - 1)])[:n]
-    redraw = {"kind": "sphere", "centre": np.asarray(centre, float), "radius": r, "polar_max": polar_max}
+    redraw = {"kind": "sphere", "centre": np.asarray(centre, float), "radius": r, "polar_max": polar_max,
+              "pole": up}
     for nrm in normals:
         stylus = cone_directions(rng, -nrm, t.opts["stylus_cone"], 1)[0]
         plan.add(mid, fid, k, centre + r * nrm, nrm, np.nan, ball_d / 2, stylus, stylus_axis=-nrm,
@@ -330,18 +417,17 @@ def _ballbar(plan, k, t, rng, ball_d, desc, truth):
     else:
         plan.features += [{"id": f, "kind": "seat"} for f in (fa, fb)]
     plan.distances.append(((fa, fb), o["length"], o["u_length"], true_len))
-    up = np.array([0.0, 0.0, 1.0])
 
-    def make(m, c, u, part):
+    def make(m, c, u, axis, part):
         mid = f"{t.id}-pos-{m + 1:02d}"
         a, b = c - true_len / 2 * u, c + true_len / 2 * u
         for fid, centre in ((fa, a), (fb, b)):
             if o["ends"] == "sphere":
                 _sphere_points(part, mid, fid, k, t, rng, centre, o["sphere_diameter"], o["points_per_sphere"],
-                               o["polar_max"], ball_d)
+                               o["polar_max"], ball_d, axis)
             else:
-                _seat_points(part, mid, fid, k, t, rng, centre, up, o["articulations"])
-        return {"measurement": mid, "A_m": a.tolist(), "B_m": b.tolist()}
+                _seat_points(part, mid, fid, k, t, rng, centre, axis, o["articulations"])
+        return {"measurement": mid, "A_m": a.tolist(), "B_m": b.tolist(), "axis": axis.tolist()}
 
     placed = _place(plan, rng, o, t.measurements, shoulder(desc), true_len / 2, make, truth)
     plan.placements[t.id] = {"kind": "ballbar", "ends": o["ends"], "true_length_m": true_len,
@@ -364,14 +450,13 @@ def _tracker(plan, k, t, rng, ball_d, desc, truth):
     T = _instrument_frame(rng, o["distance"])
     plan.T_ref_base[t.id] = T
     plan.ref_noise[t.id] = o["noise"]
-    up = np.array([0.0, 0.0, 1.0])
 
-    def make(m, c, u, part):
+    def make(m, c, u, axis, part):
         fid = f"{t.id}-{m + 1:02d}"
         for rep in range(t.measurements):
             mid = fid if t.measurements == 1 else f"{fid}-{rep + 1:02d}"
-            _seat_points(part, mid, fid, k, t, rng, c, up, o["articulations"], reference=True, frame=t.id)
-        return {"feature": fid, "position_m": c.tolist()}
+            _seat_points(part, mid, fid, k, t, rng, c, axis, o["articulations"], reference=True, frame=t.id)
+        return {"feature": fid, "position_m": c.tolist(), "axis": axis.tolist()}
 
     placed = _place(plan, rng, o, o["nests"], shoulder(desc), None, make, truth)
     plan.features += [{"id": p["feature"], "kind": "seat"} for p in placed]
@@ -447,7 +532,7 @@ def _redraw_row(plan: Plan, i: int, rng) -> None:
     place), with a new stylus direction from its cone."""
     rd = plan.redraw[i]
     if rd["kind"] == "sphere":
-        nrm = cone_directions(rng, np.array([0.0, 0.0, 1.0]), rd["polar_max"], 1)[0]
+        nrm = cone_directions(rng, rd["pole"], rd["polar_max"], 1)[0]
         plan.position[i] = rd["centre"] + rd["radius"] * nrm
         plan.normal[i] = nrm
         plan.stylus_axis[i] = -nrm

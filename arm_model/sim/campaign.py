@@ -602,6 +602,8 @@ def _task(ctx, t, i: int, ids: dict[str, str], sensor: str) -> Task:
     if kind == "ring" and any(k.startswith("stylus_cone") for k in t):
         raise ctx.error("a ring's stylus is parallel to its axis: tilt it with 'stylus_tilt_<angle unit>'",
                         tbl, next(k for k in t if k.startswith("stylus_cone")))
+    if kind in ("ballbar", "tracker"):      # without a region of its own, the chain's workspace holds what it cannot
+        o["region_given"] = any(re.fullmatch(r"(radius|height|reach)_.+", str(k)) for k in t)
     if kind == "ballbar":
         n_meas = o["positions"]
     if kind == "mocap":
