@@ -57,7 +57,7 @@ from .outliers import drop_design_outliers, drop_test_outliers
 from .result import LoopResult, Stage
 from .settings import LEGACY_RESOLUTION, NOISE_OFF, LoopSettings
 from .state import LoopState, Screening, log
-from .verdict import ADDED, verdict_text
+from .verdict import ADDED, residual_over_stated, verdict_text
 
 __all__ = ["Campaign", "Stop", "prepare", "screen", "test", "physics", "synthesise", "decide", "fit_stage",
            "outer_test_worse", "add", "run_stage", "run", "report"]
@@ -419,7 +419,7 @@ def report(state: LoopState) -> LoopResult:
     built = [{"name": c.name, "family": c.family, "joint": c.joint, "effect": c.effect.describe(),
               "added": fate.get(c.name) == ADDED, "why_not_added": None if fate.get(c.name) == ADDED else
               fate.get(c.name, "not screened")} for c in state.synthesised]
-    verdict = verdict_text(state.stages, significant, state.stop, s, built, state.model, state.vetoed)
+    verdict = verdict_text(state.stages, significant, state.stop, s, built, state.model, state.vetoed, state.stated)
     say(verdict)
     data = state.data if s.test_in_model else state.data.select(~state.test_rows)
     say("calibrating the final model on every point (" + ("design and test" if s.test_in_model else
@@ -433,4 +433,5 @@ def report(state: LoopState) -> LoopResult:
     return LoopResult(state.stages, state.last_tests, state.last_cv, state.stop, structure, significant, verdict,
                       state.candidates + state.synthesised, state.skipped, state.design.measurements(),
                       state.test.measurements(), s, state.desc, plots, state.dropped, state.test_by, state.power,
-                      model_fit, built, state.vetoed, state.data)
+                      model_fit, built, state.vetoed, state.data,
+                      residual_over_stated(state.result, state.stated)[0])
