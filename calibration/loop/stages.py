@@ -41,7 +41,7 @@ from ..diagnostics import (
 )
 from ..options import FitOptions
 from ..synthesis import RESIDUAL, synthesise as build_effects
-from .crossval import fold_fit
+from .crossval import fold_fit, warm_start
 from .decide import (
     Decision,
     candidate_priors,
@@ -218,7 +218,7 @@ def _current_folds(state: LoopState) -> None:
     """The current model's fold fits, computed if not at hand (``state.base_folds``)."""
     if state.base_folds is None:
         state.say(f"  cross-validating the current model ({state.folds.k} folds by {state.folds.by})")
-        state.base_folds = fold_fit(state.model, state.design, state.folds, state.fit)
+        state.base_folds = fold_fit(state.model, state.design, state.folds, state.fit, start=warm_start(state.result))
 
 
 def physics(state: LoopState, scr: Screening) -> list:

@@ -36,8 +36,8 @@ def residual_over_stated(result, stated=None) -> tuple[float, str]:
     ratios = [v["estimate_um"] / (stated.sigma_of(v["group"]) * 1e6) for v in groups]
     red = [v["redundancy"] for v in groups]
     pooled = math.sqrt(sum(r * x * x for r, x in zip(red, ratios, strict=True)) / sum(red))
-    words = ", ".join(f"{v['group']} {v['estimate_um']:.3g} um against the stated {stated.sigma_of(v['group']) * 1e6:.3g}"
-                      for v in groups)
+    words = ", ".join(f"{v['group']} {v['estimate_um']:.3g} um against the stated "
+                      f"{stated.sigma_of(v['group']) * 1e6:.3g}" for v in groups)
     return pooled, words
 
 
@@ -67,9 +67,10 @@ def verdict_text(stages, significant, stop, settings, built=(), model: ArmModel 
         out += (". Built from the residual, not supported, not added: "
                 + "; ".join(f"{b['name']} ({b['why_not_added']})" for b in not_added))
     if not significant and s0 > S0_LIMIT:
-        return out + (f". The final residual is {s0:.3g} times the stated uncertainties" + (f" ({words})" if words else "")
-                      + ": it is not noise at the stated level, but no tested regressor family explains it (wrong "
-                      "stated uncertainties, or structure beyond the tests). No fix is claimed.")
+        return out + (f". The final residual is {s0:.3g} times the stated uncertainties"
+                      + (f" ({words})" if words else "") + ": it is not noise at the stated level, but no tested "
+                      "regressor family explains it (wrong stated uncertainties, or structure beyond the tests). No "
+                      "fix is claimed.")
     if not significant:
         return out + (". No structured residual remains (no regressor family is significant after Bonferroni's "
                       "correction).")
