@@ -13,6 +13,7 @@ nuisance unknowns); the effects added, those built and not added, the structure 
 
     python scripts/hidden_effects_study.py                       # every case, loop seeds 0-2 (about 30 min)
     python scripts/hidden_effects_study.py --cases harmonic4 --seeds 0 -o out/hidden
+    python scripts/hidden_effects_study.py --seeds 0 --campaign-seeds 4,5     # other draws of every campaign
 
 Cases (the simulator's truth unless said; 2 um probing noise on the measuring arm):
 
@@ -117,56 +118,56 @@ def _from_sim(camp_dict: dict, what: str, strip=()) -> Case:
                 sim.reference_points, what=what, truth_points=sim.points)
 
 
-def case_harmonic4() -> Case:
+def case_harmonic4(seed: int = 3) -> Case:
     return _from_sim(_arm_campaign({"truth": {"harmonics": [{"joint": "j1", "harmonic": 4, "amplitude_deg": 0.004,
-                                                              "phase_deg": 20.0}]}}),
+                                                              "phase_deg": 20.0}]}}, seed),
                      "4th harmonic of j1's encoder, 0.004 deg")
 
 
-def case_no_thermometer() -> Case:
+def case_no_thermometer(seed: int = 3) -> Case:
     c = _from_sim(_arm_campaign({"truth": {"thermal": {"alpha_per_K": [2.3e-5]}}, "environment": {"drift_C_per_h": 8.0},
-                                 "operator": {"measurement_gap_s": 300.0}}),
+                                 "operator": {"measurement_gap_s": 300.0}}, seed),
                   "links grow 23 ppm/K, 8 K/h drift, no temperature column", strip=("temperature",))
     return c
 
 
-def case_base_tilt() -> Case:
+def case_base_tilt(seed: int = 3) -> Case:
     return _from_sim(_arm_campaign({"truth": {"lateral_compliance": {"joints": ["j1"], "stiffness_x_Nm_per_rad": 1e6,
-                                                                     "stiffness_y_Nm_per_rad": 1e6}}}),
+                                                                     "stiffness_y_Nm_per_rad": 1e6}}}, seed),
                      "base tilts under the arm's moment, 1e6 N m/rad isotropic")
 
 
-def case_coupling() -> Case:
+def case_coupling(seed: int = 3) -> Case:
     nominal = load_description(ROOT / "urdf/aacmm7.dh.toml")
     truth = ArmModel(nominal, (LinearCoupling(joints=(5,), source=4),))
-    p = random_truth(truth, np.random.default_rng(3), length=30e-6, angle=5e-5, probe=30e-6)
+    p = random_truth(truth, np.random.default_rng(seed), length=30e-6, angle=5e-5, probe=30e-6)
     p[truth.base_size:] = 2e-4
     spec = SynthSpec(ballbars=10, ballbar_points=4, seats=4, articulations=8, spheres=5, sphere_points=8,
                      noise=NOISE_UM * 1e-6)
-    c = make_campaign(truth, spec, seed=3, p_true=p)
+    c = make_campaign(truth, spec, seed=seed, p_true=p)
     return Case(c.points, c.artefacts, nominal, truth, p, what="j6 reading += 2e-4 q5 (linear coupling)")
 
 
-def case_two_bars() -> Case:
+def case_two_bars(seed: int = 3) -> Case:
     tasks = [{"kind": "ballbar", "id": "bar600", "positions": 6, "length_mm": 600.0, "points_per_sphere": 4},
              {"kind": "ballbar", "id": "bar400", "positions": 6, "length_mm": 400.0, "true_length_mm": 400.04,
               "points_per_sphere": 4},
              *ARM_TASKS[1:]]
-    return _from_sim(_arm_campaign({}, tasks=tasks), "400 mm bar 40 um longer than its certificate")
+    return _from_sim(_arm_campaign({}, seed, tasks=tasks), "400 mm bar 40 um longer than its certificate")
 
 
-def case_bent_stylus() -> Case:
+def case_bent_stylus(seed: int = 3) -> Case:
     th = np.radians(5.0)
     cb, ca = 0.0142, 0.0000876                      # the declared bending and axial compliance [mm/N]
     pc = {"bending_x_mm_per_N": cb * np.cos(th) ** 2 + ca * np.sin(th) ** 2, "bending_y_mm_per_N": cb,
           "axial_mm_per_N": cb * np.sin(th) ** 2 + ca * np.cos(th) ** 2,
           "coupling_xz_mm_per_N": (cb - ca) * np.sin(th) * np.cos(th)}
-    return _from_sim(_arm_campaign({"truth": {"probe_compliance": pc}}, force=4.0),
+    return _from_sim(_arm_campaign({"truth": {"probe_compliance": pc}}, seed, force=4.0),
                      "stylus bent 5 deg: compliance axes turned (xz 1.22 um/N), 4 N")
 
 
-def case_tracker_scale() -> Case:
-    d = {"seed": 3, "arm": str(PANDA), "tip_frame": "panda_link8", "sensor": "none",
+def case_tracker_scale(seed: int = 3) -> Case:
+    d = {"seed": seed, "arm": str(PANDA), "tip_frame": "panda_link8", "sensor": "none",
          "truth": {"length_error_mm": 0.5, "angle_error_deg": 0.1,
                    "joint_compliance": {"stiffness_Nm_per_rad": 12000.0, "gravity": True, "contact": False}},
          "task": [{"kind": "mocap", "postures": 60, "markers": 1, "sessions": 3, "noise_mm": 0.1}]}
@@ -221,18 +222,18 @@ def judge(fig: dict, loop) -> dict:
     return {"claims_clean": claims_clean, "honest": honest}
 
 
-def run_case(name: str, seeds, out: Path | None) -> list[dict]:
+def run_case(name: str, seeds, out: Path | None, campaign_seed: int = 3) -> list[dict]:
     t0 = time.time()
-    case = CASES[name]()
-    print(f"[{name}] {case.what}: {len(case.points.measurement)} points, simulated in {time.time() - t0:.0f} s",
-          flush=True)
+    case = CASES[name](campaign_seed)
+    print(f"[{name}, campaign seed {campaign_seed}] {case.what}: {len(case.points.measurement)} points, simulated in "
+          f"{time.time() - t0:.0f} s", flush=True)
     rows = []
     for seed in seeds:
         t1 = time.time()
         loop = close_loop(case.points, case.artefacts, case.desc, reference=case.reference, weights=case.weights,
                           holdout=case.holdout, seed=seed, progress=lambda s: None, **cli_defaults(case.desc))
         fig = figures(case, loop)
-        row = {"case": name, "what": case.what, "seed": seed, **fig,
+        row = {"case": name, "what": case.what, "campaign_seed": campaign_seed, "seed": seed, **fig,
                "added": [c.name + ("*" if c.origin == "residual" else "") for c in loop.added],
                "built_not_added": [b["name"] for b in loop.built if not b.get("added")],
                "vetoed": [v["name"] for v in loop.vetoed],
@@ -245,18 +246,19 @@ def run_case(name: str, seeds, out: Path | None) -> list[dict]:
               f"({row['seconds']:.0f} s)", flush=True)
         if out is not None:
             out.mkdir(parents=True, exist_ok=True)
-            (out / f"{name}-seed{seed}.json").write_text(json.dumps(row, indent=1, default=str))
+            (out / f"{name}-c{campaign_seed}-seed{seed}.json").write_text(json.dumps(row, indent=1, default=str))
     return rows
 
 
 def table(rows: list[dict]) -> str:
-    lines = ["| case | hidden effect | held-out RMS [um]: nominal / calibrated / loop / truth | added (* built) | "
-             "built, not added | structure left | seeds agree | honest |", "|---|---|---|---|---|---|---|---|"]
-    for name in dict.fromkeys(r["case"] for r in rows):
-        rs = [r for r in rows if r["case"] == name]
+    lines = ["| case (campaign seed) | hidden effect | held-out RMS [um]: nominal / calibrated / loop / truth | "
+             "added (* built) | built, not added | structure left | seeds agree | honest |",
+             "|---|---|---|---|---|---|---|---|"]
+    for name, cs in dict.fromkeys((r["case"], r["campaign_seed"]) for r in rows):
+        rs = [r for r in rows if (r["case"], r["campaign_seed"]) == (name, cs)]
         r = rs[0]
         agree = all((x["added"], x["remaining"]) == (r["added"], r["remaining"]) for x in rs)
-        lines.append(f"| {name} | {r['what']} | {r['nominal']:.2f} / {r['calibrated']:.2f} / {r['loop']:.2f} / "
+        lines.append(f"| {name} ({cs}) | {r['what']} | {r['nominal']:.2f} / {r['calibrated']:.2f} / {r['loop']:.2f} / "
                      f"{r['floor']:.2f} | {', '.join(r['added']) or '-'} | {', '.join(r['built_not_added']) or '-'} | "
                      f"{', '.join(r['remaining']) or '-'} | {'yes' if agree else 'no'} ({len(rs)}) | "
                      f"{'yes' if all(x['honest'] for x in rs) else 'no'} |")
@@ -267,12 +269,15 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--cases", default=",".join(CASES), help="comma-separated: " + ", ".join(CASES))
     ap.add_argument("--seeds", default="0,1,2", help="the loop's seeds (default 0,1,2)")
+    ap.add_argument("--campaign-seeds", default="3", help="the campaigns' seeds (default 3; each a new draw of the "
+                    "errors, poses and noise)")
     ap.add_argument("-o", "--output", type=Path, default=None, help="folder for one JSON a run")
     a = ap.parse_args(argv)
     seeds = [int(s) for s in a.seeds.split(",")]
     rows = []
-    for name in a.cases.split(","):
-        rows += run_case(name.strip(), seeds, a.output)
+    for cs in (int(s) for s in a.campaign_seeds.split(",")):
+        for name in a.cases.split(","):
+            rows += run_case(name.strip(), seeds, a.output, cs)
     print(table(rows))
     return 0
 
