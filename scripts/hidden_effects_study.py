@@ -11,7 +11,7 @@ nuisance unknowns); the effects added, those built and not added, the structure 
 "honest" checks two things: no "No structured residual remains" while the loop's held-out RMS stays above
 1.5 x the truth's floor, and no effect kept when the held-out RMS went up.
 
-    python scripts/hidden_effects_study.py                       # every case, loop seeds 0-2 (about 30 min)
+    python scripts/hidden_effects_study.py                       # every case, loop seeds 0-2 (5 min on 2 loaded cores)
     python scripts/hidden_effects_study.py --cases harmonic4 --seeds 0 -o out/hidden
     python scripts/hidden_effects_study.py --seeds 0 --campaign-seeds 4,5     # other draws of every campaign
 
