@@ -191,20 +191,51 @@ class JointGain(Effect):
     and the offset (or the first harmonic of an eccentricity) are nearly the same signature; the fit's
     covariance says how well the data tell them apart. A gain the data resolve only to worse than
     ``--min-resolution`` of :attr:`plausible_size` is held at its value (e.g. the last joint's, when the
-    ball is near that joint's axis), as the description's own parameters are."""
+    ball is near that joint's axis), as the description's own parameters are.
+
+    ``source`` (0-based; None: the joint's own reading): the reading of another joint instead, ``q_i += g
+    q_enc_source``, a linear cross-coupling (the coupling ratio of a differential wrist, a cable or a belt
+    wound by another joint: parameter ``jN.gain_by_jK``), the linear counterpart of
+    :class:`JointHarmonics`' ``source``."""
+    source: int | None = None
     key: str = field(default="joint_gain", init=False, repr=False)
     acts_on_readings: ClassVar[bool] = True
     plausible_size: ClassVar[float] = 1e-2     # a 1 % scale error of an encoder is already large
     held_when_weak: ClassVar[bool] = True
 
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.source is not None:
+            if not isinstance(self.source, numbers.Integral) or isinstance(self.source, bool) or self.source < 0:
+                raise TypeError(f"joint_gain: source must be a 0-based joint index or None, got {self.source!r}")
+            object.__setattr__(self, "source", int(self.source))
+
+    def _source(self, desc: ArmDescription, i: int) -> int:
+        if self.source is not None and self.source >= desc.n_joints:
+            raise ValueError(f"the effect '{self.key}' takes joint index {self.source} (0-based) as its source, but "
+                             f"the arm has {desc.n_joints} joints")
+        return i if self.source is None else self.source
+
     def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
-        return [(f"{desc.joint_names[i]}.gain", "1") for i in self.joint_indices(desc)]
+        out = []
+        for i in self.joint_indices(desc):
+            k = self._source(desc, i)
+            out.append((f"{desc.joint_names[i]}.gain" + ("" if k == i else f"_by_{desc.joint_names[k]}"), "1"))
+        return out
 
     def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
+        q0 = list(inputs.q)
         q = list(inputs.q)
         for k, i in enumerate(self.joint_indices(desc)):
-            q[i] = q[i] + params[k] * inputs.q[i]
+            q[i] = q[i] + params[k] * q0[self._source(desc, i)]
         inputs.q = q
+
+    def describe(self, desc: ArmDescription | None = None) -> str:
+        base = super().describe(desc)
+        if self.source is None:
+            return base
+        src = f" of {_joint(desc, self.source, 'q')}"
+        return base[:-1] + src + ")" if base.endswith(")") else base + f"({src.strip()})"
 
 
 @dataclass(frozen=True)

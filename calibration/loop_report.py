@@ -114,6 +114,7 @@ def summary_dict(loop: LoopResult, inputs: dict | None = None) -> dict:
         "structure_tests": [{**t.to_dict(), "family": f.name, "description": f.what, "p_value_holm": a}
                             for f, t, a in loop.structure],
         "structure_remains": bool(loop.remaining),
+        "residual_over_stated": loop.residual_over_stated,
         "remaining_structure": [{"family": f.name, "best_regressor": t.best, "p_value_holm": a,
                                  "explained_heldout": t.explained_cv} for f, t, a in loop.remaining],
         "built_from_residual": loop.built,

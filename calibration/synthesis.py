@@ -8,7 +8,10 @@ Family (:func:`calibration.diagnostics.families`) -> candidates (:mod:`arm_model
   angle, harmonics 1..k for k = 1..4 (those already in the model, e.g. an eccentricity's 1 and 2, left
   out); the held-out data choose k (the smallest k within the parsimony margin of the best);
 * ``qK harmonics on jN`` -> ``harmonics jN of qK (h ...)``: the same for joint N's angle error driven by
-  joint K's angle (``JointHarmonics(source=K)``, a cross-coupling such as a cable or a counterbalance);
+  joint K's angle (``JointHarmonics(source=K)``, a cross-coupling such as a cable or a counterbalance), and
+  ``coupling jN by qK``: joint N's angle error linear in joint K's reading (``JointGain(source=K)``, one
+  parameter: the coupling ratio of a differential wrist, a belt; over a joint's full turn a line is a
+  sawtooth the low harmonics cannot follow), both joints revolute;
 * ``temperature`` / ``temperature per link`` -> ``thermal growth per link`` (each link length its own coefficient,
   :class:`~arm_model.effects.ThermalGrowth` ``per_joint``; beside a common coefficient the longest link
   keeps the common one) and ``probe thermal growth`` (:class:`~arm_model.effects.ProbeThermalGrowth`);
@@ -30,6 +33,7 @@ import numpy as np
 from arm_model.effects import (
     ApproachOffset,
     EncoderEccentricity,
+    JointGain,
     JointHarmonics,
     LateralCompliance,
     ProbeCompliance,
@@ -59,6 +63,14 @@ def _harmonics_present(model: ArmModel, j: int, source: int | None = None) -> se
             if j in e.joint_indices(model.desc):
                 out |= set(e.harmonics)
     return out
+
+
+def _coupling_free(model: ArmModel, j: int, k: int) -> bool:
+    """Whether a linear coupling of joint ``j``'s angle error to joint ``k``'s reading can be offered: both joints
+    revolute (an angle in an angle) and no such coupling in the model yet."""
+    rev = model.desc.revolute_columns
+    held = any(isinstance(e, JointGain) and e.source == k and j in e.joint_indices(model.desc) for e in model.effects)
+    return j in rev and k in rev and not held
 
 
 def _harmonic_orders(present: set[int]):
@@ -99,6 +111,8 @@ def synthesise(family_names, model: ArmModel) -> list[Candidate]:
                     "joint_harmonics", jn)
         elif mc and mc.group(2) in names:
             k, j, jn = int(mc.group(1)) - 1, names[mc.group(2)], mc.group(2)
+            if _coupling_free(model, j, k):
+                add(f"coupling {jn} by q{k + 1}", JointGain(joints=(j,), source=k), "joint_coupling", jn)
             for hs in _harmonic_orders(_harmonics_present(model, j, k)):
                 add(f"harmonics {jn} of q{k + 1} (h {','.join(map(str, hs))})",
                     JointHarmonics(joints=(j,), source=k, harmonics=hs), "joint_harmonics", jn)

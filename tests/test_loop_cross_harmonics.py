@@ -71,17 +71,22 @@ def test_synthesis_of_a_cross_coupling_offers_what_the_model_lacks():
     nominal = load_description(NOMINAL)
     base = ArmModel(nominal)
     names = [c.name for c in synthesise(["q4 harmonics on j2"], base)]
-    assert names == [f"harmonics j2 of q4 (h {h})" for h in ("1", "1,2", "1,2,3", "1,2,3,4")]
-    c = synthesise(["q4 harmonics on j2"], base)[1]
+    assert names == ["coupling j2 by q4"] + [f"harmonics j2 of q4 (h {h})" for h in ("1", "1,2", "1,2,3", "1,2,3,4")]
+    lin = synthesise(["q4 harmonics on j2"], base)[0]       # the linear coupling: j2's error g q4 (a differential)
+    assert (lin.effect.joints, lin.effect.source, lin.family) == ((1,), 3, "joint_coupling")
+    assert lin.param_names(nominal) == ["j2.gain_by_j4"]
+    assert [c.name for c in synthesise(["q4 harmonics on j2"], base.with_effects(lin.effect))][0] == \
+        "harmonics j2 of q4 (h 1)"
+    c = synthesise(["q4 harmonics on j2"], base)[2]
     assert (c.effect.joints, c.effect.source, c.effect.harmonics) == ((1,), 3, (1, 2))
     assert c.param_names(nominal) == ["j2.harm1_cos_by_j4", "j2.harm1_sin_by_j4", "j2.harm2_cos_by_j4",
                                       "j2.harm2_sin_by_j4"]
     held = base.with_effects(JointHarmonics(joints=(1,), source=3, harmonics=(1, 2)))
-    assert [c.name for c in synthesise(["q4 harmonics on j2"], held)] == ["harmonics j2 of q4 (h 3)",
-                                                                          "harmonics j2 of q4 (h 3,4)"]
+    assert [c.name for c in synthesise(["q4 harmonics on j2"], held)] == [
+        "coupling j2 by q4", "harmonics j2 of q4 (h 3)", "harmonics j2 of q4 (h 3,4)"]
     # j2's own harmonics do not count as harmonics of q4, nor the other way round
     own = base.with_effects(JointHarmonics(joints=(1,), harmonics=(1, 2)))
-    assert len(synthesise(["q4 harmonics on j2"], own)) == 4
+    assert len(synthesise(["q4 harmonics on j2"], own)) == 5
     assert [c.name for c in synthesise(["q2 harmonics"], held)][0] == "harmonics j2 (h 1)"
     assert synthesise(["q4 harmonics on j9"], base) == []
 

@@ -53,7 +53,34 @@ def test_verdict_when_nothing_remains_and_when_the_library_alone_ran():
                  "not built from the residual: library only): it correlates with q2 harmonics (cos/sin(3 q2)). "
                  "No fix is claimed for it.")
     v = verdict_text([_stage(None, 2.0, 5.0, s0=4.0)], [], "", LoopSettings(), [], None)
-    assert v.startswith("no effect added. The final residual is s0 = 4 times the stated uncertainties")
+    assert v.startswith("no effect added. The final residual is 4 times the stated uncertainties: it is not noise")
+
+
+def test_a_residual_reweighted_to_its_own_scatter_is_still_judged_against_the_stated_uncertainties():
+    """When the loop re-estimated the noise (a group's residual off its stated sigma by more than a factor 2), the
+    final fit's s0 is about 1 whatever its residual holds: the verdict judges the groups' scatter against the
+    stated sigmas instead (pooled by redundancy: sqrt((30 * 5^2 + 10 * 1^2) / 40) = 4.36 here), so a campaign
+    whose residual is 5 times the stated 2 um with no family found is not called clean (before: "No structured
+    residual remains", measured on a hidden fourth harmonic, docs/close-loop.md)."""
+    from calibration.data import Weights
+    from calibration.loop.verdict import residual_over_stated
+    variance = [{"group": "sphere", "estimated": True, "estimate_um": 10.0, "redundancy": 30.0},
+                {"group": "seat", "estimated": True, "estimate_um": 2.0, "redundancy": 10.0},
+                {"group": "length", "estimated": False, "estimate_um": None, "redundancy": 5.0}]
+    stage = _stage(None, 9.0, 30.0, s0=1.02)
+    stage.result.variance = variance
+    stated = Weights(probe=2e-6)
+    ratio, words = residual_over_stated(stage.result, stated)
+    assert abs(ratio - np.sqrt((30 * 25 + 10 * 1) / 40)) < 1e-12
+    assert words == "sphere 10 um against the stated 2, seat 2 um against the stated 2"
+    v = verdict_text([stage], [], "", LoopSettings(), [], None, (), stated)
+    assert v.startswith("no effect added. The final residual is 4.36 times the stated uncertainties (sphere 10 um "
+                        "against the stated 2, seat 2 um against the stated 2): it is not noise at the stated level")
+    assert "No structured residual remains" not in v
+    # the same fit with the stated uncertainties it had (no stated given, or a residual at them): clean
+    assert "No structured residual remains" in verdict_text([stage], [], "", LoopSettings(), [], None, ())
+    variance[0]["estimate_um"] = 2.5
+    assert "No structured residual remains" in verdict_text([stage], [], "", LoopSettings(), [], None, (), stated)
 
 
 def test_an_effect_that_makes_the_outer_test_worse_is_not_added_and_said():

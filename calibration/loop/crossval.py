@@ -15,7 +15,7 @@ from ..data import CalibrationData
 from ..validation import heldout_residuals
 from .folds import Folds
 
-__all__ = ["FoldFit", "CVResult", "fold_fit", "cross_validate"]
+__all__ = ["FoldFit", "CVResult", "fold_fit", "warm_start", "cross_validate"]
 
 
 @dataclass
@@ -59,15 +59,39 @@ class CVResult:
                 "measurements": self.n_measurements, "measurements_improved": self.wins, "passed": self.passed,
                 "reason": self.reason, "screening_p_value": num(self.score_p)}
 
-def fold_fit(model: ArmModel, design: CalibrationData, folds: Folds, fit) -> FoldFit:
+def _not_worse_than_nested(res, nested, model: ArmModel, data: CalibrationData, fit):
+    """``res``, or, when it ends at a higher cost than ``nested`` (the fit of a model that ``model`` contains, on
+    the same data and weights: its own optimum can be no higher, so ``res`` stopped in another basin), the fit
+    started from ``nested``'s solution (the added parameters at zero) if that ends lower."""
+    if nested is None or not res.cost > nested.cost:
+        return res
+    again = fit(model, data, discrepancy=False, start=warm_start(nested))
+    return again if again.cost < res.cost else res
+
+
+def warm_start(result) -> dict:
+    """The free parameters of a fit by name [SI]: the start of another fit of the same or a larger model."""
+    return {n: float(v) for n, v in zip(result.model.spec.names, result.p, strict=True) if n in result.free}
+
+
+def fold_fit(model: ArmModel, design: CalibrationData, folds: Folds, fit, nested: FoldFit | None = None,
+             start: dict | None = None) -> FoldFit:
     """``model`` fitted on each fold's training part by ``fit(model, data, discrepancy=False)`` (the loop's
     :meth:`~calibration.loop.state.LoopState.fit`; a fold's fit only predicts its held-out units, so it estimates
-    no model discrepancy) and its held-out residuals per unit."""
+    no model discrepancy) and its held-out residuals per unit. ``nested``: the same folds' fits of a model that
+    ``model`` contains (the current model, ``model`` that plus a candidate): a fold whose fit ends at a higher
+    cost than the nested model's is fitted again from the nested solution (:func:`_not_worse_than_nested`;
+    measured: a linear coupling of two joints fitted from the nominal stopped at 4.7 times the noise in two folds
+    of four, where the nested model stopped at 1). ``start``: where every fold's fit starts (:func:`warm_start`
+    of the design set's fit: the folds' training parts are most of it; from the nominal, the current model's own
+    fold fits stopped at 4.4-4.8 times the noise in two folds of four on that campaign, its design fit at 1)."""
     results, sse = [], {}
     if folds.by == "pose":
         for f in range(folds.k):
             train = np.asarray(folds.assign) != f
-            res = fit(model, design.select(train), discrepancy=False)
+            res = fit(model, design.select(train), discrepancy=False, start=start)
+            res = _not_worse_than_nested(res, None if nested is None else nested.results[f], model,
+                                         design.select(train), fit)
             h = heldout_residuals(model, res.p, design, res.weights, res.reference_mode, train=train)
             for i in np.unique(h["point"]):
                 sel = h["point"] == i
@@ -78,7 +102,8 @@ def fold_fit(model: ArmModel, design: CalibrationData, folds: Folds, fit) -> Fol
     for f in range(folds.k):
         held = [m for m, g in folds.assign.items() if g == f and m in present]  # type: ignore[attr-defined]
         train = design.with_measurements([m for m, g in folds.assign.items() if g != f and m in present])  # type: ignore[attr-defined]
-        res = fit(model, train, discrepancy=False)
+        res = fit(model, train, discrepancy=False, start=start)
+        res = _not_worse_than_nested(res, None if nested is None else nested.results[f], model, train, fit)
         h = heldout_residuals(model, res.p, design.with_measurements(held), res.weights, res.reference_mode)
         keys = ([(m, int(i)) for m, i in zip(h["measurement"], h["point"], strict=True)] if folds.per_pose
                 else h["measurement"])

@@ -19,7 +19,7 @@ from ..candidates import Candidate
 from ..diagnostics import GroupTest, ResidualSpace, binned_estimates, candidate_family
 from ..identifiability import prior_scales
 from ..synthesis import RESIDUAL
-from .crossval import CVResult, cross_validate, fold_fit
+from .crossval import CVResult, cross_validate, fold_fit, warm_start
 from .settings import PARSIMONY, PHYSICS, SAME_SIGNATURE
 from .state import LoopState, Screening
 
@@ -48,7 +48,8 @@ def heldout_test(state: LoopState, scr: Screening, cand: Candidate) -> CVResult:
     cp = candidate_priors(model, cand, t)
     s = state.settings
     try:
-        new = fold_fit(model, state.design, state.folds, partial(state.fit, extra_priors=cp))
+        new = fold_fit(model, state.design, state.folds, partial(state.fit, extra_priors=cp), state.base_folds,
+                       warm_start(state.result))
         cv = cross_validate(cand.name, state.base_folds, new, scr.threshold, s.min_improvement)
         names = cand.param_names(state.desc)
         held = [k for k, r in enumerate(new.results) if not set(names) & (set(r.free) | at_bound(r))]

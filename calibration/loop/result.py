@@ -73,6 +73,9 @@ class LoopResult:
         data: every point of the campaign (outliers included).
         vetoed: candidates that passed the held-out folds of the design set but made the outer test set worse:
             name, origin, ``heldout_rms_before_um``, ``heldout_rms_after_um``, the cross-validation's reason.
+        residual_over_stated: the final design fit's residual scatter over the stated uncertainties
+            (:func:`~calibration.loop.verdict.residual_over_stated`; above
+            :data:`~calibration.loop.verdict.S0_LIMIT` with no family left, the verdict says it is not noise).
     """
     stages: list
     final_screening: list
@@ -95,6 +98,7 @@ class LoopResult:
     built: list = field(default_factory=list)
     vetoed: list = field(default_factory=list)
     data: CalibrationData | None = None
+    residual_over_stated: float | None = None
 
     @property
     def final(self) -> Stage:

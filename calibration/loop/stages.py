@@ -41,7 +41,7 @@ from ..diagnostics import (
 )
 from ..options import FitOptions
 from ..synthesis import RESIDUAL, synthesise as build_effects
-from .crossval import fold_fit
+from .crossval import fold_fit, warm_start
 from .decide import (
     Decision,
     candidate_priors,
@@ -57,7 +57,7 @@ from .outliers import drop_design_outliers, drop_test_outliers
 from .result import LoopResult, Stage
 from .settings import LEGACY_RESOLUTION, NOISE_OFF, LoopSettings
 from .state import LoopState, Screening, log
-from .verdict import ADDED, verdict_text
+from .verdict import ADDED, residual_over_stated, verdict_text
 
 __all__ = ["Campaign", "Stop", "prepare", "screen", "test", "physics", "synthesise", "decide", "fit_stage",
            "outer_test_worse", "add", "run_stage", "run", "report"]
@@ -218,7 +218,7 @@ def _current_folds(state: LoopState) -> None:
     """The current model's fold fits, computed if not at hand (``state.base_folds``)."""
     if state.base_folds is None:
         state.say(f"  cross-validating the current model ({state.folds.k} folds by {state.folds.by})")
-        state.base_folds = fold_fit(state.model, state.design, state.folds, state.fit)
+        state.base_folds = fold_fit(state.model, state.design, state.folds, state.fit, start=warm_start(state.result))
 
 
 def physics(state: LoopState, scr: Screening) -> list:
@@ -419,7 +419,7 @@ def report(state: LoopState) -> LoopResult:
     built = [{"name": c.name, "family": c.family, "joint": c.joint, "effect": c.effect.describe(),
               "added": fate.get(c.name) == ADDED, "why_not_added": None if fate.get(c.name) == ADDED else
               fate.get(c.name, "not screened")} for c in state.synthesised]
-    verdict = verdict_text(state.stages, significant, state.stop, s, built, state.model, state.vetoed)
+    verdict = verdict_text(state.stages, significant, state.stop, s, built, state.model, state.vetoed, state.stated)
     say(verdict)
     data = state.data if s.test_in_model else state.data.select(~state.test_rows)
     say("calibrating the final model on every point (" + ("design and test" if s.test_in_model else
@@ -433,4 +433,5 @@ def report(state: LoopState) -> LoopResult:
     return LoopResult(state.stages, state.last_tests, state.last_cv, state.stop, structure, significant, verdict,
                       state.candidates + state.synthesised, state.skipped, state.design.measurements(),
                       state.test.measurements(), s, state.desc, plots, state.dropped, state.test_by, state.power,
-                      model_fit, built, state.vetoed, state.data)
+                      model_fit, built, state.vetoed, state.data,
+                      residual_over_stated(state.result, state.stated)[0])
