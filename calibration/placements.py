@@ -9,7 +9,12 @@ other placements. Figures per held-out placement (``seat_figures``):
 * **seat spread (2 sigma) per hole** [mm]: ``2 sqrt(sum_i |x_i - x_mean|^2 / (n - 1))`` over the n ball
   centres in the hole (twice the RMS radial distance to the hole's mean centre, n - 1 for the mean fitted;
   the single-point articulation figure ``two_rms`` of :mod:`calibration.validation`);
-* **distance error** [mm]: distance between the two holes' mean centres minus the certified length.
+* **distance error** [mm]: distance between the two holes' mean centres minus the certified length;
+* **coverage of u** (when the model carries an uncertainty): the share of the axis values whose deviation
+  from their hole's mean centre lies within 1.96 u, for ``tip``'s u of each centre (``inside``) and for the
+  standard uncertainty of the deviation itself (``inside_dev``, :func:`deviation_u`: the errors every point of
+  the hole shares, such as where the whole seat lands, cancel in a deviation from the hole's mean and are left
+  out; the errors of each point alone count with their share in the mean).
 
 Run as ``python scripts/real_seats_study.py`` (see its ``--help``).
 """
@@ -26,16 +31,61 @@ import numpy as np
 from arm_model import InputError
 from arm_model.log import progress_line
 
-__all__ = ["seat_figures", "PlacementRow", "placement_study", "markdown_table"]
+__all__ = ["seat_figures", "deviation_u", "model_deviation_u", "PlacementRow", "placement_study", "markdown_table"]
+
+
+def deviation_u(prop, feature: np.ndarray, holes) -> np.ndarray:
+    """(N, 3) [m]: the standard uncertainty per axis of each point's deviation from its hole's mean centre,
+    ``x_i - mean_h(x)``, from a :class:`~arm_model.uncertainty.Propagation` made with ``systematic=True``.
+
+    The shared errors (the rows ``S_i`` of :attr:`~arm_model.uncertainty.Propagation.systematic`: parameters and
+    compliances; the covariance of points i and k is ``S_i^T S_k``) enter as ``S_i - mean_h(S)``; the rest of each
+    point's covariance, ``C_i - S_i^T S_i``, is its own (encoders, force sensor, probing, model discrepancy) and
+    enters with the weight it keeps in ``x_i - mean_h(x)``: ``(1 - 2/n) C_ind,i + sum_k C_ind,k / n^2``. Points of no
+    hole in ``holes`` get NaN."""
+    s = prop.systematic
+    if s is None:
+        raise ValueError("deviation_u needs a propagation made with systematic=True")
+    own = np.einsum("nii->ni", prop.cov) - np.einsum("nri,nri->ni", s, s)
+    out = np.full(own.shape, np.nan)
+    feature = np.asarray(feature)
+    for h in holes:
+        sel = feature == h
+        n = int(sel.sum())
+        if not n:
+            continue
+        sd = s[sel] - s[sel].mean(axis=0)
+        var = np.einsum("nri,nri->ni", sd, sd) + own[sel] * (1 - 2 / n) + own[sel].sum(axis=0) / n ** 2
+        out[sel] = np.sqrt(np.clip(var, 0.0, None))
+    return out
+
+
+def model_deviation_u(model: Path, points: Path, holes) -> np.ndarray | None:
+    """:func:`deviation_u` of the points file ``points`` corrected by the model file ``model`` (its covariance,
+    probing scatter and model discrepancy, as ``aacmm tip`` takes them); None when the model carries no
+    parameter covariance."""
+    from arm_model.io import read_points
+    from arm_model.model_file import parameters_of, read_model_file
+    from arm_model.uncertainty import propagate
+    arm = read_model_file(Path(model))
+    parameters = parameters_of(arm)
+    if parameters is None:
+        return None
+    pts = read_points(Path(points), arm.desc.n_joints)
+    prop = propagate(arm.model, arm.p, pts.q, pts.wrench, arm.aux(pts), parameters=parameters,
+                     inputs=arm.input_uncertainty(pts.wrench is not None), systematic=True)
+    return deviation_u(prop, pts.feature, holes)
 
 
 def seat_figures(x: np.ndarray, feature: np.ndarray, holes: tuple[str, str], length: float,
-                 u: np.ndarray | None = None) -> dict:
+                 u: np.ndarray | None = None, u_dev: np.ndarray | None = None) -> dict:
     """Spread (2 sigma) of each hole and the distance error, from ball centres ``x`` (N, 3) [m] and the
     feature of each point; values [mm]. With the centres' standard uncertainties ``u`` (N, 3) [m], also the
-    coverage: ``inside`` of the ``values`` axis deviations from their hole's mean centre lie within 1.96 u."""
+    coverage: ``inside`` of the ``values`` axis deviations from their hole's mean centre lie within 1.96 u;
+    with the deviations' own standard uncertainties ``u_dev`` (N, 3) [m] (:func:`deviation_u`), ``inside_dev``
+    of them within 1.96 u_dev."""
     out, centre = {}, {}
-    inside = values = 0
+    inside = values = inside_dev = 0
     for h in holes:
         sel = np.asarray(feature) == h
         xi = x[sel]
@@ -46,9 +96,13 @@ def seat_figures(x: np.ndarray, feature: np.ndarray, holes: tuple[str, str], len
         centre[h] = xi.mean(axis=0)
         if u is not None:
             inside += int(np.sum(np.abs(d) <= 1.96 * u[sel]))
-            values += d.size
+        if u_dev is not None:
+            inside_dev += int(np.sum(np.abs(d) <= 1.96 * u_dev[sel]))
+        values += d.size
     if u is not None:
         out["inside"], out["values"] = inside, values
+    if u_dev is not None:
+        out["inside_dev"], out["values"] = inside_dev, values
     out["spread_mean_mm"] = float(np.mean([out[f"spread_{h}_mm"] for h in holes]))
     dist = float(np.linalg.norm(centre[holes[0]] - centre[holes[1]]))
     out["distance_mm"] = dist * 1e3
@@ -160,25 +214,36 @@ def placement_study(root: Path, arm: Path, tip_frame: str | None, out: Path, tra
                 if te in group:
                     continue
                 x, feat, u = _tip(root / te / "points.csv", model, out / tr / f"{method}-tip-{te}.csv")
-                rows.append(PlacementRow(tr, method, te, seat_figures(x, feat, holes, length, u), effects))
+                u_dev = None if u is None else model_deviation_u(model, root / te / "points.csv", holes)
+                rows.append(PlacementRow(tr, method, te, seat_figures(x, feat, holes, length, u, u_dev), effects))
                 say(f"  {method} -> {te}: spread {rows[-1].figures['spread_mean_mm']:.3f} mm, distance error "
                     f"{rows[-1].figures['distance_error_mm']:+.3f} mm")
     return rows
 
 
+def _coverage(figs: list[dict], key: str) -> str:
+    """The pooled share [%] of the axis values ``key`` counts (``inside`` or ``inside_dev``), or "-"."""
+    if not figs or any(key not in f for f in figs):
+        return "-"
+    return f"{100.0 * sum(f[key] for f in figs) / sum(f['values'] for f in figs):.1f}"
+
+
 def markdown_table(rows: list[PlacementRow], holes=("hole-0", "hole-1")) -> str:
-    """One line per training placement, method and held-out placement, and the mean per method."""
+    """One line per training placement, method and held-out placement, and the mean per method (coverage:
+    pooled over the held-out placements)."""
     head = ("| trained on | model | held out | " + " | ".join(f"spread {h} 2σ [mm]" for h in holes)
-            + " | distance error [mm] | effects added |")
-    lines = [head, "|" + "---|" * (5 + len(holes))]
+            + " | distance error [mm] | within 1.96 u [%]: tip's u / the deviation's u | effects added |")
+    lines = [head, "|" + "---|" * (6 + len(holes))]
     for r in rows:
         f = r.figures
         lines.append(f"| {r.train} | {r.method} | {r.test} | "
                      + " | ".join(f"{f[f'spread_{h}_mm']:.3f}" for h in holes)
-                     + f" | {f['distance_error_mm']:+.3f} | {', '.join(r.effects) or '-'} |")
+                     + f" | {f['distance_error_mm']:+.3f} | {_coverage([f], 'inside')} / {_coverage([f], 'inside_dev')}"
+                     + f" | {', '.join(r.effects) or '-'} |")
     for m in dict.fromkeys(r.method for r in rows):
         sel = [r.figures for r in rows if r.method == m]
         lines.append(f"| **mean** | {m} | all | "
                      + " | ".join(f"{np.mean([f[f'spread_{h}_mm'] for f in sel]):.3f}" for h in holes)
-                     + f" | {np.mean([abs(f['distance_error_mm']) for f in sel]):.3f} (mean abs) | |")
+                     + f" | {np.mean([abs(f['distance_error_mm']) for f in sel]):.3f} (mean abs) | "
+                     + f"{_coverage(sel, 'inside')} / {_coverage(sel, 'inside_dev')} | |")
     return "\n".join(lines)

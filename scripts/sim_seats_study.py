@@ -8,7 +8,8 @@ the real data show. A plate with two seats 50 mm apart is measured at three plac
 (``front``, ``right``: seats facing up in front of and beside the robot; ``back-high``: facing the robot
 from behind, 0.88 m up), 30 articulations a seat. Trained on one placement, each model is applied by
 ``aacmm tip`` to the other two (calibration/placements.py): seat spread (2 sigma per hole), distance error and
-the coverage of tip's u (axis deviations from the seat's mean within 1.96 u), for
+the coverage of u (axis deviations from the seat's mean within 1.96 u: tip's u of each centre, and the
+deviation's own u, calibration.placements.deviation_u), for
 
 * ``close-loop`` and ``calibrate`` with their default options,
 * ``geometry``: ``calibrate --effect none`` (the geometry alone, no joint compliance),
@@ -197,8 +198,9 @@ def summary_rows(results: list[dict]) -> list[dict]:
                     continue
                 line[m] = {"spread_mm": float(np.mean([f["spread_mean_mm"] for f in fs])),
                            "distance_mm": float(np.mean([abs(f["distance_error_mm"]) for f in fs]))}
-                if "inside" in fs[0]:
-                    line[m]["coverage"] = 100.0 * sum(f["inside"] for f in fs) / sum(f["values"] for f in fs)
+                for key, name in (("inside", "coverage"), ("inside_dev", "coverage_dev")):
+                    if key in fs[0]:
+                        line[m][name] = 100.0 * sum(f[key] for f in fs) / sum(f["values"] for f in fs)
             out.append(line)
     return out
 
@@ -207,8 +209,9 @@ def summary_table(lines: list[dict]) -> str:
     """Markdown of :func:`summary_rows`."""
     cols = ["truth"] + [m for m in METHODS if any(m in ln for ln in lines)]
     head = (f"| robot | truth | trained on | loop added | spread 2σ [mm]: {' / '.join(cols)} "
-            f"| abs. distance error [mm]: {' / '.join(cols)} | within 1.96 u [%]: {' / '.join(cols[1:])} |")
-    md = [head, "|---|---|---|---|---|---|---|"]
+            f"| abs. distance error [mm]: {' / '.join(cols)} | within 1.96 u [%]: {' / '.join(cols[1:])} "
+            f"| within 1.96 u of the deviation [%]: {' / '.join(cols[1:])} |")
+    md = [head, "|---|---|---|---|---|---|---|---|"]
     def val(ln, m, k, fmt):
         return fmt.format(ln[m][k]) if m in ln and k in ln[m] else "-"
     for ln in lines:
@@ -216,7 +219,8 @@ def summary_table(lines: list[dict]) -> str:
                   + (", ".join(e.replace("panda_joint", "j") for e in ln["added"]) or "-") + " | "
                   + " / ".join(val(ln, m, "spread_mm", "{:.3f}") for m in cols) + " | "
                   + " / ".join(val(ln, m, "distance_mm", "{:.3f}") for m in cols) + " | "
-                  + " / ".join(val(ln, m, "coverage", "{:.1f}") for m in cols[1:]) + " |")
+                  + " / ".join(val(ln, m, "coverage", "{:.1f}") for m in cols[1:]) + " | "
+                  + " / ".join(val(ln, m, "coverage_dev", "{:.1f}") for m in cols[1:]) + " |")
     return "\n".join(md)
 
 
