@@ -115,7 +115,8 @@ def study(root: Path, urdf: Path, tip: str, places, holes, say=print) -> list[di
             row = {"train": tr, "test": te, "sigma0_um": g.sigma0 * 1e6, "growth_um_per_mm": g.growth * 1e3,
                    "u_growth_um_per_mm": g.u_growth * 1e3, "saturation_um": math.sqrt(s) * 1e6, "lr_saturating": lr,
                    "d_max_mm": g.d_max * 1e3, "d_test_median_mm": float(np.median(dist)) * 1e3,
-                   "load_r2": _load_r2(desc, d.points.q, feat, dev), "dev_rms_um": (np.sqrt((dev ** 2).mean(axis=0)) * 1e6).tolist()}
+                   "load_r2": _load_r2(desc, d.points.q, feat, dev),
+                   "dev_rms_um": (np.sqrt((dev ** 2).mean(axis=0)) * 1e6).tolist()}
             cov = prop.cov
             for name, s2 in extra.items():
                 prop.cov = cov + np.einsum("n,ij->nij", s2, np.eye(3))    # the discrepancy: each point's own, per axis
@@ -127,14 +128,16 @@ def study(root: Path, urdf: Path, tip: str, places, holes, say=print) -> list[di
             rows.append(row)
             say(f"{root.name}: {tr} -> {te}: g {row['growth_um_per_mm']:.2f} +- {row['u_growth_um_per_mm']:.2f} um/mm, "
                 f"S {row['saturation_um']:.0f} um (LR {lr:.2f}); load R2 {row['load_r2']:.2f}; "
-                + "; ".join(f"{k} {row[k]['inside']:.1f} / {row[k]['inside_dev']:.1f} % (u {row[k]['median_u_um']:.0f} um)"
+                + "; ".join(f"{k} {row[k]['inside']:.1f} / {row[k]['inside_dev']:.1f} % "
+                            f"(u {row[k]['median_u_um']:.0f} um)"
                             for k in VARIANTS))
     return rows
 
 
 def pooled(rows: list[dict]) -> str:
     """Markdown: per variant, pooled and per-pair coverage (tip's u / the deviation's u), median u."""
-    out = ["| discrepancy | within 1.96 u, tip's u: pooled (pairs) | the deviation's u: pooled (pairs) | median u [um] |",
+    out = ["| discrepancy | within 1.96 u, tip's u: pooled (pairs) "
+           "| the deviation's u: pooled (pairs) | median u [um] |",
            "|---|---|---|---|"]
     for k in VARIANTS:
         n = np.array([r[k]["values"] for r in rows])

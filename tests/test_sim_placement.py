@@ -15,7 +15,8 @@ CEILING_URDF = """<?xml version="1.0"?>
   <link name="ceiling"/>
   <link name="l1"/><link name="l2"/><link name="l3"/><link name="l4"/><link name="l5"/><link name="l6"/>
   <link name="tool"/>
-  <joint name="j1" type="revolute"><parent link="ceiling"/><child link="l1"/><origin xyz="0 0 2.5" rpy="3.14159265 0 0"/>
+  <joint name="j1" type="revolute"><parent link="ceiling"/><child link="l1"/>
+    <origin xyz="0 0 2.5" rpy="3.14159265 0 0"/>
     <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="10" velocity="1"/></joint>
   <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0 0 0.1"/>
     <axis xyz="0 1 0"/><limit lower="-2" upper="2" effort="10" velocity="1"/></joint>
