@@ -387,7 +387,8 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
     if growing is not None:
         dist = growing.distance(model.desc, q)
         sd_disc = growing.sd_at(dist)
-    npar = len(plan.pidx)
+    span = plan.spans["parameters"]
+    npar = span.stop - span.start       # the rows of the covariance's factor (fewer than the names when singular)
     cov = np.empty((n, 3, 3))
     contrib = {k: np.zeros((n, 3)) for k in CONTRIBUTIONS}
     centres = np.empty((n, 3))

@@ -174,6 +174,28 @@ def test_linear_propagation_is_j_sigma_jt_through_every_effect(nominal):
     assert_close(sy.systematic[0].T @ sy.systematic[4], ref, atol=1e-9 * np.abs(ref).max())
 
 
+def test_shared_rows_of_a_singular_parameter_covariance(nominal):
+    # a covariance file can carry a held parameter with variance from the free ones (rank below its names):
+    # the shared rows are the factor's, fewer than the names, and still give J_p(i) Sigma J_p(k)^T
+    model = ArmModel(nominal)
+    rng = np.random.default_rng(11)
+    q = rng.uniform(-2, 2, (5, nominal.n_joints))
+    names = tuple(nm for nm in model.spec.names if not nm.startswith("probe.compliance"))[:6]
+    b = rng.normal(size=(6, 4)) * 1e-5
+    cov = b @ b.T                                     # rank 4 of 6
+    pc = ParameterCovariance(names, cov)
+    inputs = default_inputs(nominal, encoder=0.0, force=0.0)
+    sy = propagate(model, None, q, parameters=pc, inputs=inputs, chunk=2, systematic=True)
+    idx = [model.spec.index(nm) for nm in names]
+    jac = _casadi_jacobians(model)
+    amat = ArmModel.aux_matrix(None, len(q), nominal.n_joints)
+    w0 = np.zeros(6)
+    p0 = np.zeros(model.spec.size)
+    jps = [np.array(jac(q[i], w0, amat[i], p0)[1])[:, idx] for i in (0, 3)]
+    ref = jps[0] @ cov @ jps[1].T
+    assert_close(sy.systematic[0].T @ sy.systematic[3], ref, atol=1e-9 * np.abs(ref).max())
+
+
 def test_compliance_contribution_by_hand(nominal):
     # one point, a pure bending force along probe x: the ball moves by c_x F_x along probe x
     model = ArmModel(nominal)
