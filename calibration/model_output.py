@@ -27,9 +27,11 @@ REPRODUCE_TOL_M = 1e-9
 #: how far the covariance read back may differ from the fit's, relative to u_i u_k
 REPRODUCE_COV_REL = 1e-9
 #: how far the covariance of a fitted ball centre from the parameters alone, through the model file and
-#: covariance read back, may differ from the fit's own, relative to the point's largest variance (the torques
-#: the model file evaluates on its own description move it by about model_check's difference, far below)
-REPRODUCE_POINT_REL = 1e-6
+#: covariance read back, may differ from the fit's own, relative to the point's largest variance: the torques
+#: the model file evaluates on its own description (at its static equilibrium) differ from the fit's last
+#: refined ones by a little (1.8e-6 measured on a Kinova chain with compliances); the error this check is for,
+#: a covariance in the wrong axes, is of the order of the origin angles (2e-3 at 20 mrad)
+REPRODUCE_POINT_REL = 1e-4
 
 
 def model_paths(out_dir, name: str) -> dict:
