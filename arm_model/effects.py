@@ -64,6 +64,22 @@ def _joint(desc: ArmDescription | None, i: int, prefix: str = "j") -> str:
     return names[i] if 0 <= i < len(names) else f"{prefix}{i + 1}"
 
 
+def _source_index(value: object, what: str) -> int | None:
+    """An effect's ``source`` joint (a 0-based index) as an int, or None; else a TypeError naming ``what``."""
+    if value is None:
+        return None
+    if not isinstance(value, numbers.Integral) or isinstance(value, bool) or value < 0:
+        raise TypeError(f"{what}: source must be a 0-based joint index or None, got {value!r}")
+    return int(value)
+
+
+def _check_source(key: str, source: int | None, desc: ArmDescription) -> None:
+    """A ValueError when the effect ``key``'s source joint is not a joint of ``desc``."""
+    if source is not None and source >= desc.n_joints:
+        raise ValueError(f"the effect '{key}' takes joint index {source} (0-based) as its source, but "
+                         f"the arm has {desc.n_joints} joints")
+
+
 def _indices(values: object, what: str, *, low: int = 0, high: int | None = None) -> tuple[int, ...]:
     """``values`` as a non-empty tuple of distinct whole numbers in [low, high] (an effect's joints, harmonics), or a
     TypeError/ValueError naming ``what``."""
@@ -205,15 +221,10 @@ class JointGain(Effect):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if self.source is not None:
-            if not isinstance(self.source, numbers.Integral) or isinstance(self.source, bool) or self.source < 0:
-                raise TypeError(f"joint_gain: source must be a 0-based joint index or None, got {self.source!r}")
-            object.__setattr__(self, "source", int(self.source))
+        object.__setattr__(self, "source", _source_index(self.source, "joint_gain"))
 
     def _source(self, desc: ArmDescription, i: int) -> int:
-        if self.source is not None and self.source >= desc.n_joints:
-            raise ValueError(f"the effect '{self.key}' takes joint index {self.source} (0-based) as its source, but "
-                             f"the arm has {desc.n_joints} joints")
+        _check_source(self.key, self.source, desc)
         return i if self.source is None else self.source
 
     def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
@@ -456,15 +467,10 @@ class JointHarmonics(Effect):
         super().__post_init__()
         object.__setattr__(self, "harmonics", _indices(self.harmonics, "joint_harmonics: harmonics", low=1,
                                                        high=MAX_HARMONIC))
-        if self.source is not None:
-            if not isinstance(self.source, numbers.Integral) or isinstance(self.source, bool) or self.source < 0:
-                raise TypeError(f"joint_harmonics: source must be a 0-based joint index or None, got {self.source!r}")
-            object.__setattr__(self, "source", int(self.source))
+        object.__setattr__(self, "source", _source_index(self.source, "joint_harmonics"))
 
     def _suffix(self, desc: ArmDescription, i: int) -> str:
-        if self.source is not None and self.source >= desc.n_joints:
-            raise ValueError(f"the effect '{self.key}' takes joint index {self.source} (0-based) as its source, but "
-                             f"the arm has {desc.n_joints} joints")
+        _check_source(self.key, self.source, desc)
         return "" if self.source is None or self.source == i else f"_by_{desc.joint_names[self.source]}"
 
     def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
