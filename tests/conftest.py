@@ -36,6 +36,15 @@ def assert_close(actual, expected, atol: float, rtol: float = 0.0, msg: str = ""
     np.testing.assert_allclose(a, e, atol=atol, rtol=rtol, err_msg=msg)
 
 
+def exit_status(argv) -> int:
+    """The exit status of ``aacmm argv`` (argparse's refusals raise SystemExit, the commands' return it)."""
+    from arm_model.cli import main
+    try:
+        return main(argv)
+    except SystemExit as exc:
+        return exc.code
+
+
 def pin_configuration(model, values) -> np.ndarray:
     """Pinocchio's configuration vector of ``model`` with the named joints at ``values`` ((name, angle or
     length) pairs; a continuous joint as its cos and sin), the others at neutral: the tests' independent route."""

@@ -8,17 +8,12 @@ from __future__ import annotations
 import pytest
 
 from arm_model.cli import main
-from conftest import NOMINAL
+from conftest import NOMINAL, exit_status
 
 QCOLS = ",".join(f"q{k}_deg" for k in range(1, 8))
 
 
-def _exit(argv) -> int:
-    """The exit status of ``aacmm argv`` (argparse's refusals raise SystemExit, the commands' return it)."""
-    try:
-        return main(argv)
-    except SystemExit as exc:
-        return exc.code
+_exit = exit_status
 
 
 def _points(tmp_path, rows=("m,f,10,20,30,40,50,60,70",)):
