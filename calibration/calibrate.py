@@ -691,7 +691,6 @@ def _without_gross(model: ArmModel, data: CalibrationData, options: FitOptions, 
     and the fit redone. Never more than :data:`GROSS_SHARE` of the points, nor a point its feature needs
     (:data:`~calibration.kinds.MIN_POINTS`, or one whose deletion leaves an unknown undetermined): past that the
     misfit is the model's, kept and said (``gross_kept``). ``options.gross_threshold`` None keeps every point."""
-    from .kinds import MIN_POINTS
     res = estimate(model, data, options)
     if options.gross_threshold is None:
         return res
@@ -700,11 +699,8 @@ def _without_gross(model: ArmModel, data: CalibrationData, options: FitOptions, 
     gross: list[GrossError] = []
     limit = max(1, int(GROSS_SHARE * len(data)))
     while (c := _gross_candidate(res, k)) is not None:
-        o, pts = c.outlier, res.data.points
-        need = 0
-        if c.between is None and pts.feature[o.point] != "":
-            same = (pts.measurement == pts.measurement[o.point]) & (pts.feature == pts.feature[o.point])
-            need = int(same.sum()) - 1 < MIN_POINTS.get(o.kind, (0, 0))[0]
+        o = c.outlier
+        need = not _droppable(res.data, [c])          # its feature needs it
         fewer, kept = _left_out(res.data, [c], index)
         try:
             without = None if len(gross) >= limit or need else estimate(model, fewer, options)
