@@ -70,8 +70,8 @@ def decode_text(raw: bytes, path: str | Path, first_line: int = 1) -> str:
     if b"\r" in raw:
         m = _LONE_CR.search(raw)
         if m:
-            raise InputError("a carriage return alone ends a line (old Mac line ends): save the file with "
-                             "LF or CRLF line ends", path, first_line + raw[: m.start()].count(b"\n"))
+            raise InputError("a carriage return alone ends a line (old Mac line ends): save the file (or send "
+                             "the stream) with LF or CRLF line ends", path, first_line + raw[: m.start()].count(b"\n"))
     return text
 
 

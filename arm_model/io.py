@@ -282,6 +282,19 @@ def _marker_groups(cols: dict, header, path: str, line: int) -> tuple:
     return groups
 
 
+def _check_ids(blk, lay: _PointsLayout, path: str) -> None:
+    """The text cells of a block (measurement, feature, session ids) hold no control character (a NUL, an
+    escape, DEL, a line or paragraph separator, a tab), the rule of :func:`id_problem` for every id the toolkit
+    writes back: a located InputError at the first one. Each distinct id is checked once."""
+    for j, c in enumerate(lay.txt_idx):
+        column = blk.texts[:, j]
+        bad = [t for t in set(column.tolist()) if t and id_problem(t)]
+        if bad:
+            i = int(np.flatnonzero(np.isin(column, bad))[0])
+            raise InputError(f"the {lay.header[c]} id {id_problem(column[i])}", path, int(blk.lines[i]),
+                             lay.header[c])
+
+
 def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
     nums = blk.numbers
     bad = ~np.isfinite(nums)
@@ -308,6 +321,7 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
     empty = np.flatnonzero(measurement == "")
     if len(empty):
         raise InputError("empty measurement id", path, int(blk.lines[empty[0]]), "measurement")
+    _check_ids(blk, lay, path)
     units = [unit_of(lay.header[c]) for c in lay.joints]
     q = nums[:, [pos[c] for c in lay.joints]] * np.array([UNIT_FACTORS[u] for u in units])
     for k, unit in enumerate(units):

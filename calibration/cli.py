@@ -353,6 +353,12 @@ def _free(model, args, data=None):
     free = resolve_parameters(model.spec, args.free or default_free(model, data))
     if args.hold:
         held = set(resolve_parameters(model.spec, args.hold))
+        if not [i for i in free if i not in held]:
+            chosen = f"--free {' '.join(args.free)}" if args.free else "the default free set"
+            raise InputError(f"nothing is left to estimate: --hold {' '.join(args.hold)} holds every parameter of "
+                             f"{chosen} ({len(free)}); a calibration with no free parameter would write the model "
+                             "it started from as if calibrated. Hold fewer parameters (the nominal model as it is: "
+                             "aacmm tip)")
         free = [i for i in free if i not in held]
     return [model.spec.names[i] for i in free]
 
@@ -370,6 +376,23 @@ def model_effects(arm, keys):
         return ArmModel(arm.desc, tuple(arm.effects) + added)
     except ValueError as exc:
         raise InputError(f"--effect: {exc}", arm.desc.source) from None
+
+
+def _check_reference_options(args, data) -> None:
+    """``--reference identity`` and ``--marker-offset`` are about the reference instrument's points: given on data
+    that hold none (no reference columns in the points file, no ``--reference-points``), they would be silently
+    ignored; an InputError instead."""
+    ref = data.points.ref
+    if ref is not None and np.isfinite(ref).any():
+        return
+    given = [f"--reference {args.reference}" if getattr(args, "reference", "fit") == "identity" else None,
+             None if getattr(args, "marker_offset", None) is None else f"--marker-offset {args.marker_offset}"]
+    given = [g for g in given if g]
+    if given:
+        verb = "concern" if len(given) > 1 else "concerns"
+        raise InputError(f"{' and '.join(given)} {verb} the reference instrument's points (columns x_ref_mm, "
+                         "y_ref_mm, z_ref_mm, or --reference-points), and the data hold none: leave "
+                         f"{'them' if len(given) > 1 else 'it'} out, or give the reference points", args.points)
 
 
 def _load_data(args, defaults: bool = False):
@@ -390,6 +413,7 @@ def _load_data(args, defaults: bool = False):
             Arm(desc, model.effects).check_points(pts)
             warnings += point_warnings(desc, pts)
     data = make_data(points, artefacts, reference=reference, marker_offsets=args.marker_offset, heldout=heldout)
+    _check_reference_options(args, data)
     added = default_effects(model, data) if defaults and args.effect is None else ()
     if added:
         from arm_model.model import ArmModel
