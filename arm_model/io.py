@@ -10,14 +10,13 @@ import json
 import logging
 import math
 import re
-import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from .csv_io import BLOCK_BYTES, csv_records, format_csv, iter_csv_blocks
-from .errors import InputError, parse_toml, read_text, unknown_key
+from .errors import InputError, id_problem, parse_toml, read_text, unknown_key
 from .output import atomic_write_bytes, guard_output
 from .readback import UnreadableOutput, read_back
 from .toml_lines import toml_key_lines, top_key_line
@@ -32,18 +31,6 @@ __all__ = ["PointSet", "Feature", "Distance", "Artefacts", "ForceSignal", "read_
            "concat_points", "POINT_COLUMNS", "format_artefacts", "read_back", "UnreadableOutput", "json_text"]
 
 FEATURE_KINDS = ("ring", "cylinder", "sphere", "seat", "plane", "point")
-def id_problem(text) -> str | None:
-    """Why ``text`` cannot be a measurement or feature id, or None: an id is one non-empty line of text (a line
-    break or another control character would split the row of every CSV file that carries it, which its reader
-    then refuses)."""
-    if not isinstance(text, str) or not text.strip():
-        return f"must be a non-empty text, got {text!r}"
-    bad = next((c for c in text if unicodedata.category(c) in ("Cc", "Zl", "Zp")), None)
-    if bad is not None:
-        return f"must be one line of text without control characters, got {text!r} (holding {bad!r})"
-    return None
-
-
 #: the kinds whose centre is one point a fit determines: the only ends a certified [[distance]] can join (a ring's or
 #: cylinder's axis is a line, a plane has no centre, a free point is no artefact's)
 CENTRE_KINDS = ("seat", "sphere")

@@ -32,7 +32,7 @@ from arm_model.parallel import cores
 
 from .options import GROSS_THRESHOLD
 
-__all__ = ["register", "run_calibrate", "run_montecarlo", "run_poses", "fit_options"]
+__all__ = ["register", "run_calibrate", "run_montecarlo", "run_poses", "fit_options", "free_names"]
 
 log = logging.getLogger(__name__)
 
@@ -62,6 +62,9 @@ def parse_holdout(text: str | None):
         if not ids:
             raise InputError(f"--holdout names no measurement (got {text!r}): give measurement ids or a fraction"
                              ) from None
+        twice = sorted({t for t in ids if ids.count(t) > 1})
+        if twice:
+            raise InputError(f"--holdout names the measurement(s) {', '.join(twice)} twice")
         return ids
     if not 0.0 < v < 1.0:
         raise InputError(f"--holdout fraction must be in (0, 1), got {text}")
@@ -346,7 +349,7 @@ def fit_options(args, **fields):
     return FitOptions(**{**kw, **fields})
 
 
-def _free(model, args, data=None):
+def free_names(model, args, data=None):
     """The names of the parameters to fit: ``--free`` (default :func:`~calibration.calibrate.default_free` of
     the model on ``data``) without ``--hold``."""
     from .calibrate import default_free, resolve_parameters
@@ -507,7 +510,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
             if why:
                 log.warning(f"joint compliance cannot be identified: {why}")
         train, test, poses = _split(args, data)
-        options = fit_options(args, free=_free(model, args, data), values=values, weights=_weights(args),
+        options = fit_options(args, free=free_names(model, args, data), values=values, weights=_weights(args),
                               on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
                               drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference,
                               gross_threshold=gross_threshold(args))
@@ -796,7 +799,7 @@ def run_montecarlo(args: argparse.Namespace) -> int:
         from arm_model.model import ArmModel
         model = ArmModel(camp.arm, _effects(args.effect))
         settings = RunSettings(holdout=args.holdout, effects=_effects(args.effect),
-                               fit=fit_options(args, free=_free(model, args), weights=_weights(args)))
+                               fit=fit_options(args, free=free_names(model, args), weights=_weights(args)))
         mc = monte_carlo(SimSource(camp), args.runs, seed=args.seed, settings=settings,
                          scheduler=args.scheduler, workers=args.workers)
         mc.check()
@@ -839,7 +842,7 @@ def run_poses(args: argparse.Namespace) -> int:
         if args.count > n:
             raise InputError(f"--count {args.count}: the points file has {n} measurement(s)", args.points)
         # the choice is made at the nominal, before any fit
-        fit = fit_options(args, free=_free(model, args, data), weights=_weights(args), weights_from_data=False)
+        fit = fit_options(args, free=free_names(model, args, data), weights=_weights(args), weights_from_data=False)
         sel = select_measurements(model, data, args.count, fit)
         from arm_model.shipped import provenance
         (out.dir / "poses.json").write_text(json_text({**sel.to_dict(), **provenance(inputs)}), encoding="utf-8")

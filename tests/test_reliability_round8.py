@@ -150,3 +150,47 @@ def test_a_mass_beyond_the_plausible_bound_is_said_with_that_bound(tmp_path, cap
     rc, err = _run(["tip", _points(tmp_path), "--arm", NOMINAL.with_suffix("").with_suffix(".urdf"), "--tip-frame",
                     "ball", "--masses", masses, "-o", tmp_path / "t.csv"], capsys)
     assert rc == 2 and "m.toml, line 3, key 'link[1].mass_kg'" in err and words in err, err
+
+
+# ---------------------------------------------------------------------------------------------
+# what the audit of every subcommand found
+
+@pytest.mark.parametrize("old, new, key", [
+    ('name = "aacmm7"', 'name = "a\\u0000b"', "key 'name'"),
+    ('name = "j2"', 'name = "j\\n2"', "key 'joint[2].name'"),
+])
+def test_an_arm_or_joint_name_with_a_control_character_is_refused(tmp_path, capsys, old, new, key):
+    """An arm named "a\\x00b" was read (its name goes into every model file, URDF and report, and names output files),
+    and a joint named "j\\n2" too (it names parameters in every CSV table): the id rule of the other readers."""
+    arm = tmp_path / "arm.toml"
+    arm.write_text(NOMINAL.read_text().replace(old, new, 1))
+    rc, err = _run(["tip", _points(tmp_path), "--arm", arm, "-o", tmp_path / "t.csv"], capsys)
+    assert rc == 2 and f"arm.toml, line" in err and key in err and "without control characters" in err, err
+
+
+def test_simulate_a_truth_the_workspace_cannot_hold_is_a_numerical_failure(tmp_path, capsys):
+    """Random length errors of 1 km (within the plausible bound) made the ball bar's placement fail in LAPACK: the
+    message was "key 'task[1]': Singular matrix", exit 2, as if the task were wrong. It is the arithmetic: exit 4,
+    said with the task and what to check."""
+    camp = tmp_path / "c.toml"
+    camp.write_text('arm = "aacmm7"\nsensor = "none"\n[truth]\nlength_error_um = 1e9\n[[task]]\nkind = "ballbar"\n')
+    rc, err = _run(["simulate", camp, "-o", tmp_path / "o"], capsys)
+    assert rc == 4 and "numerical failure: task[1] (ballbar): placing it in the true arm's workspace failed" in err, err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("command, option, words", [
+    ("calibrate", ["--holdout", "ring-01,ring-02,ring-01"], "--holdout names the measurement(s) ring-01 twice"),
+    ("close-loop", ["--candidates", ""], "--candidates names no family (got '')"),
+    ("close-loop", ["--candidates", " , "], "--candidates names no family"),
+    ("close-loop", ["--candidates", "thermal,thermal"], "--candidates names thermal twice"),
+    ("close-loop", ["--hold", "*", "--max-effects", "0"], "nothing is left to estimate"),
+])
+def test_a_list_option_that_names_nothing_or_twice_is_refused(tmp_path, capsys, command, option, words):
+    """`close-loop --candidates ""` ran with the default families and `--candidates ,` with none; `--holdout a,b,a`
+    was read as a, b; `close-loop --hold '*' --max-effects 0` wrote the nominal model as the loop's."""
+    out = tmp_path / "o"
+    rc, err = _run([command, RING / "points.csv", RING / "artefacts.toml", "--arm", "aacmm7", *option, "-o", out],
+                   capsys)
+    assert rc == 2 and words in err, err
+    assert not out.exists()
