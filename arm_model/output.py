@@ -121,7 +121,8 @@ def _through_link(final: Path) -> Path:
 
 
 def guard_output(out: str | Path, inputs=()) -> Path:
-    """Refuse an output (file or folder) that is one of the inputs or holds one (by resolved path)."""
+    """Refuse an output (file or folder) that is one of the inputs, holds one, or lies inside an input that is a
+    folder (``ring --signals DIR``), by resolved path."""
     out = Path(out)
     ro = resolved(out)
     for p in inputs:
@@ -133,6 +134,9 @@ def guard_output(out: str | Path, inputs=()) -> Path:
         if _inside(rp, ro):
             raise InputError(f"refusing to write the output over an input: the output folder holds the "
                              f"input {p} and is replaced as a whole; choose another output folder", out)
+        if _inside(ro, rp) and rp.is_dir():
+            raise InputError(f"refusing to write the output into the input folder {p} (its files are read as the "
+                             "command's input); choose an output outside it", out)
     return out
 
 

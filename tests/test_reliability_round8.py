@@ -165,7 +165,17 @@ def test_an_arm_or_joint_name_with_a_control_character_is_refused(tmp_path, caps
     arm = tmp_path / "arm.toml"
     arm.write_text(NOMINAL.read_text().replace(old, new, 1))
     rc, err = _run(["tip", _points(tmp_path), "--arm", arm, "-o", tmp_path / "t.csv"], capsys)
-    assert rc == 2 and f"arm.toml, line" in err and key in err and "without control characters" in err, err
+    assert rc == 2 and "arm.toml, line" in err and key in err and "without control characters" in err, err
+
+
+def test_a_urdf_joint_name_with_a_control_character_is_refused_at_its_line(tmp_path, capsys):
+    """A URDF may write a line break into a name (`name="j&#10;2"`); the name then names parameters in the covariance
+    CSV, whose reader refuses a cell spanning lines: refused when the URDF is read, at the joint's line."""
+    urdf = NOMINAL.with_suffix("").with_suffix(".urdf").read_text()
+    arm = tmp_path / "a.urdf"
+    arm.write_text(urdf.replace('<joint name="j2" ', '<joint name="j&#10;2" '))
+    rc, err = _run(["tip", _points(tmp_path), "--arm", arm, "--tip-frame", "ball", "-o", tmp_path / "t.csv"], capsys)
+    assert rc == 2 and "a.urdf, line 11, key 'joint.name': a <joint> name must be one line of text" in err, err
 
 
 def test_simulate_a_truth_the_workspace_cannot_hold_is_a_numerical_failure(tmp_path, capsys):
@@ -194,3 +204,42 @@ def test_a_list_option_that_names_nothing_or_twice_is_refused(tmp_path, capsys, 
                    capsys)
     assert rc == 2 and words in err, err
     assert not out.exists()
+
+
+_RESIDUALS = "measurement,feature,kind,line,residual_um,dx_um,dy_um,dz_um,standardized\n"
+
+
+@pytest.mark.parametrize("row, column, words", [
+    ("m,f,seat,2,nan,1,2,3,0.5", "residual_um", "expected a finite number, got 'nan'"),
+    ("m,f,seat,2,1,1,2,3,inf", "standardized", "expected a finite number"),
+    ("m\x01,f,seat,2,1,1,2,3,0.5", "measurement", "without control characters"),
+    ("m,f,seat,99999999999999999999,1,1,2,3,0.5", "line", "expected a line number"),
+])
+def test_a_residuals_file_is_held_to_the_rules_of_every_reader(tmp_path, capsys, row, column, words):
+    """`view --residuals`: a line number beyond a C long was an internal error (OverflowError, exit 3); `nan` in the
+    residual or standardized columns (read and not used) and a control character in an id were accepted."""
+    res = tmp_path / "r.csv"
+    res.write_text(_RESIDUALS + row + "\n")
+    out = tmp_path / "v.html"
+    rc, err = _run(["view", _points(tmp_path), "--arm", "aacmm7", "--residuals", res, "--html", out], capsys)
+    assert rc == 2 and f"r.csv, line 2, column '{column}'" in err and words in err, err
+    assert not out.exists()
+
+
+def test_live_an_empty_measurement_id_is_refused_not_replaced(tmp_path, capsys):
+    """`live --measurement ""` named the session's points after the folder, as if the option were not given."""
+    rc, err = _run(["live", SAMPLES, "--arm", "aacmm7", "--speed", "0", "--measurement", "", "-o", tmp_path / "s"],
+                   capsys)
+    assert rc == 2 and "the measurement id (--measurement) must be a non-empty text" in err, err
+    assert not (tmp_path / "s").exists()
+
+
+def test_an_output_inside_an_input_folder_is_refused(tmp_path, capsys):
+    """`ring --signals DIR -o DIR/out` wrote its report folder among the force signals it read."""
+    from arm_model.errors import InputError
+    from arm_model.output import guard_output
+    signals = tmp_path / "signals"
+    signals.mkdir()
+    with pytest.raises(InputError, match="refusing to write the output into the input folder"):
+        guard_output(signals / "out", [tmp_path / "p.csv", signals])
+    assert guard_output(tmp_path / "out", [tmp_path / "p.csv", signals]) == tmp_path / "out"
