@@ -241,5 +241,22 @@ def test_an_output_inside_an_input_folder_is_refused(tmp_path, capsys):
     signals = tmp_path / "signals"
     signals.mkdir()
     with pytest.raises(InputError, match="refusing to write the output into the input folder"):
-        guard_output(signals / "out", [tmp_path / "p.csv", signals])
-    assert guard_output(tmp_path / "out", [tmp_path / "p.csv", signals]) == tmp_path / "out"
+        guard_output(signals / "out", [tmp_path / "p.csv"], [signals])
+    assert guard_output(tmp_path / "out", [tmp_path / "p.csv"], [signals]) == tmp_path / "out"
+    assert guard_output(tmp_path / "out.csv", [tmp_path]) == tmp_path / "out.csv"     # beside an input file: fine
+
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda rows: rows[:1] + ["\x01" + rows[1]] + rows[2:], "the measurement id must be one line of text"),
+    (lambda rows: rows[:2] + [rows[1]] + rows[2:], "is given twice (one row a measurement)"),
+])
+def test_paper_table_ids_are_one_line_and_each_once(tmp_path, capsys, edit, words):
+    """`paper --table2`: a control character in a measurement id went into the report's figures (matplotlib's
+    "Glyph 1 missing" warning) and a measurement given twice was counted twice in the correlations."""
+    text = (ROOT / "correction" / "data" / "paper_table2.csv").read_text().splitlines()
+    head = next(i for i, line in enumerate(text) if line and not line.startswith("#"))
+    table = tmp_path / "t2.csv"
+    table.write_text("\n".join(text[:head] + edit(text[head:])) + "\n")
+    rc, err = _run(["paper", "--table2", table, "-o", tmp_path / "o"], capsys)
+    assert rc == 2 and "t2.csv, line" in err and "column 'measurement'" in err and words in err, err
+    assert not (tmp_path / "o").exists()
