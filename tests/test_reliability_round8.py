@@ -189,6 +189,15 @@ def test_simulate_a_truth_the_workspace_cannot_hold_is_a_numerical_failure(tmp_p
     assert not (tmp_path / "o").exists()
 
 
+def test_simulate_a_frame_key_on_a_description_arm_is_refused(tmp_path, capsys):
+    """A campaign's `tip_frame = "ball"` on the shipped DH arm was silently ignored (`--tip-frame` on the same arm
+    is refused by every command)."""
+    camp = tmp_path / "c.toml"
+    camp.write_text('arm = "aacmm7"\nsensor = "none"\ntip_frame = "ball"\n[[task]]\nkind = "seat"\n')
+    rc, err = _run(["simulate", camp, "-o", tmp_path / "o"], capsys)
+    assert rc == 2 and "c.toml, line 3, key 'tip_frame': 'tip_frame' is for an arm given as a URDF" in err, err
+
+
 @pytest.mark.parametrize("command, option, words", [
     ("calibrate", ["--holdout", "ring-01,ring-02,ring-01"], "--holdout names the measurement(s) ring-01 twice"),
     ("close-loop", ["--candidates", ""], "--candidates names no family (got '')"),

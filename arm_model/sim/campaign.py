@@ -416,6 +416,10 @@ def _campaign_arm(ctx, top: dict, base_dir: Path | None, arm) -> tuple[ArmDescri
         raise ctx.error(f"arm description not found: {arm_path}", (), "arm")
     if arm_path.suffix.lower() == ".urdf" and not top["tip_frame"]:
         raise ctx.error("an arm given as a URDF needs 'tip_frame' (the link at the ball centre)", (), "arm")
+    for key in ("tip_frame", "base_frame"):       # load_arm refuses the options; the keys were ignored
+        if arm_path.suffix.lower() != ".urdf" and top[key] is not None:
+            raise ctx.error(f"'{key}' is for an arm given as a URDF; this campaign's arm {arm_path.name} is a "
+                            "description TOML (its chain is its [[joint]] rows, its tip the [probe])", (), key)
     return _load_arm(ctx, arm_path, top["tip_frame"], top["base_frame"]), arm_path
 
 
