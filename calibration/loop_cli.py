@@ -190,6 +190,9 @@ def _check_folds(folds: int, points, reference) -> None:
     seen = (np.zeros(len(points), bool) if points.ref is None
             else np.any(np.all(np.isfinite(points.ref), axis=2), axis=1))          # reference columns in the file
     poses = int(((points.feature != "") | seen).sum()) + (0 if reference is None else len(reference))
+    if poses < 2:                   # --folds is at least 2: no number of folds fits
+        raise InputError(f"the data hold {poses} pose{'' if poses == 1 else 's'} (points on a feature and reference "
+                         "points): the loop's held-out folds need at least 2, each holding out one", points.path)
     if folds > poses:
         raise InputError(f"--folds {folds}: the data hold {poses} poses (points on a feature and reference points), "
                          f"and each fold holds out at least one: ask for at most {poses} folds")

@@ -19,6 +19,14 @@ def _points(tmp_path, rows=("m,f,10,20,30,40,50,60,70",), name="p.csv", header=N
     return path
 
 
+@pytest.fixture(scope="module")
+def ring_points(tmp_path_factory):
+    """The first 40 points (one measurement) of the example ring campaign: enough for the readers, fast to load."""
+    path = tmp_path_factory.mktemp("ring") / "points.csv"
+    path.write_text("\n".join((RING / "points.csv").read_text().splitlines()[:41]) + "\n")
+    return path
+
+
 def _run(argv, capsys):
     rc = exit_status([str(a) for a in argv])
     return rc, capsys.readouterr().err
@@ -56,15 +64,15 @@ def test_a_control_character_in_a_session_id_is_refused_too():
 # ---------------------------------------------------------------------------------------------
 # calibrate: nothing free, reference options without reference points
 
-def test_calibrate_with_every_parameter_held_is_refused(tmp_path, capsys):
+def test_calibrate_with_every_parameter_held_is_refused(tmp_path, capsys, ring_points):
     """`calibrate --hold '*'` ran a fit of 0 parameters and wrote `aacmm7-calibrated.toml`, the nominal model
     under a calibrated name, with exit 0. Nothing left to estimate is bad input: exit 2, nothing written."""
     out = tmp_path / "o"
-    rc, err = _run(["calibrate", RING / "points.csv", RING / "artefacts.toml", "--arm", "aacmm7", "--hold", "*",
+    rc, err = _run(["calibrate", ring_points, RING / "artefacts.toml", "--arm", "aacmm7", "--hold", "*",
                     "-o", out], capsys)
     assert rc == 2 and "nothing is left to estimate: --hold * holds every parameter" in err, err
     assert not out.exists()
-    rc, err = _run(["calibrate", RING / "points.csv", RING / "artefacts.toml", "--arm", "aacmm7", "--free", "j1.d",
+    rc, err = _run(["calibrate", ring_points, RING / "artefacts.toml", "--arm", "aacmm7", "--free", "j1.d",
                     "--hold", "j*", "-o", out], capsys)
     assert rc == 2 and "every parameter of --free j1.d (1)" in err, err
 
@@ -74,10 +82,10 @@ def test_calibrate_with_every_parameter_held_is_refused(tmp_path, capsys):
     (["--marker-offset", "fit"], "--marker-offset fit concerns"),
     (["--marker-offset", "zero", "--reference", "identity"], "--reference identity and --marker-offset zero concern"),
 ])
-def test_reference_options_without_reference_points_are_refused(tmp_path, capsys, options, words):
+def test_reference_options_without_reference_points_are_refused(tmp_path, capsys, options, words, ring_points):
     """`--reference identity` and `--marker-offset fit` on data without a reference point were silently ignored."""
     out = tmp_path / "o"
-    rc, err = _run(["calibrate", RING / "points.csv", RING / "artefacts.toml", "--arm", "aacmm7", *options,
+    rc, err = _run(["calibrate", ring_points, RING / "artefacts.toml", "--arm", "aacmm7", *options,
                     "-o", out], capsys)
     assert rc == 2 and words in err and "the data hold none" in err, err
     assert not out.exists()
@@ -205,11 +213,11 @@ def test_simulate_a_frame_key_on_a_description_arm_is_refused(tmp_path, capsys):
     ("close-loop", ["--candidates", "thermal,thermal"], "--candidates names thermal twice"),
     ("close-loop", ["--hold", "*", "--max-effects", "0"], "nothing is left to estimate"),
 ])
-def test_a_list_option_that_names_nothing_or_twice_is_refused(tmp_path, capsys, command, option, words):
+def test_a_list_option_that_names_nothing_or_twice_is_refused(tmp_path, capsys, command, option, words, ring_points):
     """`close-loop --candidates ""` ran with the default families and `--candidates ,` with none; `--holdout a,b,a`
     was read as a, b; `close-loop --hold '*' --max-effects 0` wrote the nominal model as the loop's."""
     out = tmp_path / "o"
-    rc, err = _run([command, RING / "points.csv", RING / "artefacts.toml", "--arm", "aacmm7", *option, "-o", out],
+    rc, err = _run([command, ring_points, RING / "artefacts.toml", "--arm", "aacmm7", *option, "-o", out],
                    capsys)
     assert rc == 2 and words in err, err
     assert not out.exists()
@@ -269,3 +277,14 @@ def test_paper_table_ids_are_one_line_and_each_once(tmp_path, capsys, edit, word
     rc, err = _run(["paper", "--table2", table, "-o", tmp_path / "o"], capsys)
     assert rc == 2 and "t2.csv, line" in err and "column 'measurement'" in err and words in err, err
     assert not (tmp_path / "o").exists()
+
+
+def test_close_loop_on_one_pose_says_so_without_asking_for_an_impossible_fold_count(tmp_path, capsys):
+    """A points file of one row: "--folds 4: the data hold 1 poses ... ask for at most 1 folds", while --folds must
+    be at least 2."""
+    rows = (RING / "points.csv").read_text().splitlines()[:2]
+    pts = tmp_path / "p.csv"
+    pts.write_text("\n".join(rows) + "\n")
+    rc, err = _run(["close-loop", pts, RING / "artefacts.toml", "--arm", "aacmm7", "-o", tmp_path / "o"], capsys)
+    assert rc == 2 and "p.csv: the data hold 1 pose (points on a feature and reference points)" in err, err
+    assert "at most 1 folds" not in err and not (tmp_path / "o").exists()
