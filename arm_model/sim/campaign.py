@@ -560,9 +560,11 @@ def _sections(ctx, data: dict) -> dict:
             raise ctx.error(f"'{k}' must not be negative", ("noise",), k)
     op = sections["operator"]
     if not 0 < op["min_force"] < op["max_force"]:
-        raise ctx.error("need 0 < min_force < max_force", ("operator",), "min_force")
+        raise ctx.error(f"need 0 < min_force < max_force, got {op['min_force']:g} N and {op['max_force']:g} N",
+                        ("operator",), "min_force")
     if not op["min_force"] <= op["force_mean"] <= op["max_force"]:
-        raise ctx.error("force_mean must lie between min_force and max_force", ("operator",), "force_mean")
+        raise ctx.error(f"force_mean must lie between min_force and max_force ({op['min_force']:g} to "
+                        f"{op['max_force']:g} N), got {op['force_mean']:g} N", ("operator",), "force_mean")
     for k in ("level_log_sd", "point_cv", "friction_coefficient"):
         if op[k] < 0:
             raise ctx.error(f"'{k}' must not be negative", ("operator",), k)
