@@ -288,3 +288,23 @@ def test_close_loop_on_one_pose_says_so_without_asking_for_an_impossible_fold_co
     rc, err = _run(["close-loop", pts, RING / "artefacts.toml", "--arm", "aacmm7", "-o", tmp_path / "o"], capsys)
     assert rc == 2 and "p.csv: the data hold 1 pose (points on a feature and reference points)" in err, err
     assert "at most 1 folds" not in err and not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["tip", "p.csv", "--arm", "aacmm7", "--arm", "a.toml", "-o", "t.csv"], "--arm"),
+    (["live", "s.csv", "--arm", "aacmm7", "--feature", "seat:a", "--feature", "seat:b", "-o", "s"], "--feature"),
+    (["calibrate", "p.csv", "a.toml", "--arm", "aacmm7", "--covariance-scale", "stated", "--covariance", "residual",
+      "-o", "o"], "--covariance-scale/--covariance"),
+])
+def test_an_option_of_one_value_given_twice_is_refused(capsys, argv, option):
+    """`--arm a --arm b` ran with b, `live --feature seat:a --feature seat:b` planned seat b alone: argparse's last
+    value won without a word. An option that takes one value is refused when given twice (repeatable options, such
+    as --free or --hold-joint, append)."""
+    rc, err = _run(argv, capsys)
+    assert rc == 2 and f"argument {option}: given twice" in err, err
+
+
+def test_repeatable_options_still_repeat():
+    from arm_model.cli import build_parser
+    argv = ["calibrate", "p.csv", "a.toml", "--arm", "aacmm7", "--free", "j1.*", "--free", "j2.*", "-o", "o"]
+    assert build_parser(argv).parse_args(argv).free == ["j1.*", "j2.*"]
