@@ -48,7 +48,6 @@ from .decide import (
     choose,
     heldout_test,
     merge_tied,
-    negative_compliances,
     physics_inclusion,
     plot_family,
 )
@@ -405,7 +404,7 @@ def run(state: LoopState) -> None:
 def report(state: LoopState) -> LoopResult:
     """The structure tests on the final fit (Holm-adjusted, and the forward selection of what remains), the
     effects built from the residual and their fate, the verdict, and the final model calibrated on every
-    point from the stated uncertainties (a joint compliance resolved significantly negative held at zero)."""
+    point from the stated uncertainties."""
     s, say = state.settings, state.say
     say("structure tests on the final fit")
     space = residual_space(state.result)
@@ -424,12 +423,8 @@ def report(state: LoopState) -> LoopResult:
     data = state.data if s.test_in_model else state.data.select(~state.test_rows)
     say("calibrating the final model on every point (" + ("design and test" if s.test_in_model else
         "but the held-out test set's") + "; outliers kept, as calibrate does)")
+    # no compliance of it is negative: every fit holds a parameter at its lower bound (calibrate, _at_bounds)
     model_fit = state.fit(state.model, data, reweight=True, weights=state.stated)
-    negative = negative_compliances(model_fit, s.alpha)
-    if negative:
-        say(f"  joint compliance resolved significantly negative in the final fit ({', '.join(negative)}): a "
-            "compliance cannot be negative, so it is held at zero and the final model refitted")
-        model_fit = state.fit(state.model, data, reweight=True, hold=tuple(negative), weights=state.stated)
     return LoopResult(state.stages, state.last_tests, state.last_cv, state.stop, structure, significant, verdict,
                       state.candidates + state.synthesised, state.skipped, state.design.measurements(),
                       state.test.measurements(), s, state.desc, plots, state.dropped, state.test_by, state.power,
