@@ -626,14 +626,15 @@ def _without_outliers(model: ArmModel, data: CalibrationData, options: FitOption
     test the default leaves gross errors out by) is at ``options.outlier_threshold`` or beyond dropped (the worst
     of each measurement at half the worst statistic or more, :func:`_one_a_measurement`: a gross error also pulls
     its neighbours out, those go only if they stay out) and refitted, until none is left (at most
-    :data:`DROP_ROUNDS` rounds); otherwise the gross errors left out (:func:`_without_gross`)."""
+    :data:`DROP_ROUNDS` rounds; lengths only with ``options.outlier_lengths``); otherwise the gross errors left out
+    (:func:`_without_gross`)."""
     if not options.drop_outliers:
         return _without_gross(model, data, options, estimate)
     index = np.arange(len(data))
     dropped: list[Outlier] = []
     for k in range(DROP_ROUNDS + 1):
         res = estimate(model, data, options)
-        cands = _tested(res, options.outlier_threshold)
+        cands = [c for c in _tested(res, options.outlier_threshold) if options.outlier_lengths or c.between is None]
         if not cands:
             res.dropped = dropped
             return res

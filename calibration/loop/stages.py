@@ -16,7 +16,8 @@
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 
@@ -109,12 +110,14 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
     state = LoopState(settings, desc, say, data, design, test, test_by, test_rows, options, camp.free, camp.hold,
                       model.spec.size, stated, cands, skipped, model, stated, remaining=list(cands))
     say("calibrating the base model on the design set")
-    result = state.fit(model, state.design)
     if settings.drop_outliers:
-        result, state.design, state.dropped["design"] = drop_design_outliers(result, state.design, state.fit)
+        result, state.design, state.dropped["design"] = drop_design_outliers(
+            state.design, partial(state.fit, model))
         if state.dropped["design"]:
-            say(f"  {len(state.dropped['design'])} outlier point(s) of the design set dropped (base model, robust "
-                f"standardized residual > {settings.outlier_threshold:g}); they stay out of every later fit")
+            say(f"  {len(state.dropped['design'])} outlier(s) of the design set dropped (base model, calibrate's "
+                f"point test at {settings.outlier_threshold:g}); they stay out of every later fit")
+    else:
+        result = state.fit(model, state.design)
     off = [v for v in result.variance if v["estimated"] and not 1 / NOISE_OFF < v["factor"] < NOISE_OFF]
     if settings.weights_from_data and off:
         result = state.fit(model, state.design, reweight=True)
