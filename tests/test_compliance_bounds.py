@@ -124,3 +124,23 @@ def test_a_fit_that_ends_where_no_arm_is_is_a_numerical_failure(nominal):
                                              r"evidence.*--hold NAME.*--min-resolution"):
         calibrate(model, data, FitOptions(prior_scale=None, weights=Weights(probe=2e-6), free=["j6.compliance"]))
 
+
+def test_the_loop_screens_at_the_current_models_torques(nominal):
+    """The screening's torques are the current model's at its equilibrium, not the nominal description's at the
+    readings the fits use: for a fit with joint 2's compliance c, joint 2's gravity torque at theta = q - c tau
+    (Pinocchio's RNEA at those angles on the fitted description: the independent route), to 1e-6 relative."""
+    from arm_model.pinocchio_model import PinocchioArm
+    from calibration.data import Weights
+    from calibration.loop.stages import at_current_torques
+    model, data = _deflected(nominal, 1, 2e-4)           # 2e-4 rad/(N m) under ~13 N m: a 2.6 mrad sag
+    res = calibrate(model, data, FitOptions(prior_scale=None, weights=Weights(probe=2e-6)))
+    c = res.value("j2.compliance")
+    assert 1.5e-4 < c < 2.5e-4
+    got = at_current_torques(res).data.aux.tau_gravity
+    arm = PinocchioArm(res.model.described(res.p))
+    theta = data.points.q.copy()
+    for _ in range(30):                                    # theta = q + c (0 - tau_gravity(theta)) on joint 2
+        theta[:, 1] = data.points.q[:, 1] - c * arm.torques(theta)[0][:, 1]
+    want = arm.torques(theta)[0]
+    assert np.allclose(got, want, rtol=1e-6, atol=1e-9 * np.abs(want).max())
+    assert np.abs(data.aux.tau_gravity - want).max() > 1e-3 * np.abs(want).max()     # the fits' own differ
