@@ -21,6 +21,7 @@ from functools import partial
 
 import numpy as np
 
+from arm_model import NumericalError
 from arm_model.description import ArmDescription
 from arm_model.effects import JointCompliance, ThermalGrowth
 from arm_model.io import Artefacts, PointSet
@@ -125,9 +126,13 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
         if _noise(result):
             say("  " + _noise(result)[2:] + " (the stated uncertainties are starting values)")
     if settings.drop_outliers:
-        state.test, state.dropped["test"] = drop_test_outliers(
-            model, result.p, state.test, state.weights, result.reference_mode, settings.outlier_threshold,
-            None if test_by == "measurement" else state.design)
+        try:
+            state.test, state.dropped["test"] = drop_test_outliers(
+                model, result.p, state.test, state.weights, result.reference_mode, settings.outlier_threshold,
+                None if test_by == "measurement" else state.design)
+        except NumericalError:        # e.g. two tracker poses: a frame and the markers' offsets undetermined
+            say("  the test set alone does not determine its own unknowns (centres, frames, offsets) for the point "
+                "test: its points are not tested for outliers")
         if state.dropped["test"]:
             say(f"  {len(state.dropped['test'])} outlier point(s) of the test set dropped (base model)")
     state.folds, state.power = choose_folds(state.design, settings)
