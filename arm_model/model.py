@@ -85,7 +85,8 @@ class ArmModel:
         low = np.full(self.spec.size, -np.inf)
         probe = self.desc.probe
         for n, v in (("probe.compliance_x", probe.bending_compliance_x),
-                     ("probe.compliance_y", probe.bending_compliance_y), ("probe.compliance_z", probe.axial_compliance)):
+                     ("probe.compliance_y", probe.bending_compliance_y),
+                     ("probe.compliance_z", probe.axial_compliance)):
             if n in self.spec.names:
                 low[self.spec.index(n)] = -v
         for e, sl in self.effect_slices():

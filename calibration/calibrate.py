@@ -989,7 +989,9 @@ def _at_bounds(s: _Setup, p, kept, stage: str, u: dict | None = None):
     (``FixedParameter.pulled``: whether the pull is significant, e.g. the loop's
     :func:`calibration.loop.decide.resolved`). Returns (kept, [FixedParameter])."""
     low = s.lower
-    below = [i for i in kept if low is not None and p[i] < low[i]]
+    if low is None:
+        return kept, []
+    below = [i for i in kept if p[i] < low[i]]
     if not below:
         return kept, []
     spec = s.problem.model.spec

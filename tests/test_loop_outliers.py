@@ -29,8 +29,11 @@ def _moved(model, c, i: int, dp) -> np.ndarray:
     q = c.points.q.copy()
     cols = []
     for k in range(q.shape[1]):
-        d = np.zeros_like(q[i]); d[k] = 1e-7
-        cols.append((model.ball_centres((q[i] + d)[None], p=c.p_true) - model.ball_centres((q[i] - d)[None], p=c.p_true))[0] / 2e-7)
+        d = np.zeros_like(q[i])
+        d[k] = 1e-7
+        plus = model.ball_centres((q[i] + d)[None], p=c.p_true)
+        minus = model.ball_centres((q[i] - d)[None], p=c.p_true)
+        cols.append((plus - minus)[0] / 2e-7)
     q[i] += np.linalg.lstsq(np.column_stack(cols), dp, rcond=None)[0]
     return q
 

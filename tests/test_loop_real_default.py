@@ -58,8 +58,8 @@ def test_default_loop_starts_from_joint_compliance_with_its_prior(tmp_path):
 @pytest.mark.slow
 def test_default_loop_on_every_placement_beats_the_published_tool(tmp_path):
     """Each placement trains, the other two are predicted (six pairs): mean spread at most 0.85x MUKCa's
-    (measured 1.634 mm, 0.79x; with the eccentricities of joints 1 and 3 from right 1.646 mm; the loop before this default
-    1.795 mm, 0.87x), no pair above 1.35x its MUKCa pair
+    (measured 1.634 mm, 0.79x; with the eccentricities of joints 1 and 3 from right 1.646 mm; the loop before
+    this default 1.795 mm, 0.87x), no pair above 1.35x its MUKCa pair
     (measured worst 1.30x, front -> back-high), the mean |distance error| within 0.15 mm of MUKCa's (measured 0.782
     against 0.666 mm: not yet no worse, docs/close-loop.md says why) and the same effects at seeds 0 and 2 (the
     seed only draws the bootstrap of the held-out figures' uncertainties)."""

@@ -28,7 +28,8 @@ def dropped_entry(o: Outlier) -> dict:
 
 def drop_design_outliers(design: CalibrationData, fit) -> tuple[CalibrationResult, CalibrationData, list]:
     """The base fit of ``design`` by ``fit(data, drop_outliers=True)`` (the loop's
-    :meth:`~calibration.loop.state.LoopState.fit` of the base model): calibrate's ``--drop-outliers``; returns that fit, the data it kept and what it dropped (:func:`dropped_entry`)."""
+    :meth:`~calibration.loop.state.LoopState.fit` of the base model): calibrate's ``--drop-outliers``;
+    returns that fit, the data it kept and what it dropped (:func:`dropped_entry`)."""
     res = fit(design, drop_outliers=True)
     return res, res.data, [dropped_entry(o) for o in res.dropped]
 

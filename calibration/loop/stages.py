@@ -60,7 +60,8 @@ from .settings import LEGACY_RESOLUTION, NOISE_OFF, LoopSettings
 from .state import LoopState, Screening, log
 from .verdict import ADDED, residual_over_stated, verdict_text
 
-__all__ = ["Campaign", "Stop", "prepare", "at_current_torques", "screen", "test", "physics", "synthesise", "decide", "fit_stage",
+__all__ = ["Campaign", "Stop", "prepare", "at_current_torques", "screen", "test", "physics", "synthesise", "decide",
+           "fit_stage",
            "outer_test_worse", "add", "run_stage", "run", "report"]
 
 

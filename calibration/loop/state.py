@@ -117,7 +117,8 @@ class LoopState:
         added, less the user's ``hold`` and the names ``hold``; the noise re-estimated from the data only with
         ``reweight``; ``discrepancy`` False: no model discrepancy (a fold's fit, which only predicts its held-out
         units); ``start``: starting values of free parameters by name (a warm start; the prior's centre and the
-        held parameters' values stay the given ones); ``drop_outliers``: calibrate's ``--drop-outliers`` (the base fit's,
+        held parameters' values stay the given ones); ``drop_outliers``: calibrate's ``--drop-outliers``
+        (the base fit's,
         :func:`~calibration.loop.outliers.drop_design_outliers`)."""
         names = fitted_names(model, self.free, self.hold, self.base_size, hold, data)
         # the added effects' plausible sizes serve the practical-resolution rule without a prior; with one,
