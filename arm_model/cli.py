@@ -130,9 +130,30 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+class _StoreOnce(argparse.Action):
+    """argparse's ``store`` (an option's value), refusing an option given twice: ``--arm a.toml --arm b.toml`` or
+    ``live --feature seat:a --feature seat:b`` took the last one without a word. Options meant to repeat use
+    ``action="append"``."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if option_string is not None:
+            given = namespace.__dict__.setdefault("_options_given", set())
+            if self.dest in given:
+                parser.error(f"argument {'/'.join(self.option_strings)}: given twice (it takes one value; the "
+                             "last would silently replace the first)")
+            given.add(self.dest)
+        setattr(namespace, self.dest, values)
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse's parser whose error message (it may quote an argument: a file name with a newline) is one
-    line, control characters escaped (subcommands' parsers are of the same class)."""
+    line, control characters escaped, and whose options taking one value refuse to be given twice
+    (subcommands' parsers are of the same class)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.register("action", None, _StoreOnce)
+        self.register("action", "store", _StoreOnce)
 
     def error(self, message: str):
         super().error(escaped(message))

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .errors import InputError, did_you_mean, parse_toml, read_text
+from .errors import InputError, did_you_mean, id_problem, parse_toml, read_text
 from .toml_lines import key_path_text, toml_key_lines
 from .units import QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
@@ -483,6 +483,8 @@ def _joint_row(r: TomlReader, convention: str, i: int, row: dict[str, Any]) -> J
                       f"{multiplier!r}", "joint", i, "mimic_multiplier")
     unit = "mm" if kind == "prismatic" else "deg"
     v = r.values(row, _joint_kind_keys(convention, kind), ("joint", i), text_keys=("name",))
+    if "name" in row and id_problem(row["name"]):       # it names parameters in every CSV table and the URDF
+        raise r.error(f"'name' {id_problem(row['name'])}", "joint", i, "name")
     if master is None and ("mimic_offset" in v or multiplier != 1.0):
         raise r.error("'mimic_multiplier' and 'mimic_offset' need 'mimic_joint'", "joint", i)
     if "lower" in v and "upper" in v and v["lower"] >= v["upper"]:
@@ -582,6 +584,8 @@ def description_from_data(data: dict[str, Any], r: TomlReader, extra_keys: tuple
     if not isinstance(name, str) or not name.strip():
         raise r.error("missing or empty 'name'" if name is None or name == "" else
                       f"'name' must be a non-empty text, got {name!r}", "name")
+    if id_problem(name):            # it names files and is written into every model file, URDF and report
+        raise r.error(f"'name' {id_problem(name)}", "name")
     convention = data.get("convention")
     if convention not in ("dh", "mdh", "urdf"):
         raise r.error(f"'convention' must be \"dh\", \"mdh\" or \"urdf\", got {convention!r}", "convention")

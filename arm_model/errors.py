@@ -6,10 +6,11 @@ import os
 import re
 import stat
 import tomllib
+import unicodedata
 from pathlib import Path
 
 __all__ = ["AacmmError", "InputError", "NumericalError", "read_text", "open_input", "decode_text", "parse_toml",
-           "did_you_mean", "unknown_key"]
+           "did_you_mean", "unknown_key", "id_problem"]
 
 
 class AacmmError(Exception):
@@ -70,8 +71,8 @@ def decode_text(raw: bytes, path: str | Path, first_line: int = 1) -> str:
     if b"\r" in raw:
         m = _LONE_CR.search(raw)
         if m:
-            raise InputError("a carriage return alone ends a line (old Mac line ends): save the file with "
-                             "LF or CRLF line ends", path, first_line + raw[: m.start()].count(b"\n"))
+            raise InputError("a carriage return alone ends a line (old Mac line ends): save the file (or send "
+                             "the stream) with LF or CRLF line ends", path, first_line + raw[: m.start()].count(b"\n"))
     return text
 
 
@@ -150,3 +151,15 @@ def unknown_key(key: str, known, shown=None, what: str = "key") -> str:
     default ``known``)."""
     known = list(known)
     return f"unknown {what} '{key}'{did_you_mean(key, known)} (known: {', '.join(shown or known)})"
+
+
+def id_problem(text) -> str | None:
+    """Why ``text`` cannot be a measurement or feature id, or None: an id is one non-empty line of text (a line
+    break or another control character would split the row of every CSV file that carries it, which its reader
+    then refuses)."""
+    if not isinstance(text, str) or not text.strip():
+        return f"must be a non-empty text, got {text!r}"
+    bad = next((c for c in text if unicodedata.category(c) in ("Cc", "Zl", "Zp")), None)
+    if bad is not None:
+        return f"must be one line of text without control characters, got {text!r} (holding {bad!r})"
+    return None

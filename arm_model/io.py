@@ -10,14 +10,13 @@ import json
 import logging
 import math
 import re
-import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from .csv_io import BLOCK_BYTES, csv_records, format_csv, iter_csv_blocks
-from .errors import InputError, parse_toml, read_text, unknown_key
+from .errors import InputError, id_problem, parse_toml, read_text, unknown_key
 from .output import atomic_write_bytes, guard_output
 from .readback import UnreadableOutput, read_back
 from .toml_lines import toml_key_lines, top_key_line
@@ -32,18 +31,6 @@ __all__ = ["PointSet", "Feature", "Distance", "Artefacts", "ForceSignal", "read_
            "concat_points", "POINT_COLUMNS", "format_artefacts", "read_back", "UnreadableOutput", "json_text"]
 
 FEATURE_KINDS = ("ring", "cylinder", "sphere", "seat", "plane", "point")
-def id_problem(text) -> str | None:
-    """Why ``text`` cannot be a measurement or feature id, or None: an id is one non-empty line of text (a line
-    break or another control character would split the row of every CSV file that carries it, which its reader
-    then refuses)."""
-    if not isinstance(text, str) or not text.strip():
-        return f"must be a non-empty text, got {text!r}"
-    bad = next((c for c in text if unicodedata.category(c) in ("Cc", "Zl", "Zp")), None)
-    if bad is not None:
-        return f"must be one line of text without control characters, got {text!r} (holding {bad!r})"
-    return None
-
-
 #: the kinds whose centre is one point a fit determines: the only ends a certified [[distance]] can join (a ring's or
 #: cylinder's axis is a line, a plane has no centre, a free point is no artefact's)
 CENTRE_KINDS = ("seat", "sphere")
@@ -282,6 +269,19 @@ def _marker_groups(cols: dict, header, path: str, line: int) -> tuple:
     return groups
 
 
+def _check_ids(blk, lay: _PointsLayout, path: str) -> None:
+    """The text cells of a block (measurement, feature, session ids) hold no control character (a NUL, an
+    escape, DEL, a line or paragraph separator, a tab), the rule of :func:`id_problem` for every id the toolkit
+    writes back: a located InputError at the first one. Each distinct id is checked once."""
+    for j, c in enumerate(lay.txt_idx):
+        column = blk.texts[:, j]
+        bad = [t for t in set(column.tolist()) if t and id_problem(t)]
+        if bad:
+            i = int(np.flatnonzero(np.isin(column, bad))[0])
+            raise InputError(f"the {lay.header[c]} id {id_problem(column[i])}", path, int(blk.lines[i]),
+                             lay.header[c])
+
+
 def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
     nums = blk.numbers
     bad = ~np.isfinite(nums)
@@ -308,6 +308,7 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
     empty = np.flatnonzero(measurement == "")
     if len(empty):
         raise InputError("empty measurement id", path, int(blk.lines[empty[0]]), "measurement")
+    _check_ids(blk, lay, path)
     units = [unit_of(lay.header[c]) for c in lay.joints]
     q = nums[:, [pos[c] for c in lay.joints]] * np.array([UNIT_FACTORS[u] for u in units])
     for k, unit in enumerate(units):

@@ -691,8 +691,9 @@ def parameters_of(arm) -> ParameterCovariance | None:
             raise InputError(f"parameter '{n}' of the covariance file is not a parameter of the model "
                              f"(known: {', '.join(names)})", arm.covariance, line, "parameter")
         if cov.units[i] != spec.units[spec.index(n)]:
-            raise InputError(f"parameter '{n}' is a '{spec.units[spec.index(n)]}' quantity, but its unit is one of "
-                             f"'{cov.units[i]}'", arm.covariance, line, "unit")
+            raise InputError(f"parameter '{n}' is a '{spec.units[spec.index(n)]}' quantity, but the unit of this row "
+                             f"is a '{cov.units[i]}' one: give the value and u in a unit of the parameter's quantity",
+                             arm.covariance, line, "unit")
     _check_agrees(arm, cov)
     try:
         out = ParameterCovariance(tuple(cov.names), cov.matrix,

@@ -120,11 +120,12 @@ def _through_link(final: Path) -> Path:
     return target
 
 
-def guard_output(out: str | Path, inputs=()) -> Path:
-    """Refuse an output (file or folder) that is one of the inputs or holds one (by resolved path)."""
+def guard_output(out: str | Path, inputs=(), input_folders=()) -> Path:
+    """Refuse an output (file or folder) that is one of the inputs or holds one, or that lies inside one of
+    ``input_folders`` (folders the command reads files from, ``ring --signals DIR``), by resolved path."""
     out = Path(out)
     ro = resolved(out)
-    for p in inputs:
+    for p in (*inputs, *input_folders):
         if p is None:
             continue
         rp = resolved(p)
@@ -133,6 +134,10 @@ def guard_output(out: str | Path, inputs=()) -> Path:
         if _inside(rp, ro):
             raise InputError(f"refusing to write the output over an input: the output folder holds the "
                              f"input {p} and is replaced as a whole; choose another output folder", out)
+    for p in input_folders:
+        if p is not None and _inside(ro, resolved(p)):
+            raise InputError(f"refusing to write the output into the input folder {p} (the command reads its "
+                             "files); choose an output outside it", out)
     return out
 
 
@@ -337,7 +342,7 @@ def check_output(stage: Path, final: Path) -> None:
 
 
 @contextlib.contextmanager
-def output_folder(final: str | Path, inputs=(), command: str = ""):
+def output_folder(final: str | Path, inputs=(), command: str = "", input_folders=()):
     """Write a command's output folder complete or not at all (see the module's doc).
 
     Args:
@@ -346,11 +351,13 @@ def output_folder(final: str | Path, inputs=(), command: str = ""):
             never inside the output folder.
         command: the subcommand (``"calibrate"``, ``"study montecarlo"``); an existing non-empty folder
             is replaced only if an earlier run of the same command wrote it.
+        input_folders: folders the command reads files from (``None`` entries ignored): the output is never
+            one of them, inside one, nor holds one.
     Yields:
         an :class:`Output`; write into ``out.dir``.
     """
     final = Path(final)
-    guard_output(final, inputs)
+    guard_output(final, inputs, input_folders)
     final = Path(os.path.abspath(final))
     final = _through_link(final)
     if final.name in ("", ".", ".."):

@@ -53,12 +53,13 @@ def to_si(value, unit: str):
 
 
 #: the largest magnitude, in SI, that an input number of each quantity may have: far beyond any arm,
-#: artefact, probe or campaign (1 km, 10 000 degrees, 100 kN, 100 kN·m, 1 m/N, 10 000 °C, 10^10 s, 1000 t).
+#: artefact, probe or campaign (1 km, 10 000 degrees, 100 kN, 100 kN·m, 1 m/N, 10 000 °C, 10^10 s, 10 t: a
+#: link of the largest robots weighs a few t).
 #: A larger number is a typo or garbage, and would overflow the arithmetic; a temperature is also at or
 #: above absolute zero (docs/formats.md §1).
 PLAUSIBLE_SI: dict[str, float] = {
     "length": 1e3, "angle": math.radians(1e4), "force": 1e5, "torque": 1e5, "compliance": 1.0,
-    "temperature": 1e4, "time": 1e10, "mass": 1e6,
+    "temperature": 1e4, "time": 1e10, "mass": 1e4,
     # effect parameters of a model file (arm_model.model_file.PARAM_UNITS)
     "angular compliance": 1.0, "expansion": 1.0, "ratio": 1e3, "temperature difference": 1e4,
     # campaign files of the simulator

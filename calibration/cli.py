@@ -32,7 +32,7 @@ from arm_model.parallel import cores
 
 from .options import GROSS_THRESHOLD
 
-__all__ = ["register", "run_calibrate", "run_montecarlo", "run_poses", "fit_options"]
+__all__ = ["register", "run_calibrate", "run_montecarlo", "run_poses", "fit_options", "free_names"]
 
 log = logging.getLogger(__name__)
 
@@ -62,6 +62,9 @@ def parse_holdout(text: str | None):
         if not ids:
             raise InputError(f"--holdout names no measurement (got {text!r}): give measurement ids or a fraction"
                              ) from None
+        twice = sorted({t for t in ids if ids.count(t) > 1})
+        if twice:
+            raise InputError(f"--holdout names the measurement(s) {', '.join(twice)} twice")
         return ids
     if not 0.0 < v < 1.0:
         raise InputError(f"--holdout fraction must be in (0, 1), got {text}")
@@ -346,13 +349,19 @@ def fit_options(args, **fields):
     return FitOptions(**{**kw, **fields})
 
 
-def _free(model, args, data=None):
+def free_names(model, args, data=None):
     """The names of the parameters to fit: ``--free`` (default :func:`~calibration.calibrate.default_free` of
     the model on ``data``) without ``--hold``."""
     from .calibrate import default_free, resolve_parameters
     free = resolve_parameters(model.spec, args.free or default_free(model, data))
     if args.hold:
         held = set(resolve_parameters(model.spec, args.hold))
+        if not [i for i in free if i not in held]:
+            chosen = f"--free {' '.join(args.free)}" if args.free else "the default free set"
+            raise InputError(f"nothing is left to estimate: --hold {' '.join(args.hold)} holds every parameter of "
+                             f"{chosen} ({len(free)}); a calibration with no free parameter would write the model "
+                             "it started from as if calibrated. Hold fewer parameters (the nominal model as it is: "
+                             "aacmm tip)")
         free = [i for i in free if i not in held]
     return [model.spec.names[i] for i in free]
 
@@ -370,6 +379,23 @@ def model_effects(arm, keys):
         return ArmModel(arm.desc, tuple(arm.effects) + added)
     except ValueError as exc:
         raise InputError(f"--effect: {exc}", arm.desc.source) from None
+
+
+def _check_reference_options(args, data) -> None:
+    """``--reference identity`` and ``--marker-offset`` are about the reference instrument's points: given on data
+    that hold none (no reference columns in the points file, no ``--reference-points``), they would be silently
+    ignored; an InputError instead."""
+    ref = data.points.ref
+    if ref is not None and np.isfinite(ref).any():
+        return
+    given = [f"--reference {args.reference}" if getattr(args, "reference", "fit") == "identity" else None,
+             None if getattr(args, "marker_offset", None) is None else f"--marker-offset {args.marker_offset}"]
+    given = [g for g in given if g]
+    if given:
+        verb = "concern" if len(given) > 1 else "concerns"
+        raise InputError(f"{' and '.join(given)} {verb} the reference instrument's points (columns x_ref_mm, "
+                         "y_ref_mm, z_ref_mm, or --reference-points), and the data hold none: leave "
+                         f"{'them' if len(given) > 1 else 'it'} out, or give the reference points", args.points)
 
 
 def _load_data(args, defaults: bool = False):
@@ -390,6 +416,7 @@ def _load_data(args, defaults: bool = False):
             Arm(desc, model.effects).check_points(pts)
             warnings += point_warnings(desc, pts)
     data = make_data(points, artefacts, reference=reference, marker_offsets=args.marker_offset, heldout=heldout)
+    _check_reference_options(args, data)
     added = default_effects(model, data) if defaults and args.effect is None else ()
     if added:
         from arm_model.model import ArmModel
@@ -483,7 +510,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
             if why:
                 log.warning(f"joint compliance cannot be identified: {why}")
         train, test, poses = _split(args, data)
-        options = fit_options(args, free=_free(model, args, data), values=values, weights=_weights(args),
+        options = fit_options(args, free=free_names(model, args, data), values=values, weights=_weights(args),
                               on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
                               drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference,
                               gross_threshold=gross_threshold(args))
@@ -772,7 +799,7 @@ def run_montecarlo(args: argparse.Namespace) -> int:
         from arm_model.model import ArmModel
         model = ArmModel(camp.arm, _effects(args.effect))
         settings = RunSettings(holdout=args.holdout, effects=_effects(args.effect),
-                               fit=fit_options(args, free=_free(model, args), weights=_weights(args)))
+                               fit=fit_options(args, free=free_names(model, args), weights=_weights(args)))
         mc = monte_carlo(SimSource(camp), args.runs, seed=args.seed, settings=settings,
                          scheduler=args.scheduler, workers=args.workers)
         mc.check()
@@ -815,7 +842,7 @@ def run_poses(args: argparse.Namespace) -> int:
         if args.count > n:
             raise InputError(f"--count {args.count}: the points file has {n} measurement(s)", args.points)
         # the choice is made at the nominal, before any fit
-        fit = fit_options(args, free=_free(model, args, data), weights=_weights(args), weights_from_data=False)
+        fit = fit_options(args, free=free_names(model, args, data), weights=_weights(args), weights_from_data=False)
         sel = select_measurements(model, data, args.count, fit)
         from arm_model.shipped import provenance
         (out.dir / "poses.json").write_text(json_text({**sel.to_dict(), **provenance(inputs)}), encoding="utf-8")

@@ -15,6 +15,7 @@ from arm_model.output import output_folder
 from .cli import (
     campaign_inputs,
     conformance_entry,
+    free_names,
     log_conformance,
     model_effects,
     model_options,
@@ -107,8 +108,14 @@ def run(args: argparse.Namespace) -> int:
 
     inputs = [p for p in (args.points, args.artefacts, *arm_inputs(args), args.reference_points) if p is not None]
     families = None
-    if args.candidates:
+    if args.candidates is not None:
         families = tuple(k.strip() for k in args.candidates.split(",") if k.strip())
+        if not families:
+            raise InputError(f"--candidates names no family (got {args.candidates!r}): give families of "
+                             f"{', '.join(FAMILIES)}, comma-separated")
+        twice = sorted({k for k in families if families.count(k) > 1})
+        if twice:
+            raise InputError(f"--candidates names {', '.join(twice)} twice")
         bad = [k for k in families if k not in FAMILIES]
         if bad:
             raise InputError(f"unknown candidate famil{'y' if len(bad) == 1 else 'ies'} {', '.join(bad)} "
@@ -126,6 +133,9 @@ def run(args: argparse.Namespace) -> int:
             log.info("base model: joint compliance under gravity (a robot read from a URDF whose links carry masses "
                      "bends under its own weight; each compliance's physical prior: non-negative, at most 10 mrad "
                      "under its joint's RMS gravity torque); --effect none for the geometry alone")
+    if args.max_effects == 0 and args.hold:      # no effect to add and every parameter held: nothing to estimate
+        from arm_model.model import ArmModel
+        free_names(ArmModel(desc, tuple(effects)), args)
     if effects and families is None:
         families = tuple(f for f in DEFAULT_FAMILIES if f not in {e.key for e in effects})
     points = read_points(args.points, desc.joint_quantities)
@@ -180,6 +190,9 @@ def _check_folds(folds: int, points, reference) -> None:
     seen = (np.zeros(len(points), bool) if points.ref is None
             else np.any(np.all(np.isfinite(points.ref), axis=2), axis=1))          # reference columns in the file
     poses = int(((points.feature != "") | seen).sum()) + (0 if reference is None else len(reference))
+    if poses < 2:                   # --folds is at least 2: no number of folds fits
+        raise InputError(f"the data hold {poses} pose{'' if poses == 1 else 's'} (points on a feature and reference "
+                         "points): the loop's held-out folds need at least 2, each holding out one", points.path)
     if folds > poses:
         raise InputError(f"--folds {folds}: the data hold {poses} poses (points on a feature and reference points), "
                          f"and each fold holds out at least one: ask for at most {poses} folds")

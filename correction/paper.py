@@ -31,7 +31,7 @@ from scipy import stats
 
 from arm_model import InputError
 from arm_model.csv_io import parse_number
-from arm_model.errors import read_text, unknown_key
+from arm_model.errors import id_problem, read_text, unknown_key
 from arm_model.units import implausible
 
 from .correlation import Correlation, correlate
@@ -108,9 +108,14 @@ def load_paper_table2(path: str | Path | None = None) -> PaperTable2:
         rec = cells(no, line)
         if len(rec) != len(header):
             raise InputError(f"{len(rec)} cells where the header has {len(header)} columns", path, no)
-        ids.append(rec[header.index("measurement")])
-        if not ids[-1]:
+        mid = rec[header.index("measurement")]
+        if not mid:
             raise InputError("empty measurement id", path, no, "measurement")
+        if id_problem(mid):             # the id is written into every table and figure of the report
+            raise InputError(f"the measurement id {id_problem(mid)}", path, no, "measurement")
+        if mid in ids:
+            raise InputError(f"measurement '{mid}' is given twice (one row a measurement)", path, no, "measurement")
+        ids.append(mid)
         for col in expected[1:]:
             cell = rec[header.index(col)]
             v = parse_number(cell)          # the toolkit's one number grammar (no '1_0', no '１', no NBSP)

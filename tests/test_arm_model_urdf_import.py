@@ -306,7 +306,7 @@ def test_masses_file_folds_fixed_children_and_branches(tmp_path):
 
 
 @pytest.mark.parametrize("text, words, line", [
-    ('[[link]]\nname = "panda_link1"\nmass_kg = -1.0\n', "mass must be in", 3),
+    ('[[link]]\nname = "panda_link1"\nmass_kg = -1.0\n', "mass must not be negative", 3),
     ('[[link]]\nname = "panda_link1"\nmass_kg = 1.0\ncom_q_mm = 3.0\n', "unknown key 'com_q_mm'", 4),
     ('[[link]]\nname = "panda_link1"\nmass_g = 1.0\n', "'mass_g' has no known unit", 3),
     ('[[link]]\nname = "panda_link1"\ncom_x_mm = 1.0\n', "missing key 'mass_<unit>'", 1),

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from urdf_fixtures import serial_urdf
 
 from arm_model import NumericalError
 from arm_model.description import GRAVITY
@@ -18,25 +19,10 @@ from conftest import assert_close
 L, M, C = 0.5, 40.0, 2e-4     # link length [m], link mass [kg] at its middle, joint compliance [rad/(N m)]
 
 #: three joints about y in a row, each link L long with M at its middle, the tip at the end of the third
-PLANAR_URDF = f"""<?xml version="1.0"?>
-<robot name="heavy3">
-  <link name="base"/>
-  <link name="l1"><inertial><origin xyz="{L / 2} 0 0"/><mass value="{M}"/>
-    <inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
-  <link name="l2"><inertial><origin xyz="{L / 2} 0 0"/><mass value="{M}"/>
-    <inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
-  <link name="l3"><inertial><origin xyz="{L / 2} 0 0"/><mass value="{M}"/>
-    <inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
-  <link name="tip"/>
-  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0 0 0"/>
-    <axis xyz="0 1 0"/><limit lower="-1.2" upper="0.3" effort="1000" velocity="1"/></joint>
-  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="{L} 0 0"/>
-    <axis xyz="0 1 0"/><limit lower="-0.8" upper="0.8" effort="1000" velocity="1"/></joint>
-  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/><origin xyz="{L} 0 0"/>
-    <axis xyz="0 1 0"/><limit lower="-0.8" upper="0.8" effort="1000" velocity="1"/></joint>
-  <joint name="tip_joint" type="fixed"><parent link="l3"/><child link="tip"/><origin xyz="{L} 0 0"/></joint>
-</robot>
-"""
+PLANAR_URDF = serial_urdf(
+    "heavy3", "base", [((0, 0, 0), (0, 0, 0), (0, 1, 0), -1.2, 0.3), ((L, 0, 0), (0, 0, 0), (0, 1, 0), -0.8, 0.8),
+                       ((L, 0, 0), (0, 0, 0), (0, 1, 0), -0.8, 0.8)],
+    "tip", (L, 0, 0), masses=[(M, (L / 2, 0, 0))] * 3, effort=1000.0)
 
 
 def _hand_gravity_torques(theta: np.ndarray) -> np.ndarray:

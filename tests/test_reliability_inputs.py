@@ -348,8 +348,15 @@ def test_hostile_names_round_trip_through_toml_and_urdf(tmp_path, name):
 
     desc = load_description(NOMINAL)
     desc = replace(desc, name=name, joints=(replace(desc.joints[0], name=name + "-j1"),) + desc.joints[1:])
-    back = parse_description(format_description(desc), "x.toml")
-    assert back.name == name and back.joints[0].name == name + "-j1"
+    if any(not c.isprintable() for c in name):
+        # a control character is refused when read (round 8: names go into file names and every CSV table), at
+        # its key; the writers still escape what a description built in Python holds
+        from arm_model import InputError
+        with pytest.raises(InputError, match=r"x.toml, line \d+, key 'name': 'name' must be one line of text"):
+            parse_description(format_description(desc), "x.toml")
+    else:
+        back = parse_description(format_description(desc), "x.toml")
+        assert back.name == name and back.joints[0].name == name + "-j1"
     urdf = tmp_path / "a.urdf"
     urdf.write_text(urdf_text(desc), encoding="utf-8")
     root = ET.parse(urdf).getroot()                       # well-formed XML

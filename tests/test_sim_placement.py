@@ -5,32 +5,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from urdf_fixtures import serial_urdf
 
 from arm_model import InputError
 from arm_model.sim import campaign_from_dict, simulate
 
 #: a six-joint arm hung 2.5 m up (a ceiling mount), 0.8 m of reach; its tool 0.1 m past the last joint
-CEILING_URDF = """<?xml version="1.0"?>
-<robot name="ceiling6">
-  <link name="ceiling"/>
-  <link name="l1"/><link name="l2"/><link name="l3"/><link name="l4"/><link name="l5"/><link name="l6"/>
-  <link name="tool"/>
-  <joint name="j1" type="revolute"><parent link="ceiling"/><child link="l1"/>
-    <origin xyz="0 0 2.5" rpy="3.14159265 0 0"/>
-    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="10" velocity="1"/></joint>
-  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0 0 0.1"/>
-    <axis xyz="0 1 0"/><limit lower="-2" upper="2" effort="10" velocity="1"/></joint>
-  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/><origin xyz="0 0 0.35"/>
-    <axis xyz="0 1 0"/><limit lower="-2.5" upper="2.5" effort="10" velocity="1"/></joint>
-  <joint name="j4" type="revolute"><parent link="l3"/><child link="l4"/><origin xyz="0 0 0.3"/>
-    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="10" velocity="1"/></joint>
-  <joint name="j5" type="revolute"><parent link="l4"/><child link="l5"/><origin xyz="0 0 0.05"/>
-    <axis xyz="0 1 0"/><limit lower="-2" upper="2" effort="10" velocity="1"/></joint>
-  <joint name="j6" type="revolute"><parent link="l5"/><child link="l6"/><origin xyz="0 0 0.05"/>
-    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="10" velocity="1"/></joint>
-  <joint name="tool_joint" type="fixed"><parent link="l6"/><child link="tool"/><origin xyz="0 0 0.1"/></joint>
-</robot>
-"""
+CEILING_URDF = serial_urdf(
+    "ceiling6", "ceiling", [((0, 0, 2.5), (3.14159265, 0, 0), (0, 0, 1), -3, 3),
+                            ((0, 0, 0.1), (0, 0, 0), (0, 1, 0), -2, 2),
+                            ((0, 0, 0.35), (0, 0, 0), (0, 1, 0), -2.5, 2.5), ((0, 0, 0.3), (0, 0, 0), (0, 0, 1), -3, 3),
+                            ((0, 0, 0.05), (0, 0, 0), (0, 1, 0), -2, 2), ((0, 0, 0.05), (0, 0, 0), (0, 0, 1), -3, 3)],
+    "tool", (0, 0, 0.1))
 
 
 def _campaign(task: dict) -> dict:

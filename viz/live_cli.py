@@ -142,7 +142,10 @@ def _header(source: LineSource, stop: _Stop) -> tuple:
         text = line_text(raw, source.name, no)
         if not text.strip():
             continue
-        cells = next(csv.reader([text.lstrip("\ufeff")]))
+        try:
+            cells = next(csv.reader([text.lstrip("\ufeff")], strict=True))
+        except csv.Error as exc:
+            raise InputError(f"the header is not valid CSV: {exc}", source.name, no) from None
         if source.datagrams and cells and _looks_numeric(cells[0]):
             skipped += 1
             continue

@@ -31,7 +31,7 @@ import numpy as np
 
 from arm_model import QUANTITY_OF_UNIT, UNIT_FACTORS, InputError, csv_records, read_text, split_unit
 from arm_model.csv_io import parse_number
-from arm_model.errors import unknown_key
+from arm_model.errors import id_problem, unknown_key
 from arm_model.units import implausible, unit_of
 
 __all__ = ["Residuals", "read_residuals", "parse_residuals", "residual_origins"]
@@ -124,7 +124,20 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
         if name not in header:
             return np.full(len(data), "", dtype=object)
         k = header.index(name)
+        for no, r in data:              # the ids of the points file: one line of text (empty: not given)
+            if r[k].strip() and id_problem(r[k].strip()):
+                raise InputError(f"{name!r} {id_problem(r[k].strip())}", path, no, name)
         return np.array([r[k].strip() for _, r in data], dtype=object)
+
+    if "residual" in by_base:
+        column("residual")              # read and not used, but a number in range as every cell of the project
+    if "standardized" in header:
+        k = header.index("standardized")
+        for no, r in data:
+            v = parse_number(r[k].strip())
+            if v is None or not math.isfinite(v) or abs(v) > 1e12:
+                raise InputError(f"expected a finite number (a residual over its standard uncertainty), got "
+                                 f"{r[k].strip()!r}", path, no, "standardized")
 
     point_lines = None
     if not has_xyz:
@@ -132,7 +145,7 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
         point_lines = np.empty(len(data), dtype=int)
         for i, (no, r) in enumerate(data):
             cell = r[k].strip()
-            if not (cell.isascii() and cell.isdigit()) or int(cell) < 1:     # '²' is a digit to isdigit
+            if not (cell.isascii() and cell.isdigit()) or len(cell) > 12 or int(cell) < 1:  # '²' is a digit to isdigit
                 raise InputError(f"expected a line number (1, 2, ...), got {cell!r}", path, no, "line")
             point_lines[i] = int(cell)
     return Residuals(path, np.column_stack([column(b) for b in _POINT]) if has_xyz else None,

@@ -151,10 +151,11 @@ class Session:
             raise TypeError(f"plan must be a SessionPlan (arm_model.live.read_plan(path)) or None, got "
                             f"{type(plan).__name__}")
         self.plan = plan or SessionPlan()
-        self.measurement = measurement or self.plan.measurement or (Path(folder).name if folder else "live")
+        self.measurement = (measurement if measurement is not None else
+                            self.plan.measurement or (Path(folder).name if folder else "live"))
         if id_problem(self.measurement):       # it is written on every point: the points file must read it back
-            source = ("--measurement" if measurement else "the plan's 'measurement'" if self.plan.measurement
-                      else "the session folder's name")
+            source = ("--measurement" if measurement is not None else
+                      "the plan's 'measurement'" if self.plan.measurement else "the session folder's name")
             raise InputError(f"the measurement id ({source}) {id_problem(self.measurement)}", None, None,
                              "key 'measurement'")
         npar = 0 if self.parameters is None else len(self.parameters.names)

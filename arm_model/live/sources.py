@@ -22,7 +22,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from ..errors import InputError, open_input
+from ..errors import InputError, decode_text, open_input
 
 __all__ = ["open_source", "LineSource", "Pacer", "TICK_S", "AHEAD_S", "MAX_LINE_BYTES", "LongLine", "line_text"]
 
@@ -52,12 +52,11 @@ def line_text(raw: bytes, name: str, no: int) -> str:
     """The text of a line a source yielded: an InputError naming the stream and the line for one too long or
     not UTF-8."""
     if isinstance(raw, LongLine):
+        decode_text(bytes(raw).rstrip(b"\r"), name, no)    # old Mac line ends (a CR alone) said as such
         raise InputError(f"a line of {raw.length} bytes or more, beyond the {MAX_LINE_BYTES} a line may hold (a "
                          f"sample line holds a few hundred; no line end?), starting {bytes(raw)!r}", name, no)
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError:
-        raise InputError("not UTF-8 text", name, no) from None
+    # the rule of every file reader: UTF-8, no NUL byte, no carriage return alone (old Mac line ends)
+    return decode_text(raw, name, no)
 
 
 class LineSource:
@@ -142,6 +141,10 @@ class _FdSource(LineSource):
                     too_long, rest = True, (rest + last)[:40]
                 elif not too_long:
                     rest += last
+                    if b"\r" in last.rstrip(b"\r"):     # old Mac line ends: said now, not after 1 MiB
+                        no += 1
+                        yield no, bytes(rest)
+                        rest, length = bytearray(), 0
             if too_long:
                 yield no + 1, _long(bytes(rest), length)
             elif rest:

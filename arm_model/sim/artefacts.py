@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..chain import NUMPY_OPS, chain_point
-from ..errors import InputError
+from ..errors import InputError, NumericalError
 from ..geometry import ball_centre_radius, cone_directions, perpendicular_basis, random_rotation
 from .campaign import Campaign, Task
 
@@ -517,6 +517,9 @@ def make_plan(campaign: Campaign, rng: np.random.Generator, truth=None) -> Plan:
         else:
             try:
                 (_ballbar if t.kind == "ballbar" else _tracker)(plan, k, t, rng, ball_d, campaign.arm, truth)
+            except np.linalg.LinAlgError as exc:        # (a ValueError too): the arithmetic, not the file
+                raise NumericalError(f"task[{k + 1}] ({t.kind}): placing it in the true arm's workspace failed "
+                                     f"({exc}); are the truth's errors far beyond the arm's size?") from None
             except ValueError as exc:
                 raise InputError(str(exc), campaign.source or "<dict>", t.line, f"key 'task[{k + 1}]'") from None
     out = plan.arrays(campaign.arm.n_joints)
@@ -546,7 +549,6 @@ def settle(plan: Plan, truth, rng, rounds: int = 8) -> None:
     """Find an articulation (no contact force) for every row without ``q_start``; a sphere or plane
     point the arm cannot reach is moved elsewhere on its feature, as an operator would. Rows that stay
     out of reach raise :class:`~arm_model.NumericalError` naming them."""
-    from ..errors import NumericalError
     from .ik import IKTargets, solve_points
 
     todo = np.flatnonzero(np.isnan(plan.q_start[:, 0]))  # type: ignore[call-overload]

@@ -416,6 +416,10 @@ def _campaign_arm(ctx, top: dict, base_dir: Path | None, arm) -> tuple[ArmDescri
         raise ctx.error(f"arm description not found: {arm_path}", (), "arm")
     if arm_path.suffix.lower() == ".urdf" and not top["tip_frame"]:
         raise ctx.error("an arm given as a URDF needs 'tip_frame' (the link at the ball centre)", (), "arm")
+    for key in ("tip_frame", "base_frame"):       # load_arm refuses the options; the keys were ignored
+        if arm_path.suffix.lower() != ".urdf" and top[key] is not None:
+            raise ctx.error(f"'{key}' is for an arm given as a URDF; this campaign's arm {arm_path.name} is a "
+                            "description TOML (its chain is its [[joint]] rows, its tip the [probe])", (), key)
     return _load_arm(ctx, arm_path, top["tip_frame"], top["base_frame"]), arm_path
 
 
@@ -556,9 +560,11 @@ def _sections(ctx, data: dict) -> dict:
             raise ctx.error(f"'{k}' must not be negative", ("noise",), k)
     op = sections["operator"]
     if not 0 < op["min_force"] < op["max_force"]:
-        raise ctx.error("need 0 < min_force < max_force", ("operator",), "min_force")
+        raise ctx.error(f"need 0 < min_force < max_force, got {op['min_force']:g} N and {op['max_force']:g} N",
+                        ("operator",), "min_force")
     if not op["min_force"] <= op["force_mean"] <= op["max_force"]:
-        raise ctx.error("force_mean must lie between min_force and max_force", ("operator",), "force_mean")
+        raise ctx.error(f"force_mean must lie between min_force and max_force ({op['min_force']:g} to "
+                        f"{op['max_force']:g} N), got {op['force_mean']:g} N", ("operator",), "force_mean")
     for k in ("level_log_sd", "point_cv", "friction_coefficient"):
         if op[k] < 0:
             raise ctx.error(f"'{k}' must not be negative", ("operator",), k)
