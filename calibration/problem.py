@@ -127,8 +127,7 @@ class Problem:
         by_key = self._artefact_instances()
         self._reference_instances(by_key)
         self.distance_items = self._distances(by_key)
-        self._dist_fn = (NumpyFunction(geo.distance_function().map(len(self.distance_items)))
-                         if self.distance_items else None)
+        self._dist_fn = mapped(geo.distance_function(), len(self.distance_items)) if self.distance_items else None
         self._point_groups()
         self._centre_functions()
         self._row_weights()
@@ -258,7 +257,7 @@ class Problem:
                 g: Group = dict(kind=kind, free_radius=fr, uinst=insts, points=pidx, row0=row, rows=rows,
                          inst=np.concatenate([np.full(len(m), i) for m, i in zip(members, insts, strict=True)]),
                          local=np.concatenate([np.full(len(m), k) for k, m in enumerate(members)]),
-                         fn=NumpyFunction(geo.kind_function(kind, fr).map(len(pidx))))
+                         fn=mapped(geo.kind_function(kind, fr), len(pidx)))
                 if kind == "reference":
                     g["anchor"] = np.array([self._ref_anchor[i] for i in pidx], dtype=int)
                     g["marker"] = np.array([self._ref_marker.get(i, -1) for i in pidx], dtype=int)
@@ -287,10 +286,7 @@ class Problem:
         functions of one point are the model's :class:`CentreKernel`, built once for equal models)."""
         nu = len(self.used)
         self._kernel = centre_kernel(self.model)
-        self._fx = NumpyFunction(self._kernel.fx.map(nu))
-        self._fxj_full = NumpyFunction(self._kernel.columns(None).map(nu))
-        # free set -> mapped Function of (x, d x / d p[free], d x / d o), shared by copies
-        self._fxj_cache: dict[tuple[int, ...], NumpyFunction] = {}
+        self._fx = mapped(self._kernel.fx, nu)
         n, jn = len(self.data), self.model.desc.n_joints
         self._q = np.ascontiguousarray(self.data.points.q[self.used].T)
         self._w = np.ascontiguousarray(self.data.wrench[self.used].T)
@@ -347,15 +343,7 @@ class Problem:
         o = np.zeros((3, nu)) if offsets is None else np.ascontiguousarray(np.asarray(offsets, float).T)
         if not jac:
             return self._fx(self._q, self._w, self._aux, p, o)[0].T, None, None
-        fn: NumpyFunction
-        if cols is None:
-            fn = self._fxj_full
-        else:
-            key = tuple(cols)
-            cached = self._fxj_cache.get(key)
-            if cached is None:
-                cached = self._fxj_cache[key] = NumpyFunction(self._kernel.columns(key).map(nu))
-            fn = cached
+        fn = mapped(self._kernel.columns(None if cols is None else tuple(cols)), nu)
         x, dx, dxo = fn(self._q, self._w, self._aux, p, o)
         x = np.asarray(x).T
         dx = np.asarray(dx).reshape(3, nu, ncol).transpose(1, 0, 2)
@@ -624,6 +612,13 @@ class CentreKernel:
                 jp = jp[:, list(key)] if key else ca.DM.zeros(3, 0)
             fn = self._columns[key] = ca.Function("xj", [q, w, aux, p, o], [x, jp, ca.jacobian(x, o)])
         return fn
+
+
+@lru_cache(maxsize=8 * CASADI_CACHE)
+def mapped(fn: Any, n: int) -> NumpyFunction:
+    """The CasADi Function ``fn`` of one point mapped over ``n`` points, as a :class:`NumpyFunction`: made once for
+    the same Function and count (the problems of a loop share their kind, distance and centre functions)."""
+    return NumpyFunction(fn.map(n))
 
 
 @lru_cache(maxsize=CASADI_CACHE)
