@@ -34,6 +34,7 @@ from .jacobian import DUAL_OPS, Dual, chain_jacobian, geometry_entries, value
 from .kinematics import run_chunks
 from .log import Progress
 from .model import ArmModel, AuxData
+from .parallel import blas_threads
 
 __all__ = ["FORCE_SENSOR_U_N", "COMPLIANCE_U_RELATIVE", "CONTRIBUTIONS", "InputUncertainty",
            "ParameterCovariance", "Propagation", "default_inputs", "propagate", "monte_carlo",
@@ -428,7 +429,7 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
             cov[s:e, j, i] = cv[i, j]
 
     # the products are thin (tens x chunk): one BLAS thread each; more spin-wait on a busy machine
-    with _blas_controller().limit(limits=1, user_api="blas"):
+    with blas_threads(1):
         run_chunks(work, n, chunk, threads)
     sources = dict(inputs.sources)
     sources["parameters"] = "none (parameters taken as exact)" if parameters is None else parameters.source
@@ -437,18 +438,6 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
     if _compliance_covered(tuple(() if parameters is None else parameters.names)):
         sources["compliance"] = "in the parameter covariance (calibrated)"
     return Propagation(centres, cov, contrib, sources, sys_rows)
-
-
-_CONTROLLER = []
-
-
-def _blas_controller():
-    """threadpoolctl's controller, made once (finding the loaded BLAS libraries takes milliseconds: too
-    long for every point of a live session)."""
-    if not _CONTROLLER:
-        from threadpoolctl import ThreadpoolController
-        _CONTROLLER.append(ThreadpoolController())
-    return _CONTROLLER[0]
 
 
 def monte_carlo(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,

@@ -172,12 +172,12 @@ def fit_growth(e, v, d, fold) -> Growth:
     (:func:`arm_model.discrepancy.pose_distance`), in folds ``fold`` (rows,): the maximum likelihood of
     ``e ~ N(0, v + sigma0^2 + growth^2 d^2)`` (rows taken as independent), ``sigma0`` and ``growth`` floored at 0,
     with their delete-one-fold jackknife uncertainties."""
-    from threadpoolctl import threadpool_limits
+    from arm_model.parallel import blas_threads
     e2, v, d2, fold = np.asarray(e) ** 2, np.asarray(v, dtype=float), np.asarray(d, dtype=float) ** 2, np.asarray(fold)
     folds = np.unique(fold)
     jack = []
     # two unknowns: the solver's tiny products spin-wait on every BLAS thread (15 x slower on a busy machine)
-    with threadpool_limits(limits=1, user_api="blas"):
+    with blas_threads(1):
         (a, b), nll = _ml(e2, v, d2, True)
         _, nll0 = _ml(e2, v, d2, False)
         for f in folds if len(folds) > 2 else ():

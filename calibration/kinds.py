@@ -137,12 +137,35 @@ def distance_function() -> Any:
 # ---------------------------------------------------------------------------------------------
 # starting states and state updates (the fits themselves are in :mod:`arm_model.geometry`)
 
+#: starting states of fitted instances kept (:func:`initial_state`): the loop fits the same points under many models
+STATE_CACHE = 4096
+_STATES: dict[tuple[Any, ...], np.ndarray] = {}
+
+
 def initial_state(kind: str, x: np.ndarray, radius: float | None = None, x_ref: np.ndarray | None = None) -> np.ndarray:
     """Packed starting state of one instance from its ball centres ``x`` (n, 3) [m] (the fits of
     :mod:`arm_model.geometry`; points that do not determine a fit start from their mean).
 
-    ``radius``: the offset radius of sphere, ring, cylinder [m] (None: fitted).
+    ``radius``: the offset radius of sphere, ring, cylinder [m] (None: fitted). The state of a sphere, ring,
+    cylinder or plane is fitted once for the same centres and radius (the last :data:`STATE_CACHE` kept: the loop
+    starts its many fits of one campaign from the same centres) and returned as a new array.
     """
+    if kind not in ("sphere", "ring", "cylinder", "plane"):
+        return _initial_state(kind, x, radius, x_ref)
+    x = np.ascontiguousarray(x, dtype=float)
+    key = (kind, radius, x.shape, x.tobytes())
+    state = _STATES.pop(key, None)
+    if state is None:
+        state = _initial_state(kind, x, radius, x_ref)
+        if len(_STATES) >= STATE_CACHE:
+            del _STATES[next(iter(_STATES))]
+    _STATES[key] = state                 # the most recent last: the oldest goes first
+    out: np.ndarray = state.copy()
+    return out
+
+
+def _initial_state(kind: str, x: np.ndarray, radius: float | None, x_ref: np.ndarray | None) -> np.ndarray:
+    """:func:`initial_state`, computed."""
     if kind == "seat":
         seat: np.ndarray = x.mean(axis=0)
         return seat

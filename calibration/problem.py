@@ -25,6 +25,7 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike
 
 from arm_model import InputError, NumericalError
+from arm_model.casadi_model import NumpyFunction
 from arm_model.geometry import ball_centre_radius
 from arm_model.io import CENTRE_KINDS
 from arm_model.model import CASADI_CACHE, ArmModel
@@ -126,7 +127,7 @@ class Problem:
         by_key = self._artefact_instances()
         self._reference_instances(by_key)
         self.distance_items = self._distances(by_key)
-        self._dist_fn = geo.distance_function().map(len(self.distance_items)) if self.distance_items else None
+        self._dist_fn = mapped(geo.distance_function(), len(self.distance_items)) if self.distance_items else None
         self._point_groups()
         self._centre_functions()
         self._row_weights()
@@ -253,10 +254,10 @@ class Problem:
                 members = [self.instances[i].points for i in insts]
                 pidx = np.concatenate(members)
                 rows = geo.KINDS[kind].rows
-                g = dict(kind=kind, free_radius=fr, uinst=insts, points=pidx, row0=row, rows=rows,
+                g: Group = dict(kind=kind, free_radius=fr, uinst=insts, points=pidx, row0=row, rows=rows,
                          inst=np.concatenate([np.full(len(m), i) for m, i in zip(members, insts, strict=True)]),
                          local=np.concatenate([np.full(len(m), k) for k, m in enumerate(members)]),
-                         fn=geo.kind_function(kind, fr).map(len(pidx)))
+                         fn=mapped(geo.kind_function(kind, fr), len(pidx)))
                 if kind == "reference":
                     g["anchor"] = np.array([self._ref_anchor[i] for i in pidx], dtype=int)
                     g["marker"] = np.array([self._ref_marker.get(i, -1) for i in pidx], dtype=int)
@@ -285,10 +286,7 @@ class Problem:
         functions of one point are the model's :class:`CentreKernel`, built once for equal models)."""
         nu = len(self.used)
         self._kernel = centre_kernel(self.model)
-        self._fx = self._kernel.fx.map(nu)
-        self._fxj_full = self._kernel.columns(None).map(nu)
-        # free set -> mapped Function of (x, d x / d p[free], d x / d o), shared by copies
-        self._fxj_cache: dict[tuple[int, ...], Any] = {}
+        self._fx = mapped(self._kernel.fx, nu)
         n, jn = len(self.data), self.model.desc.n_joints
         self._q = np.ascontiguousarray(self.data.points.q[self.used].T)
         self._w = np.ascontiguousarray(self.data.wrench[self.used].T)
@@ -344,16 +342,8 @@ class Problem:
             return np.zeros((0, 3)), (np.zeros((0, 3, ncol)) if jac else None), (np.zeros((0, 3, 3)) if jac else None)
         o = np.zeros((3, nu)) if offsets is None else np.ascontiguousarray(np.asarray(offsets, float).T)
         if not jac:
-            return np.asarray(self._fx(self._q, self._w, self._aux, p, o)).T, None, None
-        fn: Any
-        if cols is None:
-            fn = self._fxj_full
-        else:
-            key = tuple(cols)
-            fn = self._fxj_cache.get(key)
-            if fn is None:
-                fn = self._kernel.columns(key).map(nu)
-                self._fxj_cache[key] = fn
+            return self._fx(self._q, self._w, self._aux, p, o)[0].T, None, None
+        fn = mapped(self._kernel.columns(None if cols is None else tuple(cols)), nu)
         x, dx, dxo = fn(self._q, self._w, self._aux, p, o)
         x = np.asarray(x).T
         dx = np.asarray(dx).reshape(3, nu, ncol).transpose(1, 0, 2)
@@ -622,6 +612,13 @@ class CentreKernel:
                 jp = jp[:, list(key)] if key else ca.DM.zeros(3, 0)
             fn = self._columns[key] = ca.Function("xj", [q, w, aux, p, o], [x, jp, ca.jacobian(x, o)])
         return fn
+
+
+@lru_cache(maxsize=8 * CASADI_CACHE)
+def mapped(fn: Any, n: int) -> NumpyFunction:
+    """The CasADi Function ``fn`` of one point mapped over ``n`` points, as a :class:`NumpyFunction`: made once for
+    the same Function and count (the problems of a loop share their kind, distance and centre functions)."""
+    return NumpyFunction(fn.map(n))
 
 
 @lru_cache(maxsize=CASADI_CACHE)

@@ -9,7 +9,6 @@ with the damping reset (a damped restart); no convergence after that raises :cla
 """
 from __future__ import annotations
 
-import contextlib
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
@@ -20,7 +19,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike
 
-from arm_model import NumericalError
+from arm_model import NumericalError, parallel
 
 from .problem import Evaluation, Problem
 
@@ -208,9 +207,6 @@ def _lm_attempt(problem: Problem, p: ArrayLike, states: list[np.ndarray], max_it
 def blas_threads(n: int | None = 1) -> AbstractContextManager[Any]:
     """Context limiting the BLAS threads (threadpoolctl) to ``n`` (None: unchanged). The matrices here
     are thin (thousands x tens): one thread is as fast, and several threads on a busy machine are
-    slower by orders of magnitude (OpenBLAS spin-waits)."""
-    if n is None:
-        return contextlib.nullcontext()
-    from threadpoolctl import threadpool_limits
-    limits: AbstractContextManager[Any] = threadpool_limits(limits=n, user_api="blas")
+    slower by orders of magnitude (OpenBLAS spin-waits). (:func:`arm_model.parallel.blas_threads`.)"""
+    limits: AbstractContextManager[Any] = parallel.blas_threads(n)
     return limits

@@ -563,3 +563,35 @@ def test_gravity_torques_of_a_coupled_arm_are_the_potential_energy_s_slope_by_en
         tau = arm.gravity_torques(qc)
         assert abs(tau[column["elbow"]]) > 0.1                   # a real load on the master [N m]
         assert_close(tau, np.array(slope), atol=1e-6)
+
+
+def test_numpy_function_gives_a_plain_calls_arrays_bit_for_bit(nominal):
+    """NumpyFunction (the buffer path calibration evaluates) returns np.asarray of a plain CasADi call's outputs,
+    bit for bit: a mapped ball centre with its sparse Jacobian, a shared parameter vector repeated over the points,
+    a vector given as a row or a 1-D array, a scalar input; a wrong shape is refused naming the input."""
+    import casadi as ca
+
+    from arm_model.casadi_model import NumpyFunction
+    from calibration.kinds import distance_function, kind_function
+    rng = np.random.default_rng(4)
+    f = casadi_ball_centre(nominal)
+    q, w, p = ca.SX.sym("q", f.size1_in(0)), ca.SX.sym("w", 6), ca.SX.sym("p", f.size1_in(2))
+    x = f(q, w, p)
+    g = ca.Function("xj", [q, w, p], [x, ca.jacobian(x, p), ca.jacobian(x, w)]).map(50)
+    assert not g.sparsity_out(1).is_dense()
+    args = (rng.uniform(-2, 2, (f.size1_in(0), 50)), rng.normal(size=(6, 50)), 1e-4 * rng.normal(size=f.size1_in(2)))
+    for got, want in zip(NumpyFunction(g)(*args), g(*args), strict=True):
+        want = np.asarray(want)
+        assert got.shape == want.shape and got.flags.c_contiguous and np.array_equal(got, want)
+    d = distance_function().map(7)
+    a, b, length = rng.normal(size=(3, 7)), rng.normal(size=(3, 7)), rng.uniform(0.1, 1, 7)
+    for lengths in (length, length[None, :], 0.5):
+        for got, want in zip(NumpyFunction(d)(a, b, lengths), d(a, b, lengths), strict=True):
+            assert np.array_equal(got, np.asarray(want))
+    seat = kind_function("seat").map(5)          # constant, structurally sparse Jacobians
+    xs, k = rng.normal(size=(3, 5)), rng.normal(size=3)
+    for got, want in zip(NumpyFunction(seat)(xs, np.zeros((3, 5)), k, np.zeros(3)),
+                         seat(xs, np.zeros((3, 5)), k, np.zeros(3)), strict=True):
+        assert np.array_equal(got, np.asarray(want))
+    with pytest.raises(ValueError, match="input cb has shape"):
+        NumpyFunction(d)(a, b[:, :4], length)

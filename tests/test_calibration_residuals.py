@@ -198,3 +198,22 @@ def test_starting_states_find_the_features():
     # too few points for the fits: a start anyway (the solver and the readers judge the data)
     assert np.all(np.isfinite(geo.initial_state("ring", x[:2], 0.08)))
     assert np.all(np.isfinite(geo.initial_state("sphere", x[:2], 0.015)))
+
+
+def test_initial_state_is_fitted_once_for_the_same_centres_and_given_as_a_new_array(monkeypatch):
+    """The starting state of a sphere from the same centres is the fit's, computed once (the loop starts its many
+    fits of one campaign from the same centres); changing the array returned changes nothing kept."""
+    from arm_model import geometry
+    rng = np.random.default_rng(3)
+    u = rng.normal(size=(10, 3))
+    x = np.array([0.3, 0.1, 0.2]) + 0.0125 * u / np.linalg.norm(u, axis=1)[:, None]
+    fits = []
+    real = geometry.fit_sphere
+    monkeypatch.setattr(geometry, "fit_sphere", lambda *a: fits.append(1) or real(*a))
+    first = geo.initial_state("sphere", x.copy(), 0.0125)
+    first[:] = 0.0
+    second = geo.initial_state("sphere", x.copy(), 0.0125)
+    assert len(fits) == 1
+    np.testing.assert_array_equal(second, np.r_[real(x, 0.0125).centre, 0.0125])
+    geo.initial_state("sphere", x + 1e-9, 0.0125)
+    assert len(fits) == 2

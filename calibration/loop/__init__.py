@@ -94,7 +94,7 @@ def close_loop(points: PointSet, artefacts: Artefacts, desc: ArmDescription, *, 
     Raises:
         NumericalError: the base model cannot be calibrated on the design set or a training fold.
     """
-    from threadpoolctl import threadpool_limits
+    from arm_model.parallel import blas_threads
 
     settings = settings or LoopSettings()
     if kw:
@@ -102,7 +102,7 @@ def close_loop(points: PointSet, artefacts: Artefacts, desc: ArmDescription, *, 
     camp = Campaign(points, artefacts, desc, reference, tuple(effects), values, _patterns(free), _patterns(hold) or (),
                     weights, families_, tuple(extra))
     # many small dense solves: threaded BLAS only adds contention (8x slower on a loaded 2-core machine)
-    with threadpool_limits(limits=1, user_api="blas"):
+    with blas_threads(1):
         state = prepare(camp, settings, progress or progress_line(log))
         run(state)
         return report(state)
