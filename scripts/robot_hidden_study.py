@@ -44,16 +44,16 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "scripts"))
 
-from hidden_effects_study import Case, cli_defaults, figures, judge  # noqa: E402
+from hidden_effects_study import Case, cli_defaults, judge, test_rows  # noqa: E402
 
 from arm_model import PinocchioArm  # noqa: E402
 from arm_model.effects import JointCompliance, JointGain  # noqa: E402
 from arm_model.model import ArmModel  # noqa: E402
 from arm_model.sim import campaign_from_dict, simulate  # noqa: E402
-from calibration.data import Weights  # noqa: E402
-from calibration.loop import close_loop  # noqa: E402
+from calibration.data import Weights, make_data  # noqa: E402
+from calibration.loop import close_loop, heldout_figures  # noqa: E402
 from calibration.loop_report import loop_model_name  # noqa: E402
-from calibration.model_output import refine_torques, write_model  # noqa: E402
+from calibration.model_output import refine_torques, with_fitted_torques, write_model  # noqa: E402
 
 #: name: (URDF, tip link); the Panda from examples/ (its masses), the others from example-robot-data 4.1.0
 ROBOTS = {"panda": (ROOT / "examples/data/real-panda-seats/panda-with-inertials.urdf", "panda_link8", "ball_link"),
@@ -146,6 +146,34 @@ def make_case(robot: str, kind: str, name: str, seed: int) -> Case:
         held = tuple(sorted(set(c.points.measurement[c.points.session == last])))
         return dataclasses.replace(c, holdout=held, weights=Weights(probe=NOISE, reference=NOISE))
     return dataclasses.replace(c, weights=Weights(probe=NOISE))
+
+
+def _at_equilibrium(model, p, data):
+    """``data`` with the torques of ``(model, p)`` at its static equilibrium (as the model file evaluates them)."""
+    if not ({"tau_gravity", "tau_contact"} & model.needs()):
+        return data
+    temperature = None if data.aux is None else data.aux.temperature
+    return dataclasses.replace(data, aux=model.equilibrium_aux(data.points.q, data.wrench, p, temperature))
+
+
+def figures(case: Case, loop) -> dict:
+    """Held-out RMS [um] of the nominal, the base model calibrated on the design set, the loop's model and the
+    truth on the outer test set, each with the torques at its own static equilibrium (as ``aacmm tip`` applies a
+    model file; the loop's own table, ``loop_table_um``, takes them at the readings)."""
+    mask = test_rows(case, loop)
+    data = loop.data.select(mask)
+    nominal = ArmModel(case.desc, ())
+    out = {"nominal": heldout_figures(nominal, np.zeros(nominal.spec.size),
+                                      make_data(data.points, data.artefacts, nominal,
+                                                marker_offsets=data.marker_offsets), case.weights)["rms_um"]}
+    for key, st in (("calibrated", loop.stages[0]), ("loop", loop.final)):
+        out[key] = heldout_figures(st.model, st.result.p, with_fitted_torques(data, st.result), case.weights)["rms_um"]
+    tpts = case.truth_points.select(mask[: len(case.points.measurement)])
+    tdata = make_data(tpts, data.artefacts, case.truth_model, marker_offsets=data.marker_offsets)
+    out["floor"] = heldout_figures(case.truth_model, case.p_true, _at_equilibrium(case.truth_model, case.p_true, tdata),
+                                   case.weights)["rms_um"]
+    out["loop_table_um"] = [loop.stages[0].heldout["rms_um"], loop.final.heldout["rms_um"]]
+    return out
 
 
 def model_file_check(loop, case: Case) -> tuple[str, list]:
