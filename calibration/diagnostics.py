@@ -225,10 +225,17 @@ class ResidualSpace:
         return out
 
 
-def residual_space(result: CalibrationResult, extra=()) -> ResidualSpace:
+def residual_space(result: CalibrationResult, extra=(), prior: bool = False) -> ResidualSpace:
     """The residual space of ``result`` with the effects ``extra`` appended (at zero parameters).
 
-    The nuisance states are solved again at the fitted parameters (the same optimum as the fit)."""
+    The nuisance states are solved again at the fitted parameters (the same optimum as the fit). ``prior``: for a
+    fit with a Gaussian prior, the space of the score test of that penalized fit (:func:`_prior_space`: the
+    directions the prior holds back are not projected out whole); default False: every free parameter's direction
+    projected out whole, as for a fit without prior. The loop adds an effect only where the default sees it (a
+    signature beyond all the free parameters could absorb; with the penalized test on the real Panda seats trained
+    on ``back-high`` a cross-coupling of joints 1 and 2 was built, passed the placement's held-out poses and spread
+    the other placements 1.65 -> 1.86 mm) and says what structure remains with the penalized one (the default
+    claimed a certified length's offset at 15 sigma on simulated seat pairs with nothing hidden)."""
     model = result.model
     extra = tuple(extra)
     sup = ArmModel(model.desc, tuple(model.effects) + extra + (JointAngleOffset(),))
@@ -240,7 +247,7 @@ def residual_space(result: CalibrationResult, extra=()) -> ResidualSpace:
     assert ev.jp is not None, "every parameter is free in prob: its Jacobian is evaluated"
     free = np.array([sup.spec.index(n) for n in result.free], dtype=int)
     soft, r = None, ev.r.copy()
-    if len(free) and result.prior_sd is not None and len(result.prior_sd) == len(free):
+    if prior and len(free) and result.prior_sd is not None and len(result.prior_sd) == len(free):
         basis, soft, r = _prior_space(reduced_jacobian(ev.jp[:, free], ev.jt), np.asarray(result.prior_sd, float), r)
     elif len(free):
         red = reduced_jacobian(ev.jp[:, free], ev.jt)

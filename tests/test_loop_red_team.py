@@ -168,3 +168,21 @@ def test_the_loop_takes_a_compliance_s_torques_at_its_equilibrium():
     assert st.heldout["rms_um"] == pytest.approx(tip, rel=0.01)
     readings = make_data(test.points, test.artefacts, st.model, marker_offsets=test.marker_offsets)
     assert heldout_figures(st.model, st.result.p, readings, Weights(5e-5, 5e-5))["rms_um"] > 1.1 * tip
+
+
+@pytest.mark.parametrize("synthesise, per_pose", [(True, True), (False, False)])
+def test_the_decision_power_counts_the_built_candidates_a_stage_may_test(nominal, synthesise, per_pose):
+    """9 design measurements reach ``alpha / cv_top`` (1/2^9 = 0.00195 < 0.0033) but not the level the built
+    candidates of a stage are held to, ``alpha / (2 cv_top)`` = 0.00167: with effects built from the residual the
+    units become the held-out measurements' poses; with the library alone they stay the measurements."""
+    from arm_model.sim.quick import SynthSpec, make_campaign
+    from calibration.loop import LoopSettings
+    from calibration.loop.folds import choose_folds
+    model = ArmModel(nominal)
+    c = make_campaign(model, SynthSpec(ballbars=0, seats=9, articulations=4, spheres=0), seed=1,
+                      p_true=np.zeros(model.spec.size))
+    design = make_data(c.points, c.artefacts, model)
+    folds, power = choose_folds(design, LoopSettings(synthesise=synthesise))
+    assert folds.by == "measurement" and folds.per_pose is per_pose
+    assert power["level"] == pytest.approx(0.01 / (6 if synthesise else 3)) and power["can_reach"]
+    assert power["units"] == (36 if per_pose else 9)

@@ -429,7 +429,7 @@ def report(state: LoopState) -> LoopResult:
     point from the stated uncertainties (a joint compliance resolved significantly negative held at zero)."""
     s, say = state.settings, state.say
     say("structure tests on the final fit")
-    space = residual_space(state.result)
+    space = residual_space(state.result, prior=True)       # what the fit made leaves (the score test of its prior)
     st = structure_tests(space, state.folds.assign, s.rank_tol)
     adj = holm([t.p_value for _, t in st])
     structure = [(f, t, float(a)) for (f, t), a in zip(st, adj, strict=True)]
