@@ -17,7 +17,8 @@ Family (:func:`calibration.diagnostics.families`) -> candidates (:mod:`arm_model
   keeps the common one) and ``probe thermal growth`` (:class:`~arm_model.effects.ProbeThermalGrowth`);
 * ``contact force`` / ``force magnitude`` -> ``probe compliance matrix``
   (:class:`~arm_model.effects.ProbeComplianceMatrix`, the terms a probe compliance in the model does not
-  already hold);
+  already hold) and ``probe compliance axes tilted`` (its xz and yz terms only: a stylus bent or mounted askew,
+  two parameters where the matrix has up to six);
 * ``approach direction`` -> ``approach offset`` (:class:`~arm_model.effects.ApproachOffset`);
 * ``jN lateral load`` -> ``lateral compliance jN`` (:class:`~arm_model.effects.LateralCompliance`).
 
