@@ -17,6 +17,7 @@ Sign conventions:
 """
 from __future__ import annotations
 
+import math
 import numbers
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -156,6 +157,12 @@ class Effect:
         """Modify ``inputs`` and ``geom`` in place (lists of columns/expressions)."""
         raise NotImplementedError
 
+    def lower_bounds(self, desc: ArmDescription) -> list[float]:
+        """The smallest physical value [SI] of each parameter (:meth:`param_defs` order): ``-inf`` (none) by
+        default; a compliance cannot be negative in total (:meth:`ArmModel.lower_bounds` gathers them; every fit
+        holds a parameter at its bound, the model-file reader refuses a value below it)."""
+        return [-math.inf] * len(self.param_defs(desc))
+
     def describe(self, desc: ArmDescription | None = None) -> str:
         """The effect and its joints: ``j3`` by encoder column, or by name with the arm's description ``desc``."""
         return self.key if self.joints is None else f"{self.key}({', '.join(_joint(desc, i) for i in self.joints)})"
@@ -265,6 +272,10 @@ class JointCompliance(Effect):
     def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
         return [(f"{desc.joint_names[i]}.compliance", "rad/(N m)") for i in self.joint_indices(desc)]
 
+    def lower_bounds(self, desc: ArmDescription) -> list[float]:
+        """0: a joint turning against its load is no compliance."""
+        return [0.0] * len(self.param_defs(desc))
+
     def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
         q = list(inputs.q)
         for k, i in enumerate(self.joint_indices(desc)):
@@ -340,6 +351,15 @@ class ProbeCompliance(Effect):
         if self.axial:
             out.append(("probe.dcompliance_z", "m/N"))
         return out
+
+    def lower_bounds(self, desc: ArmDescription) -> list[float]:
+        """Minus the description's compliance each increment adds to (the total cannot be negative; one
+        increment of both bending axes: the smaller of theirs)."""
+        p = desc.probe
+        low = {"probe.dcompliance_x": -p.bending_compliance_x, "probe.dcompliance_y": -p.bending_compliance_y,
+               "probe.dcompliance_bend": -min(p.bending_compliance_x, p.bending_compliance_y),
+               "probe.dcompliance_z": -p.axial_compliance}
+        return [low[n] for n, _ in self.param_defs(desc)]
 
     def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
         c = list(geom.compliance)
@@ -538,6 +558,13 @@ class ProbeComplianceMatrix(Effect):
     def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
         return [(f"probe.dcompliance_{t}", "m/N") for t in _MATRIX_TERMS if t in self.terms]
 
+    def lower_bounds(self, desc: ArmDescription) -> list[float]:
+        """A diagonal term: minus the description's compliance on its axis (a compliance matrix's diagonal is not
+        negative); an off-diagonal term: none."""
+        p = desc.probe
+        low = {"xx": -p.bending_compliance_x, "yy": -p.bending_compliance_y, "zz": -p.axial_compliance}
+        return [low.get(t, -math.inf) for t in _MATRIX_TERMS if t in self.terms]
+
     def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
         it = iter(params)
         cxx, cyy, czz, cxy, cxz, cyz = (next(it) if t in self.terms else 0.0 for t in _MATRIX_TERMS)
@@ -616,6 +643,11 @@ class LateralCompliance(Effect):
             out += [(f"{desc.joint_names[i]}.lateral_compliance_x", "rad/(N m)"),
                     (f"{desc.joint_names[i]}.lateral_compliance_y", "rad/(N m)")]
         return out
+
+    def lower_bounds(self, desc: ArmDescription) -> list[float]:
+        """0: the tilt about an axis under the moment about it is a diagonal term of the joint's (positive
+        semi-definite) compliance; a link tilting against the moment is no compliance."""
+        return [0.0] * len(self.param_defs(desc))
 
     def gravity_loads(self, desc: ArmDescription, q: Any) -> list[Any]:
         """The load each parameter multiplies at the description's own geometry: per joint of the effect,

@@ -76,6 +76,23 @@ class ArmModel:
     def needs(self) -> set[str]:
         return {n for e in self.effects for n in e.needs()}
 
+    def lower_bounds(self) -> np.ndarray:
+        """The smallest physical value [SI] of every parameter (``spec`` order; ``-inf``: none): a compliance
+        cannot be negative in total, so the description's probe compliances (``probe.compliance_*``, errors
+        added to its own) are at least minus its value and every effect's parameters at least its
+        :meth:`~arm_model.effects.Effect.lower_bounds`. The one rule every fit (``calibrate``, the loop's) holds
+        its parameters to and the model-file reader checks."""
+        low = np.full(self.spec.size, -np.inf)
+        probe = self.desc.probe
+        for n, v in (("probe.compliance_x", probe.bending_compliance_x),
+                     ("probe.compliance_y", probe.bending_compliance_y),
+                     ("probe.compliance_z", probe.axial_compliance)):
+            if n in self.spec.names:
+                low[self.spec.index(n)] = -v
+        for e, sl in self.effect_slices():
+            low[sl] = e.lower_bounds(self.desc)
+        return low
+
     def effect_slices(self) -> list[tuple[Effect, slice]]:
         out, k = [], self.base_size
         for e in self.effects:

@@ -351,6 +351,7 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
             raise r.error(f"not a valid '{kind}' effect: {exc}", *where) from None
         effects.append(effect)
         expected = {n: si for n, si in defs}
+        lowest = dict(zip(expected, effect.lower_bounds(desc), strict=True))
         rows = tbl.get("parameter", [])
         if not isinstance(rows, list) or not all(isinstance(x, dict) for x in rows):
             raise r.error("'parameter' must be a list of tables", *where, "parameter")
@@ -395,6 +396,8 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
                               *pw)
             if got.get("u", 0.0) < 0:
                 raise r.error("a standard uncertainty must not be negative", *pw)
+            _check_bound(name, expected[name], got["value"], lowest[name], r,
+                         pw + (next(k for k in row if k.startswith("value_")),))
             values[name] = got["value"]
             uncertainties[name] = got.get("u", 0.0)
         missing = [n for n in expected if n not in seen]
@@ -405,6 +408,19 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
     except ValueError as exc:
         raise r.error(f"the effects overlap: {exc}", "effect") from None
     return tuple(effects), values, uncertainties, states
+
+
+def _check_bound(name: str, unit: str, value: float, low: float, r: TomlReader, where: tuple) -> None:
+    """An error at ``where`` when ``value`` [SI, ``unit``] is below the parameter's physical lower bound ``low``
+    (:meth:`arm_model.effects.Effect.lower_bounds`: a compliance cannot be negative in total; every fit holds a
+    parameter at its bound, so only a hand edit writes one below)."""
+    if not value < low - 1e-9 * abs(low):
+        return
+    if low == 0.0:
+        raise r.error(f"'{name}' is {value:.6g} {unit}: a compliance cannot be negative (the joint or link would turn "
+                      "against its load); calibrate and close-loop hold it at 0", *where)
+    raise r.error(f"'{name}' is {value:.6g} {unit}: the probe's compliance would be negative in total (this "
+                  f"increment is at least {low:.6g} {unit}, minus the description's)", *where)
 
 
 # ---------------------------------------------------------------------------------------------

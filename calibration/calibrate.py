@@ -78,6 +78,9 @@ class FixedParameter:
     reason: str
     combination: Combination | None = None
     stage: str = "start"
+    #: held at its lower bound: the value [SI] the data pulled it to (the fit without the bound) and that value's
+    #: standard uncertainty [SI] (None otherwise)
+    pulled: tuple[float, float] | None = None
 
     def to_dict(self) -> dict:
         return {"name": self.name, "value": self.value, "reason": self.reason, "stage": self.stage,
@@ -567,7 +570,34 @@ def calibrate(model: ArmModel, data: CalibrationData, options: FitOptions = FitO
     with blas_threads(options.blas):
         res = _without_outliers(model, data, options, estimate)
     res.options = options
+    _check_plausible(res)
     return res
+
+
+def _check_plausible(res: CalibrationResult) -> None:
+    """A :class:`NumericalError` when a free parameter ended where no arm is: beyond the plausible range of its
+    quantity (:func:`arm_model.units.implausible`, the table every reader refuses a value by; a model file with it
+    could not be read back). That is the data failing to determine it (a direction they see only far below the
+    noise, and no prior to hold it near its nominal value: ``--prior-scale off`` on one placement of a seat plate
+    ran a joint compliance to 6.98 rad/(N m) and an angle to 1e15 deg), not a value to publish."""
+    from arm_model.model_file import PARAM_QUANTITY
+    from arm_model.units import implausible
+
+    bad = []
+    for n in res.free:
+        i = res.model.spec.index(n)
+        unit = res.model.spec.units[i]
+        wrong = implausible(float(res.p[i]), PARAM_QUANTITY.get(unit, ""))
+        if wrong:
+            du, fac = display_unit(unit)
+            bad.append(f"{n} = {res.p[i] * fac:.4g} {du} (+- {res.uncertainty(n) * fac:.2g})")
+    if bad:
+        raise NumericalError(
+            f"the fit ended at values no arm has: {'; '.join(bad)}: not a result to publish (a "
+            "direction the data see only far below the noise, along which the fit ran away, or data no arm of this "
+            "model gives). Calibrate with the prior "
+            "(--prior-scale evidence: a parameter the data cannot see stays near its nominal value), or hold "
+            "it (--hold NAME), or let the resolution rule hold what the data resolve poorly (--min-resolution 0.1)")
 
 
 #: rounds of outlier dropping before the fit gives up
@@ -596,14 +626,15 @@ def _without_outliers(model: ArmModel, data: CalibrationData, options: FitOption
     test the default leaves gross errors out by) is at ``options.outlier_threshold`` or beyond dropped (the worst
     of each measurement at half the worst statistic or more, :func:`_one_a_measurement`: a gross error also pulls
     its neighbours out, those go only if they stay out) and refitted, until none is left (at most
-    :data:`DROP_ROUNDS` rounds); otherwise the gross errors left out (:func:`_without_gross`)."""
+    :data:`DROP_ROUNDS` rounds; lengths only with ``options.outlier_lengths``); otherwise the gross errors left out
+    (:func:`_without_gross`)."""
     if not options.drop_outliers:
         return _without_gross(model, data, options, estimate)
     index = np.arange(len(data))
     dropped: list[Outlier] = []
     for k in range(DROP_ROUNDS + 1):
         res = estimate(model, data, options)
-        cands = _tested(res, options.outlier_threshold)
+        cands = [c for c in _tested(res, options.outlier_threshold) if options.outlier_lengths or c.between is None]
         if not cands:
             res.dropped = dropped
             return res
@@ -844,7 +875,8 @@ def _deletion_residual(res: CalibrationResult, data: CalibrationData, c: _Tested
 class _Setup:
     """What a fit starts from: the problem over the candidate parameters, the given (``nominal``) and the
     starting (``p0``) parameter vectors [SI], the nuisance states fitted at ``p0``, the prior (None without
-    one) with its groups, sizes and bounds (``spec``) and group scales, and the hold rule's resolution."""
+    one) with its groups and sizes (``spec``) and group scales, the hold rule's resolution, and every parameter's
+    lower bound [SI] (``lower``: :meth:`~arm_model.model.ArmModel.lower_bounds`, with a prior or without)."""
     problem: Problem
     candidates: list
     nominal: np.ndarray
@@ -854,6 +886,7 @@ class _Setup:
     min_resolution: float | None
     spec: PriorSpec | None = None
     scales: dict = field(default_factory=dict)
+    lower: np.ndarray | None = None
 
 
 def _prior_spec(model: ArmModel, data: CalibrationData, options: FitOptions) -> PriorSpec:
@@ -890,12 +923,13 @@ def _setup(model: ArmModel, data: CalibrationData, options: FitOptions) -> _Setu
                                  max_iter=options.max_iter).states
     problem.check_tracker(p0, states)        # frames and marker offsets the data cannot place: say so first
     if options.prior_scale is None:
-        return _Setup(problem, cand, nominal, p0, states, None, options.min_resolution)
+        return _Setup(problem, cand, nominal, p0, states, None, options.min_resolution, lower=model.lower_bounds())
     pspec = _prior_spec(model, data, options)
     scales = _scales(options, [pspec.group[i] for i in cand])
     centre = nominal.copy() if options.prior_centre is None else np.array(options.prior_centre, dtype=float)
     # the prior shrinks what the data resolve poorly: nothing is held for being weak
-    return _Setup(problem, cand, nominal, p0, states, Prior(centre, pspec.sizes(scales)), None, pspec, scales)
+    return _Setup(problem, cand, nominal, p0, states, Prior(centre, pspec.sizes(scales)), None, pspec, scales,
+                  pspec.lower)
 
 
 #: the structural rank test (:func:`_structural`) evaluates about this many times as many rows as candidates
@@ -944,24 +978,67 @@ def _held(s: _Setup, p, states, kept, stage: str, options: FitOptions):
     return kept, new, idf
 
 
-def _at_bounds(s: _Setup, p, kept, stage: str):
+#: how the reason of a parameter held at its lower bound begins
+AT_BOUND = "at its lower bound"
+
+
+def _at_bounds(s: _Setup, p, kept, stage: str, u: dict | None = None):
     """The estimated parameters beyond their lower bound (a compliance that would be negative in total): held
-    at the bound (``p`` changed in place). Returns (kept, [FixedParameter])."""
-    if s.spec is None:
+    at the bound (``p`` changed in place), with or without a prior. ``u``: {spec index: standard uncertainty [SI]}
+    at the fit without the bound (:func:`_solution_u`), of the value the data pulled each to
+    (``FixedParameter.pulled``: whether the pull is significant, e.g. the loop's
+    :func:`calibration.loop.decide.resolved`). Returns (kept, [FixedParameter])."""
+    low = s.lower
+    if low is None:
+        return kept, []
+    below = [i for i in kept if p[i] < low[i]]
+    if not below:
         return kept, []
     spec = s.problem.model.spec
-    low = s.spec.lower
-    out, fixed = [], []
-    for i in kept:
-        if p[i] < low[i]:
-            du, fac = display_unit(spec.units[i])
-            fixed.append(FixedParameter(spec.names[i], float(low[i]),
-                                        f"at its lower bound {low[i] * fac:.4g} {du} (a compliance cannot be "
-                                        f"negative): the data pull it to {p[i] * fac:.4g} {du}", None, stage))
-            p[i] = low[i]
-        else:
-            out.append(i)
-    return out, fixed
+    fixed = []
+    for i in below:
+        du, fac = display_unit(spec.units[i])
+        fixed.append(FixedParameter(spec.names[i], float(low[i]),
+                                    f"{AT_BOUND} {low[i] * fac:.4g} {du} (a compliance cannot be "
+                                    f"negative): the data pull it to {p[i] * fac:.4g} {du}", None, stage,
+                                    (float(p[i]), (u or {}).get(i, math.nan))))
+        p[i] = low[i]
+    return [i for i in kept if i not in below], fixed
+
+
+def _undetermined(s: _Setup, p, kept, stage: str, u: dict):
+    """The estimated parameters whose standard uncertainty ``u`` (:func:`_solution_u`) exceeds the plausible range
+    of their quantity (:func:`arm_model.units.implausible`, the readers' table: a joint compliance's 1 rad/(N m)):
+    the data do not determine them to within any value an arm can have (a compliance of a joint whose torque or
+    lever on the tip is nil in the data; only without a prior, which bounds every uncertainty by its size), so
+    they are held at their given value (``p`` changed in place) and said, as the rank test holds what the data
+    cannot see at all. Returns (kept, [FixedParameter])."""
+    from arm_model.model_file import PARAM_QUANTITY
+    from arm_model.units import PLAUSIBLE_SI
+    spec = s.problem.model.spec
+    vague = [i for i in kept if u.get(i, 0.0) > PLAUSIBLE_SI.get(PARAM_QUANTITY.get(spec.units[i], ""), math.inf)]
+    fixed = []
+    for i in vague:
+        du, fac = display_unit(spec.units[i])
+        fixed.append(FixedParameter(spec.names[i], float(s.nominal[i]),
+                                    f"not determined: u {u[i] * fac:.3g} {du} at the fit (value {p[i] * fac:.3g} "
+                                    f"{du}) beyond any plausible value of it; held at its given value", None, stage))
+        p[i] = s.nominal[i]
+    return [i for i in kept if i not in vague], fixed
+
+
+def _solution_u(s: _Setup, sol, kept) -> dict:
+    """{spec index: standard uncertainty [SI]} of the parameters ``kept`` at the solution ``sol`` (its covariance,
+    the weighted residual variance s0^2 when above 1); empty where the covariance cannot be had (singular, no
+    redundancy)."""
+    try:
+        ev = sol.evaluation
+        prob = s.problem.with_free(kept)
+        dof = _dof(prob, len(ev.r), len(kept), prior=s.prior is not None)[0]
+        cov = _covariance(s, ev, kept, max(1.0, 2 * sol.cost / max(dof, 1)))
+    except (NumericalError, np.linalg.LinAlgError):
+        return {}
+    return {i: float(math.sqrt(max(cov[k, k], 0.0))) for k, i in enumerate(kept)}
 
 
 def _restarted(s: _Setup, prob: Problem, sol, options: FitOptions):
@@ -1020,9 +1097,11 @@ def _solve(s: _Setup, options: FitOptions):
         sol = _restarted(s, prob, _lm(s, prob, p, states, options), options)
         p, states = sol.p, sol.states
         n_before = len(kept)
-        kept, bound = _at_bounds(s, p, kept, "solution")
+        u = _solution_u(s, sol, kept) if len(kept) else {}
+        kept, bound = _at_bounds(s, p, kept, "solution", u)
+        kept, vague = _undetermined(s, p, kept, "solution", u)
         kept, new, idf1 = _held(s, p, states, kept, "solution", options)
-        fixed += bound + new
+        fixed += bound + vague + new
         if len(kept) == n_before:
             return sol, kept, fixed, idf0, idf1
         rank_rounds += bool(new)

@@ -100,6 +100,8 @@ class FitOptions:
             same false-alarm rate; beyond ``outlier_threshold`` too: a gross error is an outlier) is a gross error,
             left out and the fit redone (one at a time, the largest first, at most 5 % of the points); None keeps
             every point.
+        outlier_lengths: False: ``drop_outliers`` leaves certified lengths in (only points are dropped): the closed
+            loop's, whose base model may lack the very effect a length measures (thermal growth, a scale error).
         covariance: "residual" (scaled by the residual variance factor) or "stated".
         reference: "fit" (``T_ref_base`` unknown), "identity" (reference coordinates are base
             coordinates) or "off" (reference columns ignored).
@@ -128,6 +130,7 @@ class FitOptions:
     outlier_threshold: float = 4.0
     drop_outliers: bool = False
     gross_threshold: float | None = GROSS_THRESHOLD
+    outlier_lengths: bool = True
     covariance: str = "residual"
     reference: str = "fit"
     max_iter: int = 200
@@ -172,6 +175,7 @@ class FitOptions:
         if self.prior_length is not None:
             _in_range("prior_length", self.prior_length, *PRIOR_LENGTH_RANGE)
         _flag("drop_outliers", self.drop_outliers)
+        _flag("outlier_lengths", self.outlier_lengths)
         _flag("weights_from_data", self.weights_from_data)
         if isinstance(self.prior_scale, dict):
             for g, v in self.prior_scale.items():

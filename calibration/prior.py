@@ -35,7 +35,7 @@ import numpy as np
 
 __all__ = ["GROUP_LENGTHS", "GROUP_OFFSETS", "GROUP_ANGLES", "GROUP_TIP", "GROUP_PROBE_COMPLIANCE", "BASE_SIZES",
            "PRIOR_DOMINATED", "SCALE_RANGE", "MIN_EFFECTIVE", "PriorSpec", "parameter_groups", "prior_spec",
-           "variance_ratio", "update_scales", "NONNEGATIVE_UNITS"]
+           "variance_ratio", "update_scales"]
 
 GROUP_LENGTHS = "lengths"
 GROUP_OFFSETS = "joint offsets"
@@ -59,8 +59,6 @@ PRIOR_DOMINATED = 0.5
 SCALE_RANGE = (1e-2, 1e2)
 #: fewest parameters the data must determine in a group (``gamma_G``) for its scale to be estimated
 MIN_EFFECTIVE = 0.5
-#: units of parameters that cannot be negative in total (compliances): lower bound ``-nominal``
-NONNEGATIVE_UNITS = ("rad/(N m)", "m/N")
 
 
 #: |cos| of the angle between an origin angle's rotation axis and the joint axis from which it is the joint's
@@ -201,12 +199,12 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
     description's masses, contact torques from the forces; an off-axis compliance, the RMS moment of gravity
     about its axis that the effect's ``gravity_loads`` give; at most :data:`MAX_ANGULAR_COMPLIANCE`); another
     effect parameter the effect's own plausible size or a size by unit (:data:`UNIT_SIZES`). ``priors``
-    (names or glob patterns -> size [SI]) override. Compliances (:data:`NONNEGATIVE_UNITS`) cannot be negative
-    in total: their lower bound is minus their nominal value."""
+    (names or glob patterns -> size [SI]) override. The lower bounds are the model's
+    (:meth:`arm_model.model.ArmModel.lower_bounds`: a compliance cannot be negative in total)."""
     spec = model.spec
     probe = model.desc.probe
     eff = _effect_sizes(model, data)
-    size, lower, source = np.empty(spec.size), np.full(spec.size, -np.inf), []
+    size, lower, source = np.empty(spec.size), model.lower_bounds(), []
     for i, (n, unit) in enumerate(zip(spec.names, spec.units, strict=True)):
         hit = [v for pat, v in (priors or {}).items() if fnmatch.fnmatchcase(n, pat)]
         if hit:
@@ -222,20 +220,11 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
         else:
             size[i], src = BASE_SIZES.get(unit, UNIT_SIZES.get(unit, 1.0)), f"by unit ({unit})"
         source.append(src)
-        if unit in NONNEGATIVE_UNITS:
-            lower[i] = 0.0 - _nominal_compliance(model, n)
     groups = tuple(parameter_groups(model, spec.names))
     torque_sized = [i in eff and spec.units[i] == "rad/(N m)" and source[i] != "given" for i in range(spec.size)]
     physical = frozenset(g for g in set(groups)
                          if all(torque_sized[i] for i in range(spec.size) if groups[i] == g))
     return PriorSpec(groups, size, lower, tuple(source), physical)
-
-
-def _nominal_compliance(model, name: str) -> float:
-    """The description's own value of a compliance parameter (errors add to it; 0 for an effect's)."""
-    probe = model.desc.probe
-    return {"probe.compliance_x": probe.bending_compliance_x, "probe.compliance_y": probe.bending_compliance_y,
-            "probe.compliance_z": probe.axial_compliance}.get(name, 0.0)
 
 
 def variance_ratio(post_var: np.ndarray, prior_sd: np.ndarray) -> np.ndarray:

@@ -83,9 +83,12 @@ def test_a_compliance_injected_into_the_real_angles_is_found_recovered_and_carri
     desc, art, pts = setup
     inj = {p: _inject(pts[p], COMPLIANCE) for p in PLACES}
     loop = close_loop(inj["front"], art, desc)
-    assert [c.name for c in loop.added] == ["joint compliance (every loaded joint)"], loop.verdict
+    # the compliance first; since the loop drops calibrate's gross points (the point test: one design pose and
+    # two test poses of this misfit base model), the eccentricity of joints 4 and 6 passes the held-out folds
+    # and the outer test after it
+    assert [c.name for c in loop.added][:1] == ["joint compliance (every loaded joint)"], loop.verdict
     a, b, spread = _compare(desc, art, inj, "front", loop, ("right", "back-high"))
-    # measured: 3.21 -> 1.76 mm
+    # measured: 3.38 -> 1.27 mm (with the compliance alone, before the point test: 3.21 -> 1.76 mm)
     assert spread[1] <= 0.8 * spread[0], (a, b)
     # recovered: the injected compliance is the difference to the same fit on the recorded angles (the real
     # arm's own apparent compliance), within 3 sigma on every joint both fits resolve

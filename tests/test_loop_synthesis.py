@@ -51,7 +51,7 @@ CASES = {
     "wrist third harmonic": ((JointHarmonics(joints=(5,), harmonics=(3,)),),
                              {"j6.harm3_cos": 3.5e-5, "j6.harm3_sin": 6.0e-5}, 0.0, "harmonics j6"),
     "elbow lateral compliance": ((LateralCompliance(joints=(3,)),),
-                                 {"j4.lateral_compliance_x": 1e-5, "j4.lateral_compliance_y": -8e-6}, 0.0,
+                                 {"j4.lateral_compliance_x": 1e-5, "j4.lateral_compliance_y": 8e-6}, 0.0,
                                  "lateral compliance j4"),
     "anisotropic probe": ((ProbeComplianceMatrix(),),
                           {"probe.dcompliance_xx": 3e-6, "probe.dcompliance_yy": -3e-6, "probe.dcompliance_xy": 4e-6},

@@ -70,8 +70,9 @@ def random_values(desc, effects, seed):
     rng = np.random.default_rng(seed)
     out = {}
     for e in effects:
-        for name, unit in e.param_defs(desc):
-            out[name] = float(rng.normal(0, SCALE[unit]))
+        for (name, unit), low in zip(e.param_defs(desc), e.lower_bounds(desc), strict=True):
+            v = float(rng.normal(0, SCALE[unit]))
+            out[name] = low + abs(v - low) if v < low else v      # a compliance within its bound (model.lower_bounds)
     return out
 
 

@@ -25,7 +25,7 @@ from .state import LoopState, Screening
 
 __all__ = ["Decision", "heldout_test", "fit_on_design", "choose", "whole_family", "tied_rivals", "merge_tied",
            "physics_inclusion",
-           "negative_compliances", "resolved", "candidate_priors", "signature_overlap", "plot_family"]
+           "resolved", "candidate_priors", "signature_overlap", "plot_family"]
 
 
 @dataclass(frozen=True)
@@ -64,14 +64,10 @@ def heldout_test(state: LoopState, scr: Screening, cand: Candidate) -> CVResult:
     return cv
 
 
-#: how calibrate's reason for a parameter held at its lower bound begins (a compliance the data pull below 0)
-AT_BOUND = "at its lower bound"
-
-
 def at_bound(res: CalibrationResult) -> set[str]:
     """The parameters of ``res`` held at their lower bound: estimated (at the bound: a compliance the data put
     at zero), not left unresolved."""
-    return {f.name for f in res.fixed if f.reason.startswith(AT_BOUND)}
+    return {f.name for f in res.fixed if f.pulled is not None}
 
 
 def fit_on_design(state: LoopState, scr: Screening, cand: Candidate) -> CalibrationResult:
@@ -210,7 +206,7 @@ def whole_family(state: LoopState, scr: Screening, cand: Candidate, cv: CVResult
         return cand, cv
     res = fit_on_design(state, scr, every)
     own = set(cand.param_names(res.model.desc))
-    others = [n for n in every.param_names(res.model.desc) if n not in own and n in res.free]
+    others = [n for n in every.param_names(res.model.desc) if n not in own and (n in res.free or n in at_bound(res))]
     if not others:
         return cand, cv
     z, neg, pos = resolved(res, others, state.settings.alpha)
@@ -234,17 +230,15 @@ def whole_family(state: LoopState, scr: Screening, cand: Candidate, cv: CVResult
 
 def resolved(res: CalibrationResult, names: list, level: float) -> tuple[float, list, list]:
     """``(z, negative, positive)``: the parameters ``names`` of ``res`` resolved below ``-z u`` and above
-    ``z u``, z two-sided at ``level`` with Bonferroni over ``names``."""
+    ``z u``, z two-sided at ``level`` with Bonferroni over ``names``. A compliance every fit holds at its bound 0
+    (:meth:`arm_model.model.ArmModel.lower_bounds`) counts as negative when the value the data pulled it to is
+    below ``-z u`` of its own uncertainty (``FixedParameter.pulled``)."""
     z = float(stats.norm.isf(level / (2 * len(names))))
-    return (z, [n for n in names if res.value(n) < -z * res.uncertainty(n)],
-            [n for n in names if res.value(n) > z * res.uncertainty(n)])
-
-
-def negative_compliances(res: CalibrationResult, level: float) -> list[str]:
-    """The joint compliances of ``res`` resolved significantly negative (:func:`resolved` over the free
-    joint compliances): not a physical compliance."""
-    names = [n for n in res.free if n.endswith(".compliance") and not n.startswith("probe.")]
-    return resolved(res, names, level)[1] if names else []
+    pulled = {f.name: f.pulled for f in res.fixed if f.pulled is not None and f.name in names}
+    free = [n for n in names if n in res.free]
+    neg = [n for n in names if n in pulled and pulled[n][0] < -z * pulled[n][1]]
+    return (z, neg + [n for n in free if res.value(n) < -z * res.uncertainty(n)],
+            [n for n in free if res.value(n) > z * res.uncertainty(n)])
 
 
 def physics_inclusion(state: LoopState, scr: Screening, level: float, tested: list = ()
@@ -275,7 +269,7 @@ def physics_inclusion(state: LoopState, scr: Screening, level: float, tested: li
     if support is None:
         return None
     res, why = support
-    names = [n for n in every.param_names(res.model.desc) if n in res.free]
+    names = [n for n in every.param_names(res.model.desc) if n in res.free or n in at_bound(res)]
     if not names:
         return None
     z, neg, pos = resolved(res, names, level)

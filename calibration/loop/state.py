@@ -111,20 +111,23 @@ class LoopState:
 
     def fit(self, model: ArmModel, data: CalibrationData, extra_priors: dict | None = None, reweight: bool = False,
             hold: tuple = (), weights: Weights | None = None, discrepancy: bool = True,
-            start: dict | None = None) -> CalibrationResult:
+            start: dict | None = None, drop_outliers: bool = False) -> CalibrationResult:
         """``calibrate`` of ``model`` on ``data`` with the loop's options, the current ``weights`` (or those
         given) and ``priors`` (and ``extra_priors``): the parameters ``free`` and those of every effect the loop
         added, less the user's ``hold`` and the names ``hold``; the noise re-estimated from the data only with
         ``reweight``; ``discrepancy`` False: no model discrepancy (a fold's fit, which only predicts its held-out
         units); ``start``: starting values of free parameters by name (a warm start; the prior's centre and the
-        held parameters' values stay the given ones)."""
+        held parameters' values stay the given ones); ``drop_outliers``: calibrate's ``--drop-outliers``
+        (the base fit's,
+        :func:`~calibration.loop.outliers.drop_design_outliers`)."""
         names = fitted_names(model, self.free, self.hold, self.base_size, hold, data)
         # the added effects' plausible sizes serve the practical-resolution rule without a prior; with one,
         # the prior's own sizes (calibration.prior.prior_spec) and the evidence's scales apply
         priors = {**self.priors, **(extra_priors or {})} if self.options.prior_scale is None else None
         return calibrate(model, data, replace(
             self.options, free=names, weights=self.weights if weights is None else weights, priors=priors, start=start,
-            weights_from_data=reweight and self.settings.weights_from_data, discrepancy=discrepancy))
+            weights_from_data=reweight and self.settings.weights_from_data, discrepancy=discrepancy,
+            drop_outliers=drop_outliers, outlier_lengths=False))
 
     def test_figures(self, model: ArmModel, p, reference: str, weights: Weights | None = None) -> dict:
         """Figures of ``(model, p)`` on the outer test set (:func:`~calibration.loop.heldout.heldout_figures`):
