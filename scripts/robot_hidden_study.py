@@ -44,7 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "scripts"))
 
-from hidden_effects_study import Case, cli_defaults, judge, test_rows  # noqa: E402
+from hidden_effects_study import Case, cli_defaults, judge  # noqa: E402
 
 from arm_model import PinocchioArm  # noqa: E402
 from arm_model.effects import JointCompliance, JointGain  # noqa: E402
@@ -160,7 +160,9 @@ def figures(case: Case, loop) -> dict:
     """Held-out RMS [um] of the nominal, the base model calibrated on the design set, the loop's model and the
     truth on the outer test set, each with the torques at its own static equilibrium (as ``aacmm tip`` applies a
     model file; the loop's own table, ``loop_table_um``, takes them at the readings)."""
-    mask = test_rows(case, loop)
+    # every held-out measurement, the test set's outliers included (the loop's own table leaves them out)
+    held = set(case.holdout) or set(loop.test) | {d["measurement"] for d in loop.dropped.get("test", [])}
+    mask = np.isin(loop.data.points.measurement, sorted(held))
     data = loop.data.select(mask)
     nominal = ArmModel(case.desc, ())
     out = {"nominal": heldout_figures(nominal, np.zeros(nominal.spec.size),
