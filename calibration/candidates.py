@@ -19,7 +19,12 @@ model (``ArmModel.with_effects``). The library gives, per arm and data:
   (a constant offset deflects the probe by a constant vector, which the probe offset ``probe.x/y/z``
   absorbs: the screening shows it as not identifiable);
 * ``probe compliance (isotropic)`` / ``(anisotropic)``: bending compliance beyond the declared one;
-  only with force data.
+  only with force data;
+* ``lateral compliance jN`` of the first joint N (family ``base_tilt``): the mount tilts about the two axes across
+  the first joint under the moment of the arm's weight and of the contact wrench
+  (:class:`~arm_model.effects.LateralCompliance`, 2 parameters [rad/(N m)]): a tripod, a magnetic base, a robot's
+  pedestal or table; offered where a torque loads the arm (masses or force) and the chain has no joint
+  mimicking another (an effect on the chain's rows).
 
 A new candidate is one :class:`~arm_model.effects.Effect` subclass (parameters zero = no change,
 as every library effect) wrapped in a :class:`Candidate`, passed to the loop as an extra candidate.
@@ -37,6 +42,7 @@ from arm_model.effects import (
     ForceSensorError,
     JointCompliance,
     JointGain,
+    LateralCompliance,
     ProbeCompliance,
     ThermalGrowth,
 )
@@ -48,7 +54,8 @@ __all__ = ["Candidate", "Skipped", "FAMILIES", "DEFAULT_FAMILIES", "MIN_TEMPERAT
            "needs_model", "torques_of", "no_torque_reason"]
 
 #: candidate families of the library, by effect key (the CLI's ``--candidates`` names)
-FAMILIES = ("eccentricity", "joint_gain", "joint_compliance", "thermal", "force_sensor", "probe_compliance")
+FAMILIES = ("eccentricity", "joint_gain", "joint_compliance", "thermal", "force_sensor", "probe_compliance",
+            "base_tilt")
 
 #: the families offered when none are named: every one but ``joint_gain``, which is offered on request
 #: (``--candidates``). On the real robot data of examples/ a joint gain passed the held-out test of the poses of
@@ -149,6 +156,19 @@ def _per_joint_columns(desc: ArmDescription, skipped: list) -> dict[int, str]:
     return {i: desc.encoders[i].name for i in desc.revolute_columns}
 
 
+def _base_tilt(desc: ArmDescription, data: CalibrationData) -> Candidate | Skipped:
+    """The mount's tilt under the arm's moment: the first joint's lateral compliance (the links it moves, i.e. the
+    whole arm, tilt about its frame's x and y axes through its origin by ``c M``), or why it is not offered. Its
+    name is the one :mod:`calibration.synthesis` gives the same effect built from a ``j1 lateral load`` family."""
+    name = desc.joint_names[0]
+    reason = no_torque_reason(desc, data)
+    if reason is None and desc.coupled:
+        reason = "the chain has a joint mimicking another: a lateral compliance acts on the chain's rows"
+    if reason is not None:
+        return Skipped(f"lateral compliance {name} (base tilt)", reason)
+    return Candidate(f"lateral compliance {name}", LateralCompliance(joints=(0,)), "lateral_compliance", name)
+
+
 def library_candidates(desc: ArmDescription, data: CalibrationData, families=None,
                        extra=()) -> tuple[list[Candidate], list[Skipped]]:
     """The library's candidates for ``desc`` and ``data``, and those left out with the reason.
@@ -223,6 +243,9 @@ def library_candidates(desc: ArmDescription, data: CalibrationData, families=Non
                                  "probe_compliance"))
             out.append(Candidate("probe compliance (anisotropic)", ProbeCompliance(anisotropic=True),
                                  "probe_compliance"))
+    if "base_tilt" in families:
+        tilt = _base_tilt(desc, data)
+        (out if isinstance(tilt, Candidate) else skipped).append(tilt)
     for c in extra:
         if not isinstance(c, Candidate):
             raise TypeError(f"an extra candidate must be a Candidate, got {type(c).__name__}")

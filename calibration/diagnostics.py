@@ -156,6 +156,9 @@ class ResidualSpace:
         basis: (n, m) orthonormal basis of the free parameters' columns after the nuisance projection.
         row_point, row_measurement, row_feature, row_kind: per row (point index or -1 for a length).
         extra_slices: columns of each extra effect; offset_slice: the joint-angle columns.
+        soft: for a fit with a prior, ``(directions (n, m) orthonormal, kept (m,))``: the free parameters'
+            directions the prior holds back, each kept by ``sqrt(1 - d)`` where the fit absorbs the share ``d`` of
+            it (:func:`residual_space`); None without a prior (``basis`` projects the free parameters out whole).
     """
     result: CalibrationResult
     model: ArmModel
@@ -172,6 +175,7 @@ class ResidualSpace:
     extra_slices: list
     offset_slice: slice
     dof_used: int = 0
+    soft: tuple | None = None
 
     @property
     def data(self) -> CalibrationData:
@@ -195,6 +199,9 @@ class ResidualSpace:
         if cols.shape[1] == 0:
             return cols
         red = reduced_jacobian(cols, self.jt)
+        if self.soft is not None:
+            d, kept = self.soft
+            red = red - d @ ((1.0 - kept)[:, None] * (d.T @ red))
         return red - self.basis @ (self.basis.T @ red)
 
     def with_columns(self, cols: np.ndarray, rank_tol: float = DEFAULT_RANK_TOL) -> ResidualSpace:
@@ -218,10 +225,17 @@ class ResidualSpace:
         return out
 
 
-def residual_space(result: CalibrationResult, extra=()) -> ResidualSpace:
+def residual_space(result: CalibrationResult, extra=(), prior: bool = False) -> ResidualSpace:
     """The residual space of ``result`` with the effects ``extra`` appended (at zero parameters).
 
-    The nuisance states are solved again at the fitted parameters (the same optimum as the fit)."""
+    The nuisance states are solved again at the fitted parameters (the same optimum as the fit). ``prior``: for a
+    fit with a Gaussian prior, the space of the score test of that penalized fit (:func:`_prior_space`: the
+    directions the prior holds back are not projected out whole); default False: every free parameter's direction
+    projected out whole, as for a fit without prior. The loop adds an effect only where the default sees it (a
+    signature beyond all the free parameters could absorb; with the penalized test on the real Panda seats trained
+    on ``back-high`` a cross-coupling of joints 1 and 2 was built, passed the placement's held-out poses and spread
+    the other placements 1.65 -> 1.86 mm) and says what structure remains with the penalized one (the default
+    claimed a certified length's offset at 15 sigma on simulated seat pairs with nothing hidden)."""
     model = result.model
     extra = tuple(extra)
     sup = ArmModel(model.desc, tuple(model.effects) + extra + (JointAngleOffset(),))
@@ -232,7 +246,10 @@ def residual_space(result: CalibrationResult, extra=()) -> ResidualSpace:
     ev = prob.evaluate(p, states)
     assert ev.jp is not None, "every parameter is free in prob: its Jacobian is evaluated"
     free = np.array([sup.spec.index(n) for n in result.free], dtype=int)
-    if len(free):
+    soft, r = None, ev.r.copy()
+    if prior and len(free) and result.prior_sd is not None and len(result.prior_sd) == len(free):
+        basis, soft, r = _prior_space(reduced_jacobian(ev.jp[:, free], ev.jt), np.asarray(result.prior_sd, float), r)
+    elif len(free):
         red = reduced_jacobian(ev.jp[:, free], ev.jt)
         norm = np.linalg.norm(ev.jp[:, free], axis=0)
         red = red / np.where(norm > 0, norm, 1.0)
@@ -259,8 +276,42 @@ def residual_space(result: CalibrationResult, extra=()) -> ResidualSpace:
         n = len(e.param_defs(model.desc))
         slices.append(slice(k, k + n))
         k += n
-    return ResidualSpace(result, sup, prob, p, ev.r.copy(), ev.jp, ev.jt, basis, rp, meas, feat, kind, slices,
-                         slice(k, size))
+    return ResidualSpace(result, sup, prob, p, r, ev.jp, ev.jt, basis, rp, meas, feat, kind, slices,
+                         slice(k, size), soft=soft)
+
+
+#: share of a direction the fit absorbs (``d``) from which it counts as absorbed whole: the residual along it is
+#: then not scaled up by ``1 / sqrt(1 - d)`` (at most 1e3), the solver's own tolerance would dominate it
+_ABSORBED = 1.0 - 1e-6
+
+
+def _prior_space(red: np.ndarray, prior_sd: np.ndarray, r: np.ndarray) -> tuple:
+    """The free parameters' part of the residual space of a fit with a Gaussian prior (standard deviations
+    ``prior_sd`` [SI] of the free parameters whose reduced Jacobian is ``red`` (n, f)): (the directions absorbed
+    whole (n, a), ``(directions (n, m), kept (m,))`` of those the prior holds back, the residual in the tests'
+    coordinates).
+
+    A score test at a penalized fit: with the parameters' prior N(0, diag(sd^2)) the rows' covariance is
+    ``V = I + J diag(sd^2) J^T`` and ``V^-1 = I - H``, ``H = G (G^T G + I)^-1 G^T``, ``G = J diag(sd)`` (Woodbury);
+    the residual at the penalized optimum is ``(I - H) r0``. The test of columns ``C`` is the GLS score test
+    ``r0^T V^-1 C (C^T V^-1 C)^-1 C^T V^-1 r0``: the plain one on ``W C`` and ``W r0`` with ``W = (I - H)^(1/2)``.
+    With ``G = U S V^T``, ``H = U diag(d) U^T``, ``d = s^2 / (1 + s^2)``: W keeps ``sqrt(1 - d)`` of each direction
+    of U (none: a direction the data fix whole, as without a prior; all: one the prior pins) and the residual at the
+    fit, ``(I - H) r0``, is turned into ``W r0`` by ``1 / sqrt(1 - d)`` along them. Projecting the free parameters
+    out whole instead (the test of a fit without prior) tested the residual along directions the prior kept the fit
+    from using: on a simulated robot's seat pairs (scripts/robot_hidden_study.py, nothing hidden) the certified
+    length's offset, 99.7 % inside the geometry's span, came out 15 sigma ("structured residual remains: artefact")."""
+    sd = np.where(np.isfinite(prior_sd) & (prior_sd > 0), prior_sd, 1e9)
+    g = red * sd[None, :]
+    u, s, _ = np.linalg.svd(g, full_matrices=False)
+    u = u[:, s > 1e-9 * max(s.max(initial=0.0), 1e-300)]
+    s = s[: u.shape[1]]
+    d = s ** 2 / (1.0 + s ** 2)
+    whole = d >= _ABSORBED
+    hard, soft_dirs, kept = u[:, whole], u[:, ~whole], np.sqrt(1.0 - d[~whole])
+    r = r - hard @ (hard.T @ r)
+    r = r + soft_dirs @ ((1.0 / kept - 1.0) * (soft_dirs.T @ r))
+    return hard, (soft_dirs, kept), r
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -82,12 +82,13 @@ def register(sub) -> None:
                         "so the verdict does not depend on the seed")
     p.add_argument("--candidates", default=None, metavar="KEYS",
                    help="comma-separated candidate families: eccentricity, joint_gain, joint_compliance, thermal, "
-                        "force_sensor, probe_compliance (default every one but joint_gain, the encoder scale "
+                        "force_sensor, probe_compliance, base_tilt (the mount tilting under the arm's moment: the "
+                        "first joint's lateral compliance) (default every one but joint_gain, the encoder scale "
                         "error of each joint, offered on request; see docs/close-loop.md)")
     p.add_argument("--library-only", action="store_true",
                    help="do not build effects from the residual's structure once the library is exhausted "
                         "(default: build them: joint harmonics, per-link and probe thermal growth, a probe "
-                        "compliance matrix, an approach offset, lateral joint compliance)")
+                        "compliance matrix and its tilted axes, an approach offset, lateral joint compliance)")
     p.add_argument("--held-out-gain-only", action="store_true",
                    help="add only effects that improve the held-out data significantly (default: also include "
                         "joint compliance under gravity as physics when its signature is significant, its "

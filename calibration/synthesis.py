@@ -17,7 +17,8 @@ Family (:func:`calibration.diagnostics.families`) -> candidates (:mod:`arm_model
   keeps the common one) and ``probe thermal growth`` (:class:`~arm_model.effects.ProbeThermalGrowth`);
 * ``contact force`` / ``force magnitude`` -> ``probe compliance matrix``
   (:class:`~arm_model.effects.ProbeComplianceMatrix`, the terms a probe compliance in the model does not
-  already hold);
+  already hold) and ``probe compliance axes tilted`` (its xz and yz terms only: a stylus bent or mounted askew,
+  two parameters where the matrix has up to six);
 * ``approach direction`` -> ``approach offset`` (:class:`~arm_model.effects.ApproachOffset`);
 * ``jN lateral load`` -> ``lateral compliance jN`` (:class:`~arm_model.effects.LateralCompliance`).
 
@@ -49,6 +50,10 @@ __all__ = ["MAX_HARMONIC", "synthesise", "RESIDUAL"]
 
 #: highest harmonic of a joint angle a synthesised joint-angle error holds
 MAX_HARMONIC = 4
+#: the terms of a probe compliance whose principal axes are turned off the probe's z axis by small angles (a bent
+#: stylus, a probe mounted askew): to first order the turn couples the axial force into a lateral deflection and
+#: back, ``dC_xz = -ty (c_x - c_z)``, ``dC_yz = tx (c_y - c_z)``, and leaves the diagonal and xy unchanged
+_TILT_TERMS = ("xz", "yz")
 #: ``Candidate.origin`` of a synthesised candidate
 RESIDUAL = "residual"
 
@@ -140,6 +145,8 @@ def synthesise(family_names, model: ArmModel) -> list[Candidate]:
                         terms.remove("yy")
                     if e.axial:
                         terms.remove("zz")
+            if len(terms) > len(_TILT_TERMS):
+                add("probe compliance axes tilted", ProbeComplianceMatrix(terms=_TILT_TERMS), "probe_compliance_matrix")
             add("probe compliance matrix", ProbeComplianceMatrix(terms=tuple(terms)), "probe_compliance_matrix")
         elif fam == "approach direction":
             if ApproachOffset not in held:

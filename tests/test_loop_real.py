@@ -66,7 +66,7 @@ def test_a_test_that_cannot_reach_its_level_is_reported_before_it_runs(tmp_path,
     assert code == 0
     err = capsys.readouterr().err
     assert "warning: the held-out test cannot reach its level" in err
-    assert "smallest p = 1/2^2 = 0.25" in err and "at least 9 measurements" in err
+    assert "smallest p = 1/2^2 = 0.25" in err and "at least 10 measurements" in err
     s = json.loads((out / "summary.json").read_text())
     assert s["measurements"]["test"] == ["back-high"] and s["decision_power"]["can_reach"] is False
     assert s["effects_added"] == []

@@ -254,10 +254,11 @@ def test_synthesis_offers_only_what_the_model_lacks():
     with_ecc = base.with_effects(EncoderEccentricity(joints=(5,), harmonics=(1, 2)))
     assert [c.name for c in synthesise(["q6 harmonics"], with_ecc)] == ["harmonics j6 (h 3)", "harmonics j6 (h 3,4)"]
     cands = synthesise(["contact force", "approach direction", "j4 lateral load", "time", "measurement"], base)
-    assert [c.name for c in cands] == ["probe compliance matrix", "approach offset", "lateral compliance j4"]
+    assert [c.name for c in cands] == ["probe compliance axes tilted", "probe compliance matrix", "approach offset",
+                                       "lateral compliance j4"]
     assert all(isinstance(c, Candidate) and c.origin == RESIDUAL for c in cands)
     from arm_model.effects import ProbeCompliance
-    iso = synthesise(["contact force"], base.with_effects(ProbeCompliance()))[0]
+    iso = synthesise(["contact force"], base.with_effects(ProbeCompliance()))[-1]          # the matrix
     assert iso.param_names(nominal) == ["probe.dcompliance_yy", "probe.dcompliance_zz", "probe.dcompliance_xy",
                                         "probe.dcompliance_xz", "probe.dcompliance_yz"]
     assert synthesise(["approach direction"], base.with_effects(ApproachOffset())) == []

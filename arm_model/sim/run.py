@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..description import toml_text
+from ..effects import Geometry
 from ..errors import InputError, NumericalError
 from ..io import (
     Artefacts,
@@ -35,7 +36,7 @@ from .artefacts import Plan, make_plan
 from .campaign import Campaign
 from .ik import IKTargets, ball_jacobian, solve_ik
 from .operator import OperatorDraw, draw_operator, force_signal, measurement_slices
-from .truth import Truth, build_truth, si_key
+from .truth import POSE_EFFECTS, Truth, build_truth, si_key
 
 __all__ = ["SimResult", "simulate", "TRUTH_HEADER", "POINTS_FILE", "REFERENCE_FILE", "ARTEFACTS_FILE",
            "TRUTH_FILE", "TRUTH_POINTS_FILE", "SUMMARY_FILE", "SIGNALS_DIR"]
@@ -240,6 +241,13 @@ def _truth_check(truth, plan, q_enc, wrench, aux, labels):
     return centres, residual
 
 
+def _at_point(geom, desc, offset) -> Geometry:
+    """``geom`` with its probe point moved by ``offset`` (3,) [m], given in the tip (probe) frame."""
+    rm = np.eye(3) if desc.probe.rotation is None else np.asarray(desc.probe.rotation, float)
+    shift = rm @ np.asarray(offset, float)
+    return Geometry([list(r) for r in geom.rows], [geom.p_last[a] + shift[a] for a in range(3)], list(geom.compliance))
+
+
 def _true_markers(truth, plan, campaign, q_true, q_enc, aux) -> np.ndarray | None:
     """(N, K, 3) [m] the true markers of the posture rows in the base frame (NaN elsewhere): the true tip
     frame at the true joint values moved by each marker's offset; checked against the core model at the
@@ -255,6 +263,12 @@ def _true_markers(truth, plan, campaign, q_true, q_enc, aux) -> np.ndarray | Non
     rot = np.stack([x, np.cross(z, x), z], axis=2)
     out = np.full((len(plan), len(offsets), 3), np.nan)
     out[rows] = ball[:, None, :] + np.einsum("nij,kj->nki", rot, offsets)
+    if any(isinstance(e, POSE_EFFECTS) for e in truth.model.effects):
+        # a pose-dependent effect (a lateral compliance) turns the links past its joint: every marker moves with
+        # them, by the effect evaluated at the marker itself (the tip frame's origin moved plus the unturned offset
+        # misses the turn of the offset: 0.27 mm on a Panda whose shoulder tilts under gravity)
+        out[rows] = np.stack([truth.pose(q_true[rows], _at_point(geom, truth.nominal, o), np.zeros((n, 6)))[0]
+                              for o in offsets], axis=1)
     model, p = _check_model(truth)
     core = marker_positions(model, p, q_enc[rows], Tracker(("",), np.eye(4), offsets), [""] * n, aux.select(rows))
     worst = float(np.max(np.linalg.norm(core - out[rows], axis=2), initial=0.0))
