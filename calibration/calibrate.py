@@ -632,15 +632,25 @@ def _without_outliers(model: ArmModel, data: CalibrationData, options: FitOption
         return _without_gross(model, data, options, estimate)
     index = np.arange(len(data))
     dropped: list[Outlier] = []
+    limit = options.outlier_limit
     for k in range(DROP_ROUNDS + 1):
         res = estimate(model, data, options)
         cands = [c for c in _tested(res, options.outlier_threshold) if options.outlier_lengths or c.between is None]
         if not cands:
             res.dropped = dropped
             return res
+        drop = [] if k == DROP_ROUNDS else _droppable(res.data, _one_a_measurement(cands, options.outlier_threshold))
+        if limit is not None and (k == DROP_ROUNDS or drop):
+            drop = drop[:limit - len(dropped)]
+            if not drop:
+                o = cands[0].outlier
+                res.dropped = dropped
+                res.gross_kept = (f"{o.measurement} {o.feature} line {o.line}: standardized {o.standardized:+.1f}, "
+                                  f"kept: {len(dropped)} point(s) left out already (at most {limit}) or {DROP_ROUNDS} "
+                                  "rounds done; more is an error of the model, not of the data")
+                return res
         if k == DROP_ROUNDS:
             break
-        drop = _droppable(res.data, _one_a_measurement(cands, options.outlier_threshold))
         if not drop:
             o = cands[0].outlier
             res.dropped = dropped

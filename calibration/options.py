@@ -102,6 +102,10 @@ class FitOptions:
             every point.
         outlier_lengths: False: ``drop_outliers`` leaves certified lengths in (only points are dropped): the closed
             loop's, whose base model may lack the very effect a length measures (thermal growth, a scale error).
+        outlier_limit: with ``drop_outliers``, at most this many points are dropped; past it (or after the last
+            round) the misfit is the model's, not gross errors: the rest is kept and said (``gross_kept``) instead
+            of a numerical failure. None (default): drop until none is left. The closed loop sets it (5 % of its
+            campaign's points: an effect its base model lacks makes its largest errors look like outliers).
         covariance: "residual" (scaled by the residual variance factor) or "stated".
         reference: "fit" (``T_ref_base`` unknown), "identity" (reference coordinates are base
             coordinates) or "off" (reference columns ignored).
@@ -131,6 +135,7 @@ class FitOptions:
     drop_outliers: bool = False
     gross_threshold: float | None = GROSS_THRESHOLD
     outlier_lengths: bool = True
+    outlier_limit: int | None = None
     covariance: str = "residual"
     reference: str = "fit"
     max_iter: int = 200
@@ -176,6 +181,9 @@ class FitOptions:
             _in_range("prior_length", self.prior_length, *PRIOR_LENGTH_RANGE)
         _flag("drop_outliers", self.drop_outliers)
         _flag("outlier_lengths", self.outlier_lengths)
+        if self.outlier_limit is not None and (isinstance(self.outlier_limit, bool) or not isinstance(
+                self.outlier_limit, (int, np.integer)) or self.outlier_limit < 0):
+            raise ValueError(f"outlier_limit must be a non-negative integer or None, got {self.outlier_limit!r}")
         _flag("weights_from_data", self.weights_from_data)
         if isinstance(self.prior_scale, dict):
             for g, v in self.prior_scale.items():

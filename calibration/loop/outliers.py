@@ -12,12 +12,20 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..calibrate import CalibrationResult, Outlier, calibrate
+from ..calibrate import GROSS_SHARE, CalibrationResult, Outlier, calibrate
 from ..data import CalibrationData, concat
 from ..kinds import MIN_POINTS
 from ..options import FitOptions
 
-__all__ = ["drop_design_outliers", "drop_test_outliers", "dropped_entry"]
+__all__ = ["drop_design_outliers", "drop_test_outliers", "dropped_entry", "outlier_budget"]
+
+
+def outlier_budget(points: int) -> int:
+    """The most points the loop leaves out as gross errors in a campaign of ``points`` (design and test sets
+    together): :data:`~calibration.calibrate.GROSS_SHARE` of them, at least one, as ``calibrate``'s default. More
+    is not gross errors but what the base model lacks, the very thing the loop looks for (dropped, a hidden
+    encoder gain's largest errors went out of the test set and the loop stopped with "outliers remain")."""
+    return max(1, int(GROSS_SHARE * points))
 
 
 def dropped_entry(o: Outlier) -> dict:
@@ -34,18 +42,20 @@ def drop_design_outliers(design: CalibrationData, fit) -> tuple[CalibrationResul
     return res, res.data, [dropped_entry(o) for o in res.dropped]
 
 
-def drop_test_outliers(model, p, test: CalibrationData, weights, reference, threshold, design=None):
+def drop_test_outliers(model, p, test: CalibrationData, weights, reference, threshold, design=None, limit=None):
     """The test set without its gross points and lengths under the base model ``(model, p)``: calibrate's
     ``--drop-outliers`` at ``threshold`` with every parameter held at ``p`` (only the nuisance unknowns fitted:
     the test measurements' centres and frames, or, with ``design``, each feature's over its design and test
     poses, only the test poses then being dropped); a test instance left with too few points for its own fit goes
-    out whole (:func:`_too_small`). Returns the test set kept and what was dropped (:func:`dropped_entry`)."""
+    out whole (:func:`_too_small`); at most ``limit`` points tested out (None: no limit).
+    Returns the test set kept and what was dropped (:func:`dropped_entry`)."""
     data = test if design is None else concat(design, test)
     offset = 0 if design is None else len(design)
     values = {n: float(v) for n, v in zip(model.spec.names, p, strict=True)}
     res = calibrate(model, data, FitOptions(values=values, free=[], weights=weights, reference=reference,
                                             prior_scale=None, drop_outliers=True, outlier_threshold=threshold,
-                                            gross_threshold=None, discrepancy=False, outlier_lengths=False))
+                                            gross_threshold=None, discrepancy=False, outlier_lengths=False,
+                                            outlier_limit=limit))
     mine = [replace(o, point=o.point - offset) for o in res.dropped if o.point >= offset]
     out = [dropped_entry(o) for o in mine]
     bad = [o.point for o in mine]

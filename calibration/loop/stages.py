@@ -55,7 +55,7 @@ from .decide import (
     plot_family,
 )
 from .folds import choose_folds, outer_split
-from .outliers import drop_design_outliers, drop_test_outliers
+from .outliers import drop_design_outliers, drop_test_outliers, outlier_budget
 from .result import LoopResult, Stage
 from .settings import LEGACY_RESOLUTION, NOISE_OFF, LoopSettings
 from .state import LoopState, Screening, log
@@ -119,6 +119,8 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
         if state.dropped["design"]:
             say(f"  {len(state.dropped['design'])} outlier(s) of the design set dropped (base model, calibrate's "
                 f"point test at {settings.outlier_threshold:g}); they stay out of every later fit")
+        if result.gross_kept:
+            say(f"  outliers of the design set kept: {result.gross_kept}")
     else:
         result = state.fit(model, state.design)
     off = [v for v in result.variance if v["estimated"] and not 1 / NOISE_OFF < v["factor"] < NOISE_OFF]
@@ -132,7 +134,8 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
         try:
             state.test, state.dropped["test"] = drop_test_outliers(
                 model, result.p, state.test, state.weights, result.reference_mode, settings.outlier_threshold,
-                None if test_by == "measurement" else state.design)
+                None if test_by == "measurement" else state.design,
+                max(0, outlier_budget(len(state.data)) - len(state.dropped["design"])))
         except NumericalError:        # e.g. two tracker poses: a frame and the markers' offsets undetermined
             say("  the test set alone does not determine its own unknowns (centres, frames, offsets) for the point "
                 "test: its points are not tested for outliers")

@@ -19,6 +19,7 @@ from ..options import FitOptions
 from .crossval import CVResult, FoldFit
 from .folds import Folds
 from .heldout import heldout_figures
+from .outliers import outlier_budget
 from .settings import LoopSettings
 
 __all__ = ["LoopState", "Screening", "fitted_names"]
@@ -127,7 +128,8 @@ class LoopState:
         return calibrate(model, data, replace(
             self.options, free=names, weights=self.weights if weights is None else weights, priors=priors, start=start,
             weights_from_data=reweight and self.settings.weights_from_data, discrepancy=discrepancy,
-            drop_outliers=drop_outliers, outlier_lengths=False))
+            drop_outliers=drop_outliers, outlier_lengths=False,
+            outlier_limit=outlier_budget(len(self.data)) if drop_outliers else None))
 
     def test_figures(self, model: ArmModel, p, reference: str, weights: Weights | None = None) -> dict:
         """Figures of ``(model, p)`` on the outer test set (:func:`~calibration.loop.heldout.heldout_figures`):
