@@ -84,7 +84,8 @@ def register(sub) -> None:
                    help="comma-separated candidate families: eccentricity, joint_gain, joint_compliance, thermal, "
                         "force_sensor, probe_compliance, base_tilt (the mount tilting under the arm's moment: the "
                         "first joint's lateral compliance) (default every one but joint_gain, the encoder scale "
-                        "error of each joint, offered on request; see docs/close-loop.md)")
+                        "error of each joint, and base_tilt, offered on request: each made the other placements "
+                        "of real robot data worse; see docs/close-loop.md)")
     p.add_argument("--library-only", action="store_true",
                    help="do not build effects from the residual's structure once the library is exhausted "
                         "(default: build them: joint harmonics, per-link and probe thermal growth, a probe "
