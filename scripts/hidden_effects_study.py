@@ -214,6 +214,15 @@ def figures(case: Case, loop) -> dict:
             "loop": loop.final.heldout["rms_um"], "floor": floor["rms_um"]}
 
 
+def loop_row(loop) -> dict:
+    """What a study row records of a loop's result: the effects added (* built from the residual), built and not
+    added, vetoed, the structure left, the verdict and the test set."""
+    return {"added": [c.name + ("*" if c.origin == "residual" else "") for c in loop.added],
+            "built_not_added": [b["name"] for b in loop.built if not b.get("added")],
+            "vetoed": [v["name"] for v in loop.vetoed], "remaining": [f.name for f, *_ in loop.remaining],
+            "verdict": loop.verdict, "test": list(loop.test)}
+
+
 def judge(fig: dict, loop) -> dict:
     v = loop.verdict
     claims_clean = "No structured residual remains" in v
@@ -234,11 +243,7 @@ def run_case(name: str, seeds, out: Path | None, campaign_seed: int = 3) -> list
                           holdout=case.holdout, seed=seed, progress=lambda s: None, **cli_defaults(case.desc))
         fig = figures(case, loop)
         row = {"case": name, "what": case.what, "campaign_seed": campaign_seed, "seed": seed, **fig,
-               "added": [c.name + ("*" if c.origin == "residual" else "") for c in loop.added],
-               "built_not_added": [b["name"] for b in loop.built if not b.get("added")],
-               "vetoed": [v["name"] for v in loop.vetoed],
-               "remaining": [f.name for f, *_ in loop.remaining], "verdict": loop.verdict,
-               "test": list(loop.test), **judge(fig, loop), "seconds": round(time.time() - t1, 1)}
+               **loop_row(loop), **judge(fig, loop), "seconds": round(time.time() - t1, 1)}
         rows.append(row)
         print(f"  seed {seed}: nominal {fig['nominal']:.2f} -> calibrated {fig['calibrated']:.2f} -> loop "
               f"{fig['loop']:.2f} um (floor {fig['floor']:.2f}); added {row['added'] or '-'}; built not added "

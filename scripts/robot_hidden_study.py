@@ -44,7 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "scripts"))
 
-from hidden_effects_study import Case, cli_defaults, judge  # noqa: E402
+from hidden_effects_study import Case, cli_defaults, judge, loop_row  # noqa: E402
 
 from arm_model import PinocchioArm  # noqa: E402
 from arm_model.effects import JointGain  # noqa: E402
@@ -201,10 +201,7 @@ def run_one(robot: str, kind: str, name: str, seed: int, out: Path | None) -> di
     fig = figures(case, loop)
     status, neg = model_file_check(loop, case)
     row = {"robot": robot, "kind": kind, "case": name, "what": case.what, "campaign_seed": seed, **fig,
-           "added": [c.name + ("*" if c.origin == "residual" else "") for c in loop.added],
-           "built_not_added": [b["name"] for b in loop.built if not b.get("added")],
-           "vetoed": [v["name"] for v in loop.vetoed], "remaining": [f.name for f, *_ in loop.remaining],
-           "verdict": loop.verdict, "test": list(loop.test), **judge(fig, loop), "model_file": status,
+           **loop_row(loop), **judge(fig, loop), "model_file": status,
            "negative_compliances": neg, "seconds": round(time.time() - t0, 1)}
     print(f"[{robot} {kind} {name} c{seed}] nominal {fig['nominal']:.0f} / calibrated {fig['calibrated']:.0f} / loop "
           f"{fig['loop']:.0f} / truth {fig['floor']:.0f} um; added {row['added'] or '-'}; built not added "
