@@ -259,15 +259,21 @@ def model_check(result, arm: Arm | None = None) -> dict:
             "rms_difference_nm": float(np.sqrt(np.mean(d ** 2)) * 1e9) if len(d) else 0.0}
 
 
-def with_fitted_torques(data, result):
-    """``data`` with the gravity and contact torques evaluated on the calibrated description of ``result`` at the
-    static equilibrium its compliances give (:meth:`~arm_model.model.ArmModel.equilibrium_aux`, as the model file
-    evaluates them), when its model needs them; else ``data`` (None stays None). Held-out data are predicted with
-    these, so that the held-out figures are those ``tip`` gives with the model file."""
-    if data is None or not ({"tau_gravity", "tau_contact"} & result.model.needs()):
+def at_equilibrium(model, p, data):
+    """``data`` with the gravity and contact torques of ``(model, p)`` evaluated on its own description at the static
+    equilibrium its compliances give (:meth:`~arm_model.model.ArmModel.equilibrium_aux`, as the model file
+    evaluates them), when the model needs them; else ``data`` (None stays None)."""
+    if data is None or not ({"tau_gravity", "tau_contact"} & model.needs()):
         return data
     temperature = None if data.aux is None else data.aux.temperature
-    return replace(data, aux=result.model.equilibrium_aux(data.points.q, data.wrench, result.p, temperature))
+    return replace(data, aux=model.equilibrium_aux(data.points.q, data.wrench, np.asarray(p, float), temperature))
+
+
+def with_fitted_torques(data, result):
+    """``data`` with the torques of the calibrated model of ``result`` at its equilibrium (:func:`at_equilibrium`).
+    Held-out data are predicted with these, so that the held-out figures are those ``tip`` gives with the model
+    file."""
+    return at_equilibrium(result.model, result.p, data)
 
 
 def refine_torques(result, rounds: int = 5, tol_nm: float = 1.0):

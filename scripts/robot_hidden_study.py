@@ -53,7 +53,7 @@ from arm_model.sim import campaign_from_dict, simulate  # noqa: E402
 from calibration.data import Weights, make_data  # noqa: E402
 from calibration.loop import close_loop, heldout_figures  # noqa: E402
 from calibration.loop_report import loop_model_name  # noqa: E402
-from calibration.model_output import refine_torques, with_fitted_torques, write_model  # noqa: E402
+from calibration.model_output import at_equilibrium, refine_torques, with_fitted_torques, write_model  # noqa: E402
 
 #: name: (URDF, tip link); the Panda from examples/ (its masses), the others from example-robot-data 4.1.0
 ROBOTS = {"panda": (ROOT / "examples/data/real-panda-seats/panda-with-inertials.urdf", "panda_link8", "ball_link"),
@@ -148,14 +148,6 @@ def make_case(robot: str, kind: str, name: str, seed: int) -> Case:
     return dataclasses.replace(c, weights=Weights(probe=NOISE))
 
 
-def _at_equilibrium(model, p, data):
-    """``data`` with the torques of ``(model, p)`` at its static equilibrium (as the model file evaluates them)."""
-    if not ({"tau_gravity", "tau_contact"} & model.needs()):
-        return data
-    temperature = None if data.aux is None else data.aux.temperature
-    return dataclasses.replace(data, aux=model.equilibrium_aux(data.points.q, data.wrench, p, temperature))
-
-
 def figures(case: Case, loop) -> dict:
     """Held-out RMS [um] of the nominal, the base model calibrated on the design set, the loop's model and the
     truth on the outer test set, each with the torques at its own static equilibrium (as ``aacmm tip`` applies a
@@ -172,7 +164,7 @@ def figures(case: Case, loop) -> dict:
         out[key] = heldout_figures(st.model, st.result.p, with_fitted_torques(data, st.result), case.weights)["rms_um"]
     tpts = case.truth_points.select(mask[: len(case.points.measurement)])
     tdata = make_data(tpts, data.artefacts, case.truth_model, marker_offsets=data.marker_offsets)
-    out["floor"] = heldout_figures(case.truth_model, case.p_true, _at_equilibrium(case.truth_model, case.p_true, tdata),
+    out["floor"] = heldout_figures(case.truth_model, case.p_true, at_equilibrium(case.truth_model, case.p_true, tdata),
                                    case.weights)["rms_um"]
     out["loop_table_um"] = [loop.stages[0].heldout["rms_um"], loop.final.heldout["rms_um"]]
     return out

@@ -15,6 +15,7 @@ from ..calibrate import CalibrationResult, calibrate, default_free, resolve_para
 from ..candidates import Candidate
 from ..data import CalibrationData, Weights, concat
 from ..diagnostics import GroupTest, ResidualSpace
+from ..model_output import at_equilibrium
 from ..options import FitOptions
 from .crossval import CVResult, FoldFit
 from .folds import Folds
@@ -136,24 +137,14 @@ class LoopState:
         nuisance solved on the test measurements, or each test pose against its feature's design poses, weighted
         by ``weights`` (default the current ones); the bootstrap of their uncertainties seeded by
         ``settings.seed``. A model with joint torques takes them at its own static equilibrium, as ``aacmm tip``
-        applies its model file (:func:`at_equilibrium`)."""
+        applies its model file (:func:`calibration.model_output.at_equilibrium`; with the torques of the base
+        fit's equilibrium, a simulated UR5 with a hidden shoulder gain showed 299 -> 180 um where the model files
+        give 425 -> 303 um, scripts/robot_hidden_study.py)."""
         seed, weights = self.settings.seed, self.weights if weights is None else weights
         if self.test_by == "measurement":
             return heldout_figures(model, p, at_equilibrium(model, p, self.test), weights, reference, seed=seed)
         return heldout_figures(model, p, at_equilibrium(model, p, concat(self.design, self.test)), weights, reference,
                                np.arange(len(self.design) + len(self.test)) < len(self.design), seed)
-
-
-def at_equilibrium(model: ArmModel, p, data: CalibrationData) -> CalibrationData:
-    """``data`` with the joint torques of ``(model, p)`` at its static equilibrium on its own description
-    (:meth:`~arm_model.model.ArmModel.equilibrium_aux`, as the model file evaluates them) when the model needs
-    torques, else ``data``. The outer test set's figures (and the veto of an effect that makes them worse) are then
-    those ``tip`` gives: with the torques of the base fit's equilibrium, a simulated UR5 with a hidden shoulder gain
-    showed 299 -> 180 um where the model files give 425 -> 303 um (scripts/robot_hidden_study.py)."""
-    if not ({"tau_gravity", "tau_contact"} & model.needs()):
-        return data
-    temperature = None if data.aux is None else data.aux.temperature
-    return replace(data, aux=model.equilibrium_aux(data.points.q, data.wrench, np.asarray(p, float), temperature))
 
 
 @dataclass
