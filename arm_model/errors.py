@@ -153,13 +153,26 @@ def unknown_key(key: str, known, shown=None, what: str = "key") -> str:
     return f"unknown {what} '{key}'{did_you_mean(key, known)} (known: {', '.join(shown or known)})"
 
 
+#: the longest id or name [characters]: a name, not a payload (every row repeats it; ids of 10 000 characters
+#: are read in memory in proportion to the file, tests/test_reliability_round5.py)
+MAX_ID_LENGTH = 100_000
+
+
 def id_problem(text) -> str | None:
     """Why ``text`` cannot be a measurement or feature id, or None: an id is one non-empty line of text (a line
     break or another control character would split the row of every CSV file that carries it, which its reader
-    then refuses)."""
+    then refuses) of at most :data:`MAX_ID_LENGTH` characters."""
     if not isinstance(text, str) or not text.strip():
-        return f"must be a non-empty text, got {text!r}"
+        return f"must be a non-empty text, got {_short(text)}"
+    if len(text) > MAX_ID_LENGTH:
+        return f"must be at most {MAX_ID_LENGTH} characters long, got {len(text)} ({_short(text)})"
     bad = next((c for c in text if unicodedata.category(c) in ("Cc", "Zl", "Zp")), None)
     if bad is not None:
-        return f"must be one line of text without control characters, got {text!r} (holding {bad!r})"
+        return f"must be one line of text without control characters, got {_short(text)} (holding {bad!r})"
     return None
+
+
+def _short(value, width: int = 60) -> str:
+    """``repr(value)`` cut to about ``width`` characters (a message quotes a value, it does not reprint it)."""
+    r = repr(value)
+    return r if len(r) <= width else r[:width - 5] + "...'" + f" ({len(r)} characters)"

@@ -308,3 +308,14 @@ def test_repeatable_options_still_repeat():
     from arm_model.cli import build_parser
     argv = ["calibrate", "p.csv", "a.toml", "--arm", "aacmm7", "--free", "j1.*", "--free", "j2.*", "-o", "o"]
     assert build_parser(argv).parse_args(argv).free == ["j1.*", "j2.*"]
+
+
+def test_an_id_longer_than_the_limit_is_refused_and_not_reprinted(tmp_path, capsys):
+    """A 2 MB measurement id (a payload, not a name: it was read and would be repeated on every row and message)
+    is refused at its cell, exit 2, and the message quotes the start of it, not all of it."""
+    from arm_model.errors import MAX_ID_LENGTH
+    pts = _points(tmp_path, ("m,f,1,2,3,4,5,6,7", "m" * 2_000_000 + ",f,10,20,30,40,50,60,70"))
+    out = tmp_path / "t.csv"
+    rc, err = _run(["tip", pts, "--arm", "aacmm7", "-o", out], capsys)
+    assert rc == 2 and f"at most {MAX_ID_LENGTH} characters" in err and len(err) < 2000, err[:500]
+    assert "p.csv, line 3, column 'measurement'" in err and not out.exists()
