@@ -227,7 +227,8 @@ def _reference_figures(val: Validation, prob: Problem, states, table, data: Cali
 def heldout_residuals(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit",
                       train=None) -> dict:
     """Residual rows of held-out points with the parameters ``p`` held: ``r`` weighted (n,), ``e`` [m] (n,),
-    ``measurement``, ``kind`` and ``point`` (index into ``data``, -1 for a length) per row.
+    ``measurement``, ``kind`` and ``point`` (index into ``data``, -1 for a length) per row, and ``nuisance``:
+    the number of nuisance unknowns solved on these rows (0 with ``train``: they are solved on the training poses).
 
     ``train`` None: every point of ``data`` is held out and every nuisance unknown (centre, axis, plane,
     ``T_ref_base``) is solved on ``data`` alone. ``train`` a mask: the points where it holds are the
@@ -262,7 +263,7 @@ def heldout_residuals(model: ArmModel, p, data: CalibrationData, weights: Weight
         kind[row] = "length"
     point = np.where(ok, prob.row_point, -1)
     return {"r": r[keep], "e": (r * prob.sigma)[keep], "measurement": meas[keep], "kind": kind[keep],
-            "point": point[keep]}
+            "point": point[keep], "nuisance": int(prob.n_nuisance) if train is None else 0}
 
 
 def validate_poses(model: ArmModel, p, data: CalibrationData, train, weights: Weights | None = None,

@@ -77,6 +77,9 @@ class LoopState:
         last_tests, last_cv: the last screening and held-out tests; stop: why the loop stopped.
         vetoed: candidates that passed the held-out folds but would have made the outer test set worse (not
             added; the loop stops there).
+        families: the candidate families of the first pass (None: the library's defaults); escalated: the opt-in
+            families offered when the outer test set was worse than stated (``families``, ``candidates``, the
+            judgement ``check`` that led to it), None if not.
     """
     settings: LoopSettings
     desc: ArmDescription
@@ -110,6 +113,8 @@ class LoopState:
     last_cv: list = field(default_factory=list)
     stop: str = ""
     vetoed: list = field(default_factory=list)
+    families: tuple | None = None
+    escalated: dict | None = None
 
     def fit(self, model: ArmModel, data: CalibrationData, extra_priors: dict | None = None, reweight: bool = False,
             hold: tuple = (), weights: Weights | None = None, discrepancy: bool = True,
@@ -142,9 +147,10 @@ class LoopState:
         give 425 -> 303 um, scripts/robot_hidden_study.py)."""
         seed, weights = self.settings.seed, self.weights if weights is None else weights
         if self.test_by == "measurement":
-            return heldout_figures(model, p, at_equilibrium(model, p, self.test), weights, reference, seed=seed)
+            return heldout_figures(model, p, at_equilibrium(model, p, self.test), weights, reference, seed=seed,
+                                   stated=self.stated)
         return heldout_figures(model, p, at_equilibrium(model, p, concat(self.design, self.test)), weights, reference,
-                               np.arange(len(self.design) + len(self.test)) < len(self.design), seed)
+                               np.arange(len(self.design) + len(self.test)) < len(self.design), seed, self.stated)
 
 
 @dataclass

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import math
 
+from scipy import stats
+
 from arm_model.model import ArmModel
 
 from ..synthesis import RESIDUAL, synthesise
 from .settings import PHYSICS
 
-__all__ = ["verdict_text", "residual_over_stated", "S0_LIMIT", "ADDED"]
+__all__ = ["verdict_text", "residual_over_stated", "heldout_check", "S0_LIMIT", "ADDED"]
 
 
 #: residual standard deviation factor above which the residual is not noise at the stated level
@@ -41,12 +43,74 @@ def residual_over_stated(result, stated=None) -> tuple[float, str]:
     return pooled, words
 
 
+def heldout_check(stage, test_by: str, alpha: float) -> dict | None:
+    """Whether the outer test set is worse than a complete model predicts for it: the judgement of data the fit
+    never saw, beside the structure tests of the design fit's residual.
+
+    A complete model predicts a held-out row with the design fit's residual scatter (``s0`` times its weights)
+    and, in addition, its own propagated uncertainty; a model that lacks something predicts the rows it was not
+    fitted to worse than it fits its own. With the design fit's ``n`` rows, redundancy ``red`` (the rows less
+    their share of the unknowns, the prior's shrinkage included) and ``k`` nuisance unknowns, a held-out row's
+    prediction variance is on average ``1 + lev`` times the noise's, ``lev`` the design rows' mean leverage: the
+    parameters' share ``(n - red - k) / n`` for a test set of whole measurements, whose own ``k_t`` nuisance
+    unknowns (centres, frames) are solved on its ``n_t`` rows (``n_t - k_t`` degrees of freedom left), or
+    ``(n - red) / n`` for held-out poses predicted against their features as fitted on the design poses. The
+    statistic ``F = chi2_t / (dof_t (1 + lev) s0^2)`` (``chi2_t`` the held-out rows' sum of squared weighted
+    residuals) then follows about ``F(dof_t, red)``; the test set is *worse than stated* when its upper tail
+    ``p < alpha``. The weights are the fit's: the stated uncertainties, or the noise the loop estimated from the
+    data when they were off (then ``rms_over_stated`` says how the held-out rows compare with the stated ones).
+    Without the figures it needs (no redundancy, no degree of freedom left on the test set): None."""
+    h, res = stage.heldout, stage.result
+    chi2, rows, nuis = h.get("chi2"), h.get("rows"), h.get("nuisance")
+    red = getattr(res, "redundancy", None)
+    red = float(res.dof if red is None else red)
+    n = getattr(res, "n_residuals", None)
+    if chi2 is None or rows is None or nuis is None or n is None or red <= 0 or not res.s0 > 0:
+        return None
+    dof_t = rows - nuis if test_by == "measurement" else rows
+    if dof_t <= 0:
+        return None
+    used = n - red - (res.n_nuisance if test_by == "measurement" else 0)
+    lev = max(0.0, used) / n
+    f = chi2 / (dof_t * (1.0 + lev) * res.s0 ** 2)
+    p = float(stats.f.sf(f, dof_t, red))
+    return {"rows": int(rows), "dof": int(dof_t), "leverage": lev, "design_redundancy": red, "design_s0": float(res.s0),
+            "rms_weighted": h.get("rms_weighted"), "ratio": math.sqrt(f), "p_value": p, "alpha": alpha,
+            "rms_um": h.get("rms_um"), "rms_over_stated": h.get("rms_over_stated"), "worse_than_stated": p < alpha}
+
+
+def heldout_sentence(check: dict | None) -> str:
+    """The verdict's sentence on an outer test set worse than stated (:func:`heldout_check`), else ""."""
+    if not check or not check["worse_than_stated"]:
+        return ""
+    stated = ("" if check["rms_over_stated"] is None else
+              f"; {check['rms_over_stated']:.3g} times the stated uncertainties")
+    return (f"The outer test set is worse than a complete model predicts: its residual (RMS {check['rms_um']:.4g} "
+            f"um) is {check['ratio']:.3g} times what the design fit's scatter and the model's own uncertainty give "
+            f"for it (F-test p = {check['p_value']:.2g} < {check['alpha']:g}{stated}): the model lacks something that "
+            "shows on data it was not fitted to. The model is not complete; no fix is claimed for it.")
+
+
+def escalation_sentence(escalated: dict | None, added: list) -> str:
+    """What the escalation offered (the opt-in families, when the outer test set was worse than stated after the
+    default ones) and what of it was added; "" without escalation."""
+    if not escalated:
+        return ""
+    mine = [n for n in added if n in escalated["candidates"]]
+    return (f". The outer test set was worse than stated after the default families, so the opt-in famil"
+            f"{'y' if len(escalated['families']) == 1 else 'ies'} {', '.join(escalated['families'])} "
+            f"({len(escalated['candidates'])} candidates) were offered, kept by the same held-out rules: "
+            + ("added " + ", ".join(mine) if mine else "none was added"))
+
+
 def verdict_text(stages, significant, stop, settings, built=(), model: ArmModel | None = None, vetoed=(),
-                 stated=None) -> str:
+                 stated=None, heldout: dict | None = None, escalated: dict | None = None) -> str:
     """What was added (and how much the held-out error dropped), what passed the held-out folds but was not
     added because the outer test set got worse, what was built from the residual and not added (and why), and
     what structure remains unexplained. ``stated``: the user's stated uncertainties, against which the final
-    residual is judged (:func:`residual_over_stated`); None: the final fit's own weights."""
+    residual is judged (:func:`residual_over_stated`); None: the final fit's own weights. ``heldout``: the judgement
+    of the outer test set (:func:`heldout_check`): when it is worse than stated the verdict says so, and never
+    "No structured residual remains". ``escalated``: the opt-in families offered (``families``, ``candidates``)."""
     def label(s):
         if any(cv.candidate == s.added.name and cv.reason.startswith(PHYSICS) for cv in s.cv):
             return " (included as physics, not for a held-out gain)"
@@ -59,6 +123,8 @@ def verdict_text(stages, significant, stop, settings, built=(), model: ArmModel 
     if added:
         out += (f"; held-out test RMS {base['rms_um']:.2f} -> {last['rms_um']:.2f} um, "
                 f"max {base['max_um']:.2f} -> {last['max_um']:.2f} um")
+    out += escalation_sentence(escalated, [s.added.name for s in stages[1:]])
+    tail = heldout_sentence(heldout)
     for v in vetoed:
         out += (f". Not added, the outer test set got worse with it: {v['name']} (RMS "
                 f"{v['heldout_rms_before_um']:.2f} -> {v['heldout_rms_after_um']:.2f} um)")
@@ -70,7 +136,10 @@ def verdict_text(stages, significant, stop, settings, built=(), model: ArmModel 
         return out + (f". The final residual is {s0:.3g} times the stated uncertainties"
                       + (f" ({words})" if words else "") + ": it is not noise at the stated level, but no tested "
                       "regressor family explains it (wrong stated uncertainties, or structure beyond the tests). No "
-                      "fix is claimed.")
+                      "fix is claimed." + (" " + tail if tail else ""))
+    if not significant and tail:
+        return out + (". No regressor family is significant on the design fit's residual (after Bonferroni's "
+                      "correction), but: " + tail[0].lower() + tail[1:])
     if not significant:
         return out + (". No structured residual remains (no regressor family is significant after Bonferroni's "
                       "correction).")
@@ -82,4 +151,4 @@ def verdict_text(stages, significant, stop, settings, built=(), model: ArmModel 
            f" (no further effect is built for {', '.join(nothing)})" if nothing else "")
     built_by = " nor by the effects built from it" if not_added else ""
     return (out + f". Structured residual remains, not explained by the effect library{built_by}{why}: it "
-            f"correlates with {fams}. No fix is claimed for it.")
+            f"correlates with {fams}. No fix is claimed for it." + (" " + tail if tail else ""))
