@@ -148,7 +148,7 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
     else:
         say(state.power["note"])
     state.result = result
-    state.stages = [Stage(0, model, result, heldout=state.test_figures(model, result.p, result.reference_mode))]
+    state.stages = [Stage(0, model, result, heldout=state.test_figures(model, result))]
     say(f"  base model: s0 {result.s0:.3g}, held-out test RMS {state.stages[0].heldout['rms_um']:.2f} um")
     return state
 
@@ -362,7 +362,7 @@ def fit_stage(state: LoopState, decision: Decision, scr: Screening) -> Stage:
         sp2 = residual_space(result)
         fam2 = next((f for f in families(sp2) if f.name == fam_name), None) or candidate_family(sp2, cand)
         after = binned_estimates(sp2, fam2) if fam2 is not None else None
-    heldout = state.test_figures(model, result.p, result.reference_mode, result.weights)
+    heldout = state.test_figures(model, result, result.weights)
     return Stage(len(state.stages), model, result, cand, state.last_tests, state.cv_here + scr.cvs, decision.nested,
                  decision.alternatives, heldout, fam_name, before, after)
 

@@ -137,18 +137,20 @@ class LoopState:
             drop_outliers=drop_outliers, outlier_lengths=False,
             outlier_limit=outlier_budget(len(self.data)) if drop_outliers else None))
 
-    def test_figures(self, model: ArmModel, p, reference: str, weights: Weights | None = None) -> dict:
-        """Figures of ``(model, p)`` on the outer test set (:func:`~calibration.loop.heldout.heldout_figures`):
+    def test_figures(self, model: ArmModel, result: CalibrationResult, weights: Weights | None = None) -> dict:
+        """Figures of ``(model, result.p)`` on the outer test set (:func:`~calibration.loop.heldout.heldout_figures`):
         nuisance solved on the test measurements, or each test pose against its feature's design poses, weighted
         by ``weights`` (default the current ones); the bootstrap of their uncertainties seeded by
         ``settings.seed``. A model with joint torques takes them at its own static equilibrium, as ``aacmm tip``
         applies its model file (:func:`calibration.model_output.at_equilibrium`; with the torques of the base
         fit's equilibrium, a simulated UR5 with a hidden shoulder gain showed 299 -> 180 um where the model files
-        give 425 -> 303 um, scripts/robot_hidden_study.py)."""
+        give 425 -> 303 um, scripts/robot_hidden_study.py). The variance the fit's parameter covariance adds to the
+        held-out rows (``propagated``) is computed for a test set of whole measurements."""
         seed, weights = self.settings.seed, self.weights if weights is None else weights
+        p, reference, cov = result.p, result.reference_mode, (result.free, result.cov)
         if self.test_by == "measurement":
             return heldout_figures(model, p, at_equilibrium(model, p, self.test), weights, reference, seed=seed,
-                                   stated=self.stated)
+                                   stated=self.stated, cov=cov)
         return heldout_figures(model, p, at_equilibrium(model, p, concat(self.design, self.test)), weights, reference,
                                np.arange(len(self.design) + len(self.test)) < len(self.design), seed, self.stated)
 
