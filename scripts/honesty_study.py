@@ -87,6 +87,7 @@ def one_seed(seed: int, shape: str) -> dict:
                       for b in loop.built],
             "structure_claimed": [f.name for f, _, _ in loop.remaining],
             "heldout_worse": bool(loop.heldout_check and loop.heldout_check["worse_than_stated"]),
+            "heldout_check": loop.heldout_check,
             "escalated": None if loop.escalated is None else loop.escalated["families"],
             "verdict_clean": "No structured residual remains" in loop.verdict,
             "seconds": round(time.perf_counter() - t0, 1)}

@@ -95,16 +95,20 @@ def heldout_check(stage, test_by: str, alpha: float) -> dict | None:
             "p_stated": p_s, "worse_than_stated": p < alpha and (p_s is None or p_s < alpha)}
 
 
+def _p(p: float) -> str:
+    """A p-value as the verdict writes it (one below the smallest double written as such)."""
+    return f"= {p:.2g}" if p > 0 else "< 1e-300"
+
+
 def heldout_sentence(check: dict | None) -> str:
     """The verdict's sentence on an outer test set worse than stated (:func:`heldout_check`), else ""."""
     if not check or not check["worse_than_stated"]:
         return ""
     stated = ("" if check["p_stated"] is None else
-              f"; {check['rms_over_stated']:.3g} times the stated uncertainties, chi-square p = "
-              f"{check['p_stated']:.2g}")
+              f"; {check['rms_over_stated']:.3g} times the stated uncertainties, chi-square p {_p(check['p_stated'])}")
     return (f"The outer test set is worse than a complete model predicts: its residual (RMS {check['rms_um']:.4g} "
             f"um) is {check['ratio']:.3g} times what the design fit's scatter and the model's own uncertainty give "
-            f"for it (F-test p = {check['p_value']:.2g} < {check['alpha']:g}{stated}): the model lacks something that "
+            f"for it (F-test p {_p(check['p_value'])} < {check['alpha']:g}{stated}): the model lacks something that "
             "shows on data it was not fitted to. The model is not complete; no fix is claimed for it.")
 
 
