@@ -117,9 +117,9 @@ def test_an_exact_model_has_no_discrepancy_and_a_missing_effect_has_one(model, n
 
 def test_the_model_file_carries_the_discrepancy_into_tip(tmp_path, model):
     """calibrate writes the growing discrepancy (summary.json; the model file's model_discrepancy_um = sigma0 and
-    model_discrepancy_growth_um_per_mm to 4 digits, and the training poses' points file); the model file reads
-    them back; tip adds sigma_d(q)^2 to every point's variance per axis as the 'model discrepancy' contribution,
-    and --u-model-discrepancy-um 0 takes it out."""
+    model_discrepancy_growth_um_per_mm, one a joint, to 4 digits, and the training poses' points file); the model
+    file reads them back; tip adds sigma_d(q)^2 to every point's variance per axis as the 'model discrepancy'
+    contribution, and --u-model-discrepancy-um 0 takes it out."""
     import csv
     import json
 
@@ -132,11 +132,16 @@ def test_the_model_file_carries_the_discrepancy_into_tip(tmp_path, model):
                  str(panda / "panda-with-inertials.urdf"), "--tip-frame", "ball_link", "--no-plots", "-q",
                  "-o", str(out)]) == 0
     summary = json.loads((out / "summary.json").read_text())
-    growth = summary["model_discrepancy"]["growth"]
-    assert summary["model_discrepancy"]["sigma_um"] > 0 and growth["growth_um_per_mm"] > 0
+    growth = summary["model_discrepancy"]["growth_per_joint"]
+    assert summary["model_discrepancy"]["sigma_um"] > 0
+    assert summary["model_discrepancy"]["growth"]["growth_um_per_mm"] > 0
     arm = load_model(out / "panda-calibrated.toml")
-    assert arm.model_discrepancy == pytest.approx(growth["sigma0_um"] * 1e-6, rel=1e-3, abs=1e-10)
-    assert arm.discrepancy_growth == pytest.approx(growth["growth_um_per_mm"] * 1e-3, rel=1e-3)
+    assert arm.model_discrepancy == pytest.approx(growth["written_sigma0_um"] * 1e-6, rel=1e-3, abs=1e-10)
+    assert len(arm.discrepancy_growth) == 7 and max(arm.discrepancy_growth) > 0
+    np.testing.assert_allclose(arm.discrepancy_growth, np.array(growth["written_growth_um_per_mm"]) * 1e-3, rtol=1e-3)
+    # each joint's written growth is its estimate with its uncertainty carried, sqrt(g^2 + u^2)
+    np.testing.assert_allclose(growth["written_growth_um_per_mm"],
+                               np.hypot(growth["growth_um_per_mm"], growth["u_growth_um_per_mm"]), rtol=1e-12)
     from arm_model.io import read_points
     training = read_points(arm.training_poses).q
     np.testing.assert_allclose(training, read_points(panda / "right" / "points.csv").q, rtol=0, atol=1e-12)
@@ -248,8 +253,11 @@ def _band_campaign(model, nominal, seed, gain):
 
 
 def _growing(res):
+    """The discrepancy the model file of ``res`` carries (calibration.model_output.discrepancy_fields)."""
     from arm_model.discrepancy import GrowingDiscrepancy
-    return GrowingDiscrepancy(res.discrepancy.growth.sigma0, res.discrepancy.growth.growth, res.discrepancy.training)
+    from calibration.model_output import discrepancy_fields
+    f = discrepancy_fields(res)
+    return GrowingDiscrepancy(f["model_discrepancy"], f["discrepancy_growth"] or 0.0, res.discrepancy.training)
 
 
 def _seat_coverage(model, nominal, res, test, band):
@@ -387,23 +395,29 @@ def test_fit_growth_of_noise_free_rows_is_zero():
 
 
 def test_a_growth_floored_at_zero_is_written_as_a_constant():
-    """A growth fitted at its floor (g = 0, likelihood ratio 0: the held-out errors do not grow with distance)
-    resolves nothing: the model file gets the constant discrepancy of the same folds and no training poses,
-    never "growth 0 +- 0" as if measured; a growth above 0 is written with its sigma0."""
+    """A growth fitted at its floor with no uncertainty (g = 0 +- 0 on every joint: the held-out errors do not grow
+    with distance) resolves nothing: the model file gets the constant discrepancy of the same folds and no training
+    poses, never "growth 0" as if measured; a growth above 0, or one whose uncertainty is, is written per joint with
+    its uncertainty carried, sqrt(g^2 + u^2) (by hand), and so is sigma0; without the joints' fit, the growth of every
+    joint together the same way."""
     from types import SimpleNamespace
 
-    from calibration.discrepancy import Discrepancy, Growth
+    from calibration.discrepancy import Discrepancy, Growth, JointGrowth
     from calibration.model_output import discrepancy_fields
     flat = Growth(sigma0=31e-6, growth=0.0, u_sigma0=5e-6, u_growth=0.0, lr=0.0, d_max=0.4, d_rms=0.2)
-    d = Discrepancy(sigma=30e-6, ratio=1.2, folds=14, rows=90, growth=flat)
+    flat_j = JointGrowth(31e-6, (0.0, 0.0), 5e-6, (0.0, 0.0), (True, True), 0.0)
+    d = Discrepancy(sigma=30e-6, ratio=1.2, folds=14, rows=90, growth=flat, joints=flat_j)
     assert d.written_growth is None
     assert discrepancy_fields(SimpleNamespace(discrepancy=d)) == {"model_discrepancy": 30e-6,
                                                                   "discrepancy_growth": None}
-    grows = Growth(sigma0=12e-6, growth=7e-4, u_sigma0=4e-6, u_growth=2e-4, lr=9.0, d_max=0.4, d_rms=0.2)
-    d = Discrepancy(sigma=30e-6, ratio=1.2, folds=14, rows=90, growth=grows)
-    assert d.written_growth is grows
-    assert discrepancy_fields(SimpleNamespace(discrepancy=d)) == {"model_discrepancy": 12e-6,
-                                                                  "discrepancy_growth": 7e-4}
+    joints = JointGrowth(12e-6, (0.0, 3e-4), 5e-6, (4e-4, 0.0), (True, True), 2.0)
+    d = Discrepancy(sigma=30e-6, ratio=1.2, folds=14, rows=90, growth=flat, joints=joints)
+    got = discrepancy_fields(SimpleNamespace(discrepancy=d))
+    assert got["model_discrepancy"] == pytest.approx(13e-6, rel=1e-12)
+    np.testing.assert_allclose(got["discrepancy_growth"], (4e-4, 3e-4), rtol=1e-12)
+    grows = Growth(sigma0=12e-6, growth=3e-4, u_sigma0=5e-6, u_growth=4e-4, lr=9.0, d_max=0.4, d_rms=0.2)
+    got = discrepancy_fields(SimpleNamespace(discrepancy=Discrepancy(30e-6, 1.2, 14, 90, growth=grows)))
+    assert got == pytest.approx({"model_discrepancy": 13e-6, "discrepancy_growth": 5e-4}, rel=1e-12)
 
 
 @pytest.mark.parametrize("block", [7, 32_768])
