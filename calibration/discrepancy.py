@@ -121,11 +121,9 @@ class JointGrowth:
                 tuple(math.hypot(g, u) for g, u in zip(self.growth, self.u_growth, strict=True)))
 
     def to_dict(self) -> dict:
-        s0, g = self.predictive()
         return {"sigma0_um": self.sigma0 * 1e6, "growth_um_per_mm": [x * 1e3 for x in self.growth],
                 "u_sigma0_um": self.u_sigma0 * 1e6, "u_growth_um_per_mm": [x * 1e3 for x in self.u_growth],
-                "resolved": list(self.resolved), "likelihood_ratio_over_one_growth": self.lr,
-                "written_sigma0_um": s0 * 1e6, "written_growth_um_per_mm": [x * 1e3 for x in g]}
+                "resolved": list(self.resolved), "likelihood_ratio_over_one_growth": self.lr}
 
 
 @dataclass(frozen=True)
@@ -160,22 +158,29 @@ class Discrepancy:
 
     @property
     def written(self) -> tuple[float, float | tuple[float, ...] | None]:
-        """``(sigma0 [m], growth [1])`` the model file carries and ``tip`` adds, the estimates with their
-        uncertainty carried (``sqrt(x^2 + u(x)^2)``): the growth of each joint (:attr:`joints`,
-        :meth:`JointGrowth.predictive`), or of every joint together (:attr:`growth`) when the joints' could not be
-        fitted; ``(sigma, None)``, a constant, when neither grows (the held-out errors do not grow, to their
-        uncertainty: nothing was resolved, so the discrepancy is written as a constant, never as a measured zero
-        growth)."""
+        """``(sigma0 [m], growth [1])`` the model file carries and ``tip`` adds, every estimate with its uncertainty
+        carried (``sqrt(x^2 + u(x)^2)``): the growth of each joint (:attr:`joints`, :meth:`JointGrowth.predictive`),
+        each at least the growth of every joint together (:attr:`growth`, the same way; and ``sigma0`` at least
+        its), so that the per-joint fit says where the discrepancy grows but never makes it smaller than the pooled
+        fit does; the pooled growth alone when the joints' could not be fitted; ``(sigma, None)``, a constant, when
+        nothing grows (the held-out errors do not grow, to their uncertainty: nothing was resolved, so the
+        discrepancy is written as a constant, never as a measured zero growth)."""
+        pooled = self.growth
+        if pooled is None:
+            return self.sigma, None
+        s0 = math.hypot(pooled.sigma0, float(np.nan_to_num(pooled.u_sigma0)))
+        g: float | tuple[float, ...] = math.hypot(pooled.growth, float(np.nan_to_num(pooled.u_growth)))
         if self.joints is not None:
-            s0, g = self.joints.predictive()
-            if max(g, default=0.0) > 0:
-                return s0, g
-        elif self.growth is not None:
-            pooled = self.growth
-            growth = math.hypot(pooled.growth, float(np.nan_to_num(pooled.u_growth)))
-            if growth > 0:
-                return math.hypot(pooled.sigma0, float(np.nan_to_num(pooled.u_sigma0))), growth
+            s0_j, g_j = self.joints.predictive()
+            s0, g = max(s0, s0_j), tuple(max(x, g) for x in g_j)
+        if max(np.atleast_1d(g)) > 0:
+            return s0, g
         return self.sigma, None
+
+    def _written_dict(self) -> dict:
+        s0, g = self.written
+        return {"sigma0_um": s0 * 1e6,
+                "growth_um_per_mm": None if g is None else (np.atleast_1d(g) * 1e3).tolist()}
 
     @property
     def written_growth(self) -> float | tuple[float, ...] | None:
@@ -188,6 +193,7 @@ class Discrepancy:
                 "share": self.share, "rms_um": self.rms * 1e6,
                 "growth": None if self.growth is None else self.growth.to_dict(),
                 "growth_per_joint": None if self.joints is None else self.joints.to_dict(),
+                "written": self._written_dict(),
                 "method": "extrapolative cross-validation: the poses at each end of every joint's range held out "
                           "in turn (group deletion at the solution), the excess of their squared prediction "
                           "errors over the fit's own prediction (noise and posterior), per axis"}
