@@ -169,10 +169,11 @@ class Discrepancy:
         if pooled is None:
             return self.sigma, None
         s0 = math.hypot(pooled.sigma0, float(np.nan_to_num(pooled.u_sigma0)))
-        g: float | tuple[float, ...] = math.hypot(pooled.growth, float(np.nan_to_num(pooled.u_growth)))
+        one = math.hypot(pooled.growth, float(np.nan_to_num(pooled.u_growth)))
+        g: float | tuple[float, ...] = one
         if self.joints is not None:
             s0_j, g_j = self.joints.predictive()
-            s0, g = max(s0, s0_j), tuple(max(x, g) for x in g_j)
+            s0, g = max(s0, s0_j), tuple(max(x, one) for x in g_j)
         if max(np.atleast_1d(g)) > 0:
             return s0, g
         return self.sigma, None
