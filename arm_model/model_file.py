@@ -16,7 +16,7 @@ One TOML file (``aacmm calibrate`` and ``aacmm close-loop`` write it, every ``--
   ``model_discrepancy_um`` (the error per axis beyond the fit's own prediction on poses away from those it was
   fitted on, by extrapolative cross-validation: :mod:`calibration.discrepancy`; ``aacmm tip`` adds it),
   ``model_discrepancy_growth_um_per_mm`` (how that error grows per mm the joint motions from the nearest
-  training pose carry the ball: :mod:`arm_model.discrepancy`) and ``training_poses`` (the points file of the
+  training pose carry the ball, one number or a list of one a joint: :mod:`arm_model.discrepancy`) and ``training_poses`` (the points file of the
   poses the calibration was fitted on, relative to the TOML; read by :func:`training_poses_of`), all optional;
 * optional ``[[reference_frame]]`` and ``[[marker]]`` tables: the reference instrument's frame of each
   session and the markers' offsets on the tip frame that a calibration on tracker data estimated
