@@ -26,10 +26,14 @@ poses left in its fold (:func:`arm_model.discrepancy.pose_distance`: how far the
 nearest of them carry the ball): :func:`fit_growth` fits ``e_i ~ N(0, v_i + sigma_0^2 + g^2 d_i^2)`` by maximum
 likelihood (``sigma_0, g >= 0``; started from the method of moments, the least squares of ``e_i^2 - v_i`` on
 ``(1, d_i^2)``), with delete-one-fold jackknife uncertainties and the likelihood ratio over the constant.
-That growing ``sigma_d(q)`` is what :func:`arm_model.uncertainty.propagate` adds, per axis, to every corrected
-point of the calibrated model (the model file's ``[calibration] model_discrepancy_um`` = ``sigma_0``,
-``model_discrepancy_growth_um_per_mm`` = ``g`` and its training poses; ``aacmm tip``'s ``model discrepancy``
-contribution). Both are 0 (to their sampling scatter) when the model holds the physics of the data; they
+The same rows are also fitted joint by joint (:func:`fit_joint_growth`: ``e_i ~ N(0, v_i + sigma_0^2 + sum_j
+g_j^2 c_ij)``, ``c_ij`` joint j's share of ``d_i^2``, :func:`arm_model.discrepancy.travel_shares`), so that an
+error growing with one joint's motion grows where that joint moves. What :func:`arm_model.uncertainty.propagate`
+adds, per axis, to every corrected point of the calibrated model is :attr:`Discrepancy.written`: the per-joint
+growths and ``sigma_0`` with their jackknife uncertainty carried (``sqrt(x^2 + u^2)``), each at least the single
+growth's carried the same way (the model file's ``[calibration] model_discrepancy_um`` = ``sigma_0``,
+``model_discrepancy_growth_um_per_mm`` = ``g_j``, one a joint, and its training poses; ``aacmm tip``'s ``model
+discrepancy`` contribution). Both are 0 (to their sampling scatter) when the model holds the physics of the data; they
 grow with what the model lacks as far as the data reach beyond their own poses: an error that shows only far
 beyond what the folds span is an extrapolation of ``g``.
 """
@@ -214,8 +218,7 @@ def _ml(e2, v, cols) -> tuple[np.ndarray, float]:
     :func:`_neg_log_likelihood`. The unknowns are scaled to order 1 and started from the non-negative least squares
     of ``e2 - v`` on ``cols`` (the method of moments); a column that is 0 on every row keeps its unknown at 0."""
     from scipy.optimize import minimize, nnls
-    # a floor far below any error (1e-12 of the mean square), so that a noise-free fit keeps a finite likelihood
-    v = np.maximum(v, max(1e-12 * float(np.mean(e2 + v)), 1e-100))
+    v = _floored(e2, v)
     means = cols.mean(axis=0)
     live = means > 0
     scale = np.where(live, float(np.mean(v)) / np.where(live, means, 1.0), 0.0)
@@ -230,6 +233,12 @@ def _ml(e2, v, cols) -> tuple[np.ndarray, float]:
     if not res.success:
         raise NumericalError(f"the model discrepancy's likelihood was not maximised: {res.message}")
     return res.x * scale, float(res.fun)
+
+
+def _floored(e2, v) -> np.ndarray:
+    """The predicted variances ``v`` floored far below any error (1e-12 of the mean square), so that a noise-free
+    fit keeps a finite likelihood."""
+    return np.maximum(v, max(1e-12 * float(np.mean(e2 + v)), 1e-100))
 
 
 def _jackknife(fits: list) -> np.ndarray:
@@ -282,8 +291,8 @@ def fit_joint_growth(e, v, c, fold, pooled: Growth) -> JointGrowth:
     u = np.nan_to_num(_jackknife(jack) if jack else np.full(len(x), np.nan))
     g, ug = np.full(c.shape[1], pooled.growth), np.full(c.shape[1], np.nan_to_num(pooled.u_growth))
     g[resolved], ug[resolved] = np.sqrt(x[1:]), u[1:]
-    tot = v + pooled.sigma0 ** 2 + pooled.growth ** 2 * c.sum(axis=1)
-    nll_pooled = 0.5 * float(np.sum(np.log(tot) + e2 / tot))
+    both = np.column_stack([np.ones(len(e2)), c.sum(axis=1)])
+    nll_pooled = _neg_log_likelihood(np.array([pooled.sigma0 ** 2, pooled.growth ** 2]), e2, _floored(e2, v), both)[0]
     return JointGrowth(math.sqrt(x[0]), tuple(g.tolist()), float(u[0]), tuple(ug.tolist()),
                        tuple(bool(r) for r in resolved), max(2 * (nll_pooled - nll), 0.0))
 
