@@ -16,8 +16,9 @@ One TOML file (``aacmm calibrate`` and ``aacmm close-loop`` write it, every ``--
   ``model_discrepancy_um`` (the error per axis beyond the fit's own prediction on poses away from those it was
   fitted on, by extrapolative cross-validation: :mod:`calibration.discrepancy`; ``aacmm tip`` adds it),
   ``model_discrepancy_growth_um_per_mm`` (how that error grows per mm the joint motions from the nearest
-  training pose carry the ball, one number or a list of one a joint: :mod:`arm_model.discrepancy`) and ``training_poses`` (the points file of the
-  poses the calibration was fitted on, relative to the TOML; read by :func:`training_poses_of`), all optional;
+  training pose carry the ball, one number or a list of one a joint: :mod:`arm_model.discrepancy`) and
+  ``training_poses`` (the points file of the poses the calibration was fitted on, relative to the TOML; read by
+  :func:`training_poses_of`), all optional;
 * optional ``[[reference_frame]]`` and ``[[marker]]`` tables: the reference instrument's frame of each
   session and the markers' offsets on the tip frame that a calibration on tracker data estimated
   (:mod:`arm_model.tracker`; ``aacmm tip --reference-frame`` predicts the instrument's coordinates).
@@ -133,8 +134,11 @@ class Arm:
     def __post_init__(self):
         """A ValueError for what a model file's reader would refuse (:func:`check_calibration_table`): a scatter,
         discrepancy or growth not finite or out of its range, or a growth above 0 without the discrepancy it grows
-        from and the training poses it grows away from (it would otherwise be silently ignored)."""
-        cal = {k: [x * f for x in v] if isinstance(v, tuple) else v * f
+        from and the training poses it grows away from (it would otherwise be silently ignored). A growth given as
+        a list or an array is kept as a tuple."""
+        if isinstance(self.discrepancy_growth, (list, np.ndarray)):
+            object.__setattr__(self, "discrepancy_growth", tuple(np.asarray(self.discrepancy_growth).ravel().tolist()))
+        cal = {k: [_scaled(x, f) for x in v] if isinstance(v, tuple) else _scaled(v, f)
                for k, v, f in (("probing_scatter_um", self.probing_scatter, 1e6),
                                ("model_discrepancy_um", self.model_discrepancy, 1e6),
                                ("model_discrepancy_growth_um_per_mm", self.discrepancy_growth, 1e3))
@@ -457,6 +461,11 @@ def parse_model(text: str, path: str = "<string>") -> Arm:
                    model_discrepancy=discrepancy, discrepancy_growth=growth, training_poses=training)
     effects, values, u, states = effects_from_tables(desc, data["effect"], r)
     return Arm(desc, effects, values, u, states, covariance, scatter, tracker, discrepancy, growth, training)
+
+
+def _scaled(v, factor: float):
+    """``v * factor`` for a number (not a bool), else ``v`` as given (for the checker to refuse by name)."""
+    return v * factor if isinstance(v, (int, float)) and not isinstance(v, bool) else v
 
 
 def _growth_of(value, desc: ArmDescription, r: TomlReader) -> float | tuple[float, ...]:

@@ -413,7 +413,8 @@ def test_fit_joint_growth_finds_the_joint_that_grows():
 
 def test_a_growth_per_joint_in_a_model_file_reads_back(tmp_path, nominal):
     """A model file whose model_discrepancy_growth_um_per_mm lists one growth a joint reads back as that tuple;
-    format_model writes it so (to 4 digits) and tip's discrepancy grows along joint 1 by its own growth only."""
+    format_model writes it so (to 4 digits) and tip's discrepancy grows along joint 1 by its own growth only; an Arm
+    given a list keeps a tuple, and refuses a list of text, of the wrong length or with NaN by the key's name."""
     from arm_model.kinematics import ball_centres
     from arm_model.model_file import format_model, load_model, parse_model
     q = np.array([[0.3, 0.4, -0.2, 0.9, 0.1, -0.5, 0.2]])
@@ -428,6 +429,12 @@ def test_a_growth_per_joint_in_a_model_file_reads_back(tmp_path, nominal):
     moved[0, 0] += 0.1
     r = np.hypot(*ball_centres(nominal, moved)[0, :2])
     assert disc.sd(nominal, moved)[0] == pytest.approx(np.hypot(5e-6, 0.02 * r * 0.1), rel=1e-7)
+    from arm_model.model_file import Arm
+    arm = Arm(nominal, model_discrepancy=5e-6, discrepancy_growth=[0.02] * 7, training_poses=tmp_path / "poses.csv")
+    assert arm.discrepancy_growth == (0.02,) * 7
+    for bad in (["a"] * 7, [0.02] * 3, [math.nan] * 7):
+        with pytest.raises(ValueError, match="model_discrepancy_growth_um_per_mm|discrepancy_growth lists"):
+            Arm(nominal, model_discrepancy=5e-6, discrepancy_growth=bad, training_poses=tmp_path / "poses.csv")
 
 
 @pytest.mark.parametrize("extra, match", [
