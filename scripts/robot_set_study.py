@@ -137,11 +137,16 @@ def held_out(summary: Path, which: str, key: str) -> float:
 
 
 def study(name: str, robots: Path, out: Path, a: argparse.Namespace) -> dict:
-    """One chain: simulate, calibrate with the defaults, read the model back, the truth's floor."""
+    """One chain of :data:`CHAINS`: :func:`study_chain` of its URDF under ``robots``."""
     rel, tip, base = CHAINS[name]
+    return study_chain(name, robots / rel, rel, tip, base, out, a)
+
+
+def study_chain(name: str, urdf: Path, rel: str, tip: str, base: str | None, out: Path, a: argparse.Namespace) -> dict:
+    """One chain (``rel``: the URDF's name in the results): simulate, calibrate with the defaults, read the model
+    back, the truth's floor. ``a``: the options of :func:`main_study` (seed, postures, stiffness, campaign ...)."""
     d = out / name
     d.mkdir(parents=True, exist_ok=True)
-    urdf = robots / rel
     campaign = d / "campaign.toml"
     task = TASKS[a.campaign].format(postures=a.postures, bar_mm=a.bar_mm, positions=a.positions,
                                     articulations=a.articulations)
