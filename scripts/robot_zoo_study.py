@@ -132,7 +132,7 @@ def main_study(argv=None) -> int:
     ap.add_argument("--stiffness", type=float, default=20000.0, help="joint stiffness of the truth [N m/rad]")
     ap.add_argument("--load-only", action="store_true", help="load and compare with Pinocchio, no calibration")
     a = ap.parse_args(argv)
-    a.campaign = "mocap"
+    a.campaign, a.bar_mm, a.positions, a.articulations = "mocap", 100.0, 12, 6    # (the seats' options: unused)
     unknown = [c for c in a.chains if c not in CHAINS]
     if unknown:
         ap.error(f"unknown chain(s) {', '.join(unknown)}; known: {', '.join(CHAINS)}")
