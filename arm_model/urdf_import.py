@@ -494,16 +494,17 @@ def tip_candidates(u: _Urdf, most: int = 8) -> str:
     for messages: ``"tool0 (6 moving joints), ..."``."""
     by_child = {j.child: j for j in u.robot.joints}
     parents = {j.parent for j in u.robot.joints}
-    counts = []
-    for leaf in (name for name in u.link_elements if name not in parents):
-        n, link, seen = 0, leaf, set()
-        while link in by_child and link not in seen:
-            seen.add(link)
-            n += by_child[link].type in ("revolute", "continuous", "prismatic")
+    depth: dict[str, int] = {}          # link -> moving joints above it (each link's walk stops at a known one)
+    for start in u.link_elements:
+        path, link = [], start
+        while link in by_child and link not in depth and link not in path:     # (a loop ends the walk)
+            path.append(link)
             link = by_child[link].parent
-        if n:
-            counts.append((-n, leaf))
-    counts.sort()
+        n = depth.get(link, 0)
+        for link in reversed(path):
+            n += by_child[link].type in ("revolute", "continuous", "prismatic")
+            depth[link] = n
+    counts = sorted((-depth.get(leaf, 0), leaf) for leaf in u.link_elements if leaf not in parents and depth.get(leaf))
     shown = ", ".join(f"{leaf} ({-n} moving joint{'s' if n < -1 else ''})" for n, leaf in counts[:most])
     return (shown + (f", and {len(counts) - most} more" if len(counts) > most else "")) if counts else \
         "none: no link of this URDF hangs from a moving joint"
