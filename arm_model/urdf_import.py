@@ -231,6 +231,15 @@ def _check_not_xacro(root, path: Path) -> None:
                                  f"key '{el.tag}.{attr}'")
 
 
+def _warn_repeated(el, what: str, tags: tuple, path: Path) -> None:
+    """A warning for each of ``tags`` that ``el`` holds more than once: the first is used, as urdfdom uses it."""
+    for tag in tags:
+        found = el.findall(tag)
+        if len(found) > 1:
+            log.warning(f"{path}, line {found[1].sourceline}: {what} has {len(found)} <{tag}> elements (lines "
+                        f"{', '.join(str(f.sourceline) for f in found)}): the first is used, as urdfdom uses it")
+
+
 def _check_tree(root, path: Path) -> tuple[dict, dict]:
     """(links, joints) by name, lxml elements; names unique, joint types known, every parent and child
     defined, each link the child of one joint at most."""
@@ -245,6 +254,7 @@ def _check_tree(root, path: Path) -> tuple[dict, dict]:
             raise InputError(f"link '{name}' is defined twice (first on line {links[name].sourceline})",
                              path, el.sourceline)
         links[name] = el
+        _warn_repeated(el, f"link '{name}'", ("inertial",), path)
     children = {}
     for el in root.findall("joint"):
         name, jtype = el.get("name"), el.get("type")
@@ -272,6 +282,11 @@ def _check_tree(root, path: Path) -> tuple[dict, dict]:
             raise InputError(f"link '{child}' is the child of two joints ('{children[child]}' and '{name}'): "
                              "a URDF is a tree", path, el.sourceline)
         children[child] = name
+        _warn_repeated(el, f"joint '{name}'", ("parent", "child", "origin", "axis", "limit", "mimic"), path)
+        mimic = el.find("mimic")
+        if mimic is not None and not mimic.get("joint"):
+            raise InputError(f"joint '{name}': its <mimic> names no joint (joint=\"...\", the joint it follows)", path,
+                             mimic.sourceline, "key 'mimic.joint'")
         if jtype in ("revolute", "prismatic") and el.find("limit") is None:
             raise InputError(f"joint '{name}' ({jtype}) has no <limit>: the URDF format requires one on a {jtype} "
                              "joint (urdfdom, Pinocchio's and ROS's parser, refuses the file too); add <limit "
@@ -548,6 +563,10 @@ def _chain(u: _Urdf, tip_frame: str, base_frame: str | None = None, hold: dict |
         if j.type == "fixed" or j.name in held:
             pending = pending @ _T(j.origin)
             continue
+        if j.type not in ("revolute", "continuous", "prismatic") and j.child == tip_frame:
+            raise u.error(f"the tip frame '{tip_frame}' hangs from the {j.type} joint '{j.name}', which moves it "
+                          "freely: no chain of joints gives its place; the tip frame is a link that joints place",
+                          j.name)
         if j.type not in ("revolute", "continuous", "prismatic"):
             raise u.error(f"joint '{j.name}' on the chain to '{tip_frame}' is {j.type}: the toolkit models "
                           "revolute, continuous and prismatic joints (a floating or planar joint is a base the "

@@ -216,3 +216,41 @@ def test_unicode_names_through_the_commands(tmp_path, capsys):
     assert main(["urdf", str(path), "--tip-frame", "ツール先端", "-o", str(out), "-q"]) == 0
     assert "関節1" in out.read_text(encoding="utf-8")
     assert load_arm(path, "ツール先端").joint_names[0] == "関節1"
+
+
+def test_repeated_elements_use_the_first_as_urdfdom_does_and_say_so(tmp_path, caplog):
+    """Two <origin> (or <axis>) in one joint, as a bad xacro macro leaves them: the first is used, as urdfdom uses
+    it (the tip equals Pinocchio's), with a warning naming both lines."""
+    import pinocchio as pin
+    j2 = joint("j2", "l1", "l2", axis="0 1 0", extra='\n<origin xyz="0 0 5"/>\n<axis xyz="1 0 0"/>')
+    path = write(tmp_path, robot(j2=j2))
+    with caplog.at_level(logging.WARNING, logger="arm_model"):
+        desc = load_arm(path, "tip")
+    said = " ".join(r.getMessage() for r in caplog.records)
+    assert "has 2 <origin> elements (lines 9, 10)" in said and "has 2 <axis> elements (lines 9, 11)" in said, said
+    model = pin.buildModelFromUrdf(str(path))
+    data, q = model.createData(), np.array([0.4, -0.6, 1.2])
+    pin.framesForwardKinematics(model, data, q)
+    assert np.abs(ball_centres(desc, q[None])[0] - data.oMf[model.getFrameId("tip")].translation).max() < 1e-12
+
+
+@pytest.mark.parametrize("tj, words", [
+    ('<joint name="tj" type="floating"><parent link="l3"/><child link="tip"/></joint>',
+     "the tip frame 'tip' hangs from the floating joint 'tj', which moves it freely"),
+    ('<joint name="tj" type="fixed"><parent link="l3"/><child link="tip"/><mimic/></joint>',
+     "its <mimic> names no joint"),
+])
+def test_a_tip_no_chain_places_and_a_mimic_of_nothing_are_said_plainly(tmp_path, tj, words):
+    fixed = '<joint name="tj" type="fixed"><parent link="l3"/><child link="tip"/><origin xyz="0 0 0.05"/></joint>'
+    text = robot().replace(fixed, tj)
+    with pytest.raises(InputError, match=words) as exc:
+        load_arm(write(tmp_path, text), "tip")
+    assert exc.value.line == 11
+
+
+def test_a_campaign_takes_a_urdf_without_suffix(tmp_path):
+    write(tmp_path, robot(), "robotmodel")
+    (tmp_path / "c.toml").write_text('name = "x"\nseed = 1\narm = "robotmodel"\ntip_frame = "tip"\nsensor = "none"\n\n'
+                                     '[[task]]\nkind = "mocap"\npostures = 6\nnoise_mm = 0.15\n')
+    assert main(["simulate", str(tmp_path / "c.toml"), "-o", str(tmp_path / "out"), "-q"]) == 0
+    assert (tmp_path / "out" / "points.csv").read_text().splitlines()[0].count("_deg") == 3
