@@ -130,7 +130,7 @@ class _Urdf:
 _TOLERATED = (("Unsupported version", "an XML declaration with an unknown version (read as 1.0)"),
               ("XML declaration allowed only at the start", "an XML declaration after the start of the file (ignored)"),
               ("Extra content at the end of the document", "NUL bytes after the end of the document (ignored)"),
-              ("Namespace prefix", "an undeclared namespace prefix (declared for reading)"))
+              ("Namespace prefix", "a namespace prefix never declared (declared for reading)"))
 
 
 def _repaired(data: bytes, message: str) -> bytes | None:
@@ -173,16 +173,16 @@ def _parse_xml(path: Path, data: bytes):
         except etree.XMLSyntaxError as exc:
             line, col = exc.position if exc.position else (None, None)
             fixed = _repaired(data, exc.msg)
-            if fixed is None or fixed == data:
+            if fixed is None or fixed == data or (line, exc.msg) in {(k, m) for k, m, _ in tolerated}:   # no progress
                 raise InputError(f"not valid XML: {exc.msg}", path, line,
                                  None if col is None else f"column {col}") from None
-            tolerated.append((line, next(what for start, what in _TOLERATED if exc.msg.startswith(start))))
+            tolerated.append((line, exc.msg, next(what for start, what in _TOLERATED if exc.msg.startswith(start))))
             data = fixed
     else:
         raise InputError("not valid XML: too many faults to read past", path)
-    for line, what in tolerated:
-        log.warning(f"{path}, line {line}: {what}, as urdfdom (Pinocchio's and ROS's URDF parser) reads it; "
-                    "the file is not strict XML")
+    if tolerated:
+        said = "; ".join(dict.fromkeys(f"line {line}: {what}" for line, _, what in tolerated))
+        log.warning(f"{path} is not strict XML, read as urdfdom (Pinocchio's and ROS's URDF parser) reads it: {said}")
     info = tree.docinfo
     if info.system_url or info.public_id or (info.internalDTD is not None and any(info.internalDTD.iterentities())):
         raise InputError("a <!DOCTYPE> that declares entities or names an external DTD: a URDF needs neither (entities "
@@ -506,7 +506,7 @@ def _held_values(u: _Urdf, chain: list, tip_frame: str, hold: dict | None, elast
 
 def tip_candidates(u: _Urdf, most: int = 8) -> str:
     """The links a chain ends at (no joint below them), those behind the most moving joints first, as a phrase
-    for messages: ``"tool0 (6 moving joints), ..."``."""
+    for messages: ``"the chains end at tool0 (6 moving joints), ..."``, or that there is none."""
     by_child = {j.child: j for j in u.robot.joints}
     parents = {j.parent for j in u.robot.joints}
     depth: dict[str, int] = {}          # link -> moving joints above it (each link's walk stops at a known one)
@@ -520,9 +520,10 @@ def tip_candidates(u: _Urdf, most: int = 8) -> str:
             n += by_child[link].type in ("revolute", "continuous", "prismatic")
             depth[link] = n
     counts = sorted((-depth.get(leaf, 0), leaf) for leaf in u.link_elements if leaf not in parents and depth.get(leaf))
+    if not counts:
+        return "no link of this URDF hangs from a moving joint"
     shown = ", ".join(f"{leaf} ({-n} moving joint{'s' if n < -1 else ''})" for n, leaf in counts[:most])
-    return (shown + (f", and {len(counts) - most} more" if len(counts) > most else "")) if counts else \
-        "none: no link of this URDF hangs from a moving joint"
+    return "the chains end at " + shown + (f", and {len(counts) - most} more" if len(counts) > most else "")
 
 
 def _frame_problem(u: _Urdf, frame: str, option: str) -> InputError:
@@ -532,8 +533,8 @@ def _frame_problem(u: _Urdf, frame: str, option: str) -> InputError:
         child = u.joint_elements[frame].find("child").get("link")
         return InputError(f"'{frame}' is a joint, not a link: {option} names a link (this joint's child link is "
                           f"'{child}')", u.path, u.line(frame), f"key '{option}'")
-    return InputError(f"no link named '{frame}'{did_you_mean(frame, u.link_elements)}; the chains of this URDF end at "
-                      f"{tip_candidates(u)} ({len(u.link_elements)} links in all)", u.path, None, f"key '{option}'")
+    return InputError(f"no link named '{frame}'{did_you_mean(frame, u.link_elements)}; {tip_candidates(u)} "
+                      f"({len(u.link_elements)} links in all)", u.path, None, f"key '{option}'")
 
 
 def _chain(u: _Urdf, tip_frame: str, base_frame: str | None = None, hold: dict | None = None) -> _Chain:
@@ -543,7 +544,7 @@ def _chain(u: _Urdf, tip_frame: str, base_frame: str | None = None, hold: dict |
     chain = _walk_to_root(u, tip_frame, base_frame)
     if not chain and base_frame is None:
         raise InputError(f"link '{tip_frame}' hangs from no joint: it is a root of the URDF, so no chain reaches it; "
-                         f"the tip frame is a link at the end of a chain, e.g. {tip_candidates(u)}", u.path,
+                         f"the tip frame is a link a chain reaches: {tip_candidates(u)}", u.path,
                          u.line(tip_frame, "link"), "key '--tip-frame'")
     base = chain[0].parent if chain else tip_frame
     if base_frame is not None and base != base_frame:
@@ -924,7 +925,7 @@ def load_arm(path: str | Path, tip_frame: str | None = None, probe: dict | None 
     if is_urdf(path):
         if not tip_frame:        # (the file read first: a xacro file says so, a good one lists its chains' ends)
             raise InputError("an arm given as a URDF needs --tip-frame (the link at the ball centre, or the tool "
-                             f"point), e.g. {tip_candidates(_read_urdf(path))}", path)
+                             f"point); {tip_candidates(_read_urdf(path))}", path)
         return description_from_urdf(path, tip_frame, probe, masses=None if masses is None else load_masses(masses),
                                      base_frame=base_frame, hold=hold)
     if hold:
