@@ -128,7 +128,7 @@ class _Urdf:
 #: ship them (pybullet's minitaur, humanoid and differential robots, Drake's UR5e): (the start of lxml's message,
 #: what is tolerated). Each is repaired in the bytes without moving a line, and said once as a warning.
 _TOLERATED = (("Unsupported version", "an XML declaration with an unknown version (read as 1.0)"),
-              ("XML declaration allowed only at the start", "an XML declaration after the start of the file (ignored)"),
+              ("XML declaration allowed only at the start", "an XML declaration after blank lines (ignored)"),
               ("Extra content at the end of the document", "NUL bytes after the end of the document (ignored)"),
               ("Namespace prefix", "a namespace prefix never declared (declared for reading)"))
 
@@ -144,7 +144,9 @@ def _repaired(data: bytes, message: str) -> bytes | None:
             return data[:start] + b"1.0" + data[start + len(m.group(2)):]
     elif message.startswith("XML declaration allowed only at the start"):
         m = re.search(rb"<\?xml[^>]*\?>", data)
-        if m and b"encoding" not in m.group(0).lower().replace(b"utf-8", b""):     # (another encoding: not guessed)
+        enc = re.search(rb"encoding\s*=\s*[\"']([^\"']*)", m.group(0)) if m else None
+        if m and not data[:m.start()].lstrip(b"\xef\xbb\xbf").strip() and \
+                (enc is None or enc.group(1).lower() in (b"utf-8", b"utf8", b"us-ascii", b"ascii")):   # (not guessed)
             return data[:m.start()] + b" " * (m.end() - m.start()) + data[m.end():]
     elif message.startswith("Extra content at the end of the document"):
         stripped = data.rstrip(b"\x00\t\r\n ")       # (the tail: NUL bytes and blanks only)

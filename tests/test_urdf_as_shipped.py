@@ -50,7 +50,9 @@ def origins(desc):
 TOLERATED = {
     "xml version 0.0 (pybullet's minitaur)": (robot(decl='<?xml version="0.0" ?>\n'), 1, "unknown version"),
     "declaration after a blank line (pybullet's diff_ring)": (robot(decl='\n<?xml version="1.0" ?>\n'), 2,
-                                                               "after the start"),
+                                                               "after blank lines"),
+    "a UTF-8 declaration after blank lines": (
+        robot(decl='\n  \n<?xml version="1.0" encoding="UTF-8"?>\n'), 3, "after blank lines"),
     "a NUL byte after </robot> (pybullet's humanoid)": (robot() + "\x00", 13, "NUL bytes"),
     "drake: attributes never declared (Drake's UR5e)": (
         robot(j2=joint("j2", "l1", "l2", axis="0 1 0", limit=LIMIT.replace("<limit ", '<limit drake:acceleration="2" '))
@@ -83,6 +85,7 @@ def test_what_urdfdom_reads_past_is_read_with_a_warning(tmp_path, caplog, name):
     (robot() + "<robot name='again'/>\n", 13),                     # a second document: not a NUL byte
     (robot().replace("<robot ", "<robot  ", 1).replace('<link name="l1"/>', '<link name="l1">'), None),
     (robot(decl='<?xml version="1.0" encoding="latin-1"?>\n'.rjust(44)), None),
+    (robot(decl='<!-- made by hand -->\n<?xml version="1.0"?>\n'), 2),     # urdfdom refuses it there too
 ])
 def test_other_xml_faults_stay_refused_at_their_line(tmp_path, text, line):
     with pytest.raises(InputError, match="not valid XML") as exc:
