@@ -313,9 +313,9 @@ def _read_urdf(path: str | Path) -> _Urdf:
     root = tree.getroot()
     if root.tag != "robot":
         raise InputError(f"a URDF's root element is <robot>, got <{root.tag}>", path, root.sourceline)
+    _check_not_xacro(root, path)         # (before the name: a xacro file of macros has none)
     if not root.get("name"):
         raise InputError("<robot> has no name", path, root.sourceline)
-    _check_not_xacro(root, path)
     _check_numbers(root, path)
     links, joints = _check_tree(root, path)
     try:
