@@ -524,7 +524,8 @@ def tip_candidates(u: _Urdf, most: int = 8) -> str:
     counts = sorted((-depth.get(leaf, 0), leaf) for leaf in u.link_elements if leaf not in parents and depth.get(leaf))
     if not counts:
         return "no link of this URDF hangs from a moving joint"
-    shown = ", ".join(f"{leaf} ({-n} moving joint{'s' if n < -1 else ''})" for n, leaf in counts[:most])
+    shown = ", ".join(f"{leaf if len(leaf) <= 60 else leaf[:55] + '...'} ({-n} moving joint{'s' if n < -1 else ''})"
+                      for n, leaf in counts[:most])          # (a name may be 100 000 characters long: cut)
     return "the chains end at " + shown + (f", and {len(counts) - most} more" if len(counts) > most else "")
 
 
