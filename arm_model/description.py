@@ -188,6 +188,9 @@ class ArmDescription:
     #: the user's visuals when the arm was read from a URDF, for the viewer (:class:`Visual`); never written
     #: to a description TOML
     visuals: tuple[Visual, ...] = field(default=(), compare=False, repr=False)
+    #: the mesh files of the URDF's visuals on the chain that were not found (``package://`` beside or above the
+    #: URDF, relative to it, absolute): the viewer draws without them and says so; the kinematics never use them
+    missing_meshes: tuple[str, ...] = field(default=(), compare=False, repr=False)
 
     @cached_property
     def encoders(self) -> tuple[JointRow, ...]:

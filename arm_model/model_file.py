@@ -541,8 +541,9 @@ def load_model(path, tip_frame: str | None = None, probe: dict | None = None, ma
         bad = next((k for k, v in hold.items() if not math.isfinite(v)), None)
         if bad is not None:
             raise ValueError(f"hold[{bad!r}] must be finite, got {hold[bad]!r}")
+    from .urdf_import import is_urdf
     path = arm_path(path)
-    if path.suffix.lower() == ".urdf" or masses is not None or base_frame is not None or hold:  # load_arm: why not
+    if is_urdf(path) or masses is not None or base_frame is not None or hold:  # load_arm: why not
         from .urdf_import import load_arm
         return Arm(load_arm(path, tip_frame, probe, masses, base_frame, hold))
     if tip_frame:
