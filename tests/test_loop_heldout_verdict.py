@@ -171,7 +171,8 @@ def test_the_verdict_says_what_the_escalation_offered_and_added(added):
 
 @pytest.mark.slow
 def test_the_ur5_s_hidden_shoulder_gain_is_found_once_the_test_set_says_the_model_is_incomplete(tmp_path):
-    """(slow: about 40 s on a loaded machine) scripts/robot_hidden_study.py's UR5 seat pairs with the shoulder's encoder gain 1e-3:
+    """(slow: about 40 s on a loaded machine) scripts/robot_hidden_study.py's UR5 seat pairs with the shoulder's
+    encoder gain 1e-3:
     the default families end at the shoulder's eccentricity, 297 um held out against the truth's 98 um, and the
     verdict said "No structured residual remains". Now the outer test set is found worse than stated, the opt-in
     families are offered, the gain passes the same held-out rules and the loop's model ends within 10 % of the
