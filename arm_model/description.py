@@ -188,6 +188,9 @@ class ArmDescription:
     #: the user's visuals when the arm was read from a URDF, for the viewer (:class:`Visual`); never written
     #: to a description TOML
     visuals: tuple[Visual, ...] = field(default=(), compare=False, repr=False)
+    #: the mesh files of the URDF's visuals on the chain that were not found (``package://`` beside or above the
+    #: URDF, relative to it, absolute): the viewer draws without them and says so; the kinematics never use them
+    missing_meshes: tuple[str, ...] = field(default=(), compare=False, repr=False)
 
     @cached_property
     def encoders(self) -> tuple[JointRow, ...]:
@@ -400,7 +403,8 @@ def check_calibration_table(tbl: Any, r: TomlReader) -> None:
     """The ``[calibration]`` table of a model file: text keys ``covariance`` and ``written_by``, the
     numbers ``probing_scatter_um`` (>= 0: a calibration whose encoder and force-sensor noise alone account for
     its residual scatter writes 0; at most :data:`MAX_PROBING_SCATTER_UM`) and ``model_discrepancy_um`` (the
-    same range), ``model_discrepancy_growth_um_per_mm`` (in [0, :data:`MAX_DISCREPANCY_GROWTH_UM_PER_MM`]; above 0
+    same range), ``model_discrepancy_growth_um_per_mm`` (in [0, :data:`MAX_DISCREPANCY_GROWTH_UM_PER_MM`], or a list
+    of one such number a joint, whose length :func:`arm_model.model_file.parse_model` checks; above 0
     it needs ``model_discrepancy_um`` and ``training_poses``, the text naming the training poses' points file); the
     files (:data:`FILE_KEYS`) relative to the model file's folder, never an absolute path."""
     if not isinstance(tbl, dict):
@@ -414,10 +418,17 @@ def check_calibration_table(tbl: Any, r: TomlReader) -> None:
             raise r.error(f"unknown key '{key}' (known: {', '.join(known)}){did_you_mean(key, known)}",
                           "calibration", key)
         if key in top:
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                    or not 0 <= value <= top[key]:
-                unit = key.rsplit("_", 1)[-1] if not key.endswith("per_mm") else "um/mm"
-                raise r.error(f"'{key}' must be a number in [0, {top[key]:g}] {unit}, got {value!r}",
+            per_joint = key == "model_discrepancy_growth_um_per_mm" and isinstance(value, list)
+            for v in value if per_joint else [value]:
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
+                        or not 0 <= v <= top[key]:
+                    unit = key.rsplit("_", 1)[-1] if not key.endswith("per_mm") else "um/mm"
+                    what = "a number or a non-empty list of one number a joint" if key.endswith("per_mm") \
+                        else "a number"
+                    raise r.error(f"'{key}' must be {what} in [0, {top[key]:g}] {unit}, got {value!r}",
+                                  "calibration", key)
+            if per_joint and not value:
+                raise r.error(f"'{key}' must be a number or a non-empty list of one number a joint, got []",
                               "calibration", key)
         elif not isinstance(value, str) or not value.strip():
             raise r.error(f"'{key}' must be a non-empty text", "calibration", key)
@@ -425,7 +436,8 @@ def check_calibration_table(tbl: Any, r: TomlReader) -> None:
             raise r.error(f"'{key}' must name a file relative to the model file's folder (the model file and the "
                           f"files it names move together), got the absolute path {value!r}", "calibration", key)
     lacking = [k for k in ("model_discrepancy_um", "training_poses") if k not in tbl]
-    if tbl.get("model_discrepancy_growth_um_per_mm", 0) > 0 and lacking:
+    growth = tbl.get("model_discrepancy_growth_um_per_mm", 0)
+    if max(growth if isinstance(growth, list) else [growth]) > 0 and lacking:
         raise r.error(f"'model_discrepancy_growth_um_per_mm' needs '{lacking[0]}' (the discrepancy at the training "
                       "poses, and the points file of those poses it grows away from)", "calibration",
                       "model_discrepancy_growth_um_per_mm")

@@ -16,6 +16,15 @@ standard uncertainty per axis of that error at a pose ``q`` is modelled as::
   meaning on every arm (a wrist joint's difference counts less than a shoulder's);
 * ``sigma_0`` [m]: the discrepancy at the training poses, ``g`` [1]: its growth per metre of ``d``.
 
+The growth may also be given **per joint** (``g_j``, one per encoder joint; automatic relevance determination,
+as a Gaussian process's length scale per input): with ``t*`` the nearest training pose (by ``d``) and
+``c_j(q) = (L_j(q) (q_j - t*_j))^2`` the joint's share of ``d^2``::
+
+    sigma_d(q)^2 = sigma_0^2 + sum_j g_j^2 c_j(q)
+
+(a single ``g`` is every ``g_j = g``: ``sum_j c_j = d^2``). An error the model lacks that grows with one joint's
+motion (a gain error, a load on one joint) then grows where that joint moved, not wherever the arm did.
+
 Both are estimated by :mod:`calibration.discrepancy` from the extrapolative folds of the constant discrepancy
 (the poses held out at the ends of each joint's range, each at its ``d`` from the poses left in the fold). The
 nearest training pose was chosen over how far a pose lies beyond the box of the training joint ranges (the
@@ -33,7 +42,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["TrainingPoses", "GrowingDiscrepancy", "joint_levers", "pose_distance", "checked_poses", "LEVER_STEP"]
+__all__ = ["TrainingPoses", "GrowingDiscrepancy", "joint_levers", "pose_distance", "nearest_pose", "travel_shares",
+           "growth_text",
+           "checked_poses", "LEVER_STEP"]
 
 #: step [rad] ([m] for a prismatic joint) of the central differences of :func:`joint_levers`
 LEVER_STEP = 1e-6
@@ -100,7 +111,14 @@ def joint_levers(desc, q) -> np.ndarray:
 
 def pose_distance(desc, q, train: TrainingPoses, levers=None) -> np.ndarray:
     """(N,) [m]: ``d(q)``, how far the joint motions from the nearest of the ``train`` poses carry the ball
-    (see the module docstring); ``levers`` (N, J) [m/rad] of ``q`` when already computed.
+    (see the module docstring); ``levers`` (N, J) [m/rad] of ``q`` when already computed
+    (:func:`nearest_pose`'s distances)."""
+    return nearest_pose(desc, q, train, levers)[0]
+
+
+def nearest_pose(desc, q, train: TrainingPoses, levers=None) -> tuple[np.ndarray, np.ndarray]:
+    """``(d, index)``: (N,) [m] :func:`pose_distance` of each pose of ``q`` and (N,) the row of ``train.q`` that is
+    its nearest training pose.
 
     An exhaustive search, in blocks of query and training poses (a few hundred kB each, so that every pass stays
     in the cache), joint by joint: a revolute joint's difference is wrapped to [-pi, pi] in turns (``x -
@@ -118,6 +136,7 @@ def pose_distance(desc, q, train: TrainingPoses, levers=None) -> np.ndarray:
     qn, tn, wn = q / turn, train.q / turn, lev * turn       # wn: metres per turn (per metre)
     used = np.flatnonzero(np.any(wn != 0, axis=0))        # a joint whose lever is 0 at every query adds nothing
     best = np.full(len(q), np.inf)
+    index = np.zeros(len(q), dtype=int)
     tb = max(1, min(len(tn), _CACHE_BLOCK))
     qb = max(1, _CACHE_BLOCK // tb)
     for t0 in range(0, len(tn), tb):
@@ -132,38 +151,83 @@ def pose_distance(desc, q, train: TrainingPoses, levers=None) -> np.ndarray:
                 d *= wn[s: s + qb, j, None]
                 d *= d
                 acc += d
-            np.minimum(best[s: s + qb], acc.min(axis=1), out=best[s: s + qb])
-    return np.sqrt(best)
+            k = acc.argmin(axis=1)
+            low = acc[np.arange(len(acc)), k]
+            better = low < best[s: s + qb]
+            best[s: s + qb][better] = low[better]
+            index[s: s + qb][better] = t0 + k[better]
+    return np.sqrt(best), index
+
+
+def travel_shares(desc, q, train: TrainingPoses, levers=None) -> tuple[np.ndarray, np.ndarray]:
+    """``(d, c)``: (N,) [m] :func:`pose_distance` of each pose of ``q`` and (N, J) [m^2] each joint's share ``c_j =
+    (L_j (q_j - t*_j))^2`` of ``d^2`` from the nearest training pose ``t*`` (a revolute difference the short way
+    round; ``sum_j c_j = d^2``): how far each joint's motion from that pose carries the ball, squared."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    lev = joint_levers(desc, q) if levers is None else np.asarray(levers, dtype=float)
+    d, index = nearest_pose(desc, q, train, lev)
+    diff = q - train.q[index]
+    circ = np.asarray(train.circular, dtype=bool)
+    diff[:, circ] -= 2 * math.pi * np.rint(diff[:, circ] / (2 * math.pi))
+    return d, (lev * diff) ** 2
 
 
 @dataclass(frozen=True)
 class GrowingDiscrepancy:
-    """``sigma_d(q)^2 = sigma0^2 + (growth * d(q))^2`` (see the module docstring): ``sigma0`` [m] at the
-    training poses, ``growth`` [1] per metre of ``d`` from the nearest of the ``training`` poses (None: no
-    growth, the constant ``sigma0`` everywhere)."""
+    """``sigma_d(q)^2 = sigma0^2 + sum_j growth_j^2 c_j(q)`` (see the module docstring): ``sigma0`` [m] at the
+    training poses, ``growth`` [1] per metre of ball travel from the nearest of the ``training`` poses, one number
+    for every joint (``sigma0^2 + (growth d)^2``) or a tuple of one per joint (encoder order); 0 (or None
+    training poses): the constant ``sigma0`` everywhere."""
     sigma0: float
-    growth: float = 0.0
+    growth: float | tuple[float, ...] = 0.0
     training: TrainingPoses | None = None
 
     def __post_init__(self):
-        for name, v in (("sigma0", self.sigma0), ("growth", self.growth)):
+        if isinstance(self.growth, (tuple, list, np.ndarray)):
+            object.__setattr__(self, "growth", tuple(float(g) for g in self.growth))
+            if self.training is not None and len(self.growth) != len(self.training.names):
+                raise ValueError(f"the model discrepancy's growth has {len(self.growth)} joints, the training poses "
+                                 f"{len(self.training.names)}")
+        for name, v in (("sigma0", self.sigma0), *(("growth", g) for g in self.growths)):
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"the model discrepancy's {name} must be finite and >= 0, got {v!r}")
-        if self.growth > 0 and self.training is None:
+        if self.grows and self.training is None:
             raise ValueError("a growing model discrepancy needs the training poses it grows away from")
+
+    @property
+    def growths(self) -> tuple[float, ...]:
+        """The growth as a tuple: one value (every joint) or one per joint [1]."""
+        return self.growth if isinstance(self.growth, tuple) else (float(self.growth),)
+
+    @property
+    def grows(self) -> bool:
+        """True when some joint's growth is above 0."""
+        return max(self.growths, default=0.0) > 0
 
     def distance(self, desc, q) -> np.ndarray:
         """(N,) [m] ``d`` of each pose of ``q`` (N, J) (zeros without training poses)."""
         q = np.atleast_2d(np.asarray(q, dtype=float))
         return np.zeros(len(q)) if self.training is None else pose_distance(desc, q, self.training)
 
+    def at(self, desc, q) -> tuple[np.ndarray, np.ndarray]:
+        """``(d, sd)``: (N,) [m] the distance ``d`` of each pose of ``q`` (N, J) from the nearest training pose
+        (zeros without a growth) and ``sigma_d`` per axis there [m]."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        if not self.grows or self.training is None:
+            return np.zeros(len(q)), np.full(len(q), self.sigma0)
+        d, c = travel_shares(desc, q, self.training)
+        g2 = np.broadcast_to(np.square(self.growths), (c.shape[1],))
+        return d, np.sqrt(self.sigma0 ** 2 + c @ g2)
+
     def sd(self, desc, q) -> np.ndarray:
         """(N,) [m]: ``sigma_d`` per axis at each pose of ``q`` (N, J)."""
-        q = np.atleast_2d(np.asarray(q, dtype=float))
-        if self.growth == 0 or self.training is None:
-            return np.full(len(q), self.sigma0)
-        return self.sd_at(pose_distance(desc, q, self.training))
+        return self.at(desc, q)[1]
 
-    def sd_at(self, d) -> np.ndarray:
-        """``sigma_d`` [m] at distances ``d`` [m] from the nearest training pose (:meth:`distance`)."""
-        return np.sqrt(self.sigma0 ** 2 + (self.growth * np.asarray(d, dtype=float)) ** 2)
+
+def growth_text(growths) -> str:
+    """A growth [1] for people, in um per mm: ``"0.7"`` for one value, ``"0, 0.29, ... (joints 1-7)"`` for one a
+    joint."""
+    g = [float(x) * 1e3 for x in growths]
+    if len(g) == 1:
+        return f"{g[0]:.4g}"
+    return ", ".join(f"{x:.3g}" for x in g) + f" (joints 1-{len(g)})"

@@ -16,8 +16,9 @@ One TOML file (``aacmm calibrate`` and ``aacmm close-loop`` write it, every ``--
   ``model_discrepancy_um`` (the error per axis beyond the fit's own prediction on poses away from those it was
   fitted on, by extrapolative cross-validation: :mod:`calibration.discrepancy`; ``aacmm tip`` adds it),
   ``model_discrepancy_growth_um_per_mm`` (how that error grows per mm the joint motions from the nearest
-  training pose carry the ball: :mod:`arm_model.discrepancy`) and ``training_poses`` (the points file of the
-  poses the calibration was fitted on, relative to the TOML; read by :func:`training_poses_of`), all optional;
+  training pose carry the ball, one number or a list of one a joint: :mod:`arm_model.discrepancy`) and
+  ``training_poses`` (the points file of the poses the calibration was fitted on, relative to the TOML; read by
+  :func:`training_poses_of`), all optional;
 * optional ``[[reference_frame]]`` and ``[[marker]]`` tables: the reference instrument's frame of each
   session and the markers' offsets on the tip frame that a calibration on tracker data estimated
   (:mod:`arm_model.tracker`; ``aacmm tip --reference-frame`` predicts the instrument's coordinates).
@@ -114,7 +115,8 @@ class Arm:
     (``[calibration] probing_scatter_um``) or None; ``tracker``: the reference instrument's frames and the
     markers' offsets (``[[reference_frame]]``, ``[[marker]]``) or None; ``model_discrepancy``: the
     calibration's model discrepancy per axis [m] at its training poses (``[calibration] model_discrepancy_um``)
-    or None; ``discrepancy_growth``: its growth [1] (m per m of ``d`` from the nearest training pose;
+    or None; ``discrepancy_growth``: its growth [1] (m per m of ``d`` from the nearest training pose, one number or
+    a tuple of one a joint: :class:`~arm_model.discrepancy.GrowingDiscrepancy`;
     ``model_discrepancy_growth_um_per_mm``) or None; ``training_poses``: the points file of the calibration's
     poses (resolved path; ``training_poses``) or None."""
     desc: ArmDescription
@@ -126,17 +128,24 @@ class Arm:
     probing_scatter: float | None = None
     tracker: Tracker | None = None
     model_discrepancy: float | None = None
-    discrepancy_growth: float | None = None
+    discrepancy_growth: float | tuple[float, ...] | None = None
     training_poses: Path | None = None
 
     def __post_init__(self):
         """A ValueError for what a model file's reader would refuse (:func:`check_calibration_table`): a scatter,
         discrepancy or growth not finite or out of its range, or a growth above 0 without the discrepancy it grows
-        from and the training poses it grows away from (it would otherwise be silently ignored)."""
-        cal = {k: v * f for k, v, f in (("probing_scatter_um", self.probing_scatter, 1e6),
-                                         ("model_discrepancy_um", self.model_discrepancy, 1e6),
-                                         ("model_discrepancy_growth_um_per_mm", self.discrepancy_growth, 1e3))
+        from and the training poses it grows away from (it would otherwise be silently ignored). A growth given as
+        a list or an array is kept as a tuple."""
+        if isinstance(self.discrepancy_growth, (list, np.ndarray)):
+            object.__setattr__(self, "discrepancy_growth", tuple(np.asarray(self.discrepancy_growth).ravel().tolist()))
+        cal = {k: [_scaled(x, f) for x in v] if isinstance(v, tuple) else _scaled(v, f)
+               for k, v, f in (("probing_scatter_um", self.probing_scatter, 1e6),
+                               ("model_discrepancy_um", self.model_discrepancy, 1e6),
+                               ("model_discrepancy_growth_um_per_mm", self.discrepancy_growth, 1e3))
                if v is not None}
+        if isinstance(self.discrepancy_growth, tuple) and len(self.discrepancy_growth) != self.desc.n_joints:
+            raise ValueError(f"Arm: discrepancy_growth lists {len(self.discrepancy_growth)} growths, the arm has "
+                             f"{self.desc.n_joints} joints")
         if self.training_poses is not None:
             cal["training_poses"] = Path(self.training_poses).name or "training_poses"
         try:
@@ -151,7 +160,8 @@ class Arm:
         :class:`~arm_model.discrepancy.GrowingDiscrepancy` (its training poses read from their file, once:
         :func:`training_poses_of`) when the file gives a growth, else the constant ``model_discrepancy`` [m] or
         None."""
-        if self.model_discrepancy is None or not self.discrepancy_growth:
+        g = self.discrepancy_growth
+        if self.model_discrepancy is None or g is None or max(g if isinstance(g, tuple) else (g,)) == 0:
             return self.model_discrepancy
         return GrowingDiscrepancy(self.model_discrepancy, self.discrepancy_growth, training_poses_of(self))
 
@@ -444,13 +454,30 @@ def parse_model(text: str, path: str = "<string>") -> Arm:
         if "model_discrepancy_um" in data["calibration"]:
             discrepancy = float(data["calibration"]["model_discrepancy_um"]) * 1e-6
         if "model_discrepancy_growth_um_per_mm" in data["calibration"]:
-            growth = float(data["calibration"]["model_discrepancy_growth_um_per_mm"]) * 1e-3
+            growth = _growth_of(data["calibration"]["model_discrepancy_growth_um_per_mm"], desc, r)
     tracker = tracker_from_tables(data, r)
     if "effect" not in data:
         return Arm(desc, covariance=covariance, probing_scatter=scatter, tracker=tracker,
                    model_discrepancy=discrepancy, discrepancy_growth=growth, training_poses=training)
     effects, values, u, states = effects_from_tables(desc, data["effect"], r)
     return Arm(desc, effects, values, u, states, covariance, scatter, tracker, discrepancy, growth, training)
+
+
+def _scaled(v, factor: float):
+    """``v * factor`` for a number (not a bool), else ``v`` as given (for the checker to refuse by name)."""
+    return v * factor if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+
+
+def _growth_of(value, desc: ArmDescription, r: TomlReader) -> float | tuple[float, ...]:
+    """The model discrepancy's growth [1] of ``model_discrepancy_growth_um_per_mm`` (checked by
+    :func:`~arm_model.description.check_calibration_table`): one number, or a list of one a joint of ``desc``."""
+    if not isinstance(value, list):
+        return float(value) * 1e-3
+    if len(value) != desc.n_joints:
+        raise r.error(f"'model_discrepancy_growth_um_per_mm' lists {len(value)} growths, the arm has {desc.n_joints} "
+                      "joints (one a joint, in the order of its encoder columns)", "calibration",
+                      "model_discrepancy_growth_um_per_mm")
+    return tuple(float(v) * 1e-3 for v in value)
 
 
 def _beside(model_path: str, name: str | None, r: TomlReader, key: str) -> Path | None:
@@ -514,8 +541,9 @@ def load_model(path, tip_frame: str | None = None, probe: dict | None = None, ma
         bad = next((k for k, v in hold.items() if not math.isfinite(v)), None)
         if bad is not None:
             raise ValueError(f"hold[{bad!r}] must be finite, got {hold[bad]!r}")
+    from .urdf_import import is_urdf
     path = arm_path(path)
-    if path.suffix.lower() == ".urdf" or masses is not None or base_frame is not None or hold:  # load_arm: why not
+    if is_urdf(path) or masses is not None or base_frame is not None or hold:  # load_arm: why not
         from .urdf_import import load_arm
         return Arm(load_arm(path, tip_frame, probe, masses, base_frame, hold))
     if tip_frame:
@@ -531,17 +559,20 @@ def format_model(desc: ArmDescription, effects=(), values: dict | None = None, u
                  states: dict | None = None, *, covariance: str | None = None, written_by: str | None = None,
                  probing_scatter: float | None = None, tracker: Tracker | None = None,
                  comment: str | None = None, model_discrepancy: float | None = None,
-                 discrepancy_growth: float | None = None, training_poses: str | None = None) -> str:
+                 discrepancy_growth: float | tuple[float, ...] | None = None,
+                 training_poses: str | None = None) -> str:
     """TOML text of a model file that :func:`parse_model` reads back exactly (``probing_scatter`` and
-    ``model_discrepancy`` [m]: written in um to 4 significant digits, ``discrepancy_growth`` [1] in um/mm to 4
-    digits; ``training_poses``: the name of the training poses' points file; ``tracker``: the reference frames
-    and marker offsets)."""
+    ``model_discrepancy`` [m]: written in um to 4 significant digits, ``discrepancy_growth`` [1] (one number, or a
+    tuple of one a joint) in um/mm to 4 digits; ``training_poses``: the name of the training poses' points file;
+    ``tracker``: the reference frames and marker offsets)."""
     data = description_data(desc)
     if effects:
         data["effect"] = effect_tables(desc, effects, values or {}, uncertainties, states)
     scatter, discrepancy = (None if v is None else float(f"{v * 1e6:.4g}")
                             for v in (probing_scatter, model_discrepancy))
-    growth = None if discrepancy_growth is None else float(f"{discrepancy_growth * 1e3:.4g}")
+    growth = None if discrepancy_growth is None else (
+        [float(f"{g * 1e3:.4g}") for g in discrepancy_growth] if isinstance(discrepancy_growth, tuple)
+        else float(f"{discrepancy_growth * 1e3:.4g}"))
     cal = {k: v for k, v in (("covariance", covariance), ("written_by", written_by), ("probing_scatter_um", scatter),
                              ("model_discrepancy_um", discrepancy), ("model_discrepancy_growth_um_per_mm", growth),
                              ("training_poses", training_poses))

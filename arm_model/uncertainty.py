@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .discrepancy import GrowingDiscrepancy
+from .discrepancy import GrowingDiscrepancy, growth_text
 from .effects import ModelInputs
 from .jacobian import DUAL_OPS, Dual, chain_jacobian, geometry_entries, value
 from .kinematics import run_chunks
@@ -170,13 +170,13 @@ def default_inputs(desc, *, encoder=None, force=None, torque=None, compliance=No
         "a model file from calibrate on probed points does; a reference instrument's own noise is not the probe's")
     growing = model_discrepancy if isinstance(model_discrepancy, GrowingDiscrepancy) else None
     sigma0 = growing.sigma0 if growing is not None else model_discrepancy
-    if discrepancy is not None or growing is None or growing.growth == 0:   # a given value is a constant
+    if discrepancy is not None or growing is None or not growing.grows:   # a given value is a constant
         growing = None
     discrepancy, src["model discrepancy"] = _model_input(discrepancy, sigma0, "model_discrepancy_um",
                                                          "its calibration's extrapolative cross-validation")
     if growing is not None:
-        src["model discrepancy"] += (f", growing by {growing.growth * 1e3:.4g} um per mm from the nearest training "
-                                     "pose (model_discrepancy_growth_um_per_mm)")
+        src["model discrepancy"] += (f", growing by {growth_text(growing.growths)} um per mm of ball travel from the "
+                                     "nearest training pose (model_discrepancy_growth_um_per_mm)")
     for name, arr in (("encoder", enc), ("force", f), ("torque", t), ("compliance", c)):
         if not np.all(np.isfinite(arr)) or np.any(arr < 0):
             raise ValueError(f"{name} uncertainty must be finite and >= 0, got {arr}")
@@ -386,8 +386,7 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
     # the model discrepancy at each pose, once for all chunks (its distance from the training poses is blocked)
     growing, dist, sd_disc = inputs.growing, None, np.full(n, inputs.discrepancy)
     if growing is not None:
-        dist = growing.distance(model.desc, q)
-        sd_disc = growing.sd_at(dist)
+        dist, sd_disc = growing.at(model.desc, q)
     span = plan.spans["parameters"]
     npar = span.stop - span.start       # the rows of the covariance's factor (fewer than the names when singular)
     cov = np.empty((n, 3, 3))

@@ -59,7 +59,8 @@ from .urdf import ELASTIC_JOINTS, origin_matrix
 
 log = logging.getLogger(__name__)
 
-__all__ = ["description_from_urdf", "load_arm", "load_masses", "calibrated_urdf_text", "PAPER_PROBE",
+__all__ = ["description_from_urdf", "load_arm", "is_urdf", "tip_candidates", "URDF_SUFFIXES", "load_masses",
+           "calibrated_urdf_text", "PAPER_PROBE",
            "LinkMass"]
 
 #: the seed paper's probe: 4 mm ball, 13 N range, FEM compliances [m], [N], [m/N]
@@ -87,6 +88,8 @@ _NUMERIC = {
 _USED = {("joint", "origin", "xyz"): "length", ("joint", "origin", "rpy"): "angle", ("joint", "axis", "xyz"): "ratio",
          ("joint", "limit", "lower"): None, ("joint", "limit", "upper"): None,
          ("joint", "mimic", "multiplier"): "ratio", ("joint", "mimic", "offset"): None}
+#: used numbers that may be infinite: a joint limit of +-inf is no limit (as +-1e16 from SDF converters is)
+_UNBOUNDED = {("joint", "limit", "lower"), ("joint", "limit", "upper")}
 #: a negative mass [kg] smaller than this is rounding noise (taken as 0)
 _MASS_NOISE = 1e-9
 _ELASTIC_TYPES = dict(zip(ELASTIC_JOINTS, ("revolute", "revolute", "prismatic"), strict=True))
@@ -121,17 +124,67 @@ class _Urdf:
         return InputError(msg, self.path, None if name is None else self.line(name, kind), column)
 
 
+#: lxml's refusals that urdfdom (Pinocchio's and ROS's URDF parser, built on TinyXML) reads past, as real robots
+#: ship them (pybullet's minitaur, humanoid and differential robots, Drake's UR5e): (the start of lxml's message,
+#: what is tolerated). Each is repaired in the bytes without moving a line, and said once as a warning.
+_TOLERATED = (("Unsupported version", "an XML declaration with an unknown version (read as 1.0)"),
+              ("XML declaration allowed only at the start", "an XML declaration after blank lines (ignored)"),
+              ("Extra content at the end of the document", "NUL bytes after the end of the document (ignored)"),
+              ("Namespace prefix", "a namespace prefix never declared (declared for reading)"))
+
+
+def _repaired(data: bytes, message: str) -> bytes | None:
+    """``data`` with the fault lxml reported in ``message`` repaired as urdfdom reads past it (:data:`_TOLERATED`),
+    lines unmoved; None if it is no such fault."""
+    import re
+    if message.startswith("Unsupported version"):
+        m = re.match(rb"(\s*<\?xml\s+version\s*=\s*[\"'])([^\"']*)", data.lstrip(b"\xef\xbb\xbf"))
+        if m:
+            start = len(data) - len(data.lstrip(b"\xef\xbb\xbf")) + m.end(1)
+            return data[:start] + b"1.0" + data[start + len(m.group(2)):]
+    elif message.startswith("XML declaration allowed only at the start"):
+        m = re.search(rb"<\?xml[^>]*\?>", data)
+        enc = re.search(rb"encoding\s*=\s*[\"']([^\"']*)", m.group(0)) if m else None
+        if m and not data[:m.start()].lstrip(b"\xef\xbb\xbf").strip() and \
+                (enc is None or enc.group(1).lower() in (b"utf-8", b"utf8", b"us-ascii", b"ascii")):   # (not guessed)
+            return data[:m.start()] + b" " * (m.end() - m.start()) + data[m.end():]
+    elif message.startswith("Extra content at the end of the document"):
+        stripped = data.rstrip(b"\x00\t\r\n ")       # (the tail: NUL bytes and blanks only)
+        if b"\x00" in data[len(stripped):]:
+            return stripped + b"\n"
+    elif message.startswith("Namespace prefix"):
+        prefix, root = re.match(r"Namespace prefix ([A-Za-z_][\w.-]*)", message), re.search(rb"<robot(?=[\s>/])", data)
+        if prefix and root and prefix.group(1) not in ("xml", "xmlns"):
+            decl = f' xmlns:{prefix.group(1)}="urn:aacmm:undeclared:{prefix.group(1)}"'.encode()
+            return data[:root.end()] + decl + data[root.end():]
+    return None
+
+
 def _parse_xml(path: Path, data: bytes):
     """The lxml tree of a URDF, parsed safely: no entity resolved, nothing fetched; a DOCTYPE that declares
     entities or names an external DTD is refused (a URDF needs neither, and yourdfpy, which parses the file
-    again, would print its parse errors on standard error)."""
+    again, would print its parse errors on standard error). What urdfdom reads past (:data:`_TOLERATED`) is
+    repaired with a warning; any other XML error is refused at its line and column."""
     from lxml import etree
-    try:
-        tree = etree.parse(io.BytesIO(data), etree.XMLParser(remove_comments=False, resolve_entities=False,
-                                                              no_network=True, load_dtd=False))
-    except etree.XMLSyntaxError as exc:
-        line, col = exc.position if exc.position else (None, None)
-        raise InputError(f"not valid XML: {exc.msg}", path, line, None if col is None else f"column {col}") from None
+    tolerated = []
+    for _ in range(2 + 4 * len(_TOLERATED)):        # each repair removes one fault; a few prefixes at most
+        try:
+            tree = etree.parse(io.BytesIO(data), etree.XMLParser(remove_comments=False, resolve_entities=False,
+                                                                  no_network=True, load_dtd=False))
+            break
+        except etree.XMLSyntaxError as exc:
+            line, col = exc.position if exc.position else (None, None)
+            fixed = _repaired(data, exc.msg)
+            if fixed is None or fixed == data or (line, exc.msg) in {(k, m) for k, m, _ in tolerated}:   # no progress
+                raise InputError(f"not valid XML: {exc.msg}", path, line,
+                                 None if col is None else f"column {col}") from None
+            tolerated.append((line, exc.msg, next(what for start, what in _TOLERATED if exc.msg.startswith(start))))
+            data = fixed
+    else:
+        raise InputError("not valid XML: too many faults to read past", path)
+    if tolerated:
+        said = "; ".join(dict.fromkeys(f"line {line}: {what}" for line, _, what in tolerated))
+        log.warning(f"{path} is not strict XML, read as urdfdom (Pinocchio's and ROS's URDF parser) reads it: {said}")
     info = tree.docinfo
     if info.system_url or info.public_id or (info.internalDTD is not None and any(info.internalDTD.iterentities())):
         raise InputError("a <!DOCTYPE> that declares entities or names an external DTD: a URDF needs neither (entities "
@@ -153,6 +206,8 @@ def _check_numbers(root, path: Path) -> None:
             parts = text.split()
             vals = [parse_number(v) for v in parts] if len(parts) == n else None
             used = (ptag, el.tag, attr) in _USED
+            if used and vals and None not in vals and (ptag, el.tag, attr) in _UNBOUNDED:
+                vals = [0.0 if math.isinf(v) else v for v in vals]      # +-inf: no limit (a NaN stays refused)
             if vals is None or None in vals or (used and not all(map(math.isfinite, vals))):
                 raise InputError(f"<{el.tag} {attr}=...> must be {n} finite number{'s' if n > 1 else ''}, "
                                  f"got {text!r}", path, el.sourceline, f"key '{el.tag}.{attr}'")
@@ -178,6 +233,15 @@ def _check_not_xacro(root, path: Path) -> None:
                                  f"key '{el.tag}.{attr}'")
 
 
+def _warn_repeated(el, what: str, tags: tuple, path: Path) -> None:
+    """A warning for each of ``tags`` that ``el`` holds more than once: the first is used, as urdfdom uses it."""
+    for tag in tags:
+        found = el.findall(tag)
+        if len(found) > 1:
+            log.warning(f"{path}, line {found[1].sourceline}: {what} has {len(found)} <{tag}> elements (lines "
+                        f"{', '.join(str(f.sourceline) for f in found)}): the first is used, as urdfdom uses it")
+
+
 def _check_tree(root, path: Path) -> tuple[dict, dict]:
     """(links, joints) by name, lxml elements; names unique, joint types known, every parent and child
     defined, each link the child of one joint at most."""
@@ -192,6 +256,7 @@ def _check_tree(root, path: Path) -> tuple[dict, dict]:
             raise InputError(f"link '{name}' is defined twice (first on line {links[name].sourceline})",
                              path, el.sourceline)
         links[name] = el
+        _warn_repeated(el, f"link '{name}'", ("inertial",), path)
     children = {}
     for el in root.findall("joint"):
         name, jtype = el.get("name"), el.get("type")
@@ -203,7 +268,9 @@ def _check_tree(root, path: Path) -> tuple[dict, dict]:
             raise InputError(f"joint '{name}' is defined twice (first on line {joints[name].sourceline})",
                              path, el.sourceline)
         if jtype not in _JOINT_TYPES:
-            raise InputError(f"joint '{name}': type must be one of {', '.join(_JOINT_TYPES)}, got {jtype!r}",
+            why = (": a ball joint is pybullet's extension, not URDF (urdfdom refuses it too); give it as three "
+                   "revolute joints" if jtype == "spherical" else "")
+            raise InputError(f"joint '{name}': type must be one of {', '.join(_JOINT_TYPES)}, got {jtype!r}{why}",
                              path, el.sourceline)
         for tag in ("parent", "child"):
             sub = el.find(tag)
@@ -217,8 +284,16 @@ def _check_tree(root, path: Path) -> tuple[dict, dict]:
             raise InputError(f"link '{child}' is the child of two joints ('{children[child]}' and '{name}'): "
                              "a URDF is a tree", path, el.sourceline)
         children[child] = name
+        _warn_repeated(el, f"joint '{name}'", ("parent", "child", "origin", "axis", "limit", "mimic"), path)
+        mimic = el.find("mimic")
+        if mimic is not None and not mimic.get("joint"):
+            raise InputError(f"joint '{name}': its <mimic> names no joint (joint=\"...\", the joint it follows)", path,
+                             mimic.sourceline, "key 'mimic.joint'")
         if jtype in ("revolute", "prismatic") and el.find("limit") is None:
-            raise InputError(f"joint '{name}' ({jtype}) has no <limit>", path, el.sourceline)
+            raise InputError(f"joint '{name}' ({jtype}) has no <limit>: the URDF format requires one on a {jtype} "
+                             "joint (urdfdom, Pinocchio's and ROS's parser, refuses the file too); add <limit "
+                             "lower=... upper=... effort=... velocity=...>" + (", or make it type=\"continuous\" if "
+                             "it turns without end" if jtype == "revolute" else ""), path, el.sourceline)
         joints[name] = el
     return links, joints
 
@@ -238,13 +313,14 @@ def _read_urdf(path: str | Path) -> _Urdf:
     root = tree.getroot()
     if root.tag != "robot":
         raise InputError(f"a URDF's root element is <robot>, got <{root.tag}>", path, root.sourceline)
+    _check_not_xacro(root, path)         # (before the name: a xacro file of macros has none)
     if not root.get("name"):
         raise InputError("<robot> has no name", path, root.sourceline)
-    _check_not_xacro(root, path)
     _check_numbers(root, path)
     links, joints = _check_tree(root, path)
     try:
-        model = yourdfpy.URDF.load(io.BytesIO(data), build_scene_graph=False, load_meshes=False,
+        from lxml import etree
+        model = yourdfpy.URDF.load(io.BytesIO(etree.tostring(tree)), build_scene_graph=False, load_meshes=False,
                                    load_collision_meshes=False)
     except Exception as exc:   # a case the checks above miss: still one located-as-possible message
         raise InputError(f"yourdfpy cannot read the URDF: {exc}", path) from None
@@ -394,6 +470,8 @@ def _limits(u: _Urdf, j) -> tuple[float, float] | None:
     if j.type == "continuous" or j.limit is None or j.limit.lower is None or j.limit.upper is None:
         return None
     lower, upper = float(j.limit.lower), float(j.limit.upper)
+    if math.isinf(lower) or math.isinf(upper):       # one side unbounded: the joint has no limits to hold to
+        return None
     if lower > upper:
         raise u.error(f"joint '{j.name}': lower limit {lower:g} is above upper limit {upper:g}", j.name)
     if lower == upper or implausible([lower, upper], "length" if j.type == "prismatic" else "angle"):
@@ -428,12 +506,49 @@ def _held_values(u: _Urdf, chain: list, tip_frame: str, hold: dict | None, elast
     return out
 
 
+def tip_candidates(u: _Urdf, most: int = 8) -> str:
+    """The links a chain ends at (no joint below them), those behind the most moving joints first, as a phrase
+    for messages: ``"the chains end at tool0 (6 moving joints), ..."``, or that there is none."""
+    by_child = {j.child: j for j in u.robot.joints}
+    parents = {j.parent for j in u.robot.joints}
+    depth: dict[str, int] = {}          # link -> moving joints above it (each link's walk stops at a known one)
+    for start in u.link_elements:
+        path, link = [], start
+        while link in by_child and link not in depth and link not in path:     # (a loop ends the walk)
+            path.append(link)
+            link = by_child[link].parent
+        n = depth.get(link, 0)
+        for link in reversed(path):
+            n += by_child[link].type in ("revolute", "continuous", "prismatic")
+            depth[link] = n
+    counts = sorted((-depth.get(leaf, 0), leaf) for leaf in u.link_elements if leaf not in parents and depth.get(leaf))
+    if not counts:
+        return "no link of this URDF hangs from a moving joint"
+    shown = ", ".join(f"{leaf if len(leaf) <= 60 else leaf[:55] + '...'} ({-n} moving joint{'s' if n < -1 else ''})"
+                      for n, leaf in counts[:most])          # (a name may be 100 000 characters long: cut)
+    return "the chains end at " + shown + (f", and {len(counts) - most} more" if len(counts) > most else "")
+
+
+def _frame_problem(u: _Urdf, frame: str, option: str) -> InputError:
+    """The error for a ``--tip-frame`` or ``--base-frame`` that names no link: a joint's name says which link
+    is its child; anything else, the nearest link's name and the links chains end at."""
+    if frame in u.joint_elements:
+        child = u.joint_elements[frame].find("child").get("link")
+        return InputError(f"'{frame}' is a joint, not a link: {option} names a link (this joint's child link is "
+                          f"'{child}')", u.path, u.line(frame), f"key '{option}'")
+    return InputError(f"no link named '{frame}'{did_you_mean(frame, u.link_elements)}; {tip_candidates(u)} "
+                      f"({len(u.link_elements)} links in all)", u.path, None, f"key '{option}'")
+
+
 def _chain(u: _Urdf, tip_frame: str, base_frame: str | None = None, hold: dict | None = None) -> _Chain:
-    for frame, key in ((tip_frame, "key '--tip-frame'"), (base_frame, "key '--base-frame'")):
+    for frame, option in ((tip_frame, "--tip-frame"), (base_frame, "--base-frame")):
         if frame is not None and frame not in u.link_elements:
-            raise InputError(f"no link named '{frame}'{did_you_mean(frame, u.link_elements)} (links: "
-                             f"{', '.join(u.link_elements)})", u.path, None, key)
+            raise _frame_problem(u, frame, option)
     chain = _walk_to_root(u, tip_frame, base_frame)
+    if not chain and base_frame is None:
+        raise InputError(f"link '{tip_frame}' hangs from no joint: it is a root of the URDF, so no chain reaches it; "
+                         f"the tip frame is a link a chain reaches: {tip_candidates(u)}", u.path,
+                         u.line(tip_frame, "link"), "key '--tip-frame'")
     base = chain[0].parent if chain else tip_frame
     if base_frame is not None and base != base_frame:
         ancestors = [j.parent for j in chain]
@@ -452,6 +567,10 @@ def _chain(u: _Urdf, tip_frame: str, base_frame: str | None = None, hold: dict |
         if j.type == "fixed" or j.name in held:
             pending = pending @ _T(j.origin)
             continue
+        if j.type not in ("revolute", "continuous", "prismatic") and j.child == tip_frame:
+            raise u.error(f"the tip frame '{tip_frame}' hangs from the {j.type} joint '{j.name}', which moves it "
+                          "freely: no chain of joints gives its place; the tip frame is a link that joints place",
+                          j.name)
         if j.type not in ("revolute", "continuous", "prismatic"):
             raise u.error(f"joint '{j.name}' on the chain to '{tip_frame}' is {j.type}: the toolkit models "
                           "revolute, continuous and prismatic joints (a floating or planar joint is a base the "
@@ -592,9 +711,11 @@ def _ball_diameter(u: _Urdf, tip_frame: str) -> float | None:
         if sphere is None or sphere.get("radius") is None or not all(v is not None and abs(v) <= 1e-9 for v in xyz):
             continue
         radius = parse_number(sphere.get("radius"))
+        if radius == 0.0:           # a point (a foot's contact sphere of radius 0, as pybullet's laikago): no ball
+            continue
         wrong = None if radius is None or not math.isfinite(radius) else implausible(radius, "length")
         if radius is None or not math.isfinite(radius) or wrong or radius <= 0:
-            why = ("must not be negative" if radius is not None and radius < 0 else "must be > 0" if radius == 0
+            why = ("must not be negative" if radius is not None and radius < 0
                    else wrong[1] if wrong else "must be a finite number")
             raise InputError(f"<sphere radius=...> of the tip link '{tip_frame}' (the probe ball) {why}, got "
                              f"{sphere.get('radius')!r}", u.path, sphere.sourceline, "key 'sphere.radius'")
@@ -701,16 +822,16 @@ def _rgba_of(u: _Urdf, visual) -> tuple | None:
     return tuple(vals) if vals and len(vals) == 4 and all(v is not None and 0 <= v <= 1 for v in vals) else None
 
 
-def _visuals(u: _Urdf, ch: _Chain) -> tuple[Visual, ...]:
-    """The user's ``<visual>`` elements on the links the chain moves (and its base), each in its row's
-    link frame, for the viewer; a mesh whose file is missing, or a visual with numbers that are not
-    finite, is left out (the kinematics never use them)."""
+def _visuals(u: _Urdf, ch: _Chain) -> tuple[tuple[Visual, ...], tuple[str, ...]]:
+    """(visuals, missing): the user's ``<visual>`` elements on the links the chain moves (and its base), each in
+    its row's link frame, for the viewer; and the file names of the meshes not found (:func:`_mesh_file`), which,
+    like a visual with numbers that are not finite, are left out (the kinematics never use them)."""
     from copy import deepcopy
 
     from lxml import etree
 
     from .urdf import origin_matrix
-    out, missing = [], 0
+    out, missing = [], []
     for link, (row, T) in _link_frames(u, ch).items():
         if link not in u.link_elements:          # the frame between a turned joint's motion and its origin
             continue
@@ -727,7 +848,7 @@ def _visuals(u: _Urdf, ch: _Chain) -> tuple[Visual, ...]:
             if shape.tag == "mesh":
                 found = _mesh_file(u, shape.get("filename", ""))
                 if found is None:
-                    missing += 1
+                    missing.append(shape.get("filename", ""))
                     continue
                 shape.set("filename", str(found))
             pose = T @ origin_matrix(nums)
@@ -735,8 +856,8 @@ def _visuals(u: _Urdf, ch: _Chain) -> tuple[Visual, ...]:
                               f"<geometry>{etree.tostring(shape, encoding='unicode').strip()}</geometry>",
                               _rgba_of(u, vis)))
     if missing:
-        log.debug(f"{u.path}: {missing} mesh file(s) not found: the viewer draws the arm without them")
-    return tuple(out)
+        log.debug(f"{u.path}: {len(missing)} mesh file(s) not found: the viewer draws the arm without them")
+    return tuple(out), tuple(dict.fromkeys(missing))
 
 
 def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None = None,
@@ -769,10 +890,32 @@ def description_from_urdf(path: str | Path, tip_frame: str, probe: dict | None =
     ch = _chain(u, tip_frame, base_frame, hold)
     rows = [_row(u, j, prefix, mimic, mass, com)
             for (j, prefix, mimic), (mass, com) in zip(ch.moving, _fold_masses(u, ch, masses), strict=True)]
+    visuals, missing = _visuals(u, ch)
     return ArmDescription(name=name or u.robot.name or Path(path).stem, convention="urdf", joints=tuple(rows),
                           probe=_probe_of(u, ch, tip_frame, probe), source=str(path), tip_frame=tip_frame,
-                          visuals=_visuals(u, ch), base_frame=base_frame,
+                          visuals=visuals, missing_meshes=missing, base_frame=base_frame,
                           held_joints=tuple(sorted((hold or {}).items())))
+
+
+#: the names a URDF goes by: a xacro file is sent to the URDF reader too, which says to expand it
+URDF_SUFFIXES = (".urdf", ".xacro", ".xml")
+
+
+def is_urdf(path: str | Path) -> bool:
+    """Whether ``path`` is read as a URDF: named ``.urdf``, ``.xacro`` or ``.xml`` (any case), or a regular file of
+    another name whose first character past blanks (and a UTF-8 byte order mark) is ``<``: XML, which a description
+    TOML never is (a robot's description as its vendor names it, ``robot.URDF``, ``model``)."""
+    path = Path(path)
+    if path.suffix.lower() in URDF_SUFFIXES:
+        return True
+    try:
+        if not path.is_file():
+            return False
+        with open(path, "rb") as fh:
+            head = fh.read(4096)
+    except OSError:
+        return False
+    return head.lstrip(b"\xef\xbb\xbf").lstrip().startswith(b"<")
 
 
 def load_arm(path: str | Path, tip_frame: str | None = None, probe: dict | None = None,
@@ -782,9 +925,10 @@ def load_arm(path: str | Path, tip_frame: str | None = None, probe: dict | None 
     file; ``masses``: a masses file (:func:`load_masses`) for a URDF arm; ``base_frame``: for a URDF, the link
     the chain starts at (default its root)."""
     path = arm_path(path)
-    if path.suffix.lower() == ".urdf":
-        if not tip_frame:
-            raise InputError("an arm given as a URDF needs --tip-frame (the link at the ball centre)", path)
+    if is_urdf(path):
+        if not tip_frame:        # (the file read first: a xacro file says so, a good one lists its chains' ends)
+            raise InputError("an arm given as a URDF needs --tip-frame (the link at the ball centre, or the tool "
+                             f"point); {tip_candidates(_read_urdf(path))}", path)
         return description_from_urdf(path, tip_frame, probe, masses=None if masses is None else load_masses(masses),
                                      base_frame=base_frame, hold=hold)
     if hold:
@@ -857,7 +1001,7 @@ def calibrated_urdf_text(nominal: ArmDescription, calibrated: ArmDescription) ->
 
     from .urdf import urdf_text
 
-    if not nominal.tip_frame or not nominal.source or Path(nominal.source).suffix.lower() != ".urdf":
+    if not nominal.tip_frame or not nominal.source or not is_urdf(nominal.source):
         return urdf_text(calibrated)
     u = _read_urdf(nominal.source)
     hung = _hung_from(u, nominal.base_frame, nominal.tip_frame)

@@ -24,6 +24,7 @@ from arm_model.cli_options import (
     seed,
 )
 from arm_model.csv_io import parse_number
+from arm_model.discrepancy import growth_text
 from arm_model.io import json_text, read_artefacts, read_points
 from arm_model.log import counted
 from arm_model.model_file import Arm
@@ -674,8 +675,12 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
             g = d.growth
             log.info(f"  growing away from the training poses: {g.sigma0 * 1e6:.4g} +- {g.u_sigma0 * 1e6:.2g} um at "
                      f"them + {g.growth * 1e3:.4g} +- {g.u_growth * 1e3:.2g} um per mm of ball travel from the nearest "
-                     f"(measured up to {g.d_max * 1e3:.4g} mm; likelihood ratio over a constant {g.lr:.3g}); tip adds "
-                     "it to every point's u")
+                     f"(measured up to {g.d_max * 1e3:.4g} mm; likelihood ratio over a constant {g.lr:.3g})")
+        if d.written_growth is not None:
+            s0, gj = d.written
+            log.info(f"  per joint, with their uncertainty carried: {s0 * 1e6:.4g} um at the training poses + "
+                     f"{growth_text(gj)} um per mm of each joint's ball travel from the nearest; tip adds it to "
+                     "every point's u")
     log.info(f"model file -> {files['description']} (covariance {files['covariance'].name}); report -> "
              f"{files['report']}")
 

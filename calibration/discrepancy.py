@@ -26,10 +26,14 @@ poses left in its fold (:func:`arm_model.discrepancy.pose_distance`: how far the
 nearest of them carry the ball): :func:`fit_growth` fits ``e_i ~ N(0, v_i + sigma_0^2 + g^2 d_i^2)`` by maximum
 likelihood (``sigma_0, g >= 0``; started from the method of moments, the least squares of ``e_i^2 - v_i`` on
 ``(1, d_i^2)``), with delete-one-fold jackknife uncertainties and the likelihood ratio over the constant.
-That growing ``sigma_d(q)`` is what :func:`arm_model.uncertainty.propagate` adds, per axis, to every corrected
-point of the calibrated model (the model file's ``[calibration] model_discrepancy_um`` = ``sigma_0``,
-``model_discrepancy_growth_um_per_mm`` = ``g`` and its training poses; ``aacmm tip``'s ``model discrepancy``
-contribution). Both are 0 (to their sampling scatter) when the model holds the physics of the data; they
+The same rows are also fitted joint by joint (:func:`fit_joint_growth`: ``e_i ~ N(0, v_i + sigma_0^2 + sum_j
+g_j^2 c_ij)``, ``c_ij`` joint j's share of ``d_i^2``, :func:`arm_model.discrepancy.travel_shares`), so that an
+error growing with one joint's motion grows where that joint moves. What :func:`arm_model.uncertainty.propagate`
+adds, per axis, to every corrected point of the calibrated model is :attr:`Discrepancy.written`: the per-joint
+growths and ``sigma_0`` with their jackknife uncertainty carried (``sqrt(x^2 + u^2)``), each at least the single
+growth's carried the same way (the model file's ``[calibration] model_discrepancy_um`` = ``sigma_0``,
+``model_discrepancy_growth_um_per_mm`` = ``g_j``, one a joint, and its training poses; ``aacmm tip``'s ``model
+discrepancy`` contribution). Both are 0 (to their sampling scatter) when the model holds the physics of the data; they
 grow with what the model lacks as far as the data reach beyond their own poses: an error that shows only far
 beyond what the folds span is an extrapolation of ``g``.
 """
@@ -42,15 +46,18 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from arm_model import NumericalError
-from arm_model.discrepancy import TrainingPoses, joint_levers, pose_distance
+from arm_model.discrepancy import TrainingPoses, joint_levers, travel_shares
 
-__all__ = ["EXTREME_SHARE", "Discrepancy", "Growth", "extreme_folds", "fit_growth", "fold_errors", "group_deletions",
-           "holdable", "model_discrepancy"]
+__all__ = ["EXTREME_SHARE", "RESOLVED_TRAVEL", "Discrepancy", "Growth", "JointGrowth", "extreme_folds", "fit_growth",
+           "fit_joint_growth", "fold_errors", "group_deletions", "holdable", "model_discrepancy"]
 
 log = logging.getLogger(__name__)
 
 #: share of the poses held out at each end of a joint's range
 EXTREME_SHARE = 0.15
+#: a joint whose RMS ball travel in the folds' held-out rows is below this fraction of the largest joint's is not
+#: resolved by them: it grows at the growth of every joint together (:func:`fit_joint_growth`)
+RESOLVED_TRAVEL = 0.01
 
 
 @dataclass(frozen=True)
@@ -89,6 +96,41 @@ class Growth:
 
 
 @dataclass(frozen=True)
+class JointGrowth:
+    """The discrepancy growing with each joint's own motion, ``sigma_d(q)^2 = sigma0^2 + sum_j g_j^2 c_j(q)``
+    (:func:`fit_joint_growth`, :class:`arm_model.discrepancy.GrowingDiscrepancy`), fitted to the same held-out rows
+    as :class:`Growth`.
+
+    Attributes:
+        sigma0: [m] at the training poses; growth: (J,) [1] per metre of ball travel of each joint from the nearest
+            training pose (``c_j``: :func:`arm_model.discrepancy.travel_shares`); maximum likelihood, floored at 0.
+        u_sigma0, u_growth: their delete-one-fold jackknife standard uncertainties.
+        resolved: (J,) whether the folds moved the ball along the joint (RMS travel at least
+            :data:`RESOLVED_TRAVEL` of the largest joint's); a joint they did not resolve takes the growth of every
+            joint together (:class:`Growth`'s, with its uncertainty) instead of an estimate nothing constrains.
+        lr: twice the log-likelihood gained over one growth for every joint (:class:`Growth`).
+    """
+    sigma0: float
+    growth: tuple[float, ...]
+    u_sigma0: float
+    u_growth: tuple[float, ...]
+    resolved: tuple[bool, ...]
+    lr: float
+
+    def predictive(self) -> tuple[float, tuple[float, ...]]:
+        """``(sigma0, growth)`` with their estimation uncertainty carried: ``sqrt(sigma0^2 + u(sigma0)^2)`` and
+        ``sqrt(g_j^2 + u(g_j)^2)`` (the mean of the squares that enter ``sigma_d^2`` when the estimates scatter by
+        their u): what the model file writes and ``tip`` adds."""
+        return (math.hypot(self.sigma0, self.u_sigma0),
+                tuple(math.hypot(g, u) for g, u in zip(self.growth, self.u_growth, strict=True)))
+
+    def to_dict(self) -> dict:
+        return {"sigma0_um": self.sigma0 * 1e6, "growth_um_per_mm": [x * 1e3 for x in self.growth],
+                "u_sigma0_um": self.u_sigma0 * 1e6, "u_growth_um_per_mm": [x * 1e3 for x in self.u_growth],
+                "resolved": list(self.resolved), "likelihood_ratio_over_one_growth": self.lr}
+
+
+@dataclass(frozen=True)
 class Discrepancy:
     """The model discrepancy of a fit (:func:`model_discrepancy`).
 
@@ -102,6 +144,8 @@ class Discrepancy:
             discrepancy together): the extrapolative cross-validation error of the fit.
         growth: the discrepancy growing away from the training poses (:class:`Growth`), fitted to the same
             held-out rows; None when it could not be fitted.
+        joints: the same growing with each joint's own motion (:class:`JointGrowth`), what the model file carries
+            (:attr:`written`); None when it could not be fitted.
         training: the poses of the fit (what the growth is measured away from); training_rows: their rows in
             the fit's points.
     """
@@ -114,56 +158,96 @@ class Discrepancy:
     growth: Growth | None = None
     training: TrainingPoses | None = field(default=None, compare=False)
     training_rows: np.ndarray | None = field(default=None, compare=False)
+    joints: JointGrowth | None = None
 
     @property
-    def written_growth(self) -> Growth | None:
-        """The growth the model file carries: :attr:`growth` when it was fitted and is above 0; None when it
-        could not be fitted or is floored at 0 (the held-out errors do not grow with distance: nothing was
-        resolved, so the discrepancy is written as a constant, never as a measured zero growth)."""
-        g = self.growth
-        return g if g is not None and g.growth > 0 else None
+    def written(self) -> tuple[float, float | tuple[float, ...] | None]:
+        """``(sigma0 [m], growth [1])`` the model file carries and ``tip`` adds, every estimate with its uncertainty
+        carried (``sqrt(x^2 + u(x)^2)``): the growth of each joint (:attr:`joints`, :meth:`JointGrowth.predictive`),
+        each at least the growth of every joint together (:attr:`growth`, the same way; and ``sigma0`` at least
+        its), so that the per-joint fit says where the discrepancy grows but never makes it smaller than the pooled
+        fit does; the pooled growth alone when the joints' could not be fitted; ``(sigma, None)``, a constant, when
+        nothing grows (the held-out errors do not grow, to their uncertainty: nothing was resolved, so the
+        discrepancy is written as a constant, never as a measured zero growth)."""
+        pooled = self.growth
+        if pooled is None:
+            return self.sigma, None
+        s0 = math.hypot(pooled.sigma0, float(np.nan_to_num(pooled.u_sigma0)))
+        one = math.hypot(pooled.growth, float(np.nan_to_num(pooled.u_growth)))
+        g: float | tuple[float, ...] = one
+        if self.joints is not None:
+            s0_j, g_j = self.joints.predictive()
+            s0, g = max(s0, s0_j), tuple(max(x, one) for x in g_j)
+        if max(np.atleast_1d(g)) > 0:
+            return s0, g
+        return self.sigma, None
+
+    def _written_dict(self) -> dict:
+        s0, g = self.written
+        return {"sigma0_um": s0 * 1e6,
+                "growth_um_per_mm": None if g is None else (np.atleast_1d(g) * 1e3).tolist()}
+
+    @property
+    def written_growth(self) -> float | tuple[float, ...] | None:
+        """The growth [1] the model file carries (:attr:`written`): one a joint, or one for every joint, or None (a
+        constant)."""
+        return self.written[1]
 
     def to_dict(self) -> dict:
         return {"sigma_um": self.sigma * 1e6, "ratio": self.ratio, "folds": self.folds, "rows": self.rows,
                 "share": self.share, "rms_um": self.rms * 1e6,
                 "growth": None if self.growth is None else self.growth.to_dict(),
+                "growth_per_joint": None if self.joints is None else self.joints.to_dict(),
+                "written": self._written_dict(),
                 "method": "extrapolative cross-validation: the poses at each end of every joint's range held out "
                           "in turn (group deletion at the solution), the excess of their squared prediction "
                           "errors over the fit's own prediction (noise and posterior), per axis"}
 
 
-def _neg_log_likelihood(x, e2, v, d2) -> tuple[float, np.ndarray]:
-    """Half the negative Gaussian log-likelihood of errors with squares ``e2`` and variances ``v + a + b d2``
-    (``x = (a, b)``), and its gradient with respect to ``x``."""
-    tot = v + x[0] + x[1] * d2
+def _neg_log_likelihood(x, e2, v, cols) -> tuple[float, np.ndarray]:
+    """Half the negative Gaussian log-likelihood of errors with squares ``e2`` and variances ``v + cols @ x``, and
+    its gradient with respect to ``x``."""
+    tot = v + cols @ x
     w = 0.5 * (1.0 / tot - e2 / tot ** 2)
-    return 0.5 * float(np.sum(np.log(tot) + e2 / tot)), np.array([np.sum(w), np.sum(w * d2)])
+    return 0.5 * float(np.sum(np.log(tot) + e2 / tot)), cols.T @ w
 
 
-def _ml(e2, v, d2, growing: bool) -> tuple[np.ndarray, float]:
-    """(a, b) [m^2, 1] maximising the likelihood of ``e2`` under variances ``v + a + b d2`` (a, b >= 0; b = 0
-    unless ``growing``), and the minimised :func:`_neg_log_likelihood`. The unknowns are scaled to order 1 and
-    started from the non-negative least squares of ``e2 - v`` on ``(1, d2)`` (the method of moments)."""
+def _ml(e2, v, cols) -> tuple[np.ndarray, float]:
+    """``x >= 0`` [m^2, 1, ...] maximising the likelihood of ``e2`` under variances ``v + cols @ x`` (``cols``
+    (rows, k): a column of ones, then the squared distances each variance grows with), and the minimised
+    :func:`_neg_log_likelihood`. The unknowns are scaled to order 1 and started from the non-negative least squares
+    of ``e2 - v`` on ``cols`` (the method of moments); a column that is 0 on every row keeps its unknown at 0."""
     from scipy.optimize import minimize, nnls
-    # a floor far below any error (1e-12 of the mean square), so that a noise-free fit keeps a finite likelihood
-    v = np.maximum(v, max(1e-12 * float(np.mean(e2 + v)), 1e-100))
-    scale = np.array([float(np.mean(v)), 1.0])
-    md2 = float(np.mean(d2))
-    growing = growing and md2 > 0
-    if growing:
-        scale[1] = scale[0] / md2
-    cols = np.column_stack([np.ones_like(d2), d2])[:, : 2 if growing else 1] * scale[: 2 if growing else 1]
-    x0 = nnls(cols, e2 - v)[0] + 1e-3
-    x0 = np.append(x0, 0.0) if not growing else x0
-    bounds = [(0.0, None), (0.0, None) if growing else (0.0, 0.0)]
+    v = _floored(e2, v)
+    means = cols.mean(axis=0)
+    live = means > 0
+    scale = np.where(live, float(np.mean(v)) / np.where(live, means, 1.0), 0.0)
+    x0 = np.zeros(cols.shape[1])
+    x0[live] = nnls(cols[:, live] * scale[live], e2 - v)[0] + 1e-3
+    bounds = [(0.0, None) if ok else (0.0, 0.0) for ok in live]
 
     def cost(x):
-        f, grad = _neg_log_likelihood(x * scale, e2, v, d2)
+        f, grad = _neg_log_likelihood(x * scale, e2, v, cols)
         return f, grad * scale
     res = minimize(cost, x0, jac=True, method="L-BFGS-B", bounds=bounds)
     if not res.success:
         raise NumericalError(f"the model discrepancy's likelihood was not maximised: {res.message}")
     return res.x * scale, float(res.fun)
+
+
+def _floored(e2, v) -> np.ndarray:
+    """The predicted variances ``v`` floored far below any error (1e-12 of the mean square), so that a noise-free
+    fit keeps a finite likelihood."""
+    return np.maximum(v, max(1e-12 * float(np.mean(e2 + v)), 1e-100))
+
+
+def _jackknife(fits: list) -> np.ndarray:
+    """The delete-one-fold jackknife standard uncertainty of each column of ``fits`` (one row a fold left out);
+    NaN with fewer than 3 folds."""
+    if len(fits) < 3:
+        return np.full(np.shape(fits)[1] if len(fits) else 2, float("nan"))
+    a = np.asarray(fits)
+    return np.sqrt((len(a) - 1) / len(a) * np.sum((a - a.mean(axis=0)) ** 2, axis=0))
 
 
 def fit_growth(e, v, d, fold) -> Growth:
@@ -174,20 +258,43 @@ def fit_growth(e, v, d, fold) -> Growth:
     with their delete-one-fold jackknife uncertainties."""
     from arm_model.parallel import blas_threads
     e2, v, d2, fold = np.asarray(e) ** 2, np.asarray(v, dtype=float), np.asarray(d, dtype=float) ** 2, np.asarray(fold)
+    cols = np.column_stack([np.ones_like(d2), d2])
     folds = np.unique(fold)
-    jack = []
     # two unknowns: the solver's tiny products spin-wait on every BLAS thread (15 x slower on a busy machine)
     with blas_threads(1):
-        (a, b), nll = _ml(e2, v, d2, True)
-        _, nll0 = _ml(e2, v, d2, False)
-        for f in folds if len(folds) > 2 else ():
-            keep = fold != f
-            jack.append(np.sqrt(_ml(e2[keep], v[keep], d2[keep], True)[0]))
-    u = np.sqrt((len(jack) - 1) / len(jack) * np.sum((np.array(jack) - np.mean(jack, axis=0)) ** 2, axis=0)) \
-        if jack else np.full(2, float("nan"))
+        (a, b), nll = _ml(e2, v, cols)
+        _, nll0 = _ml(e2, v, cols[:, :1])
+        jack = [np.sqrt(_ml(e2[fold != f], v[fold != f], cols[fold != f])[0]) for f in folds] if len(folds) > 2 else []
+    u = _jackknife(jack)
     return Growth(math.sqrt(a), math.sqrt(b), float(u[0]), float(u[1]), max(2 * (nll0 - nll), 0.0),
                   float(np.sqrt(d2.max())) if len(d2) else 0.0, float(np.sqrt(d2.mean())) if len(d2) else 0.0,
                   np.sqrt(d2), np.asarray(e, dtype=float), v)
+
+
+def fit_joint_growth(e, v, c, fold, pooled: Growth) -> JointGrowth:
+    """The :class:`JointGrowth` of held-out errors ``e`` (rows,) [m] whose fit predicts the variances ``v`` [m^2],
+    with ``c`` (rows, J) [m^2] each joint's share of the squared distance from the nearest pose left in the fold
+    (:func:`arm_model.discrepancy.travel_shares`), in folds ``fold``: the maximum likelihood of ``e ~ N(0, v +
+    sigma0^2 + sum_j g_j^2 c_j)`` over the joints the folds resolve (:data:`RESOLVED_TRAVEL`; the others take
+    ``pooled``'s growth and its uncertainty), with delete-one-fold jackknife uncertainties, and the likelihood
+    ratio over ``pooled`` (one growth for every joint)."""
+    from arm_model.parallel import blas_threads
+    e2, v, c, fold = np.asarray(e) ** 2, np.asarray(v, dtype=float), np.asarray(c, dtype=float), np.asarray(fold)
+    travel = np.sqrt(c.mean(axis=0))
+    resolved = travel >= RESOLVED_TRAVEL * max(float(travel.max()), 1e-300)
+    other = c[:, ~resolved].sum(axis=1) * pooled.growth ** 2     # the unresolved joints' share, at the pooled growth
+    cols = np.column_stack([np.ones(len(e2)), c[:, resolved]])
+    with blas_threads(1):
+        x, nll = _ml(e2, v + other, cols)
+        jack = [np.sqrt(_ml(e2[fold != f], (v + other)[fold != f], cols[fold != f])[0]) for f in np.unique(fold)] \
+            if len(np.unique(fold)) > 2 else []
+    u = np.nan_to_num(_jackknife(jack) if jack else np.full(len(x), np.nan))
+    g, ug = np.full(c.shape[1], pooled.growth), np.full(c.shape[1], np.nan_to_num(pooled.u_growth))
+    g[resolved], ug[resolved] = np.sqrt(x[1:]), u[1:]
+    both = np.column_stack([np.ones(len(e2)), c.sum(axis=1)])
+    nll_pooled = _neg_log_likelihood(np.array([pooled.sigma0 ** 2, pooled.growth ** 2]), e2, _floored(e2, v), both)[0]
+    return JointGrowth(math.sqrt(x[0]), tuple(g.tolist()), float(u[0]), tuple(ug.tolist()),
+                       tuple(bool(r) for r in resolved), max(2 * (nll_pooled - nll), 0.0))
 
 
 def extreme_folds(q: np.ndarray, share: float = EXTREME_SHARE) -> list[np.ndarray]:
@@ -306,7 +413,7 @@ def model_discrepancy(prob, r: np.ndarray, js, solve, var: float, share: float =
     q = prob.data.points.q
     levers = np.zeros((len(q), q.shape[1]))
     levers[used] = joint_levers(desc, q[used])
-    errors, variances, dists, fold_of = [], [], [], []
+    errors, variances, shares, fold_of = [], [], [], []
     for fold in extreme_folds(q[used], share):
         held = holdable(prob, used[fold])
         rows = np.flatnonzero(point_rows & np.isin(rp, sorted(held)))
@@ -319,17 +426,19 @@ def model_discrepancy(prob, r: np.ndarray, js, solve, var: float, share: float =
         rest = used[~np.isin(used, sorted(held))]
         errors.append(e)
         variances.append(v)
-        dists.append(pose_distance(desc, q[rp[rows]], TrainingPoses.of(desc, q[rest]), levers[rp[rows]]))
+        shares.append(travel_shares(desc, q[rp[rows]], TrainingPoses.of(desc, q[rest]), levers[rp[rows]])[1])
         fold_of.append(np.full(len(rows), len(fold_of)))
     if not errors:
         return None
     e, v = np.concatenate(errors), np.concatenate(variances)
     observed, predicted, n_rows = float(e @ e), float(np.sum(v)), len(e)
+    c, fold_of = np.concatenate(shares), np.concatenate(fold_of)
+    growth = joints = None
     try:
-        growth = fit_growth(e, v, np.concatenate(dists), np.concatenate(fold_of))
+        growth = fit_growth(e, v, np.sqrt(c.sum(axis=1)), fold_of)
+        joints = fit_joint_growth(e, v, c, fold_of, growth)
     except NumericalError as exc:
         log.warning(f"{exc}: the model discrepancy is written as a constant (no growth away from the training poses)")
-        growth = None
     return Discrepancy(math.sqrt(max((observed - predicted) / n_rows, 0.0)),
                        math.sqrt(observed / predicted) if predicted > 0 else float("nan"), len(errors), n_rows, share,
-                       math.sqrt(observed / n_rows), growth, TrainingPoses.of(desc, q[used]), used)
+                       math.sqrt(observed / n_rows), growth, TrainingPoses.of(desc, q[used]), used, joints)

@@ -115,12 +115,33 @@ def summary_dict(loop: LoopResult, inputs: dict | None = None) -> dict:
                             for f, t, a in loop.structure],
         "structure_remains": bool(loop.remaining),
         "residual_over_stated": loop.residual_over_stated,
+        "heldout_check": loop.heldout_check,
+        "heldout_worse_than_stated": None if loop.heldout_check is None else loop.heldout_check["worse_than_stated"],
+        "escalation": None if loop.escalated is None else {
+            "families": loop.escalated["families"], "candidates": loop.escalated["candidates"],
+            "added": [c.name for c in loop.added if c.name in loop.escalated["candidates"]],
+            "check": loop.escalated["check"]},
         "remaining_structure": [{"family": f.name, "best_regressor": t.best, "p_value_holm": a,
                                  "explained_heldout": t.explained_cv} for f, t, a in loop.remaining],
         "built_from_residual": loop.built,
         "vetoed_by_outer_test": loop.vetoed,
         "verdict": loop.verdict,
     })
+
+
+def _heldout_html(check: dict | None) -> str:
+    """The report's paragraph on the outer test set's judgement (:func:`calibration.loop.verdict.heldout_check`)."""
+    if check is None:
+        return "<p>Outer test set: too few degrees of freedom to judge it against the fit's scatter.</p>"
+    stated = ("" if check["rms_over_stated"] is None else
+              f", {check['rms_over_stated']:.3g} times the stated uncertainties")
+    word = ("<b>worse than a complete model predicts</b>" if check["worse_than_stated"]
+            else "as a complete model predicts")
+    return (f"<p>Outer test set of the final model: {word}: its residual (RMS {check['rms_um']:.4g} um{stated}) is "
+            f"{check['ratio']:.3g} times what the design fit's scatter and the model's own uncertainty give for it "
+            f"({check['dof']} degrees of freedom, F-test p = {check['p_value']:.2g}"
+            + ("" if check["p_stated"] is None else f"; against the stated uncertainties chi-square p = "
+               f"{check['p_stated']:.2g}") + f", level {check['alpha']:g}).</p>")
 
 
 def before_after_text(loop: LoopResult) -> str:
@@ -314,7 +335,8 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
     table = before_after_text(loop)
     img = png("before-after.png", plot_before_after(loop))
     sections.append(f"<h2>Verdict</h2><p>{html.escape(loop.verdict)}</p><p>Stopped: "
-                    f"{html.escape(loop.stop_reason)}.</p><h2>Before and after (held-out test set)</h2>"
+                    f"{html.escape(loop.stop_reason)}.</p>{_heldout_html(loop.heldout_check)}"
+                    "<h2>Before and after (held-out test set)</h2>"
                     f"<pre>{html.escape(table)}</pre><img src='{img}'>")
     if loop.built:
         sections.append("<h2>Effects built from the residual</h2>" + reports.html_table(

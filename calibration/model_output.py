@@ -114,16 +114,14 @@ def written_covariance(result) -> tuple[list, np.ndarray]:
 def discrepancy_fields(result) -> dict:
     """The model discrepancy a result carries (:mod:`calibration.discrepancy`) as the keywords of
     :class:`~arm_model.model_file.Arm` and :func:`~arm_model.model_file.format_model`: ``model_discrepancy`` [m]
-    per axis at the training poses (the growing fit's ``sigma0``) and ``discrepancy_growth`` [1]; None without
-    one, no growth when it could not be fitted or is floored at 0 (:attr:`~calibration.discrepancy.Discrepancy.
-    written_growth`)."""
+    per axis at the training poses and ``discrepancy_growth`` [1], one a joint (:attr:`~calibration.discrepancy.
+    Discrepancy.written`: the growing fit's estimates with their uncertainty carried); None without one, no growth
+    when it could not be fitted or is floored at 0."""
     d = getattr(result, "discrepancy", None)
     if d is None:
         return {"model_discrepancy": None, "discrepancy_growth": None}
-    g = d.written_growth
-    if g is None:
-        return {"model_discrepancy": d.sigma, "discrepancy_growth": None}
-    return {"model_discrepancy": g.sigma0, "discrepancy_growth": g.growth}
+    sigma0, growth = d.written
+    return {"model_discrepancy": sigma0, "discrepancy_growth": growth}
 
 
 def _write_training_poses(result, path: Path, inputs) -> Path | None:
@@ -209,7 +207,9 @@ def _same_discrepancy(result, back: Arm, path) -> None:
     got = {"model_discrepancy": back.model_discrepancy, "discrepancy_growth": back.discrepancy_growth}
     for key, v in got.items():
         w = want[key]
-        if (v is None) != (w is None) or (w is not None and not abs(v - w) <= 6e-4 * w + 1e-15):
+        vs, ws = (np.atleast_1d(np.asarray(x, dtype=float)) if x is not None else None for x in (v, w))
+        if (vs is None) != (ws is None) or (ws is not None and not (
+                vs.shape == ws.shape and np.all(np.abs(vs - ws) <= 6e-4 * ws + 1e-15))):
             raise UnreadableOutput(f"the model file read back gives {key} {v!r}, the fit {w!r}", path)
     from arm_model.model_file import training_poses_of
     d = getattr(result, "discrepancy", None)

@@ -10,6 +10,7 @@ import numpy as np
 
 from arm_model import InputError, reports
 from arm_model.checks import warnings_html
+from arm_model.discrepancy import growth_text
 from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, json_text, write_csv
 from arm_model.log import counted
 from arm_model.shipped import provenance
@@ -354,8 +355,8 @@ def discrepancy_html(result: CalibrationResult, files: dict | None = None) -> li
 def _growth_html(d) -> list[str]:
     """The report's sentence on the discrepancy's growth away from the training poses (:class:`calibration.
     discrepancy.Growth`)."""
-    g = d.written_growth
-    if g is None:
+    g = d.growth
+    if d.written_growth is None or g is None:
         floored = " It does not grow away from the training poses (the growth fitted to the same held-out poses is " \
             "floored at 0)." if d.growth is not None else ""
         return [f"<p>{floored} The model file carries it as a constant and tip adds it to every point's "
@@ -365,8 +366,22 @@ def _growth_html(d) -> list[str]:
             f"<sup>2</sup> with sigma_0 = {_fmt(g.sigma0 * 1e6, 4)} &plusmn; {_fmt(g.u_sigma0 * 1e6, 2)} um and g = "
             f"{_fmt(g.growth * 1e3, 4)} &plusmn; {_fmt(g.u_growth * 1e3, 2)} um per mm (maximum likelihood, "
             f"uncertainties by the delete-one-fold jackknife; d up to {_fmt(g.d_max * 1e3, 4)} mm in the folds, "
-            f"likelihood ratio over a constant {_fmt(g.lr, 3)}). The model file carries sigma_0, g and the "
-            "training poses (a points file beside it); tip adds sigma_d of each point's pose to its uncertainty.</p>"]
+            f"likelihood ratio over a constant {_fmt(g.lr, 3)}).</p>"] + _joint_growth_html(d)
+
+
+def _joint_growth_html(d) -> list[str]:
+    """The report's sentence on the growth per joint the model file carries (:class:`calibration.discrepancy.
+    JointGrowth`)."""
+    j = d.joints
+    if j is None or d.written_growth is None:
+        return []
+    s0, g = d.written
+    return [f"<p>Fitted per joint (each joint's own ball travel c<sub>j</sub> from the nearest pose: sigma_d<sup>2"
+            f"</sup> = sigma_0<sup>2</sup> + sum g<sub>j</sub><sup>2</sup> c<sub>j</sub>; likelihood ratio over one g "
+            f"for every joint {_fmt(j.lr, 3)}), written with the estimates' own uncertainty carried (sqrt(g<sup>2"
+            f"</sup> + u<sup>2</sup>)): sigma_0 = {_fmt(s0 * 1e6, 4)} um, g = {html.escape(growth_text(g))} um per mm. "
+            "The model file carries them and the training poses (a points file beside it); tip adds sigma_d of "
+            "each point's pose to its uncertainty.</p>"]
 
 
 def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_training=None,

@@ -225,9 +225,14 @@ def _reference_figures(val: Validation, prob: Problem, states, table, data: Cali
 
 
 def heldout_residuals(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit",
-                      train=None) -> dict:
+                      train=None, cov: tuple | None = None) -> dict:
     """Residual rows of held-out points with the parameters ``p`` held: ``r`` weighted (n,), ``e`` [m] (n,),
-    ``measurement``, ``kind`` and ``point`` (index into ``data``, -1 for a length) per row.
+    ``measurement``, ``kind`` and ``point`` (index into ``data``, -1 for a length) per row, and ``nuisance``:
+    the number of nuisance unknowns solved on these rows (0 with ``train``: they are solved on the training poses),
+    and ``propagated``: with ``cov`` = (names, covariance [SI]) of the fitted parameters and ``train`` None, the
+    sum over the rows of the variance the parameters' uncertainty adds to each weighted residual once the
+    nuisance unknowns are solved on the rows, ``tr(P J C J^T P)`` (``J`` the weighted rows' Jacobian in those
+    parameters, ``P`` the projection off the nuisance unknowns' columns); else None.
 
     ``train`` None: every point of ``data`` is held out and every nuisance unknown (centre, axis, plane,
     ``T_ref_base``) is solved on ``data`` alone. ``train`` a mask: the points where it holds are the
@@ -251,6 +256,7 @@ def heldout_residuals(model: ArmModel, p, data: CalibrationData, weights: Weight
             raise ValueError(f"no training pose on {', '.join(missing)}: its centre cannot be predicted")
         keep = (prob.row_distance < 0) & ~train[np.maximum(prob.row_point, 0)]
     r = prob.evaluate(p, states, jac=False).r
+    propagated = _propagated(prob, p, states, cov) if cov is not None and train is None else None
     pts = data.points
     meas = np.empty(len(r), dtype=object)
     kind = np.empty(len(r), dtype=object)
@@ -262,7 +268,21 @@ def heldout_residuals(model: ArmModel, p, data: CalibrationData, weights: Weight
         kind[row] = "length"
     point = np.where(ok, prob.row_point, -1)
     return {"r": r[keep], "e": (r * prob.sigma)[keep], "measurement": meas[keep], "kind": kind[keep],
-            "point": point[keep]}
+            "point": point[keep], "nuisance": int(prob.n_nuisance) if train is None else 0, "propagated": propagated}
+
+
+def _propagated(prob: Problem, p, states, cov: tuple) -> float | None:
+    """``tr(P J C J^T P)`` of :func:`heldout_residuals` (None when the covariance is not finite)."""
+    names, c = cov
+    c = np.asarray(c, dtype=float)
+    if not len(names) or c.shape != (len(names), len(names)) or not np.all(np.isfinite(c)):
+        return None
+    spec = prob.model.spec
+    ev = prob.with_free([spec.index(n) for n in names]).evaluate(p, states, jac=True)
+    jp, jt = ev.jp, ev.jt.toarray()
+    if jt.shape[1]:
+        jp = jp - jt @ np.linalg.lstsq(jt, jp, rcond=None)[0]
+    return float(np.sum((jp @ c) * jp))
 
 
 def validate_poses(model: ArmModel, p, data: CalibrationData, train, weights: Weights | None = None,

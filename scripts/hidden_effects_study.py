@@ -216,11 +216,14 @@ def figures(case: Case, loop) -> dict:
 
 def loop_row(loop) -> dict:
     """What a study row records of a loop's result: the effects added (* built from the residual), built and not
-    added, vetoed, the structure left, the verdict and the test set."""
+    added, vetoed, the structure left, the verdict, the test set, the judgement of the test set (``heldout_check``)
+    and the opt-in families offered when it was worse (``escalated``)."""
     return {"added": [c.name + ("*" if c.origin == "residual" else "") for c in loop.added],
             "built_not_added": [b["name"] for b in loop.built if not b.get("added")],
             "vetoed": [v["name"] for v in loop.vetoed], "remaining": [f.name for f, *_ in loop.remaining],
-            "verdict": loop.verdict, "test": list(loop.test)}
+            "verdict": loop.verdict, "test": list(loop.test),
+            "heldout_check": loop.heldout_check,
+            "escalated": None if loop.escalated is None else loop.escalated["families"]}
 
 
 def judge(fig: dict, loop) -> dict:

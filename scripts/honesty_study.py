@@ -86,6 +86,10 @@ def one_seed(seed: int, shape: str) -> dict:
             "built": [{"name": b["name"], "added": b["added"], "why_not_added": b["why_not_added"]}
                       for b in loop.built],
             "structure_claimed": [f.name for f, _, _ in loop.remaining],
+            "heldout_worse": bool(loop.heldout_check and loop.heldout_check["worse_than_stated"]),
+            "heldout_check": loop.heldout_check,
+            "escalated": None if loop.escalated is None else loop.escalated["families"],
+            "verdict_clean": "No structured residual remains" in loop.verdict,
             "seconds": round(time.perf_counter() - t0, 1)}
 
 
@@ -95,13 +99,17 @@ def summary(rows: list[dict]) -> str:
     built_added = [r["seed"] for r in rows if any(a["origin"] == "residual" for a in r["added"])]
     built = [r["seed"] for r in rows if r["built"]]
     claimed = [r["seed"] for r in rows if r["structure_claimed"]]
+    worse = [r["seed"] for r in rows if r.get("heldout_worse")]
+    escalated = [r["seed"] for r in rows if r.get("escalated")]
 
     def seeds(s):
         return f" (seeds {', '.join(map(str, s))})" if s else ""
     lines = [f"{n} clean campaigns",
              f"effect added: {len(added)} of {n}{seeds(added)}; of them built from the residual: {len(built_added)}",
              f"an effect built from the residual (added or not): {len(built)} of {n}{seeds(built)}",
-             f"structure claimed: {len(claimed)} of {n}{seeds(claimed)}"]
+             f"structure claimed: {len(claimed)} of {n}{seeds(claimed)}",
+             f"outer test set worse than stated: {len(worse)} of {n}{seeds(worse)}; opt-in families offered: "
+             f"{len(escalated)} of {n}{seeds(escalated)}"]
     for r in rows:
         for b in r["built"]:
             lines.append(f"  seed {r['seed']}: built {b['name']}: " + ("added" if b["added"] else b["why_not_added"]))

@@ -13,6 +13,10 @@ model discrepancy of the extrapolative folds taken as
   training pose (:mod:`arm_model.discrepancy`);
 * ``predictive``: the same with the uncertainty of ``sigma_0`` and ``g`` (their jackknife u) added to their squares,
   ``sigma_0^2 + u(sigma_0)^2 + (g^2 + u(g)^2) d^2`` (the spread of the plug-in estimate carried into the prediction);
+* ``written``: what the model file carries and ``tip`` adds (:attr:`calibration.discrepancy.Discrepancy.written`):
+  a growth per joint, ``sigma_0^2 + sum_j g_j^2 c_j`` with each joint's own ball travel ``c_j`` from the nearest
+  training pose, every estimate with its jackknife u carried and each joint's growth at least the ``predictive``
+  one for every joint together;
 * ``saturating``: a bounded growth ``sigma_0^2 + S^2 (1 - exp(-g^2 d^2 / S^2))`` (a stationary discrepancy's variance
   cannot exceed its total ``S^2``; ``S -> inf`` is ``linear``), fitted by maximum likelihood to the same held-out
   rows, with its likelihood ratio over ``linear`` (1 degree of freedom).
@@ -35,7 +39,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-VARIANTS = ("none", "linear", "predictive", "saturating")
+VARIANTS = ("none", "linear", "predictive", "written", "saturating")
 
 
 def fit_saturating(e, v, d) -> tuple[np.ndarray, float]:
@@ -77,13 +81,14 @@ def _load_r2(desc, q, feature, dev) -> float:
 def study(root: Path, urdf: Path, tip: str, places, holes, say=print) -> list[dict]:
     """One row per training placement and held-out placement: per variant, the coverage [%] of tip's u and of the
     deviation's u, the median u [m]; the discrepancy fitted (linear and saturating) and the load R^2."""
-    from arm_model.discrepancy import TrainingPoses, pose_distance
+    from arm_model.discrepancy import GrowingDiscrepancy, TrainingPoses, pose_distance
     from arm_model.effects import JointCompliance
     from arm_model.io import read_artefacts, read_points
     from arm_model.model import ArmModel
     from arm_model.uncertainty import ParameterCovariance, default_inputs, propagate
     from arm_model.urdf_import import load_arm
     from calibration import FitOptions, calibrate, make_data
+    from calibration.model_output import discrepancy_fields
     from calibration.placements import deviation_u
     desc = load_arm(urdf, tip)
     model = ArmModel(desc, (JointCompliance(),))     # calibrate's default for a URDF whose links carry masses
@@ -96,6 +101,8 @@ def study(root: Path, urdf: Path, tip: str, places, holes, say=print) -> list[di
         (a, b, s), nll_sat = fit_saturating(g.e, g.v, g.d)
         lr = max(2 * (_linear_nll(g) - nll_sat), 0.0)
         train = TrainingPoses.of(desc, data[tr].points.q[res.discrepancy.training_rows])
+        fields = discrepancy_fields(res)
+        written = GrowingDiscrepancy(fields["model_discrepancy"], fields["discrepancy_growth"] or 0.0, train)
         inputs = default_inputs(desc, has_force=False, probing=res.probing_scatter() or 0.0, discrepancy=0.0)
         for te in places:
             if te == tr:
@@ -106,6 +113,7 @@ def study(root: Path, urdf: Path, tip: str, places, holes, say=print) -> list[di
             dist = pose_distance(desc, d.points.q, train)
             extra = {"none": 0 * dist, "linear": g.sigma0 ** 2 + (g.growth * dist) ** 2,
                      "predictive": g.sigma0 ** 2 + g.u_sigma0 ** 2 + (g.growth ** 2 + g.u_growth ** 2) * dist ** 2,
+                     "written": written.sd(desc, d.points.q) ** 2,
                      "saturating": a + s * -np.expm1(-b * dist ** 2 / s)}
             feat = d.points.feature
             dev = np.zeros_like(prop.centres)

@@ -96,13 +96,19 @@ def test_urdf_tip_at_the_last_joint_is_a_rigid_tip(nominal, tmp_path):
 
 
 def test_urdf_without_tip_frame_and_bad_xml(tmp_path):
+    """Without --tip-frame a URDF is read first: a broken one says where it is broken (a xacro file says to expand
+    it), a good one lists the links its chains end at."""
     path = tmp_path / "arm.urdf"
     path.write_text("<robot><link name='a'>")
-    with pytest.raises(InputError, match="--tip-frame"):
+    for tip in (None, "a"):
+        with pytest.raises(InputError, match="not valid XML") as exc:
+            load_arm(path, tip)
+        assert exc.value.line == 1
+    path.write_text("<robot name='r'><link name='a'/><link name='b'/><link name='c'/>"
+                    "<joint name='j' type='continuous'><parent link='a'/><child link='b'/></joint>"
+                    "<joint name='k' type='fixed'><parent link='b'/><child link='c'/></joint></robot>")
+    with pytest.raises(InputError, match=r"needs --tip-frame .*; the chains end at c \(1 moving joint\)$"):
         load_arm(path)
-    with pytest.raises(InputError) as exc:
-        load_arm(path, "a")
-    assert exc.value.line == 1
 
 
 #: three revolute joints, j2's origin at pitch +90 deg and turned in roll and yaw too (gimbal: roll and yaw

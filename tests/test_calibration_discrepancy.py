@@ -117,9 +117,9 @@ def test_an_exact_model_has_no_discrepancy_and_a_missing_effect_has_one(model, n
 
 def test_the_model_file_carries_the_discrepancy_into_tip(tmp_path, model):
     """calibrate writes the growing discrepancy (summary.json; the model file's model_discrepancy_um = sigma0 and
-    model_discrepancy_growth_um_per_mm to 4 digits, and the training poses' points file); the model file reads
-    them back; tip adds sigma_d(q)^2 to every point's variance per axis as the 'model discrepancy' contribution,
-    and --u-model-discrepancy-um 0 takes it out."""
+    model_discrepancy_growth_um_per_mm, one a joint, to 4 digits, and the training poses' points file); the model
+    file reads them back; tip adds sigma_d(q)^2 to every point's variance per axis as the 'model discrepancy'
+    contribution, and --u-model-discrepancy-um 0 takes it out."""
     import csv
     import json
 
@@ -132,11 +132,18 @@ def test_the_model_file_carries_the_discrepancy_into_tip(tmp_path, model):
                  str(panda / "panda-with-inertials.urdf"), "--tip-frame", "ball_link", "--no-plots", "-q",
                  "-o", str(out)]) == 0
     summary = json.loads((out / "summary.json").read_text())
-    growth = summary["model_discrepancy"]["growth"]
-    assert summary["model_discrepancy"]["sigma_um"] > 0 and growth["growth_um_per_mm"] > 0
+    disc = summary["model_discrepancy"]
+    joints, pooled, written = disc["growth_per_joint"], disc["growth"], disc["written"]
+    assert disc["sigma_um"] > 0 and pooled["growth_um_per_mm"] > 0
     arm = load_model(out / "panda-calibrated.toml")
-    assert arm.model_discrepancy == pytest.approx(growth["sigma0_um"] * 1e-6, rel=1e-3, abs=1e-10)
-    assert arm.discrepancy_growth == pytest.approx(growth["growth_um_per_mm"] * 1e-3, rel=1e-3)
+    assert arm.model_discrepancy == pytest.approx(written["sigma0_um"] * 1e-6, rel=1e-3, abs=1e-10)
+    assert len(arm.discrepancy_growth) == 7 and max(arm.discrepancy_growth) > 0
+    np.testing.assert_allclose(arm.discrepancy_growth, np.array(written["growth_um_per_mm"]) * 1e-3, rtol=1e-3)
+    # each joint's written growth: its estimate with its uncertainty carried, sqrt(g^2 + u^2), at least the growth
+    # of every joint together carried the same way
+    np.testing.assert_allclose(written["growth_um_per_mm"], np.maximum(
+        np.hypot(joints["growth_um_per_mm"], joints["u_growth_um_per_mm"]),
+        np.hypot(pooled["growth_um_per_mm"], pooled["u_growth_um_per_mm"])), rtol=1e-12)
     from arm_model.io import read_points
     training = read_points(arm.training_poses).q
     np.testing.assert_allclose(training, read_points(panda / "right" / "points.csv").q, rtol=0, atol=1e-12)
@@ -248,8 +255,11 @@ def _band_campaign(model, nominal, seed, gain):
 
 
 def _growing(res):
+    """The discrepancy the model file of ``res`` carries (calibration.model_output.discrepancy_fields)."""
     from arm_model.discrepancy import GrowingDiscrepancy
-    return GrowingDiscrepancy(res.discrepancy.growth.sigma0, res.discrepancy.growth.growth, res.discrepancy.training)
+    from calibration.model_output import discrepancy_fields
+    f = discrepancy_fields(res)
+    return GrowingDiscrepancy(f["model_discrepancy"], f["discrepancy_growth"] or 0.0, res.discrepancy.training)
 
 
 def _seat_coverage(model, nominal, res, test, band):
@@ -289,17 +299,19 @@ def test_an_exact_model_keeps_nominal_coverage_away_from_its_poses(model, nomina
 def test_an_undeclared_gain_widens_u_beyond_the_training_poses(model, nominal):
     """The truth has an encoder gain error of 2e-3 on joint 2 that the model lacks and the training poses keep
     that joint in the middle half of its range: the folds find a growth (likelihood ratio over a constant > 2 on
-    every seed), and the coverage of the test seats' deviations beyond the band rises on every seed (measured
-    +2 to +7 points over seeds 0-7, from 58-81 %), while inside it moves by less than 5 points."""
+    every seed), and the discrepancy the model file carries (per joint, the estimates' uncertainty carried) covers
+    the test seats' deviations beyond the band for at least 77 % of the axis values on every seed (measured 77-89 %
+    over seeds 0-7, mean 81.5 %; one growth for every joint at its estimate, as before: 60-82 %, mean 71.4 %; here
+    74.1, 75.0, 64.2 %), 8 points or more above the constant's on average, and inside the band no lower than the
+    constant's (measured +1 to +5 points: the test seats hold poses beyond the band too)."""
     gains = []
     for seed in (0, 2, 3):
         res, test, band = _band_campaign(model, nominal, seed, 2e-3)
         assert res.discrepancy.growth.lr > 2.0 and res.discrepancy.growth.growth > 0, res.discrepancy.growth
         cov = _seat_coverage(model, nominal, res, test, band)
-        assert cov["growing"][1] >= cov["constant"][1] + 0.015, cov
-        assert abs(cov["growing"][0] - cov["constant"][0]) < 0.05, cov
+        assert cov["growing"][1] >= 0.77 and cov["growing"][0] >= cov["constant"][0], cov
         gains.append(cov["growing"][1] - cov["constant"][1])
-    assert np.mean(gains) >= 0.03, gains
+    assert np.mean(gains) >= 0.08, gains
     from calibration.report import plot_discrepancy
     g = res.discrepancy.growth
     assert len(g.d) == len(g.e) == len(g.v) == res.discrepancy.rows and plot_discrepancy(res)[:4] == b"\x89PNG"
@@ -344,6 +356,87 @@ def test_a_model_file_with_a_growth_reads_and_grows(tmp_path, nominal):
     assert disc.sd(arm.desc, moved)[0] == pytest.approx(np.hypot(5e-6, 0.02 * r * 0.1), rel=1e-7)
 
 
+def test_travel_shares_and_a_growth_per_joint_by_hand():
+    """Each joint's share c_j = (L_j dq_j)^2 of d^2 from the nearest training pose (a revolute difference the short
+    way round; sum_j c_j = d^2), and sigma_d^2 = sigma0^2 + sum_j g_j^2 c_j: hand values with given levers; one
+    growth for every joint is sigma0^2 + (g d)^2."""
+    from arm_model.discrepancy import GrowingDiscrepancy, TrainingPoses, joint_levers, travel_shares
+    train = TrainingPoses(("a", "b"), [[0.0, 0.0], [3.0, 1.0]], (True, True))
+    d, c = travel_shares(None, [[0.5, 0.2], [-3.0, 0.9]], train, levers=[[2.0, 3.0], [0.5, 1.0]])
+    np.testing.assert_allclose(c, [[1.0, 0.36], [(0.5 * (2 * np.pi - 6.0)) ** 2, 0.01]], rtol=1e-12)
+    np.testing.assert_allclose(d ** 2, c.sum(axis=1), rtol=1e-12)
+    from arm_model import load_description
+    from conftest import NOMINAL
+    nominal = load_description(NOMINAL)
+    t = np.array([[0.3, 0.4, -0.2, 0.9, 0.1, -0.5, 0.2]])
+    q = t + [[0.2, -0.1, 0, 0, 0, 0, 0]]
+    lev = joint_levers(nominal, q)[0]
+    per_joint = GrowingDiscrepancy(4e-6, (0.03, 0.005, 0, 0, 0, 0, 0), TrainingPoses.of(nominal, t))
+    want = np.sqrt(16e-12 + (0.03 * lev[0] * 0.2) ** 2 + (0.005 * lev[1] * 0.1) ** 2)
+    assert per_joint.sd(nominal, q)[0] == pytest.approx(want, rel=1e-9)
+    one = GrowingDiscrepancy(4e-6, 0.03, TrainingPoses.of(nominal, t))
+    assert one.sd(nominal, q)[0] == pytest.approx(np.hypot(4e-6, 0.03 * one.distance(nominal, q)[0]), rel=1e-12)
+    with pytest.raises(ValueError, match="growth has 2 joints"):
+        GrowingDiscrepancy(4e-6, (0.1, 0.2), TrainingPoses.of(nominal, t))
+
+
+def test_fit_joint_growth_finds_the_joint_that_grows():
+    """Held-out errors that grow with joint 2's travel only (g_2 = 0.02, v = (5 um)^2, sigma0 10 um; three joints,
+    each row's travel shares up to 3 mm; 14 folds), 6 seeds: the growth per joint recovers g_2 within 4 of its
+    jackknife uncertainty (measured 0.0193-0.0207 +- 0.0003-0.0007) and the others under a fifth of it (0-0.0031),
+    the likelihood ratio over one growth for every joint is above 10 (414-505); one growth for every joint
+    underestimates where joint 2 moves (below 0.75 g_2; 0.0111-0.0120): a test pose moved 3 mm along joint 2 is
+    covered within 1.96 sigma for 93-97 % of draws by the written discrepancy (Discrepancy.written; measured
+    94.1-96.5 %), for under 85 % by one growth at its estimate (74-77 %). A joint the rows never move (travel 0) is
+    not resolved and takes the pooled growth."""
+    from calibration.discrepancy import Discrepancy, fit_growth, fit_joint_growth
+    n, fold = 1400, np.repeat(np.arange(14), 100)
+    v = np.full(n, (5e-6) ** 2)
+    for seed in range(6):
+        rng = np.random.default_rng(seed)
+        c = rng.uniform(0.0, 3e-3, (n, 4)) ** 2
+        c[:, 3] = 0.0
+        e = rng.normal(0.0, np.sqrt(v + (10e-6) ** 2 + 0.02 ** 2 * c[:, 1]))
+        pooled = fit_growth(e, v, np.sqrt(c.sum(axis=1)), fold)
+        j = fit_joint_growth(e, v, c, fold, pooled)
+        assert j.resolved == (True, True, True, False) and j.growth[3] == pooled.growth
+        assert abs(j.growth[1] - 0.02) <= 4 * j.u_growth[1] and j.lr > 10, j
+        assert all(j.growth[k] < 0.2 * 0.02 for k in (0, 2)), j
+        assert pooled.growth < 0.75 * 0.02, pooled
+        s0, g = Discrepancy(0.0, 1.0, 14, n, growth=pooled, joints=j).written
+        far = np.array([0.0, 3e-3, 0.0, 0.0]) ** 2
+        draws = rng.normal(0.0, np.sqrt((5e-6) ** 2 + (10e-6) ** 2 + 0.02 ** 2 * far[1]), 4000)
+        inside = np.mean(np.abs(draws) <= 1.96 * np.sqrt((5e-6) ** 2 + s0 ** 2 + far @ np.square(g)))
+        plain = np.mean(np.abs(draws) <= 1.96 * np.sqrt((5e-6) ** 2 + pooled.sigma0 ** 2 + pooled.growth ** 2 * far[1]))
+        assert 0.93 <= inside <= 0.97 and plain < 0.85, (inside, plain)
+
+
+def test_a_growth_per_joint_in_a_model_file_reads_back(tmp_path, nominal):
+    """A model file whose model_discrepancy_growth_um_per_mm lists one growth a joint reads back as that tuple;
+    format_model writes it so (to 4 digits) and tip's discrepancy grows along joint 1 by its own growth only; an Arm
+    given a list keeps a tuple, and refuses a list of text, of the wrong length or with NaN by the key's name."""
+    from arm_model.kinematics import ball_centres
+    from arm_model.model_file import format_model, load_model, parse_model
+    q = np.array([[0.3, 0.4, -0.2, 0.9, 0.1, -0.5, 0.2]])
+    _poses_file(tmp_path / "poses.csv", nominal, q)
+    text = format_model(nominal, model_discrepancy=5e-6, discrepancy_growth=(0.02, 0.5, 0, 0, 0, 0, 0.123456e-3),
+                        training_poses="poses.csv")
+    (tmp_path / "m.toml").write_text(text)
+    back = parse_model(text, str(tmp_path / "m.toml"))
+    assert back.discrepancy_growth == pytest.approx((0.02, 0.5, 0, 0, 0, 0, 0.1235e-3), rel=1e-12)
+    disc = load_model(tmp_path / "m.toml").discrepancy
+    moved = q.copy()
+    moved[0, 0] += 0.1
+    r = np.hypot(*ball_centres(nominal, moved)[0, :2])
+    assert disc.sd(nominal, moved)[0] == pytest.approx(np.hypot(5e-6, 0.02 * r * 0.1), rel=1e-7)
+    from arm_model.model_file import Arm
+    arm = Arm(nominal, model_discrepancy=5e-6, discrepancy_growth=[0.02] * 7, training_poses=tmp_path / "poses.csv")
+    assert arm.discrepancy_growth == (0.02,) * 7
+    for bad in (["a"] * 7, [0.02] * 3, [math.nan] * 7):
+        with pytest.raises(ValueError, match="model_discrepancy_growth_um_per_mm|discrepancy_growth lists"):
+            Arm(nominal, model_discrepancy=5e-6, discrepancy_growth=bad, training_poses=tmp_path / "poses.csv")
+
+
 @pytest.mark.parametrize("extra, match", [
     ("model_discrepancy_um = 5.0\nmodel_discrepancy_growth_um_per_mm = -1.0\n", "model_discrepancy_growth_um_per_mm"),
     ("model_discrepancy_um = 5.0\nmodel_discrepancy_growth_um_per_mm = 1e9\n", "model_discrepancy_growth_um_per_mm"),
@@ -351,6 +444,12 @@ def test_a_model_file_with_a_growth_reads_and_grows(tmp_path, nominal):
     ("model_discrepancy_growth_um_per_mm = 2.0\ntraining_poses = \"p.csv\"\n", "model_discrepancy_um"),
     ("model_discrepancy_um = 5.0\nmodel_discrepancy_grwth_um_per_mm = 2.0\n", "unknown key"),
     ("model_discrepancy_um = 5.0\ntraining_poses = 3\n", "training_poses"),
+    ("model_discrepancy_um = 5.0\nmodel_discrepancy_growth_um_per_mm = [1.0, 2.0]\ntraining_poses = \"p.csv\"\n",
+     "lists 2 growths, the arm has 7 joints"),
+    ("model_discrepancy_um = 5.0\nmodel_discrepancy_growth_um_per_mm = [1, 2, 3, 4, 5, 6, -7]\n"
+     "training_poses = \"p.csv\"\n", "model_discrepancy_growth_um_per_mm"),
+    ("model_discrepancy_um = 5.0\nmodel_discrepancy_growth_um_per_mm = []\n", "non-empty list"),
+    ("model_discrepancy_um = 5.0\nmodel_discrepancy_growth_um_per_mm = [0, 0, 0, 1, 0, 0, 0]\n", "training_poses"),
 ])
 def test_a_bad_growth_in_a_model_file_is_refused(tmp_path, extra, match):
     from arm_model import InputError
@@ -387,23 +486,29 @@ def test_fit_growth_of_noise_free_rows_is_zero():
 
 
 def test_a_growth_floored_at_zero_is_written_as_a_constant():
-    """A growth fitted at its floor (g = 0, likelihood ratio 0: the held-out errors do not grow with distance)
-    resolves nothing: the model file gets the constant discrepancy of the same folds and no training poses,
-    never "growth 0 +- 0" as if measured; a growth above 0 is written with its sigma0."""
+    """A growth fitted at its floor with no uncertainty (g = 0 +- 0 pooled and on every joint: the held-out errors
+    do not grow with distance) resolves nothing: the model file gets the constant discrepancy of the same folds and
+    no training poses, never "growth 0" as if measured. A growth above 0, or one whose uncertainty is, is written
+    per joint with its uncertainty carried, sqrt(g^2 + u^2), each joint's at least the pooled growth's carried the
+    same way, and sigma0 the larger of the two (by hand); without the joints' fit, the pooled growth alone."""
     from types import SimpleNamespace
 
-    from calibration.discrepancy import Discrepancy, Growth
+    from calibration.discrepancy import Discrepancy, Growth, JointGrowth
     from calibration.model_output import discrepancy_fields
     flat = Growth(sigma0=31e-6, growth=0.0, u_sigma0=5e-6, u_growth=0.0, lr=0.0, d_max=0.4, d_rms=0.2)
-    d = Discrepancy(sigma=30e-6, ratio=1.2, folds=14, rows=90, growth=flat)
+    flat_j = JointGrowth(31e-6, (0.0, 0.0), 5e-6, (0.0, 0.0), (True, True), 0.0)
+    d = Discrepancy(sigma=30e-6, ratio=1.2, folds=14, rows=90, growth=flat, joints=flat_j)
     assert d.written_growth is None
     assert discrepancy_fields(SimpleNamespace(discrepancy=d)) == {"model_discrepancy": 30e-6,
                                                                   "discrepancy_growth": None}
-    grows = Growth(sigma0=12e-6, growth=7e-4, u_sigma0=4e-6, u_growth=2e-4, lr=9.0, d_max=0.4, d_rms=0.2)
-    d = Discrepancy(sigma=30e-6, ratio=1.2, folds=14, rows=90, growth=grows)
-    assert d.written_growth is grows
-    assert discrepancy_fields(SimpleNamespace(discrepancy=d)) == {"model_discrepancy": 12e-6,
-                                                                  "discrepancy_growth": 7e-4}
+    pooled = Growth(sigma0=12e-6, growth=1.2e-4, u_sigma0=5e-6, u_growth=1.6e-4, lr=1.0, d_max=0.4, d_rms=0.2)
+    joints = JointGrowth(20e-6, (0.0, 3e-4, 0.0), 15e-6, (4e-4, 0.0, 1e-4), (True, True, True), 2.0)
+    d = Discrepancy(sigma=30e-6, ratio=1.2, folds=14, rows=90, growth=pooled, joints=joints)
+    got = discrepancy_fields(SimpleNamespace(discrepancy=d))
+    assert got["model_discrepancy"] == pytest.approx(25e-6, rel=1e-12)
+    np.testing.assert_allclose(got["discrepancy_growth"], (4e-4, 3e-4, 2e-4), rtol=1e-12)
+    got = discrepancy_fields(SimpleNamespace(discrepancy=Discrepancy(30e-6, 1.2, 14, 90, growth=pooled)))
+    assert got == pytest.approx({"model_discrepancy": 13e-6, "discrepancy_growth": 2e-4}, rel=1e-12)
 
 
 @pytest.mark.parametrize("block", [7, 32_768])

@@ -97,14 +97,17 @@ def test_honesty_study_counts_what_the_loop_added_built_and_claimed(tmp_path):
     (row,) = json.loads((tmp_path / "results.json").read_text())
     assert row["seed"] == 4 and row["points"] == 100 and row["temperature_span_K"] > 8.0
     assert row["added"] == [] and row["structure_claimed"] == []
+    # the outer test set's judgement leaves a clean campaign's verdict as it was: not worse, nothing escalated
+    assert not row["heldout_worse"] and row["escalated"] is None and row["verdict_clean"]
     rows = [{"seed": 0, "added": [], "built": [], "structure_claimed": []},
             {"seed": 1, "added": [{"name": "approach offset", "origin": "residual"}],
              "built": [{"name": "approach offset", "added": True, "why_not_added": None}], "structure_claimed": []},
             {"seed": 2, "added": [{"name": "thermal growth", "origin": "library"}],
              "built": [{"name": "lateral compliance j7", "added": False, "why_not_added": "not significant"}],
              "structure_claimed": ["j7 lateral load"]}]
-    assert honesty_study.summary(rows).splitlines()[:4] == [
+    assert honesty_study.summary(rows).splitlines()[:5] == [
         "3 clean campaigns", "effect added: 2 of 3 (seeds 1, 2); of them built from the residual: 1",
         "an effect built from the residual (added or not): 2 of 3 (seeds 1, 2)",
-        "structure claimed: 1 of 3 (seeds 2)"]
+        "structure claimed: 1 of 3 (seeds 2)",
+        "outer test set worse than stated: 0 of 3; opt-in families offered: 0 of 3"]
     assert honesty_study._seeds("0-2,7") == [0, 1, 2, 7]

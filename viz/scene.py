@@ -267,6 +267,13 @@ class ArmScene:
             self._pv.loadViewerModel(rootNodeName=f"{root}/arm")
             self._legend(f"arm '{self.desc.name}': " + ("its URDF's own visuals" if self.desc.visuals else
                                                           "links orange") + ", probe ball red (marker 24 mm wide)")
+            missing = self.desc.missing_meshes
+            if missing:
+                line = (f"{len(missing)} mesh file{'s' if len(missing) > 1 else ''} of the URDF not found (e.g. "
+                        f"'{missing[0]}'; package:// is looked for in a folder of that name beside or above the "
+                        "URDF): the arm is drawn without them")
+                log.warning(line)
+                self._legend(line)
         vis["/Axes"].set_property("visible", False)   # its x axis fades to orange, the arm's colour
         vis[f"{root}/base frame"].set_object(mg.LineSegments(
             mg.PointsGeometry(position=(0.15 * np.array([[0, 0, 0], [1, 0, 0], [0, 0, 0], [0, 1, 0],

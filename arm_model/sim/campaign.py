@@ -21,7 +21,7 @@ from ..errors import InputError, did_you_mean, parse_toml, read_text
 from ..shipped import SHIPPED_ARMS, shipped_path
 from ..toml_lines import key_path_text, toml_key_lines
 from ..units import implausible, split_unit
-from ..urdf_import import load_arm
+from ..urdf_import import is_urdf, load_arm
 
 __all__ = ["Campaign", "Task", "load_campaign", "campaign_from_dict", "TASK_KINDS", "SENSORS",
            "DEFAULT_ARM"]
@@ -414,10 +414,11 @@ def _campaign_arm(ctx, top: dict, base_dir: Path | None, arm) -> tuple[ArmDescri
         arm_path = DEFAULT_ARM
     if not arm_path.exists():
         raise ctx.error(f"arm description not found: {arm_path}", (), "arm")
-    if arm_path.suffix.lower() == ".urdf" and not top["tip_frame"]:
+    urdf = is_urdf(arm_path)
+    if urdf and not top["tip_frame"]:
         raise ctx.error("an arm given as a URDF needs 'tip_frame' (the link at the ball centre)", (), "arm")
     for key in ("tip_frame", "base_frame"):       # load_arm refuses the options; the keys were ignored
-        if arm_path.suffix.lower() != ".urdf" and top[key] is not None:
+        if not urdf and top[key] is not None:
             raise ctx.error(f"'{key}' is for an arm given as a URDF; this campaign's arm {arm_path.name} is a "
                             "description TOML (its chain is its [[joint]] rows, its tip the [probe])", (), key)
     return _load_arm(ctx, arm_path, top["tip_frame"], top["base_frame"]), arm_path

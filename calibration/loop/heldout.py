@@ -15,21 +15,37 @@ __all__ = ["heldout_residuals", "heldout_figures", "bootstrap_rows"]
 
 
 def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit",
-                    train=None, seed: int = 0) -> dict:
+                    train=None, seed: int = 0, stated: Weights | None = None, cov: tuple | None = None) -> dict:
     """Figures of ``(model, p)`` on held-out data [um] (``train``: see :func:`heldout_residuals`): RMS and
     max |residual| over the artefact rows (each row a residual component: a sphere/ring/plane distance, a
     seat coordinate, a length error; the reference-instrument rows only when there is nothing else, since
     their noise is the instrument's), the same per kind, the weighted RMS of all rows, and the standard
     test figures (:data:`calibration.validation.FIGURES`) of the held-out points; ``seed``: the seed of the
-    bootstrap of their standard uncertainties."""
-    h = heldout_residuals(model, p, data, weights, reference, train)
+    bootstrap of their standard uncertainties. For the loop's judgement of the test set
+    (:func:`calibration.loop.verdict.heldout_check`): ``chi2`` (the sum of the squared weighted residuals),
+    ``nuisance`` (the unknowns solved on the held-out rows), ``propagated`` (with ``cov``, the fitted parameters'
+    (names, covariance): the variance their uncertainty adds to the held-out rows, summed,
+    :func:`~calibration.validation.heldout_residuals`) and, with ``stated``, ``rms_over_stated`` and
+    ``chi2_stated``: the RMS and the sum of squares of the rows each over its stated uncertainty, over the
+    ``rows_stated`` rows whose group has one (not the lengths, whose uncertainty is each artefact's)."""
+    h = heldout_residuals(model, p, data, weights, reference, train, cov)
     e = h["e"]
     art = h["kind"] != "reference"
     head = e[art] if art.any() else e
     out = {"rms_um": float(np.sqrt(np.mean(head ** 2))) * 1e6, "max_um": float(np.max(np.abs(head))) * 1e6,
            "headline_rows": ("reference points" if not art.any() else "artefact points and lengths"
                              if (h["kind"] == "length").any() else "artefact points"),
-           "rms_weighted": float(np.sqrt(np.mean(h["r"] ** 2))), "rows": int(len(e))}
+           "rms_weighted": float(np.sqrt(np.mean(h["r"] ** 2))), "rows": int(len(e)),
+           "chi2": float(np.sum(h["r"] ** 2)), "nuisance": int(h["nuisance"]), "propagated": h["propagated"],
+           "rms_over_stated": None,
+           "chi2_stated": None, "rows_stated": 0}
+    if stated is not None:
+        sig = np.array([stated.sigma_of(k) or np.nan for k in h["kind"]])
+        ok = np.isfinite(sig) & (sig > 0)
+        if ok.any():
+            z2 = (e[ok] / sig[ok]) ** 2
+            out.update(rms_over_stated=float(np.sqrt(np.mean(z2))), chi2_stated=float(np.sum(z2)),
+                       rows_stated=int(ok.sum()))
     by_kind: dict[str, dict] = {}
     out["by_kind"] = by_kind
     for k in dict.fromkeys(h["kind"].tolist()):

@@ -76,6 +76,11 @@ class LoopResult:
         residual_over_stated: the final design fit's residual scatter over the stated uncertainties
             (:func:`~calibration.loop.verdict.residual_over_stated`; above
             :data:`~calibration.loop.verdict.S0_LIMIT` with no family left, the verdict says it is not noise).
+        heldout_check: the judgement of the outer test set of the final model
+            (:func:`~calibration.loop.verdict.heldout_check`): ``worse_than_stated`` and its figures, None when it
+            cannot be made.
+        escalated: the opt-in families offered because the outer test set was worse than stated after the default
+            ones (``families``, ``candidates``, ``check``), None if not.
     """
     stages: list
     final_screening: list
@@ -99,6 +104,8 @@ class LoopResult:
     vetoed: list = field(default_factory=list)
     data: CalibrationData | None = None
     residual_over_stated: float | None = None
+    heldout_check: dict | None = None
+    escalated: dict | None = None
 
     @property
     def final(self) -> Stage:

@@ -40,7 +40,10 @@ class LoopSettings:
     close-loop --holdout``), the outer test set's rows are kept out of it, as ``calibrate --holdout`` keeps its
     held-out measurements out of its model. ``prior_scale``: "auto" (default: the prior with the evidence's scales,
     "evidence", when the base model holds a joint compliance, whose prior is physical, else None: no prior, the
-    practical-resolution rule), "evidence", a factor, or None."""
+    practical-resolution rule), "evidence", a factor, or None. ``escalate``: when the outer test set is worse than
+    stated once the default families are exhausted (:func:`~calibration.loop.verdict.heldout_check`), the
+    families off by default (:data:`~calibration.candidates.OPT_IN_FAMILIES`) not offered yet are offered, once,
+    under the same rules (``aacmm close-loop`` turns it off when ``--candidates`` names the families)."""
     folds: int = 4
     test_fraction: float = 0.25
     alpha: float = 0.01
@@ -59,6 +62,7 @@ class LoopSettings:
     physics: bool = True
     prior_scale: float | str | None = "auto"
     test_in_model: bool = True
+    escalate: bool = True
 
     def __post_init__(self):
         object.__setattr__(self, "holdout", tuple(self.holdout or ()))

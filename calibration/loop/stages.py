@@ -29,7 +29,7 @@ from arm_model.log import counted
 from arm_model.model import ArmModel
 
 from ..calibrate import CalibrationResult
-from ..candidates import library_candidates, needs_model
+from ..candidates import DEFAULT_FAMILIES, OPT_IN_FAMILIES, library_candidates, needs_model
 from ..data import Weights, make_data
 from ..diagnostics import (
     binned_estimates,
@@ -59,10 +59,10 @@ from .outliers import drop_design_outliers, drop_test_outliers, outlier_budget
 from .result import LoopResult, Stage
 from .settings import LEGACY_RESOLUTION, NOISE_OFF, LoopSettings
 from .state import LoopState, Screening, log
-from .verdict import ADDED, residual_over_stated, verdict_text
+from .verdict import ADDED, heldout_check, residual_over_stated, verdict_text
 
 __all__ = ["Campaign", "Stop", "prepare", "at_current_torques", "screen", "test", "physics", "synthesise", "decide",
-           "fit_stage",
+           "fit_stage", "escalate",
            "outer_test_worse", "add", "run_stage", "run", "report"]
 
 
@@ -111,7 +111,8 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
                          prior_scale=scale, min_resolution=LEGACY_RESOLUTION if scale is None else None,
                          gross_threshold=None)
     state = LoopState(settings, desc, say, data, design, test, test_by, test_rows, options, camp.free, camp.hold,
-                      model.spec.size, stated, cands, skipped, model, stated, remaining=list(cands))
+                      model.spec.size, stated, cands, skipped, model, stated, remaining=list(cands),
+                      families=camp.families)
     say("calibrating the base model on the design set")
     if settings.drop_outliers:
         result, state.design, state.dropped["design"] = drop_design_outliers(
@@ -147,7 +148,7 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
     else:
         say(state.power["note"])
     state.result = result
-    state.stages = [Stage(0, model, result, heldout=state.test_figures(model, result.p, result.reference_mode))]
+    state.stages = [Stage(0, model, result, heldout=state.test_figures(model, result))]
     say(f"  base model: s0 {result.s0:.3g}, held-out test RMS {state.stages[0].heldout['rms_um']:.2f} um")
     return state
 
@@ -361,7 +362,7 @@ def fit_stage(state: LoopState, decision: Decision, scr: Screening) -> Stage:
         sp2 = residual_space(result)
         fam2 = next((f for f in families(sp2) if f.name == fam_name), None) or candidate_family(sp2, cand)
         after = binned_estimates(sp2, fam2) if fam2 is not None else None
-    heldout = state.test_figures(model, result.p, result.reference_mode, result.weights)
+    heldout = state.test_figures(model, result, result.weights)
     return Stage(len(state.stages), model, result, cand, state.last_tests, state.cv_here + scr.cvs, decision.nested,
                  decision.alternatives, heldout, fam_name, before, after)
 
@@ -438,17 +439,51 @@ def add(state: LoopState, decision: Decision, stage: Stage, scr: Screening) -> N
 
 
 def run(state: LoopState) -> None:
-    """Stages until one adds nothing or every candidate was added; sets ``state.stop``."""
+    """Stages until one adds nothing or every candidate was added; sets ``state.stop``. Then, once, when the
+    outer test set is still worse than stated (:func:`escalate`), the opt-in families join the candidates left and
+    the stages go on."""
     while True:
         outcome = run_stage(state)
         if isinstance(outcome, Stop):
             state.stop = outcome.reason
-            return
-        add(state, *outcome)
-        if not state.remaining:
+        else:
+            add(state, *outcome)
+            if state.remaining:
+                continue
             state.stop = "every candidate was added"
             state.last_tests, state.last_cv = [], []
+        if not escalate(state):
             return
+
+
+def escalate(state: LoopState) -> bool:
+    """Offer the families off by default (:data:`~calibration.candidates.OPT_IN_FAMILIES`, those not offered
+    yet), once, when the outer test set of the current model is worse than stated
+    (:func:`~calibration.loop.verdict.heldout_check`) and an effect may still be added: what the default families
+    and the effects built from the residual could not explain shows on data the fit never saw, so the effects a
+    user must otherwise ask for are tested too, each kept only by the held-out folds and the outer test set like
+    any other. The judgement is a function of the data (no seed). Returns whether new candidates were offered."""
+    s = state.settings
+    if not s.escalate or state.escalated is not None or len(state.stages) - 1 >= s.max_effects:
+        return False
+    check = heldout_check(state.stages[-1], state.test_by, s.alpha)
+    if not check or not check["worse_than_stated"]:
+        return False
+    first = DEFAULT_FAMILIES if state.families is None else state.families
+    fams = tuple(f for f in OPT_IN_FAMILIES if f not in first)
+    known = {c.name for c in state.candidates} | {c.name for c in state.synthesised}
+    have = set(state.model.spec.names)
+    new = [c for c in library_candidates(state.desc, state.data, fams)[0]
+           if c.name not in known and not set(c.param_names(state.desc)) & have] if fams else []
+    state.escalated = {"families": list(fams), "candidates": [c.name for c in new], "check": check}
+    if not new:
+        return False
+    state.say(f"the outer test set is worse than stated (RMS {check['rms_um']:.4g} um, {check['ratio']:.3g} times "
+              f"what the fit predicts, p = {check['p_value']:.2g}): offering the opt-in famil"
+              f"{'y' if len(fams) == 1 else 'ies'} {', '.join(fams)} ({', '.join(c.name for c in new)})")
+    state.candidates.extend(new)
+    state.remaining.extend(new)
+    return True
 
 
 def report(state: LoopState) -> LoopResult:
@@ -468,7 +503,9 @@ def report(state: LoopState) -> LoopResult:
     built = [{"name": c.name, "family": c.family, "joint": c.joint, "effect": c.effect.describe(),
               "added": fate.get(c.name) == ADDED, "why_not_added": None if fate.get(c.name) == ADDED else
               fate.get(c.name, "not screened")} for c in state.synthesised]
-    verdict = verdict_text(state.stages, significant, state.stop, s, built, state.model, state.vetoed, state.stated)
+    check = heldout_check(state.stages[-1], state.test_by, s.alpha)
+    verdict = verdict_text(state.stages, significant, state.stop, s, built, state.model, state.vetoed, state.stated,
+                           check, state.escalated if state.escalated and state.escalated["candidates"] else None)
     say(verdict)
     data = state.data if s.test_in_model else state.data.select(~state.test_rows)
     say("calibrating the final model on every point (" + ("design and test" if s.test_in_model else
@@ -479,4 +516,4 @@ def report(state: LoopState) -> LoopResult:
                       state.candidates + state.synthesised, state.skipped, state.design.measurements(),
                       state.test.measurements(), s, state.desc, plots, state.dropped, state.test_by, state.power,
                       model_fit, built, state.vetoed, state.data,
-                      residual_over_stated(state.result, state.stated)[0])
+                      residual_over_stated(state.result, state.stated)[0], check, state.escalated)

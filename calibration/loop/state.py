@@ -77,6 +77,9 @@ class LoopState:
         last_tests, last_cv: the last screening and held-out tests; stop: why the loop stopped.
         vetoed: candidates that passed the held-out folds but would have made the outer test set worse (not
             added; the loop stops there).
+        families: the candidate families of the first pass (None: the library's defaults); escalated: the opt-in
+            families offered when the outer test set was worse than stated (``families``, ``candidates``, the
+            judgement ``check`` that led to it), None if not.
     """
     settings: LoopSettings
     desc: ArmDescription
@@ -110,6 +113,8 @@ class LoopState:
     last_cv: list = field(default_factory=list)
     stop: str = ""
     vetoed: list = field(default_factory=list)
+    families: tuple | None = None
+    escalated: dict | None = None
 
     def fit(self, model: ArmModel, data: CalibrationData, extra_priors: dict | None = None, reweight: bool = False,
             hold: tuple = (), weights: Weights | None = None, discrepancy: bool = True,
@@ -132,19 +137,22 @@ class LoopState:
             drop_outliers=drop_outliers, outlier_lengths=False,
             outlier_limit=outlier_budget(len(self.data)) if drop_outliers else None))
 
-    def test_figures(self, model: ArmModel, p, reference: str, weights: Weights | None = None) -> dict:
-        """Figures of ``(model, p)`` on the outer test set (:func:`~calibration.loop.heldout.heldout_figures`):
+    def test_figures(self, model: ArmModel, result: CalibrationResult, weights: Weights | None = None) -> dict:
+        """Figures of ``(model, result.p)`` on the outer test set (:func:`~calibration.loop.heldout.heldout_figures`):
         nuisance solved on the test measurements, or each test pose against its feature's design poses, weighted
         by ``weights`` (default the current ones); the bootstrap of their uncertainties seeded by
         ``settings.seed``. A model with joint torques takes them at its own static equilibrium, as ``aacmm tip``
         applies its model file (:func:`calibration.model_output.at_equilibrium`; with the torques of the base
         fit's equilibrium, a simulated UR5 with a hidden shoulder gain showed 299 -> 180 um where the model files
-        give 425 -> 303 um, scripts/robot_hidden_study.py)."""
+        give 425 -> 303 um, scripts/robot_hidden_study.py). The variance the fit's parameter covariance adds to the
+        held-out rows (``propagated``) is computed for a test set of whole measurements."""
         seed, weights = self.settings.seed, self.weights if weights is None else weights
+        p, reference, cov = result.p, result.reference_mode, (result.free, result.cov)
         if self.test_by == "measurement":
-            return heldout_figures(model, p, at_equilibrium(model, p, self.test), weights, reference, seed=seed)
+            return heldout_figures(model, p, at_equilibrium(model, p, self.test), weights, reference, seed=seed,
+                                   stated=self.stated, cov=cov)
         return heldout_figures(model, p, at_equilibrium(model, p, concat(self.design, self.test)), weights, reference,
-                               np.arange(len(self.design) + len(self.test)) < len(self.design), seed)
+                               np.arange(len(self.design) + len(self.test)) < len(self.design), seed, self.stated)
 
 
 @dataclass

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import math
 
+from scipy import stats
+
 from arm_model.model import ArmModel
 
 from ..synthesis import RESIDUAL, synthesise
 from .settings import PHYSICS
 
-__all__ = ["verdict_text", "residual_over_stated", "S0_LIMIT", "ADDED"]
+__all__ = ["verdict_text", "residual_over_stated", "heldout_check", "S0_LIMIT", "ADDED"]
 
 
 #: residual standard deviation factor above which the residual is not noise at the stated level
@@ -41,12 +43,95 @@ def residual_over_stated(result, stated=None) -> tuple[float, str]:
     return pooled, words
 
 
+def heldout_check(stage, test_by: str, alpha: float) -> dict | None:
+    """Whether the outer test set is worse than stated: worse than a complete model predicts for it, judged on data
+    the fit never saw, beside the structure tests of the design fit's residual.
+
+    A complete model predicts a held-out row with the noise and, in addition, its own propagated uncertainty, on
+    average ``1 + lev`` times the noise's variance. A test set of whole measurements solves its own ``k_t``
+    nuisance unknowns (centres, frames) on its ``n_t`` rows, which leaves ``dof_t = n_t - k_t`` degrees of freedom,
+    and the fitted parameters' covariance adds ``propagated`` (:func:`~calibration.validation.heldout_residuals`:
+    ``tr(P J C J^T P)``) to their sum of squares: ``lev = propagated / (dof_t s0^2)``. Held-out poses are predicted
+    against their features as fitted on the design poses (``dof_t = n_t``), whose uncertainty adds too: ``lev`` is
+    then the design rows' mean leverage ``(n - red) / n`` (``n`` design rows, ``red`` their redundancy, the prior's
+    shrinkage included), the average prediction variance of a new row like them (also used, with the parameters'
+    share ``(n - red - k) / n``, ``k`` the design's nuisance unknowns, when the covariance is not at hand). The
+    test set is *worse than stated* when both
+
+    * against the stated uncertainties, its sum of squares ``chi2_s`` over the rows that have one (not the lengths)
+      is beyond a complete model's: ``chi2_s / (1 + lev)`` about chi-square with ``dof_s`` degrees of freedom, upper
+      tail ``p_stated < alpha``;
+    * against the design fit's own scatter (``s0`` times its weights: the stated uncertainties, or the noise the
+      loop estimated from the data when they were off): ``F = chi2_t / (dof_t (1 + lev) s0^2)`` about
+      ``F(dof_t, red)``, upper tail ``p_value < alpha``. This guards against stated uncertainties that are wrong
+      (10 um stated on a robot with 0.2 mm scatter: every test set is "worse" than them), which the design fit's
+      rule (:data:`S0_LIMIT`) reports; the first guards against a noise estimate low by chance.
+
+    Without a stated uncertainty on any row, the second alone. Without the figures it needs (no redundancy, no
+    degree of freedom left on the test set): None."""
+    h, res = stage.heldout, stage.result
+    chi2, rows, nuis = h.get("chi2"), h.get("rows"), h.get("nuisance")
+    red = getattr(res, "redundancy", None)
+    red = float(res.dof if red is None else red)
+    n = getattr(res, "n_residuals", None)
+    if chi2 is None or rows is None or nuis is None or n is None or red <= 0 or not res.s0 > 0:
+        return None
+    by_meas = test_by == "measurement"
+    dof_t = rows - nuis if by_meas else rows
+    if dof_t <= 0:
+        return None
+    prop = h.get("propagated") if by_meas else None
+    lev = (prop / (dof_t * res.s0 ** 2) if prop is not None else
+           max(0.0, n - red - (res.n_nuisance if by_meas else 0)) / n)
+    f = chi2 / (dof_t * (1.0 + lev) * res.s0 ** 2)
+    p = float(stats.f.sf(f, dof_t, red))
+    dof_s = (h.get("rows_stated") or 0) - (nuis if by_meas else 0)
+    p_s = (float(stats.chi2.sf(h["chi2_stated"] / (1.0 + lev), dof_s))
+           if h.get("chi2_stated") is not None and dof_s > 0 else None)
+    return {"rows": int(rows), "dof": int(dof_t), "leverage": lev, "design_redundancy": red, "design_s0": float(res.s0),
+            "rms_weighted": h.get("rms_weighted"), "ratio": math.sqrt(f), "p_value": p, "alpha": alpha,
+            "rms_um": h.get("rms_um"), "rms_over_stated": h.get("rms_over_stated"),
+            "ratio_stated": None if p_s is None else math.sqrt(h["chi2_stated"] / (dof_s * (1.0 + lev))),
+            "p_stated": p_s, "worse_than_stated": p < alpha and (p_s is None or p_s < alpha)}
+
+
+def _p(p: float) -> str:
+    """A p-value as the verdict writes it (one below the smallest double written as such)."""
+    return f"= {p:.2g}" if p > 0 else "< 1e-300"
+
+
+def heldout_sentence(check: dict | None) -> str:
+    """The verdict's sentence on an outer test set worse than stated (:func:`heldout_check`), else ""."""
+    if not check or not check["worse_than_stated"]:
+        return ""
+    stated = ("" if check["p_stated"] is None else
+              f"; {check['rms_over_stated']:.3g} times the stated uncertainties, chi-square p {_p(check['p_stated'])}")
+    return (f"The outer test set is worse than a complete model predicts: its residual (RMS {check['rms_um']:.4g} "
+            f"um) is {check['ratio']:.3g} times what the design fit's scatter and the model's own uncertainty give "
+            f"for it (F-test p {_p(check['p_value'])} < {check['alpha']:g}{stated}): the model lacks something that "
+            "shows on data it was not fitted to. The model is not complete; no fix is claimed for it.")
+
+
+def escalation_sentence(escalated: dict | None, added: list) -> str:
+    """What the escalation offered (the opt-in families, when the outer test set was worse than stated after the
+    default ones) and what of it was added; "" without escalation."""
+    if not escalated:
+        return ""
+    mine = [n for n in added if n in escalated["candidates"]]
+    return (f". The outer test set was worse than stated after the default families, so the opt-in famil"
+            f"{'y' if len(escalated['families']) == 1 else 'ies'} {', '.join(escalated['families'])} "
+            f"({len(escalated['candidates'])} candidates) were offered, kept by the same held-out rules: "
+            + ("added " + ", ".join(mine) if mine else "none was added"))
+
+
 def verdict_text(stages, significant, stop, settings, built=(), model: ArmModel | None = None, vetoed=(),
-                 stated=None) -> str:
+                 stated=None, heldout: dict | None = None, escalated: dict | None = None) -> str:
     """What was added (and how much the held-out error dropped), what passed the held-out folds but was not
     added because the outer test set got worse, what was built from the residual and not added (and why), and
     what structure remains unexplained. ``stated``: the user's stated uncertainties, against which the final
-    residual is judged (:func:`residual_over_stated`); None: the final fit's own weights."""
+    residual is judged (:func:`residual_over_stated`); None: the final fit's own weights. ``heldout``: the judgement
+    of the outer test set (:func:`heldout_check`): when it is worse than stated the verdict says so, and never
+    "No structured residual remains". ``escalated``: the opt-in families offered (``families``, ``candidates``)."""
     def label(s):
         if any(cv.candidate == s.added.name and cv.reason.startswith(PHYSICS) for cv in s.cv):
             return " (included as physics, not for a held-out gain)"
@@ -59,6 +144,8 @@ def verdict_text(stages, significant, stop, settings, built=(), model: ArmModel 
     if added:
         out += (f"; held-out test RMS {base['rms_um']:.2f} -> {last['rms_um']:.2f} um, "
                 f"max {base['max_um']:.2f} -> {last['max_um']:.2f} um")
+    out += escalation_sentence(escalated, [s.added.name for s in stages[1:]])
+    tail = heldout_sentence(heldout)
     for v in vetoed:
         out += (f". Not added, the outer test set got worse with it: {v['name']} (RMS "
                 f"{v['heldout_rms_before_um']:.2f} -> {v['heldout_rms_after_um']:.2f} um)")
@@ -70,7 +157,10 @@ def verdict_text(stages, significant, stop, settings, built=(), model: ArmModel 
         return out + (f". The final residual is {s0:.3g} times the stated uncertainties"
                       + (f" ({words})" if words else "") + ": it is not noise at the stated level, but no tested "
                       "regressor family explains it (wrong stated uncertainties, or structure beyond the tests). No "
-                      "fix is claimed.")
+                      "fix is claimed." + (" " + tail if tail else ""))
+    if not significant and tail:
+        return out + (". No regressor family is significant on the design fit's residual (after Bonferroni's "
+                      "correction), but: " + tail[0].lower() + tail[1:])
     if not significant:
         return out + (". No structured residual remains (no regressor family is significant after Bonferroni's "
                       "correction).")
@@ -82,4 +172,4 @@ def verdict_text(stages, significant, stop, settings, built=(), model: ArmModel 
            f" (no further effect is built for {', '.join(nothing)})" if nothing else "")
     built_by = " nor by the effects built from it" if not_added else ""
     return (out + f". Structured residual remains, not explained by the effect library{built_by}{why}: it "
-            f"correlates with {fams}. No fix is claimed for it.")
+            f"correlates with {fams}. No fix is claimed for it." + (" " + tail if tail else ""))
