@@ -48,9 +48,23 @@ from typing import Any
 import numpy as np
 
 __all__ = ["NUMPY_OPS", "Joint", "joint_value", "elastic_displacement", "ball_in_last_frame", "row_motions",
-           "chain_point", "ball_centre_expr", "probe_lever", "has_stylus"]
+           "chain_point", "ball_centre_expr", "probe_lever", "has_stylus", "cross"]
 
 NUMPY_OPS = SimpleNamespace(sin=np.sin, cos=np.cos)
+
+
+def cross(a: Any, b: Any) -> np.ndarray:
+    """``np.cross(a, b)`` of 3-vectors along the last axis (broadcast): the same products and differences, so
+    the same numbers, without np.cross's axis handling (two to three times its speed on the small stacks of the
+    Jacobians and the frames, called hundreds of thousands of times)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a1 * b2 - a2 * b1
+    out[..., 1] = a2 * b0 - a0 * b2
+    out[..., 2] = a0 * b1 - a1 * b0
+    return out
 
 #: A number of the chain: a float, a numpy array (one entry a point) or a CasADi SX/MX expression.
 Scalar = Any

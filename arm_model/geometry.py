@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
+from .chain import cross
 from .errors import NumericalError
 
 __all__ = ["CircleFit", "CylinderFit", "RingFit", "SphereFit", "PlaneFit", "kasa_circle", "fit_circle_2d",
@@ -53,9 +54,9 @@ def perpendicular_basis(u: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     26 degrees of x), ``e2 = u x e1``."""
     u = np.asarray(u, float)
     ref = np.array([1.0, 0.0, 0.0]) if abs(u[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = np.cross(u, ref)
+    e1 = cross(u, ref)
     e1 /= np.linalg.norm(e1)
-    return e1, np.cross(u, e1)
+    return e1, cross(u, e1)
 
 
 def angle_frame(a: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -66,7 +67,7 @@ def angle_frame(a: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         e1 = ref - (ref @ a) * a
         if np.linalg.norm(e1) > 0.1:
             e1 /= np.linalg.norm(e1)
-            return e1, np.cross(a, e1)
+            return e1, cross(a, e1)
     raise AssertionError("unreachable: base x and y cannot both be parallel to a unit axis")
 
 

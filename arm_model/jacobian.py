@@ -40,6 +40,7 @@ from .chain import (
     Scalar,
     Vector,
     ball_in_last_frame,
+    cross,
     elastic_displacement,
     has_stylus,
     joint_value,
@@ -377,7 +378,7 @@ def point_jacobian(u: np.ndarray, c: np.ndarray, p: np.ndarray, joints: Sequence
     frame, from the joint axes ``u`` and points ``c`` on them (N, R, 3) of :func:`joint_screws`; ``joints``
     (:class:`arm_model.chain.Joint`, None: revolute rows, one column each) and ``n_q`` map the rows to the
     encoder columns."""
-    d = np.cross(u, p[:, None, :] - c)
+    d = cross(u, p[:, None, :] - c)
     if joints is not None:
         for i, j in enumerate(joints):
             if j.prismatic:
@@ -389,7 +390,7 @@ def direction_jacobian(u: np.ndarray, v: np.ndarray, joints: Sequence[Joint] | N
                        n_q: int | None = None) -> np.ndarray:
     """(N, 3, J) d v / d q [1/rad; 0 for a prismatic joint] of directions ``v`` (N, 3) fixed in the last
     frame (``joints``, ``n_q`` as :func:`point_jacobian`)."""
-    d = np.cross(u, v[:, None, :])
+    d = cross(u, v[:, None, :])
     if joints is not None:
         for i, j in enumerate(joints):
             if j.prismatic:

@@ -28,10 +28,11 @@ def figure(width: float, height: float, rows: int | None = None, cols: int | Non
     return pyplot().subplots(rows or 1, cols or 1, figsize=(width, height), squeeze=False)
 
 
-def png(fig, dpi: int = DPI) -> bytes:
-    """The PNG bytes of ``fig`` (cropped to what is drawn); the figure is closed."""
+def png(fig, dpi: int = DPI, crop: bool = True) -> bytes:
+    """The PNG bytes of ``fig``, cropped to what is drawn (``crop``: matplotlib's ``bbox_inches="tight"``, which
+    lays the figure out once more; False for a figure laid out in fixed margins); the figure is closed."""
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight" if crop else None)
     pyplot().close(fig)
     return buf.getvalue()
 

@@ -55,7 +55,7 @@ from .identifiability import (
 from .options import FitOptions
 from .prior import PRIOR_DOMINATED, PriorSpec, prior_spec, update_scales, variance_ratio
 from .problem import Problem
-from .solver import Prior, blas_threads, levenberg_marquardt, normal_factor
+from .solver import NormalFactor, Prior, blas_threads, levenberg_marquardt, normal_factor
 
 __all__ = ["FixedParameter", "Outlier", "CalibrationResult", "calibrate", "resolve_parameters",
            "default_free", "rigid_gauge", "display_unit", "blas_threads", "identify", "variance_components",
@@ -1144,7 +1144,7 @@ class _Normal:
     Laplace log evidence (None without a prior)."""
     js: sp.csc_matrix
     jscale: np.ndarray
-    lu: object
+    lu: NormalFactor
     h: np.ndarray
     log_evidence: float | None
     deletions: list | None = None
@@ -1166,7 +1166,7 @@ def _normal(s: _Setup, sol, kept, groups=None) -> _Normal:
     lu = normal_factor(js, damp)
     log_ev = None
     if s.prior is not None:                 # Laplace: -cost - 0.5 log det(H) + log of the prior's normalisation
-        logdet = float(np.sum(np.log(np.abs(lu.U.diagonal())))) + 2.0 * float(np.sum(np.log(jscale)))
+        logdet = lu.log_abs_det() + 2.0 * float(np.sum(np.log(jscale)))
         log_ev = -(sol.cost + sol.prior_cost) - 0.5 * logdet - float(np.sum(np.log(s.prior.size[kept_arr])))
     if groups is None:
         return _Normal(js, jscale, lu, _leverage(js, lu.solve), log_ev)
@@ -1246,7 +1246,7 @@ def _tracker(prob: Problem, p, states, nrm: _Normal, n_kept: int, var: float) ->
             cols = n_kept + it.offset + np.arange(it.n_theta)
             e = np.zeros((nrm.js.shape[1], it.n_theta))
             e[cols, np.arange(it.n_theta)] = 1.0
-            blk = nrm.lu.solve(e)[cols] / np.outer(nrm.jscale[cols], nrm.jscale[cols]) * var  # type: ignore[attr-defined]
+            blk = nrm.lu.solve(e)[cols] / np.outer(nrm.jscale[cols], nrm.jscale[cols]) * var
             u[i] = np.sqrt(np.diag(blk))
     return prob.tracker(states, u)
 
@@ -1308,10 +1308,10 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         prior_centre=None if s.prior is None else s.prior.centre, options=options, prior_sd=prior_sd,
         prior_ratio=None if prior_sd is None else variance_ratio(u ** 2, prior_sd),
         prior_groups=_group_table(s, kept, u), redundancy=None if s.prior is None else red,
-        discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var)  # type: ignore[attr-defined]
+        discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var)
         if options.discrepancy else None,
         point_tests=None if level is None else point_tests(
-            prob, ev.r, nrm.js, nrm.lu.solve, nrm.h, level, nrm.deletions))  # type: ignore[attr-defined]
+            prob, ev.r, nrm.js, nrm.lu.solve, nrm.h, level, nrm.deletions))
 
 
 def _test_level(options: FitOptions) -> float | None:

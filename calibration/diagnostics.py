@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
-from scipy import stats
+from scipy import special
 
 from arm_model.chain import NUMPY_OPS
 from arm_model.effects import Effect, Geometry, contact_moment, gravity_moment, joint_frame
@@ -424,7 +424,7 @@ def test_group(space: ResidualSpace, cols: np.ndarray, names, name: str, fold_of
         f_, p = nan, nan
     else:
         f_ = (d / rank) / (rest / dof2)
-        p = float(stats.f.sf(f_, rank, dof2))
+        p = float(special.fdtrc(rank, dof2, f_))     # stats.f.sf(f_, rank, dof2), the same numbers, 20x faster
     n = len(r)
     dbic = n * math.log(rest / chi2) + rank * math.log(n) if chi2 > 0 else nan
     beta = -(vt.T / s) @ z / scale          # the Gauss-Newton step: r + C beta is smallest

@@ -260,3 +260,44 @@ def test_a_robot_urdf_with_its_meshes_and_a_flange_tip(tmp_path):
         info = view.show_pose(q)
     assert any("links orange" in line for line in view.legend)
     assert_close(info.rigid, ball_centres(d, q[None])[0], 1e-12)
+
+
+def test_a_new_websocket_gets_the_scene_then_the_mark_the_live_page_waits_for():
+    """The live page holds a request (/live/hold) open until the server's mark that the whole scene has been
+    sent (viz.bridge.SCENE_SENT): a headless browser's virtual-time budget then cannot run out before the scene
+    is there (it did when the server answered 0.2 s late). The mark comes after every command of the scene; the
+    hold request is still open while the page waits; the page aborts it on the mark."""
+    import asyncio
+
+    import meshcat.geometry as mg
+    import tornado.httpclient
+    import tornado.websocket
+    import umsgpack
+
+    from viz.bridge import LIVE_PAGE, SCENE_SENT
+
+    assert "/live/hold" in LIVE_PAGE and f'cmd.type === "{SCENE_SENT}"' in LIVE_PAGE and "hold.abort()" in LIVE_PAGE
+
+    async def client(url):
+        ws = await tornado.websocket.websocket_connect(url.rsplit("/static/", 1)[0].replace("http", "ws") + "/")
+        types = []
+        while not types or types[-1]["type"] != SCENE_SENT:
+            types.append(umsgpack.unpackb(await asyncio.wait_for(ws.read_message(), 20)))
+        ws.close()
+        hold = tornado.httpclient.AsyncHTTPClient().fetch(url.rsplit("/static/", 1)[0] + "/live/hold",
+                                                          request_timeout=0.3)
+        try:
+            await hold
+            held = False
+        except tornado.httpclient.HTTPClientError as exc:     # 599: our client gave up, the server still held it
+            held = exc.code == 599
+        return types, held
+
+    with MeshcatServer() as server:
+        server.visualizer["a"].set_object(mg.Box([0.1, 0.1, 0.1]))
+        server.visualizer["b"].set_transform(np.eye(4))
+        cmds, held = asyncio.run(client(server.url))
+    assert [c["type"] for c in cmds][-1] == SCENE_SENT
+    assert {"set_object", "set_transform"} <= {c["type"] for c in cmds[:-1]}
+    assert SCENE_SENT not in [c["type"] for c in cmds[:-1]]
+    assert held

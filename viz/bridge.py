@@ -4,7 +4,15 @@ meshcat's own ZMQ-to-websocket bridge, with three changes: the web server listen
 host only (meshcat's listens on every interface), a busy ``--port`` is reported on stdout as one
 ``error=`` line instead of a traceback, and the process stops by itself when its parent is gone
 (so that a killed parent cannot leave a server behind); it also serves the page of a live session at
-``/live/`` (:data:`LIVE_PAGE`: meshcat's viewer with a text panel). Protocol on stdout: ``zmq_url=...`` then
+``/live/`` (:data:`LIVE_PAGE`: meshcat's viewer with a text panel).
+
+The scene reaches a page over its websocket, after the page has loaded: a headless browser that renders for a
+virtual-time budget (``chromium --virtual-time-budget``, :mod:`viz.browser`) counts no time while a request is
+pending, but a websocket message is no request, so a budget could run out before the scene arrived (a screenshot
+of an empty scene when the server answered late, e.g. on a loaded machine). So the live page keeps one request
+open, ``/live/hold``, until the server's mark that the whole scene has been sent (:data:`SCENE_SENT`, written
+after the scene to every new websocket) has reached it; the server answers the request by itself after
+:data:`HOLD_S` seconds (a page that never connects is not held for longer). Protocol on stdout: ``zmq_url=...`` then
 ``web_url=...``, or ``error=<kind> <message>``.
 """
 from __future__ import annotations
@@ -17,6 +25,10 @@ import sys
 
 #: the scene node whose object carries the text of the live page's panel (``userData.lines``)
 PANEL_NODE = "aacmm/live/panel"
+#: the command the server writes to a new websocket after the whole scene (meshcat's viewer ignores it)
+SCENE_SENT = "aacmm_scene_sent"
+#: how long the server keeps the live page's ``/live/hold`` request open at most [s]
+HOLD_S = 30.0
 #: the live page (``/live/``): meshcat's viewer plus a text panel. Commands that set the panel node's
 #: object fill the panel instead of the scene; everything else is meshcat's own.
 LIVE_PAGE = """<!DOCTYPE html>
@@ -27,9 +39,15 @@ font:13px/1.35 monospace;color:#fff;background:rgba(0,0,0,0.6);border-radius:4px
 </head><body><div id="meshcat-pane"></div><pre id="aacmm-panel">waiting for the session ...</pre>
 <script type="text/javascript" src="/static/main.min.js"></script>
 <script>
+var hold = new AbortController();   // a request open until the scene is here (see viz/bridge.py)
+fetch("/live/hold", {signal: hold.signal, cache: "no-store"}).catch(function () {});
 var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
 var meshcatCommand = viewer.handle_command.bind(viewer);
 viewer.handle_command = function (cmd) {
+  if (cmd.type === "SCENE_SENT") {
+    hold.abort();
+    return;
+  }
   if (cmd.type === "set_object" && String(cmd.path).endsWith("/PANEL_NODE")) {
     var data = (cmd.object && cmd.object.object && cmd.object.object.userData) || {};
     document.getElementById("aacmm-panel").textContent = (data.lines || []).join("\\n");
@@ -39,11 +57,14 @@ viewer.handle_command = function (cmd) {
 };
 try { viewer.connect(); } catch (e) { console.info("not connected to the meshcat server: ", e); }
 </script></body></html>
-""".replace("PANEL_NODE", PANEL_NODE)
+""".replace("PANEL_NODE", PANEL_NODE).replace("SCENE_SENT", SCENE_SENT)
 
 
 def _bridge_class():
+    import tornado.gen
+    import tornado.iostream
     import tornado.web
+    import umsgpack
     from meshcat.servers.zmqserver import ZMQWebSocketBridge
 
     class LivePage(tornado.web.RequestHandler):
@@ -52,10 +73,28 @@ def _bridge_class():
             self.set_header("Cache-Control", "no-store")
             self.write(LIVE_PAGE)
 
+    class Hold(tornado.web.RequestHandler):
+        async def get(self):          # the page ends it when the scene is there; else it ends after HOLD_S
+            self.set_header("Cache-Control", "no-store")
+            await tornado.gen.sleep(HOLD_S)
+            try:
+                await self.finish()
+            except tornado.iostream.StreamClosedError:
+                pass
+
+        def on_connection_close(self):
+            pass
+
+    scene_sent = umsgpack.packb({"type": SCENE_SENT})
+
     class Bridge(ZMQWebSocketBridge):
+        def send_scene(self, websocket):
+            super().send_scene(websocket)
+            websocket.write_message(scene_sent, binary=True)
+
         def make_app(self):
             app = super().make_app()
-            app.add_handlers(r".*", [(r"/live/?", LivePage)])
+            app.add_handlers(r".*", [(r"/live/hold", Hold), (r"/live/?", LivePage)])
             listen = app.listen
             app.listen = lambda port, **kw: listen(port, address=self.host, **kw)
             return app

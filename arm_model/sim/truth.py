@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..chain import NUMPY_OPS, ball_in_last_frame, chain_point, elastic_displacement, has_stylus, probe_lever
+from ..chain import NUMPY_OPS, ball_in_last_frame, chain_point, cross, elastic_displacement, has_stylus, probe_lever
 from ..description import ArmDescription
 from ..effects import (
     ApproachOffset,
@@ -50,7 +50,7 @@ def si_key(name: str, unit: str) -> str:
 
 def probe_wrench(force, torque, z, x) -> np.ndarray:
     """(N, 6) wrench in the probe frame from base-frame force/torque and the probe axes."""
-    y = np.cross(z, x)
+    y = cross(z, x)
     r = np.stack([x, y, z], axis=1)           # rows: probe axes in base -> R_probe_base
     return np.concatenate([np.einsum("nij,nj->ni", r, force), np.einsum("nij,nj->ni", r, torque)], axis=1)
 
