@@ -249,7 +249,7 @@ def beyond_note(d) -> str:
     [m] of the points from it (:func:`arm_model.discrepancy.pose_distance`)."""
     if not len(d):
         return ""
-    return (f"; these points lie {np.median(d) * 1e3:.4g} mm (median), up to {d.max() * 1e3:.4g} mm from the nearest "
+    return (f"; these points lie {np.median(d) * 1e3:.1f} mm (median), up to {d.max() * 1e3:.1f} mm from the nearest "
             "training pose (ball travel of the joint motions)")
 
 
