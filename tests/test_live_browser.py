@@ -54,6 +54,21 @@ def panel(dom: str) -> str:
     return html.unescape(m.group(1))
 
 
+def shot(url, png):
+    """A screenshot and the DOM of the live page. Chromium stalled once past its 90 s timeout on a fresh clone
+    (2 workers, 2026-11-27, the second of this test's two screenshots; not reproduced in five runs under an
+    artificial load): a stall is given 45 s and one more try, so that it costs CI time, not a false failure.
+    What the page shows is checked as strictly either way."""
+    from viz.errors import ViewerError
+    for attempt in (1, 2):
+        try:
+            return screenshot_and_dom(url, png, width=W_PX, height=H_PX, budget_ms=2500, timeout=45.0)
+        except ViewerError as e:
+            if attempt == 2 or "did not render" not in str(e):
+                raise
+    raise AssertionError("unreachable")
+
+
 def test_the_live_page_shows_the_points_as_they_arrive(tmp_path, nominal):
     from arm_model.live import read_plan
     layout, samples = stream()
@@ -67,7 +82,7 @@ def test_the_live_page_shows_the_points_as_they_arrive(tmp_path, nominal):
     with LiveView(session, camera=camera) as view:
         k = push_until(session, samples, 0, 9)          # the ring (8 points) and the plane's first
         view.update(force=True)
-        png, dom = screenshot_and_dom(view.url, tmp_path / "nine.png", width=W_PX, height=H_PX, budget_ms=2500)
+        png, dom = shot(view.url, tmp_path / "nine.png")
         img = load_png(png)
         xy = camera.project(pts, W_PX, H_PX)
         shown = [cyan_near(img, p) for p in xy]
@@ -81,7 +96,7 @@ def test_the_live_page_shows_the_points_as_they_arrive(tmp_path, nominal):
         assert "over-force 1" in text and "plane 'table' (1 pt)" in text and "next: table (4 more)" in text
         push_until(session, samples, k, 19)
         view.update(force=True)
-        png, dom = screenshot_and_dom(view.url, tmp_path / "all.png", width=W_PX, height=H_PX, budget_ms=2500)
+        png, dom = shot(view.url, tmp_path / "all.png")
         img = load_png(png)
         # every point, but those behind the probe that now stands on the last seat
         ball = camera.project([session.points[-1].corrected], W_PX, H_PX)[0]
