@@ -200,3 +200,25 @@ def test_holdout_keeps_its_rows_out_of_the_model_which_is_calibrates_with_its_re
     np.testing.assert_allclose(a.desc.row_table(), b.desc.row_table(), atol=1e-12)
     np.testing.assert_allclose(a.desc.probe.p_last, b.desc.probe.p_last, atol=1e-12)
     capsys.readouterr()
+
+
+@pytest.mark.parametrize("extra, escalate", [([], True), (["--candidates", "eccentricity"], False)])
+def test_naming_the_candidates_turns_the_escalation_off(files, tmp_path, monkeypatch, extra, escalate):
+    """The opt-in families are offered when the outer test set is worse than stated, unless the user named the
+    candidates (``--candidates``): the settings the command hands to the loop say so."""
+    import calibration.loop as loop
+
+    seen = {}
+
+    class Handed(Exception):
+        pass
+
+    def fake_close_loop(*args, settings, **kw):
+        seen["escalate"] = settings.escalate
+        raise Handed
+
+    monkeypatch.setattr(loop, "close_loop", fake_close_loop)   # loop_cli imports it when it runs
+    code = main(["close-loop", str(files / "points.csv"), str(files / "artefacts.toml"), "--arm", str(NOMINAL),
+                 *extra, "-o", str(tmp_path / "loop")])
+    assert code == 3 and seen == {"escalate": escalate}        # the stand-in's exception is an internal error
+    assert not (tmp_path / "loop").exists()
