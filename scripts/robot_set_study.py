@@ -224,10 +224,15 @@ def main_study(argv=None) -> int:
     for name in a.chains or list(CHAINS):
         results.append(study(name, robots, a.output, a))
         print(json.dumps(results[-1]), flush=True)
-    (a.output / "results.json").write_text(json.dumps(results, indent=1) + "\n")
-    (a.output / "table.md").write_text(table(results))
-    print(table(results))
+    write_results(a.output, results, table(results))
     return 0
+
+
+def write_results(out: Path, results: list, text: str) -> None:
+    """A study's ``results.json`` (one object a chain) and ``table.md`` (``text``, also printed)."""
+    (out / "results.json").write_text(json.dumps(results, indent=1) + "\n")
+    (out / "table.md").write_text(text)
+    print(text)
 
 
 if __name__ == "__main__":

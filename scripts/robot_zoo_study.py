@@ -32,7 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "scripts"))
 
-from robot_set_study import study_chain  # noqa: E402
+from robot_set_study import study_chain, write_results  # noqa: E402
 
 from arm_model.errors import InputError  # noqa: E402
 
@@ -159,9 +159,7 @@ def main_study(argv=None) -> int:
                             if k not in res})
             print(json.dumps(res), flush=True)
         results.append(res)
-    (a.output / "results.json").write_text(json.dumps(results, indent=1) + "\n")
-    (a.output / "table.md").write_text(zoo_table(results))
-    print(zoo_table(results))
+    write_results(a.output, results, zoo_table(results))
     return 0
 
 
