@@ -793,19 +793,32 @@ def _link_frames(u: _Urdf, ch: _Chain) -> dict[str, tuple[int, np.ndarray]]:
     return out
 
 
+def _package_roots(pkg: str, here: Path) -> list[Path]:
+    """Where ``package://pkg/`` may live, in ROS's order of preference after the URDF's own tree: a folder ``pkg``
+    beside the URDF or above it (or the folder holding the URDF, if named ``pkg``), then each folder of
+    ``ROS_PACKAGE_PATH`` (ROS 1: the package itself or a folder holding it) and ``share/pkg`` under each prefix of
+    ``AMENT_PREFIX_PATH`` (ROS 2), as a sourced ROS workspace sets them."""
+    import os
+    roots = [d / pkg for d in (here, *here.parents)] + [d for d in (here, *here.parents) if d.name == pkg]
+    for entry in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep):
+        if entry:
+            d = Path(entry).expanduser()
+            roots += [d] if d.name == pkg else [d / pkg]
+    for entry in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
+        if entry:
+            roots.append(Path(entry).expanduser() / "share" / pkg)
+    return roots
+
+
 def _mesh_file(u: _Urdf, name: str) -> Path | None:
-    """The file of a ``<mesh filename>``: ``package://pkg/...`` found in a folder ``pkg`` beside the URDF or
-    above it, ``file://`` and absolute paths as they are, others relative to the URDF; None if absent."""
+    """The file of a ``<mesh filename>``: ``package://pkg/...`` found where :func:`_package_roots` says,
+    ``file://`` and absolute paths as they are, others relative to the URDF; None if absent."""
     if name.startswith("file://"):
         name = name[len("file://"):]
     here = u.path.resolve().parent
     if name.startswith("package://"):
         pkg, _, rest = name[len("package://"):].partition("/")
-        for d in (here, *here.parents):
-            for cand in (d / pkg / rest, d / rest if d.name == pkg else None):
-                if cand is not None and cand.is_file():
-                    return cand.resolve()
-        return None
+        return next((c.resolve() for c in (r / rest for r in _package_roots(pkg, here)) if c.is_file()), None)
     cand = (Path(name) if Path(name).is_absolute() else here / name).resolve()
     return cand if cand.is_file() else None
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 
 import numpy as np
 import pytest
@@ -190,6 +191,27 @@ def test_missing_meshes_are_listed_for_the_viewer_and_do_not_matter(tmp_path):
     clean = description_from_urdf(write(tmp_path, robot(), "c.urdf"), "tip")
     assert len(d.visuals) == 1 and origins(d) == origins(clean)
 
+
+
+@pytest.mark.parametrize("var, layout", [("ROS_PACKAGE_PATH", "{root}"), ("ROS_PACKAGE_PATH", "{root}/desc"),
+                                         ("AMENT_PREFIX_PATH", "{root}/install")])
+def test_package_meshes_are_found_through_a_sourced_ros_workspace(tmp_path, monkeypatch, var, layout):
+    """package://desc/... is found in ROS 1's ROS_PACKAGE_PATH (a folder holding the package, or the package
+    itself) and under ROS 2's AMENT_PREFIX_PATH/share, not only beside or above the URDF."""
+    root = tmp_path / "ws"
+    mesh_dir = (root / "install" / "share" / "desc" if var == "AMENT_PREFIX_PATH" else root / "desc") / "meshes"
+    mesh_dir.mkdir(parents=True)
+    (mesh_dir / "l1.stl").write_text("solid x\nendsolid x\n")
+    vis = '<visual><geometry><mesh filename="package://desc/meshes/l1.stl"/></geometry></visual>'
+    text = robot().replace('<link name="l1"/>', f'<link name="l1">{vis}</link>')
+    (tmp_path / "robot").mkdir()
+    urdf = write(tmp_path / "robot", text)
+    monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
+    monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
+    assert description_from_urdf(urdf, "tip").missing_meshes == ("package://desc/meshes/l1.stl",)
+    monkeypatch.setenv(var, os.pathsep.join(["/nowhere", layout.format(root=root)]))
+    d = description_from_urdf(urdf, "tip")
+    assert d.missing_meshes == () and len(d.visuals) == 1
 
 # -- axes and origins against Pinocchio --------------------------------------------------------------------------
 

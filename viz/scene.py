@@ -271,7 +271,7 @@ class ArmScene:
             if missing:
                 line = (f"{len(missing)} mesh file{'s' if len(missing) > 1 else ''} of the URDF not found (e.g. "
                         f"'{missing[0]}'; package:// is looked for in a folder of that name beside or above the "
-                        "URDF): the arm is drawn without them")
+                        "URDF, then in ROS_PACKAGE_PATH and AMENT_PREFIX_PATH/share): the arm is drawn without them")
                 log.warning(line)
                 self._legend(line)
         vis["/Axes"].set_property("visible", False)   # its x axis fades to orange, the arm's colour
