@@ -76,7 +76,7 @@ class Growth:
             left in the fold) of the held-out rows: the reach over which the growth was measured (beyond
             ``d_max`` it is an extrapolation).
         d, e, v: (rows,) the held-out rows it was fitted to: distance [m], error [m], predicted variance [m^2]
-            (for the report's plot).
+            (for the report's plot); fold: (rows,) the fold of each (for studies that refit without a fold).
     """
     sigma0: float
     growth: float
@@ -88,6 +88,7 @@ class Growth:
     d: np.ndarray = field(default_factory=lambda: np.zeros(0), compare=False, repr=False)
     e: np.ndarray = field(default_factory=lambda: np.zeros(0), compare=False, repr=False)
     v: np.ndarray = field(default_factory=lambda: np.zeros(0), compare=False, repr=False)
+    fold: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int), compare=False, repr=False)
 
     def to_dict(self) -> dict:
         return {"sigma0_um": self.sigma0 * 1e6, "growth_um_per_mm": self.growth * 1e3,
@@ -109,6 +110,8 @@ class JointGrowth:
             :data:`RESOLVED_TRAVEL` of the largest joint's); a joint they did not resolve takes the growth of every
             joint together (:class:`Growth`'s, with its uncertainty) instead of an estimate nothing constrains.
         lr: twice the log-likelihood gained over one growth for every joint (:class:`Growth`).
+        c: (rows, J) [m^2] each joint's share of the squared distance of the held-out rows (:class:`Growth`'s
+            ``d``, ``e``, ``v``, ``fold``), for studies that refit without a fold.
     """
     sigma0: float
     growth: tuple[float, ...]
@@ -116,6 +119,7 @@ class JointGrowth:
     u_growth: tuple[float, ...]
     resolved: tuple[bool, ...]
     lr: float
+    c: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)), compare=False, repr=False)
 
     def predictive(self) -> tuple[float, tuple[float, ...]]:
         """``(sigma0, growth)`` with their estimation uncertainty carried: ``sqrt(sigma0^2 + u(sigma0)^2)`` and
@@ -268,7 +272,7 @@ def fit_growth(e, v, d, fold) -> Growth:
     u = _jackknife(jack)
     return Growth(math.sqrt(a), math.sqrt(b), float(u[0]), float(u[1]), max(2 * (nll0 - nll), 0.0),
                   float(np.sqrt(d2.max())) if len(d2) else 0.0, float(np.sqrt(d2.mean())) if len(d2) else 0.0,
-                  np.sqrt(d2), np.asarray(e, dtype=float), v)
+                  np.sqrt(d2), np.asarray(e, dtype=float), v, fold)
 
 
 def fit_joint_growth(e, v, c, fold, pooled: Growth) -> JointGrowth:
@@ -294,7 +298,7 @@ def fit_joint_growth(e, v, c, fold, pooled: Growth) -> JointGrowth:
     both = np.column_stack([np.ones(len(e2)), c.sum(axis=1)])
     nll_pooled = _neg_log_likelihood(np.array([pooled.sigma0 ** 2, pooled.growth ** 2]), e2, _floored(e2, v), both)[0]
     return JointGrowth(math.sqrt(x[0]), tuple(g.tolist()), float(u[0]), tuple(ug.tolist()),
-                       tuple(bool(r) for r in resolved), max(2 * (nll_pooled - nll), 0.0))
+                       tuple(bool(r) for r in resolved), max(2 * (nll_pooled - nll), 0.0), c)
 
 
 def extreme_folds(q: np.ndarray, share: float = EXTREME_SHARE) -> list[np.ndarray]:
