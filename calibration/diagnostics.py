@@ -47,7 +47,6 @@ from .candidates import Candidate, torques_of
 from .data import CalibrationData
 from .identifiability import (
     DEFAULT_RANK_TOL,
-    plausible_length,
     point_noise,
     prior_scales,
     reduced_jacobian,
@@ -800,22 +799,23 @@ def families(space: ResidualSpace) -> list[Family]:
     return [fam for build in _FAMILY_BUILDERS for fam in build(f)]
 
 
-def test_family(space: ResidualSpace, base: ResidualSpace, fam: Family, cols: np.ndarray, names,
-                fold_of_row: np.ndarray | None, rank_tol: float = DEFAULT_RANK_TOL) -> GroupTest:
-    """One generic family's columns (``fam.columns(base)``) tested against the residual of ``space`` (``base``, or
-    ``base`` given families already kept). An offset of a groups family (one a measurement, one a feature or
-    certified length) that the data resolve only to worse than a plausible length error
-    (:func:`~calibration.identifiability.plausible_length` of the points' noise) counts as absorbed, as a candidate's
-    parameter does at the screening: on seat pairs a certified length's offset lies 99.7 % in the arm's scale, and
-    what is left of it once the geometry is projected out is the scale's move of each seat's articulations about
-    their centre, the residual itself. Its score step, one offset of the bar's whole length (the arm shrunk to a
-    point: every residual zero to first order), "explained" the residual of every simulated seat campaign
-    (scripts/robot_hidden_study.py, p = 1e-186 with nothing hidden), and the forward selection of the decisions,
-    given it, found nothing else: a shoulder's lateral compliance and a wrist's coupling (p = 5e-32 and 6e-54 without
-    it) were never built."""
+def test_family(space: ResidualSpace, fam: Family, cols: np.ndarray, names, fold_of_row: np.ndarray | None,
+                rank_tol: float = DEFAULT_RANK_TOL) -> GroupTest:
+    """One generic family's columns (``fam.columns`` of the fit's space) tested against the residual of ``space``
+    (that space, or it given the families already kept). An offset of a groups family (one a measurement, one a
+    feature or certified length) that the data resolve only to worse than one of its rows' standard uncertainty (the
+    median over its rows) counts as absorbed, as a candidate's parameter resolved worse than its plausible size does
+    at the screening. Why: on seat pairs a certified length's offset lies 99.7 % in the arm's scale, and what is left
+    of it once the geometry is projected out is the scale's move of each seat's articulations about their centre,
+    i.e. the residual itself. Its score step is an offset of the bar's whole length (the arm shrunk to a point: every
+    residual zero to first order), resolved to about ``L / sqrt(chi2)`` whatever the noise: it "explained" the
+    residual of every simulated seat campaign (scripts/robot_hidden_study.py: p = 5e-186 with nothing hidden, the
+    length's offset 100 mm on a 100 mm bar), and the decisions' forward selection, given it, found nothing else: a
+    shoulder's lateral compliance and a wrist's coupling (p = 7e-34 and 9e-56 on their own) were never built."""
     prior = None
     if fam.kind == "groups":
-        prior = np.full(len(names), plausible_length(point_noise(base.problem)))
+        rows = np.asarray(cols, float) != 0
+        prior = np.array([np.median(1.0 / cols[rows[:, k], k]) for k in range(cols.shape[1])])
     return test_group(space, cols, names, fam.name, fold_of_row, subgroups=fam.subgroups, rank_tol=rank_tol,
                       cv=fam.kind == "field", prior=prior, min_resolution=SCREEN_RESOLUTION)
 
@@ -827,7 +827,7 @@ def structure_tests(space: ResidualSpace, folds: dict[str, int] | np.ndarray | N
     out = []
     for fam in families(space):
         cols, names = fam.columns(space)
-        out.append((fam, test_family(space, space, fam, cols, names, fr, rank_tol)))
+        out.append((fam, test_family(space, fam, cols, names, fr, rank_tol)))
     out.sort(key=lambda ft: (ft[1].p_value if np.isfinite(ft[1].p_value) else 2.0, -ft[1].delta_chi2))
     return out
 
@@ -849,7 +849,7 @@ def remaining_structure(space: ResidualSpace, folds: dict[str, int] | np.ndarray
             if any(fam is k for k, _ in kept):
                 continue
             cols, names = fam.columns(space)
-            t = test_family(cur, space, fam, cols, names, fr, rank_tol)
+            t = test_family(cur, fam, cols, names, fr, rank_tol)
             if np.isfinite(t.p_value) and (best is None or t.p_value < best[1].p_value):
                 best = (fam, t, cols)
         if best is None:
