@@ -145,7 +145,7 @@ def test_a_seat_pair_length_offset_is_the_arm_shrunk_to_a_point(nominal):
     """On seat pairs a certified length's offset lies almost whole in the arm's scale; what the projection off the
     geometry leaves of it is the scale's move of each seat's articulations about their centre, i.e. the residual
     itself (independent check: its cosine with the residual), and its score step is the bar's whole length. The
-    structure tests count it as absorbed (resolved worse than one length row's uncertainty): before, the
+    structure tests count it as absorbed (a step beyond a plausible length error): before, the
     ``artefact`` family "explained" nearly all of the residual of every seat campaign, and the decisions' forward
     selection, given it, found nothing else (docs/close-loop.md, Hidden effects on robots)."""
     from calibration.diagnostics import families, structure_tests, test_family, test_group
