@@ -34,17 +34,22 @@ def _data(nominal, n, seed):
     return rng, q, w, AuxData(rng.uniform(15, 30, n), tg, tc)
 
 
-def test_effect_model_three_evaluators_agree(nominal):
-    model = ArmModel(nominal, ALL)
-    rng, q, w, aux = _data(nominal, 8, 1)
-    p = rng.normal(0, 1e-5, model.spec.size)
-    batch = model.ball_centres(q, w, p, aux)
+def _casadi_and_pinocchio_agree(model, q, w, aux, p, batch):
+    """CasADi and Pinocchio give the batch ball centres ``batch`` to 1e-12 m at every row."""
     f = model.casadi_function()
     A = ArmModel.aux_matrix(aux, len(q), 7)
     for i in range(len(q)):
         assert_close(np.array(f(q[i], w[i], A[i], p)).ravel(), batch[i], atol=1e-12)
         row = dict(temperature=aux.temperature[i], tau_gravity=aux.tau_gravity[i], tau_contact=aux.tau_contact[i])
         assert_close(model.pinocchio_ball_centre(q[i], w[i], p, row), batch[i], atol=1e-12)
+
+
+def test_effect_model_three_evaluators_agree(nominal):
+    model = ArmModel(nominal, ALL)
+    rng, q, w, aux = _data(nominal, 8, 1)
+    p = rng.normal(0, 1e-5, model.spec.size)
+    batch = model.ball_centres(q, w, p, aux)
+    _casadi_and_pinocchio_agree(model, q, w, aux, p, batch)
 
 
 def test_zero_effect_parameters_give_the_base_model(nominal):
@@ -135,9 +140,4 @@ def test_the_effects_seat_pairs_build_agree_across_the_three_evaluators(nominal)
         pk = p.copy()
         pk[k] = 0.0
         assert np.max(np.linalg.norm(batch - model.ball_centres(q, w, pk, aux), axis=1)) > 1e-6
-    f = model.casadi_function()
-    A = ArmModel.aux_matrix(aux, len(q), 7)
-    for i in range(len(q)):
-        assert_close(np.array(f(q[i], w[i], A[i], p)).ravel(), batch[i], atol=1e-12)
-        row = dict(temperature=aux.temperature[i], tau_gravity=aux.tau_gravity[i], tau_contact=aux.tau_contact[i])
-        assert_close(model.pinocchio_ball_centre(q[i], w[i], p, row), batch[i], atol=1e-12)
+    _casadi_and_pinocchio_agree(model, q, w, aux, p, batch)
