@@ -20,6 +20,12 @@ model (``ArmModel.with_effects``). The library gives, per arm and data:
   absorbs: the screening shows it as not identifiable);
 * ``probe compliance (isotropic)`` / ``(anisotropic)``: bending compliance beyond the declared one;
   only with force data;
+* ``coupling jN by qK`` (family ``joint_coupling``): joint N's reading carries a fraction ``g`` of joint K's,
+  ``q_N += g q_K`` (:class:`~arm_model.effects.JointGain` with ``source``, 1 parameter: a differential wrist's or a
+  belt's coupling ratio, an encoder read through another joint's transmission), for every ordered pair of revolute
+  joints whose source angle varies over the data; offered only on request or by the escalation (not in
+  :data:`DEFAULT_FAMILIES`: J (J - 1) candidates, the effect :mod:`calibration.synthesis` builds from a
+  ``qK harmonics on jN`` family, under the same name);
 * ``lateral compliance jN`` of the first joint N (family ``base_tilt``): the mount tilts about the two axes across
   the first joint under the moment of the arm's weight and of the contact wrench
   (:class:`~arm_model.effects.LateralCompliance`, 2 parameters [rad/(N m)]): a tripod, a magnetic base, a robot's
@@ -55,7 +61,7 @@ __all__ = ["Candidate", "Skipped", "FAMILIES", "DEFAULT_FAMILIES", "MIN_TEMPERAT
 
 #: candidate families of the library, by effect key (the CLI's ``--candidates`` names)
 FAMILIES = ("eccentricity", "joint_gain", "joint_compliance", "thermal", "force_sensor", "probe_compliance",
-            "base_tilt")
+            "base_tilt", "joint_coupling")
 
 #: the families offered when none are named: every one but ``joint_gain`` and ``base_tilt``, which are offered on
 #: request (``--candidates``). On the real robot data of examples/ each passed the held-out test of the poses of
@@ -64,8 +70,9 @@ FAMILIES = ("eccentricity", "joint_gain", "joint_compliance", "thermal", "force_
 #: self-motion leaves (docs/close-loop.md, "Joint gains"). The mount's tilt: trained on ``back-high`` (no joint
 #: compliance in the base model) it took that placement's own test set from 287 to 245 um and spread the two
 #: other placements' seats from 2.81 to 4.01 mm (tests/test_loop_real_physics.py); the joint compliance it
-#: displaced takes them to 2.07 mm.
-OPT_IN_FAMILIES = ("joint_gain", "base_tilt")
+#: displaced takes them to 2.07 mm. The reading couplings: one a pair of joints (42 on a 7-joint arm), the effect
+#: built from the residual when a ``qK harmonics on jN`` family is significant; offered whole only on evidence.
+OPT_IN_FAMILIES = ("joint_gain", "base_tilt", "joint_coupling")
 DEFAULT_FAMILIES = tuple(f for f in FAMILIES if f not in OPT_IN_FAMILIES)
 
 #: smallest temperature range [K] over the data for which thermal growth is a candidate
@@ -160,6 +167,13 @@ def _per_joint_columns(desc: ArmDescription, skipped: list) -> dict[int, str]:
     return {i: desc.encoders[i].name for i in desc.revolute_columns}
 
 
+def _couplings(names: dict[int, str], q: np.ndarray) -> list[Candidate]:
+    """``coupling jN by qK`` for every ordered pair of revolute joints (``names``: column -> name) whose source
+    angle ``q[:, K]`` varies over the data (a constant one is an offset of jN)."""
+    return [Candidate(f"coupling {n} by q{k + 1}", JointGain(joints=(i,), source=k), "joint_coupling", n)
+            for i, n in names.items() for k in names if k != i and np.ptp(q[:, k]) > 0]
+
+
 def _base_tilt(desc: ArmDescription, data: CalibrationData) -> Candidate | Skipped:
     """The mount's tilt under the arm's moment: the first joint's lateral compliance (the links it moves, i.e. the
     whole arm, tilt about its frame's x and y axes through its origin by ``c M``), or why it is not offered. Its
@@ -200,6 +214,8 @@ def library_candidates(desc: ArmDescription, data: CalibrationData, families=Non
         # a scale error of any joint's reading, a slide's (a lift's screw pitch) as a gear ratio's
         for i, j in enumerate(desc.encoders):
             out.append(Candidate(f"gain {j.name}", JointGain(joints=(i,)), "joint_gain", j.name))
+    if "joint_coupling" in families:
+        out += _couplings(names, pts.q)
     no_torque = no_torque_reason(desc, data) if "joint_compliance" in families else None
     if no_torque:
         skipped.append(Skipped("joint compliance", no_torque))

@@ -29,7 +29,7 @@ if TYPE_CHECKING:
     from .problem import Problem
 
 __all__ = ["Combination", "Identifiability", "reduced_jacobian", "analyse", "DEFAULT_RANK_TOL", "prior_scales",
-           "point_noise", "weakly_determined", "NOISE_MULTIPLE"]
+           "point_noise", "plausible_length", "weakly_determined", "NOISE_MULTIPLE"]
 
 #: relative singular value below which a direction counts as not identifiable
 DEFAULT_RANK_TOL = 1e-4
@@ -209,6 +209,12 @@ def point_noise(problem: Problem) -> float | None:
     return max(sig) if sig else None
 
 
+def plausible_length(noise: float | None = None) -> float:
+    """Plausible size [m] of a length error: the larger of 1 mm and :data:`NOISE_MULTIPLE` times ``noise`` (the
+    standard uncertainty of one point [m])."""
+    return max(PRIOR_SCALES["m"], NOISE_MULTIPLE * (noise or 0.0))
+
+
 def prior_scales(model: ArmModel, names: Sequence[str], priors: dict[str, float] | None = None,
                  noise: float | None = None,
                  length: float | None = None) -> np.ndarray:
@@ -223,7 +229,7 @@ def prior_scales(model: ArmModel, names: Sequence[str], priors: dict[str, float]
     import fnmatch
     spec = model.spec
     probe = model.desc.probe
-    lsize = length if length is not None else max(PRIOR_SCALES["m"], NOISE_MULTIPLE * (noise or 0.0))
+    lsize = length if length is not None else plausible_length(noise)
     factor = lsize / PRIOR_SCALES["m"]
     own = {spec.names[k]: e.plausible_size for e, sl in getattr(model, "effect_slices", lambda: [])()
            if e.plausible_size is not None for k in range(sl.start, sl.stop)}

@@ -83,11 +83,13 @@ def register(sub) -> None:
     p.add_argument("--candidates", default=None, metavar="KEYS",
                    help="comma-separated candidate families: eccentricity, joint_gain, joint_compliance, thermal, "
                         "force_sensor, probe_compliance, base_tilt (the mount tilting under the arm's moment: the "
-                        "first joint's lateral compliance) (default every one but joint_gain, the encoder scale "
-                        "error of each joint, and base_tilt, offered on request: each made the other placements "
-                        "of real robot data worse; see docs/close-loop.md). Without it, when the outer test set is "
-                        "still worse than stated after the default families, joint_gain and base_tilt are offered "
-                        "once under the same held-out rules; naming the families turns that off")
+                        "first joint's lateral compliance), joint_coupling (a joint's reading carrying a fraction of "
+                        "another's, every pair) (default every one but joint_gain, the encoder scale error of each "
+                        "joint, base_tilt and joint_coupling, offered on request: the first two made the other "
+                        "placements of real robot data worse; see docs/close-loop.md). Without it, when the outer "
+                        "test set is still worse than stated after the default families, joint_gain, base_tilt and "
+                        "joint_coupling are offered once under the same held-out rules; naming the families turns "
+                        "that off")
     p.add_argument("--library-only", action="store_true",
                    help="do not build effects from the residual's structure once the library is exhausted "
                         "(default: build them: joint harmonics, per-link and probe thermal growth, a probe "

@@ -137,19 +137,23 @@ def _state(worse: bool, families=None):
 
 def test_the_opt_in_families_are_offered_once_when_the_test_set_is_worse():
     """Escalation: a test set worse than stated offers every family off by default that was not offered (on a
-    measuring arm whose description gives masses: a gain per joint and the mount's tilt), once;
+    measuring arm whose description gives masses: a gain per joint, the mount's tilt and a reading coupling per pair
+    of joints), once;
     a test set at its scatter offers nothing, and a family already offered is not offered again."""
     state = _state(True)
     assert escalate(state)
     names = [c.name for c in state.remaining]
-    assert names == [f"gain {j}" for j in state.desc.joint_names] + ["lateral compliance j1"]
+    jn = state.desc.joint_names
+    assert names == ([f"gain {j}" for j in jn] + [f"coupling {j} by q{k + 1}" for j in jn for k in range(len(jn))
+                                                   if jn[k] != j] + ["lateral compliance j1"])
     assert state.escalated["families"] == list(OPT_IN_FAMILIES) and state.escalated["candidates"] == names
-    assert state.candidates == state.remaining and "offering the opt-in families joint_gain, base_tilt" in state.said[0]
+    assert state.candidates == state.remaining
+    assert "offering the opt-in families joint_gain, base_tilt, joint_coupling" in state.said[0]
     assert not escalate(state) and len(state.remaining) == len(names)          # once
     assert not escalate(_state(False)) and _state(False).escalated is None
     asked = _state(True, families=("eccentricity", "joint_gain"))
-    assert escalate(asked) and asked.escalated["families"] == ["base_tilt"]
-    assert [c.name for c in asked.remaining] == ["lateral compliance j1"]
+    assert escalate(asked) and asked.escalated["families"] == ["base_tilt", "joint_coupling"]
+    assert [c.name for c in asked.remaining][-1] == "lateral compliance j1"
     stopped = _state(True)
     stopped.settings = LoopSettings(escalate=False)
     assert not escalate(stopped) and stopped.escalated is None
@@ -193,7 +197,7 @@ def test_the_ur5_s_hidden_shoulder_gain_is_found_once_the_test_set_says_the_mode
         pytest.skip(f"{path} not cached: `pytest -m slow tests/test_robot_set.py -k quick` fetches it")
     row = rhs.run_one("ur5", "seats", "gain", 1, tmp_path)
     assert row["added"] == ["eccentricity shoulder_lift_joint", "gain shoulder_lift_joint"]
-    assert row["escalated"] == ["joint_gain", "base_tilt"] and not row["heldout_check"]["worse_than_stated"]
+    assert row["escalated"] == list(OPT_IN_FAMILIES) and not row["heldout_check"]["worse_than_stated"]
     assert row["loop"] < 1.1 * row["floor"] and "No structured residual remains" in row["verdict"]
     case = rhs.make_case("ur5", "seats", "gain", 1)
     verdicts = []

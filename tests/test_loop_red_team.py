@@ -21,13 +21,20 @@ import numpy as np
 import pytest
 
 from arm_model import PinocchioArm
-from arm_model.effects import LateralCompliance, ProbeCompliance, ProbeComplianceMatrix
+from arm_model.effects import JointGain, LateralCompliance, ProbeCompliance, ProbeComplianceMatrix
 from arm_model.io import PointSet
 from arm_model.model import ArmModel, AuxData
 from arm_model.sim import campaign_from_dict, simulate
 from arm_model.tracker import offset_matrix
 from calibration.calibrate import default_effects
-from calibration.candidates import DEFAULT_FAMILIES, FAMILIES, Candidate, Skipped, library_candidates
+from calibration.candidates import (
+    DEFAULT_FAMILIES,
+    FAMILIES,
+    OPT_IN_FAMILIES,
+    Candidate,
+    Skipped,
+    library_candidates,
+)
 from calibration.data import Weights, make_data
 from calibration.loop import close_loop, heldout_figures
 from calibration.model_output import with_fitted_torques
@@ -73,6 +80,25 @@ def test_the_base_tilt_is_a_library_candidate_where_a_torque_loads_the_arm(nomin
     cands, _ = library_candidates(nominal, make_data(_points(nominal, 12, False), None,
                                                      ArmModel(nominal, (LateralCompliance(joints=(0,)),))))
     assert "base_tilt" not in DEFAULT_FAMILIES and not [c for c in cands if c.family == "lateral_compliance"]
+
+
+def test_the_reading_couplings_are_an_opt_in_family_named_as_synthesis_builds_them(nominal):
+    """On request or by the escalation (not a default family: one candidate a pair of joints), ``coupling jN by qK``
+    for every ordered pair of revolute joints whose source angle varies, each ``JointGain(source=K)`` under the name
+    :mod:`calibration.synthesis` gives the effect built from a ``qK harmonics on jN`` family (so it is built once);
+    a source joint at one angle throughout the data gives none (its coupling is an offset of jN)."""
+    assert "joint_coupling" in OPT_IN_FAMILIES and "joint_coupling" not in DEFAULT_FAMILIES
+    pts = _points(nominal, 12, force=False)
+    cands, _ = library_candidates(nominal, make_data(pts, None, ArmModel(nominal)), families=("joint_coupling",))
+    J = nominal.n_joints
+    assert len(cands) == J * (J - 1) and {c.family for c in cands} == {"joint_coupling"}
+    c = next(c for c in cands if c.name == "coupling j6 by q5")
+    assert c.effect == JointGain(joints=(5,), source=4) and c.joint == "j6"
+    built = synthesise(["q5 harmonics on j6"], ArmModel(nominal))
+    assert any(b.name == c.name and b.effect == c.effect for b in built)
+    fixed = replace(pts, q=np.where(np.arange(J) == 2, 0.3, pts.q))
+    cands, _ = library_candidates(nominal, make_data(fixed, None, ArmModel(nominal)), families=("joint_coupling",))
+    assert not [c for c in cands if c.name.endswith(" by q3")] and len(cands) == J * (J - 1) - (J - 1)
 
 
 def test_the_contact_force_family_builds_the_tilted_axes_beside_the_matrix(nominal):

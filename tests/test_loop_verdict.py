@@ -54,6 +54,13 @@ def test_verdict_when_nothing_remains_and_when_the_library_alone_ran():
                  "No fix is claimed for it.")
     v = verdict_text([_stage(None, 2.0, 5.0, s0=4.0)], [], "", LoopSettings(), [], None)
     assert v.startswith("no effect added. The final residual is 4 times the stated uncertainties: it is not noise")
+    # one measurement's poses as the outer test set: nothing is built from the residual, and the verdict says why
+    v = verdict_text(stages, [_family("q2 harmonics", "cos/sin(3 q2)")], "", LoopSettings(), [],
+                     ArmModel(load_description(NOMINAL)), test_by="pose")
+    assert v == ("no effect added. Structured residual remains, not explained by the effect library (effects are "
+                 "not built from the residual when the outer test set is poses of the measurements the model is "
+                 "fitted to: no decision would see whether one carries over to other placements): it correlates with "
+                 "q2 harmonics (cos/sin(3 q2)). No fix is claimed for it.")
 
 
 def test_a_residual_reweighted_to_its_own_scatter_is_still_judged_against_the_stated_uncertainties():

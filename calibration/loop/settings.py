@@ -43,7 +43,9 @@ class LoopSettings:
     practical-resolution rule), "evidence", a factor, or None. ``escalate``: when the outer test set is worse than
     stated once the default families are exhausted (:func:`~calibration.loop.verdict.heldout_check`), the
     families off by default (:data:`~calibration.candidates.OPT_IN_FAMILIES`) not offered yet are offered, once,
-    under the same rules (``aacmm close-loop`` turns it off when ``--candidates`` names the families)."""
+    under the same rules (``aacmm close-loop`` turns it off when ``--candidates`` names the families).
+    ``synthesise``: build effects from the residual's structure when the library is exhausted, with an outer test
+    set of whole measurements only (:func:`~calibration.loop.verdict.builds_from_residual`)."""
     folds: int = 4
     test_fraction: float = 0.25
     alpha: float = 0.01

@@ -59,7 +59,7 @@ from .outliers import drop_design_outliers, drop_test_outliers, outlier_budget
 from .result import LoopResult, Stage
 from .settings import LEGACY_RESOLUTION, NOISE_OFF, LoopSettings
 from .state import LoopState, Screening, log
-from .verdict import ADDED, heldout_check, residual_over_stated, verdict_text
+from .verdict import ADDED, builds_from_residual, heldout_check, residual_over_stated, verdict_text
 
 __all__ = ["Campaign", "Stop", "prepare", "at_current_torques", "screen", "test", "physics", "synthesise", "decide",
            "fit_stage", "escalate",
@@ -295,7 +295,7 @@ def synthesise(state: LoopState) -> bool:
     (:func:`calibration.synthesis.synthesise`), appended to ``remaining`` (and ``synthesised``) to be
     screened and cross-validated like any candidate. Returns whether any new candidate was offered."""
     s = state.settings
-    if not s.synthesise:
+    if not builds_from_residual(s, state.test_by):
         return False
     kept = remaining_structure(residual_space(state.result), state.folds.assign, s.alpha, s.rank_tol)
     if not kept:
@@ -505,7 +505,8 @@ def report(state: LoopState) -> LoopResult:
               fate.get(c.name, "not screened")} for c in state.synthesised]
     check = heldout_check(state.stages[-1], state.test_by, s.alpha)
     verdict = verdict_text(state.stages, significant, state.stop, s, built, state.model, state.vetoed, state.stated,
-                           check, state.escalated if state.escalated and state.escalated["candidates"] else None)
+                           check, state.escalated if state.escalated and state.escalated["candidates"] else None,
+                           state.test_by)
     say(verdict)
     data = state.data if s.test_in_model else state.data.select(~state.test_rows)
     say("calibrating the final model on every point (" + ("design and test" if s.test_in_model else
