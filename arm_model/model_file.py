@@ -56,7 +56,7 @@ from .description import (
 )
 from .discrepancy import GrowingDiscrepancy, TrainingPoses
 from .effects import EFFECTS, Effect
-from .errors import InputError, did_you_mean, parse_toml, read_text
+from .errors import InputError, did_you_mean, parse_toml, read_text, resolved
 from .model import ArmModel, AuxData
 from .tracker import Tracker, tracker_from_tables, tracker_tables
 from .uncertainty import InputUncertainty, ParameterCovariance, default_inputs
@@ -497,7 +497,7 @@ def _same_file(a: Path, b: Path) -> bool:
     try:
         return a.samefile(b)
     except OSError:
-        return a.resolve() == b.resolve()
+        return resolved(a) == resolved(b)
 
 
 def training_poses_of(arm: Arm) -> TrainingPoses | None:

@@ -25,6 +25,7 @@ from arm_model.cli_options import (
 )
 from arm_model.csv_io import parse_number
 from arm_model.discrepancy import growth_text
+from arm_model.errors import resolved
 from arm_model.io import json_text, read_artefacts, read_points
 from arm_model.log import counted
 from arm_model.model_file import Arm
@@ -438,7 +439,7 @@ def _heldout_points(args, desc):
     if args.holdout_by == "measurement":
         raise InputError("--holdout-points predicts each held-out pose against its feature fitted on the training "
                          "points (as --holdout-by pose), not whole measurements: leave --holdout-by out")
-    if Path(path).resolve() == Path(args.points).resolve():
+    if resolved(path) == resolved(args.points):
         raise InputError("--holdout-points names the points file itself: the held-out poses are a file of their own",
                          path)
     return read_points(path, desc.joint_quantities)

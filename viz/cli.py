@@ -16,6 +16,7 @@ from arm_model import InputError, NumericalError, check_features, read_artefacts
 from arm_model.checks import log_warnings, point_warnings
 from arm_model.cli import command_help
 from arm_model.cli_options import add_arm_options, arm_inputs, model_from_args, number_in, port, positive
+from arm_model.errors import resolved
 from arm_model.output import output_file
 from arm_model.uncertainty_cli import add_input_options
 
@@ -106,7 +107,7 @@ def _selection(points, measurement: str | None):
 
 def run(args: argparse.Namespace) -> int:
     inputs = [f for f in (args.points, *arm_inputs(args), args.artefacts, args.residuals) if f is not None]
-    if args.html is not None and args.screenshot is not None and args.html.resolve() == args.screenshot.resolve():
+    if args.html is not None and args.screenshot is not None and resolved(args.html) == resolved(args.screenshot):
         raise InputError("--html and --screenshot name the same file", args.html)
     if args.screenshot is not None:
         from .browser import find_chromium
