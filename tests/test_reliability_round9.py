@@ -1,0 +1,118 @@
+"""Reliability, round 9: what a hostile-input audit of every subcommand found after round 8 (each test named after
+its finding; all fast: no fit, a few points). The audit's driver fed every reader of every command empty files,
+header-only files, BOMs, CRLF, tabs, duplicated and unknown columns and keys, NaN/inf/1e308/-0/huge integers, wrong
+TOML types, long lines, non-UTF-8 bytes, garbage, a folder, /dev/null, a FIFO, a missing file and symbolic-link loops
+in place of each file, and hostile live streams (stdin, TCP, UDP: cut mid-line, garbage between good lines)."""
+from __future__ import annotations
+
+import math
+import os
+import shutil
+
+import numpy as np
+import pytest
+
+from arm_model.checks import RADIAN_LIKE_RAD, JointLimitTally, radians_warning
+from conftest import NOMINAL, ROOT, exit_status
+
+QCOLS = ",".join(f"q{k}_deg" for k in range(1, 8))
+RING = ROOT / "examples" / "data" / "paper-ring-xyz"
+
+
+def _run(argv, capsys):
+    rc = exit_status([str(a) for a in argv])
+    return rc, capsys.readouterr().err
+
+
+def _points(tmp_path, rows, name="p.csv"):
+    path = tmp_path / name
+    path.write_text(f"measurement,feature,{QCOLS}\n" + "".join(r + "\n" for r in rows))
+    return path
+
+
+# ---------------------------------------------------------------------------------------------
+# a loop of symbolic links where a model file names its covariance or training-poses file
+
+MODEL = """name = "m"
+convention = "dh"
+{joints}
+[probe]
+x_mm = 0.0
+y_mm = 0.0
+z_mm = 85.0
+ball_diameter_mm = 4.0
+max_force_N = 13.0
+bending_compliance_mm_per_N = 0.0142
+axial_compliance_mm_per_N = 8.76e-05
+
+[calibration]
+covariance = "cov.csv"
+model_discrepancy_um = 1.0
+model_discrepancy_growth_um_per_mm = 0.01
+training_poses = "poses.csv"
+"""
+
+
+@pytest.mark.parametrize("looped", ["cov.csv", "poses.csv"])
+def test_a_link_loop_at_a_file_the_model_file_names_is_exit_2(tmp_path, capsys, looped):
+    """`covariance = "cov.csv"` (or `training_poses`) where cov.csv is a symbolic link to itself was an internal
+    error (exit 3, RuntimeError of Path.resolve before Python 3.13); now exit 2 naming the link, nothing written.
+    One helper resolves every user path (`arm_model.errors.resolved`)."""
+    joints = NOMINAL.read_text().split("[[joint]]", 1)[1].split("[probe]")[0]
+    (tmp_path / "m.toml").write_text(MODEL.format(joints="[[joint]]" + joints))
+    (tmp_path / "cov.csv").write_text("parameter,unit,value,u,j1.d\nj1.d,mm,0,0.001,1\n")
+    _points(tmp_path, ["m,f,10,20,30,40,50,60,70"], "poses.csv")
+    (tmp_path / looped).unlink()
+    os.symlink(looped, tmp_path / looped)
+    pts = _points(tmp_path, ["m,f,10,20,30,40,50,60,70"])
+    rc, err = _run(["tip", pts, "--arm", tmp_path / "m.toml", "--covariance", "-o", tmp_path / "t.csv"], capsys)
+    assert rc == 2 and f"{looped}: cannot follow the path: a loop of symbolic links" in err, err
+    assert "internal error" not in err and not (tmp_path / "t.csv").exists()
+
+
+def test_a_link_loop_as_holdout_points_is_exit_2(tmp_path, capsys):
+    os.symlink("h.csv", tmp_path / "h.csv")
+    pts = tmp_path / "p.csv"
+    pts.write_text("\n".join((RING / "points.csv").read_text().splitlines()[:41]) + "\n")
+    rc, err = _run(["calibrate", pts, RING / "artefacts.toml", "--arm", "aacmm7", "--holdout-points",
+                    tmp_path / "h.csv", "-o", tmp_path / "o"], capsys)
+    assert rc == 2 and "h.csv" in err and "internal error" not in err, err
+    assert not (tmp_path / "o").exists()
+
+
+# ---------------------------------------------------------------------------------------------
+# angles written in radians under the _deg columns
+
+def test_angles_in_radians_are_warned_by_tip(tmp_path, capsys):
+    """Every angle within +-2 pi degrees (radians written in degree columns: values tiny) was read without a word;
+    tip (and every command that reads points: `arm_model.checks.point_warnings`) now warns, naming the file and the
+    lines, and uses the angles as the columns say."""
+    rows = [f"m,f,{','.join(repr(math.radians(a)) for a in (10 + k, 20, 30, 40, 50, 60, 70 - k))}" for k in range(5)]
+    pts = _points(tmp_path, rows)
+    rc, err = _run(["tip", pts, "--arm", "aacmm7", "-o", tmp_path / "t.csv"], capsys)
+    assert rc == 0 and "were the angles written in radians?" in err and "p.csv lines 2, 3, 4, 5, 6" in err, err
+    rc, err = _run(["tip", _points(tmp_path, ["m,f,10,20,30,40,50,60,70", "m,f,1,2,3,4,5,6,7"], "q.csv"), "--arm",
+                    "aacmm7", "-o", tmp_path / "u.csv"], capsys)
+    assert rc == 0 and "radians" not in err, err
+
+
+def test_the_radians_tally_over_blocks_agrees_with_the_whole(nominal):
+    """tip reads a big file in blocks, in parallel parts: the tally merged over parts gives the warning of the whole
+    file, and one block with a real angle clears it."""
+    rng = np.random.default_rng(0)
+    q = rng.uniform(-0.9, 0.9, (40, 7)) * RADIAN_LIKE_RAD
+    lines = np.arange(2, 42)
+    whole = radians_warning(nominal, q, lines, "p.csv")
+    assert whole is not None and whole.count == 40
+    parts = [JointLimitTally(nominal, "p.csv") for _ in range(2)]
+    parts[0].add(q[:25], lines[:25])
+    parts[1].add(q[25:], lines[25:])
+    parts[0].merge(parts[1])
+    (w,) = parts[0].warnings()
+    assert w.message == whole.message and w.lines == whole.lines
+    q[30, 2] = math.radians(45.0)
+    late = JointLimitTally(nominal, "p.csv")
+    late.add(q[:25], lines[:25])
+    late.add(q[25:], lines[25:])
+    assert late.warnings() == [] and radians_warning(nominal, q, lines, "p.csv") is None
+
