@@ -417,6 +417,7 @@ def _load_data(args, defaults: bool = False):
         if pts is not None:
             Arm(desc, model.effects).check_points(pts)
             warnings += point_warnings(desc, pts)
+    log_warnings(warnings)          # at once: a fit that then fails (exit 4) has said what it saw in the inputs
     data = make_data(points, artefacts, reference=reference, marker_offsets=args.marker_offset, heldout=heldout)
     _check_reference_options(args, data)
     added = default_effects(model, data) if defaults and args.effect is None else ()
@@ -543,7 +544,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
                                      "conformance": conf,
                                      "warnings": [w.as_dict() for w in warnings]})
     files = {k: out.published(v) for k, v in files.items()}
-    _log_calibration(res, data, train, test, poses, warnings, (val_train, val_test, conf, worse), files)
+    _log_calibration(res, data, train, test, poses, (val_train, val_test, conf, worse), files)
     return 0
 
 
@@ -586,7 +587,7 @@ def _log_fixed(fixed) -> None:
                  "cannot see: summary.json 'fixed', parameters.csv (-v lists them here)")
 
 
-def _log_calibration(res, data, train, test, poses, warnings, validation, files) -> None:
+def _log_calibration(res, data, train, test, poses, validation, files) -> None:
     """The console report of ``aacmm calibrate``."""
     from .report import poorly_determined
     from .validation import with_u
@@ -600,7 +601,6 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
     log.info(f"{counted(len(train), 'training point')} in {counted(len(train.measurements()), 'measurement')}" + held)
     if data.points.force_kind == "two-channel":
         log.info("two-channel force sensor: the probe-y force is not measured and is taken as zero")
-    log_warnings(warnings)
     for line in noise_lines(res):
         log.info(line)
     log.info(f"solver: {res.status} after {res.iterations} iterations; s0 = {res.s0:.3f}; "
@@ -852,7 +852,6 @@ def run_poses(args: argparse.Namespace) -> int:
         sel = select_measurements(model, data, args.count, fit)
         from arm_model.shipped import provenance
         (out.dir / "poses.json").write_text(json_text({**sel.to_dict(), **provenance(inputs)}), encoding="utf-8")
-    log_warnings(warnings)
     log.info(f"{len(sel.parameters)} identifiable parameters; chosen measurements (O1, random sets' O1):")
     for m, o, r, n in zip(sel.chosen, sel.o1, sel.o1_random, sel.n_points, strict=True):
         log.info(f"  {m:20s} O1 {o:10.4g}   random {r:10.4g}   ({counted(n, 'point')})")

@@ -115,3 +115,24 @@ def test_the_radians_tally_over_blocks_agrees_with_the_whole(nominal):
     late.add(q[25:], lines[25:])
     assert late.warnings() == [] and radians_warning(nominal, q, lines, "p.csv") is None
 
+
+
+def test_input_warnings_are_said_before_a_fit_can_fail(tmp_path, capsys):
+    """calibrate, close-loop and study poses logged the input warnings (radians, over-force, joint limits) only with
+    their results: a fit that then failed (Levenberg-Marquardt on radians read as degrees: exit 4) or a later
+    refusal left the user without the one hint that explains it. They are logged as soon as the points are read."""
+    rows = (RING / "points.csv").read_text().splitlines()
+    head = rows[0].split(",")
+    deg = [k for k, c in enumerate(head) if c.endswith("_deg")]
+    out = [rows[0]]
+    for r in rows[1:41]:
+        cells = r.split(",")
+        for k in deg:
+            cells[k] = repr(math.radians(float(cells[k])))
+        out.append(",".join(cells))
+    pts = tmp_path / "rad.csv"
+    pts.write_text("\n".join(out) + "\n")
+    rc, err = _run(["study", "poses", pts, RING / "artefacts.toml", "--arm", "aacmm7", "--count", "5", "-o",
+                    tmp_path / "o"], capsys)
+    assert rc == 2 and "--count 5: the points file has 1 measurement(s)" in err, err
+    assert err.index("were the angles written in radians?") < err.index("error:"), err
