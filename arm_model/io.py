@@ -20,7 +20,7 @@ from .errors import InputError, id_problem, parse_toml, read_text, unknown_key
 from .output import atomic_write_bytes, guard_output
 from .readback import UnreadableOutput, read_back
 from .toml_lines import toml_key_lines, top_key_line
-from .units import PLAUSIBLE_SI, QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit, unit_of
+from .units import PLAUSIBLE_SI, QUANTITY_OF_UNIT, STATED_SIGMA_M, UNIT_FACTORS, implausible, split_unit, unit_of
 
 log = logging.getLogger(__name__)
 
@@ -556,6 +556,10 @@ def _artefact_distance(err, t, i: int, features: dict) -> Distance:
             if not u > 0:
                 raise err(f"'{key}' must be > 0 (a certified length has an uncertainty; leave the key "
                           f"out to use --sigma-length-um), got {v!r}", "distance", i, key)
+            if not STATED_SIGMA_M[0] <= u <= STATED_SIGMA_M[1]:
+                f = UNIT_FACTORS[parts[1]]
+                raise err(f"'{key}' must be in [{STATED_SIGMA_M[0] / f:g}, {STATED_SIGMA_M[1] / f:g}] {parts[1]} "
+                          f"(a stated uncertainty, the fit's weight), got {v!r}", "distance", i, key)
     if length is None:
         raise err("missing 'length_mm'", "distance", i)
     return Distance((between[0], between[1]), length, u)

@@ -31,6 +31,7 @@ from arm_model.log import counted
 from arm_model.model_file import Arm
 from arm_model.output import output_folder
 from arm_model.parallel import cores
+from arm_model.units import STATED_SIGMA_M
 
 from .options import GROSS_THRESHOLD
 
@@ -102,9 +103,9 @@ def marker_option(p) -> None:
                         "reflector in the probe's place). Default: fit without an artefacts file, zero with one")
 
 
-#: argparse type of a stated standard uncertainty [um]: from 1e-6 um (whose square is still a normal
-#: number in m^2) to 100 mm
-SIGMA_UM = number_in(1e-6, 1e5)
+#: argparse type of a stated standard uncertainty [um]: arm_model.units.STATED_SIGMA_M (1 pm to 100 mm), as a
+#: certified distance's u_length_mm
+SIGMA_UM = number_in(STATED_SIGMA_M[0] * 1e6, STATED_SIGMA_M[1] * 1e6)
 
 
 def sigma_options(p, prior_default: str | None = None) -> None:

@@ -136,3 +136,60 @@ def test_input_warnings_are_said_before_a_fit_can_fail(tmp_path, capsys):
                     tmp_path / "o"], capsys)
     assert rc == 2 and "--count 5: the points file has 1 measurement(s)" in err, err
     assert err.index("were the angles written in radians?") < err.index("error:"), err
+
+
+# ---------------------------------------------------------------------------------------------
+# stated uncertainties that weight a fit; the simulator's encoder step
+
+DISTANCE = ('feature = [{ id = "a", kind = "sphere", diameter_mm = 25.0 }, { id = "b", kind = "sphere", '
+            'diameter_mm = 25.0 }]\n[[distance]]\nbetween = ["a", "b"]\nlength_mm = 600.0\n')
+
+
+@pytest.mark.parametrize("line, ok", [
+    ("u_length_mm = 1e-320", False), ("u_length_mm = 1e-300", False), ("u_length_um = 1e-9", False),
+    ("u_length_m = 0.2", False), ("u_length_mm = 1e-9", True), ("u_length_um = 0.5", True),
+])
+def test_a_certified_distance_u_is_a_usable_weight(line, ok):
+    """`u_length_mm = 1e-300` was accepted (> 0) and calibrate then died inside LAPACK (exit 3, "SVD did not
+    converge", numpy overflow lines). A distance's u weights the fit as --sigma-length-um does, so it keeps the
+    option's range, one constant (`arm_model.units.STATED_SIGMA_M`: 1 pm to 100 mm), at its line and key."""
+    from arm_model import InputError
+    from arm_model.io import parse_artefacts
+    text = DISTANCE + line + "\n"
+    if ok:
+        assert parse_artefacts(text, "a.toml").distances[0].u_length > 0
+    else:
+        with pytest.raises(InputError, match=r"a.toml, line 5, key 'distance\[1\].u_length_.*must be in \[1e-"):
+            parse_artefacts(text, "a.toml")
+
+
+def test_calibrate_with_a_tiny_distance_u_is_exit_2(tmp_path, capsys):
+    art = tmp_path / "a.toml"
+    art.write_text(DISTANCE + "u_length_mm = 1e-300\n")
+    pts = _points(tmp_path, ["m,a,10,20,30,40,50,60,70"])
+    rc, err = _run(["calibrate", pts, art, "--arm", "aacmm7", "-o", tmp_path / "o"], capsys)
+    assert rc == 2 and "a.toml, line 5" in err and "internal error" not in err, err
+
+
+@pytest.mark.parametrize("step, ok", [("1e-320", False), ("1e-10", False), ("0", True), ("1e-9", True)])
+def test_the_simulated_encoder_step_is_0_or_a_real_step(step, ok):
+    """`[noise] encoder_resolution_deg = 1e-320` quantised every reading to infinity; simulate then refused its
+    own points file as bad input, naming `points.csv` the user never gave (exit 2). The step is 0 or >= 1e-9 deg."""
+    from arm_model import InputError
+    from arm_model.sim import campaign_from_dict
+    data = {"seed": 1, "noise": {"encoder_resolution_deg": float(step)},
+            "task": [{"kind": "seat", "articulations": 3}]}
+    if ok:
+        campaign_from_dict(data)
+    else:
+        with pytest.raises(InputError, match="encoder_resolution.*must be 0 .*or at least 1e-09 deg"):
+            campaign_from_dict(data)
+
+
+def test_a_simulated_points_file_its_reader_refuses_is_an_internal_error():
+    """Whatever else would make the simulator write a points file its reader refuses is the simulator's bug
+    (exit 3, docs/guarantees.md section 1b), never an input error about a file the user did not give."""
+    from arm_model.readback import UnreadableOutput
+    from arm_model.sim.run import _own_points
+    with pytest.raises(UnreadableOutput, match="points.csv: the simulated points file is refused.*finite"):
+        _own_points(f"measurement,feature,{QCOLS}\nm,f,inf,0,0,0,0,0,0\n", "points.csv", None)

@@ -43,6 +43,9 @@ _UNITS: dict[str, tuple[str, float]] = {
     "C_per_h": ("temperature_rate", 1 / 3600),
 }
 _SUFFIXES = sorted(_UNITS, key=len, reverse=True)
+#: the finest encoder step the simulator quantises to [rad] (1e-9 deg; a step of 1e-320 deg made every reading
+#: infinite, and simulate wrote a points file its own reader refused)
+_FINEST_ENCODER_STEP = math.radians(1e-9)
 _UNITLESS = ("count", "ratio", "direction", "text", "bool", "names", "table", "matrix")
 
 
@@ -559,6 +562,10 @@ def _sections(ctx, data: dict) -> dict:
     for k, v in sections["noise"].items():
         if v < 0:
             raise ctx.error(f"'{k}' must not be negative", ("noise",), k)
+    if 0 < sections["noise"]["encoder_resolution"] < _FINEST_ENCODER_STEP:
+        raise ctx.error(f"'encoder_resolution' must be 0 (no quantisation) or at least "
+                        f"{math.degrees(_FINEST_ENCODER_STEP):g} deg (finer than any encoder; the readings are "
+                        "quantised to its steps)", ("noise",), "encoder_resolution")
     op = sections["operator"]
     if not 0 < op["min_force"] < op["max_force"]:
         raise ctx.error(f"need 0 < min_force < max_force, got {op['min_force']:g} N and {op['max_force']:g} N",
