@@ -193,3 +193,19 @@ def test_a_simulated_points_file_its_reader_refuses_is_an_internal_error():
     from arm_model.sim.run import _own_points
     with pytest.raises(UnreadableOutput, match="points.csv: the simulated points file is refused.*finite"):
         _own_points(f"measurement,feature,{QCOLS}\nm,f,inf,0,0,0,0,0,0\n", "points.csv", None)
+
+
+# ---------------------------------------------------------------------------------------------
+# an empty argument
+
+@pytest.mark.parametrize("argv", [
+    ["examples", ""], ["tip", "", "--arm", "aacmm7", "-o", "t.csv"], ["tip", "p.csv", "--arm=", "-o", "t.csv"],
+    ["simulate", "c.toml", "-o", ""],
+])
+def test_an_empty_argument_is_refused(tmp_path, capsys, monkeypatch, argv):
+    """`aacmm examples ""` (a script's "$DIR" of an unset variable) copied the examples into the current folder:
+    "" is "." to every path. Every empty argument is now refused before anything is read or written."""
+    monkeypatch.chdir(tmp_path)
+    rc, err = _run(argv, capsys)
+    assert rc == 2 and "an empty argument" in err and "unset shell variable" in err, err
+    assert list(tmp_path.iterdir()) == []
