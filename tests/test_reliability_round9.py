@@ -209,3 +209,15 @@ def test_an_empty_argument_is_refused(tmp_path, capsys, monkeypatch, argv):
     rc, err = _run(argv, capsys)
     assert rc == 2 and "an empty argument" in err and "unset shell variable" in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_residual_of_an_unknown_kind_is_refused():
+    """`view --residuals`: a `kind` of `abc` (or `refrence`) was read and drawn as a feature's residual; `reference`
+    changes where a vector starts, so a typo changed the drawing without a word. One word of the known kinds."""
+    from arm_model import InputError
+    from viz.residuals import parse_residuals
+    head = "measurement,feature,kind,line,residual_um,dx_um,dy_um,dz_um,standardized\n"
+    assert list(parse_residuals(head + "m,f,reference,2,1,1,0,0,0.5\nm,f,,3,1,1,0,0,0.5\n", "r.csv").kind) == [
+        "reference", ""]
+    with pytest.raises(InputError, match=r"r.csv, line 3, column 'kind': unknown kind 'refrence'"):
+        parse_residuals(head + "m,f,seat,2,1,1,0,0,0.5\nm,f,refrence,3,1,1,0,0,0.5\n", "r.csv")
