@@ -17,8 +17,8 @@ or, as ``aacmm calibrate`` writes its ``residuals.csv``, the line of the point i
   line's, e.g. a point of another file, is not drawn and is counted).
 * ``rx, ry, rz`` or ``dx, dy, dz`` (any length unit): the residual vector, base frame: measured minus
   model (e.g. the ball centre minus its nearest point on the fitted feature's ball-centre surface).
-* ``measurement``, ``feature`` (optional text); ``kind`` (a feature kind or ``reference``: a reference
-  residual starts at its marker); ``residual`` (a length), ``standardized`` (read and not used: the
+* ``measurement``, ``feature`` (optional text); ``kind`` (a feature kind, ``reference`` or ``marker``: a
+  reference residual starts at its marker); ``residual`` (a length), ``standardized`` (read and not used: the
   columns ``aacmm calibrate`` writes). Any other column is an error naming the
   file, line 1 (the header) and the column, as in every file of the project.
 """
@@ -40,8 +40,9 @@ __all__ = ["Residuals", "read_residuals", "parse_residuals", "residual_origins"]
 
 _POINT = ("x", "y", "z")
 _VECTORS = (("rx", "ry", "rz"), ("dx", "dy", "dz"))
-#: the kinds of a residual (calibrate's residuals.csv): a feature's, or a reference point's (a tracker's marker)
-_KINDS = (*FEATURE_KINDS, "reference")
+#: the kinds of a residual (calibrate's residuals.csv): a feature's, a reference point's (a tracker's target) or a
+#: motion-capture marker's (calibration.problem's instances)
+_KINDS = (*FEATURE_KINDS, "reference", "marker")
 _TEXT = ("measurement", "feature", "kind", "line", "standardized")     # no unit: text, line number, ratio
 _LENGTHS = _POINT + _VECTORS[0] + _VECTORS[1] + ("residual",)           # a length unit each
 
