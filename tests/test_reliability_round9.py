@@ -221,3 +221,30 @@ def test_a_residual_of_an_unknown_kind_is_refused():
         "reference", ""]
     with pytest.raises(InputError, match=r"r.csv, line 3, column 'kind': unknown kind 'refrence'"):
         parse_residuals(head + "m,f,seat,2,1,1,0,0,0.5\nm,f,refrence,3,1,1,0,0,0.5\n", "r.csv")
+
+
+@pytest.mark.parametrize("section, key, value, words", [
+    ("noise", "probing_repeatability_um", 1e9, "'probing_repeatability' must be at most 100 mm"),
+    ("noise", "temperature_noise_C", 1000.0, "'temperature_noise' must be at most 10 C"),
+    ("noise", "encoder_noise_deg", 11.0, "'encoder_noise' must be at most 10 deg"),
+    ("noise", "force_noise_N", 1e4, "'force_noise' must be at most 1000 N"),
+])
+def test_a_simulated_noise_beyond_any_instrument_is_refused(section, key, value, words):
+    """A probing noise of 1 km or a temperature noise of 1000 C made simulate write readings its own readers refuse
+    (angles beyond 10 000 deg, temperatures below absolute zero): an internal error. The campaign's [noise] is
+    bounded where it is read, at its key."""
+    from arm_model import InputError
+    from arm_model.sim import campaign_from_dict
+    with pytest.raises(InputError, match=f"key '{section}.{key.rsplit('_', 1)[0]}.*{words}"):
+        campaign_from_dict({"seed": 1, section: {key: value}, "task": [{"kind": "seat", "articulations": 3}]})
+
+
+@pytest.mark.parametrize("key", ["length_error_um", "angle_error_deg", "probe_error_um"])
+def test_a_negative_zero_in_a_campaign_is_zero(tmp_path, capsys, key):
+    """`[truth] length_error_um = -0.0` passed the "not negative" check and numpy's random draw refused it ("scale
+    < 0": exit 3). Every number of a campaign is read with -0.0 as 0."""
+    camp = tmp_path / "c.toml"
+    camp.write_text(f'seed = 1\nsensor = "none"\n[signals]\nenabled = false\n[truth]\n{key} = -0.0\n'
+                    '[[task]]\nkind = "seat"\narticulations = 3\n')
+    rc, err = _run(["simulate", camp, "-o", tmp_path / "o"], capsys)
+    assert rc == 0 and "internal error" not in err, err
