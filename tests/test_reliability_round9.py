@@ -248,3 +248,17 @@ def test_a_negative_zero_in_a_campaign_is_zero(tmp_path, capsys, key):
                     '[[task]]\nkind = "seat"\narticulations = 3\n')
     rc, err = _run(["simulate", camp, "-o", tmp_path / "o"], capsys)
     assert rc == 0 and "internal error" not in err, err
+
+
+# ---------------------------------------------------------------------------------------------
+# a live stream that never starts
+
+def test_live_a_stream_that_sends_no_header_stops_after_idle(tmp_path, capsys):
+    """`live udp://...` (or a TCP server that accepts and stays silent) with `--stop-after-idle-s 0.3` waited for
+    its header for ever: the idle limit only counted once the session had begun. No line for that long before the
+    header is exit 2, nothing written."""
+    out = tmp_path / "s"
+    rc, err = _run(["live", "udp://127.0.0.1:0", "--arm", "aacmm7", "--feature", "plane:p", "--stop-after-idle-s",
+                    "0.3", "-o", out], capsys)
+    assert rc == 2 and "no line came for 0.3 s (--stop-after-idle-s): the stream sent no header" in err, err
+    assert not out.exists()
