@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -262,3 +263,18 @@ def test_live_a_stream_that_sends_no_header_stops_after_idle(tmp_path, capsys):
                     "0.3", "-o", out], capsys)
     assert rc == 2 and "no line came for 0.3 s (--stop-after-idle-s): the stream sent no header" in err, err
     assert not out.exists()
+
+
+def test_live_reads_standard_input_redirected_from_a_file(tmp_path):
+    """`aacmm live - < samples.csv` (or `< /dev/null`) stopped at once with "Operation not permitted" and no file
+    named: epoll refuses a regular file. Standard input from a file (here its descriptor, as `live -` reads fd 0) is
+    read as any stream, to its end."""
+    from arm_model.live.sources import _FdSource
+    path = tmp_path / "samples.csv"
+    path.write_bytes(b"time_s,q1_deg\r\n0,1\n0.001,2")
+    for file, want in ((path, [(1, b"time_s,q1_deg"), (2, b"0,1"), (3, b"0.001,2")]), (Path(os.devnull), [])):
+        fd = os.open(file, os.O_RDONLY)
+        try:
+            assert [x for x in _FdSource(fd, "<stdin>").lines() if x is not None] == want
+        finally:
+            os.close(fd)
