@@ -278,3 +278,13 @@ def test_live_reads_standard_input_redirected_from_a_file(tmp_path):
             assert [x for x in _FdSource(fd, "<stdin>").lines() if x is not None] == want
         finally:
             os.close(fd)
+
+
+@pytest.mark.parametrize("option", ["--scale", "--residual-scale", "--ellipsoid-scale"])
+def test_a_drawing_scale_that_draws_nothing_is_refused(tmp_path, capsys, option):
+    """`view --residual-scale 1e-320` wrote a page whose arrows were all 0 long; every scale is 0.001 to 1e9."""
+    out = tmp_path / "v.html"
+    rc, err = _run(["view", _points(tmp_path, ["m,f,10,20,30,40,50,60,70"]), "--arm", "aacmm7", option, "1e-320",
+                    "--html", out], capsys)
+    assert rc == 2 and f"argument {option}: must be in [0.001, 1e+09], got 1e-320" in err, err
+    assert not out.exists()

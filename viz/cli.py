@@ -28,8 +28,8 @@ __all__ = ["register", "run"]
 
 log = logging.getLogger(__name__)
 
-#: argparse type of a drawing scale or a frame rate: a finite number in (0, 1e9]
-SCALE = number_in(0, 1e9, low_open=True)
+#: argparse type of a drawing scale: a finite number in [0.001, 1e9]
+SCALE = number_in(1e-3, 1e9)      # (a scale of 1e-320 drew every arrow 0 long, without a word)
 #: points an animation shows a second: one every 1000 s to 10000 a second (the page's clip keeps each frame's time
 #: in a 32-bit float: 1e-300 a second put every frame at infinity, a page that never moved)
 POINTS_PER_S = number_in(1e-3, 1e4)
