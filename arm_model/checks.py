@@ -129,14 +129,20 @@ def joint_limit_warning(desc, q, lines, file: str) -> InputWarning | None:
     return _joint_limit_message(desc, out.sum(axis=0), np.asarray(lines)[out.any(axis=1)], file)
 
 
-def _largest_revolute(desc, q) -> float:
-    """The largest |reading| [rad] of the revolute encoders in ``q`` (N, J); -1 when there is none."""
-    cols = [j for j, joint in enumerate(desc.encoders[: q.shape[1]]) if not joint.prismatic]
+#: the fewest rows a file's angles are judged on (one pose near the straight arm is a pose)
+_RADIAN_ROWS = 3
+
+
+def _largest_revolute(desc, q, units) -> float:
+    """The largest |reading| [rad] of the revolute encoders in ``q`` (N, J) written in degrees (``units``: each
+    column's unit as the file wrote it); -1 when there is none."""
+    cols = [j for j, joint in enumerate(desc.encoders[: q.shape[1]])
+            if not joint.prismatic and units is not None and j < len(units) and units[j] == "deg"]
     return float(np.max(np.abs(q[:, cols]))) if cols and q.size else -1.0
 
 
 def _radians_message(largest: float, lines, file: str) -> InputWarning | None:
-    if not len(lines) or not 0.0 <= largest <= RADIAN_LIKE_RAD:
+    if len(lines) < _RADIAN_ROWS or not 0.0 <= largest <= RADIAN_LIKE_RAD:
         return None
     lines = tuple(np.asarray(lines).tolist())
     return InputWarning(
@@ -147,11 +153,12 @@ def _radians_message(largest: float, lines, file: str) -> InputWarning | None:
         f"{_lines_text(lines)}", file, lines)
 
 
-def radians_warning(desc, q, lines, file: str) -> InputWarning | None:
-    """A warning when every revolute encoder reading of the rows lies within :data:`RADIAN_LIKE_RAD` (angles
-    written in radians in a degree column), or None."""
+def radians_warning(desc, q, lines, file: str, units) -> InputWarning | None:
+    """A warning when every revolute encoder reading written in degrees (``units``: each joint column's unit, as
+    :attr:`~arm_model.io.PointSet.q_units`) lies within :data:`RADIAN_LIKE_RAD` in at least 3 rows (angles written
+    in radians in a degree column), or None."""
     q = np.atleast_2d(np.asarray(q, float))
-    return _radians_message(_largest_revolute(desc, q), lines, file)
+    return _radians_message(_largest_revolute(desc, q, units), lines, file)
 
 
 class JointLimitTally:
@@ -166,12 +173,13 @@ class JointLimitTally:
         self.largest = -1.0                 # the largest revolute |reading| so far [rad]
         self.radian_lines = []
 
-    def add(self, q, lines) -> None:
+    def add(self, q, lines, units=None) -> None:
+        """Take in a block's readings ``q`` [rad or m], its rows' ``lines`` and its joint columns' ``units``."""
         q = np.atleast_2d(np.asarray(q, float))
         out = _beyond_limits(self.desc, q)
         self.per_joint[: q.shape[1]] += out.sum(axis=0)
         self.lines.append(np.asarray(lines)[out.any(axis=1)])
-        self._radian_like(_largest_revolute(self.desc, q), [np.asarray(lines)])
+        self._radian_like(_largest_revolute(self.desc, q, units), [np.asarray(lines)])
 
     def merge(self, other: JointLimitTally) -> None:
         """Take in the tally of another part of the same file."""
@@ -198,7 +206,7 @@ def point_warnings(desc, points, force=None) -> list[InputWarning]:
     uses, default the file's own force columns)."""
     lines = points.lines if points.lines is not None else np.arange(1, len(points) + 1)
     out = [joint_limit_warning(desc, points.q, lines, points.path),
-           radians_warning(desc, points.q, lines, points.path),
+           radians_warning(desc, points.q, lines, points.path, points.q_units),
            over_force_warning(points.force if force is None else force, lines, desc.probe.max_force,
                               points.path)]
     return [w for w in out if w is not None]

@@ -152,7 +152,7 @@ class _TipTally:
         if len(self.flagged) < 11:
             self.flagged += block.lines[cols["over_force"].astype(bool)][:11].tolist()
         self.flagged_count += int(cols["over_force"].sum())
-        self.limits.add(block.q, block.lines)
+        self.limits.add(block.q, block.lines, block.q_units)
 
     def merge(self, other: _TipTally) -> None:
         self.n += other.n

@@ -62,6 +62,7 @@ class PointSet:
         session: (N,) the session of each row (column ``session``: rows of one session share one frame of
             the reference instrument), or None (one session).
         lines: (N,) 1-based line of each row in the file, for messages.
+        q_units: the unit each joint column was written in (``("deg", ...)``), or None (not read from a file).
         flagged: (N,) True where |force| exceeds the probe's calibrated range (set by
             :func:`flag_forces`); never used to drop a row.
     """
@@ -77,6 +78,7 @@ class PointSet:
     ref: np.ndarray | None = None
     lines: np.ndarray | None = None
     session: np.ndarray | None = None
+    q_units: tuple | None = None
 
     def __post_init__(self) -> None:
         # the readers refuse these with file, line and column; a PointSet built in Python is held to the same
@@ -131,7 +133,7 @@ class PointSet:
             return None if a is None else a[mask]
         return PointSet(self.path, self.measurement[mask], self.feature[mask], self.q[mask],
                         take(self.force), take(self.torque), self.force_kind, take(self.temperature),
-                        take(self.time), take(self.ref), take(self.lines), take(self.session))
+                        take(self.time), take(self.ref), take(self.lines), take(self.session), self.q_units)
 
     def over_force(self, max_force: float) -> np.ndarray:
         """(N,) True where the force magnitude exceeds ``max_force`` [N] (rows are flagged, not dropped)."""
@@ -328,7 +330,8 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
                          int(blk.lines[empty[0]]), SESSION_COLUMN)
     return PointSet(path=path, measurement=measurement, feature=blk.texts[:, 1], q=q, force=force,
                     torque=group(("mx", "my", "mz")), force_kind=force_kind, temperature=col("temperature"),
-                    time=col("time"), ref=ref, lines=blk.lines, session=session)
+                    time=col("time"), ref=ref, lines=blk.lines, session=session,
+                    q_units=tuple(unit_of(lay.header[c]) for c in lay.joints))
 
 
 def iter_points(path: str | Path, joints=None, data: bytes | None = None,
@@ -369,7 +372,7 @@ def concat_points(sets) -> PointSet:
     return PointSet(path=sets[0].path, measurement=cat("measurement"), feature=cat("feature"), q=cat("q"),
                     force=cat("force"), torque=cat("torque"), force_kind=sets[0].force_kind,
                     temperature=cat("temperature"), time=cat("time"), ref=cat("ref"), lines=cat("lines"),
-                    session=cat("session"))
+                    session=cat("session"), q_units=sets[0].q_units)
 
 
 def read_points(path: str | Path, joints=None) -> PointSet:

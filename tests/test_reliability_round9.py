@@ -16,6 +16,7 @@ from arm_model.checks import RADIAN_LIKE_RAD, JointLimitTally, radians_warning
 from conftest import NOMINAL, ROOT, exit_status
 
 QCOLS = ",".join(f"q{k}_deg" for k in range(1, 8))
+DEG = ("deg",) * 7
 RING = ROOT / "examples" / "data" / "paper-ring-xyz"
 
 
@@ -94,6 +95,10 @@ def test_angles_in_radians_are_warned_by_tip(tmp_path, capsys):
     rc, err = _run(["tip", _points(tmp_path, ["m,f,10,20,30,40,50,60,70", "m,f,1,2,3,4,5,6,7"], "q.csv"), "--arm",
                     "aacmm7", "-o", tmp_path / "u.csv"], capsys)
     assert rc == 0 and "radians" not in err, err
+    rad = tmp_path / "r.csv"                    # the same numbers under _rad columns are what the file says
+    rad.write_text(pts.read_text().replace("_deg", "_rad"))
+    rc, err = _run(["tip", rad, "--arm", "aacmm7", "-o", tmp_path / "w.csv"], capsys)
+    assert rc == 0 and "radians" not in err, err
 
 
 def test_the_radians_tally_over_blocks_agrees_with_the_whole(nominal):
@@ -102,19 +107,22 @@ def test_the_radians_tally_over_blocks_agrees_with_the_whole(nominal):
     rng = np.random.default_rng(0)
     q = rng.uniform(-0.9, 0.9, (40, 7)) * RADIAN_LIKE_RAD
     lines = np.arange(2, 42)
-    whole = radians_warning(nominal, q, lines, "p.csv")
+    whole = radians_warning(nominal, q, lines, "p.csv", DEG)
     assert whole is not None and whole.count == 40
     parts = [JointLimitTally(nominal, "p.csv") for _ in range(2)]
-    parts[0].add(q[:25], lines[:25])
-    parts[1].add(q[25:], lines[25:])
+    parts[0].add(q[:25], lines[:25], DEG)
+    parts[1].add(q[25:], lines[25:], DEG)
     parts[0].merge(parts[1])
     (w,) = parts[0].warnings()
     assert w.message == whole.message and w.lines == whole.lines
     q[30, 2] = math.radians(45.0)
     late = JointLimitTally(nominal, "p.csv")
-    late.add(q[:25], lines[:25])
-    late.add(q[25:], lines[25:])
-    assert late.warnings() == [] and radians_warning(nominal, q, lines, "p.csv") is None
+    late.add(q[:25], lines[:25], DEG)
+    late.add(q[25:], lines[25:], DEG)
+    assert late.warnings() == [] and radians_warning(nominal, q, lines, "p.csv", DEG) is None
+    q[30, 2] = 0.0
+    assert radians_warning(nominal, q, lines, "p.csv", ("rad",) * 7) is None       # radians where the file says so
+    assert radians_warning(nominal, q[:2], lines[:2], "p.csv", DEG) is None        # two poses near the straight arm
 
 
 
