@@ -649,7 +649,7 @@ def read_covariance(path) -> Covariance:
     not is an InputError naming the file, the line and the column."""
     from .csv_io import parse_number
     from .io import csv_records
-    text = read_text(path, "the covariance file")
+    text = read_text(path, "the covariance file a model file names ([calibration] covariance)")
     recs = csv_records(text, str(path))
     if not recs:
         raise InputError("the covariance file is empty", path, 1)
