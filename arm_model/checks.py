@@ -3,6 +3,9 @@
 - ``over_force``: a contact force beyond the probe's calibrated range (``max_force_N`` of the
   description). Such points are used and flagged, never dropped.
 - ``joint_limits``: an encoder angle beyond the joint's declared limits (``lower_deg``/``upper_deg``).
+- ``angle_units``: every angle of every revolute joint, in every row, within +-2 pi degrees (6.28 deg): what a file
+  whose angles were written in radians under its ``_deg`` columns looks like (no measuring pose keeps the whole arm
+  that straight). The angles are used as degrees, as the columns say.
 
 Every command that reads points logs these at WARNING (``warning: ...`` on standard error) and, when it writes a summary
 and a report, lists them there too (``"warnings"`` of summary.json, a "Warnings" section of report.html).
@@ -16,7 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["InputWarning", "over_force_warning", "joint_limit_warning", "JointLimitTally", "point_warnings",
+__all__ = ["InputWarning", "over_force_warning", "joint_limit_warning", "radians_warning", "JointLimitTally",
+           "point_warnings",
            "log_warnings", "warnings_html", "LIMIT_TOLERANCE_RAD", "limit_bounds"]
 
 log = logging.getLogger(__name__)
@@ -26,6 +30,8 @@ log = logging.getLogger(__name__)
 LIMIT_TOLERANCE_RAD = 1e-6 * np.pi / 180.0
 #: the same for a prismatic joint [m]: a nanometre
 LIMIT_TOLERANCE_M = 1e-9
+#: every revolute reading of a file within +-this [rad] (2 pi degrees: radians read as degrees) is warned
+RADIAN_LIKE_RAD = math.radians(2.0 * math.pi)
 _SHOWN = 10
 
 
@@ -123,31 +129,84 @@ def joint_limit_warning(desc, q, lines, file: str) -> InputWarning | None:
     return _joint_limit_message(desc, out.sum(axis=0), np.asarray(lines)[out.any(axis=1)], file)
 
 
+#: the fewest rows a file's angles are judged on (one pose near the straight arm is a pose)
+_RADIAN_ROWS = 3
+
+
+def _largest_revolute(desc, q, units) -> float:
+    """The largest |reading| [rad] of the revolute encoders in ``q`` (N, J) written in degrees (``units``: each
+    column's unit as the file wrote it); -1 when there is none."""
+    cols = [j for j, joint in enumerate(desc.encoders[: q.shape[1]])
+            if not joint.prismatic and units is not None and j < len(units) and units[j] == "deg"]
+    return float(np.max(np.abs(q[:, cols]))) if cols and q.size else -1.0
+
+
+def _radians_message(largest: float, lines, file: str) -> InputWarning | None:
+    if len(lines) < _RADIAN_ROWS or not 0.0 <= largest <= RADIAN_LIKE_RAD:
+        return None
+    lines = tuple(np.asarray(lines).tolist())
+    return InputWarning(
+        "angle_units",
+        f"every angle of every revolute joint, in all {len(lines)} point(s), lies within "
+        f"+-{math.degrees(RADIAN_LIKE_RAD):.2f} deg (largest |angle| {math.degrees(largest):.3g} deg): were the "
+        f"angles written in radians? The angle columns (_deg) are degrees and are used as such; {file} "
+        f"{_lines_text(lines)}", file, lines)
+
+
+def radians_warning(desc, q, lines, file: str, units) -> InputWarning | None:
+    """A warning when every revolute encoder reading written in degrees (``units``: each joint column's unit, as
+    :attr:`~arm_model.io.PointSet.q_units`) lies within :data:`RADIAN_LIKE_RAD` in at least 3 rows (angles written
+    in radians in a degree column), or None."""
+    q = np.atleast_2d(np.asarray(q, float))
+    return _radians_message(_largest_revolute(desc, q, units), lines, file)
+
+
 class JointLimitTally:
-    """:func:`joint_limit_warning` over the blocks of one file read block by block (``aacmm tip`` on
-    millions of rows): one warning for the whole file."""
+    """:func:`joint_limit_warning` and :func:`radians_warning` over the blocks of one file read block by block
+    (``aacmm tip`` on millions of rows): one warning each for the whole file. The lines of a radian-like file are
+    kept only while every block read is radian-like."""
 
     def __init__(self, desc, file: str):
         self.desc, self.file = desc, file
         self.per_joint = np.zeros(desc.n_joints, np.int64)
         self.lines = []
+        self.largest = -1.0                 # the largest revolute |reading| so far [rad]
+        self.radian_lines = []
 
-    def add(self, q, lines) -> None:
+    def add(self, q, lines, units=None) -> None:
+        """Take in a block's readings ``q`` [rad or m], its rows' ``lines`` and its joint columns' ``units``."""
         q = np.atleast_2d(np.asarray(q, float))
         out = _beyond_limits(self.desc, q)
         self.per_joint[: q.shape[1]] += out.sum(axis=0)
         self.lines.append(np.asarray(lines)[out.any(axis=1)])
+        self._radian_like(_largest_revolute(self.desc, q, units), [np.asarray(lines)])
+
+    def merge(self, other: JointLimitTally) -> None:
+        """Take in the tally of another part of the same file."""
+        self.per_joint += other.per_joint
+        self.lines += other.lines
+        self._radian_like(other.largest, other.radian_lines)
+
+    def _radian_like(self, largest: float, radian_lines: list) -> None:
+        self.largest = max(self.largest, largest)
+        self.radian_lines = self.radian_lines + radian_lines if self.largest <= RADIAN_LIKE_RAD else []
 
     def warning(self) -> InputWarning | None:
         lines = np.concatenate(self.lines) if self.lines else np.empty(0, np.int64)
         return _joint_limit_message(self.desc, self.per_joint, lines, self.file)
 
+    def warnings(self) -> list[InputWarning]:
+        """The joint-limit and the angle-unit warnings of the file (those that apply)."""
+        lines = np.sort(np.concatenate(self.radian_lines)) if self.radian_lines else np.empty(0, np.int64)
+        return [w for w in (self.warning(), _radians_message(self.largest, lines, self.file)) if w is not None]
+
 
 def point_warnings(desc, points, force=None) -> list[InputWarning]:
-    """Both checks on a :class:`~arm_model.io.PointSet` (``force``: the (N, 3) forces the command
+    """The three checks on a :class:`~arm_model.io.PointSet` (``force``: the (N, 3) forces the command
     uses, default the file's own force columns)."""
     lines = points.lines if points.lines is not None else np.arange(1, len(points) + 1)
     out = [joint_limit_warning(desc, points.q, lines, points.path),
+           radians_warning(desc, points.q, lines, points.path, points.q_units),
            over_force_warning(points.force if force is None else force, lines, desc.probe.max_force,
                               points.path)]
     return [w for w in out if w is not None]

@@ -199,6 +199,11 @@ def main(argv: list[str] | None = None) -> int:
         print("aacmm: error: a command-line argument holds a NUL character", file=sys.stderr)
         return EXIT_INPUT
     parser = build_parser(argv)
+    empty = next((a for a in argv if a == "" or (a.startswith("--") and a.endswith("=") and "=" not in a[:-1])),
+                 None)
+    if empty is not None:       # "$DIR" of an unset variable: "" is read as "." by every path (examples "" wrote
+        parser.error(f"an empty argument{f' ({empty})' if empty else ''}: a file, folder or value left out "
+                     "(an unset shell variable?)")      # into the current folder)
     args = parser.parse_args(argv)
     if args.quiet and args.verbose:
         parser.error("-q/--quiet and -v/--verbose exclude each other")

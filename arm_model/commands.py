@@ -152,7 +152,7 @@ class _TipTally:
         if len(self.flagged) < 11:
             self.flagged += block.lines[cols["over_force"].astype(bool)][:11].tolist()
         self.flagged_count += int(cols["over_force"].sum())
-        self.limits.add(block.q, block.lines)
+        self.limits.add(block.q, block.lines, block.q_units)
 
     def merge(self, other: _TipTally) -> None:
         self.n += other.n
@@ -161,8 +161,7 @@ class _TipTally:
         self.d_sum, self.d_max = self.d_sum + other.d_sum, max(self.d_max, other.d_max)
         self.flagged = (self.flagged + other.flagged)[:11]
         self.flagged_count += other.flagged_count
-        self.limits.per_joint += other.limits.per_joint
-        self.limits.lines += other.limits.lines
+        self.limits.merge(other.limits)
 
 
 def _tip_rows(arm, path, blocks, out: Path, header: bool, extra=None, reference_frame: bool = False) -> _TipTally:
@@ -274,7 +273,7 @@ def run_tip(args: argparse.Namespace) -> int:
         log.warning(f"{flagged_count} point(s) over the probe's calibrated force range "
               f"({desc.probe.max_force:g} N), flagged in column over_force; lines {', '.join(map(str, flagged[:10]))}"
               + (" ..." if flagged_count > 10 else ""))
-    log_warnings([w for w in [tally.limits.warning()] if w is not None])
+    log_warnings(tally.limits.warnings())
     return 0
 
 

@@ -10,7 +10,7 @@ import unicodedata
 from pathlib import Path
 
 __all__ = ["AacmmError", "InputError", "NumericalError", "read_text", "open_input", "decode_text", "parse_toml",
-           "did_you_mean", "unknown_key", "id_problem"]
+           "did_you_mean", "unknown_key", "id_problem", "resolved"]
 
 
 class AacmmError(Exception):
@@ -101,6 +101,15 @@ def open_input(path: str | Path, what: str):
     except BaseException:
         os.close(fd)
         raise
+
+
+def resolved(path: str | Path) -> Path:
+    """``path`` with its symbolic links resolved (as far as they exist); a link loop is an InputError (every user
+    path is resolved through here: ``Path.resolve`` raises RuntimeError on a loop before Python 3.13)."""
+    try:
+        return Path(path).resolve()
+    except (RuntimeError, OSError):     # Python < 3.13: RuntimeError on a loop; later: OSError ELOOP
+        raise InputError("cannot follow the path: a loop of symbolic links", path) from None
 
 
 def read_text(path: str | Path, what: str) -> str:

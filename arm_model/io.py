@@ -20,7 +20,7 @@ from .errors import InputError, id_problem, parse_toml, read_text, unknown_key
 from .output import atomic_write_bytes, guard_output
 from .readback import UnreadableOutput, read_back
 from .toml_lines import toml_key_lines, top_key_line
-from .units import PLAUSIBLE_SI, QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit, unit_of
+from .units import PLAUSIBLE_SI, QUANTITY_OF_UNIT, STATED_SIGMA_M, UNIT_FACTORS, implausible, split_unit, unit_of
 
 log = logging.getLogger(__name__)
 
@@ -62,6 +62,7 @@ class PointSet:
         session: (N,) the session of each row (column ``session``: rows of one session share one frame of
             the reference instrument), or None (one session).
         lines: (N,) 1-based line of each row in the file, for messages.
+        q_units: the unit each joint column was written in (``("deg", ...)``), or None (not read from a file).
         flagged: (N,) True where |force| exceeds the probe's calibrated range (set by
             :func:`flag_forces`); never used to drop a row.
     """
@@ -77,6 +78,7 @@ class PointSet:
     ref: np.ndarray | None = None
     lines: np.ndarray | None = None
     session: np.ndarray | None = None
+    q_units: tuple | None = None
 
     def __post_init__(self) -> None:
         # the readers refuse these with file, line and column; a PointSet built in Python is held to the same
@@ -131,7 +133,7 @@ class PointSet:
             return None if a is None else a[mask]
         return PointSet(self.path, self.measurement[mask], self.feature[mask], self.q[mask],
                         take(self.force), take(self.torque), self.force_kind, take(self.temperature),
-                        take(self.time), take(self.ref), take(self.lines), take(self.session))
+                        take(self.time), take(self.ref), take(self.lines), take(self.session), self.q_units)
 
     def over_force(self, max_force: float) -> np.ndarray:
         """(N,) True where the force magnitude exceeds ``max_force`` [N] (rows are flagged, not dropped)."""
@@ -328,7 +330,8 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
                          int(blk.lines[empty[0]]), SESSION_COLUMN)
     return PointSet(path=path, measurement=measurement, feature=blk.texts[:, 1], q=q, force=force,
                     torque=group(("mx", "my", "mz")), force_kind=force_kind, temperature=col("temperature"),
-                    time=col("time"), ref=ref, lines=blk.lines, session=session)
+                    time=col("time"), ref=ref, lines=blk.lines, session=session,
+                    q_units=tuple(unit_of(lay.header[c]) for c in lay.joints))
 
 
 def iter_points(path: str | Path, joints=None, data: bytes | None = None,
@@ -369,7 +372,7 @@ def concat_points(sets) -> PointSet:
     return PointSet(path=sets[0].path, measurement=cat("measurement"), feature=cat("feature"), q=cat("q"),
                     force=cat("force"), torque=cat("torque"), force_kind=sets[0].force_kind,
                     temperature=cat("temperature"), time=cat("time"), ref=cat("ref"), lines=cat("lines"),
-                    session=cat("session"))
+                    session=cat("session"), q_units=sets[0].q_units)
 
 
 def read_points(path: str | Path, joints=None) -> PointSet:
@@ -556,6 +559,10 @@ def _artefact_distance(err, t, i: int, features: dict) -> Distance:
             if not u > 0:
                 raise err(f"'{key}' must be > 0 (a certified length has an uncertainty; leave the key "
                           f"out to use --sigma-length-um), got {v!r}", "distance", i, key)
+            if not STATED_SIGMA_M[0] <= u <= STATED_SIGMA_M[1]:
+                f = UNIT_FACTORS[parts[1]]
+                raise err(f"'{key}' must be in [{STATED_SIGMA_M[0] / f:g}, {STATED_SIGMA_M[1] / f:g}] {parts[1]} "
+                          f"(a stated uncertainty, the fit's weight), got {v!r}", "distance", i, key)
     if length is None:
         raise err("missing 'length_mm'", "distance", i)
     return Distance((between[0], between[1]), length, u)

@@ -56,7 +56,7 @@ from .description import (
 )
 from .discrepancy import GrowingDiscrepancy, TrainingPoses
 from .effects import EFFECTS, Effect
-from .errors import InputError, did_you_mean, parse_toml, read_text
+from .errors import InputError, did_you_mean, parse_toml, read_text, resolved
 from .model import ArmModel, AuxData
 from .tracker import Tracker, tracker_from_tables, tracker_tables
 from .uncertainty import InputUncertainty, ParameterCovariance, default_inputs
@@ -497,7 +497,7 @@ def _same_file(a: Path, b: Path) -> bool:
     try:
         return a.samefile(b)
     except OSError:
-        return a.resolve() == b.resolve()
+        return resolved(a) == resolved(b)
 
 
 def training_poses_of(arm: Arm) -> TrainingPoses | None:
@@ -649,7 +649,7 @@ def read_covariance(path) -> Covariance:
     not is an InputError naming the file, the line and the column."""
     from .csv_io import parse_number
     from .io import csv_records
-    text = read_text(path, "the covariance file")
+    text = read_text(path, "the covariance file a model file names ([calibration] covariance)")
     recs = csv_records(text, str(path))
     if not recs:
         raise InputError("the covariance file is empty", path, 1)

@@ -38,7 +38,7 @@ import unicodedata
 import zlib
 from pathlib import Path
 
-from .errors import InputError
+from .errors import InputError, resolved
 from .readback import UnreadableOutput, read_as, read_back
 
 __all__ = ["output_folder", "output_file", "check_suffix", "Output", "safe_name", "guard_output", "atomic_write_bytes",
@@ -97,14 +97,6 @@ def safe_name(text: str, suffix: str = "") -> str:
 
 def _inside(path: Path, folder: Path) -> bool:
     return path == folder or folder in path.parents
-
-
-def resolved(path: str | Path) -> Path:
-    """``path`` with its symbolic links resolved (as far as they exist); a link loop is an InputError."""
-    try:
-        return Path(path).resolve()
-    except (RuntimeError, OSError):     # Python < 3.13: RuntimeError on a loop; later: OSError ELOOP
-        raise InputError("cannot follow the path: a loop of symbolic links", path) from None
 
 
 def _through_link(final: Path) -> Path:

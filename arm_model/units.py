@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["UNIT_FACTORS", "QUANTITY_OF_UNIT", "PLAUSIBLE_SI", "split_unit", "unit_of", "to_si", "implausible"]
+__all__ = ["UNIT_FACTORS", "QUANTITY_OF_UNIT", "PLAUSIBLE_SI", "STATED_SIGMA_M", "split_unit", "unit_of", "to_si",
+           "implausible"]
 
 #: factor that converts a value in the suffix unit to SI (m, rad, N, N·m, m/N, °C, s)
 UNIT_FACTORS: dict[str, float] = {
@@ -66,6 +67,10 @@ PLAUSIBLE_SI: dict[str, float] = {
     "stiffness": 1e12, "temperature_rate": 1e3,
 }
 ABSOLUTE_ZERO_C = -273.15
+#: the range [m] of a stated standard uncertainty of a length that weights a fit (a certified distance's
+#: ``u_length_mm``, ``--sigma-*-um``): from 1 pm, whose square is still a normal number in m^2 (1e-300 m gave a
+#: weight of 1e600: overflow, and LAPACK's SVD failed), to 100 mm
+STATED_SIGMA_M = (1e-12, 0.1)
 
 
 def implausible(value_si, quantity: str):

@@ -25,11 +25,13 @@ from arm_model.cli_options import (
 )
 from arm_model.csv_io import parse_number
 from arm_model.discrepancy import growth_text
+from arm_model.errors import resolved
 from arm_model.io import json_text, read_artefacts, read_points
 from arm_model.log import counted
 from arm_model.model_file import Arm
 from arm_model.output import output_folder
 from arm_model.parallel import cores
+from arm_model.units import STATED_SIGMA_M
 
 from .options import GROSS_THRESHOLD
 
@@ -101,9 +103,9 @@ def marker_option(p) -> None:
                         "reflector in the probe's place). Default: fit without an artefacts file, zero with one")
 
 
-#: argparse type of a stated standard uncertainty [um]: from 1e-6 um (whose square is still a normal
-#: number in m^2) to 100 mm
-SIGMA_UM = number_in(1e-6, 1e5)
+#: argparse type of a stated standard uncertainty [um]: arm_model.units.STATED_SIGMA_M (1 pm to 100 mm), as a
+#: certified distance's u_length_mm
+SIGMA_UM = number_in(STATED_SIGMA_M[0] * 1e6, STATED_SIGMA_M[1] * 1e6)
 
 
 def sigma_options(p, prior_default: str | None = None) -> None:
@@ -416,6 +418,7 @@ def _load_data(args, defaults: bool = False):
         if pts is not None:
             Arm(desc, model.effects).check_points(pts)
             warnings += point_warnings(desc, pts)
+    log_warnings(warnings)          # at once: a fit that then fails (exit 4) has said what it saw in the inputs
     data = make_data(points, artefacts, reference=reference, marker_offsets=args.marker_offset, heldout=heldout)
     _check_reference_options(args, data)
     added = default_effects(model, data) if defaults and args.effect is None else ()
@@ -438,7 +441,7 @@ def _heldout_points(args, desc):
     if args.holdout_by == "measurement":
         raise InputError("--holdout-points predicts each held-out pose against its feature fitted on the training "
                          "points (as --holdout-by pose), not whole measurements: leave --holdout-by out")
-    if Path(path).resolve() == Path(args.points).resolve():
+    if resolved(path) == resolved(args.points):
         raise InputError("--holdout-points names the points file itself: the held-out poses are a file of their own",
                          path)
     return read_points(path, desc.joint_quantities)
@@ -542,7 +545,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
                                      "conformance": conf,
                                      "warnings": [w.as_dict() for w in warnings]})
     files = {k: out.published(v) for k, v in files.items()}
-    _log_calibration(res, data, train, test, poses, warnings, (val_train, val_test, conf, worse), files)
+    _log_calibration(res, data, train, test, poses, (val_train, val_test, conf, worse), files)
     return 0
 
 
@@ -585,7 +588,7 @@ def _log_fixed(fixed) -> None:
                  "cannot see: summary.json 'fixed', parameters.csv (-v lists them here)")
 
 
-def _log_calibration(res, data, train, test, poses, warnings, validation, files) -> None:
+def _log_calibration(res, data, train, test, poses, validation, files) -> None:
     """The console report of ``aacmm calibrate``."""
     from .report import poorly_determined
     from .validation import with_u
@@ -599,7 +602,6 @@ def _log_calibration(res, data, train, test, poses, warnings, validation, files)
     log.info(f"{counted(len(train), 'training point')} in {counted(len(train.measurements()), 'measurement')}" + held)
     if data.points.force_kind == "two-channel":
         log.info("two-channel force sensor: the probe-y force is not measured and is taken as zero")
-    log_warnings(warnings)
     for line in noise_lines(res):
         log.info(line)
     log.info(f"solver: {res.status} after {res.iterations} iterations; s0 = {res.s0:.3f}; "
@@ -851,7 +853,6 @@ def run_poses(args: argparse.Namespace) -> int:
         sel = select_measurements(model, data, args.count, fit)
         from arm_model.shipped import provenance
         (out.dir / "poses.json").write_text(json_text({**sel.to_dict(), **provenance(inputs)}), encoding="utf-8")
-    log_warnings(warnings)
     log.info(f"{len(sel.parameters)} identifiable parameters; chosen measurements (O1, random sets' O1):")
     for m, o, r, n in zip(sel.chosen, sel.o1, sel.o1_random, sel.n_points, strict=True):
         log.info(f"  {m:20s} O1 {o:10.4g}   random {r:10.4g}   ({counted(n, 'point')})")

@@ -152,6 +152,7 @@ def run(args: argparse.Namespace) -> int:
         if pts is not None:
             Arm(desc, effects).check_points(pts)
             warnings += point_warnings(desc, pts)
+    log_warnings(warnings)          # at once: a loop that then fails (exit 4) has said what it saw in the inputs
     _check_folds(args.folds, points, reference)
     weights = Weights(args.sigma_probe_um * 1e-6, args.sigma_ref_um * 1e-6,
                       None if args.sigma_length_um is None else args.sigma_length_um * 1e-6)
@@ -177,7 +178,6 @@ def run(args: argparse.Namespace) -> int:
                  "reference_points": None if args.reference_points is None else str(args.reference_points)}
         conf = _conformance(loop, mpe_from_args(args))
         write_loop_report(loop, out.dir, inputs=inputs, input_names=names, warnings=warnings, conformance=conf)
-    log_warnings(warnings)
     log.info(before_after_text(loop))
     for sk in loop.skipped:
         log.info(f"{sk.name} not offered: {sk.reason}")

@@ -266,9 +266,10 @@ def ring_warnings(desc, points: PointSet, campaign: RingCampaign) -> list:
     """The input warnings of a ring campaign (:mod:`arm_model.checks`): joint angles beyond their
     limits in the points file, and forces over the probe's range among the forces the analysis used
     (the force signals' peaks with ``--signals``, else the points file's columns)."""
-    from arm_model.checks import joint_limit_warning, over_force_warning
+    from arm_model.checks import joint_limit_warning, over_force_warning, radians_warning
     lines = points.lines if points.lines is not None else np.arange(1, len(points) + 1)
-    out = [joint_limit_warning(desc, points.q, lines, points.path)]
+    out = [joint_limit_warning(desc, points.q, lines, points.path), radians_warning(desc, points.q, lines, points.path,
+                                                                                     points.q_units)]
     if campaign.measurements:
         force = np.vstack([r.forces.force for r in campaign.measurements])
         where = np.concatenate([r.lines for r in campaign.measurements])

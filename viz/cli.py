@@ -16,6 +16,7 @@ from arm_model import InputError, NumericalError, check_features, read_artefacts
 from arm_model.checks import log_warnings, point_warnings
 from arm_model.cli import command_help
 from arm_model.cli_options import add_arm_options, arm_inputs, model_from_args, number_in, port, positive
+from arm_model.errors import resolved
 from arm_model.output import output_file
 from arm_model.uncertainty_cli import add_input_options
 
@@ -27,8 +28,8 @@ __all__ = ["register", "run"]
 
 log = logging.getLogger(__name__)
 
-#: argparse type of a drawing scale or a frame rate: a finite number in (0, 1e9]
-SCALE = number_in(0, 1e9, low_open=True)
+#: argparse type of a drawing scale: a finite number in [0.001, 1e9]
+SCALE = number_in(1e-3, 1e9)      # (a scale of 1e-320 drew every arrow 0 long, without a word)
 #: points an animation shows a second: one every 1000 s to 10000 a second (the page's clip keeps each frame's time
 #: in a 32-bit float: 1e-300 a second put every frame at infinity, a page that never moved)
 POINTS_PER_S = number_in(1e-3, 1e4)
@@ -106,7 +107,7 @@ def _selection(points, measurement: str | None):
 
 def run(args: argparse.Namespace) -> int:
     inputs = [f for f in (args.points, *arm_inputs(args), args.artefacts, args.residuals) if f is not None]
-    if args.html is not None and args.screenshot is not None and args.html.resolve() == args.screenshot.resolve():
+    if args.html is not None and args.screenshot is not None and resolved(args.html) == resolved(args.screenshot):
         raise InputError("--html and --screenshot name the same file", args.html)
     if args.screenshot is not None:
         from .browser import find_chromium

@@ -128,16 +128,21 @@ class _Stop:
             signal.signal(sig, old)
 
 
-def _header(source: LineSource, stop: _Stop) -> tuple:
+def _header(source: LineSource, stop: _Stop, idle_s: float | None = None) -> tuple:
     """(line number, cells) of the stream's header: its first line that is not blank (UDP: the first that
-    is not a number, lines before it skipped and counted)."""
+    is not a number, lines before it skipped and counted). ``idle_s`` (``--stop-after-idle-s``): no line for that
+    long is an InputError (a stream that never starts: nothing is written)."""
     from arm_model.live.sources import line_text
-    skipped = 0
+    skipped, since = 0, time.monotonic()
     for item in source.lines():
         if stop.reason:
             return None, None, skipped
         if item is None:
+            if idle_s and time.monotonic() - since > idle_s:
+                raise InputError(f"no line came for {idle_s:g} s (--stop-after-idle-s): the stream sent no header "
+                                 "(time_s, q1_deg ...); nothing written", source.name)
             continue
+        since = time.monotonic()
         no, raw = item
         text = line_text(raw, source.name, no)
         if not text.strip():
@@ -181,7 +186,7 @@ def run_live(args: argparse.Namespace) -> int:
     source = open_source(args.source)
     try:
         with _Stop() as stop:
-            line, cells, skipped = _header(source, stop)
+            line, cells, skipped = _header(source, stop, args.stop_after_idle_s)
             if cells is None:
                 log.info(f"{stop.reason} before the header: nothing written")
                 return 130 if stop.reason == "interrupted" else 143

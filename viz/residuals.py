@@ -17,8 +17,9 @@ or, as ``aacmm calibrate`` writes its ``residuals.csv``, the line of the point i
   line's, e.g. a point of another file, is not drawn and is counted).
 * ``rx, ry, rz`` or ``dx, dy, dz`` (any length unit): the residual vector, base frame: measured minus
   model (e.g. the ball centre minus its nearest point on the fitted feature's ball-centre surface).
-* ``measurement``, ``feature`` (optional text); ``kind``, ``residual`` (a length), ``standardized``
-  (read and not used: the columns ``aacmm calibrate`` writes). Any other column is an error naming the
+* ``measurement``, ``feature`` (optional text); ``kind`` (a feature kind, ``reference`` or ``marker``: a
+  reference residual starts at its marker); ``residual`` (a length), ``standardized`` (read and not used: the
+  columns ``aacmm calibrate`` writes). Any other column is an error naming the
   file, line 1 (the header) and the column, as in every file of the project.
 """
 from __future__ import annotations
@@ -32,12 +33,16 @@ import numpy as np
 from arm_model import QUANTITY_OF_UNIT, UNIT_FACTORS, InputError, csv_records, read_text, split_unit
 from arm_model.csv_io import parse_number
 from arm_model.errors import id_problem, unknown_key
+from arm_model.io import FEATURE_KINDS
 from arm_model.units import implausible, unit_of
 
 __all__ = ["Residuals", "read_residuals", "parse_residuals", "residual_origins"]
 
 _POINT = ("x", "y", "z")
 _VECTORS = (("rx", "ry", "rz"), ("dx", "dy", "dz"))
+#: the kinds of a residual (calibrate's residuals.csv): a feature's, a reference point's (a tracker's target) or a
+#: motion-capture marker's (calibration.problem's instances)
+_KINDS = (*FEATURE_KINDS, "reference", "marker")
 _TEXT = ("measurement", "feature", "kind", "line", "standardized")     # no unit: text, line number, ratio
 _LENGTHS = _POINT + _VECTORS[0] + _VECTORS[1] + ("residual",)           # a length unit each
 
@@ -148,9 +153,13 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
             if not (cell.isascii() and cell.isdigit()) or len(cell) > 12 or int(cell) < 1:  # '²' is a digit to isdigit
                 raise InputError(f"expected a line number (1, 2, ...), got {cell!r}", path, no, "line")
             point_lines[i] = int(cell)
+    kinds = text_column("kind")
+    for (no, _), kind in zip(data, kinds, strict=True):    # "reference" starts at a marker: a typo would not
+        if kind and kind not in _KINDS:
+            raise InputError(f"unknown kind {kind!r} (known: {', '.join(_KINDS)})", path, no, "kind")
     return Residuals(path, np.column_stack([column(b) for b in _POINT]) if has_xyz else None,
                      np.column_stack([column(b) for b in vector]), text_column("measurement"), text_column("feature"),
-                     np.array([no for no, _ in data]), point_lines, text_column("kind"))
+                     np.array([no for no, _ in data]), point_lines, kinds)
 
 def residual_origins(res: Residuals, points, centres: np.ndarray,
                      markers: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int]:

@@ -26,8 +26,8 @@ import time
 from collections.abc import Iterable
 from pathlib import Path
 
-from ..errors import InputError
-from ..output import MARKER, guard_output, resolved
+from ..errors import InputError, resolved
+from ..output import MARKER, guard_output
 
 __all__ = ["SessionRecord", "FILES", "FLUSH_S", "read_status", "STATUS_FILE", "check_new_folder"]
 

@@ -114,8 +114,13 @@ class _FdSource(LineSource):
         return os.read(self.fd, _CHUNK)
 
     def _lines(self):
-        sel = selectors.DefaultSelector()
-        sel.register(self.fd, selectors.EVENT_READ)
+        sel: selectors.BaseSelector = selectors.DefaultSelector()
+        try:
+            sel.register(self.fd, selectors.EVENT_READ)
+        except PermissionError:     # epoll refuses a regular file or /dev/null (`live - < samples.csv`): select()
+            sel.close()             # takes them, always ready
+            sel = selectors.SelectSelector()
+            sel.register(self.fd, selectors.EVENT_READ)
         # rest: the line begun and not ended (only its first bytes once it is longer than MAX_LINE_BYTES, so a peer
         # that never sends a newline cannot fill the memory), length: its bytes so far
         rest, length, too_long, no = bytearray(), 0, False, 0

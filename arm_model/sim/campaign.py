@@ -43,6 +43,15 @@ _UNITS: dict[str, tuple[str, float]] = {
     "C_per_h": ("temperature_rate", 1 / 3600),
 }
 _SUFFIXES = sorted(_UNITS, key=len, reverse=True)
+#: the finest encoder step the simulator quantises to [rad] (1e-9 deg; a step of 1e-320 deg made every reading
+#: infinite, and simulate wrote a points file its own reader refused)
+_FINEST_ENCODER_STEP = math.radians(1e-9)
+#: the largest [noise] of a simulated instrument, in the unit shown (a probing noise of 1 km, a temperature noise
+#: of 1000 C gave readings the toolkit's readers refuse: beyond every plausible angle, below absolute zero)
+_NOISE_MAX = {"encoder_resolution": 10.0, "encoder_noise": 10.0, "probing_repeatability": 100.0, "force_noise": 1000.0,
+              "temperature_noise": 10.0}
+_NOISE_SHOWN = {"encoder_resolution": (180 / math.pi, "deg"), "encoder_noise": (180 / math.pi, "deg"),
+                "probing_repeatability": (1e3, "mm"), "force_noise": (1.0, "N"), "temperature_noise": (1.0, "C")}
 _UNITLESS = ("count", "ratio", "direction", "text", "bool", "names", "table", "matrix")
 
 
@@ -259,7 +268,7 @@ class _Ctx:
 def _number(ctx, v, table, key) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
         raise ctx.error(f"'{key}' must be a finite number, got {v!r}", table, key)
-    return float(v)
+    return float(v) + 0.0       # -0.0 is 0 (numpy's random draws refuse a scale of -0.0: "scale < 0", exit 3)
 
 
 def _section(ctx: _Ctx, data: Any, spec: dict, table: tuple) -> dict:
@@ -559,6 +568,14 @@ def _sections(ctx, data: dict) -> dict:
     for k, v in sections["noise"].items():
         if v < 0:
             raise ctx.error(f"'{k}' must not be negative", ("noise",), k)
+    for k, bound in _NOISE_MAX.items():
+        if sections["noise"][k] * _NOISE_SHOWN[k][0] > bound:
+            raise ctx.error(f"'{k}' must be at most {bound:g} {_NOISE_SHOWN[k][1]} (1 sigma; beyond, the readings "
+                            "are none an instrument gives)", ("noise",), k)
+    if 0 < sections["noise"]["encoder_resolution"] < _FINEST_ENCODER_STEP:
+        raise ctx.error(f"'encoder_resolution' must be 0 (no quantisation) or at least "
+                        f"{math.degrees(_FINEST_ENCODER_STEP):g} deg (finer than any encoder; the readings are "
+                        "quantised to its steps)", ("noise",), "encoder_resolution")
     op = sections["operator"]
     if not 0 < op["min_force"] < op["max_force"]:
         raise ctx.error(f"need 0 < min_force < max_force, got {op['min_force']:g} N and {op['max_force']:g} N",

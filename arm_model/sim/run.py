@@ -32,6 +32,7 @@ from ..io import (
 )
 from ..log import counted, progress_line
 from ..output import safe_name
+from ..readback import UnreadableOutput
 from .artefacts import Plan, make_plan
 from .campaign import Campaign
 from .ik import IKTargets, ball_jacobian, solve_ik
@@ -425,6 +426,16 @@ def _points_columns(campaign, plan, rows, readings, draw, ref) -> dict:
     return cols
 
 
+def _own_points(text: str, name: str, joints):
+    """The points file the simulator wrote, read as every command reads it; a refusal is the simulator's bug
+    (:class:`~arm_model.readback.UnreadableOutput`, exit 3; docs/guarantees.md, section 1b), never bad input naming
+    a file the user did not give."""
+    try:
+        return parse_points(text, name, joints)
+    except InputError as exc:
+        raise UnreadableOutput(f"the simulated points file is refused by its reader: {exc}", name) from None
+
+
 def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimResult:
     """Simulate ``campaign`` (seed: the campaign's unless given). ``progress``: optional callable
     taking a message, called at each stage (default: a progress record of this module's logger). Raises
@@ -473,12 +484,12 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
     points = ref_points = None
     if main_rows.size:
         texts[POINTS_FILE] = _csv_text(_points_columns(campaign, plan, main_rows, readings, draw, None))
-        points = parse_points(texts[POINTS_FILE], POINTS_FILE, desc.joint_quantities)
+        points = _own_points(texts[POINTS_FILE], POINTS_FILE, desc.joint_quantities)
     if ref_rows.size:           # beside the points file, or the points file itself when every row has them
         name = REFERENCE_FILE if main_rows.size else POINTS_FILE
         ref = _reference(plan, campaign, ref_rows, centres, markers, rng["tracker"])
         texts[name] = _csv_text(_points_columns(campaign, plan, ref_rows, readings, draw, ref))
-        ref_points = parse_points(texts[name], name, desc.joint_quantities)
+        ref_points = _own_points(texts[name], name, desc.joint_quantities)
         if not main_rows.size:
             points, ref_points, main_rows = ref_points, None, ref_rows
     artefacts = None
