@@ -1067,7 +1067,7 @@ CONTINUATION = (1e-2, 1e-1, 1.0)
 
 
 def _lm(s: _Setup, prob: Problem, p, states, options: FitOptions):
-    """Levenberg-Marquardt of ``prob`` from ``p``, ``states`` with the setup's prior (damped restarts inside);
+    """Levenberg-Marquardt of ``prob`` from ``p``, ``states`` with the setup's prior (restarts inside);
     when that does not converge and there is a prior, a continuation in the prior's scale: the fit with the
     prior narrowed to :data:`CONTINUATION` of its size (near the nominal, well conditioned), each started from
     the one before, ending at the prior itself."""

