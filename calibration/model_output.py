@@ -266,7 +266,9 @@ def at_equilibrium(model, p, data):
     if data is None or not ({"tau_gravity", "tau_contact"} & model.needs()):
         return data
     temperature = None if data.aux is None else data.aux.temperature
-    return replace(data, aux=model.equilibrium_aux(data.points.q, data.wrench, np.asarray(p, float), temperature))
+    time = None if data.aux is None else data.aux.time
+    return replace(data, aux=model.equilibrium_aux(data.points.q, data.wrench, np.asarray(p, float), temperature,
+                                                   time=time))
 
 
 def with_fitted_torques(data, result):
