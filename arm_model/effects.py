@@ -121,6 +121,10 @@ class Effect:
     #: chain: on an arm with a joint mimicking another of its chain, it acts on the master's reading and the
     #: mimicking joint follows it through the ``<mimic>`` formula (the torques are per encoder column already)
     acts_on_readings: ClassVar[bool] = False
+    #: the effect belongs to the session it was fitted on, not to the arm (a drift in that session's time): a model
+    #: file never holds it (the geometry it writes is the one at the effect's reference; the session's value is
+    #: reported beside it), so that applying the model to other data applies no drift it cannot know
+    session: ClassVar[bool] = False
 
     def __post_init__(self) -> None:
         """``joints``: None or distinct 0-based joint indices (a TypeError or ValueError here, not deep in a fit)."""
@@ -332,6 +336,7 @@ class ThermalDrift(Effect):
     power: int = 1
     reference_time_s: float = 0.0
     key: str = field(default="thermal_drift", init=False, repr=False)
+    session: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -49,3 +49,82 @@ def test_drift_scales_lengths_by_hand(nominal):
     for bad in ({"power": 3}, {"power": True}, {"reference_time_s": float("nan")}):
         with pytest.raises(ValueError, match="thermal_drift"):
             ThermalDrift(**bad)
+
+
+#: a small campaign (58 points, 8 measurements, 5-min gaps: 36 min) in a room drifting 8 K/h
+SMALL = [{"kind": "ballbar", "positions": 4, "length_mm": 600.0, "points_per_sphere": 4},
+         {"kind": "seat", "articulations": 6, "measurements": 2},
+         {"kind": "sphere", "points": 7, "measurements": 2}]
+
+
+def _no_thermometer(alpha_per_k: float):
+    """(points without their temperature column, artefacts, nominal) of the small campaign, its links growing by
+    ``alpha_per_k`` (0: not at all)."""
+    import dataclasses
+
+    from arm_model.sim import campaign_from_dict, simulate
+    d = {"seed": 3, "sensor": "xyz", "signals": {"enabled": False}, "noise": {"probing_repeatability_um": 2.0},
+         "task": SMALL, "environment": {"drift_C_per_h": 8.0}, "operator": {"measurement_gap_s": 300.0}}
+    if alpha_per_k:
+        d["truth"] = {"thermal": {"alpha_per_K": [alpha_per_k]}}
+    camp = campaign_from_dict(d)
+    sim = simulate(camp)
+    return dataclasses.replace(sim.points, temperature=None), sim.artefacts, camp.arm
+
+
+def test_loop_recovers_the_drift_and_writes_no_drift(tmp_path):
+    """Links growing 23 ppm/K in a room drifting 8 K/h (5.1e-8 /s), no thermometer: the loop adds the drift (its
+    rate within 3 u of the truth); the model file holds the geometry at the reference time and no drift (it reads
+    back, needs no time column), the summary reports the drift."""
+    import json
+
+    from arm_model.io import read_back
+    from calibration.data import Weights
+    from calibration.loop import close_loop
+    from calibration.loop_report import write_loop_report
+    points, artefacts, nominal = _no_thermometer(2.3e-5)
+    loop = close_loop(points, artefacts, nominal, weights=Weights(probe=2e-6), seed=0, progress=lambda s: None)
+    assert [c.name for c in loop.added] == ["thermal drift (time)"]
+    res = loop.model_fit or loop.final.result
+    rate, u = res.value("links.drift_rate"), res.uncertainty("links.drift_rate")
+    assert 0 < u < 2.5e-8 and abs(rate - 2.3e-5 * 8.0 / 3600.0) < 3 * u
+    write_loop_report(loop, tmp_path)
+    assert "t_ref" in next(tmp_path.glob("*.toml")).read_text()          # said in its comment
+    back = read_back(next(tmp_path.glob("*.toml")))
+    assert not any(e.session for e in back.effects) and "time" not in back.model.needs()
+    drift = json.loads((tmp_path / "summary.json").read_text())["model"]["session_drift"]
+    t_ref = loop.added[0].effect.reference_time_s
+    assert drift[0]["reference_time_s"] == t_ref and drift[0]["parameters"][0]["value"] == pytest.approx(rate)
+    # the geometry written is the fit's at t_ref: the fit's own ball centres with the time at t_ref
+    t = np.full(len(res.data), t_ref)
+    aux = AuxData(None if res.data.aux is None else res.data.aux.temperature,
+                  None if res.data.aux is None else res.data.aux.tau_gravity,
+                  None if res.data.aux is None else res.data.aux.tau_contact, t)
+    own = res.model.ball_centres(res.data.points.q, res.data.wrench, res.p, aux)
+    assert_close(back.ball_centres(res.data.points, wrench=res.data.wrench), own, atol=1e-9)
+
+
+def test_loop_adds_nothing_without_a_drift():
+    """The same campaign, its links not growing: the drift is offered (time spans 36 min, no temperature) and not
+    added."""
+    from calibration.data import Weights
+    from calibration.loop import close_loop
+    points, artefacts, nominal = _no_thermometer(0.0)
+    loop = close_loop(points, artefacts, nominal, weights=Weights(probe=2e-6), seed=0, progress=lambda s: None)
+    assert "thermal drift (time)" in {c.name for c in loop.candidates}
+    assert not loop.added
+
+
+def test_drift_offered_only_with_time_and_no_temperature():
+    """Offered for time_s spanning >= 10 min without a temperature column; not with a temperature (thermal growth
+    instead), without time, or over a short span."""
+    from types import SimpleNamespace
+
+    from calibration.candidates import MIN_DRIFT_SPAN_S, Candidate, Skipped, drift_offer
+    t = np.linspace(0.0, 2 * MIN_DRIFT_SPAN_S, 10)
+    got = drift_offer(SimpleNamespace(temperature=None, time=t))
+    assert isinstance(got, list) and [c.name for c in got] == ["thermal drift (time)"]
+    assert got[0].effect.reference_time_s == MIN_DRIFT_SPAN_S
+    assert [c.name for c in got[0].then] == ["thermal drift (time^2)"] and isinstance(got[0].then[0], Candidate)
+    for temp, time in ((np.full(10, 20.0), t), (None, None), (None, t * 0.4), (None, np.r_[t[:-1], np.nan])):
+        assert isinstance(drift_offer(SimpleNamespace(temperature=temp, time=time)), Skipped)
