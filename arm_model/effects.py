@@ -27,7 +27,8 @@ from .description import ArmDescription
 __all__ = ["ModelInputs", "Geometry", "Effect", "EncoderEccentricity", "JointCompliance",
            "ThermalGrowth", "ForceSensorError", "JointGain", "ProbeCompliance", "EFFECTS", "effect_from_name",
            "REFERENCE_TEMPERATURE_C", "JointHarmonics", "ProbeThermalGrowth", "ProbeComplianceMatrix",
-           "ApproachOffset", "LateralCompliance", "ThermalDrift", "joint_frame", "last_frame", "gravity_moment", "contact_moment"]
+           "ApproachOffset", "LateralCompliance", "ThermalDrift", "joint_frame", "last_frame", "gravity_moment",
+           "contact_moment"]
 
 REFERENCE_TEMPERATURE_C = 20.0
 

@@ -18,8 +18,8 @@ model (``ArmModel.with_effects``). The library gives, per arm and data:
 * ``thermal drift (time)`` (family ``thermal`` too): the links grow with the time instead of a temperature
   (:class:`~arm_model.effects.ThermalDrift`, one rate about the middle of the session's time span), and once it is
   added ``thermal drift (time^2)`` (a second term in the square of the time); offered only when the points have no
-  temperature and their ``time_s`` spans at least :data:`MIN_DRIFT_SPAN_S`. A session's drift, never the arm's: the written model holds the geometry at the
-  reference time and no drift (:mod:`calibration.model_output`);
+  temperature and their ``time_s`` spans at least :data:`MIN_DRIFT_SPAN_S`. A session's drift, never the arm's:
+  the written model holds the geometry at the reference time and no drift (:mod:`calibration.model_output`);
 * ``force sensor x|y|z``: gain and offset of one sensor axis; only with force data on that axis
   (a constant offset deflects the probe by a constant vector, which the probe offset ``probe.x/y/z``
   absorbs: the screening shows it as not identifiable);
@@ -43,13 +43,13 @@ import numpy as np
 from arm_model.description import ArmDescription
 from arm_model.effects import (
     Effect,
-    ThermalDrift,
     EncoderEccentricity,
     ForceSensorError,
     JointCompliance,
     JointGain,
     LateralCompliance,
     ProbeCompliance,
+    ThermalDrift,
     ThermalGrowth,
 )
 from arm_model.model import ArmModel

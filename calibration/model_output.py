@@ -44,7 +44,8 @@ def session_drift(result) -> list[dict]:
     for e, sl in result.model.effect_slices():
         if e.session:
             names = result.model.spec.names[sl]
-            out.append({"effect": e.describe(result.model.desc), "reference_time_s": getattr(e, "reference_time_s", None),
+            out.append({"effect": e.describe(result.model.desc),
+                        "reference_time_s": getattr(e, "reference_time_s", None),
                         "parameters": [{k: rows[n][k] for k in ("name", "unit", "value", "u", "state")}
                                        for n in names]})
     return out

@@ -72,27 +72,28 @@ def _no_thermometer(alpha_per_k: float):
     return dataclasses.replace(sim.points, temperature=None), sim.artefacts, camp.arm
 
 
+@pytest.mark.slow
 def test_loop_recovers_the_drift_and_writes_no_drift(tmp_path):
-    """Links growing 23 ppm/K in a room drifting 8 K/h (5.1e-8 /s), no thermometer: the loop adds the drift (its
+    """(slow: the simulator's poses of a growing arm, about 10 s unloaded) Links growing 23 ppm/K in a room
+    drifting 8 K/h (5.1e-8 /s), no thermometer: the loop adds the drift (its
     rate within 3 u of the truth); the model file holds the geometry at the reference time and no drift (it reads
     back, needs no time column), the summary reports the drift."""
-    import json
-
     from arm_model.io import read_back
     from calibration.data import Weights
     from calibration.loop import close_loop
-    from calibration.loop_report import write_loop_report
+    from calibration.loop_report import write_loop_model
+    from calibration.model_output import session_drift
     points, artefacts, nominal = _no_thermometer(2.3e-5)
     loop = close_loop(points, artefacts, nominal, weights=Weights(probe=2e-6), seed=0, progress=lambda s: None)
     assert [c.name for c in loop.added] == ["thermal drift (time)"]
     res = loop.model_fit or loop.final.result
     rate, u = res.value("links.drift_rate"), res.uncertainty("links.drift_rate")
     assert 0 < u < 2.5e-8 and abs(rate - 2.3e-5 * 8.0 / 3600.0) < 3 * u
-    write_loop_report(loop, tmp_path)
+    write_loop_model(loop, tmp_path)
     assert "t_ref" in next(tmp_path.glob("*.toml")).read_text()          # said in its comment
     back = read_back(next(tmp_path.glob("*.toml")))
     assert not any(e.session for e in back.effects) and "time" not in back.model.needs()
-    drift = json.loads((tmp_path / "summary.json").read_text())["model"]["session_drift"]
+    drift = session_drift(res)                          # summary.json's model.session_drift
     t_ref = loop.added[0].effect.reference_time_s
     assert drift[0]["reference_time_s"] == t_ref and drift[0]["parameters"][0]["value"] == pytest.approx(rate)
     # the geometry written is the fit's at t_ref: the fit's own ball centres with the time at t_ref
@@ -104,9 +105,10 @@ def test_loop_recovers_the_drift_and_writes_no_drift(tmp_path):
     assert_close(back.ball_centres(res.data.points, wrench=res.data.wrench), own, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_loop_adds_nothing_without_a_drift():
-    """The same campaign, its links not growing: the drift is offered (time spans 36 min, no temperature) and not
-    added."""
+    """(slow: about 5 s unloaded) The same campaign, its links not growing: the drift is offered (time spans 36
+    min, no temperature) and not added."""
     from calibration.data import Weights
     from calibration.loop import close_loop
     points, artefacts, nominal = _no_thermometer(0.0)
