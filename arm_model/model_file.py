@@ -339,6 +339,10 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
             raise r.error(f"unknown effect kind '{kind}' (known: {', '.join(EFFECTS)}){did_you_mean(kind, EFFECTS)}",
                           *where, "kind")
         cls = EFFECTS[kind]
+        if cls.session:
+            raise r.error(f"the effect kind '{kind}' is a drift of one session (its time and room), not of the arm: a "
+                          "model file holds the geometry at the drift's reference time and no drift (docs/formats.md)",
+                          *where, "kind")
         fields = {f.name: f for f in dataclasses.fields(cls) if f.init and f.name not in ("key", "joints")}
         known = ("kind", "joints", *fields, "parameter")
         kwargs = {}

@@ -130,3 +130,12 @@ def test_drift_offered_only_with_time_and_no_temperature():
     assert [c.name for c in got[0].then] == ["thermal drift (time^2)"] and isinstance(got[0].then[0], Candidate)
     for temp, time in ((np.full(10, 20.0), t), (None, None), (None, t * 0.4), (None, np.r_[t[:-1], np.nan])):
         assert isinstance(drift_offer(SimpleNamespace(temperature=temp, time=time)), Skipped)
+
+
+def test_model_file_refuses_a_session_drift(nominal):
+    """A model file never holds a drift in time: the reader refuses the kind at its key."""
+    from arm_model.errors import InputError
+    from arm_model.model_file import format_model, parse_model
+    text = format_model(nominal) + '\n[[effect]]\nkind = "thermal_drift"\n'
+    with pytest.raises(InputError, match="thermal_drift.*not of the arm"):
+        parse_model(text)
