@@ -16,7 +16,7 @@ from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, js
 from arm_model.shipped import provenance
 
 from .loop import LoopResult, Stage, effect_summary
-from .model_output import model_check, model_paths, session_drift, without_session_effects, write_model
+from .model_output import drift_text, model_check, model_paths, session_drift, without_session_effects, write_model
 from .report import (
     conformance_html,
     conformance_pngs,
@@ -294,23 +294,12 @@ def write_loop_model(loop: LoopResult, out_dir, inputs=()) -> dict:
     (:mod:`calibration.model_output`)."""
     res = loop.model_fit or loop.final.result
     added = [s.added.name for s in loop.stages[1:] if not s.added.effect.session]
-    drift = session_drift(res)
     comment = (f"Model of '{loop.desc.name}' found by aacmm close-loop: the description with the final fit's values "
                f"folded in and the effects " + (f"added ({', '.join(added)})" if added else "of the base model")
                + f" with their parameters.\nFitted on {len(res.data)} points ({_fitted_on(loop)}); s0 = "
-               f"{res.s0:.4g}. Read by every --arm option; format: docs/calibration.md."
-               + (f"\n{_drift_text(drift)}" if drift else ""))
+               f"{res.s0:.4g}. Read by every --arm option; format: docs/calibration.md.")
     return write_model(res, out_dir, loop_model_name(loop), inputs=inputs, written_by="aacmm close-loop",
                        comment=comment)
-
-
-def _drift_text(drift: list[dict]) -> str:
-    """The session's drift in words: the model file holds the geometry at its reference time and no drift."""
-    parts = [f"{d['effect']} about t_ref = {d['reference_time_s']:.3f} s: "
-             + ", ".join(f"{p['name']} = {p['value']:.4g} +- {p['u']:.2g} {p['unit']}" for p in d["parameters"])
-             for d in drift]
-    return ("; ".join(parts) + ". A drift of this session (its time and its room), not of the arm: the model file "
-            "holds the geometry at t_ref and no drift, so that every --arm applies none to other data.")
 
 
 def _fitted_on(loop: LoopResult) -> str:
@@ -381,7 +370,7 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
             parts.append(f"<h3>The residual that led to it</h3><img src='{img}'>")
         sections.append("".join(parts))
     if drift:
-        sections.append("<h2>The session's drift (not in the model file)</h2><p>" + html.escape(_drift_text(drift))
+        sections.append("<h2>The session's drift (not in the model file)</h2><p>" + html.escape(drift_text(drift))
                         + "</p>")
     sections.append(_final_html(loop, png))
     if conformance:

@@ -18,7 +18,8 @@ from arm_model.output import safe_name
 from arm_model.urdf_import import calibrated_urdf_text
 
 __all__ = ["model_paths", "fitted_arm", "write_model", "written_covariance", "model_check", "refine_torques",
-           "check_reproduces", "REPRODUCE_TOL_M", "discrepancy_fields", "session_drift", "without_session_effects"]
+           "check_reproduces", "REPRODUCE_TOL_M", "discrepancy_fields", "session_drift", "without_session_effects",
+           "drift_text"]
 
 #: how far beyond :func:`model_check`'s difference (the torques evaluated on the calibrated description, which
 #: the summary reports) the model file read back may put a fitted point from the fit's own ball centre [m]:
@@ -49,6 +50,16 @@ def session_drift(result) -> list[dict]:
                         "parameters": [{k: rows[n][k] for k in ("name", "unit", "value", "u", "state")}
                                        for n in names]})
     return out
+
+
+def drift_text(drift: list[dict]) -> str:
+    """The session's drift (:func:`session_drift`) in words, for the model file's comment and the report: the model
+    file holds the geometry at its reference time and no drift."""
+    parts = [f"{d['effect']} about t_ref = {d['reference_time_s']:.3f} s: "
+             + ", ".join(f"{p['name']} = {p['value']:.4g} +- {p['u']:.2g} {p['unit']}" for p in d["parameters"])
+             for d in drift]
+    return ("; ".join(parts) + ". A drift of this session (its time and its room), not of the arm: the model file "
+            "holds the geometry at t_ref and no drift, so that every --arm applies none to other data.")
 
 
 def without_session_effects(result):
@@ -111,7 +122,10 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
     """Write the model file, its covariance file, the URDF of ``result`` and, when its model discrepancy grows
     away from the training poses, their points file into ``out_dir``; returns :func:`model_paths` of the files
     written. ``inputs``: files never to be overwritten. The session's effects (a drift in its time) are not
-    written (:func:`without_session_effects`: the geometry at their reference)."""
+    written (:func:`without_session_effects`: the geometry at their reference; the comment says so)."""
+    drift = session_drift(result)
+    if drift:
+        comment = (f"{comment}\n" if comment else "") + drift_text(drift)
     result = without_session_effects(result)
     files = model_paths(out_dir, name)
     for f in files.values():
