@@ -89,7 +89,8 @@ PARAM_QUANTITY: dict[str, str] = {
 
 #: per-point input of an effect (``Effect.needs``) -> the points-file column it comes from (None:
 #: computed from the description, e.g. gravity and contact torques)
-EFFECT_COLUMNS: dict[str, str | None] = {"temperature": "temperature_C", "tau_gravity": None, "tau_contact": None}
+EFFECT_COLUMNS: dict[str, str | None] = {"temperature": "temperature_C", "tau_gravity": None, "tau_contact": None,
+                                         "time": "time_s"}
 
 STATES = ("free", "prior-dominated", "fixed", "held")
 
@@ -191,8 +192,8 @@ class Arm:
         for e in self.effects:
             for need in e.needs():
                 column = EFFECT_COLUMNS.get(need)
-                if column == "temperature_C":
-                    t = points.temperature
+                if column is not None:
+                    t = getattr(points, need)            # the PointSet's field of the input: temperature, time
                     if t is None or not np.all(np.isfinite(t)):
                         out.append((e, column))
         return out
@@ -217,10 +218,11 @@ class Arm:
         if not needs:
             return None
         temperature = points.temperature if "temperature" in needs else None
+        time = points.time if "time" in needs else None
         if needs & {"tau_gravity", "tau_contact"}:
             w = points.wrench if wrench is None else wrench
-            return self.model.equilibrium_aux(points.q, w, self.p, temperature, contact=contact)
-        return AuxData(temperature)
+            return self.model.equilibrium_aux(points.q, w, self.p, temperature, contact=contact, time=time)
+        return AuxData(temperature, time=time)
 
     def ball_centres(self, points, wrench=None, rigid: bool = False) -> np.ndarray:
         """(N, 3) ball centres [m] of a :class:`~arm_model.io.PointSet` with every effect applied, from

@@ -139,3 +139,23 @@ def test_model_file_refuses_a_session_drift(nominal):
     text = format_model(nominal) + '\n[[effect]]\nkind = "thermal_drift"\n'
     with pytest.raises(InputError, match="thermal_drift.*not of the arm"):
         parse_model(text)
+
+
+def test_an_arm_with_a_drift_in_python_reads_the_time_column(nominal):
+    """An Arm holding a drift (built in Python, e.g. ``--effect thermal_drift``; never read from a file) takes the
+    points' time_s, and names the column when the points lack it."""
+    from dataclasses import replace
+
+    from arm_model.errors import InputError
+    from arm_model.io import PointSet
+    from arm_model.model_file import Arm
+    eff = ThermalDrift(reference_time_s=60.0)
+    q = np.random.default_rng(2).uniform(-2, 2, (4, 7))
+    t = np.array([0.0, 600.0, 1200.0, 1800.0])
+    pts = PointSet(path="p.csv", measurement=np.array(["m"] * 4, dtype=object),
+                   feature=np.array([""] * 4, dtype=object), q=q, time=t)
+    arm = Arm(nominal, (eff,), {"links.drift_rate": 5e-8})
+    want = arm.model.ball_centres(q, None, arm.p, AuxData(time=t))
+    assert_close(arm.ball_centres(pts), want, atol=1e-15)
+    with pytest.raises(InputError, match="time_s"):
+        arm.ball_centres(replace(pts, time=None))
