@@ -27,7 +27,8 @@ from .description import ArmDescription
 __all__ = ["ModelInputs", "Geometry", "Effect", "EncoderEccentricity", "JointCompliance",
            "ThermalGrowth", "ForceSensorError", "JointGain", "ProbeCompliance", "EFFECTS", "effect_from_name",
            "REFERENCE_TEMPERATURE_C", "JointHarmonics", "ProbeThermalGrowth", "ProbeComplianceMatrix",
-           "ApproachOffset", "LateralCompliance", "joint_frame", "last_frame", "gravity_moment", "contact_moment"]
+           "ApproachOffset", "LateralCompliance", "ThermalDrift", "joint_frame", "last_frame", "gravity_moment",
+           "contact_moment"]
 
 REFERENCE_TEMPERATURE_C = 20.0
 
@@ -43,6 +44,7 @@ class ModelInputs:
     #: optional provider of joint moments, ``f(geom, q, i, origin) -> (M_gravity, M_contact)`` (base frame,
     #: about ``origin``, [N m]); :class:`LateralCompliance` computes them itself when None
     moments: Any = None
+    time: Any = None              # [s] the points' time stamps (``time_s``)
 
 
 @dataclass
@@ -120,6 +122,10 @@ class Effect:
     #: chain: on an arm with a joint mimicking another of its chain, it acts on the master's reading and the
     #: mimicking joint follows it through the ``<mimic>`` formula (the torques are per encoder column already)
     acts_on_readings: ClassVar[bool] = False
+    #: the effect belongs to the session it was fitted on, not to the arm (a drift in that session's time): a model
+    #: file never holds it (the geometry it writes is the one at the effect's reference; the session's value is
+    #: reported beside it), so that applying the model to other data applies no drift it cannot know
+    session: ClassVar[bool] = False
 
     def __post_init__(self) -> None:
         """``joints``: None or distinct 0-based joint indices (a TypeError or ValueError here, not deep in a fit)."""
@@ -305,12 +311,54 @@ class ThermalGrowth(Effect):
 
     def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
         dt = inputs.temperature - REFERENCE_TEMPERATURE_C
-        rows = [list(r) for r in geom.rows]
-        for k, i in enumerate(self.joint_indices(desc)):
-            scale = 1.0 + params[k if self.per_joint else 0] * dt
-            for m in desc.length_indices:
-                rows[i][m] = rows[i][m] * scale
-        geom.rows = rows
+        _grow_links(desc, geom, self.joint_indices(desc),
+                    [p * dt for p in params] if self.per_joint else [params[0] * dt])
+
+
+def _grow_links(desc: ArmDescription, geom: Geometry, joints: tuple[int, ...], growth: list[Any]) -> None:
+    """Scale the link lengths (d and a; a URDF origin's xyz) of ``joints`` by ``1 + growth`` (one growth [1] for
+    all of them, or one per joint): the thermal growth of the links, whatever drives it."""
+    rows = [list(r) for r in geom.rows]
+    for k, i in enumerate(joints):
+        scale = 1.0 + growth[k if len(growth) > 1 else 0]
+        for m in desc.length_indices:
+            rows[i][m] = rows[i][m] * scale
+    geom.rows = rows
+
+
+@dataclass(frozen=True)
+class ThermalDrift(Effect):
+    """The links grow with the time instead of a measured temperature: every link length scaled by
+    ``1 + r (t - t_ref)^power``, ``t`` the points' time stamps [s], ``t_ref`` = ``reference_time_s``; ``power`` 1
+    (``links.drift_rate`` [1/s]) or 2 (``links.drift_rate2`` [1/s^2], a drift that speeds up or turns; added on
+    top of the first, each term scales the lengths). For a session whose room drifts while the arm logs no
+    temperature: the drift is this session's (its time origin and its room's), not the arm's, and the fitted
+    geometry is the one at ``t_ref``. The growth itself is :class:`ThermalGrowth`'s (one code for both)."""
+    power: int = 1
+    reference_time_s: float = 0.0
+    key: str = field(default="thermal_drift", init=False, repr=False)
+    session: ClassVar[bool] = True
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if isinstance(self.power, bool) or self.power not in (1, 2):
+            raise ValueError(f"thermal_drift: power must be 1 or 2, got {self.power!r}")
+        if (isinstance(self.reference_time_s, bool) or not isinstance(self.reference_time_s, numbers.Real)
+                or not math.isfinite(self.reference_time_s)):
+            raise ValueError(f"thermal_drift: reference_time_s must be a finite time [s], got "
+                             f"{self.reference_time_s!r}")
+
+    def needs(self) -> tuple[str, ...]:
+        return ("time",)
+
+    def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
+        return [("links.drift_rate", "1/s")] if self.power == 1 else [("links.drift_rate2", "1/s^2")]
+
+    def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
+        if inputs.time is None:
+            raise ValueError("the effect 'thermal_drift' needs the per-point time 'time'")
+        dt = inputs.time - self.reference_time_s
+        _grow_links(desc, geom, self.joint_indices(desc), [params[0] * (dt if self.power == 1 else dt * dt)])
 
 
 @dataclass(frozen=True)
@@ -693,4 +741,5 @@ class LateralCompliance(Effect):
 
 
 EFFECTS.update({str(cls.__dataclass_fields__["key"].default): cls for cls in
-                (JointHarmonics, ProbeThermalGrowth, ProbeComplianceMatrix, ApproachOffset, LateralCompliance)})
+                (JointHarmonics, ProbeThermalGrowth, ProbeComplianceMatrix, ApproachOffset, LateralCompliance,
+                 ThermalDrift)})

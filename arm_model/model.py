@@ -29,14 +29,15 @@ EQUILIBRIUM_MAX_ITER = 60
 
 @dataclass(frozen=True)
 class AuxData:
-    """Per-point data some effects need: temperature (N,) [°C], joint torques (N, J) [N m]."""
+    """Per-point data some effects need: temperature (N,) [°C], joint torques (N, J) [N m], time (N,) [s]."""
     temperature: np.ndarray | None = None
     tau_gravity: np.ndarray | None = None
     tau_contact: np.ndarray | None = None
+    time: np.ndarray | None = None
 
     def select(self, mask: np.ndarray | slice) -> AuxData:
         return AuxData(*(None if a is None else a[mask]
-                         for a in (self.temperature, self.tau_gravity, self.tau_contact)))
+                         for a in (self.temperature, self.tau_gravity, self.tau_contact, self.time)))
 
 
 @dataclass(frozen=True)
@@ -164,13 +165,14 @@ class ArmModel:
 
     def equilibrium_aux(self, q: ArrayLike, wrench: ArrayLike | None = None, p: ArrayLike | None = None,
                         temperature: ArrayLike | None = None, *, contact: bool = True, tol: float = EQUILIBRIUM_TOL,
-                        max_iter: int = EQUILIBRIUM_MAX_ITER) -> AuxData:
+                        max_iter: int = EQUILIBRIUM_MAX_ITER, time: ArrayLike | None = None) -> AuxData:
         """The per-point inputs at the static equilibrium the arm sits in: gravity and contact torques [N m] at
         the angles ``theta`` the joints take, not at the readings ``q``:
         ``theta = F(q) + C (tau_contact(theta) - tau_gravity(theta))`` (``F``: the other effects on the readings,
         ``C``: the joint compliances of ``p``; the wrench ``wrench`` (N, 3|6) [N, N m] stays in the probe frame;
         ``contact=False``: no contact torques). The torques are Pinocchio's RNEA on the description of ``p``
-        (:meth:`described`, the description's masses); ``temperature`` (N,) [°C] where an effect needs it.
+        (:meth:`described`, the description's masses); ``temperature`` (N,) [°C] and ``time`` (N,) [s] where an
+        effect needs them.
 
         Solved by fixed-point iteration from ``theta = q`` until ``theta`` moves less than ``tol`` [rad] (or m):
         one pass (the torques at the readings) when no compliance turns a joint, a few for a sag of a few mrad
@@ -182,12 +184,13 @@ class ArmModel:
 
         q = np.atleast_2d(np.asarray(q, dtype=float))
         temp = None if temperature is None else np.asarray(temperature, dtype=float)
+        stamps = None if time is None else np.asarray(time, dtype=float)
         arm = PinocchioArm(self.described(np.zeros(self.spec.size) if p is None else p))
         w = None if wrench is None or not contact else np.atleast_2d(np.asarray(wrench, dtype=float))
         theta, step = q, np.inf
         for _ in range(max_iter):
             tau_g, tau_c = arm.torques(theta, w)
-            aux = AuxData(temp, tau_g, tau_c)
+            aux = AuxData(temp, tau_g, tau_c, stamps)
             new = self.joint_angles(q, wrench, p, aux)
             step = float(np.max(np.abs(new - theta), initial=0.0))
             theta = new
@@ -199,8 +202,8 @@ class ArmModel:
 
     # -- CasADi -------------------------------------------------------------------------------
     def casadi_function(self, name: str = "ball_centre") -> Any:
-        """``f(q[J], w[6], aux[1 + 2J], p[P]) -> p_base[3]`` with aux = (temperature [°C],
-        tau_gravity[J], tau_contact[J]) (zeros where no effect needs them).
+        """``f(q[J], w[6], aux[2 + 2J], p[P]) -> p_base[3]`` with aux = (temperature [°C],
+        tau_gravity[J], tau_contact[J], time [s]) (:meth:`aux_width`; zeros where no effect needs them).
 
         Built once for equal models (same description and effects; the model is immutable) and name: building
         the expression graph costs more than a calibration's evaluations of it (:func:`_casadi_function`)."""
@@ -216,25 +219,32 @@ class ArmModel:
         j = self.desc.n_joints
         q = ca.SX.sym("q", j)
         w = ca.SX.sym("w", 6)
-        aux = ca.SX.sym("aux", 1 + 2 * j)
+        aux = ca.SX.sym("aux", self.aux_width(j))
         p = ca.SX.sym("p", self.spec.size)
         inputs = ModelInputs(q=[q[i] for i in range(j)], wrench=[w[i] for i in range(6)],
                              temperature=aux[0], tau_gravity=[aux[1 + i] for i in range(j)],
-                             tau_contact=[aux[1 + j + i] for i in range(j)])
+                             tau_contact=[aux[1 + j + i] for i in range(j)], time=aux[1 + 2 * j])
         x, y, z = self._evaluate(p, inputs, SimpleNamespace(sin=ca.sin, cos=ca.cos))
         return ca.Function(name, [q, w, aux, p], [ca.vertcat(x, y, z)], ["q", "w", "aux", "p"], ["p_base"])
 
     @staticmethod
+    def aux_width(n_joints: int) -> int:
+        """The length of :meth:`casadi_function`'s aux input: temperature, J + J torques, time."""
+        return 2 + 2 * n_joints
+
+    @staticmethod
     def aux_matrix(aux: AuxData | None, n: int, n_joints: int) -> np.ndarray:
-        """(N, 1 + 2J) aux rows for :meth:`casadi_function` (zeros where absent)."""
-        m = np.zeros((n, 1 + 2 * n_joints))
+        """(N, :meth:`aux_width`) aux rows for :meth:`casadi_function` (zeros where absent)."""
+        m = np.zeros((n, ArmModel.aux_width(n_joints)))
         if aux is not None:
             if aux.temperature is not None:
                 m[:, 0] = aux.temperature
             if aux.tau_gravity is not None:
                 m[:, 1:1 + n_joints] = aux.tau_gravity
             if aux.tau_contact is not None:
-                m[:, 1 + n_joints:] = aux.tau_contact
+                m[:, 1 + n_joints:1 + 2 * n_joints] = aux.tau_contact
+            if aux.time is not None:
+                m[:, 1 + 2 * n_joints] = aux.time
         return m
 
     # -- Pinocchio ------------------------------------------------------------------------------
@@ -254,7 +264,8 @@ class ArmModel:
         inputs = ModelInputs(q=[float(v) for v in np.asarray(q, dtype=float)], wrench=[float(v) for v in w],
                              temperature=aux_row.get("temperature"),
                              tau_gravity=None if aux_row.get("tau_gravity") is None else list(aux_row["tau_gravity"]),
-                             tau_contact=None if aux_row.get("tau_contact") is None else list(aux_row["tau_contact"]))
+                             tau_contact=None if aux_row.get("tau_contact") is None else list(aux_row["tau_contact"]),
+                             time=aux_row.get("time"))
         inputs.moments = lambda geom, q, i, origin: self._pinocchio_moments(geom, q, i, origin, inputs.wrench)
         geom = self._apply_effects([float(v) for v in pv], inputs, NUMPY_OPS)
         arm = PinocchioArm(self._geometry_description(geom))
@@ -316,7 +327,8 @@ def _batch_inputs(q: np.ndarray, w: np.ndarray, aux: AuxData, s: int, e: int) ->
     return ModelInputs(q=list(q[s:e].T), wrench=list(w[s:e].T),
                        temperature=None if aux.temperature is None else aux.temperature[s:e],
                        tau_gravity=None if aux.tau_gravity is None else list(aux.tau_gravity[s:e].T),
-                       tau_contact=None if aux.tau_contact is None else list(aux.tau_contact[s:e].T))
+                       tau_contact=None if aux.tau_contact is None else list(aux.tau_contact[s:e].T),
+                       time=None if aux.time is None else aux.time[s:e])
 
 
 #: models whose CasADi Function is kept (a loop compares a few models at a time, each many times)

@@ -89,7 +89,8 @@ PARAM_QUANTITY: dict[str, str] = {
 
 #: per-point input of an effect (``Effect.needs``) -> the points-file column it comes from (None:
 #: computed from the description, e.g. gravity and contact torques)
-EFFECT_COLUMNS: dict[str, str | None] = {"temperature": "temperature_C", "tau_gravity": None, "tau_contact": None}
+EFFECT_COLUMNS: dict[str, str | None] = {"temperature": "temperature_C", "tau_gravity": None, "tau_contact": None,
+                                         "time": "time_s"}
 
 STATES = ("free", "prior-dominated", "fixed", "held")
 
@@ -191,8 +192,8 @@ class Arm:
         for e in self.effects:
             for need in e.needs():
                 column = EFFECT_COLUMNS.get(need)
-                if column == "temperature_C":
-                    t = points.temperature
+                if column is not None:
+                    t = getattr(points, need)            # the PointSet's field of the input: temperature, time
                     if t is None or not np.all(np.isfinite(t)):
                         out.append((e, column))
         return out
@@ -217,10 +218,11 @@ class Arm:
         if not needs:
             return None
         temperature = points.temperature if "temperature" in needs else None
+        time = points.time if "time" in needs else None
         if needs & {"tau_gravity", "tau_contact"}:
             w = points.wrench if wrench is None else wrench
-            return self.model.equilibrium_aux(points.q, w, self.p, temperature, contact=contact)
-        return AuxData(temperature)
+            return self.model.equilibrium_aux(points.q, w, self.p, temperature, contact=contact, time=time)
+        return AuxData(temperature, time=time)
 
     def ball_centres(self, points, wrench=None, rigid: bool = False) -> np.ndarray:
         """(N, 3) ball centres [m] of a :class:`~arm_model.io.PointSet` with every effect applied, from
@@ -339,6 +341,10 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
             raise r.error(f"unknown effect kind '{kind}' (known: {', '.join(EFFECTS)}){did_you_mean(kind, EFFECTS)}",
                           *where, "kind")
         cls = EFFECTS[kind]
+        if cls.session:
+            raise r.error(f"the effect kind '{kind}' is a drift of one session (its time and room), not of the arm: a "
+                          "model file holds the geometry at the drift's reference time and no drift (docs/formats.md)",
+                          *where, "kind")
         fields = {f.name: f for f in dataclasses.fields(cls) if f.init and f.name not in ("key", "joints")}
         known = ("kind", "joints", *fields, "parameter")
         kwargs = {}

@@ -15,6 +15,11 @@ model (``ArmModel.with_effects``). The library gives, per arm and data:
   ``joint compliance (every loaded joint)``: one such parameter for each of those joints at once;
 * ``thermal growth``: one expansion coefficient of every link length; offered only when the
   temperature column varies by at least :data:`MIN_TEMPERATURE_SPAN`;
+* ``thermal drift (time)`` (family ``thermal`` too): the links grow with the time instead of a temperature
+  (:class:`~arm_model.effects.ThermalDrift`, one rate about the middle of the session's time span), and once it is
+  added ``thermal drift (time^2)`` (a second term in the square of the time); offered only when the points have no
+  temperature and their ``time_s`` spans at least :data:`MIN_DRIFT_SPAN_S`. A session's drift, never the arm's:
+  the written model holds the geometry at the reference time and no drift (:mod:`calibration.model_output`);
 * ``force sensor x|y|z``: gain and offset of one sensor axis; only with force data on that axis
   (a constant offset deflects the probe by a constant vector, which the probe offset ``probe.x/y/z``
   absorbs: the screening shows it as not identifiable);
@@ -50,6 +55,7 @@ from arm_model.effects import (
     JointGain,
     LateralCompliance,
     ProbeCompliance,
+    ThermalDrift,
     ThermalGrowth,
 )
 from arm_model.model import ArmModel
@@ -57,7 +63,7 @@ from arm_model.model import ArmModel
 from .data import CalibrationData
 
 __all__ = ["Candidate", "Skipped", "FAMILIES", "DEFAULT_FAMILIES", "MIN_TEMPERATURE_SPAN", "library_candidates",
-           "needs_model", "torques_of", "no_torque_reason"]
+           "needs_model", "torques_of", "no_torque_reason", "MIN_DRIFT_SPAN_S", "drift_offer"]
 
 #: candidate families of the library, by effect key (the CLI's ``--candidates`` names)
 FAMILIES = ("eccentricity", "joint_gain", "joint_compliance", "thermal", "force_sensor", "probe_compliance",
@@ -78,6 +84,10 @@ DEFAULT_FAMILIES = tuple(f for f in FAMILIES if f not in OPT_IN_FAMILIES)
 #: smallest temperature range [K] over the data for which thermal growth is a candidate
 MIN_TEMPERATURE_SPAN = 0.2
 
+#: smallest time span [s] of points without a temperature for which a drift of the links in time is a candidate
+#: (ten minutes: a room's drift of a few K an hour grows an aluminium arm's links by a few ppm)
+MIN_DRIFT_SPAN_S = 600.0
+
 #: torque [N m] below which a joint's torque counts as zero throughout the data
 _ZERO_TORQUE = 1e-6
 #: force [N] below which a sensor axis counts as unused
@@ -95,12 +105,15 @@ class Candidate:
         joint: the joint it acts on (name), or None.
         origin: "library", "user" (an extra candidate) or "residual" (built from a structure family that
             stayed significant, :mod:`calibration.synthesis`).
+        then: candidates offered only once this one is added (a higher term of the same effect: the loop
+            screens and tests it at the next stage, never before its first term is in).
     """
     name: str
     effect: Effect
     family: str
     joint: str | None = None
     origin: str = "library"
+    then: tuple[Candidate, ...] = ()
 
     def param_names(self, desc: ArmDescription) -> list[str]:
         return [n for n, _ in self.effect.param_defs(desc)]
@@ -154,6 +167,26 @@ def no_torque_reason(desc: ArmDescription, data: CalibrationData) -> str | None:
     return ("the arm has no masses (no <inertial> in its URDF, no mass_kg in its description) and the data no "
             "force, so no joint carries a torque; give the link masses with --masses (or mass_kg in the "
             "description)")
+
+
+def drift_offer(points) -> list[Candidate] | Skipped:
+    """The candidate of a drift of the links in time (:class:`~arm_model.effects.ThermalDrift` about the middle of
+    the points' time span; its second term, power 2, offered once it is added), or why it is not offered: a
+    temperature column (thermal growth is offered instead), no or empty ``time_s``, or a span shorter than
+    :data:`MIN_DRIFT_SPAN_S`."""
+    temp, time = points.temperature, points.time
+    if temp is not None and np.all(np.isfinite(temp)):
+        return Skipped("thermal drift (time)", "the points have a temperature_C column: thermal growth instead")
+    if time is None or len(time) == 0 or not np.all(np.isfinite(time)):
+        return Skipped("thermal drift (time)", "no temperature_C column and no time_s column (or empty cells)")
+    span = float(np.ptp(time))
+    if span < MIN_DRIFT_SPAN_S:
+        return Skipped("thermal drift (time)", f"the points span {span:.3g} s only (at least {MIN_DRIFT_SPAN_S:g} s "
+                                               "needed)")
+    t_ref = float(np.round(0.5 * (np.min(time) + np.max(time)), 3))
+    second = Candidate("thermal drift (time^2)", ThermalDrift(power=2, reference_time_s=t_ref), "thermal")
+    return [Candidate("thermal drift (time)", ThermalDrift(power=1, reference_time_s=t_ref), "thermal",
+                      then=(second,))]
 
 
 def _per_joint_columns(desc: ArmDescription, skipped: list) -> dict[int, str]:
@@ -241,6 +274,8 @@ def library_candidates(desc: ArmDescription, data: CalibrationData, families=Non
         t = pts.temperature
         if t is None or not np.all(np.isfinite(t)):
             skipped.append(Skipped("thermal growth", "no temperature_C column (or empty cells)"))
+            drift = drift_offer(pts)
+            (out.extend if isinstance(drift, list) else skipped.append)(drift)
         elif np.ptp(t) < MIN_TEMPERATURE_SPAN:
             skipped.append(Skipped("thermal growth", f"the temperature varies by {np.ptp(t):.3g} K only "
                                                      f"(at least {MIN_TEMPERATURE_SPAN:g} K needed)"))

@@ -294,12 +294,19 @@ def _one_marker_a_row(points: PointSet, files: np.ndarray, offsets: str):
 
 
 def _aux_inputs(model: ArmModel, points: PointSet, files: np.ndarray, aux: AuxData | None) -> AuxData | None:
-    """The per-point inputs ``model.needs()``: ``aux``'s, else the temperatures of the points and the
+    """The per-point inputs ``model.needs()``: ``aux``'s, else the temperatures and times of the points and the
     gravity and contact torques of the nominal description."""
     needs = model.needs()
     temperature = None if aux is None else aux.temperature
     tau_g = None if aux is None else aux.tau_gravity
     tau_c = None if aux is None else aux.tau_contact
+    time = None if aux is None else aux.time
+    if "time" in needs and time is None:
+        if points.time is None or not np.all(np.isfinite(points.time)):
+            bad = 0 if points.time is None else int(np.flatnonzero(~np.isfinite(points.time))[0])
+            raise InputError("the model's effects need the points' time: add a 'time_s' column", files[bad], None,
+                             "time_s")
+        time = points.time
     if "temperature" in needs and temperature is None:
         if points.temperature is None or not np.all(np.isfinite(points.temperature)):
             bad = 0 if points.temperature is None else int(np.flatnonzero(~np.isfinite(points.temperature))[0])
@@ -311,9 +318,9 @@ def _aux_inputs(model: ArmModel, points: PointSet, files: np.ndarray, aux: AuxDa
         g, c = PinocchioArm(model.desc).torques(points.q, points.wrench)
         tau_g = g if tau_g is None else tau_g
         tau_c = c if tau_c is None else tau_c
-    if temperature is None and tau_g is None and tau_c is None:
+    if temperature is None and tau_g is None and tau_c is None and time is None:
         return None
-    return AuxData(temperature, tau_g, tau_c)
+    return AuxData(temperature, tau_g, tau_c, time)
 
 
 #: what to change when a --holdout leaves the held-out set empty (calibrate, close-loop)
@@ -381,7 +388,7 @@ def concat(a: CalibrationData, b: CalibrationData) -> CalibrationData:
             if va is None or vb is None:
                 raise ValueError(f"aux input '{name}' is given for one part only")
             return np.concatenate([va, vb])
-        aux = AuxData(join("temperature", ()), join("tau_gravity", None), join("tau_contact", None))
+        aux = AuxData(join("temperature", ()), join("tau_gravity", None), join("tau_contact", None), join("time", ()))
     marker = None if a.marker is None and b.marker is None else np.concatenate([a.markers, b.markers])
     return CalibrationData(pts, a.artefacts, aux, files, marker, a.marker_offsets, a.tracker,
                            tuple(dict.fromkeys(a.left_out_lengths + b.left_out_lengths)))

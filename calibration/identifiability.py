@@ -194,7 +194,10 @@ def analyse(jred: np.ndarray, jp: np.ndarray, names: Sequence[str], rank_tol: fl
 #: plausible size of a parameter error, by SI unit (compliances: from the description, see
 #: :func:`prior_scales`); a parameter the data resolve only to more than ``min_resolution`` of it is
 #: not identifiable in practice
-PRIOR_SCALES = {"m": 1e-3, "rad": 1e-2, "1": 0.1, "N": 1.0, "N m": 0.1, "rad/(N m)": 1e-4, "1/K": 1e-4}
+#: a link length's drift in time ([1/s], [1/s^2]: :class:`~arm_model.effects.ThermalDrift`): 100 ppm an hour
+#: (an aluminium arm, 23 ppm/K, in a room drifting by about 4 K an hour), and per hour squared
+PRIOR_SCALES = {"m": 1e-3, "rad": 1e-2, "1": 0.1, "N": 1.0, "N m": 0.1, "rad/(N m)": 1e-4, "1/K": 1e-4,
+                "1/s": 1e-4 / 3600.0, "1/s^2": 1e-4 / 3600.0**2}
 
 
 #: plausible size of a length error in units of the noise of one point: with a robot's scatter (tenths of a

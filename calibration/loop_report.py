@@ -16,7 +16,7 @@ from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, js
 from arm_model.shipped import provenance
 
 from .loop import LoopResult, Stage, effect_summary
-from .model_output import model_check, model_paths, write_model
+from .model_output import drift_text, model_check, model_paths, session_drift, without_session_effects, write_model
 from .report import (
     conformance_html,
     conformance_pngs,
@@ -293,7 +293,7 @@ def write_loop_model(loop: LoopResult, out_dir, inputs=()) -> dict:
     the last fit on the design set if absent) as a model file, covariance file and URDF
     (:mod:`calibration.model_output`)."""
     res = loop.model_fit or loop.final.result
-    added = [s.added.name for s in loop.stages[1:]]
+    added = [s.added.name for s in loop.stages[1:] if not s.added.effect.session]
     comment = (f"Model of '{loop.desc.name}' found by aacmm close-loop: the description with the final fit's values "
                f"folded in and the effects " + (f"added ({', '.join(added)})" if added else "of the base model")
                + f" with their parameters.\nFitted on {len(res.data)} points ({_fitted_on(loop)}); s0 = "
@@ -319,7 +319,9 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
     out = Path(out_dir)
     inputs = [Path(p) for p in inputs]
     conf_files = conformance_pngs(conformance, out) if conformance else {}
-    final = loop.model_fit or loop.final.result            # the fit the model file is written from
+    fit = loop.model_fit or loop.final.result
+    final = without_session_effects(fit)                   # the fit the model file is written from
+    drift = session_drift(fit)
     disc_files = discrepancy_pngs(final, out)
     for name in ("summary.json", "report.html", "before-after.txt", *model_paths(out, loop_model_name(loop)).values(),
                  *(f.name for f in conf_files.values()), *(f.name for f in disc_files.values())):
@@ -367,6 +369,9 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
                                      f"{s.plot_family}: before and after + {s.added.name}"))
             parts.append(f"<h3>The residual that led to it</h3><img src='{img}'>")
         sections.append("".join(parts))
+    if drift:
+        sections.append("<h2>The session's drift (not in the model file)</h2><p>" + html.escape(drift_text(drift))
+                        + "</p>")
     sections.append(_final_html(loop, png))
     if conformance:
         written += write_conformance_pngs(conformance, conf_files, inputs)
@@ -385,7 +390,7 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
                         "urdf": model_files["urdf"].name, "check": model_check(final),
                         "training_poses": None if poses is None else poses.name,
                         "model_discrepancy": None if final.discrepancy is None else final.discrepancy.to_dict(),
-                        "fitted_on": _fitted_on(loop), "points": len(final.data)}
+                        "fitted_on": _fitted_on(loop), "points": len(final.data), "session_drift": drift}
     summary["reference_frame"] = final.reference_frame()
     if conformance:
         summary["conformance"] = conformance

@@ -18,7 +18,8 @@ from arm_model.output import safe_name
 from arm_model.urdf_import import calibrated_urdf_text
 
 __all__ = ["model_paths", "fitted_arm", "write_model", "written_covariance", "model_check", "refine_torques",
-           "check_reproduces", "REPRODUCE_TOL_M", "discrepancy_fields"]
+           "check_reproduces", "REPRODUCE_TOL_M", "discrepancy_fields", "session_drift", "without_session_effects",
+           "drift_text"]
 
 #: how far beyond :func:`model_check`'s difference (the torques evaluated on the calibrated description, which
 #: the summary reports) the model file read back may put a fitted point from the fit's own ball centre [m]:
@@ -32,6 +33,56 @@ REPRODUCE_COV_REL = 1e-9
 #: refined ones by a little (1.8e-6 measured on a Kinova chain with compliances); the error this check is for,
 #: a covariance in the wrong axes, is of the order of the origin angles (2e-3 at 20 mrad)
 REPRODUCE_POINT_REL = 1e-4
+
+
+def session_drift(result) -> list[dict]:
+    """The session's effects of ``result`` (:attr:`~arm_model.effects.Effect.session`: a drift of the links in the
+    session's time) as the summary and report give them: per effect its name, its reference time ``t_ref`` [s] (the
+    geometry written is the one at that time of this session) and its parameters (name, SI unit, value, standard
+    uncertainty, state); empty without one."""
+    rows = {r["name"]: r for r in result.parameter_rows()}
+    out = []
+    for e, sl in result.model.effect_slices():
+        if e.session:
+            names = result.model.spec.names[sl]
+            out.append({"effect": e.describe(result.model.desc),
+                        "reference_time_s": getattr(e, "reference_time_s", None),
+                        "parameters": [{k: rows[n][k] for k in ("name", "unit", "value", "u", "state")}
+                                       for n in names]})
+    return out
+
+
+def drift_text(drift: list[dict]) -> str:
+    """The session's drift (:func:`session_drift`) in words, for the model file's comment and the report: the model
+    file holds the geometry at its reference time and no drift."""
+    parts = [f"{d['effect']} about t_ref = {d['reference_time_s']:.3f} s: "
+             + ", ".join(f"{p['name']} = {p['value']:.4g} +- {p['u']:.2g} {p['unit']}" for p in d["parameters"])
+             for d in drift]
+    return ("; ".join(parts) + ". A drift of this session (its time and its room), not of the arm: the model file "
+            "holds the geometry at t_ref and no drift, so that every --arm applies none to other data.")
+
+
+def without_session_effects(result):
+    """``result`` with its session's effects (:attr:`~arm_model.effects.Effect.session`) taken out, the rest as
+    fitted: the model, parameters, covariance and prior of the others; so the geometry at the effects' reference (a
+    drift's reference time). What a model file holds (:func:`write_model`): the session's own values are reported
+    beside it (:func:`session_drift`), never applied to other data. ``result`` itself when it has none."""
+    model = result.model
+    if not any(e.session for e in model.effects):
+        return result
+    from arm_model.model import ArmModel
+    gone = {model.spec.names[i] for e, sl in model.effect_slices() if e.session for i in range(sl.start, sl.stop)}
+    keep = [i for i, n in enumerate(model.spec.names) if n not in gone]
+    kf = [k for k, n in enumerate(result.free) if n not in gone]
+
+    def part(a, idx):
+        return None if a is None else np.asarray(a)[idx]
+    return replace(result, model=ArmModel(model.desc, tuple(e for e in model.effects if not e.session)),
+                   p=result.p[keep], free=tuple(result.free[k] for k in kf), cov=result.cov[np.ix_(kf, kf)],
+                   u=result.u[kf], corr=result.corr[np.ix_(kf, kf)], prior_centre=part(result.prior_centre, keep),
+                   prior_sd=part(result.prior_sd, kf), prior_ratio=part(result.prior_ratio, kf),
+                   fixed=tuple(f for f in result.fixed if f.name not in gone),
+                   held=tuple(n for n in result.held if n not in gone), model_check=None)
 
 
 def model_paths(out_dir, name: str) -> dict:
@@ -70,7 +121,12 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
                 comment: str | None = None) -> dict:
     """Write the model file, its covariance file, the URDF of ``result`` and, when its model discrepancy grows
     away from the training poses, their points file into ``out_dir``; returns :func:`model_paths` of the files
-    written. ``inputs``: files never to be overwritten."""
+    written. ``inputs``: files never to be overwritten. The session's effects (a drift in its time) are not
+    written (:func:`without_session_effects`: the geometry at their reference; the comment says so)."""
+    drift = session_drift(result)
+    if drift:
+        comment = (f"{comment}\n" if comment else "") + drift_text(drift)
+    result = without_session_effects(result)
     files = model_paths(out_dir, name)
     for f in files.values():
         guard_output(f, inputs)
@@ -266,7 +322,9 @@ def at_equilibrium(model, p, data):
     if data is None or not ({"tau_gravity", "tau_contact"} & model.needs()):
         return data
     temperature = None if data.aux is None else data.aux.temperature
-    return replace(data, aux=model.equilibrium_aux(data.points.q, data.wrench, np.asarray(p, float), temperature))
+    time = None if data.aux is None else data.aux.time
+    return replace(data, aux=model.equilibrium_aux(data.points.q, data.wrench, np.asarray(p, float), temperature,
+                                                   time=time))
 
 
 def with_fitted_torques(data, result):

@@ -17,6 +17,9 @@ have something to look at):
 * ``quick``: tests/test_loop_synthesis.py's own campaigns (the simulator's fast path, 280 points, random base
   errors of the seed, 3 N mean force, no temperature column), its clean reference.
 
+``--no-thermometer`` drops the temperature column of the simulated shapes (``time_s`` kept; the truth's links do
+not grow): the campaigns on which the loop offers a drift of the links in time (``thermal drift (time)``).
+
 Writes ``results.json`` (one row a seed) into ``-o`` and prints the counts.
 """
 from __future__ import annotations
@@ -70,8 +73,11 @@ def _campaign(seed: int, shape: str):
     return sim.points, sim.artefacts, camp.arm
 
 
-def one_seed(seed: int, shape: str) -> dict:
-    """The loop on one clean campaign: what it added, built and claimed."""
+def one_seed(seed: int, shape: str, no_thermometer: bool = False) -> dict:
+    """The loop on one clean campaign: what it added, built and claimed (``no_thermometer``: without the
+    temperature column)."""
+    import dataclasses
+
     import numpy as np
 
     from calibration.data import Weights
@@ -79,6 +85,8 @@ def one_seed(seed: int, shape: str) -> dict:
 
     t0 = time.perf_counter()
     points, artefacts, arm = _campaign(seed, shape)
+    if no_thermometer:
+        points = dataclasses.replace(points, temperature=None)
     loop = close_loop(points, artefacts, arm, weights=Weights(probe=2e-6), cv_top=2, seed=seed)
     t = points.temperature
     return {"seed": seed, "points": len(points), "temperature_span_K": None if t is None else float(np.ptp(t)),
@@ -131,10 +139,11 @@ def main(argv=None) -> int:
     p.add_argument("--shape", choices=[*SHAPES, "quick"], default="synthesis", help="campaign shape")
     p.add_argument("--seeds", default="0-19", help="seeds, e.g. 0-19 or 1,4,7")
     p.add_argument("-o", "--output", type=Path, default=Path("out/honesty"), help="output folder")
+    p.add_argument("--no-thermometer", action="store_true", help="drop the temperature column (time_s kept)")
     args = p.parse_args(argv)
     rows = []
     for seed in _seeds(args.seeds):
-        rows.append(one_seed(seed, args.shape))
+        rows.append(one_seed(seed, args.shape, args.no_thermometer))
         print(f"seed {seed}: added {[a['name'] for a in rows[-1]['added']]}, built "
               f"{[b['name'] for b in rows[-1]['built']]}, claimed {rows[-1]['structure_claimed']} "
               f"({rows[-1]['seconds']} s)", file=sys.stderr, flush=True)

@@ -55,7 +55,8 @@ def test_joint_angle_columns_are_the_ball_sensitivity(nominal):
     f = model.casadi_function()
     import casadi as ca
     p = ca.SX.sym("p", model.spec.size)
-    jac = ca.Function("j", [p], [ca.jacobian(f(q[0], np.zeros(6), np.zeros(1 + 2 * nominal.n_joints), p), p)])
+    aux = np.zeros(ArmModel.aux_width(nominal.n_joints))
+    jac = ca.Function("j", [p], [ca.jacobian(f(q[0], np.zeros(6), aux, p), p)])
     j = np.asarray(jac(np.zeros(model.spec.size)))[:, model.base_size:]
     h = 1e-6
     for k in range(nominal.n_joints):

@@ -41,7 +41,7 @@ def _casadi_jacobians(model: ArmModel):
     f = model.casadi_function()
     j = model.desc.n_joints
     q, w = ca.SX.sym("q", j), ca.SX.sym("w", 6)
-    aux, p = ca.SX.sym("aux", 1 + 2 * j), ca.SX.sym("p", model.spec.size)
+    aux, p = ca.SX.sym("aux", ArmModel.aux_width(j)), ca.SX.sym("p", model.spec.size)
     x = f(q, w, aux, p)
     return ca.Function("centre_jac", [q, w, aux, p], [x, ca.jacobian(x, p), ca.jacobian(x, q), ca.jacobian(x, w)])
 
@@ -74,7 +74,7 @@ def test_chain_jacobian_is_the_casadi_jacobian(nominal, tmp_path, convention):
     jac = _casadi_jacobians(model)
     size = model.spec.size
     for i in range(n):
-        x, jp, jq, jw = (np.array(v) for v in jac(q[i], w[i], np.zeros(1 + 2 * j), p))
+        x, jp, jq, jw = (np.array(v) for v in jac(q[i], w[i], np.zeros(ArmModel.aux_width(j)), p))
         assert_close(cen[i], x.ravel(), atol=1e-14)
         ref = np.hstack([jp, jq, jw])
         assert_close(g[:, :, i].T, ref, atol=1e-12 * np.abs(ref).max(), msg=f"point {i}")
@@ -329,7 +329,7 @@ def test_tip_with_a_model_file_and_its_covariance(tmp_path, nominal, capsys):
     jac = _casadi_jacobians(model)
     u_q = np.radians(0.0001) / np.sqrt(12)             # the encoder step the nominal arm's description gives
     for i in range(5):
-        out = jac(np.radians(q[i]), np.zeros(6), np.zeros(15), np.zeros(spec.size))
+        out = jac(np.radians(q[i]), np.zeros(6), np.zeros(ArmModel.aux_width(7)), np.zeros(spec.size))
         jp, jq = np.array(out[1])[:, idx], np.array(out[2])
         assert_close(u[i], np.sqrt(np.diag(jp @ cov @ jp.T + u_q ** 2 * jq @ jq.T)), atol=2e-9)
 
@@ -390,6 +390,6 @@ def test_propagation_with_prismatic_and_mimic_joints(nominal, tmp_path):
     prop = propagate(model, None, q, w, inputs=inputs)
     jac = _casadi_jacobians(model)
     for i in range(5):
-        jq = np.array(jac(q[i], w[i], np.zeros(1 + 2 * desc.n_joints), np.zeros(model.spec.size))[2])
+        jq = np.array(jac(q[i], w[i], np.zeros(ArmModel.aux_width(desc.n_joints)), np.zeros(model.spec.size))[2])
         ref = jq @ np.diag(inputs.encoder ** 2) @ jq.T
         assert_close(prop.contributions["encoders"][i], np.diag(ref), atol=1e-6 * np.abs(ref).max())

@@ -286,7 +286,7 @@ def solve_positions(model, p, targets, rng, force_base=None, tol: float = 1e-12,
     :class:`~arm_model.NumericalError` for the points not reached in ``tries`` rounds.
     """
     from ..kinematics import probe_rotations
-    from ..model import AuxData
+    from ..model import ArmModel, AuxData
 
     if model.needs() - {"temperature"}:
         raise ValueError("the fast path's inverse kinematics supports effects that need no joint torques")
@@ -306,7 +306,7 @@ def solve_positions(model, p, targets, rng, force_base=None, tol: float = 1e-12,
 
     q = first(np.arange(n))
     w = np.zeros((n, 6))
-    aux = np.zeros((1 + 2 * jn, n))
+    aux = np.zeros((ArmModel.aux_width(jn), n))
     aux[0] = 20.0
     fn = _model_jacobian(model, n)
     todo = np.ones(n, bool)

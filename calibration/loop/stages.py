@@ -29,7 +29,7 @@ from arm_model.log import counted
 from arm_model.model import ArmModel
 
 from ..calibrate import CalibrationResult
-from ..candidates import DEFAULT_FAMILIES, OPT_IN_FAMILIES, library_candidates, needs_model
+from ..candidates import DEFAULT_FAMILIES, OPT_IN_FAMILIES, drift_offer, library_candidates, needs_model
 from ..data import Weights, make_data
 from ..diagnostics import (
     binned_estimates,
@@ -96,8 +96,9 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
     (and whether their test can reach its level), and the base stage."""
     points, desc = camp.points, camp.desc
     has_t = points.temperature is not None and np.all(np.isfinite(points.temperature))
+    drift = drift_offer(points)
     need = ([JointCompliance()] + ([ThermalGrowth()] if has_t else []) + list(camp.effects)
-            + [c.effect for c in camp.extra])
+            + [c.effect for c in camp.extra] + ([c.effect for c in drift] if isinstance(drift, list) else []))
     data = make_data(points, camp.artefacts, needs_model(desc, need), reference=camp.reference)
     cands, skipped = library_candidates(desc, data, camp.families, camp.extra)
     design, test, test_by, test_rows = outer_split(data, settings)
@@ -218,7 +219,7 @@ def at_current_torques(result: CalibrationResult) -> CalibrationResult:
     if d.aux is None or (d.aux.tau_gravity is None and d.aux.tau_contact is None):
         return result
     aux = result.model.equilibrium_aux(d.points.q, d.wrench, result.p, d.aux.temperature,
-                                       contact=d.aux.tau_contact is not None)
+                                       contact=d.aux.tau_contact is not None, time=d.aux.time)
     return replace(result, data=replace(d, aux=aux))
 
 
@@ -419,7 +420,8 @@ def outer_test_worse(state: LoopState, stage: Stage, cv) -> bool:
 
 def add(state: LoopState, decision: Decision, stage: Stage, scr: Screening) -> None:
     """The stage's model becomes the current one (its effect's parameters keep their plausible sizes in every
-    later fit); the candidates that share its parameters leave the remaining ones."""
+    later fit); the candidates that share its parameters leave the remaining ones, the candidates it opens
+    (``Candidate.then``, its higher terms) join them."""
     cand, cv = decision.candidate, decision.cv
     model, result = stage.model, stage.result
     state.priors.update(candidate_priors(model, cand, scr.test_of(cand)))
@@ -436,6 +438,7 @@ def add(state: LoopState, decision: Decision, stage: Stage, scr: Screening) -> N
         if c is not cand and c.origin == RESIDUAL and set(c.param_names(state.desc)) & have:
             state.fate[c.name] = f"shares parameters with {cand.name}, which was added"
     state.remaining = [c for c in state.remaining if c is not cand and not set(c.param_names(state.desc)) & have]
+    state.remaining.extend(c for c in cand.then if not set(c.param_names(state.desc)) & have)
 
 
 def run(state: LoopState) -> None:
