@@ -51,7 +51,7 @@ from .solver import levenberg_marquardt
 
 __all__ = ["JointAngleOffset", "measurement_groups", "measurement_folds", "pose_folds", "ResidualSpace",
            "residual_space", "GroupTest", "Family", "families", "candidate_family", "test_group", "screen_candidates",
-           "structure_tests", "remaining_structure", "binned_estimates", "holm"]
+           "structure_tests", "remaining_structure", "binned_estimates", "holm", "f_upper_tail"]
 
 #: harmonics of each joint angle tested by the structure tests: those an effect built from the residual can hold
 #: (:data:`calibration.synthesis.MAX_HARMONIC`; with 1-3 only, a hidden fourth harmonic of the base joint, 0.004
@@ -424,7 +424,7 @@ def test_group(space: ResidualSpace, cols: np.ndarray, names, name: str, fold_of
         f_, p = nan, nan
     else:
         f_ = (d / rank) / (rest / dof2)
-        p = float(special.fdtrc(rank, dof2, f_))     # stats.f.sf(f_, rank, dof2), the same numbers, 20x faster
+        p = f_upper_tail(f_, rank, dof2)
     n = len(r)
     dbic = n * math.log(rest / chi2) + rank * math.log(n) if chi2 > 0 else nan
     beta = -(vt.T / s) @ z / scale          # the Gauss-Newton step: r + C beta is smallest
@@ -471,6 +471,13 @@ def row_folds(space: ResidualSpace, folds) -> np.ndarray:
         return np.array([folds.get(m, -1) for m in space.row_measurement])
     f = np.asarray(folds)
     return np.where(space.row_point >= 0, f[np.maximum(space.row_point, 0)], -1)
+
+
+def f_upper_tail(f: float, dfn: float, dfd: float) -> float:
+    """P(F > f) of Fisher's F distribution with (``dfn``, ``dfd``) degrees of freedom: the p-value of an F
+    test. ``scipy.special.fdtrc``: the numbers of ``scipy.stats.f.sf(f, dfn, dfd)`` (tested to agree to 1e-12
+    relative) without its argument handling, about 20x faster a call; f <= 0 gives 1, NaN gives NaN."""
+    return 1.0 if f <= 0 else float(special.fdtrc(dfn, dfd, f))
 
 
 def holm(p_values) -> np.ndarray:
