@@ -29,6 +29,7 @@ moment across it ("jN lateral load"); the stylus direction (approach) times the 
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -45,7 +46,14 @@ from arm_model.params import split_params
 from .calibrate import CalibrationResult
 from .candidates import Candidate, torques_of
 from .data import CalibrationData
-from .identifiability import DEFAULT_RANK_TOL, point_noise, prior_scales, reduced_jacobian, weakly_determined
+from .identifiability import (
+    DEFAULT_RANK_TOL,
+    NuisanceProjection,
+    point_noise,
+    prior_scales,
+    reduced_jacobian,
+    weakly_determined,
+)
 from .problem import Problem
 from .solver import levenberg_marquardt
 
@@ -193,12 +201,17 @@ class ResidualSpace:
     def dof(self) -> int:
         return int(self.result.dof) - self.dof_used
 
+    @functools.cached_property
+    def projection(self) -> NuisanceProjection:
+        """The nuisance's elimination (one factorization for every :meth:`project` of this space)."""
+        return NuisanceProjection(self.jt)
+
     def project(self, cols: np.ndarray) -> np.ndarray:
         """Columns (n, k) with the nuisance and the free parameters projected out."""
         cols = np.asarray(cols, dtype=float).reshape(self.n, -1)
         if cols.shape[1] == 0:
             return cols
-        red = reduced_jacobian(cols, self.jt)
+        red = self.projection(cols)
         if self.soft is not None:
             d, kept = self.soft
             red = red - d @ ((1.0 - kept)[:, None] * (d.T @ red))
@@ -211,6 +224,7 @@ class ResidualSpace:
         norm = np.linalg.norm(cols, axis=0)
         _, u, _, _ = _svd_scaled(c, norm, rank_tol)
         new = ResidualSpace(**{k: getattr(self, k) for k in self.__dataclass_fields__})
+        new.projection = self.projection            # the same nuisance: its factorization shared
         new.basis = np.hstack([self.basis, u])
         new.r = self.r - u @ (u.T @ self.r)
         new.dof_used = self.dof_used + u.shape[1]
