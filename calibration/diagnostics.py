@@ -29,6 +29,7 @@ moment across it ("jN lateral load"); the stylus direction (approach) times the 
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -47,6 +48,7 @@ from .candidates import Candidate, torques_of
 from .data import CalibrationData
 from .identifiability import (
     DEFAULT_RANK_TOL,
+    NuisanceProjection,
     plausible_length,
     point_noise,
     prior_scales,
@@ -58,7 +60,7 @@ from .solver import levenberg_marquardt
 
 __all__ = ["JointAngleOffset", "measurement_groups", "measurement_folds", "pose_folds", "ResidualSpace",
            "residual_space", "GroupTest", "Family", "families", "candidate_family", "test_group", "screen_candidates",
-           "structure_tests", "test_family", "remaining_structure", "binned_estimates", "holm"]
+           "structure_tests", "test_family", "remaining_structure", "binned_estimates", "holm", "f_upper_tail"]
 
 #: harmonics of each joint angle tested by the structure tests: those an effect built from the residual can hold
 #: (:data:`calibration.synthesis.MAX_HARMONIC`; with 1-3 only, a hidden fourth harmonic of the base joint, 0.004
@@ -200,12 +202,17 @@ class ResidualSpace:
     def dof(self) -> int:
         return int(self.result.dof) - self.dof_used
 
+    @functools.cached_property
+    def projection(self) -> NuisanceProjection:
+        """The nuisance's elimination (one factorization for every :meth:`project` of this space)."""
+        return NuisanceProjection(self.jt)
+
     def project(self, cols: np.ndarray) -> np.ndarray:
         """Columns (n, k) with the nuisance and the free parameters projected out."""
         cols = np.asarray(cols, dtype=float).reshape(self.n, -1)
         if cols.shape[1] == 0:
             return cols
-        red = reduced_jacobian(cols, self.jt)
+        red = self.projection(cols)
         if self.soft is not None:
             d, kept = self.soft
             red = red - d @ ((1.0 - kept)[:, None] * (d.T @ red))
@@ -218,6 +225,7 @@ class ResidualSpace:
         norm = np.linalg.norm(cols, axis=0)
         _, u, _, _ = _svd_scaled(c, norm, rank_tol)
         new = ResidualSpace(**{k: getattr(self, k) for k in self.__dataclass_fields__})
+        new.projection = self.projection            # the same nuisance: its factorization shared
         new.basis = np.hstack([self.basis, u])
         new.r = self.r - u @ (u.T @ self.r)
         new.dof_used = self.dof_used + u.shape[1]
@@ -431,7 +439,7 @@ def test_group(space: ResidualSpace, cols: np.ndarray, names, name: str, fold_of
         f_, p = nan, nan
     else:
         f_ = (d / rank) / (rest / dof2)
-        p = float(special.fdtrc(rank, dof2, f_))     # stats.f.sf(f_, rank, dof2), the same numbers, 20x faster
+        p = f_upper_tail(f_, rank, dof2)
     n = len(r)
     dbic = n * math.log(rest / chi2) + rank * math.log(n) if chi2 > 0 else nan
     beta = -(vt.T / s) @ z / scale          # the Gauss-Newton step: r + C beta is smallest
@@ -478,6 +486,13 @@ def row_folds(space: ResidualSpace, folds) -> np.ndarray:
         return np.array([folds.get(m, -1) for m in space.row_measurement])
     f = np.asarray(folds)
     return np.where(space.row_point >= 0, f[np.maximum(space.row_point, 0)], -1)
+
+
+def f_upper_tail(f: float, dfn: float, dfd: float) -> float:
+    """P(F > f) of Fisher's F distribution with (``dfn``, ``dfd``) degrees of freedom: the p-value of an F
+    test. ``scipy.special.fdtrc``: the numbers of ``scipy.stats.f.sf(f, dfn, dfd)`` (tested to agree to 1e-12
+    relative) without its argument handling, about 20x faster a call; f <= 0 gives 1, NaN gives NaN."""
+    return 1.0 if f <= 0 else float(special.fdtrc(dfn, dfd, f))
 
 
 def holm(p_values) -> np.ndarray:

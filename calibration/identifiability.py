@@ -21,15 +21,15 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
-from .solver import normal_solver
+from .solver import dense_enough, normal_solver
 
 if TYPE_CHECKING:
     from arm_model.model import ArmModel
 
     from .problem import Problem
 
-__all__ = ["Combination", "Identifiability", "reduced_jacobian", "analyse", "DEFAULT_RANK_TOL", "prior_scales",
-           "point_noise", "plausible_length", "weakly_determined", "NOISE_MULTIPLE"]
+__all__ = ["Combination", "Identifiability", "NuisanceProjection", "reduced_jacobian", "analyse", "DEFAULT_RANK_TOL",
+           "prior_scales", "point_noise", "plausible_length", "weakly_determined", "NOISE_MULTIPLE"]
 
 #: relative singular value below which a direction counts as not identifiable
 DEFAULT_RANK_TOL = 1e-4
@@ -106,17 +106,36 @@ def compress_rows(a: np.ndarray) -> np.ndarray:
     return np.linalg.qr(a, mode="r")  # type: ignore[return-value]  # numpy 2.4 stubs: mode "r" returns R alone
 
 
+class NuisanceProjection:
+    """``J -> J - J_t (J_t^T J_t)^-1 J_t^T J``: columns with the nuisance unknowns of ``jt`` (rows x nuisance)
+    eliminated, its normal equations factored once for every call. Up to
+    :data:`~calibration.solver.DENSE_UNKNOWNS` nuisance unknowns ``J_t`` is held dense (its products and the
+    factors: LAPACK), beyond it sparse (SuperLU): the same projection to rounding."""
+
+    def __init__(self, jt: sp.spmatrix | np.ndarray) -> None:
+        self.n = int(jt.shape[1])
+        dense = dense_enough(self.n)
+        self.jt = (jt if isinstance(jt, np.ndarray) else jt.toarray()) if dense else sp.csc_matrix(jt)
+        self._solve = normal_solver(self.jt) if self.n else None
+
+    def __call__(self, jp: np.ndarray) -> np.ndarray:
+        if self._solve is None or jp.shape[1] == 0:
+            return jp.copy()
+        jt, solve = self.jt, self._solve
+        x = solve(np.asarray(jt.T @ jp))
+        red = jp - jt @ x
+        # one refinement step (iterative refinement of the projection)
+        x2 = solve(np.asarray(jt.T @ red))
+        out: np.ndarray = red - jt @ x2
+        return out
+
+
 def reduced_jacobian(jp: np.ndarray, jt: sp.spmatrix) -> np.ndarray:
-    """``J_p - J_t (J_t^T J_t)^-1 J_t^T J_p``: the parameter Jacobian with the nuisance eliminated."""
+    """``J_p - J_t (J_t^T J_t)^-1 J_t^T J_p``: the parameter Jacobian with the nuisance eliminated
+    (:class:`NuisanceProjection`)."""
     if jt.shape[1] == 0 or jp.shape[1] == 0:
         return jp.copy()
-    solve = normal_solver(jt.tocsc())
-    x = solve(np.asarray(jt.T @ jp))
-    red = jp - jt @ x
-    # one refinement step (iterative refinement of the projection)
-    x2 = solve(np.asarray(jt.T @ red))
-    out: np.ndarray = red - jt @ x2
-    return out
+    return NuisanceProjection(jt)(jp)
 
 
 def _terms(names: Sequence[str], vec: np.ndarray, scale_in_si: np.ndarray | float, rel: float = 1e-3,

@@ -272,7 +272,12 @@ def test_joint_limit_tally_of_blocks_equals_the_whole(nominal):
     assert JointLimitTally(desc, "p.csv").warning() is None
 
 
-_plain = st.from_regex(r"[+-]?[0-9]{0,10}\.?[0-9]{0,9}", fullmatch=True).filter(lambda s: any(c.isdigit() for c in s))
+# the plain decimals [+-]?[0-9]{0,10}\.?[0-9]{0,9} with a digit, built from their parts (st.from_regex drew the
+# same language at 2.5x the CPU: 6.5 s of the test's 60 examples)
+_digits = "0123456789"
+_plain = st.builds(lambda sign, whole, dot, frac: sign + whole + dot + frac, st.sampled_from(["", "+", "-"]),
+                   st.text(_digits, max_size=10), st.sampled_from(["", "."]),
+                   st.text(_digits, max_size=9)).filter(lambda s: any(c.isdigit() for c in s))
 _other = st.sampled_from(["1e3", "-2.5E-4", " 7.25", "nan", "inf", "12345678901234567.5", "9007199254740993"])
 
 

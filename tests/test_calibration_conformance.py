@@ -82,6 +82,36 @@ def test_without_mpe_no_verdict_and_untested_mpe_said(val):
     assert r["e-uni"]["result"] is None
 
 
+def test_the_conformance_figure_holds_everything_it_draws(val, monkeypatch):
+    """The figure's fixed layout (no tight crop) keeps every title, label and legend on the canvas and no two
+    panels' drawn extents overlap: the hand rows with an MPE (legends), plus a panel of long item labels and one
+    of more items than it labels (41)."""
+    from arm_model import reports
+    from calibration.report import plot_conformance
+    rows = conformance(val, {"e-uni": 5 * UM, "spat": 5.7 * UM})
+    long = Validation()
+    long.lengths = [_length(f"ballbar-position-{i:02d}-of-the-long-campaign", 1.0 + i) for i in range(3)]
+    many = Validation()
+    many.lengths = [_length(f"b{i}", -200.0 + 10 * i) for i in range(41)]
+    rows = rows + [r for r in conformance(long) + conformance(many) if r["key"] == "e-uni"]
+    seen = {}
+
+    def keep(fig, **kw):
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        seen["canvas"] = fig.bbox
+        seen["drawn"] = fig.get_tightbbox(renderer).transformed(fig.dpi_scale_trans)
+        seen["panels"] = [ax.get_tightbbox(renderer) for ax in fig.axes]
+        return b"\x89PNG"
+    monkeypatch.setattr(reports, "png", keep)
+    plot_conformance(rows, "hand rows")
+    canvas, drawn = seen["canvas"], seen["drawn"]
+    assert drawn.x0 >= -0.5 and drawn.y0 >= -0.5 and drawn.x1 <= canvas.x1 + 0.5 and drawn.y1 <= canvas.y1 + 0.5
+    boxes = sorted(seen["panels"], key=lambda b: -b.y1)
+    assert len(boxes) == sum(1 for r in rows if r["n"])
+    assert all(a.y0 > b.y1 for a, b in zip(boxes[:-1], boxes[1:], strict=True))
+
+
 @pytest.mark.parametrize("value", ["0", "-3", "nan", "inf", "abc"])
 def test_mpe_option_out_of_range_exits_2(value, tmp_path, capsys):
     out = tmp_path / "o"

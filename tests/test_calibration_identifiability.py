@@ -173,3 +173,28 @@ def test_base_set_of_the_full_origin_errors_is_the_literature_count(nominal, tmp
             assert res.identifiability_final.rank == len(res.free)
             counts[label, ref] = len(res.free)
     assert counts == {("urdf", "fit"): 25, ("urdf", "identity"): 31, ("dh", "fit"): 23, ("dh", "identity"): 25}
+
+
+def test_nuisance_projection_dense_and_sparse_agree(monkeypatch):
+    """The nuisance's elimination held dense (up to DENSE_UNKNOWNS nuisance unknowns) and sparse (the limit set
+    to 0) give the same columns to 1e-12 of their size, orthogonal to every nuisance column, and a column made
+    of nuisance columns alone projects to zero; one factorization serves several calls."""
+    import scipy.sparse as sp
+
+    import calibration.solver as solver
+    from calibration.identifiability import NuisanceProjection, reduced_jacobian
+    rng = np.random.default_rng(3)
+    blocks = [rng.normal(size=(12, 3)) for _ in range(20)]         # 20 instances, 3 nuisance unknowns each
+    jt = sp.block_diag(blocks, format="csr")
+    jp = np.column_stack([rng.normal(size=(240, 5)), jt @ rng.normal(size=60)])
+    dense = NuisanceProjection(jt)
+    assert isinstance(dense.jt, np.ndarray)
+    got = dense(jp)
+    monkeypatch.setattr(solver, "DENSE_UNKNOWNS", 0)
+    sparse = NuisanceProjection(jt)
+    assert sp.issparse(sparse.jt)
+    assert_close(got, sparse(jp), atol=1e-12 * np.abs(jp).max())
+    assert_close(got, reduced_jacobian(jp, jt), atol=1e-12 * np.abs(jp).max())
+    assert_close(jt.T @ got, np.zeros((60, 6)), atol=1e-11 * np.abs(jp).max())
+    assert np.abs(got[:, 5]).max() < 1e-12 * np.abs(jp[:, 5]).max()
+    assert_close(dense(jp[:, :2]), got[:, :2], atol=1e-13 * np.abs(jp).max())

@@ -13,7 +13,14 @@ from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 from calibration.calibrate import FitOptions, calibrate
 from calibration.candidates import library_candidates, needs_model
 from calibration.data import Weights, make_data
-from calibration.diagnostics import JointAngleOffset, holm, measurement_folds, residual_space, screen_candidates
+from calibration.diagnostics import (
+    JointAngleOffset,
+    f_upper_tail,
+    holm,
+    measurement_folds,
+    residual_space,
+    screen_candidates,
+)
 
 
 @cache
@@ -125,6 +132,22 @@ def test_holm_by_hand():
     # p sorted 0.01, 0.02, 0.04 (m = 3): 3*0.01, max(0.03, 2*0.02), max(0.04, 1*0.04)
     np.testing.assert_allclose(holm([0.04, 0.01, 0.02, np.nan])[:3], [0.04, 0.03, 0.04])
     assert np.isnan(holm([0.04, 0.01, 0.02, np.nan])[3])
+
+
+def test_f_upper_tail_is_scipy_s_f_survival_function():
+    """The one F-test p-value of the package (the structure tests' and the held-out verdict's) equals
+    scipy.stats.f.sf over small and large degrees of freedom and F from 0 to far in the tail; F = 0 gives 1,
+    a negative F (not reachable from sums of squares) 1 as stats.f.sf does, NaN stays NaN; and one hand value:
+    F(2, 2) has P(F > f) = 1 / (1 + f)."""
+    from scipy import stats
+    for dfn in (1, 2, 3.5, 12, 200):
+        for dfd in (1, 4, 10.5, 87, 5000):
+            for f in (0.0, 1e-6, 0.3, 1.0, 2.7, 15.0, 1e3):
+                want = float(stats.f.sf(f, dfn, dfd))
+                assert abs(f_upper_tail(f, dfn, dfd) - want) <= 1e-12 * want + 1e-300, (f, dfn, dfd)
+    assert f_upper_tail(0.0, 3, 7) == 1.0 and f_upper_tail(-1.0, 3, 7) == 1.0
+    assert np.isnan(f_upper_tail(float("nan"), 3, 7))
+    assert abs(f_upper_tail(3.0, 2, 2) - 0.25) < 1e-15
 
 
 def test_candidates_follow_the_data(nominal):

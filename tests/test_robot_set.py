@@ -9,10 +9,9 @@ where Pinocchio's own mimic model builds, also through it.
 
 The package is downloaded once (``pip download``, one 96 MB wheel) into a cache outside the repository
 (``$XDG_CACHE_HOME/aacmm-toolkit``, default ``~/.cache/aacmm-toolkit``), only its URDFs kept; the tests
-skip, saying why, when it cannot be fetched. Both tests are in the slow suite (``make test-slow``), which
-keeps ``make test`` off the network: ``test_quick_subset`` (one robot of each difficulty) and
-``test_every_robot`` (all of them), which also checks that the table of docs/robots.md is the one this sweep
-finds.
+skip, saying why, when it cannot be fetched. The sweep is in the slow suite (``make test-slow``), which keeps
+``make test`` off the network: ``test_every_robot`` (all of them, one robot of each difficulty checked by name:
+:data:`QUICK`), which also checks that the table of docs/robots.md is the one this sweep finds.
 """
 from __future__ import annotations
 
@@ -212,27 +211,24 @@ def _check_tip_command(path: Path, leaf: str, desc, q, x, tmp: Path) -> None:
 # the tests
 
 @pytest.mark.slow
-def test_quick_subset(robots, tmp_path):
-    """One robot of each difficulty (:data:`QUICK`): every chain through the API, the longest through
-    ``aacmm tip``; the one Pinocchio refuses is refused here too."""
-    kinds = set()
-    for rel in QUICK:
-        res = _check_robot(robots / rel, rel, tmp_path, cli="one")
-        if res.pinocchio is not None:
-            assert "no name" in res.pinocchio
-            continue
-        assert res.chains and res.loaded == res.chains, res.refused
-        kinds |= res.kinds
-    assert {"prismatic", "continuous", "mimic", "tip at the last joint", "mirrored meshes"} <= kinds
-
-
-@pytest.mark.slow
 def test_every_robot(robots, tmp_path):
     """Every URDF of the package: every chain Pinocchio builds loads and equals it (the API and ``aacmm
-    tip``), and docs/robots.md holds the table this sweep writes."""
+    tip``), and docs/robots.md holds the table this sweep writes. Among them one robot of each difficulty
+    (:data:`QUICK`; its own test before, the same checks on the same chains, merged here): each has chains and
+    loads them all, the one Pinocchio refuses is refused for having no name, and together they hold every kind."""
     results = [_check_robot(p, str(p.relative_to(robots)), tmp_path, cli="all") for p in sorted(robots.rglob("*.urdf"))]
     for r in results:
         assert r.loaded == r.chains, f"{r.file}: {r.refused[:2]}"
+    quick = [r for r in results if r.file in QUICK]
+    assert len(quick) == len(QUICK), sorted(set(QUICK) - {r.file for r in quick})
+    kinds = set()
+    for r in quick:
+        if r.pinocchio is not None:
+            assert "no name" in r.pinocchio
+            continue
+        assert r.chains and r.loaded == r.chains, r.refused
+        kinds |= r.kinds
+    assert {"prismatic", "continuous", "mimic", "tip at the last joint", "mirrored meshes"} <= kinds
     table = robot_table(results)
     doc = (ROOT / "docs" / "robots.md").read_text()
     assert TABLE_START in doc and TABLE_END in doc

@@ -156,12 +156,13 @@ def _solve_batch(truth: Truth, q, tg: IKTargets, tol: float, max_iter: int):
     dir_err = np.full(n, np.inf)
     active = np.arange(n)
     lam = 1e-9
+    taken = -1                      # the number of points sub and geom were taken for (active only shrinks)
     for it in range(max_iter):
         if active.size == 0:
             break
-        sub = tg.take(active)
-        r, jac, pos, w = _residual_and_jacobian(truth, q[active], _take_geom(geom_all, active), sub,
-                                                has_x[active])
+        if active.size != taken:
+            sub, geom, taken = tg.take(active), _take_geom(geom_all, active), active.size
+        r, jac, pos, w = _residual_and_jacobian(truth, q[active], geom, sub, has_x[active])
         pe = np.linalg.norm(pos - sub.position, axis=1)
         de = np.max(np.abs(r[:, 3:]), axis=1)
         conv = (pe < tol) & (de < 1e-12)

@@ -8,6 +8,7 @@ from scipy import stats
 
 from arm_model.model import ArmModel
 
+from ..diagnostics import f_upper_tail
 from ..synthesis import RESIDUAL, synthesise
 from .settings import PHYSICS
 
@@ -85,7 +86,7 @@ def heldout_check(stage, test_by: str, alpha: float) -> dict | None:
     lev = (prop / (dof_t * res.s0 ** 2) if prop is not None else
            max(0.0, n - red - (res.n_nuisance if by_meas else 0)) / n)
     f = chi2 / (dof_t * (1.0 + lev) * res.s0 ** 2)
-    p = float(stats.f.sf(f, dof_t, red))
+    p = f_upper_tail(f, dof_t, red)
     dof_s = (h.get("rows_stated") or 0) - (nuis if by_meas else 0)
     p_s = (float(stats.chi2.sf(h["chi2_stated"] / (1.0 + lev), dof_s))
            if h.get("chi2_stated") is not None and dof_s > 0 else None)
