@@ -272,7 +272,10 @@ def library_candidates(desc: ArmDescription, data: CalibrationData, families=Non
                                  JointCompliance(joints=tuple(loaded), gravity=True, contact=True), "joint_compliance"))
     if "thermal" in families:
         t = pts.temperature
-        if t is None or not np.all(np.isfinite(t)):
+        if desc.coupled:
+            skipped.append(Skipped("thermal growth", "the chain has a joint mimicking another: link growth acts on "
+                                                     "the chain's rows"))
+        elif t is None or not np.all(np.isfinite(t)):
             skipped.append(Skipped("thermal growth", "no temperature_C column (or empty cells)"))
             drift = drift_offer(pts)
             (out.extend if isinstance(drift, list) else skipped.append)(drift)

@@ -159,3 +159,22 @@ def test_an_arm_with_a_drift_in_python_reads_the_time_column(nominal):
     assert_close(arm.ball_centres(pts), want, atol=1e-15)
     with pytest.raises(InputError, match="time_s"):
         arm.ball_centres(replace(pts, time=None))
+
+
+def test_no_link_growth_is_offered_on_a_chain_with_a_mimic_joint(tmp_path):
+    """A chain whose joint mimics another (rows and encoder columns differ) is offered no thermal growth or drift
+    (link growth acts on the chain's rows; the drift was an internal error of close-loop there), saying why."""
+    from types import SimpleNamespace
+
+    from test_sim_mocap import COUPLED_URDF, TIP
+
+    from arm_model.urdf_import import description_from_urdf
+    from calibration.candidates import MIN_DRIFT_SPAN_S, library_candidates
+    (tmp_path / "a.urdf").write_text(COUPLED_URDF)
+    desc = description_from_urdf(tmp_path / "a.urdf", TIP)
+    assert desc.coupled
+    n = 8
+    pts = SimpleNamespace(temperature=None, time=np.linspace(0.0, 2 * MIN_DRIFT_SPAN_S, n), force=np.zeros((n, 3)),
+                          q=np.zeros((n, desc.n_joints)))
+    out, skipped = library_candidates(desc, SimpleNamespace(points=pts), families=("thermal",))
+    assert out == [] and any(s.name == "thermal growth" and "mimicking" in s.reason for s in skipped)
