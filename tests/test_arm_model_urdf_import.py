@@ -583,14 +583,14 @@ def test_every_effect_with_a_rotated_tool_three_evaluators(tmp_path):
     q = rng.uniform(-2, 2, (n, 7))
     w = np.column_stack([rng.normal(0, 2, (n, 3)), rng.normal(0, 0.02, (n, 3))])
     tg, tc = PinocchioArm(d).torques(q, w)
-    aux = AuxData(rng.uniform(15, 30, n), tg, tc)
+    aux = AuxData(rng.uniform(15, 30, n), tg, tc, rng.uniform(0, 3600, n))
     p = rng.normal(0, 1e-5, model.spec.size)
     batch = model.ball_centres(q, w, p, aux)
     f = model.casadi_function()
     A = ArmModel.aux_matrix(aux, n, 7)
     for i in range(n):
         assert_close(np.array(f(q[i], w[i], A[i], p)).ravel(), batch[i], atol=1e-12)
-        row = dict(temperature=aux.temperature[i], tau_gravity=tg[i], tau_contact=tc[i])
+        row = dict(temperature=aux.temperature[i], tau_gravity=tg[i], tau_contact=tc[i], time=aux.time[i])
         assert_close(model.pinocchio_ball_centre(q[i], w[i], p, row), batch[i], atol=1e-12)
 
 
