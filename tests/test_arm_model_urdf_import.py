@@ -15,7 +15,7 @@ from arm_model import InputError, PinocchioArm, apply_params, ball_centres, casa
 from arm_model.cli import main
 from arm_model.description import format_description, parse_description
 from arm_model.urdf_import import calibrated_urdf_text, description_from_urdf, load_arm, load_masses
-from conftest import NOMINAL, ROOT, assert_close
+from conftest import NOMINAL, ROOT, assert_close, assert_evaluators_agree
 
 PANDA = ROOT / "examples" / "data" / "real-panda-seats" / "panda.urdf"
 PANDA_INERTIAL = ROOT / "examples" / "data" / "real-panda-seats" / "panda-with-inertials.urdf"
@@ -585,13 +585,7 @@ def test_every_effect_with_a_rotated_tool_three_evaluators(tmp_path):
     tg, tc = PinocchioArm(d).torques(q, w)
     aux = AuxData(rng.uniform(15, 30, n), tg, tc, rng.uniform(0, 3600, n))
     p = rng.normal(0, 1e-5, model.spec.size)
-    batch = model.ball_centres(q, w, p, aux)
-    f = model.casadi_function()
-    A = ArmModel.aux_matrix(aux, n, 7)
-    for i in range(n):
-        assert_close(np.array(f(q[i], w[i], A[i], p)).ravel(), batch[i], atol=1e-12)
-        row = dict(temperature=aux.temperature[i], tau_gravity=tg[i], tau_contact=tc[i], time=aux.time[i])
-        assert_close(model.pinocchio_ball_centre(q[i], w[i], p, row), batch[i], atol=1e-12)
+    assert_evaluators_agree(model, q, w, p, aux)
 
 
 def test_simulator_truth_uses_the_probe_frame(tmp_path):

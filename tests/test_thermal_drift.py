@@ -9,7 +9,7 @@ import pytest
 from arm_model import PinocchioArm
 from arm_model.effects import EFFECTS, JointCompliance, ThermalDrift, ThermalGrowth
 from arm_model.model import ArmModel, AuxData
-from conftest import assert_close
+from conftest import assert_close, assert_evaluators_agree
 
 
 def test_three_evaluators_agree(nominal):
@@ -24,13 +24,7 @@ def test_three_evaluators_agree(nominal):
     aux = AuxData(rng.uniform(15, 30, n), tg, tc, rng.uniform(0, 3600, n))
     p = rng.normal(0, 1e-5, model.spec.size)
     p[-2:] = [5e-8, 3e-11]                                   # 180 ppm an hour; a turn of the same order
-    batch = model.ball_centres(q, w, p, aux)
-    f = model.casadi_function()
-    a = ArmModel.aux_matrix(aux, n, 7)
-    for i in range(n):
-        assert_close(np.array(f(q[i], w[i], a[i], p)).ravel(), batch[i], atol=1e-12)
-        row = dict(temperature=aux.temperature[i], tau_gravity=tg[i], tau_contact=tc[i], time=aux.time[i])
-        assert_close(model.pinocchio_ball_centre(q[i], w[i], p, row), batch[i], atol=1e-12)
+    assert_evaluators_agree(model, q, w, p, aux)
 
 
 def test_drift_scales_lengths_by_hand(nominal):
