@@ -348,6 +348,11 @@ class ThermalDrift(Effect):
             raise ValueError(f"thermal_drift: reference_time_s must be a finite time [s], got "
                              f"{self.reference_time_s!r}")
 
+    @staticmethod
+    def reference_of(time: Any) -> float:
+        """The time origin a session's drift is taken about: the middle of its time stamps' span [s], to 1 ms."""
+        return float(round(0.5 * (float(min(time)) + float(max(time))), 3))
+
     def needs(self) -> tuple[str, ...]:
         return ("time",)
 

@@ -183,7 +183,7 @@ def drift_offer(points) -> list[Candidate] | Skipped:
     if span < MIN_DRIFT_SPAN_S:
         return Skipped("thermal drift (time)", f"the points span {span:.3g} s only (at least {MIN_DRIFT_SPAN_S:g} s "
                                                "needed)")
-    t_ref = float(np.round(0.5 * (np.min(time) + np.max(time)), 3))
+    t_ref = ThermalDrift.reference_of(time)
     second = Candidate("thermal drift (time^2)", ThermalDrift(power=2, reference_time_s=t_ref), "thermal")
     return [Candidate("thermal drift (time)", ThermalDrift(power=1, reference_time_s=t_ref), "thermal",
                       then=(second,))]

@@ -419,6 +419,7 @@ def _load_data(args, defaults: bool = False):
             Arm(desc, model.effects).check_points(pts)
             warnings += point_warnings(desc, pts)
     log_warnings(warnings)          # at once: a fit that then fails (exit 4) has said what it saw in the inputs
+    model = _drift_about_the_session(model, points)
     data = make_data(points, artefacts, reference=reference, marker_offsets=args.marker_offset, heldout=heldout)
     _check_reference_options(args, data)
     added = default_effects(model, data) if defaults and args.effect is None else ()
@@ -429,6 +430,23 @@ def _load_data(args, defaults: bool = False):
                  "under its own weight (each compliance's prior: non-negative, at most 10 mrad under its joint's RMS "
                  "gravity torque); --effect none for the geometry alone")
     return model, data.for_model(model), arm.values, warnings
+
+
+def _drift_about_the_session(model, points):
+    """A drift asked by ``--effect thermal_drift`` (its time origin 0) taken about the middle of the points' time
+    span, as the loop's candidate is (:meth:`ThermalDrift.reference_of`): the geometry fitted is the session's
+    middle, not the clock's zero."""
+    import dataclasses
+
+    from arm_model.effects import ThermalDrift
+    from arm_model.model import ArmModel
+    if points.time is None or not len(points.time) or not any(
+            isinstance(e, ThermalDrift) and e.reference_time_s == 0.0 for e in model.effects):
+        return model
+    t_ref = ThermalDrift.reference_of(points.time)
+    return ArmModel(model.desc, tuple(dataclasses.replace(e, reference_time_s=t_ref)
+                                      if isinstance(e, ThermalDrift) and e.reference_time_s == 0.0 else e
+                                      for e in model.effects))
 
 
 def _heldout_points(args, desc):

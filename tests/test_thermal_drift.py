@@ -172,3 +172,18 @@ def test_no_link_growth_is_offered_on_a_chain_with_a_mimic_joint(tmp_path):
                           q=np.zeros((n, desc.n_joints)))
     out, skipped = library_candidates(desc, SimpleNamespace(points=pts), families=("thermal",))
     assert out == [] and any(s.name == "thermal growth" and "mimicking" in s.reason for s in skipped)
+
+
+def test_a_drift_asked_on_the_command_line_is_taken_about_the_session(nominal):
+    """``--effect thermal_drift`` (time origin 0) is taken about the middle of the points' time span, as the loop's
+    candidate is; a drift with its own origin and the other effects are left as they are; points without time
+    leave the model as it is."""
+    from types import SimpleNamespace
+
+    from arm_model.effects import JointGain
+    from calibration.cli import _drift_about_the_session
+    model = ArmModel(nominal, (JointGain(), ThermalDrift(), ThermalDrift(power=2, reference_time_s=7.0)))
+    got = _drift_about_the_session(model, SimpleNamespace(time=np.array([1900.0, 100.0, 1000.0004])))
+    assert [getattr(e, "reference_time_s", None) for e in got.effects] == [None, 1000.0, 7.0]
+    assert got.effects[0] == model.effects[0] and got.spec.names == model.spec.names
+    assert _drift_about_the_session(model, SimpleNamespace(time=None)) is model
