@@ -20,7 +20,16 @@ from .errors import InputError, id_problem, parse_toml, read_text, unknown_key
 from .output import atomic_write_bytes, guard_output
 from .readback import UnreadableOutput, read_back
 from .toml_lines import toml_key_lines, top_key_line
-from .units import PLAUSIBLE_SI, QUANTITY_OF_UNIT, STATED_SIGMA_M, UNIT_FACTORS, implausible, split_unit, unit_of
+from .units import (
+    PLAUSIBLE_SI,
+    QUANTITY_OF_UNIT,
+    SMALLEST_ARTEFACT_M,
+    STATED_SIGMA_M,
+    UNIT_FACTORS,
+    implausible,
+    split_unit,
+    unit_of,
+)
 
 log = logging.getLogger(__name__)
 
@@ -507,6 +516,9 @@ def _artefact_feature(err, t, i: int, features: dict, extra_feature_keys: tuple)
         raise err(f"a {kind} needs 'diameter_mm'", "feature", i)
     if "diameter" in values and values["diameter"] <= 0:
         raise err("diameter must be > 0", "feature", i, "diameter_mm")
+    if "diameter" in values and values["diameter"] < SMALLEST_ARTEFACT_M:
+        raise err(f"diameter {values['diameter'] * 1e3:g} mm is below {SMALLEST_ARTEFACT_M * 1e3:g} mm: no artefact "
+                  "a ball probes (a unit slip?)", "feature", i, "diameter_mm")
     return Feature(fid, kind, values.get("diameter"), values.get("u_diameter"),
                    values.get("form_error"), values)
 
@@ -554,6 +566,9 @@ def _artefact_distance(err, t, i: int, features: dict) -> Distance:
             length = float(v) * UNIT_FACTORS[parts[1]]
             if not length > 0:
                 raise err(f"'{key}' must be > 0, got {v!r}", "distance", i, key)
+            if length < SMALLEST_ARTEFACT_M:
+                raise err(f"'{key}' = {v!r} is below {SMALLEST_ARTEFACT_M * 1e3:g} mm: no distance two probed "
+                          "centres have (a unit slip?)", "distance", i, key)
         else:
             u = float(v) * UNIT_FACTORS[parts[1]]
             if not u > 0:

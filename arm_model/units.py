@@ -72,6 +72,10 @@ ABSOLUTE_ZERO_C = -273.15
 #: weight of 1e600: overflow, and LAPACK's SVD failed), to 100 mm
 STATED_SIGMA_M = (1e-12, 0.1)
 
+#: the smallest artefact size [m] (a diameter, a certified distance): below 1 um no artefact is probed by a ball;
+#: such a value is a unit slip (1e-320 mm ran the fit 800 iterations to exit 4 instead of a refusal at its key)
+SMALLEST_ARTEFACT_M = 1e-6
+
 
 def implausible(value_si, quantity: str):
     """Where ``value_si`` (a number or an array, SI) is out of the plausible range of ``quantity``

@@ -172,6 +172,25 @@ def test_a_certified_distance_u_is_a_usable_weight(line, ok):
             parse_artefacts(text, "a.toml")
 
 
+@pytest.mark.parametrize("text, ok, where", [
+    (DISTANCE.replace("length_mm = 600.0", "length_mm = 1e-320"), False, r"line 4, key 'distance\[1\].length_mm'"),
+    (DISTANCE.replace("length_mm = 600.0", "length_um = 0.5"), False, r"line 4, key 'distance\[1\].length_um'"),
+    (DISTANCE.replace("length_mm = 600.0", "length_um = 1.0"), True, None),
+    (DISTANCE.replace("diameter_mm = 25.0 }, {", "diameter_mm = 1e-320 }, {"), False, "diameter_mm"),
+    (DISTANCE.replace("diameter_mm = 25.0 }, {", "diameter_um = 0.9 }, {"), False, "diameter_mm"),
+    (DISTANCE.replace("diameter_mm = 25.0 }, {", "diameter_um = 1.0 }, {"), True, None),
+])
+def test_an_artefact_smaller_than_a_micrometre_is_refused_at_its_key(text, ok, where):
+    """A diameter or a certified distance of 1e-320 mm was accepted (> 0) and the fit ran 800 iterations to exit 4;
+    below 1 um (`arm_model.units.SMALLEST_ARTEFACT_M`) nothing is an artefact a ball probes: refused at its key."""
+    from arm_model import InputError
+    from arm_model.io import parse_artefacts
+    if ok:
+        parse_artefacts(text, "a.toml")
+    else:
+        with pytest.raises(InputError, match=rf"a\.toml, .*{where}.*below 0\.001 mm"):
+            parse_artefacts(text, "a.toml")
+
 def test_calibrate_with_a_tiny_distance_u_is_exit_2(tmp_path, capsys):
     art = tmp_path / "a.toml"
     art.write_text(DISTANCE + "u_length_mm = 1e-300\n")
