@@ -169,11 +169,17 @@ def no_torque_reason(desc: ArmDescription, data: CalibrationData) -> str | None:
             "description)")
 
 
-def drift_offer(points) -> list[Candidate] | Skipped:
+_MIMIC_GROWTH = "the chain has a joint mimicking another: link growth acts on the chain's rows"
+
+
+def drift_offer(desc: ArmDescription, points) -> list[Candidate] | Skipped:
     """The candidate of a drift of the links in time (:class:`~arm_model.effects.ThermalDrift` about the middle of
-    the points' time span; its second term, power 2, offered once it is added), or why it is not offered: a
-    temperature column (thermal growth is offered instead), no or empty ``time_s``, or a span shorter than
-    :data:`MIN_DRIFT_SPAN_S`."""
+    the points' time span; its second term, power 2, offered once it is added), or why it is not offered: a chain
+    with a joint mimicking another (link growth acts on the chain's rows), a temperature column (thermal growth
+    is offered instead), no or empty ``time_s``, or a span shorter than :data:`MIN_DRIFT_SPAN_S`. The one
+    decision: the loop asks it both for the per-point inputs it must read and for its candidates."""
+    if desc.coupled:
+        return Skipped("thermal drift (time)", _MIMIC_GROWTH)
     temp, time = points.temperature, points.time
     if temp is not None and np.all(np.isfinite(temp)):
         return Skipped("thermal drift (time)", "the points have a temperature_C column: thermal growth instead")
@@ -272,18 +278,19 @@ def library_candidates(desc: ArmDescription, data: CalibrationData, families=Non
                                  JointCompliance(joints=tuple(loaded), gravity=True, contact=True), "joint_compliance"))
     if "thermal" in families:
         t = pts.temperature
+        has_t = t is not None and bool(np.all(np.isfinite(t)))
         if desc.coupled:
-            skipped.append(Skipped("thermal growth", "the chain has a joint mimicking another: link growth acts on "
-                                                     "the chain's rows"))
-        elif t is None or not np.all(np.isfinite(t)):
+            skipped.append(Skipped("thermal growth", _MIMIC_GROWTH))
+        elif not has_t:
             skipped.append(Skipped("thermal growth", "no temperature_C column (or empty cells)"))
-            drift = drift_offer(pts)
-            (out.extend if isinstance(drift, list) else skipped.append)(drift)
         elif np.ptp(t) < MIN_TEMPERATURE_SPAN:
             skipped.append(Skipped("thermal growth", f"the temperature varies by {np.ptp(t):.3g} K only "
                                                      f"(at least {MIN_TEMPERATURE_SPAN:g} K needed)"))
         else:
             out.append(Candidate("thermal growth", ThermalGrowth(), "thermal"))
+        if not has_t:
+            drift = drift_offer(desc, pts)
+            (out.extend if isinstance(drift, list) else skipped.append)(drift)
     if "force_sensor" in families:
         if not axes_used:
             skipped.append(Skipped("force sensor", "no force data"))
