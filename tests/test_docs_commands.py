@@ -1,0 +1,211 @@
+"""Every `aacmm ...` command line the README and docs/**/*.md show (in a shell code block, fenced or indented, or
+in an inline code span of the text) names a subcommand that exists and only options that subcommand has (checked
+against the project's own argparse parser, nothing run), an option with a fixed set of values is given one of them,
+and every bundled path the pages name (`examples/...`, `ex/...` after `aacmm examples ex`) exists."""
+from __future__ import annotations
+
+import argparse
+import re
+import shlex
+from pathlib import Path
+
+import pytest
+
+from arm_model.cli import build_parser
+from arm_model.shipped import SHIPPED_ARMS
+from conftest import ROOT
+
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+#: fenced blocks of these languages hold shell lines (the others: toml, python, csv, console output as `text`)
+SHELL_LANGUAGES = {"", "sh", "bash", "shell", "console"}
+#: a word that starts a command of a shell line
+SEPARATORS = {"|", "||", "&&", ";", "{", "}", "(", ")"}
+
+
+def code_blocks(text: str) -> list[tuple[int, str]]:
+    """(first line number, text) of each shell code block of a markdown page: fenced blocks of a shell language (or
+    none) and indented blocks (four spaces after a blank line, outside fences)."""
+    blocks: list[tuple[int, str]] = []
+    lines = text.splitlines()
+    i = 0
+    while i < len(lines):
+        fence = re.match(r"^\s*(```+|~~~+)\s*([\w+-]*)", lines[i])
+        if fence:
+            end = next((k for k in range(i + 1, len(lines)) if lines[k].strip().startswith(fence.group(1))),
+                       len(lines))
+            if fence.group(2).lower() in SHELL_LANGUAGES:
+                blocks.append((i + 2, "\n".join(lines[i + 1:end])))
+            i = end + 1
+            continue
+        if lines[i].startswith("    ") and lines[i].strip() and (i == 0 or not lines[i - 1].strip()):
+            end = i
+            while end < len(lines) and (lines[end].startswith("    ") or not lines[end].strip()):
+                end += 1
+            blocks.append((i + 1, "\n".join(line[4:] for line in lines[i:end])))
+            i = end
+            continue
+        i += 1
+    return blocks
+
+
+def shell_words(line: str) -> list[str]:
+    """The words of one shell line, comments dropped; a line shlex cannot split (an unbalanced quote in a
+    placeholder) is split on blanks."""
+    lexer = shlex.shlex(line, posix=True, punctuation_chars="|&;(){}")
+    lexer.whitespace_split = True
+    lexer.commenters = "#"
+    try:
+        return list(lexer)
+    except ValueError:
+        return line.split("#", 1)[0].split()
+
+
+def inline_commands(text: str) -> list[tuple[int, str]]:
+    """(line number, text) of each inline code span outside the fenced blocks that starts with `aacmm ` (a span may
+    run over a line break; a span quoting a message, `aacmm tip: error: ...`, is no command)."""
+    outside = re.sub(r"```.*?```", lambda m: "\n" * m.group(0).count("\n"), text, flags=re.S)
+    return [(outside[:m.start()].count("\n") + 1, m.group(1).replace("\n", " "))
+            for m in re.finditer(r"`((?:\.venv/bin/)?aacmm [^`]+)`", outside)
+            if "\n\n" not in m.group(1) and not re.match(r"\S+ \S+:", m.group(1))]
+
+
+def aacmm_commands() -> list[tuple[str, list[str]]]:
+    """(where, the words after `aacmm`) of every aacmm command line of every page's shell code blocks and inline code
+    spans; a line ending in a backslash continues on the next."""
+    found = []
+    for page in PAGES:
+        text = page.read_text(encoding="utf-8")
+        for start, block in code_blocks(text) + inline_commands(text):
+            for offset, line in enumerate(re.sub(r"\\\n", " ", block).splitlines()):
+                # a continued line counts from the block's line where it starts (close enough to find it)
+                words = shell_words(line)
+                for k, word in enumerate(words):
+                    starts = k == 0 or words[k - 1] in SEPARATORS
+                    if starts and (word == "aacmm" or word.endswith("/aacmm")):
+                        rest = words[k + 1:]
+                        end = next((j for j, w in enumerate(rest) if w in SEPARATORS), len(rest))
+                        found.append((f"{page.relative_to(ROOT)}:{start + offset}", rest[:end]))
+    return found
+
+
+def placeholder(word: str) -> bool:
+    """A word that stands for something the reader fills in: a shell variable, `<ids>`, `...`, `FILE`."""
+    return "$" in word or "<" in word or word in {"...", "…"} or bool(re.fullmatch(r"[A-Z][A-Z_,|]*", word))
+
+
+def sub_parsers(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    return {name: sub for action in parser._actions if isinstance(action, argparse._SubParsersAction)
+            for name, sub in action.choices.items()}
+
+
+def options_of(parser: argparse.ArgumentParser) -> dict[str, argparse.Action]:
+    return {option: action for action in parser._actions for option in action.option_strings}
+
+
+@pytest.fixture(scope="module")
+def aacmm() -> argparse.ArgumentParser:
+    return build_parser()
+
+
+def check(parser: argparse.ArgumentParser, argv: list[str]) -> list[str]:
+    """What is wrong with `aacmm argv` (an optional group `[--opt X]` is checked like the rest)."""
+    words = [w.strip("[]") for w in argv]
+    words = [w for w in words if w]
+    problems: list[str] = []
+    # options given before the subcommand (aacmm -q tip ...) are the top parser's
+    while words and words[0].startswith("-"):
+        if words[0] not in options_of(parser):
+            return [f"unknown option {words[0]!r} of aacmm"]
+        if words[0] in ("--version", "--help", "-h"):
+            return []
+        words = words[1:]
+    name = "aacmm"
+    while words and sub_parsers(parser):
+        choices = sub_parsers(parser)
+        if placeholder(words[0]):
+            return []
+        if words[0] not in choices:
+            return [f"{name} has no subcommand {words[0]!r} (it has: {', '.join(choices)})"]
+        name, parser, words = f"{name} {words[0]}", choices[words[0]], words[1:]
+    options = options_of(parser)
+    for k, word in enumerate(words):
+        if not word.startswith("-") or word == "-" or re.fullmatch(r"-[\d.]+(e-?\d+)?", word) or placeholder(word):
+            continue
+        option, _, inline = word.partition("=")
+        if option not in options:
+            problems.append(f"{name}: no option {option!r}")
+            continue
+        action = options[option]
+        value = inline or (words[k + 1] if k + 1 < len(words) else "")
+        if action.choices is not None and action.nargs in (None, "?") and value and not placeholder(value) \
+                and not value.startswith("-") and value not in action.choices:
+            problems.append(f"{name} {option}: {value!r} is not one of {sorted(map(str, action.choices))}")
+    return problems
+
+
+def test_the_pages_show_commands():
+    commands = aacmm_commands()
+    assert len(commands) > 200, commands
+    assert {argv[0] for _, argv in commands if argv} >= {"tip", "calibrate", "close-loop", "simulate", "live"}
+
+
+def test_every_command_and_option_the_pages_show_exists(aacmm):
+    wrong = [f"{where}: {problem}" for where, argv in aacmm_commands() for problem in check(aacmm, argv)]
+    assert not wrong, "\n".join(wrong)
+
+
+def test_the_checker_finds_what_is_wrong(aacmm):
+    """The check can fail: an unknown subcommand, an unknown option, a value outside an option's choices."""
+    assert check(aacmm, ["calibrate", "p.csv", "a.toml", "--arm", "aacmm7", "-o", "out"]) == []
+    assert check(aacmm, ["calibrat", "p.csv"])
+    assert check(aacmm, ["calibrate", "p.csv", "--no-such-option", "1"])
+    assert check(aacmm, ["calibrate", "p.csv", "--weights", "guessed"])
+    assert check(aacmm, ["study", "montecarlo", "c.toml", "--count", "3"])      # --count is study poses'
+    assert check(aacmm, ["study", "poses", "p.csv", "a.toml", "--count", "3", "[--holdout", "0.2]"])
+    assert check(aacmm, ["tip", "p.csv", "--arm", "$ARM", "-o", "t.csv"]) == []
+    assert shell_words("a | aacmm live - --arm x.toml  # comment") == ["a", "|", "aacmm", "live", "-", "--arm",
+                                                                       "x.toml"]
+
+
+#: the folders `aacmm examples DIR` writes, for paths the pages name after that command (`ex/data/...`)
+EXAMPLES_DIR_ROOTS = {"campaigns": "examples/campaigns", "data": "examples/data", "live": "examples/live",
+                      "docs": "docs"}
+
+
+#: a path of another project's repository (FIGAROH's examples) is introduced by that repository's name
+ANOTHER_REPOSITORY = re.compile(r"github|figaroh", re.I)
+
+
+def bundled_paths(text: str) -> list[tuple[str, Path]]:
+    """(path as written, where it lies in the repository) of every bundled path a page names: `examples/...`, and
+    `ex/...` after the README's `aacmm examples ex`."""
+    found = []
+    for match in re.finditer(r"(?<![\w./-])(examples|ex)/([\w./-]*[\w/])", text):
+        root, rest = match.groups()
+        if "..." in rest or "*" in rest or ANOTHER_REPOSITORY.search(text[max(0, match.start() - 160):match.start()]):
+            continue
+        top, _, tail = rest.partition("/")
+        if root == "examples":
+            where = ROOT / "examples" / rest
+        elif top == "arms":
+            name = tail.removesuffix(".dh.toml")
+            where = ROOT / (SHIPPED_ARMS[name] if name in SHIPPED_ARMS else "urdf" if not tail else tail)
+        else:
+            where = ROOT / EXAMPLES_DIR_ROOTS.get(top, f"examples/{top}") / tail
+        found.append((match.group(0), where))
+    return found
+
+
+def test_every_bundled_path_the_pages_name_exists():
+    paths = {page: bundled_paths(page.read_text(encoding="utf-8")) for page in PAGES}
+    assert sum(map(len, paths.values())) > 50
+    missing = sorted({f"{page.relative_to(ROOT)}: {written}" for page, found in paths.items()
+                      for written, where in found if not where.exists()})
+    assert not missing, "\n".join(missing)
+
+
+def test_the_path_check_finds_a_missing_path():
+    found = dict(bundled_paths("run `aacmm tip examples/data/no-such/points.csv`, then `cp ex/arms/aacmm7.dh.toml .`; "
+                               "(github owner/figaroh-examples, `examples/elsewhere/x.csv`)"))
+    assert not found["examples/data/no-such/points.csv"].exists() and found["ex/arms/aacmm7.dh.toml"].exists()
+    assert "examples/elsewhere/x.csv" not in found
