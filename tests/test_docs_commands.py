@@ -209,3 +209,54 @@ def test_the_path_check_finds_a_missing_path():
                                "(github owner/figaroh-examples, `examples/elsewhere/x.csv`)"))
     assert not found["examples/data/no-such/points.csv"].exists() and found["ex/arms/aacmm7.dh.toml"].exists()
     assert "examples/elsewhere/x.csv" not in found
+
+
+def slug(heading: str) -> str:
+    """GitHub's anchor of a markdown heading: lower case, punctuation but hyphens and underscores dropped, each
+    blank a hyphen."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def anchors(page: Path) -> set[str]:
+    """The anchors of a markdown page's headings (outside fenced blocks), a repeated one numbered as GitHub does."""
+    text = re.sub(r"```.*?```", "", page.read_text(encoding="utf-8"), flags=re.S)
+    seen: dict[str, int] = {}
+    out = set()
+    for heading in re.findall(r"^#{1,6} (.+)$", text, flags=re.M):
+        base = slug(heading)
+        out.add(base if base not in seen else f"{base}-{seen[base]}")
+        seen[base] = seen.get(base, 0) + 1
+    return out
+
+
+def page_links(page: Path) -> list[tuple[str, str]]:
+    """(target file, anchor) of each relative link of a markdown page: `[text](file.md#anchor)` and `(#anchor)`."""
+    text = re.sub(r"```.*?```", "", page.read_text(encoding="utf-8"), flags=re.S)
+    return [(target, anchor) for target, anchor in re.findall(r"\]\(([^)\s#:]*)(?:#([^)\s]*))?\)", text)]
+
+
+def test_every_link_between_the_pages_lands():
+    """A link of README.md or docs/**/*.md to a file of the repository names one that exists, and its anchor (if any)
+    is a heading of that page: a section moved or renamed keeps its links working."""
+    wrong = []
+    for page in PAGES:
+        for target, anchor in page_links(page):
+            where = (page.parent / target).resolve() if target else page
+            if not where.exists():
+                wrong.append(f"{page.relative_to(ROOT)}: {target} does not exist")
+            elif anchor and where.suffix == ".md" and anchor not in anchors(where):
+                wrong.append(f"{page.relative_to(ROOT)}: {target}#{anchor} is no heading of {where.name}")
+    assert not wrong, "\n".join(wrong)
+
+
+def test_every_docs_anchor_the_code_names_lands():
+    """A page's anchor named in the code, the tests or the pages as a path (`docs/<page>.md#<anchor>`, outside links) is
+    a heading of that page."""
+    wrong = []
+    tops = [top for top in ROOT.iterdir() if top.is_dir() and not top.name.startswith(".")]
+    code = [path for top in tops for path in top.rglob("*.py")]
+    for path in [*PAGES, *code]:
+        for name, anchor in re.findall(r"docs/([\w/-]+\.md)#([\w-]+)", path.read_text(encoding="utf-8")):
+            if not (ROOT / "docs" / name).exists() or anchor not in anchors(ROOT / "docs" / name):
+                wrong.append(f"{path.relative_to(ROOT)}: docs/{name}#{anchor}")
+    assert not wrong, "\n".join(wrong)
