@@ -73,7 +73,7 @@ FAMILIES = ("eccentricity", "joint_gain", "joint_compliance", "thermal", "force_
 #: request (``--candidates``). On the real robot data of examples/ each passed the held-out test of the poses of
 #: one plate placement and made the other placements worse. A joint gain: within one seat the poses of a redundant
 #: arm move its joints together (self-motion), and a gain of one joint fits there what another error of the same
-#: self-motion leaves (docs/close-loop.md, "Joint gains"). The mount's tilt: trained on ``back-high`` (no joint
+#: self-motion leaves (docs/studies/close-loop.md, "Joint gains"). The mount's tilt: trained on ``back-high`` (no joint
 #: compliance in the base model) it took that placement's own test set from 287 to 245 um and spread the two
 #: other placements' seats from 2.81 to 4.01 mm (tests/test_loop_real_physics.py); the joint compliance it
 #: displaced takes them to 2.07 mm. The reading couplings: one a pair of joints (42 on a 7-joint arm), the effect
