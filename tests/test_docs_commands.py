@@ -260,3 +260,28 @@ def test_every_docs_anchor_the_code_names_lands():
             if not (ROOT / "docs" / name).exists() or anchor not in anchors(ROOT / "docs" / name):
                 wrong.append(f"{path.relative_to(ROOT)}: docs/{name}#{anchor}")
     assert not wrong, "\n".join(wrong)
+
+
+#: the guides whose "Command line" section lists the options of their commands
+GUIDE_COMMANDS = {"docs/calibration.md": (("calibrate",), ("study", "montecarlo"), ("study", "poses")),
+                  "docs/close-loop.md": (("close-loop",),)}
+
+
+def command_parser(parser: argparse.ArgumentParser, path: tuple[str, ...]) -> argparse.ArgumentParser:
+    for name in path:
+        parser = sub_parsers(parser)[name]
+    return parser
+
+
+@pytest.mark.parametrize("page", sorted(GUIDE_COMMANDS))
+def test_every_option_a_guide_lists_is_its_commands(aacmm, page):
+    """Every `--option` the "Command line" section of a guide names (its table of options by purpose, the text under
+    it) is an option of the guide's commands: an option renamed or removed shows here, not in a user's shell."""
+    text = (ROOT / page).read_text(encoding="utf-8")
+    section = text.split("\n## Command line\n", 1)[1].split("\n## ", 1)[0]
+    own = {path[0] for path in GUIDE_COMMANDS[page]}
+    others = "|".join(re.escape(name) for name in sub_parsers(aacmm) if name not in own)
+    section = re.sub(rf"`(?:aacmm )?(?:{others}) [^`]*`", "", section)      # another command's option, said as such
+    known = {option for path in GUIDE_COMMANDS[page] for option in options_of(command_parser(aacmm, path))}
+    named = set(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)(?![\w<-])", section))
+    assert len(named) > 15 and not named - known, sorted(named - known)
