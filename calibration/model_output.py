@@ -238,8 +238,9 @@ def _same_point_covariance(result, back: Arm, cov, n: int = 64) -> None:
     within :data:`REPRODUCE_POINT_REL` of each point's largest, else :class:`~arm_model.io.UnreadableOutput`.
     Both sides are evaluated with the inputs the model file gives (the torques at its static equilibrium): the
     fit's last refined torques differ from them by what :func:`model_check` reports for the centres, which is not
-    what this check is for (a covariance in the wrong axes or units); on the loop-demo campaign simulated in memory (docs/close-loop.md,
-    Python) that difference alone moved a point's covariance by 1.4e-4 of its largest term."""
+    what this check is for (a covariance in the wrong axes or units); on the loop-demo campaign simulated in
+    memory (docs/close-loop.md, Python) that difference alone moved a point's covariance by 1.4e-4 of its largest
+    term."""
     from arm_model.uncertainty import InputUncertainty, ParameterCovariance, propagate
     pts, data = result.data.points, result.data
     if not len(pts) or not len(result.free):

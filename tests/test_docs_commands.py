@@ -285,3 +285,49 @@ def test_every_option_a_guide_lists_is_its_commands(aacmm, page):
     known = {option for path in GUIDE_COMMANDS[page] for option in options_of(command_parser(aacmm, path))}
     named = set(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)(?![\w<-])", section))
     assert len(named) > 15 and not named - known, sorted(named - known)
+
+
+def toml_blocks() -> list[tuple[str, str]]:
+    """(where, text) of every ```toml block of the pages that is a whole file: an excerpt with an elided line (`...`)
+    is not one."""
+    found = []
+    for page in PAGES:
+        text = page.read_text(encoding="utf-8")
+        for m in re.finditer(r"```toml\n(.*?)```", text, flags=re.S):
+            if not any(line.split("#", 1)[0].strip() in ("...", "…") for line in m.group(1).splitlines()):
+                found.append((f"{page.relative_to(ROOT)}:{text[:m.start()].count(chr(10)) + 2}", m.group(1)))
+    return found
+
+
+def read_as_its_kind(text: str, where: str, tmp_path: Path) -> str:
+    """Read a page's TOML block with the reader of the file it shows (told by its keys); the kind read."""
+    import tomllib
+
+    from arm_model.description import parse_description
+    from arm_model.io import parse_artefacts
+    from arm_model.live.plan import parse_plan
+    from arm_model.urdf_import import load_masses
+    keys = tomllib.loads(text)
+    if "convention" in keys:
+        parse_description(text, where)
+        return "description"
+    if "link" in keys:
+        (tmp_path / "masses.toml").write_text(text, encoding="utf-8")
+        load_masses(tmp_path / "masses.toml")
+        return "masses"
+    if "task" in keys:                       # a campaign: its arm is the reader's own URDF, so only the TOML
+        return "campaign"
+    if any("points" in f for f in keys.get("feature", [])):
+        parse_plan(text, where)
+        return "plan"
+    parse_artefacts(text, where)
+    return "artefacts"
+
+
+def test_every_toml_block_is_read_by_its_reader(tmp_path):
+    """A description, artefacts file, session plan or masses file a page shows is one the toolkit reads: a user
+    copies it as a start (the walk-through of a new user found no test of these blocks)."""
+    kinds = {}
+    for where, text in toml_blocks():
+        kinds[where] = read_as_its_kind(text, where, tmp_path)
+    assert {"description", "artefacts", "plan", "masses"} <= set(kinds.values()), kinds
