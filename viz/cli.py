@@ -184,7 +184,9 @@ def _run(args, inputs, outputs, tmp) -> int:
             view.show_artefacts(placements, artefacts.distances)
         if args.ellipsoids:
             _ellipsoids(arm, sel, args, view)
-        markers = None if arm.tracker is None else _markers(arm, sel, notes)
+        # a tracker's markers, unless they are the ball centres (no offsets) of points the instrument did not see
+        tip_only = arm.tracker is not None and arm.tracker.offsets is None and sel.ref is None
+        markers = None if arm.tracker is None or tip_only else _markers(arm, sel, notes)
         if residuals is not None:
             if args.measurement is not None:   # the selected measurement's (and those of no measurement)
                 residuals = residuals.select(np.isin(residuals.measurement, ["", args.measurement]))
