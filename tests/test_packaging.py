@@ -72,6 +72,11 @@ def test_examples_copies_campaigns_data_docs_and_licence(tmp_path, capsys):
     assert (dest / "docs" / "formats.md").is_file()
     # the guides link to ../README.md (calibration.md, own-arm.md: "the README's first own measurement")
     assert (dest / "README.md").read_bytes() == (ROOT / "README.md").read_bytes()
+    own = tmp_path / "project"                   # `aacmm examples .` in a folder with its own README: kept, no refusal
+    own.mkdir()
+    (own / "README.md").write_text("mine")
+    assert main(["examples", str(own)]) == 0 and (own / "README.md").read_text() == "mine"
+    assert (own / "docs" / "formats.md").is_file()
     assert (dest / "arms" / "aacmm7.dh.toml").read_bytes() == NOMINAL.read_bytes()
     for c in (ROOT / "examples" / "campaigns").glob("*.toml"):
         assert (dest / "campaigns" / c.name).read_bytes() == c.read_bytes()
