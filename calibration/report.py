@@ -446,7 +446,7 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
                f"fitted values folded in"
                + (", and the model's effects with their parameters" if effects else "") + ".\n"
                f"Solver: {result.status}; s0 = {result.s0:.4g}. Read by every --arm option; format: "
-               "docs/calibration.md.")
+               "docs/formats.md, 'The model file'.")
     written = write_model(result, out, name, inputs=inputs, written_by="aacmm calibrate", comment=comment)
     if "training_poses" in written:
         files["training_poses"] = written["training_poses"]
