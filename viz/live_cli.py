@@ -132,6 +132,7 @@ def _header(source: LineSource, stop: _Stop, idle_s: float | None = None) -> tup
     """(line number, cells) of the stream's header: its first line that is not blank (UDP: the first that
     is not a number, lines before it skipped and counted). ``idle_s`` (``--stop-after-idle-s``): no line for that
     long is an InputError (a stream that never starts: nothing is written)."""
+    from arm_model.csv_io import blank_record
     from arm_model.live.sources import line_text
     skipped, since = 0, time.monotonic()
     for item in source.lines():
@@ -145,7 +146,7 @@ def _header(source: LineSource, stop: _Stop, idle_s: float | None = None) -> tup
         since = time.monotonic()
         no, raw = item
         text = line_text(raw, source.name, no)
-        if not text.strip():
+        if blank_record(text):
             continue
         try:
             cells = next(csv.reader([text.lstrip("\ufeff")], strict=True))
@@ -225,6 +226,7 @@ def _status(args: argparse.Namespace, source: LineSource, files: list) -> dict:
 def _run(args: argparse.Namespace, source: LineSource, session: Session, layout: SampleLayout, stop: _Stop,
          skipped: int) -> int:
     """The session's loop: push every line's sample, show what it brings, keep the view drawn."""
+    from arm_model.csv_io import blank_record
     from arm_model.live.sources import Pacer, line_text
     view = _start_view(args, session)
     pacer = Pacer(args.speed if source.replay else 0.0)
@@ -252,7 +254,7 @@ def _run(args: argparse.Namespace, source: LineSource, session: Session, layout:
             no, raw = item
             try:
                 text = line_text(raw, source.name, no)
-                if not text or (datagrams and text == header_text) or not text.strip():
+                if not text or (datagrams and text == header_text) or blank_record(text):
                     continue
                 sample = layout.parse(text, no)
             except InputError as exc:

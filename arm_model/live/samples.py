@@ -22,7 +22,7 @@ import math
 import re
 from typing import NamedTuple
 
-from ..csv_io import parse_number
+from ..csv_io import blank_record, parse_number
 from ..errors import InputError, did_you_mean, read_text
 from ..units import ABSOLUTE_ZERO_C, PLAUSIBLE_SI, QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
@@ -257,12 +257,13 @@ def read_samples(path) -> int:
     """A sample stream file (docs/formats.md §8) as ``aacmm live`` reads it, line by line; the number of samples
     (the read-back of :mod:`arm_model.readback`)."""
     lines = read_text(path, "the sample stream").splitlines()
-    header = [c.strip() for c in lines[0].split(",")] if lines else []
+    first = next((k for k, text in enumerate(lines) if not blank_record(text)), len(lines))
+    header = [c.strip() for c in lines[first].split(",")] if first < len(lines) else []
     layout = SampleLayout(header, len({m.group(1) for h in header if (m := re.fullmatch(r"q(\d+)_\w+", h))}),
-                          str(path))
+                          str(path), first + 1)
     n = 0
-    for no, text in enumerate(lines[1:], start=2):
-        if text.strip():
+    for no, text in enumerate(lines[first + 1:], start=first + 2):
+        if not blank_record(text):
             layout.parse(text, no)
             n += 1
     return n
