@@ -106,3 +106,25 @@ def test_a_negative_mass_off_the_chain_is_warned(tmp_path, caplog, old, new, wor
         assert not said, said
     else:
         assert len(said) == 1 and words in said[0], said
+
+
+# ---------------------------------------------------------------------------------------------
+# absurd durations, and options of a live view not asked for
+
+@pytest.mark.parametrize("extra, words", [
+    (["--view", "--linger-s", "1e308"], "--linger-s: must be in [0, 1e+07], got 1e308"),
+    (["--stop-after-idle-s", "1e300"], "--stop-after-idle-s: must be in (0, 1e+07], got 1e300"),
+    (["--linger-s", "5"], "--linger-s: option(s) of the live view, which is not asked for (add --view)"),
+    (["--port", "7001", "--fps", "5"], "--port, --fps: option(s) of the live view")])
+def test_live_absurd_durations_and_view_options_without_a_view_are_refused(tmp_path, capsys, extra, words):
+    """`live --view --linger-s 1e308` served the view until Ctrl-C, and --linger-s, --port, --fps without --view were
+    silently ignored: exit 0 -> 2, nothing written (one type, cli_options.duration_s, for every wait)."""
+    rc, err = _run(["live", SAMPLES, "--arm", "aacmm7", "--speed", "0", "--feature", "seat:a", "-o", tmp_path / "s",
+                    *extra], capsys)
+    assert rc == 2 and words in err, err
+    assert not (tmp_path / "s").exists()
+
+
+def test_view_open_s_keeps_its_bound(capsys):
+    rc, err = _run(["view", RING / "points.csv", "--arm", "aacmm7", "--open-s", "1e308"], capsys)
+    assert rc == 2 and "--open-seconds: must be in (0, 1e+07], got 1e308" in err, err

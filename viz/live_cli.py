@@ -22,11 +22,10 @@ from arm_model.cli_options import (
     add_arm_options,
     add_output_option,
     arm_inputs,
+    duration_s,
     model_from_args,
-    non_negative,
     number_in,
     port,
-    positive,
 )
 from arm_model.live.session import RATE_HZ_RANGE
 
@@ -74,7 +73,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "count as dropped samples")
     p.add_argument("--strict", action="store_true", help="stop the session at the first bad line (default: "
                                                           "count it, say where, and skip it)")
-    p.add_argument("--stop-after-idle-s", type=positive(), default=None, metavar="S",
+    p.add_argument("--stop-after-idle-s", type=duration_s(zero=False), default=None, metavar="S",
                    help="end the session when no line came for S seconds (a network stream that does not end)")
     g = p.add_argument_group("contacts (docs/live.md)")
     g.add_argument("--contact", choices=("force", "trigger"), default="force",
@@ -96,10 +95,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     v.add_argument("--view", action="store_true", help="serve the live view on 127.0.0.1 (the URL is printed)")
     v.add_argument("--port", type=port, default=None, help="web port of the viewer (default: the first free one "
                                                             "from 7000)")
-    v.add_argument("--fps", type=number_in(0.5, 60), default=10.0, metavar="F",
+    v.add_argument("--fps", type=number_in(0.5, 60), default=None, metavar="F",
                    help="frames the live view draws a second (default 10)")
-    v.add_argument("--linger-s", type=non_negative(), default=0.0, metavar="S",
-                   help="keep serving the view S seconds after the stream ended (Ctrl-C ends it)")
+    v.add_argument("--linger-s", type=duration_s(), default=None, metavar="S",
+                   help="keep serving the view S seconds after the stream ended (at most 1e7; Ctrl-C ends it)")
     from arm_model.uncertainty_cli import add_input_options
     add_input_options(p)
     p.set_defaults(func=run_live)
@@ -175,6 +174,9 @@ def run_live(args: argparse.Namespace) -> int:
     from arm_model.uncertainty_cli import inputs_from_args
     if args.plan is not None and args.feature is not None:
         raise InputError("give --plan or --feature, not both")
+    given = [o for o, v in (("--port", args.port), ("--fps", args.fps), ("--linger-s", args.linger_s)) if v is not None]
+    if given and not args.view:
+        raise InputError(f"{', '.join(given)}: option(s) of the live view, which is not asked for (add --view)")
     try:
         contact = ContactOptions(args.contact_on_N, args.contact_off_N, args.min_dwell_s, args.contact,
                                  args.smooth_s, args.baseline_s)
@@ -291,7 +293,7 @@ def _start_view(args: argparse.Namespace, session: Session) -> LiveView | None:
     if not args.view:
         return None
     from .live import LiveView
-    view = LiveView(session, port=args.port, fps=args.fps)
+    view = LiveView(session, port=args.port, **({} if args.fps is None else {"fps": args.fps}))
     print(f"live view: {view.url}", flush=True)
     return view
 
@@ -301,8 +303,9 @@ def _finish_view(args: argparse.Namespace, session: Session, view: LiveView, sto
         view.update(force=True)
         page = view.write_html(session.record.folder / "view.html")
         log.info(f"the last view as a page -> {page}")
-        end = time.monotonic() + args.linger_s
-        if args.linger_s and not stop.reason:
+        linger = args.linger_s or 0.0
+        end = time.monotonic() + linger
+        if linger and not stop.reason:
             log.info(f"serving the live view {args.linger_s:g} s more: {view.url} (Ctrl-C ends)")
         while not stop.reason and time.monotonic() < end:
             time.sleep(0.1)
