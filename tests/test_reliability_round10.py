@@ -115,12 +115,15 @@ def test_a_negative_mass_off_the_chain_is_warned(tmp_path, caplog, old, new, wor
     (["--view", "--linger-s", "1e308"], "--linger-s: must be in [0, 1e+07], got 1e308"),
     (["--stop-after-idle-s", "1e300"], "--stop-after-idle-s: must be in (0, 1e+07], got 1e300"),
     (["--linger-s", "5"], "--linger-s: option(s) of the live view, which is not asked for (add --view)"),
-    (["--port", "7001", "--fps", "5"], "--port, --fps: option(s) of the live view")])
+    (["--port", "7001", "--fps", "5"], "--port, --fps: option(s) of the live view"),
+    (["--speed", "1e-300"], "--speed: must be 0 (as fast as possible) or in [0.001, 1e+06], got 1e-300")])
 def test_live_absurd_durations_and_view_options_without_a_view_are_refused(tmp_path, capsys, extra, words):
     """`live --view --linger-s 1e308` served the view until Ctrl-C, and --linger-s, --port, --fps without --view were
-    silently ignored: exit 0 -> 2, nothing written (one type, cli_options.duration_s, for every wait)."""
-    rc, err = _run(["live", SAMPLES, "--arm", "aacmm7", "--speed", "0", "--feature", "seat:a", "-o", tmp_path / "s",
-                    *extra], capsys)
+    silently ignored: exit 0 -> 2, nothing written (one type, cli_options.duration_s, for every wait). `--speed 1e-300`
+    replayed one sample and then waited 1e297 s (a hang): exit 2."""
+    speed = [] if "--speed" in extra else ["--speed", "0"]
+    rc, err = _run(["live", SAMPLES, "--arm", "aacmm7", *speed, "--feature", "seat:a", "-o", tmp_path / "s", *extra],
+                   capsys)
     assert rc == 2 and words in err, err
     assert not (tmp_path / "s").exists()
 

@@ -41,6 +41,16 @@ log = logging.getLogger(__name__)
 
 #: events of one kind (dropped, late, bad lines) printed one by one before they are only counted
 WARN_FIRST = 5
+#: the slowest replay (``--speed``): a thousandth of real time (1e-300 waited 1e297 s for the second sample)
+MIN_SPEED = 1e-3
+
+
+def _speed(text: str) -> float:
+    """argparse type of ``--speed``: 0 (as fast as possible) or from :data:`MIN_SPEED` to 1e6."""
+    v = number_in(0, 1e6)(text)
+    if 0 < v < MIN_SPEED:
+        raise argparse.ArgumentTypeError(f"must be 0 (as fast as possible) or in [{MIN_SPEED:g}, 1e+06], got {text}")
+    return v
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -66,8 +76,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--measurement", default=None, metavar="ID",
                    help="the measurement id written on every point of the session (default: the plan's, else the "
                         "session folder's name)")
-    p.add_argument("--speed", type=number_in(0, 1e6), default=1.0,
-                   help="replay a file at this many times real time (default 1; 0: as fast as possible)")
+    p.add_argument("--speed", type=_speed, default=1.0,
+                   help=f"replay a file at this many times real time, {MIN_SPEED:g} to 1e6 (default 1; 0: as fast as "
+                        "possible)")
     p.add_argument("--rate-Hz", type=number_in(*RATE_HZ_RANGE), default=None,
                    help="the nominal sample rate (default: estimated from the first intervals); longer gaps "
                         "count as dropped samples")
