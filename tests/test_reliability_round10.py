@@ -131,3 +131,14 @@ def test_live_absurd_durations_and_view_options_without_a_view_are_refused(tmp_p
 def test_view_open_s_keeps_its_bound(capsys):
     rc, err = _run(["view", RING / "points.csv", "--arm", "aacmm7", "--open-s", "1e308"], capsys)
     assert rc == 2 and "--open-seconds: must be in (0, 1e+07], got 1e308" in err, err
+
+
+def test_a_quoted_number_in_a_live_stream_reads_as_in_a_file():
+    """`0.1,"1",2` (a CSV writer that quotes every cell) was a bad line of a live stream, read as 1 by every file
+    reader and by the stream's own header reader: now the same number; broken quoting stays a located bad line."""
+    from arm_model import InputError
+    from arm_model.live.samples import SampleLayout
+    layout = SampleLayout(["time_s", "q1_deg", "q2_deg"], 2, "s")
+    assert layout.parse('0.1,"1"," 2"', 3) == layout.parse("0.1,1,2", 3)
+    with pytest.raises(InputError, match=r"s, line 3: not valid CSV"):
+        layout.parse('0.1,"1,2', 3)

@@ -18,6 +18,7 @@ line and the column.
 """
 from __future__ import annotations
 
+import csv
 import math
 import re
 from typing import NamedTuple
@@ -186,7 +187,7 @@ class SampleLayout:
     def parse(self, text: str, line: int) -> Sample:
         """The sample of one line (its text without the line end) [SI]; an :class:`InputError` naming
         the stream, the line and the column for anything that is not a sample of this layout."""
-        cells = text.split(",")
+        cells = text.split(",") if '"' not in text else self._quoted(text, line)
         if len(cells) != self.n_cells:
             raise InputError(f"expected {self.n_cells} cells (as the header), got {len(cells)}", self.path, line)
         if text.translate(_PLAIN):
@@ -201,6 +202,13 @@ class SampleLayout:
             if not lo <= v <= hi:
                 self._range_error(values, line)
         return self._sample(values)
+
+    def _quoted(self, text: str, line: int) -> list[str]:
+        """The cells of a line with quotes, as the file readers take them (``"12.5"`` is 12.5)."""
+        try:
+            return next(csv.reader([text], strict=True))
+        except csv.Error as exc:
+            raise InputError(f"not valid CSV: {exc}", self.path, line) from None
 
     def _range_error(self, values: list[float], line: int) -> None:
         for k, f, lo, hi, quantity in self._checks:
