@@ -142,3 +142,17 @@ def test_a_quoted_number_in_a_live_stream_reads_as_in_a_file():
     assert layout.parse('0.1,"1"," 2"', 3) == layout.parse("0.1,1,2", 3)
     with pytest.raises(InputError, match=r"s, line 3: not valid CSV"):
         layout.parse('0.1,"1,2', 3)
+
+
+@pytest.mark.parametrize("option, value, words", [
+    ("--mpe-e-uni-um", "1e308", "must be in [1e-06, 100000], got 1e308"),
+    ("--mpe-spat-um", "1e-300", "must be in [1e-06, 100000], got 1e-300"),
+    ("--outlier-threshold", "1e-300", "must be in [1, 1e+06], got 1e-300"),
+    ("--gross-threshold", "0.5", "must be in [1, 1e+06], got 0.5")])
+def test_a_verdict_or_threshold_without_meaning_is_refused(tmp_path, capsys, option, value, words):
+    """`calibrate --mpe-e-uni-um 1e308` passed every item (1e-300 failed every one) and `--outlier-threshold 1e-300`
+    reported every point as an outlier, exit 0 -> 2 before any work."""
+    rc, err = _run(["calibrate", RING / "points.csv", RING / "artefacts.toml", "--arm", "aacmm7", option, value,
+                    "-o", tmp_path / "o"], capsys)
+    assert rc == 2 and f"{option}: {words}" in err, err
+    assert not (tmp_path / "o").exists()
