@@ -156,3 +156,20 @@ def test_a_verdict_or_threshold_without_meaning_is_refused(tmp_path, capsys, opt
                     "-o", tmp_path / "o"], capsys)
     assert rc == 2 and f"{option}: {words}" in err, err
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("kind, n, ok", [("plane", 2, False), ("plane", 3, True), ("sphere", 4, False),
+                                         ("ring", 3, False), ("seat", 1, True)])
+def test_a_plan_asking_fewer_points_than_a_fit_needs_is_refused(kind, n, ok):
+    """A plan's `points = 2` on a plane was read, and the session then never fitted the plane (a note "2 of the 3
+    points a plane needs" as its only result): now refused at its key, exit 2 (live.plan.NEEDED_POINTS, the tracker's
+    own counts)."""
+    from arm_model import InputError
+    from arm_model.live import parse_plan
+    size = ", diameter_mm = 20.0" if kind in ("sphere", "ring") else ""
+    text = f'feature = [{{ id = "f", kind = "{kind}"{size}, points = {n} }}]\n'
+    if ok:
+        assert parse_plan(text, "p.toml").entries[0].points == n
+    else:
+        with pytest.raises(InputError, match=rf"p.toml, .*key 'feature\[1\].points': a {kind} needs at least"):
+            parse_plan(text, "p.toml")
