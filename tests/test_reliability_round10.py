@@ -173,3 +173,30 @@ def test_a_plan_asking_fewer_points_than_a_fit_needs_is_refused(kind, n, ok):
     else:
         with pytest.raises(InputError, match=rf"p.toml, .*key 'feature\[1\].points': a {kind} needs at least"):
             parse_plan(text, "p.toml")
+
+
+# ---------------------------------------------------------------------------------------------
+# a campaign's task sizes: signs and counts
+
+RING_TASK = {"kind": "ring", "diameter_mm": 50.0, "centre_mm": [600.0, 0.0, 50.0], "points_per_row": 4}
+
+
+@pytest.mark.parametrize("task, key, words", [
+    ({**RING_TASK, "u_diameter_mm": -1.0}, "u_diameter", "must not be negative"),
+    ({**RING_TASK, "form_error_mm": -1.0}, "form_error", "must not be negative"),
+    ({**RING_TASK, "true_form_error_mm": -1.0}, "true_form_error", "must not be negative"),
+    ({**RING_TASK, "depths_mm": [-1.0, 5.0]}, "depths", "must not be negative"),
+    ({**RING_TASK, "form_lobes": 0}, "form_lobes", "must be at least 2"),
+    ({"kind": "plane", "size_mm": [0.0, 10.0]}, "size", "must be > 0"),
+    ({"kind": "ballbar", "positions": 2, "true_length_mm": -600.0}, "true_length", "must be at least 0.001 mm"),
+    ({"kind": "tracker", "nests": 2, "distance_mm": 0.0}, "distance", "must be > 0"),
+    ({"kind": "mocap", "postures": 4, "noise_mm": -1.0}, "noise", "must not be negative"),
+    ({"kind": "mocap", "postures": 4, "markers": 10 ** 7}, "markers", "must be from 1 to 100")])
+def test_a_campaign_task_size_that_cannot_be_is_refused(task, key, words):
+    """A ring's u_diameter_mm or form_error_mm of -1 and a mocap noise of -1 mm were internal errors (exit 3); a
+    negative true form error, depth or bar length, a plane or an instrument distance of 0, and 0 form lobes were
+    simulated as given (exit 0); 10^7 mocap markers ran past 90 s on 4 postures: now exit 2 at the key."""
+    from arm_model import InputError
+    from arm_model.sim import campaign_from_dict
+    with pytest.raises(InputError, match=rf"key 'task\[1\]\.{key}.*'{key}' {words}"):
+        campaign_from_dict({"seed": 1, "sensor": "none", "task": [task]})

@@ -20,7 +20,7 @@ from ..description import ArmDescription
 from ..errors import InputError, did_you_mean, parse_toml, read_text
 from ..shipped import SHIPPED_ARMS, shipped_path
 from ..toml_lines import key_path_text, toml_key_lines
-from ..units import implausible, split_unit
+from ..units import SMALLEST_ARTEFACT_M, implausible, split_unit
 from ..urdf_import import is_urdf, load_arm
 
 __all__ = ["Campaign", "Task", "load_campaign", "campaign_from_dict", "TASK_KINDS", "SENSORS",
@@ -710,6 +710,15 @@ def _check_size(ctx, tasks, op, sg) -> None:
 #: spreads (1 sigma): not negative
 _CONE_KEYS = ("stylus_cone", "stylus_tilt", "polar_max", "force_cone")
 _SPREAD_KEYS = ("angle_jitter", "roll_jitter")
+#: a task's sizes that cannot be negative (uncertainties, form errors, spreads, noise, offsets, a ring's depths
+#: below its top face; -1 mm was an internal error or a silent ring probed above itself) and those that must be
+#: above 0 (an instrument's distance, a plane's extent; a bar's true length: at least an artefact's; 0 or -1 mm
+#: were simulated as given)
+_NON_NEGATIVE_KEYS = ("u_diameter", "form_error", "true_form_error", "depth_jitter", "depths", "noise",
+                      "marker_distance", "limit_margin")
+_POSITIVE_KEYS = ("distance", "size")
+#: the most markers a motion-capture task carries on the arm (10^7 ran for minutes on 4 postures)
+MAX_MARKERS = 100
 
 
 def _check_task(ctx, kind, o, tbl, sensor):
@@ -720,11 +729,25 @@ def _check_task(ctx, kind, o, tbl, sensor):
     for k in _SPREAD_KEYS:
         if k in o and o[k] < 0:
             raise ctx.error(f"'{k}' (a spread, 1 sigma) must not be negative", tbl, k)
+    for k in _NON_NEGATIVE_KEYS:
+        if o.get(k) is not None and min(np.atleast_1d(o[k])) < 0:
+            raise ctx.error(f"'{k}' must not be negative", tbl, k)
+    for k in _POSITIVE_KEYS:
+        if o.get(k) is not None and min(np.atleast_1d(o[k])) <= 0:
+            raise ctx.error(f"'{k}' must be > 0", tbl, k)
+    if kind == "ballbar" and o["true_length"] is not None and o["true_length"] < SMALLEST_ARTEFACT_M:
+        raise ctx.error(f"'true_length' must be at least {SMALLEST_ARTEFACT_M * 1e3:g} mm (as a certified length)", tbl,
+                        "true_length")
+    if kind == "ring" and o["form_lobes"] < 2:
+        raise ctx.error("'form_lobes' must be at least 2 (one lobe is a shifted circle, none a size error: no form "
+                        "error either way)", tbl, "form_lobes")
+    if kind == "mocap" and not 1 <= o["markers"] <= MAX_MARKERS:
+        raise ctx.error(f"'markers' must be from 1 to {MAX_MARKERS}", tbl, "markers")
     positive = {"ring": ("diameter", "points_per_row"), "sphere": ("diameter", "points"),
                 "plane": ("points",), "seat": ("articulations",),
                 "ballbar": ("length", "positions", "sphere_diameter", "reach"),
                 "tracker": ("nests", "articulations", "reach"),
-                "mocap": ("postures", "markers", "sessions")}[kind]
+                "mocap": ("postures", "sessions")}[kind]
     for k in positive:
         if o[k] <= 0:
             raise ctx.error(f"'{k}' must be > 0", tbl, k)
@@ -732,8 +755,6 @@ def _check_task(ctx, kind, o, tbl, sensor):
         if o["sessions"] > o["postures"]:
             raise ctx.error(f"{o['sessions']} sessions for {o['postures']} postures: each session needs postures",
                             tbl, "sessions")
-        if o["limit_margin"] < 0:
-            raise ctx.error("'limit_margin' must not be negative", tbl, "limit_margin")
     if kind == "ring":
         if o["roll"] is None:   # the paper's sensor sees one bending axis: its operator keeps it on the force
             o["roll"] = "bend-along-force" if sensor == "two-channel" else "random"
