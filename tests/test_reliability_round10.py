@@ -200,3 +200,20 @@ def test_a_campaign_task_size_that_cannot_be_is_refused(task, key, words):
     from arm_model.sim import campaign_from_dict
     with pytest.raises(InputError, match=rf"key 'task\[1\]\.{key}.*'{key}' {words}"):
         campaign_from_dict({"seed": 1, "sensor": "none", "task": [task]})
+
+
+@pytest.mark.parametrize("section, key, value, words", [
+    ("environment", "cycle_period_s", 0.0, "'cycle_period' must be at least 1 s"),
+    ("environment", "cycle_period_s", -1.0, "'cycle_period' must be at least 1 s"),
+    ("signals", "sample_period_s", 1e-320, "'sample_period' must be from 1e-06 s"),
+    ("signals", "sample_period_s", 1e9, "'sample_period' must be from 1e-06 s"),
+    ("operator", "measurement_gap_s", -1.0, "'measurement_gap' must not be negative")])
+def test_a_campaign_clock_that_cannot_be_is_refused(section, key, value, words):
+    """`cycle_period_s = 0` or `sample_period_s = 1e-320` made every temperature NaN (internal error, exit 3);
+    `sample_period_s = 1e9` put every time stamp at 0 and a negative measurement gap ran the clock backwards (exit 0):
+    now exit 2 at the key."""
+    from arm_model import InputError
+    from arm_model.sim import campaign_from_dict
+    with pytest.raises(InputError, match=rf"key '{section}\.{key.rsplit('_', 1)[0]}.*{words}"):
+        campaign_from_dict({"seed": 1, "sensor": "none", section: {key: value},
+                            "task": [{"kind": "seat", "articulations": 3}]})

@@ -560,6 +560,11 @@ def _truth(ctx, data: dict, desc, sensor: str) -> dict:
     return truth
 
 
+#: the shortest temperature cycle [s] and signal sample period [s] a campaign may ask for (0 s or 1e-320 s made every
+#: temperature or time stamp NaN: an internal error; 1e9 s put every time stamp at 0)
+_SHORTEST_CYCLE_S, _SHORTEST_SAMPLE_S = 1.0, 1e-6
+
+
 def _sections(ctx, data: dict) -> dict:
     """The [noise], [environment], [operator] and [signals] tables, checked."""
     sections = {}
@@ -588,9 +593,20 @@ def _sections(ctx, data: dict) -> dict:
             raise ctx.error(f"'{k}' must not be negative", ("operator",), k)
     if not 0 <= op["spike_probability"] <= 1:
         raise ctx.error("'spike_probability' must lie in [0, 1]", ("operator",), "spike_probability")
+    if op["measurement_gap"] < 0:
+        raise ctx.error("'measurement_gap' must not be negative", ("operator",), "measurement_gap")
+    env = sections["environment"]
+    if env["cycle_period"] < _SHORTEST_CYCLE_S:
+        raise ctx.error(f"'cycle_period' must be at least {_SHORTEST_CYCLE_S:g} s (a room's temperature cycle), got "
+                        f"{env['cycle_period']:g} s", ("environment",), "cycle_period")
     sg = sections["signals"]
     if sg["sample_period"] <= 0 or sg["rise"] <= 0 or sg["decay"] <= 0:
         raise ctx.error("sample period, rise and decay must be > 0", ("signals",))
+    if not _SHORTEST_SAMPLE_S <= sg["sample_period"] <= min(sg["rise"], sg["decay"]):
+        raise ctx.error(f"'sample_period' must be from {_SHORTEST_SAMPLE_S:g} s to the shorter of rise and decay "
+                        f"({min(sg['rise'], sg['decay']):g} s: a pulse sampled at least once), got "
+                        f"{sg['sample_period']:g} s (every time stamp is a multiple of it)", ("signals",),
+                        "sample_period")
     if op["point_period"] < 1.5 * (sg["rise"] + sg["decay"]):
         raise ctx.error(f"'point_period' must be at least 1.5 x (rise + decay) = "
                         f"{1.5 * (sg['rise'] + sg['decay']):.3g} s so that pulses do not overlap",
