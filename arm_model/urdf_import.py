@@ -299,7 +299,26 @@ def _check_tree(root, path: Path) -> tuple[dict, dict]:
                              "lower=... upper=... effort=... velocity=...>" + (", or make it type=\"continuous\" if "
                              "it turns without end" if jtype == "revolute" else ""), path, el.sourceline)
         joints[name] = el
+    _check_no_loop(joints, path)
     return links, joints
+
+
+def _check_no_loop(joints: dict, path: Path) -> None:
+    """An InputError at a joint of any loop of the tree (a joint whose child is its own parent, or a ring of joints
+    anywhere, not only on the chain used: urdfdom refuses such a file, and a calibrated URDF would carry it on)."""
+    parent = {el.find("child").get("link"): (el.find("parent").get("link"), el) for el in joints.values()}
+    done: set = set()
+    for start in parent:
+        seen: set = set()
+        link = start
+        while link in parent and link not in done:
+            if link in seen:
+                el = parent[link][1]
+                raise InputError(f"the joints form a loop through link '{link}' (a URDF is a tree)", path,
+                                 el.sourceline, f"key 'joint.{el.get('name')}'")
+            seen.add(link)
+            link = parent[link][0]
+        done |= seen
 
 
 def _read_urdf(path: str | Path) -> _Urdf:

@@ -217,3 +217,14 @@ def test_a_campaign_clock_that_cannot_be_is_refused(section, key, value, words):
     with pytest.raises(InputError, match=rf"key '{section}\.{key.rsplit('_', 1)[0]}.*{words}"):
         campaign_from_dict({"seed": 1, "sensor": "none", section: {key: value},
                             "task": [{"kind": "seat", "articulations": 3}]})
+
+
+@pytest.mark.parametrize("old, new, line, link", [
+    ('<child link="panda_link1" />', '<child link="panda_link0" />', 19, "panda_link0"),
+    ('<parent link="panda_link2" />', '<parent link="panda_link5" />', 53, "panda_link3")])
+def test_a_loop_of_joints_anywhere_in_a_urdf_is_refused(tmp_path, capsys, old, new, line, link):
+    """A joint whose child is its own parent (the rest of the tree then hangs from another root) was read: `urdf`
+    wrote a 6-joint arm from the 7-joint Panda, exit 0; a loop is now refused wherever it is, at its joint's line."""
+    rc, err = _run(["urdf", _panda(tmp_path, old, new), "--tip-frame", "ball_link", "-o", tmp_path / "o.urdf"], capsys)
+    assert rc == 2 and f"m.urdf, line {line}" in err and f"a loop through link '{link}'" in err, err
+    assert not (tmp_path / "o.urdf").exists()
