@@ -228,3 +228,16 @@ def test_a_loop_of_joints_anywhere_in_a_urdf_is_refused(tmp_path, capsys, old, n
     rc, err = _run(["urdf", _panda(tmp_path, old, new), "--tip-frame", "ball_link", "-o", tmp_path / "o.urdf"], capsys)
     assert rc == 2 and f"m.urdf, line {line}" in err and f"a loop through link '{link}'" in err, err
     assert not (tmp_path / "o.urdf").exists()
+
+
+@pytest.mark.parametrize("effect, value", [("joint_compliance", {"stiffness_Nm_per_rad": [1e4, 1e4]}),
+                                           ("thermal", {"alpha_per_K": [1e-5, 1e-5]}),
+                                           ("lateral_compliance", {"stiffness_x_Nm_per_rad": [1e5, 1e5]})])
+def test_a_true_effect_naming_a_joint_twice_is_refused(effect, value):
+    """`[truth.joint_compliance] joints = ["j2", "j2"]` (or thermal) was an internal error (the effect's own check,
+    exit 3); one rule for every effect's joints now, at the key (lateral_compliance had it alone)."""
+    from arm_model import InputError
+    from arm_model.sim import campaign_from_dict
+    with pytest.raises(InputError, match=rf"key 'truth\.{effect}\.joints'.*a joint is named twice"):
+        campaign_from_dict({"seed": 1, "sensor": "xyz", "truth": {effect: {"joints": ["j2", "j2"], **value}},
+                            "task": [{"kind": "seat", "articulations": 3}]})

@@ -389,7 +389,10 @@ def _joint_indices(ctx, desc: ArmDescription, names, table, revolute: bool) -> t
     joint's angle)."""
     if not names:
         return desc.revolute_columns if revolute else tuple(range(desc.n_joints))
-    return tuple(_joint_index(ctx, desc, n, table, "joints", revolute) for n in names)
+    out = tuple(_joint_index(ctx, desc, n, table, "joints", revolute) for n in names)
+    if len(set(out)) != len(out):       # (joint_compliance and thermal: an internal error of their effect's check)
+        raise ctx.error("a joint is named twice", table, "joints")
+    return out
 
 
 def _load_arm(ctx, arm_path: Path, tip_frame: str | None, base_frame: str | None) -> ArmDescription:
@@ -468,8 +471,6 @@ def _joint_values(ctx, e: dict, name: str, desc, tbl) -> None:
 
 def _lateral_compliance(ctx, e: dict, desc, tbl, raw: dict) -> None:
     e["indices"] = _joint_indices(ctx, desc, e["joints"], tbl, True)
-    if len(set(e["indices"])) != len(e["indices"]):
-        raise ctx.error("a joint is named twice", tbl, "joints")
     if e["stiffness_x"] is None and e["stiffness_y"] is None:
         raise ctx.error("'lateral_compliance' needs 'stiffness_x_<unit>' and/or 'stiffness_y_<unit>' "
                         "(about the joint frame's x and y axes)", tbl)
