@@ -241,3 +241,16 @@ def test_a_true_effect_naming_a_joint_twice_is_refused(effect, value):
     with pytest.raises(InputError, match=rf"key 'truth\.{effect}\.joints'.*a joint is named twice"):
         campaign_from_dict({"seed": 1, "sensor": "xyz", "truth": {effect: {"joints": ["j2", "j2"], **value}},
                             "task": [{"kind": "seat", "articulations": 3}]})
+
+
+def test_ctrl_c_while_the_commands_load_is_one_line(monkeypatch, capsys):
+    """Ctrl-C in the first second (`timeout -s INT 1 aacmm calibrate ...`: while the commands' modules load) printed a
+    Python traceback ending in KeyboardInterrupt; now one line, exit 130."""
+    import arm_model.cli as cli
+
+    def interrupted(argv):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(cli, "build_parser", interrupted)
+    assert cli.main(["paper", "-o", "x"]) == 130
+    err = capsys.readouterr().err
+    assert err == "aacmm: error: interrupted; nothing written\n", err
