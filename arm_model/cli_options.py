@@ -90,6 +90,9 @@ def output_path(text: str) -> Path:
     """argparse type of ``-o``: a path; an empty one is refused (it would name the current folder)."""
     if not text.strip():
         raise argparse.ArgumentTypeError("expected a path, got an empty one")
+    if text == "-":             # (it wrote a file named "-" where standard output was meant)
+        raise argparse.ArgumentTypeError("'-' (standard output) is not an output of the toolkit: name a file or "
+                                         "folder (./- for a file of that name)")
     return Path(text)
 
 
