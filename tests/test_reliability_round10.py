@@ -256,10 +256,12 @@ def test_ctrl_c_while_the_commands_load_is_one_line(monkeypatch, capsys):
     assert err == "aacmm: error: interrupted; nothing written\n", err
 
 
-@pytest.mark.parametrize("command", [["tip", "p.csv", "--arm", "aacmm7"], ["paper"], ["urdf", "aacmm7"]])
+@pytest.mark.parametrize("command", [["tip", "p.csv", "--arm", "aacmm7", "-o"], ["paper", "-o"], ["urdf", "aacmm7", "-o"],
+                                     ["view", "p.csv", "--arm", "aacmm7", "--html"], ["examples"]])
 def test_output_dash_is_refused(tmp_path, capsys, monkeypatch, command):
-    """`aacmm tip ... -o -` (standard output meant) wrote a file named "-" in the current folder, exit 0 -> 2."""
+    """`aacmm tip ... -o -` (standard output meant) wrote a file named "-" in the current folder (`view --html -`,
+    `examples -` too), exit 0 -> 2."""
     monkeypatch.chdir(tmp_path)
-    rc, err = _run([*command, "-o", "-"], capsys)
+    rc, err = _run([*command, "-"], capsys)
     assert rc == 2 and "'-' (standard output) is not an output of the toolkit" in err, err
     assert not (tmp_path / "-").exists()
