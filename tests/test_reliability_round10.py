@@ -256,8 +256,9 @@ def test_ctrl_c_while_the_commands_load_is_one_line(monkeypatch, capsys):
     assert err == "aacmm: error: interrupted; nothing written\n", err
 
 
-@pytest.mark.parametrize("command", [["tip", "p.csv", "--arm", "aacmm7", "-o"], ["paper", "-o"], ["urdf", "aacmm7", "-o"],
-                                     ["view", "p.csv", "--arm", "aacmm7", "--html"], ["examples"]])
+@pytest.mark.parametrize("command", [["tip", "p.csv", "--arm", "aacmm7", "-o"], ["paper", "-o"],
+                                     ["urdf", "aacmm7", "-o"], ["view", "p.csv", "--arm", "aacmm7", "--html"],
+                                     ["examples"]])
 def test_output_dash_is_refused(tmp_path, capsys, monkeypatch, command):
     """`aacmm tip ... -o -` (standard output meant) wrote a file named "-" in the current folder (`view --html -`,
     `examples -` too), exit 0 -> 2."""
