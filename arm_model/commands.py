@@ -11,7 +11,14 @@ import numpy as np
 
 from .checks import JointLimitTally, log_warnings
 from .cli import command_help
-from .cli_options import add_arm_options, add_frame_options, add_output_option, arm_inputs, model_from_args
+from .cli_options import (
+    add_arm_options,
+    add_frame_options,
+    add_output_option,
+    arm_inputs,
+    model_from_args,
+    output_path,
+)
 from .csv_io import format_csv
 from .errors import InputError
 from .io import concat_points, iter_points
@@ -62,7 +69,7 @@ def register(sub) -> None:
                     "shipped arm descriptions (arms/: the nominal aacmm7 as a DH table, a template for yours) and "
                     "the user docs (docs/, e.g. docs/formats.md) with the README they link to (README.md) into DIR. "
                     "Existing files are never overwritten.")
-    e.add_argument("dir", type=Path, help="destination folder (created)")
+    e.add_argument("dir", type=output_path, help="destination folder (created)")
     e.set_defaults(func=run_examples)
 
 
