@@ -366,6 +366,8 @@ def _to_columns(per_row: np.ndarray, joints: Sequence[Joint] | None, n_q: int | 
     if joints is None:
         return per_row
     n_q = max(j.column for j in joints) + 1 if n_q is None else n_q
+    if n_q == len(joints) and all(j.column == i and j.multiplier == 1.0 for i, j in enumerate(joints)):
+        return np.ascontiguousarray(per_row)          # one row a column: the same numbers, no sum to form
     out = np.zeros(per_row.shape[:2] + (n_q,))
     for i, j in enumerate(joints):
         out[:, :, j.column] += per_row[:, :, i] if j.multiplier == 1.0 else j.multiplier * per_row[:, :, i]
