@@ -27,7 +27,8 @@ def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights,
     (names, covariance): the variance their uncertainty adds to the held-out rows, summed,
     :func:`~calibration.validation.heldout_residuals`) and, with ``stated``, ``rms_over_stated`` and
     ``chi2_stated``: the RMS and the sum of squares of the rows each over its stated uncertainty, over the
-    ``rows_stated`` rows whose group has one (not the lengths, whose uncertainty is each artefact's)."""
+    ``rows_stated`` rows whose group has one the user stated (not a default, :meth:`~calibration.data.Weights.
+    stated_sigma_of`; not the lengths, whose uncertainty is each artefact's)."""
     h = heldout_residuals(model, p, data, weights, reference, train, cov)
     e = h["e"]
     art = h["kind"] != "reference"
@@ -40,7 +41,7 @@ def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights,
            "rms_over_stated": None,
            "chi2_stated": None, "rows_stated": 0}
     if stated is not None:
-        sig = np.array([stated.sigma_of(k) or np.nan for k in h["kind"]])
+        sig = np.array([stated.stated_sigma_of(k) or np.nan for k in h["kind"]])
         ok = np.isfinite(sig) & (sig > 0)
         if ok.any():
             z2 = (e[ok] / sig[ok]) ** 2
