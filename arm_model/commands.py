@@ -254,7 +254,10 @@ def run_tip(args: argparse.Namespace) -> int:
     if ref:
         k = arm.tracker.n_markers
         log.info(f"reference instrument: {k} marker(s) predicted in the frame of each row's session "
-                 f"({', '.join(repr(s) for s in arm.tracker.sessions)})")
+                 f"({', '.join(repr(s) for s in arm.tracker.sessions)})"
+                 + ("; u_x_mm ... are of the tip in the base frame and hold the fitted frame's and marker "
+                    "offsets' share, which cancels in x_ref_mm ... (no u there: docs/uncertainty.md, 'A robot "
+                    "seen by a tracker only')" if getattr(arm, "covariance", None) is not None else ""))
     if arm.effects:
         log.info("effects applied: " + ", ".join(e.describe(arm.desc) for e in arm.effects))
     if kinds == {None}:
