@@ -809,7 +809,9 @@ def noise_lines(res) -> list[str]:
         if v["group"] == "length":
             size = f"x{used:.3g} the certified/stated uncertainties"
         else:
-            size = f"{v['sigma_um']:.3g} um per axis (stated {v['sigma_um'] / used:.3g} um)"
+            start = f"{v['sigma_um'] / used:.3g} um"
+            said = f"stated {start}" if res.weights.stated_sigma_of(v["group"]) else f"default {start}, not stated"
+            size = f"{v['sigma_um']:.3g} um per axis ({said})"
         if not v["estimated"]:
             out.append(f"  {what}: {size}; not estimated (redundancy {v['redundancy']:.2g} of {v['rows']} rows, "
                        f"too little)")

@@ -112,6 +112,12 @@ def test_a_default_sigma_is_replaced_by_the_estimate_not_judged_against():
     assert v == ("no effect added. Noise estimated from the data, no uncertainty stated for it: reference 210 um (the "
                  "default 10 um replaced by the estimate); the final residual is 1.05 times the estimate. No "
                  "structured residual remains (no regressor family is significant after Bonferroni's correction).")
+    # an estimate within the loop's factor 2 of the default (15 um) is not said to replace it
+    kept = _stage(None, 20.0, 60.0, s0=1.05)
+    kept.result.variance = [dict(stage.result.variance[0], estimate_um=15.0)]
+    assert verdict_text([kept], [], "", LoopSettings(), [], None, (), defaulted) == (
+        "no effect added. No structured residual remains (no regressor family is significant after Bonferroni's "
+        "correction).")
     v = verdict_text([stage], [], "", LoopSettings(), [], None, (), given)
     assert v.startswith("no effect added. The final residual is 21 times the stated uncertainties (reference 210 um "
                         "against the stated 10): it is not noise at the stated level")

@@ -10,7 +10,7 @@ from arm_model.model import ArmModel
 
 from ..diagnostics import f_upper_tail
 from ..synthesis import RESIDUAL, synthesise
-from .settings import PHYSICS
+from .settings import NOISE_OFF, PHYSICS
 
 __all__ = ["verdict_text", "residual_over_stated", "estimated_words", "heldout_check", "builds_from_residual",
            "NOT_BUILT_ON_POSES", "S0_LIMIT", "ADDED"]
@@ -54,11 +54,13 @@ def _estimated(result) -> list[dict]:
 
 def estimated_words(result, stated=None) -> str:
     """The verdict's sentence on the groups whose noise was estimated from the data although the user stated no
-    uncertainty for them (a default started the fit and was replaced): "" when there is none."""
+    uncertainty for them and the estimate is off the default by more than the loop's factor
+    (:data:`~calibration.loop.settings.NOISE_OFF`: the default is replaced by it, a default within it would
+    have done as well): "" when there is none."""
     if stated is None:
         return ""
-    groups = [v for v in _estimated(result) if stated.sigma_of(v["group"]) and not
-              stated.stated_sigma_of(v["group"])]
+    groups = [v for v in _estimated(result) if stated.sigma_of(v["group"]) and not stated.stated_sigma_of(v["group"])
+              and not 1 / NOISE_OFF < v["estimate_um"] / (stated.sigma_of(v["group"]) * 1e6) < NOISE_OFF]
     if not groups:
         return ""
     return ("Noise estimated from the data, no uncertainty stated for it: " + ", ".join(
