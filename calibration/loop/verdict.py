@@ -117,7 +117,8 @@ def heldout_check(stage, test_by: str, alpha: float) -> dict | None:
             "rms_weighted": h.get("rms_weighted"), "ratio": math.sqrt(f), "p_value": p, "alpha": alpha,
             "rms_um": h.get("rms_um"), "rms_over_stated": h.get("rms_over_stated"),
             "ratio_stated": None if p_s is None else math.sqrt(h["chi2_stated"] / (dof_s * (1.0 + lev))),
-            "p_stated": p_s, "worse_than_stated": p < alpha and (p_s is None or p_s < alpha)}
+            "p_stated": p_s, "worse_than_stated": p < alpha and (p_s is None or p_s < alpha),
+            "stated_word": "stated" if h.get("sigmas_stated", True) else "default (not stated)"}
 
 
 def _p(p: float) -> str:
@@ -130,7 +131,8 @@ def heldout_sentence(check: dict | None) -> str:
     if not check or not check["worse_than_stated"]:
         return ""
     stated = ("" if check["p_stated"] is None else
-              f"; {check['rms_over_stated']:.3g} times the stated uncertainties, chi-square p {_p(check['p_stated'])}")
+              f"; {check['rms_over_stated']:.3g} times the {check.get('stated_word', 'stated')} uncertainties, "
+              f"chi-square p {_p(check['p_stated'])}")
     return (f"The outer test set is worse than a complete model predicts: its residual (RMS {check['rms_um']:.4g} "
             f"um) is {check['ratio']:.3g} times what the design fit's scatter and the model's own uncertainty give "
             f"for it (F-test p {_p(check['p_value'])} < {check['alpha']:g}{stated}): the model lacks something that "
