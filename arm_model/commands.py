@@ -24,7 +24,7 @@ from .errors import InputError
 from .io import concat_points, iter_points
 from .model_file import Arm
 from .output import output_file
-from .urdf import urdf_text
+from .urdf import kept_link_names, urdf_text
 
 __all__ = ["register", "tip_table", "tip_centres"]
 
@@ -261,7 +261,10 @@ def run_tip(args: argparse.Namespace) -> int:
     if ref:
         k = arm.tracker.n_markers
         log.info(f"reference instrument: {k} marker(s) predicted in the frame of each row's session "
-                 f"({', '.join(repr(s) for s in arm.tracker.sessions)})")
+                 f"({', '.join(repr(s) for s in arm.tracker.sessions)})"
+                 + ("; u_x_mm ... are of the tip in the base frame and hold the fitted frame's and marker "
+                    "offsets' share, which cancels in x_ref_mm ... (no u there: docs/uncertainty.md, 'A robot "
+                    "seen by a tracker only')" if getattr(arm, "covariance", None) is not None else ""))
     if arm.effects:
         log.info("effects applied: " + ", ".join(e.describe(arm.desc) for e in arm.effects))
     if kinds == {None}:
@@ -297,8 +300,10 @@ def run_urdf(args: argparse.Namespace) -> int:
     with output_file(args.output, arm_inputs(args), writes=".urdf") as tmp:
         arm = model_from_args(args)
         desc = arm.desc
-        tmp.write_text(urdf_text(desc), encoding="utf-8")
-    log.info(f"URDF of '{desc.name}' ({desc.n_joints} joints + 3 elastic probe joints) -> {args.output}")
+        base, tip = kept_link_names(desc)
+        tmp.write_text(urdf_text(desc, base_link=base, tip_link=tip), encoding="utf-8")
+    log.info(f"URDF of '{desc.name}' ({desc.n_joints} joints + 3 elastic probe joints) -> {args.output}; its chain "
+             f"runs from '{base}' to the ball link '{tip}' (--tip-frame {tip})")
     if arm.effects:
         log.info("note: a URDF holds the geometry only; the model's effects ("
               + ", ".join(e.describe(arm.desc) for e in arm.effects) + ") are not in it")

@@ -15,7 +15,7 @@ import numpy as np
 
 from .description import ArmDescription
 
-__all__ = ["urdf_text", "ELASTIC_JOINTS", "BALL_FRAME", "FLANGE_FRAME",
+__all__ = ["urdf_text", "kept_link_names", "ELASTIC_JOINTS", "BALL_FRAME", "FLANGE_FRAME",
            "ARM_RGBA", "BALL_RGBA"]
 
 ELASTIC_JOINTS = ("probe_bend_y", "probe_bend_x", "probe_axial")
@@ -168,6 +168,24 @@ def _off_chain_masters(desc: ArmDescription, base_link: str) -> list[str]:
                 f'<limit lower="{_f(lower)}" upper="{_f(upper)}" effort="100" velocity="3"/></joint>',
                 f'  <link name="mimic_master_{k + 1}"/>']
     return out
+
+
+def _generated_links(desc: ArmDescription) -> set[str]:
+    """The names :func:`urdf_text` gives its own links (the chain's, the probe's, the mimic masters')."""
+    masters = [e for e in desc.encoders if e.name not in {j.name for j in desc.joints}]
+    return ({f"link_{i + 1}" for i in range(len(desc.joints))} | {f"mimic_master_{k + 1}" for k in range(len(masters))}
+            | {FLANGE_FRAME, "stylus_root", "probe_bend_y_link", "probe_bend_x_link", "stylus"})
+
+
+def kept_link_names(desc: ArmDescription) -> tuple[str, str]:
+    """The base and tip link names of ``desc``'s generated URDF: those of the URDF it was read from
+    (``base_frame`` or ``base_link``, ``tip_frame``), so that the same ``--base-frame``/``--tip-frame`` read the
+    generated file too; ``base_link`` and :data:`BALL_FRAME` for a description TOML, or where a name is one the
+    generated file gives a link of its own."""
+    own = _generated_links(desc)
+    base = desc.base_frame if desc.base_frame and desc.base_frame not in own else "base_link"
+    tip = desc.tip_frame if desc.tip_frame and desc.tip_frame not in own | {base} else BALL_FRAME
+    return base, tip
 
 
 def urdf_text(desc: ArmDescription, base_link: str = "base_link", tip_link: str = BALL_FRAME) -> str:

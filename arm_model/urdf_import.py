@@ -1051,7 +1051,7 @@ def calibrated_urdf_text(nominal: ArmDescription, calibrated: ArmDescription) ->
     """
     from lxml import etree
 
-    from .urdf import urdf_text
+    from .urdf import kept_link_names, urdf_text
 
     if not nominal.tip_frame or not nominal.source or not is_urdf(nominal.source):
         return urdf_text(calibrated)
@@ -1061,7 +1061,8 @@ def calibrated_urdf_text(nominal: ArmDescription, calibrated: ArmDescription) ->
         log.info(f"calibrated URDF: the chain runs from '{nominal.base_frame}' against the URDF's tree (joints "
                  "walked backwards), which the file's own origins cannot take: written as the chain's own URDF "
                  f"('{nominal.base_frame}' to '{nominal.tip_frame}')")
-        return urdf_text(calibrated, base_link=nominal.base_frame, tip_link=nominal.tip_frame)
+        base, tip = kept_link_names(nominal)
+        return urdf_text(calibrated, base_link=base, tip_link=tip)
     ch = _chain(u, nominal.tip_frame, nominal.base_frame, dict(nominal.held_joints))
     names = [j.name for j, _, _ in ch.moving]
     if names != [j.name for j in nominal.joints] or names != [j.name for j in calibrated.joints]:

@@ -116,10 +116,12 @@ THRESHOLD_SIGMA = number_in(1, 1e6)
 def sigma_options(p, prior_default: str | None = None) -> None:
     """The stated uncertainties that weight the residuals and the prior (shared with ``aacmm close-loop``, whose
     ``--prior-scale`` defaults to ``prior_default``)."""
-    p.add_argument("--sigma-probe-um", type=SIGMA_UM, default=10.0,
-                   help="standard uncertainty of a probed ball centre per axis [um] (default 10)")
-    p.add_argument("--sigma-ref-um", type=SIGMA_UM, default=10.0,
-                   help="standard uncertainty of a reference-instrument coordinate per axis [um] (default 10)")
+    p.add_argument("--sigma-probe-um", type=SIGMA_UM, default=None,
+                   help="standard uncertainty of a probed ball centre per axis [um] (default 10, a starting value: "
+                        "a residual is judged against it only when stated)")
+    p.add_argument("--sigma-ref-um", type=SIGMA_UM, default=None,
+                   help="standard uncertainty of a reference-instrument coordinate per axis [um] (default 10, a "
+                        "starting value: a residual is judged against it only when stated)")
     p.add_argument("--sigma-length-um", type=SIGMA_UM, default=None,
                    help="standard uncertainty of a certified length without u_length_mm [um] "
                         "(default: --sigma-probe-um)")
@@ -334,10 +336,19 @@ def mpe_from_args(args) -> dict:
     return out
 
 
-def _weights(args):
+#: the stated uncertainties' default [um] (``--sigma-probe-um``, ``--sigma-ref-um``): a starting value, not a statement
+SIGMA_DEFAULT_UM = 10.0
+
+
+def weights_from_args(args):
+    """The :class:`~calibration.data.Weights` of ``--sigma-*-um``; the ones not given are the default
+    (:data:`SIGMA_DEFAULT_UM`) and named in ``defaulted``."""
     from .data import Weights
-    return Weights(probe=args.sigma_probe_um * 1e-6, reference=args.sigma_ref_um * 1e-6,
-                   length=None if args.sigma_length_um is None else args.sigma_length_um * 1e-6)
+    given = {"probe": args.sigma_probe_um, "reference": args.sigma_ref_um}
+    return Weights(probe=(given["probe"] or SIGMA_DEFAULT_UM) * 1e-6,
+                   reference=(given["reference"] or SIGMA_DEFAULT_UM) * 1e-6,
+                   length=None if args.sigma_length_um is None else args.sigma_length_um * 1e-6,
+                   defaulted=tuple(k for k, v in given.items() if v is None))
 
 
 def fit_options(args, **fields):
@@ -537,7 +548,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
             if why:
                 log.warning(f"joint compliance cannot be identified: {why}")
         train, test, poses = _split(args, data)
-        options = fit_options(args, free=free_names(model, args, data), values=values, weights=_weights(args),
+        options = fit_options(args, free=free_names(model, args, data), values=values, weights=weights_from_args(args),
                               on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
                               drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference,
                               gross_threshold=gross_threshold(args))
@@ -803,7 +814,9 @@ def noise_lines(res) -> list[str]:
         if v["group"] == "length":
             size = f"x{used:.3g} the certified/stated uncertainties"
         else:
-            size = f"{v['sigma_um']:.3g} um per axis (stated {v['sigma_um'] / used:.3g} um)"
+            start = f"{v['sigma_um'] / used:.3g} um"
+            said = f"stated {start}" if res.weights.stated_sigma_of(v["group"]) else f"default {start}, not stated"
+            size = f"{v['sigma_um']:.3g} um per axis ({said})"
         if not v["estimated"]:
             out.append(f"  {what}: {size}; not estimated (redundancy {v['redundancy']:.2g} of {v['rows']} rows, "
                        f"too little)")
@@ -829,7 +842,7 @@ def run_montecarlo(args: argparse.Namespace) -> int:
         from arm_model.model import ArmModel
         model = ArmModel(camp.arm, _effects(args.effect))
         settings = RunSettings(holdout=args.holdout, effects=_effects(args.effect),
-                               fit=fit_options(args, free=free_names(model, args), weights=_weights(args)))
+                               fit=fit_options(args, free=free_names(model, args), weights=weights_from_args(args)))
         mc = monte_carlo(SimSource(camp), args.runs, seed=args.seed, settings=settings,
                          scheduler=args.scheduler, workers=args.workers)
         mc.check()
@@ -872,7 +885,8 @@ def run_poses(args: argparse.Namespace) -> int:
         if args.count > n:
             raise InputError(f"--count {args.count}: the points file has {n} measurement(s)", args.points)
         # the choice is made at the nominal, before any fit
-        fit = fit_options(args, free=free_names(model, args, data), weights=_weights(args), weights_from_data=False)
+        fit = fit_options(args, free=free_names(model, args, data), weights=weights_from_args(args),
+                          weights_from_data=False)
         sel = select_measurements(model, data, args.count, fit)
         from arm_model.shipped import provenance
         (out.dir / "poses.json").write_text(json_text({**sel.to_dict(), **provenance(inputs)}), encoding="utf-8")

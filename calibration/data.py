@@ -2,7 +2,7 @@
 effects, split by measurement (never by point) into training and held-out sets."""
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -34,11 +34,14 @@ class Weights:
         factors: ``((group, factor), ...)``: every row of a group (a point kind: "seat", "sphere", "ring",
             "cylinder", "plane", "reference"; or "length") has its uncertainty multiplied by the factor
             (the variance components estimated from a fit, :func:`calibration.calibrate.calibrate`).
+        defaulted: which of "probe" and "reference" the user did not state (the command line's defaults):
+            starting values, never a statement to judge a residual against (:meth:`stated_sigma_of`).
     """
     probe: float = 10e-6
     reference: float = 10e-6
     length: float | None = None
     factors: tuple = ()
+    defaulted: tuple = field(default=(), compare=False)
 
     def __post_init__(self):
         for name in ("probe", "reference", "length"):
@@ -59,13 +62,17 @@ class Weights:
         new = dict(self.factors)
         for g, f in factors.items():
             new[g] = new.get(g, 1.0) * float(f)
-        return Weights(self.probe, self.reference, self.length, tuple(new.items()))
+        return Weights(self.probe, self.reference, self.length, tuple(new.items()), self.defaulted)
 
     def sigma_of(self, group: str) -> float | None:
         """The uncertainty [m] of a point of a group, factor applied (None for "length": per artefact)."""
         if group == "length":
             return None
         return (self.reference if group == "reference" else self.probe) * self.factor(group)
+
+    def stated_sigma_of(self, group: str) -> float | None:
+        """:meth:`sigma_of` when the user stated it; None when it is a default (:attr:`defaulted`)."""
+        return None if ("reference" if group == "reference" else "probe") in self.defaulted else self.sigma_of(group)
 
     @property
     def reference_sigma(self) -> float:

@@ -23,6 +23,7 @@ from .cli import (
     mpe_options,
     parse_holdout,
     sigma_options,
+    weights_from_args,
 )
 
 __all__ = ["register", "run"]
@@ -107,7 +108,6 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from .candidates import DEFAULT_FAMILIES, FAMILIES
-    from .data import Weights
     from .loop import LoopSettings, close_loop
     from .loop_report import before_after_text, write_loop_report
     from .model_output import refine_torques
@@ -154,8 +154,7 @@ def run(args: argparse.Namespace) -> int:
             warnings += point_warnings(desc, pts)
     log_warnings(warnings)          # at once: a loop that then fails (exit 4) has said what it saw in the inputs
     _check_folds(args.folds, points, reference)
-    weights = Weights(args.sigma_probe_um * 1e-6, args.sigma_ref_um * 1e-6,
-                      None if args.sigma_length_um is None else args.sigma_length_um * 1e-6)
+    weights = weights_from_args(args)
     holdout = parse_holdout(args.holdout)
     settings = LoopSettings(folds=args.folds, alpha=args.alpha, fold_by=args.fold_by,
                             **({"holdout": tuple(holdout)} if isinstance(holdout, list) else

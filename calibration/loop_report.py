@@ -134,13 +134,14 @@ def _heldout_html(check: dict | None) -> str:
     if check is None:
         return "<p>Outer test set: too few degrees of freedom to judge it against the fit's scatter.</p>"
     stated = ("" if check["rms_over_stated"] is None else
-              f", {check['rms_over_stated']:.3g} times the stated uncertainties")
+              f", {check['rms_over_stated']:.3g} times the {check.get('stated_word', 'stated')} uncertainties")
     word = ("<b>worse than a complete model predicts</b>" if check["worse_than_stated"]
             else "as a complete model predicts")
     return (f"<p>Outer test set of the final model: {word}: its residual (RMS {check['rms_um']:.4g} um{stated}) is "
             f"{check['ratio']:.3g} times what the design fit's scatter and the model's own uncertainty give for it "
             f"({check['dof']} degrees of freedom, F-test p = {check['p_value']:.2g}"
-            + ("" if check["p_stated"] is None else f"; against the stated uncertainties chi-square p = "
+            + ("" if check["p_stated"] is None else f"; against the {check.get('stated_word', 'stated')} "
+               "uncertainties chi-square p = "
                f"{check['p_stated']:.2g}") + f", level {check['alpha']:g}).</p>")
 
 

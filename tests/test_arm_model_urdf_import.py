@@ -204,6 +204,21 @@ def test_own_urdf_with_rotated_probe(nominal, tmp_path):
     assert_close(ball_centres(d, q, w), ball_centres(rot, q, w), atol=1e-12)
 
 
+@pytest.mark.parametrize("tip, kept", [("ball_link", "ball_link"), ("stylus", "ball")])
+def test_aacmm_urdf_of_a_urdf_arm_keeps_its_tip_link_name(nominal, tmp_path, tip, kept):
+    """`aacmm urdf` of an arm read from a URDF names its ball link as the input did, so the same --tip-frame reads
+    the generated file (before: the link was always 'ball', and `--tip-frame ball_link` failed with "did you mean
+    'base_link'"); the ball centres agree. A name the generated file gives a link of its own ('stylus', the
+    probe's shaft) falls back to 'ball', and the command says which name to give."""
+    from arm_model.urdf import urdf_text
+    src, out = tmp_path / "in.urdf", tmp_path / "out.urdf"
+    src.write_text(urdf_text(nominal, tip_link="tip").replace('"stylus"', '"shaft"').replace('"tip"', f'"{tip}"'))
+    assert main(["urdf", str(src), "--tip-frame", tip, "-o", str(out)]) == 0
+    again = load_arm(out, kept)
+    q = np.random.default_rng(9).uniform(-3, 3, (50, 7))
+    assert_close(ball_centres(again, q), ball_centres(nominal, q), atol=1e-12)
+
+
 # ---------------------------------------------------------------------------------------------
 # masses
 

@@ -57,6 +57,13 @@ def test_a_test_set_three_times_its_stated_u_is_not_called_complete():
                  f"uncertainty give for it (F-test p = {check['p_value']:.2g} < 0.01; 3 times the stated "
                  f"uncertainties, chi-square p = {check['p_stated']:.2g}): the model lacks something that shows on "
                  "data it was not fitted to. The model is not complete; no fix is claimed for it.")
+    # the same rows against sigmas the user did not state (command-line defaults): the decision is the same, the
+    # sentence does not call them stated
+    stage.heldout["sigmas_stated"] = False
+    check = heldout_check(stage, "measurement", 0.01)
+    assert check["worse_than_stated"]
+    v = verdict_text([stage], [], "", LoopSettings(), [], None, (), None, check)
+    assert "3 times the default (not stated) uncertainties, chi-square p" in v and "the stated" not in v
 
 
 def test_a_test_set_at_its_expected_scatter_leaves_the_verdict_as_it_was():

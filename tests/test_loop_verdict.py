@@ -90,6 +90,39 @@ def test_a_residual_reweighted_to_its_own_scatter_is_still_judged_against_the_st
     assert "No structured residual remains" in verdict_text([stage], [], "", LoopSettings(), [], None, (), stated)
 
 
+def test_a_default_sigma_is_replaced_by_the_estimate_not_judged_against():
+    """A sigma the user did not state (``--sigma-ref-um`` left at its default 10 um) is a starting value: the real
+    TALOS motion-capture data (reference noise estimated at 210 um, no family significant) were called "21 times
+    the stated uncertainties (reference 210 um against the stated 10)" with nothing stated; now the residual is
+    judged against the estimate (s0 1.05: clean) and the verdict says the default was replaced. The same 10 um
+    given on the command line is a statement and keeps the old verdict."""
+    import argparse
+
+    from calibration.cli import sigma_options, weights_from_args
+    from calibration.loop.verdict import residual_over_stated
+    p = argparse.ArgumentParser()
+    sigma_options(p)
+    defaulted, given = (weights_from_args(p.parse_args(a)) for a in ([], ["--sigma-ref-um", "10"]))
+    assert defaulted == given and defaulted.defaulted == ("probe", "reference") and given.defaulted == ("probe",)
+    assert defaulted.stated_sigma_of("reference") is None and abs(given.stated_sigma_of("reference") - 10e-6) < 1e-18
+    stage = _stage(None, 240.0, 690.0, s0=1.05)
+    stage.result.variance = [{"group": "reference", "estimated": True, "estimate_um": 210.0, "redundancy": 120.0}]
+    assert residual_over_stated(stage.result, defaulted) == (1.05, "")
+    v = verdict_text([stage], [], "", LoopSettings(), [], None, (), defaulted)
+    assert v == ("no effect added. Noise estimated from the data, no uncertainty stated for it: reference 210 um (the "
+                 "default 10 um replaced by the estimate); the final residual is 1.05 times the estimate. No "
+                 "structured residual remains (no regressor family is significant after Bonferroni's correction).")
+    # an estimate within the loop's factor 2 of the default (15 um) is not said to replace it
+    kept = _stage(None, 20.0, 60.0, s0=1.05)
+    kept.result.variance = [dict(stage.result.variance[0], estimate_um=15.0)]
+    assert verdict_text([kept], [], "", LoopSettings(), [], None, (), defaulted) == (
+        "no effect added. No structured residual remains (no regressor family is significant after Bonferroni's "
+        "correction).")
+    v = verdict_text([stage], [], "", LoopSettings(), [], None, (), given)
+    assert v.startswith("no effect added. The final residual is 21 times the stated uncertainties (reference 210 um "
+                        "against the stated 10): it is not noise at the stated level")
+
+
 def test_an_effect_that_makes_the_outer_test_worse_is_not_added_and_said():
     """The outer test set vetoes: an effect that passed the held-out folds but raises the outer test's RMS
     (2.00 -> 2.10 um) no longer passes (its reason says why), is recorded with both figures and the folds'

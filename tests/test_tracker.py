@@ -220,7 +220,7 @@ def tracker_files(tmp_path_factory, nominal):
     return out, cols, exact, p_true
 
 
-def test_calibrate_without_artefacts_then_tip_predicts_the_instrument(tracker_files, tmp_path):
+def test_calibrate_without_artefacts_then_tip_predicts_the_instrument(tracker_files, tmp_path, capsys):
     src, cols, exact, _ = tracker_files
     held = [f"pose-{i:03d}" for i in range(5, 61, 5)]
     out = tmp_path / "cal"
@@ -239,8 +239,11 @@ def test_calibrate_without_artefacts_then_tip_predicts_the_instrument(tracker_fi
     arm = load_model(out / "aacmm7-calibrated.toml")
     assert arm.tracker.sessions == ("mon", "tue") and arm.tracker.offsets.shape == (2, 3)
     tips = tmp_path / "tips.csv"
+    capsys.readouterr()
     assert main(["tip", str(src / "points.csv"), "--arm", str(out / "aacmm7-calibrated.toml"), "--reference-frame",
                  "-o", str(tips)]) == 0
+    # its u_x_mm ... are of the tip in the base frame, with the frames' and offsets' share: it says so
+    assert "cancels in x_ref_mm ... (no u there: docs/uncertainty.md" in capsys.readouterr().out
     t = np.genfromtxt(tips, delimiter=",", names=True, dtype=None, encoding="utf-8")
     rows = np.isin(cols["measurement"], held)
     for k in range(2):

@@ -27,7 +27,9 @@ def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights,
     (names, covariance): the variance their uncertainty adds to the held-out rows, summed,
     :func:`~calibration.validation.heldout_residuals`) and, with ``stated``, ``rms_over_stated`` and
     ``chi2_stated``: the RMS and the sum of squares of the rows each over its stated uncertainty, over the
-    ``rows_stated`` rows whose group has one (not the lengths, whose uncertainty is each artefact's)."""
+    ``rows_stated`` rows whose group has one (not the lengths, whose uncertainty is each artefact's);
+    ``sigmas_stated``: whether the user stated each of those (False: one is a default,
+    :meth:`~calibration.data.Weights.stated_sigma_of`, which the sentences then call so)."""
     h = heldout_residuals(model, p, data, weights, reference, train, cov)
     e = h["e"]
     art = h["kind"] != "reference"
@@ -45,7 +47,8 @@ def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights,
         if ok.any():
             z2 = (e[ok] / sig[ok]) ** 2
             out.update(rms_over_stated=float(np.sqrt(np.mean(z2))), chi2_stated=float(np.sum(z2)),
-                       rows_stated=int(ok.sum()))
+                       rows_stated=int(ok.sum()),
+                       sigmas_stated=all(stated.stated_sigma_of(k) for k in set(h["kind"][ok].tolist())))
     by_kind: dict[str, dict] = {}
     out["by_kind"] = by_kind
     for k in dict.fromkeys(h["kind"].tolist()):

@@ -10,10 +10,10 @@ from arm_model.model import ArmModel
 
 from ..diagnostics import f_upper_tail
 from ..synthesis import RESIDUAL, synthesise
-from .settings import PHYSICS
+from .settings import NOISE_OFF, PHYSICS
 
-__all__ = ["verdict_text", "residual_over_stated", "heldout_check", "builds_from_residual", "NOT_BUILT_ON_POSES",
-           "S0_LIMIT", "ADDED"]
+__all__ = ["verdict_text", "residual_over_stated", "estimated_words", "heldout_check", "builds_from_residual",
+           "NOT_BUILT_ON_POSES", "S0_LIMIT", "ADDED"]
 
 
 #: residual standard deviation factor above which the residual is not noise at the stated level
@@ -31,18 +31,41 @@ def residual_over_stated(result, stated=None) -> tuple[float, str]:
     are the residual's own scatter and ``s0`` is near 1 whatever the residual holds. So each row group whose
     noise the fit estimated gives its scatter against its stated sigma (``estimate_um / stated``), and the
     groups are pooled by their redundancy, as ``s0`` pools the rows; without a stated sigma or an estimated
-    group, ``s0``."""
-    groups = [v for v in getattr(result, "variance", None) or ()
-              if v.get("estimated") and v.get("estimate_um") is not None and v.get("redundancy", 0) > 0
-              and stated is not None and stated.sigma_of(v["group"])]
+    group, ``s0``. A sigma the user did not state (a default, :meth:`~calibration.data.Weights.stated_sigma_of`)
+    is no statement: its group is judged against its estimate (``s0``) and said by :func:`estimated_words`."""
+    variance = _estimated(result)
+    groups = [v for v in variance if stated is not None and stated.stated_sigma_of(v["group"])]
     if not groups:
         return float(result.s0), ""
-    ratios = [v["estimate_um"] / (stated.sigma_of(v["group"]) * 1e6) for v in groups]
-    red = [v["redundancy"] for v in groups]
+    ratios = [v["estimate_um"] / (stated.stated_sigma_of(v["group"]) * 1e6) for v in groups]
+    ratios += [float(result.s0)] * (len(variance) - len(groups))
+    red = [v["redundancy"] for v in groups] + [v["redundancy"] for v in variance if v not in groups]
     pooled = math.sqrt(sum(r * x * x for r, x in zip(red, ratios, strict=True)) / sum(red))
     words = ", ".join(f"{v['group']} {v['estimate_um']:.3g} um against the stated "
-                      f"{stated.sigma_of(v['group']) * 1e6:.3g}" for v in groups)
+                      f"{stated.stated_sigma_of(v['group']) * 1e6:.3g}" for v in groups)
     return pooled, words
+
+
+def _estimated(result) -> list[dict]:
+    """The row groups whose noise the fit estimated from the data (variance components with a redundancy)."""
+    return [v for v in getattr(result, "variance", None) or ()
+            if v.get("estimated") and v.get("estimate_um") is not None and v.get("redundancy", 0) > 0]
+
+
+def estimated_words(result, stated=None) -> str:
+    """The verdict's sentence on the groups whose noise was estimated from the data although the user stated no
+    uncertainty for them and the estimate is off the default by more than the loop's factor
+    (:data:`~calibration.loop.settings.NOISE_OFF`: the default is replaced by it, a default within it would
+    have done as well): "" when there is none."""
+    if stated is None:
+        return ""
+    groups = [v for v in _estimated(result) if stated.sigma_of(v["group"]) and not stated.stated_sigma_of(v["group"])
+              and not 1 / NOISE_OFF < v["estimate_um"] / (stated.sigma_of(v["group"]) * 1e6) < NOISE_OFF]
+    if not groups:
+        return ""
+    return ("Noise estimated from the data, no uncertainty stated for it: " + ", ".join(
+        f"{v['group']} {v['estimate_um']:.3g} um (the default {stated.sigma_of(v['group']) * 1e6:.3g} um replaced by "
+        "the estimate)" for v in groups) + f"; the final residual is {result.s0:.3g} times the estimate")
 
 
 def heldout_check(stage, test_by: str, alpha: float) -> dict | None:
@@ -94,7 +117,8 @@ def heldout_check(stage, test_by: str, alpha: float) -> dict | None:
             "rms_weighted": h.get("rms_weighted"), "ratio": math.sqrt(f), "p_value": p, "alpha": alpha,
             "rms_um": h.get("rms_um"), "rms_over_stated": h.get("rms_over_stated"),
             "ratio_stated": None if p_s is None else math.sqrt(h["chi2_stated"] / (dof_s * (1.0 + lev))),
-            "p_stated": p_s, "worse_than_stated": p < alpha and (p_s is None or p_s < alpha)}
+            "p_stated": p_s, "worse_than_stated": p < alpha and (p_s is None or p_s < alpha),
+            "stated_word": "stated" if h.get("sigmas_stated", True) else "default (not stated)"}
 
 
 def _p(p: float) -> str:
@@ -107,7 +131,8 @@ def heldout_sentence(check: dict | None) -> str:
     if not check or not check["worse_than_stated"]:
         return ""
     stated = ("" if check["p_stated"] is None else
-              f"; {check['rms_over_stated']:.3g} times the stated uncertainties, chi-square p {_p(check['p_stated'])}")
+              f"; {check['rms_over_stated']:.3g} times the {check.get('stated_word', 'stated')} uncertainties, "
+              f"chi-square p {_p(check['p_stated'])}")
     return (f"The outer test set is worse than a complete model predicts: its residual (RMS {check['rms_um']:.4g} "
             f"um) is {check['ratio']:.3g} times what the design fit's scatter and the model's own uncertainty give "
             f"for it (F-test p {_p(check['p_value'])} < {check['alpha']:g}{stated}): the model lacks something that "
@@ -166,6 +191,8 @@ def verdict_text(stages, significant, stop, settings, built=(), model: ArmModel 
         out += (f"; held-out test RMS {base['rms_um']:.2f} -> {last['rms_um']:.2f} um, "
                 f"max {base['max_um']:.2f} -> {last['max_um']:.2f} um")
     out += escalation_sentence(escalated, [s.added.name for s in stages[1:]])
+    noise = estimated_words(stages[-1].result, stated)
+    out += f". {noise}" if noise else ""
     tail = heldout_sentence(heldout)
     for v in vetoed:
         out += (f". Not added, the outer test set got worse with it: {v['name']} (RMS "
