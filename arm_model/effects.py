@@ -27,8 +27,8 @@ from .description import ArmDescription
 __all__ = ["ModelInputs", "Geometry", "Effect", "EncoderEccentricity", "JointCompliance",
            "ThermalGrowth", "ForceSensorError", "JointGain", "ProbeCompliance", "EFFECTS", "effect_from_name",
            "REFERENCE_TEMPERATURE_C", "JointHarmonics", "ProbeThermalGrowth", "ProbeComplianceMatrix",
-           "ApproachOffset", "LateralCompliance", "ThermalDrift", "joint_frame", "last_frame", "gravity_moment",
-           "contact_moment"]
+           "ApproachOffset", "LateralCompliance", "ThermalDrift", "JointBacklash", "joint_frame", "last_frame",
+           "gravity_moment", "contact_moment"]
 
 REFERENCE_TEMPERATURE_C = 20.0
 
@@ -526,6 +526,31 @@ def _shift_ball(desc: ArmDescription, geom: Geometry, q: Any, d_base: list[Any],
 
 
 @dataclass(frozen=True)
+class JointBacklash(Effect):
+    """Play of joint i taken up by gravity: the joint turns by ``b_i sign(-tau_gravity_i)`` beyond its encoder,
+    ``b_i`` [rad] to the side its gravity load pushes it (the sign convention of :class:`JointCompliance`'s
+    gravity part), whatever the load's size: a gear's or a bearing's play, closed one way or the other as the
+    torque the joint holds against the links' weight changes sign. Piecewise constant in the torque, linear in
+    ``b``; no bound (a reading offset the other way is the same play seen from the encoder's side)."""
+    key: str = field(default="joint_backlash", init=False, repr=False)
+    acts_on_readings: ClassVar[bool] = True
+    revolute_only: ClassVar[bool] = True
+
+    def needs(self) -> tuple[str, ...]:
+        return ("tau_gravity",)
+
+    def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
+        return [(f"{desc.joint_names[i]}.backlash", "rad") for i in self.joint_indices(desc)]
+
+    def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
+        q = list(inputs.q)
+        tau = _torques(inputs.tau_gravity, "tau_gravity")
+        for k, i in enumerate(self.joint_indices(desc)):
+            q[i] = q[i] - params[k] * ops.sign(tau[i])
+        inputs.q = q
+
+
+@dataclass(frozen=True)
 class JointHarmonics(Effect):
     """Joint-angle error periodic in an angle: ``q_i += sum_h c_h cos(h q_s) + s_h sin(h q_s)`` for the
     harmonics ``harmonics`` of the reading of joint ``source`` (0-based; None: the joint's own angle, a
@@ -747,4 +772,4 @@ class LateralCompliance(Effect):
 
 EFFECTS.update({str(cls.__dataclass_fields__["key"].default): cls for cls in
                 (JointHarmonics, ProbeThermalGrowth, ProbeComplianceMatrix, ApproachOffset, LateralCompliance,
-                 ThermalDrift)})
+                 ThermalDrift, JointBacklash)})

@@ -224,7 +224,7 @@ class ArmModel:
         inputs = ModelInputs(q=[q[i] for i in range(j)], wrench=[w[i] for i in range(6)],
                              temperature=aux[0], tau_gravity=[aux[1 + i] for i in range(j)],
                              tau_contact=[aux[1 + j + i] for i in range(j)], time=aux[1 + 2 * j])
-        x, y, z = self._evaluate(p, inputs, SimpleNamespace(sin=ca.sin, cos=ca.cos))
+        x, y, z = self._evaluate(p, inputs, SimpleNamespace(sin=ca.sin, cos=ca.cos, sign=ca.sign))
         return ca.Function(name, [q, w, aux, p], [ca.vertcat(x, y, z)], ["q", "w", "aux", "p"], ["p_base"])
 
     @staticmethod

@@ -21,10 +21,12 @@ below ``rank_tol`` are *absorbed*: the data cannot tell them from what is alread
 Generic families (:func:`structure_tests`), with ``D_j = dx/dq_j`` the ball's sensitivity to joint j:
 harmonics ``cos/sin(h q_j)``, h = 1..4, times ``D_j``; harmonics 1 and 2 of ``q_k`` times ``D_j`` for each
 other joint j (a cross-coupling, "qK harmonics on jJ"); the gravity torque and the contact torque of
-joint j times ``D_j``; contact force components and magnitude times the probe axes; temperature and
-time times the base axes and the position vector (a scale); the temperature times each link's length
-and the probe's ("temperature per link"); the tilt of joint j about its frame's x and y axes times the
-moment across it ("jN lateral load"); the stylus direction (approach) times the base axes; one offset per measurement
+joint j times ``D_j``; the gravity torque's sign times ``D_j`` (a play the load closes one way or the other,
+"jN gravity torque sign", where at least :data:`MIN_SIGN_SHARE` of the rows lie on each side); contact
+force components and magnitude times the probe axes; temperature and time times the base axes and the
+position vector (a scale); the temperature times each link's length and the probe's ("temperature per
+link"); the tilt of joint j about its frame's x and y axes times the moment across it ("jN lateral load");
+the stylus direction (approach) times the base axes; one offset per measurement
 (one-way ANOVA) and per artefact feature or certified length.
 """
 from __future__ import annotations
@@ -69,6 +71,9 @@ HARMONICS = (1, 2, 3, 4)
 #: harmonics of another joint's angle tested for a cross-coupling (low orders: a cable, a counterbalance;
 #: with the third too, one clean campaign in 20 showed a false structure among the 42 pairs)
 CROSS_HARMONICS = (1, 2)
+#: the smallest share of the rows on either side of a joint's gravity torque sign for the family of its play
+#: (``jN gravity torque sign``): with fewer, the sign picks out a handful of points, a gross error's signature
+MIN_SIGN_SHARE = 0.1
 #: a candidate parameter the data resolve only to worse than this many plausible sizes counts as absorbed
 SCREEN_RESOLUTION = 1.0
 
@@ -692,6 +697,12 @@ def _joint_families(f: _FamilyInputs) -> list[Family]:
             out.append(Family(f"{jr.name} gravity torque", f"error of joint {jr.name}'s angle proportional to the "
                               "torque it holds against gravity", "field", [dq], [(f"tau_g{j + 1}", f.tau_g[:, j])],
                               (f"gravity torque {jr.name}", "N m", 1.0, f.tau_g[:, j])))
+            sign = np.sign(f.tau_g[:, j])
+            if min(np.sum(sign > 0), np.sum(sign < 0)) >= MIN_SIGN_SHARE * len(sign):
+                out.append(Family(f"{jr.name} gravity torque sign", f"error of joint {jr.name}'s angle changing with "
+                                  "the sign of the torque it holds against gravity (a play the load closes one way "
+                                  "or the other)", "field", [dq], [(f"sign(tau_g{j + 1})", sign)],
+                                  (f"gravity torque {jr.name}", "N m", 1.0, f.tau_g[:, j])))
         if f.has_force and np.max(np.abs(f.tau_c[:, j]), initial=0.0) > 1e-6:
             out.append(Family(f"{jr.name} contact torque", f"error of joint {jr.name}'s angle proportional to the "
                               "contact force's torque on it", "field", [dq], [(f"tau_c{j + 1}", f.tau_c[:, j])],

@@ -20,7 +20,9 @@ Family (:func:`calibration.diagnostics.families`) -> candidates (:mod:`arm_model
   already hold) and ``probe compliance axes tilted`` (its xz and yz terms only: a stylus bent or mounted askew,
   two parameters where the matrix has up to six);
 * ``approach direction`` -> ``approach offset`` (:class:`~arm_model.effects.ApproachOffset`);
-* ``jN lateral load`` -> ``lateral compliance jN`` (:class:`~arm_model.effects.LateralCompliance`).
+* ``jN lateral load`` -> ``lateral compliance jN`` (:class:`~arm_model.effects.LateralCompliance`);
+* ``jN gravity torque sign`` -> ``backlash jN`` (:class:`~arm_model.effects.JointBacklash`: the joint's play,
+  closed to the side its gravity load pushes it).
 
 Other families (time, per measurement, per artefact, a joint's gravity or contact torque) have no effect
 here: they stay reported as unexplained.
@@ -34,6 +36,7 @@ import numpy as np
 from arm_model.effects import (
     ApproachOffset,
     EncoderEccentricity,
+    JointBacklash,
     JointGain,
     JointHarmonics,
     LateralCompliance,
@@ -151,6 +154,10 @@ def synthesise(family_names, model: ArmModel) -> list[Candidate]:
         elif fam == "approach direction":
             if ApproachOffset not in held:
                 add("approach offset", ApproachOffset(), "approach_offset")
+        elif (mb := re.fullmatch(r"(.+) gravity torque sign", fam)) and mb.group(1) in names:
+            j = names[mb.group(1)]
+            if not any(isinstance(e, JointBacklash) and j in e.joint_indices(desc) for e in model.effects):
+                add(f"backlash {mb.group(1)}", JointBacklash(joints=(j,)), "joint_backlash", mb.group(1))
         else:
             m = re.fullmatch(r"(.+) lateral load", fam)
             if m and m.group(1) in names and not desc.coupled:    # an effect on the rows: refused on a coupled chain
