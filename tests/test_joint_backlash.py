@@ -3,7 +3,10 @@ docs/close-loop.md): its evaluators agree, it is the rigid arm at shifted readin
 family that sees it exists only where the gravity torque changes sign, and the family builds it."""
 from __future__ import annotations
 
+import functools
+
 import numpy as np
+import pytest
 
 from arm_model import PinocchioArm, ball_centres
 from arm_model.effects import EFFECTS, JointBacklash
@@ -47,3 +50,43 @@ def test_the_sign_family_builds_the_play_once(nominal):
     cands = synthesise(["j4 gravity torque sign", "j4 gravity torque"], ArmModel(nominal, ()))
     assert [(c.name, c.effect) for c in cands] == [("backlash j4", JointBacklash(joints=(3,)))]
     assert synthesise(["j4 gravity torque sign"], ArmModel(nominal, (JointBacklash(joints=(3,)),))) == []
+
+
+@functools.cache
+def _clean_fit(nominal):
+    """A clean fast-path campaign with the gravity torques attached, fitted by least squares."""
+    from arm_model.effects import JointCompliance
+    from arm_model.sim.quick import SynthSpec, make_campaign
+    from calibration.calibrate import FitOptions, calibrate
+    from calibration.candidates import needs_model
+    from calibration.data import Weights, make_data
+
+    camp = make_campaign(ArmModel(nominal), SynthSpec(ballbars=4, ballbar_points=4, seats=2, articulations=8,
+                                                      spheres=2, sphere_points=8, noise=2e-6), seed=2)
+    data = make_data(camp.points, camp.artefacts, needs_model(nominal, [JointCompliance()]))
+    return calibrate(ArmModel(nominal), data, FitOptions(weights=Weights(probe=2e-6), prior_scale=None))
+
+
+@pytest.mark.parametrize("least", [None, 0.45])
+def test_the_sign_family_exists_where_the_torque_changes_sign(nominal, least, monkeypatch):
+    """``jN gravity torque sign`` for a joint whose gravity torque takes either sign on at least MIN_SIGN_SHARE
+    of the points, its basis that sign; none for a joint whose torque keeps one sign (its sign is a constant,
+    the joint's offset)."""
+    from calibration import diagnostics
+    from calibration.diagnostics import families, residual_space
+
+    if least is not None:              # the rule's other side: joints this campaign loads on both sides by < 45 %
+        monkeypatch.setattr(diagnostics, "MIN_SIGN_SHARE", least)
+    res = _clean_fit(nominal)
+    fams = {f.name: f for f in families(residual_space(res))}
+    tau = res.data.aux.tau_gravity
+    for j, name in enumerate(nominal.joint_names):
+        loaded = np.max(np.abs(tau[:, j])) > 1e-6         # a torque at rounding level has no sign
+        share = min(np.mean(tau[:, j] > 0), np.mean(tau[:, j] < 0)) if loaded else 0.0
+        fam = fams.get(f"{name} gravity torque sign")
+        assert (fam is not None) == (share >= diagnostics.MIN_SIGN_SHARE), (name, share)
+        if fam is not None:
+            assert_close(fam.basis[0][1], np.sign(tau[:, j]), atol=0)
+    signs = [f for f in fams if f.endswith("gravity torque sign")]
+    assert len(signs) == (5 if least is None else 4), signs        # j2: 37.5 % of its torques > 0
+    assert "j1 gravity torque sign" not in fams          # the base joint holds no gravity torque
