@@ -27,8 +27,8 @@ from .description import ArmDescription
 __all__ = ["ModelInputs", "Geometry", "Effect", "EncoderEccentricity", "JointCompliance",
            "ThermalGrowth", "ForceSensorError", "JointGain", "ProbeCompliance", "EFFECTS", "effect_from_name",
            "REFERENCE_TEMPERATURE_C", "JointHarmonics", "ProbeThermalGrowth", "ProbeComplianceMatrix",
-           "ApproachOffset", "LateralCompliance", "ThermalDrift", "JointBacklash", "joint_frame", "last_frame",
-           "gravity_moment", "contact_moment"]
+           "ApproachOffset", "LateralCompliance", "ThermalDrift", "JointBacklash", "JointHysteresis", "joint_frame",
+           "last_frame", "gravity_moment", "contact_moment"]
 
 REFERENCE_TEMPERATURE_C = 20.0
 
@@ -45,6 +45,7 @@ class ModelInputs:
     #: about ``origin``, [N m]); :class:`LateralCompliance` computes them itself when None
     moments: Any = None
     time: Any = None              # [s] the points' time stamps (``time_s``)
+    motion: list[Any] | None = None   # J [1] the sign of each reading's last move (model.reading_motion)
 
 
 @dataclass
@@ -551,6 +552,32 @@ class JointBacklash(Effect):
 
 
 @dataclass(frozen=True)
+class JointHysteresis(Effect):
+    """Hysteresis of joint i by the direction it last turned: the joint sits ``h_i m_i`` beyond its encoder, ``m_i``
+    the sign (-1, 0, +1) of its reading's move onto the point from the point captured before it
+    (``ModelInputs.motion``, :func:`arm_model.model.reading_motion`): a play or an encoder's hysteresis that the
+    last motion closes, a robot's backlash when it drives from posture to posture. ``h`` [rad], half the band;
+    no bound (its sign says which way the reading lags)."""
+    key: str = field(default="joint_hysteresis", init=False, repr=False)
+    acts_on_readings: ClassVar[bool] = True
+    revolute_only: ClassVar[bool] = True
+
+    def needs(self) -> tuple[str, ...]:
+        return ("motion",)
+
+    def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
+        return [(f"{desc.joint_names[i]}.hysteresis", "rad") for i in self.joint_indices(desc)]
+
+    def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
+        if inputs.motion is None:
+            raise ValueError("the effect 'joint_hysteresis' needs the per-point 'motion' (model.reading_motion)")
+        q = list(inputs.q)
+        for k, i in enumerate(self.joint_indices(desc)):
+            q[i] = q[i] + params[k] * inputs.motion[i]
+        inputs.q = q
+
+
+@dataclass(frozen=True)
 class JointHarmonics(Effect):
     """Joint-angle error periodic in an angle: ``q_i += sum_h c_h cos(h q_s) + s_h sin(h q_s)`` for the
     harmonics ``harmonics`` of the reading of joint ``source`` (0-based; None: the joint's own angle, a
@@ -772,4 +799,4 @@ class LateralCompliance(Effect):
 
 EFFECTS.update({str(cls.__dataclass_fields__["key"].default): cls for cls in
                 (JointHarmonics, ProbeThermalGrowth, ProbeComplianceMatrix, ApproachOffset, LateralCompliance,
-                 ThermalDrift, JointBacklash)})
+                 ThermalDrift, JointBacklash, JointHysteresis)})

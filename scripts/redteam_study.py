@@ -70,6 +70,7 @@ from robot_hidden_study import (  # noqa: E402
 
 from arm_model import PinocchioArm, load_description  # noqa: E402
 from arm_model.io import Feature  # noqa: E402
+from arm_model.model import reading_motion  # noqa: E402
 from calibration.data import Weights  # noqa: E402
 from calibration.identifiability import prior_scales  # noqa: E402
 from calibration.loop import close_loop  # noqa: E402
@@ -100,13 +101,11 @@ def case_backlash_gravity(seed: int = 3) -> Case:
 def case_backlash_motion(seed: int = 3) -> Case:
     c = _from_sim(_arm_campaign({}, seed), "j1 hysteresis 0.002 deg by the sign of its motion")
     q = c.points.q.copy()
-    m = c.points.measurement
-    step = np.zeros(len(m))
-    for i in range(1, len(m)):
-        step[i] = q[i, 0] - q[i - 1, 0] if m[i] == m[i - 1] else 0.0
-    first = np.r_[True, m[1:] != m[:-1]]
-    step[first] = -np.r_[step[1:], 0.0][first]        # a measurement's first point: as if it came from the next
-    q[:, 0] -= 0.002 * DEG * np.sign(step)
+    # the joint's last move onto each point: from the point captured before it (a monotone path between the two),
+    # the campaign's first point from a random side
+    sign = reading_motion(q, None, c.points.time)[:, 0]
+    sign[sign == 0] = np.random.default_rng(seed + 300).choice([-1.0, 1.0], int(np.sum(sign == 0)))
+    q[:, 0] -= 0.002 * DEG * sign
     return _readings(c, q)
 
 

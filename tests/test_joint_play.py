@@ -1,6 +1,7 @@
-"""A joint's play closed by gravity (:class:`arm_model.effects.JointBacklash`, red team round 3,
-docs/close-loop.md): its evaluators agree, it is the rigid arm at shifted readings (by hand), the structure
-family that sees it exists only where the gravity torque changes sign, and the family builds it."""
+"""A joint's play closed by gravity (:class:`arm_model.effects.JointBacklash`) or by its last motion
+(:class:`arm_model.effects.JointHysteresis`, :func:`arm_model.model.reading_motion`), red team round 3,
+docs/close-loop.md: the evaluators agree, each is the rigid arm at shifted readings (by hand), the structure
+families that see them exist only where the sign changes, and the families build them."""
 from __future__ import annotations
 
 import functools
@@ -9,8 +10,8 @@ import numpy as np
 import pytest
 
 from arm_model import PinocchioArm, ball_centres
-from arm_model.effects import EFFECTS, JointBacklash
-from arm_model.model import ArmModel, AuxData
+from arm_model.effects import EFFECTS, JointBacklash, JointHysteresis
+from arm_model.model import ArmModel, AuxData, reading_motion
 from calibration.synthesis import synthesise
 from conftest import assert_close
 
@@ -46,10 +47,44 @@ def test_three_evaluators_agree_and_the_play_is_a_shifted_reading(nominal):
     assert model.spec.names[-2:] == ("j2.backlash", "j4.backlash")
 
 
-def test_the_sign_family_builds_the_play_once(nominal):
-    cands = synthesise(["j4 gravity torque sign", "j4 gravity torque"], ArmModel(nominal, ()))
-    assert [(c.name, c.effect) for c in cands] == [("backlash j4", JointBacklash(joints=(3,)))]
-    assert synthesise(["j4 gravity torque sign"], ArmModel(nominal, (JointBacklash(joints=(3,)),))) == []
+def test_reading_motion_by_hand():
+    """The sign of each joint's move from the point captured before it: per session, in time order, a repeated
+    reading (a second marker) taking its twin's, a session's first point 0; the rows' order without times."""
+    q = np.array([[0.3, 1.0], [0.1, 1.0], [0.2, 0.5], [0.2, 0.5], [5.0, 5.0], [4.0, 6.0]])
+    session = np.array(["a", "a", "a", "a", "b", "b"])
+    time = np.array([2.0, 1.0, 3.0, 3.0, 0.0, 1.0])
+    want = np.array([[1, 0], [0, 0], [-1, -1], [-1, -1], [0, 0], [-1, 1]], dtype=float)
+    assert_close(reading_motion(q, session, time), want, atol=0)
+    assert_close(reading_motion(q[:2]), np.array([[0, 0], [-1, 0]], dtype=float), atol=0)
+
+
+def test_hysteresis_evaluators_agree_and_it_is_a_shifted_reading(nominal):
+    model = ArmModel(nominal, (JointHysteresis(joints=(0, 2)),))
+    q, w, aux = _inputs(nominal)
+    motion = reading_motion(q)
+    aux = AuxData(motion=motion)
+    p = np.zeros(model.spec.size)
+    p[-2:] = [4e-5, -1e-5]
+    batch = model.ball_centres(q, w, p, aux)
+    shifted = q.copy()
+    shifted[:, 0] += 4e-5 * motion[:, 0]
+    shifted[:, 2] -= 1e-5 * motion[:, 2]
+    assert_close(batch, ball_centres(nominal, shifted, w), atol=1e-12)
+    f = model.casadi_function()
+    a = ArmModel.aux_matrix(aux, len(q), nominal.n_joints)
+    for i in range(len(q)):
+        assert_close(np.array(f(q[i], w[i], a[i], p)).ravel(), batch[i], atol=1e-12)
+        assert_close(model.pinocchio_ball_centre(q[i], w[i], p, dict(motion=motion[i])), batch[i], atol=1e-12)
+    assert EFFECTS["joint_hysteresis"] is JointHysteresis
+    assert model.spec.names[-2:] == ("j1.hysteresis", "j3.hysteresis")
+
+
+def test_the_sign_families_build_the_play_once(nominal):
+    cands = synthesise(["j4 gravity torque sign", "j4 gravity torque", "j2 motion sign"], ArmModel(nominal, ()))
+    assert [(c.name, c.effect) for c in cands] == [("backlash j4", JointBacklash(joints=(3,))),
+                                                   ("hysteresis j2", JointHysteresis(joints=(1,)))]
+    held = ArmModel(nominal, (JointBacklash(joints=(3,)), JointHysteresis(joints=(1,))))
+    assert synthesise(["j4 gravity torque sign", "j2 motion sign"], held) == []
 
 
 @functools.cache
@@ -89,4 +124,8 @@ def test_the_sign_family_exists_where_the_torque_changes_sign(nominal, least, mo
             assert_close(fam.basis[0][1], np.sign(tau[:, j]), atol=0)
     signs = [f for f in fams if f.endswith("gravity torque sign")]
     assert len(signs) == (5 if least is None else 4), signs        # j2: 37.5 % of its torques > 0
+    motion = reading_motion(res.data.points.q, res.data.points.session, res.data.points.time)
+    for j, name in enumerate(nominal.joint_names):             # the last move's sign: the same rule
+        share = min(np.mean(motion[:, j] > 0), np.mean(motion[:, j] < 0))
+        assert (f"{name} motion sign" in fams) == (share >= diagnostics.MIN_SIGN_SHARE), (name, share)
     assert "j1 gravity torque sign" not in fams          # the base joint holds no gravity torque
