@@ -8,7 +8,7 @@ nuisance unknowns solved on the test points (``robot_hidden_study.figures``: the
 torques at each model's own equilibrium). The loop's model file is written and read back as ``aacmm close-loop``
 writes it.
 
-    python scripts/redteam_study.py -o out/redteam                       # every case, about 25 min on 2 cores
+    python scripts/redteam_study.py -o out/redteam                       # every case, about 5 min on 2 loaded cores
     python scripts/redteam_study.py --cases blunders,sphere-diameter -o out/redteam
 
 What is checked ("false"): a verdict of "No structured residual remains" while the loop's held-out RMS is above
@@ -24,8 +24,9 @@ the simulation keeps the simulator's own rows as the truth's (``Case.truth_point
 
 * ``backlash-gravity``: j4's reading lags its true angle by 0.002 deg against the sign of its gravity torque (a
   gear or bearing play the arm's weight takes up one way or the other);
-* ``backlash-motion``: j1's reading lags by 0.002 deg in the direction the joint moved since the previous point
-  of the same measurement (hysteresis by the sign of the joint's velocity);
+* ``backlash-motion``: j1's reading lags by 0.002 deg in the direction the joint moved onto each point from the
+  point captured before it (hysteresis by the sign of the joint's velocity, the path between two points taken as
+  monotone; the campaign's first point from a random side);
 * ``harmonics23``: j3's encoder with a 2nd (0.003 deg) and a 3rd (0.002 deg) harmonic and no first;
 * ``probe-aniso``: the stylus bends 1.5x / 0.6x the declared compliance along probe x / y, with xy (4 um/N) and
   yz (0.5 um/N) cross terms, 4 N mean force;
@@ -43,6 +44,9 @@ the simulation keeps the simulator's own rows as the truth's (``Case.truth_point
 * ``urdf-truth``: the campaign simulated on the arm's URDF (urdf/aacmm7.urdf: each joint origin off in 6
   components, 20 um and 0.003 deg) and analysed with its DH description (4 per joint);
 * ``panda-backlash``: the Panda's joint 2 and 4 readings off by 0.5 mrad against the sign of their gravity torque;
+* ``panda-hysteresis``: the Panda's joint 2 and 4 readings off by 0.5 mrad by the direction each last turned,
+  from the posture before (a robot's backlash as it drives from posture to posture; a session's first posture
+  from a random side);
 * ``panda-base-drift``: the Panda's base tilting 1 mrad/h about a horizontal axis relative to the instrument
   during the campaign (20 min a session).
 """
@@ -211,6 +215,17 @@ def case_panda_backlash(seed: int = 1) -> Case:
                                       f"gravity torque ({' / '.join(share)} positive)"))
 
 
+def case_panda_hysteresis(seed: int = 1) -> Case:
+    c, _ = _panda(seed)
+    q = c.points.q.copy()
+    sign = reading_motion(q, c.points.session, c.points.time)
+    sign[sign == 0] = np.random.default_rng(seed + 300).choice([-1.0, 1.0], int(np.sum(sign == 0)))
+    for j in (1, 3):
+        q[:, j] -= 5e-4 * sign[:, j]
+    return _mocap(dataclasses.replace(_readings(c, q), what="joints 2 and 4 backlash 0.5 mrad by the direction "
+                                      "they last turned (posture to posture)"))
+
+
 def case_panda_base_drift(seed: int = 1) -> Case:
     c, _ = _panda(seed)
     pts = c.points
@@ -235,7 +250,7 @@ CASES = {"backlash-gravity": case_backlash_gravity, "backlash-motion": case_back
          "force-lag": case_force_lag, "link-sag": case_link_sag, "thermal-gradient": case_thermal_gradient,
          "bar-30um": case_bar_30um, "sphere-diameter": case_sphere_diameter, "blunders": case_blunders,
          "urdf-truth": case_urdf_truth, "panda-backlash": case_panda_backlash,
-         "panda-base-drift": case_panda_base_drift}
+         "panda-hysteresis": case_panda_hysteresis, "panda-base-drift": case_panda_base_drift}
 
 
 def written_claims(loop) -> list[str]:
