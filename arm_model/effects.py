@@ -527,54 +527,62 @@ def _shift_ball(desc: ArmDescription, geom: Geometry, q: Any, d_base: list[Any],
 
 
 @dataclass(frozen=True)
-class JointBacklash(Effect):
-    """Play of joint i taken up by gravity: the joint turns by ``b_i sign(-tau_gravity_i)`` beyond its encoder,
-    ``b_i`` [rad] to the side its gravity load pushes it (the sign convention of :class:`JointCompliance`'s
-    gravity part), whatever the load's size: a gear's or a bearing's play, closed one way or the other as the
-    torque the joint holds against the links' weight changes sign. Piecewise constant in the torque, linear in
-    ``b``; no bound (a reading offset the other way is the same play seen from the encoder's side)."""
-    key: str = field(default="joint_backlash", init=False, repr=False)
+class _JointPlay(Effect):
+    """A joint's play: joint i sits ``b_i s_i`` beyond its encoder, ``s_i`` a per-point sign (-1, 0, +1) that says
+    which side of the play the joint rests on (:meth:`signs`); ``b`` [rad], half the band, linear and unbounded (its
+    sign says which way the reading lags)."""
     acts_on_readings: ClassVar[bool] = True
     revolute_only: ClassVar[bool] = True
-
-    def needs(self) -> tuple[str, ...]:
-        return ("tau_gravity",)
+    #: the parameter's name after the joint's (``j4.backlash``)
+    parameter: ClassVar[str] = "play"
 
     def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
-        return [(f"{desc.joint_names[i]}.backlash", "rad") for i in self.joint_indices(desc)]
+        return [(f"{desc.joint_names[i]}.{self.parameter}", "rad") for i in self.joint_indices(desc)]
+
+    def signs(self, inputs: ModelInputs, ops: Any) -> list[Any]:
+        """The side of the play of every joint (one column or expression a joint)."""
+        raise NotImplementedError
 
     def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
+        side = self.signs(inputs, ops)
         q = list(inputs.q)
-        tau = _torques(inputs.tau_gravity, "tau_gravity")
         for k, i in enumerate(self.joint_indices(desc)):
-            q[i] = q[i] - params[k] * ops.sign(tau[i])
+            q[i] = q[i] + params[k] * side[i]
         inputs.q = q
 
 
 @dataclass(frozen=True)
-class JointHysteresis(Effect):
+class JointBacklash(_JointPlay):
+    """Play of joint i closed by gravity: the joint sits ``b_i sign(-tau_gravity_i)`` beyond its encoder, ``b_i``
+    to the side its gravity load pushes it (the sign convention of :class:`JointCompliance`'s gravity part), whatever
+    the load's size: a gear's or a bearing's play, closed one way or the other as the torque the joint holds against
+    the links' weight changes sign. Piecewise constant in the torque."""
+    key: str = field(default="joint_backlash", init=False, repr=False)
+    parameter: ClassVar[str] = "backlash"
+
+    def needs(self) -> tuple[str, ...]:
+        return ("tau_gravity",)
+
+    def signs(self, inputs: ModelInputs, ops: Any) -> list[Any]:
+        return [-ops.sign(t) for t in _torques(inputs.tau_gravity, "tau_gravity")]
+
+
+@dataclass(frozen=True)
+class JointHysteresis(_JointPlay):
     """Hysteresis of joint i by the direction it last turned: the joint sits ``h_i m_i`` beyond its encoder, ``m_i``
-    the sign (-1, 0, +1) of its reading's move onto the point from the point captured before it
-    (``ModelInputs.motion``, :func:`arm_model.model.reading_motion`): a play or an encoder's hysteresis that the
-    last motion closes, a robot's backlash when it drives from posture to posture. ``h`` [rad], half the band;
-    no bound (its sign says which way the reading lags)."""
+    the sign of its reading's move onto the point from the point captured before it (``ModelInputs.motion``,
+    :func:`arm_model.model.reading_motion`): a play or an encoder's hysteresis that the last motion closes, a
+    robot's backlash when it drives from posture to posture."""
     key: str = field(default="joint_hysteresis", init=False, repr=False)
-    acts_on_readings: ClassVar[bool] = True
-    revolute_only: ClassVar[bool] = True
+    parameter: ClassVar[str] = "hysteresis"
 
     def needs(self) -> tuple[str, ...]:
         return ("motion",)
 
-    def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
-        return [(f"{desc.joint_names[i]}.hysteresis", "rad") for i in self.joint_indices(desc)]
-
-    def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
+    def signs(self, inputs: ModelInputs, ops: Any) -> list[Any]:
         if inputs.motion is None:
             raise ValueError("the effect 'joint_hysteresis' needs the per-point 'motion' (model.reading_motion)")
-        q = list(inputs.q)
-        for k, i in enumerate(self.joint_indices(desc)):
-            q[i] = q[i] + params[k] * inputs.motion[i]
-        inputs.q = q
+        return list(inputs.motion)
 
 
 @dataclass(frozen=True)

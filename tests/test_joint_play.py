@@ -13,7 +13,7 @@ from arm_model import PinocchioArm, ball_centres
 from arm_model.effects import EFFECTS, JointBacklash, JointHysteresis
 from arm_model.model import ArmModel, AuxData, reading_motion
 from calibration.synthesis import synthesise
-from conftest import assert_close
+from conftest import assert_close, assert_evaluators_agree
 
 
 def _inputs(desc, n=8, seed=4):
@@ -37,12 +37,7 @@ def test_three_evaluators_agree_and_the_play_is_a_shifted_reading(nominal):
     shifted[:, 1] -= 3e-5 * np.sign(aux.tau_gravity[:, 1])
     shifted[:, 3] += 2e-5 * np.sign(aux.tau_gravity[:, 3])
     assert_close(batch, ball_centres(nominal, shifted, w), atol=1e-12)
-    f = model.casadi_function()
-    a = ArmModel.aux_matrix(aux, len(q), nominal.n_joints)
-    for i in range(len(q)):
-        assert_close(np.array(f(q[i], w[i], a[i], p)).ravel(), batch[i], atol=1e-12)
-        assert_close(model.pinocchio_ball_centre(q[i], w[i], p, dict(tau_gravity=aux.tau_gravity[i])), batch[i],
-                     atol=1e-12)
+    assert_evaluators_agree(model, q, w, p, aux)
     assert EFFECTS["joint_backlash"] is JointBacklash
     assert model.spec.names[-2:] == ("j2.backlash", "j4.backlash")
 
@@ -70,11 +65,7 @@ def test_hysteresis_evaluators_agree_and_it_is_a_shifted_reading(nominal):
     shifted[:, 0] += 4e-5 * motion[:, 0]
     shifted[:, 2] -= 1e-5 * motion[:, 2]
     assert_close(batch, ball_centres(nominal, shifted, w), atol=1e-12)
-    f = model.casadi_function()
-    a = ArmModel.aux_matrix(aux, len(q), nominal.n_joints)
-    for i in range(len(q)):
-        assert_close(np.array(f(q[i], w[i], a[i], p)).ravel(), batch[i], atol=1e-12)
-        assert_close(model.pinocchio_ball_centre(q[i], w[i], p, dict(motion=motion[i])), batch[i], atol=1e-12)
+    assert_evaluators_agree(model, q, w, p, aux)
     assert EFFECTS["joint_hysteresis"] is JointHysteresis
     assert model.spec.names[-2:] == ("j1.hysteresis", "j3.hysteresis")
 
