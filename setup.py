@@ -1,4 +1,4 @@
-"""Build hook: the wheel carries a copy of the nominal arm and the examples (package data of
+"""Build hook: the wheel carries a copy of the nominal arm, the examples, the docs and the README (package data of
 arm_model, under arm_model/_shipped/), so an installed toolkit works without a clone.
 Everything else is declared in pyproject.toml."""
 import shutil
@@ -9,7 +9,7 @@ from setuptools.command.build_py import build_py
 
 HERE = Path(__file__).resolve().parent
 SHIPPED = {"urdf/aacmm7.dh.toml": "urdf/aacmm7.dh.toml", "urdf/aacmm7.urdf": "urdf/aacmm7.urdf",
-           "examples": "examples", "docs": "docs"}
+           "examples": "examples", "docs": "docs", "README.md": "README.md"}
 
 
 class BuildWithShipped(build_py):

@@ -198,7 +198,11 @@ def main(argv: list[str] | None = None) -> int:
     if any("\0" in str(a) for a in argv):      # only from a program (a shell cannot pass one)
         print("aacmm: error: a command-line argument holds a NUL character", file=sys.stderr)
         return EXIT_INPUT
-    parser = build_parser(argv)
+    try:        # loading the commands takes a second: Ctrl-C then is one line too, never a traceback
+        parser = build_parser(argv)
+    except KeyboardInterrupt:
+        print("aacmm: error: interrupted; nothing written", file=sys.stderr)
+        return 130
     empty = next((a for a in argv if a == "" or (a.startswith("--") and a.endswith("=") and "=" not in a[:-1])),
                  None)
     if empty is not None:       # "$DIR" of an unset variable: "" is read as "." by every path (examples "" wrote

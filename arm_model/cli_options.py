@@ -14,7 +14,7 @@ from .model_file import Arm, load_model
 
 __all__ = ["add_arm_options", "add_frame_options", "add_output_option", "output_path", "arm_from_args", "arm_inputs",
            "model_from_args", "number_in", "positive", "non_negative", "at_least", "fraction", "finite", "seed",
-           "port"]
+           "port", "duration_s", "MAX_WAIT_S"]
 
 log = logging.getLogger(__name__)
 
@@ -76,12 +76,23 @@ finite = number_in()
 seed = number_in(0, kind=int)
 #: argparse type: a TCP port
 port = number_in(1, 65535, kind=int)
+#: the longest time [s] an option may ask a command to wait or serve (about 116 days): beyond it a number is a typo
+#: (``--linger-s 1e308`` served the live view until Ctrl-C)
+MAX_WAIT_S = 1e7
+
+
+def duration_s(zero: bool = True):
+    """argparse type: a time to wait [s], finite, from 0 (``zero``; else above 0) to :data:`MAX_WAIT_S`."""
+    return number_in(0, MAX_WAIT_S, low_open=not zero)
 
 
 def output_path(text: str) -> Path:
     """argparse type of ``-o``: a path; an empty one is refused (it would name the current folder)."""
     if not text.strip():
         raise argparse.ArgumentTypeError("expected a path, got an empty one")
+    if text == "-":             # (it wrote a file named "-" where standard output was meant)
+        raise argparse.ArgumentTypeError("'-' (standard output) is not an output of the toolkit: name a file or "
+                                         "folder (./- for a file of that name)")
     return Path(text)
 
 

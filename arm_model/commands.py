@@ -11,7 +11,14 @@ import numpy as np
 
 from .checks import JointLimitTally, log_warnings
 from .cli import command_help
-from .cli_options import add_arm_options, add_frame_options, add_output_option, arm_inputs, model_from_args
+from .cli_options import (
+    add_arm_options,
+    add_frame_options,
+    add_output_option,
+    arm_inputs,
+    model_from_args,
+    output_path,
+)
 from .csv_io import format_csv
 from .errors import InputError
 from .io import concat_points, iter_points
@@ -60,8 +67,9 @@ def register(sub) -> None:
         description="Copy the shipped example campaigns (campaigns/*.toml, for aacmm simulate), the example "
                     "data (data/: a simulated ring campaign, real measured robot data with its licence), the "
                     "shipped arm descriptions (arms/: the nominal aacmm7 as a DH table, a template for yours) and "
-                    "the user docs (docs/, e.g. docs/formats.md) into DIR. Existing files are never overwritten.")
-    e.add_argument("dir", type=Path, help="destination folder (created)")
+                    "the user docs (docs/, e.g. docs/formats.md) with the README they link to (README.md) into DIR. "
+                    "Existing files are never overwritten.")
+    e.add_argument("dir", type=output_path, help="destination folder (created)")
     e.set_defaults(func=run_examples)
 
 
@@ -280,8 +288,8 @@ def run_tip(args: argparse.Namespace) -> int:
 def run_examples(args: argparse.Namespace) -> int:
     from .shipped import copy_examples
     written = copy_examples(args.dir)
-    log.info(f"examples -> {args.dir}/ ({', '.join(p.name for p in written)}); try: "
-          f"aacmm simulate {args.dir}/campaigns/paper-ring.toml -o out/paper-ring")
+    log.info(f"examples -> {args.dir}/ ({', '.join(p.name for p in written)}); start with {args.dir}/README.md; "
+             f"try: aacmm simulate {args.dir}/campaigns/paper-ring.toml -o out/paper-ring")
     return 0
 
 

@@ -32,7 +32,8 @@ import numpy as np
 
 from .errors import InputError, decode_text, open_input
 
-__all__ = ["parse_number", "csv_records", "CsvBlock", "iter_csv_blocks", "csv_spans", "format_csv", "format_row"]
+__all__ = ["parse_number", "blank_record", "csv_records", "CsvBlock", "iter_csv_blocks", "csv_spans", "format_csv",
+           "format_row"]
 
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-]?(?:nan|inf|infinity)",
                      re.IGNORECASE)
@@ -45,18 +46,35 @@ def parse_number(cell: str) -> float | None:
     return float(cell) if _NUMBER.fullmatch(cell) else None
 
 
+_SEPARATORS = " \t\r\f\v,"
+
+
+def blank_record(line: str) -> bool:
+    """True for a line that holds no value: empty, white space, or only commas between blank (or quoted
+    blank, ``""``) cells, as a spreadsheet writes an empty row (``,,,,``). Every reader of the toolkit's CSV
+    (files and live streams) skips such a line as a blank one, never counting it as a sample or a bad line."""
+    rest = line.strip(_SEPARATORS)
+    if not rest:
+        return True
+    if rest[0] != '"':
+        return False
+    try:
+        return not any(c.strip() for c in next(csv.reader([line], strict=True)))
+    except csv.Error:
+        return False
+
+
 def csv_records(text: str, path: str, first_line: int = 1) -> list[tuple[int, list[str]]]:
-    """Non-blank CSV records with their physical line; a record may not span lines."""
+    """Non-blank CSV records (:func:`blank_record`) with their physical line; a record may not span lines."""
     out = []
     for no, line in enumerate(text.splitlines(), start=first_line):
-        if not line.strip():
+        if blank_record(line):
             continue
         try:
             rec = next(csv.reader([line], strict=True))
         except csv.Error as exc:
             raise InputError(f"not valid CSV: {exc}", path, no) from None
-        if any(c.strip() for c in rec):
-            out.append((no, rec))
+        out.append((no, rec))
     return out
 
 

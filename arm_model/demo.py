@@ -19,11 +19,12 @@ import time
 from pathlib import Path
 
 from .cli import main as aacmm
+from .shipped import shipped_path
 
-ROOT = Path(__file__).resolve().parents[1]
-ARM = ROOT / "urdf" / "aacmm7.dh.toml"
-DATA = ROOT / "examples" / "data"
-CAMPAIGNS = ROOT / "examples" / "campaigns"
+# the shipped files: the checkout's, or an installed wheel's copy (`python -m arm_model.demo` after a pip install)
+ARM = shipped_path("urdf/aacmm7.dh.toml")
+DATA = shipped_path("examples/data")
+CAMPAIGNS = shipped_path("examples/campaigns")
 
 
 def _step(title: str, argv: list[str]) -> None:
@@ -43,7 +44,7 @@ def _on_campaign(command: str, folder: Path, options: list[str], out: Path) -> l
             + ["--arm", str(ARM), *options, "-o", str(out)])
 
 
-LIVE = ROOT / "examples" / "live"
+LIVE = shipped_path("examples/live")
 
 
 def _start_live(out: Path):
@@ -62,7 +63,7 @@ def _start_live(out: Path):
     print(f"\n=== 0. a live measurement session, replayed at real time in the background\n$ aacmm "
           f"{' '.join(cmd[3:])}", flush=True)
     fh = open(log, "w")
-    proc = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT, cwd=ROOT)
+    proc = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT)   # -o relative to this folder
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and proc.poll() is None:
         text = log.read_text()

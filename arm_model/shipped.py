@@ -73,11 +73,12 @@ def provenance(inputs) -> dict:
 
 def copy_examples(dest: str | Path) -> list[Path]:
     """Copy the example campaigns and data (with their licences), the shipped arm descriptions (``arms/``,
-    a template for your own DH table) and the user docs into ``dest`` (created if needed), whole or not at all:
-    copied into a temporary folder beside them first, the top-level entries (``campaigns/``, ``data/``, ``live/``,
-    ``arms/``, ``docs/``) then renamed into ``dest``. Refuses an entry that exists already (a file, a folder, a
-    symbolic link, which would lead the copy outside ``dest``): nothing is written over or through. Returns the
-    top-level entries written."""
+    a template for your own DH table), the user docs and the README (``README.md``, which the docs link to as
+    ``../README.md``; left out where ``dest`` has one of its own) into ``dest`` (created if needed), whole or not
+    at all: copied into a temporary folder beside them first, the top-level entries (``campaigns/``, ``data/``,
+    ``live/``, ``arms/``, ``docs/``, ``README.md``) then renamed into ``dest``. Refuses an entry that exists already
+    (a file, a folder, a symbolic link, which would lead the copy outside ``dest``): nothing is written over or
+    through. Returns the top-level entries written."""
     import os
     import tempfile
 
@@ -90,6 +91,9 @@ def copy_examples(dest: str | Path) -> list[Path]:
     pairs += [(shipped_path(rel), Path("arms") / Path(rel).name) for rel in SHIPPED_ARMS.values()]
     if shipped_path("docs").is_dir():
         pairs.append((shipped_path("docs"), Path("docs")))
+    # the guides link to ../README.md (its first own measurement); a folder's own README.md is left as it is
+    if shipped_path("README.md").is_file() and not os.path.lexists(dest / "README.md"):
+        pairs.append((shipped_path("README.md"), Path("README.md")))
     files = [(f, t / f.relative_to(s)) for s, t in pairs if s.is_dir() for f in s.rglob("*")
              if f.is_file() and "__pycache__" not in f.parts]
     files += [(s, t) for s, t in pairs if s.is_file()]

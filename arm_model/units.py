@@ -61,6 +61,7 @@ def to_si(value, unit: str):
 PLAUSIBLE_SI: dict[str, float] = {
     "length": 1e3, "angle": math.radians(1e4), "force": 1e5, "torque": 1e5, "compliance": 1.0,
     "temperature": 1e4, "time": 1e10, "mass": 1e4,
+    "inertia": 1e10,            # a moment of inertia [kg m^2]: 10 t at 1 km
     # effect parameters of a model file (arm_model.model_file.PARAM_UNITS)
     "angular compliance": 1.0, "expansion": 1.0, "ratio": 1e3, "temperature difference": 1e4,
     # campaign files of the simulator
@@ -97,7 +98,8 @@ def implausible(value_si, quantity: str):
         return idx, f"a temperature below absolute zero ({x:g} C)"
     f, unit = {"length": (1e3, "mm"), "angle": (180 / math.pi, "deg"), "force": (1.0, "N"),
                "torque": (1.0, "N m"), "compliance": (1e3, "mm/N"), "temperature": (1.0, "C"),
-               "time": (1.0, "s"), "mass": (1.0, "kg"), "angular compliance": (1.0, "rad/(N m)"),
+               "time": (1.0, "s"), "mass": (1.0, "kg"), "inertia": (1.0, "kg m^2"),
+               "angular compliance": (1.0, "rad/(N m)"),
                "expansion": (1.0, "1/K"), "ratio": (1.0, ""), "temperature difference": (1.0, "K"),
                "stiffness": (1.0, "N m/rad"), "temperature_rate": (1.0, "C/s")}[quantity]
     si = {"length": "m", "angle": "rad", "compliance": "m/N"}.get(quantity, unit)

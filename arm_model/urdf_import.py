@@ -80,14 +80,18 @@ _NUMERIC = {
     "safety_controller": {"soft_lower_limit": 1, "soft_upper_limit": 1, "k_position": 1, "k_velocity": 1},
 }
 #: the numbers the kinematics use, by (parent tag, tag, attribute) -> the quantity whose plausible range
-#: (arm_model.units.PLAUSIBLE_SI) they keep (None: finite only). Only these are checked beyond being
-#: numbers when the file is read; the masses and centres of mass of the links folded into the chain when
-#: they are folded (:func:`_fold_masses`); visual and collision geometry, inertia tensors, efforts,
-#: velocities, damping are never used here (an inertia of -5e-20, a mirrored mesh's negative scale are no
-#: errors).
+#: (arm_model.units.PLAUSIBLE_SI) they keep (None: finite only), and every number of an ``<inertial>``: urdfdom
+#: refuses a non-finite one there and Pinocchio then drops the link's inertial without a word, and a calibrated
+#: URDF carries it to every dynamics tool. Only these are checked beyond being numbers when the file is read; a
+#: mass the chain uses is moreover not negative (:func:`_checked_mass`), one off the chain is warned
+#: (:func:`_warn_negative_masses`); inertia tensors are not judged (none is used). Visual and collision
+#: geometry, efforts, velocities, damping are never used here (a mirrored mesh's negative scale is no error).
 _USED = {("joint", "origin", "xyz"): "length", ("joint", "origin", "rpy"): "angle", ("joint", "axis", "xyz"): "ratio",
          ("joint", "limit", "lower"): None, ("joint", "limit", "upper"): None,
-         ("joint", "mimic", "multiplier"): "ratio", ("joint", "mimic", "offset"): None}
+         ("joint", "mimic", "multiplier"): "ratio", ("joint", "mimic", "offset"): None,
+         ("inertial", "mass", "value"): "mass", ("inertial", "origin", "xyz"): "length",
+         ("inertial", "origin", "rpy"): "angle",
+         **{("inertial", "inertia", k): "inertia" for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}}
 #: used numbers that may be infinite: a joint limit of +-inf is no limit (as +-1e16 from SDF converters is)
 _UNBOUNDED = {("joint", "limit", "lower"), ("joint", "limit", "upper")}
 #: a negative mass [kg] smaller than this is rounding noise (taken as 0)
@@ -295,7 +299,26 @@ def _check_tree(root, path: Path) -> tuple[dict, dict]:
                              "lower=... upper=... effort=... velocity=...>" + (", or make it type=\"continuous\" if "
                              "it turns without end" if jtype == "revolute" else ""), path, el.sourceline)
         joints[name] = el
+    _check_no_loop(joints, path)
     return links, joints
+
+
+def _check_no_loop(joints: dict, path: Path) -> None:
+    """An InputError at a joint of any loop of the tree (a joint whose child is its own parent, or a ring of joints
+    anywhere, not only on the chain used: urdfdom refuses such a file, and a calibrated URDF would carry it on)."""
+    parent = {el.find("child").get("link"): (el.find("parent").get("link"), el) for el in joints.values()}
+    done: set = set()
+    for start in parent:
+        seen: set = set()
+        link = start
+        while link in parent and link not in done:
+            if link in seen:
+                el = parent[link][1]
+                raise InputError(f"the joints form a loop through link '{link}' (a URDF is a tree)", path,
+                                 el.sourceline, f"key 'joint.{el.get('name')}'")
+            seen.add(link)
+            link = parent[link][0]
+        done |= seen
 
 
 def _read_urdf(path: str | Path) -> _Urdf:
@@ -635,6 +658,20 @@ def _checked_mass(u: _Urdf, link: str, mass: float, com: np.ndarray) -> float:
     return max(mass, 0.0)
 
 
+def _warn_negative_masses(u: _Urdf, used: set) -> None:
+    """One warning for the negative masses (beyond rounding) of links the chain does not use (``used``: the links
+    whose masses it folds; a negative one of those is refused): no body has one, and a calibrated URDF keeps it.
+    Inertia tensors are not judged: the toolkit uses none, and 21 of the 55 URDFs of example-robot-data 4.1 hold
+    placeholder tensors that no body has (one moment larger than the other two together: 3e-6 0 0)."""
+    bad = [(name, mass) for name, link in u.link_elements.items() if name not in used
+           and (mass := link.find("inertial/mass")) is not None and float(mass.get("value", "0")) < -_MASS_NOISE]
+    if bad:
+        shown = "; ".join(f"link '{name}', {m.get('value')} kg (line {m.sourceline})" for name, m in bad[:3])
+        log.warning(f"{u.path}, line {bad[0][1].sourceline}: a negative mass, which no body has, on {len(bad)} link(s) "
+                    f"off the chain: {shown}{'; ...' if len(bad) > 3 else ''}; not used, but a calibrated URDF keeps "
+                    "it as it was")
+
+
 def _fold_masses(u: _Urdf, ch: _Chain, masses: dict | None) -> list[tuple[float, tuple]]:
     """(mass, com in the joint's child frame) of each moving joint: its child link and everything
     hanging from it (fixed joints, side branches at zero) up to the next moving joint."""
@@ -643,12 +680,13 @@ def _fold_masses(u: _Urdf, ch: _Chain, masses: dict | None) -> list[tuple[float,
     kids: dict[str, list] = {}
     for j in u.robot.joints:
         kids.setdefault(j.parent, []).append(j)
-    out = []
+    out, used = [], set()
     for j, _, _ in ch.moving:
         total, first = 0.0, np.zeros(3)
         stack = [(j.child, np.eye(4))]
         while stack:
             link, T = stack.pop()
+            used.add(link)
             if link in inert:
                 m, c = inert[link]
                 if link not in (masses or {}):          # a masses file's values are checked when it is read
@@ -660,6 +698,7 @@ def _fold_masses(u: _Urdf, ch: _Chain, masses: dict | None) -> list[tuple[float,
                     stack.append((k.child, T @ (_held(k, ch.held[k.name]) if k.name in ch.held else _T(k.origin))))
         com = first / total if total > 0 else np.zeros(3)
         out.append((total, tuple(float(v) for v in com)))
+    _warn_negative_masses(u, used)
     return out
 
 

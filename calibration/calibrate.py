@@ -136,7 +136,7 @@ def default_effects(model: ArmModel, data: CalibrationData | None = None) -> tup
     geometry cannot represent, on every pose and every placement alike, so held-out poses of one placement
     cannot say what it is worth elsewhere: it is part of the model, not a per-campaign decision. The prior
     (10 mrad at most under each joint's RMS gravity torque, non-negative) keeps a compliance the data do not
-    see at 0 (measured in docs/calibration.md: on the shared TALOS campaign the held-out error falls on every
+    see at 0 (measured in docs/studies/calibration.md: on the shared TALOS campaign the held-out error falls on every
     split, the README's 1.37 -> 1.00 mm; on the shared Panda seats, trained on one placement, the other two's
     seat spread 2.04 -> 1.71 mm; on simulated robots without compliance it costs 1-10 %)."""
     if model.desc.convention != "urdf" and not tracker_only(data):

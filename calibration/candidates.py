@@ -73,7 +73,7 @@ FAMILIES = ("eccentricity", "joint_gain", "joint_compliance", "thermal", "force_
 #: request (``--candidates``). On the real robot data of examples/ each passed the held-out test of the poses of
 #: one plate placement and made the other placements worse. A joint gain: within one seat the poses of a redundant
 #: arm move its joints together (self-motion), and a gain of one joint fits there what another error of the same
-#: self-motion leaves (docs/close-loop.md, "Joint gains"). The mount's tilt: trained on ``back-high`` (no joint
+#: self-motion leaves (docs/studies/close-loop.md, "Joint gains"). The mount's tilt: trained on ``back-high`` (no joint
 #: compliance in the base model) it took that placement's own test set from 287 to 245 um and spread the two
 #: other placements' seats from 2.81 to 4.01 mm (tests/test_loop_real_physics.py); the joint compliance it
 #: displaced takes them to 2.07 mm. The reading couplings: one a pair of joints (42 on a 7-joint arm), the effect
@@ -169,11 +169,17 @@ def no_torque_reason(desc: ArmDescription, data: CalibrationData) -> str | None:
             "description)")
 
 
-def drift_offer(points) -> list[Candidate] | Skipped:
+_MIMIC_GROWTH = "the chain has a joint mimicking another: link growth acts on the chain's rows"
+
+
+def drift_offer(desc: ArmDescription, points) -> list[Candidate] | Skipped:
     """The candidate of a drift of the links in time (:class:`~arm_model.effects.ThermalDrift` about the middle of
-    the points' time span; its second term, power 2, offered once it is added), or why it is not offered: a
-    temperature column (thermal growth is offered instead), no or empty ``time_s``, or a span shorter than
-    :data:`MIN_DRIFT_SPAN_S`."""
+    the points' time span; its second term, power 2, offered once it is added), or why it is not offered: a chain
+    with a joint mimicking another (link growth acts on the chain's rows), a temperature column (thermal growth
+    is offered instead), no or empty ``time_s``, or a span shorter than :data:`MIN_DRIFT_SPAN_S`. The one
+    decision: the loop asks it both for the per-point inputs it must read and for its candidates."""
+    if desc.coupled:
+        return Skipped("thermal drift (time)", _MIMIC_GROWTH)
     temp, time = points.temperature, points.time
     if temp is not None and np.all(np.isfinite(temp)):
         return Skipped("thermal drift (time)", "the points have a temperature_C column: thermal growth instead")
@@ -272,18 +278,19 @@ def library_candidates(desc: ArmDescription, data: CalibrationData, families=Non
                                  JointCompliance(joints=tuple(loaded), gravity=True, contact=True), "joint_compliance"))
     if "thermal" in families:
         t = pts.temperature
+        has_t = t is not None and bool(np.all(np.isfinite(t)))
         if desc.coupled:
-            skipped.append(Skipped("thermal growth", "the chain has a joint mimicking another: link growth acts on "
-                                                     "the chain's rows"))
-        elif t is None or not np.all(np.isfinite(t)):
+            skipped.append(Skipped("thermal growth", _MIMIC_GROWTH))
+        elif not has_t:
             skipped.append(Skipped("thermal growth", "no temperature_C column (or empty cells)"))
-            drift = drift_offer(pts)
-            (out.extend if isinstance(drift, list) else skipped.append)(drift)
         elif np.ptp(t) < MIN_TEMPERATURE_SPAN:
             skipped.append(Skipped("thermal growth", f"the temperature varies by {np.ptp(t):.3g} K only "
                                                      f"(at least {MIN_TEMPERATURE_SPAN:g} K needed)"))
         else:
             out.append(Candidate("thermal growth", ThermalGrowth(), "thermal"))
+        if not has_t:
+            drift = drift_offer(desc, pts)
+            (out.extend if isinstance(drift, list) else skipped.append)(drift)
     if "force_sensor" in families:
         if not axes_used:
             skipped.append(Skipped("force sensor", "no force data"))

@@ -20,7 +20,6 @@ from arm_model.cli_options import (
     model_from_args,
     non_negative,
     number_in,
-    positive,
     seed,
 )
 from arm_model.csv_io import parse_number
@@ -106,6 +105,12 @@ def marker_option(p) -> None:
 #: argparse type of a stated standard uncertainty [um]: arm_model.units.STATED_SIGMA_M (1 pm to 100 mm), as a
 #: certified distance's u_length_mm
 SIGMA_UM = number_in(STATED_SIGMA_M[0] * 1e6, STATED_SIGMA_M[1] * 1e6)
+#: argparse type of a maximum permissible error [um] (``--mpe-*-um``): a stated length tolerance, the same range
+#: (1e-300 failed every item and 1e308 passed every one, a verdict without meaning)
+MPE_UM = SIGMA_UM
+#: argparse type of a threshold on a standardized residual [sigma]: from 1 (a residual within one standard deviation
+#: is no outlier; 1e-300 reported every point as one) to 1e6
+THRESHOLD_SIGMA = number_in(1, 1e6)
 
 
 def sigma_options(p, prior_default: str | None = None) -> None:
@@ -310,11 +315,11 @@ def mpe_options(p) -> None:
         "standard tests with a maximum permissible error (MPE)",
         "Each test of the validation (calibrated model, on the training data and on the held-out data; for "
         "close-loop: the final model on every point and the design fit on the outer test set) is "
-        "plotted (conformance_*.png) with every tested item; given its MPE [um] (a finite number > 0) it "
+        "plotted (conformance_*.png) with every tested item; given its MPE [um] (1e-6 to 1e5) it "
         "gets PASS (every item within the MPE) or FAIL in the console, summary.json and the report. Without "
         "these options: the plots and figures without pass/fail. Details: docs/calibration.md.")
     for t in MPE_TESTS:
-        g.add_argument(t.option, type=positive(), default=None, metavar="UM", dest=f"mpe_{t.key.replace('-', '_')}",
+        g.add_argument(t.option, type=MPE_UM, default=None, metavar="UM", dest=f"mpe_{t.key.replace('-', '_')}",
                        help=f"{t.standard} {t.name}: {t.what}")
 
 
@@ -492,13 +497,13 @@ def _split(args, data):
 
 def _outlier_options(c) -> None:
     """The outliers' options: reported beyond ``--outlier-threshold``; dropped, kept, or the gross ones left out."""
-    c.add_argument("--outlier-threshold", type=positive(), default=4.0,
+    c.add_argument("--outlier-threshold", type=THRESHOLD_SIGMA, default=4.0,
                    help="standardized residual beyond which a point is reported as an outlier (default 4)")
     which = c.add_mutually_exclusive_group()        # the outliers: dropped, kept, or the gross ones left out
     which.add_argument("--drop-outliers", action="store_true", help="drop every point and certified length whose "
                        "gross-error test reaches --outlier-threshold and refit, in rounds (listed); default: leave out "
                        "the gross errors (--gross-threshold), keep the others")
-    c.add_argument("--gross-threshold", type=positive(), default=None,
+    c.add_argument("--gross-threshold", type=THRESHOLD_SIGMA, default=None,
                    help=f"standardized residual from which a point (its rows' deletion residual together, at the "
                         f"row-by-row false-alarm rate) is a gross error: left out and the fit redone, one at a time, "
                         f"at most 5%% of the points, and listed (default {GROSS_THRESHOLD:g})")

@@ -68,7 +68,7 @@ __all__ = ["JointAngleOffset", "measurement_groups", "measurement_folds", "pose_
 
 #: harmonics of each joint angle tested by the structure tests: those an effect built from the residual can hold
 #: (:data:`calibration.synthesis.MAX_HARMONIC`; with 1-3 only, a hidden fourth harmonic of the base joint, 0.004
-#: deg, was never seen: docs/close-loop.md, "Hidden effects nobody told the loop of")
+#: deg, was never seen: docs/studies/close-loop.md, "Hidden effects nobody told the loop of")
 HARMONICS = (1, 2, 3, 4)
 #: harmonics of another joint's angle tested for a cross-coupling (low orders: a cable, a counterbalance;
 #: with the third too, one clean campaign in 20 showed a false structure among the 42 pairs)

@@ -297,7 +297,8 @@ def write_loop_model(loop: LoopResult, out_dir, inputs=()) -> dict:
     comment = (f"Model of '{loop.desc.name}' found by aacmm close-loop: the description with the final fit's values "
                f"folded in and the effects " + (f"added ({', '.join(added)})" if added else "of the base model")
                + f" with their parameters.\nFitted on {len(res.data)} points ({_fitted_on(loop)}); s0 = "
-               f"{res.s0:.4g}. Read by every --arm option; format: docs/calibration.md.")
+               f"{res.s0:.4g}. Read by every --arm option; format: docs/formats.md, "
+               "'The model file'.")
     return write_model(res, out_dir, loop_model_name(loop), inputs=inputs, written_by="aacmm close-loop",
                        comment=comment)
 

@@ -28,7 +28,7 @@ REFERENCE = ("fit", "identity", "off")
 #: of 0.001 (Bonferroni: 4.3 for 66 rows, 5.7 for 10^5), with a margin for the heavier tails an effect the
 #: model lacks gives real residuals. A point's rows are tested together (their group-deletion residual's
 #: chi-square, :func:`calibration.calibrate.point_tests`) at the false-alarm rate this value has row by row:
-#: one row exactly at 6, three rows at chi-square 41.2 (docs/calibration.md, Uncertainty and outliers)
+#: one row exactly at 6, three rows at chi-square 41.2 (docs/studies/calibration.md, Gross errors)
 GROSS_THRESHOLD = 6.0
 
 

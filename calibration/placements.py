@@ -1,6 +1,6 @@
 """Held-out placements of a seat plate: train on one placement, predict the others.
 
-The study the real-data sections of ``docs/calibration.md`` and ``docs/close-loop.md`` report: a plate
+The study the real-data sections of ``docs/studies/calibration.md`` and ``docs/studies/close-loop.md`` report: a plate
 with two seats a certified distance apart is measured at several placements (one folder each, with a
 ``points.csv``); for every training placement, ``aacmm calibrate`` and ``aacmm close-loop`` are run on it
 with their default options, and the model each writes is applied by ``aacmm tip`` to the points of the

@@ -17,7 +17,7 @@ and its lower bound keeps it non-negative. Its group's scale stays at 1 (:attr:`
 Laplace evidence is no guide for a group whose posterior is cut by its bound (some of its parameters held at 0,
 the others' posterior far from Gaussian), and its MacKay fixed point shrinks a compliance the training poses
 see only weakly to zero, leaving its signature to the geometry, which then errs where the poses reach beyond
-the training range (measured in docs/calibration.md).
+the training range (measured in docs/studies/calibration.md).
 
 A parameter is **prior-dominated** when ``rho_k >= PRIOR_DOMINATED`` (0.5): its posterior variance is at
 least half its prior's, i.e. the data's own information on it is at most the prior's (for one parameter,

@@ -263,7 +263,7 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
             parts += [f"<h2>{title}</h2>", "<p>± the standard uncertainty of each figure: a bootstrap over the "
                       "measurements (whole measurements resampled); '-' with fewer than two "
                       "measurements of its kind."
-                      + (f" The nominal: {html.escape(base['definition'])}." if base else "") + "</p>",
+                      + (f" The {html.escape(base['definition'])}." if base else "") + "</p>",
                       reports.html_table(["figure", "unit", "nominal", "calibrated", "ratio"],
                              [(r["label"], r["unit"], with_u(r["before"], r.get("u_before")),
                                with_u(r["after"], r.get("u_after")), _fmt(r["ratio"], 3)) for r in rows])]
@@ -446,7 +446,7 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
                f"fitted values folded in"
                + (", and the model's effects with their parameters" if effects else "") + ".\n"
                f"Solver: {result.status}; s0 = {result.s0:.4g}. Read by every --arm option; format: "
-               "docs/calibration.md.")
+               "docs/formats.md, 'The model file'.")
     written = write_model(result, out, name, inputs=inputs, written_by="aacmm calibrate", comment=comment)
     if "training_poses" in written:
         files["training_poses"] = written["training_poses"]

@@ -179,8 +179,13 @@ class SimSource:
 
     def make(self, seed: int):
         from arm_model.sim import simulate
-        sim = simulate(self.campaign, seed=seed)
+        sim = simulate(self.campaign, seed=seed, progress=_no_progress)   # the study prints its own
         return self.campaign.arm, sim.points, sim.artefacts, sim.reference_points, dict(sim.truth["p"])
+
+
+def _no_progress(message: str) -> None:
+    """A run's simulation says nothing: between the study's own progress lines, each run's 'planned', 'inverse
+    kinematics', 'writing files in memory', 'force signals' (four lines a run, files it does not write) misled."""
 
 
 @dataclass(frozen=True)

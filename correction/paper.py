@@ -30,7 +30,7 @@ import numpy as np
 from scipy import stats
 
 from arm_model import InputError
-from arm_model.csv_io import parse_number
+from arm_model.csv_io import blank_record, parse_number
 from arm_model.errors import id_problem, read_text, unknown_key
 from arm_model.units import implausible
 
@@ -82,7 +82,7 @@ def load_paper_table2(path: str | Path | None = None) -> PaperTable2:
     path = Path(TABLE2_PATH if path is None else path)
     text = read_text(path, "the table")
     rows = [(no, line) for no, line in enumerate(text.splitlines(), start=1)
-            if line.strip() and not line.lstrip().startswith("#")]
+            if not blank_record(line) and not line.lstrip().startswith("#")]
     if not rows:
         raise InputError("no header line", path, 1)
 

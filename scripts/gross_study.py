@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Gross errors found on small simulated artefact sessions: the default (points and certified lengths left out at
-``--gross-threshold`` 6) and ``--drop-outliers`` (dropped at ``--outlier-threshold`` 4), docs/calibration.md
+``--gross-threshold`` 6) and ``--drop-outliers`` (dropped at ``--outlier-threshold`` 4), docs/studies/calibration.md
 ("Certified lengths and --drop-outliers on the same test").
 
 Each seed is a session of the nominal arm (66 points: three ball-bar placements of one 500 mm length with a

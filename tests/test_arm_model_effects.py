@@ -130,7 +130,8 @@ def test_an_effect_names_its_joints_by_the_arm_s_names():
 def test_the_effects_seat_pairs_build_agree_across_the_three_evaluators(nominal):
     """A reading coupling (j6 reads a fraction of q5, ``JointGain(source=4)``) and a shoulder's lateral compliance
     (``LateralCompliance`` of j2), the effects the loop builds on simulated robot seat pairs
-    (docs/close-loop.md, Hidden effects on robots): batch, CasADi and Pinocchio to 1e-12 m, and each moves the ball."""
+    (docs/studies/close-loop.md, Hidden effects on robots): batch, CasADi and Pinocchio to 1e-12 m, and each moves
+    the ball."""
     from arm_model.effects import LateralCompliance
     model = ArmModel(nominal, (JointGain(joints=(5,), source=4), LateralCompliance(joints=(1,))))
     rng, q, w, aux = _data(nominal, 6, 3)

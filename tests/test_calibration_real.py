@@ -1,9 +1,9 @@
-"""calibrate's default estimation on real robots measured by others (docs/calibration.md, "Real data").
+"""calibrate's default estimation on real robots measured by others (docs/studies/calibration.md, "Real data").
 
 * Panda seats (examples/data/real-panda-seats, the same as ../shared/data/real-panda-seats): trained on one
   plate placement, the other two predicted. The published tool's figures are MUKCa's method (its
   ``ParameterOptimizer.optimize()`` defaults) re-run on these data outside the project: mean held-out seat
-  spread 2.073 mm, mean |distance error| 0.666 mm (docs/calibration.md says how).
+  spread 2.073 mm, mean |distance error| 0.666 mm (docs/studies/calibration.md says how).
 * TALOS motion capture (../shared/data/real-talos-mocap; its URDF may not be copied into the project, so the
   test reads it there and skips when it is absent): fit on the odd postures, predict the even ones with the
   training fit's frame and marker offset. The README of the data states the nominal (frames and marker
@@ -217,7 +217,7 @@ def test_talos_evidence_scales_sit_at_the_held_out_optimum(talos_all):
     """On random halves (seeds 100, 101) the geometry's group scales the evidence chooses are where the
     held-out error is flat: halving or doubling any one group's scale (the others and the noise as chosen)
     does not predict the held-out postures better by more than 3 % on average (measured: the best of the six
-    is 0.99x; over 25 halves the medians are 0.996-1.029x, docs/calibration.md, "Where the remaining held-out
+    is 0.99x; over 25 halves the medians are 0.996-1.029x, docs/studies/calibration.md, "Where the remaining held-out
     error comes from"), so the shrinkage is not what keeps the default above the noise floor."""
     model, _ = talos_all
     ratios = {}

@@ -171,7 +171,7 @@ def test_a_seat_pair_length_offset_is_the_arm_shrunk_to_a_point(nominal):
     itself (independent check: its cosine with the residual), and its score step is the bar's whole length. The
     structure tests count it as absorbed (a step beyond a plausible length error): before, the
     ``artefact`` family "explained" nearly all of the residual of every seat campaign, and the decisions' forward
-    selection, given it, found nothing else (docs/close-loop.md, Hidden effects on robots)."""
+    selection, given it, found nothing else (docs/studies/close-loop.md, Hidden effects on robots)."""
     from calibration.diagnostics import families, structure_tests, test_family, test_group
     model = ArmModel(nominal)
     p = random_truth(model, np.random.default_rng(2), length=30e-6, angle=5e-5, probe=30e-6)

@@ -105,7 +105,7 @@ def test_loop_names_the_effect_on_other_seeds(case, seed):
     """Not tuned to one draw (slow suite: ten loops, about 50 s of CPU; the normal suite checks each effect on
     seed 3 in test_loop_names_recovers_and_halves): on other seeds (new errors, poses, noise, test set)
     the loop names the same effect and joint and lowers the held-out error. (How much depends on the draw:
-    where the effect is small next to the 2 um probing noise the RMS cannot halve; see docs/close-loop.md.)
+    where the effect is small next to the 2 um probing noise the RMS cannot halve; see docs/studies/close-loop.md.)
     Where the outer test set cannot show it (its RMS already at the noise, measured: thermal growth at seed
     4, 1.71 -> 1.83 um) the effect, which passed the held-out folds, is named as not added, never added."""
     camp = campaign_from_dict(campaign(CASES[case][0], seed=seed))

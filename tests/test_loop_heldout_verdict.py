@@ -3,7 +3,7 @@ the data it never saw several times worse than its design fit's scatter and its 
 complete, and the families off by default are then offered once (calibration.loop.stages.escalate). Before, the
 verdict judged the design fit's residual alone: on the simulated UR5 seat pairs with a hidden shoulder gain it said
 "No structured residual remains" at a held-out RMS of 297 um against the truth's 98 um and the stated 100 um
-(scripts/robot_hidden_study.py, docs/close-loop.md)."""
+(scripts/robot_hidden_study.py, docs/studies/close-loop.md)."""
 from __future__ import annotations
 
 from types import SimpleNamespace

@@ -1,5 +1,5 @@
-"""What the red-team study of hidden effects (scripts/hidden_effects_study.py, docs/close-loop.md "Hidden effects
-nobody told the loop of") found and fixed, each checked on its own:
+"""What the red-team study of hidden effects (scripts/hidden_effects_study.py, docs/studies/close-loop.md "Hidden
+effects nobody told the loop of") found and fixed, each checked on its own:
 
 * a joint's angle error linear in another joint's reading (a differential wrist's coupling ratio) is an effect
   (``JointGain(source=K)``) that the loop builds from the ``qK harmonics on jN`` family;
@@ -106,7 +106,7 @@ def test_a_fold_fit_above_its_nested_models_cost_starts_again_from_the_nested_so
 @pytest.mark.parametrize("case, added", [("coupling", ["coupling j6 by q5"]),
                                          ("harmonic4", ["eccentricity j1", "harmonics j1 (h 3,4)"])])
 def test_the_default_loop_finds_the_hidden_coupling_and_fourth_harmonic(case, added):
-    """The study's two cases the loop missed before its fixes (docs/close-loop.md: held-out RMS 25.99 and
+    """The study's two cases the loop missed before its fixes (docs/studies/close-loop.md: held-out RMS 25.99 and
     10.45 um, the truth 1.65 and 1.41 um): the default loop now adds the effect from the residual, leaves no
     structure, and its held-out RMS is within 1.3 times the truth's (about 40 s of CPU for both)."""
     sys.path.insert(0, str(ROOT / "scripts"))

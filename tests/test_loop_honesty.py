@@ -38,7 +38,7 @@ def test_no_missing_effect_adds_nothing_in_19_of_20_seeds():
 #: the outer test set of these two tests' scenario (drawn at random, seed 0, before the test set became a
 #: function of the data; the default one, bar-03, bar-08, seat-03 and sphere-03, lets an eccentricity j2 pass
 #: the folds, which the outer test set then refuses, and leaves a "q3 harmonics on j1" claimed after the
-#: harmonics are built: docs/close-loop.md, Decisions that carry over)
+#: harmonics are built: docs/studies/close-loop.md, Decisions that carry over)
 THIRD_TEST = ("bar-07", "bar-08", "seat-02", "sphere-02")
 
 
@@ -84,7 +84,7 @@ def test_effect_outside_the_library_is_built_from_the_residual(nominal):
 
 
 def test_honesty_study_counts_what_the_loop_added_built_and_claimed(tmp_path):
-    """scripts/honesty_study.py (the study behind docs/close-loop.md's table of larger clean campaigns): one
+    """scripts/honesty_study.py (the study behind docs/studies/close-loop.md's table of larger clean campaigns): one
     seed of the tiny shape runs end to end, and the counts are checked against hand-written rows."""
     import json
     import sys

@@ -2,7 +2,7 @@
 placement, its model file applied by ``aacmm tip`` to the other placements (calibration.placements, the study of
 scripts/real_seats_study.py), against the published tool MUKCa (independent reference: its held-out seat
 spread and distance error on the same pairs, platonics-delft/kinematics_calibration; their means are the
-published 2.073 mm and 0.666 mm, docs/calibration.md).
+published 2.073 mm and 0.666 mm, docs/studies/calibration.md).
 
 A robot read from a URDF whose links carry masses starts from joint compliance under gravity (each
 compliance with its physical prior, the geometry's prior scaled by the evidence: ``--prior-scale auto``), on
@@ -61,7 +61,7 @@ def test_default_loop_on_every_placement_beats_the_published_tool(tmp_path):
     (measured 1.634 mm, 0.79x; with the eccentricities of joints 1 and 3 from right 1.646 mm; the loop before
     this default 1.795 mm, 0.87x), no pair above 1.35x its MUKCa pair
     (measured worst 1.30x, front -> back-high), the mean |distance error| within 0.15 mm of MUKCa's (measured 0.782
-    against 0.666 mm: not yet no worse, docs/close-loop.md says why) and the same effects at seeds 0 and 2 (the
+    against 0.666 mm: not yet no worse, docs/studies/close-loop.md says why) and the same effects at seeds 0 and 2 (the
     seed only draws the bootstrap of the held-out figures' uncertainties)."""
     rows = _study(tmp_path / "s0", PLACES)
     spread = np.mean([r.figures["spread_mean_mm"] for r in rows])

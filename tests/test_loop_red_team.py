@@ -1,5 +1,5 @@
 """What the second red team (scripts/hidden_effects_study.py ``base-tilt`` and ``bent-stylus``,
-scripts/robot_hidden_study.py on simulated robots; docs/close-loop.md "Hidden effects nobody told the loop of")
+scripts/robot_hidden_study.py on simulated robots; docs/studies/close-loop.md "Hidden effects on robots")
 found and fixed, each checked on its own:
 
 * the mount's tilt under the arm's moment (the first joint's lateral compliance) is a library candidate on request

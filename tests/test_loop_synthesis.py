@@ -42,7 +42,7 @@ from conftest import NOMINAL, assert_close
 
 NOISE = 2e-6
 #: 280 points, 26 measurements: enough approach directions and forces that the loop's choices do not hang on
-#: one draw of the campaign (seeds 1-5 measured, docs/close-loop.md)
+#: one draw of the campaign (seeds 1-5 measured, docs/studies/close-loop.md)
 SPEC = SynthSpec(ballbars=12, ballbar_points=5, seats=4, articulations=10, spheres=10, sphere_points=12,
                  noise=NOISE)
 

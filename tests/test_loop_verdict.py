@@ -68,7 +68,7 @@ def test_a_residual_reweighted_to_its_own_scatter_is_still_judged_against_the_st
     final fit's s0 is about 1 whatever its residual holds: the verdict judges the groups' scatter against the
     stated sigmas instead (pooled by redundancy: sqrt((30 * 5^2 + 10 * 1^2) / 40) = 4.36 here), so a campaign
     whose residual is 5 times the stated 2 um with no family found is not called clean (before: "No structured
-    residual remains", measured on a hidden fourth harmonic, docs/close-loop.md)."""
+    residual remains", measured on a hidden fourth harmonic, docs/studies/close-loop.md)."""
     from calibration.data import Weights
     from calibration.loop.verdict import residual_over_stated
     variance = [{"group": "sphere", "estimated": True, "estimate_um": 10.0, "redundancy": 30.0},

@@ -1,4 +1,4 @@
-"""scripts/mocap_study.py (the study behind docs/calibration.md's "Where the remaining held-out error comes
+"""scripts/mocap_study.py (the study behind docs/studies/calibration.md's "Where the remaining held-out error comes
 from"): its noise floor on a simulated motion-capture campaign whose noise is known."""
 from __future__ import annotations
 

@@ -70,6 +70,13 @@ def test_examples_copies_campaigns_data_docs_and_licence(tmp_path, capsys):
         assert (dest / "data" / "real-talos-mocap" / name).read_bytes() == talos.read_bytes()
     assert not list((dest / "data" / "real-talos-mocap").glob("*.urdf"))
     assert (dest / "docs" / "formats.md").is_file()
+    # the guides link to ../README.md (calibration.md, own-arm.md: "the README's first own measurement")
+    assert (dest / "README.md").read_bytes() == (ROOT / "README.md").read_bytes()
+    own = tmp_path / "project"                   # `aacmm examples .` in a folder with its own README: kept, no refusal
+    own.mkdir()
+    (own / "README.md").write_text("mine")
+    assert main(["examples", str(own)]) == 0 and (own / "README.md").read_text() == "mine"
+    assert (own / "docs" / "formats.md").is_file()
     assert (dest / "arms" / "aacmm7.dh.toml").read_bytes() == NOMINAL.read_bytes()
     for c in (ROOT / "examples" / "campaigns").glob("*.toml"):
         assert (dest / "campaigns" / c.name).read_bytes() == c.read_bytes()
@@ -136,6 +143,7 @@ def test_wheel_installed_use_without_the_checkout(tmp_path):
     whl = next(wheels.glob("aacmm_toolkit-*.whl"))
     names = zipfile.ZipFile(whl).namelist()
     assert "arm_model/_shipped/urdf/aacmm7.dh.toml" in names
+    assert "arm_model/_shipped/README.md" in names and "arm_model/_shipped/docs/own-arm.md" in names
     assert "arm_model/_shipped/examples/data/real-panda-seats/LICENSE-MUKCa.txt" in names
     assert "arm_model/_shipped/examples/data/real-talos-mocap/LICENSE-figaroh.txt" in names
     assert any(n.endswith("licenses/examples/data/real-talos-mocap/LICENSE-figaroh.txt") for n in names)

@@ -1,4 +1,4 @@
-"""scripts/seat_uncertainty_study.py (docs/calibration.md, "On the placements the fit never saw"): the bounded
+"""scripts/seat_uncertainty_study.py (docs/studies/calibration.md, "On the placements the fit never saw"): the bounded
 growth it measures against the default linear one, fitted by maximum likelihood to held-out errors drawn from a
 known truth; the leave-one-fold-out check of a discrepancy variant against a known truth; the binomial odds of a
 pair outside the band with an exact u, against a direct sum."""

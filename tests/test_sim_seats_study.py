@@ -1,4 +1,4 @@
-"""scripts/sim_seats_study.py (docs/close-loop.md, "Simulated Panda robots"): simulated robots in the real seat
+"""scripts/sim_seats_study.py (docs/studies/close-loop.md, "Simulated Panda robots"): simulated robots in the real seat
 study's shape, trained on one plate placement with the default options, predicting the other two; and the
 loop's rule for candidates the held-out data cannot tell apart (:func:`calibration.loop.decide.tied_rivals`)."""
 from __future__ import annotations
@@ -64,7 +64,7 @@ def test_coaxial_eccentricities_are_shared_not_guessed(tmp_path):
 
 @pytest.mark.slow
 def test_defaults_on_simulated_panda_robots(tmp_path):
-    """Nine simulated robots, each trained on its own placement (the table of docs/close-loop.md): the default
+    """Nine simulated robots, each trained on its own placement (the table of docs/studies/close-loop.md): the default
     close-loop's held-out seat spread is below the nominal's with only the tool fitted on every robot (measured
     0.13-0.5x) and within 2.2x the truth's own (the scatter alone; measured 1.2-1.9x); every effect the loop
     adds acts on a joint of the truth's effects, and on at most one robot also on a joint the truth's do not

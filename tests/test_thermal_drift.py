@@ -118,12 +118,13 @@ def test_drift_offered_only_with_time_and_no_temperature():
 
     from calibration.candidates import MIN_DRIFT_SPAN_S, Candidate, Skipped, drift_offer
     t = np.linspace(0.0, 2 * MIN_DRIFT_SPAN_S, 10)
-    got = drift_offer(SimpleNamespace(temperature=None, time=t))
+    free = SimpleNamespace(coupled=False)
+    got = drift_offer(free, SimpleNamespace(temperature=None, time=t))
     assert isinstance(got, list) and [c.name for c in got] == ["thermal drift (time)"]
     assert got[0].effect.reference_time_s == MIN_DRIFT_SPAN_S
     assert [c.name for c in got[0].then] == ["thermal drift (time^2)"] and isinstance(got[0].then[0], Candidate)
     for temp, time in ((np.full(10, 20.0), t), (None, None), (None, t * 0.4), (None, np.r_[t[:-1], np.nan])):
-        assert isinstance(drift_offer(SimpleNamespace(temperature=temp, time=time)), Skipped)
+        assert isinstance(drift_offer(free, SimpleNamespace(temperature=temp, time=time)), Skipped)
 
 
 def test_model_file_refuses_a_session_drift(nominal):
@@ -163,7 +164,7 @@ def test_no_link_growth_is_offered_on_a_chain_with_a_mimic_joint(tmp_path):
     from test_sim_mocap import COUPLED_URDF, TIP
 
     from arm_model.urdf_import import description_from_urdf
-    from calibration.candidates import MIN_DRIFT_SPAN_S, library_candidates
+    from calibration.candidates import MIN_DRIFT_SPAN_S, drift_offer, library_candidates
     (tmp_path / "a.urdf").write_text(COUPLED_URDF)
     desc = description_from_urdf(tmp_path / "a.urdf", TIP)
     assert desc.coupled
@@ -172,6 +173,8 @@ def test_no_link_growth_is_offered_on_a_chain_with_a_mimic_joint(tmp_path):
                           q=np.zeros((n, desc.n_joints)))
     out, skipped = library_candidates(desc, SimpleNamespace(points=pts), families=("thermal",))
     assert out == [] and any(s.name == "thermal growth" and "mimicking" in s.reason for s in skipped)
+    assert any(s.name == "thermal drift (time)" and "mimicking" in s.reason for s in skipped)
+    assert "mimicking" in drift_offer(desc, pts).reason      # the loop's inputs ask the same decision: no time
 
 
 def test_a_drift_asked_on_the_command_line_is_taken_about_the_session(nominal):

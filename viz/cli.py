@@ -15,7 +15,16 @@ import numpy as np
 from arm_model import InputError, NumericalError, check_features, read_artefacts, read_points
 from arm_model.checks import log_warnings, point_warnings
 from arm_model.cli import command_help
-from arm_model.cli_options import add_arm_options, arm_inputs, model_from_args, number_in, port, positive
+from arm_model.cli_options import (
+    add_arm_options,
+    arm_inputs,
+    duration_s,
+    model_from_args,
+    number_in,
+    output_path,
+    port,
+    positive,
+)
 from arm_model.errors import resolved
 from arm_model.output import output_file
 from arm_model.uncertainty_cli import add_input_options
@@ -79,8 +88,8 @@ def register(sub) -> None:
                    help="drawn size of an ellipsoid per true size; default: from the data, so that the median "
                         f"largest semi-axis is drawn about {ELLIPSOID_TARGET_M * 1e3:g} mm (a 1-2-5 number, printed)")
     add_input_options(p)
-    p.add_argument("--html", type=Path, metavar="OUT.html", help="write the scene as a self-contained page")
-    p.add_argument("--screenshot", type=Path, metavar="OUT.png",
+    p.add_argument("--html", type=output_path, metavar="OUT.html", help="write the scene as a self-contained page")
+    p.add_argument("--screenshot", type=output_path, metavar="OUT.png",
                    help="render the page in headless Chromium and write a PNG (800 x 600)")
     p.add_argument("--browser", metavar="PATH", help="Chromium executable for --screenshot (default: chromium "
                    "on PATH)")
@@ -88,7 +97,7 @@ def register(sub) -> None:
                    help="keep serving after writing --html/--screenshot (serving is the default without them, "
                         "and with --open-s)")
     p.add_argument("--port", type=port, help="web port of the viewer (default: the first free one from 7000)")
-    p.add_argument("--open-s", "--open-seconds", dest="open_seconds", type=number_in(0, 1e7, low_open=True),
+    p.add_argument("--open-s", "--open-seconds", dest="open_seconds", type=duration_s(zero=False),
                    metavar="S", help="stop the server after S seconds (default: run until Ctrl-C; --open-seconds is "
                                      "the older spelling)")
     p.set_defaults(func=run)
@@ -184,7 +193,9 @@ def _run(args, inputs, outputs, tmp) -> int:
             view.show_artefacts(placements, artefacts.distances)
         if args.ellipsoids:
             _ellipsoids(arm, sel, args, view)
-        markers = None if arm.tracker is None else _markers(arm, sel, notes)
+        # a tracker's markers, unless they are the ball centres (no offsets) of points the instrument did not see
+        tip_only = arm.tracker is not None and arm.tracker.offsets is None and sel.ref is None
+        markers = None if arm.tracker is None or tip_only else _markers(arm, sel, notes)
         if residuals is not None:
             if args.measurement is not None:   # the selected measurement's (and those of no measurement)
                 residuals = residuals.select(np.isin(residuals.measurement, ["", args.measurement]))

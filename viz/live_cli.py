@@ -22,11 +22,10 @@ from arm_model.cli_options import (
     add_arm_options,
     add_output_option,
     arm_inputs,
+    duration_s,
     model_from_args,
-    non_negative,
     number_in,
     port,
-    positive,
 )
 from arm_model.live.session import RATE_HZ_RANGE
 
@@ -42,6 +41,16 @@ log = logging.getLogger(__name__)
 
 #: events of one kind (dropped, late, bad lines) printed one by one before they are only counted
 WARN_FIRST = 5
+#: the slowest replay (``--speed``): a thousandth of real time (1e-300 waited 1e297 s for the second sample)
+MIN_SPEED = 1e-3
+
+
+def _speed(text: str) -> float:
+    """argparse type of ``--speed``: 0 (as fast as possible) or from :data:`MIN_SPEED` to 1e6."""
+    v = number_in(0, 1e6)(text)
+    if 0 < v < MIN_SPEED:
+        raise argparse.ArgumentTypeError(f"must be 0 (as fast as possible) or in [{MIN_SPEED:g}, 1e+06], got {text}")
+    return v
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -67,14 +76,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--measurement", default=None, metavar="ID",
                    help="the measurement id written on every point of the session (default: the plan's, else the "
                         "session folder's name)")
-    p.add_argument("--speed", type=number_in(0, 1e6), default=1.0,
-                   help="replay a file at this many times real time (default 1; 0: as fast as possible)")
+    p.add_argument("--speed", type=_speed, default=1.0,
+                   help=f"replay a file at this many times real time, {MIN_SPEED:g} to 1e6 (default 1; 0: as fast as "
+                        "possible)")
     p.add_argument("--rate-Hz", type=number_in(*RATE_HZ_RANGE), default=None,
                    help="the nominal sample rate (default: estimated from the first intervals); longer gaps "
                         "count as dropped samples")
     p.add_argument("--strict", action="store_true", help="stop the session at the first bad line (default: "
                                                           "count it, say where, and skip it)")
-    p.add_argument("--stop-after-idle-s", type=positive(), default=None, metavar="S",
+    p.add_argument("--stop-after-idle-s", type=duration_s(zero=False), default=None, metavar="S",
                    help="end the session when no line came for S seconds (a network stream that does not end)")
     g = p.add_argument_group("contacts (docs/live.md)")
     g.add_argument("--contact", choices=("force", "trigger"), default="force",
@@ -96,10 +106,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     v.add_argument("--view", action="store_true", help="serve the live view on 127.0.0.1 (the URL is printed)")
     v.add_argument("--port", type=port, default=None, help="web port of the viewer (default: the first free one "
                                                             "from 7000)")
-    v.add_argument("--fps", type=number_in(0.5, 60), default=10.0, metavar="F",
+    v.add_argument("--fps", type=number_in(0.5, 60), default=None, metavar="F",
                    help="frames the live view draws a second (default 10)")
-    v.add_argument("--linger-s", type=non_negative(), default=0.0, metavar="S",
-                   help="keep serving the view S seconds after the stream ended (Ctrl-C ends it)")
+    v.add_argument("--linger-s", type=duration_s(), default=None, metavar="S",
+                   help="keep serving the view S seconds after the stream ended (at most 1e7; Ctrl-C ends it)")
     from arm_model.uncertainty_cli import add_input_options
     add_input_options(p)
     p.set_defaults(func=run_live)
@@ -132,6 +142,7 @@ def _header(source: LineSource, stop: _Stop, idle_s: float | None = None) -> tup
     """(line number, cells) of the stream's header: its first line that is not blank (UDP: the first that
     is not a number, lines before it skipped and counted). ``idle_s`` (``--stop-after-idle-s``): no line for that
     long is an InputError (a stream that never starts: nothing is written)."""
+    from arm_model.csv_io import blank_record
     from arm_model.live.sources import line_text
     skipped, since = 0, time.monotonic()
     for item in source.lines():
@@ -145,7 +156,7 @@ def _header(source: LineSource, stop: _Stop, idle_s: float | None = None) -> tup
         since = time.monotonic()
         no, raw = item
         text = line_text(raw, source.name, no)
-        if not text.strip():
+        if blank_record(text):
             continue
         try:
             cells = next(csv.reader([text.lstrip("\ufeff")], strict=True))
@@ -174,6 +185,9 @@ def run_live(args: argparse.Namespace) -> int:
     from arm_model.uncertainty_cli import inputs_from_args
     if args.plan is not None and args.feature is not None:
         raise InputError("give --plan or --feature, not both")
+    given = [o for o, v in (("--port", args.port), ("--fps", args.fps), ("--linger-s", args.linger_s)) if v is not None]
+    if given and not args.view:
+        raise InputError(f"{', '.join(given)}: option(s) of the live view, which is not asked for (add --view)")
     try:
         contact = ContactOptions(args.contact_on_N, args.contact_off_N, args.min_dwell_s, args.contact,
                                  args.smooth_s, args.baseline_s)
@@ -225,6 +239,7 @@ def _status(args: argparse.Namespace, source: LineSource, files: list) -> dict:
 def _run(args: argparse.Namespace, source: LineSource, session: Session, layout: SampleLayout, stop: _Stop,
          skipped: int) -> int:
     """The session's loop: push every line's sample, show what it brings, keep the view drawn."""
+    from arm_model.csv_io import blank_record
     from arm_model.live.sources import Pacer, line_text
     view = _start_view(args, session)
     pacer = Pacer(args.speed if source.replay else 0.0)
@@ -252,7 +267,7 @@ def _run(args: argparse.Namespace, source: LineSource, session: Session, layout:
             no, raw = item
             try:
                 text = line_text(raw, source.name, no)
-                if not text or (datagrams and text == header_text) or not text.strip():
+                if not text or (datagrams and text == header_text) or blank_record(text):
                     continue
                 sample = layout.parse(text, no)
             except InputError as exc:
@@ -289,7 +304,7 @@ def _start_view(args: argparse.Namespace, session: Session) -> LiveView | None:
     if not args.view:
         return None
     from .live import LiveView
-    view = LiveView(session, port=args.port, fps=args.fps)
+    view = LiveView(session, port=args.port, **({} if args.fps is None else {"fps": args.fps}))
     print(f"live view: {view.url}", flush=True)
     return view
 
@@ -299,8 +314,9 @@ def _finish_view(args: argparse.Namespace, session: Session, view: LiveView, sto
         view.update(force=True)
         page = view.write_html(session.record.folder / "view.html")
         log.info(f"the last view as a page -> {page}")
-        end = time.monotonic() + args.linger_s
-        if args.linger_s and not stop.reason:
+        linger = args.linger_s or 0.0
+        end = time.monotonic() + linger
+        if linger and not stop.reason:
             log.info(f"serving the live view {args.linger_s:g} s more: {view.url} (Ctrl-C ends)")
         while not stop.reason and time.monotonic() < end:
             time.sleep(0.1)

@@ -50,12 +50,10 @@ from ..geometry import (
     perpendicular_basis,
 )
 from ..io import Distance, Feature
-from .plan import PlanFeature, SessionPlan
+from .plan import NEEDED_POINTS, PlanFeature, SessionPlan
 
 __all__ = ["FeatureFit", "FeatureTracker", "NEEDED_POINTS", "COVERAGE_K", "FORM_SAMPLES_LIVE"]
 
-#: fewest points that give each kind's size and form
-NEEDED_POINTS = {"ring": 4, "cylinder": 4, "sphere": 5, "plane": 3, "seat": 1, "point": 1}
 #: coverage factor of the agreement test against a certificate
 COVERAGE_K = 2.0
 #: a ring or cylinder is fitted as a cylinder (its axis tilt free) from this many points on, when they spread

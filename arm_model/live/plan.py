@@ -37,6 +37,8 @@ __all__ = ["PlanFeature", "SessionPlan", "read_plan", "parse_plan", "format_plan
 
 #: the most contacts one plan entry may ask for
 MAX_PLAN_POINTS = 100_000
+#: fewest points that give each kind's size and form (a plan asking fewer never fits its feature)
+NEEDED_POINTS = {"ring": 4, "cylinder": 4, "sphere": 5, "plane": 3, "seat": 1, "point": 1}
 
 
 @dataclass(frozen=True)
@@ -99,6 +101,9 @@ def parse_plan(text: str, path: str = "<plan>") -> SessionPlan:
                                  path, lines.get(("feature", i)), f"key 'feature[{i + 1}]'")
         elif isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_PLAN_POINTS:
             raise InputError(f"'points' must be a whole number from 1 to {MAX_PLAN_POINTS}, got {n!r}", *where)
+        elif n < NEEDED_POINTS[feature.kind]:
+            raise InputError(f"a {feature.kind} needs at least {NEEDED_POINTS[feature.kind]} points for its fit, got "
+                             f"{n}: the session would never fit '{feature.id}'", *where)
         entries.append(PlanFeature(feature, n))
     return SessionPlan(tuple(entries), tuple(art.distances), measurement, path)
 

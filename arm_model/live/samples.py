@@ -18,11 +18,12 @@ line and the column.
 """
 from __future__ import annotations
 
+import csv
 import math
 import re
 from typing import NamedTuple
 
-from ..csv_io import parse_number
+from ..csv_io import blank_record, parse_number
 from ..errors import InputError, did_you_mean, read_text
 from ..units import ABSOLUTE_ZERO_C, PLAUSIBLE_SI, QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
@@ -186,7 +187,7 @@ class SampleLayout:
     def parse(self, text: str, line: int) -> Sample:
         """The sample of one line (its text without the line end) [SI]; an :class:`InputError` naming
         the stream, the line and the column for anything that is not a sample of this layout."""
-        cells = text.split(",")
+        cells = text.split(",") if '"' not in text else self._quoted(text, line)
         if len(cells) != self.n_cells:
             raise InputError(f"expected {self.n_cells} cells (as the header), got {len(cells)}", self.path, line)
         if text.translate(_PLAIN):
@@ -201,6 +202,13 @@ class SampleLayout:
             if not lo <= v <= hi:
                 self._range_error(values, line)
         return self._sample(values)
+
+    def _quoted(self, text: str, line: int) -> list[str]:
+        """The cells of a line with quotes, as the file readers take them (``"12.5"`` is 12.5)."""
+        try:
+            return next(csv.reader([text], strict=True))
+        except csv.Error as exc:
+            raise InputError(f"not valid CSV: {exc}", self.path, line) from None
 
     def _range_error(self, values: list[float], line: int) -> None:
         for k, f, lo, hi, quantity in self._checks:
@@ -257,12 +265,13 @@ def read_samples(path) -> int:
     """A sample stream file (docs/formats.md §8) as ``aacmm live`` reads it, line by line; the number of samples
     (the read-back of :mod:`arm_model.readback`)."""
     lines = read_text(path, "the sample stream").splitlines()
-    header = [c.strip() for c in lines[0].split(",")] if lines else []
+    first = next((k for k, text in enumerate(lines) if not blank_record(text)), len(lines))
+    header = [c.strip() for c in lines[first].split(",")] if first < len(lines) else []
     layout = SampleLayout(header, len({m.group(1) for h in header if (m := re.fullmatch(r"q(\d+)_\w+", h))}),
-                          str(path))
+                          str(path), first + 1)
     n = 0
-    for no, text in enumerate(lines[1:], start=2):
-        if text.strip():
+    for no, text in enumerate(lines[first + 1:], start=first + 2):
+        if not blank_record(text):
             layout.parse(text, no)
             n += 1
     return n

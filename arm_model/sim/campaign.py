@@ -20,7 +20,7 @@ from ..description import ArmDescription
 from ..errors import InputError, did_you_mean, parse_toml, read_text
 from ..shipped import SHIPPED_ARMS, shipped_path
 from ..toml_lines import key_path_text, toml_key_lines
-from ..units import implausible, split_unit
+from ..units import SMALLEST_ARTEFACT_M, implausible, split_unit
 from ..urdf_import import is_urdf, load_arm
 
 __all__ = ["Campaign", "Task", "load_campaign", "campaign_from_dict", "TASK_KINDS", "SENSORS",
@@ -389,7 +389,10 @@ def _joint_indices(ctx, desc: ArmDescription, names, table, revolute: bool) -> t
     joint's angle)."""
     if not names:
         return desc.revolute_columns if revolute else tuple(range(desc.n_joints))
-    return tuple(_joint_index(ctx, desc, n, table, "joints", revolute) for n in names)
+    out = tuple(_joint_index(ctx, desc, n, table, "joints", revolute) for n in names)
+    if len(set(out)) != len(out):       # (joint_compliance and thermal: an internal error of their effect's check)
+        raise ctx.error("a joint is named twice", table, "joints")
+    return out
 
 
 def _load_arm(ctx, arm_path: Path, tip_frame: str | None, base_frame: str | None) -> ArmDescription:
@@ -468,8 +471,6 @@ def _joint_values(ctx, e: dict, name: str, desc, tbl) -> None:
 
 def _lateral_compliance(ctx, e: dict, desc, tbl, raw: dict) -> None:
     e["indices"] = _joint_indices(ctx, desc, e["joints"], tbl, True)
-    if len(set(e["indices"])) != len(e["indices"]):
-        raise ctx.error("a joint is named twice", tbl, "joints")
     if e["stiffness_x"] is None and e["stiffness_y"] is None:
         raise ctx.error("'lateral_compliance' needs 'stiffness_x_<unit>' and/or 'stiffness_y_<unit>' "
                         "(about the joint frame's x and y axes)", tbl)
@@ -560,6 +561,11 @@ def _truth(ctx, data: dict, desc, sensor: str) -> dict:
     return truth
 
 
+#: the shortest temperature cycle [s] and signal sample period [s] a campaign may ask for (0 s or 1e-320 s made every
+#: temperature or time stamp NaN: an internal error; 1e9 s put every time stamp at 0)
+_SHORTEST_CYCLE_S, _SHORTEST_SAMPLE_S = 1.0, 1e-6
+
+
 def _sections(ctx, data: dict) -> dict:
     """The [noise], [environment], [operator] and [signals] tables, checked."""
     sections = {}
@@ -588,9 +594,20 @@ def _sections(ctx, data: dict) -> dict:
             raise ctx.error(f"'{k}' must not be negative", ("operator",), k)
     if not 0 <= op["spike_probability"] <= 1:
         raise ctx.error("'spike_probability' must lie in [0, 1]", ("operator",), "spike_probability")
+    if op["measurement_gap"] < 0:
+        raise ctx.error("'measurement_gap' must not be negative", ("operator",), "measurement_gap")
+    env = sections["environment"]
+    if env["cycle_period"] < _SHORTEST_CYCLE_S:
+        raise ctx.error(f"'cycle_period' must be at least {_SHORTEST_CYCLE_S:g} s (a room's temperature cycle), got "
+                        f"{env['cycle_period']:g} s", ("environment",), "cycle_period")
     sg = sections["signals"]
     if sg["sample_period"] <= 0 or sg["rise"] <= 0 or sg["decay"] <= 0:
         raise ctx.error("sample period, rise and decay must be > 0", ("signals",))
+    if not _SHORTEST_SAMPLE_S <= sg["sample_period"] <= min(sg["rise"], sg["decay"]):
+        raise ctx.error(f"'sample_period' must be from {_SHORTEST_SAMPLE_S:g} s to the shorter of rise and decay "
+                        f"({min(sg['rise'], sg['decay']):g} s: a pulse sampled at least once), got "
+                        f"{sg['sample_period']:g} s (every time stamp is a multiple of it)", ("signals",),
+                        "sample_period")
     if op["point_period"] < 1.5 * (sg["rise"] + sg["decay"]):
         raise ctx.error(f"'point_period' must be at least 1.5 x (rise + decay) = "
                         f"{1.5 * (sg['rise'] + sg['decay']):.3g} s so that pulses do not overlap",
@@ -710,6 +727,15 @@ def _check_size(ctx, tasks, op, sg) -> None:
 #: spreads (1 sigma): not negative
 _CONE_KEYS = ("stylus_cone", "stylus_tilt", "polar_max", "force_cone")
 _SPREAD_KEYS = ("angle_jitter", "roll_jitter")
+#: a task's sizes that cannot be negative (uncertainties, form errors, spreads, noise, offsets, a ring's depths
+#: below its top face; -1 mm was an internal error or a silent ring probed above itself) and those that must be
+#: above 0 (an instrument's distance, a plane's extent; a bar's true length: at least an artefact's; 0 or -1 mm
+#: were simulated as given)
+_NON_NEGATIVE_KEYS = ("u_diameter", "form_error", "true_form_error", "depth_jitter", "depths", "noise",
+                      "marker_distance", "limit_margin")
+_POSITIVE_KEYS = ("distance", "size")
+#: the most markers a motion-capture task carries on the arm (10^7 ran for minutes on 4 postures)
+MAX_MARKERS = 100
 
 
 def _check_task(ctx, kind, o, tbl, sensor):
@@ -720,11 +746,25 @@ def _check_task(ctx, kind, o, tbl, sensor):
     for k in _SPREAD_KEYS:
         if k in o and o[k] < 0:
             raise ctx.error(f"'{k}' (a spread, 1 sigma) must not be negative", tbl, k)
+    for k in _NON_NEGATIVE_KEYS:
+        if o.get(k) is not None and min(np.atleast_1d(o[k])) < 0:
+            raise ctx.error(f"'{k}' must not be negative", tbl, k)
+    for k in _POSITIVE_KEYS:
+        if o.get(k) is not None and min(np.atleast_1d(o[k])) <= 0:
+            raise ctx.error(f"'{k}' must be > 0", tbl, k)
+    if kind == "ballbar" and o["true_length"] is not None and o["true_length"] < SMALLEST_ARTEFACT_M:
+        raise ctx.error(f"'true_length' must be at least {SMALLEST_ARTEFACT_M * 1e3:g} mm (as a certified length)", tbl,
+                        "true_length")
+    if kind == "ring" and o["form_lobes"] < 2:
+        raise ctx.error("'form_lobes' must be at least 2 (one lobe is a shifted circle, none a size error: no form "
+                        "error either way)", tbl, "form_lobes")
+    if kind == "mocap" and not 1 <= o["markers"] <= MAX_MARKERS:
+        raise ctx.error(f"'markers' must be from 1 to {MAX_MARKERS}", tbl, "markers")
     positive = {"ring": ("diameter", "points_per_row"), "sphere": ("diameter", "points"),
                 "plane": ("points",), "seat": ("articulations",),
                 "ballbar": ("length", "positions", "sphere_diameter", "reach"),
                 "tracker": ("nests", "articulations", "reach"),
-                "mocap": ("postures", "markers", "sessions")}[kind]
+                "mocap": ("postures", "sessions")}[kind]
     for k in positive:
         if o[k] <= 0:
             raise ctx.error(f"'{k}' must be > 0", tbl, k)
@@ -732,8 +772,6 @@ def _check_task(ctx, kind, o, tbl, sensor):
         if o["sessions"] > o["postures"]:
             raise ctx.error(f"{o['sessions']} sessions for {o['postures']} postures: each session needs postures",
                             tbl, "sessions")
-        if o["limit_margin"] < 0:
-            raise ctx.error("'limit_margin' must not be negative", tbl, "limit_margin")
     if kind == "ring":
         if o["roll"] is None:   # the paper's sensor sees one bending axis: its operator keeps it on the force
             o["roll"] = "bend-along-force" if sensor == "two-channel" else "random"

@@ -76,7 +76,9 @@ def summary(result, elapsed: float | None = None) -> str:
     shown = {"encoder_resolution": (180 / np.pi, "deg"), "encoder_noise": (180 / np.pi, "deg"),
              "probing_repeatability": (1e6, "um"), "force_noise": (1.0, "N"), "temperature_noise": (1.0, "C")}
     nz = [f"{k} {v * shown[k][0]:.3g} {shown[k][1]}" for k, v in result.truth["noise"].items() if v]
-    lines.append("noise (1 sigma): " + (", ".join(nz) if nz else "none"))
+    instrument = any(t.kind == "mocap" for t in c.tasks)      # its noise is said on its task's line
+    lines.append("noise of the arm (1 sigma): " + (", ".join(nz) if nz else "none")
+                 + ("; the instrument's: see its task" if instrument else ""))
     s = result.stats
     ik = (f"inverse kinematics: {s['ik_attempts_mean']:.2f} random starts a point on average "
           f"(max {s['ik_attempts_max']}); " if "ik_attempts_mean" in s else "postures only: no inverse kinematics; ")

@@ -96,7 +96,7 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
     (and whether their test can reach its level), and the base stage."""
     points, desc = camp.points, camp.desc
     has_t = points.temperature is not None and np.all(np.isfinite(points.temperature))
-    drift = drift_offer(points)
+    drift = drift_offer(desc, points)
     need = ([JointCompliance(), JointHysteresis()] + ([ThermalGrowth()] if has_t else []) + list(camp.effects)
             + [c.effect for c in camp.extra] + ([c.effect for c in drift] if isinstance(drift, list) else []))
     data = make_data(points, camp.artefacts, needs_model(desc, need), reference=camp.reference)
