@@ -334,13 +334,12 @@ def joint_screws(convention: str, rows: Sequence[Vector] | np.ndarray, q: Any, j
     t = np.broadcast_to(_I4, (n, 4, 4))
     u = np.empty((n, nr, 3))
     c = np.empty((n, nr, 3))
+    try:
+        motions = None if joints is None else _motions(tuple(joints))
+    except TypeError:                                   # a joint that does not hash (an axis given as a list)
+        motions = _motions.__wrapped__(tuple(joints))  # type: ignore[arg-type]
     for i in range(nr):
-        joint = None if joints is None else joints[i]
-        # the row's motion alone (its column and mimic apply to the value below; its axis and the origin's own rpy,
-        # from which its angle errors turn it, stay): one cache entry per shape
-        local = None if joint is None else Joint(0, None if joint.axis is None else
-                                                 (float(joint.axis[0]), float(joint.axis[1]), float(joint.axis[2])),
-                                                 joint.prismatic, rpy=joint.rpy)
+        local = None if motions is None else motions[i]
         if all(isinstance(v, float) for v in rows[i]):
             before, after, (kind, axis) = _row_parts_cached(convention, tuple(rows[i]), local)
         else:
@@ -360,6 +359,15 @@ def joint_screws(convention: str, rows: Sequence[Vector] | np.ndarray, q: Any, j
     return t[:, :3, :3], t[:, :3, 3].copy(), u, c
 
 
+@lru_cache(maxsize=64)
+def _motions(joints: tuple[Joint, ...]) -> tuple[Joint, ...]:
+    """Each row's motion alone (its column and mimic apply to the value, in :func:`joint_screws`; its axis and the
+    origin's own rpy, from which its angle errors turn it, stay): one cache entry of :func:`_row_parts_cached` per
+    shape."""
+    return tuple(Joint(0, None if j.axis is None else (float(j.axis[0]), float(j.axis[1]), float(j.axis[2])),
+                       j.prismatic, rpy=j.rpy) for j in joints)
+
+
 def _times(t: np.ndarray, m: np.ndarray) -> np.ndarray:
     """t @ m for a stack t (N, 4, 4) and one matrix (4, 4) (one matrix product) or a stack."""
     out: np.ndarray = (t.reshape(-1, 4) @ m).reshape(t.shape) if m.ndim == 2 else t @ m
@@ -371,6 +379,8 @@ def _to_columns(per_row: np.ndarray, joints: Sequence[Joint] | None, n_q: int | 
     if joints is None:
         return per_row
     n_q = max(j.column for j in joints) + 1 if n_q is None else n_q
+    if n_q == len(joints) and all(j.column == i and j.multiplier == 1.0 for i, j in enumerate(joints)):
+        return np.ascontiguousarray(per_row)          # one row a column: the same numbers, no sum to form
     out = np.zeros(per_row.shape[:2] + (n_q,))
     for i, j in enumerate(joints):
         out[:, :, j.column] += per_row[:, :, i] if j.multiplier == 1.0 else j.multiplier * per_row[:, :, i]

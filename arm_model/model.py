@@ -74,6 +74,7 @@ class ArmModel:
     effects: tuple[Effect, ...] = ()
     spec: ParamSpec = field(init=False)
     base_size: int = field(init=False)
+    _slices: tuple[tuple[Effect, slice], ...] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.desc, ArmDescription):
@@ -89,14 +90,18 @@ class ArmModel:
         object.__setattr__(self, "effects", tuple(self.effects))
         base = param_spec(self.desc)
         names, units = list(base.names), list(base.units)
+        slices = []
         for e in self.effects:
-            for n, u in e.param_defs(self.desc):
+            defs = e.param_defs(self.desc)
+            for n, u in defs:
                 if n in names:
                     raise ValueError(f"parameter {n!r} is declared twice (effect {e.describe()})")
                 names.append(n)
                 units.append(u)
+            slices.append((e, slice(len(names) - len(defs), len(names))))
         object.__setattr__(self, "spec", ParamSpec(tuple(names), tuple(units), self.desc.n_joints))
         object.__setattr__(self, "base_size", base.size)
+        object.__setattr__(self, "_slices", tuple(slices))
 
     # -- structure ----------------------------------------------------------------------------
     def with_effects(self, *effects: Effect) -> ArmModel:
@@ -123,12 +128,8 @@ class ArmModel:
         return low
 
     def effect_slices(self) -> list[tuple[Effect, slice]]:
-        out, k = [], self.base_size
-        for e in self.effects:
-            n = len(e.param_defs(self.desc))
-            out.append((e, slice(k, k + n)))
-            k += n
-        return out
+        """Each effect with the slice of its parameters in ``spec`` (worked out once, with ``spec``)."""
+        return list(self._slices)
 
     # -- the one evaluation -------------------------------------------------------------------
     def _apply_effects(self, p: Any, inputs: ModelInputs, ops: Any) -> Geometry:

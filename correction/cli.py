@@ -57,6 +57,7 @@ def register(sub) -> None:
     r.add_argument("--probability-pct", type=number_in(0, 100, low_open=True, high_open=True), dest="probability",
                    default=95.0, metavar="P",
                    help="coverage probability of the expanded uncertainties (default 95)")
+    r.add_argument("--no-plots", action="store_true", help="skip the PNG figures (figures/ is not written)")
     add_input_options(r, force=False)
     add_output_option(r)
     r.set_defaults(func=run_ring)
@@ -114,7 +115,7 @@ def run_ring(args: argparse.Namespace) -> int:
             raise NumericalError(f"{args.points}: diameter uncertainty from the points: {exc}") from None
         inputs["signals"] = args.signals
         written = ring_report(campaign, out.dir, inputs, budgets, warnings, point_unc,
-                              parameters.source if parameters is not None else None)
+                              parameters.source if parameters is not None else None, plots=not args.no_plots)
     s = campaign_summary(campaign)
     log.info(f"ring '{campaign.feature}': {counted(len(campaign.measurements), 'measurement')}, "
           f"{counted(sum(r.n_points for r in campaign.measurements), 'point')}; forces from "

@@ -384,26 +384,28 @@ def _ring_tables_html(campaign: RingCampaign, summary: dict, t2: dict) -> list[s
     return parts
 
 
-def _ring_figures_html(campaign: RingCampaign, corr) -> list[str]:
-    """The report's figures, the correlations with the force and their table."""
+def _ring_figures_html(campaign: RingCampaign, corr, plots: bool = True) -> list[str]:
+    """The report's figures (none when not ``plots``), the correlations with the force and their table."""
     parts = []
     for name, cap in (("point_errors.png", "Contact point errors against angular position (paper Fig. 6, 12)"),
                       ("diameters.png", "Initial and corrected diameter errors (paper Fig. 13)"),
                       ("form_errors.png", "Initial and corrected form errors (paper Fig. 8, 14)"),
                       ("forces.png", "Force values (paper Fig. 9)")):
-        parts.append(f"<h3>{html.escape(cap)}</h3><img src='figures/{name}' alt='{html.escape(cap)}'>")
+        if plots:
+            parts.append(f"<h3>{html.escape(cap)}</h3><img src='figures/{name}' alt='{html.escape(cap)}'>")
     rm = roundness_models(campaign)
     parts.append("<h3>Roundness: radial deviations against angle, per measurement</h3>"
                  f"<p>Each point's radial deviation from the fitted cylinder (the fit's residual, outward positive; "
                  f"max - min is the form error) against its angle about the fitted axis, "
                  f"{' and '.join(MODEL_LABELS[m] for m in rm)}; the data are in roundness.csv.</p>"
-                 "<img src='figures/roundness.png' alt='polar roundness plots'>")
+                 + ("<img src='figures/roundness.png' alt='polar roundness plots'>" if plots else ""))
     parts.append("<h2>Correlation with the force (initial errors)</h2>" + reports.html_table(
         ("error", "force value", "with (0, 0)", "n", "Pearson r", "R²", "p", "slope [mm/N]"),
         [(k.y_name, k.x_name, "yes" if k.with_reference else "no", k.n, f"{k.r:.3f}", f"{k.r2:.3f}",
           f"{k.p_value:.2g}", f"{k.slope:.4f}") for k in corr]))
-    parts.append("<img src='figures/correlation_diameter.png' alt='diameter error against force'>"
-                 "<img src='figures/correlation_form.png' alt='form error against force'>")
+    if plots:
+        parts.append("<img src='figures/correlation_diameter.png' alt='diameter error against force'>"
+                     "<img src='figures/correlation_form.png' alt='form error against force'>")
     return parts
 
 
@@ -426,10 +428,10 @@ def _point_uncertainty_html(campaign: RingCampaign, point_uncertainty, parameter
 
 
 def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: list[BudgetResult],
-                warnings=(), point_uncertainty=None, parameters_source=None) -> list[Path]:
+                warnings=(), point_uncertainty=None, parameters_source=None, plots: bool = True) -> list[Path]:
     """Write the report of an analysed ring campaign into folder ``out``: ``report.html``,
     ``summary.json``, ``table2.csv``, ``correlations.csv``, ``budgets.csv``, ``roundness.csv`` and
-    ``figures/*.png``.
+    ``figures/*.png`` (not when ``plots`` is False: the report then shows no figure).
 
     Args:
         campaign: :func:`correction.models.analyse_ring_campaign`'s result.
@@ -444,7 +446,7 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
     summary.update(provenance(in_paths))
     t2 = table2(campaign)
     corr = campaign_correlations(campaign)
-    figs = _ring_figures(campaign, budgets)
+    figs = _ring_figures(campaign, budgets) if plots else {}
     parts = [f"<p>Ring <b>{html.escape(campaign.feature)}</b>, certified diameter "
              f"{campaign.reference_diameter * 1e3:.4f} mm, ball {campaign.ball_diameter * 1e3:g} mm, "  # type: ignore[operator]
              f"{len(campaign.measurements)} measurements, force sensor: {html.escape(campaign.force_kind)}. "
@@ -454,8 +456,9 @@ def ring_report(campaign: RingCampaign, out: str | Path, inputs: dict, budgets: 
     parts += [f"<p class='bad'>{html.escape(n)}</p>" for n in campaign.notes]
     parts.append(warnings_html(warnings))
     parts += _ring_tables_html(campaign, summary, t2)
-    parts += _ring_figures_html(campaign, corr)
-    parts.append("<h2>Uncertainty budgets (GUM, paper Table 3)</h2><img src='figures/budgets.png' alt='budgets'>")
+    parts += _ring_figures_html(campaign, corr, plots)
+    parts.append("<h2>Uncertainty budgets (GUM, paper Table 3)</h2>"
+                 + ("<img src='figures/budgets.png' alt='budgets'>" if plots else ""))
     parts += [_budget_html(b) for b in budgets]
     if point_uncertainty is not None:
         parts.append(_point_uncertainty_html(campaign, point_uncertainty, parameters_source))

@@ -175,3 +175,47 @@ def robots() -> Path:
             if not dest.is_dir():
                 _fetch_robot_set(dest)
     return dest
+
+
+# ---------------------------------------------------------------------------------------------
+# the order of the tests under pytest-xdist (make test, make test-slow: -n 2 --dist worksteal)
+
+#: seconds of CPU of the tests of at least about 1 s (one process, measured; the file says how): the weights the
+#: order below gives the modules; a test not listed counts DEFAULT_SECONDS
+DURATIONS = Path(__file__).with_name("durations.tsv")
+DEFAULT_SECONDS = 0.1
+
+
+def _recorded_seconds() -> dict[str, float]:
+    rows = (line.split("\t") for line in DURATIONS.read_text().splitlines() if line and not line.startswith("#"))
+    return {node: float(s) for s, node in rows}
+
+
+def balanced_order(items: list, seconds: dict[str, float], default: float = DEFAULT_SECONDS) -> list:
+    """``items`` (pytest items) ordered for worksteal on two workers: worksteal hands the first half of the list
+    to one worker and the rest to the other, each runs its half from the front, and an idle worker steals from the
+    back of the other's. So the modules (kept whole: a module fixture is set up once) are dealt heaviest first to
+    the lighter half (the longest tests start first, none starts late), and the halves are then evened in count
+    with the lightest modules' tests, which may be stolen."""
+    modules: dict[str, list] = {}
+    for item in items:
+        modules.setdefault(item.nodeid.split("::")[0], []).append(item)
+    weight = {m: sum(seconds.get(i.nodeid, default) for i in its) for m, its in modules.items()}
+    halves: tuple[list, list] = ([], [])
+    load = [0.0, 0.0]
+    for m in sorted(modules, key=lambda m: -weight[m]):
+        k = 0 if load[0] <= load[1] else 1
+        halves[k].extend(modules[m])
+        load[k] += weight[m]
+    first, second = halves
+    cut = len(items) // 2
+    if len(first) < cut:                   # the lightest tests of the second half end the first
+        k = cut - len(first)
+        return first + second[-k:] + second[:-k]
+    return first[:cut] + second + first[cut:]
+
+
+@pytest.hookimpl(trylast=True)        # after -m and -k have deselected
+def pytest_collection_modifyitems(config, items):
+    if os.environ.get("PYTEST_XDIST_WORKER") and os.environ.get("PYTEST_XDIST_WORKER_COUNT") == "2":
+        items[:] = balanced_order(items, _recorded_seconds())

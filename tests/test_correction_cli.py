@@ -157,13 +157,16 @@ def test_ring_input_uncertainties_are_overridable(small_campaign, tmp_path):
     def run(name, *opts):
         out = tmp_path / name
         assert main(["ring", str(small_campaign / "points.csv"), str(small_campaign / "artefacts.toml"),
-                     "--arm", str(NOMINAL), "-o", str(out), "-q", *opts]) == 0
+                     "--arm", str(NOMINAL), "-o", str(out), "-q", "--no-plots", *opts]) == 0
         s = json.loads((out / "summary.json").read_text())
         n = {m["measurement"]: m["n_points"] for m in s["measurements"]}
         return s["diameter_uncertainty_from_points"]["measurements"], n
 
     base, n = run("base")
     more, _ = run("more", "--u-compliance-rel", "0.4", "--u-probing-um", "3")
+    # --no-plots: every file but the figures, and a report that shows none
+    assert files_under(tmp_path / "base") == {f for f in RING_FILES if not f.startswith("figures/")}
+    assert "<img" not in (tmp_path / "base" / "report.html").read_text()
     for a, b in zip(base, more, strict=True):
         assert a["compliance_mm"] > 0
         assert_close(b["compliance_mm"], 2 * a["compliance_mm"], atol=1e-9 * a["compliance_mm"])

@@ -185,7 +185,7 @@ def test_holdout_keeps_its_rows_out_of_the_model_which_is_calibrates_with_its_re
               str(sim / "points-ref.csv"), "--sigma-probe-um", "2", "--holdout", ",".join(held), "--quiet"]
     assert main(["close-loop", *common, "--max-effects", "0", "-o", str(tmp_path / "loop")]) == 0
     # calibrate at the loop's estimation (no prior, the practical-resolution rule: tests/conftest.py loop_fit_options)
-    assert main(["calibrate", *common, "--prior-scale", "off", "--min-resolution", "0.1",
+    assert main(["calibrate", *common, "--prior-scale", "off", "--min-resolution", "0.1", "--no-plots",
                  "-o", str(tmp_path / "cal")]) == 0
     loop, cal = (json.loads((tmp_path / d / "summary.json").read_text()) for d in ("loop", "cal"))
     assert loop["measurements"]["test"] == held and loop["effects_added"] == []

@@ -102,10 +102,32 @@ def test_provenance_hashes_files_and_folders(tmp_path):
                                  str(d / "m1.csv"): hashlib.sha256(b"1\n").hexdigest()}
 
 
+#: a small campaign (about 100 points): what is checked is the summary's provenance, not the fit
+SMALL_CAMPAIGN = """seed = 5
+arm = "aacmm7"
+sensor = "xyz"
+[noise]
+probing_repeatability_um = 2.0
+[[task]]
+kind = "ballbar"
+positions = 6
+length_mm = 600.0
+points_per_sphere = 4
+[[task]]
+kind = "seat"
+articulations = 6
+measurements = 4
+[[task]]
+kind = "sphere"
+points = 7
+measurements = 4
+"""
+
+
 def test_calibrate_summary_carries_version_and_input_hashes(tmp_path):
     out = tmp_path / "sim"
-    assert main(["simulate", str(ROOT / "examples" / "campaigns" / "hidden-eccentricity.toml"),
-                 "-o", str(out), "--no-signals"]) == 0
+    (tmp_path / "campaign.toml").write_text(SMALL_CAMPAIGN)
+    assert main(["simulate", str(tmp_path / "campaign.toml"), "-o", str(out), "--no-signals"]) == 0
     pts, art = out / "points.csv", out / "artefacts.toml"
     assert main(["calibrate", str(pts), str(art), "--arm", "aacmm7", "--no-plots",
                  "-o", str(tmp_path / "cal")]) == 0
