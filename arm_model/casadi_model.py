@@ -22,7 +22,7 @@ __all__ = ["casadi_ball_centre", "NumpyFunction"]
 
 def _ops() -> SimpleNamespace:
     import casadi as ca
-    return SimpleNamespace(sin=ca.sin, cos=ca.cos)
+    return SimpleNamespace(sin=ca.sin, cos=ca.cos, sign=ca.sign)
 
 
 def casadi_ball_centre(desc: ArmDescription, name: str = "ball_centre") -> Any:

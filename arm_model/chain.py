@@ -50,7 +50,7 @@ import numpy as np
 __all__ = ["NUMPY_OPS", "Joint", "joint_value", "elastic_displacement", "ball_in_last_frame", "row_motions",
            "chain_point", "ball_centre_expr", "probe_lever", "has_stylus", "cross"]
 
-NUMPY_OPS = SimpleNamespace(sin=np.sin, cos=np.cos)
+NUMPY_OPS = SimpleNamespace(sin=np.sin, cos=np.cos, sign=np.sign)
 
 
 def cross(a: Any, b: Any) -> np.ndarray:

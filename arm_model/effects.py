@@ -27,8 +27,8 @@ from .description import ArmDescription
 __all__ = ["ModelInputs", "Geometry", "Effect", "EncoderEccentricity", "JointCompliance",
            "ThermalGrowth", "ForceSensorError", "JointGain", "ProbeCompliance", "EFFECTS", "effect_from_name",
            "REFERENCE_TEMPERATURE_C", "JointHarmonics", "ProbeThermalGrowth", "ProbeComplianceMatrix",
-           "ApproachOffset", "LateralCompliance", "ThermalDrift", "joint_frame", "last_frame", "gravity_moment",
-           "contact_moment"]
+           "ApproachOffset", "LateralCompliance", "ThermalDrift", "JointBacklash", "JointHysteresis", "joint_frame",
+           "last_frame", "gravity_moment", "contact_moment"]
 
 REFERENCE_TEMPERATURE_C = 20.0
 
@@ -45,6 +45,7 @@ class ModelInputs:
     #: about ``origin``, [N m]); :class:`LateralCompliance` computes them itself when None
     moments: Any = None
     time: Any = None              # [s] the points' time stamps (``time_s``)
+    motion: list[Any] | None = None   # J [1] the sign of each reading's last move (model.reading_motion)
 
 
 @dataclass
@@ -526,6 +527,65 @@ def _shift_ball(desc: ArmDescription, geom: Geometry, q: Any, d_base: list[Any],
 
 
 @dataclass(frozen=True)
+class _JointPlay(Effect):
+    """A joint's play: joint i sits ``b_i s_i`` beyond its encoder, ``s_i`` a per-point sign (-1, 0, +1) that says
+    which side of the play the joint rests on (:meth:`signs`); ``b`` [rad], half the band, linear and unbounded (its
+    sign says which way the reading lags)."""
+    acts_on_readings: ClassVar[bool] = True
+    revolute_only: ClassVar[bool] = True
+    #: the parameter's name after the joint's (``j4.backlash``)
+    parameter: ClassVar[str] = "play"
+
+    def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
+        return [(f"{desc.joint_names[i]}.{self.parameter}", "rad") for i in self.joint_indices(desc)]
+
+    def signs(self, inputs: ModelInputs, ops: Any) -> list[Any]:
+        """The side of the play of every joint (one column or expression a joint)."""
+        raise NotImplementedError
+
+    def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
+        side = self.signs(inputs, ops)
+        q = list(inputs.q)
+        for k, i in enumerate(self.joint_indices(desc)):
+            q[i] = q[i] + params[k] * side[i]
+        inputs.q = q
+
+
+@dataclass(frozen=True)
+class JointBacklash(_JointPlay):
+    """Play of joint i closed by gravity: the joint sits ``b_i sign(-tau_gravity_i)`` beyond its encoder, ``b_i``
+    to the side its gravity load pushes it (the sign convention of :class:`JointCompliance`'s gravity part), whatever
+    the load's size: a gear's or a bearing's play, closed one way or the other as the torque the joint holds against
+    the links' weight changes sign. Piecewise constant in the torque."""
+    key: str = field(default="joint_backlash", init=False, repr=False)
+    parameter: ClassVar[str] = "backlash"
+
+    def needs(self) -> tuple[str, ...]:
+        return ("tau_gravity",)
+
+    def signs(self, inputs: ModelInputs, ops: Any) -> list[Any]:
+        return [-ops.sign(t) for t in _torques(inputs.tau_gravity, "tau_gravity")]
+
+
+@dataclass(frozen=True)
+class JointHysteresis(_JointPlay):
+    """Hysteresis of joint i by the direction it last turned: the joint sits ``h_i m_i`` beyond its encoder, ``m_i``
+    the sign of its reading's move onto the point from the point captured before it (``ModelInputs.motion``,
+    :func:`arm_model.model.reading_motion`): a play or an encoder's hysteresis that the last motion closes, a
+    robot's backlash when it drives from posture to posture."""
+    key: str = field(default="joint_hysteresis", init=False, repr=False)
+    parameter: ClassVar[str] = "hysteresis"
+
+    def needs(self) -> tuple[str, ...]:
+        return ("motion",)
+
+    def signs(self, inputs: ModelInputs, ops: Any) -> list[Any]:
+        if inputs.motion is None:
+            raise ValueError("the effect 'joint_hysteresis' needs the per-point 'motion' (model.reading_motion)")
+        return list(inputs.motion)
+
+
+@dataclass(frozen=True)
 class JointHarmonics(Effect):
     """Joint-angle error periodic in an angle: ``q_i += sum_h c_h cos(h q_s) + s_h sin(h q_s)`` for the
     harmonics ``harmonics`` of the reading of joint ``source`` (0-based; None: the joint's own angle, a
@@ -747,4 +807,4 @@ class LateralCompliance(Effect):
 
 EFFECTS.update({str(cls.__dataclass_fields__["key"].default): cls for cls in
                 (JointHarmonics, ProbeThermalGrowth, ProbeComplianceMatrix, ApproachOffset, LateralCompliance,
-                 ThermalDrift)})
+                 ThermalDrift, JointBacklash, JointHysteresis)})

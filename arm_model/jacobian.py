@@ -125,8 +125,13 @@ def _cos(x: Scalar) -> Scalar:
     return x.cos() if isinstance(x, Dual) else np.cos(x)
 
 
+def _sign(x: Scalar) -> Scalar:
+    """The sign of a value: piecewise constant, so a Dual's sign carries no derivative."""
+    return np.sign(x.val) if isinstance(x, Dual) else np.sign(x)
+
+
 #: the ``ops`` namespace of :mod:`arm_model.chain` for :class:`Dual` (and plain numpy) values
-DUAL_OPS = SimpleNamespace(sin=_sin, cos=_cos)
+DUAL_OPS = SimpleNamespace(sin=_sin, cos=_cos, sign=_sign)
 
 
 def value(x: Scalar) -> Scalar:

@@ -19,7 +19,7 @@ from .description import ArmDescription
 from .effects import Effect, Geometry, ModelInputs
 from .params import ParamSpec, apply_params, param_spec, split_params
 
-__all__ = ["ArmModel", "AuxData", "CASADI_CACHE", "EQUILIBRIUM_TOL", "EQUILIBRIUM_MAX_ITER"]
+__all__ = ["ArmModel", "AuxData", "reading_motion", "CASADI_CACHE", "EQUILIBRIUM_TOL", "EQUILIBRIUM_MAX_ITER"]
 
 #: the static equilibrium's tolerance [rad] (m for a prismatic joint): a joint angle's last step
 EQUILIBRIUM_TOL = 1e-12
@@ -29,15 +29,43 @@ EQUILIBRIUM_MAX_ITER = 60
 
 @dataclass(frozen=True)
 class AuxData:
-    """Per-point data some effects need: temperature (N,) [°C], joint torques (N, J) [N m], time (N,) [s]."""
+    """Per-point data some effects need: temperature (N,) [°C], joint torques (N, J) [N m], time (N,) [s], the
+    sign of each reading's last move (N, J) [1] (:func:`reading_motion`)."""
     temperature: np.ndarray | None = None
     tau_gravity: np.ndarray | None = None
     tau_contact: np.ndarray | None = None
     time: np.ndarray | None = None
+    motion: np.ndarray | None = None
 
     def select(self, mask: np.ndarray | slice) -> AuxData:
         return AuxData(*(None if a is None else a[mask]
-                         for a in (self.temperature, self.tau_gravity, self.tau_contact, self.time)))
+                         for a in (self.temperature, self.tau_gravity, self.tau_contact, self.time, self.motion)))
+
+
+def reading_motion(q: ArrayLike, session: ArrayLike | None = None, time: ArrayLike | None = None) -> np.ndarray:
+    """(N, J) the sign (-1, 0, +1) of each joint's move onto each point from the point captured before it: the
+    previous point of the same session (``session`` (N,); None: one session) in the order of ``time`` (N,) [s]
+    (None or not finite: the rows' order), rows with the same readings as it (one point seen by several markers)
+    skipped; 0 for a session's first point. The direction a joint last turned, which a joint's play or an
+    encoder's hysteresis follows (:class:`~arm_model.effects.JointHysteresis`)."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    n = len(q)
+    sess = np.zeros(n, dtype=object) if session is None else np.asarray(session, dtype=object)
+    t = None if time is None else np.asarray(time, dtype=float)
+    key = np.arange(n, dtype=float) if t is None or not np.all(np.isfinite(t)) else t
+    out = np.zeros(q.shape)
+    for s in dict.fromkeys(sess.tolist()):
+        rows = np.flatnonzero(sess == s)
+        rows = rows[np.argsort(key[rows], kind="stable")]
+        last = None
+        for i in rows:
+            if last is not None and np.array_equal(q[i], q[last]):
+                out[i] = out[last]
+                continue
+            if last is not None:
+                out[i] = np.sign(q[i] - q[last])
+            last = i
+    return out
 
 
 @dataclass(frozen=True)
@@ -166,14 +194,15 @@ class ArmModel:
 
     def equilibrium_aux(self, q: ArrayLike, wrench: ArrayLike | None = None, p: ArrayLike | None = None,
                         temperature: ArrayLike | None = None, *, contact: bool = True, tol: float = EQUILIBRIUM_TOL,
-                        max_iter: int = EQUILIBRIUM_MAX_ITER, time: ArrayLike | None = None) -> AuxData:
+                        max_iter: int = EQUILIBRIUM_MAX_ITER, time: ArrayLike | None = None,
+                        motion: ArrayLike | None = None) -> AuxData:
         """The per-point inputs at the static equilibrium the arm sits in: gravity and contact torques [N m] at
         the angles ``theta`` the joints take, not at the readings ``q``:
         ``theta = F(q) + C (tau_contact(theta) - tau_gravity(theta))`` (``F``: the other effects on the readings,
         ``C``: the joint compliances of ``p``; the wrench ``wrench`` (N, 3|6) [N, N m] stays in the probe frame;
         ``contact=False``: no contact torques). The torques are Pinocchio's RNEA on the description of ``p``
-        (:meth:`described`, the description's masses); ``temperature`` (N,) [°C] and ``time`` (N,) [s] where an
-        effect needs them.
+        (:meth:`described`, the description's masses); ``temperature`` (N,) [°C], ``time`` (N,) [s] and ``motion``
+        (N, J) (:func:`reading_motion`) where an effect needs them.
 
         Solved by fixed-point iteration from ``theta = q`` until ``theta`` moves less than ``tol`` [rad] (or m):
         one pass (the torques at the readings) when no compliance turns a joint, a few for a sag of a few mrad
@@ -186,12 +215,13 @@ class ArmModel:
         q = np.atleast_2d(np.asarray(q, dtype=float))
         temp = None if temperature is None else np.asarray(temperature, dtype=float)
         stamps = None if time is None else np.asarray(time, dtype=float)
+        moves = None if motion is None else np.asarray(motion, dtype=float)
         arm = PinocchioArm(self.described(np.zeros(self.spec.size) if p is None else p))
         w = None if wrench is None or not contact else np.atleast_2d(np.asarray(wrench, dtype=float))
         theta, step = q, np.inf
         for _ in range(max_iter):
             tau_g, tau_c = arm.torques(theta, w)
-            aux = AuxData(temp, tau_g, tau_c, stamps)
+            aux = AuxData(temp, tau_g, tau_c, stamps, moves)
             new = self.joint_angles(q, wrench, p, aux)
             step = float(np.max(np.abs(new - theta), initial=0.0))
             theta = new
@@ -203,8 +233,8 @@ class ArmModel:
 
     # -- CasADi -------------------------------------------------------------------------------
     def casadi_function(self, name: str = "ball_centre") -> Any:
-        """``f(q[J], w[6], aux[2 + 2J], p[P]) -> p_base[3]`` with aux = (temperature [°C],
-        tau_gravity[J], tau_contact[J], time [s]) (:meth:`aux_width`; zeros where no effect needs them).
+        """``f(q[J], w[6], aux[2 + 3J], p[P]) -> p_base[3]`` with aux = (temperature [°C],
+        tau_gravity[J], tau_contact[J], time [s], motion[J]) (:meth:`aux_width`; zeros where no effect needs them).
 
         Built once for equal models (same description and effects; the model is immutable) and name: building
         the expression graph costs more than a calibration's evaluations of it (:func:`_casadi_function`)."""
@@ -224,14 +254,15 @@ class ArmModel:
         p = ca.SX.sym("p", self.spec.size)
         inputs = ModelInputs(q=[q[i] for i in range(j)], wrench=[w[i] for i in range(6)],
                              temperature=aux[0], tau_gravity=[aux[1 + i] for i in range(j)],
-                             tau_contact=[aux[1 + j + i] for i in range(j)], time=aux[1 + 2 * j])
-        x, y, z = self._evaluate(p, inputs, SimpleNamespace(sin=ca.sin, cos=ca.cos))
+                             tau_contact=[aux[1 + j + i] for i in range(j)], time=aux[1 + 2 * j],
+                             motion=[aux[2 + 2 * j + i] for i in range(j)])
+        x, y, z = self._evaluate(p, inputs, SimpleNamespace(sin=ca.sin, cos=ca.cos, sign=ca.sign))
         return ca.Function(name, [q, w, aux, p], [ca.vertcat(x, y, z)], ["q", "w", "aux", "p"], ["p_base"])
 
     @staticmethod
     def aux_width(n_joints: int) -> int:
-        """The length of :meth:`casadi_function`'s aux input: temperature, J + J torques, time."""
-        return 2 + 2 * n_joints
+        """The length of :meth:`casadi_function`'s aux input: temperature, J + J torques, time, J motions."""
+        return 2 + 3 * n_joints
 
     @staticmethod
     def aux_matrix(aux: AuxData | None, n: int, n_joints: int) -> np.ndarray:
@@ -246,6 +277,8 @@ class ArmModel:
                 m[:, 1 + n_joints:1 + 2 * n_joints] = aux.tau_contact
             if aux.time is not None:
                 m[:, 1 + 2 * n_joints] = aux.time
+            if aux.motion is not None:
+                m[:, 2 + 2 * n_joints:] = aux.motion
         return m
 
     # -- Pinocchio ------------------------------------------------------------------------------
@@ -266,7 +299,8 @@ class ArmModel:
                              temperature=aux_row.get("temperature"),
                              tau_gravity=None if aux_row.get("tau_gravity") is None else list(aux_row["tau_gravity"]),
                              tau_contact=None if aux_row.get("tau_contact") is None else list(aux_row["tau_contact"]),
-                             time=aux_row.get("time"))
+                             time=aux_row.get("time"),
+                             motion=None if aux_row.get("motion") is None else list(aux_row["motion"]))
         inputs.moments = lambda geom, q, i, origin: self._pinocchio_moments(geom, q, i, origin, inputs.wrench)
         geom = self._apply_effects([float(v) for v in pv], inputs, NUMPY_OPS)
         arm = PinocchioArm(self._geometry_description(geom))
@@ -329,7 +363,8 @@ def _batch_inputs(q: np.ndarray, w: np.ndarray, aux: AuxData, s: int, e: int) ->
                        temperature=None if aux.temperature is None else aux.temperature[s:e],
                        tau_gravity=None if aux.tau_gravity is None else list(aux.tau_gravity[s:e].T),
                        tau_contact=None if aux.tau_contact is None else list(aux.tau_contact[s:e].T),
-                       time=None if aux.time is None else aux.time[s:e])
+                       time=None if aux.time is None else aux.time[s:e],
+                       motion=None if aux.motion is None else list(aux.motion[s:e].T))
 
 
 #: models whose CasADi Function is kept (a loop compares a few models at a time, each many times)

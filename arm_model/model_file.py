@@ -57,7 +57,7 @@ from .description import (
 from .discrepancy import GrowingDiscrepancy, TrainingPoses
 from .effects import EFFECTS, Effect
 from .errors import InputError, did_you_mean, parse_toml, read_text, resolved
-from .model import ArmModel, AuxData
+from .model import ArmModel, AuxData, reading_motion
 from .tracker import Tracker, tracker_from_tables, tracker_tables
 from .uncertainty import InputUncertainty, ParameterCovariance, default_inputs
 from .units import implausible
@@ -219,10 +219,12 @@ class Arm:
             return None
         temperature = points.temperature if "temperature" in needs else None
         time = points.time if "time" in needs else None
+        motion = reading_motion(points.q, points.session, points.time) if "motion" in needs else None
         if needs & {"tau_gravity", "tau_contact"}:
             w = points.wrench if wrench is None else wrench
-            return self.model.equilibrium_aux(points.q, w, self.p, temperature, contact=contact, time=time)
-        return AuxData(temperature, time=time)
+            return self.model.equilibrium_aux(points.q, w, self.p, temperature, contact=contact, time=time,
+                                              motion=motion)
+        return AuxData(temperature, time=time, motion=motion)
 
     def ball_centres(self, points, wrench=None, rigid: bool = False) -> np.ndarray:
         """(N, 3) ball centres [m] of a :class:`~arm_model.io.PointSet` with every effect applied, from

@@ -318,7 +318,7 @@ def _chunk_jacobian(model: ArmModel, plan: _Plan, p, q, w, aux: AuxData):
     inp = ModelInputs(
         q=[Dual(q[:, i], {("q", i): 1.0}) for i in range(nj)],
         wrench=[Dual(w[:, k], {("w", k): 1.0}) for k in range(6)],
-        temperature=aux.temperature, time=aux.time,
+        temperature=aux.temperature, time=aux.time, motion=None if aux.motion is None else list(aux.motion.T),
         tau_gravity=None if aux.tau_gravity is None or "tau_gravity" not in wanted else list(aux.tau_gravity.T),
         tau_contact=None if aux.tau_contact is None or "tau_contact" not in wanted else list(aux.tau_contact.T))
     geom = model._apply_effects(pd, inp, DUAL_OPS)

@@ -8,7 +8,7 @@ import numpy as np
 
 from arm_model import InputError
 from arm_model.io import Artefacts, PointSet, check_features
-from arm_model.model import ArmModel, AuxData
+from arm_model.model import ArmModel, AuxData, reading_motion
 from arm_model.tracker import DEFAULT_SESSION, Tracker
 
 __all__ = ["Weights", "CalibrationData", "make_data", "merge_points", "split_holdout", "NO_ARTEFACTS",
@@ -308,6 +308,9 @@ def _aux_inputs(model: ArmModel, points: PointSet, files: np.ndarray, aux: AuxDa
     tau_g = None if aux is None else aux.tau_gravity
     tau_c = None if aux is None else aux.tau_contact
     time = None if aux is None else aux.time
+    motion = None if aux is None else aux.motion
+    if "motion" in needs and motion is None:
+        motion = reading_motion(points.q, points.session, points.time)
     if "time" in needs and time is None:
         if points.time is None or not np.all(np.isfinite(points.time)):
             bad = 0 if points.time is None else int(np.flatnonzero(~np.isfinite(points.time))[0])
@@ -325,9 +328,9 @@ def _aux_inputs(model: ArmModel, points: PointSet, files: np.ndarray, aux: AuxDa
         g, c = PinocchioArm(model.desc).torques(points.q, points.wrench)
         tau_g = g if tau_g is None else tau_g
         tau_c = c if tau_c is None else tau_c
-    if temperature is None and tau_g is None and tau_c is None and time is None:
+    if temperature is None and tau_g is None and tau_c is None and time is None and motion is None:
         return None
-    return AuxData(temperature, tau_g, tau_c, time)
+    return AuxData(temperature, tau_g, tau_c, time, motion)
 
 
 #: what to change when a --holdout leaves the held-out set empty (calibrate, close-loop)
@@ -395,7 +398,8 @@ def concat(a: CalibrationData, b: CalibrationData) -> CalibrationData:
             if va is None or vb is None:
                 raise ValueError(f"aux input '{name}' is given for one part only")
             return np.concatenate([va, vb])
-        aux = AuxData(join("temperature", ()), join("tau_gravity", None), join("tau_contact", None), join("time", ()))
+        aux = AuxData(join("temperature", ()), join("tau_gravity", None), join("tau_contact", None), join("time", ()),
+                      join("motion", None))
     marker = None if a.marker is None and b.marker is None else np.concatenate([a.markers, b.markers])
     return CalibrationData(pts, a.artefacts, aux, files, marker, a.marker_offsets, a.tracker,
                            tuple(dict.fromkeys(a.left_out_lengths + b.left_out_lengths)))

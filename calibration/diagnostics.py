@@ -21,10 +21,14 @@ below ``rank_tol`` are *absorbed*: the data cannot tell them from what is alread
 Generic families (:func:`structure_tests`), with ``D_j = dx/dq_j`` the ball's sensitivity to joint j:
 harmonics ``cos/sin(h q_j)``, h = 1..4, times ``D_j``; harmonics 1 and 2 of ``q_k`` times ``D_j`` for each
 other joint j (a cross-coupling, "qK harmonics on jJ"); the gravity torque and the contact torque of
-joint j times ``D_j``; contact force components and magnitude times the probe axes; temperature and
-time times the base axes and the position vector (a scale); the temperature times each link's length
-and the probe's ("temperature per link"); the tilt of joint j about its frame's x and y axes times the
-moment across it ("jN lateral load"); the stylus direction (approach) times the base axes; one offset per measurement
+joint j times ``D_j``; the gravity torque's sign times ``D_j`` (a play the load closes one way or the other,
+"jN gravity torque sign"), the sign of its last move onto the point (a play or an encoder's hysteresis,
+"jN motion sign", :func:`arm_model.model.reading_motion`), each where at least :data:`MIN_SIGN_SHARE` of the
+rows lie on either side of zero; contact
+force components and magnitude times the probe axes; temperature and time times the base axes and the
+position vector (a scale); the temperature times each link's length and the probe's ("temperature per
+link"); the tilt of joint j about its frame's x and y axes times the moment across it ("jN lateral load");
+the stylus direction (approach) times the base axes; one offset per measurement
 (one-way ANOVA) and per artefact feature or certified length.
 """
 from __future__ import annotations
@@ -40,7 +44,7 @@ from scipy import special
 from arm_model.chain import NUMPY_OPS
 from arm_model.effects import Effect, Geometry, contact_moment, gravity_moment, joint_frame
 from arm_model.kinematics import probe_rotations
-from arm_model.model import ArmModel
+from arm_model.model import ArmModel, reading_motion
 from arm_model.params import split_params
 
 from .calibrate import CalibrationResult
@@ -69,6 +73,9 @@ HARMONICS = (1, 2, 3, 4)
 #: harmonics of another joint's angle tested for a cross-coupling (low orders: a cable, a counterbalance;
 #: with the third too, one clean campaign in 20 showed a false structure among the 42 pairs)
 CROSS_HARMONICS = (1, 2)
+#: the smallest share of the rows on either side of a joint's gravity torque sign for the family of its play
+#: (``jN gravity torque sign``): with fewer, the sign picks out a handful of points, a gross error's signature
+MIN_SIGN_SHARE = 0.1
 #: a candidate parameter the data resolve only to worse than this many plausible sizes counts as absorbed
 SCREEN_RESOLUTION = 1.0
 
@@ -653,6 +660,16 @@ class _FamilyInputs:
     def base_dirs(self) -> list:
         return [(f"base {a}", "m", self.base_cols[i]) for i, a in enumerate("xyz")]
 
+    @property
+    def motion(self) -> np.ndarray:
+        """(N, J) the sign of each reading's last move (the data's own, else from the points:
+        :func:`arm_model.model.reading_motion`)."""
+        data = self.space.result.data
+        if data.aux is not None and data.aux.motion is not None:
+            return data.aux.motion
+        pts = self.points
+        return reading_motion(pts.q, pts.session, pts.time)
+
     def joint_dir(self, j: int) -> tuple:
         """The direction of joint j's angle error: (name, unit, weighted column)."""
         return ("angle " + self.desc.joint_names[j], "rad", self.space.jp[:, self.space.offset_slice.start + j])
@@ -678,6 +695,11 @@ def _harmonic_basis(q: np.ndarray, k: int, harmonics) -> tuple[list, dict]:
     return basis, {f"cos/sin({h} q{k + 1})": [2 * i, 2 * i + 1] for i, h in enumerate(harmonics)}
 
 
+def _both_signs(sign: np.ndarray) -> bool:
+    """At least :data:`MIN_SIGN_SHARE` of the rows on either side of zero."""
+    return bool(min(np.sum(sign > 0), np.sum(sign < 0)) >= MIN_SIGN_SHARE * len(sign))
+
+
 def _joint_families(f: _FamilyInputs) -> list[Family]:
     """Per joint: its angle error as harmonics of its own angle, proportional to its gravity torque and to
     its contact torque (where it holds one)."""
@@ -692,6 +714,18 @@ def _joint_families(f: _FamilyInputs) -> list[Family]:
             out.append(Family(f"{jr.name} gravity torque", f"error of joint {jr.name}'s angle proportional to the "
                               "torque it holds against gravity", "field", [dq], [(f"tau_g{j + 1}", f.tau_g[:, j])],
                               (f"gravity torque {jr.name}", "N m", 1.0, f.tau_g[:, j])))
+            sign = np.sign(f.tau_g[:, j])
+            if _both_signs(sign):
+                out.append(Family(f"{jr.name} gravity torque sign", f"error of joint {jr.name}'s angle changing with "
+                                  "the sign of the torque it holds against gravity (a play the load closes one way "
+                                  "or the other)", "field", [dq], [(f"sign(tau_g{j + 1})", sign)],
+                                  (f"gravity torque {jr.name}", "N m", 1.0, f.tau_g[:, j])))
+        if not jr.prismatic and _both_signs(f.motion[:, j]):
+            out.append(Family(f"{jr.name} motion sign", f"error of joint {jr.name}'s angle changing with the "
+                              "direction it last turned, onto each point from the one captured before it (a play or "
+                              "an encoder's hysteresis the motion closes)", "field", [dq],
+                              [(f"motion{j + 1}", f.motion[:, j])],
+                              (f"last move of {jr.name}", "1", 1.0, f.motion[:, j])))
         if f.has_force and np.max(np.abs(f.tau_c[:, j]), initial=0.0) > 1e-6:
             out.append(Family(f"{jr.name} contact torque", f"error of joint {jr.name}'s angle proportional to the "
                               "contact force's torque on it", "field", [dq], [(f"tau_c{j + 1}", f.tau_c[:, j])],

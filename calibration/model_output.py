@@ -329,8 +329,9 @@ def at_equilibrium(model, p, data):
         return data
     temperature = None if data.aux is None else data.aux.temperature
     time = None if data.aux is None else data.aux.time
+    motion = None if data.aux is None else data.aux.motion
     return replace(data, aux=model.equilibrium_aux(data.points.q, data.wrench, np.asarray(p, float), temperature,
-                                                   time=time))
+                                                   time=time, motion=motion))
 
 
 def with_fitted_torques(data, result):

@@ -20,7 +20,11 @@ Family (:func:`calibration.diagnostics.families`) -> candidates (:mod:`arm_model
   already hold) and ``probe compliance axes tilted`` (its xz and yz terms only: a stylus bent or mounted askew,
   two parameters where the matrix has up to six);
 * ``approach direction`` -> ``approach offset`` (:class:`~arm_model.effects.ApproachOffset`);
-* ``jN lateral load`` -> ``lateral compliance jN`` (:class:`~arm_model.effects.LateralCompliance`).
+* ``jN lateral load`` -> ``lateral compliance jN`` (:class:`~arm_model.effects.LateralCompliance`);
+* ``jN gravity torque sign`` -> ``backlash jN`` (:class:`~arm_model.effects.JointBacklash`: the joint's play,
+  closed to the side its gravity load pushes it);
+* ``jN motion sign`` -> ``hysteresis jN`` (:class:`~arm_model.effects.JointHysteresis`: the joint's play or its
+  encoder's hysteresis, closed by the direction it last turned).
 
 Other families (time, per measurement, per artefact, a joint's gravity or contact torque) have no effect
 here: they stay reported as unexplained.
@@ -34,8 +38,10 @@ import numpy as np
 from arm_model.effects import (
     ApproachOffset,
     EncoderEccentricity,
+    JointBacklash,
     JointGain,
     JointHarmonics,
+    JointHysteresis,
     LateralCompliance,
     ProbeCompliance,
     ProbeComplianceMatrix,
@@ -151,6 +157,12 @@ def synthesise(family_names, model: ArmModel) -> list[Candidate]:
         elif fam == "approach direction":
             if ApproachOffset not in held:
                 add("approach offset", ApproachOffset(), "approach_offset")
+        elif (mb := re.fullmatch(r"(.+) (gravity torque|motion) sign", fam)) and mb.group(1) in names:
+            j = names[mb.group(1)]
+            kind, word, fam_key = ((JointBacklash, "backlash", "joint_backlash") if mb.group(2) == "gravity torque"
+                                   else (JointHysteresis, "hysteresis", "joint_hysteresis"))
+            if not any(isinstance(e, kind) and j in e.joint_indices(desc) for e in model.effects):
+                add(f"{word} {mb.group(1)}", kind(joints=(j,)), fam_key, mb.group(1))
         else:
             m = re.fullmatch(r"(.+) lateral load", fam)
             if m and m.group(1) in names and not desc.coupled:    # an effect on the rows: refused on a coupled chain

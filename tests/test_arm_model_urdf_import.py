@@ -588,7 +588,7 @@ def test_every_effect_with_a_rotated_tool_three_evaluators(tmp_path):
     frame (contact moments, approach direction, compliance matrix) agree with Pinocchio, whose ball
     frame carries the tip frame's orientation (its moments come from RNEA)."""
     from arm_model.effects import EFFECTS
-    from arm_model.model import ArmModel, AuxData
+    from arm_model.model import ArmModel, AuxData, reading_motion
     mpath = tmp_path / "masses.toml"
     mpath.write_text(MASSES)
     d = load_arm(_tool_urdf(tmp_path, *TOOLS["tool along x"]), "ball_link", masses=mpath)
@@ -598,7 +598,7 @@ def test_every_effect_with_a_rotated_tool_three_evaluators(tmp_path):
     q = rng.uniform(-2, 2, (n, 7))
     w = np.column_stack([rng.normal(0, 2, (n, 3)), rng.normal(0, 0.02, (n, 3))])
     tg, tc = PinocchioArm(d).torques(q, w)
-    aux = AuxData(rng.uniform(15, 30, n), tg, tc, rng.uniform(0, 3600, n))
+    aux = AuxData(rng.uniform(15, 30, n), tg, tc, rng.uniform(0, 3600, n), reading_motion(q))
     p = rng.normal(0, 1e-5, model.spec.size)
     assert_evaluators_agree(model, q, w, p, aux)
 

@@ -68,7 +68,11 @@ def test_cross_coupled_harmonic_is_built_added_and_recovered():
     assert loop.final.heldout["rms_um"] <= 1.3 * clean.final.heldout["rms_um"], (
         loop.final.heldout["rms_um"], clean.final.heldout["rms_um"])
     assert loop.stages[0].heldout["rms_um"] > 2 * clean.final.heldout["rms_um"]      # it mattered
-    assert not loop.remaining, loop.verdict
+    # nothing left but what the same campaign shows without the hidden effect: its clean twin leaves a step in j3's
+    # error by the sign of its gravity torque (adjusted p 0.0037; on main, before that family, the same pattern as
+    # "q3 harmonics on j1", adjusted p 0.0056): the campaign's own, not the coupling's
+    left = {f.name for f, *_ in loop.remaining}
+    assert left <= {f.name for f, *_ in clean.remaining}, loop.verdict
 
 
 def test_synthesis_of_a_cross_coupling_offers_what_the_model_lacks():

@@ -23,7 +23,7 @@ import numpy as np
 
 from arm_model import NumericalError
 from arm_model.description import ArmDescription
-from arm_model.effects import JointCompliance, ThermalGrowth
+from arm_model.effects import JointCompliance, JointHysteresis, ThermalGrowth
 from arm_model.io import Artefacts, PointSet
 from arm_model.log import counted
 from arm_model.model import ArmModel
@@ -97,7 +97,7 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
     points, desc = camp.points, camp.desc
     has_t = points.temperature is not None and np.all(np.isfinite(points.temperature))
     drift = drift_offer(desc, points)
-    need = ([JointCompliance()] + ([ThermalGrowth()] if has_t else []) + list(camp.effects)
+    need = ([JointCompliance(), JointHysteresis()] + ([ThermalGrowth()] if has_t else []) + list(camp.effects)
             + [c.effect for c in camp.extra] + ([c.effect for c in drift] if isinstance(drift, list) else []))
     data = make_data(points, camp.artefacts, needs_model(desc, need), reference=camp.reference)
     cands, skipped = library_candidates(desc, data, camp.families, camp.extra)
@@ -219,7 +219,8 @@ def at_current_torques(result: CalibrationResult) -> CalibrationResult:
     if d.aux is None or (d.aux.tau_gravity is None and d.aux.tau_contact is None):
         return result
     aux = result.model.equilibrium_aux(d.points.q, d.wrench, result.p, d.aux.temperature,
-                                       contact=d.aux.tau_contact is not None, time=d.aux.time)
+                                       contact=d.aux.tau_contact is not None, time=d.aux.time,
+                                       motion=d.aux.motion)
     return replace(result, data=replace(d, aux=aux))
 
 
