@@ -118,7 +118,7 @@ def test_an_unreadable_output_is_exit_3_and_nothing_written(tmp_path, monkeypatc
     """Through a command (``aacmm urdf``, one file): the writer made to write a joint origin of 4.2 km."""
     import arm_model.commands as commands
     real = commands.urdf_text
-    monkeypatch.setattr(commands, "urdf_text", lambda desc: real(desc).replace('xyz="0.0 0.0 0.42"',
+    monkeypatch.setattr(commands, "urdf_text", lambda desc, **kw: real(desc, **kw).replace('xyz="0.0 0.0 0.42"',
                                                                                'xyz="0.0 0.0 4200.0"'))
     out = tmp_path / "a.urdf"
     assert main(["urdf", str(NOMINAL), "-o", str(out)]) == 3
