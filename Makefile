@@ -13,14 +13,14 @@ export PYTHONDONTWRITEBYTECODE :=
 
 # uv installs the dependencies (about 1.3 GB of wheels) in about 10 s where pip took 50 s, and its byte-compiling
 # of all of them 40 s more, on the 2-core AMD EPYC. Only what the toolkit imports is compiled (importing each of
-# its modules writes their bytecode and that of the libraries they use, about 1500 files), so a command starts as
-# fast as before. Where uv cannot be had, pip installs the same.
+# its modules writes their bytecode and that of the libraries they use, about 1500 files, and the test runner's),
+# so a command starts as fast as before. Where uv cannot be had, pip installs the same.
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	( $(PY) -m pip install --quiet 'uv>=0.5' && $(VENV)/bin/uv pip install --quiet --python $(PY) -e '.[test]' ) \
 	  || $(PY) -m pip install --quiet -e '.[test]'
-	$(PY) -c "import pkgutil, importlib; [importlib.import_module(m.name) for p in ('arm_model', 'calibration', \
-	  'correction', 'viz') for m in pkgutil.walk_packages(importlib.import_module(p).__path__, p + '.')]"
+	$(PY) -c "import pkgutil, importlib, pytest, xdist, hypothesis; [importlib.import_module(m.name) for p in \
+	  ('arm_model', 'calibration', 'correction', 'viz') for m in pkgutil.walk_packages(importlib.import_module(p).__path__, p + '.')]"
 	touch $(STAMP)
 
 install: $(STAMP)
