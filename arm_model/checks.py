@@ -101,7 +101,8 @@ def _beyond_limits(desc, q) -> np.ndarray:
 
 def _limits_text(joint) -> str:
     unit, factor = ("mm", 1e3) if joint.prismatic else ("deg", 180.0 / np.pi)
-    return f"{joint.lower * factor:.4g} to {joint.upper * factor:.4g} {unit}"
+    # + 0.0: a limit of -0.0 (a description written "-0") reads "0", not "-0"
+    return f"{joint.lower * factor + 0.0:.4g} to {joint.upper * factor + 0.0:.4g} {unit}"
 
 
 def _joint_limit_message(desc, per_joint, lines, file: str) -> InputWarning | None:

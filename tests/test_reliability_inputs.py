@@ -333,6 +333,15 @@ def test_joint_angles_beyond_the_limits_are_warned(tmp_path, capsys):
     assert len((tmp_path / "t.csv").read_text().splitlines()) == 4        # used all the same
 
 
+def test_a_limit_of_minus_zero_is_said_as_zero():
+    """A description's "-0" limit is shown as 0 in the warning, not "-0" (audit round 10)."""
+    from types import SimpleNamespace
+
+    from arm_model.checks import _limits_text
+    assert _limits_text(SimpleNamespace(prismatic=False, lower=-0.0, upper=3.141592653589793)) == "0 to 180 deg"
+    assert _limits_text(SimpleNamespace(prismatic=True, lower=-0.1, upper=-0.0)) == "-100 to 0 mm"
+
+
 # ---------------------------------------------------------------------------------------------
 # written files read back, whatever the names hold
 
