@@ -266,3 +266,15 @@ def test_output_dash_is_refused(tmp_path, capsys, monkeypatch, command):
     rc, err = _run([*command, "-"], capsys)
     assert rc == 2 and "'-' (standard output) is not an output of the toolkit" in err, err
     assert not (tmp_path / "-").exists()
+
+
+def test_an_effect_given_twice_is_named_at_the_option(tmp_path, capsys):
+    """``--effect X --effect X`` is refused at the option (it named the arm file, as if the arm declared it twice);
+    nothing written."""
+    seats = ROOT / "examples" / "data" / "real-panda-seats"
+    out = tmp_path / "out"
+    rc, err = _run(["calibrate", seats / "front" / "points.csv", seats / "artefacts.toml", "--arm",
+                    seats / "panda-with-inertials.urdf", "--tip-frame", "ball_link", "--effect", "eccentricity",
+                    "--effect", "eccentricity", "-o", out], capsys)
+    assert rc == 2 and "--effect eccentricity given more than once" in err and ".urdf" not in err
+    assert not out.exists()
