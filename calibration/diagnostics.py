@@ -660,10 +660,10 @@ class _FamilyInputs:
     def base_dirs(self) -> list:
         return [(f"base {a}", "m", self.base_cols[i]) for i, a in enumerate("xyz")]
 
-    @property
+    @functools.cached_property
     def motion(self) -> np.ndarray:
         """(N, J) the sign of each reading's last move (the data's own, else from the points:
-        :func:`arm_model.model.reading_motion`)."""
+        :func:`arm_model.model.reading_motion`, a loop over the rows: worked out once, not at each joint)."""
         data = self.space.result.data
         if data.aux is not None and data.aux.motion is not None:
             return data.aux.motion
