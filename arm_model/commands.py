@@ -228,15 +228,17 @@ def run_tip(args: argparse.Namespace) -> int:
         from .uncertainty_cli import tip_columns, wants_uncertainty
         parameters = parameters_of(arm)
         uncertain = wants_uncertainty(args, parameters)
-        split = None if uncertain else csv_spans(args.points, workers())
+        # one block: the uncertainty summary is over all points; a point's last move is from the point before it
+        whole = uncertain or "motion" in arm.model.needs()
+        split = None if whole else csv_spans(args.points, workers())
         ulines = []
-        if uncertain:                   # the uncertainty summary is over all points: one block
+        if whole:
             def extra(block):
                 ucols, lines = tip_columns(arm, block, parameters, args)
                 ulines.extend(lines)
                 return ucols
             tally = _tip_rows(arm, args.points, [concat_points(iter_points(args.points, desc.joint_quantities))], tmp,
-                              True, extra, ref)
+                              True, extra if uncertain else None, ref)
         elif split is None:
             tally = _tip_rows(arm, args.points, iter_points(args.points, desc.joint_quantities), tmp, True,
                               reference_frame=ref)
