@@ -19,7 +19,8 @@ from .description import ArmDescription
 from .effects import Effect, Geometry, ModelInputs
 from .params import ParamSpec, apply_params, param_spec, split_params
 
-__all__ = ["ArmModel", "AuxData", "reading_motion", "CASADI_CACHE", "EQUILIBRIUM_TOL", "EQUILIBRIUM_MAX_ITER"]
+__all__ = ["ArmModel", "AuxData", "reading_motion", "points_motion", "CASADI_CACHE", "EQUILIBRIUM_TOL",
+           "EQUILIBRIUM_MAX_ITER"]
 
 #: the static equilibrium's tolerance [rad] (m for a prismatic joint): a joint angle's last step
 EQUILIBRIUM_TOL = 1e-12
@@ -67,6 +68,13 @@ def reading_motion(q: ArrayLike, session: ArrayLike | None = None, time: ArrayLi
     out = np.empty(q.shape)
     out[order] = sorted_out[start]
     return out
+
+
+def points_motion(points: Any, given: np.ndarray | None = None) -> np.ndarray:
+    """(N, J) the sign of each joint's last move onto each point of a :class:`~arm_model.io.PointSet`: ``given``
+    when the data have their own (calibration data's ``AuxData.motion``, a live session's from its samples), else
+    from the points (:func:`reading_motion` by their session and time). The one rule of the ``motion`` input."""
+    return reading_motion(points.q, points.session, points.time) if given is None else given
 
 
 def _session_codes(session: ArrayLike | None, n: int) -> np.ndarray:

@@ -8,7 +8,7 @@ import numpy as np
 
 from arm_model import InputError
 from arm_model.io import Artefacts, PointSet, check_features
-from arm_model.model import ArmModel, AuxData, reading_motion
+from arm_model.model import ArmModel, AuxData, points_motion
 from arm_model.tracker import DEFAULT_SESSION, Tracker
 
 __all__ = ["Weights", "CalibrationData", "make_data", "merge_points", "split_holdout", "NO_ARTEFACTS",
@@ -136,6 +136,12 @@ class CalibrationData:
         return np.full(len(self), DEFAULT_SESSION, dtype=object) if s is None else s
 
     @property
+    def motion(self) -> np.ndarray:
+        """(N, J) the sign of each joint's last move onto each point: the data's own (``aux.motion``), else from the
+        points (:func:`arm_model.model.points_motion`)."""
+        return points_motion(self.points, None if self.aux is None else self.aux.motion)
+
+    @property
     def markers(self) -> np.ndarray:
         """(N,) the 0-based marker of each row's reference coordinates."""
         return np.zeros(len(self), int) if self.marker is None else self.marker
@@ -155,7 +161,7 @@ class CalibrationData:
             raise InputError(f"{self.points.n_joints} joint columns, but the arm has {model.desc.n_joints} joints",
                              self.points.path)
         files = self.files if self.files is not None else np.full(len(self), self.points.path, dtype=object)
-        return replace(self, aux=_aux_inputs(model, self.points, files, self.aux))
+        return replace(self, aux=_aux_inputs(model, self, files))
 
     def with_tracker(self, tracker: Tracker | None) -> CalibrationData:
         """These data with the reference frames and marker offsets held at ``tracker``'s (a session it has
@@ -300,17 +306,16 @@ def _one_marker_a_row(points: PointSet, files: np.ndarray, offsets: str):
     return points.select(rows), files[rows], marker
 
 
-def _aux_inputs(model: ArmModel, points: PointSet, files: np.ndarray, aux: AuxData | None) -> AuxData | None:
-    """The per-point inputs ``model.needs()``: ``aux``'s, else the temperatures and times of the points and the
-    gravity and contact torques of the nominal description."""
+def _aux_inputs(model: ArmModel, data: CalibrationData, files: np.ndarray) -> AuxData | None:
+    """The per-point inputs ``model.needs()``: ``data.aux``'s, else the temperatures, times and last moves
+    (:attr:`CalibrationData.motion`) of the points and the gravity and contact torques of the nominal description."""
+    points, aux = data.points, data.aux
     needs = model.needs()
     temperature = None if aux is None else aux.temperature
     tau_g = None if aux is None else aux.tau_gravity
     tau_c = None if aux is None else aux.tau_contact
     time = None if aux is None else aux.time
-    motion = None if aux is None else aux.motion
-    if "motion" in needs and motion is None:
-        motion = reading_motion(points.q, points.session, points.time)
+    motion = data.motion if "motion" in needs else (None if aux is None else aux.motion)
     if "time" in needs and time is None:
         if points.time is None or not np.all(np.isfinite(points.time)):
             bad = 0 if points.time is None else int(np.flatnonzero(~np.isfinite(points.time))[0])

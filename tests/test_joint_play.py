@@ -8,8 +8,7 @@ import functools
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 
 from arm_model import PinocchioArm, ball_centres
 from arm_model.effects import EFFECTS, JointBacklash, JointHysteresis
