@@ -81,7 +81,7 @@ def _session_codes(session: ArrayLike | None, n: int) -> np.ndarray:
     """(N,) an integer a session (the groups of ``==`` on the session values; None: one session)."""
     if session is None:
         return np.zeros(n, dtype=np.intp)
-    codes: dict = {}
+    codes: dict[Any, int] = {}
     return np.fromiter((codes.setdefault(s, len(codes)) for s in np.asarray(session, dtype=object).tolist()),
                        dtype=np.intp, count=n)
 

@@ -91,7 +91,7 @@ def _motion_inputs(draw):
     return q, None if session is None else np.array(session, dtype=object), time
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=200, deadline=None)
 @given(_motion_inputs())
 def test_reading_motion_is_the_row_loop_bit_for_bit(inputs):
     q, session, time = inputs
