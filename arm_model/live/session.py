@@ -10,7 +10,9 @@ feature fits out (docs/live.md).
 Each contact gives one point at its force peak (:mod:`arm_model.live.contacts`), computed by the code of
 ``aacmm tip`` (:func:`arm_model.commands.tip_centres`, every effect of a model file applied) and its
 uncertainty by :func:`arm_model.uncertainty.propagate`, so ``aacmm tip points.csv --arm ARM
---uncertainty`` on the session's ``points.csv`` writes the session's ``tips.csv`` byte for byte.
+--uncertainty`` on the session's ``points.csv`` writes the session's ``tips.csv`` byte for byte (for a model with a
+joint's hysteresis, where the arm went straight from point to point: such a point's last moves come from the samples,
+:mod:`arm_model.live.motion`).
 """
 from __future__ import annotations
 
