@@ -73,14 +73,15 @@ def register(sub) -> None:
     e.set_defaults(func=run_examples)
 
 
-def tip_centres(arm, points) -> tuple[np.ndarray, np.ndarray]:
+def tip_centres(arm, points, motion: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(rigid, corrected) ball centres (N, 3) [m] of ``aacmm tip`` for a :class:`~arm_model.io.PointSet`;
     ``arm`` an :class:`~arm_model.model_file.Arm` (every effect applied) or a description. Rigid: at a
-    zero force reading; corrected: with the points' wrench (= rigid without force columns)."""
+    zero force reading; corrected: with the points' wrench (= rigid without force columns). ``motion``: each
+    joint's last move (N, J) [1] (None: from the points, :func:`arm_model.model.points_motion`)."""
     if not isinstance(arm, Arm):
         arm = Arm(arm)
-    rigid = arm.ball_centres(points, rigid=True)
-    corrected = arm.ball_centres(points) if points.wrench is not None else rigid.copy()
+    rigid = arm.ball_centres(points, rigid=True, motion=motion)
+    corrected = arm.ball_centres(points, motion=motion) if points.wrench is not None else rigid.copy()
     return rigid, corrected
 
 
@@ -228,15 +229,17 @@ def run_tip(args: argparse.Namespace) -> int:
         from .uncertainty_cli import tip_columns, wants_uncertainty
         parameters = parameters_of(arm)
         uncertain = wants_uncertainty(args, parameters)
-        split = None if uncertain else csv_spans(args.points, workers())
+        # one block: the uncertainty summary is over all points; a point's last move is from the point before it
+        whole = uncertain or "motion" in arm.model.needs()
+        split = None if whole else csv_spans(args.points, workers())
         ulines = []
-        if uncertain:                   # the uncertainty summary is over all points: one block
+        if whole:
             def extra(block):
                 ucols, lines = tip_columns(arm, block, parameters, args)
                 ulines.extend(lines)
                 return ucols
             tally = _tip_rows(arm, args.points, [concat_points(iter_points(args.points, desc.joint_quantities))], tmp,
-                              True, extra, ref)
+                              True, extra if uncertain else None, ref)
         elif split is None:
             tally = _tip_rows(arm, args.points, iter_points(args.points, desc.joint_quantities), tmp, True,
                               reference_frame=ref)

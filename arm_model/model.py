@@ -19,7 +19,8 @@ from .description import ArmDescription
 from .effects import Effect, Geometry, ModelInputs
 from .params import ParamSpec, apply_params, param_spec, split_params
 
-__all__ = ["ArmModel", "AuxData", "reading_motion", "CASADI_CACHE", "EQUILIBRIUM_TOL", "EQUILIBRIUM_MAX_ITER"]
+__all__ = ["ArmModel", "AuxData", "reading_motion", "points_motion", "CASADI_CACHE", "EQUILIBRIUM_TOL",
+           "EQUILIBRIUM_MAX_ITER"]
 
 #: the static equilibrium's tolerance [rad] (m for a prismatic joint): a joint angle's last step
 EQUILIBRIUM_TOL = 1e-12
@@ -47,25 +48,42 @@ def reading_motion(q: ArrayLike, session: ArrayLike | None = None, time: ArrayLi
     previous point of the same session (``session`` (N,); None: one session) in the order of ``time`` (N,) [s]
     (None or not finite: the rows' order), rows with the same readings as it (one point seen by several markers)
     skipped; 0 for a session's first point. The direction a joint last turned, which a joint's play or an
-    encoder's hysteresis follows (:class:`~arm_model.effects.JointHysteresis`)."""
+    encoder's hysteresis follows (:class:`~arm_model.effects.JointHysteresis`). Vectorised: the rows sorted by
+    session and time once; each run of equal readings takes the move onto its first row."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     n = len(q)
-    sess = np.zeros(n, dtype=object) if session is None else np.asarray(session, dtype=object)
     t = None if time is None else np.asarray(time, dtype=float)
     key = np.arange(n, dtype=float) if t is None or not np.all(np.isfinite(t)) else t
-    out = np.zeros(q.shape)
-    for s in dict.fromkeys(sess.tolist()):
-        rows = np.flatnonzero(sess == s)
-        rows = rows[np.argsort(key[rows], kind="stable")]
-        last = None
-        for i in rows:
-            if last is not None and np.array_equal(q[i], q[last]):
-                out[i] = out[last]
-                continue
-            if last is not None:
-                out[i] = np.sign(q[i] - q[last])
-            last = i
+    code = _session_codes(session, n)
+    order = np.lexsort((key, code))                  # by session, then time; stable (rows' order for equal times)
+    qs, cs = q[order], code[order]
+    first = np.ones(n, bool)                         # a session's first point
+    first[1:] = cs[1:] != cs[:-1]
+    same = np.zeros(n, bool)                         # the readings of the row before it (==: NaN never the same)
+    same[1:] = ~first[1:] & np.all(qs[1:] == qs[:-1], axis=1)
+    start = np.maximum.accumulate(np.where(same, 0, np.arange(n)))   # the first row of each run of equal readings
+    moved = np.flatnonzero(~same & ~first)
+    sorted_out = np.zeros(q.shape)
+    sorted_out[moved] = np.sign(qs[moved] - qs[start[moved - 1]])
+    out = np.empty(q.shape)
+    out[order] = sorted_out[start]
     return out
+
+
+def points_motion(points: Any, given: np.ndarray | None = None) -> np.ndarray:
+    """(N, J) the sign of each joint's last move onto each point of a :class:`~arm_model.io.PointSet`: ``given``
+    when the data have their own (calibration data's ``AuxData.motion``, a live session's from its samples), else
+    from the points (:func:`reading_motion` by their session and time). The one rule of the ``motion`` input."""
+    return reading_motion(points.q, points.session, points.time) if given is None else given
+
+
+def _session_codes(session: ArrayLike | None, n: int) -> np.ndarray:
+    """(N,) an integer a session (the groups of ``==`` on the session values; None: one session)."""
+    if session is None:
+        return np.zeros(n, dtype=np.intp)
+    codes: dict[Any, int] = {}
+    return np.fromiter((codes.setdefault(s, len(codes)) for s in np.asarray(session, dtype=object).tolist()),
+                       dtype=np.intp, count=n)
 
 
 @dataclass(frozen=True)

@@ -57,7 +57,7 @@ from .description import (
 from .discrepancy import GrowingDiscrepancy, TrainingPoses
 from .effects import EFFECTS, Effect
 from .errors import InputError, did_you_mean, parse_toml, read_text, resolved
-from .model import ArmModel, AuxData, reading_motion
+from .model import ArmModel, AuxData, points_motion
 from .tracker import Tracker, tracker_from_tables, tracker_tables
 from .uncertainty import InputUncertainty, ParameterCovariance, default_inputs
 from .units import implausible
@@ -207,33 +207,35 @@ class Arm:
             raise InputError(f"the model's effect '{e.describe()}' needs the column '{column}', which the "
                              f"points lack (or hold a non-finite value in)", points.path, 1, column)
 
-    def aux(self, points, wrench=None, contact: bool = True) -> AuxData | None:
+    def aux(self, points, wrench=None, contact: bool = True, motion: np.ndarray | None = None) -> AuxData | None:
         """Per-point inputs of the effects for a :class:`~arm_model.io.PointSet` (temperature from its
         column; gravity and contact torques from this description by Pinocchio at the angles the joints take
         under them, the static equilibrium :meth:`~arm_model.model.ArmModel.equilibrium_aux`, and ``wrench``,
-        default the points' own). A column an effect needs and the points lack is an :class:`InputError` naming
-        the effect and the column. ``contact=False``: contact torques zero."""
+        default the points' own; each joint's last move: ``motion`` (N, J) [1] when given, else from the points,
+        :func:`~arm_model.model.points_motion`). A column an effect needs and the points lack is an
+        :class:`InputError` naming the effect and the column. ``contact=False``: contact torques zero."""
         self.check_points(points)
         needs = self.model.needs()
         if not needs:
             return None
         temperature = points.temperature if "temperature" in needs else None
         time = points.time if "time" in needs else None
-        motion = reading_motion(points.q, points.session, points.time) if "motion" in needs else None
+        motion = points_motion(points, motion) if "motion" in needs else None
         if needs & {"tau_gravity", "tau_contact"}:
             w = points.wrench if wrench is None else wrench
             return self.model.equilibrium_aux(points.q, w, self.p, temperature, contact=contact, time=time,
                                               motion=motion)
         return AuxData(temperature, time=time, motion=motion)
 
-    def ball_centres(self, points, wrench=None, rigid: bool = False) -> np.ndarray:
+    def ball_centres(self, points, wrench=None, rigid: bool = False, motion: np.ndarray | None = None) -> np.ndarray:
         """(N, 3) ball centres [m] of a :class:`~arm_model.io.PointSet` with every effect applied, from
         the points' wrench (or ``wrench``, e.g. forces found in signals). ``rigid``: at a zero force
-        reading (no contact wrench, no contact torques), the other effects still applied."""
+        reading (no contact wrench, no contact torques), the other effects still applied. ``motion``: as
+        :meth:`aux`."""
         w = points.wrench if wrench is None else np.asarray(wrench, dtype=float)
         if rigid:
             w = None
-        aux = self.aux(points, wrench=w, contact=not rigid)
+        aux = self.aux(points, wrench=w, contact=not rigid, motion=motion)
         return self.model.ball_centres(points.q, w, self.p, aux)
 
 

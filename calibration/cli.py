@@ -339,19 +339,12 @@ def mpe_from_args(args) -> dict:
     return out
 
 
-#: the stated uncertainties' default [um] (``--sigma-probe-um``, ``--sigma-ref-um``): a starting value, not a statement
-SIGMA_DEFAULT_UM = 10.0
-
-
 def weights_from_args(args):
-    """The :class:`~calibration.data.Weights` of ``--sigma-*-um``; the ones not given are the default
-    (:data:`SIGMA_DEFAULT_UM`) and named in ``defaulted``."""
+    """The :class:`~calibration.data.Weights` of ``--sigma-*-um``; one not given is left to ``Weights``: its default
+    (:data:`calibration.data.SIGMA_DEFAULT`), named in ``defaulted``."""
     from .data import Weights
-    given = {"probe": args.sigma_probe_um, "reference": args.sigma_ref_um}
-    return Weights(probe=(given["probe"] or SIGMA_DEFAULT_UM) * 1e-6,
-                   reference=(given["reference"] or SIGMA_DEFAULT_UM) * 1e-6,
-                   length=None if args.sigma_length_um is None else args.sigma_length_um * 1e-6,
-                   defaulted=tuple(k for k, v in given.items() if v is None))
+    return Weights(*(None if v is None else v * 1e-6 for v in (args.sigma_probe_um, args.sigma_ref_um,
+                                                                args.sigma_length_um)))
 
 
 def fit_options(args, **fields):

@@ -8,10 +8,10 @@ import numpy as np
 
 from arm_model import InputError
 from arm_model.io import Artefacts, PointSet, check_features
-from arm_model.model import ArmModel, AuxData, reading_motion
+from arm_model.model import ArmModel, AuxData, points_motion
 from arm_model.tracker import DEFAULT_SESSION, Tracker
 
-__all__ = ["Weights", "CalibrationData", "make_data", "merge_points", "split_holdout", "NO_ARTEFACTS",
+__all__ = ["Weights", "SIGMA_DEFAULT", "CalibrationData", "make_data", "merge_points", "split_holdout", "NO_ARTEFACTS",
            "MARKER_OFFSETS"]
 
 #: the artefacts of a campaign without an artefacts file (tracker points only)
@@ -19,6 +19,12 @@ NO_ARTEFACTS = Artefacts("<no artefacts file>", {}, ())
 #: how the reference instrument's markers sit on the tip frame: "fit" (each at an unknown offset, estimated)
 #: or "zero" (the instrument sees the tip point itself: a tracker's reflector in the probe's place)
 MARKER_OFFSETS = ("fit", "zero")
+
+
+#: the standard uncertainty [m] of a probed ball centre and of a reference coordinate that nobody stated: a starting
+#: value (``--sigma-probe-um``, ``--sigma-ref-um`` not given; ``Weights()`` without ``probe`` or ``reference``); to the
+#: bit what ``--sigma-probe-um 10`` gives (10 um * 1e-6), so a default and the same value stated weight alike
+SIGMA_DEFAULT = 10.0 * 1e-6
 
 
 @dataclass(frozen=True)
@@ -34,14 +40,29 @@ class Weights:
         factors: ``((group, factor), ...)``: every row of a group (a point kind: "seat", "sphere", "ring",
             "cylinder", "plane", "reference"; or "length") has its uncertainty multiplied by the factor
             (the variance components estimated from a fit, :func:`calibration.calibrate.calibrate`).
-        defaulted: which of "probe" and "reference" the user did not state (the command line's defaults):
-            starting values, never a statement to judge a residual against (:meth:`stated_sigma_of`).
+        defaulted: which of "probe" and "reference" the user did not state: starting values, never a statement
+            to judge a residual against (:meth:`stated_sigma_of`). ``probe`` or ``reference`` not given (None) is
+            :data:`SIGMA_DEFAULT` and named here, as the command line does for a ``--sigma-*-um`` not given, so
+            ``Weights()`` states nothing and ``Weights(probe=2e-6)`` states the probe's sigma only.
     """
-    probe: float = 10e-6
-    reference: float = 10e-6
-    length: float | None = None
-    factors: tuple = ()
-    defaulted: tuple = field(default=(), compare=False)
+    probe: float
+    reference: float
+    length: float | None
+    factors: tuple
+    defaulted: tuple = field(compare=False)
+
+    def __init__(self, probe: float | None = None, reference: float | None = None, length: float | None = None,
+                 factors: tuple = (), defaulted: tuple = ()):
+        given = {"probe": probe, "reference": reference}
+        for name, v in given.items():
+            object.__setattr__(self, name, SIGMA_DEFAULT if v is None else v)
+        object.__setattr__(self, "length", length)
+        object.__setattr__(self, "factors", factors)
+        if any(k not in given for k in defaulted):
+            raise ValueError(f"defaulted names sigmas of {tuple(given)}, got {tuple(defaulted)!r}")
+        unstated = tuple(defaulted) + tuple(k for k, v in given.items() if v is None)
+        object.__setattr__(self, "defaulted", tuple(k for k in given if k in unstated))
+        self.__post_init__()
 
     def __post_init__(self):
         for name in ("probe", "reference", "length"):
@@ -136,6 +157,12 @@ class CalibrationData:
         return np.full(len(self), DEFAULT_SESSION, dtype=object) if s is None else s
 
     @property
+    def motion(self) -> np.ndarray:
+        """(N, J) the sign of each joint's last move onto each point: the data's own (``aux.motion``), else from the
+        points (:func:`arm_model.model.points_motion`)."""
+        return points_motion(self.points, None if self.aux is None else self.aux.motion)
+
+    @property
     def markers(self) -> np.ndarray:
         """(N,) the 0-based marker of each row's reference coordinates."""
         return np.zeros(len(self), int) if self.marker is None else self.marker
@@ -155,7 +182,7 @@ class CalibrationData:
             raise InputError(f"{self.points.n_joints} joint columns, but the arm has {model.desc.n_joints} joints",
                              self.points.path)
         files = self.files if self.files is not None else np.full(len(self), self.points.path, dtype=object)
-        return replace(self, aux=_aux_inputs(model, self.points, files, self.aux))
+        return replace(self, aux=_aux_inputs(model, self, files))
 
     def with_tracker(self, tracker: Tracker | None) -> CalibrationData:
         """These data with the reference frames and marker offsets held at ``tracker``'s (a session it has
@@ -300,17 +327,16 @@ def _one_marker_a_row(points: PointSet, files: np.ndarray, offsets: str):
     return points.select(rows), files[rows], marker
 
 
-def _aux_inputs(model: ArmModel, points: PointSet, files: np.ndarray, aux: AuxData | None) -> AuxData | None:
-    """The per-point inputs ``model.needs()``: ``aux``'s, else the temperatures and times of the points and the
-    gravity and contact torques of the nominal description."""
+def _aux_inputs(model: ArmModel, data: CalibrationData, files: np.ndarray) -> AuxData | None:
+    """The per-point inputs ``model.needs()``: ``data.aux``'s, else the temperatures, times and last moves
+    (:attr:`CalibrationData.motion`) of the points and the gravity and contact torques of the nominal description."""
+    points, aux = data.points, data.aux
     needs = model.needs()
     temperature = None if aux is None else aux.temperature
     tau_g = None if aux is None else aux.tau_gravity
     tau_c = None if aux is None else aux.tau_contact
     time = None if aux is None else aux.time
-    motion = None if aux is None else aux.motion
-    if "motion" in needs and motion is None:
-        motion = reading_motion(points.q, points.session, points.time)
+    motion = data.motion if "motion" in needs else (None if aux is None else aux.motion)
     if "time" in needs and time is None:
         if points.time is None or not np.all(np.isfinite(points.time)):
             bad = 0 if points.time is None else int(np.flatnonzero(~np.isfinite(points.time))[0])

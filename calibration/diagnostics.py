@@ -44,7 +44,7 @@ from scipy import special
 from arm_model.chain import NUMPY_OPS
 from arm_model.effects import Effect, Geometry, contact_moment, gravity_moment, joint_frame
 from arm_model.kinematics import probe_rotations
-from arm_model.model import ArmModel, reading_motion
+from arm_model.model import ArmModel
 from arm_model.params import split_params
 
 from .calibrate import CalibrationResult
@@ -662,13 +662,9 @@ class _FamilyInputs:
 
     @functools.cached_property
     def motion(self) -> np.ndarray:
-        """(N, J) the sign of each reading's last move (the data's own, else from the points:
-        :func:`arm_model.model.reading_motion`, a loop over the rows: worked out once, not at each joint)."""
-        data = self.space.result.data
-        if data.aux is not None and data.aux.motion is not None:
-            return data.aux.motion
-        pts = self.points
-        return reading_motion(pts.q, pts.session, pts.time)
+        """(N, J) the sign of each reading's last move (:attr:`calibration.data.CalibrationData.motion`: worked
+        out once, not at each joint)."""
+        return self.space.result.data.motion
 
     def joint_dir(self, j: int) -> tuple:
         """The direction of joint j's angle error: (name, unit, weighted column)."""

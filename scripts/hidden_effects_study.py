@@ -258,19 +258,38 @@ def run_case(name: str, seeds, out: Path | None, campaign_seed: int = 3) -> list
     return rows
 
 
+#: the columns every study's table shares: the held-out RMS of the four models (:func:`rms_cell`)
+RMS_COLUMN = "held-out RMS [um]: nominal / calibrated / loop / truth"
+
+
+def listed(names) -> str:
+    """A table cell of names: comma-separated, "-" for none."""
+    return ", ".join(names) or "-"
+
+
+def rms_cell(row: dict, digits: int) -> str:
+    """The :data:`RMS_COLUMN` cell of a study's row [um]."""
+    return " / ".join(f"{row[k]:.{digits}f}" for k in ("nominal", "calibrated", "loop", "floor"))
+
+
+def markdown_table(columns: list[str], cells: list[list[str]], align: list[str] | None = None) -> str:
+    """The markdown table of the studies (this one, ``robot_hidden_study``, ``redteam_study``): a header of
+    ``columns``, the separator (``align``: each column's, default ``---``), a line a row of ``cells``."""
+    lines = ["| " + " | ".join(columns) + " |", "|" + "|".join(align or ["---"] * len(columns)) + "|"]
+    return "\n".join(lines + ["| " + " | ".join(c) + " |" for c in cells])
+
+
 def table(rows: list[dict]) -> str:
-    lines = ["| case (campaign seed) | hidden effect | held-out RMS [um]: nominal / calibrated / loop / truth | "
-             "added (* built) | built, not added | structure left | seeds agree | honest |",
-             "|---|---|---|---|---|---|---|---|"]
+    cells = []
     for name, cs in dict.fromkeys((r["case"], r["campaign_seed"]) for r in rows):
         rs = [r for r in rows if (r["case"], r["campaign_seed"]) == (name, cs)]
         r = rs[0]
         agree = all((x["added"], x["remaining"]) == (r["added"], r["remaining"]) for x in rs)
-        lines.append(f"| {name} ({cs}) | {r['what']} | {r['nominal']:.2f} / {r['calibrated']:.2f} / {r['loop']:.2f} / "
-                     f"{r['floor']:.2f} | {', '.join(r['added']) or '-'} | {', '.join(r['built_not_added']) or '-'} | "
-                     f"{', '.join(r['remaining']) or '-'} | {'yes' if agree else 'no'} ({len(rs)}) | "
-                     f"{'yes' if all(x['honest'] for x in rs) else 'no'} |")
-    return "\n".join(lines)
+        cells.append([f"{name} ({cs})", r["what"], rms_cell(r, 2), listed(r["added"]), listed(r["built_not_added"]),
+                      listed(r["remaining"]), f"{'yes' if agree else 'no'} ({len(rs)})",
+                      "yes" if all(x["honest"] for x in rs) else "no"])
+    return markdown_table(["case (campaign seed)", "hidden effect", RMS_COLUMN, "added (* built)", "built, not added",
+                           "structure left", "seeds agree", "honest"], cells)
 
 
 def main(argv=None) -> int:

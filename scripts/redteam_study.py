@@ -65,7 +65,18 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "scripts"))
 
-from hidden_effects_study import Case, _arm_campaign, _from_sim, cli_defaults, judge, loop_row  # noqa: E402
+from hidden_effects_study import (  # noqa: E402
+    RMS_COLUMN,
+    Case,
+    _arm_campaign,
+    _from_sim,
+    cli_defaults,
+    judge,
+    listed,
+    loop_row,
+    markdown_table,
+    rms_cell,
+)
 from robot_hidden_study import (  # noqa: E402
     campaign as robot_campaign,  # noqa: E402
     figures,
@@ -309,13 +320,10 @@ def verdict_word(row: dict) -> str:
 
 
 def table(rows: list[dict]) -> str:
-    lines = ["| case | hidden effect | held-out RMS [um]: nominal / calibrated / loop / truth | added (* built) | "
-             "structure left | verdict | false |", "|---|---|---|---|---|---|---|"]
-    for r in rows:
-        lines.append(f"| {r['case']} | {r['what']} | {r['nominal']:.2f} / {r['calibrated']:.2f} / {r['loop']:.2f} / "
-                     f"{r['floor']:.2f} | {', '.join(r['added']) or '-'} | {', '.join(r['remaining']) or '-'} | "
-                     f"{verdict_word(r)} | {'**yes**' if r['false'] else 'no'} |")
-    return "\n".join(lines) + "\n"
+    cells = [[r["case"], r["what"], rms_cell(r, 2), listed(r["added"]), listed(r["remaining"]), verdict_word(r),
+              "**yes**" if r["false"] else "no"] for r in rows]
+    columns = ["case", "hidden effect", RMS_COLUMN, "added (* built)", "structure left", "verdict", "false"]
+    return markdown_table(columns, cells) + "\n"
 
 
 def main(argv=None) -> int:

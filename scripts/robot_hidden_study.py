@@ -44,7 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "scripts"))
 
-from hidden_effects_study import Case, cli_defaults, judge, loop_row  # noqa: E402
+from hidden_effects_study import RMS_COLUMN, Case, cli_defaults, judge, listed, loop_row, markdown_table, rms_cell  # noqa: E402
 
 from arm_model import PinocchioArm  # noqa: E402
 from arm_model.effects import JointGain  # noqa: E402
@@ -206,16 +206,12 @@ def run_one(robot: str, kind: str, name: str, seed: int, out: Path | None) -> di
 
 
 def table(rows: list[dict]) -> str:
-    lines = ["| robot, kind | hidden effect | held-out RMS [um]: nominal / calibrated / loop / truth | loop / "
-             "calibrated | added (* built) | structure left | model file |",
-             "|---|---|---|---:|---|---|---|"]
-    for r in rows:
-        lines.append(f"| {r['robot']}, {r['kind']} (seed {r['campaign_seed']}) | {r['case']}: {r['what']} | "
-                     f"{r['nominal']:.0f} / {r['calibrated']:.0f} / {r['loop']:.0f} / {r['floor']:.0f} | "
-                     f"{r['loop'] / r['calibrated']:.2f} | {', '.join(r['added']) or '-'} | "
-                     f"{', '.join(r['remaining']) or '-'} | {r['model_file']}"
-                     f"{'; negative compliance' if r['negative_compliances'] else ''} |")
-    return "\n".join(lines) + "\n"
+    cells = [[f"{r['robot']}, {r['kind']} (seed {r['campaign_seed']})", f"{r['case']}: {r['what']}", rms_cell(r, 0),
+              f"{r['loop'] / r['calibrated']:.2f}", listed(r["added"]), listed(r["remaining"]),
+              r["model_file"] + ("; negative compliance" if r["negative_compliances"] else "")] for r in rows]
+    columns = ["robot, kind", "hidden effect", RMS_COLUMN, "loop / calibrated", "added (* built)", "structure left",
+               "model file"]
+    return markdown_table(columns, cells, ["---"] * 3 + ["---:"] + ["---"] * 3) + "\n"
 
 
 def main(argv=None) -> int:

@@ -8,6 +8,7 @@ import functools
 
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 
 from arm_model import PinocchioArm, ball_centres
 from arm_model.effects import EFFECTS, JointBacklash, JointHysteresis
@@ -51,6 +52,52 @@ def test_reading_motion_by_hand():
     want = np.array([[1, 0], [0, 0], [-1, -1], [-1, -1], [0, 0], [-1, 1]], dtype=float)
     assert_close(reading_motion(q, session, time), want, atol=0)
     assert_close(reading_motion(q[:2]), np.array([[0, 0], [-1, 0]], dtype=float), atol=0)
+
+
+def _reading_motion_loop(q, session=None, time=None):
+    """The row-by-row loop :func:`reading_motion` was until it was vectorised: the reference it must match bit for
+    bit (kept here only)."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    n = len(q)
+    sess = np.zeros(n, dtype=object) if session is None else np.asarray(session, dtype=object)
+    t = None if time is None else np.asarray(time, dtype=float)
+    key = np.arange(n, dtype=float) if t is None or not np.all(np.isfinite(t)) else t
+    out = np.zeros(q.shape)
+    for s in dict.fromkeys(sess.tolist()):
+        rows = np.flatnonzero(sess == s)
+        rows = rows[np.argsort(key[rows], kind="stable")]
+        last = None
+        for i in rows:
+            if last is not None and np.array_equal(q[i], q[last]):
+                out[i] = out[last]
+                continue
+            if last is not None:
+                out[i] = np.sign(q[i] - q[last])
+            last = i
+    return out
+
+
+@st.composite
+def _motion_inputs(draw):
+    """Rows of few distinct readings (repeats, 0.0 beside -0.0, a NaN now and then), sessions of a few names or
+    None, times with ties, a non-finite one now and then, or None."""
+    n, j = draw(st.integers(0, 14)), draw(st.integers(1, 3))
+    values = st.sampled_from([0.0, -0.0, 0.5, -0.5, 1e-300, 2.0, np.nan])
+    q = np.array(draw(st.lists(st.lists(values, min_size=j, max_size=j), min_size=n, max_size=n)),
+                 dtype=float).reshape(n, j)
+    session = draw(st.none() | st.lists(st.sampled_from(["a", "b", "c"]), min_size=n, max_size=n))
+    time = draw(st.none() | st.lists(st.sampled_from([0.0, 1.0, 1.0, 2.5, -3.0, np.inf, np.nan]), min_size=n,
+                                     max_size=n))
+    return q, None if session is None else np.array(session, dtype=object), time
+
+
+@settings(max_examples=200, deadline=None)
+@given(_motion_inputs())
+def test_reading_motion_is_the_row_loop_bit_for_bit(inputs):
+    q, session, time = inputs
+    want = _reading_motion_loop(q, session, time)
+    got = reading_motion(q, session, time)
+    assert got.shape == want.shape and got.tobytes() == want.tobytes(), (got, want)
 
 
 def test_hysteresis_evaluators_agree_and_it_is_a_shifted_reading(nominal):

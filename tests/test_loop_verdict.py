@@ -11,6 +11,7 @@ from arm_model import load_description
 from arm_model.effects import ApproachOffset, EncoderEccentricity
 from arm_model.model import ArmModel
 from calibration.candidates import Candidate
+from calibration.data import Weights
 from calibration.loop import LoopSettings, verdict_text
 from calibration.synthesis import RESIDUAL
 from conftest import NOMINAL
@@ -169,3 +170,37 @@ def test_the_test_set_and_the_folds_do_not_depend_on_the_seed(nominal):
                          folds.assign.tolist(), power["note"]))
         assert all(r == runs[0] for r in runs[1:])
         assert runs[0][0] == ("measurement" if d is data else "pose")
+
+
+def test_weights_built_in_python_state_what_they_are_given_as_the_command_line_does():
+    """A sigma not given to ``Weights`` is the default, named in ``defaulted``, as a ``--sigma-*-um`` not given:
+    ``Weights()`` states nothing (its residual judged against the estimate), ``Weights(probe=2e-6)`` the probe's
+    sigma only; the same weights from Python and from the options, with the same verdict."""
+    import argparse
+
+    import pytest
+
+    from calibration.cli import sigma_options, weights_from_args
+    from calibration.data import SIGMA_DEFAULT
+    from calibration.loop.verdict import residual_over_stated
+    p = argparse.ArgumentParser()
+    sigma_options(p)
+    um = 1e-6                                     # the options' conversion, to the bit
+    for argv, py in (([], Weights()), (["--sigma-probe-um", "2"], Weights(probe=2 * um)),
+                     (["--sigma-ref-um", "10"], Weights(reference=10 * um)),
+                     (["--sigma-probe-um", "2", "--sigma-ref-um", "100", "--sigma-length-um", "3"],
+                      Weights(2 * um, 100 * um, 3 * um))):
+        cli = weights_from_args(p.parse_args(argv))
+        assert (py, py.defaulted) == (cli, cli.defaulted), argv
+    assert Weights().defaulted == ("probe", "reference") and Weights().probe == Weights().reference == SIGMA_DEFAULT
+    assert Weights(reference=1e-4).defaulted == ("probe",) and Weights(1e-5, 1e-5).defaulted == ()
+    assert Weights(probe=2e-6).scaled({"seat": 2.0}).defaulted == ("reference",)
+    assert Weights(1e-5, 1e-5, defaulted=("reference",)).defaulted == ("reference",)
+    with pytest.raises(ValueError, match="defaulted"):
+        Weights(defaulted=("length",))
+    stage = _stage(None, 240.0, 690.0, s0=1.05)
+    stage.result.variance = [{"group": "reference", "estimated": True, "estimate_um": 210.0, "redundancy": 120.0}]
+    assert residual_over_stated(stage.result, Weights()) == (1.05, "")       # before: 21 times the "stated" 10 um
+    assert verdict_text([stage], [], "", LoopSettings(), [], None, (), Weights()).startswith(
+        "no effect added. Noise estimated from the data, no uncertainty stated for it: reference 210 um (the default")
+    assert residual_over_stated(stage.result, Weights(reference=10e-6))[0] == pytest.approx(21.0, rel=0.01)

@@ -147,3 +147,29 @@ def test_worker_errors_reach_the_parent_whole():
         os._exit(9)
     with pytest.raises(par.WorkerDied, match="exit code 9"):
         par.fork_map(die, [()])
+
+
+def test_a_hysteresis_model_reads_the_file_whole(tmp_path, capsys, small_parts):
+    """A point's last move (:class:`arm_model.effects.JointHysteresis`) is from the point captured before it, in any
+    part of the file: such a model's points are read as one block, never in parts or blocks (the second part's first
+    row took 0, its move from the first part's last row unseen: 71 um off here), and give Python's ``tip_table`` on
+    the whole set."""
+    from arm_model.commands import tip_table
+    from arm_model.effects import JointHysteresis
+    from arm_model.io import read_points
+    from arm_model.model_file import Arm, format_model
+
+    desc = load_model("aacmm7").desc
+    effect = JointHysteresis(joints=(1, 3))
+    model = tmp_path / "hyst.toml"
+    model.write_text(format_model(desc, (effect,), {"j2.hysteresis": 1e-4, "j4.hysteresis": -5e-5}))
+    src = _write(tmp_path / "points.csv", HEADER + "\n" + "\n".join(rows(400)) + "\n")
+    calls = small_parts(2)
+    out = tmp_path / "tips.csv"
+    assert main(["tip", str(src), "--arm", str(model), "-o", str(out)]) == 0
+    capsys.readouterr()
+    assert calls == []                                     # one block
+    got = np.loadtxt(out, delimiter=",", skiprows=1, usecols=(5, 6, 7))
+    arm = Arm(desc, (effect,), {"j2.hysteresis": 1e-4, "j4.hysteresis": -5e-5})
+    want = tip_table(arm, read_points(src, desc.joint_quantities))
+    assert np.max(np.abs(got - np.column_stack([want[f"{a}_mm"] for a in "xyz"]))) <= 1e-6   # the 6 decimals

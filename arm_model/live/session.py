@@ -10,7 +10,9 @@ feature fits out (docs/live.md).
 Each contact gives one point at its force peak (:mod:`arm_model.live.contacts`), computed by the code of
 ``aacmm tip`` (:func:`arm_model.commands.tip_centres`, every effect of a model file applied) and its
 uncertainty by :func:`arm_model.uncertainty.propagate`, so ``aacmm tip points.csv --arm ARM
---uncertainty`` on the session's ``points.csv`` writes the session's ``tips.csv`` byte for byte.
+--uncertainty`` on the session's ``points.csv`` writes the session's ``tips.csv`` byte for byte (for a model with a
+joint's hysteresis, where the arm went straight from point to point: such a point's last moves come from the samples,
+:mod:`arm_model.live.motion`).
 """
 from __future__ import annotations
 
@@ -30,6 +32,7 @@ from ..io import Feature, PointSet, id_problem
 from ..uncertainty import InputUncertainty
 from .contacts import Contact, ContactDetector, ContactOptions
 from .features import FeatureFit, FeatureTracker
+from .motion import LastMove
 from .plan import SessionPlan
 from .record import FILES, SessionRecord
 from .samples import Sample, SampleLayout, checked_value, sample_header
@@ -147,6 +150,10 @@ class Session:
         self.inputs = inputs
         # the arm's own inputs (its model discrepancy read once, here), with and without a force sensor
         self._default_inputs = None if inputs is not None else {f: arm.input_uncertainty(f) for f in (True, False)}
+        # each joint's last move before a contact, from the samples (a JointHysteresis effect needs it): the band
+        # from the encoder's step (its uncertainty is step / sqrt(12)) and the readings' noise in contact
+        self._moves = (LastMove(self.input_uncertainty(True).encoder * math.sqrt(12.0))
+                       if "motion" in self.model.needs() else None)
         if plan is not None and not isinstance(plan, SessionPlan):
             raise TypeError(f"plan must be a SessionPlan (arm_model.live.read_plan(path)) or None, got "
                             f"{type(plan).__name__}")
@@ -255,6 +262,12 @@ class Session:
             else:
                 if self._beyond:
                     out = out + self._watch_joints(s)
+        moves = self._moves
+        if moves is not None:
+            if was_in:
+                moves.held(s.q)
+            else:
+                moves.free(s.q)
         contact = detector.feed(s, m, line)
         if contact is not None:
             out = out + self._on_contact(contact)
@@ -512,11 +525,15 @@ class Session:
         from ..uncertainty_cli import u_columns
         feature = self.tracker.current
         ps = self._point_set(c, feature)
-        centres = tip_centres(self.arm, ps)
+        motion = None
+        if self._moves is not None:       # the sign of each joint's last move before the contact, then the band
+            motion = self._moves.motion()
+            self._moves.settle()
+        centres = tip_centres(self.arm, ps, motion)
         row = tip_table(self.arm, ps, centres)
         inputs = self.input_uncertainty(ps.wrench is not None)
-        prop = propagate(self.model, self.p, ps.q, ps.wrench, self.arm.aux(ps), parameters=self.parameters,
-                         inputs=inputs, threads=1, systematic=True)
+        prop = propagate(self.model, self.p, ps.q, ps.wrench, self.arm.aux(ps, motion=motion),
+                         parameters=self.parameters, inputs=inputs, threads=1, systematic=True)
         row.update(u_columns(prop))
         beyond = tuple(self.desc.joints[i].name for i, lo, hi in self._bounds if not lo <= c.peak.q[i] <= hi)
         point = LivePoint(c.index, c, self.measurement, feature, centres[0][0], centres[1][0], prop.u[0],

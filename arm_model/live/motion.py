@@ -1,0 +1,92 @@
+"""The direction each joint last turned before a contact, from the sample stream itself (docs/live.md, "The
+last move of each joint").
+
+A model with a :class:`~arm_model.effects.JointHysteresis` effect needs, per point, the sign of each joint's last
+move onto it (its ``motion`` input). ``aacmm tip`` and the calibration take it from the point captured before
+(:func:`arm_model.model.reading_motion`); a live session has every sample between two points, so it follows each
+joint's readings out of contact with a dead band: a joint's move is the direction it travels, and it turns only
+once its reading came back from the far end of that travel by more than the band (a play operator), so that the
+encoder's noise and a reading flickering between two steps never turn it. The band of joint j is the larger of
+
+* :data:`BAND_STEPS` steps of its encoder (the resolution the session's input uncertainties hold: the
+  description's ``encoder_resolution_deg`` or ``--encoder-resolution-deg``), and
+* :data:`BAND_SIGMAS` times the noise of its reading while the probe is held against the part (the samples in
+  contact: the operator holds still), estimated from their differences sample to sample, robustly (the median
+  absolute difference), after each contact from the last :data:`NOISE_SAMPLES` of them.
+
+The samples in contact do not move the joints' directions: the sign of a point is that of the last move before
+its contact began.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Sequence
+
+import numpy as np
+
+__all__ = ["LastMove", "BAND_STEPS", "BAND_SIGMAS", "NOISE_SAMPLES", "NOISE_LEAST"]
+
+#: the dead band is at least this many encoder steps (a reading flickering between two steps moves by one)
+BAND_STEPS = 3.0
+#: ... and at least this many standard deviations of a joint's reading noise (white noise held still for 10^5
+#: samples spans about +-4.4 sigma)
+BAND_SIGMAS = 10.0
+#: the samples in contact (their differences) the noise is estimated from: the latest ones
+NOISE_SAMPLES = 5000
+#: the fewest differences an estimate takes
+NOISE_LEAST = 20
+#: the standard deviation of a normal variable over the median of its absolute value
+_MAD_TO_SIGMA = 1.482602218505602
+
+
+class LastMove:
+    """The sign (-1, 0, +1) of each joint's last move in a stream of readings (see the module doc).
+
+    Args:
+        steps: (J,) each joint's encoder step [rad] ([m] for a prismatic joint; 0: not known).
+    """
+
+    def __init__(self, steps: Sequence[float]):
+        self.steps = [BAND_STEPS * float(s) for s in steps]
+        #: (J,) the dead band of each joint [rad] ([m])
+        self.band = list(self.steps)
+        #: (J,) the sign of each joint's last move (0: it has not moved beyond its band yet)
+        self.sign = [0.0] * len(self.steps)
+        self._end: list[float] | None = None         # the far end of each joint's current travel
+        self._held: Sequence[float] | None = None    # the last reading in contact
+        self._diffs: deque = deque(maxlen=NOISE_SAMPLES)
+
+    def free(self, q: Sequence[float]) -> None:
+        """A sample out of contact: readings ``q`` (J,)."""
+        self._held = None
+        end = self._end
+        if end is None:
+            self._end = list(q)
+            return
+        sign, band = self.sign, self.band
+        for j, x in enumerate(q):
+            s, e = sign[j], end[j]
+            if (s > 0 and x > e) or (s < 0 and x < e):        # further the same way
+                end[j] = x
+            elif x - e > band[j]:
+                sign[j], end[j] = 1.0, x
+            elif e - x > band[j]:
+                sign[j], end[j] = -1.0, x
+
+    def held(self, q: Sequence[float]) -> None:
+        """A sample in contact: its readings' differences from the sample before it (the noise)."""
+        if self._held is not None:
+            self._diffs.append([abs(a - b) for a, b in zip(q, self._held, strict=True)])
+        self._held = q
+
+    def settle(self) -> None:
+        """After a contact: the band from the noise of the readings held so far (:data:`BAND_SIGMAS`)."""
+        if len(self._diffs) < NOISE_LEAST:
+            return
+        sigma = np.median(np.asarray(self._diffs), axis=0) * _MAD_TO_SIGMA / math.sqrt(2.0)
+        self.band = [max(s, BAND_SIGMAS * float(n)) for s, n in zip(self.steps, sigma, strict=True)]
+
+    def motion(self) -> np.ndarray:
+        """(1, J) the sign of each joint's last move, as :func:`arm_model.model.points_motion` takes it."""
+        return np.array([self.sign])
