@@ -94,16 +94,16 @@ def noise_floor(model, data, ids: list) -> dict:
             "loo_rms_mm": float(np.sqrt(np.mean(loo ** 2))), "loo_errors_mm": loo.tolist()}
 
 
-def exact_campaigns(model, pts, data, draws: int) -> list:
-    """``draws`` copies of the points ``pts`` whose markers are the predictions of ``model`` fitted on every
-    posture of ``data`` (its frame, marker offset and torques) plus Gaussian noise of the noise floor's size
-    per axis (numpy default_rng seeds 0, 1, ...): campaigns the model describes exactly."""
+def exact_campaigns(model, pts, data, draws: int) -> tuple[float, list]:
+    """The noise floor per axis [m] of ``model`` fitted on every posture of ``data``, and ``draws`` copies of the
+    points ``pts`` whose markers are that fit's predictions (its frame, marker offset and torques) plus Gaussian
+    noise of that size per axis (numpy default_rng seeds 0, 1, ...): campaigns the model describes exactly."""
     res = fitted(model, data)
     at = with_fitted_torques(data, res)
     x = marker_positions(res.model, res.p, at.points.q, res.tracker, at.sessions, at.aux)[:, 0]
     sigma = float(np.sqrt(np.mean((x - at.reference) ** 2) * res.n_residuals / res.dof))
-    return [dataclasses.replace(pts, ref=(x + np.random.default_rng(s).normal(0.0, sigma, x.shape))[:, None, :])
-            for s in range(draws)]
+    return sigma, [dataclasses.replace(pts, ref=(x + np.random.default_rng(s).normal(0.0, sigma, x.shape))[:, None, :])
+                   for s in range(draws)]
 
 
 def main(argv=None) -> int:
@@ -130,7 +130,7 @@ def main(argv=None) -> int:
               for name in args.effects.split(",")}
     data = {name: make_data(pts, None, m) for name, m in models.items()}
     sizes = [int(v) for v in args.sizes.split(",") if v]
-    exact = {name: [make_data(sim, None, m) for sim in exact_campaigns(m, pts, data[name], args.exact)]
+    exact = {name: [make_data(sim, None, m) for sim in exact_campaigns(m, pts, data[name], args.exact)[1]]
              for name, m in models.items()} if args.exact else {}
     results = {}
     for split, held in splits(ids, [h for h in args.holdout.split(",") if h], args.halves, sizes, args.seeds):
