@@ -98,6 +98,8 @@ def exact_campaigns(model, pts, data, draws: int) -> tuple[float, list]:
     """The noise floor per axis [m] of ``model`` fitted on every posture of ``data``, and ``draws`` copies of the
     points ``pts`` whose markers are that fit's predictions (its frame, marker offset and torques) plus Gaussian
     noise of that size per axis (numpy default_rng seeds 0, 1, ...): campaigns the model describes exactly."""
+    if pts.ref is None or pts.ref.shape[1] != 1 or len(data.points) != len(pts):
+        raise ValueError("exact campaigns need one marker a row, every row a reference point")
     res = fitted(model, data)
     at = with_fitted_torques(data, res)
     x = marker_positions(res.model, res.p, at.points.q, res.tracker, at.sessions, at.aux)[:, 0]
@@ -123,6 +125,8 @@ def main(argv=None) -> int:
                    help="also N campaigns each model describes exactly (its fit on every posture plus noise)")
     p.add_argument("-o", "--output", type=Path, default=None, help="write the results as JSON here")
     args = p.parse_args(argv)
+    if args.exact < 0:
+        p.error("--exact: a number of draws, 0 or more")
     desc = load_arm(args.arm, args.tip_frame)
     pts = read_points(args.points, desc.n_joints)
     ids = list(dict.fromkeys(pts.measurement.tolist()))
