@@ -12,6 +12,11 @@ posture (its residual RMS per axis of the instrument and in 3D, and that 3D figu
 freedom counted: the noise floor no prediction of a posture beats) and each posture predicted from all the
 others (the leave-one-out RMS: the held-out error with as much data as the campaign has).
 
+``--exact N`` also says how much of a held-out error the model itself would leave if it were exact: each model
+fitted on every posture is taken as the truth, its predicted markers plus Gaussian noise of the noise floor's
+size per axis (N draws, seeds 0...) make N campaigns it describes exactly, and the same splits are fitted and
+predicted on them (a parametric bootstrap: the held-out RMS of an exact model at this noise and design).
+
     python scripts/mocap_study.py ../shared/data/real-talos-mocap/points.csv \\
         --arm ../shared/data/real-talos-mocap/talos_full_v2.urdf --tip-frame gripper_left_base_link \\
         --holdout pose-02,pose-04,...  --effects none,joint_compliance
@@ -19,6 +24,7 @@ others (the leave-one-out RMS: the held-out error with as much data as the campa
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -88,6 +94,20 @@ def noise_floor(model, data, ids: list) -> dict:
             "loo_rms_mm": float(np.sqrt(np.mean(loo ** 2))), "loo_errors_mm": loo.tolist()}
 
 
+def exact_campaigns(model, pts, data, draws: int) -> tuple[float, list]:
+    """The noise floor per axis [m] of ``model`` fitted on every posture of ``data``, and ``draws`` copies of the
+    points ``pts`` whose markers are that fit's predictions (its frame, marker offset and torques) plus Gaussian
+    noise of that size per axis (numpy default_rng seeds 0, 1, ...): campaigns the model describes exactly."""
+    if pts.ref is None or pts.ref.shape[1] != 1 or len(data.points) != len(pts):
+        raise ValueError("exact campaigns need one marker a row, every row a reference point")
+    res = fitted(model, data)
+    at = with_fitted_torques(data, res)
+    x = marker_positions(res.model, res.p, at.points.q, res.tracker, at.sessions, at.aux)[:, 0]
+    sigma = float(np.sqrt(np.mean((x - at.reference) ** 2) * res.n_residuals / res.dof))
+    return sigma, [dataclasses.replace(pts, ref=(x + np.random.default_rng(s).normal(0.0, sigma, x.shape))[:, None, :])
+                   for s in range(draws)]
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("points", type=Path, help="points file: one measurement a posture, reference coordinates")
@@ -101,8 +121,12 @@ def main(argv=None) -> int:
                    help="models to compare: 'none' (geometry) or effect names joined by '+', comma-separated")
     p.add_argument("--floor", action="store_true",
                    help="also the noise floor (each model fitted on every posture) and the leave-one-out RMS")
+    p.add_argument("--exact", type=int, default=0,
+                   help="also N campaigns each model describes exactly (its fit on every posture plus noise)")
     p.add_argument("-o", "--output", type=Path, default=None, help="write the results as JSON here")
     args = p.parse_args(argv)
+    if args.exact < 0:
+        p.error("--exact: a number of draws, 0 or more")
     desc = load_arm(args.arm, args.tip_frame)
     pts = read_points(args.points, desc.n_joints)
     ids = list(dict.fromkeys(pts.measurement.tolist()))
@@ -110,6 +134,8 @@ def main(argv=None) -> int:
               for name in args.effects.split(",")}
     data = {name: make_data(pts, None, m) for name, m in models.items()}
     sizes = [int(v) for v in args.sizes.split(",") if v]
+    exact = {name: [make_data(sim, None, m) for sim in exact_campaigns(m, pts, data[name], args.exact)[1]]
+             for name, m in models.items()} if args.exact else {}
     results = {}
     for split, held in splits(ids, [h for h in args.holdout.split(",") if h], args.halves, sizes, args.seeds):
         row = {}
@@ -119,6 +145,9 @@ def main(argv=None) -> int:
         for name, m in models.items():
             train, test = split_holdout(data[name], held)
             row[name] = predicted(fitted(m, train), test)
+        for name, sims in exact.items():       # (the held-out errors of every draw together)
+            row[f"{name} exact"] = np.concatenate([predicted(fitted(models[name], tr), te)
+                                                   for tr, te in (split_holdout(d, held) for d in sims)])
         results[split] = {k: {"rms_mm": float(np.sqrt(np.mean(e ** 2))), "max_mm": float(e.max()),
                               "errors_mm": e.tolist()} for k, e in row.items()}
         print(f"{split:8s} train {len(ids) - len(held):3d}  " + "  ".join(
