@@ -55,7 +55,7 @@ from .decide import (
     plot_family,
 )
 from .folds import choose_folds, outer_split
-from .outliers import drop_design_outliers, drop_test_outliers, outlier_budget
+from .outliers import drop_design_outliers, flag_test_outliers, outlier_budget
 from .result import LoopResult, Stage
 from .settings import LEGACY_RESOLUTION, NOISE_OFF, LoopSettings
 from .state import LoopState, Screening, log
@@ -132,17 +132,9 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
         if _noise(result):
             say("  " + _noise(result)[2:] + " (the stated uncertainties are starting values)")
     result = torques_at_equilibrium(state, model, result)
+    state.flagged = np.zeros(len(state.test), bool)
     if settings.drop_outliers:
-        try:
-            state.test, state.dropped["test"] = drop_test_outliers(
-                model, result.p, state.test, state.weights, result.reference_mode, settings.outlier_threshold,
-                None if test_by == "measurement" else state.design,
-                max(0, outlier_budget(len(state.data)) - len(state.dropped["design"])))
-        except NumericalError:        # e.g. two tracker poses: a frame and the markers' offsets undetermined
-            say("  the test set alone does not determine its own unknowns (centres, frames, offsets) for the point "
-                "test: its points are not tested for outliers")
-        if state.dropped["test"]:
-            say(f"  {len(state.dropped['test'])} outlier point(s) of the test set dropped (base model)")
+        _flag_test(state, model, result)
     state.folds, state.power = choose_folds(state.design, settings)
     if state.power["note"].startswith("WARNING: "):        # shown with --quiet too
         log.warning(state.power["note"][len("WARNING: "):])
@@ -152,6 +144,24 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
     state.stages = [Stage(0, model, result, heldout=state.test_figures(model, result))]
     say(f"  base model: s0 {result.s0:.3g}, held-out test RMS {state.stages[0].heldout['rms_um']:.2f} um")
     return state
+
+
+def _flag_test(state: LoopState, model: ArmModel, result: CalibrationResult) -> None:
+    """The test points the base model's point test flags (:func:`~calibration.loop.outliers.flag_test_outliers`):
+    reported, never left out of a held-out figure (each figure is also given without them, labelled)."""
+    s, say = state.settings, state.say
+    try:
+        state.flagged, state.flagged_entries = flag_test_outliers(
+            model, result.p, state.test, state.weights, result.reference_mode, s.outlier_threshold,
+            None if state.test_by == "measurement" else state.design,
+            max(0, outlier_budget(len(state.data)) - len(state.dropped["design"])))
+    except NumericalError:        # e.g. two tracker poses: a frame and the markers' offsets undetermined
+        say("  the test set alone does not determine its own unknowns (centres, frames, offsets) for the point "
+            "test: its points are not tested for outliers")
+    if state.flagged_entries:
+        ids = ", ".join(dict.fromkeys(str(e["measurement"]) for e in state.flagged_entries))
+        say(f"  {int(state.flagged.sum())} point(s) of the test set flagged by the point test (base model; {ids}): "
+            "kept in every held-out figure, which is also given without them")
 
 
 def torques_at_equilibrium(state: LoopState, model: ArmModel, result: CalibrationResult,
@@ -521,4 +531,5 @@ def report(state: LoopState) -> LoopResult:
                       state.candidates + state.synthesised, state.skipped, state.design.measurements(),
                       state.test.measurements(), s, state.desc, plots, state.dropped, state.test_by, state.power,
                       model_fit, built, state.vetoed, state.data,
-                      residual_over_stated(state.result, state.stated)[0], check, state.escalated)
+                      residual_over_stated(state.result, state.stated)[0], check, state.escalated,
+                      state.flagged_entries)

@@ -81,6 +81,9 @@ def heldout_check(stage, test_by: str, alpha: float) -> dict | None:
     then the design rows' mean leverage ``(n - red) / n`` (``n`` design rows, ``red`` their redundancy, the prior's
     shrinkage included), the average prediction variance of a new row like them (also used, with the parameters'
     share ``(n - red - k) / n``, ``k`` the design's nuisance unknowns, when the covariance is not at hand). The
+    instrument's frames and marker offsets a test set of whole measurements is predicted with (the design fit's,
+    ``held`` unknowns, not solved on its rows) add their share of the design rows' leverage, ``held / n`` (their
+    correlation with the parameters neglected). The
     test set is *worse than stated* when both
 
     * against the stated uncertainties, its sum of squares ``chi2_s`` over the rows that have one (not the lengths)
@@ -107,7 +110,7 @@ def heldout_check(stage, test_by: str, alpha: float) -> dict | None:
         return None
     prop = h.get("propagated") if by_meas else None
     lev = (prop / (dof_t * res.s0 ** 2) if prop is not None else
-           max(0.0, n - red - (res.n_nuisance if by_meas else 0)) / n)
+           max(0.0, n - red - (res.n_nuisance if by_meas else 0)) / n) + (h.get("held", 0) / n if by_meas else 0.0)
     f = chi2 / (dof_t * (1.0 + lev) * res.s0 ** 2)
     p = f_upper_tail(f, dof_t, red)
     dof_s = (h.get("rows_stated") or 0) - (nuis if by_meas else 0)
