@@ -24,7 +24,7 @@ __all__ = ["heldout_residuals", "heldout_figures", "bootstrap_rows"]
 
 def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit",
                     train=None, seed: int = 0, stated: Weights | None = None, cov: tuple | None = None,
-                    tracker=None, flagged=None) -> dict:
+                    tracker=None) -> dict:
     """Figures of ``(model, p)`` on held-out data [um], each a prediction as ``calibrate``'s held-out figures are
     (:func:`heldout_residuals` with ``train``, the poses of the training features, or ``tracker``, the training
     fit's instrument frames and marker offsets: :func:`calibration.tracking.as_predicted`): RMS and
@@ -41,12 +41,9 @@ def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights,
     ``rows_stated`` rows whose group has one (not the lengths, whose uncertainty is each artefact's);
     ``sigmas_stated``: whether the user stated each of those (False: one is a default,
     :meth:`~calibration.data.Weights.stated_sigma_of`, which the sentences then call so). ``held``: the nuisance
-    unknowns held at the training fit's values. ``flagged``: (N,) bool over the points of ``data``, those the
-    loop's point test flags (kept in every figure above); ``flagged_points`` counts those held out and
-    ``rms_um_unflagged`` / ``max_um_unflagged`` are the headline figures without them (None when none is
-    flagged). The standard figures of held-out poses (``train``) are their distances from the training features
-    (``pose_rms``, ``pose_max``: :func:`~calibration.validation.validate_poses`, as ``calibrate --holdout-by pose``
-    gives them); those of whole measurements hold the reference points predicted with ``tracker``
+    unknowns held at the training fit's values. The standard figures of held-out poses (``train``) are their
+    distances from the training features (``pose_rms``, ``pose_max``: :func:`~calibration.validation.validate_poses`,
+    as ``calibrate --holdout-by pose`` gives them); those of whole measurements hold the reference points predicted with ``tracker``
     (``reference_rms_predicted``, ``reference_max_predicted``) instead of after a best fit on them."""
     h = heldout_residuals(model, p, data, weights, reference, train, cov, tracker)
     e = h["e"]
@@ -76,7 +73,6 @@ def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights,
                              "max_um": float(np.max(np.abs(ek))) * 1e6}
     u = bootstrap_rows(head, h["measurement"][art] if art.any() else h["measurement"], seed=seed)
     out["u_rms_um"], out["u_max_um"] = (None, None) if u is None else (u[0] * 1e6, u[1] * 1e6)
-    out.update(_unflagged(h, art.any(), flagged))
     if train is not None:
         val = validate_poses(model, p, data, train, weights, reference)
     else:
@@ -90,21 +86,6 @@ def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights,
     out["standard"] = {k: summary[k] * FIGURES[k][2] for k in FIGURES if k in summary}
     out["u_standard"] = {k: None if u_std.get(k) is None else u_std[k] * FIGURES[k][2] for k in out["standard"]}
     return out
-
-
-def _unflagged(h: dict, artefacts: bool, flagged) -> dict:
-    """The headline figures of :func:`heldout_figures` without the points ``flagged`` (a mask over the points of
-    the data ``h`` came from; lengths kept): ``flagged_points`` among the held-out rows and ``rms_um_unflagged``,
-    ``max_um_unflagged`` [um] (None when none is flagged)."""
-    point = h["point"]
-    bad = np.zeros(len(point), bool) if flagged is None else (point >= 0) & np.asarray(flagged, bool)[point]
-    n = len(np.unique(point[bad]))
-    rows = (h["kind"] != "reference") if artefacts else np.ones(len(point), bool)
-    e = h["e"][rows & ~bad]
-    if not n or not len(e):
-        return {"flagged_points": n, "rms_um_unflagged": None, "max_um_unflagged": None}
-    return {"flagged_points": n, "rms_um_unflagged": float(np.sqrt(np.mean(e ** 2))) * 1e6,
-            "max_um_unflagged": float(np.max(np.abs(e))) * 1e6}
 
 
 def bootstrap_rows(e: np.ndarray, measurement: np.ndarray, samples: int = BOOTSTRAP_SAMPLES, seed: int = 0):

@@ -415,11 +415,12 @@ def outer_test_worse(state: LoopState, stage: Stage, cv) -> bool:
     """Whether the stage's RMS on the outer test set is above the current model's (an effect is never added
     when the outer test gets worse, so the before/after table never shows a step up); if so its candidate's
     held-out test no longer passes (its reason says why), and it is recorded in ``state.vetoed``."""
-    now, new = state.stages[-1].heldout["rms_um"], stage.heldout["rms_um"]
+    now, new = state.judged(state.stages[-1])["rms_um"], state.judged(stage)["rms_um"]
     if not new > now:
         return False
     name = stage.added.name
-    why = f"the outer test set got worse with it (RMS {now:.4g} -> {new:.4g} um)"
+    why = f"the outer test set got worse with it (RMS {now:.4g} -> {new:.4g} um" + (
+        f", without its {int(state.flagged.sum())} point(s) the point test flags)" if state.flagged.any() else ")")
     state.say(f"  {name} passed the held-out folds, but {why}: not added")
     state.vetoed.append({"name": name, "origin": stage.added.origin, "heldout_rms_before_um": now,
                          "heldout_rms_after_um": new, "cross_validation": cv.reason})
@@ -480,7 +481,7 @@ def escalate(state: LoopState) -> bool:
     s = state.settings
     if not s.escalate or state.escalated is not None or len(state.stages) - 1 >= s.max_effects:
         return False
-    check = heldout_check(state.stages[-1], state.test_by, s.alpha)
+    check = heldout_check(state.stages[-1], state.test_by, s.alpha, state.judged(state.stages[-1]))
     if not check or not check["worse_than_stated"]:
         return False
     first = DEFAULT_FAMILIES if state.families is None else state.families
@@ -517,7 +518,7 @@ def report(state: LoopState) -> LoopResult:
     built = [{"name": c.name, "family": c.family, "joint": c.joint, "effect": c.effect.describe(),
               "added": fate.get(c.name) == ADDED, "why_not_added": None if fate.get(c.name) == ADDED else
               fate.get(c.name, "not screened")} for c in state.synthesised]
-    check = heldout_check(state.stages[-1], state.test_by, s.alpha)
+    check = heldout_check(state.stages[-1], state.test_by, s.alpha, state.judged(state.stages[-1]))
     verdict = verdict_text(state.stages, significant, state.stop, s, built, state.model, state.vetoed, state.stated,
                            check, state.escalated if state.escalated and state.escalated["candidates"] else None,
                            state.test_by)

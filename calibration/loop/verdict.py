@@ -68,7 +68,7 @@ def estimated_words(result, stated=None) -> str:
         "the estimate)" for v in groups) + f"; the final residual is {result.s0:.3g} times the estimate")
 
 
-def heldout_check(stage, test_by: str, alpha: float) -> dict | None:
+def heldout_check(stage, test_by: str, alpha: float, figures: dict | None = None) -> dict | None:
     """Whether the outer test set is worse than stated: worse than a complete model predicts for it, judged on data
     the fit never saw, beside the structure tests of the design fit's residual.
 
@@ -96,8 +96,9 @@ def heldout_check(stage, test_by: str, alpha: float) -> dict | None:
       rule (:data:`S0_LIMIT`) reports; the first guards against a noise estimate low by chance.
 
     Without a stated uncertainty on any row, the second alone. Without the figures it needs (no redundancy, no
-    degree of freedom left on the test set): None."""
-    h, res = stage.heldout, stage.result
+    degree of freedom left on the test set): None. ``figures``: the outer test set's figures to judge (default
+    ``stage.heldout``; the loop's: :meth:`~calibration.loop.state.LoopState.judged`)."""
+    h, res = figures or stage.heldout, stage.result
     chi2, rows, nuis = h.get("chi2"), h.get("rows"), h.get("nuisance")
     red = getattr(res, "redundancy", None)
     red = float(res.dof if red is None else red)
