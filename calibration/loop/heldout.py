@@ -43,8 +43,9 @@ def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights,
     :meth:`~calibration.data.Weights.stated_sigma_of`, which the sentences then call so). ``held``: the nuisance
     unknowns held at the training fit's values. The standard figures of held-out poses (``train``) are their
     distances from the training features (``pose_rms``, ``pose_max``: :func:`~calibration.validation.validate_poses`,
-    as ``calibrate --holdout-by pose`` gives them); those of whole measurements hold the reference points predicted with ``tracker``
-    (``reference_rms_predicted``, ``reference_max_predicted``) instead of after a best fit on them."""
+    as ``calibrate --holdout-by pose`` gives them); those of whole measurements hold the reference points predicted
+    with ``tracker`` (``reference_rms_predicted``, ``reference_max_predicted``) instead of after a best fit on
+    them."""
     h = heldout_residuals(model, p, data, weights, reference, train, cov, tracker)
     e = h["e"]
     art = h["kind"] != "reference"
