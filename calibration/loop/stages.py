@@ -59,7 +59,7 @@ from .outliers import drop_design_outliers, flag_test_outliers, outlier_budget
 from .result import LoopResult, Stage
 from .settings import LEGACY_RESOLUTION, NOISE_OFF, LoopSettings
 from .state import LoopState, Screening, log
-from .verdict import ADDED, builds_from_residual, heldout_check, residual_over_stated, verdict_text
+from .verdict import ADDED, builds_from_residual, heldout_check, judged, residual_over_stated, verdict_text
 
 __all__ = ["Campaign", "Stop", "prepare", "at_current_torques", "screen", "test", "physics", "synthesise", "decide",
            "fit_stage", "escalate",
@@ -415,7 +415,7 @@ def outer_test_worse(state: LoopState, stage: Stage, cv) -> bool:
     """Whether the stage's RMS on the outer test set is above the current model's (an effect is never added
     when the outer test gets worse, so the before/after table never shows a step up); if so its candidate's
     held-out test no longer passes (its reason says why), and it is recorded in ``state.vetoed``."""
-    now, new = state.judged(state.stages[-1])["rms_um"], state.judged(stage)["rms_um"]
+    now, new = judged(state.stages[-1])["rms_um"], judged(stage)["rms_um"]
     if not new > now:
         return False
     name = stage.added.name
@@ -481,7 +481,7 @@ def escalate(state: LoopState) -> bool:
     s = state.settings
     if not s.escalate or state.escalated is not None or len(state.stages) - 1 >= s.max_effects:
         return False
-    check = heldout_check(state.stages[-1], state.test_by, s.alpha, state.judged(state.stages[-1]))
+    check = heldout_check(state.stages[-1], state.test_by, s.alpha)
     if not check or not check["worse_than_stated"]:
         return False
     first = DEFAULT_FAMILIES if state.families is None else state.families
@@ -518,7 +518,7 @@ def report(state: LoopState) -> LoopResult:
     built = [{"name": c.name, "family": c.family, "joint": c.joint, "effect": c.effect.describe(),
               "added": fate.get(c.name) == ADDED, "why_not_added": None if fate.get(c.name) == ADDED else
               fate.get(c.name, "not screened")} for c in state.synthesised]
-    check = heldout_check(state.stages[-1], state.test_by, s.alpha, state.judged(state.stages[-1]))
+    check = heldout_check(state.stages[-1], state.test_by, s.alpha)
     verdict = verdict_text(state.stages, significant, state.stop, s, built, state.model, state.vetoed, state.stated,
                            check, state.escalated if state.escalated and state.escalated["candidates"] else None,
                            state.test_by)

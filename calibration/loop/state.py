@@ -172,14 +172,6 @@ class LoopState:
             out[f"{k}_unflagged"] = None if out["unflagged"] is None else out["unflagged"][k]
         return out
 
-    def judged(self, stage) -> dict:
-        """The outer test set's figures of ``stage`` the loop's decisions read (the veto,
-        :func:`~calibration.loop.stages.outer_test_worse`; the judgement against a complete model,
-        :func:`~calibration.loop.verdict.heldout_check`): without the points the point test flags, when it flags
-        some (a gross point's error drowns the difference between two models: four points 1 mm off on a sphere of
-        the test set, 70.53 -> 70.59 um with them, the hidden cross-coupling vetoed), else those printed."""
-        return stage.heldout.get("unflagged") or stage.heldout
-
 
 @dataclass
 class Screening:
