@@ -419,8 +419,9 @@ def outer_test_worse(state: LoopState, stage: Stage, cv) -> bool:
     if not new > now:
         return False
     name = stage.added.name
+    flagged = stage.heldout.get("flagged_points") or 0
     why = f"the outer test set got worse with it (RMS {now:.4g} -> {new:.4g} um" + (
-        f", without its {int(state.flagged.sum())} point(s) the point test flags)" if state.flagged.any() else ")")
+        f", without its {flagged} point(s) the point test flags)" if flagged else ")")
     state.say(f"  {name} passed the held-out folds, but {why}: not added")
     state.vetoed.append({"name": name, "origin": stage.added.origin, "heldout_rms_before_um": now,
                          "heldout_rms_after_um": new, "cross_validation": cv.reason})
