@@ -13,6 +13,7 @@ from arm_model.effects import JointHysteresis
 from arm_model.io import PointSet
 from arm_model.live import Session
 from arm_model.live.motion import BAND_STEPS, LastMove
+from arm_model.model import reading_motion
 from arm_model.model_file import Arm, load_model
 
 STEP = math.radians(1e-4)                 # aacmm7's encoder step
@@ -118,9 +119,10 @@ def test_the_band_holds_flicker_and_noise_and_a_real_move_turns_it():
 
 def test_the_bundled_session_with_a_hysteresis_model_is_tips_byte_for_byte(tmp_path, capsys):
     """The bundled stream (the simulator's operator goes straight from point to point) with a model file of 100 and
-    -50 urad of hysteresis on joints 2 and 4: the last moves read from the samples are the points' own rule's, so
-    ``aacmm tip`` on the session's ``points.csv`` writes its ``tips.csv`` byte for byte (docs/live.md); each point
-    taken alone with a move of 0 (the session before) was 38-91 um off, every point but the first."""
+    -50 urad of hysteresis on joints 2 and 4: ``aacmm tip`` on the session's ``points.csv`` writes its ``tips.csv``
+    byte for byte (docs/live.md); the last moves read from the samples (its ``q1_move_sign`` ...) are the points' own
+    rule's here; each point taken with a move of 0 (the session before it read any) was 38-91 um off, every point but
+    the first."""
     import csv
 
     from arm_model.cli import main
@@ -140,8 +142,9 @@ def test_the_bundled_session_with_a_hysteresis_model_is_tips_byte_for_byte(tmp_p
     capsys.readouterr()
     assert (tmp_path / "again.csv").read_bytes() == (out / "tips.csv").read_bytes()
     ps = read_points(out / "points.csv", desc.joint_quantities)
+    assert ps.motion is not None and np.array_equal(ps.motion, reading_motion(ps.q, None, ps.time))
     arm = Arm(desc, (JointHysteresis(joints=(1, 3)),), values)
-    alone = np.array([tip_centres(arm, ps.select([i]))[1][0] for i in range(len(ps))])
+    alone = tip_centres(arm, ps, np.zeros(ps.q.shape))[1]
     with open(out / "tips.csv") as fh:
         live = np.array([[float(r[f"{a}_mm"]) * 1e-3 for a in "xyz"] for r in csv.DictReader(fh)])
     off = np.linalg.norm(alone - live, axis=1)
