@@ -294,7 +294,7 @@ def _move_layout(moves: dict[int, int], n_joints: int, header, path: str, line: 
         return ()
     if beyond := [i for i in sorted(moves) if i > n_joints]:
         h = header[moves[beyond[0]]]
-        raise InputError(f"'{h}': a last move for joint {beyond[0]}, but the points have {n_joints} joint columns "
+        raise InputError(f"a last move for joint {beyond[0]}, but the points have {n_joints} joint columns "
                          f"(one q<i>{MOVE_SUFFIX} a joint column)", path, line, h)
     if missing := [i for i in range(1, n_joints + 1) if i not in moves]:
         raise InputError(f"columns {', '.join(f'q{i}{MOVE_SUFFIX}' for i in missing)} missing beside "
