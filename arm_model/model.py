@@ -79,7 +79,7 @@ def points_motion(points: Any, given: np.ndarray | None = None) -> np.ndarray:
         return given
     own = getattr(points, "motion", None)         # a PointSet's; None on a namespace of q, session and time
     if own is not None:
-        return own
+        return np.asarray(own, dtype=float)
     return reading_motion(points.q, points.session, points.time)
 
 
