@@ -197,7 +197,8 @@ class _PointsLayout:
     num_idx: list
     txt_idx: list
     markers: tuple = ()     # base names (x, y, z) of each marker's reference columns
-    moves: tuple = ()       # column indices of q1_move_sign .. qJ_move_sign (none: no last moves given)
+    moves: tuple = ()       # column indices of q1_move_sign .. qJ_move_sign (none: no last moves given), read as
+    #                         text (the last cells of txt_idx): exactly -1, 0 or 1 as written
 
 
 def _joint_count_and_kinds(joints) -> tuple[int | None, tuple | None]:
@@ -279,9 +280,9 @@ def _points_layout(header: list[str], line: int, path: str, joints) -> _PointsLa
         raise InputError("both three-axis (fx, fy, fz) and two-channel (f_bend, f_axial) force columns; "
                          "give one sensor", path, line, header[cols["f_bend"][0]])
     move_idx = _move_layout(moves, len(idx), header, path, line)
-    num_idx = sorted([k for k, _ in cols.values()] + list(move_idx))
+    num_idx = sorted(k for k, _ in cols.values())
     txt_idx = [header.index(t) for t in _TEXT_COLUMNS] + ([header.index(SESSION_COLUMN)]
-                                                          if SESSION_COLUMN in header else [])
+                                                          if SESSION_COLUMN in header else []) + list(move_idx)
     return _PointsLayout(tuple(header), line, cols, tuple(cols[f"q{i}"][0] for i in idx), num_idx, txt_idx,
                          _marker_groups(cols, header, path, line), move_idx)
 
@@ -334,7 +335,7 @@ def _check_ids(blk, lay: _PointsLayout, path: str) -> None:
     """The text cells of a block (measurement, feature, session ids) hold no control character (a NUL, an
     escape, DEL, a line or paragraph separator, a tab), the rule of :func:`id_problem` for every id the toolkit
     writes back: a located InputError at the first one. Each distinct id is checked once."""
-    for j, c in enumerate(lay.txt_idx):
+    for j, c in enumerate(lay.txt_idx[:len(lay.txt_idx) - len(lay.moves)]):
         column = blk.texts[:, j]
         bad = [t for t in set(column.tolist()) if t and id_problem(t)]
         if bad:
@@ -376,13 +377,7 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
         wrong = implausible(q[:, k], QUANTITY_OF_UNIT[unit])
         if wrong:
             raise InputError(wrong[1], path, int(blk.lines[wrong[0][0]]), lay.header[lay.joints[k]])
-    motion = None
-    if lay.moves:
-        motion = nums[:, [pos[c] for c in lay.moves]] + 0.0         # + 0.0: a -0 is 0
-        if (bad := np.argwhere(~np.isin(motion, (-1.0, 0.0, 1.0)))).size:
-            i, k = bad[0]
-            raise InputError(f"a joint's last move is -1, 0 or 1 (the sign of its move onto the point), got "
-                             f"{float(motion[i, k])!r}", path, int(blk.lines[i]), lay.header[lay.moves[k]])
+    motion = _moves_from_texts(blk.texts[:, len(lay.txt_idx) - len(lay.moves):], lay, blk.lines, path)
     force, force_kind = group(("fx", "fy", "fz")), None
     if force is not None:
         force_kind = "xyz"
@@ -390,7 +385,7 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
         force_kind = "two-channel"
         force = np.column_stack([col("f_bend"), np.zeros(len(q)), col("f_axial")])  # type: ignore[list-item]
     ref = np.stack([group(m) for m in lay.markers], axis=1) if lay.markers else None  # type: ignore[misc]
-    session = blk.texts[:, 2] if blk.texts.shape[1] > 2 else None
+    session = blk.texts[:, 2] if SESSION_COLUMN in lay.header else None
     if session is not None and (empty := np.flatnonzero(session == "")).size:
         raise InputError("empty session id (a session column names the session of every row)", path,
                          int(blk.lines[empty[0]]), SESSION_COLUMN)
@@ -398,6 +393,28 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
                     torque=group(("mx", "my", "mz")), force_kind=force_kind, temperature=col("temperature"),
                     time=col("time"), ref=ref, lines=blk.lines, session=session,
                     q_units=tuple(unit_of(lay.header[c]) for c in lay.joints), motion=motion)
+
+
+#: a cell of a last-move column: -1, 0 or 1 exactly, in decimal (``+1``, ``-0``, ``1.0`` too; no exponent, so that no
+#: text rounds onto a sign: ``1e-400`` or ``0.99999999999999999`` is refused, not read as 0 or 1)
+_MOVE_CELL = re.compile(r"([+-]?)([01])(?:\.0*)?")
+
+
+def _moves_from_texts(cells: np.ndarray, lay: _PointsLayout, lines: np.ndarray, path: str) -> np.ndarray | None:
+    """(n, J) the last moves of a block's move cells (n, J) of text, or None without move columns; a cell that is not
+    exactly -1, 0 or 1 is an InputError at its line and column. Each distinct text is parsed once."""
+    if not lay.moves:
+        return None
+    values = {}
+    for t in set(cells.ravel().tolist()):
+        m = _MOVE_CELL.fullmatch(t)
+        values[t] = np.nan if m is None else (-1.0 if m.group(1) == "-" else 1.0) * float(m.group(2)) + 0.0
+    out = np.vectorize(values.__getitem__, otypes=[float])(cells)
+    if (bad := np.argwhere(np.isnan(out))).size:
+        i, k = bad[0]
+        raise InputError(f"a joint's last move is -1, 0 or 1 (the sign of its move onto the point), got "
+                         f"{cells[i, k]!r}", path, int(lines[i]), lay.header[lay.moves[k]])
+    return out
 
 
 def iter_points(path: str | Path, joints=None, data: bytes | None = None,
