@@ -405,11 +405,12 @@ def _moves_from_texts(cells: np.ndarray, lay: _PointsLayout, lines: np.ndarray, 
     exactly -1, 0 or 1 is an InputError at its line and column. Each distinct text is parsed once."""
     if not lay.moves:
         return None
+    flat = cells.ravel().tolist()
     values = {}
-    for t in set(cells.ravel().tolist()):
+    for t in set(flat):
         m = _MOVE_CELL.fullmatch(t)
         values[t] = np.nan if m is None else (-1.0 if m.group(1) == "-" else 1.0) * float(m.group(2)) + 0.0
-    out = np.vectorize(values.__getitem__, otypes=[float])(cells)
+    out = np.fromiter(map(values.__getitem__, flat), float, len(flat)).reshape(cells.shape)
     if (bad := np.argwhere(np.isnan(out))).size:
         i, k = bad[0]
         raise InputError(f"a joint's last move is -1, 0 or 1 (the sign of its move onto the point), got "
