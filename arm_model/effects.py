@@ -570,9 +570,10 @@ class JointBacklash(_JointPlay):
 @dataclass(frozen=True)
 class JointHysteresis(_JointPlay):
     """Hysteresis of joint i by the direction it last turned: the joint sits ``h_i m_i`` beyond its encoder, ``m_i``
-    the sign of its reading's move onto the point from the point captured before it (``ModelInputs.motion``,
-    :func:`arm_model.model.reading_motion`): a play or an encoder's hysteresis that the last motion closes, a
-    robot's backlash when it drives from posture to posture."""
+    the sign of its last move onto the point (``ModelInputs.motion``, :func:`arm_model.model.points_motion`: as
+    measured, a points file's ``q1_move_sign`` ..., else its reading's move from the point captured before it): a
+    play or an encoder's hysteresis that the last motion closes, a robot's backlash when it drives from posture to
+    posture."""
     key: str = field(default="joint_hysteresis", init=False, repr=False)
     parameter: ClassVar[str] = "hysteresis"
 

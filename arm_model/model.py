@@ -72,9 +72,15 @@ def reading_motion(q: ArrayLike, session: ArrayLike | None = None, time: ArrayLi
 
 def points_motion(points: Any, given: np.ndarray | None = None) -> np.ndarray:
     """(N, J) the sign of each joint's last move onto each point of a :class:`~arm_model.io.PointSet`: ``given``
-    when the data have their own (calibration data's ``AuxData.motion``, a live session's from its samples), else
+    when the caller has its own (calibration data's ``AuxData.motion``), else the points' own as measured
+    (``points.motion``: the columns ``q1_move_sign`` ... of a points file, a live session's from its samples), else
     from the points (:func:`reading_motion` by their session and time). The one rule of the ``motion`` input."""
-    return reading_motion(points.q, points.session, points.time) if given is None else given
+    if given is not None:
+        return given
+    own = getattr(points, "motion", None)         # a PointSet's; None on a namespace of q, session and time
+    if own is not None:
+        return np.asarray(own, dtype=float)
+    return reading_motion(points.q, points.session, points.time)
 
 
 def _session_codes(session: ArrayLike | None, n: int) -> np.ndarray:
