@@ -164,7 +164,7 @@ def with_assumed_masses(model: ArmModel) -> ArmModel | None:
     desc = model.desc
     if model.effects or desc.convention != "urdf" or any(j.mass > 0 for j in desc.joints):
         return None
-    ends = [j.origin[:3] for j in desc.joints[1:]] + [desc.probe.p_last]  # the next origin in each joint's frame
+    ends = [(j.origin or (0.0,) * 6)[:3] for j in desc.joints[1:]] + [desc.probe.p_last]   # in each joint's frame
     rows = tuple(replace(j, mass=ASSUMED_DENSITY * float(np.linalg.norm(e)), com=tuple(float(v) / 2 for v in e))
                  for j, e in zip(desc.joints, ends, strict=True))
     out = ArmModel(replace(desc, joints=rows), model.effects)
