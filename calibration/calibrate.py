@@ -167,7 +167,7 @@ def with_assumed_masses(model: ArmModel) -> ArmModel | None:
     ends = [(j.origin or (0.0,) * 6)[:3] for j in desc.joints[1:]] + [desc.probe.p_last]   # in each joint's frame
     rows = tuple(replace(j, mass=ASSUMED_DENSITY * float(np.linalg.norm(e)), com=tuple(float(v) / 2 for v in e))
                  for j, e in zip(desc.joints, ends, strict=True))
-    out = ArmModel(replace(desc, joints=rows), model.effects)
+    out = ArmModel(replace(desc, joints=rows, masses_assumed=True), model.effects)
     return out if gravity_compliance(out) else None
 
 

@@ -126,6 +126,12 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
     drift = session_drift(result)
     if drift:
         comment = (f"{comment}\n" if comment else "") + drift_text(drift)
+    if result.model.desc.masses_assumed:
+        from .calibrate import ASSUMED_DENSITY
+        comment = (f"{comment}\n" if comment else "") + (
+            f"The masses (mass_kg) are not the arm's: its URDF gave none; each link is a uniform rod of "
+            f"{ASSUMED_DENSITY:g} kg/m from its joint to the next, for the gravity torques. The joint compliances "
+            "are per N m of these torques.")
     result = without_session_effects(result)
     files = model_paths(out_dir, name)
     for f in files.values():

@@ -34,6 +34,7 @@ def test_each_link_is_a_rod_to_the_next_joint_as_pinocchio_places_it():
         assert row.mass == pytest.approx(ASSUMED_DENSITY * np.linalg.norm(t), abs=1e-12)
         np.testing.assert_allclose(row.com, t / 2, atol=1e-12)
     assert sum(j.mass for j in got.desc.joints) > 5.0              # a 1.1 m arm at 10 kg/m: about 11 kg
+    assert got.desc.masses_assumed and not desc.masses_assumed      # a model file written from it says so
     assert default_effects(got) != () and default_effects(ArmModel(desc)) == ()
 
 
