@@ -167,7 +167,10 @@ ROBOTS = (
                         {"joint": "panda_joint3", "amplitude_mrad": 0.3, "phase_deg": 0.0})),
     Robot("r9", "front", 21, 300.0, 0.30, 150.0, stiffness=12000.0,      # joint 1's alone
           eccentricity=({"joint": "panda_joint1", "amplitude_mrad": 1.0, "phase_deg": 120.0},)),
-    # other robot types (ARMS), their URDFs as shipped: origins off by 0.1-1 mm and 0.5-2 mrad, play 0.1-0.3 mm
+)
+#: robots of the other types of ARMS (their URDFs as shipped, given by --urdf / --python): origins off by 0.1-1 mm and
+#: 0.5-2 mrad, play 0.1-0.3 mm, encoder noise
+OTHER_ROBOTS = (
     Robot("i1", "front", 31, 500.0, 1.0, 150.0, stiffness=20000.0, arm="iiwa14", encoder_noise_urad=10.0),
     Robot("i2", "right", 32, 800.0, 1.5, 250.0, stiffness=[30000, 20000, 25000, 15000, 10000, 10000, 8000],
           eccentricity=({"joint": 1, "amplitude_mrad": 0.5, "phase_deg": 45.0},), arm="iiwa14",
@@ -370,7 +373,8 @@ def shipped_files(specs: list[str], python: str | None, arms: set) -> dict:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--robots", default=None, help="comma-separated robot names (default every Panda one: "
-                   + ", ".join(r.name for r in ROBOTS) + ")")
+                   + ", ".join(r.name for r in ROBOTS) + "; other types: "
+                   + ", ".join(f"{r.name} ({r.arm})" for r in OTHER_ROBOTS) + ")")
     p.add_argument("--methods", default=",".join(METHODS), help="comma-separated subset of " + ", ".join(METHODS)
                    + ", nominal (the nominal URDF applied as it is), close-loop@S (close-loop --seed S)")
     p.add_argument("--loop-seeds", default=None,
@@ -387,8 +391,8 @@ def main(argv=None) -> int:
                    "URDFs are installed (pybullet for iiwa14)")
     p.add_argument("-o", "--output", type=Path, default=Path("out/sim-seats"), help="output folder")
     args = p.parse_args(argv)
-    known = {r.name: r for r in ROBOTS}
-    names = args.robots.split(",") if args.robots else [r.name for r in ROBOTS if r.arm == "panda"]
+    known = {r.name: r for r in ROBOTS + OTHER_ROBOTS}
+    names = args.robots.split(",") if args.robots else [r.name for r in ROBOTS]
     unknown = [n for n in names if n not in known]
     if unknown:
         p.error(f"unknown robot(s): {', '.join(unknown)}")
