@@ -152,22 +152,27 @@ ASSUMED_DENSITY = 10.0
 
 
 def with_assumed_masses(model: ArmModel) -> ArmModel | None:
-    """``model`` with link masses assumed from the chain's geometry, for a robot read from a URDF whose chain
-    carries no mass at all (shipped without ``<inertial>``) and no effect yet; else None. Each moving joint's link
-    is taken as a uniform rod from the joint's origin to the next joint's (the last joint's: to the tip point),
+    """``model`` with link masses assumed from the chain's geometry, for a robot read from a URDF whose arm carries
+    no mass (shipped without ``<inertial>``, or with one on its tool alone: no mass on any joint but the last) and
+    no effect yet; else None. Each moving joint's link is taken as a uniform rod from the joint's origin to the
+    next joint's (the last joint's: to the tip point, a tool's given mass added to it),
     :data:`ASSUMED_DENSITY` kg/m, its centre of mass at the rod's middle: a robot held in postures still bends
     under its own weight, and without masses that weight is distributed along the arm as its links are. The
     compliances fitted are then per newton-metre of these torques (their product, the sag, is what the data
     determine). Measured on the shared Panda seats, trained on one placement, the other two's mean seat spread:
-    its URDF without masses 2.04 mm, with these masses 1.78 mm, with the published masses 1.74 mm
-    (docs/studies/calibration.md)."""
+    its URDF without masses 2.04 mm, with these masses 1.78 mm, with the published masses 1.74 mm; with a 0.2 kg
+    tool the only mass, the compliances under the tool's torques alone 2.85 mm (docs/calibration.md)."""
     desc = model.desc
-    if model.effects or desc.convention != "urdf" or any(j.mass > 0 for j in desc.joints):
+    if model.effects or desc.convention != "urdf" or any(j.mass > 0 for j in desc.joints[:-1]):
         return None
     ends = [(j.origin or (0.0,) * 6)[:3] for j in desc.joints[1:]] + [desc.probe.p_last]   # in each joint's frame
-    rows = tuple(replace(j, mass=ASSUMED_DENSITY * float(np.linalg.norm(e)), com=tuple(float(v) / 2 for v in e))
-                 for j, e in zip(desc.joints, ends, strict=True))
-    out = ArmModel(replace(desc, joints=rows, masses_assumed=True), model.effects)
+    rows = []
+    for j, e in zip(desc.joints, ends, strict=True):
+        rod = ASSUMED_DENSITY * float(np.linalg.norm(e))
+        mass = rod + j.mass                                          # (a tool's given mass added to its link's rod)
+        com = (rod * np.asarray(e, dtype=float) / 2 + j.mass * np.asarray(j.com)) / mass if mass > 0 else np.zeros(3)
+        rows.append(replace(j, mass=mass, com=tuple(float(v) for v in com)))
+    out = ArmModel(replace(desc, joints=tuple(rows), masses_assumed=True), model.effects)
     return out if gravity_compliance(out) else None
 
 

@@ -462,7 +462,8 @@ def assume_masses(model, args):
     assumed = None if getattr(args, "masses", None) is not None else with_assumed_masses(model)
     if assumed is None:
         return model
-    log.info(f"{model.desc.source or 'the URDF'} gives no link masses: each link taken as a uniform rod of "
+    tool = " but the tool's" if model.desc.joints[-1].mass > 0 else ""
+    log.info(f"{model.desc.source or 'the URDF'} gives no link masses{tool}: each link taken as a uniform rod of "
              f"{ASSUMED_DENSITY:g} kg/m from its joint to the next (the last to the tip), for the gravity torques of "
              "the joint compliance; its compliances are per N m of these torques (--masses FILE to give the "
              "masses, --effect none for the geometry alone)")

@@ -129,9 +129,9 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
     if result.model.desc.masses_assumed:
         from .calibrate import ASSUMED_DENSITY
         comment = (f"{comment}\n" if comment else "") + (
-            f"The masses (mass_kg) are not the arm's: its URDF gave none; each link is a uniform rod of "
-            f"{ASSUMED_DENSITY:g} kg/m from its joint to the next, for the gravity torques. The joint compliances "
-            "are per N m of these torques.")
+            f"The masses (mass_kg) are assumed, not the arm's: its URDF gave its links none; each link is "
+            f"a uniform rod of {ASSUMED_DENSITY:g} kg/m from its joint to the next (a tool's given mass added), for "
+            "the gravity torques. The joint compliances are per N m of these torques.")
     result = without_session_effects(result)
     files = model_paths(out_dir, name)
     for f in files.values():
