@@ -240,13 +240,6 @@ def _points_layout(header: list[str], line: int, path: str, joints) -> _PointsLa
                              f"'_deg', '_N', '_C', '_s'); the columns of a points file are {known}", path, line, h)
         base, unit = parts
         if re.fullmatch(r"q[1-9][0-9]*", base):
-            k_joint = int(base[1:]) - 1
-            want = kinds[k_joint] if kinds is not None and k_joint < len(kinds) else None
-            if want is not None and QUANTITY_OF_UNIT[unit] != want:
-                raise InputError(f"'{h}': joint {k_joint + 1} of the arm is "
-                                 + ("prismatic: its column is a length (_mm, _m or _um)" if want == "length" else
-                                    "revolute: its column is an angle (_deg or _rad)") + f", got '_{unit}'",
-                                 path, line, h)
             if QUANTITY_OF_UNIT[unit] not in ("angle", "length"):
                 raise InputError(f"a joint column is an angle (_deg or _rad) or, for a prismatic joint, a length "
                                  f"(_mm, _m or _um), got '_{unit}'", path, line, h)
@@ -268,8 +261,18 @@ def _points_layout(header: list[str], line: int, path: str, joints) -> _PointsLa
         raise InputError(f"joint columns are not q1..q{max(idx)}: missing "
                          f"{', '.join(f'q{i}' for i in missing)}", path, line)
     if n_joints is not None and len(idx) != n_joints:
-        raise InputError(f"{len(idx)} joint columns, but the arm has {n_joints} joints", path, line,
-                         header[cols[f"q{idx[-1]}"][0]])
+        raise InputError(f"{len(idx)} joint columns, but the arm has {n_joints} joints"
+                         + (" (a URDF chain holding joints the points do not give, a mobile base's or a torso's: "
+                            "start it after them with --base-frame LINK, or give each one's value with "
+                            "--hold-joint JOINT=VALUE)" if len(idx) < n_joints else ""),
+                         path, line, header[cols[f"q{idx[-1]}"][0]])
+    for i, want in enumerate(kinds or (), 1):        # each column in its joint's quantity (the count checked first)
+        h = header[cols[f"q{i}"][0]]
+        if QUANTITY_OF_UNIT[cols[f"q{i}"][1]] != want:
+            raise InputError(f"'{h}': joint {i} of the arm is "
+                             + ("prismatic: its column is a length (_mm, _m or _um)" if want == "length" else
+                                "revolute: its column is an angle (_deg or _rad)") + f", got '_{cols[f'q{i}'][1]}'",
+                             path, line, h)
     for group in _GROUPS:
         present = [b for b in group if b in cols]
         if present and len(present) != len(group):

@@ -133,6 +133,8 @@ def run(args: argparse.Namespace) -> int:
         from arm_model.model import ArmModel
 
         from .calibrate import default_effects
+        from .cli import assume_masses
+        desc = assume_masses(ArmModel(desc, tuple(effects)), args).desc
         added = default_effects(ArmModel(desc, tuple(effects)))
         effects = tuple(effects) + added
         if added:

@@ -165,7 +165,9 @@ def placement_study(root: Path, arm: Path, tip_frame: str | None, out: Path, tra
     command under ``out``. ``root`` holds the ``artefacts.toml`` (two seats and
     one certified distance between them). ``methods``: ``close-loop`` runs ``aacmm close-loop``, any other name
     ``aacmm calibrate`` (``calibrate`` with its defaults; e.g. ``geometry`` with ``--effect none`` given in
-    ``options``). ``options``: extra command-line options per method (lists)."""
+    ``options``); a name starting ``close-loop`` (``close-loop@1``) runs ``aacmm close-loop`` with that method's
+    options (e.g. ``--seed 1``); ``nominal`` applies ``arm`` itself, nothing fitted. ``options``: extra
+    command-line options per method (lists)."""
     from arm_model.io import read_artefacts
     root, out = Path(root), Path(out)
     say = progress or progress_line(logging.getLogger(__name__))
@@ -191,29 +193,32 @@ def placement_study(root: Path, arm: Path, tip_frame: str | None, out: Path, tra
             pts.parent.mkdir(parents=True, exist_ok=True)
             pts.write_text("\n".join(parts[0] + [ln for p in parts[1:] for ln in p[1:] if ln.strip()]) + "\n")
         models = {}
-        for method in (m for m in methods if m != "close-loop"):      # calibrate, with that method's options
+        if "nominal" in methods:
+            models["nominal"] = (arm, ())
+        for method in (m for m in methods if not m.startswith("close-loop") and m != "nominal"):   # calibrate
             say(f"{tr}: aacmm calibrate ({method})")
             dst = out / tr / method
             _cli(["calibrate", str(pts), str(artefacts), *arm_opts, "-o", str(dst), "--no-plots",
                   *(options or {}).get(method, [])])
             models[method] = (next(dst.glob("*-calibrated.toml")), ())
-        if "close-loop" in methods:
-            say(f"{tr}: aacmm close-loop")
-            dst = out / tr / "close-loop"
+        for method in (m for m in methods if m.startswith("close-loop")):
+            say(f"{tr}: aacmm close-loop ({method})")
+            dst = out / tr / method
             _cli(["close-loop", str(pts), str(artefacts), *arm_opts, "-o", str(dst), "--quiet",
-                  *(options or {}).get("close-loop", [])])
+                  *(options or {}).get(method, [])])
             import json
             summary = json.loads((dst / "summary.json").read_text())
             effects = tuple(e["name"] for e in summary["effects_added"])
             model = _loop_model(dst)
             if model is None:
                 raise RuntimeError(f"aacmm close-loop wrote no model file in {dst}")
-            models["close-loop"] = (model, effects)
+            models[method] = (model, effects)
         for method, (model, effects) in models.items():
             for te in places:
                 if te in group:
                     continue
-                x, feat, u = _tip(root / te / "points.csv", model, out / tr / f"{method}-tip-{te}.csv")
+                x, feat, u = _tip(root / te / "points.csv", model, out / tr / f"{method}-tip-{te}.csv",
+                                  tip_frame if method == "nominal" else None)
                 u_dev = None if u is None else model_deviation_u(model, root / te / "points.csv", holes)
                 rows.append(PlacementRow(tr, method, te, seat_figures(x, feat, holes, length, u, u_dev), effects))
                 say(f"  {method} -> {te}: spread {rows[-1].figures['spread_mean_mm']:.3f} mm, distance error "
