@@ -556,7 +556,8 @@ class JointBacklash(_JointPlay):
     """Play of joint i closed by gravity: the joint sits ``b_i sign(-tau_gravity_i)`` beyond its encoder, ``b_i``
     to the side its gravity load pushes it (the sign convention of :class:`JointCompliance`'s gravity part), whatever
     the load's size: a gear's or a bearing's play, closed one way or the other as the torque the joint holds against
-    the links' weight changes sign. Piecewise constant in the torque."""
+    the links' weight changes sign. Piecewise constant in the torque; where the torque changes sign within the play
+    itself, the joint floats in its middle (sign 0, :meth:`arm_model.model.ArmModel.equilibrium_aux`)."""
     key: str = field(default="joint_backlash", init=False, repr=False)
     parameter: ClassVar[str] = "backlash"
 
