@@ -31,7 +31,8 @@ browser:
 demo: $(STAMP)
 	$(PY) -m arm_model.demo --out $(OUT)/demo
 
-# the suite without the long studies (-m "not slow"; timings: README, Tests); test-slow: the rest (.ci/run runs both).
+# the suite without the long studies (-m "not slow"; timings: README, Tests; what CI runs: .ci/run); test-slow: the
+# rest, run by hand before merging a change to estimation.
 # make test runs the lint gate too: ruff first (it stops on a finding), then mypy (about 34 s of CPU from a fresh
 # clone) beside pytest, its findings printed after the tests' and failing make test all the same. The tests' order
 # under -n 2: tests/conftest.py balanced_order (the longest modules first, from tests/durations.tsv).
