@@ -200,7 +200,7 @@ def placement_study(root: Path, arm: Path, tip_frame: str | None, out: Path, tra
         if "close-loop" in methods:
             say(f"{tr}: aacmm close-loop")
             dst = out / tr / "close-loop"
-            _cli(["close-loop", str(pts), str(artefacts), *arm_opts, "-o", str(dst), "--quiet",
+            _cli(["close-loop", str(pts), str(artefacts), *arm_opts, "-o", str(dst), "--quiet", "--no-plots",
                   *(options or {}).get("close-loop", [])])
             import json
             summary = json.loads((dst / "summary.json").read_text())

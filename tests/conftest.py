@@ -105,7 +105,7 @@ def simulate_and_close_loop(tmp_path: Path, campaign: str, *options: str) -> tup
     sim, out = tmp_path / "sim", tmp_path / "loop"
     assert main(["simulate", str(tmp_path / "campaign.toml"), "-o", str(sim)]) == 0
     assert main(["close-loop", str(sim / "points.csv"), str(sim / "artefacts.toml"), "--arm", str(NOMINAL),
-                 "--sigma-probe-um", "2", *options, "-o", str(out)]) == 0
+                 "--sigma-probe-um", "2", "--no-plots", *options, "-o", str(out)]) == 0
     return sim, out, json.loads((out / "summary.json").read_text())
 
 

@@ -368,7 +368,7 @@ def test_close_loop_on_a_robot_with_a_prismatic_joint_runs_to_the_end(tmp_path, 
     res = simulate(campaign_from_dict(_campaign(postures=30, markers=1, sessions=1, noise_mm=0.1), base_dir=tmp_path))
     res.write(tmp_path / "sim")
     assert main(["close-loop", str(tmp_path / "sim" / "points.csv"), "--arm", str(urdf), "--tip-frame", TIP,
-                 "--max-effects", "1", "--library-only", "-o", str(tmp_path / "loop")]) == 0
+                 "--max-effects", "1", "--library-only", "--no-plots", "-o", str(tmp_path / "loop")]) == 0
     out = capsys.readouterr().out
     assert "per-joint effects lift not offered: a prismatic joint" in out
     arm = load_model(next((tmp_path / "loop").glob("*-calibrated.toml")))
