@@ -230,7 +230,7 @@ def placement_study(root: Path, arm: Path, tip_frame: str | None, out: Path, tra
         for method in (m for m in methods if m.startswith("close-loop")):
             say(f"{tr}: aacmm close-loop ({method})")
             dst = out / tr / method
-            _cli(["close-loop", str(pts), str(artefacts), *arm_opts, "-o", str(dst), "--quiet",
+            _cli(["close-loop", str(pts), str(artefacts), *arm_opts, "-o", str(dst), "--quiet", "--no-plots",
                   *(options or {}).get(method, [])])
             import json
             summary = json.loads((dst / "summary.json").read_text())

@@ -36,7 +36,7 @@ def test_units_needed_is_where_the_exact_wilcoxon_first_reaches_the_level(alpha,
 def test_one_placement_runs_with_folds_by_pose(tmp_path, capsys):
     out = tmp_path / "loop"
     code = main(["close-loop", str(REAL / "front" / "points.csv"), str(REAL / "artefacts.toml"), *ARM,
-                 "--max-effects", "1", "-o", str(out)])
+                 "--max-effects", "1", "--no-plots", "-o", str(out)])
     assert code == 0, capsys.readouterr().err
     s = json.loads((out / "summary.json").read_text())
     assert s["measurements"]["test_by"] == "pose"
