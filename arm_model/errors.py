@@ -125,15 +125,37 @@ def read_text(path: str | Path, what: str) -> str:
 
 
 def parse_toml(text: str, path: str | Path) -> dict:
-    """Parse TOML text; a syntax error becomes an InputError naming the file, line and column."""
+    """Parse TOML text; a syntax error becomes an InputError naming the file, line and column, and so does an
+    integer beyond 64 bits (TOML 1.0: "an integer that cannot be represented losslessly must be an error";
+    Python's reader takes 10**400, which every float() then met as an OverflowError, exit 3)."""
     try:
-        return tomllib.loads(text)
+        data = tomllib.loads(text)
     except RecursionError:
         raise InputError("not valid TOML: arrays or tables nested too deeply", path) from None
     except tomllib.TOMLDecodeError as exc:
         m = re.search(r"line (\d+), column (\d+)", str(exc))
         raise InputError(f"not valid TOML: {exc}", path, int(m.group(1)) if m else None,
                          f"column {m.group(2)}" if m else None) from None
+    where = _wide_integer(data, ())
+    if where is not None:
+        from .toml_lines import key_path_text, toml_key_lines
+        lines = toml_key_lines(text)
+        line = next((lines[where[:k]] for k in range(len(where), 0, -1) if where[:k] in lines), None)
+        raise InputError("not valid TOML: an integer beyond 64 bits (a TOML integer is from -2**63 to 2**63 - 1)",
+                         path, line,
+                         f"key '{key_path_text(where)}'")
+    return data
+
+
+def _wide_integer(value, where: tuple) -> tuple | None:
+    """The key path of the first integer of a parsed TOML value outside TOML's 64-bit range, or None."""
+    if isinstance(value, dict):
+        items = value.items()
+    elif isinstance(value, list):
+        items = enumerate(value)
+    else:
+        return where if isinstance(value, int) and not -2 ** 63 <= value < 2 ** 63 else None
+    return next((w for k, v in items if (w := _wide_integer(v, (*where, k))) is not None), None)
 
 
 def did_you_mean(word: str, known) -> str:
