@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, decode_text, open_input
+from .errors import InputError, decode_text, open_input, text_lines
 
 __all__ = ["parse_number", "blank_record", "csv_records", "CsvBlock", "iter_csv_blocks", "csv_spans", "format_csv",
            "format_row"]
@@ -67,7 +67,7 @@ def blank_record(line: str) -> bool:
 def csv_records(text: str, path: str, first_line: int = 1) -> list[tuple[int, list[str]]]:
     """Non-blank CSV records (:func:`blank_record`) with their physical line; a record may not span lines."""
     out = []
-    for no, line in enumerate(text.splitlines(), start=first_line):
+    for no, line in enumerate(text_lines(text), start=first_line):
         if blank_record(line):
             continue
         try:

@@ -10,7 +10,7 @@ import unicodedata
 from pathlib import Path
 
 __all__ = ["AacmmError", "InputError", "NumericalError", "read_text", "open_input", "decode_text", "parse_toml",
-           "did_you_mean", "unknown_key", "id_problem", "resolved"]
+           "did_you_mean", "unknown_key", "id_problem", "resolved", "text_lines"]
 
 
 class AacmmError(Exception):
@@ -74,6 +74,17 @@ def decode_text(raw: bytes, path: str | Path, first_line: int = 1) -> str:
             raise InputError("a carriage return alone ends a line (old Mac line ends): save the file (or send "
                              "the stream) with LF or CRLF line ends", path, first_line + raw[: m.start()].count(b"\n"))
     return text
+
+
+def text_lines(text: str) -> list[str]:
+    """The lines of a decoded text (:func:`decode_text`), numbered as every message and every text editor numbers
+    them: a line ends at a line feed (or CRLF) only. Python's ``splitlines`` also ends one at VT, FF, FS, GS, RS,
+    NEL and the Unicode line and paragraph separators, which split a CSV row in two and shifted the line of every
+    message after it."""
+    lines = text.split("\n")
+    if lines[-1] == "":
+        lines.pop()
+    return [line[:-1] if line.endswith("\r") else line for line in lines]
 
 
 def open_input(path: str | Path, what: str):

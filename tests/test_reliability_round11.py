@@ -52,3 +52,28 @@ def test_a_huge_integer_in_an_artefacts_file_is_exit_2(tmp_path, capsys):
     rc, err = _run(["ring", RING / "points.csv", art, "--arm", "aacmm7", "--no-plots", "-o", tmp_path / "o"], capsys)
     assert rc == 2 and "a.toml, line 5, key 'feature[1].diameter_mm': not valid TOML: an integer beyond" in err, err
     assert not (tmp_path / "o").exists()
+
+
+# ---------------------------------------------------------------------------------------------
+# lines are ended by a line feed only: Unicode's other line boundaries split no row
+
+@pytest.mark.parametrize("mark", ["\x0b", "\x0c", "\x1c", "\x1d", "\x1e", "\x85", "\u2028", "\u2029"])
+def test_a_unicode_line_boundary_does_not_split_a_row(tmp_path, capsys, mark):
+    """Python's splitlines() ends a line at eight more characters than a line feed (VT, FF, FS, GS, RS, NEL and the
+    Unicode line and paragraph separators). The CSV readers' cell-by-cell path split rows there, their fast path
+    did not: a points file with NEL after a number was read (exit 0), the same file with a quoted cell later in the
+    block was refused at a wrong row ("3 cells where the header has 14 columns"), and every line after such a row
+    was named one line too far. Now one rule (errors.text_lines): a line ends at LF (or CRLF); the error names the
+    line a text editor shows."""
+    rows = (RING / "points.csv").read_text().splitlines()[:5]
+    r2 = rows[2].split(",")
+    r2[1] = '"ring"'                        # a quoted cell: the block goes cell by cell
+    r3 = rows[3].split(",")
+    r3[3] = "abc"
+    pts = tmp_path / "p.csv"
+    pts.write_text("\n".join([rows[0], rows[1] + mark, ",".join(r2), ",".join(r3), rows[4]]) + "\n",
+                   encoding="utf-8", newline="")
+    rc, err = _run(["tip", pts, "--arm", "aacmm7", "-o", tmp_path / "t.csv"], capsys)
+    assert rc == 2 and "p.csv, line 4, column 'q2_deg': expected a number, got 'abc'" in err, err
+    from arm_model.errors import text_lines
+    assert text_lines(f"a{mark}b\r\nc\n\nd") == [f"a{mark}b", "c", "", "d"]
