@@ -77,3 +77,31 @@ def test_a_unicode_line_boundary_does_not_split_a_row(tmp_path, capsys, mark):
     assert rc == 2 and "p.csv, line 4, column 'q2_deg': expected a number, got 'abc'" in err, err
     from arm_model.errors import text_lines
     assert text_lines(f"a{mark}b\r\nc\n\nd") == [f"a{mark}b", "c", "", "d"]
+
+
+# ---------------------------------------------------------------------------------------------
+# Ctrl-C while the command line itself is imported
+
+def test_ctrl_c_while_the_command_line_is_imported_is_one_line(tmp_path):
+    """Ctrl-C in the first ~10-150 ms of `aacmm` (`timeout -s INT 0.05 aacmm ...`: while the console script imported
+    arm_model.cli, before its main() could catch anything) printed a Python traceback ending in KeyboardInterrupt,
+    exit 1. The entry point (arm_model.launch:main) now takes Ctrl-C before it imports anything of the toolkit: one
+    line, exit 130. Here SIGINT arrives exactly while arm_model.cli is being imported."""
+    import subprocess
+    import sys
+    code = ("import importlib.abc, os, signal, sys, time\n"
+            "class Interrupt(importlib.abc.MetaPathFinder):\n"
+            "    def find_spec(self, name, path, target=None):\n"
+            "        if name == 'arm_model.cli':\n"
+            "            os.kill(os.getpid(), signal.SIGINT)\n"
+            "            time.sleep(2)\n"
+            "        return None\n"
+            "sys.meta_path.insert(0, Interrupt())\n"
+            "from arm_model.launch import main\n"
+            "sys.argv = ['aacmm', 'paper', '-o', 'out']\n"
+            "sys.exit(main())\n")
+    run = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert (run.returncode, run.stderr) == (130, "aacmm: error: interrupted; nothing written\n"), run
+    assert not (tmp_path / "out").exists()
+    from importlib.metadata import entry_points
+    assert [e.value for e in entry_points(group="console_scripts", name="aacmm")] == ["arm_model.launch:main"]
