@@ -300,6 +300,13 @@ def _check_tree(root, path: Path) -> tuple[dict, dict]:
                              "it turns without end" if jtype == "revolute" else ""), path, el.sourceline)
         joints[name] = el
     _check_no_loop(joints, path)
+    roots = [name for name in links if name not in children]
+    if len(roots) > 1:
+        first, other = links[roots[0]], links[roots[1]]
+        raise InputError(f"two root links, '{roots[0]}' (line {first.sourceline}) and '{roots[1]}' (line "
+                         f"{other.sourceline}): a link no joint leads to is a root, and a URDF is one tree (urdfdom, "
+                         "Pinocchio's and ROS's parser, refuses the file too); join it to the tree with a joint, or "
+                         "remove it", path, other.sourceline)
     return links, joints
 
 
