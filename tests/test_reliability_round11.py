@@ -142,3 +142,53 @@ def test_an_island_link_is_a_second_root(tmp_path, capsys):
     urdf = _panda(tmp_path, "</robot>", '<link name="island"/>\n</robot>')
     rc, err = _run(["tip", SEATS, "--arm", urdf, "--tip-frame", "ball_link", "-o", tmp_path / "t.csv"], capsys)
     assert rc == 2 and "two root links, 'panda_link0' (line 8) and 'island'" in err, err
+
+
+# ---------------------------------------------------------------------------------------------
+# a full disk names where the output would have been, never a temporary name
+
+def _full_disk(monkeypatch, module, name, after=0):
+    """``module.name`` (a write) fails with ENOSPC from its ``after``-th call on, naming its arguments as the system
+    does (a copy names its source and its destination)."""
+    import errno
+    calls = []
+    real = getattr(module, name)
+
+    def full(*args, **kwargs):
+        calls.append(args)
+        if len(calls) > after:
+            names = [str(a) for a in args[:2]]
+            raise OSError(errno.ENOSPC, "No space left on device", names[0], None, *names[1:])
+        return real(*args, **kwargs)
+    monkeypatch.setattr(module, name, full)
+
+
+def test_a_page_written_into_an_output_file_on_a_full_disk_names_the_page(tmp_path, monkeypatch):
+    """`aacmm view --html /full/v.html` said "/full/.v.html.tmp-x5x81odc.html: cannot write the output file: No space
+    left on device": the page is written by a second atomic write into the first one's temporary file (view.write_html
+    in an output_file block), whose error named that temporary file. Now the page's own name (output_file turns an
+    error naming its temporary file into one naming the output, as output_folder does for its files). (The view
+    itself takes 7 s to start: the mechanism is tested here, as view uses it.)"""
+    import pathlib
+
+    from arm_model.io import atomic_write_text
+    from arm_model.output import output_file
+    _full_disk(monkeypatch, pathlib.Path, "write_bytes")
+    page = tmp_path / "v.html"
+    with pytest.raises(InputError) as info, output_file(page, writes=".html") as tmp:
+        atomic_write_text(tmp, "<html></html>")
+    assert str(info.value) == f"{page}: cannot write the output file: No space left on device; nothing written"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_examples_on_a_full_disk_names_the_file(tmp_path, capsys, monkeypatch):
+    """`aacmm examples /full/ex` said "<the toolkit's own examples/...>/points.csv, /full/ex/.examples.tmp-j185w3ye/
+    data/.../points.csv: No space left on device": the source and a temporary name. Now the file where it would
+    have been written; nothing is left (the folder it would have created included)."""
+    import shutil
+    _full_disk(monkeypatch, shutil, "copy2", after=3)
+    dest = tmp_path / "ex"
+    rc, err = _run(["examples", dest], capsys)
+    assert rc == 2 and f"error: {dest}/" in err and "cannot write the examples: No space left on device; nothing " \
+        "written" in err and ".tmp-" not in err and str(ROOT) not in err, err
+    assert list(tmp_path.iterdir()) == []
