@@ -224,3 +224,28 @@ def test_a_live_session_on_a_full_disk_names_the_file_and_keeps_whole_lines(tmp_
         assert data == b"" or data.endswith(b"\n"), f
         if data and f.name == "samples.csv":
             read_samples(f)
+
+
+# ---------------------------------------------------------------------------------------------
+# a residuals file: one residual a point
+
+HEAD = "measurement,feature,kind,line,residual_um,dx_um,dy_um,dz_um,standardized\n"
+
+
+@pytest.mark.parametrize("rows, ok", [
+    (["ring-01,ring,ring,2,1,1,0,0,0.4", "ring-01,ring,ring,3,1,1,0,0,0.4"], True),
+    (["ring-01,ring,ring,2,1,1,0,0,0.4", "ring-01,ring,ring,2,1,1,0,0,0.4"], False),      # a row pasted twice
+    (["ring-01,ring,ring,2,1,1,0,0,0.4", "ring-01,ring,ring,2,5,5,0,0,2.0"], False),      # two residuals, one point
+    (["m,t,reference,2,1,1,0,0,0.4", "m,t,reference,2,2,0,2,0,0.4"], True)])             # one a marker
+def test_a_point_given_twice_in_a_residuals_file_is_refused(rows, ok):
+    """A residuals file (view --residuals) holding a point's line twice with a feature's kind (a row pasted twice,
+    or two files joined) was read, and both vectors drawn from the one point. Now refused at the second row, naming
+    the first; a reference point keeps one row a marker."""
+    from viz.residuals import parse_residuals
+    text = HEAD + "\n".join(rows) + "\n"
+    if ok:
+        assert len(parse_residuals(text, "r.csv")) == 2
+    else:
+        with pytest.raises(InputError, match=r"r.csv, line 3, column 'line': point line 2 .* is given twice \(first "
+                                             r"on line 2\)"):
+            parse_residuals(text, "r.csv")

@@ -157,6 +157,14 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
     for (no, _), kind in zip(data, kinds, strict=True):    # "reference" starts at a marker: a typo would not
         if kind and kind not in _KINDS:
             raise InputError(f"unknown kind {kind!r} (known: {', '.join(_KINDS)})", path, no, "kind")
+    if point_lines is not None:         # one residual a point (a reference point or a mocap marker: one a marker)
+        first: dict[tuple, int] = {}
+        for (no, _), line, kind in zip(data, point_lines, kinds, strict=True):
+            if kind not in ("reference", "marker"):
+                seen = first.setdefault((int(line), kind), no)
+                if seen != no:
+                    raise InputError(f"point line {line} (kind {kind or 'not given'}) is given twice (first on line "
+                                     f"{seen}): one residual a point", path, no, "line")
     return Residuals(path, np.column_stack([column(b) for b in _POINT]) if has_xyz else None,
                      np.column_stack([column(b) for b in vector]), text_column("measurement"), text_column("feature"),
                      np.array([no for no, _ in data]), point_lines, kinds)
