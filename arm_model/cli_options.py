@@ -8,7 +8,7 @@ import logging
 import math
 from pathlib import Path
 
-from .csv_io import parse_number
+from .csv_io import SPACE, parse_number
 from .errors import InputError
 from .model_file import Arm, load_model
 
@@ -23,10 +23,10 @@ def _number(text: str, kind=float):
     """``text`` as a finite float or a whole number, by the files' number rule (:func:`arm_model.csv_io.parse_number`:
     ASCII digits only, so no "4_5" for 45 nor another script's digits; no nan or inf)."""
     what = "a whole number" if kind is int else "a finite number"
-    v = parse_number(text.strip())
-    if v is None or not math.isfinite(v) or (kind is int and not text.strip().lstrip("+-").isdecimal()):
+    v = parse_number(text)
+    if v is None or not math.isfinite(v) or (kind is int and not text.strip(SPACE).lstrip("+-").isdecimal()):
         raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
-    return int(text) if kind is int else v
+    return int(text.strip(SPACE)) if kind is int else v
 
 
 def number_in(low=None, high=None, *, low_open=False, high_open=False, kind=float):

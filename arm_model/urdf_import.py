@@ -207,8 +207,8 @@ def _check_numbers(root, path: Path) -> None:
             text = el.get(attr)
             if text is None:
                 continue
-            parts = text.split()
-            vals = [parse_number(v) for v in parts] if len(parts) == n else None
+            parts = text.split() if text.isascii() else None    # (split() also splits at a no-break space)
+            vals = [parse_number(v) for v in parts] if parts is not None and len(parts) == n else None
             used = (ptag, el.tag, attr) in _USED
             if used and vals and None not in vals and (ptag, el.tag, attr) in _UNBOUNDED:
                 vals = [0.0 if math.isinf(v) else v for v in vals]      # +-inf: no limit (a NaN stays refused)

@@ -30,7 +30,7 @@ import numpy as np
 from scipy import stats
 
 from arm_model import InputError
-from arm_model.csv_io import blank_record, parse_number
+from arm_model.csv_io import SPACE, blank_record, parse_number
 from arm_model.errors import id_problem, read_text, text_lines, unknown_key
 from arm_model.units import implausible
 
@@ -88,7 +88,7 @@ def load_paper_table2(path: str | Path | None = None) -> PaperTable2:
 
     def cells(no: int, line: str) -> list[str]:
         try:
-            return [c.strip() for c in next(csv.reader([line], strict=True))]
+            return [c.strip(SPACE) for c in next(csv.reader([line], strict=True))]
         except csv.Error as exc:
             raise InputError(f"not valid CSV: {exc}", path, no) from None
 

@@ -12,6 +12,8 @@ from __future__ import annotations
 import pytest
 
 from arm_model import InputError
+from arm_model.csv_io import SPACE
+from arm_model.errors import text_lines
 from conftest import ROOT, exit_status
 
 RING = ROOT / "examples" / "data" / "paper-ring-xyz"
@@ -64,7 +66,7 @@ def test_a_unicode_line_boundary_does_not_split_a_row(tmp_path, capsys, mark):
     did not: a points file with NEL after a number was read (exit 0), the same file with a quoted cell later in the
     block was refused at a wrong row ("3 cells where the header has 14 columns"), and every line after such a row
     was named one line too far. Now one rule (errors.text_lines): a line ends at LF (or CRLF); the error names the
-    line a text editor shows."""
+    line a text editor shows (and the cell the character pads)."""
     rows = (RING / "points.csv").read_text().splitlines()[:5]
     r2 = rows[2].split(",")
     r2[1] = '"ring"'                        # a quoted cell: the block goes cell by cell
@@ -74,8 +76,11 @@ def test_a_unicode_line_boundary_does_not_split_a_row(tmp_path, capsys, mark):
     pts.write_text("\n".join([rows[0], rows[1] + mark, ",".join(r2), ",".join(r3), rows[4]]) + "\n",
                    encoding="utf-8", newline="")
     rc, err = _run(["tip", pts, "--arm", "aacmm7", "-o", tmp_path / "t.csv"], capsys)
-    assert rc == 2 and "p.csv, line 4, column 'q2_deg': expected a number, got 'abc'" in err, err
-    from arm_model.errors import text_lines
+    last = rows[1].rsplit(",", 1)[1] + mark
+    if mark in SPACE:           # VT and FF: ASCII white space around a number
+        assert rc == 2 and "p.csv, line 4, column 'q2_deg': expected a number, got 'abc'" in err, err
+    else:                       # a number padded with any other: refused since round 11 (below)
+        assert rc == 2 and f"p.csv, line 2, column 'time_s': expected a number, got {last!r}" in err, err
     assert text_lines(f"a{mark}b\r\nc\n\nd") == [f"a{mark}b", "c", "", "d"]
 
 
@@ -249,3 +254,49 @@ def test_a_point_given_twice_in_a_residuals_file_is_refused(rows, ok):
         with pytest.raises(InputError, match=r"r.csv, line 3, column 'line': point line 2 .* is given twice \(first "
                                              r"on line 2\)"):
             parse_residuals(text, "r.csv")
+
+
+# ---------------------------------------------------------------------------------------------
+# a number is ASCII, its padding too
+
+@pytest.mark.parametrize("pad", ["\u00a0", "\u2003", "\u3000", "\u0085", "\u202f", "\u1680"])
+def test_a_number_padded_with_unicode_space_is_refused(tmp_path, capsys, pad):
+    """A number cell padded with a no-break space, an em space, an ideographic space or NEL ('12.5\\xa0', pasted
+    from a word processor or a web page) was read as the number in every CSV reader and option, while another
+    script's digits and the Unicode minus were refused: a number is ASCII, and so is the white space around it.
+    Now 'expected a number, got '1.7038\\xa0'' at the cell, in points, streams, covariance, residuals and Table 2
+    files and in options (csv_io.parse_number strips ASCII white space only)."""
+    from arm_model.csv_io import parse_number
+    assert parse_number(" 12.5\t") == 12.5 and parse_number(f"12.5{pad}") is None
+    rows = (RING / "points.csv").read_text().splitlines()[:3]
+    cells = rows[1].split(",")
+    cells[2] = cells[2] + pad
+    pts = tmp_path / "p.csv"
+    pts.write_text("\n".join([rows[0], ",".join(cells), rows[2]]) + "\n", encoding="utf-8", newline="")
+    rc, err = _run(["tip", pts, "--arm", "aacmm7", "-o", tmp_path / "t.csv"], capsys)
+    assert rc == 2 and f"p.csv, line 2, column 'q1_deg': expected a number, got {cells[2]!r}" in err, err
+    rc, err = _run(["tip", RING / "points.csv", "--arm", "aacmm7", "--u-probing-um", f"2{pad}", "-o",
+                    tmp_path / "t.csv"], capsys)
+    assert rc == 2 and "--u-probing-um" in err and "expected a finite number" in err, err
+    assert not (tmp_path / "t.csv").exists()
+
+
+def test_urdf_numbers_are_separated_by_xml_white_space_only(tmp_path, capsys):
+    """`<origin xyz="0.0825\\xa00 0"/>` was read as three numbers (Python's split() splits at a no-break space);
+    urdfdom refuses it ("Unable to parse component [0.0825 0] to a double"): now exit 2 at its line and key."""
+    urdf = _panda(tmp_path, 'xyz="0.0825 0 0"', 'xyz="0.0825\u00a00 0"')
+    rc, err = _run(["urdf", urdf, "--tip-frame", "ball_link", "-o", tmp_path / "o.urdf"], capsys)
+    assert rc == 2 and "m.urdf, line 76, key 'origin.xyz': <origin xyz=...> must be 3 finite numbers" in err, err
+
+
+def test_a_block_in_exponent_notation_keeps_the_ascii_rule(tmp_path, capsys):
+    """The fast reader hands a block written in exponent notation (the Panda's points, 1.785763899444913205e+00) to
+    numpy's loadtxt, which takes a no-break space around a number: the same rule now holds there."""
+    rows = SEATS.read_text().splitlines()
+    cells = rows[5].split(",")
+    cells[3] = "\u00a0" + cells[3]
+    rows[5] = ",".join(cells)
+    pts = tmp_path / "p.csv"
+    pts.write_text("\n".join(rows) + "\n")
+    rc, err = _run(["tip", pts, "--arm", PANDA, "--tip-frame", "ball_link", "-o", tmp_path / "t.csv"], capsys)
+    assert rc == 2 and f"p.csv, line 6, column 'q2_rad': expected a number, got {cells[3]!r}" in err, err

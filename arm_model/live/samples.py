@@ -23,7 +23,7 @@ import math
 import re
 from typing import NamedTuple
 
-from ..csv_io import blank_record, parse_number
+from ..csv_io import SPACE, blank_record, parse_number
 from ..errors import InputError, did_you_mean, read_text, text_lines
 from ..units import ABSOLUTE_ZERO_C, PLAUSIBLE_SI, QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
@@ -221,9 +221,9 @@ class SampleLayout:
         """Every cell read with the points reader's number rule; the first bad one is the error."""
         values = []
         for k, cell in enumerate(cells):
-            v = parse_number(cell.strip())
+            v = parse_number(cell)
             if v is None:
-                what = "empty cell" if not cell.strip() else f"not a number: {cell.strip()[:40]!r}"
+                what = "empty cell" if not cell.strip() else f"not a number: {cell.strip(SPACE)[:40]!r}"
                 raise InputError(f"{what} (numbers are plain decimals or exponent notation)", self.path, line,
                                  self.header[k])
             if not math.isfinite(v):
