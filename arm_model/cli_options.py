@@ -72,8 +72,9 @@ def at_least(minimum: int):
 fraction = number_in(0, 1, low_open=True, high_open=True)
 #: argparse type: a finite number (any sign)
 finite = number_in()
-#: argparse type: a random seed (a whole number >= 0)
-seed = number_in(0, kind=int)
+#: argparse type: a random seed, a whole number from 0 to 2**53 (exact as a JSON number and a TOML integer in every
+#: file that records it: --seed 2**64 made simulate write a truth.toml its reader refuses, exit 3)
+seed = number_in(0, 2 ** 53, kind=int)
 #: argparse type: a TCP port
 port = number_in(1, 65535, kind=int)
 #: the longest time [s] an option may ask a command to wait or serve (about 116 days): beyond it a number is a typo

@@ -300,3 +300,14 @@ def test_a_block_in_exponent_notation_keeps_the_ascii_rule(tmp_path, capsys):
     pts.write_text("\n".join(rows) + "\n")
     rc, err = _run(["tip", pts, "--arm", PANDA, "--tip-frame", "ball_link", "-o", tmp_path / "t.csv"], capsys)
     assert rc == 2 and f"p.csv, line 6, column 'q2_rad': expected a number, got {cells[3]!r}" in err, err
+
+
+@pytest.mark.parametrize("command", [["simulate", ROOT / "examples" / "campaigns" / "paper-ring-xyz.toml"],
+                                     ["tip", RING / "points.csv", "--arm", "aacmm7", "--mc", "10"]])
+def test_a_seed_beyond_2_53_is_refused_at_the_option(tmp_path, capsys, command):
+    """`simulate --seed 18446744073709551616` (2**64) wrote a truth.toml whose seed no TOML reader takes (64 bits at
+    most; the read-back made it exit 3): a seed is now a whole number from 0 to 2**53 (exact in JSON and TOML), at
+    the option, before any work."""
+    rc, err = _run([*command, "--seed", str(2 ** 64), "-o", tmp_path / "o.csv"], capsys)
+    assert rc == 2 and "argument --seed: must be in [0, 9.0072e+15], got 18446744073709551616" in err, err
+    assert list(tmp_path.iterdir()) == []
