@@ -203,9 +203,13 @@ MAX_ID_LENGTH = 100_000
 def id_problem(text) -> str | None:
     """Why ``text`` cannot be a measurement or feature id, or None: an id is one non-empty line of text (a line
     break or another control character would split the row of every CSV file that carries it, which its reader
-    then refuses) of at most :data:`MAX_ID_LENGTH` characters."""
+    then refuses) of at most :data:`MAX_ID_LENGTH` characters, without white space at its ends (read back
+    stripped, it would name something else)."""
     if not isinstance(text, str) or not text.strip():
         return f"must be a non-empty text, got {_short(text)}"
+    if text != text.strip():            # a CSV reader strips its cells: " j1" would read back as "j1"
+        return (f"must not begin or end with white space (every CSV reader strips its cells, so it would read back "
+                f"as {_short(text.strip())}), got {_short(text)}")
     if len(text) > MAX_ID_LENGTH:
         return f"must be at most {MAX_ID_LENGTH} characters long, got {len(text)} ({_short(text)})"
     bad = next((c for c in text if unicodedata.category(c) in ("Cc", "Zl", "Zp")), None)

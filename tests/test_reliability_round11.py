@@ -311,3 +311,27 @@ def test_a_seed_beyond_2_53_is_refused_at_the_option(tmp_path, capsys, command):
     rc, err = _run([*command, "--seed", str(2 ** 64), "-o", tmp_path / "o.csv"], capsys)
     assert rc == 2 and "argument --seed: must be in [0, 9.0072e+15], got 18446744073709551616" in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------------------------------------------
+# a name with white space at its ends
+
+def test_a_joint_name_with_white_space_at_its_ends_is_refused(tmp_path, capsys):
+    """A joint named " j1" was read; calibrate then wrote a covariance file whose cell " j1.a" its reader reads
+    stripped, as every CSV cell: the model file's read-back failed, exit 3 (an internal error). An id or a name the
+    toolkit writes into a file has no white space at its ends (errors.id_problem, one rule for every id and name)."""
+    arm = tmp_path / "arm.toml"
+    arm.write_text((ROOT / "urdf" / "aacmm7.dh.toml").read_text().replace('name = "j1"', 'name = " j1"', 1))
+    rc, err = _run(["tip", RING / "points.csv", "--arm", arm, "-o", tmp_path / "t.csv"], capsys)
+    words = "arm.toml, line 9, key 'joint[1].name': 'name' must not begin or end with white space"
+    assert rc == 2 and words in err, err
+
+
+def test_a_feature_id_with_white_space_at_its_ends_is_refused():
+    """Artefact features "ring" and "ring " were two features, but a points file's cell "ring " reads as "ring": the
+    second could never get a point (and a plan's ids the same)."""
+    from arm_model.io import parse_artefacts
+    text = (RING / "artefacts.toml").read_text() + '\n[[feature]]\nid = "ring "\nkind = "seat"\n'
+    with pytest.raises(InputError, match=r"a.toml, line 10, key 'feature\[2\].id': 'id' must not begin or end with "
+                                         r"white space"):
+        parse_artefacts(text, "a.toml")
