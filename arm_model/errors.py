@@ -10,7 +10,7 @@ import unicodedata
 from pathlib import Path
 
 __all__ = ["AacmmError", "InputError", "NumericalError", "read_text", "open_input", "decode_text", "parse_toml",
-           "did_you_mean", "unknown_key", "id_problem", "resolved", "text_lines"]
+           "did_you_mean", "unknown_key", "id_problem", "resolved", "text_lines", "INVISIBLE"]
 
 
 class AacmmError(Exception):
@@ -195,6 +195,13 @@ def unknown_key(key: str, known, shown=None, what: str = "key") -> str:
     return f"unknown {what} '{key}'{did_you_mean(key, known)} (known: {', '.join(shown or known)})"
 
 
+#: characters that show nothing or turn the text around: a byte-order mark or a zero-width space (an id that prints
+#: as another: '\ufeffring-01' beside 'ring-01', from a byte-order mark left inside a file by two exports joined) and
+#: the bidirectional embeddings, overrides and isolates (they reverse the rest of a terminal line: a message shown as
+#: another). No id or name holds one (:func:`id_problem`); every message shows them escaped
+#: (:func:`arm_model.log.escaped`)
+INVISIBLE = "\u200b\ufeff\u202a\u202b\u202c\u202d\u202e\u2066\u2067\u2068\u2069"
+
 #: the longest id or name [characters]: a name, not a payload (every row repeats it; ids of 10 000 characters
 #: are read in memory in proportion to the file, tests/test_reliability_round5.py)
 MAX_ID_LENGTH = 100_000
@@ -215,6 +222,10 @@ def id_problem(text) -> str | None:
     bad = next((c for c in text if unicodedata.category(c) in ("Cc", "Zl", "Zp")), None)
     if bad is not None:
         return f"must be one line of text without control characters, got {_short(text)} (holding {bad!r})"
+    bad = next((c for c in text if c in INVISIBLE), None)
+    if bad is not None:
+        return (f"must not hold an invisible or text-direction character, got {ascii(text)[:60]} (holding "
+                f"{ascii(bad)})")
     return None
 
 

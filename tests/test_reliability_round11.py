@@ -335,3 +335,22 @@ def test_a_feature_id_with_white_space_at_its_ends_is_refused():
     with pytest.raises(InputError, match=r"a.toml, line 10, key 'feature\[2\].id': 'id' must not begin or end with "
                                          r"white space"):
         parse_artefacts(text, "a.toml")
+
+
+# ---------------------------------------------------------------------------------------------
+# invisible and text-direction characters
+
+@pytest.mark.parametrize("mark", ["\ufeff", "\u200b", "\u202e", "\u2067"])
+def test_an_id_with_an_invisible_or_direction_character_is_refused(tmp_path, capsys, mark):
+    """A byte-order mark left inside a file (two exports joined), a zero-width space or a right-to-left override in a
+    measurement id made an id that prints as another ('\\ufeffring-01' is a measurement of its own beside 'ring-01');
+    an override also turns the rest of a terminal line around (an error message shown as another). Now refused in
+    every id and name (errors.id_problem), and shown escaped in every message (log.escaped)."""
+    from arm_model.log import escaped
+    rows = (RING / "points.csv").read_text().splitlines()[:4]
+    pts = tmp_path / "p.csv"
+    pts.write_text("\n".join([rows[0], rows[1], mark + rows[2], rows[3]]) + "\n", encoding="utf-8")
+    rc, err = _run(["tip", pts, "--arm", "aacmm7", "-o", tmp_path / "t.csv"], capsys)
+    assert rc == 2 and "p.csv, line 3, column 'measurement': the measurement id must not hold an invisible or " \
+        "text-direction character" in err and mark not in err, err
+    assert escaped(f"a{mark}b") == "a" + mark.encode("unicode_escape").decode() + "b"
