@@ -354,3 +354,20 @@ def test_an_id_with_an_invisible_or_direction_character_is_refused(tmp_path, cap
     assert rc == 2 and "p.csv, line 3, column 'measurement': the measurement id must not hold an invisible or " \
         "text-direction character" in err and mark not in err, err
     assert escaped(f"a{mark}b") == "a" + mark.encode("unicode_escape").decode() + "b"
+
+
+# ---------------------------------------------------------------------------------------------
+# options that do nothing
+
+@pytest.mark.parametrize("extra, words", [
+    (["--contact-on-N", "1"], "--contact-on-N"),
+    (["--min-dwell-s", "0.5", "--baseline-s", "0"], "--min-dwell-s, --baseline-s")])
+def test_force_contact_options_with_trigger_contacts_are_refused(tmp_path, capsys, extra, words):
+    """`live --contact trigger --contact-on-N 1` (or --contact-off-N, --min-dwell-s, --smooth-s, --baseline-s) was
+    accepted and ignored: a trigger contact lasts while the button is held, whatever the force. As the live view's
+    options without --view (round 10), exit 2 before anything is written."""
+    sess = tmp_path / "s"
+    rc, err = _run(["live", SAMPLES, "--arm", "aacmm7", "--speed", "0", "--feature", "seat:a", "--contact", "trigger",
+                    *extra, "-o", sess], capsys)
+    assert rc == 2 and f"{words}: option(s) of force contacts, which --contact trigger does not use" in err, err
+    assert not sess.exists()
