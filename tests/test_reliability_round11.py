@@ -10,6 +10,7 @@ every instant of the start-up; 10^6-row inputs; and every numeric option with na
 from __future__ import annotations
 
 import pytest
+from test_reliability_round10 import PANDA, _panda
 
 from arm_model import InputError
 from arm_model.csv_io import SPACE
@@ -115,28 +116,19 @@ def test_ctrl_c_while_the_command_line_is_imported_is_one_line(tmp_path):
 # ---------------------------------------------------------------------------------------------
 # URDFs as others ship them
 
-PANDA = ROOT / "examples" / "data" / "real-panda-seats" / "panda.urdf"
 SEATS = ROOT / "examples" / "data" / "real-panda-seats" / "front" / "points.csv"
-
-
-def _panda(tmp_path, old, new):
-    text = PANDA.read_text()
-    assert old in text
-    path = tmp_path / "m.urdf"
-    path.write_text(text.replace(old, new, 1))
-    return path
 
 
 def test_a_urdf_with_two_roots_is_refused(tmp_path, capsys):
     """A URDF whose links hang from two roots (a joint's parent made a link no joint leads to) was read: `urdf` wrote
     a 4-joint arm from the 7-joint Panda, `tip` then counted the points' columns against it. urdfdom (Pinocchio's and
     ROS's parser) refuses the file ("Two root links found"): now exit 2 naming both roots and their lines."""
-    urdf = _panda(tmp_path, '<parent link="panda_link3"/>\n    <child link="panda_link4"/>',
-                  '<parent link="orphan"/>\n    <child link="panda_link4"/>')
+    urdf = _panda(tmp_path, '<parent link="panda_link3" />\n    <child link="panda_link4" />',
+                  '<parent link="orphan" />\n    <child link="panda_link4" />')
     urdf.write_text(urdf.read_text().replace("</robot>", '<link name="orphan"/>\n</robot>'))
     rc, err = _run(["urdf", urdf, "--tip-frame", "ball_link", "-o", tmp_path / "o.urdf"], capsys)
     line = urdf.read_text().splitlines().index('<link name="orphan"/>') + 1
-    words = f"m.urdf, line {line}: two root links, 'panda_link0' (line 8) and 'orphan' (line {line})"
+    words = f"m.urdf, line {line}: two root links, 'panda_link0' (line 3) and 'orphan' (line {line})"
     assert rc == 2 and words in err, err
     assert not (tmp_path / "o.urdf").exists()
 
@@ -146,7 +138,7 @@ def test_an_island_link_is_a_second_root(tmp_path, capsys):
     elsewhere."""
     urdf = _panda(tmp_path, "</robot>", '<link name="island"/>\n</robot>')
     rc, err = _run(["tip", SEATS, "--arm", urdf, "--tip-frame", "ball_link", "-o", tmp_path / "t.csv"], capsys)
-    assert rc == 2 and "two root links, 'panda_link0' (line 8) and 'island'" in err, err
+    assert rc == 2 and "two root links, 'panda_link0' (line 3) and 'island'" in err, err
 
 
 # ---------------------------------------------------------------------------------------------
@@ -286,7 +278,7 @@ def test_urdf_numbers_are_separated_by_xml_white_space_only(tmp_path, capsys):
     urdfdom refuses it ("Unable to parse component [0.0825 0] to a double"): now exit 2 at its line and key."""
     urdf = _panda(tmp_path, 'xyz="0.0825 0 0"', 'xyz="0.0825\u00a00 0"')
     rc, err = _run(["urdf", urdf, "--tip-frame", "ball_link", "-o", tmp_path / "o.urdf"], capsys)
-    assert rc == 2 and "m.urdf, line 76, key 'origin.xyz': <origin xyz=...> must be 3 finite numbers" in err, err
+    assert rc == 2 and "m.urdf, line 71, key 'origin.xyz': <origin xyz=...> must be 3 finite numbers" in err, err
 
 
 def test_a_block_in_exponent_notation_keeps_the_ascii_rule(tmp_path, capsys):
