@@ -61,7 +61,7 @@ def parse_holdout(text: str | None):
     """``--holdout`` (of calibrate and close-loop): None, a fraction in (0, 1) or a list of measurement ids."""
     if text is None:
         return None
-    v = parse_number(text.strip())
+    v = parse_number(text)
     if v is None:                       # the files' number rule: "0.2", not "0_2" nor another script's digits
         ids = [t.strip() for t in text.split(",") if t.strip()]
         if not ids:

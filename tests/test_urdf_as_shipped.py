@@ -152,13 +152,14 @@ def test_a_revolute_joint_without_limit_is_refused_saying_why(tmp_path):
 # -- the tip frame ---------------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("tip, line, words", [
-    ("j3", 11, "'j3' is a joint, not a link: --tip-frame names a link (this joint's child link is 'l3')"),
+    ("j3", 10, "'j3' is a joint, not a link: --tip-frame names a link (this joint's child link is 'l3')"),
     ("base", 3, "link 'base' hangs from no joint: it is a root of the URDF"),
-    ("island", 8, "link 'island' hangs from no joint"),
-    ("tpi", None, "no link named 'tpi'; did you mean 'tip'?; the chains end at tip (3 moving joints) (6 links in all)"),
+    ("tpi", None, "no link named 'tpi'; did you mean 'tip'?; the chains end at tip (3 moving joints) (5 links in all)"),
 ])
 def test_a_tip_frame_on_no_chain_says_which_links_are(tmp_path, capsys, tip, line, words):
-    path = write(tmp_path, robot(links_extra='<link name="island"/>\n'))
+    """(A link no joint leads to, an island, is a second root: refused since round 11 whatever the tip frame,
+    tests/test_reliability_round11.py.)"""
+    path = write(tmp_path, robot())
     assert main(["tip", str(path), "--arm", str(path), "--tip-frame", tip, "-o", str(tmp_path / "t.csv")]) == 2
     err = capsys.readouterr().err
     assert words in err and "key '--tip-frame'" in err and (line is None or f"line {line}," in err), err
