@@ -15,10 +15,15 @@ export PYTHONDONTWRITEBYTECODE :=
 # of all of them 40 s more, on the 2-core AMD EPYC. Only what the toolkit imports is compiled (importing each of
 # its modules writes their bytecode and that of the libraries they use, about 1500 files, and the test runner's),
 # so a command starts as fast as before. Where uv cannot be had, pip installs the same.
-$(STAMP): pyproject.toml
+# $(DEPS): the libraries installed; $(STAMP): their bytecode too (make test starts mypy between the two).
+DEPS   := $(VENV)/.dependencies
+$(DEPS): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	( $(PY) -m pip install --quiet 'uv>=0.5' && $(VENV)/bin/uv pip install --quiet --python $(PY) -e '.[test]' ) \
 	  || $(PY) -m pip install --quiet -e '.[test]'
+	touch $(DEPS)
+
+$(STAMP): $(DEPS)
 	$(PY) -c "import pkgutil, importlib, pytest, xdist, hypothesis; [importlib.import_module(m.name) for p in \
 	  ('arm_model', 'calibration', 'correction', 'viz') for m in pkgutil.walk_packages(importlib.import_module(p).__path__, p + '.')]"
 	touch $(STAMP)
@@ -31,14 +36,17 @@ browser:
 demo: $(STAMP)
 	$(PY) -m arm_model.demo --out $(OUT)/demo
 
-# the suite without the long studies (-m "not slow"; timings: README, Tests); test-slow: the rest (.ci/run runs both).
-# make test runs the lint gate too: ruff first (it stops on a finding), then mypy (about 34 s of CPU from a fresh
-# clone) beside pytest, its findings printed after the tests' and failing make test all the same. The tests' order
-# under -n 2: tests/conftest.py balanced_order (the longest modules first, from tests/durations.tsv).
+# the suite without the long studies (-m "not slow"; timings: README, Tests; what CI runs: .ci/run); test-slow: the
+# rest, run by hand before merging a change to estimation.
+# make test runs the lint gate too: mypy (about 25 s of CPU from a fresh clone) starts as soon as the libraries are
+# installed, beside the single-process bytecode step, ruff and then pytest, its findings printed after the tests' and
+# failing make test all the same; ruff stops make test on a finding before the tests start. The tests' order under
+# -n 2: tests/conftest.py balanced_order (the longest modules first, from tests/durations.tsv).
 PYTEST := $(PY) -m pytest
-test: $(STAMP) browser
-	$(VENV)/bin/ruff check .
+test: $(DEPS) browser
 	$(VENV)/bin/mypy > $(VENV)/mypy.log 2>&1 & types=$$!; \
+	if ! { $(MAKE) --no-print-directory $(STAMP) && $(VENV)/bin/ruff check .; }; then \
+	  kill $$types 2>/dev/null; wait $$types; exit 1; fi; \
 	$(PYTEST) -n 2 --dist worksteal -q -m "not slow" tests; tests=$$?; \
 	wait $$types; typed=$$?; echo "mypy:"; cat $(VENV)/mypy.log; \
 	test $$tests = 0 && test $$typed = 0

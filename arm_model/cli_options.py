@@ -8,7 +8,7 @@ import logging
 import math
 from pathlib import Path
 
-from .csv_io import parse_number
+from .csv_io import SPACE, parse_number
 from .errors import InputError
 from .model_file import Arm, load_model
 
@@ -23,10 +23,10 @@ def _number(text: str, kind=float):
     """``text`` as a finite float or a whole number, by the files' number rule (:func:`arm_model.csv_io.parse_number`:
     ASCII digits only, so no "4_5" for 45 nor another script's digits; no nan or inf)."""
     what = "a whole number" if kind is int else "a finite number"
-    v = parse_number(text.strip())
-    if v is None or not math.isfinite(v) or (kind is int and not text.strip().lstrip("+-").isdecimal()):
+    v = parse_number(text)
+    if v is None or not math.isfinite(v) or (kind is int and not text.strip(SPACE).lstrip("+-").isdecimal()):
         raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
-    return int(text) if kind is int else v
+    return int(text.strip(SPACE)) if kind is int else v
 
 
 def number_in(low=None, high=None, *, low_open=False, high_open=False, kind=float):
@@ -72,8 +72,9 @@ def at_least(minimum: int):
 fraction = number_in(0, 1, low_open=True, high_open=True)
 #: argparse type: a finite number (any sign)
 finite = number_in()
-#: argparse type: a random seed (a whole number >= 0)
-seed = number_in(0, kind=int)
+#: argparse type: a random seed, a whole number from 0 to 2**53 (exact as a JSON number and a TOML integer in every
+#: file that records it: --seed 2**64 made simulate write a truth.toml its reader refuses, exit 3)
+seed = number_in(0, 2 ** 53, kind=int)
 #: argparse type: a TCP port
 port = number_in(1, 65535, kind=int)
 #: the longest time [s] an option may ask a command to wait or serve (about 116 days): beyond it a number is a typo

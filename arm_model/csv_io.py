@@ -8,8 +8,8 @@ of many (exponents) by numpy's C reader (``np.loadtxt``). Anything these do not 
 quoted cell, a wrong cell count, a blank-looking line) sends the block to the cell-by-cell reader,
 which either parses it the same way or raises the located :class:`InputError` (file, line,
 column). All paths accept the same numbers: ASCII decimals with an optional exponent (``12.5``,
-``-3e-4``) and ``nan``/``inf`` (callers refuse non-finite values with their location); never
-``4_5`` (Python's ``float`` would read 45), hex, or non-ASCII digits.
+``-3e-4``) and ``nan``/``inf`` (callers refuse non-finite values with their location), padded with ASCII white
+space only; never ``4_5`` (Python's ``float`` would read 45), hex, non-ASCII digits or a no-break space.
 
 Writing: fixed-decimal columns (``%.6f``) are formatted by integer arithmetic on numpy arrays into
 a character matrix, transposed to text order, and the unused characters dropped; other formats
@@ -30,10 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, decode_text, open_input
+from .errors import InputError, decode_text, open_input, text_lines
 
-__all__ = ["parse_number", "blank_record", "csv_records", "CsvBlock", "iter_csv_blocks", "csv_spans", "format_csv",
-           "format_row"]
+__all__ = ["parse_number", "SPACE", "blank_record", "csv_records", "CsvBlock", "iter_csv_blocks", "csv_spans",
+           "format_csv", "format_row"]
 
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-]?(?:nan|inf|infinity)",
                      re.IGNORECASE)
@@ -41,8 +41,15 @@ BLOCK_BYTES = 1 << 22          # 4 MiB (about 37 000 points rows): small tempora
 PARALLEL_BYTES = 1 << 25       # 32 MiB (about 300 000 points rows): a file worth reading in parallel parts
 
 
+#: the white space a number's cell may hold around it: ASCII only (``str.strip()`` also takes a no-break space, an
+#: ideographic space or NEL for white space, and a cell '12.5\xa0' read as 12.5 where '１２.5' was refused)
+SPACE = " \t\r\n\f\v"
+
+
 def parse_number(cell: str) -> float | None:
-    """The number in a (stripped) cell, or None if it is not one (see the module doc)."""
+    """The number in a cell (ASCII white space around it dropped, :data:`SPACE`), or None if it is not one (see
+    the module doc)."""
+    cell = cell.strip(SPACE)
     return float(cell) if _NUMBER.fullmatch(cell) else None
 
 
@@ -67,7 +74,7 @@ def blank_record(line: str) -> bool:
 def csv_records(text: str, path: str, first_line: int = 1) -> list[tuple[int, list[str]]]:
     """Non-blank CSV records (:func:`blank_record`) with their physical line; a record may not span lines."""
     out = []
-    for no, line in enumerate(text.splitlines(), start=first_line):
+    for no, line in enumerate(text_lines(text), start=first_line):
         if blank_record(line):
             continue
         try:
@@ -102,7 +109,7 @@ def _slow_block(text: str, path: str, first_line: int, header: list[str], num_id
         if len(r) != len(header):
             raise InputError(f"{len(r)} cells where the header has {len(header)} columns", path, no)
         for k, c in enumerate(num_idx):
-            cell = r[c].strip()
+            cell = r[c].strip(SPACE)
             v = parse_number(cell)
             if v is None:
                 raise _empty_cell_error(cell, path, no, header[c])
@@ -242,7 +249,10 @@ def _numbers(arr, text, lines, num_idx, before, after) -> np.ndarray | None:
     values, ok = np.concatenate([v for v, _ in parts]), np.concatenate([o for _, o in parts])
     odd = np.flatnonzero(~ok)
     if len(values) < len(flat_a) or len(odd) > 16 + len(values) // 1000:
-        # many cells in another notation (exponents): numpy's reader, or the careful one
+        # many cells in another notation (exponents): numpy's reader, or the careful one (numpy takes a no-break
+        # space or another Unicode space around a number: a block that is not ASCII goes to the careful reader)
+        if not text.isascii():
+            return None
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -252,7 +262,7 @@ def _numbers(arr, text, lines, num_idx, before, after) -> np.ndarray | None:
             return None
         return numbers if numbers.shape[0] == n else None
     for i in odd.tolist():
-        v = parse_number(arr[flat_a[i]:flat_b[i]].tobytes().decode("utf-8").strip())
+        v = parse_number(arr[flat_a[i]:flat_b[i]].tobytes().decode("utf-8"))
         if v is None:
             return None                                   # the careful reader: its located error
         values[i] = v

@@ -191,6 +191,9 @@ class ArmDescription:
     #: the mesh files of the URDF's visuals on the chain that were not found (``package://`` beside or above the
     #: URDF, relative to it, absolute): the viewer draws without them and says so; the kinematics never use them
     missing_meshes: tuple[str, ...] = field(default=(), compare=False, repr=False)
+    #: the joints' masses are not the arm's but assumed from its geometry
+    #: (:func:`calibration.calibrate.with_assumed_masses`): a written model file says so in its comment
+    masses_assumed: bool = field(default=False, compare=False, repr=False)
 
     @cached_property
     def encoders(self) -> tuple[JointRow, ...]:

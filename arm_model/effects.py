@@ -556,7 +556,8 @@ class JointBacklash(_JointPlay):
     """Play of joint i closed by gravity: the joint sits ``b_i sign(-tau_gravity_i)`` beyond its encoder, ``b_i``
     to the side its gravity load pushes it (the sign convention of :class:`JointCompliance`'s gravity part), whatever
     the load's size: a gear's or a bearing's play, closed one way or the other as the torque the joint holds against
-    the links' weight changes sign. Piecewise constant in the torque."""
+    the links' weight changes sign. Piecewise constant in the torque; where the torque changes sign within the play
+    itself, the joint floats in its middle (sign 0, :meth:`arm_model.model.ArmModel.equilibrium_aux`)."""
     key: str = field(default="joint_backlash", init=False, repr=False)
     parameter: ClassVar[str] = "backlash"
 
@@ -570,9 +571,10 @@ class JointBacklash(_JointPlay):
 @dataclass(frozen=True)
 class JointHysteresis(_JointPlay):
     """Hysteresis of joint i by the direction it last turned: the joint sits ``h_i m_i`` beyond its encoder, ``m_i``
-    the sign of its reading's move onto the point from the point captured before it (``ModelInputs.motion``,
-    :func:`arm_model.model.reading_motion`): a play or an encoder's hysteresis that the last motion closes, a
-    robot's backlash when it drives from posture to posture."""
+    the sign of its last move onto the point (``ModelInputs.motion``, :func:`arm_model.model.points_motion`: as
+    measured, a points file's ``q1_move_sign`` ..., else its reading's move from the point captured before it): a
+    play or an encoder's hysteresis that the last motion closes, a robot's backlash when it drives from posture to
+    posture."""
     key: str = field(default="joint_hysteresis", init=False, repr=False)
     parameter: ClassVar[str] = "hysteresis"
 

@@ -10,7 +10,7 @@ import unicodedata
 from pathlib import Path
 
 __all__ = ["AacmmError", "InputError", "NumericalError", "read_text", "open_input", "decode_text", "parse_toml",
-           "did_you_mean", "unknown_key", "id_problem", "resolved"]
+           "did_you_mean", "unknown_key", "id_problem", "resolved", "text_lines", "INVISIBLE"]
 
 
 class AacmmError(Exception):
@@ -76,6 +76,17 @@ def decode_text(raw: bytes, path: str | Path, first_line: int = 1) -> str:
     return text
 
 
+def text_lines(text: str) -> list[str]:
+    """The lines of a decoded text (:func:`decode_text`), numbered as every message and every text editor numbers
+    them: a line ends at a line feed (or CRLF) only. Python's ``splitlines`` also ends one at VT, FF, FS, GS, RS,
+    NEL and the Unicode line and paragraph separators, which split a CSV row in two and shifted the line of every
+    message after it."""
+    lines = text.split("\n")
+    if lines[-1] == "":
+        lines.pop()
+    return [line[:-1] if line.endswith("\r") else line for line in lines]
+
+
 def open_input(path: str | Path, what: str):
     """A user's input file opened for reading bytes, or an InputError naming it (``what``: which file
     it is, "the points file"). A folder, a FIFO or a device is refused: it is not a file (and reading
@@ -125,15 +136,37 @@ def read_text(path: str | Path, what: str) -> str:
 
 
 def parse_toml(text: str, path: str | Path) -> dict:
-    """Parse TOML text; a syntax error becomes an InputError naming the file, line and column."""
+    """Parse TOML text; a syntax error becomes an InputError naming the file, line and column, and so does an
+    integer beyond 64 bits (TOML 1.0: "an integer that cannot be represented losslessly must be an error";
+    Python's reader takes 10**400, which every float() then met as an OverflowError, exit 3)."""
     try:
-        return tomllib.loads(text)
+        data = tomllib.loads(text)
     except RecursionError:
         raise InputError("not valid TOML: arrays or tables nested too deeply", path) from None
     except tomllib.TOMLDecodeError as exc:
         m = re.search(r"line (\d+), column (\d+)", str(exc))
         raise InputError(f"not valid TOML: {exc}", path, int(m.group(1)) if m else None,
                          f"column {m.group(2)}" if m else None) from None
+    where = _wide_integer(data, ())
+    if where is not None:
+        from .toml_lines import key_path_text, toml_key_lines
+        lines = toml_key_lines(text)
+        line = next((lines[where[:k]] for k in range(len(where), 0, -1) if where[:k] in lines), None)
+        raise InputError("not valid TOML: an integer beyond 64 bits (a TOML integer is from -2**63 to 2**63 - 1)",
+                         path, line,
+                         f"key '{key_path_text(where)}'")
+    return data
+
+
+def _wide_integer(value, where: tuple) -> tuple | None:
+    """The key path of the first integer of a parsed TOML value outside TOML's 64-bit range, or None."""
+    if isinstance(value, dict):
+        items = value.items()
+    elif isinstance(value, list):
+        items = enumerate(value)
+    else:
+        return where if isinstance(value, int) and not -2 ** 63 <= value < 2 ** 63 else None
+    return next((w for k, v in items if (w := _wide_integer(v, (*where, k))) is not None), None)
 
 
 def did_you_mean(word: str, known) -> str:
@@ -162,6 +195,13 @@ def unknown_key(key: str, known, shown=None, what: str = "key") -> str:
     return f"unknown {what} '{key}'{did_you_mean(key, known)} (known: {', '.join(shown or known)})"
 
 
+#: characters that show nothing or turn the text around: a byte-order mark or a zero-width space (an id that prints
+#: as another: '\ufeffring-01' beside 'ring-01', from a byte-order mark left inside a file by two exports joined) and
+#: the bidirectional embeddings, overrides and isolates (they reverse the rest of a terminal line: a message shown as
+#: another). No id or name holds one (:func:`id_problem`); every message shows them escaped
+#: (:func:`arm_model.log.escaped`)
+INVISIBLE = "\u200b\ufeff\u202a\u202b\u202c\u202d\u202e\u2066\u2067\u2068\u2069"
+
 #: the longest id or name [characters]: a name, not a payload (every row repeats it; ids of 10 000 characters
 #: are read in memory in proportion to the file, tests/test_reliability_round5.py)
 MAX_ID_LENGTH = 100_000
@@ -170,14 +210,22 @@ MAX_ID_LENGTH = 100_000
 def id_problem(text) -> str | None:
     """Why ``text`` cannot be a measurement or feature id, or None: an id is one non-empty line of text (a line
     break or another control character would split the row of every CSV file that carries it, which its reader
-    then refuses) of at most :data:`MAX_ID_LENGTH` characters."""
+    then refuses) of at most :data:`MAX_ID_LENGTH` characters, without white space at its ends (read back
+    stripped, it would name something else)."""
     if not isinstance(text, str) or not text.strip():
         return f"must be a non-empty text, got {_short(text)}"
+    if text != text.strip():            # a CSV reader strips its cells: " j1" would read back as "j1"
+        return (f"must not begin or end with white space (every CSV reader strips its cells, so it would read back "
+                f"as {_short(text.strip())}), got {_short(text)}")
     if len(text) > MAX_ID_LENGTH:
         return f"must be at most {MAX_ID_LENGTH} characters long, got {len(text)} ({_short(text)})"
     bad = next((c for c in text if unicodedata.category(c) in ("Cc", "Zl", "Zp")), None)
     if bad is not None:
         return f"must be one line of text without control characters, got {_short(text)} (holding {bad!r})"
+    bad = next((c for c in text if c in INVISIBLE), None)
+    if bad is not None:
+        return (f"must not hold an invisible or text-direction character, got {ascii(text)[:60]} (holding "
+                f"{ascii(bad)})")
     return None
 
 

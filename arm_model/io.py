@@ -37,7 +37,8 @@ __all__ = ["PointSet", "Feature", "Distance", "Artefacts", "ForceSignal", "read_
            "read_artefacts", "read_force_signal", "check_features", "atomic_write_text",
            "atomic_write_bytes", "write_csv", "guard_output", "csv_records", "FEATURE_KINDS", "CENTRE_KINDS",
            "id_problem", "iter_points",
-           "concat_points", "POINT_COLUMNS", "format_artefacts", "read_back", "UnreadableOutput", "json_text"]
+           "concat_points", "POINT_COLUMNS", "format_artefacts", "read_back", "UnreadableOutput", "json_text",
+           "MOVE_SUFFIX", "move_columns"]
 
 FEATURE_KINDS = ("ring", "cylinder", "sphere", "seat", "plane", "point")
 #: the kinds whose centre is one point a fit determines: the only ends a certified [[distance]] can join (a ring's or
@@ -46,6 +47,15 @@ CENTRE_KINDS = ("seat", "sphere")
 _TEXT_COLUMNS = ("measurement", "feature")
 #: optional text column: rows of one session share one reference-instrument frame (docs/formats.md §3)
 SESSION_COLUMN = "session"
+#: the suffix of the optional per-joint last-move columns ``q1_move_sign`` ... ``qJ_move_sign`` (docs/formats.md §3):
+#: the sign (-1, 0, 1) of each joint's last move onto the point, a number without a unit, named by its kind
+MOVE_SUFFIX = "_move_sign"
+_MOVE_COLUMN = re.compile(r"q([1-9][0-9]*)" + MOVE_SUFFIX)
+
+
+def move_columns(n_joints: int) -> list[str]:
+    """The last-move columns of a points file for ``n_joints`` joint columns, in the joints' order."""
+    return [f"q{j + 1}{MOVE_SUFFIX}" for j in range(n_joints)]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -72,6 +82,9 @@ class PointSet:
             the reference instrument), or None (one session).
         lines: (N,) 1-based line of each row in the file, for messages.
         q_units: the unit each joint column was written in (``("deg", ...)``), or None (not read from a file).
+        motion: (N, J) the sign (-1, 0, 1) of each joint's last move onto each point [1], as measured (columns
+            ``q1_move_sign`` ...: a live session's, read from its samples), or None: the points' own rule
+            (:func:`arm_model.model.points_motion`).
         flagged: (N,) True where |force| exceeds the probe's calibrated range (set by
             :func:`flag_forces`); never used to drop a row.
     """
@@ -88,6 +101,7 @@ class PointSet:
     lines: np.ndarray | None = None
     session: np.ndarray | None = None
     q_units: tuple | None = None
+    motion: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         # the readers refuse these with file, line and column; a PointSet built in Python is held to the same
@@ -98,10 +112,22 @@ class PointSet:
         bad = ~np.isfinite(q) | (np.abs(q) > PLAUSIBLE_SI["length"])
         if bad.any():
             i, k = (int(v) for v in np.argwhere(bad)[0])
-            line = "" if self.lines is None or len(self.lines) <= i else f", line {int(self.lines[i])}"
-            raise ValueError(f"points '{self.path}': joint {k + 1} of row {i + 1}{line} is {float(q[i, k])!r}: a "
-                             f"joint value must be finite and within +-{PLAUSIBLE_SI['length']:g} (rad, or m for a "
+            raise ValueError(f"points '{self.path}': joint {k + 1} of row {i + 1}{self._at(i)} is {float(q[i, k])!r}: "
+                             f"a joint value must be finite and within +-{PLAUSIBLE_SI['length']:g} (rad, or m for a "
                              "prismatic joint)")
+        if self.motion is not None:
+            m = np.asarray(self.motion)
+            if m.shape != q.shape:
+                raise ValueError(f"points '{self.path}': motion must be (N, joints) like q {q.shape}, got the shape "
+                                 f"{m.shape}")
+            bad = ~np.isin(m, (-1.0, 0.0, 1.0))
+            if bad.any():
+                i, k = (int(v) for v in np.argwhere(bad)[0])
+                raise ValueError(f"points '{self.path}': the last move of joint {k + 1} of row {i + 1}"
+                                 f"{self._at(i)} is {float(m[i, k])!r}: it is -1, 0 or 1")
+
+    def _at(self, i: int) -> str:
+        return "" if self.lines is None or len(self.lines) <= i else f", line {int(self.lines[i])}"
 
     def __len__(self) -> int:
         return self.q.shape[0]
@@ -142,7 +168,8 @@ class PointSet:
             return None if a is None else a[mask]
         return PointSet(self.path, self.measurement[mask], self.feature[mask], self.q[mask],
                         take(self.force), take(self.torque), self.force_kind, take(self.temperature),
-                        take(self.time), take(self.ref), take(self.lines), take(self.session), self.q_units)
+                        take(self.time), take(self.ref), take(self.lines), take(self.session), self.q_units,
+                        take(self.motion))
 
     def over_force(self, max_force: float) -> np.ndarray:
         """(N,) True where the force magnitude exceeds ``max_force`` [N] (rows are flagged, not dropped)."""
@@ -170,6 +197,8 @@ class _PointsLayout:
     num_idx: list
     txt_idx: list
     markers: tuple = ()     # base names (x, y, z) of each marker's reference columns
+    moves: tuple = ()       # column indices of q1_move_sign .. qJ_move_sign (none: no last moves given), read as
+    #                         text (the last cells of txt_idx): exactly -1, 0 or 1 as written
 
 
 def _joint_count_and_kinds(joints) -> tuple[int | None, tuple | None]:
@@ -196,10 +225,14 @@ def _points_layout(header: list[str], line: int, path: str, joints) -> _PointsLa
                                  path, line)
             raise InputError(f"missing required column '{req}'", path, line, req)
     known = ("measurement, feature, session, q1_deg ..., " + ", ".join(f"{b}_<unit>" for b in POINT_COLUMNS)
-             + ", x1_ref_mm ... (markers 1 to K)")
+             + f", x1_ref_mm ... (markers 1 to K), q1{MOVE_SUFFIX} ... (each joint's last move)")
     cols: dict[str, tuple[int, str]] = {}
+    moves: dict[int, int] = {}
     for k, h in enumerate(header):
         if h in _TEXT_COLUMNS or h == SESSION_COLUMN:
+            continue
+        if mv := _MOVE_COLUMN.fullmatch(h):
+            moves[int(mv.group(1))] = k
             continue
         parts = split_unit(h)
         if parts is None:
@@ -207,13 +240,6 @@ def _points_layout(header: list[str], line: int, path: str, joints) -> _PointsLa
                              f"'_deg', '_N', '_C', '_s'); the columns of a points file are {known}", path, line, h)
         base, unit = parts
         if re.fullmatch(r"q[1-9][0-9]*", base):
-            k_joint = int(base[1:]) - 1
-            want = kinds[k_joint] if kinds is not None and k_joint < len(kinds) else None
-            if want is not None and QUANTITY_OF_UNIT[unit] != want:
-                raise InputError(f"'{h}': joint {k_joint + 1} of the arm is "
-                                 + ("prismatic: its column is a length (_mm, _m or _um)" if want == "length" else
-                                    "revolute: its column is an angle (_deg or _rad)") + f", got '_{unit}'",
-                                 path, line, h)
             if QUANTITY_OF_UNIT[unit] not in ("angle", "length"):
                 raise InputError(f"a joint column is an angle (_deg or _rad) or, for a prismatic joint, a length "
                                  f"(_mm, _m or _um), got '_{unit}'", path, line, h)
@@ -235,8 +261,18 @@ def _points_layout(header: list[str], line: int, path: str, joints) -> _PointsLa
         raise InputError(f"joint columns are not q1..q{max(idx)}: missing "
                          f"{', '.join(f'q{i}' for i in missing)}", path, line)
     if n_joints is not None and len(idx) != n_joints:
-        raise InputError(f"{len(idx)} joint columns, but the arm has {n_joints} joints", path, line,
-                         header[cols[f"q{idx[-1]}"][0]])
+        raise InputError(f"{len(idx)} joint columns, but the arm has {n_joints} joints"
+                         + (" (a URDF chain holding joints the points do not give, a mobile base's or a torso's: "
+                            "start it after them with --base-frame LINK, or give each one's value with "
+                            "--hold-joint JOINT=VALUE)" if len(idx) < n_joints else ""),
+                         path, line, header[cols[f"q{idx[-1]}"][0]])
+    for i, want in enumerate(kinds or (), 1):        # each column in its joint's quantity (the count checked first)
+        h = header[cols[f"q{i}"][0]]
+        if QUANTITY_OF_UNIT[cols[f"q{i}"][1]] != want:
+            raise InputError(f"'{h}': joint {i} of the arm is "
+                             + ("prismatic: its column is a length (_mm, _m or _um)" if want == "length" else
+                                "revolute: its column is an angle (_deg or _rad)") + f", got '_{cols[f'q{i}'][1]}'",
+                             path, line, h)
     for group in _GROUPS:
         present = [b for b in group if b in cols]
         if present and len(present) != len(group):
@@ -246,11 +282,29 @@ def _points_layout(header: list[str], line: int, path: str, joints) -> _PointsLa
     if "fx" in cols and "f_bend" in cols:
         raise InputError("both three-axis (fx, fy, fz) and two-channel (f_bend, f_axial) force columns; "
                          "give one sensor", path, line, header[cols["f_bend"][0]])
+    move_idx = _move_layout(moves, len(idx), header, path, line)
     num_idx = sorted(k for k, _ in cols.values())
     txt_idx = [header.index(t) for t in _TEXT_COLUMNS] + ([header.index(SESSION_COLUMN)]
-                                                          if SESSION_COLUMN in header else [])
+                                                          if SESSION_COLUMN in header else []) + list(move_idx)
     return _PointsLayout(tuple(header), line, cols, tuple(cols[f"q{i}"][0] for i in idx), num_idx, txt_idx,
-                         _marker_groups(cols, header, path, line))
+                         _marker_groups(cols, header, path, line), move_idx)
+
+
+def _move_layout(moves: dict[int, int], n_joints: int, header, path: str, line: int) -> tuple:
+    """The column indices of ``q1_move_sign`` ... ``qJ_move_sign`` (``moves``: joint number -> column), one a joint
+    column in the joints' order, all or none: a last move for a joint the points do not have, or a joint without
+    its last move beside the others', is an error of the header."""
+    if not moves:
+        return ()
+    if beyond := [i for i in sorted(moves) if i > n_joints]:
+        h = header[moves[beyond[0]]]
+        raise InputError(f"a last move for joint {beyond[0]}, but the points have {n_joints} joint columns "
+                         f"(one q<i>{MOVE_SUFFIX} a joint column)", path, line, h)
+    if missing := [i for i in range(1, n_joints + 1) if i not in moves]:
+        raise InputError(f"columns {', '.join(f'q{i}{MOVE_SUFFIX}' for i in missing)} missing beside "
+                         f"{', '.join(header[moves[i]] for i in sorted(moves))}: the last moves come for every joint "
+                         "or for none", path, line, header[moves[min(moves)]])
+    return tuple(moves[i] for i in range(1, n_joints + 1))
 
 
 def _marker_groups(cols: dict, header, path: str, line: int) -> tuple:
@@ -284,7 +338,7 @@ def _check_ids(blk, lay: _PointsLayout, path: str) -> None:
     """The text cells of a block (measurement, feature, session ids) hold no control character (a NUL, an
     escape, DEL, a line or paragraph separator, a tab), the rule of :func:`id_problem` for every id the toolkit
     writes back: a located InputError at the first one. Each distinct id is checked once."""
-    for j, c in enumerate(lay.txt_idx):
+    for j, c in enumerate(lay.txt_idx[:len(lay.txt_idx) - len(lay.moves)]):
         column = blk.texts[:, j]
         bad = [t for t in set(column.tolist()) if t and id_problem(t)]
         if bad:
@@ -326,6 +380,7 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
         wrong = implausible(q[:, k], QUANTITY_OF_UNIT[unit])
         if wrong:
             raise InputError(wrong[1], path, int(blk.lines[wrong[0][0]]), lay.header[lay.joints[k]])
+    motion = _moves_from_texts(blk.texts[:, len(lay.txt_idx) - len(lay.moves):], lay, blk.lines, path)
     force, force_kind = group(("fx", "fy", "fz")), None
     if force is not None:
         force_kind = "xyz"
@@ -333,14 +388,37 @@ def _points_from_block(lay: _PointsLayout, blk, path: str) -> PointSet:
         force_kind = "two-channel"
         force = np.column_stack([col("f_bend"), np.zeros(len(q)), col("f_axial")])  # type: ignore[list-item]
     ref = np.stack([group(m) for m in lay.markers], axis=1) if lay.markers else None  # type: ignore[misc]
-    session = blk.texts[:, 2] if blk.texts.shape[1] > 2 else None
+    session = blk.texts[:, 2] if SESSION_COLUMN in lay.header else None
     if session is not None and (empty := np.flatnonzero(session == "")).size:
         raise InputError("empty session id (a session column names the session of every row)", path,
                          int(blk.lines[empty[0]]), SESSION_COLUMN)
     return PointSet(path=path, measurement=measurement, feature=blk.texts[:, 1], q=q, force=force,
                     torque=group(("mx", "my", "mz")), force_kind=force_kind, temperature=col("temperature"),
                     time=col("time"), ref=ref, lines=blk.lines, session=session,
-                    q_units=tuple(unit_of(lay.header[c]) for c in lay.joints))
+                    q_units=tuple(unit_of(lay.header[c]) for c in lay.joints), motion=motion)
+
+
+#: a cell of a last-move column: -1, 0 or 1 exactly, in decimal (``+1``, ``-0``, ``1.0`` too; no exponent, so that no
+#: text rounds onto a sign: ``1e-400`` or ``0.99999999999999999`` is refused, not read as 0 or 1)
+_MOVE_CELL = re.compile(r"([+-]?)([01])(?:\.0*)?")
+
+
+def _moves_from_texts(cells: np.ndarray, lay: _PointsLayout, lines: np.ndarray, path: str) -> np.ndarray | None:
+    """(n, J) the last moves of a block's move cells (n, J) of text, or None without move columns; a cell that is not
+    exactly -1, 0 or 1 is an InputError at its line and column. Each distinct text is parsed once."""
+    if not lay.moves:
+        return None
+    flat = cells.ravel().tolist()
+    values = {}
+    for t in set(flat):
+        m = _MOVE_CELL.fullmatch(t)
+        values[t] = np.nan if m is None else (-1.0 if m.group(1) == "-" else 1.0) * float(m.group(2)) + 0.0
+    out = np.fromiter(map(values.__getitem__, flat), float, len(flat)).reshape(cells.shape)
+    if (bad := np.argwhere(np.isnan(out))).size:
+        i, k = bad[0]
+        raise InputError(f"a joint's last move is -1, 0 or 1 (the sign of its move onto the point), got "
+                         f"{cells[i, k]!r}", path, int(lines[i]), lay.header[lay.moves[k]])
+    return out
 
 
 def iter_points(path: str | Path, joints=None, data: bytes | None = None,
@@ -381,7 +459,7 @@ def concat_points(sets) -> PointSet:
     return PointSet(path=sets[0].path, measurement=cat("measurement"), feature=cat("feature"), q=cat("q"),
                     force=cat("force"), torque=cat("torque"), force_kind=sets[0].force_kind,
                     temperature=cat("temperature"), time=cat("time"), ref=cat("ref"), lines=cat("lines"),
-                    session=cat("session"), q_units=sets[0].q_units)
+                    session=cat("session"), q_units=sets[0].q_units, motion=cat("motion"))
 
 
 def read_points(path: str | Path, joints=None) -> PointSet:

@@ -26,6 +26,8 @@ import sys
 import time
 import warnings
 
+from .errors import INVISIBLE
+
 __all__ = ["PACKAGES", "PROGRESS", "console", "Progress", "progress_line", "level_from_flags", "counted", "escaped"]
 
 #: the packages whose loggers the command line configures
@@ -33,8 +35,9 @@ PACKAGES = ("arm_model", "calibration", "correction", "viz")
 #: libraries that log: their records go through the same console handler (never Python's bare fallback)
 LIBRARIES = ("yourdfpy",)
 
-#: control characters (C0, DEL, C1, the Unicode line and paragraph separators) but the tab
-_CONTROL = re.compile("[\x00-\x08\x0a-\x1f\x7f-\x9f\u2028\u2029]")
+#: control characters (C0, DEL, C1, the Unicode line and paragraph separators) but the tab, and the invisible and
+#: text-direction ones (errors.INVISIBLE)
+_CONTROL = re.compile(f"[\x00-\x08\x0a-\x1f\x7f-\x9f\u2028\u2029{INVISIBLE}]")
 _ESCAPES = {"\n": "\\n", "\r": "\\r"}
 #: the most characters of a one-line message (an error, a warning, a progress or debug line): beyond, its middle is cut
 MAX_LINE = 4000

@@ -72,9 +72,15 @@ def reading_motion(q: ArrayLike, session: ArrayLike | None = None, time: ArrayLi
 
 def points_motion(points: Any, given: np.ndarray | None = None) -> np.ndarray:
     """(N, J) the sign of each joint's last move onto each point of a :class:`~arm_model.io.PointSet`: ``given``
-    when the data have their own (calibration data's ``AuxData.motion``, a live session's from its samples), else
+    when the caller has its own (calibration data's ``AuxData.motion``), else the points' own as measured
+    (``points.motion``: the columns ``q1_move_sign`` ... of a points file, a live session's from its samples), else
     from the points (:func:`reading_motion` by their session and time). The one rule of the ``motion`` input."""
-    return reading_motion(points.q, points.session, points.time) if given is None else given
+    if given is not None:
+        return given
+    own = getattr(points, "motion", None)         # a PointSet's; None on a namespace of q, session and time
+    if own is not None:
+        return np.asarray(own, dtype=float)
+    return reading_motion(points.q, points.session, points.time)
 
 
 def _session_codes(session: ArrayLike | None, n: int) -> np.ndarray:
@@ -226,7 +232,10 @@ class ArmModel:
         one pass (the torques at the readings) when no compliance turns a joint, a few for a sag of a few mrad
         (each pass shrinks the error by about C dtau/dtheta, the sag's own relative change). The iteration
         converges while the arm is stable under its load (C dtau/dtheta < 1); otherwise, or after ``max_iter``
-        passes, a :class:`~arm_model.errors.NumericalError`."""
+        passes, a :class:`~arm_model.errors.NumericalError`. A joint with a play closed by gravity
+        (:class:`~arm_model.effects.JointBacklash`) whose gravity torque changes sign within its play has no side to
+        rest on (the torque's sign flips back and forth between passes): it floats in the middle of its play, its
+        gravity torque taken as nil at that point."""
         from .errors import NumericalError
         from .pinocchio_model import PinocchioArm
 
@@ -237,8 +246,19 @@ class ArmModel:
         arm = PinocchioArm(self.described(np.zeros(self.spec.size) if p is None else p))
         w = None if wrench is None or not contact else np.atleast_2d(np.asarray(wrench, dtype=float))
         theta, step = q, np.inf
+        play = self._gravity_play_joints(p)
+        floating = np.zeros(q.shape, dtype=bool)
+        seen: list[np.ndarray] = []
         for _ in range(max_iter):
             tau_g, tau_c = arm.torques(theta, w)
+            if play.size:
+                # a play closed by gravity whose torque turns within the play: the torque's sign flips back and forth
+                # between passes (+, -, +) and the joint has no side to rest on; it floats, its load nil
+                side = np.sign(tau_g[:, play])
+                if len(seen) == 2:
+                    floating[:, play] |= (side != 0) & (side == seen[0]) & (side != seen[1])
+                seen = [*seen[-1:], side]
+                tau_g = np.where(floating, 0.0, tau_g)
             aux = AuxData(temp, tau_g, tau_c, stamps, moves)
             new = self.joint_angles(q, wrench, p, aux)
             step = float(np.max(np.abs(new - theta), initial=0.0))
@@ -248,6 +268,15 @@ class ArmModel:
         raise NumericalError(f"the arm's static equilibrium under its load was not found: the joint angles still "
                              f"moved by {step:.3g} after {max_iter} passes (is a joint compliance so large that the "
                              "arm buckles under its own weight?)")
+
+    def _gravity_play_joints(self, p: ArrayLike | None) -> np.ndarray:
+        """The joints a :class:`~arm_model.effects.JointBacklash` of ``p`` turns (a play closed by gravity)."""
+        from .effects import JointBacklash
+
+        values = np.zeros(self.spec.size) if p is None else np.asarray(p, dtype=float)
+        out = [i for e, sl in self._slices if isinstance(e, JointBacklash)
+               for i, b in zip(e.joint_indices(self.desc), values[sl], strict=True) if b != 0.0]
+        return np.array(sorted(set(out)), dtype=np.intp)
 
     # -- CasADi -------------------------------------------------------------------------------
     def casadi_function(self, name: str = "ball_centre") -> Any:

@@ -657,7 +657,7 @@ def read_covariance(path) -> Covariance:
     decimals (no ``4_5``, ``nan`` or ``inf``); ``value`` and ``u`` in the plausible range of the unit's
     quantity, ``u`` not negative; correlations in [-1, 1], 1 on the diagonal, symmetric. A cell that is
     not is an InputError naming the file, the line and the column."""
-    from .csv_io import parse_number
+    from .csv_io import SPACE, parse_number
     from .io import csv_records
     text = read_text(path, "the covariance file a model file names ([calibration] covariance)")
     recs = csv_records(text, str(path))
@@ -692,9 +692,9 @@ def read_covariance(path) -> Covariance:
         units.append(si)
         nums = []
         for cell, column in zip(r[2:], header[2:], strict=True):
-            v = parse_number(cell.strip())
+            v = parse_number(cell)
             if v is None or not math.isfinite(v):
-                raise InputError(f"expected a finite number, got {cell.strip()!r}", path, no, column)
+                raise InputError(f"expected a finite number, got {cell.strip(SPACE)!r}", path, no, column)
             nums.append(v)
         values[i], u[i] = nums[0] * f, nums[1] * f
         for column, x in (("value", values[i]), ("u", u[i])):

@@ -42,7 +42,7 @@ from .errors import InputError, resolved
 from .readback import UnreadableOutput, read_as, read_back
 
 __all__ = ["output_folder", "output_file", "check_suffix", "Output", "safe_name", "guard_output", "atomic_write_bytes",
-           "MARKER", "published_outputs", "check_output"]
+           "MARKER", "published_outputs", "check_output", "write_error"]
 
 log = logging.getLogger(__name__)
 
@@ -172,13 +172,14 @@ def _oserror(exc: OSError, what: str, path: Path) -> InputError:
 _WRITE_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
 
 
-def _write_error(exc: OSError, stage: Path, final: Path, what: str) -> InputError | None:
+def write_error(exc: OSError, stage: Path, final: Path, what: str) -> InputError | None:
     """The InputError of an OSError raised while the output was being written into ``stage`` (the
     temporary folder or file), naming where the file would have been published (the system names the
     temporary path, or nothing: a full disk fails a write, not an open); None for an OSError of
     something else (an input)."""
-    name = None if exc.filename is None else Path(os.path.abspath(os.fsdecode(exc.filename)))
-    inside = name is not None and _inside(name, stage)
+    names = [Path(os.path.abspath(os.fsdecode(f))) for f in (exc.filename, exc.filename2) if f is not None]
+    name = next((n for n in names if _inside(n, stage)), None)      # a copy names its source first
+    inside = name is not None
     if not inside and exc.errno not in _WRITE_ERRNOS:
         return None
     where = final / name.relative_to(stage) if inside and name != stage else final
@@ -377,7 +378,7 @@ def output_folder(final: str | Path, inputs=(), command: str = "", input_folders
     except (OSError, InputError, UnreadableOutput) as exc:
         shutil.rmtree(stage, ignore_errors=True)
         _remove_empty(created)
-        named = _write_error(exc, stage, final, "the output folder") if isinstance(exc, OSError) else \
+        named = write_error(exc, stage, final, "the output folder") if isinstance(exc, OSError) else \
             _published_error(exc, stage, final)
         if named is None:
             raise
@@ -427,7 +428,8 @@ def output_file(final: str | Path, inputs=(), writes: str | None = None):
         with contextlib.suppress(OSError):
             tmp.unlink()
         _remove_empty(created)
-        named = _write_error(exc, tmp, final, "the output file") if isinstance(exc, OSError) else None
+        named = write_error(exc, tmp, final, "the output file") if isinstance(exc, OSError) else \
+            _published_error(exc, tmp, final) if isinstance(exc, (InputError, UnreadableOutput)) else None
         if named is None:
             raise
         raise named from None

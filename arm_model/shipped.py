@@ -83,6 +83,7 @@ def copy_examples(dest: str | Path) -> list[Path]:
     import tempfile
 
     from .errors import InputError
+    from .output import write_error
     dest = Path(dest)
     src = shipped_path("examples")
     if not src.is_dir():
@@ -108,8 +109,11 @@ def copy_examples(dest: str | Path) -> list[Path]:
     moved: list[Path] = []
     try:
         for f, t in files:
-            (stage / t).parent.mkdir(parents=True, exist_ok=True)
-            shutil.copy2(f, stage / t)
+            try:
+                (stage / t).parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(f, stage / t)
+            except OSError as exc:      # a full disk: named where the file would have been, not the temporary copy
+                raise write_error(exc, stage, dest, "the examples") or exc from None
         for t in tops:
             if os.path.lexists(dest / t):       # made meanwhile: never replaced
                 raise InputError("refusing to write over an entry made while copying", dest / t)

@@ -207,8 +207,8 @@ def _check_numbers(root, path: Path) -> None:
             text = el.get(attr)
             if text is None:
                 continue
-            parts = text.split()
-            vals = [parse_number(v) for v in parts] if len(parts) == n else None
+            parts = text.split() if text.isascii() else None    # (split() also splits at a no-break space)
+            vals = [parse_number(v) for v in parts] if parts is not None and len(parts) == n else None
             used = (ptag, el.tag, attr) in _USED
             if used and vals and None not in vals and (ptag, el.tag, attr) in _UNBOUNDED:
                 vals = [0.0 if math.isinf(v) else v for v in vals]      # +-inf: no limit (a NaN stays refused)
@@ -300,6 +300,13 @@ def _check_tree(root, path: Path) -> tuple[dict, dict]:
                              "it turns without end" if jtype == "revolute" else ""), path, el.sourceline)
         joints[name] = el
     _check_no_loop(joints, path)
+    roots = [name for name in links if name not in children]
+    if len(roots) > 1:
+        first, other = links[roots[0]], links[roots[1]]
+        raise InputError(f"two root links, '{roots[0]}' (line {first.sourceline}) and '{roots[1]}' (line "
+                         f"{other.sourceline}): a link no joint leads to is a root, and a URDF is one tree (urdfdom, "
+                         "Pinocchio's and ROS's parser, refuses the file too); join it to the tree with a joint, or "
+                         "remove it", path, other.sourceline)
     return links, joints
 
 

@@ -61,7 +61,7 @@ def parse_holdout(text: str | None):
     """``--holdout`` (of calibrate and close-loop): None, a fraction in (0, 1) or a list of measurement ids."""
     if text is None:
         return None
-    v = parse_number(text.strip())
+    v = parse_number(text)
     if v is None:                       # the files' number rule: "0.2", not "0_2" nor another script's digits
         ids = [t.strip() for t in text.split(",") if t.strip()]
         if not ids:
@@ -421,6 +421,9 @@ def _load_data(args, defaults: bool = False):
     arm = model_from_args(args)
     desc = arm.desc
     model = model_effects(arm, args.effect)
+    if defaults and args.effect is None:
+        model = assume_masses(model, args)
+        desc = model.desc
     points = read_points(args.points, desc.joint_quantities)
     artefacts = None if args.artefacts is None else read_artefacts(args.artefacts)
     reference = None if args.reference_points is None else read_points(args.reference_points, desc.joint_quantities)
@@ -442,6 +445,22 @@ def _load_data(args, defaults: bool = False):
                  "under its own weight (each compliance's prior: non-negative, at most 10 mrad under its joint's RMS "
                  "gravity torque); --effect none for the geometry alone")
     return model, data.for_model(model), arm.values, warnings
+
+
+def assume_masses(model, args):
+    """``model``, or with its links' masses assumed from the chain's geometry
+    (:func:`calibration.calibrate.with_assumed_masses`: a URDF without any ``<inertial>`` and no ``--masses``), said
+    on the console; the default estimation then gives it a joint compliance under gravity as any robot."""
+    from .calibrate import ASSUMED_DENSITY, with_assumed_masses
+    assumed = None if getattr(args, "masses", None) is not None else with_assumed_masses(model)
+    if assumed is None:
+        return model
+    tool = " but the tool's" if model.desc.joints[-1].mass > 0 else ""
+    log.info(f"{model.desc.source or 'the URDF'} gives no link masses{tool}: each link taken as a uniform rod of "
+             f"{ASSUMED_DENSITY:g} kg/m from its joint to the next (the last to the tip), for the gravity torques of "
+             "the joint compliance; its compliances are per N m of these torques (--masses FILE to give the "
+             "masses, --effect none for the geometry alone)")
+    return assumed
 
 
 def _drift_about_the_session(model, points):

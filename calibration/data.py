@@ -158,8 +158,8 @@ class CalibrationData:
 
     @property
     def motion(self) -> np.ndarray:
-        """(N, J) the sign of each joint's last move onto each point: the data's own (``aux.motion``), else from the
-        points (:func:`arm_model.model.points_motion`)."""
+        """(N, J) the sign of each joint's last move onto each point: the data's own (``aux.motion``), else the
+        points' (their ``q1_move_sign`` ... columns, else their rule: :func:`arm_model.model.points_motion`)."""
         return points_motion(self.points, None if self.aux is None else self.aux.motion)
 
     @property
@@ -216,7 +216,9 @@ class CalibrationData:
 def merge_points(*given: PointSet | None) -> tuple[PointSet, np.ndarray]:
     """Join point sets (file order kept, one after the other; None: none) into one; returns it and the file of
     each row. Absent force/torque columns are zero, absent reference coordinates (and markers beyond a
-    file's own), temperature and time are NaN, an absent session column is the default session."""
+    file's own), temperature and time are NaN, an absent session column is the default session; where one file
+    gives each joint's last move (``q1_move_sign`` ...), a file without takes its own points' rule
+    (:func:`arm_model.model.points_motion` of that file alone)."""
     sets = [s for s in given if s is not None]
     if len(sets) == 1:
         return sets[0], np.full(len(sets[0]), sets[0].path, dtype=object)
@@ -247,7 +249,8 @@ def merge_points(*given: PointSet | None) -> tuple[PointSet, np.ndarray]:
         force_kind=None if not kinds else (kinds.pop() if len(kinds) == 1 else "mixed"),
         temperature=stack("temperature", (), np.nan), time=stack("time", (), np.nan),
         ref=ref, session=stack("session", (), DEFAULT_SESSION),
-        lines=np.concatenate([s.line_numbers for s in sets]))
+        lines=np.concatenate([s.line_numbers for s in sets]),
+        motion=None if all(s.motion is None for s in sets) else np.vstack([points_motion(s) for s in sets]))
     files = np.concatenate([np.full(len(s), s.path, dtype=object) for s in sets])
     return merged, files
 

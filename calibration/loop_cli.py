@@ -95,6 +95,7 @@ def register(sub) -> None:
                    help="do not build effects from the residual's structure once the library is exhausted "
                         "(default: build them: joint harmonics, per-link and probe thermal growth, a probe "
                         "compliance matrix and its tilted axes, an approach offset, lateral joint compliance)")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots (the report keeps its tables)")
     p.add_argument("--held-out-gain-only", action="store_true",
                    help="add only effects that improve the held-out data significantly (default: also include "
                         "joint compliance under gravity as physics when its signature is significant, its "
@@ -133,6 +134,8 @@ def run(args: argparse.Namespace) -> int:
         from arm_model.model import ArmModel
 
         from .calibrate import default_effects
+        from .cli import assume_masses
+        desc = assume_masses(ArmModel(desc, tuple(effects)), args).desc
         added = default_effects(ArmModel(desc, tuple(effects)))
         effects = tuple(effects) + added
         if added:
@@ -176,7 +179,8 @@ def run(args: argparse.Namespace) -> int:
                  "arm": str(args.arm),
                  "reference_points": None if args.reference_points is None else str(args.reference_points)}
         conf = _conformance(loop, mpe_from_args(args))
-        write_loop_report(loop, out.dir, inputs=inputs, input_names=names, warnings=warnings, conformance=conf)
+        write_loop_report(loop, out.dir, inputs=inputs, input_names=names, warnings=warnings, conformance=conf,
+                          plots=not args.no_plots)
     log.info(before_after_text(loop))
     for sk in loop.skipped:
         log.info(f"{sk.name} not offered: {sk.reason}")

@@ -322,35 +322,38 @@ def _fitted_on(loop: LoopResult) -> str:
 
 
 def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | None = None,
-                      warnings=(), conformance: dict | None = None) -> list[Path]:
+                      warnings=(), conformance: dict | None = None, plots: bool = True) -> list[Path]:
     """Write the model file (:func:`write_loop_model`), ``summary.json``, ``report.html``,
     ``before-after.txt`` and the PNGs into ``out_dir`` (atomically, never over ``inputs``); returns the
     paths written. ``conformance``: the standard tests (:func:`calibration.cli.conformance_entry`), written
-    as ``calibrate`` writes them (summary key ``conformance``, ``conformance_*.png``, a report section)."""
+    as ``calibrate`` writes them (summary key ``conformance``, ``conformance_*.png``, a report section).
+    ``plots``: False (``--no-plots``), no PNG is drawn and the report holds the tables alone."""
     out = Path(out_dir)
     inputs = [Path(p) for p in inputs]
-    conf_files = conformance_pngs(conformance, out) if conformance else {}
+    conf_files = conformance_pngs(conformance, out) if conformance and plots else {}
     fit = loop.model_fit or loop.final.result
     final = without_session_effects(fit)                   # the fit the model file is written from
     drift = session_drift(fit)
-    disc_files = discrepancy_pngs(final, out)
+    disc_files = discrepancy_pngs(final, out) if plots else {}
     for name in ("summary.json", "report.html", "before-after.txt", *model_paths(out, loop_model_name(loop)).values(),
                  *(f.name for f in conf_files.values()), *(f.name for f in disc_files.values())):
         guard_output(out / name, inputs)
     model_files = write_loop_model(loop, out, inputs)
     written = list(model_files.values())
 
-    def png(name, data):
-        written.append(atomic_write_bytes(out / name, data, inputs))
-        return name
+    def img(name, draw, *args) -> str:
+        """``<img>`` of the plot ``draw(*args)`` written as ``name`` ("" without plots: nothing drawn)."""
+        if not plots:
+            return ""
+        written.append(atomic_write_bytes(out / name, draw(*args), inputs))
+        return f"<img src='{name}'>"
 
     sections = []
     table = before_after_text(loop)
-    img = png("before-after.png", plot_before_after(loop))
     sections.append(f"<h2>Verdict</h2><p>{html.escape(loop.verdict)}</p><p>Stopped: "
                     f"{html.escape(loop.stop_reason)}.</p>{_heldout_html(loop.heldout_check)}"
                     "<h2>Before and after (held-out test set)</h2>"
-                    f"<pre>{html.escape(table)}</pre><img src='{img}'>")
+                    f"<pre>{html.escape(table)}</pre>" + img("before-after.png", plot_before_after, loop))
     if loop.built:
         sections.append("<h2>Effects built from the residual</h2>" + reports.html_table(
             ("effect", "family", "added", "why not"),
@@ -370,22 +373,21 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
                          + " (same residual signature).</p>")
         parts.append("<h3>Screening at the previous fit</h3>"
                      + reports.html_table(_SCREEN_HEAD, _screening_rows(s.screening)))
-        img = png(f"stage-{s.index}-screening.png", plot_screening(s.screening, f"stage {s.index}: screening", gate))
-        parts.append(f"<img src='{img}'>")
+        parts.append(img(f"stage-{s.index}-screening.png", plot_screening, s.screening, f"stage {s.index}: screening",
+                         gate))
         parts.append("<h3>Cross-validation (held-out folds of the design set)</h3>"
                      + reports.html_table(_CV_HEAD, _cv_rows(s.cv)))
-        if s.plot_before is not None:
-            img = png(f"stage-{s.index}-signature.png",
-                      plot_signature(s.plot_before, s.plot_after,
-                                     f"{s.plot_family}: before and after + {s.added.name}"))
-            parts.append(f"<h3>The residual that led to it</h3><img src='{img}'>")
+        if s.plot_before is not None and plots:
+            parts.append("<h3>The residual that led to it</h3>" + img(
+                f"stage-{s.index}-signature.png", plot_signature, s.plot_before, s.plot_after,
+                f"{s.plot_family}: before and after + {s.added.name}"))
         sections.append("".join(parts))
     if drift:
         sections.append("<h2>The session's drift (not in the model file)</h2><p>" + html.escape(drift_text(drift))
                         + "</p>")
-    sections.append(_final_html(loop, png))
+    sections.append(_final_html(loop, img))
     if conformance:
-        written += write_conformance_pngs(conformance, conf_files, inputs)
+        written += write_conformance_pngs(conformance, conf_files, inputs) if plots else []
         sections.append("".join(conformance_html(conformance, conf_files)))
     written += write_discrepancy_png(final, disc_files, inputs)
     sections.append("".join(discrepancy_html(final, disc_files)))
@@ -412,15 +414,15 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
     return written
 
 
-def _final_html(loop: LoopResult, png) -> str:
+def _final_html(loop: LoopResult, img) -> str:
     """The report's section on the final fit (its screening, cross-validation, structure tests and the candidates
-    not offered); ``png(name, data)`` writes a plot and returns its name."""
+    not offered); ``img(name, draw, *args)`` writes the plot ``draw(*args)`` and returns its ``<img>`` ("" without
+    plots)."""
     parts = ["<h2>Final screening</h2>"]
     if loop.final_screening:
         parts.append(reports.html_table(_SCREEN_HEAD, _screening_rows(loop.final_screening)))
         gate = loop.settings.screen_alpha / max(sum(t.identifiable for t in loop.final_screening), 1)
-        img = png("final-screening.png", plot_screening(loop.final_screening, "final screening", gate))
-        parts.append(f"<img src='{img}'>")
+        parts.append(img("final-screening.png", plot_screening, loop.final_screening, "final screening", gate))
     if loop.final_cv:
         parts.append("<h3>Cross-validation</h3>" + reports.html_table(_CV_HEAD, _cv_rows(loop.final_cv)))
     parts.append("<h2>Structure tests on the final fit</h2>")
@@ -429,8 +431,7 @@ def _final_html(loop: LoopResult, png) -> str:
                         [(f.name, t.k, t.rank, _g(t.delta_chi2, ".1f"), _g(t.p_value, ".2g"), _g(a, ".2g"),
                           _g(t.explained_cv, ".3f"), t.best, f.what) for f, t, a in loop.structure]))
     for name, d in loop.structure_plots.items():
-        img = png(f"structure-{_slug(name)}.png", plot_signature(d, None, f"remaining structure: {name}"))
-        parts.append(f"<img src='{img}'>")
+        parts.append(img(f"structure-{_slug(name)}.png", plot_signature, d, None, f"remaining structure: {name}"))
     if loop.skipped:
         parts.append("<h3>Candidates not offered</h3>" + reports.html_table(("candidate", "why"),
                                                                [(s.name, s.reason) for s in loop.skipped]))

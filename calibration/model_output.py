@@ -126,6 +126,12 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
     drift = session_drift(result)
     if drift:
         comment = (f"{comment}\n" if comment else "") + drift_text(drift)
+    if result.model.desc.masses_assumed:
+        from .calibrate import ASSUMED_DENSITY
+        comment = (f"{comment}\n" if comment else "") + (
+            f"The masses (mass_kg) are assumed, not the arm's: its URDF gave its links none; each link is "
+            f"a uniform rod of {ASSUMED_DENSITY:g} kg/m from its joint to the next (a tool's given mass added), for "
+            "the gravity torques. The joint compliances are per N m of these torques.")
     result = without_session_effects(result)
     files = model_paths(out_dir, name)
     for f in files.values():

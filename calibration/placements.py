@@ -10,6 +10,10 @@ other placements. Figures per held-out placement (``seat_figures``):
   centres in the hole (twice the RMS radial distance to the hole's mean centre, n - 1 for the mean fitted;
   the single-point articulation figure ``two_rms`` of :mod:`calibration.validation`);
 * **distance error** [mm]: distance between the two holes' mean centres minus the certified length;
+* **distance error with the capture-order trend removed** [mm] (:func:`order_detrended_distance_error`, a
+  diagnostic, not a figure of merit): the same with one linear trend over the points' order in the file, shared by
+  both holes, fitted out; it tells an error carried by the order of capture (the plate or the base drifting while
+  the holes are measured one after the other, or the poses swept in order) from one the model makes;
 * **coverage of u** (when the model carries an uncertainty): the share of the axis values whose deviation
   from their hole's mean centre lies within 1.96 u, for ``tip``'s u of each centre (``inside``) and for the
   standard uncertainty of the deviation itself (``inside_dev``, :func:`deviation_u`: the errors every point of
@@ -31,7 +35,8 @@ import numpy as np
 from arm_model import InputError
 from arm_model.log import progress_line
 
-__all__ = ["seat_figures", "deviation_u", "model_deviation_u", "PlacementRow", "placement_study", "markdown_table"]
+__all__ = ["seat_figures", "order_detrended_distance_error", "deviation_u", "model_deviation_u", "PlacementRow",
+           "placement_study", "markdown_table"]
 
 
 def deviation_u(prop, feature: np.ndarray, holes) -> np.ndarray:
@@ -77,9 +82,29 @@ def model_deviation_u(model: Path, points: Path, holes) -> np.ndarray | None:
     return deviation_u(prop, pts.feature, holes)
 
 
+def order_detrended_distance_error(x: np.ndarray, feature: np.ndarray, holes: tuple[str, str], length: float) -> float:
+    """The distance error [mm] of two holes' centres with one linear trend over the capture order removed: ``x``
+    (N, 3) [m] the ball centres in the order they were captured (a points file's rows), ``feature`` each one's hole;
+    the points of ``holes`` are fitted by ``x_i = c_h(i) + v (i - i_mean)`` (least squares, per axis: the two centres
+    ``c`` and one trend ``v`` [m per point] for both holes), and ``|c_1 - c_0| - length`` is returned. The trend is
+    fixed by the order within each hole only (the centres take each hole's mean), and moves the distance by
+    ``v`` times the gap between the holes' mean positions in the order: large when the holes were measured one after
+    the other and the points drift along the order, nil when the order carries nothing."""
+    feature = np.asarray(feature)
+    sel = np.isin(feature, holes)
+    n = int(sel.sum())
+    t = np.arange(n) - (n - 1) / 2.0
+    a = np.column_stack([feature[sel] == holes[0], feature[sel] == holes[1], t]).astype(float)
+    if np.linalg.matrix_rank(a) < 3:
+        raise InputError(f"holes {holes[0]}, {holes[1]}: a trend over the capture order needs two points in a hole")
+    coef = np.linalg.lstsq(a, np.asarray(x, float)[sel], rcond=None)[0]
+    return float(np.linalg.norm(coef[1] - coef[0]) - length) * 1e3
+
+
 def seat_figures(x: np.ndarray, feature: np.ndarray, holes: tuple[str, str], length: float,
                  u: np.ndarray | None = None, u_dev: np.ndarray | None = None) -> dict:
-    """Spread (2 sigma) of each hole and the distance error, from ball centres ``x`` (N, 3) [m] and the
+    """Spread (2 sigma) of each hole and the distance error (also with the capture-order trend removed,
+    :func:`order_detrended_distance_error`), from ball centres ``x`` (N, 3) [m] in their captured order and the
     feature of each point; values [mm]. With the centres' standard uncertainties ``u`` (N, 3) [m], also the
     coverage: ``inside`` of the ``values`` axis deviations from their hole's mean centre lie within 1.96 u;
     with the deviations' own standard uncertainties ``u_dev`` (N, 3) [m] (:func:`deviation_u`), ``inside_dev``
@@ -107,6 +132,7 @@ def seat_figures(x: np.ndarray, feature: np.ndarray, holes: tuple[str, str], len
     dist = float(np.linalg.norm(centre[holes[0]] - centre[holes[1]]))
     out["distance_mm"] = dist * 1e3
     out["distance_error_mm"] = (dist - length) * 1e3
+    out["distance_error_detrended_mm"] = order_detrended_distance_error(x, feature, holes, length)
     return out
 
 
@@ -165,7 +191,9 @@ def placement_study(root: Path, arm: Path, tip_frame: str | None, out: Path, tra
     command under ``out``. ``root`` holds the ``artefacts.toml`` (two seats and
     one certified distance between them). ``methods``: ``close-loop`` runs ``aacmm close-loop``, any other name
     ``aacmm calibrate`` (``calibrate`` with its defaults; e.g. ``geometry`` with ``--effect none`` given in
-    ``options``). ``options``: extra command-line options per method (lists)."""
+    ``options``); a name starting ``close-loop`` (``close-loop@1``) runs ``aacmm close-loop`` with that method's
+    options (e.g. ``--seed 1``); ``nominal`` applies ``arm`` itself, nothing fitted. ``options``: extra
+    command-line options per method (lists)."""
     from arm_model.io import read_artefacts
     root, out = Path(root), Path(out)
     say = progress or progress_line(logging.getLogger(__name__))
@@ -191,29 +219,32 @@ def placement_study(root: Path, arm: Path, tip_frame: str | None, out: Path, tra
             pts.parent.mkdir(parents=True, exist_ok=True)
             pts.write_text("\n".join(parts[0] + [ln for p in parts[1:] for ln in p[1:] if ln.strip()]) + "\n")
         models = {}
-        for method in (m for m in methods if m != "close-loop"):      # calibrate, with that method's options
+        if "nominal" in methods:
+            models["nominal"] = (arm, ())
+        for method in (m for m in methods if not m.startswith("close-loop") and m != "nominal"):   # calibrate
             say(f"{tr}: aacmm calibrate ({method})")
             dst = out / tr / method
             _cli(["calibrate", str(pts), str(artefacts), *arm_opts, "-o", str(dst), "--no-plots",
                   *(options or {}).get(method, [])])
             models[method] = (next(dst.glob("*-calibrated.toml")), ())
-        if "close-loop" in methods:
-            say(f"{tr}: aacmm close-loop")
-            dst = out / tr / "close-loop"
-            _cli(["close-loop", str(pts), str(artefacts), *arm_opts, "-o", str(dst), "--quiet",
-                  *(options or {}).get("close-loop", [])])
+        for method in (m for m in methods if m.startswith("close-loop")):
+            say(f"{tr}: aacmm close-loop ({method})")
+            dst = out / tr / method
+            _cli(["close-loop", str(pts), str(artefacts), *arm_opts, "-o", str(dst), "--quiet", "--no-plots",
+                  *(options or {}).get(method, [])])
             import json
             summary = json.loads((dst / "summary.json").read_text())
             effects = tuple(e["name"] for e in summary["effects_added"])
             model = _loop_model(dst)
             if model is None:
                 raise RuntimeError(f"aacmm close-loop wrote no model file in {dst}")
-            models["close-loop"] = (model, effects)
+            models[method] = (model, effects)
         for method, (model, effects) in models.items():
             for te in places:
                 if te in group:
                     continue
-                x, feat, u = _tip(root / te / "points.csv", model, out / tr / f"{method}-tip-{te}.csv")
+                x, feat, u = _tip(root / te / "points.csv", model, out / tr / f"{method}-tip-{te}.csv",
+                                  tip_frame if method == "nominal" else None)
                 u_dev = None if u is None else model_deviation_u(model, root / te / "points.csv", holes)
                 rows.append(PlacementRow(tr, method, te, seat_figures(x, feat, holes, length, u, u_dev), effects))
                 say(f"  {method} -> {te}: spread {rows[-1].figures['spread_mean_mm']:.3f} mm, distance error "
@@ -244,6 +275,8 @@ def markdown_table(rows: list[PlacementRow], holes=("hole-0", "hole-1")) -> str:
         sel = [r.figures for r in rows if r.method == m]
         lines.append(f"| **mean** | {m} | all | "
                      + " | ".join(f"{np.mean([f[f'spread_{h}_mm'] for f in sel]):.3f}" for h in holes)
-                     + f" | {np.mean([abs(f['distance_error_mm']) for f in sel]):.3f} (mean abs) | "
+                     + f" | {np.mean([abs(f['distance_error_mm']) for f in sel]):.3f} (mean abs; "
+                     + f"{np.mean([abs(f['distance_error_detrended_mm']) for f in sel]):.3f} with the capture-order "
+                     + "trend removed) | "
                      + f"{_coverage(sel, 'inside')} / {_coverage(sel, 'inside_dev')} | |")
     return "\n".join(lines)

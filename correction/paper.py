@@ -30,8 +30,8 @@ import numpy as np
 from scipy import stats
 
 from arm_model import InputError
-from arm_model.csv_io import blank_record, parse_number
-from arm_model.errors import id_problem, read_text, unknown_key
+from arm_model.csv_io import SPACE, blank_record, parse_number
+from arm_model.errors import id_problem, read_text, text_lines, unknown_key
 from arm_model.units import implausible
 
 from .correlation import Correlation, correlate
@@ -81,14 +81,14 @@ def load_paper_table2(path: str | Path | None = None) -> PaperTable2:
     ``measurement,initial_mm,point_force_mm,mean_force_mm,max_force_mm,max10_force_mm``)."""
     path = Path(TABLE2_PATH if path is None else path)
     text = read_text(path, "the table")
-    rows = [(no, line) for no, line in enumerate(text.splitlines(), start=1)
+    rows = [(no, line) for no, line in enumerate(text_lines(text), start=1)
             if not blank_record(line) and not line.lstrip().startswith("#")]
     if not rows:
         raise InputError("no header line", path, 1)
 
     def cells(no: int, line: str) -> list[str]:
         try:
-            return [c.strip() for c in next(csv.reader([line], strict=True))]
+            return [c.strip(SPACE) for c in next(csv.reader([line], strict=True))]
         except csv.Error as exc:
             raise InputError(f"not valid CSV: {exc}", path, no) from None
 

@@ -41,6 +41,68 @@ from calibration.placements import placement_study, seat_figures  # noqa: E402
 
 URDF = ROOT / "examples" / "data" / "real-panda-seats" / "panda-with-inertials.urdf"
 TIP = "ball_link"
+PANDA_SHOULDER = 0.333   # [m] height of the Panda's shoulder (joint 2's axis) above its base: PLACES are for it
+
+
+@dataclass(frozen=True)
+class ArmSpec:
+    """A robot type: where its URDF comes from (as its maker or a package ships it, never copied here), the link
+    a ball tool is fixed to and where the ball sits in that link's frame, as the seat data set's tools are, and
+    the height of its shoulder (joint 2's axis) [m], so that each plate placement keeps its place relative to the
+    shoulder (:data:`PLACES` are the Panda's)."""
+    name: str
+    flange: str | None                    # None: the file has its ball_link (the Panda of the data set)
+    tool_m: tuple = (0.0, 0.0, 0.0)       # ball centre in the flange frame [m]
+    shoulder_m: float = PANDA_SHOULDER
+    source: str = ""                      # where the shipped file is found
+    package: tuple | None = None          # (Python package, file under it) that ships it
+
+
+ARMS = {
+    "panda": ArmSpec("panda", None, source="examples/data/real-panda-seats (the data set's own)"),
+    "iiwa14": ArmSpec("iiwa14", "lbr_iiwa_link_7", (0.0004, -0.0003, 0.131), 0.36,
+                      "pybullet 3.2.7, pybullet_data/kuka_iiwa/model.urdf (KUKA LBR iiwa 14 R820)",
+                      ("pybullet_data", "kuka_iiwa/model.urdf")),
+    "gen3": ArmSpec("gen3", "EndEffector_Link", (0.0003, 0.0002, 0.098), 0.15643 + 0.12838,
+                    "Kinova's ros_kortex, kortex_description/arms/gen3/7dof/urdf/GEN3_URDF_V12.urdf (Gen3, 7 joints)"),
+}
+
+
+def ball_urdf(text: str, arm: ArmSpec) -> str:
+    """The shipped URDF ``text`` with a ball tool: link ``ball_link`` fixed to ``arm.flange`` at ``arm.tool_m``
+    (a visual sphere of 5 mm radius, as the data set's), and one more fixed link after it (a tool's cap: the
+    tip is not a leaf). Everything else stays as shipped."""
+    x, y, z = arm.tool_m
+    tool = (f'  <link name="ball_link">\n    <visual>\n      <geometry>\n        <sphere radius="0.005"/>\n'
+            f'      </geometry>\n    </visual>\n  </link>\n'
+            f'  <joint name="ball_joint" type="fixed">\n    <origin rpy="0 0 0" xyz="{x} {y} {z}"/>\n'
+            f'    <parent link="{arm.flange}"/>\n    <child link="ball_link"/>\n  </joint>\n'
+            f'  <link name="ball_cap"/>\n  <joint name="ball_cap_joint" type="fixed">\n'
+            f'    <origin rpy="0 0 0" xyz="0 0 0.005"/>\n    <parent link="ball_link"/>\n'
+            f'    <child link="ball_cap"/>\n  </joint>\n')
+    end = text.rindex("</robot>")
+    return text[:end] + tool + text[end:]
+
+
+def without_inertials(text: str) -> str:
+    """``text`` with every ``<inertial>`` block removed (a nominal URDF as the data set ships it)."""
+    import re
+    return re.sub(r"\s*<inertial>.*?</inertial>", "", text, flags=re.S)
+
+
+def nominal_urdfs(arm: ArmSpec, shipped: Path | None, folder: Path) -> tuple[Path, Path]:
+    """(the URDF with its masses, the same without ``<inertial>``) of ``arm`` with the ball tool; for a shipped
+    file, both written into ``folder``."""
+    if arm.flange is None:
+        return URDF, URDF.with_name("panda.urdf")
+    if shipped is None:
+        raise SystemExit(f"arm {arm.name}: give its URDF (--urdf {arm.name}=PATH; {arm.source})")
+    folder.mkdir(parents=True, exist_ok=True)
+    text = ball_urdf(Path(shipped).read_text(), arm)
+    out = folder / f"{arm.name}-ball.urdf", folder / f"{arm.name}-ball-no-inertials.urdf"
+    out[0].write_text(text)
+    out[1].write_text(without_inertials(text))
+    return out
 HOLES = ("hole-0", "hole-1")
 LENGTH = 0.05            # [m] certified distance between the seats
 #: placement -> (hole-0 centre [m], direction to hole-1, seat axis out of the seat), as the real plate's
@@ -63,6 +125,8 @@ class Robot:
     stiffness: float | list | None = None     # joint stiffness under gravity [N m/rad], None: rigid joints
     eccentricity: tuple = ()              # ({"joint": ..., "amplitude_mrad": ..., "phase_deg": ...}, ...)
     gain: dict = field(default_factory=dict)  # joint index (0-based) -> gain error [1]
+    arm: str = "panda"                    # a key of ARMS
+    encoder_noise_urad: float = 0.0       # encoder noise, 1 sigma per reading [urad]
 
     def truth_text(self) -> str:
         out = [f"origins {self.length_um:.0f} um / {self.angle_mrad:.2f} mrad"]
@@ -73,11 +137,19 @@ class Robot:
         else:
             out.append("stiffness " + "/".join(f"{k / 1e3:.0f}" for k in self.stiffness) + " kN m/rad")
         for e in self.eccentricity:
-            out.append(f"eccentricity {e['joint'].replace('panda_joint', 'j')} {e['amplitude_mrad']} mrad")
+            out.append(f"eccentricity j{joint_number(e['joint'])} {e['amplitude_mrad']} mrad")
         for j, g in self.gain.items():
             out.append(f"gain j{j + 1} {g:.0e}")
         out.append(f"noise {self.noise_um:.0f} um")
+        if self.encoder_noise_urad:
+            out.append(f"encoders {self.encoder_noise_urad:.0f} urad")
         return ", ".join(out)
+
+
+def joint_number(joint) -> int:
+    """1-based joint number of an eccentricity's ``joint``: a number, or a name ending in one (``panda_joint3``)."""
+    import re
+    return int(joint) if isinstance(joint, int) else int(re.findall(r"\d+", joint)[-1])
 
 
 ROBOTS = (
@@ -96,26 +168,45 @@ ROBOTS = (
     Robot("r9", "front", 21, 300.0, 0.30, 150.0, stiffness=12000.0,      # joint 1's alone
           eccentricity=({"joint": "panda_joint1", "amplitude_mrad": 1.0, "phase_deg": 120.0},)),
 )
+#: robots of the other types of ARMS (their URDFs as shipped, given by --urdf / --python): origins off by 0.1-1 mm and
+#: 0.5-2 mrad, play 0.1-0.3 mm, encoder noise
+OTHER_ROBOTS = (
+    Robot("i1", "front", 31, 500.0, 1.0, 150.0, stiffness=20000.0, arm="iiwa14", encoder_noise_urad=10.0),
+    Robot("i2", "right", 32, 800.0, 1.5, 250.0, stiffness=[30000, 20000, 25000, 15000, 10000, 10000, 8000],
+          eccentricity=({"joint": 1, "amplitude_mrad": 0.5, "phase_deg": 45.0},), arm="iiwa14",
+          encoder_noise_urad=20.0),
+    Robot("i3", "back-high", 33, 200.0, 0.5, 100.0, arm="iiwa14", encoder_noise_urad=5.0),
+    Robot("g1", "front", 41, 500.0, 1.0, 200.0, stiffness=8000.0, arm="gen3", encoder_noise_urad=10.0),
+    Robot("g2", "right", 42, 1000.0, 2.0, 300.0, stiffness=[10000, 6000, 8000, 5000, 3000, 3000, 3000],
+          arm="gen3", encoder_noise_urad=20.0),
+    Robot("g3", "back-high", 43, 100.0, 0.5, 150.0, arm="gen3",
+          eccentricity=({"joint": 2, "amplitude_mrad": 0.6, "phase_deg": -30.0},), encoder_noise_urad=5.0),
+)
 
 
-def campaign_dict(robot: Robot) -> dict:
-    """The simulator's campaign: the truth and two seats a placement (feature ids ``<place>.<hole>``)."""
+def campaign_dict(robot: Robot, joints: list[str] | None = None) -> dict:
+    """The simulator's campaign: the truth and two seats a placement (feature ids ``<place>.<hole>``); ``joints``:
+    the arm's joint names (an eccentricity's joint given by number)."""
     tasks = []
+    lift = ARMS[robot.arm].shoulder_m - PANDA_SHOULDER
     for place, (p, d, axis) in PLACES.items():
         for h, off in zip(HOLES, (0.0, LENGTH), strict=True):
+            c = np.asarray(p, float) + off * np.asarray(d, float) + [0.0, 0.0, lift]
             tasks.append({"kind": "seat", "id": f"{place}.{h}", "axis": axis, "articulations": 30,
-                          "position_mm": ((np.asarray(p) + off * np.asarray(d, float)) * 1e3).tolist(),
-                          "stylus_cone_deg": 50.0})
+                          "position_mm": (c * 1e3).tolist(), "stylus_cone_deg": 50.0})
     truth = {"length_error_um": robot.length_um, "angle_error_deg": float(np.degrees(robot.angle_mrad * 1e-3)),
              "probe_error_um": 1000.0,
              "probe_compliance": {"bending_um_per_N": 0.0, "axial_um_per_N": 0.0}}    # a rigid tool
     if robot.stiffness is not None:
         truth["joint_compliance"] = {"stiffness_Nm_per_rad": robot.stiffness, "gravity": True, "contact": False}
     if robot.eccentricity:
-        truth["eccentricity"] = [{"joint": e["joint"], "amplitude_deg": float(np.degrees(e["amplitude_mrad"] * 1e-3)),
+        truth["eccentricity"] = [{"joint": e["joint"] if joints is None else joints[joint_number(e["joint"]) - 1],
+                                  "amplitude_deg": float(np.degrees(e["amplitude_mrad"] * 1e-3)),
                                   "phase_deg": e["phase_deg"]} for e in robot.eccentricity]
-    return {"seed": robot.seed, "sensor": "none", "signals": {"enabled": False}, "truth": truth,
-            "noise": {"probing_repeatability_um": robot.noise_um},
+    noise = {"probing_repeatability_um": robot.noise_um}
+    if robot.encoder_noise_urad:
+        noise["encoder_noise_deg"] = float(np.degrees(robot.encoder_noise_urad * 1e-6))
+    return {"seed": robot.seed, "sensor": "none", "signals": {"enabled": False}, "truth": truth, "noise": noise,
             "operator": {"force_mean_N": 0.3, "max_force_N": 1.0}, "task": tasks}
 
 
@@ -128,7 +219,7 @@ def simulate_robot(robot: Robot, folder: Path, urdf: Path = URDF) -> dict:
     from arm_model.urdf_import import load_arm
 
     desc = load_arm(urdf, TIP)
-    sim = simulate(campaign_from_dict(campaign_dict(robot), arm=desc))
+    sim = simulate(campaign_from_dict(campaign_dict(robot, [j.name for j in desc.encoders]), arm=desc))
     q_sim = sim.points.q
     q_read = q_sim.copy()
     for j, g in robot.gain.items():               # the encoder reads q_true / (1 + g)
@@ -158,41 +249,66 @@ OPTIONS = {"close-loop": [], "calibrate": [], "geometry": ["--effect", "none"],
            "nominal-tip": ["--effect", "none", "--free", "probe.x", "--free", "probe.y", "--free", "probe.z"]}
 
 
-def oracle_options(robot: Robot) -> list[str]:
-    """``calibrate`` options of the truth's own effects (each effect's parameters on the truth's joints only)."""
+def oracle_options(robot: Robot, joints: list[str] | None = None) -> list[str]:
+    """``calibrate`` options of the truth's own effects (each effect's parameters on the truth's joints only);
+    ``joints``: the arm's joint names (default the Panda's)."""
+    joints = joints or [f"panda_joint{j}" for j in range(1, 8)]
     out = ["--effect", "joint_compliance"] if robot.stiffness is not None else []
-    for key, joints, pattern in (("eccentricity", {e["joint"] for e in robot.eccentricity}, "ecc*"),
-                                 ("joint_gain", {f"panda_joint{j + 1}" for j in robot.gain}, "gain")):
-        if joints:
-            out += ["--effect", key] + [a for j in range(1, 8) if f"panda_joint{j}" not in joints
-                                        for a in ("--hold", f"panda_joint{j}.{pattern}")]
+    for key, numbers, pattern in (("eccentricity", {joint_number(e["joint"]) for e in robot.eccentricity}, "ecc*"),
+                                  ("joint_gain", {j + 1 for j in robot.gain}, "gain")):
+        if numbers:
+            out += ["--effect", key] + [a for k, name in enumerate(joints, 1) if k not in numbers
+                                        for a in ("--hold", f"{name}.{pattern}")]
     return out or ["--effect", "none"]
 
 
-def study_robot(robot: Robot, out: Path, methods=METHODS, train=None, progress=None) -> dict:
+def loop_seeds(methods) -> dict:
+    """Options of the seeded loop methods: ``close-loop@S`` runs ``close-loop --seed S``."""
+    return {m: ["--seed", m.split("@", 1)[1]] for m in methods if m.startswith("close-loop@")}
+
+
+def study_robot(robot: Robot, out: Path, methods=METHODS, train=None, progress=None, shipped: Path | None = None,
+                nominal: str = "masses") -> dict:
     """Simulate ``robot``, train every method on its training placement (``train``: these placements
-    instead), predict the others."""
-    truth = simulate_robot(robot, out / "data")
+    instead), predict the others. ``shipped``: the arm's URDF as shipped (not the Panda); ``nominal``: the
+    nominal every method starts from, the URDF with its masses (``masses``) or without ``<inertial>``
+    (``no-inertials``); the truth is always simulated with the masses (a real arm sags)."""
+    from arm_model.urdf_import import load_arm
+    with_masses, bare = nominal_urdfs(ARMS[robot.arm], shipped, out / "arm")
+    truth = simulate_robot(robot, out / "data", with_masses)
+    joints = [j.name for j in load_arm(with_masses, TIP).encoders]
     train = train or [robot.train]
-    rows = placement_study(out / "data", URDF, TIP, out / "runs", train=train, progress=progress,
-                           methods=tuple(methods), options={**OPTIONS, "oracle": oracle_options(robot)})
-    return {"robot": robot.name, "truth_text": robot.truth_text(), "train": "/".join(train),
-            "truth": truth["figures"], "rows": [r.to_dict() for r in rows]}
+    rows = placement_study(out / "data", with_masses if nominal == "masses" else bare, TIP, out / "runs",
+                           train=train, progress=progress, methods=tuple(methods),
+                           options={**OPTIONS, "oracle": oracle_options(robot, joints), **loop_seeds(methods)})
+    return {"robot": robot.name, "arm": robot.arm, "nominal": nominal, "truth_text": robot.truth_text(),
+            "train": "/".join(train), "truth": truth["figures"], "rows": [r.to_dict() for r in rows]}
+
+
+def _methods(rows: list[dict]) -> list[str]:
+    """The methods of ``rows`` in :data:`METHODS` order, the seeded loops and the plain nominal first."""
+    got = list(dict.fromkeys(x["method"] for x in rows))
+    order = ["nominal"] + [m for m in got if m.startswith("close-loop")] + list(METHODS)
+    return [m for m in dict.fromkeys(order) if m in got]
 
 
 def summary_rows(results: list[dict]) -> list[dict]:
-    """One row per robot and training placement: the effects the loop added and, per method (and the truth
-    on the same held-out placements), the mean held-out spread [mm], the mean |distance error| [mm] and the
-    pooled coverage of u [%]."""
+    """One row per robot and training placement: the effects each loop added (``added``: the first loop's;
+    ``added_by``: per loop method, e.g. per ``--seed``) and, per method (and the truth on the same held-out
+    placements), the mean held-out spread [mm], the mean |distance error| [mm] and the pooled coverage of u [%]."""
     out = []
     for r in results:
         for tr in dict.fromkeys(x["train"] for x in r["rows"]):
             rows = [x for x in r["rows"] if x["train"] == tr]
             tests = list(dict.fromkeys(x["test"] for x in rows))
+            methods = _methods(rows)
             figs = {"truth": [r["truth"][t] for t in tests]}
-            figs.update({m: [x for x in rows if x["method"] == m] for m in METHODS})
-            line = {"robot": r["robot"], "truth_text": r["truth_text"], "train": tr, "tests": tests,
-                    "added": next((x["effects"] for x in rows if x["method"] == "close-loop"), [])}
+            figs.update({m: [x for x in rows if x["method"] == m] for m in methods})
+            added_by = {m: next(x["effects"] for x in rows if x["method"] == m)
+                        for m in methods if m.startswith("close-loop")}
+            line = {"robot": r["robot"], "arm": r.get("arm", "panda"), "nominal_file": r.get("nominal", "masses"),
+                    "truth_text": r["truth_text"], "train": tr, "tests": tests, "methods": methods,
+                    "added": next(iter(added_by.values()), []), "added_by": added_by}
             for m, fs in figs.items():
                 if not fs:
                     continue
@@ -205,18 +321,27 @@ def summary_rows(results: list[dict]) -> list[dict]:
     return out
 
 
+def _short(effect: str) -> str:
+    """An effect's name with a joint's name shortened to its number (``eccentricity j1``)."""
+    import re
+    return re.sub(r"\b[A-Za-z_]+?_?(\d+)\b", lambda m: f"j{m.group(1)}", effect)
+
+
 def summary_table(lines: list[dict]) -> str:
-    """Markdown of :func:`summary_rows`."""
-    cols = ["truth"] + [m for m in METHODS if any(m in ln for ln in lines)]
-    head = (f"| robot | truth | trained on | loop added | spread 2σ [mm]: {' / '.join(cols)} "
+    """Markdown of :func:`summary_rows`: the first loop method's effects, whether every loop method (seed) added
+    the same, and per method the spread, the distance error and the coverage."""
+    cols = ["truth"] + list(dict.fromkeys(m for ln in lines for m in ln["methods"]))
+    head = (f"| robot | truth | trained on | loop added | same at every seed | spread 2σ [mm]: {' / '.join(cols)} "
             f"| abs. distance error [mm]: {' / '.join(cols)} | within 1.96 u [%]: {' / '.join(cols[1:])} "
             f"| within 1.96 u of the deviation [%]: {' / '.join(cols[1:])} |")
-    md = [head, "|---|---|---|---|---|---|---|---|"]
+    md = [head, "|---|---|---|---|---|---|---|---|---|"]
     def val(ln, m, k, fmt):
         return fmt.format(ln[m][k]) if m in ln and k in ln[m] else "-"
     for ln in lines:
+        same = len({tuple(v) for v in ln["added_by"].values()}) <= 1
         md.append(f"| {ln['robot']} | {ln['truth_text']} | {ln['train']} | "
-                  + (", ".join(e.replace("panda_joint", "j") for e in ln["added"]) or "-") + " | "
+                  + (", ".join(_short(e) for e in ln["added"]) or "-") + " | "
+                  + (f"{'yes' if same else 'NO'} ({len(ln['added_by'])})" if ln["added_by"] else "-") + " | "
                   + " / ".join(val(ln, m, "spread_mm", "{:.3f}") for m in cols) + " | "
                   + " / ".join(val(ln, m, "distance_mm", "{:.3f}") for m in cols) + " | "
                   + " / ".join(val(ln, m, "coverage", "{:.1f}") for m in cols[1:]) + " | "
@@ -224,27 +349,65 @@ def summary_table(lines: list[dict]) -> str:
     return "\n".join(md)
 
 
+def shipped_files(specs: list[str], python: str | None, arms: set) -> dict:
+    """arm -> its URDF as shipped: ``NAME=PATH`` of ``--urdf``, else the file of the package that ships it, found in
+    the environment of ``python`` (scripts/robot_zoo_study.py's look-up)."""
+    out = {}
+    for spec in specs:
+        name, _, path = spec.partition("=")
+        if name not in ARMS or not path:
+            raise SystemExit(f"--urdf {spec}: expected NAME=PATH with NAME one of {', '.join(ARMS)}")
+        out[name] = Path(path)
+    wanted = {ARMS[a].package[0] for a in arms if a not in out and ARMS[a].package}
+    if wanted:
+        sys.path.insert(0, str(ROOT / "scripts"))
+        from robot_zoo_study import package_dirs
+        dirs = package_dirs(python, wanted)
+        for a in arms:
+            pkg = ARMS[a].package
+            if a not in out and pkg and pkg[0] in dirs:
+                out[a] = dirs[pkg[0]] / pkg[1]
+    return out
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--robots", default=None, help="comma-separated robot names (default every one: "
-                   + ", ".join(r.name for r in ROBOTS) + ")")
-    p.add_argument("--methods", default=",".join(METHODS), help="comma-separated subset of " + ", ".join(METHODS))
+    p.add_argument("--robots", default=None, help="comma-separated robot names (default every Panda one: "
+                   + ", ".join(r.name for r in ROBOTS) + "; other types: "
+                   + ", ".join(f"{r.name} ({r.arm})" for r in OTHER_ROBOTS) + ")")
+    p.add_argument("--methods", default=",".join(METHODS), help="comma-separated subset of " + ", ".join(METHODS)
+                   + ", nominal (the nominal URDF applied as it is), close-loop@S (close-loop --seed S)")
+    p.add_argument("--loop-seeds", default=None,
+                   help="comma-separated seeds: close-loop is run once per seed (close-loop@S) in place of once")
     p.add_argument("--every-placement", action="store_true",
                    help="train each robot on each placement in turn (default: its own training placement)")
+    p.add_argument("--nominal", choices=("masses", "no-inertials"), default="masses",
+                   help="the nominal URDF the methods start from: with its link masses, or without <inertial> "
+                   "(the truth always sags under the masses)")
+    p.add_argument("--urdf", action="append", default=[], metavar="ARM=PATH",
+                   help="the URDF of an arm of another robot type as shipped (" + "; ".join(
+                       f"{a.name}: {a.source}" for a in ARMS.values() if a.flange) + ")")
+    p.add_argument("--python", default=None, help="the Python of an environment where the packages shipping the "
+                   "URDFs are installed (pybullet for iiwa14)")
     p.add_argument("-o", "--output", type=Path, default=Path("out/sim-seats"), help="output folder")
     args = p.parse_args(argv)
+    known = {r.name: r for r in ROBOTS + OTHER_ROBOTS}
     names = args.robots.split(",") if args.robots else [r.name for r in ROBOTS]
-    known = {r.name: r for r in ROBOTS}
     unknown = [n for n in names if n not in known]
     if unknown:
         p.error(f"unknown robot(s): {', '.join(unknown)}")
+    methods = args.methods.split(",")
+    if args.loop_seeds:
+        methods = [m for m in methods if m != "close-loop"] + [f"close-loop@{s}" for s in args.loop_seeds.split(",")]
+    shipped = shipped_files(args.urdf, args.python, {known[n].arm for n in names} - {"panda"})
     results = []
     for n in names:
         robot = known[n]
-        print(f"{n}: {robot.truth_text()}; trained on {robot.train}", file=sys.stderr, flush=True)
-        results.append(study_robot(robot, args.output / n, args.methods.split(","),
+        print(f"{n} ({robot.arm}): {robot.truth_text()}; trained on {robot.train}", file=sys.stderr, flush=True)
+        results.append(study_robot(robot, args.output / n, methods,
                                    train=list(PLACES) if args.every_placement else None,
-                                   progress=lambda m: print("  " + m, file=sys.stderr, flush=True)))
+                                   progress=lambda m: print("  " + m, file=sys.stderr, flush=True),
+                                   shipped=shipped.get(robot.arm), nominal=args.nominal))
         (args.output / "results.json").write_text(json.dumps(results, indent=1) + "\n")
     lines = summary_rows(results)
     (args.output / "summary.json").write_text(json.dumps(lines, indent=1) + "\n")

@@ -4,6 +4,7 @@ viz on top)."""
 from __future__ import annotations
 
 import ast
+import functools
 import importlib
 import inspect
 import re
@@ -17,6 +18,16 @@ DOC = ROOT / "docs" / "architecture.md"
 FLOORS = {"arm_model": 0, "calibration": 1, "correction": 1, "viz": 2}
 #: backticked words of the doc that are command-line words, not code
 CLI_WORDS = {"aacmm", "-o"}
+
+
+@functools.cache
+def _parse(text: str) -> ast.Module:
+    """The syntax tree of a module's ``text``, parsed once for the checks of this file (they only read it)."""
+    return ast.parse(text)
+
+
+def _tree(path) -> ast.Module:
+    return _parse(path.read_text(encoding="utf-8"))
 
 
 def _spans() -> list[str]:
@@ -77,7 +88,7 @@ def test_every_name_the_doc_names_is_in_the_code():
 
 def _imports(path):
     """(line, top-level package) of every absolute import in ``path``, inside functions too."""
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+    for node in ast.walk(_tree(path)):
         if isinstance(node, ast.Import):
             for a in node.names:
                 yield node.lineno, a.name.split(".")[0]
@@ -145,7 +156,7 @@ def module_graph(root=ROOT, packages=tuple(FLOORS)) -> dict[str, dict[str, int]]
     paths = {_module_name(p, root): p for pkg in packages for p in sorted((root / pkg).rglob("*.py"))}
     graph: dict[str, dict[str, int]] = {}
     for module, path in paths.items():
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+        tree = _tree(path)
         edges = graph.setdefault(module, {})
         for line, target in _import_targets(module, path.name == "__init__.py", tree, set(paths)):
             if target is not None and target != module:
@@ -264,7 +275,7 @@ def long_functions(root=ROOT, packages=tuple(FLOORS), limit: int = MAX_FUNCTION_
     out = []
     for pkg in packages:
         for path in sorted((root / pkg).rglob("*.py")):
-            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            for node in ast.walk(_tree(path)):
                 if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                     n = node.end_lineno - node.lineno + 1
                     if n > limit:
@@ -294,7 +305,7 @@ def private_imports(root=ROOT, packages=tuple(FLOORS)) -> list[str]:
     paths = {_module_name(p, root): p for pkg in packages for p in sorted((root / pkg).rglob("*.py"))}
     out = []
     for module, path in paths.items():
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        for node in ast.walk(_tree(path)):
             if isinstance(node, ast.Import):
                 names = [(a.name, None) for a in node.names]
             elif isinstance(node, ast.ImportFrom):

@@ -159,7 +159,7 @@ def test_calibrate_with_mpe_end_to_end(files, tmp_path, capsys):
 def test_calibrate_without_mpe_says_so(files, tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["calibrate", str(files["points"]), str(files["artefacts"]), "--arm", str(NOMINAL),
-                 "--sigma-probe-um", "2", "--weights", "stated", "-o", str(out)]) == 0
+                 "--sigma-probe-um", "2", "--weights", "stated", "--no-plots", "-o", str(out)]) == 0
     text = capsys.readouterr().out
     s = json.loads((out / "summary.json").read_text())
     assert not s["conformance"]["mpe_given"]

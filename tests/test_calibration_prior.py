@@ -161,14 +161,12 @@ def test_evidence_finds_each_groups_scale(model, length, angle, seed):
         assert 0.5 < res.prior_scales[g] / truth < 2.0, (g, res.prior_scales, truth)
 
 
-@pytest.mark.slow
-def test_the_prior_does_not_bias_well_determined_parameters(model):
-    """20 campaigns (slow: about 15 s): for every parameter the data determine (posterior/prior variance below
-    0.1 in each fit), the mean over the campaigns of z = (estimate - truth) / u is within +-0.3 pooled over the
-    parameters, and the prior's own pull, (MAP - least squares) / u of the least-squares fit, averages within
-    +-0.3 for each parameter (measured: |pooled mean z| 0.02, pulls below 0.04)."""
+def _bias(model, seeds) -> tuple[list[float], dict[str, list[float]]]:
+    """Over the campaigns of ``seeds``, for every parameter the data determine (posterior/prior variance below 0.1
+    in each fit): z = (estimate - truth) / u, and the prior's own pull, (MAP - least squares) / u of the least-squares
+    fit, by name."""
     z, pull = [], {}
-    for seed in range(100, 120):
+    for seed in seeds:
         data, p = _campaign(model, seed, length=1e-4, angle=2e-4)
         res = calibrate(model, data, FitOptions(weights=W))
         ls = calibrate(model, data, FitOptions(weights=W, prior_scale=None, free=res.free))
@@ -178,6 +176,26 @@ def test_the_prior_does_not_bias_well_determined_parameters(model):
                 i = model.spec.index(n)
                 z.append((res.p[i] - eq[i]) / res.u[k])
                 pull.setdefault(n, []).append((res.p[i] - ls.p[i]) / ls.u[ls.free.index(n)])
+    return z, pull
+
+
+def test_the_prior_does_not_bias_well_determined_parameters_on_three_campaigns(model):
+    """The study below on its first three campaigns (1.5 s of CPU): the same bounds, over 69 z values (measured: mean
+    z -0.02, RMS 0.92, largest mean pull 0.06). A prior 4 times too narrow (the evidence's scales divided by 4 in
+    the MAP fit) fails it: a mean pull of 0.84."""
+    z, pull = _bias(model, range(100, 103))
+    assert len(z) >= 60
+    assert abs(np.mean(z)) < 0.3 and 0.7 < np.sqrt(np.mean(np.square(z))) < 1.4
+    assert max(abs(np.mean(v)) for v in pull.values()) < 0.3
+
+
+@pytest.mark.slow
+def test_the_prior_does_not_bias_well_determined_parameters(model):
+    """20 campaigns (slow: about 15 s): for every parameter the data determine (posterior/prior variance below
+    0.1 in each fit), the mean over the campaigns of z = (estimate - truth) / u is within +-0.3 pooled over the
+    parameters, and the prior's own pull, (MAP - least squares) / u of the least-squares fit, averages within
+    +-0.3 for each parameter (measured: |pooled mean z| 0.02, pulls below 0.04)."""
+    z, pull = _bias(model, range(100, 120))
     assert abs(np.mean(z)) < 0.3 and 0.7 < np.sqrt(np.mean(np.square(z))) < 1.4
     assert max(abs(np.mean(v)) for v in pull.values()) < 0.3
 

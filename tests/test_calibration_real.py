@@ -212,6 +212,32 @@ def test_talos_joint_compliance_carries_over_to_random_halves(talos_all):
     assert np.mean(ratios) <= 0.9, ratios
 
 
+def _scale_ratios(talos_all, seeds, groups=("lengths", "axis angles", "joint offsets")) -> dict:
+    """(group, factor) -> the held-out RMS on the random halves of ``seeds`` with that group's scale halved or
+    doubled (the others and the noise as the evidence chose them) over the RMS at the evidence's scales."""
+    model, _ = talos_all
+    ratios: dict = {}
+    for s in seeds:
+        train, test = _talos_split(talos_all, 31, s)
+        chosen = calibrate(model, train, FitOptions(weights_from_data=True)).prior_scales
+        at = _predicted_rms(calibrate(model, train, FitOptions(weights_from_data=True, prior_scale=dict(chosen))),
+                            test)
+        for group in groups:
+            for factor in (0.5, 2.0):
+                moved = calibrate(model, train, FitOptions(weights_from_data=True,
+                                                           prior_scale={**chosen, group: chosen[group] * factor}))
+                ratios.setdefault((group, factor), []).append(_predicted_rms(moved, test) / at)
+    return ratios
+
+
+def test_talos_evidence_scale_of_the_lengths_sits_at_the_held_out_optimum_on_one_half(talos_all):
+    """The study below on one half (seed 100) and the group nearest its bound, the lengths (about 3 s of CPU):
+    halved or doubled, the held-out error is not 3 % lower (measured 1.109 and 0.977). (Starting from a lengths
+    scale 4 times too small, doubling it predicts 16 % better: 0.836.)"""
+    for key, r in _scale_ratios(talos_all, (100,), ("lengths",)).items():
+        assert r[0] >= 0.97, (key, r)
+
+
 @pytest.mark.slow
 def test_talos_evidence_scales_sit_at_the_held_out_optimum(talos_all):
     """On random halves (seeds 100, 101) the geometry's group scales the evidence chooses are where the
@@ -219,19 +245,7 @@ def test_talos_evidence_scales_sit_at_the_held_out_optimum(talos_all):
     does not predict the held-out postures better by more than 3 % on average (measured: the best of the six
     is 0.99x; over 25 halves the medians are 0.996-1.029x, docs/studies/calibration.md, "Where the remaining held-out
     error comes from"), so the shrinkage is not what keeps the default above the noise floor."""
-    model, _ = talos_all
-    ratios = {}
-    for s in FIGAROH_HALVES:
-        train, test = _talos_split(talos_all, 31, 100 + s)
-        chosen = calibrate(model, train, FitOptions(weights_from_data=True)).prior_scales
-        at = _predicted_rms(calibrate(model, train, FitOptions(weights_from_data=True, prior_scale=dict(chosen))),
-                            test)
-        for group in ("lengths", "axis angles", "joint offsets"):
-            for factor in (0.5, 2.0):
-                moved = calibrate(model, train, FitOptions(weights_from_data=True,
-                                                           prior_scale={**chosen, group: chosen[group] * factor}))
-                ratios.setdefault((group, factor), []).append(_predicted_rms(moved, test) / at)
-    for key, r in ratios.items():
+    for key, r in _scale_ratios(talos_all, (100, 101)).items():
         assert np.mean(r) >= 0.97, (key, r)
 
 

@@ -73,7 +73,7 @@ def test_ring_report_from_point_columns_on_the_bundled_campaign(tmp_path):
     data = ROOT / "examples/data/paper-ring-xyz"
     out = tmp_path / "r"
     assert main(["ring", str(data / "points.csv"), str(data / "artefacts.toml"), "--arm", str(NOMINAL),
-                 "-o", str(out), "--u-force-N", "0.01"]) == 0
+                 "-o", str(out), "--u-force-N", "0.01", "--no-plots"]) == 0
     s = json.loads((out / "summary.json").read_text())
     assert len(s["measurements"]) == 17 and s["force_kind"] == "xyz"
     ucor = [t for b in s["budgets"] if b["name"] == "diameter, full wrench" for t in b["terms"] if t["name"] == "u_cor"]

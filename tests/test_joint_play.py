@@ -192,3 +192,38 @@ def test_the_default_loop_finds_a_robots_backlash_by_its_last_motion():
     for name in ("panda_joint2.hysteresis", "panda_joint4.hysteresis"):    # the truth: 5e-4 rad beyond its reading
         assert res.value(name) == pytest.approx(5e-4, abs=max(3 * res.uncertainty(name), 5e-5)), name
     assert fig["loop"] <= 1.5 * fig["floor"] and fig["calibrated"] > 2 * fig["floor"], fig
+
+
+def test_a_gravity_torque_turning_within_the_play_floats_the_joint_in_its_middle(nominal):
+    """A play closed by gravity at a posture whose gravity torque changes sign inside the play: the fixed point
+    swung between its two sides (a model fitted with 17 mrad of play on a real robot's elbow could not be applied
+    to another placement, tip exit 4); the joint now floats in the middle (its sign 0, its torque nil), the other
+    points keep the sides their torques give, by hand."""
+    model = ArmModel(nominal, (JointBacklash(joints=(1,)),))
+    arm = PinocchioArm(nominal)
+    q = np.tile(np.array([0.3, 0.0, 0.4, 1.2, -0.5, 0.7, 0.2]), (3, 1))
+    # the angle of joint 2 where its torque turns from - to + (a hanging joint: the side its torque pushes it to
+    # turns the torque; where it turns from + to -, the push carries it away and the side holds): bisection
+    grid = np.linspace(-np.pi, np.pi, 73)
+    t = arm.torques(np.column_stack([np.full(73, 0.3), grid, np.tile(q[0, 2:], (73, 1))]))[0][:, 1]
+    k = int(np.flatnonzero((t[:-1] < 0) & (t[1:] > 0))[0])
+    lo, hi, t_lo = grid[k], grid[k + 1], t[k]
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        t = arm.torques(np.r_[q[0, :1], mid, q[0, 2:]][None])[0][0, 1]
+        lo, hi, t_lo = (mid, hi, t) if t * t_lo > 0 else (lo, mid, t_lo)
+    q[0, 1] = mid                              # at the turn; the others a play's width or more either side
+    q[1, 1], q[2, 1] = mid - 0.3, mid + 0.3
+    p = np.zeros(model.spec.size)
+    p[-1] = 0.02
+    aux = model.equilibrium_aux(q, None, p)
+    assert aux.tau_gravity[0, 1] == 0.0
+    assert_close(model.joint_angles(q, None, p, aux)[0], q[0], atol=0)
+    for k in (1, 2):                           # by hand: the side the torque at the shifted angle gives
+        side = -np.sign(arm.torques(q[k][None])[0][0, 1])
+        theta = q[k].copy()
+        theta[1] += 0.02 * side
+        assert -np.sign(arm.torques(theta[None])[0][0, 1]) == side
+        assert_close(model.joint_angles(q[k:k + 1], None, p, aux.__class__(
+            None, aux.tau_gravity[k:k + 1], aux.tau_contact[k:k + 1]))[0], theta, atol=1e-15)
+    assert_close(aux.tau_gravity[1:], arm.torques(model.joint_angles(q, None, p, aux)[1:])[0], atol=1e-12)

@@ -13,6 +13,7 @@ from arm_model.effects import JointHysteresis
 from arm_model.io import PointSet
 from arm_model.live import Session
 from arm_model.live.motion import BAND_STEPS, LastMove
+from arm_model.model import reading_motion
 from arm_model.model_file import Arm, load_model
 
 STEP = math.radians(1e-4)                 # aacmm7's encoder step
@@ -118,9 +119,10 @@ def test_the_band_holds_flicker_and_noise_and_a_real_move_turns_it():
 
 def test_the_bundled_session_with_a_hysteresis_model_is_tips_byte_for_byte(tmp_path, capsys):
     """The bundled stream (the simulator's operator goes straight from point to point) with a model file of 100 and
-    -50 urad of hysteresis on joints 2 and 4: the last moves read from the samples are the points' own rule's, so
-    ``aacmm tip`` on the session's ``points.csv`` writes its ``tips.csv`` byte for byte (docs/live.md); each point
-    taken alone with a move of 0 (the session before) was 38-91 um off, every point but the first."""
+    -50 urad of hysteresis on joints 2 and 4: ``aacmm tip`` on the session's ``points.csv`` writes its ``tips.csv``
+    byte for byte (docs/live.md); the last moves read from the samples (its ``q1_move_sign`` ...) are the points' own
+    rule's here; each point taken with a move of 0 (the session before it read any) was 38-91 um off, every point but
+    the first."""
     import csv
 
     from arm_model.cli import main
@@ -140,9 +142,52 @@ def test_the_bundled_session_with_a_hysteresis_model_is_tips_byte_for_byte(tmp_p
     capsys.readouterr()
     assert (tmp_path / "again.csv").read_bytes() == (out / "tips.csv").read_bytes()
     ps = read_points(out / "points.csv", desc.joint_quantities)
+    assert ps.motion is not None and np.array_equal(ps.motion, reading_motion(ps.q, None, ps.time))
     arm = Arm(desc, (JointHysteresis(joints=(1, 3)),), values)
-    alone = np.array([tip_centres(arm, ps.select([i]))[1][0] for i in range(len(ps))])
+    alone = tip_centres(arm, ps, np.zeros(ps.q.shape))[1]
     with open(out / "tips.csv") as fh:
         live = np.array([[float(r[f"{a}_mm"]) * 1e-3 for a in "xyz"] for r in csv.DictReader(fh)])
     off = np.linalg.norm(alone - live, axis=1)
     assert len(off) == 19 and off[0] < 1e-9 and np.all(off[1:] > 3e-5), off
+
+
+def test_a_record_where_the_operator_overshoots_gives_tips_again_byte_for_byte(tmp_path, capsys):
+    """The simulated session above as a stream file, through ``aacmm live`` with a model file of its hysteresis:
+    ``points.csv`` holds each point's true last move (``q1_move_sign`` ..., exactly the test's truth) and the band it
+    was read with is in ``session.json``, so ``aacmm tip points.csv`` writes ``tips.csv`` byte for byte. The same
+    file without the move columns (what the session wrote before) gives tip the move from the point before: 19-100 um
+    off on the five points where the operator overshot or held a joint still, 0 elsewhere."""
+    import csv
+    import json
+
+    from arm_model.cli import main
+    from arm_model.io import read_points
+    from arm_model.model_file import format_model
+
+    desc, samples, truth = _session_stream()
+    stream = tmp_path / "samples.csv"
+    with open(stream, "w") as fh:
+        fh.write(",".join(["time_s"] + [f"q{j + 1}_rad" for j in range(7)] + ["fx_N", "fy_N", "fz_N"]) + "\n")
+        fh.writelines(",".join(map(repr, (t, *map(float, q), *map(float, w)))) + "\n" for t, q, w in samples)
+    model = tmp_path / "hysteresis.toml"
+    model.write_text(format_model(desc, (JointHysteresis(joints=(1, 2, 4)),), dict(HYSTERESIS)))
+    out = tmp_path / "live"
+    assert main(["live", str(stream), "--arm", str(model), "--speed", "0", "-o", str(out)]) == 0
+    points = out / "points.csv"
+    assert np.array_equal(read_points(points, desc.joint_quantities).motion, truth)
+    band = json.loads((out / "session.json").read_text())["last_move"]
+    assert band["band_steps"] == BAND_STEPS and [j["dead_band_rad"] for j in band["joints"]] == [BAND_STEPS * STEP] * 7
+    assert main(["tip", str(points), "--arm", str(model), "--uncertainty", "-o", str(tmp_path / "again.csv")]) == 0
+    assert (tmp_path / "again.csv").read_bytes() == (out / "tips.csv").read_bytes()
+    rows = list(csv.reader(open(points)))                     # before: no column for the moves
+    keep = [k for k, h in enumerate(rows[0]) if not h.endswith("_move_sign")]
+    (tmp_path / "old.csv").write_text("".join(",".join(r[k] for k in keep) + "\n" for r in rows))
+    assert main(["tip", str(tmp_path / "old.csv"), "--arm", str(model), "-o", str(tmp_path / "old-tips.csv")]) == 0
+    capsys.readouterr()
+
+    def centres(path):
+        with open(path) as fh:
+            return np.array([[float(r[f"{a}_mm"]) for a in "xyz"] for r in csv.DictReader(fh)])
+    off = np.linalg.norm(centres(tmp_path / "old-tips.csv") - centres(out / "tips.csv"), axis=1) * 1e3    # [um]
+    wrong = [k % 3 == 2 or k == 7 for k in range(len(truth))]
+    assert np.all(off[wrong] > 15) and np.all(off[wrong] < 110) and np.all(off[~np.array(wrong)] < 1e-3), off

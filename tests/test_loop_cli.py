@@ -183,7 +183,9 @@ def test_holdout_keeps_its_rows_out_of_the_model_which_is_calibrates_with_its_re
     held = ["bar-pos-02", "seat-03", "sphere-03"]
     common = [str(sim / "points.csv"), str(sim / "artefacts.toml"), "--arm", str(NOMINAL), "--reference-points",
               str(sim / "points-ref.csv"), "--sigma-probe-um", "2", "--holdout", ",".join(held), "--quiet"]
-    assert main(["close-loop", *common, "--max-effects", "0", "-o", str(tmp_path / "loop")]) == 0
+    assert main(["close-loop", *common, "--max-effects", "0", "--no-plots", "-o", str(tmp_path / "loop")]) == 0
+    # --no-plots: no PNG drawn, the report with its tables alone
+    assert not list((tmp_path / "loop").glob("*.png")) and "<img" not in (tmp_path / "loop" / "report.html").read_text()
     # calibrate at the loop's estimation (no prior, the practical-resolution rule: tests/conftest.py loop_fit_options)
     assert main(["calibrate", *common, "--prior-scale", "off", "--min-resolution", "0.1", "--no-plots",
                  "-o", str(tmp_path / "cal")]) == 0

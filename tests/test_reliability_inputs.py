@@ -311,7 +311,7 @@ def test_calibrate_and_close_loop_flag_over_range_forces(small, tmp_path, capsys
     s = json.loads((tmp_path / "cal" / "summary.json").read_text())
     assert [w["lines"] for w in s["warnings"]] == [[6]]
     assert "<h2>Warnings</h2>" in (tmp_path / "cal" / "report.html").read_text()
-    code, _, text = run(["close-loop", *base, "--max-effects", "0", "--folds", "2", "--quiet",
+    code, _, text = run(["close-loop", *base, "--max-effects", "0", "--folds", "2", "--quiet", "--no-plots",
                          "-o", tmp_path / "loop"], capsys)
     assert code == 0 and "warning: 1 point(s) with a force over the probe's calibrated range" in text
     s = json.loads((tmp_path / "loop" / "summary.json").read_text())

@@ -166,7 +166,7 @@ def test_campaign_reader_returns_or_says_where(tmp_path_factory, data):
 # option parsers
 
 TYPES = [(positive(), lambda v: 0 < v), (non_negative(), lambda v: v >= 0), (fraction, lambda v: 0 < v < 1),
-         (finite, lambda v: True), (seed, lambda v: v >= 0 and isinstance(v, int)),
+         (finite, lambda v: True), (seed, lambda v: 0 <= v <= 2 ** 53 and isinstance(v, int)),
          (port, lambda v: 1 <= v <= 65535), (at_least(2), lambda v: v >= 2),
          (number_in(0, 100, low_open=True, high_open=True), lambda v: 0 < v < 100),
          (number_in(0, 1, high_open=True), lambda v: 0 <= v < 1)]

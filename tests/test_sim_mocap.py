@@ -214,7 +214,8 @@ def _obvious_commands(tmp_path, urdf, tip: str, postures: int = 40, seed: int = 
     sim, cal, floor = tmp_path / "sim", tmp_path / "cal", tmp_path / "floor"
     assert main(["simulate", str(tmp_path / "c.toml"), "-o", str(sim)]) == 0
     points = str(sim / "points.csv")
-    assert main(["calibrate", points, "--arm", str(urdf), "--tip-frame", tip, "--holdout", "0.3", "-o", str(cal)]) == 0
+    assert main(["calibrate", points, "--arm", str(urdf), "--tip-frame", tip, "--holdout", "0.3", "--no-plots", "-o",
+                 str(cal)]) == 0
     model = next(cal.glob("*-calibrated.toml"))
     arm = load_model(model)
     assert arm.tracker is not None and arm.tracker.offsets.shape == (1, 3)
@@ -222,7 +223,8 @@ def _obvious_commands(tmp_path, urdf, tip: str, postures: int = 40, seed: int = 
     nominal, calibrated = _holdout_rms(summary)
     truth = simulate(load_campaign(tmp_path / "c.toml")).truth
     (tmp_path / "truth.toml").write_text(format_model(truth["description"]))
-    assert main(["calibrate", points, "--arm", str(tmp_path / "truth.toml"), "--holdout", "0.3", "-o", str(floor)]) == 0
+    assert main(["calibrate", points, "--arm", str(tmp_path / "truth.toml"), "--holdout", "0.3", "--no-plots",
+                 "-o", str(floor)]) == 0
     floor_summary = json.loads((floor / "summary.json").read_text())
     assert floor_summary["holdout"] == summary["holdout"]
     # the prediction of the instrument's coordinates, row by row, and the calibrated URDF read back
@@ -319,7 +321,7 @@ def test_a_held_out_session_is_registered_anew_and_said_so(robot_dir, tmp_path, 
     points = str(tmp_path / "sim" / "points.csv")
     second = [m for m, s in zip(res.points.measurement, res.points.session, strict=True) if s == "pose-s2"]
     assert main(["calibrate", points, "--arm", str(urdf), "--tip-frame", TIP, "--holdout", ",".join(second),
-                 "-o", str(tmp_path / "cal")]) == 0
+                 "--no-plots", "-o", str(tmp_path / "cal")]) == 0
     assert "held-out session(s) 'pose-s2' have no frame from the training data" in capsys.readouterr().out
     assert main(["tip", points, "--arm", str(tmp_path / "cal" / "liftarm-calibrated.toml"), "--reference-frame",
                  "-o", str(tmp_path / "tips.csv")]) == 2
@@ -368,7 +370,7 @@ def test_close_loop_on_a_robot_with_a_prismatic_joint_runs_to_the_end(tmp_path, 
     res = simulate(campaign_from_dict(_campaign(postures=30, markers=1, sessions=1, noise_mm=0.1), base_dir=tmp_path))
     res.write(tmp_path / "sim")
     assert main(["close-loop", str(tmp_path / "sim" / "points.csv"), "--arm", str(urdf), "--tip-frame", TIP,
-                 "--max-effects", "1", "--library-only", "-o", str(tmp_path / "loop")]) == 0
+                 "--max-effects", "1", "--library-only", "--no-plots", "-o", str(tmp_path / "loop")]) == 0
     out = capsys.readouterr().out
     assert "per-joint effects lift not offered: a prismatic joint" in out
     arm = load_model(next((tmp_path / "loop").glob("*-calibrated.toml")))

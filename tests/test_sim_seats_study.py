@@ -91,3 +91,25 @@ def test_defaults_on_simulated_panda_robots(tmp_path):
     assert len(beyond) <= 1, beyond
     assert 0.90 <= inside / values <= 1.0, inside / values
     assert 0.92 <= inside_dev / values <= 0.97, inside_dev / values
+
+
+def test_a_ball_tool_added_to_a_shipped_urdf_as_the_data_set_has_it(tmp_path):
+    """The study's other robot types (study.ARMS) get a ``ball_link`` fixed to their flange, with one more fixed link
+    after it (the tip is not a leaf), the rest of the file as shipped: on the bundled Panda URDF with its ball
+    renamed away, the new tip is the flange's frame moved by the tool offset (checked against
+    probe_rotations of the flange frame); without <inertial> the kinematics stay and no mass is left."""
+    from arm_model.kinematics import ball_centres, probe_rotations
+    from arm_model.urdf_import import load_arm
+    text = study.URDF.read_text().replace('"ball_link"', '"old_ball"').replace('"ball_joint"', '"old_joint"')
+    arm = study.ArmSpec("t", "panda_hand_tcp", (0.001, -0.002, 0.03))
+    (tmp_path / "a.urdf").write_text(study.ball_urdf(text, arm))
+    (tmp_path / "b.urdf").write_text(study.without_inertials(study.ball_urdf(text, arm)))
+    (tmp_path / "flange.urdf").write_text(text)
+    q = np.random.default_rng(0).uniform(-1.5, 1.5, (5, 7))
+    flange = load_arm(tmp_path / "flange.urdf", "panda_hand_tcp")
+    want = ball_centres(flange, q) + np.einsum("nij,j->ni", probe_rotations(flange, q), arm.tool_m)
+    for name in ("a.urdf", "b.urdf"):
+        desc = load_arm(tmp_path / name, study.TIP)
+        np.testing.assert_allclose(ball_centres(desc, q), want, atol=1e-12)
+    assert any(j.mass for j in load_arm(tmp_path / "a.urdf", study.TIP).joints)
+    assert not any(j.mass for j in load_arm(tmp_path / "b.urdf", study.TIP).joints)

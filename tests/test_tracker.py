@@ -339,7 +339,7 @@ def test_close_loop_without_artefacts(nominal, tmp_path):
     cols, *_ = _campaign(model, np.zeros(model.spec.size), n=10, noise=20e-6, sessions=("mon",))
     write_csv(tmp_path / "p.csv", cols, fmt="%.12g")
     out = tmp_path / "loop"
-    assert main(["close-loop", str(tmp_path / "p.csv"), "--arm", "aacmm7", "-o", str(out)]) == 0
+    assert main(["close-loop", str(tmp_path / "p.csv"), "--arm", "aacmm7", "--no-plots", "-o", str(out)]) == 0
     arm = load_model(out / "aacmm7-calibrated.toml")
     assert arm.tracker.sessions == ("mon",) and arm.tracker.offsets.shape == (2, 3)
     assert_close(arm.tracker.offsets, OFFSETS, atol=2e-4)

@@ -89,17 +89,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     g = p.add_argument_group("contacts (docs/live.md)")
     g.add_argument("--contact", choices=("force", "trigger"), default="force",
                    help="find contacts from the force (default) or from the trigger column (the arm's button)")
-    g.add_argument("--contact-on-N", type=number_in(0, 1e5, low_open=True), default=0.1,
+    g.add_argument("--contact-on-N", type=number_in(0, 1e5, low_open=True), default=None,
                    help="the smoothed force, its zero removed, that starts a contact (default 0.1; raised to 8 "
                         "times the noise the sensor shows out of contact)")
-    g.add_argument("--contact-off-N", type=number_in(0, 1e5, low_open=True), default=0.05,
+    g.add_argument("--contact-off-N", type=number_in(0, 1e5, low_open=True), default=None,
                    help="below it the contact ends (default 0.05, less than --contact-on-N; raised to 4 times "
                         "the noise)")
-    g.add_argument("--min-dwell-s", type=number_in(0, 1e4), default=0.02,
+    g.add_argument("--min-dwell-s", type=number_in(0, 1e4), default=None,
                    help="how long the force must stay at or above --contact-on-N for a point (default 0.02)")
-    g.add_argument("--smooth-s", type=number_in(0, 10), default=0.005,
+    g.add_argument("--smooth-s", type=number_in(0, 10), default=None,
                    help="time constant of the force's smoothing for contacts (default 0.005; 0: none)")
-    g.add_argument("--baseline-s", type=number_in(0, 1e4), default=2.0,
+    g.add_argument("--baseline-s", type=number_in(0, 1e4), default=None,
                    help="time constant of the zero that follows the sensor out of contact (default 2; 0: the "
                         "force is not zeroed)")
     v = p.add_argument_group("live view (docs/viewer.md)")
@@ -188,9 +188,14 @@ def run_live(args: argparse.Namespace) -> int:
     given = [o for o, v in (("--port", args.port), ("--fps", args.fps), ("--linger-s", args.linger_s)) if v is not None]
     if given and not args.view:
         raise InputError(f"{', '.join(given)}: option(s) of the live view, which is not asked for (add --view)")
+    force = {"on": ("--contact-on-N", args.contact_on_N), "off": ("--contact-off-N", args.contact_off_N),
+             "dwell": ("--min-dwell-s", args.min_dwell_s), "smooth": ("--smooth-s", args.smooth_s),
+             "baseline": ("--baseline-s", args.baseline_s)}
+    given = [o for o, v in force.values() if v is not None]
+    if given and args.contact == "trigger":     # a trigger contact lasts while the button is held, whatever the force
+        raise InputError(f"{', '.join(given)}: option(s) of force contacts, which --contact trigger does not use")
     try:
-        contact = ContactOptions(args.contact_on_N, args.contact_off_N, args.min_dwell_s, args.contact,
-                                 args.smooth_s, args.baseline_s)
+        contact = ContactOptions(source=args.contact, **{k: v for k, (_, v) in force.items() if v is not None})
     except ValueError as exc:
         raise InputError(f"contact options: {exc}") from None
     arm = model_from_args(args)

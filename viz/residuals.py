@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import QUANTITY_OF_UNIT, UNIT_FACTORS, InputError, csv_records, read_text, split_unit
-from arm_model.csv_io import parse_number
+from arm_model.csv_io import SPACE, parse_number
 from arm_model.errors import id_problem, unknown_key
 from arm_model.io import FEATURE_KINDS
 from arm_model.units import implausible, unit_of
@@ -116,9 +116,9 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
         k, h = by_base[base]
         out = np.empty(len(data))
         for i, (no, r) in enumerate(data):
-            v = parse_number(r[k].strip())      # the toolkit's one number grammar (no '1_0', no '１')
+            v = parse_number(r[k])      # the toolkit's one number grammar (no '1_0', no '１', no NBSP)
             if v is None or not math.isfinite(v):
-                raise InputError(f"expected a finite number, got {r[k].strip()!r}", path, no, h)
+                raise InputError(f"expected a finite number, got {r[k].strip(SPACE)!r}", path, no, h)
             wrong = implausible(v * UNIT_FACTORS[unit_of(h)], "length")    # 1e308 overflowed the drawing
             if wrong:
                 raise InputError(wrong[1], path, no, h)
@@ -139,10 +139,10 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
     if "standardized" in header:
         k = header.index("standardized")
         for no, r in data:
-            v = parse_number(r[k].strip())
+            v = parse_number(r[k])
             if v is None or not math.isfinite(v) or abs(v) > 1e12:
                 raise InputError(f"expected a finite number (a residual over its standard uncertainty), got "
-                                 f"{r[k].strip()!r}", path, no, "standardized")
+                                 f"{r[k].strip(SPACE)!r}", path, no, "standardized")
 
     point_lines = None
     if not has_xyz:
@@ -157,6 +157,14 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
     for (no, _), kind in zip(data, kinds, strict=True):    # "reference" starts at a marker: a typo would not
         if kind and kind not in _KINDS:
             raise InputError(f"unknown kind {kind!r} (known: {', '.join(_KINDS)})", path, no, "kind")
+    if point_lines is not None:         # one residual a point (a reference point or a mocap marker: one a marker)
+        first: dict[tuple, int] = {}
+        for (no, _), line, kind in zip(data, point_lines, kinds, strict=True):
+            if kind not in ("reference", "marker"):
+                seen = first.setdefault((int(line), kind), no)
+                if seen != no:
+                    raise InputError(f"point line {line} (kind {kind or 'not given'}) is given twice (first on line "
+                                     f"{seen}): one residual a point", path, no, "line")
     return Residuals(path, np.column_stack([column(b) for b in _POINT]) if has_xyz else None,
                      np.column_stack([column(b) for b in vector]), text_column("measurement"), text_column("feature"),
                      np.array([no for no, _ in data]), point_lines, kinds)

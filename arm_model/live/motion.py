@@ -48,7 +48,10 @@ class LastMove:
     """
 
     def __init__(self, steps: Sequence[float]):
-        self.steps = [BAND_STEPS * float(s) for s in steps]
+        #: (J,) each joint's encoder step [rad] ([m])
+        self.encoder_steps = [float(s) for s in steps]
+        #: (J,) the least dead band of each joint: :data:`BAND_STEPS` steps [rad] ([m])
+        self.steps = [BAND_STEPS * s for s in self.encoder_steps]
         #: (J,) the dead band of each joint [rad] ([m])
         self.band = list(self.steps)
         #: (J,) the sign of each joint's last move (0: it has not moved beyond its band yet)

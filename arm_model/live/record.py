@@ -19,6 +19,7 @@ exact sample values), ``tips.csv`` (``aacmm tip``'s output for it, with uncertai
 """
 from __future__ import annotations
 
+import contextlib
 import datetime
 import json
 import os
@@ -104,8 +105,12 @@ class SessionRecord:
             raise InputError("another session started in this folder at the same time", folder) from None
         except OSError as exc:
             raise InputError(f"cannot create the session folder: {exc.strerror}", folder) from None
-        os.write(fd, f"{COMMAND}\n".encode())
-        os.close(fd)
+        try:
+            _write_all(fd, f"{COMMAND}\n".encode())
+        except OSError as exc:
+            raise _write_failed(exc, folder / MARKER) from None
+        finally:
+            os.close(fd)
         self.folder = folder
         self._fds: dict[str, int] = {}
         self._buf: dict[str, list[str]] = {}
@@ -122,7 +127,10 @@ class SessionRecord:
         """Create the file of ``role`` (never an existing one), with a ``header`` line."""
         if role in self._fds:
             return
-        self._fds[role] = os.open(self.path(role), os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o666)
+        try:
+            self._fds[role] = os.open(self.path(role), os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o666)
+        except OSError as exc:
+            raise _write_failed(exc, self.path(role)) from None
         self._buf[role] = []
         if header is not None:
             self._buf[role].append(header if header.endswith("\n") else header + "\n")
@@ -137,11 +145,14 @@ class SessionRecord:
 
     def write_file(self, role: str, text: str) -> None:
         """Write a small file whole (``artefacts.toml``), once."""
-        fd = os.open(self.path(role), os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
         try:
-            _write_all(fd, text.encode("utf-8"))
-        finally:
-            os.close(fd)
+            fd = os.open(self.path(role), os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+            try:
+                _write_all(fd, text.encode("utf-8"))
+            finally:
+                os.close(fd)
+        except OSError as exc:
+            raise _write_failed(exc, self.path(role)) from None
 
     def flush(self, update: dict | None = None) -> None:
         """Write every queued line (one write a file); with ``update``, also replace ``session.json`` with
@@ -151,7 +162,14 @@ class SessionRecord:
             if buf:
                 data = "".join(buf).encode("utf-8")
                 buf.clear()
-                _write_all(self._fds[role], data)
+                fd = self._fds[role]
+                size = os.fstat(fd).st_size
+                try:
+                    _write_all(fd, data)
+                except OSError as exc:      # a full disk: a part written is cut off, the file ends at a whole line
+                    with contextlib.suppress(OSError):
+                        os.ftruncate(fd, size)
+                    raise _write_failed(exc, self.path(role)) from None
         if update is not None:
             self.status.update(update)
             self.status["updated"] = _now()
@@ -174,10 +192,22 @@ class SessionRecord:
 
     def _write_status(self) -> None:
         tmp = self.folder / f".{STATUS_FILE}.tmp"
-        with open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(self.status, fh, indent=1, allow_nan=False, default=str)
-            fh.write("\n")
-        os.replace(tmp, self.folder / STATUS_FILE)
+        try:
+            with open(tmp, "w", encoding="utf-8") as fh:
+                json.dump(self.status, fh, indent=1, allow_nan=False, default=str)
+                fh.write("\n")
+            os.replace(tmp, self.folder / STATUS_FILE)
+        except OSError as exc:
+            tmp.unlink(missing_ok=True)
+            raise _write_failed(exc, self.folder / STATUS_FILE) from None
+
+
+def _write_failed(exc: OSError, path: Path) -> InputError:
+    """A write of the session folder that the system refused (a full disk, a quota): the file named, and what the
+    folder keeps (every file ends at a whole line; ``session.json`` at its last write, ``"status": "running"``)."""
+    return InputError(f"cannot write the session's file: {exc.strerror or exc}; the session stops, and its folder "
+                      "keeps what was written before (every file ends at a whole line; session.json says "
+                      "\"running\" as of its last write)", path)
 
 
 def _write_all(fd: int, data: bytes) -> None:

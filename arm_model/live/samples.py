@@ -23,8 +23,8 @@ import math
 import re
 from typing import NamedTuple
 
-from ..csv_io import blank_record, parse_number
-from ..errors import InputError, did_you_mean, read_text
+from ..csv_io import SPACE, blank_record, parse_number
+from ..errors import InputError, did_you_mean, read_text, text_lines
 from ..units import ABSOLUTE_ZERO_C, PLAUSIBLE_SI, QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
 __all__ = ["Sample", "SampleLayout", "TIME_COLUMNS", "sample_header", "read_samples", "sample_bounds", "checked_value"]
@@ -221,9 +221,9 @@ class SampleLayout:
         """Every cell read with the points reader's number rule; the first bad one is the error."""
         values = []
         for k, cell in enumerate(cells):
-            v = parse_number(cell.strip())
+            v = parse_number(cell)
             if v is None:
-                what = "empty cell" if not cell.strip() else f"not a number: {cell.strip()[:40]!r}"
+                what = "empty cell" if not cell.strip() else f"not a number: {cell.strip(SPACE)[:40]!r}"
                 raise InputError(f"{what} (numbers are plain decimals or exponent notation)", self.path, line,
                                  self.header[k])
             if not math.isfinite(v):
@@ -264,7 +264,7 @@ class SampleLayout:
 def read_samples(path) -> int:
     """A sample stream file (docs/formats.md §8) as ``aacmm live`` reads it, line by line; the number of samples
     (the read-back of :mod:`arm_model.readback`)."""
-    lines = read_text(path, "the sample stream").splitlines()
+    lines = text_lines(read_text(path, "the sample stream"))
     first = next((k for k, text in enumerate(lines) if not blank_record(text)), len(lines))
     header = [c.strip() for c in lines[first].split(",")] if first < len(lines) else []
     layout = SampleLayout(header, len({m.group(1) for h in header if (m := re.fullmatch(r"q(\d+)_\w+", h))}),

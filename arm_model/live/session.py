@@ -10,9 +10,9 @@ feature fits out (docs/live.md).
 Each contact gives one point at its force peak (:mod:`arm_model.live.contacts`), computed by the code of
 ``aacmm tip`` (:func:`arm_model.commands.tip_centres`, every effect of a model file applied) and its
 uncertainty by :func:`arm_model.uncertainty.propagate`, so ``aacmm tip points.csv --arm ARM
---uncertainty`` on the session's ``points.csv`` writes the session's ``tips.csv`` byte for byte (for a model with a
-joint's hysteresis, where the arm went straight from point to point: such a point's last moves come from the samples,
-:mod:`arm_model.live.motion`).
+--uncertainty`` on the session's ``points.csv`` writes the session's ``tips.csv`` byte for byte, a model with a
+joint's hysteresis included: each point's last moves, read from the samples (:mod:`arm_model.live.motion`), are
+recorded with it (``q1_move_sign`` ...).
 """
 from __future__ import annotations
 
@@ -28,11 +28,11 @@ import numpy as np
 from ..checks import limit_bounds
 from ..csv_io import format_row
 from ..errors import InputError
-from ..io import Feature, PointSet, id_problem
+from ..io import Feature, PointSet, id_problem, move_columns
 from ..uncertainty import InputUncertainty
 from .contacts import Contact, ContactDetector, ContactOptions
 from .features import FeatureFit, FeatureTracker
-from .motion import LastMove
+from .motion import BAND_SIGMAS, BAND_STEPS, NOISE_SAMPLES, LastMove
 from .plan import SessionPlan
 from .record import FILES, SessionRecord
 from .samples import Sample, SampleLayout, checked_value, sample_header
@@ -150,10 +150,11 @@ class Session:
         self.inputs = inputs
         # the arm's own inputs (its model discrepancy read once, here), with and without a force sensor
         self._default_inputs = None if inputs is not None else {f: arm.input_uncertainty(f) for f in (True, False)}
-        # each joint's last move before a contact, from the samples (a JointHysteresis effect needs it): the band
-        # from the encoder's step (its uncertainty is step / sqrt(12)) and the readings' noise in contact
+        # each joint's last move before a contact, from the samples: a JointHysteresis effect needs it, and the record
+        # keeps it (points.csv's q1_move_sign ...: what the points file alone cannot give a later fit); the band from
+        # the encoder's step (its uncertainty is step / sqrt(12)) and the readings' noise in contact
         self._moves = (LastMove(self.input_uncertainty(True).encoder * math.sqrt(12.0))
-                       if "motion" in self.model.needs() else None)
+                       if "motion" in self.model.needs() or folder is not None else None)
         if plan is not None and not isinstance(plan, SessionPlan):
             raise TypeError(f"plan must be a SessionPlan (arm_model.live.read_plan(path)) or None, got "
                             f"{type(plan).__name__}")
@@ -507,7 +508,8 @@ class Session:
                         q=np.array([s.q]), force=None if w is None else np.array([w[:3]]), torque=torque,
                         force_kind=kind or ("xyz" if w is not None else None),
                         temperature=None if s.temperature is None else np.array([s.temperature]),
-                        time=np.array([s.t]), lines=np.array([self.counts["points"] + 2]))
+                        time=np.array([s.t]), lines=np.array([self.counts["points"] + 2]),
+                        motion=None if self._moves is None else self._moves.motion())
 
     def input_uncertainty(self, force: bool) -> InputUncertainty:
         """The input uncertainties of a point with (``force``) or without a measured wrench: the ``inputs``
@@ -524,15 +526,13 @@ class Session:
         from ..uncertainty import propagate
         from ..uncertainty_cli import u_columns
         feature = self.tracker.current
-        ps = self._point_set(c, feature)
-        motion = None
-        if self._moves is not None:       # the sign of each joint's last move before the contact, then the band
-            motion = self._moves.motion()
+        ps = self._point_set(c, feature)  # with the sign of each joint's last move before the contact
+        if self._moves is not None:       # then the band from the readings held in this contact
             self._moves.settle()
-        centres = tip_centres(self.arm, ps, motion)
+        centres = tip_centres(self.arm, ps)
         row = tip_table(self.arm, ps, centres)
         inputs = self.input_uncertainty(ps.wrench is not None)
-        prop = propagate(self.model, self.p, ps.q, ps.wrench, self.arm.aux(ps, motion=motion),
+        prop = propagate(self.model, self.p, ps.q, ps.wrench, self.arm.aux(ps),
                          parameters=self.parameters, inputs=inputs, threads=1, systematic=True)
         row.update(u_columns(prop))
         beyond = tuple(self.desc.joints[i].name for i, lo, hi in self._bounds if not lo <= c.peak.q[i] <= hi)
@@ -567,7 +567,22 @@ class Session:
         noise = self.noise()
         return {"counts": dict(self.counts), "last_sample_time_s": self._last_t,
                 "force_noise_N": None if noise is None else [round(float(v), 6) for v in noise],
-                "thresholds_N": self.thresholds()}
+                "thresholds_N": self.thresholds(), "last_move": self._last_move_status()}
+
+    def _last_move_status(self) -> dict | None:
+        """How the joints' last moves are read (docs/live.md, "The last move of each joint"): the rule's constants
+        and, per joint, its encoder step and the dead band the next point's moves are read with (SI: rad, m for a
+        prismatic joint); None when they are not followed."""
+        moves = self._moves
+        if moves is None:
+            return None
+        joints = []
+        for name, kind, step, band in zip(self.desc.joint_names, self.desc.joint_quantities, moves.encoder_steps,
+                                          moves.band, strict=True):
+            unit = "m" if kind == "length" else "rad"
+            joints.append({"joint": name, f"encoder_step_{unit}": step, f"dead_band_{unit}": band})
+        return {"band_steps": BAND_STEPS, "band_sigmas": BAND_SIGMAS, "noise_samples": NOISE_SAMPLES,
+                "joints": joints}
 
     def _status(self, extra: dict | None) -> dict:
         from ..shipped import version
@@ -585,7 +600,7 @@ class Session:
         rec.open("samples", ",".join(layout.header))
         self._samples_buf = rec.queue("samples")
         rec.open("events", ",".join(EVENT_COLUMNS))
-        rec.open("points", ",".join(points_columns(self.desc.n_joints, layout)))
+        rec.open("points", ",".join(points_columns(self.desc.n_joints, layout, self._moves is not None)))
         rec.open("tips", ",".join(TIP_COLUMNS))
         rec.open("contacts", ",".join(CONTACT_COLUMNS))
         rec.open("features", ",".join(FEATURE_COLUMNS))
@@ -629,14 +644,15 @@ TIP_COLUMNS = ("measurement", "feature", "x_rigid_mm", "y_rigid_mm", "z_rigid_mm
                "dx_um", "dy_um", "dz_um", "deflection_um", "over_force", "u_x_mm", "u_y_mm", "u_z_mm")
 
 
-def points_columns(n_joints: int, layout: SampleLayout) -> list[str]:
+def points_columns(n_joints: int, layout: SampleLayout, moves: bool = True) -> list[str]:
     """The columns of a session's ``points.csv`` (docs/formats.md §3) for a stream of ``layout``: the
-    angles in rad and the forces in N, torques in N m, so that each value is the sample's exactly."""
+    angles in rad and the forces in N, torques in N m, so that each value is the sample's exactly; with ``moves``,
+    each joint's last move read from the samples (``q1_move_sign`` ...)."""
     cols = ["measurement", "feature"] + [f"q{j + 1}_rad" for j in range(n_joints)]
     cols += {"xyz": ["fx_N", "fy_N", "fz_N"], "two-channel": ["f_bend_N", "f_axial_N"]}.get(layout.force_kind, [])
     cols += ["mx_Nm", "my_Nm", "mz_Nm"] if layout.has_torque else []
     cols += ["temperature_C"] if layout.has_temperature else []
-    return cols + ["time_s"]
+    return cols + ["time_s"] + (move_columns(n_joints) if moves else [])
 
 
 def _points_values(ps: PointSet) -> dict:
@@ -654,6 +670,8 @@ def _points_values(ps: PointSet) -> dict:
     if ps.temperature is not None:
         cols["temperature_C"] = ps.temperature
     cols["time_s"] = ps.time
+    if ps.motion is not None:
+        cols.update(zip(move_columns(ps.n_joints), ps.motion.astype(int).T, strict=True))
     return cols
 
 
