@@ -34,11 +34,13 @@ __all__ = ["summary_dict", "before_after_text", "write_loop_report", "write_loop
 TABLE = (("rms_um", "RMS", "um"), ("max_um", "max", "um"), ("length_error_max", "length max", "um"),
          ("length_error_rms", "length RMS", "um"), ("articulation_2rms", "artic. 2RMS", "um"),
          ("sphere_diameter_error_max", "sphere diam.", "um"), ("ring_diameter_error_max", "ring diam.", "um"),
-         ("flatness_max", "flatness", "um"), ("reference_rms", "ref. RMS", "um"))
+         ("flatness_max", "flatness", "um"), ("reference_rms_predicted", "ref. RMS", "um"),
+         ("pose_rms", "pose RMS", "um"))
 
 
 #: the held-out figures of a stage that the summary repeats per added effect
-HELDOUT_KEYS = ("rms_um", "u_rms_um", "max_um", "u_max_um", "standard", "u_standard")
+HELDOUT_KEYS = ("rms_um", "u_rms_um", "max_um", "u_max_um", "standard", "u_standard", "flagged_points",
+                "rms_um_unflagged", "max_um_unflagged")
 
 
 def _num(v):
@@ -111,6 +113,7 @@ def summary_dict(loop: LoopResult, inputs: dict | None = None) -> dict:
         "final_cross_validation": [c.to_dict() for c in loop.final_cv],
         "stop_reason": loop.stop_reason,
         "outliers_dropped": loop.dropped,
+        "test_outliers_flagged": loop.flagged,
         "structure_tests": [{**t.to_dict(), "family": f.name, "description": f.what, "p_value_holm": a}
                             for f, t, a in loop.structure],
         "structure_remains": bool(loop.remaining),
@@ -165,6 +168,12 @@ def before_after_text(loop: LoopResult) -> str:
             for k, _, _ in cols))
     if len(rows) > 1:
         lines.append(f"RMS ratio base / final: {rows[0]['rms_um'] / rows[-1]['rms_um']:.2f}")
+    if loop.flagged and rows[0].get("rms_um_unflagged") is not None:
+        ids = ", ".join(dict.fromkeys(str(e["measurement"]) for e in loop.flagged))
+        lines.append(f"{len(loop.flagged)} test point(s) flagged by the point test under the base model ({ids}) are in "
+                     "every figure above; without them, RMS " + " -> ".join(
+                         f"{r['rms_um_unflagged']:.2f}" for r in rows) + " um, max " + " -> ".join(
+                         f"{r['max_um_unflagged']:.2f}" for r in rows) + " um")
     return "\n".join(lines)
 
 

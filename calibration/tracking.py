@@ -18,7 +18,7 @@ from .kinds import MIN_POINTS
 from .problem import Problem
 from .solver import levenberg_marquardt
 
-__all__ = ["fit_tracker", "has_reference", "own_frames_fit"]
+__all__ = ["fit_tracker", "has_reference", "own_frames_fit", "as_predicted", "held_unknowns"]
 
 
 def has_reference(data: CalibrationData) -> bool:
@@ -46,3 +46,31 @@ def fit_tracker(model: ArmModel, p, data: CalibrationData, weights: Weights | No
     states = levenberg_marquardt(prob, np.asarray(p, float), prob.initial_states(p)).states
     prob.check_tracker(p, states)
     return prob.tracker(states)
+
+
+def as_predicted(data: CalibrationData, tracker: Tracker | None, reference: str = "fit") -> CalibrationData:
+    """Held-out ``data`` as a prediction sees them, the one rule of every held-out figure (``calibrate``'s
+    validation, :func:`calibration.validation.validate` and :func:`~calibration.validation.heldout_residuals`, and
+    so the loop's outer test set and folds): the instrument's frame of every session ``tracker`` (the training
+    fit's) has one for, and the markers' offsets, held at the training fit's values; a session the training data
+    never saw keeps its frame unknown, to be solved on the held-out points (for the nominal baseline exactly as
+    for the calibrated model). ``data`` unchanged without a tracker, reference coordinates or ``reference``
+    "fit" (frames not estimated)."""
+    if tracker is None or reference != "fit" or not has_reference(data):
+        return data
+    return data.with_tracker(tracker)
+
+
+def held_unknowns(data: CalibrationData, reference: str = "fit") -> int:
+    """How many nuisance unknowns of ``data``'s reference rows are held at another fit's values
+    (:func:`as_predicted`): 6 for each session's frame its tracker has, 3 for each marker's offset when the
+    offsets are unknowns."""
+    tr, ref = data.tracker, data.reference
+    if tr is None or reference != "fit" or ref is None:
+        return 0
+    rows = np.all(np.isfinite(ref), axis=1)
+    frames = sum(6 for s in set(data.sessions[rows].astype(str).tolist()) if tr.frame(s) is not None)
+    free = rows & (np.asarray(data.points.feature) == "")            # a marker on the tip, not a tracker nest
+    markers = (3 * len(set(data.markers[free].tolist()))
+               if data.marker_offsets == "fit" and tr.offsets is not None else 0)
+    return frames + markers

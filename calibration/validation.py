@@ -148,11 +148,12 @@ def validate(model: ArmModel, p, data: CalibrationData, weights: Weights | None 
     frames and marker offsets of a fit on other data of the same instrument stations) adds the reference
     points' errors with those (``reference_predicted``) beside those after their own best fit (left out
     where a session of ``data`` has too few reference points to fit its own frame: a prediction needs none)."""
-    from .tracking import has_reference, own_frames_fit
+    from .tracking import as_predicted, own_frames_fit
     with blas_threads(1):
-        if tracker is None or reference != "fit" or not has_reference(data):
+        held = as_predicted(data, tracker, reference)
+        if held is data:
             return _validate(model, p, data, weights, reference)
-        pred = _validate(model, p, data.with_tracker(tracker), weights, reference)
+        pred = _validate(model, p, held, weights, reference)
         val = _validate(model, p, data, weights, reference) if own_frames_fit(data) else replace(pred, reference=None,
                                                                                                reference_errors=None)
         assert pred.reference is not None, "data with reference points are validated on them"
@@ -225,20 +226,25 @@ def _reference_figures(val: Validation, prob: Problem, states, table, data: Cali
 
 
 def heldout_residuals(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit",
-                      train=None, cov: tuple | None = None) -> dict:
+                      train=None, cov: tuple | None = None, tracker: Tracker | None = None) -> dict:
     """Residual rows of held-out points with the parameters ``p`` held: ``r`` weighted (n,), ``e`` [m] (n,),
-    ``measurement``, ``kind`` and ``point`` (index into ``data``, -1 for a length) per row, and ``nuisance``:
+    ``measurement``, ``kind`` and ``point`` (index into ``data``, -1 for a length) per row, ``nuisance``:
     the number of nuisance unknowns solved on these rows (0 with ``train``: they are solved on the training poses),
-    and ``propagated``: with ``cov`` = (names, covariance [SI]) of the fitted parameters and ``train`` None, the
-    sum over the rows of the variance the parameters' uncertainty adds to each weighted residual once the
-    nuisance unknowns are solved on the rows, ``tr(P J C J^T P)`` (``J`` the weighted rows' Jacobian in those
-    parameters, ``P`` the projection off the nuisance unknowns' columns); else None.
+    ``held``: the number held at the training fit's values (``tracker``'s frames and offsets,
+    :func:`calibration.tracking.held_unknowns`), and ``propagated``: with ``cov`` = (names, covariance [SI]) of the
+    fitted parameters and ``train`` None, the sum over the rows of the variance the parameters' uncertainty adds to
+    each weighted residual once the nuisance unknowns are solved on the rows, ``tr(P J C J^T P)`` (``J`` the
+    weighted rows' Jacobian in those parameters, ``P`` the projection off the nuisance unknowns' columns); else None.
 
-    ``train`` None: every point of ``data`` is held out and every nuisance unknown (centre, axis, plane,
-    ``T_ref_base``) is solved on ``data`` alone. ``train`` a mask: the points where it holds are the
-    training poses; the nuisance unknowns are solved on them, and the rows of the other points are
-    returned (a held-out pose against the centre fitted on the rest of its feature's poses); the
-    lengths then belong to training."""
+    ``train`` None: every point of ``data`` is held out and every nuisance unknown (centre, axis, plane) is solved
+    on ``data`` alone, but those of the reference instrument that ``tracker`` (the training fit's) holds: each
+    session's ``T_ref_base`` and the markers' offsets are the training fit's
+    (:func:`calibration.tracking.as_predicted`, the rule of ``calibrate``'s held-out figures), a session it has no
+    frame for is solved on ``data``. ``train`` a mask: the points where it holds are the training poses; the
+    nuisance unknowns are solved on them, and the rows of the other points are returned (a held-out pose against
+    the centre fitted on the rest of its feature's poses); the lengths then belong to training."""
+    from .tracking import as_predicted, held_unknowns
+    given, data = data, as_predicted(data, tracker, reference)
     prob = Problem(model, data, weights, [], reference=reference)
     if train is None:
         states = levenberg_marquardt(prob, p, prob.initial_states(p)).states
@@ -256,7 +262,10 @@ def heldout_residuals(model: ArmModel, p, data: CalibrationData, weights: Weight
             raise ValueError(f"no training pose on {', '.join(missing)}: its centre cannot be predicted")
         keep = (prob.row_distance < 0) & ~train[np.maximum(prob.row_point, 0)]
     r = prob.evaluate(p, states, jac=False).r
-    propagated = _propagated(prob, p, states, cov) if cov is not None and train is None else None
+    # the parameters' uncertainty along what the frames and offsets absorb is not a prediction's: projected off
+    # their columns as when they are solved (the held frames' and offsets' own share: ``held``)
+    propagated = (_propagated(prob if data is given else Problem(model, given, weights, [], reference=reference), p,
+                              states, cov) if cov is not None and train is None else None)
     pts = data.points
     meas = np.empty(len(r), dtype=object)
     kind = np.empty(len(r), dtype=object)
@@ -268,7 +277,8 @@ def heldout_residuals(model: ArmModel, p, data: CalibrationData, weights: Weight
         kind[row] = "length"
     point = np.where(ok, prob.row_point, -1)
     return {"r": r[keep], "e": (r * prob.sigma)[keep], "measurement": meas[keep], "kind": kind[keep],
-            "point": point[keep], "nuisance": int(prob.n_nuisance) if train is None else 0, "propagated": propagated}
+            "point": point[keep], "nuisance": int(prob.n_nuisance) if train is None else 0,
+            "held": held_unknowns(data, reference), "propagated": propagated}
 
 
 def _propagated(prob: Problem, p, states, cov: tuple) -> float | None:

@@ -76,20 +76,20 @@ def test_row_groups_cover_every_row_once(campaign):
 
 
 def test_close_loop_test_set_drop_uses_each_groups_scale(campaign):
-    """The close-loop's held-out outlier drop (base model, nuisance solved on the test set) flags on the same
+    """The close-loop's held-out outlier test (base model, nuisance solved on the test set) flags on the same
     per-group scale: the clean tracker points (10x noisier than stated alike) stay and a gross probe point
     goes; one pooled scale over all rows (computed here by hand) drops clean tracker points instead."""
-    from calibration.loop import drop_test_outliers, heldout_residuals
+    from calibration.loop import flag_test_outliers, heldout_residuals
     model, c = campaign
     q = c.points.q.copy()
     bad = int(np.flatnonzero(c.points.feature == "seat")[5])
     q[bad, 1] += 5e-4                                      # ~0.3 mm: 100 probe sigmas
     data = make_data(replace(c.points, q=q), c.artefacts, model, reference=c.reference_points)
-    kept, out = drop_test_outliers(model, c.p_true, data, STATED, "fit", 4.0)
+    flagged_rows, out = flag_test_outliers(model, c.p_true, data, STATED, "fit", 4.0)
     # the gross point and the siblings its seat centre (fitted on the test set) spreads it to; no tracker point
     assert out and {(o["measurement"], o["feature"]) for o in out} == {(c.points.measurement[bad], "seat")}, out
     assert max(o["standardized"] for o in out if o["standardized"] is not None) > 20
-    assert len(kept) == len(data) - len(out)
+    assert flagged_rows.sum() == len(out)
     n_probe = len(c.points)
     # the pooled scale (1.4826 median |r| of all held-out rows) on the same residuals
     h = heldout_residuals(model, c.p_true, data, STATED, "fit")

@@ -10,7 +10,7 @@ import pytest
 from arm_model.model import ArmModel
 from arm_model.sim.quick import SynthSpec, make_campaign
 from calibration import Weights, make_data
-from calibration.loop import drop_test_outliers
+from calibration.loop import flag_test_outliers
 from calibration.validation import heldout_residuals
 
 SPEC = SynthSpec(ballbars=4, ballbar_points=5, seats=4, articulations=8, spheres=1, sphere_points=12, noise=2e-6)
@@ -51,11 +51,11 @@ def test_a_point_gross_in_its_three_rows_together_is_dropped_whole(campaign):
     h = heldout_residuals(model, p, data, STATED, "fit")
     rows = h["point"] == i
     assert np.all(np.abs(h["r"][rows]) < 4.0), h["r"][rows]          # row by row: not an outlier
-    kept, out = drop_test_outliers(model, p, data, STATED, "fit", 4.0)
+    flagged, out = flag_test_outliers(model, p, data, STATED, "fit", 4.0)
     assert [(o["measurement"], o["line"]) for o in out] == [(c.points.measurement[i], int(c.points.lines[i]))], out
     assert out[0]["standardized"] > 4.0 and out[0]["why"] == "outlier"
-    assert len(kept) == len(data) - 1
-    kept, out = drop_test_outliers(model, p, make_data(c.points, c.artefacts, model), STATED, "fit", 4.0)
+    assert np.flatnonzero(flagged).tolist() == [i]
+    flagged, out = flag_test_outliers(model, p, make_data(c.points, c.artefacts, model), STATED, "fit", 4.0)
     assert out == []
 
 
@@ -78,5 +78,5 @@ def test_a_model_error_is_not_dropped_as_outliers(campaign):
     assert limit == 4 and len(calibrate(model, data, held).dropped) > limit
     res = calibrate(model, data, replace(held, outlier_limit=limit))
     assert 1 <= len(res.dropped) <= limit and res.gross_kept and "error of the model" in res.gross_kept
-    kept, out = drop_test_outliers(model, p, data, STATED, "fit", 4.0, limit=limit)
+    flagged, out = flag_test_outliers(model, p, data, STATED, "fit", 4.0, limit=limit)
     assert 1 <= sum(o["why"] == "outlier" for o in out) <= limit, out

@@ -382,3 +382,61 @@ def test_marker_columns_read_back_whatever_their_count_and_unit(k, n, unit, numb
     pts = parse_points(_text(cols), "p.csv")
     assert pts.n_markers == k and list(pts.session) == sessions
     assert_close(pts.ref, values * factor, atol=0, rtol=1e-11)
+
+
+# -- close-loop's outer test set: a prediction, as calibrate's held-out figures ------------------------------------
+
+def _loop_on_tracker(nominal, gross_mm: float = 0.0):
+    """close-loop's first stage (:func:`calibration.loop.stages.prepare`: the split, the base fit on the design set,
+    the test set's point test and its figures) on a tracker campaign of one session (16 poses, 2 markers, 20 um
+    noise), the even poses held out; ``gross_mm``: marker 1 of pose-004 (held out) moved that far along x. Returns
+    the loop's state and its test set."""
+    from calibration.data import split_holdout
+    from calibration.loop import LoopSettings
+    from calibration.loop.stages import Campaign, prepare
+    model = ArmModel(nominal)
+    cols, *_ = _campaign(model, np.zeros(model.spec.size), n=16, noise=20e-6, sessions=("mon",))
+    cols["x1_ref_mm"][3] += gross_mm
+    text = ",".join(cols) + "\n" + "\n".join(",".join(str(cols[k][i]) for k in cols) for i in range(16))
+    held = tuple(f"pose-{i:03d}" for i in range(2, 17, 2))
+    state = prepare(Campaign(parse_points(text), None, nominal), LoopSettings(holdout=held, test_in_model=False),
+                    lambda _: None)
+    return state, split_holdout(state.data, list(held))[1]
+
+
+def _predicted_rms(res, test) -> tuple[float, float]:
+    """RMS of the markers' 3D errors and of their components [m], frames and offsets of the fit ``res``
+    (arm_model.tracker, not the calibration code under test)."""
+    x = marker_positions(res.model, res.p, test.points.q, res.tracker, test.sessions)
+    e = x[np.arange(len(test)), test.markers] - test.reference
+    return float(np.sqrt(np.mean(np.sum(e ** 2, axis=1)))), float(np.sqrt(np.mean(e ** 2)))
+
+
+def test_close_loops_test_set_figure_is_calibrates_heldout_prediction(nominal):
+    """The outer test set's figures are predictions with the design fit's frame and marker offsets, to 1e-9 m: of
+    calibrate's held-out validation (validate with the fit's tracker) and of the markers placed by
+    arm_model.tracker; refitting the frame and offsets on the test poses (the loop's old figure) gives less."""
+    from calibration.validation import validate
+    state, test = _loop_on_tracker(nominal)
+    res, h = state.stages[0].result, state.stages[0].heldout
+    rms3, rms = _predicted_rms(res, test)
+    val = validate(res.model, res.p, test, res.weights, res.reference_mode, tracker=res.tracker)
+    assert h["standard"]["reference_rms_predicted"] * 1e-6 == pytest.approx(rms3, abs=1e-9)
+    assert val.reference_predicted["rms"] == pytest.approx(rms3, abs=1e-9)
+    assert h["rms_um"] * 1e-6 == pytest.approx(rms, abs=1e-9) and h["nuisance"] == 0 and h["held"] == 6 + 2 * 3
+    assert "reference_rms" not in h["standard"] and val.reference["rms"] < 0.9 * rms3      # refitted: smaller
+
+
+def test_a_test_point_far_off_stays_in_the_figure_and_is_reported(nominal):
+    """A held-out marker 3 mm off: the point test flags it (reported), the figure keeps it (equal to the
+    prediction of every test point) and gives the figure without it beside (the prediction of the others)."""
+    state, test = _loop_on_tracker(nominal, gross_mm=3.0)
+    res, h = state.stages[0].result, state.stages[0].heldout
+    rms3, rms = _predicted_rms(res, test)
+    assert [f["measurement"] for f in state.flagged_entries] == ["pose-004"] and h["flagged_points"] == 1
+    assert "pose-004" in state.test.measurements()
+    assert h["standard"]["reference_rms_predicted"] * 1e-6 == pytest.approx(rms3, abs=1e-9)
+    assert h["rms_um"] * 1e-6 == pytest.approx(rms, abs=1e-9) and rms > 2e-4
+    clean = _predicted_rms(res, state.test.select(~state.flagged))[1]
+    assert state.flagged.sum() == 1 and clean < 0.6 * rms
+    assert h["rms_um_unflagged"] * 1e-6 == pytest.approx(clean, abs=1e-9)

@@ -55,7 +55,7 @@ from ..data import Weights
 from .crossval import CVResult, cross_validate
 from .decide import resolved
 from .heldout import bootstrap_rows, heldout_figures, heldout_residuals
-from .outliers import drop_test_outliers
+from .outliers import flag_test_outliers
 from .result import LoopResult, Stage, display, effect_summary
 from .settings import LEGACY_RESOLUTION, PHYSICS, LoopSettings, wilcoxon_units_needed
 from .stages import Campaign, prepare, report, run
@@ -64,7 +64,7 @@ from .verdict import verdict_text
 
 __all__ = ["LoopSettings", "CVResult", "Stage", "LoopResult", "close_loop", "heldout_residuals",
            "heldout_figures", "cross_validate", "display", "effect_summary", "wilcoxon_units_needed", "PHYSICS",
-           "bootstrap_rows", "drop_test_outliers", "resolved", "verdict_text", "LEGACY_RESOLUTION"]
+           "bootstrap_rows", "flag_test_outliers", "resolved", "verdict_text", "LEGACY_RESOLUTION"]
 
 
 def close_loop(points: PointSet, artefacts: Artefacts, desc: ArmDescription, *, reference: PointSet | None = None,

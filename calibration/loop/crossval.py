@@ -84,7 +84,9 @@ def fold_fit(model: ArmModel, design: CalibrationData, folds: Folds, fit, nested
     measured: a linear coupling of two joints fitted from the nominal stopped at 4.7 times the noise in two folds
     of four, where the nested model stopped at 1). ``start``: where every fold's fit starts (:func:`warm_start`
     of the design set's fit: the folds' training parts are most of it; from the nominal, the current model's own
-    fold fits stopped at 4.4-4.8 times the noise in two folds of four on that campaign, its design fit at 1)."""
+    fold fits stopped at 4.4-4.8 times the noise in two folds of four on that campaign, its design fit at 1).
+    A fold's held-out units are predicted as the outer test set is (:func:`~calibration.validation.heldout_residuals`):
+    the instrument's frames and marker offsets those of the fold's training fit, never refitted on the units."""
     results, sse = [], {}
     if folds.by == "pose":
         for f in range(folds.k):
@@ -104,7 +106,8 @@ def fold_fit(model: ArmModel, design: CalibrationData, folds: Folds, fit, nested
         train = design.with_measurements([m for m, g in folds.assign.items() if g != f and m in present])  # type: ignore[attr-defined]
         res = fit(model, train, discrepancy=False, start=start)
         res = _not_worse_than_nested(res, None if nested is None else nested.results[f], model, train, fit)
-        h = heldout_residuals(model, res.p, design.with_measurements(held), res.weights, res.reference_mode)
+        h = heldout_residuals(model, res.p, design.with_measurements(held), res.weights, res.reference_mode,
+                              tracker=res.tracker)
         keys = ([(m, int(i)) for m, i in zip(h["measurement"], h["point"], strict=True)] if folds.per_pose
                 else h["measurement"])
         for key in dict.fromkeys(keys):

@@ -9,14 +9,25 @@ from arm_model import InputError
 from arm_model.model import ArmModel
 
 from ..data import CalibrationData, Weights
-from ..validation import BOOTSTRAP_SAMPLES, FIGURES, bootstrap, heldout_residuals, resamples, validate
+from ..validation import (
+    BOOTSTRAP_SAMPLES,
+    FIGURES,
+    bootstrap,
+    heldout_residuals,
+    resamples,
+    validate,
+    validate_poses,
+)
 
 __all__ = ["heldout_residuals", "heldout_figures", "bootstrap_rows"]
 
 
 def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights, reference: str = "fit",
-                    train=None, seed: int = 0, stated: Weights | None = None, cov: tuple | None = None) -> dict:
-    """Figures of ``(model, p)`` on held-out data [um] (``train``: see :func:`heldout_residuals`): RMS and
+                    train=None, seed: int = 0, stated: Weights | None = None, cov: tuple | None = None,
+                    tracker=None) -> dict:
+    """Figures of ``(model, p)`` on held-out data [um], each a prediction as ``calibrate``'s held-out figures are
+    (:func:`heldout_residuals` with ``train``, the poses of the training features, or ``tracker``, the training
+    fit's instrument frames and marker offsets: :func:`calibration.tracking.as_predicted`): RMS and
     max |residual| over the artefact rows (each row a residual component: a sphere/ring/plane distance, a
     seat coordinate, a length error; the reference-instrument rows only when there is nothing else, since
     their noise is the instrument's), the same per kind, the weighted RMS of all rows, and the standard
@@ -29,8 +40,13 @@ def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights,
     ``chi2_stated``: the RMS and the sum of squares of the rows each over its stated uncertainty, over the
     ``rows_stated`` rows whose group has one (not the lengths, whose uncertainty is each artefact's);
     ``sigmas_stated``: whether the user stated each of those (False: one is a default,
-    :meth:`~calibration.data.Weights.stated_sigma_of`, which the sentences then call so)."""
-    h = heldout_residuals(model, p, data, weights, reference, train, cov)
+    :meth:`~calibration.data.Weights.stated_sigma_of`, which the sentences then call so). ``held``: the nuisance
+    unknowns held at the training fit's values. The standard figures of held-out poses (``train``) are their
+    distances from the training features (``pose_rms``, ``pose_max``: :func:`~calibration.validation.validate_poses`,
+    as ``calibrate --holdout-by pose`` gives them); those of whole measurements hold the reference points predicted
+    with ``tracker`` (``reference_rms_predicted``, ``reference_max_predicted``) instead of after a best fit on
+    them."""
+    h = heldout_residuals(model, p, data, weights, reference, train, cov, tracker)
     e = h["e"]
     art = h["kind"] != "reference"
     head = e[art] if art.any() else e
@@ -38,7 +54,8 @@ def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights,
            "headline_rows": ("reference points" if not art.any() else "artefact points and lengths"
                              if (h["kind"] == "length").any() else "artefact points"),
            "rms_weighted": float(np.sqrt(np.mean(h["r"] ** 2))), "rows": int(len(e)),
-           "chi2": float(np.sum(h["r"] ** 2)), "nuisance": int(h["nuisance"]), "propagated": h["propagated"],
+           "chi2": float(np.sum(h["r"] ** 2)), "nuisance": int(h["nuisance"]), "held": int(h["held"]),
+           "propagated": h["propagated"],
            "rms_over_stated": None,
            "chi2_stated": None, "rows_stated": 0}
     if stated is not None:
@@ -57,12 +74,16 @@ def heldout_figures(model: ArmModel, p, data: CalibrationData, weights: Weights,
                              "max_um": float(np.max(np.abs(ek))) * 1e6}
     u = bootstrap_rows(head, h["measurement"][art] if art.any() else h["measurement"], seed=seed)
     out["u_rms_um"], out["u_max_um"] = (None, None) if u is None else (u[0] * 1e6, u[1] * 1e6)
-    held = data if train is None else data.select(~np.asarray(train, bool))
-    try:
-        val = validate(model, p, held, weights, reference)
-        summary, u_std = val.summary(), bootstrap(val, seed=seed)
-    except InputError:                # held-out poses too few on some feature for its own fit
-        summary, u_std = {}, {}
+    if train is not None:
+        val = validate_poses(model, p, data, train, weights, reference)
+    else:
+        try:
+            val = validate(model, p, data, weights, reference, tracker)
+        except InputError:                # a test instance with too few points for its own fit
+            val = None
+    summary, u_std = ({}, {}) if val is None else (val.summary(), bootstrap(val, seed=seed))
+    if "reference_rms_predicted" in summary:     # the frames refitted on the held-out points: not a prediction
+        summary = {k: v for k, v in summary.items() if k not in ("reference_rms", "reference_max")}
     out["standard"] = {k: summary[k] * FIGURES[k][2] for k in FIGURES if k in summary}
     out["u_standard"] = {k: None if u_std.get(k) is None else u_std[k] * FIGURES[k][2] for k in out["standard"]}
     return out

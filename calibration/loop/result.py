@@ -60,8 +60,7 @@ class LoopResult:
         remaining: the families kept by the forward selection (conditional test, Bonferroni-adjusted p).
         verdict: a sentence; candidates, skipped: the candidate set; design, test: measurement ids.
         structure_plots: binned estimates of the significant families at the final fit.
-        dropped: outlier points left out ("design": by the base fit, "test": by the base model's
-            held-out residuals), with measurement, feature, line.
+        dropped: outlier points left out ("design": by the base fit), with measurement, feature, line.
         test_by: the outer test set holds whole "measurement"s or "pose"s of every feature.
         power: the folds of the decisions and whether their test can reach its level (see
         :func:`~calibration.loop.folds.choose_folds`).
@@ -81,6 +80,8 @@ class LoopResult:
             cannot be made.
         escalated: the opt-in families offered because the outer test set was worse than stated after the default
             ones (``families``, ``candidates``, ``check``), None if not.
+        flagged: the test points the base model's point test flags, as ``dropped``'s entries: kept in every
+            held-out figure (the stages' ``heldout`` also give the headline figures without them, labelled).
     """
     stages: list
     final_screening: list
@@ -106,6 +107,7 @@ class LoopResult:
     residual_over_stated: float | None = None
     heldout_check: dict | None = None
     escalated: dict | None = None
+    flagged: list = field(default_factory=list)
 
     @property
     def final(self) -> Stage:
@@ -125,6 +127,7 @@ class LoopResult:
             h = s.heldout
             rows.append({"stage": s.index, "model": "base model" if s.added is None else f"+ {s.added.name}",
                          "rms_um": h["rms_um"], "max_um": h["max_um"],
+                         "rms_um_unflagged": h.get("rms_um_unflagged"), "max_um_unflagged": h.get("max_um_unflagged"),
                          "ratio_rms": base["rms_um"] / h["rms_um"] if h["rms_um"] > 0 else float("inf"),
                          **{k: v for k, v in h["standard"].items()},
                          "u": {"rms_um": h["u_rms_um"], "max_um": h["u_max_um"], **h["u_standard"]}})

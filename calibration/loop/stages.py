@@ -55,11 +55,11 @@ from .decide import (
     plot_family,
 )
 from .folds import choose_folds, outer_split
-from .outliers import drop_design_outliers, drop_test_outliers, outlier_budget
+from .outliers import drop_design_outliers, flag_test_outliers, outlier_budget
 from .result import LoopResult, Stage
 from .settings import LEGACY_RESOLUTION, NOISE_OFF, LoopSettings
 from .state import LoopState, Screening, log
-from .verdict import ADDED, builds_from_residual, heldout_check, residual_over_stated, verdict_text
+from .verdict import ADDED, builds_from_residual, heldout_check, judged, residual_over_stated, verdict_text
 
 __all__ = ["Campaign", "Stop", "prepare", "at_current_torques", "screen", "test", "physics", "synthesise", "decide",
            "fit_stage", "escalate",
@@ -132,17 +132,9 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
         if _noise(result):
             say("  " + _noise(result)[2:] + " (the stated uncertainties are starting values)")
     result = torques_at_equilibrium(state, model, result)
+    state.flagged = np.zeros(len(state.test), bool)
     if settings.drop_outliers:
-        try:
-            state.test, state.dropped["test"] = drop_test_outliers(
-                model, result.p, state.test, state.weights, result.reference_mode, settings.outlier_threshold,
-                None if test_by == "measurement" else state.design,
-                max(0, outlier_budget(len(state.data)) - len(state.dropped["design"])))
-        except NumericalError:        # e.g. two tracker poses: a frame and the markers' offsets undetermined
-            say("  the test set alone does not determine its own unknowns (centres, frames, offsets) for the point "
-                "test: its points are not tested for outliers")
-        if state.dropped["test"]:
-            say(f"  {len(state.dropped['test'])} outlier point(s) of the test set dropped (base model)")
+        _flag_test(state, model, result)
     state.folds, state.power = choose_folds(state.design, settings)
     if state.power["note"].startswith("WARNING: "):        # shown with --quiet too
         log.warning(state.power["note"][len("WARNING: "):])
@@ -152,6 +144,24 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
     state.stages = [Stage(0, model, result, heldout=state.test_figures(model, result))]
     say(f"  base model: s0 {result.s0:.3g}, held-out test RMS {state.stages[0].heldout['rms_um']:.2f} um")
     return state
+
+
+def _flag_test(state: LoopState, model: ArmModel, result: CalibrationResult) -> None:
+    """The test points the base model's point test flags (:func:`~calibration.loop.outliers.flag_test_outliers`):
+    reported, never left out of a held-out figure (each figure is also given without them, labelled)."""
+    s, say = state.settings, state.say
+    try:
+        state.flagged, state.flagged_entries = flag_test_outliers(
+            model, result.p, state.test, state.weights, result.reference_mode, s.outlier_threshold,
+            None if state.test_by == "measurement" else state.design,
+            max(0, outlier_budget(len(state.data)) - len(state.dropped["design"])))
+    except NumericalError:        # e.g. two tracker poses: a frame and the markers' offsets undetermined
+        say("  the test set alone does not determine its own unknowns (centres, frames, offsets) for the point "
+            "test: its points are not tested for outliers")
+    if state.flagged_entries:
+        ids = ", ".join(dict.fromkeys(str(e["measurement"]) for e in state.flagged_entries))
+        say(f"  {int(state.flagged.sum())} point(s) of the test set flagged by the point test (base model; {ids}): "
+            "kept in every held-out figure, which is also given without them")
 
 
 def torques_at_equilibrium(state: LoopState, model: ArmModel, result: CalibrationResult,
@@ -405,11 +415,13 @@ def outer_test_worse(state: LoopState, stage: Stage, cv) -> bool:
     """Whether the stage's RMS on the outer test set is above the current model's (an effect is never added
     when the outer test gets worse, so the before/after table never shows a step up); if so its candidate's
     held-out test no longer passes (its reason says why), and it is recorded in ``state.vetoed``."""
-    now, new = state.stages[-1].heldout["rms_um"], stage.heldout["rms_um"]
+    now, new = judged(state.stages[-1])["rms_um"], judged(stage)["rms_um"]
     if not new > now:
         return False
     name = stage.added.name
-    why = f"the outer test set got worse with it (RMS {now:.4g} -> {new:.4g} um)"
+    flagged = stage.heldout.get("flagged_points") or 0
+    why = f"the outer test set got worse with it (RMS {now:.4g} -> {new:.4g} um" + (
+        f", without its {flagged} point(s) the point test flags)" if flagged else ")")
     state.say(f"  {name} passed the held-out folds, but {why}: not added")
     state.vetoed.append({"name": name, "origin": stage.added.origin, "heldout_rms_before_um": now,
                          "heldout_rms_after_um": new, "cross_validation": cv.reason})
@@ -521,4 +533,5 @@ def report(state: LoopState) -> LoopResult:
                       state.candidates + state.synthesised, state.skipped, state.design.measurements(),
                       state.test.measurements(), s, state.desc, plots, state.dropped, state.test_by, state.power,
                       model_fit, built, state.vetoed, state.data,
-                      residual_over_stated(state.result, state.stated)[0], check, state.escalated)
+                      residual_over_stated(state.result, state.stated)[0], check, state.escalated,
+                      state.flagged_entries)

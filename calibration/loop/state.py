@@ -63,7 +63,9 @@ class LoopState:
             parameter vector (the parameters after it are those of the effects the loop added).
         stated: the user's stated uncertainties; candidates, skipped: the library's candidate set.
         folds, power: the folds of the decisions and whether their test can reach its level.
-        dropped: outlier points left out ("design", "test").
+        dropped: outlier points left out ("design"; the test set's are never left out).
+        flagged: (len(test),) bool, the test points the base model's point test flags (kept in every figure;
+            also left out in the figures labelled so); flagged_entries: their descriptions.
 
     Changed by the stages:
         weights: the uncertainties every fit starts from (estimated from the data when the stated ones are
@@ -100,7 +102,9 @@ class LoopState:
     weights: Weights
     folds: Folds | None = None
     power: dict = field(default_factory=dict)
-    dropped: dict = field(default_factory=lambda: {"design": [], "test": []})
+    dropped: dict = field(default_factory=lambda: {"design": []})
+    flagged: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    flagged_entries: list = field(default_factory=list)
     priors: dict = field(default_factory=dict)
     result: CalibrationResult | None = None
     stages: list = field(default_factory=list)
@@ -138,8 +142,12 @@ class LoopState:
             outlier_limit=outlier_budget(len(self.data)) if drop_outliers else None))
 
     def test_figures(self, model: ArmModel, result: CalibrationResult, weights: Weights | None = None) -> dict:
-        """Figures of ``(model, result.p)`` on the outer test set (:func:`~calibration.loop.heldout.heldout_figures`):
-        nuisance solved on the test measurements, or each test pose against its feature's design poses, weighted
+        """Figures of ``(model, result.p)`` on the outer test set (:func:`~calibration.loop.heldout.heldout_figures`),
+        each a prediction as ``calibrate``'s held-out figures are: the test measurements' own centres solved on
+        them, the instrument's frames and marker offsets those of the design fit (``result.tracker``; a session
+        the design set lacks solved on the test points), or each test pose against its feature's design poses;
+        every test point in them (without those the point test flags, ``flagged``, also: ``unflagged``, and
+        ``rms_um_unflagged``, ``max_um_unflagged``; their nuisance solved without them), weighted
         by ``weights`` (default the current ones); the bootstrap of their uncertainties seeded by
         ``settings.seed``. A model with joint torques takes them at its own static equilibrium, as ``aacmm tip``
         applies its model file (:func:`calibration.model_output.at_equilibrium`; with the torques of the base
@@ -148,11 +156,21 @@ class LoopState:
         held-out rows (``propagated``) is computed for a test set of whole measurements."""
         seed, weights = self.settings.seed, self.weights if weights is None else weights
         p, reference, cov = result.p, result.reference_mode, (result.free, result.cov)
-        if self.test_by == "measurement":
-            return heldout_figures(model, p, at_equilibrium(model, p, self.test), weights, reference, seed=seed,
-                                   stated=self.stated, cov=cov)
-        return heldout_figures(model, p, at_equilibrium(model, p, concat(self.design, self.test)), weights, reference,
-                               np.arange(len(self.design) + len(self.test)) < len(self.design), seed, self.stated)
+
+        def figures(test):
+            if self.test_by == "measurement":
+                return heldout_figures(model, p, at_equilibrium(model, p, test), weights, reference, seed=seed,
+                                       stated=self.stated, cov=cov, tracker=result.tracker)
+            n = len(self.design)
+            return heldout_figures(model, p, at_equilibrium(model, p, concat(self.design, test)), weights, reference,
+                                   np.arange(n + len(test)) < n, seed, self.stated)
+        out = figures(self.test)
+        out["flagged_points"] = int(self.flagged.sum())
+        out["unflagged"] = (figures(self.test.select(~self.flagged)) if self.flagged.any() and not self.flagged.all()
+                            else None)
+        for k in ("rms_um", "max_um"):
+            out[f"{k}_unflagged"] = None if out["unflagged"] is None else out["unflagged"][k]
+        return out
 
 
 @dataclass
