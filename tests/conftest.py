@@ -188,6 +188,9 @@ def robots() -> Path:
 #  loop_cli residual and --library-only -> test_loop_honesty ..._built_from_the_residual, ..._library_alone
 #  loop_cross_harmonics library alone -> test_loop_cross_harmonics ..._built_added_and_recovered; test_loop_honesty
 #  loop_effects other seeds (10)      -> test_loop_effects names_recovers_and_halves (seed 3; seeds 4, 5: slow only)
+#  loop_effects eccentricity, probe compliance (seed 3) -> test_loop_cross_harmonics, test_loop_synthesis [lobing];
+#                                       test_loop_effects [force_sensor] and its indistinguishable compliance
+#  loop_real_physics gain injected    -> test_loop_real_physics compliance injected (the same injection and checks)
 #  loop_heldout_verdict UR5 gain      -> test_loop_heldout_verdict three_times_..._u, opt_in_families_offered
 #  loop_hidden_effects coupling, 4th harmonic -> test_loop_hidden_effects linear_coupling, structure_tests_see_a_fourth
 #  loop_honesty 19 of 20 seeds        -> test_loop_honesty ..._on_two_seeds (0, 1), honesty_study (seed 4)

@@ -106,6 +106,7 @@ def test_a_compliance_injected_into_the_real_angles_is_found_recovered_and_carri
 GAIN = 5e-3                # encoder scale error injected on the shoulder (panda_joint2): 0.5 %
 
 
+@pytest.mark.slow        # make test holds its property with the compliance injected the same way (the test above)
 def test_a_joint_gain_injected_into_the_real_angles_is_found_recovered_and_carries_over(setup):
     """Encoder readings of joint 2 divided by 1 + g (so the true angle is (1 + g) times the reading, the
     convention of :class:`arm_model.effects.JointGain`), independent of the effect code: the loop trained
