@@ -673,6 +673,13 @@ def _check_writable(desc: ArmDescription) -> None:
     if p.lever == 0.0 and p.compliance.any():
         raise NumericalError(f"the probe of the arm '{desc.name}' has no stylus but compliances "
                              f"{p.compliance.tolist()} m/N: a tip without a stylus bends under no force")
+    if p.lever is None and default_lever(p.p_last, p.rotation) is not None:
+        # the stylus length is the ball's coordinate along probe z; read back, a ball at or behind the last joint
+        # origin along probe z gets a hinge behind the ball (|p|): the file would not be this arm
+        raise NumericalError(f"the probe of the arm '{desc.name}': its ball lies "
+                             f"{p.stylus_length * 1e3:.6g} mm along probe z from the last "
+                             "joint origin, at or behind it: this arm cannot be written (a fit that ran away along a "
+                             "direction the data do not see?)")
 
 
 def description_data(desc: ArmDescription) -> dict[str, Any]:

@@ -363,3 +363,24 @@ def test_force_contact_options_with_trigger_contacts_are_refused(tmp_path, capsy
                     *extra, "-o", sess], capsys)
     assert rc == 2 and f"{words}: option(s) of force contacts, which --contact trigger does not use" in err, err
     assert not sess.exists()
+
+
+def test_a_fitted_probe_whose_ball_ran_behind_the_last_joint_is_a_numerical_failure_not_a_file_read_otherwise():
+    """A calibration on 5000 ring points (the bundled ring repeated) let the prior-dominated probe z run from +85 to
+    -93.6 mm: the written file read back put the stylus hinge behind the ball (|p|) where the fit had the ball's
+    coordinate (-93.6 mm), 74 nm apart on a 5.9 N point, exit 3 ('a bug'). Such an arm is now refused by the
+    writer as a numerical failure naming the probe (exit 4 at the command), as a joint origin beyond the reader's
+    rules is."""
+    from dataclasses import replace
+
+    from arm_model.description import description_data, load_description
+    from arm_model.errors import NumericalError
+    from arm_model.shipped import shipped_path
+
+    desc = load_description(shipped_path("urdf/aacmm7.dh.toml"))
+    description_data(desc)                                   # the nominal is written
+    ran = replace(desc, probe=replace(desc.probe, p_last=(2e-6, -1e-6, -0.0936)))
+    with pytest.raises(NumericalError, match=r"probe .*-93\.6 mm along probe z"):
+        description_data(ran)
+    stated = replace(ran, probe=replace(ran.probe, lever=0.0936))   # a stylus length stated is written as stated
+    assert description_data(stated)["probe"]["stylus_length_mm"] == pytest.approx(93.6)
