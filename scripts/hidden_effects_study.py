@@ -249,17 +249,27 @@ def run_case(name: str, seeds, out: Path | None, campaign_seed: int = 3) -> list
                **loop_row(loop), **judge(fig, loop), "seconds": round(time.time() - t1, 1)}
         rows.append(row)
         print(f"  seed {seed}: nominal {fig['nominal']:.2f} -> calibrated {fig['calibrated']:.2f} -> loop "
-              f"{fig['loop']:.2f} um (floor {fig['floor']:.2f}); added {row['added'] or '-'}; built not added "
-              f"{row['built_not_added'] or '-'}; remaining {row['remaining'] or '-'}; honest {row['honest']} "
+              f"{fig['loop']:.2f} um (floor {fig['floor']:.2f}); {effects_text(row)}; honest {row['honest']} "
               f"({row['seconds']:.0f} s)", flush=True)
-        if out is not None:
-            out.mkdir(parents=True, exist_ok=True)
-            (out / f"{name}-c{campaign_seed}-seed{seed}.json").write_text(json.dumps(row, indent=1, default=str))
+        save_row(out, f"{name}-c{campaign_seed}-seed{seed}", row)
     return rows
 
 
 #: the columns every study's table shares: the held-out RMS of the four models (:func:`rms_cell`)
 RMS_COLUMN = "held-out RMS [um]: nominal / calibrated / loop / truth"
+
+
+def effects_text(row: dict) -> str:
+    """What the loop did, for a case's console line: the effects added, built but not added, and remaining."""
+    return (f"added {row['added'] or '-'}; built not added {row['built_not_added'] or '-'}; remaining "
+            f"{row['remaining'] or '-'}")
+
+
+def save_row(out: Path | None, name: str, row: dict) -> None:
+    """A case's row as ``out/name.json`` (nothing without ``out``)."""
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / f"{name}.json").write_text(json.dumps(row, indent=1, default=str))
 
 
 def listed(names) -> str:

@@ -54,7 +54,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import sys
 import time
 from pathlib import Path
@@ -71,11 +70,13 @@ from hidden_effects_study import (  # noqa: E402
     _arm_campaign,
     _from_sim,
     cli_defaults,
+    effects_text,
     judge,
     listed,
     loop_row,
     markdown_table,
     rms_cell,
+    save_row,
 )
 from robot_hidden_study import (  # noqa: E402
     campaign as robot_campaign,  # noqa: E402
@@ -300,13 +301,10 @@ def run_case(name: str, campaign_seed: int | None, out: Path | None) -> dict:
     worse = (row["heldout_check"] or {}).get("worse_than_stated")
     dropped = sum(len(v) for v in loop.dropped.values())
     print(f"[{name}] {case.what}: nominal {fig['nominal']:.2f} / calibrated {fig['calibrated']:.2f} / loop "
-          f"{fig['loop']:.2f} / truth {fig['floor']:.2f} um; added {row['added'] or '-'}; built not added "
-          f"{row['built_not_added'] or '-'}; remaining {row['remaining'] or '-'}; test set worse than stated "
+          f"{fig['loop']:.2f} / truth {fig['floor']:.2f} um; {effects_text(row)}; test set worse than stated "
           f"{worse}; points dropped {dropped}; false {row['false']} {row['unresolved_written'] or ''} "
           f"({row['seconds']:.0f} s)", flush=True)
-    if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
-        (out / f"{name}.json").write_text(json.dumps(row, indent=1, default=str))
+    save_row(out, name, row)
     return row
 
 

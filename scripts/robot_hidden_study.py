@@ -44,7 +44,18 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "scripts"))
 
-from hidden_effects_study import RMS_COLUMN, Case, cli_defaults, judge, listed, loop_row, markdown_table, rms_cell  # noqa: E402
+from hidden_effects_study import (  # noqa: E402
+    RMS_COLUMN,
+    Case,
+    cli_defaults,
+    effects_text,
+    judge,
+    listed,
+    loop_row,
+    markdown_table,
+    rms_cell,
+    save_row,
+)
 
 from arm_model import PinocchioArm  # noqa: E402
 from arm_model.effects import JointGain  # noqa: E402
@@ -196,12 +207,9 @@ def run_one(robot: str, kind: str, name: str, seed: int, out: Path | None) -> di
            **loop_row(loop), **judge(fig, loop), "model_file": status,
            "negative_compliances": neg, "seconds": round(time.time() - t0, 1)}
     print(f"[{robot} {kind} {name} c{seed}] nominal {fig['nominal']:.0f} / calibrated {fig['calibrated']:.0f} / loop "
-          f"{fig['loop']:.0f} / truth {fig['floor']:.0f} um; added {row['added'] or '-'}; built not added "
-          f"{row['built_not_added'] or '-'}; remaining {row['remaining'] or '-'}; model file {status}; negative "
+          f"{fig['loop']:.0f} / truth {fig['floor']:.0f} um; {effects_text(row)}; model file {status}; negative "
           f"{neg or '-'}; honest {row['honest']} ({row['seconds']:.0f} s)", flush=True)
-    if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
-        (out / f"{robot}-{kind}-{name}-c{seed}.json").write_text(json.dumps(row, indent=1, default=str))
+    save_row(out, f"{robot}-{kind}-{name}-c{seed}", row)
     return row
 
 
