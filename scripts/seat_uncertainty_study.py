@@ -179,17 +179,32 @@ def _positive_part(m) -> np.ndarray:
     return (v * np.maximum(w, 0.0)) @ v.T
 
 
+def _whitened(lin: dict) -> tuple:
+    """``(js, r, solve)`` of the linearised fit ``lin`` with its rows divided by ``sqrt(var)``, so that a row's
+    variance is 1 and ``solve`` (``b -> A^-1 b``, ``A = js^T js + diag(damp)``, the prior's precision ``damp`` as the
+    fit put it in its normal matrix) gives the posterior itself, as the result's covariance is computed:
+    ``(J^T J / var + P)^-1``."""
+    js, r, solve, var = (lin[key] for key in ("js", "r", "solve", "var"))
+    n = js.shape[1]
+    jtj = (js.T @ js).toarray()
+    damp = np.diag(np.linalg.inv(solve(np.eye(n)))) - np.diag(jtj)
+    a_inv = np.linalg.inv(jtj / var + np.diag(np.maximum(damp, 0.0)))
+    a_inv = 0.5 * (a_inv + a_inv.T)
+    return js / math.sqrt(var), r / math.sqrt(var), lambda b: a_inv @ b
+
+
 def robust_covariance(name: str, k: int, lin: dict) -> np.ndarray:
-    """The covariance of the first ``k`` (scaled) unknowns of the linearised fit ``lin``
-    (:func:`captured_linearisation`): ``posterior`` ``var A^-1``; ``jackknife`` it :func:`lifted` to the
-    delete-one-point jackknife ``sum_O d_O d_O^T`` (``d_O`` the change of the unknowns from the fit without point O's
-    rows to the fit with them, :func:`calibration.discrepancy.group_deletions`); ``fold-shift`` it plus the positive
-    part of ``mean_F (d_F d_F^T - C_F)`` over the extrapolative folds F (:func:`calibration.discrepancy.extreme_folds`),
-    ``C_F = var Z_F^T (I - H_FF)^-1 Z_F`` (``Z_F = J_F A^-1``) the covariance of ``d_F`` when the model holds."""
+    """The covariance of the first ``k`` (column-scaled) unknowns of the linearised fit ``lin``
+    (:func:`captured_linearisation`, rows whitened by :func:`_whitened`): ``posterior`` ``A^-1``; ``jackknife`` it
+    :func:`lifted` to the delete-one-point jackknife ``sum_O d_O d_O^T`` (``d_O`` the change of the unknowns from the
+    fit without point O's rows to the fit with them, :func:`calibration.discrepancy.group_deletions`); ``fold-shift``
+    it plus the positive part of ``mean_F (d_F d_F^T - C_F)`` over the extrapolative folds F
+    (:func:`calibration.discrepancy.extreme_folds`), ``C_F = Z_F^T (I - H_FF)^-1 Z_F`` (``Z_F = J_F A^-1``) the
+    covariance of ``d_F`` when the model holds."""
     from calibration.discrepancy import extreme_folds, group_deletions, holdable
-    prob, r, js, solve, var = (lin[key] for key in ("prob", "r", "js", "solve", "var"))
-    a_inv = solve(np.eye(js.shape[1]))
-    post = var * 0.5 * (a_inv + a_inv.T)[:k, :k]
+    prob = lin["prob"]
+    js, r, solve = _whitened(lin)
+    post = solve(np.eye(js.shape[1]))[:k, :k]
     rp = prob.row_point
     point_rows = (prob.row_distance < 0) & (rp >= 0)
     pts = np.unique(rp[point_rows])
@@ -208,7 +223,7 @@ def robust_covariance(name: str, k: int, lin: dict) -> np.ndarray:
         if d is None:
             continue
         z = solve(js[rows].toarray().T).T[:, :k]
-        excess += np.outer(d[:k], d[:k]) - var * z.T @ m @ z
+        excess += np.outer(d[:k], d[:k]) - z.T @ m @ z
         n += 1
     return post + _positive_part(excess / max(n, 1))
 
@@ -300,7 +315,7 @@ def study(root: Path, urdf: Path, tip: str, places, holes, say=print, covariance
         with captured_linearisation() as lin:
             res = calibrate(model, data[tr], FitOptions(weights_from_data=True))
         cov_p = res.cov
-        if covariance != "posterior":      # in the fit's scaled unknowns, scaled back by the posterior's own diagonal
+        if covariance != "posterior":      # in the fit's column-scaled unknowns, scaled back by the posterior's
             post, robust = (robust_covariance(c, len(res.free), lin) for c in ("posterior", covariance))
             scale = np.sqrt(np.diag(res.cov) / np.diag(post))
             cov_p = robust * np.outer(scale, scale)
