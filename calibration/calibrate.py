@@ -1616,17 +1616,22 @@ def nominal_baseline(model: ArmModel, data: CalibrationData, options: FitOptions
     """The nominal model given the same nuisance unknowns as a calibration with ``options``: the description
     (``options.values``) with only the tip offset fitted (probe.x/y/z, where free: a probe's ball whose place
     on the last link may not be known; a tracker's markers at unknown offsets are nuisance unknowns of every
-    fit) by least squares, the artefacts' unknowns and the
+    fit) under the calibration's own prior (``options.prior_scale``: by default the evidence's scale of the tip
+    offset, its ceiling and its rule for a direction the data barely see, :mod:`calibration.prior`; without a
+    prior, by least squares), the artefacts' unknowns and the
     reference frame solved as in every fit, at the same weights (no noise estimate of its own), on every point
     of ``data`` (give it the fit's ``data``: without the gross errors the fit left out). Its
     ``p``/``reference`` are the baseline every "nominal -> calibrated" figure compares against; it carries no
-    model discrepancy (nothing reads one of the baseline's: its extrapolative folds cost a fit's tenth)."""
+    model discrepancy (nothing reads one of the baseline's: its extrapolative folds cost a fit's tenth). (Without
+    the prior, a ring gauge probed with the stylus along its axis, which sees probe z only through the stylus'
+    tilt, moved the bundled ring campaign's probe z by -246 mm.)"""
     spec = model.spec
     cand = resolve_parameters(spec, default_free(model, data) if options.free is None else options.free)
     tip = [spec.names[i] for i in cand if spec.names[i] in ("probe.x", "probe.y", "probe.z")]
-    return calibrate(model, data, replace(options, free=tuple(tip), prior_scale=None, min_resolution=None,
-                                          weights_from_data=False, drop_outliers=False, gross_threshold=None,
-                                          start=None, on_unidentifiable="fix", discrepancy=False))
+    return calibrate(model, data, replace(options, free=tuple(tip), prior_scale=options.prior_scale if tip else None,
+                                          min_resolution=None, weights_from_data=False, drop_outliers=False,
+                                          gross_threshold=None, start=None, on_unidentifiable="fix",
+                                          discrepancy=False))
 
 
 def evidence_scale(model: ArmModel, data: CalibrationData, options: FitOptions = FitOptions()) -> tuple[dict, list]:
