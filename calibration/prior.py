@@ -19,6 +19,18 @@ the others' posterior far from Gaussian), and its MacKay fixed point shrinks a c
 see only weakly to zero, leaving its signature to the geometry, which then errs where the poses reach beyond
 the training range (measured in docs/studies/calibration.md).
 
+A joint's play (:class:`arm_model.effects.JointBacklash`, :class:`~arm_model.effects.JointHysteresis`) has a physical
+prior too: size :data:`arm_model.effects.PLAY` (1 mrad, the largest plausible play), its group's scale not estimated;
+a backlash is non-negative (its lower bound). A play is seen only as the difference between the points on its two
+sides: where one side holds fewer than :data:`MIN_SIDE_SHARE` of the points, or the sign is nil on every point (a
+joint with no gravity torque, one that never moved), the play is the joint's offset in the data plus what a handful
+of points carry (a real Panda's elbow, trained on one placement whose gravity torque keeps one sign, fitted 17 mrad
+of "play" at 1 mrad: its offset, the rank test having held the offset instead). Such a parameter is **prior only**
+(:func:`prior_only`): its data's column is left out of the fit (:attr:`calibration.problem.Problem.prior_only`), so
+it stays at its prior's centre with its prior's uncertainty (prior-dominated, ``rho = 1``) and that uncertainty,
+uncorrelated, is carried by every propagation (a pose on the other side of the play is that uncertain). Without a
+prior it is held at its given value, with that reason.
+
 A parameter is **prior-dominated** when ``rho_k >= PRIOR_DOMINATED`` (0.5): its posterior variance is at
 least half its prior's, i.e. the data's own information on it is at most the prior's (for one parameter,
 ``1 / u_post^2 = 1 / u_prior^2 + 1 / u_data^2``, so ``rho >= 0.5`` iff ``u_data >= u_prior``). Such a
@@ -29,13 +41,13 @@ from __future__ import annotations
 
 import fnmatch
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 __all__ = ["GROUP_LENGTHS", "GROUP_OFFSETS", "GROUP_ANGLES", "GROUP_TIP", "GROUP_PROBE_COMPLIANCE", "BASE_SIZES",
-           "PRIOR_DOMINATED", "SCALE_RANGE", "MIN_EFFECTIVE", "PriorSpec", "parameter_groups", "prior_spec",
-           "variance_ratio", "update_scales"]
+           "PRIOR_DOMINATED", "SCALE_RANGE", "MIN_EFFECTIVE", "MIN_SIDE_SHARE", "NIL_LOAD", "PriorSpec",
+           "parameter_groups", "prior_spec", "variance_ratio", "update_scales", "both_sides", "prior_only"]
 
 GROUP_LENGTHS = "lengths"
 GROUP_OFFSETS = "joint offsets"
@@ -55,6 +67,14 @@ DEFLECTION = 1e-2
 MAX_ANGULAR_COMPLIANCE = 0.1
 #: posterior/prior variance ratio from which a parameter is prior-dominated
 PRIOR_DOMINATED = 0.5
+#: the smallest share of the points on either side of a sign (a play's, a gravity torque's, a last move's) for the data
+#: to see the sign apart from a constant: with fewer, the sign picks out a handful of points (a gross error's
+#: signature), and a play is the joint's offset (:func:`prior_only`; the loop's sign families, :mod:`calibration.
+#: diagnostics`)
+MIN_SIDE_SHARE = 0.1
+#: a joint's gravity torque at most this fraction of the largest one in the data (any joint, any point) is nil: its
+#: sign is rounding (a vertical axis)
+NIL_LOAD = 1e-9
 #: range of a group's scale (times the plausible sizes)
 SCALE_RANGE = (1e-2, 1e2)
 #: fewest parameters the data must determine in a group (``gamma_G``) for its scale to be estimated
@@ -127,13 +147,17 @@ class PriorSpec:
         lower: lower bound of the parameter [SI] (``-inf``: none; a compliance: minus its nominal value).
         source: how each size was set (for the report).
         physical: the groups whose prior is physical (every parameter an angular compliance sized by the data's
-            torque): the evidence leaves their scale as given (1 by default).
+            torque, or an effect's physical size such as a play's): the evidence leaves their scale as given (1 by
+            default).
+        prior_only: {spec index: why} of the parameters the data cannot tell from others (:func:`prior_only`):
+            their data's column is left out of the fit, the prior alone holds them.
     """
     group: tuple
     size: np.ndarray
     lower: np.ndarray
     source: tuple
     physical: frozenset = frozenset()
+    prior_only: dict = field(default_factory=dict)
 
     def sizes(self, scales: dict | float) -> np.ndarray:
         """The prior's standard deviations [SI] at group ``scales`` (a dict, or one factor for every group)."""
@@ -161,8 +185,8 @@ def _torque_reference(model, data, joint: int) -> float:
     return float(np.sqrt(np.mean(t ** 2))) if len(t) else 0.0
 
 
-def _effect_sizes(model, data) -> dict[int, tuple[float, str]]:
-    """{spec index: (size at scale 1, source)} of every effect parameter."""
+def _effect_sizes(model, data) -> dict[int, tuple[float, str, bool]]:
+    """{spec index: (size at scale 1, source, whether the size is physical)} of every effect parameter."""
     desc = model.desc
     out = {}
     for e, sl in model.effect_slices():
@@ -179,11 +203,12 @@ def _effect_sizes(model, data) -> dict[int, tuple[float, str]]:
                 size = MAX_ANGULAR_COMPLIANCE if tau <= 0 else min(DEFLECTION / tau, MAX_ANGULAR_COMPLIANCE)
                 load = "torque" if loads is None else "gravity moment"
                 out[k] = (size, f"{DEFLECTION * 1e3:g} mrad under the joint's RMS {load} in the data "
-                                f"({tau:.3g} N m)" if tau > 0 else f"no {load} in the data")
+                                f"({tau:.3g} N m)" if tau > 0 else f"no {load} in the data", True)
             elif e.plausible_size is not None:
-                out[k] = (float(e.plausible_size), "the effect's plausible size")
+                out[k] = (float(e.plausible_size), f"the effect's {'physical' if e.physical_size else 'plausible'} "
+                                                   f"size ({e.plausible_size:g} {unit})", e.physical_size)
             else:
-                out[k] = (UNIT_SIZES.get(unit, 1.0), f"by unit ({unit})")
+                out[k] = (UNIT_SIZES.get(unit, 1.0), f"by unit ({unit})", False)
     return out
 
 
@@ -198,9 +223,11 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
     not estimated) under the RMS torque the data give it (gravity from the
     description's masses, contact torques from the forces; an off-axis compliance, the RMS moment of gravity
     about its axis that the effect's ``gravity_loads`` give; at most :data:`MAX_ANGULAR_COMPLIANCE`); another
-    effect parameter the effect's own plausible size or a size by unit (:data:`UNIT_SIZES`). ``priors``
+    effect parameter the effect's own plausible size (a play's physical one, :data:`arm_model.effects.PLAY`: its
+    group's scale not estimated either) or a size by unit (:data:`UNIT_SIZES`); the plays the data cannot tell
+    from the joint's offset, prior only (:func:`prior_only`). ``priors``
     (names or glob patterns -> size [SI]) override. The lower bounds are the model's
-    (:meth:`arm_model.model.ArmModel.lower_bounds`: a compliance cannot be negative in total)."""
+    (:meth:`arm_model.model.ArmModel.lower_bounds`: a compliance cannot be negative in total, nor a backlash)."""
     spec = model.spec
     probe = model.desc.probe
     eff = _effect_sizes(model, data)
@@ -210,7 +237,7 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
         if hit:
             size[i], src = float(hit[0]), "given"
         elif i in eff:
-            size[i], src = eff[i]
+            size[i], src, _ = eff[i]
         elif n.startswith("probe.compliance"):
             c = probe.axial_compliance if n.endswith("_z") else max(probe.bending_compliance_x,
                                                                     probe.bending_compliance_y)
@@ -221,10 +248,54 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
             size[i], src = BASE_SIZES.get(unit, UNIT_SIZES.get(unit, 1.0)), f"by unit ({unit})"
         source.append(src)
     groups = tuple(parameter_groups(model, spec.names))
-    torque_sized = [i in eff and spec.units[i] == "rad/(N m)" and source[i] != "given" for i in range(spec.size)]
-    physical = frozenset(g for g in set(groups)
-                         if all(torque_sized[i] for i in range(spec.size) if groups[i] == g))
-    return PriorSpec(groups, size, lower, tuple(source), physical)
+    sized = [i in eff and eff[i][2] and source[i] != "given" for i in range(spec.size)]
+    physical = frozenset(g for g in set(groups) if all(sized[i] for i in range(spec.size) if groups[i] == g))
+    return PriorSpec(groups, size, lower, tuple(source), physical, prior_only(model, data))
+
+
+def both_sides(sign) -> bool:
+    """Whether at least :data:`MIN_SIDE_SHARE` of the entries of ``sign`` lie on either side of zero (the one rule
+    for a sign the data can see apart from a constant)."""
+    sign = np.asarray(sign)
+    return bool(min(np.sum(sign > 0), np.sum(sign < 0)) >= MIN_SIDE_SHARE * len(sign))
+
+
+def _side_inputs(model, data):
+    """The per-point inputs (numpy columns) an effect's :meth:`~arm_model.effects.Effect.sides` reads: the angles,
+    the gravity torques with a nil one (:data:`NIL_LOAD`) at 0, the last moves."""
+    from arm_model.effects import ModelInputs
+    aux = data.aux
+    tau = None if aux is None or aux.tau_gravity is None else np.array(aux.tau_gravity, dtype=float)
+    if tau is not None:
+        tau[np.abs(tau) <= NIL_LOAD * np.max(np.abs(tau), initial=0.0)] = 0.0
+    motion = None if aux is None or aux.motion is None else np.asarray(aux.motion, dtype=float)
+    return ModelInputs(q=list(np.asarray(data.points.q, dtype=float).T), wrench=[0.0] * 6,
+                       tau_gravity=None if tau is None else list(tau.T),
+                       motion=None if motion is None else list(motion.T))
+
+
+def prior_only(model, data) -> dict[int, str]:
+    """{spec index: why} of the effect parameters the data cannot tell from the joint's offset: a play
+    (:meth:`~arm_model.effects.Effect.sides`) whose points hold fewer than :data:`MIN_SIDE_SHARE` on one side
+    (:func:`both_sides`), its sign nil on every point included (no gravity torque, no motion)."""
+    if not len(data):
+        return {}
+    from arm_model.chain import NUMPY_OPS
+    inputs = _side_inputs(model, data)
+    out = {}
+    for e, sl in model.effect_slices():
+        sides = e.sides(model.desc, inputs, NUMPY_OPS)
+        if sides is None:
+            continue
+        for k, side in zip(range(sl.start, sl.stop), sides, strict=True):
+            side = np.broadcast_to(np.asarray(side, dtype=float), (len(data),))
+            if both_sides(side):
+                continue
+            pos, neg = int(np.sum(side > 0)), int(np.sum(side < 0))
+            out[k] = (f"the side of its play is nil on all {len(side)} points" if pos + neg == 0 else
+                      f"{min(pos, neg)} of {len(side)} points on one side of its play (fewer than "
+                      f"{MIN_SIDE_SHARE:.0%}): the data cannot tell it from the joint's offset")
+    return out
 
 
 def variance_ratio(post_var: np.ndarray, prior_sd: np.ndarray) -> np.ndarray:
