@@ -46,8 +46,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["GROUP_LENGTHS", "GROUP_OFFSETS", "GROUP_ANGLES", "GROUP_TIP", "GROUP_PROBE_COMPLIANCE", "BASE_SIZES",
-           "PRIOR_DOMINATED", "SCALE_RANGE", "MIN_EFFECTIVE", "MIN_SIDE_SHARE", "NIL_LOAD", "PriorSpec",
-           "parameter_groups", "prior_spec", "variance_ratio", "update_scales", "both_sides", "prior_only"]
+           "PRIOR_DOMINATED", "SCALE_RANGE", "MIN_EFFECTIVE", "MIN_SIDE_SHARE", "MIN_SIDE_VISITS", "NIL_LOAD",
+           "PriorSpec", "parameter_groups", "prior_spec", "variance_ratio", "update_scales", "both_sides",
+           "side_visits", "prior_only"]
 
 GROUP_LENGTHS = "lengths"
 GROUP_OFFSETS = "joint offsets"
@@ -72,6 +73,12 @@ PRIOR_DOMINATED = 0.5
 #: signature), and a play is the joint's offset (:func:`prior_only`; the loop's sign families, :mod:`calibration.
 #: diagnostics`)
 MIN_SIDE_SHARE = 0.1
+#: the fewest separate visits (runs of consecutive points, in the capture order of each measurement) of each side of a
+#: play for the data to see it: a side met in one or two runs is a step or two along the capture order, which the
+#: plate or the base creeping while the points are taken, or the sweep's own pose-dependent error, makes as well (a
+#: real Panda's joint 3, met in 2 + 2 runs on one placement, fitted 2.2 mrad of play and spread the other placements'
+#: seats over 5 mm; held, 1.5 mm)
+MIN_SIDE_VISITS = 3
 #: a joint's gravity torque at most this fraction of the largest one in the data (any joint, any point) is nil: its
 #: sign is rounding (a vertical axis)
 NIL_LOAD = 1e-9
@@ -274,10 +281,47 @@ def _side_inputs(model, data):
                        motion=None if motion is None else list(motion.T))
 
 
+def side_visits(side, measurement=None, time=None) -> tuple[int, int]:
+    """(runs on the positive side, runs on the negative side) of the per-point ``side`` (-1, 0, +1): the separate
+    visits of each side in the capture order of each measurement (the rows' order, or ``time`` [s] where every
+    point has one); a point with side 0 neither breaks nor starts a run."""
+    side = np.asarray(side, dtype=float)
+    meas = np.zeros(len(side), dtype=object) if measurement is None else np.asarray(measurement, dtype=object)
+    t = None if time is None else np.asarray(time, dtype=float)
+    order = (np.arange(len(side)) if t is None or not np.all(np.isfinite(t))
+             else np.argsort(t, kind="stable"))
+    runs = [0, 0]
+    for m in dict.fromkeys(meas.tolist()):
+        s = side[order[meas[order] == m]]
+        s = s[s != 0]
+        first = np.r_[True, s[1:] != s[:-1]] if len(s) else np.zeros(0, bool)
+        runs[0] += int(np.sum(first & (s > 0)))
+        runs[1] += int(np.sum(first & (s < 0)))
+    return runs[0], runs[1]
+
+
+def _unseen_play(side: np.ndarray, points) -> str | None:
+    """Why the data cannot see a play whose per-point sides are ``side``, or None when they can: both sides hold
+    :data:`MIN_SIDE_SHARE` of the points (:func:`both_sides`) in at least :data:`MIN_SIDE_VISITS` runs each."""
+    pos, neg = int(np.sum(side > 0)), int(np.sum(side < 0))
+    if pos + neg == 0:
+        return f"the side of its play is nil on all {len(side)} points"
+    if not both_sides(side):
+        return (f"{min(pos, neg)} of {len(side)} points on one side of its play (fewer than {MIN_SIDE_SHARE:.0%}): "
+                "the data cannot tell it from the joint's offset")
+    visits = side_visits(side, points.measurement, points.time)
+    if min(visits) < MIN_SIDE_VISITS:
+        return (f"its sides are met in {visits[0]} and {visits[1]} runs of the capture order (fewer than "
+                f"{MIN_SIDE_VISITS} each): the data cannot tell it from a drift while the points were taken")
+    return None
+
+
 def prior_only(model, data) -> dict[int, str]:
-    """{spec index: why} of the effect parameters the data cannot tell from the joint's offset: a play
-    (:meth:`~arm_model.effects.Effect.sides`) whose points hold fewer than :data:`MIN_SIDE_SHARE` on one side
-    (:func:`both_sides`), its sign nil on every point included (no gravity torque, no motion)."""
+    """{spec index: why} of the effect parameters the data cannot see apart from others: a play
+    (:meth:`~arm_model.effects.Effect.sides`) whose sign is nil on every point (no gravity torque, no motion), whose
+    points hold fewer than :data:`MIN_SIDE_SHARE` on one side (:func:`both_sides`; the joint's offset), or whose
+    sides are each met in fewer than :data:`MIN_SIDE_VISITS` runs of the capture order (:func:`side_visits`; a drift
+    along it)."""
     if not len(data):
         return {}
     from arm_model.chain import NUMPY_OPS
@@ -288,13 +332,9 @@ def prior_only(model, data) -> dict[int, str]:
         if sides is None:
             continue
         for k, side in zip(range(sl.start, sl.stop), sides, strict=True):
-            side = np.broadcast_to(np.asarray(side, dtype=float), (len(data),))
-            if both_sides(side):
-                continue
-            pos, neg = int(np.sum(side > 0)), int(np.sum(side < 0))
-            out[k] = (f"the side of its play is nil on all {len(side)} points" if pos + neg == 0 else
-                      f"{min(pos, neg)} of {len(side)} points on one side of its play (fewer than "
-                      f"{MIN_SIDE_SHARE:.0%}): the data cannot tell it from the joint's offset")
+            why = _unseen_play(np.broadcast_to(np.asarray(side, dtype=float), (len(data),)), data.points)
+            if why is not None:
+                out[k] = why
     return out
 
 
