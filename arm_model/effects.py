@@ -28,7 +28,7 @@ __all__ = ["ModelInputs", "Geometry", "Effect", "EncoderEccentricity", "JointCom
            "ThermalGrowth", "ForceSensorError", "JointGain", "ProbeCompliance", "EFFECTS", "effect_from_name",
            "REFERENCE_TEMPERATURE_C", "JointHarmonics", "ProbeThermalGrowth", "ProbeComplianceMatrix",
            "ApproachOffset", "LateralCompliance", "ThermalDrift", "JointBacklash", "JointHysteresis", "joint_frame",
-           "last_frame", "gravity_moment", "contact_moment", "PLAY"]
+           "last_frame", "gravity_moment", "contact_moment", "PLAY", "DRIFT_STRAIN"]
 
 REFERENCE_TEMPERATURE_C = 20.0
 
@@ -99,6 +99,9 @@ def _indices(values: object, what: str, *, low: int = 0, high: int | None = None
 
 #: the highest harmonic an effect takes (of a joint angle: a period of 0.36 deg, below any drive's)
 MAX_HARMONIC = 1000
+#: the largest plausible thermal strain of the links over one session [1] (aluminium's 23e-6 /K over 4 K): the size of a
+#: drift's prior over the data's time span (:class:`ThermalDrift`)
+DRIFT_STRAIN = 1e-4
 #: the largest plausible play of a joint [rad] (half the band): a robot's gear play is typically 0.01-1 mrad (harmonic
 #: drives the least), a measuring arm's bearings far less; the size of a play's physical prior (:class:`JointBacklash`,
 #: :class:`JointHysteresis`)
@@ -176,6 +179,12 @@ class Effect:
         default; a compliance cannot be negative in total (:meth:`ArmModel.lower_bounds` gathers them; every fit
         holds a parameter at its bound, the model-file reader refuses a value below it)."""
         return [-math.inf] * len(self.param_defs(desc))
+
+    def prior_sizes(self, desc: ArmDescription, inputs: ModelInputs) -> list[tuple[float, str]] | None:
+        """The size [SI] of each parameter's prior (:meth:`param_defs` order) and whence, from the data's per-point
+        ``inputs`` (numpy columns) where the effect's scale lies in them (a drift's, in the data's time span); None:
+        :attr:`plausible_size`, or a size by unit (:mod:`calibration.prior`)."""
+        return None
 
     def sides(self, desc: ArmDescription, inputs: ModelInputs, ops: Any) -> list[Any] | None:
         """For an effect each of whose parameters acts through a per-point sign only (a joint's play): that sign
@@ -362,6 +371,17 @@ class ThermalDrift(Effect):
                 or not math.isfinite(self.reference_time_s)):
             raise ValueError(f"thermal_drift: reference_time_s must be a finite time [s], got "
                              f"{self.reference_time_s!r}")
+
+    def prior_sizes(self, desc: ArmDescription, inputs: ModelInputs) -> list[tuple[float, str]] | None:
+        """:data:`DRIFT_STRAIN` over the data's largest time from ``reference_time_s`` (to the power ``power``)."""
+        if inputs.time is None or not len(inputs.time):
+            return None
+        span = float(max(abs(float(min(inputs.time)) - self.reference_time_s),
+                         abs(float(max(inputs.time)) - self.reference_time_s)))
+        if not math.isfinite(span) or span <= 0:
+            return None
+        return [(DRIFT_STRAIN / span ** self.power, f"a link strain of {DRIFT_STRAIN:g} over the data's {span:.4g} s "
+                                                    "from the reference time")]
 
     @staticmethod
     def reference_of(time: Any) -> float:

@@ -195,13 +195,17 @@ def _torque_reference(model, data, joint: int) -> float:
 def _effect_sizes(model, data) -> dict[int, tuple[float, str, bool]]:
     """{spec index: (size at scale 1, source, whether the size is physical)} of every effect parameter."""
     desc = model.desc
+    inputs = _model_inputs(model, data)
     out = {}
     for e, sl in model.effect_slices():
         defs = e.param_defs(desc)
         joints = list(e.joint_indices(desc)) if hasattr(e, "joint_indices") else []
         loads = e.gravity_loads(desc, data.points.q) if hasattr(e, "gravity_loads") and len(data) else None
+        own = e.prior_sizes(desc, inputs) if len(data) else None
         for n, (k, (name, unit)) in enumerate(zip(range(sl.start, sl.stop), defs, strict=True)):
-            if unit == "rad/(N m)":
+            if own is not None:
+                out[k] = (own[n][0], own[n][1], e.physical_size)
+            elif unit == "rad/(N m)":
                 j = next((i for i in joints if name.startswith(desc.joint_names[i] + ".")), None)
                 if loads is not None:           # an off-axis compliance: the moment it multiplies
                     tau = float(np.sqrt(np.mean(np.asarray(loads[n]) ** 2)))
@@ -230,7 +234,8 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
     not estimated) under the RMS torque the data give it (gravity from the
     description's masses, contact torques from the forces; an off-axis compliance, the RMS moment of gravity
     about its axis that the effect's ``gravity_loads`` give; at most :data:`MAX_ANGULAR_COMPLIANCE`); another
-    effect parameter the effect's own plausible size (a play's physical one, :data:`arm_model.effects.PLAY`: its
+    effect parameter the size the effect takes from the data (a drift's: :data:`arm_model.effects.DRIFT_STRAIN` over
+    the data's time span), else its own plausible size (a play's physical one, :data:`arm_model.effects.PLAY`: its
     group's scale not estimated either) or a size by unit (:data:`UNIT_SIZES`); the plays the data cannot tell
     from the joint's offset, prior only (:func:`prior_only`). ``priors``
     (names or glob patterns -> size [SI]) override. The lower bounds are the model's
@@ -267,18 +272,21 @@ def both_sides(sign) -> bool:
     return bool(min(np.sum(sign > 0), np.sum(sign < 0)) >= MIN_SIDE_SHARE * len(sign))
 
 
-def _side_inputs(model, data):
-    """The per-point inputs (numpy columns) an effect's :meth:`~arm_model.effects.Effect.sides` reads: the angles,
-    the gravity torques with a nil one (:data:`NIL_LOAD`) at 0, the last moves."""
+def _model_inputs(model, data):
+    """The per-point inputs (numpy columns) an effect's :meth:`~arm_model.effects.Effect.sides` and
+    :meth:`~arm_model.effects.Effect.prior_sizes` read: the angles, the gravity torques with a nil one
+    (:data:`NIL_LOAD`) at 0, the last moves, the time stamps."""
     from arm_model.effects import ModelInputs
     aux = data.aux
     tau = None if aux is None or aux.tau_gravity is None else np.array(aux.tau_gravity, dtype=float)
     if tau is not None:
         tau[np.abs(tau) <= NIL_LOAD * np.max(np.abs(tau), initial=0.0)] = 0.0
     motion = None if aux is None or aux.motion is None else np.asarray(aux.motion, dtype=float)
+    time = aux.time if aux is not None and aux.time is not None else data.points.time
     return ModelInputs(q=list(np.asarray(data.points.q, dtype=float).T), wrench=[0.0] * 6,
                        tau_gravity=None if tau is None else list(tau.T),
-                       motion=None if motion is None else list(motion.T))
+                       motion=None if motion is None else list(motion.T),
+                       time=None if time is None else np.asarray(time, dtype=float))
 
 
 def side_visits(side, measurement=None, time=None) -> tuple[int, int]:
@@ -325,7 +333,7 @@ def prior_only(model, data) -> dict[int, str]:
     if not len(data):
         return {}
     from arm_model.chain import NUMPY_OPS
-    inputs = _side_inputs(model, data)
+    inputs = _model_inputs(model, data)
     out = {}
     for e, sl in model.effect_slices():
         sides = e.sides(model.desc, inputs, NUMPY_OPS)

@@ -118,3 +118,22 @@ def test_side_visits_by_hand():
     time = np.array([0.0, 2.0, 1.0, 3.0])                         # in time order: 1, 1, -1, -1
     assert prior.side_visits(np.r_[1, -1, 1, -1], None, time) == (1, 1)
     assert prior.side_visits(np.r_[1, -1, 1, -1], None, np.r_[0.0, np.nan, 1, 2]) == (2, 2)   # a time missing: rows
+
+
+def test_a_drifts_prior_is_a_strain_over_the_datas_time_span(nominal):
+    """A drift of the links in time: its prior's size is :data:`arm_model.effects.DRIFT_STRAIN` over the data's
+    largest time from the reference (to the drift's power), not a size by unit (1 /s, a link doubling each second)."""
+    from arm_model.effects import DRIFT_STRAIN, ThermalDrift
+    from arm_model.io import PointSet
+    from arm_model.model import AuxData
+    from calibration.data import CalibrationData
+
+    q = np.zeros((3, nominal.n_joints))
+    pts = PointSet(path="<p>", measurement=np.array(["m"] * 3, dtype=object), feature=np.array([""] * 3, dtype=object),
+                   q=q, time=np.array([100.0, 700.0, 2500.0]))
+    data = CalibrationData(points=pts, artefacts=None, aux=AuxData(time=pts.time))
+    model = ArmModel(nominal, (ThermalDrift(reference_time_s=1000.0), ThermalDrift(power=2, reference_time_s=1000.0)))
+    spec = prior.prior_spec(model, data)
+    assert spec.size[-2] == pytest.approx(DRIFT_STRAIN / 1500.0) and spec.size[-1] == pytest.approx(
+        DRIFT_STRAIN / 1500.0 ** 2)
+    assert "over the data's 1500 s" in spec.source[-1]
