@@ -811,8 +811,10 @@ def prior_lines(res) -> list[str]:
                    "with about the prior's uncertainty, which the covariance carries):")
         for r in dominated:
             du, _ = display_unit(r["unit"])
+            why = res.prior_only.get(r["name"])
             out.append(f"  {r['name']}: {r['display_value']:.4g} ± {r['display_u']:.3g} {du} (prior ± "
-                       f"{r['display_prior_u']:.3g}, posterior/prior variance {r['prior_ratio']:.2f})")
+                       f"{r['display_prior_u']:.3g}, posterior/prior variance {r['prior_ratio']:.2f})"
+                       + ("" if why is None else f"; prior only: {why}"))
     return out
 
 
