@@ -134,8 +134,9 @@ class Effect:
     #: file never holds it (the geometry it writes is the one at the effect's reference; the session's value is
     #: reported beside it), so that applying the model to other data applies no drift it cannot know
     session: ClassVar[bool] = False
-    #: :attr:`plausible_size` is a physical bound (a joint's play), not a guess the data may revise: the evidence does
-    #: not scale its prior group (:attr:`calibration.prior.PriorSpec.physical`)
+    #: :attr:`plausible_size` is a physical maximum (a joint's play), not a guess the data may revise upwards: the
+    #: evidence may shrink its prior group's scale below 1, never raise it above (:attr:`calibration.prior.PriorSpec.
+    #: capped`)
     physical_size: ClassVar[bool] = False
 
     def __post_init__(self) -> None:
@@ -566,9 +567,9 @@ class _JointPlay(Effect):
     which side of the play the joint rests on (:meth:`signs`); ``b`` [rad], half the band, linear in the model.
 
     Its prior (:mod:`calibration.prior`): :attr:`plausible_size` :data:`PLAY` (1 mrad, the largest plausible half
-    band of a joint's play), a physical size the evidence does not scale; a play whose points lie nearly all on one
-    side (or whose sign is nil: no gravity torque, no motion) is the joint's offset in the data, and the prior alone
-    holds it."""
+    band of a joint's play), a physical maximum the evidence may shrink, never exceed; a play whose points lie nearly
+    all on one side (or whose sign is nil: no gravity torque, no motion; or whose sides come in too few runs of the
+    capture order) is the joint's offset, or a drift, in the data, and the prior alone holds it."""
     acts_on_readings: ClassVar[bool] = True
     revolute_only: ClassVar[bool] = True
     plausible_size: ClassVar[float] = PLAY

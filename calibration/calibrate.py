@@ -1381,7 +1381,8 @@ def _test_level(options: FitOptions) -> float | None:
 
 def _group_table(s: _Setup, kept, u) -> dict:
     """{group: scale, parameters, effective (gamma: the parameters the data determine), size source, physical
-    (its scale not chosen by the evidence, :attr:`calibration.prior.PriorSpec.physical`)} of the prior's groups
+    (its scale not chosen by the evidence, :attr:`calibration.prior.PriorSpec.physical`), capped (its scale at most 1,
+    :attr:`~calibration.prior.PriorSpec.capped`)} of the prior's groups
     over the free parameters ``kept``."""
     if s.prior is None:
         return {}
@@ -1394,7 +1395,8 @@ def _group_table(s: _Setup, kept, u) -> dict:
         out[g] = {"scale": s.scales.get(g, 1.0), "parameters": [spec.names[i] for i in idx],
                   "effective_parameters": float(np.sum(1.0 - rho)),
                   "size_at_scale_1": {spec.names[i]: float(s.spec.size[i]) for i in idx},
-                  "size_source": sorted({s.spec.source[i] for i in idx}), "physical": g in s.spec.physical}
+                  "size_source": sorted({s.spec.source[i] for i in idx}), "physical": g in s.spec.physical,
+                  "capped": g in s.spec.capped}
     return out
 
 

@@ -802,7 +802,8 @@ def prior_lines(res) -> list[str]:
               + ("" if res.evidence[-1].get("settled", True) else "; " + res.evidence[-1]["note"]) + ")"
               if evidence else " (scales given)") + ":"]
     for g, v in res.prior_groups.items():
-        physical = " (a physical prior: not chosen by the evidence)" if v.get("physical") else ""
+        physical = (" (a physical prior: not chosen by the evidence)" if v.get("physical") else
+                    " (a physical maximum: the evidence may shrink it, never above 1)" if v.get("capped") else "")
         out.append(f"  {g}: scale {v['scale']:.3g}{physical}; the data determine {v['effective_parameters']:.1f} of "
                    f"its {len(v['parameters'])} parameters")
     dominated = [r for r in res.parameter_rows() if r["state"] == "prior-dominated"]

@@ -20,8 +20,10 @@ see only weakly to zero, leaving its signature to the geometry, which then errs 
 the training range (measured in docs/studies/calibration.md).
 
 A joint's play (:class:`arm_model.effects.JointBacklash`, :class:`~arm_model.effects.JointHysteresis`) has a physical
-prior too: size :data:`arm_model.effects.PLAY` (1 mrad, the largest plausible play), its group's scale not estimated;
-a backlash is non-negative (its lower bound). A play is seen only as the difference between the points on its two
+size too, a maximum: :data:`arm_model.effects.PLAY` (1 mrad, the largest plausible play); the evidence may shrink its
+group's scale (plays the data show small), never raise it above 1 (:attr:`PriorSpec.capped`: uncapped, it ran to 100
+times, and a real Panda's joint 3 took 3 mrad of "play" that spread the seats of other placements over 5 mm); a
+backlash is non-negative (its lower bound). A play is seen only as the difference between the points on its two
 sides: where one side holds fewer than :data:`MIN_SIDE_SHARE` of the points, or the sign is nil on every point (a
 joint with no gravity torque, one that never moved), the play is the joint's offset in the data plus what a handful
 of points carry (a real Panda's elbow, trained on one placement whose gravity torque keeps one sign, fitted 17 mrad
@@ -154,8 +156,9 @@ class PriorSpec:
         lower: lower bound of the parameter [SI] (``-inf``: none; a compliance: minus its nominal value).
         source: how each size was set (for the report).
         physical: the groups whose prior is physical (every parameter an angular compliance sized by the data's
-            torque, or an effect's physical size such as a play's): the evidence leaves their scale as given (1 by
-            default).
+            torque): the evidence leaves their scale as given (1 by default).
+        capped: the groups whose size is a physical maximum (every parameter a play's,
+            :attr:`arm_model.effects.Effect.physical_size`): the evidence may shrink their scale, never above 1.
         prior_only: {spec index: why} of the parameters the data cannot tell from others (:func:`prior_only`):
             their data's column is left out of the fit, the prior alone holds them.
     """
@@ -165,6 +168,7 @@ class PriorSpec:
     source: tuple
     physical: frozenset = frozenset()
     prior_only: dict = field(default_factory=dict)
+    capped: frozenset = frozenset()
 
     def sizes(self, scales: dict | float) -> np.ndarray:
         """The prior's standard deviations [SI] at group ``scales`` (a dict, or one factor for every group)."""
@@ -192,8 +196,9 @@ def _torque_reference(model, data, joint: int) -> float:
     return float(np.sqrt(np.mean(t ** 2))) if len(t) else 0.0
 
 
-def _effect_sizes(model, data) -> dict[int, tuple[float, str, bool]]:
-    """{spec index: (size at scale 1, source, whether the size is physical)} of every effect parameter."""
+def _effect_sizes(model, data) -> dict[int, tuple[float, str, str]]:
+    """{spec index: (size at scale 1, source, kind)} of every effect parameter: kind "physical" (an angular
+    compliance's, the evidence leaves its scale), "maximum" (a physical maximum, its scale at most 1) or ""."""
     desc = model.desc
     inputs = _model_inputs(model, data)
     out = {}
@@ -204,7 +209,7 @@ def _effect_sizes(model, data) -> dict[int, tuple[float, str, bool]]:
         own = e.prior_sizes(desc, inputs) if len(data) else None
         for n, (k, (name, unit)) in enumerate(zip(range(sl.start, sl.stop), defs, strict=True)):
             if own is not None:
-                out[k] = (own[n][0], own[n][1], e.physical_size)
+                out[k] = (own[n][0], own[n][1], "maximum" if e.physical_size else "")
             elif unit == "rad/(N m)":
                 j = next((i for i in joints if name.startswith(desc.joint_names[i] + ".")), None)
                 if loads is not None:           # an off-axis compliance: the moment it multiplies
@@ -214,12 +219,13 @@ def _effect_sizes(model, data) -> dict[int, tuple[float, str, bool]]:
                 size = MAX_ANGULAR_COMPLIANCE if tau <= 0 else min(DEFLECTION / tau, MAX_ANGULAR_COMPLIANCE)
                 load = "torque" if loads is None else "gravity moment"
                 out[k] = (size, f"{DEFLECTION * 1e3:g} mrad under the joint's RMS {load} in the data "
-                                f"({tau:.3g} N m)" if tau > 0 else f"no {load} in the data", True)
+                                f"({tau:.3g} N m)" if tau > 0 else f"no {load} in the data", "physical")
             elif e.plausible_size is not None:
                 out[k] = (float(e.plausible_size), f"the effect's {'physical' if e.physical_size else 'plausible'} "
-                                                   f"size ({e.plausible_size:g} {unit})", e.physical_size)
+                                                   f"size ({e.plausible_size:g} {unit})",
+                          "maximum" if e.physical_size else "")
             else:
-                out[k] = (UNIT_SIZES.get(unit, 1.0), f"by unit ({unit})", False)
+                out[k] = (UNIT_SIZES.get(unit, 1.0), f"by unit ({unit})", "")
     return out
 
 
@@ -235,8 +241,8 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
     description's masses, contact torques from the forces; an off-axis compliance, the RMS moment of gravity
     about its axis that the effect's ``gravity_loads`` give; at most :data:`MAX_ANGULAR_COMPLIANCE`); another
     effect parameter the size the effect takes from the data (a drift's: :data:`arm_model.effects.DRIFT_STRAIN` over
-    the data's time span), else its own plausible size (a play's physical one, :data:`arm_model.effects.PLAY`: its
-    group's scale not estimated either) or a size by unit (:data:`UNIT_SIZES`); the plays the data cannot tell
+    the data's time span), else its own plausible size (a play's physical maximum, :data:`arm_model.effects.PLAY`: its
+    group's scale at most 1) or a size by unit (:data:`UNIT_SIZES`); the plays the data cannot tell
     from the joint's offset, prior only (:func:`prior_only`). ``priors``
     (names or glob patterns -> size [SI]) override. The lower bounds are the model's
     (:meth:`arm_model.model.ArmModel.lower_bounds`: a compliance cannot be negative in total, nor a backlash)."""
@@ -260,9 +266,11 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
             size[i], src = BASE_SIZES.get(unit, UNIT_SIZES.get(unit, 1.0)), f"by unit ({unit})"
         source.append(src)
     groups = tuple(parameter_groups(model, spec.names))
-    sized = [i in eff and eff[i][2] and source[i] != "given" for i in range(spec.size)]
-    physical = frozenset(g for g in set(groups) if all(sized[i] for i in range(spec.size) if groups[i] == g))
-    return PriorSpec(groups, size, lower, tuple(source), physical, prior_only(model, data))
+    kind = [eff[i][2] if i in eff and source[i] != "given" else "" for i in range(spec.size)]
+
+    def every(what: str) -> frozenset:
+        return frozenset(g for g in set(groups) if all(kind[i] == what for i in range(spec.size) if groups[i] == g))
+    return PriorSpec(groups, size, lower, tuple(source), every("physical"), prior_only(model, data), every("maximum"))
 
 
 def both_sides(sign) -> bool:
@@ -363,7 +371,8 @@ def update_scales(scales: dict, spec: PriorSpec, kept, delta: np.ndarray, rho: n
 
     Returns ``(new scales, {group: gamma_G})``; a group whose data determine fewer than
     :data:`MIN_EFFECTIVE` parameters keeps its scale (its evidence is flat), and so does a physical group
-    (:attr:`PriorSpec.physical`); every scale stays in :data:`SCALE_RANGE`."""
+    (:attr:`PriorSpec.physical`); every scale stays in :data:`SCALE_RANGE`, a capped group's at most 1
+    (:attr:`PriorSpec.capped`)."""
     kept = np.asarray(kept, dtype=int)
     new, gamma = dict(scales), {}
     for g, idx in spec.groups_of(kept).items():
@@ -376,5 +385,5 @@ def update_scales(scales: dict, spec: PriorSpec, kept, delta: np.ndarray, rho: n
         target = math.sqrt(max(z2 / gam, SCALE_RANGE[0] ** 2))
         old = scales.get(g, 1.0)
         tau = math.exp(math.log(old) + damping * (math.log(target) - math.log(old)))
-        new[g] = float(min(max(tau, SCALE_RANGE[0]), SCALE_RANGE[1]))
+        new[g] = float(min(max(tau, SCALE_RANGE[0]), 1.0 if g in spec.capped else SCALE_RANGE[1]))
     return new, gamma

@@ -86,7 +86,7 @@ def test_a_play_seen_on_both_sides_is_recovered_within_its_uncertainty(nominal):
 
 
 def test_the_plays_priors(nominal):
-    """Each play's prior: physical size :data:`PLAY`, its group physical (the evidence leaves it), a backlash >= 0, a
+    """Each play's prior: physical size :data:`PLAY`, a maximum (its group's scale at most 1), a backlash >= 0, a
     hysteresis signed (which side lags is the encoder's side); a joint whose gravity torque is nil (j1, a vertical
     axis: rounding-level torques, :data:`calibration.prior.NIL_LOAD`) has no side: prior-only."""
     from calibration.candidates import needs_model
@@ -99,7 +99,7 @@ def test_the_plays_priors(nominal):
     spec = prior.prior_spec(model, data)
     names = model.spec.names
     for k in range(model.base_size, model.spec.size):
-        assert spec.size[k] == PLAY and spec.group[k] in spec.physical, names[k]
+        assert spec.size[k] == PLAY and spec.group[k] in spec.capped and spec.group[k] not in spec.physical, names[k]
     lower = dict(zip(names, spec.lower, strict=True))
     assert lower["j2.backlash"] == lower["j4.backlash"] == 0.0 and lower["j3.hysteresis"] == -np.inf
     assert list(spec.prior_only) == [names.index("j1.backlash")], spec.prior_only
@@ -137,3 +137,17 @@ def test_a_drifts_prior_is_a_strain_over_the_datas_time_span(nominal):
     assert spec.size[-2] == pytest.approx(DRIFT_STRAIN / 1500.0) and spec.size[-1] == pytest.approx(
         DRIFT_STRAIN / 1500.0 ** 2)
     assert "over the data's 1500 s" in spec.source[-1]
+
+
+def test_a_capped_group_shrinks_with_the_evidence_but_never_grows_past_its_physical_size():
+    """MacKay's fixed point on a capped group (a play's: its size a physical maximum) and an ordinary one, each of
+    two fully determined parameters (rho = 0): at 3 sizes from the centre the ordinary scale goes to 3 (hand-derived:
+    sqrt((9 + 9) / 2)), the capped one stops at 1; at 0.3 sizes both go to 0.3."""
+    from calibration.prior import PriorSpec, update_scales
+
+    spec = PriorSpec(("lengths", "lengths", "effect b", "effect b"), np.array([1e-3, 1e-3, PLAY, PLAY]),
+                     np.array([-np.inf, -np.inf, 0.0, 0.0]), ("a",) * 4, capped=frozenset({"effect b"}))
+    for z, want in ((3.0, 1.0), (0.3, 0.3)):
+        delta = z * np.array([1e-3, -1e-3, PLAY, PLAY])
+        new, _ = update_scales({"lengths": 1.0, "effect b": 1.0}, spec, [0, 1, 2, 3], delta, np.zeros(4))
+        assert new["lengths"] == pytest.approx(z, rel=1e-12) and new["effect b"] == pytest.approx(want, rel=1e-12)
