@@ -1029,7 +1029,7 @@ def _held(s: _Setup, p, states, kept, stage: str, options: FitOptions):
     if s.prior is not None:
         kept = sorted(kept + only)
     else:
-        new += [FixedParameter(spec.names[i], 0.0, f"prior only ({s.prior_only[i]}); held at its given value",
+        new += [FixedParameter(spec.names[i], 0.0, f"not seen by the data ({s.prior_only[i]}); held at its given value",
                                None, stage) for i in only]
     for k, f in enumerate(new):
         i = spec.index(f.name)
