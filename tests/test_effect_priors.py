@@ -66,6 +66,10 @@ def test_a_play_with_one_side_nearly_empty_stays_at_its_prior(nominal, minority)
     assert res.value(f"{name}.backlash") == pytest.approx(0.0, abs=1e-9)
     assert res.uncertainty(f"{name}.backlash") == pytest.approx(PLAY, rel=1e-6)
     assert "one side of its play" in res.prior_only[f"{name}.backlash"]
+    from calibration.report import prior_html
+    page = "".join(prior_html(res))
+    assert "Left to the prior" in page and f"{name}.backlash" in page and "(at most 1)" in page
+    assert res.to_dict()["prior"]["prior_only"] == res.prior_only
     assert res.value(f"{name}.theta_offset") == pytest.approx(OFFSET, abs=5e-5)
     # without a prior: held at its given value, with the reason
     res0, _ = _fit(nominal, data.select(np.r_[pos[:80 - minority], neg[:minority]]), prior_scale=None)
