@@ -21,13 +21,14 @@ the training range (measured in docs/studies/calibration.md).
 
 A joint's play (:class:`arm_model.effects.JointBacklash`, :class:`~arm_model.effects.JointHysteresis`) has a physical
 size too, a maximum: :data:`arm_model.effects.PLAY` (1 mrad, the largest plausible play); the evidence may shrink its
-group's scale (plays the data show small), never raise it above 1 (:attr:`PriorSpec.capped`: uncapped, it ran to 100
-times, and a real Panda's joint 3 took 3 mrad of "play" that spread the seats of other placements over 5 mm); a
-backlash is non-negative (its lower bound). A play is seen only as the difference between the points on its two
-sides: where one side holds fewer than :data:`MIN_SIDE_SHARE` of the points, or the sign is nil on every point (a
-joint with no gravity torque, one that never moved), the play is the joint's offset in the data plus what a handful
-of points carry (a real Panda's elbow, trained on one placement whose gravity torque keeps one sign, fitted 17 mrad
-of "play" at 1 mrad: its offset, the rank test having held the offset instead). Such a parameter is **prior only**
+group's scale (plays the data show small), never raise it above 1 (:attr:`PriorSpec.capped`; an ordinary group's
+may reach :data:`SCALE_RANGE`'s 100); a backlash is non-negative (its lower bound). A play is seen only as the
+difference between the points on its two sides: where one side holds fewer than :data:`MIN_SIDE_SHARE` of the points,
+or the sign is nil on every point (a joint with no gravity torque, one that never moved), the play is the joint's
+offset in the data plus what a handful of points carry; where a side is met in fewer than :data:`MIN_SIDE_VISITS`
+runs of the capture order, it is a step along the order, which a drift makes too (a real Panda's elbow, trained on
+one placement whose gravity torque keeps one sign, fitted 17 mrad of "play" at 1 mrad: its offset, the rank test
+having held the offset instead). Such a parameter is **prior only**
 (:func:`prior_only`): its data's column is left out of the fit (:attr:`calibration.problem.Problem.prior_only`), so
 it stays at its prior's centre with its prior's uncertainty (prior-dominated, ``rho = 1``) and that uncertainty,
 uncorrelated, is carried by every propagation (a pose on the other side of the play is that uncertain). Without a
