@@ -802,7 +802,8 @@ def prior_lines(res) -> list[str]:
               + ("" if res.evidence[-1].get("settled", True) else "; " + res.evidence[-1]["note"]) + ")"
               if evidence else " (scales given)") + ":"]
     for g, v in res.prior_groups.items():
-        physical = " (a physical prior: not chosen by the evidence)" if v.get("physical") else ""
+        physical = (" (a physical prior: not chosen by the evidence)" if v.get("physical") else
+                    " (a physical maximum: the evidence may shrink it, never above 1)" if v.get("capped") else "")
         out.append(f"  {g}: scale {v['scale']:.3g}{physical}; the data determine {v['effective_parameters']:.1f} of "
                    f"its {len(v['parameters'])} parameters")
     dominated = [r for r in res.parameter_rows() if r["state"] == "prior-dominated"]
@@ -811,8 +812,10 @@ def prior_lines(res) -> list[str]:
                    "with about the prior's uncertainty, which the covariance carries):")
         for r in dominated:
             du, _ = display_unit(r["unit"])
+            why = res.prior_only.get(r["name"])
             out.append(f"  {r['name']}: {r['display_value']:.4g} ± {r['display_u']:.3g} {du} (prior ± "
-                       f"{r['display_prior_u']:.3g}, posterior/prior variance {r['prior_ratio']:.2f})")
+                       f"{r['display_prior_u']:.3g}, posterior/prior variance {r['prior_ratio']:.2f})"
+                       + ("" if why is None else f"; prior only: {why}"))
     return out
 
 

@@ -315,16 +315,21 @@ def prior_html(result: CalibrationResult) -> list[str]:
     determine."""
     if result.prior_scales is None:
         return []
-    rows = [(g, _fmt(v["scale"], 3) + (" (physical)" if v.get("physical") else ""), len(v["parameters"]),
+    rows = [(g, _fmt(v["scale"], 3) + (" (physical)" if v.get("physical") else " (at most 1)" if v.get("capped")
+                                        else ""), len(v["parameters"]),
              _fmt(v["effective_parameters"], 3),
              "; ".join(v["size_source"])) for g, v in result.prior_groups.items()]
     how = (f"chosen by the evidence together with the noise ({len(result.evidence)} rounds)" if result.evidence
            else "given")
-    return ["<h2>Prior</h2>",
-            f"<p>Each free parameter ~ N(nominal, (scale x plausible size)^2), one scale a group, {how}. "
-            "'determined': the number of the group's parameters the data determine (sum of 1 - posterior/prior "
-            "variance).</p>",
-            reports.html_table(["group", "scale", "parameters", "determined", "plausible size at scale 1"], rows)]
+    out = ["<h2>Prior</h2>",
+           f"<p>Each free parameter ~ N(nominal, (scale x plausible size)^2), one scale a group, {how}. "
+           "'determined': the number of the group's parameters the data determine (sum of 1 - posterior/prior "
+           "variance).</p>",
+           reports.html_table(["group", "scale", "parameters", "determined", "plausible size at scale 1"], rows)]
+    if result.prior_only:
+        out += ["<p>Left to the prior (the data cannot see them; prior-dominated at the prior's centre):</p>",
+                reports.html_table(["parameter", "why"], sorted(result.prior_only.items()))]
+    return out
 
 
 def plot_discrepancy(result: CalibrationResult) -> bytes:
