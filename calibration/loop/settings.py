@@ -56,7 +56,6 @@ class LoopSettings:
     seed: int = 0
     rank_tol: float = DEFAULT_RANK_TOL
     drop_outliers: bool = True
-    outlier_threshold: float = 4.0
     holdout: tuple = ()
     fold_by: str = "auto"
     weights_from_data: bool = True

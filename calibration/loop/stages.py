@@ -42,7 +42,7 @@ from ..diagnostics import (
     structure_tests,
 )
 from ..model_output import refine_torques, with_fitted_torques
-from ..options import FitOptions
+from ..options import GROSS_THRESHOLD, FitOptions
 from ..synthesis import RESIDUAL, synthesise as build_effects
 from .crossval import fold_fit, warm_start
 from .decide import (
@@ -108,27 +108,26 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
     scale = _prior_scale(model, design, camp, stated, settings, say)
     # the loop drops its outliers itself, once, on the base model (``settings.drop_outliers``): every model it
     # compares is fitted on the same points (no gross errors left out fit by fit)
-    options = FitOptions(values=camp.values, rank_tol=settings.rank_tol, outlier_threshold=settings.outlier_threshold,
-                         prior_scale=scale, min_resolution=LEGACY_RESOLUTION if scale is None else None,
-                         gross_threshold=None)
+    options = FitOptions(values=camp.values, rank_tol=settings.rank_tol, prior_scale=scale,
+                         min_resolution=LEGACY_RESOLUTION if scale is None else None, gross_threshold=None)
     state = LoopState(settings, desc, say, data, design, test, test_by, test_rows, options, camp.free, camp.hold,
                       model.spec.size, stated, cands, skipped, model, stated, remaining=list(cands),
                       families=camp.families)
     say("calibrating the base model on the design set")
-    # the outliers of the design set are found at the stated sigmas, by calibrate's point test (step 2 of
-    # docs/close-loop.md); the base fit is then calibrate's default fit of the design set without them (the noise
-    # estimated jointly with the prior's scales in the evidence's rounds, from the stated sigmas; the torques
-    # refined as calibrate refines them, :func:`torques_at_equilibrium`). Dropped at the noise estimated with
-    # them, a 20 um campaign stated at 10 um lost a clean design pose at 4.03 and with it the budget that
-    # flags a test marker 3 mm off (tests/test_tracker.py)
+    # the base fit is calibrate's default fit of the design set: the noise estimated jointly with the prior's
+    # scales in the evidence's rounds (from the stated sigmas), the gross points left out by calibrate's own rule
+    # at the noise it estimates (points only, at most the loop's budget: step 2 of docs/close-loop.md), the torques
+    # then refined as calibrate refines them (:func:`torques_at_equilibrium`)
     if settings.drop_outliers:
-        first, state.design, state.dropped["design"] = drop_design_outliers(state.design, partial(state.fit, model))
+        result, state.design, state.dropped["design"] = drop_design_outliers(
+            state.design, partial(state.fit, model, reweight=True))
         if state.dropped["design"]:
-            say(f"  {len(state.dropped['design'])} outlier(s) of the design set dropped (base model, calibrate's "
-                f"point test at {settings.outlier_threshold:g}); they stay out of every later fit")
-        if first.gross_kept:
-            say(f"  outliers of the design set kept: {first.gross_kept}")
-    result = state.fit(model, state.design, reweight=True)
+            say(f"  {len(state.dropped['design'])} outlier(s) of the design set dropped (base fit, calibrate's "
+                f"gross-error test at {GROSS_THRESHOLD:g}); they stay out of every later fit")
+        if result.gross_kept:
+            say(f"  outliers of the design set kept: {result.gross_kept}")
+    else:
+        result = state.fit(model, state.design, reweight=True)
     # each group's noise over its stated sigma (the fit's weights times what its residual still says)
     off = [v for v in result.variance if v["estimated"] and not 1 / NOISE_OFF < v["factor"] * result.weights.factor(
         v["group"]) / stated.factor(v["group"]) < NOISE_OFF]
@@ -157,8 +156,7 @@ def _flag_test(state: LoopState, model: ArmModel, result: CalibrationResult) -> 
     s, say = state.settings, state.say
     try:
         state.flagged, state.flagged_entries = flag_test_outliers(
-            model, result.p, state.test, state.weights, result.reference_mode, s.outlier_threshold,
-            None if state.test_by == "measurement" else state.design,
+            model, result.p, state.test, state.weights, result.reference_mode, None if state.test_by == "measurement" else state.design,
             max(0, outlier_budget(len(state.data)) - len(state.dropped["design"])))
     except NumericalError:        # e.g. two tracker poses: a frame and the markers' offsets undetermined
         say("  the test set alone does not determine its own unknowns (centres, frames, offsets) for the point "
