@@ -57,7 +57,7 @@ from .decide import (
 from .folds import choose_folds, outer_split
 from .outliers import drop_design_outliers, flag_test_outliers, outlier_budget
 from .result import LoopResult, Stage
-from .settings import LEGACY_RESOLUTION, NOISE_OFF, LoopSettings
+from .settings import LEGACY_RESOLUTION, LoopSettings
 from .state import LoopState, Screening, log
 from .verdict import ADDED, builds_from_residual, heldout_check, judged, residual_over_stated, verdict_text
 
@@ -92,7 +92,7 @@ class Stop:
 
 def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
     """The data and their split, the base model calibrated on the design set (outliers dropped, the noise
-    estimated when the stated uncertainties are off), the test set's outliers, the folds of the decisions
+    estimated), the test set's outliers, the folds of the decisions
     (and whether their test can reach its level), and the base stage."""
     points, desc = camp.points, camp.desc
     has_t = points.temperature is not None and np.all(np.isfinite(points.temperature))
@@ -128,10 +128,9 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
             say(f"  outliers of the design set kept: {result.gross_kept}")
     else:
         result = state.fit(model, state.design, reweight=True)
-    # each group's noise over its stated sigma (the fit's weights times what its residual still says)
-    off = [v for v in result.variance if v["estimated"] and not 1 / NOISE_OFF < v["factor"] * result.weights.factor(
-        v["group"]) / stated.factor(v["group"]) < NOISE_OFF]
-    if settings.weights_from_data and off:
+    # every decision and later fit weighs the rows by the noise this fit estimated (re-estimated at each model
+    # added, fit_stage), as calibrate's default fit does: nothing is judged against the stated sigmas
+    if settings.weights_from_data:
         state.weights = result.weights
         if _noise(result):
             say("  " + _noise(result)[2:] + " (the stated uncertainties are starting values)")
@@ -363,15 +362,15 @@ def run_stage(state: LoopState) -> tuple[Decision, Stage, Screening] | Stop:
 
 
 def fit_stage(state: LoopState, decision: Decision, scr: Screening) -> Stage:
-    """The model with the decision's candidate, recalibrated on the design set (the noise re-estimated if the
-    loop estimates it; the candidate's parameters with their plausible sizes), as a new stage with its figures
+    """The model with the decision's candidate, recalibrated on the design set (the noise re-estimated at it, as
+    the base fit estimates it, if the loop estimates the noise; the candidate's parameters with their plausible
+    sizes), as a new stage with its figures
     on the outer test set and the plots of its signature before and after. The state is not changed."""
     cand = decision.candidate
     fam_name, before = plot_family(scr.space, cand)
     model = state.model.with_effects(cand.effect)
     state.say(f"adding {cand.name}; recalibrating")
-    result = state.fit(model, state.design, candidate_priors(model, cand, scr.test_of(cand)),
-                       reweight=state.weights != state.stated)
+    result = state.fit(model, state.design, candidate_priors(model, cand, scr.test_of(cand)), reweight=True)
     after = None
     if fam_name is not None:
         sp2 = residual_space(result)

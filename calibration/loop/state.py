@@ -68,8 +68,8 @@ class LoopState:
             also left out in the figures labelled so); flagged_entries: their descriptions.
 
     Changed by the stages:
-        weights: the uncertainties every fit starts from (estimated from the data when the stated ones are
-            off by more than :data:`~calibration.loop.settings.NOISE_OFF`).
+        weights: the uncertainties every fit starts from: the noise estimated from the data by the current model's
+            fit on the design set (the stated ones with ``settings.weights_from_data`` False).
         priors: plausible sizes of the added effects' parameters (at least ten times their screening estimate).
         model, result: the current model and its fit on the design set; stages: one per model.
         remaining: the candidates not added; synthesised: every candidate built from the residual;
