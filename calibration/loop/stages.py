@@ -152,10 +152,11 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
 def _flag_test(state: LoopState, model: ArmModel, result: CalibrationResult) -> None:
     """The test points the base model's point test flags (:func:`~calibration.loop.outliers.flag_test_outliers`):
     reported, never left out of a held-out figure (each figure is also given without them, labelled)."""
-    s, say = state.settings, state.say
+    say = state.say
     try:
         state.flagged, state.flagged_entries = flag_test_outliers(
-            model, result.p, state.test, state.weights, result.reference_mode, None if state.test_by == "measurement" else state.design,
+            model, result.p, state.test, state.weights, result.reference_mode,
+            None if state.test_by == "measurement" else state.design,
             max(0, outlier_budget(len(state.data)) - len(state.dropped["design"])))
     except NumericalError:        # e.g. two tracker poses: a frame and the markers' offsets undetermined
         say("  the test set alone does not determine its own unknowns (centres, frames, offsets) for the point "
