@@ -50,12 +50,13 @@ def test_the_loops_base_stage_is_calibrates_default_fit():
     model = ArmModel(desc, gravity_compliance(ArmModel(desc)))
     points = _tracker_points(ArmModel(desc))
     held = tuple(f"pose-{i:02d}" for i in range(2, 25, 2))
-    # the loop's outlier test (step 2) left out: it is not calibrate's and finds nothing on these data
-    settings = LoopSettings(holdout=held, test_in_model=False, drop_outliers=False)
+    # the loop's gross points (step 2) are calibrate's, found inside the same fit (none on these data)
+    settings = LoopSettings(holdout=held, test_in_model=False)
     state = prepare(Campaign(points, None, desc, effects=model.effects), settings, lambda _: None)
     base = state.stages[0].result
     train, _ = split_holdout(make_data(points, None).for_model(model), list(held))
     ref = refine_torques(calibrate(model, train, FitOptions(weights_from_data=True)))
+    assert not ref.gross and not state.dropped["design"]
     assert base.free == ref.free
     u = np.array([ref.uncertainty(n) for n in ref.free])
     diff = np.array([base.value(n) - ref.value(n) for n in ref.free])
