@@ -767,15 +767,18 @@ def _without_gross(model: ArmModel, data: CalibrationData, options: FitOptions, 
     same false-alarm rate) is at ``options.gross_threshold`` (and ``outlier_threshold``) or beyond, it is left out
     and the fit redone. Never more than :data:`GROSS_SHARE` of the points, nor a point its feature needs
     (:data:`~calibration.kinds.MIN_POINTS`, or one whose deletion leaves an unknown undetermined): past that the
-    misfit is the model's, kept and said (``gross_kept``). ``options.gross_threshold`` None keeps every point."""
+    misfit is the model's, kept and said (``gross_kept``). ``options.gross_threshold`` None keeps every point;
+    ``options.outlier_limit`` (not None) is the most points left out, ``options.outlier_lengths`` False leaves
+    every certified length in (the closed loop's base fit, :mod:`calibration.loop.outliers`)."""
     res = estimate(model, data, options)
     if options.gross_threshold is None:
         return res
     k = max(options.gross_threshold, options.outlier_threshold)
     index = np.arange(len(data))
     gross: list[GrossError] = []
-    limit = max(1, int(GROSS_SHARE * len(data)))
-    while (c := _gross_candidate(res, k)) is not None:
+    limit = max(1, int(GROSS_SHARE * len(data))) if options.outlier_limit is None else options.outlier_limit
+    share = f"{GROSS_SHARE:.0%} of them" if options.outlier_limit is None else "the most it may leave out"
+    while (c := _gross_candidate(res, k, options.outlier_lengths)) is not None:
         o = c.outlier
         need = not _droppable(res.data, [c])          # its feature needs it
         fewer, kept = _left_out(res.data, [c], index)
@@ -786,7 +789,7 @@ def _without_gross(model: ArmModel, data: CalibrationData, options: FitOptions, 
         if without is None:
             where = f"{o.measurement} line {o.line}" if c.between is None else f"{o.measurement} length {o.feature}"
             res.gross_kept = (f"{where}: standardized {o.standardized:+.1f} (beyond {k:.2f}), "
-                              f"kept: leaving out more than {limit} point(s) ({GROSS_SHARE:.0%} of them), a point its "
+                              f"kept: leaving out more than {limit} point(s) ({share}), a point its "
                               "feature needs, or one the fit cannot do without is an error of the model, not of the "
                               "data")
             break
@@ -820,10 +823,10 @@ def _tested(res: CalibrationResult, k: float) -> list[_Tested]:
     return sorted(out, key=lambda c: -abs(c.outlier.standardized))
 
 
-def _gross_candidate(res: CalibrationResult, k: float) -> _Tested | None:
-    """The point or certified length of ``res`` whose gross-error test is the largest, if at ``k`` or beyond
-    (:func:`_tested`)."""
-    cands = _tested(res, k)
+def _gross_candidate(res: CalibrationResult, k: float, lengths: bool = True) -> _Tested | None:
+    """The point (or, with ``lengths``, certified length) of ``res`` whose gross-error test is the largest, if at
+    ``k`` or beyond (:func:`_tested`)."""
+    cands = [c for c in _tested(res, k) if lengths or c.between is None]
     return cands[0] if cands else None
 
 
