@@ -163,10 +163,7 @@ def _hold_joint(text: str) -> tuple[str, float]:
 def model_from_args(args: argparse.Namespace) -> Arm:
     """The arm named by :func:`add_arm_options`: description, effects and their parameter values
     (:class:`arm_model.model_file.Arm`), read by the one loader every subcommand uses."""
-    hold = tuple(getattr(args, "hold_joint", None) or ())
-    twice = sorted({n for n, _ in hold if [m for m, _ in hold].count(n) > 1})
-    if twice:
-        raise InputError(f"joint '{twice[0]}' is given twice to --hold-joint", None, None, "key '--hold-joint'")
+    hold = tuple(getattr(args, "hold_joint", None) or ())      # a joint given twice: refused by the parser
     key = (args.arm, args.tip_frame, getattr(args, "masses", None), getattr(args, "base_frame", None), hold)
     cached = getattr(args, "_arm_loaded", None)
     if cached is None or cached[0] != key:        # read once per command line (arm_inputs reads it first)

@@ -440,12 +440,22 @@ def check_suffix(final: Path, writes: str | None) -> None:
     must not have the suffix of another format the toolkit reads (:func:`arm_model.readback.read_as`), or the
     file would be refused by its own read-back and misread by every command given it."""
     suffix = final.suffix.lower()
-    if writes is None or suffix == writes.lower():
+    if writes is None or _FORMATS.get(suffix, suffix[1:].upper()) == _FORMATS.get(writes.lower()):
         return
     other = read_as(suffix)
     if other is not None:
         raise InputError(f"a '{final.suffix}' file is read as {other} by the toolkit, but this command writes "
                          f"{writes[1:].upper()}: name the output '{writes}' (or with a suffix no reader takes)", final)
+    if suffix in _FORMATS:      # view --html x.png: a page no image viewer opens, a screenshot no browser shows
+        raise InputError(f"a '{final.suffix}' file is {_FORMATS[suffix]}, but {_FORMATS[writes.lower()]} is written "
+                         f"there: name the output '{writes}' (or with a suffix of no other format)", final)
+
+
+#: the suffixes of formats a file's name promises (an output named with another format's is refused)
+_FORMATS = {".html": "HTML", ".htm": "HTML", ".xhtml": "HTML", ".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG",
+            ".gif": "GIF", ".webp": "WebP", ".svg": "SVG", ".pdf": "PDF", ".bmp": "BMP", ".tif": "TIFF",
+            ".tiff": "TIFF", ".csv": "CSV", ".toml": "TOML", ".urdf": "URDF", ".json": "JSON", ".zip": "ZIP",
+            ".gz": "gzip", ".npy": "NumPy", ".npz": "NumPy"}
 
 
 def atomic_write_bytes(path: str | Path, data: bytes, inputs=()) -> Path:

@@ -45,9 +45,6 @@ def _effects(keys):
     if "none" in (keys or ()) and len(set(keys)) > 1:
         raise InputError(f"--effect none is the geometry alone: it takes no other --effect (got "
                          f"{', '.join(k for k in keys if k != 'none')})")
-    twice = sorted({k for k in keys or () if list(keys).count(k) > 1})
-    if twice:
-        raise InputError(f"--effect {', '.join(twice)} given more than once: give each effect once")
     for k in keys or ():
         if k == "none":
             continue
