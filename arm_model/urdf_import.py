@@ -194,6 +194,13 @@ def _parse_xml(path: Path, data: bytes):
         raise InputError("a <!DOCTYPE> that declares entities or names an external DTD: a URDF needs neither (entities "
                          "could read other files or the network); remove it", path,
                          data[: max(data.find(b"<!DOCTYPE"), 0)].count(b"\n") + 1)
+    root = tree.getroot()
+    ns = etree.QName(root).namespace
+    if ns is not None and root.prefix is None and "xacro" not in ns:
+        # <robot xmlns="...">: urdfdom reads the names as written (Pinocchio takes the file); so do we
+        for el in root.iter(f"{{{ns}}}*"):
+            el.tag = etree.QName(el).localname
+        etree.cleanup_namespaces(tree)
     return tree
 
 

@@ -127,3 +127,60 @@ def test_the_reproduce_line_runs_in_the_session_folder(tmp_path, capsys, monkeyp
     assert (tmp_path / "out" / "s" / "tips-again.csv").read_bytes() == (tmp_path / "out" / "s" / "tips.csv").read_bytes()
     moves = (tmp_path / "out" / "s" / "points.csv").read_text().splitlines()[0]
     assert moves.endswith(",q7_move_sign")
+
+
+# ---------------------------------------------------------------------------------------------
+# round 12: URDFs that are odd but valid XML
+
+def test_a_urdf_in_a_default_namespace_reads_as_urdfdom_reads_it(tmp_path):
+    """`<robot name="panda" xmlns="http://www.ros.org/urdf">` (a default namespace; urdfdom, Pinocchio's parser,
+    reads the names as written and takes the file) was refused: "a URDF's root element is <robot>, got
+    <{http://www.ros.org/urdf}robot>". Now the default namespace is dropped on reading: the same arm as without it.
+    (The audit's other 87 odd-but-valid or hostile URDFs, entities, comments, CDATA, processing instructions,
+    character references in numbers, prefixed foreign elements, continuous joints with limits, mimic chains,
+    UTF-16 and BOM, 20 000 extra links, were read as before or refused at their line.)"""
+    import numpy as np
+    from test_reliability_round10 import PANDA, _panda
+
+    from arm_model.model_file import load_model
+    ns = _panda(tmp_path, '<robot name="panda">', '<robot name="panda" xmlns="http://www.ros.org/urdf">')
+    arm, plain = load_model(ns, "ball_link"), load_model(PANDA, "ball_link")
+    assert arm.desc == plain.desc
+    q = np.random.default_rng(12).uniform(-1.0, 1.0, (5, plain.desc.n_joints))
+    np.testing.assert_array_equal(arm.model.ball_centres(q, None, arm.p), plain.model.ball_centres(q, None, plain.p))
+
+
+# ---------------------------------------------------------------------------------------------
+# round 12: the model file's [calibration] table
+
+def test_a_nul_in_a_file_the_model_file_names_is_refused_at_its_key():
+    """`covariance = "c.csv\\u0000"` (TOML's escape makes a NUL, which no system takes in a file name) was exit 3, an
+    internal error: os.stat raised ValueError where the reader looked whether the file was the model file itself.
+    Now exit 2 at the key's line, for `covariance` and `training_poses` alike."""
+    from arm_model import InputError
+    from arm_model.model_file import parse_model
+    text = (ROOT / "urdf" / "aacmm7.dh.toml").read_text()
+    for key in ("covariance", "training_poses"):
+        bad = text + f'\n[calibration]\n{key} = "c.csv\\u0000"\n'
+        line = len(bad.splitlines())
+        with pytest.raises(InputError, match=rf"m.toml, line {line}, key 'calibration.{key}': '{key}' holds a NUL "
+                                             "character: not a file name"):
+            parse_model(bad, str(ROOT / "m.toml"))
+
+
+# ---------------------------------------------------------------------------------------------
+# round 12: -o at a link to a pipe
+
+def test_an_output_linked_to_a_pipe_is_refused_by_its_own_name(tmp_path, capsys):
+    """`aacmm tip ... -o /dev/stdout | cat` said "/proc/4242/fd/pipe:[794503]: cannot write the output file: No such
+    file or directory": the link was followed to its target, which for a pipe is no path, before the output was
+    checked for being a pipe. Now the link's target is checked first: "/dev/stdout: the output exists and is a FIFO
+    (named pipe), not a regular file" (a file output) or "not a folder" (a folder output). Here a link to a FIFO."""
+    import os
+    os.mkfifo(tmp_path / "fifo")
+    os.symlink(tmp_path / "fifo", tmp_path / "out")
+    for command, what in ((["tip", RING / "points.csv", "--arm", "aacmm7"], "a regular file"),
+                          (["simulate", ROOT / "examples" / "campaigns" / "paper-ring-xyz.toml"], "a folder")):
+        rc, err = _run([*command, "-o", tmp_path / "out"], capsys)
+        assert rc == 2 and f"{tmp_path / 'out'}: the output exists and is a FIFO (named pipe), not {what}" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fifo", "out"]
