@@ -184,3 +184,20 @@ def test_an_output_linked_to_a_pipe_is_refused_by_its_own_name(tmp_path, capsys)
         rc, err = _run([*command, "-o", tmp_path / "out"], capsys)
         assert rc == 2 and f"{tmp_path / 'out'}: the output exists and is a FIFO (named pipe), not {what}" in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["fifo", "out"]
+
+
+# ---------------------------------------------------------------------------------------------
+# round 12: an output inside an input folder
+
+@pytest.mark.parametrize("inside", ["examples/data/copy", "docs/x", "examples"])
+def test_examples_into_the_folder_they_are_copied_from_is_refused(capsys, inside):
+    """`aacmm examples examples/data/copy` in a clone (or into the installed package's own folder) wrote a copy of the
+    examples inside the toolkit's examples: the next `aacmm examples` shipped that copy as an example of its own, one
+    more level each time. The rule of every command (docs/guarantees.md: no output inside a folder the command reads
+    files from) now holds for `examples` too: exit 2, nothing written."""
+    from arm_model.shipped import shipped_path
+    dest = shipped_path(".") / inside
+    existed = dest.exists()
+    rc, err = _run(["examples", dest], capsys)
+    assert rc == 2 and "refusing to write the examples into the folder" in err and "they are copied from" in err, err
+    assert dest.exists() == existed
