@@ -353,6 +353,9 @@ def _read_urdf(path: str | Path) -> _Urdf:
     _check_not_xacro(root, path)         # (before the name: a xacro file of macros has none)
     if not root.get("name"):
         raise InputError("<robot> has no name", path, root.sourceline)
+    if id_problem(root.get("name")):    # the arm's name: in every file name, model file, URDF and report (the rule of
+        raise InputError(f"the <robot> name {id_problem(root.get('name'))}", path, root.sourceline,  # a DH table's)
+                         "key 'robot.name'")
     _check_numbers(root, path)
     links, joints = _check_tree(root, path)
     try:

@@ -201,3 +201,21 @@ def test_examples_into_the_folder_they_are_copied_from_is_refused(capsys, inside
     rc, err = _run(["examples", dest], capsys)
     assert rc == 2 and "refusing to write the examples into the folder" in err and "they are copied from" in err, err
     assert dest.exists() == existed
+
+
+@pytest.mark.parametrize("name, words", [
+    ("x&#10;y", "must be one line of text without control characters"),
+    ("a&#9;b", "must be one line of text without control characters"),
+    (" panda", "must not begin or end with white space"),
+    ("pan&#x202e;da", "must not hold an invisible or text-direction character"),
+    ("x" * 100_001, "must be at most 100000 characters long")])
+def test_a_robot_name_follows_the_rule_of_every_name(tmp_path, capsys, name, words):
+    """A URDF's `<robot name="x&#10;y">` (or with a tab, white space at its ends, a text-direction character) was read:
+    `calibrate` then wrote a model file named after it that its own reader refuses, exit 3 ("a bug"); a name of 10^7
+    characters made `urdf` write a comment libxml2 refuses (exit 3). A DH table's `name` was held to the rule of every
+    id and name (errors.id_problem), the URDF's robot name was not: now it is, exit 2 at its line."""
+    from test_reliability_round10 import _panda
+    urdf = _panda(tmp_path, '<robot name="panda">', f'<robot name="{name}">')
+    rc, err = _run(["urdf", urdf, "--tip-frame", "ball_link", "-o", tmp_path / "o.urdf"], capsys)
+    assert rc == 2 and f"m.urdf, line 1, key 'robot.name': the <robot> name {words}" in err, err
+    assert not (tmp_path / "o.urdf").exists()
