@@ -219,3 +219,15 @@ def test_a_robot_name_follows_the_rule_of_every_name(tmp_path, capsys, name, wor
     rc, err = _run(["urdf", urdf, "--tip-frame", "ball_link", "-o", tmp_path / "o.urdf"], capsys)
     assert rc == 2 and f"m.urdf, line 1, key 'robot.name': the <robot> name {words}" in err, err
     assert not (tmp_path / "o.urdf").exists()
+
+
+def test_a_task_id_leaves_room_for_its_measurements_number(tmp_path, capsys):
+    """`simulate` with a task id of 100 000 characters (the longest id) ran the campaign, then its points file's read-
+    back refused the measurement id "<id>-01" (100 003 characters): exit 3 after the work. The task id is now held
+    to the longest id less the suffix its measurements add, at its key, before any work."""
+    camp = tmp_path / "c.toml"
+    text = (ROOT / "examples" / "campaigns" / "paper-ring-xyz.toml").read_text()
+    camp.write_text(text.replace('id = "ring"', f'id = "{"r" * 99_990}"'))
+    rc, err = _run(["simulate", camp, "-o", tmp_path / "o"], capsys)
+    assert rc == 2 and "c.toml, line 44, key 'task[1].id': 'id' must be at most 99968 characters long" in err, err
+    assert not (tmp_path / "o").exists()
