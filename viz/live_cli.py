@@ -63,7 +63,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "and joint-limit events as they happen, refit the features of a plan after each point, and "
                     "record everything in the session folder as it goes (docs/live.md).",
         epilog="Exit status: 0 the stream ended; 2 a bad header, option or file (nothing written), or a bad line "
-               "with --strict or a stream that failed (a connection reset: the session is kept, said partial); 130/143 Ctrl-C/SIGTERM (the session is kept, complete up "
+               "with --strict or a stream that failed (a connection reset: the session is kept, said partial); "
+               "130/143 Ctrl-C/SIGTERM (the session is kept, complete up "
                "to the last sample read).")
     p.add_argument("source", help="a recorded stream (a file: replayed at its time stamps, see --speed), '-' "
                                   "(standard input), tcp://HOST:PORT (connect to a server sending the lines) or "

@@ -10,7 +10,8 @@
 Every source yields ``(line number, bytes of the line without its end)`` and, while nothing comes, an
 idle ``None`` at least every :data:`TICK_S` seconds (so that the session flushes its record and the
 view stays alive). A stream ends at its end (end of file, the connection closed); a connection reset (or
-broken otherwise) is an ``OSError`` naming the connection, never an end; a UDP source never ends by itself (``--stop-after-idle-s``, Ctrl-C or SIGTERM end it).
+broken otherwise) is an ``OSError`` naming the connection, never an end; a UDP source never ends by itself
+(``--stop-after-idle-s``, Ctrl-C or SIGTERM end it).
 """
 from __future__ import annotations
 
