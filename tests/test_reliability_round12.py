@@ -247,3 +247,37 @@ def test_the_calibrated_name_of_the_longest_arm_name_is_a_name():
     longest, other = "p" * MAX_ID_LENGTH, "p" * (MAX_ID_LENGTH - 1) + "q"
     assert id_problem(calibrated_name(longest)) is None and calibrated_name(longest).endswith("-calibrated")
     assert calibrated_name(longest) != calibrated_name(other)       # two arms never get one name
+
+
+# ---------------------------------------------------------------------------------------------
+# round 12: options that do nothing
+
+@pytest.mark.parametrize("argv, words", [
+    (["tip", RING / "points.csv", "--arm", "aacmm7", "--u-probing-um", "3"],
+     "--u-probing-um: option(s) of the uncertainty, which is not asked for (add --uncertainty"),
+    (["tip", RING / "points.csv", "--arm", "aacmm7", "--encoder-resolution-deg", "0.001", "--u-force-N", "1", "1"],
+     "--encoder-resolution-deg, --u-force-N: option(s) of the uncertainty"),
+    (["tip", RING / "points.csv", "--arm", "aacmm7", "--uncertainty", "--seed", "4"],
+     "--seed: option(s) of the Monte Carlo, which is not asked for (add --mc N)"),
+    (["view", RING / "points.csv", "--arm", "aacmm7", "--u-compliance-rel", "0.5", "--ellipsoid-scale", "10"],
+     "--u-compliance-rel, --ellipsoid-scale: option(s) of the ellipsoids, which is not asked for (add --ellipsoids)"),
+    (["view", RING / "points.csv", "--arm", "aacmm7", "--fps", "4"],
+     "--points-per-s: option(s) of the animation, which is not asked for (add --animate)"),
+    (["view", RING / "points.csv", "--arm", "aacmm7", "--browser", "chromium"],
+     "--browser: option(s) of the screenshot, which is not asked for (add --screenshot OUT.png)"),
+    (["live", "-", "--arm", "aacmm7", "--speed", "2"],
+     "--speed: option(s) of a file's replay, which is not asked for (- is a stream, taken as its lines come)"),
+    (["live", SAMPLES, "--arm", "aacmm7", "--stop-after-idle-s", "2"],
+     "--stop-after-idle-s: option(s) of a stream that may fall silent, which is not asked for (the file")])
+def test_an_option_that_would_do_nothing_is_refused(tmp_path, capsys, argv, words):
+    """`tip --u-probing-um 3` without --uncertainty wrote the centres without any uncertainty and said nothing of the
+    option (the input uncertainties, and --seed without --mc, were read and dropped); so were view's input
+    uncertainties and --ellipsoid-scale without --ellipsoids, --points-per-s without --animate, --browser without
+    --screenshot, live's --speed on a stream (paced as it comes) and --stop-after-idle-s on a file (never idle). As
+    round 10 and 11 did for live's view and contact options: exit 2 naming them and what they belong to, before any
+    work (tip: once the arm says whether a covariance makes the uncertainty anyway)."""
+    out = ["-o", tmp_path / "o.csv"] if argv[0] == "tip" else ["--html", tmp_path / "o.html"] \
+        if argv[0] == "view" else ["-o", tmp_path / "s"]
+    rc, err = _run([*argv, *out], capsys)
+    assert rc == 2 and words in err, err
+    assert list(tmp_path.iterdir()) == []

@@ -78,7 +78,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--measurement", default=None, metavar="ID",
                    help="the measurement id written on every point of the session (default: the plan's, else the "
                         "session folder's name)")
-    p.add_argument("--speed", type=_speed, default=1.0,
+    p.add_argument("--speed", type=_speed, default=None,
                    help=f"replay a file at this many times real time, {MIN_SPEED:g} to 1e6 (default 1; 0: as fast as "
                         "possible)")
     p.add_argument("--rate-Hz", type=number_in(*RATE_HZ_RANGE), default=None,
@@ -184,7 +184,7 @@ def run_live(args: argparse.Namespace) -> int:
     from arm_model.live.record import check_new_folder
     from arm_model.live.samples import SampleLayout
     from arm_model.live.sources import open_source
-    from arm_model.uncertainty_cli import inputs_from_args
+    from arm_model.uncertainty_cli import inputs_from_args, refuse_unused
     if args.plan is not None and args.feature is not None:
         raise InputError("give --plan or --feature, not both")
     given = [o for o, v in (("--port", args.port), ("--fps", args.fps), ("--linger-s", args.linger_s)) if v is not None]
@@ -196,6 +196,12 @@ def run_live(args: argparse.Namespace) -> int:
     given = [o for o, v in force.values() if v is not None]
     if given and args.contact == "trigger":     # a trigger contact lasts while the button is held, whatever the force
         raise InputError(f"{', '.join(given)}: option(s) of force contacts, which --contact trigger does not use")
+    file = _is_file(args.source)        # a file is replayed at its time stamps; a stream comes as it comes
+    refuse_unused(args, file, "a file's replay", f"{args.source} is a stream, taken as its lines come",
+                  (("--speed", "speed"),))
+    refuse_unused(args, not file, "a stream that may fall silent", f"the file {args.source} is read to its end",
+                  (("--stop-after-idle-s", "stop_after_idle_s"),))
+    args.speed = 1.0 if args.speed is None else args.speed
     try:
         contact = ContactOptions(source=args.contact, **{k: v for k, (_, v) in force.items() if v is not None})
     except ValueError as exc:
