@@ -177,8 +177,11 @@ def model_from_args(args: argparse.Namespace) -> Arm:
 
 def arm_inputs(args: argparse.Namespace) -> list:
     """Every file the ``--arm`` options read: the arm, the ``--masses`` file and the covariance and training poses
-    files a model file names. Outputs are never written over any of them (:func:`arm_model.output.guard_output`)."""
-    files = [args.arm, getattr(args, "masses", None)]
+    files a model file names. Outputs are never written over any of them (:func:`arm_model.output.guard_output`).
+    A shipped arm given by name is its file (the name is no file of the current folder: `--arm aacmm7 -o aacmm7` was
+    refused as an output over an input)."""
+    from .shipped import arm_path
+    files = [arm_path(args.arm), getattr(args, "masses", None)]
     try:
         arm = model_from_args(args)
         named = [arm.covariance, arm.training_poses]

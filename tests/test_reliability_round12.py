@@ -176,14 +176,19 @@ def test_an_output_linked_to_a_pipe_is_refused_by_its_own_name(tmp_path, capsys)
     """`aacmm tip ... -o /dev/stdout | cat` said "/proc/4242/fd/pipe:[794503]: cannot write the output file: No such
     file or directory": the link was followed to its target, which for a pipe is no path, before the output was
     checked for being a pipe. Now the link's target is checked first: "/dev/stdout: the output exists and is a FIFO
-    (named pipe), not a regular file" (a file output) or "not a folder" (a folder output). Here a link to a FIFO."""
+    (named pipe), not a regular file" (a file output) or "not a folder" (a folder output); `live -o /dev/stdout` the
+    same ("cannot create the session folder" at /proc/.../pipe:[n] before). Here a link to a FIFO."""
     import os
     os.mkfifo(tmp_path / "fifo")
     os.symlink(tmp_path / "fifo", tmp_path / "out")
-    for command, what in ((["tip", RING / "points.csv", "--arm", "aacmm7"], "a regular file"),
-                          (["simulate", ROOT / "examples" / "campaigns" / "paper-ring-xyz.toml"], "a folder")):
+    for command, what in ((["tip", RING / "points.csv", "--arm", "aacmm7"], "the output exists and is a FIFO (named "
+                                                                            "pipe), not a regular file"),
+                          (["simulate", ROOT / "examples" / "campaigns" / "paper-ring-xyz.toml"],
+                           "the output exists and is a FIFO (named pipe), not a folder"),
+                          (["live", SAMPLES, "--arm", "aacmm7"], "the session folder must be a new folder, but a file "
+                                                                 "of that name exists")):
         rc, err = _run([*command, "-o", tmp_path / "out"], capsys)
-        assert rc == 2 and f"{tmp_path / 'out'}: the output exists and is a FIFO (named pipe), not {what}" in err, err
+        assert rc == 2 and f"{tmp_path / 'out'}: {what}" in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["fifo", "out"]
 
 
@@ -281,3 +286,18 @@ def test_an_option_that_would_do_nothing_is_refused(tmp_path, capsys, argv, word
     rc, err = _run([*argv, *out], capsys)
     assert rc == 2 and words in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_shipped_arm_named_on_the_command_line_is_not_a_file_of_the_current_folder(tmp_path, capsys, monkeypatch):
+    """`aacmm tip points.csv --arm aacmm7 -o aacmm7` was refused ("refusing to write the output over an input file"):
+    the shipped arm's name was taken for a file of the current folder among the inputs an output must not replace
+    (and `ring ... --arm aacmm7 -o .` said "the output folder holds the input aacmm7"). The inputs now hold the shipped
+    arm's own file, as the arm is read."""
+    monkeypatch.chdir(tmp_path)
+    rc, err = _run(["tip", RING / "points.csv", "--arm", "aacmm7", "-o", "aacmm7"], capsys)
+    assert rc == 0, err
+    assert (tmp_path / "aacmm7").read_text().startswith("measurement,feature,x_rigid_mm")
+    from arm_model.shipped import shipped_path
+    (tmp_path / "aacmm7").unlink()          # (a file of the name would be the arm read)
+    rc, err = _run(["urdf", "aacmm7", "-o", shipped_path("urdf/aacmm7.dh.toml")], capsys)
+    assert rc == 2 and "refusing to write the output over an input file" in err, err
