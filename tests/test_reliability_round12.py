@@ -301,3 +301,15 @@ def test_a_shipped_arm_named_on_the_command_line_is_not_a_file_of_the_current_fo
     (tmp_path / "aacmm7").unlink()          # (a file of the name would be the arm read)
     rc, err = _run(["urdf", "aacmm7", "-o", shipped_path("urdf/aacmm7.dh.toml")], capsys)
     assert rc == 2 and "refusing to write the output over an input file" in err, err
+
+
+@pytest.mark.parametrize("diameter", ["2_5", "\u0661\u0662", "\uff12\uff15", "25\u00a0", "0x19"])
+def test_a_feature_option_s_diameter_is_a_number_by_the_one_rule(diameter):
+    """`live --feature sphere:a:2_5` made a 25 mm sphere and `--feature sphere:a:١٢` (Arabic digits) a 12 mm one:
+    the option's diameter went through Python's float(), which takes underscores and any script's digits, where
+    every other number of the toolkit (files and options) is ASCII without underscores (csv_io.parse_number)."""
+    from arm_model import InputError
+    from arm_model.live import single_feature_plan
+    with pytest.raises(InputError, match="--feature: the diameter must be a number in mm"):
+        single_feature_plan(f"sphere:a:{diameter}")
+    assert single_feature_plan("sphere:a: 25").entries[0].feature.diameter == pytest.approx(0.025)
