@@ -1359,8 +1359,9 @@ def _test_level(options: FitOptions) -> float | None:
 
 def _group_table(s: _Setup, kept, u) -> dict:
     """{group: scale, parameters, effective (gamma: the parameters the data determine), size source, physical
-    (its scale not chosen by the evidence, :attr:`calibration.prior.PriorSpec.physical`)} of the prior's groups
-    over the free parameters ``kept``."""
+    (its scale not chosen by the evidence, :attr:`calibration.prior.PriorSpec.physical`), ceiling (the largest
+    scale the evidence may give it, :meth:`calibration.prior.PriorSpec.ceiling`)} of the prior's groups over the
+    free parameters ``kept``."""
     if s.prior is None:
         return {}
     spec = s.problem.model.spec
@@ -1372,7 +1373,8 @@ def _group_table(s: _Setup, kept, u) -> dict:
         out[g] = {"scale": s.scales.get(g, 1.0), "parameters": [spec.names[i] for i in idx],
                   "effective_parameters": float(np.sum(1.0 - rho)),
                   "size_at_scale_1": {spec.names[i]: float(s.spec.size[i]) for i in idx},
-                  "size_source": sorted({s.spec.source[i] for i in idx}), "physical": g in s.spec.physical}
+                  "size_source": sorted({s.spec.source[i] for i in idx}), "physical": g in s.spec.physical,
+                  "ceiling": s.spec.ceiling(g)}
     return out
 
 
@@ -1616,17 +1618,22 @@ def nominal_baseline(model: ArmModel, data: CalibrationData, options: FitOptions
     """The nominal model given the same nuisance unknowns as a calibration with ``options``: the description
     (``options.values``) with only the tip offset fitted (probe.x/y/z, where free: a probe's ball whose place
     on the last link may not be known; a tracker's markers at unknown offsets are nuisance unknowns of every
-    fit) by least squares, the artefacts' unknowns and the
+    fit) under the calibration's own prior (``options.prior_scale``: by default the evidence's scale of the tip
+    offset, its ceiling and its rule for a direction the data barely see, :mod:`calibration.prior`; without a
+    prior, by least squares), the artefacts' unknowns and the
     reference frame solved as in every fit, at the same weights (no noise estimate of its own), on every point
     of ``data`` (give it the fit's ``data``: without the gross errors the fit left out). Its
     ``p``/``reference`` are the baseline every "nominal -> calibrated" figure compares against; it carries no
-    model discrepancy (nothing reads one of the baseline's: its extrapolative folds cost a fit's tenth)."""
+    model discrepancy (nothing reads one of the baseline's: its extrapolative folds cost a fit's tenth). (Without
+    the prior, a ring gauge probed with the stylus along its axis, which sees probe z only through the stylus'
+    tilt, moved the bundled ring campaign's probe z by -246 mm.)"""
     spec = model.spec
     cand = resolve_parameters(spec, default_free(model, data) if options.free is None else options.free)
     tip = [spec.names[i] for i in cand if spec.names[i] in ("probe.x", "probe.y", "probe.z")]
-    return calibrate(model, data, replace(options, free=tuple(tip), prior_scale=None, min_resolution=None,
-                                          weights_from_data=False, drop_outliers=False, gross_threshold=None,
-                                          start=None, on_unidentifiable="fix", discrepancy=False))
+    return calibrate(model, data, replace(options, free=tuple(tip), prior_scale=options.prior_scale if tip else None,
+                                          min_resolution=None, weights_from_data=False, drop_outliers=False,
+                                          gross_threshold=None, start=None, on_unidentifiable="fix",
+                                          discrepancy=False))
 
 
 def evidence_scale(model: ArmModel, data: CalibrationData, options: FitOptions = FitOptions()) -> tuple[dict, list]:

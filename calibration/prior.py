@@ -24,6 +24,21 @@ least half its prior's, i.e. the data's own information on it is at most the pri
 ``1 / u_post^2 = 1 / u_prior^2 + 1 / u_data^2``, so ``rho >= 0.5`` iff ``u_data >= u_prior``). Such a
 parameter stays near its nominal value with about its prior's uncertainty, and that uncertainty is part of
 the posterior covariance every propagation uses.
+
+A parameter the data **barely see** (``rho_k >= BARELY_SEEN``, 0.9: the data's own uncertainty on it at least 3
+times its prior's size) has **no say in its group's scale** (:func:`update_scales` sums over the group's other
+parameters): it follows the scale the others give. The fixed point is the Laplace evidence's stationary point, a
+local statement. Along a direction the data barely curve, a small systematic pull (residual structure the model
+does not hold, which a long lever can mimic) moves the MAP estimate by about ``tau^2`` times the pull, the estimate
+feeds the next round's scale, and the scale runs to wherever the pull is spent: the tip offset of a stylus held
+parallel to a ring gauge's axis (probe z, which such a ring sees only through the stylus' tilt) went from 85 mm
+to -93.6 mm, behind the wrist, on the bundled ring campaign repeated four times, its scale at the old cap of 100
+(docs/calibration.md, "Ceilings, and what the data barely see").
+
+Every group's scale also has a **ceiling** (:attr:`PriorSpec.ceiling`): no prior standard deviation wider than the
+largest error the arm's own dimensions allow (:func:`limits`): the tip's place :data:`TIP_SHARE` of its distance
+from the last joint's origin (the stylus), a joint row's length :data:`LENGTH_SHARE` of the chain's length, an
+angle :data:`MAX_ANGLE`; never below the plausible size itself (scale 1).
 """
 from __future__ import annotations
 
@@ -34,8 +49,8 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["GROUP_LENGTHS", "GROUP_OFFSETS", "GROUP_ANGLES", "GROUP_TIP", "GROUP_PROBE_COMPLIANCE", "BASE_SIZES",
-           "PRIOR_DOMINATED", "SCALE_RANGE", "MIN_EFFECTIVE", "PriorSpec", "parameter_groups", "prior_spec",
-           "variance_ratio", "update_scales"]
+           "PRIOR_DOMINATED", "BARELY_SEEN", "SCALE_RANGE", "MIN_EFFECTIVE", "TIP_SHARE", "LENGTH_SHARE", "MAX_ANGLE",
+           "PriorSpec", "parameter_groups", "prior_spec", "chain_length", "limits", "variance_ratio", "update_scales"]
 
 GROUP_LENGTHS = "lengths"
 GROUP_OFFSETS = "joint offsets"
@@ -55,10 +70,24 @@ DEFLECTION = 1e-2
 MAX_ANGULAR_COMPLIANCE = 0.1
 #: posterior/prior variance ratio from which a parameter is prior-dominated
 PRIOR_DOMINATED = 0.5
+#: posterior/prior variance ratio from which the data barely see a parameter (their own information on it at most
+#: a ninth of the prior's: its data uncertainty at least 3 times the prior's size): it has no say in its group's
+#: scale (:func:`update_scales`)
+BARELY_SEEN = 0.9
 #: range of a group's scale (times the plausible sizes)
 SCALE_RANGE = (1e-2, 1e2)
 #: fewest parameters the data must determine in a group (``gamma_G``) for its scale to be estimated
 MIN_EFFECTIVE = 0.5
+#: the largest plausible error (one standard deviation) of the tip's place on the last link, as a share of its
+#: distance from the last joint's origin (a 100 mm stylus: 5 mm; a ball off by more is another stylus than the
+#: description's, not a calibration)
+TIP_SHARE = 0.05
+#: the largest plausible error (one standard deviation) of a joint row's length, as a share of the chain's length
+#: (:func:`chain_length`: a metre-long arm, 5 mm; a machined or cast link is made to a small fraction of that)
+LENGTH_SHARE = 0.005
+#: the largest plausible error (one standard deviation) [rad] of an angle of a joint row: an encoder's zero or an
+#: axis' tilt (50 mrad, 2.9 deg; the real TALOS's offsets the evidence puts at 19 mrad)
+MAX_ANGLE = 0.05
 
 
 #: |cos| of the angle between an origin angle's rotation axis and the joint axis from which it is the joint's
@@ -128,12 +157,25 @@ class PriorSpec:
         source: how each size was set (for the report).
         physical: the groups whose prior is physical (every parameter an angular compliance sized by the data's
             torque): the evidence leaves their scale as given (1 by default).
+        limit: the largest plausible standard deviation of each parameter [SI] (:func:`limits`; ``inf``: none
+            but :data:`SCALE_RANGE`).
     """
     group: tuple
     size: np.ndarray
     lower: np.ndarray
     source: tuple
     physical: frozenset = frozenset()
+    limit: np.ndarray | None = None
+
+    def ceiling(self, group: str) -> float:
+        """The largest scale the evidence may give ``group``: the smallest of its parameters' ``limit / size``, at
+        least 1 (a size given or set by the data is a statement the ceiling does not narrow), at most
+        :data:`SCALE_RANGE`'s top."""
+        if self.limit is None:
+            return SCALE_RANGE[1]
+        idx = [i for i, g in enumerate(self.group) if g == group]
+        top = min((float(self.limit[i] / self.size[i]) for i in idx), default=math.inf)
+        return min(max(top, 1.0), SCALE_RANGE[1])
 
     def sizes(self, scales: dict | float) -> np.ndarray:
         """The prior's standard deviations [SI] at group ``scales`` (a dict, or one factor for every group)."""
@@ -187,6 +229,32 @@ def _effect_sizes(model, data) -> dict[int, tuple[float, str]]:
     return out
 
 
+def chain_length(desc) -> float:
+    """The length [m] of the chain of ``desc``: the sum of its joint rows' translations (DH/MDH ``hypot(d, a)``, a
+    URDF origin's ``|(x, y, z)|``) and the tip's distance from the last joint's origin: the arm's size, at least its
+    reach."""
+    rows = sum(math.hypot(j.d, j.a) if j.origin is None else float(np.linalg.norm(j.origin[:3])) for j in desc.joints)
+    return float(rows + np.linalg.norm(desc.probe.p_last))
+
+
+def limits(model) -> np.ndarray:
+    """The largest plausible standard deviation [SI] of each parameter's error, from the arm's own dimensions: the
+    tip offset (probe.x/y/z) :data:`TIP_SHARE` of the tip's distance from the last joint's origin, a joint row's
+    length :data:`LENGTH_SHARE` of the chain's length (:func:`chain_length`), a joint row's angle
+    :data:`MAX_ANGLE`; each at least the length's or angle's plausible size at scale 1 (:data:`BASE_SIZES`); other
+    parameters ``inf`` (their scale bounded by :data:`SCALE_RANGE` alone)."""
+    spec, desc = model.spec, model.desc
+    length = max(LENGTH_SHARE * chain_length(desc), BASE_SIZES["m"])
+    tip = max(TIP_SHARE * float(np.linalg.norm(desc.probe.p_last)), BASE_SIZES["m"])
+    out = np.full(spec.size, math.inf)
+    for i, (n, unit) in enumerate(zip(spec.names, spec.units, strict=True)):
+        if n in ("probe.x", "probe.y", "probe.z"):
+            out[i] = tip
+        elif i < model.base_size and not n.startswith("probe."):
+            out[i] = {"m": length, "rad": max(MAX_ANGLE, BASE_SIZES["rad"])}.get(unit, math.inf)
+    return out
+
+
 def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
     """The groups, plausible sizes and bounds of every parameter of ``model`` for ``data``.
 
@@ -224,7 +292,7 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
     torque_sized = [i in eff and spec.units[i] == "rad/(N m)" and source[i] != "given" for i in range(spec.size)]
     physical = frozenset(g for g in set(groups)
                          if all(torque_sized[i] for i in range(spec.size) if groups[i] == g))
-    return PriorSpec(groups, size, lower, tuple(source), physical)
+    return PriorSpec(groups, size, lower, tuple(source), physical, limits(model))
 
 
 def variance_ratio(post_var: np.ndarray, prior_sd: np.ndarray) -> np.ndarray:
@@ -242,20 +310,24 @@ def update_scales(scales: dict, spec: PriorSpec, kept, delta: np.ndarray, rho: n
             posteriori fit, ``rho`` their posterior/prior variance ratios (:func:`variance_ratio`).
         damping: the new log scale is ``damping`` of the way to the fixed point's (1: all of it).
 
-    Returns ``(new scales, {group: gamma_G})``; a group whose data determine fewer than
-    :data:`MIN_EFFECTIVE` parameters keeps its scale (its evidence is flat), and so does a physical group
-    (:attr:`PriorSpec.physical`); every scale stays in :data:`SCALE_RANGE`."""
+    Returns ``(new scales, {group: gamma_G})``. Only the group's parameters the data see (``rho <``
+    :data:`BARELY_SEEN`) enter its fixed point: one the data barely see follows the scale the others give (see the
+    module docstring); a group whose data determine fewer than :data:`MIN_EFFECTIVE` parameters keeps its scale
+    (its evidence is flat), and so does a physical group (:attr:`PriorSpec.physical`); every scale stays in
+    :data:`SCALE_RANGE` and under its group's ceiling (:meth:`PriorSpec.ceiling`). ``gamma_G`` is over every
+    parameter of the group."""
     kept = np.asarray(kept, dtype=int)
     new, gamma = dict(scales), {}
     for g, idx in spec.groups_of(kept).items():
         sel = np.isin(kept, idx)
+        gamma[g] = float(np.sum(1.0 - rho[sel]))
+        sel &= rho < BARELY_SEEN
         gam = float(np.sum(1.0 - rho[sel]))
-        gamma[g] = gam
         if gam < MIN_EFFECTIVE or g in spec.physical:
             continue
         z2 = float(np.sum((delta[sel] / spec.size[kept[sel]]) ** 2))
         target = math.sqrt(max(z2 / gam, SCALE_RANGE[0] ** 2))
         old = scales.get(g, 1.0)
         tau = math.exp(math.log(old) + damping * (math.log(target) - math.log(old)))
-        new[g] = float(min(max(tau, SCALE_RANGE[0]), SCALE_RANGE[1]))
+        new[g] = float(min(max(tau, SCALE_RANGE[0]), spec.ceiling(g)))
     return new, gamma

@@ -28,15 +28,33 @@ variant fitted on the other folds (leave one fold out), and the mean of its squa
 whether the variant's variance holds on a fold it did not see (1) or over-states it (below 1). Per pair, the
 coverage's aim is 90-97 %; :func:`band_odds` gives how often even an exact u lands outside it by chance.
 
+With ``--parameter-covariance`` the fit's parameter covariance that every variant propagates is replaced by a
+model-robust one estimated from the training data (:func:`robust_covariance`): ``jackknife``, the delete-one-point
+jackknife of the parameters (the leave-one-out shifts of the fit, exact for the model linearised at the solution:
+an HC3-type sandwich that holds when the model is wrong), taken in every direction where it exceeds the posterior
+(:func:`lifted`); ``fold-shift``, the posterior plus the positive part of the parameters' spread between the
+extrapolative folds beyond what the fit predicts for it (each fold's shift of the parameters when its poses at an
+end of a joint's range are left out, against the shift's covariance under the model): a random-effects variance of
+the parameters across the joint range, which grows away from the training poses through the Jacobian.
+
+With ``--noise joint-play`` the training scatter is carried to the held-out points as play in the joints rather than
+as the fit's isotropic probing scatter (:func:`fit_joint_play`: a variance per joint angle, propagated through each
+point's joint Jacobian, plus an isotropic one, by maximum likelihood from the training centres' deviations from their
+seats' means), so that it grows where the joints' levers are long.
+
 It also says how much of the largest axis' deviations a linear function of the seven gravity torques explains
 (R^2, within each seat): an error driven by the load that the model lacks.
 
     python scripts/seat_uncertainty_study.py                       # the real Panda (examples/data/real-panda-seats)
     python scripts/seat_uncertainty_study.py --sim r1,r4,r8        # simulated robots, each trained on every placement
+    python scripts/seat_uncertainty_study.py --parameter-covariance fold-shift
+    python scripts/seat_uncertainty_study.py --noise joint-play
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
+import importlib
 import math
 import sys
 from pathlib import Path
@@ -49,6 +67,10 @@ sys.path.insert(0, str(ROOT))
 VARIANTS = ("none", "constant", "linear", "predictive", "per-joint", "written", "saturating")
 #: the variants :func:`fold_check` refits without each fold
 CHECKED = ("constant", "linear", "predictive", "per-joint", "written")
+#: the parameter covariances ``--parameter-covariance`` offers (:func:`robust_covariance`)
+COVARIANCES = ("posterior", "jackknife", "fold-shift")
+#: how the training scatter is carried to the held-out points (``--noise``, :func:`fit_joint_play`)
+NOISES = ("isotropic", "joint-play")
 #: the aim for each pair's coverage [%]
 BAND = (90.0, 97.0)
 
@@ -123,6 +145,137 @@ def band_odds(n: int, p: float = 0.95, band=BAND) -> tuple[float, float]:
     return float(binom.cdf(lo - 1, n, p)), float(binom.sf(hi, n, p))
 
 
+@contextlib.contextmanager
+def captured_linearisation():
+    """Within the block, a dict that holds the last fit's linearisation at its solution, as
+    :func:`calibration.calibrate` hands it to :func:`calibration.discrepancy.model_discrepancy` (``prob``, ``r``,
+    ``js``, ``solve``, ``var``: see there)."""
+    mod = importlib.import_module("calibration.calibrate")
+    got: dict = {}
+    original = mod.model_discrepancy
+
+    def spy(prob, r, js, solve, var, *args, **kwargs):
+        got.update(prob=prob, r=r, js=js, solve=solve, var=var)
+        return original(prob, r, js, solve, var, *args, **kwargs)
+    mod.model_discrepancy = spy
+    try:
+        yield got
+    finally:
+        mod.model_discrepancy = original
+
+
+def lifted(post, other) -> np.ndarray:
+    """The covariance that is ``post`` where ``other`` is smaller and ``other`` where it is larger, direction by
+    direction: ``P^1/2 max(I, P^-1/2 O P^-1/2) P^1/2`` (the eigenvalues of the whitened ``other`` floored at 1)."""
+    w, vec = np.linalg.eigh(post)
+    w = np.maximum(w, 1e-30 * w.max())
+    half, inv_half = (vec * np.sqrt(w)) @ vec.T, (vec / np.sqrt(w)) @ vec.T
+    lw, lv = np.linalg.eigh(0.5 * (inv_half @ other @ inv_half + (inv_half @ other @ inv_half).T))
+    return half @ ((lv * np.maximum(lw, 1.0)) @ lv.T) @ half
+
+
+def _positive_part(m) -> np.ndarray:
+    w, v = np.linalg.eigh(0.5 * (m + m.T))
+    return (v * np.maximum(w, 0.0)) @ v.T
+
+
+def _whitened(lin: dict) -> tuple:
+    """``(js, r, solve)`` of the linearised fit ``lin`` with its rows divided by ``sqrt(var)``, so that a row's
+    variance is 1 and ``solve`` (``b -> A^-1 b``, ``A = js^T js + diag(damp)``, the prior's precision ``damp`` as the
+    fit put it in its normal matrix) gives the posterior itself, as the result's covariance is computed:
+    ``(J^T J / var + P)^-1``."""
+    js, r, solve, var = (lin[key] for key in ("js", "r", "solve", "var"))
+    n = js.shape[1]
+    jtj = (js.T @ js).toarray()
+    damp = np.diag(np.linalg.inv(solve(np.eye(n)))) - np.diag(jtj)
+    a_inv = np.linalg.inv(jtj / var + np.diag(np.maximum(damp, 0.0)))
+    a_inv = 0.5 * (a_inv + a_inv.T)
+    return js / math.sqrt(var), r / math.sqrt(var), lambda b: a_inv @ b
+
+
+def robust_covariance(name: str, k: int, lin: dict) -> np.ndarray:
+    """The covariance of the first ``k`` (column-scaled) unknowns of the linearised fit ``lin``
+    (:func:`captured_linearisation`, rows whitened by :func:`_whitened`): ``posterior`` ``A^-1``; ``jackknife`` it
+    :func:`lifted` to the delete-one-point jackknife ``sum_O d_O d_O^T`` (``d_O`` the change of the unknowns from the
+    fit without point O's rows to the fit with them, :func:`calibration.discrepancy.group_deletions`); ``fold-shift``
+    it plus the positive part of ``mean_F (d_F d_F^T - C_F)`` over the extrapolative folds F
+    (:func:`calibration.discrepancy.extreme_folds`), ``C_F = Z_F^T (I - H_FF)^-1 Z_F`` (``Z_F = J_F A^-1``) the
+    covariance of ``d_F`` when the model holds."""
+    from calibration.discrepancy import extreme_folds, group_deletions, holdable
+    prob = lin["prob"]
+    js, r, solve = _whitened(lin)
+    post = solve(np.eye(js.shape[1]))[:k, :k]
+    rp = prob.row_point
+    point_rows = (prob.row_distance < 0) & (rp >= 0)
+    pts = np.unique(rp[point_rows])
+    if name == "posterior":
+        return post
+    if name == "jackknife":
+        shifts = np.array([d[:k] for _, _, d in group_deletions(js, solve, r, [np.flatnonzero(point_rows & (rp == i))
+                                                                               for i in pts]) if d is not None])
+        return lifted(post, shifts.T @ shifts)
+    if name != "fold-shift":
+        raise ValueError(f"unknown parameter covariance {name!r} (known: {', '.join(COVARIANCES)})")
+    excess, n = np.zeros((k, k)), 0
+    for fold in extreme_folds(prob.data.points.q[pts]):
+        rows = np.flatnonzero(point_rows & np.isin(rp, sorted(holdable(prob, pts[fold]))))
+        _, m, d = group_deletions(js, solve, r, [rows])[0] if len(rows) else (None, None, None)
+        if d is None:
+            continue
+        z = solve(js[rows].toarray().T).T[:, :k]
+        excess += np.outer(d[:k], d[:k]) - z.T @ m @ z
+        n += 1
+    return post + _positive_part(excess / max(n, 1))
+
+
+def joint_blocks(model, p, d) -> np.ndarray:
+    """(N, J, 3, 3) [m^2/rad^2]: for every point of the calibration data ``d`` and every joint j, ``J_j J_j^T``,
+    the ball's motion per radian of joint j (per metre of a prismatic one) times its transpose, at parameters ``p``."""
+    from arm_model.uncertainty import default_inputs, propagate
+    nj = model.desc.n_joints
+    out = []
+    for j in range(nj):
+        inputs = default_inputs(model.desc, has_force=False, probing=0.0, discrepancy=0.0, encoder=np.eye(nj)[j])
+        out.append(propagate(model, p, d.points.q, d.wrench, d.aux, inputs=inputs).cov)
+    return np.stack(out, axis=1)
+
+
+def fit_joint_play(dev, blocks, weight) -> tuple[np.ndarray, float, float]:
+    """``(sd_q (J,) [rad], sd_iso [m], lr)``: the maximum likelihood of deviations ``dev`` (N, 3) [m] of centres from
+    their seat's mean, each ``N(0, w_i (sum_j sd_q_j^2 B_ij + sd_iso^2 I))`` (``blocks`` B (N, J, 3, 3) from
+    :func:`joint_blocks`, ``weight`` w (N,) ``1 - 1/n`` of the seat's n points), and twice the log-likelihood it
+    gains over the isotropic scatter alone (``sd_q = 0``; about chi-square with J degrees of freedom). A joint that
+    moves the ball less than :data:`calibration.discrepancy.RESOLVED_TRAVEL` of the most moving joint's (RMS lever:
+    its axis passes near the ball) keeps ``sd_q = 0``: the deviations cannot see its play."""
+    from scipy.optimize import minimize
+
+    from calibration.discrepancy import RESOLVED_TRAVEL
+    nj = blocks.shape[1]
+    lever2 = np.einsum("njii->j", blocks) / len(dev)
+    seen = np.sqrt(lever2) >= RESOLVED_TRAVEL * math.sqrt(float(lever2.max()))
+    scale = np.full(nj + 1, float(np.mean(dev ** 2)))
+    scale[:nj] /= np.maximum(lever2, 1e-30)                     # unknowns of order 1
+
+    def nll(x):
+        var = np.exp(x) * scale * np.r_[seen, True]
+        c = (np.einsum("j,njab->nab", var[:nj], blocks) + var[nj] * np.eye(3)) * weight[:, None, None]
+        return 0.5 * float(np.sum(np.linalg.slogdet(c)[1] + np.einsum("na,nab,nb->n", dev, np.linalg.inv(c), dev)))
+    bounds = [(-30.0, 5.0)] * (nj + 1)
+    best = min((minimize(nll, np.full(nj + 1, x0), method="L-BFGS-B", bounds=bounds) for x0 in (-3.0, -1.0)),
+               key=lambda r: r.fun)
+    iso = minimize(lambda x: nll(np.r_[np.full(nj, -30.0), x]), np.zeros(1), method="L-BFGS-B", bounds=bounds[:1])
+    var = np.exp(best.x) * scale * np.r_[seen, True]
+    return np.sqrt(var[:nj]), float(math.sqrt(var[nj])), max(2 * (iso.fun - best.fun), 0.0)
+
+
+def _seat_deviations(centres, feature, holes) -> np.ndarray:
+    dev = np.zeros_like(centres)
+    for h in holes:
+        sel = feature == h
+        dev[sel] = centres[sel] - centres[sel].mean(axis=0)
+    return dev
+
+
 def _linear_nll(g) -> float:
     tot = g.v + g.sigma0 ** 2 + (g.growth * g.d) ** 2
     return 0.5 * float(np.sum(np.log(tot) + g.e ** 2 / tot))
@@ -138,9 +291,12 @@ def _load_r2(desc, q, feature, dev) -> float:
     return 1.0 - float(np.var(dev[:, ax] - a @ c) / np.var(dev[:, ax]))
 
 
-def study(root: Path, urdf: Path, tip: str, places, holes, say=print) -> list[dict]:
+def study(root: Path, urdf: Path, tip: str, places, holes, say=print, covariance: str = "posterior",
+          noise: str = "isotropic") -> list[dict]:
     """One row per training placement and held-out placement: per variant, the coverage [%] of tip's u and of the
-    deviation's u, the median u [m]; the discrepancy fitted (linear and saturating) and the load R^2."""
+    deviation's u, the median and mean u [m]; the discrepancy fitted (linear and saturating) and the load R^2.
+    ``covariance``: the parameter covariance propagated (:data:`COVARIANCES`, :func:`robust_covariance`); ``noise``:
+    the training scatter as the fit's probing scatter or as joint play (:data:`NOISES`, :func:`fit_joint_play`)."""
     from arm_model.discrepancy import GrowingDiscrepancy, TrainingPoses, travel_shares
     from arm_model.effects import JointCompliance
     from arm_model.io import read_artefacts, read_points
@@ -156,7 +312,13 @@ def study(root: Path, urdf: Path, tip: str, places, holes, say=print) -> list[di
     data = {p: make_data(read_points(root / p / "points.csv", desc.n_joints), art, model) for p in places}
     rows = []
     for tr in places:
-        res = calibrate(model, data[tr], FitOptions(weights_from_data=True))
+        with captured_linearisation() as lin:
+            res = calibrate(model, data[tr], FitOptions(weights_from_data=True))
+        cov_p = res.cov
+        if covariance != "posterior":      # in the fit's column-scaled unknowns, scaled back by the posterior's
+            post, robust = (robust_covariance(c, len(res.free), lin) for c in ("posterior", covariance))
+            scale = np.sqrt(np.diag(res.cov) / np.diag(post))
+            cov_p = robust * np.outer(scale, scale)
         g, joints = res.discrepancy.growth, res.discrepancy.joints
         check = fold_check(g.e, g.v, joints.c, g.fold)
         fitted = {k: variant_fit(k, g.e, g.v, joints.c, g.fold) for k in ("constant", "per-joint")}
@@ -168,12 +330,25 @@ def study(root: Path, urdf: Path, tip: str, places, holes, say=print) -> list[di
         fields = discrepancy_fields(res)
         written = GrowingDiscrepancy(fields["model_discrepancy"], fields["discrepancy_growth"] or 0.0, train)
         inputs = default_inputs(desc, has_force=False, probing=res.probing_scatter() or 0.0, discrepancy=0.0)
+        play = None
+        if noise == "joint-play":
+            d = data[tr]
+            centres = propagate(model, res.p, d.points.q, d.wrench, d.aux, inputs=inputs).centres
+            n_seat = np.array([np.sum(d.points.feature == f) for f in d.points.feature])
+            sel = np.isin(d.points.feature, holes)
+            play = fit_joint_play(_seat_deviations(centres, d.points.feature, holes)[sel],
+                                  joint_blocks(model, res.p, d)[sel], (1.0 - 1.0 / n_seat)[sel])
+            inputs = default_inputs(desc, has_force=False, probing=play[1], discrepancy=0.0,
+                                    encoder=np.hypot(inputs.encoder, play[0]))
+            say(f"{root.name}: {tr}: joint play [urad] {', '.join(f'{x * 1e6:.0f}' for x in play[0])}, isotropic "
+                f"{play[1] * 1e6:.0f} um (likelihood ratio over the isotropic alone {play[2]:.1f}); probing "
+                f"scatter {(res.probing_scatter() or 0.0) * 1e6:.0f} um")
         for te in places:
             if te == tr:
                 continue
             d = data[te]
             prop = propagate(model, res.p, d.points.q, d.wrench, d.aux, inputs=inputs, systematic=True,
-                             parameters=ParameterCovariance(tuple(res.free), res.cov))
+                             parameters=ParameterCovariance(tuple(res.free), cov_p))
             dist, shares = travel_shares(desc, d.points.q, train)
             extra = {"none": 0 * dist, "constant": fitted["constant"][0] + 0 * dist,
                      "linear": g.sigma0 ** 2 + (g.growth * dist) ** 2,
@@ -182,11 +357,11 @@ def study(root: Path, urdf: Path, tip: str, places, holes, say=print) -> list[di
                      "written": written.sd(desc, d.points.q) ** 2,
                      "saturating": a + s * -np.expm1(-b * dist ** 2 / s)}
             feat = d.points.feature
-            dev = np.zeros_like(prop.centres)
-            for h in holes:
-                sel = feat == h
-                dev[sel] = prop.centres[sel] - prop.centres[sel].mean(axis=0)
+            dev = _seat_deviations(prop.centres, feat, holes)
             row = {"train": tr, "test": te, "fold_check": check, "sigma0_um": g.sigma0 * 1e6,
+                   "covariance": covariance, "noise": noise,
+                   "joint_play": None if play is None else {"sd_urad": (play[0] * 1e6).tolist(),
+                                                            "isotropic_um": play[1] * 1e6, "lr": play[2]},
                    "growth_um_per_mm": g.growth * 1e3,
                    "u_growth_um_per_mm": g.u_growth * 1e3, "saturation_um": math.sqrt(s) * 1e6, "lr_saturating": lr,
                    "d_max_mm": g.d_max * 1e3, "d_test_median_mm": float(np.median(dist)) * 1e3,
@@ -200,7 +375,10 @@ def study(root: Path, urdf: Path, tip: str, places, holes, say=print) -> list[di
                 row[name] = {"inside": float(np.mean(np.abs(dev[sel]) <= 1.96 * u[sel])) * 100,
                              "inside_dev": float(np.mean(np.abs(dev[sel]) <= 1.96 * u_dev[sel])) * 100,
                              "z2_dev": float(np.mean((dev[sel] / u_dev[sel]) ** 2)),
-                             "median_u_um": float(np.median(u[sel])) * 1e6, "values": int(sel.sum()) * 3}
+                             "median_u_um": float(np.median(u[sel])) * 1e6, "values": int(sel.sum()) * 3,
+                             "mean_u_um": float(np.mean(u[sel])) * 1e6,
+                             "mean_u_dev_um": float(np.mean(u_dev[sel])) * 1e6,
+                             "inside_dev_axes": (np.mean(np.abs(dev[sel]) <= 1.96 * u_dev[sel], axis=0) * 100).tolist()}
             rows.append(row)
             say(f"{root.name}: {tr} -> {te}: g {row['growth_um_per_mm']:.2f} +- {row['u_growth_um_per_mm']:.2f} um/mm, "
                 f"S {row['saturation_um']:.0f} um (LR {lr:.2f}); load R2 {row['load_r2']:.2f}; "
@@ -237,6 +415,10 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--sim", default=None, help="comma-separated simulated robots of scripts/sim_seats_study.py "
                    "(default: the real Panda data)")
+    p.add_argument("--parameter-covariance", choices=COVARIANCES, default="posterior",
+                   help="the parameter covariance every variant propagates (default: the fit's posterior)")
+    p.add_argument("--noise", choices=NOISES, default="isotropic",
+                   help="the training scatter carried as the fit's probing scatter (default) or as joint play")
     p.add_argument("-o", "--output", type=Path, default=Path("out/seat-uncertainty"), help="output folder")
     args = p.parse_args(argv)
     import json
@@ -251,11 +433,12 @@ def main(argv=None) -> int:
                 p.error(f"unknown robot {name!r} (known: {', '.join(known)})")
             folder = args.output / name
             sim.simulate_robot(known[name], folder)
-            rows += study(folder, sim.URDF, sim.TIP, list(sim.PLACES), sim.HOLES, say)
+            rows += study(folder, sim.URDF, sim.TIP, list(sim.PLACES), sim.HOLES, say, args.parameter_covariance,
+                          args.noise)
     else:
         data = ROOT / "examples" / "data" / "real-panda-seats"
         rows = study(data, data / "panda-with-inertials.urdf", "ball_link", ["front", "right", "back-high"],
-                     ("hole-0", "hole-1"), say)
+                     ("hole-0", "hole-1"), say, args.parameter_covariance, args.noise)
     args.output.mkdir(parents=True, exist_ok=True)
     (args.output / "results.json").write_text(json.dumps(rows, indent=1) + "\n")
     print(pooled(rows))

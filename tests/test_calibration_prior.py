@@ -4,6 +4,8 @@ prior cost, the evidence's choice of each group's scale against campaigns whose 
 known scales, no bias on well-determined parameters, the parameter groups, and the command line."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -265,3 +267,90 @@ def test_joint_compliance_groups_are_physical_and_given_sizes_are_not():
     data = make_data(read_points(panda / "front" / "points.csv", 7), read_artefacts(panda / "artefacts.toml"), model)
     assert prior_spec(model, data).physical == frozenset({"effect joint_compliance"})
     assert prior_spec(model, data, {"panda_joint2.compliance": 1e-3}).physical == frozenset()
+
+
+def test_a_parameter_the_data_barely_see_has_no_say_in_its_groups_scale():
+    """MacKay's fixed point on a group of three: two parameters fully determined (rho = 0) at 0.1 prior sizes from
+    the centre, the third barely seen (rho = 0.97, the data's own uncertainty 5.7 prior sizes) and pulled 9 sizes
+    off (a systematic pull on a direction the data barely see: the bundled ring's probe z). The scale is the
+    determined ones' own, sqrt((0.01 + 0.01) / 2) = 0.1 (hand-derived); with the third counted, as before, it was
+    sqrt(81.02 / 2.03) = 6.3 and grew round after round. At rho = 0.6 (prior-dominated, but seen) it still counts:
+    sqrt(81.02 / 2.4) = 5.81."""
+    from calibration.prior import PriorSpec, update_scales
+    spec = PriorSpec(("tip offset",) * 3, np.full(3, 1e-3), np.full(3, -np.inf), ("a",) * 3)
+    new, gamma = update_scales({"tip offset": 1.0}, spec, [0, 1, 2], np.array([1e-4, -1e-4, -9e-3]),
+                               np.array([0.0, 0.0, 0.97]))
+    assert new["tip offset"] == pytest.approx(0.1, rel=1e-12)
+    assert gamma["tip offset"] == pytest.approx(2.03, rel=1e-12)
+    seen, _ = update_scales({"tip offset": 1.0}, spec, [0, 1, 2], np.array([1e-4, -1e-4, -9e-3]),
+                            np.array([0.0, 0.0, 0.6]))
+    assert seen["tip offset"] == pytest.approx(np.sqrt(81.02 / 2.4), rel=1e-12)
+
+
+def test_each_groups_scale_stops_at_the_ceiling_the_arms_dimensions_give(model):
+    """The shipped AACMM (DH rows, an 85 mm stylus): the ceilings are 5 % of the tip's distance from the last joint
+    (4.25 mm: scale 4.25), 0.5 % of the chain's length (the sum of its rows' hypot(d, a) and the stylus, summed by
+    hand from its description) and 50 mrad; determined parameters 300 sizes off stop there, not at the old cap of
+    100. A group whose sizes were given beyond the ceiling keeps at least scale 1."""
+    import math
+
+    from calibration.prior import PriorSpec, chain_length, limits, update_scales
+    desc = model.desc
+    by_hand = sum(math.hypot(j.d, j.a) for j in desc.joints) + 0.085
+    assert chain_length(desc) == pytest.approx(by_hand, rel=1e-12)
+    lim = limits(model)
+    spec = model.spec
+    assert lim[spec.index("probe.z")] == pytest.approx(0.05 * 0.085, rel=1e-12)
+    assert lim[spec.index("j2.a")] == pytest.approx(0.005 * by_hand, rel=1e-12)
+    assert lim[spec.index("j3.alpha")] == 0.05
+    assert math.isinf(lim[spec.index("probe.compliance_x")])
+    pspec = prior_spec(model, None)              # no effect: no data needed
+    for g, top in ((GROUP_TIP, 4.25), (GROUP_LENGTHS, 5.0 * by_hand), (GROUP_ANGLES, 50.0), (GROUP_OFFSETS, 50.0)):
+        kept = [i for i, n in enumerate(pspec.group) if n == g]
+        new, _ = update_scales({g: 1.0}, pspec, kept, 0.3 * np.ones(len(kept)), np.zeros(len(kept)))
+        assert new[g] == pytest.approx(top, rel=1e-9), g
+    wide = PriorSpec(("lengths",), np.array([0.05]), np.array([-np.inf]), ("given",), limit=np.array([5e-3]))
+    assert wide.ceiling("lengths") == 1.0
+
+
+def _ring(model, measurements: int, copies: int):
+    """The bundled ring campaign's first ``measurements`` measurements, every row given ``copies`` times."""
+    from arm_model.io import read_artefacts, read_points
+    from conftest import ROOT
+    ring = ROOT / "examples" / "data" / "paper-ring-xyz"
+    data = make_data(read_points(ring / "points.csv", 7), read_artefacts(ring / "artefacts.toml"), model)
+    rows = np.flatnonzero(np.isin(data.points.measurement, sorted(set(data.points.measurement))[:measurements]))
+    return data.select(np.tile(rows, copies))
+
+
+def test_the_tip_offset_a_ring_barely_sees_does_not_run_away_on_repeated_rows(model):
+    """The bundled ring (stylus parallel to the ring's axis: probe z seen only through the stylus' tilt), its first
+    four measurements given four times (1152 rows; about 2.5 s of CPU), the default fit: before, probe z's pull (the
+    scatter of the joint readings, which tilt the stylus) raised the tip offset's scale to its cap of 100 and probe
+    z ran from 85 mm to -89 mm (-173.6 mm off), behind the wrist. Now the scale is probe x and y's (0.01) and every
+    parameter is where the rows given once put it, within their uncertainty, probe z within a micrometre."""
+    opts = FitOptions(weights=Weights(probe=2.94e-6), gross_threshold=None, discrepancy=False)
+    once = calibrate(model, _ring(model, 4, 1), opts)
+    res = calibrate(model, _ring(model, 4, 4), opts)
+    assert res.evidence[-1]["settled"] and res.prior_scales[GROUP_TIP] <= 0.02
+    assert abs(res.value("probe.z")) < 1e-6
+    assert res.free == once.free
+    for k, n in enumerate(once.free):
+        assert abs(res.value(n) - once.value(n)) < 2 * once.u[k], n
+
+
+def test_the_nominal_baseline_fits_its_tip_offset_under_the_prior(model):
+    """The like-for-like nominal of the bundled ring's first three measurements: before, its tip offset was fitted by
+    least squares and probe z moved by -252 +- 30 mm (the ball 167 mm behind the wrist); under the calibration's prior
+    (the evidence's scale, probe z barely seen) it stays within a micrometre, probe x and y still fitted (the fit
+    without a prior, ``--prior-scale off``, is least squares as before)."""
+    from calibration.calibrate import nominal_baseline
+    data = _ring(model, 3, 1)
+    opts = FitOptions(weights=Weights(probe=2.94e-6))
+    base = nominal_baseline(model, data, opts)
+    assert base.free == ("probe.x", "probe.y", "probe.z") and base.prior_scales is not None
+    assert abs(base.value("probe.z")) < 1e-6
+    plain = nominal_baseline(model, data, replace(opts, prior_scale=None))
+    assert plain.prior_scales is None and plain.value("probe.z") < -0.1
+    for n in ("probe.x", "probe.y"):
+        assert abs(base.value(n) - plain.value(n)) < 2 * plain.uncertainty(n), n

@@ -77,3 +77,67 @@ def test_band_odds_is_the_binomial_tail():
     got = study.band_odds(n, p)
     assert abs(got[0] - below) < 1e-12 and abs(got[1] - above) < 1e-12
     assert 0.10 < got[1] < 0.12                                 # an exact u lands above 97 % one pair in nine
+
+
+def test_lifted_is_the_larger_covariance_in_every_direction():
+    rng = np.random.default_rng(5)
+    a, b = rng.normal(size=(4, 4)), rng.normal(size=(4, 4))
+    post, other = a @ a.T + 0.1 * np.eye(4), b @ b.T
+    got = study.lifted(post, other)
+    for m in (post, other):                                     # at least each of the two, as a covariance
+        assert np.linalg.eigvalsh(got - m).min() > -1e-9 * np.abs(got).max()
+    assert np.allclose(study.lifted(post, 0.5 * post), post)    # the posterior where the other is smaller
+    assert np.allclose(study.lifted(post, 3.0 * post), 3.0 * post)
+
+
+def _line_fit(x, y) -> dict:
+    """A straight line fitted by least squares to (x, y), as the linearisation a fit hands on
+    (:func:`study.captured_linearisation`): one row a point, its angle ``x``."""
+    from types import SimpleNamespace
+
+    import scipy.sparse as sp
+    a = np.column_stack([np.ones_like(x), x])
+    a_inv = np.linalg.inv(a.T @ a)
+    r = y - a @ (a_inv @ a.T @ y)
+    prob = SimpleNamespace(row_point=np.arange(len(x)), row_distance=np.full(len(x), -1.0), instances=[],
+                           data=SimpleNamespace(points=SimpleNamespace(q=x[:, None])))
+    return {"prob": prob, "r": r, "js": sp.csc_matrix(a), "solve": lambda b: a_inv @ b,
+            "var": float(r @ r / (len(x) - 2))}
+
+
+def test_fold_shift_widens_the_slope_where_the_line_misses_a_curvature():
+    """A line fitted to a parabola: leaving out either end of the range moves the slope far beyond what the noise
+    gives, so the fold-shift covariance of the slope is several times the posterior; fitted to a line it stays near
+    it (its positive part keeps some of the noise)."""
+    ratios = {}
+    for curvature in (0.0, 3.0):
+        got = []
+        for seed in range(20):
+            rng = np.random.default_rng(seed)
+            x = rng.uniform(-1.0, 1.0, 60)
+            lin = _line_fit(x, 1.0 + 2.0 * x + curvature * x ** 2 + rng.normal(0.0, 1.0, 60))
+            post, jack, shift = (study.robust_covariance(c, 2, lin) for c in study.COVARIANCES)
+            assert np.linalg.eigvalsh(shift - post).min() > -1e-12 and np.linalg.eigvalsh(jack - post).min() > -1e-12
+            got.append(shift[1, 1] / post[1, 1])
+        ratios[curvature] = float(np.mean(got))
+    assert ratios[0.0] < 1.5                                    # measured 1.27
+    assert ratios[3.0] > 5.0                                    # measured 9.5
+
+
+def test_joint_play_is_recovered_from_deviations_and_not_found_in_an_isotropic_scatter():
+    """Deviations drawn from known play of three joints (random levers up to 0.8 m, the third's axis through the
+    ball) plus an isotropic scatter: the play of the two seen joints and the scatter come back within 10 %, the
+    hidden joint's at 0; an isotropic scatter alone gives a likelihood ratio of chi-square size, no play."""
+    rng = np.random.default_rng(11)
+    n = 800
+    levers = rng.uniform(-0.8, 0.8, (n, 3, 3))                 # [m/rad] the ball's motion per radian, per joint
+    levers[:, 2] *= 1e-6                                        # joint 3: its axis passes through the ball
+    blocks = np.einsum("nja,njb->njab", levers, levers)
+    weight = np.full(n, 1.0)
+    play = np.array([300e-6, 150e-6, 0.0])                      # [rad]
+    dev = np.einsum("nja,nj->na", levers, rng.normal(size=(n, 3)) * play) + rng.normal(0.0, 80e-6, (n, 3))
+    sd_q, iso, lr = study.fit_joint_play(dev, blocks, weight)
+    assert np.allclose(sd_q[:2], play[:2], rtol=0.1) and sd_q[2] == 0.0
+    assert iso == np.clip(iso, 72e-6, 88e-6) and lr > 100
+    sd_q, iso, lr = study.fit_joint_play(rng.normal(0.0, 80e-6, (n, 3)), blocks, weight)
+    assert lr < 12 and np.all(sd_q * 0.8 < 40e-6)              # no play worth half the scatter at 0.8 m
