@@ -1,10 +1,17 @@
 """Reliability, round 12: the leftovers of round 11 (a TCP reset read as the stream's end, a repeatable option given
 the same value twice, an output whose suffix contradicts its option, live's reproduce line run where it says) and
-what a hostile-input audit of the readers and options the earlier rounds touched least found: the model file's
-effect sections and its covariance block, URDFs that are odd but valid XML (entities, comments, namespaces, mimic
-joints, continuous joints with limits), points files with a byte-order mark, mixed line ends and thousands of
-columns, options at the ends of their ranges, and `-o` at a symbolic link, a folder, inside an input, or shared by
-two commands at once. Each test is named after its finding; all are fast (no fit, a few points)."""
+what a hostile-input audit of the readers and options the earlier rounds touched least found. The audit's driver
+(about 880 command runs in process, and 1 450 calls of the readers themselves) fed: 88 URDFs odd but valid or hostile
+(XML declarations in other encodings, UTF-16, BOM, CR/CRLF, comments, CDATA, processing instructions, DOCTYPEs with
+internal and external entities, a billion laughs, character references in numbers, default and prefixed namespaces,
+continuous joints with limits, mimic chains, 20 000 extra links, a 10^7-character name), each to `tip` and to `urdf`;
+163 targeted and 260 random edits of a calibrated model file's [[effect]] tables, [calibration] table and covariance
+file; 52 points files (BOM, mixed line ends, 20 000 columns, 10^5 cells, 10 MB cells, other encodings); every
+numeric option at its range ends (parser-level: 22 values each), and `live` (55 runs: thresholds, rates, speeds,
+streams with BOM, wide headers, clocks at 1e15 s); 47 `-o` targets (links to files, inputs, folders, pipes, loops,
+dangling; hard links; `..`; FIFOs; 300-byte names) and concurrent writers; 66 tip/base frame pairs; `view`'s
+options; the readers of points, artefacts, plans, descriptions, model files, residuals, Table 2, force signals and
+masses files under random edits. Each test is named after its finding; all are fast (no fit, a few points)."""
 from __future__ import annotations
 
 import json
