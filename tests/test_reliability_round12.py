@@ -320,3 +320,19 @@ def test_a_feature_option_s_diameter_is_a_number_by_the_one_rule(diameter):
     with pytest.raises(InputError, match="--feature: the diameter must be a number in mm"):
         single_feature_plan(f"sphere:a:{diameter}")
     assert single_feature_plan("sphere:a: 25").entries[0].feature.diameter == pytest.approx(0.025)
+
+
+def test_a_free_pattern_whose_parameters_are_all_held_is_refused():
+    """`calibrate --free j1.a --free j2.a --hold j1.a` fitted j2.a alone and said nothing of `--free j1.a`: the hold
+    undid it (the two options contradict each other on j1.a). A --free pattern every parameter of which --hold holds
+    is now an error naming both, before the fit (calibrate and close-loop choose their free set there); a glob that
+    --hold narrows (`--free 'j*.a' --hold j1.a`) stays."""
+    from types import SimpleNamespace
+
+    from arm_model import InputError
+    from arm_model.model_file import load_model
+    from calibration.cli import free_names
+    model = load_model("aacmm7").model
+    with pytest.raises(InputError, match=r"--free j1.a: every parameter it names is held by --hold j1.a"):
+        free_names(model, SimpleNamespace(free=["j1.a", "j2.a"], hold=["j1.a"]))
+    assert free_names(model, SimpleNamespace(free=["j*.a"], hold=["j1.a"])) == [f"j{k}.a" for k in range(2, 8)]
