@@ -496,6 +496,8 @@ def _beside(model_path: str, name: str | None, r: TomlReader, key: str) -> Path 
     file's folder; the model file itself is an InputError at ``key``."""
     if name is None:
         return None
+    if "\0" in name:               # no system takes it in a file name (os.stat raised ValueError: exit 3)
+        raise r.error(f"'{key}' holds a NUL character: not a file name", "calibration", key)
     out = (Path(model_path).parent / name) if model_path != "<string>" else Path(name)
     if model_path != "<string>" and _same_file(out, Path(model_path)):
         raise r.error(f"'{key}' names the model file itself: it names the {key.replace('_', ' ')} file written "

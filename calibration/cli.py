@@ -45,9 +45,6 @@ def _effects(keys):
     if "none" in (keys or ()) and len(set(keys)) > 1:
         raise InputError(f"--effect none is the geometry alone: it takes no other --effect (got "
                          f"{', '.join(k for k in keys if k != 'none')})")
-    twice = sorted({k for k in keys or () if list(keys).count(k) > 1})
-    if twice:
-        raise InputError(f"--effect {', '.join(twice)} given more than once: give each effect once")
     for k in keys or ():
         if k == "none":
             continue
@@ -377,6 +374,10 @@ def free_names(model, args, data=None):
                              f"{chosen} ({len(free)}); a calibration with no free parameter would write the model "
                              "it started from as if calibrated. Hold fewer parameters (the nominal model as it is: "
                              "aacmm tip)")
+        undone = next((p for p in args.free or () if set(resolve_parameters(model.spec, [p])) <= held), None)
+        if undone is not None:      # `--free j1.a --hold j1.a`: one of the two does nothing
+            raise InputError(f"--free {undone}: every parameter it names is held by --hold {' '.join(args.hold)}; "
+                             "give a parameter to one of the two")
         free = [i for i in free if i not in held]
     return [model.spec.names[i] for i in free]
 

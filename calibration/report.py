@@ -16,7 +16,7 @@ from arm_model.log import counted
 from arm_model.shipped import provenance
 
 from .calibrate import CalibrationResult, display_unit
-from .model_output import model_check, model_paths, write_model
+from .model_output import calibrated_name, model_check, model_paths, write_model
 from .validation import with_u
 
 __all__ = ["write_outputs", "plot_residuals", "plot_parameters", "plot_correlation", "plot_conformance",
@@ -433,7 +433,7 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError("the output must be a directory", out)
-    name = f"{result.model.desc.name}-calibrated"
+    name = calibrated_name(result.model.desc.name)
     model_files = model_paths(out, name)
     files = {"description": model_files["model"], "covariance": model_files["covariance"],
              "urdf": model_files["urdf"], "summary": out / "summary.json",
