@@ -190,6 +190,9 @@ def robots() -> Path:
 #  loop_effects other seeds (10)      -> test_loop_effects names_recovers_and_halves (seed 3; seeds 4, 5: slow only)
 #  loop_effects eccentricity, probe compliance (seed 3) -> test_loop_cross_harmonics, test_loop_synthesis [lobing];
 #                                       test_loop_effects [force_sensor] and its indistinguishable compliance
+#  loop_effects joint compliance (seed 3) -> test_model_file tip_with_the_loops_model (j2's, found on this arm beside
+#                                       an eccentricity); test_loop_sim_seats hidden compliance, test_loop_real_physics
+#                                       compliance injected (robots: found, within 3 sigma, the held-out spread cut)
 #  loop_real_physics gain injected    -> test_loop_real_physics compliance injected (the same injection and checks)
 #  loop_heldout_verdict UR5 gain      -> test_loop_heldout_verdict three_times_..._u, opt_in_families_offered
 #  loop_hidden_effects coupling, 4th harmonic -> test_loop_hidden_effects linear_coupling, structure_tests_see_a_fourth
