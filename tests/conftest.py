@@ -188,6 +188,8 @@ def robots() -> Path:
 #  loop_cli residual and --library-only -> test_loop_cross_harmonics ..._built_added_and_recovered,
 #                                       test_loop_honesty ..._library_alone
 #  loop_cross_harmonics library alone -> test_loop_cross_harmonics ..._built_added_and_recovered; test_loop_honesty
+#  loop_cross_harmonics test-set instance gross -> test_loop_cross_harmonics ..._too_small_flag_it_whole (the
+#                                       test set's point test, same data), ..._built_added_and_recovered
 #  loop_effects other seeds (10)      -> test_loop_effects names_recovers_and_halves (seed 3; seeds 4, 5: slow only)
 #  loop_effects eccentricity, probe compliance (seed 3) -> test_loop_cross_harmonics, test_loop_synthesis [lobing];
 #                                       test_loop_effects [force_sensor] and its indistinguishable compliance
