@@ -135,14 +135,16 @@ def _sphere_goes_out_whole(flagged: list, pts, inst) -> None:
 
 def test_test_set_outliers_that_leave_an_instance_too_small_flag_it_whole():
     """make test's share of the loop test below (slow): the test set's point test itself
-    (:func:`calibration.loop.flag_test_outliers`, the loop's threshold), on the same test set under the true model
-    and parameters: the sphere's gross points flagged as outliers, then its other points, too few left for its fit."""
+    (:func:`calibration.loop.flag_test_outliers`, calibrate's gross-error rule), on the same test set under the true
+    model and parameters: the sphere's gross points flagged as outliers, then its other points, too few left for its
+    fit."""
     from calibration.data import make_data
     from calibration.loop import flag_test_outliers
-    from calibration.loop.settings import LoopSettings
+    from calibration.loop.outliers import outlier_budget
     truth, p, camp, pts, inst = _gross_sphere_campaign()
     test = make_data(pts.select(np.isin(pts.measurement, GROSS_TEST)), camp.artefacts, truth)
-    mask, flagged = flag_test_outliers(truth, p, test, Weights(probe=NOISE), "fit", LoopSettings().outlier_threshold)
+    # the loop's budget: calibrate's 5 % of the whole campaign (nothing dropped from the design here)
+    mask, flagged = flag_test_outliers(truth, p, test, Weights(probe=NOISE), "fit", limit=outlier_budget(len(pts)))
     _sphere_goes_out_whole(flagged, pts, inst)
     assert mask.sum() == len(flagged) == len(inst), flagged       # nothing else flagged
 
