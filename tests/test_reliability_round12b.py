@@ -1,0 +1,35 @@
+"""Reliability, round 12 (b): the leftovers of the round 12 hostile-input audit. A session that took no point wrote a
+header-only points.csv (no points file: `tip` refused it, so session.json's `reproduce` failed); a model file reached
+through a symbolic link looked for the files it names beside the link; `view --residual-scale` without anything it
+draws was accepted and did nothing. Each test is named after its finding and is quick (no fit, a few points)."""
+from __future__ import annotations
+
+import json
+
+from conftest import ROOT, exit_status
+
+RING = ROOT / "examples" / "data" / "paper-ring-xyz"
+SAMPLES = ROOT / "examples" / "live" / "samples.csv"
+
+
+def _run(argv, capsys):
+    rc = exit_status([str(a) for a in argv])
+    return rc, capsys.readouterr().err
+
+
+def test_a_session_without_a_point_writes_no_points_file_and_no_reproduce_line(tmp_path, capsys):
+    """99 samples, no contact: points.csv and tips.csv were a header alone, which `tip` refuses ("no points after the
+    header line"), so the `reproduce` command of session.json failed, and the folder held a file its reader refuses.
+    Now both files come with the first point, `reproduce` is null until then, and the command says why."""
+    stream = tmp_path / "stream.csv"
+    stream.write_text("".join(SAMPLES.read_text().splitlines(keepends=True)[:100]))
+    sess = tmp_path / "s"
+    rc = exit_status(["live", str(stream), "--arm", "aacmm7", "--speed", "0", "-o", str(sess)])
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    assert "no point was taken: the folder has no points.csv and no tips.csv" in out.out + out.err
+    assert sorted(p.name for p in sess.iterdir() if not p.name.startswith(".")) == \
+        ["contacts.csv", "events.csv", "features.csv", "samples.csv", "session.json"]
+    status = json.loads((sess / "session.json").read_text())
+    assert status["counts"]["points"] == 0 and status["reproduce"] is None
+
