@@ -33,3 +33,21 @@ def test_a_session_without_a_point_writes_no_points_file_and_no_reproduce_line(t
     status = json.loads((sess / "session.json").read_text())
     assert status["counts"]["points"] == 0 and status["reproduce"] is None
 
+
+def test_a_model_file_through_a_link_names_the_files_beside_itself(tmp_path):
+    """A model file reached through a symbolic link (`ln -s ../cal/m.toml current.toml`) looked for its covariance
+    file and training poses beside the link, where there are none (or another fit's: read as this one's). The
+    files a model file names were written beside it; a link is not a copy of its folder. Now both are looked for
+    beside the file the link points to (docs/formats.md), as the model file named directly."""
+    from arm_model.model_file import parse_model
+    real, other = tmp_path / "cal", tmp_path / "elsewhere"
+    real.mkdir()
+    other.mkdir()
+    text = (ROOT / "urdf" / "aacmm7.dh.toml").read_text() + \
+        '\n[calibration]\ncovariance = "m-covariance.csv"\ntraining_poses = "m-training.csv"\n'
+    (real / "m.toml").write_text(text)
+    (other / "current.toml").symlink_to(real / "m.toml")
+    (tmp_path / "up.toml").symlink_to(other / "current.toml")         # a link to a link: followed to its end
+    for name in (tmp_path / "up.toml", real / "m.toml"):               # through the links, and named directly
+        arm = parse_model(text, str(name))
+        assert (arm.covariance, arm.training_poses) == (real / "m-covariance.csv", real / "m-training.csv")
