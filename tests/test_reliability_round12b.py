@@ -34,6 +34,18 @@ def test_a_session_without_a_point_writes_no_points_file_and_no_reproduce_line(t
     assert status["counts"]["points"] == 0 and status["reproduce"] is None
 
 
+def test_a_residual_scale_without_anything_it_draws_is_refused(tmp_path, capsys):
+    """`view --residual-scale 100` without --residuals, and with no tracker's markers seen in the points, drew nothing
+    with it and said nothing (the other options that did nothing were refused in round 12). Now exit 2 naming it and
+    what it belongs to, nothing written; with --residuals it draws (tests/test_viz_cli.py)."""
+    out = tmp_path / "v.html"
+    rc, err = _run(["view", RING / "points.csv", "--arm", "aacmm7", "--residual-scale", "100", "--html", out], capsys)
+    assert rc == 2 and "--residual-scale: option(s) of the drawing of residuals, which is not asked for (add " \
+        "--residuals FILE; or, for a tracker's markers, a model file with [[reference_frame]] and points with its " \
+        "reference columns)" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_model_file_through_a_link_names_the_files_beside_itself(tmp_path):
     """A model file reached through a symbolic link (`ln -s ../cal/m.toml current.toml`) looked for its covariance
     file and training poses beside the link, where there are none (or another fit's: read as this one's). The
