@@ -6,15 +6,9 @@ from __future__ import annotations
 
 import json
 
+from test_reliability_round12 import RING, SAMPLES, _run
+
 from conftest import ROOT, exit_status
-
-RING = ROOT / "examples" / "data" / "paper-ring-xyz"
-SAMPLES = ROOT / "examples" / "live" / "samples.csv"
-
-
-def _run(argv, capsys):
-    rc = exit_status([str(a) for a in argv])
-    return rc, capsys.readouterr().err
 
 
 def test_a_session_without_a_point_writes_no_points_file_and_no_reproduce_line(tmp_path, capsys):
