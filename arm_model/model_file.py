@@ -492,13 +492,15 @@ def _growth_of(value, desc: ArmDescription, r: TomlReader) -> float | tuple[floa
 
 
 def _beside(model_path: str, name: str | None, r: TomlReader, key: str) -> Path | None:
-    """A file a model file names (``covariance``, ``training_poses``; None: not named): relative to the model
-    file's folder; the model file itself is an InputError at ``key``."""
+    """A file a model file names (``covariance``, ``training_poses``; None: not named): relative to the folder of
+    the model file itself, its symbolic links followed (a link to a model file is not a copy of its folder: the
+    files written with it are beside the file, not beside the link); the model file itself is an InputError at
+    ``key``."""
     if name is None:
         return None
     if "\0" in name:               # no system takes it in a file name (os.stat raised ValueError: exit 3)
         raise r.error(f"'{key}' holds a NUL character: not a file name", "calibration", key)
-    out = (Path(model_path).parent / name) if model_path != "<string>" else Path(name)
+    out = (resolved(model_path).parent / name) if model_path != "<string>" else Path(name)
     if model_path != "<string>" and _same_file(out, Path(model_path)):
         raise r.error(f"'{key}' names the model file itself: it names the {key.replace('_', ' ')} file written "
                       "beside it", "calibration", key)

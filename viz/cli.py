@@ -179,6 +179,14 @@ def _run(args, inputs, outputs, tmp) -> int:
     d_um = np.linalg.norm(centres - rigid, axis=1) * 1e6
     if args.scale is None:
         args.scale = arrow_scale(d_um if args.animate else d_um[args.point - 1:args.point])
+    # a tracker's markers, unless they are the ball centres (no offsets) of points the instrument did not see
+    tip_only = arm.tracker is not None and arm.tracker.offsets is None and sel.ref is None
+    marker_notes: list[str] = []
+    markers = None if arm.tracker is None or tip_only else _markers(arm, sel, marker_notes)
+    drawn = residuals is not None or (markers is not None and markers[1] is not None)
+    refuse_unused(args, drawn, "the drawing of residuals", "add --residuals FILE; or, for a tracker's markers, a "
+                  "model file with [[reference_frame]] and points with its reference columns",
+                  (("--residual-scale", "residual_scale"),))
     serve = args.serve or args.open_seconds is not None or (args.html is None and args.screenshot is None)
 
     from .view import View  # heavy backends from here on
@@ -199,9 +207,7 @@ def _run(args, inputs, outputs, tmp) -> int:
             view.show_artefacts(placements, artefacts.distances)
         if args.ellipsoids:
             _ellipsoids(arm, sel, args, view)
-        # a tracker's markers, unless they are the ball centres (no offsets) of points the instrument did not see
-        tip_only = arm.tracker is not None and arm.tracker.offsets is None and sel.ref is None
-        markers = None if arm.tracker is None or tip_only else _markers(arm, sel, notes)
+        notes += marker_notes
         if residuals is not None:
             if args.measurement is not None:   # the selected measurement's (and those of no measurement)
                 residuals = residuals.select(np.isin(residuals.measurement, ["", args.measurement]))

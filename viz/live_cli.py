@@ -378,6 +378,9 @@ def _summary(session: Session, said: dict, skipped: int, status: str, message: s
              f"shorter than {session.contact_options.dwell:g} s, dropped {c['dropped']}, late {c['late']}, bad lines "
              f"{c['bad_lines']}" + _jumps(c) + (f", {skipped} datagram line(s) before the header" if skipped else "")
              + f" -> {folder}")
+    if not c["points"]:
+        log.info("no point was taken: the folder has no points.csv and no tips.csv, and session.json no reproduce "
+                 "command (null)")
     noise = session.noise()
     if noise is not None:
         d = session.thresholds()

@@ -130,7 +130,8 @@ class Session:
         rate: the nominal sample rate [Hz] (None: estimated from the first intervals), in :data:`RATE_HZ_RANGE`.
         layout: the stream's :class:`~arm_model.live.samples.SampleLayout` (its header is recorded and
             raw lines are recorded as received); None: samples pushed from Python, recorded in SI.
-        inputs_files: files the session reads (never written over); status: more ``session.json`` keys.
+        inputs_files: files the session reads (never written over); status: more ``session.json`` keys (a
+            ``reproduce`` command, on points.csv, is null there until the first point writes points.csv).
     """
 
     def __init__(self, arm: Any, folder: str | Path | None = None, *, plan: SessionPlan | None = None,
@@ -192,6 +193,13 @@ class Session:
         self.points: list[LivePoint] = []
         self.events: list[Event] = []
         self.layout = layout
+        # points.csv and tips.csv come with the first point (a header alone is no points file: `tip` refuses it), and
+        # with them status's ``reproduce`` (a command on points.csv): null in session.json until then
+        status = dict(status or {})
+        self._reproduce = status.pop("reproduce", None)
+        if self._reproduce is not None:
+            status["reproduce"] = None
+        self._point_files: dict[str, str] = {}
         self.record = None if folder is None else SessionRecord(folder, inputs_files, self._status(status))
         if self.record is not None and self.plan.entries:
             self.record.write_file("artefacts", self.plan.artefacts_text())
@@ -555,6 +563,11 @@ class Session:
         rec = self.record
         if rec is None:
             return
+        if self.counts["points"] == 1:      # the first point: its files, and the command that reproduces them
+            for role, header in self._point_files.items():
+                rec.open(role, header)
+            if self._reproduce is not None:
+                rec.status["reproduce"] = self._reproduce
         rec.append("points", format_row({k: v[0] for k, v in _points_values(ps).items()}, "%.17g"))
         rec.append("tips", format_row({k: v[0] for k, v in point.row.items()}, "%.6f"))
         c = point.contact
@@ -593,15 +606,16 @@ class Session:
                 "max_force_N": self.max_force, "files": dict(FILES), **(extra or {})}
 
     def _open_record(self, layout: SampleLayout) -> None:
-        """Create the record's files once the stream's columns are known, each with its header."""
+        """Create the record's files once the stream's columns are known, each with its header (points.csv and
+        tips.csv with the first point: a file of a header alone is not a points file)."""
         rec = self.record
         if rec is None:
             return
         rec.open("samples", ",".join(layout.header))
         self._samples_buf = rec.queue("samples")
         rec.open("events", ",".join(EVENT_COLUMNS))
-        rec.open("points", ",".join(points_columns(self.desc.n_joints, layout, self._moves is not None)))
-        rec.open("tips", ",".join(TIP_COLUMNS))
+        self._point_files = {"points": ",".join(points_columns(self.desc.n_joints, layout, self._moves is not None)),
+                             "tips": ",".join(TIP_COLUMNS)}
         rec.open("contacts", ",".join(CONTACT_COLUMNS))
         rec.open("features", ",".join(FEATURE_COLUMNS))
         rec.flush()
