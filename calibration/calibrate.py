@@ -53,7 +53,7 @@ from .identifiability import (
     weakly_determined,
 )
 from .options import FitOptions
-from .prior import PRIOR_DOMINATED, PriorSpec, prior_spec, update_scales, variance_ratio
+from .prior import PRIOR_DOMINATED, PriorSpec, prior_spec, secant_gains, update_scales, variance_ratio
 from .problem import Problem
 from .solver import NormalFactor, Prior, blas_threads, levenberg_marquardt, normal_factor
 
@@ -1419,12 +1419,15 @@ def _evidence(model: ArmModel, data: CalibrationData, options: FitOptions) -> Ca
 
 
 def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
-    """From the fit ``sol`` of the base set ``kept``: each round updates every group's scale by MacKay's fixed
-    point (:func:`calibration.prior.update_scales`) and, with ``weights_from_data``, every row group's noise
-    by its variance component (:func:`variance_components`, the leverages including the prior), and refits
-    from the previous solution, until all change by less than :data:`EVIDENCE_TOL` (damped from the tenth
-    round). Returns (setup, solution, kept, fixed, rounds)."""
+    """From the fit ``sol`` of the base set ``kept``: each round takes every group's scale toward MacKay's fixed
+    point (:func:`calibration.prior.update_scales`) and, with ``weights_from_data``, every row group's noise toward
+    its variance component (:func:`variance_components`, the leverages including the prior), each log step
+    lengthened or shortened by its secant over the rounds (:func:`calibration.prior.secant_gains`: a scale the
+    data shrink toward the floor gets there in a few rounds rather than by ever equal steps), and refits from the
+    previous solution, until the fixed point's steps are all below :data:`EVIDENCE_TOL` (relative): the fixed
+    point's own solution. Returns (setup, solution, kept, fixed, rounds)."""
     history = []
+    last: dict = {}
     for k in range(EVIDENCE_ROUNDS):
         prob = s.problem.with_free(kept)
         ev = sol.evaluation
@@ -1435,20 +1438,23 @@ def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
         post = np.diag(_covariance(s, ev, kept, var))
         kept_arr = np.asarray(kept, dtype=int)
         rho = variance_ratio(post, s.prior.size[kept_arr])
-        damping = 1.0 if k < 10 else 0.5
-        scales, gamma = update_scales(s.scales, s.spec, kept_arr, sol.p[kept_arr] - s.prior.centre[kept_arr], rho,
-                                      damping)
-        factors = {}
+        targets, gamma = update_scales(s.scales, s.spec, kept_arr, sol.p[kept_arr] - s.prior.centre[kept_arr], rho)
+        steps = {("scale", g): math.log(targets[g] / s.scales[g]) for g in targets}
         if options.weights_from_data:
-            factors = {v["group"]: v["factor"] ** damping for v in variance_components(prob, ev.r, nrm.h, prob.weights)
-                       if v["estimated"]}
-        change = max([abs(math.log(scales[g] / s.scales[g])) for g in scales] +
-                     [abs(math.log(f)) for f in factors.values()] + [0.0])
+            steps.update({("noise", v["group"]): math.log(v["factor"])
+                          for v in variance_components(prob, ev.r, nrm.h, prob.weights) if v["estimated"]})
         history.append({"round": k + 1, "scales": dict(s.scales), "effective_parameters": gamma,
                         "noise_factors": dict(prob.weights.factors), "s0": math.sqrt(2 * sol.cost / red)})
-        if change <= EVIDENCE_TOL:
+        if max([abs(r) for r in steps.values()] + [0.0]) <= EVIDENCE_TOL:
             history[-1]["settled"] = True
             return s, sol, kept, fixed, history
+        gains = secant_gains(steps, last)
+        scales = {g: s.spec.bounded(g, tau * math.exp(gains["scale", g] * steps["scale", g]))
+                  for g, tau in s.scales.items()}
+        moves = {key: gains[key] * r for key, r in steps.items()}
+        moves.update({("scale", g): math.log(scales[g] / s.scales[g]) for g in scales})
+        last = {key: (r, moves[key]) for key, r in steps.items()}
+        factors = {g: math.exp(m) for (kind, g), m in moves.items() if kind == "noise"}
         s = replace(s, scales=scales, prior=Prior(s.prior.centre, s.spec.sizes(scales)),
                     problem=_reweighted_problem(s.problem, prob.weights.scaled(factors)))
         p = sol.p.copy()
