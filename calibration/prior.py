@@ -339,18 +339,20 @@ def update_scales(scales: dict, spec: PriorSpec, kept, delta: np.ndarray, rho: n
 MAX_GAIN = 10.0
 
 
-def secant_gains(steps: dict, last: dict) -> dict:
-    """How far (a factor of the step) to move each log quantity of a fixed-point iteration ``x <- x + r(x)``, from
-    its steps ``r`` this round and last round's ``(step r, move made)`` (``last``; a key without, or whose move was
-    0: 1, the plain fixed point). The secant of ``r`` over the last move, ``slope = (r - r_last) / move``, is -1 for
-    a fixed point reached in one step; the gain is Newton's on ``r = 0``, ``-1 / slope``, at most :data:`MAX_GAIN`
-    (also where ``r`` does not shrink: a scale running to its bound, where the plain iteration creeps with ever
-    equal steps). An iteration that overshoots (slope below -1) is damped by the same rule (a 2-cycle is cut at
-    its middle). The point where ``r = 0`` is the fixed point's own: only the number of rounds changes."""
+def secant_gains(steps: dict, last: dict, tol: float) -> dict:
+    """How far (a factor of the step) to move each log scale of the fixed-point iteration ``x <- x + r(x)``
+    (:func:`update_scales`), from its steps ``r`` this round and last round's ``(step r, move made)`` (``last``).
+    The secant of ``r`` over the last move, ``slope = (r - r_last) / move``, is -1 for a fixed point reached in one
+    step; the gain is Newton's on ``r = 0``, ``-1 / slope``, at most :data:`MAX_GAIN` (also where ``r`` does not
+    shrink: a scale running to its bound, where the plain iteration creeps with ever equal steps); an iteration that
+    overshoots (slope below -1) is damped by the same rule (a 2-cycle is cut at its middle). The gain is 1 (the
+    plain fixed point) for a key without history, or whose step or last move is within ``tol`` (the iteration's own
+    tolerance: a secant over so short a move, or a gain on so short a step, would amplify the refit's noise). The
+    point where ``r = 0`` is the fixed point's own: only the number of rounds changes."""
     out = {}
     for key, r in steps.items():
         r_last, move = last.get(key, (0.0, 0.0))
-        if move == 0.0 or r == 0.0:
+        if abs(move) <= tol or abs(r) <= tol:
             out[key] = 1.0
             continue
         slope = (r - r_last) / move
