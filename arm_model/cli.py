@@ -145,15 +145,28 @@ class _StoreOnce(argparse.Action):
         setattr(namespace, self.dest, values)
 
 
+class _AppendOnce(argparse._AppendAction):
+    """argparse's ``append`` (a repeatable option), refusing a value given twice: ``--hold j1.d --hold j1.d``,
+    ``--effect thermal --effect thermal`` or ``--hold-joint j7 --hold-joint j7=5`` (a value that is a (name, value)
+    pair is the same when its name is) were taken as if once, or the last one silently won."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        key = values[0] if isinstance(values, tuple) else values
+        if any((v[0] if isinstance(v, tuple) else v) == key for v in getattr(namespace, self.dest, None) or ()):
+            parser.error(f"argument {'/'.join(self.option_strings)}: {key} given more than once: give each once")
+        super().__call__(parser, namespace, values, option_string)
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse's parser whose error message (it may quote an argument: a file name with a newline) is one
-    line, control characters escaped, and whose options taking one value refuse to be given twice
-    (subcommands' parsers are of the same class)."""
+    line, control characters escaped, whose options taking one value refuse to be given twice and whose repeatable
+    options refuse a value given twice (subcommands' parsers are of the same class)."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self.register("action", None, _StoreOnce)
         self.register("action", "store", _StoreOnce)
+        self.register("action", "append", _AppendOnce)
 
     def error(self, message: str):
         super().error(escaped(message))

@@ -163,10 +163,7 @@ def _hold_joint(text: str) -> tuple[str, float]:
 def model_from_args(args: argparse.Namespace) -> Arm:
     """The arm named by :func:`add_arm_options`: description, effects and their parameter values
     (:class:`arm_model.model_file.Arm`), read by the one loader every subcommand uses."""
-    hold = tuple(getattr(args, "hold_joint", None) or ())
-    twice = sorted({n for n, _ in hold if [m for m, _ in hold].count(n) > 1})
-    if twice:
-        raise InputError(f"joint '{twice[0]}' is given twice to --hold-joint", None, None, "key '--hold-joint'")
+    hold = tuple(getattr(args, "hold_joint", None) or ())      # a joint given twice: refused by the parser
     key = (args.arm, args.tip_frame, getattr(args, "masses", None), getattr(args, "base_frame", None), hold)
     cached = getattr(args, "_arm_loaded", None)
     if cached is None or cached[0] != key:        # read once per command line (arm_inputs reads it first)
@@ -180,8 +177,11 @@ def model_from_args(args: argparse.Namespace) -> Arm:
 
 def arm_inputs(args: argparse.Namespace) -> list:
     """Every file the ``--arm`` options read: the arm, the ``--masses`` file and the covariance and training poses
-    files a model file names. Outputs are never written over any of them (:func:`arm_model.output.guard_output`)."""
-    files = [args.arm, getattr(args, "masses", None)]
+    files a model file names. Outputs are never written over any of them (:func:`arm_model.output.guard_output`).
+    A shipped arm given by name is its file (the name is no file of the current folder: `--arm aacmm7 -o aacmm7` was
+    refused as an output over an input)."""
+    from .shipped import arm_path
+    files = [arm_path(args.arm), getattr(args, "masses", None)]
     try:
         arm = model_from_args(args)
         named = [arm.covariance, arm.training_poses]

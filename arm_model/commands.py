@@ -226,9 +226,12 @@ def run_tip(args: argparse.Namespace) -> int:
         if ref:
             _check_tracker(arm, args.arm)
         from .model_file import parameters_of
-        from .uncertainty_cli import tip_columns, wants_uncertainty
+        from .uncertainty_cli import refuse_unused, tip_columns, wants_uncertainty
         parameters = parameters_of(arm)
         uncertain = wants_uncertainty(args, parameters)
+        refuse_unused(args, uncertain, "the uncertainty", "add --uncertainty; a model file with a covariance gives it "
+                      "always")
+        refuse_unused(args, bool(args.mc), "the Monte Carlo", "add --mc N", (("--seed", "seed"),))
         # one block: the uncertainty summary is over all points; a point's last move is from the point before it
         whole = uncertain or "motion" in arm.model.needs()
         split = None if whole else csv_spans(args.points, workers())

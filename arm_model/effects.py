@@ -28,7 +28,7 @@ __all__ = ["ModelInputs", "Geometry", "Effect", "EncoderEccentricity", "JointCom
            "ThermalGrowth", "ForceSensorError", "JointGain", "ProbeCompliance", "EFFECTS", "effect_from_name",
            "REFERENCE_TEMPERATURE_C", "JointHarmonics", "ProbeThermalGrowth", "ProbeComplianceMatrix",
            "ApproachOffset", "LateralCompliance", "ThermalDrift", "JointBacklash", "JointHysteresis", "joint_frame",
-           "last_frame", "gravity_moment", "contact_moment"]
+           "last_frame", "gravity_moment", "contact_moment", "PLAY", "DRIFT_STRAIN"]
 
 REFERENCE_TEMPERATURE_C = 20.0
 
@@ -99,6 +99,13 @@ def _indices(values: object, what: str, *, low: int = 0, high: int | None = None
 
 #: the highest harmonic an effect takes (of a joint angle: a period of 0.36 deg, below any drive's)
 MAX_HARMONIC = 1000
+#: the largest plausible thermal strain of the links over one session [1] (aluminium's 23e-6 /K over 4 K): the size of a
+#: drift's prior over the data's time span (:class:`ThermalDrift`)
+DRIFT_STRAIN = 1e-4
+#: the largest plausible play of a joint [rad] (half the band): a robot's gear play is typically 0.01-1 mrad (harmonic
+#: drives the least), a measuring arm's bearings far less; the size of a play's physical prior (:class:`JointBacklash`,
+#: :class:`JointHysteresis`)
+PLAY = 1e-3
 
 
 @dataclass(frozen=True)
@@ -127,6 +134,10 @@ class Effect:
     #: file never holds it (the geometry it writes is the one at the effect's reference; the session's value is
     #: reported beside it), so that applying the model to other data applies no drift it cannot know
     session: ClassVar[bool] = False
+    #: :attr:`plausible_size` is a physical maximum (a joint's play), not a guess the data may revise upwards: the
+    #: evidence may shrink its prior group's scale below 1, never raise it above (:attr:`calibration.prior.PriorSpec.
+    #: capped`)
+    physical_size: ClassVar[bool] = False
 
     def __post_init__(self) -> None:
         """``joints``: None or distinct 0-based joint indices (a TypeError or ValueError here, not deep in a fit)."""
@@ -169,6 +180,19 @@ class Effect:
         default; a compliance cannot be negative in total (:meth:`ArmModel.lower_bounds` gathers them; every fit
         holds a parameter at its bound, the model-file reader refuses a value below it)."""
         return [-math.inf] * len(self.param_defs(desc))
+
+    def prior_sizes(self, desc: ArmDescription, inputs: ModelInputs) -> list[tuple[float, str]] | None:
+        """The size [SI] of each parameter's prior (:meth:`param_defs` order) and whence, from the data's per-point
+        ``inputs`` (numpy columns) where the effect's scale lies in them (a drift's, in the data's time span); None:
+        :attr:`plausible_size`, or a size by unit (:mod:`calibration.prior`)."""
+        return None
+
+    def sides(self, desc: ArmDescription, inputs: ModelInputs, ops: Any) -> list[Any] | None:
+        """For an effect each of whose parameters acts through a per-point sign only (a joint's play): that sign
+        (-1, 0, +1; one column a parameter, :meth:`param_defs` order), the side of the play each point rests on; None
+        for the others. A parameter whose points lie nearly all on one side is the joint's offset in the data
+        (:func:`calibration.prior.prior_only`)."""
+        return None
 
     def describe(self, desc: ArmDescription | None = None) -> str:
         """The effect and its joints: ``j3`` by encoder column, or by name with the arm's description ``desc``."""
@@ -348,6 +372,17 @@ class ThermalDrift(Effect):
                 or not math.isfinite(self.reference_time_s)):
             raise ValueError(f"thermal_drift: reference_time_s must be a finite time [s], got "
                              f"{self.reference_time_s!r}")
+
+    def prior_sizes(self, desc: ArmDescription, inputs: ModelInputs) -> list[tuple[float, str]] | None:
+        """:data:`DRIFT_STRAIN` over the data's largest time from ``reference_time_s`` (to the power ``power``)."""
+        if inputs.time is None or not len(inputs.time):
+            return None
+        span = float(max(abs(float(min(inputs.time)) - self.reference_time_s),
+                         abs(float(max(inputs.time)) - self.reference_time_s)))
+        if not math.isfinite(span) or span <= 0:
+            return None
+        return [(DRIFT_STRAIN / span ** self.power, f"a link strain of {DRIFT_STRAIN:g} over the data's {span:.4g} s "
+                                                    "from the reference time")]
 
     @staticmethod
     def reference_of(time: Any) -> float:
@@ -529,10 +564,16 @@ def _shift_ball(desc: ArmDescription, geom: Geometry, q: Any, d_base: list[Any],
 @dataclass(frozen=True)
 class _JointPlay(Effect):
     """A joint's play: joint i sits ``b_i s_i`` beyond its encoder, ``s_i`` a per-point sign (-1, 0, +1) that says
-    which side of the play the joint rests on (:meth:`signs`); ``b`` [rad], half the band, linear and unbounded (its
-    sign says which way the reading lags)."""
+    which side of the play the joint rests on (:meth:`signs`); ``b`` [rad], half the band, linear in the model.
+
+    Its prior (:mod:`calibration.prior`): :attr:`plausible_size` :data:`PLAY` (1 mrad, the largest plausible half
+    band of a joint's play), a physical maximum the evidence may shrink, never exceed; a play whose points lie nearly
+    all on one side (or whose sign is nil: no gravity torque, no motion; or whose sides come in too few runs of the
+    capture order) is the joint's offset, or a drift, in the data, and the prior alone holds it."""
     acts_on_readings: ClassVar[bool] = True
     revolute_only: ClassVar[bool] = True
+    plausible_size: ClassVar[float] = PLAY
+    physical_size: ClassVar[bool] = True
     #: the parameter's name after the joint's (``j4.backlash``)
     parameter: ClassVar[str] = "play"
 
@@ -542,6 +583,10 @@ class _JointPlay(Effect):
     def signs(self, inputs: ModelInputs, ops: Any) -> list[Any]:
         """The side of the play of every joint (one column or expression a joint)."""
         raise NotImplementedError
+
+    def sides(self, desc: ArmDescription, inputs: ModelInputs, ops: Any) -> list[Any]:
+        side = self.signs(inputs, ops)
+        return [side[i] for i in self.joint_indices(desc)]
 
     def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
         side = self.signs(inputs, ops)
@@ -564,6 +609,11 @@ class JointBacklash(_JointPlay):
     def needs(self) -> tuple[str, ...]:
         return ("tau_gravity",)
 
+    def lower_bounds(self, desc: ArmDescription) -> list[float]:
+        """0: gravity carries the links through the play to the side it pushes them, beyond a reading taken on the
+        drive's side of the play (a reading on the link's side sees no play at all): never against the load."""
+        return [0.0] * len(self.param_defs(desc))
+
     def signs(self, inputs: ModelInputs, ops: Any) -> list[Any]:
         return [-ops.sign(t) for t in _torques(inputs.tau_gravity, "tau_gravity")]
 
@@ -574,7 +624,11 @@ class JointHysteresis(_JointPlay):
     the sign of its last move onto the point (``ModelInputs.motion``, :func:`arm_model.model.points_motion`: as
     measured, a points file's ``q1_move_sign`` ..., else its reading's move from the point captured before it): a
     play or an encoder's hysteresis that the last motion closes, a robot's backlash when it drives from posture to
-    posture."""
+    posture.
+
+    Signed, unlike :class:`JointBacklash` (no lower bound; its width is ``|h|``): ``h > 0`` when the reading lags the
+    joint (an encoder's hysteresis, a measuring arm's joint moved by hand), ``h < 0`` when the joint lags the reading
+    (a link dragged through its play by a drive whose encoder sits on the motor)."""
     key: str = field(default="joint_hysteresis", init=False, repr=False)
     parameter: ClassVar[str] = "hysteresis"
 

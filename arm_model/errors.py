@@ -10,7 +10,7 @@ import unicodedata
 from pathlib import Path
 
 __all__ = ["AacmmError", "InputError", "NumericalError", "read_text", "open_input", "decode_text", "parse_toml",
-           "did_you_mean", "unknown_key", "id_problem", "resolved", "text_lines", "INVISIBLE"]
+           "did_you_mean", "unknown_key", "id_problem", "resolved", "text_lines", "INVISIBLE", "MAX_ID_LENGTH"]
 
 
 class AacmmError(Exception):

@@ -432,13 +432,14 @@ def effects_from_tables(desc: ArmDescription, tables, r: TomlReader):
 
 def _check_bound(name: str, unit: str, value: float, low: float, r: TomlReader, where: tuple) -> None:
     """An error at ``where`` when ``value`` [SI, ``unit``] is below the parameter's physical lower bound ``low``
-    (:meth:`arm_model.effects.Effect.lower_bounds`: a compliance cannot be negative in total; every fit holds a
-    parameter at its bound, so only a hand edit writes one below)."""
+    (:meth:`arm_model.effects.Effect.lower_bounds`: a compliance cannot be negative in total, nor a backlash; every
+    fit holds a parameter at its bound, so only a hand edit writes one below)."""
     if not value < low - 1e-9 * abs(low):
         return
     if low == 0.0:
-        raise r.error(f"'{name}' is {value:.6g} {unit}: a compliance cannot be negative (the joint or link would turn "
-                      "against its load); calibrate and close-loop hold it at 0", *where)
+        what = ("a joint's backlash cannot be negative (gravity carries the link to the side it pushes it)"
+                if unit == "rad" else "a compliance cannot be negative (the joint or link would turn against its load)")
+        raise r.error(f"'{name}' is {value:.6g} {unit}: {what}; calibrate and close-loop hold it at 0", *where)
     raise r.error(f"'{name}' is {value:.6g} {unit}: the probe's compliance would be negative in total (this "
                   f"increment is at least {low:.6g} {unit}, minus the description's)", *where)
 
@@ -495,6 +496,8 @@ def _beside(model_path: str, name: str | None, r: TomlReader, key: str) -> Path 
     file's folder; the model file itself is an InputError at ``key``."""
     if name is None:
         return None
+    if "\0" in name:               # no system takes it in a file name (os.stat raised ValueError: exit 3)
+        raise r.error(f"'{key}' holds a NUL character: not a file name", "calibration", key)
     out = (Path(model_path).parent / name) if model_path != "<string>" else Path(name)
     if model_path != "<string>" and _same_file(out, Path(model_path)):
         raise r.error(f"'{key}' names the model file itself: it names the {key.replace('_', ' ')} file written "

@@ -99,12 +99,14 @@ def _inside(path: Path, folder: Path) -> bool:
     return path == folder or folder in path.parents
 
 
-def _through_link(final: Path) -> Path:
+def _through_link(final: Path, what: str) -> Path:
     """The output path ``final``, or the target of the symbolic link it is (written through, the link kept); a link
     whose target's folder does not exist is an InputError: as a shell's > does, no folder is made for it elsewhere,
-    outside every path the user named."""
+    outside every path the user named. A link to what is not ``what`` ("a regular file", "a folder") nor a folder
+    (``/dev/stdout``: a link to a pipe, whose target is no path) is refused as such, named as given."""
     if not final.is_symlink():
         return final
+    _refuse_special(final, what)
     target = resolved(final)
     if not target.parent.is_dir():
         raise InputError(f"the output is a symbolic link to {target}, whose folder does not exist (a link is "
@@ -352,7 +354,7 @@ def output_folder(final: str | Path, inputs=(), command: str = "", input_folders
     final = Path(final)
     guard_output(final, inputs, input_folders)
     final = Path(os.path.abspath(final))
-    final = _through_link(final)
+    final = _through_link(final, "a folder")
     if final.name in ("", ".", ".."):
         raise InputError("name an output folder", final)
     _check_folder(final, command)
@@ -399,7 +401,7 @@ def output_file(final: str | Path, inputs=(), writes: str | None = None):
     final = Path(final)
     guard_output(final, inputs)         # over an input: said first
     check_suffix(final, writes)
-    final = _through_link(final)        # written through the link (as a shell's > does), the link kept
+    final = _through_link(final, "a regular file")      # written through the link (as a shell's > does), the link kept
     if final.is_dir():
         raise InputError("the output is a file, but a folder of that name exists", final)
     if final.name in ("", ".", ".."):
@@ -440,12 +442,22 @@ def check_suffix(final: Path, writes: str | None) -> None:
     must not have the suffix of another format the toolkit reads (:func:`arm_model.readback.read_as`), or the
     file would be refused by its own read-back and misread by every command given it."""
     suffix = final.suffix.lower()
-    if writes is None or suffix == writes.lower():
+    if writes is None or _FORMATS.get(suffix, suffix[1:].upper()) == _FORMATS.get(writes.lower()):
         return
     other = read_as(suffix)
     if other is not None:
         raise InputError(f"a '{final.suffix}' file is read as {other} by the toolkit, but this command writes "
                          f"{writes[1:].upper()}: name the output '{writes}' (or with a suffix no reader takes)", final)
+    if suffix in _FORMATS:      # view --html x.png: a page no image viewer opens, a screenshot no browser shows
+        raise InputError(f"a '{final.suffix}' file is {_FORMATS[suffix]}, but {_FORMATS[writes.lower()]} is written "
+                         f"there: name the output '{writes}' (or with a suffix of no other format)", final)
+
+
+#: the suffixes of formats a file's name promises (an output named with another format's is refused)
+_FORMATS = {".html": "HTML", ".htm": "HTML", ".xhtml": "HTML", ".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG",
+            ".gif": "GIF", ".webp": "WebP", ".svg": "SVG", ".pdf": "PDF", ".bmp": "BMP", ".tif": "TIFF",
+            ".tiff": "TIFF", ".csv": "CSV", ".toml": "TOML", ".urdf": "URDF", ".json": "JSON", ".zip": "ZIP",
+            ".gz": "gzip", ".npy": "NumPy", ".npz": "NumPy"}
 
 
 def atomic_write_bytes(path: str | Path, data: bytes, inputs=()) -> Path:

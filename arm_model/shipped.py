@@ -82,7 +82,7 @@ def copy_examples(dest: str | Path) -> list[Path]:
     import os
     import tempfile
 
-    from .errors import InputError
+    from .errors import InputError, resolved
     from .output import write_error
     dest = Path(dest)
     src = shipped_path("examples")
@@ -99,6 +99,11 @@ def copy_examples(dest: str | Path) -> list[Path]:
              if f.is_file() and "__pycache__" not in f.parts]
     files += [(s, t) for s, t in pairs if s.is_file()]
     tops = list(dict.fromkeys(t.parts[0] for _, t in files))
+    read = [src] + [s for s, _ in pairs if s.is_dir()]
+    inside = next((r for r in read if resolved(dest).is_relative_to(resolved(r))), None)
+    if inside is not None:      # the copy would walk its own output (and the next copy would ship it)
+        raise InputError(f"refusing to write the examples into the folder {inside} they are copied from: choose a "
+                         "folder outside it", dest)
     clashes = [dest / t for t in tops if os.path.lexists(dest / t)]
     if clashes:
         raise InputError(f"refusing to write over or into {len(clashes)} existing entr"

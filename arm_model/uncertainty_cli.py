@@ -19,7 +19,7 @@ from .uncertainty import (
 )
 
 __all__ = ["add_input_options", "inputs_from_args", "add_tip_options", "wants_uncertainty", "tip_columns",
-           "contribution_lines", "u_columns"]
+           "contribution_lines", "u_columns", "refuse_unused", "INPUT_OPTIONS"]
 
 
 #: the largest values the input-uncertainty options take (their plausible ranges, docs/uncertainty.md):
@@ -86,12 +86,28 @@ def add_tip_options(p) -> None:
                    help="also a Monte Carlo of N samples of the same inputs: columns u_x_mc_mm ... (with "
                         "--covariance also cov_xx_mc_um2 ...) and the largest relative difference to the linear "
                         "result, per axis and along any direction")
-    g.add_argument("--seed", type=seed, default=0, help="seed of the --mc Monte Carlo draws (default 0)")
+    g.add_argument("--seed", type=seed, default=None, help="seed of the --mc Monte Carlo draws (default 0)")
     add_input_options(p)
 
 
 def wants_uncertainty(args, parameters: ParameterCovariance | None) -> bool:
     return bool(parameters is not None or args.uncertainty or args.covariance or args.mc)
+
+
+#: the options of :func:`add_input_options` (option, its attribute)
+INPUT_OPTIONS = (("--encoder-resolution-deg", "encoder_resolution_deg"), ("--u-force-N", "u_force_N"),
+                 ("--u-compliance-rel", "u_compliance_rel"), ("--u-probing-um", "u_probing_um"),
+                 ("--u-model-discrepancy-um", "u_model_discrepancy_um"))
+
+
+def refuse_unused(args, used: bool, what: str, ask: str, options=INPUT_OPTIONS) -> None:
+    """An InputError when one of ``options`` ((option, attribute) pairs; default the input uncertainties) was given
+    to a command that will not use it (``used`` False): accepted, it would do nothing, without a word (``tip
+    --u-probing-um 3`` wrote no uncertainty). ``what``: what the options are of; ``ask``: how to ask for it."""
+    from .errors import InputError
+    given = [o for o, attr in options if getattr(args, attr, None) is not None]
+    if given and not used:
+        raise InputError(f"{', '.join(given)}: option(s) of {what}, which is not asked for ({ask})")
 
 
 def contribution_lines(res) -> list[str]:
@@ -130,14 +146,15 @@ def tip_columns(arm, points, parameters, args) -> tuple[dict, list[str]]:
     lines.append(f"  {'total':<17} {tot[0]:8.3f} {tot[1]:8.3f} {tot[2]:8.3f}")
     if args.mc:
         mc = monte_carlo(model, p, points_q, wrench, aux, parameters=parameters, inputs=inputs,
-                         samples=args.mc, seed=args.seed)
+                         samples=args.mc, seed=args.seed or 0)
         umc = mc.u
         cols.update({f"u_{a}_mc_mm": umc[:, k] * 1e3 for k, a in enumerate("xyz")})
         if args.covariance:
             cols.update({k.replace("_um2", "_mc_um2"): v for k, v in covariance_columns(mc.cov).items()})
         with np.errstate(invalid="ignore", divide="ignore"):
             rel = np.where(u > 0, umc / u - 1.0, 0.0)
-        lines.append(f"Monte Carlo ({args.mc} samples, seed {args.seed}): u_mc / u_linear - 1 over the points and "
+        lines.append(f"Monte Carlo ({args.mc} samples, seed {args.seed or 0}): u_mc / u_linear - 1 over the points "
+                     "and "
                      f"axes: median {np.median(rel):+.3f}, largest |.| {np.max(np.abs(rel)):.3f}")
         d = directional_ratio(res.cov, mc.cov) - 1.0
         if np.isfinite(d).any():

@@ -194,6 +194,17 @@ def _parse_xml(path: Path, data: bytes):
         raise InputError("a <!DOCTYPE> that declares entities or names an external DTD: a URDF needs neither (entities "
                          "could read other files or the network); remove it", path,
                          data[: max(data.find(b"<!DOCTYPE"), 0)].count(b"\n") + 1)
+    root = tree.getroot()
+    pi = next(root.iter(etree.ProcessingInstruction), None)
+    if pi is not None:      # urdfdom (TinyXML) takes it for a misplaced XML declaration and refuses the file
+        raise InputError(f"a processing instruction <?{pi.target} ...?> inside <robot>: urdfdom (Pinocchio's and ROS's "
+                         "parser) refuses the file; remove it", path, pi.sourceline)
+    ns = etree.QName(root).namespace
+    if ns is not None and root.prefix is None and "xacro" not in ns:
+        # <robot xmlns="...">: urdfdom reads the names as written (Pinocchio takes the file); so do we
+        for el in root.iter(f"{{{ns}}}*"):
+            el.tag = etree.QName(el).localname
+        etree.cleanup_namespaces(tree)
     return tree
 
 
@@ -219,6 +230,22 @@ def _check_numbers(root, path: Path) -> None:
             wrong = implausible(vals, quantity) if quantity else None
             if wrong:
                 raise InputError(f"<{el.tag} {attr}=...>: {wrong[1]}", path, el.sourceline, f"key '{el.tag}.{attr}'")
+
+
+def _drop_shapeless(root, path: Path) -> None:
+    """A ``<visual>`` or ``<collision>`` whose ``<geometry>`` holds no shape first (empty, or another element): left
+    out with a warning, as urdfdom leaves it out ("Could not parse visual element"; Pinocchio reads the file). The
+    kinematics never use it; yourdfpy stopped at it ("list index out of range", "Unknown tag: foo": no line)."""
+    for geometry in list(root.iter("geometry")):
+        kids = [c for c in geometry if isinstance(c.tag, str)]
+        holder = geometry.getparent()
+        if (kids and kids[0].tag in ("box", "cylinder", "sphere", "mesh")) or holder is None or \
+                holder.tag not in ("visual", "collision") or holder.getparent() is None:
+            continue
+        what = f"<{kids[0].tag}>" if kids else "nothing"
+        log.warning(f"{path}, line {geometry.sourceline}: a <{holder.tag}> whose <geometry> holds {what} where a box, "
+                    "cylinder, sphere or mesh is expected: left out, as urdfdom leaves it out")
+        holder.getparent().remove(holder)
 
 
 def _check_not_xacro(root, path: Path) -> None:
@@ -346,8 +373,12 @@ def _read_urdf(path: str | Path) -> _Urdf:
     _check_not_xacro(root, path)         # (before the name: a xacro file of macros has none)
     if not root.get("name"):
         raise InputError("<robot> has no name", path, root.sourceline)
+    if id_problem(root.get("name")):    # the arm's name: in every file name, model file, URDF and report (the rule of
+        raise InputError(f"the <robot> name {id_problem(root.get('name'))}", path, root.sourceline,  # a DH table's)
+                         "key 'robot.name'")
     _check_numbers(root, path)
     links, joints = _check_tree(root, path)
+    _drop_shapeless(root, path)
     try:
         from lxml import etree
         model = yourdfpy.URDF.load(io.BytesIO(etree.tostring(tree)), build_scene_graph=False, load_meshes=False,

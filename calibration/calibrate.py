@@ -53,7 +53,7 @@ from .identifiability import (
     weakly_determined,
 )
 from .options import FitOptions
-from .prior import PRIOR_DOMINATED, PriorSpec, prior_spec, secant_gains, update_scales, variance_ratio
+from .prior import PRIOR_DOMINATED, PriorSpec, prior_only, prior_spec, secant_gains, update_scales, variance_ratio
 from .problem import Problem
 from .solver import NormalFactor, Prior, blas_threads, levenberg_marquardt, normal_factor
 
@@ -294,6 +294,9 @@ class CalibrationResult:
     gross_kept: str | None = None             # why a gross-looking point was kept (the model's error), or None
     redundancy: float | None = None           # with a prior: rows less their share of the unknowns (s0's divisor)
     point_tests: dict | None = None           # every point's gross-error test (:func:`point_tests`), when asked
+    #: {name: why} of the free parameters the data cannot tell from others, left to the prior alone
+    #: (:func:`calibration.prior.prior_only`: prior-dominated, at its centre with its size)
+    prior_only: dict = field(default_factory=dict)
 
     # -- access by name ----------------------------------------------------------------------------
     @property
@@ -451,7 +454,8 @@ class CalibrationResult:
             "prior": None if self.prior_scales is None else {
                 "scales": dict(self.prior_scales), "groups": self.prior_groups, "log_evidence": self.log_evidence,
                 "prior_dominated_ratio": PRIOR_DOMINATED, "evidence_rounds": self.evidence,
-                "prior_dominated": [n for n in self.free if self.state(n) == "prior-dominated"]},
+                "prior_dominated": [n for n in self.free if self.state(n) == "prior-dominated"],
+                "prior_only": dict(self.prior_only)},
             "outliers": [o.to_dict() for o in self.outliers], "dropped": [o.to_dict() for o in self.dropped],
             "gross_errors_removed": [g.to_dict() for g in self.gross], "gross_kept": self.gross_kept,
             "instances": self.instances, "distances": self.distances,
@@ -763,15 +767,18 @@ def _without_gross(model: ArmModel, data: CalibrationData, options: FitOptions, 
     same false-alarm rate) is at ``options.gross_threshold`` (and ``outlier_threshold``) or beyond, it is left out
     and the fit redone. Never more than :data:`GROSS_SHARE` of the points, nor a point its feature needs
     (:data:`~calibration.kinds.MIN_POINTS`, or one whose deletion leaves an unknown undetermined): past that the
-    misfit is the model's, kept and said (``gross_kept``). ``options.gross_threshold`` None keeps every point."""
+    misfit is the model's, kept and said (``gross_kept``). ``options.gross_threshold`` None keeps every point;
+    ``options.outlier_limit`` (not None) is the most points left out, ``options.outlier_lengths`` False leaves
+    every certified length in (the closed loop's base fit, :mod:`calibration.loop.outliers`)."""
     res = estimate(model, data, options)
     if options.gross_threshold is None:
         return res
     k = max(options.gross_threshold, options.outlier_threshold)
     index = np.arange(len(data))
     gross: list[GrossError] = []
-    limit = max(1, int(GROSS_SHARE * len(data)))
-    while (c := _gross_candidate(res, k)) is not None:
+    limit = max(1, int(GROSS_SHARE * len(data))) if options.outlier_limit is None else options.outlier_limit
+    share = f"{GROSS_SHARE:.0%} of them" if options.outlier_limit is None else "the most it may leave out"
+    while (c := _gross_candidate(res, k, options.outlier_lengths)) is not None:
         o = c.outlier
         need = not _droppable(res.data, [c])          # its feature needs it
         fewer, kept = _left_out(res.data, [c], index)
@@ -782,7 +789,7 @@ def _without_gross(model: ArmModel, data: CalibrationData, options: FitOptions, 
         if without is None:
             where = f"{o.measurement} line {o.line}" if c.between is None else f"{o.measurement} length {o.feature}"
             res.gross_kept = (f"{where}: standardized {o.standardized:+.1f} (beyond {k:.2f}), "
-                              f"kept: leaving out more than {limit} point(s) ({GROSS_SHARE:.0%} of them), a point its "
+                              f"kept: leaving out more than {limit} point(s) ({share}), a point its "
                               "feature needs, or one the fit cannot do without is an error of the model, not of the "
                               "data")
             break
@@ -816,10 +823,10 @@ def _tested(res: CalibrationResult, k: float) -> list[_Tested]:
     return sorted(out, key=lambda c: -abs(c.outlier.standardized))
 
 
-def _gross_candidate(res: CalibrationResult, k: float) -> _Tested | None:
-    """The point or certified length of ``res`` whose gross-error test is the largest, if at ``k`` or beyond
-    (:func:`_tested`)."""
-    cands = _tested(res, k)
+def _gross_candidate(res: CalibrationResult, k: float, lengths: bool = True) -> _Tested | None:
+    """The point (or, with ``lengths``, certified length) of ``res`` whose gross-error test is the largest, if at
+    ``k`` or beyond (:func:`_tested`)."""
+    cands = [c for c in _tested(res, k) if lengths or c.between is None]
     return cands[0] if cands else None
 
 
@@ -917,8 +924,10 @@ def _deletion_residual(res: CalibrationResult, data: CalibrationData, c: _Tested
 class _Setup:
     """What a fit starts from: the problem over the candidate parameters, the given (``nominal``) and the
     starting (``p0``) parameter vectors [SI], the nuisance states fitted at ``p0``, the prior (None without
-    one) with its groups and sizes (``spec``) and group scales, the hold rule's resolution, and every parameter's
-    lower bound [SI] (``lower``: :meth:`~arm_model.model.ArmModel.lower_bounds`, with a prior or without)."""
+    one) with its groups and sizes (``spec``) and group scales, the hold rule's resolution, every parameter's
+    lower bound [SI] (``lower``: :meth:`~arm_model.model.ArmModel.lower_bounds`, with a prior or without), and
+    {spec index: why} of the candidates the data cannot tell from others (``prior_only``,
+    :func:`calibration.prior.prior_only`: left to the prior, held without one)."""
     problem: Problem
     candidates: list
     nominal: np.ndarray
@@ -929,6 +938,7 @@ class _Setup:
     spec: PriorSpec | None = None
     scales: dict = field(default_factory=dict)
     lower: np.ndarray | None = None
+    prior_only: dict = field(default_factory=dict)
 
 
 def _prior_spec(model: ArmModel, data: CalibrationData, options: FitOptions) -> PriorSpec:
@@ -960,18 +970,21 @@ def _setup(model: ArmModel, data: CalibrationData, options: FitOptions) -> _Setu
     p0 = nominal.copy()
     for name, v in (options.start or {}).items():
         p0[spec.index(name)] = v
-    problem = Problem(model, data, options.weights, cand, reference=options.reference)
+    only = {i: why for i, why in prior_only(model, data).items() if i in cand}
+    problem = Problem(model, data, options.weights, cand, reference=options.reference,
+                      prior_only=sorted(only) if options.prior_scale is not None else [])
     states = levenberg_marquardt(problem.with_free([]), p0, problem.initial_states(p0),
                                  max_iter=options.max_iter).states
     problem.check_tracker(p0, states)        # frames and marker offsets the data cannot place: say so first
     if options.prior_scale is None:
-        return _Setup(problem, cand, nominal, p0, states, None, options.min_resolution, lower=model.lower_bounds())
+        return _Setup(problem, cand, nominal, p0, states, None, options.min_resolution, lower=model.lower_bounds(),
+                      prior_only=only)
     pspec = _prior_spec(model, data, options)
     scales = _scales(options, [pspec.group[i] for i in cand])
     centre = nominal.copy() if options.prior_centre is None else np.array(options.prior_centre, dtype=float)
     # the prior shrinks what the data resolve poorly: nothing is held for being weak
     return _Setup(problem, cand, nominal, p0, states, Prior(centre, pspec.sizes(scales)), None, pspec, scales,
-                  pspec.lower)
+                  pspec.lower, only)
 
 
 #: the structural rank test (:func:`_structural`) evaluates about this many times as many rows as candidates
@@ -1008,11 +1021,19 @@ def _held(s: _Setup, p, states, kept, stage: str, options: FitOptions):
     back to its given value (not a warm start's, not where a fit moved it along a direction the data do not
     see or see only below the noise: that value would be carried into every pose the model is used at);
     ``p`` is changed in place. With a prior and fewer data dimensions than candidates, the rank test is the
-    structural one (:func:`_structural`)."""
-    problem = _structural(s, kept) or s.problem
-    kept, new, idf = identify(problem, p, states, kept, replace(options, min_resolution=s.min_resolution),
+    structural one (:func:`_structural`). The prior-only parameters (``s.prior_only``) take no part in it: with a
+    prior they stay estimated (the prior alone holds them), without one they are held with their reason."""
+    only = [i for i in kept if i in s.prior_only]
+    rest = [i for i in kept if i not in s.prior_only]
+    problem = _structural(s, rest) or s.problem
+    kept, new, idf = identify(problem, p, states, rest, replace(options, min_resolution=s.min_resolution),
                               stage=stage)
     spec = s.problem.model.spec
+    if s.prior is not None:
+        kept = sorted(kept + only)
+    else:
+        new += [FixedParameter(spec.names[i], 0.0, f"not seen by the data ({s.prior_only[i]}); held at its given value",
+                               None, stage) for i in only]
     for k, f in enumerate(new):
         i = spec.index(f.name)
         p[i] = s.nominal[i]
@@ -1022,6 +1043,8 @@ def _held(s: _Setup, p, states, kept, stage: str, options: FitOptions):
 
 #: how the reason of a parameter held at its lower bound begins
 AT_BOUND = "at its lower bound"
+#: why a parameter has a lower bound, by unit (a compliance otherwise)
+_BOUND_WHY = {"rad": "a joint's play cannot be negative"}
 
 
 def _at_bounds(s: _Setup, p, kept, stage: str, u: dict | None = None):
@@ -1040,9 +1063,10 @@ def _at_bounds(s: _Setup, p, kept, stage: str, u: dict | None = None):
     fixed = []
     for i in below:
         du, fac = display_unit(spec.units[i])
+        why = _BOUND_WHY.get(spec.units[i], "a compliance cannot be negative")
         fixed.append(FixedParameter(spec.names[i], float(low[i]),
-                                    f"{AT_BOUND} {low[i] * fac:.4g} {du} (a compliance cannot be "
-                                    f"negative): the data pull it to {p[i] * fac:.4g} {du}", None, stage,
+                                    f"{AT_BOUND} {low[i] * fac:.4g} {du} ({why}): the data pull it to "
+                                    f"{p[i] * fac:.4g} {du}", None, stage,
                                     (float(p[i]), (u or {}).get(i, math.nan))))
         p[i] = low[i]
     return [i for i in kept if i not in below], fixed
@@ -1340,6 +1364,7 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         prior_centre=None if s.prior is None else s.prior.centre, options=options, prior_sd=prior_sd,
         prior_ratio=None if prior_sd is None else variance_ratio(u ** 2, prior_sd),
         prior_groups=_group_table(s, kept, u), redundancy=None if s.prior is None else red,
+        prior_only={} if s.prior is None else {spec.names[i]: why for i, why in s.prior_only.items() if i in kept},
         discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var)
         if options.discrepancy else None,
         point_tests=None if level is None else point_tests(
@@ -1359,8 +1384,9 @@ def _test_level(options: FitOptions) -> float | None:
 
 def _group_table(s: _Setup, kept, u) -> dict:
     """{group: scale, parameters, effective (gamma: the parameters the data determine), size source, physical
-    (its scale not chosen by the evidence, :attr:`calibration.prior.PriorSpec.physical`), ceiling (the largest
-    scale the evidence may give it, :meth:`calibration.prior.PriorSpec.ceiling`)} of the prior's groups over the
+    (its scale not chosen by the evidence, :attr:`calibration.prior.PriorSpec.physical`), capped (its scale at most 1,
+    :attr:`~calibration.prior.PriorSpec.capped`), ceiling (the largest scale the evidence may give it,
+    :meth:`calibration.prior.PriorSpec.ceiling`)} of the prior's groups over the
     free parameters ``kept``."""
     if s.prior is None:
         return {}
@@ -1374,7 +1400,7 @@ def _group_table(s: _Setup, kept, u) -> dict:
                   "effective_parameters": float(np.sum(1.0 - rho)),
                   "size_at_scale_1": {spec.names[i]: float(s.spec.size[i]) for i in idx},
                   "size_source": sorted({s.spec.source[i] for i in idx}), "physical": g in s.spec.physical,
-                  "ceiling": s.spec.ceiling(g)}
+                  "capped": g in s.spec.capped, "ceiling": s.spec.ceiling(g)}
     return out
 
 

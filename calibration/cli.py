@@ -45,9 +45,6 @@ def _effects(keys):
     if "none" in (keys or ()) and len(set(keys)) > 1:
         raise InputError(f"--effect none is the geometry alone: it takes no other --effect (got "
                          f"{', '.join(k for k in keys if k != 'none')})")
-    twice = sorted({k for k in keys or () if list(keys).count(k) > 1})
-    if twice:
-        raise InputError(f"--effect {', '.join(twice)} given more than once: give each effect once")
     for k in keys or ():
         if k == "none":
             continue
@@ -377,6 +374,10 @@ def free_names(model, args, data=None):
                              f"{chosen} ({len(free)}); a calibration with no free parameter would write the model "
                              "it started from as if calibrated. Hold fewer parameters (the nominal model as it is: "
                              "aacmm tip)")
+        undone = next((p for p in args.free or () if set(resolve_parameters(model.spec, [p])) <= held), None)
+        if undone is not None:      # `--free j1.a --hold j1.a`: one of the two does nothing
+            raise InputError(f"--free {undone}: every parameter it names is held by --hold {' '.join(args.hold)}; "
+                             "give a parameter to one of the two")
         free = [i for i in free if i not in held]
     return [model.spec.names[i] for i in free]
 
@@ -802,7 +803,8 @@ def prior_lines(res) -> list[str]:
               + ("" if res.evidence[-1].get("settled", True) else "; " + res.evidence[-1]["note"]) + ")"
               if evidence else " (scales given)") + ":"]
     for g, v in res.prior_groups.items():
-        physical = " (a physical prior: not chosen by the evidence)" if v.get("physical") else ""
+        physical = (" (a physical prior: not chosen by the evidence)" if v.get("physical") else
+                    " (a physical maximum: the evidence may shrink it, never above 1)" if v.get("capped") else "")
         out.append(f"  {g}: scale {v['scale']:.3g}{physical}; the data determine {v['effective_parameters']:.1f} of "
                    f"its {len(v['parameters'])} parameters")
     dominated = [r for r in res.parameter_rows() if r["state"] == "prior-dominated"]
@@ -811,8 +813,10 @@ def prior_lines(res) -> list[str]:
                    "with about the prior's uncertainty, which the covariance carries):")
         for r in dominated:
             du, _ = display_unit(r["unit"])
+            why = res.prior_only.get(r["name"])
             out.append(f"  {r['name']}: {r['display_value']:.4g} ± {r['display_u']:.3g} {du} (prior ± "
-                       f"{r['display_prior_u']:.3g}, posterior/prior variance {r['prior_ratio']:.2f})")
+                       f"{r['display_prior_u']:.3g}, posterior/prior variance {r['prior_ratio']:.2f})"
+                       + ("" if why is None else f"; prior only: {why}"))
     return out
 
 

@@ -23,8 +23,8 @@ harmonics ``cos/sin(h q_j)``, h = 1..4, times ``D_j``; harmonics 1 and 2 of ``q_
 other joint j (a cross-coupling, "qK harmonics on jJ"); the gravity torque and the contact torque of
 joint j times ``D_j``; the gravity torque's sign times ``D_j`` (a play the load closes one way or the other,
 "jN gravity torque sign"), the sign of its last move onto the point (a play or an encoder's hysteresis,
-"jN motion sign", :func:`arm_model.model.reading_motion`), each where at least :data:`MIN_SIGN_SHARE` of the
-rows lie on either side of zero; contact
+"jN motion sign", :func:`arm_model.model.reading_motion`), each where at least
+:data:`calibration.prior.MIN_SIDE_SHARE` of the rows lie on either side of zero; contact
 force components and magnitude times the probe axes; temperature and time times the base axes and the
 position vector (a scale); the temperature times each link's length and the probe's ("temperature per
 link"); the tilt of joint j about its frame's x and y axes times the moment across it ("jN lateral load");
@@ -59,6 +59,7 @@ from .identifiability import (
     reduced_jacobian,
     weakly_determined,
 )
+from .prior import both_sides
 from .problem import Problem
 from .solver import levenberg_marquardt
 
@@ -73,9 +74,6 @@ HARMONICS = (1, 2, 3, 4)
 #: harmonics of another joint's angle tested for a cross-coupling (low orders: a cable, a counterbalance;
 #: with the third too, one clean campaign in 20 showed a false structure among the 42 pairs)
 CROSS_HARMONICS = (1, 2)
-#: the smallest share of the rows on either side of a joint's gravity torque sign for the family of its play
-#: (``jN gravity torque sign``): with fewer, the sign picks out a handful of points, a gross error's signature
-MIN_SIGN_SHARE = 0.1
 #: a candidate parameter the data resolve only to worse than this many plausible sizes counts as absorbed
 SCREEN_RESOLUTION = 1.0
 
@@ -691,11 +689,6 @@ def _harmonic_basis(q: np.ndarray, k: int, harmonics) -> tuple[list, dict]:
     return basis, {f"cos/sin({h} q{k + 1})": [2 * i, 2 * i + 1] for i, h in enumerate(harmonics)}
 
 
-def _both_signs(sign: np.ndarray) -> bool:
-    """At least :data:`MIN_SIGN_SHARE` of the rows on either side of zero."""
-    return bool(min(np.sum(sign > 0), np.sum(sign < 0)) >= MIN_SIGN_SHARE * len(sign))
-
-
 def _joint_families(f: _FamilyInputs) -> list[Family]:
     """Per joint: its angle error as harmonics of its own angle, proportional to its gravity torque and to
     its contact torque (where it holds one)."""
@@ -711,12 +704,12 @@ def _joint_families(f: _FamilyInputs) -> list[Family]:
                               "torque it holds against gravity", "field", [dq], [(f"tau_g{j + 1}", f.tau_g[:, j])],
                               (f"gravity torque {jr.name}", "N m", 1.0, f.tau_g[:, j])))
             sign = np.sign(f.tau_g[:, j])
-            if _both_signs(sign):
+            if both_sides(sign):
                 out.append(Family(f"{jr.name} gravity torque sign", f"error of joint {jr.name}'s angle changing with "
                                   "the sign of the torque it holds against gravity (a play the load closes one way "
                                   "or the other)", "field", [dq], [(f"sign(tau_g{j + 1})", sign)],
                                   (f"gravity torque {jr.name}", "N m", 1.0, f.tau_g[:, j])))
-        if not jr.prismatic and _both_signs(f.motion[:, j]):
+        if not jr.prismatic and both_sides(f.motion[:, j]):
             out.append(Family(f"{jr.name} motion sign", f"error of joint {jr.name}'s angle changing with the "
                               "direction it last turned, onto each point from the one captured before it (a play or "
                               "an encoder's hysteresis the motion closes)", "field", [dq],

@@ -166,6 +166,7 @@ def run(args: argparse.Namespace) -> int:
                             max_effects=args.max_effects, cv_top=args.cv_top, seed=args.seed,
                             synthesise=not args.library_only, physics=not args.held_out_gain_only,
                             prior_scale=args.prior_scale, test_in_model=args.holdout is None,
+                            weights_from_data=args.weights == "data",
                             escalate=args.candidates is None)
     with output_folder(args.output, inputs, "close-loop") as out:
         loop = close_loop(points, artefacts, desc, reference=reference, effects=tuple(effects), values=arm.values,

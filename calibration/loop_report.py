@@ -16,7 +16,15 @@ from arm_model.io import atomic_write_bytes, atomic_write_text, guard_output, js
 from arm_model.shipped import provenance
 
 from .loop import LoopResult, Stage, effect_summary
-from .model_output import drift_text, model_check, model_paths, session_drift, without_session_effects, write_model
+from .model_output import (
+    calibrated_name,
+    drift_text,
+    model_check,
+    model_paths,
+    session_drift,
+    without_session_effects,
+    write_model,
+)
 from .report import (
     conformance_html,
     conformance_pngs,
@@ -295,7 +303,7 @@ def _cv_rows(cvs):
 
 def loop_model_name(loop: LoopResult) -> str:
     """Name of the loop's model file (without ``.toml``): ``<arm>-calibrated``."""
-    return f"{loop.desc.name}-calibrated"
+    return calibrated_name(loop.desc.name)
 
 
 def write_loop_model(loop: LoopResult, out_dir, inputs=()) -> dict:

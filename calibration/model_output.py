@@ -6,18 +6,21 @@ Format: :mod:`arm_model.model_file` and docs/calibration.md ("The model file")."
 from __future__ import annotations
 
 import dataclasses
+import zlib
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from arm_model import InputError
+from arm_model.errors import MAX_ID_LENGTH
 from arm_model.io import UnreadableOutput, atomic_write_text, guard_output, read_back
 from arm_model.model_file import Arm, format_model, write_covariance
 from arm_model.output import safe_name
 from arm_model.urdf_import import calibrated_urdf_text
 
-__all__ = ["model_paths", "fitted_arm", "write_model", "written_covariance", "model_check", "refine_torques",
+__all__ = ["calibrated_name", "model_paths", "fitted_arm", "write_model", "written_covariance", "model_check",
+           "refine_torques",
            "check_reproduces", "REPRODUCE_TOL_M", "discrepancy_fields", "session_drift", "without_session_effects",
            "drift_text"]
 
@@ -83,6 +86,16 @@ def without_session_effects(result):
                    prior_sd=part(result.prior_sd, kf), prior_ratio=part(result.prior_ratio, kf),
                    fixed=tuple(f for f in result.fixed if f.name not in gone),
                    held=tuple(n for n in result.held if n not in gone), model_check=None)
+
+
+def calibrated_name(arm_name: str) -> str:
+    """The name of a calibrated model (its model file's ``name``, and its files' names): ``<arm>-calibrated``; an arm
+    name so long that this would pass the longest name a reader takes (:data:`arm_model.errors.MAX_ID_LENGTH`) is
+    cut, and given a checksum of the whole (the file would be refused by its own read-back)."""
+    name = f"{arm_name}-calibrated"
+    if len(name) <= MAX_ID_LENGTH:
+        return name
+    return f"{arm_name[:MAX_ID_LENGTH - 20]}-{zlib.crc32(arm_name.encode('utf-8')):08x}-calibrated"
 
 
 def model_paths(out_dir, name: str) -> dict:

@@ -100,12 +100,14 @@ class FitOptions:
             same false-alarm rate; beyond ``outlier_threshold`` too: a gross error is an outlier) is a gross error,
             left out and the fit redone (one at a time, the largest first, at most 5 % of the points); None keeps
             every point.
-        outlier_lengths: False: ``drop_outliers`` leaves certified lengths in (only points are dropped): the closed
-            loop's, whose base model may lack the very effect a length measures (thermal growth, a scale error).
+        outlier_lengths: False: ``drop_outliers`` and the gross errors (``gross_threshold``) leave certified lengths
+            in (only points are left out): the closed loop's, whose base model may lack the very effect a length
+            measures (thermal growth, a scale error).
         outlier_limit: with ``drop_outliers``, at most this many points are dropped; past it (or after the last
             round) the misfit is the model's, not gross errors: the rest is kept and said (``gross_kept``) instead
-            of a numerical failure. None (default): drop until none is left. The closed loop sets it (5 % of its
-            campaign's points: an effect its base model lacks makes its largest errors look like outliers).
+            of a numerical failure. None (default): drop until none is left (``gross_threshold``'s: 5 % of the
+            points). The closed loop sets it (5 % of its campaign's points: an effect its base model lacks makes
+            its largest errors look like outliers).
         covariance: "residual" (scaled by the residual variance factor) or "stated".
         reference: "fit" (``T_ref_base`` unknown), "identity" (reference coordinates are base
             coordinates) or "off" (reference columns ignored).

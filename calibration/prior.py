@@ -19,6 +19,21 @@ the others' posterior far from Gaussian), and its MacKay fixed point shrinks a c
 see only weakly to zero, leaving its signature to the geometry, which then errs where the poses reach beyond
 the training range (measured in docs/studies/calibration.md).
 
+A joint's play (:class:`arm_model.effects.JointBacklash`, :class:`~arm_model.effects.JointHysteresis`) has a physical
+size too, a maximum: :data:`arm_model.effects.PLAY` (1 mrad, the largest plausible play); the evidence may shrink its
+group's scale (plays the data show small), never raise it above 1 (:attr:`PriorSpec.capped`; an ordinary group's
+may reach :data:`SCALE_RANGE`'s 100); a backlash is non-negative (its lower bound). A play is seen only as the
+difference between the points on its two sides: where one side holds fewer than :data:`MIN_SIDE_SHARE` of the points,
+or the sign is nil on every point (a joint with no gravity torque, one that never moved), the play is the joint's
+offset in the data plus what a handful of points carry; where a side is met in fewer than :data:`MIN_SIDE_VISITS`
+runs of the capture order, it is a step along the order, which a drift makes too (a real Panda's elbow, trained on
+one placement whose gravity torque keeps one sign, fitted 17 mrad of "play" at 1 mrad: its offset, the rank test
+having held the offset instead). Such a parameter is **prior only**
+(:func:`prior_only`): its data's column is left out of the fit (:attr:`calibration.problem.Problem.prior_only`), so
+it stays at its prior's centre with its prior's uncertainty (prior-dominated, ``rho = 1``) and that uncertainty,
+uncorrelated, is carried by every propagation (a pose on the other side of the play is that uncertain). Without a
+prior it is held at its given value, with that reason.
+
 A parameter is **prior-dominated** when ``rho_k >= PRIOR_DOMINATED`` (0.5): its posterior variance is at
 least half its prior's, i.e. the data's own information on it is at most the prior's (for one parameter,
 ``1 / u_post^2 = 1 / u_prior^2 + 1 / u_data^2``, so ``rho >= 0.5`` iff ``u_data >= u_prior``). Such a
@@ -44,14 +59,15 @@ from __future__ import annotations
 
 import fnmatch
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 __all__ = ["GROUP_LENGTHS", "GROUP_OFFSETS", "GROUP_ANGLES", "GROUP_TIP", "GROUP_PROBE_COMPLIANCE", "BASE_SIZES",
            "PRIOR_DOMINATED", "BARELY_SEEN", "SCALE_RANGE", "MIN_EFFECTIVE", "TIP_SHARE", "LENGTH_SHARE", "MAX_ANGLE",
-           "PriorSpec", "parameter_groups", "prior_spec", "chain_length", "limits", "variance_ratio", "update_scales",
-           "MAX_GAIN", "secant_gains"]
+           "MIN_SIDE_SHARE", "MIN_SIDE_VISITS", "NIL_LOAD", "PriorSpec", "parameter_groups", "prior_spec",
+           "chain_length", "limits", "variance_ratio", "update_scales", "MAX_GAIN", "secant_gains", "both_sides",
+           "side_visits", "prior_only"]
 
 GROUP_LENGTHS = "lengths"
 GROUP_OFFSETS = "joint offsets"
@@ -75,6 +91,20 @@ PRIOR_DOMINATED = 0.5
 #: a ninth of the prior's: its data uncertainty at least 3 times the prior's size): it has no say in its group's
 #: scale (:func:`update_scales`)
 BARELY_SEEN = 0.9
+#: the smallest share of the points on either side of a sign (a play's, a gravity torque's, a last move's) for the data
+#: to see the sign apart from a constant: with fewer, the sign picks out a handful of points (a gross error's
+#: signature), and a play is the joint's offset (:func:`prior_only`; the loop's sign families, :mod:`calibration.
+#: diagnostics`)
+MIN_SIDE_SHARE = 0.1
+#: the fewest separate visits (runs of consecutive points, in the capture order of each measurement) of each side of a
+#: play for the data to see it: a side met in one or two runs is a step or two along the capture order, which the
+#: plate or the base creeping while the points are taken, or the sweep's own pose-dependent error, makes as well (a
+#: real Panda's joint 3, met in 2 + 2 runs on one placement, fitted 2.2 mrad of play and spread the other placements'
+#: seats over 5 mm; held, 1.5 mm)
+MIN_SIDE_VISITS = 3
+#: a joint's gravity torque at most this fraction of the largest one in the data (any joint, any point) is nil: its
+#: sign is rounding (a vertical axis)
+NIL_LOAD = 1e-9
 #: range of a group's scale (times the plausible sizes)
 SCALE_RANGE = (1e-2, 1e2)
 #: fewest parameters the data must determine in a group (``gamma_G``) for its scale to be estimated
@@ -160,6 +190,10 @@ class PriorSpec:
             torque): the evidence leaves their scale as given (1 by default).
         limit: the largest plausible standard deviation of each parameter [SI] (:func:`limits`; ``inf``: none
             but :data:`SCALE_RANGE`).
+        capped: the groups whose size is a physical maximum (every parameter a play's,
+            :attr:`arm_model.effects.Effect.physical_size`): the evidence may shrink their scale, never above 1.
+        prior_only: {spec index: why} of the parameters the data cannot tell from others (:func:`prior_only`):
+            their data's column is left out of the fit, the prior alone holds them.
     """
     group: tuple
     size: np.ndarray
@@ -167,11 +201,15 @@ class PriorSpec:
     source: tuple
     physical: frozenset = frozenset()
     limit: np.ndarray | None = None
+    prior_only: dict = field(default_factory=dict)
+    capped: frozenset = frozenset()
 
     def ceiling(self, group: str) -> float:
         """The largest scale the evidence may give ``group``: the smallest of its parameters' ``limit / size``, at
         least 1 (a size given or set by the data is a statement the ceiling does not narrow), at most
-        :data:`SCALE_RANGE`'s top."""
+        :data:`SCALE_RANGE`'s top; 1 for a capped group (:attr:`capped`)."""
+        if group in self.capped:
+            return 1.0
         if self.limit is None:
             return SCALE_RANGE[1]
         idx = [i for i, g in enumerate(self.group) if g == group]
@@ -208,16 +246,24 @@ def _torque_reference(model, data, joint: int) -> float:
     return float(np.sqrt(np.mean(t ** 2))) if len(t) else 0.0
 
 
-def _effect_sizes(model, data) -> dict[int, tuple[float, str]]:
-    """{spec index: (size at scale 1, source)} of every effect parameter."""
+def _effect_sizes(model, data) -> dict[int, tuple[float, str, str]]:
+    """{spec index: (size at scale 1, source, kind)} of every effect parameter: kind "physical" (an angular
+    compliance's, the evidence leaves its scale), "maximum" (a physical maximum, its scale at most 1) or ""."""
     desc = model.desc
+    slices = list(model.effect_slices())
+    if not slices:
+        return {}
+    inputs = _model_inputs(model, data)
     out = {}
-    for e, sl in model.effect_slices():
+    for e, sl in slices:
         defs = e.param_defs(desc)
         joints = list(e.joint_indices(desc)) if hasattr(e, "joint_indices") else []
         loads = e.gravity_loads(desc, data.points.q) if hasattr(e, "gravity_loads") and len(data) else None
+        own = e.prior_sizes(desc, inputs) if len(data) else None
         for n, (k, (name, unit)) in enumerate(zip(range(sl.start, sl.stop), defs, strict=True)):
-            if unit == "rad/(N m)":
+            if own is not None:
+                out[k] = (own[n][0], own[n][1], "maximum" if e.physical_size else "")
+            elif unit == "rad/(N m)":
                 j = next((i for i in joints if name.startswith(desc.joint_names[i] + ".")), None)
                 if loads is not None:           # an off-axis compliance: the moment it multiplies
                     tau = float(np.sqrt(np.mean(np.asarray(loads[n]) ** 2)))
@@ -226,11 +272,13 @@ def _effect_sizes(model, data) -> dict[int, tuple[float, str]]:
                 size = MAX_ANGULAR_COMPLIANCE if tau <= 0 else min(DEFLECTION / tau, MAX_ANGULAR_COMPLIANCE)
                 load = "torque" if loads is None else "gravity moment"
                 out[k] = (size, f"{DEFLECTION * 1e3:g} mrad under the joint's RMS {load} in the data "
-                                f"({tau:.3g} N m)" if tau > 0 else f"no {load} in the data")
+                                f"({tau:.3g} N m)" if tau > 0 else f"no {load} in the data", "physical")
             elif e.plausible_size is not None:
-                out[k] = (float(e.plausible_size), "the effect's plausible size")
+                out[k] = (float(e.plausible_size), f"the effect's {'physical' if e.physical_size else 'plausible'} "
+                                                   f"size ({e.plausible_size:g} {unit})",
+                          "maximum" if e.physical_size else "")
             else:
-                out[k] = (UNIT_SIZES.get(unit, 1.0), f"by unit ({unit})")
+                out[k] = (UNIT_SIZES.get(unit, 1.0), f"by unit ({unit})", "")
     return out
 
 
@@ -271,9 +319,12 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
     not estimated) under the RMS torque the data give it (gravity from the
     description's masses, contact torques from the forces; an off-axis compliance, the RMS moment of gravity
     about its axis that the effect's ``gravity_loads`` give; at most :data:`MAX_ANGULAR_COMPLIANCE`); another
-    effect parameter the effect's own plausible size or a size by unit (:data:`UNIT_SIZES`). ``priors``
+    effect parameter the size the effect takes from the data (a drift's: :data:`arm_model.effects.DRIFT_STRAIN` over
+    the data's time span), else its own plausible size (a play's physical maximum, :data:`arm_model.effects.PLAY`: its
+    group's scale at most 1) or a size by unit (:data:`UNIT_SIZES`); the plays the data cannot tell
+    from the joint's offset, prior only (:func:`prior_only`). ``priors``
     (names or glob patterns -> size [SI]) override. The lower bounds are the model's
-    (:meth:`arm_model.model.ArmModel.lower_bounds`: a compliance cannot be negative in total)."""
+    (:meth:`arm_model.model.ArmModel.lower_bounds`: a compliance cannot be negative in total, nor a backlash)."""
     spec = model.spec
     probe = model.desc.probe
     eff = _effect_sizes(model, data)
@@ -283,7 +334,7 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
         if hit:
             size[i], src = float(hit[0]), "given"
         elif i in eff:
-            size[i], src = eff[i]
+            size[i], src, _ = eff[i]
         elif n.startswith("probe.compliance"):
             c = probe.axial_compliance if n.endswith("_z") else max(probe.bending_compliance_x,
                                                                     probe.bending_compliance_y)
@@ -294,10 +345,93 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
             size[i], src = BASE_SIZES.get(unit, UNIT_SIZES.get(unit, 1.0)), f"by unit ({unit})"
         source.append(src)
     groups = tuple(parameter_groups(model, spec.names))
-    torque_sized = [i in eff and spec.units[i] == "rad/(N m)" and source[i] != "given" for i in range(spec.size)]
-    physical = frozenset(g for g in set(groups)
-                         if all(torque_sized[i] for i in range(spec.size) if groups[i] == g))
-    return PriorSpec(groups, size, lower, tuple(source), physical, limits(model))
+    kind = [eff[i][2] if i in eff and source[i] != "given" else "" for i in range(spec.size)]
+
+    def every(what: str) -> frozenset:
+        return frozenset(g for g in set(groups) if all(kind[i] == what for i in range(spec.size) if groups[i] == g))
+    return PriorSpec(groups, size, lower, tuple(source), every("physical"), limits(model), prior_only(model, data),
+                     every("maximum"))
+
+
+def both_sides(sign) -> bool:
+    """Whether at least :data:`MIN_SIDE_SHARE` of the entries of ``sign`` lie on either side of zero (the one rule
+    for a sign the data can see apart from a constant)."""
+    sign = np.asarray(sign)
+    return bool(min(np.sum(sign > 0), np.sum(sign < 0)) >= MIN_SIDE_SHARE * len(sign))
+
+
+def _model_inputs(model, data):
+    """The per-point inputs (numpy columns) an effect's :meth:`~arm_model.effects.Effect.sides` and
+    :meth:`~arm_model.effects.Effect.prior_sizes` read: the angles, the gravity torques with a nil one
+    (:data:`NIL_LOAD`) at 0, the last moves, the time stamps."""
+    from arm_model.effects import ModelInputs
+    aux = data.aux
+    tau = None if aux is None or aux.tau_gravity is None else np.array(aux.tau_gravity, dtype=float)
+    if tau is not None:
+        tau[np.abs(tau) <= NIL_LOAD * np.max(np.abs(tau), initial=0.0)] = 0.0
+    motion = None if aux is None or aux.motion is None else np.asarray(aux.motion, dtype=float)
+    time = aux.time if aux is not None and aux.time is not None else data.points.time
+    return ModelInputs(q=list(np.asarray(data.points.q, dtype=float).T), wrench=[0.0] * 6,
+                       tau_gravity=None if tau is None else list(tau.T),
+                       motion=None if motion is None else list(motion.T),
+                       time=None if time is None else np.asarray(time, dtype=float))
+
+
+def side_visits(side, measurement=None, time=None) -> tuple[int, int]:
+    """(runs on the positive side, runs on the negative side) of the per-point ``side`` (-1, 0, +1): the separate
+    visits of each side in the capture order of each measurement (the rows' order, or ``time`` [s] where every
+    point has one); a point with side 0 neither breaks nor starts a run."""
+    side = np.asarray(side, dtype=float)
+    meas = np.zeros(len(side), dtype=object) if measurement is None else np.asarray(measurement, dtype=object)
+    t = None if time is None else np.asarray(time, dtype=float)
+    order = (np.arange(len(side)) if t is None or not np.all(np.isfinite(t))
+             else np.argsort(t, kind="stable"))
+    runs = [0, 0]
+    for m in dict.fromkeys(meas.tolist()):
+        s = side[order[meas[order] == m]]
+        s = s[s != 0]
+        first = np.r_[True, s[1:] != s[:-1]] if len(s) else np.zeros(0, bool)
+        runs[0] += int(np.sum(first & (s > 0)))
+        runs[1] += int(np.sum(first & (s < 0)))
+    return runs[0], runs[1]
+
+
+def _unseen_play(side: np.ndarray, points) -> str | None:
+    """Why the data cannot see a play whose per-point sides are ``side``, or None when they can: both sides hold
+    :data:`MIN_SIDE_SHARE` of the points (:func:`both_sides`) in at least :data:`MIN_SIDE_VISITS` runs each."""
+    pos, neg = int(np.sum(side > 0)), int(np.sum(side < 0))
+    if pos + neg == 0:
+        return f"the side of its play is nil on all {len(side)} points"
+    if not both_sides(side):
+        return (f"{min(pos, neg)} of {len(side)} points on one side of its play (fewer than {MIN_SIDE_SHARE:.0%}): "
+                "the data cannot tell it from the joint's offset")
+    visits = side_visits(side, points.measurement, points.time)
+    if min(visits) < MIN_SIDE_VISITS:
+        return (f"its sides are met in {visits[0]} and {visits[1]} runs of the capture order (fewer than "
+                f"{MIN_SIDE_VISITS} each): the data cannot tell it from a drift while the points were taken")
+    return None
+
+
+def prior_only(model, data) -> dict[int, str]:
+    """{spec index: why} of the effect parameters the data cannot see apart from others: a play
+    (:meth:`~arm_model.effects.Effect.sides`) whose sign is nil on every point (no gravity torque, no motion), whose
+    points hold fewer than :data:`MIN_SIDE_SHARE` on one side (:func:`both_sides`; the joint's offset), or whose
+    sides are each met in fewer than :data:`MIN_SIDE_VISITS` runs of the capture order (:func:`side_visits`; a drift
+    along it)."""
+    if data is None or not len(data):
+        return {}
+    from arm_model.chain import NUMPY_OPS
+    inputs = _model_inputs(model, data)
+    out = {}
+    for e, sl in model.effect_slices():
+        sides = e.sides(model.desc, inputs, NUMPY_OPS)
+        if sides is None:
+            continue
+        for k, side in zip(range(sl.start, sl.stop), sides, strict=True):
+            why = _unseen_play(np.broadcast_to(np.asarray(side, dtype=float), (len(data),)), data.points)
+            if why is not None:
+                out[k] = why
+    return out
 
 
 def variance_ratio(post_var: np.ndarray, prior_sd: np.ndarray) -> np.ndarray:
@@ -318,9 +452,10 @@ def update_scales(scales: dict, spec: PriorSpec, kept, delta: np.ndarray, rho: n
     :data:`BARELY_SEEN`) enter its fixed point: one the data barely see follows the scale the others give (see the
     module docstring); a group whose data determine fewer than :data:`MIN_EFFECTIVE` parameters keeps its scale
     (its evidence is flat), and so does a physical group (:attr:`PriorSpec.physical`); every scale stays in
-    :data:`SCALE_RANGE` and under its group's ceiling (:meth:`PriorSpec.bounded`). ``gamma_G`` is over every
-    parameter of the group. The rounds of :func:`calibration.calibrate.calibrate` move each scale by
-    :func:`secant_gains` times the way to this fixed point."""
+    :data:`SCALE_RANGE` and under its group's ceiling (:meth:`PriorSpec.bounded`; a capped group's,
+    :attr:`PriorSpec.capped`, is 1). ``gamma_G`` is over every parameter of the group. The rounds of
+    :func:`calibration.calibrate.calibrate` move each scale by :func:`secant_gains` times the way to this fixed
+    point."""
     kept = np.asarray(kept, dtype=int)
     new, gamma = dict(scales), {}
     for g, idx in spec.groups_of(kept).items():

@@ -98,6 +98,9 @@ class Problem:
         reference: "fit" (``T_ref_base`` of each session a nuisance unknown, or held at the frame of
             ``data.tracker`` when it has one), "identity" (reference coordinates are base coordinates) or
             "off" (reference columns ignored).
+        prior_only: indices into ``model.spec`` of free parameters the data cannot tell from others
+            (:func:`calibration.prior.prior_only`): their columns of the Jacobian are left out (zero), so that only
+            a prior holds them.
     """
     model: ArmModel
     data: CalibrationData
@@ -106,9 +109,11 @@ class Problem:
     free_radius: bool = False
     distances: bool = True
     reference: str = "fit"
+    prior_only: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
 
     def __post_init__(self) -> None:
         self.free = np.asarray(self.free, dtype=int)
+        self.prior_only = np.asarray(self.prior_only, dtype=int)
         self._build()
 
     # -- structure --------------------------------------------------------------------------------
@@ -420,6 +425,7 @@ class Problem:
         if jp is None:
             return Evaluation(r, x)
         jp /= self.sigma[:, None]
+        jp[:, np.isin(self.free, self.prior_only)] = 0.0
         ti, tj, tv = (np.concatenate(a) if a else np.zeros(0, int) for a in sparse)
         tv = tv.astype(float) / self.sigma[ti] if len(ti) else np.zeros(0)
         jt = sp.csr_matrix((tv, (ti, tj)), shape=(self.n_rows, self.n_nuisance))

@@ -16,7 +16,7 @@ from arm_model.log import counted
 from arm_model.shipped import provenance
 
 from .calibrate import CalibrationResult, display_unit
-from .model_output import model_check, model_paths, write_model
+from .model_output import calibrated_name, model_check, model_paths, write_model
 from .validation import with_u
 
 __all__ = ["write_outputs", "plot_residuals", "plot_parameters", "plot_correlation", "plot_conformance",
@@ -315,16 +315,21 @@ def prior_html(result: CalibrationResult) -> list[str]:
     determine."""
     if result.prior_scales is None:
         return []
-    rows = [(g, _fmt(v["scale"], 3) + (" (physical)" if v.get("physical") else ""), len(v["parameters"]),
+    rows = [(g, _fmt(v["scale"], 3) + (" (physical)" if v.get("physical") else " (at most 1)" if v.get("capped")
+                                        else ""), len(v["parameters"]),
              _fmt(v["effective_parameters"], 3),
              "; ".join(v["size_source"])) for g, v in result.prior_groups.items()]
     how = (f"chosen by the evidence together with the noise ({len(result.evidence)} rounds)" if result.evidence
            else "given")
-    return ["<h2>Prior</h2>",
-            f"<p>Each free parameter ~ N(nominal, (scale x plausible size)^2), one scale a group, {how}. "
-            "'determined': the number of the group's parameters the data determine (sum of 1 - posterior/prior "
-            "variance).</p>",
-            reports.html_table(["group", "scale", "parameters", "determined", "plausible size at scale 1"], rows)]
+    out = ["<h2>Prior</h2>",
+           f"<p>Each free parameter ~ N(nominal, (scale x plausible size)^2), one scale a group, {how}. "
+           "'determined': the number of the group's parameters the data determine (sum of 1 - posterior/prior "
+           "variance).</p>",
+           reports.html_table(["group", "scale", "parameters", "determined", "plausible size at scale 1"], rows)]
+    if result.prior_only:
+        out += ["<p>Left to the prior (the data cannot see them; prior-dominated at the prior's centre):</p>",
+                reports.html_table(["parameter", "why"], sorted(result.prior_only.items()))]
+    return out
 
 
 def plot_discrepancy(result: CalibrationResult) -> bytes:
@@ -428,7 +433,7 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError("the output must be a directory", out)
-    name = f"{result.model.desc.name}-calibrated"
+    name = calibrated_name(result.model.desc.name)
     model_files = model_paths(out, name)
     files = {"description": model_files["model"], "covariance": model_files["covariance"],
              "urdf": model_files["urdf"], "summary": out / "summary.json",

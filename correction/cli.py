@@ -92,7 +92,8 @@ def run_ring(args: argparse.Namespace) -> int:
     inputs = {"points": args.points, "artefacts": args.artefacts, "arm": args.arm}
     if args.signals is not None and not args.signals.is_dir():
         raise InputError("--signals must be a folder of <measurement>.csv force signals", args.signals)
-    with output_folder(args.output, [*inputs.values(), *arm_inputs(args)], "ring", input_folders=[args.signals]) as out:
+    with output_folder(args.output, [args.points, args.artefacts, *arm_inputs(args)], "ring",
+                       input_folders=[args.signals]) as out:
         arm = model_from_args(args)
         desc = arm.desc
         points = read_points(args.points, desc.joint_quantities)

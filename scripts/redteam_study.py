@@ -22,8 +22,9 @@ points, 2 um probing noise, campaign seed 3; the robot: robot_hidden_study's Pan
 in 3 sessions, 0.1 mm noise, the third session held out). A change of the readings or of a logged column after
 the simulation keeps the simulator's own rows as the truth's (``Case.truth_points``):
 
-* ``backlash-gravity``: j4's reading lags its true angle by 0.002 deg against the sign of its gravity torque (a
-  gear or bearing play the arm's weight takes up one way or the other);
+* ``backlash-gravity``: j4 sits 0.002 deg beyond its reading to the side its weight pushes it (against the sign of
+  its gravity torque: a gear or bearing play the arm's weight takes up one way or the other, the reading on the
+  drive's side; until 2026-11-27 the campaign put it on the other side, a play no weight closes);
 * ``backlash-motion``: j1's reading lags by 0.002 deg in the direction the joint moved onto each point from the
   point captured before it (hysteresis by the sign of the joint's velocity, the path between two points taken as
   monotone; the campaign's first point from a random side);
@@ -43,7 +44,8 @@ the simulation keeps the simulator's own rows as the truth's (``Case.truth_point
 * ``blunders``: four points moved 10, 20, 30, 40 um (5-20 sigma) by a slip of one reading;
 * ``urdf-truth``: the campaign simulated on the arm's URDF (urdf/aacmm7.urdf: each joint origin off in 6
   components, 20 um and 0.003 deg) and analysed with its DH description (4 per joint);
-* ``panda-backlash``: the Panda's joint 2 and 4 readings off by 0.5 mrad against the sign of their gravity torque;
+* ``panda-backlash``: the Panda's joints 2 and 4 sit 0.5 mrad beyond their readings to the side their weight pushes
+  them (as ``backlash-gravity``);
 * ``panda-hysteresis``: the Panda's joint 2 and 4 readings off by 0.5 mrad by the direction each last turned,
   from the posture before (a robot's backlash as it drives from posture to posture; a session's first posture
   from a random side);
@@ -108,7 +110,7 @@ def _tau_gravity(camp_dict: dict) -> tuple[Case, np.ndarray]:
 def case_backlash_gravity(seed: int = 3) -> Case:
     c, tau = _tau_gravity(_arm_campaign({}, seed))
     q = c.points.q.copy()
-    q[:, 3] -= 0.002 * DEG * np.sign(tau[:, 3])
+    q[:, 3] += 0.002 * DEG * np.sign(tau[:, 3])     # the joint at q + b sign(-tau): JointBacklash's b > 0
     share = float(np.mean(tau[:, 3] > 0))
     return dataclasses.replace(_readings(c, q), what=f"j4 play 0.002 deg by the sign of its gravity torque "
                                f"({share:.0%} positive)")
@@ -221,7 +223,7 @@ def case_panda_backlash(seed: int = 1) -> Case:
     c, tau = _panda(seed)
     q = c.points.q.copy()
     for j in (1, 3):
-        q[:, j] -= 5e-4 * np.sign(tau[:, j])
+        q[:, j] += 5e-4 * np.sign(tau[:, j])
     share = [f"{np.mean(tau[:, j] > 0):.0%}" for j in (1, 3)]
     return _mocap(dataclasses.replace(_readings(c, q), what=f"joints 2 and 4 play 0.5 mrad by the sign of their "
                                       f"gravity torque ({' / '.join(share)} positive)"))

@@ -185,15 +185,24 @@ def robots() -> Path:
 #  calibration_sim acceptance         -> test_calibration_fit truth_within_three_sigma, held_out_..._five_fold
 #  calibration_study dask cluster     -> test_calibration_study monte_carlo_local (dask: only the executor)
 #  joint_play backlash by the loop, Panda -> test_joint_play sign families build/exist (the loop end to end: slow only)
-#  loop_cli residual and --library-only -> test_loop_honesty ..._built_from_the_residual, ..._library_alone
+#  loop_cli residual and --library-only -> test_loop_cross_harmonics ..._built_added_and_recovered,
+#                                       test_loop_honesty ..._library_alone
 #  loop_cross_harmonics library alone -> test_loop_cross_harmonics ..._built_added_and_recovered; test_loop_honesty
+#  loop_cross_harmonics test-set instance gross -> test_loop_cross_harmonics ..._too_small_flag_it_whole (the
+#                                       test set's point test, same data), ..._built_added_and_recovered
 #  loop_effects other seeds (10)      -> test_loop_effects names_recovers_and_halves (seed 3; seeds 4, 5: slow only)
 #  loop_effects eccentricity, probe compliance (seed 3) -> test_loop_cross_harmonics, test_loop_synthesis [lobing];
 #                                       test_loop_effects [force_sensor] and its indistinguishable compliance
+#  loop_effects joint compliance (seed 3) -> test_model_file tip_with_the_loops_model (j2's, found on this arm beside
+#                                       an eccentricity); test_loop_sim_seats hidden compliance, test_loop_real_physics
+#                                       compliance injected (robots: found, within 3 sigma, the held-out spread cut)
 #  loop_real_physics gain injected    -> test_loop_real_physics compliance injected (the same injection and checks)
 #  loop_heldout_verdict UR5 gain      -> test_loop_heldout_verdict three_times_..._u, opt_in_families_offered
 #  loop_hidden_effects coupling, 4th harmonic -> test_loop_hidden_effects linear_coupling, structure_tests_see_a_fourth
 #  loop_honesty 19 of 20 seeds        -> test_loop_honesty ..._on_two_seeds (0, 1), honesty_study (seed 4)
+#  loop_honesty third harmonic built  -> test_loop_honesty ..._library_alone (the family, same campaign);
+#                                       test_loop_synthesis offers_only_what_the_model_lacks (its harmonics);
+#                                       test_loop_cross_harmonics ..._built_added_and_recovered (built, added)
 #  loop_real level cannot be reached  -> test_loop_real units_needed, one_placement (the warning: slow only)
 #  loop_real_default six pairs vs MUKCa -> test_loop_real_default starts_from_joint_compliance (two of six pairs)
 #  loop_real_physics back-high        -> test_loop_real_default (front); test_loop_real_physics compliance injected

@@ -3,12 +3,15 @@ same nuisance unknowns (the tip offset, the artefacts, the reference frame), a c
 on held-out data is said plainly, and ``--holdout-by pose`` validates a campaign of single placements."""
 from __future__ import annotations
 
+import hashlib
 import json
 
 import pytest
 
 from arm_model.cli import main
+from arm_model.shipped import shipped_path, version
 from calibration.validation import worse_than_nominal
+from conftest import NOMINAL
 
 #: a campaign whose arm is exactly its description (no error at all) seen with 20 um of noise: calibrating
 #: can only fit the noise, so on held-out poses the calibrated model is worse than the nominal
@@ -63,6 +66,12 @@ def test_held_out_poses_and_a_calibration_worse_than_the_nominal(exact_fit, caps
                  "--holdout", "0.5", "--holdout-by", "pose", "--no-plots", "-o", str(out)]) == 0
     text = capsys.readouterr()
     s = json.loads((out / "summary.json").read_text())
+    # provenance: the version, and the hashes of the inputs, the arm given by name as the shipped file it is
+    assert s["aacmm_version"] == version()
+    points = sim / "points.csv"
+    assert s["input_sha256"][str(points)] == hashlib.sha256(points.read_bytes()).hexdigest()
+    nominal_sha = hashlib.sha256(NOMINAL.read_bytes()).hexdigest()
+    assert s["input_sha256"][str(shipped_path("urdf/aacmm7.dh.toml"))] == nominal_sha
     held = s["holdout_poses"]
     assert s["holdout_by"] == "pose" and len(held) == 4 * 6          # half of each seat's 12 poses
     assert s["n_points"] == 48 - len(held)

@@ -85,7 +85,7 @@ def test_close_loop_test_set_drop_uses_each_groups_scale(campaign):
     bad = int(np.flatnonzero(c.points.feature == "seat")[5])
     q[bad, 1] += 5e-4                                      # ~0.3 mm: 100 probe sigmas
     data = make_data(replace(c.points, q=q), c.artefacts, model, reference=c.reference_points)
-    flagged_rows, out = flag_test_outliers(model, c.p_true, data, STATED, "fit", 4.0)
+    flagged_rows, out = flag_test_outliers(model, c.p_true, data, STATED, "fit")
     # the gross point and the siblings its seat centre (fitted on the test set) spreads it to; no tracker point
     assert out and {(o["measurement"], o["feature"]) for o in out} == {(c.points.measurement[bad], "seat")}, out
     assert max(o["standardized"] for o in out if o["standardized"] is not None) > 20

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from arm_model.effects import JointCompliance, LateralCompliance, ProbeCompliance, ProbeComplianceMatrix
+from arm_model.effects import JointBacklash, JointCompliance, LateralCompliance, ProbeCompliance, ProbeComplianceMatrix
 from arm_model.model import ArmModel
 from arm_model.sim.quick import SynthSpec, make_campaign
 from calibration import FitOptions, calibrate
@@ -73,16 +73,19 @@ def test_a_fit_without_a_prior_holds_a_compliance_at_its_bound(pulled_negative):
 
 def test_a_negative_compliance_in_a_model_file_is_refused_at_its_key(nominal, tmp_path, capsys):
     """A joint compliance of -5 urad/(N m) was read and applied (the joint turning against its load); a lateral one
-    too; a probe's bending increment that makes its compliance negative in total. Each is refused naming the
+    too; a probe's bending increment that makes its compliance negative in total; a joint's backlash below 0 (a play
+    against the links' weight). Each is refused naming the
     file, the line and the key (exit 2), and a probe increment within the description's compliance is read."""
     from arm_model.model_file import format_model
-    text = format_model(nominal, (JointCompliance(), LateralCompliance(joints=(3,)), ProbeCompliance()))
+    text = format_model(nominal, (JointCompliance(), LateralCompliance(joints=(3,)), ProbeCompliance(),
+                                  JointBacklash(joints=(1,))))
     pts = tmp_path / "p.csv"
     pts.write_text("measurement,feature," + ",".join(f"q{i}_deg" for i in range(1, 8)) + "\nm1,,"
                    + ",".join(["10"] * 7) + "\n")
     cases = [('name = "j1.compliance", value_urad_per_Nm = 0.0', "-5.0", "a compliance cannot be negative"),
              ('name = "j4.lateral_compliance_y", value_urad_per_Nm = 0.0', "-0.5", "a compliance cannot be negative"),
-             ('name = "probe.dcompliance_bend", value_um_per_N = 0.0', "-20.0", "negative in total")]
+             ('name = "probe.dcompliance_bend", value_um_per_N = 0.0', "-20.0", "negative in total"),
+             ('name = "j2.backlash", value_urad = 0.0', "-30.0", "a joint's backlash cannot be negative")]
     for old, new, words in cases:
         assert old in text, old
         model = tmp_path / "m.toml"

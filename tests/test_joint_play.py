@@ -142,14 +142,14 @@ def _clean_fit(nominal):
 
 @pytest.mark.parametrize("least", [None, 0.45])
 def test_the_sign_family_exists_where_the_torque_changes_sign(nominal, least, monkeypatch):
-    """``jN gravity torque sign`` for a joint whose gravity torque takes either sign on at least MIN_SIGN_SHARE
+    """``jN gravity torque sign`` for a joint whose gravity torque takes either sign on at least MIN_SIDE_SHARE
     of the points, its basis that sign; none for a joint whose torque keeps one sign (its sign is a constant,
     the joint's offset)."""
-    from calibration import diagnostics
+    from calibration import prior
     from calibration.diagnostics import families, residual_space
 
     if least is not None:              # the rule's other side: joints this campaign loads on both sides by < 45 %
-        monkeypatch.setattr(diagnostics, "MIN_SIGN_SHARE", least)
+        monkeypatch.setattr(prior, "MIN_SIDE_SHARE", least)
     res = _clean_fit(nominal)
     fams = {f.name: f for f in families(residual_space(res))}
     tau = res.data.aux.tau_gravity
@@ -157,7 +157,7 @@ def test_the_sign_family_exists_where_the_torque_changes_sign(nominal, least, mo
         loaded = np.max(np.abs(tau[:, j])) > 1e-6         # a torque at rounding level has no sign
         share = min(np.mean(tau[:, j] > 0), np.mean(tau[:, j] < 0)) if loaded else 0.0
         fam = fams.get(f"{name} gravity torque sign")
-        assert (fam is not None) == (share >= diagnostics.MIN_SIGN_SHARE), (name, share)
+        assert (fam is not None) == (share >= prior.MIN_SIDE_SHARE), (name, share)
         if fam is not None:
             assert_close(fam.basis[0][1], np.sign(tau[:, j]), atol=0)
     signs = [f for f in fams if f.endswith("gravity torque sign")]
@@ -165,7 +165,7 @@ def test_the_sign_family_exists_where_the_torque_changes_sign(nominal, least, mo
     motion = reading_motion(res.data.points.q, res.data.points.session, res.data.points.time)
     for j, name in enumerate(nominal.joint_names):             # the last move's sign: the same rule
         share = min(np.mean(motion[:, j] > 0), np.mean(motion[:, j] < 0))
-        assert (f"{name} motion sign" in fams) == (share >= diagnostics.MIN_SIGN_SHARE), (name, share)
+        assert (f"{name} motion sign" in fams) == (share >= prior.MIN_SIDE_SHARE), (name, share)
     assert "j1 gravity torque sign" not in fams          # the base joint holds no gravity torque
 
 

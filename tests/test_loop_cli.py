@@ -115,7 +115,8 @@ def test_bad_options_stop_with_one_message(files, tmp_path, capsys):
     assert not out.exists()
 
 
-@pytest.mark.slow   # make test-slow: the API side is held in make test by test_loop_honesty
+@pytest.mark.slow   # make test-slow: the API side is held in make test by test_loop_cross_harmonics (built) and
+#                     test_loop_honesty (the library alone)
 def test_effect_built_from_the_residual_and_library_only(tmp_path, capsys):
     """A third harmonic of the wrist j6 hidden in the simulator's truth: by default the loop builds it from
     the residual (summary.json origin "residual"); with --library-only it adds nothing."""

@@ -1,9 +1,9 @@
-"""Installed use: --version, shipped arms by name, `aacmm examples`, provenance in summaries, and
-(slow) a wheel built and run from another folder without the checkout."""
+"""Installed use: --version, shipped arms by name, `aacmm examples`, provenance (a calibrate summary's:
+tests/test_calibration_baseline.py, with the arm by name), and (slow) a wheel built and run from another folder
+without the checkout."""
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import shutil
 import subprocess
@@ -100,42 +100,6 @@ def test_provenance_hashes_files_and_folders(tmp_path):
     assert p["aacmm_version"] == version()
     assert p["input_sha256"] == {str(a): hashlib.sha256(b"x,y\n").hexdigest(),
                                  str(d / "m1.csv"): hashlib.sha256(b"1\n").hexdigest()}
-
-
-#: a small campaign (about 100 points): what is checked is the summary's provenance, not the fit
-SMALL_CAMPAIGN = """seed = 5
-arm = "aacmm7"
-sensor = "xyz"
-[noise]
-probing_repeatability_um = 2.0
-[[task]]
-kind = "ballbar"
-positions = 6
-length_mm = 600.0
-points_per_sphere = 4
-[[task]]
-kind = "seat"
-articulations = 6
-measurements = 4
-[[task]]
-kind = "sphere"
-points = 7
-measurements = 4
-"""
-
-
-def test_calibrate_summary_carries_version_and_input_hashes(tmp_path):
-    out = tmp_path / "sim"
-    (tmp_path / "campaign.toml").write_text(SMALL_CAMPAIGN)
-    assert main(["simulate", str(tmp_path / "campaign.toml"), "-o", str(out), "--no-signals"]) == 0
-    pts, art = out / "points.csv", out / "artefacts.toml"
-    assert main(["calibrate", str(pts), str(art), "--arm", "aacmm7", "--no-plots",
-                 "-o", str(tmp_path / "cal")]) == 0
-    s = json.loads((tmp_path / "cal" / "summary.json").read_text())
-    assert s["aacmm_version"] == version()
-    assert s["input_sha256"][str(pts)] == hashlib.sha256(pts.read_bytes()).hexdigest()
-    nominal_sha = hashlib.sha256(NOMINAL.read_bytes()).hexdigest()
-    assert s["input_sha256"][str(shipped_path("urdf/aacmm7.dh.toml"))] == nominal_sha
 
 
 def test_pyproject_licence_is_an_spdx_string():

@@ -276,5 +276,5 @@ def test_an_effect_given_twice_is_named_at_the_option(tmp_path, capsys):
     rc, err = _run(["calibrate", seats / "front" / "points.csv", seats / "artefacts.toml", "--arm",
                     seats / "panda-with-inertials.urdf", "--tip-frame", "ball_link", "--effect", "eccentricity",
                     "--effect", "eccentricity", "-o", out], capsys)
-    assert rc == 2 and "--effect eccentricity given more than once" in err and ".urdf" not in err
+    assert rc == 2 and "argument --effect: eccentricity given more than once" in err and ".urdf" not in err
     assert not out.exists()

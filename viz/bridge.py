@@ -103,7 +103,7 @@ def _bridge_class():
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = argparse.ArgumentParser(prog="viz.bridge", description=__doc__)
     ap.add_argument("--host", default="127.0.0.1")
     ap.add_argument("--port", type=int, default=None, help="web port; default: the first free one from 7000")
     ap.add_argument("--parent-pid", type=int, default=None, help="stop when this process is gone")

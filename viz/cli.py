@@ -27,7 +27,7 @@ from arm_model.cli_options import (
 )
 from arm_model.errors import resolved
 from arm_model.output import output_file
-from arm_model.uncertainty_cli import add_input_options
+from arm_model.uncertainty_cli import INPUT_OPTIONS, add_input_options, refuse_unused
 
 from .errors import ViewerError
 from .placement import place_features
@@ -63,7 +63,7 @@ def register(sub) -> None:
                       help="show the arm at the N-th point of the selection, file order (default 1)")
     pose.add_argument("--animate", action="store_true",
                       help="animate the arm through every point of the selection (embedded in --html pages)")
-    p.add_argument("--points-per-s", "--fps", dest="fps", type=POINTS_PER_S, default=2.0, metavar="F",
+    p.add_argument("--points-per-s", "--fps", dest="fps", type=POINTS_PER_S, default=None, metavar="F",
                    help="when animating: points shown a second, 0.001 to 10000 (default 2; --fps is the older "
                         "spelling; it is not the live view's display rate)")
     p.add_argument("--scale", type=SCALE, default=None,
@@ -115,6 +115,12 @@ def _selection(points, measurement: str | None):
 
 
 def run(args: argparse.Namespace) -> int:
+    refuse_unused(args, args.ellipsoids, "the ellipsoids", "add --ellipsoids",
+                  INPUT_OPTIONS + (("--ellipsoid-scale", "ellipsoid_scale"),))
+    refuse_unused(args, args.animate, "the animation", "add --animate", (("--points-per-s", "fps"),))
+    refuse_unused(args, args.screenshot is not None, "the screenshot", "add --screenshot OUT.png",
+                  (("--browser", "browser"),))
+    args.fps = 2.0 if args.fps is None else args.fps
     inputs = [f for f in (args.points, *arm_inputs(args), args.artefacts, args.residuals) if f is not None]
     if args.html is not None and args.screenshot is not None and resolved(args.html) == resolved(args.screenshot):
         raise InputError("--html and --screenshot name the same file", args.html)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import csv
 import logging
+import os
 import signal
 import time
 from pathlib import Path
@@ -62,7 +63,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "and joint-limit events as they happen, refit the features of a plan after each point, and "
                     "record everything in the session folder as it goes (docs/live.md).",
         epilog="Exit status: 0 the stream ended; 2 a bad header, option or file (nothing written), or a bad line "
-               "with --strict (the session is kept); 130/143 Ctrl-C/SIGTERM (the session is kept, complete up "
+               "with --strict or a stream that failed (a connection reset: the session is kept, said partial); "
+               "130/143 Ctrl-C/SIGTERM (the session is kept, complete up "
                "to the last sample read).")
     p.add_argument("source", help="a recorded stream (a file: replayed at its time stamps, see --speed), '-' "
                                   "(standard input), tcp://HOST:PORT (connect to a server sending the lines) or "
@@ -76,7 +78,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--measurement", default=None, metavar="ID",
                    help="the measurement id written on every point of the session (default: the plan's, else the "
                         "session folder's name)")
-    p.add_argument("--speed", type=_speed, default=1.0,
+    p.add_argument("--speed", type=_speed, default=None,
                    help=f"replay a file at this many times real time, {MIN_SPEED:g} to 1e6 (default 1; 0: as fast as "
                         "possible)")
     p.add_argument("--rate-Hz", type=number_in(*RATE_HZ_RANGE), default=None,
@@ -182,7 +184,7 @@ def run_live(args: argparse.Namespace) -> int:
     from arm_model.live.record import check_new_folder
     from arm_model.live.samples import SampleLayout
     from arm_model.live.sources import open_source
-    from arm_model.uncertainty_cli import inputs_from_args
+    from arm_model.uncertainty_cli import inputs_from_args, refuse_unused
     if args.plan is not None and args.feature is not None:
         raise InputError("give --plan or --feature, not both")
     given = [o for o, v in (("--port", args.port), ("--fps", args.fps), ("--linger-s", args.linger_s)) if v is not None]
@@ -194,6 +196,12 @@ def run_live(args: argparse.Namespace) -> int:
     given = [o for o, v in force.values() if v is not None]
     if given and args.contact == "trigger":     # a trigger contact lasts while the button is held, whatever the force
         raise InputError(f"{', '.join(given)}: option(s) of force contacts, which --contact trigger does not use")
+    file = _is_file(args.source)        # a file is replayed at its time stamps; a stream comes as it comes
+    refuse_unused(args, file, "a file's replay", f"{args.source} is a stream, taken as its lines come",
+                  (("--speed", "speed"),))
+    refuse_unused(args, not file, "a stream that may fall silent", f"the file {args.source} is read to its end",
+                  (("--stop-after-idle-s", "stop_after_idle_s"),))
+    args.speed = 1.0 if args.speed is None else args.speed
     try:
         contact = ContactOptions(source=args.contact, **{k: v for k, (_, v) in force.items() if v is not None})
     except ValueError as exc:
@@ -224,12 +232,22 @@ def _is_file(spec: str) -> bool:
 
 
 def _status(args: argparse.Namespace, source: LineSource, files: list) -> dict:
-    from arm_model.shipped import provenance
-    tip = ["aacmm", "tip", "points.csv", "--arm", str(args.arm)]
+    """session.json's first keys; ``reproduce``: the command that, run in the session folder, writes its tips.csv
+    again byte for byte (a file it names is named from there; the points' last moves are points.csv's
+    q1_move_sign ... columns, which a joint's hysteresis needs and every session with a folder writes)."""
+    import shlex
+
+    from arm_model.shipped import SHIPPED_ARMS, provenance
+
+    def there(path) -> str:     # a relative path as seen from the session folder
+        if Path(path).is_absolute() or (str(path) in SHIPPED_ARMS and not Path(path).exists()):
+            return str(path)
+        return os.path.relpath(Path(path).absolute(), Path(args.output).absolute())
+    tip = ["aacmm", "tip", "points.csv", "--arm", there(args.arm)]
     tip += ["--tip-frame", args.tip_frame] if args.tip_frame else []
     tip += ["--base-frame", args.base_frame] if getattr(args, "base_frame", None) else []
     tip += [x for name, v in getattr(args, "hold_joint", None) or () for x in ("--hold-joint", f"{name}={v!r}")]
-    tip += ["--masses", str(args.masses)] if args.masses else []
+    tip += ["--masses", there(args.masses)] if args.masses else []
     for opt in ("encoder_resolution_deg", "u_compliance_rel", "u_probing_um", "u_model_discrepancy_um"):
         if getattr(args, opt, None) is not None:
             tip += ["--" + opt.replace("_", "-"), repr(getattr(args, opt))]
@@ -237,7 +255,7 @@ def _status(args: argparse.Namespace, source: LineSource, files: list) -> dict:
         tip += ["--u-force-N", *map(repr, args.u_force_N)]
     return {"source": source.name, "speed": args.speed if source.replay else None,
             "plan": None if args.plan is None else str(args.plan), "feature": args.feature,
-            "reproduce": " ".join(tip + ["--uncertainty", "-o", "tips-again.csv"]),
+            "reproduce": shlex.join(tip + ["--uncertainty", "-o", "tips-again.csv"]),
             **provenance([f for f in files if f is not None])}
 
 
@@ -290,7 +308,9 @@ def _run(args: argparse.Namespace, source: LineSource, session: Session, layout:
             if view is not None:
                 view.update()
     except OSError as exc:
-        status, message, code = "stopped", f"the stream failed: {exc.strerror or exc}", 2
+        status, code = "stopped", 2
+        message = (f"{exc.filename or source.name}: the stream failed: {exc.strerror or exc}; the session is partial: "
+                   "the samples the stream had still to send never came")
     if stop.reason and code == 0:
         status = stop.reason
         message = "interrupted (Ctrl-C)" if status == "interrupted" else "terminated (SIGTERM)"

@@ -22,6 +22,11 @@ from .errors import ViewerError
 __all__ = ["MeshcatServer"]
 
 _PROJECT_ROOT = Path(__file__).resolve().parents[1]
+#: the server process's program: viz/bridge.py run as ``__main__`` by its path, not as ``-m viz.bridge``, which would
+#: import the viz package first (its ``__init__`` loads scipy and the arm model the bridge never uses: 0.5 s of CPU
+#: at every start, measured); the argument after it, "viz.bridge", names the process and is dropped
+_BRIDGE_PROGRAM = ("import runpy, sys; del sys.argv[1]; "
+                   f"runpy.run_path({str(Path(__file__).with_name('bridge.py'))!r}, run_name='__main__')")
 
 
 class MeshcatServer:
@@ -73,7 +78,7 @@ class MeshcatServer:
         """Start the server process and connect a visualizer; raises :class:`ViewerError`."""
         if self._proc is not None:
             return self
-        cmd = [sys.executable, "-u", "-m", "viz.bridge", "--host", self.host,
+        cmd = [sys.executable, "-u", "-c", _BRIDGE_PROGRAM, "viz.bridge", "--host", self.host,
                "--parent-pid", str(os.getpid())]
         if self.port is not None:
             cmd += ["--port", str(self.port)]

@@ -133,10 +133,10 @@ def single_feature_plan(spec: str) -> SessionPlan:
         raise InputError(f"--feature must be KIND:ID or KIND:ID:DIAMETER_MM, got {spec!r}")
     text = f'[[feature]]\nid = {_toml_str(parts[1])}\nkind = {_toml_str(parts[0])}\n'
     if len(parts) == 3:
-        try:
-            d = float(parts[2])
-        except ValueError:
-            raise InputError(f"--feature: the diameter must be a number in mm, got {parts[2]!r}") from None
+        from ..csv_io import parse_number
+        d = parse_number(parts[2])      # the one rule of a number (ASCII, no '_': float() took '2_5' and '١٢')
+        if d is None:
+            raise InputError(f"--feature: the diameter must be a number in mm, got {parts[2]!r}")
         text += f"diameter_mm = {d!r}\n"
     try:
         return parse_plan(text, "--feature")

@@ -82,9 +82,8 @@ def check_new_folder(folder: str | Path, inputs: Iterable = ()) -> Path:
     nothing is created."""
     folder = Path(folder)
     guard_output(folder, inputs)
-    folder = resolved(folder) if folder.is_symlink() else Path(os.path.abspath(folder))
-    _refuse_existing(folder)
-    return folder
+    _refuse_existing(folder)    # as named, links followed: a link to a pipe (/dev/stdout) resolves to no path
+    return resolved(folder) if folder.is_symlink() else Path(os.path.abspath(folder))
 
 
 class SessionRecord:

@@ -9,8 +9,9 @@
 
 Every source yields ``(line number, bytes of the line without its end)`` and, while nothing comes, an
 idle ``None`` at least every :data:`TICK_S` seconds (so that the session flushes its record and the
-view stays alive). A stream ends at its end (end of file, the connection closed); a UDP source never
-ends by itself (``--stop-after-idle-s``, Ctrl-C or SIGTERM end it).
+view stays alive). A stream ends at its end (end of file, the connection closed); a connection reset (or
+broken otherwise) is an ``OSError`` naming the connection, never an end; a UDP source never ends by itself
+(``--stop-after-idle-s``, Ctrl-C or SIGTERM end it).
 """
 from __future__ import annotations
 
@@ -175,8 +176,8 @@ class _TcpSource(_FdSource):
     def _read(self) -> bytes:
         try:
             return self._sock.recv(_CHUNK)
-        except ConnectionError:
-            return b""
+        except ConnectionError as exc:  # a reset is no end of the stream: what the server had still to send is lost
+            raise OSError(exc.errno, f"the server broke the connection ({exc.strerror or exc})", self.name) from None
 
 
 class _UdpSource(LineSource):

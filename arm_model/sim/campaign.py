@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..description import ArmDescription
-from ..errors import InputError, did_you_mean, parse_toml, read_text
+from ..errors import MAX_ID_LENGTH, InputError, did_you_mean, parse_toml, read_text
 from ..shipped import SHIPPED_ARMS, shipped_path
 from ..toml_lines import key_path_text, toml_key_lines
 from ..units import SMALLEST_ARTEFACT_M, implausible, split_unit
@@ -149,6 +149,8 @@ _DEFAULT_CONE = {"ring": 0.0, "sphere": math.radians(30.0), "plane": math.radian
                  "mocap": 0.0}
 _ID = {"ring": "ring", "sphere": "sphere", "plane": "plane", "seat": "seat", "ballbar": "bar",
        "tracker": "nest", "mocap": "pose"}
+#: the longest suffix a measurement id adds to its task's id ("-pos-07", "-07-12"; counts up to 10^6 points)
+_ID_SUFFIX = 32
 
 
 @dataclass(frozen=True)
@@ -629,6 +631,9 @@ def _task(ctx, t, i: int, ids: dict[str, str], sensor: str) -> Task:
     tid = o.pop("id") or _ID[kind]
     if not re.fullmatch(r"[A-Za-z0-9_.\-]+", tid):
         raise ctx.error(f"'id' {tid!r} may hold letters, digits, '_', '.', '-' only", tbl, "id")
+    if len(tid) > MAX_ID_LENGTH - _ID_SUFFIX:      # its measurements' ids ("<id>-pos-07") are ids the reader takes
+        raise ctx.error(f"'id' must be at most {MAX_ID_LENGTH - _ID_SUFFIX} characters long (a measurement id adds "
+                        f"its number to it, and an id is at most {MAX_ID_LENGTH}), got {len(tid)}", tbl, "id")
     if tid in ids:
         raise ctx.error(f"task id '{tid}' is used twice", tbl, "id")
     ids[tid] = kind

@@ -1,14 +1,16 @@
 """Gross points: the design set's left out before any effect is weighed, by the base fit; the test set's flagged,
 never left out, by the base model with its parameters held (decided once, so they favour no model). Both are
-``calibrate``'s own ``--drop-outliers`` (:func:`calibration.calibrate.calibrate` with ``drop_outliers``): a point's
-rows tested together by their group deletion (the shared leverage solve of
-:func:`calibration.discrepancy.point_tests`), the worst of each measurement dropped and the fit redone, in rounds; a
-point its feature needs is kept. Points only: a certified length off under the base model is the evidence of what
-the model lacks (thermal growth, a scale error), which the loop is there to find (dropped, a simulated thermal
-campaign's test set lost its 14.6-sigma ball bar and the held-out gain of thermal growth fell from 53 % to 16 %).
-A held-out figure that leaves out the points the test flags is not a prediction of the test set: it drops the
-hardest points (on the real TALOS capture, two postures of 30 at 4.2-4.4, which the model predicts like any other),
-so the loop's figures keep them and give the figures without them beside, labelled."""
+``calibrate``'s own default gross-error rule (:func:`calibration.calibrate.calibrate` with its ``gross_threshold``,
+:data:`~calibration.options.GROSS_THRESHOLD`, at the noise the fit estimates): a point's rows tested together by
+their group deletion (the shared leverage solve of :func:`calibration.discrepancy.point_tests`), the largest left
+out and the fit redone, one at a time; a point its feature needs is kept. One rule, one threshold: the loop's own
+at 4 at the stated sigmas dropped clean postures of the real TALOS capture that ``calibrate`` keeps (random
+halves 0.793 / 0.674 mm against ``calibrate``'s 0.684 / 0.679). Points only: a certified length off under the
+base model is the evidence of what the model lacks (thermal growth, a scale error), which the loop is there to
+find (dropped, a simulated thermal campaign's test set lost its 14.6-sigma ball bar and the held-out gain of
+thermal growth fell from 53 % to 16 %). A held-out figure that leaves out the points the test flags is not a
+prediction of the test set: it drops the hardest points, so the loop's figures keep them and give the figures
+without them beside, labelled."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -38,28 +40,29 @@ def dropped_entry(o: Outlier) -> dict:
 
 
 def drop_design_outliers(design: CalibrationData, fit) -> tuple[CalibrationResult, CalibrationData, list]:
-    """The base fit of ``design`` by ``fit(data, drop_outliers=True)`` (the loop's
-    :meth:`~calibration.loop.state.LoopState.fit` of the base model): calibrate's ``--drop-outliers``;
-    returns that fit, the data it kept and what it dropped (:func:`dropped_entry`)."""
-    res = fit(design, drop_outliers=True)
-    return res, res.data, [dropped_entry(o) for o in res.dropped]
+    """The base fit of ``design`` by ``fit(data, gross=True)`` (the loop's
+    :meth:`~calibration.loop.state.LoopState.fit` of the base model): calibrate's default fit with its gross
+    errors left out; returns that fit, the data it kept and what it left out (:func:`dropped_entry`)."""
+    res = fit(design, gross=True)
+    return res, res.data, [dropped_entry(g.outlier) for g in res.gross]
 
 
-def flag_test_outliers(model, p, test: CalibrationData, weights, reference, threshold, design=None, limit=None):
-    """The gross points of the test set under the base model ``(model, p)``: those calibrate's
-    ``--drop-outliers`` at ``threshold`` drops with every parameter held at ``p`` (only the nuisance unknowns
-    fitted: the test measurements' centres and frames, or, with ``design``, each feature's over its design and test
-    poses, only the test poses then being tested); with them the other points of a test instance they leave with
-    too few points for its own fit (:func:`_too_small`); at most ``limit`` points tested out (None: no limit).
+def flag_test_outliers(model, p, test: CalibrationData, weights, reference, design=None, limit=None):
+    """The gross points of the test set under the base model ``(model, p)``: those calibrate's gross-error rule
+    (:data:`~calibration.options.GROSS_THRESHOLD`) leaves out with every parameter held at ``p`` and the noise
+    ``weights`` (only the nuisance unknowns fitted: the test measurements' centres and frames, or, with
+    ``design``, each feature's over its design and test poses, only the test poses then being tested); with them
+    the other points of a test instance they leave with too few points for its own fit (:func:`_too_small`); at
+    most ``limit`` points tested out (None: calibrate's 5 %).
     Returns (a (len(test),) bool mask of those points, their entries, :func:`dropped_entry`)."""
     data = test if design is None else concat(design, test)
     offset = 0 if design is None else len(design)
     values = {n: float(v) for n, v in zip(model.spec.names, p, strict=True)}
     res = calibrate(model, data, FitOptions(values=values, free=[], weights=weights, reference=reference,
-                                            prior_scale=None, drop_outliers=True, outlier_threshold=threshold,
-                                            gross_threshold=None, discrepancy=False, outlier_lengths=False,
+                                            prior_scale=None, discrepancy=False, outlier_lengths=False,
                                             outlier_limit=limit))
-    mine = [replace(o, point=o.point - offset) for o in res.dropped if o.point >= offset]
+    mine = [replace(g.outlier, point=g.outlier.point - offset) for g in res.gross
+            if g.outlier.point is not None and g.outlier.point >= offset]
     out = [dropped_entry(o) for o in mine]
     bad = [o.point for o in mine]
     if design is None:

@@ -17,9 +17,9 @@ SAME_SIGNATURE = 0.99
 PHYSICS = "included as physics"
 #: held-out improvement (fraction) within which a smaller nested candidate is preferred
 PARSIMONY = 0.01
-#: the loop's decisions use the noise estimated from the data when a group's residual differs from its
-#: stated sigma by more than this factor (the stated sigmas are wrong); within it the stated sigmas are kept,
-#: since a missing effect inflates the residual of the groups it acts on and re-weighting would hide it
+#: the verdict says a default sigma (one the user did not state) was replaced by the noise estimated from the data
+#: when they differ by more than this factor (every fit of the loop weighs the rows by the estimate, as calibrate's
+#: default fit does; within the factor the default would have done as well)
 NOISE_OFF = 2.0
 #: how the decisions' folds are made: by whole measurement, by pose inside each feature, or the first
 #: that can reach the significance level
@@ -56,7 +56,6 @@ class LoopSettings:
     seed: int = 0
     rank_tol: float = DEFAULT_RANK_TOL
     drop_outliers: bool = True
-    outlier_threshold: float = 4.0
     holdout: tuple = ()
     fold_by: str = "auto"
     weights_from_data: bool = True

@@ -42,7 +42,7 @@ from ..diagnostics import (
     structure_tests,
 )
 from ..model_output import refine_torques, with_fitted_torques
-from ..options import FitOptions
+from ..options import GROSS_THRESHOLD, FitOptions
 from ..synthesis import RESIDUAL, synthesise as build_effects
 from .crossval import fold_fit, warm_start
 from .decide import (
@@ -57,7 +57,7 @@ from .decide import (
 from .folds import choose_folds, outer_split
 from .outliers import drop_design_outliers, flag_test_outliers, outlier_budget
 from .result import LoopResult, Stage
-from .settings import LEGACY_RESOLUTION, NOISE_OFF, LoopSettings
+from .settings import LEGACY_RESOLUTION, LoopSettings
 from .state import LoopState, Screening, log
 from .verdict import ADDED, builds_from_residual, heldout_check, judged, residual_over_stated, verdict_text
 
@@ -92,7 +92,7 @@ class Stop:
 
 def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
     """The data and their split, the base model calibrated on the design set (outliers dropped, the noise
-    estimated when the stated uncertainties are off), the test set's outliers, the folds of the decisions
+    estimated), the test set's outliers, the folds of the decisions
     (and whether their test can reach its level), and the base stage."""
     points, desc = camp.points, camp.desc
     has_t = points.temperature is not None and np.all(np.isfinite(points.temperature))
@@ -108,31 +108,29 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
     scale = _prior_scale(model, design, camp, stated, settings, say)
     # the loop drops its outliers itself, once, on the base model (``settings.drop_outliers``): every model it
     # compares is fitted on the same points (no gross errors left out fit by fit)
-    options = FitOptions(values=camp.values, rank_tol=settings.rank_tol, outlier_threshold=settings.outlier_threshold,
-                         prior_scale=scale, min_resolution=LEGACY_RESOLUTION if scale is None else None,
-                         gross_threshold=None)
+    options = FitOptions(values=camp.values, rank_tol=settings.rank_tol, prior_scale=scale,
+                         min_resolution=LEGACY_RESOLUTION if scale is None else None, gross_threshold=None)
     state = LoopState(settings, desc, say, data, design, test, test_by, test_rows, options, camp.free, camp.hold,
                       model.spec.size, stated, cands, skipped, model, stated, remaining=list(cands),
                       families=camp.families)
     say("calibrating the base model on the design set")
-    # the outliers of the design set are found at the stated sigmas, by calibrate's point test (step 2 of
-    # docs/close-loop.md); the base fit is then calibrate's default fit of the design set without them (the noise
-    # estimated jointly with the prior's scales in the evidence's rounds, from the stated sigmas; the torques
-    # refined as calibrate refines them, :func:`torques_at_equilibrium`). Dropped at the noise estimated with
-    # them, a 20 um campaign stated at 10 um lost a clean design pose at 4.03 and with it the budget that
-    # flags a test marker 3 mm off (tests/test_tracker.py)
+    # the base fit is calibrate's default fit of the design set: the noise estimated jointly with the prior's
+    # scales in the evidence's rounds (from the stated sigmas), the gross points left out by calibrate's own rule
+    # at the noise it estimates (points only, at most the loop's budget: step 2 of docs/close-loop.md), the torques
+    # then refined as calibrate refines them (:func:`torques_at_equilibrium`)
     if settings.drop_outliers:
-        first, state.design, state.dropped["design"] = drop_design_outliers(state.design, partial(state.fit, model))
+        result, state.design, state.dropped["design"] = drop_design_outliers(
+            state.design, partial(state.fit, model, reweight=True))
         if state.dropped["design"]:
-            say(f"  {len(state.dropped['design'])} outlier(s) of the design set dropped (base model, calibrate's "
-                f"point test at {settings.outlier_threshold:g}); they stay out of every later fit")
-        if first.gross_kept:
-            say(f"  outliers of the design set kept: {first.gross_kept}")
-    result = state.fit(model, state.design, reweight=True)
-    # each group's noise over its stated sigma (the fit's weights times what its residual still says)
-    off = [v for v in result.variance if v["estimated"] and not 1 / NOISE_OFF < v["factor"] * result.weights.factor(
-        v["group"]) / stated.factor(v["group"]) < NOISE_OFF]
-    if settings.weights_from_data and off:
+            say(f"  {len(state.dropped['design'])} outlier(s) of the design set dropped (base fit, calibrate's "
+                f"gross-error test at {GROSS_THRESHOLD:g}); they stay out of every later fit")
+        if result.gross_kept:
+            say(f"  outliers of the design set kept: {result.gross_kept}")
+    else:
+        result = state.fit(model, state.design, reweight=True)
+    # every decision and later fit weighs the rows by the noise this fit estimated (re-estimated at each model
+    # added, fit_stage), as calibrate's default fit does: nothing is judged against the stated sigmas
+    if settings.weights_from_data:
         state.weights = result.weights
         if _noise(result):
             say("  " + _noise(result)[2:] + " (the stated uncertainties are starting values)")
@@ -154,10 +152,10 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
 def _flag_test(state: LoopState, model: ArmModel, result: CalibrationResult) -> None:
     """The test points the base model's point test flags (:func:`~calibration.loop.outliers.flag_test_outliers`):
     reported, never left out of a held-out figure (each figure is also given without them, labelled)."""
-    s, say = state.settings, state.say
+    say = state.say
     try:
         state.flagged, state.flagged_entries = flag_test_outliers(
-            model, result.p, state.test, state.weights, result.reference_mode, s.outlier_threshold,
+            model, result.p, state.test, state.weights, result.reference_mode,
             None if state.test_by == "measurement" else state.design,
             max(0, outlier_budget(len(state.data)) - len(state.dropped["design"])))
     except NumericalError:        # e.g. two tracker poses: a frame and the markers' offsets undetermined
@@ -365,15 +363,15 @@ def run_stage(state: LoopState) -> tuple[Decision, Stage, Screening] | Stop:
 
 
 def fit_stage(state: LoopState, decision: Decision, scr: Screening) -> Stage:
-    """The model with the decision's candidate, recalibrated on the design set (the noise re-estimated if the
-    loop estimates it; the candidate's parameters with their plausible sizes), as a new stage with its figures
+    """The model with the decision's candidate, recalibrated on the design set (the noise re-estimated at it, as
+    the base fit estimates it, if the loop estimates the noise; the candidate's parameters with their plausible
+    sizes), as a new stage with its figures
     on the outer test set and the plots of its signature before and after. The state is not changed."""
     cand = decision.candidate
     fam_name, before = plot_family(scr.space, cand)
     model = state.model.with_effects(cand.effect)
     state.say(f"adding {cand.name}; recalibrating")
-    result = state.fit(model, state.design, candidate_priors(model, cand, scr.test_of(cand)),
-                       reweight=state.weights != state.stated)
+    result = state.fit(model, state.design, candidate_priors(model, cand, scr.test_of(cand)), reweight=True)
     after = None
     if fam_name is not None:
         sp2 = residual_space(result)

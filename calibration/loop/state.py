@@ -16,7 +16,7 @@ from ..candidates import Candidate
 from ..data import CalibrationData, Weights, concat
 from ..diagnostics import GroupTest, ResidualSpace
 from ..model_output import at_equilibrium
-from ..options import FitOptions
+from ..options import GROSS_THRESHOLD, FitOptions
 from .crossval import CVResult, FoldFit
 from .folds import Folds
 from .heldout import heldout_figures
@@ -68,8 +68,8 @@ class LoopState:
             also left out in the figures labelled so); flagged_entries: their descriptions.
 
     Changed by the stages:
-        weights: the uncertainties every fit starts from (estimated from the data when the stated ones are
-            off by more than :data:`~calibration.loop.settings.NOISE_OFF`).
+        weights: the uncertainties every fit starts from: the noise estimated from the data by the current model's
+            fit on the design set (the stated ones with ``settings.weights_from_data`` False).
         priors: plausible sizes of the added effects' parameters (at least ten times their screening estimate).
         model, result: the current model and its fit on the design set; stages: one per model.
         remaining: the candidates not added; synthesised: every candidate built from the residual;
@@ -122,15 +122,15 @@ class LoopState:
 
     def fit(self, model: ArmModel, data: CalibrationData, extra_priors: dict | None = None, reweight: bool = False,
             hold: tuple = (), weights: Weights | None = None, discrepancy: bool = True,
-            start: dict | None = None, drop_outliers: bool = False) -> CalibrationResult:
+            start: dict | None = None, gross: bool = False) -> CalibrationResult:
         """``calibrate`` of ``model`` on ``data`` with the loop's options, the current ``weights`` (or those
         given) and ``priors`` (and ``extra_priors``): the parameters ``free`` and those of every effect the loop
         added, less the user's ``hold`` and the names ``hold``; the noise re-estimated from the data only with
         ``reweight``; ``discrepancy`` False: no model discrepancy (a fold's fit, which only predicts its held-out
         units); ``start``: starting values of free parameters by name (a warm start; the prior's centre and the
-        held parameters' values stay the given ones); ``drop_outliers``: calibrate's ``--drop-outliers``
-        (the base fit's,
-        :func:`~calibration.loop.outliers.drop_design_outliers`)."""
+        held parameters' values stay the given ones); ``gross``: calibrate's default gross-error rule
+        (:data:`~calibration.options.GROSS_THRESHOLD`; points only, at most the loop's budget): the base fit's,
+        :func:`~calibration.loop.outliers.drop_design_outliers` (every other fit keeps every point)."""
         names = fitted_names(model, self.free, self.hold, self.base_size, hold, data)
         # the added effects' plausible sizes serve the practical-resolution rule without a prior; with one,
         # the prior's own sizes (calibration.prior.prior_spec) and the evidence's scales apply
@@ -138,8 +138,8 @@ class LoopState:
         return calibrate(model, data, replace(
             self.options, free=names, weights=self.weights if weights is None else weights, priors=priors, start=start,
             weights_from_data=reweight and self.settings.weights_from_data, discrepancy=discrepancy,
-            drop_outliers=drop_outliers, outlier_lengths=False,
-            outlier_limit=outlier_budget(len(self.data)) if drop_outliers else None))
+            gross_threshold=GROSS_THRESHOLD if gross else None, outlier_lengths=False,
+            outlier_limit=outlier_budget(len(self.data)) if gross else None))
 
     def test_figures(self, model: ArmModel, result: CalibrationResult, weights: Weights | None = None) -> dict:
         """Figures of ``(model, result.p)`` on the outer test set (:func:`~calibration.loop.heldout.heldout_figures`),

@@ -26,10 +26,9 @@ def residual_over_stated(result, stated=None) -> tuple[float, str]:
     """By how much the final fit's residual exceeds the *stated* uncertainties ``stated``
     (:class:`~calibration.data.Weights`), and the groups' figures as words.
 
-    The fit's own ``s0`` is no measure of it when the loop re-estimated the noise from the data (a group's
-    residual off its stated sigma by more than :data:`~calibration.loop.settings.NOISE_OFF`): its weights then
-    are the residual's own scatter and ``s0`` is near 1 whatever the residual holds. So each row group whose
-    noise the fit estimated gives its scatter against its stated sigma (``estimate_um / stated``), and the
+    The fit's own ``s0`` is no measure of it when the loop estimated the noise from the data (its default): its
+    weights then are the residual's own scatter and ``s0`` is near 1 whatever the residual holds. So each row group
+    whose noise the fit estimated gives its scatter against its stated sigma (``estimate_um / stated``), and the
     groups are pooled by their redundancy, as ``s0`` pools the rows; without a stated sigma or an estimated
     group, ``s0``. A sigma the user did not state (a default, :meth:`~calibration.data.Weights.stated_sigma_of`)
     is no statement: its group is judged against its estimate (``s0``) and said by :func:`estimated_words`."""
