@@ -6,6 +6,10 @@
 - ``angle_units``: every angle of every revolute joint, in every row, within +-2 pi degrees (6.28 deg): what a file
   whose angles were written in radians under its ``_deg`` columns looks like (no measuring pose keeps the whole arm
   that straight). The angles are used as degrees, as the columns say.
+- ``duplicate_rows``: rows that repeat an earlier row of the file exactly (measurement, feature and every reading):
+  a fit counts each copy as one more independent observation, which narrows every uncertainty and the evidence's
+  prior scales as if the point had been measured again (a file written twice, or concatenated with itself). The
+  rows are used as read.
 
 Every command that reads points logs these at WARNING (``warning: ...`` on standard error) and, when it writes a summary
 and a report, lists them there too (``"warnings"`` of summary.json, a "Warnings" section of report.html).
@@ -20,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["InputWarning", "over_force_warning", "joint_limit_warning", "radians_warning", "JointLimitTally",
-           "point_warnings",
+           "duplicate_rows_warning", "point_warnings",
            "log_warnings", "warnings_html", "LIMIT_TOLERANCE_RAD", "limit_bounds"]
 
 log = logging.getLogger(__name__)
@@ -37,8 +41,8 @@ _SHOWN = 10
 
 @dataclass(frozen=True)
 class InputWarning:
-    """``kind`` ("over_force", "joint_limits"), the ``message``, the ``file`` and the 1-based ``lines``
-    of the rows concerned (all of them), and ``count``."""
+    """``kind`` ("over_force", "joint_limits", "angle_units", "duplicate_rows"), the ``message``, the ``file`` and
+    the 1-based ``lines`` of the rows concerned (all of them), and ``count``."""
     kind: str
     message: str
     file: str
@@ -202,14 +206,43 @@ class JointLimitTally:
         return [w for w in (self.warning(), _radians_message(self.largest, lines, self.file)) if w is not None]
 
 
+def duplicate_rows_warning(points, lines, file: str) -> InputWarning | None:
+    """A warning for the rows of ``points`` (a :class:`~arm_model.io.PointSet`) that repeat an earlier row exactly:
+    the same measurement, feature and session, and every reading (joints, forces, torques, temperature, time,
+    reference coordinates, move signs) bit for bit; or None. ``lines``: the rows' lines in ``file`` (those of
+    the copies are reported)."""
+    n = len(points.q)
+    cols = [np.asarray(a, float).reshape(n, -1) for a in (points.q, points.force, points.torque, points.temperature,
+                                                        points.time, points.ref, points.motion) if a is not None]
+    values = np.ascontiguousarray(np.hstack(cols))
+    session = points.session if points.session is not None else np.full(n, "")
+    seen: set = set()
+    copies = []
+    for i in range(n):
+        key = (str(points.measurement[i]), str(points.feature[i]), str(session[i]), values[i].tobytes())
+        if key in seen:
+            copies.append(i)
+        seen.add(key)
+    if not copies:
+        return None
+    rows = tuple(int(v) for v in np.asarray(lines)[copies])
+    return InputWarning(
+        "duplicate_rows",
+        f"{len(rows)} row(s) repeat an earlier row exactly (measurement, feature and every reading): a fit counts "
+        f"each copy as one more independent observation, which narrows every uncertainty and the prior's scales as "
+        f"if the point had been measured again; used as read (remove the copies if the file holds rows twice); "
+        f"{file} {_lines_text(rows)}", file, rows)
+
+
 def point_warnings(desc, points, force=None) -> list[InputWarning]:
-    """The three checks on a :class:`~arm_model.io.PointSet` (``force``: the (N, 3) forces the command
+    """The four checks on a :class:`~arm_model.io.PointSet` (``force``: the (N, 3) forces the command
     uses, default the file's own force columns)."""
     lines = points.lines if points.lines is not None else np.arange(1, len(points) + 1)
     out = [joint_limit_warning(desc, points.q, lines, points.path),
            radians_warning(desc, points.q, lines, points.path, points.q_units),
            over_force_warning(points.force if force is None else force, lines, desc.probe.max_force,
-                              points.path)]
+                              points.path),
+           duplicate_rows_warning(points, lines, points.path)]
     return [w for w in out if w is not None]
 
 

@@ -53,7 +53,7 @@ from .identifiability import (
     weakly_determined,
 )
 from .options import FitOptions
-from .prior import PRIOR_DOMINATED, PriorSpec, prior_only, prior_spec, update_scales, variance_ratio
+from .prior import PRIOR_DOMINATED, PriorSpec, prior_only, prior_spec, secant_gains, update_scales, variance_ratio
 from .problem import Problem
 from .solver import NormalFactor, Prior, blas_threads, levenberg_marquardt, normal_factor
 
@@ -1445,12 +1445,16 @@ def _evidence(model: ArmModel, data: CalibrationData, options: FitOptions) -> Ca
 
 
 def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
-    """From the fit ``sol`` of the base set ``kept``: each round updates every group's scale by MacKay's fixed
-    point (:func:`calibration.prior.update_scales`) and, with ``weights_from_data``, every row group's noise
-    by its variance component (:func:`variance_components`, the leverages including the prior), and refits
-    from the previous solution, until all change by less than :data:`EVIDENCE_TOL` (damped from the tenth
-    round). Returns (setup, solution, kept, fixed, rounds)."""
+    """From the fit ``sol`` of the base set ``kept``: each round takes every group's scale toward MacKay's fixed
+    point (:func:`calibration.prior.update_scales`), its log step lengthened or shortened by its secant over the
+    rounds before (:func:`calibration.prior.secant_gains`: a scale the data shrink toward the floor gets there in a
+    few rounds rather than by ever equal steps), and, with ``weights_from_data``, every row group's noise to its
+    variance component (:func:`variance_components`, the leverages including the prior; damped from the tenth
+    round), and refits from the previous solution, until the fixed point's steps are all below
+    :data:`EVIDENCE_TOL` (relative): the plain fixed point's own stopping rule and solution, in fewer rounds.
+    Returns (setup, solution, kept, fixed, rounds)."""
     history = []
+    last: dict = {}
     for k in range(EVIDENCE_ROUNDS):
         prob = s.problem.with_free(kept)
         ev = sol.evaluation
@@ -1461,22 +1465,26 @@ def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
         post = np.diag(_covariance(s, ev, kept, var))
         kept_arr = np.asarray(kept, dtype=int)
         rho = variance_ratio(post, s.prior.size[kept_arr])
-        damping = 1.0 if k < 10 else 0.5
-        scales, gamma = update_scales(s.scales, s.spec, kept_arr, sol.p[kept_arr] - s.prior.centre[kept_arr], rho,
-                                      damping)
+        targets, gamma = update_scales(s.scales, s.spec, kept_arr, sol.p[kept_arr] - s.prior.centre[kept_arr], rho)
+        steps = {g: math.log(targets[g] / tau) for g, tau in s.scales.items()}
         factors = {}
         if options.weights_from_data:
-            factors = {v["group"]: v["factor"] ** damping for v in variance_components(prob, ev.r, nrm.h, prob.weights)
+            factors = {v["group"]: v["factor"] for v in variance_components(prob, ev.r, nrm.h, prob.weights)
                        if v["estimated"]}
-        change = max([abs(math.log(scales[g] / s.scales[g])) for g in scales] +
-                     [abs(math.log(f)) for f in factors.values()] + [0.0])
         history.append({"round": k + 1, "scales": dict(s.scales), "effective_parameters": gamma,
                         "noise_factors": dict(prob.weights.factors), "s0": math.sqrt(2 * sol.cost / red)})
-        if change <= EVIDENCE_TOL:
+        if max([abs(r) for r in steps.values()] + [abs(math.log(f)) for f in factors.values()]) <= EVIDENCE_TOL:
             history[-1]["settled"] = True
             return s, sol, kept, fixed, history
+        gains = secant_gains(steps, last, EVIDENCE_TOL)
+        scales = {g: s.spec.bounded(g, tau * math.exp(gains[g] * steps[g])) for g, tau in s.scales.items()}
+        # the first move, from the starting scales (far from the fixed point, where its step is not near linear),
+        # is no secant's base
+        last = {g: (r, math.log(scales[g] / s.scales[g])) for g, r in steps.items()} if k else {}
+        damping = 1.0 if k < 10 else 0.5
         s = replace(s, scales=scales, prior=Prior(s.prior.centre, s.spec.sizes(scales)),
-                    problem=_reweighted_problem(s.problem, prob.weights.scaled(factors)))
+                    problem=_reweighted_problem(s.problem, prob.weights.scaled(
+                        {g: f ** damping for g, f in factors.items()})))
         p = sol.p.copy()
         kept, bound = _at_bounds(s, p, kept, "evidence")
         fixed = fixed + bound

@@ -66,7 +66,8 @@ import numpy as np
 __all__ = ["GROUP_LENGTHS", "GROUP_OFFSETS", "GROUP_ANGLES", "GROUP_TIP", "GROUP_PROBE_COMPLIANCE", "BASE_SIZES",
            "PRIOR_DOMINATED", "BARELY_SEEN", "SCALE_RANGE", "MIN_EFFECTIVE", "TIP_SHARE", "LENGTH_SHARE", "MAX_ANGLE",
            "MIN_SIDE_SHARE", "MIN_SIDE_VISITS", "NIL_LOAD", "PriorSpec", "parameter_groups", "prior_spec",
-           "chain_length", "limits", "variance_ratio", "update_scales", "both_sides", "side_visits", "prior_only"]
+           "chain_length", "limits", "variance_ratio", "update_scales", "MAX_GAIN", "secant_gains", "both_sides",
+           "side_visits", "prior_only"]
 
 GROUP_LENGTHS = "lengths"
 GROUP_OFFSETS = "joint offsets"
@@ -214,6 +215,10 @@ class PriorSpec:
         idx = [i for i, g in enumerate(self.group) if g == group]
         top = min((float(self.limit[i] / self.size[i]) for i in idx), default=math.inf)
         return min(max(top, 1.0), SCALE_RANGE[1])
+
+    def bounded(self, group: str, scale: float) -> float:
+        """``scale`` of ``group`` kept in :data:`SCALE_RANGE` and under the group's :meth:`ceiling`."""
+        return float(min(max(scale, SCALE_RANGE[0]), self.ceiling(group)))
 
     def sizes(self, scales: dict | float) -> np.ndarray:
         """The prior's standard deviations [SI] at group ``scales`` (a dict, or one factor for every group)."""
@@ -434,23 +439,23 @@ def variance_ratio(post_var: np.ndarray, prior_sd: np.ndarray) -> np.ndarray:
     return np.clip(np.asarray(post_var) / np.asarray(prior_sd) ** 2, 0.0, 1.0)
 
 
-def update_scales(scales: dict, spec: PriorSpec, kept, delta: np.ndarray, rho: np.ndarray,
-                  damping: float = 1.0) -> tuple[dict, dict]:
-    """One evidence update of the group scales (MacKay's fixed point, see the module docstring).
+def update_scales(scales: dict, spec: PriorSpec, kept, delta: np.ndarray, rho: np.ndarray) -> tuple[dict, dict]:
+    """The evidence's fixed point of the group scales (MacKay's, see the module docstring): the scale each group's
+    update gives from the current fit.
 
     Args:
         scales: current scale of each group.
         kept: spec indices of the estimated parameters; ``delta`` their ``p - centre`` [SI] at the maximum a
             posteriori fit, ``rho`` their posterior/prior variance ratios (:func:`variance_ratio`).
-        damping: the new log scale is ``damping`` of the way to the fixed point's (1: all of it).
 
     Returns ``(new scales, {group: gamma_G})``. Only the group's parameters the data see (``rho <``
     :data:`BARELY_SEEN`) enter its fixed point: one the data barely see follows the scale the others give (see the
     module docstring); a group whose data determine fewer than :data:`MIN_EFFECTIVE` parameters keeps its scale
     (its evidence is flat), and so does a physical group (:attr:`PriorSpec.physical`); every scale stays in
-    :data:`SCALE_RANGE` and under its group's ceiling (:meth:`PriorSpec.ceiling`; a capped group's,
-    :attr:`PriorSpec.capped`, is 1). ``gamma_G`` is over every
-    parameter of the group."""
+    :data:`SCALE_RANGE` and under its group's ceiling (:meth:`PriorSpec.bounded`; a capped group's,
+    :attr:`PriorSpec.capped`, is 1). ``gamma_G`` is over every parameter of the group. The rounds of
+    :func:`calibration.calibrate.calibrate` move each scale by :func:`secant_gains` times the way to this fixed
+    point."""
     kept = np.asarray(kept, dtype=int)
     new, gamma = dict(scales), {}
     for g, idx in spec.groups_of(kept).items():
@@ -461,8 +466,30 @@ def update_scales(scales: dict, spec: PriorSpec, kept, delta: np.ndarray, rho: n
         if gam < MIN_EFFECTIVE or g in spec.physical:
             continue
         z2 = float(np.sum((delta[sel] / spec.size[kept[sel]]) ** 2))
-        target = math.sqrt(max(z2 / gam, SCALE_RANGE[0] ** 2))
-        old = scales.get(g, 1.0)
-        tau = math.exp(math.log(old) + damping * (math.log(target) - math.log(old)))
-        new[g] = float(min(max(tau, SCALE_RANGE[0]), spec.ceiling(g)))
+        new[g] = spec.bounded(g, math.sqrt(z2 / gam))
     return new, gamma
+
+
+#: the largest factor by which :func:`secant_gains` lengthens a fixed point's step
+MAX_GAIN = 10.0
+
+
+def secant_gains(steps: dict, last: dict, tol: float) -> dict:
+    """How far (a factor of the step) to move each log scale of the fixed-point iteration ``x <- x + r(x)``
+    (:func:`update_scales`), from its steps ``r`` this round and last round's ``(step r, move made)`` (``last``).
+    The secant of ``r`` over the last move, ``slope = (r - r_last) / move``, is -1 for a fixed point reached in one
+    step; the gain is Newton's on ``r = 0``, ``-1 / slope``, at most :data:`MAX_GAIN` (also where ``r`` does not
+    shrink: a scale running to its bound, where the plain iteration creeps with ever equal steps); an iteration that
+    overshoots (slope below -1) is damped by the same rule (a 2-cycle is cut at its middle). The gain is 1 (the
+    plain fixed point) for a key without history, or whose step or last move is within ``tol`` (the iteration's own
+    tolerance: a secant over so short a move, or a gain on so short a step, would amplify the refit's noise). The
+    point where ``r = 0`` is the fixed point's own: only the number of rounds changes."""
+    out = {}
+    for key, r in steps.items():
+        r_last, move = last.get(key, (0.0, 0.0))
+        if abs(move) <= tol or abs(r) <= tol:
+            out[key] = 1.0
+            continue
+        slope = (r - r_last) / move
+        out[key] = MAX_GAIN if slope >= -1.0 / MAX_GAIN else -1.0 / slope
+    return out

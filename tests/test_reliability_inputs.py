@@ -269,6 +269,7 @@ def test_calibrate_with_one_pose_repeated_says_unidentifiable(small, tmp_path, c
     pts.write_text("\n".join([lines[0]] + [sphere] * 12) + "\n")
     code, _, err = run(["calibrate", pts, small / "artefacts.toml", "--arm", NOMINAL, "-o", tmp_path / "o"], capsys)
     assert code == 2 and "unidentifiable" in err and "did not converge" not in err
+    assert "warning: 11 row(s) repeat an earlier row exactly" in err       # said before the fit fails
     assert not (tmp_path / "o").exists()
 
 
@@ -317,6 +318,27 @@ def test_calibrate_and_close_loop_flag_over_range_forces(small, tmp_path, capsys
     s = json.loads((tmp_path / "loop" / "summary.json").read_text())
     assert [w["lines"] for w in s["warnings"]] == [[6]]
     assert "<h2>Warnings</h2>" in (tmp_path / "loop" / "report.html").read_text()
+
+
+def test_rows_repeated_exactly_are_warned_with_the_copies_lines(tmp_path):
+    """A points file with rows given twice (the copies at lines 5-7; a row differing in one reading's last digit is no
+    copy): one ``duplicate_rows`` warning with the copies' lines and count, as summary.json lists it."""
+    from arm_model import load_description
+    from arm_model.checks import point_warnings
+    from arm_model.io import read_points
+    lines = (RING / "points.csv").read_text().splitlines()[:4]
+    head = lines[0].split(",")
+    k = head.index("q3_deg")
+    near = lines[3].split(",")
+    near[k] = near[k][:-1] + ("1" if near[k][-1] != "1" else "2")
+    pts = tmp_path / "p.csv"
+    pts.write_text("\n".join(lines + [lines[1], lines[2], lines[2], ",".join(near)]) + "\n")
+    desc = load_description(NOMINAL)
+    (w,) = [w for w in point_warnings(desc, read_points(pts, desc.n_joints)) if w.kind == "duplicate_rows"]
+    assert w.as_dict()["count"] == 3 and w.as_dict()["lines"] == [5, 6, 7]
+    assert w.message.startswith("3 row(s) repeat an earlier row exactly") and "lines 5, 6, 7" in w.message
+    pts.write_text("\n".join(lines + [",".join(near)]) + "\n")
+    assert not [w for w in point_warnings(desc, read_points(pts, desc.n_joints)) if w.kind == "duplicate_rows"]
 
 
 def test_joint_angles_beyond_the_limits_are_warned(tmp_path, capsys):
