@@ -66,7 +66,8 @@ import numpy as np
 __all__ = ["GROUP_LENGTHS", "GROUP_OFFSETS", "GROUP_ANGLES", "GROUP_TIP", "GROUP_PROBE_COMPLIANCE", "BASE_SIZES",
            "PRIOR_DOMINATED", "BARELY_SEEN", "SCALE_RANGE", "MIN_EFFECTIVE", "TIP_SHARE", "LENGTH_SHARE", "MAX_ANGLE",
            "MIN_SIDE_SHARE", "MIN_SIDE_VISITS", "NIL_LOAD", "PriorSpec", "parameter_groups", "prior_spec",
-           "chain_length", "limits", "variance_ratio", "update_scales", "both_sides", "side_visits", "unseen_side", "prior_only"]
+           "chain_length", "limits", "variance_ratio", "update_scales", "both_sides", "side_visits", "unseen_side",
+           "prior_only"]
 
 GROUP_LENGTHS = "lengths"
 GROUP_OFFSETS = "joint offsets"
