@@ -431,6 +431,13 @@ class CalibrationResult:
         return {**self.tracker.to_dict(), "fitted": self.reference_mode == "fit",
                 "marker_offsets": self.data.marker_offsets}
 
+    def weights_dict(self) -> dict:
+        """The noise the fit weighted its rows by: the standard uncertainties [um] and each row group's factor on
+        them (``factors``); ``from_data``: the factors estimated from the residuals (``--weights data``)."""
+        return {"probe_um": self.weights.probe * 1e6, "reference_um": self.weights.reference * 1e6,
+                "length_um": None if self.weights.length is None else self.weights.length * 1e6,
+                "factors": dict(self.weights.factors), "from_data": bool(self.weights_history)}
+
     def to_dict(self) -> dict:
         """JSON-ready summary (SI values, plus display units in the parameter rows)."""
         return {
@@ -444,10 +451,7 @@ class CalibrationResult:
             "identifiability_start": self.identifiability.to_dict(),
             "identifiability_final": self.identifiability_final.to_dict(),
             "reference_frame": self.reference_frame(),
-            "weights": {"probe_um": self.weights.probe * 1e6, "reference_um": self.weights.reference * 1e6,
-                        "length_um": None if self.weights.length is None else self.weights.length * 1e6,
-                        "factors": dict(self.weights.factors),
-                        "from_data": bool(self.weights_history)},
+            "weights": self.weights_dict(),
             "variance_components": self.variance, "weights_history": self.weights_history,
             "probing_scatter": self._budget_um(),
             "model_discrepancy": None if self.discrepancy is None else self.discrepancy.to_dict(),

@@ -23,8 +23,10 @@ harmonics ``cos/sin(h q_j)``, h = 1..4, times ``D_j``; harmonics 1 and 2 of ``q_
 other joint j (a cross-coupling, "qK harmonics on jJ"); the gravity torque and the contact torque of
 joint j times ``D_j``; the gravity torque's sign times ``D_j`` (a play the load closes one way or the other,
 "jN gravity torque sign"), the sign of its last move onto the point (a play or an encoder's hysteresis,
-"jN motion sign", :func:`arm_model.model.reading_motion`), each where at least
-:data:`calibration.prior.MIN_SIDE_SHARE` of the rows lie on either side of zero; contact
+"jN motion sign", :func:`arm_model.model.reading_motion`), each only where the data can see the play it would
+build (:func:`calibration.prior.unseen_side`, the rule that leaves a play at its prior: at least
+:data:`calibration.prior.MIN_SIDE_SHARE` of the rows on either side of zero, each side met in at least
+:data:`calibration.prior.MIN_SIDE_VISITS` runs of the capture order); contact
 force components and magnitude times the probe axes; temperature and time times the base axes and the
 position vector (a scale); the temperature times each link's length and the probe's ("temperature per
 link"); the tilt of joint j about its frame's x and y axes times the moment across it ("jN lateral load");
@@ -59,7 +61,7 @@ from .identifiability import (
     reduced_jacobian,
     weakly_determined,
 )
-from .prior import both_sides
+from .prior import unseen_side
 from .problem import Problem
 from .solver import levenberg_marquardt
 
@@ -704,12 +706,12 @@ def _joint_families(f: _FamilyInputs) -> list[Family]:
                               "torque it holds against gravity", "field", [dq], [(f"tau_g{j + 1}", f.tau_g[:, j])],
                               (f"gravity torque {jr.name}", "N m", 1.0, f.tau_g[:, j])))
             sign = np.sign(f.tau_g[:, j])
-            if both_sides(sign):
+            if unseen_side(sign, f.points) is None:
                 out.append(Family(f"{jr.name} gravity torque sign", f"error of joint {jr.name}'s angle changing with "
                                   "the sign of the torque it holds against gravity (a play the load closes one way "
                                   "or the other)", "field", [dq], [(f"sign(tau_g{j + 1})", sign)],
                                   (f"gravity torque {jr.name}", "N m", 1.0, f.tau_g[:, j])))
-        if not jr.prismatic and both_sides(f.motion[:, j]):
+        if not jr.prismatic and unseen_side(f.motion[:, j], f.points) is None:
             out.append(Family(f"{jr.name} motion sign", f"error of joint {jr.name}'s angle changing with the "
                               "direction it last turned, onto each point from the one captured before it (a play or "
                               "an encoder's hysteresis the motion closes)", "field", [dq],

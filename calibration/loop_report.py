@@ -76,7 +76,7 @@ def _clean(o):
 def _stage_dict(s: Stage) -> dict:
     r = s.result
     out = {"stage": s.index, "model_effects": [e.describe() for e in s.model.effects],
-           "fit": {"s0": r.s0, "dof": r.dof, "points": len(r.data), "status": r.status,
+           "fit": {"s0": r.s0, "dof": r.dof, "points": len(r.data), "status": r.status, "noise": r.weights_dict(),
                    "fixed": [f.to_dict() for f in r.fixed]},
            "heldout_test": s.heldout}
     if s.added is not None:

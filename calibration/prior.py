@@ -67,7 +67,7 @@ __all__ = ["GROUP_LENGTHS", "GROUP_OFFSETS", "GROUP_ANGLES", "GROUP_TIP", "GROUP
            "PRIOR_DOMINATED", "BARELY_SEEN", "SCALE_RANGE", "MIN_EFFECTIVE", "TIP_SHARE", "LENGTH_SHARE", "MAX_ANGLE",
            "MIN_SIDE_SHARE", "MIN_SIDE_VISITS", "NIL_LOAD", "PriorSpec", "parameter_groups", "prior_spec",
            "chain_length", "limits", "variance_ratio", "update_scales", "MAX_GAIN", "secant_gains", "both_sides",
-           "side_visits", "prior_only"]
+           "side_visits", "unseen_side", "prior_only"]
 
 GROUP_LENGTHS = "lengths"
 GROUP_OFFSETS = "joint offsets"
@@ -396,9 +396,13 @@ def side_visits(side, measurement=None, time=None) -> tuple[int, int]:
     return runs[0], runs[1]
 
 
-def _unseen_play(side: np.ndarray, points) -> str | None:
-    """Why the data cannot see a play whose per-point sides are ``side``, or None when they can: both sides hold
-    :data:`MIN_SIDE_SHARE` of the points (:func:`both_sides`) in at least :data:`MIN_SIDE_VISITS` runs each."""
+def unseen_side(side, points) -> str | None:
+    """Why the data cannot see a play whose per-point sides are ``side`` (-1, 0, +1) on ``points`` (their
+    ``measurement`` and ``time`` give the capture order), or None when they can: both sides hold
+    :data:`MIN_SIDE_SHARE` of the points (:func:`both_sides`) in at least :data:`MIN_SIDE_VISITS` runs each
+    (:func:`side_visits`). The one rule for a play: :func:`prior_only` and the loop's sign families
+    (:mod:`calibration.diagnostics`) both ask it."""
+    side = np.asarray(side, dtype=float)
     pos, neg = int(np.sum(side > 0)), int(np.sum(side < 0))
     if pos + neg == 0:
         return f"the side of its play is nil on all {len(side)} points"
@@ -428,7 +432,7 @@ def prior_only(model, data) -> dict[int, str]:
         if sides is None:
             continue
         for k, side in zip(range(sl.start, sl.stop), sides, strict=True):
-            why = _unseen_play(np.broadcast_to(np.asarray(side, dtype=float), (len(data),)), data.points)
+            why = unseen_side(np.broadcast_to(np.asarray(side, dtype=float), (len(data),)), data.points)
             if why is not None:
                 out[k] = why
     return out

@@ -169,6 +169,30 @@ def test_the_sign_family_exists_where_the_torque_changes_sign(nominal, least, mo
     assert "j1 gravity torque sign" not in fams          # the base joint holds no gravity torque
 
 
+@pytest.mark.parametrize("visits", [None, 3 + 1000])
+def test_a_sign_family_exists_exactly_where_the_play_it_builds_is_seen(nominal, visits, monkeypatch):
+    """The loop builds ``backlash jN`` from ``jN gravity torque sign`` only where the prior lets the data see that
+    play (:func:`calibration.prior.prior_only` leaves it free): a play built and then held at its prior has nothing
+    to add. The runs rule too, not only the share rule: with MIN_SIDE_VISITS above any side's runs (the other case)
+    every joint's sides pass the share rule as before but no sign family is left, and every play is prior only."""
+    from calibration import prior
+    from calibration.diagnostics import families, residual_space
+
+    if visits is not None:
+        monkeypatch.setattr(prior, "MIN_SIDE_VISITS", visits)
+    res = _clean_fit(nominal)
+    fams = {f.name for f in families(residual_space(res))}
+    signs = [f for f in fams if f.endswith(" sign")]
+    for j, name in enumerate(nominal.joint_names):
+        built = ArmModel(nominal, (JointBacklash(joints=(j,)),))
+        seen = not prior.prior_only(built, res.data)
+        assert (f"{name} gravity torque sign" in fams) == seen, (name, prior.prior_only(built, res.data))
+        motion = res.data.motion[:, j]
+        visits_j = prior.side_visits(motion, res.data.points.measurement, res.data.points.time)
+        assert (f"{name} motion sign" in fams) == (prior.both_sides(motion) and min(visits_j) >= prior.MIN_SIDE_VISITS)
+    assert (len(signs) >= 5) if visits is None else (signs == []), signs
+
+
 @pytest.mark.slow
 def test_the_default_loop_finds_a_robots_backlash_by_its_last_motion():
     """scripts/redteam_study.py ``panda-hysteresis`` (docs/close-loop.md, red team round 3): joints 2 and 4 of a

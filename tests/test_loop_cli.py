@@ -88,6 +88,24 @@ def test_close_loop_writes_the_report(files, tmp_path, capsys):
     assert "E_UNI on training data" in printed.out and "FAIL" in printed.out
 
 
+def test_weights_stated_keeps_the_stated_sigmas(files, tmp_path):
+    """``--weights stated`` (once ignored by close-loop): every fit weights its rows by the stated 100 um, with no
+    factor from the data (``--weights data``, the default, would scale each row group to its residuals: s0 about 1),
+    so the base fit's s0 is the residual's scatter (the probing noise and the eccentricity left out, about 15 um)
+    over 100 um; summary.json's stage fits say so."""
+    out = tmp_path / "loop"
+    assert main(["close-loop", str(files / "points.csv"), str(files / "artefacts.toml"), "--arm", str(NOMINAL),
+                 "--sigma-probe-um", "100", "--max-effects", "0", "--candidates", "eccentricity", "--library-only",
+                 "--no-plots", "--weights", "stated",
+                 "-o", str(out)]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["settings"]["weights_from_data"] is False
+    (stage,) = s["stages"]
+    noise = stage["fit"]["noise"]
+    assert noise["probe_um"] == pytest.approx(100.0) and noise["factors"] == {} and not noise["from_data"], noise
+    assert 0.03 < stage["fit"]["s0"] < 0.4, stage["fit"]["s0"]
+
+
 def test_refuses_to_write_over_an_input(files, tmp_path, capsys):
     points = tmp_path / "summary.json"                  # an input where the report would go
     points.write_text((files / "points.csv").read_text())
