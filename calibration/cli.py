@@ -832,7 +832,10 @@ def noise_lines(res) -> list[str]:
             start = f"{v['sigma_um'] / used:.3g} um"
             said = f"stated {start}" if res.weights.stated_sigma_of(v["group"]) else f"default {start}, not stated"
             size = f"{v['sigma_um']:.3g} um per axis ({said})"
-        if not v["estimated"]:
+        if v.get("no_scatter"):
+            out.append(f"  {what}: {size}; not estimated: the residuals show no scatter (below 1e-6 um: the same "
+                       f"poses repeated?)")
+        elif not v["estimated"]:
             out.append(f"  {what}: {size}; not estimated (redundancy {v['redundancy']:.2g} of {v['rows']} rows, "
                        f"too little)")
         elif res.weights_history:
