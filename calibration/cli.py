@@ -640,7 +640,7 @@ def _log_fixed(fixed) -> None:
 def _log_calibration(res, data, train, test, poses, validation, files) -> None:
     """The console report of ``aacmm calibrate``."""
     from .report import poorly_determined
-    from .validation import with_u
+    from .validation import ratio_text, with_u
     val_train, val_test, conf, worse = validation
     held = ("" if test is None and poses is None else
             f", {counted(len(test), 'held-out point')} in {counted(len(test.measurements()), 'measurement')}"
@@ -696,7 +696,7 @@ def _log_calibration(res, data, train, test, poses, validation, files) -> None:
                      "bootstrap over its measurements):")
             for r in rows:
                 log.info(f"  {r['label']}: {with_u(r['before'], r['u_before'])} -> {with_u(r['after'], r['u_after'])} "
-                         f"{r['unit']} ({r['ratio']:.2f}x)")
+                         f"{r['unit']} ({ratio_text(r['ratio'])})")
     new = sessions_without_frame(res, test)
     if new:
         log.info(f"note: held-out session(s) {', '.join(repr(s) for s in new)} have no frame from the training data: "

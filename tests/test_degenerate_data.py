@@ -16,7 +16,8 @@ SEAT = '\n[[feature]]\nid = "seat"\nkind = "seat"\n'
 
 def _run(argv, capsys):
     rc = exit_status([str(a) for a in argv])
-    return rc, capsys.readouterr().err
+    got = capsys.readouterr()
+    return rc, got.err, got.out
 
 
 def _case(tmp_path, rings: int, seat_rows: int):
@@ -40,7 +41,7 @@ def test_a_calibration_on_one_pose_repeated_is_a_numerical_failure(tmp_path, cap
     then failed in ``math.log(0)``: exit 3. Now no parameter is identifiable, and that is exit 4 naming it."""
     pts, art = _case(tmp_path, 0, 20)
     out = tmp_path / "o"
-    rc, err = _run(["calibrate", pts, art, "--arm", "aacmm7", "--no-plots", "-o", out], capsys)
+    rc, err, said = _run(["calibrate", pts, art, "--arm", "aacmm7", "--no-plots", "-o", out], capsys)
     assert rc == 4 and "the data determine none of the 31 parameters" in err, err
     assert "internal error" not in err and not out.exists()
 
@@ -52,7 +53,7 @@ def test_a_feature_at_one_pose_repeated_gives_no_noise_estimate(tmp_path, capsys
     stated (default) uncertainty, said as such."""
     pts, art = _case(tmp_path, 2, 10)
     out = tmp_path / "o"
-    rc, err = _run(["calibrate", pts, art, "--arm", "aacmm7", "--no-plots", "-o", out], capsys)
+    rc, err, said = _run(["calibrate", pts, art, "--arm", "aacmm7", "--no-plots", "-o", out], capsys)
     assert rc == 0, err
     s = json.loads((out / "summary.json").read_text())
     seat = next(v for v in s["variance_components"] if v["group"] == "seat")
@@ -60,3 +61,7 @@ def test_a_feature_at_one_pose_repeated_gives_no_noise_estimate(tmp_path, capsys
     assert s["weights"]["factors"].get("seat", 1.0) == pytest.approx(1.0), s["weights"]
     ring = next(v for v in s["variance_components"] if v["group"] == "ring")
     assert ring["estimated"] and 1.0 < ring["estimate_um"] < 10.0, ring
+    # the seat's articulation is rounding before and after: no ratio (it was "infx"), never "worse than nominal"
+    art = [r for r in s["validation_training"] if r["key"].startswith("articulation")]
+    assert art and all(r["ratio"] is None for r in art), art
+    assert "(no ratio: the calibrated figure is below 1 pm)" in said and "infx" not in said, said
