@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
+
 import pytest
 
 from conftest import ROOT, exit_status
@@ -65,3 +67,31 @@ def test_a_feature_at_one_pose_repeated_gives_no_noise_estimate(tmp_path, capsys
     art = [r for r in s["validation_training"] if r["key"].startswith("articulation")]
     assert art and all(r["ratio"] is None for r in art), art
     assert "(no ratio: the calibrated figure is below 1 pm)" in said and "infx" not in said, said
+
+
+def test_a_ring_measurement_at_one_pose_repeated_is_named(tmp_path, capsys):
+    """`ring` on a measurement whose points are one pose repeated said "no principal direction gives a circle seed:
+    the points are collinear" (their spread was 1e-17 m of rounding, not 0), without the measurement. Now: the
+    file, line and measurement, and that the points coincide; exit 4, nothing written."""
+    lines = (RING / "points.csv").read_text().splitlines()
+    pts = tmp_path / "points.csv"
+    pts.write_text("\n".join([lines[0], *[lines[1]] * 8]) + "\n")
+    out = tmp_path / "o"
+    rc, err, _ = _run(["ring", pts, RING / "artefacts.toml", "--arm", "aacmm7", "--no-plots", "-o", out], capsys)
+    assert rc == 4 and "points.csv, line 2, measurement 'ring-01': all points coincide (to rounding)" in err, err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("points", [
+    np.tile([0.5, -0.3, 0.2], (10, 1)),                                     # one pose repeated
+    np.tile([0.5, -0.3, 0.2], (10, 1)) + 1e-15 * np.arange(30).reshape(10, 3) % 3,   # and rounding
+    [0.5, -0.3, 0.2] + np.outer(np.linspace(0, 0.1, 10), [1, 2, 3]),       # collinear
+])
+@pytest.mark.parametrize("fit", ["fit_plane", "fit_sphere", "fit_cylinder", "ring_fit"])
+def test_every_feature_fit_refuses_degenerate_points(points, fit):
+    """Coinciding or collinear points determine no plane, sphere or cylinder: a NumericalError (exit 4 in a
+    command), never a fit returned."""
+    from arm_model import NumericalError, geometry
+    f = getattr(geometry, fit)
+    with pytest.raises(NumericalError):
+        f(points, 0.006, 0.175) if fit == "ring_fit" else f(points)
