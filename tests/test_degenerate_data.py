@@ -7,8 +7,9 @@ from __future__ import annotations
 import json
 
 import numpy as np
-
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from conftest import ROOT, exit_status
 
@@ -95,3 +96,23 @@ def test_every_feature_fit_refuses_degenerate_points(points, fit):
     f = getattr(geometry, fit)
     with pytest.raises(NumericalError):
         f(points, 0.006, 0.175) if fit == "ring_fit" else f(points)
+
+
+@settings(max_examples=30, deadline=None)
+@given(rows=st.integers(8, 40), cols=st.integers(2, 8), seed=st.integers(0, 2**32 - 1),
+       rounding=st.floats(1e-18, 1e-13))
+def test_the_rank_of_columns_the_nuisance_absorbs_is_zero(rows, cols, seed, rounding):
+    """``analyse`` on a reduced Jacobian of pure rounding (every parameter absorbed by the nuisance unknowns, as
+    when one pose is repeated) kept a direction: its threshold was relative to the largest singular value, itself
+    rounding. Now rank 0, every parameter named; and an exact copy of a visible column (two joints moving
+    together) is one direction, the copy held with the combination."""
+    from calibration.identifiability import analyse
+    rng = np.random.default_rng(seed)
+    jp = rng.standard_normal((rows, cols))
+    idf = analyse(rounding * rng.standard_normal((rows, cols)), jp, [f"p{k}" for k in range(cols)])
+    assert idf.rank == 0 and len(idf.dependent) == cols, idf
+    twin = np.column_stack([jp, jp[:, 0]])
+    idf = analyse(twin, twin, [f"p{k}" for k in range(cols + 1)])
+    assert idf.rank == cols and len(idf.dependent) == 1, idf
+    held = idf.dependent[0]
+    assert {n for n, _ in idf.combinations[held].terms} == {"p0", f"p{cols}"}, idf.combinations
