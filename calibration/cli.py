@@ -26,7 +26,7 @@ from arm_model.csv_io import parse_number
 from arm_model.discrepancy import growth_text
 from arm_model.errors import resolved
 from arm_model.io import json_text, read_artefacts, read_points
-from arm_model.log import counted
+from arm_model.log import counted, progress_line
 from arm_model.model_file import Arm
 from arm_model.output import output_folder
 from arm_model.parallel import cores
@@ -567,7 +567,11 @@ def run_calibrate(args: argparse.Namespace) -> int:
                               on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
                               drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference,
                               gross_threshold=gross_threshold(args))
+        say = progress_line(log)            # a long fit (10^5 points: minutes) says where it is
+        say(f"fitting the model to {counted(len(train.points), 'point')} (with the noise, the prior and the model "
+            "discrepancy from the data)")
         res = refine_torques(calibrate(model, train, options))
+        say("the nominal baseline and the validation figures")
         base = nominal_baseline(model, res.data, replace(res.options, weights=res.weights))
         # the held-out rows' torques on the calibrated description, as the model file (tip) evaluates them
         test, data = with_fitted_torques(test, res), with_fitted_torques(data, res)
@@ -575,6 +579,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
                 (res, test, base) if poses is None else (res, data, base, ~poses))
         val_train, val_test, conf = conformance_entry(mpe_from_args(args), (res, res.data, base), held)
         worse = worse_than_nominal(val_test or [])
+        say("writing the model file and the report")
         files = write_outputs(res, out.dir, inputs=inputs, validation_training=val_train,
                               validation_holdout=val_test, plots=not args.no_plots,
                               extra={"inputs": {"points": str(args.points),
