@@ -46,6 +46,13 @@ Group = dict[str, Any]
 Triplets = tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]
 
 
+def _one_row(points, rows: np.ndarray) -> bool:
+    """Whether the rows ``rows`` of ``points`` are one reading repeated: the same encoder angles, force and torque
+    (a seat held at one pose and pushed in turn is not: the force moves the ball centre the model computes)."""
+    cols = [points.q[rows]] + [a[rows] for a in (points.force, points.torque) if a is not None]
+    return len(np.unique(np.column_stack(cols), axis=0)) == 1
+
+
 @dataclass
 class Instance:
     """One artefact feature within one measurement, or the reference instrument's frame of one session
@@ -172,6 +179,13 @@ class Problem:
                     raise InputError(f"measurement '{m}', feature '{f}' ({kind}): {len(rows)} points but only "
                                      f"{distinct} distinct pose(s) (the same encoder angles repeated): the {kind}'s "
                                      f"unknowns are unidentifiable; at least {need} distinct points needed", *where)
+                if kind == "seat" and len(rows) > 1 and not self._has_ref[rows].any() and _one_row(pts, rows):
+                    # one seat row repeated: its copies' residuals are exactly 0, counted as redundancy and noise
+                    # (the noise of the seat came out at 7e-11 um, close-loop's s0 at 0.03 with p-values of 1e-198)
+                    raise InputError(f"measurement '{m}', feature '{f}' (seat): its {len(rows)} points are one "
+                                     "reading repeated (the same encoder angles and force): they say no more than "
+                                     "one point and would count as independent; articulate the seat, or keep one "
+                                     "row", *where)
                 by_key[(m, f)] = self._add(Instance(m, f, kind, rows, 0, geo.n_theta(kind, free_r),
                                                     None if free_r else radius, free_r))
         self.unused = np.sort(np.concatenate(unused)) if unused else np.zeros(0, int)

@@ -23,38 +23,46 @@ def _run(argv, capsys):
     return rc, got.err, got.out
 
 
-def _case(tmp_path, rings: int, seat_rows: int):
+def _case(tmp_path, rings: int, seat_rows: int, step_deg: float = 0.0):
     """The first ``rings`` measurements of the example ring campaign and ``seat_rows`` copies of its first pose
-    as a seat (one pose repeated: an operator who did not articulate)."""
+    as a seat (one pose repeated: an operator who did not articulate), the last joint of copy k moved by k
+    ``step_deg``."""
     lines = (RING / "points.csv").read_text().splitlines()
     ids = tuple(f"ring-{k:02d}," for k in range(1, rings + 1))
     rows = [r for r in lines[1:] if ids and r.startswith(ids)]
-    seat = "seat-1,seat," + lines[1].split(",", 2)[2]
+    cells = lines[1].split(",")
+    q7 = lines[0].split(",").index("q7_deg")
+    seat = [",".join(["seat-1", "seat", *cells[2:q7], f"{float(cells[q7]) + k * step_deg:.12f}", *cells[q7 + 1:]])
+            for k in range(seat_rows)]
     pts = tmp_path / "points.csv"
-    pts.write_text("\n".join([lines[0], *rows, *[seat] * seat_rows]) + "\n")
+    pts.write_text("\n".join([lines[0], *rows, *seat]) + "\n")
     art = tmp_path / "artefacts.toml"
     art.write_text((RING / "artefacts.toml").read_text() + SEAT)
     return pts, art
 
 
-def test_a_calibration_on_one_pose_repeated_is_a_numerical_failure(tmp_path, capsys):
-    """20 rows of one pose on a seat (a seat needs one point, so the reader takes it): the nuisance centre absorbs
-    every parameter. The rank test kept one parameter whose reduced column was rounding, scaled to unit size
-    (``s > rank_tol * s_max`` with ``s_max`` itself rounding), and the noise estimate of exactly zero residuals
-    then failed in ``math.log(0)``: exit 3. Now no parameter is identifiable, and that is exit 4 naming it."""
+def test_a_seat_at_one_reading_repeated_is_refused(tmp_path, capsys):
+    """20 rows of one reading on a seat (a seat needs one point, so the count check took it): the copies' residuals
+    are exactly 0, counted as redundancy and as the seat's noise. The fit then failed in ``math.log(0)`` (exit 3);
+    beside other features the seat's noise came out at 7e-11 um, weighted 1e22 times theirs, and close-loop stopped
+    on a weight factor of 0 (exit 3). As for every other kind (docs/guarantees.md, "one pose repeated"): exit 2 at
+    the seat's first line, nothing written."""
     pts, art = _case(tmp_path, 0, 20)
-    out = tmp_path / "o"
-    rc, err, said = _run(["calibrate", pts, art, "--arm", "aacmm7", "--no-plots", "-o", out], capsys)
-    assert rc == 4 and "the data determine none of the 31 parameters" in err, err
-    assert "internal error" not in err and not out.exists()
+    for command in ("calibrate", "close-loop"):
+        out = tmp_path / command
+        rc, err, _ = _run([command, pts, art, "--arm", "aacmm7", "--no-plots", "-o", out], capsys)
+        assert rc == 2 and "line 2, column 'feature': measurement 'seat-1', feature 'seat' (seat): its " in err
+        assert "points are one reading repeated" in err, err
+        assert not out.exists()
 
 
-def test_a_feature_at_one_pose_repeated_gives_no_noise_estimate(tmp_path, capsys):
-    """Two ring measurements and a seat at one pose repeated 10 times: the seat's residuals are exactly zero, and
-    its noise was estimated as 7e-11 um and weighted 1e22 times the ring's (written in summary.json as the seat's
-    noise). A residual below the smallest uncertainty one may state (1 pm) is rounding: the seat keeps its
-    stated (default) uncertainty, said as such."""
-    pts, art = _case(tmp_path, 2, 10)
+def test_a_feature_whose_residuals_are_rounding_gives_no_noise_estimate(tmp_path, capsys):
+    """Two ring measurements and a seat at one pose repeated 10 times, the last joint 1e-11 deg apart (rounding of
+    a reading written two ways; no longer one reading repeated): the seat's residuals are 1e-16 m, and its noise was
+    estimated at that size and weighted 1e20 times the ring's (written in summary.json as the seat's noise). A
+    residual below the smallest uncertainty one may state (1 pm) is rounding: the seat keeps its stated (default)
+    uncertainty, said as such."""
+    pts, art = _case(tmp_path, 2, 10, step_deg=1e-11)
     out = tmp_path / "o"
     rc, err, said = _run(["calibrate", pts, art, "--arm", "aacmm7", "--no-plots", "-o", out], capsys)
     assert rc == 0, err
