@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike
 from arm_model import InputError, NumericalError
 from arm_model.casadi_model import NumpyFunction
 from arm_model.geometry import ball_centre_radius
-from arm_model.io import CENTRE_KINDS
+from arm_model.io import CENTRE_KINDS, PointSet
 from arm_model.model import CASADI_CACHE, ArmModel
 from arm_model.tracker import DEFAULT_SESSION, Tracker, offset_matrix
 
@@ -46,7 +46,7 @@ Group = dict[str, Any]
 Triplets = tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]
 
 
-def _one_row(points, rows: np.ndarray) -> bool:
+def _one_row(points: PointSet, rows: np.ndarray) -> bool:
     """Whether the rows ``rows`` of ``points`` are one reading repeated: the same encoder angles, force and torque
     (a seat held at one pose and pushed in turn is not: the force moves the ball centre the model computes)."""
     cols = [points.q[rows]] + [a[rows] for a in (points.force, points.torque) if a is not None]

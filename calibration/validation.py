@@ -39,8 +39,8 @@ from .problem import Problem
 from .solver import blas_threads, levenberg_marquardt
 
 __all__ = ["Validation", "validate", "validate_poses", "heldout_residuals", "before_after", "figure_rows",
-           "bootstrap", "with_u", "ratio_text", "FIGURES", "DIAMETER_MIN_POINTS", "BOOTSTRAP_SAMPLES", "MpeTest", "MPE_TESTS",
-           "conformance", "worse_than_nominal"]
+           "bootstrap", "with_u", "ratio_text", "FIGURES", "DIAMETER_MIN_POINTS", "BOOTSTRAP_SAMPLES", "MpeTest",
+           "MPE_TESTS", "conformance", "worse_than_nominal"]
 
 #: resamples of :func:`bootstrap` (the relative precision of a standard deviation from B resamples
 #: is about 1 / sqrt(2 B): 3 % for 500)
