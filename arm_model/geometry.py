@@ -356,13 +356,18 @@ def _check_rank(jac: np.ndarray, what: str, names: tuple[str, ...]) -> None:
                              "the points do not determine the fit")
 
 
+#: points whose RMS spread about their centroid is at most this share of their largest coordinate coincide: the
+#: spread is the rounding of double precision (a pose repeated gives 1e-17 m, and was called "collinear")
+COINCIDE = 1e-12
+
+
 def _normalised(p: np.ndarray, what: str) -> tuple[np.ndarray, float, np.ndarray]:
     """``(origin, scale, z)``: the points about their centroid in units of their RMS distance from it (the
     fits solve on ``z``, well scaled whatever the unit and placement)."""
     o = p.mean(axis=0)
     scale = float(np.sqrt(((p - o) ** 2).sum(axis=1).mean()))
-    if scale == 0:
-        raise NumericalError(f"all points coincide: no {what}")
+    if scale <= COINCIDE * float(np.abs(p).max()):      # a spread of rounding (one pose repeated) is none
+        raise NumericalError(f"all points coincide (to rounding): no {what}")
     return o, scale, (p - o) / scale
 
 
@@ -687,9 +692,9 @@ def _points(points: ArrayLike, need: int, what: str, dim: int = 3) -> np.ndarray
 def fit_plane(points: ArrayLike) -> PlaneFit:
     """Least-squares (orthogonal) plane through >= 3 non-collinear points."""
     p = _points(points, 3, "plane")
-    c = p.mean(axis=0)
-    _, s, vt = np.linalg.svd(p - c, full_matrices=False)
-    if s[1] <= 1e-9 * max(s[0], 1e-300):
+    c, _, z = _normalised(p, "plane")
+    _, s, vt = np.linalg.svd(z, full_matrices=False)
+    if s[1] <= 1e-9 * s[0]:
         raise NumericalError(f"{len(p)} collinear points cannot place a plane")
     return PlaneFit(point=c, normal=vt[2], residuals=(p - c) @ vt[2])
 
@@ -701,7 +706,7 @@ def sphere_seed(points: ArrayLike) -> tuple[np.ndarray, float]:
         NumericalError: fewer than 4 points, or points on one plane.
     """
     p = _points(points, 4, "sphere")
-    o = p.mean(axis=0)
+    o, _, _ = _normalised(p, "sphere")
     z = p - o
     a = np.column_stack([2 * z, np.ones(len(z))])
     sol, _, rank, _ = np.linalg.lstsq(a, np.sum(z * z, axis=1), rcond=None)

@@ -39,6 +39,7 @@ import scipy.sparse as sp
 from arm_model import InputError, NumericalError
 from arm_model.model import ArmModel
 from arm_model.tracker import Tracker
+from arm_model.units import STATED_SIGMA_M
 
 from .data import CalibrationData, Weights
 from .discrepancy import Discrepancy, group_deletions, model_discrepancy
@@ -1172,6 +1173,10 @@ def _solve(s: _Setup, options: FitOptions):
         kept, vague = _undetermined(s, p, kept, "solution", u)
         kept, new, idf1 = _held(s, p, states, kept, "solution", options)
         fixed += bound + vague + new
+        if s.candidates and not kept:
+            raise NumericalError(f"the data determine none of the {len(s.candidates)} parameters (each held: "
+                                 "not observable from these points, e.g. one pose repeated); measure more "
+                                 "distinct poses")
         if len(kept) == n_before:
             return sol, kept, fixed, idf0, idf1
         rank_rounds += bool(new)
@@ -1581,7 +1586,9 @@ def variance_components(problem: Problem, r: np.ndarray, leverage: np.ndarray, w
     stated uncertainty must be multiplied. Rows beyond :data:`OUTLIER_ROWS` robust standard deviations of
     their group are left out (a gross error would inflate the estimate). Groups with less than
     :data:`MIN_REDUNDANCY` redundant rows are not estimated (``estimated`` False, factor 1), unless their
-    residuals refute the stated uncertainty (:func:`_refutes`; ``stated_refuted`` True).
+    residuals refute the stated uncertainty (:func:`_refutes`; ``stated_refuted`` True); nor are groups whose
+    estimate lies below the smallest stated uncertainty, ``arm_model.units.STATED_SIGMA_M`` (``no_scatter``
+    True: residuals of rounding size, a pose repeated exactly, hold no noise to estimate).
 
     Returns one dict a group: ``group``, ``rows``, ``redundancy``, ``factor``, ``estimated``, and
     ``sigma_um`` (the current uncertainty of a point of the group, per axis, factor applied) and
@@ -1600,8 +1607,14 @@ def variance_components(problem: Problem, r: np.ndarray, leverage: np.ndarray, w
         ok = red >= MIN_REDUNDANCY or refuted
         factor = math.sqrt(float(r[idx] @ r[idx]) / red) if ok else 1.0
         sig = weights.sigma_of(name)
+        # residuals below the smallest uncertainty anyone may state are rounding, not scatter (a pose repeated
+        # exactly): no estimate of the noise (a factor of 0 weighted the rows infinitely, and a log of it failed)
+        no_scatter = ok and factor * (sig if sig is not None else weights.length_sigma(None)) < STATED_SIGMA_M[0]
+        if no_scatter:
+            ok, factor = False, 1.0
         out.append({"group": name, "rows": int(len(idx)), "redundancy": red, "factor": factor, "estimated": ok,
-                    "stated_refuted": bool(refuted), "gross_rows_left_out": int(gross.sum()),
+                    "stated_refuted": bool(refuted), "no_scatter": bool(no_scatter),
+                    "gross_rows_left_out": int(gross.sum()),
                     "sigma_um": None if sig is None else sig * 1e6,
                     "estimate_um": None if sig is None else sig * factor * 1e6})
     return out

@@ -26,7 +26,7 @@ from arm_model.csv_io import parse_number
 from arm_model.discrepancy import growth_text
 from arm_model.errors import resolved
 from arm_model.io import json_text, read_artefacts, read_points
-from arm_model.log import counted
+from arm_model.log import counted, progress_line
 from arm_model.model_file import Arm
 from arm_model.output import output_folder
 from arm_model.parallel import cores
@@ -568,7 +568,11 @@ def run_calibrate(args: argparse.Namespace) -> int:
                               on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
                               drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference,
                               gross_threshold=gross_threshold(args))
+        say = progress_line(log)            # a long fit (10^5 points: minutes) says where it is
+        say(f"fitting the model to {counted(len(train.points), 'point')} (with the noise, the prior and the model "
+            "discrepancy from the data)")
         res = refine_torques(calibrate(model, train, options))
+        say("the nominal baseline and the validation figures")
         base = nominal_baseline(model, res.data, replace(res.options, weights=res.weights))
         # the held-out rows' torques on the calibrated description, as the model file (tip) evaluates them
         test, data = with_fitted_torques(test, res), with_fitted_torques(data, res)
@@ -576,6 +580,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
                 (res, test, base) if poses is None else (res, data, base, ~poses))
         val_train, val_test, conf = conformance_entry(mpe_from_args(args), (res, res.data, base), held)
         worse = worse_than_nominal(val_test or [])
+        say("writing the model file and the report")
         files = write_outputs(res, out.dir, inputs=inputs, validation_training=val_train,
                               validation_holdout=val_test, plots=not args.no_plots,
                               extra={"inputs": {"points": str(args.points),
@@ -641,7 +646,7 @@ def _log_fixed(fixed) -> None:
 def _log_calibration(res, data, train, test, poses, validation, files) -> None:
     """The console report of ``aacmm calibrate``."""
     from .report import poorly_determined
-    from .validation import with_u
+    from .validation import ratio_text, with_u
     val_train, val_test, conf, worse = validation
     held = ("" if test is None and poses is None else
             f", {counted(len(test), 'held-out point')} in {counted(len(test.measurements()), 'measurement')}"
@@ -697,7 +702,7 @@ def _log_calibration(res, data, train, test, poses, validation, files) -> None:
                      "bootstrap over its measurements):")
             for r in rows:
                 log.info(f"  {r['label']}: {with_u(r['before'], r['u_before'])} -> {with_u(r['after'], r['u_after'])} "
-                         f"{r['unit']} ({r['ratio']:.2f}x)")
+                         f"{r['unit']} ({ratio_text(r['ratio'])})")
     new = sessions_without_frame(res, test)
     if new:
         log.info(f"note: held-out session(s) {', '.join(repr(s) for s in new)} have no frame from the training data: "
@@ -836,7 +841,10 @@ def noise_lines(res) -> list[str]:
             start = f"{v['sigma_um'] / used:.3g} um"
             said = f"stated {start}" if res.weights.stated_sigma_of(v["group"]) else f"default {start}, not stated"
             size = f"{v['sigma_um']:.3g} um per axis ({said})"
-        if not v["estimated"]:
+        if v.get("no_scatter"):
+            out.append(f"  {what}: {size}; not estimated: the residuals show no scatter (below 1e-6 um: the same "
+                       f"poses repeated?)")
+        elif not v["estimated"]:
             out.append(f"  {what}: {size}; not estimated (redundancy {v['redundancy']:.2g} of {v['rows']} rows, "
                        f"too little)")
         elif res.weights_history:

@@ -6,7 +6,8 @@ the data say about the parameters. Its columns are scaled by the norms of the *u
 (so a parameter whose effect the nuisance absorbs entirely, like the base rotation ``j1.theta_offset``
 without reference coordinates, shows as a near-zero column) and decomposed:
 
-* SVD: singular values, numerical rank (``s > rank_tol * s_max``), condition number of the
+* SVD: singular values, numerical rank (``s > rank_tol * max(s_max, 1)``: a scaled column is at most unit, so a
+  direction is never kept for being large beside nothing), condition number of the
   identifiable part, and the null-space directions written as named parameter combinations;
 * QR with column pivoting (LAPACK ``geqp3``): which parameters to hold fixed, one per null direction;
   for each, the combination with the kept parameters that the data cannot see.
@@ -180,7 +181,9 @@ def analyse(jred: np.ndarray, jp: np.ndarray, names: Sequence[str], rank_tol: fl
         mag = np.abs(gs) / np.abs(gs).max(axis=0)
         gauge_names = {names[k] for k in np.flatnonzero(mag.max(axis=1) > 1e-6)}
     _, s, vt = np.linalg.svd(a, full_matrices=False)
-    smax = s[0] if s.size and s[0] > 0 else 1.0
+    # relative to the largest, and never to less than a whole column's own effect (``a``'s columns are at most
+    # unit): when the nuisance absorbs every parameter (one pose repeated), rounding is not a direction
+    smax = max(s[0], 1.0) if s.size else 1.0
     rank = int(np.sum(s > rank_tol * smax))
     condition = float(s[0] / s[rank - 1]) if rank else float("inf")
     # pivoted QR on the columns scaled for the choice (same null space as ``a``)

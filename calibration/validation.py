@@ -31,6 +31,7 @@ import numpy as np
 from arm_model.geometry import feature_diameter, smallest_enclosing_sphere
 from arm_model.model import ArmModel
 from arm_model.tracker import Tracker
+from arm_model.units import STATED_SIGMA_M
 
 from .data import CalibrationData, Weights
 from .kinds import MIN_POINTS
@@ -38,8 +39,8 @@ from .problem import Problem
 from .solver import blas_threads, levenberg_marquardt
 
 __all__ = ["Validation", "validate", "validate_poses", "heldout_residuals", "before_after", "figure_rows",
-           "bootstrap", "with_u", "FIGURES", "DIAMETER_MIN_POINTS", "BOOTSTRAP_SAMPLES", "MpeTest", "MPE_TESTS",
-           "conformance", "worse_than_nominal"]
+           "bootstrap", "with_u", "ratio_text", "FIGURES", "DIAMETER_MIN_POINTS", "BOOTSTRAP_SAMPLES", "MpeTest",
+           "MPE_TESTS", "conformance", "worse_than_nominal"]
 
 #: resamples of :func:`bootstrap` (the relative precision of a standard deviation from B resamples
 #: is about 1 / sqrt(2 B): 3 % for 500)
@@ -316,8 +317,8 @@ def validate_poses(model: ArmModel, p, data: CalibrationData, train, weights: We
 
 def worse_than_nominal(rows: list[dict]) -> list[dict]:
     """The rows of :func:`figure_rows` (nominal before, calibrated after) where the calibrated model is worse
-    than the nominal: ``after > before``."""
-    return [r for r in rows if r["after"] > r["before"]]
+    than the nominal: ``after > before``, beyond rounding (:data:`arm_model.units.STATED_SIGMA_M`; rows in um)."""
+    return [r for r in rows if r["after"] > r["before"] and r["after"] >= STATED_SIGMA_M[0] * 1e6]
 
 
 def _units(val: Validation) -> dict:
@@ -386,6 +387,11 @@ def bootstrap(val: Validation, samples: int = BOOTSTRAP_SAMPLES, seed: int = 0) 
     return out
 
 
+def ratio_text(ratio: float | None) -> str:
+    """A row's nominal/calibrated ratio as the console shows it: ``"15.70x"``, or that there is none."""
+    return "no ratio: the calibrated figure is below 1 pm" if ratio is None else f"{ratio:.2f}x"
+
+
 def with_u(value, u, digits: int = 2) -> str:
     """``"12.30 ± 0.45"`` (``"12.30"`` without an uncertainty)."""
     if value is None:
@@ -410,7 +416,9 @@ def figure_rows(va: Validation, vb: Validation) -> list[dict]:
     rows = []
     for key, (label, unit, factor) in FIGURES.items():
         if key in a and key in b:
-            ratio = a[key] / b[key] if b[key] > 0 else float("inf")
+            # every figure is a length [m]: below the smallest stated uncertainty it is rounding (a seat probed at
+            # one pose repeated), and a ratio to it is no measured gain (it was printed "infx")
+            ratio = a[key] / b[key] if b[key] >= STATED_SIGMA_M[0] else None
             rows.append({"key": key, "label": label, "unit": unit, "before": a[key] * factor,
                          "after": b[key] * factor, "ratio": ratio,
                          "u_before": None if ua.get(key) is None else ua[key] * factor,

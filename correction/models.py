@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from arm_model import InputError
+from arm_model import InputError, NumericalError
 from arm_model.geometry import CylinderFit, ring_fit
 from arm_model.io import PointSet, read_force_signal
 from arm_model.output import safe_name
@@ -227,7 +227,11 @@ def analyse_ring_campaign(desc, points: PointSet, artefacts, feature: str | None
         if points.torque is not None:
             wrench = np.column_stack([wrench, points.torque[idx]])
         wrench_centres = arm.ball_centres(sub, wrench=wrench) if "wrench" in models else None
-        fits = correct_ring(rigid, desc.probe.ball_diameter, ring.diameter, c, forces, wrench_centres, models)
+        try:
+            fits = correct_ring(rigid, desc.probe.ball_diameter, ring.diameter, c, forces, wrench_centres, models)
+        except NumericalError as exc:       # the one measurement whose points give no ring, named
+            line = int(points.line_numbers[idx[0]])
+            raise NumericalError(f"{points.path}, line {line}, measurement '{mid}': {exc}") from None
         out.append(RingMeasurement(mid, forces, force_summary(forces.bending), fits, points.line_numbers[idx], idx))
     if kind == "two-channel":
         notes.append("two-channel force sensor (f_bend, f_axial): the bending force along probe y is not "

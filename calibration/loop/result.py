@@ -128,7 +128,8 @@ class LoopResult:
             rows.append({"stage": s.index, "model": "base model" if s.added is None else f"+ {s.added.name}",
                          "rms_um": h["rms_um"], "max_um": h["max_um"],
                          "rms_um_unflagged": h.get("rms_um_unflagged"), "max_um_unflagged": h.get("max_um_unflagged"),
-                         "ratio_rms": base["rms_um"] / h["rms_um"] if h["rms_um"] > 0 else float("inf"),
+                         # below 1 pm a figure is rounding: no ratio (as calibrate's, validation.figure_rows)
+                         "ratio_rms": base["rms_um"] / h["rms_um"] if h["rms_um"] >= 1e-6 else None,
                          **{k: v for k, v in h["standard"].items()},
                          "u": {"rms_um": h["u_rms_um"], "max_um": h["u_max_um"], **h["u_standard"]}})
         return rows
