@@ -1482,7 +1482,8 @@ def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
                        if v["estimated"]}
         history.append({"round": k + 1, "scales": dict(s.scales), "effective_parameters": gamma,
                         "noise_factors": dict(prob.weights.factors), "s0": math.sqrt(2 * sol.cost / red)})
-        if max([abs(r) for r in steps.values()] + [abs(math.log(f)) for f in factors.values()]) <= EVIDENCE_TOL:
+        moves = [abs(r) for r in steps.values()] + [abs(math.log(f)) for f in factors.values()]
+        if max(moves, default=0.0) <= EVIDENCE_TOL:
             history[-1]["settled"] = True
             return s, sol, kept, fixed, history
         gains = secant_gains(steps, last, EVIDENCE_TOL)
