@@ -361,16 +361,32 @@ def group_deletions(js, solve, r: np.ndarray, groups, chunk: int = 2000, tol: fl
     return out
 
 
+def _hat_blocks(js_o, z: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    """``H_OO`` (groups, size, size) of the groups at positions ``pos`` (groups, size) of the sparse rows ``js_o`` and
+    of ``z = (A^-1 J_O^T)^T``: one sparse product a group for large groups, one a pair of positions for small ones."""
+    g, size = pos.shape
+    if size > 16:
+        return np.stack([np.asarray(js_o[p] @ z[p].T) for p in pos])
+    h = np.empty((g, size, size))
+    for i in range(size):
+        rows = js_o[pos[:, i]]
+        for j in range(size):
+            h[:, i, j] = np.asarray(rows.multiply(z[pos[:, j]]).sum(axis=1)).ravel()
+    return h
+
+
 def _deletion_batch(jr, solve, r: np.ndarray, batch: list, tol: float, leverage: np.ndarray | None) -> list:
     """:func:`group_deletions` of the groups ``batch`` (one dense solve; the groups of one size together)."""
-    jd = jr[np.concatenate(batch)].toarray()
-    z = solve(jd.T).T                                   # (rows, unknowns): A^-1 J_O^T, row by row
+    js_o = jr[np.concatenate(batch)]
+    z = solve(js_o.T.toarray()).T                       # (rows, unknowns): A^-1 J_O^T, row by row
     start = np.cumsum([0] + [len(o) for o in batch])
     out: list = [None] * len(batch)
     for size in np.unique(np.diff(start)):
         which = np.flatnonzero(np.diff(start) == size)
-        pos = start[which][:, None] + np.arange(size)   # (groups, size) positions in jd and z
-        h = np.einsum("giu,gju->gij", jd[pos], z[pos])
+        pos = start[which][:, None] + np.arange(size)   # (groups, size) positions in js_o and z
+        # H_OO = J_O A^-1 J_O^T of each group: the sparse rows times z (a row of J_O touches the parameters and its
+        # own instance's unknowns only, so this costs rows^2 x nonzeros a row, not rows^2 x unknowns)
+        h = _hat_blocks(js_o, z, pos)
         rows = np.stack([batch[g] for g in which])
         if leverage is not None:
             leverage[rows] = np.einsum("gii->gi", h)

@@ -564,3 +564,31 @@ def test_no_output_over_the_training_poses_file(tmp_path, nominal):
     assert main(["tip", str(tmp_path / "poses.csv"), "--arm", str(tmp_path / "m.toml"), "--uncertainty", "-o",
                  str(tmp_path / "poses.csv"), "-q"]) == 2
     assert (tmp_path / "poses.csv").read_bytes() == before
+
+
+def test_group_deletions_match_the_dense_hat_matrix_by_hand():
+    """The block-sparse products of :func:`group_deletions` equal the dense formulas (H = J A^-1 J^T in full), for
+    small groups (one product a pair of positions) and a large one (one sparse product a group), to 1e-10."""
+    from calibration.discrepancy import group_deletions
+    rng = np.random.default_rng(7)
+    n_par, n_inst, per = 5, 30, 8                          # parameters; instances of 3 unknowns, 8 rows each
+    rows = n_inst * per
+    j = np.zeros((rows, n_par + 3 * n_inst))
+    j[:, :n_par] = rng.normal(size=(rows, n_par))
+    for k in range(n_inst):                                 # each row touches its own instance's unknowns only
+        j[k * per:(k + 1) * per, n_par + 3 * k:n_par + 3 * k + 3] = rng.normal(size=(per, 3))
+    a = j.T @ j + np.diag(np.r_[np.full(n_par, 0.1), np.zeros(3 * n_inst)])
+    r = rng.normal(size=rows)
+    groups = [np.array([0]), np.array([9]), np.array([17, 18, 30]), np.array([40, 50, 60]),
+              rng.choice(np.arange(64, rows), 40, replace=False)]
+    lev = np.full(rows, np.nan)
+    got = group_deletions(sp.csc_matrix(j), lambda b: np.linalg.solve(a, b), r, groups, chunk=20, leverage=lev)
+    h = j @ np.linalg.solve(a, j.T)
+    for o, (e, m, d) in zip(groups, got, strict=True):
+        m_ref = np.linalg.inv(np.eye(len(o)) - h[np.ix_(o, o)])
+        e_ref = m_ref @ r[o]
+        np.testing.assert_allclose(m, m_ref, rtol=1e-10, atol=1e-10 * np.abs(m_ref).max())
+        np.testing.assert_allclose(e, e_ref, rtol=1e-10, atol=1e-10 * np.abs(e_ref).max())
+        d_ref = np.linalg.solve(a, j[o].T @ e_ref)
+        np.testing.assert_allclose(d, d_ref, rtol=1e-10, atol=1e-10 * np.abs(d_ref).max())
+        np.testing.assert_allclose(lev[o], np.diag(h)[o], rtol=1e-10)
