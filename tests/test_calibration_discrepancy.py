@@ -566,10 +566,14 @@ def test_no_output_over_the_training_poses_file(tmp_path, nominal):
     assert (tmp_path / "poses.csv").read_bytes() == before
 
 
-def test_group_deletions_match_the_dense_hat_matrix_by_hand():
-    """The block-sparse products of :func:`group_deletions` equal the dense formulas (H = J A^-1 J^T in full), for
-    small groups (one product a pair of positions) and a large one (one sparse product a group), to 1e-10."""
+@pytest.mark.parametrize("dense_unknowns", [0, 10 ** 9], ids=["sparse", "dense"])
+def test_group_deletions_match_the_dense_hat_matrix_by_hand(monkeypatch, dense_unknowns):
+    """The block-sparse products of :func:`group_deletions` (and its dense product, for few unknowns) equal the dense
+    formulas (H = J A^-1 J^T in full), for small groups (one product a pair of positions) and a large one (one sparse
+    product a group), to 1e-10."""
+    from calibration import discrepancy
     from calibration.discrepancy import group_deletions
+    monkeypatch.setattr(discrepancy, "DENSE_UNKNOWNS", dense_unknowns)
     rng = np.random.default_rng(7)
     n_par, n_inst, per = 5, 30, 8                          # parameters; instances of 3 unknowns, 8 rows each
     rows = n_inst * per
