@@ -59,7 +59,7 @@ from __future__ import annotations
 
 import fnmatch
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -192,8 +192,6 @@ class PriorSpec:
             but :data:`SCALE_RANGE`).
         capped: the groups whose size is a physical maximum (every parameter a play's,
             :attr:`arm_model.effects.Effect.physical_size`): the evidence may shrink their scale, never above 1.
-        prior_only: {spec index: why} of the parameters the data cannot tell from others (:func:`prior_only`):
-            their data's column is left out of the fit, the prior alone holds them.
     """
     group: tuple
     size: np.ndarray
@@ -201,7 +199,6 @@ class PriorSpec:
     source: tuple
     physical: frozenset = frozenset()
     limit: np.ndarray | None = None
-    prior_only: dict = field(default_factory=dict)
     capped: frozenset = frozenset()
 
     def ceiling(self, group: str) -> float:
@@ -322,7 +319,7 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
     effect parameter the size the effect takes from the data (a drift's: :data:`arm_model.effects.DRIFT_STRAIN` over
     the data's time span), else its own plausible size (a play's physical maximum, :data:`arm_model.effects.PLAY`: its
     group's scale at most 1) or a size by unit (:data:`UNIT_SIZES`); the plays the data cannot tell
-    from the joint's offset, prior only (:func:`prior_only`). ``priors``
+    from the joint's offset the fit leaves to this prior alone (:func:`prior_only`). ``priors``
     (names or glob patterns -> size [SI]) override. The lower bounds are the model's
     (:meth:`arm_model.model.ArmModel.lower_bounds`: a compliance cannot be negative in total, nor a backlash)."""
     spec = model.spec
@@ -349,8 +346,7 @@ def prior_spec(model, data, priors: dict | None = None) -> PriorSpec:
 
     def every(what: str) -> frozenset:
         return frozenset(g for g in set(groups) if all(kind[i] == what for i in range(spec.size) if groups[i] == g))
-    return PriorSpec(groups, size, lower, tuple(source), every("physical"), limits(model), prior_only(model, data),
-                     every("maximum"))
+    return PriorSpec(groups, size, lower, tuple(source), every("physical"), limits(model), every("maximum"))
 
 
 def both_sides(sign) -> bool:
