@@ -19,7 +19,8 @@ from .description import ArmDescription
 from .effects import ArtefactDrift, Effect, Geometry, ModelInputs
 from .params import ParamSpec, apply_params, param_spec, split_params
 
-__all__ = ["ArmModel", "AuxData", "reading_motion", "points_motion", "capture_position", "capture_columns", "CASADI_CACHE", "EQUILIBRIUM_TOL",
+__all__ = ["ArmModel", "AuxData", "reading_motion", "points_motion", "capture_position", "capture_columns",
+           "CASADI_CACHE", "EQUILIBRIUM_TOL",
            "EQUILIBRIUM_MAX_ITER"]
 
 #: the static equilibrium's tolerance [rad] (m for a prismatic joint): a joint angle's last step
