@@ -894,7 +894,9 @@ class ArtefactDrift(Effect):
         object.__setattr__(self, "measurements", tuple(ids))
 
     def needs(self) -> tuple[str, ...]:
-        return ("capture",)
+        """The capture places, once bound to measurements (an unbound one, ``--effect artefact_drift`` before the
+        data are read, has no parameter and needs nothing)."""
+        return ("capture",) if self.measurements else ()
 
     def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
         return [(f"{m}.drift_{a}", "m") for m in self.measurements for a in "xyz"]
