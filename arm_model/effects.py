@@ -878,7 +878,8 @@ class ArtefactDrift(Effect):
     A nuisance of the measurement, as the artefact's place is (:attr:`Effect.session`): a model file never holds it,
     and applying the model (``tip``) to other data applies no drift (each measurement has its own, unknown). The
     shift is along the base axes at the joint angles the effects listed before it leave: list it after them (the
-    command line and the loop put it last)."""
+    command line puts it after the effects given with it; one the loop adds later turns the shift by that effect's
+    own small angle only, a micrometre for a millimetre's drift and a milliradian)."""
     measurements: tuple[str, ...] = ()
     key: str = field(default="artefact_drift", init=False, repr=False)
     session: ClassVar[bool] = True
