@@ -298,6 +298,15 @@ class ArmDescription:
         return tuple(j.axis for j in self.joints) if self.convention == "urdf" else None
 
     @property
+    def chain_length(self) -> float:
+        """The length [m] of the chain: the sum of its joint rows' translations (DH/MDH ``hypot(d, a)``, a URDF
+        origin's ``|(x, y, z)|``) and the tip's distance from the last joint's origin: the arm's size, at least its
+        reach."""
+        rows = sum(math.hypot(j.d, j.a) if j.origin is None else float(np.linalg.norm(j.origin[:3]))
+                   for j in self.joints)
+        return float(rows + np.linalg.norm(self.probe.p_last))
+
+    @property
     def length_indices(self) -> tuple[int, ...]:
         """Indices of the row values that are lengths (thermal growth scales them)."""
         return (0, 1, 2) if self.convention == "urdf" else (1, 2)

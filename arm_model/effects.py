@@ -28,7 +28,7 @@ __all__ = ["ModelInputs", "Geometry", "Effect", "EncoderEccentricity", "JointCom
            "ThermalGrowth", "ForceSensorError", "JointGain", "ProbeCompliance", "EFFECTS", "effect_from_name",
            "REFERENCE_TEMPERATURE_C", "JointHarmonics", "ProbeThermalGrowth", "ProbeComplianceMatrix",
            "ApproachOffset", "LateralCompliance", "ThermalDrift", "JointBacklash", "JointHysteresis", "joint_frame",
-           "last_frame", "gravity_moment", "contact_moment", "PLAY", "DRIFT_STRAIN"]
+           "last_frame", "gravity_moment", "contact_moment", "PLAY", "DRIFT_STRAIN", "ArtefactDrift"]
 
 REFERENCE_TEMPERATURE_C = 20.0
 
@@ -45,6 +45,9 @@ class ModelInputs:
     #: about ``origin``, [N m]); :class:`LateralCompliance` computes them itself when None
     moments: Any = None
     time: Any = None              # [s] the points' time stamps (``time_s``)
+    #: K columns [1]: each point's place in the capture of its measurement, -1/2 (first) to +1/2 (last), in the
+    #: column of its measurement (0 in the others; :func:`arm_model.model.capture_columns`)
+    capture: list[Any] | None = None
     motion: list[Any] | None = None   # J [1] the sign of each reading's last move (model.reading_motion)
 
 
@@ -861,6 +864,66 @@ class LateralCompliance(Effect):
         _shift_ball(desc, geom, q, shift, ops, last)
 
 
+@dataclass(frozen=True)
+class ArtefactDrift(Effect):
+    """The artefact (or the arm's base under it) creeping while one measurement is captured: the artefact of
+    measurement ``m`` sits at ``c + D_m s`` when a point is taken, ``c`` its place at the middle of the capture and
+    ``s`` the point's place in the capture, -1/2 at the first point to +1/2 at the last (``ModelInputs.capture``:
+    the time stamps where the measurement has them, else its rows' order, :func:`arm_model.model.capture_columns`).
+    ``D_m`` [m] (base frame; parameters ``<m>.drift_x/y/z``) is the artefact's whole displacement over the capture,
+    one per measurement of ``measurements``: the ball, seen from the artefact, is moved by ``-D_m s``, so every
+    feature's fitted place (a seat's centre, a sphere's, a plane) is the one at the middle of its measurement's
+    capture. A rigid translation of the whole artefact, linear along the capture; a rotation of it is not modelled.
+
+    A nuisance of the measurement, as the artefact's place is (:attr:`Effect.session`): a model file never holds it,
+    and applying the model (``tip``) to other data applies no drift (each measurement has its own, unknown). The
+    shift is along the base axes at the joint angles the effects listed before it leave: list it after them (the
+    command line puts it after the effects given with it; one the loop adds later turns the shift by that effect's
+    own small angle only, a micrometre for a millimetre's drift and a milliradian)."""
+    measurements: tuple[str, ...] = ()
+    key: str = field(default="artefact_drift", init=False, repr=False)
+    session: ClassVar[bool] = True
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.joints is not None:
+            raise ValueError("artefact_drift moves the artefact, not a joint: it takes no joints")
+        ids = self.measurements
+        if (not isinstance(ids, (tuple, list)) or not all(isinstance(m, str) and m for m in ids)
+                or len(set(ids)) != len(ids)):
+            raise ValueError(f"artefact_drift: measurements must be distinct measurement ids, got {ids!r}")
+        object.__setattr__(self, "measurements", tuple(ids))
+
+    def needs(self) -> tuple[str, ...]:
+        """The capture places, once bound to measurements (an unbound one, ``--effect artefact_drift`` before the
+        data are read, has no parameter and needs nothing)."""
+        return ("capture",) if self.measurements else ()
+
+    def param_defs(self, desc: ArmDescription) -> list[tuple[str, str]]:
+        return [(f"{m}.drift_{a}", "m") for m in self.measurements for a in "xyz"]
+
+    def prior_sizes(self, desc: ArmDescription, inputs: ModelInputs) -> list[tuple[float, str]] | None:
+        """:data:`DRIFT_STRAIN` of the arm's size (:meth:`ArmDescription.chain_length`): the distance from the
+        base to an artefact in its reach changing by a thermal strain of the structures between them."""
+        size = DRIFT_STRAIN * desc.chain_length
+        return [(size, f"a strain of {DRIFT_STRAIN:g} over the arm's size ({desc.chain_length:.3g} m)")] * (
+            3 * len(self.measurements))
+
+    def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
+        if not self.measurements:
+            return
+        if inputs.capture is None or len(inputs.capture) != len(self.measurements):
+            raise ValueError(f"the effect 'artefact_drift' needs one 'capture' column a measurement "
+                             f"({len(self.measurements)})")
+        d = [0.0, 0.0, 0.0]
+        for k, s in enumerate(inputs.capture):
+            d = [d[a] - params[3 * k + a] * s for a in range(3)]
+        _shift_ball(desc, geom, inputs.q, d, ops)
+
+    def describe(self, desc: ArmDescription | None = None) -> str:
+        return f"{self.key}({len(self.measurements)} measurement{'' if len(self.measurements) == 1 else 's'})"
+
+
 EFFECTS.update({str(cls.__dataclass_fields__["key"].default): cls for cls in
                 (JointHarmonics, ProbeThermalGrowth, ProbeComplianceMatrix, ApproachOffset, LateralCompliance,
-                 ThermalDrift, JointBacklash, JointHysteresis)})
+                 ThermalDrift, JointBacklash, JointHysteresis, ArtefactDrift)})

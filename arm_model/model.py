@@ -16,10 +16,11 @@ from numpy.typing import ArrayLike
 
 from .chain import NUMPY_OPS, ball_centre_expr
 from .description import ArmDescription
-from .effects import Effect, Geometry, ModelInputs
+from .effects import ArtefactDrift, Effect, Geometry, ModelInputs
 from .params import ParamSpec, apply_params, param_spec, split_params
 
-__all__ = ["ArmModel", "AuxData", "reading_motion", "points_motion", "CASADI_CACHE", "EQUILIBRIUM_TOL",
+__all__ = ["ArmModel", "AuxData", "reading_motion", "points_motion", "capture_position", "capture_columns",
+           "CASADI_CACHE", "EQUILIBRIUM_TOL",
            "EQUILIBRIUM_MAX_ITER"]
 
 #: the static equilibrium's tolerance [rad] (m for a prismatic joint): a joint angle's last step
@@ -31,16 +32,47 @@ EQUILIBRIUM_MAX_ITER = 60
 @dataclass(frozen=True)
 class AuxData:
     """Per-point data some effects need: temperature (N,) [°C], joint torques (N, J) [N m], time (N,) [s], the
-    sign of each reading's last move (N, J) [1] (:func:`reading_motion`)."""
+    sign of each reading's last move (N, J) [1] (:func:`reading_motion`), each point's place in its measurement's
+    capture (N, K) [1] (:func:`capture_columns`)."""
     temperature: np.ndarray | None = None
     tau_gravity: np.ndarray | None = None
     tau_contact: np.ndarray | None = None
     time: np.ndarray | None = None
     motion: np.ndarray | None = None
+    capture: np.ndarray | None = None
 
     def select(self, mask: np.ndarray | slice) -> AuxData:
-        return AuxData(*(None if a is None else a[mask]
-                         for a in (self.temperature, self.tau_gravity, self.tau_contact, self.time, self.motion)))
+        return AuxData(*(None if a is None else a[mask] for a in (self.temperature, self.tau_gravity,
+                                                                  self.tau_contact, self.time, self.motion,
+                                                                  self.capture)))
+
+
+def capture_position(measurement: ArrayLike, time: ArrayLike | None = None) -> np.ndarray:
+    """(N,) each point's place in the capture of its measurement [1], -1/2 at its first point to +1/2 at its last:
+    by the time stamps ``time`` (N,) [s] where every point of the measurement has one and they span a time, else by
+    the rows' order within the measurement (the capture order: the rows of one measurement keep their file order),
+    evenly spaced; 0 for a measurement of one point. The time base of :class:`~arm_model.effects.ArtefactDrift`."""
+    meas = np.asarray(measurement, dtype=object)
+    t = None if time is None else np.asarray(time, dtype=float)
+    out = np.zeros(len(meas))
+    for m in dict.fromkeys(meas.tolist()):
+        rows = np.flatnonzero(meas == m)
+        stamps = None if t is None else t[rows]
+        if stamps is not None and np.all(np.isfinite(stamps)) and np.ptp(stamps) > 0:
+            out[rows] = (stamps - 0.5 * (stamps.min() + stamps.max())) / np.ptp(stamps)
+        elif len(rows) > 1:
+            out[rows] = np.arange(len(rows)) / (len(rows) - 1) - 0.5
+    return out
+
+
+def capture_columns(measurements: tuple[str, ...], measurement: ArrayLike, time: ArrayLike | None = None
+                    ) -> np.ndarray:
+    """(N, K) the capture place (:func:`capture_position`) of each point in the column of its measurement, one column
+    each of ``measurements`` (K), 0 elsewhere: the ``capture`` input of :class:`~arm_model.effects.ArtefactDrift`."""
+    meas = np.asarray(measurement, dtype=object)
+    s = capture_position(meas, time)
+    return np.column_stack([np.where(meas == m, s, 0.0) for m in measurements]) if measurements else \
+        np.zeros((len(meas), 0))
 
 
 def reading_motion(q: ArrayLike, session: ArrayLike | None = None, time: ArrayLike | None = None) -> np.ndarray:
@@ -134,6 +166,15 @@ class ArmModel:
     def needs(self) -> set[str]:
         return {n for e in self.effects for n in e.needs()}
 
+    @property
+    def capture_measurements(self) -> tuple[str, ...]:
+        """The measurements whose capture place (``AuxData.capture``, one column each, this order) the effects read:
+        those of its :class:`~arm_model.effects.ArtefactDrift` (at most one)."""
+        drifts = [e for e in self.effects if isinstance(e, ArtefactDrift)]
+        if len(drifts) > 1:
+            raise ValueError("a model holds one artefact_drift at most (it covers every measurement)")
+        return drifts[0].measurements if drifts else ()
+
     def lower_bounds(self) -> np.ndarray:
         """The smallest physical value [SI] of every parameter (``spec`` order; ``-inf``: none): a compliance
         cannot be negative in total, so the description's probe compliances (``probe.compliance_*``, errors
@@ -219,14 +260,14 @@ class ArmModel:
     def equilibrium_aux(self, q: ArrayLike, wrench: ArrayLike | None = None, p: ArrayLike | None = None,
                         temperature: ArrayLike | None = None, *, contact: bool = True, tol: float = EQUILIBRIUM_TOL,
                         max_iter: int = EQUILIBRIUM_MAX_ITER, time: ArrayLike | None = None,
-                        motion: ArrayLike | None = None) -> AuxData:
+                        motion: ArrayLike | None = None, capture: ArrayLike | None = None) -> AuxData:
         """The per-point inputs at the static equilibrium the arm sits in: gravity and contact torques [N m] at
         the angles ``theta`` the joints take, not at the readings ``q``:
         ``theta = F(q) + C (tau_contact(theta) - tau_gravity(theta))`` (``F``: the other effects on the readings,
         ``C``: the joint compliances of ``p``; the wrench ``wrench`` (N, 3|6) [N, N m] stays in the probe frame;
         ``contact=False``: no contact torques). The torques are Pinocchio's RNEA on the description of ``p``
         (:meth:`described`, the description's masses); ``temperature`` (N,) [°C], ``time`` (N,) [s] and ``motion``
-        (N, J) (:func:`reading_motion`) where an effect needs them.
+        (N, J) (:func:`reading_motion`) and ``capture`` (N, K) (:func:`capture_columns`) where an effect needs them.
 
         Solved by fixed-point iteration from ``theta = q`` until ``theta`` moves less than ``tol`` [rad] (or m):
         one pass (the torques at the readings) when no compliance turns a joint, a few for a sag of a few mrad
@@ -243,6 +284,7 @@ class ArmModel:
         temp = None if temperature is None else np.asarray(temperature, dtype=float)
         stamps = None if time is None else np.asarray(time, dtype=float)
         moves = None if motion is None else np.asarray(motion, dtype=float)
+        places = None if capture is None else np.asarray(capture, dtype=float)
         arm = PinocchioArm(self.described(np.zeros(self.spec.size) if p is None else p))
         w = None if wrench is None or not contact else np.atleast_2d(np.asarray(wrench, dtype=float))
         theta, step = q, np.inf
@@ -259,7 +301,7 @@ class ArmModel:
                     floating[:, play] |= (side != 0) & (side == seen[0]) & (side != seen[1])
                 seen = [*seen[-1:], side]
                 tau_g = np.where(floating, 0.0, tau_g)
-            aux = AuxData(temp, tau_g, tau_c, stamps, moves)
+            aux = AuxData(temp, tau_g, tau_c, stamps, moves, places)
             new = self.joint_angles(q, wrench, p, aux)
             step = float(np.max(np.abs(new - theta), initial=0.0))
             theta = new
@@ -280,8 +322,9 @@ class ArmModel:
 
     # -- CasADi -------------------------------------------------------------------------------
     def casadi_function(self, name: str = "ball_centre") -> Any:
-        """``f(q[J], w[6], aux[2 + 3J], p[P]) -> p_base[3]`` with aux = (temperature [°C],
-        tau_gravity[J], tau_contact[J], time [s], motion[J]) (:meth:`aux_width`; zeros where no effect needs them).
+        """``f(q[J], w[6], aux[2 + 3J + K], p[P]) -> p_base[3]`` with aux = (temperature [°C],
+        tau_gravity[J], tau_contact[J], time [s], motion[J], capture[K]) (:meth:`aux_width`, K the
+        :attr:`capture_measurements`; zeros where no effect needs them).
 
         Built once for equal models (same description and effects; the model is immutable) and name: building
         the expression graph costs more than a calibration's evaluations of it (:func:`_casadi_function`)."""
@@ -297,24 +340,27 @@ class ArmModel:
         j = self.desc.n_joints
         q = ca.SX.sym("q", j)
         w = ca.SX.sym("w", 6)
-        aux = ca.SX.sym("aux", self.aux_width(j))
+        k = len(self.capture_measurements)
+        aux = ca.SX.sym("aux", self.aux_width(j, k))
         p = ca.SX.sym("p", self.spec.size)
         inputs = ModelInputs(q=[q[i] for i in range(j)], wrench=[w[i] for i in range(6)],
                              temperature=aux[0], tau_gravity=[aux[1 + i] for i in range(j)],
                              tau_contact=[aux[1 + j + i] for i in range(j)], time=aux[1 + 2 * j],
-                             motion=[aux[2 + 2 * j + i] for i in range(j)])
+                             motion=[aux[2 + 2 * j + i] for i in range(j)],
+                             capture=[aux[2 + 3 * j + i] for i in range(k)])
         x, y, z = self._evaluate(p, inputs, SimpleNamespace(sin=ca.sin, cos=ca.cos, sign=ca.sign))
         return ca.Function(name, [q, w, aux, p], [ca.vertcat(x, y, z)], ["q", "w", "aux", "p"], ["p_base"])
 
     @staticmethod
-    def aux_width(n_joints: int) -> int:
-        """The length of :meth:`casadi_function`'s aux input: temperature, J + J torques, time, J motions."""
-        return 2 + 3 * n_joints
+    def aux_width(n_joints: int, n_capture: int = 0) -> int:
+        """The length of :meth:`casadi_function`'s aux input: temperature, J + J torques, time, J motions, K capture
+        places."""
+        return 2 + 3 * n_joints + n_capture
 
     @staticmethod
-    def aux_matrix(aux: AuxData | None, n: int, n_joints: int) -> np.ndarray:
+    def aux_matrix(aux: AuxData | None, n: int, n_joints: int, n_capture: int = 0) -> np.ndarray:
         """(N, :meth:`aux_width`) aux rows for :meth:`casadi_function` (zeros where absent)."""
-        m = np.zeros((n, ArmModel.aux_width(n_joints)))
+        m = np.zeros((n, ArmModel.aux_width(n_joints, n_capture)))
         if aux is not None:
             if aux.temperature is not None:
                 m[:, 0] = aux.temperature
@@ -325,7 +371,9 @@ class ArmModel:
             if aux.time is not None:
                 m[:, 1 + 2 * n_joints] = aux.time
             if aux.motion is not None:
-                m[:, 2 + 2 * n_joints:] = aux.motion
+                m[:, 2 + 2 * n_joints:2 + 3 * n_joints] = aux.motion
+            if aux.capture is not None and n_capture:
+                m[:, 2 + 3 * n_joints:] = aux.capture
         return m
 
     # -- Pinocchio ------------------------------------------------------------------------------
@@ -347,7 +395,8 @@ class ArmModel:
                              tau_gravity=None if aux_row.get("tau_gravity") is None else list(aux_row["tau_gravity"]),
                              tau_contact=None if aux_row.get("tau_contact") is None else list(aux_row["tau_contact"]),
                              time=aux_row.get("time"),
-                             motion=None if aux_row.get("motion") is None else list(aux_row["motion"]))
+                             motion=None if aux_row.get("motion") is None else list(aux_row["motion"]),
+                             capture=None if aux_row.get("capture") is None else list(aux_row["capture"]))
         inputs.moments = lambda geom, q, i, origin: self._pinocchio_moments(geom, q, i, origin, inputs.wrench)
         geom = self._apply_effects([float(v) for v in pv], inputs, NUMPY_OPS)
         arm = PinocchioArm(self._geometry_description(geom))
@@ -411,7 +460,8 @@ def _batch_inputs(q: np.ndarray, w: np.ndarray, aux: AuxData, s: int, e: int) ->
                        tau_gravity=None if aux.tau_gravity is None else list(aux.tau_gravity[s:e].T),
                        tau_contact=None if aux.tau_contact is None else list(aux.tau_contact[s:e].T),
                        time=None if aux.time is None else aux.time[s:e],
-                       motion=None if aux.motion is None else list(aux.motion[s:e].T))
+                       motion=None if aux.motion is None else list(aux.motion[s:e].T),
+                       capture=None if aux.capture is None else list(aux.capture[s:e].T))
 
 
 #: models whose CasADi Function is kept (a loop compares a few models at a time, each many times)

@@ -57,7 +57,7 @@ from .description import (
 from .discrepancy import GrowingDiscrepancy, TrainingPoses
 from .effects import EFFECTS, Effect
 from .errors import InputError, did_you_mean, parse_toml, read_text, resolved
-from .model import ArmModel, AuxData, points_motion
+from .model import ArmModel, AuxData, capture_columns, points_motion
 from .tracker import Tracker, tracker_from_tables, tracker_tables
 from .uncertainty import InputUncertainty, ParameterCovariance, default_inputs
 from .units import implausible
@@ -212,7 +212,8 @@ class Arm:
         column; gravity and contact torques from this description by Pinocchio at the angles the joints take
         under them, the static equilibrium :meth:`~arm_model.model.ArmModel.equilibrium_aux`, and ``wrench``,
         default the points' own; each joint's last move: ``motion`` (N, J) [1] when given, else from the points,
-        :func:`~arm_model.model.points_motion`). A column an effect needs and the points lack is an
+        :func:`~arm_model.model.points_motion`; each point's place in its measurement's capture,
+        :func:`~arm_model.model.capture_columns`). A column an effect needs and the points lack is an
         :class:`InputError` naming the effect and the column. ``contact=False``: contact torques zero."""
         self.check_points(points)
         needs = self.model.needs()
@@ -221,11 +222,13 @@ class Arm:
         temperature = points.temperature if "temperature" in needs else None
         time = points.time if "time" in needs else None
         motion = points_motion(points, motion) if "motion" in needs else None
+        capture = (capture_columns(self.model.capture_measurements, points.measurement, points.time)
+                   if "capture" in needs else None)
         if needs & {"tau_gravity", "tau_contact"}:
             w = points.wrench if wrench is None else wrench
             return self.model.equilibrium_aux(points.q, w, self.p, temperature, contact=contact, time=time,
-                                              motion=motion)
-        return AuxData(temperature, time=time, motion=motion)
+                                              motion=motion, capture=capture)
+        return AuxData(temperature, time=time, motion=motion, capture=capture)
 
     def ball_centres(self, points, wrench=None, rigid: bool = False, motion: np.ndarray | None = None) -> np.ndarray:
         """(N, 3) ball centres [m] of a :class:`~arm_model.io.PointSet` with every effect applied, from

@@ -65,7 +65,7 @@ PLAUSIBLE_SI: dict[str, float] = {
     # effect parameters of a model file (arm_model.model_file.PARAM_UNITS)
     "angular compliance": 1.0, "expansion": 1.0, "ratio": 1e3, "temperature difference": 1e4,
     # campaign files of the simulator
-    "stiffness": 1e12, "temperature_rate": 1e3,
+    "stiffness": 1e12, "temperature_rate": 1e3, "length_rate": 1.0,
 }
 ABSOLUTE_ZERO_C = -273.15
 #: the range [m] of a stated standard uncertainty of a length that weights a fit (a certified distance's
@@ -101,7 +101,8 @@ def implausible(value_si, quantity: str):
                "time": (1.0, "s"), "mass": (1.0, "kg"), "inertia": (1.0, "kg m^2"),
                "angular compliance": (1.0, "rad/(N m)"),
                "expansion": (1.0, "1/K"), "ratio": (1.0, ""), "temperature difference": (1.0, "K"),
-               "stiffness": (1.0, "N m/rad"), "temperature_rate": (1.0, "C/s")}[quantity]
+               "stiffness": (1.0, "N m/rad"), "temperature_rate": (1.0, "C/s"),
+               "length_rate": (3.6e6, "mm/h")}[quantity]
     si = {"length": "m", "angle": "rad", "compliance": "m/N"}.get(quantity, unit)
     sep, sep_si = (" " if unit else ""), (" " if si else "")    # a ratio has no unit: no blank before none
     shown = f"{x * f:g}{sep}{unit}" if math.isfinite(x * f) else f"{x:g}{sep_si}{si}"     # 1e308 m is no "inf mm"

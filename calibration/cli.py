@@ -435,7 +435,7 @@ def _load_data(args, defaults: bool = False):
             Arm(desc, model.effects).check_points(pts)
             warnings += point_warnings(desc, pts)
     log_warnings(warnings)          # at once: a fit that then fails (exit 4) has said what it saw in the inputs
-    model = _drift_about_the_session(model, points)
+    model = with_artefact_drift(_drift_about_the_session(model, points), points.measurements())
     data = make_data(points, artefacts, reference=reference, marker_offsets=args.marker_offset, heldout=heldout)
     _check_reference_options(args, data)
     added = default_effects(model, data) if defaults and args.effect is None else ()
@@ -462,6 +462,19 @@ def assume_masses(model, args):
              "the joint compliance; its compliances are per N m of these torques (--masses FILE to give the "
              "masses, --effect none for the geometry alone)")
     return assumed
+
+
+def with_artefact_drift(model, measurements):
+    """``model`` with a drift of the artefact asked by ``--effect artefact_drift`` (no measurements named) given one
+    displacement per measurement of ``measurements`` (:class:`~arm_model.effects.ArtefactDrift`), put after the
+    other effects (its shift is along the base axes at the joint angles they leave)."""
+    from arm_model.effects import ArtefactDrift
+    from arm_model.model import ArmModel
+    drifts = [e for e in model.effects if isinstance(e, ArtefactDrift) and not e.measurements]
+    if not drifts:
+        return model
+    rest = tuple(e for e in model.effects if not isinstance(e, ArtefactDrift) or e.measurements)
+    return ArmModel(model.desc, rest + (ArtefactDrift(measurements=tuple(measurements)),))
 
 
 def _drift_about_the_session(model, points):

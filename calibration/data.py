@@ -8,7 +8,7 @@ import numpy as np
 
 from arm_model import InputError
 from arm_model.io import Artefacts, PointSet, check_features
-from arm_model.model import ArmModel, AuxData, points_motion
+from arm_model.model import ArmModel, AuxData, capture_columns, points_motion
 from arm_model.tracker import DEFAULT_SESSION, Tracker
 
 __all__ = ["Weights", "SIGMA_DEFAULT", "CalibrationData", "make_data", "merge_points", "split_holdout", "NO_ARTEFACTS",
@@ -332,7 +332,8 @@ def _one_marker_a_row(points: PointSet, files: np.ndarray, offsets: str):
 
 def _aux_inputs(model: ArmModel, data: CalibrationData, files: np.ndarray) -> AuxData | None:
     """The per-point inputs ``model.needs()``: ``data.aux``'s, else the temperatures, times and last moves
-    (:attr:`CalibrationData.motion`) of the points and the gravity and contact torques of the nominal description."""
+    (:attr:`CalibrationData.motion`) of the points, the gravity and contact torques of the nominal description and each
+    point's place in its measurement's capture (:func:`arm_model.model.capture_columns`)."""
     points, aux = data.points, data.aux
     needs = model.needs()
     temperature = None if aux is None else aux.temperature
@@ -357,9 +358,12 @@ def _aux_inputs(model: ArmModel, data: CalibrationData, files: np.ndarray) -> Au
         g, c = PinocchioArm(model.desc).torques(points.q, points.wrench)
         tau_g = g if tau_g is None else tau_g
         tau_c = c if tau_c is None else tau_c
-    if temperature is None and tau_g is None and tau_c is None and time is None and motion is None:
+    capture = None if aux is None else aux.capture
+    if "capture" in needs and capture is None:
+        capture = capture_columns(model.capture_measurements, points.measurement, points.time)
+    if temperature is None and tau_g is None and tau_c is None and time is None and motion is None and capture is None:
         return None
-    return AuxData(temperature, tau_g, tau_c, time, motion)
+    return AuxData(temperature, tau_g, tau_c, time, motion, capture)
 
 
 #: what to change when a --holdout leaves the held-out set empty (calibrate, close-loop)
@@ -428,7 +432,7 @@ def concat(a: CalibrationData, b: CalibrationData) -> CalibrationData:
                 raise ValueError(f"aux input '{name}' is given for one part only")
             return np.concatenate([va, vb])
         aux = AuxData(join("temperature", ()), join("tau_gravity", None), join("tau_contact", None), join("time", ()),
-                      join("motion", None))
+                      join("motion", None), join("capture", None))
     marker = None if a.marker is None and b.marker is None else np.concatenate([a.markers, b.markers])
     return CalibrationData(pts, a.artefacts, aux, files, marker, a.marker_offsets, a.tracker,
                            tuple(dict.fromkeys(a.left_out_lengths + b.left_out_lengths)))

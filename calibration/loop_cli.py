@@ -9,6 +9,7 @@ from arm_model.checks import log_warnings, point_warnings
 from arm_model.cli import command_help
 from arm_model.cli_options import arm_inputs, at_least, model_from_args, number_in, seed
 from arm_model.io import read_artefacts, read_points
+from arm_model.model import ArmModel
 from arm_model.model_file import Arm
 from arm_model.output import output_folder
 
@@ -24,6 +25,7 @@ from .cli import (
     parse_holdout,
     sigma_options,
     weights_from_args,
+    with_artefact_drift,
 )
 
 __all__ = ["register", "run"]
@@ -131,8 +133,6 @@ def run(args: argparse.Namespace) -> int:
     desc = arm.desc
     effects = model_effects(arm, args.effect).effects
     if args.effect is None:
-        from arm_model.model import ArmModel
-
         from .calibrate import default_effects
         from .cli import assume_masses
         desc = assume_masses(ArmModel(desc, tuple(effects)), args).desc
@@ -143,11 +143,11 @@ def run(args: argparse.Namespace) -> int:
                      "bends under its own weight; each compliance's physical prior: non-negative, at most 10 mrad "
                      "under its joint's RMS gravity torque); --effect none for the geometry alone")
     if args.max_effects == 0 and args.hold:      # no effect to add and every parameter held: nothing to estimate
-        from arm_model.model import ArmModel
         free_names(ArmModel(desc, tuple(effects)), args)
     if effects and families is None:
         families = tuple(f for f in DEFAULT_FAMILIES if f not in {e.key for e in effects})
     points = read_points(args.points, desc.joint_quantities)
+    effects = with_artefact_drift(ArmModel(desc, tuple(effects)), points.measurements()).effects
     artefacts = None if args.artefacts is None else read_artefacts(args.artefacts)
     reference = read_points(args.reference_points, desc.joint_quantities) if args.reference_points else None
     warnings = []

@@ -58,11 +58,14 @@ def session_drift(result) -> list[dict]:
 def drift_text(drift: list[dict]) -> str:
     """The session's drift (:func:`session_drift`) in words, for the model file's comment and the report: the model
     file holds the geometry at its reference time and no drift."""
-    parts = [f"{d['effect']} about t_ref = {d['reference_time_s']:.3f} s: "
+    parts = [(f"{d['effect']} about t_ref = {d['reference_time_s']:.3f} s: " if d["reference_time_s"] is not None
+              else f"{d['effect']} (each measurement's artefact displaced from its first point to its last; the "
+                   "features fitted where it sits at the middle of the capture): ")
              + ", ".join(f"{p['name']} = {p['value']:.4g} +- {p['u']:.2g} {p['unit']}" for p in d["parameters"])
              for d in drift]
-    return ("; ".join(parts) + ". A drift of this session (its time and its room), not of the arm: the model file "
-            "holds the geometry at t_ref and no drift, so that every --arm applies none to other data.")
+    return ("; ".join(parts) + ". A drift of this session (its time and its room, its fixtures), not of the arm: the "
+            "model file holds the geometry at its reference and no drift, so that every --arm applies none to other "
+            "data.")
 
 
 def without_session_effects(result):
@@ -349,8 +352,9 @@ def at_equilibrium(model, p, data):
     temperature = None if data.aux is None else data.aux.temperature
     time = None if data.aux is None else data.aux.time
     motion = None if data.aux is None else data.aux.motion
+    capture = None if data.aux is None else data.aux.capture
     return replace(data, aux=model.equilibrium_aux(data.points.q, data.wrench, np.asarray(p, float), temperature,
-                                                   time=time, motion=motion))
+                                                   time=time, motion=motion, capture=capture))
 
 
 def with_fitted_torques(data, result):

@@ -283,8 +283,7 @@ def chain_length(desc) -> float:
     """The length [m] of the chain of ``desc``: the sum of its joint rows' translations (DH/MDH ``hypot(d, a)``, a
     URDF origin's ``|(x, y, z)|``) and the tip's distance from the last joint's origin: the arm's size, at least its
     reach."""
-    rows = sum(math.hypot(j.d, j.a) if j.origin is None else float(np.linalg.norm(j.origin[:3])) for j in desc.joints)
-    return float(rows + np.linalg.norm(desc.probe.p_last))
+    return float(desc.chain_length)
 
 
 def limits(model) -> np.ndarray:

@@ -309,7 +309,8 @@ class Problem:
         n, jn = len(self.data), self.model.desc.n_joints
         self._q = np.ascontiguousarray(self.data.points.q[self.used].T)
         self._w = np.ascontiguousarray(self.data.wrench[self.used].T)
-        self._aux = np.ascontiguousarray(ArmModel.aux_matrix(self.data.aux, n, jn)[self.used].T)
+        aux = ArmModel.aux_matrix(self.data.aux, n, jn, len(self.model.capture_measurements))
+        self._aux = np.ascontiguousarray(aux[self.used].T)
 
     def _row_weights(self) -> None:
         """The standard uncertainty of every row (``sigma``) and the point, instance and distance it comes from."""

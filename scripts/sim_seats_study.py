@@ -16,7 +16,13 @@ deviation's own u, calibration.placements.deviation_u), for
 * ``nominal-tip``: the nominal URDF with only the tool offset (probe.x/y/z) and the seats fitted,
 * ``oracle``: ``calibrate`` told the truth's effects (joint compliance if the truth has it, the eccentricity or
   gain of the truth's joints only): what the right structure gives on these data,
-* ``truth``: the hidden truth applied to the same readings (the figures' floor: the scatter alone).
+* ``drift`` (asked by ``--methods``): ``calibrate --effect joint_compliance --effect artefact_drift``,
+* ``truth``: the hidden truth applied to the same readings (the figures' floor: the scatter alone, and with
+  ``--capture sweep-drift`` the plate's creep).
+
+``--capture sweep`` takes each seat's poses in a sweep round it (the real files' order), ``sweep-drift`` also lets
+the plate creep at a constant velocity (0.3-0.8 mm over a placement, drawn per robot): a known truth for the
+capture-order trend of the real data (docs/studies/calibration.md).
 
 A gain error ``q_true = (1 + g) q_enc`` is put into the readings after the simulation (``q_enc / (1 + g)``
 for the simulator's exact readings), independent of the effect code.
@@ -111,6 +117,15 @@ PLACES = {"front": ([0.383, 0.003, 0.001], [0, -1, 0], [0, 0, 1]),
           "right": ([0.382, 0.432, 0.007], [0, 1, 0], [0, 0, 1]),
           "back-high": ([-0.450, -0.009, 0.880], [0, 1, 0], [1, 0, 0])}
 METHODS = ("close-loop", "calibrate", "geometry", "nominal-tip", "oracle")
+#: methods run when asked (``--methods``): ``drift``, calibrate with the artefact's drift beside the joint compliance
+EXTRA_METHODS = ("drift",)
+#: how the seats' articulations are captured (``--capture``): in random order; in sweeps (each seat's poses in turn
+#: round it, as a robot program takes them, the real files' order); in sweeps while the plate creeps; in random order
+#: while it creeps (the creep then unlike any pose's error)
+CAPTURES = ("random", "sweep", "sweep-drift", "random-drift")
+#: the plate's creep over one placement's capture of ``sweep-drift`` [mm]: drawn per robot (its seed) in this range,
+#: in a random direction; the real Panda's capture-order trends are 0.4-0.75 mm a placement
+DRIFT_MM = (0.3, 0.8)
 
 
 @dataclass(frozen=True)
@@ -184,16 +199,27 @@ OTHER_ROBOTS = (
 )
 
 
-def campaign_dict(robot: Robot, joints: list[str] | None = None) -> dict:
+def drift_velocity(robot: Robot, period_s: float, articulations: int) -> np.ndarray:
+    """(3,) [m/s] the plate's creep of ``sweep-drift`` (:data:`DRIFT_MM` over one placement's ``2 articulations``
+    points, one every ``period_s``), drawn from the robot's seed."""
+    rng = np.random.default_rng([robot.seed, 7])
+    d = rng.normal(size=3)
+    size = rng.uniform(*DRIFT_MM) * 1e-3
+    return d / np.linalg.norm(d) * size / (2 * articulations * period_s)
+
+
+def campaign_dict(robot: Robot, joints: list[str] | None = None, capture: str = "random") -> dict:
     """The simulator's campaign: the truth and two seats a placement (feature ids ``<place>.<hole>``); ``joints``:
-    the arm's joint names (an eccentricity's joint given by number)."""
+    the arm's joint names (an eccentricity's joint given by number); ``capture``: one of :data:`CAPTURES` (a sweep
+    takes the next seat at once, a point period later: the capture's time follows the rows)."""
     tasks = []
     lift = ARMS[robot.arm].shoulder_m - PANDA_SHOULDER
     for place, (p, d, axis) in PLACES.items():
         for h, off in zip(HOLES, (0.0, LENGTH), strict=True):
             c = np.asarray(p, float) + off * np.asarray(d, float) + [0.0, 0.0, lift]
             tasks.append({"kind": "seat", "id": f"{place}.{h}", "axis": axis, "articulations": 30,
-                          "position_mm": (c * 1e3).tolist(), "stylus_cone_deg": 50.0})
+                          "position_mm": (c * 1e3).tolist(), "stylus_cone_deg": 50.0,
+                          "order": "sweep" if capture.startswith("sweep") else "random"})
     truth = {"length_error_um": robot.length_um, "angle_error_deg": float(np.degrees(robot.angle_mrad * 1e-3)),
              "probe_error_um": 1000.0,
              "probe_compliance": {"bending_um_per_N": 0.0, "axial_um_per_N": 0.0}}    # a rigid tool
@@ -206,11 +232,19 @@ def campaign_dict(robot: Robot, joints: list[str] | None = None) -> dict:
     noise = {"probing_repeatability_um": robot.noise_um}
     if robot.encoder_noise_urad:
         noise["encoder_noise_deg"] = float(np.degrees(robot.encoder_noise_urad * 1e-6))
-    return {"seed": robot.seed, "sensor": "none", "signals": {"enabled": False}, "truth": truth, "noise": noise,
-            "operator": {"force_mean_N": 0.3, "max_force_N": 1.0}, "task": tasks}
+    operator = {"force_mean_N": 0.3, "max_force_N": 1.0}
+    out = {"seed": robot.seed, "sensor": "none", "signals": {"enabled": False}, "truth": truth, "noise": noise,
+           "operator": operator, "task": tasks}
+    if capture != "random":
+        period = 1.2
+        operator.update(point_period_s=period, measurement_gap_s=period)
+    if capture.endswith("-drift"):
+        v = drift_velocity(robot, 1.2, 30)
+        out["environment"] = {"artefact_drift_mm_per_h": (v * 1e3 * 3600).tolist()}
+    return out
 
 
-def simulate_robot(robot: Robot, folder: Path, urdf: Path = URDF) -> dict:
+def simulate_robot(robot: Robot, folder: Path, urdf: Path = URDF, capture: str = "random") -> dict:
     """Write ``folder/<placement>/points.csv`` and ``folder/artefacts.toml``; return the truth's own figures
     per placement (the hidden model on the same readings) and its parameters."""
     from arm_model import PinocchioArm
@@ -219,7 +253,7 @@ def simulate_robot(robot: Robot, folder: Path, urdf: Path = URDF) -> dict:
     from arm_model.urdf_import import load_arm
 
     desc = load_arm(urdf, TIP)
-    sim = simulate(campaign_from_dict(campaign_dict(robot, [j.name for j in desc.encoders]), arm=desc))
+    sim = simulate(campaign_from_dict(campaign_dict(robot, [j.name for j in desc.encoders], capture), arm=desc))
     q_sim = sim.points.q
     q_read = q_sim.copy()
     for j, g in robot.gain.items():               # the encoder reads q_true / (1 + g)
@@ -246,6 +280,7 @@ def simulate_robot(robot: Robot, folder: Path, urdf: Path = URDF) -> dict:
 
 
 OPTIONS = {"close-loop": [], "calibrate": [], "geometry": ["--effect", "none"],
+           "drift": ["--effect", "joint_compliance", "--effect", "artefact_drift"],
            "nominal-tip": ["--effect", "none", "--free", "probe.x", "--free", "probe.y", "--free", "probe.z"]}
 
 
@@ -268,27 +303,29 @@ def loop_seeds(methods) -> dict:
 
 
 def study_robot(robot: Robot, out: Path, methods=METHODS, train=None, progress=None, shipped: Path | None = None,
-                nominal: str = "masses") -> dict:
+                nominal: str = "masses", capture: str = "random") -> dict:
     """Simulate ``robot``, train every method on its training placement (``train``: these placements
     instead), predict the others. ``shipped``: the arm's URDF as shipped (not the Panda); ``nominal``: the
     nominal every method starts from, the URDF with its masses (``masses``) or without ``<inertial>``
-    (``no-inertials``); the truth is always simulated with the masses (a real arm sags)."""
+    (``no-inertials``); the truth is always simulated with the masses (a real arm sags); ``capture``: one of
+    :data:`CAPTURES`."""
     from arm_model.urdf_import import load_arm
     with_masses, bare = nominal_urdfs(ARMS[robot.arm], shipped, out / "arm")
-    truth = simulate_robot(robot, out / "data", with_masses)
+    truth = simulate_robot(robot, out / "data", with_masses, capture)
     joints = [j.name for j in load_arm(with_masses, TIP).encoders]
     train = train or [robot.train]
     rows = placement_study(out / "data", with_masses if nominal == "masses" else bare, TIP, out / "runs",
                            train=train, progress=progress, methods=tuple(methods),
                            options={**OPTIONS, "oracle": oracle_options(robot, joints), **loop_seeds(methods)})
-    return {"robot": robot.name, "arm": robot.arm, "nominal": nominal, "truth_text": robot.truth_text(),
+    return {"robot": robot.name, "arm": robot.arm, "nominal": nominal, "capture": capture,
+            "truth_text": robot.truth_text(),
             "train": "/".join(train), "truth": truth["figures"], "rows": [r.to_dict() for r in rows]}
 
 
 def _methods(rows: list[dict]) -> list[str]:
     """The methods of ``rows`` in :data:`METHODS` order, the seeded loops and the plain nominal first."""
     got = list(dict.fromkeys(x["method"] for x in rows))
-    order = ["nominal"] + [m for m in got if m.startswith("close-loop")] + list(METHODS)
+    order = ["nominal"] + [m for m in got if m.startswith("close-loop")] + list(METHODS + EXTRA_METHODS)
     return [m for m in dict.fromkeys(order) if m in got]
 
 
@@ -375,7 +412,8 @@ def main(argv=None) -> int:
     p.add_argument("--robots", default=None, help="comma-separated robot names (default every Panda one: "
                    + ", ".join(r.name for r in ROBOTS) + "; other types: "
                    + ", ".join(f"{r.name} ({r.arm})" for r in OTHER_ROBOTS) + ")")
-    p.add_argument("--methods", default=",".join(METHODS), help="comma-separated subset of " + ", ".join(METHODS)
+    p.add_argument("--methods", default=",".join(METHODS), help="comma-separated subset of "
+                   + ", ".join(METHODS + EXTRA_METHODS)
                    + ", nominal (the nominal URDF applied as it is), close-loop@S (close-loop --seed S)")
     p.add_argument("--loop-seeds", default=None,
                    help="comma-separated seeds: close-loop is run once per seed (close-loop@S) in place of once")
@@ -389,6 +427,9 @@ def main(argv=None) -> int:
                        f"{a.name}: {a.source}" for a in ARMS.values() if a.flange) + ")")
     p.add_argument("--python", default=None, help="the Python of an environment where the packages shipping the "
                    "URDFs are installed (pybullet for iiwa14)")
+    p.add_argument("--capture", choices=CAPTURES, default="random",
+                   help="the seats' poses in random order, in sweeps, or in sweeps while the plate creeps by "
+                   f"{DRIFT_MM[0]:g}-{DRIFT_MM[1]:g} mm a placement")
     p.add_argument("-o", "--output", type=Path, default=Path("out/sim-seats"), help="output folder")
     args = p.parse_args(argv)
     known = {r.name: r for r in ROBOTS + OTHER_ROBOTS}
@@ -407,7 +448,7 @@ def main(argv=None) -> int:
         results.append(study_robot(robot, args.output / n, methods,
                                    train=list(PLACES) if args.every_placement else None,
                                    progress=lambda m: print("  " + m, file=sys.stderr, flush=True),
-                                   shipped=shipped.get(robot.arm), nominal=args.nominal))
+                                   shipped=shipped.get(robot.arm), nominal=args.nominal, capture=args.capture))
         (args.output / "results.json").write_text(json.dumps(results, indent=1) + "\n")
     lines = summary_rows(results)
     (args.output / "summary.json").write_text(json.dumps(lines, indent=1) + "\n")

@@ -38,15 +38,16 @@ def assert_close(actual, expected, atol: float, rtol: float = 0.0, msg: str = ""
 
 def assert_evaluators_agree(model, q, w, p, aux, atol: float = 1e-12) -> None:
     """The model's ball centres by the numpy batch path, its CasADi function and Pinocchio agree to ``atol`` [m]
-    at every row of ``q``, ``w`` with the per-point ``aux`` (temperature, torques, time, motion)."""
+    at every row of ``q``, ``w`` with the per-point ``aux`` (temperature, torques, time, motion, capture)."""
     from arm_model.model import ArmModel
     batch = model.ball_centres(q, w, p, aux)
     f = model.casadi_function()
-    a = ArmModel.aux_matrix(aux, len(q), q.shape[1])
+    a = ArmModel.aux_matrix(aux, len(q), q.shape[1], len(model.capture_measurements))
     for i in range(len(q)):
         assert_close(np.array(f(q[i], w[i], a[i], p)).ravel(), batch[i], atol=atol)
         row = {k: None if v is None else v[i] for k, v in (("temperature", aux.temperature), ("tau_gravity",
-               aux.tau_gravity), ("tau_contact", aux.tau_contact), ("time", aux.time), ("motion", aux.motion))}
+               aux.tau_gravity), ("tau_contact", aux.tau_contact), ("time", aux.time), ("motion", aux.motion),
+               ("capture", aux.capture))}
         assert_close(model.pinocchio_ball_centre(q[i], w[i], p, row), batch[i], atol=atol)
 
 def exit_status(argv) -> int:

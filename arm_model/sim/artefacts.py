@@ -393,8 +393,11 @@ def _plane(plan, k, t, rng, ball_d):
 
 
 def _seat_points(plan, mid, fid, k, t, rng, position, axis, n, reference=False, frame=""):
-    for _ in range(n):
-        stylus = cone_directions(rng, -np.asarray(axis), t.opts["stylus_cone"], 1)[0]
+    styli = [cone_directions(rng, -np.asarray(axis), t.opts["stylus_cone"], 1)[0] for _ in range(n)]
+    if t.opts.get("order", "random") == "sweep":          # going round the seat: by the stylus' azimuth about it
+        e1, e2 = perpendicular_basis(np.asarray(axis, float))
+        styli.sort(key=lambda s: float(np.arctan2(s @ e2, s @ e1)))
+    for stylus in styli:
         plan.add(mid, fid, k, position, axis, np.tan(t.opts["force_cone"]), 0.0, stylus, reference=reference,
                  stylus_axis=-np.asarray(axis), stylus_cone=t.opts["stylus_cone"], frame=frame)
 

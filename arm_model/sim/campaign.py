@@ -29,6 +29,9 @@ __all__ = ["Campaign", "Task", "load_campaign", "campaign_from_dict", "TASK_KIND
 DEFAULT_ARM = shipped_path(SHIPPED_ARMS["aacmm7"])
 TASK_KINDS = ("ring", "sphere", "plane", "seat", "ballbar", "tracker", "mocap")
 SENSORS = ("xyz", "two-channel", "none")
+#: a seat's articulations in random order, or in a sweep (by the stylus' azimuth about the seat's axis: each pose next
+#: to the one before, as a robot program or an operator going round the seat takes them)
+SEAT_ORDERS = ("random", "sweep")
 
 # unit suffix -> (quantity, factor to SI); the longest suffix wins ("_Nm_per_rad" before "_rad")
 _UNITS: dict[str, tuple[str, float]] = {
@@ -41,6 +44,7 @@ _UNITS: dict[str, tuple[str, float]] = {
     "Nm_per_rad": ("stiffness", 1.0), "Nm_per_deg": ("stiffness", 180 / math.pi),
     "per_K": ("expansion", 1.0), "ppm_per_K": ("expansion", 1e-6),
     "C_per_h": ("temperature_rate", 1 / 3600),
+    "mm_per_h": ("length_rate", 1e-3 / 3600), "um_per_h": ("length_rate", 1e-6 / 3600),
 }
 _SUFFIXES = sorted(_UNITS, key=len, reverse=True)
 #: the finest encoder step the simulator quantises to [rad] (1e-9 deg; a step of 1e-320 deg made every reading
@@ -101,7 +105,8 @@ _S = {
               "probing_repeatability": ("length", 0.0, None), "force_noise": ("force", 0.0, None),
               "temperature_noise": ("temperature", 0.0, None)},
     "environment": {"temperature": ("temperature", 20.0, None), "drift": ("temperature_rate", 0.0, None),
-                    "cycle_amplitude": ("temperature", 0.0, None), "cycle_period": ("time", 86400.0, None)},
+                    "cycle_amplitude": ("temperature", 0.0, None), "cycle_period": ("time", 86400.0, None),
+                    "artefact_drift": ("length_rate", (0.0, 0.0, 0.0), 3)},
     "operator": {"force_mean": ("force", 1.0, None), "level_log_sd": ("ratio", 0.35, None),
                  "point_cv": ("ratio", 0.35, None), "min_force": ("force", 0.15, None),
                  "max_force": ("force", 8.0, None), "spike_probability": ("ratio", 0.002, None),
@@ -125,7 +130,8 @@ _TASKS = {
     "plane": {"point": ("length", (0.6, -0.2, 0.0), 3), "normal": ("direction", (0.0, 0.0, 1.0), 3),
               "size": ("length", (0.3, 0.3), 2), "points": ("count", 25, None)},
     "seat": {"position": ("length", (0.6, 0.2, 0.05), 3), "axis": ("direction", (0.0, 0.0, 1.0), 3),
-             "articulations": ("count", 20, None), "force_cone": ("angle", math.radians(30.0), None)},
+             "articulations": ("count", 20, None), "force_cone": ("angle", math.radians(30.0), None),
+             "order": ("text", "random", None)},
     "ballbar": {"positions": ("count", 20, None), "length": ("length", 0.6, None),
                 "u_length": ("length", None, None), "true_length": ("length", None, None),
                 "ends": ("text", "sphere", None), "sphere_diameter": ("length", 25e-3, None),
@@ -782,6 +788,8 @@ def _check_task(ctx, kind, o, tbl, sensor):
             o["roll"] = "bend-along-force" if sensor == "two-channel" else "random"
         if o["roll"] not in ("random", "bend-along-force"):
             raise ctx.error("'roll' must be \"random\" or \"bend-along-force\"", tbl, "roll")
+    if kind == "seat" and o["order"] not in SEAT_ORDERS:
+        raise ctx.error(f"'order' must be one of {', '.join(map(repr, SEAT_ORDERS))}", tbl, "order")
     if kind == "ballbar":
         if o["ends"] not in ("sphere", "seat"):
             raise ctx.error("'ends' must be \"sphere\" or \"seat\"", tbl, "ends")

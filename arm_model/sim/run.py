@@ -357,6 +357,16 @@ def _truth_columns(desc, plan, q_true, q_enc, centres, f_true, draw) -> dict:
     return cols
 
 
+def _drift_artefacts(plan, velocity, time) -> None:
+    """Every artefact creeping at ``velocity`` (3,) [m/s] (base frame; ``[environment] artefact_drift``): the ball
+    centre of each contact row taken at ``time`` [s] sits ``velocity * time`` from its artefact's given place (the
+    place at time 0). A posture's target is the true tip and moves with nothing."""
+    v = np.asarray(velocity, dtype=float)
+    if np.any(v):
+        rows = ~np.asarray(plan.posture, dtype=bool)
+        plan.position[rows] = plan.position[rows] + np.outer(np.asarray(time, dtype=float)[rows], v)
+
+
 def _solve(truth, plan, draw, x_dir, labels, rng, say):
     """True joint angles (N, J) [rad], wrenches (N, 6) and the inverse kinematics' random starts of the
     contact rows: the inverse kinematics on the true arm for the rows that touch something, a posture's own
@@ -458,6 +468,7 @@ def simulate(campaign: Campaign, seed: int | None = None, progress=None) -> SimR
     say(f"{counted(len(plan), 'point')} in {counted(len(set(plan.measurement)), 'measurement')} planned")
     draw = draw_operator(plan, campaign.operator, campaign.environment, campaign.signals, rng["operator"])
     x_dir = _x_directions(plan, draw.force, rng["operator"])
+    _drift_artefacts(plan, campaign.environment["artefact_drift"], draw.time)
     labels = [f"{m} row {i + 1} (feature {f})"
               for i, (m, f) in enumerate(zip(plan.measurement, plan.feature, strict=True))]
     q_true, wrench, attempts = _solve(truth, plan, draw, x_dir, labels, rng["ik"], say)

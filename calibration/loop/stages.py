@@ -233,7 +233,7 @@ def at_current_torques(result: CalibrationResult) -> CalibrationResult:
         return result
     aux = result.model.equilibrium_aux(d.points.q, d.wrench, result.p, d.aux.temperature,
                                        contact=d.aux.tau_contact is not None, time=d.aux.time,
-                                       motion=d.aux.motion)
+                                       motion=d.aux.motion, capture=d.aux.capture)
     return replace(result, data=replace(d, aux=aux))
 
 
