@@ -65,3 +65,23 @@ def test_fold_by_measurement_on_one_measurement_is_refused_before_any_fit(tmp_pa
     assert rc == 2 and "--fold-by measurement: 1 design measurement(s)" in err and "--fold-by pose" in err, err
     assert "calibrating the base model" not in err and not (tmp_path / "o").exists()
     assert time.process_time() - t0 < 1.5
+
+
+def test_a_sigma_nobody_stated_and_no_row_used_is_written_null(tmp_path):
+    """summary.json's ``weights`` (calibrate) and each close-loop stage's ``fit.noise`` wrote ``reference_um: 10`` on
+    data without reference coordinates, where nobody stated it and no row used it: a default written as if
+    resolved. Null now, and ``defaulted`` names the sigmas nobody stated; a stated one is written as stated. (The
+    whole close-loop run: tests/test_loop_cli.py, test_weights_stated_keeps_the_stated_sigmas, make test-slow.)"""
+    from types import SimpleNamespace
+
+    from calibration.calibrate import CalibrationResult
+    from calibration.data import Weights
+    _, data = _two_seats(tmp_path, 0.0008)
+
+    def noise(weights):
+        return CalibrationResult.weights_dict(SimpleNamespace(weights=weights, data=data, weights_history=[]))
+    w = noise(Weights())
+    assert w["reference_um"] is None and w["probe_um"] == pytest.approx(10.0), w
+    assert w["defaulted"] == ["probe", "reference"]
+    w = noise(Weights(probe=3e-6, reference=50e-6))
+    assert w["reference_um"] == pytest.approx(50.0) and w["defaulted"] == [], w
