@@ -52,7 +52,7 @@ from .description import (
     default_lever,
     load_description,
 )
-from .errors import InputError, did_you_mean, id_problem, open_input, parse_toml, read_text, resolved
+from .errors import InputError, beside, did_you_mean, id_problem, named_in, open_input, parse_toml, read_text, resolved
 from .shipped import arm_path
 from .units import implausible
 from .urdf import ELASTIC_JOINTS, origin_matrix
@@ -892,11 +892,11 @@ def _mesh_file(u: _Urdf, name: str) -> Path | None:
     ``file://`` and absolute paths as they are, others relative to the URDF; None if absent."""
     if name.startswith("file://"):
         name = name[len("file://"):]
-    here = u.path.resolve().parent
     if name.startswith("package://"):
         pkg, _, rest = name[len("package://"):].partition("/")
-        return next((resolved(c) for c in (r / rest for r in _package_roots(pkg, here)) if c.is_file()), None)
-    cand = resolved(Path(name) if Path(name).is_absolute() else here / name)
+        return next((resolved(c) for c in (r / rest for r in _package_roots(pkg, beside(u.path))) if c.is_file()),
+                    None)
+    cand = resolved(named_in(u.path, name))
     return cand if cand.is_file() else None
 
 

@@ -85,3 +85,31 @@ def test_a_sigma_nobody_stated_and_no_row_used_is_written_null(tmp_path):
     assert w["defaulted"] == ["probe", "reference"]
     w = noise(Weights(probe=3e-6, reference=50e-6))
     assert w["reference_um"] == pytest.approx(50.0) and w["defaulted"] == [], w
+
+
+def test_paths_named_in_a_file_are_beside_the_real_file(tmp_path):
+    """A campaign's ``arm`` and a URDF's relative ``<mesh filename>`` are taken beside the file itself, its symbolic
+    links followed, as a model file's ``covariance`` and ``training_poses`` (one rule, ``arm_model.errors.named_in``):
+    a link to a file is not a copy of its folder. (Not a defect on main: its ``Path.resolve`` spellings followed the
+    links too; this guards the one rule.)"""
+    from arm_model.errors import named_in
+    from arm_model.sim import load_campaign
+    from arm_model.urdf_import import description_from_urdf
+    real, other = tmp_path / "real", tmp_path / "other"
+    real.mkdir()
+    other.mkdir()
+    (real / "my-arm.toml").write_text(NOMINAL.read_text().replace('name = "aacmm7"', 'name = "mine"', 1))
+    (real / "c.toml").write_text('seed = 1\narm = "my-arm.toml"\n[[task]]\nkind = "seat"\narticulations = 3\n')
+    (other / "c.toml").symlink_to(real / "c.toml")
+    (tmp_path / "up.toml").symlink_to(other / "c.toml")            # a link to a link: followed to its end
+    for name in (real / "c.toml", other / "c.toml", tmp_path / "up.toml"):
+        assert load_campaign(name).arm_path == real / "my-arm.toml"
+    (real / "meshes").mkdir()
+    (real / "meshes" / "l1.stl").write_text("solid x\nendsolid x\n")
+    vis = '<visual><geometry><mesh filename="meshes/l1.stl"/></geometry></visual>'
+    text = (ROOT / "urdf" / "aacmm7.urdf").read_text().replace('<link name="link_1">', f'<link name="link_1">{vis}')
+    (real / "arm.urdf").write_text(text)
+    (other / "arm.urdf").symlink_to(real / "arm.urdf")
+    for name in (real / "arm.urdf", other / "arm.urdf"):
+        assert description_from_urdf(name, "ball").missing_meshes == ()
+    assert named_in(other / "c.toml", "/abs/x.toml") == __import__("pathlib").Path("/abs/x.toml")
