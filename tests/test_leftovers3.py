@@ -113,3 +113,42 @@ def test_paths_named_in_a_file_are_beside_the_real_file(tmp_path):
     for name in (real / "arm.urdf", other / "arm.urdf"):
         assert description_from_urdf(name, "ball").missing_meshes == ()
     assert named_in(other / "c.toml", "/abs/x.toml") == __import__("pathlib").Path("/abs/x.toml")
+
+
+def test_a_seat_whose_poses_are_each_repeated_counts_each_reading_once(tmp_path):
+    """Three seats of 8 articulations each, every row written three times (a logger that wrote each reading thrice,
+    the time aside): the copies were counted as independent observations (dof 57 -> 201, every u narrowed by about
+    sqrt(3), s0 lowered); only a seat of one reading repeated was refused. Now each reading counts once, as in the
+    file written once: the same estimate, u, s0 and dof; the warning says how many rows and which."""
+    from arm_model import load_description
+    from arm_model.checks import point_warnings
+    from arm_model.io import read_artefacts, read_points
+    from arm_model.model import ArmModel
+    from arm_model.sim import campaign_from_dict, simulate
+    from calibration.calibrate import calibrate
+    from calibration.data import make_data
+    from calibration.options import FitOptions
+    camp = {"seed": 3, "sensor": "xyz", "signals": {"enabled": False}, "noise": {"probing_repeatability_um": 5.0},
+            "truth": {"probe_error_um": 50.0}, "task": [{"kind": "seat", "articulations": 8, "measurements": 3}]}
+    simulate(campaign_from_dict(camp)).write(tmp_path)
+    lines = (tmp_path / "points.csv").read_text().splitlines()
+    t = lines[0].split(",").index("time_s")
+    thrice = [",".join(c[:t] + [f"{float(c[t]) + k * 0.001:.3f}"] + c[t + 1:])
+              for c in (r.split(",") for r in lines[1:]) for k in range(3)]
+    (tmp_path / "x3.csv").write_text("\n".join([lines[0], *thrice]) + "\n")
+    desc = load_description(NOMINAL)
+    model = ArmModel(desc, ())
+    art = read_artefacts(tmp_path / "artefacts.toml")
+    fits = []
+    for name in ("points.csv", "x3.csv"):
+        pts = read_points(tmp_path / name, 7)
+        res = calibrate(model, make_data(pts, art, model), FitOptions(free=("probe.*",), discrepancy=False))
+        fits.append((res.dof, res.s0, [(r["name"], r["value"], r["u"]) for r in res.parameter_rows()
+                                       if r["state"] != "held"]))
+    (once, x3) = fits
+    assert once[0] == x3[0] == 57 and x3[1] == pytest.approx(once[1], rel=1e-9)
+    assert [n for n, _, _ in x3[2]] == [n for n, _, _ in once[2]] and len(once[2]) == 6
+    for (_, v1, u1), (_, v3, u3) in zip(once[2], x3[2], strict=True):
+        assert v3 == pytest.approx(v1, abs=1e-12) and u3 == pytest.approx(u1, rel=1e-6)
+    (w,) = [w for w in point_warnings(desc, read_points(tmp_path / "x3.csv", 7)) if w.kind == "duplicate_rows"]
+    assert w.count == 2 * (len(lines) - 1) and w.lines[:2] == (3, 4) and "counts each reading once" in w.message
