@@ -152,3 +152,26 @@ def test_a_seat_whose_poses_are_each_repeated_counts_each_reading_once(tmp_path)
         assert v3 == pytest.approx(v1, abs=1e-12) and u3 == pytest.approx(u1, rel=1e-6)
     (w,) = [w for w in point_warnings(desc, read_points(tmp_path / "x3.csv", 7)) if w.kind == "duplicate_rows"]
     assert w.count == 2 * (len(lines) - 1) and w.lines[:2] == (3, 4) and "counts each reading once" in w.message
+
+
+def test_the_prior_and_the_loops_sign_families_read_one_motion(tmp_path):
+    """calibration.prior read the effects' inputs through a copy of the batch path's (``_model_inputs`` beside
+    ``arm_model.model._batch_inputs``) and the last moves from ``aux.motion`` only, where the loop's sign families
+    read the points' own (``CalibrationData.motion``): on data prepared for a model without a play, ``prior_only``
+    of a model with a hysteresis raised "needs the per-point 'motion'". Now one builder
+    (``arm_model.model.model_inputs``, the prior's differences as options) and one source of the last moves."""
+    import numpy as np
+
+    from arm_model.effects import JointHysteresis
+    from arm_model.model import model_inputs
+    from calibration.prior import _model_inputs, prior_only, unseen_side
+    model, data = _two_seats(tmp_path, 0.0008)
+    assert data.aux is None or data.aux.motion is None
+    with_play = type(model)(model.desc, (JointHysteresis(joints=(0, 1)),))
+    why = prior_only(with_play, data)
+    first = with_play.spec.size - 2                 # j1.hysteresis, j2.hysteresis: the families' rule on the same signs
+    assert {first + j for j in (0, 1) if unseen_side(data.motion[:, j], data.points) is not None} == set(why)
+    got = _model_inputs(with_play, data)
+    assert np.array_equal(np.column_stack(got.motion), data.motion) and got.wrench == [0.0] * 6
+    batch = model_inputs(data.points.q, data.aux, np.zeros((len(data), 6)))
+    assert np.array_equal(np.column_stack(batch.q), np.column_stack(got.q)) and batch.motion is None
