@@ -52,6 +52,7 @@ from .description import (
     default_lever,
     load_description,
 )
+from .effects import PAPER_STYLUS_COMPLIANCE
 from .errors import InputError, beside, did_you_mean, id_problem, named_in, open_input, parse_toml, read_text, resolved
 from .shipped import arm_path
 from .units import implausible
@@ -64,8 +65,8 @@ __all__ = ["description_from_urdf", "load_arm", "is_urdf", "tip_candidates", "UR
            "LinkMass"]
 
 #: the seed paper's probe: 4 mm ball, 13 N range, FEM compliances [m], [N], [m/N]
-PAPER_PROBE = dict(ball_diameter=0.004, max_force=13.0, bending_compliance_x=1.42e-5,
-                   bending_compliance_y=1.42e-5, axial_compliance=8.76e-8)
+PAPER_PROBE = dict(ball_diameter=0.004, max_force=13.0, bending_compliance_x=PAPER_STYLUS_COMPLIANCE[0],
+                   bending_compliance_y=PAPER_STYLUS_COMPLIANCE[1], axial_compliance=PAPER_STYLUS_COMPLIANCE[2])
 
 _JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
 #: numeric attributes of URDF elements: tag -> {attribute: count}; every one must be that many numbers

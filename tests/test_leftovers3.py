@@ -16,8 +16,9 @@ def _run(argv, capsys):
     return rc, got.err, got.out
 
 
-def _two_seats(tmp_path, u_length_mm: float):
-    """Two seats of 5 ring poses each (a ball bar's two ends), 600 mm apart as certified at ``u_length_mm``."""
+def _two_seats(tmp_path, u_length_mm: float, model=None):
+    """Two seats of 5 ring poses each (a ball bar's two ends), 600 mm apart as certified at ``u_length_mm``, and
+    ``model`` (default the nominal arm's)."""
     from arm_model import load_description
     from arm_model.io import read_artefacts, read_points
     from arm_model.model import ArmModel
@@ -28,8 +29,7 @@ def _two_seats(tmp_path, u_length_mm: float):
     (tmp_path / "a.toml").write_text('[[feature]]\nid = "a"\nkind = "seat"\n[[feature]]\nid = "b"\nkind = "seat"\n'
                                      f'[[distance]]\nbetween = ["a", "b"]\nlength_mm = 600.0\n'
                                      f'u_length_mm = {u_length_mm!r}\n')
-    desc = load_description(NOMINAL)
-    model = ArmModel(desc, ())
+    model = ArmModel(load_description(NOMINAL), ()) if model is None else model
     return model, make_data(read_points(tmp_path / "p.csv", 7), read_artefacts(tmp_path / "a.toml"), model)
 
 
@@ -175,3 +175,33 @@ def test_the_prior_and_the_loops_sign_families_read_one_motion(tmp_path):
     assert np.array_equal(np.column_stack(got.motion), data.motion) and got.wrench == [0.0] * 6
     batch = model_inputs(data.points.q, data.aux, np.zeros((len(data), 6)))
     assert np.array_equal(np.column_stack(batch.q), np.column_stack(got.q)) and batch.motion is None
+
+
+@pytest.mark.parametrize("stylus_mm", [85.0, 42.5])
+def test_the_probe_compliance_prior_is_the_styluss_own(tmp_path, stylus_mm):
+    """The probe-compliance effects' prior was 1 um/N "by unit" whatever the stylus. It is the compliance of the
+    description's stylus made as the seed paper's 85 mm one (FEM diag(0.0142, 0.0142, 0.0000876) mm/N): bending by
+    the cube of the length, axial by the length; an off-diagonal term the geometric mean of its diagonal ones.
+    References by hand from the paper's numbers."""
+    import dataclasses
+    import math
+
+    from arm_model import load_description
+    from arm_model.effects import ProbeCompliance, ProbeComplianceMatrix
+    from arm_model.model import ArmModel
+    from calibration.prior import prior_spec
+    desc = load_description(NOMINAL)
+    desc = dataclasses.replace(desc, probe=dataclasses.replace(desc.probe, p_last=(0.0, 0.0, stylus_mm * 1e-3)))
+    r = stylus_mm / 85.0
+    bend, axial = 0.0142e-3 * r ** 3, 0.0000876e-3 * r
+    want = {"probe.dcompliance_bend": bend, "probe.dcompliance_z": axial, "probe.dcompliance_xx": bend,
+            "probe.dcompliance_zz": axial, "probe.dcompliance_xy": bend,
+            "probe.dcompliance_xz": math.sqrt(bend * axial)}
+    model = ArmModel(desc, (ProbeCompliance(axial=True), ProbeComplianceMatrix(terms=("xx", "zz", "xy", "xz"))))
+    assert desc.probe.stylus_length == pytest.approx(stylus_mm * 1e-3)
+    _, data = _two_seats(tmp_path, 0.0008, model)
+    spec = prior_spec(model, data)
+    for name, size in want.items():
+        k = model.spec.index(name)
+        assert spec.size[k] == pytest.approx(size, rel=1e-12), name
+        assert f"{stylus_mm:g} mm stylus made as the seed paper's 85 mm one" in spec.source[k], spec.source[k]
