@@ -6,10 +6,11 @@
 - ``angle_units``: every angle of every revolute joint, in every row, within +-2 pi degrees (6.28 deg): what a file
   whose angles were written in radians under its ``_deg`` columns looks like (no measuring pose keeps the whole arm
   that straight). The angles are used as degrees, as the columns say.
-- ``duplicate_rows``: rows that repeat an earlier row of the file exactly (measurement, feature and every reading):
-  a fit counts each copy as one more independent observation, which narrows every uncertainty and the evidence's
-  prior scales as if the point had been measured again (a file written twice, or concatenated with itself). The
-  rows are used as read.
+- ``duplicate_rows``: rows that repeat an earlier reading exactly (measurement, feature and every reading of the
+  pose, the time and temperature aside: :func:`repeated_readings`): a copy says nothing its first did not, and
+  counted as one more independent observation it would narrow every uncertainty and the evidence's prior scales
+  as if the point had been measured again (a file written twice, a logger that wrote one reading several times).
+  A fit counts each reading once.
 
 Every command that reads points logs these at WARNING (``warning: ...`` on standard error) and, when it writes a summary
 and a report, lists them there too (``"warnings"`` of summary.json, a "Warnings" section of report.html).
@@ -24,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["InputWarning", "over_force_warning", "joint_limit_warning", "radians_warning", "JointLimitTally",
-           "duplicate_rows_warning", "point_warnings",
+           "repeated_readings", "duplicate_rows_warning", "point_warnings",
            "log_warnings", "warnings_html", "LIMIT_TOLERANCE_RAD", "limit_bounds"]
 
 log = logging.getLogger(__name__)
@@ -206,32 +207,42 @@ class JointLimitTally:
         return [w for w in (self.warning(), _radians_message(self.largest, lines, self.file)) if w is not None]
 
 
-def duplicate_rows_warning(points, lines, file: str) -> InputWarning | None:
-    """A warning for the rows of ``points`` (a :class:`~arm_model.io.PointSet`) that repeat an earlier row exactly:
-    the same measurement, feature and session, and every reading (joints, forces, torques, temperature, time,
-    reference coordinates, move signs) bit for bit; or None. ``lines``: the rows' lines in ``file`` (those of
-    the copies are reported)."""
+def repeated_readings(points, labels=()) -> np.ndarray:
+    """(N,) for each row of ``points`` (a :class:`~arm_model.io.PointSet`) the index of the earlier row it repeats, -1
+    for none: the same measurement, feature and session (and ``labels``: further (N,) arrays that must agree) and,
+    bit for bit, the same pose: joints, forces, torques, reference coordinates and move signs. The time and the
+    temperature may differ (a logger that wrote one reading several times stamps each copy anew; the temperature is
+    the room's, not the pose's). A copy says nothing the first did not (its errors are the first's), so a fit counts
+    each reading once (:class:`calibration.problem.Problem`)."""
     n = len(points.q)
-    cols = [np.asarray(a, float).reshape(n, -1) for a in (points.q, points.force, points.torque, points.temperature,
-                                                        points.time, points.ref, points.motion) if a is not None]
+    cols = [np.asarray(a, float).reshape(n, -1) for a in (points.q, points.force, points.torque, points.ref,
+                                                        points.motion) if a is not None]
     values = np.ascontiguousarray(np.hstack(cols))
     session = points.session if points.session is not None else np.full(n, "")
-    seen: set = set()
-    copies = []
+    first: dict = {}
+    out = np.full(n, -1)
     for i in range(n):
-        key = (str(points.measurement[i]), str(points.feature[i]), str(session[i]), values[i].tobytes())
-        if key in seen:
-            copies.append(i)
-        seen.add(key)
-    if not copies:
+        key = (str(points.measurement[i]), str(points.feature[i]), str(session[i]),
+               *(str(lab[i]) for lab in labels), values[i].tobytes())
+        out[i] = first.setdefault(key, i)
+    out[out == np.arange(n)] = -1
+    return out
+
+
+def duplicate_rows_warning(points, lines, file: str) -> InputWarning | None:
+    """A warning for the rows of ``points`` (a :class:`~arm_model.io.PointSet`) that repeat an earlier reading
+    (:func:`repeated_readings`), or None. ``lines``: the rows' lines in ``file`` (those of the copies are
+    reported)."""
+    copies = np.flatnonzero(repeated_readings(points) >= 0)
+    if not len(copies):
         return None
     rows = tuple(int(v) for v in np.asarray(lines)[copies])
     return InputWarning(
         "duplicate_rows",
-        f"{len(rows)} row(s) repeat an earlier row exactly (measurement, feature and every reading): a fit counts "
-        f"each copy as one more independent observation, which narrows every uncertainty and the prior's scales as "
-        f"if the point had been measured again; used as read (remove the copies if the file holds rows twice); "
-        f"{file} {_lines_text(rows)}", file, rows)
+        f"{len(rows)} row(s) repeat an earlier reading exactly (measurement, feature, joints, force and every "
+        f"reading of the pose; the time and temperature may differ): a copy says nothing its first did not (its "
+        f"errors are the first's), so a fit counts each reading once, as one observation (remove the copies if the "
+        f"file holds rows twice; articulate again to measure a pose again); {file} {_lines_text(rows)}", file, rows)
 
 
 def point_warnings(desc, points, force=None) -> list[InputWarning]:

@@ -28,7 +28,8 @@ __all__ = ["ModelInputs", "Geometry", "Effect", "EncoderEccentricity", "JointCom
            "ThermalGrowth", "ForceSensorError", "JointGain", "ProbeCompliance", "EFFECTS", "effect_from_name",
            "REFERENCE_TEMPERATURE_C", "JointHarmonics", "ProbeThermalGrowth", "ProbeComplianceMatrix",
            "ApproachOffset", "LateralCompliance", "ThermalDrift", "JointBacklash", "JointHysteresis", "joint_frame",
-           "last_frame", "gravity_moment", "contact_moment", "PLAY", "DRIFT_STRAIN", "ArtefactDrift"]
+           "last_frame", "gravity_moment", "contact_moment", "PLAY", "DRIFT_STRAIN", "ArtefactDrift", "PAPER_STYLUS",
+           "PAPER_STYLUS_COMPLIANCE", "stylus_compliance"]
 
 REFERENCE_TEMPERATURE_C = 20.0
 
@@ -105,6 +106,10 @@ MAX_HARMONIC = 1000
 #: the largest plausible thermal strain of the links over one session [1] (aluminium's 23e-6 /K over 4 K): the size of a
 #: drift's prior over the data's time span (:class:`ThermalDrift`)
 DRIFT_STRAIN = 1e-4
+#: the seed paper's stylus [m] (hinge to ball) and its FEM compliances [m/N] (bending x, y; axial): the stylus a probe
+#: compliance's prior is scaled from (:func:`stylus_compliance`)
+PAPER_STYLUS = 0.085
+PAPER_STYLUS_COMPLIANCE = (1.42e-5, 1.42e-5, 8.76e-8)
 #: the largest plausible play of a joint [rad] (half the band): a robot's gear play is typically 0.01-1 mrad (harmonic
 #: drives the least), a measuring arm's bearings far less; the size of a play's physical prior (:class:`JointBacklash`,
 #: :class:`JointHysteresis`)
@@ -429,6 +434,31 @@ class ForceSensorError(Effect):
         inputs.wrench = w
 
 
+def stylus_compliance(length: float) -> tuple[float, float, float]:
+    """The compliances [m/N] (bending x, y; axial) of a stylus ``length`` [m] long made as the seed paper's 85 mm
+    one (:data:`PAPER_STYLUS_COMPLIANCE`): a cantilever's bending compliance grows with the cube of its length
+    (``L^3 / (3 E I)``), a rod's axial one with the length (``L / (E A)``)."""
+    r = length / PAPER_STYLUS
+    bx, by, ax = PAPER_STYLUS_COMPLIANCE
+    return bx * r ** 3, by * r ** 3, ax * r
+
+
+def _stylus_sizes(desc: ArmDescription, terms: list[str]) -> list[tuple[float, str]] | None:
+    """The prior size [m/N] of each compliance term ("xx", "yy", "zz", "xy", "xz", "yz") of the probe: the compliance
+    of the description's stylus made as the seed paper's (:func:`stylus_compliance`), an off-diagonal term the
+    geometric mean of its two diagonal ones (the largest a positive compliance matrix allows); None for a tip without
+    a stylus (a size by unit)."""
+    length = desc.probe.stylus_length
+    if not length > 0:
+        return None
+    c = dict(zip(("xx", "yy", "zz"), stylus_compliance(length), strict=True))
+    c.update(xy=math.sqrt(c["xx"] * c["yy"]), xz=math.sqrt(c["xx"] * c["zz"]), yz=math.sqrt(c["yy"] * c["zz"]))
+    how = (f"the compliance of a {length * 1e3:.4g} mm stylus made as the seed paper's {PAPER_STYLUS * 1e3:g} mm one "
+           f"(bending {PAPER_STYLUS_COMPLIANCE[0] * 1e6:g} um/N x (L / {PAPER_STYLUS * 1e3:g} mm)^3, axial "
+           f"{PAPER_STYLUS_COMPLIANCE[2] * 1e6:g} um/N x L / {PAPER_STYLUS * 1e3:g} mm)")
+    return [(c[t], f"{c[t] * 1e6:.3g} um/N: {how}") for t in terms]
+
+
 @dataclass(frozen=True)
 class ProbeCompliance(Effect):
     """Bending compliance of the probe beyond the declared one: one increment [m/N] for both
@@ -452,6 +482,12 @@ class ProbeCompliance(Effect):
                "probe.dcompliance_bend": -min(p.bending_compliance_x, p.bending_compliance_y),
                "probe.dcompliance_z": -p.axial_compliance}
         return [low[n] for n, _ in self.param_defs(desc)]
+
+    def prior_sizes(self, desc: ArmDescription, inputs: ModelInputs) -> list[tuple[float, str]] | None:
+        """The compliance of the description's stylus made as the seed paper's (:func:`stylus_compliance`)."""
+        terms = {"probe.dcompliance_x": "xx", "probe.dcompliance_y": "yy", "probe.dcompliance_bend": "xx",
+                 "probe.dcompliance_z": "zz"}
+        return _stylus_sizes(desc, [terms[n] for n, _ in self.param_defs(desc)])
 
     def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
         c = list(geom.compliance)
@@ -736,6 +772,11 @@ class ProbeComplianceMatrix(Effect):
         p = desc.probe
         low = {"xx": -p.bending_compliance_x, "yy": -p.bending_compliance_y, "zz": -p.axial_compliance}
         return [low.get(t, -math.inf) for t in _MATRIX_TERMS if t in self.terms]
+
+    def prior_sizes(self, desc: ArmDescription, inputs: ModelInputs) -> list[tuple[float, str]] | None:
+        """The compliance of the description's stylus made as the seed paper's (:func:`stylus_compliance`), an
+        off-diagonal term the geometric mean of its diagonal ones."""
+        return _stylus_sizes(desc, [t for t in _MATRIX_TERMS if t in self.terms])
 
     def apply(self, desc: ArmDescription, params: list[Any], inputs: ModelInputs, geom: Geometry, ops: Any) -> None:
         it = iter(params)

@@ -10,7 +10,8 @@ import unicodedata
 from pathlib import Path
 
 __all__ = ["AacmmError", "InputError", "NumericalError", "read_text", "open_input", "decode_text", "parse_toml",
-           "did_you_mean", "unknown_key", "id_problem", "resolved", "text_lines", "INVISIBLE", "MAX_ID_LENGTH"]
+           "did_you_mean", "unknown_key", "id_problem", "resolved", "beside", "named_in", "text_lines", "INVISIBLE",
+           "MAX_ID_LENGTH"]
 
 
 class AacmmError(Exception):
@@ -121,6 +122,20 @@ def resolved(path: str | Path) -> Path:
         return Path(path).resolve()
     except (RuntimeError, OSError):     # Python < 3.13: RuntimeError on a loop; later: OSError ELOOP
         raise InputError("cannot follow the path: a loop of symbolic links", path) from None
+
+
+def beside(file: str | Path) -> Path:
+    """The folder the paths named inside ``file`` are relative to: that of the file itself, its symbolic links
+    followed (a link to a file is not a copy of its folder: the files it names were written, or shipped, beside the
+    real file). :func:`named_in` is the rule for one name."""
+    return resolved(file).parent
+
+
+def named_in(file: str | Path, name: str | Path) -> Path:
+    """A path ``name`` named inside ``file`` (a campaign's ``arm``, a URDF's ``<mesh filename>``, a model file's
+    ``covariance`` and ``training_poses``): as it is when absolute, else relative to :func:`beside` ``file``."""
+    path = Path(name)
+    return path if path.is_absolute() else beside(file) / path
 
 
 def read_text(path: str | Path, what: str) -> str:

@@ -20,7 +20,7 @@ from .effects import ArtefactDrift, Effect, Geometry, ModelInputs
 from .params import ParamSpec, apply_params, param_spec, split_params
 
 __all__ = ["ArmModel", "AuxData", "reading_motion", "points_motion", "capture_position", "capture_columns",
-           "CASADI_CACHE", "EQUILIBRIUM_TOL",
+           "model_inputs", "CASADI_CACHE", "EQUILIBRIUM_TOL",
            "EQUILIBRIUM_MAX_ITER"]
 
 #: the static equilibrium's tolerance [rad] (m for a prismatic joint): a joint angle's last step
@@ -241,7 +241,7 @@ class ArmModel:
         chunk = 16384
         for s in range(0, n, chunk):
             e = min(s + chunk, n)
-            x, y, z = self._evaluate(pv, _batch_inputs(q, w, aux, s, e), NUMPY_OPS)
+            x, y, z = self._evaluate(pv, model_inputs(q, aux, w, slice(s, e)), NUMPY_OPS)
             out[s:e, 0], out[s:e, 1], out[s:e, 2] = x, y, z
         return out
 
@@ -253,7 +253,7 @@ class ArmModel:
         q = np.atleast_2d(np.asarray(q, dtype=float))
         n = q.shape[0]
         aux = self._check_aux(aux, n)
-        inputs = _batch_inputs(q, _six_columns(wrench, n), aux, 0, n)
+        inputs = model_inputs(q, aux, _six_columns(wrench, n))
         self._apply_effects(None if p is None else np.asarray(p, dtype=float), inputs, NUMPY_OPS)
         return np.column_stack([np.broadcast_to(np.asarray(c, dtype=float), (n,)) for c in inputs.q])
 
@@ -453,15 +453,34 @@ def _six_columns(wrench: ArrayLike | None, n: int) -> np.ndarray:
     return w
 
 
-def _batch_inputs(q: np.ndarray, w: np.ndarray, aux: AuxData, s: int, e: int) -> ModelInputs:
-    """The batch path's inputs of rows ``s:e``: columns of the readings, wrench and ``aux``."""
-    return ModelInputs(q=list(q[s:e].T), wrench=list(w[s:e].T),
-                       temperature=None if aux.temperature is None else aux.temperature[s:e],
-                       tau_gravity=None if aux.tau_gravity is None else list(aux.tau_gravity[s:e].T),
-                       tau_contact=None if aux.tau_contact is None else list(aux.tau_contact[s:e].T),
-                       time=None if aux.time is None else aux.time[s:e],
-                       motion=None if aux.motion is None else list(aux.motion[s:e].T),
-                       capture=None if aux.capture is None else list(aux.capture[s:e].T))
+def model_inputs(q: np.ndarray, aux: AuxData | None, wrench: np.ndarray | None = None, rows: slice = slice(None), *,
+                 nil_load: float | None = None, time: np.ndarray | None = None,
+                 motion: np.ndarray | None = None) -> ModelInputs:
+    """The per-point inputs (numpy columns) the effects read, of the rows ``rows``: the readings ``q`` (N, J) [rad, m],
+    the ``wrench`` (N, 6) [N, N m] (None: nil, one 0 a component), and ``aux``'s temperature, torques, time, last
+    moves and capture places. The one place that builds them: the batch path (:meth:`ArmModel.ball_centres`) and,
+    with its options, the prior's reading of the data (:func:`calibration.prior.prior_only`, the effects' prior
+    sizes):
+
+    - ``nil_load``: a gravity torque at most this fraction of the largest in the rows is 0, its sign rounding (a
+      vertical axis holds none);
+    - ``time``, ``motion``: used where ``aux`` has none (the points' own time stamps and last moves)."""
+    a = AuxData() if aux is None else aux
+    tau = a.tau_gravity
+    if tau is not None and nil_load is not None:
+        tau = np.array(tau[rows], dtype=float)
+        tau[np.abs(tau) <= nil_load * np.max(np.abs(tau), initial=0.0)] = 0.0
+    elif tau is not None:
+        tau = tau[rows]
+    t = a.time if a.time is not None else time
+    m = a.motion if a.motion is not None else motion
+    return ModelInputs(q=list(q[rows].T), wrench=[0.0] * 6 if wrench is None else list(wrench[rows].T),
+                       temperature=None if a.temperature is None else a.temperature[rows],
+                       tau_gravity=None if tau is None else list(tau.T),
+                       tau_contact=None if a.tau_contact is None else list(a.tau_contact[rows].T),
+                       time=None if t is None else np.asarray(t, dtype=float)[rows],
+                       motion=None if m is None else list(np.asarray(m, dtype=float)[rows].T),
+                       capture=None if a.capture is None else list(a.capture[rows].T))
 
 
 #: models whose CasADi Function is kept (a loop compares a few models at a time, each many times)

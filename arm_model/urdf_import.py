@@ -52,7 +52,8 @@ from .description import (
     default_lever,
     load_description,
 )
-from .errors import InputError, did_you_mean, id_problem, open_input, parse_toml, read_text, resolved
+from .effects import PAPER_STYLUS_COMPLIANCE
+from .errors import InputError, beside, did_you_mean, id_problem, named_in, open_input, parse_toml, read_text, resolved
 from .shipped import arm_path
 from .units import implausible
 from .urdf import ELASTIC_JOINTS, origin_matrix
@@ -64,8 +65,8 @@ __all__ = ["description_from_urdf", "load_arm", "is_urdf", "tip_candidates", "UR
            "LinkMass"]
 
 #: the seed paper's probe: 4 mm ball, 13 N range, FEM compliances [m], [N], [m/N]
-PAPER_PROBE = dict(ball_diameter=0.004, max_force=13.0, bending_compliance_x=1.42e-5,
-                   bending_compliance_y=1.42e-5, axial_compliance=8.76e-8)
+PAPER_PROBE = dict(ball_diameter=0.004, max_force=13.0, bending_compliance_x=PAPER_STYLUS_COMPLIANCE[0],
+                   bending_compliance_y=PAPER_STYLUS_COMPLIANCE[1], axial_compliance=PAPER_STYLUS_COMPLIANCE[2])
 
 _JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
 #: numeric attributes of URDF elements: tag -> {attribute: count}; every one must be that many numbers
@@ -892,11 +893,11 @@ def _mesh_file(u: _Urdf, name: str) -> Path | None:
     ``file://`` and absolute paths as they are, others relative to the URDF; None if absent."""
     if name.startswith("file://"):
         name = name[len("file://"):]
-    here = u.path.resolve().parent
     if name.startswith("package://"):
         pkg, _, rest = name[len("package://"):].partition("/")
-        return next((resolved(c) for c in (r / rest for r in _package_roots(pkg, here)) if c.is_file()), None)
-    cand = resolved(Path(name) if Path(name).is_absolute() else here / name)
+        return next((resolved(c) for c in (r / rest for r in _package_roots(pkg, beside(u.path))) if c.is_file()),
+                    None)
+    cand = resolved(named_in(u.path, name))
     return cand if cand.is_file() else None
 
 

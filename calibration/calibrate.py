@@ -434,10 +434,17 @@ class CalibrationResult:
 
     def weights_dict(self) -> dict:
         """The noise the fit weighted its rows by: the standard uncertainties [um] and each row group's factor on
-        them (``factors``); ``from_data``: the factors estimated from the residuals (``--weights data``)."""
-        return {"probe_um": self.weights.probe * 1e6, "reference_um": self.weights.reference * 1e6,
-                "length_um": None if self.weights.length is None else self.weights.length * 1e6,
-                "factors": dict(self.weights.factors), "from_data": bool(self.weights_history)}
+        them (``factors``); ``from_data``: the factors estimated from the residuals (``--weights data``);
+        ``defaulted``: those of "probe" and "reference" nobody stated (their value the starting default,
+        ``--sigma-*-um`` not given). A default no row of the fit used (``reference_um`` without reference
+        coordinates) is null: nothing resolved it."""
+        w = self.weights
+        ref = self.data.reference
+        used = {"probe": True, "reference": ref is not None and bool(np.isfinite(ref).all(axis=1).any())}
+        um = {k: None if k in w.defaulted and not used[k] else getattr(w, k) * 1e6 for k in used}
+        return {"probe_um": um["probe"], "reference_um": um["reference"],
+                "length_um": None if w.length is None else w.length * 1e6,
+                "factors": dict(w.factors), "from_data": bool(self.weights_history), "defaulted": list(w.defaulted)}
 
     def to_dict(self) -> dict:
         """JSON-ready summary (SI values, plus display units in the parameter rows)."""

@@ -356,20 +356,13 @@ def both_sides(sign) -> bool:
 
 
 def _model_inputs(model, data):
-    """The per-point inputs (numpy columns) an effect's :meth:`~arm_model.effects.Effect.sides` and
-    :meth:`~arm_model.effects.Effect.prior_sizes` read: the angles, the gravity torques with a nil one
-    (:data:`NIL_LOAD`) at 0, the last moves, the time stamps."""
-    from arm_model.effects import ModelInputs
-    aux = data.aux
-    tau = None if aux is None or aux.tau_gravity is None else np.array(aux.tau_gravity, dtype=float)
-    if tau is not None:
-        tau[np.abs(tau) <= NIL_LOAD * np.max(np.abs(tau), initial=0.0)] = 0.0
-    motion = None if aux is None or aux.motion is None else np.asarray(aux.motion, dtype=float)
-    time = aux.time if aux is not None and aux.time is not None else data.points.time
-    return ModelInputs(q=list(np.asarray(data.points.q, dtype=float).T), wrench=[0.0] * 6,
-                       tau_gravity=None if tau is None else list(tau.T),
-                       motion=None if motion is None else list(motion.T),
-                       time=None if time is None else np.asarray(time, dtype=float))
+    """The per-point inputs an effect's :meth:`~arm_model.effects.Effect.sides` and
+    :meth:`~arm_model.effects.Effect.prior_sizes` read (:func:`arm_model.model.model_inputs`): no wrench, a nil
+    gravity torque (:data:`NIL_LOAD`) at 0, the points' time stamps where the data's inputs have none, and the last
+    moves of :attr:`calibration.data.CalibrationData.motion` (the loop's sign families read the same)."""
+    from arm_model.model import model_inputs
+    return model_inputs(np.asarray(data.points.q, dtype=float), data.aux, nil_load=NIL_LOAD, time=data.points.time,
+                        motion=data.motion)
 
 
 def side_visits(side, measurement=None, time=None) -> tuple[int, int]:

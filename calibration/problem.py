@@ -26,8 +26,9 @@ from numpy.typing import ArrayLike
 
 from arm_model import InputError, NumericalError
 from arm_model.casadi_model import NumpyFunction
+from arm_model.checks import repeated_readings
 from arm_model.geometry import ball_centre_radius
-from arm_model.io import CENTRE_KINDS, PointSet
+from arm_model.io import CENTRE_KINDS
 from arm_model.model import CASADI_CACHE, ArmModel
 from arm_model.tracker import DEFAULT_SESSION, Tracker, offset_matrix
 
@@ -44,13 +45,6 @@ POINT_KINDS = ("seat", "sphere", "ring", "cylinder", "plane", "reference")
 Group = dict[str, Any]
 #: Jacobian triplets (rows, columns, values) of the nuisance increments, as lists of arrays
 Triplets = tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]
-
-
-def _one_row(points: PointSet, rows: np.ndarray) -> bool:
-    """Whether the rows ``rows`` of ``points`` are one reading repeated: the same encoder angles, force and torque
-    (a seat held at one pose and pushed in turn is not: the force moves the ball centre the model computes)."""
-    cols = [points.q[rows]] + [a[rows] for a in (points.force, points.torque) if a is not None]
-    return len(np.unique(np.column_stack(cols), axis=0)) == 1
 
 
 @dataclass
@@ -134,6 +128,12 @@ class Problem:
         self._has_ref = (np.all(np.isfinite(xref), axis=1) if xref is not None and self.reference != "off"
                          else np.zeros(len(pts), bool))
         self._xref_all = xref
+        #: the rows that repeat an earlier reading of their feature (:func:`arm_model.checks.repeated_readings`; the
+        #: marker of a row of several markers told apart): counted once, as the first (their residuals would be the
+        #: first's, counted as independent observations: every uncertainty narrowed by sqrt(copies))
+        self.repeats = np.flatnonzero(repeated_readings(pts, (self.data.markers,)) >= 0)
+        self._repeat = np.zeros(len(pts), bool)
+        self._repeat[self.repeats] = True
         self.instances: list[Instance] = []
         self.n_nuisance = 0
         by_key = self._artefact_instances()
@@ -164,7 +164,7 @@ class Problem:
                 rows = rows_m[pts.feature[rows_m] == f]
                 kind = arte.features[f].kind if f else "point"
                 if kind == "point":
-                    unused.append(rows[~self._has_ref[rows]])
+                    unused.append(rows[~self._has_ref[rows] & ~self._repeat[rows]])
                     continue
                 feat = arte.features[f]
                 radius = None
@@ -184,13 +184,14 @@ class Problem:
                     raise InputError(f"measurement '{m}', feature '{f}' ({kind}): {len(rows)} points but only "
                                      f"{distinct} distinct pose(s) (the same encoder angles repeated): the {kind}'s "
                                      f"unknowns are unidentifiable; at least {need} distinct points needed", *where)
-                if kind == "seat" and len(rows) > 1 and not self._has_ref[rows].any() and _one_row(pts, rows):
+                if kind == "seat" and len(rows) > 1 and self._repeat[rows].sum() == len(rows) - 1:
                     # one seat row repeated: its copies' residuals are exactly 0, counted as redundancy and noise
                     # (the noise of the seat came out at 7e-11 um, close-loop's s0 at 0.03 with p-values of 1e-198)
                     raise InputError(f"measurement '{m}', feature '{f}' (seat): its {len(rows)} points are one "
                                      "reading repeated (the same encoder angles and force): they say no more than "
                                      "one point and would count as independent; articulate the seat, or keep one "
                                      "row", *where)
+                rows = rows[~self._repeat[rows]]
                 by_key[(m, f)] = self._add(Instance(m, f, kind, rows, 0, geo.n_theta(kind, free_r),
                                                     None if free_r else radius, free_r))
         self.unused = np.sort(np.concatenate(unused)) if unused else np.zeros(0, int)
@@ -206,7 +207,7 @@ class Problem:
         self._ref_anchor: dict[int, int] = {}
         self._ref_marker: dict[int, int] = {}
         ref_rows: list[int] = []
-        for i in np.flatnonzero(self._has_ref):
+        for i in np.flatnonzero(self._has_ref & ~self._repeat):
             f = pts.feature[i]
             kind = arte.features[f].kind if f else "point"
             if kind in ("point", "seat"):

@@ -30,7 +30,7 @@ from .problem import Evaluation, Problem
 
 __all__ = ["LMResult", "Prior", "levenberg_marquardt", "normal_solver", "normal_factor", "NormalFactor",
            "normal_matrix", "column_norms", "scale_columns", "dense_enough", "blas_threads", "RESTARTS",
-           "DENSE_UNKNOWNS"]
+           "DENSE_UNKNOWNS", "tight_rows", "TIGHT_RATIO"]
 
 
 @dataclass
@@ -199,10 +199,43 @@ def levenberg_marquardt(problem: Problem, p0: ArrayLike, states0: list[np.ndarra
             out.iterations = done
             return out
         p, states, lam = out.p, out.states, out.damping
+    cause = tight_rows(problem) or ("the data may not determine the unknowns (a feature probed at too few "
+                                    "distinct poses, poses repeated, or an arm far from its description); check "
+                                    "the points and the arm")
     raise NumericalError(f"Levenberg-Marquardt did not converge in {done} iterations ({RESTARTS} restarts "
-                         f"from its best point; cost {out.cost:.6g}): the data may not determine the unknowns "
-                         "(a feature probed at too few distinct poses, poses repeated, or an arm far from its "
-                         "description); check the points and the arm")
+                         f"from its best point; cost {out.cost:.6g}): {cause}")
+
+
+#: a row whose standard uncertainty is below this fraction of the median row's is held so tightly that
+#: Levenberg-Marquardt may not follow it (a certified length of 1 pm beside 0.1 mm of scatter, 1e-9)
+TIGHT_RATIO = 1e-6
+
+
+def tight_rows(problem: Problem) -> str | None:
+    """What holds the fit far tighter than its other rows (rows whose standard uncertainty is below
+    :data:`TIGHT_RATIO` of the median row's), said for a fit that did not converge; None when nothing is.
+
+    A length ``L`` held at ``u`` is a curved valley of the cost whose floor Levenberg-Marquardt follows by
+    steps of about ``sqrt(2 L u)`` (0.3 um at 1 pm on 50 mm): the centres it joins cannot move the millimetres
+    a fit asks of them."""
+    sig = problem.sigma
+    if len(sig) < 2:
+        return None
+    med = float(np.median(sig))
+    k = int(np.argmin(sig))
+    if not sig[k] < TIGHT_RATIO * med:
+        return None
+    if problem.row_distance[k] >= 0:
+        d = problem.distance_items[problem.row_distance[k]]
+        what = (f"the certified length between '{d.between[0]}' and '{d.between[1]}' (measurement "
+                f"'{d.measurement}') held at its stated u {sig[k] * 1e3:.3g} mm")
+        ask = "state the certificate's real standard uncertainty (u_length_mm, or --sigma-length-um)"
+    else:
+        kind = problem.instances[problem.row_instance[k]].kind
+        what = f"the {kind} rows held at a standard uncertainty of {sig[k] * 1e3:.3g} mm"
+        ask = "state their real standard uncertainty (the --sigma-*-um options)"
+    return (f"{what}, {med / sig[k]:.2g} times tighter than the median row ({med * 1e3:.3g} mm): a fit follows a "
+            f"constraint that tight by tiny steps and cannot move the unknowns it joins; {ask}")
 
 
 def _lm_attempt(problem: Problem, p: ArrayLike, states: list[np.ndarray], max_iter: int, xtol: float, ftol: float,

@@ -314,13 +314,19 @@ def test_each_groups_scale_stops_at_the_ceiling_the_arms_dimensions_give(model):
 
 
 def _ring(model, measurements: int, copies: int):
-    """The bundled ring campaign's first ``measurements`` measurements, every row given ``copies`` times."""
+    """The bundled ring campaign's first ``measurements`` measurements, every row given ``copies`` times, copy k's
+    joint readings k 1e-10 rad apart (a reading repeated exactly counts once, :class:`calibration.problem.Problem`;
+    these are poses measured again, their ball centres 1e-10 m apart at a metre, 3e-5 of the noise)."""
+    import dataclasses
+
     from arm_model.io import read_artefacts, read_points
     from conftest import ROOT
     ring = ROOT / "examples" / "data" / "paper-ring-xyz"
     data = make_data(read_points(ring / "points.csv", 7), read_artefacts(ring / "artefacts.toml"), model)
     rows = np.flatnonzero(np.isin(data.points.measurement, sorted(set(data.points.measurement))[:measurements]))
-    return data.select(np.tile(rows, copies))
+    out = data.select(np.tile(rows, copies))
+    q = out.points.q + np.repeat(np.arange(copies), len(rows))[:, None] * 1e-10
+    return dataclasses.replace(out, points=dataclasses.replace(out.points, q=q))
 
 
 RING_OPTIONS = FitOptions(weights=Weights(probe=2.94e-6), gross_threshold=None, discrepancy=False)

@@ -88,11 +88,38 @@ def test_close_loop_writes_the_report(files, tmp_path, capsys):
     assert "E_UNI on training data" in printed.out and "FAIL" in printed.out
 
 
+class _BaseFit(Exception):
+    """Raised in place of the loop's first fit (:func:`test_weights_stated_reach_the_base_fit`)."""
+
+
+@pytest.mark.parametrize("weights, from_data", [("stated", False), ("data", True)])
+def test_weights_stated_reach_the_base_fit(files, tmp_path, monkeypatch, weights, from_data):
+    """The fast counterpart of :func:`test_weights_stated_keeps_the_stated_sigmas` (6.5 s of CPU, make test-slow):
+    ``--weights stated`` reaches the loop's base fit, whose weights every later fit takes, as the stated 100 um with
+    no noise from the data; ``--weights data`` as starting values. The base fit itself is not run (0.3 s)."""
+    import calibration.loop.state as state
+    seen = []
+
+    def first_fit(model, data, options):
+        seen.append(options)
+        raise _BaseFit
+
+    monkeypatch.setattr(state, "calibrate", first_fit)
+    main(["close-loop", str(files / "points.csv"), str(files / "artefacts.toml"), "--arm", str(NOMINAL),
+          "--sigma-probe-um", "100", "--max-effects", "0", "--candidates", "eccentricity", "--library-only",
+          "--no-plots", "--weights", weights, "-o", str(tmp_path / "loop")])
+    (options,) = seen
+    assert options.weights.probe == pytest.approx(100e-6) and "probe" not in options.weights.defaulted
+    assert options.weights.factors == () and options.weights_from_data is from_data
+    assert not (tmp_path / "loop").exists()
+
+
+@pytest.mark.slow
 def test_weights_stated_keeps_the_stated_sigmas(files, tmp_path):
     """``--weights stated`` (once ignored by close-loop): every fit weights its rows by the stated 100 um, with no
     factor from the data (``--weights data``, the default, would scale each row group to its residuals: s0 about 1),
     so the base fit's s0 is the residual's scatter (the probing noise and the eccentricity left out, about 15 um)
-    over 100 um; summary.json's stage fits say so."""
+    over 100 um; summary.json's stage fits say so, the reference's sigma nobody stated and no row used null."""
     out = tmp_path / "loop"
     assert main(["close-loop", str(files / "points.csv"), str(files / "artefacts.toml"), "--arm", str(NOMINAL),
                  "--sigma-probe-um", "100", "--max-effects", "0", "--candidates", "eccentricity", "--library-only",
@@ -103,6 +130,7 @@ def test_weights_stated_keeps_the_stated_sigmas(files, tmp_path):
     (stage,) = s["stages"]
     noise = stage["fit"]["noise"]
     assert noise["probe_um"] == pytest.approx(100.0) and noise["factors"] == {} and not noise["from_data"], noise
+    assert noise["reference_um"] is None and noise["defaulted"] == ["reference"], noise
     assert 0.03 < stage["fit"]["s0"] < 0.4, stage["fit"]["s0"]
 
 

@@ -269,7 +269,7 @@ def test_calibrate_with_one_pose_repeated_says_unidentifiable(small, tmp_path, c
     pts.write_text("\n".join([lines[0]] + [sphere] * 12) + "\n")
     code, _, err = run(["calibrate", pts, small / "artefacts.toml", "--arm", NOMINAL, "-o", tmp_path / "o"], capsys)
     assert code == 2 and "unidentifiable" in err and "did not converge" not in err
-    assert "warning: 11 row(s) repeat an earlier row exactly" in err       # said before the fit fails
+    assert "warning: 11 row(s) repeat an earlier reading exactly" in err       # said before the fit fails
     assert not (tmp_path / "o").exists()
 
 
@@ -336,7 +336,7 @@ def test_rows_repeated_exactly_are_warned_with_the_copies_lines(tmp_path):
     desc = load_description(NOMINAL)
     (w,) = [w for w in point_warnings(desc, read_points(pts, desc.n_joints)) if w.kind == "duplicate_rows"]
     assert w.as_dict()["count"] == 3 and w.as_dict()["lines"] == [5, 6, 7]
-    assert w.message.startswith("3 row(s) repeat an earlier row exactly") and "lines 5, 6, 7" in w.message
+    assert w.message.startswith("3 row(s) repeat an earlier reading exactly") and "lines 5, 6, 7" in w.message
     pts.write_text("\n".join(lines + [",".join(near)]) + "\n")
     assert not [w for w in point_warnings(desc, read_points(pts, desc.n_joints)) if w.kind == "duplicate_rows"]
 

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..description import ArmDescription
-from ..errors import MAX_ID_LENGTH, InputError, did_you_mean, parse_toml, read_text
+from ..errors import MAX_ID_LENGTH, InputError, beside, did_you_mean, parse_toml, read_text
 from ..shipped import SHIPPED_ARMS, shipped_path
 from ..toml_lines import key_path_text, toml_key_lines
 from ..units import SMALLEST_ARTEFACT_M, implausible, split_unit
@@ -844,11 +844,12 @@ def _errors(ctx, tbl, desc) -> dict[str, float]:
 
 
 def load_campaign(path: str | Path) -> Campaign:
-    """Read a campaign TOML file; the arm path in it is relative to the file."""
+    """Read a campaign TOML file; the arm path in it is relative to the file (:func:`arm_model.errors.beside`: the
+    real file's folder, its links followed)."""
     path = Path(path)
     text = read_text(path, "the campaign file")
     data = parse_toml(text, str(path))
-    return _parse(data, str(path), toml_key_lines(text), path.resolve().parent)
+    return _parse(data, str(path), toml_key_lines(text), beside(path))
 
 
 def campaign_from_dict(data: dict, arm: str | Path | ArmDescription | None = None,

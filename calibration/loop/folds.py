@@ -13,7 +13,7 @@ from ..data import CalibrationData, split_holdout, split_poses, spread
 from ..diagnostics import measurement_folds, measurement_groups, pose_folds
 from .settings import LoopSettings, wilcoxon_units_needed
 
-__all__ = ["Folds", "outer_split", "spread_measurements", "choose_folds"]
+__all__ = ["Folds", "outer_split", "spread_measurements", "check_fold_by", "choose_folds"]
 
 
 
@@ -81,6 +81,17 @@ def spread_measurements(data: CalibrationData, fraction: float) -> list[str]:
     return out
 
 
+def check_fold_by(design: CalibrationData, settings: LoopSettings) -> None:
+    """Folds of whole measurements (``fold_by="measurement"``) need at least 2 design measurements: an
+    :class:`InputError` otherwise, said before any fit (the design set is the data less the outer test set,
+    :func:`outer_split`)."""
+    n_meas = len(design.measurements())
+    if settings.fold_by == "measurement" and n_meas < 2:
+        raise InputError(f"--fold-by measurement: {n_meas} design measurement(s) (the measurements the outer test set "
+                         "leaves): folds of whole measurements need at least 2; fold by pose (--fold-by pose), or "
+                         "give more measurements", design.points.path, None, "measurement")
+
+
 def choose_folds(design: CalibrationData, settings: LoopSettings) -> tuple[Folds, dict]:
     """The folds of the decisions and, decided before any test runs, whether the held-out test can reach
     its level with them (a one-sided Wilcoxon test over n units cannot go below p = 1/2^n). A stage tests at most
@@ -97,9 +108,7 @@ def choose_folds(design: CalibrationData, settings: LoopSettings) -> tuple[Folds
     if by == "auto":
         by = "measurement" if n_meas >= 2 else "pose"
     if by == "measurement":
-        if n_meas < 2:
-            raise InputError(f"{n_meas} design measurement(s): folds of whole measurements need at least 2; "
-                             "fold by pose (--fold-by pose)")
+        check_fold_by(design, settings)
         k = min(settings.folds, n_meas)          # said in the note when fewer than asked
         assign = measurement_folds(design, k)
         per_pose = settings.fold_by == "auto" and n_meas < need

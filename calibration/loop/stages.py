@@ -54,7 +54,7 @@ from .decide import (
     physics_inclusion,
     plot_family,
 )
-from .folds import choose_folds, outer_split
+from .folds import check_fold_by, choose_folds, outer_split
 from .outliers import drop_design_outliers, flag_test_outliers, outlier_budget
 from .result import LoopResult, Stage
 from .settings import LEGACY_RESOLUTION, LoopSettings
@@ -102,6 +102,7 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
     data = make_data(points, camp.artefacts, needs_model(desc, need), reference=camp.reference)
     cands, skipped = library_candidates(desc, data, camp.families, camp.extra)
     design, test, test_by, test_rows = outer_split(data, settings)
+    check_fold_by(design, settings)             # before any fit
     _say_split(say, data, design, test, test_by, len(cands), settings)
     stated = camp.weights or Weights()
     model = ArmModel(desc, tuple(camp.effects))
