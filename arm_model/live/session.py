@@ -35,7 +35,7 @@ from .features import FeatureFit, FeatureTracker
 from .motion import BAND_SIGMAS, BAND_STEPS, NOISE_SAMPLES, LastMove
 from .plan import SessionPlan
 from .record import FILES, SessionRecord
-from .samples import Sample, SampleLayout, checked_value, sample_header
+from .samples import Sample, SampleBlock, SampleLayout, checked_value, sample_header
 
 __all__ = ["Session", "LivePoint", "Event", "EVENT_KINDS", "PERIOD_SAMPLES", "GAP_FACTOR", "LIMIT_MARGIN_RAD",
            "JUMP_PERIODS", "JUMP_GAPS", "JUMP_BACK_PERIODS", "JUMP_CONFIRM",
@@ -282,6 +282,65 @@ class Session:
             out = out + self._on_contact(contact)
         elif was_in and not detector.in_contact:
             self.counts["bumps"] = detector.bumps
+        return out
+
+    def push_block(self, block: SampleBlock) -> tuple:
+        """Samples that came together (:meth:`~arm_model.live.samples.SampleLayout.parse_block` of lines read at
+        once): what :meth:`push_sample` on each in turn brings, and the same state and files after it. The samples
+        that a clock, a gap, a force beyond the probe's range or a joint limit concerns, the first ones (the period,
+        the sensor's zero and noise) and those held off the clock go through :meth:`push_sample`; the others are
+        taken by array operations and one loop for the moving averages, which must go sample by sample (the same
+        operations in the same order: the same numbers). A point's latency counts from the moment the session
+        takes up the sample that ends its contact, as for a sample pushed alone."""
+        if self.layout is None:
+            raise ValueError("push_block needs the session's sample layout (a stream's header)")
+        out: list = []
+        n, k = block.n, 0
+        masks = _BlockMasks(self, block)
+        while k < n:
+            end = masks.quiet_until(k)
+            if end > k:
+                out += self._push_rows(block, k, end)
+                k = end
+            else:
+                out += self.push_sample(block.sample(k), block.texts[k], block.lines[k])
+                k += 1
+        rec = self.record
+        if rec is not None and time.monotonic() >= rec.next_flush:
+            rec.flush(self._progress())
+        return tuple(out)
+
+    def _push_rows(self, block: SampleBlock, a: int, b: int) -> list:
+        """Rows ``a`` to ``b - 1`` of ``block``: on the stream's clock, no gap, no force beyond the range, no joint
+        leaving or coming back inside its limits (:class:`_BlockMasks`), the detector past its first samples."""
+        detector, moves, rec = self._detector, self._moves, self.record
+        out: list = []
+        k = a
+        while k < b:
+            was_in = detector.in_contact
+            changes: list = []
+            nxt, contact = detector.feed_rows(block, k, b, changes)
+            self.counts["samples"] += nxt - k
+            self._last_t = block.t[nxt - 1]
+            if moves is not None:
+                held = np.full(nxt - k, was_in)
+                for c in changes:                           # the rows after a change are in (out of) contact
+                    held[c - k + 1:] = not held[c - k]
+                last = nxt - 1 if contact is not None else nxt
+                moves.follow(block.q[k:last], held[:last - k])
+            if contact is not None:     # the row that ended it is taken up now (its moves, its record, the point)
+                self._t_push = time.perf_counter()
+                if moves is not None:
+                    moves.follow(block.q[nxt - 1:nxt], held[-1:])
+            if rec is not None:
+                self._samples_buf.append("\n".join(block.texts[k:nxt]) + "\n")
+            if changes:
+                self.counts["bumps"] = detector.bumps
+            if contact is not None:
+                self.latest, self.latest_magnitude = block.sample(nxt - 1), block.mags[nxt - 1]
+                out += self._on_contact(contact)
+            k = nxt
+        self.latest, self.latest_magnitude = block.sample(b - 1), block.mags[b - 1]
         return out
 
     def _late(self, s: Sample, raw: str | None, last: float) -> tuple:
@@ -641,6 +700,60 @@ class Session:
             v.append(s.temperature)
         text = ",".join(map(repr, v))
         return text if s.trigger is None else f"{text},{int(s.trigger)}"
+
+
+class _BlockMasks:
+    """Which rows of a :class:`~arm_model.live.samples.SampleBlock` :meth:`Session.push_block` takes by array
+    operations: a row is *quiet* when :meth:`Session.push_sample` would find it on the stream's clock (after the row
+    before it by more than 0 and at most the gap limit), its force within the probe's range with no over-force
+    armed, no joint leaving its limits nor coming back inside one that left them, and the contact detector past its
+    first samples. The masks are made again when the session's limits or joints beyond them change."""
+
+    def __init__(self, session: Session, block: SampleBlock):
+        self.session, self.block = session, block
+        self._key: tuple | None = None
+        self._loud: np.ndarray = np.zeros(0, int)
+        t = block.t_arr
+        self._dt = np.empty(block.n)
+        self._dt[1:] = t[1:] - t[:-1]
+        self._dt[0] = np.nan
+        over = block.mags_arr > session.max_force
+        bounds = session._bounds
+        if bounds:
+            idx = [i for i, _, _ in bounds]
+            lo = np.array([lo for _, lo, _ in bounds])
+            hi = np.array([hi for _, _, hi in bounds])
+            q = block.q[:, idx]
+            self._out = (q < lo) | (q > hi)                                           # beyond its limits
+            self._inside = (lo + LIMIT_MARGIN_RAD <= q) & (q <= hi - LIMIT_MARGIN_RAD)   # back inside, re-armed
+            self._bound_joints = idx
+        else:
+            self._out = self._inside = np.zeros((block.n, 0), bool)
+            self._bound_joints = []
+        self._over = over
+
+    def quiet_until(self, k: int) -> int:
+        """The first row from ``k`` on that is not quiet (``k`` itself when it is not; the block's length when
+        every one is)."""
+        s = self.session
+        if (s._held or s._last_t is None or s._over or not math.isfinite(s._gap_limit)
+                or not s._detector.ready(self.block.wrench is not None)):
+            return k
+        dt = self.block.t[k] - s._last_t
+        if not 0.0 < dt <= s._gap_limit or dt > s._jump_limit:
+            return k
+        key = (s._gap_limit, s._jump_limit, frozenset(s._beyond))
+        if key != self._key:
+            self._key = key
+            loud = self._over.copy()
+            loud[1:] |= ~((self._dt[1:] > 0.0) & (self._dt[1:] <= s._gap_limit) & (self._dt[1:] <= s._jump_limit))
+            beyond = np.array([i in s._beyond for i in self._bound_joints], bool)
+            loud |= (self._out & ~beyond).any(axis=1) | (self._inside & beyond).any(axis=1)
+            self._loud = np.flatnonzero(loud)
+        at = int(np.searchsorted(self._loud, k))
+        if at < len(self._loud) and self._loud[at] == k:
+            return k
+        return int(self._loud[at]) if at < len(self._loud) else self.block.n
 
 
 #: columns of ``contacts.csv``
