@@ -330,16 +330,17 @@ def _blocks(chunk: list, source: LineSource, layout: SampleLayout) -> list:
     from arm_model.csv_io import blank_record
     from arm_model.live.sources import chunk_texts
     header_text, datagrams = ",".join(layout.header), source.datagrams
+    from arm_model.live.session import BLOCK_LEAST
     items = chunk_texts(chunk, source.name)
     texts: list[str] = [x[1] for x in items if not isinstance(x, InputError)]
-    if len(texts) == len(items) and all(x[:1] in _SAMPLE_START for x in texts):    # no blank line, no header
+    if len(texts) == len(items) >= BLOCK_LEAST and all(x[:1] in _SAMPLE_START for x in texts):    # no blank, no header
         return layout.parse_block(texts, [x[0] for x in items])
     out: list = []
     nos: list[int] = []
     texts = []
     for item in items:
         if isinstance(item, InputError):
-            out += layout.parse_block(texts, nos)
+            out += _parsed(layout, texts, nos)
             out.append(item)
             texts, nos = [], []
             continue
@@ -348,17 +349,42 @@ def _blocks(chunk: list, source: LineSource, layout: SampleLayout) -> list:
             continue
         texts.append(text)
         nos.append(no)
-    return out + layout.parse_block(texts, nos)
+    return out + _parsed(layout, texts, nos)
 
 
-def _push(block: SampleBlock, session: Session, pacer: Pacer, idle, view: LiveView | None, said: dict) -> bool:
-    """Push a block, in the parts that are due (a paced replay); False when the pacing was interrupted."""
+def _parsed(layout: SampleLayout, texts: list[str], nos: list[int]) -> list:
+    """A block of the lines (:meth:`SampleLayout.parse_block`), or for a few, each line's ``(sample, text, line)``
+    (or its error): a line that comes alone costs no arrays."""
+    from arm_model.live.session import BLOCK_LEAST
+    if len(texts) >= BLOCK_LEAST:
+        return layout.parse_block(texts, nos)
+    out: list = []
+    for text, no in zip(texts, nos, strict=True):
+        try:
+            out.append((layout.parse(text, no), text, no))
+        except InputError as exc:
+            out.append(exc)
+    return out
+
+
+def _push(block: SampleBlock | tuple, session: Session, pacer: Pacer, idle, view: LiveView | None,
+          said: dict) -> bool:
+    """Push a block, in the parts that are due (a paced replay), or one ``(sample, text, line)``; False when the
+    pacing was interrupted."""
+    if isinstance(block, tuple):
+        if pacer.speed > 0 and not pacer.wait(block[0].t, idle):
+            return False
+        for o in session.push_sample(*block):
+            _show(o, said)
+        if view is not None:
+            view.update()
+        return True
     k = 0
     while k < block.n:
         if pacer.speed > 0 and not pacer.wait(block.t[k], idle):
             return False
         end = pacer.released(block.t_arr, k)
-        for o in session.push_block(block if (k, end) == (0, block.n) else block.part(k, end)):
+        for o in session.push_block(block, k, end):
             _show(o, said)
         if view is not None:
             view.update()

@@ -85,7 +85,6 @@ class SampleBlock:
 
     def __init__(self, layout: SampleLayout, values: np.ndarray, texts: list[str], lines: list[int]):
         cols = layout.columns(values)
-        self._layout, self._values = layout, values
         self.n, self.texts, self.lines = len(values), texts, lines
         self.t_arr, self.q, self.wrench = cols["t"], cols["q"], cols["wrench"]
         self.pressed, self.temperature = cols["pressed"], cols["temperature"]
@@ -100,13 +99,11 @@ class SampleBlock:
             self.fx, self.fy, self.fz = fx.tolist(), fy.tolist(), fz.tolist()
         self.mags = self.mags_arr.tolist()
         self._wrench_rows: list | None = None
+        #: what a session that takes this block keeps of it (its masks of the rows it may take at once)
+        self.masks: object = None
 
     def __len__(self) -> int:
         return self.n
-
-    def part(self, a: int, b: int) -> SampleBlock:
-        """Rows ``a`` to ``b - 1`` as a block of their own."""
-        return SampleBlock(self._layout, self._values[a:b], self.texts[a:b], self.lines[a:b])
 
     def sample(self, k: int) -> Sample:
         """Row ``k`` as the :class:`Sample` :meth:`SampleLayout.parse` gives for its line."""

@@ -38,7 +38,7 @@ from .record import FILES, SessionRecord
 from .samples import Sample, SampleBlock, SampleLayout, checked_value, sample_header
 
 __all__ = ["Session", "LivePoint", "Event", "EVENT_KINDS", "PERIOD_SAMPLES", "GAP_FACTOR", "LIMIT_MARGIN_RAD",
-           "JUMP_PERIODS", "JUMP_GAPS", "JUMP_BACK_PERIODS", "JUMP_CONFIRM",
+           "JUMP_PERIODS", "JUMP_GAPS", "JUMP_BACK_PERIODS", "JUMP_CONFIRM", "BLOCK_LEAST",
            "TIP_COLUMNS", "CONTACT_COLUMNS", "EVENT_COLUMNS", "FEATURE_COLUMNS", "points_columns"]
 
 #: the kinds of :class:`Event`
@@ -59,6 +59,9 @@ JUMP_CONFIRM = 4
 #: the nominal sample rates a session takes [Hz]: a sample every 1000 s to a million a second (beyond, a gap of a
 #: millisecond counted 1e305 dropped samples, and a rate of 5e-324 Hz made the period infinite)
 RATE_HZ_RANGE = (1e-3, 1e6)
+#: the fewest samples in a row that :meth:`Session.push_block` takes by array operations (fewer: one by one, which
+#: costs less than the arrays' set-up)
+BLOCK_LEAST = 16
 #: a joint back inside its limits by this much re-arms its joint-limit event [rad] (0.05 deg)
 LIMIT_MARGIN_RAD = math.radians(0.05)
 
@@ -284,27 +287,33 @@ class Session:
             self.counts["bumps"] = detector.bumps
         return out
 
-    def push_block(self, block: SampleBlock) -> tuple:
+    def push_block(self, block: SampleBlock, start: int = 0, end: int | None = None) -> tuple:
         """Samples that came together (:meth:`~arm_model.live.samples.SampleLayout.parse_block` of lines read at
-        once): what :meth:`push_sample` on each in turn brings, and the same state and files after it. The samples
-        that a clock, a gap, a force beyond the probe's range or a joint limit concerns, the first ones (the period,
-        the sensor's zero and noise) and those held off the clock go through :meth:`push_sample`; the others are
-        taken by array operations and one loop for the moving averages, which must go sample by sample (the same
-        operations in the same order: the same numbers). A point's latency counts from the moment the session
-        takes up the sample that ends its contact, as for a sample pushed alone."""
+        once; rows ``start`` to ``end - 1`` of ``block``, default all): what :meth:`push_sample` on each in turn
+        brings, and the same state and files after it. The samples that a clock, a gap, a force beyond the probe's
+        range or a joint limit concerns, the first ones (the period, the sensor's zero and noise), those held off
+        the clock and runs of fewer than :data:`BLOCK_LEAST` go through :meth:`push_sample`; the others are taken by
+        array operations and one loop for the moving averages, which must go sample by sample (the same operations
+        in the same order: the same numbers). A point's latency counts from the moment the session takes up the
+        sample that ends its contact, as for a sample pushed alone."""
         if self.layout is None:
             raise ValueError("push_block needs the session's sample layout (a stream's header)")
         out: list = []
-        n, k = block.n, 0
-        masks = _BlockMasks(self, block)
-        while k < n:
-            end = masks.quiet_until(k)
-            if end > k:
-                out += self._push_rows(block, k, end)
-                k = end
+        k, end = start, block.n if end is None else end
+        masks = block.masks if isinstance(block.masks, _BlockMasks) and block.masks.session is self else None
+        while k < end:
+            stop = k
+            if end - k >= BLOCK_LEAST:
+                if masks is None:
+                    masks = block.masks = _BlockMasks(self, block)
+                stop = min(masks.quiet_until(k), end)
+            if stop - k >= BLOCK_LEAST:
+                out += self._push_rows(block, k, stop)
+                k = stop
             else:
-                out += self.push_sample(block.sample(k), block.texts[k], block.lines[k])
-                k += 1
+                for i in range(k, max(stop, k + 1)):
+                    out += self.push_sample(block.sample(i), block.texts[i], block.lines[i])
+                k = max(stop, k + 1)
         rec = self.record
         if rec is not None and time.monotonic() >= rec.next_flush:
             rec.flush(self._progress())
