@@ -289,6 +289,9 @@ def _run(args: argparse.Namespace, source: LineSource, session: Session, layout:
                 idle_since = time.monotonic()
             ended = False
             for item in _blocks(chunk, source, layout):
+                if stop.reason:
+                    ended = True
+                    break
                 if isinstance(item, InputError):
                     _show(session.bad_line(item), said)
                     if args.strict:
