@@ -27,6 +27,7 @@ point is at the force peak inside it (the first sample without a force sensor).
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -132,6 +133,8 @@ class ContactDetector:
         self.raw_noise = None
         self.bumps = 0
         self.count = 0
+        #: when :meth:`feed_rows` came to the row that ended the last contact it closed [s, ``time.perf_counter``]
+        self.closed_at = 0.0
 
     @property
     def in_contact(self) -> bool:
@@ -288,7 +291,8 @@ class ContactDetector:
         """Rows ``a`` to ``b - 1`` of ``rows`` (samples on the stream's clock, after :meth:`ready`), as :meth:`feed`
         on each in turn (the same arithmetic in the same order, so the same contacts, peaks and thresholds); stops
         after the first row that ends a contact with a point: (the next row, the contact), else (b, None).
-        ``changes`` gets each row at which a contact opens or ends (the rows after it are in, or out)."""
+        ``changes`` gets each row at which a contact opens or ends (the rows after it are in, or out);
+        :attr:`closed_at` the moment it came to the row that ended the contact (its peak is found after it)."""
         if not self._by_force:
             return self._trigger_rows(rows, a, b, changes)
         if rows.wrench is None:             # no force sensor: no contact, nothing followed
@@ -353,6 +357,7 @@ class ContactDetector:
                 opened = None
                 self._t, self._held, self._fs[:], self._base[:] = tp, held_t, (f0, f1, f2), (b0, b1, b2)
                 self._n_base, self._dt, self._a_smooth, self._a_base = n_base, dtp, a_s, a_b
+                self.closed_at = time.perf_counter()
                 found = self._close(tk)
                 k += 1
                 free, n_idle = k, len(idle)
@@ -401,6 +406,7 @@ class ContactDetector:
                 k = at + 1
                 continue
             self._keep(rows, k, at)         # released at ``at``: the contact ends there
+            self.closed_at = time.perf_counter()
             found = self._close(rows.t[at])
             k = at + 1
             if found is not None:

@@ -295,7 +295,8 @@ class Session:
         the clock and runs of fewer than :data:`BLOCK_LEAST` go through :meth:`push_sample`; the others are taken by
         array operations and one loop for the moving averages, which must go sample by sample (the same operations
         in the same order: the same numbers). A point's latency counts from the moment the session takes up the
-        sample that ends its contact, as for a sample pushed alone."""
+        sample that ends its contact, as for a sample pushed alone (the joints' moves of the block's samples before
+        it, followed by array operations once the contact's end is known, count in it: tens of µs)."""
         if self.layout is None:
             raise ValueError("push_block needs the session's sample layout (a stream's header)")
         out: list = []
@@ -336,9 +337,9 @@ class Session:
                 for c in changes:                           # the rows after a change are in (out of) contact
                     held[c - k + 1:] = not held[c - k]
                 last = nxt - 1 if contact is not None else nxt
-                moves.follow(block.q[k:last], held[:last - k])
-            if contact is not None:     # the row that ended it is taken up now (its moves, its record, the point)
-                self._t_push = time.perf_counter()
+                moves.follow(block.q[k:last], held[:last - k])   # (with a contact: counted in its point's latency)
+            if contact is not None:     # from the row that ended it: its peak, its moves, its record, the point
+                self._t_push = detector.closed_at
                 if moves is not None:
                     moves.follow(block.q[nxt - 1:nxt], held[-1:])
             if rec is not None:
