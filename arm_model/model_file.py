@@ -177,8 +177,9 @@ class Arm:
         return default_inputs(self.desc, has_force=has_force, model_probing=self.probing_scatter,
                               model_discrepancy=model_disc, **given)
 
-    @property
+    @functools.cached_property
     def model(self) -> ArmModel:
+        """The :class:`~arm_model.model.ArmModel` of the description and the effects (made once: both are fixed)."""
         return ArmModel(self.desc, tuple(self.effects))
 
     @property

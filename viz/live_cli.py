@@ -32,7 +32,8 @@ from arm_model.live.session import RATE_HZ_RANGE
 
 if TYPE_CHECKING:          # only for the annotations: the live modules load when the command runs
     from arm_model.live import SampleLayout, Session
-    from arm_model.live.sources import LineSource
+    from arm_model.live.samples import SampleBlock
+    from arm_model.live.sources import LineSource, Pacer
 
     from .live import LiveView
 
@@ -261,15 +262,14 @@ def _status(args: argparse.Namespace, source: LineSource, files: list) -> dict:
 
 def _run(args: argparse.Namespace, source: LineSource, session: Session, layout: SampleLayout, stop: _Stop,
          skipped: int) -> int:
-    """The session's loop: push every line's sample, show what it brings, keep the view drawn."""
-    from arm_model.csv_io import blank_record
-    from arm_model.live.sources import Pacer, line_text
+    """The session's loop: push the samples of the lines that came together (a block), show what they bring, keep
+    the view drawn. A replay is paced sample by sample (the samples due within :data:`AHEAD_S` go together)."""
+    from arm_model.live.sources import Pacer
     view = _start_view(args, session)
     pacer = Pacer(args.speed if source.replay else 0.0)
     said: dict[str, int] = {}
-    header_text = ",".join(layout.header)
     idle_since = time.monotonic()
-    watch_idle, datagrams, paced = args.stop_after_idle_s is not None, source.datagrams, pacer.speed > 0
+    watch_idle = args.stop_after_idle_s is not None
     status, message, code = "complete", "the stream ended", 0
 
     def idle() -> bool:
@@ -278,35 +278,32 @@ def _run(args: argparse.Namespace, source: LineSource, session: Session, layout:
             view.update()
         return stop.reason is not None
     try:
-        for item in source.lines():
+        for chunk in source.chunks():
             if stop.reason:
                 break
-            if item is None:
+            if chunk is None:
                 if idle() or (args.stop_after_idle_s and time.monotonic() - idle_since > args.stop_after_idle_s):
                     break
                 continue
             if watch_idle:
                 idle_since = time.monotonic()
-            no, raw = item
-            try:
-                text = line_text(raw, source.name, no)
-                if not text or (datagrams and text == header_text) or blank_record(text):
-                    continue
-                sample = layout.parse(text, no)
-            except InputError as exc:
-                _show(session.bad_line(exc), said)
-                if args.strict:
-                    status, message, code = "stopped", f"stopped at a bad line (--strict): {exc}", 2
+            ended = False
+            for item in _blocks(chunk, source, layout):
+                if stop.reason:
+                    ended = True
                     break
-                continue
-            if paced and not pacer.wait(sample.t, idle):
+                if isinstance(item, InputError):
+                    _show(session.bad_line(item), said)
+                    if args.strict:
+                        status, message, code = "stopped", f"stopped at a bad line (--strict): {item}", 2
+                        ended = True
+                        break
+                    continue
+                if not _push(item, session, pacer, idle, view, said):
+                    ended = True
+                    break
+            if ended:
                 break
-            out = session.push_sample(sample, text, no)
-            if out:
-                for o in out:
-                    _show(o, said)
-            if view is not None:
-                view.update()
     except OSError as exc:
         status, code = "stopped", 2
         message = (f"{exc.filename or source.name}: the stream failed: {exc.strerror or exc}; the session is partial: "
@@ -323,6 +320,79 @@ def _run(args: argparse.Namespace, source: LineSource, session: Session, layout:
     if code == 2:
         raise InputError(message.split(": ", 1)[1] if message.startswith("stopped at") else message)
     return code
+
+
+#: the first characters of a line that is neither blank nor a header
+_SAMPLE_START = frozenset("0123456789+-.")
+
+
+def _blocks(chunk: list, source: LineSource, layout: SampleLayout) -> list:
+    """The samples of the lines that came together, as blocks (:class:`~arm_model.live.samples.SampleBlock`), and
+    each bad line's :class:`InputError`, in the stream's order (blank lines and, over UDP, a repeated header
+    skipped)."""
+    from arm_model.csv_io import blank_record
+    from arm_model.live.sources import chunk_texts
+    header_text, datagrams = ",".join(layout.header), source.datagrams
+    from arm_model.live.session import BLOCK_LEAST
+    items = chunk_texts(chunk, source.name)
+    texts: list[str] = [x[1] for x in items if not isinstance(x, InputError)]
+    if len(texts) == len(items) >= BLOCK_LEAST and all(x[:1] in _SAMPLE_START for x in texts):    # no blank, no header
+        return layout.parse_block(texts, [x[0] for x in items])
+    out: list = []
+    nos: list[int] = []
+    texts = []
+    for item in items:
+        if isinstance(item, InputError):
+            out += _parsed(layout, texts, nos)
+            out.append(item)
+            texts, nos = [], []
+            continue
+        no, text = item
+        if not text or (datagrams and text == header_text) or blank_record(text):
+            continue
+        texts.append(text)
+        nos.append(no)
+    return out + _parsed(layout, texts, nos)
+
+
+def _parsed(layout: SampleLayout, texts: list[str], nos: list[int]) -> list:
+    """A block of the lines (:meth:`SampleLayout.parse_block`), or for a few, each line's ``(sample, text, line)``
+    (or its error): a line that comes alone costs no arrays."""
+    from arm_model.live.session import BLOCK_LEAST
+    if len(texts) >= BLOCK_LEAST:
+        return layout.parse_block(texts, nos)
+    out: list = []
+    for text, no in zip(texts, nos, strict=True):
+        try:
+            out.append((layout.parse(text, no), text, no))
+        except InputError as exc:
+            out.append(exc)
+    return out
+
+
+def _push(block: SampleBlock | tuple, session: Session, pacer: Pacer, idle, view: LiveView | None,
+          said: dict) -> bool:
+    """Push a block, in the parts that are due (a paced replay), or one ``(sample, text, line)``; False when the
+    pacing was interrupted."""
+    if isinstance(block, tuple):
+        if pacer.speed > 0 and not pacer.wait(block[0].t, idle):
+            return False
+        for o in session.push_sample(*block):
+            _show(o, said)
+        if view is not None:
+            view.update()
+        return True
+    k = 0
+    while k < block.n:
+        if pacer.speed > 0 and not pacer.wait(block.t[k], idle):
+            return False
+        end = pacer.released(block.t_arr, k)
+        for o in session.push_block(block, k, end):
+            _show(o, said)
+        if view is not None:
+            view.update()
+        k = end
+    return True
 
 
 def _start_view(args: argparse.Namespace, session: Session) -> LiveView | None:

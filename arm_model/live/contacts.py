@@ -27,10 +27,13 @@ point is at the force peak inside it (the first sample without a force sensor).
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..peaks import contact_peak, signal_noise
-from .samples import Sample
+from .samples import Sample, SampleBlock
 
 __all__ = ["ContactOptions", "Contact", "ContactDetector", "CONTACT_SOURCES", "NOISE_EVERY", "NOISE_ON", "NOISE_OFF"]
 
@@ -113,7 +116,7 @@ class ContactDetector:
         self.options = options
         self._by_force = options.source == "force"
         self.on, self.off = options.on, options.off
-        self._buf: list | None = None       # samples of the open contact
+        self._buf: _Samples | None = None   # samples of the open contact
         self._mags: list = []
         self._lines: list = []
         self._held = 0.0                    # time the zeroed force stayed >= on in the open contact [s]
@@ -122,6 +125,7 @@ class ContactDetector:
         self._t = None
         self._dt = 0.0
         self._a_smooth, self._a_base = 1.0, 0.0
+        self._known: dict = {}              # interval [s] -> the factors of the moving averages
         self._n_base = 1
         self._warm: float | None = None     # the start of the warm-up, while it lasts
         self._idle: list = []               # smoothed-minus-baseline x of samples out of contact
@@ -129,6 +133,8 @@ class ContactDetector:
         self.raw_noise = None
         self.bumps = 0
         self.count = 0
+        #: when :meth:`feed_rows` came to the row that ended the last contact it closed [s, ``time.perf_counter``]
+        self.closed_at = 0.0
 
     @property
     def in_contact(self) -> bool:
@@ -161,14 +167,14 @@ class ContactDetector:
         buf = self._buf
         if buf is None:
             if starts:
-                self._buf, self._mags, self._lines = [s], [magnitude], [line]
+                self._buf, self._mags, self._lines = _Samples(s), [magnitude], [line]
                 self._held = 0.0
                 self._hold(raw, s.t)
             elif self._by_force:
                 self._follow(s)
             return None
         if inside:
-            buf.append(s)
+            buf.add(s)
             self._mags.append(magnitude)
             self._lines.append(line)
             self._hold(raw, s.t)
@@ -200,11 +206,18 @@ class ContactDetector:
         return math.sqrt(dx * dx + dy * dy + dz * dz), math.sqrt(rx * rx + ry * ry + rz * rz)
 
     def _alphas(self, dt: float) -> None:
-        """The moving averages' factors for an interval ``dt`` [s]."""
+        """The moving averages' factors for an interval ``dt`` [s] (remembered: the intervals of a stream's time
+        stamps take a few values, which their rounding makes differ from one sample to the next)."""
         self._dt = dt
-        o = self.options
-        self._a_smooth = 1.0 - math.exp(-dt / o.smooth) if o.smooth > 0 else 1.0
-        self._a_base = 1.0 - math.exp(-dt / o.baseline) if o.baseline > 0 else 0.0
+        known = self._known.get(dt)
+        if known is None:
+            o = self.options
+            known = (1.0 - math.exp(-dt / o.smooth) if o.smooth > 0 else 1.0,
+                     1.0 - math.exp(-dt / o.baseline) if o.baseline > 0 else 0.0)
+            if len(self._known) >= _KNOWN_DT:
+                self._known.clear()
+            self._known[dt] = known
+        self._a_smooth, self._a_base = known
 
     def _hold(self, raw: float, t: float) -> None:
         if raw >= self.on:
@@ -232,7 +245,6 @@ class ContactDetector:
         """The sensor's noise per channel [N] (:func:`arm_model.peaks.signal_noise` of the raw readings out of
         contact), the smoothed force's (the largest channel's, through the moving average) and the
         thresholds raised to it."""
-        import numpy as np
         if len(idle) < NOISE_LEAST:
             return
         x = np.array(idle, float)[:, :3]
@@ -248,7 +260,7 @@ class ContactDetector:
         """The stream ended: the open contact, if any, ends at its last sample."""
         if self._buf is None:
             return None
-        return self._close(self._buf[-1].t)
+        return self._close(self._buf.last_t)
 
     def shift(self, dt: float) -> None:
         """The stream's clock jumped: move the detector's times by ``dt`` [s] so that the next sample follows
@@ -267,4 +279,180 @@ class ContactDetector:
             return None
         k = contact_peak(mags) if self._by_force or any(mags) else 0
         self.count += 1
-        return Contact(self.count, buf[0].t, end, len(buf), buf[k], mags[k], lines[k])
+        return Contact(self.count, buf.first_t, end, len(buf), buf[k], mags[k], lines[k])
+
+    # -- samples that came together ---------------------------------------------------------------
+    def ready(self, has_force: bool) -> bool:
+        """True when :meth:`feed_rows` may take the next samples (the warm-up and the first reading are taken one
+        by one)."""
+        return not self._by_force or not has_force or (self._fs is not None and self._warm is None)
+
+    def feed_rows(self, rows: SampleBlock, a: int, b: int, changes: list) -> tuple[int, Contact | None]:
+        """Rows ``a`` to ``b - 1`` of ``rows`` (samples on the stream's clock, after :meth:`ready`), as :meth:`feed`
+        on each in turn (the same arithmetic in the same order, so the same contacts, peaks and thresholds); stops
+        after the first row that ends a contact with a point: (the next row, the contact), else (b, None).
+        ``changes`` gets each row at which a contact opens or ends (the rows after it are in, or out);
+        :attr:`closed_at` the moment it came to the row that ended the contact (its peak is found after it)."""
+        if not self._by_force:
+            return self._trigger_rows(rows, a, b, changes)
+        if rows.wrench is None:             # no force sensor: no contact, nothing followed
+            return b, None
+        t, fx, fy, fz = rows.t, rows.fx, rows.fy, rows.fz
+        fs, base = self._fs, self._base
+        assert fs is not None and fx is not None and fy is not None and fz is not None
+        f0, f1, f2 = fs
+        b0, b1, b2 = base
+        tp, dtp, a_s, a_b = self._t, self._dt, self._a_smooth, self._a_base
+        on, off, held_t, n_base = self.on, self.off, self._held, self._n_base
+        zero, idle, buf, known = self.options.baseline > 0, self._idle, self._buf, self._known
+        opened = a if buf is not None else None             # the first row of this call in the open contact
+        free = a                                            # the first row out of contact not yet in ``idle``
+        n_idle = len(idle)
+        k, found = a, None
+        while k < b:
+            tk = t[k]
+            dt = tk - tp
+            if dt != dtp:
+                factors = known.get(dt)
+                if factors is None:
+                    self._alphas(dt)
+                    factors = self._a_smooth, self._a_base
+                dtp, (a_s, a_b) = dt, factors
+            x, y, z = fx[k], fy[k], fz[k]
+            f0 += a_s * (x - f0)
+            f1 += a_s * (y - f1)
+            f2 += a_s * (z - f2)
+            tp = tk
+            d0, d1, d2 = f0 - b0, f1 - b1, f2 - b2
+            level = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            if opened is None:
+                if level >= on:                             # a contact opens
+                    idle += rows.wrench_rows(free, k)
+                    opened, held_t = k, 0.0
+                    changes.append(k)
+                    buf = self._buf = _Samples()
+                    self._mags, self._lines = [], []
+                else:
+                    if zero:
+                        n_base += 1
+                        a_f = 1.0 / n_base                  # max(1 / n, a_b)
+                        if a_f < a_b:
+                            a_f = a_b
+                        b0 += a_f * (f0 - b0)
+                        b1 += a_f * (f1 - b1)
+                        b2 += a_f * (f2 - b2)
+                    n_idle += 1
+                    k += 1
+                    if n_idle >= NOISE_EVERY:
+                        idle += rows.wrench_rows(free, k)
+                        free, n_idle = k, 0
+                        self._a_smooth = a_s                # the factor of the last interval, as feed leaves it
+                        self._noise(idle)
+                        idle.clear()
+                        on, off = self.on, self.off
+                    continue
+            elif level < off:                               # it ends here
+                self._keep(rows, opened, k)
+                changes.append(k)
+                opened = None
+                self._t, self._held, self._fs[:], self._base[:] = tp, held_t, (f0, f1, f2), (b0, b1, b2)
+                self._n_base, self._dt, self._a_smooth, self._a_base = n_base, dtp, a_s, a_b
+                self.closed_at = time.perf_counter()
+                found = self._close(tk)
+                k += 1
+                free, n_idle = k, len(idle)
+                if found is not None:
+                    break
+                buf = None
+                continue
+            r0, r1, r2 = x - b0, y - b1, z - b2
+            if math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) >= on:
+                held_t += dtp
+            k += 1
+        if opened is not None:
+            self._keep(rows, opened, k)
+        elif found is None:
+            idle += rows.wrench_rows(free, k)
+        self._t, self._held, self._n_base = tp, held_t, n_base
+        self._dt, self._a_smooth, self._a_base = dtp, a_s, a_b
+        self._fs[:], self._base[:] = (f0, f1, f2), (b0, b1, b2)
+        return k, found
+
+    def _keep(self, rows: SampleBlock, a: int, b: int) -> None:
+        """Rows ``a`` to ``b - 1`` are in the open contact."""
+        assert self._buf is not None
+        self._buf.add_rows(rows, a, b)
+        self._mags.extend(rows.mags[a:b])
+        self._lines.extend(rows.lines[a:b])
+
+    def _trigger_rows(self, rows: SampleBlock, a: int, b: int, changes: list) -> tuple[int, Contact | None]:
+        """:meth:`feed_rows` for contacts from the trigger: a contact lasts while it is held."""
+        pressed = rows.pressed
+        if pressed is None:                 # no trigger column: never pressed
+            return b, None
+        k = a
+        while k < b:
+            state = self._buf is not None
+            flips = np.flatnonzero(pressed[k:b] != state)
+            if not len(flips):
+                if state:
+                    self._keep(rows, k, b)
+                return b, None
+            at = k + int(flips[0])
+            changes.append(at)
+            if not state:                   # pressed at ``at``: a contact opens with it
+                self._buf, self._mags, self._lines, self._held = _Samples(), [], [], 0.0
+                self._keep(rows, at, at + 1)
+                k = at + 1
+                continue
+            self._keep(rows, k, at)         # released at ``at``: the contact ends there
+            self.closed_at = time.perf_counter()
+            found = self._close(rows.t[at])
+            k = at + 1
+            if found is not None:
+                return k, found
+        return b, None
+
+
+#: intervals whose factors a detector remembers (a stream with jittered time stamps may have many)
+_KNOWN_DT = 4096
+
+
+class _Samples:
+    """The samples of the open contact: :class:`Sample` objects pushed one by one, or rows of :class:`SampleBlock`
+    kept by reference (the one sample a point needs is made when it is asked for)."""
+
+    def __init__(self, first: Sample | None = None):
+        self._parts: list = []              # (rows or None, first row, end row, Sample or None)
+        self._n = 0
+        if first is not None:
+            self.add(first)
+
+    def add(self, s: Sample) -> None:
+        self._parts.append((None, 0, 1, s))
+        self._n += 1
+
+    def add_rows(self, rows: SampleBlock, a: int, b: int) -> None:
+        if b > a:
+            self._parts.append((rows, a, b, None))
+            self._n += b - a
+
+    def __len__(self) -> int:
+        return self._n
+
+    def __getitem__(self, k: int) -> Sample:
+        for rows, a, b, s in self._parts:
+            if k < b - a:
+                return s if rows is None else rows.sample(a + k)
+            k -= b - a
+        raise IndexError(k)
+
+    @property
+    def first_t(self) -> float:
+        rows, a, _, s = self._parts[0]
+        return s.t if rows is None else rows.t[a]
+
+    @property
+    def last_t(self) -> float:
+        rows, _, b, s = self._parts[-1]
+        return s.t if rows is None else rows.t[b - 1]

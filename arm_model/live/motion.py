@@ -20,7 +20,6 @@ its contact began.
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Sequence
 
 import numpy as np
@@ -58,7 +57,9 @@ class LastMove:
         self.sign = [0.0] * len(self.steps)
         self._end: list[float] | None = None         # the far end of each joint's current travel
         self._held: Sequence[float] | None = None    # the last reading in contact
-        self._diffs: deque = deque(maxlen=NOISE_SAMPLES)
+        # the latest NOISE_SAMPLES differences in contact, a ring (their median does not depend on the order)
+        self._diffs = np.zeros((NOISE_SAMPLES, len(self.steps)))
+        self._n_diffs = 0                            # differences written so far
 
     def free(self, q: Sequence[float]) -> None:
         """A sample out of contact: readings ``q`` (J,)."""
@@ -80,14 +81,76 @@ class LastMove:
     def held(self, q: Sequence[float]) -> None:
         """A sample in contact: its readings' differences from the sample before it (the noise)."""
         if self._held is not None:
-            self._diffs.append([abs(a - b) for a, b in zip(q, self._held, strict=True)])
+            self._diffs[self._n_diffs % NOISE_SAMPLES] = [abs(a - b) for a, b in zip(q, self._held, strict=True)]
+            self._n_diffs += 1
         self._held = q
+
+    def follow(self, q: np.ndarray, held: np.ndarray) -> None:
+        """Samples in a row at once: readings ``q`` (n, J), ``held`` (n,) True for a sample in contact; the same
+        state as :meth:`held` and :meth:`free` on each in turn (the same comparisons on the same numbers)."""
+        if not len(q):
+            return
+        prev = np.empty_like(q)
+        prev[1:] = q[:-1]
+        inner = np.empty(len(q), bool)
+        inner[1:] = held[:-1]
+        inner[0] = self._held is not None
+        if inner[0]:
+            prev[0] = self._held
+        pairs = held & inner                        # held after a held one: a difference
+        self._ring(np.abs(q[pairs] - prev[pairs]))
+        self._held = q[-1].tolist() if held[-1] else None
+        free = q[~held]
+        if len(free) and self._end is None:
+            self._end = free[0].tolist()
+            free = free[1:]
+        if len(free):
+            self._free_rows(free)
+
+    def _ring(self, d: np.ndarray) -> None:
+        """Write differences (k, J) into the ring of the latest :data:`NOISE_SAMPLES`, in order."""
+        d = d[-NOISE_SAMPLES:]
+        at = (self._n_diffs + np.arange(len(d))) % NOISE_SAMPLES
+        self._diffs[at] = d
+        self._n_diffs += len(d)
+
+    def _free_rows(self, x: np.ndarray) -> None:
+        """:meth:`free` on each row of ``x`` (n, J) in turn, by array operations: a joint travelling up keeps the
+        running maximum as its end and turns at the first reading more than its band below it (down: the running
+        minimum, above it; not moved yet: the first reading beyond the band either side of its start)."""
+        sign, end, band = self.sign, self._end, self.band
+        assert end is not None, "the first free reading sets the ends"
+        todo = [(j, 0) for j in range(x.shape[1])]
+        while todo:
+            nxt = []
+            for j, a in todo:
+                col, s, e = x[a:, j], sign[j], end[j]
+                if s > 0:
+                    run = np.maximum.accumulate(np.maximum(col, e))
+                    beyond = run - col > band[j]
+                elif s < 0:
+                    run = np.minimum.accumulate(np.minimum(col, e))
+                    beyond = col - run > band[j]
+                else:
+                    beyond = np.abs(col - e) > band[j]
+                k = int(np.argmax(beyond)) if len(col) else 0
+                if not len(col) or not beyond[k]:
+                    if s != 0 and len(col):
+                        end[j] = float(run[-1])
+                    continue
+                xk = float(col[k])
+                sign[j] = (1.0 if xk - e > band[j] else -1.0) if s == 0 else -s
+                end[j] = xk
+                if a + k + 1 < len(x):
+                    nxt.append((j, a + k + 1))
+            todo = nxt
 
     def settle(self) -> None:
         """After a contact: the band from the noise of the readings held so far (:data:`BAND_SIGMAS`)."""
-        if len(self._diffs) < NOISE_LEAST:
+        n = min(self._n_diffs, NOISE_SAMPLES)
+        if n < NOISE_LEAST:
             return
-        sigma = np.median(np.asarray(self._diffs), axis=0) * _MAD_TO_SIGMA / math.sqrt(2.0)
+        sigma = np.median(self._diffs[:n], axis=0) * _MAD_TO_SIGMA / math.sqrt(2.0)
         self.band = [max(s, BAND_SIGMAS * float(n)) for s, n in zip(self.steps, sigma, strict=True)]
 
     def motion(self) -> np.ndarray:

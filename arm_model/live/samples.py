@@ -21,13 +21,18 @@ from __future__ import annotations
 import csv
 import math
 import re
+from collections.abc import Sequence
+from itertools import repeat
 from typing import NamedTuple
+
+import numpy as np
 
 from ..csv_io import SPACE, blank_record, parse_number
 from ..errors import InputError, did_you_mean, read_text, text_lines
 from ..units import ABSOLUTE_ZERO_C, PLAUSIBLE_SI, QUANTITY_OF_UNIT, UNIT_FACTORS, implausible, split_unit
 
-__all__ = ["Sample", "SampleLayout", "TIME_COLUMNS", "sample_header", "read_samples", "sample_bounds", "checked_value"]
+__all__ = ["Sample", "SampleBlock", "SampleLayout", "TIME_COLUMNS", "sample_header", "read_samples", "sample_bounds",
+           "checked_value"]
 
 #: the names the time column may have (one of them, once)
 TIME_COLUMNS = ("time_s", "t_s")
@@ -66,6 +71,53 @@ class Sample(NamedTuple):
     wrench: tuple | None = None
     trigger: bool | None = None
     temperature: float | None = None
+
+
+class SampleBlock:
+    """Samples that came together (lines of a stream read at once, :meth:`SampleLayout.parse_block`), SI.
+
+    Attributes:
+        n: their count; texts, lines: each line as received and its number in the stream.
+        t_arr (n,) [s], q (n, J) [rad], wrench (n, 6) [N, N m] or None, pressed (n,) bool or None (the trigger),
+        temperature (n,) [°C] or None, mags_arr (n,) |F| [N] (0 without a force sensor): arrays;
+        t, fx, fy, fz, mags: the same as lists of floats, for the loops that must go sample by sample.
+    """
+
+    def __init__(self, layout: SampleLayout, values: np.ndarray, texts: list[str], lines: list[int]):
+        cols = layout.columns(values)
+        self.n, self.texts, self.lines = len(values), texts, lines
+        self.t_arr, self.q, self.wrench = cols["t"], cols["q"], cols["wrench"]
+        self.pressed, self.temperature = cols["pressed"], cols["temperature"]
+        self.t = self.t_arr.tolist()
+        w = self.wrench
+        if w is None:
+            self.mags_arr = np.zeros(self.n)
+            self.fx = self.fy = self.fz = None
+        else:
+            fx, fy, fz = w[:, 0], w[:, 1], w[:, 2]
+            self.mags_arr = np.sqrt(fx * fx + fy * fy + fz * fz)   # as the one-sample path: the same operations
+            self.fx, self.fy, self.fz = fx.tolist(), fy.tolist(), fz.tolist()
+        self.mags = self.mags_arr.tolist()
+        self._wrench_rows: list | None = None
+        #: what a session that takes this block keeps of it (its masks of the rows it may take at once)
+        self.masks: object = None
+
+    def __len__(self) -> int:
+        return self.n
+
+    def sample(self, k: int) -> Sample:
+        """Row ``k`` as the :class:`Sample` :meth:`SampleLayout.parse` gives for its line."""
+        w = None if self.wrench is None else tuple(self.wrench[k].tolist())
+        return Sample(self.t[k], tuple(self.q[k].tolist()), w,
+                      None if self.pressed is None else bool(self.pressed[k]),
+                      None if self.temperature is None else float(self.temperature[k]))
+
+    def wrench_rows(self, a: int, b: int) -> list:
+        """Rows ``a`` to ``b - 1`` of the wrench, each a list of 6 floats."""
+        if self._wrench_rows is None:
+            assert self.wrench is not None
+            self._wrench_rows = self.wrench.tolist()
+        return self._wrench_rows[a:b]
 
 
 def sample_header(n_joints: int, force: str | None = "xyz", torque: bool = False, trigger: bool = False,
@@ -124,6 +176,7 @@ class SampleLayout:
         self._lows, self._highs = [-math.inf] * self.n_cells, [math.inf] * self.n_cells
         for k, f, lo, hi, _ in self._checks:
             self._lows[k], self._highs[k] = lo / f * (1 - 1e-9), hi / f * (1 - 1e-9)
+        self._low_row, self._high_row = np.array(self._lows), np.array(self._highs)
         self._q_slice = self._joint_slice()
         f = self._force
         self._f_slice = (f[0][0] if self.force_kind == "xyz" and not self._torque and [c[1] for c in f] == [1.0] * 3
@@ -187,6 +240,47 @@ class SampleLayout:
     def parse(self, text: str, line: int) -> Sample:
         """The sample of one line (its text without the line end) [SI]; an :class:`InputError` naming
         the stream, the line and the column for anything that is not a sample of this layout."""
+        return self._sample(self._values(text, line))
+
+    def parse_block(self, texts: Sequence[str], lines: Sequence[int]) -> list[SampleBlock | InputError]:
+        """Lines that came together (their texts without the line ends, none blank, and their numbers): their
+        samples as :class:`SampleBlock` runs, each line that is not a sample as its :class:`InputError` (the one
+        :meth:`parse` gives), in the stream's order. Plain lines are read at once (one split, ``float`` on each
+        cell, the range check on the array): the same numbers as :meth:`parse`."""
+        n = len(texts)
+        if not n:
+            return []
+        joined = ",".join(texts)
+        values = None
+        if not joined.translate(_PLAIN) and set(map(str.count, texts, repeat(",", n))) == {self.n_cells - 1}:
+            try:
+                values = np.array(list(map(float, joined.split(","))), float).reshape(n, self.n_cells)
+            except ValueError:                  # a cell float() refuses: the line's own error, below
+                values = None
+        bad = np.ones(n, bool)                  # the lines each read alone
+        if values is not None:
+            bad = np.asarray(((values < self._low_row) | (values > self._high_row)).any(axis=1))
+            if not bad.any():
+                return [SampleBlock(self, values, list(texts), list(lines))]
+        out: list[SampleBlock | InputError] = []
+        rows: list = []
+        first = 0
+        for k, (text, line) in enumerate(zip(texts, lines, strict=True)):
+            try:
+                row = self._values(text, line) if values is None or bad[k] else values[k]
+            except InputError as exc:
+                if rows:
+                    out.append(SampleBlock(self, np.array(rows, float), list(texts[first:k]), list(lines[first:k])))
+                out.append(exc)
+                rows, first = [], k + 1
+                continue
+            rows.append(row)
+        if rows:
+            out.append(SampleBlock(self, np.array(rows, float), list(texts[first:]), list(lines[first:])))
+        return out
+
+    def _values(self, text: str, line: int) -> list[float]:
+        """The numbers of one line in the file's units, checked (see :meth:`parse`)."""
         cells = text.split(",") if '"' not in text else self._quoted(text, line)
         if len(cells) != self.n_cells:
             raise InputError(f"expected {self.n_cells} cells (as the header), got {len(cells)}", self.path, line)
@@ -201,7 +295,7 @@ class SampleLayout:
         for v, lo, hi in zip(values, self._lows, self._highs, strict=True):
             if not lo <= v <= hi:
                 self._range_error(values, line)
-        return self._sample(values)
+        return values
 
     def _quoted(self, text: str, line: int) -> list[str]:
         """The cells of a line with quotes, as the file readers take them (``"12.5"`` is 12.5)."""
@@ -209,6 +303,28 @@ class SampleLayout:
             return next(csv.reader([text], strict=True))
         except csv.Error as exc:
             raise InputError(f"not valid CSV: {exc}", self.path, line) from None
+
+    def columns(self, values: np.ndarray) -> dict:
+        """The SI columns of samples ``values`` (n, cells) in the file's units, as :meth:`parse` makes each sample
+        (the same products by the same unit factors): ``t`` (n,), ``q`` (n, J), ``wrench`` (n, 6) or None,
+        ``pressed`` (n,) bool or None, ``temperature`` (n,) or None."""
+        n = len(values)
+        qs = self._q_slice
+        if qs is None:
+            q = np.stack([values[:, k] * f for k, f in self._joints], axis=1)
+        else:
+            q = values[:, qs[0]:qs[1]] * qs[2]
+        wrench = None
+        if self.force_kind is not None:
+            wrench = np.zeros((n, 6))
+            for i, c in enumerate(self._force):
+                if c is not None:
+                    wrench[:, i] = values[:, c[0]] * c[1]
+            for i, (k, f) in enumerate(self._torque):
+                wrench[:, 3 + i] = values[:, k] * f
+        return {"t": values[:, self._time], "q": q, "wrench": wrench,
+                "pressed": None if self._trigger is None else values[:, self._trigger] != 0.0,
+                "temperature": None if self._temperature is None else values[:, self._temperature]}
 
     def _range_error(self, values: list[float], line: int) -> None:
         for k, f, lo, hi, quantity in self._checks:

@@ -23,15 +23,20 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import InputError, decode_text, open_input
 
-__all__ = ["open_source", "LineSource", "Pacer", "TICK_S", "AHEAD_S", "MAX_LINE_BYTES", "LongLine", "line_text"]
+__all__ = ["open_source", "LineSource", "Pacer", "TICK_S", "AHEAD_S", "MAX_LINE_BYTES", "CHUNK_LINES", "LongLine",
+           "line_text", "chunk_texts"]
 
 #: the longest wait without a sign of life [s]
 TICK_S = 0.25
 #: a replayed sample is released at most this early [s]
 AHEAD_S = 0.01
 _CHUNK = 1 << 16
+#: the most lines of a file read at once (and at most about :data:`_CHUNK` bytes)
+CHUNK_LINES = 1024
 #: the longest line a stream may send [bytes] (a sample line is a few hundred): a longer one is a bad line, its
 #: bytes dropped as they come (a peer that never sends a newline cannot fill the memory)
 MAX_LINE_BYTES = 1 << 20
@@ -49,6 +54,27 @@ def _long(head: bytes, length: int) -> LongLine:
     return out
 
 
+def chunk_texts(chunk: list, name: str) -> list:
+    """The texts of the lines of a chunk (:meth:`LineSource.chunks`): ``(line number, text)`` for each, or the
+    :class:`InputError` :func:`line_text` gives for one; the chunk's bytes decoded at once when they are plain."""
+    if not any(isinstance(raw, LongLine) for _, raw in chunk):
+        data = b"\n".join(raw for _, raw in chunk)
+        if b"\0" not in data and b"\r" not in data:
+            try:
+                text = data.decode("utf-8")
+            except UnicodeDecodeError:
+                pass
+            else:
+                return list(zip((no for no, _ in chunk), text.split("\n"), strict=True))
+    out = []
+    for no, raw in chunk:
+        try:
+            out.append((no, line_text(raw, name, no)))
+        except InputError as exc:
+            out.append(exc)
+    return out
+
+
 def line_text(raw: bytes, name: str, no: int) -> str:
     """The text of a line a source yielded: an InputError naming the stream and the line for one too long or
     not UTF-8."""
@@ -62,19 +88,46 @@ def line_text(raw: bytes, name: str, no: int) -> str:
 
 class LineSource:
     """Lines of one stream (see the module doc). ``name``: the stream for messages; ``replay``: True
-    for a file (paced at its time stamps); ``datagrams``: True for UDP (headers may repeat)."""
+    for a file (paced at its time stamps); ``datagrams``: True for UDP (headers may repeat).
+
+    :meth:`lines` yields the lines one by one, :meth:`chunks` the lines that came together (a read of a pipe
+    or a socket, a datagram, a stretch of a file) as lists: both continue where the other stopped."""
     name = "<stream>"
     replay = False
     datagrams = False
     _it = None
+    _rest: list | None = None
 
-    def lines(self):
-        """The one iterator over the stream (every call continues where the last stopped)."""
+    def _chunk_iter(self):
         if self._it is None:
-            self._it = self._lines()
+            self._it = self._chunks()
         return self._it
 
-    def _lines(self):
+    def lines(self):
+        """Every line, one by one (and the idle ``None`` ticks)."""
+        it = self._chunk_iter()
+        while True:
+            if self._rest:
+                yield self._rest.pop(0)
+                continue
+            chunk = next(it, False)
+            if chunk is False:
+                return
+            if chunk is None:
+                yield None
+            else:
+                self._rest = list(chunk)
+
+    def chunks(self):
+        """Lists of ``(line number, bytes)`` that came together (never empty), and the idle ``None`` ticks."""
+        it = self._chunk_iter()
+        if self._rest:
+            rest, self._rest = self._rest, None
+            yield rest
+        for chunk in it:        # not ``yield from``: a generator dropped would close the stream's own  # noqa: UP028
+            yield chunk
+
+    def _chunks(self):
         raise NotImplementedError
 
     def close(self) -> None:
@@ -88,8 +141,8 @@ class _FileSource(LineSource):
         self.name = str(path)
         self._fh = open_input(path, "the sample stream")
 
-    def _lines(self):
-        no = 0
+    def _chunks(self):
+        no, chunk, size = 0, [], 0
         while raw := self._fh.readline(MAX_LINE_BYTES + 1):
             no += 1
             if len(raw) > MAX_LINE_BYTES and not raw.endswith(b"\n"):
@@ -97,9 +150,15 @@ class _FileSource(LineSource):
                 while raw and not raw.endswith(b"\n"):     # the rest of it, a bounded piece at a time
                     raw = self._fh.readline(MAX_LINE_BYTES)
                     length += len(raw)
-                yield no, _long(head, length)
-                continue
-            yield no, raw.rstrip(b"\r\n") if raw.endswith(b"\n") else raw
+                chunk.append((no, _long(head, length)))
+            else:
+                chunk.append((no, raw.rstrip(b"\r\n") if raw.endswith(b"\n") else raw))
+            size += len(raw)
+            if len(chunk) >= CHUNK_LINES or size >= _CHUNK:
+                yield chunk
+                chunk, size = [], 0
+        if chunk:
+            yield chunk
 
     def close(self) -> None:
         self._fh.close()
@@ -114,7 +173,7 @@ class _FdSource(LineSource):
     def _read(self) -> bytes:
         return os.read(self.fd, _CHUNK)
 
-    def _lines(self):
+    def _chunks(self):
         sel: selectors.BaseSelector = selectors.DefaultSelector()
         try:
             sel.register(self.fd, selectors.EVENT_READ)
@@ -134,13 +193,14 @@ class _FdSource(LineSource):
                 if not data:
                     break
                 *ended, last = data.split(b"\n")
+                chunk = []
                 for part in ended:
                     no += 1
                     total = length + len(part)
                     if too_long or total > MAX_LINE_BYTES:
-                        yield no, _long(bytes(rest) or part, total)
+                        chunk.append((no, _long(bytes(rest) or part, total)))
                     else:
-                        yield no, (bytes(rest) + part).rstrip(b"\r")
+                        chunk.append((no, (bytes(rest) + part).rstrip(b"\r")))
                     rest, length, too_long = bytearray(), 0, False
                 length += len(last)
                 if not too_long and length > MAX_LINE_BYTES:
@@ -149,12 +209,14 @@ class _FdSource(LineSource):
                     rest += last
                     if b"\r" in last.rstrip(b"\r"):     # old Mac line ends: said now, not after 1 MiB
                         no += 1
-                        yield no, bytes(rest)
+                        chunk.append((no, bytes(rest)))
                         rest, length = bytearray(), 0
+                if chunk:
+                    yield chunk
             if too_long:
-                yield no + 1, _long(bytes(rest), length)
+                yield [(no + 1, _long(bytes(rest), length))]
             elif rest:
-                yield no + 1, bytes(rest).rstrip(b"\r")
+                yield [(no + 1, bytes(rest).rstrip(b"\r"))]
         finally:
             sel.close()
 
@@ -198,7 +260,7 @@ class _UdpSource(LineSource):
         """The (host, port) bound (port 0 in the spec takes a free one)."""
         return self._sock.getsockname()[:2]
 
-    def _lines(self):
+    def _chunks(self):
         no = 0
         while True:
             try:
@@ -206,11 +268,14 @@ class _UdpSource(LineSource):
             except TimeoutError:
                 yield None
                 continue
+            chunk = []
             for raw in data.split(b"\n"):
                 raw = raw.rstrip(b"\r")
                 if raw:
                     no += 1
-                    yield no, raw
+                    chunk.append((no, raw))
+            if chunk:
+                yield chunk
 
     def close(self) -> None:
         self._sock.close()
@@ -247,6 +312,15 @@ class Pacer:
         self.speed = float(speed)
         self._t0 = None
         self._w0 = 0.0
+
+    def released(self, t: np.ndarray, k: int) -> int:
+        """The end of the run of samples from ``k`` (times ``t`` (n,) [s]; sample ``k`` was waited for) that
+        :meth:`wait` would release now without waiting (all of them at ``speed`` 0)."""
+        if self.speed <= 0 or self._t0 is None:
+            return len(t)
+        due = self._w0 + (t[k + 1:] - self._t0) / self.speed
+        ahead = np.flatnonzero(due - time.monotonic() > AHEAD_S)
+        return k + 1 + int(ahead[0]) if len(ahead) else len(t)
 
     def wait(self, t: float, idle: Callable[[], bool] | None = None) -> bool:
         """True once due; False when ``idle()`` asked to stop."""
