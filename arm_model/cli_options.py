@@ -14,7 +14,7 @@ from .model_file import Arm, load_model
 
 __all__ = ["add_arm_options", "add_frame_options", "add_output_option", "output_path", "arm_from_args", "arm_inputs",
            "model_from_args", "number_in", "positive", "non_negative", "at_least", "fraction", "finite", "seed",
-           "port", "duration_s", "MAX_WAIT_S"]
+           "port", "duration_s", "MAX_WAIT_S", "comma_list"]
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +51,24 @@ def number_in(low=None, high=None, *, low_open=False, high_open=False, kind=floa
         return v
     parse.__name__ = "whole number" if kind is int else "number"     # argparse names the type in messages
     return parse
+
+
+def comma_list(text: str, option: str, what: str, give: str) -> tuple[str, ...]:
+    """The items of a comma-separated list option (``--holdout a,b``, ``--candidates x,y``), each stripped of
+    its padding: an InputError naming ``option`` for a list of nothing, an empty item (``a,,b`` or a trailing
+    comma: the ``$ID`` of an unset shell variable, as an empty argument is) or an item given twice. ``what``: one
+    item's kind ("measurement"), ``give``: what the option takes, for the messages."""
+    items = tuple(t.strip(SPACE) for t in text.split(","))
+    if not any(items):
+        raise InputError(f"{option} names no {what} (got {text!r}): give {give}")
+    if not all(items):
+        k = items.index("")
+        raise InputError(f"{option} {text!r}: item {k + 1} of {len(items)} is empty (a comma too many, or an unset "
+                         f"shell variable?): give {give}")
+    twice = sorted({t for t in items if items.count(t) > 1})
+    if twice:
+        raise InputError(f"{option} names {', '.join(twice)} twice")
+    return items
 
 
 def positive(kind=float):
