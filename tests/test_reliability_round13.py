@@ -28,3 +28,51 @@ def test_an_empty_item_of_a_list_option_is_refused(tmp_path, capsys, command, op
                     "-o", out], capsys)
     assert rc == 2 and words in err, err
     assert not out.exists()
+
+
+THERMAL = ('\n[[effect]]\nkind = "thermal"\nper_joint = false\nparameter = [\n    { name = "links.thermal_alpha", '
+           'value_ppm_per_K = 1.0, u_ppm_per_K = 0.0, state = "fixed" },\n]\n')
+
+
+def _short_stream(tmp_path, n=300):
+    from test_reliability_round12 import SAMPLES
+    stream = tmp_path / "stream.csv"
+    stream.write_text("".join(SAMPLES.read_text().splitlines(keepends=True)[:n]))
+    return stream
+
+
+def test_a_stream_without_a_column_the_model_needs_is_refused_at_its_header(tmp_path, capsys):
+    """`live --arm` a model with a thermal effect, on a stream without `temperature_C`: the session folder was created,
+    the first point then stopped the command naming 'points.csv, line 1' (no such input) and session.json stayed
+    'running', as if the process had been killed. Now the header is refused (its file, line 1, the column), exit 2, no
+    folder: the rule of every points file (`Arm.check_columns`, the one message of `Arm.check_points`)."""
+    from conftest import NOMINAL
+    model = tmp_path / "thermal.toml"
+    model.write_text(NOMINAL.read_text() + THERMAL)
+    stream, sess = _short_stream(tmp_path), tmp_path / "s"
+    rc, err = _run(["live", stream, "--arm", model, "--speed", "0", "--feature", "seat:a", "-o", sess], capsys)
+    assert rc == 2 and ("stream.csv, line 1, column 'temperature_C': the model's effect 'thermal' needs the column "
+                        "'temperature_C', which the stream lacks") in err, err
+    assert not sess.exists()
+
+
+def test_an_error_inside_a_live_session_closes_it_as_stopped(tmp_path, capsys, monkeypatch):
+    """An error raised while a sample was taken (any but the stream's own failure) left session.json at 'running',
+    which says the process was killed. Now the session is closed as 'stopped' with the error, and the error keeps its
+    exit status (here a bug: 3)."""
+    import json
+
+    from arm_model.live import Session
+    real = Session.push_sample
+
+    def failing(self, sample, *a, **k):
+        if self.counts["samples"] >= 100:
+            raise RuntimeError("a bug in a point's computation")
+        return real(self, sample, *a, **k)
+    monkeypatch.setattr(Session, "push_sample", failing)
+    sess = tmp_path / "s"
+    rc, err = _run(["live", _short_stream(tmp_path), "--arm", "aacmm7", "--speed", "0", "-o", sess], capsys)
+    assert rc == 3 and "a bug in a point's computation" in err, err
+    status = json.loads((sess / "session.json").read_text())
+    assert status["status"] == "stopped" and "a bug in a point's computation" in status["message"]
+    assert status["counts"]["samples"] == 100

@@ -311,6 +311,12 @@ def _run(args: argparse.Namespace, source: LineSource, session: Session, layout:
         status, code = "stopped", 2
         message = (f"{exc.filename or source.name}: the stream failed: {exc.strerror or exc}; the session is partial: "
                    "the samples the stream had still to send never came")
+    except Exception as exc:
+        # any other error inside the session (a bug included): the session is closed as stopped, saying why (never
+        # left 'running' as if killed), and the error goes on to its exit status (2, 3 or 4)
+        for out in session.close("stopped", f"stopped by an error: {exc}"):
+            _show(out, said)
+        raise
     if stop.reason and code == 0:
         status = stop.reason
         message = "interrupted (Ctrl-C)" if status == "interrupted" else "terminated (SIGTERM)"
