@@ -1,20 +1,22 @@
 """Reliability, round 13: a hostile-input audit of what changed most recently (the priors and the evidence: model
 files carrying prior-dominated parameters and their covariance, read back by `tip`, `view` and `live`; `--effect` for
 every kind on data without the columns it needs; close-loop's options; `live` from files, standard input, TCP and UDP;
-plans; URDF and DH descriptions; outputs through links, into inputs and their folders; the ends of every numeric option's
-range). Each test is named after its finding and is quick (no fit, a few points)."""
+plans; URDF and DH descriptions; outputs through links, into inputs and their folders; the ends of every numeric
+option's range). Each test is named after its finding and is quick (no fit, a few points)."""
 from __future__ import annotations
 
 import pytest
-
 from test_reliability_round12 import RING, _run
+
+from conftest import exit_status
 
 
 @pytest.mark.parametrize("command, option, value, words", [
     ("calibrate", "--holdout", "ring-01,,ring-02", "--holdout 'ring-01,,ring-02': item 2 of 3 is empty"),
     ("calibrate", "--holdout", "ring-01,", "item 2 of 2 is empty"),
     ("close-loop", "--holdout", ",ring-01", "item 1 of 2 is empty"),
-    ("close-loop", "--candidates", "thermal,,eccentricity", "--candidates 'thermal,,eccentricity': item 2 of 3 is empty"),
+    ("close-loop", "--candidates", "thermal,,eccentricity",
+     "--candidates 'thermal,,eccentricity': item 2 of 3 is empty"),
     ("close-loop", "--candidates", "thermal,", "item 2 of 2 is empty"),
     ("close-loop", "--candidates", " , ", "--candidates names no family"),
     ("calibrate", "--holdout", "ring-01,ring-02,ring-01", "--holdout names ring-01 twice"),
@@ -76,3 +78,43 @@ def test_an_error_inside_a_live_session_closes_it_as_stopped(tmp_path, capsys, m
     status = json.loads((sess / "session.json").read_text())
     assert status["status"] == "stopped" and "a bug in a point's computation" in status["message"]
     assert status["counts"]["samples"] == 100
+
+
+def test_a_udp_session_started_late_skips_any_line_before_the_header(tmp_path, capsys):
+    """Over UDP a session may start while the adapter is mid-stream: the lines before the next header are to be
+    skipped. A datagram line cut in two whose second half starts with a comma (or bytes that are not text) was taken
+    as the header: exit 2, 'empty column name in the header', the session lost. Now, over UDP, the header is the first
+    line naming the time column; every line before it is counted and skipped (a file, standard input and TCP keep
+    their first line as the header, refused when wrong)."""
+    import json
+    import socket
+    import threading
+    import time
+    stream = _short_stream(tmp_path)
+    lines = stream.read_bytes().splitlines(keepends=True)
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+
+    def send():
+        end = time.monotonic() + 30
+        while time.monotonic() < end:       # until the session listens (its port taken)
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as p:
+                try:
+                    p.bind(("127.0.0.1", port))
+                except OSError:
+                    break
+            time.sleep(0.02)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            for d in (b",-153.2937,92.1295,-89.4768\n", b"\xff\xfe garbage\n", b"0.5,1,2,3\n", *lines):
+                s.sendto(d, ("127.0.0.1", port))
+                time.sleep(0.0005)
+    threading.Thread(target=send, daemon=True).start()
+    sess = tmp_path / "s"
+    rc = exit_status(["live", f"udp://127.0.0.1:{port}", "--arm", "aacmm7", "--stop-after-idle-s", "2", "-o",
+                      str(sess)])
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    assert json.loads((sess / "session.json").read_text())["counts"]["samples"] == len(lines) - 1
+    assert "3 datagram line(s) before the header" in out.out + out.err

@@ -141,10 +141,13 @@ class _Stop:
 
 
 def _header(source: LineSource, stop: _Stop, idle_s: float | None = None) -> tuple:
-    """(line number, cells) of the stream's header: its first line that is not blank (UDP: the first that
-    is not a number, lines before it skipped and counted). ``idle_s`` (``--stop-after-idle-s``): no line for that
-    long is an InputError (a stream that never starts: nothing is written)."""
+    """(line number, cells) of the stream's header: its first line that is not blank (UDP: the first that names the
+    time column, ``time_s`` or ``t_s``; every datagram line before it, a sample, a line cut in two, bytes that are not
+    text, skipped and counted, so that a session started late joins at the next header). ``idle_s``
+    (``--stop-after-idle-s``): no line for that long is an InputError (a stream that never starts: nothing is
+    written)."""
     from arm_model.csv_io import blank_record
+    from arm_model.live.samples import TIME_COLUMNS
     from arm_model.live.sources import line_text
     skipped, since = 0, time.monotonic()
     for item in source.lines():
@@ -157,26 +160,23 @@ def _header(source: LineSource, stop: _Stop, idle_s: float | None = None) -> tup
             continue
         since = time.monotonic()
         no, raw = item
-        text = line_text(raw, source.name, no)
-        if blank_record(text):
-            continue
         try:
+            text = line_text(raw, source.name, no)
+            if blank_record(text):
+                continue
             cells = next(csv.reader([text.lstrip("\ufeff")], strict=True))
-        except csv.Error as exc:
+        except (InputError, csv.Error) as exc:
+            if source.datagrams:
+                skipped += 1
+                continue
+            if isinstance(exc, InputError):
+                raise
             raise InputError(f"the header is not valid CSV: {exc}", source.name, no) from None
-        if source.datagrams and cells and _looks_numeric(cells[0]):
+        if source.datagrams and not {c.strip() for c in cells} & set(TIME_COLUMNS):
             skipped += 1
             continue
         return no, cells, skipped
     raise InputError("the stream ended before its header line (time_s, q1_deg ...)", source.name)
-
-
-def _looks_numeric(cell: str) -> bool:
-    try:
-        float(cell)
-        return True
-    except ValueError:
-        return False
 
 
 def run_live(args: argparse.Namespace) -> int:
