@@ -118,3 +118,21 @@ def test_a_udp_session_started_late_skips_any_line_before_the_header(tmp_path, c
     assert rc == 0, out.err
     assert json.loads((sess / "session.json").read_text())["counts"]["samples"] == len(lines) - 1
     assert "3 datagram line(s) before the header" in out.out + out.err
+
+
+@pytest.mark.parametrize("kind, key", [("plane", "diameter_mm = 5.0"), ("seat", "diameter_mm = 25.0"),
+                                       ("point", "form_error_mm = 0.001"), ("seat", "u_diameter_mm = 0.001")])
+def test_a_certificate_of_a_kind_without_a_diameter_is_refused(kind, key):
+    """A `diameter_mm` (or `u_diameter_mm`, `form_error_mm`) on a plane, a seat or a point was read and ignored
+    (`live --feature plane:p:5` ran as if the 5 said something): the three keys certify a ring, a cylinder or a sphere
+    (docs/formats.md), so on another kind they are a key of another kind, refused at their line (one reader:
+    artefacts files, live plans and `--feature`)."""
+    from arm_model.errors import InputError
+    from arm_model.io import parse_artefacts
+    from arm_model.live.plan import single_feature_plan
+    with pytest.raises(InputError, match=rf"line 4, key 'feature\[1\]\.{key.split()[0]}': '{key.split()[0]}' is not "
+                                         rf"a key of a {kind}"):
+        parse_artefacts(f'[[feature]]\nid = "f"\nkind = "{kind}"\n{key}\n', "a.toml")
+    parse_artefacts('[[feature]]\nid = "f"\nkind = "sphere"\ndiameter_mm = 25.0\nform_error_mm = 0.001\n', "a.toml")
+    with pytest.raises(InputError, match="'diameter_mm' is not a key of a plane"):
+        single_feature_plan("plane:p:5")
