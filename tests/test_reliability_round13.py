@@ -136,3 +136,15 @@ def test_a_certificate_of_a_kind_without_a_diameter_is_refused(kind, key):
     parse_artefacts('[[feature]]\nid = "f"\nkind = "sphere"\ndiameter_mm = 25.0\nform_error_mm = 0.001\n', "a.toml")
     with pytest.raises(InputError, match="'diameter_mm' is not a key of a plane"):
         single_feature_plan("plane:p:5")
+
+
+@pytest.mark.parametrize("argv", [["tip", RING / "points.csv", "--arm", "aacmm7", "-o", "{out}/"],
+                                  ["urdf", "aacmm7", "-o", "{out}/"],
+                                  ["view", RING / "points.csv", "--arm", "aacmm7", "--html", "{out}/"]])
+def test_a_file_output_named_with_a_trailing_slash_is_refused(tmp_path, capsys, argv):
+    """`tip -o t.csv/` wrote the file t.csv (Path() drops the slash; the shell's `> t.csv/` refuses it: a trailing
+    slash names a folder). Now every one-file output refuses it at the option (`cli_options.file_output_path`)."""
+    out = tmp_path / "t.csv"
+    rc, err = _run([str(a).replace("{out}", str(out)) for a in argv], capsys)
+    assert rc == 2 and "ends with '/', which names a folder: this output is one file" in err, err
+    assert not out.exists()
