@@ -155,8 +155,9 @@ def _header(source: LineSource, stop: _Stop, idle_s: float | None = None) -> tup
             return None, None, skipped
         if item is None:
             if idle_s and time.monotonic() - since > idle_s:
+                before = f", {skipped} line(s) before it skipped" if skipped else ""
                 raise InputError(f"no line came for {idle_s:g} s (--stop-after-idle-s): the stream sent no header "
-                                 "(time_s, q1_deg ...); nothing written", source.name)
+                                 f"(time_s, q1_deg ...{before}); nothing written", source.name)
             continue
         since = time.monotonic()
         no, raw = item
