@@ -6,15 +6,16 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import os
 from pathlib import Path
 
 from .csv_io import SPACE, parse_number
 from .errors import InputError
 from .model_file import Arm, load_model
 
-__all__ = ["add_arm_options", "add_frame_options", "add_output_option", "output_path", "arm_from_args", "arm_inputs",
-           "model_from_args", "number_in", "positive", "non_negative", "at_least", "fraction", "finite", "seed",
-           "port", "duration_s", "MAX_WAIT_S"]
+__all__ = ["add_arm_options", "add_frame_options", "add_output_option", "output_path", "file_output_path",
+           "arm_from_args", "arm_inputs", "model_from_args", "number_in", "positive", "non_negative", "at_least",
+           "fraction", "finite", "seed", "port", "duration_s", "MAX_WAIT_S", "comma_list"]
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +52,24 @@ def number_in(low=None, high=None, *, low_open=False, high_open=False, kind=floa
         return v
     parse.__name__ = "whole number" if kind is int else "number"     # argparse names the type in messages
     return parse
+
+
+def comma_list(text: str, option: str, what: str, give: str) -> tuple[str, ...]:
+    """The items of a comma-separated list option (``--holdout a,b``, ``--candidates x,y``), each stripped of
+    its padding: an InputError naming ``option`` for a list of nothing, an empty item (``a,,b`` or a trailing
+    comma: the ``$ID`` of an unset shell variable, as an empty argument is) or an item given twice. ``what``: one
+    item's kind ("measurement"), ``give``: what the option takes, for the messages."""
+    items = tuple(t.strip(SPACE) for t in text.split(","))
+    if not any(items):
+        raise InputError(f"{option} names no {what} (got {text!r}): give {give}")
+    if not all(items):
+        k = items.index("")
+        raise InputError(f"{option} {text!r}: item {k + 1} of {len(items)} is empty (a comma too many, or an unset "
+                         f"shell variable?): give {give}")
+    twice = sorted({t for t in items if items.count(t) > 1})
+    if twice:
+        raise InputError(f"{option} names {', '.join(twice)} twice")
+    return items
 
 
 def positive(kind=float):
@@ -97,6 +116,16 @@ def output_path(text: str) -> Path:
     return Path(text)
 
 
+def file_output_path(text: str) -> Path:
+    """argparse type of an output that is one file (``tip -o``, ``urdf -o``, ``view --html``): :func:`output_path`'s,
+    and no trailing slash (``t.csv/`` names a folder; Path() dropped the slash and the file t.csv was written)."""
+    path = output_path(text)
+    if text.endswith(("/", os.sep)):
+        raise argparse.ArgumentTypeError(f"{text!r} ends with '/', which names a folder: this output is one file "
+                                         f"(give {text.rstrip('/' + os.sep)!r})")
+    return path
+
+
 def add_output_option(p, kind: str = "folder", what: str = "", *, as_it_runs: bool = False) -> None:
     """``-o/--output``, the one output of every command, defined here for all: ``kind`` "folder" (metavar DIR) or
     "file" (FILE); ``what`` names it in the help ("CSV", "session folder"). Its promises are kept by
@@ -111,7 +140,8 @@ def add_output_option(p, kind: str = "folder", what: str = "", *, as_it_runs: bo
            "created, or an earlier output of this command replaced; written whole or not at all" if folder else
            "written whole or not at all")
     never = "never an input or a folder holding one" if folder else "never one of the inputs"
-    p.add_argument("-o", "--output", type=output_path, required=True, metavar="DIR" if folder else "FILE",
+    p.add_argument("-o", "--output", type=output_path if folder else file_output_path, required=True,
+                   metavar="DIR" if folder else "FILE",
                    help=f"{name} ({how}; {never}; nothing is written outside it)")
 
 

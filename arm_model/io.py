@@ -532,8 +532,9 @@ class Artefacts:
         return [f for f in self.features.values() if f.kind in kinds]
 
 
-#: the numeric keys of a feature (lengths; each with its unit suffix)
+#: the numeric keys of a feature (lengths; each with its unit suffix), which only the kinds of a certified diameter take
 _FEATURE_LENGTHS = ("diameter", "u_diameter", "form_error")
+_DIAMETER_KINDS = ("ring", "cylinder", "sphere")
 
 
 def read_artefacts(path: str | Path) -> Artefacts:
@@ -590,7 +591,11 @@ def _artefact_feature(err, t, i: int, features: dict, extra_feature_keys: tuple)
             raise err(f"'{key}': {wrong[1]}", "feature", i, key)
         if parts[0] != "diameter" and values[parts[0]] < 0:
             raise err(f"'{key}' must not be negative, got {v!r}", "feature", i, key)
-    if kind in ("ring", "cylinder", "sphere") and "diameter" not in values:
+    if values and kind not in _DIAMETER_KINDS:      # a certificate the kind has not: a key of another kind
+        key = next(k for k in t if (parts := split_unit(k)) is not None and parts[0] in _FEATURE_LENGTHS)
+        raise err(f"'{key}' is not a key of a {kind}: diameter_mm, u_diameter_mm and form_error_mm certify a "
+                  f"{', '.join(_DIAMETER_KINDS[:-1])} or {_DIAMETER_KINDS[-1]}", "feature", i, key)
+    if kind in _DIAMETER_KINDS and "diameter" not in values:
         raise err(f"a {kind} needs 'diameter_mm'", "feature", i)
     if "diameter" in values and values["diameter"] <= 0:
         raise err("diameter must be > 0", "feature", i, "diameter_mm")

@@ -187,26 +187,31 @@ class Arm:
         """The parameter vector of :attr:`model`: zeros for the description, the effects' values."""
         return self.model.spec.vector(self.values)
 
+    def needed_columns(self) -> list[tuple[Effect, str, str]]:
+        """(effect, input, column) of every per-point input an effect reads from a column of the points (or of a live
+        stream): ``temperature`` from ``temperature_C``, ``time`` from ``time_s`` (:data:`EFFECT_COLUMNS`)."""
+        return [(e, need, column) for e in self.effects for need in e.needs()
+                if (column := EFFECT_COLUMNS.get(need)) is not None]
+
     def missing_inputs(self, points) -> list[tuple[Effect, str]]:
         """(effect, column) of every points-file column an effect needs and ``points`` lack."""
-        out = []
-        for e in self.effects:
-            for need in e.needs():
-                column = EFFECT_COLUMNS.get(need)
-                if column is not None:
-                    t = getattr(points, need)            # the PointSet's field of the input: temperature, time
-                    if t is None or not np.all(np.isfinite(t)):
-                        out.append((e, column))
-        return out
+        return [(e, column) for e, need, column in self.needed_columns()
+                if (t := getattr(points, need)) is None or not np.all(np.isfinite(t))]
+
+    def check_columns(self, columns, what: str, path, line: int) -> None:
+        """An :class:`InputError` at ``path``, ``line`` naming the effect and the column when ``columns`` (the names
+        a file or a stream gives: ``what``, "points" or "stream") lack one an effect needs: the one rule of
+        :meth:`check_points`, for a header read before any row (``aacmm live``'s stream, before its folder exists)."""
+        for e, _, column in self.needed_columns():
+            if column not in columns:
+                raise _missing_column(e, column, what, path, line)
 
     def check_points(self, points) -> None:
         """An :class:`InputError` naming the effect and the column when ``points`` lack a column an
         effect needs."""
         missing = self.missing_inputs(points)
         if missing:
-            e, column = missing[0]
-            raise InputError(f"the model's effect '{e.describe()}' needs the column '{column}', which the "
-                             f"points lack (or hold a non-finite value in)", points.path, 1, column)
+            raise _missing_column(*missing[0], "points", points.path, 1, " (or hold a non-finite value in)")
 
     def aux(self, points, wrench=None, contact: bool = True, motion: np.ndarray | None = None) -> AuxData | None:
         """Per-point inputs of the effects for a :class:`~arm_model.io.PointSet` (temperature from its
@@ -793,3 +798,9 @@ def read_model_file(path: Path) -> Arm:
     parameters_of(arm)
     training_poses_of(arm)
     return arm
+
+
+def _missing_column(effect: Effect, column: str, what: str, path, line: int, more: str = "") -> InputError:
+    """The one message of a column an effect needs and a file or stream lacks."""
+    return InputError(f"the model's effect '{effect.describe()}' needs the column '{column}', which the {what} "
+                      f"lack{'s' if what == 'stream' else ''}{more}", path, line, column)

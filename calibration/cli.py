@@ -16,6 +16,7 @@ from arm_model.cli_options import (
     add_output_option,
     arm_inputs,
     at_least,
+    comma_list,
     fraction,
     model_from_args,
     non_negative,
@@ -60,14 +61,7 @@ def parse_holdout(text: str | None):
         return None
     v = parse_number(text)
     if v is None:                       # the files' number rule: "0.2", not "0_2" nor another script's digits
-        ids = [t.strip() for t in text.split(",") if t.strip()]
-        if not ids:
-            raise InputError(f"--holdout names no measurement (got {text!r}): give measurement ids or a fraction"
-                             ) from None
-        twice = sorted({t for t in ids if ids.count(t) > 1})
-        if twice:
-            raise InputError(f"--holdout names the measurement(s) {', '.join(twice)} twice")
-        return ids
+        return list(comma_list(text, "--holdout", "measurement", "measurement ids, comma-separated, or a fraction"))
     if not 0.0 < v < 1.0:
         raise InputError(f"--holdout fraction must be in (0, 1), got {text}")
     return v

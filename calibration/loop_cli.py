@@ -7,7 +7,7 @@ import logging
 from arm_model import InputError
 from arm_model.checks import log_warnings, point_warnings
 from arm_model.cli import command_help
-from arm_model.cli_options import arm_inputs, at_least, model_from_args, number_in, seed
+from arm_model.cli_options import arm_inputs, at_least, comma_list, model_from_args, number_in, seed
 from arm_model.io import read_artefacts, read_points
 from arm_model.model import ArmModel
 from arm_model.model_file import Arm
@@ -118,13 +118,8 @@ def run(args: argparse.Namespace) -> int:
     inputs = [p for p in (args.points, args.artefacts, *arm_inputs(args), args.reference_points) if p is not None]
     families = None
     if args.candidates is not None:
-        families = tuple(k.strip() for k in args.candidates.split(",") if k.strip())
-        if not families:
-            raise InputError(f"--candidates names no family (got {args.candidates!r}): give families of "
-                             f"{', '.join(FAMILIES)}, comma-separated")
-        twice = sorted({k for k in families if families.count(k) > 1})
-        if twice:
-            raise InputError(f"--candidates names {', '.join(twice)} twice")
+        families = comma_list(args.candidates, "--candidates", "family",
+                              f"families of {', '.join(FAMILIES)}, comma-separated")
         bad = [k for k in families if k not in FAMILIES]
         if bad:
             raise InputError(f"unknown candidate famil{'y' if len(bad) == 1 else 'ies'} {', '.join(bad)} "

@@ -207,7 +207,7 @@ def test_simulate_a_frame_key_on_a_description_arm_is_refused(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("command, option, words", [
-    ("calibrate", ["--holdout", "ring-01,ring-02,ring-01"], "--holdout names the measurement(s) ring-01 twice"),
+    ("calibrate", ["--holdout", "ring-01,ring-02,ring-01"], "--holdout names ring-01 twice"),
     ("close-loop", ["--candidates", ""], "an empty argument"),      # every empty argument: round 9
     ("close-loop", ["--candidates", " , "], "--candidates names no family"),
     ("close-loop", ["--candidates", "thermal,thermal"], "--candidates names thermal twice"),

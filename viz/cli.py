@@ -19,9 +19,9 @@ from arm_model.cli_options import (
     add_arm_options,
     arm_inputs,
     duration_s,
+    file_output_path,
     model_from_args,
     number_in,
-    output_path,
     port,
     positive,
 )
@@ -88,8 +88,8 @@ def register(sub) -> None:
                    help="drawn size of an ellipsoid per true size; default: from the data, so that the median "
                         f"largest semi-axis is drawn about {ELLIPSOID_TARGET_M * 1e3:g} mm (a 1-2-5 number, printed)")
     add_input_options(p)
-    p.add_argument("--html", type=output_path, metavar="OUT.html", help="write the scene as a self-contained page")
-    p.add_argument("--screenshot", type=output_path, metavar="OUT.png",
+    p.add_argument("--html", type=file_output_path, metavar="OUT.html", help="write the scene as a self-contained page")
+    p.add_argument("--screenshot", type=file_output_path, metavar="OUT.png",
                    help="render the page in headless Chromium and write a PNG (800 x 600)")
     p.add_argument("--browser", metavar="PATH", help="Chromium executable for --screenshot (default: chromium "
                    "on PATH)")

@@ -142,10 +142,13 @@ class _Stop:
 
 
 def _header(source: LineSource, stop: _Stop, idle_s: float | None = None) -> tuple:
-    """(line number, cells) of the stream's header: its first line that is not blank (UDP: the first that
-    is not a number, lines before it skipped and counted). ``idle_s`` (``--stop-after-idle-s``): no line for that
-    long is an InputError (a stream that never starts: nothing is written)."""
+    """(line number, cells) of the stream's header: its first line that is not blank (UDP: the first that names the
+    time column, ``time_s`` or ``t_s``; every datagram line before it, a sample, a line cut in two, bytes that are not
+    text, skipped and counted, so that a session started late joins at the next header). ``idle_s``
+    (``--stop-after-idle-s``): no line for that long is an InputError (a stream that never starts: nothing is
+    written)."""
     from arm_model.csv_io import blank_record
+    from arm_model.live.samples import TIME_COLUMNS
     from arm_model.live.sources import line_text
     skipped, since = 0, time.monotonic()
     for item in source.lines():
@@ -153,31 +156,29 @@ def _header(source: LineSource, stop: _Stop, idle_s: float | None = None) -> tup
             return None, None, skipped
         if item is None:
             if idle_s and time.monotonic() - since > idle_s:
+                before = f", {skipped} line(s) before it skipped" if skipped else ""
                 raise InputError(f"no line came for {idle_s:g} s (--stop-after-idle-s): the stream sent no header "
-                                 "(time_s, q1_deg ...); nothing written", source.name)
+                                 f"(time_s, q1_deg ...{before}); nothing written", source.name)
             continue
         since = time.monotonic()
         no, raw = item
-        text = line_text(raw, source.name, no)
-        if blank_record(text):
-            continue
         try:
+            text = line_text(raw, source.name, no)
+            if blank_record(text):
+                continue
             cells = next(csv.reader([text.lstrip("\ufeff")], strict=True))
-        except csv.Error as exc:
+        except (InputError, csv.Error) as exc:
+            if source.datagrams:
+                skipped += 1
+                continue
+            if isinstance(exc, InputError):
+                raise
             raise InputError(f"the header is not valid CSV: {exc}", source.name, no) from None
-        if source.datagrams and cells and _looks_numeric(cells[0]):
+        if source.datagrams and not {c.strip() for c in cells} & set(TIME_COLUMNS):
             skipped += 1
             continue
         return no, cells, skipped
     raise InputError("the stream ended before its header line (time_s, q1_deg ...)", source.name)
-
-
-def _looks_numeric(cell: str) -> bool:
-    try:
-        float(cell)
-        return True
-    except ValueError:
-        return False
 
 
 def run_live(args: argparse.Namespace) -> int:
@@ -308,6 +309,12 @@ def _run(args: argparse.Namespace, source: LineSource, session: Session, layout:
         status, code = "stopped", 2
         message = (f"{exc.filename or source.name}: the stream failed: {exc.strerror or exc}; the session is partial: "
                    "the samples the stream had still to send never came")
+    except Exception as exc:
+        # any other error inside the session (a bug included): the session is closed as stopped, saying why (never
+        # left 'running' as if killed), and the error goes on to its exit status (2, 3 or 4)
+        for out in session.close("stopped", f"stopped by an error: {exc}"):
+            _show(out, said)
+        raise
     if stop.reason and code == 0:
         status = stop.reason
         message = "interrupted (Ctrl-C)" if status == "interrupted" else "terminated (SIGTERM)"

@@ -151,6 +151,9 @@ class Session:
         self.contact_options = contact
         self._detector = ContactDetector(contact)
         self._force_kind = None if layout is None else layout.force_kind
+        if layout is not None:      # a column an effect needs, missing from the header: refused before any file exists
+            arm.check_columns({"time_s", *(("temperature_C",) if layout.has_temperature else ())}, "stream",
+                              layout.path, layout.header_line)
         self.inputs = inputs
         # the arm's own inputs (its model discrepancy read once, here), with and without a force sensor
         self._default_inputs = None if inputs is not None else {f: arm.input_uncertainty(f) for f in (True, False)}
