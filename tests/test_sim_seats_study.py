@@ -1,6 +1,7 @@
 """scripts/sim_seats_study.py (docs/studies/close-loop.md, "Simulated Panda robots"): simulated robots in the real seat
 study's shape, trained on one plate placement with the default options, predicting the other two; and the
-loop's rule for candidates the held-out data cannot tell apart (:func:`calibration.loop.decide.tied_rivals`)."""
+loop's rule for candidates the held-out data cannot tell apart (:func:`calibration.loop.decide.resolve_tie`, its
+unit tests in tests/test_loop_pairs.py)."""
 from __future__ import annotations
 
 import re
@@ -9,41 +10,10 @@ import sys
 import numpy as np
 import pytest
 
-from arm_model.effects import EncoderEccentricity, JointGain
-from calibration.candidates import Candidate
-from calibration.loop.crossval import CVResult, FoldFit
-from calibration.loop.decide import tied_rivals
 from conftest import ROOT
 
 sys.path.insert(0, str(ROOT / "scripts"))
 import sim_seats_study as study  # noqa: E402
-
-
-def _cv(name: str, errors) -> CVResult:
-    """A passing held-out test whose units' mean squared errors are ``errors``."""
-    sse = {i: (float(e), 1) for i, e in enumerate(errors)}
-    return CVResult(name, 1.0, 0.8, 0.2, 1e-6, 0.005, len(sse), len(sse), True, "", folds=FoldFit([], sse))
-
-
-def _ecc(j: int) -> Candidate:
-    return Candidate(f"eccentricity j{j + 1}", EncoderEccentricity(joints=(j,), harmonics=(1, 2)), "eccentricity",
-                     f"j{j + 1}")
-
-
-def test_tied_rivals_by_hand():
-    """A rival of the same family on another joint is tied when the winner is not significantly better per
-    unit (one-sided paired Wilcoxon at the level); better on all 40 units (p = 2^-40) it is not; another
-    family, or the same joint, is never a rival."""
-    rng = np.random.default_rng(0)
-    base = rng.uniform(1.0, 2.0, 40)
-    win, cv = _ecc(0), _cv("w", base)
-    tied = (_ecc(2), _cv("t", base + rng.normal(0, 0.05, 40)))            # differences of both signs
-    beaten = (_ecc(3), _cv("b", base + 0.1))                               # worse on every unit
-    gain = (Candidate("gain j3", JointGain(joints=(2,)), "joint_gain", "j3"), _cv("g", base))
-    got = tied_rivals(win, cv, [(win, cv), tied, beaten, gain], 0.005)
-    assert [c.name for c, _ in got] == ["eccentricity j3"]
-    assert got[0][1] > 0.005
-    assert tied_rivals(win, cv, [(win, cv), beaten], 0.005) == []
 
 
 @pytest.mark.slow

@@ -166,11 +166,15 @@ def resolve_tie(state: LoopState, scr: Screening, cand: Candidate, cv: CVResult
     score test on the whole design set. The tie only says which of the tied candidates carries a signature the
     held-out folds support (``cand`` passed them); the one chosen lowers the held-out RMS by at least
     ``min_improvement`` itself, and the outer test set still vetoes it (:func:`calibration.loop.stages.decide`).
+    A tie is declared when ``cand`` is not better than a rival at the screening's level (``screen_alpha``, one
+    comparison each, no Bonferroni): at the decisions' own level (``alpha`` over the candidates tested) a winner 38 %
+    lower than the current model was "tied" with a rival 27 % lower (paired p = 0.011, 15 units), and the rule
+    took the rival (scripts/redteam_study.py, ``probe-aniso``).
     Returns the candidate, its held-out test (passed, its reason saying it was chosen by the rule) and the tie's
     record (None: no tie)."""
     s = state.settings
     vetoed = {v["name"] for v in state.vetoed}
-    rivals = tie_rivals(scr, cand, cv, scr.threshold, s.min_improvement, state.desc, vetoed)
+    rivals = tie_rivals(scr, cand, cv, s.screen_alpha, s.min_improvement, state.desc, vetoed)
     if not rivals:
         return cand, cv, None
     tied = [(cand, cv, None)] + rivals
@@ -182,7 +186,7 @@ def resolve_tie(state: LoopState, scr: Screening, cand: Candidate, cv: CVResult
                 "delta_chi2": float(t.delta_chi2), "relative_improvement": float(v.improvement),
                 "wilcoxon_p_value": float(v.p_value), "paired_p_value": p}
     record = {"candidates": [row(*x) for x in tied], "heldout_best": cand.name, "chosen": chosen.name,
-              "rule": TIE_RULE, "level": float(scr.threshold)}
+              "rule": TIE_RULE, "level": float(s.screen_alpha)}
     state.say(f"  tie: {cand.name} (held-out {100 * cv.improvement:.1f} % lower, score p = "
               f"{scr.test_of(cand).p_value:.2g}) is not told from "
               + ", ".join(f"{c.name} ({100 * v.improvement:.1f} %, score p = {scr.test_of(c).p_value:.2g}, paired "
