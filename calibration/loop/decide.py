@@ -6,7 +6,7 @@ among candidates the held-out units cannot tell apart (:func:`resolve_tie`), and
 tell from the one added."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 
 import numpy as np
@@ -25,7 +25,7 @@ from .settings import PARSIMONY, PHYSICS, SAME_SIGNATURE
 from .state import LoopState, Screening
 
 __all__ = ["Decision", "heldout_test", "fit_on_design", "choose", "whole_family", "TIE_RULE", "paired_worse",
-           "tie_rivals", "tie_order", "resolve_tie", "physics_inclusion",
+           "tie_rivals", "tie_order", "joinable", "joined", "resolve_tie", "PER_JOINT", "physics_inclusion",
            "resolved", "candidate_priors", "signature_overlap", "plot_family"]
 
 
@@ -115,8 +115,12 @@ def choose(state: LoopState, scr: Screening, passing: list) -> Decision:
 
 #: how a tie is resolved (console, report and summary.json say it): the simpler first, then the evidence of every
 #: design unit together, never the held-out split's noise
-TIE_RULE = ("the fewest parameters (identifiable directions at the screening), then the strongest score test on the "
-            "whole design set (the smallest p), then the name")
+TIE_RULE = ("the fewest parameters (identifiable directions at the screening); of one effect on several joints, the "
+            "effect on every tied joint at once if that lowers the held-out RMS by --min-improvement; else the "
+            "strongest score test on the whole design set (the smallest p), then the name")
+
+#: effect families with one library candidate a joint, whose tied candidates the tie rule joins into one
+PER_JOINT = ("eccentricity", "joint_gain")
 
 
 def paired_worse(cv_a: CVResult, cv_b: CVResult) -> float:
@@ -157,6 +161,54 @@ def tie_order(scr: Screening, cand: Candidate) -> tuple:
     return (t.rank, t.p_value if np.isfinite(t.p_value) else 2.0, cand.name)
 
 
+def joinable(tied: list[Candidate], scr: Screening) -> list[Candidate]:
+    """Of the tied candidates, those with the fewest parameters when they are one library effect of
+    :data:`PER_JOINT` on two or more joints (one joint each): the ones the tie rule joins; else []."""
+    fewest = min(scr.test_of(c).rank for c in tied)
+    best = [c for c in tied if scr.test_of(c).rank == fewest]
+    if len(best) < 2 or len({c.family for c in best}) > 1 or best[0].family not in PER_JOINT or any(
+            c.origin != "library" or c.joint is None or c.parts or len(c.effect.joints or ()) != 1 for c in best):
+        return []
+    return best
+
+
+def joined(cands: list[Candidate], scr: Screening, desc) -> tuple[Candidate, GroupTest]:
+    """One candidate of the effect of ``cands`` (one library effect of a :data:`PER_JOINT` family, one joint each) on
+    all their joints (``"eccentricity j1+j3"``) and its score test assembled from theirs (the sum of their
+    statistics' sizes, the smallest p, the one-step estimates of each joint's parameters)."""
+    named = {j: str(c.joint) for c in cands for j in c.effect.joints}
+    joints = tuple(sorted(named))
+    first = cands[0]
+    prefix = first.name[:-len(str(first.joint))].rstrip()            # "eccentricity", "gain"
+    merged = Candidate(f"{prefix} {'+'.join(named[j] for j in joints)}", replace(first.effect, joints=joints),
+                       first.family)
+    tests = [scr.test_of(c) for c in cands]
+    est = {n: (b, u) for t in tests for n, b, u in zip(t.names, t.estimate, t.u, strict=True)}
+    pnames = merged.param_names(desc)
+    nan = (float("nan"), float("nan"))
+    test = replace(tests[0], name=merged.name, k=sum(t.k for t in tests), rank=sum(t.rank for t in tests),
+                   absorbed=tuple(a for t in tests for a in t.absorbed), names=tuple(pnames),
+                   estimate=np.array([est.get(n, nan)[0] for n in pnames]),
+                   u=np.array([est.get(n, nan)[1] for n in pnames]), p_value=min(t.p_value for t in tests))
+    return merged, test
+
+
+def _join_tie(state: LoopState, scr: Screening, cands: list[Candidate]) -> tuple[Candidate, CVResult] | None:
+    """The effect on every tied joint (:func:`joined`), held-out tested; returned when it lowers the held-out RMS by
+    at least ``min_improvement`` and its parameters were resolved in every fold, else None."""
+    merged, test = joined(cands, scr, state.desc)
+    scr.candidates.append(merged)
+    scr.tests.append(test)
+    state.say(f"    cross-validating + {merged.name} (the effect on every tied joint)")
+    got = heldout_test(state, scr, merged)
+    state.say(f"      {got.reason}")
+    scr.gated.append((merged, test))
+    scr.cvs.append(got)
+    if got.held or not (np.isfinite(got.improvement) and got.improvement >= state.settings.min_improvement):
+        return None
+    return merged, got
+
+
 def resolve_tie(state: LoopState, scr: Screening, cand: Candidate, cv: CVResult
                 ) -> tuple[Candidate, CVResult, dict | None]:
     """When the held-out units cannot tell the chosen ``cand`` from other candidates (:func:`tie_rivals`), which of
@@ -178,7 +230,14 @@ def resolve_tie(state: LoopState, scr: Screening, cand: Candidate, cv: CVResult
     if not rivals:
         return cand, cv, None
     tied = [(cand, cv, None)] + rivals
-    chosen, ccv, _ = min(tied, key=lambda x: tie_order(scr, x[0]))
+    state.say(f"  tie: {cand.name} (held-out {100 * cv.improvement:.1f} % lower, score p = "
+              f"{scr.test_of(cand).p_value:.2g}) is not told from "
+              + ", ".join(f"{c.name} ({100 * v.improvement:.1f} %, score p = {scr.test_of(c).p_value:.2g}, paired "
+                          f"p = {p:.2g})" for c, v, p in rivals) + " on held-out data")
+    members = joinable([c for c, _, _ in tied], scr)
+    both = _join_tie(state, scr, members) if members else None
+    chosen, ccv = both if both is not None else min(((c, v) for c, v, _ in tied),
+                                                   key=lambda x: tie_order(scr, x[0]))
 
     def row(c, v, p):
         t = scr.test_of(c)
@@ -186,12 +245,9 @@ def resolve_tie(state: LoopState, scr: Screening, cand: Candidate, cv: CVResult
                 "delta_chi2": float(t.delta_chi2), "relative_improvement": float(v.improvement),
                 "wilcoxon_p_value": float(v.p_value), "paired_p_value": p}
     record = {"candidates": [row(*x) for x in tied], "heldout_best": cand.name, "chosen": chosen.name,
+              "joined": [c.name for c in members] if both is not None else None,
               "rule": TIE_RULE, "level": float(s.screen_alpha)}
-    state.say(f"  tie: {cand.name} (held-out {100 * cv.improvement:.1f} % lower, score p = "
-              f"{scr.test_of(cand).p_value:.2g}) is not told from "
-              + ", ".join(f"{c.name} ({100 * v.improvement:.1f} %, score p = {scr.test_of(c).p_value:.2g}, paired "
-                          f"p = {p:.2g})" for c, v, p in rivals)
-              + f" on held-out data; by the tie rule ({TIE_RULE}): {chosen.name}")
+    state.say(f"  by the tie rule ({TIE_RULE}): {chosen.name}")
     if chosen is not cand:
         ccv.passed = True
         ccv.reason = (f"tied with {cand.name} on held-out data, chosen by the tie rule; its own held-out RMS "
