@@ -62,8 +62,8 @@ from arm_model.model import ArmModel
 
 from .data import CalibrationData
 
-__all__ = ["Candidate", "Skipped", "FAMILIES", "DEFAULT_FAMILIES", "MIN_TEMPERATURE_SPAN", "library_candidates",
-           "needs_model", "torques_of", "no_torque_reason", "MIN_DRIFT_SPAN_S", "drift_offer"]
+__all__ = ["Candidate", "pair_of", "Skipped", "FAMILIES", "DEFAULT_FAMILIES", "MIN_TEMPERATURE_SPAN",
+           "library_candidates", "needs_model", "torques_of", "no_torque_reason", "MIN_DRIFT_SPAN_S", "drift_offer"]
 
 #: candidate families of the library, by effect key (the CLI's ``--candidates`` names)
 FAMILIES = ("eccentricity", "joint_gain", "joint_compliance", "thermal", "force_sensor", "probe_compliance",
@@ -107,6 +107,8 @@ class Candidate:
             stayed significant, :mod:`calibration.synthesis`).
         then: candidates offered only once this one is added (a higher term of the same effect: the loop
             screens and tests it at the next stage, never before its first term is in).
+        parts: for a pair (:func:`pair_of`), the two candidates added together as one; ``effect`` is then the
+            first part's, and :attr:`effects` holds both.
     """
     name: str
     effect: Effect
@@ -114,12 +116,29 @@ class Candidate:
     joint: str | None = None
     origin: str = "library"
     then: tuple[Candidate, ...] = ()
+    parts: tuple[Candidate, ...] = ()
+
+    @property
+    def effects(self) -> tuple[Effect, ...]:
+        """The effects this candidate adds to the model: its own, or its parts' (a pair)."""
+        return tuple(c.effect for c in self.parts) if self.parts else (self.effect,)
 
     def param_names(self, desc: ArmDescription) -> list[str]:
-        return [n for n, _ in self.effect.param_defs(desc)]
+        return [n for e in self.effects for n, _ in e.param_defs(desc)]
 
     def size(self, desc: ArmDescription) -> int:
-        return len(self.effect.param_defs(desc))
+        return len(self.param_names(desc))
+
+
+def pair_of(a: Candidate, b: Candidate) -> Candidate:
+    """Two candidates offered as one (``"a + b"``, :attr:`Candidate.parts`): the loop's pair step, for effects that
+    help only together (:mod:`calibration.loop.pairs`). Its family is the parts' when they share it, else both
+    joined by ``+``; its origin "residual" when a part was built from the residual, "user" when a part is the
+    user's, else "library"."""
+    fam = a.family if a.family == b.family else f"{a.family}+{b.family}"
+    origins = {a.origin, b.origin}
+    origin = "residual" if "residual" in origins else "user" if "user" in origins else "library"
+    return Candidate(f"{a.name} + {b.name}", a.effect, fam, None, origin, parts=(a, b))
 
 
 @dataclass(frozen=True)

@@ -545,13 +545,15 @@ def screen_candidates(result: CalibrationResult, candidates, folds: dict[str, in
     tests: list[GroupTest | None] = [None] * len(candidates)
     first = None
     for members in _batches(desc, set(result.model.spec.names), candidates):
-        space = residual_space(result, [candidates[i].effect for i in members])
+        space = residual_space(result, [e for i in members for e in candidates[i].effects])
         first = first or space
         fr = row_folds(space, folds) if folds is not None and len(folds) else None
-        for i, sl in zip(members, space.extra_slices, strict=True):
+        slices = iter(space.extra_slices)
+        for i in members:
             c = candidates[i]
             names = c.param_names(desc)
-            tests[i] = test_group(space, space.jp[:, sl], names, c.name, fr, rank_tol=rank_tol,
+            cols = np.hstack([space.jp[:, next(slices)] for _ in c.effects])      # a pair: both effects' columns
+            tests[i] = test_group(space, cols, names, c.name, fr, rank_tol=rank_tol,
                                   prior=prior_scales(space.model, names, noise=point_noise(space.problem)),
                                   min_resolution=SCREEN_RESOLUTION)
     if first is None:
@@ -913,6 +915,8 @@ def remaining_structure(space: ResidualSpace, folds: dict[str, int] | np.ndarray
 
 def candidate_family(space: ResidualSpace, cand: Candidate, fams: list[Family] | None = None) -> Family | None:
     """The generic family that shows a candidate's signature best in a plot (by family key)."""
+    if cand.parts:                      # a pair: two signatures, no one family shows it
+        return None
     fams = families(space) if fams is None else fams
     by = {f.name: f for f in fams}
     j = None

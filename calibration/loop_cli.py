@@ -79,6 +79,9 @@ def register(sub) -> None:
     p.add_argument("--max-effects", type=at_least(0), default=4, help="most effects to add (default 4)")
     p.add_argument("--cv-top", type=at_least(1), default=3,
                    help="candidates cross-validated at each step, the best screened first (default 3)")
+    p.add_argument("--pairs", type=at_least(0), default=2,
+                   help="when no single candidate is added at a step, the most pairs of the candidates tested there "
+                        "cross-validated together, each member significant given the other (default 2; 0: none)")
     p.add_argument("--seed", type=seed, default=0,
                    help="seed of the bootstrap of the held-out figures' uncertainties (default 0). The test set and "
                         "the folds are not drawn at random: they are a function of the data (docs/close-loop.md), "
@@ -158,7 +161,7 @@ def run(args: argparse.Namespace) -> int:
                             **({"holdout": tuple(holdout)} if isinstance(holdout, list) else
                                {"test_fraction": holdout} if holdout is not None else {}),
                             screen_alpha=args.screen_alpha, min_improvement=args.min_improvement,
-                            max_effects=args.max_effects, cv_top=args.cv_top, seed=args.seed,
+                            max_effects=args.max_effects, cv_top=args.cv_top, pairs=args.pairs, seed=args.seed,
                             synthesise=not args.library_only, physics=not args.held_out_gain_only,
                             prior_scale=args.prior_scale, test_in_model=args.holdout is None,
                             weights_from_data=args.weights == "data",

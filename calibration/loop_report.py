@@ -81,9 +81,11 @@ def _stage_dict(s: Stage) -> dict:
            "heldout_test": s.heldout}
     if s.added is not None:
         out["added"] = {"name": s.added.name, "family": s.added.family, "joint": s.added.joint,
-                        "origin": s.added.origin, "effect": s.added.effect.describe(),
+                        "origin": s.added.origin, "effect": "; ".join(e.describe() for e in s.added.effects),
+                        "pair_of": [c.name for c in s.added.parts] or None,
                         "parameters": effect_summary(r, s.added),
-                        "indistinguishable_nested": s.nested, "indistinguishable_alternatives": s.alternatives}
+                        "indistinguishable_nested": s.nested, "indistinguishable_alternatives": s.alternatives,
+                        "tie": s.tie}
         out["screening"] = [t.to_dict() for t in s.screening]
         out["cross_validation"] = [c.to_dict() for c in s.cv]
     return out
@@ -101,7 +103,8 @@ def summary_dict(loop: LoopResult, inputs: dict | None = None) -> dict:
                         "parameters": effect_summary(s.result, s.added),
                         "heldout_before": {k: prev[k] for k in HELDOUT_KEYS},
                         "heldout_after": {k: s.heldout[k] for k in HELDOUT_KEYS},
-                        "indistinguishable_from": s.nested + [a for a in s.alternatives if a not in s.nested]})
+                        "indistinguishable_from": s.nested + [a for a in s.alternatives if a not in s.nested],
+                        "pair_of": [c.name for c in s.added.parts] or None, "tie": s.tie})
         prev = s.heldout
     return _clean({
         "inputs": inputs or {},
@@ -311,7 +314,7 @@ def write_loop_model(loop: LoopResult, out_dir, inputs=()) -> dict:
     the last fit on the design set if absent) as a model file, covariance file and URDF
     (:mod:`calibration.model_output`)."""
     res = loop.model_fit or loop.final.result
-    added = [s.added.name for s in loop.stages[1:] if not s.added.effect.session]
+    added = [s.added.name for s in loop.stages[1:] if not any(e.session for e in s.added.effects)]
     comment = (f"Model of '{loop.desc.name}' found by aacmm close-loop: the description with the final fit's values "
                f"folded in and the effects " + (f"added ({', '.join(added)})" if added else "of the base model")
                + f" with their parameters.\nFitted on {len(res.data)} points ({_fitted_on(loop)}); s0 = "
@@ -375,6 +378,19 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
                             [(r["name"], _g(r["display_value"], ".5g"), _g(r["display_u"], ".2g"), r["display_unit"],
                               r["state"] + (f", phase {r['phase_deg']:.1f} deg" if "phase_deg" in r else ""))
                              for r in prm]))
+        if s.added.parts:
+            parts.append("<p>A pair, added together: " + html.escape(", ".join(c.name for c in s.added.parts))
+                         + " (each significant given the other, better on the held-out folds than either alone).</p>")
+        if s.tie:
+            parts.append(f"<p>A tie: the held-out units did not tell these candidates apart; chosen "
+                         f"{html.escape(s.tie['chosen'])} by the tie rule ({html.escape(s.tie['rule'])}).</p>"
+                         + reports.html_table(("candidate", "parameters", "score p", "held-out RMS lower [%]",
+                                               "Wilcoxon p", "paired p (worse than the held-out best)"),
+                                              [(t["name"], t["parameters"], _g(t["score_p_value"], ".2g"),
+                                                _g(100 * t["relative_improvement"], ".1f"),
+                                                _g(t["wilcoxon_p_value"], ".2g"),
+                                                "-" if t["paired_p_value"] is None else _g(t["paired_p_value"], ".2g"))
+                                               for t in s.tie["candidates"]]))
         if s.nested or s.alternatives:
             parts.append("<p>The data cannot tell it from: "
                          + html.escape(", ".join(dict.fromkeys(s.nested + s.alternatives)))

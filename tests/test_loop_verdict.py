@@ -18,7 +18,8 @@ from conftest import NOMINAL
 
 
 def _stage(added, rms, mx, s0=1.0):
-    return SimpleNamespace(added=added, heldout={"rms_um": rms, "max_um": mx}, result=SimpleNamespace(s0=s0), cv=[])
+    return SimpleNamespace(added=added, heldout={"rms_um": rms, "max_um": mx}, result=SimpleNamespace(s0=s0), cv=[],
+                           tie=None)
 
 
 def _family(name, best):

@@ -33,6 +33,8 @@ class Stage:
         heldout: figures of this model on the outer test set (:func:`heldout_figures`).
         plot_before, plot_after: binned estimates of the added effect's signature family at the
             previous fit and at this fit (:func:`calibration.diagnostics.binned_estimates`).
+        tie: the candidates the held-out units could not tell from the one added, their scores, the one chosen
+            and the rule (:func:`calibration.loop.decide.resolve_tie`); None when there was no tie.
     """
     index: int
     model: ArmModel
@@ -46,6 +48,7 @@ class Stage:
     plot_family: str | None = None
     plot_before: dict | None = None
     plot_after: dict | None = None
+    tie: dict | None = None
 
 
 @dataclass
@@ -149,7 +152,9 @@ def display(value: float, unit: str) -> tuple[float, str]:
 def effect_summary(result: CalibrationResult, cand: Candidate) -> list[dict]:
     """The added effect's parameters: name, SI value and u, display value and u, and for an eccentricity or
     joint harmonics the amplitude and phase of each harmonic (``a sin(h q + phi)``, amplitude u by linear
-    propagation)."""
+    propagation); a pair's, part by part."""
+    if cand.parts:
+        return [row for c in cand.parts for row in effect_summary(result, c)]
     desc = result.model.desc
     rows = []
     for name, unit in cand.effect.param_defs(desc):

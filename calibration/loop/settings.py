@@ -45,7 +45,9 @@ class LoopSettings:
     families off by default (:data:`~calibration.candidates.OPT_IN_FAMILIES`) not offered yet are offered, once,
     under the same rules (``aacmm close-loop`` turns it off when ``--candidates`` names the families).
     ``synthesise``: build effects from the residual's structure when the library is exhausted, with an outer test
-    set of whole measurements only (:func:`~calibration.loop.verdict.builds_from_residual`)."""
+    set of whole measurements only (:func:`~calibration.loop.verdict.builds_from_residual`). ``pairs``: when no single
+    candidate is added at a stage, at most this many pairs of the candidates tested there are cross-validated as one
+    candidate each (:mod:`calibration.loop.pairs`; 0: no pair step)."""
     folds: int = 4
     test_fraction: float = 0.25
     alpha: float = 0.01
@@ -64,6 +66,7 @@ class LoopSettings:
     prior_scale: float | str | None = "auto"
     test_in_model: bool = True
     escalate: bool = True
+    pairs: int = 2
 
     def __post_init__(self):
         object.__setattr__(self, "holdout", tuple(self.holdout or ()))
@@ -81,8 +84,8 @@ class LoopSettings:
                 and not isinstance(self.prior_scale, bool) and 0 < self.prior_scale < math.inf):
             raise ValueError(f"prior_scale must be 'auto', 'evidence', a positive factor or None, got "
                              f"{self.prior_scale!r}")
-        if self.min_improvement < 0 or self.max_effects < 0 or self.cv_top < 1:
-            raise ValueError("min_improvement and max_effects must be >= 0 and cv_top >= 1")
+        if self.min_improvement < 0 or self.max_effects < 0 or self.cv_top < 1 or self.pairs < 0:
+            raise ValueError("min_improvement, max_effects and pairs must be >= 0 and cv_top >= 1")
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)

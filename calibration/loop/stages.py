@@ -9,6 +9,8 @@
   - :func:`test`: the held-out test of the gated candidates;
   - :func:`synthesise`: effects built from the structure still in the residual, offered as candidates;
   - :func:`physics`: joint compliance as physics, when nothing passed (library or built from the residual);
+  - :func:`pairs`: two of the candidates tested at the stage together, when nothing else was added
+    (:mod:`calibration.loop.pairs`);
   - :func:`~calibration.loop.decide.choose`: the one candidate to add;
   - :func:`add`: the model with it, recalibrated on the design set;
 
@@ -50,18 +52,19 @@ from .decide import (
     candidate_priors,
     choose,
     heldout_test,
-    merge_tied,
     physics_inclusion,
     plot_family,
 )
 from .folds import check_fold_by, choose_folds, outer_split
 from .outliers import drop_design_outliers, flag_test_outliers, outlier_budget
+from .pairs import beats_parts, candidate_pairs, pair_pool, rank_pairs
 from .result import LoopResult, Stage
 from .settings import LEGACY_RESOLUTION, LoopSettings
 from .state import LoopState, Screening, log
 from .verdict import ADDED, builds_from_residual, heldout_check, judged, residual_over_stated, verdict_text
 
-__all__ = ["Campaign", "Stop", "prepare", "at_current_torques", "screen", "test", "physics", "synthesise", "decide",
+__all__ = ["Campaign", "Stop", "prepare", "at_current_torques", "screen", "test", "physics", "pairs", "synthesise",
+           "decide",
            "fit_stage", "escalate",
            "outer_test_worse", "add", "run_stage", "run", "report"]
 
@@ -305,6 +308,50 @@ def physics(state: LoopState, scr: Screening) -> list:
     return [got]
 
 
+def pairs(state: LoopState, scr: Screening) -> tuple[Decision, Stage] | None:
+    """The pair step (:mod:`calibration.loop.pairs`), when nothing else was added at the stage: the pairs of the
+    candidates held-out tested at the stage, each member significant given the other at the current fit, the best
+    ``settings.pairs`` of them cross-validated (at ``alpha`` over every candidate tested at the stage), kept only
+    when better on the held-out folds than each member alone, then :func:`decide` (the outer test set's veto).
+    Counts as two effects against ``max_effects``. Returns the decision and its stage, or None."""
+    s, say = state.settings, state.say
+    if not s.pairs or sum(len(st.added.effects) for st in state.stages[1:]) + 2 > s.max_effects \
+            or not state.power["can_reach"]:
+        return None
+    tested = state.cv_here + [cv for cv in scr.cvs if cv not in state.cv_here]
+    pool = pair_pool(scr.ranked, tested)
+    offered = candidate_pairs(pool, state.desc)
+    if not offered:
+        return None
+    tests, space = screen_candidates(at_current_torques(state.result), offered, state.folds.assign, s.rank_tol)
+    single = {c.name: t for c, t in scr.ranked}
+    ranked = rank_pairs(offered, tests, single, space.chi2, space.dof, s.screen_alpha)
+    say(f"  pairs of the {len(pool)} candidates tested at this stage: {len(ranked)} of {len(offered)} with each "
+        f"member significant given the other (score test, p < {s.screen_alpha / len(offered):.2g})")
+    todo = ranked[: s.pairs]
+    if not todo:
+        return None
+    _current_folds(state)
+    scr.threshold = s.alpha / (len(tested) + len(todo))
+    passing = []
+    for pc, t, p in todo:
+        scr.candidates.append(pc)
+        scr.tests.append(t)
+        scr.gated.append((pc, t))
+        say(f"  cross-validating the pair + {pc.name} (score p = {t.p_value:.2g}; each member given the other "
+            f"p <= {p:.2g})")
+        cv = heldout_test(state, scr, pc)
+        why = beats_parts(cv, tested, pc, s.min_improvement) if cv.passed else None
+        if why:
+            cv.passed, cv.reason = False, f"{cv.reason}; but {why}"
+        say(f"    {cv.reason}")
+        scr.cvs.append(cv)
+        if cv.passed:
+            passing.append((pc, cv))
+    state.last_cv = state.cv_here + [cv for cv in scr.cvs if cv not in state.cv_here]
+    return decide(state, scr, passing) if passing else None
+
+
 def synthesise(state: LoopState) -> bool:
     """When the library is exhausted: the structure families still significant at the current fit (forward
     selection, Bonferroni, held-out explained variance > 0) become candidate effects
@@ -356,9 +403,11 @@ def run_stage(state: LoopState) -> tuple[Decision, Stage, Screening] | Stop:
         if not built and synthesise(state):
             continue
         staged = decide(state, scr, physics(state, scr)) if weigh_physics else None
+        if staged is None:
+            staged = pairs(state, scr)
         if staged is not None:
             return (*staged, scr)
-        state.cv_here = state.last_cv if weigh_physics else state.cv_here
+        state.cv_here = state.last_cv if weigh_physics or state.settings.pairs else state.cv_here
         return stop
     raise AssertionError("unreachable")
 
@@ -370,7 +419,7 @@ def fit_stage(state: LoopState, decision: Decision, scr: Screening) -> Stage:
     on the outer test set and the plots of its signature before and after. The state is not changed."""
     cand = decision.candidate
     fam_name, before = plot_family(scr.space, cand)
-    model = state.model.with_effects(cand.effect)
+    model = state.model.with_effects(*cand.effects)
     state.say(f"adding {cand.name}; recalibrating")
     result = state.fit(model, state.design, candidate_priors(model, cand, scr.test_of(cand)), reweight=True)
     after = None
@@ -380,7 +429,7 @@ def fit_stage(state: LoopState, decision: Decision, scr: Screening) -> Stage:
         after = binned_estimates(sp2, fam2) if fam2 is not None else None
     heldout = state.test_figures(model, result, result.weights)
     return Stage(len(state.stages), model, result, cand, state.last_tests, state.cv_here + scr.cvs, decision.nested,
-                 decision.alternatives, heldout, fam_name, before, after)
+                 decision.alternatives, heldout, fam_name, before, after, decision.tie)
 
 
 def decide(state: LoopState, scr: Screening, passing: list) -> tuple[Decision, Stage] | None:
@@ -393,26 +442,10 @@ def decide(state: LoopState, scr: Screening, passing: list) -> tuple[Decision, S
         decision = choose(state, scr, passing)
         stage = fit_stage(state, decision, scr)
         if not outer_test_worse(state, stage, decision.cv):
-            return shared(state, scr, passing, decision, stage)
+            return decision, stage
         top = max(passing, key=lambda x: x[1].improvement)[0]
         passing = [(c, v) for c, v in passing if c is not decision.candidate and c is not top]
     return None
-
-
-def shared(state: LoopState, scr: Screening, passing: list, decision: Decision, stage: Stage
-           ) -> tuple[Decision, Stage]:
-    """The decision to add, its effect shared with the passing candidates the held-out data cannot tell from it
-    (:func:`~calibration.loop.decide.merge_tied`) when that joint candidate passes the held-out folds and
-    does not make the outer test set worse; else ``decision`` and ``stage`` as they are."""
-    cand, cv = merge_tied(state, scr, decision.candidate, decision.cv, passing)
-    if cand is decision.candidate:
-        return decision, stage
-    joint = Decision(cand, cv, [], [])
-    joint_stage = fit_stage(state, joint, scr)
-    if outer_test_worse(state, joint_stage, cv):
-        state.say(f"  keeping {decision.candidate.name}")
-        return decision, stage
-    return joint, joint_stage
 
 
 def outer_test_worse(state: LoopState, stage: Stage, cv) -> bool:
@@ -454,6 +487,8 @@ def add(state: LoopState, decision: Decision, stage: Stage, scr: Screening) -> N
     for c in state.remaining:
         if c is not cand and c.origin == RESIDUAL and set(c.param_names(state.desc)) & have:
             state.fate[c.name] = f"shares parameters with {cand.name}, which was added"
+    for c in cand.parts:              # a pair: each part was added
+        state.fate[c.name] = ADDED
     state.remaining = [c for c in state.remaining if c is not cand and not set(c.param_names(state.desc)) & have]
     state.remaining.extend(c for c in cand.then if not set(c.param_names(state.desc)) & have)
 

@@ -192,7 +192,13 @@ def verdict_text(stages, significant, stop, settings, built=(), model: ArmModel 
     def label(s):
         if any(cv.candidate == s.added.name and cv.reason.startswith(PHYSICS) for cv in s.cv):
             return " (included as physics, not for a held-out gain)"
-        return " (found from the residual)" if s.added.origin == RESIDUAL else ""
+        out = " (found from the residual)" if s.added.origin == RESIDUAL else ""
+        if s.added.parts:
+            out += " (a pair: each helps only with the other)"
+        if s.tie:
+            others = [t["name"] for t in s.tie["candidates"] if t["name"] != s.added.name]
+            out += f" (tied on held-out data with {', '.join(others)}; chosen by the tie rule)"
+        return out
 
     added = [s.added.name + label(s) for s in stages[1:]]
     s0, words = residual_over_stated(stages[-1].result, stated)
