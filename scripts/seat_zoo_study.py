@@ -54,9 +54,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "scripts"))
 
+import sim_seats_study as seats  # noqa: E402
+
 from calibration.placements import placement_study, seat_figures  # noqa: E402
-from sim_seats_study import ARMS as SEAT_ARMS  # noqa: E402
-from sim_seats_study import HOLES, LENGTH, TIP, URDF, ArmSpec, nominal_urdfs, shipped_files  # noqa: E402
+
+HOLES, LENGTH, TIP, URDF = seats.HOLES, seats.LENGTH, seats.TIP, seats.URDF
 
 PANDA_DATA = ROOT / "examples" / "data" / "real-panda-seats"
 PANDA_REACH = 0.855      # [m] the Panda's reach, the scale of the real plate's placements
@@ -75,15 +77,15 @@ def _robot_set() -> Path:
 @dataclass(frozen=True)
 class ZooArm:
     """A robot type of the zoo: its ball tool (:class:`sim_seats_study.ArmSpec`) and its reach [m]."""
-    spec: ArmSpec
+    spec: seats.ArmSpec
     reach_m: float
 
 
 ARMS = {
-    "panda": ZooArm(SEAT_ARMS["panda"], 0.855),
-    "iiwa14": ZooArm(SEAT_ARMS["iiwa14"], 0.82),
-    "gen3": ZooArm(SEAT_ARMS["gen3"], 0.902),
-    "ur5": ZooArm(ArmSpec("ur5", "tool0", (0.0004, 0.0003, 0.125), 0.089159,
+    "panda": ZooArm(seats.ARMS["panda"], 0.855),
+    "iiwa14": ZooArm(seats.ARMS["iiwa14"], 0.82),
+    "gen3": ZooArm(seats.ARMS["gen3"], 0.902),
+    "ur5": ZooArm(seats.ArmSpec("ur5", "tool0", (0.0004, 0.0003, 0.125), 0.089159,
                           "example-robot-data 4.1.0, robots/ur_description/urdf/ur5_robot.urdf (UR5, 6 joints)"), 0.85),
 }
 
@@ -330,10 +332,10 @@ def table(lines: list[dict]) -> str:
 def arm_files(names: list[str], specs: list[str], python: str | None, out: Path) -> dict:
     """robot type -> its URDF with the ball tool (with its masses, without ``<inertial>``), written under ``out``."""
     arms = {ARMS[n].spec.name for n in names}
-    shipped = shipped_files([s for s in specs if not s.startswith("ur5=")], python, arms - {"panda", "ur5"})
+    shipped = seats.shipped_files([s for s in specs if not s.startswith("ur5=")], python, arms - {"panda", "ur5"})
     ur5 = [s.partition("=")[2] for s in specs if s.startswith("ur5=")]
     shipped["ur5"] = Path(ur5[0]) if ur5 else _robot_set() / "ur_description" / "urdf" / "ur5_robot.urdf"
-    return {a: nominal_urdfs(ARMS[a].spec, shipped.get(a), out / "arms" / a) for a in arms}
+    return {a: seats.nominal_urdfs(ARMS[a].spec, shipped.get(a), out / "arms" / a) for a in arms}
 
 
 def main(argv=None) -> int:
