@@ -310,15 +310,17 @@ def summary(results: list[dict]) -> list[dict]:
 
 
 def table(lines: list[dict]) -> str:
-    """Markdown of :func:`summary`: one row per robot, spread / |distance error| per method, the coverage of the
-    deviation's u of ``calibrate`` and ``close-loop@0``, the loop's effects at each seed."""
+    """Markdown of :func:`summary`: one row per robot, the truth's own spread (the scatter's floor), spread /
+    |distance error| per method, the coverage of the deviation's u of ``calibrate`` and ``close-loop@0``, the
+    loop's effects at each seed."""
     cols = list(dict.fromkeys(m for ln in lines for m in ln["methods"] if not m.startswith("close-loop@")
                               or m == "close-loop@0"))
-    md = ["| robot | truth | " + " | ".join(cols) + " | u covers (calibrate / loop) [%] | loop added (seeds "
-          + "/".join(map(str, LOOP_SEEDS)) + ") |", "|---|---|" + "---:|" * len(cols) + "---|---|"]
+    md = ["| robot | truth | truth's spread | " + " | ".join(cols) + " | u covers (calibrate / loop) [%] | loop added "
+          "(seeds " + "/".join(map(str, LOOP_SEEDS)) + ") |", "|---|---|---:|" + "---:|" * len(cols) + "---|---|"]
     for ln in lines:
         ms = ln["methods"]
-        cells = [f"{ms[c]['spread_mm']:.3f} / {ms[c]['distance_mm']:.3f}" if c in ms else "-" for c in cols]
+        cells = [f"{ln['truth']['spread_mm']:.3f}"]
+        cells += [f"{ms[c]['spread_mm']:.3f} / {ms[c]['distance_mm']:.3f}" if c in ms else "-" for c in cols]
         cov = " / ".join(f"{ms[m]['coverage_dev']:.1f}" if "coverage_dev" in ms.get(m, {}) else "-"
                          for m in ("calibrate", "close-loop@0"))
         added = [ms[f"close-loop@{s}"]["added"] for s in LOOP_SEEDS if f"close-loop@{s}" in ms]
