@@ -474,8 +474,14 @@ def secant_gains(steps: dict, last: dict, tol: float) -> dict:
     shrink: a scale running to its bound, where the plain iteration creeps with ever equal steps); an iteration that
     overshoots (slope below -1) is damped by the same rule (a 2-cycle is cut at its middle). The gain is 1 (the
     plain fixed point) for a key without history, or whose step or last move is within ``tol`` (the iteration's own
-    tolerance: a secant over so short a move, or a gain on so short a step, would amplify the refit's noise). The
-    point where ``r = 0`` is the fixed point's own: only the number of rounds changes."""
+    tolerance: a secant over so short a move, or a gain on so short a step, would amplify the refit's noise), and
+    for a step that grew as the scale moved its way (slope above ``1 / MAX_GAIN``): no creep, but the other groups'
+    moves of the same round changing this one's fixed point (the rounds are coupled), so the secant is no Newton
+    step; lengthened tenfold it threw a KUKA iiwa's joint offsets from 8.5 to the floor, 0.01, in one round (its
+    fixed point near 2), where the data no longer see the group and its scale stays (:func:`update_scales`), and
+    the seats of a placement it never saw spread 3.6 mm instead of 0.8 (docs/studies/calibration.md, "The seat
+    data set's shape on other robots"). The point where ``r = 0`` is the fixed point's own: only the number of
+    rounds changes."""
     out = {}
     for key, r in steps.items():
         r_last, move = last.get(key, (0.0, 0.0))
@@ -483,5 +489,8 @@ def secant_gains(steps: dict, last: dict, tol: float) -> dict:
             out[key] = 1.0
             continue
         slope = (r - r_last) / move
-        out[key] = MAX_GAIN if slope >= -1.0 / MAX_GAIN else -1.0 / slope
+        if slope > 1.0 / MAX_GAIN:                 # the step grew: the other groups moved this one's fixed point
+            out[key] = 1.0
+        else:
+            out[key] = MAX_GAIN if slope >= -1.0 / MAX_GAIN else -1.0 / slope
     return out

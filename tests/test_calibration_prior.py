@@ -405,7 +405,9 @@ def test_secant_gains_by_hand():
     """Hand-derived gains: a log step that stays equal (a scale shrinking to its floor) gets the largest gain; a map
     x <- x + r with r = -0.5 x (slope -0.5) gets 2, Newton's, which lands on its root; a 2-cycle (r = +-a, moves
     +-a: slope -2) gets 0.5, its middle; a key without history, whose last move or whose step is within the
-    tolerance, 1."""
+    tolerance, 1; a step that grew as the scale moved its way (the other groups' moves: a KUKA iiwa's joint offsets,
+    r = -0.5 then -1.42 over a move of -0.5, slope +1.84) 1, and one that grew by a tenth of the move at most (slope
+    +0.1, a creep) the largest."""
     from calibration.prior import MAX_GAIN, secant_gains
     x0, x1 = 4.0, 2.0                      # r(x) = -0.5 x: from 4 a plain step to 2, then the secant step
     g = secant_gains({"a": -0.5 * x1, "b": -0.1, "c": 0.3, "d": 0.2, "e": 0.1, "f": 0.01},
@@ -414,3 +416,5 @@ def test_secant_gains_by_hand():
     assert g["a"] == pytest.approx(2.0, rel=1e-12) and x1 + g["a"] * (-0.5 * x1) == pytest.approx(0.0, abs=1e-12)
     assert g["b"] == MAX_GAIN and g["c"] == pytest.approx(0.5, rel=1e-12)
     assert g["d"] == g["e"] == g["f"] == 1.0
+    g = secant_gains({"grew": -1.42, "creep": -0.11}, {"grew": (-0.5, -0.5), "creep": (-0.1, -0.1)}, 0.02)
+    assert g["grew"] == 1.0 and g["creep"] == MAX_GAIN
