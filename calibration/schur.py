@@ -12,7 +12,9 @@ certified length links, a frame and its markers), so the nuisance block ``D = J_
     H = J A^-1 J^T:   H_ik = g_i S^-1 g_k^T + j_ni D^-1 j_nk^T,  g_i = j_pi - j_ni W
 
 (``j_pi``, ``j_ni`` row i's parameter and nuisance parts). The second term of ``H_ik`` is 0 unless rows i and k
-touch the same component. Every quantity costs the rows times the parameters squared plus the components' sizes
+touch the same component. A nuisance unknown that meets many others (a reference instrument's frame, which every
+nest seen in it meets: :data:`HUB_DEGREE`) is put with the parameters ("parameters" below the module docstring
+means these columns), so that no component grows with the rows. Every quantity costs the rows times the parameters squared plus the components' sizes
 cubed, where the LU of ``A`` with a dense right-hand side over every unknown (:class:`calibration.solver.
 NormalFactor`) costs the rows times the unknowns, which grow with the rows.
 """
@@ -27,7 +29,12 @@ from scipy.sparse.csgraph import connected_components
 
 from arm_model import NumericalError
 
-__all__ = ["BlockNormal", "ROW_CHUNK"]
+__all__ = ["BlockNormal", "ROW_CHUNK", "HUB_DEGREE"]
+
+#: a nuisance unknown whose column meets more than this many others in the normal matrix (a reference instrument's
+#: frame, which every nest or marker seen in it meets) joins the parameters in the Schur complement, so that the
+#: nuisance block keeps small components (one a nest, not one of every nest and the frame)
+HUB_DEGREE = 64
 
 #: rows whose parameter part ``g`` is held at once (rows x parameters doubles): bounds the memory of a leverage
 ROW_CHUNK = 20000
@@ -50,14 +57,19 @@ class BlockNormal:
         self.n_par = int(n_par)
         n = self.j.shape[1]
         self.damping = np.array(np.broadcast_to(np.asarray(damping, dtype=float), (n,)))
-        p = self.n_par
-        jp = self._jp = self.j[:, :p].toarray()
-        self._jn = self.j[:, p:].tocsr()
-        self._dinv, self._logdet_d = _block_inverse(self._jn.T @ self._jn + sp.diags(self.damping[p:]))
+        jn_all = self.j[:, self.n_par:].tocsc()
+        degree = np.diff((jn_all.T @ jn_all).tocsc().indptr)
+        hub = self.n_par + np.flatnonzero(degree > HUB_DEGREE)
+        self._dense = np.concatenate([np.arange(self.n_par), hub]).astype(int)
+        self._rest = np.setdiff1d(np.arange(self.n_par, n), hub)
+        p = len(self._dense)
+        jp = self._jp = self.j[:, self._dense].toarray()
+        self._jn = self.j[:, self._rest].tocsr()
+        self._dinv, self._logdet_d = _block_inverse(self._jn.T @ self._jn + sp.diags(self.damping[self._rest]))
         self._bt = np.asarray(self._jn.T @ jp)                           # B^T (nuisance x parameters)
         self._w = np.asarray(self._dinv @ self._bt)                     # W = D^-1 B^T
         s = jp.T @ jp - self._bt.T @ self._w
-        s.flat[:: p + 1] += self.damping[:p]
+        s.flat[:: p + 1] += self.damping[self._dense]
         self._s = _lu(0.5 * (s + s.T)) if p else None
 
     def _solve_s(self, b: np.ndarray) -> np.ndarray:
@@ -66,10 +78,11 @@ class BlockNormal:
     def solve(self, b: np.ndarray) -> np.ndarray:
         """``A^-1 b`` for a vector or a matrix of columns ``b``."""
         b = np.asarray(b, dtype=float)
-        p = self.n_par
-        y = self._dinv @ b[p:]
-        xp = self._solve_s(b[:p] - self._bt.T @ y)
-        return np.concatenate([xp, y - self._w @ xp])
+        y = self._dinv @ b[self._rest]
+        xp = self._solve_s(b[self._dense] - self._bt.T @ y)
+        x = np.empty_like(b)
+        x[self._dense], x[self._rest] = xp, y - self._w @ xp
+        return x
 
     def log_abs_det(self) -> float:
         """``log |det A| = log |det D| + log |det S|``."""
@@ -81,7 +94,7 @@ class BlockNormal:
         if _indices(rows):
             return self._jp[rows], self._jn[rows]
         rows = sp.csr_matrix(rows)
-        return rows[:, :self.n_par].toarray(), rows[:, self.n_par:].tocsr()
+        return rows[:, self._dense].toarray(), rows[:, self._rest].tocsr()
 
     def parts(self, rows) -> tuple[np.ndarray, np.ndarray, sp.csr_matrix, sp.csr_matrix]:
         """``(g, g S^-1, j_n D^-1, j_n)`` of ``rows`` (indices into the rows of ``j``, or Jacobian rows: CSR over every

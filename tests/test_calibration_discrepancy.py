@@ -585,13 +585,18 @@ def _blocked(seed: int = 7):
     return j, np.r_[np.full(n_par, 0.1), np.zeros(3 * n_inst)]
 
 
-def test_block_normal_equals_the_dense_normal_matrix():
+@pytest.mark.parametrize("hub_degree", [64, 3], ids=["blocks", "hubs"])
+def test_block_normal_equals_the_dense_normal_matrix(monkeypatch, hub_degree):
     """:class:`~calibration.schur.BlockNormal` (the Schur complement of the nuisance block) against numpy on the dense
-    normal matrix: solves, log determinant, the leverages of the rows and of rows outside the fit, to 1e-10."""
+    normal matrix: solves, log determinant, the leverages of the rows and of rows outside the fit, to 1e-10; also with
+    the nuisance unknowns that meet more than 3 others taken with the parameters (the two instances a length links)."""
+    from calibration import schur
     from calibration.schur import BlockNormal
+    monkeypatch.setattr(schur, "HUB_DEGREE", hub_degree)
     j, damp = _blocked()
     a = j.T @ j + np.diag(damp)
     f = BlockNormal(sp.csc_matrix(j), 5, damp)
+    assert len(f._dense) == (5 if hub_degree == 64 else 11)
     b = np.random.default_rng(1).normal(size=(a.shape[0], 3))
     np.testing.assert_allclose(f.solve(b), np.linalg.solve(a, b), rtol=1e-10, atol=1e-10)
     assert abs(f.log_abs_det() - np.linalg.slogdet(a)[1]) <= 1e-10 * abs(np.linalg.slogdet(a)[1])
