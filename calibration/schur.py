@@ -13,9 +13,9 @@ certified length links, a frame and its markers), so the nuisance block ``D = J_
 
 (``j_pi``, ``j_ni`` row i's parameter and nuisance parts). The second term of ``H_ik`` is 0 unless rows i and k
 touch the same component. A nuisance unknown that meets many others (a reference instrument's frame, which every
-nest seen in it meets: :data:`HUB_DEGREE`) is put with the parameters ("parameters" below the module docstring
-means these columns), so that no component grows with the rows. Every quantity costs the rows times the parameters squared plus the components' sizes
-cubed, where the LU of ``A`` with a dense right-hand side over every unknown (:class:`calibration.solver.
+nest seen in it meets: :data:`HUB_DEGREE`) is taken with the parameters (in ``p`` above), so that no component
+grows with the rows. Every quantity costs the rows times the parameters squared plus the components' sizes cubed,
+where the LU of ``A`` with a dense right-hand side over every unknown (:class:`calibration.solver.
 NormalFactor`) costs the rows times the unknowns, which grow with the rows.
 """
 from __future__ import annotations
