@@ -14,9 +14,10 @@ certified length links, a frame and its markers), so the nuisance block ``D = J_
 (``j_pi``, ``j_ni`` row i's parameter and nuisance parts). The second term of ``H_ik`` is 0 unless rows i and k
 touch the same component. A nuisance unknown that meets many others (a reference instrument's frame, which every
 nest seen in it meets: :data:`HUB_DEGREE`) is taken with the parameters (in ``p`` above), so that no component
-grows with the rows. Every quantity costs the rows times the parameters squared plus the components' sizes cubed,
-where the LU of ``A`` with a dense right-hand side over every unknown (:class:`calibration.solver.
-NormalFactor`) costs the rows times the unknowns, which grow with the rows.
+grows with the rows; up to :data:`calibration.solver.DENSE_UNKNOWNS` unknowns every one is (``A`` dense, one LU).
+Every quantity costs the rows times the parameters squared plus the components' sizes cubed, where the LU of ``A``
+with a dense right-hand side over every unknown (:class:`calibration.solver.NormalFactor`) costs the rows times the
+unknowns, which grow with the rows.
 """
 from __future__ import annotations
 
@@ -28,6 +29,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from arm_model import NumericalError
+
+from .solver import dense_enough
 
 __all__ = ["BlockNormal", "ROW_CHUNK", "HUB_DEGREE"]
 
@@ -57,9 +60,11 @@ class BlockNormal:
         self.n_par = int(n_par)
         n = self.j.shape[1]
         self.damping = np.array(np.broadcast_to(np.asarray(damping, dtype=float), (n,)))
-        jn_all = self.j[:, self.n_par:].tocsc()
-        degree = np.diff((jn_all.T @ jn_all).tocsc().indptr)
-        hub = self.n_par + np.flatnonzero(degree > HUB_DEGREE)
+        if dense_enough(n):                 # few unknowns: every one dense (LAPACK beats scipy.sparse's overhead)
+            hub = np.arange(self.n_par, n)
+        else:
+            jn = self.j[:, self.n_par:].tocsc()
+            hub = self.n_par + np.flatnonzero(np.diff((jn.T @ jn).tocsc().indptr) > HUB_DEGREE)
         self._dense = np.concatenate([np.arange(self.n_par), hub]).astype(int)
         self._rest = np.setdiff1d(np.arange(self.n_par, n), hub)
         p = len(self._dense)

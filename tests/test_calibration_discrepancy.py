@@ -585,18 +585,21 @@ def _blocked(seed: int = 7):
     return j, np.r_[np.full(n_par, 0.1), np.zeros(3 * n_inst)]
 
 
-@pytest.mark.parametrize("hub_degree", [64, 3], ids=["blocks", "hubs"])
-def test_block_normal_equals_the_dense_normal_matrix(monkeypatch, hub_degree):
+@pytest.mark.parametrize(("dense_unknowns", "hub_degree", "dense"), [(0, 64, 5), (0, 3, 11), (400, 64, 95)],
+                         ids=["blocks", "hubs", "dense"])
+def test_block_normal_equals_the_dense_normal_matrix(monkeypatch, dense_unknowns, hub_degree, dense):
     """:class:`~calibration.schur.BlockNormal` (the Schur complement of the nuisance block) against numpy on the dense
     normal matrix: solves, log determinant, the leverages of the rows and of rows outside the fit, to 1e-10; also with
-    the nuisance unknowns that meet more than 3 others taken with the parameters (the two instances a length links)."""
-    from calibration import schur
+    the nuisance unknowns that meet more than 3 others taken with the parameters (the two instances a length links),
+    and with every unknown dense (few unknowns)."""
+    from calibration import schur, solver
     from calibration.schur import BlockNormal
     monkeypatch.setattr(schur, "HUB_DEGREE", hub_degree)
+    monkeypatch.setattr(solver, "DENSE_UNKNOWNS", dense_unknowns)
     j, damp = _blocked()
     a = j.T @ j + np.diag(damp)
     f = BlockNormal(sp.csc_matrix(j), 5, damp)
-    assert len(f._dense) == (5 if hub_degree == 64 else 11)
+    assert len(f._dense) == dense
     b = np.random.default_rng(1).normal(size=(a.shape[0], 3))
     np.testing.assert_allclose(f.solve(b), np.linalg.solve(a, b), rtol=1e-10, atol=1e-10)
     assert abs(f.log_abs_det() - np.linalg.slogdet(a)[1]) <= 1e-10 * abs(np.linalg.slogdet(a)[1])
@@ -607,16 +610,18 @@ def test_block_normal_equals_the_dense_normal_matrix(monkeypatch, hub_degree):
                                np.einsum("ij,ji->i", j[out], np.linalg.solve(a_out, j[out].T)), rtol=1e-10)
 
 
-@pytest.mark.parametrize("large_fold", [10 ** 9, 0], ids=["hat", "without"])
-def test_group_deletions_match_the_dense_hat_matrix_by_hand(monkeypatch, large_fold):
+@pytest.mark.parametrize(("large_fold", "dense_unknowns"), [(10 ** 9, 0), (0, 0), (10 ** 9, 400)],
+                         ids=["hat", "without", "dense"])
+def test_group_deletions_match_the_dense_hat_matrix_by_hand(monkeypatch, large_fold, dense_unknowns):
     """:func:`group_deletions` (``H_OO`` from the Schur complement's blocks) equals the dense formulas (H = J A^-1
     J^T in full), for small groups (one product a pair of positions), a large one (one sparse product a group) and
     the two rows of a length, to 1e-10; :func:`fold_errors` the same by ``(I - H_OO)^-1`` and by the fit without the
     fold (``large_fold`` 0)."""
-    from calibration import discrepancy
+    from calibration import discrepancy, solver
     from calibration.discrepancy import deletion_shift, group_deletions
     from calibration.schur import BlockNormal
     monkeypatch.setattr(discrepancy, "LARGE_FOLD", large_fold)
+    monkeypatch.setattr(solver, "DENSE_UNKNOWNS", dense_unknowns)
     j, damp = _blocked()
     rows = len(j) - 2
     a = j.T @ j + np.diag(damp)
