@@ -377,6 +377,8 @@ def _hat_blocks(parts, pos: np.ndarray) -> np.ndarray:
     g, gs, y, jn = parts
     h = np.einsum("gip,gjp->gij", gs[pos], g[pos])
     size = pos.shape[1]
+    if y is None:                                       # no nuisance block
+        return h
     if size > 16:
         return h + np.stack([(y[p] @ jn[p].T).toarray() for p in pos])
     for i in range(size):

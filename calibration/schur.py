@@ -68,12 +68,18 @@ class BlockNormal:
         self._dense = np.concatenate([np.arange(self.n_par), hub]).astype(int)
         self._rest = np.setdiff1d(np.arange(self.n_par, n), hub)
         p = len(self._dense)
-        jp = self._jp = self.j[:, self._dense].toarray()
-        self._jn = self.j[:, self._rest].tocsr()
-        self._dinv, self._logdet_d = _block_inverse(self._jn.T @ self._jn + sp.diags(self.damping[self._rest]))
-        self._bt = np.asarray(self._jn.T @ jp)                           # B^T (nuisance x parameters)
-        self._w = np.asarray(self._dinv @ self._bt)                     # W = D^-1 B^T
-        s = jp.T @ jp - self._bt.T @ self._w
+        self._jn: sp.csr_matrix | None = None               # None: no nuisance block (every unknown dense)
+        self._logdet_d = 0.0
+        if len(self._rest):
+            jp = self._jp = self.j[:, self._dense].toarray()
+            self._jn = self.j[:, self._rest].tocsr()
+            self._dinv, self._logdet_d = _block_inverse(self._jn.T @ self._jn + sp.diags(self.damping[self._rest]))
+            self._bt = np.asarray(self._jn.T @ jp)                       # B^T (nuisance x parameters)
+            self._w = np.asarray(self._dinv @ self._bt)                 # W = D^-1 B^T
+            s = jp.T @ jp - self._bt.T @ self._w
+        else:
+            jp = self._jp = self.j.toarray()
+            s = jp.T @ jp
         s.flat[:: p + 1] += self.damping[self._dense]
         self._s = _lu(0.5 * (s + s.T)) if p else None
 
@@ -83,6 +89,8 @@ class BlockNormal:
     def solve(self, b: np.ndarray) -> np.ndarray:
         """``A^-1 b`` for a vector or a matrix of columns ``b``."""
         b = np.asarray(b, dtype=float)
+        if self._jn is None:
+            return self._solve_s(b)
         y = self._dinv @ b[self._rest]
         xp = self._solve_s(b[self._dense] - self._bt.T @ y)
         x = np.empty_like(b)
@@ -94,17 +102,22 @@ class BlockNormal:
         s = 0.0 if self._s is None else float(np.sum(np.log(np.abs(np.diagonal(self._s[0])))))
         return self._logdet_d + s
 
-    def _rows(self, rows) -> tuple[np.ndarray, sp.csr_matrix]:
-        """``(j_p, j_n)`` of ``rows``: indices into the rows of ``j``, or Jacobian rows (CSR over every unknown)."""
+    def _rows(self, rows) -> tuple[np.ndarray, sp.csr_matrix | None]:
+        """``(j_p, j_n)`` of ``rows``: indices into the rows of ``j``, or Jacobian rows (CSR over every unknown);
+        ``j_n`` None without a nuisance block."""
         if _indices(rows):
-            return self._jp[rows], self._jn[rows]
+            return self._jp[rows], None if self._jn is None else self._jn[rows]
         rows = sp.csr_matrix(rows)
+        if self._jn is None:
+            return rows.toarray(), None
         return rows[:, self._dense].toarray(), rows[:, self._rest].tocsr()
 
-    def parts(self, rows) -> tuple[np.ndarray, np.ndarray, sp.csr_matrix, sp.csr_matrix]:
+    def parts(self, rows) -> tuple[np.ndarray, np.ndarray, sp.csr_matrix | None, sp.csr_matrix | None]:
         """``(g, g S^-1, j_n D^-1, j_n)`` of ``rows`` (indices into the rows of ``j``, or Jacobian rows: CSR over every
-        unknown): ``H_ik = g_i S^-1 g_k^T + (j_n D^-1)_i j_nk^T``."""
+        unknown): ``H_ik = g_i S^-1 g_k^T + (j_n D^-1)_i j_nk^T`` (the last two None without a nuisance block)."""
         jp, jn = self._rows(rows)
+        if jn is None:
+            return jp, self._solve_s(jp.T).T, None, None
         g = jp - np.asarray(jn @ self._w)
         return g, self._solve_s(g.T).T, (jn @ self._dinv).tocsr(), jn
 
@@ -118,7 +131,9 @@ class BlockNormal:
         h = np.empty(rows.shape[0])
         for s in range(0, rows.shape[0], ROW_CHUNK):
             g, gs, y, jn = self.parts(rows[s: s + ROW_CHUNK])
-            h[s: s + ROW_CHUNK] = np.einsum("ij,ij->i", g, gs) + np.asarray(y.multiply(jn).sum(axis=1)).ravel()
+            h[s: s + ROW_CHUNK] = np.einsum("ij,ij->i", g, gs)
+            if y is not None:
+                h[s: s + ROW_CHUNK] += np.asarray(y.multiply(jn).sum(axis=1)).ravel()
         return h
 
     def without(self, rows: np.ndarray) -> BlockNormal:
