@@ -10,10 +10,16 @@ unknowns (sphere and seat centres, T_ref_base) are solved jointly in both solver
 residual written in numpy (ball centres from ``ArmModel.ball_centres``), the same free parameters, the
 same start and tight tolerances; its Jacobian is by 2-point finite differences (MINPACK ``lm``, and
 ``trf`` told the Jacobian's sparsity, which it uses to group the differences).
+
+Large campaigns (:func:`large`): the whole ``aacmm calibrate`` command on simulated campaigns of about 10^3, 10^4 and
+10^5 residual rows (:func:`large_campaign`), its wall, CPU and peak memory against :data:`LARGE_TARGET`.
 """
 from __future__ import annotations
 
+import math
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
@@ -169,10 +175,76 @@ def compare(model: ArmModel, n: int, scipy_methods=("lm", "trf-sparse")) -> dict
     return row
 
 
-QUICK = {"sizes": (500, 1000), "scipy_sizes": (500,)}   # make bench BENCH=--quick
+def large_campaign(points: int, seed: int = 5) -> str:
+    """A campaign TOML (``aacmm simulate``) of about ``points`` points for the nominal arm, its nuisance unknowns
+    growing with the points as a long real campaign's do: 6 sphere positions (25 points a measurement, 25 % of the
+    points), 4 planes (30 a measurement, 15 %), a ball bar (two spheres of 6 points a position, 20 %), 8 seat
+    positions (20 articulations a measurement, 30 %) and tracker nests (3 articulations a nest, 10 %), the
+    positions drawn (``seed``) over the arm's working volume; each measurement is an instance of its own (a centre,
+    a plane, the bar's two centres linked by their certified length)."""
+    rng = np.random.default_rng(seed)
+
+    def place(height=(-0.05, 0.35)) -> str:
+        a, radius = rng.uniform(-2.0, 2.0), rng.uniform(0.45, 0.7)
+        return f"[{radius * math.cos(a) * 1e3:.1f}, {radius * math.sin(a) * 1e3:.1f}, {rng.uniform(*height) * 1e3:.1f}]"
+
+    def count(share: float, per: int, tasks: int = 1) -> int:
+        return max(1, round(share * points / per / tasks))
+
+    tasks = [f'kind = "sphere"\nid = "sph{i}"\ncentre_mm = {place()}\ndiameter_mm = 25.4\npoints = 25\n'
+             f"measurements = {count(0.25, 25, 6)}" for i in range(6)]
+    tasks += [f'kind = "plane"\nid = "pl{i}"\npoint_mm = {place((-0.1, 0.0))}\nsize_mm = [200.0, 200.0]\npoints = 30\n'
+              f"measurements = {count(0.15, 30, 4)}" for i in range(4)]
+    tasks += [f'kind = "ballbar"\nid = "bar"\npositions = {count(0.2, 12)}\nlength_mm = 600.004\nu_length_mm = 0.0008\n'
+              "points_per_sphere = 6"]
+    # the seats after the spheres, planes and ball bar: residuals.csv names a point by its line and kind, and the
+    # tracker's seats (points-ref.csv) must not share a line with a seat of points.csv
+    tasks += [f'kind = "seat"\nid = "seat{i}"\nposition_mm = {place()}\narticulations = 20\n'
+              f"measurements = {count(0.3, 20, 8)}" for i in range(8)]
+    tasks += [f'kind = "tracker"\nid = "nest"\nnests = {count(0.1, 3)}\narticulations = 3']
+    head = (f'name = "large"\ndescription = "about {points} points"\nseed = {seed}\narm = "aacmm7"\nsensor = "xyz"\n'
+            "[noise]\nprobing_repeatability_um = 2.0\nforce_noise_N = 0.01\n[operator]\nforce_mean_N = 1.5\n")
+    return head + "".join(f"[[task]]\n{t}\n" for t in tasks)
 
 
-def main(sizes=(500, 1000, 2000, 5000), scipy_sizes=(500, 1000, 2000)) -> dict:
+#: what ``aacmm calibrate`` (default options) should take on a campaign of about 10^5 residual rows (45 000 points of
+#: :func:`large_campaign`, 2.1-2.2 rows a point) on 2 cores
+LARGE_TARGET = {"wall_s": 300.0, "peak_MiB": 2048.0}
+
+
+def large(sizes=(450, 4500, 45_000)) -> list[dict]:
+    """``aacmm calibrate`` (default options: the fit under one BLAS thread) on :func:`large_campaign` of each size,
+    simulated first (``aacmm simulate --no-signals``): wall, CPU (user + system) and peak memory of the command
+    (:func:`benchmarks.bench_io.run`), against :data:`LARGE_TARGET`."""
+    import json
+    import subprocess
+
+    from benchmarks.bench_io import AACMM, run
+    print(f"aacmm calibrate on a large campaign (default options); target at 10^5 rows: <= "
+          f"{LARGE_TARGET['wall_s']:.0f} s wall, < {LARGE_TARGET['peak_MiB'] / 1024:.0f} GiB peak")
+    print(f"{'points':>7} {'rows':>7} {'unknowns':>8} {'wall s':>8} {'CPU s':>8} {'peak MiB':>9}")
+    out = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in sizes:
+            d = Path(tmp) / str(n)
+            d.mkdir()
+            (d / "c.toml").write_text(large_campaign(n))
+            sim = d / "sim"
+            subprocess.run(AACMM + ["simulate", str(d / "c.toml"), "--no-signals", "-q", "-o", str(sim)], check=True)
+            wall, cpu, peak = run(["calibrate", sim / "points.csv", sim / "artefacts.toml", "--reference-points",
+                                   sim / "points-ref.csv", "--arm", "aacmm7", "--no-plots", "-q", "-o", d / "cal"])
+            summary = json.loads((d / "cal" / "summary.json").read_text())
+            row = {"points": n, "rows": summary["n_residuals"], "wall": wall, "cpu": cpu, "peak": peak,
+                   "unknowns": len(summary["free"]) + summary["n_nuisance"]}
+            print(f"{n:>7} {row['rows']:>7} {row['unknowns']:>8} {wall:>8.1f} {cpu:>8.1f} {peak:>9.0f}", flush=True)
+            out.append(row)
+    return out
+
+
+QUICK = {"sizes": (500, 1000), "scipy_sizes": (500,), "large_sizes": (450,)}   # make bench BENCH=--quick
+
+
+def main(sizes=(500, 1000, 2000, 5000), scipy_sizes=(500, 1000, 2000), large_sizes=(450, 4500, 45_000)) -> dict:
     desc = load_description(ARM)
     model = ArmModel(desc, (EncoderEccentricity(joints=(0, 1, 2, 3, 4, 5), harmonics=(1,)),))
     print(f"model: {model.spec.size} parameters ({model.base_size} base + 12 eccentricity); times: best of 2-3 runs")
@@ -186,6 +258,8 @@ def main(sizes=(500, 1000, 2000, 5000), scipy_sizes=(500, 1000, 2000)) -> dict:
     print("x LM: scipy time / our LM time (same start, same free set); x cal: / our whole calibrate (identifiability "
           "twice, covariance, leverage); rel p: |p_scipy - p_ours| / |p_ours|; dp/u: max |difference| / reported u; "
           "rel cost: |cost_scipy - cost_ours| / cost_ours")
+    print()
+    rows["large"] = large(large_sizes)
     return rows
 
 

@@ -42,7 +42,7 @@ from arm_model.tracker import Tracker
 from arm_model.units import STATED_SIGMA_M
 
 from .data import CalibrationData, Weights
-from .discrepancy import Discrepancy, group_deletions, model_discrepancy
+from .discrepancy import Discrepancy, deletion_shift, group_deletions, model_discrepancy
 from .identifiability import (
     Combination,
     Identifiability,
@@ -56,7 +56,8 @@ from .identifiability import (
 from .options import FitOptions
 from .prior import PRIOR_DOMINATED, PriorSpec, prior_only, prior_spec, secant_gains, update_scales, variance_ratio
 from .problem import Problem
-from .solver import NormalFactor, Prior, blas_threads, levenberg_marquardt, normal_factor
+from .schur import BlockNormal
+from .solver import Prior, blas_threads, levenberg_marquardt
 
 __all__ = ["FixedParameter", "Outlier", "CalibrationResult", "calibrate", "resolve_parameters",
            "default_free", "rigid_gauge", "display_unit", "blas_threads", "identify", "variance_components",
@@ -475,16 +476,6 @@ class CalibrationResult:
         }
 
 
-def _leverage(j: sp.csc_matrix, solve, chunk: int = 2000) -> np.ndarray:
-    jr = j.tocsr()
-    h = np.empty(j.shape[0])
-    for s in range(0, j.shape[0], chunk):
-        blk = jr[s: s + chunk]
-        z = solve(np.asarray(blk.T.todense()))
-        h[s: s + chunk] = np.asarray(blk.multiply(z.T).sum(axis=1)).ravel()
-    return np.clip(h, 0.0, 1.0 - 1e-12)
-
-
 def identify(problem: Problem, p, states, candidates, options: FitOptions = FitOptions(), *,
              stage: str = "start"):
     """Which of the ``candidates`` (indices into ``problem.model.spec``) the data identify at ``p`` and
@@ -853,10 +844,10 @@ def _test_groups(prob: Problem) -> tuple[np.ndarray, np.ndarray, list]:
     return points, lengths, (np.split(rows, start[1:]) if len(rows) else []) + [np.array([i]) for i in lengths]
 
 
-def point_tests(prob: Problem, r: np.ndarray, js, solve, leverage: np.ndarray, k: float,
+def point_tests(prob: Problem, r: np.ndarray, factor: BlockNormal, leverage: np.ndarray, k: float,
                 deletions: list | None = None) -> dict:
     """The gross-error test of every point and every certified length of a fit of ``prob`` (``r`` its weighted
-    residuals, ``js``, ``solve`` and ``leverage`` as :func:`~calibration.discrepancy.model_discrepancy` and
+    residuals, ``factor`` and ``leverage`` as :func:`~calibration.discrepancy.model_discrepancy` and
     :func:`_normal`): the point's residual rows ``O`` together (a seat's or a marker's three, a sphere's one, a
     point's reference rows with its feature's; a length's one) deleted from the joint fit (parameters, prior and
     every nuisance unknown: :func:`~calibration.discrepancy.group_deletions`), ``e_O = (I - H_OO)^-1 r_O`` with
@@ -880,18 +871,18 @@ def point_tests(prob: Problem, r: np.ndarray, js, solve, leverage: np.ndarray, k
     scale = robust_scales(r, leverage, kinds)
     m_rows = np.array([len(o) for o in groups], dtype=int)
     chi2, dele = np.full(len(groups), np.nan), np.full(len(groups), np.nan)
-    tests = group_deletions(js, solve, r, groups) if deletions is None else deletions
-    for i, (o, (e, m, _)) in enumerate(zip(groups, tests, strict=True)):
+    tests = group_deletions(factor, r, groups) if deletions is None else deletions
+    for i, (o, (e, m)) in enumerate(zip(groups, tests, strict=True)):
         if e is not None:
             w = r[o] / scale[o]
             chi2[i] = float(w @ m @ w)
             dele[i] = float(np.linalg.norm(prob.sigma[o] * e))
     sigma = sigma_equivalent(chi2, m_rows) if len(groups) else np.zeros(0)
     for i in np.flatnonzero(np.nan_to_num(sigma) >= 0.5 * k):
-        o, (_, m, d) = groups[i], tests[i]
+        o, (e, m) = groups[i], tests[i]
         h_without = leverage.copy()
         h_without[o] = 0.0
-        w = r[o] / robust_scales(r + js @ d, h_without, kinds)[o]
+        w = r[o] / robust_scales(r + factor.j @ deletion_shift(factor, o, e), h_without, kinds)[o]
         chi2[i] = float(w @ m @ w)
         sigma[i] = sigma_equivalent(chi2[i], m_rows[i])
     n = len(points)
@@ -1212,11 +1203,12 @@ def _covariance(s: _Setup, ev, kept, var: float) -> np.ndarray:
 @dataclass
 class _Normal:
     """The column-scaled full Jacobian (parameters and nuisance) at the solution: ``js``, its column scale
-    ``jscale``, the LU of its normal matrix (prior information included), the rows' leverage ``h`` and the
-    Laplace log evidence (None without a prior)."""
+    ``jscale``, its normal matrix (prior information included) factored by the Schur complement of the nuisance
+    (``factor``, :class:`~calibration.schur.BlockNormal`), the rows' leverage ``h`` and the Laplace log evidence
+    (None without a prior)."""
     js: sp.csc_matrix
     jscale: np.ndarray
-    lu: NormalFactor
+    factor: BlockNormal
     h: np.ndarray
     log_evidence: float | None
     deletions: list | None = None
@@ -1224,8 +1216,8 @@ class _Normal:
 
 def _normal(s: _Setup, sol, kept, groups=None) -> _Normal:
     """:class:`_Normal` of the solution ``sol``; with ``groups`` (of residual rows: :func:`_test_groups`) also their
-    deletions (:func:`~calibration.discrepancy.group_deletions`, ``deletions``), whose solve gives the leverage of
-    their rows (the other rows' by :func:`_leverage`)."""
+    deletions (:func:`~calibration.discrepancy.group_deletions`, ``deletions``), which give the leverage of their
+    rows (the other rows' by :meth:`~calibration.schur.BlockNormal.leverage`)."""
     ev = sol.evaluation
     j = sp.hstack([sp.csr_matrix(ev.jp), ev.jt], format="csc") if len(kept) else ev.jt.tocsc()
     jscale = np.sqrt(np.asarray(j.multiply(j).sum(axis=0)).ravel())
@@ -1235,19 +1227,19 @@ def _normal(s: _Setup, sol, kept, groups=None) -> _Normal:
     damp = np.zeros(js.shape[1])
     if s.prior is not None:
         damp[:len(kept)] = 1.0 / s.prior.size[kept_arr] ** 2 / jscale[:len(kept)] ** 2
-    lu = normal_factor(js, damp)
+    factor = BlockNormal(js, len(kept), damp)
     log_ev = None
     if s.prior is not None:                 # Laplace: -cost - 0.5 log det(H) + log of the prior's normalisation
-        logdet = lu.log_abs_det() + 2.0 * float(np.sum(np.log(jscale)))
+        logdet = factor.log_abs_det() + 2.0 * float(np.sum(np.log(jscale)))
         log_ev = -(sol.cost + sol.prior_cost) - 0.5 * logdet - float(np.sum(np.log(s.prior.size[kept_arr])))
     if groups is None:
-        return _Normal(js, jscale, lu, _leverage(js, lu.solve), log_ev)
+        return _Normal(js, jscale, factor, np.clip(factor.leverage(), 0.0, 1.0 - 1e-12), log_ev)
     h = np.full(js.shape[0], np.nan)
-    deletions = group_deletions(js, lu.solve, ev.r, groups, leverage=h)
+    deletions = group_deletions(factor, ev.r, groups, leverage=h)
     rest = np.flatnonzero(np.isnan(h))
     if len(rest):
-        h[rest] = _leverage(js[rest], lu.solve)
-    return _Normal(js, jscale, lu, np.clip(h, 0.0, 1.0 - 1e-12), log_ev, deletions)
+        h[rest] = factor.leverage(rest)
+    return _Normal(js, jscale, factor, np.clip(h, 0.0, 1.0 - 1e-12), log_ev, deletions)
 
 
 def _point_table(prob: Problem, data: CalibrationData, p, states, z: np.ndarray) -> dict:
@@ -1318,7 +1310,7 @@ def _tracker(prob: Problem, p, states, nrm: _Normal, n_kept: int, var: float) ->
             cols = n_kept + it.offset + np.arange(it.n_theta)
             e = np.zeros((nrm.js.shape[1], it.n_theta))
             e[cols, np.arange(it.n_theta)] = 1.0
-            blk = nrm.lu.solve(e)[cols] / np.outer(nrm.jscale[cols], nrm.jscale[cols]) * var
+            blk = nrm.factor.solve(e)[cols] / np.outer(nrm.jscale[cols], nrm.jscale[cols]) * var
             u[i] = np.sqrt(np.diag(blk))
     return prob.tracker(states, u)
 
@@ -1381,10 +1373,10 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         prior_ratio=None if prior_sd is None else variance_ratio(u ** 2, prior_sd),
         prior_groups=_group_table(s, kept, u), redundancy=None if s.prior is None else red,
         prior_only={} if s.prior is None else {spec.names[i]: why for i, why in s.prior_only.items() if i in kept},
-        discrepancy=model_discrepancy(prob, ev.r, nrm.js, nrm.lu.solve, var)
+        discrepancy=model_discrepancy(prob, ev.r, nrm.factor, var)
         if options.discrepancy else None,
         point_tests=None if level is None else point_tests(
-            prob, ev.r, nrm.js, nrm.lu.solve, nrm.h, level, nrm.deletions))
+            prob, ev.r, nrm.factor, nrm.h, level, nrm.deletions))
 
 
 def _test_level(options: FitOptions) -> float | None:

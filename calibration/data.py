@@ -388,8 +388,9 @@ def split_holdout(data: CalibrationData, holdout, seed: int = 0,
         rng = np.random.default_rng(seed)
         # stratify by the set of feature kinds a measurement touches
         groups: dict[tuple, list[str]] = {}
+        rows_of = data.points.measurement_rows()
         for m in ids:
-            feats = set(data.points.feature[data.points.measurement == m])
+            feats = set(data.points.feature[rows_of[m]])
             kinds = tuple(sorted(data.artefacts.features[f].kind if f else "free" for f in feats))
             groups.setdefault(kinds, []).append(m)
         chosen = []

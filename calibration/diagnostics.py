@@ -109,8 +109,8 @@ def measurement_groups(data: CalibrationData) -> list[list[str]]:
     possible."""
     pts, arte = data.points, data.artefacts
     groups: dict[tuple, list[str]] = {}
-    for m in data.measurements():
-        feats = set(pts.feature[pts.measurement == m])
+    for m, rows in pts.measurement_rows().items():
+        feats = set(pts.feature[rows])
         kinds = tuple(sorted(arte.features[f].kind if f else "free" for f in feats))
         groups.setdefault(kinds, []).append(m)
     return [sorted(groups[key]) for key in sorted(groups)]

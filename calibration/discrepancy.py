@@ -48,8 +48,11 @@ import numpy as np
 from arm_model import NumericalError
 from arm_model.discrepancy import TrainingPoses, joint_levers, travel_shares
 
+from .schur import BlockNormal
+
 __all__ = ["EXTREME_SHARE", "RESOLVED_TRAVEL", "Discrepancy", "Growth", "JointGrowth", "extreme_folds", "fit_growth",
-           "fit_joint_growth", "fold_errors", "group_deletions", "holdable", "model_discrepancy"]
+           "fit_joint_growth", "fold_errors", "group_deletions", "deletion_shift", "LARGE_FOLD", "holdable",
+           "model_discrepancy"]
 
 log = logging.getLogger(__name__)
 
@@ -335,20 +338,18 @@ def holdable(prob, held) -> set:
     return out
 
 
-def group_deletions(js, solve, r: np.ndarray, groups, chunk: int = 2000, tol: float = 1e-9,
+def group_deletions(factor: BlockNormal, r: np.ndarray, groups, chunk: int = 2000, tol: float = 1e-9,
                     leverage: np.ndarray | None = None) -> list:
     """The group-deletion identity of a linearised joint fit, for each group of residual rows ``O`` in ``groups``
     (index arrays; Cook and Weisberg 1982, ch. 3): ``(e_O, M_O)`` with ``M_O = (I - H_OO)^-1``, ``H = J A^-1
-    J^T`` the hat matrix of the joint fit (``js`` the column-scaled Jacobian of every unknown, ``solve`` ``b ->
-    A^-1 b`` with the prior's precision in ``A``) and ``e_O = M_O r_O`` the group's prediction errors by the
-    fit without it, in weighted units (``r`` the weighted residuals); their covariance is ``var M_O``
-    (``var`` the variance of a weighted row); and ``d_O = A^-1 J_O^T e_O``, the change of the (scaled)
-    unknowns from the fit without the group to the fit with it (the other rows' residuals without it are
-    ``r + js d_O``). ``(None, None, None)`` for a group the fit cannot do without (an eigenvalue of ``I -
-    H_OO`` at ``tol`` or below: deleting it leaves an unknown undetermined). The groups are taken ``chunk``
-    rows at a time (one dense solve each). ``leverage``: an array (rows,) whose groups' rows take the diagonal of
-    ``H_OO`` (their leverage, from the same solve)."""
-    jr = js.tocsr()
+    J^T`` the hat matrix of the joint fit (``factor`` the normal matrix ``A`` of the column-scaled Jacobian ``J``
+    of every unknown, the prior's precision in it: :class:`~calibration.schur.BlockNormal`) and ``e_O = M_O r_O``
+    the group's prediction errors by the fit without it, in weighted units (``r`` the weighted residuals); their
+    covariance is ``var M_O`` (``var`` the variance of a weighted row). ``(None, None)`` for a group the fit cannot
+    do without (an eigenvalue of ``I - H_OO`` at ``tol`` or below: deleting it leaves an unknown undetermined).
+    ``H_OO`` is formed from the factor's blocks (:meth:`~calibration.schur.BlockNormal.parts`), the groups
+    ``chunk`` rows at a time. The change of the unknowns the group makes is :func:`deletion_shift`. ``leverage``: an
+    array (rows,) whose groups' rows take the diagonal of ``H_OO`` (their leverage)."""
     out: list = []
     i = 0
     while i < len(groups):
@@ -357,44 +358,45 @@ def group_deletions(js, solve, r: np.ndarray, groups, chunk: int = 2000, tol: fl
             batch.append(np.asarray(groups[i], dtype=int))
             n += len(batch[-1])
             i += 1
-        out += _deletion_batch(jr, solve, r, batch, tol, leverage)
+        out += _deletion_batch(factor, r, batch, tol, leverage)
     return out
 
 
-#: below this many unknowns a batch's ``H_OO`` is one dense product (faster there than the sparse products of
-#: :func:`_hat_blocks`, whose Python loop costs the small fits of a campaign more than it saves: the test suite's
-#: calibration files 21 -> 27 s of CPU with the sparse products alone); from it on, the sparse products (a 9710-point
-#: campaign of ~5000 unknowns: 161 -> 106 s of CPU for the whole calibrate)
-DENSE_UNKNOWNS = 2000
+def deletion_shift(factor: BlockNormal, rows: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """``d_O = A^-1 J_O^T e_O``: the change of the (scaled) unknowns from the fit without the rows ``O`` to the fit
+    with them (``e_O`` their prediction errors, :func:`group_deletions`; the other rows' residuals without them are
+    ``r + J d_O``)."""
+    return factor.solve(factor.j[rows].T @ e)
 
 
-def _hat_blocks(js_o, z: np.ndarray, pos: np.ndarray) -> np.ndarray:
-    """``H_OO`` (groups, size, size) of the groups at positions ``pos`` (groups, size) of the sparse rows ``js_o`` and
-    of ``z = (A^-1 J_O^T)^T``: one sparse product a group for large groups, one a pair of positions for small ones."""
-    g, size = pos.shape
+def _hat_blocks(parts, pos: np.ndarray) -> np.ndarray:
+    """``H_OO`` (groups, size, size) of the groups at positions ``pos`` (groups, size) of the rows of ``parts``
+    (:meth:`~calibration.schur.BlockNormal.parts`): the parameters' part by one product, the nuisance part (rows
+    of one component only) by one sparse product a group for large groups, one a pair of positions for small
+    ones."""
+    g, gs, y, jn = parts
+    h = np.einsum("gip,gjp->gij", gs[pos], g[pos])
+    size = pos.shape[1]
+    if y is None:                                       # no nuisance block
+        return h
     if size > 16:
-        return np.stack([np.asarray(js_o[p] @ z[p].T) for p in pos])
-    h = np.empty((g, size, size))
+        return h + np.stack([(y[p] @ jn[p].T).toarray() for p in pos])
     for i in range(size):
-        rows = js_o[pos[:, i]]
-        for j in range(size):
-            h[:, i, j] = np.asarray(rows.multiply(z[pos[:, j]]).sum(axis=1)).ravel()
+        rows = y[pos[:, i]]
+        for k in range(size):
+            h[:, i, k] += np.asarray(rows.multiply(jn[pos[:, k]]).sum(axis=1)).ravel()
     return h
 
 
-def _deletion_batch(jr, solve, r: np.ndarray, batch: list, tol: float, leverage: np.ndarray | None) -> list:
-    """:func:`group_deletions` of the groups ``batch`` (one dense solve; the groups of one size together)."""
-    js_o = jr[np.concatenate(batch)]
-    z = solve(js_o.T.toarray()).T                       # (rows, unknowns): A^-1 J_O^T, row by row
-    jd = js_o.toarray() if z.shape[1] < DENSE_UNKNOWNS else None
+def _deletion_batch(factor: BlockNormal, r: np.ndarray, batch: list, tol: float, leverage: np.ndarray | None) -> list:
+    """:func:`group_deletions` of the groups ``batch`` (the groups of one size together)."""
+    parts = factor.parts(np.concatenate(batch))
     start = np.cumsum([0] + [len(o) for o in batch])
     out: list = [None] * len(batch)
     for size in np.unique(np.diff(start)):
         which = np.flatnonzero(np.diff(start) == size)
-        pos = start[which][:, None] + np.arange(size)   # (groups, size) positions in js_o and z
-        # H_OO = J_O A^-1 J_O^T of each group: the sparse rows times z (a row of J_O touches the parameters and its
-        # own instance's unknowns only, so this costs rows^2 x nonzeros a row, not rows^2 x unknowns)
-        h = np.einsum("giu,gju->gij", jd[pos], z[pos]) if jd is not None else _hat_blocks(js_o, z, pos)
+        pos = start[which][:, None] + np.arange(size)   # (groups, size) positions in the batch's rows
+        h = _hat_blocks(parts, pos)
         rows = np.stack([batch[g] for g in which])
         if leverage is not None:
             leverage[rows] = np.einsum("gii->gi", h)
@@ -403,32 +405,69 @@ def _deletion_batch(jr, solve, r: np.ndarray, batch: list, tol: float, leverage:
         m = np.full_like(ih, np.nan)
         m[ok] = np.linalg.inv(ih[ok])
         e = np.einsum("gij,gj->gi", m, r[rows])
-        d = np.einsum("giu,gi->gu", z[pos], e)
         for g, k in enumerate(which):
-            out[k] = (e[g], m[g], d[g]) if ok[g] else (None, None, None)
+            out[k] = (e[g], m[g]) if ok[g] else (None, None)
     return out
 
 
-def fold_errors(prob, r: np.ndarray, js, solve, var: float, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+#: a fold of more residual rows than this is deleted by the normal matrix of the fit without it
+#: (:func:`_fold_without`) instead of by ``(I - H_OO)^-1`` in full (rows^2 memory, rows^3 time)
+LARGE_FOLD = 500
+
+
+def _fold_without(factor: BlockNormal, r: np.ndarray, rows: np.ndarray, tol: float) -> tuple | None:
+    """``(e_O, diag M_O)`` of :func:`group_deletions` for a large group ``rows``, by the other side of Woodbury's
+    identity: ``M_O = I + J_O A_-O^-1 J_O^T`` with ``A_-O = A - J_O^T J_O`` the normal matrix of the fit without
+    the group (:meth:`~calibration.schur.BlockNormal.without`), so ``e_O = r_O + J_O A_-O^-1 J_O^T r_O``; None when
+    the smallest eigenvalue of ``I - H_OO``, ``1 / (1 + mu)`` with ``mu`` the largest of ``J_O A_-O^-1 J_O^T``
+    (Lanczos), is at ``tol`` or below, or ``A_-O`` is singular: the criterion of :func:`group_deletions`."""
+    from scipy.sparse.linalg import LinearOperator, eigsh
+    try:
+        rest = factor.without(rows)
+    except NumericalError:
+        return None
+    jo = factor.j[rows]
+    n = len(rows)
+    if n > 1:
+        op = LinearOperator((n, n), matvec=lambda x: jo @ rest.solve(jo.T @ np.ravel(x)), dtype=float)
+        mu = float(eigsh(op, k=1, which="LA", tol=1e-3, v0=np.ones(n), return_eigenvectors=False)[0])
+    else:
+        mu = float(rest.leverage(jo)[0])
+    if 1.0 / (1.0 + mu) <= tol:
+        return None
+    return r[rows] + jo @ rest.solve(jo.T @ r[rows]), 1.0 + rest.leverage(jo)
+
+
+def fold_errors(prob, r: np.ndarray, factor: BlockNormal, var: float, rows: np.ndarray,
+                tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray] | None:
     """The prediction errors [m] of the residual ``rows`` of a fit of ``prob`` by the fit without them, and the
     variances [m^2] that fit predicts for them (noise and posterior), for the model linearised at the solution:
-    ``(I - H_OO)^-1 r_O`` and the diagonal of ``var (I - H_OO)^-1`` (:func:`group_deletions`), in metres (each
-    row times its sigma); None when the fit cannot do without the rows. Arguments as :func:`model_discrepancy`."""
-    e, m, _ = group_deletions(js, solve, r, [rows])[0]
-    if e is None:
-        return None
+    ``(I - H_OO)^-1 r_O`` and the diagonal of ``var (I - H_OO)^-1`` (:func:`group_deletions`; beyond
+    :data:`LARGE_FOLD` rows by :func:`_fold_without`), in metres (each row times its sigma); None when the fit
+    cannot do without the rows. Arguments as :func:`model_discrepancy`."""
+    if len(rows) > LARGE_FOLD:
+        got = _fold_without(factor, r, rows, tol)
+        if got is None:
+            return None
+        e, m_diag = got
+    else:
+        e, m = group_deletions(factor, r, [rows], tol=tol)[0]
+        if e is None:
+            return None
+        m_diag = np.diag(m)
     sig = prob.sigma[rows]
-    return sig * e, var * np.diag(m) * sig ** 2
+    return sig * e, var * m_diag * sig ** 2
 
 
-def model_discrepancy(prob, r: np.ndarray, js, solve, var: float, share: float = EXTREME_SHARE) -> Discrepancy | None:
+def model_discrepancy(prob, r: np.ndarray, factor: BlockNormal, var: float,
+                      share: float = EXTREME_SHARE) -> Discrepancy | None:
     """The model discrepancy of a fit of ``prob`` (see the module docstring).
 
     Args:
         prob: the :class:`~calibration.problem.Problem` fitted (its rows, their points and sigmas [m]).
         r: (rows,) weighted residuals at the solution.
-        js: the column-scaled Jacobian (rows x unknowns: free parameters and nuisance), sparse.
-        solve: ``b -> A^-1 b`` with ``A = js^T js`` plus the prior's precision (scaled alike).
+        factor: the normal matrix ``A`` of the column-scaled Jacobian (rows x unknowns: free parameters and
+            nuisance) plus the prior's precision (scaled alike): :class:`~calibration.schur.BlockNormal`.
         var: the variance of a weighted row (``s0^2``, or 1 with stated uncertainties).
 
     Returns None when no fold can be formed (no joint varies, too few points)."""
@@ -447,7 +486,7 @@ def model_discrepancy(prob, r: np.ndarray, js, solve, var: float, share: float =
         rows = np.flatnonzero(point_rows & np.isin(rp, sorted(held)))
         if not len(rows):
             continue
-        got = fold_errors(prob, r, js, solve, var, rows)
+        got = fold_errors(prob, r, factor, var, rows)
         if got is None:
             continue
         e, v = got

@@ -158,8 +158,7 @@ class Problem:
         ball = self.model.desc.probe.ball_diameter
         by_key: dict[tuple[str, str], int] = {}
         unused: list[np.ndarray] = []
-        for m in pts.measurements():
-            rows_m = np.flatnonzero(pts.measurement == m)
+        for m, rows_m in pts.measurement_rows().items():
             for f in dict.fromkeys(pts.feature[rows_m].tolist()):
                 rows = rows_m[pts.feature[rows_m] == f]
                 kind = arte.features[f].kind if f else "point"

@@ -149,14 +149,14 @@ def band_odds(n: int, p: float = 0.95, band=BAND) -> tuple[float, float]:
 def captured_linearisation():
     """Within the block, a dict that holds the last fit's linearisation at its solution, as
     :func:`calibration.calibrate` hands it to :func:`calibration.discrepancy.model_discrepancy` (``prob``, ``r``,
-    ``js``, ``solve``, ``var``: see there)."""
+    ``factor``, ``var``: see there)."""
     mod = importlib.import_module("calibration.calibrate")
     got: dict = {}
     original = mod.model_discrepancy
 
-    def spy(prob, r, js, solve, var, *args, **kwargs):
-        got.update(prob=prob, r=r, js=js, solve=solve, var=var)
-        return original(prob, r, js, solve, var, *args, **kwargs)
+    def spy(prob, r, factor, var, *args, **kwargs):
+        got.update(prob=prob, r=r, factor=factor, var=var)
+        return original(prob, r, factor, var, *args, **kwargs)
     mod.model_discrepancy = spy
     try:
         yield got
@@ -180,17 +180,13 @@ def _positive_part(m) -> np.ndarray:
 
 
 def _whitened(lin: dict) -> tuple:
-    """``(js, r, solve)`` of the linearised fit ``lin`` with its rows divided by ``sqrt(var)``, so that a row's
-    variance is 1 and ``solve`` (``b -> A^-1 b``, ``A = js^T js + diag(damp)``, the prior's precision ``damp`` as the
-    fit put it in its normal matrix) gives the posterior itself, as the result's covariance is computed:
-    ``(J^T J / var + P)^-1``."""
-    js, r, solve, var = (lin[key] for key in ("js", "r", "solve", "var"))
-    n = js.shape[1]
-    jtj = (js.T @ js).toarray()
-    damp = np.diag(np.linalg.inv(solve(np.eye(n)))) - np.diag(jtj)
-    a_inv = np.linalg.inv(jtj / var + np.diag(np.maximum(damp, 0.0)))
-    a_inv = 0.5 * (a_inv + a_inv.T)
-    return js / math.sqrt(var), r / math.sqrt(var), lambda b: a_inv @ b
+    """``(factor, r)`` of the linearised fit ``lin`` with its rows divided by ``sqrt(var)``, so that a row's variance
+    is 1 and ``factor`` (:class:`calibration.schur.BlockNormal` of ``A = J^T J / var + diag(damping)``, the prior's
+    precision as the fit put it in its normal matrix) gives the posterior itself, as the result's covariance is
+    computed: ``(J^T J / var + P)^-1``."""
+    from calibration.schur import BlockNormal
+    factor, r, var = lin["factor"], lin["r"], lin["var"]
+    return BlockNormal(factor.j / math.sqrt(var), factor.n_par, factor.damping), r / math.sqrt(var)
 
 
 def robust_covariance(name: str, k: int, lin: dict) -> np.ndarray:
@@ -201,27 +197,31 @@ def robust_covariance(name: str, k: int, lin: dict) -> np.ndarray:
     it plus the positive part of ``mean_F (d_F d_F^T - C_F)`` over the extrapolative folds F
     (:func:`calibration.discrepancy.extreme_folds`), ``C_F = Z_F^T (I - H_FF)^-1 Z_F`` (``Z_F = J_F A^-1``) the
     covariance of ``d_F`` when the model holds."""
-    from calibration.discrepancy import extreme_folds, group_deletions, holdable
+    from calibration.discrepancy import deletion_shift, extreme_folds, group_deletions, holdable
     prob = lin["prob"]
-    js, r, solve = _whitened(lin)
-    post = solve(np.eye(js.shape[1]))[:k, :k]
+    factor, r = _whitened(lin)
+    js, solve = factor.j, factor.solve
+    post = solve(np.eye(js.shape[1])[:, :k])[:k]
     rp = prob.row_point
     point_rows = (prob.row_distance < 0) & (rp >= 0)
     pts = np.unique(rp[point_rows])
     if name == "posterior":
         return post
     if name == "jackknife":
-        shifts = np.array([d[:k] for _, _, d in group_deletions(js, solve, r, [np.flatnonzero(point_rows & (rp == i))
-                                                                               for i in pts]) if d is not None])
+        groups = [np.flatnonzero(point_rows & (rp == i)) for i in pts]
+        dels = group_deletions(factor, r, groups)
+        shifts = np.array([deletion_shift(factor, o, e)[:k] for o, (e, _) in zip(groups, dels, strict=True)
+                           if e is not None])
         return lifted(post, shifts.T @ shifts)
     if name != "fold-shift":
         raise ValueError(f"unknown parameter covariance {name!r} (known: {', '.join(COVARIANCES)})")
     excess, n = np.zeros((k, k)), 0
     for fold in extreme_folds(prob.data.points.q[pts]):
         rows = np.flatnonzero(point_rows & np.isin(rp, sorted(holdable(prob, pts[fold]))))
-        _, m, d = group_deletions(js, solve, r, [rows])[0] if len(rows) else (None, None, None)
-        if d is None:
+        e, m = group_deletions(factor, r, [rows])[0] if len(rows) else (None, None)
+        if e is None:
             continue
+        d = deletion_shift(factor, rows, e)
         z = solve(js[rows].toarray().T).T[:, :k]
         excess += np.outer(d[:k], d[:k]) - z.T @ m @ z
         n += 1

@@ -223,3 +223,17 @@ def test_every_description_written_reads_back_or_is_not_written(nominal):
         format_description(replace(nominal, joints=tuple(joints)))
     with pytest.raises(NumericalError, match="no stylus"):
         format_description(nominal.with_probe(lever=0.0))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.sampled_from(["a", "b", "m-10", "m-2", "Z"]), max_size=30))
+def test_measurement_rows_are_each_measurements_rows_in_order(ids):
+    """:meth:`PointSet.measurement_rows` (one sort) equals a pass over every row a measurement, in order of first
+    appearance (:meth:`PointSet.measurements`)."""
+    from arm_model.io import PointSet
+    m = np.array(ids, dtype=object)
+    pts = PointSet(None, m, m, np.zeros((len(m), 7)))
+    got = pts.measurement_rows()
+    assert list(got) == pts.measurements()
+    for k, rows in got.items():
+        np.testing.assert_array_equal(rows, np.flatnonzero(m == k))

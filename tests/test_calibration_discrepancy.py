@@ -5,6 +5,7 @@ into ``aacmm tip``'s uncertainty."""
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
 from calibration import FitOptions, Weights, calibrate, make_data
 from calibration.discrepancy import extreme_folds, fold_errors, holdable
 from calibration.problem import Problem
+from calibration.schur import BlockNormal
 from calibration.solver import levenberg_marquardt
 from calibration.validation import heldout_residuals
 
@@ -53,8 +55,8 @@ def test_extreme_folds_take_both_ends_of_every_moving_joint():
 
 def _dense_system(model, res):
     """The joint fit of ``res`` linearised at its solution, built here from the problem's Jacobian (dense):
-    the problem, weighted residuals, the scaled Jacobian, a solver of the normal matrix with the prior's
-    precision, and that matrix."""
+    the problem, weighted residuals, its normal matrix with the prior's precision factored
+    (:class:`~calibration.schur.BlockNormal`), that matrix and the Jacobian (dense)."""
     free = [model.spec.index(n) for n in res.free]
     prob = Problem(model, res.data, res.weights, free, reference=res.reference_mode)
     st = levenberg_marquardt(prob.with_free([]), res.p, prob.initial_states(res.p)).states
@@ -62,7 +64,9 @@ def _dense_system(model, res):
     j = np.hstack([ev.jp, ev.jt.toarray()])
     a = j.T @ j
     a[np.arange(len(free)), np.arange(len(free))] += 1.0 / res.prior_sd ** 2
-    return prob, ev.r, sp.csc_matrix(j), (lambda b: np.linalg.solve(a, b)), a, j
+    damp = np.zeros(j.shape[1])
+    damp[:len(free)] = 1.0 / res.prior_sd ** 2
+    return prob, ev.r, BlockNormal(j, len(free), damp), a, j
 
 
 def test_group_deletion_predicts_the_refit_without_the_held_out_poses(model):
@@ -72,11 +76,11 @@ def test_group_deletion_predicts_the_refit_without_the_held_out_poses(model):
     fit without them (Woodbury's other side, ``var sigma^2 (1 + j A_-O^-1 j^T)``) to 1e-9."""
     data = _campaign(model, 1)
     res = calibrate(model, data, FitOptions(weights=W, prior_scale=1.0))
-    prob, r, js, solve, a, j = _dense_system(model, res)
+    prob, r, factor, a, j = _dense_system(model, res)
     used = np.unique(prob.row_point[prob.row_point >= 0])
     held = np.array(sorted(holdable(prob, used[extreme_folds(data.points.q[used], 0.1)[2]])))
     rows = np.flatnonzero((prob.row_distance < 0) & np.isin(prob.row_point, held))
-    e, v = fold_errors(prob, r, js, solve, 1.0, rows)
+    e, v = fold_errors(prob, r, factor, 1.0, rows)
     train = ~np.isin(np.arange(len(data)), held)
     sizes = dict(zip(res.free, res.prior_sd, strict=True))
     refit = calibrate(model, data.select(train), FitOptions(free=res.free, weights=res.weights, prior_scale=1.0,
@@ -566,33 +570,83 @@ def test_no_output_over_the_training_poses_file(tmp_path, nominal):
     assert (tmp_path / "poses.csv").read_bytes() == before
 
 
-@pytest.mark.parametrize("dense_unknowns", [0, 10 ** 9], ids=["sparse", "dense"])
-def test_group_deletions_match_the_dense_hat_matrix_by_hand(monkeypatch, dense_unknowns):
-    """The block-sparse products of :func:`group_deletions` (and its dense product, for few unknowns) equal the dense
-    formulas (H = J A^-1 J^T in full), for small groups (one product a pair of positions) and a large one (one sparse
-    product a group), to 1e-10."""
-    from calibration import discrepancy
-    from calibration.discrepancy import group_deletions
-    monkeypatch.setattr(discrepancy, "DENSE_UNKNOWNS", dense_unknowns)
-    rng = np.random.default_rng(7)
-    n_par, n_inst, per = 5, 30, 8                          # parameters; instances of 3 unknowns, 8 rows each
+def _blocked(seed: int = 7):
+    """A random linear fit shaped as a calibration's: 5 parameters with a prior, 30 instances of 3 unknowns with 8
+    rows each (a row touches the parameters and its own instance only), two rows linking instances 0 and 1 (a
+    certified length); ``(j, damping)``."""
+    rng = np.random.default_rng(seed)
+    n_par, n_inst, per = 5, 30, 8
     rows = n_inst * per
-    j = np.zeros((rows, n_par + 3 * n_inst))
-    j[:, :n_par] = rng.normal(size=(rows, n_par))
-    for k in range(n_inst):                                 # each row touches its own instance's unknowns only
+    j = np.zeros((rows + 2, n_par + 3 * n_inst))
+    j[:, :n_par] = rng.normal(size=(rows + 2, n_par))
+    for k in range(n_inst):
         j[k * per:(k + 1) * per, n_par + 3 * k:n_par + 3 * k + 3] = rng.normal(size=(per, 3))
-    a = j.T @ j + np.diag(np.r_[np.full(n_par, 0.1), np.zeros(3 * n_inst)])
-    r = rng.normal(size=rows)
+    j[rows:, n_par:n_par + 6] = rng.normal(size=(2, 6))
+    return j, np.r_[np.full(n_par, 0.1), np.zeros(3 * n_inst)]
+
+
+@pytest.mark.parametrize(("dense_unknowns", "hub_degree", "dense"), [(0, 64, 5), (0, 3, 11), (400, 64, 95)],
+                         ids=["blocks", "hubs", "dense"])
+def test_block_normal_equals_the_dense_normal_matrix(monkeypatch, dense_unknowns, hub_degree, dense):
+    """:class:`~calibration.schur.BlockNormal` (the Schur complement of the nuisance block) against numpy on the dense
+    normal matrix: solves, log determinant, the leverages of the rows and of rows outside the fit, to 1e-10; also with
+    the nuisance unknowns that meet more than 3 others taken with the parameters (the two instances a length links),
+    and with every unknown dense (few unknowns)."""
+    from calibration import schur, solver
+    from calibration.schur import BlockNormal
+    monkeypatch.setattr(schur, "HUB_DEGREE", hub_degree)
+    monkeypatch.setattr(solver, "DENSE_UNKNOWNS", dense_unknowns)
+    j, damp = _blocked()
+    a = j.T @ j + np.diag(damp)
+    f = BlockNormal(sp.csc_matrix(j), 5, damp)
+    assert len(f._dense) == dense
+    b = np.random.default_rng(1).normal(size=(a.shape[0], 3))
+    np.testing.assert_allclose(f.solve(b), np.linalg.solve(a, b), rtol=1e-10, atol=1e-10)
+    assert abs(f.log_abs_det() - np.linalg.slogdet(a)[1]) <= 1e-10 * abs(np.linalg.slogdet(a)[1])
+    np.testing.assert_allclose(f.leverage(), np.einsum("ij,ji->i", j, np.linalg.solve(a, j.T)), rtol=1e-10)
+    out = np.arange(10, 100, 3)                     # rows of the fit without them
+    a_out = a - j[out].T @ j[out]
+    np.testing.assert_allclose(f.without(out).leverage(j[out]),
+                               np.einsum("ij,ji->i", j[out], np.linalg.solve(a_out, j[out].T)), rtol=1e-10)
+
+
+@pytest.mark.parametrize(("large_fold", "dense_unknowns"), [(10 ** 9, 0), (0, 0), (10 ** 9, 400)],
+                         ids=["hat", "without", "dense"])
+def test_group_deletions_match_the_dense_hat_matrix_by_hand(monkeypatch, large_fold, dense_unknowns):
+    """:func:`group_deletions` (``H_OO`` from the Schur complement's blocks) equals the dense formulas (H = J A^-1
+    J^T in full), for small groups (one product a pair of positions), a large one (one sparse product a group) and
+    the two rows of a length, to 1e-10; :func:`fold_errors` the same by ``(I - H_OO)^-1`` and by the fit without the
+    fold (``large_fold`` 0)."""
+    from calibration import discrepancy, solver
+    from calibration.discrepancy import deletion_shift, group_deletions
+    from calibration.schur import BlockNormal
+    monkeypatch.setattr(discrepancy, "LARGE_FOLD", large_fold)
+    monkeypatch.setattr(solver, "DENSE_UNKNOWNS", dense_unknowns)
+    j, damp = _blocked()
+    rows = len(j) - 2
+    a = j.T @ j + np.diag(damp)
+    rng = np.random.default_rng(8)
+    r = rng.normal(size=len(j))
     groups = [np.array([0]), np.array([9]), np.array([17, 18, 30]), np.array([40, 50, 60]),
-              rng.choice(np.arange(64, rows), 40, replace=False)]
-    lev = np.full(rows, np.nan)
-    got = group_deletions(sp.csc_matrix(j), lambda b: np.linalg.solve(a, b), r, groups, chunk=20, leverage=lev)
+              rng.choice(np.arange(64, rows), 40, replace=False), np.array([rows, rows + 1])]
+    lev = np.full(len(j), np.nan)
+    factor = BlockNormal(sp.csc_matrix(j), 5, damp)
+    got = group_deletions(factor, r, groups, chunk=20, leverage=lev)
     h = j @ np.linalg.solve(a, j.T)
-    for o, (e, m, d) in zip(groups, got, strict=True):
+    for o, (e, m) in zip(groups, got, strict=True):
         m_ref = np.linalg.inv(np.eye(len(o)) - h[np.ix_(o, o)])
         e_ref = m_ref @ r[o]
         np.testing.assert_allclose(m, m_ref, rtol=1e-10, atol=1e-10 * np.abs(m_ref).max())
         np.testing.assert_allclose(e, e_ref, rtol=1e-10, atol=1e-10 * np.abs(e_ref).max())
         d_ref = np.linalg.solve(a, j[o].T @ e_ref)
-        np.testing.assert_allclose(d, d_ref, rtol=1e-10, atol=1e-10 * np.abs(d_ref).max())
+        np.testing.assert_allclose(deletion_shift(factor, o, e), d_ref, rtol=1e-10, atol=1e-10 * np.abs(d_ref).max())
         np.testing.assert_allclose(lev[o], np.diag(h)[o], rtol=1e-10)
+    prob = SimpleNamespace(sigma=np.full(len(j), 2.0))
+    e, v = fold_errors(prob, r, factor, 3.0, groups[4])
+    m_ref = np.linalg.inv(np.eye(40) - h[np.ix_(groups[4], groups[4])])
+    np.testing.assert_allclose(e, 2.0 * m_ref @ r[groups[4]], rtol=1e-10)
+    np.testing.assert_allclose(v, 12.0 * np.diag(m_ref), rtol=1e-10)
+    only = np.zeros((4, 2))                          # the fit cannot do without row 3 (the only one on column 1)
+    only[:, 0], only[3, 1] = 1.0, 1.0
+    one = SimpleNamespace(sigma=np.ones(4))
+    assert fold_errors(one, np.ones(4), BlockNormal(only, 2), 1.0, np.array([2, 3])) is None

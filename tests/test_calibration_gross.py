@@ -18,7 +18,8 @@ from arm_model.model import ArmModel
 from arm_model.sim.quick import SynthSpec, make_campaign
 from calibration import FitOptions, calibrate, make_data
 from calibration.calibrate import sigma_equivalent
-from calibration.discrepancy import group_deletions
+from calibration.discrepancy import deletion_shift, group_deletions
+from calibration.schur import BlockNormal
 
 
 def _linear(seed, n=40, k=6, prior=0.5):
@@ -39,8 +40,10 @@ def test_group_deletion_is_the_refit_without_the_group():
     j, y, beta, a, r = _linear(1)
     prior = 0.5
     groups = [np.array([0, 1, 2]), np.array([7]), np.array([20, 5])]
-    got = group_deletions(sp.csc_matrix(j), lambda b: np.linalg.solve(a, b), -r, groups, chunk=4)
-    for o, (e, m, d) in zip(groups, got, strict=True):
+    factor = BlockNormal(sp.csc_matrix(j), j.shape[1], prior)
+    got = group_deletions(factor, -r, groups, chunk=4)
+    for o, (e, m) in zip(groups, got, strict=True):
+        d = deletion_shift(factor, o, e)
         keep = np.setdiff1d(np.arange(len(y)), o)
         jk = np.vstack([j[keep], np.sqrt(prior) * np.eye(j.shape[1])])
         yk = np.concatenate([y[keep], np.zeros(j.shape[1])])
@@ -53,14 +56,12 @@ def test_group_deletion_is_the_refit_without_the_group():
 
 
 def test_group_the_fit_cannot_do_without_is_not_tested():
-    """Rows whose deletion leaves an unknown undetermined (the only row on a column): (None, None, None)."""
+    """Rows whose deletion leaves an unknown undetermined (the only row on a column): (None, None)."""
     j = np.zeros((5, 2))
     j[:, 0] = 1.0
     j[4, 1] = 1.0
-    a = j.T @ j
-    got = group_deletions(sp.csc_matrix(j), lambda b: np.linalg.solve(a, b), np.ones(5), [np.array([4]),
-                                                                                          np.array([0, 1])])
-    assert got[0] == (None, None, None) and got[1][0] is not None
+    got = group_deletions(BlockNormal(sp.csc_matrix(j), 2), np.ones(5), [np.array([4]), np.array([0, 1])])
+    assert got[0] == (None, None) and got[1][0] is not None
 
 
 def test_deletion_statistic_is_chi_square_on_clean_gaussian_data():
@@ -71,7 +72,7 @@ def test_deletion_statistic_is_chi_square_on_clean_gaussian_data():
     for seed in range(300):
         j, y, beta, a, r = _linear(seed + 10, n=30, k=8, prior=1e-3)
         groups = [np.arange(3 * i, 3 * i + 3) for i in range(10)]
-        for e, m, _ in group_deletions(sp.csc_matrix(j), lambda b: np.linalg.solve(a, b), r, groups):
+        for e, m in group_deletions(BlockNormal(sp.csc_matrix(j), j.shape[1], 1e-3), r, groups):
             t.append(float(e @ np.linalg.solve(m, e)))      # = r_O^T M_O r_O
     t = np.array(t)
     assert abs(np.mean(t) / 3.0 - 1.0) < 0.05

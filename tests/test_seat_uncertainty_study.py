@@ -95,14 +95,13 @@ def _line_fit(x, y) -> dict:
     (:func:`study.captured_linearisation`): one row a point, its angle ``x``."""
     from types import SimpleNamespace
 
-    import scipy.sparse as sp
+    from calibration.schur import BlockNormal
     a = np.column_stack([np.ones_like(x), x])
     a_inv = np.linalg.inv(a.T @ a)
     r = y - a @ (a_inv @ a.T @ y)
     prob = SimpleNamespace(row_point=np.arange(len(x)), row_distance=np.full(len(x), -1.0), instances=[],
                            data=SimpleNamespace(points=SimpleNamespace(q=x[:, None])))
-    return {"prob": prob, "r": r, "js": sp.csc_matrix(a), "solve": lambda b: a_inv @ b,
-            "var": float(r @ r / (len(x) - 2))}
+    return {"prob": prob, "r": r, "factor": BlockNormal(a, 2), "var": float(r @ r / (len(x) - 2))}
 
 
 def test_fold_shift_widens_the_slope_where_the_line_misses_a_curvature():
