@@ -17,6 +17,7 @@ deviation's own u, calibration.placements.deviation_u), for
 * ``oracle``: ``calibrate`` told the truth's effects (joint compliance if the truth has it, the eccentricity or
   gain of the truth's joints only): what the right structure gives on these data,
 * ``drift`` (asked by ``--methods``): ``calibrate --effect joint_compliance --effect artefact_drift``,
+* ``close-loop-drift`` (asked by ``--methods``): ``close-loop --effect joint_compliance --effect artefact_drift``,
 * ``truth``: the hidden truth applied to the same readings (the figures' floor: the scatter alone, and with
   ``--capture sweep-drift`` the plate's creep).
 
@@ -117,8 +118,9 @@ PLACES = {"front": ([0.383, 0.003, 0.001], [0, -1, 0], [0, 0, 1]),
           "right": ([0.382, 0.432, 0.007], [0, 1, 0], [0, 0, 1]),
           "back-high": ([-0.450, -0.009, 0.880], [0, 1, 0], [1, 0, 0])}
 METHODS = ("close-loop", "calibrate", "geometry", "nominal-tip", "oracle")
-#: methods run when asked (``--methods``): ``drift``, calibrate with the artefact's drift beside the joint compliance
-EXTRA_METHODS = ("drift",)
+#: methods run when asked (``--methods``): ``drift``, calibrate with the artefact's drift beside the joint compliance;
+#: ``close-loop-drift``, close-loop from that base model
+EXTRA_METHODS = ("drift", "close-loop-drift")
 #: how the seats' articulations are captured (``--capture``): in random order; in sweeps (each seat's poses in turn
 #: round it, as a robot program takes them, the real files' order); in sweeps while the plate creeps; in random order
 #: while it creeps (the creep then unlike any pose's error)
@@ -281,6 +283,7 @@ def simulate_robot(robot: Robot, folder: Path, urdf: Path = URDF, capture: str =
 
 OPTIONS = {"close-loop": [], "calibrate": [], "geometry": ["--effect", "none"],
            "drift": ["--effect", "joint_compliance", "--effect", "artefact_drift"],
+           "close-loop-drift": ["--effect", "joint_compliance", "--effect", "artefact_drift"],
            "nominal-tip": ["--effect", "none", "--free", "probe.x", "--free", "probe.y", "--free", "probe.z"]}
 
 
