@@ -332,6 +332,25 @@ def _fitted_on(loop: LoopResult) -> str:
             "every point but the held-out test set's (--holdout)")
 
 
+def _pair_tie_html(s) -> str:
+    """The report's lines on a stage's pair (added together) and tie (chosen by the tie rule)."""
+    parts = []
+    if s.added.parts:
+        parts.append("<p>A pair, added together: " + html.escape(", ".join(c.name for c in s.added.parts))
+                     + " (each significant given the other, better on the held-out folds than either alone).</p>")
+    if s.tie:
+        parts.append(f"<p>A tie: the held-out units did not tell these candidates apart; chosen "
+                     f"{html.escape(s.tie['chosen'])} by the tie rule ({html.escape(s.tie['rule'])}).</p>"
+                     + reports.html_table(("candidate", "parameters", "score p", "held-out RMS lower [%]",
+                                           "Wilcoxon p", "paired p (worse than the held-out best)"),
+                                          [(t["name"], t["parameters"], _g(t["score_p_value"], ".2g"),
+                                            _g(100 * t["relative_improvement"], ".1f"),
+                                            _g(t["wilcoxon_p_value"], ".2g"),
+                                            "-" if t["paired_p_value"] is None else _g(t["paired_p_value"], ".2g"))
+                                           for t in s.tie["candidates"]]))
+    return "".join(parts)
+
+
 def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | None = None,
                       warnings=(), conformance: dict | None = None, plots: bool = True) -> list[Path]:
     """Write the model file (:func:`write_loop_model`), ``summary.json``, ``report.html``,
@@ -378,19 +397,7 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
                             [(r["name"], _g(r["display_value"], ".5g"), _g(r["display_u"], ".2g"), r["display_unit"],
                               r["state"] + (f", phase {r['phase_deg']:.1f} deg" if "phase_deg" in r else ""))
                              for r in prm]))
-        if s.added.parts:
-            parts.append("<p>A pair, added together: " + html.escape(", ".join(c.name for c in s.added.parts))
-                         + " (each significant given the other, better on the held-out folds than either alone).</p>")
-        if s.tie:
-            parts.append(f"<p>A tie: the held-out units did not tell these candidates apart; chosen "
-                         f"{html.escape(s.tie['chosen'])} by the tie rule ({html.escape(s.tie['rule'])}).</p>"
-                         + reports.html_table(("candidate", "parameters", "score p", "held-out RMS lower [%]",
-                                               "Wilcoxon p", "paired p (worse than the held-out best)"),
-                                              [(t["name"], t["parameters"], _g(t["score_p_value"], ".2g"),
-                                                _g(100 * t["relative_improvement"], ".1f"),
-                                                _g(t["wilcoxon_p_value"], ".2g"),
-                                                "-" if t["paired_p_value"] is None else _g(t["paired_p_value"], ".2g"))
-                                               for t in s.tie["candidates"]]))
+        parts.append(_pair_tie_html(s))
         if s.nested or s.alternatives:
             parts.append("<p>The data cannot tell it from: "
                          + html.escape(", ".join(dict.fromkeys(s.nested + s.alternatives)))

@@ -130,7 +130,7 @@ def test_every_output_option_is_the_one_helper():
     """Every ``-o/--output`` of every subcommand comes from ``add_output_option``: one type (an empty path is
     refused), one help of the same promises; the commands that write are the ones we know."""
     from arm_model.cli import build_parser
-    from arm_model.cli_options import output_path
+    from arm_model.cli_options import file_output_path, output_path
     outputs = {}
     for words, sub in _subcommands(build_parser()):
         for action in sub._actions:
@@ -140,7 +140,7 @@ def test_every_output_option_is_the_one_helper():
                             "study poses", "close-loop", "live"}
     for words, action in outputs.items():
         assert action.option_strings == ["-o", "--output"] and action.required, words
-        assert action.type is output_path, words
+        assert action.type is (file_output_path if action.metavar == "FILE" else output_path), words
         assert "never" in action.help and "nothing is written outside it" in action.help, words
         assert ("whole or not at all" in action.help) != (words == "live"), words
 

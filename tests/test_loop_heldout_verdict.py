@@ -35,7 +35,7 @@ def _stage(rms_over_u: float, s0: float = 1.0, nuisance: int = NUIS, fit_over_st
             "chi2": ROWS * (rms_over_u / fit_over_stated) ** 2, "rms_weighted": rms_over_u / fit_over_stated,
             "rms_over_stated": rms_over_u, "chi2_stated": ROWS * rms_over_u ** 2, "rows_stated": ROWS,
             "propagated": None}
-    return SimpleNamespace(added=None, heldout=held, result=SimpleNamespace(s0=s0, **DESIGN), cv=[])
+    return SimpleNamespace(added=None, heldout=held, result=SimpleNamespace(s0=s0, **DESIGN), cv=[], tie=None)
 
 
 def test_a_test_set_three_times_its_stated_u_is_not_called_complete():
@@ -172,7 +172,8 @@ def test_the_verdict_says_what_the_escalation_offered_and_added(added):
     from calibration.candidates import Candidate
     gain = Candidate("gain j2", JointGain(joints=(1,)), "joint_gain", "j2")
     stages = [_stage(3.0)] + ([SimpleNamespace(added=gain, heldout={"rms_um": 100.0, "max_um": 290.0},
-                                               result=SimpleNamespace(s0=1.0, **DESIGN), cv=[])] if added else [])
+                                               result=SimpleNamespace(s0=1.0, **DESIGN), cv=[], tie=None)]
+                              if added else [])
     esc = {"families": ["joint_gain", "base_tilt"], "candidates": ["gain j1", "gain j2"]}
     v = verdict_text(stages, [], "", LoopSettings(), [], None, (), None, None, esc)
     assert ("The outer test set was worse than stated after the default families, so the opt-in families "
