@@ -33,7 +33,7 @@ import numpy as np
 from .errors import InputError, decode_text, open_input, text_lines
 
 __all__ = ["parse_number", "SPACE", "blank_record", "csv_records", "CsvBlock", "iter_csv_blocks", "csv_spans",
-           "format_csv", "format_row"]
+           "format_csv", "format_row", "label_rows"]
 
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-]?(?:nan|inf|infinity)",
                      re.IGNORECASE)
@@ -674,3 +674,12 @@ def format_csv(columns: dict, fmt="%.9g", header: bool = True, chunk: int = 16_3
             continue
         out.append(_rows_text(mats))
     return b"".join(out)
+
+
+def label_rows(labels) -> dict[str, np.ndarray]:
+    """``{label: its rows (file order)}`` of the (N,) ``labels`` (text), in order of first appearance, in one sort
+    (not one pass over every row a label)."""
+    ids, first, inverse = np.unique(np.asarray(labels), return_index=True, return_inverse=True)
+    order = np.argsort(inverse, kind="stable")
+    split = np.split(order, np.cumsum(np.bincount(inverse.ravel(), minlength=len(ids)))[:-1])
+    return {str(ids[k]): split[k] for k in np.argsort(first, kind="stable")}

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .csv_io import BLOCK_BYTES, csv_records, format_csv, iter_csv_blocks
+from .csv_io import BLOCK_BYTES, csv_records, format_csv, iter_csv_blocks, label_rows
 from .errors import InputError, id_problem, parse_toml, read_text, unknown_key
 from .output import atomic_write_bytes, guard_output
 from .readback import UnreadableOutput, read_back
@@ -163,12 +163,8 @@ class PointSet:
         return list(dict.fromkeys(self.measurement.tolist()))
 
     def measurement_rows(self) -> dict[str, np.ndarray]:
-        """``{measurement id: its rows (file order)}`` in order of first appearance, in one sort (not one pass over
-        every row a measurement)."""
-        ids, first, inverse = np.unique(self.measurement, return_index=True, return_inverse=True)
-        order = np.argsort(inverse, kind="stable")
-        split = np.split(order, np.cumsum(np.bincount(inverse.ravel(), minlength=len(ids)))[:-1])
-        return {str(ids[k]): split[k] for k in np.argsort(first, kind="stable")}
+        """``{measurement id: its rows (file order)}`` in order of first appearance (:func:`label_rows`)."""
+        return label_rows(self.measurement)
 
     def select(self, mask) -> PointSet:
         """The rows where ``mask`` (bool array or index array) holds, file order kept."""

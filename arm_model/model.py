@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .chain import NUMPY_OPS, ball_centre_expr
+from .csv_io import label_rows
 from .description import ArmDescription
 from .effects import ArtefactDrift, Effect, Geometry, ModelInputs
 from .params import ParamSpec, apply_params, param_spec, split_params
@@ -52,11 +53,10 @@ def capture_position(measurement: ArrayLike, time: ArrayLike | None = None) -> n
     by the time stamps ``time`` (N,) [s] where every point of the measurement has one and they span a time, else by
     the rows' order within the measurement (the capture order: the rows of one measurement keep their file order),
     evenly spaced; 0 for a measurement of one point. The time base of :class:`~arm_model.effects.ArtefactDrift`."""
-    meas = np.asarray(measurement, dtype=object)
+    meas = np.asarray(measurement)
     t = None if time is None else np.asarray(time, dtype=float)
     out = np.zeros(len(meas))
-    for m in dict.fromkeys(meas.tolist()):
-        rows = np.flatnonzero(meas == m)
+    for rows in label_rows(meas).values():
         stamps = None if t is None else t[rows]
         if stamps is not None and np.all(np.isfinite(stamps)) and np.ptp(stamps) > 0:
             out[rows] = (stamps - 0.5 * (stamps.min() + stamps.max())) / np.ptp(stamps)
@@ -69,10 +69,14 @@ def capture_columns(measurements: tuple[str, ...], measurement: ArrayLike, time:
                     ) -> np.ndarray:
     """(N, K) the capture place (:func:`capture_position`) of each point in the column of its measurement, one column
     each of ``measurements`` (K), 0 elsewhere: the ``capture`` input of :class:`~arm_model.effects.ArtefactDrift`."""
-    meas = np.asarray(measurement, dtype=object)
+    meas = np.asarray(measurement)
+    out = np.zeros((len(meas), len(measurements)))
     s = capture_position(meas, time)
-    return np.column_stack([np.where(meas == m, s, 0.0) for m in measurements]) if measurements else \
-        np.zeros((len(meas), 0))
+    rows = label_rows(meas)
+    for k, m in enumerate(measurements):
+        if m in rows:
+            out[rows[m], k] = s[rows[m]]
+    return out
 
 
 def reading_motion(q: ArrayLike, session: ArrayLike | None = None, time: ArrayLike | None = None) -> np.ndarray:

@@ -66,7 +66,7 @@ import numpy as np
 __all__ = ["GROUP_LENGTHS", "GROUP_OFFSETS", "GROUP_ANGLES", "GROUP_TIP", "GROUP_PROBE_COMPLIANCE", "BASE_SIZES",
            "PRIOR_DOMINATED", "BARELY_SEEN", "SCALE_RANGE", "MIN_EFFECTIVE", "TIP_SHARE", "LENGTH_SHARE", "MAX_ANGLE",
            "MIN_SIDE_SHARE", "MIN_SIDE_VISITS", "NIL_LOAD", "PriorSpec", "parameter_groups", "prior_spec",
-           "chain_length", "limits", "variance_ratio", "update_scales", "MAX_GAIN", "secant_gains", "both_sides",
+           "limits", "variance_ratio", "update_scales", "MAX_GAIN", "secant_gains", "both_sides",
            "side_visits", "unseen_side", "prior_only"]
 
 GROUP_LENGTHS = "lengths"
@@ -114,7 +114,7 @@ MIN_EFFECTIVE = 0.5
 #: description's, not a calibration)
 TIP_SHARE = 0.05
 #: the largest plausible error (one standard deviation) of a joint row's length, as a share of the chain's length
-#: (:func:`chain_length`: a metre-long arm, 5 mm; a machined or cast link is made to a small fraction of that)
+#: (`ArmDescription.chain_length`: a metre-long arm, 5 mm; a machined or cast link is made to a small fraction of that)
 LENGTH_SHARE = 0.005
 #: the largest plausible error (one standard deviation) [rad] of an angle of a joint row: an encoder's zero or an
 #: axis' tilt (50 mrad, 2.9 deg; the real TALOS's offsets the evidence puts at 19 mrad)
@@ -279,21 +279,14 @@ def _effect_sizes(model, data) -> dict[int, tuple[float, str, str]]:
     return out
 
 
-def chain_length(desc) -> float:
-    """The length [m] of the chain of ``desc``: the sum of its joint rows' translations (DH/MDH ``hypot(d, a)``, a
-    URDF origin's ``|(x, y, z)|``) and the tip's distance from the last joint's origin: the arm's size, at least its
-    reach."""
-    return float(desc.chain_length)
-
-
 def limits(model) -> np.ndarray:
     """The largest plausible standard deviation [SI] of each parameter's error, from the arm's own dimensions: the
     tip offset (probe.x/y/z) :data:`TIP_SHARE` of the tip's distance from the last joint's origin, a joint row's
-    length :data:`LENGTH_SHARE` of the chain's length (:func:`chain_length`), a joint row's angle
+    length :data:`LENGTH_SHARE` of the chain's length (`ArmDescription.chain_length`), a joint row's angle
     :data:`MAX_ANGLE`; each at least the length's or angle's plausible size at scale 1 (:data:`BASE_SIZES`); other
     parameters ``inf`` (their scale bounded by :data:`SCALE_RANGE` alone)."""
     spec, desc = model.spec, model.desc
-    length = max(LENGTH_SHARE * chain_length(desc), BASE_SIZES["m"])
+    length = max(LENGTH_SHARE * desc.chain_length, BASE_SIZES["m"])
     tip = max(TIP_SHARE * float(np.linalg.norm(desc.probe.p_last)), BASE_SIZES["m"])
     out = np.full(spec.size, math.inf)
     for i, (n, unit) in enumerate(zip(spec.names, spec.units, strict=True)):

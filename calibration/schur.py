@@ -21,16 +21,13 @@ unknowns, which grow with the rows.
 """
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
-import scipy.linalg as sla
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from arm_model import NumericalError
 
-from .solver import dense_enough
+from .solver import SINGULAR, NormalFactor, dense_enough
 
 __all__ = ["BlockNormal", "ROW_CHUNK", "HUB_DEGREE"]
 
@@ -41,9 +38,6 @@ HUB_DEGREE = 64
 
 #: rows whose parameter part ``g`` is held at once (rows x parameters doubles): bounds the memory of a leverage
 ROW_CHUNK = 20000
-
-_SINGULAR = ("unidentifiable: an unknown does not affect the residuals, the normal matrix is singular ({}) (too few "
-             "distinct points on a feature, a pose repeated, or a parameter the data cannot identify)")
 
 
 class BlockNormal:
@@ -81,10 +75,10 @@ class BlockNormal:
             jp = self._jp = self.j.toarray()
             s = jp.T @ jp
         s.flat[:: p + 1] += self.damping[self._dense]
-        self._s = _lu(0.5 * (s + s.T)) if p else None
+        self._s = NormalFactor(0.5 * (s + s.T)) if p else None
 
     def _solve_s(self, b: np.ndarray) -> np.ndarray:
-        return sla.lu_solve(self._s, b, check_finite=False) if self._s is not None else b
+        return self._s.solve(b) if self._s is not None else b
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """``A^-1 b`` for a vector or a matrix of columns ``b``."""
@@ -99,7 +93,7 @@ class BlockNormal:
 
     def log_abs_det(self) -> float:
         """``log |det A| = log |det D| + log |det S|``."""
-        s = 0.0 if self._s is None else float(np.sum(np.log(np.abs(np.diagonal(self._s[0])))))
+        s = 0.0 if self._s is None else self._s.log_abs_det()
         return self._logdet_d + s
 
     def _rows(self, rows) -> tuple[np.ndarray, sp.csr_matrix | None]:
@@ -148,17 +142,6 @@ def _indices(rows) -> bool:
     return isinstance(rows, np.ndarray) and rows.ndim == 1 and rows.dtype.kind in "iu"
 
 
-def _lu(a: np.ndarray):
-    """LAPACK's LU of ``a``; :class:`NumericalError` when exactly singular (as :class:`calibration.solver.
-    NormalFactor`)."""
-    with np.errstate(all="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", sla.LinAlgWarning)
-        lu = sla.lu_factor(a, check_finite=False)
-    if np.any(np.diagonal(lu[0]) == 0.0) or not np.all(np.isfinite(lu[0])):
-        raise NumericalError(_SINGULAR.format("a zero pivot"))
-    return lu
-
-
 def _block_inverse(d: sp.spmatrix) -> tuple[sp.csr_matrix, float]:
     """``(D^-1, log |det D|)`` of a symmetric sparse ``d`` that is block diagonal by the connected components of its
     pattern: each component's dense block inverted (LAPACK, the components of one size together)."""
@@ -183,7 +166,7 @@ def _block_inverse(d: sp.spmatrix) -> tuple[sp.csr_matrix, float]:
         np.add.at(blocks, (slot[label[d.row[sel]]], local[d.row[sel]], local[d.col[sel]]), d.data[sel])
         sign, logabs = np.linalg.slogdet(blocks)
         if np.any(sign == 0):
-            raise NumericalError(_SINGULAR.format("a nuisance block"))
+            raise NumericalError(SINGULAR.format("a nuisance block"))
         logdet += float(np.sum(logabs))
         inv = np.linalg.inv(blocks)
         rows.append(np.broadcast_to(idx[:, :, None], inv.shape).ravel())

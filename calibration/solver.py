@@ -30,7 +30,7 @@ from .problem import Evaluation, Problem
 
 __all__ = ["LMResult", "Prior", "levenberg_marquardt", "normal_solver", "normal_factor", "NormalFactor",
            "normal_matrix", "column_norms", "scale_columns", "dense_enough", "blas_threads", "RESTARTS",
-           "DENSE_UNKNOWNS", "tight_rows", "TIGHT_RATIO"]
+           "DENSE_UNKNOWNS", "tight_rows", "TIGHT_RATIO", "SINGULAR"]
 
 
 @dataclass
@@ -76,6 +76,11 @@ class Prior:
 DENSE_UNKNOWNS = 400
 
 
+#: the message of a normal matrix that is exactly singular ({}: what was singular)
+SINGULAR = ("unidentifiable: an unknown does not affect the residuals, the normal matrix is singular ({}) (too few "
+            "distinct points on a feature, a pose repeated, or a parameter the data cannot identify)")
+
+
 class NormalFactor:
     """LU factors of a normal matrix ``J^T J + diag(damping)``: :meth:`solve` and :meth:`log_abs_det`, dense
     (LAPACK ``getrf``) or sparse (SuperLU)."""
@@ -87,14 +92,12 @@ class NormalFactor:
                 with np.errstate(all="ignore"), warnings.catch_warnings():
                     warnings.simplefilter("ignore", sla.LinAlgWarning)
                     self._lu = sla.lu_factor(a, check_finite=False)
-                if np.any(np.diagonal(self._lu[0]) == 0.0):
+                if np.any(np.diagonal(self._lu[0]) == 0.0) or not np.all(np.isfinite(self._lu[0])):
                     raise RuntimeError("Factor is exactly singular")
             else:
                 self._superlu = spla.splu(sp.csc_matrix(a))
         except RuntimeError as exc:          # exactly singular
-            raise NumericalError(f"unidentifiable: an unknown does not affect the residuals, the normal matrix "
-                                 f"is singular ({exc}) (too few distinct points on a feature, a pose repeated, or "
-                                 "a parameter the data cannot identify)") from None
+            raise NumericalError(SINGULAR.format(exc)) from None
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """``A^-1 b`` for a vector or a matrix of columns ``b``."""

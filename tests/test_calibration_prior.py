@@ -294,10 +294,10 @@ def test_each_groups_scale_stops_at_the_ceiling_the_arms_dimensions_give(model):
     100. A group whose sizes were given beyond the ceiling keeps at least scale 1."""
     import math
 
-    from calibration.prior import PriorSpec, chain_length, limits, update_scales
+    from calibration.prior import PriorSpec, limits, update_scales
     desc = model.desc
     by_hand = sum(math.hypot(j.d, j.a) for j in desc.joints) + 0.085
-    assert chain_length(desc) == pytest.approx(by_hand, rel=1e-12)
+    assert desc.chain_length == pytest.approx(by_hand, rel=1e-12)
     lim = limits(model)
     spec = model.spec
     assert lim[spec.index("probe.z")] == pytest.approx(0.05 * 0.085, rel=1e-12)
