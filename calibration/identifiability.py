@@ -9,8 +9,10 @@ without reference coordinates, shows as a near-zero column) and decomposed:
 * SVD: singular values, numerical rank (``s > rank_tol * max(s_max, 1)``: a scaled column is at most unit, so a
   direction is never kept for being large beside nothing), condition number of the
   identifiable part, and the null-space directions written as named parameter combinations;
-* QR with column pivoting (LAPACK ``geqp3``): which parameters to hold fixed, one per null direction;
-  for each, the combination with the kept parameters that the data cannot see.
+* which parameters to hold fixed, one per null direction (:func:`hold_choice`: from the null space alone, in
+  units of the parameters' plausible sizes, so the choice depends neither on the poses that revealed it, nor
+  on the parameters' order, nor on unknowns the data do not need); for each, the combination with the kept
+  parameters that the data cannot see.
 """
 from __future__ import annotations
 
@@ -151,15 +153,18 @@ def _terms(names: Sequence[str], vec: np.ndarray, scale_in_si: np.ndarray | floa
 
 
 def analyse(jred: np.ndarray, jp: np.ndarray, names: Sequence[str], rank_tol: float = DEFAULT_RANK_TOL,
-            pivot_scale: np.ndarray | None = None, n_weak: int = 3, gauge: np.ndarray | None = None) -> Identifiability:
+            pivot_scale: np.ndarray | None = None, n_weak: int = 3, gauge: np.ndarray | None = None,
+            tie_key: Sequence[Any] | None = None) -> Identifiability:
     """Identifiability of the parameters ``names`` from the reduced (``jred``) and full (``jp``)
     weighted Jacobians (rows x len(names)).
 
     Args:
         rank_tol: relative singular value below which a direction is not identifiable.
-        pivot_scale: column scale [SI] for the pivoting that picks the parameters to keep (e.g. plausible
-            error sizes, :func:`prior_scales`: of two equivalent parameters the one whose plausible error
-            moves the data more is kept); default the column norms.
+        pivot_scale: plausible error size [SI] of each parameter for the choice of the parameters to hold
+            (:func:`hold_choice`; e.g. :func:`prior_scales`: of two equivalent parameters the one whose plausible
+            error moves the data more is kept); default the inverse column norms (each column's effect at unit).
+        tie_key: a sort key per parameter for exact ties of that choice (the smallest held); default the place
+            in ``names`` (the earlier held).
         gauge: (len(names), k) parameter directions [SI] known to leave the cost unchanged (exact
             symmetries, e.g. rigid motions of the base frame): projected out, so they count as null.
     """
@@ -180,16 +185,16 @@ def analyse(jred: np.ndarray, jp: np.ndarray, names: Sequence[str], rank_tol: fl
         a = a - (a @ q) @ q.T
         mag = np.abs(gs) / np.abs(gs).max(axis=0)
         gauge_names = {names[k] for k in np.flatnonzero(mag.max(axis=1) > 1e-6)}
-    _, s, vt = np.linalg.svd(a, full_matrices=False)
+    _, s, vt = np.linalg.svd(a)           # vt square: every null direction, also with fewer rows than columns
     # relative to the largest, and never to less than a whole column's own effect (``a``'s columns are at most
     # unit): when the nuisance absorbs every parameter (one pose repeated), rounding is not a direction
     smax = max(s[0], 1.0) if s.size else 1.0
     rank = int(np.sum(s > rank_tol * smax))
     condition = float(s[0] / s[rank - 1]) if rank else float("inf")
-    # pivoted QR on the columns scaled for the choice (same null space as ``a``)
-    b = a if pivot_scale is None else a * (scale * np.asarray(pivot_scale, dtype=float))
-    _, _, piv = sla.qr(b, mode="economic", pivoting=True)
-    kept, dep = np.sort(piv[:rank]), piv[rank:]
+    size = 1.0 / scale if pivot_scale is None else np.asarray(pivot_scale, dtype=float)
+    held = hold_choice(vt[rank:].T / scale[:, None], size, range(n) if tie_key is None else tie_key)
+    kept = np.array([k for k in range(n) if k not in set(held)], dtype=int)
+    dep = held
     dependent = tuple(names[k] for k in sorted(dep))
     combos = {}
     dep = sorted(dep)
@@ -208,6 +213,37 @@ def analyse(jred: np.ndarray, jp: np.ndarray, names: Sequence[str], rank_tol: fl
                  for i in range(max(rank - n_weak, 0), rank))[::-1]
     return Identifiability(names, scale, s, rank, rank_tol, condition, dependent, combos, null, weak,
                            tuple(names[k] for k in np.flatnonzero(tiny)), tuple(sorted(gauge_names)))
+
+
+#: two parameters whose shares of the unseen directions (:func:`hold_choice`) agree to this (relative) are tied
+TIE_TOL = 1e-6
+
+
+def hold_choice(null: np.ndarray, size: np.ndarray, tie_key: Sequence[Any]) -> list[int]:
+    """The parameters to hold, one per direction the data do not see: ``null`` (n, k) a basis of those
+    directions [SI], ``size`` (n,) each parameter's plausible error size [SI], ``tie_key`` a sort key per
+    parameter. In units of the sizes (``z = p / size``) the directions get an orthonormal basis ``Z``; the
+    parameter whose row of ``Z`` is longest (the one most made of what the data do not see, for its size: of two
+    equivalent parameters the one whose plausible error moves the data less) is held and its direction taken out
+    of the others' rows, k times. Rows within :data:`TIE_TOL` of the longest are tied, the smallest key held.
+
+    The choice depends on the subspace alone: not on its basis, the poses that revealed it (whose column norms
+    an order of pivoting would follow), the parameters' order (given keys of their own), or unknowns the data do
+    not need (a parameter without effect is a direction of its own, held first, orthogonal to the rest).
+    Returns the held indices, in the order chosen."""
+    if null.shape[1] == 0:
+        return []
+    z = np.linalg.qr(null / np.asarray(size, dtype=float)[:, None])[0]
+    held: list[int] = []
+    for _ in range(null.shape[1]):
+        norms = np.linalg.norm(z, axis=1)
+        norms[held] = -1.0
+        tied = np.flatnonzero(norms >= norms.max() * (1.0 - TIE_TOL))
+        j = int(min(tied, key=lambda i: tie_key[int(i)]))
+        held.append(j)
+        d = z[j] / np.linalg.norm(z[j])
+        z = z - np.outer(z @ d, d)
+    return held
 
 
 # ---------------------------------------------------------------------------------------------
