@@ -482,11 +482,11 @@ def identify(problem: Problem, p, states, candidates, options: FitOptions = FitO
     ``states``: ``(kept indices, [FixedParameter], Identifiability)``.
 
     Two tests, in order: linear dependence (SVD rank of the reduced Jacobian with the base frame's rigid
-    motions projected out; :func:`~calibration.identifiability.hold_choice` chooses which to hold from the null
-    space in units of the plausible error sizes of :func:`~calibration.identifiability.prior_scales`: of two
-    equivalent parameters the one whose plausible error moves the data more is kept, an exact tie going to the
-    later one along the chain (:func:`hold_keys`), so that the choice depends neither on rounding, nor on the
-    poses of the rank test, nor on unknowns added that the data do not need),
+    motions projected out; :func:`~calibration.identifiability.keep_choice`, columns scaled by the plausible error
+    sizes of :func:`~calibration.identifiability.prior_scales`, chooses which to keep: of two equivalent
+    parameters the one whose plausible error moves the data more is kept, an exact tie going to the later one
+    along the chain (:func:`hold_keys`), so that the choice depends neither on rounding, nor on the parameters'
+    order, nor on unknowns added that the data do not need),
     then practical resolution (``options.min_resolution``,
     :func:`~calibration.identifiability.weakly_determined`). With ``options.on_unidentifiable == "stop"``:
     raise :class:`NumericalError` with the list instead of holding them.
@@ -535,8 +535,8 @@ def identify(problem: Problem, p, states, candidates, options: FitOptions = FitO
 
 
 def hold_keys(model: ArmModel, indices) -> list[tuple]:
-    """The tie keys of :func:`~calibration.identifiability.hold_choice` for the spec's parameters ``indices``: a
-    description's parameter by its place along the chain (the earlier held), then an effect's by its name, so
+    """The tie keys of :func:`~calibration.identifiability.keep_choice` for the spec's parameters ``indices``: a
+    description's parameter by its place along the chain (the later kept), then an effect's by its name, so
     that effects added, or given in another order, change no tie between the description's parameters."""
     spec = model.spec
     return [(0, i, "") if i < model.base_size else (1, 0, spec.names[i]) for i in indices]

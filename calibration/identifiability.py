@@ -9,10 +9,10 @@ without reference coordinates, shows as a near-zero column) and decomposed:
 * SVD: singular values, numerical rank (``s > rank_tol * max(s_max, 1)``: a scaled column is at most unit, so a
   direction is never kept for being large beside nothing), condition number of the
   identifiable part, and the null-space directions written as named parameter combinations;
-* which parameters to hold fixed, one per null direction (:func:`hold_choice`: from the null space alone, in
-  units of the parameters' plausible sizes, so the choice depends neither on the poses that revealed it, nor
-  on the parameters' order, nor on unknowns the data do not need); for each, the combination with the kept
-  parameters that the data cannot see.
+* which parameters to hold fixed, one per null direction (:func:`keep_choice`: pivoted Gram-Schmidt on the
+  columns scaled by plausible sizes, exact ties by the parameters' own keys, so that neither their order nor
+  unknowns the data do not need change the choice); for each, the combination with the kept parameters that
+  the data cannot see.
 """
 from __future__ import annotations
 
@@ -160,11 +160,11 @@ def analyse(jred: np.ndarray, jp: np.ndarray, names: Sequence[str], rank_tol: fl
 
     Args:
         rank_tol: relative singular value below which a direction is not identifiable.
-        pivot_scale: plausible error size [SI] of each parameter for the choice of the parameters to hold
-            (:func:`hold_choice`; e.g. :func:`prior_scales`: of two equivalent parameters the one whose plausible
-            error moves the data more is kept); default the inverse column norms (each column's effect at unit).
-        tie_key: a sort key per parameter for exact ties of that choice (the smallest held); default the place
-            in ``names`` (the earlier held).
+        pivot_scale: column scale [SI] for the choice of the parameters to keep (:func:`keep_choice`; e.g.
+            plausible error sizes, :func:`prior_scales`: of two equivalent parameters the one whose plausible
+            error moves the data more is kept); default the column norms.
+        tie_key: a sort key per parameter for exact ties of that choice (the largest kept); default the place
+            in ``names`` (the later kept).
         gauge: (len(names), k) parameter directions [SI] known to leave the cost unchanged (exact
             symmetries, e.g. rigid motions of the base frame): projected out, so they count as null.
     """
@@ -191,11 +191,12 @@ def analyse(jred: np.ndarray, jp: np.ndarray, names: Sequence[str], rank_tol: fl
     smax = max(s[0], 1.0) if s.size else 1.0
     rank = int(np.sum(s > rank_tol * smax))
     condition = float(s[0] / s[rank - 1]) if rank else float("inf")
-    size = 1.0 / scale if pivot_scale is None else np.asarray(pivot_scale, dtype=float)
-    held = hold_choice(vt[rank:].T / scale[:, None], size, range(n) if tie_key is None else tie_key)
-    kept = np.array([k for k in range(n) if k not in set(held)], dtype=int)
-    dep = held
-    dependent = tuple(names[k] for k in sorted(dep))
+    # the columns scaled for the choice (same null space as ``a``)
+    b = a if pivot_scale is None else a * (scale * np.asarray(pivot_scale, dtype=float))
+    chosen = set(keep_choice(b, rank, range(n) if tie_key is None else tie_key))
+    kept = np.array(sorted(chosen), dtype=int)
+    dep = [k for k in range(n) if k not in chosen]
+    dependent = tuple(names[k] for k in dep)
     combos = {}
     dep = sorted(dep)
     coefs = np.linalg.lstsq(a[:, kept], a[:, dep], rcond=None)[0] if rank and dep else None
@@ -215,35 +216,29 @@ def analyse(jred: np.ndarray, jp: np.ndarray, names: Sequence[str], rank_tol: fl
                            tuple(names[k] for k in np.flatnonzero(tiny)), tuple(sorted(gauge_names)))
 
 
-#: two parameters whose shares of the unseen directions (:func:`hold_choice`) agree to this (relative) are tied
+#: two columns whose lengths (:func:`keep_choice`) agree to this (relative) are tied: the tie key decides
 TIE_TOL = 1e-6
 
 
-def hold_choice(null: np.ndarray, size: np.ndarray, tie_key: Sequence[Any]) -> list[int]:
-    """The parameters to hold, one per direction the data do not see: ``null`` (n, k) a basis of those
-    directions [SI], ``size`` (n,) each parameter's plausible error size [SI], ``tie_key`` a sort key per
-    parameter. In units of the sizes (``z = p / size``) the directions get an orthonormal basis ``Z``; the
-    parameter whose row of ``Z`` is longest (the one most made of what the data do not see, for its size: of two
-    equivalent parameters the one whose plausible error moves the data less) is held and its direction taken out
-    of the others' rows, k times. Rows within :data:`TIE_TOL` of the longest are tied, the smallest key held.
-
-    The choice depends on the subspace alone: not on its basis, the poses that revealed it (whose column norms
-    an order of pivoting would follow), the parameters' order (given keys of their own), or unknowns the data do
-    not need (a parameter without effect is a direction of its own, held first, orthogonal to the rest).
-    Returns the held indices, in the order chosen."""
-    if null.shape[1] == 0:
-        return []
-    z = np.linalg.qr(null / np.asarray(size, dtype=float)[:, None])[0]
-    held: list[int] = []
-    for _ in range(null.shape[1]):
-        norms = np.linalg.norm(z, axis=1)
-        norms[held] = -1.0
+def keep_choice(b: np.ndarray, rank: int, tie_key: Sequence[Any]) -> list[int]:
+    """The ``rank`` columns of ``b`` (rows x n; each column a parameter's effect over its plausible error size) to
+    keep, in the order chosen: greedily the longest column once the chosen ones are taken out of all (pivoted
+    Gram-Schmidt, each length computed afresh rather than downdated), so of two equivalent parameters the one whose
+    plausible error moves the data more is kept. Columns within :data:`TIE_TOL` of the longest are tied and the
+    largest key is kept: a tie is decided by the parameters' own keys, never by their order, by rounding, or by
+    how many other parameters there are (a column without effect never competes)."""
+    r = np.array(b, dtype=float)
+    kept: list[int] = []
+    for _ in range(rank):
+        norms = np.linalg.norm(r, axis=0)
+        norms[kept] = -1.0
         tied = np.flatnonzero(norms >= norms.max() * (1.0 - TIE_TOL))
-        j = int(min(tied, key=lambda i: tie_key[int(i)]))
-        held.append(j)
-        d = z[j] / np.linalg.norm(z[j])
-        z = z - np.outer(z @ d, d)
-    return held
+        j = int(max(tied, key=lambda i: tie_key[int(i)]))
+        kept.append(j)
+        d = r[:, j] / norms[j]
+        for _ in range(2):                  # twice: orthogonal to rounding
+            r = r - np.outer(d, d @ r)
+    return kept
 
 
 # ---------------------------------------------------------------------------------------------

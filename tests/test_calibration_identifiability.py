@@ -237,10 +237,11 @@ def _twin_yaw_jacobian(seed: int) -> np.ndarray:
 
 def test_the_held_branch_of_an_exact_ambiguity_does_not_flip():
     """Of two parameters that explain the data equally (a simulated chain's origin yaw y2 and joint offset o2,
-    equal plausible sizes), which one is held is decided by the null space in units of the sizes and the chain's
-    order (the earlier held), not by the poses, the parameters' order, or unknowns added that the data do not
-    need (nil columns, as an artefact's drift where every measurement is one point): the same branch every time.
-    (The pivoted QR it replaces chose by column norms after elimination: a near tie decided by the poses.)"""
+    equal plausible sizes), which one is held is decided by the tie keys (the chain's order: the later kept), not
+    by the poses, the parameters' order, or unknowns added that the data do not need (nil columns, as an
+    artefact's drift where every measurement is one point): the same branch every time. (LAPACK's pivoted QR with
+    a tie weight of 1e-6 of a parameter's place over the parameter count, which this replaced, held o2 in some of
+    these orders.)"""
     from calibration.identifiability import PRIOR_SCALES
     names = ["o1", "l1", "y2", "o2", "l2", "o3", "l3"]
     sizes = np.array([PRIOR_SCALES["rad" if n[0] in "oy" else "m"] for n in names])
