@@ -232,6 +232,8 @@ def keep_choice(b: np.ndarray, rank: int, tie_key: Sequence[Any]) -> list[int]:
     for _ in range(rank):
         norms = np.linalg.norm(r, axis=0)
         norms[kept] = -1.0
+        if norms.max() <= 0.0:              # nothing left to keep (a rank counted beyond the columns' own)
+            break
         tied = np.flatnonzero(norms >= norms.max() * (1.0 - TIE_TOL))
         j = int(max(tied, key=lambda i: tie_key[int(i)]))
         kept.append(j)
