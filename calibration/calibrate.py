@@ -482,10 +482,11 @@ def identify(problem: Problem, p, states, candidates, options: FitOptions = FitO
     ``states``: ``(kept indices, [FixedParameter], Identifiability)``.
 
     Two tests, in order: linear dependence (SVD rank of the reduced Jacobian with the base frame's rigid
-    motions projected out; pivoted QR, columns scaled by the plausible error sizes of
-    :func:`~calibration.identifiability.prior_scales`, chooses which to hold: of two equivalent parameters
-    the one whose plausible error moves the data more is kept, an exact tie going to the later one in the
-    spec's order, so that the choice never depends on rounding),
+    motions projected out; :func:`~calibration.identifiability.keep_choice`, columns scaled by the plausible error
+    sizes of :func:`~calibration.identifiability.prior_scales`, chooses which to keep: of two equivalent
+    parameters the one whose plausible error moves the data more is kept, an exact tie going to the later one
+    along the chain (:func:`hold_keys`), so that the choice depends neither on rounding, nor on the parameters'
+    order, nor on unknowns added that the data do not need),
     then practical resolution (``options.min_resolution``,
     :func:`~calibration.identifiability.weakly_determined`). With ``options.on_unidentifiable == "stop"``:
     raise :class:`NumericalError` with the list instead of holding them.
@@ -501,8 +502,7 @@ def identify(problem: Problem, p, states, candidates, options: FitOptions = FitO
     names = [spec.names[i] for i in kept]
     sizes = functools.partial(prior_scales, model, priors=options.priors, noise=point_noise(problem),
                               length=options.prior_length)
-    pivot = sizes(names) * (1.0 + TIE_BREAK * np.asarray(kept, dtype=float) / max(spec.size, 1))
-    idf = analyse(jred, ev.jp, names, options.rank_tol, pivot, gauge=gauge)
+    idf = analyse(jred, ev.jp, names, options.rank_tol, sizes(names), gauge=gauge, tie_key=hold_keys(model, kept))
     fixed = []
     if idf.dependent:
         if stop:
@@ -534,8 +534,12 @@ def identify(problem: Problem, p, states, candidates, options: FitOptions = FitO
     return kept, fixed, idf
 
 
-#: relative weight given to a parameter's place in the spec when two equivalent ones are tied for the pivot
-TIE_BREAK = 1e-6
+def hold_keys(model: ArmModel, indices) -> list[tuple]:
+    """The tie keys of :func:`~calibration.identifiability.keep_choice` for the spec's parameters ``indices``: a
+    description's parameter by its place along the chain (the later kept), then an effect's by its name, so
+    that effects added, or given in another order, change no tie between the description's parameters."""
+    spec = model.spec
+    return [(0, i, "") if i < model.base_size else (1, 0, spec.names[i]) for i in indices]
 
 
 def _dependent_reason(idf: Identifiability, name: str) -> str:
@@ -994,22 +998,29 @@ def _setup(model: ArmModel, data: CalibrationData, options: FitOptions) -> _Setu
 STRUCTURAL_ROWS = 4
 
 
-def _structural(s: _Setup, kept) -> Problem | None:
-    """With a prior, when the data have fewer degrees of freedom (rows less nuisance unknowns) than there are
-    candidates (``kept``), the same problem (the same instances: artefacts, frames, markers) over poses drawn
-    across the data's joint ranges (each widened by a tenth, at least 0.05 rad or m; seeded), several times as
-    many rows: its rank deficiencies are those of the chain and the kind of measurement (a base frame's rigid
-    motion, a tool offset along a plane's normal), not those of too few poses. Those are the ones to hold; what
-    the data are merely too few to separate stays free under the prior, prior-dominated where the data add
-    nothing (a humanoid touching one table on 21 poses: 105 candidates, 18 data dimensions; held by the data's
-    rank, the tool offset went and the held-out touches got worse than the nominal's). None otherwise."""
+def _structural(s: _Setup, kept, p, states) -> Problem | None:
+    """With a prior, when the data have fewer degrees of freedom (rows less nuisance unknowns) than there are candidates
+    (``kept``) with an effect on them at ``p`` and ``states`` (one without any, an artefact's drift where every
+    measurement is one point, is held for that by either test and counts for neither: unknowns the data do not need
+    change neither the test nor its poses), the same problem (the same instances: artefacts, frames, markers) over
+    poses drawn across the data's joint ranges (each widened by a tenth, at least 0.05 rad or m; seeded), several
+    times as many rows: its rank deficiencies are those of the chain and the kind of measurement (a base frame's
+    rigid motion, a tool offset along a plane's normal), not those of too few poses. Those are the ones to hold;
+    what the data are merely too few to separate stays free under the prior, prior-dominated where the data add
+    nothing (a humanoid touching one table on 21 poses: 105 candidates, 18 data dimensions; held by the data's rank,
+    the tool offset went and the held-out touches got worse than the nominal's). None otherwise."""
     prob = s.problem
-    n_nuis = sum(it.n_theta for it in prob.with_free(list(kept)).instances)
-    if s.prior is None or prob.n_rows - n_nuis >= len(kept):
+    if s.prior is None or not kept:
+        return None
+    with_kept = prob.with_free(list(kept))
+    n_nuis = sum(it.n_theta for it in with_kept.instances)
+    norms = np.linalg.norm(with_kept.evaluate(p, states).jp, axis=0)
+    n_seen = int(np.sum(norms > 1e-12 * max(float(norms.max()), 1e-300)))
+    if prob.n_rows - n_nuis >= n_seen:
         return None
     data = prob.data
     q = data.points.q
-    reps = int(math.ceil(STRUCTURAL_ROWS * len(kept) / max(prob.n_rows, 1))) + 1
+    reps = int(math.ceil(STRUCTURAL_ROWS * n_seen / max(prob.n_rows, 1))) + 1
     rows = np.tile(np.arange(len(q)), reps)
     lo, hi = q.min(axis=0), q.max(axis=0)
     pad = np.maximum(0.1 * (hi - lo), 0.05)
@@ -1028,7 +1039,7 @@ def _held(s: _Setup, p, states, kept, stage: str, options: FitOptions):
     prior they stay estimated (the prior alone holds them), without one they are held with their reason."""
     only = [i for i in kept if i in s.prior_only]
     rest = [i for i in kept if i not in s.prior_only]
-    problem = _structural(s, rest) or s.problem
+    problem = _structural(s, rest, p, states) or s.problem
     kept, new, idf = identify(problem, p, states, rest, replace(options, min_resolution=s.min_resolution),
                               stage=stage)
     spec = s.problem.model.spec

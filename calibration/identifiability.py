@@ -9,8 +9,10 @@ without reference coordinates, shows as a near-zero column) and decomposed:
 * SVD: singular values, numerical rank (``s > rank_tol * max(s_max, 1)``: a scaled column is at most unit, so a
   direction is never kept for being large beside nothing), condition number of the
   identifiable part, and the null-space directions written as named parameter combinations;
-* QR with column pivoting (LAPACK ``geqp3``): which parameters to hold fixed, one per null direction;
-  for each, the combination with the kept parameters that the data cannot see.
+* which parameters to hold fixed, one per null direction (:func:`keep_choice`: pivoted Gram-Schmidt on the
+  columns scaled by plausible sizes, exact ties by the parameters' own keys, so that neither their order nor
+  unknowns the data do not need change the choice); for each, the combination with the kept parameters that
+  the data cannot see.
 """
 from __future__ import annotations
 
@@ -151,15 +153,18 @@ def _terms(names: Sequence[str], vec: np.ndarray, scale_in_si: np.ndarray | floa
 
 
 def analyse(jred: np.ndarray, jp: np.ndarray, names: Sequence[str], rank_tol: float = DEFAULT_RANK_TOL,
-            pivot_scale: np.ndarray | None = None, n_weak: int = 3, gauge: np.ndarray | None = None) -> Identifiability:
+            pivot_scale: np.ndarray | None = None, n_weak: int = 3, gauge: np.ndarray | None = None,
+            tie_key: Sequence[Any] | None = None) -> Identifiability:
     """Identifiability of the parameters ``names`` from the reduced (``jred``) and full (``jp``)
     weighted Jacobians (rows x len(names)).
 
     Args:
         rank_tol: relative singular value below which a direction is not identifiable.
-        pivot_scale: column scale [SI] for the pivoting that picks the parameters to keep (e.g. plausible
-            error sizes, :func:`prior_scales`: of two equivalent parameters the one whose plausible error
-            moves the data more is kept); default the column norms.
+        pivot_scale: column scale [SI] for the choice of the parameters to keep (:func:`keep_choice`; e.g.
+            plausible error sizes, :func:`prior_scales`: of two equivalent parameters the one whose plausible
+            error moves the data more is kept); default the column norms.
+        tie_key: a sort key per parameter for exact ties of that choice (the largest kept); default the place
+            in ``names`` (the later kept).
         gauge: (len(names), k) parameter directions [SI] known to leave the cost unchanged (exact
             symmetries, e.g. rigid motions of the base frame): projected out, so they count as null.
     """
@@ -180,17 +185,18 @@ def analyse(jred: np.ndarray, jp: np.ndarray, names: Sequence[str], rank_tol: fl
         a = a - (a @ q) @ q.T
         mag = np.abs(gs) / np.abs(gs).max(axis=0)
         gauge_names = {names[k] for k in np.flatnonzero(mag.max(axis=1) > 1e-6)}
-    _, s, vt = np.linalg.svd(a, full_matrices=False)
+    _, s, vt = np.linalg.svd(a)           # vt square: every null direction, also with fewer rows than columns
     # relative to the largest, and never to less than a whole column's own effect (``a``'s columns are at most
     # unit): when the nuisance absorbs every parameter (one pose repeated), rounding is not a direction
     smax = max(s[0], 1.0) if s.size else 1.0
     rank = int(np.sum(s > rank_tol * smax))
     condition = float(s[0] / s[rank - 1]) if rank else float("inf")
-    # pivoted QR on the columns scaled for the choice (same null space as ``a``)
+    # the columns scaled for the choice (same null space as ``a``)
     b = a if pivot_scale is None else a * (scale * np.asarray(pivot_scale, dtype=float))
-    _, _, piv = sla.qr(b, mode="economic", pivoting=True)
-    kept, dep = np.sort(piv[:rank]), piv[rank:]
-    dependent = tuple(names[k] for k in sorted(dep))
+    chosen = set(keep_choice(b, rank, range(n) if tie_key is None else tie_key))
+    kept = np.array(sorted(chosen), dtype=int)
+    dep = [k for k in range(n) if k not in chosen]
+    dependent = tuple(names[k] for k in dep)
     combos = {}
     dep = sorted(dep)
     coefs = np.linalg.lstsq(a[:, kept], a[:, dep], rcond=None)[0] if rank and dep else None
@@ -208,6 +214,33 @@ def analyse(jred: np.ndarray, jp: np.ndarray, names: Sequence[str], rank_tol: fl
                  for i in range(max(rank - n_weak, 0), rank))[::-1]
     return Identifiability(names, scale, s, rank, rank_tol, condition, dependent, combos, null, weak,
                            tuple(names[k] for k in np.flatnonzero(tiny)), tuple(sorted(gauge_names)))
+
+
+#: two columns whose lengths (:func:`keep_choice`) agree to this (relative) are tied: the tie key decides
+TIE_TOL = 1e-6
+
+
+def keep_choice(b: np.ndarray, rank: int, tie_key: Sequence[Any]) -> list[int]:
+    """The ``rank`` columns of ``b`` (rows x n; each column a parameter's effect over its plausible error size) to
+    keep, in the order chosen: greedily the longest column once the chosen ones are taken out of all (pivoted
+    Gram-Schmidt, each length computed afresh rather than downdated), so of two equivalent parameters the one whose
+    plausible error moves the data more is kept. Columns within :data:`TIE_TOL` of the longest are tied and the
+    largest key is kept: a tie is decided by the parameters' own keys, never by their order, by rounding, or by
+    how many other parameters there are (a column without effect never competes)."""
+    r = np.array(b, dtype=float)
+    kept: list[int] = []
+    for _ in range(rank):
+        norms = np.linalg.norm(r, axis=0)
+        norms[kept] = -1.0
+        if norms.max() <= 0.0:              # nothing left to keep (a rank counted beyond the columns' own)
+            break
+        tied = np.flatnonzero(norms >= norms.max() * (1.0 - TIE_TOL))
+        j = int(max(tied, key=lambda i: tie_key[int(i)]))
+        kept.append(j)
+        d = r[:, j] / norms[j]
+        for _ in range(2):                  # twice: orthogonal to rounding
+            r = r - np.outer(d, d @ r)
+    return kept
 
 
 # ---------------------------------------------------------------------------------------------

@@ -17,6 +17,11 @@ fitted on every posture is taken as the truth, its predicted markers plus Gaussi
 size per axis (N draws, seeds 0...) make N campaigns it describes exactly, and the same splits are fitted and
 predicted on them (a parametric bootstrap: the held-out RMS of an exact model at this noise and design).
 
+``--compare-halves`` also fits each random half's complement (the held-out postures as training) and compares the
+two fits' parameters: for those both estimate, the difference over its standard uncertainty (both fits' u
+combined), their RMS and how many lie beyond 2, and the parameters only one fit estimates (the other held them):
+whether the halves tell different geometries or the same one within its uncertainty.
+
     python scripts/mocap_study.py ../shared/data/real-talos-mocap/points.csv \\
         --arm ../shared/data/real-talos-mocap/talos_full_v2.urdf --tip-frame gripper_left_base_link \\
         --holdout pose-02,pose-04,...  --effects none,joint_compliance
@@ -108,6 +113,18 @@ def exact_campaigns(model, pts, data, draws: int) -> tuple[float, list]:
                    for s in range(draws)]
 
 
+def compare_fits(a, b) -> dict:
+    """The parameters of two fits ``a``, ``b`` (:class:`~calibration.CalibrationResult`): for those both estimate,
+    ``z = (a - b) / hypot(u_a, u_b)``, with each fit's state (free, prior-dominated); the largest |z| first."""
+    common = [n for n in a.free if n in b.free]
+    rows = sorted(({"name": n, "z": (a.value(n) - b.value(n)) / float(np.hypot(a.uncertainty(n), b.uncertainty(n))),
+                    "states": [a.state(n), b.state(n)]} for n in common), key=lambda r: -abs(r["z"]))
+    z = np.array([r["z"] for r in rows])
+    return {"z_rms": float(np.sqrt(np.mean(z ** 2))) if len(z) else None, "beyond_2": int(np.sum(np.abs(z) > 2)),
+            "common": len(common), "only_first": sorted(set(a.free) - set(b.free)),
+            "only_second": sorted(set(b.free) - set(a.free)), "parameters": rows}
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("points", type=Path, help="points file: one measurement a posture, reference coordinates")
@@ -123,6 +140,8 @@ def main(argv=None) -> int:
                    help="also the noise floor (each model fitted on every posture) and the leave-one-out RMS")
     p.add_argument("--exact", type=int, default=0,
                    help="also N campaigns each model describes exactly (its fit on every posture plus noise)")
+    p.add_argument("--compare-halves", action="store_true",
+                   help="also fit each random half's held-out postures and compare the two fits' parameters")
     p.add_argument("-o", "--output", type=Path, default=None, help="write the results as JSON here")
     args = p.parse_args(argv)
     if args.exact < 0:
@@ -142,14 +161,26 @@ def main(argv=None) -> int:
         first = next(iter(models))
         train, test = split_holdout(data[first], held)
         row["nominal"] = errors(nominal_baseline(models[first], train, FitOptions(weights_from_data=True)), test)
+        compared = {}
         for name, m in models.items():
             train, test = split_holdout(data[name], held)
-            row[name] = predicted(fitted(m, train), test)
+            res = fitted(m, train)
+            row[name] = predicted(res, test)
+            if args.compare_halves and split.startswith("half"):
+                other = fitted(m, split_holdout(data[name], [i for i in ids if i not in held])[0])
+                compared[name] = compare_fits(res, other)
+                c = compared[name]
+                print(f"{split:8s} {name}: the halves' {c['common']} common parameters, z RMS {c['z_rms']:.2f}, "
+                      f"{c['beyond_2']} beyond 2 (" + ", ".join(f"{r['name']} {r['z']:+.2f}"
+                                                            for r in c["parameters"][:3]) + f"); only one half: "
+                      f"{len(c['only_first']) + len(c['only_second'])}", flush=True)
         for name, sims in exact.items():       # (the held-out errors of every draw together)
             row[f"{name} exact"] = np.concatenate([predicted(fitted(models[name], tr), te)
                                                    for tr, te in (split_holdout(d, held) for d in sims)])
         results[split] = {k: {"rms_mm": float(np.sqrt(np.mean(e ** 2))), "max_mm": float(e.max()),
                               "errors_mm": e.tolist()} for k, e in row.items()}
+        for name, c in compared.items():
+            results[split][name]["halves_compared"] = c
         print(f"{split:8s} train {len(ids) - len(held):3d}  " + "  ".join(
             f"{k} {v['rms_mm']:.3f}" for k, v in results[split].items()), flush=True)
     if args.floor:

@@ -215,6 +215,8 @@ def robots() -> Path:
 #  sim_mocap robot set (6), coupled   -> test_sim_mocap obvious_commands_on_a_simulated_..., [lift]
 #  sim_pose_effects lobing from the CLI -> test_loop_synthesis [lobing]
 #  sim_seats_study coaxial, nine robots -> test_loop_pairs (the tie rule by hand); test_loop_sim_seats
+#  tracker_talos nil unknowns change no held parameter (TALOS, 4 s) -> test_calibration_identifiability
+#                                       held_branch_of_an_exact_ambiguity (a simulated chain: nil columns, orders)
 #  thermal_drift loop with and without drift -> test_thermal_drift offered_only_with_time, evaluators (loop: slow only)
 #  uncertainty_coverage 12 seeds x 3  -> test_calibration_real panda_heldout_uncertainty_coverage;
 #                                       test_uncertainty monte_carlo_agrees_with_linear
