@@ -23,6 +23,7 @@ from .cli import (
     mpe_from_args,
     mpe_options,
     parse_holdout,
+    refuse_undriven_effects,
     sigma_options,
     weights_from_args,
     with_artefact_drift,
@@ -157,6 +158,7 @@ def run(args: argparse.Namespace) -> int:
             Arm(desc, effects).check_points(pts)
             warnings += point_warnings(desc, pts)
     log_warnings(warnings)          # at once: a loop that then fails (exit 4) has said what it saw in the inputs
+    refuse_undriven_effects(args.effect, desc, points, reference)
     _check_folds(args.folds, points, reference)
     weights = weights_from_args(args)
     holdout = parse_holdout(args.holdout)
