@@ -454,7 +454,7 @@ class CalibrationResult:
         return {
             "status": self.status, "iterations": self.iterations, "evaluations": self.evaluations,
             "cost": self.cost, "s0": self.s0, "covariance_source": self.covariance_source,
-            "n_points": len(self.data), "n_residuals": self.n_residuals, "n_nuisance": self.n_nuisance,
+            **self.data.counts(), "n_residuals": self.n_residuals, "n_nuisance": self.n_nuisance,
             "dof": self.dof, "redundancy": self.redundancy, "parameters": self.parameter_rows(),
             "free": list(self.free),
             "fixed": [f.to_dict() for f in self.fixed], "held": list(self.held),
