@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -118,45 +119,163 @@ def pose_distance(desc, q, train: TrainingPoses, levers=None) -> np.ndarray:
 
 def nearest_pose(desc, q, train: TrainingPoses, levers=None) -> tuple[np.ndarray, np.ndarray]:
     """``(d, index)``: (N,) [m] :func:`pose_distance` of each pose of ``q`` and (N,) the row of ``train.q`` that is
-    its nearest training pose.
+    its nearest training pose (of equally near ones, the first).
 
-    An exhaustive search, in blocks of query and training poses (a few hundred kB each, so that every pass stays
-    in the cache), joint by joint: a revolute joint's difference is wrapped to [-pi, pi] in turns (``x -
-    rint(x)``), then weighted by the query's lever and squared. The weights are the query pose's own levers (and a
-    joint whose axis passes through the ball weighs nothing), so the metric is no fixed one a k-d tree is built
-    for; an exact tree search through a lower bound of it was measured slower (docs/uncertainty.md, "Speed").
-    Measured on 2 cores: 1e4 poses against 1e4 training poses in 0.8-1 s (``make bench``, ``bench_uncertainty``)."""
+    Exact. The metric weighs each joint by the lever at the query pose (a revolute joint's difference wrapped to
+    [-pi, pi], in turns: ``x - rint(x)``; a joint whose axis passes through the ball weighs nothing), so it is no
+    fixed one a k-d tree is built for. Repeated queries (a point's rows) are searched once. Beyond
+    :data:`_TREE_PAIRS` query x training poses the queries are grouped by the shape of their levers (k-means of
+    their logarithms, :data:`_TREE_GROUPS` groups) and each group searched in a ``scipy.spatial.cKDTree`` of the
+    training poses scaled by the group's levers (periodic in the revolute joints): the tree metric times the
+    smallest ratio of a query's lever to the group's is a lower bound of the query's distance, so every pose
+    within the best of :data:`_TREE_FIRST` tree neighbours' distance over that ratio is a candidate, and the
+    nearest candidate is the nearest pose. The queries whose levers the group's fit badly (the candidates' volume
+    :data:`_TREE_SPREAD` times the query's own ball or more, or a lever of 0) are searched exhaustively, as every
+    query is below that size: in blocks of query and training poses (a few hundred kB each), joint by joint, the
+    distances computed by the same operations in both searches (the same numbers: tests/test_calibration_discrepancy.py
+    checks both against a plain loop, and the trees against the exhaustive search bit for bit). Measured (2 shared
+    cores, CPU; ``benchmarks/bench_uncertainty.py``, ``discrepancy_folds``): a fold of ``calibrate``'s model
+    discrepancy on 10^5 random poses of aacmm7 (15 000 against 85 000) 25.3 s exhaustive, 4.3 s by the trees (the
+    same numbers); its 14 folds 64.5 s by the trees (about 355 s exhaustive); 10^4 x 10^4 1.7 -> 0.9 s."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     if q.shape[1] != len(train.names):
         raise ValueError(f"q has {q.shape[1]} joints, the training poses {len(train.names)}")
     checked_poses(q, train.circular, "the poses whose distance from the training poses is asked")
     lev = joint_levers(desc, q) if levers is None else np.asarray(levers, dtype=float)
+    unique, inverse = np.unique(np.hstack([q, lev]), axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    q, lev = unique[:, :q.shape[1]], unique[:, q.shape[1]:]
     circ = np.asarray(train.circular, dtype=bool)
     turn = np.where(circ, 2 * math.pi, 1.0)                 # revolute joints in turns, prismatic ones in metres
-    qn, tn, wn = q / turn, train.q / turn, lev * turn       # wn: metres per turn (per metre)
-    used = np.flatnonzero(np.any(wn != 0, axis=0))        # a joint whose lever is 0 at every query adds nothing
+    search = _PoseSearch(q / turn, train.q / turn, lev * turn, circ)
     best = np.full(len(q), np.inf)
     index = np.zeros(len(q), dtype=int)
-    tb = max(1, min(len(tn), _CACHE_BLOCK))
-    qb = max(1, _CACHE_BLOCK // tb)
-    for t0 in range(0, len(tn), tb):
-        tt = tn[t0: t0 + tb]
-        for s in range(0, len(q), qb):
-            acc = np.zeros((min(qb, len(q) - s), len(tt)))
-            d = np.empty_like(acc)
-            for j in used:
-                np.subtract(qn[s: s + qb, j, None], tt[None, :, j], out=d)
-                if circ[j]:
-                    d -= np.rint(d)
-                d *= wn[s: s + qb, j, None]
-                d *= d
-                acc += d
-            k = acc.argmin(axis=1)
-            low = acc[np.arange(len(acc)), k]
-            better = low < best[s: s + qb]
-            best[s: s + qb][better] = low[better]
-            index[s: s + qb][better] = t0 + k[better]
-    return np.sqrt(best), index
+    rest = np.arange(len(q))
+    if len(q) * len(train.q) >= _TREE_PAIRS:
+        rest = search.by_trees(best, index)
+    search.exhaustive(rest, best, index)
+    return np.sqrt(best)[inverse], index[inverse]
+
+
+#: query x training poses from which :func:`nearest_pose` searches k-d trees (below, the exhaustive search is as fast)
+_TREE_PAIRS = 50_000_000
+#: groups of queries by the shape of their levers, one k-d tree each
+_TREE_GROUPS = 32
+#: a query is searched exhaustively when its candidates' ball holds this many times its own (the product over the
+#: joints of its lever ratios to the group's over the smallest): measured, 1000 left 0.5 % of random aacmm7 poses
+#: to the exhaustive search and 12 candidates a query to the trees
+_TREE_SPREAD = 1000.0
+#: the tree neighbours whose exact distance bounds the search of each query
+_TREE_FIRST = 4
+
+
+@dataclass(frozen=True)
+class _PoseSearch:
+    """The nearest training pose of each query, exactly (:func:`nearest_pose`): queries ``qn`` (N, J) and training
+    poses ``tn`` (T, J) in turns (metres for a prismatic joint), ``wn`` (N, J) the queries' levers [m per turn],
+    ``circ`` (J,) the revolute joints. The searches fill ``best`` (N,) (squared distances) and ``index`` (N,)."""
+    qn: np.ndarray
+    tn: np.ndarray
+    wn: np.ndarray
+    circ: np.ndarray
+
+    @cached_property
+    def used(self) -> np.ndarray:
+        return np.flatnonzero(np.any(self.wn != 0, axis=0))   # a joint whose lever is 0 at every query adds nothing
+
+    def squared(self, qi: np.ndarray, ti: np.ndarray) -> np.ndarray:
+        """The squared distances of the pairs (queries ``qi``, training poses ``ti``), broadcast together, by the
+        operations of the exhaustive search in its order (the same numbers)."""
+        acc = np.zeros(np.broadcast_shapes(np.shape(qi), np.shape(ti)))
+        for j in self.used:
+            d = self.qn[qi, j] - self.tn[ti, j]
+            if self.circ[j]:
+                d -= np.rint(d)
+            d *= self.wn[qi, j]
+            d *= d
+            acc += d
+        return acc
+
+    def exhaustive(self, rows: np.ndarray, best: np.ndarray, index: np.ndarray) -> None:
+        """Queries ``rows`` against every training pose, in cache-sized blocks."""
+        if not len(rows):
+            return
+        qn, wn, circ = self.qn[rows], self.wn[rows], self.circ
+        tb = max(1, min(len(self.tn), _CACHE_BLOCK))
+        qb = max(1, _CACHE_BLOCK // tb)
+        for t0 in range(0, len(self.tn), tb):
+            tt = self.tn[t0: t0 + tb]
+            for s in range(0, len(rows), qb):
+                r = rows[s: s + qb]
+                acc = np.zeros((len(r), len(tt)))
+                d = np.empty_like(acc)
+                for j in self.used:             # as squared(), in place
+                    np.subtract(qn[s: s + qb, j, None], tt[None, :, j], out=d)
+                    if circ[j]:
+                        d -= np.rint(d)
+                    d *= wn[s: s + qb, j, None]
+                    d *= d
+                    acc += d
+                k = acc.argmin(axis=1)
+                low = acc[np.arange(len(acc)), k]
+                better = low < best[r]
+                best[r[better]] = low[better]
+                index[r[better]] = t0 + k[better]
+
+    def by_trees(self, best: np.ndarray, index: np.ndarray) -> np.ndarray:
+        """The queries that the k-d trees search (see :func:`nearest_pose`); returns the others."""
+        import warnings
+
+        from scipy.cluster.vq import kmeans2
+        used = self.used
+        w = self.wn[:, used]
+        rest = np.flatnonzero(~np.all(w > 0, axis=1))
+        fit = np.flatnonzero(np.all(w > 0, axis=1))
+        if len(fit) < 2 * _TREE_GROUPS:
+            return np.arange(len(w))
+        logs = np.log(w[fit])
+        with warnings.catch_warnings():           # a group left empty: no tree for it, nothing lost
+            warnings.simplefilter("ignore")
+            centres, label = kmeans2(logs - logs.mean(axis=1, keepdims=True), _TREE_GROUPS, seed=0, minit="++")
+        for g, centre in enumerate(centres):
+            mine = fit[label == g]
+            if len(mine):
+                rest = np.concatenate([rest, self._tree_group(mine, np.exp(centre), best, index)])
+        return np.sort(rest)
+
+    def _tree_group(self, rows: np.ndarray, scale: np.ndarray, best: np.ndarray, index: np.ndarray) -> np.ndarray:
+        """Queries ``rows`` in a tree of the training poses scaled by ``scale`` (J_used,); returns those left to
+        the exhaustive search."""
+        from scipy.spatial import cKDTree
+        used = self.used
+        ratio = self.wn[rows][:, used] / scale
+        low = ratio.min(axis=1)
+        far = np.sum(np.log(ratio / low[:, None]), axis=1) > math.log(_TREE_SPREAD)
+        left, rows, low = rows[far], rows[~far], low[~far]
+        periodic = self.circ[used]
+
+        def coords(x: np.ndarray) -> np.ndarray:
+            c = x[:, used] * scale
+            c[:, periodic] = x[:, used][:, periodic] % 1.0 * scale[periodic] % scale[periodic]   # in [0, scale)
+            return c
+
+        tree = cKDTree(coords(self.tn), boxsize=np.where(periodic, scale, 0.0))
+        at = coords(self.qn[rows])
+        k = min(_TREE_FIRST, len(self.tn))
+        _, first = tree.query(at, k=k)
+        first = np.asarray(first).reshape(len(rows), k)
+        bound = np.sqrt(self.squared(rows[:, None], first).min(axis=1))
+        radius = bound / low * (1 + 1e-9) + 1e-12 * float(scale.max())      # rounding of either metric
+        found = tree.query_ball_point(at, radius, return_sorted=False)
+        counts = np.fromiter((len(f) for f in found), dtype=int, count=len(found))
+        qi = np.repeat(rows, counts)
+        ti = np.fromiter((t for f in found for t in f), dtype=int, count=int(counts.sum()))
+        d2 = self.squared(qi, ti)
+        order = np.lexsort((ti, d2, qi))                  # by query, then distance, then training row
+        head = order[np.r_[0, np.flatnonzero(np.diff(qi[order])) + 1]]
+        best[qi[head]] = d2[head]
+        index[qi[head]] = ti[head]
+        return left
 
 
 def travel_shares(desc, q, train: TrainingPoses, levers=None) -> tuple[np.ndarray, np.ndarray]:

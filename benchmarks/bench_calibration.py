@@ -197,8 +197,8 @@ def large_campaign(points: int, seed: int = 5) -> str:
               f"measurements = {count(0.15, 30, 4)}" for i in range(4)]
     tasks += [f'kind = "ballbar"\nid = "bar"\npositions = {count(0.2, 12)}\nlength_mm = 600.004\nu_length_mm = 0.0008\n'
               "points_per_sphere = 6"]
-    # the seats after the spheres, planes and ball bar: residuals.csv names a point by its line and kind, and the
-    # tracker's seats (points-ref.csv) must not share a line with a seat of points.csv
+    # the seats after the spheres, planes and ball bar (residuals.csv names a point by its file and line: the order no
+    # longer matters, kept so that the campaign stays the one measured)
     tasks += [f'kind = "seat"\nid = "seat{i}"\nposition_mm = {place()}\narticulations = 20\n'
               f"measurements = {count(0.3, 20, 8)}" for i in range(8)]
     tasks += [f'kind = "tracker"\nid = "nest"\nnests = {count(0.1, 3)}\narticulations = 3']

@@ -89,6 +89,44 @@ def tip_growth(n_points: int, training: tuple) -> dict:
     return rows
 
 
+def discrepancy_folds(n_points: int = 10**5, exhaustive_folds: int = 1) -> dict:
+    """The nearest-pose search of ``calibrate``'s model discrepancy on ``n_points`` random poses of the arm within its
+    joint limits: each extrapolative fold (:func:`calibration.discrepancy.extreme_folds`, 15 % of the poses at an
+    end of a joint's range) against the other poses, by the k-d trees (every fold) and by the exhaustive search
+    (the first ``exhaustive_folds``), CPU seconds; the results compared bit for bit."""
+    import arm_model.discrepancy as dm
+    from calibration.discrepancy import extreme_folds
+    desc = load_description(ARM)
+    q = np.random.default_rng(5).uniform(*np.clip(np.array(limit_bounds(desc)).T, -np.pi, np.pi),
+                                         (n_points, desc.n_joints))
+    lev = dm.joint_levers(desc, q)
+    folds = extreme_folds(q)
+    keep, rows = dm._TREE_PAIRS, []
+    try:
+        for k, fold in enumerate(folds):
+            rest = np.setdiff1d(np.arange(n_points), fold)
+            train = dm.TrainingPoses.of(desc, q[rest])
+            got = {}
+            for how, pairs in (("trees", 0), ("exhaustive", 10**30)):
+                if how == "exhaustive" and k >= exhaustive_folds:
+                    continue
+                dm._TREE_PAIRS = pairs
+                t0 = time.process_time()
+                got[how] = dm.nearest_pose(desc, q[fold], train, lev[fold])
+                got[how + "_s"] = time.process_time() - t0
+            same = None if "exhaustive" not in got else all(
+                np.array_equal(a, b) for a, b in zip(got["trees"], got["exhaustive"], strict=True))
+            rows.append(dict(fold=k, queries=len(fold), training=len(rest), trees_s=got["trees_s"],
+                             exhaustive_s=got.get("exhaustive_s"), identical=same))
+            print(f"fold {k + 1}/{len(folds)}: {len(fold):,} poses against {len(rest):,}: trees {got['trees_s']:.2f} s"
+                  + ("" if same is None else f", exhaustive {got['exhaustive_s']:.2f} s, identical {same}"))
+    finally:
+        dm._TREE_PAIRS = keep
+    total = sum(r["trees_s"] for r in rows)
+    print(f"{len(rows)} folds of {n_points:,} poses by the trees: {total:.1f} s CPU")
+    return dict(rows=rows, trees_total_s=total)
+
+
 def main(sizes=(10**4, 10**5, 10**6), tip_points: int = 10**4, training: tuple = (10**3, 10**4)) -> dict:
     desc = load_description(ARM)
     model = ArmModel(desc)

@@ -99,10 +99,12 @@ class Outlier:
     line: int | None           # line in the points file
     standardized: float
     residual: float            # [m]
+    file: str | None = None    # the points file the point is in (None for a distance): a point is (file, line)
 
     def to_dict(self) -> dict:
         return {"kind": self.kind, "measurement": self.measurement, "feature": self.feature, "point": self.point,
-                "line": self.line, "standardized": self.standardized, "residual_um": self.residual * 1e6}
+                "file": self.file, "line": self.line, "standardized": self.standardized,
+                "residual_um": self.residual * 1e6}
 
 
 def resolve_parameters(spec, patterns) -> list[int]:
@@ -242,8 +244,8 @@ class CalibrationResult:
         status, iterations, evaluations, cost: solver outcome (cost = 0.5 sum r_w^2).
         n_residuals, n_nuisance, dof: problem size.
         identifiability: at the start; identifiability_final: at the solution.
-        residuals: per-point table (``Problem.residual_table`` plus ``standardized``, ``line``,
-            ``measurement``, ``feature``); instances: per artefact instance scalars;
+        residuals: per-point table (``Problem.residual_table`` plus ``standardized``, ``measurement``,
+            ``feature``, ``file`` and ``line``: a point is its file and line); instances: per artefact instance scalars;
             distances: per certified-length instance.
         tracker: the reference instrument's frame ``T_ref_base`` of each session and the markers' offsets
             on the tip frame (:class:`arm_model.tracker.Tracker`, with the standard uncertainties of their
@@ -452,7 +454,7 @@ class CalibrationResult:
         return {
             "status": self.status, "iterations": self.iterations, "evaluations": self.evaluations,
             "cost": self.cost, "s0": self.s0, "covariance_source": self.covariance_source,
-            "n_points": len(self.data), "n_residuals": self.n_residuals, "n_nuisance": self.n_nuisance,
+            **self.data.counts(), "n_residuals": self.n_residuals, "n_nuisance": self.n_nuisance,
             "dof": self.dof, "redundancy": self.redundancy, "parameters": self.parameter_rows(),
             "free": list(self.free),
             "fixed": [f.to_dict() for f in self.fixed], "held": list(self.held),
@@ -821,7 +823,7 @@ def _tested(res: CalibrationResult, k: float) -> list[_Tested]:
         out.append(_Tested(Outlier(str(tab["kind"][row]), str(pts.measurement[pi]), str(pts.feature[pi]), pi,
                                    None if pts.lines is None else int(pts.lines[pi]),
                                    math.copysign(float(t["sigma"][i]), float(tab["standardized"][row])),
-                                   float(tab["value"][row]))))
+                                   float(tab["value"][row]), res.data.file_of(pi))))
     for i in np.flatnonzero(np.nan_to_num(t["length_sigma"]) >= k):
         d = res.distances[int(t["length"][i])]
         out.append(_Tested(Outlier("distance", d["measurement"], " - ".join(d["between"]), None, None,
@@ -1255,7 +1257,8 @@ def _normal(s: _Setup, sol, kept, groups=None) -> _Normal:
 
 def _point_table(prob: Problem, data: CalibrationData, p, states, z: np.ndarray) -> dict:
     """:meth:`Problem.residual_table` with each point's standardized residual (the largest |z| of its rows,
-    signed for one-row kinds), measurement, feature and file line."""
+    signed for one-row kinds), measurement, feature, file and line (the file: points of a reference or held-out
+    file share line numbers with the points file)."""
     table = prob.residual_table(p, states)
     pts = data.points
     zp = np.zeros(len(table["point"]))
@@ -1270,6 +1273,8 @@ def _point_table(prob: Problem, data: CalibrationData, p, states, z: np.ndarray)
     table["measurement"] = pts.measurement[table["point"]]
     table["feature"] = pts.feature[table["point"]]
     table["line"] = (pts.lines[table["point"]] if pts.lines is not None else table["point"] + 1)
+    table["file"] = (data.files[table["point"]] if data.files is not None
+                     else np.full(len(table["point"]), pts.path, dtype=object))
     return table
 
 
@@ -1281,7 +1286,7 @@ def _outliers(prob: Problem, data: CalibrationData, table: dict, zd: np.ndarray,
         pi = int(table["point"][i])
         out.append(Outlier(str(table["kind"][i]), str(pts.measurement[pi]), str(pts.feature[pi]), pi,
                            None if pts.lines is None else int(pts.lines[pi]), float(table["standardized"][i]),
-                           float(table["value"][i])))
+                           float(table["value"][i]), data.file_of(pi)))
     for i in np.flatnonzero(np.abs(zd) > threshold):
         d = prob.distance_items[i]
         out.append(Outlier("distance", d.measurement, " - ".join(d.between), None, None, float(zd[i]),

@@ -63,7 +63,8 @@ from arm_model.model import ArmModel
 from .data import CalibrationData
 
 __all__ = ["Candidate", "pair_of", "Skipped", "FAMILIES", "DEFAULT_FAMILIES", "MIN_TEMPERATURE_SPAN",
-           "library_candidates", "needs_model", "torques_of", "no_torque_reason", "MIN_DRIFT_SPAN_S", "drift_offer"]
+           "library_candidates", "needs_model", "torques_of", "no_torque_reason", "has_force", "MIN_DRIFT_SPAN_S",
+           "drift_offer"]
 
 #: candidate families of the library, by effect key (the CLI's ``--candidates`` names)
 FAMILIES = ("eccentricity", "joint_gain", "joint_compliance", "thermal", "force_sensor", "probe_compliance",
@@ -177,11 +178,15 @@ def torques_of(desc: ArmDescription, data: CalibrationData) -> tuple[np.ndarray,
     return PinocchioArm(desc).torques(data.points.q, data.points.wrench)
 
 
+def has_force(points) -> bool:
+    """Whether the points (a :class:`~arm_model.io.PointSet`) carry a measured contact force: force columns, not zero
+    throughout."""
+    return points.force is not None and np.max(np.abs(points.force), initial=0.0) > _ZERO_FORCE
+
+
 def no_torque_reason(desc: ArmDescription, data: CalibrationData) -> str | None:
     """Why no joint carries a torque in these data (no masses and no force), or None."""
-    pts = data.points
-    has_force = pts.force is not None and np.max(np.abs(pts.force), initial=0.0) > _ZERO_FORCE
-    if has_force or any(j.mass > 0 for j in desc.joints):
+    if has_force(data.points) or any(j.mass > 0 for j in desc.joints):
         return None
     return ("the arm has no masses (no <inertial> in its URDF, no mass_kg in its description) and the data no "
             "force, so no joint carries a torque; give the link masses with --masses (or mass_kg in the "

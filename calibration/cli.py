@@ -391,6 +391,38 @@ def model_effects(arm, keys):
         raise InputError(f"--effect: {exc}", arm.desc.source) from None
 
 
+#: the ``--effect`` kinds the measured contact force alone drives (the probe's bending, the force sensor's errors)
+FORCE_DRIVEN = ("probe_compliance", "probe_compliance_matrix", "force_sensor")
+#: the ``--effect`` kinds a joint's load drives: the contact force's torque, or gravity's on the links' masses
+LOAD_DRIVEN = ("joint_compliance", "lateral_compliance")
+
+
+def refuse_undriven_effects(keys, desc, *sets) -> None:
+    """An InputError for an ``--effect`` of ``keys`` that nothing in the data drives, which the fit would hold at
+    zero ("no effect on the data") as if estimated: a :data:`FORCE_DRIVEN` kind on points (``sets``: the PointSets
+    of the command, None for a file not given) with no measured force (no force columns, or zero throughout), a
+    :data:`LOAD_DRIVEN` kind there on an arm without masses (under gravity alone a robot's joints still bend: kept)."""
+    from .candidates import has_force
+    sets = [s for s in sets if s is not None]
+    asked = [k for k in keys or () if k in FORCE_DRIVEN + LOAD_DRIVEN]
+    if not asked or any(has_force(s) for s in sets):
+        return
+    names = list(dict.fromkeys(s.path for s in sets))
+    held = (f"{' and '.join(names)} {'hold' if len(names) > 1 else 'holds'} "
+            + ("no force columns (fx_N, fy_N, fz_N)" if all(s.force is None for s in sets)
+               else "no force (its columns zero on every row)"))
+    for k in asked:
+        if k in FORCE_DRIVEN:
+            raise InputError(f"--effect {k} is driven by the measured contact force, and {held}: nothing could "
+                             "estimate it (the fit would hold it at zero); leave it out, or give the force the probe "
+                             "measured", names[0], 1)
+        if not any(j.mass > 0 for j in desc.joints):
+            raise InputError(f"--effect {k} turns under a joint's load, the contact force's torque or gravity's on the "
+                             f"links' masses, and {held} while the arm has no masses (no <inertial> in its URDF, no "
+                             "mass_kg in its description): nothing could estimate it; leave it out, or give the link "
+                             "masses (--masses) or the force", names[0], 1)
+
+
 def _check_reference_options(args, data) -> None:
     """``--reference identity`` and ``--marker-offset`` are about the reference instrument's points: given on data
     that hold none (no reference columns in the points file, no ``--reference-points``), they would be silently
@@ -432,6 +464,7 @@ def _load_data(args, defaults: bool = False):
     model = with_artefact_drift(_drift_about_the_session(model, points), points.measurements())
     data = make_data(points, artefacts, reference=reference, marker_offsets=args.marker_offset, heldout=heldout)
     _check_reference_options(args, data)
+    refuse_undriven_effects(args.effect, desc, points, reference, heldout)
     added = default_effects(model, data) if defaults and args.effect is None else ()
     if added:
         from arm_model.model import ArmModel

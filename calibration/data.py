@@ -7,6 +7,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from arm_model import InputError
+from arm_model.checks import repeated_readings
 from arm_model.io import Artefacts, PointSet, check_features
 from arm_model.model import ArmModel, AuxData, capture_columns, points_motion
 from arm_model.tracker import DEFAULT_SESSION, Tracker
@@ -173,6 +174,17 @@ class CalibrationData:
         reference columns."""
         ref = self.points.ref
         return None if ref is None else ref[np.arange(len(self)), self.markers]
+
+    def counts(self) -> dict[str, int]:
+        """``n_rows``: the rows of the points files these data hold (a row of several markers once); ``n_points``:
+        the distinct readings among them, as the fit counts them (a row that repeats an earlier reading exactly,
+        :func:`arm_model.checks.repeated_readings`, counts once: :class:`calibration.problem.Problem`)."""
+        files = self.files if self.files is not None else np.full(len(self), self.points.path, dtype=object)
+        lines = self.points.lines if self.points.lines is not None else np.arange(1, len(self) + 1)
+        first = repeated_readings(self.points, (self.markers,)) < 0
+        rows = list(zip(files.tolist(), np.asarray(lines).tolist(), strict=True))
+        return {"n_points": len({r for r, keep in zip(rows, first.tolist(), strict=True) if keep}),
+                "n_rows": len(set(rows))}
 
     def for_model(self, model: ArmModel) -> CalibrationData:
         """These data with the per-point inputs ``model.needs()`` attached (the aux inputs already given are

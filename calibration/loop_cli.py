@@ -23,10 +23,12 @@ from .cli import (
     mpe_from_args,
     mpe_options,
     parse_holdout,
+    refuse_undriven_effects,
     sigma_options,
     weights_from_args,
     with_artefact_drift,
 )
+from .loop.settings import MAX_COUNT
 
 __all__ = ["register", "run"]
 
@@ -76,10 +78,12 @@ def register(sub) -> None:
                    help="level of the score-test screening, Bonferroni over the candidates (default 0.05)")
     p.add_argument("--min-improvement", type=number_in(0, 1, high_open=True), default=0.02,
                    help="smallest relative drop of the held-out RMS for an effect to be added (default 0.02)")
-    p.add_argument("--max-effects", type=at_least(0), default=4, help="most effects to add (default 4)")
-    p.add_argument("--cv-top", type=at_least(1), default=3,
-                   help="candidates cross-validated at each step, the best screened first (default 3)")
-    p.add_argument("--pairs", type=at_least(0), default=2,
+    p.add_argument("--max-effects", type=number_in(0, MAX_COUNT, kind=int), default=4,
+                   help=f"most effects to add (default 4; at most {MAX_COUNT})")
+    p.add_argument("--cv-top", type=number_in(1, MAX_COUNT, kind=int), default=3,
+                   help=f"candidates cross-validated at each step, the best screened first (default 3; at most "
+                        f"{MAX_COUNT})")
+    p.add_argument("--pairs", type=number_in(0, MAX_COUNT, kind=int), default=2,
                    help="when no single candidate is added at a step, the most pairs of the candidates tested there "
                         "cross-validated together, each member significant given the other (default 2; 0: none)")
     p.add_argument("--seed", type=seed, default=0,
@@ -154,6 +158,7 @@ def run(args: argparse.Namespace) -> int:
             Arm(desc, effects).check_points(pts)
             warnings += point_warnings(desc, pts)
     log_warnings(warnings)          # at once: a loop that then fails (exit 4) has said what it saw in the inputs
+    refuse_undriven_effects(args.effect, desc, points, reference)
     _check_folds(args.folds, points, reference)
     weights = weights_from_args(args)
     holdout = parse_holdout(args.holdout)

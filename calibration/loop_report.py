@@ -73,10 +73,17 @@ def _clean(o):
     return o
 
 
+def _counts(data) -> dict:
+    """``points`` (the distinct readings a fit counts, a repeated one once) and ``rows`` (the points files' rows) of
+    ``data`` (:meth:`~calibration.data.CalibrationData.counts`)."""
+    c = data.counts()
+    return {"points": c["n_points"], "rows": c["n_rows"]}
+
+
 def _stage_dict(s: Stage) -> dict:
     r = s.result
     out = {"stage": s.index, "model_effects": [e.describe() for e in s.model.effects],
-           "fit": {"s0": r.s0, "dof": r.dof, "points": len(r.data), "status": r.status, "noise": r.weights_dict(),
+           "fit": {"s0": r.s0, "dof": r.dof, **_counts(r.data), "status": r.status, "noise": r.weights_dict(),
                    "fixed": [f.to_dict() for f in r.fixed]},
            "heldout_test": s.heldout}
     if s.added is not None:
@@ -434,7 +441,7 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
                         "urdf": model_files["urdf"].name, "check": model_check(final),
                         "training_poses": None if poses is None else poses.name,
                         "model_discrepancy": None if final.discrepancy is None else final.discrepancy.to_dict(),
-                        "fitted_on": _fitted_on(loop), "points": len(final.data), "session_drift": drift}
+                        "fitted_on": _fitted_on(loop), **_counts(final.data), "session_drift": drift}
     summary["reference_frame"] = final.reference_frame()
     if conformance:
         summary["conformance"] = conformance

@@ -464,7 +464,7 @@ def write_outputs(result: CalibrationResult, out_dir, *, inputs=(), validation_t
         "u": np.array([r["display_u"] for r in rows])}, inputs, fmt="%.9g")
     t = result.residuals
     write_csv(files["residuals"], {
-        "measurement": t["measurement"], "feature": t["feature"], "kind": t["kind"],
+        "measurement": t["measurement"], "feature": t["feature"], "kind": t["kind"], "file": t["file"],
         "line": np.asarray(t["line"], dtype=int), "residual_um": t["value"] * 1e6,
         "dx_um": t["vector"][:, 0] * 1e6, "dy_um": t["vector"][:, 1] * 1e6, "dz_um": t["vector"][:, 2] * 1e6,
         "standardized": t["standardized"]}, inputs, fmt="%.6g")

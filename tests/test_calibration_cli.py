@@ -113,3 +113,44 @@ def test_study_poses(files, tmp_path, capsys):
     from arm_model.shipped import version
     assert sel["aacmm_version"] == version()
     assert sel["input_sha256"][str(f["points"])] == hashlib.sha256(f["points"].read_bytes()).hexdigest()
+
+
+PANDA = __import__("conftest").ROOT / "examples" / "data" / "real-panda-seats"
+
+
+@pytest.mark.parametrize("command, urdf, effect, words", [
+    ("calibrate", "panda.urdf", "probe_compliance", "is driven by the measured contact force"),
+    ("calibrate", "panda-with-inertials.urdf", "force_sensor", "is driven by the measured contact force"),
+    ("calibrate", "panda.urdf", "joint_compliance", "while the arm has no masses"),
+    ("close-loop", "panda.urdf", "probe_compliance_matrix", "is driven by the measured contact force"),
+    ("close-loop", "panda.urdf", "lateral_compliance", "while the arm has no masses"),
+])
+def test_an_effect_nothing_in_the_data_drives_is_refused(tmp_path, capsys, command, urdf, effect, words):
+    """Points without force columns: an effect the measured force alone drives, or a joint's compliance on an arm
+    without masses, was held at zero as if estimated ("no effect on the data"); refused, naming the option and the
+    file, exit 2, nothing written."""
+    points = PANDA / "front" / "points.csv"
+    out = tmp_path / "out"
+    code = main([command, str(points), str(PANDA / "artefacts.toml"), "--arm", str(PANDA / urdf), "--tip-frame",
+                 "ball_link", "--effect", effect, "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err
+    assert f"{points}, line 1: --effect {effect} " in err and words in err, err
+    assert f"{points} holds no force columns (fx_N, fy_N, fz_N)" in err, err
+    assert not out.exists()
+
+
+def test_a_joint_compliance_under_gravity_alone_is_kept():
+    """Without force, a robot's joints still bend under their links' weight: joint and lateral compliance are
+    kept on an arm with masses; with a force column, every force-driven effect is."""
+    from arm_model import read_points
+    from arm_model.io import parse_points
+    from arm_model.urdf_import import description_from_urdf
+    from calibration.cli import FORCE_DRIVEN, LOAD_DRIVEN, refuse_undriven_effects
+    desc = description_from_urdf(PANDA / "panda-with-inertials.urdf", "ball_link")
+    points = read_points(PANDA / "front" / "points.csv", desc.joint_quantities)
+    refuse_undriven_effects(LOAD_DRIVEN, desc, points, None)
+    pushed = parse_points("measurement,feature," + ",".join(f"q{i}_rad" for i in range(1, 8)) + ",fx_N,fy_N,fz_N\n"
+                          "m,f,0,0,0,-1,0,1,0,0,0,2\n", "f.csv", desc.joint_quantities)
+    refuse_undriven_effects(FORCE_DRIVEN + LOAD_DRIVEN, description_from_urdf(PANDA / "panda.urdf", "ball_link"),
+                            points, pushed)

@@ -515,14 +515,17 @@ def test_a_growth_floored_at_zero_is_written_as_a_constant():
     assert got == pytest.approx({"model_discrepancy": 13e-6, "discrepancy_growth": 2e-4}, rel=1e-12)
 
 
-@pytest.mark.parametrize("block", [7, 32_768])
-def test_pose_distance_is_a_plain_loop_over_the_training_poses(monkeypatch, nominal, block):
-    """The blocked search (blocks of 7 elements or the default) gives every query's distance to its nearest training
-    pose as a plain loop over them does (math per pose and joint: a revolute difference wrapped by atan2, the
-    prismatic one not; levers given, one of them 0), to 1e-12 relative; a training pose a whole turn of every
-    revolute joint away from a query is at distance 0."""
+@pytest.mark.parametrize("block, trees", [(7, False), (32_768, False), (32_768, True)])
+def test_pose_distance_is_a_plain_loop_over_the_training_poses(monkeypatch, nominal, block, trees):
+    """The blocked search (blocks of 7 elements or the default) and the k-d trees' give every query's distance to its
+    nearest training pose as a plain loop over them does (math per pose and joint: a revolute difference wrapped by
+    atan2, the prismatic one not; levers given, one of them 0), to 1e-12 relative; a training pose a whole turn of
+    every revolute joint away from a query is at distance 0."""
     import arm_model.discrepancy as dm
     monkeypatch.setattr(dm, "_CACHE_BLOCK", block)
+    if trees:                       # every query by the trees, in two groups
+        monkeypatch.setattr(dm, "_TREE_PAIRS", 0)
+        monkeypatch.setattr(dm, "_TREE_GROUPS", 2)
     rng = np.random.default_rng(3)
     q, t = rng.uniform(-7.0, 7.0, (40, 7)), rng.uniform(-7.0, 7.0, (23, 7))
     t[5] = q[3] + np.r_[2 * np.pi, -2 * np.pi, 4 * np.pi, 0.0, 2 * np.pi, 0.0, 0.0]
@@ -537,6 +540,30 @@ def test_pose_distance_is_a_plain_loop_over_the_training_poses(monkeypatch, nomi
             for i in range(len(q))]
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-13)
     assert got[3] < 1e-13
+
+
+def test_the_trees_find_the_exhaustive_search_s_nearest_pose_bit_for_bit(monkeypatch, nominal):
+    """The k-d trees' search (:func:`arm_model.discrepancy.nearest_pose` beyond ``_TREE_PAIRS``) against the
+    exhaustive one on the same poses: the same distances to the last bit and the same training rows, with what could
+    part them: angles of several turns, a prismatic joint, levers of 0 (a query's, and a joint's at every query),
+    repeated queries, training poses repeated (ties: the first row) and a whole turn away from a query, poses whose
+    levers are far from their group's (left to the exhaustive search)."""
+    import arm_model.discrepancy as dm
+    rng = np.random.default_rng(11)
+    q, t = rng.uniform(-9.0, 9.0, (700, 7)), rng.uniform(-9.0, 9.0, (900, 7))
+    lev = rng.uniform(0.05, 1.0, (700, 7)) * rng.choice([0.01, 1.0], (700, 7), p=[0.05, 0.95])
+    lev[:, 6], lev[::50, 3], lev[:, 5] = 1.0, 0.0, 0.0              # prismatic; a lever 0; a joint through the ball
+    q[100:120], lev[100:120] = q[0], lev[0]                           # one query repeated
+    t[400:405] = t[17]                                                # training rows repeated: a tie
+    t[600] = q[5] + np.r_[2 * np.pi, -4 * np.pi, 0.0, 2 * np.pi, 0.0, 0.0, 0.0]
+    q[200] = t[17] + 1e-9
+    train = dm.TrainingPoses(tuple(f"j{k}" for k in range(7)), t, (True,) * 6 + (False,))
+    monkeypatch.setattr(dm, "_TREE_PAIRS", 10 ** 30)
+    d0, i0 = dm.nearest_pose(nominal, q, train, lev)
+    monkeypatch.setattr(dm, "_TREE_PAIRS", 0)
+    d1, i1 = dm.nearest_pose(nominal, q, train, lev)
+    assert np.array_equal(d0, d1) and np.array_equal(i0, i1)
+    assert i1[200] == 17 and i1[5] == 600 and d1[5] < 1e-13 and np.all(d1[100:120] == d1[0])
 
 
 def test_joint_levers_are_each_joints_own_differences(nominal):

@@ -151,3 +151,18 @@ def test_too_few_touches_hold_only_what_the_chain_cannot_separate(campaign, caps
     # held by the data's own rank (11 free) the held-out RMS was 0.76 of the nominal's; structurally 0.37
     rms = [r for r in s["validation_holdout"] if r["key"] == "pose_rms"][0]
     assert rms["after"] < 0.5 * rms["before"], rms
+
+
+def test_repeated_readings_count_once_in_n_points_and_each_in_n_rows(campaign, capsys):
+    """Two rows of the file written twice more (a logger's copies): the fit counts each reading once, and so does
+    summary.json's n_points (it counted the copies: 43); n_rows counts the file's rows."""
+    rows = (campaign / "train.csv").read_text().splitlines()
+    twice = campaign / "twice"
+    twice.mkdir(exist_ok=True)
+    (twice / "train.csv").write_text("\n".join(rows + [rows[3], rows[3], rows[7]]) + "\n")
+    for name in ("walker.urdf", "table.toml"):
+        (twice / name).write_text((campaign / name).read_text())
+    assert _calibrate(twice, "-o", str(twice / "cal")) == 0
+    assert "3 row(s) repeat an earlier reading exactly" in capsys.readouterr().err
+    s = json.loads((twice / "cal" / "summary.json").read_text())
+    assert (s["n_points"], s["n_rows"]) == (40, 43)

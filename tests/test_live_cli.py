@@ -239,3 +239,32 @@ def test_any_numbers_are_a_sample_or_one_located_error(values):
         assert exc.line == 3 and exc.column in LAYOUT.header
     else:
         assert all(map(lambda v: abs(v) < 1e10, (s.t, *s.q, *s.wrench)))
+
+
+@pytest.mark.parametrize("rate, said", [(100.0, True), (5000.0, True), (1000.0, False), (1400.0, False)])
+def test_a_stated_rate_the_time_stamps_contradict_is_said_with_both_figures(tmp_path, capsys, rate, said):
+    """--rate-Hz 100 on the example's 1 kHz stream (or 5000): every gap was judged against the stated period without a
+    word (at 5000 Hz, 4 samples counted dropped a sample). One 'rate' event, printed and in events.csv, giving both
+    figures: the stated rate and period, the time stamps' median interval and rate; within 1.5x, none. By a file
+    (rows taken by arrays) and pushed one at a time the same."""
+    from arm_model.live import Session
+    (tmp_path / "samples.csv").write_text("".join(LINES[:301]))
+    # without force columns (contacts by the trigger) the rows after the first are taken by arrays at once
+    (tmp_path / "trigger.csv").write_text("".join(",".join(c for k, c in enumerate(r.rstrip("\n").split(","))
+                                                           if k not in (8, 9, 10)) + "\n" for r in LINES[:301]))
+    assert "fx_N" not in (tmp_path / "trigger.csv").read_text()
+    events, err = [], ""
+    for name, more in (("samples", []), ("trigger", ["--contact", "trigger"])):
+        d = tmp_path / name
+        assert main(["live", str(tmp_path / f"{name}.csv"), "--arm", "aacmm7", "--speed", "0", "--rate-Hz",
+                     f"{rate:g}", *more, "-o", str(d)]) == 0
+        err += capsys.readouterr().err
+        events += [e["message"] for e in rows(d / "events.csv") if e["kind"] == "rate"]
+    session = Session("aacmm7", rate=rate)
+    events += [e.message for k in range(300) for e in session.push(k * 1e-3, (0.0,) * 7, (0.0, 0.0, 0.0))
+               if e.kind == "rate"]
+    assert len(events) == 3 * int(said), events
+    if said:
+        words = (f"the stated rate (--rate-Hz) {rate:g} Hz, a sample every {1e3 / rate:.4g} ms, contradicts the time "
+                 "stamps: the median of their first 16 intervals is 1 ms (1000 Hz)")
+        assert all(words in e for e in events) and err.count(words) == 2, err

@@ -193,3 +193,16 @@ def test_a_seat_pair_length_offset_is_the_arm_shrunk_to_a_point(nominal):
     guarded = test_family(space, fam, cols, names, None)
     assert names[k] in guarded.absorbed
     assert dict((f.name, t.p_value) for f, t in structure_tests(space, None))["artefact"] > 0.01
+
+
+@pytest.mark.parametrize("name, bad", [("max_effects", 1001), ("cv_top", 10 ** 300), ("pairs", 1001)],
+                         ids=["max_effects", "cv_top", "pairs"])
+def test_loop_counts_are_bounded(name, bad):
+    """The loop's counts stop at MAX_COUNT (more than any library offers), the CLI's bound and the API's the same:
+    ``cv_top`` 10^300 was taken and written to summary.json as a 301-digit integer."""
+    from calibration.loop import LoopSettings
+    from calibration.loop.settings import MAX_COUNT
+    assert MAX_COUNT == 1000
+    LoopSettings(**{name: MAX_COUNT})
+    with pytest.raises(ValueError, match=f"{name} must be at most 1000"):
+        LoopSettings(**{name: bad})

@@ -109,6 +109,17 @@ def test_pairs_are_built_from_the_tested_candidates_only(nominal):
     assert pair_of(c2, built).origin == "residual" and pair_of(c2, built).family == "joint_compliance+joint_backlash"
 
 
+def test_the_tests_run_at_a_stage_are_listed_in_one_place():
+    """The pair and physics steps' "tested at this stage" (before their own held-out tests, and after for
+    ``last_cv``): the stage's earlier tests, then the pass's not among them, in order, each once
+    (:meth:`~calibration.loop.state.LoopState.tested_here`)."""
+    from calibration.loop.state import LoopState
+    a, b, c = (_cv(n, np.ones(4)) for n in "abc")
+    here = SimpleNamespace(cv_here=[a, b])
+    assert LoopState.tested_here(here, SimpleNamespace(cvs=[b, c])) == [a, b, c]
+    assert LoopState.tested_here(here, SimpleNamespace(cvs=[])) == [a, b] and here.cv_here == [a, b]
+
+
 def test_a_pair_must_beat_each_member_alone_on_the_held_out_folds():
     a, b = _ecc(0), _ecc(2)
     pair = pair_of(a, b)

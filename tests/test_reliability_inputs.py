@@ -104,6 +104,9 @@ BAD_OPTIONS = [
     (["calibrate", "{p}", "{a}", "--plausible-length-mm", "1e308"], "--plausible-length-mm"),
     (["calibrate", "{p}", "{a}", "--prior-scale", "1_0"], "--prior-scale"),
     (["close-loop", "{p}", "{a}", "--alpha", "1e-320"], "--alpha"),
+    (["close-loop", "{p}", "{a}", "--max-effects", "99999999999999999999"], "--max-effects"),
+    (["close-loop", "{p}", "{a}", "--cv-top", "1001"], "--cv-top"),
+    (["close-loop", "{p}", "{a}", "--pairs", "1" + "0" * 300], "--pairs"),
     (["study", "montecarlo", "{c}", "--runs", "99999999999999999999"], "--runs"),
     (["view", "{p}", "--scale", "1e308", "--html", "{o}.html"], "--scale"),
 ]

@@ -188,7 +188,8 @@ OPTIONS = [("ring", "--probability-pct"), ("ring", "--delta-T-C"), ("ring", "--u
            ("ring", "--compliance-mm-per-N"), ("calibrate", "--sigma-probe-um"), ("calibrate", "--seed"),
            ("calibrate", "--min-resolution"), ("calibrate", "--outlier-threshold"), ("calibrate", "--rank-tol"),
            ("close-loop", "--min-improvement"), ("close-loop", "--folds"), ("close-loop", "--alpha"),
-           ("close-loop", "--test-fraction")]
+           ("close-loop", "--test-fraction"), ("close-loop", "--max-effects"), ("close-loop", "--cv-top"),
+           ("close-loop", "--pairs")]
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

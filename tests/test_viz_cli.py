@@ -271,26 +271,35 @@ def test_a_simulated_campaign_is_drawn_where_the_truth_is(simulated, tmp_path, c
 
 def test_residuals_of_aacmm_calibrate(simulated, tmp_path, capsys):
     """The residuals.csv that aacmm calibrate writes is drawn as it is: each vector from the ball centre
-    of its points-file line (with the calibrated arm), the tracker rows of the other file counted."""
+    of its points-file line (with the calibrated arm), the tracker rows of the other file counted. The seat
+    first in the points file: its lines are those of the tracker's seats (nests) in points-ref.csv, a point is
+    its file and line (named by line and kind alone, residuals.csv was refused by its reader: exit 3)."""
     import csv
 
     from arm_model import load_description, read_points
 
+    lines = (simulated / "points.csv").read_text().splitlines(keepends=True)
+    seat = [r for r in lines[1:] if r.startswith("seat-")]
+    points = tmp_path / "points.csv"
+    points.write_text("".join([lines[0], *seat, *(r for r in lines[1:] if r not in seat)]))
     cal = tmp_path / "cal"
-    assert main(["calibrate", str(simulated / "points.csv"), str(simulated / "artefacts.toml"), "--arm",
+    assert main(["calibrate", str(points), str(simulated / "artefacts.toml"), "--arm",
                  str(NOMINAL), "--reference-points", str(simulated / "points-ref.csv"), "--no-plots",
                  "-o", str(cal)]) == 0
     arm = next(cal.glob("*-calibrated.toml"))
     capsys.readouterr()
     out = tmp_path / "view.html"
-    assert run_view(simulated / "points.csv", "--arm", arm, "--residuals", cal / "residuals.csv",
+    assert run_view(points, "--arm", arm, "--residuals", cal / "residuals.csv",
                     "--residual-scale", 2000, "--ellipsoids", "--ellipsoid-scale", 3000, "--html", out) == 0
     text = capsys.readouterr().out
     desc = load_description(arm)
-    pts = read_points(simulated / "points.csv", desc.n_joints)
+    pts = read_points(points, desc.n_joints)
     rows = list(csv.DictReader((cal / "residuals.csv").read_text().splitlines()))
-    here = [r for r in rows if r["measurement"] in set(pts.measurement)]   # not the tracker file's nests
-    assert 0 < len(here) < len(rows)
+    here = [r for r in rows if r["file"] == str(points)]
+    assert {r["file"] for r in rows} == {str(points), str(simulated / "points-ref.csv")}
+    assert here == [r for r in rows if r["measurement"] in set(pts.measurement)]   # not the tracker file's nests
+    shared = {(r["line"], r["kind"]) for r in here} & {(r["line"], r["kind"]) for r in rows if r not in here}
+    assert shared and 0 < len(here) < len(rows)     # seats of both files on the same lines
     assert f"magenta lines: {len(here)} residual vector(s), drawn x2000" in text
     assert f"note: {len(rows) - len(here)} residual(s)" in text
     cmds = page_commands(out.read_text())
@@ -312,7 +321,7 @@ def test_residuals_of_aacmm_calibrate(simulated, tmp_path, capsys):
     geo = ell["object"]["geometries"][0]["data"]
     v = np.frombuffer(geo["attributes"]["position"]["array"].data, dtype=np.float32).reshape(n, -1, 3)
     tips = tmp_path / "tips.csv"
-    assert main(["tip", str(simulated / "points.csv"), "--arm", str(arm), "--covariance", "-o", str(tips)]) == 0
+    assert main(["tip", str(points), "--arm", str(arm), "--covariance", "-o", str(tips)]) == 0
     t = np.genfromtxt(tips, delimiter=",", names=True, dtype=None, encoding="utf-8")
     cov = np.empty((n, 3, 3))
     for a, b in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)):

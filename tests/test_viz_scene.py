@@ -202,6 +202,40 @@ def test_residuals_by_points_file_line(nominal):
     assert skipped == 1
 
 
+def test_residuals_name_a_point_by_file_and_line(tmp_path):
+    """A point is its file and line: a seat of the points file and one of the reference file on the same line are
+    two points (read, not refused as one given twice); the one of another file is counted, not drawn; the same
+    file and line twice is still refused. The file named as written, by a path to the same file, or, once moved,
+    by its name when no other file has that name (:func:`viz.residuals.shown_file`)."""
+    from arm_model.io import parse_points
+    from viz.residuals import shown_file
+
+    pts = parse_points("measurement,feature," + ",".join(f"q{i}_deg" for i in range(1, 8)) + "\n"
+                       "seat-01,seat,0,30,0,60,0,45,0\nseat-01,seat,10,30,0,60,0,45,0\n", "sim/points.csv", 7)
+    centres = np.arange(6.0).reshape(2, 3)
+    head = "measurement,feature,kind,file,line,dx_um,dy_um,dz_um\n"
+    text = head + ("seat-01,seat,seat,sim/points.csv,2,1,0,0\nseat-01,seat,seat,sim/points.csv,3,0,1,0\n"
+                   "seat-01,seat,seat,sim/points-ref.csv,2,0,0,1\n")
+    res = parse_residuals(text, "res.csv")
+    assert res.file.tolist() == ["sim/points.csv", "sim/points.csv", "sim/points-ref.csv"]
+    origins, vectors, skipped = residual_origins(res, pts, centres)
+    assert_close(origins, centres, 0.0)
+    assert_close(vectors, [[1e-6, 0, 0], [0, 1e-6, 0]], 1e-18)
+    assert skipped == 1
+    with pytest.raises(InputError, match="point line 2 of sim/points.csv .* given twice") as e:
+        parse_residuals(text + "seat-01,seat,seat,sim/points.csv,2,1,1,1\n", "res.csv")
+    assert e.value.line == 5 and e.value.column == "line"
+    files = ["sim/points.csv", "sim/points-ref.csv", ""]
+    assert shown_file(files, "sim/points.csv") == {"sim/points.csv"}
+    assert shown_file(files, "moved/points.csv") == {"sim/points.csv"}          # moved: by its name
+    assert shown_file(files + ["other/points.csv"], "moved/points.csv") == set()  # two of that name: neither
+    real = tmp_path / "a" / "points.csv"
+    real.parent.mkdir()
+    real.write_text("x")
+    assert shown_file([str(real), str(tmp_path / "b" / "points.csv")], tmp_path / "a" / ".." / "a" / "points.csv") \
+        == {str(real)}                                                           # the same file on disk
+
+
 GOOD = "x_mm,y_mm,z_mm,rx_um,ry_um,rz_um\n1,2,3,0.1,0.2,0.3\n"
 
 

@@ -214,8 +214,9 @@ def _run(args, inputs, outputs, tmp) -> int:
             all_markers = None if arm.tracker is None else _markers(arm, points)[0]
             origins, vectors, skipped = residual_origins(residuals, points, arm.ball_centres(points), all_markers)
             if skipped:
-                notes.append(f"{skipped} residual(s) of {residuals.path} name lines that are not points of "
-                             f"{points.path} with the same measurement and feature; not drawn")
+                notes.append(f"{skipped} residual(s) of {residuals.path} name points that are not those of "
+                             f"{points.path} (another file, or another measurement or feature at that line); not "
+                             "drawn")
             if len(vectors):
                 _default_scale(args, vectors)
                 view.show_residuals(origins, vectors, scale=args.residual_scale)

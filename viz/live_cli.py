@@ -84,7 +84,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "possible)")
     p.add_argument("--rate-Hz", type=number_in(*RATE_HZ_RANGE), default=None,
                    help="the nominal sample rate (default: estimated from the first intervals); longer gaps "
-                        "count as dropped samples")
+                        "count as dropped samples; when the median of the first 16 intervals is off it by more than "
+                        "1.5x, a 'rate' event says so with both figures")
     p.add_argument("--strict", action="store_true", help="stop the session at the first bad line (default: "
                                                           "count it, say where, and skip it)")
     p.add_argument("--stop-after-idle-s", type=duration_s(zero=False), default=None, metavar="S",
@@ -436,7 +437,7 @@ def _show(out: object, said: dict) -> None:
         log.info(f"  {out.describe()}")
     elif isinstance(out, Event):
         n = said[out.kind] = said.get(out.kind, 0) + 1
-        if out.kind in ("over_force", "joint_limit", "clock_jump", "end") or n <= WARN_FIRST:
+        if out.kind in ("over_force", "joint_limit", "clock_jump", "end", "rate") or n <= WARN_FIRST:
             log.warning(str(out))
         elif n == WARN_FIRST + 1:
             log.warning(f"more '{out.kind}' events are counted, not shown (events.csv has each)")

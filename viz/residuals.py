@@ -6,18 +6,22 @@ given::
     measurement,feature,x_mm,y_mm,z_mm,rx_um,ry_um,rz_um
     ring-01,ring,512.113,-20.410,118.025,1.8,-0.6,0.2
 
-or, as ``aacmm calibrate`` writes its ``residuals.csv``, the line of the point in the points file::
+or, as ``aacmm calibrate`` writes its ``residuals.csv``, the point's file and line::
 
-    measurement,feature,kind,line,residual_um,dx_um,dy_um,dz_um,standardized
-    ring-01,ring,ring,2,1.93,1.8,-0.6,0.2,0.4
+    measurement,feature,kind,file,line,residual_um,dx_um,dy_um,dz_um,standardized
+    ring-01,ring,ring,sim/points.csv,2,1.93,1.8,-0.6,0.2,0.4
 
 * ``x, y, z`` (any length unit): where the vector starts, the ball centre in the base frame; or
   ``line``: the file line of the point in the points file the viewer shows (the vector then starts at
-  that point's deflection-corrected ball centre; a row whose measurement or feature differs from that
-  line's, e.g. a point of another file, is not drawn and is counted).
+  that point's deflection-corrected ball centre; a row of another file, or whose measurement or feature
+  differs from that line's, is not drawn and is counted). ``file`` (optional, with ``line``): the points file
+  of the row as the calibration was given it; a point is its file and line (a reference file's points share
+  line numbers with the points file's). A row is of the file shown when its ``file`` is that file's path or
+  names the same file; failing any such row (the files moved), when its ``file`` has the shown file's name and
+  no other file of the residuals has that name (:func:`shown_file`).
 * ``rx, ry, rz`` or ``dx, dy, dz`` (any length unit): the residual vector, base frame: measured minus
   model (e.g. the ball centre minus its nearest point on the fitted feature's ball-centre surface).
-* ``measurement``, ``feature`` (optional text); ``kind`` (a feature kind, ``reference`` or ``marker``: a
+* ``measurement``, ``feature``, ``file`` (optional text); ``kind`` (a feature kind, ``reference`` or ``marker``: a
   reference residual starts at its marker); ``residual`` (a length), ``standardized`` (read and not used: the
   columns ``aacmm calibrate`` writes). Any other column is an error naming the
   file, line 1 (the header) and the column, as in every file of the project.
@@ -25,6 +29,7 @@ or, as ``aacmm calibrate`` writes its ``residuals.csv``, the line of the point i
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -36,21 +41,22 @@ from arm_model.errors import id_problem, unknown_key
 from arm_model.io import FEATURE_KINDS
 from arm_model.units import implausible, unit_of
 
-__all__ = ["Residuals", "read_residuals", "parse_residuals", "residual_origins"]
+__all__ = ["Residuals", "read_residuals", "parse_residuals", "residual_origins", "shown_file"]
 
 _POINT = ("x", "y", "z")
 _VECTORS = (("rx", "ry", "rz"), ("dx", "dy", "dz"))
 #: the kinds of a residual (calibrate's residuals.csv): a feature's, a reference point's (a tracker's target) or a
 #: motion-capture marker's (calibration.problem's instances)
 _KINDS = (*FEATURE_KINDS, "reference", "marker")
-_TEXT = ("measurement", "feature", "kind", "line", "standardized")     # no unit: text, line number, ratio
+_TEXT = ("measurement", "feature", "kind", "file", "line", "standardized")     # no unit: text, line number, ratio
 _LENGTHS = _POINT + _VECTORS[0] + _VECTORS[1] + ("residual",)           # a length unit each
 
 @dataclass(frozen=True)
 class Residuals:
     """Residual vectors ``vectors`` (N, 3) [m], base frame, starting at ``points`` (N, 3) [m] or, when
     the file gives none, at the points-file lines ``point_lines`` (N,); ``measurement``, ``feature`` and
-    ``kind`` (N,) text ("" when absent); ``lines`` (N,) the file line of each row."""
+    ``kind`` (N,) text ("" when absent); ``lines`` (N,) the file line of each row; ``file`` (N,) the points file
+    of each ``point_lines`` entry ("" when absent)."""
     path: str
     points: np.ndarray | None
     vectors: np.ndarray
@@ -59,6 +65,7 @@ class Residuals:
     lines: np.ndarray
     point_lines: np.ndarray | None = None
     kind: np.ndarray | None = None
+    file: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.vectors)
@@ -68,7 +75,8 @@ class Residuals:
         def take(a):
             return None if a is None else a[mask]
         return Residuals(self.path, take(self.points), self.vectors[mask], self.measurement[mask],
-                         self.feature[mask], self.lines[mask], take(self.point_lines), take(self.kind))
+                         self.feature[mask], self.lines[mask], take(self.point_lines), take(self.kind),
+                         take(self.file))
 
 def read_residuals(path: str | Path) -> Residuals:
     """Read a residuals CSV (see the module documentation)."""
@@ -157,17 +165,19 @@ def parse_residuals(text: str, path: str = "<string>") -> Residuals:
     for (no, _), kind in zip(data, kinds, strict=True):    # "reference" starts at a marker: a typo would not
         if kind and kind not in _KINDS:
             raise InputError(f"unknown kind {kind!r} (known: {', '.join(_KINDS)})", path, no, "kind")
+    files = text_column("file")
     if point_lines is not None:         # one residual a point (a reference point or a mocap marker: one a marker)
         first: dict[tuple, int] = {}
-        for (no, _), line, kind in zip(data, point_lines, kinds, strict=True):
+        for (no, _), line, kind, file in zip(data, point_lines, kinds, files, strict=True):
             if kind not in ("reference", "marker"):
-                seen = first.setdefault((int(line), kind), no)
+                seen = first.setdefault((file, int(line), kind), no)
                 if seen != no:
-                    raise InputError(f"point line {line} (kind {kind or 'not given'}) is given twice (first on line "
-                                     f"{seen}): one residual a point", path, no, "line")
+                    where = f" of {file}" if file else ""
+                    raise InputError(f"point line {line}{where} (kind {kind or 'not given'}) is given twice (first on "
+                                     f"line {seen}): one residual a point", path, no, "line")
     return Residuals(path, np.column_stack([column(b) for b in _POINT]) if has_xyz else None,
                      np.column_stack([column(b) for b in vector]), text_column("measurement"), text_column("feature"),
-                     np.array([no for no, _ in data]), point_lines, kinds)
+                     np.array([no for no, _ in data]), point_lines, kinds, files)
 
 def residual_origins(res: Residuals, points, centres: np.ndarray,
                      markers: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int]:
@@ -183,15 +193,17 @@ def residual_origins(res: Residuals, points, centres: np.ndarray,
 
     Returns:
         (origins (M, 3), vectors (M, 3), skipped): ``skipped`` counts rows given by a line that is not a
-        point of ``points`` with the same measurement and feature.
+        point of ``points`` (a row of another ``file``, :func:`shown_file`) with the same measurement and feature.
     """
     if res.points is not None:
         return res.points, res.vectors, 0
     row_of = {int(line): i for i, line in enumerate(points.lines)}
+    mine = shown_file(() if res.file is None else res.file, points.path)
     keep, origins, seen = [], [], {}
     for k, line in enumerate(res.point_lines):
         i = row_of.get(int(line))
-        if i is None or (res.measurement[k] and res.measurement[k] != points.measurement[i]) \
+        if i is None or (res.file is not None and res.file[k] and res.file[k] not in mine) \
+                or (res.measurement[k] and res.measurement[k] != points.measurement[i]) \
                 or (res.feature[k] and res.feature[k] != points.feature[i]):
             continue
         keep.append(k)
@@ -203,3 +215,22 @@ def residual_origins(res: Residuals, points, centres: np.ndarray,
             origins.append(centres[i])
     return np.reshape(origins, (-1, 3)), res.vectors[keep], len(res.vectors) - len(keep)
 
+
+
+def shown_file(files, shown: str | Path) -> set[str]:
+    """The entries of a residuals file's ``file`` column (``files``; "" not given) that are the points file
+    ``shown``: those equal to its path or naming the same file on disk; failing any (the files moved since the
+    calibration), the entry with its file name when no other entry has that name; else none."""
+    names = {str(f) for f in files if f}
+    same = {f for f in names if f == str(shown) or _same_file(f, shown)}
+    if same:
+        return same
+    named = {f for f in names if Path(f).name == Path(shown).name}
+    return named if len(named) == 1 else set()
+
+
+def _same_file(a: str | Path, b: str | Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):        # a file that is not there (moved), a name the system refuses
+        return False

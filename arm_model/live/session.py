@@ -43,7 +43,7 @@ __all__ = ["Session", "LivePoint", "Event", "EVENT_KINDS", "PERIOD_SAMPLES", "GA
 
 #: the kinds of :class:`Event`
 EVENT_KINDS = ("over_force", "joint_limit", "dropped", "late", "time_jump", "clock_jump", "bad_line", "bump", "plan",
-               "end")
+               "end", "rate")
 #: intervals from which the nominal sample period is estimated (their median), unless given
 PERIOD_SAMPLES = 16
 #: a gap longer than this many nominal periods holds dropped samples
@@ -179,6 +179,8 @@ class Session:
             raise ValueError(f"rate: the nominal sample rate must be in [{RATE_HZ_RANGE[0]:g}, "
                              f"{RATE_HZ_RANGE[1]:g}] Hz, got {rate!r}")
         self._period = None if rate is None else 1.0 / float(rate)
+        # the first intervals of the time stamps, to check a stated rate against (None: no rate, or checked)
+        self._rate_seen: list | None = None if rate is None else []
         self._gap_limit = -math.inf if rate is None else GAP_FACTOR * self._period  # type: ignore[operator]  # learning: every interval
         self._first_gaps: list = []
         self._widest = 0.0                  # the widest interval taken beyond the gap limit [s]
@@ -253,6 +255,8 @@ class Session:
                 return self._off_clock(s, raw, line)
             if t - last > self._gap_limit:
                 out = self._gap(last, t)
+            if self._rate_seen is not None:
+                out = out + self._check_rate(t - last, t)
         self._last_t = t
         self.counts["samples"] += 1
         self.latest = s
@@ -294,8 +298,9 @@ class Session:
         """Samples that came together (:meth:`~arm_model.live.samples.SampleLayout.parse_block` of lines read at
         once; rows ``start`` to ``end - 1`` of ``block``, default all): what :meth:`push_sample` on each in turn
         brings, and the same state and files after it. The samples that a clock, a gap, a force beyond the probe's
-        range or a joint limit concerns, the first ones (the period, the sensor's zero and noise), those held off
-        the clock and runs of fewer than :data:`BLOCK_LEAST` go through :meth:`push_sample`; the others are taken by
+        range or a joint limit concerns, the first ones (the period or the check of a stated rate, the sensor's zero
+        and noise), those held off the clock and runs of fewer than :data:`BLOCK_LEAST` go through
+        :meth:`push_sample`; the others are taken by
         array operations and one loop for the moving averages, which must go sample by sample (the same operations
         in the same order: the same numbers). A point's latency counts from the moment the session takes up the
         sample that ends its contact, as for a sample pushed alone (the joints' moves of the block's samples before
@@ -514,6 +519,27 @@ class Session:
         if self.record is not None:
             self.record.append("events", _csv_line([_num(t), kind, count, message]))
         return ev
+
+    def _check_rate(self, interval: float, t: float) -> tuple:
+        """The stated rate against the time stamps: once :data:`PERIOD_SAMPLES` intervals on the clock are in, a
+        ``rate`` event when their median is more than :data:`GAP_FACTOR` times the stated period or less than the
+        period over it (every sample counted with dropped ones, or a dropped sample unseen), giving both figures.
+        ``interval`` [s]: the next one, up to the sample at ``t`` (until then the samples go one by one:
+        :meth:`_BlockMasks.quiet_until`)."""
+        seen = self._rate_seen
+        assert seen is not None and self._period is not None, "a rate to check"
+        seen.append(float(interval))
+        if len(seen) < PERIOD_SAMPLES:
+            return ()
+        self._rate_seen = None
+        median, period = float(np.median(seen[:PERIOD_SAMPLES])), self._period
+        if period / GAP_FACTOR <= median <= GAP_FACTOR * period:
+            return ()
+        return (self._event(t, "rate", f"the stated rate (--rate-Hz) {1.0 / period:.6g} Hz, a sample every "
+                                       f"{period * 1e3:.4g} ms, contradicts the time stamps: the median of their first "
+                                       f"{PERIOD_SAMPLES} intervals is {median * 1e3:.4g} ms ({1.0 / median:.6g} Hz); "
+                                       "dropped samples are counted against the stated rate (give the stream's rate, "
+                                       "or leave --rate-Hz out to learn it from the time stamps)"),)
 
     def _clock_bounds(self, period: float) -> None:
         """How far a time stamp may be from the last one taken, ahead and back, and stay on the stream's clock [s]."""
@@ -750,7 +776,7 @@ class _BlockMasks:
         every one is)."""
         s = self.session
         if (s._held or s._last_t is None or s._over or not math.isfinite(s._gap_limit)
-                or not s._detector.ready(self.block.wrench is not None)):
+                or s._rate_seen is not None or not s._detector.ready(self.block.wrench is not None)):
             return k
         dt = self.block.t[k] - s._last_t
         if not 0.0 < dt <= s._gap_limit or dt > s._jump_limit:

@@ -35,7 +35,7 @@ def outlier_budget(points: int) -> int:
 
 def dropped_entry(o: Outlier) -> dict:
     """The loop's description of a point left out (``summary.json`` ``outliers_dropped``)."""
-    return {"measurement": o.measurement, "feature": o.feature, "line": o.line,
+    return {"measurement": o.measurement, "feature": o.feature, "file": o.file, "line": o.line,
             "standardized": abs(float(o.standardized)), "why": "outlier"}
 
 
@@ -84,6 +84,7 @@ def _too_small(test: CalibrationData, bad: list, out: list) -> list:
         left = np.setdiff1d(np.flatnonzero((pts.measurement == m) & (pts.feature == f)), bad)
         if kind in MIN_POINTS and len(left) <= max(MIN_POINTS[kind]):
             more += [int(i) for i in left]
-            out += [{"measurement": m, "feature": f, "line": None if pts.lines is None else int(pts.lines[i]),
+            out += [{"measurement": m, "feature": f, "file": test.file_of(i),
+                     "line": None if pts.lines is None else int(pts.lines[i]),
                      "standardized": None, "why": "its feature instance has too few points left"} for i in left]
     return more

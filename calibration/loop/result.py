@@ -63,7 +63,7 @@ class LoopResult:
         remaining: the families kept by the forward selection (conditional test, Bonferroni-adjusted p).
         verdict: a sentence; candidates, skipped: the candidate set; design, test: measurement ids.
         structure_plots: binned estimates of the significant families at the final fit.
-        dropped: outlier points left out ("design": by the base fit), with measurement, feature, line.
+        dropped: outlier points left out ("design": by the base fit), with measurement, feature, file and line.
         test_by: the outer test set holds whole "measurement"s or "pose"s of every feature.
         power: the folds of the decisions and whether their test can reach its level (see
         :func:`~calibration.loop.folds.choose_folds`).

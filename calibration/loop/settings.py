@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from ..identifiability import DEFAULT_RANK_TOL
 
 __all__ = ["LoopSettings", "wilcoxon_units_needed", "SAME_SIGNATURE", "PHYSICS", "PARSIMONY", "NOISE_OFF", "FOLD_BY",
-           "LEGACY_RESOLUTION"]
+           "LEGACY_RESOLUTION", "MAX_COUNT"]
 
 #: the practical-resolution rule the loop's fits without a prior keep (calibrate's default before its prior)
 LEGACY_RESOLUTION = 0.1
@@ -24,6 +24,11 @@ NOISE_OFF = 2.0
 #: how the decisions' folds are made: by whole measurement, by pose inside each feature, or the first
 #: that can reach the significance level
 FOLD_BY = ("auto", "measurement", "pose")
+#: the most effects to add, candidates to cross-validate a stage or pairs to try (``max_effects``, ``cv_top``,
+#: ``pairs``): more than any arm's library offers (every family of a J-joint chain: J^2 + 2 J + 10 candidates, 970 at
+#: 30 joints); beyond it a count is a typo (``--cv-top 1e300`` was taken, and written to summary.json as a 301-digit
+#: integer that JSON readers of other tools round)
+MAX_COUNT = 1000
 
 
 def wilcoxon_units_needed(alpha: float, tests: int) -> int:
@@ -86,6 +91,9 @@ class LoopSettings:
                              f"{self.prior_scale!r}")
         if self.min_improvement < 0 or self.max_effects < 0 or self.cv_top < 1 or self.pairs < 0:
             raise ValueError("min_improvement, max_effects and pairs must be >= 0 and cv_top >= 1")
+        for name in ("max_effects", "cv_top", "pairs"):
+            if getattr(self, name) > MAX_COUNT:
+                raise ValueError(f"{name} must be at most {MAX_COUNT}, got {getattr(self, name)}")
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)

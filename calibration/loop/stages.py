@@ -296,7 +296,7 @@ def physics(state: LoopState, scr: Screening) -> list:
     residual: a compliance would otherwise absorb part of the signature of an effect the library lacks.
     Returns ``[(candidate, CVResult)]`` or ``[]``."""
     _current_folds(state)
-    tested = state.cv_here + [cv for cv in scr.cvs if cv not in state.cv_here]
+    tested = state.tested_here(scr)
     got = physics_inclusion(state, scr, state.settings.alpha / max(len(tested), 1), tested)
     if got is None:
         return []
@@ -304,7 +304,7 @@ def physics(state: LoopState, scr: Screening) -> list:
         scr.gated.append((got[0], scr.test_of(got[0])))
     if got[1] not in scr.cvs:
         scr.cvs.append(got[1])
-    state.last_cv = state.cv_here + [cv for cv in scr.cvs if cv not in state.cv_here]
+    state.last_cv = state.tested_here(scr)
     return [got]
 
 
@@ -318,7 +318,7 @@ def pairs(state: LoopState, scr: Screening) -> tuple[Decision, Stage] | None:
     if not s.pairs or sum(len(st.added.effects) for st in state.stages[1:]) + 2 > s.max_effects \
             or not state.power["can_reach"]:
         return None
-    tested = state.cv_here + [cv for cv in scr.cvs if cv not in state.cv_here]
+    tested = state.tested_here(scr)
     pool = pair_pool(scr.ranked, tested)
     offered = candidate_pairs(pool, state.desc)
     if not offered:
@@ -348,7 +348,7 @@ def pairs(state: LoopState, scr: Screening) -> tuple[Decision, Stage] | None:
         scr.cvs.append(cv)
         if cv.passed:
             passing.append((pc, cv))
-    state.last_cv = state.cv_here + [cv for cv in scr.cvs if cv not in state.cv_here]
+    state.last_cv = state.tested_here(scr)
     return decide(state, scr, passing) if passing else None
 
 

@@ -141,6 +141,12 @@ class LoopState:
             gross_threshold=GROSS_THRESHOLD if gross else None, outlier_lengths=False,
             outlier_limit=outlier_budget(len(self.data)) if gross else None))
 
+    def tested_here(self, scr: Screening) -> list[CVResult]:
+        """The held-out tests run at the current stage: its earlier passes' (``cv_here``), then those of the pass
+        ``scr`` not among them, in order (the physics and pair steps' "tested at this stage", before their own
+        tests and after)."""
+        return self.cv_here + [cv for cv in scr.cvs if cv not in self.cv_here]
+
     def test_figures(self, model: ArmModel, result: CalibrationResult, weights: Weights | None = None) -> dict:
         """Figures of ``(model, result.p)`` on the outer test set (:func:`~calibration.loop.heldout.heldout_figures`),
         each a prediction as ``calibrate``'s held-out figures are: the test measurements' own centres solved on
