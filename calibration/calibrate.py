@@ -56,6 +56,7 @@ from .identifiability import (
 from .options import FitOptions
 from .prior import PRIOR_DOMINATED, PriorSpec, prior_only, prior_spec, secant_gains, update_scales, variance_ratio
 from .problem import Problem
+from .region import RegionEffect, region_effect
 from .schur import BlockNormal
 from .solver import Prior, blas_threads, levenberg_marquardt
 
@@ -291,6 +292,8 @@ class CalibrationResult:
     prior_groups: dict = field(default_factory=dict)   # per group: scale, parameters, effective parameters
     model_check: dict | None = None           # model_output.model_check of this fit, when refine_torques made it
     discrepancy: Discrepancy | None = None    # the error beyond the fit's own prediction away from its poses
+    #: the parameters' random effect between regions of the joint space (calibration.region), in the covariance file
+    region: RegionEffect | None = None
     options: FitOptions | None = None         # the options of the fit (calibrate's, as given)
     gross: list = field(default_factory=list)  # GrossError: points left out of the fit (indices into the data given)
     gross_kept: str | None = None             # why a gross-looking point was kept (the model's error), or None
@@ -464,6 +467,7 @@ class CalibrationResult:
             "variance_components": self.variance, "weights_history": self.weights_history,
             "probing_scatter": self._budget_um(),
             "model_discrepancy": None if self.discrepancy is None else self.discrepancy.to_dict(),
+            "region_effect": None if self.region is None else self.region.to_dict(),
             "prior": None if self.prior_scales is None else {
                 "scales": dict(self.prior_scales), "groups": self.prior_groups, "log_evidence": self.log_evidence,
                 "prior_dominated_ratio": PRIOR_DOMINATED, "evidence_rounds": self.evidence,
@@ -1375,6 +1379,8 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         prior_only={} if s.prior is None else {spec.names[i]: why for i, why in s.prior_only.items() if i in kept},
         discrepancy=model_discrepancy(prob, ev.r, nrm.factor, var)
         if options.discrepancy else None,
+        region=region_effect(prob, ev.r, nrm.factor, var, nrm.jscale, u if prior_sd is None else prior_sd,
+                             tuple(spec.names[i] for i in kept)) if options.discrepancy else None,
         point_tests=None if level is None else point_tests(
             prob, ev.r, nrm.factor, nrm.h, level, nrm.deletions))
 

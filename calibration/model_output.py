@@ -19,6 +19,8 @@ from arm_model.model_file import Arm, format_model, write_covariance
 from arm_model.output import safe_name
 from arm_model.urdf_import import calibrated_urdf_text
 
+from .region import predictive_covariance
+
 __all__ = ["calibrated_name", "model_paths", "fitted_arm", "write_model", "written_covariance", "model_check",
            "refine_torques",
            "check_reproduces", "REPRODUCE_TOL_M", "discrepancy_fields", "session_drift", "without_session_effects",
@@ -173,7 +175,8 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
 
 def written_covariance(result) -> tuple[list, np.ndarray]:
     """(names, covariance [SI^2]) of the covariance file of ``result``: the fit's covariance of its free
-    parameters expressed in the parameters of the model file, whose description holds the base errors folded
+    parameters for poses it never saw (the posterior plus the parameters' random effect between regions of the joint
+    space, :func:`calibration.region.predictive_covariance`) expressed in the parameters of the model file, whose description holds the base errors folded
     in (:func:`arm_model.params.folded_jacobian`: ``T C T^T``; the same as the fit's but for a URDF origin's angle
     errors, which the model file turns about the calibrated origin's own axes, the fit about the nominal's). A
     parameter is written when it is free or, through ``T``, takes a variance from one (the other angles of an
@@ -185,7 +188,7 @@ def written_covariance(result) -> tuple[list, np.ndarray]:
     t[: model.base_size, : model.base_size] = folded_jacobian(model.desc, result.p)
     t_free = t[:, idx]
     rows = [i for i in range(spec.size) if i in idx or np.any(t_free[i] != 0.0)]
-    cov = t_free[rows] @ result.cov @ t_free[rows].T
+    cov = t_free[rows] @ predictive_covariance(result) @ t_free[rows].T
     return [spec.names[i] for i in rows], 0.5 * (cov + cov.T)
 
 
@@ -274,7 +277,7 @@ def _same_point_covariance(result, back: Arm, cov, n: int = 64) -> None:
     aux = back.aux(pts, wrench=data.wrench)
     aux = None if aux is None else aux.select(k)
     own = propagate(result.model, result.p, pts.q[k], w, aux,
-                    parameters=ParameterCovariance(tuple(result.free), result.cov), inputs=none).cov
+                    parameters=ParameterCovariance(tuple(result.free), predictive_covariance(result)), inputs=none).cov
     got = propagate(back.model, back.p, pts.q[k], w, aux,
                     parameters=ParameterCovariance(tuple(cov.names), cov.matrix), inputs=none).cov
     scale = np.max(np.abs(np.einsum("nii->ni", own)), axis=1)[:, None, None]

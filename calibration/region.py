@@ -1,0 +1,179 @@
+"""The parameters' random effect between regions of the joint space: what the posterior misses where a model's
+best parameters depend on the region of poses they were fitted on.
+
+A model that lacks an effect (a load the joints feel differently on each branch of a redundant arm, a contact
+that pushes the ball in a direction the plate's placement sets) is absorbed by the parameters, and the values
+that absorb it best differ from one region of the joint space to the next: a fit on one region predicts another
+worse than its posterior says, in the directions of the parameters, not as a scatter of each point. The
+extrapolative folds of :mod:`calibration.discrepancy` (the ends of each joint's range) do not show it when the
+training poses fall into separate regions (the elbow-up and elbow-down branches of a 7-joint arm reaching one
+seat): each end is still predicted from poses of its own branch.
+
+So the training poses are split into regions (:func:`pose_regions`: Ward's hierarchical clustering of the poses
+on the circle of each joint, cut into 2, 3 and 4 regions, :data:`REGION_SPLITS`), each region is held out in turn
+and predicted by the fit without it (the group deletion at the solution, :func:`calibration.discrepancy.
+group_deletions`: prediction errors ``e_O`` with covariance ``var M_O`` when the model holds, against each
+feature fitted on the remaining poses), and the variance of a random shift ``b`` of the free parameters that a
+region draws on its own, ``b ~ N(0, diag(t) P)`` (``P`` the prior's variance of each parameter: its plausible
+size; the posterior's without a prior), is fitted by maximum likelihood to those errors::
+
+    e_O ~ N(0, var M_O + G_O diag(t) G_O^T),   0 <= t_j <= 1
+
+(``G_O`` the held-out rows' Jacobian with respect to the free parameters, per prior standard deviation). ``t_j = 0``
+when the model holds (the regions predict each other as the posterior says); at most 1: a region's parameters do
+not differ from another's by more than the parameter's plausible size. The covariance file written with the model
+holds ``posterior + diag(t) P`` (:func:`predictive_covariance`), so ``aacmm tip``'s u of a point in a region the
+fit never saw carries the shift its region may draw, through the Jacobian at that point: it grows where the
+parameters' effect differs from the training poses', and a deviation from a feature's mean keeps the part that
+varies over the feature's poses. The parameters' own u (console, report) stay the posterior's.
+
+Constants: :data:`REGION_SPLITS` (2 to 4 regions; measured with 2-3, 2-4 and 2-6 in docs/studies/calibration.md: the
+same coverage to 2 points) and the bound ``t <= 1`` (the prior's size, the model's own statement of what a
+parameter may plausibly be).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .discrepancy import LARGE_FOLD, group_deletions, holdable
+from .schur import BlockNormal
+
+__all__ = ["REGION_SPLITS", "RegionEffect", "pose_regions", "fit_region_variances", "region_effect",
+           "predictive_covariance"]
+
+#: the numbers of regions the training poses are cut into (each partition's regions are held out in turn)
+REGION_SPLITS = (2, 3, 4)
+#: the bounds of ``log t`` (``t`` a parameter's random-effect variance per prior variance): 0 below, 1 above
+_LOG_T = (-30.0, 0.0)
+
+
+@dataclass(frozen=True)
+class RegionEffect:
+    """The parameters' random effect between regions of the joint space (:func:`region_effect`).
+
+    Attributes:
+        names: the free parameters; variance: (k,) [SI^2] each one's random-effect variance (``t_j P_j``).
+        ratio: (k,) ``t_j``, the variance per prior variance (0 when the regions predict each other as the
+            posterior says, at most 1).
+        lr: twice the log-likelihood gained over no random effect (about chi-square with up to k degrees of freedom
+            when there is none; the bound at 0 makes it smaller).
+        folds: the regions held out; rows: their residual rows, pooled.
+    """
+    names: tuple[str, ...]
+    variance: np.ndarray
+    ratio: np.ndarray
+    lr: float
+    folds: int
+    rows: int
+
+    def to_dict(self) -> dict:
+        order = np.argsort(-self.ratio)
+        return {"likelihood_ratio": self.lr, "folds": self.folds, "rows": self.rows,
+                "sd_per_prior_sd": {self.names[i]: math.sqrt(float(self.ratio[i])) for i in order
+                                    if self.ratio[i] > 1e-6},
+                "method": "leave one region of the joint space out (Ward's clusters of the training poses, 2-4 "
+                          "regions): the variance of each free parameter's shift between regions, per its prior "
+                          "variance, by maximum likelihood on the regions' prediction errors (group deletion at the "
+                          "solution); added to the covariance file"}
+
+
+def pose_regions(q: np.ndarray, splits=REGION_SPLITS) -> list[np.ndarray]:
+    """Index arrays into the rows of ``q`` (N, J) [rad]: for each number of regions ``k`` in ``splits`` (below N),
+    the rows of each of the ``k`` clusters of Ward's hierarchical clustering of the poses as points
+    ``(cos q_j, sin q_j)`` (each angle on its circle: a range across +-pi is one region). A joint that does not move
+    adds nothing to the distances."""
+    from scipy.cluster.hierarchy import fcluster, linkage
+    q = np.asarray(q, dtype=float)
+    if len(q) < 3:
+        return []
+    tree = linkage(np.column_stack([np.cos(q), np.sin(q)]), "ward")
+    out = []
+    for k in splits:
+        if k >= len(q):
+            continue
+        lab = fcluster(tree, k, "maxclust")
+        out += [np.flatnonzero(lab == c) for c in np.unique(lab)]
+    return out
+
+
+def fit_region_variances(parts) -> tuple[np.ndarray, float]:
+    """``(t (k,), lr)``: the maximum likelihood of ``t`` (bounded to [0, 1], :data:`_LOG_T`) for errors ``e_O`` of
+    folds ``parts = [(M_O, G_O, e_O)]`` distributed ``N(0, M_O + G_O diag(t) G_O^T)`` (``M_O`` (n, n), ``G_O`` (n, k),
+    in units of a row's noise and of each parameter's prior standard deviation), and twice the log-likelihood it
+    gains over ``t = 0``. Optimised in ``log t`` (L-BFGS-B, the analytic gradient ``1/2 (g_j^T C^-1 g_j -
+    (g_j^T C^-1 e)^2) t_j``), from two starts (far below and at a tenth of the bound)."""
+    from scipy.optimize import minimize
+    k = parts[0][1].shape[1]
+
+    def nll(x):
+        t = np.exp(x)
+        f, grad = 0.0, np.zeros(k)
+        for m, g, e in parts:
+            c = np.linalg.cholesky(m + (g * t) @ g.T)
+            ig = np.linalg.solve(c, g)
+            ie = np.linalg.solve(c, e)
+            a = ig.T @ ie
+            f += float(np.sum(np.log(np.diag(c))) + 0.5 * ie @ ie)
+            grad += 0.5 * (np.einsum("ij,ij->j", ig, ig) - a ** 2) * t
+        return f, grad
+    bounds = [_LOG_T] * k
+    best = min((minimize(nll, np.full(k, x0), jac=True, method="L-BFGS-B", bounds=bounds)
+                for x0 in (-12.0, math.log(0.1))), key=lambda r: r.fun)
+    return np.exp(best.x), max(2 * (nll(np.full(k, _LOG_T[0]))[0] - float(best.fun)), 0.0)
+
+
+def region_effect(prob, r: np.ndarray, factor: BlockNormal, var: float, jscale: np.ndarray, size: np.ndarray,
+                  names) -> RegionEffect | None:
+    """The parameters' random effect between regions of a fit of ``prob`` (module docstring).
+
+    Args:
+        prob, r, factor, var: as :func:`calibration.discrepancy.model_discrepancy` (the first ``len(names)`` columns
+            of ``factor.j`` are the free parameters).
+        jscale: the column scale of ``factor.j`` (``J = factor.j * jscale`` per SI unit of each unknown).
+        size: (k,) [SI] the prior's standard deviation of each free parameter (the posterior's without a prior).
+        names: the free parameters.
+
+    A region whose rows pass :data:`calibration.discrepancy.LARGE_FOLD` is held out by an evenly spaced subset of its
+    poses within that many rows. None when no region can be held out (too few poses, nothing free)."""
+    k = len(names)
+    rp = prob.row_point
+    point_rows = (prob.row_distance < 0) & (rp >= 0)
+    used = np.unique(rp[point_rows])
+    if not k or len(used) < 3:
+        return None
+    per_point = max(1, int(np.sum(point_rows)) // len(used))
+    if var != 1.0:          # rows of unit variance, the prior as the fit put it: the posterior is A^-1 itself
+        factor, r = BlockNormal(factor.j / math.sqrt(var), factor.n_par, factor.damping), r / math.sqrt(var)
+    parts, n_rows = [], 0
+    g_scale = jscale[:k] * np.asarray(size, dtype=float)
+    for region in pose_regions(prob.data.points.q[used]):
+        region = region[np.linspace(0, len(region) - 1, min(len(region), LARGE_FOLD // per_point)).astype(int)]
+        rows = np.flatnonzero(point_rows & np.isin(rp, sorted(holdable(prob, used[region]))))
+        if not len(rows) or len(rows) > LARGE_FOLD:
+            continue
+        e, m = group_deletions(factor, r, [rows])[0]
+        if e is None:
+            continue
+        g = factor.j[rows][:, :k]
+        g = (g.toarray() if hasattr(g, "toarray") else np.asarray(g)) * g_scale
+        parts.append((0.5 * (m + m.T), g, e))
+        n_rows += len(rows)
+    if not parts:
+        return None
+    t, lr = fit_region_variances(parts)
+    t = np.where(t <= math.exp(_LOG_T[0]) * 1.01, 0.0, t)
+    return RegionEffect(tuple(names), t * np.asarray(size, dtype=float) ** 2, t, lr, len(parts), n_rows)
+
+
+def predictive_covariance(result) -> np.ndarray:
+    """The covariance [SI^2] of ``result.free`` for predicting poses the fit never saw: the posterior ``result.cov``
+    plus the parameters' random effect between regions (``result.region``, :class:`RegionEffect`, matched by name;
+    none: the posterior itself). What the covariance file holds."""
+    reg = getattr(result, "region", None)
+    if reg is None:
+        return result.cov
+    extra = dict(zip(reg.names, reg.variance, strict=True))
+    return result.cov + np.diag([float(extra.get(n, 0.0)) for n in result.free])
