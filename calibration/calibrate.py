@@ -1380,7 +1380,7 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         discrepancy=model_discrepancy(prob, ev.r, nrm.factor, var)
         if options.discrepancy else None,
         region=region_effect(prob, ev.r, nrm.factor, var, nrm.jscale, u if prior_sd is None else prior_sd,
-                             tuple(spec.names[i] for i in kept)) if options.discrepancy else None,
+                             tuple(spec.names[i] for i in kept), _prior_group(s, kept)) if options.region_effect else None,
         point_tests=None if level is None else point_tests(
             prob, ev.r, nrm.factor, nrm.h, level, nrm.deletions))
 
@@ -1394,6 +1394,18 @@ def _test_level(options: FitOptions) -> float | None:
     if options.gross_threshold is None:
         return None
     return max(options.gross_threshold, options.outlier_threshold)
+
+
+def _prior_group(s: _Setup, kept) -> np.ndarray | None:
+    """(len(kept),) the index of the prior's group of each free parameter (:meth:`~calibration.prior.PriorSpec.
+    groups_of`), or None without a prior."""
+    if s.prior is None:
+        return None
+    kept = np.asarray(kept, dtype=int)
+    out = np.zeros(len(kept), dtype=int)
+    for g, idx in enumerate(s.spec.groups_of(kept).values()):
+        out[np.isin(kept, idx)] = g
+    return out
 
 
 def _group_table(s: _Setup, kept, u) -> dict:

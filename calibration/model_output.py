@@ -115,8 +115,8 @@ def model_paths(out_dir, name: str) -> dict:
 
 def fitted_arm(result, name: str | None = None, training_poses: Path | None = None) -> Arm:
     """The :class:`~arm_model.model_file.Arm` of a :class:`~calibration.calibrate.CalibrationResult`:
-    the base errors folded into the description, the effects with their fitted values, uncertainties
-    and states (free / fixed / held), the reference instrument's frames and markers (``result.tracker``) and the
+    the base errors folded into the description, the effects with their fitted values, uncertainties (the covariance
+    file's: :func:`calibration.region.predictive_covariance`) and states (free / fixed / held), the reference instrument's frames and markers (``result.tracker``) and the
     model discrepancy; its growth away from the training poses only with ``training_poses``, the points file of
     those poses (:func:`write_model` writes it), else the discrepancy at the training poses alone (an Arm refuses a
     growth without the poses it grows away from)."""
@@ -129,8 +129,9 @@ def fitted_arm(result, name: str | None = None, training_poses: Path | None = No
     fields = discrepancy_fields(result)
     if training_poses is None:
         fields["discrepancy_growth"] = None
+    u = dict(zip(result.free, np.sqrt(np.clip(np.diag(predictive_covariance(result)), 0.0, None)), strict=True))
     return Arm(desc, tuple(model.effects), {n: result.value(n) for n in names},
-               {n: result.uncertainty(n) for n in names}, {n: rows[n]["state"] for n in names},
+               {n: float(u.get(n, 0.0)) for n in names}, {n: rows[n]["state"] for n in names},
                tracker=result.tracker, training_poses=training_poses if fields["discrepancy_growth"] else None,
                **fields)
 

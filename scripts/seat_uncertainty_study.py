@@ -67,9 +67,10 @@ sys.path.insert(0, str(ROOT))
 VARIANTS = ("none", "constant", "linear", "predictive", "per-joint", "written", "saturating")
 #: the variants :func:`fold_check` refits without each fold
 CHECKED = ("constant", "linear", "predictive", "per-joint", "written")
-#: the parameter covariances ``--parameter-covariance`` offers (:func:`robust_covariance`; ``written``: the covariance
-#: file's, the posterior plus the parameters' random effect between regions, :mod:`calibration.region`)
-COVARIANCES = ("written", "posterior", "jackknife", "fold-shift")
+#: the parameter covariances ``--parameter-covariance`` offers (:func:`robust_covariance`; ``region``: the covariance
+#: file's of a fit with ``FitOptions(region_effect=True)``, the posterior plus the parameters' random effect between
+#: regions of the joint space, :mod:`calibration.region`)
+COVARIANCES = ("posterior", "region", "jackknife", "fold-shift")
 #: how the training scatter is carried to the held-out points (``--noise``, :func:`fit_joint_play`)
 NOISES = ("isotropic", "joint-play")
 #: the aim for each pair's coverage [%]
@@ -292,7 +293,7 @@ def _load_r2(desc, q, feature, dev) -> float:
     return 1.0 - float(np.var(dev[:, ax] - a @ c) / np.var(dev[:, ax]))
 
 
-def study(root: Path, urdf: Path, tip: str, places, holes, say=print, covariance: str = "written",
+def study(root: Path, urdf: Path, tip: str, places, holes, say=print, covariance: str = "posterior",
           noise: str = "isotropic") -> list[dict]:
     """One row per training placement and held-out placement: per variant, the coverage [%] of tip's u and of the
     deviation's u, the median and mean u [m]; the discrepancy fitted (linear and saturating) and the load R^2.
@@ -315,9 +316,9 @@ def study(root: Path, urdf: Path, tip: str, places, holes, say=print, covariance
     rows = []
     for tr in places:
         with captured_linearisation() as lin:
-            res = calibrate(model, data[tr], FitOptions(weights_from_data=True))
-        cov_p = predictive_covariance(res) if covariance == "written" else res.cov
-        if covariance not in ("written", "posterior"):   # in the fit's column-scaled unknowns, scaled back by the posterior's
+            res = calibrate(model, data[tr], FitOptions(weights_from_data=True, region_effect=covariance == "region"))
+        cov_p = predictive_covariance(res)
+        if covariance not in ("posterior", "region"):   # in the fit's column-scaled unknowns, scaled back by the posterior's
             post, robust = (robust_covariance(c, len(res.free), lin) for c in ("posterior", covariance))
             scale = np.sqrt(np.diag(res.cov) / np.diag(post))
             cov_p = robust * np.outer(scale, scale)
@@ -417,9 +418,10 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--sim", default=None, help="comma-separated simulated robots of scripts/sim_seats_study.py "
                    "(default: the real Panda data)")
-    p.add_argument("--parameter-covariance", choices=COVARIANCES, default="written",
-                   help="the parameter covariance every variant propagates (default: the covariance file's; "
-                        "posterior: the fit's posterior alone)")
+    p.add_argument("--parameter-covariance", choices=COVARIANCES, default="posterior",
+                   help="the parameter covariance every variant propagates (default: the fit's posterior; region: "
+                        "with the parameters' random effect between regions, as the covariance file of a fit with "
+                        "FitOptions(region_effect=True))")
     p.add_argument("--noise", choices=NOISES, default="isotropic",
                    help="the training scatter carried as the fit's probing scatter (default) or as joint play")
     p.add_argument("-o", "--output", type=Path, default=Path("out/seat-uncertainty"), help="output folder")
