@@ -1380,7 +1380,8 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         discrepancy=model_discrepancy(prob, ev.r, nrm.factor, var)
         if options.discrepancy else None,
         region=region_effect(prob, ev.r, nrm.factor, var, nrm.jscale, u if prior_sd is None else prior_sd,
-                             tuple(spec.names[i] for i in kept), _prior_group(s, kept)) if options.region_effect else None,
+                             tuple(spec.names[i] for i in kept), _prior_group(s, kept))
+        if options.region_effect else None,
         point_tests=None if level is None else point_tests(
             prob, ev.r, nrm.factor, nrm.h, level, nrm.deletions))
 

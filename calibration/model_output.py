@@ -116,10 +116,10 @@ def model_paths(out_dir, name: str) -> dict:
 def fitted_arm(result, name: str | None = None, training_poses: Path | None = None) -> Arm:
     """The :class:`~arm_model.model_file.Arm` of a :class:`~calibration.calibrate.CalibrationResult`:
     the base errors folded into the description, the effects with their fitted values, uncertainties (the covariance
-    file's: :func:`calibration.region.predictive_covariance`) and states (free / fixed / held), the reference instrument's frames and markers (``result.tracker``) and the
-    model discrepancy; its growth away from the training poses only with ``training_poses``, the points file of
-    those poses (:func:`write_model` writes it), else the discrepancy at the training poses alone (an Arm refuses a
-    growth without the poses it grows away from)."""
+    file's: :func:`calibration.region.predictive_covariance`) and states (free / fixed / held), the reference
+    instrument's frames and markers (``result.tracker``) and the model discrepancy; its growth away from the training
+    poses only with ``training_poses``, the points file of those poses (:func:`write_model` writes it), else the
+    discrepancy at the training poses alone (an Arm refuses a growth without the poses it grows away from)."""
     desc = result.described()
     if name:
         desc = replace(desc, name=name)
@@ -177,11 +177,11 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
 def written_covariance(result) -> tuple[list, np.ndarray]:
     """(names, covariance [SI^2]) of the covariance file of ``result``: the fit's covariance of its free
     parameters for poses it never saw (the posterior plus the parameters' random effect between regions of the joint
-    space, :func:`calibration.region.predictive_covariance`) expressed in the parameters of the model file, whose description holds the base errors folded
-    in (:func:`arm_model.params.folded_jacobian`: ``T C T^T``; the same as the fit's but for a URDF origin's angle
-    errors, which the model file turns about the calibrated origin's own axes, the fit about the nominal's). A
-    parameter is written when it is free or, through ``T``, takes a variance from one (the other angles of an
-    origin with a fixed one); names in the parameters' order."""
+    space, :func:`calibration.region.predictive_covariance`) expressed in the parameters of the model file, whose
+    description holds the base errors folded in (:func:`arm_model.params.folded_jacobian`: ``T C T^T``; the same as
+    the fit's but for a URDF origin's angle errors, which the model file turns about the calibrated origin's own
+    axes, the fit about the nominal's). A parameter is written when it is free or, through ``T``, takes a variance
+    from one (the other angles of an origin with a fixed one); names in the parameters' order."""
     from arm_model.params import folded_jacobian
     spec, model = result.model.spec, result.model
     idx = [spec.index(n) for n in result.free]

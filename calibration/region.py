@@ -15,21 +15,29 @@ and predicted by the fit without it (the group deletion at the solution, :func:`
 group_deletions`: prediction errors ``e_O`` with covariance ``var M_O`` when the model holds, against each
 feature fitted on the remaining poses), and the variance of a random shift ``b`` of the free parameters that a
 region draws on its own, ``b ~ N(0, diag(t) P)`` (``P`` the prior's variance of each parameter: its plausible
-size; the posterior's without a prior), is fitted by maximum likelihood to those errors::
+size, the posterior's without a prior; one ``t`` for each of the prior's groups, lengths, angles, each effect's
+parameters), is fitted by maximum likelihood to those errors::
 
-    e_O ~ N(0, var M_O + G_O diag(t) G_O^T),   0 <= t_j <= 1
+    e_O ~ N(0, var M_O + G_O diag(t) G_O^T),   0 <= t <= 1
 
-(``G_O`` the held-out rows' Jacobian with respect to the free parameters, per prior standard deviation). ``t_j = 0``
-when the model holds (the regions predict each other as the posterior says); at most 1: a region's parameters do
-not differ from another's by more than the parameter's plausible size. The covariance file written with the model
-holds ``posterior + diag(t) P`` (:func:`predictive_covariance`), so ``aacmm tip``'s u of a point in a region the
+(``G_O`` the held-out rows' Jacobian with respect to the free parameters). ``t = 0`` when the model holds (the
+regions predict each other as the posterior says); at most 1: a region's parameters do not differ from another's by
+more than the parameter's plausible size. The folds overlap (every pose is in one region of each partition), so the
+likelihood ratio over ``t = 0`` is not chi-square: it is judged against :data:`NULL_DRAWS` draws of the same folds'
+errors as the model holds (a Monte Carlo test at 5 %), and the effect is kept only when it passes all of them, less
+the mean ``t`` of those draws (the variance that noise alone gives the fit).
+
+With ``FitOptions(region_effect=True)`` the covariance file written with the model holds ``posterior + diag(t) P``
+(:func:`predictive_covariance`, and the model file's u of each effect with it), so ``aacmm tip``'s u of a point the
 fit never saw carries the shift its region may draw, through the Jacobian at that point: it grows where the
-parameters' effect differs from the training poses', and a deviation from a feature's mean keeps the part that
-varies over the feature's poses. The parameters' own u (console, report) stay the posterior's.
+parameters' effect differs from the training poses', and a deviation from a feature's mean keeps the part that varies
+over the feature's poses. The parameters' own u (console, report) stay the posterior's. Off by default: on the real
+Panda seats trained on one placement the test passes on two trainings whose other placements were covered already,
+and on the third (`front`, whose `back-high` placement is the one under-covered) it is at the edge of the test's
+level (docs/studies/calibration.md).
 
-Constants: :data:`REGION_SPLITS` (2 to 4 regions; measured with 2-3, 2-4 and 2-6 in docs/studies/calibration.md: the
-same coverage to 2 points) and the bound ``t <= 1`` (the prior's size, the model's own statement of what a
-parameter may plausibly be).
+Constants: :data:`REGION_SPLITS` (2 to 4 regions), the bound ``t <= 1`` (the prior's size, the model's own statement
+of what a parameter may plausibly be) and the test's 19 draws (the fewest for a 5 % Monte Carlo test).
 """
 from __future__ import annotations
 
@@ -79,7 +87,8 @@ class RegionEffect:
 
     def to_dict(self) -> dict:
         order = np.argsort(-self.ratio)
-        return {"likelihood_ratio": self.lr, "likelihood_ratio_null_max": self.lr_null, "folds": self.folds, "rows": self.rows,
+        return {"likelihood_ratio": self.lr, "likelihood_ratio_null_max": self.lr_null, "folds": self.folds,
+                "rows": self.rows,
                 "sd_per_prior_sd": {self.names[i]: math.sqrt(float(self.ratio[i])) for i in order
                                     if self.ratio[i] > 1e-6},
                 "method": "leave one region of the joint space out (Ward's clusters of the training poses, 2-4 "
@@ -123,7 +132,7 @@ def fit_region_variances(parts, group=None) -> tuple[np.ndarray, float]:
 
 def _fit_terms(terms, group=None) -> tuple[np.ndarray, float]:
     """:func:`fit_region_variances` on each fold's ``(Q, b)`` whitened by ``M_O`` (``L L^T = M_O``, ``G~ = L^-1 G``,
-    ``e~ = L^-1 e``, ``Q = G~^T G~``, ``b = G~^T e~``): with ``D = diag(t)^1/2``, ``K = I + D Q D`` and ``W = D K^-1 D``,
+    ``e~ = L^-1 e``, ``Q = G~^T G~``, ``b = G~^T e~``): with ``D = diag(t)^1/2``, ``K = I + D Q D``, ``W = D K^-1 D``,
     the log-likelihood's terms that depend on ``t`` are ``log det K`` and ``- b^T W b``, so each evaluation costs
     k x k (Woodbury), every fold at once. Optimised in ``t`` from 0 (L-BFGS-B within the bounds, the analytic gradient
     ``1/2 (Q_jj - (QWQ)_jj - a_j^2)``, ``a = b - Q W b``)."""

@@ -98,8 +98,8 @@ def test_a_fit_with_the_region_effect_writes_it_into_the_covariance_file(tmp_pat
     panda = ROOT / "examples" / "data" / "real-panda-seats"
     desc = load_arm(panda / "panda-with-inertials.urdf", "ball_link")
     model = ArmModel(desc, (JointCompliance(),))
-    data = make_data(read_points(panda / "right" / "points.csv", desc.n_joints), read_artefacts(panda / "artefacts.toml"),
-                     model)
+    points = read_points(panda / "right" / "points.csv", desc.n_joints)
+    data = make_data(points, read_artefacts(panda / "artefacts.toml"), model)
     res = calibrate(model, data, FitOptions(weights_from_data=True, region_effect=True))
     reg = res.region
     assert reg is not None and reg.folds == 9 and reg.lr > 3 * reg.lr_null and reg.ratio.max() > 1e-3
