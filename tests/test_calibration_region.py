@@ -1,6 +1,8 @@
 """The parameters' random effect between regions of the joint space (calibration/region.py)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -79,41 +81,56 @@ def test_predictive_covariance_adds_the_effect_by_name():
     np.testing.assert_array_equal(predictive_covariance(Result()), np.diag([1.25, 2.0, 3.5]))
 
 
-def test_a_fit_with_the_region_effect_writes_it_into_the_covariance_file(tmp_path):
-    """The real Panda trained on its `right` placement: its pose regions predict each other far worse than the
-    posterior says (likelihood ratio 340 against at most 17 of the 19 draws as the model holds), so the effect is
-    taken; the covariance file written holds the posterior plus each parameter's random-effect variance (a probe
-    offset and a compliance, which the model file's folding of the origin angles leaves alone), and the parameters'
-    own u (the result's) stay the posterior's."""
-    from dataclasses import replace
 
+def _right_fit(**options):
     from arm_model.effects import JointCompliance
     from arm_model.io import read_artefacts, read_points
     from arm_model.model import ArmModel
-    from arm_model.model_file import load_model, read_covariance
     from arm_model.urdf_import import load_arm
     from calibration import FitOptions, calibrate, make_data
-    from calibration.model_output import write_model, written_covariance
     from conftest import ROOT
     panda = ROOT / "examples" / "data" / "real-panda-seats"
     desc = load_arm(panda / "panda-with-inertials.urdf", "ball_link")
     model = ArmModel(desc, (JointCompliance(),))
     points = read_points(panda / "right" / "points.csv", desc.n_joints)
     data = make_data(points, read_artefacts(panda / "artefacts.toml"), model)
-    res = calibrate(model, data, FitOptions(weights_from_data=True, region_effect=True))
-    reg = res.region
-    assert reg is not None and reg.folds == 9 and reg.lr > 3 * reg.lr_null and reg.ratio.max() > 1e-3
-    assert np.all((reg.ratio >= 0) & (reg.ratio <= 1))
-    assert set(reg.to_dict()["sd_per_prior_sd"]) <= set(res.free)
+    return calibrate(model, data, FitOptions(weights_from_data=True, **options))
+
+
+def test_the_covariance_file_holds_the_posterior_plus_the_region_effect(tmp_path):
+    """A region effect on a fit (here given: a probe offset and a compliance, which the model file's folding of the
+    origin angles leaves alone) is in the covariance file written, and in the model file's u of the effect, which
+    its reader checks against that file; the result's own u stay the posterior's."""
+    from dataclasses import replace
+
+    from arm_model.model_file import load_model, read_covariance
+    from calibration.model_output import write_model, written_covariance
+    res = _right_fit()
+    assert res.region is None                      # off by default
+    extra = {"probe.x": 4e-8, "panda_joint3.compliance": 1e-10}
+    res = replace(res, region=RegionEffect(tuple(extra), np.array(list(extra.values())), np.array([0.1, 0.2]), 50.0,
+                                           9, 540, 20.0))
     files = write_model(res, tmp_path, "panda-calibrated")
-    cov = read_covariance(load_model(files["model"]).covariance)
+    arm = load_model(files["model"])
+    cov = read_covariance(arm.covariance)
     names, want = written_covariance(res)
     _, post = written_covariance(replace(res, region=None))
     assert list(cov.names) == names
     np.testing.assert_allclose(cov.matrix, want, rtol=1e-6, atol=1e-30)
-    extra = dict(zip(reg.names, reg.variance, strict=True))
-    for n in ("probe.x", "probe.z", "panda_joint3.compliance", "panda_joint4.compliance"):
+    for n, v in extra.items():
         i = names.index(n)
-        assert cov.matrix[i, i] - post[i, i] == pytest.approx(extra[n], rel=1e-6, abs=1e-30)
-    assert sum(extra[n] > 0 for n in ("probe.x", "probe.z", "panda_joint3.compliance", "panda_joint4.compliance")) >= 2
+        assert cov.matrix[i, i] - post[i, i] == pytest.approx(v, rel=1e-6)
+    k = res.free.index("panda_joint3.compliance")
+    assert arm.uncertainties["panda_joint3.compliance"] == pytest.approx(math.sqrt(res.cov[k, k] + 1e-10), rel=1e-6)
     np.testing.assert_allclose(res.u, np.sqrt(np.diag(res.cov)), rtol=1e-12)
+
+
+def test_the_real_right_placement_shows_a_region_effect_and_keeps_it():
+    """The real Panda trained on its `right` placement: its pose regions predict each other far worse than the
+    posterior says (likelihood ratio 340 against at most 17 of the 19 draws as the model holds), so the effect is
+    kept, each variance within [0, 1] of its prior's, and written for free parameters only."""
+    res = _right_fit(region_effect=True)
+    reg = res.region
+    assert reg is not None and reg.folds == 9 and reg.lr > 3 * reg.lr_null and reg.ratio.max() > 1e-3
+    assert np.all((reg.ratio >= 0) & (reg.ratio <= 1)) and reg.names == res.free
+    assert set(reg.to_dict()["sd_per_prior_sd"]) <= set(res.free)
