@@ -56,6 +56,7 @@ from .identifiability import (
 from .options import FitOptions
 from .prior import PRIOR_DOMINATED, PriorSpec, prior_only, prior_spec, secant_gains, update_scales, variance_ratio
 from .problem import Problem
+from .region import RegionEffect, region_effect
 from .schur import BlockNormal
 from .solver import Prior, blas_threads, levenberg_marquardt
 
@@ -293,6 +294,8 @@ class CalibrationResult:
     prior_groups: dict = field(default_factory=dict)   # per group: scale, parameters, effective parameters
     model_check: dict | None = None           # model_output.model_check of this fit, when refine_torques made it
     discrepancy: Discrepancy | None = None    # the error beyond the fit's own prediction away from its poses
+    #: the parameters' random effect between regions of the joint space (calibration.region), in the covariance file
+    region: RegionEffect | None = None
     options: FitOptions | None = None         # the options of the fit (calibrate's, as given)
     gross: list = field(default_factory=list)  # GrossError: points left out of the fit (indices into the data given)
     gross_kept: str | None = None             # why a gross-looking point was kept (the model's error), or None
@@ -466,6 +469,7 @@ class CalibrationResult:
             "variance_components": self.variance, "weights_history": self.weights_history,
             "probing_scatter": self._budget_um(),
             "model_discrepancy": None if self.discrepancy is None else self.discrepancy.to_dict(),
+            "region_effect": None if self.region is None else self.region.to_dict(),
             "prior": None if self.prior_scales is None else {
                 "scales": dict(self.prior_scales), "groups": self.prior_groups, "log_evidence": self.log_evidence,
                 "prior_dominated_ratio": PRIOR_DOMINATED, "evidence_rounds": self.evidence,
@@ -1391,6 +1395,9 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         prior_only={} if s.prior is None else {spec.names[i]: why for i, why in s.prior_only.items() if i in kept},
         discrepancy=model_discrepancy(prob, ev.r, nrm.factor, var)
         if options.discrepancy else None,
+        region=region_effect(prob, ev.r, nrm.factor, var, nrm.jscale, u if prior_sd is None else prior_sd,
+                             tuple(spec.names[i] for i in kept), _prior_group(s, kept))
+        if options.region_effect else None,
         point_tests=None if level is None else point_tests(
             prob, ev.r, nrm.factor, nrm.h, level, nrm.deletions))
 
@@ -1404,6 +1411,18 @@ def _test_level(options: FitOptions) -> float | None:
     if options.gross_threshold is None:
         return None
     return max(options.gross_threshold, options.outlier_threshold)
+
+
+def _prior_group(s: _Setup, kept) -> np.ndarray | None:
+    """(len(kept),) the index of the prior's group of each free parameter (:meth:`~calibration.prior.PriorSpec.
+    groups_of`), or None without a prior."""
+    if s.prior is None:
+        return None
+    kept = np.asarray(kept, dtype=int)
+    out = np.zeros(len(kept), dtype=int)
+    for g, idx in enumerate(s.spec.groups_of(kept).values()):
+        out[np.isin(kept, idx)] = g
+    return out
 
 
 def _group_table(s: _Setup, kept, u) -> dict:

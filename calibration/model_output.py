@@ -19,6 +19,8 @@ from arm_model.model_file import Arm, format_model, write_covariance
 from arm_model.output import safe_name
 from arm_model.urdf_import import calibrated_urdf_text
 
+from .region import predictive_covariance
+
 __all__ = ["calibrated_name", "model_paths", "fitted_arm", "write_model", "written_covariance", "model_check",
            "refine_torques",
            "check_reproduces", "REPRODUCE_TOL_M", "discrepancy_fields", "session_drift", "without_session_effects",
@@ -113,11 +115,11 @@ def model_paths(out_dir, name: str) -> dict:
 
 def fitted_arm(result, name: str | None = None, training_poses: Path | None = None) -> Arm:
     """The :class:`~arm_model.model_file.Arm` of a :class:`~calibration.calibrate.CalibrationResult`:
-    the base errors folded into the description, the effects with their fitted values, uncertainties
-    and states (free / fixed / held), the reference instrument's frames and markers (``result.tracker``) and the
-    model discrepancy; its growth away from the training poses only with ``training_poses``, the points file of
-    those poses (:func:`write_model` writes it), else the discrepancy at the training poses alone (an Arm refuses a
-    growth without the poses it grows away from)."""
+    the base errors folded into the description, the effects with their fitted values, uncertainties (the covariance
+    file's: :func:`calibration.region.predictive_covariance`) and states (free / fixed / held), the reference
+    instrument's frames and markers (``result.tracker``) and the model discrepancy; its growth away from the training
+    poses only with ``training_poses``, the points file of those poses (:func:`write_model` writes it), else the
+    discrepancy at the training poses alone (an Arm refuses a growth without the poses it grows away from)."""
     desc = result.described()
     if name:
         desc = replace(desc, name=name)
@@ -127,8 +129,9 @@ def fitted_arm(result, name: str | None = None, training_poses: Path | None = No
     fields = discrepancy_fields(result)
     if training_poses is None:
         fields["discrepancy_growth"] = None
+    u = dict(zip(result.free, np.sqrt(np.clip(np.diag(predictive_covariance(result)), 0.0, None)), strict=True))
     return Arm(desc, tuple(model.effects), {n: result.value(n) for n in names},
-               {n: result.uncertainty(n) for n in names}, {n: rows[n]["state"] for n in names},
+               {n: float(u.get(n, 0.0)) for n in names}, {n: rows[n]["state"] for n in names},
                tracker=result.tracker, training_poses=training_poses if fields["discrepancy_growth"] else None,
                **fields)
 
@@ -173,11 +176,12 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
 
 def written_covariance(result) -> tuple[list, np.ndarray]:
     """(names, covariance [SI^2]) of the covariance file of ``result``: the fit's covariance of its free
-    parameters expressed in the parameters of the model file, whose description holds the base errors folded
-    in (:func:`arm_model.params.folded_jacobian`: ``T C T^T``; the same as the fit's but for a URDF origin's angle
-    errors, which the model file turns about the calibrated origin's own axes, the fit about the nominal's). A
-    parameter is written when it is free or, through ``T``, takes a variance from one (the other angles of an
-    origin with a fixed one); names in the parameters' order."""
+    parameters for poses it never saw (the posterior plus the parameters' random effect between regions of the joint
+    space, :func:`calibration.region.predictive_covariance`) expressed in the parameters of the model file, whose
+    description holds the base errors folded in (:func:`arm_model.params.folded_jacobian`: ``T C T^T``; the same as
+    the fit's but for a URDF origin's angle errors, which the model file turns about the calibrated origin's own
+    axes, the fit about the nominal's). A parameter is written when it is free or, through ``T``, takes a variance
+    from one (the other angles of an origin with a fixed one); names in the parameters' order."""
     from arm_model.params import folded_jacobian
     spec, model = result.model.spec, result.model
     idx = [spec.index(n) for n in result.free]
@@ -185,7 +189,7 @@ def written_covariance(result) -> tuple[list, np.ndarray]:
     t[: model.base_size, : model.base_size] = folded_jacobian(model.desc, result.p)
     t_free = t[:, idx]
     rows = [i for i in range(spec.size) if i in idx or np.any(t_free[i] != 0.0)]
-    cov = t_free[rows] @ result.cov @ t_free[rows].T
+    cov = t_free[rows] @ predictive_covariance(result) @ t_free[rows].T
     return [spec.names[i] for i in rows], 0.5 * (cov + cov.T)
 
 
@@ -274,7 +278,7 @@ def _same_point_covariance(result, back: Arm, cov, n: int = 64) -> None:
     aux = back.aux(pts, wrench=data.wrench)
     aux = None if aux is None else aux.select(k)
     own = propagate(result.model, result.p, pts.q[k], w, aux,
-                    parameters=ParameterCovariance(tuple(result.free), result.cov), inputs=none).cov
+                    parameters=ParameterCovariance(tuple(result.free), predictive_covariance(result)), inputs=none).cov
     got = propagate(back.model, back.p, pts.q[k], w, aux,
                     parameters=ParameterCovariance(tuple(cov.names), cov.matrix), inputs=none).cov
     scale = np.max(np.abs(np.einsum("nii->ni", own)), axis=1)[:, None, None]

@@ -126,6 +126,9 @@ class FitOptions:
         blas: BLAS threads during the fit (None: unchanged).
         discrepancy: estimate the model discrepancy (:mod:`calibration.discrepancy`); False leaves the result's
             ``discrepancy`` None (a fit that only predicts held-out data, as a cross-validation fold's).
+        region_effect: also estimate the parameters' random effect between regions of the joint space
+            (:mod:`calibration.region`) and add it to the covariance file; off by default (measured on the real and
+            simulated seat robots in docs/studies/calibration.md: it does not reach the worst real pair).
     """
     free: tuple[str, ...] | None = None
     values: dict[str, float] | None = None
@@ -149,6 +152,7 @@ class FitOptions:
     prior_centre: np.ndarray | None = field(default=None, compare=False)
     blas: int | None = 1
     discrepancy: bool = True
+    region_effect: bool = False
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__

@@ -48,6 +48,7 @@ It also says how much of the largest axis' deviations a linear function of the s
     python scripts/seat_uncertainty_study.py                       # the real Panda (examples/data/real-panda-seats)
     python scripts/seat_uncertainty_study.py --sim r1,r4,r8        # simulated robots, each trained on every placement
     python scripts/seat_uncertainty_study.py --parameter-covariance fold-shift
+    python scripts/seat_uncertainty_study.py --parameter-covariance region     # calibration.region's random effect
     python scripts/seat_uncertainty_study.py --noise joint-play
 """
 from __future__ import annotations
@@ -67,8 +68,12 @@ sys.path.insert(0, str(ROOT))
 VARIANTS = ("none", "constant", "linear", "predictive", "per-joint", "written", "saturating")
 #: the variants :func:`fold_check` refits without each fold
 CHECKED = ("constant", "linear", "predictive", "per-joint", "written")
-#: the parameter covariances ``--parameter-covariance`` offers (:func:`robust_covariance`)
+#: the parameter covariances :func:`robust_covariance` offers
 COVARIANCES = ("posterior", "jackknife", "fold-shift")
+#: ``--parameter-covariance``'s choices: those, and ``region``, the covariance file's of a fit with
+#: ``FitOptions(region_effect=True)`` (the posterior plus the parameters' random effect between regions of the joint
+#: space, :mod:`calibration.region`)
+CHOICES = ("posterior", "region", "jackknife", "fold-shift")
 #: how the training scatter is carried to the held-out points (``--noise``, :func:`fit_joint_play`)
 NOISES = ("isotropic", "joint-play")
 #: the aim for each pair's coverage [%]
@@ -295,7 +300,7 @@ def study(root: Path, urdf: Path, tip: str, places, holes, say=print, covariance
           noise: str = "isotropic") -> list[dict]:
     """One row per training placement and held-out placement: per variant, the coverage [%] of tip's u and of the
     deviation's u, the median and mean u [m]; the discrepancy fitted (linear and saturating) and the load R^2.
-    ``covariance``: the parameter covariance propagated (:data:`COVARIANCES`, :func:`robust_covariance`); ``noise``:
+    ``covariance``: the parameter covariance propagated (:data:`CHOICES`, :func:`robust_covariance`); ``noise``:
     the training scatter as the fit's probing scatter or as joint play (:data:`NOISES`, :func:`fit_joint_play`)."""
     from arm_model.discrepancy import GrowingDiscrepancy, TrainingPoses, travel_shares
     from arm_model.effects import JointCompliance
@@ -306,6 +311,7 @@ def study(root: Path, urdf: Path, tip: str, places, holes, say=print, covariance
     from calibration import FitOptions, calibrate, make_data
     from calibration.model_output import discrepancy_fields
     from calibration.placements import deviation_u
+    from calibration.region import predictive_covariance
     desc = load_arm(urdf, tip)
     model = ArmModel(desc, (JointCompliance(),))     # calibrate's default for a URDF whose links carry masses
     art = read_artefacts(root / "artefacts.toml")
@@ -313,9 +319,9 @@ def study(root: Path, urdf: Path, tip: str, places, holes, say=print, covariance
     rows = []
     for tr in places:
         with captured_linearisation() as lin:
-            res = calibrate(model, data[tr], FitOptions(weights_from_data=True))
-        cov_p = res.cov
-        if covariance != "posterior":      # in the fit's column-scaled unknowns, scaled back by the posterior's
+            res = calibrate(model, data[tr], FitOptions(weights_from_data=True, region_effect=covariance == "region"))
+        cov_p = predictive_covariance(res)
+        if covariance not in ("posterior", "region"):   # in the fit's scaled unknowns, scaled back by the posterior's
             post, robust = (robust_covariance(c, len(res.free), lin) for c in ("posterior", covariance))
             scale = np.sqrt(np.diag(res.cov) / np.diag(post))
             cov_p = robust * np.outer(scale, scale)
@@ -415,8 +421,10 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--sim", default=None, help="comma-separated simulated robots of scripts/sim_seats_study.py "
                    "(default: the real Panda data)")
-    p.add_argument("--parameter-covariance", choices=COVARIANCES, default="posterior",
-                   help="the parameter covariance every variant propagates (default: the fit's posterior)")
+    p.add_argument("--parameter-covariance", choices=CHOICES, default="posterior",
+                   help="the parameter covariance every variant propagates (default: the fit's posterior; region: "
+                        "with the parameters' random effect between regions, as the covariance file of a fit with "
+                        "FitOptions(region_effect=True))")
     p.add_argument("--noise", choices=NOISES, default="isotropic",
                    help="the training scatter carried as the fit's probing scatter (default) or as joint play")
     p.add_argument("-o", "--output", type=Path, default=Path("out/seat-uncertainty"), help="output folder")
