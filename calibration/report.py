@@ -71,8 +71,8 @@ def plot_parameters(result: CalibrationResult) -> bytes:
         ax.set_xticklabels([r["name"] for r in rr], rotation=90, fontsize=7)
         ax.set_ylabel(f"[{unit}]")
     axes[0, 0].set_title("estimated errors (p = 0 is the nominal description), bars: 2 u")
-    fig.tight_layout()
-    return reports.png(fig)
+    fig.tight_layout()          # fits every label inside the figure: no crop, which would lay it out once more
+    return reports.png(fig, crop=False)
 
 
 def plot_correlation(result: CalibrationResult) -> bytes:
