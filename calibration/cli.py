@@ -252,6 +252,12 @@ def register(sub) -> None:
                    help="scale the parameters' covariance by the residual variance factor s0^2 (default) or trust "
                         "the stated uncertainties (s0 = 1); --covariance is the older spelling (aacmm tip's "
                         "--covariance is another option: it writes each point's covariance)")
+    c.add_argument("--region-effect", action="store_true",
+                   help="also estimate how much the parameters shift between regions of the joint space (the "
+                        "training poses cut into 2-4 regions, each predicted by the fit without it; kept only when a "
+                        "Monte Carlo test at 5%% finds it) and add it to the covariance file, so aacmm tip's u of a "
+                        "pose the fit never saw carries it; parameters.csv and the report keep the posterior's u "
+                        "(summary.json: region_effect). Off by default (docs/uncertainty.md)")
     c.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     mpe_options(c)
     c.set_defaults(func=run_calibrate)
@@ -590,6 +596,14 @@ def gross_threshold(args: argparse.Namespace) -> float | None:
     return GROSS_THRESHOLD if args.gross_threshold is None else args.gross_threshold
 
 
+def _points_and_rows(data) -> str:
+    """``"40 points"``, or ``"40 points (43 rows)"`` when some rows repeat a reading (counted once by the fit:
+    :meth:`calibration.data.CalibrationData.counts`)."""
+    n = data.counts()
+    rows = "" if n["n_rows"] == n["n_points"] else f" ({counted(n['n_rows'], 'row')})"
+    return counted(n["n_points"], "point") + rows
+
+
 def run_calibrate(args: argparse.Namespace) -> int:
     from .calibrate import calibrate, nominal_baseline
     from .model_output import refine_torques, with_fitted_torques
@@ -607,10 +621,10 @@ def run_calibrate(args: argparse.Namespace) -> int:
         options = fit_options(args, free=free_names(model, args, data), values=values, weights=weights_from_args(args),
                               on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
                               drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference,
-                              gross_threshold=gross_threshold(args))
+                              gross_threshold=gross_threshold(args), region_effect=args.region_effect)
         say = progress_line(log)            # a long fit (10^5 points: minutes) says where it is
-        say(f"fitting the model to {counted(len(train.points), 'point')} (with the noise, the prior and the model "
-            "discrepancy from the data)")
+        say(f"fitting the model to {_points_and_rows(train)} (with the noise, the prior and the model discrepancy from "
+            "the data)")
         res = refine_torques(calibrate(model, train, options))
         say("the nominal baseline and the validation figures")
         base = nominal_baseline(model, res.data, replace(res.options, weights=res.weights))

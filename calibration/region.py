@@ -27,14 +27,14 @@ likelihood ratio over ``t = 0`` is not chi-square: it is judged against :data:`N
 errors as the model holds (a Monte Carlo test at 5 %), and the effect is kept only when it passes all of them, less
 the mean ``t`` of those draws (the variance that noise alone gives the fit).
 
-With ``FitOptions(region_effect=True)`` the covariance file written with the model holds ``posterior + diag(t) P``
-(:func:`predictive_covariance`, and the model file's u of each effect with it), so ``aacmm tip``'s u of a point the
-fit never saw carries the shift its region may draw, through the Jacobian at that point: it grows where the
-parameters' effect differs from the training poses', and a deviation from a feature's mean keeps the part that varies
-over the feature's poses. The parameters' own u (console, report) stay the posterior's. Off by default: on the real
-Panda seats trained on one placement the test passes on two trainings whose other placements were covered already,
-and on the third (`front`, whose `back-high` placement is the one under-covered) it is at the edge of the test's
-level (docs/studies/calibration.md).
+With ``FitOptions(region_effect=True)`` (``aacmm calibrate --region-effect``) the covariance file written with the model
+holds ``posterior + diag(t) P`` (:func:`predictive_covariance`, and the model file's u of each effect with it), so
+``aacmm tip``'s u of a point the fit never saw carries the shift its region may draw, through the Jacobian at that
+point: it grows where the parameters' effect differs from the training poses', and a deviation from a feature's mean
+keeps the part that varies over the feature's poses. The parameters' own u (console, report) stay the posterior's. Off
+by default: on the real Panda seats trained on one placement the test passes on two trainings whose other placements
+were covered already, and on the third (`front`, whose `back-high` placement is the one under-covered) it is at the edge
+of the test's level (docs/studies/calibration.md).
 
 Constants: :data:`REGION_SPLITS` (2 to 4 regions), the bound ``t <= 1`` (the prior's size, the model's own statement
 of what a parameter may plausibly be) and the test's 19 draws (the fewest for a 5 % Monte Carlo test).
