@@ -247,17 +247,7 @@ def register(sub) -> None:
     c.add_argument("--on-unidentifiable", choices=("fix", "stop"), default="fix",
                    help="hold unidentifiable parameters fixed and list them (default), or stop with the list")
     _outlier_options(c)
-    c.add_argument("--covariance-scale", "--covariance", dest="covariance", choices=("residual", "stated"),
-                   default="residual",
-                   help="scale the parameters' covariance by the residual variance factor s0^2 (default) or trust "
-                        "the stated uncertainties (s0 = 1); --covariance is the older spelling (aacmm tip's "
-                        "--covariance is another option: it writes each point's covariance)")
-    c.add_argument("--region-effect", action="store_true",
-                   help="also estimate how much the parameters shift between regions of the joint space (the "
-                        "training poses cut into 2-4 regions, each predicted by the fit without it; kept only when a "
-                        "Monte Carlo test at 5%% finds it) and add it to the covariance file, so aacmm tip's u of a "
-                        "pose the fit never saw carries it; parameters.csv and the report keep the posterior's u "
-                        "(summary.json: region_effect). Off by default (docs/uncertainty.md)")
+    _covariance_options(c)
     c.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     mpe_options(c)
     c.set_defaults(func=run_calibrate)
@@ -567,6 +557,21 @@ def _split(args, data):
         raise InputError(f"--holdout {args.holdout} --holdout-by pose holds out no pose: every feature has too few "
                          "poses to spare one (a feature keeps the fewest its fit needs, plus one)")
     return data.select(~mask), None, mask
+
+def _covariance_options(c) -> None:
+    """The parameters' covariance: its scale, and the region effect the covariance file adds to it."""
+    c.add_argument("--covariance-scale", "--covariance", dest="covariance", choices=("residual", "stated"),
+                   default="residual",
+                   help="scale the parameters' covariance by the residual variance factor s0^2 (default) or trust "
+                        "the stated uncertainties (s0 = 1); --covariance is the older spelling (aacmm tip's "
+                        "--covariance is another option: it writes each point's covariance)")
+    c.add_argument("--region-effect", action="store_true",
+                   help="also estimate how much the parameters shift between regions of the joint space (the "
+                        "training poses cut into 2-4 regions, each predicted by the fit without it; kept only when a "
+                        "Monte Carlo test at 5%% finds it) and add it to the covariance file, so aacmm tip's u of a "
+                        "pose the fit never saw carries it; parameters.csv and the report keep the posterior's u "
+                        "(summary.json: region_effect). Off by default (docs/uncertainty.md)")
+
 
 def _outlier_options(c) -> None:
     """The outliers' options: reported beyond ``--outlier-threshold``; dropped, kept, or the gross ones left out."""
