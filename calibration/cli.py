@@ -247,11 +247,7 @@ def register(sub) -> None:
     c.add_argument("--on-unidentifiable", choices=("fix", "stop"), default="fix",
                    help="hold unidentifiable parameters fixed and list them (default), or stop with the list")
     _outlier_options(c)
-    c.add_argument("--covariance-scale", "--covariance", dest="covariance", choices=("residual", "stated"),
-                   default="residual",
-                   help="scale the parameters' covariance by the residual variance factor s0^2 (default) or trust "
-                        "the stated uncertainties (s0 = 1); --covariance is the older spelling (aacmm tip's "
-                        "--covariance is another option: it writes each point's covariance)")
+    _covariance_options(c)
     c.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     mpe_options(c)
     c.set_defaults(func=run_calibrate)
@@ -562,6 +558,21 @@ def _split(args, data):
                          "poses to spare one (a feature keeps the fewest its fit needs, plus one)")
     return data.select(~mask), None, mask
 
+def _covariance_options(c) -> None:
+    """The parameters' covariance: its scale, and the region effect the covariance file adds to it."""
+    c.add_argument("--covariance-scale", "--covariance", dest="covariance", choices=("residual", "stated"),
+                   default="residual",
+                   help="scale the parameters' covariance by the residual variance factor s0^2 (default) or trust "
+                        "the stated uncertainties (s0 = 1); --covariance is the older spelling (aacmm tip's "
+                        "--covariance is another option: it writes each point's covariance)")
+    c.add_argument("--region-effect", action="store_true",
+                   help="also estimate how much the parameters shift between regions of the joint space (the "
+                        "training poses cut into 2-4 regions, each predicted by the fit without it; kept only when a "
+                        "Monte Carlo test at 5%% finds it) and add it to the covariance file, so aacmm tip's u of a "
+                        "pose the fit never saw carries it; parameters.csv and the report keep the posterior's u "
+                        "(summary.json: region_effect). Off by default (docs/uncertainty.md)")
+
+
 def _outlier_options(c) -> None:
     """The outliers' options: reported beyond ``--outlier-threshold``; dropped, kept, or the gross ones left out."""
     c.add_argument("--outlier-threshold", type=THRESHOLD_SIGMA, default=4.0,
@@ -590,6 +601,14 @@ def gross_threshold(args: argparse.Namespace) -> float | None:
     return GROSS_THRESHOLD if args.gross_threshold is None else args.gross_threshold
 
 
+def _points_and_rows(data) -> str:
+    """``"40 points"``, or ``"40 points (43 rows)"`` when some rows repeat a reading (counted once by the fit:
+    :meth:`calibration.data.CalibrationData.counts`)."""
+    n = data.counts()
+    rows = "" if n["n_rows"] == n["n_points"] else f" ({counted(n['n_rows'], 'row')})"
+    return counted(n["n_points"], "point") + rows
+
+
 def run_calibrate(args: argparse.Namespace) -> int:
     from .calibrate import calibrate, nominal_baseline
     from .model_output import refine_torques, with_fitted_torques
@@ -607,10 +626,10 @@ def run_calibrate(args: argparse.Namespace) -> int:
         options = fit_options(args, free=free_names(model, args, data), values=values, weights=weights_from_args(args),
                               on_unidentifiable=args.on_unidentifiable, outlier_threshold=args.outlier_threshold,
                               drop_outliers=args.drop_outliers, covariance=args.covariance, reference=args.reference,
-                              gross_threshold=gross_threshold(args))
+                              gross_threshold=gross_threshold(args), region_effect=args.region_effect)
         say = progress_line(log)            # a long fit (10^5 points: minutes) says where it is
-        say(f"fitting the model to {counted(len(train.points), 'point')} (with the noise, the prior and the model "
-            "discrepancy from the data)")
+        say(f"fitting the model to {_points_and_rows(train)} (with the noise, the prior and the model discrepancy from "
+            "the data)")
         res = refine_torques(calibrate(model, train, options))
         say("the nominal baseline and the validation figures")
         base = nominal_baseline(model, res.data, replace(res.options, weights=res.weights))

@@ -222,6 +222,11 @@ def _line(o) -> str:
     return "length" if o.point is None else str(o.line)
 
 
+def _file(o) -> str:
+    """The points file of an outlier's point (a point is its file and line), empty for a certified length."""
+    return "" if o.point is None or o.file is None else str(o.file)
+
+
 def _fmt(v, digits=4):
     if v is None:
         return "-"
@@ -283,8 +288,9 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
               reports.html_table(["parameter", "state", "unit", "estimate", "u", "prior u", "ratio"], par)]
     if result.outliers:
         parts += ["<h2>Outliers (kept)</h2>" if not result.dropped else "<h2>Outliers</h2>",
-                  reports.html_table(["kind", "measurement", "feature", "line", "standardized", "residual [um]"],
-                         [(o.kind, o.measurement, o.feature, o.line, _fmt(o.standardized, 3),
+                  reports.html_table(["kind", "measurement", "feature", "file", "line", "standardized",
+                                      "residual [um]"],
+                         [(o.kind, o.measurement, o.feature, _file(o), _line(o), _fmt(o.standardized, 3),
                            _fmt(o.residual * 1e6, 4)) for o in result.outliers])]
     if result.gross:
         parts += ["<h2>Gross errors (left out of the fit)</h2>",
@@ -292,16 +298,18 @@ def _html(result: CalibrationResult, summary: dict, files: dict) -> str:
                   "as the standardized residual of the same false-alarm rate) reached the threshold, left out one at a "
                   "time (the largest first) and the fit redone; 'deletion residual': the point's (or length's) "
                   "residual under the fit without it. <code>--keep-outliers</code> keeps them.</p>",
-                  reports.html_table(["measurement", "feature", "line", "standardized", "threshold",
+                  reports.html_table(["measurement", "feature", "file", "line", "standardized", "threshold",
                                       "deletion residual [um]"],
-                         [(g.outlier.measurement, g.outlier.feature, _line(g.outlier), _fmt(g.outlier.standardized, 3),
-                           _fmt(g.threshold, 3), _fmt(g.residual * 1e6, 4)) for g in result.gross])]
+                         [(g.outlier.measurement, g.outlier.feature, _file(g.outlier), _line(g.outlier),
+                           _fmt(g.outlier.standardized, 3), _fmt(g.threshold, 3),
+                           _fmt(g.residual * 1e6, 4)) for g in result.gross])]
     if result.gross_kept:
         parts += [f"<p>Gross-looking point kept: {html.escape(result.gross_kept)}</p>"]
     if result.dropped:
         parts += ["<h2>Dropped points (refitted without them)</h2>",
-                  reports.html_table(["measurement", "feature", "line", "standardized"],
-                         [(o.measurement, o.feature, _line(o), _fmt(o.standardized, 3)) for o in result.dropped])]
+                  reports.html_table(["measurement", "feature", "file", "line", "standardized"],
+                         [(o.measurement, o.feature, _file(o), _line(o), _fmt(o.standardized, 3))
+                          for o in result.dropped])]
     for name, title in (("residuals_png", "Residuals"), ("parameters_png", "Estimates"),
                         ("correlation_png", "Correlations")):
         if name in files:
