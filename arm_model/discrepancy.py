@@ -71,6 +71,13 @@ class TrainingPoses:
         object.__setattr__(self, "q", q)
         object.__setattr__(self, "circular", tuple(bool(c) for c in self.circular))
 
+    @cached_property
+    def scaled(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(tn, columns)``: the poses in turns (metres for a prismatic joint), (T, J), and the same as (J, T)
+        contiguous columns: what every search divides and reads (computed once, not per query: a live point)."""
+        tn = self.q / np.where(np.asarray(self.circular, dtype=bool), 2 * math.pi, 1.0)
+        return tn, np.ascontiguousarray(tn.T)
+
     @classmethod
     def of(cls, desc, q) -> TrainingPoses:
         """The training poses ``q`` (T, J) of the arm ``desc`` (its encoder columns: revolute ones circular)."""
@@ -142,12 +149,16 @@ def nearest_pose(desc, q, train: TrainingPoses, levers=None) -> tuple[np.ndarray
         raise ValueError(f"q has {q.shape[1]} joints, the training poses {len(train.names)}")
     checked_poses(q, train.circular, "the poses whose distance from the training poses is asked")
     lev = joint_levers(desc, q) if levers is None else np.asarray(levers, dtype=float)
-    unique, inverse = np.unique(np.hstack([q, lev]), axis=0, return_inverse=True)
-    inverse = inverse.ravel()
-    q, lev = unique[:, :q.shape[1]], unique[:, q.shape[1]:]
+    if len(q) > 1:
+        unique, inverse = np.unique(np.hstack([q, lev]), axis=0, return_inverse=True)
+        inverse = inverse.ravel()
+        q, lev = unique[:, :q.shape[1]], unique[:, q.shape[1]:]
+    else:                                                   # one query (a live point): nothing to share
+        inverse = np.zeros(len(q), dtype=int)
     circ = np.asarray(train.circular, dtype=bool)
     turn = np.where(circ, 2 * math.pi, 1.0)                 # revolute joints in turns, prismatic ones in metres
-    search = _PoseSearch(q / turn, train.q / turn, lev * turn, circ)
+    tn, columns = train.scaled                              # the training poses divided once, not per query
+    search = _PoseSearch(q / turn, tn, lev * turn, circ, columns)
     best = np.full(len(q), np.inf)
     index = np.zeros(len(q), dtype=int)
     rest = np.arange(len(q))
@@ -173,11 +184,13 @@ _TREE_FIRST = 4
 class _PoseSearch:
     """The nearest training pose of each query, exactly (:func:`nearest_pose`): queries ``qn`` (N, J) and training
     poses ``tn`` (T, J) in turns (metres for a prismatic joint), ``wn`` (N, J) the queries' levers [m per turn],
-    ``circ`` (J,) the revolute joints. The searches fill ``best`` (N,) (squared distances) and ``index`` (N,)."""
+    ``circ`` (J,) the revolute joints, ``columns`` (J, T) ``tn`` transposed, contiguous (each joint's values read in
+    one run). The searches fill ``best`` (N,) (squared distances) and ``index`` (N,)."""
     qn: np.ndarray
     tn: np.ndarray
     wn: np.ndarray
     circ: np.ndarray
+    columns: np.ndarray
 
     @cached_property
     def used(self) -> np.ndarray:
@@ -204,13 +217,13 @@ class _PoseSearch:
         tb = max(1, min(len(self.tn), _CACHE_BLOCK))
         qb = max(1, _CACHE_BLOCK // tb)
         for t0 in range(0, len(self.tn), tb):
-            tt = self.tn[t0: t0 + tb]
+            tt = self.columns[:, t0: t0 + tb]
             for s in range(0, len(rows), qb):
                 r = rows[s: s + qb]
-                acc = np.zeros((len(r), len(tt)))
+                acc = np.zeros((len(r), tt.shape[1]))
                 d = np.empty_like(acc)
                 for j in self.used:             # as squared(), in place
-                    np.subtract(qn[s: s + qb, j, None], tt[None, :, j], out=d)
+                    np.subtract(qn[s: s + qb, j, None], tt[None, j], out=d)
                     if circ[j]:
                         d -= np.rint(d)
                     d *= wn[s: s + qb, j, None]

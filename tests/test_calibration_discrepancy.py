@@ -566,6 +566,27 @@ def test_the_trees_find_the_exhaustive_search_s_nearest_pose_bit_for_bit(monkeyp
     assert i1[200] == 17 and i1[5] == 600 and d1[5] < 1e-13 and np.all(d1[100:120] == d1[0])
 
 
+def test_one_pose_at_a_time_equals_the_batch_bit_for_bit(nominal):
+    """A live session asks :meth:`GrowingDiscrepancy.at` one pose at a time, against training poses scaled once
+    (:attr:`TrainingPoses.scaled`, cached for the session) and without ``np.unique``: the same ``d`` and
+    ``sigma_d`` to the last bit as the whole batch in one call on fresh training poses, and as a fresh
+    ``TrainingPoses`` each time; a repeated pose included."""
+    import arm_model.discrepancy as dm
+    rng = np.random.default_rng(5)
+    n = nominal.n_joints
+    t = rng.uniform(-3.0, 3.0, (60, n))
+    q = np.vstack([rng.uniform(-3.0, 3.0, (6, n)), t[7] + 1e-3])
+    q = np.vstack([q, q[2]])
+    names, circ = tuple(nominal.joint_names), tuple(not j.prismatic for j in nominal.encoders)
+    shared = dm.GrowingDiscrepancy(5e-6, 0.02, dm.TrainingPoses(names, t, circ))
+    d_all, sd_all = dm.GrowingDiscrepancy(5e-6, 0.02, dm.TrainingPoses(names, t.copy(), circ)).at(nominal, q)
+    for k, qk in enumerate(q):
+        d1, sd1 = shared.at(nominal, qk[None])
+        d2, sd2 = dm.GrowingDiscrepancy(5e-6, 0.02, dm.TrainingPoses(names, t.copy(), circ)).at(nominal, qk[None])
+        assert d1[0] == d_all[k] == d2[0] and sd1[0] == sd_all[k] == sd2[0]
+    assert d_all[-1] == d_all[2] and d_all[6] < d_all[:6].min()
+
+
 def test_joint_levers_are_each_joints_own_differences(nominal):
     """The levers from one chain call of the 2 J shifted poses are those of each joint's own central differences
     (1e-12 relative), and joint 1's is the ball's distance from its vertical axis (by hand, 1e-9)."""
