@@ -713,7 +713,10 @@ def _log_calibration(res, data, train, test, poses, validation, files) -> None:
             + ("the --holdout-points file's" if np.any(data.files[poses] != data.files[~poses][0]) and
                np.all(data.files[poses] == data.files[poses][0]) and data.files[poses][0] != data.points.path
                else "a share of every feature's") + ")")
-    log.info(f"{counted(len(train), 'training point')} in {counted(len(train.measurements()), 'measurement')}" + held)
+    n = train.counts()                  # a repeated reading counts once, as in the fit (its rows said beside)
+    rows = "" if n["n_rows"] == n["n_points"] else f" ({counted(n['n_rows'], 'row')})"
+    log.info(f"{counted(n['n_points'], 'training point')}{rows} in {counted(len(train.measurements()), 'measurement')}"
+             + held)
     if data.points.force_kind == "two-channel":
         log.info("two-channel force sensor: the probe-y force is not measured and is taken as zero")
     for line in noise_lines(res):

@@ -76,7 +76,9 @@ def test_repeated_readings_are_counted_once_and_outliers_name_their_file(files, 
     pts.write_text("\n".join([*lines, lines[3]]) + "\n")
     n = len(lines) - 1
     summary = _calibrate(files, tmp_path / "out", points=pts)
-    assert f"fitting the model to {n} points ({n + 1} rows)" in capsys.readouterr().err
+    printed = capsys.readouterr()
+    assert f"fitting the model to {n} points ({n + 1} rows)" in printed.err
+    assert f"{n} training points ({n + 1} rows) in " in printed.out + printed.err     # the console's count too
     html = (tmp_path / "out" / "report.html").read_text()
     assert [(g["file"], g["line"]) for g in summary["gross_errors_removed"]] == [(str(pts), 7)]
     assert "<th>file</th><th>line</th>" in html and f"<td>{pts}</td><td>7</td>" in html
