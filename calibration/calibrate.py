@@ -1277,8 +1277,7 @@ def _point_table(prob: Problem, data: CalibrationData, p, states, z: np.ndarray)
     table["measurement"] = pts.measurement[table["point"]]
     table["feature"] = pts.feature[table["point"]]
     table["line"] = (pts.lines[table["point"]] if pts.lines is not None else table["point"] + 1)
-    table["file"] = (data.files[table["point"]] if data.files is not None
-                     else np.full(len(table["point"]), pts.path, dtype=object))
+    table["file"] = data.point_files[table["point"]]
     return table
 
 

@@ -601,12 +601,12 @@ def gross_threshold(args: argparse.Namespace) -> float | None:
     return GROSS_THRESHOLD if args.gross_threshold is None else args.gross_threshold
 
 
-def _points_and_rows(data) -> str:
+def _points_and_rows(data, noun: str = "point") -> str:
     """``"40 points"``, or ``"40 points (43 rows)"`` when some rows repeat a reading (counted once by the fit:
-    :meth:`calibration.data.CalibrationData.counts`)."""
+    :meth:`calibration.data.CalibrationData.counts`); ``noun``: what a point is called ("training point")."""
     n = data.counts()
     rows = "" if n["n_rows"] == n["n_points"] else f" ({counted(n['n_rows'], 'row')})"
-    return counted(n["n_points"], "point") + rows
+    return counted(n["n_points"], noun) + rows
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
@@ -713,9 +713,7 @@ def _log_calibration(res, data, train, test, poses, validation, files) -> None:
             + ("the --holdout-points file's" if np.any(data.files[poses] != data.files[~poses][0]) and
                np.all(data.files[poses] == data.files[poses][0]) and data.files[poses][0] != data.points.path
                else "a share of every feature's") + ")")
-    n = train.counts()                  # a repeated reading counts once, as in the fit (its rows said beside)
-    rows = "" if n["n_rows"] == n["n_points"] else f" ({counted(n['n_rows'], 'row')})"
-    log.info(f"{counted(n['n_points'], 'training point')}{rows} in {counted(len(train.measurements()), 'measurement')}"
+    log.info(f"{_points_and_rows(train, 'training point')} in {counted(len(train.measurements()), 'measurement')}"
              + held)
     if data.points.force_kind == "two-channel":
         log.info("two-channel force sensor: the probe-y force is not measured and is taken as zero")

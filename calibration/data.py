@@ -140,6 +140,11 @@ class CalibrationData:
     def file_of(self, i: int) -> str:
         return str(self.files[i]) if self.files is not None else self.points.path
 
+    @property
+    def point_files(self) -> np.ndarray:
+        """(N,) object: the points file of each point (``files``, else the points' own path)."""
+        return self.files if self.files is not None else np.full(len(self), self.points.path, dtype=object)
+
     def where(self, i: int) -> str:
         """``file line N`` of point ``i`` for messages."""
         line = None if self.points.lines is None else int(self.points.lines[i])
@@ -179,7 +184,7 @@ class CalibrationData:
         """``n_rows``: the rows of the points files these data hold (a row of several markers once); ``n_points``:
         the distinct readings among them, as the fit counts them (a row that repeats an earlier reading exactly,
         :func:`arm_model.checks.repeated_readings`, counts once: :class:`calibration.problem.Problem`)."""
-        files = self.files if self.files is not None else np.full(len(self), self.points.path, dtype=object)
+        files = self.point_files
         lines = self.points.lines if self.points.lines is not None else np.arange(1, len(self) + 1)
         first = repeated_readings(self.points, (self.markers,)) < 0
         rows = list(zip(files.tolist(), np.asarray(lines).tolist(), strict=True))
@@ -193,8 +198,7 @@ class CalibrationData:
         if self.points.n_joints != model.desc.n_joints:
             raise InputError(f"{self.points.n_joints} joint columns, but the arm has {model.desc.n_joints} joints",
                              self.points.path)
-        files = self.files if self.files is not None else np.full(len(self), self.points.path, dtype=object)
-        return replace(self, aux=_aux_inputs(model, self, files))
+        return replace(self, aux=_aux_inputs(model, self, self.point_files))
 
     def with_tracker(self, tracker: Tracker | None) -> CalibrationData:
         """These data with the reference frames and marker offsets held at ``tracker``'s (a session it has
@@ -432,8 +436,7 @@ def split_holdout(data: CalibrationData, holdout, seed: int = 0,
 def concat(a: CalibrationData, b: CalibrationData) -> CalibrationData:
     """``a``'s rows then ``b``'s (same artefacts and marker setting), files, markers and aux inputs kept."""
     pts, _ = merge_points(a.points, b.points)
-    files = np.concatenate([a.files if a.files is not None else np.full(len(a), a.points.path, dtype=object),
-                            b.files if b.files is not None else np.full(len(b), b.points.path, dtype=object)])
+    files = np.concatenate([a.point_files, b.point_files])
     aux = None
     if a.aux is not None or b.aux is not None:
         def join(name, width):
