@@ -14,7 +14,8 @@ import numpy as np
 from .data import Weights
 from .identifiability import DEFAULT_RANK_TOL
 
-__all__ = ["FitOptions", "UNIDENTIFIABLE", "COVARIANCE", "REFERENCE", "PRIOR_FACTOR_LIMITS", "PRIOR_LENGTH_RANGE"]
+__all__ = ["FitOptions", "UNIDENTIFIABLE", "COVARIANCE", "REFERENCE", "ARM_SCALE", "PRIOR_FACTOR_LIMITS",
+           "PRIOR_LENGTH_RANGE"]
 
 #: what :func:`~calibration.calibrate.calibrate` does with parameters the data cannot identify
 UNIDENTIFIABLE = ("fix", "stop")
@@ -22,6 +23,8 @@ UNIDENTIFIABLE = ("fix", "stop")
 COVARIANCE = ("residual", "stated")
 #: how reference coordinates enter the fit
 REFERENCE = ("fit", "identity", "off")
+#: FitOptions.arm_scale choices
+ARM_SCALE = ("data", "prior")
 
 #: standardized residual [robust standard deviations] from which a point is a gross error, left out by default:
 #: above Baarda's data-snooping critical value of a Gaussian campaign of up to 10^5 rows at a family-wise level
@@ -126,6 +129,11 @@ class FitOptions:
         blas: BLAS threads during the fit (None: unchanged).
         discrepancy: estimate the model discrepancy (:mod:`calibration.discrepancy`); False leaves the result's
             ``discrepancy`` None (a fit that only predicts held-out data, as a cross-validation fold's).
+        arm_scale: with the evidence's prior (``prior_scale="evidence"``): "data" (default) leaves the arm's uniform
+            scale to the data, a flat prior on it (the prior's centre the description scaled by the factor the
+            evidence gives, :func:`calibration.prior.scale_step`), where the data set it to within
+            :data:`calibration.prior.MAX_SCALE_U` (a certified length does); "prior": the lengths' prior shrinks it
+            too.
         region_effect: also estimate the parameters' random effect between regions of the joint space
             (:mod:`calibration.region`) and add it to the covariance file; off by default (measured on the real and
             simulated seat robots in docs/studies/calibration.md: it does not reach the worst real pair).
@@ -153,6 +161,7 @@ class FitOptions:
     blas: int | None = 1
     discrepancy: bool = True
     region_effect: bool = False
+    arm_scale: str = "data"
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -175,6 +184,7 @@ class FitOptions:
         _choice("on_unidentifiable", self.on_unidentifiable, UNIDENTIFIABLE)
         _choice("covariance", self.covariance, COVARIANCE)
         _choice("reference", self.reference, REFERENCE)
+        _choice("arm_scale", self.arm_scale, ARM_SCALE)
         _positive("rank_tol", self.rank_tol)
         if not self.rank_tol < 1:
             raise ValueError(f"rank_tol must be below 1, got {self.rank_tol!r}")
