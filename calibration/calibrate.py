@@ -979,9 +979,12 @@ class _ArmScale:
     u: float
     direction: np.ndarray
     set: bool
+    start: float = 0.0
 
     def to_dict(self) -> dict:
-        return {"value": self.value, "u": self.u, "set_by_data": self.set, "max_u": MAX_SCALE_U}
+        """``value``: the scale of the prior's centre from the description (``start``, the scale of the centre
+        given, projected on the direction in the prior's metric, plus ``value``)."""
+        return {"value": self.start + self.value, "u": self.u, "set_by_data": self.set, "max_u": MAX_SCALE_U}
 
 
 def _prior_spec(model: ArmModel, data: CalibrationData, options: FitOptions) -> PriorSpec:
@@ -1478,10 +1481,41 @@ def _group_table(s: _Setup, kept, u) -> dict:
 
 
 def _fit(model: ArmModel, data: CalibrationData, options: FitOptions) -> CalibrationResult:
-    """One fit at the weights and prior scales given: :func:`_setup`, :func:`_solve`, :func:`_result`."""
+    """One fit at the weights and prior scales given: :func:`_setup`, :func:`_solve`, the arm's scale
+    (:func:`_scale_rounds`), :func:`_result`."""
     s = _setup(model, data, options)
     sol, kept, fixed, idf0, idf1 = _solve(s, options)
+    s, sol, kept, fixed = _scale_rounds(s, sol, kept, fixed, options)
     return _result(s, sol, kept, fixed, (idf0, idf1), options)
+
+
+def _scale_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
+    """With a prior at given scales and ``options.arm_scale`` "data": the arm's uniform scale of the prior's centre
+    (:func:`_arm_scale_round`) and the fit again, until its step is below :data:`EVIDENCE_TOL` of its ``u`` (a fit
+    started from an earlier fit's centre, whose scale it holds: one round). Returns (setup, solution, kept, fixed)."""
+    if s.prior is None or options.arm_scale != "data":
+        return s, sol, kept, fixed
+    for _ in range(EVIDENCE_ROUNDS):
+        red = float(np.sum(1.0 - _normal(s, sol, kept).h))
+        var = 2 * sol.cost / red if options.covariance == "residual" and not options.weights_from_data else 1.0
+        new, move = _arm_scale_round(s, sol, kept, _covariance(s, sol.evaluation, kept, var))
+        if move <= EVIDENCE_TOL:
+            return _settled(s, new), sol, kept, fixed
+        s = new
+        p = sol.p.copy()
+        kept, bound = _at_bounds(s, p, kept, "evidence")
+        fixed = fixed + bound
+        sol = _lm(s, s.problem.with_free(kept), p, sol.states, options)
+    return s, sol, kept, fixed
+
+
+def _settled(s: _Setup, new: _Setup) -> _Setup:
+    """``s`` (the setup its solution was fitted with) with the arm's scale that :func:`_arm_scale_round` found at
+    that solution, its value the one of ``s``'s centre."""
+    if new.arm_scale is None:
+        return replace(s, arm_scale=None)
+    value = s.arm_scale.value if s.arm_scale is not None else 0.0
+    return replace(s, arm_scale=replace(new.arm_scale, value=value))
 
 
 def _reweighted_problem(problem: Problem, weights: Weights) -> Problem:
@@ -1555,7 +1589,7 @@ def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
                 history[-1]["arm_scale"] = scaled.arm_scale.to_dict()
         if max(moves, default=0.0) <= EVIDENCE_TOL:
             history[-1]["settled"] = True
-            return s, sol, kept, fixed, history
+            return _settled(s, scaled) if options.arm_scale == "data" else s, sol, kept, fixed, history
         gains = secant_gains(steps, last, EVIDENCE_TOL)
         scales = {g: s.spec.bounded(g, tau * math.exp(gains[g] * steps[g])) for g, tau in s.scales.items()}
         # the first move, from the starting scales (far from the fixed point, where its step is not near linear),
@@ -1624,7 +1658,11 @@ def _arm_scale_round(s: _Setup, sol, kept, cov: np.ndarray) -> tuple[_Setup, flo
     before = old.value if old is not None else 0.0
     ok = u <= MAX_SCALE_U
     value = before + step if ok else 0.0
-    new = _ArmScale(value, u, d, ok)
+    # the scale of the centre given from the description (p = 0; an earlier fit's centre holds its scale), in the
+    # prior's metric
+    w = d[idx] / s.prior.size[idx] ** 2
+    start = old.start if old is not None else float(w @ base[idx]) / float(w @ d[idx])
+    new = _ArmScale(value, u, d, ok, start)
     return replace(s, arm_scale=new, prior=Prior(base + value * d, s.prior.size)), abs(value - before) / u
 
 
