@@ -24,7 +24,7 @@ COVARIANCE = ("residual", "stated")
 #: how reference coordinates enter the fit
 REFERENCE = ("fit", "identity", "off")
 #: FitOptions.arm_scale choices
-ARM_SCALE = ("data", "prior")
+ARM_SCALE = ("evidence", "data", "prior")
 
 #: standardized residual [robust standard deviations] from which a point is a gross error, left out by default:
 #: above Baarda's data-snooping critical value of a Gaussian campaign of up to 10^5 rows at a family-wise level
