@@ -58,6 +58,7 @@ from .options import FitOptions
 from .prior import (
     MAX_SCALE_U,
     PRIOR_DOMINATED,
+    SCALE_SIZE,
     PriorSpec,
     prior_only,
     prior_spec,
@@ -1667,7 +1668,7 @@ def _arm_scale_round(s: _Setup, sol, kept, cov: np.ndarray, mode: str) -> tuple[
     if ok and mode == "evidence":
         # its own Gaussian prior N(0, sigma^2), sigma by the evidence: the flat estimate ~ N(0, sigma^2 + u^2) gives
         # sigma^2 = max(0, flat^2 - u^2), and the posterior mean shrinks it by sigma^2 / (sigma^2 + u^2)
-        var = max(0.0, flat ** 2 - u ** 2)
+        var = min(max(0.0, flat ** 2 - u ** 2), SCALE_SIZE ** 2)
         ok = var > 0
         precision = 1.0 / var if ok else math.inf
         flat *= var / (var + u ** 2)

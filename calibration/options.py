@@ -161,7 +161,7 @@ class FitOptions:
     blas: int | None = 1
     discrepancy: bool = True
     region_effect: bool = False
-    arm_scale: str = "data"
+    arm_scale: str = "prior"
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__

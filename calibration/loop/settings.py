@@ -70,7 +70,7 @@ class LoopSettings:
     synthesise: bool = True
     physics: bool = True
     prior_scale: float | str | None = "auto"
-    arm_scale: str = "data"
+    arm_scale: str = "prior"
     test_in_model: bool = True
     escalate: bool = True
     pairs: int = 2
