@@ -68,3 +68,23 @@ def test_a_direction_the_data_do_not_see_has_no_scale():
 def test_unknown_arm_scale_is_refused():
     with pytest.raises(ValueError, match="arm_scale"):
         FitOptions(arm_scale="free")
+
+
+def test_a_certified_scale_error_is_the_scale_not_the_lengths_prior(nominal):
+    """A simulated campaign of ball bars, seats and a sphere (5 um noise) on an arm 0.2 % larger than its description
+    plus 0.1 mm / 0.1 mrad random errors: with ``arm_scale="data"`` the fit gives the scale 0.2 % within 0.02 % (u
+    below 0.01 %), and the lengths' prior scale stays at the random errors' size (at most 0.15; the default, which
+    shrinks the scale with the lengths, widens their group to 0.38 to reach it)."""
+    from arm_model.sim.quick import SynthSpec, make_campaign, random_truth
+    from calibration import Weights, calibrate, make_data
+    model = ArmModel(nominal)
+    spec = SynthSpec(ballbars=6, ballbar_points=5, seats=3, articulations=8, spheres=1, sphere_points=10, rings=0,
+                     ring_points=0, planes=0, plane_points=0, reference_points=0, force=0.0, noise=5e-6,
+                     reference_noise=5e-6)
+    truth = random_truth(model, np.random.default_rng(1), length=1e-4, angle=1e-4, probe=1e-4)
+    c = make_campaign(model, spec, seed=1, p_true=truth + 2e-3 * uniform_scale(model))
+    res = calibrate(model, make_data(c.points, c.artefacts, model),
+                    FitOptions(arm_scale="data", weights=Weights(probe=5e-6, reference=5e-6)))
+    assert res.arm_scale["set_by_data"] and res.arm_scale["u"] < 1e-4
+    assert abs(res.arm_scale["value"] - 2e-3) < 2e-4, res.arm_scale
+    assert res.prior_scales["lengths"] <= 0.15, res.prior_scales
