@@ -58,7 +58,6 @@ from .options import FitOptions
 from .prior import (
     MAX_SCALE_U,
     PRIOR_DOMINATED,
-    SCALE_SIZE,
     PriorSpec,
     prior_only,
     prior_spec,
@@ -981,7 +980,6 @@ class _ArmScale:
     direction: np.ndarray
     set: bool
     start: float = 0.0
-    precision: float = 0.0
 
     def to_dict(self) -> dict:
         """``value``: the scale of the prior's centre from the description (``start``, the scale of the centre
@@ -1495,12 +1493,12 @@ def _scale_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
     """With a prior at given scales and ``options.arm_scale`` "data": the arm's uniform scale of the prior's centre
     (:func:`_arm_scale_round`) and the fit again, until its step is below :data:`EVIDENCE_TOL` of its ``u`` (a fit
     started from an earlier fit's centre, whose scale it holds: one round). Returns (setup, solution, kept, fixed)."""
-    if s.prior is None or options.arm_scale == "prior":
+    if s.prior is None or options.arm_scale != "data":
         return s, sol, kept, fixed
     for _ in range(EVIDENCE_ROUNDS):
         red = float(np.sum(1.0 - _normal(s, sol, kept).h))
         var = 2 * sol.cost / red if options.covariance == "residual" and not options.weights_from_data else 1.0
-        new, move = _arm_scale_round(s, sol, kept, _covariance(s, sol.evaluation, kept, var), options.arm_scale)
+        new, move = _arm_scale_round(s, sol, kept, _covariance(s, sol.evaluation, kept, var))
         if move <= EVIDENCE_TOL:
             return _settled(s, new), sol, kept, fixed
         s = new
@@ -1584,14 +1582,14 @@ def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
                         "noise_factors": dict(prob.weights.factors), "s0": math.sqrt(2 * sol.cost / red)})
         moves = [abs(r) for r in steps.values()] + [abs(math.log(f)) for f in factors.values()]
         scaled = s
-        if options.arm_scale != "prior":
-            scaled, move = _arm_scale_round(s, sol, kept, cov, options.arm_scale)
+        if options.arm_scale == "data":
+            scaled, move = _arm_scale_round(s, sol, kept, cov)
             moves.append(move)
             if scaled.arm_scale is not None:
                 history[-1]["arm_scale"] = scaled.arm_scale.to_dict()
         if max(moves, default=0.0) <= EVIDENCE_TOL:
             history[-1]["settled"] = True
-            return _settled(s, scaled) if options.arm_scale != "prior" else s, sol, kept, fixed, history
+            return _settled(s, scaled) if options.arm_scale == "data" else s, sol, kept, fixed, history
         gains = secant_gains(steps, last, EVIDENCE_TOL)
         scales = {g: s.spec.bounded(g, tau * math.exp(gains[g] * steps[g])) for g, tau in s.scales.items()}
         # the first move, from the starting scales (far from the fixed point, where its step is not near linear),
@@ -1644,7 +1642,7 @@ def _scale_direction(s: _Setup, sol, kept) -> np.ndarray | None:
     return out
 
 
-def _arm_scale_round(s: _Setup, sol, kept, cov: np.ndarray, mode: str) -> tuple[_Setup, float]:
+def _arm_scale_round(s: _Setup, sol, kept, cov: np.ndarray) -> tuple[_Setup, float]:
     """One round of the arm's uniform scale under a flat prior (:func:`calibration.prior.scale_step`) from the fit
     ``sol`` (posterior covariance ``cov`` of ``kept``): the setup with the prior's centre at the given centre
     scaled by the new value (or at the given centre when the data do not set the scale: its ``u`` beyond
@@ -1662,18 +1660,9 @@ def _arm_scale_round(s: _Setup, sol, kept, cov: np.ndarray, mode: str) -> tuple[
     # prior's metric
     w = d[idx] / s.prior.size[idx] ** 2
     start = old.start if old is not None else float(w @ base[idx]) / float(w @ d[idx])
-    flat = start + before + step                     # the scale's estimate under a flat prior
-    precision = 0.0
     ok = u <= MAX_SCALE_U
-    if ok and mode == "evidence":
-        # its own Gaussian prior N(0, sigma^2), sigma by the evidence: the flat estimate ~ N(0, sigma^2 + u^2) gives
-        # sigma^2 = max(0, flat^2 - u^2), and the posterior mean shrinks it by sigma^2 / (sigma^2 + u^2)
-        var = min(max(0.0, flat ** 2 - u ** 2), SCALE_SIZE ** 2)
-        ok = var > 0
-        precision = 1.0 / var if ok else math.inf
-        flat *= var / (var + u ** 2)
-    value = flat - start if ok else 0.0
-    new = _ArmScale(value, u, d, ok, start, precision)
+    value = before + step if ok else 0.0
+    new = _ArmScale(value, u, d, ok, start)
     return replace(s, arm_scale=new, prior=Prior(base + value * d, s.prior.size)), abs(value - before) / u
 
 
@@ -1688,7 +1677,6 @@ def _with_scale_u(s: _Setup, kept, cov: np.ndarray) -> np.ndarray:
     w = a.direction[idx] / s.prior.size[idx] ** 2
     g = cov @ w
     den = float(w @ a.direction[idx] - w @ g)
-    den += a.precision
     return cov + np.outer(g, g) / den if den > 0 else cov
 
 

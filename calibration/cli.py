@@ -142,10 +142,10 @@ def sigma_options(p, prior_default: str | None = None) -> None:
                         "weak parameters)" + ("; auto: evidence when the base model holds a joint compliance "
                                                 "(its prior is physical), else off" if auto else "")
                    + f". Default {default} (docs/calibration.md)")
-    p.add_argument("--arm-scale", choices=("evidence", "data", "prior"), default="prior",
-                   help="with the evidence's prior: data (default) leaves the arm's uniform scale to the data (a flat "
-                        "prior on it) where they set it within 0.5 %% (a certified length does); prior: the lengths' "
-                        "prior shrinks it too (docs/calibration.md)")
+    p.add_argument("--arm-scale", choices=("prior", "data"), default="prior",
+                   help="prior (default): the lengths' prior shrinks the arm's uniform scale too; data: a flat prior "
+                        "on the scale, where the data set it within 0.5 %% (a certified length does; not the default: "
+                        "docs/calibration.md)")
 
 
 

@@ -67,7 +67,7 @@ __all__ = ["GROUP_LENGTHS", "GROUP_OFFSETS", "GROUP_ANGLES", "GROUP_TIP", "GROUP
            "PRIOR_DOMINATED", "BARELY_SEEN", "SCALE_RANGE", "MIN_EFFECTIVE", "TIP_SHARE", "LENGTH_SHARE", "MAX_ANGLE",
            "MIN_SIDE_SHARE", "MIN_SIDE_VISITS", "NIL_LOAD", "PriorSpec", "parameter_groups", "prior_spec",
            "limits", "variance_ratio", "update_scales", "MAX_GAIN", "secant_gains", "both_sides",
-           "side_visits", "unseen_side", "prior_only", "MAX_SCALE_U", "SCALE_SIZE", "uniform_scale", "scale_step"]
+           "side_visits", "unseen_side", "prior_only", "MAX_SCALE_U", "uniform_scale", "scale_step"]
 
 GROUP_LENGTHS = "lengths"
 GROUP_OFFSETS = "joint offsets"
@@ -493,10 +493,6 @@ def secant_gains(steps: dict, last: dict, tol: float) -> dict:
 #: :func:`scale_step`): the largest plausible error of a length as a share of the chain's (:data:`LENGTH_SHARE`).
 #: Data that cannot place the scale that well (seats without a certified length: about 8 %) leave it to the prior.
 MAX_SCALE_U = LENGTH_SHARE
-#: the plausible size [1] of the arm's uniform scale error (:data:`BASE_SIZES`' 1 mm at a metre; a 20 K change of an
-#: aluminium arm's temperature makes 5e-4): the evidence may shrink the scale's own prior, never widen it beyond this
-#: (a capped group's rule)
-SCALE_SIZE = 1e-3
 
 
 def uniform_scale(model) -> np.ndarray:
