@@ -142,6 +142,10 @@ def sigma_options(p, prior_default: str | None = None) -> None:
                         "weak parameters)" + ("; auto: evidence when the base model holds a joint compliance "
                                                 "(its prior is physical), else off" if auto else "")
                    + f". Default {default} (docs/calibration.md)")
+    p.add_argument("--arm-scale", choices=("prior", "data"), default="prior",
+                   help="prior (default): the lengths' prior shrinks the arm's uniform scale too; data: a flat prior "
+                        "on the scale, where the data set it within 0.5 %% (a certified length does; not the default: "
+                        "docs/calibration.md)")
 
 
 
@@ -343,7 +347,8 @@ def fit_options(args, **fields):
         raise InputError(f"--min-resolution holds weak parameters without a prior: give --prior-scale off with it "
                          f"(the prior, --prior-scale {prior}, shrinks them instead)")
     kw = {"min_resolution": args.min_resolution or None,
-          "weights_from_data": getattr(args, "weights", "stated") == "data", "prior_scale": prior}
+          "weights_from_data": getattr(args, "weights", "stated") == "data", "prior_scale": prior,
+          "arm_scale": getattr(args, "arm_scale", "data")}
     if getattr(args, "plausible_length_mm", None) is not None:
         kw["prior_length"] = args.plausible_length_mm * 1e-3
     if args.rank_tol is not None:

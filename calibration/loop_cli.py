@@ -168,7 +168,8 @@ def run(args: argparse.Namespace) -> int:
                             screen_alpha=args.screen_alpha, min_improvement=args.min_improvement,
                             max_effects=args.max_effects, cv_top=args.cv_top, pairs=args.pairs, seed=args.seed,
                             synthesise=not args.library_only, physics=not args.held_out_gain_only,
-                            prior_scale=args.prior_scale, test_in_model=args.holdout is None,
+                            prior_scale=args.prior_scale, arm_scale=args.arm_scale,
+                            test_in_model=args.holdout is None,
                             weights_from_data=args.weights == "data",
                             escalate=args.candidates is None)
     with output_folder(args.output, inputs, "close-loop") as out:
