@@ -393,20 +393,29 @@ FORCE_DRIVEN = ("probe_compliance", "probe_compliance_matrix", "force_sensor")
 LOAD_DRIVEN = ("joint_compliance", "lateral_compliance")
 
 
+def _undriven_why(sets) -> tuple[list, str] | None:
+    """(the files, what they lack) when none of the PointSets ``sets`` (None: a file not given) carries a measured
+    contact force, else None."""
+    from .candidates import has_force
+    sets = [s for s in sets if s is not None]
+    if any(has_force(s) for s in sets):
+        return None
+    names = list(dict.fromkeys(s.path for s in sets))
+    return names, (f"{' and '.join(names)} {'hold' if len(names) > 1 else 'holds'} "
+                   + ("no force columns (fx_N, fy_N, fz_N)" if all(s.force is None for s in sets)
+                      else "no force (its columns zero on every row)"))
+
+
 def refuse_undriven_effects(keys, desc, *sets) -> None:
     """An InputError for an ``--effect`` of ``keys`` that nothing in the data drives, which the fit would hold at
     zero ("no effect on the data") as if estimated: a :data:`FORCE_DRIVEN` kind on points (``sets``: the PointSets
     of the command, None for a file not given) with no measured force (no force columns, or zero throughout), a
     :data:`LOAD_DRIVEN` kind there on an arm without masses (under gravity alone a robot's joints still bend: kept)."""
-    from .candidates import has_force
-    sets = [s for s in sets if s is not None]
     asked = [k for k in keys or () if k in FORCE_DRIVEN + LOAD_DRIVEN]
-    if not asked or any(has_force(s) for s in sets):
+    undriven = _undriven_why(sets) if asked else None
+    if undriven is None:
         return
-    names = list(dict.fromkeys(s.path for s in sets))
-    held = (f"{' and '.join(names)} {'hold' if len(names) > 1 else 'holds'} "
-            + ("no force columns (fx_N, fy_N, fz_N)" if all(s.force is None for s in sets)
-               else "no force (its columns zero on every row)"))
+    names, held = undriven
     for k in asked:
         if k in FORCE_DRIVEN:
             raise InputError(f"--effect {k} is driven by the measured contact force, and {held}: nothing could "
@@ -417,6 +426,30 @@ def refuse_undriven_effects(keys, desc, *sets) -> None:
                              f"links' masses, and {held} while the arm has no masses (no <inertial> in its URDF, no "
                              "mass_kg in its description): nothing could estimate it; leave it out, or give the link "
                              "masses (--masses) or the force", names[0], 1)
+
+
+def refuse_undriven_free(model, free, hold, *sets) -> None:
+    """An InputError for a ``--free`` pattern naming a parameter that the measured contact force alone drives (the
+    probe's compliance ``probe.compliance_*``, the parameters of a :data:`FORCE_DRIVEN` effect of a model file) on
+    points ``sets`` with no measured force, and not held by ``hold``: the fit would report it "fixed: no effect on the
+    data" and write the model as if it had been estimated, as :func:`refuse_undriven_effects` refuses for
+    ``--effect``. The default free set names no probe compliance (:func:`calibration.calibrate.default_free`)."""
+    from .calibrate import resolve_parameters
+    undriven = _undriven_why(sets) if free else None
+    if undriven is None:
+        return
+    names, held_by_data = undriven
+    spec = model.spec
+    driven = {i for i, n in enumerate(spec.names) if n.startswith("probe.compliance")}
+    driven |= {i for e, sl in model.effect_slices() if e.key in FORCE_DRIVEN for i in range(sl.start, sl.stop)}
+    held = set(resolve_parameters(spec, hold)) if hold else set()
+    for pat in free:
+        hit = [spec.names[i] for i in resolve_parameters(spec, [pat]) if i in driven and i not in held]
+        if hit:
+            raise InputError(f"--free {pat} names {', '.join(hit)}, driven by the measured contact force alone, and "
+                             f"{held_by_data}: nothing could estimate {'it' if len(hit) == 1 else 'them'} (the fit "
+                             "would hold them as they are, as if estimated); name the other parameters only, hold "
+                             "these with --hold, or give the force the probe measured", names[0], 1)
 
 
 def _check_reference_options(args, data) -> None:
@@ -461,6 +494,7 @@ def _load_data(args, defaults: bool = False):
     data = make_data(points, artefacts, reference=reference, marker_offsets=args.marker_offset, heldout=heldout)
     _check_reference_options(args, data)
     refuse_undriven_effects(args.effect, desc, points, reference, heldout)
+    refuse_undriven_free(model, args.free, args.hold, points, reference)
     added = default_effects(model, data) if defaults and args.effect is None else ()
     if added:
         from arm_model.model import ArmModel

@@ -140,6 +140,41 @@ def test_an_effect_nothing_in_the_data_drives_is_refused(tmp_path, capsys, comma
     assert not out.exists()
 
 
+@pytest.mark.parametrize("command", ["calibrate", "close-loop"])
+def test_a_probe_compliance_freed_on_data_without_force_is_refused(tmp_path, capsys, command):
+    """`--free 'probe.*'` on points without force columns held the probe's compliances ("fixed: no effect on the
+    data", exit 0) and wrote the model as if they had been estimated; refused as `--effect probe_compliance` is,
+    naming the option and the file, exit 2, nothing written."""
+    points = PANDA / "front" / "points.csv"
+    out = tmp_path / "out"
+    code = main([command, str(points), str(PANDA / "artefacts.toml"), "--arm", str(PANDA / "panda.urdf"),
+                 "--tip-frame", "ball_link", "--free", "probe.*", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err
+    assert f"{points}, line 1: --free probe.* names probe.compliance_x" in err, err
+    assert f"{points} holds no force columns (fx_N, fy_N, fz_N)" in err, err
+    assert not out.exists()
+
+
+def test_a_probe_compliance_freed_is_kept_when_held_or_pushed():
+    """The check of `--free` refuses only a force-driven parameter left free on data without force: one held by
+    `--hold`, or on points with a force, passes; a pattern of other parameters passes."""
+    from arm_model import read_points
+    from arm_model.errors import InputError
+    from arm_model.io import parse_points
+    from arm_model.urdf_import import description_from_urdf
+    from calibration.cli import refuse_undriven_free
+    model = ArmModel(description_from_urdf(PANDA / "panda.urdf", "ball_link"), ())
+    points = read_points(PANDA / "front" / "points.csv", model.desc.joint_quantities)
+    refuse_undriven_free(model, ["probe.*"], ["probe.compliance_*"], points)
+    refuse_undriven_free(model, ["probe.x", "panda_joint*.origin_z"], None, points)
+    pushed = parse_points("measurement,feature," + ",".join(f"q{i}_rad" for i in range(1, 8)) + ",fx_N,fy_N,fz_N\n"
+                          "m,f,0,0,0,-1,0,1,0,0,0,2\n", "f.csv", model.desc.joint_quantities)
+    refuse_undriven_free(model, ["probe.*"], None, points, pushed)
+    with pytest.raises(InputError, match="--free probe.compliance_z names probe.compliance_z, driven by"):
+        refuse_undriven_free(model, ["probe.x", "probe.compliance_z"], None, points)
+
+
 def test_a_joint_compliance_under_gravity_alone_is_kept():
     """Without force, a robot's joints still bend under their links' weight: joint and lateral compliance are
     kept on an arm with masses; with a force column, every force-driven effect is."""
