@@ -411,6 +411,8 @@ def refuse_undriven_effects(keys, desc, *sets) -> None:
     zero ("no effect on the data") as if estimated: a :data:`FORCE_DRIVEN` kind on points (``sets``: the PointSets
     of the command, None for a file not given) with no measured force (no force columns, or zero throughout), a
     :data:`LOAD_DRIVEN` kind there on an arm without masses (under gravity alone a robot's joints still bend: kept)."""
+    if "thermal" in (keys or ()):
+        _refuse_constant_temperature(sets)
     asked = [k for k in keys or () if k in FORCE_DRIVEN + LOAD_DRIVEN]
     undriven = _undriven_why(sets) if asked else None
     if undriven is None:
@@ -426,6 +428,27 @@ def refuse_undriven_effects(keys, desc, *sets) -> None:
                              f"links' masses, and {held} while the arm has no masses (no <inertial> in its URDF, no "
                              "mass_kg in its description): nothing could estimate it; leave it out, or give the link "
                              "masses (--masses) or the force", names[0], 1)
+
+
+def _refuse_constant_temperature(sets) -> None:
+    """An InputError for ``--effect thermal`` on points (``sets``: PointSets, None for a file not given) whose
+    temperature spans less than :data:`calibration.candidates.MIN_TEMPERATURE_SPAN`, the range close-loop needs to
+    offer it: the links' growth is then either no effect on the data (at 20 °C) or a constant scale the lengths
+    already take, and the fit would write it 'fixed' at zero. Points without a temperature are refused where the
+    effect's inputs are checked."""
+    from .candidates import MIN_TEMPERATURE_SPAN
+    sets = [s for s in sets if s is not None and s.temperature is not None]
+    if not sets or not all(np.all(np.isfinite(s.temperature)) for s in sets):
+        return
+    t = np.concatenate([s.temperature for s in sets])
+    span = float(np.ptp(t))
+    if span < MIN_TEMPERATURE_SPAN:
+        names = list(dict.fromkeys(s.path for s in sets))
+        raise InputError(f"--effect thermal grows the links with the measured temperature, and the temperature of "
+                         f"{' and '.join(names)} varies by {span:.3g} K only (at least {MIN_TEMPERATURE_SPAN:g} K "
+                         "needed, as close-loop needs to offer it): nothing could estimate it (the fit would hold it "
+                         "at zero); leave it out, or give points measured over a range of temperatures", names[0], 1,
+                         "temperature_C")
 
 
 def refuse_undriven_free(model, free, hold, *sets) -> None:

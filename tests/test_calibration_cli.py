@@ -8,6 +8,7 @@ import pytest
 
 from arm_model import load_description
 from arm_model.cli import main
+from arm_model.errors import InputError
 from arm_model.model import ArmModel
 from arm_model.sim.quick import SynthSpec, make_campaign
 from conftest import NOMINAL
@@ -173,6 +174,38 @@ def test_a_probe_compliance_freed_is_kept_when_held_or_pushed():
     refuse_undriven_free(model, ["probe.*"], None, points, pushed)
     with pytest.raises(InputError, match="--free probe.compliance_z names probe.compliance_z, driven by"):
         refuse_undriven_free(model, ["probe.x", "probe.compliance_z"], None, points)
+
+
+@pytest.mark.parametrize("command", ["calibrate", "close-loop"])
+def test_a_thermal_effect_on_a_constant_temperature_is_refused(tmp_path, capsys, command):
+    """`--effect thermal` on points at one temperature was fitted and written 'fixed' at zero ("no effect on the
+    data" at 20 degC, "not separable" from the lengths elsewhere), exit 0; refused as the force-driven effects are,
+    naming the option, the file and its temperature column, exit 2, nothing written."""
+    lines = (PANDA / "front" / "points.csv").read_text().splitlines()
+    points = tmp_path / "points.csv"
+    points.write_text("\n".join([lines[0] + ",temperature_C"] + [row + ",21.5" for row in lines[1:]]) + "\n")
+    out = tmp_path / "out"
+    code = main([command, str(points), str(PANDA / "artefacts.toml"), "--arm", str(PANDA / "panda.urdf"),
+                 "--tip-frame", "ball_link", "--effect", "thermal", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err
+    assert f"{points}, line 1, column 'temperature_C': --effect thermal grows the links" in err, err
+    assert "varies by 0 K only (at least 0.2 K needed" in err, err
+    assert not out.exists()
+
+
+def test_a_thermal_effect_over_a_temperature_range_is_kept():
+    """The temperature check refuses a span below 0.2 K only, over all the points files of the fit together."""
+    from arm_model.io import parse_points
+    from arm_model.urdf_import import description_from_urdf
+    from calibration.cli import refuse_undriven_effects
+    desc = description_from_urdf(PANDA / "panda.urdf", "ball_link")
+    head = "measurement,feature," + ",".join(f"q{i}_rad" for i in range(1, 8)) + ",fx_N,fy_N,fz_N,temperature_C\n"
+    cold, warm = (parse_points(head + f"m,f,0,0,0,-1,0,1,0,0,0,2,{t}\nm,f,0,0,0,-1,0,1,0.1,0,0,2,{t}\n", f"{t}.csv",
+                               desc.joint_quantities) for t in (20.0, 20.3))
+    refuse_undriven_effects(("thermal",), desc, cold, warm)
+    with pytest.raises(InputError, match="varies by 0 K only"):
+        refuse_undriven_effects(("thermal",), desc, cold, None)
 
 
 def test_a_joint_compliance_under_gravity_alone_is_kept():
