@@ -666,12 +666,26 @@ def _points_and_rows(data, noun: str = "point") -> str:
     return counted(n["n_points"], noun) + rows
 
 
+def refuse_unnameable_files(*paths) -> None:
+    """An InputError for a points file (``paths``; None: not given) whose path cannot be a cell of ``residuals.csv``,
+    which names each point by its file and line: a line break, tab or other control character, an invisible or
+    text-direction character, or white space at its ends (the reader strips its cells) would make the command
+    write a file its reader refuses (exit 3 after the whole fit) or one naming another file. Before any work."""
+    from arm_model.errors import id_problem
+    for path in paths:
+        why = None if path is None else id_problem(str(path))
+        if why:
+            raise InputError(f"the file's path {why}: residuals.csv names each point by its file and line, and could "
+                             "not name these; rename the file (or its folder)", ascii(str(path)))
+
+
 def run_calibrate(args: argparse.Namespace) -> int:
     from .calibrate import calibrate, nominal_baseline
     from .model_output import refine_torques, with_fitted_torques
     from .report import write_outputs
     from .validation import worse_than_nominal
     inputs = [args.points, args.artefacts, *arm_inputs(args), args.reference_points, args.holdout_points]
+    refuse_unnameable_files(args.points, args.reference_points, args.holdout_points)
     with output_folder(args.output, inputs, "calibrate") as out:
         model, data, values, warnings = _load_data(args, defaults=True)
         if any(e.key == "joint_compliance" for e in model.effects):

@@ -222,3 +222,21 @@ def test_a_joint_compliance_under_gravity_alone_is_kept():
                           "m,f,0,0,0,-1,0,1,0,0,0,2\n", "f.csv", desc.joint_quantities)
     refuse_undriven_effects(FORCE_DRIVEN + LOAD_DRIVEN, description_from_urdf(PANDA / "panda.urdf", "ball_link"),
                             points, pushed)
+
+
+@pytest.mark.parametrize("name, words", [("a\nb.csv", "without control characters"),
+                                         ("a\u202eb.csv", "invisible or text-direction"),
+                                         ("a.csv ", "begin or end with white space")])
+def test_a_points_file_residuals_csv_cannot_name_is_refused_before_the_fit(tmp_path, capsys, name, words):
+    """residuals.csv names each point by its file: a points file named with a line break, a text-direction
+    character or a trailing space made calibrate fit, then stop at the read-back of residuals.csv, exit 3 ("internal
+    error ... please report it"); refused before any work, exit 2, nothing written."""
+    points = tmp_path / name
+    points.write_text((PANDA / "front" / "points.csv").read_text())
+    out = tmp_path / "out"
+    code = main(["calibrate", str(points), str(PANDA / "artefacts.toml"), "--arm", str(PANDA / "panda.urdf"),
+                 "--tip-frame", "ball_link", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "internal error" not in err and "Traceback" not in err
+    assert f"{ascii(str(points))}: the file's path must" in err and words in err, err
+    assert not out.exists()
