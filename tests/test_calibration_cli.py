@@ -141,20 +141,27 @@ def test_an_effect_nothing_in_the_data_drives_is_refused(tmp_path, capsys, comma
     assert not out.exists()
 
 
+def _refused(tmp_path, capsys, command, points, *options) -> str:
+    """The standard error of ``command`` on ``points`` of the Panda's seats (its artefacts, its URDF without masses)
+    with ``options``, asserted refused: exit 2, no traceback or internal error, nothing written."""
+    out = tmp_path / "out"
+    code = main([command, str(points), str(PANDA / "artefacts.toml"), "--arm", str(PANDA / "panda.urdf"),
+                 "--tip-frame", "ball_link", *options, "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err and "internal error" not in err, err
+    assert not out.exists()
+    return err
+
+
 @pytest.mark.parametrize("command", ["calibrate", "close-loop"])
 def test_a_probe_compliance_freed_on_data_without_force_is_refused(tmp_path, capsys, command):
     """`--free 'probe.*'` on points without force columns held the probe's compliances ("fixed: no effect on the
     data", exit 0) and wrote the model as if they had been estimated; refused as `--effect probe_compliance` is,
     naming the option and the file, exit 2, nothing written."""
     points = PANDA / "front" / "points.csv"
-    out = tmp_path / "out"
-    code = main([command, str(points), str(PANDA / "artefacts.toml"), "--arm", str(PANDA / "panda.urdf"),
-                 "--tip-frame", "ball_link", "--free", "probe.*", "-o", str(out)])
-    err = capsys.readouterr().err
-    assert code == 2 and "Traceback" not in err
+    err = _refused(tmp_path, capsys, command, points, "--free", "probe.*")
     assert f"{points}, line 1: --free probe.* names probe.compliance_x" in err, err
     assert f"{points} holds no force columns (fx_N, fy_N, fz_N)" in err, err
-    assert not out.exists()
 
 
 def test_a_probe_compliance_freed_is_kept_when_held_or_pushed():
@@ -184,14 +191,9 @@ def test_a_thermal_effect_on_a_constant_temperature_is_refused(tmp_path, capsys,
     lines = (PANDA / "front" / "points.csv").read_text().splitlines()
     points = tmp_path / "points.csv"
     points.write_text("\n".join([lines[0] + ",temperature_C"] + [row + ",21.5" for row in lines[1:]]) + "\n")
-    out = tmp_path / "out"
-    code = main([command, str(points), str(PANDA / "artefacts.toml"), "--arm", str(PANDA / "panda.urdf"),
-                 "--tip-frame", "ball_link", "--effect", "thermal", "-o", str(out)])
-    err = capsys.readouterr().err
-    assert code == 2 and "Traceback" not in err
+    err = _refused(tmp_path, capsys, command, points, "--effect", "thermal")
     assert f"{points}, line 1, column 'temperature_C': --effect thermal grows the links" in err, err
     assert "varies by 0 K only (at least 0.2 K needed" in err, err
-    assert not out.exists()
 
 
 def test_a_thermal_effect_over_a_temperature_range_is_kept():
@@ -233,10 +235,5 @@ def test_a_points_file_residuals_csv_cannot_name_is_refused_before_the_fit(tmp_p
     error ... please report it"); refused before any work, exit 2, nothing written."""
     points = tmp_path / name
     points.write_text((PANDA / "front" / "points.csv").read_text())
-    out = tmp_path / "out"
-    code = main(["calibrate", str(points), str(PANDA / "artefacts.toml"), "--arm", str(PANDA / "panda.urdf"),
-                 "--tip-frame", "ball_link", "-o", str(out)])
-    err = capsys.readouterr().err
-    assert code == 2 and "internal error" not in err and "Traceback" not in err
+    err = _refused(tmp_path, capsys, "calibrate", points)
     assert f"{ascii(str(points))}: the file's path must" in err and words in err, err
-    assert not out.exists()
