@@ -469,10 +469,11 @@ def refuse_undriven_free(model, free, hold, *sets) -> None:
     for pat in free:
         hit = [spec.names[i] for i in resolve_parameters(spec, [pat]) if i in driven and i not in held]
         if hit:
+            it, one = ("it", "it") if len(hit) == 1 else ("them", "they")
             raise InputError(f"--free {pat} names {', '.join(hit)}, driven by the measured contact force alone, and "
-                             f"{held_by_data}: nothing could estimate {'it' if len(hit) == 1 else 'them'} (the fit "
-                             "would hold them as they are, as if estimated); name the other parameters only, hold "
-                             "these with --hold, or give the force the probe measured", names[0], 1)
+                             f"{held_by_data}: nothing could estimate {it} (the fit would hold {it} as {one} "
+                             f"{'is' if len(hit) == 1 else 'are'}, as if estimated); name the other parameters only, "
+                             f"hold {it} with --hold, or give the force the probe measured", names[0], 1)
 
 
 def _check_reference_options(args, data) -> None:
