@@ -406,15 +406,17 @@ def _undriven_why(sets) -> tuple[list, str] | None:
                       else "no force (its columns zero on every row)"))
 
 
-def refuse_undriven_effects(keys, desc, *sets) -> None:
+def refuse_undriven_effects(keys, desc, *sets, without_force: tuple[list, str] | None = None) -> None:
     """An InputError for an ``--effect`` of ``keys`` that nothing in the data drives, which the fit would hold at
     zero ("no effect on the data") as if estimated: a :data:`FORCE_DRIVEN` kind on points (``sets``: the PointSets
     of the command, None for a file not given) with no measured force (no force columns, or zero throughout), a
-    :data:`LOAD_DRIVEN` kind there on an arm without masses (under gravity alone a robot's joints still bend: kept)."""
+    :data:`LOAD_DRIVEN` kind there on an arm without masses (under gravity alone a robot's joints still bend: kept).
+    ``without_force``: (the files, what they lack) when the data are known to hold no force before they exist (a
+    simulated campaign without a force sensor), instead of ``sets``."""
     if "thermal" in (keys or ()):
         _refuse_constant_temperature(sets)
     asked = [k for k in keys or () if k in FORCE_DRIVEN + LOAD_DRIVEN]
-    undriven = _undriven_why(sets) if asked else None
+    undriven = (without_force or _undriven_why(sets)) if asked else None
     if undriven is None:
         return
     names, held = undriven
@@ -451,14 +453,15 @@ def _refuse_constant_temperature(sets) -> None:
                          "temperature_C")
 
 
-def refuse_undriven_free(model, free, hold, *sets) -> None:
+def refuse_undriven_free(model, free, hold, *sets, without_force: tuple[list, str] | None = None) -> None:
     """An InputError for a ``--free`` pattern naming a parameter that the measured contact force alone drives (the
     probe's compliance ``probe.compliance_*``, the parameters of a :data:`FORCE_DRIVEN` effect of a model file) on
     points ``sets`` with no measured force, and not held by ``hold``: the fit would report it "fixed: no effect on the
     data" and write the model as if it had been estimated, as :func:`refuse_undriven_effects` refuses for
-    ``--effect``. The default free set names no probe compliance (:func:`calibration.calibrate.default_free`)."""
+    ``--effect``. The default free set names no probe compliance (:func:`calibration.calibrate.default_free`).
+    ``without_force``: as :func:`refuse_undriven_effects`."""
     from .calibrate import resolve_parameters
-    undriven = _undriven_why(sets) if free else None
+    undriven = (without_force or _undriven_why(sets)) if free else None
     if undriven is None:
         return
     names, held_by_data = undriven
@@ -1000,6 +1003,11 @@ def run_montecarlo(args: argparse.Namespace) -> int:
     with output_folder(args.output, camp.inputs, "study montecarlo") as out:
         from arm_model.model import ArmModel
         model = ArmModel(camp.arm, _effects(args.effect))
+        if camp.sensor == "none":       # simulated points without force columns: as calibrate refuses them
+            why = ([str(args.campaign)], f"{args.campaign} simulates no force sensor (sensor = \"none\": its points "
+                                         "hold no force columns)")
+            refuse_undriven_effects(args.effect, camp.arm, without_force=why)
+            refuse_undriven_free(model, args.free, args.hold, without_force=why)
         settings = RunSettings(holdout=args.holdout, effects=_effects(args.effect),
                                fit=fit_options(args, free=free_names(model, args), weights=weights_from_args(args)))
         mc = monte_carlo(SimSource(camp), args.runs, seed=args.seed, settings=settings,

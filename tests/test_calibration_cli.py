@@ -237,3 +237,21 @@ def test_a_points_file_residuals_csv_cannot_name_is_refused_before_the_fit(tmp_p
     points.write_text((PANDA / "front" / "points.csv").read_text())
     err = _refused(tmp_path, capsys, "calibrate", points)
     assert f"{ascii(str(points))}: the file's path must" in err and words in err, err
+
+
+@pytest.mark.parametrize("option", [("--effect", "probe_compliance"), ("--free", "probe.*")])
+def test_study_montecarlo_refuses_a_probe_compliance_without_a_force_sensor(tmp_path, capsys, option):
+    """A campaign simulating no force sensor (sensor = "none": no force columns) with `--effect probe_compliance`
+    or `--free 'probe.*'` ran every fit with the compliance held, exit 0 (and a biased probe.z, the contact still
+    deflecting it); refused before any run, as calibrate refuses it on measured points, exit 2, nothing written."""
+    root = __import__("conftest").ROOT
+    text = (root / "examples" / "campaigns" / "calibration.toml").read_text()
+    assert 'sensor = "xyz"' in text
+    camp = tmp_path / "none.toml"
+    camp.write_text(text.replace('sensor = "xyz"', 'sensor = "none"'))
+    out = tmp_path / "out"
+    code = main(["study", "montecarlo", str(camp), "--runs", "1", "--holdout", "0", *option, "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err, err
+    assert f"{camp}, line 1: {' '.join(option)} " in err and "simulates no force sensor" in err, err
+    assert not out.exists()
