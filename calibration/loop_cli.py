@@ -24,6 +24,7 @@ from .cli import (
     mpe_options,
     parse_holdout,
     refuse_undriven_effects,
+    refuse_undriven_free,
     sigma_options,
     weights_from_args,
     with_artefact_drift,
@@ -159,6 +160,7 @@ def run(args: argparse.Namespace) -> int:
             warnings += point_warnings(desc, pts)
     log_warnings(warnings)          # at once: a loop that then fails (exit 4) has said what it saw in the inputs
     refuse_undriven_effects(args.effect, desc, points, reference)
+    refuse_undriven_free(ArmModel(desc, tuple(effects)), args.free, args.hold, points, reference)
     _check_folds(args.folds, points, reference)
     weights = weights_from_args(args)
     holdout = parse_holdout(args.holdout)
