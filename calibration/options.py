@@ -128,7 +128,8 @@ class FitOptions:
             ``discrepancy`` None (a fit that only predicts held-out data, as a cross-validation fold's).
         region_effect: also estimate the parameters' random effect between regions of the joint space
             (:mod:`calibration.region`) and add it to the covariance file; off by default (measured on the real and
-            simulated seat robots in docs/studies/calibration.md: it does not reach the worst real pair).
+            simulated seat robots with calibrate and close-loop in docs/studies/calibration.md: it does not reach the
+            worst real pair and widens pairs covered already).
     """
     free: tuple[str, ...] | None = None
     values: dict[str, float] | None = None
