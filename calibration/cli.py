@@ -631,7 +631,13 @@ def _covariance_options(c) -> None:
                    help="scale the parameters' covariance by the residual variance factor s0^2 (default) or trust "
                         "the stated uncertainties (s0 = 1); --covariance is the older spelling (aacmm tip's "
                         "--covariance is another option: it writes each point's covariance)")
-    c.add_argument("--region-effect", action="store_true",
+    region_option(c)
+
+
+def region_option(p) -> None:
+    """``--region-effect``: the parameters' random effect between regions of the joint space in the covariance file
+    (``calibrate`` and ``close-loop``: :mod:`calibration.region`)."""
+    p.add_argument("--region-effect", action="store_true",
                    help="also estimate how much the parameters shift between regions of the joint space (the "
                         "training poses cut into 2-4 regions, each predicted by the fit without it; kept only when a "
                         "Monte Carlo test at 5%% finds it) and add it to the covariance file, so aacmm tip's u of a "

@@ -25,6 +25,7 @@ from .cli import (
     parse_holdout,
     refuse_undriven_effects,
     refuse_undriven_free,
+    region_option,
     sigma_options,
     weights_from_args,
     with_artefact_drift,
@@ -113,6 +114,7 @@ def register(sub) -> None:
                         "docs/close-loop.md)")
     model_options(p)
     sigma_options(p, prior_default="auto")
+    region_option(p)
     mpe_options(p)
     p.set_defaults(func=run)
 
@@ -173,7 +175,7 @@ def run(args: argparse.Namespace) -> int:
                             prior_scale=args.prior_scale, arm_scale=args.arm_scale,
                             test_in_model=args.holdout is None,
                             weights_from_data=args.weights == "data",
-                            escalate=args.candidates is None)
+                            escalate=args.candidates is None, region_effect=args.region_effect)
     with output_folder(args.output, inputs, "close-loop") as out:
         loop = close_loop(points, artefacts, desc, reference=reference, effects=tuple(effects), values=arm.values,
                           free=args.free, hold=args.hold, weights=weights, settings=settings, families_=families)

@@ -137,7 +137,8 @@ class FitOptions:
             seats' held-out distance error but takes up the signature of effects the model lacks on simulated robots.
         region_effect: also estimate the parameters' random effect between regions of the joint space
             (:mod:`calibration.region`) and add it to the covariance file; off by default (measured on the real and
-            simulated seat robots in docs/studies/calibration.md: it does not reach the worst real pair).
+            simulated seat robots with calibrate and close-loop in docs/studies/calibration.md: it does not reach the
+            worst real pair and widens pairs covered already).
     """
     free: tuple[str, ...] | None = None
     values: dict[str, float] | None = None

@@ -53,7 +53,9 @@ class LoopSettings:
     ``synthesise``: build effects from the residual's structure when the library is exhausted, with an outer test
     set of whole measurements only (:func:`~calibration.loop.verdict.builds_from_residual`). ``pairs``: when no single
     candidate is added at a stage, at most this many pairs of the candidates tested there are cross-validated as one
-    candidate each (:mod:`calibration.loop.pairs`; 0: no pair step)."""
+    candidate each (:mod:`calibration.loop.pairs`; 0: no pair step). ``region_effect``: the final model's fit also
+    estimates the parameters' random effect between regions of the joint space (:mod:`calibration.region`), which the
+    covariance file adds, as ``calibrate --region-effect`` does (the loop's decisions and folds never use it)."""
     folds: int = 4
     test_fraction: float = 0.25
     alpha: float = 0.01
@@ -74,6 +76,7 @@ class LoopSettings:
     test_in_model: bool = True
     escalate: bool = True
     pairs: int = 2
+    region_effect: bool = False
 
     def __post_init__(self):
         object.__setattr__(self, "holdout", tuple(self.holdout or ()))

@@ -568,7 +568,7 @@ def report(state: LoopState) -> LoopResult:
     say("calibrating the final model on every point (" + ("design and test" if s.test_in_model else
         "but the held-out test set's") + "; outliers kept, as calibrate does)")
     # no compliance of it is negative: every fit holds a parameter at its lower bound (calibrate, _at_bounds)
-    model_fit = state.fit(state.model, data, reweight=True, weights=state.stated)
+    model_fit = state.fit(state.model, data, reweight=True, weights=state.stated, region=s.region_effect)
     return LoopResult(state.stages, state.last_tests, state.last_cv, state.stop, structure, significant, verdict,
                       state.candidates + state.synthesised, state.skipped, state.design.measurements(),
                       state.test.measurements(), s, state.desc, plots, state.dropped, state.test_by, state.power,
