@@ -139,6 +139,13 @@ def value(x: Scalar) -> Scalar:
     return x.val if isinstance(x, Dual) else x
 
 
+@lru_cache(maxsize=64)
+def _entry_index(convention: str, n_rows: int, n_q: int) -> tuple[int, dict[tuple[Any, ...], int]]:
+    """(how many entries, entry -> its column) of :func:`geometry_entries`, made once a shape."""
+    entries = geometry_entries(convention, n_rows, n_q)
+    return len(entries), {key: k for k, key in enumerate(entries)}
+
+
 def geometry_entries(convention: str, n_rows: int, n_q: int | None = None) -> list[tuple[Any, ...]]:
     """Names of the columns of :func:`chain_jacobian`: ``("row", i, k)`` (row i, its k-th value in
     :meth:`~arm_model.description.ArmDescription.row_table` order), ``("p_last", k)``,
@@ -214,8 +221,8 @@ def chain_jacobian(convention: str, rows: Sequence[Vector] | np.ndarray, p_last:
         wrench = None if wrench is None else [_float(v) for v in wrench]   # tens of times cheaper than (1,) arrays
     nj = len(rows)
     m = len(rows[0])
-    entries = geometry_entries(convention, nj, len(q))
-    acc: list[list[Any]] = [[0.0, 0.0, 0.0] for _ in entries]     # the Jacobian's slabs, summed in this order
+    n_entries, index = _entry_index(convention, nj, len(q))
+    acc: list[list[Any]] = [[0.0, 0.0, 0.0] for _ in range(n_entries)]   # the Jacobian's slabs, summed in order
     # the probe: local derivatives by dual numbers through the chain's own code
     pl = [Dual(v, {("p_last", k): 1.0}) for k, v in enumerate(p_last)]
     cp = [Dual(v, {("compliance", k): 1.0}) for k, v in enumerate(compliance)]
@@ -250,7 +257,6 @@ def chain_jacobian(convention: str, rows: Sequence[Vector] | np.ndarray, p_last:
             slab = acc[c]
             for e in range(3):
                 slab[e] = slab[e] + (d[e] if coef == 1.0 else coef * d[e])
-    index = {key: k for k, key in enumerate(entries)}
     for a in range(3):            # local derivative of the ball, rotated to the base
         if not isinstance(ball[a], Dual):
             continue
@@ -258,7 +264,7 @@ def chain_jacobian(convention: str, rows: Sequence[Vector] | np.ndarray, p_last:
             slab = acc[index[key]]
             for e in range(3):
                 slab[e] = slab[e] + cols[a][e] * coef
-    jac = np.zeros((len(entries), 3, n))
+    jac = np.zeros((n_entries, 3, n))
     if n == 1:
         jac[:, :, 0] = acc
     else:
