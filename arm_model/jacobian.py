@@ -139,6 +139,13 @@ def value(x: Scalar) -> Scalar:
     return x.val if isinstance(x, Dual) else x
 
 
+@lru_cache(maxsize=64)
+def _entry_index(convention: str, n_rows: int, n_q: int) -> tuple[int, dict[tuple[Any, ...], int]]:
+    """(how many entries, entry -> its column) of :func:`geometry_entries`, made once a shape."""
+    entries = geometry_entries(convention, n_rows, n_q)
+    return len(entries), {key: k for k, key in enumerate(entries)}
+
+
 def geometry_entries(convention: str, n_rows: int, n_q: int | None = None) -> list[tuple[Any, ...]]:
     """Names of the columns of :func:`chain_jacobian`: ``("row", i, k)`` (row i, its k-th value in
     :meth:`~arm_model.description.ArmDescription.row_table` order), ``("p_last", k)``,
@@ -158,6 +165,8 @@ def _rotate_frame(cols: Frame, axis: int | tuple[float, ...], angle: Scalar) -> 
     """Columns of ``R Rot(axis, angle)`` from the columns (X, Y, Z) of R."""
     X, Y, Z = cols
     c, s = np.cos(angle), np.sin(angle)
+    if isinstance(angle, float):          # one point (chain_jacobian's floats): keep them Python floats
+        c, s = float(c), float(s)
     if axis == 2:
         return (tuple(c * x + s * y for x, y in zip(X, Y, strict=True)),
                 tuple(c * y - s * x for x, y in zip(X, Y, strict=True)), Z)
@@ -206,10 +215,14 @@ def chain_jacobian(convention: str, rows: Sequence[Vector] | np.ndarray, p_last:
         (3, N) slab an entry.
     """
     n = len(np.asarray(q[0]))
+    if n == 1:        # one point (a live session's): Python floats, the same IEEE operations bit for bit, and
+        rows, p_last, compliance, q = ([[_float(v) for v in r] for r in rows], [_float(v) for v in p_last],
+                                       [_float(v) for v in compliance], [_float(v) for v in q])
+        wrench = None if wrench is None else [_float(v) for v in wrench]   # tens of times cheaper than (1,) arrays
     nj = len(rows)
     m = len(rows[0])
-    entries = geometry_entries(convention, nj, len(q))
-    jac = np.zeros((len(entries), 3, n))
+    n_entries, index = _entry_index(convention, nj, len(q))
+    acc: list[list[Any]] = [[0.0, 0.0, 0.0] for _ in range(n_entries)]   # the Jacobian's slabs, summed in order
     # the probe: local derivatives by dual numbers through the chain's own code
     pl = [Dual(v, {("p_last", k): 1.0}) for k, v in enumerate(p_last)]
     cp = [Dual(v, {("compliance", k): 1.0}) for k, v in enumerate(compliance)]
@@ -241,20 +254,34 @@ def chain_jacobian(convention: str, rows: Sequence[Vector] | np.ndarray, p_last:
     for kind, u, o, moved in motions:
         d = u if kind == "T" or o is None else _cross(u, [centre[e] - o[e] for e in range(3)])
         for c, coef in moved:
+            slab = acc[c]
             for e in range(3):
-                jac[c, e] += d[e] if coef == 1.0 else coef * d[e]
-    index = {key: k for k, key in enumerate(entries)}
+                slab[e] = slab[e] + (d[e] if coef == 1.0 else coef * d[e])
     for a in range(3):            # local derivative of the ball, rotated to the base
         if not isinstance(ball[a], Dual):
             continue
         for key, coef in ball[a].der.items():
-            c = index[key]
+            slab = acc[index[key]]
             for e in range(3):
-                jac[c, e] += cols[a][e] * coef
+                slab[e] = slab[e] + cols[a][e] * coef
+    jac = np.zeros((n_entries, 3, n))
+    if n == 1:
+        jac[:, :, 0] = acc
+    else:
+        for c, slab in enumerate(acc):
+            for e in range(3):
+                jac[c, e] = slab[e]
     out = np.empty((n, 3))
     for e in range(3):
         out[:, e] = centre[e]
     return out, jac
+
+
+def _float(x: Any) -> Any:
+    """The value of one point's column (an array of one) as a Python float; a scalar, a Dual as it is."""
+    if isinstance(x, np.ndarray):
+        return float(x.reshape(-1)[0])
+    return float(x) if isinstance(x, np.floating) else x
 
 
 _I4 = np.eye(4)

@@ -288,7 +288,22 @@ class _Plan:
     use_compliance: bool
 
 
+#: the last plan and what it was made of (a live session propagates each point alone, from the same objects)
+_LAST_PLAN: list = [None, None]
+
+
 def _plan(model: ArmModel, parameters, inputs: InputUncertainty, n_q: int) -> _Plan:
+    """The plan of :func:`propagate`; the last one again for the same (frozen) model, covariance and inputs."""
+    key = (model, parameters, inputs, n_q)
+    last, plan = _LAST_PLAN
+    if last is not None and all(a is b for a, b in zip(last[:3], key[:3], strict=True)) and last[3] == n_q:
+        return plan
+    plan = _make_plan(model, parameters, inputs, n_q)
+    _LAST_PLAN[:] = [key, plan]
+    return plan
+
+
+def _make_plan(model: ArmModel, parameters, inputs: InputUncertainty, n_q: int) -> _Plan:
     spec = model.spec
     pnames = () if parameters is None else tuple(parameters.names)
     pidx = [spec.index(nm) for nm in pnames]
@@ -340,7 +355,7 @@ def _chunk_jacobian(model: ArmModel, plan: _Plan, p, q, w, aux: AuxData):
             k = plan.d_index.get(key)
             if k is None:
                 continue
-            if np.ndim(coef) == 0:
+            if not isinstance(coef, np.ndarray) or coef.ndim == 0:
                 mmat[k, col] += coef
             else:
                 t = g[col] * coef
@@ -348,6 +363,8 @@ def _chunk_jacobian(model: ArmModel, plan: _Plan, p, q, w, aux: AuxData):
     return cen, g, mmat, per_point
 
 
+#: at most this many points are propagated without limiting the BLAS threads (their products are tiny)
+_FEW = 16
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
 
@@ -427,8 +444,9 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
             cov[s:e, i, j] = cv[i, j]
             cov[s:e, j, i] = cv[i, j]
 
-    # the products are thin (tens x chunk): one BLAS thread each; more spin-wait on a busy machine
-    with blas_threads(1):
+    # the products are thin (tens x chunk): one BLAS thread each; more spin-wait on a busy machine (a few points'
+    # products are below BLAS's own threshold for threads: setting the limit would cost more than them)
+    with blas_threads(1 if n > _FEW else None):
         run_chunks(work, n, chunk, threads)
     sources = dict(inputs.sources)
     sources["parameters"] = "none (parameters taken as exact)" if parameters is None else parameters.source

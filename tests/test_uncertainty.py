@@ -13,12 +13,16 @@ from arm_model.effects import (
     ApproachOffset,
     EncoderEccentricity,
     ForceSensorError,
+    JointBacklash,
     JointCompliance,
+    JointGain,
     JointHarmonics,
+    JointHysteresis,
     LateralCompliance,
     ProbeCompliance,
     ProbeComplianceMatrix,
     ProbeThermalGrowth,
+    ThermalDrift,
     ThermalGrowth,
 )
 from arm_model.jacobian import chain_jacobian, direction_jacobian, joint_screws, point_jacobian
@@ -47,13 +51,23 @@ def _casadi_jacobians(model: ArmModel):
 
 
 def _arms(nominal, tmp_path):
+    """The test arms by convention; each built when asked for (loading one takes up to seconds)."""
     from test_arm_model_evaluators import SLIDER, _dh_with_prismatic
 
     from arm_model.description import parse_description
-    path = tmp_path / "arm.urdf"
-    path.write_text(arm_urdf(nominal).replace('<axis xyz="0.0 0.0 1.0"/>', '<axis xyz="0 0.6 0.8"/>', 1))
-    return {"dh": nominal, "mdh": replace(nominal, convention="mdh"), "urdf": load_arm(path, "tip"),
-            "mdh-prismatic": _dh_with_prismatic(nominal, "mdh"), "urdf-prismatic-mimic": parse_description(SLIDER)}
+
+    def urdf():
+        path = tmp_path / "arm.urdf"
+        path.write_text(arm_urdf(nominal).replace('<axis xyz="0.0 0.0 1.0"/>', '<axis xyz="0 0.6 0.8"/>', 1))
+        return load_arm(path, "tip")
+    return _Lazy({"dh": lambda: nominal, "mdh": lambda: replace(nominal, convention="mdh"), "urdf": urdf,
+                  "mdh-prismatic": lambda: _dh_with_prismatic(nominal, "mdh"),
+                  "urdf-prismatic-mimic": lambda: parse_description(SLIDER)})
+
+
+class _Lazy(dict):
+    def __getitem__(self, key):
+        return super().__getitem__(key)()
 
 
 CONVENTIONS = ["dh", "mdh", "urdf", "mdh-prismatic", "urdf-prismatic-mimic"]
@@ -78,6 +92,12 @@ def test_chain_jacobian_is_the_casadi_jacobian(nominal, tmp_path, convention):
         assert_close(cen[i], x.ravel(), atol=1e-14)
         ref = np.hstack([jp, jq, jw])
         assert_close(g[:, :, i].T, ref, atol=1e-12 * np.abs(ref).max(), msg=f"point {i}")
+        # one point alone (a live session's) runs on Python floats: the batch's numbers, bit for bit
+        one = [[v if np.ndim(v) == 0 else v[i: i + 1] for v in r] for r in rows]
+        c1, g1 = chain_jacobian(desc.convention, one, pl, c, list(q[i: i + 1].T), list(w[i: i + 1].T),
+                                desc.chain_joints, desc.probe.rotation, desc.probe.lever)
+        np.testing.assert_array_equal(c1[0], cen[i])
+        np.testing.assert_array_equal(g1[:, :, 0], g[:, :, i])
     assert g.shape[0] == size + j + 6
 
 
@@ -172,6 +192,70 @@ def test_linear_propagation_is_j_sigma_jt_through_every_effect(nominal):
     jps = [np.array(jac(q[i], w[i], amat[i], p)[1])[:, free] for i in (0, 4)]
     ref = jps[0] @ cov @ jps[1].T
     assert_close(sy.systematic[0].T @ sy.systematic[4], ref, atol=1e-9 * np.abs(ref).max())
+
+
+@pytest.mark.parametrize("convention", ["dh", "urdf"])
+def test_one_point_propagation_is_the_batch_and_finite_differences_on_every_effect(nominal, tmp_path, convention):
+    # a live session propagates each point alone (chain_jacobian on Python floats, the plan made once): the same
+    # covariance as the points propagated together (relative 1e-15), every effect kind a model file holds
+    desc = _arms(nominal, tmp_path)[convention]
+    model = ArmModel(desc, (EncoderEccentricity(joints=(1, 3)), JointGain(joints=(2,)), ThermalGrowth(),
+                            ThermalDrift(), ForceSensorError(), ProbeCompliance(anisotropic=True, axial=True),
+                            JointCompliance(joints=(1, 2)), JointHarmonics(joints=(2,), source=1, harmonics=(1, 2)),
+                            ProbeThermalGrowth(), ProbeComplianceMatrix(), ApproachOffset(),
+                            LateralCompliance(joints=(1, 4)), JointBacklash(joints=(3,)), JointHysteresis(joints=(5,))))
+    rng = np.random.default_rng(8)
+    n, j = 3, desc.n_joints
+    q = rng.uniform(-2, 2, (n, j))
+    w = np.column_stack([rng.normal(0, 3, (n, 3)), rng.normal(0, 0.05, (n, 3))])
+    aux = AuxData(temperature=rng.uniform(18, 26, n), tau_gravity=rng.normal(0, 20, (n, j)),
+                  tau_contact=rng.normal(0, 2, (n, j)), time=rng.uniform(0, 3600, n),
+                  motion=rng.choice([-1.0, 1.0], (n, j)))
+    spec = model.spec
+    scale = np.array([{"m": 1e-4, "rad": 1e-4, "m/N": 1e-6, "1": 1e-3, "N": 0.05, "1/K": 1e-6, "1/s": 1e-8,
+                       "1/s^2": 1e-12, "rad/(N m)": 1e-6}[u] for u in spec.units])
+    p = rng.normal(0, 1, spec.size) * scale
+    free = [i for i, nm in enumerate(spec.names) if not nm.startswith("probe.compliance")]
+    cov = _random_cov(rng, len(free), scale[free])
+    pc = ParameterCovariance(tuple(spec.names[i] for i in free), cov)
+    inputs = default_inputs(desc, encoder=np.linspace(1e-6, 7e-6, j), force=(0.07, 0.05, 0.04), torque=0.002)
+    batch = propagate(model, p, q, w, aux, parameters=pc, inputs=inputs, systematic=True)
+    u_w = np.concatenate([inputs.force, inputs.torque])
+    ones = []
+    for i in range(n):
+        one = propagate(model, p, q[i: i + 1], w[i: i + 1], aux.select(slice(i, i + 1)), parameters=pc,
+                        inputs=inputs, threads=1, systematic=True)
+        assert_close(one.cov[0], batch.cov[i], atol=1e-15 * np.abs(batch.cov[i]).max(), msg=f"point {i}")
+        assert_close(one.systematic[0], batch.systematic[i], atol=1e-15 * np.abs(batch.systematic[i]).max())
+        ones.append(one.cov[0])
+
+    # J by CasADi (exact; its own AD of the effects' code): the covariance to 1e-9 relative (through the factor
+    # propagate uses: the covariance's own rounding in it is not the Jacobian's)
+    jac = _casadi_jacobians(model)
+    amat = ArmModel.aux_matrix(aux, n, j)
+    lfac = pc.factor()
+    for i in range(n):
+        _, jp, jq, jw = (np.array(v) for v in jac(q[i], w[i], amat[i], p))
+        a = jp[:, free] @ lfac
+        ref = a @ a.T + jq @ np.diag(inputs.encoder ** 2) @ jq.T + jw @ np.diag(u_w ** 2) @ jw.T
+        assert_close(ones[i], ref, atol=1e-9 * np.abs(ref).max(), msg=f"point {i} against CasADi")
+    # the encoders' and the force sensor's parts by central differences of the model's centres (all points and steps
+    # in one call; relative 1e-6: the differences' truncation and rounding)
+    steps = np.concatenate([np.full(j, 1e-6), np.full(6, 0.1)])       # the centre is nearly linear in the wrench
+    x0 = np.hstack([q, w])
+    xs = np.concatenate([x0[:, None, :] + np.diag(steps) * sgn for sgn in (1.0, -1.0)], axis=1)   # (n, 2K, K)
+    k2 = xs.shape[1]
+    cen = model.ball_centres(xs[:, :, :j].reshape(-1, j), xs[:, :, j:].reshape(-1, 6), p,
+                             AuxData(*(None if v is None else np.repeat(v, k2, axis=0) for v in (
+                                 aux.temperature, aux.tau_gravity, aux.tau_contact, aux.time, aux.motion))))
+    cen = cen.reshape(n, 2, len(steps), 3)
+    dq = ((cen[:, 0] - cen[:, 1]) / (2 * steps[:, None])).transpose(0, 2, 1)     # (n, 3, K)
+    no_p = default_inputs(desc, encoder=inputs.encoder, force=inputs.force, torque=inputs.torque, compliance=0.0)
+    for i in range(n):
+        jq, jw = dq[i, :, :j], dq[i, :, j:]
+        want = jq @ np.diag(inputs.encoder ** 2) @ jq.T + jw @ np.diag(u_w ** 2) @ jw.T
+        got = propagate(model, p, q[i: i + 1], w[i: i + 1], aux.select(slice(i, i + 1)), inputs=no_p, threads=1).cov[0]
+        assert_close(got, want, atol=1e-6 * np.abs(want).max(), msg=f"point {i} against differences")
 
 
 def test_shared_rows_of_a_singular_parameter_covariance(nominal):
