@@ -20,7 +20,7 @@ from ..candidates import Candidate
 from ..diagnostics import GroupTest, ResidualSpace, binned_estimates, candidate_family
 from ..identifiability import prior_scales
 from ..synthesis import RESIDUAL
-from .crossval import CVResult, cross_validate, fold_fit, warm_start
+from .crossval import CVResult, cross_validate, fold_fit, one_sided, warm_start
 from .settings import PARSIMONY, PHYSICS, SAME_SIGNATURE
 from .state import LoopState, Screening
 
@@ -129,7 +129,7 @@ def paired_worse(cv_a: CVResult, cv_b: CVResult) -> float:
     units = sorted(cv_b.folds.sse)
     d = np.array([cv_a.folds.sse[u][0] / cv_a.folds.sse[u][1] - cv_b.folds.sse[u][0] / cv_b.folds.sse[u][1]
                   for u in units])
-    return 1.0 if np.all(d == 0) else float(stats.wilcoxon(d, alternative="greater", zero_method="wilcox").pvalue)
+    return one_sided(d)
 
 
 def tie_rivals(scr: Screening, cand: Candidate, cv: CVResult, level: float, min_improvement: float,
