@@ -302,13 +302,21 @@ def _screening_rows(tests):
 _SCREEN_HEAD = ("candidate", "k", "rank", "delta chi2", "p (score F)", "delta BIC", "explained (held-out)",
                 "absorbed parameters")
 _CV_HEAD = ("candidate", "weighted RMS before", "after", "improvement", "Wilcoxon p", "threshold",
-            "measurements improved", "passed", "reason")
+            "stability (subsets passing; folds better)", "measurements improved", "passed", "reason")
 
 
 def _cv_rows(cvs):
     return [(c.candidate, _g(c.rms_base, ".4g"), _g(c.rms_new, ".4g"), _g(100 * c.improvement, ".1f") + " %",
-             _g(c.p_value, ".2g"), _g(c.threshold, ".2g"), f"{c.wins} / {c.n_measurements}",
+             _g(c.p_value, ".2g"), _g(c.threshold, ".2g"), _stability_cell(c), f"{c.wins} / {c.n_measurements}",
              "yes" if c.passed else "no", c.reason) for c in cvs]
+
+
+def _stability_cell(c) -> str:
+    """The stability rule's figures of a held-out test: the leave-one-fold-out subsets that pass, the folds better."""
+    if not c.subset_p:
+        return "-"
+    better = sum(1 for v in c.fold_change if v > 0)
+    return f"{round(c.stability * len(c.subset_p))} / {len(c.subset_p)}; {better} / {len(c.fold_change)}"
 
 
 def loop_model_name(loop: LoopResult) -> str:

@@ -96,7 +96,7 @@ def _fold_units(folds: Folds, design: CalibrationData) -> list[int]:
     """Held-out units of each fold of ``folds`` (poses, measurements, or the poses of each fold's measurements)."""
     if folds.by == "pose":
         return [int(np.sum(np.asarray(folds.assign) == f)) for f in range(folds.k)]
-    assign: dict = folds.assign  # type: ignore[assignment]
+    assign: dict = folds.assign
     if not folds.per_pose:
         return [sum(1 for g in assign.values() if g == f) for f in range(folds.k)]
     pts = design.points
