@@ -302,7 +302,7 @@ def _screening_rows(tests):
 _SCREEN_HEAD = ("candidate", "k", "rank", "delta chi2", "p (score F)", "delta BIC", "explained (held-out)",
                 "absorbed parameters")
 _CV_HEAD = ("candidate", "weighted RMS before", "after", "improvement", "Wilcoxon p", "threshold",
-            "stability (subsets passing; folds better)", "measurements improved", "passed", "reason")
+            "folds better", "measurements improved", "passed", "reason")
 
 
 def _cv_rows(cvs):
@@ -312,11 +312,10 @@ def _cv_rows(cvs):
 
 
 def _stability_cell(c) -> str:
-    """The stability rule's figures of a held-out test: the leave-one-fold-out subsets that pass, the folds better."""
-    if not c.subset_p:
+    """The stability rule's figure of a held-out test: the folds whose held-out RMS it lowers, of all."""
+    if not c.fold_change:
         return "-"
-    better = sum(1 for v in c.fold_change if v > 0)
-    return f"{round(c.stability * len(c.subset_p))} / {len(c.subset_p)}; {better} / {len(c.fold_change)}"
+    return f"{sum(1 for v in c.fold_change if v > 0)} / {len(c.fold_change)}"
 
 
 def loop_model_name(loop: LoopResult) -> str:

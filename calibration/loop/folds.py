@@ -11,7 +11,7 @@ from arm_model import InputError
 
 from ..data import CalibrationData, split_holdout, split_poses, spread
 from ..diagnostics import measurement_folds, measurement_groups, pose_folds
-from .settings import STABILITY_RULE, LoopSettings, stable_count, subset_level, wilcoxon_units_needed
+from .settings import STABILITY_RULE, LoopSettings, wilcoxon_units_needed
 
 __all__ = ["Folds", "outer_split", "spread_measurements", "check_fold_by", "choose_folds"]
 
@@ -92,26 +92,6 @@ def check_fold_by(design: CalibrationData, settings: LoopSettings) -> None:
                          "give more measurements", design.points.path, None, "measurement")
 
 
-def _fold_units(folds: Folds, design: CalibrationData) -> list[int]:
-    """Held-out units of each fold of ``folds`` (poses, measurements, or the poses of each fold's measurements)."""
-    if folds.by == "pose":
-        return [int(np.sum(np.asarray(folds.assign) == f)) for f in range(folds.k)]
-    assign: dict = folds.assign
-    if not folds.per_pose:
-        return [sum(1 for g in assign.values() if g == f) for f in range(folds.k)]
-    pts = design.points
-    return [int(sum(np.sum(pts.feature[pts.measurement == m] != "") for m, g in assign.items() if g == f))
-            for f in range(folds.k)]
-
-
-def stable_reach(units: list[int], level: float) -> bool:
-    """Whether the stability rule (:data:`~calibration.loop.settings.STABILITY_RULE`) can pass with folds of
-    ``units`` held-out units each: with every difference positive, a subset of n units has p = 1/2^n."""
-    n = sum(units)
-    kept = [n - u for u in units if u > 0]
-    return n > 0 and sum(0.5 ** m < subset_level(level, m, n) for m in kept) >= stable_count(len(kept))
-
-
 def choose_folds(design: CalibrationData, settings: LoopSettings) -> tuple[Folds, dict]:
     """The folds of the decisions and, decided before any test runs, whether the held-out test can reach
     its level with them (a one-sided Wilcoxon test over n units cannot go below p = 1/2^n). A stage tests at most
@@ -131,8 +111,7 @@ def choose_folds(design: CalibrationData, settings: LoopSettings) -> tuple[Folds
         check_fold_by(design, settings)
         k = min(settings.folds, n_meas)          # said in the note when fewer than asked
         assign = measurement_folds(design, k)
-        per_meas = [sum(1 for g in assign.values() if g == f) for f in range(k)]
-        per_pose = settings.fold_by == "auto" and (n_meas < need or not stable_reach(per_meas, level))
+        per_pose = settings.fold_by == "auto" and n_meas < need
         n_poses = int(sum(np.sum(design.points.feature[design.points.measurement == m] != "") for m in assign))
         folds = Folds("measurement", k, assign, per_pose, n_poses)
     else:
@@ -142,11 +121,9 @@ def choose_folds(design: CalibrationData, settings: LoopSettings) -> tuple[Folds
                              "feature keeps the poses its own fit needs); give at most that many folds by pose")
     n = folds.units
     smallest = 0.5 ** n if n else 1.0
-    stable = stable_reach(_fold_units(folds, design), level)
-    ok = smallest < level and stable
+    ok = smallest < level
     power = {"fold_by": folds.by, "folds": folds.k, "units": n, "unit": folds.unit_name, "needed": need,
-             "smallest_p": smallest, "level": level, "can_reach": ok, "stability_rule": STABILITY_RULE,
-             "stability_can_reach": stable}
+             "smallest_p": smallest, "level": level, "can_reach": ok, "stability_rule": STABILITY_RULE}
     why = "" if folds.k == settings.folds else f" (--folds {settings.folds}: only {n_meas} design measurements)"
     if folds.by == "pose" and settings.fold_by == "auto":
         why = f" (only {n_meas} design measurement: whole measurements cannot be held out)"
@@ -157,11 +134,6 @@ def choose_folds(design: CalibrationData, settings: LoopSettings) -> tuple[Folds
         power["note"] = (f"decisions: {folds.k} folds by {by}{why}; one-sided Wilcoxon over {n} {folds.unit_name} "
                          f"(smallest possible p = 1/2^{n} < {level:.2g} = alpha / {tests} candidates), and "
                          f"{STABILITY_RULE}")
-    elif smallest < level:
-        power["note"] = (f"WARNING: the held-out test cannot reach its level with these data: over {n} "
-                         f"{folds.unit_name} in {folds.k} folds the test passes at {level:.2g} = alpha / {tests} "
-                         f"candidates, but not the {STABILITY_RULE}; give more {folds.unit_name} or more folds "
-                         "(--folds). No effect can be added.")
     else:
         fix = ("more measurements, or folds by pose (--fold-by pose)" if by == "measurement"
                else "more poses on each feature, or more measurements")

@@ -6,9 +6,8 @@ from dataclasses import dataclass
 
 from ..identifiability import DEFAULT_RANK_TOL
 
-__all__ = ["LoopSettings", "wilcoxon_units_needed", "STABILITY", "STABILITY_RULE", "subset_level", "stable_count",
-           "SAME_SIGNATURE", "PHYSICS", "PARSIMONY", "NOISE_OFF", "FOLD_BY",
-           "LEGACY_RESOLUTION", "MAX_COUNT"]
+__all__ = ["LoopSettings", "wilcoxon_units_needed", "STABILITY_RULE", "SAME_SIGNATURE", "PHYSICS", "PARSIMONY",
+           "NOISE_OFF", "FOLD_BY", "LEGACY_RESOLUTION", "MAX_COUNT"]
 
 #: the practical-resolution rule the loop's fits without a prior keep (calibrate's default before its prior)
 LEGACY_RESOLUTION = 0.1
@@ -32,28 +31,11 @@ FOLD_BY = ("auto", "measurement", "pose")
 MAX_COUNT = 1000
 
 
-#: stability selection (Meinshausen & Buehlmann 2010) over the folds: the share of the leave-one-fold-out subsets of
-#: the held-out units in which a candidate's one-sided test must still pass (within their recommended 0.6-0.9)
-STABILITY = 0.75
-#: the rule as the console, report and summary.json state it
-STABILITY_RULE = (f"stability over the folds: with each fold's held-out units left out in turn, the one-sided Wilcoxon "
-                  f"test of the units kept must still pass in at least {STABILITY:.0%} of the subsets, each at the "
-                  "level scaled to the units it keeps (z of the level times sqrt(kept / all): the same effect size "
-                  "per unit), and every fold's held-out RMS lower with it; no refit")
-
-
-def subset_level(level: float, kept: int, n: int) -> float:
-    """The one-sided level a subset of ``kept`` of ``n`` held-out units is held to by the stability rule
-    (:data:`STABILITY_RULE`): the normal quantile of ``level`` scaled by ``sqrt(kept / n)``, so that a subset that
-    shows the same effect size per unit as a set of ``n`` units at ``level`` passes (a rank test's z grows as the
-    square root of the units). ``kept == n`` gives ``level``."""
-    from scipy import stats
-    return float(stats.norm.sf(stats.norm.isf(level) * math.sqrt(kept / n)))
-
-
-def stable_count(k: int) -> int:
-    """Leave-one-fold-out subsets of ``k`` folds that must pass: ``ceil(STABILITY k)``."""
-    return math.ceil(STABILITY * k - 1e-9)
+#: the stability rule of the held-out decisions (:func:`calibration.loop.crossval.cross_validate`), as the console,
+#: report and summary.json state it
+STABILITY_RULE = ("every fold better: besides the one-sided Wilcoxon test over every held-out unit, the candidate must "
+                  "lower the held-out RMS of each fold's units (each fold's training fit predicting them), so that no "
+                  "verdict rests on the units of a few folds; computed from the held-out residuals at hand, no refit")
 
 
 def wilcoxon_units_needed(alpha: float, tests: int) -> int:
