@@ -37,9 +37,9 @@ class CVResult:
             residual of each); threshold: the level it was held to (``alpha / tested``).
         wins: measurements improved, of ``n_measurements``.
         fold_change: each fold's relative held-out RMS change with the candidate (:func:`fold_changes`, positive:
-            better); stability: the share of the folds better. Passing needs ``p_value < threshold``, every fold
-            better (:data:`~calibration.loop.settings.STABILITY_RULE`) and an improvement of at least
-            ``min_improvement``.
+            better); stability: the share of the folds better. Passing needs ``p_value < threshold`` and the
+            held-out RMS lower by at least ``min_improvement`` in the pool and in every fold
+            (:data:`~calibration.loop.settings.STABILITY_RULE`).
     """
     candidate: str
     rms_base: float
@@ -165,7 +165,7 @@ def cross_validate(name: str, base: FoldFit, new: FoldFit | None, threshold: flo
     d = b - a
     p = one_sided(d)
     change = fold_changes(base, new, ms)
-    worse = [k + 1 for k, c in enumerate(change) if not c > 0]
+    worse = [k + 1 for k, c in enumerate(change) if not (c > 0 and c >= min_improvement)]
     wins = int(np.sum(d > 0))
     passed = p < threshold and not worse and imp >= min_improvement
     folds = ", ".join(f"{100 * c:+.1f} %" for c in change)
@@ -176,8 +176,8 @@ def cross_validate(name: str, base: FoldFit, new: FoldFit | None, threshold: flo
         reason = f"not significant on held-out data (Wilcoxon p = {p:.2g} >= {threshold:.2g})"
     elif worse:
         reason = (f"not stable: Wilcoxon p = {p:.2g} < {threshold:.2g}, but fold(s) "
-                  f"{', '.join(str(k) for k in worse)} of {len(change)} not better with it (held-out RMS {folds} "
-                  "lower by fold)")
+                  f"{', '.join(str(k) for k in worse)} of {len(change)} not {100 * min_improvement:g} % better with "
+                  f"it (held-out RMS {folds} lower by fold)")
     else:
         reason = (f"significant but too small: held-out RMS {100 * imp:.1f} % lower "
                   f"(at least {100 * min_improvement:g} % required)")

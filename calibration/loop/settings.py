@@ -34,8 +34,9 @@ MAX_COUNT = 1000
 #: the stability rule of the held-out decisions (:func:`calibration.loop.crossval.cross_validate`), as the console,
 #: report and summary.json state it
 STABILITY_RULE = ("every fold better: besides the one-sided Wilcoxon test over every held-out unit, the candidate must "
-                  "lower the held-out RMS of each fold's units (each fold's training fit predicting them), so that no "
-                  "verdict rests on the units of a few folds; computed from the held-out residuals at hand, no refit")
+                  "lower the held-out RMS of each fold's units (each fold's training fit predicting them) by at least "
+                  "--min-improvement, as it must the pooled RMS, so that no verdict rests on the units of a few folds; "
+                  "computed from the held-out residuals at hand, no refit")
 
 
 def wilcoxon_units_needed(alpha: float, tests: int) -> int:
