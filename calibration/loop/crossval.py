@@ -176,8 +176,9 @@ def cross_validate(name: str, base: FoldFit, new: FoldFit | None, threshold: flo
         reason = f"not significant on held-out data (Wilcoxon p = {p:.2g} >= {threshold:.2g})"
     elif worse:
         reason = (f"not stable: Wilcoxon p = {p:.2g} < {threshold:.2g}, but fold(s) "
-                  f"{', '.join(str(k) for k in worse)} of {len(change)} not {100 * min_improvement:g} % better with "
-                  f"it (held-out RMS {folds} lower by fold)")
+                  f"{', '.join(str(k) for k in worse)} of {len(change)} not "
+                  + (f"{100 * min_improvement:g} % " if min_improvement > 0 else "")
+                  + f"better with it (held-out RMS {folds} lower by fold)")
     else:
         reason = (f"significant but too small: held-out RMS {100 * imp:.1f} % lower "
                   f"(at least {100 * min_improvement:g} % required)")
