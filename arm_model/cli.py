@@ -29,7 +29,7 @@ import sys
 import time
 import traceback
 
-from .errors import AacmmError, NumericalError
+from .errors import AacmmError, NumericalError, folder_path_problem
 from .log import console, escaped, level_from_flags
 from .output import published_outputs
 from .shipped import version
@@ -231,6 +231,13 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name}: error: {escaped(text)}", file=sys.stderr, flush=True)
         except (OSError, ValueError):
             pass
+
+    # "samples.csv/" names a folder; an argument made a Path drops the "/" (and the file was read): refused as given
+    wrong = next(filter(None, (folder_path_problem(a.partition("=")[2] if a.startswith("--") else a) for a in argv)),
+                 None)
+    if wrong is not None:
+        error(f"{wrong}; nothing written")
+        return EXIT_INPUT
 
     previous = None
     try:

@@ -124,6 +124,17 @@ def pose_distance(desc, q, train: TrainingPoses, levers=None) -> np.ndarray:
     return nearest_pose(desc, q, train, levers)[0]
 
 
+def _queries(q, train: TrainingPoses) -> np.ndarray:
+    """``q`` as an (N, J) float array of poses the distance from ``train`` can be asked of: a ValueError unless it
+    has the training poses' joints and every value is finite and plausible (:func:`checked_poses`), checked before
+    any lever is evaluated (the chain at an infinite angle is NaN)."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    if q.shape[1] != len(train.names):
+        raise ValueError(f"q has {q.shape[1]} joints, the training poses {len(train.names)}")
+    checked_poses(q, train.circular, "the poses whose distance from the training poses is asked")
+    return q
+
+
 def nearest_pose(desc, q, train: TrainingPoses, levers=None) -> tuple[np.ndarray, np.ndarray]:
     """``(d, index)``: (N,) [m] :func:`pose_distance` of each pose of ``q`` and (N,) the row of ``train.q`` that is
     its nearest training pose (of equally near ones, the first).
@@ -144,11 +155,12 @@ def nearest_pose(desc, q, train: TrainingPoses, levers=None) -> tuple[np.ndarray
     cores, CPU; ``benchmarks/bench_uncertainty.py``, ``discrepancy_folds``): a fold of ``calibrate``'s model
     discrepancy on 10^5 random poses of aacmm7 (15 000 against 85 000) 25.3 s exhaustive, 4.3 s by the trees (the
     same numbers); its 14 folds 64.5 s by the trees (about 355 s exhaustive); 10^4 x 10^4 1.7 -> 0.9 s."""
-    q = np.atleast_2d(np.asarray(q, dtype=float))
-    if q.shape[1] != len(train.names):
-        raise ValueError(f"q has {q.shape[1]} joints, the training poses {len(train.names)}")
-    checked_poses(q, train.circular, "the poses whose distance from the training poses is asked")
-    lev = joint_levers(desc, q) if levers is None else np.asarray(levers, dtype=float)
+    q = _queries(q, train)
+    return _nearest(q, train, joint_levers(desc, q) if levers is None else np.asarray(levers, dtype=float))
+
+
+def _nearest(q: np.ndarray, train: TrainingPoses, lev: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`nearest_pose` of poses ``q`` (N, J) checked by :func:`_queries`, their levers ``lev`` (N, J)."""
     if len(q) > 1:
         unique, inverse = np.unique(np.hstack([q, lev]), axis=0, return_inverse=True)
         inverse = inverse.ravel()
@@ -295,9 +307,9 @@ def travel_shares(desc, q, train: TrainingPoses, levers=None) -> tuple[np.ndarra
     """``(d, c)``: (N,) [m] :func:`pose_distance` of each pose of ``q`` and (N, J) [m^2] each joint's share ``c_j =
     (L_j (q_j - t*_j))^2`` of ``d^2`` from the nearest training pose ``t*`` (a revolute difference the short way
     round; ``sum_j c_j = d^2``): how far each joint's motion from that pose carries the ball, squared."""
-    q = np.atleast_2d(np.asarray(q, dtype=float))
+    q = _queries(q, train)
     lev = joint_levers(desc, q) if levers is None else np.asarray(levers, dtype=float)
-    d, index = nearest_pose(desc, q, train, lev)
+    d, index = _nearest(q, train, lev)
     diff = q - train.q[index]
     circ = np.asarray(train.circular, dtype=bool)
     diff[:, circ] -= 2 * math.pi * np.rint(diff[:, circ] / (2 * math.pi))

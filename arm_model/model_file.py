@@ -527,7 +527,8 @@ def _same_file(a: Path, b: Path) -> bool:
 def training_poses_of(arm: Arm) -> TrainingPoses | None:
     """The training poses of an :class:`Arm` (its model file's ``training_poses`` points file, read by
     :func:`arm_model.io.read_points` with the arm's joints), or None when it names none; a file that is not
-    such a points file is an InputError naming it."""
+    such a points file is an InputError naming it. Angles that look like radians under its ``_deg`` columns are
+    warned of as in every points file (:func:`arm_model.checks.radians_warning`)."""
     if arm.training_poses is None:
         return None
     from .io import read_points
@@ -541,6 +542,11 @@ def training_poses_of(arm: Arm) -> TrainingPoses | None:
                          "points file of the arm's joints)", exc.path, exc.line, exc.column) from None
     if not len(pts.q):
         raise InputError("the training poses file holds no pose", arm.training_poses)
+    from .checks import log_warnings, radians_warning
+    # the rule of every points file (arm_model.checks): radians under the _deg columns put every pose near the
+    # straight arm, and d(q) (the discrepancy's growth) is then measured from poses the arm never took
+    log_warnings(w for w in [radians_warning(arm.desc, pts.q, pts.line_numbers, str(arm.training_poses),
+                                             pts.q_units)] if w is not None)
     return TrainingPoses.of(arm.desc, pts.q)
 
 

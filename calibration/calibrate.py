@@ -46,6 +46,7 @@ from .discrepancy import Discrepancy, deletion_shift, group_deletions, model_dis
 from .identifiability import (
     Combination,
     Identifiability,
+    NuisanceProjection,
     analyse,
     compress_rows,
     point_noise,
@@ -54,7 +55,18 @@ from .identifiability import (
     weakly_determined,
 )
 from .options import FitOptions
-from .prior import PRIOR_DOMINATED, PriorSpec, prior_only, prior_spec, secant_gains, update_scales, variance_ratio
+from .prior import (
+    MAX_SCALE_U,
+    PRIOR_DOMINATED,
+    PriorSpec,
+    prior_only,
+    prior_spec,
+    scale_step,
+    secant_gains,
+    uniform_scale,
+    update_scales,
+    variance_ratio,
+)
 from .problem import Problem
 from .region import RegionEffect, region_effect
 from .schur import BlockNormal
@@ -304,6 +316,8 @@ class CalibrationResult:
     #: {name: why} of the free parameters the data cannot tell from others, left to the prior alone
     #: (:func:`calibration.prior.prior_only`: prior-dominated, at its centre with its size)
     prior_only: dict = field(default_factory=dict)
+    #: the arm's uniform scale in the prior's centre (``FitOptions.arm_scale`` "data"): value, u [1], set_by_data
+    arm_scale: dict | None = None
 
     # -- access by name ----------------------------------------------------------------------------
     @property
@@ -474,7 +488,7 @@ class CalibrationResult:
                 "scales": dict(self.prior_scales), "groups": self.prior_groups, "log_evidence": self.log_evidence,
                 "prior_dominated_ratio": PRIOR_DOMINATED, "evidence_rounds": self.evidence,
                 "prior_dominated": [n for n in self.free if self.state(n) == "prior-dominated"],
-                "prior_only": dict(self.prior_only)},
+                "prior_only": dict(self.prior_only), "arm_scale": self.arm_scale},
             "outliers": [o.to_dict() for o in self.outliers], "dropped": [o.to_dict() for o in self.dropped],
             "gross_errors_removed": [g.to_dict() for g in self.gross], "gross_kept": self.gross_kept,
             "instances": self.instances, "distances": self.distances,
@@ -952,6 +966,25 @@ class _Setup:
     scales: dict = field(default_factory=dict)
     lower: np.ndarray | None = None
     prior_only: dict = field(default_factory=dict)
+    arm_scale: _ArmScale | None = None
+
+
+@dataclass(frozen=True)
+class _ArmScale:
+    """The arm's uniform scale in the prior's centre (``centre = c0 + value * direction``, ``FitOptions.arm_scale``
+    "data"): ``value`` and its standard uncertainty ``u`` [1], ``direction`` [SI] (full parameter vector, zero but on
+    the free parameters: :func:`_scale_direction`), ``set``: whether the data set it (``u`` at most
+    :data:`calibration.prior.MAX_SCALE_U`; else ``value`` is 0 and the prior's centre the given one)."""
+    value: float
+    u: float
+    direction: np.ndarray
+    set: bool
+    start: float = 0.0
+
+    def to_dict(self) -> dict:
+        """``value``: the scale of the prior's centre from the description (``start``, the scale of the centre
+        given, projected on the direction in the prior's metric, plus ``value``)."""
+        return {"value": self.start + self.value, "u": self.u, "set_by_data": self.set, "max_u": MAX_SCALE_U}
 
 
 def _prior_spec(model: ArmModel, data: CalibrationData, options: FitOptions) -> PriorSpec:
@@ -1368,7 +1401,7 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
                f"a posteriori: s0^2 = {s0 ** 2:.4g} (weighted residual variance over the redundancy {red:.3g}: rows "
                "less their share of the unknowns, the prior included)")
               if options.covariance == "residual" else "stated uncertainties (s0 = 1)")
-    cov = _covariance(s, ev, kept, var)
+    cov = _with_scale_u(s, kept, _covariance(s, ev, kept, var))
     u = np.sqrt(np.diag(cov))
     corr = cov / np.outer(u, u) if len(kept) else cov
     z = standardized_residuals(prob, ev.r, nrm.h)
@@ -1391,6 +1424,7 @@ def _result(s: _Setup, sol, kept, fixed, idfs, options: FitOptions) -> Calibrati
         prior_centre=None if s.prior is None else s.prior.centre, options=options, prior_sd=prior_sd,
         prior_ratio=None if prior_sd is None else variance_ratio(u ** 2, prior_sd),
         prior_groups=_group_table(s, kept, u), redundancy=None if s.prior is None else red,
+        arm_scale=None if s.arm_scale is None else s.arm_scale.to_dict(),
         prior_only={} if s.prior is None else {spec.names[i]: why for i, why in s.prior_only.items() if i in kept},
         discrepancy=model_discrepancy(prob, ev.r, nrm.factor, var)
         if options.discrepancy else None,
@@ -1447,10 +1481,41 @@ def _group_table(s: _Setup, kept, u) -> dict:
 
 
 def _fit(model: ArmModel, data: CalibrationData, options: FitOptions) -> CalibrationResult:
-    """One fit at the weights and prior scales given: :func:`_setup`, :func:`_solve`, :func:`_result`."""
+    """One fit at the weights and prior scales given: :func:`_setup`, :func:`_solve`, the arm's scale
+    (:func:`_scale_rounds`), :func:`_result`."""
     s = _setup(model, data, options)
     sol, kept, fixed, idf0, idf1 = _solve(s, options)
+    s, sol, kept, fixed = _scale_rounds(s, sol, kept, fixed, options)
     return _result(s, sol, kept, fixed, (idf0, idf1), options)
+
+
+def _scale_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
+    """With a prior at given scales and ``options.arm_scale`` "data": the arm's uniform scale of the prior's centre
+    (:func:`_arm_scale_round`) and the fit again, until its step is below :data:`EVIDENCE_TOL` of its ``u`` (a fit
+    started from an earlier fit's centre, whose scale it holds: one round). Returns (setup, solution, kept, fixed)."""
+    if s.prior is None or options.arm_scale != "data":
+        return s, sol, kept, fixed
+    for _ in range(EVIDENCE_ROUNDS):
+        red = float(np.sum(1.0 - _normal(s, sol, kept).h))
+        var = 2 * sol.cost / red if options.covariance == "residual" and not options.weights_from_data else 1.0
+        new, move = _arm_scale_round(s, sol, kept, _covariance(s, sol.evaluation, kept, var))
+        if move <= EVIDENCE_TOL:
+            return _settled(s, new), sol, kept, fixed
+        s = new
+        p = sol.p.copy()
+        kept, bound = _at_bounds(s, p, kept, "evidence")
+        fixed = fixed + bound
+        sol = _lm(s, s.problem.with_free(kept), p, sol.states, options)
+    return s, sol, kept, fixed
+
+
+def _settled(s: _Setup, new: _Setup) -> _Setup:
+    """``s`` (the setup its solution was fitted with) with the arm's scale that :func:`_arm_scale_round` found at
+    that solution, its value the one of ``s``'s centre."""
+    if new.arm_scale is None:
+        return replace(s, arm_scale=None)
+    value = s.arm_scale.value if s.arm_scale is not None else 0.0
+    return replace(s, arm_scale=replace(new.arm_scale, value=value))
 
 
 def _reweighted_problem(problem: Problem, weights: Weights) -> Problem:
@@ -1504,9 +1569,9 @@ def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
         nrm = _normal(s, sol, kept)
         red = float(np.sum(1.0 - nrm.h))          # the redundancy with the prior, as in :func:`_result`
         var = 2 * sol.cost / red if options.covariance == "residual" and not options.weights_from_data else 1.0
-        post = np.diag(_covariance(s, ev, kept, var))
+        cov = _covariance(s, ev, kept, var)
         kept_arr = np.asarray(kept, dtype=int)
-        rho = variance_ratio(post, s.prior.size[kept_arr])
+        rho = variance_ratio(np.diag(cov), s.prior.size[kept_arr])
         targets, gamma = update_scales(s.scales, s.spec, kept_arr, sol.p[kept_arr] - s.prior.centre[kept_arr], rho)
         steps = {g: math.log(targets[g] / tau) for g, tau in s.scales.items()}
         factors = {}
@@ -1516,16 +1581,22 @@ def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
         history.append({"round": k + 1, "scales": dict(s.scales), "effective_parameters": gamma,
                         "noise_factors": dict(prob.weights.factors), "s0": math.sqrt(2 * sol.cost / red)})
         moves = [abs(r) for r in steps.values()] + [abs(math.log(f)) for f in factors.values()]
+        scaled = s
+        if options.arm_scale == "data":
+            scaled, move = _arm_scale_round(s, sol, kept, cov)
+            moves.append(move)
+            if scaled.arm_scale is not None:
+                history[-1]["arm_scale"] = scaled.arm_scale.to_dict()
         if max(moves, default=0.0) <= EVIDENCE_TOL:
             history[-1]["settled"] = True
-            return s, sol, kept, fixed, history
+            return _settled(s, scaled) if options.arm_scale == "data" else s, sol, kept, fixed, history
         gains = secant_gains(steps, last, EVIDENCE_TOL)
         scales = {g: s.spec.bounded(g, tau * math.exp(gains[g] * steps[g])) for g, tau in s.scales.items()}
         # the first move, from the starting scales (far from the fixed point, where its step is not near linear),
         # is no secant's base
         last = {g: (r, math.log(scales[g] / s.scales[g])) for g, r in steps.items()} if k else {}
         damping = 1.0 if k < 10 else 0.5
-        s = replace(s, scales=scales, prior=Prior(s.prior.centre, s.spec.sizes(scales)),
+        s = replace(scaled, scales=scales, prior=Prior(scaled.prior.centre, s.spec.sizes(scales)),
                     problem=_reweighted_problem(s.problem, prob.weights.scaled(
                         {g: f ** damping for g, f in factors.items()})))
         p = sol.p.copy()
@@ -1536,6 +1607,77 @@ def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
     history[-1]["note"] = (f"the prior scales and noise did not settle in {EVIDENCE_ROUNDS} rounds; the last "
                            "round's are used")
     return s, sol, kept, fixed, history
+
+
+#: relative step [1] of the arm's uniform scale in the finite difference of the residuals along it
+SCALE_STEP = 1e-6
+#: the most the free parameters may miss of the uniform scale's effect on the residuals (relative) for the data's
+#: scale to be estimated: beyond it the parameters held (given, or exactly not separable) carry the scale
+SCALE_MISS = 0.1
+
+
+def _scale_direction(s: _Setup, sol, kept) -> np.ndarray | None:
+    """The direction of the free parameters ``kept`` (full parameter vector [SI], zero elsewhere) that acts on the
+    data as the arm's uniform scale does (:func:`calibration.prior.uniform_scale`, every length of the description
+    held or free), the nuisance unknowns eliminated: the least-squares combination of the reduced Jacobian's columns
+    that gives the residuals' change along the scale (a finite difference). None when the free parameters miss more
+    than :data:`SCALE_MISS` of it (or the arm has no length)."""
+    prob = s.problem.with_free(kept)
+    full = uniform_scale(prob.model)
+    ev = sol.evaluation
+    if not np.any(full) or not len(kept):
+        return None
+    moved = prob.evaluate(sol.p + SCALE_STEP * full, sol.states, jac=False).r
+    target = (moved - ev.r)[:, None] / SCALE_STEP
+    if ev.jt.shape[1]:
+        project = NuisanceProjection(ev.jt)
+        target, jred = project(target)[:, 0], project(ev.jp)
+    else:
+        target, jred = target[:, 0], ev.jp
+    x = np.linalg.lstsq(jred, target, rcond=None)[0]
+    if not np.linalg.norm(jred @ x - target) <= SCALE_MISS * np.linalg.norm(target):
+        return None
+    out = np.zeros_like(full)
+    out[np.asarray(kept, dtype=int)] = x
+    return out
+
+
+def _arm_scale_round(s: _Setup, sol, kept, cov: np.ndarray) -> tuple[_Setup, float]:
+    """One round of the arm's uniform scale under a flat prior (:func:`calibration.prior.scale_step`) from the fit
+    ``sol`` (posterior covariance ``cov`` of ``kept``): the setup with the prior's centre at the given centre
+    scaled by the new value (or at the given centre when the data do not set the scale: its ``u`` beyond
+    :data:`calibration.prior.MAX_SCALE_U`) and the step in units of its ``u`` (0 when not set)."""
+    assert s.prior is not None, "the arm's scale is the prior's"
+    old = s.arm_scale
+    base = s.prior.centre - (old.value * old.direction if old is not None else 0.0)
+    d = _scale_direction(s, sol, kept)
+    if d is None:
+        return replace(s, arm_scale=None, prior=Prior(base, s.prior.size)), 0.0
+    idx = np.asarray(kept, dtype=int)
+    step, u = scale_step(d[idx], s.prior.size[idx], sol.p[idx] - s.prior.centre[idx], cov)
+    before = old.value if old is not None else 0.0
+    # the scale of the centre given from the description (p = 0; an earlier fit's centre holds its scale), in the
+    # prior's metric
+    w = d[idx] / s.prior.size[idx] ** 2
+    start = old.start if old is not None else float(w @ base[idx]) / float(w @ d[idx])
+    ok = u <= MAX_SCALE_U
+    value = before + step if ok else 0.0
+    new = _ArmScale(value, u, d, ok, start)
+    return replace(s, arm_scale=new, prior=Prior(base + value * d, s.prior.size)), abs(value - before) / u
+
+
+def _with_scale_u(s: _Setup, kept, cov: np.ndarray) -> np.ndarray:
+    """The posterior covariance ``cov`` of ``kept`` with the uncertainty of the arm's scale the data set (a flat
+    prior on it: the rank-one term of the prior precision's Schur complement, ``cov L d (cov L d)^T / den``,
+    :func:`calibration.prior.scale_step`); ``cov`` as it is without one."""
+    a = s.arm_scale
+    if a is None or not a.set or s.prior is None or not len(kept):
+        return cov
+    idx = np.asarray(kept, dtype=int)
+    w = a.direction[idx] / s.prior.size[idx] ** 2
+    g = cov @ w
+    den = float(w @ a.direction[idx] - w @ g)
+    return cov + np.outer(g, g) / den if den > 0 else cov
 
 
 #: fewest redundant rows (rows minus their share of the unknowns) for a group's noise to be estimated

@@ -142,6 +142,10 @@ def sigma_options(p, prior_default: str | None = None) -> None:
                         "weak parameters)" + ("; auto: evidence when the base model holds a joint compliance "
                                                 "(its prior is physical), else off" if auto else "")
                    + f". Default {default} (docs/calibration.md)")
+    p.add_argument("--arm-scale", choices=("prior", "data"), default="prior",
+                   help="prior (default): the lengths' prior shrinks the arm's uniform scale too; data: a flat prior "
+                        "on the scale, where the data set it within 0.5 %% (a certified length does; not the default: "
+                        "docs/calibration.md)")
 
 
 
@@ -343,7 +347,8 @@ def fit_options(args, **fields):
         raise InputError(f"--min-resolution holds weak parameters without a prior: give --prior-scale off with it "
                          f"(the prior, --prior-scale {prior}, shrinks them instead)")
     kw = {"min_resolution": args.min_resolution or None,
-          "weights_from_data": getattr(args, "weights", "stated") == "data", "prior_scale": prior}
+          "weights_from_data": getattr(args, "weights", "stated") == "data", "prior_scale": prior,
+          "arm_scale": getattr(args, "arm_scale", "data")}
     if getattr(args, "plausible_length_mm", None) is not None:
         kw["prior_length"] = args.plausible_length_mm * 1e-3
     if args.rank_tol is not None:
@@ -393,20 +398,33 @@ FORCE_DRIVEN = ("probe_compliance", "probe_compliance_matrix", "force_sensor")
 LOAD_DRIVEN = ("joint_compliance", "lateral_compliance")
 
 
-def refuse_undriven_effects(keys, desc, *sets) -> None:
+def _undriven_why(sets) -> tuple[list, str] | None:
+    """(the files, what they lack) when none of the PointSets ``sets`` (None: a file not given) carries a measured
+    contact force, else None."""
+    from .candidates import has_force
+    sets = [s for s in sets if s is not None]
+    if any(has_force(s) for s in sets):
+        return None
+    names = list(dict.fromkeys(s.path for s in sets))
+    return names, (f"{' and '.join(names)} {'hold' if len(names) > 1 else 'holds'} "
+                   + ("no force columns (fx_N, fy_N, fz_N)" if all(s.force is None for s in sets)
+                      else "no force (its columns zero on every row)"))
+
+
+def refuse_undriven_effects(keys, desc, *sets, without_force: tuple[list, str] | None = None) -> None:
     """An InputError for an ``--effect`` of ``keys`` that nothing in the data drives, which the fit would hold at
     zero ("no effect on the data") as if estimated: a :data:`FORCE_DRIVEN` kind on points (``sets``: the PointSets
     of the command, None for a file not given) with no measured force (no force columns, or zero throughout), a
-    :data:`LOAD_DRIVEN` kind there on an arm without masses (under gravity alone a robot's joints still bend: kept)."""
-    from .candidates import has_force
-    sets = [s for s in sets if s is not None]
+    :data:`LOAD_DRIVEN` kind there on an arm without masses (under gravity alone a robot's joints still bend: kept).
+    ``without_force``: (the files, what they lack) when the data are known to hold no force before they exist (a
+    simulated campaign without a force sensor), instead of ``sets``."""
+    if "thermal" in (keys or ()):
+        _refuse_constant_temperature(sets)
     asked = [k for k in keys or () if k in FORCE_DRIVEN + LOAD_DRIVEN]
-    if not asked or any(has_force(s) for s in sets):
+    undriven = (without_force or _undriven_why(sets)) if asked else None
+    if undriven is None:
         return
-    names = list(dict.fromkeys(s.path for s in sets))
-    held = (f"{' and '.join(names)} {'hold' if len(names) > 1 else 'holds'} "
-            + ("no force columns (fx_N, fy_N, fz_N)" if all(s.force is None for s in sets)
-               else "no force (its columns zero on every row)"))
+    names, held = undriven
     for k in asked:
         if k in FORCE_DRIVEN:
             raise InputError(f"--effect {k} is driven by the measured contact force, and {held}: nothing could "
@@ -417,6 +435,53 @@ def refuse_undriven_effects(keys, desc, *sets) -> None:
                              f"links' masses, and {held} while the arm has no masses (no <inertial> in its URDF, no "
                              "mass_kg in its description): nothing could estimate it; leave it out, or give the link "
                              "masses (--masses) or the force", names[0], 1)
+
+
+def _refuse_constant_temperature(sets) -> None:
+    """An InputError for ``--effect thermal`` on points (``sets``: PointSets, None for a file not given) whose
+    temperature spans less than :data:`calibration.candidates.MIN_TEMPERATURE_SPAN`, the range close-loop needs to
+    offer it: the links' growth is then either no effect on the data (at 20 °C) or a constant scale the lengths
+    already take, and the fit would write it 'fixed' at zero. Points without a temperature are refused where the
+    effect's inputs are checked."""
+    from .candidates import MIN_TEMPERATURE_SPAN
+    sets = [s for s in sets if s is not None and s.temperature is not None]
+    if not sets or not all(np.all(np.isfinite(s.temperature)) for s in sets):
+        return
+    t = np.concatenate([s.temperature for s in sets])
+    span = float(np.ptp(t))
+    if span < MIN_TEMPERATURE_SPAN:
+        names = list(dict.fromkeys(s.path for s in sets))
+        raise InputError(f"--effect thermal grows the links with the measured temperature, and the temperature of "
+                         f"{' and '.join(names)} varies by {span:.3g} K only (at least {MIN_TEMPERATURE_SPAN:g} K "
+                         "needed, as close-loop needs to offer it): nothing could estimate it (the fit would hold it "
+                         "at zero); leave it out, or give points measured over a range of temperatures", names[0], 1,
+                         "temperature_C")
+
+
+def refuse_undriven_free(model, free, hold, *sets, without_force: tuple[list, str] | None = None) -> None:
+    """An InputError for a ``--free`` pattern naming a parameter that the measured contact force alone drives (the
+    probe's compliance ``probe.compliance_*``, the parameters of a :data:`FORCE_DRIVEN` effect of a model file) on
+    points ``sets`` with no measured force, and not held by ``hold``: the fit would report it "fixed: no effect on the
+    data" and write the model as if it had been estimated, as :func:`refuse_undriven_effects` refuses for
+    ``--effect``. The default free set names no probe compliance (:func:`calibration.calibrate.default_free`).
+    ``without_force``: as :func:`refuse_undriven_effects`."""
+    from .calibrate import resolve_parameters
+    undriven = (without_force or _undriven_why(sets)) if free else None
+    if undriven is None:
+        return
+    names, held_by_data = undriven
+    spec = model.spec
+    driven = {i for i, n in enumerate(spec.names) if n.startswith("probe.compliance")}
+    driven |= {i for e, sl in model.effect_slices() if e.key in FORCE_DRIVEN for i in range(sl.start, sl.stop)}
+    held = set(resolve_parameters(spec, hold)) if hold else set()
+    for pat in free:
+        hit = [spec.names[i] for i in resolve_parameters(spec, [pat]) if i in driven and i not in held]
+        if hit:
+            it, one = ("it", "it") if len(hit) == 1 else ("them", "they")
+            raise InputError(f"--free {pat} names {', '.join(hit)}, driven by the measured contact force alone, and "
+                             f"{held_by_data}: nothing could estimate {it} (the fit would hold {it} as {one} "
+                             f"{'is' if len(hit) == 1 else 'are'}, as if estimated); name the other parameters only, "
+                             f"hold {it} with --hold, or give the force the probe measured", names[0], 1)
 
 
 def _check_reference_options(args, data) -> None:
@@ -461,6 +526,7 @@ def _load_data(args, defaults: bool = False):
     data = make_data(points, artefacts, reference=reference, marker_offsets=args.marker_offset, heldout=heldout)
     _check_reference_options(args, data)
     refuse_undriven_effects(args.effect, desc, points, reference, heldout)
+    refuse_undriven_free(model, args.free, args.hold, points, reference)
     added = default_effects(model, data) if defaults and args.effect is None else ()
     if added:
         from arm_model.model import ArmModel
@@ -565,7 +631,13 @@ def _covariance_options(c) -> None:
                    help="scale the parameters' covariance by the residual variance factor s0^2 (default) or trust "
                         "the stated uncertainties (s0 = 1); --covariance is the older spelling (aacmm tip's "
                         "--covariance is another option: it writes each point's covariance)")
-    c.add_argument("--region-effect", action="store_true",
+    region_option(c)
+
+
+def region_option(p) -> None:
+    """``--region-effect``: the parameters' random effect between regions of the joint space in the covariance file
+    (``calibrate`` and ``close-loop``: :mod:`calibration.region`)."""
+    p.add_argument("--region-effect", action="store_true",
                    help="also estimate how much the parameters shift between regions of the joint space (the "
                         "training poses cut into 2-4 regions, each predicted by the fit without it; kept only when a "
                         "Monte Carlo test at 5%% finds it) and add it to the covariance file, so aacmm tip's u of a "
@@ -609,12 +681,26 @@ def _points_and_rows(data, noun: str = "point") -> str:
     return counted(n["n_points"], noun) + rows
 
 
+def refuse_unnameable_files(*paths) -> None:
+    """An InputError for a points file (``paths``; None: not given) whose path cannot be a cell of ``residuals.csv``,
+    which names each point by its file and line: a line break, tab or other control character, an invisible or
+    text-direction character, or white space at its ends (the reader strips its cells) would make the command
+    write a file its reader refuses (exit 3 after the whole fit) or one naming another file. Before any work."""
+    from arm_model.errors import id_problem
+    for path in paths:
+        why = None if path is None else id_problem(str(path))
+        if why:
+            raise InputError(f"the file's path {why}: residuals.csv names each point by its file and line, and could "
+                             "not name these; rename the file (or its folder)", ascii(str(path)))
+
+
 def run_calibrate(args: argparse.Namespace) -> int:
     from .calibrate import calibrate, nominal_baseline
     from .model_output import refine_torques, with_fitted_torques
     from .report import write_outputs
     from .validation import worse_than_nominal
     inputs = [args.points, args.artefacts, *arm_inputs(args), args.reference_points, args.holdout_points]
+    refuse_unnameable_files(args.points, args.reference_points, args.holdout_points)
     with output_folder(args.output, inputs, "calibrate") as out:
         model, data, values, warnings = _load_data(args, defaults=True)
         if any(e.key == "joint_compliance" for e in model.effects):
@@ -928,6 +1014,11 @@ def run_montecarlo(args: argparse.Namespace) -> int:
     with output_folder(args.output, camp.inputs, "study montecarlo") as out:
         from arm_model.model import ArmModel
         model = ArmModel(camp.arm, _effects(args.effect))
+        if camp.sensor == "none":       # simulated points without force columns: as calibrate refuses them
+            why = ([str(args.campaign)], f"{args.campaign} simulates no force sensor (sensor = \"none\": its points "
+                                         "hold no force columns)")
+            refuse_undriven_effects(args.effect, camp.arm, without_force=why)
+            refuse_undriven_free(model, args.free, args.hold, without_force=why)
         settings = RunSettings(holdout=args.holdout, effects=_effects(args.effect),
                                fit=fit_options(args, free=free_names(model, args), weights=weights_from_args(args)))
         mc = monte_carlo(SimSource(camp), args.runs, seed=args.seed, settings=settings,

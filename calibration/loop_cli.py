@@ -24,6 +24,8 @@ from .cli import (
     mpe_options,
     parse_holdout,
     refuse_undriven_effects,
+    refuse_undriven_free,
+    region_option,
     sigma_options,
     weights_from_args,
     with_artefact_drift,
@@ -112,6 +114,7 @@ def register(sub) -> None:
                         "docs/close-loop.md)")
     model_options(p)
     sigma_options(p, prior_default="auto")
+    region_option(p)
     mpe_options(p)
     p.set_defaults(func=run)
 
@@ -159,6 +162,7 @@ def run(args: argparse.Namespace) -> int:
             warnings += point_warnings(desc, pts)
     log_warnings(warnings)          # at once: a loop that then fails (exit 4) has said what it saw in the inputs
     refuse_undriven_effects(args.effect, desc, points, reference)
+    refuse_undriven_free(ArmModel(desc, tuple(effects)), args.free, args.hold, points, reference)
     _check_folds(args.folds, points, reference)
     weights = weights_from_args(args)
     holdout = parse_holdout(args.holdout)
@@ -168,9 +172,10 @@ def run(args: argparse.Namespace) -> int:
                             screen_alpha=args.screen_alpha, min_improvement=args.min_improvement,
                             max_effects=args.max_effects, cv_top=args.cv_top, pairs=args.pairs, seed=args.seed,
                             synthesise=not args.library_only, physics=not args.held_out_gain_only,
-                            prior_scale=args.prior_scale, test_in_model=args.holdout is None,
+                            prior_scale=args.prior_scale, arm_scale=args.arm_scale,
+                            test_in_model=args.holdout is None,
                             weights_from_data=args.weights == "data",
-                            escalate=args.candidates is None)
+                            escalate=args.candidates is None, region_effect=args.region_effect)
     with output_folder(args.output, inputs, "close-loop") as out:
         loop = close_loop(points, artefacts, desc, reference=reference, effects=tuple(effects), values=arm.values,
                           free=args.free, hold=args.hold, weights=weights, settings=settings, families_=families)

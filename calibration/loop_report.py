@@ -448,6 +448,7 @@ def write_loop_report(loop: LoopResult, out_dir, inputs=(), input_names: dict | 
                         "urdf": model_files["urdf"].name, "check": model_check(final),
                         "training_poses": None if poses is None else poses.name,
                         "model_discrepancy": None if final.discrepancy is None else final.discrepancy.to_dict(),
+                        "region_effect": None if final.region is None else final.region.to_dict(),
                         "fitted_on": _fitted_on(loop), **_counts(final.data), "session_drift": drift}
     summary["reference_frame"] = final.reference_frame()
     if conformance:

@@ -376,9 +376,11 @@ def refine_torques(result, rounds: int = 5, tol_nm: float = 1.0):
 
     Only for models with an effect that needs the torques; the same free parameters, started at the
     fit's values, with the fit's own options (``result.options``: covariance, rank_tol, outlier threshold,
-    prior) at its final weights; the fixed, held and dropped parameters and points (gross errors too) and the
-    identifiability analyses of ``result`` are kept; the last round's :func:`model_check` is the result's
-    ``model_check`` (the writers report it without computing it again)."""
+    prior) at its final weights; the fixed, held and dropped parameters and points (gross errors too), the
+    identifiability analyses and the region effect (:mod:`calibration.region`, estimated once: the refits move the
+    parameters by the torques' nanometres, its Monte Carlo test costs seconds a fit) of ``result`` are kept; the
+    last round's :func:`model_check` is the result's ``model_check``
+    (the writers report it without computing it again)."""
     model = result.model
     if not ({"tau_gravity", "tau_contact"} & model.needs()):
         return result
@@ -386,10 +388,10 @@ def refine_torques(result, rounds: int = 5, tol_nm: float = 1.0):
     from .options import FitOptions
     data = result.data
     keep = {f: getattr(result, f) for f in ("fixed", "held", "dropped", "gross", "gross_kept", "identifiability",
-                                             "evidence", "weights_history", "options")}
+                                             "evidence", "weights_history", "options", "region")}
     base = replace(result.options or FitOptions(), weights=result.weights, reference=result.reference_mode,
                    min_resolution=None, drop_outliers=False, gross_threshold=None, weights_from_data=False, start=None,
-                   prior_scale=result.prior_scales, prior_centre=result.prior_centre)
+                   prior_scale=result.prior_scales, prior_centre=result.prior_centre, region_effect=False)
     cur = result
     for _ in range(rounds):
         values = dict(zip(model.spec.names, (float(v) for v in cur.p), strict=True))

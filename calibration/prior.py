@@ -67,7 +67,7 @@ __all__ = ["GROUP_LENGTHS", "GROUP_OFFSETS", "GROUP_ANGLES", "GROUP_TIP", "GROUP
            "PRIOR_DOMINATED", "BARELY_SEEN", "SCALE_RANGE", "MIN_EFFECTIVE", "TIP_SHARE", "LENGTH_SHARE", "MAX_ANGLE",
            "MIN_SIDE_SHARE", "MIN_SIDE_VISITS", "NIL_LOAD", "PriorSpec", "parameter_groups", "prior_spec",
            "limits", "variance_ratio", "update_scales", "MAX_GAIN", "secant_gains", "both_sides",
-           "side_visits", "unseen_side", "prior_only"]
+           "side_visits", "unseen_side", "prior_only", "MAX_SCALE_U", "uniform_scale", "scale_step"]
 
 GROUP_LENGTHS = "lengths"
 GROUP_OFFSETS = "joint offsets"
@@ -487,3 +487,46 @@ def secant_gains(steps: dict, last: dict, tol: float) -> dict:
         else:
             out[key] = MAX_GAIN if slope >= -1.0 / MAX_GAIN else -1.0 / slope
     return out
+
+
+#: the largest standard uncertainty [1] of the arm's uniform scale for the data to set it (a flat prior on the scale,
+#: :func:`scale_step`): the largest plausible error of a length as a share of the chain's (:data:`LENGTH_SHARE`).
+#: Data that cannot place the scale that well (seats without a certified length: about 8 %) leave it to the prior.
+MAX_SCALE_U = LENGTH_SHARE
+
+
+def uniform_scale(model) -> np.ndarray:
+    """The direction [m] (full parameter vector, ``model.spec`` order) that scales the arm's geometry uniformly:
+    each joint row's lengths (DH ``d``, ``a``; a URDF origin's ``x``, ``y``, ``z``) and the tip offset by their
+    description's values, every angle and effect parameter 0. ``p + s * uniform_scale(model)`` is the arm ``1 + s``
+    times as large (to first order), every point it reaches scaled about its base."""
+    desc = model.desc
+    spec = model.spec
+    out = np.zeros(spec.size)
+    table = desc.row_table()
+    for i, j in enumerate(desc.joints):
+        for k, f in enumerate(desc.row_fields):
+            n = spec.index(f"{j.name}.{f}")
+            if spec.units[n] == "m":
+                out[n] = table[i, k]
+    for k, axis in enumerate("xyz"):
+        out[spec.index(f"probe.{axis}")] = desc.probe.p_last[k]
+    return out
+
+
+def scale_step(direction: np.ndarray, size: np.ndarray, delta: np.ndarray, cov: np.ndarray) -> tuple[float, float]:
+    """The arm's uniform scale under a flat prior, by the evidence: ``(step, u)`` [1] of the scale ``s`` of the prior's
+    centre ``c0 + s * direction``.
+
+    With ``p ~ N(c0 + s d, diag(size^2))`` and ``s`` flat, the maximum a posteriori ``s`` (the marginal likelihood's
+    maximum in ``s``, for a Gaussian posterior the same) solves ``d^T L (p(s) - c0 - s d) = 0``, ``L = diag(1 /
+    size^2)``; the fit ``p(s)`` moves with the centre by ``cov L d`` (``cov`` the posterior covariance at the
+    current centre), so one Newton step from the current ``s`` is ``d^T L delta / (d^T L d - d^T L cov L d)``
+    (``delta`` the fit's ``p - centre``), exact for a linear model, and the denominator is the posterior precision
+    of ``s``: ``u = den^-1/2`` (inf where the data do not see the direction). Vectors over the free parameters
+    [SI]."""
+    w = direction / size ** 2
+    den = float(w @ direction - w @ cov @ w)
+    if not den > 0:
+        return 0.0, math.inf
+    return float(w @ delta) / den, 1.0 / math.sqrt(den)

@@ -260,18 +260,24 @@ def least_squares_rows(data: Path, urdf: Path, train: list[str]) -> list[dict]:
 LOOP_SEEDS = (0, 1, 2)
 
 
+#: the methods of ``--methods``: the nominal, the commands with their defaults (the loop at each of LOOP_SEEDS), and
+#: with ``--region-effect`` (calibration/region.py; the loop at seed 0)
+METHODS = ("nominal", "calibrate") + tuple(f"close-loop@{s}" for s in LOOP_SEEDS)
+REGION_METHODS = ("calibrate-region", "close-loop-region")
+
+
 def study_robot(robot: ZooRobot, urdfs: tuple[Path, Path], out: Path, noise_m: float, train: list[str],
-                variants: list[str], say) -> dict:
-    """Simulate ``robot`` on ``urdfs[0]`` (its URDF with masses and the ball tool), run every method from the nominal
-    ``urdfs[1]`` (the same, or without ``<inertial>``) trained on each placement of ``train``, and each threshold
-    variant (``NAME=VALUE`` of calibration/prior.py)."""
+                variants: list[str], say, methods=METHODS) -> dict:
+    """Simulate ``robot`` on ``urdfs[0]`` (its URDF with masses and the ball tool), run every method of ``methods``
+    (:data:`METHODS`, :data:`REGION_METHODS`) from the nominal ``urdfs[1]`` (the same, or without ``<inertial>``)
+    trained on each placement of ``train``, and each threshold variant (``NAME=VALUE`` of calibration/prior.py)."""
     import calibration.prior as prior
     sim = simulate_robot(robot, urdfs[0], out / "data", noise_m)
     urdf = urdfs[1]
-    methods = ("nominal", "calibrate") + tuple(f"close-loop@{s}" for s in LOOP_SEEDS)
-    options = {f"close-loop@{s}": ["--seed", str(s)] for s in LOOP_SEEDS}
+    options = {**{f"close-loop@{s}": ["--seed", str(s)] for s in LOOP_SEEDS},
+               "calibrate-region": ["--region-effect"], "close-loop-region": ["--region-effect"]}
     rows = [r.to_dict() for r in placement_study(out / "data", urdf, TIP, out / "runs", train=train, progress=say,
-                                                 methods=methods, options=options)]
+                                                 methods=tuple(methods), options=options)]
     rows += least_squares_rows(out / "data", urdf, train)
     for v in variants:
         name, _, value = v.partition("=")
@@ -356,6 +362,9 @@ def main(argv=None) -> int:
     p.add_argument("--nominal", choices=("masses", "no-inertials"), default="masses",
                    help="the nominal URDF the methods start from: with its link masses, or without <inertial> (the "
                    "truth always sags under the masses)")
+    p.add_argument("--methods", default=",".join(METHODS),
+                   help="comma-separated methods (default: " + ", ".join(METHODS) + "; also "
+                   + ", ".join(REGION_METHODS) + ": the commands with --region-effect)")
     p.add_argument("-o", "--output", type=Path, default=Path("out/seat-zoo"), help="output folder")
     args = p.parse_args(argv)
     known = {r.name: r for r in ROBOTS}
@@ -375,7 +384,7 @@ def main(argv=None) -> int:
         files = urdfs[robot.arm]
         results.append(study_robot(robot, (files[0], files[0] if args.nominal == "masses" else files[1]),
                                    args.output / n, noise, args.trains.split(","),
-                                   variants, say))
+                                   variants, say, args.methods.split(",")))
         (args.output / "results.json").write_text(json.dumps(results, indent=1) + "\n")
     lines = summary(results)
     (args.output / "results.json").write_text(json.dumps({"noise_um": noise * 1e6, "nominal": args.nominal,

@@ -18,6 +18,7 @@ deviation's own u, calibration.placements.deviation_u), for
   gain of the truth's joints only): what the right structure gives on these data,
 * ``drift`` (asked by ``--methods``): ``calibrate --effect joint_compliance --effect artefact_drift``,
 * ``close-loop-drift`` (asked by ``--methods``): ``close-loop --effect joint_compliance --effect artefact_drift``,
+* ``calibrate-region``, ``close-loop-region`` (asked by ``--methods``): the commands with ``--region-effect``,
 * ``truth``: the hidden truth applied to the same readings (the figures' floor: the scatter alone, and with
   ``--capture sweep-drift`` the plate's creep).
 
@@ -119,8 +120,9 @@ PLACES = {"front": ([0.383, 0.003, 0.001], [0, -1, 0], [0, 0, 1]),
           "back-high": ([-0.450, -0.009, 0.880], [0, 1, 0], [1, 0, 0])}
 METHODS = ("close-loop", "calibrate", "geometry", "nominal-tip", "oracle")
 #: methods run when asked (``--methods``): ``drift``, calibrate with the artefact's drift beside the joint compliance;
-#: ``close-loop-drift``, close-loop from that base model
-EXTRA_METHODS = ("drift", "close-loop-drift")
+#: ``close-loop-drift``, close-loop from that base model; ``calibrate-region`` and ``close-loop-region``, the commands
+#: with ``--region-effect`` (calibration/region.py)
+EXTRA_METHODS = ("drift", "close-loop-drift", "calibrate-region", "close-loop-region")
 #: how the seats' articulations are captured (``--capture``): in random order; in sweeps (each seat's poses in turn
 #: round it, as a robot program takes them, the real files' order); in sweeps while the plate creeps; in random order
 #: while it creeps (the creep then unlike any pose's error)
@@ -284,6 +286,7 @@ def simulate_robot(robot: Robot, folder: Path, urdf: Path = URDF, capture: str =
 OPTIONS = {"close-loop": [], "calibrate": [], "geometry": ["--effect", "none"],
            "drift": ["--effect", "joint_compliance", "--effect", "artefact_drift"],
            "close-loop-drift": ["--effect", "joint_compliance", "--effect", "artefact_drift"],
+           "calibrate-region": ["--region-effect"], "close-loop-region": ["--region-effect"],
            "nominal-tip": ["--effect", "none", "--free", "probe.x", "--free", "probe.y", "--free", "probe.z"]}
 
 

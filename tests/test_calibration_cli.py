@@ -8,6 +8,7 @@ import pytest
 
 from arm_model import load_description
 from arm_model.cli import main
+from arm_model.errors import InputError
 from arm_model.model import ArmModel
 from arm_model.sim.quick import SynthSpec, make_campaign
 from conftest import NOMINAL
@@ -140,6 +141,75 @@ def test_an_effect_nothing_in_the_data_drives_is_refused(tmp_path, capsys, comma
     assert not out.exists()
 
 
+def _refused(tmp_path, capsys, command, points, *options) -> str:
+    """The standard error of ``command`` on ``points`` of the Panda's seats (its artefacts, its URDF without masses)
+    with ``options``, asserted refused: exit 2, no traceback or internal error, nothing written."""
+    out = tmp_path / "out"
+    code = main([command, str(points), str(PANDA / "artefacts.toml"), "--arm", str(PANDA / "panda.urdf"),
+                 "--tip-frame", "ball_link", *options, "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err and "internal error" not in err, err
+    assert not out.exists()
+    return err
+
+
+@pytest.mark.parametrize("command", ["calibrate", "close-loop"])
+def test_a_probe_compliance_freed_on_data_without_force_is_refused(tmp_path, capsys, command):
+    """`--free 'probe.*'` on points without force columns held the probe's compliances ("fixed: no effect on the
+    data", exit 0) and wrote the model as if they had been estimated; refused as `--effect probe_compliance` is,
+    naming the option and the file, exit 2, nothing written."""
+    points = PANDA / "front" / "points.csv"
+    err = _refused(tmp_path, capsys, command, points, "--free", "probe.*")
+    assert f"{points}, line 1: --free probe.* names probe.compliance_x" in err, err
+    assert f"{points} holds no force columns (fx_N, fy_N, fz_N)" in err, err
+
+
+def test_a_probe_compliance_freed_is_kept_when_held_or_pushed():
+    """The check of `--free` refuses only a force-driven parameter left free on data without force: one held by
+    `--hold`, or on points with a force, passes; a pattern of other parameters passes."""
+    from arm_model import read_points
+    from arm_model.errors import InputError
+    from arm_model.io import parse_points
+    from arm_model.urdf_import import description_from_urdf
+    from calibration.cli import refuse_undriven_free
+    model = ArmModel(description_from_urdf(PANDA / "panda.urdf", "ball_link"), ())
+    points = read_points(PANDA / "front" / "points.csv", model.desc.joint_quantities)
+    refuse_undriven_free(model, ["probe.*"], ["probe.compliance_*"], points)
+    refuse_undriven_free(model, ["probe.x", "panda_joint*.origin_z"], None, points)
+    pushed = parse_points("measurement,feature," + ",".join(f"q{i}_rad" for i in range(1, 8)) + ",fx_N,fy_N,fz_N\n"
+                          "m,f,0,0,0,-1,0,1,0,0,0,2\n", "f.csv", model.desc.joint_quantities)
+    refuse_undriven_free(model, ["probe.*"], None, points, pushed)
+    with pytest.raises(InputError, match="--free probe.compliance_z names probe.compliance_z, driven by"):
+        refuse_undriven_free(model, ["probe.x", "probe.compliance_z"], None, points)
+
+
+@pytest.mark.parametrize("command", ["calibrate", "close-loop"])
+def test_a_thermal_effect_on_a_constant_temperature_is_refused(tmp_path, capsys, command):
+    """`--effect thermal` on points at one temperature was fitted and written 'fixed' at zero ("no effect on the
+    data" at 20 degC, "not separable" from the lengths elsewhere), exit 0; refused as the force-driven effects are,
+    naming the option, the file and its temperature column, exit 2, nothing written."""
+    lines = (PANDA / "front" / "points.csv").read_text().splitlines()
+    points = tmp_path / "points.csv"
+    points.write_text("\n".join([lines[0] + ",temperature_C"] + [row + ",21.5" for row in lines[1:]]) + "\n")
+    err = _refused(tmp_path, capsys, command, points, "--effect", "thermal")
+    assert f"{points}, line 1, column 'temperature_C': --effect thermal grows the links" in err, err
+    assert "varies by 0 K only (at least 0.2 K needed" in err, err
+
+
+def test_a_thermal_effect_over_a_temperature_range_is_kept():
+    """The temperature check refuses a span below 0.2 K only, over all the points files of the fit together."""
+    from arm_model.io import parse_points
+    from arm_model.urdf_import import description_from_urdf
+    from calibration.cli import refuse_undriven_effects
+    desc = description_from_urdf(PANDA / "panda.urdf", "ball_link")
+    head = "measurement,feature," + ",".join(f"q{i}_rad" for i in range(1, 8)) + ",fx_N,fy_N,fz_N,temperature_C\n"
+    cold, warm = (parse_points(head + f"m,f,0,0,0,-1,0,1,0,0,0,2,{t}\nm,f,0,0,0,-1,0,1,0.1,0,0,2,{t}\n", f"{t}.csv",
+                               desc.joint_quantities) for t in (20.0, 20.3))
+    refuse_undriven_effects(("thermal",), desc, cold, warm)
+    with pytest.raises(InputError, match="varies by 0 K only"):
+        refuse_undriven_effects(("thermal",), desc, cold, None)
+
+
 def test_a_joint_compliance_under_gravity_alone_is_kept():
     """Without force, a robot's joints still bend under their links' weight: joint and lateral compliance are
     kept on an arm with masses; with a force column, every force-driven effect is."""
@@ -154,3 +224,34 @@ def test_a_joint_compliance_under_gravity_alone_is_kept():
                           "m,f,0,0,0,-1,0,1,0,0,0,2\n", "f.csv", desc.joint_quantities)
     refuse_undriven_effects(FORCE_DRIVEN + LOAD_DRIVEN, description_from_urdf(PANDA / "panda.urdf", "ball_link"),
                             points, pushed)
+
+
+@pytest.mark.parametrize("name, words", [("a\nb.csv", "without control characters"),
+                                         ("a\u202eb.csv", "invisible or text-direction"),
+                                         ("a.csv ", "begin or end with white space")])
+def test_a_points_file_residuals_csv_cannot_name_is_refused_before_the_fit(tmp_path, capsys, name, words):
+    """residuals.csv names each point by its file: a points file named with a line break, a text-direction
+    character or a trailing space made calibrate fit, then stop at the read-back of residuals.csv, exit 3 ("internal
+    error ... please report it"); refused before any work, exit 2, nothing written."""
+    points = tmp_path / name
+    points.write_text((PANDA / "front" / "points.csv").read_text())
+    err = _refused(tmp_path, capsys, "calibrate", points)
+    assert f"{ascii(str(points))}: the file's path must" in err and words in err, err
+
+
+@pytest.mark.parametrize("option", [("--effect", "probe_compliance"), ("--free", "probe.*")])
+def test_study_montecarlo_refuses_a_probe_compliance_without_a_force_sensor(tmp_path, capsys, option):
+    """A campaign simulating no force sensor (sensor = "none": no force columns) with `--effect probe_compliance`
+    or `--free 'probe.*'` ran every fit with the compliance held, exit 0 (and a biased probe.z, the contact still
+    deflecting it); refused before any run, as calibrate refuses it on measured points, exit 2, nothing written."""
+    root = __import__("conftest").ROOT
+    text = (root / "examples" / "campaigns" / "calibration.toml").read_text()
+    assert 'sensor = "xyz"' in text
+    camp = tmp_path / "none.toml"
+    camp.write_text(text.replace('sensor = "xyz"', 'sensor = "none"'))
+    out = tmp_path / "out"
+    code = main(["study", "montecarlo", str(camp), "--runs", "1", "--holdout", "0", *option, "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err, err
+    assert f"{camp}, line 1: {' '.join(option)} " in err and "simulates no force sensor" in err, err
+    assert not out.exists()

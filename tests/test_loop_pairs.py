@@ -259,3 +259,21 @@ def test_two_plays_that_help_only_together_are_added_as_a_pair():
     assert row["added"] == ["backlash panda_joint2 + backlash panda_joint4*"], row["added"]
     assert row["loop"] < 0.9 * row["calibrated"] and row["loop"] < 1.2 * row["floor"], row
     assert not row["false"]
+
+
+def test_the_held_out_units_sums_equal_a_mask_per_unit_bit_for_bit():
+    """fold_fit's per-unit sums (:func:`calibration.loop.crossval.unit_sse`, one pass over the rows; the per-pose
+    branch compared every key with every row, quadratic) equal the sums over a boolean mask of each unit's rows,
+    bit for bit, for the three kinds of unit: (measurement, point) pairs, measurements, points."""
+    from calibration.loop.crossval import unit_sse
+    rng = np.random.default_rng(7)
+    n = 600
+    meas = np.array([f"m{k}" for k in rng.integers(0, 12, n)])
+    point = rng.integers(-1, 60, n)
+    r = rng.normal(size=n) * 10.0 ** rng.integers(-7, -3, n)
+    for keys in ([(m, int(i)) for m, i in zip(meas, point, strict=True)], list(meas), [int(i) for i in point]):
+        got = unit_sse(keys, r)
+        assert list(got) == list(dict.fromkeys(keys))
+        for key, (s, count) in got.items():
+            sel = np.array([k == key for k in keys])      # the former per-pose code
+            assert s == float(np.sum(r[sel] ** 2)) and count == int(sel.sum())

@@ -202,6 +202,26 @@ def test_residuals_by_points_file_line(nominal):
     assert skipped == 1
 
 
+@pytest.mark.parametrize("second", ["./sim/points.csv", ""])
+def test_a_point_given_twice_under_two_spellings_of_its_file_is_refused(second, tmp_path, monkeypatch):
+    """The reader refuses a (file, line) given twice as text; the same point named by 'sim/points.csv' and
+    './sim/points.csv' (or with the file left empty on one row) passed it and was drawn twice (110 vectors for 109
+    points): refused where the rows are matched to the points shown, naming the second row's line."""
+    from arm_model.io import parse_points
+    text = ("measurement,feature," + ",".join(f"q{i}_deg" for i in range(1, 8)) + "\n"
+            "seat-01,seat,0,30,0,60,0,45,0\nseat-01,seat,10,30,0,60,0,45,0\n")
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "sim").mkdir()
+    (tmp_path / "sim" / "points.csv").write_text(text)
+    pts = parse_points(text, "sim/points.csv", 7)
+    head = "measurement,feature,kind,file,line,dx_um,dy_um,dz_um\n"
+    res = parse_residuals(head + "seat-01,seat,seat,sim/points.csv,2,1,0,0\nseat-01,seat,seat,sim/points.csv,3,0,1,0\n"
+                          f"seat-01,seat,seat,{second},2,0,0,1\n", "res.csv")
+    with pytest.raises(InputError, match="point line 2 of sim/points.csv .* given twice") as e:
+        residual_origins(res, pts, np.arange(6.0).reshape(2, 3))
+    assert e.value.line == 4 and e.value.column == "line"
+
+
 def test_residuals_name_a_point_by_file_and_line(tmp_path):
     """A point is its file and line: a seat of the points file and one of the reference file on the same line are
     two points (read, not refused as one given twice); the one of another file is counted, not drawn; the same

@@ -194,18 +194,28 @@ def residual_origins(res: Residuals, points, centres: np.ndarray,
     Returns:
         (origins (M, 3), vectors (M, 3), skipped): ``skipped`` counts rows given by a line that is not a
         point of ``points`` (a row of another ``file``, :func:`shown_file`) with the same measurement and feature.
+
+    A point of ``points`` given twice (the same kind; its file spelt two ways, ``calpts.csv`` and ``./calpts.csv``,
+    or left empty on one row, which the reader cannot tell apart) is an InputError naming the second row's line.
     """
     if res.points is not None:
         return res.points, res.vectors, 0
     row_of = {int(line): i for i, line in enumerate(points.lines)}
     mine = shown_file(() if res.file is None else res.file, points.path)
-    keep, origins, seen = [], [], {}
+    keep, origins, seen, drawn = [], [], {}, {}
     for k, line in enumerate(res.point_lines):
         i = row_of.get(int(line))
         if i is None or (res.file is not None and res.file[k] and res.file[k] not in mine) \
                 or (res.measurement[k] and res.measurement[k] != points.measurement[i]) \
                 or (res.feature[k] and res.feature[k] != points.feature[i]):
             continue
+        kind = "" if res.kind is None else res.kind[k]
+        if kind not in ("reference", "marker"):     # one residual a point, however its file is spelt ("", ./x)
+            first = drawn.setdefault((i, kind), k)
+            if first != k:
+                raise InputError(f"point line {int(line)} of {points.path} (kind {kind or 'not given'}) is given twice "
+                                 f"(first on line {res.lines[first]}, file {_named(res, first)}; here file "
+                                 f"{_named(res, k)}): one residual a point", res.path, int(res.lines[k]), "line")
         keep.append(k)
         if markers is not None and res.kind is not None and res.kind[k] == "reference":
             m = seen.get(i, 0)
@@ -215,6 +225,12 @@ def residual_origins(res: Residuals, points, centres: np.ndarray,
             origins.append(centres[i])
     return np.reshape(origins, (-1, 3)), res.vectors[keep], len(res.vectors) - len(keep)
 
+
+
+def _named(res: Residuals, k: int) -> str:
+    """The ``file`` cell of row ``k`` for a message: quoted, or "not given"."""
+    f = "" if res.file is None else res.file[k]
+    return repr(f) if f else "not given"
 
 
 def shown_file(files, shown: str | Path) -> set[str]:

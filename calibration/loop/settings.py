@@ -53,14 +53,17 @@ class LoopSettings:
     close-loop --holdout``), the outer test set's rows are kept out of it, as ``calibrate --holdout`` keeps its
     held-out measurements out of its model. ``prior_scale``: "auto" (default: the prior with the evidence's scales,
     "evidence", when the base model holds a joint compliance, whose prior is physical, else None: no prior, the
-    practical-resolution rule), "evidence", a factor, or None. ``escalate``: when the outer test set is worse than
+    practical-resolution rule), "evidence", a factor, or None. ``arm_scale``: every fit's
+    :attr:`calibration.options.FitOptions.arm_scale`. ``escalate``: when the outer test set is worse than
     stated once the default families are exhausted (:func:`~calibration.loop.verdict.heldout_check`), the
     families off by default (:data:`~calibration.candidates.OPT_IN_FAMILIES`) not offered yet are offered, once,
     under the same rules (``aacmm close-loop`` turns it off when ``--candidates`` names the families).
     ``synthesise``: build effects from the residual's structure when the library is exhausted, with an outer test
     set of whole measurements only (:func:`~calibration.loop.verdict.builds_from_residual`). ``pairs``: when no single
     candidate is added at a stage, at most this many pairs of the candidates tested there are cross-validated as one
-    candidate each (:mod:`calibration.loop.pairs`; 0: no pair step)."""
+    candidate each (:mod:`calibration.loop.pairs`; 0: no pair step). ``region_effect``: the final model's fit also
+    estimates the parameters' random effect between regions of the joint space (:mod:`calibration.region`), which the
+    covariance file adds, as ``calibrate --region-effect`` does (the loop's decisions and folds never use it)."""
     folds: int = 4
     test_fraction: float = 0.25
     alpha: float = 0.01
@@ -77,9 +80,11 @@ class LoopSettings:
     synthesise: bool = True
     physics: bool = True
     prior_scale: float | str | None = "auto"
+    arm_scale: str = "prior"
     test_in_model: bool = True
     escalate: bool = True
     pairs: int = 2
+    region_effect: bool = False
 
     def __post_init__(self):
         object.__setattr__(self, "holdout", tuple(self.holdout or ()))

@@ -113,6 +113,7 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
     # the loop drops its outliers itself, once, on the base model (``settings.drop_outliers``): every model it
     # compares is fitted on the same points (no gross errors left out fit by fit)
     options = FitOptions(values=camp.values, rank_tol=settings.rank_tol, prior_scale=scale,
+                         arm_scale=settings.arm_scale,
                          min_resolution=LEGACY_RESOLUTION if scale is None else None, gross_threshold=None)
     state = LoopState(settings, desc, say, data, design, test, test_by, test_rows, options, camp.free, camp.hold,
                       model.spec.size, stated, cands, skipped, model, stated, remaining=list(cands),
@@ -567,7 +568,7 @@ def report(state: LoopState) -> LoopResult:
     say("calibrating the final model on every point (" + ("design and test" if s.test_in_model else
         "but the held-out test set's") + "; outliers kept, as calibrate does)")
     # no compliance of it is negative: every fit holds a parameter at its lower bound (calibrate, _at_bounds)
-    model_fit = state.fit(state.model, data, reweight=True, weights=state.stated)
+    model_fit = state.fit(state.model, data, reweight=True, weights=state.stated, region=s.region_effect)
     return LoopResult(state.stages, state.last_tests, state.last_cv, state.stop, structure, significant, verdict,
                       state.candidates + state.synthesised, state.skipped, state.design.measurements(),
                       state.test.measurements(), s, state.desc, plots, state.dropped, state.test_by, state.power,

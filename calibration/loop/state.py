@@ -122,7 +122,7 @@ class LoopState:
 
     def fit(self, model: ArmModel, data: CalibrationData, extra_priors: dict | None = None, reweight: bool = False,
             hold: tuple = (), weights: Weights | None = None, discrepancy: bool = True,
-            start: dict | None = None, gross: bool = False) -> CalibrationResult:
+            start: dict | None = None, gross: bool = False, region: bool = False) -> CalibrationResult:
         """``calibrate`` of ``model`` on ``data`` with the loop's options, the current ``weights`` (or those
         given) and ``priors`` (and ``extra_priors``): the parameters ``free`` and those of every effect the loop
         added, less the user's ``hold`` and the names ``hold``; the noise re-estimated from the data only with
@@ -130,7 +130,9 @@ class LoopState:
         units); ``start``: starting values of free parameters by name (a warm start; the prior's centre and the
         held parameters' values stay the given ones); ``gross``: calibrate's default gross-error rule
         (:data:`~calibration.options.GROSS_THRESHOLD`; points only, at most the loop's budget): the base fit's,
-        :func:`~calibration.loop.outliers.drop_design_outliers` (every other fit keeps every point)."""
+        :func:`~calibration.loop.outliers.drop_design_outliers` (every other fit keeps every point); ``region``: the
+        parameters' random effect between regions of the joint space too
+        (:mod:`calibration.region`; the final model's)."""
         names = fitted_names(model, self.free, self.hold, self.base_size, hold, data)
         # the added effects' plausible sizes serve the practical-resolution rule without a prior; with one,
         # the prior's own sizes (calibration.prior.prior_spec) and the evidence's scales apply
@@ -139,7 +141,7 @@ class LoopState:
             self.options, free=names, weights=self.weights if weights is None else weights, priors=priors, start=start,
             weights_from_data=reweight and self.settings.weights_from_data, discrepancy=discrepancy,
             gross_threshold=GROSS_THRESHOLD if gross else None, outlier_lengths=False,
-            outlier_limit=outlier_budget(len(self.data)) if gross else None))
+            outlier_limit=outlier_budget(len(self.data)) if gross else None, region_effect=region))
 
     def tested_here(self, scr: Screening) -> list[CVResult]:
         """The held-out tests run at the current stage: its earlier passes' (``cv_here``), then those of the pass
