@@ -302,13 +302,20 @@ def _screening_rows(tests):
 _SCREEN_HEAD = ("candidate", "k", "rank", "delta chi2", "p (score F)", "delta BIC", "explained (held-out)",
                 "absorbed parameters")
 _CV_HEAD = ("candidate", "weighted RMS before", "after", "improvement", "Wilcoxon p", "threshold",
-            "measurements improved", "passed", "reason")
+            "folds better", "measurements improved", "passed", "reason")
 
 
 def _cv_rows(cvs):
     return [(c.candidate, _g(c.rms_base, ".4g"), _g(c.rms_new, ".4g"), _g(100 * c.improvement, ".1f") + " %",
-             _g(c.p_value, ".2g"), _g(c.threshold, ".2g"), f"{c.wins} / {c.n_measurements}",
+             _g(c.p_value, ".2g"), _g(c.threshold, ".2g"), _stability_cell(c), f"{c.wins} / {c.n_measurements}",
              "yes" if c.passed else "no", c.reason) for c in cvs]
+
+
+def _stability_cell(c) -> str:
+    """The stability rule's figure of a held-out test: the folds whose held-out RMS it lowers, of all."""
+    if not c.fold_change:
+        return "-"
+    return f"{sum(1 for v in c.fold_change if v > 0)} / {len(c.fold_change)}"
 
 
 def loop_model_name(loop: LoopResult) -> str:

@@ -48,7 +48,12 @@ def test_close_loop_writes_the_report(files, tmp_path, capsys):
     assert all(r["u"]["rms_um"] > 0 for r in s["before_after"])
     assert s["structure_remains"] is False and "eccentricity j3" in s["verdict"]
     assert s["stages"][1]["cross_validation"][0]["passed"] is True
+    # the stability rule stated and its figures: every fold of the one added better by --min-improvement
+    cv = s["stages"][1]["cross_validation"][0]
+    assert cv["stability"] == cv["stability_required"] == 1.0 and min(cv["fold_relative_improvements"]) >= 0.02
+    assert "every fold better" in s["decision_power"]["stability_rule"]
     html = (out / "report.html").read_text()
+    assert "folds better" in html
     for png in ("before-after.png", "stage-1-screening.png", "stage-1-signature.png"):
         assert (out / png).stat().st_size > 1000 and png in html
     assert (out / "before-after.txt").read_text().startswith("held-out test set")

@@ -11,7 +11,7 @@ from arm_model import InputError
 
 from ..data import CalibrationData, split_holdout, split_poses, spread
 from ..diagnostics import measurement_folds, measurement_groups, pose_folds
-from .settings import LoopSettings, wilcoxon_units_needed
+from .settings import STABILITY_RULE, LoopSettings, wilcoxon_units_needed
 
 __all__ = ["Folds", "outer_split", "spread_measurements", "check_fold_by", "choose_folds"]
 
@@ -123,7 +123,7 @@ def choose_folds(design: CalibrationData, settings: LoopSettings) -> tuple[Folds
     smallest = 0.5 ** n if n else 1.0
     ok = smallest < level
     power = {"fold_by": folds.by, "folds": folds.k, "units": n, "unit": folds.unit_name, "needed": need,
-             "smallest_p": smallest, "level": level, "can_reach": ok}
+             "smallest_p": smallest, "level": level, "can_reach": ok, "stability_rule": STABILITY_RULE}
     why = "" if folds.k == settings.folds else f" (--folds {settings.folds}: only {n_meas} design measurements)"
     if folds.by == "pose" and settings.fold_by == "auto":
         why = f" (only {n_meas} design measurement: whole measurements cannot be held out)"
@@ -132,7 +132,8 @@ def choose_folds(design: CalibrationData, settings: LoopSettings) -> tuple[Folds
                f"its measurement's own centre: {n_meas} measurements are too few units)")
     if ok:
         power["note"] = (f"decisions: {folds.k} folds by {by}{why}; one-sided Wilcoxon over {n} {folds.unit_name} "
-                         f"(smallest possible p = 1/2^{n} < {level:.2g} = alpha / {tests} candidates)")
+                         f"(smallest possible p = 1/2^{n} < {level:.2g} = alpha / {tests} candidates), and "
+                         f"{STABILITY_RULE}")
     else:
         fix = ("more measurements, or folds by pose (--fold-by pose)" if by == "measurement"
                else "more poses on each feature, or more measurements")

@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 from ..identifiability import DEFAULT_RANK_TOL
 
-__all__ = ["LoopSettings", "wilcoxon_units_needed", "SAME_SIGNATURE", "PHYSICS", "PARSIMONY", "NOISE_OFF", "FOLD_BY",
-           "LEGACY_RESOLUTION", "MAX_COUNT"]
+__all__ = ["LoopSettings", "wilcoxon_units_needed", "STABILITY_RULE", "SAME_SIGNATURE", "PHYSICS", "PARSIMONY",
+           "NOISE_OFF", "FOLD_BY", "LEGACY_RESOLUTION", "MAX_COUNT"]
 
 #: the practical-resolution rule the loop's fits without a prior keep (calibrate's default before its prior)
 LEGACY_RESOLUTION = 0.1
@@ -29,6 +29,14 @@ FOLD_BY = ("auto", "measurement", "pose")
 #: 30 joints); beyond it a count is a typo (``--cv-top 1e300`` was taken, and written to summary.json as a 301-digit
 #: integer that JSON readers of other tools round)
 MAX_COUNT = 1000
+
+
+#: the stability rule of the held-out decisions (:func:`calibration.loop.crossval.cross_validate`), as the console,
+#: report and summary.json state it
+STABILITY_RULE = ("every fold better: besides the one-sided Wilcoxon test over every held-out unit, the candidate must "
+                  "lower the held-out RMS of each fold's units (each fold's training fit predicting them) by at least "
+                  "--min-improvement, as it must the pooled RMS, so that no verdict rests on the units of a few folds; "
+                  "computed from the held-out residuals at hand, no refit")
 
 
 def wilcoxon_units_needed(alpha: float, tests: int) -> int:

@@ -422,7 +422,7 @@ def fit_stage(state: LoopState, decision: Decision, scr: Screening) -> Stage:
     fam_name, before = plot_family(scr.space, cand)
     model = state.model.with_effects(*cand.effects)
     state.say(f"adding {cand.name}; recalibrating")
-    result = state.fit(model, state.design, candidate_priors(model, cand, scr.test_of(cand)), reweight=True)
+    result = state.fit(model, state.design, candidate_priors(model, cand), reweight=True)
     after = None
     if fam_name is not None:
         sp2 = residual_space(result)
@@ -475,7 +475,7 @@ def add(state: LoopState, decision: Decision, stage: Stage, scr: Screening) -> N
     (``Candidate.then``, its higher terms) join them."""
     cand, cv = decision.candidate, decision.cv
     model, result = stage.model, stage.result
-    state.priors.update(candidate_priors(model, cand, scr.test_of(cand)))
+    state.priors.update(candidate_priors(model, cand))
     old_weights = state.weights
     state.model, state.result, state.weights = model, result, result.weights
     state.stages.append(stage)
