@@ -48,9 +48,11 @@ def test_close_loop_writes_the_report(files, tmp_path, capsys):
     assert all(r["u"]["rms_um"] > 0 for r in s["before_after"])
     assert s["structure_remains"] is False and "eccentricity j3" in s["verdict"]
     assert s["stages"][1]["cross_validation"][0]["passed"] is True
-    # the stability rule stated and its figures: every fold of the one added better by --min-improvement
+    # the stability rule stated and its figures: the one added far below its level (no fold required), yet every
+    # fold better by --min-improvement
     cv = s["stages"][1]["cross_validation"][0]
-    assert cv["stability"] == cv["stability_required"] == 1.0 and min(cv["fold_relative_improvements"]) >= 0.02
+    assert cv["wilcoxon_p_value"] < cv["threshold"] / 10 and cv["stability_required"] == 0.0
+    assert cv["stability"] == 1.0 and min(cv["fold_relative_improvements"]) >= 0.02
     assert "every fold better" in s["decision_power"]["stability_rule"]
     html = (out / "report.html").read_text()
     assert "folds better" in html

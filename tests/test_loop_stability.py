@@ -1,6 +1,6 @@
 """The stability rule of the loop's held-out decisions (calibration.loop.crossval.cross_validate): a candidate passes
-only if the one-sided Wilcoxon test over every held-out unit passes and every fold's held-out RMS is lower with it by
-at least min_improvement, as the pooled RMS must be.
+only if the one-sided Wilcoxon test over every held-out unit passes and, when its p lies within STABLE_MARGIN of the
+level, every fold's held-out RMS is lower with it by at least min_improvement, as the pooled RMS must be.
 Constructed per-unit errors, no fit: the refused cases are ones the rule before it (p below the level and the
 improvement large enough) passed."""
 from __future__ import annotations
@@ -12,7 +12,7 @@ import pytest
 from scipy import stats
 
 from calibration.loop.crossval import FoldFit, cross_validate, fold_changes
-from calibration.loop.settings import STABILITY_RULE
+from calibration.loop.settings import STABILITY_RULE, STABLE_MARGIN
 
 LEVEL = 0.005
 
@@ -74,8 +74,11 @@ def test_the_same_evidence_in_every_fold_passes():
     assert cv.stability == 1.0 and "every fold better" in cv.reason
 
 
-def test_a_fold_made_worse_refuses_a_strongly_significant_candidate():
-    """Three folds clearly better, the fourth worse: p far below the level, and still refused."""
+def test_a_fold_made_worse_refuses_a_candidate_near_its_level_only():
+    """Three folds clearly better, the fourth worse, p < 1e-4: far below a level of 0.005 it passes on the pooled test
+    (a true drift extrapolated into one fold of a short campaign makes that fold worse: tests/test_thermal_drift's slow
+    case, folds +32.9, -1.7, +27.5, -57.7 % at p 8.9e-5 against 0.01); at a level within STABLE_MARGIN of its p it is
+    refused."""
     rng = np.random.default_rng(3)
     fold = np.repeat(np.arange(4), 20)
     d = rng.normal(1.0, 1.0, 80)
@@ -84,14 +87,16 @@ def test_a_fold_made_worse_refuses_a_strongly_significant_candidate():
     cv = cross_validate("one fold worse", base, new, LEVEL, 0.0)
     assert cv.p_value < 1e-4 and cv.improvement > 0
     assert cv.fold_change[3] < 0 < min(cv.fold_change[:3]) and cv.stability == 0.75
-    assert not cv.passed and "fold(s) 4 of 4 not better" in cv.reason
+    assert cv.passed and f"by more than {STABLE_MARGIN:g}x" in cv.reason and cv.to_dict()["stability_required"] == 0
+    near = cross_validate("one fold worse", base, new, 2.0 * cv.p_value, 0.0)
+    assert not near.passed and "fold(s) 4 of 4 not better" in near.reason and near.to_dict()["stability_required"] == 1
     assert math.isclose(cv.fold_change[3], 1.0 - math.sqrt(np.sum(10.0 - d[fold == 3]) / 200.0), rel_tol=1e-12)
 
 
 def test_a_fold_barely_better_refuses_a_candidate_whatever_its_p():
     """Every fold better, the first by 1 % only (the real Panda's joint 2 eccentricity trained on back-high: folds +1.2,
-    +5.6, +3.5, +6.6 %, p 0.0034 against 0.0033): refused at --min-improvement 2 % whatever p is (the level is 1 here,
-    so only the folds decide); passed when no improvement is required."""
+    +5.6, +3.5, +6.6 %, p 0.0034 against 0.0033): refused at --min-improvement 2 % with p anywhere within STABLE_MARGIN
+    of the level; passed when no improvement is required."""
     rng = np.random.default_rng(5)
     fold = np.repeat(np.arange(4), 11)
     v = rng.normal(0.0, 1.0, 44)
@@ -102,10 +107,12 @@ def test_a_fold_barely_better_refuses_a_candidate_whatever_its_p():
         shift = (sum(new.sse[i][0] for i in sel) - (0.99 if f == 0 else 0.95) ** 2 * 10.0 * len(sel)) / len(sel)
         for i in sel:
             new.sse[i] = (new.sse[i][0] - shift, 1)
-    cv = cross_validate("edge", base, new, 1.0, 0.02)
-    assert cv.fold_change == pytest.approx((0.01, 0.05, 0.05, 0.05), abs=1e-12)
-    assert not cv.passed and "fold(s) 1 of 4 not 2 % better" in cv.reason
-    assert cross_validate("edge", base, new, 1.0, 0.0).passed
+    p = cross_validate("edge", base, new, 1.0, 0.0).p_value
+    for level in (1.0001 * p, 0.9999 * STABLE_MARGIN * p):     # both ends of the band where the folds decide
+        cv = cross_validate("edge", base, new, level, 0.02)
+        assert cv.fold_change == pytest.approx((0.01, 0.05, 0.05, 0.05), abs=1e-12)
+        assert not cv.passed and "fold(s) 1 of 4 not 2 % better" in cv.reason
+        assert cross_validate("edge", base, new, level, 0.0).passed
 
 
 def test_the_rule_is_stated():

@@ -14,6 +14,7 @@ from arm_model.model import ArmModel
 from ..data import CalibrationData
 from ..validation import heldout_residuals
 from .folds import Folds
+from .settings import STABLE_MARGIN
 
 __all__ = ["FoldFit", "CVResult", "fold_fit", "unit_sse", "warm_start", "cross_validate"]
 
@@ -38,8 +39,9 @@ class CVResult:
         wins: measurements improved, of ``n_measurements``.
         fold_change: each fold's relative held-out RMS change with the candidate (:func:`fold_changes`, positive:
             better); stability: the share of the folds better. Passing needs ``p_value < threshold`` and the
-            held-out RMS lower by at least ``min_improvement`` in the pool and in every fold
-            (:data:`~calibration.loop.settings.STABILITY_RULE`).
+            held-out RMS lower by at least ``min_improvement`` in the pool, and in every fold when ``p_value`` is
+            within ``STABLE_MARGIN`` of the threshold (``stable_needed``;
+            :data:`~calibration.loop.settings.STABILITY_RULE`).
     """
     candidate: str
     rms_base: float
@@ -55,6 +57,7 @@ class CVResult:
     folds: FoldFit | None = field(default=None, repr=False)
     held: bool = False            # its parameters were held (not resolved) in some fold's training part
     fold_change: tuple = ()
+    stable_needed: bool = True    # p within STABLE_MARGIN of the level: every fold must be better
 
     @property
     def stability(self) -> float:
@@ -69,7 +72,8 @@ class CVResult:
                 "wilcoxon_p_value": num(self.p_value), "threshold": num(self.threshold),
                 "measurements": self.n_measurements, "measurements_improved": self.wins, "passed": self.passed,
                 "reason": self.reason, "screening_p_value": num(self.score_p), "stability": num(self.stability),
-                "stability_required": 1.0, "fold_relative_improvements": [num(v) for v in self.fold_change]}
+                "stability_required": 1.0 if self.stable_needed else 0.0,
+                "fold_relative_improvements": [num(v) for v in self.fold_change]}
 
 def _not_worse_than_nested(res, nested, model: ArmModel, data: CalibrationData, fit):
     """``res``, or, when it ends at a higher cost than ``nested`` (the fit of a model that ``model`` contains, on
@@ -174,17 +178,19 @@ def cross_validate(name: str, base: FoldFit, new: FoldFit | None, threshold: flo
     d = b - a
     p = one_sided(d)
     change = fold_changes(base, new, ms)
-    worse = [k + 1 for k, c in enumerate(change) if not (c > 0 and c >= min_improvement)]
+    near = p >= threshold / STABLE_MARGIN
+    worse = [k + 1 for k, c in enumerate(change) if not (c > 0 and c >= min_improvement)] if near else []
     wins = int(np.sum(d > 0))
     passed = p < threshold and not worse and imp >= min_improvement
     folds = ", ".join(f"{100 * c:+.1f} %" for c in change)
     if passed:
-        reason = (f"held-out RMS {100 * imp:.1f} % lower, Wilcoxon p = {p:.2g} < {threshold:.2g}, every fold "
-                  f"better ({folds})")
+        reason = (f"held-out RMS {100 * imp:.1f} % lower, Wilcoxon p = {p:.2g} < {threshold:.2g}, "
+                  + ("every fold better" if near else f"below the level by more than {STABLE_MARGIN:g}x")
+                  + f" (by fold: {folds})")
     elif p >= threshold:
         reason = f"not significant on held-out data (Wilcoxon p = {p:.2g} >= {threshold:.2g})"
     elif worse:
-        reason = (f"not stable: Wilcoxon p = {p:.2g} < {threshold:.2g}, but fold(s) "
+        reason = (f"not stable: Wilcoxon p = {p:.2g} < {threshold:.2g} (within {STABLE_MARGIN:g}x of it), but fold(s) "
                   f"{', '.join(str(k) for k in worse)} of {len(change)} not "
                   + (f"{100 * min_improvement:g} % " if min_improvement > 0 else "")
                   + f"better with it (held-out RMS {folds} lower by fold)")
@@ -192,6 +198,6 @@ def cross_validate(name: str, base: FoldFit, new: FoldFit | None, threshold: flo
         reason = (f"significant but too small: held-out RMS {100 * imp:.1f} % lower "
                   f"(at least {100 * min_improvement:g} % required)")
     return CVResult(name, rms_b, rms_a, imp, p, threshold, len(ms), wins, passed, reason, folds=new,
-                    fold_change=change)
+                    fold_change=change, stable_needed=near)
 
 
