@@ -348,7 +348,7 @@ def fit_options(args, **fields):
                          f"(the prior, --prior-scale {prior}, shrinks them instead)")
     kw = {"min_resolution": args.min_resolution or None,
           "weights_from_data": getattr(args, "weights", "stated") == "data", "prior_scale": prior,
-          "arm_scale": getattr(args, "arm_scale", "data")}
+          "arm_scale": getattr(args, "arm_scale", "prior")}
     if getattr(args, "plausible_length_mm", None) is not None:
         kw["prior_length"] = args.plausible_length_mm * 1e-3
     if args.rank_tol is not None:
