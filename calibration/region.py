@@ -50,6 +50,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from arm_model.errors import NumericalError
+
 from .discrepancy import LARGE_FOLD, group_deletions, holdable
 from .schur import BlockNormal
 
@@ -168,6 +170,9 @@ def _fit_terms(terms, group=None) -> tuple[np.ndarray, float]:
         grad = 0.5 * (q_diag - np.einsum("fij,fji->i", qw, q) - np.einsum("fi,fi->i", a, a))
         return f, np.bincount(group, grad, minlength=n_t)
     best = minimize(nll, np.zeros(n_t), jac=True, method="L-BFGS-B", bounds=[(0.0, T_MAX)] * n_t)
+    if not best.success:
+        raise NumericalError(f"the region effect's variance fit did not converge (L-BFGS-B: {best.message}); run "
+                             "without --region-effect")
     return np.clip(best.x, 0.0, T_MAX), max(2 * (nll(np.zeros(n_t))[0] - float(best.fun)), 0.0)
 
 

@@ -157,3 +157,15 @@ def test_refining_the_torques_keeps_the_region_effect_without_testing_it_again(r
     refined = refine_torques(right_region)
     assert refined is not right_region and not calls
     assert refined.region is right_region.region and refined.free == right_region.region.names
+
+
+def test_a_variance_fit_that_does_not_converge_is_reported(monkeypatch):
+    """The optimiser's failure is a NumericalError naming it, never the point where it stopped taken as the fit."""
+    import scipy.optimize
+    from scipy.optimize import OptimizeResult
+
+    from arm_model.errors import NumericalError
+    failed = OptimizeResult(x=np.zeros(3), fun=0.0, success=False, message="ABNORMAL_TERMINATION_IN_LNSRCH")
+    monkeypatch.setattr(scipy.optimize, "minimize", lambda *a, **k: failed)
+    with pytest.raises(NumericalError, match="did not converge.*ABNORMAL"):
+        fit_region_variances(_folds(np.random.default_rng(1), np.zeros(3), n_folds=3))
