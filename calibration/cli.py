@@ -884,6 +884,8 @@ def _log_calibration(res, data, train, test, poses, validation, files) -> None:
             log.info(f"  per joint, with their uncertainty carried: {s0 * 1e6:.4g} um at the training poses + "
                      f"{growth_text(gj)} um per mm of each joint's ball travel from the nearest; tip adds it to "
                      "every point's u")
+    if res.region is not None:
+        log.info(f"region effect: {res.region.summary()}")
     log.info(f"model file -> {files['description']} (covariance {files['covariance'].name}); report -> "
              f"{files['report']}")
 

@@ -98,6 +98,17 @@ class RegionEffect:
     p_value: float = float("nan")
     draws: int = 0
 
+    def summary(self) -> str:
+        """One line for the console: the test, and what the covariance file gets from it."""
+        null = (f"critical {self.lr_null:.3g}, p {self.p_value:.2g} over {self.draws} null draws; " if self.draws
+                else "no Monte Carlo test; ")
+        test = f"likelihood ratio {self.lr:.3g} ({null}{self.folds} regions)"
+        big = np.argsort(-self.ratio)[:3]
+        shown = [f"{self.names[i]} {math.sqrt(float(self.ratio[i])):.2g}" for i in big if self.ratio[i] > 1e-6]
+        if shown:
+            return f"kept: {test}; shift between regions per prior sd, largest: {', '.join(shown)}"
+        return f"not kept (nothing added to the covariance): {test}"
+
     def to_dict(self) -> dict:
         order = np.argsort(-self.ratio)
         return {"likelihood_ratio": self.lr, "likelihood_ratio_critical": self.lr_null, "p_value": self.p_value,

@@ -39,9 +39,11 @@ def without(files, tmp_path_factory):
 
 
 def test_region_effect_option_reaches_the_fit_and_a_rejected_effect_leaves_the_covariance_file(files, without,
-                                                                                                 tmp_path):
+                                                                                                 tmp_path, capsys):
     off_dir, off = without
+    capsys.readouterr()
     on = _calibrate(files, tmp_path / "on", "--region-effect")
+    assert "region effect: not kept (nothing added to the covariance): likelihood ratio" in capsys.readouterr().out
     assert off["region_effect"] is None
     reg = on["region_effect"]
     assert reg is not None and reg["folds"] > 0 and reg["likelihood_ratio"] < reg["likelihood_ratio_critical"]
@@ -49,15 +51,20 @@ def test_region_effect_option_reaches_the_fit_and_a_rejected_effect_leaves_the_c
     assert (tmp_path / "on" / COV).read_bytes() == (off_dir / COV).read_bytes()
 
 
-def test_a_kept_region_effect_widens_the_covariance_file(files, without, tmp_path, monkeypatch):
+def test_a_kept_region_effect_widens_the_covariance_file(files, without, tmp_path, monkeypatch, capsys):
     """With the Monte Carlo test switched off (no null draws: the maximum-likelihood variances are taken as they
     are) the effect is kept, and the covariance file written holds more than the posterior."""
     from arm_model.model_file import read_covariance
     from calibration import region
     monkeypatch.setattr(region, "NULL_DRAWS", 0)
     off_dir, off = without
+    capsys.readouterr()
     on = _calibrate(files, tmp_path / "on", "--region-effect")
     assert on["region_effect"]["sd_per_prior_sd"]
+    largest = next(iter(on["region_effect"]["sd_per_prior_sd"]))
+    err = capsys.readouterr().out
+    assert "region effect: kept: likelihood ratio" in err and "no Monte Carlo test" in err
+    assert f"largest: {largest}" in err
     a, b = read_covariance(off_dir / COV), read_covariance(tmp_path / "on" / COV)
     assert a.names == b.names
     grown = np.diag(b.matrix) - np.diag(a.matrix)
