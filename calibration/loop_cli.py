@@ -194,6 +194,9 @@ def run(args: argparse.Namespace) -> int:
     for sk in loop.skipped:
         log.info(f"{sk.name} not offered: {sk.reason}")
     log.info(loop.verdict)
+    region = (loop.model_fit or loop.final.result).region
+    if region is not None:
+        log.info(f"region effect (the model file's covariance): {region.summary()}")
     from .loop_report import loop_model_name
     from .model_output import model_paths
     log_conformance(conf)

@@ -24,14 +24,14 @@ def files(tmp_path_factory, nominal):
     return c.write(tmp_path_factory.mktemp("campaign"))
 
 
-def _loop(f, out, *extra) -> dict:
+def _loop(f, out, *extra, quiet: bool = True) -> dict:
     assert main(["close-loop", str(f["points"]), str(f["artefacts"]), "--arm", str(NOMINAL), "--effect", "none",
-                 "--max-effects", "0", "--library-only", "--folds", "2", "--quiet", "--no-plots", "-o", str(out),
-                 *extra]) == 0
+                 "--max-effects", "0", "--library-only", "--folds", "2", *(["--quiet"] if quiet else []), "--no-plots",
+                 "-o", str(out), *extra]) == 0
     return json.loads((out / "summary.json").read_text())
 
 
-def test_close_loop_region_effect_reaches_the_model_file(files, tmp_path, monkeypatch):
+def test_close_loop_region_effect_reaches_the_model_file(files, tmp_path, monkeypatch, capsys):
     """Off by default; ``--region-effect`` with the Monte Carlo test switched off (no null draws: the variances kept
     as estimated) puts the effect into summary.json (``model.region_effect``) and into the covariance file, whose
     variances hold the region's on top of the posterior's; the effect is estimated once, on the final model's fit
@@ -54,7 +54,8 @@ def test_close_loop_region_effect_reaches_the_model_file(files, tmp_path, monkey
         return fit(model, data, options)
     monkeypatch.setattr(importlib.import_module("calibration.calibrate"), "region_effect", spy)
     monkeypatch.setattr(state, "calibrate", counted)
-    on = _loop(files, tmp_path / "on", "--region-effect")
+    on = _loop(files, tmp_path / "on", "--region-effect", quiet=False)
+    assert "region effect (the model file's covariance): kept: likelihood ratio" in capsys.readouterr().out
     assert flags[-1] and not any(flags[:-1]) and seen         # the final model's fit only, not the loop's folds
     reg = on["model"]["region_effect"]
     assert on["settings"]["region_effect"] is True and reg["folds"] > 0 and reg["sd_per_prior_sd"]
