@@ -38,7 +38,7 @@ from .kinds import MIN_POINTS
 from .problem import Problem
 from .solver import blas_threads, levenberg_marquardt
 
-__all__ = ["Validation", "validate", "validate_poses", "heldout_residuals", "before_after", "figure_rows",
+__all__ = ["Validation", "validate", "validate_poses", "heldout_residuals", "unit_sse", "before_after", "figure_rows",
            "bootstrap", "with_u", "ratio_text", "FIGURES", "DIAMETER_MIN_POINTS", "BOOTSTRAP_SAMPLES", "MpeTest",
            "MPE_TESTS", "conformance", "worse_than_nominal"]
 
@@ -296,25 +296,25 @@ def _propagated(prob: Problem, p, states, cov: tuple) -> float | None:
     return float(np.sum((jp @ c) * jp))
 
 
-#: the fewest rows numpy sums pairwise (fewer: one after the other, as :func:`numpy.bincount` adds them)
-_PAIRWISE_ROWS = 8
+def unit_sse(keys: list, r: np.ndarray) -> dict:
+    """{unit: (sum of its squared residuals, its number of rows)} of the residual rows ``r`` whose units are
+    ``keys`` (one a row: a measurement, a point, (measurement, point)), in the order units first appear. One pass
+    over the rows (grouping by a mask per unit was quadratic in the held-out points: the per-pose folds of 10^4
+    points); each unit's rows summed in their order, bit for bit as a boolean mask of them would be."""
+    rows: dict = {}
+    for n, key in enumerate(keys):
+        rows.setdefault(key, []).append(n)
+    return {key: (float(np.sum(r[idx] ** 2)), len(idx)) for key, idx in rows.items()}
 
 
 def _point_norms(e: np.ndarray, point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(idx, norms)``: the points of the rows ``point`` (N,) (-1: a row of no point, left out), ascending, and the
     norm [m] of each one's rows of ``e`` (N,) [m], bit for bit ``sqrt(sum(e[point == i] ** 2))`` but in one pass
-    (that mask per point was quadratic in the rows: 5000 points took seconds). A point of 8 rows or more is summed by
-    :func:`numpy.sum` itself on its rows in their order (numpy sums those pairwise, not one after the other)."""
+    (:func:`unit_sse`; that mask per point was quadratic in the rows: 5000 points took seconds)."""
     on = point >= 0
-    idx, inv, counts = np.unique(point[on], return_inverse=True, return_counts=True)
-    sq = np.asarray(e, dtype=float)[on] ** 2
-    total = np.bincount(inv, weights=sq, minlength=len(idx))
-    big = np.flatnonzero(counts >= _PAIRWISE_ROWS)
-    if len(big):
-        order, ends = np.argsort(inv, kind="stable"), np.cumsum(counts)
-        for k in big:
-            total[k] = np.sum(sq[order[ends[k] - counts[k]: ends[k]]])
-    return idx, np.sqrt(total)
+    sums = unit_sse(point[on].tolist(), np.asarray(e, dtype=float)[on])
+    idx = np.array(sorted(sums), dtype=point.dtype)
+    return idx, np.sqrt(np.array([sums[i][0] for i in idx.tolist()], dtype=float))
 
 
 def validate_poses(model: ArmModel, p, data: CalibrationData, train, weights: Weights | None = None,

@@ -262,10 +262,10 @@ def test_two_plays_that_help_only_together_are_added_as_a_pair():
 
 
 def test_the_held_out_units_sums_equal_a_mask_per_unit_bit_for_bit():
-    """fold_fit's per-unit sums (:func:`calibration.loop.crossval.unit_sse`, one pass over the rows; the per-pose
+    """fold_fit's per-unit sums (:func:`calibration.validation.unit_sse`, one pass over the rows; the per-pose
     branch compared every key with every row, quadratic) equal the sums over a boolean mask of each unit's rows,
     bit for bit, for the three kinds of unit: (measurement, point) pairs, measurements, points."""
-    from calibration.loop.crossval import unit_sse
+    from calibration.validation import unit_sse
     rng = np.random.default_rng(7)
     n = 600
     meas = np.array([f"m{k}" for k in rng.integers(0, 12, n)])

@@ -12,11 +12,11 @@ from scipy import stats
 from arm_model.model import ArmModel
 
 from ..data import CalibrationData
-from ..validation import heldout_residuals
+from ..validation import heldout_residuals, unit_sse
 from .folds import Folds
 from .settings import STABLE_MARGIN
 
-__all__ = ["FoldFit", "CVResult", "fold_fit", "unit_sse", "warm_start", "cross_validate"]
+__all__ = ["FoldFit", "CVResult", "fold_fit", "warm_start", "cross_validate"]
 
 
 @dataclass
@@ -88,17 +88,6 @@ def _not_worse_than_nested(res, nested, model: ArmModel, data: CalibrationData, 
 def warm_start(result) -> dict:
     """The free parameters of a fit by name [SI]: the start of another fit of the same or a larger model."""
     return {n: float(v) for n, v in zip(result.model.spec.names, result.p, strict=True) if n in result.free}
-
-
-def unit_sse(keys: list, r: np.ndarray) -> dict:
-    """{unit: (sum of its squared residuals, its number of rows)} of the residual rows ``r`` whose units are
-    ``keys`` (one a row: a measurement, a point, (measurement, point)), in the order units first appear. One pass
-    over the rows (grouping by a mask per unit was quadratic in the held-out points: the per-pose folds of 10^4
-    points); each unit's rows summed in their order, as a boolean mask of them would be."""
-    rows: dict = {}
-    for n, key in enumerate(keys):
-        rows.setdefault(key, []).append(n)
-    return {key: (float(np.sum(r[idx] ** 2)), len(idx)) for key, idx in rows.items()}
 
 
 def fold_fit(model: ArmModel, design: CalibrationData, folds: Folds, fit, nested: FoldFit | None = None,
