@@ -61,6 +61,7 @@ from .prior import (
     PriorSpec,
     prior_only,
     prior_spec,
+    scale_precision,
     scale_step,
     secant_gains,
     uniform_scale,
@@ -1674,9 +1675,7 @@ def _with_scale_u(s: _Setup, kept, cov: np.ndarray) -> np.ndarray:
     if a is None or not a.set or s.prior is None or not len(kept):
         return cov
     idx = np.asarray(kept, dtype=int)
-    w = a.direction[idx] / s.prior.size[idx] ** 2
-    g = cov @ w
-    den = float(w @ a.direction[idx] - w @ g)
+    _, g, den = scale_precision(a.direction[idx], s.prior.size[idx], cov)
     return cov + np.outer(g, g) / den if den > 0 else cov
 
 

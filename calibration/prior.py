@@ -67,7 +67,8 @@ __all__ = ["GROUP_LENGTHS", "GROUP_OFFSETS", "GROUP_ANGLES", "GROUP_TIP", "GROUP
            "PRIOR_DOMINATED", "BARELY_SEEN", "SCALE_RANGE", "MIN_EFFECTIVE", "TIP_SHARE", "LENGTH_SHARE", "MAX_ANGLE",
            "MIN_SIDE_SHARE", "MIN_SIDE_VISITS", "NIL_LOAD", "PriorSpec", "parameter_groups", "prior_spec",
            "limits", "variance_ratio", "update_scales", "MAX_GAIN", "secant_gains", "both_sides",
-           "side_visits", "unseen_side", "prior_only", "MAX_SCALE_U", "uniform_scale", "scale_step"]
+           "side_visits", "unseen_side", "prior_only", "MAX_SCALE_U", "uniform_scale", "scale_step",
+           "scale_precision"]
 
 GROUP_LENGTHS = "lengths"
 GROUP_OFFSETS = "joint offsets"
@@ -525,8 +526,16 @@ def scale_step(direction: np.ndarray, size: np.ndarray, delta: np.ndarray, cov: 
     (``delta`` the fit's ``p - centre``), exact for a linear model, and the denominator is the posterior precision
     of ``s``: ``u = den^-1/2`` (inf where the data do not see the direction). Vectors over the free parameters
     [SI]."""
-    w = direction / size ** 2
-    den = float(w @ direction - w @ cov @ w)
+    w, _, den = scale_precision(direction, size, cov)
     if not den > 0:
         return 0.0, math.inf
     return float(w @ delta) / den, 1.0 / math.sqrt(den)
+
+
+def scale_precision(direction: np.ndarray, size: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """``(w, g, den)`` of the arm's scale along ``direction`` under a flat prior: ``w = L d`` (``L = diag(1 /
+    size^2)``), ``g = cov w`` and the scale's posterior precision ``den = d^T L d - w^T cov w`` (the Schur complement
+    of :func:`scale_step`; the covariance with the scale's uncertainty is ``cov + g g^T / den``)."""
+    w = direction / size ** 2
+    g = cov @ w
+    return w, g, float(w @ direction - w @ g)
