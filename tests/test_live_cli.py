@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import signal
 import socket
 import subprocess
@@ -19,6 +20,7 @@ from arm_model import InputError
 from arm_model.cli import main
 from arm_model.io import read_points
 from arm_model.live import SampleLayout, read_status
+from arm_model.live.sources import open_source
 from conftest import ROOT
 
 EXAMPLE = ROOT / "examples" / "live"
@@ -76,6 +78,53 @@ def test_tcp_gives_the_file_session(short):
     assert (out / "tips.csv").read_bytes() == (short / "file" / "tips.csv").read_bytes()
 
 
+def _wait_bound(port: int, timeout: float = 60.0) -> None:
+    """Until a UDP socket listens on ``port`` (Linux's /proc/net/udp; elsewhere 1 s): a datagram sent before
+    the session binds is lost, however loaded the machine."""
+    tables = [p for p in ("/proc/net/udp", "/proc/net/udp6") if os.path.exists(p)]
+    if not tables:
+        time.sleep(1.0)
+        return
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        for table in tables:
+            with open(table) as fh:
+                if any(int(row.split()[1].rsplit(":", 1)[1], 16) == port for row in list(fh)[1:]):
+                    return
+        time.sleep(0.02)
+
+
+def test_a_udp_source_holds_a_burst_while_the_session_is_busy(short):
+    """The session asks the kernel for a large receive buffer: a whole 4 s stream sent while nothing reads
+    arrives whole (where the system grants the buffer; the console says when it does not)."""
+    from arm_model.live.sources import UDP_BUFFER_BYTES
+    source = open_source("udp://127.0.0.1:0")
+    try:
+        if source.buffer_bytes < UDP_BUFFER_BYTES:
+            pytest.skip(f"this system grants a UDP buffer of {source.buffer_bytes} bytes only")
+        lines = (short / "samples.csv").read_bytes().splitlines(keepends=True)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            for k in range(0, len(lines), 20):
+                s.sendto(b"".join(lines[k:k + 20]), source.address)
+        got = []
+        for chunk in source.chunks():
+            if chunk is None:
+                break
+            got += [raw for _, raw in chunk]
+        assert got == [line.rstrip(b"\r\n") for line in lines]
+    finally:
+        source.close()
+
+
+def test_a_small_udp_buffer_is_said(tmp_path, monkeypatch, capsys):
+    from arm_model.live import sources
+    monkeypatch.setattr(sources._UdpSource, "_ask_buffer", lambda self, size: 212992)
+    assert live("udp://127.0.0.1:0", "-o", tmp_path / "s", "--stop-after-idle-s", "0.3") == 2
+    err = capsys.readouterr().err
+    assert "the UDP receive buffer is 208 KiB" in err and "net.core.rmem_max=8388608" in err
+    assert not (tmp_path / "s").exists()
+
+
 def test_udp_gives_the_file_session(short):
     probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     probe.bind(("127.0.0.1", 0))
@@ -84,14 +133,14 @@ def test_udp_gives_the_file_session(short):
     lines = (short / "samples.csv").read_text().splitlines(keepends=True)
 
     def send():
-        time.sleep(1.0)
+        _wait_bound(port)
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
             s.sendto(b"0.5,1,2,3,4,5,6,7,0,0,0,0\n", ("127.0.0.1", port))    # before any header: skipped
             for k in range(1, len(lines), 20):
                 if k % 1000 == 1:
                     s.sendto(lines[0].encode(), ("127.0.0.1", port))          # the header, again and again
                 s.sendto("".join(lines[k:k + 20]).encode(), ("127.0.0.1", port))
-                time.sleep(0.001)
+                time.sleep(0.005)     # 4x real time: a pause of the session under ~0.4 s loses nothing in any buffer
     threading.Thread(target=send, daemon=True).start()
     out = short / "udp"
     assert live(f"udp://127.0.0.1:{port}", "-o", out, "--measurement", "m", "--stop-after-idle-s", "1.5") == 0

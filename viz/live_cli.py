@@ -214,6 +214,7 @@ def run_live(args: argparse.Namespace) -> int:
     files = [args.plan, *arm_inputs(args)] + ([Path(args.source)] if _is_file(args.source) else [])
     check_new_folder(args.output, files)
     source = open_source(args.source)
+    _say_small_buffer(source)
     try:
         with _Stop() as stop:
             line, cells, skipped = _header(source, stop, args.stop_after_idle_s)
@@ -228,6 +229,15 @@ def run_live(args: argparse.Namespace) -> int:
             return _run(args, source, session, layout, stop, skipped)
     finally:
         source.close()
+
+
+def _say_small_buffer(source: LineSource) -> None:
+    from arm_model.live.sources import UDP_BUFFER_BYTES
+    granted = getattr(source, "buffer_bytes", None)
+    if granted is not None and granted < UDP_BUFFER_BYTES:
+        log.warning(f"the UDP receive buffer is {granted // 1024} KiB (the system's limit): a pause of the session "
+                    f"longer than that buffer holds loses datagrams (counted as dropped samples); "
+                    f"'sysctl -w net.core.rmem_max={UDP_BUFFER_BYTES}' raises the limit")
 
 
 def _is_file(spec: str) -> bool:

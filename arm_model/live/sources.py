@@ -35,6 +35,9 @@ TICK_S = 0.25
 #: a replayed sample is released at most this early [s]
 AHEAD_S = 0.01
 _CHUNK = 1 << 16
+#: the receive buffer a UDP source asks the kernel for [bytes]: at 1 kHz a stall of seconds (a slow disk, a loaded
+#: machine) loses no datagram. Linux grants at most ``net.core.rmem_max`` unless the process may force more.
+UDP_BUFFER_BYTES = 8 << 20
 #: the most lines of a file read at once (and at most about :data:`_CHUNK` bytes)
 CHUNK_LINES = 1024
 #: the longest line a stream may send [bytes] (a sample line is a few hundred): a longer one is a bad line, its
@@ -254,6 +257,20 @@ class _UdpSource(LineSource):
             self._sock.close()
             raise InputError(f"cannot listen on {spec}: {exc.strerror or exc}") from None
         self._sock.settimeout(TICK_S)
+        self.buffer_bytes = self._ask_buffer(UDP_BUFFER_BYTES)
+
+    def _ask_buffer(self, size: int) -> int:
+        """Asks for a receive buffer of ``size`` bytes (forced where the process may, else as much as the
+        system allows) and returns what the kernel granted."""
+        for option in (getattr(socket, "SO_RCVBUFFORCE", None), socket.SO_RCVBUF):
+            if option is None:
+                continue
+            try:
+                self._sock.setsockopt(socket.SOL_SOCKET, option, size)
+                break
+            except OSError:
+                continue
+        return int(self._sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF))
 
     @property
     def address(self) -> tuple:
