@@ -59,6 +59,24 @@ def exit_status(argv) -> int:
         return exc.code
 
 
+def wait_udp_bound(port: int, timeout: float = 60.0) -> None:
+    """Until a UDP socket listens on ``port`` (Linux's /proc/net/udp; elsewhere 1 s): a datagram sent before
+    the session binds is lost, however loaded the machine. (Probing by binding the port oneself would race the
+    session's own bind.)"""
+    import time
+    tables = [p for p in ("/proc/net/udp", "/proc/net/udp6") if os.path.exists(p)]
+    if not tables:
+        time.sleep(1.0)
+        return
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        for table in tables:
+            with open(table) as fh:
+                if any(int(row.split()[1].rsplit(":", 1)[1], 16) == port for row in list(fh)[1:]):
+                    return
+        time.sleep(0.02)
+
+
 def pin_configuration(model, values) -> np.ndarray:
     """Pinocchio's configuration vector of ``model`` with the named joints at ``values`` ((name, angle or
     length) pairs; a continuous joint as its cos and sin), the others at neutral: the tests' independent route."""

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import signal
 import socket
 import subprocess
@@ -21,7 +20,7 @@ from arm_model.cli import main
 from arm_model.io import read_points
 from arm_model.live import SampleLayout, read_status
 from arm_model.live.sources import open_source
-from conftest import ROOT
+from conftest import ROOT, wait_udp_bound
 
 EXAMPLE = ROOT / "examples" / "live"
 SAMPLES = EXAMPLE / "samples.csv"
@@ -78,22 +77,6 @@ def test_tcp_gives_the_file_session(short):
     assert (out / "tips.csv").read_bytes() == (short / "file" / "tips.csv").read_bytes()
 
 
-def _wait_bound(port: int, timeout: float = 60.0) -> None:
-    """Until a UDP socket listens on ``port`` (Linux's /proc/net/udp; elsewhere 1 s): a datagram sent before
-    the session binds is lost, however loaded the machine."""
-    tables = [p for p in ("/proc/net/udp", "/proc/net/udp6") if os.path.exists(p)]
-    if not tables:
-        time.sleep(1.0)
-        return
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        for table in tables:
-            with open(table) as fh:
-                if any(int(row.split()[1].rsplit(":", 1)[1], 16) == port for row in list(fh)[1:]):
-                    return
-        time.sleep(0.02)
-
-
 def test_a_udp_source_holds_a_burst_while_the_session_is_busy(short):
     """The session asks the kernel for a large receive buffer: a whole 4 s stream sent while nothing reads
     arrives whole (where the system grants the buffer; the console says when it does not)."""
@@ -133,7 +116,7 @@ def test_udp_gives_the_file_session(short):
     lines = (short / "samples.csv").read_text().splitlines(keepends=True)
 
     def send():
-        _wait_bound(port)
+        wait_udp_bound(port)
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
             s.sendto(b"0.5,1,2,3,4,5,6,7,0,0,0,0\n", ("127.0.0.1", port))    # before any header: skipped
             for k in range(1, len(lines), 20):

@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 from test_reliability_round12 import RING, _run
 
-from conftest import exit_status
+from conftest import exit_status, wait_udp_bound
 
 
 @pytest.mark.parametrize("command, option, value, words", [
@@ -98,14 +98,7 @@ def test_a_udp_session_started_late_skips_any_line_before_the_header(tmp_path, c
     probe.close()
 
     def send():
-        end = time.monotonic() + 30
-        while time.monotonic() < end:       # until the session listens (its port taken)
-            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as p:
-                try:
-                    p.bind(("127.0.0.1", port))
-                except OSError:
-                    break
-            time.sleep(0.02)
+        wait_udp_bound(port)
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
             for d in (b",-153.2937,92.1295,-89.4768\n", b"\xff\xfe garbage\n", b"0.5,1,2,3\n", *lines):
                 s.sendto(d, ("127.0.0.1", port))
