@@ -47,10 +47,16 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["NUMPY_OPS", "Joint", "joint_value", "elastic_displacement", "ball_in_last_frame", "row_motions",
-           "chain_point", "ball_centre_expr", "probe_lever", "has_stylus", "cross"]
+__all__ = ["NUMPY_OPS", "FLOAT_OPS", "Joint", "joint_value", "elastic_displacement", "ball_in_last_frame",
+           "row_motions", "chain_point", "ball_centre_expr", "probe_lever", "has_stylus", "cross"]
 
 NUMPY_OPS = SimpleNamespace(sin=np.sin, cos=np.cos, sign=np.sign)
+#: One point on Python floats (a live point: tens of times cheaper than numpy columns of one value): numpy's own
+#: ``sin``, ``cos`` and ``sign`` as Python floats, and every angle that depends on the inputs (a joint value, the
+#: stylus's bending) taken through them, never skipped when 0, as the batch takes its columns: the batch's numbers
+#: bit for bit (the same IEEE operations in the same order; tests/test_arm_model_evaluators.py).
+FLOAT_OPS = SimpleNamespace(sin=lambda x: float(np.sin(x)), cos=lambda x: float(np.cos(x)),
+                            sign=lambda x: float(np.sign(x)), floats=True)
 
 
 def cross(a: Any, b: Any) -> np.ndarray:
@@ -111,7 +117,8 @@ def _is_const(x: object) -> bool:
 
 
 def _cos_sin(angle: Scalar, ops: Any) -> tuple[Scalar, Scalar]:
-    if _is_const(angle):
+    """cos and sin of an angle that depends on the inputs (:data:`FLOAT_OPS`: always by ``ops``)."""
+    if _is_const(angle) and not getattr(ops, "floats", False):
         return math.cos(angle), math.sin(angle)
     return ops.cos(angle), ops.sin(angle)
 
@@ -227,10 +234,11 @@ def chain_point(convention: str, rows: Sequence[Vector] | np.ndarray, q: Vector,
     never a matrix; a constant zero motion is skipped (exact).
     """
     x, y, z = point
+    floats = getattr(ops, "floats", False)       # FLOAT_OPS: a joint's amount is an input, as the batch's columns
     for i in range(len(rows) - 1, -1, -1):
-        for kind, axis, amount, _, _ in reversed(row_motions(convention, rows[i], joint_value(joints, i, q),
-                                                             None if joints is None else joints[i])):
-            const = _is_const(amount)
+        for kind, axis, amount, _, moves in reversed(row_motions(convention, rows[i], joint_value(joints, i, q),
+                                                                 None if joints is None else joints[i])):
+            const = _is_const(amount) and not (floats and moves)
             if const and amount == 0.0:
                 continue
             if kind == "T":

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .chain import NUMPY_OPS, ball_centre_expr
+from .chain import FLOAT_OPS, NUMPY_OPS, ball_centre_expr
 from .description import ArmDescription
 from .params import split_params
 
@@ -83,6 +83,12 @@ def ball_centres(desc: ArmDescription, q: ArrayLike, wrench: ArrayLike | None = 
         raise ValueError(f"q must have shape (N, {desc.n_joints}), got {q.shape}")
     n = q2.shape[0]
     w = as_wrench(wrench, n)
+    if n == 1:          # one point (a live session's): on Python floats, the batch's numbers bit for bit (FLOAT_OPS)
+        floats = desc.chain_floats(p)
+        x, y, z = ball_centre_expr(desc.convention, floats[0], floats[1], floats[2], q2[0].tolist(),
+                                   None if w is None else w[0].tolist(), FLOAT_OPS, desc.chain_joints,
+                                   floats[3], desc.probe.lever)
+        return np.array([x, y, z]) if single else np.array([[x, y, z]])
     rows, p_last, compliance = split_params(desc, None if p is None else np.asarray(p, dtype=float))
     out = np.empty((n, 3))
 

@@ -249,7 +249,8 @@ def beyond_note(d) -> str:
     [m] of the points from it (:func:`arm_model.discrepancy.pose_distance`)."""
     if not len(d):
         return ""
-    return (f"; these points lie {np.median(d) * 1e3:.1f} mm (median), up to {d.max() * 1e3:.1f} mm from the nearest "
+    median = float(d[0]) if len(d) == 1 else np.median(d)          # one point (a live one's): itself
+    return (f"; these points lie {median * 1e3:.1f} mm (median), up to {d.max() * 1e3:.1f} mm from the nearest "
             "training pose (ball travel of the joint motions)")
 
 

@@ -595,3 +595,51 @@ def test_numpy_function_gives_a_plain_calls_arrays_bit_for_bit(nominal):
         assert np.array_equal(got, np.asarray(want))
     with pytest.raises(ValueError, match="input cb has shape"):
         NumpyFunction(d)(a, b[:, :4], length)
+
+
+_ONE_POINT_ARMS: dict = {}
+
+
+def _one_point_arms(nominal):
+    """Arms of every convention and probe kind for :func:`test_one_point_on_floats_is_the_batch_bit_for_bit` (made
+    once)."""
+    if _ONE_POINT_ARMS:
+        return _ONE_POINT_ARMS
+    arms = _ONE_POINT_ARMS
+    arms.update(_arms(nominal))
+    p_last, rpy = ROTATED_PROBES["arbitrary rpy"]
+    arms["dh-rotated-lever"] = nominal.with_probe(p_last=p_last, rpy=rpy, lever=0.05)
+    arms["mdh-no-stylus"] = _mdh_variant(nominal).with_probe(lever=0.0)
+    arms["dh-nominal"] = nominal
+    return arms
+
+
+@settings(max_examples=30, deadline=None)
+@given(arm=st.sampled_from(["dh", "mdh", "urdf", "dh-rotated-lever", "mdh-no-stylus", "dh-nominal"]),
+       seed=st.integers(0, 2 ** 32 - 1), wrench=st.sampled_from([None, 3, 6]), errors=st.booleans(),
+       zero=st.booleans())
+def test_one_point_on_floats_is_the_batch_bit_for_bit(nominal, arm, seed, wrench, errors, zero):
+    """One point (a live session's tip) runs on Python floats (:data:`arm_model.chain.FLOAT_OPS`): the same ball
+    centre as the same point among others on numpy columns, to the last bit (so within 1e-12 m), on DH, MDH and URDF
+    chains with prismatic and mimic joints, rotated probes, a stylus lever and none, rigid or with a force or a wrench,
+    with parameter errors or without; a joint at exactly 0 and a zero wrench included (the batch turns them, the
+    floats must not skip them); and Pinocchio's centre of the same point to 1e-12 m (an independent evaluator)."""
+    desc = _one_point_arms(nominal)[arm]
+    rng = np.random.default_rng(seed)
+    q = _q_within(desc, rng, 4)
+    w = None if wrench is None else np.column_stack([rng.normal(0, 3.0, (4, 3)), rng.normal(0, 0.05, (4, 3))])
+    if zero:
+        q[1, :2] = 0.0
+        if w is not None:
+            w[2] = 0.0
+    w = None if w is None else w[:, :wrench]
+    p = random_params(rng, desc) if errors else None
+    batch = ball_centres(desc, q, w, p)
+    for i in range(len(q)):
+        one = ball_centres(desc, q[i: i + 1], None if w is None else w[i: i + 1], p)
+        assert one.shape == (1, 3) and np.array_equal(one[0], batch[i]), (i, one[0] - batch[i])
+        assert np.array_equal(ball_centres(desc, q[i], None if w is None else w[i], p), batch[i])
+    if arm == "dh-nominal":
+        pin = PinocchioArm(desc if p is None else apply_params(desc, p))
+        assert_close(ball_centres(desc, q[0], None if w is None else w[0], p),
+                     pin.ball_centre(q[0], None if w is None else w[0]), atol=1e-12)

@@ -10,6 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from hypothesis import given, settings, strategies as st
 
 from arm_model.effects import EncoderEccentricity
 from arm_model.model import ArmModel
@@ -698,3 +699,38 @@ def test_group_deletions_match_the_dense_hat_matrix_by_hand(monkeypatch, large_f
     only[:, 0], only[3, 1] = 1.0, 1.0
     one = SimpleNamespace(sigma=np.ones(4))
     assert fold_errors(one, np.ones(4), BlockNormal(only, 2), 1.0, np.array([2, 3])) is None
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), n_train=st.integers(1, 60), joints=st.integers(1, 8),
+       prismatic=st.integers(0, 2), zero_levers=st.integers(0, 3), tie=st.booleans())
+def test_one_query_is_the_plain_loop_and_the_batch_bit_for_bit(nominal, seed, n_train, joints, prismatic,
+                                                                zero_levers, tie):
+    """One pose asked alone (a live point: :meth:`_PoseSearch.one`, all training poses at once) has the distance a plain
+    loop over the training poses gives (math per pose and joint, a revolute difference wrapped by atan2), to 1e-12
+    relative, and the distance and training row that the same pose gets among others in the blocked search, to the
+    last bit: angles of several turns, prismatic joints, levers of 0 (every one, at most), training poses repeated
+    (a tie: the first row) or a whole turn away."""
+    import arm_model.discrepancy as dm
+    rng = np.random.default_rng(seed)
+    circ = tuple(k >= prismatic for k in range(joints))
+    t = rng.uniform(-9.0, 9.0, (n_train, joints))
+    q = rng.uniform(-9.0, 9.0, (5, joints))
+    lev = rng.uniform(0.0, 1.0, (5, joints))
+    lev[0, rng.permutation(joints)[:zero_levers]] = 0.0
+    if tie and n_train > 2:
+        t[-1] = t[1]
+        q[0] = t[1] + np.where(circ, 2 * np.pi * rng.integers(-2, 3, joints), 0.0) + 1e-7
+    train = dm.TrainingPoses(tuple(f"j{k}" for k in range(joints)), t, circ)
+    d_all, i_all = dm.nearest_pose(nominal, q, train, lev)
+
+    def diff(a, b, c):
+        return math.atan2(math.sin(a - b), math.cos(a - b)) if c else a - b
+    for i in range(len(q)):
+        d1, i1 = dm.nearest_pose(nominal, q[i: i + 1], train, lev[i: i + 1])
+        assert d1[0] == d_all[i] and i1[0] == i_all[i], (i, d1[0] - d_all[i], i1[0], i_all[i])
+        want = min(math.sqrt(sum((lev[i, j] * diff(q[i, j], tp[j], circ[j])) ** 2 for j in range(joints)))
+                   for tp in t)
+        assert d1[0] == pytest.approx(want, rel=1e-12, abs=1e-13)
+    if tie and n_train > 2:                 # rows 1 and T-1 are the same pose: the first of them, never the last
+        assert i_all[0] != n_train - 1
