@@ -139,8 +139,8 @@ def pose_folds(data: CalibrationData, k: int, blocked: bool = False) -> np.ndarr
     :func:`~calibration.data.pose_order`, are dealt to the folds in turn (continuing from instance to
     instance), so that each fold spans the instance's poses: every held-out pose has training neighbours on
     both sides, an interpolative test. ``blocked``: the folds are blocks of the joint space
-    (:func:`~calibration.data.blocked_folds` over every pose that can be held out), so that each fold is predicted from poses
-    away from it, an extrapolative test (Roberts et al. 2017, "Cross-validation strategies for data with
+    (:func:`~calibration.data.blocked_folds` over every pose that can be held out), so that each fold is predicted
+    from poses away from it, an extrapolative test (Roberts et al. 2017, "Cross-validation strategies for data with
     temporal, spatial, hierarchical, or phylogenetic structure", Ecography 40:913); an instance keeps at least
     the points its fit needs outside every fold (the excess of a fold's points in it, first in the
     instance's :func:`~calibration.data.pose_order`, are not held). Either way a
@@ -156,7 +156,7 @@ def pose_folds(data: CalibrationData, k: int, blocked: bool = False) -> np.ndarr
     groups = [(kind, rows) for kind, rows in pose_groups(data)
               if not (len(rows) - math.ceil(len(rows) / k) < MIN_POINTS[kind][0] or len(rows) < 2)]
     if not blocked:
-        for kind, rows in groups:
+        for _, rows in groups:
             out[rows[pose_order(data.points.q[rows])]] = (start + np.arange(len(rows))) % k
             start += len(rows)
         return out

@@ -122,7 +122,8 @@ def choose_folds(design: CalibrationData, settings: LoopSettings) -> tuple[Folds
     n = folds.units
     smallest = 0.5 ** n if n else 1.0
     ok = smallest < level
-    power = {"fold_by": folds.by, "pose_folds": settings.pose_folds if folds.by == "pose" else None, "folds": folds.k, "units": n, "unit": folds.unit_name, "needed": need,
+    power = {"fold_by": folds.by, "pose_folds": settings.pose_folds if folds.by == "pose" else None,
+             "folds": folds.k, "units": n, "unit": folds.unit_name, "needed": need,
              "smallest_p": smallest, "level": level, "can_reach": ok, "stability_rule": STABILITY_RULE}
     why = "" if folds.k == settings.folds else f" (--folds {settings.folds}: only {n_meas} design measurements)"
     if folds.by == "pose" and settings.fold_by == "auto":
