@@ -490,6 +490,38 @@ def pose_order(q: np.ndarray) -> np.ndarray:
     return np.argsort(x @ axis, kind="stable")
 
 
+def blocked_folds(q: np.ndarray, k: int) -> np.ndarray:
+    """Fold (0..k-1) of every pose ``q`` (n, J) [rad]: blocks of the joint space by recursive bisection along the
+    principal directions (:func:`~calibration.data.pose_order` of the part at hand, the angles taken about each
+    joint's circular mean, :func:`centred_angles`): the poses split at the rank that gives the two sides
+    ``floor(k/2)`` and ``ceil(k/2)`` folds' shares, each side split again along its own main direction, until one
+    fold a part. The folds are near equal in size and contiguous in joint space, so that a held-out pose's nearest
+    training pose lies across a block's border rather than beside it. No seed: a function of the poses."""
+    a = centred_angles(q)
+    out = np.zeros(len(a), dtype=int)
+
+    def split(rows: np.ndarray, first: int, parts: int) -> None:
+        if parts < 2 or len(rows) < 2:
+            out[rows] = first
+            return
+        low = parts // 2
+        order = rows[pose_order(a[rows])]
+        cut = int(round(len(rows) * low / parts))
+        split(order[:cut], first, low)
+        split(order[cut:], first + low, parts - low)
+
+    split(np.arange(len(a)), 0, k)
+    return out
+
+
+def centred_angles(q: np.ndarray) -> np.ndarray:
+    """Joint angles ``q`` (n, J) [rad] measured from each joint's circular mean, in (-pi, pi]: a range across +-pi
+    is one interval."""
+    q = np.asarray(q, dtype=float)
+    centre = np.angle(np.mean(np.exp(1j * q), axis=0))
+    return np.angle(np.exp(1j * (q - centre)))
+
+
 def spread(n: int, k: int) -> np.ndarray:
     """``k`` of ``n`` ranks evenly spaced (the middle of each of ``k`` equal parts): ``floor((j + 1/2) n / k)``."""
     return np.floor((np.arange(k) + 0.5) * n / k).astype(int)

@@ -133,26 +133,42 @@ def measurement_folds(data: CalibrationData, k: int) -> dict[str, int]:
     return out
 
 
-def pose_folds(data: CalibrationData, k: int) -> np.ndarray:
-    """Fold (0..k-1) of every point, -1 for points never held out: inside each artefact instance (a
-    feature within a measurement; the reference points as one) the poses, in
+def pose_folds(data: CalibrationData, k: int, blocked: bool = False) -> np.ndarray:
+    """Fold (0..k-1) of every point, -1 for points never held out. Dealt (default): inside each artefact instance
+    (a feature within a measurement; the reference points as one) the poses, in
     :func:`~calibration.data.pose_order`, are dealt to the folds in turn (continuing from instance to
-    instance), so that each fold spans the instance's poses and a held-out pose is predicted against the
-    instance's centre (axis, plane, ``T_ref_base``) fitted on the instance's other poses. An instance whose
-    training part would have fewer points than its fit needs is never held out. No seed: the folds are a
-    function of the poses."""
-    from .data import pose_groups, pose_order
+    instance), so that each fold spans the instance's poses: every held-out pose has training neighbours on
+    both sides, an interpolative test. ``blocked``: the folds are blocks of the joint space
+    (:func:`~calibration.data.blocked_folds` over every pose that can be held out), so that each fold is predicted
+    from poses away from it, an extrapolative test (Roberts et al. 2017, "Cross-validation strategies for data with
+    temporal, spatial, hierarchical, or phylogenetic structure", Ecography 40:913); an instance keeps at least
+    the points its fit needs outside every fold (the excess of a fold's points in it, first in the
+    instance's :func:`~calibration.data.pose_order`, are not held). Either way a
+    held-out pose is predicted against its instance's centre (axis, plane, ``T_ref_base``) fitted on the
+    instance's other poses, and an instance whose training part would have fewer points than its fit needs is
+    never held out. No seed: the folds are a function of the poses."""
+    from .data import blocked_folds, pose_groups, pose_order
     from .kinds import MIN_POINTS
     if k < 2:
         raise ValueError(f"cross-validation needs at least 2 folds, got {k}")
     out = np.full(len(data), -1)
     start = 0
-    for kind, rows in pose_groups(data):
-        n = len(rows)
-        if n - math.ceil(n / k) < MIN_POINTS[kind][0] or n < 2:
-            continue
-        out[rows[pose_order(data.points.q[rows])]] = (start + np.arange(n)) % k
-        start += n
+    groups = [(kind, rows) for kind, rows in pose_groups(data)
+              if not (len(rows) - math.ceil(len(rows) / k) < MIN_POINTS[kind][0] or len(rows) < 2)]
+    if not blocked:
+        for _, rows in groups:
+            out[rows[pose_order(data.points.q[rows])]] = (start + np.arange(len(rows))) % k
+            start += len(rows)
+        return out
+    if not groups:
+        return out
+    rows = np.concatenate([r for _, r in groups])
+    out[rows] = blocked_folds(data.points.q[rows], k)
+    for kind, rows in groups:             # each instance keeps the points its own fit needs in every training part
+        rows = rows[pose_order(data.points.q[rows])]
+        for f in range(k):
+            held = rows[out[rows] == f]
+            out[held[:max(len(held) - (len(rows) - MIN_POINTS[kind][0]), 0)]] = -1
     return out
 
 

@@ -48,6 +48,7 @@ import numpy as np
 from arm_model import NumericalError
 from arm_model.discrepancy import TrainingPoses, joint_levers, travel_shares
 
+from .data import centred_angles
 from .schur import BlockNormal
 
 __all__ = ["EXTREME_SHARE", "RESOLVED_TRAVEL", "Discrepancy", "Growth", "JointGrowth", "extreme_folds", "fit_growth",
@@ -314,9 +315,8 @@ def extreme_folds(q: np.ndarray, share: float = EXTREME_SHARE) -> list[np.ndarra
     if n < 2:
         return out
     k = max(1, int(round(share * n)))
-    for j in range(q.shape[1]):
-        centre = np.angle(np.mean(np.exp(1j * q[:, j])))
-        a = np.angle(np.exp(1j * (q[:, j] - centre)))
+    angles = centred_angles(q)
+    for a in angles.T:
         if np.ptp(a) <= 1e-9:
             continue
         order = np.argsort(a, kind="stable")

@@ -30,7 +30,7 @@ from .cli import (
     weights_from_args,
     with_artefact_drift,
 )
-from .loop.settings import MAX_COUNT
+from .loop.settings import MAX_COUNT, POSE_FOLDS
 
 __all__ = ["register", "run"]
 
@@ -73,6 +73,10 @@ def register(sub) -> None:
                    help="folds of the held-out decisions: whole measurements, or poses inside each feature "
                         "(predicted against the feature's centre fitted on its other poses); auto (default): by "
                         "measurement when there are enough measurements for the test to reach --alpha, else by pose")
+    p.add_argument("--pose-folds", choices=POSE_FOLDS, default="dealt",
+                   help="folds by pose: dealt (default: each feature's poses dealt in turn along their main "
+                        "direction, every held-out pose between training ones) or blocked (blocks of the joint "
+                        "space, each fold predicted from poses away from it)")
     p.add_argument("--alpha", type=ALPHA, default=0.01,
                    help="significance level of the held-out test to add an effect (Bonferroni over the candidates "
                         "tested) and of the final structure tests (Holm) (default 0.01)")
@@ -166,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
     _check_folds(args.folds, points, reference)
     weights = weights_from_args(args)
     holdout = parse_holdout(args.holdout)
-    settings = LoopSettings(folds=args.folds, alpha=args.alpha, fold_by=args.fold_by,
+    settings = LoopSettings(folds=args.folds, alpha=args.alpha, fold_by=args.fold_by, pose_folds=args.pose_folds,
                             **({"holdout": tuple(holdout)} if isinstance(holdout, list) else
                                {"test_fraction": holdout} if holdout is not None else {}),
                             screen_alpha=args.screen_alpha, min_improvement=args.min_improvement,

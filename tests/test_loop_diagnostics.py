@@ -111,9 +111,66 @@ def test_splits_are_functions_of_the_data_not_of_the_row_order(nominal):
         assert measurement_folds(other, 3) == measurement_folds(data, 3)
         assert spread_measurements(other, 0.25) == spread_measurements(data, 0.25)
         assert poses(other, split_poses(other, 0.25)) == poses(data, split_poses(data, 0.25))
-        fa, fb = pose_folds(data, 4), pose_folds(other, 4)
-        for f in range(4):
-            assert poses(other, fb == f) == poses(data, fa == f), f
+        for blocked in (False, True):
+            fa, fb = pose_folds(data, 4, blocked), pose_folds(other, 4, blocked)
+            for f in range(4):
+                assert poses(other, fb == f) == poses(data, fa == f), (blocked, f)
+
+
+def test_blocked_folds_by_hand():
+    """Poses t v / 12 on a line in joint space (t = 0..11 given shuffled): 4 blocked folds are the four runs of 3
+    consecutive t (the line bisected at its middle, each half at its own), 3 folds runs of 4 (the first cut at
+    1/3: floor(3/2) = 1 fold's share on one side); the same on the poses -t v / 12."""
+    from calibration.data import blocked_folds
+    t = np.random.default_rng(0).permutation(12).astype(float)
+    v = np.array([0.2, -0.9, 0.1])
+    for q in (np.outer(t, v) / 12, np.outer(-t, v) / 12):
+        for k in (4, 3):
+            f = blocked_folds(q, k)
+            runs = [set(t[f == g]) for g in range(k)]
+            assert sorted(map(sorted, runs)) == [list(np.arange(i, i + 12 // k, dtype=float))
+                                                 for i in range(0, 12, 12 // k)], (k, f)
+
+
+def test_blocked_folds_lie_apart_from_their_training_poses():
+    """A sweep-like pose set (48 poses spread over a plane of a 7-joint space, with scatter): each held-out
+    pose's nearest training pose is on average more than 1.5 times as far with blocked folds as with the dealt
+    ones, the folds are equal in size, and the construction depends on the poses alone (rows shuffled: the
+    same poses in each fold)."""
+    from calibration.data import blocked_folds, pose_order
+    rng = np.random.default_rng(3)
+    plane = rng.normal(size=(2, 7))
+    q = rng.uniform(-1, 1, (48, 2)) @ plane + 0.02 * rng.normal(size=(48, 7))
+
+    def nearest(f):
+        return np.mean(np.concatenate([np.min(np.linalg.norm(q[f == g][:, None] - q[f != g][None], axis=2), axis=1)
+                                       for g in range(4)]))
+    blocked = blocked_folds(q, 4)
+    dealt = np.empty(48, dtype=int)
+    dealt[pose_order(q)] = np.arange(48) % 4
+    assert np.bincount(blocked).tolist() == [12] * 4
+    assert nearest(blocked) > 1.5 * nearest(dealt), (nearest(blocked), nearest(dealt))
+    perm = rng.permutation(48)
+    again = blocked_folds(q[perm], 4)
+    for g in range(4):
+        assert sorted(perm[again == g]) == sorted(np.flatnonzero(blocked == g))
+
+
+def test_blocked_pose_folds_keep_each_feature_fittable(nominal):
+    """Blocked folds by pose on a campaign: every fold holds poses out, and every instance keeps at least the
+    points its fit needs outside each fold; LoopSettings refuses an unknown way of folding."""
+    from calibration.data import pose_groups
+    from calibration.diagnostics import pose_folds
+    from calibration.kinds import MIN_POINTS
+    from calibration.loop import LoopSettings
+    _, data, _ = fitted(nominal)
+    f = pose_folds(data, 4, blocked=True)
+    assert all(np.sum(f == g) > 0 for g in range(4))
+    for kind, rows in pose_groups(data):
+        for g in range(4):
+            assert np.sum(f[rows] != g) >= MIN_POINTS[kind][0], (kind, g)
+    with pytest.raises(ValueError, match="pose_folds"):
+        LoopSettings(pose_folds="random")
 
 
 def test_pose_order_and_spread_by_hand():

@@ -115,18 +115,21 @@ def choose_folds(design: CalibrationData, settings: LoopSettings) -> tuple[Folds
         n_poses = int(sum(np.sum(design.points.feature[design.points.measurement == m] != "") for m in assign))
         folds = Folds("measurement", k, assign, per_pose, n_poses)
     else:
-        folds = Folds("pose", settings.folds, pose_folds(design, settings.folds))
+        folds = Folds("pose", settings.folds, pose_folds(design, settings.folds, settings.pose_folds == "blocked"))
         if folds.units < folds.k:
             raise InputError(f"--folds {folds.k}: the design set has {folds.units} poses that can be held out (a "
                              "feature keeps the poses its own fit needs); give at most that many folds by pose")
     n = folds.units
     smallest = 0.5 ** n if n else 1.0
     ok = smallest < level
-    power = {"fold_by": folds.by, "folds": folds.k, "units": n, "unit": folds.unit_name, "needed": need,
+    power = {"fold_by": folds.by, "pose_folds": settings.pose_folds if folds.by == "pose" else None,
+             "folds": folds.k, "units": n, "unit": folds.unit_name, "needed": need,
              "smallest_p": smallest, "level": level, "can_reach": ok, "stability_rule": STABILITY_RULE}
     why = "" if folds.k == settings.folds else f" (--folds {settings.folds}: only {n_meas} design measurements)"
     if folds.by == "pose" and settings.fold_by == "auto":
         why = f" (only {n_meas} design measurement: whole measurements cannot be held out)"
+    if folds.by == "pose" and settings.pose_folds == "blocked":
+        why += ", blocks of the joint space"
     elif folds.per_pose:
         why += (f", {folds.k} of {n_meas} measurements held out in turn, the test over their poses (each against "
                f"its measurement's own centre: {n_meas} measurements are too few units)")

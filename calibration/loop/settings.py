@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from ..identifiability import DEFAULT_RANK_TOL
 
 __all__ = ["LoopSettings", "wilcoxon_units_needed", "STABILITY_RULE", "STABLE_MARGIN", "SAME_SIGNATURE", "PHYSICS",
-           "PARSIMONY", "NOISE_OFF", "FOLD_BY", "LEGACY_RESOLUTION", "MAX_COUNT"]
+           "PARSIMONY", "NOISE_OFF", "FOLD_BY", "POSE_FOLDS", "LEGACY_RESOLUTION", "MAX_COUNT"]
 
 #: the practical-resolution rule the loop's fits without a prior keep (calibrate's default before its prior)
 LEGACY_RESOLUTION = 0.1
@@ -24,6 +24,10 @@ NOISE_OFF = 2.0
 #: how the decisions' folds are made: by whole measurement, by pose inside each feature, or the first
 #: that can reach the significance level
 FOLD_BY = ("auto", "measurement", "pose")
+#: how folds by pose are made (:func:`calibration.diagnostics.pose_folds`): each instance's poses dealt in turn along
+#: their main direction (every held-out pose between training ones: interpolative), or blocks of the joint space
+#: (each fold predicted from poses away from it: extrapolative)
+POSE_FOLDS = ("dealt", "blocked")
 #: the most effects to add, candidates to cross-validate a stage or pairs to try (``max_effects``, ``cv_top``,
 #: ``pairs``): more than any arm's library offers (every family of a J-joint chain: J^2 + 2 J + 10 candidates, 970 at
 #: 30 joints); beyond it a count is a typo (``--cv-top 1e300`` was taken, and written to summary.json as a 301-digit
@@ -82,6 +86,7 @@ class LoopSettings:
     drop_outliers: bool = True
     holdout: tuple = ()
     fold_by: str = "auto"
+    pose_folds: str = "dealt"
     weights_from_data: bool = True
     synthesise: bool = True
     physics: bool = True
@@ -96,6 +101,8 @@ class LoopSettings:
         object.__setattr__(self, "holdout", tuple(self.holdout or ()))
         if self.fold_by not in FOLD_BY:
             raise ValueError(f"fold_by must be one of {', '.join(FOLD_BY)}, got {self.fold_by!r}")
+        if self.pose_folds not in POSE_FOLDS:
+            raise ValueError(f"pose_folds must be one of {', '.join(POSE_FOLDS)}, got {self.pose_folds!r}")
         if self.folds < 2:
             raise ValueError(f"folds must be at least 2, got {self.folds}")
         if not 0.0 < self.test_fraction < 1.0:
