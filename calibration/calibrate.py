@@ -56,6 +56,7 @@ from .identifiability import (
 )
 from .options import FitOptions
 from .prior import (
+    GEOMETRY_GROUPS,
     MAX_SCALE_U,
     PRIOR_DOMINATED,
     PriorSpec,
@@ -1573,7 +1574,8 @@ def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
         cov = _covariance(s, ev, kept, var)
         kept_arr = np.asarray(kept, dtype=int)
         rho = variance_ratio(np.diag(cov), s.prior.size[kept_arr])
-        targets, gamma = update_scales(s.scales, s.spec, kept_arr, sol.p[kept_arr] - s.prior.centre[kept_arr], rho)
+        targets, gamma = update_scales(s.scales, s.spec, kept_arr, sol.p[kept_arr] - s.prior.centre[kept_arr], rho,
+                                       GEOMETRY_GROUPS if options.prior_groups == "pooled" else ())
         steps = {g: math.log(targets[g] / tau) for g, tau in s.scales.items()}
         factors = {}
         if options.weights_from_data:

@@ -255,6 +255,26 @@ def test_a_physical_group_keeps_its_scale_while_the_evidence_moves_the_others():
     assert new["effect c"] == 1.0 and gamma == {"lengths": 2.0, "effect c": 2.0}
 
 
+def test_pooled_groups_share_one_fixed_point_and_the_others_keep_their_own():
+    """``prior_groups="pooled"``: lengths (two parameters 3 sizes off, both determined), joint offsets (one, 1 size
+    off, rho 0.5) and a physical compliance group. Pooled over the geometric groups the scale of both is
+    sqrt((9 + 9 + 1) / (2 + 0.5)) = 2.757 (hand-derived), separate 3 and sqrt(1 / 0.5) = 1.414; the physical group
+    stays at 1 either way, and so does the pool when its groups determine fewer than 0.5 parameters in all."""
+    from calibration.prior import GEOMETRY_GROUPS, PriorSpec, update_scales
+    spec = PriorSpec(("lengths", "lengths", "joint offsets", "effect c"), np.array([1e-3, 1e-3, 1e-3, 2e-4]),
+                     np.array([-np.inf, -np.inf, -np.inf, 0.0]), ("a",) * 4, frozenset({"effect c"}))
+    delta, rho = np.array([3e-3, -3e-3, 1e-3, 6e-4]), np.array([0.0, 0.0, 0.5, 0.0])
+    start = {"lengths": 1.0, "joint offsets": 1.0, "effect c": 1.0}
+    apart, gamma = update_scales(start, spec, [0, 1, 2, 3], delta, rho)
+    pooled, gamma_pooled = update_scales(start, spec, [0, 1, 2, 3], delta, rho, GEOMETRY_GROUPS)
+    assert apart["lengths"] == pytest.approx(3.0, rel=1e-12)
+    assert apart["joint offsets"] == pytest.approx(np.sqrt(2.0), rel=1e-12)
+    assert pooled["lengths"] == pooled["joint offsets"] == pytest.approx(np.sqrt(19 / 2.5), rel=1e-12)
+    assert pooled["effect c"] == apart["effect c"] == 1.0 and gamma_pooled == gamma
+    unseen, _ = update_scales(start, spec, [0, 1, 2, 3], delta, np.array([0.95, 0.95, 0.95, 0.0]), GEOMETRY_GROUPS)
+    assert unseen["lengths"] == unseen["joint offsets"] == 1.0
+
+
 def test_joint_compliance_groups_are_physical_and_given_sizes_are_not():
     """prior_spec marks the joint compliance effect's group physical (every parameter sized by the data's
     torque); a size given for one of its parameters makes the group an ordinary one (the user's size)."""

@@ -63,8 +63,9 @@ class LoopSettings:
     close-loop --holdout``), the outer test set's rows are kept out of it, as ``calibrate --holdout`` keeps its
     held-out measurements out of its model. ``prior_scale``: "auto" (default: the prior with the evidence's scales,
     "evidence", when the base model holds a joint compliance, whose prior is physical, else None: no prior, the
-    practical-resolution rule), "evidence", a factor, or None. ``arm_scale``: every fit's
-    :attr:`calibration.options.FitOptions.arm_scale`. ``escalate``: when the outer test set is worse than
+    practical-resolution rule), "evidence", a factor, or None. ``arm_scale``, ``prior_groups``: every fit's
+    :attr:`calibration.options.FitOptions.arm_scale` and :attr:`~calibration.options.FitOptions.prior_groups`.
+    ``escalate``: when the outer test set is worse than
     stated once the default families are exhausted (:func:`~calibration.loop.verdict.heldout_check`), the
     families off by default (:data:`~calibration.candidates.OPT_IN_FAMILIES`) not offered yet are offered, once,
     under the same rules (``aacmm close-loop`` turns it off when ``--candidates`` names the families).
@@ -92,6 +93,7 @@ class LoopSettings:
     physics: bool = True
     prior_scale: float | str | None = "auto"
     arm_scale: str = "prior"
+    prior_groups: str = "separate"
     test_in_model: bool = True
     escalate: bool = True
     pairs: int = 2
