@@ -959,6 +959,8 @@ def prior_lines(res) -> list[str]:
            + (f", the scales chosen by the evidence ({len(res.evidence)} rounds"
               + ("" if res.evidence[-1].get("settled", True) else "; " + res.evidence[-1]["note"]) + ")"
               if evidence else " (scales given)") + ":"]
+    if res.pooled_groups():
+        out.append(f"  one scale for {', '.join(res.pooled_groups())} (--prior-groups pooled)")
     for g, v in res.prior_groups.items():
         physical = (" (a physical prior: not chosen by the evidence)" if v.get("physical") else
                     " (a physical maximum: the evidence may shrink it, never above 1)" if v.get("capped") else "")

@@ -47,14 +47,15 @@ def main(argv=None) -> int:
     p.add_argument("--pin", default="", help="comma-separated group=scale pinned (e.g. 'lengths=3')")
     p.add_argument("--methods", default="calibrate,close-loop")
     p.add_argument("-o", "--output", type=Path, required=True)
-    p.add_argument("rest", nargs="*", help="after --: options of the study script")
-    args = p.parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    cut = argv.index("--") if "--" in argv else len(argv)
+    args = p.parse_args(argv[:cut])             # after --: options of the study script
     pins = {k: float(v) for k, v in (s.split("=") for s in args.pin.split(",") if s)}
     if pins:
         CALIBRATE.update_scales = pinned_update(pins)     # what calibrate() calls, for this process only
     fit = ["--prior-groups", args.groups]
     loop = fit + ["--pose-folds", args.pose_folds]
-    rest = ["--methods", args.methods, "-o", str(args.output), *args.rest]
+    rest = ["--methods", args.methods, "-o", str(args.output), *argv[cut + 1:]]
     if args.study == "real":
         import real_seats_study
         return int(real_seats_study.main(["--calibrate-options", " ".join(fit), "--loop-options", " ".join(loop),

@@ -275,6 +275,28 @@ def test_pooled_groups_share_one_fixed_point_and_the_others_keep_their_own():
     assert unseen["lengths"] == unseen["joint offsets"] == 1.0
 
 
+def test_a_pooled_fit_gives_the_geometry_one_scale_and_says_so(model):
+    """``prior_groups="pooled"`` on a simulated campaign whose lengths and tip are off by 0.1 mm and angles by 1 mrad
+    (ten times as many plausible sizes): separate, the evidence gives both angles' groups a scale over twice the
+    lengths' and the tip's; pooled, the four geometric groups one scale (each under its ceiling) between the separate
+    ones, which the result, the console and summary.json name; an unknown choice is refused."""
+    from calibration.cli import prior_lines
+    data, _ = _campaign(model, 3, length=1e-4, angle=1e-3, probe=1e-4)
+    apart = calibrate(model, data, FitOptions(weights=W))
+    pooled = calibrate(model, data, FitOptions(weights=W, prior_groups="pooled"))
+    geometry = [g for g in (GROUP_LENGTHS, GROUP_OFFSETS, GROUP_ANGLES, GROUP_TIP) if g in pooled.prior_scales]
+    assert len(geometry) == 4 and apart.pooled_groups() == []
+    sep = apart.prior_scales
+    assert min(sep[GROUP_ANGLES], sep[GROUP_OFFSETS]) > 2 * max(sep[GROUP_LENGTHS], sep[GROUP_TIP]), sep
+    tau = [pooled.prior_scales[g] for g in geometry]
+    assert max(tau) == pytest.approx(min(tau), rel=1e-9), pooled.prior_scales
+    assert min(sep[g] for g in geometry) < tau[0] < max(sep[g] for g in geometry)
+    assert pooled.to_dict()["prior"]["pooled"] == geometry == pooled.pooled_groups()
+    assert any("one scale for lengths" in line for line in prior_lines(pooled))
+    with pytest.raises(ValueError, match="prior_groups"):
+        FitOptions(prior_groups="together")
+
+
 def test_joint_compliance_groups_are_physical_and_given_sizes_are_not():
     """prior_spec marks the joint compliance effect's group physical (every parameter sized by the data's
     torque); a size given for one of its parameters makes the group an ordinary one (the user's size)."""
