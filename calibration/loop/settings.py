@@ -5,6 +5,7 @@ import math
 from dataclasses import dataclass
 
 from ..identifiability import DEFAULT_RANK_TOL
+from ..prior import PRIOR_GROUPS
 
 __all__ = ["LoopSettings", "wilcoxon_units_needed", "STABILITY_RULE", "STABLE_MARGIN", "SAME_SIGNATURE", "PHYSICS",
            "PARSIMONY", "NOISE_OFF", "FOLD_BY", "POSE_FOLDS", "LEGACY_RESOLUTION", "MAX_COUNT"]
@@ -105,6 +106,8 @@ class LoopSettings:
             raise ValueError(f"fold_by must be one of {', '.join(FOLD_BY)}, got {self.fold_by!r}")
         if self.pose_folds not in POSE_FOLDS:
             raise ValueError(f"pose_folds must be one of {', '.join(POSE_FOLDS)}, got {self.pose_folds!r}")
+        if self.prior_groups not in PRIOR_GROUPS:
+            raise ValueError(f"prior_groups must be one of {', '.join(PRIOR_GROUPS)}, got {self.prior_groups!r}")
         if self.folds < 2:
             raise ValueError(f"folds must be at least 2, got {self.folds}")
         if not 0.0 < self.test_fraction < 1.0:
