@@ -10,7 +10,7 @@ import unicodedata
 from pathlib import Path
 
 __all__ = ["AacmmError", "InputError", "NumericalError", "read_text", "open_input", "decode_text", "parse_toml",
-           "did_you_mean", "unknown_key", "id_problem", "folder_path_problem", "resolved", "beside", "named_in",
+           "did_you_mean", "unknown_key", "id_problem", "resolved", "beside", "named_in",
            "text_lines", "INVISIBLE", "MAX_ID_LENGTH"]
 
 
@@ -92,7 +92,8 @@ def open_input(path: str | Path, what: str):
     """A user's input file opened for reading bytes, or an InputError naming it (``what``: which file
     it is, "the points file"). A folder, a FIFO or a device is refused: it is not a file (and reading
     a FIFO would wait forever). A path is opened as given: ``"samples.csv/"`` is refused as the system refuses it
-    (not a directory; ``Path`` would drop the separator and read the file: :func:`folder_path_problem`)."""
+    (not a directory; ``Path`` would drop the separator and read the file: the command line's paths are checked as
+    given by :func:`arm_model.cli_options.path_arg`)."""
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))     # a FIFO's open would wait
     except IsADirectoryError:
@@ -113,25 +114,6 @@ def open_input(path: str | Path, what: str):
     except BaseException:
         os.close(fd)
         raise
-
-
-_SEPARATORS = tuple(s for s in (os.sep, os.altsep) if s)
-
-
-def folder_path_problem(arg: str) -> InputError | None:
-    """An InputError naming ``arg`` when it ends in a path separator but names what is not a folder
-    (``samples.csv/``: the system says "Not a directory"), else None. ``pathlib.Path`` drops a trailing separator,
-    so a command's path argument would read ``samples.csv``: every argument of the command line is checked as
-    given (:func:`arm_model.cli.main`), as :func:`open_input` opens a path given as text."""
-    if not arg.endswith(_SEPARATORS):
-        return None
-    try:
-        os.stat(arg)
-    except NotADirectoryError as exc:
-        return InputError(f"{exc.strerror}: a path that ends in '{arg[-1]}' names a folder", arg)
-    except (OSError, ValueError):       # absent, unreadable: the command that uses it says so
-        pass
-    return None
 
 
 def resolved(path: str | Path) -> Path:
