@@ -6,15 +6,14 @@ from __future__ import annotations
 import argparse
 import logging
 import math
-import os
 from pathlib import Path
 
 from .csv_io import SPACE, parse_number
-from .errors import InputError, id_problem
+from .errors import InputError, path_problem
 from .model_file import Arm, load_model
 
 __all__ = ["add_arm_options", "add_frame_options", "add_output_option", "output_path", "file_output_path",
-           "path_arg", "folder_arg", "path_problem",
+           "path_arg", "folder_arg",
            "arm_from_args", "arm_inputs", "model_from_args", "number_in", "positive", "non_negative", "at_least",
            "fraction", "finite", "seed", "port", "duration_s", "MAX_WAIT_S", "comma_list"]
 
@@ -107,51 +106,9 @@ def duration_s(zero: bool = True):
     return number_in(0, MAX_WAIT_S, low_open=not zero)
 
 
-_SEPARATORS = tuple(s for s in (os.sep, os.altsep) if s)
-
-
-def path_problem(text: str, folder: bool = False) -> str | None:
-    """Why ``text``, a path as given on the command line, cannot name a file (``folder``: a folder) that a command
-    reads or writes, or None. Checked on the text as given, whatever the spelling of its option (``-o X``, ``-oX``,
-    ``--output=X``, ``--out X``), before :class:`pathlib.Path` drops a trailing ``/`` or ``/.``:
-
-    - an empty path names the current folder ("$DIR" of an unset variable);
-    - a byte that is not UTF-8 (calibrate wrote its whole fit, then failed on residuals.csv, exit 3), a line break,
-      tab or other control character, an invisible or text-direction character, or white space at its
-      ends (:func:`arm_model.errors.id_problem`): the outputs name their inputs (summary.json, residuals.csv, whose
-      reader strips its cells) and the console quotes them, and could not name this one;
-    - a path ending in ``/`` or ``/.`` that the system refuses as "Not a directory" (``samples.csv/``);
-    - a file given with a trailing ``/`` or ``/.`` (``t.csv/`` names a folder; Path() dropped it and the file
-      ``t.csv`` was read or written)."""
-    if not text.strip():
-        return "expected a path, got an empty one (an unset shell variable?)"
-    bad = next((c for c in text if "\ud800" <= c <= "\udfff"), None)
-    if bad is not None:         # a name's byte that is not UTF-8 (Python's argv holds it as a lone surrogate)
-        byte = f" (byte 0x{ord(bad) - 0xDC00:02x})" if ord(bad) >= 0xDC80 else ""
-        return (f"the path {ascii(text)[:60]} is not UTF-8 text{byte}: the outputs, which name their inputs, could "
-                "not name it; rename the file (or its folder)")
-    why = id_problem(text)
-    if why:
-        return f"the path {why}: rename the file (or its folder)"
-    tail = next((s + d for s in _SEPARATORS for d in ("", ".") if text.endswith(s + d)), None)
-    if tail is None:            # Path() keeps what the system sees: the command that uses the path says what is wrong
-        return None
-    try:
-        os.stat(text)
-    except NotADirectoryError as exc:
-        return f"{text!r}: {exc.strerror}: a path that ends in {tail!r} names a folder"
-    except (OSError, ValueError):       # absent, unreadable: the command that uses it says so
-        pass
-    if not folder:
-        plain = text[:-len(tail)].rstrip("".join(_SEPARATORS))
-        return (f"{text!r} ends with {tail!r}, which names a folder: this argument is a file"
-                + (f" (give {plain!r})" if plain else ""))
-    return None
-
-
 def path_arg(text: str, folder: bool = False) -> Path:
     """argparse type of every path argument of the toolkit (an input file, ``--arm``, an output): the path, or an
-    argparse error saying why the text as given cannot name one (:func:`path_problem`)."""
+    argparse error saying why the text as given cannot name one (:func:`arm_model.errors.path_problem`)."""
     why = path_problem(text, folder)
     if why:
         raise argparse.ArgumentTypeError(why)

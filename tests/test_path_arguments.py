@@ -161,3 +161,33 @@ def test_odd_path_strings_never_give_a_traceback(capsys, text, at):
         assert rc in (0, 2) and "Traceback" not in err and "internal error" not in err, (argv, err)
         assert points.read_bytes() == before
         assert {p.name for p in Path(tmp).iterdir()} == {"w"}
+
+
+def test_a_path_named_inside_a_file_with_a_trailing_slash_is_refused_at_its_key(tmp_path, nominal, capsys):
+    """A model file's ``covariance = "c.csv/"`` (or ``training_poses``) and a campaign's ``arm = "arm.toml/"`` read
+    the file ``c.csv``, ``arm.toml`` (Path drops the slash): refused at the key, as on the command line."""
+    from arm_model.model_file import format_model, parse_model
+    (tmp_path / "c.csv").write_text("x\n")
+    for name, tail in (("c.csv/", "'/'"), ("c.csv/.", "'/.'")):
+        with pytest.raises(InputError, match=rf"key 'calibration.covariance': 'covariance': '{name}': Not a directory: "
+                                             rf"a path that ends in {tail} names a folder"):
+            parse_model(format_model(nominal, covariance=name), str(tmp_path / "m.toml"))
+    (tmp_path / "arm.toml").write_text(Path(ROOT / "urdf" / "aacmm7.dh.toml").read_text())
+    camp = tmp_path / "c.toml"
+    camp.write_text(CAMPAIGN.read_text().replace('arm = "aacmm7"', 'arm = "arm.toml/"'))
+    assert exit_status(["simulate", str(camp), "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "key 'arm': 'arm': 'arm.toml/': Not a directory" in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_output_that_is_an_input_under_another_name_is_refused(tmp_path, capsys):
+    """``tip -o copy.csv``, copy.csv a hard link to the points file: the guard compared resolved paths only, and
+    copy.csv was replaced; now the same file (device and inode) is refused too, exit 2, nothing written."""
+    points = _small_points(tmp_path)
+    os.link(points, tmp_path / "copy.csv")
+    before = _listing(tmp_path)
+    assert exit_status(["tip", str(points), "--arm", "aacmm7", "-o", str(tmp_path / "copy.csv")]) == 2
+    err = capsys.readouterr().err
+    assert f"it is the input {points} under another name (a hard link)" in err, err
+    assert _listing(tmp_path) == before and os.path.samefile(points, tmp_path / "copy.csv")
