@@ -144,3 +144,12 @@ def test_the_factor_of_a_singular_covariance_and_what_it_refuses():
         ParameterCovariance(("a", "b", "c", "d"), r * np.outer(sd, sd)).factor()
     with pytest.raises(ValueError, match=r"negative variance \(b: -1e-12\)"):
         ParameterCovariance(("a", "b"), np.diag([1.0, -1e-12])).factor()
+    # correlations that no covariance has (0.9, 0.9, -0.9) among small parameters beside a large one: the raw
+    # eigenvalue, -8e-25, passed the raw check (-1e-9 of the largest, 1e-6); the correlations' -0.8 does not
+    r = np.eye(4)
+    for i, j, v in ((1, 2, 0.9), (1, 3, 0.9), (2, 3, -0.9)):
+        r[i, j] = r[j, i] = v
+    sd = np.array([1e-3, 1e-12, 1e-12, 1e-12])
+    assert np.linalg.eigvalsh(r * np.outer(sd, sd)).min() > -1e-9 * 1e-6
+    with pytest.raises(ValueError, match=r"correlations is -0.8, mostly along [bcd], [bcd], [bcd]\)"):
+        ParameterCovariance(("a", "b", "c", "d"), r * np.outer(sd, sd)).factor()
