@@ -29,7 +29,7 @@ import sys
 import time
 import traceback
 
-from .errors import AacmmError, NumericalError, folder_path_problem
+from .errors import AacmmError, NumericalError
 from .log import console, escaped, level_from_flags
 from .output import published_outputs
 from .shipped import version
@@ -171,6 +171,14 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str):
         super().error(escaped(message))
 
+    def _get_values(self, action, arg_strings):
+        # an option's value "--" attached (--mc=--, -o--): Python 3.11's argparse drops it as the end of the options
+        # and stores an empty list, which the command took as no value (--mc=-- ran no Monte Carlo, exit 0) or met
+        # as a list (-o=--: exit 3)
+        if action.option_strings and action.nargs in (None, argparse.OPTIONAL) and arg_strings == ["--"]:
+            self.error(f"argument {'/'.join(action.option_strings)}: expected a value, got '--'")
+        return super()._get_values(action, arg_strings)
+
 
 class _Version(argparse.Action):
     """``--version``: the installed version, looked up only when asked (importlib.metadata is slow to
@@ -231,13 +239,6 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name}: error: {escaped(text)}", file=sys.stderr, flush=True)
         except (OSError, ValueError):
             pass
-
-    # "samples.csv/" names a folder; an argument made a Path drops the "/" (and the file was read): refused as given
-    wrong = next(filter(None, (folder_path_problem(a.partition("=")[2] if a.startswith("--") else a) for a in argv)),
-                 None)
-    if wrong is not None:
-        error(f"{wrong}; nothing written")
-        return EXIT_INPUT
 
     previous = None
     try:

@@ -1,19 +1,19 @@
 """The command-line toolbox every ``aacmm`` command uses: argparse types for numbers checked at the
-boundary (finite, in range, named in the message), the ``--arm`` options with the one loader of the
-arm they name, and the one ``-o/--output`` option."""
+boundary (finite, in range, named in the message) and the one type of every path argument (:func:`path_arg`), the
+``--arm`` options with the one loader of the arm they name, and the one ``-o/--output`` option."""
 from __future__ import annotations
 
 import argparse
 import logging
 import math
-import os
 from pathlib import Path
 
 from .csv_io import SPACE, parse_number
-from .errors import InputError
+from .errors import InputError, path_problem
 from .model_file import Arm, load_model
 
 __all__ = ["add_arm_options", "add_frame_options", "add_output_option", "output_path", "file_output_path",
+           "path_arg", "folder_arg",
            "arm_from_args", "arm_inputs", "model_from_args", "number_in", "positive", "non_negative", "at_least",
            "fraction", "finite", "seed", "port", "duration_s", "MAX_WAIT_S", "comma_list"]
 
@@ -106,24 +106,37 @@ def duration_s(zero: bool = True):
     return number_in(0, MAX_WAIT_S, low_open=not zero)
 
 
-def output_path(text: str) -> Path:
-    """argparse type of ``-o``: a path; an empty one is refused (it would name the current folder)."""
-    if not text.strip():
-        raise argparse.ArgumentTypeError("expected a path, got an empty one")
-    if text == "-":             # (it wrote a file named "-" where standard output was meant)
-        raise argparse.ArgumentTypeError("'-' (standard output) is not an output of the toolkit: name a file or "
-                                         "folder (./- for a file of that name)")
+def path_arg(text: str, folder: bool = False) -> Path:
+    """argparse type of every path argument of the toolkit (an input file, ``--arm``, an output): the path, or an
+    argparse error saying why the text as given cannot name one (:func:`arm_model.errors.path_problem`)."""
+    why = path_problem(text, folder)
+    if why:
+        raise argparse.ArgumentTypeError(why)
     return Path(text)
 
 
+def folder_arg(text: str) -> Path:
+    """argparse type of a folder that a command reads (``ring --signals DIR``): :func:`path_arg` for a folder."""
+    return path_arg(text, folder=True)
+
+
+def _not_stdout(text: str) -> None:
+    if text == "-":             # (it wrote a file named "-" where standard output was meant)
+        raise argparse.ArgumentTypeError("'-' (standard output) is not an output of the toolkit: name a file or "
+                                         "folder (./- for a file of that name)")
+
+
+def output_path(text: str) -> Path:
+    """argparse type of an output folder (``-o``): :func:`path_arg` for a folder, and not ``-``."""
+    _not_stdout(text)
+    return path_arg(text, folder=True)
+
+
 def file_output_path(text: str) -> Path:
-    """argparse type of an output that is one file (``tip -o``, ``urdf -o``, ``view --html``): :func:`output_path`'s,
-    and no trailing slash (``t.csv/`` names a folder; Path() dropped the slash and the file t.csv was written)."""
-    path = output_path(text)
-    if text.endswith(("/", os.sep)):
-        raise argparse.ArgumentTypeError(f"{text!r} ends with '/', which names a folder: this output is one file "
-                                         f"(give {text.rstrip('/' + os.sep)!r})")
-    return path
+    """argparse type of an output that is one file (``tip -o``, ``urdf -o``, ``view --html``): :func:`path_arg` for
+    a file (no trailing slash), and not ``-``."""
+    _not_stdout(text)
+    return path_arg(text)
 
 
 def add_output_option(p, kind: str = "folder", what: str = "", *, as_it_runs: bool = False) -> None:
@@ -149,9 +162,9 @@ def add_arm_options(p, help_arm: str = "the arm: a shipped arm's name (aacmm7), 
                                        "(the effects a model file holds are applied) or a URDF with --tip-frame "
                                        "(docs/formats.md §2, docs/own-arm.md)") -> None:
     """``--arm`` with :func:`add_frame_options` and ``--masses``, the same for every subcommand."""
-    p.add_argument("--arm", type=Path, required=True, help=help_arm)
+    p.add_argument("--arm", type=path_arg, required=True, help=help_arm)
     add_frame_options(p)
-    p.add_argument("--masses", type=Path, default=None, metavar="TOML",
+    p.add_argument("--masses", type=path_arg, default=None, metavar="TOML",
                    help="for a URDF arm: link masses and centres of mass ([[link]] name, mass_kg, com_x_mm, "
                         "com_y_mm, com_z_mm), replacing the URDF's <inertial>; gravity torques (joint "
                         "compliance) need masses")

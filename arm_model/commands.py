@@ -18,6 +18,7 @@ from .cli_options import (
     arm_inputs,
     model_from_args,
     output_path,
+    path_arg,
 )
 from .csv_io import format_csv
 from .errors import InputError
@@ -38,7 +39,7 @@ def register(sub) -> None:
                     "the rigid ball centre, the deflection-corrected ball centre [mm] and the deflection [um]. "
                     "Points whose force exceeds the probe's calibrated range are flagged (over_force = 1), "
                     "never dropped.")
-    p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3)")
+    p.add_argument("points", type=path_arg, help="points CSV (docs/formats.md §3)")
     add_arm_options(p)
     add_output_option(p, "file", "output CSV")
     p.add_argument("--reference-frame", action="store_true",
@@ -55,7 +56,7 @@ def register(sub) -> None:
         "urdf", help=command_help("urdf"),
         description="Write the URDF (links, joints, the probe's virtual elastic joints, visuals) generated "
                     "from an arm description. The repository's urdf/aacmm7.urdf is made this way.")
-    u.add_argument("arm", type=Path, help="arm description TOML or a shipped arm's name (aacmm7), or a URDF with "
+    u.add_argument("arm", type=path_arg, help="arm description TOML or a shipped arm's name (aacmm7), or a URDF with "
                                           "--tip-frame, to see the chain the toolkit reads from it "
                                           "(docs/formats.md §2)")
     add_frame_options(u)

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 from .cli import main as aacmm
+from .cli_options import output_path
 from .shipped import shipped_path
 
 # the shipped files: the checkout's, or an installed wheel's copy (`python -m arm_model.demo` after a pip install)
@@ -91,7 +92,7 @@ def _end_live(proc, log: Path | None) -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m arm_model.demo", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default out/demo)")
+    ap.add_argument("--out", type=output_path, default=Path("out/demo"), help="output folder (default out/demo)")
     ap.add_argument("--no-live", action="store_true", help="leave out step 0 (the live session and its view)")
     args = ap.parse_args(argv)
     out = args.out

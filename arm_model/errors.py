@@ -10,7 +10,7 @@ import unicodedata
 from pathlib import Path
 
 __all__ = ["AacmmError", "InputError", "NumericalError", "read_text", "open_input", "decode_text", "parse_toml",
-           "did_you_mean", "unknown_key", "id_problem", "folder_path_problem", "resolved", "beside", "named_in",
+           "did_you_mean", "unknown_key", "id_problem", "path_problem", "resolved", "beside", "named_in",
            "text_lines", "INVISIBLE", "MAX_ID_LENGTH"]
 
 
@@ -92,7 +92,8 @@ def open_input(path: str | Path, what: str):
     """A user's input file opened for reading bytes, or an InputError naming it (``what``: which file
     it is, "the points file"). A folder, a FIFO or a device is refused: it is not a file (and reading
     a FIFO would wait forever). A path is opened as given: ``"samples.csv/"`` is refused as the system refuses it
-    (not a directory; ``Path`` would drop the separator and read the file: :func:`folder_path_problem`)."""
+    (not a directory; ``Path`` would drop the separator and read the file: the command line's paths are checked as
+    given by :func:`arm_model.cli_options.path_arg`)."""
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))     # a FIFO's open would wait
     except IsADirectoryError:
@@ -118,19 +119,44 @@ def open_input(path: str | Path, what: str):
 _SEPARATORS = tuple(s for s in (os.sep, os.altsep) if s)
 
 
-def folder_path_problem(arg: str) -> InputError | None:
-    """An InputError naming ``arg`` when it ends in a path separator but names what is not a folder
-    (``samples.csv/``: the system says "Not a directory"), else None. ``pathlib.Path`` drops a trailing separator,
-    so a command's path argument would read ``samples.csv``: every argument of the command line is checked as
-    given (:func:`arm_model.cli.main`), as :func:`open_input` opens a path given as text."""
-    if not arg.endswith(_SEPARATORS):
+def path_problem(text: str, folder: bool = False, base: str | Path | None = None) -> str | None:
+    """Why ``text``, a path as given (on the command line: :func:`arm_model.cli_options.path_arg`, whatever the
+    spelling of its option; or in a file: a model file's ``covariance``, a campaign's ``arm``), cannot name a file
+    (``folder``: a folder) that a command reads or writes, or None; ``base``: the folder a relative path is
+    relative to (default the current one). Checked on the text as given, before :class:`pathlib.Path` drops a
+    trailing ``/`` or ``/.``:
+
+    - an empty path names the current folder ("$DIR" of an unset variable);
+    - a byte that is not UTF-8 (calibrate wrote its whole fit, then failed on residuals.csv, exit 3), a line break,
+      tab or other control character, an invisible or text-direction character, or white space at its
+      ends (:func:`id_problem`): the outputs name their inputs (summary.json, residuals.csv, whose
+      reader strips its cells) and the console quotes them, and could not name this one;
+    - a path ending in ``/`` or ``/.`` that the system refuses as "Not a directory" (``samples.csv/``);
+    - a file given with a trailing ``/`` or ``/.`` (``t.csv/`` names a folder; Path() dropped it and the file
+      ``t.csv`` was read or written)."""
+    if not text.strip():
+        return "expected a path, got an empty one (an unset shell variable?)"
+    bad = next((c for c in text if "\ud800" <= c <= "\udfff"), None)
+    if bad is not None:         # a name's byte that is not UTF-8 (Python's argv holds it as a lone surrogate)
+        byte = f" (byte 0x{ord(bad) - 0xDC00:02x})" if ord(bad) >= 0xDC80 else ""
+        return (f"the path {ascii(text)[:60]} is not UTF-8 text{byte}: the outputs, which name their inputs, could "
+                "not name it; rename the file (or its folder)")
+    why = id_problem(text)
+    if why:
+        return f"the path {why}: rename the file (or its folder)"
+    tail = next((s + d for s in _SEPARATORS for d in ("", ".") if text.endswith(s + d)), None)
+    if tail is None:            # Path() keeps what the system sees: the command that uses the path says what is wrong
         return None
     try:
-        os.stat(arg)
+        os.stat(text if base is None else os.path.join(base, text))
     except NotADirectoryError as exc:
-        return InputError(f"{exc.strerror}: a path that ends in '{arg[-1]}' names a folder", arg)
+        return f"{text!r}: {exc.strerror}: a path that ends in {tail!r} names a folder"
     except (OSError, ValueError):       # absent, unreadable: the command that uses it says so
         pass
+    if not folder:
+        plain = text[:-len(tail)].rstrip("".join(_SEPARATORS))
+        return (f"{text!r} ends with {tail!r}, which names a folder: a file is expected here"
+                + (f" (give {plain!r})" if plain else ""))
     return None
 
 

@@ -56,7 +56,7 @@ from .description import (
 )
 from .discrepancy import GrowingDiscrepancy, TrainingPoses
 from .effects import EFFECTS, Effect
-from .errors import InputError, did_you_mean, named_in, parse_toml, read_text, resolved
+from .errors import InputError, beside, did_you_mean, named_in, parse_toml, path_problem, read_text, resolved
 from .model import ArmModel, AuxData, capture_columns, points_motion
 from .tracker import Tracker, tracker_from_tables, tracker_tables
 from .uncertainty import InputUncertainty, ParameterCovariance, default_inputs
@@ -509,6 +509,9 @@ def _beside(model_path: str, name: str | None, r: TomlReader, key: str) -> Path 
         return None
     if "\0" in name:               # no system takes it in a file name (os.stat raised ValueError: exit 3)
         raise r.error(f"'{key}' holds a NUL character: not a file name", "calibration", key)
+    why = path_problem(name, base=None if model_path == "<string>" else beside(model_path))
+    if why:             # "c.csv/" read c.csv (Path drops the slash)
+        raise r.error(f"'{key}': {why}", "calibration", key)
     out = named_in(model_path, name) if model_path != "<string>" else Path(name)
     if model_path != "<string>" and _same_file(out, Path(model_path)):
         raise r.error(f"'{key}' names the model file itself: it names the {key.replace('_', ' ')} file written "

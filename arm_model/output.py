@@ -116,7 +116,9 @@ def _through_link(final: Path, what: str) -> Path:
 
 def guard_output(out: str | Path, inputs=(), input_folders=()) -> Path:
     """Refuse an output (file or folder) that is one of the inputs or holds one, or that lies inside one of
-    ``input_folders`` (folders the command reads files from, ``ring --signals DIR``), by resolved path."""
+    ``input_folders`` (folders the command reads files from, ``ring --signals DIR``), by resolved path, or that is
+    an input file under another name (a hard link: ``tip -o copy.csv`` replaced ``copy.csv``, a link to the points
+    file)."""
     out = Path(out)
     ro = resolved(out)
     for p in (*inputs, *input_folders):
@@ -125,6 +127,9 @@ def guard_output(out: str | Path, inputs=(), input_folders=()) -> Path:
         rp = resolved(p)
         if rp == ro:
             raise InputError("refusing to write the output over an input file", out)
+        if _same_file(ro, rp):
+            raise InputError(f"refusing to write the output over an input file: it is the input {p} under another "
+                             "name (a hard link)", out)
         if _inside(rp, ro):
             raise InputError(f"refusing to write the output over an input: the output folder holds the "
                              f"input {p} and is replaced as a whole; choose another output folder", out)
@@ -133,6 +138,14 @@ def guard_output(out: str | Path, inputs=(), input_folders=()) -> Path:
             raise InputError(f"refusing to write the output into the input folder {p} (the command reads its "
                              "files); choose an output outside it", out)
     return out
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether ``a`` and ``b`` both exist and are one file (:func:`os.path.samefile`: device and inode)."""
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):
+        return False
 
 
 def _mode(umask_mode: int) -> int:

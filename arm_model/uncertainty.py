@@ -37,7 +37,7 @@ from .model import ArmModel, AuxData
 from .parallel import blas_threads
 
 __all__ = ["FORCE_SENSOR_U_N", "COMPLIANCE_U_RELATIVE", "CONTRIBUTIONS", "InputUncertainty",
-           "ParameterCovariance", "Propagation", "default_inputs", "propagate", "monte_carlo",
+           "ParameterCovariance", "Propagation", "Propagator", "default_inputs", "propagate", "monte_carlo",
            "covariance_columns", "directional_ratio"]
 
 log = logging.getLogger(__name__)
@@ -103,12 +103,25 @@ class ParameterCovariance:
         object.__setattr__(self, "cov", c)
 
     def factor(self) -> np.ndarray:
-        """L with ``L L^T = cov`` (eigen-decomposition: a positive semi-definite cov is accepted)."""
-        w, v = np.linalg.eigh(self.cov)
+        """L (k, r) with ``L L^T = cov``, r its rank: the eigen-decomposition of the correlation matrix, scaled back
+        by the standard deviations. Parameters of widely different scales (m beside rad/(N m)) keep their relative
+        precision: the raw covariance's eigenvectors carry the rounding of its largest variance into the smallest
+        (J cov J^T off by 2e-2 relative for scales over nine decades, 3e-15 scaled: tests/test_uncertainty_plans.py).
+        A positive semi-definite cov is accepted: a correlation matrix with an eigenvalue below -1e-9 is a
+        ValueError naming the parameters of its eigenvector."""
+        var = np.diag(self.cov)
+        if var.size and var.min() < 0:
+            raise ValueError(f"the parameter covariance has a negative variance ({self.names[int(np.argmin(var))]}: "
+                             f"{var.min():.3g})")
+        sd = np.sqrt(var)
+        sd = np.where(sd > 0, sd, 1.0)      # a parameter held exactly: its row of the correlations is 0 (or not PSD)
+        w, v = np.linalg.eigh(self.cov / np.outer(sd, sd))
         if w.size and w.min() < -1e-9 * max(w.max(), 0.0):
-            raise ValueError(f"the parameter covariance is not positive semi-definite (eigenvalue {w.min():.3g})")
+            along = np.argsort(-np.abs(v[:, 0]))[:3]
+            raise ValueError(f"the parameter covariance is not positive semi-definite (an eigenvalue of its "
+                             f"correlations is {w[0]:.3g}, mostly along {', '.join(self.names[i] for i in along)})")
         keep = w > 0
-        return v[:, keep] * np.sqrt(w[keep])
+        return sd[:, None] * (v[:, keep] * np.sqrt(w[keep]))
 
 
 def default_inputs(desc, *, encoder=None, force=None, torque=None, compliance=None, probing=None,
@@ -289,21 +302,6 @@ class _Plan:
     use_compliance: bool
 
 
-#: the last plan and what it was made of (a live session propagates each point alone, from the same objects)
-_LAST_PLAN: list = [None, None]
-
-
-def _plan(model: ArmModel, parameters, inputs: InputUncertainty, n_q: int) -> _Plan:
-    """The plan of :func:`propagate`; the last one again for the same (frozen) model, covariance and inputs."""
-    key = (model, parameters, inputs, n_q)
-    last, plan = _LAST_PLAN
-    if last is not None and all(a is b for a, b in zip(last[:3], key[:3], strict=True)) and last[3] == n_q:
-        return plan
-    plan = _make_plan(model, parameters, inputs, n_q)
-    _LAST_PLAN[:] = [key, plan]
-    return plan
-
-
 def _make_plan(model: ArmModel, parameters, inputs: InputUncertainty, n_q: int) -> _Plan:
     spec = model.spec
     pnames = () if parameters is None else tuple(parameters.names)
@@ -394,68 +392,87 @@ def propagate(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,
         systematic: also keep :attr:`Propagation.systematic` (for features fitted to several points,
             whose shared errors do not average out).
     """
-    q, w, aux = _prepare(model, q, wrench, aux)
-    n, nj = q.shape
-    spec = model.spec
-    p = np.zeros(spec.size) if p is None else np.asarray(p, dtype=float)
-    if p.shape != (spec.size,):
-        raise ValueError(f"p has shape {p.shape}, expected ({spec.size},)")
-    plan = _plan(model, parameters, inputs, nj)
-    # the model discrepancy at each pose, once for all chunks (its distance from the training poses is blocked)
-    growing, dist, sd_disc = inputs.growing, None, np.full(n, inputs.discrepancy)
-    if growing is not None:
-        dist, sd_disc = growing.at(model.desc, q)
-    span = plan.spans["parameters"]
-    npar = span.stop - span.start       # the rows of the covariance's factor (fewer than the names when singular)
-    cov = np.empty((n, 3, 3))
-    contrib = {k: np.zeros((n, 3)) for k in CONTRIBUTIONS}
-    centres = np.empty((n, 3))
-    sys_rows = np.zeros((n, npar + 3, 3)) if systematic else None
+    return Propagator(model, parameters, inputs)(p, q, wrench, aux, threads=threads, chunk=chunk,
+                                                 systematic=systematic)
 
-    def work(s: int) -> None:
-        e = min(s + chunk, n)
-        cen, g, mmat, per_point = _chunk_jacobian(model, plan, p, q[s:e], w[s:e], aux.select(slice(s, e)))
-        centres[s:e] = cen
-        b = plan.s_mat @ mmat
-        gf = g.reshape(g.shape[0], -1)
-        pp = np.stack([per_point[k] for k in per_point]).reshape(len(per_point), -1) if per_point else None
-        cv = np.zeros((3, 3, e - s))
-        for name, sl in plan.spans.items():
-            blk = b[sl]
-            if not blk.shape[0]:
-                continue
-            nz = np.flatnonzero(np.any(blk != 0, axis=0))
-            a = blk[:, nz] @ gf[nz]
-            if pp is not None:
-                a += plan.s_mat[sl][:, list(per_point)] @ pp
-            a = a.reshape(len(blk), 3, e - s)
-            if sys_rows is not None and name == "parameters":
-                sys_rows[s:e, :npar] = a.transpose(2, 0, 1)
-            _add_squares(a, cv, contrib[name][s:e])
-        if plan.use_compliance:
-            a = g[plan.comp_cols] * inputs.compliance[:, None, None]
-            if sys_rows is not None:
-                sys_rows[s:e, npar:] = a.transpose(2, 0, 1)
-            _add_squares(a, cv, contrib["compliance"][s:e])
-        for name, sd in (("probing", np.full(e - s, inputs.probing)), ("model discrepancy", sd_disc[s:e])):
-            for i in range(3):
-                cv[i, i] += sd ** 2
-            contrib[name][s:e] = sd[:, None] ** 2
-        for i, j in _PAIRS:
-            cov[s:e, i, j] = cv[i, j]
-            cov[s:e, j, i] = cv[i, j]
 
-    # the products are thin (tens x chunk): one BLAS thread each; more spin-wait on a busy machine (a few points'
-    # products are below BLAS's own threshold for threads: setting the limit would cost more than them)
-    with blas_threads(1 if n > _FEW else None):
-        run_chunks(work, n, chunk, threads)
-    sources = dict(inputs.sources)
-    sources["parameters"] = "none (parameters taken as exact)" if parameters is None else parameters.source
-    if dist is not None:
-        sources["model discrepancy"] += beyond_note(dist)
-    if _compliance_covered(tuple(() if parameters is None else parameters.names)):
-        sources["compliance"] = "in the parameter covariance (calibrated)"
-    return Propagation(centres, cov, contrib, sources, sys_rows)
+class Propagator:
+    """:func:`propagate` for one model, parameter covariance and input uncertainties, its plan (the covariance's
+    factor, the directions of the Jacobian, the stacked matrix) made once, when it is built: for many calls on the
+    same objects (a live session propagates each point alone). The plan is this object's own state, read only once
+    built: models, covariances or inputs used alternately, in one thread or several, each have their own (a
+    module-wide cache of the last plan, found by the objects' identity, served a covariance changed in place with
+    the plan of its old values)."""
+
+    def __init__(self, model: ArmModel, parameters: ParameterCovariance | None, inputs: InputUncertainty):
+        self.model, self.parameters, self.inputs = model, parameters, inputs
+        self._plan = _make_plan(model, parameters, inputs, model.desc.n_joints)
+
+    def __call__(self, p, q, wrench=None, aux: AuxData | None = None, *, threads: int | None = None,
+                 chunk: int = 8192, systematic: bool = False) -> Propagation:
+        """:func:`propagate` of the points ``q`` (with ``wrench``, ``aux``) at the parameters ``p``."""
+        model, parameters, inputs, plan = self.model, self.parameters, self.inputs, self._plan
+        q, w, aux = _prepare(model, q, wrench, aux)
+        n = len(q)
+        spec = model.spec
+        p = np.zeros(spec.size) if p is None else np.asarray(p, dtype=float)
+        if p.shape != (spec.size,):
+            raise ValueError(f"p has shape {p.shape}, expected ({spec.size},)")
+        # the model discrepancy at each pose, once for all chunks (its distance from the training poses is blocked)
+        growing, dist, sd_disc = inputs.growing, None, np.full(n, inputs.discrepancy)
+        if growing is not None:
+            dist, sd_disc = growing.at(model.desc, q)
+        span = plan.spans["parameters"]
+        npar = span.stop - span.start       # the rows of the covariance's factor (fewer than the names when singular)
+        cov = np.empty((n, 3, 3))
+        contrib = {k: np.zeros((n, 3)) for k in CONTRIBUTIONS}
+        centres = np.empty((n, 3))
+        sys_rows = np.zeros((n, npar + 3, 3)) if systematic else None
+
+        def work(s: int) -> None:
+            e = min(s + chunk, n)
+            cen, g, mmat, per_point = _chunk_jacobian(model, plan, p, q[s:e], w[s:e], aux.select(slice(s, e)))
+            centres[s:e] = cen
+            b = plan.s_mat @ mmat
+            gf = g.reshape(g.shape[0], -1)
+            pp = np.stack([per_point[k] for k in per_point]).reshape(len(per_point), -1) if per_point else None
+            cv = np.zeros((3, 3, e - s))
+            for name, sl in plan.spans.items():
+                blk = b[sl]
+                if not blk.shape[0]:
+                    continue
+                nz = np.flatnonzero(np.any(blk != 0, axis=0))
+                a = blk[:, nz] @ gf[nz]
+                if pp is not None:
+                    a += plan.s_mat[sl][:, list(per_point)] @ pp
+                a = a.reshape(len(blk), 3, e - s)
+                if sys_rows is not None and name == "parameters":
+                    sys_rows[s:e, :npar] = a.transpose(2, 0, 1)
+                _add_squares(a, cv, contrib[name][s:e])
+            if plan.use_compliance:
+                a = g[plan.comp_cols] * inputs.compliance[:, None, None]
+                if sys_rows is not None:
+                    sys_rows[s:e, npar:] = a.transpose(2, 0, 1)
+                _add_squares(a, cv, contrib["compliance"][s:e])
+            for name, sd in (("probing", np.full(e - s, inputs.probing)), ("model discrepancy", sd_disc[s:e])):
+                for i in range(3):
+                    cv[i, i] += sd ** 2
+                contrib[name][s:e] = sd[:, None] ** 2
+            for i, j in _PAIRS:
+                cov[s:e, i, j] = cv[i, j]
+                cov[s:e, j, i] = cv[i, j]
+
+        # the products are thin (tens x chunk): one BLAS thread each; more spin-wait on a busy machine (a few points'
+        # products are below BLAS's own threshold for threads: setting the limit would cost more than them)
+        with blas_threads(1 if n > _FEW else None):
+            run_chunks(work, n, chunk, threads)
+        sources = dict(inputs.sources)
+        sources["parameters"] = "none (parameters taken as exact)" if parameters is None else parameters.source
+        if dist is not None:
+            sources["model discrepancy"] += beyond_note(dist)
+        if _compliance_covered(tuple(() if parameters is None else parameters.names)):
+            sources["compliance"] = "in the parameter covariance (calibrated)"
+        return Propagation(centres, cov, contrib, sources, sys_rows)
 
 
 def monte_carlo(model: ArmModel, p, q, wrench=None, aux: AuxData | None = None, *,

@@ -4,7 +4,6 @@ from __future__ import annotations
 import argparse
 import logging
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
@@ -21,6 +20,7 @@ from arm_model.cli_options import (
     model_from_args,
     non_negative,
     number_in,
+    path_arg,
     seed,
 )
 from arm_model.csv_io import parse_number
@@ -69,9 +69,10 @@ def parse_holdout(text: str | None):
 
 def campaign_inputs(p) -> None:
     """Points, artefacts, arm, reference points and output folder (shared with ``aacmm close-loop``)."""
-    p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3); its reference columns (x_ref_mm ..., "
-                                             "or x1_ref_mm ... for several markers) are a tracker's coordinates")
-    p.add_argument("artefacts", type=Path, nargs="?", default=None,
+    p.add_argument("points", type=path_arg,
+                   help="points CSV (docs/formats.md §3); its reference columns (x_ref_mm ..., or x1_ref_mm ... for "
+                        "several markers) are a tracker's coordinates")
+    p.add_argument("artefacts", type=path_arg, nargs="?", default=None,
                    help="artefacts TOML (docs/formats.md §4); leave it out for a campaign of tracker (reference) "
                         "coordinates only: every row a free point with reference columns")
     add_arm_options(p, "nominal arm: a shipped arm's name (aacmm7), a description TOML or model file, or a URDF "
@@ -82,7 +83,7 @@ def campaign_inputs(p) -> None:
 
 def reference_points_option(p) -> None:
     """``--reference-points``: a second points file of reference coordinates (calibrate, close-loop, study poses)."""
-    p.add_argument("--reference-points", type=Path, default=None,
+    p.add_argument("--reference-points", type=path_arg, default=None,
                    help="a second points CSV whose rows all carry reference coordinates (x_ref_mm ...), e.g. tracker "
                         "nests, joined to the points file (docs/formats.md §3)")
 
@@ -244,7 +245,7 @@ def register(sub) -> None:
                         "held out, each predicted against its feature as fitted on the training poses (reference "
                         "points: with the training fit's T_ref_base), so one placement of one artefact can be "
                         "validated")
-    c.add_argument("--holdout-points", type=Path, default=None, metavar="FILE",
+    c.add_argument("--holdout-points", type=path_arg, default=None, metavar="FILE",
                    help="a points CSV of poses kept out of the fit (a stated validation set, the same columns as "
                         "the points file), each predicted against its feature (measurement and feature ids of the "
                         "points file) as fitted on the training points, as --holdout-by pose does")
@@ -274,7 +275,7 @@ def register(sub) -> None:
                                   "--seed, --seed+1, ...; each run is calibrated and validated on held-out "
                                   "measurements. Local processes by default; --scheduler sends the runs to a Dask "
                                   "cluster. Writes study.json and prints a table.")
-    m.add_argument("campaign", type=Path, help="campaign TOML of the simulator (docs/formats.md §6)")
+    m.add_argument("campaign", type=path_arg, help="campaign TOML of the simulator (docs/formats.md §6)")
     m.add_argument("--runs", type=number_in(1, 100_000, kind=int), default=20,
                    help="number of runs (default 20; at most 100000)")
     m.add_argument("--seed", type=seed, default=0,
@@ -295,8 +296,8 @@ def register(sub) -> None:
                       description="Greedy choice of --count measurements of a points file (a candidate pool, "
                                   "measured or simulated) maximising O1 = (prod s_i)^(1/m)/sqrt(n) of the "
                                   "identification Jacobian; compared with random choices of the same size.")
-    q.add_argument("points", type=Path, help="candidate points CSV (docs/formats.md §3)")
-    q.add_argument("artefacts", type=Path, nargs="?", default=None,
+    q.add_argument("points", type=path_arg, help="candidate points CSV (docs/formats.md §3)")
+    q.add_argument("artefacts", type=path_arg, nargs="?", default=None,
                    help="artefacts TOML (docs/formats.md §4); none for reference (tracker) points only")
     add_arm_options(q, "nominal arm: a shipped arm's name (aacmm7), a description TOML, or a URDF with --tip-frame "
                        "(docs/formats.md §2)")
@@ -685,26 +686,12 @@ def _points_and_rows(data, noun: str = "point") -> str:
     return counted(n["n_points"], noun) + rows
 
 
-def refuse_unnameable_files(*paths) -> None:
-    """An InputError for a points file (``paths``; None: not given) whose path cannot be a cell of ``residuals.csv``,
-    which names each point by its file and line: a line break, tab or other control character, an invisible or
-    text-direction character, or white space at its ends (the reader strips its cells) would make the command
-    write a file its reader refuses (exit 3 after the whole fit) or one naming another file. Before any work."""
-    from arm_model.errors import id_problem
-    for path in paths:
-        why = None if path is None else id_problem(str(path))
-        if why:
-            raise InputError(f"the file's path {why}: residuals.csv names each point by its file and line, and could "
-                             "not name these; rename the file (or its folder)", ascii(str(path)))
-
-
 def run_calibrate(args: argparse.Namespace) -> int:
     from .calibrate import calibrate, nominal_baseline
     from .model_output import refine_torques, with_fitted_torques
     from .report import write_outputs
     from .validation import worse_than_nominal
     inputs = [args.points, args.artefacts, *arm_inputs(args), args.reference_points, args.holdout_points]
-    refuse_unnameable_files(args.points, args.reference_points, args.holdout_points)
     with output_folder(args.output, inputs, "calibrate") as out:
         model, data, values, warnings = _load_data(args, defaults=True)
         if any(e.key == "joint_compliance" for e in model.effects):

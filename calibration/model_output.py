@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from arm_model import InputError
-from arm_model.errors import MAX_ID_LENGTH
+from arm_model.errors import MAX_ID_LENGTH, NumericalError
 from arm_model.io import UnreadableOutput, atomic_write_text, guard_output, read_back
 from arm_model.model_file import Arm, format_model, write_covariance
 from arm_model.output import safe_name
@@ -156,19 +156,23 @@ def write_model(result, out_dir, name: str, *, inputs=(), written_by: str = "aac
     for f in files.values():
         guard_output(f, inputs)
     arm = fitted_arm(result, name, files["training_poses"])
+    poses_file = files.pop("training_poses")
+    poses = poses_file if _grows(result) else None
+    try:
+        text = format_model(arm.desc, arm.effects, arm.values, arm.uncertainties, arm.states,
+                            covariance=files["covariance"].name, written_by=written_by,
+                            probing_scatter=result.probing_scatter(), tracker=arm.tracker, comment=comment,
+                            **discrepancy_fields(result), training_poses=None if poses is None else poses.name)
+    except ValueError as exc:       # a fitted scatter beyond any arm's (106 mm: two placements under one id), exit 3
+        raise NumericalError(f"{exc}: a fit this far from its data describes no arm (are the points of several "
+                             "placements under one measurement id, or a column in the wrong unit?)") from None
     names, cov = written_covariance(result)
     spec = result.model.spec
     idx = [spec.index(n) for n in names]
     write_covariance(files["covariance"], names, [spec.units[i] for i in idx], result.p[idx], cov, inputs)
-    poses = _write_training_poses(result, files.pop("training_poses"), inputs)
     if poses is not None:
-        files["training_poses"] = poses
-    atomic_write_text(files["model"], format_model(arm.desc, arm.effects, arm.values, arm.uncertainties, arm.states,
-                                                   covariance=files["covariance"].name, written_by=written_by,
-                                                   probing_scatter=result.probing_scatter(), tracker=arm.tracker,
-                                                   comment=comment, **discrepancy_fields(result),
-                                                   training_poses=None if poses is None else poses.name),
-                      inputs)
+        files["training_poses"] = _write_training_poses(result, poses, inputs)
+    atomic_write_text(files["model"], text, inputs)
     atomic_write_text(files["urdf"], calibrated_urdf_text(result.model.desc, arm.desc), inputs)
     check_reproduces(result, read_back(files["model"]), files["model"], urdf=files["urdf"])
     return files
@@ -206,12 +210,17 @@ def discrepancy_fields(result) -> dict:
     return {"model_discrepancy": sigma0, "discrepancy_growth": growth}
 
 
-def _write_training_poses(result, path: Path, inputs) -> Path | None:
-    """The points file of the fit's poses (``measurement``, ``feature``, the joint columns in the description's
-    units) that a growing model discrepancy is measured from, or None (nothing written) without growth."""
+def _grows(result) -> bool:
+    """Whether the model discrepancy of ``result`` grows away from its training poses (their points file is
+    written, and the model file names it)."""
     d = getattr(result, "discrepancy", None)
-    if d is None or d.written_growth is None or d.training_rows is None:
-        return None
+    return not (d is None or d.written_growth is None or d.training_rows is None)
+
+
+def _write_training_poses(result, path: Path, inputs) -> Path:
+    """The points file of the fit's poses (``measurement``, ``feature``, the joint columns in the description's
+    units) that a growing model discrepancy (:func:`_grows`) is measured from."""
+    d = result.discrepancy
     pts = result.data.points
     rows = np.asarray(d.training_rows, dtype=int)
     cols = {"measurement": np.asarray(pts.measurement)[rows].astype(object),

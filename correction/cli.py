@@ -4,14 +4,21 @@ from __future__ import annotations
 
 import argparse
 import logging
-from pathlib import Path
 
 import numpy as np
 
 from arm_model import InputError, NumericalError, read_artefacts, read_points
 from arm_model.checks import log_warnings
 from arm_model.cli import command_help
-from arm_model.cli_options import add_arm_options, add_output_option, arm_inputs, model_from_args, number_in
+from arm_model.cli_options import (
+    add_arm_options,
+    add_output_option,
+    arm_inputs,
+    folder_arg,
+    model_from_args,
+    number_in,
+    path_arg,
+)
 from arm_model.io import check_features
 from arm_model.log import counted
 from arm_model.output import output_folder
@@ -36,10 +43,11 @@ def register(sub) -> None:
                     "point's radial deviation from the fitted cylinder against its angle, initial and corrected: "
                     "the data of the polar roundness plots) and figures/*.png into the output folder "
                     "(docs/formats.md).")
-    r.add_argument("points", type=Path, help="points CSV (docs/formats.md §3) with the ring's points")
-    r.add_argument("artefacts", type=Path, help="artefacts TOML (docs/formats.md §4) with the ring (kind = \"ring\")")
+    r.add_argument("points", type=path_arg, help="points CSV (docs/formats.md §3) with the ring's points")
+    r.add_argument("artefacts", type=path_arg,
+                   help="artefacts TOML (docs/formats.md §4) with the ring (kind = \"ring\")")
     add_arm_options(r)
-    r.add_argument("--signals", type=Path, metavar="DIR",
+    r.add_argument("--signals", type=folder_arg, metavar="DIR",
                    help="folder of force signals, one <measurement>.csv a measurement (docs/formats.md §5); "
                         "without it the points file's force columns are used")
     r.add_argument("--feature", metavar="ID", help="id of the ring feature when the artefacts file has several rings")
@@ -72,7 +80,7 @@ def register(sub) -> None:
                     "leave-one-out. Writes report.html, summary.json, table2_implied.csv, findings.csv and "
                     "figures/*.png.",
         epilog="Output files: docs/formats.md §7, docs/ring-pipeline.md.")
-    p.add_argument("--table2", type=Path, default=None, metavar="CSV",
+    p.add_argument("--table2", type=path_arg, default=None, metavar="CSV",
                    help="a Table 2 CSV in the bundled format (default: the bundled correction/data/paper_table2.csv; "
                         "docs/ring-pipeline.md)")
     add_output_option(p)

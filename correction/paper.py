@@ -126,6 +126,10 @@ def load_paper_table2(path: str | Path | None = None) -> PaperTable2:
             wrong = implausible(v * 1e-3, "length")     # 1e308 mm overflowed the fits (exit 3 after publishing)
             if wrong:
                 raise InputError(wrong[1], path, no, col)
+            if col == "initial_mm" and v == 0:      # its improvements were written as -inf %, exit 0
+                raise InputError("an initial diameter error of 0: each model's improvement is a percentage of it "
+                                 "(give the measured error; a ring measured without error has nothing to correct)",
+                                 path, no, col)
             data[col].append(v * 1e-3)
     if len(ids) < MIN_ROWS:
         raise InputError(f"{len(ids)} measurement row(s); correlations and the cross-validated loop need at least "

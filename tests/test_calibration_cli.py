@@ -232,11 +232,17 @@ def test_a_joint_compliance_under_gravity_alone_is_kept():
 def test_a_points_file_residuals_csv_cannot_name_is_refused_before_the_fit(tmp_path, capsys, name, words):
     """residuals.csv names each point by its file: a points file named with a line break, a text-direction
     character or a trailing space made calibrate fit, then stop at the read-back of residuals.csv, exit 3 ("internal
-    error ... please report it"); refused before any work, exit 2, nothing written."""
+    error ... please report it"); refused by the command line's path type before any work, exit 2, nothing
+    written."""
+    from conftest import exit_status
     points = tmp_path / name
     points.write_text((PANDA / "front" / "points.csv").read_text())
-    err = _refused(tmp_path, capsys, "calibrate", points)
-    assert f"{ascii(str(points))}: the file's path must" in err and words in err, err
+    out = tmp_path / "out"
+    code = exit_status(["calibrate", str(points), str(PANDA / "artefacts.toml"), "--arm", str(PANDA / "panda.urdf"),
+                        "--tip-frame", "ball_link", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "argument points: the path must" in err and words in err, err
+    assert not out.exists()
 
 
 @pytest.mark.parametrize("option", [("--effect", "probe_compliance"), ("--free", "probe.*")])

@@ -139,5 +139,5 @@ def test_a_file_output_named_with_a_trailing_slash_is_refused(tmp_path, capsys, 
     slash names a folder). Now every one-file output refuses it at the option (`cli_options.file_output_path`)."""
     out = tmp_path / "t.csv"
     rc, err = _run([str(a).replace("{out}", str(out)) for a in argv], capsys)
-    assert rc == 2 and "ends with '/', which names a folder: this output is one file" in err, err
+    assert rc == 2 and "ends with '/', which names a folder: a file is expected here" in err, err
     assert not out.exists()

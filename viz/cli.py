@@ -22,6 +22,7 @@ from arm_model.cli_options import (
     file_output_path,
     model_from_args,
     number_in,
+    path_arg,
     port,
     positive,
 )
@@ -55,7 +56,7 @@ def register(sub) -> None:
                     "--scale times long, the measured ball centres, artefacts placed by fitting their points "
                     "(--artefacts) and residual vectors (--residuals). The scales are printed and written on "
                     "the page. The server stops at Ctrl-C, at SIGTERM, or after --open-s.")
-    p.add_argument("points", type=Path, help="points CSV (docs/formats.md §3)")
+    p.add_argument("points", type=path_arg, help="points CSV (docs/formats.md §3)")
     add_arm_options(p)
     p.add_argument("--measurement", metavar="ID", help="show only the points of this measurement id (default: all)")
     pose = p.add_mutually_exclusive_group()
@@ -71,9 +72,9 @@ def register(sub) -> None:
                         "100 mm long); default: from the data, so that the median deflection shown is drawn "
                         f"about {ARROW_TARGET_M * 1e3:g} mm long, well outside the 24 mm ball marker "
                         "(a 1-2-5 number, printed)")
-    p.add_argument("--artefacts", type=Path, help="artefacts TOML (docs/formats.md §4): draw each feature, placed "
+    p.add_argument("--artefacts", type=path_arg, help="artefacts TOML (docs/formats.md §4): draw each feature, placed "
                    "by fitting its points in each measurement")
-    p.add_argument("--residuals", type=Path, help="residuals CSV: x_mm, y_mm, z_mm, rx_um, ry_um, rz_um, or the "
+    p.add_argument("--residuals", type=path_arg, help="residuals CSV: x_mm, y_mm, z_mm, rx_um, ry_um, rz_um, or the "
                    "residuals.csv of aacmm calibrate (line, dx_um, dy_um, dz_um; see docs/viewer.md): draw "
                    "each residual vector")
     p.add_argument("--residual-scale", type=SCALE, default=None,

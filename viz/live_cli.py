@@ -26,6 +26,7 @@ from arm_model.cli_options import (
     duration_s,
     model_from_args,
     number_in,
+    path_arg,
     port,
 )
 from arm_model.live.session import RATE_HZ_RANGE
@@ -67,12 +68,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                "with --strict or a stream that failed (a connection reset: the session is kept, said partial); "
                "130/143 Ctrl-C/SIGTERM (the session is kept, complete up "
                "to the last sample read).")
-    p.add_argument("source", help="a recorded stream (a file: replayed at its time stamps, see --speed), '-' "
-                                  "(standard input), tcp://HOST:PORT (connect to a server sending the lines) or "
-                                  "udp://HOST:PORT (listen for datagrams of whole lines)")
+    p.add_argument("source", type=_source,
+                   help="a recorded stream (a file: replayed at its time stamps, see --speed), '-' (standard input), "
+                        "tcp://HOST:PORT (connect to a server sending the lines) or udp://HOST:PORT (listen for "
+                        "datagrams of whole lines)")
     add_arm_options(p)
     add_output_option(p, "folder", "the session folder", as_it_runs=True)
-    p.add_argument("--plan", type=Path, default=None, help="session plan TOML: the features in order, their kind, "
+    p.add_argument("--plan", type=path_arg, default=None, help="session plan TOML: the features in order, their kind, "
                                                           "certificate and number of points (docs/formats.md §9)")
     p.add_argument("--feature", default=None, metavar="KIND:ID[:DIAMETER_MM]",
                    help="ad hoc: every point belongs to one feature of this kind (instead of --plan)")
@@ -242,6 +244,14 @@ def _say_small_buffer(source: LineSource) -> None:
 
 def _is_file(spec: str) -> bool:
     return spec != "-" and "://" not in spec
+
+
+def _source(text: str) -> str:
+    """argparse type of SOURCE: as given; a file's path checked as every path argument is
+    (:func:`arm_model.cli_options.path_arg`)."""
+    if _is_file(text):
+        path_arg(text)
+    return text
 
 
 def _status(args: argparse.Namespace, source: LineSource, files: list) -> dict:

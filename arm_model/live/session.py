@@ -157,6 +157,7 @@ class Session:
         self.inputs = inputs
         # the arm's own inputs (its model discrepancy read once, here), with and without a force sensor
         self._default_inputs = None if inputs is not None else {f: arm.input_uncertainty(f) for f in (True, False)}
+        self._propagators: dict = {}        # with and without a measured wrench: uncertainty.Propagator, made once
         # each joint's last move before a contact, from the samples: a JointHysteresis effect needs it, and the record
         # keeps it (points.csv's q1_move_sign ...: what the points file alone cannot give a later fit); the band from
         # the encoder's step (its uncertainty is step / sqrt(12)) and the readings' noise in contact
@@ -629,15 +630,16 @@ class Session:
     def _on_contact(self, c: Contact) -> tuple:
         """The point of contact ``c``: ``aacmm tip``'s centres and uncertainty, recorded, then the fits."""
         from ..commands import tip_centres, tip_table
-        from ..uncertainty import propagate
+        from ..uncertainty import Propagator
         from ..uncertainty_cli import u_columns
         feature = self.tracker.current
         ps = self._point_set(c, feature)  # with the sign of each joint's last move before the contact
         centres = tip_centres(self.arm, ps)
         row = tip_table(self.arm, ps, centres)
-        inputs = self.input_uncertainty(ps.wrench is not None)
-        prop = propagate(self.model, self.p, ps.q, ps.wrench, self.arm.aux(ps),
-                         parameters=self.parameters, inputs=inputs, threads=1, systematic=True)
+        force = ps.wrench is not None
+        if force not in self._propagators:
+            self._propagators[force] = Propagator(self.model, self.parameters, self.input_uncertainty(force))
+        prop = self._propagators[force](self.p, ps.q, ps.wrench, self.arm.aux(ps), threads=1, systematic=True)
         row.update(u_columns(prop))
         beyond = tuple(self.desc.joints[i].name for i, lo, hi in self._bounds if not lo <= c.peak.q[i] <= hi)
         point = LivePoint(c.index, c, self.measurement, feature, centres[0][0], centres[1][0], prop.u[0],

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..description import ArmDescription
-from ..errors import MAX_ID_LENGTH, InputError, beside, did_you_mean, parse_toml, read_text
+from ..errors import MAX_ID_LENGTH, InputError, beside, did_you_mean, parse_toml, path_problem, read_text
 from ..shipped import SHIPPED_ARMS, shipped_path
 from ..toml_lines import key_path_text, toml_key_lines
 from ..units import SMALLEST_ARTEFACT_M, implausible, split_unit
@@ -425,6 +425,9 @@ def _campaign_arm(ctx, top: dict, base_dir: Path | None, arm) -> tuple[ArmDescri
         return arm, arm_path
     arm_path = Path(arm) if arm is not None else None
     if arm_path is None and top["arm"] is not None:
+        why = path_problem(top["arm"], base=base_dir)
+        if why:         # "arm.toml/" read arm.toml (Path drops the slash)
+            raise ctx.error(f"'arm': {why}", (), "arm")
         arm_path = Path(top["arm"])
         if not arm_path.is_absolute() and base_dir is not None:
             arm_path = base_dir / arm_path

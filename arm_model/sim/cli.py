@@ -4,12 +4,11 @@ from __future__ import annotations
 import argparse
 import logging
 import time
-from pathlib import Path
 
 import numpy as np
 
 from ..cli import command_help
-from ..cli_options import add_output_option, seed
+from ..cli_options import add_output_option, path_arg, seed
 from ..log import PROGRESS, counted
 from ..output import output_folder
 from .campaign import load_campaign
@@ -31,7 +30,7 @@ def register(sub) -> None:
                     f"{TRUTH_POINTS_FILE}, which no analysis reads. The same seed gives identical bytes.",
         epilog="Campaign file: docs/formats.md §6; every key and its unit: docs/simulator.md. Output files: "
                "docs/formats.md §7.")
-    p.add_argument("campaign", type=Path, help="campaign TOML file")
+    p.add_argument("campaign", type=path_arg, help="campaign TOML file")
     add_output_option(p)
     p.add_argument("--seed", type=seed, default=None,
                    help="seed of every random draw of the simulation (default: the campaign's 'seed')")
