@@ -56,6 +56,7 @@ from .identifiability import (
 )
 from .options import FitOptions
 from .prior import (
+    GEOMETRY_GROUPS,
     MAX_SCALE_U,
     PRIOR_DOMINATED,
     PriorSpec,
@@ -446,6 +447,12 @@ class CalibrationResult:
         before = np.zeros(self.model.spec.size) if p_before is None else p_before
         return before_after(self.model, before, self.p, data, self.weights, self.reference_mode)
 
+    def pooled_groups(self) -> list[str]:
+        """The prior's groups that share one scale (``FitOptions.prior_groups="pooled"``), in this fit."""
+        if self.prior_scales is None or self.options is None or self.options.prior_groups != "pooled":
+            return []
+        return [g for g in GEOMETRY_GROUPS if g in self.prior_scales]
+
     def reference_frame(self) -> dict | None:
         """JSON-ready reference instrument's frames ``T_ref_base`` and markers' offsets, or None without them."""
         if self.tracker is None:
@@ -489,7 +496,7 @@ class CalibrationResult:
                 "scales": dict(self.prior_scales), "groups": self.prior_groups, "log_evidence": self.log_evidence,
                 "prior_dominated_ratio": PRIOR_DOMINATED, "evidence_rounds": self.evidence,
                 "prior_dominated": [n for n in self.free if self.state(n) == "prior-dominated"],
-                "prior_only": dict(self.prior_only), "arm_scale": self.arm_scale},
+                "prior_only": dict(self.prior_only), "arm_scale": self.arm_scale, "pooled": self.pooled_groups()},
             "outliers": [o.to_dict() for o in self.outliers], "dropped": [o.to_dict() for o in self.dropped],
             "gross_errors_removed": [g.to_dict() for g in self.gross], "gross_kept": self.gross_kept,
             "instances": self.instances, "distances": self.distances,
@@ -1573,7 +1580,8 @@ def _evidence_rounds(s: _Setup, sol, kept, fixed, options: FitOptions):
         cov = _covariance(s, ev, kept, var)
         kept_arr = np.asarray(kept, dtype=int)
         rho = variance_ratio(np.diag(cov), s.prior.size[kept_arr])
-        targets, gamma = update_scales(s.scales, s.spec, kept_arr, sol.p[kept_arr] - s.prior.centre[kept_arr], rho)
+        targets, gamma = update_scales(s.scales, s.spec, kept_arr, sol.p[kept_arr] - s.prior.centre[kept_arr], rho,
+                                       GEOMETRY_GROUPS if options.prior_groups == "pooled" else ())
         steps = {g: math.log(targets[g] / tau) for g, tau in s.scales.items()}
         factors = {}
         if options.weights_from_data:

@@ -143,6 +143,10 @@ def sigma_options(p, prior_default: str | None = None) -> None:
                         "weak parameters)" + ("; auto: evidence when the base model holds a joint compliance "
                                                 "(its prior is physical), else off" if auto else "")
                    + f". Default {default} (docs/calibration.md)")
+    p.add_argument("--prior-groups", choices=("separate", "pooled"), default="separate",
+                   help="with the evidence's scales: separate (default): each group its own scale; pooled: the "
+                        "geometric groups (lengths, joint offsets, axis angles, the tip or marker offset) one scale, "
+                        "one fixed point of the evidence over the four (docs/calibration.md)")
     p.add_argument("--arm-scale", choices=("prior", "data"), default="prior",
                    help="prior (default): the lengths' prior shrinks the arm's uniform scale too; data: a flat prior "
                         "on the scale, where the data set it within 0.5 %% (a certified length does; not the default: "
@@ -349,7 +353,7 @@ def fit_options(args, **fields):
                          f"(the prior, --prior-scale {prior}, shrinks them instead)")
     kw = {"min_resolution": args.min_resolution or None,
           "weights_from_data": getattr(args, "weights", "stated") == "data", "prior_scale": prior,
-          "arm_scale": getattr(args, "arm_scale", "prior")}
+          "arm_scale": getattr(args, "arm_scale", "prior"), "prior_groups": getattr(args, "prior_groups", "separate")}
     if getattr(args, "plausible_length_mm", None) is not None:
         kw["prior_length"] = args.plausible_length_mm * 1e-3
     if args.rank_tol is not None:
@@ -942,6 +946,8 @@ def prior_lines(res) -> list[str]:
            + (f", the scales chosen by the evidence ({len(res.evidence)} rounds"
               + ("" if res.evidence[-1].get("settled", True) else "; " + res.evidence[-1]["note"]) + ")"
               if evidence else " (scales given)") + ":"]
+    if res.pooled_groups():
+        out.append(f"  one scale for {', '.join(res.pooled_groups())} (--prior-groups pooled)")
     for g, v in res.prior_groups.items():
         physical = (" (a physical prior: not chosen by the evidence)" if v.get("physical") else
                     " (a physical maximum: the evidence may shrink it, never above 1)" if v.get("capped") else "")

@@ -176,7 +176,7 @@ def run(args: argparse.Namespace) -> int:
                             screen_alpha=args.screen_alpha, min_improvement=args.min_improvement,
                             max_effects=args.max_effects, cv_top=args.cv_top, pairs=args.pairs, seed=args.seed,
                             synthesise=not args.library_only, physics=not args.held_out_gain_only,
-                            prior_scale=args.prior_scale, arm_scale=args.arm_scale,
+                            prior_scale=args.prior_scale, arm_scale=args.arm_scale, prior_groups=args.prior_groups,
                             test_in_model=args.holdout is None,
                             weights_from_data=args.weights == "data",
                             escalate=args.candidates is None, region_effect=args.region_effect)

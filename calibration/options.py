@@ -13,6 +13,7 @@ import numpy as np
 
 from .data import Weights
 from .identifiability import DEFAULT_RANK_TOL
+from .prior import PRIOR_GROUPS
 
 __all__ = ["FitOptions", "UNIDENTIFIABLE", "COVARIANCE", "REFERENCE", "ARM_SCALE", "PRIOR_FACTOR_LIMITS",
            "PRIOR_LENGTH_RANGE"]
@@ -125,6 +126,9 @@ class FitOptions:
         prior_scale: "evidence" (default: a Gaussian prior on every free parameter, one scale a parameter
             group chosen by the evidence, :mod:`calibration.prior`), a positive factor (every group's
             scale), a dict {group: scale} (e.g. the ``prior_scales`` of an earlier fit), or None (no prior).
+        prior_groups: with the evidence's scales, "separate" (each group its own scale) or "pooled" (the
+            geometric groups, lengths, joint offsets, axis angles and the tip offset, one scale by one fixed point;
+            :func:`calibration.prior.update_scales`).
         prior_centre: the prior's centre (full parameter vector [SI]); None: ``values``.
         blas: BLAS threads during the fit (None: unchanged).
         discrepancy: estimate the model discrepancy (:mod:`calibration.discrepancy`); False leaves the result's
@@ -159,6 +163,7 @@ class FitOptions:
     prior_length: float | None = None
     weights_from_data: bool = False
     prior_scale: float | str | dict[str, float] | None = "evidence"
+    prior_groups: str = "separate"
     prior_centre: np.ndarray | None = field(default=None, compare=False)
     blas: int | None = 1
     discrepancy: bool = True
@@ -187,6 +192,7 @@ class FitOptions:
         _choice("covariance", self.covariance, COVARIANCE)
         _choice("reference", self.reference, REFERENCE)
         _choice("arm_scale", self.arm_scale, ARM_SCALE)
+        _choice("prior_groups", self.prior_groups, PRIOR_GROUPS)
         _positive("rank_tol", self.rank_tol)
         if not self.rank_tol < 1:
             raise ValueError(f"rank_tol must be below 1, got {self.rank_tol!r}")

@@ -74,10 +74,14 @@ def errors(res, test) -> np.ndarray:
     return np.linalg.norm(error_vectors(res, test), axis=1)
 
 
+#: the options of every fit (``--prior-groups`` sets its prior groups)
+FIT = FitOptions(weights_from_data=True)
+
+
 def fitted(model, train):
     """``calibrate``'s default fit of ``model`` on ``train`` as ``aacmm calibrate`` makes it: the noise from the
     data, the torques refined on the calibrated description."""
-    return refine_torques(calibrate(model, train, FitOptions(weights_from_data=True)))
+    return refine_torques(calibrate(model, train, FIT))
 
 
 def predicted(res, test) -> np.ndarray:
@@ -142,8 +146,12 @@ def main(argv=None) -> int:
                    help="also N campaigns each model describes exactly (its fit on every posture plus noise)")
     p.add_argument("--compare-halves", action="store_true",
                    help="also fit each random half's held-out postures and compare the two fits' parameters")
+    p.add_argument("--prior-groups", choices=("separate", "pooled"), default="separate",
+                   help="the prior's groups of every fit (FitOptions.prior_groups; default separate)")
     p.add_argument("-o", "--output", type=Path, default=None, help="write the results as JSON here")
     args = p.parse_args(argv)
+    global FIT
+    FIT = dataclasses.replace(FIT, prior_groups=args.prior_groups)
     if args.exact < 0:
         p.error("--exact: a number of draws, 0 or more")
     desc = load_arm(args.arm, args.tip_frame)
@@ -160,7 +168,7 @@ def main(argv=None) -> int:
         row = {}
         first = next(iter(models))
         train, test = split_holdout(data[first], held)
-        row["nominal"] = errors(nominal_baseline(models[first], train, FitOptions(weights_from_data=True)), test)
+        row["nominal"] = errors(nominal_baseline(models[first], train, FIT), test)
         compared = {}
         for name, m in models.items():
             train, test = split_holdout(data[name], held)

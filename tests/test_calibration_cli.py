@@ -261,3 +261,13 @@ def test_study_montecarlo_refuses_a_probe_compliance_without_a_force_sensor(tmp_
     assert code == 2 and "Traceback" not in err, err
     assert f"{camp}, line 1: {' '.join(option)} " in err and "simulates no force sensor" in err, err
     assert not out.exists()
+
+
+def test_prior_groups_is_an_option_of_the_fit():
+    """``calibrate --prior-groups pooled`` is the fit's ``FitOptions.prior_groups`` (default separate)."""
+    from arm_model.cli import build_parser
+    from calibration.cli import fit_options
+    argv = ["calibrate", "points.csv", "artefacts.toml", "--arm", str(NOMINAL), "-o", "out"]
+    assert fit_options(build_parser(argv).parse_args(argv)).prior_groups == "separate"
+    argv += ["--prior-groups", "pooled"]
+    assert fit_options(build_parser(argv).parse_args(argv)).prior_groups == "pooled"

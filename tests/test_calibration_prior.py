@@ -255,6 +255,48 @@ def test_a_physical_group_keeps_its_scale_while_the_evidence_moves_the_others():
     assert new["effect c"] == 1.0 and gamma == {"lengths": 2.0, "effect c": 2.0}
 
 
+def test_pooled_groups_share_one_fixed_point_and_the_others_keep_their_own():
+    """``prior_groups="pooled"``: lengths (two parameters 3 sizes off, both determined), joint offsets (one, 1 size
+    off, rho 0.5) and a physical compliance group. Pooled over the geometric groups the scale of both is
+    sqrt((9 + 9 + 1) / (2 + 0.5)) = 2.757 (hand-derived), separate 3 and sqrt(1 / 0.5) = 1.414; the physical group
+    stays at 1 either way, and so does the pool when its groups determine fewer than 0.5 parameters in all."""
+    from calibration.prior import GEOMETRY_GROUPS, PriorSpec, update_scales
+    spec = PriorSpec(("lengths", "lengths", "joint offsets", "effect c"), np.array([1e-3, 1e-3, 1e-3, 2e-4]),
+                     np.array([-np.inf, -np.inf, -np.inf, 0.0]), ("a",) * 4, frozenset({"effect c"}))
+    delta, rho = np.array([3e-3, -3e-3, 1e-3, 6e-4]), np.array([0.0, 0.0, 0.5, 0.0])
+    start = {"lengths": 1.0, "joint offsets": 1.0, "effect c": 1.0}
+    apart, gamma = update_scales(start, spec, [0, 1, 2, 3], delta, rho)
+    pooled, gamma_pooled = update_scales(start, spec, [0, 1, 2, 3], delta, rho, GEOMETRY_GROUPS)
+    assert apart["lengths"] == pytest.approx(3.0, rel=1e-12)
+    assert apart["joint offsets"] == pytest.approx(np.sqrt(2.0), rel=1e-12)
+    assert pooled["lengths"] == pooled["joint offsets"] == pytest.approx(np.sqrt(19 / 2.5), rel=1e-12)
+    assert pooled["effect c"] == apart["effect c"] == 1.0 and gamma_pooled == gamma
+    unseen, _ = update_scales(start, spec, [0, 1, 2, 3], delta, np.array([0.95, 0.95, 0.95, 0.0]), GEOMETRY_GROUPS)
+    assert unseen["lengths"] == unseen["joint offsets"] == 1.0
+
+
+def test_a_pooled_fit_gives_the_geometry_one_scale_and_says_so(model):
+    """``prior_groups="pooled"`` on a simulated campaign whose lengths and tip are off by 0.1 mm and angles by 1 mrad
+    (ten times as many plausible sizes): separate, the evidence gives both angles' groups a scale over twice the
+    lengths' and the tip's; pooled, the four geometric groups one scale (each under its ceiling) between the separate
+    ones, which the result, the console and summary.json name; an unknown choice is refused."""
+    from calibration.cli import prior_lines
+    data, _ = _campaign(model, 3, length=1e-4, angle=1e-3, probe=1e-4)
+    apart = calibrate(model, data, FitOptions(weights=W))
+    pooled = calibrate(model, data, FitOptions(weights=W, prior_groups="pooled"))
+    geometry = [g for g in (GROUP_LENGTHS, GROUP_OFFSETS, GROUP_ANGLES, GROUP_TIP) if g in pooled.prior_scales]
+    assert len(geometry) == 4 and apart.pooled_groups() == []
+    sep = apart.prior_scales
+    assert min(sep[GROUP_ANGLES], sep[GROUP_OFFSETS]) > 2 * max(sep[GROUP_LENGTHS], sep[GROUP_TIP]), sep
+    tau = [pooled.prior_scales[g] for g in geometry]
+    assert max(tau) == pytest.approx(min(tau), rel=1e-9), pooled.prior_scales
+    assert min(sep[g] for g in geometry) < tau[0] < max(sep[g] for g in geometry)
+    assert pooled.to_dict()["prior"]["pooled"] == geometry == pooled.pooled_groups()
+    assert any("one scale for lengths" in line for line in prior_lines(pooled))
+    with pytest.raises(ValueError, match="prior_groups"):
+        FitOptions(prior_groups="together")
+
+
 def test_joint_compliance_groups_are_physical_and_given_sizes_are_not():
     """prior_spec marks the joint compliance effect's group physical (every parameter sized by the data's
     torque); a size given for one of its parameters makes the group an ordinary one (the user's size)."""

@@ -6,6 +6,7 @@ import json
 import numpy as np
 import pytest
 
+from arm_model import InputError
 from arm_model.cli import main
 from arm_model.model_file import load_model
 from arm_model.sim import campaign_from_dict, simulate
@@ -278,3 +279,24 @@ def test_naming_the_candidates_turns_the_escalation_off(files, tmp_path, monkeyp
                  *extra, "-o", str(tmp_path / "loop")])
     assert code == 3 and seen == {"escalate": escalate}        # the stand-in's exception is an internal error
     assert not (tmp_path / "loop").exists()
+
+
+def test_prior_groups_and_pose_folds_reach_the_loops_settings(files, tmp_path, monkeypatch, capsys):
+    """``--prior-groups pooled --pose-folds blocked`` are the settings the loop is given (every fit's
+    ``FitOptions.prior_groups`` is ``LoopSettings.prior_groups``); an unknown choice stops with exit 2."""
+    import calibration.loop as loop
+    got = {}
+
+    def stop(*args, settings, **kw):
+        got["settings"] = settings
+        raise InputError("stopped by the test")
+    monkeypatch.setattr(loop, "close_loop", stop)
+    args = ["close-loop", str(files / "points.csv"), str(files / "artefacts.toml"), "--arm", str(NOMINAL), "-o"]
+    assert main(args + [str(tmp_path / "a"), "--prior-groups", "pooled", "--pose-folds", "blocked"]) == 2
+    assert (got["settings"].prior_groups, got["settings"].pose_folds) == ("pooled", "blocked")
+    assert main(args + [str(tmp_path / "b")]) == 2 and got["settings"].prior_groups == "separate"
+    with pytest.raises(SystemExit):
+        main(args + [str(tmp_path / "c"), "--prior-groups", "one"])
+    capsys.readouterr()
+    with pytest.raises(ValueError, match="prior_groups"):
+        loop.LoopSettings(prior_groups="one")

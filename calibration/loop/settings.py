@@ -5,6 +5,7 @@ import math
 from dataclasses import dataclass
 
 from ..identifiability import DEFAULT_RANK_TOL
+from ..prior import PRIOR_GROUPS
 
 __all__ = ["LoopSettings", "wilcoxon_units_needed", "STABILITY_RULE", "STABLE_MARGIN", "SAME_SIGNATURE", "PHYSICS",
            "PARSIMONY", "NOISE_OFF", "FOLD_BY", "POSE_FOLDS", "LEGACY_RESOLUTION", "MAX_COUNT"]
@@ -63,8 +64,9 @@ class LoopSettings:
     close-loop --holdout``), the outer test set's rows are kept out of it, as ``calibrate --holdout`` keeps its
     held-out measurements out of its model. ``prior_scale``: "auto" (default: the prior with the evidence's scales,
     "evidence", when the base model holds a joint compliance, whose prior is physical, else None: no prior, the
-    practical-resolution rule), "evidence", a factor, or None. ``arm_scale``: every fit's
-    :attr:`calibration.options.FitOptions.arm_scale`. ``escalate``: when the outer test set is worse than
+    practical-resolution rule), "evidence", a factor, or None. ``arm_scale``, ``prior_groups``: every fit's
+    :attr:`calibration.options.FitOptions.arm_scale` and :attr:`~calibration.options.FitOptions.prior_groups`.
+    ``escalate``: when the outer test set is worse than
     stated once the default families are exhausted (:func:`~calibration.loop.verdict.heldout_check`), the
     families off by default (:data:`~calibration.candidates.OPT_IN_FAMILIES`) not offered yet are offered, once,
     under the same rules (``aacmm close-loop`` turns it off when ``--candidates`` names the families).
@@ -92,6 +94,7 @@ class LoopSettings:
     physics: bool = True
     prior_scale: float | str | None = "auto"
     arm_scale: str = "prior"
+    prior_groups: str = "separate"
     test_in_model: bool = True
     escalate: bool = True
     pairs: int = 2
@@ -103,6 +106,8 @@ class LoopSettings:
             raise ValueError(f"fold_by must be one of {', '.join(FOLD_BY)}, got {self.fold_by!r}")
         if self.pose_folds not in POSE_FOLDS:
             raise ValueError(f"pose_folds must be one of {', '.join(POSE_FOLDS)}, got {self.pose_folds!r}")
+        if self.prior_groups not in PRIOR_GROUPS:
+            raise ValueError(f"prior_groups must be one of {', '.join(PRIOR_GROUPS)}, got {self.prior_groups!r}")
         if self.folds < 2:
             raise ValueError(f"folds must be at least 2, got {self.folds}")
         if not 0.0 < self.test_fraction < 1.0:

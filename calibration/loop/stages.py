@@ -113,7 +113,7 @@ def prepare(camp: Campaign, settings: LoopSettings, say) -> LoopState:
     # the loop drops its outliers itself, once, on the base model (``settings.drop_outliers``): every model it
     # compares is fitted on the same points (no gross errors left out fit by fit)
     options = FitOptions(values=camp.values, rank_tol=settings.rank_tol, prior_scale=scale,
-                         arm_scale=settings.arm_scale,
+                         arm_scale=settings.arm_scale, prior_groups=settings.prior_groups,
                          min_resolution=LEGACY_RESOLUTION if scale is None else None, gross_threshold=None)
     state = LoopState(settings, desc, say, data, design, test, test_by, test_rows, options, camp.free, camp.hold,
                       model.spec.size, stated, cands, skipped, model, stated, remaining=list(cands),
