@@ -45,3 +45,33 @@ def test_the_parser_is_built_once_a_subcommand_module_and_parsing_leaves_it_unch
     after = vars(tip.parse_args(bare))                               # no option of the first parse carries over
     assert after == vars(fresh.parse_args(bare)) and after["tip_frame"] is None and not after["quiet"]
     assert tip.format_help() == fresh.format_help()
+
+
+def test_the_nuisance_jacobian_kept_pattern_gives_scipys_matrix_and_another_pattern_is_built_anew():
+    import numpy as np
+    import scipy.sparse as sp
+
+    from calibration.problem import _TripletsCsr
+    rng = np.random.default_rng(3)
+    rows = np.repeat(np.arange(40), 3)
+    cols = (rng.integers(0, 10, 40)[:, None] * 3 + np.arange(3)).reshape(-1)[::-1].copy()   # not in order
+
+    def same(a, b):
+        return all(np.array_equal(getattr(a, k), getattr(b, k)) for k in ("data", "indices", "indptr")) \
+            and a.shape == b.shape and a.indices.dtype == b.indices.dtype
+
+    make = _TripletsCsr()
+    for k in range(3):                 # the first call builds and keeps the pattern, the next ones reuse it
+        v = rng.standard_normal(len(rows))
+        v[k] = 0.0                     # an explicit zero stays, as in scipy's
+        assert same(make(rows, cols, v, (40, 30)), sp.csr_matrix((v, (rows, cols)), shape=(40, 30)))
+    assert make._kept is not None
+    moved = cols.copy()
+    moved[0] = (moved[0] + 1) % 30
+    v = rng.standard_normal(len(rows))
+    assert same(make(rows, moved, v, (40, 30)), sp.csr_matrix((v, (rows, moved)), shape=(40, 30)))
+    assert same(make(rows, moved, v, (41, 30)), sp.csr_matrix((v, (rows, moved)), shape=(41, 30)))
+    twice = np.concatenate([rows, rows[:1]]), np.concatenate([cols, cols[:1]])    # scipy sums a repeated pair
+    v = rng.standard_normal(len(twice[0]))
+    fresh = _TripletsCsr()
+    assert same(fresh(*twice, v, (40, 30)), sp.csr_matrix((v, twice), shape=(40, 30))) and fresh._kept is None
