@@ -19,6 +19,7 @@ output behind.
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib
 import importlib.util
 import logging
@@ -104,7 +105,24 @@ def _add_common(parser: argparse.ArgumentParser, top: bool) -> None:
 
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The ``aacmm`` parser. With ``argv`` (the command line), only the subcommand it names is built in
-    full (the others are listed for ``--help``); without, every subcommand."""
+    full (the others are listed for ``--help``); without, every subcommand.
+
+    Built once a process for each set of subcommand modules (a few milliseconds, which a program or a test
+    calling :func:`main` many times paid each time) and shared: parse with it, never change it. Parsing reads a
+    parser and never changes it; the subcommands' ``func`` and defaults are fixed when it is built."""
+    return _build(_modules(argv))
+
+
+def _modules(argv: list[str] | None) -> tuple[str, ...]:
+    """The modules whose subcommands the parser for ``argv`` builds in full (None: all of them)."""
+    if argv is None:
+        return COMMAND_MODULES
+    wanted = _requested(argv)
+    return (COMMANDS[wanted][0],) if wanted in COMMANDS else ()
+
+
+@functools.lru_cache(maxsize=len(COMMAND_MODULES) + 2)
+def _build(modules: tuple[str, ...]) -> argparse.ArgumentParser:
     parser = _Parser(
         prog="aacmm",
         description="Portable measuring arm toolkit: deflection-aware ball centres from encoder angles and "
@@ -114,11 +132,6 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         epilog=EXIT_STATUS)
     parser.add_argument("--version", action=_Version, nargs=0, help="show the toolkit's version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    wanted = _requested(argv) if argv is not None else None
-    if argv is None:
-        modules = COMMAND_MODULES
-    else:
-        modules = (COMMANDS[wanted][0],) if wanted in COMMANDS else ()
     for module in modules:
         if importlib.util.find_spec(module.rsplit(".", 1)[0]) is None or importlib.util.find_spec(module) is None:
             continue

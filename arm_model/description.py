@@ -5,7 +5,7 @@ Inside, everything is SI: lengths [m], angles [rad], forces [N], compliances [m/
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -203,6 +203,13 @@ class ArmDescription:
     masses_assumed: bool = field(default=False, compare=False, repr=False)
 
     @cached_property
+    def exact_key(self) -> str:
+        """Every field of the description, each number exactly (``repr``: 0.0 and -0.0 differ, as they may in a
+        written file), as one text: the key of a cache of what is derived from it (``==`` compares the kinematic
+        fields only, and equal numbers)."""
+        return repr(tuple(getattr(self, f.name) for f in fields(self)))
+
+    @cached_property
     def encoders(self) -> tuple[JointRow, ...]:
         """The joints whose values are the encoder columns q1..qJ, in column order: every joint of the
         chain but those mimicking another joint of the chain, and for a joint mimicking one off the chain,
@@ -369,7 +376,13 @@ class TomlReader:
 
     def __init__(self, path: str, text: str):
         self.path = path
-        self.lines = toml_key_lines(text)
+        self._text = text
+
+    @cached_property
+    def lines(self) -> dict[tuple[Any, ...], int]:
+        """The line of each key path (:func:`~arm_model.toml_lines.toml_key_lines`), worked out when a message
+        first needs one: a text without a mistake never pays for it."""
+        return toml_key_lines(self._text)
 
     def error(self, msg: str, *path: Any) -> InputError:
         """An InputError at ``path`` (the key path; its line, else its table's, else none)."""

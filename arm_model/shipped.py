@@ -6,6 +6,7 @@ copy under ``arm_model/_shipped/`` (made by ``setup.py`` at build time), so ``--
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import shutil
 from pathlib import Path
@@ -37,8 +38,9 @@ def arm_path(value: str | Path) -> Path:
     return p
 
 
+@functools.lru_cache(maxsize=1)
 def version() -> str:
-    """The installed version of aacmm-toolkit."""
+    """The installed version of aacmm-toolkit (looked up once a process: every summary records it)."""
     from importlib.metadata import PackageNotFoundError, version as _v
     try:
         return _v("aacmm-toolkit")

@@ -128,6 +128,7 @@ class Problem:
         self._has_ref = (np.all(np.isfinite(xref), axis=1) if xref is not None and self.reference != "off"
                          else np.zeros(len(pts), bool))
         self._xref_all = xref
+        self._nuisance_csr = _TripletsCsr()       # the nuisance Jacobian's rows and columns are the same each time
         #: the rows that repeat an earlier reading of their feature (:func:`arm_model.checks.repeated_readings`; the
         #: marker of a row of several markers told apart): counted once, as the first (their residuals would be the
         #: first's, counted as independent observations: every uncertainty narrowed by sqrt(copies))
@@ -443,8 +444,7 @@ class Problem:
         jp[:, np.isin(self.free, self.prior_only)] = 0.0
         ti, tj, tv = (np.concatenate(a) if a else np.zeros(0, int) for a in sparse)
         tv = tv.astype(float) / self.sigma[ti] if len(ti) else np.zeros(0)
-        jt = sp.csr_matrix((tv, (ti, tj)), shape=(self.n_rows, self.n_nuisance))
-        return Evaluation(r, x, jp, jt)
+        return Evaluation(r, x, jp, self._nuisance_csr(ti, tj, tv, (self.n_rows, self.n_nuisance)))
 
     def _group_rows(self, g: Group, x: np.ndarray, dx: np.ndarray | None, dxo: np.ndarray | None,
                     states: list[np.ndarray], r: np.ndarray, jp: np.ndarray | None, sparse: Triplets) -> None:
@@ -633,6 +633,30 @@ class CentreKernel:
                 jp = jp[:, list(key)] if key else ca.DM.zeros(3, 0)
             fn = self._columns[key] = ca.Function("xj", [q, w, aux, p, o], [x, jp, ca.jacobian(x, o)])
         return fn
+
+
+class _TripletsCsr:
+    """``csr_matrix((values, (rows, columns)), shape)`` for triplets whose rows and columns repeat from call to call
+    (the nuisance Jacobian of each evaluation of a problem). The first call builds it as scipy does (sorted by row,
+    then column) and keeps the order that puts the values there; a call with the same rows, columns and shape only
+    reorders its values into a copy of the kept index arrays: the same matrix bit for bit, five times faster.
+    Triplets that repeat a (row, column) pair (scipy sums them) are never kept."""
+
+    def __init__(self) -> None:
+        self._kept: tuple[tuple[int, int], np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def __call__(self, rows: np.ndarray, columns: np.ndarray, values: np.ndarray, shape: tuple[int, int]
+                 ) -> sp.csr_matrix:
+        kept = self._kept
+        if kept is not None and kept[0] == shape and np.array_equal(kept[1], rows) and np.array_equal(kept[2], columns):
+            order, indices, indptr = kept[3:]
+            return sp.csr_matrix((values[order], indices.copy(), indptr.copy()), shape=shape)
+        out = sp.csr_matrix((values, (rows, columns)), shape=shape)
+        order = np.lexsort((columns, rows))
+        if out.nnz == len(values) and np.array_equal(out.indices, columns[order]) \
+                and np.array_equal(out.data, values[order]):
+            self._kept = (shape, rows.copy(), columns.copy(), order, out.indices.copy(), out.indptr.copy())
+        return out
 
 
 @lru_cache(maxsize=8 * CASADI_CACHE)
