@@ -210,6 +210,9 @@ def robots() -> Path:
 #  loop_cross_harmonics test-set instance gross -> test_loop_cross_harmonics ..._too_small_flag_it_whole (the
 #                                       test set's point test, same data), ..._built_added_and_recovered
 #  loop_effects other seeds (10)      -> test_loop_effects names_recovers_and_halves (seed 3; seeds 4, 5: slow only)
+#  loop_effects thermal (seed 3)      -> test_loop_effects [force_sensor] (a library effect named, recovered, halved);
+#                                       test_loop_cli close_loop_writes_the_report; test_model_file calibrate_writes
+#                                       (the thermal rate from a drifting campaign)
 #  loop_effects eccentricity, probe compliance (seed 3) -> test_loop_cross_harmonics, test_loop_synthesis [lobing];
 #                                       test_loop_effects [force_sensor] and its indistinguishable compliance
 #  loop_effects joint compliance (seed 3) -> test_model_file tip_with_the_loops_model (j2's, found on this arm beside
@@ -218,7 +221,8 @@ def robots() -> Path:
 #  loop_real_physics gain injected    -> test_loop_real_physics compliance injected (the same injection and checks)
 #  loop_heldout_verdict UR5 gain      -> test_loop_heldout_verdict three_times_..._u, opt_in_families_offered
 #  loop_hidden_effects coupling, 4th harmonic -> test_loop_hidden_effects linear_coupling, structure_tests_see_a_fourth
-#  loop_honesty 19 of 20 seeds        -> test_loop_honesty ..._on_two_seeds (0, 1), honesty_study (seed 4)
+#  loop_honesty 19 of 20 seeds        -> test_loop_honesty ..._on_seed_1, honesty_study (seed 4); the clean twins of
+#                                       test_loop_cross_harmonics and test_loop_synthesis [lobing]
 #  loop_honesty third harmonic built  -> test_loop_honesty ..._library_alone (the family, same campaign);
 #                                       test_loop_synthesis offers_only_what_the_model_lacks (its harmonics);
 #                                       test_loop_cross_harmonics ..._built_added_and_recovered (built, added)

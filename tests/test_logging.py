@@ -8,7 +8,7 @@ import subprocess
 import sys
 
 import pytest
-from test_reliability_inputs import RING, run, small  # noqa: F401  (the CLI runner and small campaign)
+from test_reliability_inputs import RING, run
 
 from arm_model.cli import COMMANDS, build_parser, main
 from arm_model.log import Progress, console, counted
@@ -133,8 +133,16 @@ def test_progress_in_a_file_has_plain_lines(capsys):
     assert capsys.readouterr() == ("", "") and not bar.enabled
 
 
-def test_study_progress_into_a_log_file_has_no_carriage_return(small, tmp_path):  # noqa: F811 (the imported fixture)
-    """A real command, its standard error a file (as `aacmm ... 2> log`)."""
+def test_study_progress_into_a_log_file_has_no_carriage_return(tmp_path):
+    """A real command, its standard error a file (as `aacmm ... 2> log`). The campaign: a quick synthetic one
+    (arm_model.sim.quick, 0.3 s of CPU; the simulator's campaign of test_reliability_inputs cost this module 3 s
+    more): what is checked is the progress lines, not the study."""
+    from arm_model import load_description
+    from arm_model.model import ArmModel
+    from arm_model.sim.quick import SynthSpec, make_campaign
+    small = tmp_path / "small"
+    make_campaign(ArmModel(load_description(NOMINAL)), SynthSpec(ballbars=4, seats=2, articulations=6, spheres=2,
+                                                                 sphere_points=8), seed=5).write(small)
     log = tmp_path / "log.txt"
     with open(log, "w") as fh:
         r = subprocess.run([sys.executable, "-m", "arm_model.cli", "study", "poses", str(small / "points.csv"),

@@ -28,19 +28,20 @@ def _clean_loop(seed: int, **settings):
                       **settings)
 
 
-def test_no_missing_effect_adds_nothing_on_two_seeds():
-    """The study below on its first two seeds (about 6 s of CPU; seed 4 runs end to end in
-    test_honesty_study_counts_what_the_loop_added_built_and_claimed): nothing added, no structure claimed on either.
-    (An over-eager loop, ``alpha=0.5, min_improvement=0``, fails it: structure claimed on seed 1.)"""
-    for seed in (0, 1):
-        loop = _clean_loop(seed)
-        assert not loop.added and not loop.remaining, (seed, loop.verdict)
+def test_no_missing_effect_adds_nothing_on_seed_1():
+    """The study below on its seed 1 (about 4 s of CPU; seed 0 runs in make test-slow's study, seed 4 end to end in
+    test_honesty_study_counts_what_the_loop_added_built_and_claimed, and the clean twins of test_loop_cross_harmonics
+    and test_loop_synthesis add nothing either): nothing added, no structure claimed. (The docstring of the two-seed
+    test this replaces said an over-eager loop, ``alpha=0.5, min_improvement=0``, claimed structure on seed 1; on
+    main of 2026-11-28 it claims nothing on seed 0 or 1: the fold rule and the outer test set hold it too.)"""
+    loop = _clean_loop(1)
+    assert not loop.added and not loop.remaining, loop.verdict
 
 
 @pytest.mark.slow
 def test_no_missing_effect_adds_nothing_in_19_of_20_seeds():
-    """(slow: 20 campaigns, about 80 s of CPU; make test runs seeds 0 and 1 in test_no_missing_effect_adds_nothing_on_
-    two_seeds and seed 4 end to end in test_honesty_study_counts_what_the_loop_added_built_and_claimed)"""
+    """(slow: 20 campaigns, about 80 s of CPU; make test runs seed 1 in test_no_missing_effect_adds_nothing_on_seed_1
+    and seed 4 end to end in test_honesty_study_counts_what_the_loop_added_built_and_claimed)"""
     added, claims = [], []
     for seed in range(20):
         loop = _clean_loop(seed)

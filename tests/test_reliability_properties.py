@@ -192,7 +192,9 @@ OPTIONS = [("ring", "--probability-pct"), ("ring", "--delta-T-C"), ("ring", "--u
            ("close-loop", "--pairs")]
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+# 80 examples: five values a numeric option on average (150 took 2.9 s of CPU; the cell strategy's specials are drawn
+# first by hypothesis's derandomized search)
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(value=cell, k=st.integers(0, len(OPTIONS) - 1))
 def test_numeric_options_are_finite_or_refused(capsys, value, k):
     cmd, opt = OPTIONS[k]
