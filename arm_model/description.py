@@ -170,13 +170,6 @@ class Probe:
         return np.array([self.bending_compliance_x, self.bending_compliance_y, self.axial_compliance])
 
 
-#: parameter vectors whose :meth:`ArmDescription.chain_floats` a description keeps
-_CHAIN_FLOATS_KEPT = 8
-#: (rows, p_last, compliance, rotation) of :meth:`ArmDescription.chain_floats`
-ChainFloats = tuple[tuple[tuple[float, ...], ...], tuple[float, ...], tuple[float, ...],
-                    "tuple[tuple[float, ...], ...] | None"]
-
-
 @dataclass(frozen=True)
 class ArmDescription:
     """A serial arm: joint rows from the base out and a probe. ``convention`` is "dh", "mdh" or
@@ -233,22 +226,6 @@ class ArmDescription:
             out[source] = JointRow(name=source, kind=j.kind, lower=None if lims is None else lims[0],
                                    upper=None if lims is None else lims[1])
         return tuple(out.values())
-
-    def chain_floats(self, p: ArrayLike | None = None) -> ChainFloats:
-        """``(rows, p_last, compliance, rotation)`` of the description plus the errors ``p`` (None: none) as Python
-        floats (:func:`arm_model.params.split_params`, and :attr:`Probe.rotation`): what one point's evaluation on
-        floats reads (:data:`arm_model.chain.FLOAT_OPS`), made once for the same ``p`` (the last few kept), not per
-        point."""
-        from .params import split_params
-        key = None if p is None else np.asarray(p, dtype=float).tobytes()
-        cache: dict[bytes | None, ChainFloats] = self.__dict__.setdefault("_chain_floats", {})
-        if key not in cache:
-            rows, p_last, compliance = split_params(self, None if p is None else np.asarray(p, dtype=float).tolist())
-            if len(cache) >= _CHAIN_FLOATS_KEPT:
-                cache.clear()
-            cache[key] = (tuple(tuple(float(v) for v in r) for r in rows), tuple(float(v) for v in p_last),
-                          tuple(float(v) for v in compliance), self.probe.rotation)
-        return cache[key]
 
     @cached_property
     def chain_joints(self) -> tuple[Joint, ...]:

@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike
 
 from .chain import FLOAT_OPS, NUMPY_OPS, ball_centre_expr
 from .description import ArmDescription
-from .params import split_params
+from .params import chain_floats, split_params
 
 __all__ = ["ball_centres", "rigid_centres", "as_wrench", "probe_rotations"]
 
@@ -84,7 +84,7 @@ def ball_centres(desc: ArmDescription, q: ArrayLike, wrench: ArrayLike | None = 
     n = q2.shape[0]
     w = as_wrench(wrench, n)
     if n == 1:          # one point (a live session's): on Python floats, the batch's numbers bit for bit (FLOAT_OPS)
-        floats = desc.chain_floats(p)
+        floats = chain_floats(desc, p)
         x, y, z = ball_centre_expr(desc.convention, floats[0], floats[1], floats[2], q2[0].tolist(),
                                    None if w is None else w[0].tolist(), FLOAT_OPS, desc.chain_joints,
                                    floats[3], desc.probe.lever)

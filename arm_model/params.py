@@ -18,7 +18,13 @@ from numpy.typing import ArrayLike
 
 from .description import ArmDescription
 
-__all__ = ["ParamSpec", "param_spec", "split_params", "apply_params", "folded_jacobian"]
+__all__ = ["ParamSpec", "param_spec", "split_params", "apply_params", "folded_jacobian", "chain_floats"]
+
+#: parameter vectors whose :func:`chain_floats` a description keeps
+_CHAIN_FLOATS_KEPT = 8
+#: (rows, p_last, compliance, rotation) of :func:`chain_floats`
+ChainFloats = tuple[tuple[tuple[float, ...], ...], tuple[float, ...], tuple[float, ...],
+                    "tuple[tuple[float, ...], ...] | None"]
 
 _UNITS = {"theta_offset": "rad", "d": "m", "a": "m", "alpha": "rad", "origin_x": "m", "origin_y": "m",
           "origin_z": "m", "origin_roll": "rad", "origin_pitch": "rad", "origin_yaw": "rad"}
@@ -128,3 +134,19 @@ def folded_jacobian(desc: ArmDescription, p: ArrayLike) -> np.ndarray:
         out[m * i + 3: m * i + 6, m * i + 3: m * i + 6] = np.column_stack(
             [(1.0, 0.0, 0.0), rx.T[:, 1], (rotation_xyz((0.0, pitch, 0.0)) @ rx).T[:, 2]])
     return out
+
+
+def chain_floats(desc: ArmDescription, p: ArrayLike | None = None) -> ChainFloats:
+    """``(rows, p_last, compliance, rotation)`` of the description plus the errors ``p`` (None: none) as Python
+    floats (:func:`split_params`, and :attr:`~arm_model.description.Probe.rotation`): what one point's evaluation
+    on floats reads (:data:`arm_model.chain.FLOAT_OPS`), made once for the same ``p`` (the last few kept on the
+    description), not per point."""
+    key = None if p is None else np.asarray(p, dtype=float).tobytes()
+    cache: dict[bytes | None, ChainFloats] = desc.__dict__.setdefault("_chain_floats", {})
+    if key not in cache:
+        rows, p_last, compliance = split_params(desc, None if p is None else np.asarray(p, dtype=float).tolist())
+        if len(cache) >= _CHAIN_FLOATS_KEPT:
+            cache.clear()
+        cache[key] = (tuple(tuple(float(v) for v in r) for r in rows), tuple(float(v) for v in p_last),
+                      tuple(float(v) for v in compliance), desc.probe.rotation)
+    return cache[key]

@@ -231,7 +231,7 @@ def import_cycles(graph: dict[str, dict[str, int]]) -> list[list[str]]:
 
 
 def _describe(cycle: list[str], graph) -> str:
-    steps = [f"{a} (line {graph[a][b]}) -> {b}" for a, b in zip(cycle, cycle[1:], strict=True)]
+    steps = [f"{a} (line {graph[a][b]}) -> {b}" for a, b in zip(cycle[:-1], cycle[1:], strict=True)]
     return "\n    ".join(steps)
 
 

@@ -245,7 +245,7 @@ def test_degenerate_paper_tables(tmp_path, capsys):
     rows = [ln for ln in src.splitlines() if ln.strip() and not ln.startswith("#")]
     zero = rows[0] + "\n" + "\n".join(ln.split(",")[0] + ",0,0,0,0,0" for ln in rows[1:]) + "\n"
     cases = [(_table(tmp_path, "two.csv", "\n".join(rows[:3]) + "\n"), "2 measurement row(s)"),
-             (_table(tmp_path, "zero.csv", zero), "initial diameter errors are all equal"),
+             (_table(tmp_path, "zero.csv", zero), "line 2, column 'initial_mm': an initial diameter error of 0"),
              (_table(tmp_path, "latin1.csv", data=src.encode().replace(b"measurement", b"m\xe9asurement", 1)),
               "not UTF-8 text"),
              (_table(tmp_path, "extra.csv", src.replace("max10_force_mm", "max10_force_mm,note", 1)),

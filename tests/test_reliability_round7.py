@@ -371,7 +371,7 @@ def test_a_session_measurement_id_with_a_line_break_is_refused_before_any_write(
     plan.write_text('measurement = "a\\nb"\n[[feature]]\nid = "s"\nkind = "seat"\n')
     for extra, out, words in ((["--plan", str(plan)], "s1", "plan.toml, line 1, key 'measurement'"),
                               (["--measurement", "a\tb"], "s2", "the measurement id (--measurement)"),
-                              ([], "s\n3", "the measurement id (the session folder's name)")):
+                              ([], "s\n3", "argument -o/--output: the path")):  # refused as a path
         rc = _exit(["live", str(samples), "--arm", "aacmm7", "--speed", "0", "-o", str(tmp_path / out), *extra])
         err = capsys.readouterr().err
         assert rc == 2 and words in err and "one line of text without control characters" in err, err
